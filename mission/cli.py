@@ -1,0 +1,89 @@
+"""The ``marsupial`` command line.
+
+Subcommands are imported lazily so that ``marsupial --help`` is fast and a missing optional
+dependency of one subcommand does not break the others. Each subcommand lives next to the code
+it drives and exposes a ``click.Command``; this module only maps names to them and turns our
+errors into exit codes (library code never exits).
+"""
+from __future__ import annotations
+
+import importlib
+import logging
+import sys
+
+import click
+
+from mission.errors import MarsupialError
+
+SUBCOMMANDS: dict[str, tuple[str, str]] = {
+    "simulate": ("sim.simulate_cli", "simulate"),
+    "mock-vehicle": ("sim.vehicle_cli", "mock_vehicle"),
+    "carrier": ("sim.carrier", "carrier_command"),
+    "run": ("mission.run_cli", "run"),
+    "plot": ("mission.run_cli", "plot"),
+    "demo": ("sim.demo", "demo"),
+    "bench": ("bench.__main__", "bench"),
+}
+
+SUMMARIES = {
+    "simulate": "Integrate the paper's closed loop (one scenario, or a Monte-Carlo batch).",
+    "mock-vehicle": "Run the PX4-like kinematic MAVLink vehicle (SITL-free testing).",
+    "carrier": "Run the carrier robot simulator that publishes its state on Zenoh.",
+    "run": "Fly the offboard mission on a PX4 vehicle (mock, SITL or real).",
+    "plot": "Draw the paper-style figures from a flight log directory.",
+    "demo": "Mock vehicle + carrier simulator + mission, on embedded defaults.",
+    "bench": "Benchmarks: print a table and write JSON.",
+}
+
+
+class LazyGroup(click.Group):
+    """A click group whose subcommands are imported on first use."""
+
+    def list_commands(self, ctx: click.Context) -> list[str]:
+        return list(SUBCOMMANDS)
+
+    def get_command(self, ctx: click.Context, name: str) -> click.Command | None:
+        if name not in SUBCOMMANDS:
+            return None
+        module, attr = SUBCOMMANDS[name]
+        return getattr(importlib.import_module(module), attr)
+
+    def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        with formatter.section("Commands"):
+            formatter.write_dl([(n, SUMMARIES[n]) for n in SUBCOMMANDS])
+
+
+@click.group(cls=LazyGroup, context_settings={"help_option_names": ["-h", "--help"]})
+@click.option("-v", "--verbose", count=True, help="More log output (-v info, -vv debug).")
+def cli(verbose: int) -> None:
+    """marsupial: offboard mission controller for a carrier robot and its passenger UAV.
+
+    The passenger rides the carrier, separates with no jump in its input when the carrier nears
+    the target (Hu, Jayawardhana, Cao: equilibrium-driven separation), and flies to the target,
+    while the carrier never reaches it. Velocity setpoints go to a PX4 vehicle over MAVLink 2;
+    the carrier's state arrives over Eclipse Zenoh.
+    """
+    level = [logging.WARNING, logging.INFO, logging.DEBUG][min(verbose, 2)]
+    logging.basicConfig(level=level, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the console script; returns the process exit code."""
+    try:
+        rv = cli.main(args=argv, prog_name="marsupial", standalone_mode=False)
+    except click.exceptions.Abort:
+        click.echo("aborted", err=True)
+        return 130
+    except click.ClickException as exc:
+        exc.show()
+        return exc.exit_code
+    except MarsupialError as exc:
+        click.echo(f"error: {exc}", err=True)
+        return exc.exit_code
+    except KeyboardInterrupt:
+        return 130
+    return rv if isinstance(rv, int) else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,114 @@
+"""PX4 MAVLink protocol facts shared by the link (client) and the mock vehicle (server).
+
+Pure constants and encoders; no I/O. Sources: ../shared/REFERENCE.md (PX4 main, 2026, and what a
+real PX4 SITL was seen to do on the wire).
+"""
+from __future__ import annotations
+
+from enum import IntEnum
+
+
+class MainMode(IntEnum):
+    MANUAL = 1
+    ALTCTL = 2
+    POSCTL = 3
+    AUTO = 4
+    ACRO = 5
+    OFFBOARD = 6
+    STABILIZED = 7
+
+
+class AutoSubMode(IntEnum):
+    READY = 1
+    TAKEOFF = 2
+    LOITER = 3
+    MISSION = 4
+    RTL = 5
+    LAND = 6
+    FOLLOW_TARGET = 8
+    PRECLAND = 9
+
+
+def encode_custom_mode(main: int, sub: int = 0) -> int:
+    """HEARTBEAT.custom_mode = (main << 16) | (sub << 24)."""
+    return (int(main) << 16) | (int(sub) << 24)
+
+
+def decode_custom_mode(custom_mode: int) -> tuple[int, int]:
+    """Inverse of :func:`encode_custom_mode`: (main mode, sub mode)."""
+    return (custom_mode >> 16) & 0xFF, (custom_mode >> 24) & 0xFF
+
+
+# Named modes as (main, sub) pairs and their names as pymavlink's interpret_px4_mode prints them.
+MODES: dict[str, tuple[int, int]] = {
+    "MANUAL": (MainMode.MANUAL, 0),
+    "ALTCTL": (MainMode.ALTCTL, 0),
+    "POSCTL": (MainMode.POSCTL, 0),
+    "OFFBOARD": (MainMode.OFFBOARD, 0),
+    "STABILIZED": (MainMode.STABILIZED, 0),
+    "ACRO": (MainMode.ACRO, 0),
+    "AUTO.READY": (MainMode.AUTO, AutoSubMode.READY),
+    "AUTO.TAKEOFF": (MainMode.AUTO, AutoSubMode.TAKEOFF),
+    "AUTO.LOITER": (MainMode.AUTO, AutoSubMode.LOITER),
+    "AUTO.MISSION": (MainMode.AUTO, AutoSubMode.MISSION),
+    "AUTO.RTL": (MainMode.AUTO, AutoSubMode.RTL),
+    "AUTO.LAND": (MainMode.AUTO, AutoSubMode.LAND),
+}
+HOLD = "AUTO.LOITER"
+
+
+def mode_name(custom_mode: int) -> str:
+    """Readable PX4 mode name of a HEARTBEAT custom_mode (``"UNKNOWN(0x..)"`` otherwise)."""
+    pair = decode_custom_mode(custom_mode)
+    for name, (main, sub) in MODES.items():
+        if (int(main), int(sub)) == pair:
+            return name
+    return f"UNKNOWN(0x{custom_mode:08x})"
+
+
+def custom_mode_of(name: str) -> int:
+    main, sub = MODES[name]
+    return encode_custom_mode(main, sub)
+
+
+# COM_OBL_RC_ACT value -> mode entered on offboard loss (6 Terminate, 7 Disarm handled apart).
+OFFBOARD_LOSS_ACTION_MODE = {0: "POSCTL", 1: "ALTCTL", 2: "STABILIZED", 3: "AUTO.RTL", 4: "AUTO.LAND", 5: "AUTO.LOITER"}
+
+# HEARTBEAT
+MAV_AUTOPILOT_PX4 = 12
+MAV_TYPE_QUADROTOR = 2
+MAV_TYPE_ONBOARD_CONTROLLER = 18
+MAV_MODE_FLAG_CUSTOM_MODE_ENABLED = 1
+MAV_MODE_FLAG_SAFETY_ARMED = 128
+MAV_STATE_STANDBY = 3
+MAV_STATE_ACTIVE = 4
+MAV_STATE_CRITICAL = 5
+
+# Commands and results
+MAV_CMD_DO_SET_MODE = 176
+MAV_CMD_COMPONENT_ARM_DISARM = 400
+MAV_CMD_NAV_TAKEOFF = 22
+MAV_CMD_NAV_LAND = 21
+MAV_CMD_NAV_RETURN_TO_LAUNCH = 20
+MAV_CMD_REQUEST_MESSAGE = 512
+MAV_CMD_SET_MESSAGE_INTERVAL = 511
+ARM_FORCE_MAGIC = 21196
+MAV_RESULT_ACCEPTED = 0
+MAV_RESULT_TEMPORARILY_REJECTED = 1
+MAV_RESULT_DENIED = 2
+MAV_RESULT_UNSUPPORTED = 3
+MAV_RESULT_FAILED = 4
+
+# SET_POSITION_TARGET_LOCAL_NED
+MAV_FRAME_LOCAL_NED = 1
+MAV_FRAME_BODY_NED = 8
+TYPE_MASK_VELOCITY = 0x0DC7  # 3527: velocity only
+TYPE_MASK_VELOCITY_YAW = 2503  # velocity + yaw (MAVSDK set_velocity_ned)
+TYPE_MASK_VELOCITY_YAW_RATE = 1479  # velocity + yaw rate (MAVSDK set_velocity_body)
+TYPE_MASK_POSITION = 2552
+
+# EXTENDED_SYS_STATE.landed_state
+LANDED_ON_GROUND = 1
+LANDED_IN_AIR = 2
+LANDED_TAKEOFF = 3
+LANDED_LANDING = 4
