@@ -1,0 +1,235 @@
+"""Typed, validated configuration from TOML (pydantic models; errors name the field).
+
+One file describes a whole marsupial pair: the law, the scenario geometry, the safety filter,
+the simulator, the mission controller, the MAVLink and Zenoh endpoints and the carrier
+simulator. Every section has safe defaults, so a file only states what differs. Layering: file,
+then command-line overrides (:func:`with_overrides`).
+
+Frames: ``scenario`` vectors are in the local frame of the flight, PX4's local NED [m] (z down)
+for missions; the simulator is frame-agnostic (``scenario.frame`` only affects plots).
+"""
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from mission.errors import ConfigError
+from mission.law import LawParams, check_assumptions
+from mission.safety import Obstacles, SafetyConfig
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+
+
+class LawSection(_Model):
+    """Gains of the paper's law (paper values by default)."""
+
+    k_c: float = Field(0.5, gt=0, description="carrier gain [1/s]")
+    k_p: float = Field(1.0, gt=0, description="passenger gain")
+    b: float = Field(8.0, gt=1, description="b > 1")
+    c: float = Field(1.0, gt=0, description="[m]")
+    d: float = Field(1.0, gt=0, description="[m]")
+
+    def params(self) -> LawParams:
+        return LawParams(k_c=self.k_c, k_p=self.k_p, b=self.b, c=self.c, d=self.d)
+
+
+class ObstacleSection(_Model):
+    center: list[float]
+    radius: float = Field(gt=0, description="[m]")
+
+
+class ScenarioSection(_Model):
+    """Geometry: where the carrier, passenger and target are at t = 0 [m]."""
+
+    dim: Literal[2, 3] = 3
+    frame: Literal["local_ned", "xyz"] = "local_ned"
+    carrier_start: list[float] = [0.0, 0.0, 0.0]
+    target: list[float] = [20.0, 15.0, -4.0]
+    passenger_start: list[float] | None = None
+    planar_carrier: bool = True
+    eta: float | None = Field(None, gt=0, description="Assumption 1 lower bound [m]; default |e_tc(0)|")
+    carrier_mode: Literal["stop", "remark1"] = "stop"
+    obstacles: list[ObstacleSection] = []
+
+    @model_validator(mode="after")
+    def _dims(self) -> "ScenarioSection":
+        for name in ("carrier_start", "target", "passenger_start"):
+            v = getattr(self, name)
+            if v is not None and len(v) != self.dim:
+                raise ConfigError(f"scenario.{name}", v, f"must have {self.dim} components (scenario.dim)")
+        for i, ob in enumerate(self.obstacles):
+            if len(ob.center) != self.dim:
+                raise ConfigError(f"scenario.obstacles[{i}].center", ob.center, f"must have {self.dim} components")
+        return self
+
+    def obstacle_set(self) -> Obstacles:
+        return Obstacles.of([(o.center, o.radius) for o in self.obstacles], self.dim)
+
+
+class SafetySection(_Model):
+    """CBF filter and limits; a limit left out is off (the simulator's paper runs)."""
+
+    cbf_gain: float = Field(1.0, gt=0, description="class-K gain [1/s]")
+    margin_m: float = Field(0.5, ge=0)
+    passenger_max_speed_m_s: float | None = Field(None, gt=0)
+    passenger_max_accel_m_s2: float | None = Field(None, gt=0)
+    carrier_max_speed_m_s: float | None = Field(None, gt=0)
+    carrier_max_accel_m_s2: float | None = Field(None, gt=0)
+    z_min_m: float | None = None
+    z_max_m: float | None = None
+    filter_carrier: bool = True
+
+    def passenger(self) -> SafetyConfig:
+        return SafetyConfig(self.cbf_gain, self.margin_m, self.passenger_max_speed_m_s, self.passenger_max_accel_m_s2, self.z_min_m, self.z_max_m)
+
+    def carrier(self) -> SafetyConfig:
+        return SafetyConfig(self.cbf_gain, self.margin_m, self.carrier_max_speed_m_s, self.carrier_max_accel_m_s2)
+
+
+class SimSection(_Model):
+    """Numeric closed loop: a fixed step with the command held over it (a digital controller)."""
+
+    dt_s: float = Field(1e-3, gt=0, le=0.1)
+    duration_s: float = Field(30.0, gt=0)
+    departure_margin_m: float = Field(1e-3, gt=0, description="see sim/closed_loop.py: latch of |e_tc|")
+    p1_tolerance_m: float = Field(1e-6, gt=0, description="|e_pc| counted as 'on the carrier' before T")
+    p2_tolerance_m: float = Field(0.1, gt=0, description="final |e_pt| counted as 'at the target'")
+
+
+class MonteCarloSection(_Model):
+    """Random scenarios satisfying the assumptions (for --monte-carlo)."""
+
+    distance_m: tuple[float, float] = (12.0, 60.0)
+    height_m: tuple[float, float] = (0.0, 6.0)
+
+
+class MissionSection(_Model):
+    """The offboard controller (``marsupial run``)."""
+
+    rate_hz: float = Field(50.0, gt=0, le=1000)
+    dock_offset_ned_m: list[float] = [0.0, 0.0, -1.5]
+    dock_tolerance_m: float = Field(0.5, gt=0)
+    track_gain: float = Field(1.0, gt=0, description="[1/s] pull of the vehicle to the reference")
+    join_speed_m_s: float = Field(1.0, gt=0)
+    arrival_radius_m: float = Field(0.5, gt=0)
+    arrival_dwell_s: float = Field(2.0, ge=0)
+    final_action: Literal["hold", "land"] = "hold"
+    carrier_timeout_s: float = Field(0.5, gt=0)
+    heartbeat_timeout_s: float = Field(2.0, gt=0)
+    prestream_s: float = Field(1.0, ge=0.2)
+    command_retries: int = Field(3, ge=1, le=10)
+    max_duration_s: float = Field(300.0, gt=0)
+    connect_timeout_s: float = Field(20.0, gt=0)
+    log_dir: str = "logs"
+
+
+class MavlinkSection(_Model):
+    url: str = "udpin:127.0.0.1:14540"
+    target_system: int | None = Field(None, ge=1, le=255)
+    source_system: int = Field(1, ge=1, le=255)
+    source_component: int = Field(191, ge=1, le=255)
+    signing_key_file: str | None = None
+
+
+class ZenohSection(_Model):
+    """Zenoh session: peer on loopback with multicast scouting off by default."""
+
+    mode: Literal["peer", "client", "router"] = "peer"
+    listen: list[str] = []
+    connect: list[str] = []
+    multicast_scouting: bool = False
+    config_file: str | None = None
+    pair: str = Field("pair0", pattern=r"^[A-Za-z0-9_\-]+$")
+    encoding: Literal["json", "cdr"] = "json"
+
+
+class CarrierSection(_Model):
+    """The carrier simulator (``marsupial carrier``)."""
+
+    rate_hz: float = Field(30.0, gt=0, le=1000)
+    max_speed_m_s: float = Field(3.0, gt=0)
+
+
+class VehicleSection(_Model):
+    """The mock vehicle started by ``marsupial demo``."""
+
+    velocity_tau_s: float = Field(0.2, gt=0)
+
+
+class Config(_Model):
+    law: LawSection = LawSection()
+    scenario: ScenarioSection = ScenarioSection()
+    safety: SafetySection = SafetySection()
+    sim: SimSection = SimSection()
+    monte_carlo: MonteCarloSection = MonteCarloSection()
+    mission: MissionSection = MissionSection()
+    mavlink: MavlinkSection = MavlinkSection()
+    zenoh: ZenohSection = ZenohSection()
+    carrier: CarrierSection = CarrierSection()
+    vehicle: VehicleSection = VehicleSection()
+
+    @model_validator(mode="after")
+    def _assumptions(self) -> "Config":
+        s = self.scenario
+        check_assumptions(
+            np.array(s.carrier_start),
+            np.array(s.target),
+            self.law.params(),
+            planar_carrier=s.planar_carrier and s.dim == 3,
+            eta=s.eta,
+            passenger_start=None if s.passenger_start is None else np.array(s.passenger_start),
+        )
+        if len(self.mission.dock_offset_ned_m) != 3:
+            raise ConfigError("mission.dock_offset_ned_m", self.mission.dock_offset_ned_m, "must have 3 components")
+        return self
+
+
+def _error_from_validation(exc: ValidationError) -> ConfigError:
+    err = exc.errors()[0]
+    loc = ".".join(str(p) for p in err["loc"] if p != "__root__")
+    ctx_error = (err.get("ctx") or {}).get("error")
+    if isinstance(ctx_error, ConfigError):
+        return ctx_error
+    rule = err["msg"].removeprefix("Value error, ")
+    if err["type"] == "extra_forbidden":
+        rule = "unknown field (check spelling; see configs/ for examples)"
+    return ConfigError(loc or "config", err.get("input"), rule)
+
+
+def from_dict(data: dict[str, Any]) -> Config:
+    """Validate a nested dict into a :class:`Config`, raising :class:`ConfigError`."""
+    try:
+        return Config.model_validate(data)
+    except ValidationError as exc:
+        raise _error_from_validation(exc) from None
+
+
+def load_config(path: str | Path) -> Config:
+    """Read and validate a TOML file. Raises :class:`ConfigError` naming the field."""
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text())
+    except FileNotFoundError:
+        raise ConfigError("config", str(path), "file not found") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError("config", str(path), f"not valid TOML: {exc}") from None
+    return from_dict(data)
+
+
+def with_overrides(cfg: Config, overrides: dict[str, Any]) -> Config:
+    """A copy of ``cfg`` with dotted-key overrides (``{"mavlink.url": "udpin:..."}``), revalidated."""
+    data = cfg.model_dump()
+    for key, value in overrides.items():
+        if value is None:
+            continue
+        node = data
+        *parents, leaf = key.split(".")
+        for p in parents:
+            node = node[p]
+        node[leaf] = value
+    return from_dict(data)

@@ -1,0 +1,133 @@
+"""One control tick of the marsupial pair: law, separation latch, safety (pure, numpy).
+
+The same functions serve the realtime controller (arrays of shape ``(n,)``) and the batch
+simulator (``(B, n)``); neither knows how time advances or where states come from.
+
+Anchor and separation latch (design decisions, see DESIGN.md facts 2 and 3):
+
+- Before separation the *anchor* is the carrier's dock point; the passenger's law works in error
+  coordinates ``e_pc = x_p - anchor``, and feeds forward the anchor's velocity.
+- The separation event is the docked carrier reaching ``|e_tc| = b c - departure_margin``. At
+  ``|e_tc| = b c`` exactly, ``e_pc = 0`` is an equilibrium (``P = 0``) that an exactly-docked
+  passenger never leaves; the margin is the paper's ``T+``: the carrier coasts a hair past the
+  unstable equilibrium so the separating branch has a (tiny) non-zero input. With the default
+  1 mm the relative input starts at about 8 mm/s instead of jumping.
+- At the event the anchor is latched: the passenger's law keeps using the carrier position and
+  ``|e_tc|`` of that instant (paper Remark 1) whatever the carrier does next (it stops in the
+  paper; it keeps its own plan under Remark 1; a real carrier also brakes over some distance).
+  Latching only ``|e_tc|`` would let a carrier that drives away make ``P`` positive again and
+  pull the passenger back, so the position is latched.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from mission.law import LawParams, carrier_command, norm, passenger_command
+from mission.safety import FilterResult, Obstacles, SafetyConfig, filter_velocity
+
+
+@dataclass(frozen=True)
+class TickModel:
+    """Everything a tick needs besides the state.
+
+    target [m] shape (n,) or (B, n); obstacles seen by the passenger (the carrier sees their
+    planar projection when ``planar_carrier``); carrier_mode "stop" (paper eq. 4) or "remark1"
+    (the carrier keeps its velocity of the separation instant); departure_margin_m [m].
+    """
+
+    law: LawParams
+    target: np.ndarray
+    obstacles: Obstacles
+    passenger_safety: SafetyConfig
+    carrier_safety: SafetyConfig
+    planar_carrier: bool = False
+    carrier_mode: Literal["stop", "remark1"] = "stop"
+    departure_margin_m: float = 1e-3
+    filter_carrier: bool = True
+
+    @property
+    def event_distance_m(self) -> float:
+        """Carrier-target distance [m] at which the separation event fires: ``b c - margin``."""
+        return self.law.separation_distance_m - self.departure_margin_m
+
+
+@dataclass(frozen=True)
+class PassengerTick:
+    """Passenger command of one tick. u [m/s] safe command; relative [m/s] the law's ``u_p -
+    u_c`` before the filter; desired [m/s] the law's ``u_p``; P [1/s]; leaving: separating branch."""
+
+    u: np.ndarray
+    desired: np.ndarray
+    relative: np.ndarray
+    P: np.ndarray
+    leaving: np.ndarray
+    safety: FilterResult
+
+
+def passenger_tick(
+    anchor: np.ndarray,
+    anchor_velocity: np.ndarray,
+    e_pc: np.ndarray,
+    separated: np.ndarray | bool,
+    model: TickModel,
+    u_prev: np.ndarray | None = None,
+    dt_s: float | None = None,
+) -> PassengerTick:
+    """Law + safety for the passenger at ``anchor + e_pc`` [m].
+
+    anchor_velocity [m/s] is fed forward while docked (the carrier command, or a measured dock
+    velocity); after separation nothing is fed forward (the anchor is latched).
+    """
+    sep = np.asarray(separated, dtype=bool)
+    e_tc = model.target - anchor
+    u_ff = np.where(sep[..., None], 0.0, anchor_velocity)
+    cmd = passenger_command(e_pc, e_tc, u_ff, model.law)
+    safe = filter_velocity(anchor + e_pc, cmd.u_p, model.obstacles, model.passenger_safety, u_prev, dt_s)
+    return PassengerTick(u=safe.u, desired=cmd.u_p, relative=cmd.relative, P=cmd.P, leaving=cmd.leaving, safety=safe)
+
+
+def carrier_tick(
+    x_c: np.ndarray,
+    separated: np.ndarray | bool,
+    model: TickModel,
+    own_plan_velocity: np.ndarray | None = None,
+    u_prev: np.ndarray | None = None,
+    dt_s: float | None = None,
+) -> FilterResult:
+    """Carrier command [m/s] at ``x_c`` [m]: the paper's approach while docked; after
+    separation zero ("stop") or ``own_plan_velocity`` ("remark1"), filtered for obstacles."""
+    sep = np.asarray(separated, dtype=bool)
+    u = carrier_command(model.target - x_c, ~sep, model.law, planar=model.planar_carrier)
+    if model.carrier_mode == "remark1" and own_plan_velocity is not None:
+        u = np.where(sep[..., None], own_plan_velocity, u)
+    if not model.filter_carrier:
+        return filter_velocity(x_c, u, Obstacles.none(x_c.shape[-1]), model.carrier_safety, u_prev, dt_s)
+    if model.planar_carrier and x_c.shape[-1] == 3:
+        planar = filter_velocity(x_c[..., :2], u[..., :2], model.obstacles.planar(), model.carrier_safety,
+                                 None if u_prev is None else u_prev[..., :2], dt_s)
+        u3 = np.concatenate([planar.u, np.zeros(planar.u.shape[:-1] + (1,))], axis=-1)
+        return FilterResult(u3, planar.changed, planar.correction_m_s, planar.feasible, planar.cbf_active)
+    return filter_velocity(x_c, u, model.obstacles, model.carrier_safety, u_prev, dt_s)
+
+
+def separation_due(anchor: np.ndarray, separated: np.ndarray | bool, model: TickModel) -> np.ndarray:
+    """True where a docked pair has reached the event distance (the latch fires)."""
+    return ~np.asarray(separated, dtype=bool) & (norm(model.target - anchor) <= model.event_distance_m)
+
+
+def crossing_fraction(start: np.ndarray, step: np.ndarray, target: np.ndarray, radius: float) -> np.ndarray:
+    """Fraction theta in [0, 1] of a straight step ``start -> start + step`` [m] at which the
+    distance to ``target`` first equals ``radius`` [m] (exact: a quadratic in theta).
+    Returns 1 where the step does not reach the sphere."""
+    w = start - target
+    a = np.einsum("...i,...i->...", step, step)
+    b = 2.0 * np.einsum("...i,...i->...", w, step)
+    c = np.einsum("...i,...i->...", w, w) - radius**2
+    disc = np.maximum(b * b - 4 * a * c, 0.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        theta = (-b - np.sqrt(disc)) / (2 * a)
+    theta = np.where((a > 0) & np.isfinite(theta), theta, 1.0)
+    return np.clip(theta, 0.0, 1.0)

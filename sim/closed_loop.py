@@ -1,0 +1,259 @@
+"""Numeric closed loop of the paper, for one scenario or a batch of thousands at once (pure).
+
+The loop is what a digital controller does: every ``dt_s`` the tick of :mod:`mission.tick`
+computes the carrier's and the passenger's commands (law, latch, safety filter), which are held
+over the step (zero-order hold, so positions advance exactly along straight segments). The
+passenger is integrated in error coordinates ``e_pc = x_p - anchor`` (DESIGN.md fact 2): an
+exactly-docked passenger stays at ``e_pc = 0`` bit for bit, and leaves by increments that are not
+lost below one ULP of an absolute position. The separation event (docked carrier reaching
+``b c - departure_margin``) is located exactly inside its step (the step is a straight segment,
+so the crossing is a quadratic root) and the carrier is put on the crossing point.
+
+Arrays: batch axis first, ``(B, n)``; time series ``(K, B, ...)`` recorded every
+``record_every`` steps. All units SI.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+
+from mission.config import Config
+from mission.law import norm
+from mission.tick import TickModel, carrier_tick, crossing_fraction, passenger_tick
+
+DEPARTURE_THRESHOLD_M = 0.1  # |e_pc| that counts as "has left the carrier" [m]
+
+
+def model_from_config(cfg: Config, target: np.ndarray | None = None) -> TickModel:
+    """The :class:`TickModel` a configuration describes (``target`` overrides, e.g. a batch)."""
+    s = cfg.scenario
+    return TickModel(
+        law=cfg.law.params(),
+        target=np.asarray(s.target if target is None else target, dtype=float),
+        obstacles=s.obstacle_set(),
+        passenger_safety=cfg.safety.passenger(),
+        carrier_safety=cfg.safety.carrier(),
+        planar_carrier=bool(s.planar_carrier and s.dim == 3),
+        carrier_mode=s.carrier_mode,
+        departure_margin_m=cfg.sim.departure_margin_m,
+        filter_carrier=cfg.safety.filter_carrier,
+    )
+
+
+@dataclass
+class ClosedLoopResult:
+    """Time series and per-scenario summary of a closed-loop run.
+
+    Series (recorded): t [s] (K,); x_c, x_p [m] (K, B, n); u_c, u_p [m/s] (K, B, n); P [1/s]
+    (K, B); separated (K, B). Summary arrays have shape (B,); NaN where undefined (no
+    separation). ``summary(i)`` gives the JSON dict of scenario ``i``.
+    """
+
+    t: np.ndarray
+    x_c: np.ndarray
+    x_p: np.ndarray
+    u_c: np.ndarray
+    u_p: np.ndarray
+    P: np.ndarray
+    separated: np.ndarray
+    target: np.ndarray
+    separation_time_s: np.ndarray
+    carrier_target_distance_at_separation_m: np.ndarray
+    relative_speed_at_separation_m_s: np.ndarray
+    relative_input_jump_m_s: np.ndarray
+    departure_delay_s: np.ndarray
+    final_passenger_target_distance_m: np.ndarray
+    min_carrier_target_distance_m: np.ndarray
+    min_obstacle_clearance_m: np.ndarray
+    max_passenger_speed_m_s: np.ndarray
+    max_passenger_accel_m_s2: np.ndarray
+    max_offset_before_separation_m: np.ndarray
+    p1: np.ndarray
+    p2: np.ndarray
+    p3: np.ndarray
+    has_obstacles: bool
+    settings: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def batch_size(self) -> int:
+        return int(self.p1.shape[0])
+
+    def distances(self, i: int = 0) -> dict[str, np.ndarray]:
+        """|e_pc|, |e_tc|, |e_pt| [m] over time for scenario ``i`` (the paper's distance figure)."""
+        tgt = self.target[i] if self.target.ndim == 2 else self.target
+        return {
+            "e_pc": norm(self.x_p[:, i] - self.x_c[:, i]),
+            "e_tc": norm(tgt - self.x_c[:, i]),
+            "e_pt": norm(self.x_p[:, i] - tgt),
+        }
+
+    def summary(self, i: int = 0) -> dict[str, Any]:
+        """JSON-ready summary of scenario ``i`` (keys shared with the flight log's summary)."""
+
+        def num(a: np.ndarray) -> float | None:
+            v = float(a[i])
+            return None if not np.isfinite(v) else round(v, 6)
+
+        return {
+            "separation_time_s": num(self.separation_time_s),
+            "carrier_target_distance_at_separation_m": num(self.carrier_target_distance_at_separation_m),
+            "relative_speed_at_separation_m_s": num(self.relative_speed_at_separation_m_s),
+            "relative_input_jump_m_s": num(self.relative_input_jump_m_s),
+            "departure_delay_s": num(self.departure_delay_s),
+            "final_passenger_target_distance_m": num(self.final_passenger_target_distance_m),
+            "min_carrier_target_distance_m": num(self.min_carrier_target_distance_m),
+            "min_obstacle_clearance_m": num(self.min_obstacle_clearance_m) if self.has_obstacles else None,
+            "max_passenger_speed_m_s": num(self.max_passenger_speed_m_s),
+            "max_passenger_accel_m_s2": num(self.max_passenger_accel_m_s2),
+            "p1": bool(self.p1[i]),
+            "p2": bool(self.p2[i]),
+            "p3": bool(self.p3[i]),
+        }
+
+
+def simulate(
+    model: TickModel,
+    carrier_start: np.ndarray,
+    *,
+    duration_s: float,
+    dt_s: float,
+    passenger_offset: np.ndarray | None = None,
+    record_every: int = 10,
+    p1_tolerance_m: float = 1e-6,
+    p2_tolerance_m: float = 0.1,
+    progress: Callable[[int], None] | None = None,
+) -> ClosedLoopResult:
+    """Integrate the closed loop from ``carrier_start`` [m] ((n,) or (B, n)).
+
+    ``passenger_offset`` [m] is the passenger's start relative to the carrier (zero: exactly
+    docked, Assumption 2). ``progress(k)`` is called with the number of steps done, now and then.
+    """
+    x_c = np.atleast_2d(np.asarray(carrier_start, dtype=float)).copy()
+    B, n = x_c.shape
+    target = np.broadcast_to(model.target, (B, n)).astype(float)
+    model = TickModel(**{**model.__dict__, "target": target})
+    anchor = x_c.copy()
+    e_pc = np.zeros((B, n)) if passenger_offset is None else np.broadcast_to(passenger_offset, (B, n)).astype(float).copy()
+    sep = np.zeros(B, dtype=bool)
+    v_own = np.zeros((B, n))
+    u_c_prev = np.zeros((B, n))
+    u_p_prev = np.zeros((B, n))
+    nan = np.full(B, np.nan)
+    T, d_sep, rel_before, rel_after, depart = nan.copy(), nan.copy(), nan.copy(), nan.copy(), nan.copy()
+    rel_before_vec = np.zeros((B, n))
+    pending = np.zeros(B, dtype=bool)
+    max_before = np.zeros(B)
+    min_ct = norm(target - x_c)
+    has_obs = len(model.obstacles) > 0
+    min_clear = np.full(B, np.inf)
+    max_speed = np.zeros(B)
+    max_accel = np.zeros(B)
+    use_accel = model.passenger_safety.max_accel_m_s2 is not None
+    use_accel_c = model.carrier_safety.max_accel_m_s2 is not None
+    steps = int(round(duration_s / dt_s))
+    rec: dict[str, list] = {k: [] for k in ("t", "x_c", "x_p", "u_c", "u_p", "P", "sep")}
+    bc_event = model.event_distance_m
+
+    for k in range(steps + 1):
+        t = k * dt_s
+        u_c = carrier_tick(x_c, sep, model, v_own, u_c_prev if use_accel_c else None, dt_s).u
+        v_anchor = np.where(sep[:, None], 0.0, u_c)
+        pt = passenger_tick(anchor, v_anchor, e_pc, sep, model, u_p_prev if use_accel else None, dt_s)
+        u_p = pt.u
+        x_p = anchor + e_pc
+        # bookkeeping at time t
+        if pending.any():
+            rel_after_vec = pt.relative[pending]
+            rel_after[pending] = norm(rel_after_vec)
+            rel_before[pending] = norm(rel_after_vec - rel_before_vec[pending])
+            pending[:] = False
+        a = norm(e_pc)
+        max_before = np.where(sep, max_before, np.maximum(max_before, a))
+        newly_departed = sep & np.isnan(depart) & (a > DEPARTURE_THRESHOLD_M)
+        depart[newly_departed] = t - T[newly_departed]
+        np.minimum(min_ct, norm(target - x_c), out=min_ct)
+        if has_obs:
+            clear = model.obstacles.clearance(x_p).min(axis=-1)
+            xc_obs = model.obstacles.planar().clearance(x_c[:, :2]) if model.planar_carrier else model.obstacles.clearance(x_c)
+            np.minimum(min_clear, np.minimum(clear, xc_obs.min(axis=-1)), out=min_clear)
+        speed = norm(u_p)
+        np.maximum(max_speed, speed, out=max_speed)
+        if k > 0:
+            np.maximum(max_accel, norm(u_p - u_p_prev) / dt_s, out=max_accel)
+        if k % record_every == 0 or k == steps:
+            for key, val in (("t", t), ("x_c", x_c), ("x_p", x_p), ("u_c", u_c), ("u_p", u_p), ("P", pt.P), ("sep", sep)):
+                rec[key].append(np.copy(val))
+            if progress is not None:
+                progress(k)
+        if k == steps:
+            break
+        # zero-order hold step
+        x_c_new = x_c + u_c * dt_s
+        step_anchor = v_anchor * dt_s
+        anchor_new = anchor + step_anchor
+        e_pc = e_pc + (u_p - v_anchor) * dt_s
+        due = ~sep & (norm(target - anchor_new) <= bc_event)
+        if due.any():
+            theta = crossing_fraction(anchor[due], step_anchor[due], target[due], bc_event)
+            anchor_new[due] = anchor[due] + theta[:, None] * step_anchor[due]
+            if model.carrier_mode == "stop":
+                x_c_new[due] = anchor_new[due]
+            v_own[due] = u_c[due]
+            sep = sep | due
+            T[due] = t + theta * dt_s
+            d_sep[due] = norm(target[due] - anchor_new[due])
+            rel_before_vec[due] = pt.relative[due]
+            pending = due.copy()
+        x_c, anchor = x_c_new, anchor_new
+        u_c_prev, u_p_prev = u_c, u_p
+
+    final = norm(anchor + e_pc - target)
+    p1 = sep & (max_before <= p1_tolerance_m) & ~np.isnan(depart)
+    p2 = sep & (final <= p2_tolerance_m)
+    p3 = min_ct > 0.0
+    stack = {k: np.asarray(v) for k, v in rec.items()}
+    return ClosedLoopResult(
+        t=stack["t"], x_c=stack["x_c"], x_p=stack["x_p"], u_c=stack["u_c"], u_p=stack["u_p"], P=stack["P"],
+        separated=stack["sep"], target=target,
+        separation_time_s=T, carrier_target_distance_at_separation_m=d_sep,
+        relative_speed_at_separation_m_s=rel_after, relative_input_jump_m_s=rel_before,
+        departure_delay_s=depart, final_passenger_target_distance_m=final,
+        min_carrier_target_distance_m=min_ct,
+        min_obstacle_clearance_m=min_clear if has_obs else np.full(B, np.nan),
+        max_passenger_speed_m_s=max_speed, max_passenger_accel_m_s2=max_accel,
+        max_offset_before_separation_m=max_before, p1=p1, p2=p2, p3=p3, has_obstacles=has_obs,
+        settings={"dt_s": dt_s, "duration_s": duration_s, "p1_tolerance_m": p1_tolerance_m, "p2_tolerance_m": p2_tolerance_m},
+    )
+
+
+def simulate_config(cfg: Config, progress: Callable[[int], None] | None = None, record_every: int = 10) -> ClosedLoopResult:
+    """Run the single scenario of a configuration."""
+    s = cfg.scenario
+    offset = None if s.passenger_start is None else np.asarray(s.passenger_start) - np.asarray(s.carrier_start)
+    return simulate(
+        model_from_config(cfg), np.asarray(s.carrier_start, dtype=float), duration_s=cfg.sim.duration_s,
+        dt_s=cfg.sim.dt_s, passenger_offset=offset, record_every=record_every,
+        p1_tolerance_m=cfg.sim.p1_tolerance_m, p2_tolerance_m=cfg.sim.p2_tolerance_m, progress=progress,
+    )
+
+
+def random_scenarios(cfg: Config, count: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """``count`` random (carrier_start, target) pairs [m] that satisfy the paper's assumptions:
+    the carrier at the origin, the target at a horizontal distance drawn from
+    ``monte_carlo.distance_m`` (always > b c) and, in 3D, a height from ``monte_carlo.height_m``
+    clipped to ``b c`` (planar carrier)."""
+    rng = np.random.default_rng(seed)
+    n = cfg.scenario.dim
+    bc = cfg.law.params().separation_distance_m
+    lo, hi = cfg.monte_carlo.distance_m
+    dist = rng.uniform(max(lo, bc * 1.05), max(hi, bc * 1.1), count)
+    ang = rng.uniform(0, 2 * np.pi, count)
+    target = np.zeros((count, n))
+    target[:, 0], target[:, 1] = dist * np.cos(ang), dist * np.sin(ang)
+    if n == 3:
+        h_lo, h_hi = cfg.monte_carlo.height_m
+        sign = -1.0 if cfg.scenario.frame == "local_ned" else 1.0
+        target[:, 2] = sign * np.minimum(rng.uniform(h_lo, h_hi, count), 0.95 * bc)
+    return np.zeros((count, n)), target
