@@ -146,6 +146,15 @@ class ZenohSection(_Model):
     config_file: str | None = None
     pair: str = Field("pair0", pattern=r"^[A-Za-z0-9_\-]+$")
     encoding: Literal["json", "cdr"] = "json"
+    rendezvous: str | None = Field(
+        "tcp/127.0.0.1:7448",
+        description="peer mode with no listen/connect endpoints and no config_file: every process "
+        "listens on this loopback endpoint if it is free (the first one wins) and on an ephemeral "
+        "loopback port, and connects to it; gossip then meshes the peers. None: loopback ephemeral "
+        "listener only (useful with multicast scouting)",
+    )
+    carrier_key: str | None = Field(None, description="override of the carrier state key (e.g. a ROS 2 odom key)")
+    carrier_max_age_s: float = Field(0.5, gt=0, description="[s] age above which a carrier state is stale")
 
 
 class CarrierSection(_Model):
@@ -153,6 +162,9 @@ class CarrierSection(_Model):
 
     rate_hz: float = Field(30.0, gt=0, le=1000)
     max_speed_m_s: float = Field(3.0, gt=0)
+    passenger_timeout_s: float = Field(
+        1.0, gt=0, description="[s] simulated; a passenger status older than this (or a lost "
+        "liveliness token) stops a carrier that is approaching the target")
 
 
 class VehicleSection(_Model):

@@ -11,9 +11,13 @@ little as possible (least squares) so that every barrier stays non-negative:
 The QP is solved in closed form where that is exact (no constraint violated, or a projection on
 one violated constraint that satisfies all others: it meets the KKT conditions, so it is the
 optimum) and by DAQP otherwise. If the QP is infeasible the fallback is zero velocity (hold
-position) and ``feasible`` is false. Then the change of command is limited to
-``max_accel_m_s2 * dt_s`` (along the change) and the speed to ``max_speed_m_s`` (scaling, so the
-direction is kept; scaling towards zero never breaks a satisfied barrier constraint).
+position) and ``feasible`` is false.
+
+Order: the change of command is first limited to ``max_accel_m_s2 * dt_s`` (along the change),
+then the barriers act, then the speed is limited to ``max_speed_m_s`` by scaling (the direction is
+kept, and scaling towards zero never breaks a satisfied barrier constraint). So the barriers have
+the last word: when an obstacle demands a harder stop than the acceleration limit allows, safety
+wins over comfort (``cbf_active`` says so).
 """
 from __future__ import annotations
 
@@ -29,7 +33,8 @@ _TOL = 1e-9
 
 @dataclass(frozen=True)
 class Obstacles:
-    """Circular (2D) or spherical (3D) obstacles: centers [m] shape (m, n), radii [m] shape (m,)."""
+    """Circular (2D) or spherical (3D) obstacles: centers [m] shape (m, n) (or (B, m, n) for a
+    batch with per-scenario obstacles), radii [m] shape (m,)."""
 
     centers: np.ndarray
     radii: np.ndarray
@@ -50,7 +55,7 @@ class Obstacles:
 
     def planar(self) -> "Obstacles":
         """The same obstacles seen by a planar robot: their first two coordinates (circles)."""
-        return Obstacles(self.centers[:, :2], self.radii)
+        return Obstacles(self.centers[..., :2], self.radii)
 
     def clearance(self, x: np.ndarray) -> np.ndarray:
         """Distance [m] from ``x`` (..., n) to each obstacle's surface: shape (..., m)."""
@@ -184,10 +189,11 @@ def filter_velocity(
     ``u_prev`` [m/s] and ``dt_s`` [s] enable the acceleration limit.
     """
     u_des = np.asarray(u_des, dtype=float)
-    A, b = barrier_constraints(np.asarray(x, dtype=float), obstacles, cfg)
-    u, feasible, active = project_cbf(u_des, A, b)
+    u = u_des
     if cfg.max_accel_m_s2 is not None and u_prev is not None and dt_s is not None:
         u = limit_accel(u, u_prev, cfg.max_accel_m_s2, dt_s)
+    A, b = barrier_constraints(np.asarray(x, dtype=float), obstacles, cfg)
+    u, feasible, active = project_cbf(u, A, b)
     if cfg.max_speed_m_s is not None:
         u = limit_speed(u, cfg.max_speed_m_s)
     correction = norm(u - u_des)

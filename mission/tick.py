@@ -47,6 +47,13 @@ class TickModel:
     carrier_mode: Literal["stop", "remark1"] = "stop"
     departure_margin_m: float = 1e-3
     filter_carrier: bool = True
+    carrier_obstacles: Obstacles | None = None  # default: obstacles (planar) + target keep-out
+
+    def __post_init__(self) -> None:
+        if self.carrier_obstacles is None:
+            keepout = 0.5 * self.law.separation_distance_m if self.carrier_mode == "remark1" else 0.0
+            object.__setattr__(self, "carrier_obstacles", default_carrier_obstacles(
+                self.obstacles, np.asarray(self.target), self.planar_carrier, keepout))
 
     @property
     def event_distance_m(self) -> float:
@@ -85,8 +92,18 @@ def passenger_tick(
     e_tc = model.target - anchor
     u_ff = np.where(sep[..., None], 0.0, anchor_velocity)
     cmd = passenger_command(e_pc, e_tc, u_ff, model.law)
-    safe = filter_velocity(anchor + e_pc, cmd.u_p, model.obstacles, model.passenger_safety, u_prev, dt_s)
-    return PassengerTick(u=safe.u, desired=cmd.u_p, relative=cmd.relative, P=cmd.P, leaving=cmd.leaving, safety=safe)
+    desired = cmd.u_p
+    a_max = model.passenger_safety.max_accel_m_s2
+    if a_max is not None:
+        # Arrival shaping: never faster than the speed from which the acceleration limit can
+        # still stop at the target, sqrt(2 a_max |e_pt|); keeps the direction. Without it the
+        # saturated law reaches the target at full speed and circles it (seen in the 2D run).
+        stop_speed = np.sqrt(2.0 * a_max * norm(e_pc - e_tc))
+        speed = norm(desired)
+        scale = np.where(sep, np.minimum(1.0, stop_speed / np.maximum(speed, 1e-300)), 1.0)
+        desired = desired * scale[..., None]
+    safe = filter_velocity(anchor + e_pc, desired, model.obstacles, model.passenger_safety, u_prev, dt_s)
+    return PassengerTick(u=safe.u, desired=desired, relative=cmd.relative, P=cmd.P, leaving=cmd.leaving, safety=safe)
 
 
 def carrier_tick(
@@ -103,14 +120,26 @@ def carrier_tick(
     u = carrier_command(model.target - x_c, ~sep, model.law, planar=model.planar_carrier)
     if model.carrier_mode == "remark1" and own_plan_velocity is not None:
         u = np.where(sep[..., None], own_plan_velocity, u)
-    if not model.filter_carrier:
-        return filter_velocity(x_c, u, Obstacles.none(x_c.shape[-1]), model.carrier_safety, u_prev, dt_s)
+    obstacles = model.carrier_obstacles if model.filter_carrier else Obstacles.none(2 if model.planar_carrier else x_c.shape[-1])
     if model.planar_carrier and x_c.shape[-1] == 3:
-        planar = filter_velocity(x_c[..., :2], u[..., :2], model.obstacles.planar(), model.carrier_safety,
+        planar = filter_velocity(x_c[..., :2], u[..., :2], obstacles, model.carrier_safety,
                                  None if u_prev is None else u_prev[..., :2], dt_s)
         u3 = np.concatenate([planar.u, np.zeros(planar.u.shape[:-1] + (1,))], axis=-1)
         return FilterResult(u3, planar.changed, planar.correction_m_s, planar.feasible, planar.cbf_active)
-    return filter_velocity(x_c, u, model.obstacles, model.carrier_safety, u_prev, dt_s)
+    return filter_velocity(x_c, u, obstacles, model.carrier_safety, u_prev, dt_s)
+
+
+def default_carrier_obstacles(obstacles: Obstacles, target: np.ndarray, planar: bool, keepout_m: float) -> Obstacles:
+    """What the carrier avoids: the obstacles (their planar projection for a planar carrier)
+    plus, when ``keepout_m > 0``, a keep-out disc of that radius [m] around the target, so that a
+    carrier that keeps its own plan after separation (Remark 1) still never reaches the target
+    (P3). A batch of targets (B, n) gives per-scenario obstacle centres (B, m + 1, n)."""
+    obs = obstacles.planar() if planar else obstacles
+    if keepout_m <= 0:
+        return obs
+    centre = target[..., :2] if planar else target
+    centers = np.broadcast_to(obs.centers, centre.shape[:-1] + obs.centers.shape[-2:])
+    return Obstacles(np.concatenate([centers, centre[..., None, :]], axis=-2), np.append(obs.radii, keepout_m))
 
 
 def separation_due(anchor: np.ndarray, separated: np.ndarray | bool, model: TickModel) -> np.ndarray:

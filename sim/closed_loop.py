@@ -21,7 +21,7 @@ import numpy as np
 
 from mission.config import Config
 from mission.law import norm
-from mission.tick import TickModel, carrier_tick, crossing_fraction, passenger_tick
+from mission.tick import TickModel, carrier_tick, crossing_fraction, passenger_tick, separation_due
 
 DEPARTURE_THRESHOLD_M = 0.1  # |e_pc| that counts as "has left the carrier" [m]
 
@@ -194,7 +194,7 @@ def simulate(
         step_anchor = v_anchor * dt_s
         anchor_new = anchor + step_anchor
         e_pc = e_pc + (u_p - v_anchor) * dt_s
-        due = ~sep & (norm(target - anchor_new) <= bc_event)
+        due = separation_due(anchor_new, sep, model)
         if due.any():
             theta = crossing_fraction(anchor[due], step_anchor[due], target[due], bc_event)
             anchor_new[due] = anchor[due] + theta[:, None] * step_anchor[due]
