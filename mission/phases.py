@@ -1,0 +1,415 @@
+"""The mission state machine (pure): observations in, phase + setpoint + request out.
+
+::
+
+    PREFLIGHT --vehicle, position, carrier fresh; geometry ok--> STREAMING
+        |  geometry breaks the paper's assumptions --> ABORT(geometry)  (nothing was sent)
+    STREAMING --zero-velocity setpoints for prestream_s--> ARMING (or OFFBOARD if armed)
+    ARMING    --armed--> OFFBOARD           refused after retries --> ABORT(arming_refused)
+    OFFBOARD  --mode is OFFBOARD--> JOIN    refused after retries --> ABORT(offboard_refused)
+    JOIN      --reference reached the dock point, vehicle within dock tolerance--> RIDING
+    RIDING    --docked carrier within b c - margin of the target (latched)--> SEPARATED
+    SEPARATED --passenger left the dock (> 0.1 m)--> NAVIGATING
+    NAVIGATING --within arrival radius for arrival dwell--> ARRIVED
+    ARRIVED   --request Hold or Land--> HOLD | LAND --vehicle shows that mode--> DONE
+
+    any phase --> ABORT(reason): vehicle_lost, pilot_override, carrier_lost, position_lost,
+                  arming_refused, offboard_refused, geometry, interrupted, timeout
+    ABORT requests Hold (never disarm in the air) unless the vehicle is lost or a pilot took
+    over (then nothing is sent: never fight the pilot); setpoints stop once Hold is shown.
+
+The passenger is flown through a *reference*: the paper's closed loop (``mission.tick``, the
+same functions as the simulator) integrated in error coordinates about the dock point, which the
+vehicle tracks with ``u = u_ref + track_gain (x_ref - x_p)``. The reference sits exactly on the
+dock while riding, so separation happens at ``b c`` whatever the vehicle's tracking lag
+(DESIGN.md fact 3), and its departure is smooth. The carrier's state is needed until
+separation; afterwards the anchor is latched and a lost carrier only costs P3 monitoring.
+
+Frames: local NED [m], [m/s]; times [s] on the controller's clock.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from enum import Enum
+
+import numpy as np
+
+from mission.law import check_assumptions, norm
+from mission.errors import AssumptionError
+from mission.safety import SafetyConfig, filter_velocity
+from mission.tick import TickModel, crossing_fraction, passenger_tick
+
+DEPARTURE_THRESHOLD_M = 0.1
+
+
+class Phase(str, Enum):
+    PREFLIGHT = "PREFLIGHT"
+    STREAMING = "STREAMING"
+    ARMING = "ARMING"
+    OFFBOARD = "OFFBOARD"
+    JOIN = "JOIN"
+    RIDING = "RIDING"
+    SEPARATED = "SEPARATED"
+    NAVIGATING = "NAVIGATING"
+    ARRIVED = "ARRIVED"
+    HOLD = "HOLD"
+    LAND = "LAND"
+    DONE = "DONE"
+    ABORT = "ABORT"
+
+
+class AbortReason(str, Enum):
+    VEHICLE_LOST = "vehicle_lost"
+    PILOT_OVERRIDE = "pilot_override"
+    CARRIER_LOST = "carrier_lost"
+    POSITION_LOST = "position_lost"
+    ARMING_REFUSED = "arming_refused"
+    OFFBOARD_REFUSED = "offboard_refused"
+    GEOMETRY = "geometry"
+    INTERRUPTED = "interrupted"
+    TIMEOUT = "timeout"
+
+
+# Phases in which the vehicle is ours in OFFBOARD and must stay there.
+FLYING = {Phase.JOIN, Phase.RIDING, Phase.SEPARATED, Phase.NAVIGATING, Phase.ARRIVED}
+BEFORE_SEPARATION = {Phase.PREFLIGHT, Phase.STREAMING, Phase.ARMING, Phase.OFFBOARD, Phase.JOIN, Phase.RIDING}
+
+
+@dataclass(frozen=True)
+class VehicleObs:
+    """The vehicle as the link sees it: position/velocity [m], [m/s] NED; heartbeat age [s]."""
+
+    position_ned_m: np.ndarray
+    velocity_ned_m_s: np.ndarray
+    armed: bool
+    mode: str
+    heartbeat_age_s: float
+    position_valid: bool = True
+
+
+@dataclass(frozen=True)
+class CarrierObs:
+    """The carrier's newest state: position/velocity NED [m], [m/s]; age [s]; liveliness."""
+
+    position_ned_m: np.ndarray
+    velocity_ned_m_s: np.ndarray
+    age_s: float
+    alive: bool | None = True
+
+
+@dataclass(frozen=True)
+class Observation:
+    """What one tick sees. ``failed`` maps a request ("arm", "offboard") to the vehicle's reason
+    once the controller gave up on it after its retries."""
+
+    t_s: float
+    vehicle: VehicleObs | None
+    carrier: CarrierObs | None
+    failed: dict[str, str] = field(default_factory=dict)
+    interrupted: bool = False
+
+
+@dataclass(frozen=True)
+class MissionModel:
+    """Fixed parameters of a mission (built from the config by the controller)."""
+
+    tick: TickModel
+    command_safety: SafetyConfig  # limits on what is sent to the vehicle
+    dock_offset_ned_m: np.ndarray
+    dock_tolerance_m: float
+    track_gain: float
+    join_speed_m_s: float
+    arrival_radius_m: float
+    arrival_dwell_s: float
+    final_action: str  # "hold" | "land"
+    carrier_timeout_s: float
+    heartbeat_timeout_s: float
+    prestream_s: float
+    connect_timeout_s: float
+    max_duration_s: float
+    dt_s: float
+
+
+@dataclass(frozen=True)
+class MissionState:
+    """Everything the machine remembers between ticks (immutable; ``step`` returns a new one)."""
+
+    phase: Phase = Phase.PREFLIGHT
+    since_s: float = 0.0
+    start_s: float | None = None
+    reason: str = ""
+    detail: str = ""
+    x_ref: np.ndarray | None = None  # reference passenger position [m] NED
+    e_ref: np.ndarray | None = None  # reference error to the anchor [m]
+    anchor: np.ndarray | None = None  # latched anchor after separation [m]
+    prev_dock: np.ndarray | None = None
+    separation_time_s: float | None = None
+    arrived_since_s: float | None = None
+    u_ref: np.ndarray | None = None
+    u_cmd: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class Decision:
+    """What the controller does this tick. setpoint [m/s] NED or None (send nothing);
+    request: a vehicle command to have in flight ("arm", "offboard", "hold", "land") or None.
+    Diagnostics for the flight log: dock, P, relative (law's u_p - u_c), desired, safety_acted."""
+
+    setpoint: np.ndarray | None
+    request: str | None = None
+    dock: np.ndarray | None = None
+    P: float = float("nan")
+    relative: np.ndarray | None = None
+    desired: np.ndarray | None = None
+    safety_acted: bool = False
+    events: tuple[str, ...] = ()
+
+
+ZERO = np.zeros(3)
+
+
+def _to(state: MissionState, phase: Phase, t: float, **kw) -> MissionState:
+    return replace(state, phase=phase, since_s=t, **kw)
+
+
+def _abort(state: MissionState, t: float, reason: AbortReason, detail: str = "") -> MissionState:
+    return replace(state, phase=Phase.ABORT, since_s=t, reason=reason.value, detail=detail)
+
+
+def _carrier_ok(obs: Observation, m: MissionModel) -> bool:
+    c = obs.carrier
+    return c is not None and c.age_s <= m.carrier_timeout_s and c.alive is not False
+
+
+def _hold_decision(state: MissionState, obs: Observation) -> Decision:
+    """Ask for Hold; keep zero-velocity setpoints flowing until the vehicle shows it (so a
+    switch that is slow to take effect never leaves OFFBOARD without setpoints)."""
+    v = obs.vehicle
+    if v is not None and v.mode == "OFFBOARD":
+        return Decision(setpoint=ZERO.copy(), request="hold")
+    return Decision(setpoint=None, request="hold" if v is not None and v.mode != "AUTO.LOITER" and v.armed else None)
+
+
+def step(state: MissionState, obs: Observation, m: MissionModel) -> tuple[MissionState, Decision]:
+    """Advance the mission by one tick. Pure: same inputs, same outputs."""
+    t = obs.t_s
+    if state.start_s is None:
+        state = replace(state, start_s=t, since_s=t)
+    state, early = _failsafes(state, obs, m)
+    if early is not None:
+        return state, early
+    handler = _HANDLERS[state.phase]
+    return handler(state, obs, m)
+
+
+def _failsafes(state: MissionState, obs: Observation, m: MissionModel) -> tuple[MissionState, Decision | None]:
+    """Transitions that any phase can take, checked before the phase's own logic."""
+    t, v, ph = obs.t_s, obs.vehicle, state.phase
+    if ph in (Phase.DONE,):
+        return state, Decision(setpoint=None)
+    if ph == Phase.ABORT:
+        if state.reason in (AbortReason.VEHICLE_LOST.value, AbortReason.PILOT_OVERRIDE.value, AbortReason.GEOMETRY.value):
+            return state, Decision(setpoint=None)
+        return state, _hold_decision(state, obs)
+    if obs.interrupted:
+        new = _abort(state, t, AbortReason.INTERRUPTED, "signal")
+        return new, _decided(new, obs, "abort: interrupted")
+    if ph != Phase.PREFLIGHT and (v is None or v.heartbeat_age_s > m.heartbeat_timeout_s):
+        new = _abort(state, t, AbortReason.VEHICLE_LOST, "no HEARTBEAT")
+        return new, Decision(setpoint=None, events=("abort: vehicle heartbeat lost",))
+    final_modes = ("AUTO.LOITER", "AUTO.LAND")
+    if ph in FLYING and v is not None and v.mode != "OFFBOARD" and not (ph == Phase.ARRIVED and v.mode in final_modes):
+        new = _abort(state, t, AbortReason.PILOT_OVERRIDE, f"vehicle switched to {v.mode}")
+        return new, Decision(setpoint=None, events=(f"abort: vehicle left OFFBOARD ({v.mode}); not fighting it",))
+    if ph not in (Phase.PREFLIGHT,) and v is not None and not v.position_valid:
+        new = _abort(state, t, AbortReason.POSITION_LOST, "position estimate invalid")
+        return new, _decided(new, obs, "abort: position estimate lost")
+    if ph in BEFORE_SEPARATION - {Phase.PREFLIGHT} and not _carrier_ok(obs, m):
+        new = _abort(state, t, AbortReason.CARRIER_LOST, _carrier_detail(obs, m))
+        return new, _decided(new, obs, "abort: carrier state lost before separation")
+    if state.start_s is not None and t - state.start_s > m.max_duration_s and ph not in (Phase.HOLD, Phase.LAND):
+        new = _abort(state, t, AbortReason.TIMEOUT, f"mission longer than {m.max_duration_s:g} s")
+        return new, _decided(new, obs, "abort: mission timeout")
+    return state, None
+
+
+def _decided(state: MissionState, obs: Observation, event: str) -> Decision:
+    d = _hold_decision(state, obs)
+    return replace(d, events=(event,))
+
+
+def _carrier_detail(obs: Observation, m: MissionModel) -> str:
+    c = obs.carrier
+    if c is None:
+        return "no carrier state received"
+    if c.alive is False:
+        return "carrier liveliness token gone"
+    return f"carrier state {c.age_s:.2f} s old (limit {m.carrier_timeout_s:g} s)"
+
+
+def _dock(obs: Observation, m: MissionModel) -> np.ndarray:
+    return obs.carrier.position_ned_m + m.dock_offset_ned_m
+
+
+def _preflight(state: MissionState, obs: Observation, m: MissionModel) -> tuple[MissionState, Decision]:
+    t, v = obs.t_s, obs.vehicle
+    ready = v is not None and v.heartbeat_age_s <= m.heartbeat_timeout_s and v.position_valid and _carrier_ok(obs, m)
+    if not ready:
+        if t - state.since_s > m.connect_timeout_s:
+            why = "no vehicle" if v is None else ("no carrier" if not _carrier_ok(obs, m) else "vehicle not ready")
+            new = _abort(state, t, AbortReason.VEHICLE_LOST if v is None else AbortReason.CARRIER_LOST, why)
+            return new, Decision(setpoint=None, events=(f"abort: preflight: {why}",))
+        return state, Decision(setpoint=None)
+    dock = _dock(obs, m)
+    try:
+        check_assumptions(dock, m.tick.target, m.tick.law, planar_carrier=m.tick.planar_carrier, field_prefix="mission")
+        horizontal = norm((v.position_ned_m - dock)[:2])
+        if horizontal > m.dock_tolerance_m:
+            raise AssumptionError("mission.passenger", v.position_ned_m.round(2).tolist(),
+                                  f"passenger {horizontal:.2f} m from the dock point horizontally "
+                                  f"(tolerance {m.dock_tolerance_m:g} m, Assumption 2)")
+    except AssumptionError as exc:
+        new = _abort(state, t, AbortReason.GEOMETRY, str(exc))
+        return new, Decision(setpoint=None, events=(f"abort: geometry: {exc}",))
+    new = _to(state, Phase.STREAMING, t)
+    return new, Decision(setpoint=ZERO.copy(), dock=dock, events=("preflight ok",))
+
+
+def _streaming(state, obs, m):
+    t = obs.t_s
+    if t - state.since_s >= m.prestream_s:
+        nxt = Phase.OFFBOARD if obs.vehicle.armed else Phase.ARMING
+        return _to(state, nxt, t), Decision(setpoint=ZERO.copy(), request="offboard" if nxt == Phase.OFFBOARD else "arm")
+    return state, Decision(setpoint=ZERO.copy())
+
+
+def _arming(state, obs, m):
+    t = obs.t_s
+    if "arm" in obs.failed:
+        new = _abort(state, t, AbortReason.ARMING_REFUSED, obs.failed["arm"])
+        return new, Decision(setpoint=None, events=(f"abort: arming refused: {obs.failed['arm']}",))
+    if obs.vehicle.armed:
+        return _to(state, Phase.OFFBOARD, t), Decision(setpoint=ZERO.copy(), request="offboard")
+    return state, Decision(setpoint=ZERO.copy(), request="arm")
+
+
+def _offboard(state, obs, m):
+    t, v = obs.t_s, obs.vehicle
+    if "offboard" in obs.failed:
+        new = _abort(state, t, AbortReason.OFFBOARD_REFUSED, obs.failed["offboard"])
+        return new, _decided(new, obs, f"abort: OFFBOARD refused: {obs.failed['offboard']}")
+    if v.mode == "OFFBOARD":
+        new = _to(state, Phase.JOIN, t, x_ref=v.position_ned_m.copy(), u_cmd=ZERO.copy())
+        return new, Decision(setpoint=ZERO.copy())
+    return state, Decision(setpoint=ZERO.copy(), request="offboard")
+
+
+def _track(state: MissionState, obs: Observation, m: MissionModel, x_ref: np.ndarray, u_ref: np.ndarray) -> tuple[np.ndarray, bool]:
+    """Vehicle command [m/s]: reference velocity plus a pull to the reference, filtered at the
+    vehicle's real position (obstacles, floor, speed and acceleration of the vehicle)."""
+    x_p = obs.vehicle.position_ned_m
+    desired = u_ref + m.track_gain * (x_ref - x_p)
+    prev = state.u_cmd if state.u_cmd is not None else obs.vehicle.velocity_ned_m_s
+    safe = filter_velocity(x_p, desired, m.tick.obstacles, m.command_safety, prev, m.dt_s)
+    return safe.u, bool(safe.changed)
+
+
+def _join(state, obs, m):
+    """Move the reference from where the vehicle took over to the dock point at join speed."""
+    t = obs.t_s
+    dock = _dock(obs, m)
+    v_dock = obs.carrier.velocity_ned_m_s
+    gap = dock - state.x_ref
+    dist = float(norm(gap))
+    step_len = m.join_speed_m_s * m.dt_s
+    if dist <= step_len:
+        x_ref, u_ref = dock.copy(), v_dock.copy()
+    else:
+        u_ref = gap / dist * m.join_speed_m_s + v_dock
+        x_ref = state.x_ref + u_ref * m.dt_s
+    u, acted = _track(state, obs, m, x_ref, u_ref)
+    docked = dist <= step_len and norm(obs.vehicle.position_ned_m - dock) <= m.dock_tolerance_m
+    if docked:
+        new = _to(state, Phase.RIDING, t, x_ref=dock.copy(), e_ref=ZERO.copy(), prev_dock=dock.copy(), u_cmd=u, u_ref=v_dock.copy())
+        return new, Decision(setpoint=u, dock=dock, desired=u_ref, safety_acted=acted, events=("docked: riding the carrier",))
+    return replace(state, x_ref=x_ref, u_cmd=u, u_ref=u_ref), Decision(setpoint=u, dock=dock, desired=u_ref, safety_acted=acted)
+
+
+def _riding(state, obs, m):
+    """Equilibrium (i): the reference stays exactly on the dock; the latch fires at b c - margin."""
+    t = obs.t_s
+    dock = _dock(obs, m)
+    v_dock = obs.carrier.velocity_ned_m_s
+    if norm(m.tick.target - dock) <= m.tick.event_distance_m:
+        theta = float(crossing_fraction(state.prev_dock, dock - state.prev_dock, m.tick.target, m.tick.event_distance_m))
+        anchor = state.prev_dock + theta * (dock - state.prev_dock)
+        new = _to(state, Phase.SEPARATED, t, anchor=anchor, e_ref=ZERO.copy(), x_ref=anchor.copy(),
+                  separation_time_s=t - (1 - theta) * m.dt_s)
+        return _navigate(new, obs, m, events=(f"separated at |e_tc| = {norm(m.tick.target - anchor):.3f} m",))
+    tick = passenger_tick(dock, v_dock, ZERO, False, m.tick, state.u_ref, m.dt_s)
+    u, acted = _track(state, obs, m, dock, tick.u)
+    new = replace(state, x_ref=dock.copy(), e_ref=ZERO.copy(), prev_dock=dock.copy(), u_ref=tick.u, u_cmd=u)
+    return new, Decision(setpoint=u, dock=dock, P=float(tick.P), relative=tick.relative, desired=tick.desired,
+                         safety_acted=acted or bool(tick.safety.changed))
+
+
+def _navigate(state, obs, m, events=()):
+    """Equilibria (ii)->(iii): integrate the reference with the latched anchor, track it."""
+    t = obs.t_s
+    tick = passenger_tick(state.anchor, ZERO, state.e_ref, True, m.tick, state.u_ref, m.dt_s)
+    e_ref = state.e_ref + tick.u * m.dt_s
+    x_ref = state.anchor + e_ref
+    u, acted = _track(state, obs, m, x_ref, tick.u)
+    phase, since, arrived = state.phase, state.since_s, state.arrived_since_s
+    evs = list(events)
+    if phase == Phase.SEPARATED and norm(e_ref) > DEPARTURE_THRESHOLD_M:
+        phase, since = Phase.NAVIGATING, t
+        evs.append("left the carrier: navigating")
+    at_target = norm(obs.vehicle.position_ned_m - m.tick.target) <= m.arrival_radius_m
+    if phase in (Phase.NAVIGATING,):
+        arrived = (arrived if arrived is not None else t) if at_target else None
+        if arrived is not None and t - arrived >= m.arrival_dwell_s:
+            phase, since = Phase.ARRIVED, t
+            evs.append("arrived at the target")
+    new = replace(state, phase=phase, since_s=since, e_ref=e_ref, x_ref=x_ref, u_ref=tick.u, u_cmd=u, arrived_since_s=arrived)
+    dec = Decision(setpoint=u, dock=_dock(obs, m) if obs.carrier is not None else None, P=float(tick.P),
+                   relative=tick.relative, desired=tick.desired, safety_acted=acted or bool(tick.safety.changed), events=tuple(evs))
+    if phase == Phase.ARRIVED:
+        dec = replace(dec, request=m.final_action)
+    return new, dec
+
+
+def _arrived(state, obs, m):
+    t, v = obs.t_s, obs.vehicle
+    want = "AUTO.LOITER" if m.final_action == "hold" else "AUTO.LAND"
+    if v.mode == want:
+        nxt = Phase.HOLD if m.final_action == "hold" else Phase.LAND
+        return _to(state, nxt, t), Decision(setpoint=None, events=(f"vehicle in {want}",))
+    new, dec = _navigate(state, obs, m)
+    return replace(new, phase=Phase.ARRIVED, since_s=state.since_s), replace(dec, request=m.final_action)
+
+
+def _final(state, obs, m):
+    return _to(state, Phase.DONE, obs.t_s), Decision(setpoint=None, events=("mission complete",))
+
+
+def finished(state: MissionState, decision: Decision) -> bool:
+    """True when the controller loop may stop: DONE, or ABORT with nothing left to send."""
+    if state.phase == Phase.DONE:
+        return True
+    return state.phase == Phase.ABORT and decision.setpoint is None and decision.request is None
+
+
+_HANDLERS = {
+    Phase.PREFLIGHT: _preflight,
+    Phase.STREAMING: _streaming,
+    Phase.ARMING: _arming,
+    Phase.OFFBOARD: _offboard,
+    Phase.JOIN: _join,
+    Phase.RIDING: _riding,
+    Phase.SEPARATED: _navigate,
+    Phase.NAVIGATING: _navigate,
+    Phase.ARRIVED: _arrived,
+    Phase.HOLD: _final,
+    Phase.LAND: _final,
+}

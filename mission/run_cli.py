@@ -1,0 +1,171 @@
+"""``marsupial run`` (fly the mission) and ``marsupial plot`` (figures from a flight log)."""
+from __future__ import annotations
+
+import json
+import logging
+import signal
+import threading
+import time
+from contextlib import ExitStack
+from pathlib import Path
+from typing import Any
+
+import click
+import numpy as np
+
+from mission.carrier_bridge import CarrierFeed, PassengerPublisher, open_session
+from mission.clock import ScaledClock
+from mission.config import Config, load_config, with_overrides
+from mission.controller import MissionController, MissionOutcome, mission_info, mission_model
+from mission.errors import ConfigError
+from mission.link import VehicleLink
+from mission.log import FlightRecorder, read_record
+from mission.phases import AbortReason
+
+log = logging.getLogger(__name__)
+
+EXIT_CODES = {AbortReason.GEOMETRY.value: 2, AbortReason.VEHICLE_LOST.value: 3}
+EXIT_ABORT = 5
+
+
+def read_signing_key(path: str) -> bytes:
+    """A 32-byte MAVLink 2 signing key from a file: 64 hex digits or 32 raw bytes."""
+    raw = Path(path).read_bytes()
+    text = raw.strip()
+    try:
+        key = bytes.fromhex(text.decode("ascii"))
+    except (UnicodeDecodeError, ValueError):
+        key = raw
+    if len(key) != 32:
+        raise ConfigError("mavlink.signing_key_file", path, "must hold 32 bytes (raw) or 64 hex digits")
+    return key
+
+
+def fly(cfg: Config, *, speed: float = 1.0, log_dir: str | Path | None = None, stop: threading.Event | None = None,
+        on_event=None) -> MissionOutcome:
+    """Fly one mission with ``cfg`` (the library entry point of ``marsupial run``).
+
+    Opens the Zenoh session and the MAVLink link, runs :class:`MissionController` and closes
+    everything in reverse order. ``speed`` is the clock speed factor (simulation only).
+    """
+    mission_model(cfg)  # validate before anything is opened
+    key = read_signing_key(cfg.mavlink.signing_key_file) if cfg.mavlink.signing_key_file else None
+    clock = ScaledClock(speed)
+    directory = Path(log_dir) if log_dir else Path(cfg.mission.log_dir) / f"{time.strftime('%Y%m%d-%H%M%S')}-{cfg.zenoh.pair}"
+    recorder = FlightRecorder(directory, mission_info(cfg))
+    with ExitStack() as stack:
+        session = open_session(cfg.zenoh)
+        stack.callback(session.close)
+        feed = CarrierFeed(session, cfg.zenoh.pair, clock, encoding=cfg.zenoh.encoding, max_age_s=cfg.mission.carrier_timeout_s)
+        stack.callback(feed.close)
+        publisher = PassengerPublisher(session, cfg.zenoh.pair)
+        stack.callback(publisher.close)
+        link = VehicleLink(cfg.mavlink.url, clock, target_system=cfg.mavlink.target_system,
+                           source_system=cfg.mavlink.source_system, source_component=cfg.mavlink.source_component,
+                           tlog_path=str(recorder.tlog_path), signing_key=key,
+                           heartbeat_timeout_s=cfg.mission.heartbeat_timeout_s)
+        link.open()
+        stack.callback(link.close)
+        controller = MissionController(cfg, link, feed, clock, publisher=publisher, recorder=recorder,
+                                       on_event=on_event, stop=stop)
+        return controller.run()
+
+
+def exit_code(outcome: MissionOutcome) -> int:
+    if outcome.ok:
+        return 0
+    return EXIT_CODES.get(outcome.reason, EXIT_ABORT)
+
+
+@click.command("run")
+@click.argument("config", type=click.Path(dir_okay=False))
+@click.option("--mavlink", "mavlink_url", help="MAVLink endpoint (overrides mavlink.url), e.g. udpin:127.0.0.1:14540, "
+              "udpout:10.0.0.2:14540, tcp:127.0.0.1:5760, /dev/ttyACM0:921600.")
+@click.option("--zenoh-listen", multiple=True, help="Zenoh endpoint to listen on, e.g. tcp/127.0.0.1:7450 (repeatable).")
+@click.option("--zenoh-connect", multiple=True, help="Zenoh endpoint to connect to, e.g. tcp/127.0.0.1:7447 (repeatable).")
+@click.option("--zenoh-mode", type=click.Choice(["peer", "client"]), help="Zenoh session mode (overrides zenoh.mode).")
+@click.option("--pair", help="Name of the marsupial pair: the Zenoh key namespace marsupial/<pair>/...")
+@click.option("--speed", type=click.FloatRange(min=0.01), default=1.0, show_default=True,
+              help="Clock speed factor. Simulation only: must equal the mock vehicle's and carrier's --speed.")
+@click.option("--log-dir", type=click.Path(file_okay=False), help="Where to write the flight log (default mission.log_dir/<time>-<pair>).")
+@click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON at the end.")
+def run(config: str, mavlink_url: str | None, zenoh_listen: tuple[str, ...], zenoh_connect: tuple[str, ...],
+        zenoh_mode: str | None, pair: str | None, speed: float, log_dir: str | None, as_json: bool) -> int:
+    """Fly the marsupial mission described by CONFIG on a PX4 vehicle.
+
+    The passenger takes off from the carrier, joins the dock point, rides while the carrier
+    approaches the target, separates smoothly when the carrier is within b*c of it, flies to the
+    target and ends in Hold or Land (mission.final_action). Carrier states arrive over Zenoh;
+    velocity setpoints go to the vehicle over MAVLink 2 in OFFBOARD mode.
+
+    \b
+    Phase changes are printed as they happen. On Ctrl-C or SIGTERM the vehicle is put in Hold
+    (never disarmed in the air) and the program exits once it shows Hold.
+    Exit codes: 0 mission complete; 2 bad configuration or geometry that breaks the paper's
+    assumptions (nothing was sent to the vehicle); 3 vehicle lost; 5 other abort (the reason is
+    printed: pilot_override, carrier_lost, position_lost, arming_refused, offboard_refused,
+    interrupted, timeout).
+    """
+    cfg = load_config(config)
+    overrides: dict[str, Any] = {"mavlink.url": mavlink_url, "zenoh.pair": pair, "zenoh.mode": zenoh_mode}
+    if zenoh_listen:
+        overrides["zenoh.listen"] = list(zenoh_listen)
+    if zenoh_connect:
+        overrides["zenoh.connect"] = list(zenoh_connect)
+    cfg = with_overrides(cfg, overrides)
+    stop = threading.Event()
+    start = time.monotonic()
+
+    def on_signal(signum: int, _frame: Any) -> None:
+        click.echo(f"signal {signal.Signals(signum).name}: asking the vehicle to Hold", err=True)
+        stop.set()
+
+    previous = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+
+    def on_event(phase: str, text: str) -> None:
+        click.echo(f"[{(time.monotonic() - start) * speed:8.2f} s] {text}")
+
+    try:
+        outcome = fly(cfg, speed=speed, log_dir=log_dir, stop=stop, on_event=on_event)
+    finally:
+        for s, h in previous.items():
+            signal.signal(s, h)
+    if as_json:
+        click.echo(json.dumps(outcome.summary, indent=2))
+    else:
+        for key in ("separation_time_s", "carrier_target_distance_at_separation_m", "relative_input_jump_m_s",
+                    "final_passenger_target_distance_m", "min_carrier_target_distance_m", "p1", "p2", "p3"):
+            click.echo(f"  {key:<42} {outcome.summary.get(key)}")
+    if outcome.log_dir:
+        click.echo(f"flight log: {outcome.log_dir}")
+    if not outcome.ok:
+        click.echo(f"mission aborted: {outcome.reason}: {outcome.detail}", err=True)
+    return exit_code(outcome)
+
+
+@click.command("plot")
+@click.argument("log_dir", type=click.Path(file_okay=False, exists=True))
+@click.option("--out", "out_path", type=click.Path(dir_okay=False), help="Output image (default LOG_DIR/flight.png).")
+def plot(log_dir: str, out_path: str | None) -> int:
+    """Draw the paper-style figures (trajectories; |e_pc|, |e_tc|, |e_pt| over time) from a
+    flight log directory written by ``marsupial run`` or ``marsupial demo``."""
+    from sim.plots import Trajectories, plot_run
+
+    rec = read_record(log_dir)
+    # The law's carrier position for the passenger is the dock point (carrier + offset).
+    x_p, x_c = rec.vec("x_p"), rec.vec("dock")
+    ok = np.isfinite(x_p).all(axis=1) & np.isfinite(x_c).all(axis=1)
+    if not ok.any():
+        raise ConfigError("log_dir", log_dir, "the record holds no tick with both vehicle and carrier positions")
+    info = rec.info
+    riding = np.flatnonzero(rec.phase == "RIDING")
+    t0 = rec.t[riding[0]] if len(riding) else rec.t[ok][0]
+    sep = info.get("separation_time_s")
+    tr = Trajectories(t=rec.t[ok] - t0, x_c=x_c[ok], x_p=x_p[ok], target=np.asarray(info["target_ned_m"]),
+                      separation_time_s=None if sep is None else sep - t0,
+                      obstacles=[(np.asarray(o["center"]), o["radius"]) for o in info.get("obstacles", [])],
+                      frame="local_ned", title=f"flight {Path(log_dir).name} (carrier = its dock point)",
+                      bc_m=info.get("bc_m"))
+    out = plot_run(tr, out_path or Path(log_dir) / "flight.png")
+    click.echo(f"plot written to {out}")
+    return 0
