@@ -1,0 +1,212 @@
+"""``marsupial demo``: the whole system on embedded defaults, no hardware, no external router.
+
+For each marsupial pair it starts three processes that talk over real sockets: the mock
+vehicle (MAVLink over UDP), the carrier simulator (Zenoh) and the mission controller
+(``marsupial run``). The pairs share one Zenoh network: the demo hosts a Zenoh router session on
+a free loopback port and every process connects to it, each pair in its own key namespace
+``marsupial/<pair>/...`` with its own MAVLink port. It shows the live phase of each mission,
+then prints a summary table, writes a plot per pair and exits 0 when P1-P3 held for every pair.
+"""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from contextlib import ExitStack
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import click
+from tqdm import tqdm
+
+from mission.carrier_bridge import open_session
+from mission.config import ZenohSection, load_config
+from mission.phases import Phase
+
+DEFAULT_CONFIG = Path(__file__).resolve().parents[1] / "configs" / "demo.toml"
+PHASE_ORDER = [p.value for p in Phase if p not in (Phase.ABORT,)]
+
+
+def free_port(kind: int) -> int:
+    """A port the OS just handed out on 127.0.0.1 (the process that uses it binds it next)."""
+    with socket.socket(socket.AF_INET, kind) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def _python_cli(*args: str) -> list[str]:
+    return [sys.executable, "-m", "mission.cli", *args]
+
+
+@dataclass
+class PairRun:
+    """The processes and state of one pair in the demo."""
+
+    name: str
+    log_dir: Path
+    procs: dict[str, subprocess.Popen] = field(default_factory=dict)
+    phase: str = "starting"
+    lines: list[str] = field(default_factory=list)
+
+    def summary(self) -> dict:
+        path = self.log_dir / "summary.json"
+        return json.loads(path.read_text()) if path.exists() else {}
+
+
+def _stop(proc: subprocess.Popen, timeout_s: float = 5.0) -> None:
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGTERM)
+        try:
+            proc.wait(timeout=timeout_s)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+def _follow(pair: PairRun, bar: tqdm, lock: threading.Lock) -> None:
+    """Read the mission's stdout: phase lines move the progress bar."""
+    stream = pair.procs["mission"].stdout
+    assert stream is not None
+    for raw in stream:
+        line = raw.rstrip()
+        pair.lines.append(line)
+        if "] phase " in line:
+            phase = line.split("] phase ", 1)[1].split()[0]
+            pair.phase = phase
+            with lock:
+                if phase in PHASE_ORDER:
+                    bar.n = PHASE_ORDER.index(phase) + 1
+                bar.set_postfix_str(" ".join(f"{p.name}:{p.phase}" for p in _ALL_PAIRS), refresh=True)
+                bar.refresh()
+
+
+_ALL_PAIRS: list[PairRun] = []
+
+
+def start_pair(config: str, name: str, zenoh_ep: str, speed: float, log_root: Path, stack: ExitStack,
+               quiet: bool) -> PairRun:
+    """Start the carrier, the mock vehicle and the mission of one pair; register their cleanup."""
+    cfg = load_config(config)
+    pair = PairRun(name=name, log_dir=log_root / name)
+    mav_port = free_port(socket.SOCK_DGRAM)
+    err = subprocess.DEVNULL if quiet else None
+    carrier = subprocess.Popen(_python_cli("carrier", config, "--speed", str(speed), "--pair", name,
+                                           "--zenoh-connect", zenoh_ep), stderr=err)
+    stack.callback(_stop, carrier)
+    start = ",".join(str(v) for v in cfg.scenario.carrier_start)
+    vehicle = subprocess.Popen(_python_cli("mock-vehicle", "--mavlink", "udpin:127.0.0.1:0", "--target",
+                                           f"udpout:127.0.0.1:{mav_port}", "--speed", str(speed), "--start-ned", start,
+                                           "--tau", str(cfg.vehicle.velocity_tau_s)), stderr=err)
+    stack.callback(_stop, vehicle)
+    mission = subprocess.Popen(_python_cli("run", config, "--mavlink", f"udpin:127.0.0.1:{mav_port}", "--zenoh-connect",
+                                           zenoh_ep, "--pair", name, "--speed", str(speed), "--log-dir", str(pair.log_dir)),
+                               stdout=subprocess.PIPE, stderr=err, text=True)
+    stack.callback(_stop, mission, 30.0)
+    pair.procs = {"carrier": carrier, "vehicle": vehicle, "mission": mission}
+    return pair
+
+
+def run_demo(config: str, speed: float, pairs: int, log_root: Path, plot_path: str | None, timeout_s: float,
+             quiet: bool = True, progress: bool = True) -> tuple[int, list[dict]]:
+    """Run ``pairs`` marsupial pairs at ``speed``; return the exit code and each pair's summary."""
+    from mission.run_cli import plot as plot_command
+
+    log_root.mkdir(parents=True, exist_ok=True)
+    zenoh_port = free_port(socket.SOCK_STREAM)
+    zenoh_ep = f"tcp/127.0.0.1:{zenoh_port}"
+    _ALL_PAIRS.clear()
+    lock = threading.Lock()
+    with ExitStack() as stack:
+        router = open_session(ZenohSection(mode="router", listen=[zenoh_ep]))
+        stack.callback(router.close)
+        runs = [start_pair(config, f"pair{i}", zenoh_ep, speed, log_root, stack, quiet) for i in range(pairs)]
+        _ALL_PAIRS.extend(runs)
+        bar = tqdm(total=len(PHASE_ORDER), desc="mission", unit="phase", disable=not progress,
+                   bar_format="{desc}: {n_fmt}/{total_fmt} phases |{bar}| {elapsed} {postfix}")
+        stack.callback(bar.close)
+        readers = [threading.Thread(target=_follow, args=(p, bar, lock), daemon=True) for p in runs]
+        for r in readers:
+            r.start()
+        deadline = time.monotonic() + timeout_s
+        for p in runs:
+            try:
+                p.procs["mission"].wait(timeout=max(deadline - time.monotonic(), 0.1))
+            except subprocess.TimeoutExpired:
+                p.procs["mission"].send_signal(signal.SIGINT)
+        for r in readers:
+            r.join(timeout=5.0)
+    summaries = []
+    for p in runs:
+        s = p.summary()
+        s["pair"] = p.name
+        s["mission_exit_code"] = p.procs["mission"].returncode
+        summaries.append(s)
+        if plot_path and (p.log_dir / "record.csv").exists():
+            out = plot_path if pairs == 1 else str(Path(plot_path).with_stem(f"{Path(plot_path).stem}-{p.name}"))
+            plot_command.callback(str(p.log_dir), out)  # type: ignore[misc]
+    ok = all(s.get("p1") and s.get("p2") and s.get("p3") and s["mission_exit_code"] == 0 for s in summaries)
+    return (0 if ok else 1), summaries
+
+
+ROWS = [
+    ("separation time [s]", "separation_time_s"),
+    ("carrier-target distance at separation [m]", "carrier_target_distance_at_separation_m"),
+    ("relative command jump at separation [m/s]", "relative_input_jump_m_s"),
+    ("closest carrier-target approach [m]", "min_carrier_target_distance_m"),
+    ("final passenger-target distance [m]", "final_passenger_target_distance_m"),
+    ("max passenger speed [m/s]", "max_passenger_speed_m_s"),
+    ("P1 separation", "p1"),
+    ("P2 navigation", "p2"),
+    ("P3 carrier avoids target", "p3"),
+    ("mission exit code", "mission_exit_code"),
+]
+
+
+def format_table(summaries: list[dict]) -> str:
+    width = max(len(r[0]) for r in ROWS)
+    head = f"{'':<{width}}  " + "  ".join(f"{s['pair']:>10}" for s in summaries)
+    lines = [head, "-" * len(head)]
+    for label, key in ROWS:
+        cells = []
+        for s in summaries:
+            v = s.get(key)
+            cells.append(f"{v:>10.3f}" if isinstance(v, float) else f"{str(v):>10}")
+        lines.append(f"{label:<{width}}  " + "  ".join(cells))
+    return "\n".join(lines)
+
+
+@click.command("demo")
+@click.option("--config", type=click.Path(dir_okay=False, exists=True), default=str(DEFAULT_CONFIG), show_default=True,
+              help="Mission configuration shared by every pair.")
+@click.option("--speed", type=click.FloatRange(min=0.1, max=100), default=10.0, show_default=True,
+              help="Speed factor of every clock (vehicle, carrier, mission), like PX4's SIH speed factor.")
+@click.option("--pairs", type=click.IntRange(1, 8), default=1, show_default=True,
+              help="Number of marsupial pairs flying at once on one Zenoh network.")
+@click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default="logs/demo/flight.png", show_default=True,
+              help="Where to write the flight plot (one per pair, suffixed, with --pairs > 1).")
+@click.option("--log-root", type=click.Path(file_okay=False), default="logs/demo", show_default=True,
+              help="Directory for the flight logs (one sub-directory per pair).")
+@click.option("--timeout", "timeout_s", type=float, default=120.0, show_default=True, help="Wall-clock limit [s].")
+@click.option("--verbose-children", is_flag=True, help="Show the children's log output.")
+def demo(config: str, speed: float, pairs: int, plot_path: str, log_root: str, timeout_s: float, verbose_children: bool) -> int:
+    """Fly the whole system: mock PX4 vehicle + carrier simulator + mission controller.
+
+    Each runs as its own process, talking over real UDP (MAVLink 2) and Zenoh on loopback; no
+    hardware, no PX4, no external router. Ends with a summary table and a plot; exit code 0 when
+    the paper's P1-P3 held for every pair.
+    """
+    os.environ.setdefault("PYTHONUNBUFFERED", "1")
+    code, summaries = run_demo(config, speed, pairs, Path(log_root), plot_path, timeout_s, quiet=not verbose_children,
+                               progress=True)
+    click.echo(format_table(summaries))
+    for s in summaries:
+        click.echo(f"{s['pair']}: flight log {Path(log_root) / s['pair']}")
+    if plot_path:
+        click.echo(f"plot: {plot_path}" + (" (one per pair)" if pairs > 1 else ""))
+    click.echo("P1-P3 held" if code == 0 else "P1-P3 did NOT all hold", err=code != 0)
+    return code
