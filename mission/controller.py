@@ -146,6 +146,7 @@ def _vehicle_obs(state: Any) -> VehicleObs | None:
         velocity_ned_m_s=np.zeros(3) if vel is None else np.asarray(vel, dtype=float),
         armed=state.armed, mode=state.mode, heartbeat_age_s=state.heartbeat_age_s,
         position_valid=bool(state.position_valid and pos is not None),
+        position_age_s=float("inf") if state.position_rx_s is None else state.t_s - state.position_rx_s,
     )
 
 

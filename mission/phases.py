@@ -40,6 +40,7 @@ from mission.safety import SafetyConfig, filter_velocity
 from mission.tick import TickModel, crossing_fraction, passenger_tick
 
 DEPARTURE_THRESHOLD_M = 0.1
+TELEMETRY_SILENT_S = 0.4  # position older than this (PX4 streams it at 30 Hz): the link went quiet [s]
 
 
 class Phase(str, Enum):
@@ -85,6 +86,7 @@ class VehicleObs:
     mode: str
     heartbeat_age_s: float
     position_valid: bool = True
+    position_age_s: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -208,6 +210,8 @@ def _failsafes(state: MissionState, obs: Observation, m: MissionModel) -> tuple[
     if ph in (Phase.DONE,):
         return state, Decision(setpoint=None)
     if ph == Phase.ABORT:
+        if v is None or v.heartbeat_age_s > m.heartbeat_timeout_s:
+            return state, Decision(setpoint=None)  # nobody to talk to: PX4's own failsafe acts
         if state.reason in (AbortReason.VEHICLE_LOST.value, AbortReason.PILOT_OVERRIDE.value, AbortReason.GEOMETRY.value):
             return state, Decision(setpoint=None)
         return state, _hold_decision(state, obs)
@@ -222,6 +226,10 @@ def _failsafes(state: MissionState, obs: Observation, m: MissionModel) -> tuple[
         new = _abort(state, t, AbortReason.PILOT_OVERRIDE, f"vehicle switched to {v.mode}")
         return new, Decision(setpoint=None, events=(f"abort: vehicle left OFFBOARD ({v.mode}); not fighting it",))
     if ph not in (Phase.PREFLIGHT,) and v is not None and not v.position_valid:
+        if TELEMETRY_SILENT_S < v.position_age_s <= m.heartbeat_timeout_s:
+            # The position stream went quiet (a link blackout, not an estimator failure): hover
+            # until the heartbeat timeout decides whether the vehicle is lost.
+            return state, Decision(setpoint=ZERO.copy(), events=("telemetry silent",))
         new = _abort(state, t, AbortReason.POSITION_LOST, "position estimate invalid")
         return new, _decided(new, obs, "abort: position estimate lost")
     if ph in BEFORE_SEPARATION - {Phase.PREFLIGHT} and not _carrier_ok(obs, m):

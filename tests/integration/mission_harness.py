@@ -1,0 +1,130 @@
+"""A whole marsupial pair in one test process, over real sockets.
+
+The mock vehicle (its own threads, real UDP on 127.0.0.1), the carrier simulator (its own Zenoh
+session listening on a test-chosen port) and the mission controller (its own Zenoh session and
+MAVLink link) run on clocks with the same speed factor. Faults are injected from the test.
+"""
+from __future__ import annotations
+
+import contextlib
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Iterator
+
+from mission.carrier_bridge import CarrierFeed, PassengerPublisher, open_session
+from mission.clock import ScaledClock
+from mission.config import Config, load_config, with_overrides
+from mission.controller import MissionController, MissionOutcome, mission_info
+from mission.link import VehicleLink
+from mission.log import FlightRecorder
+from mission.phases import Phase
+from sim.carrier import CarrierSim
+from sim.vehicle import MockVehicle, VehicleOptions
+from tests.conftest import CONFIGS, free_port
+import socket
+
+
+@dataclass
+class Pair:
+    cfg: Config
+    vehicle: MockVehicle
+    link: VehicleLink
+    controller: MissionController
+    carrier: CarrierSim
+    carrier_stop: threading.Event
+    carrier_thread: threading.Thread
+    log_dir: Path
+    outcome: MissionOutcome | None = None
+    thread: threading.Thread | None = None
+    events: list[tuple[float, str]] = field(default_factory=list)
+
+    @property
+    def phase(self) -> Phase:
+        return self.controller.state.phase
+
+    def wait_phase(self, *phases: Phase, timeout_s: float = 20.0) -> Phase:
+        """Wait (wall clock) until the mission is in one of ``phases``; fail on timeout/finish."""
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            if self.phase in phases:
+                return self.phase
+            if self.thread is not None and not self.thread.is_alive():
+                raise AssertionError(f"mission ended in {self.phase} ({self.controller.state.reason}) before {phases}")
+            time.sleep(0.002)
+        raise AssertionError(f"timed out waiting for {phases}; phase is {self.phase}")
+
+    def finish(self, timeout_s: float = 30.0) -> MissionOutcome:
+        assert self.thread is not None
+        self.thread.join(timeout=timeout_s)
+        assert not self.thread.is_alive(), f"mission still running in {self.phase}"
+        assert self.outcome is not None
+        return self.outcome
+
+    def stop_carrier(self) -> None:
+        """The carrier stops publishing (its process hangs): its state goes stale."""
+        self.carrier_stop.set()
+        self.carrier_thread.join(timeout=5.0)
+
+
+@contextlib.contextmanager
+def flying_pair(tmp_path: Path, *, speed: float = 10.0, config: str = "demo.toml", overrides: dict[str, Any] | None = None,
+                vehicle: dict[str, Any] | None = None, start: bool = True) -> Iterator[Pair]:
+    cfg = load_config(CONFIGS / config)
+    zport = free_port(socket.SOCK_STREAM)
+    ep = f"tcp/127.0.0.1:{zport}"
+    base = {"zenoh.listen": [], "zenoh.connect": [ep], "zenoh.rendezvous": None}
+    mcfg = with_overrides(cfg, {**base, **(overrides or {})})
+    ccfg = with_overrides(cfg, {"zenoh.listen": [ep], "zenoh.connect": [], "zenoh.rendezvous": None})
+    with contextlib.ExitStack() as stack:
+        carrier_session = open_session(ccfg.zenoh)
+        stack.callback(carrier_session.close)
+        carrier = CarrierSim(ccfg, ScaledClock(speed), carrier_session)
+        stack.callback(carrier.close)
+        carrier_stop = threading.Event()
+        carrier_thread = threading.Thread(target=carrier.run, args=(carrier_stop,), daemon=True)
+        carrier_thread.start()
+        stack.callback(carrier_thread.join, 5.0)
+        stack.callback(carrier_stop.set)
+        session = open_session(mcfg.zenoh)
+        stack.callback(session.close)
+        clock = ScaledClock(speed)
+        feed = CarrierFeed(session, mcfg.zenoh.pair, clock, max_age_s=mcfg.mission.carrier_timeout_s)
+        stack.callback(feed.close)
+        publisher = PassengerPublisher(session, mcfg.zenoh.pair)
+        stack.callback(publisher.close)
+        log_dir = tmp_path / "flight"
+        recorder = FlightRecorder(log_dir, mission_info(mcfg))
+        link = VehicleLink("udpin:127.0.0.1:0", clock, tlog_path=str(recorder.tlog_path),
+                           heartbeat_timeout_s=mcfg.mission.heartbeat_timeout_s)
+        link.open()
+        stack.callback(link.close)
+        vopts = {"target": f"127.0.0.1:{link.port}", "speed": speed, "start_ned": tuple(cfg.scenario.carrier_start),
+                 **(vehicle or {})}
+        v = stack.enter_context(MockVehicle(VehicleOptions(**vopts)))
+        pair = Pair(cfg=mcfg, vehicle=v, link=link, controller=None, carrier=carrier, carrier_stop=carrier_stop,  # type: ignore[arg-type]
+                    carrier_thread=carrier_thread, log_dir=log_dir)
+        stop = threading.Event()
+        pair.controller = MissionController(mcfg, link, feed, clock, publisher=publisher, recorder=recorder,
+                                            on_event=lambda p, text: pair.events.append((clock.now(), text)), stop=stop)
+
+        def fly() -> None:
+            pair.outcome = pair.controller.run()
+
+        pair.thread = threading.Thread(target=fly, daemon=True)
+        stack.callback(lambda: pair.thread.join(30.0) if pair.thread.is_alive() else None)
+        stack.callback(stop.set)
+        if start:
+            pair.thread.start()
+        yield pair
+
+
+def wait_for(predicate: Callable[[], Any], timeout_s: float = 10.0, what: str = "condition") -> Any:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        value = predicate()
+        if value:
+            return value
+        time.sleep(0.005)
+    raise AssertionError(f"timed out waiting for {what}")
