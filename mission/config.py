@@ -153,8 +153,9 @@ class ZenohSection(_Model):
         "loopback port, and connects to it; gossip then meshes the peers. None: loopback ephemeral "
         "listener only (useful with multicast scouting)",
     )
-    carrier_key: str | None = Field(None, description="override of the carrier state key (e.g. a ROS 2 odom key)")
-    carrier_max_age_s: float = Field(0.5, gt=0, description="[s] age above which a carrier state is stale")
+    carrier_key: str | None = Field(
+        None, description="override of the carrier state key, e.g. 'robot1/odom' (zenoh-bridge-ros2dds) or "
+        "'0/odom/nav_msgs::msg::dds_::Odometry_/*' (rmw_zenoh) with encoding 'cdr'")
 
 
 class CarrierSection(_Model):

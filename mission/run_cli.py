@@ -56,7 +56,7 @@ def fly(cfg: Config, *, speed: float = 1.0, log_dir: str | Path | None = None, s
     with ExitStack() as stack:
         session = open_session(cfg.zenoh)
         stack.callback(session.close)
-        feed = CarrierFeed(session, cfg.zenoh.pair, clock, encoding=cfg.zenoh.encoding, max_age_s=cfg.mission.carrier_timeout_s)
+        feed = CarrierFeed.from_section(session, cfg.zenoh, clock, max_age_s=cfg.mission.carrier_timeout_s)
         stack.callback(feed.close)
         publisher = PassengerPublisher(session, cfg.zenoh.pair)
         stack.callback(publisher.close)

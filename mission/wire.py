@@ -1,0 +1,498 @@
+"""Wire formats of the carrier-passenger bus (pure: no Zenoh, no sockets).
+
+Two robots talk over Zenoh: the carrier publishes its state, the passenger publishes its mission
+phase and state. This module defines those messages, their codecs and their validation; the
+transport (:mod:`mission.carrier_bridge`) only moves bytes.
+
+Carrier state, JSON (the default encoding), one UTF-8 object per sample::
+
+    {"stamp": 12.345,            # [s] sender's clock (any monotonic epoch; only its order is used)
+     "seq": 7,                   # integer >= 0, strictly increasing per sender
+     "frame": "local_ned",       # "local_ned" or "wgs84"
+     "position": [n, e, d],      # local_ned: [m] north, east, down in the vehicle's local frame
+                                 # wgs84: [lat deg, lon deg, alt m (AMSL, up)]
+     "velocity": [vn, ve, vd],   # [m/s] NED, whatever the position frame
+     "yaw": 0.1}                 # [rad] heading from north towards east; optional, may be null
+
+Every number must be finite; ``position``/``velocity`` have exactly 3 numbers; unknown fields are
+ignored (forward compatibility). A ``wgs84`` state is converted to local NED through the
+vehicle's origin (PX4's GPS_GLOBAL_ORIGIN) with :func:`geodetic_to_ned`.
+
+Carrier state, ROS 2 ``nav_msgs/msg/Odometry`` in CDR (with the 4-byte encapsulation header), as
+zenoh-bridge-ros2dds (key ``<namespace>/odom``) or rmw_zenoh (key
+``<domain>/<topic>/nav_msgs::msg::dds_::Odometry_/*``) publish it. Decoded with ``rosbags``.
+ROS uses ENU (world) and FLU (body); we convert to NED/FRD:
+
+- position (x=e, y=n, z=u) -> (n, e, -u) [m], in the odometry's world frame taken as the
+  vehicle's local frame (same origin: the user's job, as with any ROS-PX4 setup);
+- twist: REP 105 puts ``twist`` in ``child_frame_id`` (the body, FLU). Assumption: if
+  ``child_frame_id`` is empty or equals ``header.frame_id`` the twist is already world ENU;
+  otherwise it is body FLU and is rotated to ENU by the pose orientation (a unit quaternion is
+  then required). Then ENU -> NED like the position. Angular twist is ignored.
+- yaw: ENU yaw (from east, counter-clockwise) -> NED yaw ``pi/2 - yaw_enu`` wrapped to
+  (-pi, pi]; an all-zero quaternion means "no orientation" and gives ``yaw None``.
+- stamp: ``header.stamp`` [s]; Odometry has no sequence number, so ``seq`` is given by the caller
+  (the bridge numbers samples on receipt and orders CDR samples by stamp only).
+
+Passenger status, JSON::
+
+    {"phase": "RIDING", "stamp": 3.2, "seq": 41,
+     "position": [n, e, d], "velocity": [vn, ve, vd],     # [m], [m/s] local NED
+     "separated": false, "anchor": [n, e, d] | null}      # latched anchor [m] NED after separation
+
+A decode or validation failure raises :class:`WireError` whose ``reason`` is one of
+:data:`REASONS`; the bridge counts drops per reason.
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import numpy as np
+
+from mission.errors import MarsupialError
+
+Frame = Literal["local_ned", "wgs84"]
+FRAMES: tuple[str, ...] = ("local_ned", "wgs84")
+
+#: Mission phases the controller publishes, in mission order (ABORT can follow any).
+PHASES: tuple[str, ...] = (
+    "PREFLIGHT", "STREAMING", "ARMING", "OFFBOARD", "JOIN", "RIDING", "SEPARATED", "NAVIGATING",
+    "ARRIVED", "HOLD", "LAND", "DONE", "ABORT",
+)
+
+#: Reasons a sample is rejected (keys of the bridge's drop counters). ``stale_seq`` and
+#: ``stale_stamp`` come from the bridge's ordering check and ``internal`` from a bug in a
+#: decoder, not from the codecs.
+REASONS: tuple[str, ...] = (
+    "decode", "missing", "type", "shape", "nonfinite", "frame", "range", "orientation", "phase",
+    "origin", "stale_seq", "stale_stamp", "internal",
+)
+
+EARTH_RADIUS_M = 6371000.0  # PX4's CONSTANTS_RADIUS_OF_EARTH [m]
+
+ODOMETRY_TYPE = "nav_msgs/msg/Odometry"
+
+
+class WireError(MarsupialError):
+    """A sample could not be decoded or failed validation. ``reason`` is one of :data:`REASONS`."""
+
+    def __init__(self, reason: str, detail: str = "") -> None:
+        self.reason, self.detail = reason, detail
+        super().__init__(f"{reason}: {detail}" if detail else reason)
+
+
+# --------------------------------------------------------------------------- values
+
+
+def _vec3(value: Any, name: str) -> np.ndarray:
+    """A read-only float array (3,) from a sequence of 3 real numbers (not bools)."""
+    if isinstance(value, np.ndarray):
+        if value.shape != (3,):
+            raise WireError("shape", f"{name} must have 3 components, got shape {value.shape}")
+        if not np.issubdtype(value.dtype, np.number) or np.issubdtype(value.dtype, np.bool_):
+            raise WireError("type", f"{name} must be numbers")
+        out = value.astype(float)
+    else:
+        if not isinstance(value, (list, tuple)):
+            raise WireError("type", f"{name} must be a list of 3 numbers, got {type(value).__name__}")
+        if len(value) != 3:
+            raise WireError("shape", f"{name} must have 3 components, got {len(value)}")
+        for v in value:
+            if isinstance(v, bool) or not isinstance(v, (int, float)):
+                raise WireError("type", f"{name} must be numbers, got {type(v).__name__}")
+        try:
+            out = np.array(value, dtype=float)
+        except OverflowError:
+            raise WireError("nonfinite", f"{name} overflows a float") from None
+    if not np.all(np.isfinite(out)):
+        raise WireError("nonfinite", f"{name} = {out.tolist()}")
+    out.flags.writeable = False
+    return out
+
+
+def _real(value: Any, name: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
+        raise WireError("type", f"{name} must be a number, got {type(value).__name__}")
+    try:
+        out = float(value)
+    except OverflowError:
+        raise WireError("nonfinite", f"{name} overflows a float") from None
+    if not math.isfinite(out):
+        raise WireError("nonfinite", f"{name} = {out}")
+    return out
+
+
+def _int(value: Any, name: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise WireError("type", f"{name} must be an integer, got {type(value).__name__}")
+    if value < 0:
+        raise WireError("range", f"{name} must be >= 0, got {value}")
+    return int(value)
+
+
+def wrap_pi(angle_rad: float) -> float:
+    """Angle wrapped to (-pi, pi] [rad]."""
+    a = math.remainder(angle_rad, 2 * math.pi)
+    return math.pi if a == -math.pi else a
+
+
+@dataclass(frozen=True)
+class CarrierState:
+    """The carrier's state as sent on the wire (validated on construction).
+
+    stamp_s [s] sender's clock; seq (>= 0) per-sender sequence number; frame "local_ned" or
+    "wgs84"; position: local_ned [m] (n, e, d), wgs84 (lat [deg], lon [deg], alt [m] AMSL up);
+    velocity_ned_m_s [m/s] NED in both frames; yaw_rad [rad] heading from north towards east, or
+    None. Arrays are read-only float (3,). Raises :class:`WireError` when invalid.
+    """
+
+    stamp_s: float
+    seq: int
+    frame: Frame
+    position: np.ndarray
+    velocity_ned_m_s: np.ndarray
+    yaw_rad: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.frame not in FRAMES:
+            raise WireError("frame", f"unknown frame {self.frame!r} (expected one of {FRAMES})")
+        object.__setattr__(self, "stamp_s", _real(self.stamp_s, "stamp"))
+        object.__setattr__(self, "seq", _int(self.seq, "seq"))
+        object.__setattr__(self, "position", _vec3(self.position, "position"))
+        object.__setattr__(self, "velocity_ned_m_s", _vec3(self.velocity_ned_m_s, "velocity"))
+        if self.yaw_rad is not None:
+            object.__setattr__(self, "yaw_rad", _real(self.yaw_rad, "yaw"))
+        if self.frame == "wgs84":
+            lat, lon, _ = self.position
+            if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
+                raise WireError("range", f"wgs84 lat/lon out of range: {lat}, {lon}")
+
+
+@dataclass(frozen=True)
+class PassengerStatus:
+    """The passenger's mission phase and state (validated on construction).
+
+    phase one of :data:`PHASES`; stamp_s [s] sender's clock; seq (>= 0); position_ned_m [m] and
+    velocity_ned_m_s [m/s] local NED; separated: the separation latch has fired; anchor_ned_m
+    [m] the latched anchor (carrier position at separation) or None.
+    """
+
+    phase: str
+    stamp_s: float
+    seq: int
+    position_ned_m: np.ndarray
+    velocity_ned_m_s: np.ndarray
+    separated: bool = False
+    anchor_ned_m: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.phase, str):
+            raise WireError("type", f"phase must be a string, got {type(self.phase).__name__}")
+        if self.phase not in PHASES:
+            raise WireError("phase", f"unknown phase {self.phase!r}")
+        if not isinstance(self.separated, (bool, np.bool_)):
+            raise WireError("type", f"separated must be a boolean, got {type(self.separated).__name__}")
+        object.__setattr__(self, "separated", bool(self.separated))
+        object.__setattr__(self, "stamp_s", _real(self.stamp_s, "stamp"))
+        object.__setattr__(self, "seq", _int(self.seq, "seq"))
+        object.__setattr__(self, "position_ned_m", _vec3(self.position_ned_m, "position"))
+        object.__setattr__(self, "velocity_ned_m_s", _vec3(self.velocity_ned_m_s, "velocity"))
+        if self.anchor_ned_m is not None:
+            object.__setattr__(self, "anchor_ned_m", _vec3(self.anchor_ned_m, "anchor"))
+
+
+# --------------------------------------------------------------------------- geodesy
+
+
+@dataclass(frozen=True)
+class GeoOrigin:
+    """Origin of the local NED frame: lat [deg], lon [deg], alt [m] AMSL (PX4's GPS_GLOBAL_ORIGIN)."""
+
+    lat_deg: float
+    lon_deg: float
+    alt_m: float
+
+    def __post_init__(self) -> None:
+        for name in ("lat_deg", "lon_deg", "alt_m"):
+            if not math.isfinite(getattr(self, name)):
+                raise WireError("origin", f"origin {name} must be finite")
+        if not (-90.0 < self.lat_deg < 90.0 and -180.0 <= self.lon_deg <= 180.0):
+            raise WireError("origin", f"origin out of range: {self.lat_deg}, {self.lon_deg}")
+
+
+def geodetic_to_ned(lat_deg: float, lon_deg: float, alt_m: float, origin: GeoOrigin) -> np.ndarray:
+    """Local NED [m] (3,) of a geodetic point, relative to ``origin``.
+
+    Azimuthal equidistant projection on a sphere of radius 6 371 000 m, exactly PX4's
+    ``MapProjection::project`` (so our local frame agrees with the vehicle's); down = origin
+    altitude minus altitude. A local tangent-plane approximation: good to centimetres within a
+    few kilometres of the origin.
+    """
+    lat, lon = math.radians(lat_deg), math.radians(lon_deg)
+    lat0, lon0 = math.radians(origin.lat_deg), math.radians(origin.lon_deg)
+    sin0, cos0 = math.sin(lat0), math.cos(lat0)
+    sin_lat, cos_lat = math.sin(lat), math.cos(lat)
+    cos_dlon = math.cos(lon - lon0)
+    c = math.acos(min(max(sin0 * sin_lat + cos0 * cos_lat * cos_dlon, -1.0), 1.0))
+    k = c / math.sin(c) if abs(c) > 0.0 else 1.0
+    north = k * (cos0 * sin_lat - sin0 * cos_lat * cos_dlon) * EARTH_RADIUS_M
+    east = k * cos_lat * math.sin(lon - lon0) * EARTH_RADIUS_M
+    return np.array([north, east, origin.alt_m - alt_m])
+
+
+def ned_to_geodetic(ned_m: np.ndarray, origin: GeoOrigin) -> tuple[float, float, float]:
+    """Inverse of :func:`geodetic_to_ned` (PX4's ``MapProjection::reproject``): (lat [deg],
+    lon [deg], alt [m]) of a local NED point [m]."""
+    north, east, down = (float(v) for v in ned_m)
+    lat0, lon0 = math.radians(origin.lat_deg), math.radians(origin.lon_deg)
+    sin0, cos0 = math.sin(lat0), math.cos(lat0)
+    x, y = north / EARTH_RADIUS_M, east / EARTH_RADIUS_M
+    c = math.hypot(x, y)
+    if c > 0.0:
+        sin_c, cos_c = math.sin(c), math.cos(c)
+        lat = math.asin(cos_c * sin0 + x * sin_c * cos0 / c)
+        lon = lon0 + math.atan2(y * sin_c, c * cos0 * cos_c - x * sin0 * sin_c)
+    else:
+        lat, lon = lat0, lon0
+    return math.degrees(lat), math.degrees(lon), origin.alt_m - down
+
+
+def to_local_ned(state: CarrierState, origin: GeoOrigin | None) -> CarrierState:
+    """``state`` in frame local_ned: unchanged if already so; a wgs84 state is projected through
+    ``origin`` (raises ``WireError("origin")`` if there is none)."""
+    if state.frame == "local_ned":
+        return state
+    if origin is None:
+        raise WireError("origin", "a wgs84 carrier state needs the vehicle's origin (GPS_GLOBAL_ORIGIN)")
+    ned = geodetic_to_ned(*(float(v) for v in state.position), origin)
+    return CarrierState(state.stamp_s, state.seq, "local_ned", ned, state.velocity_ned_m_s, state.yaw_rad)
+
+
+# --------------------------------------------------------------------------- JSON
+
+
+def _load_object(raw: bytes | bytearray | memoryview | str) -> dict[str, Any]:
+    try:
+        text = raw if isinstance(raw, str) else bytes(raw).decode("utf-8")
+        obj = json.loads(text)
+    except (UnicodeDecodeError, ValueError, RecursionError) as exc:
+        raise WireError("decode", f"not UTF-8 JSON: {exc}") from None
+    if not isinstance(obj, dict):
+        raise WireError("decode", f"expected a JSON object, got {type(obj).__name__}")
+    return obj
+
+
+def _field(obj: dict[str, Any], name: str) -> Any:
+    if name not in obj:
+        raise WireError("missing", f"field {name!r} missing")
+    return obj[name]
+
+
+def encode_carrier_json(state: CarrierState) -> bytes:
+    """The JSON bytes of ``state`` (schema in the module docstring)."""
+    return json.dumps({
+        "stamp": state.stamp_s,
+        "seq": state.seq,
+        "frame": state.frame,
+        "position": state.position.tolist(),
+        "velocity": state.velocity_ned_m_s.tolist(),
+        "yaw": state.yaw_rad,
+    }, allow_nan=False).encode()
+
+
+def decode_carrier_json(raw: bytes | bytearray | memoryview | str) -> CarrierState:
+    """A validated :class:`CarrierState` from JSON bytes; raises :class:`WireError`.
+
+    JSON's non-standard ``NaN``/``Infinity`` literals are parsed, then rejected as "nonfinite".
+    """
+    obj = _load_object(raw)
+    frame = _field(obj, "frame")
+    if not isinstance(frame, str):
+        raise WireError("type", f"frame must be a string, got {type(frame).__name__}")
+    return CarrierState(
+        stamp_s=_field(obj, "stamp"),
+        seq=_field(obj, "seq"),
+        frame=frame,  # type: ignore[arg-type]  # validated by CarrierState
+        position=_field(obj, "position"),
+        velocity_ned_m_s=_field(obj, "velocity"),
+        yaw_rad=obj.get("yaw"),
+    )
+
+
+def encode_passenger_json(status: PassengerStatus) -> bytes:
+    """The JSON bytes of ``status`` (schema in the module docstring)."""
+    return json.dumps({
+        "phase": status.phase,
+        "stamp": status.stamp_s,
+        "seq": status.seq,
+        "position": status.position_ned_m.tolist(),
+        "velocity": status.velocity_ned_m_s.tolist(),
+        "separated": status.separated,
+        "anchor": None if status.anchor_ned_m is None else status.anchor_ned_m.tolist(),
+    }, allow_nan=False).encode()
+
+
+def decode_passenger_json(raw: bytes | bytearray | memoryview | str) -> PassengerStatus:
+    """A validated :class:`PassengerStatus` from JSON bytes; raises :class:`WireError`."""
+    obj = _load_object(raw)
+    return PassengerStatus(
+        phase=_field(obj, "phase"),
+        stamp_s=_field(obj, "stamp"),
+        seq=_field(obj, "seq"),
+        position_ned_m=_field(obj, "position"),
+        velocity_ned_m_s=_field(obj, "velocity"),
+        separated=_field(obj, "separated"),
+        anchor_ned_m=obj.get("anchor"),
+    )
+
+
+# --------------------------------------------------------------------------- ROS 2 CDR
+
+
+def ros2dds_odom_key(namespace: str = "") -> str:
+    """Key of ``<namespace>/odom`` as zenoh-bridge-ros2dds routes it (no leading slash)."""
+    ns = namespace.strip("/")
+    return f"{ns}/odom" if ns else "odom"
+
+
+def rmw_zenoh_odom_key(domain_id: int = 0, topic: str = "odom") -> str:
+    """Key expression matching an Odometry topic published through rmw_zenoh (any type hash)."""
+    return f"{domain_id}/{topic.strip('/')}/nav_msgs::msg::dds_::Odometry_/*"
+
+
+_typestore: Any = None
+
+
+def _ros() -> Any:
+    """The rosbags ROS 2 Humble type store (built once, on first use)."""
+    global _typestore
+    if _typestore is None:
+        from rosbags.typesys import Stores, get_typestore
+
+        _typestore = get_typestore(Stores.ROS2_HUMBLE)
+    return _typestore
+
+
+def _quat_rotate(q_xyzw: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Rotate ``v`` by the unit quaternion ``q`` (x, y, z, w): ``q v q*``."""
+    x, y, z, w = q_xyzw
+    u = np.array([x, y, z])
+    return v + 2.0 * np.cross(u, np.cross(u, v) + w * v)
+
+
+def enu_to_ned(v: np.ndarray) -> np.ndarray:
+    """(e, n, u) -> (n, e, -u); its own inverse."""
+    return np.array([v[1], v[0], -v[2]], dtype=float)
+
+
+def _yaw_quat_enu(yaw_ned_rad: float) -> np.ndarray:
+    """Quaternion (x, y, z, w) of a pure ENU yaw equivalent to the NED heading ``yaw_ned_rad``."""
+    yaw_enu = math.pi / 2 - yaw_ned_rad
+    return np.array([0.0, 0.0, math.sin(yaw_enu / 2), math.cos(yaw_enu / 2)])
+
+
+def encode_odometry_cdr(
+    state: CarrierState,
+    *,
+    frame_id: str = "odom",
+    child_frame_id: str = "base_link",
+) -> bytes:
+    """``state`` (local_ned) as a CDR ``nav_msgs/msg/Odometry`` (little endian, with header).
+
+    Position and orientation in ENU; with a ``child_frame_id`` other than ``""``/``frame_id``
+    the linear twist is expressed in the body FLU frame (rotated by the yaw; the state must then
+    have a yaw), else in world ENU. ``yaw None`` gives an all-zero quaternion.
+    """
+    if state.frame != "local_ned":
+        raise WireError("frame", "encode_odometry_cdr needs a local_ned state")
+    ts = _ros()
+    T = ts.types
+    body = child_frame_id not in ("", frame_id)
+    if state.yaw_rad is None:
+        if body:
+            raise WireError("orientation", "a body-frame twist needs the state's yaw")
+        q = np.zeros(4)
+    else:
+        q = _yaw_quat_enu(state.yaw_rad)
+    p_enu = enu_to_ned(state.position)
+    v_enu = enu_to_ned(state.velocity_ned_m_s)
+    if body:
+        q_inv = np.array([-q[0], -q[1], -q[2], q[3]])
+        v_enu = _quat_rotate(q_inv, v_enu)
+    sec = math.floor(state.stamp_s)
+    nanosec = min(int(round((state.stamp_s - sec) * 1e9)), 999_999_999)
+    msg = T[ODOMETRY_TYPE](
+        header=T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=sec, nanosec=nanosec), frame_id=frame_id),
+        child_frame_id=child_frame_id,
+        pose=T["geometry_msgs/msg/PoseWithCovariance"](
+            pose=T["geometry_msgs/msg/Pose"](
+                position=T["geometry_msgs/msg/Point"](x=float(p_enu[0]), y=float(p_enu[1]), z=float(p_enu[2])),
+                orientation=T["geometry_msgs/msg/Quaternion"](x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3])),
+            ),
+            covariance=np.zeros(36),
+        ),
+        twist=T["geometry_msgs/msg/TwistWithCovariance"](
+            twist=T["geometry_msgs/msg/Twist"](
+                linear=T["geometry_msgs/msg/Vector3"](x=float(v_enu[0]), y=float(v_enu[1]), z=float(v_enu[2])),
+                angular=T["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0),
+            ),
+            covariance=np.zeros(36),
+        ),
+    )
+    return bytes(ts.serialize_cdr(msg, ODOMETRY_TYPE))
+
+
+def decode_odometry_cdr(raw: bytes | bytearray | memoryview, *, seq: int = 0) -> CarrierState:
+    """A validated local_ned :class:`CarrierState` from a CDR ``nav_msgs/msg/Odometry``.
+
+    Frames per the module docstring (ENU/FLU -> NED/FRD). Raises :class:`WireError`: "decode"
+    (not an Odometry), "nonfinite", "orientation" (body twist with a non-unit quaternion).
+    """
+    try:
+        msg = _ros().deserialize_cdr(bytes(raw), ODOMETRY_TYPE)
+    except Exception as exc:  # rosbags raises assorted errors (struct, index, unicode) on garbage
+        raise WireError("decode", f"not a CDR {ODOMETRY_TYPE}: {type(exc).__name__}: {exc}") from None
+    stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+    pose = msg.pose.pose
+    p_enu = np.array([pose.position.x, pose.position.y, pose.position.z], dtype=float)
+    q = np.array([pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w], dtype=float)
+    lin = msg.twist.twist.linear
+    v = np.array([lin.x, lin.y, lin.z], dtype=float)
+    if not (np.all(np.isfinite(p_enu)) and np.all(np.isfinite(q)) and np.all(np.isfinite(v)) and math.isfinite(stamp)):
+        raise WireError("nonfinite", "Odometry has a non-finite number")
+    qn = float(np.linalg.norm(q))
+    has_orientation = qn > 0.0
+    if has_orientation and abs(qn - 1.0) > 1e-3:
+        raise WireError("orientation", f"quaternion norm {qn:.6f} is not 1")
+    body = msg.child_frame_id not in ("", msg.header.frame_id)
+    if body:
+        if not has_orientation:
+            raise WireError("orientation", "body-frame twist with an all-zero quaternion")
+        v = _quat_rotate(q / qn, v)
+    yaw = None
+    if has_orientation:
+        x, y, z, w = q / qn
+        yaw_enu = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+        yaw = wrap_pi(math.pi / 2 - yaw_enu)
+    return CarrierState(stamp, seq, "local_ned", enu_to_ned(p_enu), enu_to_ned(v), yaw)
+
+
+def decode_carrier(raw: bytes | bytearray | memoryview, encoding: str, *, seq: int = 0) -> CarrierState:
+    """Dispatch on ``encoding`` ("json" or "cdr"); ``seq`` is used by CDR only."""
+    if encoding == "json":
+        return decode_carrier_json(raw)
+    if encoding == "cdr":
+        return decode_odometry_cdr(raw, seq=seq)
+    raise ValueError(f"unknown encoding {encoding!r}")
+
+
+def encode_carrier(state: CarrierState, encoding: str) -> bytes:
+    """Dispatch on ``encoding`` ("json" or "cdr")."""
+    if encoding == "json":
+        return encode_carrier_json(state)
+    if encoding == "cdr":
+        return encode_odometry_cdr(state)
+    raise ValueError(f"unknown encoding {encoding!r}")

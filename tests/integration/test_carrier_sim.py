@@ -1,0 +1,388 @@
+"""The carrier simulator over real Zenoh: waits for the passenger, drives towards the target with
+the paper's law while the passenger rides, stops after separation (or keeps its velocity under
+Remark 1), and stops when the passenger goes silent or vanishes. Plus its command line."""
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+import subprocess
+import sys
+import threading
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+import zenoh
+
+from mission.carrier_bridge import CarrierFeed, PassengerPublisher, keys
+from mission.cli import main as cli_main
+from mission.clock import ManualClock, ScaledClock
+from mission.config import Config, from_dict
+from mission.wire import CarrierState, PassengerStatus, decode_carrier_json
+from sim.carrier import CarrierMode, CarrierSim
+from tests.integration.zenoh_util import endpoint, free_port, peer, wait_for
+
+pytestmark = pytest.mark.timeout(30)
+
+TARGET = np.array([20.0, 15.0, -4.0])
+
+
+def _cfg(pair: str = "sim", **scenario: object) -> Config:
+    return from_dict({
+        "zenoh": {"pair": pair},
+        "scenario": {"carrier_start": [0.0, 0.0, 0.0], "target": TARGET.tolist(), **scenario},
+        "carrier": {"rate_hz": 30.0, "max_speed_m_s": 3.0, "passenger_timeout_s": 1.0},
+    })
+
+
+class Passenger:
+    """The test's stand-in for the mission controller: publishes statuses with its own seq."""
+
+    def __init__(self, session: zenoh.Session, pair: str, clock: ManualClock | ScaledClock) -> None:
+        self.pub = PassengerPublisher(session, pair)
+        self.clock, self.seq = clock, 0
+
+    def say(self, phase: str) -> int:
+        self.seq += 1
+        separated = phase in ("SEPARATED", "NAVIGATING", "ARRIVED", "HOLD", "LAND", "DONE")
+        self.pub.publish(PassengerStatus(phase, self.clock.now(), self.seq, [0, 0, -1.5], [0, 0, 0], separated))
+        return self.seq
+
+
+class Recorder:
+    """Every carrier state published on the pair's key, in arrival order (thread-safe)."""
+
+    def __init__(self, session: zenoh.Session, pair: str) -> None:
+        self._lock = threading.Lock()
+        self._states: list[CarrierState] = []
+        self.sub = session.declare_subscriber(keys(pair).carrier_state, self._on)
+
+    def _on(self, sample: zenoh.Sample) -> None:
+        s = decode_carrier_json(sample.payload.to_bytes())
+        with self._lock:
+            self._states.append(s)
+
+    @property
+    def states(self) -> list[CarrierState]:
+        with self._lock:
+            return list(self._states)
+
+
+@contextlib.contextmanager
+def sessions(n_clients: int = 2) -> Iterator[list[zenoh.Session]]:
+    """A listening session (the simulator's) and ``n_clients`` sessions connected to it."""
+    ep = endpoint(free_port())
+    out = [peer(listen=[ep])]
+    try:
+        for _ in range(n_clients):
+            out.append(peer(connect=[ep]))
+        for s in out[1:]:
+            wait_for(lambda s=s: len(list(s.info.peers_zid())) > 0, what="connected")
+        yield out
+    finally:
+        for s in reversed(out):
+            s.close()
+
+
+@contextlib.contextmanager
+def running(sim: CarrierSim) -> Iterator[threading.Event]:
+    stop = threading.Event()
+    thread = threading.Thread(target=sim.run, args=(stop,), name="carrier-sim")
+    thread.start()
+    try:
+        yield stop
+    finally:
+        stop.set()
+        thread.join(timeout=5)
+        assert not thread.is_alive()
+
+
+def _seen(sim: CarrierSim, seq: int) -> bool:
+    rx = sim.passenger.latest()
+    return rx is not None and rx.status.seq == seq
+
+
+def test_step_by_step_waits_drives_towards_the_target_and_stops_after_separation() -> None:
+    clock = ManualClock()
+    dt = 1.0 / 30.0
+    with sessions(1) as (sa, sb), CarrierSim(_cfg(), clock, sa) as sim, \
+            CarrierFeed(sb, "sim", clock) as observer:
+        passenger = Passenger(sb, "sim", clock)
+        try:
+            wait_for(lambda: sim.publisher.matched, what="observer subscribed")
+            first = sim.step(0.0)
+            assert sim.mode is CarrierMode.WAITING
+            np.testing.assert_array_equal(first.position, [0.0, 0.0, 0.0])
+            np.testing.assert_array_equal(first.velocity_ned_m_s, [0.0, 0.0, 0.0])
+            wait_for(lambda: passenger.pub.matched)
+            seq = passenger.say("JOIN")
+            wait_for(lambda: _seen(sim, seq), what="JOIN seen")
+            for _ in range(3):
+                clock.advance(dt)
+                s = sim.step(dt)
+                assert sim.mode is CarrierMode.WAITING and not s.velocity_ned_m_s.any()
+
+            seq = passenger.say("RIDING")
+            wait_for(lambda: _seen(sim, seq), what="RIDING seen")
+            states = []
+            for _ in range(20):
+                clock.advance(dt)
+                states.append(sim.step(dt))
+            assert sim.mode is CarrierMode.APPROACHING
+            dist = [np.linalg.norm((TARGET - s.position)[:2]) for s in states]
+            assert all(b < a for a, b in zip(dist, dist[1:]))  # monotonically closer
+            for s in states:
+                assert s.position[2] == 0.0 and s.velocity_ned_m_s[2] == 0.0  # planar carrier
+                assert np.linalg.norm(s.velocity_ned_m_s) <= 3.0 + 1e-9  # carrier.max_speed_m_s
+                e_tc = (TARGET - s.position)[:2]
+                heading = s.velocity_ned_m_s[:2] / np.linalg.norm(s.velocity_ned_m_s[:2])
+                np.testing.assert_allclose(heading, e_tc / np.linalg.norm(e_tc), atol=1e-9)  # u_c ∥ e_tc
+            # position integrates the held command
+            np.testing.assert_allclose(states[-1].position, states[-2].position + states[-2].velocity_ned_m_s * dt)
+            # published as returned (the observer may miss a sample: publishers drop under congestion)
+            rx = wait_for(lambda: (r := observer.latest()) is not None and r.state.seq >= states[0].seq and r)
+            sent = {s.seq: s for s in states}
+            np.testing.assert_array_equal(rx.state.position, sent[rx.state.seq].position)
+            np.testing.assert_array_equal(rx.state.velocity_ned_m_s, sent[rx.state.seq].velocity_ned_m_s)
+
+            seq = passenger.say("SEPARATED")
+            wait_for(lambda: _seen(sim, seq), what="SEPARATED seen")
+            clock.advance(dt)
+            stop = sim.step(dt)
+            assert sim.mode is CarrierMode.SEPARATED
+            assert not stop.velocity_ned_m_s.any()
+            for _ in range(5):
+                clock.advance(dt)
+                np.testing.assert_array_equal(sim.step(dt).position, stop.position)
+            # latched: a later RIDING does not restart the approach
+            seq = passenger.say("RIDING")
+            wait_for(lambda: _seen(sim, seq))
+            clock.advance(dt)
+            assert not sim.step(dt).velocity_ned_m_s.any() and sim.mode is CarrierMode.SEPARATED
+        finally:
+            passenger.pub.close()
+
+
+def test_remark1_keeps_the_velocity_of_the_separation_instant() -> None:
+    clock = ManualClock()
+    dt = 1.0 / 30.0
+    with sessions(1) as (sa, sb), CarrierSim(_cfg(carrier_mode="remark1"), clock, sa) as sim:
+        passenger = Passenger(sb, "sim", clock)
+        try:
+            sim.step(0.0)
+            wait_for(lambda: passenger.pub.matched)
+            seq = passenger.say("RIDING")
+            wait_for(lambda: _seen(sim, seq))
+            for _ in range(5):
+                clock.advance(dt)
+                before = sim.step(dt)
+            seq = passenger.say("NAVIGATING")
+            wait_for(lambda: _seen(sim, seq))  # any phase after separation
+            after = []
+            for _ in range(5):
+                clock.advance(dt)
+                after.append(sim.step(dt))
+            assert sim.mode is CarrierMode.SEPARATED
+            for s in after:
+                np.testing.assert_allclose(s.velocity_ned_m_s, before.velocity_ned_m_s, atol=1e-12)
+            np.testing.assert_allclose(after[-1].position - after[-2].position, before.velocity_ned_m_s * dt, atol=1e-12)
+        finally:
+            passenger.pub.close()
+
+
+def test_abort_before_separation_stops_for_good() -> None:
+    clock = ManualClock()
+    dt = 1.0 / 30.0
+    with sessions(1) as (sa, sb), CarrierSim(_cfg(), clock, sa) as sim:
+        passenger = Passenger(sb, "sim", clock)
+        try:
+            sim.step(0.0)
+            wait_for(lambda: passenger.pub.matched)
+            seq = passenger.say("RIDING")
+            wait_for(lambda: _seen(sim, seq))
+            clock.advance(dt)
+            assert sim.step(dt).velocity_ned_m_s.any()
+            seq = passenger.say("ABORT")
+            wait_for(lambda: _seen(sim, seq))
+            clock.advance(dt)
+            assert not sim.step(dt).velocity_ned_m_s.any() and sim.mode is CarrierMode.STOPPED
+            seq = passenger.say("RIDING")
+            wait_for(lambda: _seen(sim, seq))
+            clock.advance(dt)
+            assert not sim.step(dt).velocity_ned_m_s.any() and sim.mode is CarrierMode.STOPPED
+        finally:
+            passenger.pub.close()
+
+
+def test_2d_scenario_publishes_3d_states_at_down_zero() -> None:
+    clock = ManualClock()
+    cfg = from_dict({"zenoh": {"pair": "flat"}, "scenario": {"dim": 2, "carrier_start": [1.0, 2.0], "target": [20.0, 15.0]}})
+    with sessions(1) as (sa, sb), CarrierSim(cfg, clock, sa) as sim:
+        passenger = Passenger(sb, "flat", clock)
+        try:
+            assert sim.step(0.0).position.tolist() == [1.0, 2.0, 0.0]
+            wait_for(lambda: passenger.pub.matched)
+            seq = passenger.say("RIDING")
+            wait_for(lambda: _seen(sim, seq))
+            clock.advance(0.1)
+            s = sim.step(0.1)
+            assert s.velocity_ned_m_s.shape == (3,) and s.velocity_ned_m_s[2] == 0.0 and s.velocity_ned_m_s[0] > 0
+        finally:
+            passenger.pub.close()
+
+
+def test_cdr_carrier_on_a_ros_key_reaches_a_feed_configured_the_same_way() -> None:
+    clock = ManualClock()
+    cfg = from_dict({"zenoh": {"pair": "ros", "encoding": "cdr", "carrier_key": "robot1/odom"},
+                     "scenario": {"carrier_start": [3.0, 4.0, 0.0], "target": TARGET.tolist()}})
+    with sessions(1) as (sa, sb), CarrierSim(cfg, clock, sa) as sim, \
+            CarrierFeed.from_section(sb, cfg.zenoh, clock, max_age_s=0.5) as feed:
+        passenger = Passenger(sb, "ros", clock)
+        try:
+            wait_for(lambda: sim.publisher.matched)
+            wait_for(lambda: passenger.pub.matched)
+            seq = passenger.say("RIDING")
+            wait_for(lambda: _seen(sim, seq))
+            sent = {}
+
+            def got_one() -> bool:
+                clock.advance(0.1)
+                s = sim.step(0.1)
+                sent[round(s.stamp_s, 6)] = s
+                rx = feed.latest()
+                return rx is not None and rx.state.velocity_ned_m_s.any()
+
+            wait_for(got_one)
+            rx = feed.latest()
+            assert rx is not None and rx.key == "robot1/odom"
+            ref = sent[round(rx.state.stamp_s, 6)]  # Odometry carries the stamp, not the seq
+            np.testing.assert_allclose(rx.state.position, ref.position, atol=1e-9)
+            np.testing.assert_allclose(rx.state.velocity_ned_m_s, ref.velocity_ned_m_s, atol=1e-9)
+            assert rx.state.yaw_rad == pytest.approx(ref.yaw_rad)
+        finally:
+            passenger.pub.close()
+
+
+def test_running_carrier_stops_within_one_period_after_separated() -> None:
+    clock = ScaledClock(speed=2.0)
+    with sessions(1) as (sa, sb), CarrierSim(_cfg(), clock, sa) as sim:
+        period = sim.period_s
+        recorder = Recorder(sb, "sim")
+        passenger = Passenger(sb, "sim", clock)
+        try:
+            wait_for(lambda: sim.publisher.matched, what="recorder subscribed")
+            with running(sim):
+                wait_for(lambda: passenger.pub.matched)
+
+                def moving() -> bool:
+                    passenger.say("RIDING")
+                    st = recorder.states
+                    return len(st) > 0 and np.linalg.norm(st[-1].position) > 0.5
+
+                wait_for(moving, what="carrier moving")
+                seq = passenger.say("SEPARATED")
+                wait_for(lambda: _seen(sim, seq), what="SEPARATED received")
+                rx_time = sim.passenger.latest().rx_time_s  # type: ignore[union-attr]
+                wait_for(lambda: sum(s.stamp_s > rx_time + 4 * period for s in recorder.states) >= 3,
+                         what="states after the stop")
+            states = recorder.states
+        finally:
+            recorder.sub.undeclare()
+            passenger.pub.close()
+    before = [s for s in states if s.stamp_s < rx_time]
+    after = [s for s in states if s.stamp_s >= rx_time + period]
+    assert before[-1].velocity_ned_m_s.any()
+    stop_position = after[0].position
+    for s in after:  # from one period after the status arrived: stopped, not moving
+        assert not s.velocity_ned_m_s.any()
+        np.testing.assert_array_equal(s.position, stop_position)
+    travelled = np.linalg.norm(stop_position - before[-1].position)
+    assert travelled <= 3.0 * period * 1.5 + 1e-9  # at most about one period of motion at <= 3 m/s
+
+
+def test_running_carrier_stops_when_the_passenger_goes_silent_or_vanishes() -> None:
+    clock = ScaledClock(speed=10.0)  # passenger_timeout_s 1.0 simulated = 0.1 s wall
+    with sessions(2) as (sa, sb, sc), CarrierSim(_cfg(), clock, sa) as sim:
+        recorder = Recorder(sb, "sim")
+        passenger = Passenger(sc, "sim", clock)
+        try:
+            wait_for(lambda: sim.publisher.matched, what="recorder subscribed")
+            with running(sim):
+                wait_for(lambda: passenger.pub.matched)
+                wait_for(lambda: passenger.say("RIDING") and sim.mode is CarrierMode.APPROACHING, what="approaching")
+                last = passenger.say("RIDING")
+                wait_for(lambda: _seen(sim, last))
+                last_rx = sim.passenger.latest().rx_time_s  # type: ignore[union-attr]
+                # silence (the token stays): the status goes stale after passenger_timeout_s
+                wait_for(lambda: sim.mode is CarrierMode.PAUSED, timeout_s=5.0, what="paused on silence")
+                paused_at = clock.now()
+                assert paused_at - last_rx >= 1.0  # not before the timeout
+                wait_for(lambda: any(s.stamp_s > paused_at and not s.velocity_ned_m_s.any() for s in recorder.states))
+                # the passenger speaks again while riding: the approach resumes
+                wait_for(lambda: passenger.say("RIDING") and sim.mode is CarrierMode.APPROACHING, what="resumed")
+                # the passenger's process dies: its token goes at once, well before a timeout
+                passenger.pub.close()
+                sc.close()
+                gone_at = clock.now()
+                wait_for(lambda: sim.mode is CarrierMode.PAUSED, timeout_s=5.0, what="paused on lost token")
+                assert sim.passenger.alive is False
+                assert clock.now() - gone_at < 1.0
+                wait_for(lambda: any(s.stamp_s > clock.now() - 0.01 and not s.velocity_ned_m_s.any()
+                                     for s in recorder.states[-3:]), what="published stop")
+        finally:
+            recorder.sub.undeclare()
+            passenger.pub.close()
+
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def test_cli_config_error_exits_2(tmp_path: Path) -> None:
+    assert cli_main(["carrier", str(tmp_path / "missing.toml")]) == 2
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[carrier]\nrate_hz = -5\n")
+    assert cli_main(["carrier", str(bad)]) == 2
+    good = tmp_path / "good.toml"
+    good.write_text("")
+    assert cli_main(["carrier", str(good), "--pair", "no/slash"]) == 2
+
+
+def test_cli_runs_publishes_and_exits_0_on_sigterm(tmp_path: Path) -> None:
+    cfg = tmp_path / "carrier.toml"
+    cfg.write_text('[zenoh]\npair = "cli"\n[scenario]\ncarrier_start = [1.0, 2.0, 0.0]\n')
+    ep = endpoint(free_port())
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "mission.cli", "-v", "carrier", str(cfg), "--zenoh-listen", ep, "--speed", "2"],
+        cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        env={**os.environ, "PYTHONWARNINGS": "error"},
+    )
+    try:
+        observer = wait_for(lambda: _try_connect(ep), timeout_s=15.0, what="carrier process listening")
+        try:
+            with CarrierFeed(observer, "cli", ScaledClock()) as feed:
+                rx = wait_for(feed.latest, timeout_s=10.0, what="a state from the process")
+                np.testing.assert_array_equal(rx.state.position, [1.0, 2.0, 0.0])
+                assert wait_for(lambda: feed.alive, what="carrier token") is True
+                proc.send_signal(signal.SIGTERM)
+                _, err = proc.communicate(timeout=10)
+                assert proc.returncode == 0, err
+                wait_for(lambda: feed.alive is False, what="token gone after exit")
+        finally:
+            observer.close()
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert "SIGTERM" in err
+
+
+def _try_connect(ep: str) -> zenoh.Session | None:
+    from mission.errors import BusError
+
+    try:
+        s = peer(connect=[ep], mode="client")  # a client fails fast when nobody listens yet
+    except BusError:
+        return None
+    return s

@@ -1,0 +1,76 @@
+"""Helpers for tests with real Zenoh sessions on loopback (multicast scouting off, explicit
+``tcp/127.0.0.1:<port>`` endpoints chosen per test, so tests can run in parallel)."""
+from __future__ import annotations
+
+import contextlib
+import socket
+import time
+from collections.abc import Callable, Iterator
+from typing import TypeVar
+
+import zenoh
+
+from mission.carrier_bridge import open_session
+from mission.config import ZenohSection
+
+T = TypeVar("T")
+
+
+def free_port() -> int:
+    """A TCP port free on 127.0.0.1 right now (bind to port 0, read it, close)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def endpoint(port: int) -> str:
+    return f"tcp/127.0.0.1:{port}"
+
+
+def wait_for(predicate: Callable[[], T], timeout_s: float = 10.0, what: str = "condition") -> T:
+    """Poll ``predicate`` until it returns a truthy value (returned) or fail after ``timeout_s``."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        value = predicate()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
+        time.sleep(0.002)
+
+
+def peer(listen: list[str] | None = None, connect: list[str] | None = None, mode: str = "peer") -> zenoh.Session:
+    """A session on loopback with the given endpoints (no multicast, no rendezvous)."""
+    section = ZenohSection(mode=mode, listen=listen or [], connect=connect or [], multicast_scouting=False,
+                           rendezvous=None)  # type: ignore[arg-type]
+    return open_session(section)
+
+
+@contextlib.contextmanager
+def closing_all(*sessions: zenoh.Session) -> Iterator[tuple[zenoh.Session, ...]]:
+    """Close every session on exit (undeclare entities before leaving the block)."""
+    try:
+        yield sessions
+    finally:
+        for s in sessions:
+            s.close()
+
+
+@contextlib.contextmanager
+def peer_pair() -> Iterator[tuple[zenoh.Session, zenoh.Session]]:
+    """Two connected peer sessions: ``a`` listens on a fresh port, ``b`` connects to it."""
+    ep = endpoint(free_port())
+    a = peer(listen=[ep])
+    try:
+        b = peer(listen=["tcp/127.0.0.1:0"], connect=[ep])
+    except BaseException:
+        a.close()
+        raise
+    with closing_all(a, b):
+        wait_for(lambda: len(list(b.info.peers_zid())) > 0, what="b connected to a")
+        yield a, b
+
+
+def wait_matched(pub: zenoh.Publisher, timeout_s: float = 10.0) -> None:
+    """Wait until ``pub`` has a matching subscriber (so the next put is delivered)."""
+    wait_for(lambda: pub.matching_status.matching, timeout_s, f"a subscriber matching {pub.key_expr}")

@@ -1,0 +1,241 @@
+"""Wire formats: JSON and CDR codecs, frame conversions, validation reasons."""
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from mission.wire import (
+    CarrierState,
+    GeoOrigin,
+    PassengerStatus,
+    WireError,
+    decode_carrier_json,
+    decode_odometry_cdr,
+    decode_passenger_json,
+    encode_carrier_json,
+    encode_odometry_cdr,
+    encode_passenger_json,
+    geodetic_to_ned,
+    ned_to_geodetic,
+    rmw_zenoh_odom_key,
+    ros2dds_odom_key,
+    to_local_ned,
+)
+
+GOOD = {"stamp": 12.345, "seq": 7, "frame": "local_ned", "position": [1.0, 2.0, -3.0],
+        "velocity": [0.5, -0.25, 0.0], "yaw": 0.1}
+
+
+def _json(**changes: object) -> bytes:
+    obj = dict(GOOD)
+    for k, v in changes.items():
+        if v is _DELETE:
+            del obj[k]
+        else:
+            obj[k] = v
+    return json.dumps(obj).encode()
+
+
+_DELETE = object()
+
+
+def test_json_round_trip_keeps_every_field() -> None:
+    s = decode_carrier_json(_json())
+    assert (s.stamp_s, s.seq, s.frame, s.yaw_rad) == (12.345, 7, "local_ned", 0.1)
+    np.testing.assert_array_equal(s.position, [1.0, 2.0, -3.0])
+    np.testing.assert_array_equal(s.velocity_ned_m_s, [0.5, -0.25, 0.0])
+    again = decode_carrier_json(encode_carrier_json(s))
+    assert again.stamp_s == s.stamp_s and again.seq == s.seq and again.yaw_rad == s.yaw_rad
+    np.testing.assert_array_equal(again.position, s.position)
+
+
+def test_yaw_is_optional_and_unknown_fields_are_ignored() -> None:
+    s = decode_carrier_json(_json(yaw=_DELETE, extra="future field"))
+    assert s.yaw_rad is None
+    assert decode_carrier_json(_json(yaw=None)).yaw_rad is None
+
+
+def test_state_arrays_are_read_only() -> None:
+    s = decode_carrier_json(_json())
+    with pytest.raises(ValueError):
+        s.position[0] = 5.0
+
+
+@pytest.mark.parametrize(
+    ("payload", "reason"),
+    [
+        (b"\xff\xfe garbage \x00", "decode"),
+        (b"{not json", "decode"),
+        (b"[1, 2, 3]", "decode"),
+        (b'{"stamp": 1, "seq": 1, "frame": "local_ned", "position": [NaN, 0, 0], "velocity": [0, 0, 0]}', "nonfinite"),
+        (b'{"stamp": Infinity, "seq": 1, "frame": "local_ned", "position": [0, 0, 0], "velocity": [0, 0, 0]}', "nonfinite"),
+        (_json(stamp=_DELETE), "missing"),
+        (_json(position=_DELETE), "missing"),
+        (_json(stamp="12.3"), "type"),
+        (_json(seq=1.5), "type"),
+        (_json(seq=True), "type"),
+        (_json(seq=-1), "range"),
+        (_json(position=[1, 2]), "shape"),
+        (_json(position="1,2,3"), "type"),
+        (_json(velocity=[1, "a", 2]), "type"),
+        (_json(velocity=[1, None, 2]), "type"),
+        (_json(yaw="north"), "type"),
+        (_json(frame="enu"), "frame"),
+        (_json(frame=3), "type"),
+        (_json(stamp=10**400), "nonfinite"),
+        (_json(frame="wgs84", position=[95.0, 8.0, 400.0]), "range"),
+    ],
+)
+def test_bad_json_raises_with_reason(payload: bytes, reason: str) -> None:
+    with pytest.raises(WireError) as info:
+        decode_carrier_json(payload)
+    assert info.value.reason == reason
+
+
+def test_geodetic_numbers_match_a_sphere_of_px4_radius() -> None:
+    origin = GeoOrigin(47.0, 8.0, 400.0)
+    ned = geodetic_to_ned(47.001, 8.0, 395.0, origin)
+    # 0.001 deg of latitude on R = 6 371 000 m: R * pi / 180 * 1e-3 = 111.194927 m
+    assert ned[0] == pytest.approx(111.194927, abs=1e-4)
+    assert ned[1] == pytest.approx(0.0, abs=1e-9)
+    assert ned[2] == pytest.approx(5.0)  # 5 m below the origin's altitude: down = +5
+    east = geodetic_to_ned(47.0, 8.001, 400.0, origin)
+    assert east[1] == pytest.approx(111.194927 * math.cos(math.radians(47.0)), rel=1e-6)
+    assert east[0] == pytest.approx(0.0, abs=2e-3)  # the projection's curvature term
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    lat0=st.floats(-80, 80), lon0=st.floats(-179, 179),
+    n=st.floats(-5000, 5000), e=st.floats(-5000, 5000), d=st.floats(-500, 500),
+)
+def test_geodetic_conversion_inverts(lat0: float, lon0: float, n: float, e: float, d: float) -> None:
+    origin = GeoOrigin(lat0, lon0, 100.0)
+    lat, lon, alt = ned_to_geodetic(np.array([n, e, d]), origin)
+    back = geodetic_to_ned(lat, lon, alt, origin)
+    np.testing.assert_allclose(back, [n, e, d], atol=1e-6)
+
+
+def test_wgs84_state_is_converted_through_the_origin() -> None:
+    s = decode_carrier_json(_json(frame="wgs84", position=[47.001, 8.0, 395.0]))
+    local = to_local_ned(s, GeoOrigin(47.0, 8.0, 400.0))
+    assert local.frame == "local_ned"
+    np.testing.assert_allclose(local.position, [111.194927, 0.0, 5.0], atol=1e-4)
+    np.testing.assert_array_equal(local.velocity_ned_m_s, s.velocity_ned_m_s)
+    with pytest.raises(WireError) as info:
+        to_local_ned(s, None)
+    assert info.value.reason == "origin"
+
+
+def test_cdr_world_twist_enu_to_ned_numbers() -> None:
+    from rosbags.typesys import Stores, get_typestore
+
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    T = ts.types
+    yaw_enu = 0.0  # facing east
+    msg = T["nav_msgs/msg/Odometry"](
+        header=T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=100, nanosec=250_000_000), frame_id="odom"),
+        child_frame_id="",  # empty: the twist is world ENU (our documented assumption)
+        pose=T["geometry_msgs/msg/PoseWithCovariance"](
+            pose=T["geometry_msgs/msg/Pose"](
+                position=T["geometry_msgs/msg/Point"](x=10.0, y=20.0, z=3.0),
+                orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=math.sin(yaw_enu / 2), w=math.cos(yaw_enu / 2)),
+            ),
+            covariance=np.zeros(36),
+        ),
+        twist=T["geometry_msgs/msg/TwistWithCovariance"](
+            twist=T["geometry_msgs/msg/Twist"](
+                linear=T["geometry_msgs/msg/Vector3"](x=1.0, y=2.0, z=0.5),
+                angular=T["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0),
+            ),
+            covariance=np.zeros(36),
+        ),
+    )
+    raw = bytes(ts.serialize_cdr(msg, "nav_msgs/msg/Odometry"))
+    s = decode_odometry_cdr(raw, seq=4)
+    assert s.frame == "local_ned" and s.seq == 4
+    assert s.stamp_s == pytest.approx(100.25)
+    np.testing.assert_allclose(s.position, [20.0, 10.0, -3.0])  # (e, n, u) -> (n, e, -u)
+    np.testing.assert_allclose(s.velocity_ned_m_s, [2.0, 1.0, -0.5])
+    assert s.yaw_rad == pytest.approx(math.pi / 2)  # east in NED
+
+
+def test_cdr_body_twist_is_rotated_by_the_orientation() -> None:
+    # Heading north-east in NED (yaw 45 deg), moving 2 m/s forward: body FLU twist (2, 0, 0).
+    state = CarrierState(5.0, 0, "local_ned", [3.0, 4.0, 0.0], [math.sqrt(2), math.sqrt(2), 0.0], math.pi / 4)
+    raw = encode_odometry_cdr(state, child_frame_id="base_link")
+    from rosbags.typesys import Stores, get_typestore
+
+    msg = get_typestore(Stores.ROS2_HUMBLE).deserialize_cdr(raw, "nav_msgs/msg/Odometry")
+    assert msg.twist.twist.linear.x == pytest.approx(2.0)  # forward in the body frame
+    assert msg.twist.twist.linear.y == pytest.approx(0.0, abs=1e-12)
+    back = decode_odometry_cdr(raw)
+    np.testing.assert_allclose(back.velocity_ned_m_s, state.velocity_ned_m_s, atol=1e-12)
+    np.testing.assert_allclose(back.position, state.position)
+    assert back.yaw_rad == pytest.approx(math.pi / 4)
+
+
+def test_cdr_garbage_and_bad_quaternion_are_rejected() -> None:
+    with pytest.raises(WireError) as info:
+        decode_odometry_cdr(b"\x00\x01\x00\x00garbage")
+    assert info.value.reason == "decode"
+    state = CarrierState(1.0, 0, "local_ned", [0, 0, 0], [1, 0, 0], None)
+    raw = encode_odometry_cdr(state, child_frame_id="")  # no yaw: zero quaternion, world twist
+    assert decode_odometry_cdr(raw).yaw_rad is None
+    with pytest.raises(WireError):
+        encode_odometry_cdr(state, child_frame_id="base_link")  # body twist needs a yaw
+
+
+def test_cdr_nan_is_rejected() -> None:
+    state = CarrierState(1.0, 0, "local_ned", [0, 0, 0], [1, 0, 0], 0.0)
+    raw = bytearray(encode_odometry_cdr(state))
+    good = decode_odometry_cdr(bytes(raw))
+    assert good.position[0] == 0.0
+    # pose.position.x sits after the header (4) + stamp (8) + frame_id "odom" (4 + 5, padded)
+    # + child_frame_id "base_link" (4 + 10, padded to 8): find the float64 slot of e (= 0.0)
+    # by writing NaN over every 8-byte aligned zero until decoding rejects it.
+    nan = np.array([np.nan]).tobytes()
+    rejected = False
+    for off in range(4, len(raw) - 8, 8):
+        trial = bytearray(raw)
+        trial[off:off + 8] = nan
+        try:
+            decode_odometry_cdr(bytes(trial))
+        except WireError as exc:
+            if exc.reason == "nonfinite":
+                rejected = True
+                break
+    assert rejected
+
+
+def test_ros_key_forms() -> None:
+    assert ros2dds_odom_key("") == "odom"
+    assert ros2dds_odom_key("/robot1/") == "robot1/odom"
+    assert rmw_zenoh_odom_key(0, "/odom") == "0/odom/nav_msgs::msg::dds_::Odometry_/*"
+
+
+def test_passenger_status_round_trip_and_validation() -> None:
+    st_ = PassengerStatus("SEPARATED", 3.5, 12, [1, 2, -3], [0.1, 0.2, 0.3], True, [4.0, 5.0, 0.0])
+    back = decode_passenger_json(encode_passenger_json(st_))
+    assert (back.phase, back.stamp_s, back.seq, back.separated) == ("SEPARATED", 3.5, 12, True)
+    np.testing.assert_array_equal(back.anchor_ned_m, [4.0, 5.0, 0.0])
+    riding = decode_passenger_json(encode_passenger_json(
+        PassengerStatus("RIDING", 1.0, 1, [0, 0, 0], [0, 0, 0])))
+    assert riding.anchor_ned_m is None and riding.separated is False
+    for bad, reason in [
+        ({"phase": "FLYING"}, "phase"),
+        ({"phase": 3}, "type"),
+        ({"separated": "no"}, "type"),
+        ({"anchor": [1, 2]}, "shape"),
+        ({"position": [0, float("nan"), 0]}, "nonfinite"),
+    ]:
+        obj = json.loads(encode_passenger_json(st_))
+        obj.update(bad)
+        with pytest.raises(WireError) as info:
+            decode_passenger_json(json.dumps(obj).encode())
+        assert info.value.reason == reason, bad
