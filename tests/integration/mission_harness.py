@@ -69,7 +69,7 @@ class Pair:
 
 
 @contextlib.contextmanager
-def flying_pair(tmp_path: Path, *, speed: float = 10.0, config: str = "demo.toml", overrides: dict[str, Any] | None = None,
+def flying_pair(tmp_path: Path, *, speed: float = 5.0, config: str = "demo.toml", overrides: dict[str, Any] | None = None,
                 vehicle: dict[str, Any] | None = None, start: bool = True) -> Iterator[Pair]:
     cfg = load_config(CONFIGS / config)
     zport = free_port(socket.SOCK_STREAM)

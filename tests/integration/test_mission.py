@@ -1,8 +1,9 @@
 """The mission controller against the mock vehicle (UDP) and the carrier simulator (Zenoh).
 
-Each test flies a whole pair at 10x real time and asserts on behaviour and numbers: P1-P3 from
-the flight log, the smoothness of the relative command at separation, and one defined reaction
-per failsafe (DESIGN.md; the README's safety table).
+Each test flies a whole pair at 5x real time and asserts on behaviour and numbers: P1-P3 from the
+flight log, the smoothness of the relative command at separation, and one defined reaction per
+failsafe (DESIGN.md; the README's safety table). Timeouts scale with the speed: at 5x, PX4's 1 s
+offboard-loss timeout is 0.2 s of wall time, which a loaded 2-core CI machine still keeps.
 """
 from __future__ import annotations
 
@@ -43,7 +44,8 @@ def test_full_mission_p1_p3_and_smooth_separation(tmp_path):
 
 def test_flight_log_is_complete_and_tlog_readable(tmp_path):
     with flying_pair(tmp_path) as pair:
-        pair.finish()
+        out = pair.finish()
+    assert out.phase == "DONE", (out.reason, out.detail)
     rec = read_record(pair.log_dir)
     phases_seen = [p for p in dict.fromkeys(rec.phase) if p != "PREFLIGHT"]  # the record holds each tick's outcome
     assert phases_seen == ["STREAMING", "ARMING", "OFFBOARD", "JOIN", "RIDING", "SEPARATED", "NAVIGATING",
