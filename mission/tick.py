@@ -25,7 +25,7 @@ from typing import Literal
 
 import numpy as np
 
-from mission.law import LawParams, carrier_command, norm, passenger_command
+from mission.law import LawParams, carrier_command, norm, passenger_command, uniform, where_rows
 from mission.safety import FilterResult, Obstacles, SafetyConfig, filter_velocity
 
 
@@ -64,7 +64,9 @@ class TickModel:
 @dataclass(frozen=True)
 class PassengerTick:
     """Passenger command of one tick. u [m/s] safe command; relative [m/s] the law's ``u_p -
-    u_c`` before the filter; desired [m/s] the law's ``u_p``; P [1/s]; leaving: separating branch."""
+    u_c`` before the filter; desired [m/s] the law's ``u_p`` (``u`` may be this very array when
+    the filter changed nothing: read, never write into them); P [1/s]; leaving: separating
+    branch; e_pc_norm_m [m] ``|e_pc|``."""
 
     u: np.ndarray
     desired: np.ndarray
@@ -72,6 +74,7 @@ class PassengerTick:
     P: np.ndarray
     leaving: np.ndarray
     safety: FilterResult
+    e_pc_norm_m: np.ndarray
 
 
 def passenger_tick(
@@ -82,28 +85,34 @@ def passenger_tick(
     model: TickModel,
     u_prev: np.ndarray | None = None,
     dt_s: float | None = None,
+    e_tc_norm_m: np.ndarray | None = None,
 ) -> PassengerTick:
     """Law + safety for the passenger at ``anchor + e_pc`` [m].
 
     anchor_velocity [m/s] is fed forward while docked (the carrier command, or a measured dock
     velocity); after separation nothing is fed forward (the anchor is latched).
+    ``e_tc_norm_m`` [m]: ``|target - anchor|`` when the caller has it already (else computed).
     """
     sep = np.asarray(separated, dtype=bool)
     e_tc = model.target - anchor
-    u_ff = np.where(sep[..., None], 0.0, anchor_velocity)
-    cmd = passenger_command(e_pc, e_tc, u_ff, model.law)
+    u_ff = where_rows(sep, 0.0, anchor_velocity)
+    cmd = passenger_command(e_pc, e_tc, u_ff, model.law, e_tc_norm_m)
     desired = cmd.u_p
     a_max = model.passenger_safety.max_accel_m_s2
-    if a_max is not None:
+    shaped = False if a_max is None else uniform(sep)  # True: all separated, None: some
+    if shaped is not False:  # (the scale below is exactly 1 where docked: skipped if all are)
         # Arrival shaping: never faster than the speed from which the acceleration limit can
         # still stop at the target, sqrt(2 a_max |e_pt|); keeps the direction. Without it the
         # saturated law reaches the target at full speed and circles it (seen in the 2D run).
         stop_speed = np.sqrt(2.0 * a_max * norm(e_pc - e_tc))
         speed = norm(desired)
-        scale = np.where(sep, np.minimum(1.0, stop_speed / np.maximum(speed, 1e-300)), 1.0)
+        scale = np.minimum(1.0, stop_speed / np.maximum(speed, 1e-300))
+        if shaped is None:
+            scale = np.where(sep, scale, 1.0)
         desired = desired * scale[..., None]
-    safe = filter_velocity(anchor + e_pc, desired, model.obstacles, model.passenger_safety, u_prev, dt_s)
-    return PassengerTick(u=safe.u, desired=desired, relative=cmd.relative, P=cmd.P, leaving=cmd.leaving, safety=safe)
+    safe = filter_velocity(anchor + e_pc, desired, model.obstacles, model.passenger_safety, u_prev, dt_s, copy=False)
+    return PassengerTick(u=safe.u, desired=desired, relative=cmd.relative, P=cmd.P, leaving=cmd.leaving, safety=safe,
+                         e_pc_norm_m=cmd.e_pc_norm_m)
 
 
 def carrier_tick(
@@ -117,16 +126,19 @@ def carrier_tick(
     """Carrier command [m/s] at ``x_c`` [m]: the paper's approach while docked; after
     separation zero ("stop") or ``own_plan_velocity`` ("remark1"), filtered for obstacles."""
     sep = np.asarray(separated, dtype=bool)
-    u = carrier_command(model.target - x_c, ~sep, model.law, planar=model.planar_carrier)
-    if model.carrier_mode == "remark1" and own_plan_velocity is not None:
-        u = np.where(sep[..., None], own_plan_velocity, u)
+    u = carrier_command(model.target - x_c, ~sep, model.law, planar=model.planar_carrier)  # a new array
+    if model.carrier_mode == "remark1" and own_plan_velocity is not None and uniform(sep) is not False:
+        u = np.where(sep[..., None], own_plan_velocity, u)  # a new array too
     obstacles = model.carrier_obstacles if model.filter_carrier else Obstacles.none(2 if model.planar_carrier else x_c.shape[-1])
     if model.planar_carrier and x_c.shape[-1] == 3:
-        planar = filter_velocity(x_c[..., :2], u[..., :2], obstacles, model.carrier_safety,
-                                 None if u_prev is None else u_prev[..., :2], dt_s)
-        u3 = np.concatenate([planar.u, np.zeros(planar.u.shape[:-1] + (1,))], axis=-1)
-        return FilterResult(u3, planar.changed, planar.correction_m_s, planar.feasible, planar.cbf_active)
-    return filter_velocity(x_c, u, obstacles, model.carrier_safety, u_prev, dt_s)
+        in_plane = u[..., :2]
+        planar = filter_velocity(x_c[..., :2], in_plane, obstacles, model.carrier_safety,
+                                 None if u_prev is None else u_prev[..., :2], dt_s, copy=False)
+        if planar.u is not in_plane:  # u is ours: reuse it as the 3D command, in the plane
+            u[..., :2] = planar.u
+        u[..., 2:] = 0.0
+        return FilterResult(u, planar.changed, planar.correction_m_s, planar.feasible, planar.cbf_active)
+    return filter_velocity(x_c, u, obstacles, model.carrier_safety, u_prev, dt_s, copy=False)
 
 
 def default_carrier_obstacles(obstacles: Obstacles, target: np.ndarray, planar: bool, keepout_m: float) -> Obstacles:
@@ -142,9 +154,14 @@ def default_carrier_obstacles(obstacles: Obstacles, target: np.ndarray, planar: 
     return Obstacles(np.concatenate([centers, centre[..., None, :]], axis=-2), np.append(obs.radii, keepout_m))
 
 
-def separation_due(anchor: np.ndarray, separated: np.ndarray | bool, model: TickModel) -> np.ndarray:
-    """True where a docked pair has reached the event distance (the latch fires)."""
-    return ~np.asarray(separated, dtype=bool) & (norm(model.target - anchor) <= model.event_distance_m)
+def separation_due(anchor: np.ndarray, separated: np.ndarray | bool, model: TickModel,
+                   distance_m: np.ndarray | None = None) -> np.ndarray:
+    """True where a docked pair has reached the event distance (the latch fires).
+
+    ``distance_m`` [m]: ``|target - anchor|`` when the caller has it already (else computed)."""
+    if distance_m is None:
+        distance_m = norm(model.target - anchor)
+    return ~np.asarray(separated, dtype=bool) & (distance_m <= model.event_distance_m)
 
 
 def crossing_fraction(start: np.ndarray, step: np.ndarray, target: np.ndarray, radius: float) -> np.ndarray:

@@ -20,7 +20,7 @@ from typing import Any, Callable
 import numpy as np
 
 from mission.config import Config
-from mission.law import norm
+from mission.law import norm, uniform, where_rows
 from mission.tick import TickModel, carrier_tick, crossing_fraction, passenger_tick, separation_due
 
 DEPARTURE_THRESHOLD_M = 0.1  # |e_pc| that counts as "has left the carrier" [m]
@@ -140,13 +140,17 @@ def simulate(
     v_own = np.zeros((B, n))
     u_c_prev = np.zeros((B, n))
     u_p_prev = np.zeros((B, n))
+    zero_velocity = np.zeros((B, n))
+    zero_velocity.setflags(write=False)
     nan = np.full(B, np.nan)
     T, d_sep, rel_before, rel_after, depart = nan.copy(), nan.copy(), nan.copy(), nan.copy(), nan.copy()
     rel_before_vec = np.zeros((B, n))
     pending = np.zeros(B, dtype=bool)
     max_before = np.zeros(B)
-    min_ct = norm(target - x_c)
+    dist_ct = norm(target - anchor)  # |target - anchor| [m] of the current step, reused by the law
+    min_ct = dist_ct.copy()  # (x_c == anchor at the start)
     has_obs = len(model.obstacles) > 0
+    carrier_obs = model.obstacles.planar() if model.planar_carrier else model.obstacles
     min_clear = np.full(B, np.inf)
     max_speed = np.zeros(B)
     max_accel = np.zeros(B)
@@ -156,33 +160,42 @@ def simulate(
     rec: dict[str, list] = {k: [] for k in ("t", "x_c", "x_p", "u_c", "u_p", "P", "sep")}
     bc_event = model.event_distance_m
 
+    # Per step every norm is computed once and reused; arrays the step owns are updated in place.
     for k in range(steps + 1):
         t = k * dt_s
         u_c = carrier_tick(x_c, sep, model, v_own, u_c_prev if use_accel_c else None, dt_s).u
-        v_anchor = np.where(sep[:, None], 0.0, u_c)
-        pt = passenger_tick(anchor, v_anchor, e_pc, sep, model, u_p_prev if use_accel else None, dt_s)
+        v_anchor = where_rows(sep, zero_velocity, u_c)  # read-only: u_c or zero_velocity itself when uniform
+        pt = passenger_tick(anchor, v_anchor, e_pc, sep, model, u_p_prev if use_accel else None, dt_s, dist_ct)
         u_p = pt.u
-        x_p = anchor + e_pc
+        recording = k % record_every == 0 or k == steps
+        x_p = anchor + e_pc if has_obs or recording else None
         # bookkeeping at time t
         if pending.any():
             rel_after_vec = pt.relative[pending]
             rel_after[pending] = norm(rel_after_vec)
             rel_before[pending] = norm(rel_after_vec - rel_before_vec[pending])
             pending[:] = False
-        a = norm(e_pc)
-        max_before = np.where(sep, max_before, np.maximum(max_before, a))
-        newly_departed = sep & np.isnan(depart) & (a > DEPARTURE_THRESHOLD_M)
-        depart[newly_departed] = t - T[newly_departed]
+        a = pt.e_pc_norm_m  # |e_pc| [m], as the law computed it
+        docked = uniform(~sep)
+        if docked is None:
+            max_before = np.where(sep, max_before, np.maximum(max_before, a))
+        elif docked:
+            np.maximum(max_before, a, out=max_before)
+        if docked is not True:
+            newly_departed = sep & np.isnan(depart) & (a > DEPARTURE_THRESHOLD_M)
+            depart[newly_departed] = t - T[newly_departed]
         np.minimum(min_ct, norm(target - x_c), out=min_ct)
         if has_obs:
             clear = model.obstacles.clearance(x_p).min(axis=-1)
-            xc_obs = model.obstacles.planar().clearance(x_c[:, :2]) if model.planar_carrier else model.obstacles.clearance(x_c)
+            xc_obs = carrier_obs.clearance(x_c[:, :2]) if model.planar_carrier else carrier_obs.clearance(x_c)
             np.minimum(min_clear, np.minimum(clear, xc_obs.min(axis=-1)), out=min_clear)
         speed = norm(u_p)
         np.maximum(max_speed, speed, out=max_speed)
         if k > 0:
-            np.maximum(max_accel, norm(u_p - u_p_prev) / dt_s, out=max_accel)
-        if k % record_every == 0 or k == steps:
+            accel = norm(u_p - u_p_prev)
+            accel /= dt_s
+            np.maximum(max_accel, accel, out=max_accel)
+        if recording:
             for key, val in (("t", t), ("x_c", x_c), ("x_p", x_p), ("u_c", u_c), ("u_p", u_p), ("P", pt.P), ("sep", sep)):
                 rec[key].append(np.copy(val))
             if progress is not None:
@@ -190,11 +203,15 @@ def simulate(
         if k == steps:
             break
         # zero-order hold step
-        x_c_new = x_c + u_c * dt_s
+        x_c_new = u_c * dt_s
+        x_c_new += x_c
         step_anchor = v_anchor * dt_s
         anchor_new = anchor + step_anchor
-        e_pc = e_pc + (u_p - v_anchor) * dt_s
-        due = separation_due(anchor_new, sep, model)
+        de_pc = u_p - v_anchor
+        de_pc *= dt_s
+        e_pc += de_pc  # (e_pc is this loop's own array)
+        dist_ct = norm(target - anchor_new)
+        due = separation_due(anchor_new, sep, model, dist_ct)
         if due.any():
             theta = crossing_fraction(anchor[due], step_anchor[due], target[due], bc_event)
             anchor_new[due] = anchor[due] + theta[:, None] * step_anchor[due]
@@ -203,7 +220,7 @@ def simulate(
             v_own[due] = u_c[due]
             sep = sep | due
             T[due] = t + theta * dt_s
-            d_sep[due] = norm(target[due] - anchor_new[due])
+            d_sep[due] = dist_ct[due] = norm(target[due] - anchor_new[due])
             rel_before_vec[due] = pt.relative[due]
             pending = due.copy()
         x_c, anchor = x_c_new, anchor_new
