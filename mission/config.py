@@ -120,7 +120,7 @@ class MissionSection(_Model):
     arrival_dwell_s: float = Field(2.0, ge=0)
     final_action: Literal["hold", "land"] = "hold"
     carrier_timeout_s: float = Field(0.5, gt=0)
-    heartbeat_timeout_s: float = Field(2.0, gt=0)
+    heartbeat_timeout_s: float = Field(3.0, gt=0, description="[s] MAVSDK also declares a vehicle lost after 3 s")
     prestream_s: float = Field(1.0, ge=0.2)
     command_retries: int = Field(3, ge=1, le=10)
     max_duration_s: float = Field(300.0, gt=0)
