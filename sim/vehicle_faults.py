@@ -26,6 +26,7 @@ class FaultOptions:
     blackouts: windows ``(start_s, duration_s)`` of simulated time since vehicle start during
         which nothing goes in or out.
     refuse_arming_reason: if set, arming is denied with this STATUSTEXT (a failed preflight check).
+    refuse_offboard_reason: if set, DO_SET_MODE OFFBOARD is TEMPORARILY_REJECTED with this STATUSTEXT.
     seed: seed of the random generator (loss and jitter draws).
     """
 
@@ -36,6 +37,7 @@ class FaultOptions:
     blackouts: tuple[tuple[float, float], ...] = field(default_factory=tuple)
     refuse_arming_reason: str | None = None
     seed: int | None = 0
+    refuse_offboard_reason: str | None = None
 
     def __post_init__(self) -> None:
         for name in ("loss_in", "loss_out"):
@@ -102,7 +104,7 @@ class FaultInjector:
         """Remove and return the held items due at or before ``t_s``, oldest due first."""
         out: list[tuple[str, Any]] = []
         with self._lock:
-            while self._queue and self._queue[0][0] <= t_s:
+            while self._queue and self._queue[0][0] <= t_s + 1e-9:
                 _, _, kind, item = heapq.heappop(self._queue)
                 out.append((kind, item))
         return out

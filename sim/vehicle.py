@@ -1,0 +1,664 @@
+"""A PX4-like kinematic MAVLink vehicle for SITL-free testing (issue 3).
+
+It speaks MAVLink 2 over UDP like a PX4 SITL on its onboard link (../shared/REFERENCE.md is the
+specification): HEARTBEAT and the onboard-profile streams from start-up, DO_SET_MODE and
+COMPONENT_ARM_DISARM with PX4's checks and ACKs, OFFBOARD with its setpoint rules and failsafes,
+NAV_TAKEOFF / NAV_LAND / NAV_RETURN_TO_LAUNCH / Hold, the parameter protocol, REQUEST_MESSAGE,
+SET_MESSAGE_INTERVAL and TIMESYNC. MAVSDK connects to it, arms it and flies it offboard.
+
+Structure: one thread runs the loop. Each pass it (1) advances the physics in fixed steps of
+:data:`PHYSICS_DT_S` simulated seconds up to the clock's time, running the commander's timers at
+every step, (2) releases datagrams held by the latency fault, (3) sends the streams that are due,
+and (4) waits on the sockets until the next thing is due. Because physics and timers run on
+simulated time in fixed steps, a flight at ``speed`` 20 follows the same trajectory as at 1.
+
+Modules: :mod:`sim.vehicle_physics` (point mass), :mod:`sim.vehicle_commander` (modes, arming,
+failsafes), :mod:`sim.vehicle_telemetry` (streams, messages, geodesy), :mod:`sim.vehicle_params`
+(parameter table), :mod:`sim.vehicle_protocol` (what PX4 makes of a command or setpoint),
+:mod:`sim.vehicle_faults` (loss, latency, blackouts), :mod:`sim.vehicle_link` (UDP endpoints,
+codec, signing), :mod:`sim.vehicle_probe` (a pymavlink peer for tests and the bench).
+
+Choices where PX4 leaves room, or where the mock simplifies (see also the commander's docstring):
+- Position-only setpoints (type_mask 2552) are accepted in LOCAL_NED and flown by a P loop;
+  in BODY_NED they are rejected. Any other type_mask or frame is dropped, counted in
+  ``setpoints_rejected``, and is not proof of life.
+- Latency is one-way and applies in each direction; loss and blackouts too. All fault times are
+  simulated seconds.
+- STATUSTEXT goes only to a link whose peer sent a HEARTBEAT within 2.5 s (as PX4 does);
+  ``VehicleOptions.statustext_needs_heartbeat=False`` sends them regardless.
+- Ground: ``d = 0`` of the local frame (the origin's altitude, ``home``). A start with ``d < 0``
+  stands on a platform at that height (a passenger on its carrier's deck) until it lifts off.
+- Home is set where the vehicle arms on the ground; ``home`` (lat, lon, alt) is the EKF origin.
+- ``snapshot()`` reports the true state; ``position_noise_m`` only affects the telemetry.
+- ODOMETRY, HIGHRES_IMU and the vehicle's own TIMESYNC requests are not streamed. Stream rates
+  scale with ``speed`` up to wall-clock caps (LOCAL_POSITION_NED and HEARTBEAT 300 Hz, ATTITUDE
+  100 Hz, the others 50 Hz; see :mod:`sim.vehicle_telemetry`).
+- Offboard loss with COM_OBL_RC_ACT = 0 and no RC: POSCTL that holds position and descends, as
+  seen on a 2025 SITL; not PX4 2026's fall-through to NAV_RCL_ACT (PR #26289).
+"""
+from __future__ import annotations
+
+import collections
+import logging
+import math
+import os
+import select
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from mission import px4
+from mission.clock import ScaledClock
+from mission.mavlink_env import mavlink
+from sim import vehicle_telemetry as tel
+from sim.vehicle_commander import Commander
+from sim.vehicle_faults import FaultInjector, FaultOptions
+from sim.vehicle_link import VehicleLink, parse_endpoint
+from sim.vehicle_params import ParamTable, UnknownParam
+from sim.vehicle_physics import KinState, Limits, initial_state, step
+from sim.vehicle_protocol import int_param, mode_of_set_mode, param_value, setpoint_of
+
+__all__ = ["MockVehicle", "VehicleOptions", "FaultOptions", "VehicleSnapshot", "spawn_process", "PHYSICS_DT_S"]
+
+log = logging.getLogger(__name__)
+
+PHYSICS_DT_S = 0.005  # fixed physics step [s, simulated]
+MAX_POLL_WALL_S = 0.02  # longest socket wait [s, wall]; bounds the reaction to stop()
+DUE_EPSILON = 1e-9  # [s] tolerance when comparing due times with the step grid
+RX_BATCH = 256  # datagrams read per socket per pass
+STATUSTEXT_PEER_TIMEOUT_S = 2.5  # PX4 treats a peer without HEARTBEAT for this long as gone
+
+COUNTER_NAMES = (
+    "rx_datagrams", "rx_messages", "rx_malformed", "rx_unknown_ids", "rx_unsigned_rejected", "rx_wrong_target",
+    "rx_ignored", "commands", "setpoints_accepted", "setpoints_rejected", "params_set", "tx_messages", "tx_errors",
+    "dropped_in", "dropped_out", "blackout_in", "blackout_out", "delayed_in", "delayed_out", "physics_steps",
+    "internal_errors",
+)
+
+
+@dataclass(frozen=True)
+class VehicleOptions:
+    """How to run a :class:`MockVehicle`. Units: [s] simulated, [m] NED, [m/s], [deg] for lat/lon.
+
+    bind: local UDP address (``HOST:PORT`` or a pymavlink ``udpin:`` URL); port 0 = ephemeral.
+    target: where it sends from start-up (onboard link); it latches on the first peer that talks.
+    gcs_target / gcs_bind: optional second link (PX4's GCS link sends to 14550).
+    speed: clock speed factor; all rates and timeouts scale with it.
+    home: EKF origin (lat [deg], lon [deg], alt [m AMSL]) of the local NED frame.
+    start_ned: start position [m] NED; on the ground when ``d >= 0``, on a platform when ``d < 0``.
+    params: PX4 parameter overrides, e.g. ``{"COM_OF_LOSS_T": 1.0}``.
+    velocity_tau_s: time constant [s] of the first-order velocity response.
+    wind_ned_m_s: uncompensated drift in the air [m/s] NED. position_noise_m: sigma of the
+    Gaussian noise on the reported position [m] (seeded by ``faults.seed``).
+    signing_key: 32-byte MAVLink 2 signing key; then unsigned messages other than HEARTBEAT
+    are rejected and everything sent is signed.
+    """
+
+    bind: str = "127.0.0.1:0"
+    target: str | None = "127.0.0.1:14540"
+    gcs_target: str | None = None
+    gcs_bind: str = "127.0.0.1:0"
+    speed: float = 1.0
+    sysid: int = 1
+    compid: int = 1
+    home: tuple[float, float, float] = (47.397742, 8.545594, 488.0)
+    start_ned: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    params: dict[str, float] = field(default_factory=dict)
+    velocity_tau_s: float = 0.2
+    faults: FaultOptions = field(default_factory=FaultOptions)
+    signing_key: bytes | None = None
+    wind_ned_m_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    position_noise_m: float = 0.0
+    statustext_needs_heartbeat: bool = True
+
+    def __post_init__(self) -> None:
+        if not self.speed > 0:
+            raise ValueError(f"speed must be > 0, got {self.speed!r}")
+        if not 1 <= self.sysid <= 255 or not 1 <= self.compid <= 255:
+            raise ValueError(f"sysid and compid must be in 1..255, got {self.sysid}, {self.compid}")
+        if self.signing_key is not None and len(self.signing_key) != 32:
+            raise ValueError(f"signing_key must be 32 bytes, got {len(self.signing_key)}")
+        if not self.velocity_tau_s > 0:
+            raise ValueError(f"velocity_tau_s must be > 0, got {self.velocity_tau_s!r}")
+
+
+@dataclass(frozen=True)
+class VehicleSnapshot:
+    """The vehicle's true state at simulated time ``t_s`` [s] (read-only arrays, NED)."""
+
+    t_s: float
+    position_ned_m: np.ndarray
+    velocity_ned_m_s: np.ndarray
+    yaw_rad: float
+    armed: bool
+    mode: str
+    landed_state: int
+    in_failsafe: bool
+    position_valid: bool
+    home_ned_m: np.ndarray
+    last_setpoint_t_s: float
+    counters: dict[str, int]
+
+
+def _frozen(values: Sequence[float]) -> np.ndarray:
+    array = np.array(values, dtype=float)
+    array.flags.writeable = False
+    return array
+
+
+class MockVehicle:
+    """The PX4-like vehicle. ``with MockVehicle(opts) as v:`` starts it and stops it on exit."""
+
+    def __init__(self, options: VehicleOptions | None = None) -> None:
+        self.options = opts = options or VehicleOptions()
+        self.clock = ScaledClock(opts.speed)
+        self.params = ParamTable(opts.params, opts.sysid)
+        self._geo = tel.Geo(*opts.home)
+        self._kin: KinState = initial_state(opts.start_ned)
+        self._commander = Commander(self.params, self._kin)
+        self._commander.refuse_arming_reason = opts.faults.refuse_arming_reason
+        self._commander.refuse_offboard_reason = opts.faults.refuse_offboard_reason
+        self._faults = FaultInjector(opts.faults)
+        self._noise = tel.PositionNoise(opts.position_noise_m, opts.faults.seed)
+        self._streams = tel.make_streams(opts.speed)
+        self._links: list[VehicleLink] = []
+        self._lock = threading.RLock()
+        self._stop_event = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._steps = 0
+        self._counters = dict.fromkeys(COUNTER_NAMES, 0)
+        self._chunk_id = 0
+        self._events: collections.deque[tuple[float, int, str]] = collections.deque(maxlen=1000)
+        self._unsent: list[tuple[float, int, str]] = []
+        self._command_handlers: dict[int, Callable[[VehicleLink, list[float]], tuple[int, list[Any]]]] = {
+            px4.MAV_CMD_DO_SET_MODE: self._cmd_set_mode,
+            px4.MAV_CMD_COMPONENT_ARM_DISARM: self._cmd_arm_disarm,
+            px4.MAV_CMD_NAV_TAKEOFF: self._cmd_takeoff,
+            px4.MAV_CMD_NAV_LAND: lambda link, p: (self._commander.set_mode(self._t_s, "AUTO.LAND"), []),
+            px4.MAV_CMD_NAV_RETURN_TO_LAUNCH: lambda link, p: (self._commander.set_mode(self._t_s, "AUTO.RTL"), []),
+            px4.MAV_CMD_REQUEST_MESSAGE: self._cmd_request_message,
+            px4.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: lambda link, p: (px4.MAV_RESULT_ACCEPTED, [tel.autopilot_version(opts.sysid)]),
+            px4.MAV_CMD_SET_MESSAGE_INTERVAL: self._cmd_set_message_interval,
+        }
+        self._handlers: dict[str, Callable[[VehicleLink, Any], None]] = {
+            "HEARTBEAT": self._on_heartbeat,
+            "COMMAND_LONG": self._on_command_long,
+            "COMMAND_INT": self._on_command_int,
+            "SET_POSITION_TARGET_LOCAL_NED": self._on_setpoint,
+            "PARAM_REQUEST_LIST": self._on_param_request_list,
+            "PARAM_REQUEST_READ": self._on_param_request_read,
+            "PARAM_SET": self._on_param_set,
+            "TIMESYNC": self._on_timesync,
+        }
+
+    # ---- lifetime ------------------------------------------------------------------------
+    def __enter__(self) -> MockVehicle:
+        self.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    def start(self) -> None:
+        """Bind the sockets and start the loop thread; the clock restarts at 0."""
+        if self._thread is not None:
+            return
+        opts = self.options
+        self._links.append(VehicleLink("onboard", parse_endpoint(opts.bind, "udpin"),
+                                       parse_endpoint(opts.target, "udpout") if opts.target else None,
+                                       opts.sysid, opts.compid, opts.signing_key))
+        if opts.gcs_target:
+            self._links.append(VehicleLink("gcs", parse_endpoint(opts.gcs_bind, "udpin"), parse_endpoint(opts.gcs_target, "udpout"),
+                                           opts.sysid, opts.compid, opts.signing_key))
+        self.clock = ScaledClock(opts.speed)
+        self._stop_event.clear()
+        self._thread = threading.Thread(target=self._run, name=f"mock-vehicle-{self.port}", daemon=True)
+        self._thread.start()
+        log.info("mock vehicle sysid %d listening on UDP %d, sending to %s (speed %g)", opts.sysid, self.port,
+                 opts.target, opts.speed)
+
+    def stop(self) -> None:
+        """Stop the loop and close the sockets (idempotent)."""
+        self._stop_event.set()
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join(timeout=5.0)
+        self._thread = None
+        for link in self._links:
+            link.close()
+        self._links.clear()
+
+    @property
+    def port(self) -> int:
+        """The UDP port the onboard link is bound to (after :meth:`start`)."""
+        if not self._links:
+            raise RuntimeError("the vehicle is not started")
+        return self._links[0].port
+
+    @property
+    def gcs_port(self) -> int | None:
+        return self._links[1].port if len(self._links) > 1 else None
+
+    # ---- public API (any thread) ---------------------------------------------------------
+    @property
+    def counters(self) -> dict[str, int]:
+        """A copy of the counters (received, malformed, dropped, sent, ...)."""
+        with self._lock:
+            counters = dict(self._counters)
+        counters["held_by_latency"] = self._faults.pending()
+        return counters
+
+    def snapshot(self) -> VehicleSnapshot:
+        """The true state now (advanced to the clock's time first)."""
+        with self._lock:
+            self._advance_to(self.clock.now())
+            k, c = self._kin, self._commander
+            return VehicleSnapshot(
+                t_s=self._t_s, position_ned_m=_frozen((k.n_m, k.e_m, k.d_m)),
+                velocity_ned_m_s=_frozen((k.vn_m_s, k.ve_m_s, k.vd_m_s)), yaw_rad=k.yaw_rad, armed=c.armed,
+                mode=c.mode, landed_state=c.landed_state(k), in_failsafe=c.in_failsafe,
+                position_valid=c.position_valid, home_ned_m=_frozen(c.home_ned_m),
+                last_setpoint_t_s=c.last_setpoint_t_s, counters=self.counters)
+
+    def wait_for(self, predicate: Callable[[VehicleSnapshot], bool], timeout_s: float = 5.0,
+                 poll_s: float = 0.002) -> VehicleSnapshot | None:
+        """Poll :meth:`snapshot` until ``predicate`` holds; None after ``timeout_s`` wall seconds."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            snap = self.snapshot()
+            if predicate(snap):
+                return snap
+            if time.monotonic() >= deadline:
+                return None
+            time.sleep(poll_s)
+
+    def event_time(self, text_part: str, after_s: float = -math.inf) -> float | None:
+        """Simulated time [s] of the first event after ``after_s`` whose text contains ``text_part``."""
+        return next((t for t, _, text in self.events() if t > after_s and text_part in text), None)
+
+    def events(self) -> list[tuple[float, int, str]]:
+        """The STATUSTEXTs the vehicle produced: (simulated time [s], severity, text), oldest first.
+
+        The time is the physics step at which the event happened (exact, whatever the speed)."""
+        with self._lock:
+            return list(self._events)
+
+    def force_mode(self, mode: str) -> None:
+        """A pilot takes over and switches to ``mode`` (a name of ``mission.px4.MODES``)."""
+        with self._lock:
+            self._advance_to(self.clock.now())
+            self._commander.force_mode(self._t_s, mode)
+        log.info("fault: pilot took over in %s", mode)
+
+    def set_faults(self, **changes: Any) -> FaultOptions:
+        """Change fault injection at run time (fields of :class:`FaultOptions`)."""
+        if "refuse_arming_reason" in changes:
+            self.refuse_arming(changes["refuse_arming_reason"])
+        if "refuse_offboard_reason" in changes:
+            self.refuse_offboard(changes["refuse_offboard_reason"])
+        options = self._faults.update(**changes)
+        log.info("faults now %s", options)
+        return options
+
+    def refuse_arming(self, reason: str | None) -> None:
+        """Deny arming with STATUSTEXT ``reason`` (None: allow again)."""
+        with self._lock:
+            self._commander.refuse_arming_reason = reason
+
+    def refuse_offboard(self, reason: str | None) -> None:
+        """Reject DO_SET_MODE OFFBOARD with STATUSTEXT ``reason`` (None: allow again)."""
+        with self._lock:
+            self._commander.refuse_offboard_reason = reason
+
+    def lose_position_estimate(self, lost: bool = True) -> None:
+        """Invalidate (or restore) the position estimate: OFFBOARD is refused and exited."""
+        with self._lock:
+            self._commander.position_valid = not lost
+        log.info("fault: position estimate %s", "lost" if lost else "restored")
+
+    def set_param(self, name: str, value: float) -> None:
+        """Set a PX4 parameter as a PARAM_SET would."""
+        self.params.set(name, value)
+
+    def status_line(self) -> str:
+        """One line for the log: time, mode, position and the counters that reveal trouble."""
+        s = self.snapshot()
+        c = s.counters
+        n, e, d = s.position_ned_m
+        return (f"t={s.t_s:.1f}s {s.mode} {'ARMED' if s.armed else 'disarmed'}{' FAILSAFE' if s.in_failsafe else ''} "
+                f"ned=({n:.1f},{e:.1f},{d:.1f}) rx={c['rx_messages']} malformed={c['rx_malformed']} "
+                f"unknown_ids={c['rx_unknown_ids']} unsigned={c['rx_unsigned_rejected']} wrong_target={c['rx_wrong_target']} "
+                f"sp={c['setpoints_accepted']}/{c['setpoints_rejected']}rej tx={c['tx_messages']} "
+                f"drop_in={c['dropped_in'] + c['blackout_in']} drop_out={c['dropped_out'] + c['blackout_out']}")
+
+    # ---- the loop ------------------------------------------------------------------------
+    @property
+    def _t_s(self) -> float:
+        return self._steps * PHYSICS_DT_S
+
+    def _run(self) -> None:
+        while not self._stop_event.is_set():
+            try:
+                self._pass()
+            except Exception:  # noqa: BLE001  (log, count, keep flying)
+                self._counters["internal_errors"] += 1
+                log.exception("mock vehicle loop error")
+                time.sleep(0.01)
+
+    def _pass(self) -> None:
+        now = self.clock.now()
+        with self._lock:
+            self._advance_to(now)
+            for kind, item in self._faults.due(self._t_s):
+                self._release(kind, item)
+            self._service_streams(self._t_s)
+            self._flush_outbox()
+            wait_s = self._wait_wall_s(self._t_s)
+        self._poll(wait_s)
+
+    def _limits(self) -> Limits:
+        p = self.params.get
+        return Limits(p("MPC_XY_VEL_MAX"), p("MPC_Z_VEL_MAX_UP"), p("MPC_Z_VEL_MAX_DN"), p("MPC_ACC_HOR"),
+                      p("MPC_ACC_UP_MAX"), p("MPC_ACC_DOWN_MAX"), self.options.velocity_tau_s,
+                      math.radians(p("MPC_YAWRAUTO_MAX")))
+
+    def _advance_to(self, t_s: float) -> None:
+        """Run the physics and the commander in fixed steps up to simulated time ``t_s``."""
+        target = int(t_s / PHYSICS_DT_S)
+        if target <= self._steps:
+            return
+        limits, wind, commander, kin = self._limits(), self.options.wind_ned_m_s, self._commander, self._kin
+        for k in range(self._steps + 1, target + 1):
+            kin = step(kin, commander.step(k * PHYSICS_DT_S, kin), limits, wind, PHYSICS_DT_S)
+        self._counters["physics_steps"] += target - self._steps
+        self._kin, self._steps = kin, target
+        commander.kin = kin
+        self._collect_events()
+
+    def _collect_events(self) -> None:
+        """Move the commander's STATUSTEXTs to the event log and the send queue."""
+        if self._commander.outbox:
+            outbox, self._commander.outbox = self._commander.outbox, []
+            self._events.extend(outbox)
+            self._unsent.extend(outbox)
+
+    def _wait_wall_s(self, t_s: float) -> float:
+        """Wall seconds until the physics step at which the next stream or held datagram is due."""
+        due = [s.next_due_s for s in self._streams.values() if s.period_s > 0]
+        held = self._faults.next_due_s()
+        if held is not None:
+            due.append(held)
+        next_s = min(due, default=t_s + 1.0)
+        wake_s = math.ceil(next_s / PHYSICS_DT_S - DUE_EPSILON) * PHYSICS_DT_S
+        return min(max(wake_s - self.clock.now(), 0.0) / self.clock.speed, MAX_POLL_WALL_S)
+
+    def _poll(self, wait_s: float) -> None:
+        links = list(self._links)
+        try:
+            ready, _, _ = select.select([link.sock for link in links], [], [], wait_s)
+        except (OSError, ValueError):  # closed by stop()
+            return
+        for link in links:
+            if link.sock in ready:
+                self._drain(link)
+
+    def _drain(self, link: VehicleLink) -> None:
+        for _ in range(RX_BATCH):
+            try:
+                data, address = link.sock.recvfrom(65535)
+            except (BlockingIOError, InterruptedError):
+                return
+            except OSError:
+                return
+            with self._lock:
+                self._advance_to(self.clock.now())
+                self._admit_in(link, data, address)
+
+    def _admit_in(self, link: VehicleLink, data: bytes, address: tuple[str, int]) -> None:
+        fate, delay_s = self._faults.admit("in", self._t_s)
+        if fate == "blackout":
+            self._counters["blackout_in"] += 1
+        elif fate == "lost":
+            self._counters["dropped_in"] += 1
+        elif fate == "delay":
+            self._counters["delayed_in"] += 1
+            self._faults.hold(self._t_s + delay_s, "in", (link, data, address))
+        else:
+            self._process(link, data, address)
+
+    def _release(self, kind: str, item: Any) -> None:
+        if kind == "in":
+            self._process(*item)
+        else:
+            link, data = item
+            if link.target is not None and link in self._links and not link.sendto(data, link.target):
+                self._counters["tx_errors"] += 1
+
+    # ---- receiving -----------------------------------------------------------------------
+    def _process(self, link: VehicleLink, data: bytes, address: tuple[str, int]) -> None:
+        self._counters["rx_datagrams"] += 1
+        messages, leftover = link.parse(data)
+        if leftover:
+            self._counters["rx_malformed"] += 1
+        for msg in messages:
+            self._dispatch(link, msg, address)
+        self._flush_outbox()
+
+    def _dispatch(self, link: VehicleLink, msg: Any, address: tuple[str, int]) -> None:
+        kind = msg.get_type()
+        if kind == "BAD_DATA":
+            unsigned = "signature" in str(getattr(msg, "reason", ""))
+            self._counters["rx_unsigned_rejected" if unsigned else "rx_malformed"] += 1
+            log.debug("rx %s from %s: %s", kind, address, getattr(msg, "reason", ""))
+            return
+        if kind.startswith("UNKNOWN_"):
+            self._counters["rx_unknown_ids"] += 1
+            return
+        self._counters["rx_messages"] += 1
+        link.latch(address)
+        handler = self._handlers.get(kind)
+        if handler is None:
+            self._counters["rx_ignored"] += 1
+            return
+        try:
+            handler(link, msg)
+        except (ValueError, TypeError, OverflowError, AttributeError, UnicodeError) as exc:
+            self._counters["rx_malformed"] += 1
+            log.debug("rx %s rejected: %s", kind, exc)
+
+    def _targets_me(self, msg: Any) -> bool:
+        ok = (msg.target_system in (0, self.options.sysid)) and (msg.target_component in (0, self.options.compid))
+        if not ok:
+            self._counters["rx_wrong_target"] += 1
+        return ok
+
+    def _on_heartbeat(self, link: VehicleLink, msg: Any) -> None:
+        link.last_peer_heartbeat_s = self._t_s
+
+    def _on_command_long(self, link: VehicleLink, msg: Any) -> None:
+        if self._targets_me(msg):
+            params = [msg.param1, msg.param2, msg.param3, msg.param4, msg.param5, msg.param6, msg.param7]
+            self._command(link, msg, [float(p) for p in params])
+
+    def _on_command_int(self, link: VehicleLink, msg: Any) -> None:
+        if self._targets_me(msg):
+            params = [msg.param1, msg.param2, msg.param3, msg.param4, msg.x, msg.y, msg.z]
+            self._command(link, msg, [float(p) for p in params])
+
+    def _command(self, link: VehicleLink, msg: Any, params: list[float]) -> None:
+        """Run a command and ACK it to its sender (after which any reply messages follow)."""
+        self._counters["commands"] += 1
+        handler = self._command_handlers.get(msg.command)
+        result, replies = handler(link, params) if handler else (px4.MAV_RESULT_UNSUPPORTED, [])
+        header = msg.get_header()
+        ack = mavlink.MAVLink_command_ack_message(msg.command, result, 0, 0, header.srcSystem, header.srcComponent)
+        self._send(link, ack)
+        for reply in replies:
+            self._send(link, reply)
+        log.debug("command %d %s -> result %d", msg.command, params, result)
+
+    def _cmd_set_mode(self, link: VehicleLink, p: list[float]) -> tuple[int, list[Any]]:
+        name = mode_of_set_mode(p)
+        if name is None:
+            return px4.MAV_RESULT_UNSUPPORTED, []
+        result = self._commander.set_mode(self._t_s, name)
+        log.info("DO_SET_MODE %s -> %d", name, result)
+        return result, []
+
+    def _cmd_arm_disarm(self, link: VehicleLink, p: list[float]) -> tuple[int, list[Any]]:
+        arm, force = int_param(p[0]), int_param(p[1]) == px4.ARM_FORCE_MAGIC
+        if arm == 1:
+            result = self._commander.arm(self._t_s, force)
+        elif arm == 0:
+            result = self._commander.disarm(self._t_s, force)
+        else:
+            result = px4.MAV_RESULT_DENIED
+        log.info("%s%s -> %d", "ARM" if arm == 1 else "DISARM", " (forced)" if force else "", result)
+        return result, []
+
+    def _cmd_takeoff(self, link: VehicleLink, p: list[float]) -> tuple[int, list[Any]]:
+        home_amsl_m = self.options.home[2] - self._commander.home_ned_m[2]
+        altitude_m = p[6] - home_amsl_m if math.isfinite(p[6]) else None
+        return self._commander.takeoff(self._t_s, altitude_m), []
+
+    def _cmd_request_message(self, link: VehicleLink, p: list[float]) -> tuple[int, list[Any]]:
+        msg_id = int_param(p[0])
+        if msg_id == mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
+            return px4.MAV_RESULT_ACCEPTED, [tel.autopilot_version(self.options.sysid)]
+        stream = next((s for s in self._streams.values() if s.msg_id == msg_id), None)
+        if stream is None:
+            return px4.MAV_RESULT_UNSUPPORTED, []
+        return px4.MAV_RESULT_ACCEPTED, [tel.build(stream.name, self._telemetry_state(), self._geo, self._noise)]
+
+    def _cmd_set_message_interval(self, link: VehicleLink, p: list[float]) -> tuple[int, list[Any]]:
+        msg_id, interval_us = int_param(p[0]), p[1]
+        stream = next((s for s in self._streams.values() if s.msg_id == msg_id), None)
+        if stream is None or not math.isfinite(interval_us):
+            return px4.MAV_RESULT_DENIED, []
+        rate_hz = stream.default_rate_hz if interval_us == 0 else (0.0 if interval_us < 0 else 1e6 / interval_us)
+        stream.set_rate(rate_hz, self.clock.speed)
+        stream.next_due_s = self._t_s
+        return px4.MAV_RESULT_ACCEPTED, []
+
+    def _on_setpoint(self, link: VehicleLink, msg: Any) -> None:
+        if not self._targets_me(msg):
+            return
+        setpoint = setpoint_of(msg, self._kin.yaw_rad)
+        if setpoint is None:
+            self._counters["setpoints_rejected"] += 1
+            return
+        self._counters["setpoints_accepted"] += 1
+        self._commander.accept_setpoint(self._t_s, setpoint)
+
+    def _on_param_request_list(self, link: VehicleLink, msg: Any) -> None:
+        if self._targets_me(msg):
+            for index in range(len(self.params)):
+                self._send(link, param_value(self.params, self.params.name_at(index)))
+
+    def _on_param_request_read(self, link: VehicleLink, msg: Any) -> None:
+        if not self._targets_me(msg):
+            return
+        try:
+            name = self.params.name_at(msg.param_index) if msg.param_index >= 0 else str(msg.param_id)
+            self._send(link, param_value(self.params, name))
+        except (UnknownParam, KeyError):
+            self._counters["rx_ignored"] += 1
+
+    def _on_param_set(self, link: VehicleLink, msg: Any) -> None:
+        if not self._targets_me(msg):
+            return
+        try:
+            self.params.set_from_wire(str(msg.param_id), msg.param_value, msg.param_type)
+        except (UnknownParam, ValueError):
+            self._counters["rx_ignored"] += 1
+            return
+        self._counters["params_set"] += 1
+        log.info("PARAM_SET %s = %g", msg.param_id, self.params.get(str(msg.param_id)))
+        self._send(link, param_value(self.params, str(msg.param_id)))
+
+    def _on_timesync(self, link: VehicleLink, msg: Any) -> None:
+        if msg.tc1 == 0:
+            self._send(link, mavlink.MAVLink_timesync_message(int(self._t_s * 1e9), msg.ts1))
+
+    # ---- sending -------------------------------------------------------------------------
+    def _send(self, link: VehicleLink, msg: Any) -> None:
+        """Encode ``msg`` on ``link`` and send it through the outbound faults."""
+        data = link.pack(msg)
+        self._counters["tx_messages"] += 1
+        fate, delay_s = self._faults.admit("out", self._t_s)
+        if fate == "blackout":
+            self._counters["blackout_out"] += 1
+        elif fate == "lost":
+            self._counters["dropped_out"] += 1
+        elif fate == "delay":
+            self._counters["delayed_out"] += 1
+            self._faults.hold(self._t_s + delay_s, "out", (link, data))
+        elif link.target is not None and not link.sendto(data, link.target):
+            self._counters["tx_errors"] += 1
+
+    def _telemetry_state(self) -> tel.TelemetryState:
+        c, k = self._commander, self._kin
+        return tel.TelemetryState(self._t_s, k, c.mode, c.armed, c.system_status(), c.landed_state(k), c.armable(),
+                                  c.position_valid, c.setpoint, c.home_ned_m)
+
+    def _service_streams(self, t_s: float) -> None:
+        due = [s for s in self._streams.values() if s.period_s > 0 and s.next_due_s <= t_s + DUE_EPSILON]
+        if not due:
+            return
+        state = self._telemetry_state()
+        for stream in due:
+            msg = tel.build(stream.name, state, self._geo, self._noise)
+            for link in self._links:
+                self._send(link, msg)
+            stream.next_due_s += stream.period_s
+            if stream.next_due_s <= t_s:
+                stream.next_due_s = t_s + stream.period_s
+
+    def _flush_outbox(self) -> None:
+        """Send the commander's STATUSTEXTs to the links whose peer is alive (PX4 rule)."""
+        self._collect_events()
+        unsent, self._unsent = self._unsent, []
+        for _, severity, text in unsent:
+            log.info("STATUSTEXT %s", text)
+            self._chunk_id = self._chunk_id % 65535 + 1
+            for link in self._links:
+                peer_alive = self._t_s - link.last_peer_heartbeat_s <= STATUSTEXT_PEER_TIMEOUT_S
+                if peer_alive or not self.options.statustext_needs_heartbeat:
+                    for chunk in tel.statustext_chunks(severity, text, self._chunk_id):
+                        self._send(link, chunk)
+
+
+def spawn_process(args: Sequence[str], timeout_s: float = 15.0, **popen_kwargs: Any) -> tuple[subprocess.Popen[bytes], int]:
+    """Start ``python -m sim.vehicle_cli ARGS`` as its own process; return it and its UDP port.
+
+    The port comes from ``--port-file`` (added here). Stop the process with ``terminate()``
+    (SIGTERM: clean exit 0) and ``wait()``.
+    """
+    directory = tempfile.mkdtemp(prefix="mock-vehicle-")
+    port_file = os.path.join(directory, "port")
+    command = [sys.executable, "-m", "sim.vehicle_cli", "--port-file", port_file, *args]
+    process = subprocess.Popen(command, **popen_kwargs)
+    deadline = time.monotonic() + timeout_s
+    try:
+        while time.monotonic() < deadline:
+            if os.path.exists(port_file):
+                with open(port_file, encoding="ascii") as handle:
+                    text = handle.read().strip()
+                if text.isdigit():
+                    return process, int(text)
+            if process.poll() is not None:
+                raise RuntimeError(f"mock vehicle exited with code {process.returncode} before listening")
+            time.sleep(0.02)
+        process.kill()
+        process.wait()
+        raise TimeoutError(f"mock vehicle did not report its port within {timeout_s} s")
+    finally:
+        if os.path.exists(port_file):
+            os.unlink(port_file)
+        os.rmdir(directory)

@@ -1,0 +1,257 @@
+"""Telemetry of the mock vehicle: the onboard-profile streams and their MAVLink messages.
+
+Message builders are plain functions of a :class:`TelemetryState` (one consistent picture of the
+vehicle taken under its lock). Geodetic output is a flat-earth projection of local NED around
+the EKF origin (``home`` option): good to millimetres over the few kilometres a flight covers.
+
+Stream rates are PX4's onboard profile in simulated Hz; every rate scales with the speed factor.
+So that a sped-up run stays cheap, each stream's wall-clock rate is capped: LOCAL_POSITION_NED
+and HEARTBEAT at :data:`CAP_PRIMARY_WALL_HZ`, ATTITUDE at :data:`CAP_ATTITUDE_WALL_HZ`, every
+other stream at :data:`CAP_OTHER_WALL_HZ`. At speed 1 no cap bites (PX4's rates exactly); at
+speed 20 LOCAL_POSITION_NED arrives at 300 Hz wall (15 Hz simulated), ATTITUDE at 100 Hz wall
+(5 Hz simulated), SYS_STATUS at 50 Hz wall (2.5 Hz simulated). SET_MESSAGE_INTERVAL changes the
+simulated rate; the caps still apply.
+"""
+from __future__ import annotations
+
+import math
+import random
+from dataclasses import dataclass
+from typing import Any
+
+from mission import px4
+from mission.mavlink_env import mavlink
+from sim.vehicle_commander import Setpoint
+from sim.vehicle_physics import KinState, attitude_rad, quaternion
+
+EARTH_RADIUS_M = 6_378_137.0
+CAP_PRIMARY_WALL_HZ = 300.0
+CAP_OTHER_WALL_HZ = 50.0
+CAP_ATTITUDE_WALL_HZ = 100.0
+
+# name, default rate [Hz simulated], wall-clock cap [Hz]
+STREAM_TABLE: tuple[tuple[str, float, float], ...] = (
+    ("HEARTBEAT", 1.0, CAP_PRIMARY_WALL_HZ),
+    ("LOCAL_POSITION_NED", 30.0, CAP_PRIMARY_WALL_HZ),
+    ("ATTITUDE", 100.0, CAP_ATTITUDE_WALL_HZ),
+    ("ATTITUDE_QUATERNION", 50.0, CAP_OTHER_WALL_HZ),
+    ("GLOBAL_POSITION_INT", 50.0, CAP_OTHER_WALL_HZ),
+    ("POSITION_TARGET_LOCAL_NED", 10.0, CAP_OTHER_WALL_HZ),
+    ("ALTITUDE", 10.0, CAP_OTHER_WALL_HZ),
+    ("VFR_HUD", 10.0, CAP_OTHER_WALL_HZ),
+    ("SYS_STATUS", 5.0, CAP_OTHER_WALL_HZ),
+    ("EXTENDED_SYS_STATE", 5.0, CAP_OTHER_WALL_HZ),
+    ("GPS_GLOBAL_ORIGIN", 1.0, CAP_OTHER_WALL_HZ),
+    ("HOME_POSITION", 0.5, CAP_OTHER_WALL_HZ),
+)
+
+SENSORS_PRESENT = (px4.SENSOR_3D_GYRO | px4.SENSOR_3D_ACCEL | px4.SENSOR_3D_MAG | px4.SENSOR_ABSOLUTE_PRESSURE
+                   | px4.SENSOR_GPS | px4.SENSOR_ANGULAR_RATE_CONTROL | px4.SENSOR_ATTITUDE_STABILIZATION
+                   | px4.SENSOR_YAW_POSITION | px4.SENSOR_Z_ALTITUDE_CONTROL | px4.SENSOR_XY_POSITION_CONTROL
+                   | px4.SENSOR_MOTOR_OUTPUTS | px4.SENSOR_AHRS | px4.SENSOR_PREARM_CHECK | px4.SYS_STATUS_EXTENSION_USED)
+CAPABILITIES = (px4.MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT | px4.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
+                | px4.MAV_PROTOCOL_CAPABILITY_MISSION_INT | px4.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
+                | px4.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
+                | px4.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_GLOBAL_INT | px4.MAV_PROTOCOL_CAPABILITY_MAVLINK2)
+FLIGHT_SW_VERSION = (1 << 24) | (16 << 16) | (0 << 8) | 255  # 1.16.0 release, as PX4 encodes it
+
+
+@dataclass
+class Stream:
+    """One periodic message: its period [s, simulated] after the wall cap, and next due time."""
+
+    name: str
+    msg_id: int
+    default_rate_hz: float
+    wall_cap_hz: float
+    period_s: float = 0.0  # 0: disabled
+    next_due_s: float = 0.0
+
+    def set_rate(self, rate_hz: float, speed: float) -> None:
+        """Set the simulated rate [Hz]; <= 0 disables. The wall cap bounds rate * speed."""
+        self.period_s = 0.0 if rate_hz <= 0 else max(1.0 / rate_hz, speed / self.wall_cap_hz)
+
+
+def make_streams(speed: float) -> dict[str, Stream]:
+    """The onboard-profile streams at their default rates for clock ``speed``."""
+    streams = {}
+    for name, rate_hz, cap_hz in STREAM_TABLE:
+        stream = Stream(name, getattr(mavlink, f"MAVLINK_MSG_ID_{name}"), rate_hz, cap_hz)
+        stream.set_rate(rate_hz, speed)
+        streams[name] = stream
+    return streams
+
+
+@dataclass(frozen=True)
+class Geo:
+    """Flat-earth projection around the EKF origin: latitude, longitude [deg], altitude [m AMSL]."""
+
+    lat0_deg: float
+    lon0_deg: float
+    alt0_m: float
+
+    def to_geodetic(self, n_m: float, e_m: float, d_m: float) -> tuple[float, float, float]:
+        """Local NED [m] -> (lat [deg], lon [deg], alt [m AMSL])."""
+        lat = self.lat0_deg + math.degrees(n_m / EARTH_RADIUS_M)
+        lon = self.lon0_deg + math.degrees(e_m / (EARTH_RADIUS_M * math.cos(math.radians(self.lat0_deg))))
+        return lat, lon, self.alt0_m - d_m
+
+
+@dataclass(frozen=True)
+class TelemetryState:
+    """Everything the streams report, taken at one instant (``t_s`` simulated seconds)."""
+
+    t_s: float
+    kin: KinState
+    mode: str
+    armed: bool
+    system_status: int
+    landed_state: int
+    armable: bool
+    position_valid: bool
+    setpoint: Setpoint | None
+    home_ned_m: tuple[float, float, float]
+
+
+def _ms(t_s: float) -> int:
+    return int(t_s * 1000.0) & 0xFFFFFFFF
+
+
+def _us(t_s: float) -> int:
+    return int(t_s * 1e6)
+
+
+def heartbeat(s: TelemetryState) -> Any:
+    return mavlink.MAVLink_heartbeat_message(
+        px4.MAV_TYPE_QUADROTOR, px4.MAV_AUTOPILOT_PX4, px4.base_mode_of(s.mode, s.armed),
+        px4.custom_mode_of(s.mode), s.system_status, 3)
+
+
+def sys_status(s: TelemetryState) -> Any:
+    health = SENSORS_PRESENT
+    if not s.armable:
+        health &= ~px4.SENSOR_PREARM_CHECK
+    if not s.position_valid:
+        health &= ~(px4.SENSOR_GPS | px4.SENSOR_XY_POSITION_CONTROL)
+    return mavlink.MAVLink_sys_status_message(SENSORS_PRESENT, SENSORS_PRESENT, health, 150, 65535, -1, -1,
+                                              0, 0, 0, 0, 0, 0, 0, 0, 0)
+
+
+def extended_sys_state(s: TelemetryState) -> Any:
+    return mavlink.MAVLink_extended_sys_state_message(0, s.landed_state)
+
+
+def local_position_ned(s: TelemetryState, noisy: tuple[float, float, float]) -> Any:
+    k = s.kin
+    return mavlink.MAVLink_local_position_ned_message(_ms(s.t_s), *noisy, k.vn_m_s, k.ve_m_s, k.vd_m_s)
+
+
+def global_position_int(s: TelemetryState, geo: Geo, noisy: tuple[float, float, float]) -> Any:
+    k = s.kin
+    lat, lon, alt = geo.to_geodetic(*noisy)
+    heading_cdeg = int(round(math.degrees(k.yaw_rad) * 100.0)) % 36000
+    return mavlink.MAVLink_global_position_int_message(
+        _ms(s.t_s), int(round(lat * 1e7)), int(round(lon * 1e7)), int(round(alt * 1000.0)),
+        int(round((s.home_ned_m[2] - noisy[2]) * 1000.0)), _cm_s(k.vn_m_s), _cm_s(k.ve_m_s), _cm_s(k.vd_m_s), heading_cdeg)
+
+
+def _cm_s(v_m_s: float) -> int:
+    return max(-32768, min(32767, int(round(v_m_s * 100.0))))
+
+
+def attitude(s: TelemetryState) -> Any:
+    roll, pitch, yaw = attitude_rad(s.kin)
+    return mavlink.MAVLink_attitude_message(_ms(s.t_s), roll, pitch, yaw, 0.0, 0.0, s.kin.yaw_rate_rad_s)
+
+
+def attitude_quaternion(s: TelemetryState) -> Any:
+    q = quaternion(*attitude_rad(s.kin))
+    return mavlink.MAVLink_attitude_quaternion_message(_ms(s.t_s), *q, 0.0, 0.0, s.kin.yaw_rate_rad_s, [0.0] * 4)
+
+
+def position_target_local_ned(s: TelemetryState) -> Any:
+    sp, nan = s.setpoint, float("nan")
+    if sp is None or s.mode != "OFFBOARD":
+        n, e, d = s.kin.n_m, s.kin.e_m, s.kin.d_m
+        return mavlink.MAVLink_position_target_local_ned_message(_ms(s.t_s), px4.MAV_FRAME_LOCAL_NED, px4.TYPE_MASK_POSITION,
+                                                                 n, e, d, nan, nan, nan, nan, nan, nan, s.kin.yaw_rad, nan)
+    pos = sp.ned if sp.kind == "position" else (nan, nan, nan)
+    vel = sp.ned if sp.kind == "velocity" else (nan, nan, nan)
+    yaw = sp.yaw_rad if sp.yaw_rad is not None else nan
+    yaw_rate = sp.yaw_rate_rad_s if sp.yaw_rate_rad_s is not None else nan
+    return mavlink.MAVLink_position_target_local_ned_message(_ms(s.t_s), px4.MAV_FRAME_LOCAL_NED, sp.type_mask,
+                                                             *pos, *vel, nan, nan, nan, yaw, yaw_rate)
+
+
+def altitude(s: TelemetryState, geo: Geo) -> Any:
+    k = s.kin
+    amsl = geo.alt0_m - k.d_m
+    return mavlink.MAVLink_altitude_message(_us(s.t_s), amsl, amsl, -k.d_m, s.home_ned_m[2] - k.d_m,
+                                            float("nan"), max(0.0, k.ground_d_m - k.d_m))
+
+
+def vfr_hud(s: TelemetryState, geo: Geo) -> Any:
+    k = s.kin
+    speed = math.hypot(k.vn_m_s, k.ve_m_s)
+    heading = int(round(math.degrees(k.yaw_rad))) % 360
+    throttle = 0 if not s.armed else 50
+    return mavlink.MAVLink_vfr_hud_message(speed, speed, heading, throttle, geo.alt0_m - k.d_m, -k.vd_m_s)
+
+
+def home_position(s: TelemetryState, geo: Geo) -> Any:
+    lat, lon, alt = geo.to_geodetic(*s.home_ned_m)
+    return mavlink.MAVLink_home_position_message(int(round(lat * 1e7)), int(round(lon * 1e7)), int(round(alt * 1000.0)),
+                                                 *s.home_ned_m, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, _us(s.t_s))
+
+
+def gps_global_origin(s: TelemetryState, geo: Geo) -> Any:
+    return mavlink.MAVLink_gps_global_origin_message(int(round(geo.lat0_deg * 1e7)), int(round(geo.lon0_deg * 1e7)),
+                                                     int(round(geo.alt0_m * 1000.0)), _us(s.t_s))
+
+
+def autopilot_version(sysid: int) -> Any:
+    return mavlink.MAVLink_autopilot_version_message(CAPABILITIES, FLIGHT_SW_VERSION, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8,
+                                                     0x26AC, 0x0011, 0x4D4F434B00000000 | sysid, [0] * 18)
+
+
+def statustext_chunks(severity: int, text: str, chunk_id: int) -> list[Any]:
+    """STATUSTEXT messages of ``text``: one if it fits in 50 bytes, else chunks sharing ``chunk_id``."""
+    data = text.encode("utf-8", "replace")
+    if len(data) <= 50:
+        return [mavlink.MAVLink_statustext_message(severity, data, 0, 0)]
+    pieces = [data[i:i + 50] for i in range(0, len(data), 50)]
+    if len(pieces[-1]) == 50:
+        pieces.append(b"")  # a final short chunk marks the end
+    return [mavlink.MAVLink_statustext_message(severity, piece, chunk_id, seq) for seq, piece in enumerate(pieces)]
+
+
+class PositionNoise:
+    """Seeded Gaussian noise [m] added to the reported position (never to the true state)."""
+
+    def __init__(self, sigma_m: float, seed: int | None) -> None:
+        self.sigma_m = float(sigma_m)
+        self._rng = random.Random(None if seed is None else seed + 7919)
+
+    def apply(self, kin: KinState) -> tuple[float, float, float]:
+        if self.sigma_m <= 0.0:
+            return kin.n_m, kin.e_m, kin.d_m
+        g = self._rng.gauss
+        return kin.n_m + g(0.0, self.sigma_m), kin.e_m + g(0.0, self.sigma_m), kin.d_m + g(0.0, self.sigma_m)
+
+
+def build(name: str, s: TelemetryState, geo: Geo, noise: PositionNoise) -> Any:
+    """The message of stream ``name`` for state ``s``."""
+    if name == "HEARTBEAT":
+        return heartbeat(s)
+    if name == "LOCAL_POSITION_NED":
+        return local_position_ned(s, noise.apply(s.kin))
+    if name == "GLOBAL_POSITION_INT":
+        return global_position_int(s, geo, noise.apply(s.kin))
+    if name in ("ALTITUDE", "VFR_HUD", "HOME_POSITION", "GPS_GLOBAL_ORIGIN"):
+        return _GEO_BUILDERS[name](s, geo)
+    return _PLAIN_BUILDERS[name](s)
+
+
+_GEO_BUILDERS = {"ALTITUDE": altitude, "VFR_HUD": vfr_hud, "HOME_POSITION": home_position, "GPS_GLOBAL_ORIGIN": gps_global_origin}
+_PLAIN_BUILDERS = {"SYS_STATUS": sys_status, "EXTENDED_SYS_STATE": extended_sys_state, "ATTITUDE": attitude,
+                   "ATTITUDE_QUATERNION": attitude_quaternion, "POSITION_TARGET_LOCAL_NED": position_target_local_ned}

@@ -1,0 +1,320 @@
+"""Mock vehicle behaviour over real UDP on loopback (ephemeral ports), pymavlink as the client.
+
+Modes, arming, OFFBOARD entry and loss, failsafes, auto-disarm, auto modes and kinematics.
+Timing facts are checked in simulated time (the vehicle's event log stamps each event at the
+physics step where it happened), so they hold at any speed factor and on a loaded machine.
+"""
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+
+from mission import px4
+from sim.vehicle import PHYSICS_DT_S, MockVehicle, VehicleOptions
+from sim.vehicle_probe import Probe, SetpointStream, connect, sleep_until, start_offboard
+
+pytestmark = pytest.mark.timeout(30)
+
+
+@pytest.fixture
+def probe() -> Iterator[Probe]:
+    with Probe() as p:
+        yield p
+
+
+def vehicle_for(probe: Probe, speed: float = 10.0, **options: object) -> MockVehicle:
+    return MockVehicle(VehicleOptions(bind="127.0.0.1:0", target=f"127.0.0.1:{probe.port}", speed=speed, **options))  # type: ignore[arg-type]
+
+
+def climb_to(v: MockVehicle, probe: Probe, altitude_m: float, stream: SetpointStream, timeout_s: float = 5.0) -> None:
+    stream.set(velocity_ned_m_s=(0.0, 0.0, -2.0))
+    assert v.wait_for(lambda s: s.position_ned_m[2] <= -altitude_m, timeout_s), "did not climb"
+    stream.set(velocity_ned_m_s=(0.0, 0.0, 0.0))
+
+
+def test_heartbeat_identity_and_initial_hold(probe: Probe) -> None:
+    with vehicle_for(probe, speed=10.0):
+        hb = probe.wait_for("HEARTBEAT", timeout_s=2.0)
+        assert hb is not None
+        header = hb.get_header()
+        assert (header.srcSystem, header.srcComponent) == (1, 1)
+        assert hb.get_msgbuf()[0] == 0xFD  # MAVLink 2
+        assert (hb.type, hb.autopilot) == (px4.MAV_TYPE_QUADROTOR, px4.MAV_AUTOPILOT_PX4)
+        assert hb.custom_mode == px4.custom_mode_of("AUTO.LOITER") == 50593792
+        assert hb.base_mode == 29  # as seen on SITL: Hold, disarmed
+        assert hb.system_status == px4.MAV_STATE_STANDBY
+        ess = probe.wait_for("EXTENDED_SYS_STATE", timeout_s=2.0)
+        assert ess is not None and ess.landed_state == px4.LANDED_ON_GROUND
+
+
+def test_heartbeat_rate_is_1hz_simulated(probe: Probe) -> None:
+    with vehicle_for(probe, speed=20.0):
+        assert probe.wait_for("HEARTBEAT", timeout_s=2.0)
+        assert probe.count_between("HEARTBEAT", 0.5, 6.5) == 6
+
+
+def test_offboard_rejected_without_setpoint_stream(probe: Probe) -> None:
+    with vehicle_for(probe) as v:
+        connect(probe)
+        ack = probe.set_mode("OFFBOARD")
+        assert ack is not None and ack.result == px4.MAV_RESULT_TEMPORARILY_REJECTED
+        assert probe.wait_for("STATUSTEXT", lambda m: "OFFBOARD" in m.text, 2.0) is not None
+        assert v.snapshot().mode == "AUTO.LOITER"
+        # armed with no stream: still rejected
+        assert probe.arm().result == px4.MAV_RESULT_ACCEPTED
+        assert probe.set_mode("OFFBOARD").result == px4.MAV_RESULT_TEMPORARILY_REJECTED
+
+
+def test_offboard_accepted_with_stream_then_armed_and_flying(probe: Probe) -> None:
+    with vehicle_for(probe) as v:
+        connect(probe)
+        stream = start_offboard(probe, (0.0, 0.0, -1.0))
+        with stream:
+            assert probe.wait_mode("OFFBOARD") and probe.wait_armed(True)
+            hb = probe.latest("HEARTBEAT")
+            assert (hb.base_mode, hb.custom_mode, hb.system_status) == (145, 393216, px4.MAV_STATE_ACTIVE)
+            snap = v.wait_for(lambda s: s.position_ned_m[2] < -1.0, 3.0)
+            assert snap is not None and snap.landed_state == px4.LANDED_IN_AIR
+            assert probe.wait_for("EXTENDED_SYS_STATE", lambda m: m.landed_state == px4.LANDED_IN_AIR, 2.0)
+
+
+def test_arming_in_offboard_without_fresh_stream_is_denied(probe: Probe) -> None:
+    with vehicle_for(probe, speed=20.0) as v:
+        connect(probe)
+        stream = start_offboard(probe, arm=False)
+        stream.stop()
+        t_stop = v.snapshot().last_setpoint_t_s
+        assert v.wait_for(lambda s: s.t_s > t_stop + 1.2, 2.0)
+        mark = probe.mark()
+        ack = probe.arm()
+        assert ack is not None and ack.result == px4.MAV_RESULT_TEMPORARILY_REJECTED
+        assert probe.wait_for("STATUSTEXT", lambda m: "Arming denied" in m.text, 2.0, after=mark)
+        assert not v.snapshot().armed
+
+
+@pytest.mark.parametrize(("action", "mode"), [(0, "POSCTL"), (4, "AUTO.LAND"), (5, "AUTO.LOITER")])
+def test_offboard_loss_failsafe_after_com_of_loss_t(probe: Probe, action: int, mode: str) -> None:
+    loss_t_s = 1.0
+    with vehicle_for(probe, speed=20.0, params={"COM_OF_LOSS_T": loss_t_s, "COM_OBL_RC_ACT": action}) as v:
+        connect(probe)
+        stream = start_offboard(probe, (0.0, 0.0, -2.0))
+        assert v.wait_for(lambda s: s.position_ned_m[2] < -2.0, 3.0)
+        stream.stop()
+        assert probe.wait_mode(mode, 3.0)
+        snap = v.snapshot()
+        t_failsafe = v.event_time("Failsafe activated")
+        assert t_failsafe is not None
+        assert loss_t_s < t_failsafe - snap.last_setpoint_t_s <= loss_t_s + 2 * PHYSICS_DT_S
+        assert snap.in_failsafe and snap.mode == mode
+        hb = probe.wait_for("HEARTBEAT", lambda m: m.system_status == px4.MAV_STATE_CRITICAL, 3.0)
+        assert hb is not None and px4.mode_name(hb.custom_mode) == mode
+        assert probe.wait_for("STATUSTEXT", lambda m: "Failsafe activated" in m.text, 2.0)
+
+
+def test_failsafe_without_rc_descends_lands_and_disarms(probe: Probe) -> None:
+    with vehicle_for(probe, speed=20.0) as v:
+        connect(probe)
+        stream = start_offboard(probe, (1.0, 0.0, -2.0))
+        assert v.wait_for(lambda s: s.position_ned_m[2] < -3.0, 3.0)
+        stream.stop()
+        assert v.wait_for(lambda s: s.mode == "POSCTL", 2.0)
+        # let the velocity settle, then watch a descent at MPC_LAND_SPEED with the position held
+        start = v.wait_for(lambda s: abs(s.velocity_ned_m_s[2] - 0.7) < 0.01, 2.0)
+        assert start is not None
+        later = v.wait_for(lambda s: s.t_s > start.t_s + 1.0, 2.0)
+        assert later is not None
+        rate = (later.position_ned_m[2] - start.position_ned_m[2]) / (later.t_s - start.t_s)
+        assert rate == pytest.approx(0.7, abs=0.02)
+        assert np.allclose(later.position_ned_m[:2], start.position_ned_m[:2], atol=0.05)
+        landed = v.wait_for(lambda s: s.landed_state == px4.LANDED_ON_GROUND, 5.0)
+        assert landed is not None and landed.position_ned_m[2] == 0.0
+        assert probe.wait_armed(False, 3.0)
+        t_landed = v.event_time("Landing detected")
+        t_disarmed = v.event_time("Disarmed by landing")
+        assert t_landed is not None and t_disarmed is not None
+        assert t_disarmed - t_landed == pytest.approx(2.0, abs=2 * PHYSICS_DT_S)  # COM_DISARM_LAND
+
+
+def test_failsafe_returns_to_offboard_when_setpoints_resume(probe: Probe) -> None:
+    # a slow failsafe descent, so that it cannot land and disarm first on a loaded machine
+    with vehicle_for(probe, speed=5.0, params={"MPC_LAND_SPEED": 0.2}) as v:
+        connect(probe)
+        stream = start_offboard(probe, (0.0, 0.0, -3.0))
+        assert v.wait_for(lambda s: s.position_ned_m[2] < -2.0, 3.0)
+        stream.stop()
+        assert v.wait_for(lambda s: s.mode == "POSCTL", 2.0)
+        t_failsafe = v.event_time("Failsafe activated")
+        assert t_failsafe is not None
+        probe.send(probe.setpoint_message((0.0, 0.0, 0.0)))  # a single setpoint: its arrival time is known
+        snap = v.wait_for(lambda s: s.mode == "OFFBOARD", 2.0)
+        assert snap is not None and not snap.in_failsafe and snap.armed
+        t_back = v.event_time("Failsafe deactivated", after_s=t_failsafe)
+        assert t_back is not None and 0.0 < t_back - snap.last_setpoint_t_s <= 0.2
+        with SetpointStream(probe, 0.01, velocity_ned_m_s=(0.0, 0.0, 0.0)):
+            assert probe.wait_mode("OFFBOARD", 2.0)
+
+
+def test_auto_disarm_preflight_when_not_taking_off(probe: Probe) -> None:
+    with vehicle_for(probe, speed=20.0) as v:
+        connect(probe)
+        assert probe.arm().result == px4.MAV_RESULT_ACCEPTED
+        assert probe.wait_armed(False, 3.0)
+        t_armed, t_disarmed = v.event_time("Armed"), v.event_time("auto preflight disarming")
+        assert t_armed is not None and t_disarmed is not None
+        assert t_disarmed - t_armed == pytest.approx(10.0, abs=2 * PHYSICS_DT_S)  # COM_DISARM_PRFLT
+
+
+def test_disarm_in_air_needs_force(probe: Probe) -> None:
+    with vehicle_for(probe) as v:
+        connect(probe)
+        with start_offboard(probe, (0.0, 0.0, -2.0)):
+            assert v.wait_for(lambda s: s.position_ned_m[2] < -1.0, 3.0)
+            assert probe.arm(False).result == px4.MAV_RESULT_TEMPORARILY_REJECTED
+            assert probe.arm(False, force=True).result == px4.MAV_RESULT_ACCEPTED
+            # disarmed in the air: it falls to the ground
+            assert v.wait_for(lambda s: s.landed_state == px4.LANDED_ON_GROUND, 3.0)
+
+
+def test_velocity_first_order_response_time_constant(probe: Probe) -> None:
+    tau_s, v_cmd = 0.3, 2.0
+    params = {"MPC_ACC_HOR": 100.0, "MPC_ACC_UP_MAX": 100.0}
+    with vehicle_for(probe, speed=5.0, velocity_tau_s=tau_s, params=params, start_ned=(0.0, 0.0, -1.0)) as v:
+        connect(probe)
+        with start_offboard(probe, (0.0, 0.0, -0.5)) as stream:
+            assert v.wait_for(lambda s: s.position_ned_m[2] < -1.5 and abs(s.velocity_ned_m_s[2] + 0.5) < 1e-3, 3.0)
+            mark = probe.mark()
+            stream.set(velocity_ned_m_s=(v_cmd, 0.0, -0.5))
+            assert v.wait_for(lambda s: s.velocity_ned_m_s[0] > 0.99 * v_cmd, 3.0)
+        samples = [(m.time_boot_ms / 1000.0, m.vx) for m in probe.messages("LOCAL_POSITION_NED", after=mark)]
+        rising = [(t, vx) for t, vx in samples if 0.05 * v_cmd < vx < 0.95 * v_cmd]
+        assert len(rising) >= 10
+        t, vx = np.array(rising).T
+        slope = np.polyfit(t, np.log(1.0 - vx / v_cmd), 1)[0]
+        assert -1.0 / slope == pytest.approx(tau_s, rel=0.03)
+
+
+def test_velocity_and_acceleration_limits(probe: Probe) -> None:
+    with vehicle_for(probe, speed=10.0, params={"MPC_XY_VEL_MAX": 4.0}) as v:
+        connect(probe)
+        with start_offboard(probe, (0.0, 0.0, -10.0)) as stream:
+            snap = v.wait_for(lambda s: s.position_ned_m[2] < -6.0, 3.0)
+            assert snap is not None and snap.velocity_ned_m_s[2] == pytest.approx(-3.0, abs=1e-3)  # MPC_Z_VEL_MAX_UP
+            mark = probe.mark()
+            stream.set(velocity_ned_m_s=(30.0, 30.0, 0.0))
+            snap = v.wait_for(lambda s: np.hypot(*s.velocity_ned_m_s[:2]) > 3.999, 3.0)
+            assert snap is not None
+            later = v.wait_for(lambda s: s.t_s > snap.t_s + 1.0, 2.0)
+            assert later is not None and np.hypot(*later.velocity_ned_m_s[:2]) == pytest.approx(4.0, abs=1e-3)
+            stream.set(velocity_ned_m_s=(0.0, 0.0, 10.0))
+            snap = v.wait_for(lambda s: s.velocity_ned_m_s[2] > 1.499, 3.0)
+            assert snap is not None and snap.velocity_ned_m_s[2] == pytest.approx(1.5, abs=1e-3)  # MPC_Z_VEL_MAX_DN
+        samples = [(m.time_boot_ms / 1000.0, np.hypot(m.vx, m.vy)) for m in probe.messages("LOCAL_POSITION_NED", after=mark)]
+        t, speed = np.array(samples).T
+        accel = np.diff(speed) / np.diff(t)
+        assert accel.max() <= 3.0 + 0.05  # MPC_ACC_HOR
+        assert accel.max() > 2.5  # and it is reached
+
+
+def test_ground_does_not_slide_and_platform_start(probe: Probe) -> None:
+    with vehicle_for(probe, speed=20.0, start_ned=(5.0, -3.0, -0.5)) as v:
+        connect(probe)
+        snap = v.snapshot()
+        assert snap.landed_state == px4.LANDED_ON_GROUND and list(snap.position_ned_m) == [5.0, -3.0, -0.5]
+        with start_offboard(probe, (2.0, 0.0, 0.0)) as stream:
+            assert v.wait_for(lambda s: s.t_s > snap.t_s + 1.0, 2.0)
+            assert list(v.snapshot().position_ned_m) == [5.0, -3.0, -0.5]  # no horizontal slide on the ground
+            stream.set(velocity_ned_m_s=(0.0, 0.0, -1.0))
+            assert v.wait_for(lambda s: s.position_ned_m[2] < -1.0, 2.0)
+            stream.set(velocity_ned_m_s=(0.0, 0.0, 1.0))
+            # the platform it started on is gone: it lands on the ground, d = 0
+            landed = v.wait_for(lambda s: s.landed_state == px4.LANDED_ON_GROUND, 5.0)
+            assert landed is not None and landed.position_ned_m[2] == 0.0
+
+
+def test_takeoff_hold_and_land_commands(probe: Probe) -> None:
+    with vehicle_for(probe, speed=20.0) as v:
+        connect(probe)
+        assert probe.arm().result == px4.MAV_RESULT_ACCEPTED
+        assert probe.command(px4.MAV_CMD_NAV_TAKEOFF).result == px4.MAV_RESULT_ACCEPTED
+        assert probe.wait_mode("AUTO.TAKEOFF", 2.0)
+        held = v.wait_for(lambda s: s.mode == "AUTO.LOITER" and s.landed_state == px4.LANDED_IN_AIR, 5.0)
+        assert held is not None
+        later = v.wait_for(lambda s: s.t_s > held.t_s + 2.0, 2.0)
+        assert later is not None and later.position_ned_m[2] == pytest.approx(-2.5, abs=0.05)  # MIS_TAKEOFF_ALT
+        assert probe.command(px4.MAV_CMD_NAV_LAND).result == px4.MAV_RESULT_ACCEPTED
+        assert probe.wait_mode("AUTO.LAND", 2.0)
+        assert probe.wait_for("EXTENDED_SYS_STATE", lambda m: m.landed_state == px4.LANDED_LANDING, 2.0)
+        assert v.wait_for(lambda s: not s.armed, 5.0)
+
+
+def test_takeoff_to_param7_altitude_amsl(probe: Probe) -> None:
+    with vehicle_for(probe, speed=20.0, home=(47.0, 8.0, 400.0)) as v:
+        connect(probe)
+        assert probe.arm().result == px4.MAV_RESULT_ACCEPTED
+        ack = probe.command(px4.MAV_CMD_NAV_TAKEOFF, (math.nan,) * 6 + (404.0,))
+        assert ack is not None and ack.result == px4.MAV_RESULT_ACCEPTED
+        held = v.wait_for(lambda s: s.mode == "AUTO.LOITER" and s.landed_state == px4.LANDED_IN_AIR, 5.0)
+        assert held is not None
+        assert v.wait_for(lambda s: abs(s.position_ned_m[2] + 4.0) < 0.05, 3.0)
+
+
+def test_return_to_launch_flies_home_and_lands(probe: Probe) -> None:
+    with vehicle_for(probe, speed=20.0, params={"RTL_RETURN_ALT": 6.0}) as v:
+        connect(probe)
+        with start_offboard(probe, (4.0, 3.0, -2.0)):
+            assert v.wait_for(lambda s: s.position_ned_m[0] > 8.0, 5.0)
+            assert probe.command(px4.MAV_CMD_NAV_RETURN_TO_LAUNCH).result == px4.MAV_RESULT_ACCEPTED
+            assert probe.wait_mode("AUTO.RTL", 2.0)
+            climbed = v.wait_for(lambda s: s.position_ned_m[2] <= -5.9, 5.0)
+            assert climbed is not None
+            landed = v.wait_for(lambda s: s.landed_state == px4.LANDED_ON_GROUND, 10.0)
+            assert landed is not None and np.allclose(landed.position_ned_m, [0.0, 0.0, 0.0], atol=0.6)
+            assert v.wait_for(lambda s: not s.armed, 5.0)
+
+
+def test_position_setpoint_and_body_frame_velocity(probe: Probe) -> None:
+    with vehicle_for(probe, speed=20.0) as v:
+        connect(probe)
+        with start_offboard(probe, type_mask=px4.TYPE_MASK_POSITION, position_ned_m=(3.0, -2.0, -4.0), yaw_rad=math.pi / 2) as s:
+            snap = v.wait_for(lambda x: np.allclose(x.position_ned_m, [3.0, -2.0, -4.0], atol=0.02), 5.0)
+            assert snap is not None and snap.yaw_rad == pytest.approx(math.pi / 2, abs=0.01)
+            # BODY_NED forward at yaw 90 deg is east
+            s.set(velocity_ned_m_s=(1.0, 0.0, 0.0), type_mask=px4.TYPE_MASK_VELOCITY_YAW_RATE,
+                  frame=px4.MAV_FRAME_BODY_NED, yaw_rate_rad_s=0.0)
+            moving = v.wait_for(lambda x: x.velocity_ned_m_s[1] > 0.99, 3.0)
+            assert moving is not None and abs(moving.velocity_ned_m_s[0]) < 0.02
+
+
+def _fly_script(speed: float, result: dict[float, np.ndarray]) -> None:
+    """A 4 s simulated flight whose setpoints change at given simulated times since arming,
+    then 1.5 s to come to rest."""
+    script = [(1.0, (1.5, 0.5, -0.5)), (2.5, (-0.5, 1.0, 0.0)), (3.5, (0.0, 0.0, 0.0))]
+    with Probe() as probe, vehicle_for(probe, speed=speed) as v:
+        connect(probe)
+        stream = start_offboard(probe, (0.0, 0.0, -1.5), period_s=0.1 / speed)
+        t_armed = v.event_time("Armed by external command")
+        assert t_armed is not None
+        with stream:
+            for t_change, velocity in script:
+                sleep_until(v.clock, t_armed + t_change)
+                stream.set(send_now=True, velocity_ned_m_s=velocity)
+            final = v.wait_for(lambda s: s.t_s >= t_armed + 5.0, 3.0)
+        assert final is not None and np.allclose(final.velocity_ned_m_s, 0.0, atol=1e-3)
+        result[speed] = final.position_ned_m
+
+
+def test_speed_factor_10_flies_the_same_trajectory() -> None:
+    result: dict[float, np.ndarray] = {}
+    threads = [threading.Thread(target=_fly_script, args=(speed, result)) for speed in (1.0, 10.0)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join(timeout=20.0)
+    assert set(result) == {1.0, 10.0}
+    assert np.linalg.norm(result[1.0]) > 2.5  # it did fly somewhere
+    assert np.linalg.norm(result[10.0] - result[1.0]) < 0.05, result

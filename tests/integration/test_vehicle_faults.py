@@ -1,0 +1,242 @@
+"""Mock vehicle fault injection and robustness: garbage on the socket, loss, latency, blackouts,
+a pilot taking over, loss of the position estimate, arming refusal, MAVLink 2 signing."""
+from __future__ import annotations
+
+import random
+import struct
+import time
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+
+from mission import px4
+from mission.mavlink_env import mavlink
+from sim.vehicle import FaultOptions, MockVehicle, VehicleOptions
+from sim.vehicle_probe import Probe, connect, start_offboard
+
+pytestmark = pytest.mark.timeout(30)
+KEY = bytes(range(32))
+
+
+@pytest.fixture
+def probe() -> Iterator[Probe]:
+    with Probe() as p:
+        yield p
+
+
+def vehicle_for(probe: Probe, speed: float = 10.0, **options: object) -> MockVehicle:
+    return MockVehicle(VehicleOptions(bind="127.0.0.1:0", target=f"127.0.0.1:{probe.port}", speed=speed, **options))  # type: ignore[arg-type]
+
+
+def _frame(probe: Probe, msg: object) -> bytearray:
+    data = bytearray(msg.pack(probe.mav))  # type: ignore[attr-defined]
+    probe.mav.seq = (probe.mav.seq + 1) % 256
+    return data
+
+
+def test_garbage_bytes_are_counted_and_never_crash_it(probe: Probe) -> None:
+    rng = random.Random(1234)
+    with vehicle_for(probe) as v:
+        connect(probe)
+        arm = _frame(probe, mavlink.MAVLink_command_long_message(1, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0))
+        good = _frame(probe, mavlink.MAVLink_heartbeat_message(6, 8, 0, 0, 0, 3))
+        bad_crc = bytearray(arm)
+        bad_crc[-1] ^= 0xFF
+        unknown_id = bytearray(arm)
+        unknown_id[7:10] = (54321).to_bytes(3, "little")  # an id outside the dialect
+        corpus: list[bytes] = [bytes(bad_crc), bytes(unknown_id), bytes(arm[:9]), b"", b"\xfd", b"\xfe\xff" * 10,
+                               b"\xfd\xff\x01" + bytes(300), bytes(good) + b"\x00\x01garbage"]
+        corpus += [bytes(rng.getrandbits(8) for _ in range(rng.randint(1, 300))) for _ in range(300)]
+        corpus += [b"\xfd" + bytes(rng.getrandbits(8) for _ in range(rng.randint(8, 280))) for _ in range(200)]
+        for data in corpus:
+            probe.send_raw(data)
+        assert v.wait_for(lambda s: s.counters["rx_datagrams"] >= len(corpus), 5.0)
+        counters = v.counters
+        assert counters["rx_malformed"] >= 500 and counters["rx_unknown_ids"] >= 1
+        assert counters["internal_errors"] == 0 and not v.snapshot().armed  # the bad-CRC arm was refused
+        # still alive and answering
+        ack = probe.arm()
+        assert ack is not None and ack.result == px4.MAV_RESULT_ACCEPTED
+        assert "malformed=" in v.status_line()
+
+
+def test_random_structured_fields_never_crash_it(probe: Probe) -> None:
+    """Valid frames with random payload values (NaN, huge ints, odd modes, strings)."""
+    rng = random.Random(99)
+    floats = [float("nan"), float("inf"), -float("inf"), 0.0, 1.0, -1.0, 1e38, 21196.0, 176.0, 400.0, 6.0, 129.0]
+    with vehicle_for(probe) as v:
+        connect(probe)
+        for _ in range(300):
+            p = [rng.choice(floats) for _ in range(7)]
+            command = rng.choice([176, 400, 22, 21, 20, 512, 511, 520, rng.randrange(65536)])
+            msgs = [mavlink.MAVLink_command_long_message(rng.choice([0, 1]), rng.choice([0, 1]), command, 0, *p),
+                    mavlink.MAVLink_command_int_message(1, 1, 0, command, 0, 0, *p[:4], rng.randrange(-2**31, 2**31),
+                                                        rng.randrange(-2**31, 2**31), p[6]),
+                    mavlink.MAVLink_set_position_target_local_ned_message(0, 1, 1, rng.randrange(256), rng.randrange(65536),
+                                                                          *(rng.choice(floats) for _ in range(11))),
+                    mavlink.MAVLink_param_set_message(1, 1, bytes(rng.getrandbits(8) % 127 + 1 for _ in range(16)),
+                                                      rng.choice(floats), rng.randrange(256)),
+                    mavlink.MAVLink_param_request_read_message(1, 1, b"\xff\xfe", rng.randrange(-32768, 32768))]
+            probe.send(rng.choice(msgs))
+        assert v.wait_for(lambda s: s.counters["rx_messages"] >= 300, 5.0)
+        assert v.counters["internal_errors"] == 0
+        v.force_mode("AUTO.LOITER")
+        assert probe.wait_for("HEARTBEAT", after=probe.mark(), timeout_s=2.0) is not None
+
+
+def test_packet_loss_each_way(probe: Probe) -> None:
+    faults = FaultOptions(loss_in=0.5, loss_out=0.3, seed=7)
+    with vehicle_for(probe, speed=10.0, faults=faults) as v:
+        assert probe.wait_for("HEARTBEAT", timeout_s=3.0)
+        for _ in range(400):
+            probe.heartbeat()
+        assert v.wait_for(lambda s: s.counters["dropped_in"] + s.counters["rx_messages"] >= 400
+                          and s.counters["tx_messages"] >= 400, 3.0)
+        counters = v.counters
+        assert counters["dropped_in"] / 400 == pytest.approx(0.5, abs=0.08)
+        assert counters["dropped_out"] / counters["tx_messages"] == pytest.approx(0.3, abs=0.06)
+        v.set_faults(loss_in=0.0, loss_out=0.0)
+        dropped = v.counters["dropped_in"]
+        ack = probe.arm()
+        assert ack is not None and ack.result == px4.MAV_RESULT_ACCEPTED and v.counters["dropped_in"] == dropped
+
+
+def test_latency_and_jitter_delay_both_ways(probe: Probe) -> None:
+    speed, latency_s = 5.0, 0.4
+    with vehicle_for(probe, speed=speed, faults=FaultOptions(latency_s=latency_s, jitter_s=0.1, seed=3)) as v:
+        assert probe.wait_for("HEARTBEAT", timeout_s=3.0)
+        t_sent = time.monotonic()
+        ack = probe.arm(timeout_s=3.0)
+        round_trip_wall_s = time.monotonic() - t_sent
+        assert ack is not None and ack.result == px4.MAV_RESULT_ACCEPTED
+        assert round_trip_wall_s >= 2 * latency_s / speed * 0.95  # a lower bound: robust on a loaded machine
+        counters = v.counters
+        assert counters["delayed_in"] >= 1 and counters["delayed_out"] >= 1
+        # telemetry is late by at least the latency: its timestamp lags the vehicle clock
+        mark = probe.mark()
+        msg = probe.wait_for("LOCAL_POSITION_NED", after=mark, timeout_s=2.0)
+        assert msg is not None and v.clock.now() - msg.time_boot_ms / 1000.0 >= latency_s * 0.95
+
+
+def test_blackout_window_silences_both_ways(probe: Probe) -> None:
+    with vehicle_for(probe, speed=10.0, faults=FaultOptions(blackouts=((1.0, 2.0),))) as v:
+        connect(probe)
+        assert v.wait_for(lambda s: s.t_s > 4.0, 3.0)
+        stamps = np.array([m.time_boot_ms for m in probe.messages("LOCAL_POSITION_NED")])
+        assert (stamps < 1000).any() and (stamps >= 3000).any()
+        assert not ((stamps >= 1000) & (stamps < 3000)).any()
+        counters = v.counters
+        assert counters["blackout_in"] > 0 and counters["blackout_out"] > 0
+
+
+def test_blackout_in_flight_triggers_offboard_loss(probe: Probe) -> None:
+    with vehicle_for(probe, speed=10.0) as v:
+        connect(probe)
+        with start_offboard(probe, (0.0, 0.0, -2.0)):
+            assert v.wait_for(lambda s: s.position_ned_m[2] < -2.0, 3.0)
+            t_now = v.clock.now()
+            v.set_faults(blackouts=[(t_now, 2.0)])
+            assert v.wait_for(lambda s: s.mode == "POSCTL" and s.in_failsafe, 2.0)
+            # the link comes back while the stream still runs: PX4 returns to OFFBOARD by itself
+            assert v.wait_for(lambda s: s.mode == "OFFBOARD" and not s.in_failsafe, 3.0)
+
+
+def test_pilot_takeover_forces_mode_and_holds(probe: Probe) -> None:
+    with vehicle_for(probe, speed=10.0) as v:
+        connect(probe)
+        with start_offboard(probe, (1.0, 0.0, -2.0)):
+            assert v.wait_for(lambda s: s.position_ned_m[2] < -3.0, 3.0)
+            v.force_mode("POSCTL")
+            assert probe.wait_mode("POSCTL", 2.0)
+            hb = probe.latest("HEARTBEAT")
+            assert hb.system_status == px4.MAV_STATE_ACTIVE and hb.base_mode == 209  # no failsafe: a pilot flies
+            settled = v.wait_for(lambda s: np.allclose(s.velocity_ned_m_s, 0.0, atol=0.01), 3.0)
+            assert settled is not None
+            later = v.wait_for(lambda s: s.t_s > settled.t_s + 2.0, 2.0)
+            assert later is not None and np.allclose(later.position_ned_m, settled.position_ned_m, atol=0.02)
+            assert later.mode == "POSCTL"  # setpoints still arrive, but it does not return to OFFBOARD
+        with pytest.raises(ValueError):
+            v.force_mode("NOT_A_MODE")
+
+
+def test_position_estimate_loss_exits_and_refuses_offboard(probe: Probe) -> None:
+    with vehicle_for(probe, speed=10.0) as v:
+        connect(probe)
+        with start_offboard(probe, (1.0, 0.0, -2.0)):
+            assert v.wait_for(lambda s: s.position_ned_m[2] < -3.0, 3.0)
+            v.lose_position_estimate(True)
+            assert probe.wait_mode("AUTO.LAND", 2.0)
+            snap = v.snapshot()
+            assert snap.in_failsafe and not snap.position_valid
+            assert probe.wait_for("STATUSTEXT", lambda m: "no local position" in m.text, 2.0)
+            ack = probe.set_mode("OFFBOARD")
+            assert ack is not None and ack.result == px4.MAV_RESULT_TEMPORARILY_REJECTED
+            status = probe.wait_for("SYS_STATUS", lambda m: not m.onboard_control_sensors_health & px4.SENSOR_GPS,
+                                    after=probe.mark(), timeout_s=2.0)
+            assert status is not None and not status.onboard_control_sensors_health & px4.SENSOR_PREARM_CHECK
+            assert v.wait_for(lambda s: not s.armed, 10.0)  # descends, lands, disarms
+        v.lose_position_estimate(False)
+        assert v.wait_for(lambda s: s.position_valid, 1.0)
+
+
+def test_arming_refusal_with_reason(probe: Probe) -> None:
+    reason = "Arming denied: Preflight Fail: Accel uncalibrated"
+    with vehicle_for(probe, faults=FaultOptions(refuse_arming_reason=reason)) as v:
+        connect(probe)
+        status = probe.wait_for("SYS_STATUS", timeout_s=2.0)
+        assert status is not None and not status.onboard_control_sensors_health & px4.SENSOR_PREARM_CHECK
+        ack = probe.arm()
+        assert ack is not None and ack.result == px4.MAV_RESULT_TEMPORARILY_REJECTED
+        texts = []
+        assert probe.wait_until(lambda: reason in "".join(texts := [m.text for m in probe.messages("STATUSTEXT")]), 2.0), texts
+        v.refuse_arming(None)
+        assert probe.arm().result == px4.MAV_RESULT_ACCEPTED
+        v.set_faults(refuse_arming_reason="Arming denied: again")
+        assert probe.arm(False).result == px4.MAV_RESULT_ACCEPTED
+        assert probe.arm().result == px4.MAV_RESULT_TEMPORARILY_REJECTED
+
+
+def test_offboard_refusal_with_reason(probe: Probe) -> None:
+    reason = "Mode OFFBOARD rejected: test"
+    with vehicle_for(probe, faults=FaultOptions(refuse_offboard_reason=reason)) as v:
+        connect(probe)
+        with pytest.raises(TimeoutError):
+            start_offboard(probe, timeout_s=0.5)
+        assert probe.wait_for("STATUSTEXT", lambda m: m.text == reason, 2.0)
+        v.refuse_offboard(None)
+        with start_offboard(probe, arm=False):
+            assert probe.wait_mode("OFFBOARD", 2.0)
+
+
+def test_signing_rejects_unsigned_commands_but_accepts_unsigned_heartbeat(probe: Probe) -> None:
+    with vehicle_for(probe, signing_key=KEY) as v:
+        hb = probe.wait_for("HEARTBEAT", timeout_s=2.0)
+        assert hb is not None and hb.get_msgbuf()[2] & 0x01  # the vehicle signs what it sends
+        probe.heartbeat()  # unsigned HEARTBEAT: accepted
+        assert v.wait_for(lambda s: s.counters["rx_messages"] >= 1, 2.0)
+        assert probe.arm(timeout_s=0.3) is None
+        probe.send(probe.setpoint_message())
+        assert v.wait_for(lambda s: s.counters["rx_unsigned_rejected"] >= 2, 2.0)
+        assert v.counters["setpoints_accepted"] == 0
+        with Probe(vehicle=("127.0.0.1", v.port), signing_key=bytes(32)) as wrong_key:
+            assert wrong_key.arm(timeout_s=0.3) is None
+        with Probe(vehicle=("127.0.0.1", v.port), signing_key=KEY) as signed:
+            # the vehicle latched on the first probe: a signed peer is still heard, answered there
+            signed.send(mavlink.MAVLink_command_long_message(1, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0))
+            ack = probe.wait_for("COMMAND_ACK", timeout_s=2.0)
+            assert ack is not None and ack.result == px4.MAV_RESULT_ACCEPTED
+        assert v.snapshot().armed
+
+
+def test_signing_key_must_be_32_bytes() -> None:
+    with pytest.raises(ValueError, match="32 bytes"):
+        VehicleOptions(signing_key=b"short")
+
+
+def test_fault_options_are_validated() -> None:
+    with pytest.raises(ValueError):
+        FaultOptions(loss_in=1.5)
+    with pytest.raises(ValueError):
+        FaultOptions(blackouts=((1.0, -1.0),))
+    assert struct.calcsize("<f") == 4

@@ -1,0 +1,342 @@
+"""Mock vehicle MAVLink protocol: targets, NaN parameters, parameters, message requests and
+intervals, TIMESYNC, setpoint validation, streams and their rates, latching, GCS link, CLI."""
+from __future__ import annotations
+
+import math
+import signal
+import statistics
+import subprocess
+from collections.abc import Iterator
+from pathlib import Path
+
+import click
+import pytest
+from click.testing import CliRunner
+
+from mission import px4
+from mission.mavlink_env import mavlink
+from sim.vehicle import FaultOptions, MockVehicle, VehicleOptions, spawn_process
+from sim.vehicle_cli import mock_vehicle, read_signing_key
+from sim.vehicle_link import parse_endpoint
+from sim.vehicle_params import PARAM_SPECS, pack_int32, unpack_int32
+from sim.vehicle_probe import Probe, SetpointStream, connect, start_offboard
+
+pytestmark = pytest.mark.timeout(30)
+NAN = math.nan
+
+
+@pytest.fixture
+def probe() -> Iterator[Probe]:
+    with Probe() as p:
+        yield p
+
+
+def vehicle_for(probe: Probe, speed: float = 10.0, **options: object) -> MockVehicle:
+    return MockVehicle(VehicleOptions(bind="127.0.0.1:0", target=f"127.0.0.1:{probe.port}", speed=speed, **options))  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("target", [(2, 1), (1, 50), (255, 190)])
+def test_command_with_wrong_target_gets_no_ack(probe: Probe, target: tuple[int, int]) -> None:
+    with vehicle_for(probe) as v:
+        connect(probe)
+        ack = probe.command(px4.MAV_CMD_COMPONENT_ARM_DISARM, (1.0,), target=target, timeout_s=0.3)
+        assert ack is None
+        assert v.counters["rx_wrong_target"] == 1 and not v.snapshot().armed
+        broadcast = probe.command(px4.MAV_CMD_COMPONENT_ARM_DISARM, (1.0,), target=(0, 0))
+        assert broadcast is not None and broadcast.result == px4.MAV_RESULT_ACCEPTED
+        assert (broadcast.target_system, broadcast.target_component) == (255, 190)  # ACK goes to the sender
+
+
+def test_setpoints_to_another_system_are_not_proof_of_life(probe: Probe) -> None:
+    with vehicle_for(probe) as v:
+        connect(probe)
+        with SetpointStream(probe, 0.01, target=(2, 1)):
+            assert v.wait_for(lambda s: s.counters["rx_wrong_target"] >= 5, 2.0)
+            assert probe.set_mode("OFFBOARD").result == px4.MAV_RESULT_TEMPORARILY_REJECTED
+        assert v.counters["setpoints_accepted"] == 0
+
+
+def test_nan_parameters_are_tolerated(probe: Probe) -> None:
+    with vehicle_for(probe) as v:
+        connect(probe)
+        # what MAVSDK sends: arm with param1 = 1 and NaN elsewhere; DO_SET_MODE(129, 6, 0, NaN...)
+        assert probe.command(px4.MAV_CMD_COMPONENT_ARM_DISARM, (1.0,)).result == px4.MAV_RESULT_ACCEPTED
+        assert probe.command(px4.MAV_CMD_DO_SET_MODE, (129.0, 3.0, NAN)).result == px4.MAV_RESULT_TEMPORARILY_REJECTED
+        assert probe.command(px4.MAV_CMD_DO_SET_MODE, (129.0, 4.0, 3.0)).result == px4.MAV_RESULT_ACCEPTED
+        assert probe.command(px4.MAV_CMD_COMPONENT_ARM_DISARM, (NAN,)).result == px4.MAV_RESULT_ACCEPTED  # NaN -> 0
+        assert not v.snapshot().armed
+        assert probe.command(px4.MAV_CMD_DO_SET_MODE, (NAN, NAN, NAN)).result == px4.MAV_RESULT_UNSUPPORTED
+        assert v.counters["internal_errors"] == 0
+
+
+def test_set_mode_as_command_int(probe: Probe) -> None:
+    with vehicle_for(probe) as v:
+        connect(probe)
+        with SetpointStream(probe, 0.01):
+            assert v.wait_for(lambda s: s.counters["setpoints_accepted"] > 2, 2.0)
+            ack = probe.command(px4.MAV_CMD_DO_SET_MODE, (129.0, 6.0, 0.0), as_int=True)
+            assert ack is not None and ack.result == px4.MAV_RESULT_ACCEPTED
+            assert probe.wait_mode("OFFBOARD", 2.0)
+
+
+def test_force_arm_skips_the_checks(probe: Probe) -> None:
+    with vehicle_for(probe, faults=FaultOptions(refuse_arming_reason="Arming denied: test")) as v:
+        connect(probe)
+        assert probe.arm().result == px4.MAV_RESULT_TEMPORARILY_REJECTED
+        assert probe.arm(force=True).result == px4.MAV_RESULT_ACCEPTED
+        assert v.snapshot().armed and probe.wait_armed(True, 2.0)
+
+
+def test_unknown_command_is_unsupported(probe: Probe) -> None:
+    with vehicle_for(probe):
+        connect(probe)
+        ack = probe.command(31000)
+        assert ack is not None and ack.result == px4.MAV_RESULT_UNSUPPORTED
+
+
+def test_parameter_protocol_list_read_set(probe: Probe) -> None:
+    with vehicle_for(probe, params={"MPC_XY_VEL_MAX": 8.0}) as v:
+        connect(probe)
+        mark = probe.mark()
+        probe.send(mavlink.MAVLink_param_request_list_message(1, 1))
+        assert probe.wait_until(lambda: len(probe.messages("PARAM_VALUE", after=mark)) >= len(PARAM_SPECS), 3.0)
+        values = {m.param_id: m for m in probe.messages("PARAM_VALUE", after=mark)}
+        assert set(values) >= {"COM_OF_LOSS_T", "COM_OBL_RC_ACT", "COM_DISARM_PRFLT", "COM_DISARM_LAND", "MPC_XY_VEL_MAX",
+                               "MPC_Z_VEL_MAX_UP", "MPC_Z_VEL_MAX_DN", "MPC_ACC_HOR", "MPC_TKO_SPEED", "MPC_LAND_SPEED",
+                               "MIS_TAKEOFF_ALT", "NAV_RCL_ACT", "COM_ARM_WO_GPS"}
+        assert sorted(m.param_index for m in values.values()) == list(range(len(PARAM_SPECS)))
+        assert all(m.param_count == len(PARAM_SPECS) for m in values.values())
+        assert values["COM_OF_LOSS_T"].param_type == px4.MAV_PARAM_TYPE_REAL32 and values["COM_OF_LOSS_T"].param_value == 1.0
+        assert values["MPC_XY_VEL_MAX"].param_value == 8.0  # the override
+        rc_act = values["NAV_RCL_ACT"]
+        assert rc_act.param_type == px4.MAV_PARAM_TYPE_INT32 and unpack_int32(rc_act.param_value) == 2  # bit-packed
+
+        mark = probe.mark()
+        probe.send(mavlink.MAVLink_param_request_read_message(1, 1, b"MPC_LAND_SPEED", -1))
+        reply = probe.wait_for("PARAM_VALUE", after=mark, timeout_s=2.0)
+        assert reply is not None and reply.param_id == "MPC_LAND_SPEED" and reply.param_value == pytest.approx(0.7)
+        mark = probe.mark()
+        probe.send(mavlink.MAVLink_param_request_read_message(1, 1, b"", 0))
+        reply = probe.wait_for("PARAM_VALUE", after=mark, timeout_s=2.0)
+        assert reply is not None and reply.param_index == 0 and reply.param_id == PARAM_SPECS[0].name
+
+        mark = probe.mark()
+        probe.send(mavlink.MAVLink_param_set_message(1, 1, b"COM_OF_LOSS_T", 2.5, px4.MAV_PARAM_TYPE_REAL32))
+        reply = probe.wait_for("PARAM_VALUE", lambda m: m.param_id == "COM_OF_LOSS_T", 2.0, mark)
+        assert reply is not None and reply.param_value == 2.5 and v.params.get("COM_OF_LOSS_T") == 2.5
+        probe.send(mavlink.MAVLink_param_set_message(1, 1, b"COM_OBL_RC_ACT", pack_int32(5), px4.MAV_PARAM_TYPE_INT32))
+        reply = probe.wait_for("PARAM_VALUE", lambda m: m.param_id == "COM_OBL_RC_ACT", 2.0, mark)
+        assert reply is not None and unpack_int32(reply.param_value) == 5 and v.params.get("COM_OBL_RC_ACT") == 5
+
+        mark = probe.mark()
+        probe.send(mavlink.MAVLink_param_set_message(1, 1, b"NO_SUCH_PARAM", 1.0, px4.MAV_PARAM_TYPE_REAL32))
+        probe.send(mavlink.MAVLink_param_request_read_message(1, 1, b"NO_SUCH_PARAM", -1))
+        assert probe.wait_for("PARAM_VALUE", after=mark, timeout_s=0.3) is None
+
+
+def test_request_message_autopilot_version_and_home(probe: Probe) -> None:
+    with vehicle_for(probe):
+        connect(probe)
+        mark = probe.mark()
+        ack = probe.command(px4.MAV_CMD_REQUEST_MESSAGE, (float(mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION),))
+        assert ack is not None and ack.result == px4.MAV_RESULT_ACCEPTED
+        version = probe.wait_for("AUTOPILOT_VERSION", after=mark, timeout_s=2.0)
+        assert version is not None
+        for capability in (px4.MAV_PROTOCOL_CAPABILITY_MAVLINK2, px4.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED,
+                           px4.MAV_PROTOCOL_CAPABILITY_COMMAND_INT, px4.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT,
+                           px4.MAV_PROTOCOL_CAPABILITY_MISSION_INT):
+            assert version.capabilities & capability
+        mark = probe.mark()
+        ack = probe.command(px4.MAV_CMD_REQUEST_MESSAGE, (float(mavlink.MAVLINK_MSG_ID_HOME_POSITION),))
+        assert ack is not None and ack.result == px4.MAV_RESULT_ACCEPTED
+        home = probe.wait_for("HOME_POSITION", after=mark, timeout_s=2.0)
+        assert home is not None and (home.latitude, home.longitude, home.altitude) == (473977420, 85455940, 488000)
+        ack = probe.command(px4.MAV_CMD_REQUEST_MESSAGE, (12345.0,))
+        assert ack is not None and ack.result != px4.MAV_RESULT_ACCEPTED
+
+
+def test_set_message_interval(probe: Probe) -> None:
+    with vehicle_for(probe, speed=5.0) as v:
+        connect(probe)
+        interval = lambda msg_id, us: probe.command(px4.MAV_CMD_SET_MESSAGE_INTERVAL, (float(msg_id), us))  # noqa: E731
+        assert interval(mavlink.MAVLINK_MSG_ID_ATTITUDE, -1.0).result == px4.MAV_RESULT_ACCEPTED
+        assert interval(mavlink.MAVLINK_MSG_ID_HEARTBEAT, 100_000.0).result == px4.MAV_RESULT_ACCEPTED
+        t0 = v.clock.now() + 0.2
+        assert 19 <= probe.count_between("HEARTBEAT", t0, t0 + 2.0) <= 21  # 10 Hz simulated
+        assert probe.count_between("ATTITUDE", t0, t0 + 2.0) == 0
+        assert interval(mavlink.MAVLINK_MSG_ID_ATTITUDE, 0.0).result == px4.MAV_RESULT_ACCEPTED  # default again
+        assert probe.wait_for("ATTITUDE", after=probe.mark(), timeout_s=1.0) is not None
+        assert interval(12345, 1000.0).result == px4.MAV_RESULT_DENIED
+
+
+def test_timesync_is_answered(probe: Probe) -> None:
+    with vehicle_for(probe):
+        connect(probe)
+        mark = probe.mark()
+        probe.send(mavlink.MAVLink_timesync_message(0, 123456789))
+        reply = probe.wait_for("TIMESYNC", after=mark, timeout_s=2.0)
+        assert reply is not None and reply.ts1 == 123456789 and reply.tc1 > 0
+
+
+def test_onboard_streams_at_px4_rates_at_speed_1(probe: Probe) -> None:
+    with vehicle_for(probe, speed=1.0) as v:
+        connect(probe)
+        assert v.wait_for(lambda s: s.t_s > 1.2, 3.0)
+    expected_ms = {"LOCAL_POSITION_NED": 1000 / 30, "ATTITUDE": 10, "ATTITUDE_QUATERNION": 20, "GLOBAL_POSITION_INT": 20,
+                   "POSITION_TARGET_LOCAL_NED": 100, "SYS_STATUS": 200, "EXTENDED_SYS_STATE": 200}
+    for name, period_ms in expected_ms.items():
+        stamps = [m.time_boot_ms if hasattr(m, "time_boot_ms") else None for m in probe.messages(name)]
+        if stamps[0] is None:
+            continue
+        assert statistics.median(b - a for a, b in zip(stamps, stamps[1:])) == pytest.approx(period_ms, abs=5.1), name
+    for name in ("ALTITUDE", "VFR_HUD", "GPS_GLOBAL_ORIGIN", "HOME_POSITION"):
+        assert probe.messages(name), name
+    status = probe.latest("SYS_STATUS")
+    for bits in (status.onboard_control_sensors_present, status.onboard_control_sensors_health):
+        assert bits & px4.SENSOR_PREARM_CHECK and bits & px4.SYS_STATUS_EXTENSION_USED
+    assert (status.voltage_battery, status.current_battery, status.battery_remaining) == (65535, -1, -1)
+
+
+def test_stream_wall_rate_is_capped_at_high_speed(probe: Probe) -> None:
+    with vehicle_for(probe, speed=20.0):
+        connect(probe)
+        heartbeats = probe.count_between("HEARTBEAT", 0.5, 20.5)
+    stamps = [m.time_boot_ms for m in probe.messages("LOCAL_POSITION_NED")]
+    # 30 Hz simulated would be 600 Hz wall; capped at 300 Hz wall = 15 Hz simulated
+    assert statistics.median(b - a for a, b in zip(stamps, stamps[1:])) == pytest.approx(1000 * 20 / 300, abs=5.1)
+    stamps = [m.time_boot_ms for m in probe.messages("ATTITUDE")]
+    assert statistics.median(b - a for a, b in zip(stamps, stamps[1:])) == pytest.approx(1000 * 20 / 100, abs=5.1)
+    assert 19 <= heartbeats <= 21  # still 1 Hz simulated
+
+
+def test_global_position_consistent_with_local_ned(probe: Probe) -> None:
+    with vehicle_for(probe, speed=20.0, start_ned=(100.0, -50.0, 0.0)):
+        connect(probe)
+        gpi = probe.wait_for("GLOBAL_POSITION_INT", timeout_s=2.0)
+        assert gpi is not None
+        assert (gpi.lat / 1e7 - 47.397742) * math.radians(1) * 6378137.0 == pytest.approx(100.0, abs=0.02)
+        east_m = (gpi.lon / 1e7 - 8.545594) * math.radians(1) * 6378137.0 * math.cos(math.radians(47.397742))
+        assert east_m == pytest.approx(-50.0, abs=0.02)
+        assert gpi.alt == 488000 and gpi.relative_alt == 0
+
+
+@pytest.mark.parametrize(("frame", "mask", "accepted"), [
+    (px4.MAV_FRAME_LOCAL_NED, px4.TYPE_MASK_VELOCITY, True),
+    (px4.MAV_FRAME_LOCAL_NED, px4.TYPE_MASK_VELOCITY_YAW, True),
+    (px4.MAV_FRAME_BODY_NED, px4.TYPE_MASK_VELOCITY_YAW_RATE, True),
+    (px4.MAV_FRAME_BODY_NED, px4.TYPE_MASK_VELOCITY, True),
+    (px4.MAV_FRAME_LOCAL_NED, px4.TYPE_MASK_POSITION, True),
+    (px4.MAV_FRAME_BODY_NED, px4.TYPE_MASK_POSITION, False),
+    (9, px4.TYPE_MASK_VELOCITY, False),  # MAV_FRAME_BODY_OFFSET_NED: unsupported
+    (px4.MAV_FRAME_LOCAL_NED, 0, False),
+    (px4.MAV_FRAME_LOCAL_NED, 0x0FFF, False),
+])
+def test_setpoint_frames_and_type_masks(probe: Probe, frame: int, mask: int, accepted: bool) -> None:
+    with vehicle_for(probe) as v:
+        connect(probe)
+        for _ in range(3):
+            probe.send(probe.setpoint_message((1.0, 0.0, 0.0), mask, frame, position_ned_m=(1.0, 2.0, -3.0), yaw_rad=0.0,
+                                              yaw_rate_rad_s=0.0))
+        assert v.wait_for(lambda s: s.counters["setpoints_accepted"] + s.counters["setpoints_rejected"] == 3, 2.0)
+        assert v.counters["setpoints_accepted"] == (3 if accepted else 0)
+        result = probe.set_mode("OFFBOARD").result
+        assert result == (px4.MAV_RESULT_ACCEPTED if accepted else px4.MAV_RESULT_TEMPORARILY_REJECTED)
+
+
+def test_non_finite_velocity_setpoint_is_dropped(probe: Probe) -> None:
+    with vehicle_for(probe) as v:
+        connect(probe)
+        probe.send(probe.setpoint_message((NAN, 0.0, 0.0)))
+        probe.send(probe.setpoint_message((math.inf, 0.0, 0.0)))
+        assert v.wait_for(lambda s: s.counters["setpoints_rejected"] == 2, 2.0)
+        assert probe.set_mode("OFFBOARD").result == px4.MAV_RESULT_TEMPORARILY_REJECTED
+
+
+def test_sends_to_target_from_startup_then_latches_on_first_peer(probe: Probe) -> None:
+    with Probe() as first_listener, MockVehicle(VehicleOptions(target=f"127.0.0.1:{first_listener.port}", speed=10.0)) as v:
+        assert first_listener.wait_for("HEARTBEAT", timeout_s=2.0)  # talks first, before anyone speaks
+        probe.vehicle = ("127.0.0.1", v.port)
+        probe.heartbeat()
+        assert probe.wait_for("HEARTBEAT", timeout_s=2.0) is not None
+        mark = first_listener.mark()
+        with Probe(vehicle=("127.0.0.1", v.port)) as second:
+            second.heartbeat()
+            assert second.wait_for("HEARTBEAT", timeout_s=0.3) is None  # latched on the first peer
+        assert first_listener.wait_for("HEARTBEAT", after=mark, timeout_s=0.3) is None
+
+
+def test_gcs_link_gets_heartbeats_too(probe: Probe) -> None:
+    with Probe() as gcs, vehicle_for(probe, gcs_target=f"127.0.0.1:{gcs.port}") as v:
+        assert probe.wait_for("HEARTBEAT", timeout_s=2.0) and gcs.wait_for("HEARTBEAT", timeout_s=2.0)
+        assert v.gcs_port is not None and v.gcs_port != v.port
+        gcs.heartbeat()
+        ack = gcs.command(px4.MAV_CMD_COMPONENT_ARM_DISARM, (1.0,))
+        assert ack is not None and ack.result == px4.MAV_RESULT_ACCEPTED  # answered on the GCS link
+
+
+def test_statustext_only_after_peer_heartbeat(probe: Probe) -> None:
+    with vehicle_for(probe) as v:
+        assert probe.wait_for("HEARTBEAT", timeout_s=2.0)
+        assert probe.set_mode("OFFBOARD").result == px4.MAV_RESULT_TEMPORARILY_REJECTED
+        assert v.events() and probe.wait_for("STATUSTEXT", timeout_s=0.3) is None
+        probe.heartbeat()
+        assert probe.set_mode("OFFBOARD").result == px4.MAV_RESULT_TEMPORARILY_REJECTED
+        assert probe.wait_for("STATUSTEXT", timeout_s=2.0) is not None
+
+
+def test_cli_process_reports_port_and_stops_cleanly_on_sigterm(probe: Probe) -> None:
+    args = ["--mavlink", "udpin:127.0.0.1:0", "--target", f"udpout:127.0.0.1:{probe.port}", "--speed", "10",
+            "--param", "COM_OF_LOSS_T=0.5", "--status-every", "0.1"]
+    process, port = spawn_process(args, stderr=subprocess.PIPE)
+    try:
+        assert probe.wait_for("HEARTBEAT", timeout_s=5.0) is not None
+        assert probe.vehicle == ("127.0.0.1", port)
+        mark = probe.mark()
+        probe.send(mavlink.MAVLink_param_request_read_message(1, 1, b"COM_OF_LOSS_T", -1))
+        reply = probe.wait_for("PARAM_VALUE", after=mark, timeout_s=2.0)
+        assert reply is not None and reply.param_value == 0.5
+        connect(probe)
+        with start_offboard(probe, (0.0, 0.0, -1.0)):
+            assert probe.wait_mode("OFFBOARD", 2.0)
+    finally:
+        process.send_signal(signal.SIGTERM)
+        _, stderr = process.communicate(timeout=10)
+    assert process.returncode == 0
+    assert b"OFFBOARD" in stderr and b"rx=" in stderr  # the status line
+
+
+@pytest.mark.parametrize(("text", "scheme", "address"), [
+    ("127.0.0.1:14580", "udpin", ("127.0.0.1", 14580)),
+    ("udpin:0.0.0.0:14580", "udpin", ("0.0.0.0", 14580)),
+    ("udp://127.0.0.1:0", "udpin", ("127.0.0.1", 0)),
+    ("udpout:127.0.0.1:14540", "udpout", ("127.0.0.1", 14540)),
+    ("udpout://10.0.0.2:14550", "udpout", ("10.0.0.2", 14550)),
+    (":14540", "udpin", ("127.0.0.1", 14540)),
+])
+def test_endpoint_url_forms(text: str, scheme: str, address: tuple[str, int]) -> None:
+    endpoint = parse_endpoint(text)
+    assert (endpoint.scheme, endpoint.address) == (scheme, address)
+
+
+@pytest.mark.parametrize("text", ["tcp:127.0.0.1:5760", "127.0.0.1", "udpin:host:port", "udp:1.2.3.4:70000"])
+def test_bad_endpoints_are_refused(text: str) -> None:
+    with pytest.raises(ValueError):
+        parse_endpoint(text)
+
+
+def test_cli_help_explains_every_option() -> None:
+    result = CliRunner().invoke(mock_vehicle, ["--help"])
+    assert result.exit_code == 0
+    for param in mock_vehicle.params:
+        assert param.help, param.name  # type: ignore[attr-defined]
+        assert param.opts[0] in result.output
+
+
+def test_signing_key_file_hex_or_raw(tmp_path: Path) -> None:
+    key = bytes(range(32))
+    (tmp_path / "hex").write_text(key.hex() + "\n")
+    (tmp_path / "raw").write_bytes(key)
+    (tmp_path / "bad").write_text("abc")
+    assert read_signing_key(tmp_path / "hex") == key == read_signing_key(tmp_path / "raw")
+    with pytest.raises(click.BadParameter):
+        read_signing_key(tmp_path / "bad")
