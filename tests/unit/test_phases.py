@@ -1,0 +1,130 @@
+"""The mission state machine, driven by synthetic observations (pure, no sockets)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mission.config import load_config
+from mission.controller import mission_model
+from mission.law import norm
+from mission.phases import AbortReason, CarrierObs, MissionState, Observation, Phase, VehicleObs, finished, step
+from tests.conftest import CONFIGS
+
+
+@pytest.fixture(scope="module")
+def model():
+    return mission_model(load_config(CONFIGS / "demo.toml"))
+
+
+def fly(model, *, ticks=4000, carrier_age=0.0, on_tick=None, vehicle_tau=0.0):
+    """A perfect kinematic world: the vehicle integrates the setpoint (optionally through a first
+    order lag), the carrier drives at 2 m/s towards the target while the machine says RIDING."""
+    dt = model.dt_s
+    x_p = np.zeros(3)
+    v_p = np.zeros(3)
+    x_c = np.zeros(3)
+    v_c = np.zeros(3)
+    mode, armed = "AUTO.LOITER", False
+    state = MissionState()
+    log = []
+    for k in range(ticks):
+        t = k * dt
+        vehicle = VehicleObs(x_p.copy(), v_p.copy(), armed, mode, heartbeat_age_s=0.1)
+        carrier = CarrierObs(x_c - v_c * carrier_age, v_c.copy(), age_s=carrier_age)
+        obs = Observation(t_s=t, vehicle=vehicle, carrier=carrier)
+        if on_tick:
+            obs = on_tick(k, obs) or obs
+        state, dec = step(state, obs, model)
+        log.append((t, state.phase, dec))
+        if dec.request == "arm":
+            armed = True
+        elif dec.request == "offboard":
+            mode = "OFFBOARD"
+        elif dec.request == "hold":
+            mode = "AUTO.LOITER"
+        if dec.setpoint is not None and mode == "OFFBOARD":
+            assert np.isfinite(dec.setpoint).all()
+            v_p = dec.setpoint if vehicle_tau == 0 else v_p + (dec.setpoint - v_p) * dt / vehicle_tau
+        elif mode != "OFFBOARD":
+            v_p = np.zeros(3)
+        x_p = x_p + v_p * dt
+        if state.phase == Phase.RIDING:
+            e = model.tick.target - x_c
+            e[2] = 0.0
+            v_c = e / norm(e) * 2.0
+        else:
+            v_c = np.zeros(3)
+        x_c = x_c + v_c * dt
+        if finished(state, dec):
+            break
+    return state, log, x_p, x_c
+
+
+def test_perfect_world_completes_and_latches_at_bc(model):
+    state, log, x_p, x_c = fly(model)
+    phases = list(dict.fromkeys(p for _, p, _ in log))
+    assert phases == [Phase.STREAMING, Phase.ARMING, Phase.OFFBOARD, Phase.JOIN, Phase.RIDING, Phase.SEPARATED,
+                      Phase.NAVIGATING, Phase.ARRIVED, Phase.HOLD, Phase.DONE]
+    # the latch is located inside the tick: the anchor sits at b c - margin exactly
+    assert norm(model.tick.target - state.anchor) == pytest.approx(model.tick.event_distance_m, abs=1e-9)
+    assert norm(x_p - model.tick.target) <= model.arrival_radius_m
+
+
+def test_relative_command_continuous_across_separation(model):
+    state, log, _, _ = fly(model, vehicle_tau=0.2)
+    i = next(k for k, (_, p, _) in enumerate(log) if p == Phase.SEPARATED)
+    before, after = log[i - 1][2], log[i][2]
+    # the law's relative input: exactly 0 docked, ~8 mm/s just after (no jump)
+    assert norm(before.relative) == 0.0
+    assert norm(after.relative) < 0.02
+    # the command sent changes by at most one tick of the command's acceleration limit
+    a_max = model.command_safety.max_accel_m_s2
+    assert norm(after.setpoint - before.setpoint) <= a_max * model.dt_s + 1e-9
+
+
+def test_late_carrier_samples_are_extrapolated(model):
+    # Samples 0.3 s old while the carrier drives at 2 m/s: the dock point is moved on by
+    # v * age, so the vehicle rides where the carrier really is, not 0.6 m behind it.
+    offsets = []
+
+    def watch(k, obs):
+        c = obs.carrier
+        if norm(c.velocity_ned_m_s) > 1.9:  # riding at full carrier speed
+            true_dock = c.position_ned_m + c.velocity_ned_m_s * c.age_s + model.dock_offset_ned_m
+            offsets.append(norm(obs.vehicle.position_ned_m - true_dock))
+
+    state, _, _, _ = fly(model, carrier_age=0.3, on_tick=watch)
+    assert state.phase == Phase.DONE
+    assert len(offsets) > 100 and max(offsets[50:]) < 0.05
+
+
+def test_pilot_override_sends_nothing_more(model):
+    def pilot(k, obs):
+        if k > 600:
+            return Observation(obs.t_s, VehicleObs(obs.vehicle.position_ned_m, obs.vehicle.velocity_ned_m_s, True, "POSCTL", 0.1),
+                               obs.carrier)
+
+    state, log, _, _ = fly(model, on_tick=pilot)
+    assert state.phase == Phase.ABORT and state.reason == AbortReason.PILOT_OVERRIDE.value
+    assert log[-1][2].setpoint is None and log[-1][2].request is None
+
+
+def test_geometry_refusal_sends_nothing(model):
+    def far(k, obs):
+        v = obs.vehicle
+        return Observation(obs.t_s, VehicleObs(v.position_ned_m + [3.0, 0, 0], v.velocity_ned_m_s, False, v.mode, 0.1), obs.carrier)
+
+    state, log, _, _ = fly(model, on_tick=far, ticks=10)
+    assert state.reason == AbortReason.GEOMETRY.value
+    assert all(d.setpoint is None and d.request is None for _, _, d in log)
+
+
+def test_stale_carrier_before_separation_aborts_to_hold(model):
+    def stale(k, obs):
+        if k > 500:
+            c = obs.carrier
+            return Observation(obs.t_s, obs.vehicle, CarrierObs(c.position_ned_m, c.velocity_ned_m_s, age_s=2.0))
+
+    state, log, _, _ = fly(model, on_tick=stale, ticks=700)
+    assert state.reason == AbortReason.CARRIER_LOST.value
+    assert any(d.request == "hold" for _, p, d in log if p == Phase.ABORT)
