@@ -78,7 +78,8 @@ BEFORE_SEPARATION = {Phase.PREFLIGHT, Phase.STREAMING, Phase.ARMING, Phase.OFFBO
 
 @dataclass(frozen=True)
 class VehicleObs:
-    """The vehicle as the link sees it: position/velocity [m], [m/s] NED; heartbeat age [s]."""
+    """The vehicle as the link sees it: position/velocity [m], [m/s] NED; HEARTBEAT and
+    LOCAL_POSITION_NED ages [s]."""
 
     position_ned_m: np.ndarray
     velocity_ned_m_s: np.ndarray
@@ -178,6 +179,14 @@ def _abort(state: MissionState, t: float, reason: AbortReason, detail: str = "")
     return replace(state, phase=Phase.ABORT, since_s=t, reason=reason.value, detail=detail)
 
 
+def _vehicle_lost(v: VehicleObs | None, m: MissionModel) -> bool:
+    """No HEARTBEAT for heartbeat_timeout_s while the position stream is silent too. PX4 sends
+    HEARTBEAT at 1 Hz: on a link losing 30% of its packets three in a row go missing in most
+    flights, while the 30 Hz LOCAL_POSITION_NED shows the vehicle is there (its mode is then
+    up to a few seconds old, which only delays noticing a pilot's takeover)."""
+    return v is None or (v.heartbeat_age_s > m.heartbeat_timeout_s and v.position_age_s > TELEMETRY_SILENT_S)
+
+
 def _carrier_ok(obs: Observation, m: MissionModel) -> bool:
     c = obs.carrier
     return c is not None and c.age_s <= m.carrier_timeout_s and c.alive is not False
@@ -210,7 +219,7 @@ def _failsafes(state: MissionState, obs: Observation, m: MissionModel) -> tuple[
     if ph in (Phase.DONE,):
         return state, Decision(setpoint=None)
     if ph == Phase.ABORT:
-        if v is None or v.heartbeat_age_s > m.heartbeat_timeout_s:
+        if _vehicle_lost(v, m):
             return state, Decision(setpoint=None)  # nobody to talk to: PX4's own failsafe acts
         if state.reason in (AbortReason.VEHICLE_LOST.value, AbortReason.PILOT_OVERRIDE.value, AbortReason.GEOMETRY.value):
             return state, Decision(setpoint=None)
@@ -218,7 +227,7 @@ def _failsafes(state: MissionState, obs: Observation, m: MissionModel) -> tuple[
     if obs.interrupted:
         new = _abort(state, t, AbortReason.INTERRUPTED, "signal")
         return new, _decided(new, obs, "abort: interrupted")
-    if ph != Phase.PREFLIGHT and (v is None or v.heartbeat_age_s > m.heartbeat_timeout_s):
+    if ph != Phase.PREFLIGHT and _vehicle_lost(v, m):
         new = _abort(state, t, AbortReason.VEHICLE_LOST, "no HEARTBEAT")
         return new, Decision(setpoint=None, events=("abort: vehicle heartbeat lost",))
     final_modes = ("AUTO.LOITER", "AUTO.LAND")
@@ -256,7 +265,11 @@ def _carrier_detail(obs: Observation, m: MissionModel) -> str:
 
 
 def _dock(obs: Observation, m: MissionModel) -> np.ndarray:
-    return obs.carrier.position_ned_m + m.dock_offset_ned_m
+    """Dock point [m] NED now: the carrier's last position moved on by its velocity over the
+    sample's age (a late sample would otherwise pull the passenger back by speed x age), plus
+    the dock offset."""
+    c = obs.carrier
+    return c.position_ned_m + c.velocity_ned_m_s * c.age_s + m.dock_offset_ned_m
 
 
 def _preflight(state: MissionState, obs: Observation, m: MissionModel) -> tuple[MissionState, Decision]:

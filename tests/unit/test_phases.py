@@ -95,7 +95,7 @@ def test_late_carrier_samples_are_extrapolated(model):
 
     state, _, _, _ = fly(model, carrier_age=0.3, on_tick=watch)
     assert state.phase == Phase.DONE
-    assert len(offsets) > 100 and max(offsets[50:]) < 0.05
+    assert len(offsets) > 100 and max(offsets[len(offsets) // 2:]) < 0.05  # after the start transient
 
 
 def test_pilot_override_sends_nothing_more(model):
