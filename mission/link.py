@@ -423,6 +423,7 @@ class _Telemetry:
     def __init__(self) -> None:
         self.position_ned_m: np.ndarray | None = None
         self.velocity_ned_m_s: np.ndarray | None = None
+        self.position_finite = False  # position and velocity all finite (checked once per message)
         self.position_rx_s: float | None = None
         self.heartbeat_rx_s: float | None = None
         self.base_mode = 0
@@ -673,9 +674,7 @@ class VehicleLink:
         fresh = (
             tm.position_rx_s is not None
             and now - tm.position_rx_s <= self.position_timeout_s
-            and tm.position_ned_m is not None
-            and tm.velocity_ned_m_s is not None
-            and bool(np.all(np.isfinite(tm.position_ned_m)) and np.all(np.isfinite(tm.velocity_ned_m_s)))
+            and tm.position_finite
         )
         return VehicleState(
             t_s=now,
@@ -886,8 +885,9 @@ class VehicleLink:
         v = np.asarray(v_ned_m_s, dtype=float)
         if v.shape != (3,):
             raise ValueError(f"velocity must have shape (3,), got {v.shape}")
-        if not (np.all(np.isfinite(v)) and np.all(np.abs(v) <= _FLOAT32_MAX)):
-            raise ValueError(f"refusing non-finite velocity setpoint {v.tolist()}")
+        vn, ve, vd = v.tolist()  # three Python floats: checked faster than with numpy reductions
+        if not all(math.isfinite(c) and abs(c) <= _FLOAT32_MAX for c in (vn, ve, vd)):
+            raise ValueError(f"refusing non-finite velocity setpoint {[vn, ve, vd]}")
         if yaw_rad is not None and not (math.isfinite(yaw_rad) and abs(yaw_rad) <= _FLOAT32_MAX):
             raise ValueError(f"refusing non-finite yaw {yaw_rad!r}")
         target = self._require_vehicle()
@@ -895,7 +895,7 @@ class VehicleLink:
         time_boot_ms = int(self._clock.now() * 1000.0) & 0xFFFFFFFF
         msg = mavlink.MAVLink_set_position_target_local_ned_message(
             time_boot_ms, target[0], target[1], px4.MAV_FRAME_LOCAL_NED, mask,
-            0.0, 0.0, 0.0, float(v[0]), float(v[1]), float(v[2]), 0.0, 0.0, 0.0,
+            0.0, 0.0, 0.0, vn, ve, vd, 0.0, 0.0, 0.0,
             0.0 if yaw_rad is None else float(yaw_rad), 0.0,
         )
         self._send(msg, "tx_setpoints")
@@ -1108,6 +1108,7 @@ class VehicleLink:
         tm = self._telemetry
         tm.position_ned_m = _readonly_vector(msg.x, msg.y, msg.z)
         tm.velocity_ned_m_s = _readonly_vector(msg.vx, msg.vy, msg.vz)
+        tm.position_finite = bool(np.isfinite(tm.position_ned_m).all() and np.isfinite(tm.velocity_ned_m_s).all())
         tm.position_rx_s = t_rx
 
     def _on_extended_sys_state(self, msg: Any, t_rx: float) -> None:
