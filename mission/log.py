@@ -55,8 +55,7 @@ class FlightRecorder:
                *_vec(relative), *_vec(desired), *_vec(u_cmd), int(safety_acted), carrier_age_s, mode, int(armed)]
         self._csv.writerow(row)
         self.rows += 1
-        if self.rows % 50 == 0:
-            self._file.flush()
+        self._file.flush()  # one write per tick: a killed controller leaves every tick it ran on disk
 
     def close(self, outcome: dict[str, Any] | None = None, info_update: dict[str, Any] | None = None) -> dict[str, Any]:
         """Close the CSV, add ``info_update`` (e.g. the latched anchor) to ``mission.json`` and
@@ -88,12 +87,19 @@ class FlightRecord:
 
 def read_record(directory: str | Path) -> FlightRecord:
     directory = Path(directory)
-    with open(directory / "record.csv", newline="") as f:
-        rows = list(csv.DictReader(f))
     info = json.loads((directory / "mission.json").read_text())
-    numeric = [c for c in COLUMNS if c not in ("phase", "mode")]
-    cols = {c: np.array([float(r[c]) for r in rows]) if rows else np.zeros(0) for c in numeric}
-    return FlightRecord(t=cols["t_s"], phase=np.array([r["phase"] for r in rows]), cols=cols, info=info)
+    with open(directory / "record.csv", newline="") as f:
+        reader = csv.reader(f)
+        header = next(reader, list(COLUMNS))
+        columns: list[list[str]] = [[] for _ in header]
+        for row in reader:  # column lists, not a dict per row: a long flight stays small
+            if len(row) == len(header):
+                for column, value in zip(columns, row):
+                    column.append(value)
+    text = {"phase", "mode"}
+    cols = {name: np.array(values, dtype=float) for name, values in zip(header, columns) if name not in text}
+    phase = np.array(columns[header.index("phase")], dtype=str)
+    return FlightRecord(t=cols["t_s"], phase=phase, cols=cols, info=info)
 
 
 def _num(x: float | None) -> float | None:
