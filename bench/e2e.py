@@ -62,7 +62,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
-import os
 import random
 import resource
 import select
@@ -82,6 +81,7 @@ import zenoh
 
 from mission import px4
 from mission.mavlink_env import mavlink
+from sim.net import free_port
 
 ROOT = Path(__file__).resolve().parents[1]
 DEMO_CONFIG = ROOT / "configs" / "demo.toml"
@@ -91,12 +91,6 @@ SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35)  # Linux asm-generic valu
 _STAMP_CMSG_LEN = socket.CMSG_SPACE(16)
 WARMUP_S = 0.3  # of RIDING, not measured [s]
 
-
-def free_port(kind: int) -> int:
-    """A port the OS just handed out on 127.0.0.1 (whoever uses it binds it next)."""
-    with socket.socket(socket.AF_INET, kind) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def percentiles_ms(values_ns: Any) -> dict[str, float | int | None]:

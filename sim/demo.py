@@ -27,16 +27,10 @@ from tqdm import tqdm
 from mission.carrier_bridge import open_session
 from mission.config import ZenohSection, load_config
 from mission.phases import Phase
+from sim.net import free_port
 
 DEFAULT_CONFIG = Path(__file__).resolve().parents[1] / "configs" / "demo.toml"
 PHASE_ORDER = [p.value for p in Phase if p not in (Phase.ABORT,)]
-
-
-def free_port(kind: int) -> int:
-    """A port the OS just handed out on 127.0.0.1 (the process that uses it binds it next)."""
-    with socket.socket(socket.AF_INET, kind) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def _python_cli(*args: str) -> list[str]:

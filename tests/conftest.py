@@ -1,22 +1,15 @@
 """Shared fixtures: free loopback ports, config paths."""
 from __future__ import annotations
 
-import socket
 from pathlib import Path
 
 import pytest
 
 import mission.mavlink_env  # noqa: F401  (sets MAVLINK20 before anything imports pymavlink's mavutil)
+from sim.net import free_port  # noqa: F401  (re-exported for the tests)
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIGS = ROOT / "configs"
-
-
-def free_port(kind: int = socket.SOCK_DGRAM) -> int:
-    """A port the OS just handed out on 127.0.0.1 (for endpoints that must be named up front)."""
-    with socket.socket(socket.AF_INET, kind) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 @pytest.fixture

@@ -11,7 +11,7 @@ import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterator
+from typing import Any, Iterator
 
 from mission.carrier_bridge import CarrierFeed, PassengerPublisher, open_session
 from mission.clock import ScaledClock
@@ -22,8 +22,8 @@ from mission.log import FlightRecorder
 from mission.phases import Phase
 from sim.carrier import CarrierSim
 from sim.vehicle import MockVehicle, VehicleOptions
-from tests.conftest import CONFIGS, free_port
-import socket
+from sim.net import free_port, wait_for  # noqa: F401  (wait_for re-exported for the tests)
+from tests.conftest import CONFIGS
 
 
 @dataclass
@@ -72,7 +72,7 @@ class Pair:
 def flying_pair(tmp_path: Path, *, speed: float = 5.0, config: str = "demo.toml", overrides: dict[str, Any] | None = None,
                 vehicle: dict[str, Any] | None = None, start: bool = True) -> Iterator[Pair]:
     cfg = load_config(CONFIGS / config)
-    zport = free_port(socket.SOCK_STREAM)
+    zport = free_port()
     ep = f"tcp/127.0.0.1:{zport}"
     base = {"zenoh.listen": [], "zenoh.connect": [ep], "zenoh.rendezvous": None}
     mcfg = with_overrides(cfg, {**base, **(overrides or {})})
@@ -118,13 +118,3 @@ def flying_pair(tmp_path: Path, *, speed: float = 5.0, config: str = "demo.toml"
         if start:
             pair.thread.start()
         yield pair
-
-
-def wait_for(predicate: Callable[[], Any], timeout_s: float = 10.0, what: str = "condition") -> Any:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        value = predicate()
-        if value:
-            return value
-        time.sleep(0.005)
-    raise AssertionError(f"timed out waiting for {what}")

@@ -3,40 +3,18 @@
 from __future__ import annotations
 
 import contextlib
-import socket
-import time
-from collections.abc import Callable, Iterator
-from typing import TypeVar
+from collections.abc import Iterator
 
 import zenoh
 
 from mission.carrier_bridge import open_session
 from mission.config import ZenohSection
+from sim.net import free_port, wait_for  # noqa: F401  (re-exported for the tests)
 
-T = TypeVar("T")
-
-
-def free_port() -> int:
-    """A TCP port free on 127.0.0.1 right now (bind to port 0, read it, close)."""
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def endpoint(port: int) -> str:
     return f"tcp/127.0.0.1:{port}"
-
-
-def wait_for(predicate: Callable[[], T], timeout_s: float = 10.0, what: str = "condition") -> T:
-    """Poll ``predicate`` until it returns a truthy value (returned) or fail after ``timeout_s``."""
-    deadline = time.monotonic() + timeout_s
-    while True:
-        value = predicate()
-        if value:
-            return value
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
-        time.sleep(0.002)
 
 
 def peer(listen: list[str] | None = None, connect: list[str] | None = None, mode: str = "peer") -> zenoh.Session:

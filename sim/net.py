@@ -1,0 +1,30 @@
+"""Small helpers for processes and tests that talk over loopback."""
+from __future__ import annotations
+
+import socket
+import time
+from collections.abc import Callable
+from typing import TypeVar
+
+T = TypeVar("T")
+
+
+def free_port(kind: int = socket.SOCK_STREAM) -> int:
+    """A port the OS just handed out on 127.0.0.1 (TCP by default; ``socket.SOCK_DGRAM`` for
+    UDP), for an endpoint that must be named before the process that binds it starts."""
+    with socket.socket(socket.AF_INET, kind) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def wait_for(predicate: Callable[[], T], timeout_s: float = 10.0, what: str = "condition") -> T:
+    """Poll ``predicate`` (wall clock) until it returns a truthy value, which is returned;
+    raise ``AssertionError`` naming ``what`` after ``timeout_s``."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        value = predicate()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
+        time.sleep(0.002)
