@@ -66,8 +66,10 @@ def zenoh_config(section: ZenohSection) -> zenoh.Config:
       endpoints loopback-only unless given: a router listens on ``tcp/127.0.0.1:7447``, a client
       connects there, a peer with no endpoints uses the loopback ``rendezvous`` (see
       ZenohSection) so two processes on one machine find each other with no router, or only an
-      ephemeral loopback listener if ``rendezvous`` is None. With multicast scouting on and no
-      endpoints, Zenoh's own defaults apply (it listens on all interfaces: that is the point).
+      ephemeral loopback listener if ``rendezvous`` is None; a peer given only connect endpoints
+      also listens on an ephemeral loopback port (not Zenoh's all-interfaces default). With
+      multicast scouting on and no endpoints, Zenoh's own defaults apply (it listens on all
+      interfaces: that is the point).
 
     Raises :class:`ConfigError` naming the field when Zenoh refuses a value.
     """
@@ -95,6 +97,10 @@ def zenoh_config(section: ZenohSection) -> zenoh.Config:
                 _insert(conf, "listen/exit_on_failure", False, "zenoh.rendezvous")
             elif not section.multicast_scouting:
                 listen = ["tcp/127.0.0.1:0"]
+        elif section.mode == "peer" and not listen and not section.multicast_scouting:
+            # A peer given only connect endpoints would otherwise get Zenoh's default listener,
+            # tcp/[::]:0 on every interface; keep it on loopback like every other default.
+            listen = ["tcp/127.0.0.1:0"]
     if listen:
         _insert(conf, "listen/endpoints", listen, "zenoh.listen")
     if connect:

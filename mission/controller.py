@@ -16,7 +16,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from mission import phases
+from mission import phases, px4
 from mission.clock import Clock, Periodic
 from mission.config import Config
 from mission.errors import CommandRejected, ConfigError, LinkError
@@ -147,6 +147,7 @@ def _vehicle_obs(state: Any) -> VehicleObs | None:
         armed=state.armed, mode=state.mode, heartbeat_age_s=state.heartbeat_age_s,
         position_valid=bool(state.position_valid and pos is not None),
         position_age_s=float("inf") if state.position_rx_s is None else state.t_s - state.position_rx_s,
+        in_failsafe=state.system_status == px4.MAV_STATE_CRITICAL,
     )
 
 

@@ -13,10 +13,12 @@
     NAVIGATING --within arrival radius for arrival dwell--> ARRIVED
     ARRIVED   --request Hold or Land--> HOLD | LAND --vehicle shows that mode--> DONE
 
-    any phase --> ABORT(reason): vehicle_lost, pilot_override, carrier_lost, position_lost,
+    any phase --> ABORT(reason): vehicle_lost, pilot_override, vehicle_failsafe (PX4 left
+                  OFFBOARD for one of its own failsafes), carrier_lost, position_lost,
                   arming_refused, offboard_refused, geometry, interrupted, timeout
     ABORT requests Hold (never disarm in the air) unless the vehicle is lost or a pilot took
-    over (then nothing is sent: never fight the pilot); setpoints stop once Hold is shown.
+    over or PX4 runs its own failsafe (then nothing is sent: never fight either); setpoints stop
+    once Hold is shown.
 
 The passenger is flown through a *reference*: the paper's closed loop (``mission.tick``, the
 same functions as the simulator) integrated in error coordinates about the dock point, which the
@@ -62,6 +64,7 @@ class Phase(str, Enum):
 class AbortReason(str, Enum):
     VEHICLE_LOST = "vehicle_lost"
     PILOT_OVERRIDE = "pilot_override"
+    VEHICLE_FAILSAFE = "vehicle_failsafe"
     CARRIER_LOST = "carrier_lost"
     POSITION_LOST = "position_lost"
     ARMING_REFUSED = "arming_refused"
@@ -88,6 +91,7 @@ class VehicleObs:
     heartbeat_age_s: float
     position_valid: bool = True
     position_age_s: float = 0.0
+    in_failsafe: bool = False  # HEARTBEAT system_status CRITICAL: PX4 runs one of its failsafes
 
 
 @dataclass(frozen=True)
@@ -221,7 +225,8 @@ def _failsafes(state: MissionState, obs: Observation, m: MissionModel) -> tuple[
     if ph == Phase.ABORT:
         if _vehicle_lost(v, m):
             return state, Decision(setpoint=None)  # nobody to talk to: PX4's own failsafe acts
-        if state.reason in (AbortReason.VEHICLE_LOST.value, AbortReason.PILOT_OVERRIDE.value, AbortReason.GEOMETRY.value):
+        if state.reason in (AbortReason.VEHICLE_LOST.value, AbortReason.PILOT_OVERRIDE.value,
+                            AbortReason.VEHICLE_FAILSAFE.value, AbortReason.GEOMETRY.value):
             return state, Decision(setpoint=None)
         return state, _hold_decision(state, obs)
     if obs.interrupted:
@@ -232,7 +237,8 @@ def _failsafes(state: MissionState, obs: Observation, m: MissionModel) -> tuple[
         return new, Decision(setpoint=None, events=("abort: vehicle heartbeat lost",))
     final_modes = ("AUTO.LOITER", "AUTO.LAND")
     if ph in FLYING and v is not None and v.mode != "OFFBOARD" and not (ph == Phase.ARRIVED and v.mode in final_modes):
-        new = _abort(state, t, AbortReason.PILOT_OVERRIDE, f"vehicle switched to {v.mode}")
+        reason = AbortReason.VEHICLE_FAILSAFE if v.in_failsafe else AbortReason.PILOT_OVERRIDE
+        new = _abort(state, t, reason, f"vehicle switched to {v.mode}")
         return new, Decision(setpoint=None, events=(f"abort: vehicle left OFFBOARD ({v.mode}); not fighting it",))
     if ph not in (Phase.PREFLIGHT,) and v is not None and not v.position_valid:
         if TELEMETRY_SILENT_S < v.position_age_s <= m.heartbeat_timeout_s:

@@ -30,7 +30,10 @@ EXIT_ABORT = 5
 
 def read_signing_key(path: str) -> bytes:
     """A 32-byte MAVLink 2 signing key from a file: 64 hex digits or 32 raw bytes."""
-    raw = Path(path).read_bytes()
+    try:
+        raw = Path(path).read_bytes()
+    except OSError as exc:
+        raise ConfigError("mavlink.signing_key_file", path, f"cannot read the key file: {exc.strerror}") from None
     text = raw.strip()
     try:
         key = bytes.fromhex(text.decode("ascii"))
@@ -88,9 +91,13 @@ def exit_code(outcome: MissionOutcome) -> int:
 @click.option("--speed", type=click.FloatRange(min=0.01), default=1.0, show_default=True,
               help="Clock speed factor. Simulation only: must equal the mock vehicle's and carrier's --speed.")
 @click.option("--log-dir", type=click.Path(file_okay=False), help="Where to write the flight log (default mission.log_dir/<time>-<pair>).")
+@click.option("--signing-key", "signing_key_file", type=click.Path(dir_okay=False),
+              help="MAVLink 2 signing key file, 64 hex digits or 32 raw bytes (overrides mavlink.signing_key_file): "
+              "everything sent is signed, and only HEARTBEAT may arrive unsigned.")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON at the end.")
 def run(config: str, mavlink_url: str | None, zenoh_listen: tuple[str, ...], zenoh_connect: tuple[str, ...],
-        zenoh_mode: str | None, pair: str | None, speed: float, log_dir: str | None, as_json: bool) -> int:
+        zenoh_mode: str | None, pair: str | None, speed: float, log_dir: str | None, signing_key_file: str | None,
+        as_json: bool) -> int:
     """Fly the marsupial mission described by CONFIG on a PX4 vehicle.
 
     The passenger takes off from the carrier, joins the dock point, rides while the carrier
@@ -103,11 +110,12 @@ def run(config: str, mavlink_url: str | None, zenoh_listen: tuple[str, ...], zen
     (never disarmed in the air) and the program exits once it shows Hold.
     Exit codes: 0 mission complete; 2 bad configuration or geometry that breaks the paper's
     assumptions (nothing was sent to the vehicle); 3 vehicle lost; 5 other abort (the reason is
-    printed: pilot_override, carrier_lost, position_lost, arming_refused, offboard_refused,
+    printed: pilot_override, vehicle_failsafe, carrier_lost, position_lost, arming_refused, offboard_refused,
     interrupted, timeout).
     """
     cfg = load_config(config)
-    overrides: dict[str, Any] = {"mavlink.url": mavlink_url, "zenoh.pair": pair, "zenoh.mode": zenoh_mode}
+    overrides: dict[str, Any] = {"mavlink.url": mavlink_url, "zenoh.pair": pair, "zenoh.mode": zenoh_mode,
+                                 "mavlink.signing_key_file": signing_key_file}
     if zenoh_listen:
         overrides["zenoh.listen"] = list(zenoh_listen)
     if zenoh_connect:

@@ -14,9 +14,11 @@ Carrier state, JSON (the default encoding), one UTF-8 object per sample::
      "velocity": [vn, ve, vd],   # [m/s] NED, whatever the position frame
      "yaw": 0.1}                 # [rad] heading from north towards east; optional, may be null
 
-Every number must be finite; ``position``/``velocity`` have exactly 3 numbers; unknown fields are
-ignored (forward compatibility). A ``wgs84`` state is converted to local NED through the
-vehicle's origin (PX4's GPS_GLOBAL_ORIGIN) with :func:`geodetic_to_ned`.
+Every number must be finite; ``position``/``velocity`` have exactly 3 numbers, each within
++-1e7 m and +-1e3 m/s (:data:`POSITION_LIMIT_M`, :data:`VELOCITY_LIMIT_M_S`: "range" beyond);
+``seq`` fits an int64; unknown fields are ignored (forward compatibility). A ``wgs84`` state is
+converted to local NED through the vehicle's origin (PX4's GPS_GLOBAL_ORIGIN) with
+:func:`geodetic_to_ned`.
 
 Carrier state, ROS 2 ``nav_msgs/msg/Odometry`` in CDR (with the 4-byte encapsulation header), as
 zenoh-bridge-ros2dds (key ``<namespace>/odom``) or rmw_zenoh (key
@@ -72,6 +74,9 @@ REASONS: tuple[str, ...] = (
 )
 
 EARTH_RADIUS_M = 6371000.0  # PX4's CONSTANTS_RADIUS_OF_EARTH [m]
+SEQ_MAX = 2**63 - 1  # sequence numbers are int64, as in ROS 2 / DDS
+POSITION_LIMIT_M = 1e7  # |local NED component| or |wgs84 altitude| [m]: beyond this a sample is corrupt
+VELOCITY_LIMIT_M_S = 1e3  # |velocity component| [m/s]
 
 ODOMETRY_TYPE = "nav_msgs/msg/Odometry"
 
@@ -128,9 +133,18 @@ def _real(value: Any, name: str) -> float:
 def _int(value: Any, name: str) -> int:
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
         raise WireError("type", f"{name} must be an integer, got {type(value).__name__}")
-    if value < 0:
-        raise WireError("range", f"{name} must be >= 0, got {value}")
+    if not 0 <= value <= SEQ_MAX:
+        raise WireError("range", f"{name} must be in 0..2**63-1, got {value}")
     return int(value)
+
+
+def _bounded(v: np.ndarray, limit: float, name: str) -> np.ndarray:
+    """``v`` if every component is within +-``limit``; a finite but absurd number (a carrier
+    10 000 km away, or a sequence number that would make every later one look old) is a
+    corrupt sample, not a state."""
+    if np.any(np.abs(v) > limit):
+        raise WireError("range", f"{name} = {v.tolist()}: components must be within +-{limit:g}")
+    return v
 
 
 def wrap_pi(angle_rad: float) -> float:
@@ -161,8 +175,9 @@ class CarrierState:
             raise WireError("frame", f"unknown frame {self.frame!r} (expected one of {FRAMES})")
         object.__setattr__(self, "stamp_s", _real(self.stamp_s, "stamp"))
         object.__setattr__(self, "seq", _int(self.seq, "seq"))
-        object.__setattr__(self, "position", _vec3(self.position, "position"))
-        object.__setattr__(self, "velocity_ned_m_s", _vec3(self.velocity_ned_m_s, "velocity"))
+        object.__setattr__(self, "position", _bounded(_vec3(self.position, "position"), POSITION_LIMIT_M, "position"))
+        object.__setattr__(self, "velocity_ned_m_s", _bounded(_vec3(self.velocity_ned_m_s, "velocity"),
+                                                              VELOCITY_LIMIT_M_S, "velocity"))
         if self.yaw_rad is not None:
             object.__setattr__(self, "yaw_rad", _real(self.yaw_rad, "yaw"))
         if self.frame == "wgs84":
@@ -198,10 +213,13 @@ class PassengerStatus:
         object.__setattr__(self, "separated", bool(self.separated))
         object.__setattr__(self, "stamp_s", _real(self.stamp_s, "stamp"))
         object.__setattr__(self, "seq", _int(self.seq, "seq"))
-        object.__setattr__(self, "position_ned_m", _vec3(self.position_ned_m, "position"))
-        object.__setattr__(self, "velocity_ned_m_s", _vec3(self.velocity_ned_m_s, "velocity"))
+        object.__setattr__(self, "position_ned_m", _bounded(_vec3(self.position_ned_m, "position"), POSITION_LIMIT_M,
+                                                            "position"))
+        object.__setattr__(self, "velocity_ned_m_s", _bounded(_vec3(self.velocity_ned_m_s, "velocity"),
+                                                              VELOCITY_LIMIT_M_S, "velocity"))
         if self.anchor_ned_m is not None:
-            object.__setattr__(self, "anchor_ned_m", _vec3(self.anchor_ned_m, "anchor"))
+            object.__setattr__(self, "anchor_ned_m", _bounded(_vec3(self.anchor_ned_m, "anchor"), POSITION_LIMIT_M,
+                                                              "anchor"))
 
 
 # --------------------------------------------------------------------------- geodesy
@@ -463,6 +481,12 @@ def decode_odometry_cdr(raw: bytes | bytearray | memoryview, *, seq: int = 0) ->
     v = np.array([lin.x, lin.y, lin.z], dtype=float)
     if not (np.all(np.isfinite(p_enu)) and np.all(np.isfinite(q)) and np.all(np.isfinite(v)) and math.isfinite(stamp)):
         raise WireError("nonfinite", "Odometry has a non-finite number")
+    # Bound before any arithmetic: a finite but huge number would overflow the norm or the
+    # rotation below (an overflow warning, then inf) instead of being refused by its rule.
+    if np.any(np.abs(q) > 2.0):
+        raise WireError("orientation", f"quaternion {q.tolist()} is not a rotation")
+    if np.any(np.abs(v) > VELOCITY_LIMIT_M_S):
+        raise WireError("range", f"twist {v.tolist()}: components must be within +-{VELOCITY_LIMIT_M_S:g}")
     qn = float(np.linalg.norm(q))
     has_orientation = qn > 0.0
     if has_orientation and abs(qn - 1.0) > 1e-3:

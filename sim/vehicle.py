@@ -175,6 +175,7 @@ class MockVehicle:
         self._steps = 0
         self._counters = dict.fromkeys(COUNTER_NAMES, 0)
         self._chunk_id = 0
+        self._position_fault_done = False  # FaultOptions.position_lost_at_s applied
         self._events: collections.deque[tuple[float, int, str]] = collections.deque(maxlen=1000)
         self._unsent: list[tuple[float, int, str]] = []
         self._command_handlers: dict[int, Callable[[VehicleLink, list[float]], tuple[int, list[Any]]]] = {
@@ -355,6 +356,10 @@ class MockVehicle:
         now = self.clock.now()
         with self._lock:
             self._advance_to(now)
+            lost_at_s = self._faults.options.position_lost_at_s
+            if lost_at_s is not None and self._t_s >= lost_at_s and not self._position_fault_done:
+                self._position_fault_done = True
+                self.lose_position_estimate(True)
             for kind, item in self._faults.due(self._t_s):
                 self._release(kind, item)
             self._service_streams(self._t_s)

@@ -126,6 +126,9 @@ def _write_port_file(path: Path, port: int) -> None:
               help="Fault: deny arming with this STATUSTEXT reason (a failing preflight check).")
 @click.option("--refuse-offboard", metavar="REASON", default=None,
               help="Fault: reject every switch to OFFBOARD (TEMPORARILY_REJECTED) with this STATUSTEXT.")
+@click.option("--lose-position", "lose_position_s", type=click.FloatRange(min=0.0), default=None, metavar="SECONDS",
+              help="Fault: the position estimate is lost for good at this time [s simulated since start]; PX4 "
+                   "leaves the modes that need it (failsafe Descend, shown as AUTO.LAND).")
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed of the loss, jitter and noise draws.")
 @click.option("--signing-key", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
               metavar="FILE", help="Enable MAVLink 2 signing with this key (64 hex digits or 32 raw bytes): "
@@ -137,7 +140,7 @@ def _write_port_file(path: Path, port: int) -> None:
 def mock_vehicle(mavlink_url: str, target_url: str, gcs_url: str | None, speed: float, home: str, start_ned: str,
                  sysid: int, params: tuple[str, ...], tau_s: float, wind: str, position_noise: float, loss_in: float,
                  loss_out: float, latency_ms: float, jitter_ms: float, blackouts: tuple[str, ...],
-                 refuse_arming: str | None, refuse_offboard: str | None, seed: int, signing_key: Path | None, port_file: Path | None,
+                 refuse_arming: str | None, refuse_offboard: str | None, lose_position_s: float | None, seed: int, signing_key: Path | None, port_file: Path | None,
                  status_every: float) -> None:
     """Run the PX4-like kinematic MAVLink vehicle until SIGINT or SIGTERM.
 
@@ -150,7 +153,7 @@ def mock_vehicle(mavlink_url: str, target_url: str, gcs_url: str | None, speed: 
     bind, target = _endpoints(mavlink_url, target_url)
     faults = FaultOptions(loss_in=loss_in, loss_out=loss_out, latency_s=latency_ms / 1000.0, jitter_s=jitter_ms / 1000.0,
                           blackouts=tuple(_blackout(b) for b in blackouts), refuse_arming_reason=refuse_arming, seed=seed,
-                          refuse_offboard_reason=refuse_offboard)
+                          refuse_offboard_reason=refuse_offboard, position_lost_at_s=lose_position_s)
     options = VehicleOptions(
         bind=bind, target=target, gcs_target=gcs_url, speed=speed, sysid=sysid,
         home=_floats(home, 3, "--home"), start_ned=_floats(start_ned, 3, "--start-ned"),  # type: ignore[arg-type]

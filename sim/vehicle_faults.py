@@ -27,6 +27,8 @@ class FaultOptions:
         which nothing goes in or out.
     refuse_arming_reason: if set, arming is denied with this STATUSTEXT (a failed preflight check).
     refuse_offboard_reason: if set, DO_SET_MODE OFFBOARD is TEMPORARILY_REJECTED with this STATUSTEXT.
+    position_lost_at_s: if set, the position estimate is lost at this simulated time since vehicle
+        start (as :meth:`sim.vehicle.MockVehicle.lose_position_estimate`), for good.
     seed: seed of the random generator (loss and jitter draws).
     """
 
@@ -38,6 +40,7 @@ class FaultOptions:
     refuse_arming_reason: str | None = None
     seed: int | None = 0
     refuse_offboard_reason: str | None = None
+    position_lost_at_s: float | None = None
 
     def __post_init__(self) -> None:
         for name in ("loss_in", "loss_out"):
@@ -51,6 +54,8 @@ class FaultOptions:
         if any(duration < 0 for _, duration in windows):
             raise ValueError(f"blackout durations must be >= 0, got {windows!r}")
         object.__setattr__(self, "blackouts", windows)
+        if self.position_lost_at_s is not None and not self.position_lost_at_s >= 0.0:
+            raise ValueError(f"position_lost_at_s must be >= 0, got {self.position_lost_at_s!r}")
 
 
 class FaultInjector:

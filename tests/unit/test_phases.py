@@ -128,3 +128,12 @@ def test_stale_carrier_before_separation_aborts_to_hold(model):
     state, log, _, _ = fly(model, on_tick=stale, ticks=700)
     assert state.reason == AbortReason.CARRIER_LOST.value
     assert any(d.request == "hold" for _, p, d in log if p == Phase.ABORT)
+
+
+def test_mission_too_long_holds(model):
+    from dataclasses import replace
+
+    state, log, _, _ = fly(replace(model, max_duration_s=8.0))
+    assert state.reason == AbortReason.TIMEOUT.value
+    assert any(d.request == "hold" for _, p, d in log if p == Phase.ABORT)
+    assert log[-1][2].setpoint is None  # once Hold shows, nothing more is sent
