@@ -26,4 +26,27 @@ if _already_imported and not mavutil.mavlink20():
 
 mavlink = mavutil.mavlink
 
-__all__ = ["mavutil", "mavlink"]
+
+def read_signing_key(path: str | os.PathLike[str], field: str = "mavlink.signing_key_file") -> bytes:
+    """A 32-byte MAVLink 2 signing key from a file holding 64 hex digits or 32 raw bytes.
+
+    Raises :class:`mission.errors.ConfigError` naming ``field`` if the file cannot be read or
+    holds anything else. The key itself never appears in the message.
+    """
+    from pathlib import Path
+
+    from mission.errors import ConfigError
+
+    try:
+        raw = Path(path).read_bytes()
+    except OSError as exc:
+        raise ConfigError(field, str(path), f"cannot read the key file: {exc.strerror}") from None
+    try:
+        key = bytes.fromhex(raw.strip().decode("ascii"))
+    except (UnicodeDecodeError, ValueError):
+        key = raw
+    if len(key) != 32:
+        raise ConfigError(field, str(path), "must hold 32 bytes (raw) or 64 hex digits")
+    return key
+
+__all__ = ["mavutil", "mavlink", "read_signing_key"]

@@ -6,19 +6,20 @@ import logging
 import signal
 import threading
 import time
-from contextlib import ExitStack
+from contextlib import ExitStack, contextmanager
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterator
 
 import click
 import numpy as np
 
 from mission.carrier_bridge import CarrierFeed, PassengerPublisher, open_session
-from mission.clock import ScaledClock
+from mission.clock import Clock, ScaledClock
 from mission.config import Config, load_config, with_overrides
 from mission.controller import MissionController, MissionOutcome, mission_info, mission_model
 from mission.errors import ConfigError
 from mission.link import VehicleLink
+from mission.mavlink_env import read_signing_key
 from mission.log import FlightRecorder, read_record
 from mission.phases import AbortReason
 
@@ -28,34 +29,12 @@ EXIT_CODES = {AbortReason.GEOMETRY.value: 2, AbortReason.VEHICLE_LOST.value: 3}
 EXIT_ABORT = 5
 
 
-def read_signing_key(path: str) -> bytes:
-    """A 32-byte MAVLink 2 signing key from a file: 64 hex digits or 32 raw bytes."""
-    try:
-        raw = Path(path).read_bytes()
-    except OSError as exc:
-        raise ConfigError("mavlink.signing_key_file", path, f"cannot read the key file: {exc.strerror}") from None
-    text = raw.strip()
-    try:
-        key = bytes.fromhex(text.decode("ascii"))
-    except (UnicodeDecodeError, ValueError):
-        key = raw
-    if len(key) != 32:
-        raise ConfigError("mavlink.signing_key_file", path, "must hold 32 bytes (raw) or 64 hex digits")
-    return key
-
-
-def fly(cfg: Config, *, speed: float = 1.0, log_dir: str | Path | None = None, stop: threading.Event | None = None,
-        on_event=None) -> MissionOutcome:
-    """Fly one mission with ``cfg`` (the library entry point of ``marsupial run``).
-
-    Opens the Zenoh session and the MAVLink link, runs :class:`MissionController` and closes
-    everything in reverse order. ``speed`` is the clock speed factor (simulation only).
-    """
-    mission_model(cfg)  # validate before anything is opened
+@contextmanager
+def mission_io(cfg: Config, clock: Clock, tlog_path: str | Path | None = None) -> Iterator[tuple[CarrierFeed, PassengerPublisher, VehicleLink]]:
+    """Open what a mission talks through, per ``cfg``: the Zenoh session with the carrier feed
+    and the passenger publisher, and the MAVLink link (opened, signing per
+    ``mavlink.signing_key_file``). Everything is closed in reverse order on exit."""
     key = read_signing_key(cfg.mavlink.signing_key_file) if cfg.mavlink.signing_key_file else None
-    clock = ScaledClock(speed)
-    directory = Path(log_dir) if log_dir else Path(cfg.mission.log_dir) / f"{time.strftime('%Y%m%d-%H%M%S')}-{cfg.zenoh.pair}"
-    recorder = FlightRecorder(directory, mission_info(cfg))
     with ExitStack() as stack:
         session = open_session(cfg.zenoh)
         stack.callback(session.close)
@@ -65,10 +44,28 @@ def fly(cfg: Config, *, speed: float = 1.0, log_dir: str | Path | None = None, s
         stack.callback(publisher.close)
         link = VehicleLink(cfg.mavlink.url, clock, target_system=cfg.mavlink.target_system,
                            source_system=cfg.mavlink.source_system, source_component=cfg.mavlink.source_component,
-                           tlog_path=str(recorder.tlog_path), signing_key=key,
+                           tlog_path=None if tlog_path is None else str(tlog_path), signing_key=key,
                            heartbeat_timeout_s=cfg.mission.heartbeat_timeout_s)
         link.open()
         stack.callback(link.close)
+        yield feed, publisher, link
+
+
+def fly(cfg: Config, *, speed: float = 1.0, log_dir: str | Path | None = None, stop: threading.Event | None = None,
+        on_event=None) -> MissionOutcome:
+    """Fly one mission with ``cfg`` (the library entry point of ``marsupial run``).
+
+    Opens the Zenoh session and the MAVLink link (:func:`mission_io`), runs
+    :class:`MissionController` and closes everything in reverse order. ``speed`` is the clock
+    speed factor (simulation only).
+    """
+    mission_model(cfg)  # validate before anything is opened
+    if cfg.mavlink.signing_key_file:
+        read_signing_key(cfg.mavlink.signing_key_file)
+    clock = ScaledClock(speed)
+    directory = Path(log_dir) if log_dir else Path(cfg.mission.log_dir) / f"{time.strftime('%Y%m%d-%H%M%S')}-{cfg.zenoh.pair}"
+    recorder = FlightRecorder(directory, mission_info(cfg))
+    with mission_io(cfg, clock, recorder.tlog_path) as (feed, publisher, link):
         controller = MissionController(cfg, link, feed, clock, publisher=publisher, recorder=recorder,
                                        on_event=on_event, stop=stop)
         return controller.run()

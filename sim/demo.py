@@ -27,7 +27,7 @@ from tqdm import tqdm
 from mission.carrier_bridge import open_session
 from mission.config import ZenohSection, load_config
 from mission.phases import Phase
-from sim.net import free_port
+from sim.net import free_port, stop_process
 
 DEFAULT_CONFIG = Path(__file__).resolve().parents[1] / "configs" / "demo.toml"
 PHASE_ORDER = [p.value for p in Phase if p not in (Phase.ABORT,)]
@@ -50,16 +50,6 @@ class PairRun:
     def summary(self) -> dict:
         path = self.log_dir / "summary.json"
         return json.loads(path.read_text()) if path.exists() else {}
-
-
-def _stop(proc: subprocess.Popen, timeout_s: float = 5.0) -> None:
-    if proc.poll() is None:
-        proc.send_signal(signal.SIGTERM)
-        try:
-            proc.wait(timeout=timeout_s)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
 
 
 def _follow(pair: PairRun, bar: tqdm, lock: threading.Lock) -> None:
@@ -91,16 +81,16 @@ def start_pair(config: str, name: str, zenoh_ep: str, speed: float, log_root: Pa
     err = subprocess.DEVNULL if quiet else None
     carrier = subprocess.Popen(_python_cli("carrier", config, "--speed", str(speed), "--pair", name,
                                            "--zenoh-connect", zenoh_ep), stderr=err)
-    stack.callback(_stop, carrier)
+    stack.callback(stop_process, carrier)
     start = ",".join(str(v) for v in cfg.scenario.carrier_start)
     vehicle = subprocess.Popen(_python_cli("mock-vehicle", "--mavlink", "udpin:127.0.0.1:0", "--target",
                                            f"udpout:127.0.0.1:{mav_port}", "--speed", str(speed), "--start-ned", start,
                                            "--tau", str(cfg.vehicle.velocity_tau_s)), stderr=err)
-    stack.callback(_stop, vehicle)
+    stack.callback(stop_process, vehicle)
     mission = subprocess.Popen(_python_cli("run", config, "--mavlink", f"udpin:127.0.0.1:{mav_port}", "--zenoh-connect",
                                            zenoh_ep, "--pair", name, "--speed", str(speed), "--log-dir", str(pair.log_dir)),
                                stdout=subprocess.PIPE, stderr=err, text=True)
-    stack.callback(_stop, mission, 30.0)
+    stack.callback(stop_process, mission, 30.0)
     pair.procs = {"carrier": carrier, "vehicle": vehicle, "mission": mission}
     return pair
 

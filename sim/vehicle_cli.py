@@ -14,6 +14,8 @@ from types import FrameType
 
 import click
 
+from mission.errors import ConfigError
+from mission.mavlink_env import read_signing_key as read_key_file
 from sim.vehicle import MockVehicle, VehicleOptions
 from sim.vehicle_faults import FaultOptions
 from sim.vehicle_link import parse_endpoint
@@ -55,17 +57,11 @@ def _blackout(text: str) -> tuple[float, float]:
 
 
 def read_signing_key(path: Path) -> bytes:
-    """A 32-byte MAVLink 2 signing key from a file holding 64 hex digits or 32 raw bytes."""
-    data = path.read_bytes()
-    text = data.strip()
+    """The key file of --signing-key (see :func:`mission.mavlink_env.read_signing_key`)."""
     try:
-        if len(text) == 64:
-            return bytes.fromhex(text.decode("ascii"))
-    except (UnicodeDecodeError, ValueError):
-        pass
-    if len(data) == 32:
-        return data
-    raise click.BadParameter(f"{path}: expected 64 hex digits or 32 raw bytes", param_hint="--signing-key")
+        return read_key_file(path, field="--signing-key")
+    except ConfigError as exc:
+        raise click.BadParameter(f"{path}: {exc.rule}", param_hint="--signing-key") from None
 
 
 def _endpoints(mavlink_url: str, target_url: str) -> tuple[str, str]:

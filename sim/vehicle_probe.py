@@ -13,13 +13,16 @@ import socket
 import threading
 import time
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from mission import px4
 from mission.mavlink_env import mavlink
 from sim.vehicle_link import parse_endpoint, signing_timestamp_now
 
 NAN = float("nan")
+
+if TYPE_CHECKING:
+    from sim.vehicle import MockVehicle
 
 
 class Probe:
@@ -272,6 +275,13 @@ def sleep_until(clock: Any, t_s: float, spin_wall_s: float = 0.001) -> None:
     a few tens of microseconds of wall time at any speed factor."""
     while (remaining_wall_s := (t_s - clock.now()) / clock.speed) > 0:
         time.sleep(remaining_wall_s - spin_wall_s if remaining_wall_s > 2 * spin_wall_s else 0)
+
+
+def vehicle_for(probe: Probe, speed: float = 10.0, **options: Any) -> "MockVehicle":
+    """A :class:`sim.vehicle.MockVehicle` on an ephemeral port that talks to ``probe``."""
+    from sim.vehicle import MockVehicle, VehicleOptions
+
+    return MockVehicle(VehicleOptions(bind="127.0.0.1:0", target=f"127.0.0.1:{probe.port}", speed=speed, **options))
 
 
 def connect(probe: Probe, timeout_s: float = 3.0, heartbeat_period_s: float = 0.1) -> Probe:

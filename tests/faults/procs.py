@@ -18,7 +18,6 @@ import contextlib
 import csv
 import json
 import os
-import signal
 import socket
 import subprocess
 import sys
@@ -31,7 +30,7 @@ from typing import Any
 from mission import px4
 from mission.carrier_bridge import open_session
 from mission.config import ZenohSection
-from sim.net import wait_for
+from sim.net import stop_process, wait_for
 from sim.vehicle import spawn_process
 from sim.vehicle_probe import Probe, connect
 from tests.conftest import CONFIGS, free_port
@@ -50,17 +49,6 @@ def udp_bound(port: int) -> bool:
 
 def cli(*args: str) -> list[str]:
     return [sys.executable, "-m", "mission.cli", *args]
-
-
-def stop_process(proc: subprocess.Popen[Any], timeout_s: float = 5.0) -> None:
-    """SIGTERM, then SIGKILL after ``timeout_s``; always reaped."""
-    if proc.poll() is None:
-        proc.send_signal(signal.SIGTERM)
-        try:
-            proc.wait(timeout=timeout_s)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
 
 
 class Router:

@@ -13,11 +13,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterator
 
-from mission.carrier_bridge import CarrierFeed, PassengerPublisher, open_session
+from mission.carrier_bridge import open_session
 from mission.clock import ScaledClock
 from mission.config import Config, load_config, with_overrides
 from mission.controller import MissionController, MissionOutcome, mission_info
 from mission.link import VehicleLink
+from mission.run_cli import mission_io
 from mission.log import FlightRecorder
 from mission.phases import Phase
 from sim.carrier import CarrierSim
@@ -74,7 +75,7 @@ def flying_pair(tmp_path: Path, *, speed: float = 5.0, config: str = "demo.toml"
     cfg = load_config(CONFIGS / config)
     zport = free_port()
     ep = f"tcp/127.0.0.1:{zport}"
-    base = {"zenoh.listen": [], "zenoh.connect": [ep], "zenoh.rendezvous": None}
+    base = {"zenoh.listen": [], "zenoh.connect": [ep], "zenoh.rendezvous": None, "mavlink.url": "udpin:127.0.0.1:0"}
     mcfg = with_overrides(cfg, {**base, **(overrides or {})})
     ccfg = with_overrides(cfg, {"zenoh.listen": [ep], "zenoh.connect": [], "zenoh.rendezvous": None})
     with contextlib.ExitStack() as stack:
@@ -87,19 +88,10 @@ def flying_pair(tmp_path: Path, *, speed: float = 5.0, config: str = "demo.toml"
         carrier_thread.start()
         stack.callback(carrier_thread.join, 5.0)
         stack.callback(carrier_stop.set)
-        session = open_session(mcfg.zenoh)
-        stack.callback(session.close)
         clock = ScaledClock(speed)
-        feed = CarrierFeed(session, mcfg.zenoh.pair, clock, max_age_s=mcfg.mission.carrier_timeout_s)
-        stack.callback(feed.close)
-        publisher = PassengerPublisher(session, mcfg.zenoh.pair)
-        stack.callback(publisher.close)
         log_dir = tmp_path / "flight"
         recorder = FlightRecorder(log_dir, mission_info(mcfg))
-        link = VehicleLink("udpin:127.0.0.1:0", clock, tlog_path=str(recorder.tlog_path),
-                           heartbeat_timeout_s=mcfg.mission.heartbeat_timeout_s)
-        link.open()
-        stack.callback(link.close)
+        feed, publisher, link = stack.enter_context(mission_io(mcfg, clock, recorder.tlog_path))
         vopts = {"target": f"127.0.0.1:{link.port}", "speed": speed, "start_ned": tuple(cfg.scenario.carrier_start),
                  **(vehicle or {})}
         v = stack.enter_context(MockVehicle(VehicleOptions(**vopts)))

@@ -8,27 +8,15 @@ from __future__ import annotations
 
 import math
 import threading
-import time
-from collections.abc import Iterator
 
 import numpy as np
 import pytest
 
 from mission import px4
-from sim.vehicle import PHYSICS_DT_S, MockVehicle, VehicleOptions
-from sim.vehicle_probe import Probe, SetpointStream, connect, sleep_until, start_offboard
+from sim.vehicle import PHYSICS_DT_S, MockVehicle
+from sim.vehicle_probe import Probe, SetpointStream, connect, sleep_until, start_offboard, vehicle_for
 
 pytestmark = pytest.mark.timeout(30)
-
-
-@pytest.fixture
-def probe() -> Iterator[Probe]:
-    with Probe() as p:
-        yield p
-
-
-def vehicle_for(probe: Probe, speed: float = 10.0, **options: object) -> MockVehicle:
-    return MockVehicle(VehicleOptions(bind="127.0.0.1:0", target=f"127.0.0.1:{probe.port}", speed=speed, **options))  # type: ignore[arg-type]
 
 
 def climb_to(v: MockVehicle, probe: Probe, altitude_m: float, stream: SetpointStream, timeout_s: float = 5.0) -> None:

@@ -5,28 +5,17 @@ from __future__ import annotations
 import random
 import struct
 import time
-from collections.abc import Iterator
 
 import numpy as np
 import pytest
 
 from mission import px4
 from mission.mavlink_env import mavlink
-from sim.vehicle import FaultOptions, MockVehicle, VehicleOptions
-from sim.vehicle_probe import Probe, connect, start_offboard
+from sim.vehicle import FaultOptions, VehicleOptions
+from sim.vehicle_probe import Probe, connect, start_offboard, vehicle_for
 
 pytestmark = pytest.mark.timeout(30)
 KEY = bytes(range(32))
-
-
-@pytest.fixture
-def probe() -> Iterator[Probe]:
-    with Probe() as p:
-        yield p
-
-
-def vehicle_for(probe: Probe, speed: float = 10.0, **options: object) -> MockVehicle:
-    return MockVehicle(VehicleOptions(bind="127.0.0.1:0", target=f"127.0.0.1:{probe.port}", speed=speed, **options))  # type: ignore[arg-type]
 
 
 def _frame(probe: Probe, msg: object) -> bytearray:

@@ -6,7 +6,6 @@ import math
 import signal
 import statistics
 import subprocess
-from collections.abc import Iterator
 from pathlib import Path
 
 import click
@@ -19,20 +18,10 @@ from sim.vehicle import FaultOptions, MockVehicle, VehicleOptions, spawn_process
 from sim.vehicle_cli import mock_vehicle, read_signing_key
 from sim.vehicle_link import parse_endpoint
 from sim.vehicle_params import PARAM_SPECS, pack_int32, unpack_int32
-from sim.vehicle_probe import Probe, SetpointStream, connect, start_offboard
+from sim.vehicle_probe import Probe, SetpointStream, connect, start_offboard, vehicle_for
 
 pytestmark = pytest.mark.timeout(30)
 NAN = math.nan
-
-
-@pytest.fixture
-def probe() -> Iterator[Probe]:
-    with Probe() as p:
-        yield p
-
-
-def vehicle_for(probe: Probe, speed: float = 10.0, **options: object) -> MockVehicle:
-    return MockVehicle(VehicleOptions(bind="127.0.0.1:0", target=f"127.0.0.1:{probe.port}", speed=speed, **options))  # type: ignore[arg-type]
 
 
 @pytest.mark.parametrize("target", [(2, 1), (1, 50), (255, 190)])
