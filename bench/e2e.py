@@ -600,31 +600,21 @@ def child_main(rate_hz: float, duration_s: float, zenoh_connect: str, log_dir: s
     """The controller process: ``marsupial run``'s wiring with the tracing proxies."""
     from contextlib import ExitStack
 
-    from mission.carrier_bridge import CarrierFeed, PassengerPublisher, open_session
     from mission.config import load_config, with_overrides
     from mission.controller import MissionController, mission_info
-    from mission.link import VehicleLink
     from mission.log import FlightRecorder
+    from mission.run_cli import mission_io
 
     cfg = with_overrides(load_config(DEMO_CONFIG), {
         "mission.rate_hz": rate_hz, "mission.max_duration_s": duration_s + 120.0, "zenoh.pair": PAIR,
-        "zenoh.listen": [], "zenoh.connect": [zenoh_connect]})
+        "zenoh.listen": [], "zenoh.connect": [zenoh_connect], "mavlink.url": "udpin:127.0.0.1:0"})
     clock = _Clock()
     trace = _Trace(clock)
     stop = threading.Event()
     window: dict[str, Any] = {}
     with ExitStack() as stack:
         recorder = FlightRecorder(Path(log_dir) / "flight", mission_info(cfg))
-        session = open_session(cfg.zenoh)
-        stack.callback(session.close)
-        feed = CarrierFeed.from_section(session, cfg.zenoh, clock, max_age_s=cfg.mission.carrier_timeout_s)
-        stack.callback(feed.close)
-        publisher = PassengerPublisher(session, cfg.zenoh.pair)
-        stack.callback(publisher.close)
-        link = VehicleLink("udpin:127.0.0.1:0", clock, tlog_path=str(recorder.tlog_path),
-                           heartbeat_timeout_s=cfg.mission.heartbeat_timeout_s)
-        link.open()
-        stack.callback(link.close)
+        feed, publisher, link = stack.enter_context(mission_io(cfg, clock, recorder.tlog_path))
         controller = MissionController(cfg, _TracedLink(link, trace), _TracedFeed(feed, trace), clock,
                                        publisher=publisher, recorder=recorder, stop=stop)
         trace.controller = controller
