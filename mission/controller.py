@@ -181,11 +181,13 @@ class MissionController:
         self.ticks = 0
         self.overruns = 0
         self._seq = 0
+        self._origin_given = False
 
     def _observe(self, t: float, worker: CommandWorker) -> Observation:
         vstate = self.link.state
-        if vstate.origin is not None and getattr(self.feed, "_origin", None) is None and hasattr(self.feed, "set_origin"):
-            self.feed.set_origin(GeoOrigin(*vstate.origin))
+        if vstate.origin is not None and not self._origin_given:
+            self.feed.set_origin(GeoOrigin(*vstate.origin))  # wgs84 carrier states become usable
+            self._origin_given = True
         return Observation(t_s=t, vehicle=_vehicle_obs(vstate), carrier=_carrier_obs(self.feed.latest(), self.feed.alive),
                            failed=dict(worker.failed), interrupted=self.stop.is_set())
 
