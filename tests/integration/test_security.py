@@ -210,7 +210,9 @@ def _delivered(pub_session: zenoh.Session, sub_session: zenoh.Session, key: str,
         pub = pub_session.declare_publisher(key)
         marker = pub_session.declare_publisher("marsupial/test/marker")
         try:
-            wait_for(lambda: marker.matching_status.matching, 10.0, "marker subscriber matched")
+            # both routes known before anything is put (puts with no known subscriber are dropped at
+            # the source; the ACL acts on puts, not on declarations, so a denied key matches too)
+            wait_for(lambda: marker.matching_status.matching and pub.matching_status.matching, 10.0, "subscribers matched")
             for i in range(n):
                 pub.put(f"state {i}".encode())
             # the marker follows the same route: once it arrived, any allowed put arrived before it
