@@ -39,9 +39,8 @@ import numpy as np
 from mission.law import check_assumptions, norm
 from mission.errors import AssumptionError
 from mission.safety import SafetyConfig, filter_velocity
-from mission.tick import TickModel, crossing_fraction, passenger_tick
+from mission.tick import DEPARTURE_THRESHOLD_M, TickModel, latch_point, passenger_tick, separation_due
 
-DEPARTURE_THRESHOLD_M = 0.1
 TELEMETRY_SILENT_S = 0.4  # position older than this (PX4 streams it at 30 Hz): the link went quiet [s]
 
 
@@ -367,11 +366,10 @@ def _riding(state, obs, m):
     t = obs.t_s
     dock = _dock(obs, m)
     v_dock = obs.carrier.velocity_ned_m_s
-    if norm(m.tick.target - dock) <= m.tick.event_distance_m:
-        theta = float(crossing_fraction(state.prev_dock, dock - state.prev_dock, m.tick.target, m.tick.event_distance_m))
-        anchor = state.prev_dock + theta * (dock - state.prev_dock)
+    if separation_due(dock, False, m.tick):
+        theta, anchor = latch_point(state.prev_dock, dock, m.tick.target, m.tick)
         new = _to(state, Phase.SEPARATED, t, anchor=anchor, e_ref=ZERO.copy(), x_ref=anchor.copy(),
-                  separation_time_s=t - (1 - theta) * m.dt_s)
+                  separation_time_s=t - (1 - float(theta)) * m.dt_s)
         return _navigate(new, obs, m, events=(f"separated at |e_tc| = {norm(m.tick.target - anchor):.3f} m",))
     tick = passenger_tick(dock, v_dock, ZERO, False, m.tick, state.u_ref, m.dt_s)
     u, acted = _track(state, obs, m, dock, tick.u)

@@ -29,6 +29,9 @@ from mission.law import LawParams, carrier_command, norm, passenger_command, uni
 from mission.safety import FilterResult, Obstacles, SafetyConfig, filter_velocity
 
 
+DEPARTURE_THRESHOLD_M = 0.1  # |e_pc| [m] beyond which the passenger counts as having left the carrier
+
+
 @dataclass(frozen=True)
 class TickModel:
     """Everything a tick needs besides the state.
@@ -162,6 +165,15 @@ def separation_due(anchor: np.ndarray, separated: np.ndarray | bool, model: Tick
     if distance_m is None:
         distance_m = norm(model.target - anchor)
     return ~np.asarray(separated, dtype=bool) & (distance_m <= model.event_distance_m)
+
+
+def latch_point(previous: np.ndarray, anchor: np.ndarray, target: np.ndarray, model: TickModel) -> tuple[np.ndarray, np.ndarray]:
+    """Where the latch fired inside the step ``previous -> anchor`` [m] (a straight segment: the
+    anchor moved at constant velocity over the tick): (theta in [0, 1], the anchor at the event).
+    Shared by the realtime phases and the batch simulator."""
+    step = anchor - previous
+    theta = crossing_fraction(previous, step, target, model.event_distance_m)
+    return theta, previous + theta[..., None] * step
 
 
 def crossing_fraction(start: np.ndarray, step: np.ndarray, target: np.ndarray, radius: float) -> np.ndarray:

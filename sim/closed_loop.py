@@ -21,9 +21,8 @@ import numpy as np
 
 from mission.config import Config
 from mission.law import norm, uniform, where_rows
-from mission.tick import TickModel, carrier_tick, crossing_fraction, passenger_tick, separation_due
+from mission.tick import DEPARTURE_THRESHOLD_M, TickModel, carrier_tick, latch_point, passenger_tick, separation_due
 
-DEPARTURE_THRESHOLD_M = 0.1  # |e_pc| that counts as "has left the carrier" [m]
 
 
 def model_from_config(cfg: Config, target: np.ndarray | None = None) -> TickModel:
@@ -158,7 +157,6 @@ def simulate(
     use_accel_c = model.carrier_safety.max_accel_m_s2 is not None
     steps = int(round(duration_s / dt_s))
     rec: dict[str, list] = {k: [] for k in ("t", "x_c", "x_p", "u_c", "u_p", "P", "sep")}
-    bc_event = model.event_distance_m
 
     # Per step every norm is computed once and reused; arrays the step owns are updated in place.
     for k in range(steps + 1):
@@ -213,8 +211,7 @@ def simulate(
         dist_ct = norm(target - anchor_new)
         due = separation_due(anchor_new, sep, model, dist_ct)
         if due.any():
-            theta = crossing_fraction(anchor[due], step_anchor[due], target[due], bc_event)
-            anchor_new[due] = anchor[due] + theta[:, None] * step_anchor[due]
+            theta, anchor_new[due] = latch_point(anchor[due], anchor_new[due], target[due], model)
             if model.carrier_mode == "stop":
                 x_c_new[due] = anchor_new[due]
             v_own[due] = u_c[due]

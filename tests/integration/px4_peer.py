@@ -16,18 +16,6 @@ from mission import px4
 from mission.mavlink_env import mavlink, mavutil
 
 
-def eventually(condition: Callable[[], Any], timeout_s: float = 5.0, what: str = "condition") -> Any:
-    """Wait (wall clock) until ``condition()`` is truthy and return it; fail the test otherwise."""
-    deadline = time.monotonic() + timeout_s
-    while True:
-        value = condition()
-        if value:
-            return value
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
-        time.sleep(0.002)
-
-
 class Px4Peer:
     """PX4-like endpoint (sysid/compid, HEARTBEAT, LOCAL_POSITION_NED, COMMAND_LONG answers).
 

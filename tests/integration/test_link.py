@@ -22,7 +22,8 @@ from mission.clock import ManualClock, ScaledClock
 from mission.errors import CommandRejected, LinkError, LinkTimeout
 from mission.link import LinkCounters, VehicleLink, VehicleState
 from mission.mavlink_env import mavlink, mavutil
-from tests.integration.px4_peer import Px4Peer, eventually
+from sim.net import wait_for as eventually
+from tests.integration.px4_peer import Px4Peer
 
 ANY_PORT = "udpin:127.0.0.1:0"
 

@@ -17,7 +17,7 @@ from mission.clock import Periodic, ScaledClock
 from mission.errors import CommandRejected
 from mission.link import VehicleLink
 from sim.vehicle import MockVehicle, VehicleOptions
-from tests.integration.px4_peer import eventually
+from sim.net import wait_for as eventually
 
 SPEED = 10.0
 KEY = bytes(range(7, 39))
