@@ -33,6 +33,8 @@ class LawSection(_Model):
     b: float = Field(8.0, gt=1, description="b > 1")
     c: float = Field(1.0, gt=0, description="[m]")
     d: float = Field(1.0, gt=0, description="[m]")
+    departure_margin_m: float = Field(
+        1e-3, gt=0, description="[m] separation fires at |e_tc| = b c - this (mission/tick.py), in flights and simulations")
 
     def params(self) -> LawParams:
         return LawParams(k_c=self.k_c, k_p=self.k_p, b=self.b, c=self.c, d=self.d)
@@ -96,7 +98,6 @@ class SimSection(_Model):
 
     dt_s: float = Field(1e-3, gt=0, le=0.1)
     duration_s: float = Field(30.0, gt=0)
-    departure_margin_m: float = Field(1e-3, gt=0, description="see sim/closed_loop.py: latch of |e_tc|")
     p1_tolerance_m: float = Field(1e-6, gt=0, description="|e_pc| counted as 'on the carrier' before T")
     p2_tolerance_m: float = Field(0.1, gt=0, description="final |e_pt| counted as 'at the target'")
 

@@ -21,24 +21,8 @@ import numpy as np
 
 from mission.config import Config
 from mission.law import norm, uniform, where_rows
+from mission.model import model_from_config
 from mission.tick import DEPARTURE_THRESHOLD_M, TickModel, carrier_tick, latch_point, passenger_tick, separation_due
-
-
-
-def model_from_config(cfg: Config, target: np.ndarray | None = None) -> TickModel:
-    """The :class:`TickModel` a configuration describes (``target`` overrides, e.g. a batch)."""
-    s = cfg.scenario
-    return TickModel(
-        law=cfg.law.params(),
-        target=np.asarray(s.target if target is None else target, dtype=float),
-        obstacles=s.obstacle_set(),
-        passenger_safety=cfg.safety.passenger(),
-        carrier_safety=cfg.safety.carrier(),
-        planar_carrier=bool(s.planar_carrier and s.dim == 3),
-        carrier_mode=s.carrier_mode,
-        departure_margin_m=cfg.sim.departure_margin_m,
-        filter_carrier=cfg.safety.filter_carrier,
-    )
 
 
 @dataclass

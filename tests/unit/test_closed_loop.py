@@ -90,7 +90,7 @@ def test_departure_survives_where_absolute_coordinates_would_lose_it():
 def test_carrier_never_closer_than_b_c(paper3d):
     cfg, r = paper3d
     bc = cfg.law.params().separation_distance_m
-    assert r.min_carrier_target_distance_m[0] >= bc - cfg.sim.departure_margin_m - 1e-9
+    assert r.min_carrier_target_distance_m[0] >= bc - cfg.law.departure_margin_m - 1e-9
 
 
 def test_2d_obstacles_keep_clearance_and_reach_target(paper2d):

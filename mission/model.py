@@ -1,0 +1,59 @@
+"""The fixed parameters of a flight and of a simulation, built from a configuration.
+
+:func:`model_from_config` gives the :class:`mission.tick.TickModel` (law, target, obstacles,
+both safety filters, separation latch) that the realtime controller and the batch simulator
+(:mod:`sim.closed_loop`) share; :func:`mission_model` adds what only a flight has (docking,
+tracking, arrival, timeouts, the command filter) as a :class:`mission.phases.MissionModel`.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from mission.config import Config
+from mission.errors import ConfigError
+from mission.phases import MissionModel
+from mission.safety import SafetyConfig
+from mission.tick import TickModel
+
+COMMAND_MARGIN_FACTOR = 0.5  # the command filter's obstacle margin, of safety.margin_m
+COMMAND_SPEED_FACTOR = 1.25  # its speed limit, of the reference's (room to pull onto the reference)
+COMMAND_ACCEL_FACTOR = 1.5  # its acceleration limit, of the reference's
+
+
+def model_from_config(cfg: Config, target: np.ndarray | None = None) -> TickModel:
+    """The :class:`TickModel` a configuration describes (``target`` overrides, e.g. a batch)."""
+    s = cfg.scenario
+    return TickModel(
+        law=cfg.law.params(),
+        target=np.asarray(s.target if target is None else target, dtype=float),
+        obstacles=s.obstacle_set(),
+        passenger_safety=cfg.safety.passenger(),
+        carrier_safety=cfg.safety.carrier(),
+        planar_carrier=bool(s.planar_carrier and s.dim == 3),
+        carrier_mode=s.carrier_mode,
+        departure_margin_m=cfg.law.departure_margin_m,
+        filter_carrier=cfg.safety.filter_carrier,
+    )
+
+
+def mission_model(cfg: Config) -> MissionModel:
+    """The phases' fixed parameters from a configuration (3D, local NED)."""
+    if cfg.scenario.dim != 3:
+        raise ConfigError("scenario.dim", cfg.scenario.dim, "a flight needs dim = 3 (local NED)")
+    tick = model_from_config(cfg)
+    s = cfg.safety
+    ref_speed = s.passenger_max_speed_m_s
+    command = SafetyConfig(
+        cbf_gain=s.cbf_gain, margin_m=s.margin_m * COMMAND_MARGIN_FACTOR,
+        max_speed_m_s=None if ref_speed is None else ref_speed * COMMAND_SPEED_FACTOR,
+        max_accel_m_s2=None if s.passenger_max_accel_m_s2 is None else s.passenger_max_accel_m_s2 * COMMAND_ACCEL_FACTOR,
+        z_min_m=s.z_min_m, z_max_m=s.z_max_m,
+    )
+    m = cfg.mission
+    return MissionModel(
+        tick=tick, command_safety=command, dock_offset_ned_m=np.asarray(m.dock_offset_ned_m, dtype=float),
+        dock_tolerance_m=m.dock_tolerance_m, track_gain=m.track_gain, join_speed_m_s=m.join_speed_m_s,
+        arrival_radius_m=m.arrival_radius_m, arrival_dwell_s=m.arrival_dwell_s, final_action=m.final_action,
+        carrier_timeout_s=m.carrier_timeout_s, heartbeat_timeout_s=m.heartbeat_timeout_s, prestream_s=m.prestream_s,
+        connect_timeout_s=m.connect_timeout_s, max_duration_s=m.max_duration_s, dt_s=1.0 / m.rate_hz,
+    )
