@@ -11,6 +11,7 @@ from __future__ import annotations
 import logging
 import queue
 import threading
+import time
 from dataclasses import dataclass
 from typing import Any, Callable
 
@@ -19,78 +20,62 @@ import numpy as np
 from mission import phases, px4
 from mission.clock import Clock, Periodic
 from mission.config import Config
-from mission.errors import CommandRejected, ConfigError, LinkError
+from mission.errors import CommandRejected, LinkError
 from mission.log import FlightRecorder
-from mission.phases import CarrierObs, MissionModel, MissionState, Observation, Phase, VehicleObs
-from mission.safety import SafetyConfig
+from mission.model import mission_model
+from mission.phases import CarrierObs, Decision, MissionState, Observation, Phase, VehicleObs
+from mission.ports import CarrierSource, Request, StatusSink, Vehicle
 from mission.wire import GeoOrigin, PassengerStatus
-from sim.closed_loop import model_from_config
 
 log = logging.getLogger(__name__)
 
 ABORT_GRACE_S = 15.0  # longest the loop keeps asking for Hold after an abort [s]
 
 
-def mission_model(cfg: Config) -> MissionModel:
-    """The phases' fixed parameters from a configuration (3D, local NED)."""
-    if cfg.scenario.dim != 3:
-        raise ConfigError("scenario.dim", cfg.scenario.dim, "a flight needs dim = 3 (local NED)")
-    tick = model_from_config(cfg)
-    s = cfg.safety
-    ref_speed = s.passenger_max_speed_m_s
-    command = SafetyConfig(
-        cbf_gain=s.cbf_gain, margin_m=s.margin_m * 0.5,
-        max_speed_m_s=None if ref_speed is None else ref_speed * 1.25,
-        max_accel_m_s2=None if s.passenger_max_accel_m_s2 is None else s.passenger_max_accel_m_s2 * 1.5,
-        z_min_m=s.z_min_m, z_max_m=s.z_max_m,
-    )
-    m = cfg.mission
-    return MissionModel(
-        tick=tick, command_safety=command, dock_offset_ned_m=np.asarray(m.dock_offset_ned_m, dtype=float),
-        dock_tolerance_m=m.dock_tolerance_m, track_gain=m.track_gain, join_speed_m_s=m.join_speed_m_s,
-        arrival_radius_m=m.arrival_radius_m, arrival_dwell_s=m.arrival_dwell_s, final_action=m.final_action,
-        carrier_timeout_s=m.carrier_timeout_s, heartbeat_timeout_s=m.heartbeat_timeout_s, prestream_s=m.prestream_s,
-        connect_timeout_s=m.connect_timeout_s, max_duration_s=m.max_duration_s, dt_s=1.0 / m.rate_hz,
-    )
-
-
 class CommandWorker:
-    """Runs vehicle commands ("arm", "offboard", "hold", "land") one at a time off the loop.
+    """Runs vehicle commands (:class:`Request`) one at a time off the loop.
 
-    A request is retried up to ``retries`` times (each try is the link's own ACK/retry cycle);
+    A request is retried up to ``retries`` times (each try is the vehicle's own ACK/retry cycle);
     then ``failed[request]`` holds the vehicle's reason and the phases decide. Hold and Land may
-    be asked again after ``repeat_s`` if the vehicle still does not show the mode.
+    be asked again after ``repeat_s`` if the vehicle still does not show the mode. With
+    ``threaded=False`` a request runs inside :meth:`submit` (deterministic unit tests on a
+    manual clock); the flight always uses the thread, so commands never stall the setpoints.
     """
 
-    ACTIONS = {"arm": "arm", "offboard": "offboard", "hold": "hold", "land": "land"}
-
-    def __init__(self, link: Any, clock: Clock, retries: int = 3, repeat_s: float = 2.0) -> None:
-        self.link, self.clock, self.retries, self.repeat_s = link, clock, retries, repeat_s
+    def __init__(self, vehicle: Vehicle, clock: Clock, retries: int = 3, repeat_s: float = 2.0,
+                 threaded: bool = True) -> None:
+        self.link, self.clock, self.retries, self.repeat_s = vehicle, clock, retries, repeat_s
         self.failed: dict[str, str] = {}
-        self._queue: queue.Queue[str | None] = queue.Queue()
+        self._queue: queue.Queue[Request | None] = queue.Queue()
         self._busy = threading.Event()
-        self._last: dict[str, float] = {}
-        self._thread = threading.Thread(target=self._run, name="mission-commands", daemon=True)
-        self._thread.start()
+        self._last: dict[Request, float] = {}
+        self._thread: threading.Thread | None = None
+        if threaded:
+            self._thread = threading.Thread(target=self._run, name="mission-commands", daemon=True)
+            self._thread.start()
 
     def submit(self, request: str) -> None:
-        if self._busy.is_set() or request in self.failed:
+        req = Request(request)
+        if self._busy.is_set() or req in self.failed:
             return
-        last = self._last.get(request)
+        last = self._last.get(req)
         if last is not None and self.clock.now() - last < self.repeat_s:
             return
-        self._last[request] = self.clock.now()
+        self._last[req] = self.clock.now()
         self._busy.set()
-        self._queue.put(request)
+        if self._thread is None:
+            self._handle(req)
+        else:
+            self._queue.put(req)
 
-    def _execute(self, request: str) -> None:
-        if request == "arm":
+    def _execute(self, request: Request) -> None:
+        if request is Request.ARM:
             self.link.arm()
-        elif request == "offboard":
+        elif request is Request.OFFBOARD:
             self.link.set_mode("OFFBOARD")
-        elif request == "hold":
+        elif request is Request.HOLD:
             self.link.hold()
-        elif request == "land":
+        elif request is Request.LAND:
             self.link.land()
 
     def _run(self) -> None:
@@ -98,27 +83,31 @@ class CommandWorker:
             request = self._queue.get()
             if request is None:
                 return
-            reason = ""
-            for attempt in range(1, self.retries + 1):
-                try:
-                    self._execute(request)
-                    log.info("vehicle accepted %s", request)
-                    reason = ""
-                    break
-                except CommandRejected as exc:
-                    reason = exc.reason or f"MAV_RESULT {exc.result}"
-                except LinkError as exc:
-                    reason = str(exc)
-                log.warning("%s refused (try %d/%d): %s", request, attempt, self.retries, reason)
-                self.clock.sleep(0.5)
-            if reason and request in ("arm", "offboard"):
-                self.failed[request] = reason
-            self._last[request] = self.clock.now()
-            self._busy.clear()
+            self._handle(request)
+
+    def _handle(self, request: Request) -> None:
+        reason = ""
+        for attempt in range(1, self.retries + 1):
+            try:
+                self._execute(request)
+                log.info("vehicle accepted %s", request)
+                reason = ""
+                break
+            except CommandRejected as exc:
+                reason = exc.reason or f"MAV_RESULT {exc.result}"
+            except LinkError as exc:
+                reason = str(exc)
+            log.warning("%s refused (try %d/%d): %s", request, attempt, self.retries, reason)
+            self.clock.sleep(0.5)
+        if reason and request in (Request.ARM, Request.OFFBOARD):
+            self.failed[request.value] = reason
+        self._last[request] = self.clock.now()
+        self._busy.clear()
 
     def close(self) -> None:
-        self._queue.put(None)
-        self._thread.join(timeout=5.0)
+        if self._thread is not None:
+            self._queue.put(None)
+            self._thread.join(timeout=5.0)
 
 
 @dataclass
@@ -134,6 +123,10 @@ class MissionOutcome:
     @property
     def ok(self) -> bool:
         return self.phase == Phase.DONE.value
+
+
+def _no_stamp() -> int:
+    return 0
 
 
 def _vehicle_obs(state: Any) -> VehicleObs | None:
@@ -159,36 +152,60 @@ def _carrier_obs(received: Any, alive: bool | None) -> CarrierObs | None:
                       velocity_ned_m_s=np.asarray(st.velocity_ned_m_s, dtype=float), age_s=received.age_s, alive=alive)
 
 
+@dataclass(frozen=True)
+class TickReport:
+    """What one tick did, for an ``on_tick`` observer (benches, tools): the tick's time on the
+    mission clock [s], the phase after it, its decision, the carrier sample it used (or None),
+    and CLOCK_MONOTONIC stamps [ns] of the tick's start, the end of its observation, the
+    setpoint send call and its return (both 0 when nothing was sent)."""
+
+    t_s: float
+    phase: Phase
+    decision: Decision
+    carrier: Any
+    start_ns: int
+    observed_ns: int
+    send_ns: int
+    sent_ns: int
+
+
 class MissionController:
     """One mission: ``run()`` ticks at ``mission.rate_hz`` until DONE or ABORT.
 
-    link: a :class:`mission.link.VehicleLink` (opened, vehicle identified or not yet);
-    feed: a :class:`mission.carrier_bridge.CarrierFeed`; publisher: a
-    :class:`mission.carrier_bridge.PassengerPublisher` (or None); recorder: a
-    :class:`mission.log.FlightRecorder` (or None); ``on_event(phase, text)`` is called on every
-    phase change and event (the CLI prints them).
+    link: the :class:`~mission.ports.Vehicle` (a :class:`mission.link.VehicleLink`, opened,
+    vehicle identified or not yet); feed: the :class:`~mission.ports.CarrierSource` (a
+    :class:`mission.carrier_bridge.CarrierFeed`); publisher: a :class:`~mission.ports.StatusSink`
+    (or None); recorder: a :class:`mission.log.FlightRecorder` (or None). ``on_event(phase,
+    text)`` is called on every phase change and event (the CLI prints them), ``on_tick(report)``
+    after every tick (:class:`TickReport`; keep it short: it runs in the loop).
+    ``command_thread=False`` runs vehicle commands inside the tick (unit tests only).
     """
 
-    def __init__(self, cfg: Config, link: Any, feed: Any, clock: Clock, *, publisher: Any = None,
-                 recorder: FlightRecorder | None = None, on_event: Callable[[str, str], None] | None = None,
-                 stop: threading.Event | None = None) -> None:
+    def __init__(self, cfg: Config, link: Vehicle, feed: CarrierSource, clock: Clock, *,
+                 publisher: StatusSink | None = None, recorder: FlightRecorder | None = None,
+                 on_event: Callable[[str, str], None] | None = None, on_tick: Callable[[TickReport], None] | None = None,
+                 stop: threading.Event | None = None, command_thread: bool = True) -> None:
         self.cfg, self.link, self.feed, self.clock = cfg, link, feed, clock
         self.publisher, self.recorder = publisher, recorder
         self.model = mission_model(cfg)
         self.on_event = on_event or (lambda phase, text: None)
+        self.on_tick = on_tick
         self.stop = stop or threading.Event()
+        self.command_thread = command_thread
         self.state = MissionState()
         self.ticks = 0
         self.overruns = 0
         self._seq = 0
         self._origin_given = False
+        self._received: Any = None
 
     def _observe(self, t: float, worker: CommandWorker) -> Observation:
         vstate = self.link.state
         if vstate.origin is not None and not self._origin_given:
             self.feed.set_origin(GeoOrigin(*vstate.origin))  # wgs84 carrier states become usable
             self._origin_given = True
-        return Observation(t_s=t, vehicle=_vehicle_obs(vstate), carrier=_carrier_obs(self.feed.latest(), self.feed.alive),
+        self._received = self.feed.latest()
+        return Observation(t_s=t, vehicle=_vehicle_obs(vstate), carrier=_carrier_obs(self._received, self.feed.alive),
                            failed=dict(worker.failed), interrupted=self.stop.is_set())
 
     def _publish(self, t: float, obs: Observation) -> None:
@@ -215,18 +232,24 @@ class MissionController:
 
     def run(self) -> MissionOutcome:
         """Fly the mission; returns its outcome (never raises for a vehicle-side failure)."""
-        worker = CommandWorker(self.link, self.clock, retries=self.cfg.mission.command_retries)
+        worker = CommandWorker(self.link, self.clock, retries=self.cfg.mission.command_retries,
+                               threaded=self.command_thread)
         periodic = Periodic(self.clock, self.model.dt_s)
         last_phase = None
+        stamp = time.monotonic_ns if self.on_tick is not None else _no_stamp
         try:
             while True:
                 t = periodic.wait()
+                start_ns = stamp()
                 obs = self._observe(t, worker)
+                observed_ns = send_ns = sent_ns = stamp()
                 self.state, dec = phases.step(self.state, obs, self.model)
                 if dec.setpoint is not None:
                     sp = np.asarray(dec.setpoint, dtype=float)
                     if np.all(np.isfinite(sp)):
+                        send_ns = stamp()
                         self.link.send_velocity_ned(sp)
+                        sent_ns = stamp()
                     else:  # never reached: the filter's output is finite; refuse rather than send
                         log.error("non-finite setpoint %s withheld", sp)
                 if dec.request is not None:
@@ -240,6 +263,10 @@ class MissionController:
                 self._publish(t, obs)
                 self._record(t, obs, dec)
                 self.ticks += 1
+                if self.on_tick is not None:
+                    self.on_tick(TickReport(t, self.state.phase, dec, self._received, start_ns, observed_ns,
+                                            send_ns if dec.setpoint is not None else 0,
+                                            sent_ns if dec.setpoint is not None else 0))
                 if phases.finished(self.state, dec):
                     break
                 if self.state.phase == Phase.ABORT and t - self.state.since_s > ABORT_GRACE_S:

@@ -37,6 +37,7 @@ from enum import Enum
 import numpy as np
 
 from mission.law import check_assumptions, norm
+from mission.ports import Request
 from mission.errors import AssumptionError
 from mission.safety import SafetyConfig, filter_velocity
 from mission.tick import DEPARTURE_THRESHOLD_M, TickModel, latch_point, passenger_tick, separation_due
@@ -158,11 +159,11 @@ class MissionState:
 @dataclass(frozen=True)
 class Decision:
     """What the controller does this tick. setpoint [m/s] NED or None (send nothing);
-    request: a vehicle command to have in flight ("arm", "offboard", "hold", "land") or None.
+    request: the vehicle command to have in flight (:class:`~mission.ports.Request`) or None.
     Diagnostics for the flight log: dock, P, relative (law's u_p - u_c), desired, safety_acted."""
 
     setpoint: np.ndarray | None
-    request: str | None = None
+    request: Request | None = None
     dock: np.ndarray | None = None
     P: float = float("nan")
     relative: np.ndarray | None = None
@@ -200,8 +201,8 @@ def _hold_decision(state: MissionState, obs: Observation) -> Decision:
     switch that is slow to take effect never leaves OFFBOARD without setpoints)."""
     v = obs.vehicle
     if v is not None and v.mode == "OFFBOARD":
-        return Decision(setpoint=ZERO.copy(), request="hold")
-    return Decision(setpoint=None, request="hold" if v is not None and v.mode != "AUTO.LOITER" and v.armed else None)
+        return Decision(setpoint=ZERO.copy(), request=Request.HOLD)
+    return Decision(setpoint=None, request=Request.HOLD if v is not None and v.mode != "AUTO.LOITER" and v.armed else None)
 
 
 def step(state: MissionState, obs: Observation, m: MissionModel) -> tuple[MissionState, Decision]:
@@ -305,29 +306,29 @@ def _streaming(state, obs, m):
     t = obs.t_s
     if t - state.since_s >= m.prestream_s:
         nxt = Phase.OFFBOARD if obs.vehicle.armed else Phase.ARMING
-        return _to(state, nxt, t), Decision(setpoint=ZERO.copy(), request="offboard" if nxt == Phase.OFFBOARD else "arm")
+        return _to(state, nxt, t), Decision(setpoint=ZERO.copy(), request=Request.OFFBOARD if nxt == Phase.OFFBOARD else Request.ARM)
     return state, Decision(setpoint=ZERO.copy())
 
 
 def _arming(state, obs, m):
     t = obs.t_s
-    if "arm" in obs.failed:
-        new = _abort(state, t, AbortReason.ARMING_REFUSED, obs.failed["arm"])
+    if Request.ARM in obs.failed:
+        new = _abort(state, t, AbortReason.ARMING_REFUSED, obs.failed[Request.ARM])
         return new, Decision(setpoint=None, events=(f"abort: arming refused: {obs.failed['arm']}",))
     if obs.vehicle.armed:
-        return _to(state, Phase.OFFBOARD, t), Decision(setpoint=ZERO.copy(), request="offboard")
-    return state, Decision(setpoint=ZERO.copy(), request="arm")
+        return _to(state, Phase.OFFBOARD, t), Decision(setpoint=ZERO.copy(), request=Request.OFFBOARD)
+    return state, Decision(setpoint=ZERO.copy(), request=Request.ARM)
 
 
 def _offboard(state, obs, m):
     t, v = obs.t_s, obs.vehicle
-    if "offboard" in obs.failed:
-        new = _abort(state, t, AbortReason.OFFBOARD_REFUSED, obs.failed["offboard"])
+    if Request.OFFBOARD in obs.failed:
+        new = _abort(state, t, AbortReason.OFFBOARD_REFUSED, obs.failed[Request.OFFBOARD])
         return new, _decided(new, obs, f"abort: OFFBOARD refused: {obs.failed['offboard']}")
     if v.mode == "OFFBOARD":
         new = _to(state, Phase.JOIN, t, x_ref=v.position_ned_m.copy(), u_cmd=ZERO.copy())
         return new, Decision(setpoint=ZERO.copy())
-    return state, Decision(setpoint=ZERO.copy(), request="offboard")
+    return state, Decision(setpoint=ZERO.copy(), request=Request.OFFBOARD)
 
 
 def _track(state: MissionState, obs: Observation, m: MissionModel, x_ref: np.ndarray, u_ref: np.ndarray) -> tuple[np.ndarray, bool]:
@@ -400,18 +401,18 @@ def _navigate(state, obs, m, events=()):
     dec = Decision(setpoint=u, dock=_dock(obs, m) if obs.carrier is not None else None, P=float(tick.P),
                    relative=tick.relative, desired=tick.desired, safety_acted=acted or bool(tick.safety.changed), events=tuple(evs))
     if phase == Phase.ARRIVED:
-        dec = replace(dec, request=m.final_action)
+        dec = replace(dec, request=Request(m.final_action))
     return new, dec
 
 
 def _arrived(state, obs, m):
     t, v = obs.t_s, obs.vehicle
-    want = "AUTO.LOITER" if m.final_action == "hold" else "AUTO.LAND"
+    want = "AUTO.LOITER" if m.final_action == Request.HOLD else "AUTO.LAND"
     if v.mode == want:
-        nxt = Phase.HOLD if m.final_action == "hold" else Phase.LAND
+        nxt = Phase.HOLD if m.final_action == Request.HOLD else Phase.LAND
         return _to(state, nxt, t), Decision(setpoint=None, events=(f"vehicle in {want}",))
     new, dec = _navigate(state, obs, m)
-    return replace(new, phase=Phase.ARRIVED, since_s=state.since_s), replace(dec, request=m.final_action)
+    return replace(new, phase=Phase.ARRIVED, since_s=state.since_s), replace(dec, request=Request(m.final_action))
 
 
 def _final(state, obs, m):

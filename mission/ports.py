@@ -1,0 +1,81 @@
+"""What the mission loop needs from the world, as narrow interfaces (ports).
+
+:class:`mission.controller.MissionController` talks to three things and knows each only by the
+Protocol below, so a MAVLink link to PX4, the mock vehicle or a test's in-process fake are
+interchangeable (as are a Zenoh feed and a scripted one):
+
+* a :class:`Vehicle`: its newest telemetry snapshot, a velocity setpoint, and four commands
+  (arm, set mode, hold, land), each blocking until the vehicle confirmed it or raising
+  :class:`mission.errors.CommandRejected` / :class:`mission.errors.LinkError`;
+* a :class:`CarrierSource`: the newest carrier state with its receive time and age, the
+  carrier's liveliness, and the EKF origin for geodetic carrier states;
+* a :class:`StatusSink`: where the passenger's phase and state go (the carrier listens).
+
+Implementations: :class:`mission.link.VehicleLink`, :class:`mission.carrier_bridge.CarrierFeed`,
+:class:`mission.carrier_bridge.PassengerPublisher`; ``tests/unit/fake_vehicle.py`` fakes all
+three without sockets.
+"""
+from __future__ import annotations
+
+from enum import StrEnum
+from typing import TYPE_CHECKING, Protocol
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from mission.carrier_bridge import ReceivedCarrierState
+    from mission.link import VehicleState
+    from mission.wire import GeoOrigin, PassengerStatus
+
+
+class Request(StrEnum):
+    """A vehicle command the mission phases ask to have in flight (equal to its lower-case name)."""
+
+    ARM = "arm"
+    OFFBOARD = "offboard"
+    HOLD = "hold"
+    LAND = "land"
+
+
+class Vehicle(Protocol):
+    """The passenger UAV as the mission loop sees it."""
+
+    @property
+    def state(self) -> VehicleState:
+        """Newest telemetry snapshot (never blocks)."""
+        ...
+
+    def send_velocity_ned(self, v_ned_m_s: np.ndarray, yaw_rad: float | None = None) -> None:
+        """One velocity setpoint [m/s] NED (yaw [rad] or keep the current heading)."""
+        ...
+
+    def arm(self) -> None: ...
+
+    def set_mode(self, mode: str) -> None:
+        """Switch to PX4 mode ``mode`` (a name of :data:`mission.px4.MODES`)."""
+        ...
+
+    def hold(self) -> None: ...
+
+    def land(self) -> None: ...
+
+
+class CarrierSource(Protocol):
+    """The carrier's state as received (newest only, with its age on the mission clock)."""
+
+    def latest(self) -> ReceivedCarrierState | None: ...
+
+    @property
+    def alive(self) -> bool | None:
+        """Carrier liveliness (True, False, or None when not known yet)."""
+        ...
+
+    def set_origin(self, origin: GeoOrigin | None) -> None:
+        """The vehicle's EKF origin, so geodetic carrier states map to local NED."""
+        ...
+
+
+class StatusSink(Protocol):
+    """Where the passenger's status goes each tick."""
+
+    def publish(self, status: PassengerStatus) -> None: ...

@@ -1,0 +1,130 @@
+"""An in-process fake world for the mission loop: vehicle, carrier feed and status sink, no sockets.
+
+In the spirit of the PX4 ROS 2 Interface Library's fake autopilot: the controller talks to it
+through the same narrow ports (:mod:`mission.ports`) as to the MAVLink link and the Zenoh feed,
+on a :class:`~mission.clock.ManualClock`, so a whole mission runs in a fraction of a second and
+every test is deterministic. Physics are the simplest that fly: the vehicle's velocity is the last
+setpoint while in OFFBOARD (zero otherwise), the carrier drives at ``carrier_speed_m_s`` towards
+the target while the passenger's published phase is RIDING and stands otherwise (as the carrier
+simulator does). Commands act at once, or are refused by a scripted policy.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from mission import px4
+from mission.carrier_bridge import ReceivedCarrierState
+from mission.clock import ManualClock
+from mission.errors import CommandRejected
+from mission.link import VehicleState
+from mission.wire import CarrierState, GeoOrigin, PassengerStatus
+
+
+@dataclass
+class FakeWorld:
+    """Implements :class:`~mission.ports.Vehicle`, :class:`~mission.ports.CarrierSource` and
+    :class:`~mission.ports.StatusSink` at once; lists what the controller did."""
+
+    clock: ManualClock
+    target_ned_m: np.ndarray
+    carrier_speed_m_s: float = 2.0
+    vehicle_ned_m: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    carrier_ned_m: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    armed: bool = False
+    mode: str = "AUTO.LOITER"
+    refuse: dict[str, str] = field(default_factory=dict)  # command name -> the vehicle's reason
+    heartbeat_until_s: float = math.inf  # the vehicle falls silent after this [s]
+    carrier_until_s: float = math.inf  # the carrier falls silent after this [s]
+    setpoints: list[tuple[float, np.ndarray]] = field(default_factory=list)
+    commands: list[tuple[float, str]] = field(default_factory=list)
+    statuses: list[PassengerStatus] = field(default_factory=list)
+    origin_given: GeoOrigin | None = None
+
+    def __post_init__(self) -> None:
+        self._v_p = np.zeros(3)
+        self._v_c = np.zeros(3)
+        self._t = self.clock.now()
+        self._carrier_rx_s = self._t
+        self._seq = 0
+
+    # ------------------------------------------------------------------ the world
+    def _advance(self) -> float:
+        now = self.clock.now()
+        dt = now - self._t
+        if dt > 0:
+            self.vehicle_ned_m = self.vehicle_ned_m + self._v_p * dt
+            self.carrier_ned_m = self.carrier_ned_m + self._v_c * dt
+            self._t = now
+        return now
+
+    # ------------------------------------------------------------------ Vehicle
+    @property
+    def state(self) -> VehicleState:
+        now = self._advance()
+        beat = min(now, self.heartbeat_until_s)
+        return VehicleState(
+            t_s=now, system_id=1, component_id=1, position_ned_m=self.vehicle_ned_m.copy(),
+            velocity_ned_m_s=self._v_p.copy(), position_rx_s=beat, heartbeat_rx_s=beat, armed=self.armed,
+            mode=self.mode, custom_mode=px4.custom_mode_of(self.mode), base_mode=px4.base_mode_of(self.mode, self.armed),
+            system_status=px4.MAV_STATE_ACTIVE if self.armed else px4.MAV_STATE_STANDBY, landed_state=None,
+            position_valid=True, origin=None, last_statustext="")
+
+    def send_velocity_ned(self, v_ned_m_s: np.ndarray, yaw_rad: float | None = None) -> None:
+        now = self._advance()
+        self.setpoints.append((now, np.array(v_ned_m_s, dtype=float)))
+        self._v_p = np.array(v_ned_m_s, dtype=float) if self.mode == "OFFBOARD" else np.zeros(3)
+
+    def _command(self, name: str) -> None:
+        self._advance()
+        self.commands.append((self.clock.now(), name))
+        if name in self.refuse:
+            command = px4.MAV_CMD_COMPONENT_ARM_DISARM if name == "arm" else px4.MAV_CMD_DO_SET_MODE
+            raise CommandRejected(command, px4.MAV_RESULT_DENIED, self.refuse[name])
+
+    def arm(self) -> None:
+        self._command("arm")
+        self.armed = True
+
+    def set_mode(self, mode: str) -> None:
+        self._command(mode)
+        self.mode = mode
+        if mode != "OFFBOARD":
+            self._v_p = np.zeros(3)
+
+    def hold(self) -> None:
+        self.set_mode("AUTO.LOITER")
+
+    def land(self) -> None:
+        self.set_mode("AUTO.LAND")
+
+    # ------------------------------------------------------------------ CarrierSource
+    def latest(self) -> ReceivedCarrierState | None:
+        now = self._advance()
+        if now <= self.carrier_until_s:
+            self._seq += 1
+            self._carrier_rx_s = now
+        state = CarrierState(stamp_s=self._carrier_rx_s, seq=self._seq, frame="local_ned",
+                             position=self.carrier_ned_m.copy(), velocity_ned_m_s=self._v_c.copy())
+        return ReceivedCarrierState(value=state, key="fake/carrier", rx_time_s=self._carrier_rx_s,
+                                    age_s=now - self._carrier_rx_s, stale=False)
+
+    @property
+    def alive(self) -> bool | None:
+        return self.clock.now() <= self.carrier_until_s
+
+    def set_origin(self, origin: GeoOrigin | None) -> None:
+        self.origin_given = origin
+
+    # ------------------------------------------------------------------ StatusSink
+    def publish(self, status: PassengerStatus) -> None:
+        self._advance()
+        self.statuses.append(status)
+        if status.phase == "RIDING" and self.clock.now() <= self.carrier_until_s:
+            e = np.asarray(self.target_ned_m, dtype=float) - self.carrier_ned_m
+            e[2] = 0.0
+            self._v_c = e / float(np.linalg.norm(e)) * self.carrier_speed_m_s
+        else:
+            self._v_c = np.zeros(3)
