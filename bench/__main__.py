@@ -111,7 +111,7 @@ class Bench:
                      f"{t['p50_us']:.1f} / {t['p99_us']:.1f} ({t['cpu_p50_us']:.1f} / {t['cpu_p99_us']:.1f})", target, ok)
 
     def e2e(self) -> None:
-        from bench.e2e import mavlink_ping, zenoh_ping
+        from bench.floor import mavlink_ping, zenoh_ping
 
         n = 100 if self.quick else 300
         zen = zenoh_ping(n, 1.0 / CARRIER_RATE_HZ)
@@ -145,7 +145,7 @@ class Bench:
                      f"{_ms(legs['zenoh'])} | {_ms(legs['wait'])} | {_ms(legs['tick_to_arrival'])}")
             self.row("e2e", f"{at} p50 [ms]: observe | step | send -> arrival",
                      f"{_ms(legs['observe'])} | {_ms(legs['step'])} | {_ms(legs['send_to_arrival'])}")
-        from bench.e2e import step_warm_cold
+        from bench.law_bench import step_warm_cold
 
         sw = step_warm_cold(samples=50 if self.quick else 150)
         out["step_warm_cold"] = sw

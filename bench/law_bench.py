@@ -11,19 +11,20 @@ beside a compiled baseline of the same integrator (numba, if installed) measured
 """
 from __future__ import annotations
 
-import argparse
 import json
 import platform
 import time
 from pathlib import Path
 
+import click
 import numpy as np
 
 from mission.config import load_config
 from mission.law import LawParams
 from mission.safety import Obstacles, SafetyConfig
 from mission.tick import TickModel, passenger_tick
-from sim.closed_loop import model_from_config, random_scenarios, simulate
+from mission.model import model_from_config
+from sim.closed_loop import random_scenarios, simulate
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -112,14 +113,46 @@ def numba_baseline(scenarios: int, steps: int) -> dict | None:
     return {"scenarios": scenarios, "steps": steps, "wall_s": wall, "scenario_steps_per_s": scenarios * steps / wall}
 
 
-def main(argv: list[str] | None = None) -> dict:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--json", default=str(ROOT / "out" / "bench_law.json"))
-    ap.add_argument("--quick", action="store_true", help="fewer samples and steps")
-    args = ap.parse_args(argv)
-    samples = 3000 if args.quick else 20000
+def step_warm_cold(gap_s: float = 0.02, samples: int = 150) -> dict:
+    """One RIDING tick of :func:`mission.phases.step` (law + both filters) on the demo's model,
+    back to back ("warm") and after sleeping ``gap_s`` before each call ("cold", as a 50 Hz loop
+    is): p50/p99 [us]. The difference is what a mostly idle periodic loop pays on this machine
+    (caches, branch predictors and the core's idle state), not what the code does."""
+    from mission import phases
+    from mission.config import load_config
+    from mission.model import mission_model
+    from mission.phases import CarrierObs, MissionState, Observation, Phase, VehicleObs
+
+    model = mission_model(load_config(ROOT / "configs" / "demo.toml"))
+    dock = np.array([0.0, 0.0, -1.5])
+    state = MissionState(phase=Phase.RIDING, x_ref=dock, e_ref=np.zeros(3), prev_dock=dock, u_ref=np.zeros(3),
+                         u_cmd=np.zeros(3), start_s=0.0)
+    obs = Observation(t_s=1.0, vehicle=VehicleObs(dock, np.zeros(3), True, "OFFBOARD", 0.1),
+                      carrier=CarrierObs(np.zeros(3), np.zeros(3), 0.01))
+    out = {}
+    for name, gap, n in (("warm", 0.0, samples * 10), ("cold", gap_s, samples)):
+        times = []
+        for _ in range(n):
+            if gap:
+                time.sleep(gap)
+            t0 = time.perf_counter_ns()
+            phases.step(state, obs, model)
+            times.append(time.perf_counter_ns() - t0)
+        out[f"{name}_p50_us"] = float(np.percentile(times, 50) / 1e3)
+        out[f"{name}_p99_us"] = float(np.percentile(times, 99) / 1e3)
+    out["gap_s"] = gap_s
+    return out
+
+
+@click.command()
+@click.option("--json", "json_path", type=click.Path(dir_okay=False), default=str(ROOT / "out" / "bench_law.json"),
+              show_default=True, help="Where to write the figures (JSON).")
+@click.option("--quick", is_flag=True, help="Fewer samples and steps.")
+def main(json_path: str, quick: bool) -> dict:
+    """Law + safety tick latency and batch throughput (see the module docstring)."""
+    samples = 3000 if quick else 20000
     ticks = [tick_latency(n, samples) for n in (0, 1, 8)]
-    sizes = [(1, 2000), (100, 2000), (10000, 300)] if not args.quick else [(1, 500), (100, 500), (10000, 50)]
+    sizes = [(1, 2000), (100, 2000), (10000, 300)] if not quick else [(1, 500), (100, 500), (10000, 50)]
     batches = []
     for scenarios, steps in sizes:
         row = batch_throughput(scenarios, steps)
@@ -137,8 +170,8 @@ def main(argv: list[str] | None = None) -> dict:
         ratio = f"{r['scenario_steps_per_s'] / nb:>8.2f}" if nb else f"{'-':>8}"
         print(f"{r['scenarios']:<12}{r['steps']:>8}{r['scenario_steps_per_s']:>18.3g}{(nb or float('nan')):>18.3g}{ratio}")
     result = {"tick": ticks, "batch": batches}
-    Path(args.json).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.json).write_text(json.dumps(result, indent=2))
+    Path(json_path).parent.mkdir(parents=True, exist_ok=True)
+    Path(json_path).write_text(json.dumps(result, indent=2))
     return result
 
 

@@ -23,7 +23,7 @@ from mission.errors import CommandRejected, LinkError, LinkTimeout
 from mission.link import LinkCounters, VehicleLink, VehicleState
 from mission.mavlink_env import mavlink, mavutil
 from sim.net import wait_for as eventually
-from tests.integration.px4_peer import Px4Peer
+from sim.fake_px4 import FakePx4 as Px4Peer
 
 ANY_PORT = "udpin:127.0.0.1:0"
 

@@ -1,10 +1,12 @@
-"""A PX4-like MAVLink peer for link tests: a real pymavlink endpoint on a real socket.
+"""A scriptable fake PX4: a real pymavlink endpoint on a real socket, for tests and benches.
 
 It streams HEARTBEAT and LOCAL_POSITION_NED like PX4's onboard link (faster, to keep tests
 short), records every message it receives, and answers COMMAND_LONG through a replaceable
-policy (``peer.on_command``), so a test can make the vehicle accept, reject with a STATUSTEXT
-reason, stay silent, or double-ACK a mode change as PX4 of 2025 does. It is not a model of
-PX4: that is ``sim/vehicle.py``'s job.
+policy (``fake.on_command``), so a test can make the vehicle accept, reject with a STATUSTEXT
+reason, stay silent, or double-ACK a mode change as PX4 of 2025 does. With ``rx_stamps`` it
+also records the kernel's receive stamp of every datagram (the bench's end-to-end latency).
+
+It is not a model of PX4 (no dynamics, no failsafes): that is :mod:`sim.vehicle`'s job.
 """
 from __future__ import annotations
 
@@ -14,13 +16,19 @@ from typing import Any, Callable
 
 from mission import px4
 from mission.mavlink_env import mavlink, mavutil
+from sim.net import enable_rx_stamps, recv_stamped
+
+CommandPolicy = Callable[["FakePx4", Any], None]
 
 
-class Px4Peer:
+class FakePx4:
     """PX4-like endpoint (sysid/compid, HEARTBEAT, LOCAL_POSITION_NED, COMMAND_LONG answers).
 
     ``url`` defaults to ``udpout:127.0.0.1:<link_port>`` (the vehicle talks first, as PX4 SITL
-    does towards 14540). Rates are wall-clock Hz.
+    does towards 14540). Rates are wall-clock Hz; 0 stops that stream. It starts disarmed in
+    Hold; set ``armed`` / ``custom_mode`` to script another state. ``rx_stamps`` (UDP only):
+    keep ``(kernel receive stamp [ns, CLOCK_REALTIME], message)`` of every message in
+    :attr:`stamped`.
     """
 
     def __init__(
@@ -30,34 +38,40 @@ class Px4Peer:
         url: str | None = None,
         sysid: int = 1,
         compid: int = 1,
-        autopilot: int = px4.MAV_AUTOPILOT_PX4,
-        mav_type: int = px4.MAV_TYPE_QUADROTOR,
+        autopilot: int = mavlink.MAV_AUTOPILOT_PX4,
+        mav_type: int = mavlink.MAV_TYPE_QUADROTOR,
         heartbeat_hz: float = 20.0,
         position_hz: float = 50.0,
         position_ned_m: tuple[float, float, float] = (1.0, 2.0, -3.0),
         velocity_ned_m_s: tuple[float, float, float] = (0.1, 0.2, 0.3),
         signing_key: bytes | None = None,
+        rx_stamps: bool = False,
     ) -> None:
         self.conn: Any = mavutil.mavlink_connection(
             url or f"udpout:127.0.0.1:{link_port}", source_system=sysid, source_component=compid
         )
         if signing_key is not None:
             self.conn.setup_signing(signing_key, sign_outgoing=True, allow_unsigned_callback=lambda _m, _i: True)
+        self.rx_stamps = rx_stamps
+        if rx_stamps:
+            enable_rx_stamps(self.conn.port)
         self.autopilot, self.mav_type = autopilot, mav_type
         self.heartbeat_hz, self.position_hz = heartbeat_hz, position_hz
         self.position_ned_m, self.velocity_ned_m_s = position_ned_m, velocity_ned_m_s
         self.custom_mode = px4.custom_mode_of("AUTO.LOITER")
         self.armed = False
-        self.on_command: Callable[[Px4Peer, Any], None] = Px4Peer.obey
+        self.on_command: CommandPolicy = FakePx4.obey
+        self.stamped: list[tuple[int, Any]] = []
         self._received: list[Any] = []
+        self._text_id = 0
         self._lock = threading.Lock()
         self._send_lock = threading.Lock()
         self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="test-px4-peer", daemon=True)
+        self._thread = threading.Thread(target=self._run, name="fake-px4", daemon=True)
 
     # ---------------------------------------------------------------- lifetime
 
-    def __enter__(self) -> Px4Peer:
+    def __enter__(self) -> FakePx4:
         self._thread.start()
         return self
 
@@ -79,13 +93,13 @@ class Px4Peer:
             self.conn.mav.send(msg)
 
     def send_raw(self, data: bytes) -> None:
-        """Send raw bytes from the peer's own socket (garbage tests)."""
+        """Send raw bytes from the fake's own socket (garbage tests)."""
         with self._send_lock:
             self.conn.write(data)
 
     def heartbeat(self) -> None:
-        base = px4.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (px4.MAV_MODE_FLAG_SAFETY_ARMED if self.armed else 0)
-        status = px4.MAV_STATE_ACTIVE if self.armed else px4.MAV_STATE_STANDBY
+        base = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (mavlink.MAV_MODE_FLAG_SAFETY_ARMED if self.armed else 0)
+        status = mavlink.MAV_STATE_ACTIVE if self.armed else mavlink.MAV_STATE_STANDBY
         self.send(mavlink.MAVLink_heartbeat_message(self.mav_type, self.autopilot, base, self.custom_mode, status, 3))
 
     def local_position(self) -> None:
@@ -98,7 +112,7 @@ class Px4Peer:
 
     def long_statustext(self, text: str, severity: int = 2) -> None:
         """Send ``text`` in 50-character chunks with a fresh non-zero id, as PX4 does."""
-        self._text_id = getattr(self, "_text_id", 0) % 65535 + 1
+        self._text_id = self._text_id % 65535 + 1
         chunks = [text[i:i + 50] for i in range(0, len(text), 50)] or [""]
         if len(chunks[-1]) == 50:
             chunks.append("")  # a full last chunk is followed by an empty one that ends the text
@@ -113,16 +127,22 @@ class Px4Peer:
     # ---------------------------------------------------------------- command policies
 
     @staticmethod
-    def obey(peer: Px4Peer, msg: Any) -> None:
+    def obey(fake: FakePx4, msg: Any) -> None:
         """Default policy: apply arm/disarm and mode changes, ACK everything ACCEPTED."""
-        if msg.command == px4.MAV_CMD_COMPONENT_ARM_DISARM:
-            peer.armed = round(msg.param1) == 1
-        elif msg.command == px4.MAV_CMD_DO_SET_MODE:
-            peer.custom_mode = px4.encode_custom_mode(int(msg.param2), int(msg.param3))
-        peer.ack(msg, px4.MAV_RESULT_ACCEPTED)
+        if msg.command == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
+            fake.armed = round(msg.param1) == 1
+        elif msg.command == mavlink.MAV_CMD_DO_SET_MODE:
+            fake.custom_mode = px4.encode_custom_mode(int(msg.param2), int(msg.param3))
+        fake.ack(msg, mavlink.MAV_RESULT_ACCEPTED)
 
     @staticmethod
-    def silent(peer: Px4Peer, msg: Any) -> None:
+    def obey_and_beat(fake: FakePx4, msg: Any) -> None:
+        """Policy: :meth:`obey`, then a HEARTBEAT at once (the new mode shows without waiting)."""
+        FakePx4.obey(fake, msg)
+        fake.heartbeat()
+
+    @staticmethod
+    def silent(fake: FakePx4, msg: Any) -> None:
         """Policy: never answer."""
 
     # ---------------------------------------------------------------- loop
@@ -137,17 +157,40 @@ class Px4Peer:
             if self.position_hz and now >= next_pos:
                 self.local_position()
                 next_pos = now + 1.0 / self.position_hz
-            if self.conn.select(0.002):
+            due = min(t for t, on in ((next_hb, self.heartbeat_hz), (next_pos, self.position_hz), (now + 0.05, True))
+                      if on)
+            if self.conn.select(min(max(due - time.monotonic(), 0.0), 0.05)):
                 self._drain()
 
     def _drain(self) -> None:
+        if self.rx_stamps:
+            self._drain_stamped()
+            return
         while True:
             msg = self.conn.recv_msg()
             if msg is None:
                 return
-            if msg.get_type() == "BAD_DATA":
-                continue
+            self._handle(msg)
+
+    def _drain_stamped(self) -> None:
+        """One datagram with its kernel stamp (``recv_msg`` would lose the stamp)."""
+        try:
+            data, stamp_ns, _ = recv_stamped(self.conn.port)
+        except OSError:
+            return
+        try:
+            messages = self.conn.mav.parse_buffer(data) or []
+        except Exception:  # malformed: pymavlink raises on some; the fake only records
+            return
+        for msg in messages:
             with self._lock:
-                self._received.append(msg)
-            if msg.get_type() == "COMMAND_LONG":
-                self.on_command(self, msg)
+                self.stamped.append((stamp_ns, msg))
+            self._handle(msg)
+
+    def _handle(self, msg: Any) -> None:
+        if msg.get_type() == "BAD_DATA":
+            return
+        with self._lock:
+            self._received.append(msg)
+        if msg.get_type() == "COMMAND_LONG":
+            self.on_command(self, msg)

@@ -1,0 +1,173 @@
+"""The controller process of the end-to-end bench (``python -m bench.e2e_child``; internal).
+
+It runs the real :class:`~mission.controller.MissionController` with ``marsupial run``'s wiring
+(:func:`mission.run_cli.mission_io`: VehicleLink, CarrierFeed, PassengerPublisher,
+FlightRecorder) on the demo configuration at the asked rate, and records every tick that sent a
+setpoint through the controller's ``on_tick`` observer: when the tick started, when its
+observation ended, which carrier sample it used (``seq`` and when the feed's Zenoh callback
+received it), and when ``send_velocity_ned`` was called and returned. Its clock is
+CLOCK_MONOTONIC at speed 1; stamps are converted to CLOCK_REALTIME with an offset sampled at
+start (the two do not drift apart measurably in a run of seconds). It prints ``PORT <n>`` (the
+link's UDP port) first, then writes its record as JSON to ``--out``.
+"""
+from __future__ import annotations
+
+import json
+import resource
+import threading
+import time
+from contextlib import ExitStack
+from pathlib import Path
+from typing import Any
+
+import click
+
+ROOT = Path(__file__).resolve().parents[1]
+DEMO_CONFIG = ROOT / "configs" / "demo.toml"
+PAIR = "bench"
+WARMUP_S = 0.3  # of RIDING, not measured [s]
+
+
+class RealtimeMonotonicClock:
+    """The Clock protocol at speed 1 on CLOCK_MONOTONIC, convertible to CLOCK_REALTIME [ns]."""
+
+    speed = 1.0
+
+    def __init__(self) -> None:
+        best = None
+        for _ in range(50):  # the realtime - monotonic offset, from the tightest bracket
+            m0 = time.monotonic_ns()
+            r = time.time_ns()
+            m1 = time.monotonic_ns()
+            if best is None or m1 - m0 < best[0]:
+                best = (m1 - m0, r - (m0 + m1) // 2)
+        assert best is not None
+        self._offset_ns = best[1]
+        self._t0_ns = time.monotonic_ns()
+
+    def now(self) -> float:
+        return (time.monotonic_ns() - self._t0_ns) * 1e-9
+
+    def sleep(self, duration_s: float) -> None:
+        if duration_s > 0:
+            time.sleep(duration_s)
+
+    def real_ns(self, t_s: float) -> int:
+        """CLOCK_REALTIME [ns] of clock time ``t_s`` [s]."""
+        return self._t0_ns + int(round(t_s * 1e9)) + self._offset_ns
+
+    def real_of_monotonic_ns(self, monotonic_ns: int) -> int:
+        return monotonic_ns + self._offset_ns
+
+    def real_now_ns(self) -> int:
+        return time.monotonic_ns() + self._offset_ns
+
+    def clock_s(self, monotonic_ns: int) -> float:
+        """Clock time [s] of a CLOCK_MONOTONIC stamp [ns]."""
+        return (monotonic_ns - self._t0_ns) * 1e-9
+
+
+class SendLog:
+    """The ``on_tick`` observer: one row per tick that sent a setpoint (a list of tuples: cheap).
+
+    Row: [tick start, seq used, its receipt, send returned, send time on the link clock [ms],
+    riding, observation done, send called]; times [ns] CLOCK_REALTIME.
+    """
+
+    def __init__(self, clock: RealtimeMonotonicClock) -> None:
+        self.clock = clock
+        self.rows: list[tuple[int, int, int, int, int, bool, int, int]] = []
+        self._seq, self._rx_s = -1, 0.0
+
+    def __call__(self, report: Any) -> None:
+        if report.carrier is not None:  # the sample stays "used" until a newer one arrives
+            self._seq, self._rx_s = report.carrier.value.seq, report.carrier.rx_time_s
+        if not report.send_ns:
+            return
+        c = self.clock
+        self.rows.append((c.real_of_monotonic_ns(report.start_ns), self._seq, c.real_ns(self._rx_s),
+                          c.real_of_monotonic_ns(report.sent_ns), int(c.clock_s(report.sent_ns) * 1000),
+                          report.phase.value == "RIDING", c.real_of_monotonic_ns(report.observed_ns),
+                          c.real_of_monotonic_ns(report.send_ns)))
+
+
+def child_main(rate_hz: float, duration_s: float, zenoh_connect: str, log_dir: str, out: str,
+               profile: str = "") -> None:
+    """The controller process: ``marsupial run``'s wiring with the tick observer."""
+    from mission.config import load_config, with_overrides
+    from mission.controller import MissionController, mission_info
+    from mission.log import FlightRecorder
+    from mission.run_cli import mission_io
+
+    cfg = with_overrides(load_config(DEMO_CONFIG), {
+        "mission.rate_hz": rate_hz, "mission.max_duration_s": duration_s + 120.0, "zenoh.pair": PAIR,
+        "zenoh.listen": [], "zenoh.connect": [zenoh_connect], "mavlink.url": "udpin:127.0.0.1:0"})
+    clock = RealtimeMonotonicClock()
+    sends = SendLog(clock)
+    stop = threading.Event()
+    window: dict[str, Any] = {}
+    with ExitStack() as stack:
+        recorder = FlightRecorder(Path(log_dir) / "flight", mission_info(cfg))
+        feed, publisher, link = stack.enter_context(mission_io(cfg, clock, recorder.tlog_path))
+        controller = MissionController(cfg, link, feed, clock, publisher=publisher, recorder=recorder, stop=stop,
+                                       on_tick=sends)
+        print(f"PORT {link.port}", flush=True)
+
+        def measure_window() -> None:
+            deadline = time.monotonic() + 30.0
+            while controller.state.phase.value != "RIDING":
+                if time.monotonic() > deadline or controller.state.phase.value in ("ABORT", "DONE"):
+                    stop.set()
+                    return
+                time.sleep(0.001)
+            time.sleep(WARMUP_S)
+            window["start"] = (clock.real_now_ns(), time.process_time(), controller.ticks)
+            time.sleep(duration_s)
+            window["end"] = (clock.real_now_ns(), time.process_time(), controller.ticks)
+            stop.set()
+
+        watcher = threading.Thread(target=measure_window, daemon=True)
+        watcher.start()
+        if profile:
+            import cProfile
+
+            profiler = cProfile.Profile()
+            outcome = profiler.runcall(controller.run)
+            profiler.dump_stats(profile)
+        else:
+            outcome = controller.run()
+        watcher.join(timeout=5.0)
+        counters = link.counters
+    if "end" not in window:
+        raise SystemExit(f"the controller never rode steadily: {outcome.phase} {outcome.reason} {outcome.detail}")
+    (s_ns, s_cpu, s_ticks), (e_ns, e_cpu, e_ticks) = window["start"], window["end"]
+    wall_s = (e_ns - s_ns) / 1e9
+    result = {
+        "sends": sends.rows,
+        "window_ns": [s_ns, e_ns],
+        "wall_s": wall_s,
+        "cpu_share": (e_cpu - s_cpu) / wall_s,
+        "loop_hz": (e_ticks - s_ticks) / wall_s,
+        "overruns": controller.overruns,
+        "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,  # Linux: KiB
+        "tx_setpoints": counters.tx_setpoints,
+        "outcome": f"{outcome.phase} {outcome.reason}",
+        "feed": feed.counters,
+    }
+    Path(out).write_text(json.dumps(result))
+
+
+@click.command()
+@click.option("--rate", type=float, default=50.0, show_default=True, help="Controller rate [Hz].")
+@click.option("--duration", type=float, default=5.0, show_default=True, help="Measured RIDING time [s].")
+@click.option("--zenoh-connect", required=True, help="Zenoh endpoint of the bench's carrier session.")
+@click.option("--log-dir", required=True, type=click.Path(file_okay=False), help="Flight record directory.")
+@click.option("--out", required=True, type=click.Path(dir_okay=False), help="Where to write the record (JSON).")
+@click.option("--profile", default="", help="Write cProfile statistics of the loop here.")
+def main(rate: float, duration: float, zenoh_connect: str, log_dir: str, out: str, profile: str) -> None:
+    """Run the controller for the end-to-end bench (internal: started by bench.e2e)."""
+    child_main(rate, duration, zenoh_connect, log_dir, out, profile)
+
+
+if __name__ == "__main__":
+    main()
