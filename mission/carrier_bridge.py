@@ -36,6 +36,7 @@ import zenoh
 from mission.clock import Clock
 from mission.config import ZenohSection
 from mission.errors import BusError, ConfigError
+from mission.port_holder import port_in_use
 from mission.wire import (
     CarrierState,
     GeoOrigin,
@@ -115,6 +116,42 @@ def _insert(conf: zenoh.Config, key: str, value: Any, field: str) -> None:
         raise ConfigError(field, value, f"refused by Zenoh: {exc}") from None
 
 
+def describe_endpoints(section: ZenohSection) -> str:
+    """One line for a user: the Zenoh mode and the endpoints this section listens on and connects
+    to (as :func:`zenoh_config` resolves them)."""
+    if section.config_file:
+        base = f"config file {section.config_file}"
+        extra = [f"listen {', '.join(section.listen)}"] if section.listen else []
+        extra += [f"connect {', '.join(section.connect)}"] if section.connect else []
+        return f"Zenoh {base}" + (f" ({'; '.join(extra)})" if extra else "")
+    listen, connect = list(section.listen), list(section.connect)
+    if section.mode == "router" and not listen:
+        listen = ["tcp/127.0.0.1:7447"]
+    elif section.mode == "client" and not connect:
+        connect = ["tcp/127.0.0.1:7447"]
+    elif section.mode == "peer" and not listen and not connect:
+        if section.rendezvous and not section.multicast_scouting:
+            return f"Zenoh peer, loopback rendezvous {section.rendezvous} (zenoh.rendezvous)"
+        if section.multicast_scouting:
+            return "Zenoh peer, multicast scouting (all interfaces)"
+    parts = [f"listen {', '.join(listen)}"] if listen else []
+    parts += [f"connect {', '.join(connect)}"] if connect else []
+    return f"Zenoh {section.mode}, " + ("; ".join(parts) or "ephemeral loopback listener")
+
+
+def _listen_in_use(section: ZenohSection, text: str) -> Exception | None:
+    """A :class:`PortInUse` naming the listen endpoint (and its holder) when Zenoh's error says
+    a listen address is taken, else None."""
+    if "Address already in use" not in text:
+        return None
+    for endpoint in section.listen:
+        proto, _, address = endpoint.partition("/")
+        host, _, port = address.partition("?")[0].rpartition(":")
+        if port.isdigit() and address.split("?")[0] in text:
+            return port_in_use(f"Zenoh listen endpoint {endpoint}", host, int(port), "udp" if proto == "udp" else "tcp")
+    return None
+
+
 def open_session(section: ZenohSection) -> zenoh.Session:
     """Open a Zenoh session for ``section`` (see :func:`zenoh_config`); raises :class:`BusError`
     when Zenoh cannot open it (e.g. a listen port already taken). Close it with ``close()`` or a
@@ -123,6 +160,9 @@ def open_session(section: ZenohSection) -> zenoh.Session:
     try:
         session = zenoh.open(conf)
     except zenoh.ZError as exc:
+        taken = _listen_in_use(section, str(exc))
+        if taken is not None:
+            raise taken from None
         raise BusError(f"cannot open Zenoh session ({section.mode}, listen={section.listen}, "
                        f"connect={section.connect}): {exc}") from None
     log.info("zenoh session %s open (%s)", session.zid(), section.mode)

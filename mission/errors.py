@@ -55,6 +55,16 @@ class BusError(MarsupialError):
     exit_code = 4
 
 
+class PortInUse(MarsupialError):
+    """A local port this command must bind is taken; the message names it and its holder."""
+
+    exit_code = 6
+
+
+class LinkPortInUse(PortInUse, LinkError):
+    """The MAVLink endpoint's port is taken (a :class:`LinkError` too; exit code 6)."""
+
+
 class MissionAborted(MarsupialError):
     """The mission ended in ABORT; ``reason`` says why (a phases.AbortReason value)."""
 

@@ -65,8 +65,9 @@ import numpy as np
 
 from mission import px4
 from mission.clock import Clock, ScaledClock
-from mission.errors import CommandRejected, LinkError, LinkTimeout
+from mission.errors import CommandRejected, LinkError, LinkPortInUse, LinkTimeout, PortInUse
 from mission.mavlink_env import mavlink, mavutil
+from mission.port_holder import is_addr_in_use, port_in_use
 
 __all__ = ["VehicleLink", "VehicleState", "LinkCounters", "DEFAULT_URL"]
 
@@ -225,8 +226,10 @@ class _UdpTransport:
             else:
                 self._peer = (socket.gethostbyname(host), port)
                 self._sock.bind(("0.0.0.0", 0))
-        except OSError:
+        except OSError as exc:
             self._sock.close()
+            if listen and is_addr_in_use(exc):
+                raise port_in_use(f"MAVLink link udpin:{host}:{port}", host, port, cls=LinkPortInUse) from None
             raise
         self._listen = listen
 
@@ -338,7 +341,7 @@ def _open_transport(url: str) -> _Transport:
         if device.startswith("/") or device.upper().startswith("COM"):
             path, _, baud = device.replace(",", ":").partition(":")
             return _SerialTransport(path, int(baud) if baud else 57600)
-    except LinkError:
+    except (LinkError, PortInUse):
         raise
     except (OSError, ValueError, ImportError) as exc:
         raise LinkError(f"cannot open MAVLink link {url!r}: {exc}") from exc

@@ -106,6 +106,12 @@ def _num(x: float | None) -> float | None:
     return None if x is None or not np.isfinite(x) else round(float(x), 6)
 
 
+def _nanmax(values: np.ndarray) -> float | None:
+    """Largest finite value, or None when there is none (a flight that never saw the vehicle)."""
+    finite = values[np.isfinite(values)]
+    return _num(finite.max()) if finite.size else None
+
+
 def summarise(directory: str | Path) -> dict[str, Any]:
     """The summary of a flight, with the keys of ``marsupial simulate --json``.
 
@@ -126,12 +132,13 @@ def summarise(directory: str | Path) -> dict[str, Any]:
         "separation_time_s", "carrier_target_distance_at_separation_m", "relative_speed_at_separation_m_s",
         "relative_input_jump_m_s", "departure_delay_s", "final_passenger_target_distance_m",
         "min_carrier_target_distance_m", "min_obstacle_clearance_m", "max_passenger_speed_m_s")}
+    out["riding_start_s"] = _num(t0) if riding.any() else None  # on the mission clock (record.csv t_s)
     have_c = np.isfinite(x_c).all(axis=1)
     if have_c.any():
         out["min_carrier_target_distance_m"] = _num(norm(target - x_c[have_c]).min())
     if len(r.t):
         out["final_passenger_target_distance_m"] = _num(norm(x_p[-1] - target))
-        out["max_passenger_speed_m_s"] = _num(np.nanmax(norm(v_p)))
+        out["max_passenger_speed_m_s"] = _nanmax(norm(v_p))
     obstacles = info.get("obstacles", [])
     if obstacles and len(r.t):
         clear = min(float((norm(x_p - np.asarray(o["center"])) - o["radius"]).min()) for o in obstacles)
@@ -151,7 +158,7 @@ def summarise(directory: str | Path) -> dict[str, Any]:
     tol = float(info.get("dock_tolerance_m", 0.5))
     offset_riding = norm(x_p[riding] - dock[riding]).max() if riding.any() else np.inf
     out["max_offset_before_separation_m"] = _num(offset_riding)
-    out["max_relative_command_step_m_s"] = _num(np.nanmax(norm(np.diff(rel_cmd[riding | sep_phases], axis=0)))) if (riding | sep_phases).sum() > 1 else None
+    out["max_relative_command_step_m_s"] = _nanmax(norm(np.diff(rel_cmd[riding | sep_phases], axis=0))) if (riding | sep_phases).sum() > 1 else None
     out["p1"] = bool(riding.any() and offset_riding <= tol and out["departure_delay_s"] is not None)
     out["p2"] = bool(np.isin(r.phase, ["ARRIVED"]).any() and out["final_passenger_target_distance_m"] is not None
                      and out["final_passenger_target_distance_m"] <= float(info.get("arrival_radius_m", 0.5)))

@@ -278,6 +278,33 @@ def _dock(obs: Observation, m: MissionModel) -> np.ndarray:
     return c.position_ned_m + c.velocity_ned_m_s * c.age_s + m.dock_offset_ned_m
 
 
+def live_geometry_problem(dock: np.ndarray, vehicle_ned_m: np.ndarray, m: MissionModel) -> str | None:
+    """What is wrong with the live geometry at start-up, in terms of what the user controls (the
+    carrier's and the vehicle's positions, config fields), or None. The paper's conditions on the
+    states the controller sees: the docked carrier farther than ``b c`` from the target, the target
+    within ``b c`` of the planar carrier's plane, the vehicle on the carrier (Assumptions 1-2)."""
+    bc = m.tick.law.separation_distance_m
+    target = m.tick.target
+    dist = float(norm(target - dock))
+    where = np.round(dock - m.dock_offset_ned_m, 2).tolist()
+    if dist <= bc:
+        return (f"the carrier (at {where} NED) is already {dist:.2f} m from the target, inside b*c = {bc:g} m "
+                f"(its dock point would separate the passenger at once): restart the carrier "
+                f"(`marsupial carrier` starts at scenario.carrier_start) or move it more than {bc:g} m from the target")
+    if m.tick.planar_carrier:
+        height = abs(float(target[2] - dock[2]))
+        if height > bc:
+            return (f"the target is {height:.2f} m above the dock point, more than b*c = {bc:g} m: the carrier can never "
+                    f"come within b*c of it; lower scenario.target or change mission.dock_offset_ned_m")
+    horizontal = float(norm((vehicle_ned_m - dock)[:2]))
+    if horizontal > m.dock_tolerance_m:
+        return (f"the vehicle (at {np.round(vehicle_ned_m, 2).tolist()} NED) is {horizontal:.2f} m from the carrier's "
+                f"dock point horizontally, more than mission.dock_tolerance_m = {m.dock_tolerance_m:g} m "
+                f"(Assumption 2: the passenger starts on the carrier): put the vehicle on the carrier "
+                f"(`marsupial mock-vehicle --start-ned N,E,D`) or the carrier under it (scenario.carrier_start)")
+    return None
+
+
 def _preflight(state: MissionState, obs: Observation, m: MissionModel) -> tuple[MissionState, Decision]:
     t, v = obs.t_s, obs.vehicle
     ready = v is not None and v.heartbeat_age_s <= m.heartbeat_timeout_s and v.position_valid and _carrier_ok(obs, m)
@@ -288,16 +315,15 @@ def _preflight(state: MissionState, obs: Observation, m: MissionModel) -> tuple[
             return new, Decision(setpoint=None, events=(f"abort: preflight: {why}",))
         return state, Decision(setpoint=None)
     dock = _dock(obs, m)
-    try:
-        check_assumptions(dock, m.tick.target, m.tick.law, planar_carrier=m.tick.planar_carrier, field_prefix="mission")
-        horizontal = norm((v.position_ned_m - dock)[:2])
-        if horizontal > m.dock_tolerance_m:
-            raise AssumptionError("mission.passenger", v.position_ned_m.round(2).tolist(),
-                                  f"passenger {horizontal:.2f} m from the dock point horizontally "
-                                  f"(tolerance {m.dock_tolerance_m:g} m, Assumption 2)")
-    except AssumptionError as exc:
-        new = _abort(state, t, AbortReason.GEOMETRY, str(exc))
-        return new, Decision(setpoint=None, events=(f"abort: geometry: {exc}",))
+    problem = live_geometry_problem(dock, v.position_ned_m, m)
+    if problem is None:
+        try:
+            check_assumptions(dock, m.tick.target, m.tick.law, planar_carrier=m.tick.planar_carrier, field_prefix="mission")
+        except AssumptionError as exc:
+            problem = str(exc)
+    if problem is not None:
+        new = _abort(state, t, AbortReason.GEOMETRY, problem)
+        return new, Decision(setpoint=None, events=(f"abort: geometry: {problem}",))
     new = _to(state, Phase.STREAMING, t)
     return new, Decision(setpoint=ZERO.copy(), dock=dock, events=("preflight ok",))
 

@@ -22,6 +22,7 @@ from mission.link import VehicleLink
 from mission.mavlink_env import read_signing_key
 from mission.log import FlightRecorder, read_record
 from mission.phases import AbortReason
+from mission.run_report import WaitReporter, abort_hint, phase_printer, startup_lines
 
 log = logging.getLogger(__name__)
 
@@ -52,12 +53,13 @@ def mission_io(cfg: Config, clock: Clock, tlog_path: str | Path | None = None) -
 
 
 def fly(cfg: Config, *, speed: float = 1.0, log_dir: str | Path | None = None, stop: threading.Event | None = None,
-        on_event=None) -> MissionOutcome:
+        on_event=None, on_start=None) -> MissionOutcome:
     """Fly one mission with ``cfg`` (the library entry point of ``marsupial run``).
 
     Opens the Zenoh session and the MAVLink link (:func:`mission_io`), runs
     :class:`MissionController` and closes everything in reverse order. ``speed`` is the clock
-    speed factor (simulation only).
+    speed factor (simulation only). ``on_start(controller, link, feed, clock)`` is called once
+    everything is open, just before the loop starts (the CLI watches the wait for the vehicle).
     """
     mission_model(cfg)  # validate before anything is opened
     if cfg.mavlink.signing_key_file:
@@ -68,6 +70,8 @@ def fly(cfg: Config, *, speed: float = 1.0, log_dir: str | Path | None = None, s
     with mission_io(cfg, clock, recorder.tlog_path) as (feed, publisher, link):
         controller = MissionController(cfg, link, feed, clock, publisher=publisher, recorder=recorder,
                                        on_event=on_event, stop=stop)
+        if on_start is not None:
+            on_start(controller, link, feed, clock)
         return controller.run()
 
 
@@ -105,10 +109,14 @@ def run(config: str, mavlink_url: str | None, zenoh_listen: tuple[str, ...], zen
     \b
     Phase changes are printed as they happen. On Ctrl-C or SIGTERM the vehicle is put in Hold
     (never disarmed in the air) and the program exits once it shows Hold.
+    Until the vehicle and the carrier are both seen it says what it waits for, with a countdown
+    to mission.connect_timeout_s. Phase lines show the mission clock and, from the start of
+    riding, t (the paper's t = 0; summary.json and plots count from there).
     Exit codes: 0 mission complete; 2 bad configuration or geometry that breaks the paper's
-    assumptions (nothing was sent to the vehicle); 3 vehicle lost; 5 other abort (the reason is
-    printed: pilot_override, vehicle_failsafe, carrier_lost, position_lost, arming_refused, offboard_refused,
-    interrupted, timeout).
+    assumptions (nothing was sent to the vehicle); 3 vehicle lost (or never found); 4 Zenoh
+    cannot start; 5 other abort (the reason is printed: pilot_override, vehicle_failsafe,
+    carrier_lost, position_lost, arming_refused, offboard_refused, interrupted, timeout);
+    6 a port to bind is in use (the holder is named).
     """
     cfg = load_config(config)
     overrides: dict[str, Any] = {"mavlink.url": mavlink_url, "zenoh.pair": pair, "zenoh.mode": zenoh_mode,
@@ -119,25 +127,32 @@ def run(config: str, mavlink_url: str | None, zenoh_listen: tuple[str, ...], zen
         overrides["zenoh.connect"] = list(zenoh_connect)
     cfg = with_overrides(cfg, overrides)
     stop = threading.Event()
-    start = time.monotonic()
+    for line in startup_lines(cfg, speed):
+        click.echo(line)
 
     def on_signal(signum: int, _frame: Any) -> None:
         click.echo(f"signal {signal.Signals(signum).name}: asking the vehicle to Hold", err=True)
         stop.set()
 
     previous = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+    on_event, remember, seen = phase_printer(click.echo)
 
-    def on_event(phase: str, text: str) -> None:
-        click.echo(f"[{(time.monotonic() - start) * speed:8.2f} s] {text}")
+    def on_start(controller: Any, link: Any, feed: Any, clock: Any) -> None:
+        remember(controller, link, feed, clock)
+        seen["reporter"] = WaitReporter(cfg, controller, link, feed, clock).start()
 
     try:
-        outcome = fly(cfg, speed=speed, log_dir=log_dir, stop=stop, on_event=on_event)
+        outcome = fly(cfg, speed=speed, log_dir=log_dir, stop=stop, on_event=on_event, on_start=on_start)
     finally:
+        if seen.get("reporter") is not None:
+            seen["reporter"].stop()
+            seen["reporter"].clear()
         for s, h in previous.items():
             signal.signal(s, h)
     if as_json:
         click.echo(json.dumps(outcome.summary, indent=2))
-    else:
+    elif seen["riding_start_s"] is not None:
+        click.echo("summary (times since the start of riding, t = 0):")
         for key in ("separation_time_s", "carrier_target_distance_at_separation_m", "relative_input_jump_m_s",
                     "final_passenger_target_distance_m", "min_carrier_target_distance_m", "p1", "p2", "p3"):
             click.echo(f"  {key:<42} {outcome.summary.get(key)}")
@@ -145,32 +160,61 @@ def run(config: str, mavlink_url: str | None, zenoh_listen: tuple[str, ...], zen
         click.echo(f"flight log: {outcome.log_dir}")
     if not outcome.ok:
         click.echo(f"mission aborted: {outcome.reason}: {outcome.detail}", err=True)
+        hint = abort_hint(cfg, outcome.reason, outcome.detail)
+        if hint:
+            click.echo(hint, err=True)
     return exit_code(outcome)
 
 
 @click.command("plot")
 @click.argument("log_dir", type=click.Path(file_okay=False, exists=True))
-@click.option("--out", "out_path", type=click.Path(dir_okay=False), help="Output image (default LOG_DIR/flight.png).")
+@click.option("--out", "out_path", type=click.Path(dir_okay=False),
+              help="Output image (default LOG_DIR/flight.png; with a folder of flight logs, one per log).")
 def plot(log_dir: str, out_path: str | None) -> int:
-    """Draw the paper-style figures (trajectories; |e_pc|, |e_tc|, |e_pt| over time) from a
-    flight log directory written by ``marsupial run`` or ``marsupial demo``."""
+    """Draw the paper-style figures (trajectories; |e_pc|, |e_tc|, |e_pt| over t, the time since
+    the start of riding) from a flight log directory written by ``marsupial run`` or
+    ``marsupial demo`` (e.g. logs/demo/pair0). Given a folder of flight logs (logs/demo), it
+    plots each one into its own directory. Exit code 2 when LOG_DIR holds no flight log."""
+    directory = Path(log_dir)
+    if (directory / "mission.json").is_file():
+        out = plot_flight(directory, out_path or directory / "flight.png")
+        click.echo(f"plot written to {out}")
+        return 0
+    logs = sorted(d for d in directory.iterdir() if (d / "mission.json").is_file())
+    if not logs:
+        raise ConfigError("LOG_DIR", log_dir, "holds no flight log (mission.json and record.csv): give a directory "
+                          "written by `marsupial run` (mission.log_dir/<time>-<pair>, printed at the end of the run) "
+                          "or by the demo (logs/demo/pair0)")
+    if out_path and len(logs) > 1:
+        raise ConfigError("--out", out_path, f"one output file for {len(logs)} flight logs; leave --out out "
+                          "(each plot goes to its own log directory) or give one log directory")
+    for d in logs:
+        out = plot_flight(d, out_path or d / "flight.png")
+        click.echo(f"plot written to {out}")
+    return 0
+
+
+def plot_flight(log_dir: Path, out_path: str | Path) -> Path:
+    """The paper-style figure of one flight log; times from the start of riding (t = 0)."""
     from sim.plots import Trajectories, plot_run
 
+    if not (log_dir / "record.csv").is_file():
+        raise ConfigError("LOG_DIR", str(log_dir), "has mission.json but no record.csv: the flight never started")
     rec = read_record(log_dir)
     # The law's carrier position for the passenger is the dock point (carrier + offset).
     x_p, x_c = rec.vec("x_p"), rec.vec("dock")
     ok = np.isfinite(x_p).all(axis=1) & np.isfinite(x_c).all(axis=1)
     if not ok.any():
-        raise ConfigError("log_dir", log_dir, "the record holds no tick with both vehicle and carrier positions")
+        raise ConfigError("LOG_DIR", str(log_dir), "the record holds no tick with both vehicle and carrier positions "
+                          "(the mission aborted before it saw both; see its summary.json)")
     info = rec.info
     riding = np.flatnonzero(rec.phase == "RIDING")
     t0 = rec.t[riding[0]] if len(riding) else rec.t[ok][0]
     sep = info.get("separation_time_s")
+    origin = "start of riding" if len(riding) else "first tick with both positions (never rode)"
     tr = Trajectories(t=rec.t[ok] - t0, x_c=x_c[ok], x_p=x_p[ok], target=np.asarray(info["target_ned_m"]),
                       separation_time_s=None if sep is None else sep - t0,
                       obstacles=[(np.asarray(o["center"]), o["radius"]) for o in info.get("obstacles", [])],
-                      frame="local_ned", title=f"flight {Path(log_dir).name} (carrier = its dock point)",
-                      bc_m=info.get("bc_m"))
-    out = plot_run(tr, out_path or Path(log_dir) / "flight.png")
-    click.echo(f"plot written to {out}")
-    return 0
+                      frame="local_ned", title=f"flight {log_dir.name} (carrier = its dock point; t = 0 at the {origin}, "
+                      f"mission clock {t0:.2f} s)", bc_m=info.get("bc_m"))
+    return plot_run(tr, out_path)

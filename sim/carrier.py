@@ -40,7 +40,7 @@ import click
 import numpy as np
 import zenoh
 
-from mission.carrier_bridge import CarrierPublisher, PassengerFeed, open_session
+from mission.carrier_bridge import CarrierPublisher, PassengerFeed, describe_endpoints, keys, open_session
 from mission.clock import Clock, Periodic, ScaledClock
 from mission.config import Config, load_config, with_overrides
 from mission.tick import TickModel, carrier_tick
@@ -279,4 +279,16 @@ def carrier_command(config: str, speed: float, pair: str | None, listen: tuple[s
         "zenoh.encoding": encoding,
         "carrier.rate_hz": rate,
     })
+    click.echo(startup_line(cfg, speed), err=True)
     return main(cfg, speed, duration)
+
+
+def startup_line(cfg: Config, speed: float) -> str:
+    """What ``marsupial carrier`` says at start-up: pair, endpoint, mode, what it waits for."""
+    k = keys(cfg.zenoh.pair)
+    plan = {"stop": "stops at separation", "remark1": "keeps its own plan after separation (Remark 1)"}
+    start = np.round(np.asarray(cfg.scenario.carrier_start, dtype=float), 2).tolist()
+    return (f"carrier {cfg.zenoh.pair}: publishing {k.carrier_state} ({cfg.zenoh.encoding}, {cfg.carrier.rate_hz:g} Hz) "
+            f"on {describe_endpoints(cfg.zenoh)}; mode {cfg.scenario.carrier_mode} ({plan[cfg.scenario.carrier_mode]}); "
+            f"at {start} NED [m], waiting for the passenger to ride (phase RIDING on {k.passenger_phase}); "
+            f"clock x{speed:g}")

@@ -26,11 +26,14 @@ from tqdm import tqdm
 
 from mission.carrier_bridge import open_session
 from mission.config import ZenohSection, load_config
+from mission.errors import MarsupialError
 from mission.phases import Phase
 from sim.net import free_port, stop_process
 
 DEFAULT_CONFIG = Path(__file__).resolve().parents[1] / "configs" / "demo.toml"
-PHASE_ORDER = [p.value for p in Phase if p not in (Phase.ABORT,)]
+# The nominal path of a mission; HOLD and LAND are alternatives of the same step.
+PHASE_STEPS = [(p.value,) for p in Phase if p not in (Phase.ABORT, Phase.HOLD, Phase.LAND, Phase.DONE)] + [
+    (Phase.HOLD.value, Phase.LAND.value), (Phase.DONE.value,)]
 
 
 def _python_cli(*args: str) -> list[str]:
@@ -52,8 +55,52 @@ class PairRun:
         return json.loads(path.read_text()) if path.exists() else {}
 
 
-def _follow(pair: PairRun, bar: tqdm, lock: threading.Lock) -> None:
-    """Read the mission's stdout: phase lines move the progress bar."""
+def phase_step(phase: str) -> int | None:
+    """1-based step of ``phase`` on the nominal path (HOLD and LAND are the same step), or None
+    for ABORT or an unknown name."""
+    for i, names in enumerate(PHASE_STEPS, start=1):
+        if phase in names:
+            return i
+    return None
+
+
+class PairProgress:
+    """The demo's live display: one bar per pair on a terminal, whose count never goes back
+    (a phase skipped, e.g. ARMING when already armed, jumps forward; an abort leaves the bar
+    where it was and names the reason); plain ``pair: line`` phase lines otherwise."""
+
+    def __init__(self, names: list[str], tty: bool, out=None) -> None:
+        self.tty, self.out = tty, out or sys.stdout
+        self._lock = threading.Lock()
+        self.steps: dict[str, int] = {n: 0 for n in names}
+        self.bars: dict[str, tqdm] = {}
+        if tty:
+            width = max(len(n) for n in names)
+            for i, name in enumerate(names):
+                self.bars[name] = tqdm(total=len(PHASE_STEPS), desc=f"{name:<{width}}", position=i, file=self.out,
+                                       leave=True, bar_format="{desc} {n_fmt}/{total_fmt} |{bar:20}| {elapsed} {postfix}")
+
+    def update(self, pair: str, phase: str, line: str) -> None:
+        with self._lock:
+            step = phase_step(phase)
+            if step is not None:
+                self.steps[pair] = max(self.steps[pair], step)
+            if not self.tty:
+                self.out.write(f"{pair}: {line}\n")
+                self.out.flush()
+                return
+            bar = self.bars[pair]
+            bar.n = self.steps[pair]
+            bar.set_postfix_str(phase if step is not None else line.split("] ", 1)[-1], refresh=False)
+            bar.refresh()
+
+    def close(self) -> None:
+        for bar in self.bars.values():
+            bar.close()
+
+
+def _follow(pair: PairRun, progress: PairProgress) -> None:
+    """Read the mission's stdout: phase lines move the pair's progress."""
     stream = pair.procs["mission"].stdout
     assert stream is not None
     for raw in stream:
@@ -62,14 +109,7 @@ def _follow(pair: PairRun, bar: tqdm, lock: threading.Lock) -> None:
         if "] phase " in line:
             phase = line.split("] phase ", 1)[1].split()[0]
             pair.phase = phase
-            with lock:
-                if phase in PHASE_ORDER:
-                    bar.n = PHASE_ORDER.index(phase) + 1
-                bar.set_postfix_str(" ".join(f"{p.name}:{p.phase}" for p in _ALL_PAIRS), refresh=True)
-                bar.refresh()
-
-
-_ALL_PAIRS: list[PairRun] = []
+            progress.update(pair.name, phase, line.strip())
 
 
 def start_pair(config: str, name: str, zenoh_ep: str, speed: float, log_root: Path, stack: ExitStack,
@@ -103,17 +143,13 @@ def run_demo(config: str, speed: float, pairs: int, log_root: Path, plot_path: s
     log_root.mkdir(parents=True, exist_ok=True)
     zenoh_port = free_port(socket.SOCK_STREAM)
     zenoh_ep = f"tcp/127.0.0.1:{zenoh_port}"
-    _ALL_PAIRS.clear()
-    lock = threading.Lock()
     with ExitStack() as stack:
         router = open_session(ZenohSection(mode="router", listen=[zenoh_ep]))
         stack.callback(router.close)
         runs = [start_pair(config, f"pair{i}", zenoh_ep, speed, log_root, stack, quiet) for i in range(pairs)]
-        _ALL_PAIRS.extend(runs)
-        bar = tqdm(total=len(PHASE_ORDER), desc="mission", unit="phase", disable=not progress,
-                   bar_format="{desc}: {n_fmt}/{total_fmt} phases |{bar}| {elapsed} {postfix}")
-        stack.callback(bar.close)
-        readers = [threading.Thread(target=_follow, args=(p, bar, lock), daemon=True) for p in runs]
+        display = PairProgress([p.name for p in runs], tty=progress and sys.stdout.isatty())
+        stack.callback(display.close)
+        readers = [threading.Thread(target=_follow, args=(p, display), daemon=True) for p in runs]
         for r in readers:
             r.start()
         deadline = time.monotonic() + timeout_s
@@ -132,7 +168,11 @@ def run_demo(config: str, speed: float, pairs: int, log_root: Path, plot_path: s
         summaries.append(s)
         if plot_path and (p.log_dir / "record.csv").exists():
             out = plot_path if pairs == 1 else str(Path(plot_path).with_stem(f"{Path(plot_path).stem}-{p.name}"))
-            plot_command.callback(str(p.log_dir), out)  # type: ignore[misc]
+            try:
+                plot_command.callback(str(p.log_dir), out)  # type: ignore[misc]
+                s["plot"] = out
+            except MarsupialError as exc:
+                s["plot_error"] = str(exc)
     ok = all(s.get("p1") and s.get("p2") and s.get("p3") and s["mission_exit_code"] == 0 for s in summaries)
     return (0 if ok else 1), summaries
 
@@ -147,8 +187,39 @@ ROWS = [
     ("P1 separation", "p1"),
     ("P2 navigation", "p2"),
     ("P3 carrier avoids target", "p3"),
-    ("mission exit code", "mission_exit_code"),
+    ("mission outcome (exit code)", "outcome"),
 ]
+
+PROPERTY_TEXT = {
+    "p1": "P1 separation: the vehicle stayed within mission.dock_tolerance_m of the dock while riding, "
+          "and left it after separation",
+    "p2": "P2 navigation: the vehicle arrived within mission.arrival_radius_m of the target",
+    "p3": "P3: the carrier never reached the target",
+}
+
+
+def outcome_text(s: dict) -> str:
+    """``done (0)`` or ``abort:<reason> (<code>)``: the mission process's own verdict, which is
+    about the flight (it completed or aborted), not about P1-P3."""
+    code = s.get("mission_exit_code")
+    phase = s.get("phase")
+    if phase == "DONE":
+        return f"done ({code})"
+    if s.get("reason"):
+        return f"{s['reason']} ({code})"
+    return f"no summary ({code})"
+
+
+def verdict_lines(summaries: list[dict]) -> list[str]:
+    """One line per pair that failed, naming the properties that did not hold and why they matter."""
+    lines = []
+    for s in summaries:
+        failed = [k for k in ("p1", "p2", "p3") if not s.get(k)]
+        if not failed:
+            continue
+        flight = "the mission completed, but" if s.get("phase") == "DONE" else f"the mission ended in {outcome_text(s)};"
+        lines.append(f"{s['pair']}: {flight} did not hold: " + "; ".join(PROPERTY_TEXT[k] for k in failed))
+    return lines
 
 
 def format_table(summaries: list[dict]) -> str:
@@ -158,7 +229,7 @@ def format_table(summaries: list[dict]) -> str:
     for label, key in ROWS:
         cells = []
         for s in summaries:
-            v = s.get(key)
+            v = outcome_text(s) if key == "outcome" else s.get(key)
             cells.append(f"{v:>10.3f}" if isinstance(v, float) else f"{str(v):>10}")
         lines.append(f"{label:<{width}}  " + "  ".join(cells))
     return "\n".join(lines)
@@ -187,10 +258,12 @@ def demo(config: str, speed: float, pairs: int, plot_path: str, log_root: str, t
     os.environ.setdefault("PYTHONUNBUFFERED", "1")
     code, summaries = run_demo(config, speed, pairs, Path(log_root), plot_path, timeout_s, quiet=not verbose_children,
                                progress=True)
+    click.echo("times count from the start of riding (t = 0, as in the paper)")
     click.echo(format_table(summaries))
     for s in summaries:
-        click.echo(f"{s['pair']}: flight log {Path(log_root) / s['pair']}")
-    if plot_path:
-        click.echo(f"plot: {plot_path}" + (" (one per pair)" if pairs > 1 else ""))
+        plot = f", plot {s['plot']}" if s.get("plot") else (f", no plot: {s['plot_error']}" if s.get("plot_error") else "")
+        click.echo(f"{s['pair']}: flight log {Path(log_root) / s['pair']}{plot}")
+    for line in verdict_lines(summaries):
+        click.echo(line, err=True)
     click.echo("P1-P3 held" if code == 0 else "P1-P3 did NOT all hold", err=code != 0)
     return code

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from mission.mavlink_env import mavlink
+from mission.port_holder import is_addr_in_use, port_in_use
 
 SIGNING_EPOCH = datetime.datetime(2015, 1, 1, tzinfo=datetime.timezone.utc)
 UNSIGNED_ALLOWED_IDS = frozenset({mavlink.MAVLINK_MSG_ID_HEARTBEAT, mavlink.MAVLINK_MSG_ID_RADIO_STATUS})
@@ -70,7 +71,13 @@ class VehicleLink:
         self.name = name
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
-        self.sock.bind(bind.address)
+        try:
+            self.sock.bind(bind.address)
+        except OSError as exc:
+            self.sock.close()
+            if is_addr_in_use(exc):
+                raise port_in_use(f"mock vehicle {name} link", *bind.address) from None
+            raise
         self.sock.setblocking(False)
         self.target: tuple[str, int] | None = target.address if target else None
         self.latched = False

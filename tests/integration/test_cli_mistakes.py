@@ -1,0 +1,59 @@
+"""A new user's mistakes, through the real command line: a message that says what happened and
+what to do, a documented exit code, never a traceback."""
+from __future__ import annotations
+
+import os
+import socket
+import subprocess
+import sys
+
+from tests.conftest import CONFIGS, ROOT, free_port
+
+
+def _cli(*args: str, timeout: float = 60) -> subprocess.CompletedProcess:
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    return subprocess.run([sys.executable, "-m", "mission.cli", *args], capture_output=True, text=True,
+                          timeout=timeout, cwd=ROOT, env=env)
+
+
+def test_second_mock_vehicle_names_the_port_and_its_holder():
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as taken:
+        taken.bind(("127.0.0.1", 0))
+        port = taken.getsockname()[1]
+        out = _cli("mock-vehicle", "--mavlink", f"udpin:127.0.0.1:{port}", "--target", "udpout:127.0.0.1:9")
+    assert out.returncode == 6, out.stderr
+    assert "Traceback" not in out.stderr
+    assert f"UDP port 127.0.0.1:{port} is already in use, held by process {os.getpid()}" in out.stderr
+
+
+def test_run_with_a_taken_mavlink_port_names_it():
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as taken:
+        taken.bind(("127.0.0.1", 0))
+        port = taken.getsockname()[1]
+        out = _cli("run", str(CONFIGS / "demo.toml"), "--mavlink", f"udpin:127.0.0.1:{port}",
+                   "--zenoh-listen", f"tcp/127.0.0.1:{free_port()}")
+    assert out.returncode == 6 and "Traceback" not in out.stderr
+    assert f"127.0.0.1:{port} is already in use, held by process {os.getpid()}" in out.stderr
+
+
+def test_run_without_a_vehicle_says_what_it_waits_for_and_what_to_do(tmp_path):
+    cfg = tmp_path / "short.toml"
+    text = (CONFIGS / "demo.toml").read_text().replace("max_duration_s = 180.0", "max_duration_s = 180.0\nconnect_timeout_s = 1.5")
+    cfg.write_text(text)
+    mav = free_port(socket.SOCK_DGRAM)
+    out = _cli("run", str(cfg), "--mavlink", f"udpin:127.0.0.1:{mav}", "--zenoh-listen", f"tcp/127.0.0.1:{free_port()}",
+               "--pair", "lonely", "--log-dir", str(tmp_path / "log"))
+    assert out.returncode == 3, out.stdout + out.stderr
+    assert "Traceback" not in out.stderr and "Warning" not in out.stderr
+    assert f"vehicle on MAVLink udpin:127.0.0.1:{mav}" in out.stdout
+    assert f"waiting for the vehicle (no HEARTBEAT yet on udpin:127.0.0.1:{mav}) and the carrier " \
+           "(no state yet on marsupial/lonely/carrier/state); giving up in" in out.stdout
+    assert "mission.connect_timeout_s = 1.5 s" in out.stdout
+    assert "start `marsupial mock-vehicle`" in out.stderr
+    assert "separation_time_s" not in out.stdout  # no table of None for a mission that never rode
+
+
+def test_plot_of_a_folder_without_logs_says_which_folder_to_give(tmp_path):
+    out = _cli("plot", str(tmp_path))
+    assert out.returncode == 2 and "Traceback" not in out.stderr
+    assert "holds no flight log" in out.stderr and "logs/demo/pair0" in out.stderr
