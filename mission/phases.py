@@ -275,6 +275,7 @@ def _dock(obs: Observation, m: MissionModel) -> np.ndarray:
     sample's age (a late sample would otherwise pull the passenger back by speed x age), plus
     the dock offset."""
     c = obs.carrier
+    assert c is not None  # every caller checked it
     return c.position_ned_m + c.velocity_ned_m_s * c.age_s + m.dock_offset_ned_m
 
 
@@ -314,6 +315,7 @@ def _preflight(state: MissionState, obs: Observation, m: MissionModel) -> tuple[
             new = _abort(state, t, AbortReason.VEHICLE_LOST if v is None else AbortReason.CARRIER_LOST, why)
             return new, Decision(setpoint=None, events=(f"abort: preflight: {why}",))
         return state, Decision(setpoint=None)
+    assert v is not None  # ready
     dock = _dock(obs, m)
     problem = live_geometry_problem(dock, v.position_ned_m, m)
     if problem is None:
@@ -360,9 +362,11 @@ def _offboard(state, obs, m):
 def _track(state: MissionState, obs: Observation, m: MissionModel, x_ref: np.ndarray, u_ref: np.ndarray) -> tuple[np.ndarray, bool]:
     """Vehicle command [m/s]: reference velocity plus a pull to the reference, filtered at the
     vehicle's real position (obstacles, floor, speed and acceleration of the vehicle)."""
-    x_p = obs.vehicle.position_ned_m
+    v = obs.vehicle
+    assert v is not None  # tracking happens only with a vehicle
+    x_p = v.position_ned_m
     desired = u_ref + m.track_gain * (x_ref - x_p)
-    prev = state.u_cmd if state.u_cmd is not None else obs.vehicle.velocity_ned_m_s
+    prev = state.u_cmd if state.u_cmd is not None else v.velocity_ned_m_s
     safe = filter_velocity(x_p, desired, m.tick.obstacles, m.command_safety, prev, m.dt_s)
     return safe.u, bool(safe.changed)
 

@@ -94,7 +94,7 @@ def simulate(config: str, as_json: bool, plot_path: str | None, count: int | Non
         else:
             click.echo(f"{count} scenarios (seed {seed}): P1 {report['fraction_p1']:.1%}  P2 {report['fraction_p2']:.1%}  "
                        f"P3 {report['fraction_p3']:.1%}  all {report['fraction_all']:.1%}")
-            click.echo(f"worst final passenger-target distances: "
+            click.echo("worst final passenger-target distances: "
                        + ", ".join(f"{w['final_passenger_target_distance_m']:.4f} m" for w in report["worst_cases"]))
         return 0 if report["fraction_all"] == 1.0 else 1
     steps = int(round(cfg.sim.duration_s / cfg.sim.dt_s))

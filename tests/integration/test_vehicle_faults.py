@@ -177,8 +177,8 @@ def test_arming_refusal_with_reason(probe: Probe) -> None:
         assert status is not None and not status.onboard_control_sensors_health & px4.SENSOR_PREARM_CHECK
         ack = probe.arm()
         assert ack is not None and ack.result == px4.MAV_RESULT_TEMPORARILY_REJECTED
-        texts = []
-        assert probe.wait_until(lambda: reason in "".join(texts := [m.text for m in probe.messages("STATUSTEXT")]), 2.0), texts
+        assert probe.wait_until(lambda: reason in "".join(m.text for m in probe.messages("STATUSTEXT")), 2.0), \
+            [m.text for m in probe.messages("STATUSTEXT")]
         v.refuse_arming(None)
         assert probe.arm().result == px4.MAV_RESULT_ACCEPTED
         v.set_faults(refuse_arming_reason="Arming denied: again")
