@@ -196,7 +196,7 @@ def plot(log_dir: str, out_path: str | None) -> int:
 
 def plot_flight(log_dir: Path, out_path: str | Path) -> Path:
     """The paper-style figure of one flight log; times from the start of riding (t = 0)."""
-    from sim.plots import Trajectories, plot_run
+    from mission.plots import Trajectories, plot_run
 
     if not (log_dir / "record.csv").is_file():
         raise ConfigError("LOG_DIR", str(log_dir), "has mission.json but no record.csv: the flight never started")

@@ -13,7 +13,7 @@ from tqdm import tqdm
 from mission.config import Config, load_config
 from sim import closed_loop
 from sim.closed_loop import ClosedLoopResult, model_from_config, random_scenarios, simulate_config
-from sim.plots import Trajectories, plot_run
+from mission.plots import Trajectories, plot_run
 
 log = logging.getLogger(__name__)
 
