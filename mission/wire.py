@@ -54,6 +54,7 @@ from typing import Any, Literal
 
 import numpy as np
 
+from mission import geodesy
 from mission.errors import MarsupialError
 
 Frame = Literal["local_ned", "wgs84"]
@@ -73,7 +74,6 @@ REASONS: tuple[str, ...] = (
     "origin", "stale_seq", "stale_stamp", "internal",
 )
 
-EARTH_RADIUS_M = 6371000.0  # PX4's CONSTANTS_RADIUS_OF_EARTH [m]
 SEQ_MAX = 2**63 - 1  # sequence numbers are int64, as in ROS 2 / DDS
 POSITION_LIMIT_M = 1e7  # |local NED component| or |wgs84 altitude| [m]: beyond this a sample is corrupt
 VELOCITY_LIMIT_M_S = 1e3  # |velocity component| [m/s]
@@ -242,40 +242,17 @@ class GeoOrigin:
 
 
 def geodetic_to_ned(lat_deg: float, lon_deg: float, alt_m: float, origin: GeoOrigin) -> np.ndarray:
-    """Local NED [m] (3,) of a geodetic point, relative to ``origin``.
-
-    Azimuthal equidistant projection on a sphere of radius 6 371 000 m, exactly PX4's
-    ``MapProjection::project`` (so our local frame agrees with the vehicle's); down = origin
-    altitude minus altitude. A local tangent-plane approximation: good to centimetres within a
-    few kilometres of the origin.
-    """
-    lat, lon = math.radians(lat_deg), math.radians(lon_deg)
-    lat0, lon0 = math.radians(origin.lat_deg), math.radians(origin.lon_deg)
-    sin0, cos0 = math.sin(lat0), math.cos(lat0)
-    sin_lat, cos_lat = math.sin(lat), math.cos(lat)
-    cos_dlon = math.cos(lon - lon0)
-    c = math.acos(min(max(sin0 * sin_lat + cos0 * cos_lat * cos_dlon, -1.0), 1.0))
-    k = c / math.sin(c) if abs(c) > 0.0 else 1.0
-    north = k * (cos0 * sin_lat - sin0 * cos_lat * cos_dlon) * EARTH_RADIUS_M
-    east = k * cos_lat * math.sin(lon - lon0) * EARTH_RADIUS_M
+    """Local NED [m] (3,) of a geodetic point, relative to ``origin``: PX4's projection
+    (:func:`mission.geodesy.project`); down = origin altitude minus altitude."""
+    north, east = geodesy.project(lat_deg, lon_deg, origin.lat_deg, origin.lon_deg)
     return np.array([north, east, origin.alt_m - alt_m])
 
 
 def ned_to_geodetic(ned_m: np.ndarray, origin: GeoOrigin) -> tuple[float, float, float]:
-    """Inverse of :func:`geodetic_to_ned` (PX4's ``MapProjection::reproject``): (lat [deg],
-    lon [deg], alt [m]) of a local NED point [m]."""
+    """Inverse of :func:`geodetic_to_ned`: (lat [deg], lon [deg], alt [m]) of a local NED point [m]."""
     north, east, down = (float(v) for v in ned_m)
-    lat0, lon0 = math.radians(origin.lat_deg), math.radians(origin.lon_deg)
-    sin0, cos0 = math.sin(lat0), math.cos(lat0)
-    x, y = north / EARTH_RADIUS_M, east / EARTH_RADIUS_M
-    c = math.hypot(x, y)
-    if c > 0.0:
-        sin_c, cos_c = math.sin(c), math.cos(c)
-        lat = math.asin(cos_c * sin0 + x * sin_c * cos0 / c)
-        lon = lon0 + math.atan2(y * sin_c, c * cos0 * cos_c - x * sin0 * sin_c)
-    else:
-        lat, lon = lat0, lon0
-    return math.degrees(lat), math.degrees(lon), origin.alt_m - down
+    lat, lon = geodesy.reproject(north, east, origin.lat_deg, origin.lon_deg)
+    return lat, lon, origin.alt_m - down
 
 
 def to_local_ned(state: CarrierState, origin: GeoOrigin | None) -> CarrierState:

@@ -1,8 +1,8 @@
 """Telemetry of the mock vehicle: the onboard-profile streams and their MAVLink messages.
 
 Message builders are plain functions of a :class:`TelemetryState` (one consistent picture of the
-vehicle taken under its lock). Geodetic output is a flat-earth projection of local NED around
-the EKF origin (``home`` option): good to millimetres over the few kilometres a flight covers.
+vehicle taken under its lock). Geodetic output is PX4's own projection of local NED around the
+EKF origin (``home`` option; :mod:`mission.geodesy`).
 
 Stream rates are PX4's onboard profile in simulated Hz; every rate scales with the speed factor.
 So that a sped-up run stays cheap, each stream's wall-clock rate is capped: LOCAL_POSITION_NED
@@ -19,12 +19,11 @@ import random
 from dataclasses import dataclass
 from typing import Any
 
-from mission import px4
+from mission import geodesy, px4
 from mission.mavlink_env import mavlink
 from sim.vehicle_commander import Setpoint
 from sim.vehicle_physics import KinState, attitude_rad, quaternion
 
-EARTH_RADIUS_M = 6_378_137.0
 CAP_PRIMARY_WALL_HZ = 300.0
 CAP_OTHER_WALL_HZ = 50.0
 CAP_ATTITUDE_WALL_HZ = 100.0
@@ -84,7 +83,8 @@ def make_streams(speed: float) -> dict[str, Stream]:
 
 @dataclass(frozen=True)
 class Geo:
-    """Flat-earth projection around the EKF origin: latitude, longitude [deg], altitude [m AMSL]."""
+    """PX4's projection (:mod:`mission.geodesy`) around the EKF origin: latitude, longitude [deg],
+    altitude [m AMSL]."""
 
     lat0_deg: float
     lon0_deg: float
@@ -92,8 +92,7 @@ class Geo:
 
     def to_geodetic(self, n_m: float, e_m: float, d_m: float) -> tuple[float, float, float]:
         """Local NED [m] -> (lat [deg], lon [deg], alt [m AMSL])."""
-        lat = self.lat0_deg + math.degrees(n_m / EARTH_RADIUS_M)
-        lon = self.lon0_deg + math.degrees(e_m / (EARTH_RADIUS_M * math.cos(math.radians(self.lat0_deg))))
+        lat, lon = geodesy.reproject(n_m, e_m, self.lat0_deg, self.lon0_deg)
         return lat, lon, self.alt0_m - d_m
 
 

@@ -12,7 +12,7 @@ import click
 import pytest
 from click.testing import CliRunner
 
-from mission import px4
+from mission import geodesy, px4
 from mission.mavlink_env import mavlink
 from sim.vehicle import FaultOptions, MockVehicle, VehicleOptions, spawn_process
 from sim.vehicle_cli import mock_vehicle, read_signing_key
@@ -203,8 +203,8 @@ def test_global_position_consistent_with_local_ned(probe: Probe) -> None:
         connect(probe)
         gpi = probe.wait_for("GLOBAL_POSITION_INT", timeout_s=2.0)
         assert gpi is not None
-        assert (gpi.lat / 1e7 - 47.397742) * math.radians(1) * 6378137.0 == pytest.approx(100.0, abs=0.02)
-        east_m = (gpi.lon / 1e7 - 8.545594) * math.radians(1) * 6378137.0 * math.cos(math.radians(47.397742))
+        north_m, east_m = geodesy.project(gpi.lat / 1e7, gpi.lon / 1e7, 47.397742, 8.545594)  # PX4's projection
+        assert north_m == pytest.approx(100.0, abs=0.02)
         assert east_m == pytest.approx(-50.0, abs=0.02)
         assert gpi.alt == 488000 and gpi.relative_alt == 0
 
