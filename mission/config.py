@@ -12,14 +12,16 @@ from __future__ import annotations
 
 import tomllib
 from pathlib import Path
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from mission.errors import ConfigError
-from mission.law import LawParams, check_assumptions
-from mission.safety import Obstacles, SafetyConfig
+
+if TYPE_CHECKING:  # the schema imports no law: the converters below import it when called
+    from mission.law import LawParams
+    from mission.safety import Obstacles, SafetyConfig
 
 class _Model(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
@@ -37,6 +39,8 @@ class LawSection(_Model):
         1e-3, gt=0, description="[m] separation fires at |e_tc| = b c - this (mission/tick.py), in flights and simulations")
 
     def params(self) -> LawParams:
+        from mission.law import LawParams
+
         return LawParams(k_c=self.k_c, k_p=self.k_p, b=self.b, c=self.c, d=self.d)
 
 
@@ -70,6 +74,8 @@ class ScenarioSection(_Model):
         return self
 
     def obstacle_set(self) -> Obstacles:
+        from mission.safety import Obstacles
+
         return Obstacles.of([(o.center, o.radius) for o in self.obstacles], self.dim)
 
 
@@ -87,9 +93,13 @@ class SafetySection(_Model):
     filter_carrier: bool = True
 
     def passenger(self) -> SafetyConfig:
+        from mission.safety import SafetyConfig
+
         return SafetyConfig(self.cbf_gain, self.margin_m, self.passenger_max_speed_m_s, self.passenger_max_accel_m_s2, self.z_min_m, self.z_max_m)
 
     def carrier(self) -> SafetyConfig:
+        from mission.safety import SafetyConfig
+
         return SafetyConfig(self.cbf_gain, self.margin_m, self.carrier_max_speed_m_s, self.carrier_max_accel_m_s2)
 
 
@@ -190,6 +200,8 @@ class Config(_Model):
     @model_validator(mode="after")
     def _assumptions(self) -> "Config":
         s = self.scenario
+        from mission.law import check_assumptions  # the geometry the law needs, checked at load
+
         check_assumptions(
             np.array(s.carrier_start),
             np.array(s.target),
