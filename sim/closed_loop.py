@@ -20,6 +20,7 @@ from typing import Any, Callable
 import numpy as np
 
 from mission.config import Config
+from mission.errors import ConfigError
 from mission.law import norm, uniform, where_rows
 from mission.model import model_from_config
 from mission.tick import DEPARTURE_THRESHOLD_M, TickModel, carrier_tick, latch_point, passenger_tick, separation_due
@@ -226,32 +227,89 @@ def simulate(
     )
 
 
-def simulate_config(cfg: Config, progress: Callable[[int], None] | None = None, record_every: int = 10) -> ClosedLoopResult:
-    """Run the single scenario of a configuration."""
+def is_mission_config(cfg: Config) -> bool:
+    """True when the configuration file has a ``[mission]`` section: it describes a flight
+    (``marsupial run``), and ``simulate`` models what the flight does (:func:`simulate_config`)."""
+    return "mission" in cfg.model_fields_set
+
+
+def as_flown(cfg: Config) -> tuple[np.ndarray, float]:
+    """The start of the law's carrier [m] and the P2 tolerance [m] of the scenario ``run`` flies.
+
+    In a flight the passenger's law treats the carrier's *dock point* (carrier position +
+    ``mission.dock_offset_ned_m``) as the carrier: it joins the dock point (JOIN), and riding
+    starts there, docked, while the carrier is still at ``scenario.carrier_start`` (the carrier
+    waits for RIDING). The carrier's own law is planar, so its motion does not depend on the
+    offset. P2 is arrival within ``mission.arrival_radius_m``. Raises :class:`ConfigError` for
+    what a flight refuses (dim 2)."""
+    if cfg.scenario.dim != 3:
+        raise ConfigError("scenario.dim", cfg.scenario.dim, "the file has a [mission] section, so it describes a "
+                          "flight, which needs dim = 3 (local NED); remove [mission] to simulate the 2D law")
+    start = np.asarray(cfg.scenario.carrier_start, dtype=float) + np.asarray(cfg.mission.dock_offset_ned_m, dtype=float)
+    return start, cfg.mission.arrival_radius_m
+
+
+def simulate_config(cfg: Config, progress: Callable[[int], None] | None = None, record_every: int = 10,
+                    flown: bool | None = None) -> ClosedLoopResult:
+    """Run the single scenario of a configuration, from the start of riding (t = 0).
+
+    ``flown`` (default: :func:`is_mission_config`) simulates what ``run`` flies (:func:`as_flown`:
+    the dock point as the law's carrier, the passenger docked on it, P2 within the arrival
+    radius); otherwise the paper's scenario as written (``scenario.passenger_start`` relative to
+    the carrier, P2 within ``sim.p2_tolerance_m``).
+    """
     s = cfg.scenario
-    offset = None if s.passenger_start is None else np.asarray(s.passenger_start) - np.asarray(s.carrier_start)
+    flown = is_mission_config(cfg) if flown is None else flown
+    if flown:
+        start, p2_tol = as_flown(cfg)
+        offset = None
+    else:
+        start, p2_tol = np.asarray(s.carrier_start, dtype=float), cfg.sim.p2_tolerance_m
+        offset = None if s.passenger_start is None else np.asarray(s.passenger_start) - np.asarray(s.carrier_start)
     return simulate(
-        model_from_config(cfg), np.asarray(s.carrier_start, dtype=float), duration_s=cfg.sim.duration_s,
+        model_from_config(cfg), start, duration_s=cfg.sim.duration_s,
         dt_s=cfg.sim.dt_s, passenger_offset=offset, record_every=record_every,
-        p1_tolerance_m=cfg.sim.p1_tolerance_m, p2_tolerance_m=cfg.sim.p2_tolerance_m, progress=progress,
+        p1_tolerance_m=cfg.sim.p1_tolerance_m, p2_tolerance_m=p2_tol, progress=progress,
     )
+
+
+def target_reachable(cfg: Config, target: np.ndarray) -> np.ndarray:
+    """Which targets (B, n) the filtered passenger can reach (B,): not inside an obstacle's
+    keep-out disc (radius + ``safety.margin_m``) widened by ``sim.p2_tolerance_m``. A target in
+    there is unreachable by design (the CBF keeps the passenger out), so P2 cannot hold."""
+    obstacles = cfg.scenario.obstacle_set()
+    if len(obstacles) == 0:
+        return np.ones(target.shape[0], dtype=bool)
+    return (obstacles.clearance(target) > cfg.safety.margin_m + cfg.sim.p2_tolerance_m).all(axis=-1)
 
 
 def random_scenarios(cfg: Config, count: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
     """``count`` random (carrier_start, target) pairs [m] that satisfy the paper's assumptions:
     the carrier at the origin, the target at a horizontal distance drawn from
     ``monte_carlo.distance_m`` (always > b c) and, in 3D, a height from ``monte_carlo.height_m``
-    clipped to ``b c`` (planar carrier)."""
+    clipped to ``b c`` (planar carrier). A target the passenger cannot reach (inside an
+    obstacle's keep-out disc, :func:`target_reachable`) is drawn again (the draws of the
+    reachable ones do not change)."""
     rng = np.random.default_rng(seed)
     n = cfg.scenario.dim
     bc = cfg.law.params().separation_distance_m
     lo, hi = cfg.monte_carlo.distance_m
-    dist = rng.uniform(max(lo, bc * 1.05), max(hi, bc * 1.1), count)
-    ang = rng.uniform(0, 2 * np.pi, count)
-    target = np.zeros((count, n))
-    target[:, 0], target[:, 1] = dist * np.cos(ang), dist * np.sin(ang)
-    if n == 3:
-        h_lo, h_hi = cfg.monte_carlo.height_m
-        sign = -1.0 if cfg.scenario.frame == "local_ned" else 1.0
-        target[:, 2] = sign * np.minimum(rng.uniform(h_lo, h_hi, count), 0.95 * bc)
+    h_lo, h_hi = cfg.monte_carlo.height_m
+    sign = -1.0 if cfg.scenario.frame == "local_ned" else 1.0
+
+    def draw(k: int) -> np.ndarray:
+        dist = rng.uniform(max(lo, bc * 1.05), max(hi, bc * 1.1), k)
+        ang = rng.uniform(0, 2 * np.pi, k)
+        target = np.zeros((k, n))
+        target[:, 0], target[:, 1] = dist * np.cos(ang), dist * np.sin(ang)
+        if n == 3:
+            target[:, 2] = sign * np.minimum(rng.uniform(h_lo, h_hi, k), 0.95 * bc)
+        return target
+
+    target = draw(count)
+    for _ in range(1000):
+        bad = ~target_reachable(cfg, target)
+        if not bad.any():
+            break
+        target[bad] = draw(int(bad.sum()))
     return np.zeros((count, n)), target

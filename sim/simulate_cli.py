@@ -12,7 +12,7 @@ from tqdm import tqdm
 
 from mission.config import Config, load_config
 from sim import closed_loop
-from sim.closed_loop import ClosedLoopResult, model_from_config, random_scenarios, simulate_config
+from sim.closed_loop import ClosedLoopResult, as_flown, is_mission_config, model_from_config, random_scenarios, simulate_config
 from mission.plots import Trajectories, plot_run
 
 log = logging.getLogger(__name__)
@@ -41,16 +41,29 @@ def _progress_bar(total_steps: int, desc: str, enabled: bool):
 
 
 def run_monte_carlo(cfg: Config, count: int, seed: int, show_progress: bool) -> dict:
-    """Simulate ``count`` random scenarios in one batch and summarise P1-P3 over them."""
+    """Simulate ``count`` random scenarios in one batch and summarise P1-P3 over them.
+
+    ``worst_cases``: the failing scenarios first, then the largest final passenger-target
+    distances (at most :data:`WORST_SHOWN`), each with its id (``index``; the same seed gives the
+    same scenarios), its parameters (carrier start, target, the target's distance to the nearest
+    obstacle surface) and its summary."""
     starts, targets = random_scenarios(cfg, count, seed)
+    p2_tol = cfg.sim.p2_tolerance_m
+    if is_mission_config(cfg):
+        start, p2_tol = as_flown(cfg)
+        starts = starts + start  # the law's carrier is the dock point, as flown
     steps = int(round(cfg.sim.duration_s / cfg.sim.dt_s))
     bar, update = _progress_bar(steps, f"{count} scenarios", show_progress)
     with bar:
         res = closed_loop.simulate(model_from_config(cfg, target=targets), starts, duration_s=cfg.sim.duration_s,
                        dt_s=cfg.sim.dt_s, record_every=max(steps // 200, 1), p1_tolerance_m=cfg.sim.p1_tolerance_m,
-                       p2_tolerance_m=cfg.sim.p2_tolerance_m, progress=update)
+                       p2_tolerance_m=p2_tol, progress=update)
     ok = res.p1 & res.p2 & res.p3
-    worst = np.argsort(-res.final_passenger_target_distance_m)[:3]
+    failing = np.flatnonzero(~ok)
+    by_distance = [int(i) for i in np.argsort(-res.final_passenger_target_distance_m) if ok[i]]
+    worst = [int(i) for i in failing[:WORST_SHOWN]] if len(failing) else by_distance[:3]
+    obstacles = cfg.scenario.obstacle_set()
+    target_clear = obstacles.clearance(res.target).min(axis=-1) if len(obstacles) else np.full(count, np.nan)
     return {
         "scenarios": count,
         "seed": seed,
@@ -58,13 +71,35 @@ def run_monte_carlo(cfg: Config, count: int, seed: int, show_progress: bool) -> 
         "fraction_p2": float(res.p2.mean()),
         "fraction_p3": float(res.p3.mean()),
         "fraction_all": float(ok.mean()),
-        "max_relative_input_jump_m_s": float(np.nanmax(res.relative_input_jump_m_s)),
-        "max_departure_delay_s": float(np.nanmax(res.departure_delay_s)),
+        "failing": len(failing),
+        "max_relative_input_jump_m_s": _finite_max(res.relative_input_jump_m_s),
+        "max_departure_delay_s": _finite_max(res.departure_delay_s),
         "min_carrier_target_distance_m": float(res.min_carrier_target_distance_m.min()),
         "worst_cases": [
-            {"index": int(i), "target": res.target[i].round(3).tolist(), **res.summary(int(i))} for i in worst
+            {"index": i, "carrier_start": starts[i].round(3).tolist(), "target": res.target[i].round(3).tolist(),
+             "target_obstacle_clearance_m": None if np.isnan(target_clear[i]) else round(float(target_clear[i]), 3),
+             **res.summary(i)} for i in worst
         ],
     }
+
+
+WORST_SHOWN = 10
+
+
+def _finite_max(values: np.ndarray) -> float | None:
+    """Largest finite value (None when no scenario has one, e.g. none separated)."""
+    finite = values[np.isfinite(values)]
+    return float(finite.max()) if finite.size else None
+
+
+def format_case(w: dict) -> str:
+    """One worst case on one line: id, parameters, verdict."""
+    held = " ".join(f"{p.upper()} {'ok' if w[p] else 'FAILED'}" for p in ("p1", "p2", "p3"))
+    clear = "" if w["target_obstacle_clearance_m"] is None else f", target {w['target_obstacle_clearance_m']:.2f} m from an obstacle"
+    sep = w["separation_time_s"]
+    return (f"  #{w['index']:<5} carrier start {w['carrier_start']}, target {w['target']}{clear}: "
+            f"separation {'never' if sep is None else f'at t = {sep:.2f} s'}, "
+            f"final |e_pt| {w['final_passenger_target_distance_m']:.4f} m; {held}")
 
 
 @click.command("simulate")
@@ -82,10 +117,27 @@ def simulate(config: str, as_json: bool, plot_path: str | None, count: int | Non
     closest carrier-target approach, obstacle clearance, peak speed, and P1-P3 of the paper's
     Definition 1: P1 |e_pc| <= sim.p1_tolerance_m before separation and the passenger leaves
     (> 0.1 m) after it; P2 the final |e_pt| <= sim.p2_tolerance_m; P3 |e_tc| > 0 throughout.
+    Time t = 0 is the start of riding (the passenger docked), as in the paper and in `run`'s
+    summary.
+
+    \b
+    A file with a [mission] section describes a flight: simulate then models what `run` flies
+    (the passenger rides the dock point, carrier + mission.dock_offset_ned_m, from the start of
+    riding; P2 within mission.arrival_radius_m), so both give the same P1-P3 verdict.
+    With --monte-carlo, random targets the passenger cannot reach (inside an obstacle's keep-out
+    disc: radius + safety.margin_m + sim.p2_tolerance_m) are drawn again; the failing scenarios
+    (or else the worst) are printed with their id and parameters.
+
     Exit code 0 when P1-P3 hold (for every scenario with --monte-carlo), 1 otherwise, 2 on a bad
     config.
     """
     cfg = load_config(config)
+    if is_mission_config(cfg) and not as_json:
+        start, p2_tol = as_flown(cfg)
+        click.echo(f"{Path(config).name} has a [mission] section: simulating what `marsupial run` flies: the passenger "
+                   f"rides the dock point (carrier + mission.dock_offset_ned_m, starting at {np.round(start, 3).tolist()}) "
+                   f"from t = 0, the start of riding (take-off and JOIN are not simulated); P2 = within "
+                   f"mission.arrival_radius_m = {p2_tol:g} m", err=True)
     show = not no_progress and sys.stderr.isatty() and not as_json or (not no_progress and count is not None)
     if count is not None:
         report = run_monte_carlo(cfg, count, seed, show)
@@ -94,8 +146,13 @@ def simulate(config: str, as_json: bool, plot_path: str | None, count: int | Non
         else:
             click.echo(f"{count} scenarios (seed {seed}): P1 {report['fraction_p1']:.1%}  P2 {report['fraction_p2']:.1%}  "
                        f"P3 {report['fraction_p3']:.1%}  all {report['fraction_all']:.1%}")
-            click.echo("worst final passenger-target distances: "
-                       + ", ".join(f"{w['final_passenger_target_distance_m']:.4f} m" for w in report["worst_cases"]))
+            if report["failing"]:
+                shown = min(report["failing"], WORST_SHOWN)
+                click.echo(f"{report['failing']} failing scenarios (first {shown}; id = index, same --seed replays them):")
+            else:
+                click.echo("largest final passenger-target distances (id = index, same --seed replays them):")
+            for w in report["worst_cases"]:
+                click.echo(format_case(w))
         return 0 if report["fraction_all"] == 1.0 else 1
     steps = int(round(cfg.sim.duration_s / cfg.sim.dt_s))
     bar, update = _progress_bar(steps, Path(config).stem, show)

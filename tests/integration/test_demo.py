@@ -7,6 +7,12 @@ import sys
 
 import pytest
 
+from mission.config import load_config
+from sim.closed_loop import simulate_config
+from tests.conftest import CONFIGS
+
+DEMO = CONFIGS / "demo.toml"
+
 pytestmark = pytest.mark.slow
 
 
@@ -25,6 +31,11 @@ def test_demo_flies_p1_p3_with_plot(tmp_path):
     assert (tmp_path / "flight.png").stat().st_size > 20_000
     assert "P1-P3 held" in out.stdout + out.stderr
     assert (tmp_path / "logs" / "pair0" / "flight.tlog").stat().st_size > 10_000
+    # `simulate` of the same mission config models what was flown: same verdict, same separation
+    sim = simulate_config(load_config(DEMO)).summary()
+    assert (sim["p1"], sim["p2"], sim["p3"]) == (s["p1"], s["p2"], s["p3"])
+    assert sim["separation_time_s"] == pytest.approx(s["separation_time_s"], abs=0.5)
+    assert sim["carrier_target_distance_at_separation_m"] == pytest.approx(s["carrier_target_distance_at_separation_m"], abs=0.01)
 
 
 def test_three_pairs_fly_at_once_on_one_network(tmp_path):
