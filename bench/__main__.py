@@ -1,4 +1,4 @@
-"""``marsupial bench`` / ``python -m bench``: every benchmark of issue 7 in one table, plus JSON.
+"""``marsupial bench`` / ``python -m bench``: every benchmark in one table, plus JSON.
 
 Sections (``--section NAME``, repeatable; all by default):
 
@@ -16,8 +16,7 @@ Sections (``--section NAME``, repeatable; all by default):
               the ``e2e``/``stream`` controller runs).
 
 Figures are wall-clock times on a shared machine: the table starts with the machine and its load
-average, and a floor measured in the same run stands beside the end-to-end figures. Each target of
-issue 7 is printed next to its figure with ``pass`` or ``MISS``.
+average, and a floor measured in the same run stands beside the end-to-end figures. Each target is printed next to its figure with ``pass`` or ``MISS``.
 """
 from __future__ import annotations
 
@@ -271,7 +270,7 @@ def format_table(info: dict[str, Any], rows: list[Row]) -> str:
 @click.option("--json", "json_path", type=click.Path(dir_okay=False), default=str(Path("out") / "bench.json"),
               show_default=True, help="Where to write every figure as JSON.")
 def bench(quick: bool, sections: tuple[str, ...], json_path: str) -> int:
-    """Benchmarks of the controller against its floor and its targets (issue 7).
+    """Benchmarks of the controller against its floor and its targets.
 
     Prints one table (machine, figure, value, target, pass/MISS) and writes the raw figures as
     JSON. Sections: tick (law + safety), e2e (Zenoh sample -> MAVLink setpoint, beside the

@@ -1,4 +1,4 @@
-"""The integrated demo as a benchmark (issue 7, sections 4 and 6).
+"""The integrated demo as a benchmark (``bench`` sections demo and memory).
 
 ``marsupial demo`` (:func:`sim.demo.run_demo`: mock vehicle, carrier simulator and ``marsupial
 run`` as three processes over UDP and Zenoh, plus the demo's Zenoh router in this process) at a

@@ -1,4 +1,4 @@
-"""Benchmarks of the mock vehicle (issue 3). Prints a table; never run as a test.
+"""Benchmarks of the mock vehicle. Prints a table; never run as a test.
 
 1. Setpoint throughput: a separate sender process blasts SET_POSITION_TARGET_LOCAL_NED at a
    fixed rate for a second; the vehicle (in this process, speed 1) must accept every one of them

@@ -24,7 +24,7 @@ The passenger is flown through a *reference*: the paper's closed loop (``mission
 same functions as the simulator) integrated in error coordinates about the dock point, which the
 vehicle tracks with ``u = u_ref + track_gain (x_ref - x_p)``. The reference sits exactly on the
 dock while riding, so separation happens at ``b c`` whatever the vehicle's tracking lag
-(DESIGN.md fact 3), and its departure is smooth. The carrier's state is needed until
+(README, "Facts about the law" 3), and its departure is smooth. The carrier's state is needed until
 separation; afterwards the anchor is latched and a lost carrier only costs P3 monitoring.
 
 Frames: local NED [m], [m/s]; times [s] on the controller's clock.

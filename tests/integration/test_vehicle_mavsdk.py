@@ -1,5 +1,5 @@
 """MAVSDK, an independent client nobody here wrote, connects to the mock vehicle, arms it and
-flies it offboard, as it flew a real PX4 SITL (../shared/REFERENCE.md, last section)."""
+flies it offboard, as MAVSDK flies a real PX4 SITL."""
 from __future__ import annotations
 
 import socket
