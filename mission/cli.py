@@ -23,6 +23,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "plot": ("mission.run_cli", "plot"),
     "demo": ("sim.demo", "demo"),
     "bench": ("bench.__main__", "bench"),
+    "config": ("mission.config_cli", "config_command"),
 }
 
 SUMMARIES = {
@@ -33,6 +34,7 @@ SUMMARIES = {
     "plot": "Draw the paper-style figures from a flight log directory.",
     "demo": "Mock vehicle + carrier simulator + mission, on embedded defaults.",
     "bench": "Benchmarks: print a table and write JSON.",
+    "config": "Every configuration field: type, default, rule, meaning and unit (--schema: JSON).",
 }
 
 

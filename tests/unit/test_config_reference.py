@@ -1,0 +1,38 @@
+"""The configuration reference: every field documented with a unit, the README in step."""
+from __future__ import annotations
+
+import re
+
+from click.testing import CliRunner
+
+from mission.config_cli import config_command
+from mission.config_reference import DOCS, fields, markdown_table
+from tests.conftest import CONFIGS, ROOT
+
+
+def test_every_field_has_a_meaning_with_a_unit():
+    rows = fields()
+    assert len(rows) > 60
+    missing = [r["key"] for r in rows if not re.match(r"^\[[^\]]+\] \S", r["doc"])]
+    assert not missing, ("fields without a '[unit] meaning' doc: add description='[unit] ...' to the Field in "
+                         f"mission/config.py or an entry in mission/config_reference.py DOCS: {missing}")
+
+
+def test_no_doc_for_a_field_that_does_not_exist():
+    keys = {r["key"] for r in fields()}
+    assert not set(DOCS) - keys, set(DOCS) - keys
+
+
+def test_readme_table_is_the_generated_one():
+    text = (ROOT / "README.md").read_text()
+    block = text.split("<!-- config-reference:start -->\n", 1)[1].split("\n<!-- config-reference:end -->", 1)[0]
+    assert block == markdown_table(), "README out of step: paste `marsupial config --markdown` between the markers"
+
+
+def test_config_command_prints_reference_schema_and_effective_values():
+    runner = CliRunner()
+    out = runner.invoke(config_command, [], standalone_mode=False).output
+    assert "mission.connect_timeout_s  (float, default 20.0, > 0)" in out and "[s] how long `run` waits" in out
+    assert '"$defs"' in runner.invoke(config_command, ["--schema"], standalone_mode=False).output
+    eff = runner.invoke(config_command, [str(CONFIGS / "demo.toml")], standalone_mode=False).output
+    assert "scenario.target = [24.0, 18.0, -5.0]" in eff and "mission.connect_timeout_s = 20.0" in eff
