@@ -29,6 +29,10 @@ COLUMNS = (
 )
 
 
+CLOCK_NOTE = ("times here and in record.csv (t_s) are on the mission clock [s] since the controller started; "
+              "summary.json counts from riding_start_s, the start of riding (t = 0 as in the paper)")
+
+
 def _vec(v: np.ndarray | None) -> list[float]:
     return [float("nan")] * 3 if v is None else [float(x) for x in v]
 
@@ -61,11 +65,13 @@ class FlightRecorder:
         """Close the CSV, add ``info_update`` (e.g. the latched anchor) to ``mission.json`` and
         write ``summary.json`` (returned)."""
         self._file.close()
-        if info_update:
-            info = json.loads((self.dir / "mission.json").read_text())
-            info.update(info_update)
-            (self.dir / "mission.json").write_text(json.dumps(info, indent=2))
+        info = json.loads((self.dir / "mission.json").read_text())
+        info.update(info_update or {})
+        (self.dir / "mission.json").write_text(json.dumps(info, indent=2))
         summary = summarise(self.dir)
+        info["clock"] = CLOCK_NOTE
+        info["riding_start_s"] = summary.get("riding_start_s")
+        (self.dir / "mission.json").write_text(json.dumps(info, indent=2))
         if outcome:
             summary.update(outcome)
         (self.dir / "summary.json").write_text(json.dumps(summary, indent=2))

@@ -78,7 +78,7 @@ class PairProgress:
             width = max(len(n) for n in names)
             for i, name in enumerate(names):
                 self.bars[name] = tqdm(total=len(PHASE_STEPS), desc=f"{name:<{width}}", position=i, file=self.out,
-                                       leave=True, bar_format="{desc} {n_fmt}/{total_fmt} |{bar:20}| {elapsed} {postfix}")
+                                       leave=True, bar_format="{desc} {n_fmt}/{total_fmt} |{bar:20}| {elapsed}{postfix}")
 
     def update(self, pair: str, phase: str, line: str) -> None:
         with self._lock:
@@ -191,16 +191,15 @@ ROWS = [
 ]
 
 PROPERTY_TEXT = {
-    "p1": "P1 separation: the vehicle stayed within mission.dock_tolerance_m of the dock while riding, "
-          "and left it after separation",
-    "p2": "P2 navigation: the vehicle arrived within mission.arrival_radius_m of the target",
-    "p3": "P3: the carrier never reached the target",
+    "p1": "P1 (ride within mission.dock_tolerance_m of the dock point, then separate and leave it)",
+    "p2": "P2 (arrive within mission.arrival_radius_m of the target)",
+    "p3": "P3 (the carrier never reaches the target)",
 }
 
 
 def outcome_text(s: dict) -> str:
-    """``done (0)`` or ``abort:<reason> (<code>)``: the mission process's own verdict, which is
-    about the flight (it completed or aborted), not about P1-P3."""
+    """``done (0)`` or ``<reason> (<code>)``: the mission process's own verdict, which is about
+    the flight (it completed or aborted), not about P1-P3."""
     code = s.get("mission_exit_code")
     phase = s.get("phase")
     if phase == "DONE":
@@ -211,27 +210,31 @@ def outcome_text(s: dict) -> str:
 
 
 def verdict_lines(summaries: list[dict]) -> list[str]:
-    """One line per pair that failed, naming the properties that did not hold and why they matter."""
+    """One line per pair that failed, naming the properties that did not hold and why."""
     lines = []
     for s in summaries:
         failed = [k for k in ("p1", "p2", "p3") if not s.get(k)]
         if not failed:
             continue
-        flight = "the mission completed, but" if s.get("phase") == "DONE" else f"the mission ended in {outcome_text(s)};"
-        lines.append(f"{s['pair']}: {flight} did not hold: " + "; ".join(PROPERTY_TEXT[k] for k in failed))
+        if s.get("phase") == "DONE":
+            flight = "the mission completed, but"
+        elif s.get("reason"):
+            flight = f"the mission aborted ({s['reason']}: {s.get('detail', '')}), so"
+        else:
+            flight = f"the mission left no summary (exit code {s.get('mission_exit_code')}), so"
+        lines.append(f"{s['pair']}: {flight} these did not hold: " + "; ".join(PROPERTY_TEXT[k] for k in failed))
     return lines
 
 
 def format_table(summaries: list[dict]) -> str:
     width = max(len(r[0]) for r in ROWS)
-    head = f"{'':<{width}}  " + "  ".join(f"{s['pair']:>10}" for s in summaries)
+    cells = {key: [outcome_text(s) if key == "outcome" else s.get(key) for s in summaries] for _, key in ROWS}
+    text = {key: [f"{v:.3f}" if isinstance(v, float) else str(v) for v in values] for key, values in cells.items()}
+    col = max([10] + [len(s["pair"]) for s in summaries] + [len(v) for values in text.values() for v in values])
+    head = f"{'':<{width}}  " + "  ".join(f"{s['pair']:>{col}}" for s in summaries)
     lines = [head, "-" * len(head)]
     for label, key in ROWS:
-        cells = []
-        for s in summaries:
-            v = outcome_text(s) if key == "outcome" else s.get(key)
-            cells.append(f"{v:>10.3f}" if isinstance(v, float) else f"{str(v):>10}")
-        lines.append(f"{label:<{width}}  " + "  ".join(cells))
+        lines.append(f"{label:<{width}}  " + "  ".join(f"{v:>{col}}" for v in text[key]))
     return "\n".join(lines)
 
 

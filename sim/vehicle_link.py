@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from mission.mavlink_env import mavlink
+from mission.errors import LinkError
 from mission.port_holder import is_addr_in_use, port_in_use
 
 SIGNING_EPOCH = datetime.datetime(2015, 1, 1, tzinfo=datetime.timezone.utc)
@@ -77,7 +78,9 @@ class VehicleLink:
             self.sock.close()
             if is_addr_in_use(exc):
                 raise port_in_use(f"mock vehicle {name} link", *bind.address) from None
-            raise
+            host, port = bind.address
+            raise LinkError(f"cannot open mock vehicle {name} link on UDP {host}:{port}: {exc.strerror} "
+                            "(is the host an address of this machine?)") from None
         self.sock.setblocking(False)
         self.target: tuple[str, int] | None = target.address if target else None
         self.latched = False
