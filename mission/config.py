@@ -169,14 +169,68 @@ class ZenohSection(_Model):
         "'0/odom/nav_msgs::msg::dds_::Odometry_/*' (rmw_zenoh) with encoding 'cdr'")
 
 
-class CarrierSection(_Model):
-    """The carrier simulator (``marsupial carrier``)."""
+class CarrierMavlinkSection(_Model):
+    """``carrier.backend = "mavlink"``: a PX4 rover or boat, flown through the passenger's link code."""
 
+    url: str = Field("udpin:127.0.0.1:14541", description="PX4 instance i sends its onboard link to 14540 + i")
+    target_system: int | None = Field(None, ge=1, le=255, description="the rover's MAV_SYS_ID (PX4 instance i: i + 1)")
+    source_system: int | None = Field(None, ge=1, le=255, description="our system id; default: target_system, "
+                                      "or 1 (PX4 registers an onboard controller of its own system only)")
+    source_component: int = Field(191, ge=1, le=255)
+    signing_key_file: str | None = None
+    heartbeat_timeout_s: float = Field(3.0, gt=0)
+    prestream_s: float = Field(1.0, ge=0.2, description="[s] setpoints streamed before OFFBOARD is asked")
+    offset_ned_m: list[float] = Field([0.0, 0.0, 0.0], description="[m] the vehicle's local origin in the "
+                                      "shared frame (added to LOCAL_POSITION_NED)")
+    shared_origin: list[float] | None = Field(None, description="lat [deg], lon [deg], alt [m] of the shared "
+                                              "frame's origin: the offset then comes from the vehicle's EKF origin")
+
+
+class CarrierRos2Section(_Model):
+    """``carrier.backend = "ros2"``: a ROS 2 robot over Zenoh (nav_msgs/Odometry in, geometry_msgs/Twist out, CDR)."""
+
+    key_form: Literal["ros2dds", "rmw_zenoh"] = Field("ros2dds", description="zenoh-bridge-ros2dds keys "
+                                                      "('<ns>/odom') or rmw_zenoh keys ('<domain>/<ns>/odom/<type>/<hash>')")
+    namespace: str = Field("", pattern=r"^[A-Za-z0-9_/]*$")
+    domain_id: int = Field(0, ge=0, le=232)
+    odom_topic: str = Field("odom", pattern=r"^[A-Za-z0-9_/]+$")
+    cmd_vel_topic: str = Field("cmd_vel", pattern=r"^[A-Za-z0-9_/]+$")
+    offset_ned_m: list[float] = Field([0.0, 0.0, 0.0], description="[m] the odom frame's origin in the shared frame")
+
+
+class CarrierSection(_Model):
+    """The carrier-side controller (``marsupial carrier``) and its backend."""
+
+    backend: Literal["sim", "mavlink", "ros2"] = "sim"
     rate_hz: float = Field(30.0, gt=0, le=1000)
     max_speed_m_s: float = Field(3.0, gt=0)
     passenger_timeout_s: float = Field(
         1.0, gt=0, description="[s] simulated; a passenger status older than this (or a lost "
         "liveliness token) stops a carrier that is approaching the target")
+    state_timeout_s: float = Field(0.5, gt=0, le=10, description="[s] own state older than this stops the carrier")
+    p3_margin_m: float = Field(0.5, gt=0, description="[m] the P3 guard keeps the carrier at least b c - margin "
+                               "from the target, whatever the passenger does")
+    brake_decel_m_s2: float | None = Field(None, gt=0, description="[m/s^2] braking the guard plans with; "
+                                           "default safety.carrier_max_accel_m_s2, else 1")
+    brake_delay_s: float = Field(0.0, ge=0, le=5, description="[s] the carrier's response delay the guard allows for")
+    kinematics: Literal["holonomic", "diff_drive", "ackermann"] = "holonomic"
+    heading_gain: float = Field(2.0, gt=0, description="[1/s] tracking law: yaw rate per heading error")
+    max_yaw_rate_rad_s: float = Field(1.0, gt=0)
+    min_speed_fraction: float = Field(0.3, ge=0, le=1, description="Ackermann: speed kept while misaligned")
+    wheelbase_m: float = Field(0.3, gt=0)
+    max_steer_rad: float = Field(0.5, gt=0, lt=1.5)
+    start_yaw_rad: float | None = Field(None, description="[rad] sim backend: initial heading (default: towards the target)")
+    mavlink: CarrierMavlinkSection = CarrierMavlinkSection()
+    ros2: CarrierRos2Section = CarrierRos2Section()
+
+    @model_validator(mode="after")
+    def _vectors(self) -> "CarrierSection":
+        for name, v in (("mavlink.offset_ned_m", self.mavlink.offset_ned_m), ("ros2.offset_ned_m", self.ros2.offset_ned_m)):
+            if len(v) != 3:
+                raise ConfigError(f"carrier.{name}", v, "must have 3 components")
+        if self.mavlink.shared_origin is not None and len(self.mavlink.shared_origin) != 3:
+            raise ConfigError("carrier.mavlink.shared_origin", self.mavlink.shared_origin, "must be [lat, lon, alt]")
+        return self
 
 
 class VehicleSection(_Model):
@@ -210,6 +264,11 @@ class Config(_Model):
             eta=s.eta,
             passenger_start=None if s.passenger_start is None else np.array(s.passenger_start),
         )
+        if not self.carrier.p3_margin_m > self.sim.departure_margin_m:
+            raise ConfigError("carrier.p3_margin_m", self.carrier.p3_margin_m,
+                              "must exceed sim.departure_margin_m, or the carrier never reaches the separation distance")
+        if self.carrier.p3_margin_m >= self.law.b * self.law.c:
+            raise ConfigError("carrier.p3_margin_m", self.carrier.p3_margin_m, "must be < b c")
         if len(self.mission.dock_offset_ned_m) != 3:
             raise ConfigError("mission.dock_offset_ned_m", self.mission.dock_offset_ned_m, "must have 3 components")
         return self

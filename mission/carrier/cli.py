@@ -1,0 +1,172 @@
+"""``marsupial carrier CONFIG``: the carrier-side controller on the backend of ``carrier.backend``.
+
+``sim`` (the built-in kinematic robot), ``mavlink`` (a PX4 rover or boat) or ``ros2`` (a ROS 2
+robot through Zenoh). :func:`main` is the library entry point; the click command only parses.
+"""
+from __future__ import annotations
+
+import json
+import logging
+import signal
+import threading
+from contextlib import ExitStack
+from pathlib import Path
+from types import FrameType
+from typing import Any
+
+import click
+import numpy as np
+import zenoh
+
+from mission.carrier.controller import CarrierBackend, CarrierController
+from mission.carrier_bridge import describe_endpoints, keys, open_session
+from mission.clock import Clock, ScaledClock
+from mission.config import Config, load_config, with_overrides
+
+log = logging.getLogger(__name__)
+
+
+def open_backend(cfg: Config, clock: Clock, session: zenoh.Session, stack: ExitStack) -> CarrierBackend:
+    """The backend of ``cfg.carrier.backend``, opened; closed by ``stack``."""
+    backend: CarrierBackend
+    if cfg.carrier.backend == "sim":
+        from mission.carrier.sim_robot import SimRobot
+
+        backend = SimRobot(cfg, clock)
+    elif cfg.carrier.backend == "mavlink":
+        from mission.carrier.mavlink_vehicle import MavlinkCarrier
+
+        backend = MavlinkCarrier(cfg, clock)
+    else:
+        from mission.carrier.ros2_robot import Ros2Carrier
+
+        backend = Ros2Carrier(cfg, clock, session)
+    stack.callback(backend.close)
+    return backend
+
+
+def main(cfg: Config, speed: float = 1.0, duration_s: float | None = None, stop_event: threading.Event | None = None,
+         summary_path: str | Path | None = None) -> int:
+    """Open the session of ``cfg.zenoh`` and the backend, run the controller until stopped;
+    write the summary (JSON) to ``summary_path`` if given; return exit code 0.
+
+    SIGINT/SIGTERM set the stop event when called from the main thread. Raises
+    :class:`~mission.errors.BusError` if Zenoh cannot open, :class:`~mission.errors.LinkError`
+    if the vehicle link cannot open.
+    """
+    stop = stop_event or threading.Event()
+    restore: dict[int, Any] = {}
+    if threading.current_thread() is threading.main_thread():
+        def _stop(signum: int, _frame: FrameType | None) -> None:
+            log.info("carrier: %s, stopping", signal.Signals(signum).name)
+            stop.set()
+
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            restore[sig] = signal.signal(sig, _stop)
+    try:
+        clock = ScaledClock(speed)
+        with ExitStack() as stack:
+            session = open_session(cfg.zenoh)
+            stack.callback(session.close)
+            backend = open_backend(cfg, clock, session, stack)
+            with CarrierController(cfg, clock, session, backend) as ctl:
+                try:
+                    ctl.run(stop, duration_s)
+                finally:
+                    summary = ctl.summary()
+                    log.info("carrier %s stopped in mode %s; closest approach to the target %s m, braking distance %s m",
+                             ctl.pair, summary["mode"], _fmt(summary["closest_target_distance_m"]),
+                             _fmt(summary["braking_distance_m"]))
+                    if summary_path is not None:
+                        Path(summary_path).parent.mkdir(parents=True, exist_ok=True)
+                        Path(summary_path).write_text(json.dumps(summary, indent=2, default=_jsonable) + "\n")
+    finally:
+        for sig, handler in restore.items():
+            signal.signal(sig, handler)
+    return 0
+
+
+def _fmt(value: float | None) -> str:
+    return "-" if value is None else f"{value:.3f}"
+
+
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, np.generic):
+        return value.item()
+    raise TypeError(f"not JSON serialisable: {type(value).__name__}")
+
+
+@click.command("carrier", context_settings={"help_option_names": ["-h", "--help"]})
+@click.argument("config", type=click.Path(dir_okay=False))
+@click.option("--backend", type=click.Choice(["sim", "mavlink", "ros2"]), default=None,
+              help="The carrier robot: built-in kinematic robot, PX4 rover/boat over MAVLink, ROS 2 robot over "
+                   "Zenoh [default: carrier.backend, sim].")
+@click.option("--speed", type=click.FloatRange(min=0, min_open=True), default=1.0, show_default=True,
+              help="Clock speed factor (like PX4's SIH speed factor); use the mock vehicle's.")
+@click.option("--pair", default=None, help="Pair name: keys marsupial/<pair>/... [default: zenoh.pair]")
+@click.option("--zenoh-listen", "listen", multiple=True, metavar="ENDPOINT",
+              help="Zenoh listen endpoint, e.g. tcp/127.0.0.1:7448 (repeatable; replaces zenoh.listen).")
+@click.option("--zenoh-connect", "connect", multiple=True, metavar="ENDPOINT",
+              help="Zenoh endpoint to connect to (repeatable; replaces zenoh.connect).")
+@click.option("--encoding", type=click.Choice(["json", "cdr"]), default=None,
+              help="Carrier state encoding: JSON or ROS 2 nav_msgs/Odometry CDR [default: zenoh.encoding].")
+@click.option("--rate", type=click.FloatRange(min=0, min_open=True, max=1000), default=None, metavar="HZ",
+              help="Control/publish rate in simulated Hz [default: carrier.rate_hz, 30].")
+@click.option("--mavlink", "mavlink_url", default=None, metavar="URL",
+              help="MAVLink URL of the carrier vehicle (mavlink backend) [default: carrier.mavlink.url].")
+@click.option("--duration", type=click.FloatRange(min=0, min_open=True), default=None, metavar="S",
+              help="Stop after this many simulated seconds [default: run until SIGINT/SIGTERM].")
+@click.option("--summary", "summary_path", type=click.Path(dir_okay=False), default=None, metavar="PATH",
+              help="Write the carrier's summary (closest approach, braking distance, guard activity) as JSON.")
+def carrier_command(config: str, backend: str | None, speed: float, pair: str | None, listen: tuple[str, ...],
+                    connect: tuple[str, ...], encoding: str | None, rate: float | None, mavlink_url: str | None,
+                    duration: float | None, summary_path: str | None) -> int:
+    """Run the carrier-side controller of CONFIG (a TOML file).
+
+    The carrier waits until the passenger's published phase is RIDING, then drives towards
+    scenario.target with the paper's law u_c = k_c e_tc (planar, CBF obstacle filter,
+    carrier.max_speed_m_s, a tracking law for diff-drive/Ackermann robots), and stops when the
+    phase says SEPARATED or later (scenario.carrier_mode = "remark1": keeps its velocity of that
+    instant). It stops if the passenger goes silent or vanishes before separation, or if its own
+    state goes stale. Whatever the passenger says, the P3 guard keeps it at least
+    b c - carrier.p3_margin_m from the target.
+
+    It publishes its state (local NED) on marsupial/<pair>/carrier/state at --rate and holds
+    the token marsupial/<pair>/carrier/alive. Exit 0 on SIGINT/SIGTERM or after --duration;
+    2 on a configuration error; 3 if the vehicle link cannot open; 4 if Zenoh cannot start.
+    """
+    cfg = load_config(config)
+    cfg = with_overrides(cfg, {
+        "carrier.backend": backend,
+        "zenoh.pair": pair,
+        "zenoh.listen": list(listen) if listen else None,
+        "zenoh.connect": list(connect) if connect else None,
+        "zenoh.encoding": encoding,
+        "carrier.rate_hz": rate,
+        "carrier.mavlink.url": mavlink_url,
+    })
+    click.echo(startup_line(cfg, speed), err=True)
+    return main(cfg, speed, duration, summary_path=summary_path)
+
+
+def startup_line(cfg: Config, speed: float) -> str:
+    """What ``marsupial carrier`` says at start-up: pair, backend, endpoint, mode, what it waits for."""
+    k = keys(cfg.zenoh.pair)
+    c = cfg.carrier
+    plan = {"stop": "stops at separation", "remark1": "keeps its own plan after separation (Remark 1)"}
+    robot = {"sim": "built-in kinematic robot",
+             "mavlink": f"PX4 vehicle on {c.mavlink.url} (sysid {c.mavlink.target_system or 'first PX4 heard'})",
+             "ros2": f"ROS 2 robot, {c.ros2.key_form} keys {ros2_keys_text(cfg)}"}[c.backend]
+    start = np.round(np.asarray(cfg.scenario.carrier_start, dtype=float), 2).tolist()
+    return (f"carrier {cfg.zenoh.pair}: {robot} ({c.kinematics}); publishing {k.carrier_state} ({cfg.zenoh.encoding}, "
+            f"{c.rate_hz:g} Hz) on {describe_endpoints(cfg.zenoh)}; mode {cfg.scenario.carrier_mode} "
+            f"({plan[cfg.scenario.carrier_mode]}); P3 guard at {cfg.law.b * cfg.law.c - c.p3_margin_m:g} m from the "
+            f"target; at {start} NED [m], waiting for the passenger to ride (phase RIDING on {k.passenger_phase}); "
+            f"clock x{speed:g}")
+
+
+def ros2_keys_text(cfg: Config) -> str:
+    from mission.carrier.ros2_link import ros2_topics
+
+    t = ros2_topics(cfg.carrier.ros2)
+    return f"odom {t.odom_sub}, cmd_vel {t.cmd_vel_pub}"

@@ -1,0 +1,295 @@
+"""The carrier-side control loop: own state in, the paper's carrier law, the P3 guard and the
+tracking law, a command out to the backend, the carrier's state out on Zenoh.
+
+Every period ``1 / carrier.rate_hz`` [s] of the injected clock the controller
+
+1. lets the backend advance (the built-in kinematic robot integrates its held command; a real
+   vehicle moves on its own) and reads the carrier's own state (shared local NED frame);
+2. updates its mode from the passenger's newest status (:mod:`mission.carrier.modes`);
+3. decides the command: :func:`mission.tick.carrier_tick` (paper eq. 4, CBF filter, speed and
+   acceleration limits), then :func:`~mission.carrier.tracking.track` (what the robot can do),
+   then the P3 guard (:mod:`mission.carrier.guard`), whatever the mode;
+4. sends it to the backend and publishes a :class:`~mission.wire.CarrierState` for the passenger.
+
+Failsafes (each a stop: a zero command, still sent, so a PX4 vehicle stays in OFFBOARD and brakes)::
+
+    own state missing or older than carrier.state_timeout_s  -> stop, publish nothing (the
+                                                                passenger's carrier_timeout fires)
+    passenger lost before separation                         -> PAUSED (stop) until it rides again
+    backend not under our control (vehicle lost, pilot took over, not armed/OFFBOARD yet)
+                                                             -> stop commanding motion; logged
+"""
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+import threading
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import numpy as np
+import zenoh
+
+from mission.carrier.guard import GuardParams, P3Guard
+from mission.carrier.modes import CarrierMode, PassengerView, next_mode
+from mission.carrier.tracking import Tracked, TrackingParams, heading_of, track
+from mission.carrier_bridge import CarrierPublisher, PassengerFeed
+from mission.clock import Clock, Periodic
+from mission.config import Config
+from mission.tick import TickModel, carrier_tick
+from mission.wire import CarrierState
+
+log = logging.getLogger(__name__)
+
+STOP = Tracked(0.0, 0.0, 0.0, np.zeros(2), np.zeros(2))
+
+
+@dataclass(frozen=True)
+class OwnState:
+    """The carrier's own state: t_s [s] clock time of the measurement; position_ned_m (3,) [m]
+    and velocity_ned_m_s (3,) [m/s] in the shared local NED frame; yaw_rad [rad] or None."""
+
+    t_s: float
+    position_ned_m: np.ndarray
+    velocity_ned_m_s: np.ndarray
+    yaw_rad: float | None
+
+
+class CarrierBackend(Protocol):
+    """What the controller needs of a carrier robot (sim, mavlink, ros2)."""
+
+    name: str
+
+    def advance(self, dt_s: float) -> None:
+        """Move ``dt_s`` [s] under the held command (the built-in robot; no-op for real ones)."""
+
+    def own_state(self) -> OwnState | None:
+        """The newest own state, or None before the first."""
+
+    def control_fault(self) -> str | None:
+        """Why the vehicle does not take our commands now (None: it does)."""
+
+    def command(self, cmd: Tracked) -> None:
+        """Send (or hold) the command: a setpoint velocity, or forward speed and yaw rate."""
+
+    def close(self) -> None:
+        """Leave the vehicle safe and release what was opened."""
+
+
+def carrier_model(cfg: Config) -> TickModel:
+    """The tick model of the carrier: the config's, with the carrier's speed limit
+    ``min(carrier.max_speed_m_s, safety.carrier_max_speed_m_s)`` [m/s]."""
+    from sim.closed_loop import model_from_config  # the one config -> model builder
+
+    model = model_from_config(cfg)
+    limit = cfg.carrier.max_speed_m_s
+    if model.carrier_safety.max_speed_m_s is not None:
+        limit = min(limit, model.carrier_safety.max_speed_m_s)
+    return dataclasses.replace(model, carrier_safety=dataclasses.replace(model.carrier_safety, max_speed_m_s=limit))
+
+
+def guard_params(cfg: Config) -> GuardParams:
+    """The P3 guard of ``cfg``: radius ``b c - carrier.p3_margin_m`` [m]; it plans with the
+    carrier's response delay plus one control period (a command is held that long)."""
+    decel = cfg.carrier.brake_decel_m_s2 or cfg.safety.carrier_max_accel_m_s2 or 1.0
+    return GuardParams(cfg.law.b * cfg.law.c - cfg.carrier.p3_margin_m, decel, cfg.carrier.brake_delay_s,
+                       1.0 / cfg.carrier.rate_hz)
+
+
+def tracking_params(cfg: Config) -> TrackingParams:
+    c = cfg.carrier
+    return TrackingParams(c.kinematics, c.heading_gain, c.max_yaw_rate_rad_s, c.min_speed_fraction, c.wheelbase_m,
+                          c.max_steer_rad)
+
+
+def _pad3(v: np.ndarray) -> np.ndarray:
+    """A (2,) or (3,) vector as (3,) (a 2D scenario's carrier sits at down = 0)."""
+    v = np.asarray(v, dtype=float)
+    return np.concatenate([v, np.zeros(3 - v.shape[0])]) if v.shape[0] < 3 else v
+
+
+class CarrierController:
+    """The carrier of the pair ``cfg.zenoh.pair`` driving ``backend``, on an open Zenoh ``session``.
+
+    ``clock``: the injected clock. ``pair`` and ``encoding`` default to ``cfg.zenoh``. The caller
+    owns the session and the backend; :meth:`close` undeclares what the controller declared.
+    """
+
+    def __init__(self, cfg: Config, clock: Clock, session: zenoh.Session, backend: CarrierBackend, *,
+                 pair: str | None = None, encoding: str | None = None) -> None:
+        self.cfg, self.clock, self.backend = cfg, clock, backend
+        self.pair = pair or cfg.zenoh.pair
+        self.model = carrier_model(cfg)
+        self.guard = guard_params(cfg)
+        self.tracking = tracking_params(cfg)
+        self.dim = cfg.scenario.dim
+        self.planar = self.model.planar_carrier or self.dim == 2
+        self.p3_guard = P3Guard(self.guard, np.asarray(self.model.target), planar=self.planar)
+        self.period_s = 1.0 / cfg.carrier.rate_hz
+        self.velocity_m_s = np.zeros(self.dim)  # [m/s] motion commanded over the last period
+        self.mode = CarrierMode.WAITING
+        self.seq = 0
+        self.hold_reason: str | None = "no own state yet"
+        self._plan_velocity = np.zeros(self.dim)
+        self._stats: dict[str, Any] = {"closest_target_distance_m": math.inf, "guard_active_ticks": 0,
+                                       "stale_ticks": 0, "ticks": 0, "distance_at_separation_m": None,
+                                       "braking_distance_m": None, "stopped_target_distance_m": None}
+        self._last_position: np.ndarray | None = None
+        self._after_separation_m = 0.0
+        self.passenger = PassengerFeed(session, self.pair, clock, max_age_s=cfg.carrier.passenger_timeout_s)
+        try:
+            self.publisher = CarrierPublisher(session, self.pair, encoding or cfg.zenoh.encoding,  # type: ignore[arg-type]
+                                              key=cfg.zenoh.carrier_key)
+        except Exception:
+            self.passenger.close()
+            raise
+
+    # ------------------------------------------------------------------ decisions
+    def _view(self) -> PassengerView:
+        rx = self.passenger.latest()
+        if self.passenger.alive is False:
+            lost: str | None = "its liveliness token is gone"
+        elif rx is None:
+            lost = "no status received"
+        elif rx.stale:
+            lost = f"its status is {rx.age_s:.2f} s old (> {self.passenger.max_age_s} s)"
+        else:
+            lost = None
+        if rx is None:
+            return PassengerView(None, False, lost)
+        return PassengerView(rx.status.phase, rx.status.separated, lost)
+
+    def _update_mode(self) -> None:
+        mode, why = next_mode(self.mode, self._view())
+        if mode is self.mode:
+            return
+        level = logging.WARNING if mode in (CarrierMode.PAUSED, CarrierMode.STOPPED) else logging.INFO
+        log.log(level, "carrier %s: %s -> %s (%s)", self.pair, self.mode.value, mode.value, why)
+        if mode is CarrierMode.SEPARATED:
+            self._plan_velocity = (self.velocity_m_s.copy() if self.mode is CarrierMode.APPROACHING
+                                   else np.zeros_like(self.velocity_m_s))
+        self.mode = mode
+
+    def _decide(self, state: OwnState, dt_s: float) -> Tracked:
+        x_c = state.position_ned_m[:self.dim]
+        separated = self.mode is not CarrierMode.APPROACHING
+        plan = self._plan_velocity if self.mode is CarrierMode.SEPARATED else None
+        res = carrier_tick(x_c, separated, self.model, own_plan_velocity=plan, u_prev=self.velocity_m_s,
+                           dt_s=dt_s if dt_s > 0 else None)
+        if not bool(np.all(res.feasible)):
+            log.warning("carrier %s: CBF filter infeasible at %s; holding still", self.pair, x_c.tolist())
+        u = np.asarray(res.u, dtype=float)
+        yaw = state.yaw_rad if state.yaw_rad is not None else 0.0
+        t, v_meas = state.t_s, state.velocity_ned_m_s[:self.dim]
+        if self.tracking.kind == "holonomic":
+            g = self.p3_guard.limit(t, x_c, u, v_meas)
+            cmd, active = track(g.u, yaw, self.tracking), g.active
+            self.velocity_m_s = g.u
+        else:
+            cmd = track(u, yaw, self.tracking)
+            speed, active = self.p3_guard.limit_heading(t, x_c, cmd.speed_m_s, yaw, v_meas)
+            if active:
+                scale = speed / cmd.speed_m_s if cmd.speed_m_s > 0 else 0.0
+                cmd = Tracked(speed, cmd.yaw_rate_rad_s, cmd.bearing_rad, heading_of(speed, yaw),
+                              cmd.setpoint_ned_m_s * scale)
+            motion = np.zeros(self.dim)
+            motion[:2] = cmd.velocity_ned_m_s
+            self.velocity_m_s = motion
+        if active:
+            self._stats["guard_active_ticks"] += 1
+        return cmd
+
+    def _account(self, state: OwnState) -> None:
+        """Closest approach |e_tc|, distance when the separation was heard, path length after it."""
+        x = state.position_ned_m[:self.dim]
+        dist = float(np.linalg.norm(np.asarray(self.model.target) - x))
+        s = self._stats
+        s["closest_target_distance_m"] = min(s["closest_target_distance_m"], dist)
+        if self.mode is CarrierMode.SEPARATED:
+            if s["distance_at_separation_m"] is None:
+                s["distance_at_separation_m"] = dist
+            elif self._last_position is not None:
+                self._after_separation_m += float(np.linalg.norm(x - self._last_position))
+            s["braking_distance_m"] = self._after_separation_m
+            s["stopped_target_distance_m"] = dist
+        self._last_position = x.copy()
+
+    # ------------------------------------------------------------------ stepping
+    def step(self, dt_s: float) -> CarrierState | None:
+        """Advance ``dt_s`` [s], decide and send the next command, publish and return the state
+        published (None when the own state is stale: a stop, nothing published)."""
+        if dt_s < 0:
+            raise ValueError(f"dt_s must be >= 0, got {dt_s!r}")
+        self.backend.advance(dt_s)
+        self._stats["ticks"] += 1
+        self._update_mode()
+        state = self.backend.own_state()
+        now = self.clock.now()
+        if state is None:
+            why = "no own state yet"
+        elif now - state.t_s > self.cfg.carrier.state_timeout_s:
+            why = f"own state {now - state.t_s:.2f} s old (> {self.cfg.carrier.state_timeout_s} s)"
+        else:
+            why = self.backend.control_fault()
+        if why != self.hold_reason:
+            if why is None:
+                log.info("carrier %s: in control (%s backend)", self.pair, self.backend.name)
+            else:
+                log.warning("carrier %s: stopped: %s", self.pair, why)
+            self.hold_reason = why
+        if state is None or now - state.t_s > self.cfg.carrier.state_timeout_s:
+            self._stats["stale_ticks"] += 1
+            self.velocity_m_s = np.zeros(self.dim)
+            self.backend.command(STOP)
+            return None
+        cmd = self._decide(state, dt_s) if why is None else STOP
+        if why is not None:
+            self.velocity_m_s = np.zeros(self.dim)
+        self.backend.command(cmd)
+        self._account(state)
+        fresh = self.backend.own_state() or state  # the built-in robot now holds the new command
+        out = CarrierState(fresh.t_s, self.seq, "local_ned", _pad3(fresh.position_ned_m[:self.dim]),
+                           _pad3(fresh.velocity_ned_m_s[:self.dim]), fresh.yaw_rad)
+        self.publisher.publish(out)
+        self.seq += 1
+        return out
+
+    def run(self, stop_event: threading.Event, duration_s: float | None = None) -> None:
+        """Step at ``carrier.rate_hz`` on the clock until ``stop_event`` is set or ``duration_s``
+        [s] of clock time has passed. Steps once at once."""
+        t0 = last = self.clock.now()
+        periodic = Periodic(self.clock, self.period_s)
+        self.step(0.0)
+        log.info("carrier %s (%s backend) publishing on %s at %.1f Hz (clock speed %g)", self.pair,
+                 self.backend.name, self.publisher.key, self.cfg.carrier.rate_hz, getattr(self.clock, "speed", 1.0))
+        while not stop_event.is_set():
+            tick = periodic.wait()
+            if duration_s is not None and tick - t0 >= duration_s:
+                break
+            self.step(tick - last)
+            last = tick
+        if periodic.overruns:
+            log.warning("carrier %s: %d overruns of the %.1f ms period", self.pair, periodic.overruns, 1e3 * self.period_s)
+
+    def summary(self) -> dict[str, Any]:
+        """Closest approach to the target, distance when the separation was heard, braking
+        distance after it [m], guard and stale tick counts, mode."""
+        out = dict(self._stats)
+        out.update(mode=self.mode.value, guard_radius_m=self.guard.radius_m, backend=self.backend.name,
+                   separation_distance_m=self.model.law.separation_distance_m,
+                   passenger_feed=self.passenger.counters)
+        if math.isinf(out["closest_target_distance_m"]):
+            out["closest_target_distance_m"] = None
+        return out
+
+    def close(self) -> None:
+        """Undeclare the publisher, the liveliness token and the passenger subscribers."""
+        self.publisher.close()
+        self.passenger.close()
+
+    def __enter__(self) -> "CarrierController":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

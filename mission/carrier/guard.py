@@ -1,0 +1,133 @@
+"""The P3 guard of the carrier: the carrier never comes closer to the target than
+``r_guard = b c - margin`` [m], whatever the passenger does (never separates, vanishes, lies).
+
+It sits after the law, the CBF filter and the tracking law, and is independent of the
+passenger's phase: it only reads the carrier's own position and velocity, the target and the
+velocity about to be commanded. The component of the command towards the target is capped at
+the speed from which the carrier can still stop before the guard circle::
+
+    h      = |e_tc| - r_guard                   (|e_tc| as the law measures it: a planar carrier's
+                                                 distance to a target above its plane counts the height)
+    v_fly  = max(measured inward speed, inward commands sent within the last delay_s)
+    h_pred = h - v_fly delay_s                  (where the vehicle is when this command acts)
+    v_in  <= a (sqrt(T^2 + 2 h_pred / a) - T),  0 if h_pred <= 0   (v T + v^2 / 2a = h_pred)
+
+``a`` [m/s^2] is the braking deceleration, ``delay_s`` [s] the vehicle's response delay (commands
+already on their way still act during it), ``T`` [s] the control period (a command is held that
+long). A vehicle that brakes at ``a`` and obeys each command after ``delay_s`` then never crosses
+the circle (tested with a transport-delayed, deceleration-limited vehicle in the unit tests).
+
+Only the inward component is cut: motion along the guard circle or away from the target is
+untouched, so a carrier that keeps its own plan (Remark 1) slides around the circle. The cap
+falls at rate ``a`` while the carrier closes in at the cap: the guard brakes, it does not slam.
+"""
+from __future__ import annotations
+
+import collections
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class GuardParams:
+    """radius_m [m] ``b c - margin``; brake_decel_m_s2 [m/s^2] > 0; delay_s [s] >= 0 the
+    vehicle's response delay; period_s [s] > 0 how long a command is held."""
+
+    radius_m: float
+    brake_decel_m_s2: float
+    delay_s: float = 0.0
+    period_s: float = 0.01
+
+    def __post_init__(self) -> None:
+        if not (self.radius_m > 0 and self.brake_decel_m_s2 > 0 and self.delay_s >= 0 and self.period_s > 0):
+            raise ValueError(f"invalid guard parameters {self}")
+
+
+@dataclass(frozen=True)
+class GuardResult:
+    """u [m/s] the guarded command (same shape as the input); cap_m_s [m/s] the inward speed
+    allowed here; clearance_m [m] ``h``; active: the guard changed the command."""
+
+    u: np.ndarray
+    cap_m_s: float
+    clearance_m: float
+    active: bool
+
+
+def stopping_speed(distance_m: float, decel_m_s2: float, hold_s: float) -> float:
+    """Largest speed [m/s] ``v`` with ``v hold_s + v^2 / (2 decel) <= distance_m`` (0 if none)."""
+    if distance_m <= 0.0:
+        return 0.0
+    return decel_m_s2 * (math.sqrt(hold_s * hold_s + 2.0 * distance_m / decel_m_s2) - hold_s)
+
+
+class P3Guard:
+    """The guard with its memory of the inward commands still in flight (see the module docstring).
+
+    Pure apart from that memory: times come from the caller's clock [s].
+    """
+
+    def __init__(self, params: GuardParams, target: np.ndarray, planar: bool = True) -> None:
+        self.p = params
+        self.target = np.asarray(target, dtype=float)
+        self.k = self.target.shape[-1]
+        self.planar = planar  # the carrier moves in the first two axes only: cut the command there
+        self._sent: collections.deque[tuple[float, float]] = collections.deque()
+
+    def _geometry(self, x_c: np.ndarray) -> tuple[np.ndarray | None, float]:
+        e = self.target[:self.k] - np.asarray(x_c, dtype=float)[:self.k]
+        dist = float(math.sqrt(float(e @ e)))
+        return (None if dist < 1e-9 else e / dist), dist - self.p.radius_m
+
+    def cap(self, t_s: float, x_c: np.ndarray, velocity_m_s: np.ndarray | None) -> tuple[float, float, np.ndarray | None]:
+        """(inward speed cap [m/s], clearance h [m], unit vector towards the target or None)."""
+        n, h = self._geometry(x_c)
+        while self._sent and self._sent[0][0] < t_s - self.p.delay_s - 1e-9:
+            self._sent.popleft()
+        if n is None:
+            return 0.0, h, None
+        v_fly = 0.0
+        if velocity_m_s is not None:
+            v_fly = max(v_fly, float(np.asarray(velocity_m_s, dtype=float)[:self.k] @ n))
+        if self._sent and self.p.delay_s > 0:
+            v_fly = max(v_fly, max(v for _, v in self._sent))
+        h_pred = h - v_fly * self.p.delay_s
+        return stopping_speed(h_pred, self.p.brake_decel_m_s2, self.p.period_s), h, n
+
+    def limit(self, t_s: float, x_c: np.ndarray, u: np.ndarray, velocity_m_s: np.ndarray | None = None) -> GuardResult:
+        """Cap the inward component of the velocity command ``u`` [m/s] ((2,) or (3,)) of a
+        carrier at ``x_c`` [m] moving at ``velocity_m_s`` [m/s] (measured; None: unknown)."""
+        u = np.asarray(u, dtype=float)
+        cap, h, n = self.cap(t_s, x_c, velocity_m_s)
+        if n is None:  # on the target: no inward direction; stop (the guard was already broken)
+            self._sent.append((t_s, 0.0))
+            return GuardResult(np.zeros_like(u), 0.0, h, bool(np.any(u != 0.0)))
+        inward = float(u[:self.k] @ n)
+        if inward <= cap:
+            self._sent.append((t_s, inward))
+            return GuardResult(u, cap, h, False)
+        out = u.copy()
+        m = n.copy()
+        if self.planar:
+            m[2:] = 0.0  # u . n changes only through the plane's components
+        out[:self.k] = u[:self.k] - (inward - cap) * m / float(m @ m)  # m @ m > 0: inward > cap >= 0
+        self._sent.append((t_s, cap))
+        return GuardResult(out, cap, h, True)
+
+    def limit_heading(self, t_s: float, x_c: np.ndarray, speed_m_s: float, yaw_rad: float,
+                      velocity_m_s: np.ndarray | None = None) -> tuple[float, bool]:
+        """For a robot that moves only along its heading ``yaw_rad`` [rad]: the largest forward
+        speed [m/s] (<= ``speed_m_s``) whose inward component respects the cap, and whether it was cut."""
+        cap, _, n = self.cap(t_s, x_c, velocity_m_s)
+        if n is None:
+            self._sent.append((t_s, 0.0))
+            return 0.0, speed_m_s != 0.0
+        cos_in = math.cos(yaw_rad) * n[0] + math.sin(yaw_rad) * n[1]
+        inward = speed_m_s * cos_in
+        if inward <= cap:
+            self._sent.append((t_s, inward))
+            return speed_m_s, False
+        self._sent.append((t_s, cap))
+        return cap / cos_in, True  # cos_in > 0 here (inward > cap >= 0 with speed >= 0)

@@ -1,0 +1,87 @@
+"""Tracking law (pure): the law's planar velocity command made into what the carrier can do.
+
+A holonomic carrier follows any planar velocity. A differential-drive (unicycle) or Ackermann
+carrier moves only along its heading ``psi`` [rad, NED, from north towards east]: it is given a
+forward speed ``v`` [m/s] and a yaw rate ``omega`` [rad/s]. The standard law for such robots
+(heading-error steering with cosine speed scaling, e.g. Siegwart & Nourbakhsh, "Introduction to
+Autonomous Mobile Robots", sec. 3.6)::
+
+    psi_d = atan2(u_e, u_n),   e = wrap(psi_d - psi)
+    omega = sat(k_psi e, omega_max)       Ackermann: also |omega| <= |v| tan(delta_max) / L
+    v     = |u| max(cos e, s_min)          s_min = 0 (diff-drive: turn in place), > 0 (Ackermann:
+                                           it can only turn while it moves)
+
+so the robot slows while it is misaligned and never drives fast the wrong way. The motion it
+really makes, ``v (cos psi, sin psi)``, is what the P3 guard caps (:func:`~.guard.guard_along_heading`).
+
+For a PX4 rover in OFFBOARD the velocity setpoint becomes a speed ``|v_sp|`` and a bearing
+``atan2(v_sp)`` that PX4's own attitude loop steers to (``AckermannOffboardMode.cpp``), so the
+command sent is ``v (cos psi_d, sin psi_d)``: the scaled speed towards the desired bearing.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+Kinematics = Literal["holonomic", "diff_drive", "ackermann"]
+
+
+@dataclass(frozen=True)
+class TrackingParams:
+    """kind; heading_gain [1/s]; max_yaw_rate_rad_s [rad/s]; min_speed_fraction (Ackermann
+    creep, in [0, 1]); wheelbase_m [m] and max_steer_rad [rad] (Ackermann)."""
+
+    kind: Kinematics = "holonomic"
+    heading_gain: float = 2.0
+    max_yaw_rate_rad_s: float = 1.0
+    min_speed_fraction: float = 0.3
+    wheelbase_m: float = 0.3
+    max_steer_rad: float = 0.5
+
+
+@dataclass(frozen=True)
+class Tracked:
+    """speed_m_s [m/s] forward (>= 0); yaw_rate_rad_s [rad/s]; bearing_rad [rad] desired
+    heading; velocity_ned_m_s (2,) (holonomic: the command's shape) the motion along the current heading [m/s]; setpoint_ned_m_s
+    (2,) what a velocity-setpoint vehicle is sent [m/s]."""
+
+    speed_m_s: float
+    yaw_rate_rad_s: float
+    bearing_rad: float
+    velocity_ned_m_s: np.ndarray
+    setpoint_ned_m_s: np.ndarray
+
+
+def wrap_pi(angle_rad: float) -> float:
+    """Angle wrapped to [-pi, pi) [rad]."""
+    return (angle_rad + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def heading_of(speed_m_s: float, yaw_rad: float) -> np.ndarray:
+    """Planar velocity (2,) [m/s] NED of forward speed ``speed_m_s`` at heading ``yaw_rad``."""
+    return np.array([speed_m_s * math.cos(yaw_rad), speed_m_s * math.sin(yaw_rad)])
+
+
+def track(u_ned_m_s: np.ndarray, yaw_rad: float, p: TrackingParams) -> Tracked:
+    """Forward speed and yaw rate following the planar command ``u_ned_m_s`` (first two
+    components used) from heading ``yaw_rad``; see the module docstring."""
+    un, ue = float(u_ned_m_s[0]), float(u_ned_m_s[1])
+    speed_des = math.hypot(un, ue)
+    if p.kind == "holonomic":
+        bearing = math.atan2(ue, un) if speed_des > 1e-9 else yaw_rad
+        v = np.array(u_ned_m_s, dtype=float)  # every component (a non-planar carrier keeps its third)
+        return Tracked(speed_des, 0.0, bearing, v, v.copy())
+    if speed_des <= 1e-9:
+        return Tracked(0.0, 0.0, yaw_rad, np.zeros(2), np.zeros(2))
+    bearing = math.atan2(ue, un)
+    err = wrap_pi(bearing - yaw_rad)
+    floor = p.min_speed_fraction if p.kind == "ackermann" else 0.0
+    speed = speed_des * max(math.cos(err), floor)
+    rate_max = p.max_yaw_rate_rad_s
+    if p.kind == "ackermann":
+        rate_max = min(rate_max, speed * math.tan(p.max_steer_rad) / p.wheelbase_m)
+    omega = min(max(p.heading_gain * err, -rate_max), rate_max)
+    return Tracked(speed, omega, bearing, heading_of(speed, yaw_rad), heading_of(speed, bearing))

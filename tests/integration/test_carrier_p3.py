@@ -1,0 +1,109 @@
+"""Issue 11 item 3: the carrier enforces P3 itself. Whatever the passenger does (never separates,
+lies about its phase, vanishes), the carrier's own controller never brings it closer to the
+target than b c - carrier.p3_margin_m. Real Zenoh between the carrier and a scripted passenger;
+the carrier steps on a manual clock."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mission.clock import ManualClock
+from mission.config import Config, from_dict
+from sim.carrier import CarrierMode, CarrierSim
+from tests.integration.test_carrier_sim import TARGET, Passenger, _seen, sessions
+from tests.integration.zenoh_util import wait_for
+
+pytestmark = pytest.mark.timeout(60)
+
+DT = 1.0 / 30.0
+RADIUS = 8.0 - 0.5  # b c - p3_margin_m
+
+
+def _cfg(**carrier: object) -> Config:
+    mode = carrier.pop("carrier_mode", "stop")
+    return from_dict({
+        "zenoh": {"pair": "p3"},
+        "scenario": {"carrier_start": [0.0, 0.0, 0.0], "target": TARGET.tolist(), "carrier_mode": mode},
+        "safety": {"carrier_max_accel_m_s2": 1.0},
+        "carrier": {"rate_hz": 30.0, "max_speed_m_s": 3.0, "passenger_timeout_s": 1.0, "p3_margin_m": 0.5, **carrier},
+    })
+
+
+def _drive(sim: CarrierSim, clock: ManualClock, passenger: Passenger, script: dict[int, str], steps: int,
+           refresh: str | None) -> list[float]:
+    """Step the carrier ``steps`` times; at step k the passenger says ``script[k]`` (waited for);
+    every 10 steps it repeats ``refresh`` (None: silence). Returns |e_tc| [m] after every step."""
+    distances = []
+    for k in range(steps):
+        say = script.get(k) or (refresh if refresh and k % 10 == 0 else None)
+        if say:
+            seq = passenger.say(say)
+            wait_for(lambda: _seen(sim, seq), what=f"{say} seen")
+        clock.advance(DT)
+        sim.step(DT)
+        distances.append(float(np.linalg.norm(TARGET - np.pad(sim.position_m, (0, 3 - sim.position_m.shape[0])))))
+    return distances
+
+
+@pytest.mark.parametrize("kinematics", ["holonomic", "diff_drive", "ackermann"])
+def test_a_passenger_that_never_separates_cannot_bring_the_carrier_inside_the_guard(kinematics: str) -> None:
+    clock = ManualClock()
+    with sessions(1) as (sa, sb), CarrierSim(_cfg(kinematics=kinematics), clock, sa) as sim:
+        passenger = Passenger(sb, "p3", clock)
+        try:
+            wait_for(lambda: passenger.pub.matched)
+            d = _drive(sim, clock, passenger, {0: "RIDING"}, 30 * 40, refresh="RIDING")
+        finally:
+            passenger.pub.close()
+        assert sim.mode is CarrierMode.APPROACHING  # it still believes the passenger rides
+    assert min(d) >= RADIUS - 1e-9, min(d)
+    assert d[-1] < RADIUS + 0.1  # it got there: the guard stops it at the circle, not early
+    assert sim.summary()["guard_active_ticks"] > 0
+
+
+def test_a_lying_separated_phase_under_remark1_does_not_carry_the_carrier_into_the_target() -> None:
+    """Remark 1: after separation the carrier keeps its velocity of that instant. A passenger that
+    says SEPARATED while the carrier is still far away would send it straight on through the
+    target; the guard stops it at the circle (it may slide along it, never inside)."""
+    clock = ManualClock()
+    with sessions(1) as (sa, sb), CarrierSim(_cfg(carrier_mode="remark1"), clock, sa) as sim:
+        passenger = Passenger(sb, "p3", clock)
+        try:
+            wait_for(lambda: passenger.pub.matched)
+            d = _drive(sim, clock, passenger, {0: "RIDING", 60: "SEPARATED"}, 30 * 30, refresh=None)
+        finally:
+            passenger.pub.close()
+        assert sim.mode is CarrierMode.SEPARATED
+    assert d[60] > 12.0  # the lie came far from the target
+    assert min(d) >= RADIUS - 1e-9, min(d)
+
+
+def test_a_phase_that_jumps_back_to_riding_does_not_restart_the_approach() -> None:
+    clock = ManualClock()
+    with sessions(1) as (sa, sb), CarrierSim(_cfg(), clock, sa) as sim:
+        passenger = Passenger(sb, "p3", clock)
+        try:
+            wait_for(lambda: passenger.pub.matched)
+            d = _drive(sim, clock, passenger, {0: "RIDING", 90: "SEPARATED", 100: "RIDING"}, 400, refresh="RIDING")
+        finally:
+            passenger.pub.close()
+    assert sim.mode is CarrierMode.SEPARATED
+    assert d[-1] == pytest.approx(d[250], abs=1e-9)  # stopped for good after braking (3 s at 1 m/s^2)
+    assert min(d) >= RADIUS - 1e-9
+
+
+def test_a_passenger_that_vanishes_stops_the_carrier_outside_the_guard() -> None:
+    clock = ManualClock()
+    with sessions(1) as (sa, sb), CarrierSim(_cfg(), clock, sa) as sim:
+        passenger = Passenger(sb, "p3", clock)
+        try:
+            wait_for(lambda: passenger.pub.matched)
+            d = _drive(sim, clock, passenger, {0: "RIDING"}, 120, refresh="RIDING")
+            assert sim.mode is CarrierMode.APPROACHING
+        finally:
+            passenger.pub.close()  # the passenger's process dies: its token goes too
+        wait_for(lambda: sim.passenger.alive is False, what="token gone")
+        d += _drive(sim, clock, passenger, {}, 30 * 20, refresh=None)
+        assert sim.mode is CarrierMode.PAUSED
+    assert d[-1] == pytest.approx(d[-30], abs=1e-9)  # standing still
+    assert min(d) >= RADIUS - 1e-9

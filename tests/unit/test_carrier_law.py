@@ -1,0 +1,122 @@
+"""The carrier's own law, pure: the P3 guard, the tracking law and the mode machine."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from mission.carrier.guard import GuardParams, P3Guard, stopping_speed
+from mission.carrier.modes import CarrierMode, PassengerView, next_mode
+from mission.carrier.tracking import TrackingParams, track
+
+TARGET = np.array([20.0, 15.0, -4.0])
+
+
+def test_stopping_speed_stops_within_the_distance() -> None:
+    for h in (0.01, 0.5, 3.0, 40.0):
+        v = stopping_speed(h, 1.0, 0.2)
+        assert v * 0.2 + v * v / 2.0 == pytest.approx(h)
+    assert stopping_speed(0.0, 1.0, 0.2) == 0.0 and stopping_speed(-1.0, 1.0, 0.2) == 0.0
+
+
+def test_guard_measures_the_distance_as_the_law_does_height_included() -> None:
+    g = P3Guard(GuardParams(7.5, 1.0, 0.0, 1e-9), TARGET)
+    x = np.array([TARGET[0] - 6.0, TARGET[1], 0.0])  # planar 6 m, height 4 m: |e_tc| = 7.21 < 7.5
+    assert g.cap(0.0, x, None)[0] == 0.0
+    r = g.limit(0.0, x, np.array([1.0, 0.5, 0.0]))
+    assert r.u[0] <= 1e-12 and r.u[1] == 0.5 and r.u[2] == 0.0  # nothing that shortens |e_tc|; stays in the plane
+
+
+def test_guard_cuts_only_the_inward_component() -> None:
+    g = P3Guard(GuardParams(7.5, 1.0, 0.0, 1e-9), TARGET)
+    x = TARGET - np.array([8.0, 0.0, 0.0])  # distance 8: clearance 0.5, cap 1 m/s
+    u = np.array([3.0, 2.0, 0.0])
+    r = g.limit(0.0, x, u)
+    assert r.active and r.clearance_m == pytest.approx(0.5) and r.cap_m_s == pytest.approx(1.0)
+    assert r.u.tolist() == pytest.approx([1.0, 2.0, 0.0])  # tangential 2 m/s kept
+    away = g.limit(0.0, x, -u)
+    assert not away.active and away.u.tolist() == (-u).tolist()
+    inside = g.limit(0.0, TARGET - np.array([5.0, 0.0, 0.0]), np.array([1.0, 0.0, 0.0]))
+    assert inside.u.tolist() == [0.0, 0.0, 0.0]  # inside the circle: no inward motion at all
+
+
+def test_guard_counts_the_measured_speed_over_the_delay() -> None:
+    g = P3Guard(GuardParams(7.5, 1.0, 0.5, 1e-9), TARGET)
+    x = TARGET - np.array([10.0, 0.0, 0.0])  # clearance 2.5
+    still = g.cap(0.0, x, np.zeros(3))[0]
+    moving = g.cap(0.0, x, np.array([2.0, 0.0, 0.0]))[0]  # 1 m covered before a command acts
+    assert still == pytest.approx(math.sqrt(5.0)) and moving == pytest.approx(math.sqrt(3.0))
+
+
+def test_guard_along_heading_slows_a_robot_heading_in() -> None:
+    g = P3Guard(GuardParams(7.5, 1.0, 0.0, 1e-9), TARGET)
+    x = TARGET - np.array([8.0, 0.0, 0.0])
+    speed, cut = g.limit_heading(0.0, x, 3.0, math.radians(60.0))  # cos 60 = 0.5 inwards
+    assert cut and speed == pytest.approx(2.0)  # inward 2 * 0.5 = 1 = cap
+    speed, cut = g.limit_heading(0.0, x, 3.0, math.radians(120.0))  # heading away
+    assert not cut and speed == 3.0
+
+
+@settings(max_examples=60, deadline=None)
+@given(h0=st.floats(0.0, 30.0), v0_frac=st.floats(0.0, 1.0), decel=st.floats(0.3, 5.0), delay=st.floats(0.0, 0.5))
+def test_a_vehicle_that_brakes_as_planned_never_crosses_the_guard_circle(h0: float, v0_frac: float, decel: float,
+                                                                          delay: float) -> None:
+    """1D worst case: the law always wants 5 m/s inwards (a passenger that never separates);
+    the vehicle obeys each command ``delay`` late (a transport delay: the hard case) and
+    decelerates at most ``decel``. Starting at rest or below the cap, the clearance never goes
+    below zero, and the carrier ends at the circle (it does not stop needlessly early)."""
+    dt = 0.01
+    lag = int(round(delay / dt))
+    guard = P3Guard(GuardParams(7.5, decel, lag * dt, dt), np.array([7.5 + h0, 0.0]))
+    x = 0.0
+    v = v0_frac * stopping_speed(h0 - 0.0, decel, lag * dt + dt) if lag == 0 else 0.0
+    queue = [v] * lag
+    for k in range(int(30.0 / dt)):
+        sent = guard.limit(k * dt, np.array([x, 0.0]), np.array([5.0, 0.0]), np.array([v, 0.0])).u[0]
+        queue.append(sent)
+        wanted = queue.pop(0)
+        v = max(wanted, v - decel * dt) if wanted < v else wanted
+        x += v * dt
+        assert h0 - x >= -1e-9, (h0 - x, v)
+    assert h0 - x < 0.05 or h0 > 25.0
+
+
+@pytest.mark.parametrize("kind", ["diff_drive", "ackermann"])
+def test_tracking_scales_speed_by_heading_error_and_turns_towards_the_command(kind: str) -> None:
+    p = TrackingParams(kind, heading_gain=2.0, max_yaw_rate_rad_s=1.0, min_speed_fraction=0.3, wheelbase_m=0.3,
+                       max_steer_rad=0.5)
+    aligned = track(np.array([2.0, 0.0]), 0.0, p)
+    assert aligned.speed_m_s == pytest.approx(2.0) and aligned.yaw_rate_rad_s == pytest.approx(0.0)
+    side = track(np.array([0.0, 2.0]), 0.0, p)  # 90 degrees to the right (east)
+    assert side.yaw_rate_rad_s > 0  # turn clockwise seen from above: towards east
+    floor = 0.3 if kind == "ackermann" else 0.0
+    assert side.speed_m_s == pytest.approx(2.0 * floor, abs=1e-12)
+    if kind == "ackermann":  # yaw rate bounded by v tan(delta) / L
+        assert side.yaw_rate_rad_s <= side.speed_m_s * math.tan(0.5) / 0.3 + 1e-12
+    assert track(np.zeros(2), 1.0, p).speed_m_s == 0.0
+    assert side.setpoint_ned_m_s.tolist() == pytest.approx([0.0, side.speed_m_s])  # towards the bearing
+
+
+def test_holonomic_tracking_passes_the_command_through() -> None:
+    u = np.array([1.0, -2.0, 0.5])
+    out = track(u, 0.3, TrackingParams("holonomic"))
+    assert out.velocity_ned_m_s.tolist() == u.tolist() and out.yaw_rate_rad_s == 0.0
+
+
+@pytest.mark.parametrize(("mode", "view", "expected"), [
+    (CarrierMode.WAITING, PassengerView(None, False, "no status received"), CarrierMode.WAITING),
+    (CarrierMode.WAITING, PassengerView("JOIN"), CarrierMode.WAITING),
+    (CarrierMode.WAITING, PassengerView("RIDING"), CarrierMode.APPROACHING),
+    (CarrierMode.APPROACHING, PassengerView("RIDING", lost="stale"), CarrierMode.PAUSED),
+    (CarrierMode.PAUSED, PassengerView("RIDING"), CarrierMode.APPROACHING),
+    (CarrierMode.APPROACHING, PassengerView("RIDING", separated=True), CarrierMode.SEPARATED),
+    (CarrierMode.PAUSED, PassengerView("NAVIGATING", lost="stale"), CarrierMode.SEPARATED),
+    (CarrierMode.APPROACHING, PassengerView("ABORT"), CarrierMode.STOPPED),
+    (CarrierMode.SEPARATED, PassengerView("RIDING"), CarrierMode.SEPARATED),
+    (CarrierMode.STOPPED, PassengerView("RIDING"), CarrierMode.STOPPED),
+])
+def test_mode_transitions(mode: CarrierMode, view: PassengerView, expected: CarrierMode) -> None:
+    assert next_mode(mode, view)[0] is expected
