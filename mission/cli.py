@@ -18,6 +18,7 @@ from mission.errors import MarsupialError
 SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "simulate": ("sim.simulate_cli", "simulate"),
     "mock-vehicle": ("sim.vehicle_cli", "mock_vehicle"),
+    "ros2-robot": ("sim.ros2_robot", "ros2_robot"),
     "carrier": ("mission.carrier.cli", "carrier_command"),
     "run": ("mission.run_cli", "run"),
     "plot": ("mission.run_cli", "plot"),
@@ -29,6 +30,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
 SUMMARIES = {
     "simulate": "Integrate the paper's closed loop (one scenario, or a Monte-Carlo batch).",
     "mock-vehicle": "Run the PX4-like kinematic MAVLink vehicle (SITL-free testing).",
+    "ros2-robot": "Run a ROS-2-shaped robot over Zenoh (Twist cmd_vel in, Odometry out).",
     "carrier": "Run the carrier-side controller (built-in robot, PX4 rover, ROS 2 robot).",
     "run": "Fly the offboard mission on a PX4 vehicle (mock, SITL or real).",
     "plot": "Draw the paper-style figures from a flight log directory.",

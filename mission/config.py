@@ -212,7 +212,9 @@ class CarrierSection(_Model):
                                "from the target, whatever the passenger does")
     brake_decel_m_s2: float | None = Field(None, gt=0, description="[m/s^2] braking the guard plans with; "
                                            "default safety.carrier_max_accel_m_s2, else 1")
-    brake_delay_s: float = Field(0.0, ge=0, le=5, description="[s] the carrier's response delay the guard allows for")
+    brake_delay_s: float | None = Field(None, ge=0, le=5, description="[s] the carrier's response delay (command "
+                                        "to motion, plus the age of its state) the guard allows for; default 0 for "
+                                        "the built-in robot, 0.3 s for a real one (mavlink, ros2)")
     kinematics: Literal["holonomic", "diff_drive", "ackermann"] = "holonomic"
     heading_gain: float = Field(2.0, gt=0, description="[1/s] tracking law: yaw rate per heading error")
     max_yaw_rate_rad_s: float = Field(1.0, gt=0)

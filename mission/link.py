@@ -134,6 +134,8 @@ class VehicleState:
     SYS_STATUS reports the AHRS/estimator as present and enabled, that it is healthy."""
     origin: tuple[float, float, float] | None
     """EKF origin (lat [deg], lon [deg], alt [m] AMSL) from GPS_GLOBAL_ORIGIN, or None."""
+    yaw_rad: float | None
+    """Heading [rad] from north towards east, from ATTITUDE; None before the first (or non-finite)."""
     last_statustext: str
     """Text of the latest (reassembled) STATUSTEXT from the vehicle, ``""`` if none."""
 
@@ -436,6 +438,7 @@ class _Telemetry:
         self.landed_state: int | None = None
         self.ahrs_healthy: bool | None = None
         self.origin: tuple[float, float, float] | None = None
+        self.yaw_rad: float | None = None
         self.last_statustext = ""
 
 
@@ -695,6 +698,7 @@ class VehicleLink:
             landed_state=tm.landed_state,
             position_valid=bool(fresh) and tm.ahrs_healthy is not False,
             origin=tm.origin,
+            yaw_rad=tm.yaw_rad,
             last_statustext=tm.last_statustext,
         )
 
@@ -1127,6 +1131,10 @@ class VehicleLink:
     def _on_origin(self, msg: Any, t_rx: float) -> None:
         self._telemetry.origin = (msg.latitude * 1e-7, msg.longitude * 1e-7, msg.altitude * 1e-3)
 
+    def _on_attitude(self, msg: Any, t_rx: float) -> None:
+        yaw = float(msg.yaw)
+        self._telemetry.yaw_rad = yaw if math.isfinite(yaw) else None
+
     def _on_statustext(self, msg: Any, t_rx: float) -> None:
         text = self._assembler.feed(str(msg.text), int(getattr(msg, "id", 0)), int(getattr(msg, "chunk_seq", 0)))
         if text is None:
@@ -1148,6 +1156,7 @@ class VehicleLink:
         "EXTENDED_SYS_STATE": _on_extended_sys_state,
         "SYS_STATUS": _on_sys_status,
         "GPS_GLOBAL_ORIGIN": _on_origin,
+        "ATTITUDE": _on_attitude,
         "STATUSTEXT": _on_statustext,
         "COMMAND_ACK": _on_command_ack,
     }

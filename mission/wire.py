@@ -497,3 +497,35 @@ def encode_carrier(state: CarrierState, encoding: str) -> bytes:
     if encoding == "cdr":
         return encode_odometry_cdr(state)
     raise ValueError(f"unknown encoding {encoding!r}")
+
+
+# --------------------------------------------------------------------------- ROS 2 Twist (cmd_vel)
+
+TWIST_TYPE = "geometry_msgs/msg/Twist"
+
+
+def encode_twist_cdr(linear_flu_m_s: np.ndarray, angular_flu_rad_s: np.ndarray) -> bytes:
+    """A CDR ``geometry_msgs/msg/Twist`` (little endian, with header) of body FLU velocities:
+    linear [m/s] (x forward, y left, z up) and angular [rad/s] (z: counter-clockwise from above)."""
+    lin = _bounded(_vec3(linear_flu_m_s, "linear"), VELOCITY_LIMIT_M_S, "linear")
+    ang = _bounded(_vec3(angular_flu_rad_s, "angular"), VELOCITY_LIMIT_M_S, "angular")
+    T = _ros().types
+    msg = T[TWIST_TYPE](linear=T["geometry_msgs/msg/Vector3"](x=float(lin[0]), y=float(lin[1]), z=float(lin[2])),
+                        angular=T["geometry_msgs/msg/Vector3"](x=float(ang[0]), y=float(ang[1]), z=float(ang[2])))
+    return bytes(_ros().serialize_cdr(msg, TWIST_TYPE))
+
+
+def decode_twist_cdr(raw: bytes | bytearray | memoryview) -> tuple[np.ndarray, np.ndarray]:
+    """(linear [m/s], angular [rad/s]) body FLU from a CDR ``geometry_msgs/msg/Twist``.
+    Raises :class:`WireError` "decode", "nonfinite" or "range"."""
+    if len(raw) > 256:  # a Twist is 52 bytes; refuse before decoding
+        raise WireError("size", f"{len(raw)} bytes is no Twist")
+    try:
+        msg = _ros().deserialize_cdr(bytes(raw), TWIST_TYPE)
+    except Exception as exc:  # rosbags raises assorted errors on garbage
+        raise WireError("decode", f"not a CDR {TWIST_TYPE}: {type(exc).__name__}: {exc}") from None
+    lin = np.array([msg.linear.x, msg.linear.y, msg.linear.z], dtype=float)
+    ang = np.array([msg.angular.x, msg.angular.y, msg.angular.z], dtype=float)
+    if not (np.all(np.isfinite(lin)) and np.all(np.isfinite(ang))):
+        raise WireError("nonfinite", "Twist has a non-finite number")
+    return _bounded(lin, VELOCITY_LIMIT_M_S, "linear"), _bounded(ang, VELOCITY_LIMIT_M_S, "angular")

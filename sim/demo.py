@@ -112,17 +112,41 @@ def _follow(pair: PairRun, progress: PairProgress) -> None:
             progress.update(pair.name, phase, line.strip())
 
 
+def start_carrier_robot(kind: str, name: str, zenoh_ep: str, speed: float, start: str, stack: ExitStack,
+                        err: int | None) -> tuple[list[str], subprocess.Popen | None]:
+    """The robot under a ``kind`` carrier ("sim": built in, none to start; "mavlink": a mock PX4
+    rover, sysid 2; "ros2": a ROS-2-shaped robot on rmw_zenoh keys in namespace ``name``) and the
+    carrier controller's arguments for it."""
+    if kind == "mavlink":
+        port = free_port(socket.SOCK_DGRAM)
+        robot = subprocess.Popen(_python_cli("mock-vehicle", "--frame", "rover", "--sysid", "2", "--mavlink",
+                                             "udpin:127.0.0.1:0", "--target", f"udpout:127.0.0.1:{port}", "--speed",
+                                             str(speed), "--start-ned", start), stderr=err)
+        stack.callback(stop_process, robot)
+        return ["--backend", "mavlink", "--mavlink", f"udpin:127.0.0.1:{port}", "--target-system", "2",
+                "--kinematics", "ackermann"], robot
+    if kind == "ros2":
+        robot = subprocess.Popen(_python_cli("ros2-robot", "--key-form", "rmw_zenoh", "--namespace", name,
+                                             "--zenoh-connect", zenoh_ep, "--speed", str(speed)), stderr=err)
+        stack.callback(stop_process, robot)
+        return ["--backend", "ros2", "--key-form", "rmw_zenoh", "--ros2-namespace", name, "--kinematics",
+                "diff_drive", "--offset-ned", start], robot  # its odometry starts at zero where it stands
+    return ["--backend", "sim"], None
+
+
 def start_pair(config: str, name: str, zenoh_ep: str, speed: float, log_root: Path, stack: ExitStack,
-               quiet: bool) -> PairRun:
-    """Start the carrier, the mock vehicle and the mission of one pair; register their cleanup."""
+               quiet: bool, carrier_kind: str = "sim") -> PairRun:
+    """Start the carrier (and its robot), the mock vehicle and the mission of one pair; register their cleanup."""
     cfg = load_config(config)
     pair = PairRun(name=name, log_dir=log_root / name)
     mav_port = free_port(socket.SOCK_DGRAM)
     err = subprocess.DEVNULL if quiet else None
-    carrier = subprocess.Popen(_python_cli("carrier", config, "--speed", str(speed), "--pair", name,
-                                           "--zenoh-connect", zenoh_ep), stderr=err)
-    stack.callback(stop_process, carrier)
     start = ",".join(str(v) for v in cfg.scenario.carrier_start)
+    backend_args, robot = start_carrier_robot(carrier_kind, name, zenoh_ep, speed, start, stack, err)
+    carrier = subprocess.Popen(_python_cli("carrier", config, "--speed", str(speed), "--pair", name,
+                                           "--zenoh-connect", zenoh_ep, "--summary", str(pair.log_dir / "carrier.json"),
+                                           *backend_args), stderr=err)
+    stack.callback(stop_process, carrier)
     vehicle = subprocess.Popen(_python_cli("mock-vehicle", "--mavlink", "udpin:127.0.0.1:0", "--target",
                                            f"udpout:127.0.0.1:{mav_port}", "--speed", str(speed), "--start-ned", start,
                                            "--tau", str(cfg.vehicle.velocity_tau_s)), stderr=err)
@@ -132,11 +156,13 @@ def start_pair(config: str, name: str, zenoh_ep: str, speed: float, log_root: Pa
                                stdout=subprocess.PIPE, stderr=err, text=True)
     stack.callback(stop_process, mission, 30.0)
     pair.procs = {"carrier": carrier, "vehicle": vehicle, "mission": mission}
+    if robot is not None:
+        pair.procs["carrier_robot"] = robot
     return pair
 
 
 def run_demo(config: str, speed: float, pairs: int, log_root: Path, plot_path: str | None, timeout_s: float,
-             quiet: bool = True, progress: bool = True) -> tuple[int, list[dict]]:
+             quiet: bool = True, progress: bool = True, carrier: str = "sim") -> tuple[int, list[dict]]:
     """Run ``pairs`` marsupial pairs at ``speed``; return the exit code and each pair's summary."""
     from mission.run_cli import plot as plot_command
 
@@ -146,7 +172,7 @@ def run_demo(config: str, speed: float, pairs: int, log_root: Path, plot_path: s
     with ExitStack() as stack:
         router = open_session(ZenohSection(mode="router", listen=[zenoh_ep]))
         stack.callback(router.close)
-        runs = [start_pair(config, f"pair{i}", zenoh_ep, speed, log_root, stack, quiet) for i in range(pairs)]
+        runs = [start_pair(config, f"pair{i}", zenoh_ep, speed, log_root, stack, quiet, carrier) for i in range(pairs)]
         display = PairProgress([p.name for p in runs], tty=progress and sys.stdout.isatty())
         stack.callback(display.close)
         readers = [threading.Thread(target=_follow, args=(p, display), daemon=True) for p in runs]
@@ -165,6 +191,11 @@ def run_demo(config: str, speed: float, pairs: int, log_root: Path, plot_path: s
         s = p.summary()
         s["pair"] = p.name
         s["mission_exit_code"] = p.procs["mission"].returncode
+        carrier_summary = p.log_dir / "carrier.json"
+        if carrier_summary.exists():  # the carrier's own account (written when it stops)
+            c = json.loads(carrier_summary.read_text())
+            s["carrier_stop_target_distance_m"] = c.get("stopped_target_distance_m")
+            s["carrier_braking_distance_m"] = c.get("braking_distance_m")
         summaries.append(s)
         if plot_path and (p.log_dir / "record.csv").exists():
             out = plot_path if pairs == 1 else str(Path(plot_path).with_stem(f"{Path(plot_path).stem}-{p.name}"))
@@ -182,6 +213,8 @@ ROWS = [
     ("carrier-target distance at separation [m]", "carrier_target_distance_at_separation_m"),
     ("relative command jump at separation [m/s]", "relative_input_jump_m_s"),
     ("closest carrier-target approach [m]", "min_carrier_target_distance_m"),
+    ("carrier stopped at, from the target [m]", "carrier_stop_target_distance_m"),
+    ("carrier braking distance [m]", "carrier_braking_distance_m"),
     ("final passenger-target distance [m]", "final_passenger_target_distance_m"),
     ("max passenger speed [m/s]", "max_passenger_speed_m_s"),
     ("P1 separation", "p1"),
@@ -251,7 +284,11 @@ def format_table(summaries: list[dict]) -> str:
               help="Directory for the flight logs (one sub-directory per pair).")
 @click.option("--timeout", "timeout_s", type=float, default=120.0, show_default=True, help="Wall-clock limit [s].")
 @click.option("--verbose-children", is_flag=True, help="Show the children's log output.")
-def demo(config: str, speed: float, pairs: int, plot_path: str, log_root: str, timeout_s: float, verbose_children: bool) -> int:
+@click.option("--carrier", "carrier_kind", type=click.Choice(["sim", "mavlink", "ros2"]), default="sim", show_default=True,
+              help="The carrier robot: built-in kinematic robot; a mock PX4 Ackermann rover over MAVLink; a "
+                   "ROS-2-shaped diff-drive robot over Zenoh (rmw_zenoh keys).")
+def demo(config: str, speed: float, pairs: int, plot_path: str, log_root: str, timeout_s: float, verbose_children: bool,
+         carrier_kind: str) -> int:
     """Fly the whole system: mock PX4 vehicle + carrier simulator + mission controller.
 
     Each runs as its own process, talking over real UDP (MAVLink 2) and Zenoh on loopback; no
@@ -260,7 +297,7 @@ def demo(config: str, speed: float, pairs: int, plot_path: str, log_root: str, t
     """
     os.environ.setdefault("PYTHONUNBUFFERED", "1")
     code, summaries = run_demo(config, speed, pairs, Path(log_root), plot_path, timeout_s, quiet=not verbose_children,
-                               progress=True)
+                               progress=True, carrier=carrier_kind)
     click.echo("times count from the start of riding (t = 0, as in the paper)")
     click.echo(format_table(summaries))
     for s in summaries:

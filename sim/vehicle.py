@@ -64,6 +64,7 @@ from sim.vehicle_link import VehicleLink, parse_endpoint
 from sim.vehicle_params import ParamTable, UnknownParam
 from sim.vehicle_physics import KinState, Limits, initial_state, step
 from sim.vehicle_protocol import int_param, mode_of_set_mode, param_value, setpoint_of
+from sim.rover_physics import rover_stepper
 
 __all__ = ["MockVehicle", "VehicleOptions", "FaultOptions", "VehicleSnapshot", "spawn_process", "PHYSICS_DT_S"]
 
@@ -74,6 +75,9 @@ MAX_POLL_WALL_S = 0.02  # longest socket wait [s, wall]; bounds the reaction to 
 DUE_EPSILON = 1e-9  # [s] tolerance when comparing due times with the step grid
 RX_BATCH = 256  # datagrams read per socket per pass
 STATUSTEXT_PEER_TIMEOUT_S = 2.5  # PX4 treats a peer without HEARTBEAT for this long as gone
+FRAMES = {"quadrotor": px4.MAV_TYPE_QUADROTOR, "rover": px4.MAV_TYPE_GROUND_ROVER}
+# A PX4 rover is "landed" only when disarmed (RoverLandDetector.cpp): no preflight auto-disarm.
+ROVER_PARAMS = {"COM_DISARM_PRFLT": 0.0}
 
 COUNTER_NAMES = (
     "rx_datagrams", "rx_messages", "rx_malformed", "rx_unknown_ids", "rx_unsigned_rejected", "rx_wrong_target",
@@ -117,6 +121,7 @@ class VehicleOptions:
     wind_ned_m_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
     position_noise_m: float = 0.0
     statustext_needs_heartbeat: bool = True
+    frame: str = "quadrotor"  # or "rover": MAV_TYPE_GROUND_ROVER, Ackermann kinematics (sim.rover_physics)
 
     def __post_init__(self) -> None:
         if not self.speed > 0:
@@ -127,6 +132,8 @@ class VehicleOptions:
             raise ValueError(f"signing_key must be 32 bytes, got {len(self.signing_key)}")
         if not self.velocity_tau_s > 0:
             raise ValueError(f"velocity_tau_s must be > 0, got {self.velocity_tau_s!r}")
+        if self.frame not in FRAMES:
+            raise ValueError(f"frame must be one of {sorted(FRAMES)}, got {self.frame!r}")
 
 
 @dataclass(frozen=True)
@@ -159,10 +166,11 @@ class MockVehicle:
     def __init__(self, options: VehicleOptions | None = None) -> None:
         self.options = opts = options or VehicleOptions()
         self.clock = ScaledClock(opts.speed)
-        self.params = ParamTable(opts.params, opts.sysid)
+        self.params = ParamTable({**(ROVER_PARAMS if opts.frame == "rover" else {}), **opts.params}, opts.sysid)
         self._geo = tel.Geo(*opts.home)
         self._kin: KinState = initial_state(opts.start_ned)
         self._commander = Commander(self.params, self._kin)
+        self._physics = rover_stepper(lambda: self._commander.mode) if opts.frame == "rover" else step
         self._commander.refuse_arming_reason = opts.faults.refuse_arming_reason
         self._commander.refuse_offboard_reason = opts.faults.refuse_offboard_reason
         self._faults = FaultInjector(opts.faults)
@@ -380,7 +388,7 @@ class MockVehicle:
             return
         limits, wind, commander, kin = self._limits(), self.options.wind_ned_m_s, self._commander, self._kin
         for k in range(self._steps + 1, target + 1):
-            kin = step(kin, commander.step(k * PHYSICS_DT_S, kin), limits, wind, PHYSICS_DT_S)
+            kin = self._physics(kin, commander.step(k * PHYSICS_DT_S, kin), limits, wind, PHYSICS_DT_S)
         self._counters["physics_steps"] += target - self._steps
         self._kin, self._steps = kin, target
         commander.kin = kin
@@ -528,6 +536,8 @@ class MockVehicle:
         return result, []
 
     def _cmd_takeoff(self, link: VehicleLink, p: list[float]) -> tuple[int, list[Any]]:
+        if self.options.frame == "rover":
+            return px4.MAV_RESULT_UNSUPPORTED, []
         home_amsl_m = self.options.home[2] - self._commander.home_ned_m[2]
         altitude_m = p[6] - home_amsl_m if math.isfinite(p[6]) else None
         return self._commander.takeoff(self._t_s, altitude_m), []
@@ -610,7 +620,7 @@ class MockVehicle:
     def _telemetry_state(self) -> tel.TelemetryState:
         c, k = self._commander, self._kin
         return tel.TelemetryState(self._t_s, k, c.mode, c.armed, c.system_status(), c.landed_state(k), c.armable(),
-                                  c.position_valid, c.setpoint, c.home_ned_m)
+                                  c.position_valid, c.setpoint, c.home_ned_m, FRAMES[self.options.frame])
 
     def _service_streams(self, t_s: float) -> None:
         due = [s for s in self._streams.values() if s.period_s > 0 and s.next_due_s <= t_s + DUE_EPSILON]

@@ -100,6 +100,9 @@ def _write_port_file(path: Path, port: int) -> None:
               help="Start position [m] in local NED. D >= 0: on the ground; D < 0: standing on a platform at that "
                    "height (a carrier deck) until it lifts off.")
 @click.option("--sysid", type=click.IntRange(1, 255), default=1, show_default=True, help="MAVLink system id.")
+@click.option("--frame", type=click.Choice(["quadrotor", "rover"]), default="quadrotor", show_default=True,
+              help="quadrotor: point-mass multicopter; rover: MAV_TYPE_GROUND_ROVER on the ground, Ackermann "
+                   "kinematics, PX4's rover offboard rules (speed |v| towards bearing atan2(v)).")
 @click.option("--param", "params", multiple=True, metavar="NAME=VALUE",
               help="Override a PX4 parameter, e.g. --param COM_OF_LOSS_T=1.0 (repeatable).")
 @click.option("--tau", "tau_s", type=click.FloatRange(min=0.0, min_open=True), default=0.2, show_default=True,
@@ -134,7 +137,7 @@ def _write_port_file(path: Path, port: int) -> None:
 @click.option("--status-every", type=click.FloatRange(min=0.0), default=5.0, show_default=True, metavar="SECONDS",
               help="Log a status line with mode, position and the counters every SECONDS of wall time (0: never).")
 def mock_vehicle(mavlink_url: str, target_url: str, gcs_url: str | None, speed: float, home: str, start_ned: str,
-                 sysid: int, params: tuple[str, ...], tau_s: float, wind: str, position_noise: float, loss_in: float,
+                 sysid: int, frame: str, params: tuple[str, ...], tau_s: float, wind: str, position_noise: float, loss_in: float,
                  loss_out: float, latency_ms: float, jitter_ms: float, blackouts: tuple[str, ...],
                  refuse_arming: str | None, refuse_offboard: str | None, lose_position_s: float | None, seed: int, signing_key: Path | None, port_file: Path | None,
                  status_every: float) -> None:
@@ -151,7 +154,7 @@ def mock_vehicle(mavlink_url: str, target_url: str, gcs_url: str | None, speed: 
                           blackouts=tuple(_blackout(b) for b in blackouts), refuse_arming_reason=refuse_arming, seed=seed,
                           refuse_offboard_reason=refuse_offboard, position_lost_at_s=lose_position_s)
     options = VehicleOptions(
-        bind=bind, target=target, gcs_target=gcs_url, speed=speed, sysid=sysid,
+        bind=bind, target=target, gcs_target=gcs_url, speed=speed, sysid=sysid, frame=frame,
         home=_floats(home, 3, "--home"), start_ned=_floats(start_ned, 3, "--start-ned"),  # type: ignore[arg-type]
         params=dict(_param(p) for p in params), velocity_tau_s=tau_s, faults=faults,
         signing_key=read_signing_key(signing_key) if signing_key else None,

@@ -110,6 +110,7 @@ class TelemetryState:
     position_valid: bool
     setpoint: Setpoint | None
     home_ned_m: tuple[float, float, float]
+    mav_type: int = px4.MAV_TYPE_QUADROTOR
 
 
 def _ms(t_s: float) -> int:
@@ -122,7 +123,7 @@ def _us(t_s: float) -> int:
 
 def heartbeat(s: TelemetryState) -> Any:
     return mavlink.MAVLink_heartbeat_message(
-        px4.MAV_TYPE_QUADROTOR, px4.MAV_AUTOPILOT_PX4, px4.base_mode_of(s.mode, s.armed),
+        s.mav_type, px4.MAV_AUTOPILOT_PX4, px4.base_mode_of(s.mode, s.armed),
         px4.custom_mode_of(s.mode), s.system_status, 3)
 
 

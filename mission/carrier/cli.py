@@ -38,7 +38,7 @@ def open_backend(cfg: Config, clock: Clock, session: zenoh.Session, stack: ExitS
 
         backend = MavlinkCarrier(cfg, clock)
     else:
-        from mission.carrier.ros2_robot import Ros2Carrier
+        from mission.carrier.ros2_link import Ros2Carrier
 
         backend = Ros2Carrier(cfg, clock, session)
     stack.callback(backend.close)
@@ -114,13 +114,24 @@ def _jsonable(value: Any) -> Any:
               help="Control/publish rate in simulated Hz [default: carrier.rate_hz, 30].")
 @click.option("--mavlink", "mavlink_url", default=None, metavar="URL",
               help="MAVLink URL of the carrier vehicle (mavlink backend) [default: carrier.mavlink.url].")
+@click.option("--target-system", type=click.IntRange(1, 255), default=None,
+              help="MAVLink system id of the carrier vehicle [default: carrier.mavlink.target_system].")
+@click.option("--kinematics", type=click.Choice(["holonomic", "diff_drive", "ackermann"]), default=None,
+              help="What the carrier can follow (tracking law) [default: carrier.kinematics].")
+@click.option("--offset-ned", default=None, metavar="N,E,D",
+              help="Where the vehicle's local (mavlink) or odom (ros2) frame origin sits in the shared frame [m].")
+@click.option("--ros2-namespace", default=None, help="ROS namespace of the robot (ros2) [default: carrier.ros2.namespace].")
+@click.option("--key-form", type=click.Choice(["ros2dds", "rmw_zenoh"]), default=None,
+              help="ROS 2 key form (ros2) [default: carrier.ros2.key_form].")
 @click.option("--duration", type=click.FloatRange(min=0, min_open=True), default=None, metavar="S",
               help="Stop after this many simulated seconds [default: run until SIGINT/SIGTERM].")
 @click.option("--summary", "summary_path", type=click.Path(dir_okay=False), default=None, metavar="PATH",
               help="Write the carrier's summary (closest approach, braking distance, guard activity) as JSON.")
 def carrier_command(config: str, backend: str | None, speed: float, pair: str | None, listen: tuple[str, ...],
                     connect: tuple[str, ...], encoding: str | None, rate: float | None, mavlink_url: str | None,
-                    duration: float | None, summary_path: str | None) -> int:
+                    target_system: int | None, kinematics: str | None, offset_ned: str | None,
+                    ros2_namespace: str | None, key_form: str | None, duration: float | None,
+                    summary_path: str | None) -> int:
     """Run the carrier-side controller of CONFIG (a TOML file).
 
     The carrier waits until the passenger's published phase is RIDING, then drives towards
@@ -136,8 +147,22 @@ def carrier_command(config: str, backend: str | None, speed: float, pair: str | 
     2 on a configuration error; 3 if the vehicle link cannot open; 4 if Zenoh cannot start.
     """
     cfg = load_config(config)
+    chosen = backend or cfg.carrier.backend
+    offset = None
+    if offset_ned is not None:
+        try:
+            offset = [float(p) for p in offset_ned.split(",")]
+        except ValueError:
+            offset = []
+        if len(offset) != 3:
+            raise click.BadParameter(f"expected N,E,D, got {offset_ned!r}", param_hint="--offset-ned")
     cfg = with_overrides(cfg, {
         "carrier.backend": backend,
+        "carrier.kinematics": kinematics,
+        "carrier.mavlink.target_system": target_system,
+        "carrier.ros2.namespace": ros2_namespace,
+        "carrier.ros2.key_form": key_form,
+        f"carrier.{chosen if chosen != 'sim' else 'mavlink'}.offset_ned_m": offset,
         "zenoh.pair": pair,
         "zenoh.listen": list(listen) if listen else None,
         "zenoh.connect": list(connect) if connect else None,

@@ -43,6 +43,7 @@ from mission.wire import CarrierState
 log = logging.getLogger(__name__)
 
 STOP = Tracked(0.0, 0.0, 0.0, np.zeros(2), np.zeros(2))
+REAL_DELAY_S = 0.3  # [s] default response delay of a real carrier for the P3 guard (carrier.brake_delay_s)
 
 
 @dataclass(frozen=True)
@@ -66,6 +67,9 @@ class CarrierBackend(Protocol):
 
     def own_state(self) -> OwnState | None:
         """The newest own state, or None before the first."""
+
+    def engage(self) -> None:
+        """The carrier has to move now: take control of the vehicle (arm, OFFBOARD) if needed."""
 
     def control_fault(self) -> str | None:
         """Why the vehicle does not take our commands now (None: it does)."""
@@ -92,9 +96,10 @@ def carrier_model(cfg: Config) -> TickModel:
 def guard_params(cfg: Config) -> GuardParams:
     """The P3 guard of ``cfg``: radius ``b c - carrier.p3_margin_m`` [m]; it plans with the
     carrier's response delay plus one control period (a command is held that long)."""
-    decel = cfg.carrier.brake_decel_m_s2 or cfg.safety.carrier_max_accel_m_s2 or 1.0
-    return GuardParams(cfg.law.b * cfg.law.c - cfg.carrier.p3_margin_m, decel, cfg.carrier.brake_delay_s,
-                       1.0 / cfg.carrier.rate_hz)
+    c = cfg.carrier
+    decel = c.brake_decel_m_s2 or cfg.safety.carrier_max_accel_m_s2 or 1.0
+    delay = c.brake_delay_s if c.brake_delay_s is not None else (0.0 if c.backend == "sim" else REAL_DELAY_S)
+    return GuardParams(cfg.law.b * cfg.law.c - c.p3_margin_m, decel, delay, 1.0 / c.rate_hz)
 
 
 def tracking_params(cfg: Config) -> TrackingParams:
@@ -127,10 +132,10 @@ class CarrierController:
         self.planar = self.model.planar_carrier or self.dim == 2
         self.p3_guard = P3Guard(self.guard, np.asarray(self.model.target), planar=self.planar)
         self.period_s = 1.0 / cfg.carrier.rate_hz
-        self.velocity_m_s = np.zeros(self.dim)  # [m/s] motion commanded over the last period
+        self.velocity_m_s = np.zeros(self.dim)  # [m/s] the filtered (and, holonomic, guarded) law command
         self.mode = CarrierMode.WAITING
         self.seq = 0
-        self.hold_reason: str | None = "no own state yet"
+        self.hold_reason: str | None = "no valid own state"
         self._plan_velocity = np.zeros(self.dim)
         self._stats: dict[str, Any] = {"closest_target_distance_m": math.inf, "guard_active_ticks": 0,
                                        "stale_ticks": 0, "ticks": 0, "distance_at_separation_m": None,
@@ -193,9 +198,10 @@ class CarrierController:
                 scale = speed / cmd.speed_m_s if cmd.speed_m_s > 0 else 0.0
                 cmd = Tracked(speed, cmd.yaw_rate_rad_s, cmd.bearing_rad, heading_of(speed, yaw),
                               cmd.setpoint_ned_m_s * scale)
-            motion = np.zeros(self.dim)
-            motion[:2] = cmd.velocity_ned_m_s
-            self.velocity_m_s = motion
+            # The law's planar command (not the motion along the heading) is what the
+            # acceleration limit and Remark 1 act on: tying it to the heading would let the
+            # command turn only as fast as the robot already does (a heading lock).
+            self.velocity_m_s = u
         if active:
             self._stats["guard_active_ticks"] += 1
         return cmd
@@ -224,10 +230,12 @@ class CarrierController:
         self.backend.advance(dt_s)
         self._stats["ticks"] += 1
         self._update_mode()
+        if self.mode is CarrierMode.APPROACHING:
+            self.backend.engage()
         state = self.backend.own_state()
         now = self.clock.now()
         if state is None:
-            why = "no own state yet"
+            why = "no valid own state"
         elif now - state.t_s > self.cfg.carrier.state_timeout_s:
             why = f"own state {now - state.t_s:.2f} s old (> {self.cfg.carrier.state_timeout_s} s)"
         else:

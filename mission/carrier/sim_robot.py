@@ -49,6 +49,9 @@ class SimRobot:
     def own_state(self) -> OwnState:
         return OwnState(self.clock.now(), _pad3(self.position_m), _pad3(self.velocity_m_s), self.yaw_rad)
 
+    def engage(self) -> None:
+        pass
+
     def control_fault(self) -> str | None:
         return None
 
