@@ -146,7 +146,9 @@ class MavlinkCarrier:
             self._streaming_since = self.clock.now()
 
     def close(self) -> None:
-        """Ask for Hold if we had control (best effort), stop the worker, close the link."""
+        """Ask for Hold if we had control (best effort), stop the worker, close the link. Idempotent."""
+        if not self.link.is_open:
+            return
         try:
             st = self.link.state
             if self._engaged and st.armed and st.mode == "OFFBOARD" and self.link.vehicle_alive():
@@ -156,4 +158,5 @@ class MavlinkCarrier:
         finally:
             if self._worker is not None:
                 self._worker.close()
+                self._worker = None
             self.link.close()

@@ -50,3 +50,17 @@ def test_three_pairs_fly_at_once_on_one_network(tmp_path):
         assert info["anchor_ned_m"] is not None
     # Crosstalk on the bus itself is tested in test_bridge_pairs.py (distinct states per pair);
     # here three full stacks share one Zenoh router and every one of them completes.
+
+
+@pytest.mark.parametrize("carrier", ["mavlink", "ros2"])
+def test_demo_with_a_real_carrier_interface_holds_p1_p3_and_the_guard(tmp_path, carrier):
+    """--carrier mavlink: the carrier controller flies a mock PX4 Ackermann rover (sysid 2) in
+    OFFBOARD; --carrier ros2: it drives a ROS-2-shaped diff-drive robot on rmw_zenoh keys."""
+    out = _demo(tmp_path, "--carrier", carrier)
+    assert out.returncode == 0, out.stdout + out.stderr
+    s = json.loads((tmp_path / "logs" / "pair0" / "summary.json").read_text())
+    assert s["p1"] and s["p2"] and s["p3"] and s["phase"] == "DONE"
+    c = json.loads((tmp_path / "logs" / "pair0" / "carrier.json").read_text())
+    assert c["backend"] == carrier and c["mode"] == "separated"
+    assert c["closest_target_distance_m"] >= 8.0 - 0.5  # b c - p3_margin_m: the carrier's own guard
+    assert 0.0 < c["braking_distance_m"] < 3.0

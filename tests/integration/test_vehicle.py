@@ -306,3 +306,25 @@ def test_speed_factor_10_flies_the_same_trajectory() -> None:
     assert set(result) == {1.0, 10.0}
     assert np.linalg.norm(result[1.0]) > 2.5  # it did fly somewhere
     assert np.linalg.norm(result[10.0] - result[1.0]) < 0.05, result
+
+
+def test_rover_frame_is_a_ground_rover_that_refuses_takeoff_and_drives_offboard() -> None:
+    from sim.vehicle import MockVehicle, VehicleOptions
+    from sim.vehicle_probe import Probe
+
+    with Probe() as probe, MockVehicle(VehicleOptions(target=f"127.0.0.1:{probe.port}", speed=5.0,
+                                                      frame="rover")) as v:
+        probe.vehicle = ("127.0.0.1", v.port)
+        hb = probe.wait_for("HEARTBEAT", timeout_s=5.0)
+        assert hb is not None and hb.type == 10  # MAV_TYPE_GROUND_ROVER
+        ack = probe.command(px4.MAV_CMD_NAV_TAKEOFF, (0, 0, 0, 0, 0, 0, 10.0))
+        assert ack is not None and ack.result == px4.MAV_RESULT_UNSUPPORTED
+        stream = probe.every(0.02, lambda: probe.send(probe.setpoint_message((1.0, 0.0, -1.0))))
+        try:
+            assert probe.arm().result == px4.MAV_RESULT_ACCEPTED
+            assert probe.set_mode("OFFBOARD").result == px4.MAV_RESULT_ACCEPTED
+            snap = v.wait_for(lambda s: s.velocity_ned_m_s[0] > 0.9, timeout_s=10.0)
+            assert snap is not None and snap.position_ned_m[2] == 0.0  # climb commands ignored: on the ground
+            assert v.snapshot().armed  # no preflight auto-disarm for a rover (armed = not landed)
+        finally:
+            stream.set()

@@ -1,0 +1,230 @@
+"""The carrier controller on real robots' interfaces, over real sockets: a PX4-like Ackermann
+rover (the mock vehicle's rover frame) through MAVLink, and a ROS-2-shaped robot through Zenoh
+under both key forms. A scripted passenger talks to the carrier over Zenoh; clocks run at 5x."""
+from __future__ import annotations
+
+import contextlib
+import threading
+from collections.abc import Iterator
+from typing import Any
+
+import numpy as np
+import pytest
+import zenoh
+
+from mission.carrier.controller import CarrierController
+from mission.carrier.modes import CarrierMode
+from mission.carrier.mavlink_vehicle import MavlinkCarrier
+from mission.carrier.ros2_link import Ros2Carrier, ros2_topics
+from mission.carrier_bridge import CarrierFeed, PassengerPublisher
+from mission.clock import ScaledClock
+from mission.config import Config, from_dict
+from mission.wire import PassengerStatus
+from sim.ros2_robot import Ros2RobotSim
+from sim.vehicle import MockVehicle, VehicleOptions
+from tests.integration.zenoh_util import peer_pair, wait_for
+
+pytestmark = pytest.mark.timeout(90)
+
+SPEED = 5.0
+TARGET = np.array([20.0, 15.0, -4.0])
+START = np.array([2.0, 1.0, 0.0])
+RADIUS = 8.0 - 0.5
+
+
+def _cfg(backend: str, kinematics: str, **carrier: Any) -> Config:
+    return from_dict({
+        "zenoh": {"pair": "cb"},
+        "scenario": {"carrier_start": START.tolist(), "target": TARGET.tolist()},
+        "safety": {"carrier_max_accel_m_s2": 1.0},
+        "carrier": {"backend": backend, "kinematics": kinematics, "max_speed_m_s": 2.0, "passenger_timeout_s": 1.0,
+                    "p3_margin_m": 0.5, **carrier},
+    })
+
+
+class ScriptedPassenger:
+    """Publishes a phase at 20 Hz (clock) from its own thread: ``phase`` can be changed at any time."""
+
+    def __init__(self, session: zenoh.Session, clock: ScaledClock) -> None:
+        self.pub = PassengerPublisher(session, "cb")
+        self.clock, self.phase, self.seq = clock, "JOIN", 0
+        self.stop = threading.Event()
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+
+    def _run(self) -> None:
+        while not self.stop.is_set():
+            self.seq += 1
+            sep = self.phase in ("SEPARATED", "NAVIGATING")
+            self.pub.publish(PassengerStatus(self.phase, self.clock.now(), self.seq, [0, 0, -1.5], [0, 0, 0], sep))
+            self.clock.sleep(0.05)
+
+    def close(self) -> None:
+        self.stop.set()
+        self.thread.join(5.0)
+        self.pub.close()
+
+
+@contextlib.contextmanager
+def carrier_running(cfg: Config, clock: ScaledClock, session: zenoh.Session, backend: Any) -> Iterator[CarrierController]:
+    ctl = CarrierController(cfg, clock, session, backend)
+    stop = threading.Event()
+    thread = threading.Thread(target=ctl.run, args=(stop,), daemon=True)
+    thread.start()
+    try:
+        yield ctl
+    finally:
+        stop.set()
+        thread.join(5.0)
+        assert not thread.is_alive()
+        ctl.close()
+
+
+def _distance(position: np.ndarray) -> float:
+    return float(np.linalg.norm(TARGET - position))
+
+
+@contextlib.contextmanager
+def rover_carrier(**carrier: Any) -> Iterator[tuple[Config, ScaledClock, zenoh.Session, zenoh.Session, MavlinkCarrier, MockVehicle]]:
+    cfg = _cfg("mavlink", "ackermann", mavlink={"url": "udpin:127.0.0.1:0", "target_system": 2,
+                                                "offset_ned_m": START.tolist()}, **carrier)
+    clock = ScaledClock(SPEED)
+    with peer_pair() as (sa, sb):
+        backend = MavlinkCarrier(cfg, clock)
+        try:
+            opts = VehicleOptions(target=f"127.0.0.1:{backend.link.port}", speed=SPEED, sysid=2, frame="rover")
+            with MockVehicle(opts) as rover:
+                yield cfg, clock, sa, sb, backend, rover
+        finally:
+            backend.close()
+
+
+def _watch(rover: MockVehicle, ctl: CarrierController, until: Any, timeout_s: float, what: str) -> list[float]:
+    """Distances [m] of the rover's true position (shared frame) until ``until()`` holds."""
+    distances: list[float] = []
+
+    def check() -> bool:
+        distances.append(_distance(rover.snapshot().position_ned_m + START))
+        return bool(until())
+
+    wait_for(check, timeout_s, what)
+    return distances
+
+
+def test_px4_rover_arms_when_the_passenger_rides_and_stops_outside_the_guard_after_separation() -> None:
+    with rover_carrier() as (cfg, clock, sa, sb, backend, rover):
+        passenger = ScriptedPassenger(sb, clock)
+        try:
+            with carrier_running(cfg, clock, sa, backend) as ctl, CarrierFeed(sb, "cb", clock) as feed:
+                rx = wait_for(lambda: feed.latest(), what="carrier state")
+                np.testing.assert_allclose(rx.state.position, START, atol=1e-6)  # offset into the shared frame
+                assert not rover.snapshot().armed  # waiting for the passenger: not armed for nothing
+                passenger.phase = "RIDING"
+                wait_for(lambda: rover.snapshot().mode == "OFFBOARD" and rover.snapshot().armed, 20, "armed in OFFBOARD")
+                d = _watch(rover, ctl, lambda: _distance(rover.snapshot().position_ned_m + START) < 8.3, 30, "near 8 m")
+                passenger.phase = "SEPARATED"
+                wait_for(lambda: ctl.mode is CarrierMode.SEPARATED, what="separated heard")
+                d += _watch(rover, ctl, lambda: np.linalg.norm(rover.snapshot().velocity_ned_m_s) < 1e-3, 20, "stopped")
+                summary = ctl.summary()
+        finally:
+            passenger.close()
+        backend.close()  # the carrier program exits: it asks for Hold
+        snap = rover.snapshot()
+    assert min(d) >= RADIUS, min(d)
+    assert summary["braking_distance_m"] is not None and 0.0 < summary["braking_distance_m"] < 3.0
+    assert summary["stopped_target_distance_m"] >= RADIUS
+    assert snap.mode == "AUTO.LOITER"  # the carrier asked for Hold when it stopped
+    assert all(b <= a + 0.05 for a, b in zip(d, d[1:]))  # the Ackermann rover closed in without loops
+
+
+def test_px4_rover_under_a_passenger_that_never_separates_stops_at_the_guard() -> None:
+    with rover_carrier() as (cfg, clock, sa, sb, backend, rover):
+        passenger = ScriptedPassenger(sb, clock)
+        passenger.phase = "RIDING"
+        try:
+            with carrier_running(cfg, clock, sa, backend) as ctl:
+                wait_for(lambda: rover.snapshot().armed, 20, "armed")
+                d = _watch(rover, ctl, lambda: ctl.summary()["guard_active_ticks"] > 30
+                           and np.linalg.norm(rover.snapshot().velocity_ned_m_s) < 1e-3, 60, "held at the guard")
+                assert ctl.mode is CarrierMode.APPROACHING
+        finally:
+            passenger.close()
+    assert min(d) >= RADIUS, min(d)
+    assert d[-1] < RADIUS + 0.5
+
+
+def test_stale_own_state_stops_the_carrier_and_its_publishing() -> None:
+    """A blackout of the rover's link: no LOCAL_POSITION_NED. The carrier stops commanding motion
+    and publishes nothing (a stale carrier state must never look fresh to the passenger)."""
+    with rover_carrier() as (cfg, clock, sa, sb, backend, rover):
+        passenger = ScriptedPassenger(sb, clock)
+        passenger.phase = "RIDING"
+        try:
+            with carrier_running(cfg, clock, sa, backend) as ctl, CarrierFeed(sb, "cb", clock) as feed:
+                wait_for(lambda: np.linalg.norm(rover.snapshot().velocity_ned_m_s) > 0.5, 30, "moving")
+                t0 = rover.snapshot().t_s
+                rover.set_faults(blackouts=((t0, 3.0),))
+                wait_for(lambda: (ctl.hold_reason or "").startswith("own state"), 10, "stale own state seen")
+                seq_stale = wait_for(lambda: feed.latest()).state.seq
+                clock.sleep(1.0)
+                assert feed.latest().state.seq == seq_stale  # nothing published while stale
+                assert ctl.summary()["stale_ticks"] > 0
+                wait_for(lambda: ctl.hold_reason is None, 20, "back in control after the blackout")
+        finally:
+            passenger.close()
+
+
+@pytest.mark.parametrize(("key_form", "kinematics"), [("rmw_zenoh", "diff_drive"), ("ros2dds", "holonomic")])
+def test_ros2_robot_follows_the_law_and_stops_outside_the_guard(key_form: str, kinematics: str) -> None:
+    cfg = _cfg("ros2", kinematics, ros2={"key_form": key_form, "namespace": "robot1", "offset_ned_m": START.tolist()})
+    clock = ScaledClock(SPEED)
+    topics = ros2_topics(cfg.carrier.ros2)
+    with peer_pair() as (sa, sb):
+        robot = Ros2RobotSim(sb, topics, clock, holonomic=kinematics == "holonomic", yaw_rad=-1.0)
+        stop_robot = threading.Event()
+        robot_thread = threading.Thread(target=robot.run, args=(stop_robot,), daemon=True)
+        robot_thread.start()
+        backend = Ros2Carrier(cfg, clock, sa)
+        passenger = ScriptedPassenger(sb, clock)
+        try:
+            with carrier_running(cfg, clock, sa, backend) as ctl:
+                wait_for(lambda: ctl.hold_reason is None, 10, "odometry received")
+                state = backend.own_state()
+                np.testing.assert_allclose(state.position_ned_m, START, atol=1e-9)  # odom origin + offset
+                assert state.yaw_rad == pytest.approx(-1.0)  # ENU quaternion back to the NED heading
+                passenger.phase = "RIDING"
+                d: list[float] = []
+
+                def near() -> bool:
+                    d.append(_distance(robot.position_m + START))
+                    return d[-1] < 8.3
+
+                wait_for(near, 40, "near 8 m")
+                passenger.phase = "SEPARATED"
+
+                def stopped() -> bool:
+                    d.append(_distance(robot.position_m + START))
+                    return ctl.mode is CarrierMode.SEPARATED and np.linalg.norm(robot.body_velocity) < 1e-6
+
+                wait_for(stopped, 20, "stopped")
+                assert robot.commands > 30 and backend.dropped == {}
+        finally:
+            passenger.close()
+            stop_robot.set()
+            robot_thread.join(5.0)
+            backend.close()
+            robot.close()
+    assert min(d) >= RADIUS, min(d)
+
+
+def test_ros2_keys_of_both_forms() -> None:
+    from mission.config import CarrierRos2Section
+
+    dds = ros2_topics(CarrierRos2Section(namespace="/robot1/"))
+    assert (dds.odom_sub, dds.cmd_vel_pub) == ("robot1/odom", "robot1/cmd_vel")
+    rmw = ros2_topics(CarrierRos2Section(key_form="rmw_zenoh", domain_id=3))
+    assert rmw.odom_sub == "3/odom/nav_msgs::msg::dds_::Odometry_/*"
+    assert rmw.cmd_vel_pub == ("3/cmd_vel/geometry_msgs::msg::dds_::Twist_/"
+                               "RIHS01_9c45bf16fe0983d80e3cfe750d6835843d265a9a6c46bd2e609fcddde6fb8d2a")
+    assert zenoh.KeyExpr(rmw.cmd_vel_sub).intersects(zenoh.KeyExpr(rmw.cmd_vel_pub))
+    assert zenoh.KeyExpr(rmw.odom_sub).intersects(zenoh.KeyExpr(rmw.odom_pub))
