@@ -266,9 +266,9 @@ class Config(_Model):
             eta=s.eta,
             passenger_start=None if s.passenger_start is None else np.array(s.passenger_start),
         )
-        if not self.carrier.p3_margin_m > self.sim.departure_margin_m:
+        if not self.carrier.p3_margin_m > self.law.departure_margin_m:
             raise ConfigError("carrier.p3_margin_m", self.carrier.p3_margin_m,
-                              "must exceed sim.departure_margin_m, or the carrier never reaches the separation distance")
+                              "must exceed law.departure_margin_m, or the carrier never reaches the separation distance")
         if self.carrier.p3_margin_m >= self.law.b * self.law.c:
             raise ConfigError("carrier.p3_margin_m", self.carrier.p3_margin_m, "must be < b c")
         if len(self.mission.dock_offset_ned_m) != 3:

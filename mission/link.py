@@ -134,10 +134,10 @@ class VehicleState:
     SYS_STATUS reports the AHRS/estimator as present and enabled, that it is healthy."""
     origin: tuple[float, float, float] | None
     """EKF origin (lat [deg], lon [deg], alt [m] AMSL) from GPS_GLOBAL_ORIGIN, or None."""
-    yaw_rad: float | None
-    """Heading [rad] from north towards east, from ATTITUDE; None before the first (or non-finite)."""
     last_statustext: str
     """Text of the latest (reassembled) STATUSTEXT from the vehicle, ``""`` if none."""
+    yaw_rad: float | None = None
+    """Heading [rad] from north towards east, from ATTITUDE; None before the first (or non-finite)."""
 
     @property
     def heartbeat_age_s(self) -> float:

@@ -81,8 +81,8 @@ def main(cfg: Config, speed: float = 1.0, duration_s: float | None = None, stop_
                         Path(summary_path).parent.mkdir(parents=True, exist_ok=True)
                         Path(summary_path).write_text(json.dumps(summary, indent=2, default=_jsonable) + "\n")
     finally:
-        for sig, handler in restore.items():
-            signal.signal(sig, handler)
+        for signum, handler in restore.items():
+            signal.signal(signum, handler)
     return 0
 
 

@@ -37,6 +37,7 @@ from mission.carrier.tracking import Tracked, TrackingParams, heading_of, track
 from mission.carrier_bridge import CarrierPublisher, PassengerFeed
 from mission.clock import Clock, Periodic
 from mission.config import Config
+from mission.model import model_from_config
 from mission.tick import TickModel, carrier_tick
 from mission.wire import CarrierState
 
@@ -84,8 +85,6 @@ class CarrierBackend(Protocol):
 def carrier_model(cfg: Config) -> TickModel:
     """The tick model of the carrier: the config's, with the carrier's speed limit
     ``min(carrier.max_speed_m_s, safety.carrier_max_speed_m_s)`` [m/s]."""
-    from sim.closed_loop import model_from_config  # the one config -> model builder
-
     model = model_from_config(cfg)
     limit = cfg.carrier.max_speed_m_s
     if model.carrier_safety.max_speed_m_s is not None:
@@ -234,6 +233,7 @@ class CarrierController:
             self.backend.engage()
         state = self.backend.own_state()
         now = self.clock.now()
+        why: str | None
         if state is None:
             why = "no valid own state"
         elif now - state.t_s > self.cfg.carrier.state_timeout_s:
