@@ -81,11 +81,13 @@ class WaitReporter:
             return None
         limit = self.cfg.mission.connect_timeout_s
         left = max(limit - (self.clock.now() - state.since_s), 0.0)
-        return (f"waiting for {' and '.join(missing)}; giving up in {left:.0f} s "
+        speed = float(getattr(self.clock, "speed", 1.0))
+        wall = "" if speed == 1.0 else f", {left / speed:.1f} s wall at clock x{speed:g}"
+        return (f"waiting for {' and '.join(missing)}; giving up in {left:.0f} s{wall} "
                 f"(mission.connect_timeout_s = {limit:g} s)")
 
     def _run(self) -> None:
-        wait_s = min(self.period_s, 0.3)  # the first word comes quickly
+        wait_s = min(self.period_s, 1.0)  # the first word comes soon, but not before a vehicle could answer
         while not self._done.wait(wait_s):
             wait_s = self.period_s
             text = self.line()
