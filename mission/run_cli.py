@@ -188,9 +188,17 @@ def plot(log_dir: str, out_path: str | None) -> int:
     if out_path and len(logs) > 1:
         raise ConfigError("--out", out_path, f"one output file for {len(logs)} flight logs; leave --out out "
                           "(each plot goes to its own log directory) or give one log directory")
+    plotted = 0
     for d in logs:
-        out = plot_flight(d, out_path or d / "flight.png")
+        try:
+            out = plot_flight(d, out_path or d / "flight.png")
+        except ConfigError as exc:  # one aborted flight does not hide the others
+            click.echo(f"{d}: no plot: {exc.rule}", err=True)
+            continue
         click.echo(f"plot written to {out}")
+        plotted += 1
+    if not plotted:
+        raise ConfigError("LOG_DIR", log_dir, f"none of its {len(logs)} flight logs has a flight to plot")
     return 0
 
 
@@ -206,7 +214,7 @@ def plot_flight(log_dir: Path, out_path: str | Path) -> Path:
     ok = np.isfinite(x_p).all(axis=1) & np.isfinite(x_c).all(axis=1)
     if not ok.any():
         raise ConfigError("LOG_DIR", str(log_dir), "the record holds no tick with both vehicle and carrier positions "
-                          "(the mission aborted before it saw both; see its summary.json)")
+                          "(the mission ended before it flew: see its summary.json)")
     info = rec.info
     riding = np.flatnonzero(rec.phase == "RIDING")
     t0 = rec.t[riding[0]] if len(riding) else rec.t[ok][0]
