@@ -76,9 +76,29 @@ DOCS: dict[str, str] = {
     "zenoh.encoding": "[-] carrier state encoding: `json` or `cdr` (ROS 2 nav_msgs/Odometry)",
     "zenoh.rendezvous": "[-] peers with no endpoints meet on this loopback endpoint (the first process listens); none: ephemeral listener only",
     "zenoh.carrier_key": "[-] override of the carrier state key, e.g. `robot1/odom` (zenoh-bridge-ros2dds) or `0/odom/nav_msgs::msg::dds_::Odometry_/*` (rmw_zenoh)",
-    "carrier.rate_hz": "[Hz] carrier simulator's integration and publish rate (simulated time)",
-    "carrier.max_speed_m_s": "[m/s] carrier simulator's speed limit",
-    "carrier.passenger_timeout_s": "[s] simulated; a passenger status older than this (or a lost liveliness token) stops an approaching carrier",
+    "carrier.backend": "[-] the carrier robot `marsupial carrier` drives: `sim` (built-in kinematic robot), `mavlink` (PX4 rover/boat), `ros2` (ROS 2 robot over Zenoh)",
+    "carrier.rate_hz": "[Hz] carrier controller's tick and publish rate (the built-in robot integrates at it; simulated time)",
+    "carrier.max_speed_m_s": "[m/s] carrier speed limit in the law's command (with safety.carrier_max_speed_m_s)",
+    "carrier.passenger_timeout_s": "[s] a passenger status older than this (or a lost liveliness token) stops an approaching carrier",
+    "carrier.kinematics": "[-] what the carrier can follow: `holonomic` (any planar velocity), `diff_drive` or `ackermann` (tracking law: speed scaled by the heading error, yaw rate to the bearing)",
+    "carrier.max_yaw_rate_rad_s": "[rad/s] tracking law: yaw rate limit",
+    "carrier.min_speed_fraction": "[-] tracking law, Ackermann: fraction of the speed kept while misaligned (it turns only while moving)",
+    "carrier.wheelbase_m": "[m] tracking law, Ackermann: wheelbase (yaw rate <= v tan(max_steer) / wheelbase)",
+    "carrier.max_steer_rad": "[rad] tracking law, Ackermann: steering angle limit",
+    "carrier.mavlink": "[-] table: the PX4 vehicle of the `mavlink` backend",
+    "carrier.mavlink.url": "[-] the carrier vehicle's endpoint (as mavlink.url); PX4 SITL instance i sends to 14540 + i",
+    "carrier.mavlink.target_system": "[-] MAVLink system id of the carrier vehicle (PX4 SITL instance i: i + 1); default: the first PX4 heard",
+    "carrier.mavlink.source_system": "[-] our MAVLink system id on that link (default: target_system, else 1)",
+    "carrier.mavlink.source_component": "[-] our MAVLink component id (191: onboard computer)",
+    "carrier.mavlink.signing_key_file": "[-] MAVLink 2 signing key file of the carrier's link",
+    "carrier.mavlink.heartbeat_timeout_s": "[s] the carrier vehicle counts as lost after this long without HEARTBEAT (stop)",
+    "carrier.mavlink.shared_origin": "[deg, deg, m] lat, lon, alt AMSL of the shared frame's origin; when set the offset comes from the vehicle's EKF origin (GPS_GLOBAL_ORIGIN)",
+    "carrier.ros2": "[-] table: the ROS 2 robot of the `ros2` backend",
+    "carrier.ros2.key_form": "[-] `ros2dds` (zenoh-bridge-ros2dds: `<ns>/odom`) or `rmw_zenoh` (`<domain>/<ns>/odom/<type>/<hash>`)",
+    "carrier.ros2.namespace": "[-] ROS namespace of the robot's topics",
+    "carrier.ros2.domain_id": "[-] ROS_DOMAIN_ID (rmw_zenoh keys start with it)",
+    "carrier.ros2.odom_topic": "[-] nav_msgs/Odometry topic (ENU, REP 103) the carrier reads",
+    "carrier.ros2.cmd_vel_topic": "[-] geometry_msgs/Twist topic (body FLU) the carrier commands",
     "vehicle.velocity_tau_s": "[s] the demo's mock vehicle: time constant of its velocity response",
 }
 
@@ -132,6 +152,8 @@ def fields() -> list[dict[str, str]]:
                          "rule": _rule(p), "doc": doc})
             if "$ref" in items:  # a list of tables (obstacles)
                 walk(f"{key}[].", _resolve(schema, items))
+            if "$ref" in p:  # a sub-table (carrier.mavlink, carrier.ros2)
+                walk(f"{key}.", _resolve(schema, p))
 
     for section, ref in schema["properties"].items():
         walk(f"{section}.", _resolve(schema, ref))
