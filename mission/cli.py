@@ -4,57 +4,52 @@ Subcommands are imported lazily so that ``marsupial --help`` is fast and a missi
 dependency of one subcommand does not break the others. Each subcommand lives next to the code
 it drives and exposes a ``click.Command``; this module only maps names to them and turns our
 errors into exit codes (library code never exits).
+
+The product's own subcommands are listed here. Other packages (the simulator's ``sim``, the
+benchmarks' ``bench``) register theirs under the entry-point group ``marsupial.commands`` in
+``pyproject.toml``, each naming a :class:`~mission.subcommands.Subcommand`; the product names
+none of their modules.
 """
 from __future__ import annotations
 
-import importlib
 import logging
 import sys
+from functools import cache
 
 import click
 
 from mission.errors import MarsupialError
+from mission.subcommands import Subcommand, registered
 
-SUBCOMMANDS: dict[str, tuple[str, str]] = {
-    "simulate": ("sim.simulate_cli", "simulate"),
-    "mock-vehicle": ("sim.vehicle_cli", "mock_vehicle"),
-    "ros2-robot": ("sim.ros2_robot", "ros2_robot"),
-    "carrier": ("mission.carrier.cli", "carrier_command"),
-    "run": ("mission.run_cli", "run"),
-    "plot": ("mission.run_cli", "plot"),
-    "demo": ("sim.demo", "demo"),
-    "bench": ("bench.__main__", "bench"),
-    "config": ("mission.config_cli", "config_command"),
+PRODUCT: dict[str, Subcommand] = {
+    "carrier": Subcommand("mission.carrier.cli:carrier_command",
+                          "Run the carrier-side controller (built-in robot, PX4 rover, ROS 2 robot)."),
+    "run": Subcommand("mission.run_cli:run", "Fly the offboard mission on a PX4 vehicle (mock, SITL or real)."),
+    "plot": Subcommand("mission.run_cli:plot", "Draw the paper-style figures from a flight log directory."),
+    "config": Subcommand("mission.config_cli:config_command",
+                         "Every configuration field: type, default, rule, meaning and unit (--schema: JSON)."),
 }
 
-SUMMARIES = {
-    "simulate": "Integrate the paper's closed loop (one scenario, or a Monte-Carlo batch).",
-    "mock-vehicle": "Run the PX4-like kinematic MAVLink vehicle (SITL-free testing).",
-    "ros2-robot": "Run a ROS-2-shaped robot over Zenoh (Twist cmd_vel in, Odometry out).",
-    "carrier": "Run the carrier-side controller (built-in robot, PX4 rover, ROS 2 robot).",
-    "run": "Fly the offboard mission on a PX4 vehicle (mock, SITL or real).",
-    "plot": "Draw the paper-style figures from a flight log directory.",
-    "demo": "Mock vehicle + carrier simulator + mission, on embedded defaults.",
-    "bench": "Benchmarks: print a table and write JSON.",
-    "config": "Every configuration field: type, default, rule, meaning and unit (--schema: JSON).",
-}
+
+@cache
+def subcommands() -> dict[str, Subcommand]:
+    """Every subcommand by name: the product's, then the registered ones (:func:`registered`)."""
+    return {**PRODUCT, **{name: spec for name, spec in registered().items() if name not in PRODUCT}}
 
 
 class LazyGroup(click.Group):
     """A click group whose subcommands are imported on first use."""
 
     def list_commands(self, ctx: click.Context) -> list[str]:
-        return list(SUBCOMMANDS)
+        return list(subcommands())
 
     def get_command(self, ctx: click.Context, name: str) -> click.Command | None:
-        if name not in SUBCOMMANDS:
-            return None
-        module, attr = SUBCOMMANDS[name]
-        return getattr(importlib.import_module(module), attr)
+        spec = subcommands().get(name)
+        return None if spec is None else spec.load()
 
     def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
         with formatter.section("Commands"):
-            formatter.write_dl([(n, SUMMARIES[n]) for n in SUBCOMMANDS])
+            formatter.write_dl([(name, spec.summary) for name, spec in subcommands().items()])
 
 
 @click.group(cls=LazyGroup, context_settings={"help_option_names": ["-h", "--help"]})
