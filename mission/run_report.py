@@ -14,8 +14,10 @@ import threading
 from typing import Any, Callable, TextIO
 
 from mission.carrier_bridge import describe_endpoints, keys
+from mission.clock import Clock
 from mission.config import Config
 from mission.phases import Phase
+from mission.ports import CarrierSource, Vehicle
 
 CLOCKS_NOTE = ("times: [mission X s] = the controller's clock since it started (record.csv t_s); "
                "t = time since the start of riding, the paper's t = 0 (summary.json, plots)")
@@ -30,7 +32,7 @@ def startup_lines(cfg: Config, speed: float) -> list[str]:
     ]
 
 
-def waiting_for(cfg: Config, link: Any, feed: Any) -> list[str]:
+def waiting_for(cfg: Config, link: Vehicle, feed: CarrierSource) -> list[str]:
     """What the controller still waits for before it can start (empty: nothing)."""
     missing = []
     st = link.state
@@ -54,7 +56,7 @@ class WaitReporter:
     long until it gives up (``mission.connect_timeout_s``). On a terminal the line is redrawn in
     place; otherwise plain lines."""
 
-    def __init__(self, cfg: Config, controller: Any, link: Any, feed: Any, clock: Any,
+    def __init__(self, cfg: Config, controller: Any, link: Vehicle, feed: CarrierSource, clock: Clock,
                  out: TextIO | None = None, period_s: float | None = None) -> None:
         self.cfg, self.controller, self.link, self.feed, self.clock = cfg, controller, link, feed, clock
         self.out = out or sys.stdout
