@@ -235,12 +235,6 @@ class CarrierSection(_Model):
         return self
 
 
-class VehicleSection(_Model):
-    """The mock vehicle started by ``marsupial demo``."""
-
-    velocity_tau_s: float = Field(0.2, gt=0)
-
-
 class Config(_Model):
     law: LawSection = LawSection()
     scenario: ScenarioSection = ScenarioSection()
@@ -251,7 +245,6 @@ class Config(_Model):
     mavlink: MavlinkSection = MavlinkSection()
     zenoh: ZenohSection = ZenohSection()
     carrier: CarrierSection = CarrierSection()
-    vehicle: VehicleSection = VehicleSection()
 
     @model_validator(mode="after")
     def _assumptions(self) -> "Config":

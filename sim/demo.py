@@ -148,8 +148,8 @@ def start_pair(config: str, name: str, zenoh_ep: str, speed: float, log_root: Pa
                                            *backend_args), stderr=err)
     stack.callback(stop_process, carrier)
     vehicle = subprocess.Popen(_python_cli("mock-vehicle", "--mavlink", "udpin:127.0.0.1:0", "--target",
-                                           f"udpout:127.0.0.1:{mav_port}", "--speed", str(speed), "--start-ned", start,
-                                           "--tau", str(cfg.vehicle.velocity_tau_s)), stderr=err)
+                                           f"udpout:127.0.0.1:{mav_port}", "--speed", str(speed), "--start-ned", start),
+                               stderr=err)
     stack.callback(stop_process, vehicle)
     mission = subprocess.Popen(_python_cli("run", config, "--mavlink", f"udpin:127.0.0.1:{mav_port}", "--zenoh-connect",
                                            zenoh_ep, "--pair", name, "--speed", str(speed), "--log-dir", str(pair.log_dir)),

@@ -68,6 +68,8 @@ def rover_stepper(mode_of: Callable[[], str], limits: RoverLimits | None = None)
     lim = limits or RoverLimits()
 
     def step(state: KinState, command: Command, _limits: object, _wind: object, dt_s: float) -> KinState:
-        return rover_step(state, command if mode_of() == "OFFBOARD" else STOP, lim, dt_s)
+        # a setpoint without a finite horizontal velocity (PX4 semantics: NaN = not controlled) stops it
+        drive = mode_of() == "OFFBOARD" and math.isfinite(command.vn_m_s) and math.isfinite(command.ve_m_s)
+        return rover_step(state, command if drive else STOP, lim, dt_s)
 
     return step

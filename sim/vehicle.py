@@ -12,16 +12,18 @@ every step, (2) releases datagrams held by the latency fault, (3) sends the stre
 and (4) waits on the sockets until the next thing is due. Because physics and timers run on
 simulated time in fixed steps, a flight at ``speed`` 20 follows the same trajectory as at 1.
 
-Modules: :mod:`sim.vehicle_physics` (point mass), :mod:`sim.vehicle_commander` (modes, arming,
+Modules: :mod:`sim.vehicle_physics` (PX4's position controller on an SIH-like airframe), :mod:`sim.vehicle_commander` (modes, arming,
 failsafes), :mod:`sim.vehicle_telemetry` (streams, messages, geodesy), :mod:`sim.vehicle_params`
 (parameter table), :mod:`sim.vehicle_protocol` (what PX4 makes of a command or setpoint),
 :mod:`sim.vehicle_faults` (loss, latency, blackouts), :mod:`sim.vehicle_link` (UDP endpoints,
 codec, signing), :mod:`sim.vehicle_probe` (a pymavlink peer for tests and the bench).
 
 Choices where PX4 leaves room, or where the mock simplifies (see also the commander's docstring):
-- Position-only setpoints (type_mask 2552) are accepted in LOCAL_NED and flown by a P loop;
-  in BODY_NED they are rejected. Any other type_mask or frame is dropped, counted in
-  ``setpoints_rejected``, and is not proof of life.
+- Setpoints are read as PX4 reads them (:func:`sim.vehicle_protocol.setpoint_of`): any
+  combination of position, velocity and acceleration in LOCAL_NED, velocity and acceleration in
+  BODY_NED, flown by PX4's position controller (:mod:`sim.mc_position_control`). Another frame, the
+  FORCE bit with an acceleration, or nothing to control: dropped with PX4's STATUSTEXT (*at most
+  once a second per text), counted in ``setpoints_rejected``, and not proof of life.
 - Latency is one-way and applies in each direction; loss and blackouts too. All fault times are
   simulated seconds.
 - STATUSTEXT goes only to a link whose peer sent a HEARTBEAT within 2.5 s (as PX4 does);
@@ -61,7 +63,7 @@ from sim import vehicle_telemetry as tel
 from sim.vehicle_commander import Commander
 from sim.vehicle_faults import FaultInjector, FaultOptions
 from sim.vehicle_link import VehicleLink, parse_endpoint
-from sim.vehicle_params import ParamTable, UnknownParam
+from sim.vehicle_params import ParamTable, UnknownParam, vehicle_limits
 from sim.vehicle_physics import KinState, Limits, initial_state, step
 from sim.vehicle_protocol import int_param, mode_of_set_mode, param_value, setpoint_of
 from sim.rover_physics import rover_stepper
@@ -98,9 +100,9 @@ class VehicleOptions:
     home: EKF origin (lat [deg], lon [deg], alt [m AMSL]) of the local NED frame.
     start_ned: start position [m] NED; on the ground when ``d >= 0``, on a platform when ``d < 0``.
     params: PX4 parameter overrides, e.g. ``{"COM_OF_LOSS_T": 1.0}``.
-    velocity_tau_s: time constant [s] of the first-order velocity response.
-    wind_ned_m_s: uncompensated drift in the air [m/s] NED. position_noise_m: sigma of the
-    Gaussian noise on the reported position [m] (seeded by ``faults.seed``).
+    wind_ned_m_s: wind [m/s] NED: a drag force in the air, which PX4's velocity integrator slowly
+    compensates. position_noise_m: sigma of the Gaussian noise on the reported position [m]
+    (seeded by ``faults.seed``).
     signing_key: 32-byte MAVLink 2 signing key; then unsigned messages other than HEARTBEAT
     are rejected and everything sent is signed.
     """
@@ -115,7 +117,6 @@ class VehicleOptions:
     home: tuple[float, float, float] = (47.397742, 8.545594, 488.0)
     start_ned: tuple[float, float, float] = (0.0, 0.0, 0.0)
     params: dict[str, float] = field(default_factory=dict)
-    velocity_tau_s: float = 0.2
     faults: FaultOptions = field(default_factory=FaultOptions)
     signing_key: bytes | None = None
     wind_ned_m_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -130,8 +131,6 @@ class VehicleOptions:
             raise ValueError(f"sysid and compid must be in 1..255, got {self.sysid}, {self.compid}")
         if self.signing_key is not None and len(self.signing_key) != 32:
             raise ValueError(f"signing_key must be 32 bytes, got {len(self.signing_key)}")
-        if not self.velocity_tau_s > 0:
-            raise ValueError(f"velocity_tau_s must be > 0, got {self.velocity_tau_s!r}")
         if self.frame not in FRAMES:
             raise ValueError(f"frame must be one of {sorted(FRAMES)}, got {self.frame!r}")
 
@@ -376,10 +375,7 @@ class MockVehicle:
         self._poll(wait_s)
 
     def _limits(self) -> Limits:
-        p = self.params.get
-        return Limits(p("MPC_XY_VEL_MAX"), p("MPC_Z_VEL_MAX_UP"), p("MPC_Z_VEL_MAX_DN"), p("MPC_ACC_HOR"),
-                      p("MPC_ACC_UP_MAX"), p("MPC_ACC_DOWN_MAX"), self.options.velocity_tau_s,
-                      math.radians(p("MPC_YAWRAUTO_MAX")))
+        return vehicle_limits(self.params)
 
     def _advance_to(self, t_s: float) -> None:
         """Run the physics and the commander in fixed steps up to simulated time ``t_s``."""
@@ -564,9 +560,10 @@ class MockVehicle:
     def _on_setpoint(self, link: VehicleLink, msg: Any) -> None:
         if not self._targets_me(msg):
             return
-        setpoint = setpoint_of(msg, self._kin.yaw_rad)
+        setpoint, reason = setpoint_of(msg, self._kin.yaw_rad)
         if setpoint is None:
             self._counters["setpoints_rejected"] += 1
+            self._commander.reject_setpoint(self._t_s, reason)
             return
         self._counters["setpoints_accepted"] += 1
         self._commander.accept_setpoint(self._t_s, setpoint)

@@ -105,10 +105,8 @@ def _write_port_file(path: Path, port: int) -> None:
                    "kinematics, PX4's rover offboard rules (speed |v| towards bearing atan2(v)).")
 @click.option("--param", "params", multiple=True, metavar="NAME=VALUE",
               help="Override a PX4 parameter, e.g. --param COM_OF_LOSS_T=1.0 (repeatable).")
-@click.option("--tau", "tau_s", type=click.FloatRange(min=0.0, min_open=True), default=0.2, show_default=True,
-              metavar="SECONDS", help="Time constant of the first-order velocity response [s].")
 @click.option("--wind", default="0,0,0", show_default=True, metavar="N,E,D",
-              help="Wind [m/s] NED: an uncompensated drift while in the air.")
+              help="Wind [m/s] NED: a drag force in the air (PX4's velocity integrator slowly compensates it).")
 @click.option("--position-noise", type=click.FloatRange(min=0.0), default=0.0, show_default=True, metavar="METRES",
               help="Sigma [m] of Gaussian noise on the reported position (seeded by --seed).")
 @click.option("--loss-in", type=click.FloatRange(0.0, 1.0), default=0.0, show_default=True, metavar="FRACTION",
@@ -137,11 +135,11 @@ def _write_port_file(path: Path, port: int) -> None:
 @click.option("--status-every", type=click.FloatRange(min=0.0), default=5.0, show_default=True, metavar="SECONDS",
               help="Log a status line with mode, position and the counters every SECONDS of wall time (0: never).")
 def mock_vehicle(mavlink_url: str, target_url: str, gcs_url: str | None, speed: float, home: str, start_ned: str,
-                 sysid: int, frame: str, params: tuple[str, ...], tau_s: float, wind: str, position_noise: float, loss_in: float,
+                 sysid: int, frame: str, params: tuple[str, ...], wind: str, position_noise: float, loss_in: float,
                  loss_out: float, latency_ms: float, jitter_ms: float, blackouts: tuple[str, ...],
                  refuse_arming: str | None, refuse_offboard: str | None, lose_position_s: float | None, seed: int, signing_key: Path | None, port_file: Path | None,
                  status_every: float) -> None:
-    """Run the PX4-like kinematic MAVLink vehicle until SIGINT or SIGTERM.
+    """Run the PX4-like MAVLink vehicle until SIGINT or SIGTERM.
 
     By default it mirrors PX4 SITL: it binds UDP 127.0.0.1:14580, sends HEARTBEAT and the
     onboard-profile streams to 127.0.0.1:14540 from start-up, and answers the first peer that
@@ -156,7 +154,7 @@ def mock_vehicle(mavlink_url: str, target_url: str, gcs_url: str | None, speed: 
     options = VehicleOptions(
         bind=bind, target=target, gcs_target=gcs_url, speed=speed, sysid=sysid, frame=frame,
         home=_floats(home, 3, "--home"), start_ned=_floats(start_ned, 3, "--start-ned"),  # type: ignore[arg-type]
-        params=dict(_param(p) for p in params), velocity_tau_s=tau_s, faults=faults,
+        params=dict(_param(p) for p in params), faults=faults,
         signing_key=read_signing_key(signing_key) if signing_key else None,
         wind_ned_m_s=_floats(wind, 3, "--wind"), position_noise_m=position_noise)  # type: ignore[arg-type]
     run(options, port_file, status_every)

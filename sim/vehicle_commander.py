@@ -38,17 +38,23 @@ from sim.vehicle_physics import Command, KinState
 POSITION_GAIN_1_S = 1.0  # P gain of the position loops (Hold, position setpoints) [1/s]
 ARRIVAL_RADIUS_M = 0.5
 TAKEOFF_DONE_M = 0.1
+REJECTION_REPEAT_S = 1.0  # [s] a dropped setpoint's STATUSTEXT is repeated at most this often
 
 MODES_NEEDING_POSITION = frozenset({"OFFBOARD", "POSCTL", "AUTO.LOITER", "AUTO.TAKEOFF", "AUTO.RTL", "AUTO.MISSION", "AUTO.READY"})
 
 
+NAN3 = (math.nan, math.nan, math.nan)
+
+
 @dataclass(frozen=True)
 class Setpoint:
-    """A validated offboard setpoint in local NED: a velocity [m/s] or a position [m], with
-    an absolute yaw [rad] or a yaw rate [rad/s] (both None: keep the yaw)."""
+    """An accepted offboard setpoint in local NED, as PX4's trajectory setpoint: position [m],
+    velocity [m/s], acceleration [m/s^2]; NaN components are not controlled. An absolute yaw
+    [rad] or a yaw rate [rad/s] (both None: keep the yaw)."""
 
-    kind: str  # "velocity" | "position"
-    ned: tuple[float, float, float]
+    position: tuple[float, float, float] = NAN3
+    velocity: tuple[float, float, float] = NAN3
+    acceleration: tuple[float, float, float] = NAN3
     yaw_rad: float | None = None
     yaw_rate_rad_s: float | None = None
     type_mask: int = px4.TYPE_MASK_VELOCITY
@@ -83,6 +89,7 @@ class Commander:
         self.rtl_return_d_m = kin.d_m
         self.now_s = 0.0  # time of the latest step or command [s]
         self.outbox: list[tuple[float, int, str]] = []  # (t_s, severity, text) to send
+        self._rejections: dict[str, float] = {}  # STATUSTEXT of a dropped setpoint -> when last said
         self.kin = kin
 
     # ---- helpers -------------------------------------------------------------------------
@@ -114,6 +121,14 @@ class Commander:
         self.setpoint = setpoint
         self.last_setpoint_t_s = t_s
         self.setpoints_received += 1
+
+    def reject_setpoint(self, t_s: float, reason: str) -> None:
+        """A setpoint was dropped: PX4 logs ``reason`` as a critical STATUSTEXT (*here at most
+        once per :data:`REJECTION_REPEAT_S` per text, where PX4 repeats it for every message)."""
+        self.now_s = max(self.now_s, t_s)
+        if t_s - self._rejections.get(reason, -math.inf) >= REJECTION_REPEAT_S:
+            self._rejections[reason] = t_s
+            self._say(reason, px4.MAV_SEVERITY_CRITICAL)
 
     def set_mode(self, t_s: float, name: str) -> int:
         """Handle DO_SET_MODE to mode ``name``; return the MAV_RESULT."""
@@ -272,11 +287,12 @@ class Commander:
             return self._rtl_command(kin)
         return self._hold_command(kin, self.hold_ned_m)
 
-    def _offboard_command(self, kin: KinState, sp: Setpoint) -> Command:
-        if sp.kind == "position":
-            return self._hold_command(kin, sp.ned, sp.yaw_rad)
-        vn, ve, vd = sp.ned
-        return Command(vn, ve, vd, sp.yaw_rad, sp.yaw_rate_rad_s)
+    @staticmethod
+    def _offboard_command(kin: KinState, sp: Setpoint) -> Command:
+        """The trajectory setpoint as it is: PX4's position controller flies it unsmoothed."""
+        vn, ve, vd = sp.velocity
+        return Command(vn, ve, vd, sp.yaw_rad, sp.yaw_rate_rad_s, position_ned_m=sp.position,
+                       acceleration_ned_m_s2=sp.acceleration)
 
     @staticmethod
     def _hold_command(kin: KinState, target_ned_m: tuple[float, float, float], yaw_rad: float | None = None) -> Command:

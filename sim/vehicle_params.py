@@ -13,6 +13,8 @@ import threading
 from dataclasses import dataclass
 
 from mission import px4
+from sim.mc_position_control import Gains
+from sim.vehicle_physics import Limits
 
 
 @dataclass(frozen=True)
@@ -38,9 +40,26 @@ PARAM_SPECS: tuple[ParamSpec, ...] = (
     ParamSpec("MPC_XY_CRUISE", 5.0, False, "horizontal speed of auto modes (RTL) [m/s]"),
     ParamSpec("MPC_Z_VEL_MAX_UP", 3.0, False, "climb speed limit [m/s]"),
     ParamSpec("MPC_Z_VEL_MAX_DN", 1.5, False, "descent speed limit [m/s]"),
-    ParamSpec("MPC_ACC_HOR", 3.0, False, "horizontal acceleration limit [m/s^2]"),
-    ParamSpec("MPC_ACC_UP_MAX", 4.0, False, "upward acceleration limit [m/s^2]"),
-    ParamSpec("MPC_ACC_DOWN_MAX", 3.0, False, "downward acceleration limit [m/s^2]"),
+    ParamSpec("MPC_ACC_HOR", 3.0, False, "horizontal acceleration of auto modes [m/s^2] (reported only: OFFBOARD is not smoothed)"),
+    ParamSpec("MPC_ACC_HOR_MAX", 5.0, False, "horizontal acceleration limit of manual modes [m/s^2] (reported only)"),
+    ParamSpec("MPC_ACC_UP_MAX", 4.0, False, "upward acceleration of auto modes [m/s^2] (reported only)"),
+    ParamSpec("MPC_ACC_DOWN_MAX", 3.0, False, "downward acceleration of auto modes [m/s^2] (reported only)"),
+    ParamSpec("MPC_JERK_MAX", 8.0, False, "jerk limit of manual modes [m/s^3] (reported only)"),
+    ParamSpec("MPC_JERK_AUTO", 4.0, False, "jerk limit of auto modes [m/s^3] (reported only)"),
+    ParamSpec("MPC_XY_P", 0.95, False, "horizontal position gain [1/s]"),
+    ParamSpec("MPC_Z_P", 1.0, False, "vertical position gain [1/s]"),
+    ParamSpec("MPC_XY_VEL_P_ACC", 1.8, False, "horizontal velocity P gain [1/s]"),
+    ParamSpec("MPC_XY_VEL_I_ACC", 0.4, False, "horizontal velocity I gain [1/s^2]"),
+    ParamSpec("MPC_XY_VEL_D_ACC", 0.2, False, "horizontal velocity D gain [-]"),
+    ParamSpec("MPC_Z_VEL_P_ACC", 4.0, False, "vertical velocity P gain [1/s]"),
+    ParamSpec("MPC_Z_VEL_I_ACC", 2.0, False, "vertical velocity I gain [1/s^2]"),
+    ParamSpec("MPC_Z_VEL_D_ACC", 0.0, False, "vertical velocity D gain [-]"),
+    ParamSpec("MPC_VELD_LP", 5.0, False, "low-pass cutoff of the velocity derivative (D term) [Hz]"),
+    ParamSpec("MPC_TILTMAX_AIR", 45.0, False, "tilt limit in the air [deg]"),
+    ParamSpec("MPC_THR_HOVER", 0.5, False, "hover thrust [0..1]"),
+    ParamSpec("MPC_THR_MIN", 0.12, False, "minimum collective thrust [0..1]"),
+    ParamSpec("MPC_THR_MAX", 1.0, False, "maximum collective thrust [0..1]"),
+    ParamSpec("MPC_THR_XY_MARG", 0.3, False, "horizontal thrust margin [0..1]"),
     ParamSpec("MPC_TKO_SPEED", 1.5, False, "takeoff climb speed [m/s]"),
     ParamSpec("MPC_LAND_SPEED", 0.7, False, "landing descent speed [m/s]"),
     ParamSpec("MPC_YAWRAUTO_MAX", 45.0, False, "yaw rate limit [deg/s]"),
@@ -119,3 +138,13 @@ class ParamTable:
         if spec.is_int:
             return pack_int32(int(value)), px4.MAV_PARAM_TYPE_INT32
         return float(value), px4.MAV_PARAM_TYPE_REAL32
+
+
+def vehicle_limits(table: ParamTable) -> Limits:
+    """The dynamics' gains and limits from the current parameter values (airframe: the fitted one)."""
+    p = table.get
+    gains = Gains(p("MPC_XY_P"), p("MPC_Z_P"), p("MPC_XY_VEL_P_ACC"), p("MPC_XY_VEL_I_ACC"), p("MPC_XY_VEL_D_ACC"),
+                  p("MPC_Z_VEL_P_ACC"), p("MPC_Z_VEL_I_ACC"), p("MPC_Z_VEL_D_ACC"), p("MPC_VELD_LP"), p("MPC_XY_VEL_MAX"),
+                  p("MPC_Z_VEL_MAX_UP"), p("MPC_Z_VEL_MAX_DN"), math.radians(p("MPC_TILTMAX_AIR")), p("MPC_THR_HOVER"),
+                  p("MPC_THR_MIN"), p("MPC_THR_MAX"), p("MPC_THR_XY_MARG"))
+    return Limits(gains, yaw_rate_max_rad_s=math.radians(p("MPC_YAWRAUTO_MAX")))

@@ -1,52 +1,70 @@
-"""Point-mass multicopter kinematics of the mock vehicle (pure functions, no I/O).
+"""Multicopter dynamics of the mock vehicle: PX4's position controller on an SIH-like airframe.
 
-Frames and units: local NED [m] around the EKF origin (home), velocities [m/s] NED, yaw [rad]
-from north, clockwise positive. ``d <= ground_d_m`` is above the ground; the vehicle can never be
-below it.
+Pure functions, no I/O. Frames and units: local NED [m] around the EKF origin (home), velocities
+[m/s] NED, yaw [rad] from north, clockwise positive. ``d <= ground_d_m`` is above the ground; the
+vehicle can never be below it.
 
-Model, per fixed step ``dt_s``:
-- the commanded velocity is clamped to the speed limits (horizontal norm ``xy_vel_max_m_s``,
-  climb ``z_vel_max_up_m_s``, descent ``z_vel_max_dn_m_s``);
-- the velocity follows it with a first-order response of time constant ``tau_s`` (exact
-  discretisation: after one step the remaining error is ``exp(-dt/tau)`` of the previous one),
-  with the change per step limited by the horizontal acceleration ``acc_hor_m_s2`` (norm) and
-  the vertical ``acc_up_m_s2`` / ``acc_dn_m_s2``;
-- in the air the ground velocity is that response plus the wind (an uncompensated drift: the
-  modes with a position loop correct it, a pure velocity setpoint does not);
-- on the ground the vehicle does not slide: it stays put until it is powered and commanded
-  upwards (``vd < 0``), then it lifts off at once; touching the ground while descending stops it;
-- unpowered (disarmed) in the air it falls freely.
+Model, per fixed step ``dt_s`` (structured as PX4 SITL with its SIH simulator):
+- the command is a trajectory setpoint (position, velocity, acceleration; NaN = not controlled),
+  flown by PX4's position controller (:mod:`sim.mc_position_control`, the ``MPC_*`` gains): it
+  yields the acceleration the thrust setpoint asks for;
+- the airframe realises that acceleration through a first-order lag (attitude loop and motors;
+  :class:`Airframe` ``tilt_tau_s`` horizontally, ``thrust_tau_s`` vertically) and feels SIH's
+  linear drag ``-drag_1_s * (v - wind)`` (``SIH_KDV / SIH_MASS``; vertically ``drag_z_1_s``, what
+  PX4's hover-thrust estimator leaves of it). The wind is therefore a force
+  that PX4's velocity integrator slowly compensates, as on SIH;
+- the constants of :data:`FITTED_AIRFRAME` are fitted to a real PX4 SITL's recorded responses
+  (``bench/px4_response_fit.py``);
+- on the ground the vehicle does not slide: it stays put until it is powered and the setpoint
+  asks to climb (PX4's ``want_takeoff``), then it lifts off at once; touching the ground while
+  descending stops it (the controller's integrator resets on the ground, as PX4's does);
+- unpowered (disarmed) in the air it falls, with drag.
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
-GRAVITY_M_S2 = 9.80665
+from sim.mc_position_control import GRAVITY_M_S2, ControllerState, Gains, Setpoint3, control
+
 YAW_TIME_CONSTANT_S = 0.3
-TOUCHDOWN_SPEED_M_S = 0.05  # below this climb rate on the ground it is not a liftoff
+NAN = math.nan
+
+
+@dataclass(frozen=True)
+class Airframe:
+    """The free constants of the airframe [s, 1/s]: what PX4's parameters do not fix."""
+
+    drag_1_s: float = 1.0  # SIH_KDV / SIH_MASS: linear drag per unit mass, horizontal [1/s]
+    tilt_tau_s: float = 0.25  # lag of the horizontal acceleration behind the controller's [s]
+    thrust_tau_s: float = 0.08  # lag of the vertical acceleration [s]
+    # vertical drag as the controller feels it [1/s]: PX4's hover-thrust estimator (MPC_USE_HTE)
+    # takes part of SIH's vertical drag for a change of hover thrust and compensates it
+    drag_z_1_s: float = 1.0
+
+
+# fitted to ../shared/px4_sitl/responses (original recording) by ``python -m bench.px4_response_fit --fit``
+FITTED_AIRFRAME = Airframe(drag_1_s=1.099, tilt_tau_s=0.2816, thrust_tau_s=0.0568, drag_z_1_s=0.699)
 
 
 @dataclass(frozen=True)
 class Limits:
-    """Velocity and acceleration limits [m/s, m/s^2], response time constant [s], yaw rate [rad/s]."""
+    """Everything that shapes the response: PX4's controller gains and limits, the airframe,
+    and the yaw rate limit [rad/s] (``MPC_YAWRAUTO_MAX``)."""
 
-    xy_vel_max_m_s: float = 12.0
-    z_vel_max_up_m_s: float = 3.0
-    z_vel_max_dn_m_s: float = 1.5
-    acc_hor_m_s2: float = 3.0
-    acc_up_m_s2: float = 4.0
-    acc_dn_m_s2: float = 3.0
-    tau_s: float = 0.2
+    gains: Gains = field(default_factory=Gains)
+    airframe: Airframe = FITTED_AIRFRAME
     yaw_rate_max_rad_s: float = math.radians(45.0)
 
 
 @dataclass(frozen=True, slots=True)
 class Command:
-    """What the flight controller asks of the point mass: velocity [m/s] NED and a yaw target.
+    """What the flight controller asks of the vehicle: a trajectory setpoint and a yaw target.
 
-    ``yaw_rad`` (absolute) takes precedence over ``yaw_rate_rad_s``; with neither, yaw is held.
-    ``powered`` is False when disarmed (motors off).
+    Velocity [m/s] NED (``vn_m_s, ve_m_s, vd_m_s``), position [m] NED (``position_ned_m``) and
+    acceleration feed-forward [m/s^2] NED (``acceleration_ned_m_s2``); a NaN component is not
+    controlled (PX4 semantics). ``yaw_rad`` (absolute) takes precedence over
+    ``yaw_rate_rad_s``; with neither, yaw is held. ``powered`` is False when disarmed.
     """
 
     vn_m_s: float = 0.0
@@ -55,16 +73,22 @@ class Command:
     yaw_rad: float | None = None
     yaw_rate_rad_s: float | None = None
     powered: bool = True
+    position_ned_m: tuple[float, float, float] = (NAN, NAN, NAN)
+    acceleration_ned_m_s2: tuple[float, float, float] = (NAN, NAN, NAN)
+
+    def setpoint(self) -> Setpoint3:
+        return Setpoint3(self.position_ned_m, (self.vn_m_s, self.ve_m_s, self.vd_m_s), self.acceleration_ned_m_s2)
 
 
 @dataclass(frozen=True, slots=True)
 class KinState:
-    """Point-mass state: position [m] NED, velocity [m/s] NED (without wind), yaw [rad].
+    """Vehicle state: position [m] NED, velocity [m/s] NED (over ground), yaw [rad].
 
-    ``an_m_s2, ae_m_s2`` is the last horizontal acceleration (for the attitude telemetry),
-    ``yaw_rate_rad_s`` the last yaw rate. ``ground_d_m`` is the level the vehicle stands on
-    (the carrier deck at start, the ground ``0`` once it has lifted off). ``on_ground`` is the
-    landed flag of the physics (no motion possible but liftoff).
+    ``an_m_s2, ae_m_s2, ad_m_s2`` is the acceleration the thrust produces (gravity compensated:
+    hover is 0; it sets the attitude telemetry), ``dvn, dve, dvd`` the low-passed acceleration
+    PX4's D term sees, ``ctrl`` the position controller's memory, ``yaw_rate_rad_s`` the last
+    yaw rate. ``ground_d_m`` is the level the vehicle stands on (the carrier deck at start, the
+    ground ``0`` once it has lifted off). ``on_ground`` is the landed flag of the physics.
     """
 
     n_m: float
@@ -79,6 +103,11 @@ class KinState:
     ae_m_s2: float = 0.0
     ground_d_m: float = 0.0
     on_ground: bool = True
+    ad_m_s2: float = 0.0
+    dvn_m_s2: float = 0.0
+    dve_m_s2: float = 0.0
+    dvd_m_s2: float = 0.0
+    ctrl: ControllerState = ControllerState()
 
 
 def initial_state(start_ned_m: tuple[float, float, float]) -> KinState:
@@ -87,16 +116,6 @@ def initial_state(start_ned_m: tuple[float, float, float]) -> KinState:
     n, e, d = (float(x) for x in start_ned_m)
     ground = min(d, 0.0)
     return KinState(n_m=n, e_m=e, d_m=ground, ground_d_m=ground, on_ground=True)
-
-
-def clamp_velocity(vn: float, ve: float, vd: float, limits: Limits) -> tuple[float, float, float]:
-    """Commanded velocity [m/s] NED clamped to the horizontal norm and vertical limits."""
-    speed_h = math.hypot(vn, ve)
-    if speed_h > limits.xy_vel_max_m_s > 0.0:
-        scale = limits.xy_vel_max_m_s / speed_h
-        vn, ve = vn * scale, ve * scale
-    vd = min(max(vd, -limits.z_vel_max_up_m_s), limits.z_vel_max_dn_m_s)
-    return vn, ve, vd
 
 
 def wrap_pi(angle_rad: float) -> float:
@@ -114,39 +133,46 @@ def _yaw_rate(state: KinState, command: Command, limits: Limits) -> float:
     return min(max(rate, -limits.yaw_rate_max_rad_s), limits.yaw_rate_max_rad_s)
 
 
-def _response(state: KinState, command: Command, limits: Limits, dt_s: float) -> tuple[float, float, float, float, float]:
-    """New velocity (vn, ve, vd) [m/s] and horizontal acceleration (an, ae) [m/s^2]."""
-    vn_c, ve_c, vd_c = clamp_velocity(command.vn_m_s, command.ve_m_s, command.vd_m_s, limits)
-    alpha = 1.0 - math.exp(-dt_s / limits.tau_s) if limits.tau_s > 0 else 1.0
-    dvn, dve, dvd = (vn_c - state.vn_m_s) * alpha, (ve_c - state.ve_m_s) * alpha, (vd_c - state.vd_m_s) * alpha
-    dv_h_max = limits.acc_hor_m_s2 * dt_s
-    dv_h = math.hypot(dvn, dve)
-    if dv_h > dv_h_max:
-        scale = dv_h_max / dv_h
-        dvn, dve = dvn * scale, dve * scale
-    dvd = min(max(dvd, -limits.acc_up_m_s2 * dt_s), limits.acc_dn_m_s2 * dt_s)
-    return state.vn_m_s + dvn, state.ve_m_s + dve, state.vd_m_s + dvd, dvn / dt_s, dve / dt_s
+def _lag(value: float, target: float, dt_s: float, tau_s: float) -> float:
+    """One exact step of a first-order lag of time constant ``tau_s`` towards ``target``."""
+    return target if tau_s <= 0.0 else target + (value - target) * math.exp(-dt_s / tau_s)
 
 
 def step(state: KinState, command: Command, limits: Limits, wind_ned_m_s: tuple[float, float, float], dt_s: float) -> KinState:
-    """Advance the point mass by ``dt_s`` [s] under ``command``; see the module docstring."""
-    if state.on_ground and not (command.powered and command.vd_m_s < -TOUCHDOWN_SPEED_M_S):
-        return state  # landed states are always at rest on their ground
-    yaw_rate = _yaw_rate(state, command, limits) if command.powered else 0.0
+    """Advance the vehicle by ``dt_s`` [s] under ``command``; see the module docstring."""
+    sp = command.setpoint()
+    if state.on_ground and not (command.powered and sp.wants_climb(state.d_m)):
+        # landed: at rest on its ground, the controller's integrator reset (as PX4's)
+        if state.ctrl.integral == (0.0, 0.0, 0.0) and state.an_m_s2 == state.ae_m_s2 == state.ad_m_s2 == 0.0:
+            return state
+        return KinState(state.n_m, state.e_m, state.d_m, yaw_rad=state.yaw_rad, ground_d_m=state.ground_d_m, on_ground=True)
+    air = limits.airframe
+    pos = (state.n_m, state.e_m, state.d_m)
+    vel = (state.vn_m_s, state.ve_m_s, state.vd_m_s)
     if command.powered:
-        vn, ve, vd, an, ae = _response(state, command, limits, dt_s)
+        yaw_rate = _yaw_rate(state, command, limits)
+        acc_sp, ctrl = control(sp, pos, vel, (state.dvn_m_s2, state.dve_m_s2, state.dvd_m_s2), state.ctrl, limits.gains, dt_s)
+        an = _lag(state.an_m_s2, acc_sp[0], dt_s, air.tilt_tau_s)
+        ae = _lag(state.ae_m_s2, acc_sp[1], dt_s, air.tilt_tau_s)
+        ad = _lag(state.ad_m_s2, acc_sp[2], dt_s, air.thrust_tau_s)
     else:
-        vn, ve, vd, an, ae = state.vn_m_s, state.ve_m_s, state.vd_m_s + GRAVITY_M_S2 * dt_s, 0.0, 0.0
+        yaw_rate, ctrl = 0.0, ControllerState()
+        an, ae, ad = 0.0, 0.0, GRAVITY_M_S2
     wn, we, wd = wind_ned_m_s
-    n = state.n_m + (vn + wn) * dt_s
-    e = state.e_m + (ve + we) * dt_s
-    d = state.d_m + (vd + wd) * dt_s
+    k = air.drag_1_s
+    accel = (an - k * (vel[0] - wn), ae - k * (vel[1] - we), ad - air.drag_z_1_s * (vel[2] - wd))
+    vn, ve, vd = (vel[i] + accel[i] * dt_s for i in range(3))
+    n, e, d = state.n_m + vn * dt_s, state.e_m + ve * dt_s, state.d_m + vd * dt_s
+    alpha = 1.0 - math.exp(-dt_s * 2.0 * math.pi * limits.gains.veld_lp_hz)
+    dvn = state.dvn_m_s2 + (accel[0] - state.dvn_m_s2) * alpha
+    dve = state.dve_m_s2 + (accel[1] - state.dve_m_s2) * alpha
+    dvd = state.dvd_m_s2 + (accel[2] - state.dvd_m_s2) * alpha
     yaw = wrap_pi(state.yaw_rad + yaw_rate * dt_s)
     # once it lifts off, the platform it stood on (the carrier deck) no longer supports it
     ground = 0.0 if state.on_ground else state.ground_d_m
     if d >= ground and not state.on_ground:
         return KinState(n, e, ground, yaw_rad=yaw, ground_d_m=ground, on_ground=True)
-    return KinState(n, e, d, vn, ve, vd, yaw, yaw_rate, an, ae, ground, False)
+    return KinState(n, e, d, vn, ve, vd, yaw, yaw_rate, an, ae, ground, False, ad, dvn, dve, dvd, ctrl)
 
 
 def attitude_rad(state: KinState) -> tuple[float, float, float]:

@@ -207,9 +207,11 @@ class Probe:
     def setpoint_message(self, velocity_ned_m_s: tuple[float, float, float] = (0.0, 0.0, 0.0),
                          type_mask: int = px4.TYPE_MASK_VELOCITY, frame: int = px4.MAV_FRAME_LOCAL_NED,
                          position_ned_m: tuple[float, float, float] = (NAN, NAN, NAN), yaw_rad: float = NAN,
-                         yaw_rate_rad_s: float = NAN, target: tuple[int, int] = (1, 1)) -> Any:
+                         yaw_rate_rad_s: float = NAN, target: tuple[int, int] = (1, 1),
+                         acceleration_ned_m_s2: tuple[float, float, float] = (NAN, NAN, NAN)) -> Any:
         return mavlink.MAVLink_set_position_target_local_ned_message(
-            0, *target, frame, type_mask, *position_ned_m, *velocity_ned_m_s, NAN, NAN, NAN, yaw_rad, yaw_rate_rad_s)
+            0, *target, frame, type_mask, *position_ned_m, *velocity_ned_m_s, *acceleration_ned_m_s2, yaw_rad,
+            yaw_rate_rad_s)
 
     def every(self, period_s: float, action: Callable[[], None]) -> threading.Event:
         """Run ``action`` every ``period_s`` wall seconds until the returned event is set

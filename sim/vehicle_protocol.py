@@ -14,13 +14,10 @@ from sim.vehicle_commander import Setpoint
 from sim.vehicle_params import ParamTable
 from sim.vehicle_physics import body_to_ned
 
-# type_mask -> what the setpoint carries; any other mask is dropped (and is not proof of life)
-SETPOINT_KINDS = {
-    px4.TYPE_MASK_VELOCITY: "velocity",
-    px4.TYPE_MASK_VELOCITY_YAW: "velocity",
-    px4.TYPE_MASK_VELOCITY_YAW_RATE: "velocity",
-    px4.TYPE_MASK_POSITION: "position",
-}
+# type_mask bits (MAVLink POSITION_TARGET_TYPEMASK)
+X_IGNORE, Y_IGNORE, Z_IGNORE, VX_IGNORE, VY_IGNORE, VZ_IGNORE = 1, 2, 4, 8, 16, 32
+AX_IGNORE, AY_IGNORE, AZ_IGNORE, FORCE_SET, YAW_IGNORE, YAW_RATE_IGNORE = 64, 128, 256, 512, 1024, 2048
+NAN = math.nan
 
 
 def int_param(value: float) -> int:
@@ -39,30 +36,41 @@ def mode_of_set_mode(params: list[float]) -> str | None:
     return next((name for name, pair in px4.MODES.items() if (int(pair[0]), int(pair[1])) == wanted), None)
 
 
-def setpoint_of(msg: Any, yaw_rad: float) -> Setpoint | None:
-    """SET_POSITION_TARGET_LOCAL_NED as a setpoint in local NED, or None if PX4 would drop it.
+def setpoint_of(msg: Any, yaw_rad: float) -> tuple[Setpoint | None, str]:
+    """SET_POSITION_TARGET_LOCAL_NED as PX4's ``mavlink_receiver`` reads it: (the setpoint in
+    local NED, "") or (None, the STATUSTEXT PX4 logs when it drops the message).
 
-    Frames LOCAL_NED (1) and BODY_NED (8, velocity rotated by the current ``yaw_rad`` only);
-    masks velocity (3527), velocity + yaw (2503), velocity + yaw rate (1479) and position + yaw
-    (2552, LOCAL_NED only). The fields a mask uses must be finite.
+    LOCAL_NED (1): each field is NaN when its ignore bit is set, else taken as sent (NaN or inf
+    included: PX4's position controller then holds, see :mod:`sim.mc_position_control`).
+    BODY_NED (8): velocity (unless any of its bits is ignored) and acceleration rotated by the
+    yaw ``yaw_rad`` (*PX4 rotates the acceleration by the full attitude), never a position.
+    Any other frame, an acceleration with the FORCE bit (512), or nothing at all to control is
+    dropped (and is not proof of life).
     """
-    frame, mask = msg.coordinate_frame, msg.type_mask
-    kind = SETPOINT_KINDS.get(mask)
-    if kind is None or frame not in (px4.MAV_FRAME_LOCAL_NED, px4.MAV_FRAME_BODY_NED):
-        return None
-    if kind == "position":
-        ned = (msg.x, msg.y, msg.z)
-        if frame != px4.MAV_FRAME_LOCAL_NED or not all(map(math.isfinite, ned)):
-            return None
-        return Setpoint("position", ned, msg.yaw if math.isfinite(msg.yaw) else None, None, mask)
-    velocity = (msg.vx, msg.vy, msg.vz)
-    if not all(map(math.isfinite, velocity)):
-        return None
-    if frame == px4.MAV_FRAME_BODY_NED:
-        velocity = body_to_ned(*velocity, yaw_rad)
-    yaw = msg.yaw if mask == px4.TYPE_MASK_VELOCITY_YAW and math.isfinite(msg.yaw) else None
-    yaw_rate = msg.yaw_rate if mask == px4.TYPE_MASK_VELOCITY_YAW_RATE and math.isfinite(msg.yaw_rate) else None
-    return Setpoint("velocity", velocity, yaw, yaw_rate, mask)
+    frame, mask = msg.coordinate_frame, int(msg.type_mask)
+
+    def field(bit: int, value: float) -> float:
+        return NAN if mask & bit else float(value)
+
+    if frame == px4.MAV_FRAME_LOCAL_NED:
+        position = (field(X_IGNORE, msg.x), field(Y_IGNORE, msg.y), field(Z_IGNORE, msg.z))
+        velocity = (field(VX_IGNORE, msg.vx), field(VY_IGNORE, msg.vy), field(VZ_IGNORE, msg.vz))
+        acceleration = (field(AX_IGNORE, msg.afx), field(AY_IGNORE, msg.afy), field(AZ_IGNORE, msg.afz))
+    elif frame == px4.MAV_FRAME_BODY_NED:
+        position = (NAN, NAN, NAN)
+        velocity = (NAN, NAN, NAN) if mask & (VX_IGNORE | VY_IGNORE | VZ_IGNORE) else body_to_ned(msg.vx, msg.vy, msg.vz, yaw_rad)
+        acceleration = (NAN, NAN, NAN) if mask & (AX_IGNORE | AY_IGNORE | AZ_IGNORE) \
+            else body_to_ned(float(msg.afx), float(msg.afy), float(msg.afz), yaw_rad)
+    else:
+        return None, f"SET_POSITION_TARGET_LOCAL_NED coordinate frame {frame} unsupported"
+    has_acceleration = not all(math.isnan(a) for a in acceleration)
+    if has_acceleration and mask & FORCE_SET:
+        return None, "SET_POSITION_TARGET_LOCAL_NED force not supported"
+    if all(math.isnan(x) for x in (*position, *velocity)) and not has_acceleration:
+        return None, "SET_POSITION_TARGET_LOCAL_NED invalid"
+    yaw = None if mask & YAW_IGNORE or not math.isfinite(msg.yaw) else float(msg.yaw)
+    yaw_rate = None if mask & YAW_RATE_IGNORE or not math.isfinite(msg.yaw_rate) else float(msg.yaw_rate)
+    return Setpoint(position, velocity, acceleration, yaw, yaw_rate, mask), ""
 
 
 def param_value(params: ParamTable, name: str) -> Any:

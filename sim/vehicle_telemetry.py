@@ -175,12 +175,10 @@ def position_target_local_ned(s: TelemetryState) -> Any:
         n, e, d = s.kin.n_m, s.kin.e_m, s.kin.d_m
         return mavlink.MAVLink_position_target_local_ned_message(_ms(s.t_s), px4.MAV_FRAME_LOCAL_NED, px4.TYPE_MASK_POSITION,
                                                                  n, e, d, nan, nan, nan, nan, nan, nan, s.kin.yaw_rad, nan)
-    pos = sp.ned if sp.kind == "position" else (nan, nan, nan)
-    vel = sp.ned if sp.kind == "velocity" else (nan, nan, nan)
     yaw = sp.yaw_rad if sp.yaw_rad is not None else nan
     yaw_rate = sp.yaw_rate_rad_s if sp.yaw_rate_rad_s is not None else nan
     return mavlink.MAVLink_position_target_local_ned_message(_ms(s.t_s), px4.MAV_FRAME_LOCAL_NED, sp.type_mask,
-                                                             *pos, *vel, nan, nan, nan, yaw, yaw_rate)
+                                                             *sp.position, *sp.velocity, *sp.acceleration, yaw, yaw_rate)
 
 
 def altitude(s: TelemetryState, geo: Geo) -> Any:

@@ -148,7 +148,7 @@ class Flight:
         self._files += [out, err]
         vehicle, _ = spawn_process(["--mavlink", "udpin:127.0.0.1:0", "--target", f"udpout:127.0.0.1:{self.mav_port}",
                                     "--gcs", f"127.0.0.1:{self.gcs.port}", "--speed", str(self.speed), "--start-ned",
-                                    "0,0,0", "--tau", "0.2", "--status-every", "0.5", *self.vehicle_args],
+                                    "0,0,0", "--status-every", "0.5", *self.vehicle_args],
                                    stdout=out, stderr=err, env={**os.environ, "PYTHONUNBUFFERED": "1"})
         self.procs["vehicle"] = vehicle
         connect(self.gcs, timeout_s=10.0)

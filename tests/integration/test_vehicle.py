@@ -111,14 +111,16 @@ def test_failsafe_without_rc_descends_lands_and_disarms(probe: Probe) -> None:
         assert v.wait_for(lambda s: s.position_ned_m[2] < -3.0, 3.0)
         stream.stop()
         assert v.wait_for(lambda s: s.mode == "POSCTL", 2.0)
-        # let the velocity settle, then watch a descent at MPC_LAND_SPEED with the position held
-        start = v.wait_for(lambda s: abs(s.velocity_ned_m_s[2] - 0.7) < 0.01, 2.0)
+        # let the velocity settle, then watch a descent at about MPC_LAND_SPEED (PX4 SITL: 0.5-0.7 m/s)
+        # while it brakes from 1 m/s north and holds its position
+        start = v.wait_for(lambda s: abs(s.velocity_ned_m_s[2] - 0.7) < 0.05, 2.0)
         assert start is not None
         later = v.wait_for(lambda s: s.t_s > start.t_s + 1.0, 2.0)
         assert later is not None
         rate = (later.position_ned_m[2] - start.position_ned_m[2]) / (later.t_s - start.t_s)
-        assert rate == pytest.approx(0.7, abs=0.02)
-        assert np.allclose(later.position_ned_m[:2], start.position_ned_m[:2], atol=0.05)
+        assert rate == pytest.approx(0.68, abs=0.03)
+        assert np.allclose(later.position_ned_m[:2], start.position_ned_m[:2], atol=0.4)
+        assert np.hypot(*later.velocity_ned_m_s[:2]) < 0.4
         landed = v.wait_for(lambda s: s.landed_state == px4.LANDED_ON_GROUND, 5.0)
         assert landed is not None and landed.position_ned_m[2] == 0.0
         assert probe.wait_armed(False, 3.0)
@@ -168,44 +170,53 @@ def test_disarm_in_air_needs_force(probe: Probe) -> None:
             assert v.wait_for(lambda s: s.landed_state == px4.LANDED_ON_GROUND, 3.0)
 
 
-def test_velocity_first_order_response_time_constant(probe: Probe) -> None:
-    tau_s, v_cmd = 0.3, 2.0
-    params = {"MPC_ACC_HOR": 100.0, "MPC_ACC_UP_MAX": 100.0}
-    with vehicle_for(probe, speed=5.0, velocity_tau_s=tau_s, params=params, start_ned=(0.0, 0.0, -1.0)) as v:
+def test_velocity_steps_answer_like_px4(probe: Probe) -> None:
+    """PX4 SITL's recorded steps (../shared/px4_sitl/responses): a 2 m/s horizontal step peaks at
+    79-84 % within 4 s (never 90 %: the small integrator against drag); a 1 m/s vertical step
+    reaches 90 % in 0.5-0.9 s and peaks at 95-107 %. Measured on LOCAL_POSITION_NED."""
+    with vehicle_for(probe, speed=5.0, start_ned=(0.0, 0.0, -1.0)) as v:
         connect(probe)
         with start_offboard(probe, (0.0, 0.0, -0.5)) as stream:
-            assert v.wait_for(lambda s: s.position_ned_m[2] < -1.5 and abs(s.velocity_ned_m_s[2] + 0.5) < 1e-3, 3.0)
+            assert v.wait_for(lambda s: s.position_ned_m[2] < -3.0, 5.0)
+            stream.set(velocity_ned_m_s=(0.0, 0.0, 0.0))
+            rest = v.wait_for(lambda s: s.t_s > 4.0 + v.event_time("Armed") and np.linalg.norm(s.velocity_ned_m_s) < 0.02, 5.0)
+            assert rest is not None
             mark = probe.mark()
-            stream.set(velocity_ned_m_s=(v_cmd, 0.0, -0.5))
-            assert v.wait_for(lambda s: s.velocity_ned_m_s[0] > 0.99 * v_cmd, 3.0)
-        samples = [(m.time_boot_ms / 1000.0, m.vx) for m in probe.messages("LOCAL_POSITION_NED", after=mark)]
-        rising = [(t, vx) for t, vx in samples if 0.05 * v_cmd < vx < 0.95 * v_cmd]
-        assert len(rising) >= 10
-        t, vx = np.array(rising).T
-        slope = np.polyfit(t, np.log(1.0 - vx / v_cmd), 1)[0]
-        assert -1.0 / slope == pytest.approx(tau_s, rel=0.03)
+            stream.set(send_now=True, velocity_ned_m_s=(2.0, 0.0, 0.0))
+            t_north = v.snapshot().t_s
+            assert v.wait_for(lambda s: s.t_s > t_north + 4.0, 3.0)
+            north = [(m.time_boot_ms / 1000.0 - t_north, m.vx) for m in probe.messages("LOCAL_POSITION_NED", after=mark)]
+            stream.set(velocity_ned_m_s=(0.0, 0.0, 0.0))
+            assert v.wait_for(lambda s: s.t_s > t_north + 10.0 and np.linalg.norm(s.velocity_ned_m_s) < 0.3, 5.0)
+            mark = probe.mark()
+            stream.set(send_now=True, velocity_ned_m_s=(0.0, 0.0, -1.0))
+            t_up = v.snapshot().t_s
+            assert v.wait_for(lambda s: s.t_s > t_up + 3.0, 3.0)
+            up = [(m.time_boot_ms / 1000.0 - t_up, -m.vz) for m in probe.messages("LOCAL_POSITION_NED", after=mark)]
+    peak = max(vx for t, vx in north if t <= 4.0) / 2.0
+    assert 0.77 <= peak <= 0.86
+    t90 = next(t for t, vz in up if vz >= 0.9)
+    assert 0.4 <= t90 <= 0.8
+    assert 0.95 <= max(vz for _, vz in up) <= 1.1  # PX4: 0.95-1.07
 
 
-def test_velocity_and_acceleration_limits(probe: Probe) -> None:
+def test_velocity_limits(probe: Probe) -> None:
     with vehicle_for(probe, speed=10.0, params={"MPC_XY_VEL_MAX": 4.0}) as v:
         connect(probe)
+        mark = probe.mark()
         with start_offboard(probe, (0.0, 0.0, -10.0)) as stream:
-            snap = v.wait_for(lambda s: s.position_ned_m[2] < -6.0, 3.0)
-            assert snap is not None and snap.velocity_ned_m_s[2] == pytest.approx(-3.0, abs=1e-3)  # MPC_Z_VEL_MAX_UP
+            assert v.wait_for(lambda s: s.position_ned_m[2] < -15.0, 3.0)
+            climb = [-m.vz for m in probe.messages("LOCAL_POSITION_NED", after=mark)]
+            assert max(climb) <= 3.0 * 1.07  # MPC_Z_VEL_MAX_UP limits the setpoint (PX4 overshoots steps by 3-7 %)
+            assert climb[-1] == pytest.approx(3.0, abs=0.1)
             mark = probe.mark()
             stream.set(velocity_ned_m_s=(30.0, 30.0, 0.0))
-            snap = v.wait_for(lambda s: np.hypot(*s.velocity_ned_m_s[:2]) > 3.999, 3.0)
-            assert snap is not None
-            later = v.wait_for(lambda s: s.t_s > snap.t_s + 1.0, 2.0)
-            assert later is not None and np.hypot(*later.velocity_ned_m_s[:2]) == pytest.approx(4.0, abs=1e-3)
-            stream.set(velocity_ned_m_s=(0.0, 0.0, 10.0))
-            snap = v.wait_for(lambda s: s.velocity_ned_m_s[2] > 1.499, 3.0)
-            assert snap is not None and snap.velocity_ned_m_s[2] == pytest.approx(1.5, abs=1e-3)  # MPC_Z_VEL_MAX_DN
-        samples = [(m.time_boot_ms / 1000.0, np.hypot(m.vx, m.vy)) for m in probe.messages("LOCAL_POSITION_NED", after=mark)]
-        t, speed = np.array(samples).T
-        accel = np.diff(speed) / np.diff(t)
-        assert accel.max() <= 3.0 + 0.05  # MPC_ACC_HOR
-        assert accel.max() > 2.5  # and it is reached
+            t0 = v.snapshot().t_s
+            assert v.wait_for(lambda s: s.t_s > t0 + 20.0, 5.0)
+        speeds = [np.hypot(m.vx, m.vy) for m in probe.messages("LOCAL_POSITION_NED", after=mark)]
+        assert len(speeds) > 100
+        assert max(speeds) <= 4.0 * 1.05  # MPC_XY_VEL_MAX limits the setpoint
+        assert speeds[-1] > 3.5  # the integrator closes most of the drag deficit
 
 
 def test_ground_does_not_slide_and_platform_start(probe: Probe) -> None:
@@ -233,7 +244,8 @@ def test_takeoff_hold_and_land_commands(probe: Probe) -> None:
         held = v.wait_for(lambda s: s.mode == "AUTO.LOITER" and s.landed_state == px4.LANDED_IN_AIR, 5.0)
         assert held is not None
         later = v.wait_for(lambda s: s.t_s > held.t_s + 2.0, 2.0)
-        assert later is not None and later.position_ned_m[2] == pytest.approx(-2.5, abs=0.05)  # MIS_TAKEOFF_ALT
+        # MIS_TAKEOFF_ALT, overshot a little: the vertical integrator carries the climb's drag compensation
+        assert later is not None and later.position_ned_m[2] == pytest.approx(-2.5, abs=0.1)
         assert probe.command(px4.MAV_CMD_NAV_LAND).result == px4.MAV_RESULT_ACCEPTED
         assert probe.wait_mode("AUTO.LAND", 2.0)
         assert probe.wait_for("EXTENDED_SYS_STATE", lambda m: m.landed_state == px4.LANDED_LANDING, 2.0)
@@ -292,8 +304,8 @@ def _fly_script(speed: float, result: dict[float, np.ndarray]) -> None:
                 sleep_until(v.clock, t_armed + t_change)
                 stream.set(send_now=True, velocity_ned_m_s=velocity)
             final = v.wait_for(lambda s: s.t_s >= t_armed + 5.0, 3.0)
-        assert final is not None and np.allclose(final.velocity_ned_m_s, 0.0, atol=1e-3)
-        result[speed] = final.position_ned_m
+        assert final is not None and np.linalg.norm(final.velocity_ned_m_s) < 0.5  # PX4 leaves a slow residual
+        result[speed] = np.concatenate((final.position_ned_m, final.velocity_ned_m_s))
 
 
 def test_speed_factor_10_flies_the_same_trajectory() -> None:
@@ -304,8 +316,9 @@ def test_speed_factor_10_flies_the_same_trajectory() -> None:
     for thread in threads:
         thread.join(timeout=20.0)
     assert set(result) == {1.0, 10.0}
-    assert np.linalg.norm(result[1.0]) > 2.5  # it did fly somewhere
-    assert np.linalg.norm(result[10.0] - result[1.0]) < 0.05, result
+    assert np.linalg.norm(result[1.0][:3]) > 2.5  # it did fly somewhere
+    assert np.linalg.norm(result[10.0][:3] - result[1.0][:3]) < 0.05, result
+    assert np.linalg.norm(result[10.0][3:] - result[1.0][3:]) < 0.02, result
 
 
 def test_rover_frame_is_a_ground_rover_that_refuses_takeoff_and_drives_offboard() -> None:

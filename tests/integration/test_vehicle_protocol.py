@@ -9,6 +9,7 @@ import subprocess
 from pathlib import Path
 
 import click
+import numpy as np
 import pytest
 from click.testing import CliRunner
 
@@ -217,28 +218,61 @@ def test_global_position_consistent_with_local_ned(probe: Probe) -> None:
     (px4.MAV_FRAME_LOCAL_NED, px4.TYPE_MASK_POSITION, True),
     (px4.MAV_FRAME_BODY_NED, px4.TYPE_MASK_POSITION, False),
     (9, px4.TYPE_MASK_VELOCITY, False),  # MAV_FRAME_BODY_OFFSET_NED: unsupported
-    (px4.MAV_FRAME_LOCAL_NED, 0, False),
-    (px4.MAV_FRAME_LOCAL_NED, 0x0FFF, False),
+    (px4.MAV_FRAME_LOCAL_NED, 0, True),  # everything used, as PX4 takes it
+    (px4.MAV_FRAME_LOCAL_NED, 3072, True),  # position + velocity + acceleration feed-forward
+    (px4.MAV_FRAME_BODY_NED, 3072, True),  # velocity + acceleration (a position has no body frame)
+    (px4.MAV_FRAME_LOCAL_NED, 0x0FFF, False),  # nothing to control
+    (px4.MAV_FRAME_LOCAL_NED, 3072 | 512, False),  # FORCE with an acceleration: "force not supported"
 ])
 def test_setpoint_frames_and_type_masks(probe: Probe, frame: int, mask: int, accepted: bool) -> None:
     with vehicle_for(probe) as v:
         connect(probe)
         for _ in range(3):
             probe.send(probe.setpoint_message((1.0, 0.0, 0.0), mask, frame, position_ned_m=(1.0, 2.0, -3.0), yaw_rad=0.0,
-                                              yaw_rate_rad_s=0.0))
+                                              yaw_rate_rad_s=0.0, acceleration_ned_m_s2=(0.5, 0.0, 0.0)))
         assert v.wait_for(lambda s: s.counters["setpoints_accepted"] + s.counters["setpoints_rejected"] == 3, 2.0)
         assert v.counters["setpoints_accepted"] == (3 if accepted else 0)
         result = probe.set_mode("OFFBOARD").result
         assert result == (px4.MAV_RESULT_ACCEPTED if accepted else px4.MAV_RESULT_TEMPORARILY_REJECTED)
 
 
-def test_non_finite_velocity_setpoint_is_dropped(probe: Probe) -> None:
-    with vehicle_for(probe) as v:
+def test_non_finite_velocity_setpoint_is_proof_of_life_and_holds(probe: Probe) -> None:
+    """PX4 forwards a setpoint whose used fields are NaN or inf (it is proof of life); its
+    position controller finds it invalid and stops ("Failsafe: stop and wait")."""
+    with vehicle_for(probe, speed=10.0) as v:
         connect(probe)
-        probe.send(probe.setpoint_message((NAN, 0.0, 0.0)))
-        probe.send(probe.setpoint_message((math.inf, 0.0, 0.0)))
-        assert v.wait_for(lambda s: s.counters["setpoints_rejected"] == 2, 2.0)
-        assert probe.set_mode("OFFBOARD").result == px4.MAV_RESULT_TEMPORARILY_REJECTED
+        with start_offboard(probe, (1.0, 0.0, -1.0)) as stream:
+            assert v.wait_for(lambda s: s.position_ned_m[2] < -2.0, 3.0)
+            stream.set(velocity_ned_m_s=(NAN, 0.0, 0.0))
+            accepted = v.counters["setpoints_accepted"]
+            t0 = v.snapshot().t_s
+            snap = v.wait_for(lambda s: s.t_s > t0 + 5.0, 3.0)
+            assert snap is not None and snap.mode == "OFFBOARD" and not snap.in_failsafe
+            assert snap.counters["setpoints_accepted"] > accepted and snap.counters["setpoints_rejected"] == 0
+            assert np.linalg.norm(snap.velocity_ned_m_s) < 0.2
+            stream.set(velocity_ned_m_s=(math.inf, 0.0, 0.0))
+            later = v.wait_for(lambda s: s.t_s > snap.t_s + 2.0, 3.0)
+            assert later is not None and later.mode == "OFFBOARD" and np.linalg.norm(later.velocity_ned_m_s) < 0.2
+
+
+@pytest.mark.parametrize(("mask", "frame", "text"), [
+    (3072 | 512, px4.MAV_FRAME_LOCAL_NED, "force not supported"),
+    (0x0FFF, px4.MAV_FRAME_LOCAL_NED, "SET_POSITION_TARGET_LOCAL_NED invalid"),
+    (px4.TYPE_MASK_VELOCITY, 9, "coordinate frame 9"),  # (the text is longer than one STATUSTEXT chunk)
+])
+def test_dropped_setpoint_is_not_proof_of_life_and_says_why(probe: Probe, mask: int, frame: int, text: str) -> None:
+    with vehicle_for(probe, speed=10.0) as v:
+        connect(probe)
+        with start_offboard(probe, (0.0, 0.0, -1.0)) as stream:
+            assert v.wait_for(lambda s: s.position_ned_m[2] < -2.0, 3.0)
+            stream.set(type_mask=mask, frame=frame, velocity_ned_m_s=(1.0, 0.0, 0.0), acceleration_ned_m_s2=(0.5, 0.0, 0.0))
+            msg = probe.wait_for("STATUSTEXT", lambda m: text in m.text, 2.0)
+            assert msg is not None and msg.severity == px4.MAV_SEVERITY_CRITICAL
+            assert v.wait_for(lambda s: s.mode == "POSCTL" and s.in_failsafe, 3.0)  # the stream is lost: offboard loss
+        counters = v.counters
+        assert counters["setpoints_rejected"] >= 10
+        # said at most once a second, not for every dropped message
+        assert len([m for m in probe.messages("STATUSTEXT") if text in m.text]) <= 3
 
 
 def test_sends_to_target_from_startup_then_latches_on_first_peer(probe: Probe) -> None:

@@ -1,0 +1,125 @@
+"""The mock vehicle against real PX4's recorded offboard responses (issue 10). Prints a table.
+
+Replays the setpoint sequence of each recording (``tests/data/px4_responses/``, copied from
+../shared/px4_sitl/responses/: ``original`` and the held-out ``repeat``) into the mock's dynamics
+(:mod:`sim.px4_replay`) and prints, per step / ramp / sine segment, the RMS velocity difference
+from PX4, the mean over the segments, the ramp lags, and the same for the old first-order mock
+and for PX4 against itself (the two recordings).
+
+``--fit`` refits the free airframe constants (:class:`sim.vehicle_physics.Airframe`: drag, tilt
+lag, thrust lag) to the ``original`` recording only by Nelder-Mead on the mean RMS, and prints them
+beside :data:`sim.vehicle_physics.FITTED_AIRFRAME`; ``repeat`` stays a held-out check.
+
+Usage: ``python -m bench.px4_response_fit [--fit] [--json out.json]``.
+"""
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import asdict, fields
+from pathlib import Path
+from typing import Any
+
+import click
+import numpy as np
+
+from sim.px4_replay import Comparison, Recording, compare, load_recording, px4_vs_px4_rms
+from sim.vehicle_physics import FITTED_AIRFRAME, Airframe, Limits
+
+DATA = Path(__file__).resolve().parents[1] / "tests" / "data" / "px4_responses"
+RECORDINGS = ("original", "repeat")
+
+
+def load_all() -> dict[str, Recording]:
+    return {name: load_recording(DATA / f"{name}.csv.gz") for name in RECORDINGS}
+
+
+def nelder_mead(f, x0: np.ndarray, step: np.ndarray, iterations: int = 60) -> tuple[np.ndarray, float]:
+    """Minimise ``f`` from ``x0`` (a small Nelder-Mead; no SciPy in the project)."""
+    simplex = [x0] + [x0 + np.eye(len(x0))[i] * step[i] for i in range(len(x0))]
+    values = [f(x) for x in simplex]
+    for it in range(iterations):
+        order = np.argsort(values)
+        simplex, values = [simplex[i] for i in order], [values[i] for i in order]
+        click.echo(f"  fit {it:3d}: {values[0]:.4f} at {np.round(simplex[0], 4).tolist()}", err=True)
+        centroid = np.mean(simplex[:-1], axis=0)
+        reflected = centroid + (centroid - simplex[-1])
+        fr = f(reflected)
+        if fr < values[0]:
+            expanded = centroid + 2.0 * (centroid - simplex[-1])
+            fe = f(expanded)
+            simplex[-1], values[-1] = (expanded, fe) if fe < fr else (reflected, fr)
+        elif fr < values[-2]:
+            simplex[-1], values[-1] = reflected, fr
+        else:
+            contracted = centroid + 0.5 * (simplex[-1] - centroid)
+            fc = f(contracted)
+            if fc < values[-1]:
+                simplex[-1], values[-1] = contracted, fc
+            else:
+                simplex = [simplex[0]] + [simplex[0] + 0.5 * (x - simplex[0]) for x in simplex[1:]]
+                values = [values[0]] + [f(x) for x in simplex[1:]]
+    best = int(np.argmin(values))
+    return simplex[best], values[best]
+
+
+def fit(rec: Recording, start: Airframe) -> tuple[Airframe, float]:
+    """Airframe constants minimising the mean RMS against ``rec`` (all must stay positive)."""
+    names = [f.name for f in fields(Airframe)]
+
+    def cost(x: np.ndarray) -> float:
+        if np.any(x <= 0):
+            return 10.0
+        return compare(rec, Limits(airframe=Airframe(*x))).mean_rms_m_s
+
+    x0 = np.array([getattr(start, n) for n in names])
+    best, value = nelder_mead(cost, x0, 0.2 * x0)
+    return Airframe(**dict(zip(names, (float(round(v, 4)) for v in best)))), value
+
+
+def table(results: dict[str, dict[str, Comparison]], self_rms: dict[str, float]) -> str:
+    models = list(results)
+    segments = list(self_rms)
+    header = f"{'segment':28s}" + "".join(f"{m + '/' + r:>22s}" for m in models for r in RECORDINGS) + f"{'PX4 vs PX4':>12s}"
+    lines = [header, "-" * len(header)]
+    for seg in segments:
+        cells = "".join(f"{results[m][r].rms_m_s[seg]:22.3f}" for m in models for r in RECORDINGS)
+        lines.append(f"{seg:28s}{cells}{self_rms[seg]:12.3f}")
+    cells = "".join(f"{results[m][r].mean_rms_m_s:22.3f}" for m in models for r in RECORDINGS)
+    lines.append(f"{'mean RMS [m/s] (target 0.15)':28s}{cells}{float(np.mean(list(self_rms.values()))):12.3f}")
+    for ramp in ("ramp_velocity_only", "ramp_pos_vel_acc"):
+        cells = "".join(f"{results[m][r].lag_mock_m[ramp]:10.2f} m ({results[m][r].lag_ratio(ramp):4.2f}x) " for m in models
+                        for r in RECORDINGS)
+        lines.append(f"{'lag ' + ramp:28s}{cells}")
+        px4 = "  ".join(f"{r}: {results[models[0]][r].lag_px4_m[ramp]:.2f} m" for r in RECORDINGS)
+        lines.append(f"{'  PX4 lag (its positions)':28s}  {px4}")
+    return "\n".join(lines)
+
+
+@click.command()
+@click.option("--fit", "do_fit", is_flag=True, help="Refit the airframe constants to the original recording.")
+@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="Also write the figures as JSON.")
+def main(do_fit: bool, json_path: Path | None) -> None:
+    """Print the mock-vs-PX4 table (and optionally refit)."""
+    recs = load_all()
+    airframes = {"mock": FITTED_AIRFRAME}
+    if do_fit:
+        t0 = time.monotonic()
+        fitted, value = fit(recs["original"], FITTED_AIRFRAME)
+        click.echo(f"fitted on original in {time.monotonic() - t0:.0f} s: {fitted} (mean RMS {value:.4f}); "
+                   f"module constants: {FITTED_AIRFRAME}")
+        airframes["refit"] = fitted
+    results = {name: {r: compare(recs[r], Limits(airframe=af)) for r in RECORDINGS} for name, af in airframes.items()}
+    self_rms = px4_vs_px4_rms(recs["original"], recs["repeat"])
+    click.echo(table(results, self_rms))
+    if json_path is not None:
+        payload: dict[str, Any] = {name: {"airframe": asdict(airframes[name]),
+                          **{r: {"rms_m_s": c.rms_m_s, "mean_rms_m_s": c.mean_rms_m_s, "lag_mock_m": c.lag_mock_m,
+                                 "lag_px4_m": c.lag_px4_m} for r, c in res.items()}} for name, res in results.items()}
+        payload["px4_vs_px4_rms_m_s"] = self_rms
+        json_path.write_text(json.dumps(payload, indent=1))
+
+
+if __name__ == "__main__":
+    main()
