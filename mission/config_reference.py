@@ -99,7 +99,6 @@ DOCS: dict[str, str] = {
     "carrier.ros2.domain_id": "[-] ROS_DOMAIN_ID (rmw_zenoh keys start with it)",
     "carrier.ros2.odom_topic": "[-] nav_msgs/Odometry topic (ENU, REP 103) the carrier reads",
     "carrier.ros2.cmd_vel_topic": "[-] geometry_msgs/Twist topic (body FLU) the carrier commands",
-    "vehicle.velocity_tau_s": "[s] the demo's mock vehicle: time constant of its velocity response",
 }
 
 
