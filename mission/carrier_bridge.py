@@ -35,7 +35,7 @@ import zenoh
 
 from mission.clock import Clock
 from mission.config import ZenohSection
-from mission.errors import BusError, ConfigError
+from mission.errors import BusError, BusPortInUse, ConfigError
 from mission.port_holder import port_in_use
 from mission.wire import (
     CarrierState,
@@ -148,7 +148,8 @@ def _listen_in_use(section: ZenohSection, text: str) -> Exception | None:
         proto, _, address = endpoint.partition("/")
         host, _, port = address.partition("?")[0].rpartition(":")
         if port.isdigit() and address.split("?")[0] in text:
-            return port_in_use(f"Zenoh listen endpoint {endpoint}", host, int(port), "udp" if proto == "udp" else "tcp")
+            return port_in_use(f"Zenoh listen endpoint {endpoint}", host, int(port), "udp" if proto == "udp" else "tcp",
+                               cls=BusPortInUse)
     return None
 
 

@@ -65,6 +65,10 @@ class LinkPortInUse(PortInUse, LinkError):
     """The MAVLink endpoint's port is taken (a :class:`LinkError` too; exit code 6)."""
 
 
+class BusPortInUse(PortInUse, BusError):
+    """A Zenoh listen endpoint's port is taken (a :class:`BusError` too; exit code 6)."""
+
+
 class MissionAborted(MarsupialError):
     """The mission ended in ABORT; ``reason`` says why (a phases.AbortReason value)."""
 

@@ -57,3 +57,17 @@ def test_plot_of_a_folder_without_logs_says_which_folder_to_give(tmp_path):
     out = _cli("plot", str(tmp_path))
     assert out.returncode == 2 and "Traceback" not in out.stderr
     assert "holds no flight log" in out.stderr and "logs/demo/pair0" in out.stderr
+
+
+def test_carrier_with_a_taken_zenoh_port_names_it_and_says_who_it_is():
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        out = _cli("carrier", str(CONFIGS / "demo.toml"), "--zenoh-listen", f"tcp/127.0.0.1:{port}", "--pair", "busy")
+    assert out.returncode == 6 and "Traceback" not in out.stderr
+    first = out.stderr.splitlines()[0]  # the start-up line: pair, key, endpoint, mode
+    assert first.startswith("carrier busy: ") and "marsupial/busy/carrier/state" in first
+    assert f"Zenoh peer, listen tcp/127.0.0.1:{port}" in first and "mode stop" in first
+    assert f"Zenoh listen endpoint tcp/127.0.0.1:{port}: TCP port 127.0.0.1:{port} is already in use, " \
+           f"held by process {os.getpid()}" in out.stderr
