@@ -38,7 +38,8 @@ def test_run_with_a_taken_mavlink_port_names_it():
 
 def test_run_without_a_vehicle_says_what_it_waits_for_and_what_to_do(tmp_path):
     cfg = tmp_path / "short.toml"
-    text = (CONFIGS / "demo.toml").read_text().replace("max_duration_s = 180.0", "max_duration_s = 180.0\nconnect_timeout_s = 1.5")
+    text = (CONFIGS / "demo.toml").read_text().replace("connect_timeout_s = 20.0", "connect_timeout_s = 1.5")
+    assert "connect_timeout_s = 1.5" in text
     cfg.write_text(text)
     mav = free_port(socket.SOCK_DGRAM)
     out = _cli("run", str(cfg), "--mavlink", f"udpin:127.0.0.1:{mav}", "--zenoh-listen", f"tcp/127.0.0.1:{free_port()}",
