@@ -70,8 +70,8 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of the console script; returns the process exit code."""
     try:
         rv = cli.main(args=argv, prog_name="marsupial", standalone_mode=False)
-    except click.exceptions.Abort:
-        click.echo("aborted", err=True)
+    except click.exceptions.Abort:  # Ctrl-C (click turns KeyboardInterrupt into Abort)
+        click.echo("interrupted: stopped (processes this command started are stopped too)", err=True)
         return 130
     except click.ClickException as exc:
         exc.show()
