@@ -259,6 +259,7 @@ class _Feed(Generic[T]):
         self._dropped: dict[str, int] = {}
         self._alive: bool | None = None
         self._closed = False
+        self._listeners: list[Callable[[T], None]] = []
         self._sub = _declare(f"subscriber on {key}", lambda: session.declare_subscriber(key, self._on_sample))
         self._alive_sub = None
         if alive_key is not None:
@@ -309,6 +310,14 @@ class _Feed(Generic[T]):
                 self._accepted += 1
         if reason is not None:
             self._drop(reason, key, f"seq {seq} stamp {stamp} not after seq {last[0]} stamp {last[1]}")  # type: ignore[index]
+            return
+        for listener in self._listeners:
+            listener(value)
+
+    def add_listener(self, callback: Callable[[T], None]) -> None:
+        """Call ``callback(value)`` on Zenoh's thread after each accepted sample (it must not
+        block); e.g. the lockstep relay waits for the sample of a step."""
+        self._listeners.append(callback)
 
     def _drop(self, reason: str, key: str, detail: str) -> None:
         with self._lock:
@@ -532,6 +541,7 @@ class PassengerPublisher(_Publisher):
     def __init__(self, session: zenoh.Session, pair: str) -> None:
         k = keys(pair)
         super().__init__(session, k.passenger_alive)
+        self.last_seq = -1  # seq of the last status sent
         try:
             self._state = self._publisher(k.passenger_state, zenoh.Encoding.APPLICATION_JSON)
             self._phase = self._publisher(k.passenger_phase, zenoh.Encoding.TEXT_PLAIN)
@@ -547,4 +557,5 @@ class PassengerPublisher(_Publisher):
     def publish(self, status: PassengerStatus) -> None:
         """Send ``status`` on the state key and its phase on the phase key."""
         self._put(self._state, encode_passenger_json(status))
+        self.last_seq = status.seq
         self._put(self._phase, status.phase.encode())

@@ -8,8 +8,9 @@ loop stops, the stream stops, and PX4's offboard-loss failsafe sees it.
 """
 from __future__ import annotations
 
+import collections
 import logging
-import queue
+import math
 import threading
 import time
 from dataclasses import dataclass
@@ -18,7 +19,7 @@ from typing import Any, Callable
 import numpy as np
 
 from mission import phases, px4
-from mission.clock import Clock, Periodic
+from mission.clock import Clock, Periodic, join_thread
 from mission.config import Config
 from mission.errors import CommandRejected, LinkError
 from mission.log import FlightRecorder
@@ -46,7 +47,8 @@ class CommandWorker:
                  threaded: bool = True) -> None:
         self.link, self.clock, self.retries, self.repeat_s = vehicle, clock, retries, repeat_s
         self.failed: dict[str, str] = {}
-        self._queue: queue.Queue[Request | None] = queue.Queue()
+        self._requests: collections.deque[Request | None] = collections.deque()
+        self._cond = threading.Condition()
         self._busy = threading.Event()
         self._last: dict[Request, float] = {}
         self._thread: threading.Thread | None = None
@@ -66,7 +68,19 @@ class CommandWorker:
         if self._thread is None:
             self._handle(req)
         else:
-            self._queue.put(req)
+            self._put(req)
+
+    def _put(self, request: Request | None) -> None:
+        with self._cond:
+            self._requests.append(request)
+            self.clock.notify(self._cond)
+
+    def _next(self) -> Request | None:
+        """The next request; waits on the clock (so a lockstep clock runs this thread in turn)."""
+        with self._cond:
+            while not self._requests:
+                self.clock.wait(self._cond, math.inf)
+            return self._requests.popleft()
 
     def _execute(self, request: Request) -> None:
         if request is Request.ARM:
@@ -80,7 +94,7 @@ class CommandWorker:
 
     def _run(self) -> None:
         while True:
-            request = self._queue.get()
+            request = self._next()
             if request is None:
                 return
             self._handle(request)
@@ -106,8 +120,8 @@ class CommandWorker:
 
     def close(self) -> None:
         if self._thread is not None:
-            self._queue.put(None)
-            self._thread.join(timeout=5.0)
+            self._put(None)
+            join_thread(self.clock, self._thread, 5.0)
 
 
 @dataclass

@@ -37,7 +37,8 @@ is kept under one lock; :attr:`VehicleLink.state` returns an immutable snapshot.
 never dies on bad input: every parse or handler error is caught and counted.
 
 Time. Every timeout, deadline and receive stamp reads the injected clock (``clock.now()``, in
-seconds of simulated time); wall-clock waits are ``clock`` seconds divided by ``clock.speed``.
+seconds of simulated time); every wait goes through it (``clock.wait``, ``clock.notify``), so the
+link runs the same on a scaled wall clock and in lockstep (:mod:`mission.lockstep`).
 The wall clock is read once at ``open`` only where a format defines a wall time: the tlog's
 epoch stamps and the MAVLink 2 signing timestamp.
 
@@ -530,7 +531,8 @@ class VehicleLink:
         self._tx_lock = threading.Lock()
         self._command_lock = threading.Lock()
         self._stop = threading.Event()
-        self._wake_heartbeat = threading.Event()
+        self._heartbeat_cond = threading.Condition()
+        self._listeners: list[Callable[[Any], None]] = []
         self._threads: list[threading.Thread] = []
         self._transport: _Transport | None = None
         self._opened = False
@@ -584,7 +586,8 @@ class VehicleLink:
     def close(self) -> None:
         """Stop the threads, close the socket and the tlog. Idempotent; sends nothing."""
         self._stop.set()
-        self._wake_heartbeat.set()
+        with self._heartbeat_cond:
+            self._clock.notify(self._heartbeat_cond)
         for thread in self._threads:
             thread.join(timeout=2.0)
             if thread.is_alive():  # pragma: no cover - would be a bug in a loop
@@ -598,7 +601,7 @@ class VehicleLink:
             if tlog is not None:
                 tlog.close()
         with self._changed:
-            self._changed.notify_all()
+            self._clock.notify(self._changed)
         if transport is not None:
             log.info("MAVLink link %s closed: %s", self.url, self.counters)
 
@@ -709,7 +712,7 @@ class VehicleLink:
             return False
         if self._transport is None:
             raise LinkError(f"link {self.url!r} is closed")
-        self._changed.wait(min(remaining / self._clock.speed, _WALL_SLICE_S))
+        self._clock.wait(self._changed, remaining)
         return True
 
     # ---------------------------------------------------------------- commands
@@ -907,6 +910,11 @@ class VehicleLink:
         )
         self._send(msg, "tx_setpoints")
 
+    def send_message(self, msg: Any) -> bool:
+        """Send any pymavlink message as is (e.g. the lockstep TIMESYNC answer); False if there
+        is no peer yet. Raises LinkError on socket errors or a closed link."""
+        return self._send(msg, None)
+
     # ---------------------------------------------------------------- transmit
 
     def _require_vehicle(self) -> tuple[int, int]:
@@ -918,7 +926,7 @@ class VehicleLink:
             raise LinkError("no vehicle identified yet: call wait_vehicle() first")
         return vehicle
 
-    def _send(self, msg: Any, counter: str) -> bool:
+    def _send(self, msg: Any, counter: str | None) -> bool:
         """Encode (and sign), write and log one message. Returns False if there is no peer yet.
 
         Raises LinkError on socket errors or a closed link.
@@ -968,8 +976,10 @@ class VehicleLink:
                     log.warning("heartbeat not sent: %s", exc)
             except Exception:  # pragma: no cover - the heartbeat must keep beating
                 log.exception("heartbeat thread error")
-            self._wake_heartbeat.wait(self.heartbeat_period_s / self._clock.speed)
-            self._wake_heartbeat.clear()
+            deadline = self._clock.now() + self.heartbeat_period_s
+            with self._heartbeat_cond:
+                while not self._stop.is_set() and (remaining := deadline - self._clock.now()) > 0:
+                    self._clock.wait(self._heartbeat_cond, remaining)
 
     # ---------------------------------------------------------------- receive
 
@@ -1070,7 +1080,14 @@ class VehicleLink:
             handler = self._HANDLERS.get(kind)
             if handler is not None:
                 handler(self, msg, t_rx)
-            self._changed.notify_all()
+            self._clock.notify(self._changed)
+        for listener in self._listeners:
+            listener(msg)
+
+    def add_listener(self, callback: Callable[[Any], None]) -> None:
+        """Call ``callback(msg)`` for every message from the identified vehicle, in the receiver
+        thread, after the link has handled it (e.g. the lockstep clock reads SYSTEM_TIME)."""
+        self._listeners.append(callback)
 
     def _log_rx(self, msg: Any) -> None:
         with self._tx_lock:

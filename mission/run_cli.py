@@ -14,7 +14,7 @@ import click
 import numpy as np
 
 from mission.carrier_bridge import CarrierFeed, PassengerPublisher, open_session
-from mission.clock import Clock, ScaledClock
+from mission.clock import Clock, LockstepClock, ScaledClock
 from mission.config import Config, load_config, with_overrides
 from mission.controller import MissionController, MissionOutcome, mission_info, mission_model
 from mission.errors import ConfigError
@@ -49,22 +49,32 @@ def mission_io(cfg: Config, clock: Clock, tlog_path: str | Path | None = None) -
                            heartbeat_timeout_s=cfg.mission.heartbeat_timeout_s)
         link.open()
         stack.callback(link.close)
+        if isinstance(clock, LockstepClock):  # step on the vehicle's time; bring the carrier along
+            from mission.lockstep import MavlinkUpstream, ZenohRelay
+
+            MavlinkUpstream(clock, link)
+            relay = ZenohRelay(session, cfg.zenoh.pair, feed, publisher, watchdog_wall_s=clock.watchdog_wall_s)
+            stack.callback(relay.close)
+            clock.downstream = relay
+            stack.callback(clock.close)  # before the link closes: its threads wait on the clock
         yield feed, publisher, link
 
 
 def fly(cfg: Config, *, speed: float = 1.0, log_dir: str | Path | None = None, stop: threading.Event | None = None,
-        on_event=None, on_start=None) -> MissionOutcome:
+        on_event=None, on_start=None, clock: Clock | None = None) -> MissionOutcome:
     """Fly one mission with ``cfg`` (the library entry point of ``marsupial run``).
 
     Opens the Zenoh session and the MAVLink link (:func:`mission_io`), runs
     :class:`MissionController` and closes everything in reverse order. ``speed`` is the clock
     speed factor (simulation only). ``on_start(controller, link, feed, clock)`` is called once
     everything is open, just before the loop starts (the CLI watches the wait for the vehicle).
+    ``clock`` replaces the scaled clock, e.g. a :class:`LockstepClock` (made in the calling
+    thread) that steps on the mock vehicle's simulated time.
     """
     mission_model(cfg)  # validate before anything is opened
     if cfg.mavlink.signing_key_file:
         read_signing_key(cfg.mavlink.signing_key_file)
-    clock = ScaledClock(speed)
+    clock = clock or ScaledClock(speed)
     directory = Path(log_dir) if log_dir else Path(cfg.mission.log_dir) / f"{time.strftime('%Y%m%d-%H%M%S')}-{cfg.zenoh.pair}"
     recorder = FlightRecorder(directory, mission_info(cfg))
     with mission_io(cfg, clock, recorder.tlog_path) as (feed, publisher, link):
@@ -72,7 +82,10 @@ def fly(cfg: Config, *, speed: float = 1.0, log_dir: str | Path | None = None, s
                                        on_event=on_event, stop=stop)
         if on_start is not None:
             on_start(controller, link, feed, clock)
-        return controller.run()
+        try:
+            return controller.run()
+        finally:
+            clock.close()
 
 
 def exit_code(outcome: MissionOutcome) -> int:
@@ -91,14 +104,17 @@ def exit_code(outcome: MissionOutcome) -> int:
 @click.option("--pair", help="Name of the marsupial pair: the Zenoh key namespace marsupial/<pair>/...")
 @click.option("--speed", type=click.FloatRange(min=0.01), default=1.0, show_default=True,
               help="Clock speed factor. Simulation only: must equal the mock vehicle's and carrier's --speed.")
+@click.option("--lockstep", is_flag=True, help="Simulation only: step on the mock vehicle's simulated time (its "
+              "--lockstep) and bring the carrier simulator (--lockstep) along; --speed is then the pace after a "
+              "participant is lost.")
 @click.option("--log-dir", type=click.Path(file_okay=False), help="Where to write the flight log (default mission.log_dir/<time>-<pair>).")
 @click.option("--signing-key", "signing_key_file", type=click.Path(dir_okay=False),
               help="MAVLink 2 signing key file, 64 hex digits or 32 raw bytes (overrides mavlink.signing_key_file): "
               "everything sent is signed, and only HEARTBEAT may arrive unsigned.")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON at the end.")
 def run(config: str, mavlink_url: str | None, zenoh_listen: tuple[str, ...], zenoh_connect: tuple[str, ...],
-        zenoh_mode: str | None, pair: str | None, speed: float, log_dir: str | None, signing_key_file: str | None,
-        as_json: bool) -> int:
+        zenoh_mode: str | None, pair: str | None, speed: float, lockstep: bool, log_dir: str | None,
+        signing_key_file: str | None, as_json: bool) -> int:
     """Fly the marsupial mission described by CONFIG on a PX4 vehicle.
 
     The passenger takes off from the carrier, joins the dock point, rides while the carrier
@@ -142,7 +158,8 @@ def run(config: str, mavlink_url: str | None, zenoh_listen: tuple[str, ...], zen
         seen["reporter"] = WaitReporter(cfg, controller, link, feed, clock).start()
 
     try:
-        outcome = fly(cfg, speed=speed, log_dir=log_dir, stop=stop, on_event=on_event, on_start=on_start)
+        clock: Clock = LockstepClock(speed=speed, name="mission-lockstep") if lockstep else ScaledClock(speed)
+        outcome = fly(cfg, speed=speed, log_dir=log_dir, stop=stop, on_event=on_event, on_start=on_start, clock=clock)
     finally:
         if seen.get("reporter") is not None:
             seen["reporter"].stop()

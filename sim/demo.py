@@ -135,24 +135,30 @@ def start_carrier_robot(kind: str, name: str, zenoh_ep: str, speed: float, start
 
 
 def start_pair(config: str, name: str, zenoh_ep: str, speed: float, log_root: Path, stack: ExitStack,
-               quiet: bool, carrier_kind: str = "sim") -> PairRun:
-    """Start the carrier (and its robot), the mock vehicle and the mission of one pair; register their cleanup."""
+               quiet: bool, carrier_kind: str = "sim", lockstep: bool = False) -> PairRun:
+    """Start the carrier (and its robot), the mock vehicle and the mission of one pair; register their cleanup.
+
+    ``lockstep`` (built-in carrier only): the three step on the mock vehicle's simulated time
+    (``speed`` is then the pace after a participant is lost); else wall clocks scaled by ``speed``."""
     cfg = load_config(config)
     pair = PairRun(name=name, log_dir=log_root / name)
     mav_port = free_port(socket.SOCK_DGRAM)
     err = subprocess.DEVNULL if quiet else None
+    mode = ["--lockstep"] if lockstep else []
     start = ",".join(str(v) for v in cfg.scenario.carrier_start)
     backend_args, robot = start_carrier_robot(carrier_kind, name, zenoh_ep, speed, start, stack, err)
     carrier = subprocess.Popen(_python_cli("carrier", config, "--speed", str(speed), "--pair", name,
                                            "--zenoh-connect", zenoh_ep, "--summary", str(pair.log_dir / "carrier.json"),
-                                           *backend_args), stderr=err)
+                                           *backend_args, *mode), stderr=err)
     stack.callback(stop_process, carrier)
     vehicle = subprocess.Popen(_python_cli("mock-vehicle", "--mavlink", "udpin:127.0.0.1:0", "--target",
-                                           f"udpout:127.0.0.1:{mav_port}", "--speed", str(speed), "--start-ned", start),
+                                           f"udpout:127.0.0.1:{mav_port}", "--speed", str(speed), "--start-ned", start,
+                                           *mode),
                                stderr=err)
     stack.callback(stop_process, vehicle)
     mission = subprocess.Popen(_python_cli("run", config, "--mavlink", f"udpin:127.0.0.1:{mav_port}", "--zenoh-connect",
-                                           zenoh_ep, "--pair", name, "--speed", str(speed), "--log-dir", str(pair.log_dir)),
+                                           zenoh_ep, "--pair", name, "--speed", str(speed), "--log-dir", str(pair.log_dir),
+                                           *mode),
                                stdout=subprocess.PIPE, stderr=err, text=True)
     stack.callback(stop_process, mission, 30.0)
     pair.procs = {"carrier": carrier, "vehicle": vehicle, "mission": mission}
@@ -162,8 +168,10 @@ def start_pair(config: str, name: str, zenoh_ep: str, speed: float, log_root: Pa
 
 
 def run_demo(config: str, speed: float, pairs: int, log_root: Path, plot_path: str | None, timeout_s: float,
-             quiet: bool = True, progress: bool = True, carrier: str = "sim") -> tuple[int, list[dict]]:
-    """Run ``pairs`` marsupial pairs at ``speed``; return the exit code and each pair's summary."""
+             quiet: bool = True, progress: bool = True, carrier: str = "sim",
+             lockstep: bool = True) -> tuple[int, list[dict]]:
+    """Run ``pairs`` marsupial pairs, in lockstep on each mock vehicle's simulated time (built-in
+    carrier only) or at ``speed``; return the exit code and each pair's summary."""
     from mission.run_cli import plot as plot_command
 
     log_root.mkdir(parents=True, exist_ok=True)
@@ -172,7 +180,9 @@ def run_demo(config: str, speed: float, pairs: int, log_root: Path, plot_path: s
     with ExitStack() as stack:
         router = open_session(ZenohSection(mode="router", listen=[zenoh_ep]))
         stack.callback(router.close)
-        runs = [start_pair(config, f"pair{i}", zenoh_ep, speed, log_root, stack, quiet, carrier) for i in range(pairs)]
+        lockstep = lockstep and carrier == "sim"
+        runs = [start_pair(config, f"pair{i}", zenoh_ep, speed, log_root, stack, quiet, carrier, lockstep)
+                for i in range(pairs)]
         display = PairProgress([p.name for p in runs], tty=progress and sys.stdout.isatty())
         stack.callback(display.close)
         readers = [threading.Thread(target=_follow, args=(p, display), daemon=True) for p in runs]
@@ -274,8 +284,12 @@ def format_table(summaries: list[dict]) -> str:
 @click.command("demo")
 @click.option("--config", type=click.Path(dir_okay=False, exists=True), default=str(DEFAULT_CONFIG), show_default=True,
               help="Mission configuration shared by every pair.")
+@click.option("--realtime", is_flag=True, help="Run on wall clocks scaled by --speed (to watch a run live) instead of "
+              "in lockstep on the mock vehicle's simulated time, as fast as the CPU allows. The mavlink and ros2 "
+              "carriers always run in real time.")
 @click.option("--speed", type=click.FloatRange(min=0.1, max=100), default=10.0, show_default=True,
-              help="Speed factor of every clock (vehicle, carrier, mission), like PX4's SIH speed factor.")
+              help="With --realtime: speed factor of every clock (vehicle, carrier, mission), like PX4's SIH speed "
+              "factor. In lockstep: the pace after a participant is lost.")
 @click.option("--pairs", type=click.IntRange(1, 8), default=1, show_default=True,
               help="Number of marsupial pairs flying at once on one Zenoh network.")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default="logs/demo/flight.png", show_default=True,
@@ -287,8 +301,8 @@ def format_table(summaries: list[dict]) -> str:
 @click.option("--carrier", "carrier_kind", type=click.Choice(["sim", "mavlink", "ros2"]), default="sim", show_default=True,
               help="The carrier robot: built-in kinematic robot; a mock PX4 Ackermann rover over MAVLink; a "
                    "ROS-2-shaped diff-drive robot over Zenoh (rmw_zenoh keys).")
-def demo(config: str, speed: float, pairs: int, plot_path: str, log_root: str, timeout_s: float, verbose_children: bool,
-         carrier_kind: str) -> int:
+def demo(config: str, realtime: bool, speed: float, pairs: int, plot_path: str, log_root: str, timeout_s: float,
+         verbose_children: bool, carrier_kind: str) -> int:
     """Fly the whole system: mock PX4 vehicle + carrier simulator + mission controller.
 
     Each runs as its own process, talking over real UDP (MAVLink 2) and Zenoh on loopback; no
@@ -297,7 +311,7 @@ def demo(config: str, speed: float, pairs: int, plot_path: str, log_root: str, t
     """
     os.environ.setdefault("PYTHONUNBUFFERED", "1")
     code, summaries = run_demo(config, speed, pairs, Path(log_root), plot_path, timeout_s, quiet=not verbose_children,
-                               progress=True, carrier=carrier_kind)
+                               progress=True, carrier=carrier_kind, lockstep=not realtime)
     click.echo("times count from the start of riding (t = 0, as in the paper)")
     click.echo(format_table(summaries))
     for s in summaries:

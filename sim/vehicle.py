@@ -77,6 +77,7 @@ MAX_POLL_WALL_S = 0.02  # longest socket wait [s, wall]; bounds the reaction to 
 DUE_EPSILON = 1e-9  # [s] tolerance when comparing due times with the step grid
 RX_BATCH = 256  # datagrams read per socket per pass
 STATUSTEXT_PEER_TIMEOUT_S = 2.5  # PX4 treats a peer without HEARTBEAT for this long as gone
+LOCKSTEP_HELLO_WALL_S = 0.05  # lockstep: resend period of the first barrier until a controller answers [s, wall]
 FRAMES = {"quadrotor": px4.MAV_TYPE_QUADROTOR, "rover": px4.MAV_TYPE_GROUND_ROVER}
 # A PX4 rover is "landed" only when disarmed (RoverLandDetector.cpp): no preflight auto-disarm.
 ROVER_PARAMS = {"COM_DISARM_PRFLT": 0.0}
@@ -105,6 +106,9 @@ class VehicleOptions:
     (seeded by ``faults.seed``).
     signing_key: 32-byte MAVLink 2 signing key; then unsigned messages other than HEARTBEAT
     are rejected and everything sent is signed.
+    lockstep: own simulated time and step in lockstep with the controller on the onboard link
+    (:mod:`mission.lockstep`); ``speed`` is then the pace after the controller leaves or stays
+    silent for ``lockstep_watchdog_wall_s`` wall seconds.
     """
 
     bind: str = "127.0.0.1:0"
@@ -123,6 +127,8 @@ class VehicleOptions:
     position_noise_m: float = 0.0
     statustext_needs_heartbeat: bool = True
     frame: str = "quadrotor"  # or "rover": MAV_TYPE_GROUND_ROVER, Ackermann kinematics (sim.rover_physics)
+    lockstep: bool = False
+    lockstep_watchdog_wall_s: float = 5.0
 
     def __post_init__(self) -> None:
         if not self.speed > 0:
@@ -164,7 +170,7 @@ class MockVehicle:
 
     def __init__(self, options: VehicleOptions | None = None) -> None:
         self.options = opts = options or VehicleOptions()
-        self.clock = ScaledClock(opts.speed)
+        self.clock: ScaledClock | _StepClock = _StepClock(self) if opts.lockstep else ScaledClock(opts.speed)
         self.params = ParamTable({**(ROVER_PARAMS if opts.frame == "rover" else {}), **opts.params}, opts.sysid)
         self._geo = tel.Geo(*opts.home)
         self._kin: KinState = initial_state(opts.start_ned)
@@ -174,7 +180,7 @@ class MockVehicle:
         self._commander.refuse_offboard_reason = opts.faults.refuse_offboard_reason
         self._faults = FaultInjector(opts.faults)
         self._noise = tel.PositionNoise(opts.position_noise_m, opts.faults.seed)
-        self._streams = tel.make_streams(opts.speed)
+        self._streams = tel.make_streams(1.0 if opts.lockstep else opts.speed)
         self._links: list[VehicleLink] = []
         self._lock = threading.RLock()
         self._stop_event = threading.Event()
@@ -185,6 +191,9 @@ class MockVehicle:
         self._position_fault_done = False  # FaultOptions.position_lost_at_s applied
         self._events: collections.deque[tuple[float, int, str]] = collections.deque(maxlen=1000)
         self._unsent: list[tuple[float, int, str]] = []
+        self._barrier_ns = -1  # lockstep: the step the vehicle waits at
+        self._lockstep_answer: int | None = None  # the controller's answer (its next wake [ns])
+        self._marked_steps = -1  # lockstep: last step announced by SYSTEM_TIME
         self._command_handlers: dict[int, Callable[[VehicleLink, list[float]], tuple[int, list[Any]]]] = {
             px4.MAV_CMD_DO_SET_MODE: self._cmd_set_mode,
             px4.MAV_CMD_COMPONENT_ARM_DISARM: self._cmd_arm_disarm,
@@ -225,7 +234,7 @@ class MockVehicle:
         if opts.gcs_target:
             self._links.append(VehicleLink("gcs", parse_endpoint(opts.gcs_bind, "udpin"), parse_endpoint(opts.gcs_target, "udpout"),
                                            opts.sysid, opts.compid, opts.signing_key))
-        self.clock = ScaledClock(opts.speed)
+        self.clock = _StepClock(self) if opts.lockstep else ScaledClock(opts.speed)
         self._stop_event.clear()
         self._thread = threading.Thread(target=self._run, name=f"mock-vehicle-{self.port}", daemon=True)
         self._thread.start()
@@ -351,6 +360,14 @@ class MockVehicle:
         return self._steps * PHYSICS_DT_S
 
     def _run(self) -> None:
+        if self.options.lockstep:
+            try:
+                self._run_lockstep()
+            except Exception:  # noqa: BLE001  (log, count, fly on in real time)
+                self._counters["internal_errors"] += 1
+                log.exception("mock vehicle lockstep error")
+            with self._lock:
+                self.clock = ScaledClock(self.options.speed, start_s=self._t_s)
         while not self._stop_event.is_set():
             try:
                 self._pass()
@@ -363,23 +380,95 @@ class MockVehicle:
         now = self.clock.now()
         with self._lock:
             self._advance_to(now)
-            lost_at_s = self._faults.options.position_lost_at_s
-            if lost_at_s is not None and self._t_s >= lost_at_s and not self._position_fault_done:
-                self._position_fault_done = True
-                self.lose_position_estimate(True)
-            for kind, item in self._faults.due(self._t_s):
-                self._release(kind, item)
-            self._service_streams(self._t_s)
-            self._flush_outbox()
+            self._service_step()
             wait_s = self._wait_wall_s(self._t_s)
         self._poll(wait_s)
+
+    def _service_step(self) -> None:
+        """At the current step: apply the position fault, release held datagrams, send the
+        streams that are due and the commander's STATUSTEXTs (lock held)."""
+        lost_at_s = self._faults.options.position_lost_at_s
+        if lost_at_s is not None and self._t_s >= lost_at_s and not self._position_fault_done:
+            self._position_fault_done = True
+            self.lose_position_estimate(True)
+        for kind, item in self._faults.due(self._t_s):
+            self._release(kind, item)
+        self._service_streams(self._t_s)
+        self._flush_outbox()
+
+    # ---- lockstep (mission.lockstep documents the protocol) --------------------------------
+    def _run_lockstep(self) -> None:
+        """Own simulated time: at each barrier send TIMESYNC(0, t) and wait for the controller's
+        answer (tc1 = its next wake) before integrating up to that wake, step by step, with the
+        streams, faults and commands of every step. Returns when the controller leaves or is
+        silent for ``lockstep_watchdog_wall_s`` (the caller goes on in real time) or on stop()."""
+        onboard, joined = self._links[0], False
+        watchdog_s = self.options.lockstep_watchdog_wall_s
+        while not self._stop_event.is_set():
+            with self._lock:
+                self._service_step()
+                self._barrier_ns, self._lockstep_answer = self._t_ns, None
+                self._send_control(onboard, mavlink.MAVLink_timesync_message(0, self._t_ns))
+            called = time.monotonic()
+            answer = None
+            while not self._stop_event.is_set():
+                self._poll(MAX_POLL_WALL_S)
+                answer = self._lockstep_answer
+                if answer is not None:
+                    break
+                now = time.monotonic()
+                if not joined and now - called > LOCKSTEP_HELLO_WALL_S:  # nobody yet: say hello again
+                    with self._lock:
+                        self._send(onboard, tel.build("HEARTBEAT", self._telemetry_state(), self._geo, self._noise))
+                        self._send_control(onboard, mavlink.MAVLink_timesync_message(0, self._t_ns))
+                    called = now
+                elif joined and now - called > watchdog_s:
+                    log.warning("lockstep: no answer for step t = %.3f s within %.1f s (wall); the controller is "
+                                "gone, going on in real time at speed %g", self._t_s, watchdog_s, self.options.speed)
+                    return
+            if answer is None:
+                return
+            if answer < 0:
+                log.info("lockstep: the controller left at t = %.3f s; going on in real time at speed %g",
+                         self._t_s, self.options.speed)
+                return
+            joined = True
+            target = max(self._steps + 1, math.ceil(answer / self._step_ns - 1e-6))
+            with self._lock:
+                while self._steps < target - 1:
+                    self._advance_steps(self._steps + 1)
+                    self._service_step()
+                self._advance_steps(target)
+
+    @property
+    def _step_ns(self) -> int:
+        return round(PHYSICS_DT_S * 1e9)
+
+    @property
+    def _t_ns(self) -> int:
+        return self._steps * self._step_ns
+
+    def _send_control(self, link: VehicleLink, msg: Any) -> None:
+        """Send a lockstep clock message: never through the link faults, never counted."""
+        if link.target is not None:
+            link.sendto(link.pack(msg), link.target)
+
+    def _mark_time(self, link: VehicleLink) -> None:
+        """In lockstep, precede the first datagram of a step on the onboard link with
+        SYSTEM_TIME, so the controller stamps what follows with this step's time."""
+        if self.options.lockstep and link is self._links[0] and self._marked_steps != self._steps:
+            self._marked_steps = self._steps
+            self._send_control(link, mavlink.MAVLink_system_time_message(0, self._t_ns // 1_000_000))
 
     def _limits(self) -> Limits:
         return vehicle_limits(self.params)
 
     def _advance_to(self, t_s: float) -> None:
         """Run the physics and the commander in fixed steps up to simulated time ``t_s``."""
-        target = int(t_s / PHYSICS_DT_S)
+        self._advance_steps(int(t_s / PHYSICS_DT_S))
+
+    def _advance_steps(self, target: int) -> None:
+        """Run the physics and the commander up to step number ``target``."""
         if target <= self._steps:
             return
         limits, wind, commander, kin = self._limits(), self.options.wind_ned_m_s, self._commander, self._kin
@@ -427,7 +516,10 @@ class MockVehicle:
                 return
             with self._lock:
                 self._advance_to(self.clock.now())
-                self._admit_in(link, data, address)
+                if self.options.lockstep and _is_timesync(data):
+                    self._process(link, data, address)  # the simulation's clock: no link faults
+                else:
+                    self._admit_in(link, data, address)
 
     def _admit_in(self, link: VehicleLink, data: bytes, address: tuple[str, int]) -> None:
         fate, delay_s = self._faults.admit("in", self._t_s)
@@ -446,6 +538,8 @@ class MockVehicle:
             self._process(*item)
         else:
             link, data = item
+            if link.target is not None and link in self._links:
+                self._mark_time(link)
             if link.target is not None and link in self._links and not link.sendto(data, link.target):
                 self._counters["tx_errors"] += 1
 
@@ -597,6 +691,8 @@ class MockVehicle:
     def _on_timesync(self, link: VehicleLink, msg: Any) -> None:
         if msg.tc1 == 0:
             self._send(link, mavlink.MAVLink_timesync_message(int(self._t_s * 1e9), msg.ts1))
+        elif self.options.lockstep and link is self._links[0] and msg.ts1 == self._barrier_ns:
+            self._lockstep_answer = int(msg.tc1)  # the controller finished this step
 
     # ---- sending -------------------------------------------------------------------------
     def _send(self, link: VehicleLink, msg: Any) -> None:
@@ -611,8 +707,10 @@ class MockVehicle:
         elif fate == "delay":
             self._counters["delayed_out"] += 1
             self._faults.hold(self._t_s + delay_s, "out", (link, data))
-        elif link.target is not None and not link.sendto(data, link.target):
-            self._counters["tx_errors"] += 1
+        elif link.target is not None:
+            self._mark_time(link)
+            if not link.sendto(data, link.target):
+                self._counters["tx_errors"] += 1
 
     def _telemetry_state(self) -> tel.TelemetryState:
         c, k = self._commander, self._kin
@@ -644,6 +742,26 @@ class MockVehicle:
                 if peer_alive or not self.options.statustext_needs_heartbeat:
                     for chunk in tel.statustext_chunks(severity, text, self._chunk_id):
                         self._send(link, chunk)
+
+
+class _StepClock:
+    """The lockstep vehicle's own clock: its physics step times [s], advanced by the vehicle."""
+
+    speed = 1.0
+
+    def __init__(self, vehicle: MockVehicle) -> None:
+        self._vehicle = vehicle
+
+    def now(self) -> float:
+        return self._vehicle._t_s
+
+
+def _is_timesync(data: bytes) -> bool:
+    """Is this datagram a MAVLink 1 or 2 TIMESYNC (id 111)? (Read from the header, before the
+    link faults decide its fate.)"""
+    if len(data) >= 10 and data[0] == 0xFD:
+        return data[7] | data[8] << 8 | data[9] << 16 == mavlink.MAVLINK_MSG_ID_TIMESYNC
+    return len(data) >= 6 and data[0] == 0xFE and data[5] == mavlink.MAVLINK_MSG_ID_TIMESYNC
 
 
 def spawn_process(args: Sequence[str], timeout_s: float = 15.0, **popen_kwargs: Any) -> tuple[subprocess.Popen[bytes], int]:

@@ -132,13 +132,15 @@ def _write_port_file(path: Path, port: int) -> None:
                                    "unsigned messages other than HEARTBEAT are rejected, everything sent is signed.")
 @click.option("--port-file", type=click.Path(dir_okay=False, path_type=Path), default=None, metavar="PATH",
               help="Write the bound UDP port to PATH once listening (for a parent process).")
+@click.option("--lockstep", is_flag=True, help="Own simulated time and step in lockstep with the controller on the "
+              "onboard link (marsupial run --lockstep); --speed is then the pace after the controller is gone.")
 @click.option("--status-every", type=click.FloatRange(min=0.0), default=5.0, show_default=True, metavar="SECONDS",
               help="Log a status line with mode, position and the counters every SECONDS of wall time (0: never).")
 def mock_vehicle(mavlink_url: str, target_url: str, gcs_url: str | None, speed: float, home: str, start_ned: str,
                  sysid: int, frame: str, params: tuple[str, ...], wind: str, position_noise: float, loss_in: float,
                  loss_out: float, latency_ms: float, jitter_ms: float, blackouts: tuple[str, ...],
                  refuse_arming: str | None, refuse_offboard: str | None, lose_position_s: float | None, seed: int, signing_key: Path | None, port_file: Path | None,
-                 status_every: float) -> None:
+                 lockstep: bool, status_every: float) -> None:
     """Run the PX4-like MAVLink vehicle until SIGINT or SIGTERM.
 
     By default it mirrors PX4 SITL: it binds UDP 127.0.0.1:14580, sends HEARTBEAT and the
@@ -156,7 +158,8 @@ def mock_vehicle(mavlink_url: str, target_url: str, gcs_url: str | None, speed: 
         home=_floats(home, 3, "--home"), start_ned=_floats(start_ned, 3, "--start-ned"),  # type: ignore[arg-type]
         params=dict(_param(p) for p in params), faults=faults,
         signing_key=read_signing_key(signing_key) if signing_key else None,
-        wind_ned_m_s=_floats(wind, 3, "--wind"), position_noise_m=position_noise)  # type: ignore[arg-type]
+        wind_ned_m_s=_floats(wind, 3, "--wind"), position_noise_m=position_noise,  # type: ignore[arg-type]
+        lockstep=lockstep)
     run(options, port_file, status_every)
 
 
@@ -175,7 +178,8 @@ def run(options: VehicleOptions, port_file: Path | None = None, status_every_s: 
         with MockVehicle(options) as vehicle:
             if port_file is not None:
                 _write_port_file(port_file, vehicle.port)
-            log.info("mock vehicle on UDP %d -> %s, speed %g", vehicle.port, options.target, options.speed)
+            log.info("mock vehicle on UDP %d -> %s, %s", vehicle.port, options.target,
+                     "lockstep" if options.lockstep else f"speed {options.speed:g}")
             while not stop.wait(status_every_s if status_every_s > 0 else None):
                 log.info("%s", vehicle.status_line())
             log.info("stopping: %s", vehicle.status_line())

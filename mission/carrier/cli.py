@@ -20,8 +20,9 @@ import zenoh
 
 from mission.carrier.controller import CarrierBackend, CarrierController
 from mission.carrier_bridge import describe_endpoints, keys, open_session
-from mission.clock import Clock, ScaledClock
+from mission.clock import Clock, LockstepClock, ScaledClock
 from mission.config import Config, load_config, with_overrides
+from mission.lockstep import ZenohUpstream
 
 log = logging.getLogger(__name__)
 
@@ -46,9 +47,13 @@ def open_backend(cfg: Config, clock: Clock, session: zenoh.Session, stack: ExitS
 
 
 def main(cfg: Config, speed: float = 1.0, duration_s: float | None = None, stop_event: threading.Event | None = None,
-         summary_path: str | Path | None = None) -> int:
+         summary_path: str | Path | None = None, lockstep: bool = False) -> int:
     """Open the session of ``cfg.zenoh`` and the backend, run the controller until stopped;
     write the summary (JSON) to ``summary_path`` if given; return exit code 0.
+
+    ``lockstep`` (simulation): step on the mission controller's clock relay
+    (:mod:`mission.lockstep`) instead of a wall clock scaled by ``speed``; ``speed`` is then the
+    pace once the relay falls silent.
 
     SIGINT/SIGTERM set the stop event when called from the main thread. Raises
     :class:`~mission.errors.BusError` if Zenoh cannot open, :class:`~mission.errors.LinkError`
@@ -56,20 +61,25 @@ def main(cfg: Config, speed: float = 1.0, duration_s: float | None = None, stop_
     """
     stop = stop_event or threading.Event()
     restore: dict[int, Any] = {}
+    clock: Clock = LockstepClock(speed=speed, name="carrier-lockstep") if lockstep else ScaledClock(speed)
     if threading.current_thread() is threading.main_thread():
         def _stop(signum: int, _frame: FrameType | None) -> None:
             log.info("carrier: %s, stopping", signal.Signals(signum).name)
             stop.set()
+            threading.Thread(target=clock.close, daemon=True).start()  # a lockstep sleep ends now
 
         for sig in (signal.SIGINT, signal.SIGTERM):
             restore[sig] = signal.signal(sig, _stop)
     try:
-        clock = ScaledClock(speed)
         with ExitStack() as stack:
             session = open_session(cfg.zenoh)
             stack.callback(session.close)
             backend = open_backend(cfg, clock, session, stack)
             with CarrierController(cfg, clock, session, backend) as ctl:
+                if isinstance(clock, LockstepClock):
+                    upstream = ZenohUpstream(clock, session, ctl.pair, ctl.passenger, published=lambda: ctl.seq - 1)
+                    stack.callback(upstream.close)
+                    stack.callback(clock.close)
                 try:
                     ctl.run(stop, duration_s)
                 finally:
@@ -125,13 +135,15 @@ def _jsonable(value: Any) -> Any:
               help="ROS 2 key form (ros2) [default: carrier.ros2.key_form].")
 @click.option("--duration", type=click.FloatRange(min=0, min_open=True), default=None, metavar="S",
               help="Stop after this many simulated seconds [default: run until SIGINT/SIGTERM].")
+@click.option("--lockstep", is_flag=True, help="Simulation: step on the mission controller's lockstep clock "
+              "(marsupial run --lockstep, the mock vehicle's simulated time) instead of a scaled wall clock.")
 @click.option("--summary", "summary_path", type=click.Path(dir_okay=False), default=None, metavar="PATH",
               help="Write the carrier's summary (closest approach, braking distance, guard activity) as JSON.")
 def carrier_command(config: str, backend: str | None, speed: float, pair: str | None, listen: tuple[str, ...],
                     connect: tuple[str, ...], encoding: str | None, rate: float | None, mavlink_url: str | None,
                     target_system: int | None, kinematics: str | None, offset_ned: str | None,
                     ros2_namespace: str | None, key_form: str | None, duration: float | None,
-                    summary_path: str | None) -> int:
+                    lockstep: bool, summary_path: str | None) -> int:
     """Run the carrier-side controller of CONFIG (a TOML file).
 
     The carrier waits until the passenger's published phase is RIDING, then drives towards
@@ -171,7 +183,7 @@ def carrier_command(config: str, backend: str | None, speed: float, pair: str | 
         "carrier.mavlink.url": mavlink_url,
     })
     click.echo(startup_line(cfg, speed), err=True)
-    return main(cfg, speed, duration, summary_path=summary_path)
+    return main(cfg, speed, duration, summary_path=summary_path, lockstep=lockstep)
 
 
 def startup_line(cfg: Config, speed: float) -> str:

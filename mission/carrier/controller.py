@@ -265,7 +265,9 @@ class CarrierController:
 
     def run(self, stop_event: threading.Event, duration_s: float | None = None) -> None:
         """Step at ``carrier.rate_hz`` on the clock until ``stop_event`` is set or ``duration_s``
-        [s] of clock time has passed. Steps once at once."""
+        [s] of clock time has passed. Steps once at the clock's first instant (at once on a
+        scaled clock, at the first barrier in lockstep)."""
+        self.clock.sleep(0.0)
         t0 = last = self.clock.now()
         periodic = Periodic(self.clock, self.period_s)
         self.step(0.0)

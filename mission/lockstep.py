@@ -1,0 +1,229 @@
+"""Lockstep simulated time over the real transports (the wire side of :class:`~mission.clock.LockstepClock`).
+
+The mock vehicle owns simulated time, like PX4 SITL's simulator; the mission controller and the
+carrier simulator step on it. Nothing else changes: the controller's code is the same in lockstep
+and in real time, only its injected clock differs.
+
+MAVLink, vehicle <-> controller (the vehicle's onboard link):
+
+- ``SYSTEM_TIME`` (time_unix_usec 0, time_boot_ms ``t``) from the vehicle: its time is ``t``;
+  the telemetry that follows was sampled then. Sent before each burst between barriers.
+- ``TIMESYNC`` request (tc1 0, ts1 ``t`` [ns]) from the vehicle: a *barrier*. The vehicle has
+  integrated up to ``t``, sent everything due at ``t`` and will not integrate further until the
+  controller answers.
+- ``TIMESYNC`` answer (tc1 ``wake`` [ns], ts1 ``t``) from the controller: it has finished step
+  ``t`` (its setpoint and commands were sent before, on the same socket, so the vehicle has them)
+  and next needs the vehicle at ``wake``; ``wake < 0``: it leaves the lockstep.
+  These messages are the simulation's own clock, so the vehicle's link faults (loss, latency,
+  blackout) never touch them; every other message suffers the faults in simulated time.
+
+Zenoh, controller <-> carrier simulator (``marsupial/<pair>/clock/...``, reliable, blocking):
+
+- ``clock/time`` ``"t seq"`` from the controller: step to ``t`` [ns] (sent at a barrier when the
+  carrier is due, before the controller computes that step) once you have the passenger status
+  ``seq`` (the last one the controller published).
+- ``clock/ready`` ``"t wake seq"`` from the carrier: done at ``t``, next needs ``wake`` [ns]; its
+  last state sample is ``seq``, and the controller waits for that sample before its own step.
+
+Zenoh does not keep the order of samples across keys (measured: a put on one key overtook the
+put before it on another in 915 of 2000 tries), so each side waits for the *stamped sample*
+(its ``seq``) named in the clock message, not merely for the clock message.
+
+One barrier: the vehicle integrates to ``t`` and stops -> the controller relays ``t`` to the
+carrier if it is due and waits for its ready -> the controller's threads run their step ->
+the controller answers with ``min`` of every wake -> the vehicle integrates to that wake.
+A participant silent for ``watchdog_wall_s`` wall seconds (a killed process) is dropped: the
+vehicle goes on in real time at its ``--speed`` (the controller's silence is then offboard loss,
+as in PX4), a dropped carrier stops being waited for (its silence is carrier loss).
+"""
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from typing import Any, Callable
+
+import zenoh
+
+from mission.carrier_bridge import keys
+from mission.clock import LockstepClock
+from mission.mavlink_env import mavlink
+
+log = logging.getLogger(__name__)
+
+HELLO_WALL_S = 0.05  # resend period of a call nobody has answered yet [s, wall]
+
+
+def clock_keys(pair: str) -> tuple[str, str]:
+    """The (time, ready) keys of pair ``pair``."""
+    root = keys(pair).carrier_state.rsplit("/", 2)[0]
+    return f"{root}/clock/time", f"{root}/clock/ready"
+
+
+def _publisher(session: zenoh.Session, key: str) -> zenoh.Publisher:
+    # Reliable and blocking: a clock message must never be dropped; express keeps it in order
+    # with the (express) state samples of the same session.
+    return session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK, express=True)
+
+
+def _ints(sample: zenoh.Sample, count: int) -> list[int] | None:
+    try:
+        values = [int(v) for v in sample.payload.to_bytes().decode("ascii").split()]
+    except (UnicodeDecodeError, ValueError):
+        return None
+    return values if len(values) == count else None
+
+
+class MavlinkUpstream:
+    """The controller's side of the vehicle's clock: reads SYSTEM_TIME / TIMESYNC from ``link``
+    and answers the barriers. ``link`` is a :class:`mission.link.VehicleLink`."""
+
+    def __init__(self, clock: LockstepClock, link: Any) -> None:
+        self.clock, self.link = clock, link
+        link.add_listener(self._on_message)
+        clock.upstream = self
+
+    def _on_message(self, msg: Any) -> None:
+        kind = msg.get_type()
+        if kind == "SYSTEM_TIME":
+            self.clock.advance(int(msg.time_boot_ms) * 1_000_000)
+        elif kind == "TIMESYNC" and msg.tc1 == 0:
+            self.clock.barrier(int(msg.ts1))
+
+    def report(self, t_ns: int, wake_ns: int) -> None:
+        self.link.send_message(mavlink.MAVLink_timesync_message(wake_ns, t_ns))
+
+
+class ZenohRelay:
+    """The controller brings the pair's carrier simulator along (a :class:`~mission.clock.Downstream`).
+
+    Before the first barrier completes it calls the carrier every :data:`HELLO_WALL_S` until it
+    answers (for at most ``join_wall_s``); later it waits ``watchdog_wall_s`` at most, then drops
+    the carrier until it answers again (a restarted carrier rejoins at a later barrier).
+    """
+
+    def __init__(self, session: zenoh.Session, pair: str, feed: Any, publisher: Any, *, watchdog_wall_s: float = 5.0,
+                 join_wall_s: float = 30.0) -> None:
+        time_key, ready_key = clock_keys(pair)
+        self.watchdog_wall_s, self.join_wall_s = watchdog_wall_s, join_wall_s
+        self._publisher = publisher  # PassengerPublisher: last_seq
+        self._cv = threading.Condition()
+        self._ready: tuple[int, int, int] | None = None
+        self._seen_seq = -1  # newest carrier state seq received
+        self._state = "joining"  # -> joined -> dropped -> joined ...
+        self._wake_ns = 0
+        self.dropped = 0
+        self._pub = _publisher(session, time_key)
+        self._sub = session.declare_subscriber(ready_key, self._on_ready)
+        feed.add_listener(self._on_state)
+
+    def _on_state(self, state: Any) -> None:
+        with self._cv:
+            self._seen_seq = max(self._seen_seq, int(state.seq))
+            self._cv.notify_all()
+
+    def _on_ready(self, sample: zenoh.Sample) -> None:
+        values = _ints(sample, 3)
+        if values is None:
+            log.warning("lockstep: malformed ready on %s dropped", sample.key_expr)
+            return
+        with self._cv:
+            self._ready = (values[0], values[1], values[2])
+            if values[1] < 0:  # it left
+                if self._state != "dropped":
+                    log.info("lockstep: the carrier left at t = %.3f s", values[0] / 1e9)
+                self._state = "dropped"
+            elif self._state == "dropped":
+                self._state, self._wake_ns = "joined", values[1]
+                log.warning("lockstep: the carrier is back (ready at t = %.3f s)", values[0] / 1e9)
+            self._cv.notify_all()
+
+    def wake_ns(self) -> int | None:
+        with self._cv:
+            return self._wake_ns if self._state == "joined" else None
+
+    def run(self, t_ns: int) -> None:
+        with self._cv:
+            state, wake = self._state, self._wake_ns
+        call = f"{t_ns} {self._publisher.last_seq}"
+        if state == "dropped":
+            self._pub.put(call)  # lets a restarted carrier find the clock
+            return
+        if state == "joined" and wake > t_ns:
+            return
+        limit = self.join_wall_s if state == "joining" else self.watchdog_wall_s
+        start = last_put = time.monotonic()
+        self._pub.put(call)
+        with self._cv:
+            while not (self._ready is not None and self._ready[0] >= t_ns and self._seen_seq >= self._ready[2]):
+                now = time.monotonic()
+                if now - start > limit:
+                    self._state = "dropped"
+                    self.dropped += 1
+                    log.warning("lockstep: the carrier did not answer step t = %.3f s within %.1f s (wall); "
+                                "going on without it", t_ns / 1e9, limit)
+                    return
+                if self._state == "joining" and now - last_put > HELLO_WALL_S:
+                    self._cv.release()
+                    try:
+                        self._pub.put(call)
+                    finally:
+                        self._cv.acquire()
+                    last_put = now
+                self._cv.wait(HELLO_WALL_S)
+            self._state, self._wake_ns = "joined", self._ready[1]
+
+    def close(self) -> None:
+        for entity in (self._sub, self._pub):
+            try:
+                entity.undeclare()
+            except zenoh.ZError as exc:
+                log.debug("undeclare: %s", exc)
+
+
+class ZenohUpstream:
+    """The carrier simulator's side: steps on ``clock/time`` once the passenger status it names
+    has arrived on ``feed`` (a PassengerFeed), answers on ``clock/ready`` with the seq of its
+    last state sample (``published()``)."""
+
+    def __init__(self, clock: LockstepClock, session: zenoh.Session, pair: str, feed: Any,
+                 published: Callable[[], int]) -> None:
+        time_key, ready_key = clock_keys(pair)
+        self.clock, self._published = clock, published
+        self._lock = threading.Lock()
+        self._seen_seq = -1  # newest passenger status seq received
+        self._pending: tuple[int, int] | None = None  # (t, status seq) waiting for that status
+        self._pub = _publisher(session, ready_key)
+        feed.add_listener(self._on_status)
+        self._sub = session.declare_subscriber(time_key, self._on_time)
+        clock.upstream = self
+
+    def _on_status(self, status: Any) -> None:
+        with self._lock:
+            self._seen_seq = max(self._seen_seq, int(status.seq))
+            pending = self._pending
+            if pending is None or self._seen_seq < pending[1]:
+                return
+            self._pending = None
+        self.clock.barrier(pending[0])
+
+    def _on_time(self, sample: zenoh.Sample) -> None:
+        values = _ints(sample, 2)
+        if values is None:
+            log.warning("lockstep: malformed time on %s dropped", sample.key_expr)
+            return
+        with self._lock:
+            if self._seen_seq < values[1]:
+                self._pending = (values[0], values[1])
+                return
+        self.clock.barrier(values[0])
+
+    def report(self, t_ns: int, wake_ns: int) -> None:
+        self._pub.put(f"{t_ns} {wake_ns} {self._published()}")
+
+    def close(self) -> None:
+        for entity in (self._sub, self._pub):
+            try:
+                entity.undeclare()
+            except zenoh.ZError as exc:
+                log.debug("undeclare: %s", exc)
