@@ -150,6 +150,9 @@ class Periodic:
 def join_thread(clock: Clock, thread: threading.Thread, timeout_s: float) -> bool:
     """Wait on ``clock`` until ``thread`` has ended or ``timeout_s`` [s] passed; True if it
     ended. Unlike ``thread.join`` it lets a lockstep clock run the thread meanwhile."""
+    if not (isinstance(clock, LockstepClock) and clock.lockstep):
+        thread.join(timeout_s / clock.speed)
+        return not thread.is_alive()
     deadline = clock.now() + timeout_s
     while thread.is_alive() and clock.now() < deadline:
         clock.sleep(min(0.01, max(deadline - clock.now(), 0.0)))
