@@ -22,49 +22,44 @@ from typing import Any
 
 import click
 
+from mission.clock import MonotonicClock
+
 ROOT = Path(__file__).resolve().parents[1]
 DEMO_CONFIG = ROOT / "configs" / "demo.toml"
 PAIR = "bench"
 WARMUP_S = 0.3  # of RIDING, not measured [s]
 
 
-class RealtimeMonotonicClock:
-    """The Clock protocol at speed 1 on CLOCK_MONOTONIC, convertible to CLOCK_REALTIME [ns]."""
+def realtime_offset_ns() -> int:
+    """CLOCK_REALTIME - CLOCK_MONOTONIC [ns], from the tightest of 50 brackets."""
+    best = None
+    for _ in range(50):
+        m0 = time.monotonic_ns()
+        r = time.time_ns()
+        m1 = time.monotonic_ns()
+        if best is None or m1 - m0 < best[0]:
+            best = (m1 - m0, r - (m0 + m1) // 2)
+    assert best is not None
+    return best[1]
 
-    speed = 1.0
+
+class RealtimeMonotonicClock(MonotonicClock):
+    """The controller's clock here: :class:`mission.clock.MonotonicClock`, whose times and
+    stamps also convert to CLOCK_REALTIME [ns] (the kernel's receive stamps are realtime)."""
 
     def __init__(self) -> None:
-        best = None
-        for _ in range(50):  # the realtime - monotonic offset, from the tightest bracket
-            m0 = time.monotonic_ns()
-            r = time.time_ns()
-            m1 = time.monotonic_ns()
-            if best is None or m1 - m0 < best[0]:
-                best = (m1 - m0, r - (m0 + m1) // 2)
-        assert best is not None
-        self._offset_ns = best[1]
-        self._t0_ns = time.monotonic_ns()
-
-    def now(self) -> float:
-        return (time.monotonic_ns() - self._t0_ns) * 1e-9
-
-    def sleep(self, duration_s: float) -> None:
-        if duration_s > 0:
-            time.sleep(duration_s)
+        self._offset_ns = realtime_offset_ns()
+        super().__init__()
 
     def real_ns(self, t_s: float) -> int:
         """CLOCK_REALTIME [ns] of clock time ``t_s`` [s]."""
-        return self._t0_ns + int(round(t_s * 1e9)) + self._offset_ns
+        return self.to_monotonic_ns(t_s) + self._offset_ns
 
     def real_of_monotonic_ns(self, monotonic_ns: int) -> int:
         return monotonic_ns + self._offset_ns
 
     def real_now_ns(self) -> int:
         return time.monotonic_ns() + self._offset_ns
-
-    def clock_s(self, monotonic_ns: int) -> float:
-        """Clock time [s] of a CLOCK_MONOTONIC stamp [ns]."""
-        return (monotonic_ns - self._t0_ns) * 1e-9
 
 
 class SendLog:
@@ -86,7 +81,7 @@ class SendLog:
             return
         c = self.clock
         self.rows.append((c.real_of_monotonic_ns(report.start_ns), self._seq, c.real_ns(self._rx_s),
-                          c.real_of_monotonic_ns(report.sent_ns), int(c.clock_s(report.sent_ns) * 1000),
+                          c.real_of_monotonic_ns(report.sent_ns), int(c.from_monotonic_ns(report.sent_ns) * 1000),
                           report.phase.value == "RIDING", c.real_of_monotonic_ns(report.observed_ns),
                           c.real_of_monotonic_ns(report.send_ns)))
 

@@ -3,7 +3,8 @@
 Every timeout, watchdog, stream period and integration step reads a :class:`Clock`, never
 ``time.time()``. A :class:`ScaledClock` runs ``speed`` times faster than the wall clock, like
 PX4's SIH speed factor, so processes that share a speed factor agree on rates and timeouts
-while a test flies a minute in seconds. A :class:`ManualClock` is driven by hand in unit tests.
+while a test flies a minute in seconds. A :class:`ManualClock` is driven by hand in unit tests; a :class:`MonotonicClock` (speed 1)
+converts to and from CLOCK_MONOTONIC stamps.
 A :class:`LockstepClock` follows simulated time owned by another process (the mock vehicle) and
 holds it until every thread of this process that waits on the clock has finished its step, as
 PX4 SITL does with its simulator (see :mod:`mission.lockstep` for the wire protocol).
@@ -86,6 +87,27 @@ class ScaledClock:
     def wall(self, duration_s: float) -> float:
         """Wall-clock seconds that ``duration_s`` simulated seconds take."""
         return duration_s / self.speed
+
+
+class MonotonicClock(ScaledClock):
+    """A :class:`ScaledClock` at speed 1 whose times convert to and from CLOCK_MONOTONIC [ns], for
+    benches and tools that stamp events with ``time.monotonic_ns()`` (as the controller's
+    ``on_tick`` reports do). ``now()`` starts at 0 when the clock is made."""
+
+    def __init__(self) -> None:
+        super().__init__(1.0)
+        self._t0_ns = time.monotonic_ns()
+
+    def now(self) -> float:
+        return (time.monotonic_ns() - self._t0_ns) * 1e-9
+
+    def to_monotonic_ns(self, t_s: float) -> int:
+        """CLOCK_MONOTONIC [ns] of clock time ``t_s`` [s]."""
+        return self._t0_ns + round(t_s * 1e9)
+
+    def from_monotonic_ns(self, monotonic_ns: int) -> float:
+        """Clock time [s] of a CLOCK_MONOTONIC stamp [ns]."""
+        return (monotonic_ns - self._t0_ns) * 1e-9
 
 
 class ManualClock:
