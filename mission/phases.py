@@ -301,8 +301,9 @@ def live_geometry_problem(dock: np.ndarray, vehicle_ned_m: np.ndarray, m: Missio
     if horizontal > m.dock_tolerance_m:
         return (f"the vehicle (at {np.round(vehicle_ned_m, 2).tolist()} NED) is {horizontal:.2f} m from the carrier's "
                 f"dock point horizontally, more than mission.dock_tolerance_m = {m.dock_tolerance_m:g} m "
-                f"(Assumption 2: the passenger starts on the carrier): put the vehicle on the carrier "
-                f"(`marsupial mock-vehicle --start-ned N,E,D`) or the carrier under it (scenario.carrier_start)")
+                f"(Assumption 2: the passenger starts on the carrier): put the vehicle on the carrier (land it there; "
+                f"a mock vehicle: restart `marsupial mock-vehicle`, --start-ned N,E,D) or restart the carrier "
+                f"under it (scenario.carrier_start)")
     return None
 
 
