@@ -10,7 +10,9 @@ RO_DECEL_LIM, and the attitude loop steers the heading to the bearing. The model
     motion: n' = speed cos psi, e' = speed sin psi; d stays on the ground
 
 so a rover, unlike a multicopter, cannot move sideways, needs speed to turn, and brakes over
-``v^2 / (2 decel)``. Outside OFFBOARD (Hold, failsafes) it brakes to a stop, as PX4 rovers hold.
+``v^2 / (2 decel)``. As in PX4, a zero setpoint has bearing ``atan2(0, 0) = 0``: a rover told to
+stop steers north while it brakes. Outside OFFBOARD (Hold, failsafes) it brakes to a stop
+holding its heading, as PX4 rovers hold.
 Wind and the vertical command are ignored (a ground vehicle).
 """
 from __future__ import annotations
@@ -27,18 +29,20 @@ STOP = Command(0.0, 0.0, 0.0)
 @dataclass(frozen=True)
 class RoverLimits:
     """speed_max_m_s [m/s]; accel_m_s2 / decel_m_s2 [m/s^2] of the speed slew; yaw_gain [1/s];
-    wheelbase_m [m]; max_steer_rad [rad]."""
+    wheelbase_m [m]; max_steer_rad [rad]. Defaults: PX4's SIH Ackermann rover (airframe 10045:
+    RO_SPEED_LIM, RO_ACCEL_LIM, RO_DECEL_LIM, RO_YAW_P, RA_WHEEL_BASE, RA_MAX_STR_ANG)."""
 
     speed_max_m_s: float = 3.0
-    accel_m_s2: float = 1.0
-    decel_m_s2: float = 1.5
-    yaw_gain: float = 2.0
-    wheelbase_m: float = 0.32
-    max_steer_rad: float = 0.5
+    accel_m_s2: float = 3.0
+    decel_m_s2: float = 3.0
+    yaw_gain: float = 5.0
+    wheelbase_m: float = 0.321
+    max_steer_rad: float = 0.5236
 
 
-def rover_step(state: KinState, command: Command, limits: RoverLimits, dt_s: float) -> KinState:
-    """Advance the rover by ``dt_s`` [s] under ``command`` (its horizontal velocity; see the module docstring)."""
+def rover_step(state: KinState, command: Command, limits: RoverLimits, dt_s: float, steer: bool = True) -> KinState:
+    """Advance the rover by ``dt_s`` [s] under ``command`` (its horizontal velocity; see the module
+    docstring); ``steer`` False holds the heading (a mode other than OFFBOARD)."""
     speed = math.hypot(state.vn_m_s, state.ve_m_s)
     speed_sp = min(math.hypot(command.vn_m_s, command.ve_m_s), limits.speed_max_m_s) if command.powered else 0.0
     if speed_sp > speed:
@@ -46,8 +50,8 @@ def rover_step(state: KinState, command: Command, limits: RoverLimits, dt_s: flo
     else:
         new_speed = max(speed_sp, speed - limits.decel_m_s2 * dt_s)
     yaw = state.yaw_rad
-    if speed_sp > 1e-6:
-        bearing = math.atan2(command.ve_m_s, command.vn_m_s)
+    if steer and command.powered:
+        bearing = math.atan2(command.ve_m_s, command.vn_m_s)  # 0 (north) for a zero setpoint, as in PX4
         rate_max = new_speed * math.tan(limits.max_steer_rad) / limits.wheelbase_m
         rate = min(max(limits.yaw_gain * wrap_pi(bearing - yaw), -rate_max), rate_max)
     else:
@@ -69,7 +73,8 @@ def rover_stepper(mode_of: Callable[[], str], limits: RoverLimits | None = None)
 
     def step(state: KinState, command: Command, _limits: object, _wind: object, dt_s: float) -> KinState:
         # a setpoint without a finite horizontal velocity (PX4 semantics: NaN = not controlled) stops it
-        drive = mode_of() == "OFFBOARD" and math.isfinite(command.vn_m_s) and math.isfinite(command.ve_m_s)
-        return rover_step(state, command if drive else STOP, lim, dt_s)
+        offboard = mode_of() == "OFFBOARD"
+        drive = offboard and math.isfinite(command.vn_m_s) and math.isfinite(command.ve_m_s)
+        return rover_step(state, command if drive else STOP, lim, dt_s, steer=drive)
 
     return step

@@ -138,9 +138,11 @@ class CarrierController:
         self._plan_velocity = np.zeros(self.dim)
         self._stats: dict[str, Any] = {"closest_target_distance_m": math.inf, "guard_active_ticks": 0,
                                        "stale_ticks": 0, "ticks": 0, "distance_at_separation_m": None,
-                                       "braking_distance_m": None, "stopped_target_distance_m": None}
+                                       "braking_distance_m": None, "braking_displacement_m": None,
+                                       "stopped_target_distance_m": None}
         self._last_position: np.ndarray | None = None
         self._after_separation_m = 0.0
+        self._separation_position = np.zeros(self.dim)
         self.passenger = PassengerFeed(session, self.pair, clock, max_age_s=cfg.carrier.passenger_timeout_s)
         try:
             self.publisher = CarrierPublisher(session, self.pair, encoding or cfg.zenoh.encoding,  # type: ignore[arg-type]
@@ -175,8 +177,19 @@ class CarrierController:
                                    else np.zeros_like(self.velocity_m_s))
         self.mode = mode
 
+    def _stopping(self) -> bool:
+        """A stop for good or for now: not approaching, and no own plan (Remark 1) to follow."""
+        if self.mode is CarrierMode.APPROACHING:
+            return False
+        return not (self.mode is CarrierMode.SEPARATED and self.model.carrier_mode == "remark1")
+
     def _decide(self, state: OwnState, dt_s: float) -> Tracked:
         x_c = state.position_ned_m[:self.dim]
+        if self._stopping() and getattr(self.backend, "brakes_itself", False):
+            # A real vehicle brakes with its own limits: ramping the command down at
+            # safety.carrier_max_accel_m_s2 (the built-in robot's braking) would keep it driving.
+            self.velocity_m_s = np.zeros(self.dim)
+            return STOP
         separated = self.mode is not CarrierMode.APPROACHING
         plan = self._plan_velocity if self.mode is CarrierMode.SEPARATED else None
         res = carrier_tick(x_c, separated, self.model, own_plan_velocity=plan, u_prev=self.velocity_m_s,
@@ -192,6 +205,14 @@ class CarrierController:
             self.velocity_m_s = g.u
         else:
             cmd = track(u, yaw, self.tracking)
+            k_v = self.cfg.carrier.speed_feedback_gain
+            if k_v > 0 and cmd.speed_m_s > 0:
+                # A vehicle whose own speed loop overshoots (PX4's rover: 2.7 m/s for 2) is asked
+                # for less while it is too fast, more while too slow: v_sp = v + k (v - v_meas).
+                forward = math.cos(yaw) * float(v_meas[0]) + math.sin(yaw) * float(v_meas[1])
+                wanted = min(max(cmd.speed_m_s + k_v * (cmd.speed_m_s - forward), 0.0), 2.0 * cmd.speed_m_s)
+                cmd = Tracked(wanted, cmd.yaw_rate_rad_s, cmd.bearing_rad, heading_of(wanted, yaw),
+                              cmd.setpoint_ned_m_s * (wanted / cmd.speed_m_s))
             speed, active = self.p3_guard.limit_heading(t, x_c, cmd.speed_m_s, yaw, v_meas)
             if active:
                 scale = speed / cmd.speed_m_s if cmd.speed_m_s > 0 else 0.0
@@ -205,8 +226,18 @@ class CarrierController:
             self._stats["guard_active_ticks"] += 1
         return cmd
 
+    def _in_plane(self, state: OwnState | None) -> OwnState | None:
+        """A planar carrier in 3D lives in the plane of scenario.carrier_start: its estimator's
+        height (a PX4 rover's EKF altitude drifted 5 m on SITL) is not used or published."""
+        if state is None or not (self.planar and self.dim == 3):
+            return state
+        p, v = state.position_ned_m.copy(), state.velocity_ned_m_s.copy()
+        p[2], v[2] = self.cfg.scenario.carrier_start[2], 0.0
+        return OwnState(state.t_s, p, v, state.yaw_rad)
+
     def _account(self, state: OwnState) -> None:
-        """Closest approach |e_tc|, distance when the separation was heard, path length after it."""
+        """Closest approach |e_tc|, distance when the separation was heard, path length and
+        straight-line displacement after it (the braking distance), distance where it stopped."""
         x = state.position_ned_m[:self.dim]
         dist = float(np.linalg.norm(np.asarray(self.model.target) - x))
         s = self._stats
@@ -214,9 +245,11 @@ class CarrierController:
         if self.mode is CarrierMode.SEPARATED:
             if s["distance_at_separation_m"] is None:
                 s["distance_at_separation_m"] = dist
+                self._separation_position = x.copy()
             elif self._last_position is not None:
                 self._after_separation_m += float(np.linalg.norm(x - self._last_position))
-            s["braking_distance_m"] = self._after_separation_m
+            s["braking_distance_m"] = self._after_separation_m  # path length
+            s["braking_displacement_m"] = float(np.linalg.norm(x - self._separation_position))
             s["stopped_target_distance_m"] = dist
         self._last_position = x.copy()
 
@@ -231,7 +264,11 @@ class CarrierController:
         self._update_mode()
         if self.mode is CarrierMode.APPROACHING:
             self.backend.engage()
-        state = self.backend.own_state()
+        elif self.mode in (CarrierMode.SEPARATED, CarrierMode.STOPPED) and self._stopping():
+            park = getattr(self.backend, "park", None)
+            if park is not None:
+                park()  # stopped for good: a PX4 vehicle holds position in Hold
+        state = self._in_plane(self.backend.own_state())
         now = self.clock.now()
         why: str | None
         if state is None:
@@ -256,7 +293,7 @@ class CarrierController:
             self.velocity_m_s = np.zeros(self.dim)
         self.backend.command(cmd)
         self._account(state)
-        fresh = self.backend.own_state() or state  # the built-in robot now holds the new command
+        fresh = self._in_plane(self.backend.own_state()) or state  # the built-in robot now holds the new command
         out = CarrierState(fresh.t_s, self.seq, "local_ned", _pad3(fresh.position_ned_m[:self.dim]),
                            _pad3(fresh.velocity_ned_m_s[:self.dim]), fresh.yaw_rad)
         self.publisher.publish(out)

@@ -17,6 +17,10 @@ already on their way still act during it), ``T`` [s] the control period (a comma
 long). A vehicle that brakes at ``a`` and obeys each command after ``delay_s`` then never crosses
 the circle (tested with a transport-delayed, deceleration-limited vehicle in the unit tests).
 
+A vehicle that does not slow down as told (a PX4 rover overshoots its speed setpoint, and
+brakes late) is caught by its measured speed: once its measured inward speed exceeds the cap by
+:data:`OVERSPEED_M_S`, the guard commands no inward motion at all until it is back under.
+
 Only the inward component is cut: motion along the guard circle or away from the target is
 untouched, so a carrier that keeps its own plan (Remark 1) slides around the circle. The cap
 falls at rate ``a`` while the carrier closes in at the cap: the guard brakes, it does not slam.
@@ -28,6 +32,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+
+OVERSPEED_M_S = 0.1  # [m/s] measured inward speed above the cap at which the guard brakes outright
 
 
 @dataclass(frozen=True)
@@ -82,19 +88,20 @@ class P3Guard:
         return (None if dist < 1e-9 else e / dist), dist - self.p.radius_m
 
     def cap(self, t_s: float, x_c: np.ndarray, velocity_m_s: np.ndarray | None) -> tuple[float, float, np.ndarray | None]:
-        """(inward speed cap [m/s], clearance h [m], unit vector towards the target or None)."""
+        """(inward speed cap [m/s], clearance h [m], unit vector towards the target or None).
+        The cap is 0 while the measured inward speed is over it by more than :data:`OVERSPEED_M_S`."""
         n, h = self._geometry(x_c)
         while self._sent and self._sent[0][0] < t_s - self.p.delay_s - 1e-9:
             self._sent.popleft()
         if n is None:
             return 0.0, h, None
-        v_fly = 0.0
-        if velocity_m_s is not None:
-            v_fly = max(v_fly, float(np.asarray(velocity_m_s, dtype=float)[:self.k] @ n))
+        measured = 0.0 if velocity_m_s is None else float(np.asarray(velocity_m_s, dtype=float)[:self.k] @ n)
+        v_fly = max(0.0, measured)
         if self._sent and self.p.delay_s > 0:
             v_fly = max(v_fly, max(v for _, v in self._sent))
         h_pred = h - v_fly * self.p.delay_s
-        return stopping_speed(h_pred, self.p.brake_decel_m_s2, self.p.period_s), h, n
+        cap = stopping_speed(h_pred, self.p.brake_decel_m_s2, self.p.period_s)
+        return (0.0 if measured > cap + OVERSPEED_M_S else cap), h, n
 
     def limit(self, t_s: float, x_c: np.ndarray, u: np.ndarray, velocity_m_s: np.ndarray | None = None) -> GuardResult:
         """Cap the inward component of the velocity command ``u`` [m/s] ((2,) or (3,)) of a

@@ -16,6 +16,15 @@ zero until it wants motion, as PX4 needs before and during OFFBOARD)::
     armed and OFFBOARD ---------------------------------------------> in control (engaged)
     engaged, then a mode other than OFFBOARD -----------------------> pilot took over: fault for
                                                                        good, never re-taken
+    park() (the carrier is done: separated, or the passenger aborted), once its speed is below
+        PARK_SPEED_M_S --------------------------------------------> Hold (AUTO.LOITER): PX4 holds
+                                                                       position where it stopped
+
+A zero velocity setpoint does not stop a PX4 rover well: its bearing atan2(0, 0) = 0 steers it
+north while it brakes, and its speed loop lets it creep; "stop" is therefore a tiny speed along
+its own heading while in OFFBOARD, and Hold once the carrier is done and has come to rest. Not
+before: PX4's Ackermann Hold drives back to the point where Hold began, and a rover still
+rolling at 2 m/s overshoots that point and loops back towards it at up to 3 m/s (seen on SITL).
 
 The vehicle is armed only when the carrier first has to move (the passenger rides), so a
 carrier waiting for its passenger is not armed for nothing. On close it asks for Hold.
@@ -23,6 +32,7 @@ carrier waiting for its passenger is not armed for nothing. On close it asks for
 from __future__ import annotations
 
 import logging
+import math
 
 import numpy as np
 
@@ -38,11 +48,15 @@ from mission.wire import GeoOrigin, geodetic_to_ned
 
 log = logging.getLogger(__name__)
 
+STOP_SPEED_M_S = 1e-3  # [m/s] "stop" to a PX4 rover: this speed along its own heading (see command)
+PARK_SPEED_M_S = 0.2  # [m/s] below this the stopped carrier is handed to PX4's Hold
+
 
 class MavlinkCarrier:
     """The carrier vehicle behind ``cfg.carrier.mavlink`` (the link is opened here)."""
 
     name = "mavlink"
+    brakes_itself = True
 
     def __init__(self, cfg: Config, clock: Clock) -> None:
         m = cfg.carrier.mavlink
@@ -62,6 +76,7 @@ class MavlinkCarrier:
         self._want_control = False
         self._engaged = False
         self._override: str | None = None
+        self._parked = False
         self.send_errors = 0
 
     # ------------------------------------------------------------------ state
@@ -88,6 +103,19 @@ class MavlinkCarrier:
         """The carrier has to move: take control (arm, OFFBOARD) when the rules allow."""
         self._want_control = True
 
+    def park(self) -> None:
+        """The carrier is done (separated and stopping, or the passenger aborted): once it is at
+        rest, ask for Hold (once, if we have control)."""
+        if self._parked or not self._engaged:
+            return
+        st = self.link.state
+        v = st.velocity_ned_m_s
+        rolling = v is None or math.hypot(float(v[0]), float(v[1])) >= PARK_SPEED_M_S
+        if st.armed and st.mode == "OFFBOARD" and not rolling:
+            self._parked = True
+            log.info("carrier vehicle: stopped for good, asking for Hold")
+            self._ensure_worker().submit("hold")
+
     def control_fault(self) -> str | None:
         st = self.link.state
         if st.system_id is None:
@@ -96,6 +124,8 @@ class MavlinkCarrier:
             return f"vehicle lost: no HEARTBEAT for {st.heartbeat_age_s:.1f} s"
         if self._override:
             return self._override
+        if self._parked:
+            return f"parked (mode {st.mode or '-'}): the carrier's part is done"
         if self._shared_origin is not None and self._origin_offset is None:
             return "waiting for the vehicle's EKF origin (GPS_GLOBAL_ORIGIN)"
         if not st.position_valid:
@@ -135,6 +165,10 @@ class MavlinkCarrier:
         v = np.zeros(3)
         n = min(2, cmd.setpoint_ned_m_s.shape[0])
         v[:n] = cmd.setpoint_ned_m_s[:n]  # a ground or surface vehicle: no vertical command
+        yaw = self.link.state.yaw_rad
+        if self.kind != "holonomic" and math.hypot(v[0], v[1]) < STOP_SPEED_M_S and yaw is not None:
+            # PX4's rover steers to atan2(v): a zero setpoint would turn it north while it brakes.
+            v[0], v[1] = STOP_SPEED_M_S * math.cos(yaw), STOP_SPEED_M_S * math.sin(yaw)
         try:
             self.link.send_velocity_ned(v)
         except LinkError as exc:
@@ -151,7 +185,7 @@ class MavlinkCarrier:
             return
         try:
             st = self.link.state
-            if self._engaged and st.armed and st.mode == "OFFBOARD" and self.link.vehicle_alive():
+            if self._engaged and not self._parked and st.armed and st.mode == "OFFBOARD" and self.link.vehicle_alive():
                 self.link.hold(timeout_s=0.3, retries=1, confirm_timeout_s=1.0)
         except LinkError as exc:
             log.warning("carrier vehicle: Hold on exit not confirmed: %s", exc)

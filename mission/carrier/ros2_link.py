@@ -99,6 +99,7 @@ class Ros2Carrier:
     """The ROS 2 robot of ``cfg.carrier.ros2`` on an open Zenoh ``session`` (owned by the caller)."""
 
     name = "ros2"
+    brakes_itself = True  # a base driver ramps its own wheels
 
     def __init__(self, cfg: Config, clock: Clock, session: zenoh.Session) -> None:
         self.clock = clock

@@ -124,16 +124,17 @@ def test_px4_rover_arms_when_the_passenger_rides_and_stops_outside_the_guard_aft
                 d = _watch(rover, ctl, lambda: _distance(rover.snapshot().position_ned_m + START) < 8.3, 30, "near 8 m")
                 passenger.phase = "SEPARATED"
                 wait_for(lambda: ctl.mode is CarrierMode.SEPARATED, what="separated heard")
-                d += _watch(rover, ctl, lambda: np.linalg.norm(rover.snapshot().velocity_ned_m_s) < 1e-3, 20, "stopped")
+                d += _watch(rover, ctl, lambda: rover.snapshot().mode == "AUTO.LOITER"
+                            and np.linalg.norm(rover.snapshot().velocity_ned_m_s) < 1e-3, 20, "stopped in Hold")
                 summary = ctl.summary()
+                assert (ctl.hold_reason or "").startswith("parked")
         finally:
             passenger.close()
-        backend.close()  # the carrier program exits: it asks for Hold
         snap = rover.snapshot()
     assert min(d) >= RADIUS, min(d)
     assert summary["braking_distance_m"] is not None and 0.0 < summary["braking_distance_m"] < 3.0
     assert summary["stopped_target_distance_m"] >= RADIUS
-    assert snap.mode == "AUTO.LOITER"  # the carrier asked for Hold when it stopped
+    assert snap.mode == "AUTO.LOITER" and snap.armed  # the carrier parked the rover in Hold when it was done
     assert all(b <= a + 0.05 for a, b in zip(d, d[1:]))  # the Ackermann rover closed in without loops
 
 

@@ -47,8 +47,16 @@ def test_guard_counts_the_measured_speed_over_the_delay() -> None:
     g = P3Guard(GuardParams(7.5, 1.0, 0.5, 1e-9), TARGET)
     x = TARGET - np.array([10.0, 0.0, 0.0])  # clearance 2.5
     still = g.cap(0.0, x, np.zeros(3))[0]
-    moving = g.cap(0.0, x, np.array([2.0, 0.0, 0.0]))[0]  # 1 m covered before a command acts
-    assert still == pytest.approx(math.sqrt(5.0)) and moving == pytest.approx(math.sqrt(3.0))
+    moving = g.cap(0.0, x, np.array([1.0, 0.0, 0.0]))[0]  # 0.5 m covered before a command acts
+    assert still == pytest.approx(math.sqrt(5.0)) and moving == pytest.approx(2.0)
+
+
+def test_guard_brakes_outright_a_vehicle_faster_than_it_was_told() -> None:
+    g = P3Guard(GuardParams(7.5, 1.0, 0.0, 1e-9), TARGET)
+    x = TARGET - np.array([8.0, 0.0, 0.0])  # cap 1 m/s
+    assert g.limit(0.0, x, np.array([3.0, 0.0, 0.0]), np.array([1.05, 0.0, 0.0])).u[0] == pytest.approx(1.0)
+    braked = g.limit(0.0, x, np.array([3.0, 0.5, 0.0]), np.array([1.5, 0.0, 0.0]))  # a PX4 rover overshooting
+    assert braked.u.tolist() == pytest.approx([0.0, 0.5, 0.0]) and braked.cap_m_s == 0.0
 
 
 def test_guard_along_heading_slows_a_robot_heading_in() -> None:
