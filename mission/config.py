@@ -221,6 +221,8 @@ class CarrierSection(_Model):
     min_speed_fraction: float = Field(0.3, ge=0, le=1, description="Ackermann: speed kept while misaligned")
     wheelbase_m: float = Field(0.3, gt=0)
     max_steer_rad: float = Field(0.5, gt=0, lt=1.5)
+    align_on_deck_m: float = Field(0.0, ge=0, le=5, description="[m] largest horizontal shift of the carrier's "
+                                   "estimate onto the passenger's while it stands on the deck (before take-off); 0 off")
     speed_feedback_gain: float = Field(0.0, ge=0, le=5, description="[-] diff-drive/Ackermann: speed setpoint "
                                        "v + k (v - v_measured), for a vehicle whose speed loop overshoots; 0 off")
     start_yaw_rad: float | None = Field(None, description="[rad] sim backend: initial heading (default: towards the target)")

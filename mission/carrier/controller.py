@@ -43,6 +43,7 @@ from mission.wire import CarrierState
 
 log = logging.getLogger(__name__)
 
+ON_DECK = frozenset({"PREFLIGHT", "STREAMING", "ARMING"})  # passenger phases before it lifts off the deck
 STOP = Tracked(0.0, 0.0, 0.0, np.zeros(2), np.zeros(2))
 REAL_DELAY_S = 0.3  # [s] default response delay of a real carrier for the P3 guard (carrier.brake_delay_s)
 
@@ -143,6 +144,8 @@ class CarrierController:
         self._last_position: np.ndarray | None = None
         self._after_separation_m = 0.0
         self._separation_position = np.zeros(self.dim)
+        self._alignment = np.zeros(3)
+        self._aligned = False
         self.passenger = PassengerFeed(session, self.pair, clock, max_age_s=cfg.carrier.passenger_timeout_s)
         try:
             self.publisher = CarrierPublisher(session, self.pair, encoding or cfg.zenoh.encoding,  # type: ignore[arg-type]
@@ -227,13 +230,43 @@ class CarrierController:
         return cmd
 
     def _in_plane(self, state: OwnState | None) -> OwnState | None:
-        """A planar carrier in 3D lives in the plane of scenario.carrier_start: its estimator's
-        height (a PX4 rover's EKF altitude drifted 5 m on SITL) is not used or published."""
-        if state is None or not (self.planar and self.dim == 3):
-            return state
-        p, v = state.position_ned_m.copy(), state.velocity_ned_m_s.copy()
-        p[2], v[2] = self.cfg.scenario.carrier_start[2], 0.0
+        """The own state as the controller uses it: shifted by the deck alignment (if any), and,
+        for a planar carrier in 3D, in the plane of scenario.carrier_start (its estimator's height:
+        a PX4 rover's EKF altitude drifted 5 m on SITL, is not used or published)."""
+        if state is None:
+            return None
+        p, v = state.position_ned_m + self._alignment, state.velocity_ned_m_s.copy()
+        if self.planar and self.dim == 3:
+            p[2], v[2] = self.cfg.scenario.carrier_start[2], 0.0
         return OwnState(state.t_s, p, v, state.yaw_rad)
+
+    def _align_on_deck(self) -> None:
+        """carrier.align_on_deck_m > 0: while the passenger still stands on the deck (PREFLIGHT ..
+        ARMING, fresh), shift the own horizontal position onto the passenger's, once, if the
+        two estimates differ by at most that much (two GPS-based EKFs disagree by ~1 m). Until
+        then the carrier publishes nothing: the passenger waits for it.
+
+        Trust: a passenger that lies about where it stands moves the carrier's frame by at most
+        align_on_deck_m; the P3 guard holds in the aligned (the passenger's) frame."""
+        limit = self.cfg.carrier.align_on_deck_m
+        if limit <= 0 or self._aligned or self.mode is not CarrierMode.WAITING:
+            return
+        rx = self.passenger.latest()
+        if rx is None or rx.stale or rx.status.phase not in ON_DECK:
+            return
+        own = self.backend.own_state()
+        if own is None:
+            return
+        shift = np.zeros(3)
+        shift[:2] = rx.status.position_ned_m[:2] - own.position_ned_m[:2]
+        self._aligned = True
+        if float(np.linalg.norm(shift)) > limit:
+            log.warning("carrier %s: passenger on the deck is %.2f m away (> carrier.align_on_deck_m = %g): not aligning",
+                        self.pair, float(np.linalg.norm(shift)), limit)
+            return
+        self._alignment = shift
+        log.info("carrier %s: aligned on the passenger standing on the deck: shift %s m", self.pair,
+                 np.round(shift, 3).tolist())
 
     def _account(self, state: OwnState) -> None:
         """Closest approach |e_tc|, distance when the separation was heard, path length and
@@ -262,6 +295,7 @@ class CarrierController:
         self.backend.advance(dt_s)
         self._stats["ticks"] += 1
         self._update_mode()
+        self._align_on_deck()
         if self.mode is CarrierMode.APPROACHING:
             self.backend.engage()
         elif self.mode in (CarrierMode.SEPARATED, CarrierMode.STOPPED) and self._stopping():
@@ -296,6 +330,8 @@ class CarrierController:
         fresh = self._in_plane(self.backend.own_state()) or state  # the built-in robot now holds the new command
         out = CarrierState(fresh.t_s, self.seq, "local_ned", _pad3(fresh.position_ned_m[:self.dim]),
                            _pad3(fresh.velocity_ned_m_s[:self.dim]), fresh.yaw_rad)
+        if self.cfg.carrier.align_on_deck_m > 0 and not self._aligned:
+            return out  # not yet placed in the passenger's frame: nothing the passenger should use
         self.publisher.publish(out)
         self.seq += 1
         return out
@@ -324,6 +360,7 @@ class CarrierController:
         distance after it [m], guard and stale tick counts, mode."""
         out = dict(self._stats)
         out.update(mode=self.mode.value, guard_radius_m=self.guard.radius_m, backend=self.backend.name,
+                   deck_alignment_m=self._alignment.tolist(),
                    separation_distance_m=self.model.law.separation_distance_m,
                    passenger_feed=self.passenger.counters)
         if math.isinf(out["closest_target_distance_m"]):

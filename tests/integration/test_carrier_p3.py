@@ -9,6 +9,7 @@ import pytest
 
 from mission.clock import ManualClock
 from mission.config import Config, from_dict
+from mission.wire import PassengerStatus
 from sim.carrier import CarrierMode, CarrierSim
 from tests.integration.test_carrier_sim import TARGET, Passenger, _seen, sessions
 from tests.integration.zenoh_util import wait_for
@@ -107,3 +108,39 @@ def test_a_passenger_that_vanishes_stops_the_carrier_outside_the_guard() -> None
         assert sim.mode is CarrierMode.PAUSED
     assert d[-1] == pytest.approx(d[-30], abs=1e-9)  # standing still
     assert min(d) >= RADIUS - 1e-9
+
+
+def test_deck_alignment_moves_the_carrier_onto_the_passenger_once_and_only_so_far() -> None:
+    """carrier.align_on_deck_m: two estimators disagree; while the passenger stands on the deck
+    the carrier shifts its horizontal estimate onto the passenger's (at most that far), once, and
+    publishes nothing before (the passenger waits for it)."""
+    clock = ManualClock()
+    cfg = from_dict({**_cfg().model_dump(), "carrier": {**_cfg().carrier.model_dump(), "align_on_deck_m": 1.0}})
+    with sessions(1) as (sa, sb), CarrierSim(cfg, clock, sa) as sim:
+        passenger = Passenger(sb, "p3", clock)
+        try:
+            wait_for(lambda: passenger.pub.matched)
+            assert sim.step(0.0) is not None and sim.seq == 0  # not published: not aligned yet
+            passenger.pub.publish(PassengerStatus("PREFLIGHT", clock.now(), 1, [0.6, -0.3, 0.0], [0, 0, 0]))
+            wait_for(lambda: _seen(sim, 1))
+            clock.advance(DT)
+            out = sim.step(DT)
+            assert sim.seq == 1 and out.position.tolist() == pytest.approx([0.6, -0.3, 0.0])
+            passenger.pub.publish(PassengerStatus("ARMING", clock.now(), 2, [5.0, 5.0, 0.0], [0, 0, 0]))
+            wait_for(lambda: _seen(sim, 2))
+            clock.advance(DT)
+            assert sim.step(DT).position.tolist() == pytest.approx([0.6, -0.3, 0.0])  # once only
+        finally:
+            passenger.pub.close()
+    far = from_dict({**cfg.model_dump(), "carrier": {**cfg.carrier.model_dump(), "align_on_deck_m": 0.5}})
+    clock = ManualClock()
+    with sessions(1) as (sa, sb), CarrierSim(far, clock, sa) as sim:
+        passenger = Passenger(sb, "p3", clock)
+        try:
+            wait_for(lambda: passenger.pub.matched)
+            passenger.pub.publish(PassengerStatus("PREFLIGHT", clock.now(), 1, [0.6, -0.3, 0.0], [0, 0, 0]))
+            wait_for(lambda: _seen(sim, 1))
+            assert sim.step(DT).position.tolist() == pytest.approx([0.0, 0.0, 0.0])  # 0.67 m > 0.5: refused
+            assert sim.summary()["deck_alignment_m"] == [0.0, 0.0, 0.0]
+        finally:
+            passenger.pub.close()

@@ -1,0 +1,123 @@
+"""Both robots on real PX4 SITL: a SIH quadrotor passenger (instance 0, sysid 1) under
+``marsupial run`` and a SIH Ackermann rover carrier (airframe 10045, instance 1, sysid 2) under
+``marsupial carrier`` with the ``mavlink`` backend, each in OFFBOARD, in one network namespace of
+the test's own (``configs/px4_sitl_rover.toml``). Real time: about 70 s.
+
+Skipped unless ``MARSUPIAL_PX4_SITL`` names a PX4 SITL build (a folder with ``bin/px4`` and
+``etc/``, e.g. ``../shared/px4_sitl``) and the test may create network namespaces (root, ``ip``).
+Each PX4 runs under ``unshare -m`` with a private ``/tmp``: PX4 keeps a lock socket per instance
+number in ``/tmp``, which network namespaces do not separate, so another PX4 of the same instance
+elsewhere on the machine would make ours exit at once. (Self-contained on purpose, to stay out of
+the way of the shared PX4 fixture in this folder; it can move onto it.)
+"""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+CONFIG = ROOT / "configs" / "px4_sitl_rover.toml"
+BUILD = os.environ.get("MARSUPIAL_PX4_SITL")
+
+pytestmark = [
+    pytest.mark.slow,
+    pytest.mark.timeout(240),
+    pytest.mark.skipif(not BUILD, reason="MARSUPIAL_PX4_SITL is not set (a PX4 SITL build: bin/px4 and etc/)"),
+    pytest.mark.skipif(os.geteuid() != 0 or shutil.which("ip") is None or shutil.which("unshare") is None,
+                       reason="needs root, ip and unshare for a private network namespace"),
+]
+
+
+def _px4(ns: str, build: Path, out: Path, instance: int, airframe: int) -> subprocess.Popen[bytes]:
+    rootfs = out / f"rootfs{instance}"
+    script = (f"mount -t tmpfs px4tmp /tmp && exec env AIRFRAME={airframe} PX4_SIM_SPEED_FACTOR=1.08 "
+              f"{build / 'run-sih.sh'} {rootfs} {instance}")
+    log = open(out / f"px4-{instance}.out", "wb")
+    return subprocess.Popen(["ip", "netns", "exec", ns, "unshare", "-m", "sh", "-c", script], stdout=log,
+                            stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+
+
+def _cli(ns: str, out: Path, name: str, *args: str) -> subprocess.Popen[bytes]:
+    env = {**os.environ, "PYTHONUNBUFFERED": "1", "PYTHONPATH": str(ROOT)}
+    return subprocess.Popen(["ip", "netns", "exec", ns, sys.executable, "-m", "mission.cli", "-v", *args],
+                            stdout=open(out / f"{name}.out", "wb"), stderr=open(out / f"{name}.err", "wb"),
+                            env=env, cwd=ROOT, stdin=subprocess.DEVNULL)
+
+
+def _stop(proc: subprocess.Popen[bytes], timeout_s: float = 10.0) -> None:
+    if proc.poll() is None:
+        proc.terminate()
+        try:
+            proc.wait(timeout_s)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+def _wait_text(path: Path, text: str, timeout_s: float) -> None:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if path.exists() and text in path.read_text(errors="replace"):
+            return
+        time.sleep(0.2)  # polling a log file PX4 writes; the event is the text, not the time
+    raise AssertionError(f"{text!r} not in {path} within {timeout_s} s")
+
+
+@pytest.fixture
+def two_px4(tmp_path: Path) -> Iterator[tuple[str, Path]]:
+    """A network namespace with a SIH quadrotor (instance 0) and a SIH Ackermann rover
+    (instance 1), both armable; everything is stopped and the namespace deleted afterwards."""
+    assert BUILD is not None
+    build = Path(BUILD).resolve()
+    ns = f"mcarrier-{os.getpid()}"
+    subprocess.run(["ip", "netns", "add", ns], check=True)
+    procs: list[subprocess.Popen[bytes]] = []
+    try:
+        subprocess.run(["ip", "netns", "exec", ns, "ip", "link", "set", "lo", "up"], check=True)
+        procs = [_px4(ns, build, tmp_path, 0, 10040), _px4(ns, build, tmp_path, 1, 10045)]
+        for i in (0, 1):  # PX4 prints this once its estimator has a home: armable
+            _wait_text(tmp_path / f"px4-{i}.out", "home set", 60.0)
+        yield ns, tmp_path
+    finally:
+        for p in procs:
+            _stop(p)
+        subprocess.run(["ip", "netns", "delete", ns], check=False)
+
+
+def test_quadrotor_and_rover_on_px4_each_in_offboard_p1_p3_and_the_rover_stops_outside_b_c_minus_half_a_metre(
+        two_px4: tuple[str, Path]) -> None:
+    ns, out = two_px4
+    carrier = _cli(ns, out, "carrier", "carrier", str(CONFIG), "--zenoh-listen", "tcp/127.0.0.1:7450",
+                   "--summary", str(out / "carrier.json"))
+    try:
+        _wait_text(out / "carrier.err", "publishing on", 30.0)
+        mission = _cli(ns, out, "mission", "run", str(CONFIG), "--zenoh-connect", "tcp/127.0.0.1:7450",
+                       "--log-dir", str(out / "flight"))
+        try:
+            code = mission.wait(180.0)
+        finally:
+            _stop(mission)
+        time.sleep(3.0)  # let the rover settle in Hold before the carrier's account is closed
+    finally:
+        _stop(carrier)
+    s = json.loads((out / "flight" / "summary.json").read_text())
+    c = json.loads((out / "carrier.json").read_text())
+    carrier_err = (out / "carrier.err").read_text(errors="replace")
+    print(json.dumps({"mission": s, "carrier": c}, indent=1))  # the numbers of the flight, with -s
+    assert code == 0, (out / "mission.err").read_text(errors="replace")[-3000:]
+    assert "carrier vehicle armed and in OFFBOARD" in carrier_err  # the rover under our controller
+    assert s["phase"] == "DONE" and s["p2"] and s["p3"], s
+    assert s["p1"], f"P1: the passenger strayed {s['max_offset_before_separation_m']:.2f} m from the dock point"
+    assert s["final_passenger_target_distance_m"] <= 0.5  # the passenger arrived
+    assert c["backend"] == "mavlink" and c["mode"] == "separated"
+    assert c["closest_target_distance_m"] >= 8.0 - 0.5  # b c - 0.5 m: the rover stops short of it
+    assert c["braking_displacement_m"] is not None and np.isfinite(c["braking_displacement_m"])
