@@ -22,9 +22,12 @@ compensated).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 GRAVITY_M_S2 = 9.80665
+# PX4 runs the position controller at each new estimate: 125 Hz on SITL (EKF2_PREDICT_US 10 ms on
+# a 250 Hz IMU: every 2nd sample); with the mock's 5 ms physics step, every 2nd step (100 Hz)
+CONTROL_PERIOD_S = 0.008
 NAN = math.nan
 Vec3 = tuple[float, float, float]
 
@@ -77,9 +80,16 @@ class Setpoint3:
 
 @dataclass(frozen=True, slots=True)
 class ControllerState:
-    """The controller's memory: the velocity integrator [m/s^2] NED (``I`` of the PID)."""
+    """The controller's memory: the velocity integrator [m/s^2] NED (``I`` of the PID), and for
+    the telemetry its last velocity setpoint [m/s] and acceleration setpoint [m/s^2] NED (PX4
+    streams them as POSITION_TARGET_LOCAL_NED) and normalised thrust vector (ATTITUDE_TARGET)."""
 
     integral: Vec3 = (0.0, 0.0, 0.0)
+    velocity_sp: Vec3 = (NAN, NAN, NAN)
+    acceleration_sp: Vec3 = (0.0, 0.0, 0.0)
+    thrust: Vec3 = (0.0, 0.0, -0.5)
+    produced: Vec3 = (0.0, 0.0, 0.0)  # the output [m/s^2] NED, held between updates
+    age_s: float = 0.0  # since the last update [s]
 
 
 def _add_if_finite(base: float, addition: float) -> float:
@@ -176,4 +186,16 @@ def control(sp: Setpoint3, pos: Vec3, vel: Vec3, vel_dot: Vec3, state: Controlle
     int_e = integ[1] + gains.xy_vel_i * err[1] * dt_s if fin(err[1]) else integ[1]
     int_d = integ[2] + gains.z_vel_i * err[2] * dt_s if fin(err[2]) else integ[2]
     int_d = min(max(int_d, -GRAVITY_M_S2), GRAVITY_M_S2)
-    return (produced_n, produced_e, thr[2] * scale + GRAVITY_M_S2), ControllerState((int_n, int_e, int_d))
+    produced = (produced_n, produced_e, thr[2] * scale + GRAVITY_M_S2)
+    return produced, ControllerState((int_n, int_e, int_d), vel_sp, (acc_sp[0], acc_sp[1], acc_sp[2]),
+                                     (thr[0], thr[1], thr[2]), produced)
+
+
+def control_at_rate(sp: Setpoint3, pos: Vec3, vel: Vec3, vel_dot: Vec3, state: ControllerState, gains: Gains,
+                    dt_s: float, period_s: float = CONTROL_PERIOD_S) -> tuple[Vec3, ControllerState]:
+    """:func:`control` run every ``period_s`` (over the time elapsed since its last run), its
+    output held in between: PX4 runs the controller at each estimate, not at the simulator's rate."""
+    age_s = state.age_s + dt_s
+    if age_s < period_s - 1e-9:
+        return state.produced, replace(state, age_s=age_s)
+    return control(sp, pos, vel, vel_dot, state, gains, age_s)

@@ -32,9 +32,10 @@ Choices where PX4 leaves room, or where the mock simplifies (see also the comman
   stands on a platform at that height (a passenger on its carrier's deck) until it lifts off.
 - Home is set where the vehicle arms on the ground; ``home`` (lat, lon, alt) is the EKF origin.
 - ``snapshot()`` reports the true state; ``position_noise_m`` only affects the telemetry.
-- ODOMETRY, HIGHRES_IMU and the vehicle's own TIMESYNC requests are not streamed. Stream rates
-  scale with ``speed`` up to wall-clock caps (LOCAL_POSITION_NED and HEARTBEAT 300 Hz, ATTITUDE
-  100 Hz, the others 50 Hz; see :mod:`sim.vehicle_telemetry`).
+- Streams: PX4's onboard profile at its rates (:mod:`sim.vehicle_telemetry`), kept per link and
+  changed by SET_MESSAGE_INTERVAL on the link it arrives on, as PX4 does. Stream rates scale with
+  ``speed`` up to wall-clock caps (LOCAL_POSITION_NED and HEARTBEAT 300 Hz, ATTITUDE
+  100 Hz, the others 50 Hz). The vehicle's own TIMESYNC requests are not streamed.
 - Offboard loss with COM_OBL_RC_ACT = 0 and no RC: POSCTL that holds position and descends, as
   seen on a 2025 SITL; not PX4 2026's fall-through to NAV_RCL_ACT (PR #26289).
 """
@@ -78,6 +79,7 @@ DUE_EPSILON = 1e-9  # [s] tolerance when comparing due times with the step grid
 RX_BATCH = 256  # datagrams read per socket per pass
 STATUSTEXT_PEER_TIMEOUT_S = 2.5  # PX4 treats a peer without HEARTBEAT for this long as gone
 LOCKSTEP_HELLO_WALL_S = 0.05  # lockstep: resend period of the first barrier until a controller answers [s, wall]
+LINK_NAMES = ("onboard", "gcs")
 FRAMES = {"quadrotor": px4.MAV_TYPE_QUADROTOR, "rover": px4.MAV_TYPE_GROUND_ROVER}
 # A PX4 rover is "landed" only when disarmed (RoverLandDetector.cpp): no preflight auto-disarm.
 ROVER_PARAMS = {"COM_DISARM_PRFLT": 0.0}
@@ -180,12 +182,14 @@ class MockVehicle:
         self._commander.refuse_offboard_reason = opts.faults.refuse_offboard_reason
         self._faults = FaultInjector(opts.faults)
         self._noise = tel.PositionNoise(opts.position_noise_m, opts.faults.seed)
-        self._streams = tel.make_streams(1.0 if opts.lockstep else opts.speed)
+        # per link, as PX4 keeps them: SET_MESSAGE_INTERVAL changes the link it arrived on
+        self._streams = {name: tel.make_streams(1.0 if opts.lockstep else opts.speed) for name in LINK_NAMES}
         self._links: list[VehicleLink] = []
         self._lock = threading.RLock()
         self._stop_event = threading.Event()
         self._thread: threading.Thread | None = None
         self._steps = 0
+        self._limits_cache: tuple[int, Limits] | None = None
         self._counters = dict.fromkeys(COUNTER_NAMES, 0)
         self._chunk_id = 0
         self._position_fault_done = False  # FaultOptions.position_lost_at_s applied
@@ -203,6 +207,7 @@ class MockVehicle:
             px4.MAV_CMD_REQUEST_MESSAGE: self._cmd_request_message,
             px4.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: lambda link, p: (px4.MAV_RESULT_ACCEPTED, [tel.autopilot_version(opts.sysid)]),
             px4.MAV_CMD_SET_MESSAGE_INTERVAL: self._cmd_set_message_interval,
+            px4.MAV_CMD_GET_MESSAGE_INTERVAL: self._cmd_get_message_interval,
         }
         self._handlers: dict[str, Callable[[VehicleLink, Any], None]] = {
             "HEARTBEAT": self._on_heartbeat,
@@ -461,7 +466,11 @@ class MockVehicle:
             self._send_control(link, mavlink.MAVLink_system_time_message(0, self._t_ns // 1_000_000))
 
     def _limits(self) -> Limits:
-        return vehicle_limits(self.params)
+        """The dynamics' gains and limits from the parameters (derived again only after a change)."""
+        cached = self._limits_cache
+        if cached is None or cached[0] != self.params.version:
+            cached = self._limits_cache = (self.params.version, vehicle_limits(self.params))
+        return cached[1]
 
     def _advance_to(self, t_s: float) -> None:
         """Run the physics and the commander in fixed steps up to simulated time ``t_s``."""
@@ -488,7 +497,7 @@ class MockVehicle:
 
     def _wait_wall_s(self, t_s: float) -> float:
         """Wall seconds until the physics step at which the next stream or held datagram is due."""
-        due = [s.next_due_s for s in self._streams.values() if s.period_s > 0]
+        due = [s.next_due_s for link in self._links for s in self._streams[link.name].values() if s.period_s > 0]
         held = self._faults.next_due_s()
         if held is not None:
             due.append(held)
@@ -632,23 +641,44 @@ class MockVehicle:
         altitude_m = p[6] - home_amsl_m if math.isfinite(p[6]) else None
         return self._commander.takeoff(self._t_s, altitude_m), []
 
+    def _stream_of(self, link: VehicleLink, msg_id: int) -> tel.Stream | None:
+        return next((s for s in self._streams[link.name].values() if s.msg_id == msg_id), None)
+
     def _cmd_request_message(self, link: VehicleLink, p: list[float]) -> tuple[int, list[Any]]:
         msg_id = int_param(p[0])
         if msg_id == mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
             return px4.MAV_RESULT_ACCEPTED, [tel.autopilot_version(self.options.sysid)]
-        stream = next((s for s in self._streams.values() if s.msg_id == msg_id), None)
+        stream = self._stream_of(link, msg_id)
         if stream is None:
-            return px4.MAV_RESULT_UNSUPPORTED, []
+            return px4.MAV_RESULT_DENIED, []  # as PX4 when it cannot send the message
         return px4.MAV_RESULT_ACCEPTED, [tel.build(stream.name, self._telemetry_state(), self._geo, self._noise)]
 
     def _cmd_set_message_interval(self, link: VehicleLink, p: list[float]) -> tuple[int, list[Any]]:
+        """PX4's rules (mavlink_receiver.cpp, and measured on SITL): FAILED for HEARTBEAT, for a
+        message it cannot stream, or with param3, param4 or param7 (response target) set; interval
+        < 0 stops the stream, 0 (or NaN) restores the default, > 0 sets it (delivered up to the
+        stream's source rate). Only the link the command came on changes."""
         msg_id, interval_us = int_param(p[0]), p[1]
-        stream = next((s for s in self._streams.values() if s.msg_id == msg_id), None)
-        if stream is None or not math.isfinite(interval_us):
-            return px4.MAV_RESULT_DENIED, []
-        rate_hz = stream.default_rate_hz if interval_us == 0 else (0.0 if interval_us < 0 else 1e6 / interval_us)
+        stream = self._stream_of(link, msg_id)
+        extras_set = any(math.isfinite(x) and int(x + 0.5) != 0 for x in (p[2], p[3], p[6]))
+        if stream is None or msg_id == mavlink.MAVLINK_MSG_ID_HEARTBEAT or extras_set:
+            return px4.MAV_RESULT_FAILED, []
+        if interval_us < -1e-5:
+            rate_hz = 0.0
+        elif interval_us > 1e-5:
+            rate_hz = 1e6 / interval_us
+        else:
+            rate_hz = stream.default_rate_hz
         stream.set_rate(rate_hz, self.clock.speed)
         stream.next_due_s = self._t_s
+        return px4.MAV_RESULT_ACCEPTED, []
+
+    def _cmd_get_message_interval(self, link: VehicleLink, p: list[float]) -> tuple[int, list[Any]]:
+        """MESSAGE_INTERVAL of the stream on this link (PX4: 0 when it is not streamed), sent
+        before the ACK as PX4 does."""
+        msg_id = int_param(p[0])
+        stream = self._stream_of(link, msg_id)
+        self._send(link, mavlink.MAVLink_message_interval_message(msg_id, stream.interval_us() if stream else 0))
         return px4.MAV_RESULT_ACCEPTED, []
 
     def _on_setpoint(self, link: VehicleLink, msg: Any) -> None:
@@ -718,17 +748,19 @@ class MockVehicle:
                                   c.position_valid, c.setpoint, c.home_ned_m, FRAMES[self.options.frame])
 
     def _service_streams(self, t_s: float) -> None:
-        due = [s for s in self._streams.values() if s.period_s > 0 and s.next_due_s <= t_s + DUE_EPSILON]
-        if not due:
-            return
-        state = self._telemetry_state()
-        for stream in due:
-            msg = tel.build(stream.name, state, self._geo, self._noise)
-            for link in self._links:
-                self._send(link, msg)
-            stream.next_due_s += stream.period_s
-            if stream.next_due_s <= t_s:
-                stream.next_due_s = t_s + stream.period_s
+        state: tel.TelemetryState | None = None
+        built: dict[str, Any] = {}  # one message per stream and step, whichever link it goes to
+        for link in self._links:
+            for stream in self._streams[link.name].values():
+                if stream.period_s <= 0 or stream.next_due_s > t_s + DUE_EPSILON:
+                    continue
+                if stream.name not in built:
+                    state = state or self._telemetry_state()
+                    built[stream.name] = tel.build(stream.name, state, self._geo, self._noise)
+                self._send(link, built[stream.name])
+                stream.next_due_s += stream.period_s
+                if stream.next_due_s <= t_s:
+                    stream.next_due_s = t_s + stream.period_s
 
     def _flush_outbox(self) -> None:
         """Send the commander's STATUSTEXTs to the links whose peer is alive (PX4 rule)."""

@@ -91,6 +91,7 @@ class ParamTable:
         self._lock = threading.Lock()
         self._values: dict[str, float | int] = {s.name: (int(s.default) if s.is_int else float(s.default)) for s in PARAM_SPECS}
         self._values["MAV_SYS_ID"] = int(sysid)
+        self.version = 0  # incremented by every change (lets readers cache what they derive)
         for name, value in (overrides or {}).items():
             self.set(name, value)
 
@@ -112,6 +113,7 @@ class ParamTable:
         stored: float | int = int(round(value)) if spec.is_int else float(value)
         with self._lock:
             self._values[name] = stored
+            self.version += 1
         return stored
 
     def set_from_wire(self, name: str, wire_value: float, wire_type: int) -> float | int:

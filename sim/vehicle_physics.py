@@ -25,7 +25,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from sim.mc_position_control import GRAVITY_M_S2, ControllerState, Gains, Setpoint3, control
+from sim.mc_position_control import GRAVITY_M_S2, ControllerState, Gains, Setpoint3, control_at_rate
 
 YAW_TIME_CONSTANT_S = 0.3
 NAN = math.nan
@@ -151,7 +151,8 @@ def step(state: KinState, command: Command, limits: Limits, wind_ned_m_s: tuple[
     vel = (state.vn_m_s, state.ve_m_s, state.vd_m_s)
     if command.powered:
         yaw_rate = _yaw_rate(state, command, limits)
-        acc_sp, ctrl = control(sp, pos, vel, (state.dvn_m_s2, state.dve_m_s2, state.dvd_m_s2), state.ctrl, limits.gains, dt_s)
+        acc_sp, ctrl = control_at_rate(sp, pos, vel, (state.dvn_m_s2, state.dve_m_s2, state.dvd_m_s2), state.ctrl,
+                                       limits.gains, dt_s)
         an = _lag(state.an_m_s2, acc_sp[0], dt_s, air.tilt_tau_s)
         ae = _lag(state.ae_m_s2, acc_sp[1], dt_s, air.tilt_tau_s)
         ad = _lag(state.ad_m_s2, acc_sp[2], dt_s, air.thrust_tau_s)
