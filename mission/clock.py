@@ -230,7 +230,8 @@ class LockstepClock:
     runs, so everything they read that arrived before the barrier is the same in every run:
     the outcome is deterministic. I/O threads (receivers, Zenoh callbacks) are not
     participants: their notifications take effect at the next barrier. The thread that makes
-    the clock counts as running until it first waits.
+    the clock counts as running until it first waits (``creator_runs=False``: a test thread that
+    only starts the participants' threads).
 
     Liveness: if the upstream is silent for ``watchdog_wall_s`` wall seconds while this
     process waits for it (``join_wall_s`` before the first barrier), or on :meth:`close`, the
@@ -239,7 +240,7 @@ class LockstepClock:
     """
 
     def __init__(self, *, speed: float = 1.0, watchdog_wall_s: float = 5.0, join_wall_s: float = 60.0,
-                 name: str = "lockstep") -> None:
+                 name: str = "lockstep", creator_runs: bool = True) -> None:
         if not speed > 0:
             raise ValueError(f"speed must be > 0, got {speed!r}")
         self.speed = float(speed)
@@ -253,7 +254,8 @@ class LockstepClock:
         self._started = False
         self._tickets: dict[int, _Ticket] = {}
         self._order: dict[int, int] = {}
-        self._running: dict[int, threading.Thread] = {threading.get_ident(): threading.current_thread()}
+        me = threading.current_thread()
+        self._running: dict[int, threading.Thread] = {me.ident or 0: me} if creator_runs else {}
         self._barrier_ns: int | None = None
         self._done_ns = -1
         self._wake_ns = 0

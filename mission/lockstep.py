@@ -32,9 +32,12 @@ put before it on another in 915 of 2000 tries), so each side waits for the *stam
 One barrier: the vehicle integrates to ``t`` and stops -> the controller relays ``t`` to the
 carrier if it is due and waits for its ready -> the controller's threads run their step ->
 the controller answers with ``min`` of every wake -> the vehicle integrates to that wake.
-A participant silent for ``watchdog_wall_s`` wall seconds (a killed process) is dropped: the
-vehicle goes on in real time at its ``--speed`` (the controller's silence is then offboard loss,
-as in PX4), a dropped carrier stops being waited for (its silence is carrier loss).
+A participant silent for a few wall seconds (a killed or hung process) is dropped: the vehicle
+goes on in real time at its ``--speed`` after :data:`VEHICLE_WATCHDOG_WALL_S` without an answer
+(the controller's silence is then offboard loss, as in PX4); the controller stops waiting for a
+carrier after :data:`CARRIER_WATCHDOG_WALL_S` (its silence is then carrier loss) and goes on in
+real time after :data:`CONTROLLER_WATCHDOG_WALL_S` without the vehicle (vehicle loss). The
+carrier's limit is the shortest, so a lost carrier never makes the vehicle drop the controller.
 """
 from __future__ import annotations
 
@@ -52,6 +55,9 @@ from mission.mavlink_env import mavlink
 log = logging.getLogger(__name__)
 
 HELLO_WALL_S = 0.05  # resend period of a call nobody has answered yet [s, wall]
+CARRIER_WATCHDOG_WALL_S = 2.0  # the controller drops a carrier silent this long [s, wall]
+CONTROLLER_WATCHDOG_WALL_S = 5.0  # the controller's clock falls back to the wall clock [s, wall]
+VEHICLE_WATCHDOG_WALL_S = 10.0  # the vehicle drops a controller silent this long [s, wall]
 
 
 def clock_keys(pair: str) -> tuple[str, str]:
@@ -102,7 +108,8 @@ class ZenohRelay:
     the carrier until it answers again (a restarted carrier rejoins at a later barrier).
     """
 
-    def __init__(self, session: zenoh.Session, pair: str, feed: Any, publisher: Any, *, watchdog_wall_s: float = 5.0,
+    def __init__(self, session: zenoh.Session, pair: str, feed: Any, publisher: Any, *,
+                 watchdog_wall_s: float = CARRIER_WATCHDOG_WALL_S,
                  join_wall_s: float = 30.0) -> None:
         time_key, ready_key = clock_keys(pair)
         self.watchdog_wall_s, self.join_wall_s = watchdog_wall_s, join_wall_s

@@ -53,7 +53,7 @@ def mission_io(cfg: Config, clock: Clock, tlog_path: str | Path | None = None) -
             from mission.lockstep import MavlinkUpstream, ZenohRelay
 
             MavlinkUpstream(clock, link)
-            relay = ZenohRelay(session, cfg.zenoh.pair, feed, publisher, watchdog_wall_s=clock.watchdog_wall_s)
+            relay = ZenohRelay(session, cfg.zenoh.pair, feed, publisher)
             stack.callback(relay.close)
             clock.downstream = relay
             stack.callback(clock.close)  # before the link closes: its threads wait on the clock

@@ -130,7 +130,7 @@ class VehicleOptions:
     statustext_needs_heartbeat: bool = True
     frame: str = "quadrotor"  # or "rover": MAV_TYPE_GROUND_ROVER, Ackermann kinematics (sim.rover_physics)
     lockstep: bool = False
-    lockstep_watchdog_wall_s: float = 5.0
+    lockstep_watchdog_wall_s: float = 10.0  # mission.lockstep.VEHICLE_WATCHDOG_WALL_S
 
     def __post_init__(self) -> None:
         if not self.speed > 0:

@@ -2,7 +2,9 @@
 
 The mock vehicle (its own threads, real UDP on 127.0.0.1), the carrier simulator (its own Zenoh
 session listening on a test-chosen port) and the mission controller (its own Zenoh session and
-MAVLink link) run on clocks with the same speed factor. Faults are injected from the test.
+MAVLink link) step in lockstep on the vehicle's simulated time (``lockstep=False``: on clocks with
+the same speed factor). Faults are injected from the test; ``speed`` is the pace of the wall
+clock the vehicle and the controller fall back to once one of them stops.
 """
 from __future__ import annotations
 
@@ -14,11 +16,12 @@ from pathlib import Path
 from typing import Any, Iterator
 
 from mission.carrier_bridge import open_session
-from mission.clock import ScaledClock
+from mission.clock import LockstepClock, ScaledClock
 from mission.config import Config, load_config, with_overrides
 from mission.controller import MissionController, MissionOutcome, mission_info
 from mission.link import VehicleLink
 from mission.run_cli import mission_io
+from mission.lockstep import ZenohUpstream
 from mission.log import FlightRecorder
 from mission.phases import Phase
 from sim.carrier import CarrierSim
@@ -71,7 +74,7 @@ class Pair:
 
 @contextlib.contextmanager
 def flying_pair(tmp_path: Path, *, speed: float = 5.0, config: str = "demo.toml", overrides: dict[str, Any] | None = None,
-                vehicle: dict[str, Any] | None = None, start: bool = True) -> Iterator[Pair]:
+                vehicle: dict[str, Any] | None = None, start: bool = True, lockstep: bool = True) -> Iterator[Pair]:
     cfg = load_config(CONFIGS / config)
     zport = free_port()
     ep = f"tcp/127.0.0.1:{zport}"
@@ -81,19 +84,25 @@ def flying_pair(tmp_path: Path, *, speed: float = 5.0, config: str = "demo.toml"
     with contextlib.ExitStack() as stack:
         carrier_session = open_session(ccfg.zenoh)
         stack.callback(carrier_session.close)
-        carrier = CarrierSim(ccfg, ScaledClock(speed), carrier_session)
+        cclock = LockstepClock(speed=speed, name="carrier", creator_runs=False) if lockstep else ScaledClock(speed)
+        carrier = CarrierSim(ccfg, cclock, carrier_session)
         stack.callback(carrier.close)
+        if isinstance(cclock, LockstepClock):
+            upstream = ZenohUpstream(cclock, carrier_session, carrier.pair, carrier.passenger,
+                                     published=lambda: carrier.seq - 1)
+            stack.callback(upstream.close)
         carrier_stop = threading.Event()
         carrier_thread = threading.Thread(target=carrier.run, args=(carrier_stop,), daemon=True)
         carrier_thread.start()
         stack.callback(carrier_thread.join, 5.0)
+        stack.callback(cclock.close)  # the carrier's sleep ends now, whatever the controller does
         stack.callback(carrier_stop.set)
-        clock = ScaledClock(speed)
+        clock = LockstepClock(speed=speed, name="mission", creator_runs=False) if lockstep else ScaledClock(speed)
         log_dir = tmp_path / "flight"
         recorder = FlightRecorder(log_dir, mission_info(mcfg))
         feed, publisher, link = stack.enter_context(mission_io(mcfg, clock, recorder.tlog_path))
         vopts = {"target": f"127.0.0.1:{link.port}", "speed": speed, "start_ned": tuple(cfg.scenario.carrier_start),
-                 **(vehicle or {})}
+                 "lockstep": lockstep, **(vehicle or {})}
         v = stack.enter_context(MockVehicle(VehicleOptions(**vopts)))
         pair = Pair(cfg=mcfg, vehicle=v, link=link, controller=None, carrier=carrier, carrier_stop=carrier_stop,  # type: ignore[arg-type]
                     carrier_thread=carrier_thread, log_dir=log_dir)
