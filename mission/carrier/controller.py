@@ -309,6 +309,8 @@ class CarrierController:
             why = "no valid own state"
         elif now - state.t_s > self.cfg.carrier.state_timeout_s:
             why = f"own state {now - state.t_s:.2f} s old (> {self.cfg.carrier.state_timeout_s} s)"
+        elif state.yaw_rad is None and self.tracking.kind != "holonomic":
+            why = "no heading yet (a robot that moves along its heading cannot be steered or guarded without it)"
         else:
             why = self.backend.control_fault()
         if why != self.hold_reason:
