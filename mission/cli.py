@@ -19,6 +19,7 @@ from functools import cache
 import click
 
 from mission.errors import MarsupialError
+from mission.lifetime import end_with_parent
 from mission.subcommands import Subcommand, registered
 
 PRODUCT: dict[str, Subcommand] = {
@@ -68,6 +69,7 @@ def cli(verbose: int) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the console script; returns the process exit code."""
+    end_with_parent()
     try:
         rv = cli.main(args=argv, prog_name="marsupial", standalone_mode=False)
     except click.exceptions.Abort:  # Ctrl-C (click turns KeyboardInterrupt into Abort)

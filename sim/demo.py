@@ -27,6 +27,7 @@ from tqdm import tqdm
 from mission.carrier_bridge import open_session
 from mission.config import ZenohSection, load_config
 from mission.errors import MarsupialError
+from mission.lifetime import supervise_children
 from mission.phases import Phase
 from sim.net import free_port, stop_process
 
@@ -174,6 +175,7 @@ def run_demo(config: str, speed: float, pairs: int, log_root: Path, plot_path: s
     carrier only) or at ``speed``; return the exit code and each pair's summary."""
     from mission.run_cli import plot as plot_command
 
+    supervise_children()  # a demo killed outright takes its processes with it
     log_root.mkdir(parents=True, exist_ok=True)
     zenoh_port = free_port(socket.SOCK_STREAM)
     zenoh_ep = f"tcp/127.0.0.1:{zenoh_port}"

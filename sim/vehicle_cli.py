@@ -189,4 +189,7 @@ def run(options: VehicleOptions, port_file: Path | None = None, status_every_s: 
 
 
 if __name__ == "__main__":
+    from mission.lifetime import end_with_parent
+
+    end_with_parent()
     mock_vehicle()
