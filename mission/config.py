@@ -223,8 +223,9 @@ class CarrierSection(_Model):
     max_steer_rad: float = Field(0.5, gt=0, lt=1.5)
     align_on_deck_m: float = Field(0.0, ge=0, le=5, description="[m] largest horizontal shift of the carrier's "
                                    "estimate onto the passenger's while it stands on the deck (before take-off); 0 off")
-    speed_feedback_gain: float = Field(0.0, ge=0, le=5, description="[-] diff-drive/Ackermann: speed setpoint "
-                                       "v + k (v - v_measured), for a vehicle whose speed loop overshoots; 0 off")
+    speed_ratio_tau_s: float = Field(0.0, ge=0, le=30, description="[s] diff-drive/Ackermann: time constant of the "
+                                     "estimate r >= 1 of measured over asked forward speed; the vehicle is asked for v / r "
+                                     "(a speed loop that overshoots); 0 off")
     start_yaw_rad: float | None = Field(None, description="[rad] sim backend: initial heading (default: towards the target)")
     mavlink: CarrierMavlinkSection = CarrierMavlinkSection()
     ros2: CarrierRos2Section = CarrierRos2Section()

@@ -146,6 +146,8 @@ class CarrierController:
         self._separation_position = np.zeros(self.dim)
         self._alignment = np.zeros(3)
         self._aligned = False
+        self._speed_ratio = 1.0  # measured / asked forward speed (carrier.speed_ratio_tau_s)
+        self._last_speed_cmd = 0.0
         self.passenger = PassengerFeed(session, self.pair, clock, max_age_s=cfg.carrier.passenger_timeout_s)
         try:
             self.publisher = CarrierPublisher(session, self.pair, encoding or cfg.zenoh.encoding,  # type: ignore[arg-type]
@@ -208,19 +210,12 @@ class CarrierController:
             self.velocity_m_s = g.u
         else:
             cmd = track(u, yaw, self.tracking)
-            k_v = self.cfg.carrier.speed_feedback_gain
-            if k_v > 0 and cmd.speed_m_s > 0:
-                # A vehicle whose own speed loop overshoots (PX4's rover: 2.7 m/s for 2) is asked
-                # for less while it is too fast, more while too slow: v_sp = v + k (v - v_meas).
-                forward = math.cos(yaw) * float(v_meas[0]) + math.sin(yaw) * float(v_meas[1])
-                wanted = min(max(cmd.speed_m_s + k_v * (cmd.speed_m_s - forward), 0.0), 2.0 * cmd.speed_m_s)
-                cmd = Tracked(wanted, cmd.yaw_rate_rad_s, cmd.bearing_rad, heading_of(wanted, yaw),
-                              cmd.setpoint_ned_m_s * (wanted / cmd.speed_m_s))
             speed, active = self.p3_guard.limit_heading(t, x_c, cmd.speed_m_s, yaw, v_meas)
             if active:
                 scale = speed / cmd.speed_m_s if cmd.speed_m_s > 0 else 0.0
                 cmd = Tracked(speed, cmd.yaw_rate_rad_s, cmd.bearing_rad, heading_of(speed, yaw),
                               cmd.setpoint_ned_m_s * scale)
+            cmd = self._calibrated(cmd, yaw, v_meas, dt_s)  # what to ask for so that it does ``cmd``
             # The law's planar command (not the motion along the heading) is what the
             # acceleration limit and Remark 1 act on: tying it to the heading would let the
             # command turn only as fast as the robot already does (a heading lock).
@@ -228,6 +223,25 @@ class CarrierController:
         if active:
             self._stats["guard_active_ticks"] += 1
         return cmd
+
+    def _calibrated(self, cmd: Tracked, yaw: float, v_meas: np.ndarray, dt_s: float) -> Tracked:
+        """carrier.speed_ratio_tau_s > 0: a vehicle whose own speed loop runs fast (PX4's SIH
+        rover: 2.7 m/s for 2) is asked for ``v / r``, where ``r`` >= 1 is its measured forward speed
+        over the speed last asked, low-passed with that time constant (a feedback on the speed
+        error itself oscillated: the vehicle answers within a period). Never more than asked."""
+        tau = self.cfg.carrier.speed_ratio_tau_s
+        if tau <= 0:
+            return cmd
+        forward = math.cos(yaw) * float(v_meas[0]) + math.sin(yaw) * float(v_meas[1])
+        if self._last_speed_cmd > 0.3 and dt_s > 0:  # a ratio of small speeds is noise
+            alpha = 1.0 - math.exp(-dt_s / tau)
+            self._speed_ratio += alpha * (forward / self._last_speed_cmd - self._speed_ratio)
+        ratio = min(max(self._speed_ratio, 1.0), 3.0)
+        self._last_speed_cmd = cmd.speed_m_s / ratio
+        if ratio == 1.0:
+            return cmd
+        asked = cmd.speed_m_s / ratio  # the motion (velocity_ned_m_s) stays what the vehicle will do
+        return Tracked(asked, cmd.yaw_rate_rad_s, cmd.bearing_rad, cmd.velocity_ned_m_s, cmd.setpoint_ned_m_s / ratio)
 
     def _in_plane(self, state: OwnState | None) -> OwnState | None:
         """The own state as the controller uses it: shifted by the deck alignment (if any), and,

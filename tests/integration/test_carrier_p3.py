@@ -10,6 +10,8 @@ import pytest
 from mission.clock import ManualClock
 from mission.config import Config, from_dict
 from mission.wire import PassengerStatus
+from mission.carrier.controller import CarrierController
+from mission.carrier.sim_robot import SimRobot
 from sim.carrier import CarrierMode, CarrierSim
 from tests.integration.test_carrier_sim import TARGET, Passenger, _seen, sessions
 from tests.integration.zenoh_util import wait_for
@@ -144,3 +146,42 @@ def test_deck_alignment_moves_the_carrier_onto_the_passenger_once_and_only_so_fa
             assert sim.summary()["deck_alignment_m"] == [0.0, 0.0, 0.0]
         finally:
             passenger.pub.close()
+
+
+class OvershootingRobot(SimRobot):
+    """A diff-drive robot whose speed loop runs 35 % fast, as the SIH rover ran 2.7 m/s for 2."""
+
+    def command(self, cmd):  # type: ignore[no-untyped-def]
+        super().command(cmd)
+        self.speed_m_s *= 1.35
+
+
+@pytest.mark.parametrize("tau", [0.0, 1.0])
+def test_speed_calibration_holds_an_overshooting_robot_at_the_law_s_speed_and_the_guard_holds(tau: float) -> None:
+    clock = ManualClock()
+    cfg = _cfg(kinematics="diff_drive", speed_ratio_tau_s=tau, max_speed_m_s=2.0)
+    with sessions(1) as (sa, sb):
+        robot = OvershootingRobot(cfg, clock)
+        with CarrierController(cfg, clock, sa, robot) as ctl:
+            passenger = Passenger(sb, "p3", clock)
+            speeds, d = [], []
+            try:
+                wait_for(lambda: passenger.pub.matched)
+                for k in range(30 * 25):
+                    if k % 10 == 0:
+                        seq = passenger.say("RIDING")
+                        wait_for(lambda: ctl.passenger.latest() is not None and ctl.passenger.latest().status.seq == seq)
+                    clock.advance(DT)
+                    ctl.step(DT)
+                    speeds.append(robot.speed_m_s)
+                    d.append(float(np.linalg.norm(TARGET - robot.position_m)))
+            finally:
+                passenger.pub.close()
+    if tau == 0.0:
+        assert max(speeds[:300]) == pytest.approx(2.0 * 1.35, abs=0.01)  # the overshoot, unchecked
+    else:
+        assert max(speeds[200:300]) == pytest.approx(2.0, abs=0.05)  # cruising at the law's speed
+        assert max(speeds[:300]) < 2.0 * 1.35 - 0.3  # it never ran as fast as unchecked
+    # A robot faster than told can enter the circle by at most the overspeed tolerance held for
+    # a period (0.1 m/s x 1/30 s = 3 mm) before the guard's measured-speed brake catches it.
+    assert min(d) >= RADIUS - 0.1 * DT
