@@ -141,13 +141,14 @@ def scripted_flight(speed: float, flight_s: float, out: dict[float, FlightRow]) 
         assert t_armed is not None
         wall0 = time.monotonic()
         with stream:
+            climb_s = FLIGHT_SCRIPT[1][0]  # the climb keeps its length (PX4's response needs it to get clear of the ground)
             for t_change, velocity in FLIGHT_SCRIPT[1:]:
-                sleep_until(vehicle.clock, t_armed + t_change * scale)
+                sleep_until(vehicle.clock, t_armed + climb_s + (t_change - climb_s) * scale)
                 stream.set(send_now=True, velocity_ned_m_s=velocity)
             sleep_until(vehicle.clock, t_armed + flight_s)
             wall_s = time.monotonic() - wall0
             end = vehicle.wait_for(lambda s: s.t_s >= t_armed + flight_s + 2.0, 10.0)
-        assert end is not None and vehicle.snapshot().mode == "OFFBOARD"
+        assert end is not None and end.mode == "OFFBOARD" and end.armed, (end.mode if end else None)
         out[speed] = FlightRow(speed, flight_s, wall_s, tuple(float(x) for x in end.position_ned_m))  # type: ignore[arg-type]
 
 
