@@ -62,6 +62,7 @@ from mission.clock import ScaledClock
 from mission.mavlink_env import mavlink
 from sim import vehicle_telemetry as tel
 from sim.vehicle_commander import Commander
+from sim.vehicle_estimator import EstimateDrift, flown_on_estimate
 from sim.vehicle_faults import FaultInjector, FaultOptions
 from sim.vehicle_link import VehicleLink, parse_endpoint
 from sim.vehicle_params import ParamTable, UnknownParam, vehicle_limits
@@ -105,7 +106,9 @@ class VehicleOptions:
     params: PX4 parameter overrides, e.g. ``{"COM_OF_LOSS_T": 1.0}``.
     wind_ned_m_s: wind [m/s] NED: a drag force in the air, which PX4's velocity integrator slowly
     compensates. position_noise_m: sigma of the Gaussian noise on the reported position [m]
-    (seeded by ``faults.seed``).
+    (seeded by ``faults.seed``). estimate_drift_m_s: the reported position wanders as PX4's
+    estimate does (std of the drift rate [m/s]; PX4 SITL: 0.18, :mod:`sim.vehicle_estimator`);
+    0 (default): no wander.
     signing_key: 32-byte MAVLink 2 signing key; then unsigned messages other than HEARTBEAT
     are rejected and everything sent is signed.
     lockstep: own simulated time and step in lockstep with the controller on the onboard link
@@ -127,6 +130,7 @@ class VehicleOptions:
     signing_key: bytes | None = None
     wind_ned_m_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
     position_noise_m: float = 0.0
+    estimate_drift_m_s: float = 0.0
     statustext_needs_heartbeat: bool = True
     frame: str = "quadrotor"  # or "rover": MAV_TYPE_GROUND_ROVER, Ackermann kinematics (sim.rover_physics)
     lockstep: bool = False
@@ -139,6 +143,8 @@ class VehicleOptions:
             raise ValueError(f"sysid and compid must be in 1..255, got {self.sysid}, {self.compid}")
         if self.signing_key is not None and len(self.signing_key) != 32:
             raise ValueError(f"signing_key must be 32 bytes, got {len(self.signing_key)}")
+        if not self.estimate_drift_m_s >= 0:
+            raise ValueError(f"estimate_drift_m_s must be >= 0, got {self.estimate_drift_m_s!r}")
         if self.frame not in FRAMES:
             raise ValueError(f"frame must be one of {sorted(FRAMES)}, got {self.frame!r}")
 
@@ -181,7 +187,8 @@ class MockVehicle:
         self._commander.refuse_arming_reason = opts.faults.refuse_arming_reason
         self._commander.refuse_offboard_reason = opts.faults.refuse_offboard_reason
         self._faults = FaultInjector(opts.faults)
-        self._noise = tel.PositionNoise(opts.position_noise_m, opts.faults.seed)
+        self._drift = EstimateDrift(opts.estimate_drift_m_s, seed=opts.faults.seed)
+        self._noise = tel.PositionNoise(opts.position_noise_m, opts.faults.seed, self._drift if self._drift.enabled else None)
         # per link, as PX4 keeps them: SET_MESSAGE_INTERVAL changes the link it arrived on
         self._streams = {name: tel.make_streams(1.0 if opts.lockstep else opts.speed) for name in LINK_NAMES}
         self._links: list[VehicleLink] = []
@@ -481,8 +488,13 @@ class MockVehicle:
         if target <= self._steps:
             return
         limits, wind, commander, kin = self._limits(), self.options.wind_ned_m_s, self._commander, self._kin
+        drift = self._drift if self._drift.enabled else None
         for k in range(self._steps + 1, target + 1):
-            kin = self._physics(kin, commander.step(k * PHYSICS_DT_S, kin), limits, wind, PHYSICS_DT_S)
+            command = commander.step(k * PHYSICS_DT_S, kin)
+            if drift is not None:  # PX4 flies its (wandering) estimate to a position setpoint
+                drift.advance(PHYSICS_DT_S)
+                command = flown_on_estimate(command, drift.offset)
+            kin = self._physics(kin, command, limits, wind, PHYSICS_DT_S)
         self._counters["physics_steps"] += target - self._steps
         self._kin, self._steps = kin, target
         commander.kin = kin

@@ -279,6 +279,33 @@ def sleep_until(clock: Any, t_s: float, spin_wall_s: float = 0.001) -> None:
         time.sleep(remaining_wall_s - spin_wall_s if remaining_wall_s > 2 * spin_wall_s else 0)
 
 
+class Lockstep:
+    """The probe's side of the vehicle's lockstep clock (mission/lockstep.py): wait at a barrier
+    (the vehicle's TIMESYNC request), act, release the vehicle up to a wake time."""
+
+    def __init__(self, probe: Probe, timeout_s: float = 10.0) -> None:
+        self.timeout_s = timeout_s
+        self.probe, self.mark, self.t_ns = probe, 0, -1
+
+    def barrier(self) -> int:
+        msg = self.probe.wait_for("TIMESYNC", lambda m: m.tc1 == 0 and m.ts1 > self.t_ns, self.timeout_s, self.mark)
+        if msg is None:
+            raise TimeoutError("the vehicle never reached its next barrier")
+        self.mark, self.t_ns = self.probe.mark(), int(msg.ts1)
+        return self.t_ns
+
+    def release(self, wake_ns: int) -> None:
+        self.probe.send(mavlink.MAVLink_timesync_message(max(wake_ns, self.t_ns + 1), self.t_ns))
+
+    def run_for(self, seconds: float, each: Callable[[], None], period_s: float = 0.02) -> None:
+        """Call ``each`` (e.g. send a setpoint) at every barrier, ``period_s`` apart, for ``seconds``."""
+        end_ns = self.t_ns + round(seconds * 1e9)
+        while self.t_ns < end_ns:
+            each()
+            self.release(self.t_ns + round(period_s * 1e9))
+            self.barrier()
+
+
 def vehicle_for(probe: Probe, speed: float = 10.0, **options: Any) -> "MockVehicle":
     """A :class:`sim.vehicle.MockVehicle` on an ephemeral port that talks to ``probe``."""
     from sim.vehicle import MockVehicle, VehicleOptions

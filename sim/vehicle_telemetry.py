@@ -26,6 +26,7 @@ from typing import Any
 from mission import geodesy, px4
 from mission.mavlink_env import mavlink
 from sim.vehicle_commander import Setpoint
+from sim.vehicle_estimator import EstimateDrift
 from sim.vehicle_physics import GRAVITY_M_S2, KinState, attitude_rad, quaternion
 
 CAP_PRIMARY_WALL_HZ = 300.0
@@ -306,17 +307,22 @@ def statustext_chunks(severity: int, text: str, chunk_id: int) -> list[Any]:
 
 
 class PositionNoise:
-    """Seeded Gaussian noise [m] added to the reported position (never to the true state)."""
+    """What the reported position adds to the true one (never to the true state): seeded Gaussian
+    noise [m] and, when set, the estimate's wander ``drift`` (:mod:`sim.vehicle_estimator`)."""
 
-    def __init__(self, sigma_m: float, seed: int | None) -> None:
+    def __init__(self, sigma_m: float, seed: int | None, drift: EstimateDrift | None = None) -> None:
         self.sigma_m = float(sigma_m)
         self._rng = random.Random(None if seed is None else seed + 7919)
+        self.drift = drift
 
     def apply(self, kin: KinState) -> tuple[float, float, float]:
+        n, e, d = kin.n_m, kin.e_m, kin.d_m
+        if self.drift is not None:
+            n, e, d = n + self.drift.offset[0], e + self.drift.offset[1], d + self.drift.offset[2]
         if self.sigma_m <= 0.0:
-            return kin.n_m, kin.e_m, kin.d_m
+            return n, e, d
         g = self._rng.gauss
-        return kin.n_m + g(0.0, self.sigma_m), kin.e_m + g(0.0, self.sigma_m), kin.d_m + g(0.0, self.sigma_m)
+        return n + g(0.0, self.sigma_m), e + g(0.0, self.sigma_m), d + g(0.0, self.sigma_m)
 
 
 def build(name: str, s: TelemetryState, geo: Geo, noise: PositionNoise) -> Any:

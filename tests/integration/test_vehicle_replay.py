@@ -19,7 +19,7 @@ from mission import px4
 from mission.mavlink_env import mavlink
 from sim.px4_replay import FIRST_REPLAYED_SEGMENT, Recording, compare, load_recording, rms_by_segment
 from sim.vehicle_physics import Limits
-from sim.vehicle_probe import Probe, connect, vehicle_for
+from sim.vehicle_probe import Lockstep, Probe, connect, vehicle_for
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(120)]
 
@@ -27,23 +27,6 @@ DATA = Path(__file__).resolve().parents[1] / "data" / "px4_responses"
 NAN = float("nan")
 UNREAD_STREAMS = ("ATTITUDE", "ATTITUDE_QUATERNION", "GLOBAL_POSITION_INT", "HIGHRES_IMU", "ODOMETRY", "ALTITUDE",
                   "VFR_HUD", "ATTITUDE_TARGET", "POSITION_TARGET_LOCAL_NED", "ESTIMATOR_STATUS")
-
-
-class Lockstep:
-    """The probe's side of the vehicle's lockstep clock (mission/lockstep.py): wait at a barrier
-    (the vehicle's TIMESYNC request), act, release the vehicle up to a wake time."""
-
-    def __init__(self, probe: Probe) -> None:
-        self.probe, self.mark, self.t_ns = probe, 0, -1
-
-    def barrier(self) -> int:
-        msg = self.probe.wait_for("TIMESYNC", lambda m: m.tc1 == 0 and m.ts1 > self.t_ns, 10.0, self.mark)
-        assert msg is not None, "the vehicle never reached its next barrier"
-        self.mark, self.t_ns = self.probe.mark(), int(msg.ts1)
-        return self.t_ns
-
-    def release(self, wake_ns: int) -> None:
-        self.probe.send(mavlink.MAVLink_timesync_message(max(wake_ns, self.t_ns + 1), self.t_ns))
 
 
 def setpoint_message(probe: Probe, rec: Recording, i: int, shift: np.ndarray) -> object:
