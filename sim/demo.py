@@ -292,7 +292,7 @@ def format_table(summaries: list[dict]) -> str:
 @click.option("--speed", type=click.FloatRange(min=0.1, max=100), default=10.0, show_default=True,
               help="With --realtime: speed factor of every clock (vehicle, carrier, mission), like PX4's SIH speed "
               "factor. In lockstep: the pace after a participant is lost.")
-@click.option("--pairs", type=click.IntRange(1, 8), default=1, show_default=True,
+@click.option("--pairs", type=click.IntRange(1, 16), default=1, show_default=True,
               help="Number of marsupial pairs flying at once on one Zenoh network.")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default="logs/demo/flight.png", show_default=True,
               help="Where to write the flight plot (one per pair, suffixed, with --pairs > 1).")
