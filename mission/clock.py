@@ -215,7 +215,6 @@ class _Ticket:
     cond: threading.Condition | None
     granted: bool = False
     dirty: bool = False  # notified by a participant during this step: runs again in this step
-    pending: bool = False  # notified from outside (I/O threads): runs at the next step
 
 
 class LockstepClock:
@@ -228,8 +227,10 @@ class LockstepClock:
     (deadline reached, or notified) one at a time in a fixed order, each until it waits on the
     clock again, and (3) reports ``(t, next wake)`` upstream. Between barriers no participant
     runs, so everything they read that arrived before the barrier is the same in every run:
-    the outcome is deterministic. I/O threads (receivers, Zenoh callbacks) are not
-    participants: their notifications take effect at the next barrier. The thread that makes
+    the outcome is deterministic. Participants run in the order of their thread names. I/O
+    threads (receivers, Zenoh callbacks) are not participants: a condition they notify wakes its
+    waiters at the next barrier, whether the notification came before or after a waiter parked
+    (what a command's ACK races with). The thread that makes
     the clock counts as running until it first waits (``creator_runs=False``: a test thread that
     only starts the participants' threads).
 
@@ -257,6 +258,7 @@ class LockstepClock:
         me = threading.current_thread()
         self._running: dict[int, threading.Thread] = {me.ident or 0: me} if creator_runs else {}
         self._barrier_ns: int | None = None
+        self._notified: set[threading.Condition] = set()  # by I/O threads since the last barrier
         self._done_ns = -1
         self._wake_ns = 0
         self._fallback: ScaledClock | None = None
@@ -309,13 +311,12 @@ class LockstepClock:
     def notify(self, cond: threading.Condition) -> None:
         me = threading.get_ident()
         with self._cv:
-            inside = me in self._running
-            for ticket in self._tickets.values():
-                if ticket.cond is cond:
-                    if inside:
+            if me in self._running:
+                for ticket in self._tickets.values():
+                    if ticket.cond is cond:
                         ticket.dirty = True
-                    else:
-                        ticket.pending = True
+            else:
+                self._notified.add(cond)
         cond.notify_all()
 
     def close(self) -> None:
@@ -419,12 +420,14 @@ class LockstepClock:
         if self.downstream is not None:
             self.downstream.run(t_ns)
         with self._cv:
+            notified, self._notified = self._notified, set()
             for ticket in self._tickets.values():
-                if ticket.pending:
-                    ticket.dirty, ticket.pending = True, False
+                if ticket.cond is not None and ticket.cond in notified:
+                    ticket.dirty = True
         for _ in range(10_000):
             with self._cv:
-                due = sorted((k for k in self._tickets.values() if k.deadline_ns <= t_ns or k.dirty), key=lambda k: k.order)
+                due = sorted((k for k in self._tickets.values() if k.deadline_ns <= t_ns or k.dirty),
+                             key=lambda k: (k.thread.name, k.order))
             if not due:
                 break
             for ticket in due:
@@ -447,7 +450,7 @@ class LockstepClock:
             if self._tickets.get(me) is not ticket:
                 return
             del self._tickets[me]
-            ticket.dirty, ticket.pending = False, False
+            ticket.dirty = False
             self._running[me] = ticket.thread
             ticket.granted = True
             if ticket.cond is None:

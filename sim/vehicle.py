@@ -538,9 +538,17 @@ class MockVehicle:
             with self._lock:
                 self._advance_to(self.clock.now())
                 if self.options.lockstep and _is_timesync(data):
-                    self._process(link, data, address)  # the simulation's clock: no link faults
+                    self._clock_message(link, data, address)
                 else:
                     self._admit_in(link, data, address)
+
+    def _clock_message(self, link: VehicleLink, data: bytes, address: tuple[str, int]) -> None:
+        """A lockstep TIMESYNC: the simulation's own clock, so no link faults and no counters."""
+        messages, _ = link.parse(data)
+        for msg in messages:
+            if msg.get_type() == "TIMESYNC":
+                link.latch(address)
+                self._on_timesync(link, msg)
 
     def _admit_in(self, link: VehicleLink, data: bytes, address: tuple[str, int]) -> None:
         fate, delay_s = self._faults.admit("in", self._t_s)

@@ -108,6 +108,7 @@ class Flight:
     vehicle_args: tuple[str, ...] = ()
     mission_args: tuple[str, ...] = ()
     mission_verbose: bool = False  # -vv: debug logging (more output to search for leaks)
+    lockstep: bool = False  # the three step on the vehicle's simulated time; speed: pace once one stops
     mav_port: int = 0
     procs: dict[str, subprocess.Popen[Any]] = field(default_factory=dict)
     gcs: Probe | None = None
@@ -128,7 +129,11 @@ class Flight:
 
     def start_carrier(self) -> None:
         self._popen("carrier", cli("-v", "carrier", str(self.config), "--speed", str(self.speed), "--pair", self.pair,
-                                   "--zenoh-connect", self.router.endpoint))
+                                   "--zenoh-connect", self.router.endpoint, *self._mode))
+
+    @property
+    def _mode(self) -> list[str]:
+        return ["--lockstep"] if self.lockstep else []
 
     def carrier_alive(self) -> bool:
         return self.router.has(f"marsupial/{self.pair}/carrier/alive")
@@ -139,7 +144,7 @@ class Flight:
         self.start_carrier()
         self._popen("mission", cli(*(["-vv"] if self.mission_verbose else []), "run", str(self.config), "--mavlink", f"udpin:127.0.0.1:{self.mav_port}",
                                    "--zenoh-connect", self.router.endpoint, "--pair", self.pair, "--speed",
-                                   str(self.speed), "--log-dir", str(self.log_dir), *self.mission_args))
+                                   str(self.speed), "--log-dir", str(self.log_dir), *self._mode, *self.mission_args))
         wait_for(lambda: self.carrier_alive() and self.router.has(f"marsupial/{self.pair}/passenger/alive")
                  and udp_bound(self.mav_port) or self._died(), 30.0, "carrier and mission up")
         self.gcs = Probe()
@@ -148,7 +153,7 @@ class Flight:
         self._files += [out, err]
         vehicle, _ = spawn_process(["--mavlink", "udpin:127.0.0.1:0", "--target", f"udpout:127.0.0.1:{self.mav_port}",
                                     "--gcs", f"127.0.0.1:{self.gcs.port}", "--speed", str(self.speed), "--start-ned",
-                                    "0,0,0", "--status-every", "0.5", *self.vehicle_args],
+                                    "0,0,0", "--status-every", "0.5", *self._mode, *self.vehicle_args],
                                    stdout=out, stderr=err, env={**os.environ, "PYTHONUNBUFFERED": "1"})
         self.procs["vehicle"] = vehicle
         connect(self.gcs, timeout_s=10.0)

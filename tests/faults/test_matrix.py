@@ -94,7 +94,7 @@ def assert_completed(f: Flight) -> dict[str, Any]:
 
 def _lossy(tmp_path: Path, name: str, loss: float, seed: int, extra: tuple[str, ...] = ()) -> dict[str, int]:
     args = ("--loss-in", str(loss), "--loss-out", str(loss), "--seed", str(seed), *extra)
-    with flight(tmp_path, name, vehicle_args=args) as f:
+    with flight(tmp_path, name, vehicle_args=args, lockstep=True) as f:
         assert_completed(f)
         c = f.vehicle_counters()
     if loss > 0:
@@ -122,7 +122,7 @@ def test_full_loss_matrix(tmp_path: Path, loss: float, seed: int) -> None:
 
 
 def _long_blackout(tmp_path: Path, name: str, start_s: float, after_separation: bool) -> None:
-    with flight(tmp_path, name, vehicle_args=("--blackout", f"{start_s}:3")) as f:
+    with flight(tmp_path, name, vehicle_args=("--blackout", f"{start_s}:3"), lockstep=True) as f:
         f.wait_mission(40.0)
         assert_exit(f, 3, "vehicle_lost")
         assert_log_complete(f, "ABORT", "vehicle_lost")
@@ -192,7 +192,7 @@ def test_mission_killed_falls_back_per_com_obl_rc_act_and_pilot_takeover_is_not_
 
 
 def _refused(tmp_path: Path, name: str, flag: str, text: str, reason: str) -> None:
-    with flight(tmp_path, name, vehicle_args=(flag, text)) as f:
+    with flight(tmp_path, name, vehicle_args=(flag, text), lockstep=True) as f:
         f.wait_mission(30.0)
         assert_exit(f, 5, reason)
         assert text in f.text("mission.err")  # the vehicle's STATUSTEXT is the reason given
@@ -214,7 +214,7 @@ def test_arming_and_offboard_refused_and_position_estimate_lost(tmp_path: Path) 
 
 
 def _position_lost(tmp_path: Path) -> None:
-    with flight(tmp_path, "position", vehicle_args=("--lose-position", "10")) as f:
+    with flight(tmp_path, "position", vehicle_args=("--lose-position", "10"), lockstep=True) as f:
         f.wait_mission(30.0)
         # PX4 itself leaves OFFBOARD for its failsafe (Descend, shown as AUTO.LAND); the
         # mission sees the vehicle leave OFFBOARD and stops commanding, never fights it.
