@@ -430,8 +430,9 @@ class MockVehicle:
                     break
                 now = time.monotonic()
                 if not joined and now - called > LOCKSTEP_HELLO_WALL_S:  # nobody yet: say hello again
-                    with self._lock:
-                        self._send(onboard, tel.build("HEARTBEAT", self._telemetry_state(), self._geo, self._noise))
+                    with self._lock:  # (time has not started: no link faults yet, or latency would hold it forever)
+                        heartbeat = tel.build("HEARTBEAT", self._telemetry_state(), self._geo, self._noise)
+                        self._send_control(onboard, heartbeat)
                         self._send_control(onboard, mavlink.MAVLink_timesync_message(0, self._t_ns))
                     called = now
                 elif joined and now - called > watchdog_s:
