@@ -9,14 +9,22 @@ Zenoh network without crosstalk::
     marsupial/<pair>/passenger/phase    the phase alone, UTF-8 text (for humans and tools)
     marsupial/<pair>/passenger/alive    liveliness token of the passenger
 
-Receiving (:class:`CarrierFeed`, :class:`PassengerFeed`): a callback on Zenoh's thread decodes
-and validates each sample, stamps its receive time with the injected clock and keeps only the
-newest accepted one under a lock (it never blocks and never calls Zenoh). A rejected sample is
-dropped and counted per reason (``feed.counters``), never a crash and never returned. Samples
-must be newer than the last accepted one from the same key: a strictly greater sequence number
-and a stamp not older ("stale_seq", "stale_stamp"); CDR Odometry has no sequence number, so
-there the stamp must be strictly greater. When the sender's liveliness token goes away the
-ordering is forgotten, so a restarted sender that counts from 0 again is accepted.
+Receiving (:class:`CarrierFeed`, :class:`PassengerFeed`): a callback on Zenoh's thread checks
+the payload size before anything else (:data:`MAX_PAYLOAD_BYTES`, drop reason "size": a 10 MB
+sample costs a length read, not a copy and a parse), decodes and validates each sample, stamps
+its receive time with the injected clock and keeps only the newest accepted one under a lock
+(it never blocks and never calls Zenoh). A rejected sample is dropped and counted per reason
+(``feed.counters``), never a crash and never returned.
+
+- :class:`CarrierFeed` binds to one source and gates every state against the carrier's own
+  limits (:mod:`mission.feed_gate`: source binding, sequence/stamp/position/velocity
+  plausibility, resynchronisation); samples from other sources are counted per source.
+- :class:`PassengerFeed`: samples must be newer than the last accepted one from the same key: a
+  strictly greater sequence number and a stamp not older ("stale_seq", "stale_stamp").
+
+When the sender's liveliness token goes away the ordering (and the carrier feed's binding) is
+forgotten, so a restarted sender that counts from 0 again, from a new Zenoh session, is accepted.
+Publishers put their Zenoh entity id and a sequence number in each sample's ``source_info``.
 
 Staleness: ``latest()`` always returns the newest accepted state with its age on the local clock
 (``age_s``) and ``stale = age_s > max_age_s``; it does not hide old data. The controller decides
@@ -36,6 +44,7 @@ import zenoh
 from mission.clock import Clock
 from mission.config import ZenohSection
 from mission.errors import BusError, BusPortInUse, ConfigError
+from mission.feed_gate import ANONYMOUS, FeedGate, GateLimits, Sample
 from mission.port_holder import port_in_use
 from mission.wire import (
     CarrierState,
@@ -52,6 +61,8 @@ from mission.wire import (
 log = logging.getLogger(__name__)
 
 Encoding = Literal["json", "cdr"]
+#: Largest sample a feed decodes [bytes]; a carrier state is ~200 B in JSON, ~750 B as CDR Odometry.
+MAX_PAYLOAD_BYTES = 8192
 _ZENOH_ENCODING = {"json": zenoh.Encoding.APPLICATION_JSON, "cdr": zenoh.Encoding.APPLICATION_CDR}
 
 
@@ -279,6 +290,19 @@ class _Feed(Generic[T]):
     def _order_of(self, value: T) -> tuple[int, float]:
         raise NotImplementedError
 
+    def _admit(self, value: T, key: str, source: str, rx: float) -> str | None:
+        """Lock held: the drop reason for ``value``, or None to accept it. Default: newer than
+        the last accepted sample on the same key (sequence number and stamp)."""
+        seq, stamp = self._order_of(value)
+        last = self._last_order.get(key)
+        if last is not None:
+            if self._use_seq and seq <= last[0]:
+                return "stale_seq"
+            if stamp < last[1] or (stamp == last[1] and not self._use_seq):
+                return "stale_stamp"
+        self._last_order[key] = (seq, stamp)
+        return None
+
     def _on_sample(self, sample: zenoh.Sample) -> None:
         rx = self.clock.now()
         key = str(sample.key_expr)
@@ -287,6 +311,9 @@ class _Feed(Generic[T]):
         try:
             if sample.kind != zenoh.SampleKind.PUT:
                 raise WireError("decode", "DELETE sample")
+            size = len(sample.payload)
+            if size > MAX_PAYLOAD_BYTES:
+                raise WireError("size", f"{size} bytes > {MAX_PAYLOAD_BYTES}")
             value = self._decode(sample.payload.to_bytes())
         except WireError as exc:
             self._drop(exc.reason, key, str(exc))
@@ -295,21 +322,16 @@ class _Feed(Generic[T]):
             log.exception("unexpected error decoding a sample on %s", key)
             self._drop("internal", key, "unexpected error")
             return
-        seq, stamp = self._order_of(value)
+        info = sample.source_info
+        source = ANONYMOUS if info is None else f"{info.source_id.zid}/{info.source_id.eid}"
         with self._lock:
-            last = self._last_order.get(key)
-            reason = None
-            if last is not None:
-                if self._use_seq and seq <= last[0]:
-                    reason = "stale_seq"
-                elif stamp < last[1] or (stamp == last[1] and not self._use_seq):
-                    reason = "stale_stamp"
+            reason = self._admit(value, key, source, rx)
             if reason is None:
-                self._last_order[key] = (seq, stamp)
                 self._latest = (value, key, rx)
                 self._accepted += 1
         if reason is not None:
-            self._drop(reason, key, f"seq {seq} stamp {stamp} not after seq {last[0]} stamp {last[1]}")  # type: ignore[index]
+            seq, stamp = self._order_of(value)
+            self._drop(reason, key, f"seq {seq} stamp {stamp} from {source}")
             return
         for listener in self._listeners:
             listener(value)
@@ -332,8 +354,12 @@ class _Feed(Generic[T]):
             self._alive = alive
             if not alive:
                 self._last_order.clear()  # a restarted sender may count from 0 again
+                self._forget_sender()
         if changed:
             (log.info if alive else log.warning)("%s is %s", self.alive_key, "alive" if alive else "gone")
+
+    def _forget_sender(self) -> None:
+        """Lock held: the sender's liveliness token went away."""
 
     # -- caller's thread
     def latest(self) -> Received[T] | None:
@@ -356,7 +382,11 @@ class _Feed(Generic[T]):
     def counters(self) -> dict[str, Any]:
         """Snapshot: ``{"received": n, "accepted": n, "dropped": {reason: n}}``."""
         with self._lock:
-            return {"received": self._received, "accepted": self._accepted, "dropped": dict(self._dropped)}
+            return {"received": self._received, "accepted": self._accepted, "dropped": dict(self._dropped),
+                    **self._extra_counters()}
+
+    def _extra_counters(self) -> dict[str, Any]:
+        return {}
 
     def close(self) -> None:
         """Undeclare the subscribers (idempotent)."""
@@ -383,7 +413,10 @@ class CarrierFeed(_Feed[CarrierState]):
     encoding: "json" (default) or "cdr" (ROS 2 Odometry); key: override of the state key (e.g.
     :func:`mission.wire.ros2dds_odom_key`); origin: the vehicle's geodetic origin, needed to
     accept wgs84 states (drop reason "origin" without it; see :meth:`set_origin`); max_age_s
-    [s] on ``clock``. The liveliness of ``marsupial/<pair>/carrier/alive`` gives ``alive``.
+    [s] on ``clock``; limits: the carrier's own limits for the plausibility gate (default: 3 m/s
+    top speed). The liveliness of ``marsupial/<pair>/carrier/alive`` gives ``alive``; when it
+    goes away the feed unbinds its source. ``counters`` add ``bound_source``,
+    ``rejected_sources`` ({source: n}) and ``resyncs``.
     """
 
     _received_type = ReceivedCarrierState
@@ -398,11 +431,13 @@ class CarrierFeed(_Feed[CarrierState]):
         key: str | None = None,
         origin: GeoOrigin | None = None,
         max_age_s: float = 0.5,
+        limits: GateLimits | None = None,
     ) -> None:
         if encoding not in _ZENOH_ENCODING:
             raise ConfigError("zenoh.encoding", encoding, "must be 'json' or 'cdr'")
         self.encoding = encoding
         self._use_seq = encoding == "json"  # Odometry has no sequence number: order by stamp
+        self.gate = FeedGate(limits or GateLimits(max_speed_m_s=3.0), use_seq=self._use_seq)
         self._origin = origin
         self._cdr_count = 0
         k = keys(pair)
@@ -411,11 +446,27 @@ class CarrierFeed(_Feed[CarrierState]):
     @classmethod
     def from_section(
         cls, session: zenoh.Session, section: ZenohSection, clock: Clock, *, max_age_s: float,
-        origin: GeoOrigin | None = None,
+        origin: GeoOrigin | None = None, limits: GateLimits | None = None,
     ) -> "CarrierFeed":
         """The feed a :class:`ZenohSection` describes (pair, encoding, carrier_key)."""
         return cls(session, section.pair, clock, encoding=section.encoding, key=section.carrier_key,
-                   origin=origin, max_age_s=max_age_s)
+                   origin=origin, max_age_s=max_age_s, limits=limits)
+
+    def _admit(self, value: CarrierState, key: str, source: str, rx: float) -> str | None:
+        was = self.gate.bound
+        reason = self.gate.offer(source, Sample(value.seq, value.stamp_s, value.position, value.velocity_ned_m_s, rx))
+        if self.gate.bound != was:
+            log.info("carrier feed bound to source %s on %s", self.gate.bound, key)
+        return reason
+
+    def _forget_sender(self) -> None:
+        if self.gate.bound is not None:
+            log.warning("carrier feed: source %s unbound (liveliness token gone)", self.gate.bound)
+        self.gate.unbind()
+
+    def _extra_counters(self) -> dict[str, Any]:
+        return {"bound_source": self.gate.bound, "rejected_sources": dict(self.gate.rejected_sources),
+                "resyncs": self.gate.resyncs}
 
     def set_origin(self, origin: GeoOrigin | None) -> None:
         """Set the geodetic origin used for wgs84 states from now on."""
@@ -471,6 +522,7 @@ class _Publisher:
         self._session = session
         self._entities: list[Any] = []
         self._closed = False
+        self._sn = 0
         self._token = _declare(f"liveliness token {alive_key}", lambda: session.liveliness().declare_token(alive_key))
         self._entities.append(self._token)
 
@@ -480,10 +532,11 @@ class _Publisher:
         self._entities.append(pub)
         return pub
 
-    @staticmethod
-    def _put(pub: zenoh.Publisher, payload: bytes) -> None:
+    def _put(self, pub: zenoh.Publisher, payload: bytes) -> None:
+        """Put with our identity in ``source_info`` (the receiver binds to it)."""
+        self._sn += 1
         try:
-            pub.put(payload)
+            pub.put(payload, source_info=zenoh.SourceInfo(pub.id, self._sn))
         except zenoh.ZError as exc:
             raise BusError(f"cannot publish on {pub.key_expr}: {exc}") from None
 

@@ -9,6 +9,7 @@ loop stops, the stream stops, and PX4's offboard-loss failsafe sees it.
 from __future__ import annotations
 
 import collections
+import dataclasses
 import logging
 import math
 import threading
@@ -219,8 +220,12 @@ class MissionController:
             self.feed.set_origin(GeoOrigin(*vstate.origin))  # wgs84 carrier states become usable
             self._origin_given = True
         self._received = self.feed.latest()
+        failed = dict(worker.failed)
+        signing = getattr(self.link, "signing_problem", lambda: None)()
+        if signing:
+            failed["signing"] = signing  # no vehicle yet, and the reason is the key
         return Observation(t_s=t, vehicle=_vehicle_obs(vstate), carrier=_carrier_obs(self._received, self.feed.alive),
-                           failed=dict(worker.failed), interrupted=self.stop.is_set())
+                           failed=failed, interrupted=self.stop.is_set())
 
     def _publish(self, t: float, obs: Observation) -> None:
         if self.publisher is None or obs.vehicle is None:
@@ -291,6 +296,18 @@ class MissionController:
             self.overruns = periodic.overruns
         return self._outcome()
 
+    def _counters(self) -> dict[str, Any]:
+        """What was dropped and why, for summary.json: the carrier feed's counters (received,
+        accepted, dropped per reason, bound and rejected sources, resyncs) and the link's."""
+        out: dict[str, Any] = {}
+        feed_counters = getattr(self.feed, "counters", None)
+        if isinstance(feed_counters, dict):
+            out["carrier_feed"] = feed_counters
+        link_counters = getattr(self.link, "counters", None)
+        if dataclasses.is_dataclass(link_counters):
+            out["link"] = dataclasses.asdict(link_counters)
+        return out
+
     def _outcome(self) -> MissionOutcome:
         st = self.state
         summary: dict[str, Any] = {}
@@ -299,7 +316,7 @@ class MissionController:
             info = {"separation_time_s": st.separation_time_s,
                     "anchor_ned_m": None if st.anchor is None else st.anchor.tolist()}
             outcome = {"phase": st.phase.value, "reason": st.reason, "detail": st.detail,
-                       "ticks": self.ticks, "loop_overruns": self.overruns}
+                       "ticks": self.ticks, "loop_overruns": self.overruns, **self._counters()}
             summary = self.recorder.close(outcome, info)
             log_dir = str(self.recorder.dir)
         return MissionOutcome(phase=st.phase.value, reason=st.reason, detail=st.detail, log_dir=log_dir, summary=summary)

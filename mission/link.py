@@ -5,11 +5,12 @@ One :class:`VehicleLink` talks to one autopilot. It
 * opens a transport chosen by URL (``udpin:HOST:PORT`` listen, the default and PX4 SITL's
   onboard link; ``udpout:HOST:PORT``; ``tcp:HOST:PORT``; a serial device ``/dev/ttyX[:BAUD]`` or
   ``serial:/dev/ttyX[:BAUD]``, passed to pymavlink's ``mavserial``);
-* identifies the vehicle from its first PX4 HEARTBEAT (autopilot 12, component ``target_component``)
-  and from then on accepts telemetry and COMMAND_ACKs only from that system and component; other
-  systems are counted in ``counters.rejected_foreign`` and ignored. On ``udpin`` replies go only to
-  the address the vehicle last sent from (pymavlink's ``mavudp`` would send to every address
-  that ever talked to the port, a rogue sender included);
+* identifies the vehicle (see Vehicle identity below) and from then on accepts telemetry and
+  COMMAND_ACKs only from that system and component; other systems are counted in
+  ``counters.rejected_foreign`` and ignored. On ``udpin`` replies go only to the address the
+  vehicle last sent from, and only a message that passed every check (signature, identity)
+  moves it (pymavlink's ``mavudp`` would send to every address that ever talked to the port, a
+  rogue sender included);
 * sends its own 1 Hz (link clock) HEARTBEAT as an onboard controller (type 18, autopilot 8);
 * sends commands with ACK, retry and timeout; a non-ACCEPTED result raises
   :class:`~mission.errors.CommandRejected` carrying the vehicle's STATUSTEXT reason;
@@ -21,7 +22,16 @@ One :class:`VehicleLink` talks to one autopilot. It
 * writes a ``.tlog`` (8-byte big-endian microsecond stamp + raw packet) of every packet sent and
   every valid packet received, readable by ``mavlogdump.py``.
 
-Identity. By default the link uses system id 1 and component 191 (MAV_COMP_ID_ONBOARD_COMPUTER):
+Vehicle identity. With ``target_system`` set (``mavlink.target_system``), the first HEARTBEAT
+of a PX4 autopilot (autopilot 12) of a vehicle type (:data:`VEHICLE_TYPES`) from that system and
+``target_component`` identifies it. Unset, a vehicle is adopted only after
+:data:`ADOPT_HEARTBEATS` such HEARTBEATs from one system and component with the same type, none
+older than ``heartbeat_timeout_s``, while no other PX4 autopilot is heard (two at once: neither
+is adopted, a warning says to set ``mavlink.target_system``). What was adopted is logged. A
+stray HEARTBEAT of another system (a rogue sysid 42 talking first) is counted in
+``rejected_foreign`` and never becomes the vehicle.
+
+Our identity. By default the link uses system id 1 and component 191 (MAV_COMP_ID_ONBOARD_COMPUTER):
 a companion computer is a component of the UAV's own system, and PX4 only registers an
 ONBOARD_CONTROLLER heartbeat that comes from its own system id (``mavlink_receiver.cpp``,
 ``same_system``). PX4's default MAV_SYS_ID is 1; set ``source_system`` if the vehicle's differs.
@@ -42,10 +52,16 @@ link runs the same on a scaled wall clock and in lockstep (:mod:`mission.lockste
 The wall clock is read once at ``open`` only where a format defines a wall time: the tlog's
 epoch stamps and the MAVLink 2 signing timestamp.
 
-Signing (optional, ``signing_key`` of 32 bytes). Outgoing packets are signed; incoming packets
-must carry a valid signature, except HEARTBEAT, which may come unsigned (so the vehicle can be
-found before keys match). The key is never logged, never in ``repr`` and never in the tlog
-(signed packets carry only a 6-byte truncated SHA-256).
+Signing (optional, ``signing_key`` of 32 bytes). Outgoing packets are signed; every incoming
+packet, HEARTBEAT included, counts only with a valid signature made with our key: an unsigned
+one is dropped (``rx_unsigned``), one signed with another key or replayed is dropped
+(``rx_bad_signature``); neither identifies a vehicle, changes its state or moves the reply
+address. A PX4 HEARTBEAT signed with another key is remembered so that
+:meth:`VehicleLink.signing_problem` can say "wrong key" rather than "no vehicle". A refused
+packet never advances pymavlink's per-stream replay timestamp (pymavlink updates it before it
+checks the signature, so one forged packet stamped in the future would lock the real vehicle
+out). The key is never logged, never in ``repr`` and never in the tlog (signed packets carry
+only a 6-byte truncated SHA-256).
 """
 from __future__ import annotations
 
@@ -70,7 +86,7 @@ from mission.errors import CommandRejected, LinkError, LinkPortInUse, LinkTimeou
 from mission.mavlink_env import mavlink, mavutil
 from mission.port_holder import is_addr_in_use, port_in_use
 
-__all__ = ["VehicleLink", "VehicleState", "LinkCounters", "DEFAULT_URL"]
+__all__ = ["VehicleLink", "VehicleState", "LinkCounters", "DEFAULT_URL", "VEHICLE_TYPES", "ADOPT_HEARTBEATS"]
 
 log = logging.getLogger(__name__)
 
@@ -80,8 +96,13 @@ MAV_COMP_ID_ONBOARD_COMPUTER = 191
 MAV_AUTOPILOT_INVALID = 8
 MAV_RESULT_IN_PROGRESS = 5
 MAV_STATE_ACTIVE = 4
-# HEARTBEAT types that are never a vehicle's autopilot, whatever their autopilot field says.
-_NON_VEHICLE_TYPES = frozenset({6, 18, 26, 27})  # GCS, ONBOARD_CONTROLLER, GIMBAL, ADSB
+#: MAV_TYPEs of an aerial vehicle a passenger can be: fixed wing 1, quadrotor 2, coaxial 3,
+#: helicopter 4, airship 7, hexa 13, octo 14, tricopter 15, flapping wing 16, VTOLs 19-25,
+#: dodeca 29, deca 35, generic multirotor 43, VTOL gyrodyne 47. Anything else (a GCS, an
+#: onboard controller, a gimbal, a camera, a rover...) is never adopted as the vehicle.
+VEHICLE_TYPES = frozenset({1, 2, 3, 4, 7, 13, 14, 15, 16, 19, 20, 21, 22, 23, 24, 25, 29, 35, 43, 47})
+#: Consistent HEARTBEATs needed to adopt a vehicle when ``target_system`` is not configured.
+ADOPT_HEARTBEATS = 3
 _STATUSTEXT_CHUNK_LEN = 50
 _SEVERITY_WARNING = 4  # MAV_SEVERITY_WARNING; EMERGENCY 0 .. DEBUG 7
 _FLOAT32_MAX = float(np.finfo(np.float32).max)
@@ -161,13 +182,16 @@ class LinkCounters:
     rx_bad: int = 0
     """Garbage, CRC, length, signature and parse errors (the receiver survived each)."""
     rx_bad_signature: int = 0
-    """Subset of rx_bad: packets refused for a missing or wrong signature."""
+    """Subset of rx_bad: signed packets refused (another key, or a replayed timestamp)."""
+    rx_unsigned: int = 0
+    """Subset of rx_bad: unsigned packets refused by a signed link (HEARTBEAT included)."""
     rx_unknown: int = 0
     """Valid packets whose message id is not in the dialect (e.g. PX4's 380, 410, 411)."""
     rx_ignored: int = 0
     """Valid packets not applied: before identification, or from another component."""
     rejected_foreign: int = 0
-    """Valid packets from a system other than the identified vehicle."""
+    """Valid packets from a system other than the identified vehicle, and HEARTBEATs of other
+    autopilots heard while none was adopted yet."""
     rx_errors: int = 0
     """Socket errors and unexpected handler exceptions in the receiver."""
     tx_messages: int = 0
@@ -374,9 +398,29 @@ def _reset_parser(codec: Any) -> None:
     codec.expected_length = mavlink.HEADER_LEN_V1 + 2
 
 
-def _allow_unsigned(_codec: Any, msg_id: int) -> bool:
-    """Signing policy: only HEARTBEAT may arrive unsigned."""
-    return msg_id == mavlink.MAVLINK_MSG_ID_HEARTBEAT
+def _refuse_unsigned(_codec: Any, _msg_id: int) -> bool:
+    """Signing policy: nothing may arrive unsigned (HEARTBEAT included)."""
+    return False
+
+
+def _keep_replay_state_on_failure(codec: Any) -> None:
+    """Make ``codec``'s signature check leave its per-stream replay timestamp alone when the
+    check fails (pymavlink stores a packet's timestamp before verifying its signature)."""
+    check = codec.check_signature
+
+    def check_signature(msgbuf: bytearray, src_system: int, src_component: int) -> bool:
+        streams = codec.signing.stream_timestamps
+        stream = (msgbuf[-13], src_system, src_component)
+        before = streams.get(stream)
+        ok = bool(check(msgbuf, src_system, src_component))
+        if not ok:
+            if before is None:
+                streams.pop(stream, None)
+            else:
+                streams[stream] = before
+        return ok
+
+    codec.check_signature = check_signature
 
 
 def _statustext_level(severity: int) -> int:
@@ -460,7 +504,8 @@ class VehicleLink:
     clock:
         Injected clock for every timeout, period and receive stamp [s].
     target_system, target_component:
-        Accept only this vehicle. ``target_system=None`` takes the first PX4 autopilot heard;
+        Accept only this vehicle. ``target_system=None`` adopts a PX4 autopilot after
+        :data:`ADOPT_HEARTBEATS` consistent HEARTBEATs (see the module docstring);
         ``target_component`` is the autopilot's component id (1; 0 accepts any).
     source_system, source_component:
         Our own ids: default 1 (the vehicle's own system, see the module docstring) and 191
@@ -469,7 +514,7 @@ class VehicleLink:
         Write a ``.tlog`` of every packet sent and every valid packet received.
     signing_key:
         32-byte MAVLink 2 signing key; outgoing packets are signed, incoming ones must be
-        (HEARTBEAT excepted).
+        (HEARTBEAT included).
     heartbeat_timeout_s:
         The vehicle counts as lost after this long without a HEARTBEAT [s] (:meth:`vehicle_alive`).
     heartbeat_period_s:
@@ -548,6 +593,11 @@ class VehicleLink:
         self._ack_seq = 0
         self._counts: dict[str, int] = {f.name: 0 for f in fields(LinkCounters)}
         self._ignored_autopilots: set[tuple[int, int]] = set()
+        # unidentified PX4 autopilots heard: (sysid, compid) -> [heartbeats, last rx [s], MAV_TYPE]
+        self._candidates: dict[tuple[int, int], list[Any]] = {}
+        self._ambiguous_warned = False
+        self._heard: dict[tuple[int, int], int] = {}  # PX4 HEARTBEATs heard before adoption, per source
+        self._wrong_key: tuple[int, int, int] | None = None  # (sysid, compid, HEARTBEATs) signed with another key
 
     def __repr__(self) -> str:
         state = "open" if self.is_open else "closed"
@@ -993,9 +1043,10 @@ class VehicleLink:
             signing = codec.signing
             signing.secret_key = self._signing_key
             signing.sign_outgoing = outgoing
-            signing.allow_unsigned_callback = _allow_unsigned
+            signing.allow_unsigned_callback = _refuse_unsigned
             signing.link_id = 0
             signing.timestamp = stamp
+        _keep_replay_state_on_failure(self._rx_codec)
 
     def _receive_loop(self) -> None:
         """Receiver thread: block on the transport, parse every datagram, never die."""
@@ -1051,8 +1102,7 @@ class VehicleLink:
     def _handle_message(self, msg: Any, t_rx: float, address: Address | None, transport: _Transport) -> None:
         kind = msg.get_type()
         if kind == "BAD_DATA":
-            bad_signature = "signature" in str(getattr(msg, "reason", ""))
-            self._count("rx_bad", "rx_bad_signature" if bad_signature else None)
+            self._count("rx_bad", self._bad_signature(msg))
             return
         self._count("rx_messages", "rx_unknown" if kind.startswith("UNKNOWN_") else None)
         source = (msg.get_srcSystem(), msg.get_srcComponent())
@@ -1060,7 +1110,7 @@ class VehicleLink:
         with self._changed:
             vehicle, found = self._vehicle, False
             if vehicle is None:
-                if not (kind == "HEARTBEAT" and self._is_our_autopilot(msg, source)):
+                if not (kind == "HEARTBEAT" and self._is_our_autopilot(msg, source) and self._adopt(msg, source, t_rx)):
                     self._counts["rx_ignored"] += 1
                     return
                 vehicle, found = source, True
@@ -1095,7 +1145,7 @@ class VehicleLink:
 
     def _is_our_autopilot(self, msg: Any, source: tuple[int, int]) -> bool:
         """Is this HEARTBEAT from the PX4 autopilot we are to fly (lock held)?"""
-        if msg.type in _NON_VEHICLE_TYPES:
+        if msg.type not in VEHICLE_TYPES:
             return False
         if self._target_system is not None and source[0] != self._target_system:
             return False
@@ -1107,6 +1157,64 @@ class VehicleLink:
                 log.warning("ignoring non-PX4 autopilot %d at sysid %d compid %d", msg.autopilot, *source)
             return False
         return True
+
+    def _adopt(self, msg: Any, source: tuple[int, int], t_rx: float) -> bool:
+        """Lock held, ``msg`` a PX4 vehicle HEARTBEAT from ``source``: adopt it now? A configured
+        ``target_system`` is adopted at once; otherwise after ADOPT_HEARTBEATS consistent ones
+        while no other autopilot is heard (the module docstring)."""
+        if self._target_system is not None:
+            log.info("vehicle adopted (mavlink.target_system): PX4 autopilot sysid %d compid %d, MAV_TYPE %d",
+                     source[0], source[1], msg.type)
+            return True
+        if len(self._heard) < 64 or source in self._heard:
+            self._heard[source] = self._heard.get(source, 0) + 1
+        fresh = {k: c for k, c in self._candidates.items() if t_rx - c[1] <= self.heartbeat_timeout_s}
+        cand = fresh.get(source)
+        if cand is None or cand[2] != msg.type:
+            cand = [0, t_rx, msg.type]
+        cand[0], cand[1] = cand[0] + 1, t_rx
+        fresh[source] = cand
+        self._candidates = fresh
+        if cand[0] < ADOPT_HEARTBEATS:
+            return False
+        others = sorted(k for k in fresh if k != source)
+        if others:
+            if not self._ambiguous_warned:
+                self._ambiguous_warned = True
+                log.warning("several PX4 autopilots heard (%s and %s): adopting none while both talk; "
+                            "set mavlink.target_system", source, ", ".join(map(str, others)))
+            return False
+        self._candidates.clear()
+        self._counts["rejected_foreign"] += sum(n for k, n in self._heard.items() if k[0] != source[0])
+        log.info("vehicle adopted after %d consistent HEARTBEATs: PX4 autopilot sysid %d compid %d, MAV_TYPE %d",
+                 cand[0], source[0], source[1], msg.type)
+        return True
+
+    def _bad_signature(self, msg: Any) -> str | None:
+        """The counter of a refused packet (BAD_DATA): unsigned, badly signed, or neither; a PX4
+        HEARTBEAT signed with another key is remembered for :meth:`signing_problem`."""
+        if self._signing_key is None or "signature" not in str(getattr(msg, "reason", "")):
+            return None
+        raw = bytes(getattr(msg, "data", b""))
+        if len(raw) < 10 or raw[0] != mavlink.PROTOCOL_MARKER_V2 or not raw[2] & mavlink.MAVLINK_IFLAG_SIGNED:
+            return "rx_unsigned"
+        msg_id = raw[7] | raw[8] << 8 | raw[9] << 16
+        if msg_id == mavlink.MAVLINK_MSG_ID_HEARTBEAT and len(raw) > 15 and raw[15] == px4.MAV_AUTOPILOT_PX4:
+            with self._lock:  # HEARTBEAT payload: custom_mode u32, type u8, autopilot u8 (byte 15)
+                wrong = self._wrong_key
+                seen = wrong[2] if wrong is not None and wrong[:2] == (raw[5], raw[6]) else 0
+                self._wrong_key = (raw[5], raw[6], seen + 1)
+        return "rx_bad_signature"
+
+    def signing_problem(self) -> str | None:
+        """Why no vehicle was identified on a signed link, if the reason is the key: a PX4
+        autopilot was heard, but only with signatures made with another key. None otherwise."""
+        with self._lock:
+            wrong, vehicle = self._wrong_key, self._vehicle
+        if vehicle is not None or wrong is None:
+            return None
+        return (f"PX4 autopilot sysid {wrong[0]} compid {wrong[1]} signs with another key "
+                f"({wrong[2]} HEARTBEATs refused): check mavlink.signing_key_file")
 
     def _announce(self, source: tuple[int, int]) -> None:
         """Send our HEARTBEAT before the vehicle becomes visible as identified, so it knows us

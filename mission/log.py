@@ -1,7 +1,10 @@
 """Flight record: a CSV row per controller tick, a summary JSON, beside the link's ``.tlog``.
 
 A log directory holds ``record.csv`` (the controller's own record), ``summary.json`` (the same
-keys as ``marsupial simulate --json``, computed from the record), ``mission.json`` (target,
+keys as ``marsupial simulate --json``, computed from the record, plus how the mission ended and
+the drop counters: ``carrier_feed`` = received, accepted, ``dropped`` per reason,
+``bound_source``, ``rejected_sources`` per source, ``resyncs``; ``link`` = the MAVLink link's
+counters, e.g. ``rejected_foreign``, ``rx_unsigned``, ``rx_bad_signature``), ``mission.json`` (target,
 obstacles, b c: what a plot needs) and ``flight.tlog`` (every MAVLink packet, written by the
 link; readable by pymavlink's ``mavlogdump.py``). Frames: local NED [m], [m/s]; time [s] on the
 controller's clock.

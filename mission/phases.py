@@ -15,7 +15,9 @@
 
     any phase --> ABORT(reason): vehicle_lost, pilot_override, vehicle_failsafe (PX4 left
                   OFFBOARD for one of its own failsafes), carrier_lost, position_lost,
-                  arming_refused, offboard_refused, geometry, interrupted, timeout
+                  arming_refused, offboard_refused, geometry, interrupted, timeout,
+                  signing_mismatch (no vehicle by connect_timeout_s, but a PX4 autopilot was
+                  heard signing with another key: ``failed["signing"]`` says which)
     ABORT requests Hold (never disarm in the air) unless the vehicle is lost or a pilot took
     over or PX4 runs its own failsafe (then nothing is sent: never fight either); setpoints stop
     once Hold is shown.
@@ -72,6 +74,7 @@ class AbortReason(str, Enum):
     GEOMETRY = "geometry"
     INTERRUPTED = "interrupted"
     TIMEOUT = "timeout"
+    SIGNING_MISMATCH = "signing_mismatch"
 
 
 # Phases in which the vehicle is ours in OFFBOARD and must stay there.
@@ -313,7 +316,10 @@ def _preflight(state: MissionState, obs: Observation, m: MissionModel) -> tuple[
     if not ready:
         if t - state.since_s > m.connect_timeout_s:
             why = "no vehicle" if v is None else ("no carrier" if not _carrier_ok(obs, m) else "vehicle not ready")
-            new = _abort(state, t, AbortReason.VEHICLE_LOST if v is None else AbortReason.CARRIER_LOST, why)
+            reason = AbortReason.VEHICLE_LOST if v is None else AbortReason.CARRIER_LOST
+            if v is None and "signing" in obs.failed:
+                why, reason = obs.failed["signing"], AbortReason.SIGNING_MISMATCH
+            new = _abort(state, t, reason, why)
             return new, Decision(setpoint=None, events=(f"abort: preflight: {why}",))
         return state, Decision(setpoint=None)
     assert v is not None  # ready

@@ -18,6 +18,7 @@ from mission.clock import Clock, LockstepClock, ScaledClock
 from mission.config import Config, load_config, with_overrides
 from mission.controller import MissionController, MissionOutcome, mission_info, mission_model
 from mission.errors import ConfigError
+from mission.feed_gate import GateLimits
 from mission.link import VehicleLink
 from mission.mavlink_env import read_signing_key
 from mission.log import FlightRecorder, read_record
@@ -30,6 +31,12 @@ EXIT_CODES = {AbortReason.GEOMETRY.value: 2, AbortReason.VEHICLE_LOST.value: 3}
 EXIT_ABORT = 5
 
 
+def carrier_limits(cfg: Config) -> GateLimits:
+    """The carrier's own limits the feed's plausibility gate checks states against: its top
+    speed (``carrier.max_speed_m_s``, or ``safety.carrier_max_speed_m_s`` if larger)."""
+    return GateLimits(max_speed_m_s=max(cfg.carrier.max_speed_m_s, cfg.safety.carrier_max_speed_m_s or 0.0))
+
+
 @contextmanager
 def mission_io(cfg: Config, clock: Clock, tlog_path: str | Path | None = None) -> Iterator[tuple[CarrierFeed, PassengerPublisher, VehicleLink]]:
     """Open what a mission talks through, per ``cfg``: the Zenoh session with the carrier feed
@@ -39,11 +46,13 @@ def mission_io(cfg: Config, clock: Clock, tlog_path: str | Path | None = None) -
     with ExitStack() as stack:
         session = open_session(cfg.zenoh)
         stack.callback(session.close)
-        feed = CarrierFeed.from_section(session, cfg.zenoh, clock, max_age_s=cfg.mission.carrier_timeout_s)
+        feed = CarrierFeed.from_section(session, cfg.zenoh, clock, max_age_s=cfg.mission.carrier_timeout_s,
+                                        limits=carrier_limits(cfg))
         stack.callback(feed.close)
         publisher = PassengerPublisher(session, cfg.zenoh.pair)
         stack.callback(publisher.close)
         link = VehicleLink(cfg.mavlink.url, clock, target_system=cfg.mavlink.target_system,
+                           target_component=cfg.mavlink.target_component,
                            source_system=cfg.mavlink.source_system, source_component=cfg.mavlink.source_component,
                            tlog_path=None if tlog_path is None else str(tlog_path), signing_key=key,
                            heartbeat_timeout_s=cfg.mission.heartbeat_timeout_s)

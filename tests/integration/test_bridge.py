@@ -21,7 +21,7 @@ from mission.clock import ManualClock, ScaledClock
 from mission.config import ZenohSection
 from mission.errors import BusError, ConfigError
 from mission.wire import CarrierState, GeoOrigin, PassengerStatus, encode_odometry_cdr, ros2dds_odom_key
-from tests.integration.zenoh_util import endpoint, free_port, peer, peer_pair, wait_for, wait_matched
+from tests.integration.zenoh_util import LENIENT, endpoint, free_port, peer, peer_pair, wait_for, wait_matched
 
 pytestmark = pytest.mark.timeout(30)
 
@@ -40,7 +40,7 @@ def _raw(n: int, **changes: object) -> bytes:
 
 def test_json_states_flow_and_are_returned_in_local_ned() -> None:
     clock = ManualClock(10.0)
-    with peer_pair() as (a, b), CarrierFeed(b, "p", clock) as feed, CarrierPublisher(a, "p") as pub:
+    with peer_pair() as (a, b), CarrierFeed(b, "p", clock, limits=LENIENT) as feed, CarrierPublisher(a, "p") as pub:
         assert feed.latest() is None
         wait_for(lambda: pub.matched, what="publisher matched")
         pub.publish(_state(1))
@@ -51,13 +51,15 @@ def test_json_states_flow_and_are_returned_in_local_ned() -> None:
         np.testing.assert_array_equal(rx.state.velocity_ned_m_s, [0.5, -0.5, 0.0])
         assert rx.rx_time_s == 10.0 and rx.age_s == 0.0 and not rx.stale
         assert wait_for(lambda: feed.alive, what="carrier token") is True
-        assert feed.counters == {"received": 1, "accepted": 1, "dropped": {}}
+        c = feed.counters
+        assert (c["received"], c["accepted"], c["dropped"]) == (1, 1, {})
+        assert c["bound_source"] == f"{a.zid()}/{pub._pub.id.eid}" and c["rejected_sources"] == {}
 
 
 def test_cdr_odometry_from_a_ros_bridge_key_is_converted_enu_to_ned() -> None:
     clock = ManualClock()
     key = ros2dds_odom_key("robot1")  # as zenoh-bridge-ros2dds routes /robot1/odom
-    with peer_pair() as (a, b), CarrierFeed(b, "p", clock, encoding="cdr", key=key) as feed:
+    with peer_pair() as (a, b), CarrierFeed(b, "p", clock, encoding="cdr", key=key, limits=LENIENT) as feed:
         pub = a.declare_publisher(key)
         try:
             wait_matched(pub)
@@ -75,7 +77,7 @@ def test_cdr_odometry_from_a_ros_bridge_key_is_converted_enu_to_ned() -> None:
 
 
 def test_carrier_publisher_cdr_round_trip() -> None:
-    with peer_pair() as (a, b), CarrierFeed(b, "p", ManualClock(), encoding="cdr") as feed, \
+    with peer_pair() as (a, b), CarrierFeed(b, "p", ManualClock(), encoding="cdr", limits=LENIENT) as feed, \
             CarrierPublisher(a, "p", "cdr") as pub:
         wait_for(lambda: pub.matched)
         pub.publish(CarrierState(3.0, 0, "local_ned", [4.0, -5.0, 0.0], [1.0, 1.0, 0.0], math.pi / 4))
@@ -85,7 +87,7 @@ def test_carrier_publisher_cdr_round_trip() -> None:
 
 
 def test_wgs84_states_are_converted_through_the_origin_or_dropped_without_one() -> None:
-    with peer_pair() as (a, b), CarrierFeed(b, "p", ManualClock()) as feed:
+    with peer_pair() as (a, b), CarrierFeed(b, "p", ManualClock(), limits=LENIENT) as feed:
         pub = a.declare_publisher(keys("p").carrier_state)
         try:
             wait_matched(pub)
@@ -114,7 +116,7 @@ def test_malformed_and_out_of_order_samples_are_dropped_counted_and_never_return
         (_raw(3), "stale_seq"),  # older
         (_raw(6, stamp=0.2), "stale_stamp"),  # newer seq but older stamp
     ]
-    with peer_pair() as (a, b), CarrierFeed(b, "p", ManualClock()) as feed:
+    with peer_pair() as (a, b), CarrierFeed(b, "p", ManualClock(), limits=LENIENT) as feed:
         pub = a.declare_publisher(keys("p").carrier_state)
         try:
             wait_matched(pub)
@@ -138,7 +140,7 @@ def test_malformed_and_out_of_order_samples_are_dropped_counted_and_never_return
 
 def test_age_grows_when_the_publisher_stops_and_stale_is_flagged_not_hidden() -> None:
     clock = ManualClock()
-    with peer_pair() as (a, b), CarrierFeed(b, "p", clock, max_age_s=0.5) as feed, CarrierPublisher(a, "p") as pub:
+    with peer_pair() as (a, b), CarrierFeed(b, "p", clock, max_age_s=0.5, limits=LENIENT) as feed, CarrierPublisher(a, "p") as pub:
         wait_for(lambda: pub.matched)
         pub.publish(_state(1))
         first = wait_for(feed.latest)
@@ -156,7 +158,7 @@ def test_age_grows_when_the_publisher_stops_and_stale_is_flagged_not_hidden() ->
 
 def test_age_on_a_scaled_clock_grows_in_simulated_seconds() -> None:
     clock = ScaledClock(speed=20.0)
-    with peer_pair() as (a, b), CarrierFeed(b, "p", clock, max_age_s=0.5) as feed, CarrierPublisher(a, "p") as pub:
+    with peer_pair() as (a, b), CarrierFeed(b, "p", clock, max_age_s=0.5, limits=LENIENT) as feed, CarrierPublisher(a, "p") as pub:
         wait_for(lambda: pub.matched)
         pub.publish(_state(1))
         wait_for(feed.latest)
@@ -169,7 +171,7 @@ def test_liveliness_goes_false_when_the_publishers_session_closes_and_ordering_r
     ep = endpoint(free_port())
     b = peer(listen=[ep])
     try:
-        with CarrierFeed(b, "p", ManualClock()) as feed:
+        with CarrierFeed(b, "p", ManualClock(), limits=LENIENT) as feed:
             a = peer(connect=[ep])
             pub = CarrierPublisher(a, "p")
             wait_for(lambda: pub.matched)
@@ -279,7 +281,7 @@ def test_rendezvous_default_lets_two_peers_with_the_same_config_meet() -> None:
     try:
         second = open_session(section)  # cannot bind it (harmless), connects to it
         try:
-            with CarrierFeed(first, "p", ManualClock()) as feed, CarrierPublisher(second, "p") as pub:
+            with CarrierFeed(first, "p", ManualClock(), limits=LENIENT) as feed, CarrierPublisher(second, "p") as pub:
                 wait_for(lambda: pub.matched)
                 pub.publish(_state(1))
                 assert wait_for(feed.latest).state.seq == 1

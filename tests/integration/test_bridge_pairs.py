@@ -14,7 +14,7 @@ import pytest
 from mission.carrier_bridge import CarrierFeed, CarrierPublisher, PassengerFeed, PassengerPublisher
 from mission.clock import ManualClock
 from mission.wire import CarrierState, PassengerStatus
-from tests.integration.zenoh_util import endpoint, free_port, peer, wait_for
+from tests.integration.zenoh_util import LENIENT, endpoint, free_port, peer, wait_for
 
 pytestmark = pytest.mark.timeout(30)
 
@@ -34,7 +34,7 @@ def test_three_pairs_publishing_at_once_have_no_crosstalk() -> None:
                 s = peer(connect=[hub_ep], mode="client")
                 stack.callback(s.close)
                 side[name] = s
-        cfeeds = {n: stack.enter_context(CarrierFeed(passengers[n], n, clock)) for n in PAIRS}
+        cfeeds = {n: stack.enter_context(CarrierFeed(passengers[n], n, clock, limits=LENIENT)) for n in PAIRS}
         pfeeds = {n: stack.enter_context(PassengerFeed(carriers[n], n, clock)) for n in PAIRS}
         cpubs = {n: stack.enter_context(CarrierPublisher(carriers[n], n)) for n in PAIRS}
         ppubs = {n: stack.enter_context(PassengerPublisher(passengers[n], n)) for n in PAIRS}

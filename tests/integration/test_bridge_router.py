@@ -9,7 +9,7 @@ import pytest
 from mission.carrier_bridge import CarrierFeed, CarrierPublisher, PassengerFeed, PassengerPublisher
 from mission.clock import ManualClock
 from mission.wire import CarrierState, PassengerStatus
-from tests.integration.zenoh_util import endpoint, free_port, peer, wait_for
+from tests.integration.zenoh_util import LENIENT, endpoint, free_port, peer, wait_for
 
 pytestmark = pytest.mark.timeout(30)
 
@@ -22,7 +22,7 @@ def test_router_routes_pub_sub_and_liveliness_between_clients() -> None:
         carrier_side = peer(connect=[ep], mode="client")
         try:
             clock = ManualClock()
-            with CarrierFeed(passenger_side, "fleet1", clock) as cfeed, \
+            with CarrierFeed(passenger_side, "fleet1", clock, limits=LENIENT) as cfeed, \
                     PassengerFeed(carrier_side, "fleet1", clock) as pfeed, \
                     PassengerPublisher(passenger_side, "fleet1") as ppub:
                 cpub = CarrierPublisher(carrier_side, "fleet1")

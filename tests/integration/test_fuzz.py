@@ -29,7 +29,7 @@ from mission.mavlink_env import mavlink
 from mission.wire import CarrierState, encode_carrier_json, encode_odometry_cdr
 from sim.vehicle import MockVehicle, VehicleOptions
 from sim.vehicle_probe import Probe
-from tests.integration.zenoh_util import peer_pair, wait_for, wait_matched
+from tests.integration.zenoh_util import LENIENT, peer_pair, wait_for, wait_matched
 
 SCALE = max(1, int(os.environ.get("MARSUPIAL_FUZZ_SCALE", "1")))
 MAVLINK_FRAMES = 100_000 * SCALE
@@ -286,8 +286,8 @@ def zenoh_corpus(seed: int, count: int, last_seq: int) -> Iterator[tuple[str, by
 
 
 def test_carrier_feed_drops_and_counts_every_malformed_payload() -> None:
-    with peer_pair() as (a, b), CarrierFeed(b, "fz", ManualClock()) as feed, \
-            CarrierFeed(b, "fz", ManualClock(), encoding="cdr", key="fz/odom") as cdr_feed:
+    with peer_pair() as (a, b), CarrierFeed(b, "fz", ManualClock(), limits=LENIENT) as feed, \
+            CarrierFeed(b, "fz", ManualClock(), encoding="cdr", key="fz/odom", limits=LENIENT) as cdr_feed:
         import zenoh
 
         pub = a.declare_publisher(keys("fz").carrier_state, congestion_control=zenoh.CongestionControl.BLOCK)

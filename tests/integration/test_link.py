@@ -60,11 +60,11 @@ def test_identifies_px4_and_snapshots_state() -> None:
     clock = ManualClock(5.0)
     with VehicleLink(ANY_PORT, clock) as link, Px4Peer(link.port, position_ned_m=(1.0, 2.0, -3.0)) as peer:
         peer.armed, peer.custom_mode = True, px4.custom_mode_of("OFFBOARD")
+        first = link.wait_vehicle(timeout_s=5.0)  # adopted after 3 HEARTBEATs; nothing before counts
         peer.send(mavlink.MAVLink_extended_sys_state_message(0, px4.LANDED_IN_AIR))
         peer.send(mavlink.MAVLink_gps_global_origin_message(473977418, 85455939, 488000, 0))
         ahrs = mavlink.MAV_SYS_STATUS_AHRS
         peer.send(mavlink.MAVLink_sys_status_message(ahrs, ahrs, ahrs, 0, 65535, -1, -1, 0, 0, 0, 0, 0, 0))
-        first = link.wait_vehicle(timeout_s=5.0)
         assert (first.system_id, first.component_id) == (1, 1)
         assert link.vehicle_id == (1, 1)
         s = link.wait_until(
@@ -385,7 +385,7 @@ def test_garbage_is_counted_and_the_receiver_survives(link: VehicleLink) -> None
         link.wait_until(lambda s: s.last_statustext == "after the garbage", 5.0)
         c = link.counters
         assert c.rx_bad >= 5 and c.rx_unknown == 1 and c.rx_errors == 0
-        t0 = link.state.position_rx_s
+        t0 = link.wait_until(lambda s: s.position_rx_s is not None, 5.0).position_rx_s
         link.wait_until(lambda s: s.position_rx_s is not None and s.position_rx_s > t0, 5.0)
         assert all(t.is_alive() for t in _link_threads() if t.name.startswith("marsupial-link-rx"))
 
@@ -506,23 +506,57 @@ def test_signed_link_signs_everything_and_keeps_the_key_out_of_the_tlog(
     assert KEY.hex() not in caplog.text and repr(KEY) not in caplog.text
 
 
-def test_signed_link_refuses_unsigned_telemetry_but_sees_unsigned_heartbeat() -> None:
+def test_signed_link_refuses_everything_unsigned_heartbeat_included() -> None:
     with VehicleLink(ANY_PORT, ScaledClock(1.0), signing_key=KEY) as link, Px4Peer(link.port) as peer:
-        assert link.wait_vehicle(5.0).system_id == 1  # unsigned HEARTBEAT is allowed
-        eventually(lambda: link.counters.rx_bad_signature >= 10, what="unsigned packets refused")
-        assert link.state.position_ned_m is None
-        peer.on_command = Px4Peer.obey
-        with pytest.raises(LinkTimeout):  # the unsigned ACK is refused too
-            link.command_long(px4.MAV_CMD_REQUEST_MESSAGE, 148.0, timeout_s=0.1, retries=0)
+        eventually(lambda: link.counters.rx_unsigned >= 30, what="unsigned packets refused")
+        assert link.vehicle_id is None and link.state.heartbeat_rx_s is None and link.state.position_ned_m is None
+        assert link.counters.rx_bad_signature == 0 and link.signing_problem() is None
+        assert peer.received() == []  # nothing unsigned gave it our reply address
 
 
-def test_wrong_key_is_refused() -> None:
+def test_signed_link_follows_the_signed_vehicle_and_ignores_unsigned_spoofs() -> None:
+    """Unsigned HEARTBEATs copying the vehicle's id, claiming POSCTL, from another address: they
+    neither change the vehicle's mode nor move the reply address."""
+    with VehicleLink(ANY_PORT, ScaledClock(1.0), signing_key=KEY) as link, \
+            Px4Peer(link.port, signing_key=KEY) as vehicle:
+        link.wait_vehicle(5.0)
+        with Px4Peer(link.port, sysid=1, heartbeat_hz=50.0, position_hz=0.0) as spoofer:
+            spoofer.custom_mode = px4.custom_mode_of("POSCTL")
+            eventually(lambda: link.counters.rx_unsigned >= 20, what="spoofed HEARTBEATs refused")
+            assert link.state.mode == "AUTO.LOITER"
+            link.send_velocity_ned(np.array([0.5, 0.0, 0.0]))
+            eventually(lambda: vehicle.received("SET_POSITION_TARGET_LOCAL_NED"), what="setpoint at the vehicle")
+            assert spoofer.received() == []
+
+
+def test_wrong_key_is_refused_with_its_own_reason() -> None:
     with VehicleLink(ANY_PORT, ScaledClock(1.0), signing_key=KEY) as link, \
             Px4Peer(link.port, signing_key=bytes(32)) as peer:
-        link.wait_vehicle(5.0)
         eventually(lambda: link.counters.rx_bad_signature >= 10, what="badly signed packets refused")
-        assert link.state.position_ned_m is None
-        assert peer.received("HEARTBEAT")  # it hears us; we do not believe it
+        assert link.vehicle_id is None and link.state.position_ned_m is None
+        problem = link.signing_problem()
+        assert problem is not None and "sysid 1 compid 1 signs with another key" in problem
+        assert peer.received() == []  # we never answered it
+
+
+def test_a_forged_packet_stamped_in_the_future_does_not_lock_the_vehicle_out() -> None:
+    """pymavlink records a stream's timestamp before checking the signature; the link undoes that
+    for refused packets, so a forgery stamped far ahead cannot make the real vehicle's packets
+    look replayed."""
+    forger = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    forger.signing.secret_key, forger.signing.sign_outgoing = bytes(32), True
+    forger.signing.link_id, forger.signing.timestamp = 0, 2**47  # ~44 years ahead
+    forged = mavlink.MAVLink_heartbeat_message(2, 12, 0, 0, 3, 3).pack(forger)
+    with VehicleLink(ANY_PORT, ScaledClock(1.0), signing_key=KEY) as link:
+        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            for _ in range(3):
+                sock.sendto(forged, ("127.0.0.1", link.port))
+            eventually(lambda: link.counters.rx_bad_signature >= 3, what="forgeries refused")
+        finally:
+            sock.close()
+        with Px4Peer(link.port, signing_key=KEY):
+            assert link.wait_vehicle(5.0).system_id == 1
 
 
 def test_bad_signing_key_is_refused_without_echoing_it() -> None:

@@ -9,8 +9,13 @@ import zenoh
 
 from mission.carrier_bridge import open_session
 from mission.config import ZenohSection
+from mission.feed_gate import GateLimits
 from sim.net import free_port, wait_for  # noqa: F401  (re-exported for the tests)
 
+
+#: Carrier-feed limits for transport and codec tests: one sample binds its source and no speed
+#: limit bites (binding and plausibility have their own tests, test_feed_trust.py).
+LENIENT = GateLimits(max_speed_m_s=1000.0, bind_samples=1)
 
 
 def endpoint(port: int) -> str:

@@ -1,0 +1,120 @@
+"""The carrier feed's source binding and plausibility gate (pure, no Zenoh): a second source,
+an outlier, a stamp an hour ahead, a teleport, a relocalised carrier."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mission.feed_gate import FeedGate, GateLimits, Sample, implausible
+
+LIMITS = GateLimits(max_speed_m_s=2.0)
+RATE_HZ = 30.0
+
+
+def track(n: int, *, start: int = 0, north0: float = 0.0, v: float = 1.0, seq0: int = 0, t0: float = 0.0) -> list[Sample]:
+    """A carrier driving north at ``v`` m/s, sampled at 30 Hz (stamp = receive time)."""
+    out = []
+    for k in range(start, start + n):
+        t = t0 + k / RATE_HZ
+        out.append(Sample(seq0 + k, t, np.array([north0 + v * (t - t0), 0.0, 0.0]), np.array([v, 0.0, 0.0]), t))
+    return out
+
+
+def offer_all(gate: FeedGate, source: str, samples: list[Sample]) -> list[str | None]:
+    return [gate.offer(source, s) for s in samples]
+
+
+def test_binds_after_three_plausible_samples_and_drops_every_other_source() -> None:
+    gate = FeedGate(LIMITS)
+    real = track(60)
+    assert offer_all(gate, "real", real[:3]) == ["unbound", "unbound", None]
+    assert gate.bound == "real"
+    # a rogue with higher sequence numbers, 50 m away, interleaved: every one dropped and counted
+    rogue = [Sample(10_000 + k, s.stamp_s, s.position_ned_m + [50.0, 0, 0], s.velocity_ned_m_s, s.rx_s) for k, s in enumerate(real)]
+    results = [(gate.offer("rogue", r), gate.offer("real", s)) for r, s in zip(rogue[3:], real[3:])]
+    assert all(r == "source" and s is None for r, s in results)
+    assert gate.rejected_sources == {"rogue": 57}
+
+
+def test_a_single_stray_sample_does_not_bind_and_an_inconsistent_track_never_does() -> None:
+    gate = FeedGate(LIMITS)
+    stray = track(1, north0=50.0)[0]
+    assert gate.offer("stray", stray) == "unbound"
+    real = track(10, start=1)
+    assert offer_all(gate, "real", real[:3])[-1] is None and gate.bound == "real"
+    # samples that jump 20 m each never make 3 plausible in a row
+    gate = FeedGate(LIMITS)
+    jumpy = [Sample(k, k / RATE_HZ, np.array([20.0 * (k % 2), 0, 0]), np.zeros(3), k / RATE_HZ) for k in range(10)]
+    assert set(offer_all(gate, "j", jumpy)) == {"unbound"} and gate.bound is None
+
+
+@pytest.mark.parametrize("name, change, reason", [
+    ("an hour ahead", {"stamp_s": 3600.0}, "stamp_jump"),
+    ("20 m teleport", {"position_ned_m": np.array([20.0, 0.0, 0.0])}, "jump"),
+    ("speed over the limit", {"velocity_ned_m_s": np.array([9.0, 0.0, 0.0])}, "speed"),
+    ("velocity against the motion", {"velocity_ned_m_s": np.array([-2.5, 0.0, 0.0])}, "velocity"),
+    ("sequence jump", {"seq": 10**9}, "seq_jump"),
+    ("old sequence", {"seq": 0}, "stale_seq"),
+    ("old stamp", {"stamp_s": 0.0}, "stale_stamp"),
+])
+def test_one_outlier_is_dropped_and_never_poisons_the_samples_after_it(name: str, change: dict, reason: str) -> None:
+    gate = FeedGate(LIMITS)
+    samples = track(40)
+    assert offer_all(gate, "c", samples[:20])[-1] is None
+    s = samples[20]
+    bad = Sample(**{"seq": s.seq, "stamp_s": s.stamp_s, "position_ned_m": s.position_ned_m + [0.3, 0, 0],
+                    "velocity_ned_m_s": s.velocity_ned_m_s, "rx_s": s.rx_s, **change})
+    assert gate.offer("c", bad) == reason, name
+    assert offer_all(gate, "c", samples[21:]) == [None] * 19  # the next honest sample is accepted at once
+    assert gate.resyncs == 0
+
+
+def test_one_percent_outliers_all_dropped_and_all_honest_samples_accepted() -> None:
+    rng = np.random.default_rng(3)
+    gate = FeedGate(LIMITS)
+    samples = track(3000)
+    bad = set(rng.choice(np.arange(10, 3000), size=30, replace=False).tolist())
+    for k, s in enumerate(samples):
+        if k in bad:
+            kind = k % 3
+            out = Sample(s.seq, s.stamp_s + (3600.0 if kind == 0 else 0.0),
+                         s.position_ned_m + ([20.0, 0, 0] if kind == 1 else [0, 0, 0]),
+                         s.velocity_ned_m_s * (10.0 if kind == 2 else 1.0), s.rx_s)
+            assert gate.offer("c", out) is not None
+        else:
+            assert gate.offer("c", s) == (None if k >= 2 else "unbound")
+
+
+def test_a_relocalised_carrier_is_followed_after_a_consistent_track_of_its_own() -> None:
+    gate = FeedGate(LIMITS)
+    before = track(10)
+    offer_all(gate, "c", before)
+    after = track(10, start=10, north0=30.0)  # the carrier's localisation jumped 30 m for good
+    results = offer_all(gate, "c", after)
+    assert results[:4] == ["jump"] * 4 and results[4:] == [None] * 6
+    assert gate.resyncs == 1
+
+
+def test_unbind_lets_a_restarted_carrier_bind_again() -> None:
+    gate = FeedGate(LIMITS)
+    offer_all(gate, "c1", track(5))
+    gate.unbind()
+    assert offer_all(gate, "c2", track(3, seq0=0, north0=-7.0)) == ["unbound", "unbound", None]
+    assert gate.bound == "c2"
+
+
+def test_foreign_sources_are_counted_by_name_up_to_a_bound() -> None:
+    gate = FeedGate(LIMITS)
+    real = track(3)
+    offer_all(gate, "real", real)
+    for i in range(40):
+        gate.offer(f"rogue{i}", real[-1])
+    assert len(gate.rejected_sources) == 17 and gate.rejected_sources["other"] == 24
+
+
+def test_implausible_accepts_a_carrier_at_its_top_speed_after_a_silence() -> None:
+    a = Sample(1, 0.0, np.zeros(3), np.array([2.0, 0, 0]), 0.0)
+    b = Sample(31, 1.0, np.array([2.0, 0, 0]), np.array([2.0, 0, 0]), 1.2)  # 1 s later, 2 m on
+    assert implausible(a, b, LIMITS, use_seq=True) is None
+    with pytest.raises(ValueError):
+        GateLimits(max_speed_m_s=0.0)
