@@ -7,15 +7,27 @@ then command-line overrides (:func:`with_overrides`).
 
 Frames: ``scenario`` vectors are in the local frame of the flight, PX4's local NED [m] (z down)
 for missions; the simulator is frame-agnostic (``scenario.frame`` only affects plots).
+
+Everything is checked at load and a bad value raises :class:`ConfigError` naming the field (the
+CLI exits 2): the file must be UTF-8 TOML; numbers are strict (a string or a boolean is never a
+number, an integer field takes no fraction); every margin, timeout, rate, speed, gain and
+string length has bounds (a 1e300 timeout would switch a failsafe off, a 0.001 Hz loop would not
+hear SIGTERM for 1000 s); URLs, ports and Zenoh endpoints and key expressions are parsed; and the
+geometry is checked across fields (:meth:`Config._cross_fields`): altitude band not empty, dock
+point above the carrier and inside the band, target inside the band and above ground, starts and
+target outside every obstacle, departure margin well inside b c, carrier rate fast enough for
+the carrier timeout.
 """
 from __future__ import annotations
 
+import math
+import re
 import tomllib
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Annotated, Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from mission.errors import ConfigError
 
@@ -24,19 +36,105 @@ if TYPE_CHECKING:  # the schema imports no law: the converters below import it w
     from mission.safety import Obstacles, SafetyConfig
 
 class _Model(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+    # strict: "3" and true are not numbers, 2.5 is not an integer (an int is still a float)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False, strict=True)
+
+
+MAX_PATH_CHARS = 1024
+MAX_URL_CHARS = 256
+COORD_LIMIT_M = 1e6  # |component| of a position in the config [m]
+
+
+def _tuple_of_list(value: Any) -> Any:
+    """TOML has no tuples: a list is taken as one (its items stay strictly typed)."""
+    return tuple(value) if isinstance(value, list) else value
+
+
+FloatPair = Annotated[tuple[float, float], BeforeValidator(_tuple_of_list)]
+Coord = Annotated[float, Field(ge=-COORD_LIMIT_M, le=COORD_LIMIT_M)]
+Path_ = Annotated[str, Field(min_length=1, max_length=MAX_PATH_CHARS)]
+
+
+def _printable(value: str) -> str:
+    if any(ord(ch) < 32 or ord(ch) == 127 for ch in value):
+        raise ValueError("must not contain control characters")
+    return value
+
+
+_ZENOH_ENDPOINT = re.compile(r"^(?P<proto>[a-z][a-z0-9-]*)/(?P<address>[^#?\s]+?)(?P<rest>[#?].*)?$")
+_HOST_PORT_PROTOCOLS = {"tcp", "udp", "tls", "quic", "ws"}
+
+
+def check_port(text: str, *, allow_zero: bool) -> int:
+    """A port number 1..65535 (0 too if ``allow_zero``: an ephemeral listener); ValueError otherwise."""
+    if not text.isdigit():
+        raise ValueError(f"port {text!r} is not a number")
+    port = int(text)
+    if not (0 if allow_zero else 1) <= port <= 65535:
+        raise ValueError(f"port {port} out of range {0 if allow_zero else 1}..65535")
+    return port
+
+
+def _host_port(spec: str, *, allow_zero: bool) -> None:
+    host, sep, port = spec.rpartition(":")
+    if not sep or not host or host in ("[]",):
+        raise ValueError("expected HOST:PORT")
+    check_port(port, allow_zero=allow_zero)
+
+
+def check_mavlink_url(url: str) -> str:
+    """``udpin:HOST:PORT`` (port 0: ephemeral), ``udp:``, ``udpout:HOST:PORT``, ``tcp:HOST:PORT``,
+    or a serial device ``/dev/X[:BAUD]`` / ``serial:/dev/X[:BAUD]`` / ``COMn[:BAUD]``, as
+    :func:`mission.link._open_transport` takes them; ValueError naming what is wrong."""
+    scheme, sep, rest = url.partition(":")
+    if sep and scheme in ("udpin", "udp"):
+        _host_port(rest, allow_zero=True)
+    elif sep and scheme in ("udpout", "tcp"):
+        _host_port(rest, allow_zero=False)
+    else:
+        device = rest if scheme == "serial" else url
+        if not (device.startswith("/") or device.upper().startswith("COM")):
+            raise ValueError("expected udpin:HOST:PORT, udpout:HOST:PORT, tcp:HOST:PORT or a serial device "
+                             "(/dev/ttyX[:BAUD])")
+        _, _, baud = device.replace(",", ":").partition(":")
+        if baud and not (baud.isdigit() and 50 <= int(baud) <= 10_000_000):
+            raise ValueError(f"baud rate {baud!r} must be a number in 50..10000000")
+    return url
+
+
+def check_zenoh_endpoint(endpoint: str, *, listen: bool) -> str:
+    """A Zenoh locator ``PROTO/ADDRESS[#config]``; for tcp/udp/tls/quic/ws the address is
+    ``HOST:PORT`` (port 0 only for a listener). ValueError naming what is wrong."""
+    m = _ZENOH_ENDPOINT.match(endpoint)
+    if m is None:
+        raise ValueError("expected a Zenoh endpoint PROTO/ADDRESS, e.g. tcp/127.0.0.1:7447")
+    if m["proto"] in _HOST_PORT_PROTOCOLS:
+        _host_port(m["address"], allow_zero=listen)
+    return endpoint
+
+
+def check_key_expr(key: str) -> str:
+    """A Zenoh key expression (Zenoh's own parser decides); ValueError otherwise."""
+    import zenoh
+
+    try:
+        zenoh.KeyExpr(key)
+    except zenoh.ZError as exc:
+        raise ValueError(f"not a Zenoh key expression: {exc}") from None
+    return key
 
 
 class LawSection(_Model):
     """Gains of the paper's law (paper values by default)."""
 
-    k_c: float = Field(0.5, gt=0, description="carrier gain [1/s]")
-    k_p: float = Field(1.0, gt=0, description="passenger gain")
-    b: float = Field(8.0, gt=1, description="b > 1")
-    c: float = Field(1.0, gt=0, description="[m]")
-    d: float = Field(1.0, gt=0, description="[m]")
+    k_c: float = Field(0.5, gt=0, le=100, description="carrier gain [1/s]")
+    k_p: float = Field(1.0, gt=0, le=100, description="passenger gain")
+    b: float = Field(8.0, gt=1, le=1000, description="b > 1")
+    c: float = Field(1.0, gt=0, le=1000, description="[m]")
+    d: float = Field(1.0, gt=0, le=1000, description="[m]")
     departure_margin_m: float = Field(
-        1e-3, gt=0, description="[m] separation fires at |e_tc| = b c - this (mission/tick.py), in flights and simulations")
+        1e-3, gt=0, le=0.5, description="[m] separation fires at |e_tc| = b c - this (mission/tick.py), in flights "
+        "and simulations (below 1e-6 m the departure drowns in rounding; also < b c / 10)")
 
     def params(self) -> LawParams:
         from mission.law import LawParams
@@ -45,8 +143,8 @@ class LawSection(_Model):
 
 
 class ObstacleSection(_Model):
-    center: list[float]
-    radius: float = Field(gt=0, description="[m]")
+    center: list[Coord]
+    radius: float = Field(gt=0, le=100_000, description="[m]")
 
 
 class ScenarioSection(_Model):
@@ -54,13 +152,13 @@ class ScenarioSection(_Model):
 
     dim: Literal[2, 3] = 3
     frame: Literal["local_ned", "xyz"] = "local_ned"
-    carrier_start: list[float] = [0.0, 0.0, 0.0]
-    target: list[float] = [20.0, 15.0, -4.0]
-    passenger_start: list[float] | None = None
+    carrier_start: list[Coord] = [0.0, 0.0, 0.0]
+    target: list[Coord] = [20.0, 15.0, -4.0]
+    passenger_start: list[Coord] | None = None
     planar_carrier: bool = True
-    eta: float | None = Field(None, gt=0, description="Assumption 1 lower bound [m]; default |e_tc(0)|")
+    eta: float | None = Field(None, gt=0, le=10_000_000, description="Assumption 1 lower bound [m]; default |e_tc(0)|")
     carrier_mode: Literal["stop", "remark1"] = "stop"
-    obstacles: list[ObstacleSection] = []
+    obstacles: list[ObstacleSection] = Field([], max_length=1000)
 
     @model_validator(mode="after")
     def _dims(self) -> "ScenarioSection":
@@ -82,14 +180,14 @@ class ScenarioSection(_Model):
 class SafetySection(_Model):
     """CBF filter and limits; a limit left out is off (the simulator's paper runs)."""
 
-    cbf_gain: float = Field(1.0, gt=0, description="class-K gain [1/s]")
-    margin_m: float = Field(0.5, ge=0)
-    passenger_max_speed_m_s: float | None = Field(None, gt=0)
-    passenger_max_accel_m_s2: float | None = Field(None, gt=0)
-    carrier_max_speed_m_s: float | None = Field(None, gt=0)
-    carrier_max_accel_m_s2: float | None = Field(None, gt=0)
-    z_min_m: float | None = None
-    z_max_m: float | None = None
+    cbf_gain: float = Field(1.0, gt=0, le=100, description="class-K gain [1/s]")
+    margin_m: float = Field(0.5, ge=0, le=100)
+    passenger_max_speed_m_s: float | None = Field(None, gt=0, le=100)
+    passenger_max_accel_m_s2: float | None = Field(None, gt=0, le=100)
+    carrier_max_speed_m_s: float | None = Field(None, gt=0, le=100)
+    carrier_max_accel_m_s2: float | None = Field(None, gt=0, le=100)
+    z_min_m: float | None = Field(None, ge=-100_000, le=100_000, description="[m] NED: ceiling (most negative z)")
+    z_max_m: float | None = Field(None, ge=-100_000, le=100_000, description="[m] NED: floor (z <= z_max_m once flying)")
     filter_carrier: bool = True
 
     def passenger(self) -> SafetyConfig:
@@ -107,57 +205,72 @@ class SimSection(_Model):
     """Numeric closed loop: a fixed step with the command held over it (a digital controller)."""
 
     dt_s: float = Field(1e-3, gt=0, le=0.1)
-    duration_s: float = Field(30.0, gt=0)
-    p1_tolerance_m: float = Field(1e-6, gt=0, description="|e_pc| counted as 'on the carrier' before T")
-    p2_tolerance_m: float = Field(0.1, gt=0, description="final |e_pt| counted as 'at the target'")
+    duration_s: float = Field(30.0, gt=0, le=100_000)
+    p1_tolerance_m: float = Field(1e-6, gt=0, le=10, description="|e_pc| counted as 'on the carrier' before T")
+    p2_tolerance_m: float = Field(0.1, gt=0, le=10, description="final |e_pt| counted as 'at the target'")
 
 
 class MonteCarloSection(_Model):
     """Random scenarios satisfying the assumptions (for --monte-carlo)."""
 
-    distance_m: tuple[float, float] = (12.0, 60.0)
-    height_m: tuple[float, float] = (0.0, 6.0)
+    distance_m: FloatPair = (12.0, 60.0)
+    height_m: FloatPair = (0.0, 6.0)
+
+    @model_validator(mode="after")
+    def _ranges(self) -> "MonteCarloSection":
+        for name in ("distance_m", "height_m"):
+            lo, hi = getattr(self, name)
+            if not (0 <= lo <= hi <= COORD_LIMIT_M):
+                raise ConfigError(f"monte_carlo.{name}", [lo, hi], f"must be 0 <= low <= high <= {COORD_LIMIT_M:g}")
+        return self
 
 
 class MissionSection(_Model):
     """The offboard controller (``marsupial run``)."""
 
-    rate_hz: float = Field(50.0, gt=0, le=1000)
-    dock_offset_ned_m: list[float] = [0.0, 0.0, -1.5]
-    dock_tolerance_m: float = Field(0.5, gt=0)
-    track_gain: float = Field(1.0, gt=0, description="[1/s] pull of the vehicle to the reference")
-    join_speed_m_s: float = Field(1.0, gt=0)
-    arrival_radius_m: float = Field(0.5, gt=0)
-    arrival_dwell_s: float = Field(2.0, ge=0)
+    rate_hz: float = Field(50.0, ge=10, le=1000, description="[Hz] PX4 needs > 2 Hz in OFFBOARD; >= 10 Hz also "
+                           "keeps SIGTERM answered within 0.1 s")
+    dock_offset_ned_m: list[float] = Field([0.0, 0.0, -1.5], description="[m] NED from the carrier; down < 0")
+    dock_tolerance_m: float = Field(0.5, gt=0, le=5)
+    track_gain: float = Field(1.0, gt=0, le=50, description="[1/s] pull of the vehicle to the reference")
+    join_speed_m_s: float = Field(1.0, gt=0, le=20)
+    arrival_radius_m: float = Field(0.5, gt=0, le=50)
+    arrival_dwell_s: float = Field(2.0, ge=0, le=600)
     final_action: Literal["hold", "land"] = "hold"
-    carrier_timeout_s: float = Field(0.5, gt=0)
-    heartbeat_timeout_s: float = Field(3.0, gt=0, description="[s] MAVSDK also declares a vehicle lost after 3 s")
-    prestream_s: float = Field(1.0, ge=0.2)
+    carrier_timeout_s: float = Field(0.5, gt=0, le=10, description="[s] a carrier state older than this is lost")
+    heartbeat_timeout_s: float = Field(3.0, gt=0, le=30, description="[s] MAVSDK also declares a vehicle lost after 3 s")
+    prestream_s: float = Field(1.0, ge=0.2, le=10)
     command_retries: int = Field(3, ge=1, le=10)
-    max_duration_s: float = Field(300.0, gt=0)
-    connect_timeout_s: float = Field(20.0, gt=0)
-    log_dir: str = "logs"
+    max_duration_s: float = Field(300.0, gt=0, le=86400)
+    connect_timeout_s: float = Field(20.0, gt=0, le=600)
+    log_dir: Path_ = "logs"
+
+    _log_dir_printable = field_validator("log_dir")(_printable)
 
 
 class MavlinkSection(_Model):
-    url: str = "udpin:127.0.0.1:14540"
+    url: str = Field("udpin:127.0.0.1:14540", max_length=MAX_URL_CHARS)
     target_system: int | None = Field(None, ge=1, le=255, description="fly only this system; unset: adopt a PX4 "
                                       "autopilot after 3 consistent HEARTBEATs (mission.link)")
     target_component: int = Field(1, ge=0, le=255, description="the autopilot's component id (0: any)")
     source_system: int = Field(1, ge=1, le=255)
     source_component: int = Field(191, ge=1, le=255)
-    signing_key_file: str | None = None
+    signing_key_file: Path_ | None = None
+
+    _url_ok = field_validator("url")(check_mavlink_url)
+    _key_file_printable = field_validator("signing_key_file")(lambda v: v if v is None else _printable(v))
 
 
 class ZenohSection(_Model):
     """Zenoh session: peer on loopback with multicast scouting off by default."""
 
     mode: Literal["peer", "client", "router"] = "peer"
-    listen: list[str] = []
-    connect: list[str] = []
+    listen: list[Annotated[str, Field(max_length=MAX_URL_CHARS)]] = Field([], max_length=16)
+    connect: list[Annotated[str, Field(max_length=MAX_URL_CHARS)]] = Field([], max_length=16)
     multicast_scouting: bool = False
-    config_file: str | None = None
-    pair: str = Field("pair0", pattern=r"^[A-Za-z0-9_\-]+$")
+    config_file: Path_ | None = None
+    pair: str = Field("pair0", pattern=r"^[A-Za-z0-9_\-]+$", max_length=64,
+                      description="one chunk of the key expressions marsupial/<pair>/...")
     encoding: Literal["json", "cdr"] = "json"
     rendezvous: str | None = Field(
         "tcp/127.0.0.1:7448",
@@ -167,25 +280,48 @@ class ZenohSection(_Model):
         "listener only (useful with multicast scouting)",
     )
     carrier_key: str | None = Field(
-        None, description="override of the carrier state key, e.g. 'robot1/odom' (zenoh-bridge-ros2dds) or "
+        None, max_length=MAX_URL_CHARS,
+        description="override of the carrier state key, e.g. 'robot1/odom' (zenoh-bridge-ros2dds) or "
         "'0/odom/nav_msgs::msg::dds_::Odometry_/*' (rmw_zenoh) with encoding 'cdr'")
+
+    @field_validator("listen", "connect")
+    @classmethod
+    def _endpoints(cls, value: list[str], info: Any) -> list[str]:
+        for endpoint in value:
+            check_zenoh_endpoint(endpoint, listen=info.field_name == "listen")
+        return value
+
+    @field_validator("rendezvous")
+    @classmethod
+    def _rendezvous(cls, value: str | None) -> str | None:
+        return None if value is None else check_zenoh_endpoint(value, listen=False)
+
+    @field_validator("carrier_key")
+    @classmethod
+    def _key(cls, value: str | None) -> str | None:
+        return None if value is None else check_key_expr(value)
+
+    _config_file_printable = field_validator("config_file")(lambda v: v if v is None else _printable(v))
 
 
 class CarrierMavlinkSection(_Model):
     """``carrier.backend = "mavlink"``: a PX4 rover or boat, flown through the passenger's link code."""
 
-    url: str = Field("udpin:127.0.0.1:14541", description="PX4 instance i sends its onboard link to 14540 + i")
+    url: str = Field("udpin:127.0.0.1:14541", max_length=MAX_URL_CHARS,
+                     description="PX4 instance i sends its onboard link to 14540 + i")
     target_system: int | None = Field(None, ge=1, le=255, description="the rover's MAV_SYS_ID (PX4 instance i: i + 1)")
     source_system: int | None = Field(None, ge=1, le=255, description="our system id; default: target_system, "
                                       "or 1 (PX4 registers an onboard controller of its own system only)")
     source_component: int = Field(191, ge=1, le=255)
-    signing_key_file: str | None = None
-    heartbeat_timeout_s: float = Field(3.0, gt=0)
+    signing_key_file: Path_ | None = None
+    heartbeat_timeout_s: float = Field(3.0, gt=0, le=30)
     prestream_s: float = Field(1.0, ge=0.2, description="[s] setpoints streamed before OFFBOARD is asked")
     offset_ned_m: list[float] = Field([0.0, 0.0, 0.0], description="[m] the vehicle's local origin in the "
                                       "shared frame (added to LOCAL_POSITION_NED)")
     shared_origin: list[float] | None = Field(None, description="lat [deg], lon [deg], alt [m] of the shared "
                                               "frame's origin: the offset then comes from the vehicle's EKF origin")
+
+    _url_ok = field_validator("url")(check_mavlink_url)
 
 
 class CarrierRos2Section(_Model):
@@ -204,10 +340,11 @@ class CarrierSection(_Model):
     """The carrier-side controller (``marsupial carrier``) and its backend."""
 
     backend: Literal["sim", "mavlink", "ros2"] = "sim"
-    rate_hz: float = Field(30.0, gt=0, le=1000)
-    max_speed_m_s: float = Field(3.0, gt=0)
+    rate_hz: float = Field(30.0, ge=5, le=1000)
+    max_speed_m_s: float = Field(3.0, gt=0, le=100, description="[m/s] the carrier's top speed (the passenger's "
+                                 "feed also gates carrier states against it)")
     passenger_timeout_s: float = Field(
-        1.0, gt=0, description="[s] simulated; a passenger status older than this (or a lost "
+        1.0, gt=0, le=10, description="[s] simulated; a passenger status older than this (or a lost "
         "liveliness token) stops a carrier that is approaching the target")
     state_timeout_s: float = Field(0.5, gt=0, le=10, description="[s] own state older than this stops the carrier")
     p3_margin_m: float = Field(0.5, gt=0, description="[m] the P3 guard keeps the carrier at least b c - margin "
@@ -273,7 +410,47 @@ class Config(_Model):
             raise ConfigError("carrier.p3_margin_m", self.carrier.p3_margin_m, "must be < b c")
         if len(self.mission.dock_offset_ned_m) != 3:
             raise ConfigError("mission.dock_offset_ned_m", self.mission.dock_offset_ned_m, "must have 3 components")
+        self._cross_fields()
         return self
+
+    def _cross_fields(self) -> None:
+        """Checks that need several fields (raise ConfigError naming the field to change)."""
+        s, sf, m = self.scenario, self.safety, self.mission
+        bc = self.law.params().separation_distance_m
+        if not self.law.departure_margin_m >= 1e-6:
+            raise ConfigError("law.departure_margin_m", self.law.departure_margin_m,
+                              "must be >= 1e-6 m (a smaller departure drowns in float rounding: the passenger stays)")
+        if not self.law.departure_margin_m < bc / 10:
+            raise ConfigError("law.departure_margin_m", self.law.departure_margin_m,
+                              f"must be < b*c/10 = {bc / 10:g} m (at >= b*c the passenger never separates)")
+        if sf.z_min_m is not None and sf.z_max_m is not None and not sf.z_min_m < sf.z_max_m:
+            raise ConfigError("safety.z_min_m", sf.z_min_m, f"empty altitude band: must be < safety.z_max_m = {sf.z_max_m:g}")
+        for i, ob in enumerate(s.obstacles):
+            for name in ("carrier_start", "target", "passenger_start"):
+                point = getattr(s, name)
+                if point is not None and math.dist(point, ob.center) <= ob.radius:
+                    raise ConfigError(f"scenario.{name}", point, f"inside scenario.obstacles[{i}] "
+                                      f"(center {ob.center}, radius {ob.radius:g} m)")
+        if s.dim != 3 or s.frame != "local_ned":
+            return
+        # local NED, z down: the carrier drives on the ground at carrier_start's z
+        ground = s.carrier_start[2]
+        dock_z = ground + m.dock_offset_ned_m[2]
+        if not m.dock_offset_ned_m[2] < 0:
+            raise ConfigError("mission.dock_offset_ned_m", m.dock_offset_ned_m,
+                              "the dock point must be above the carrier (down component < 0): it is underground")
+        if not s.target[2] <= ground:
+            raise ConfigError("scenario.target", s.target, f"below the ground (z {s.target[2]:g} > carrier z {ground:g}, NED)")
+        for name, z in (("mission.dock_offset_ned_m", dock_z), ("scenario.target", s.target[2])):
+            value = m.dock_offset_ned_m if name.startswith("mission") else s.target
+            if sf.z_max_m is not None and z > sf.z_max_m:
+                raise ConfigError(name, value, f"below the altitude floor safety.z_max_m = {sf.z_max_m:g} (z {z:g}, NED)")
+            if sf.z_min_m is not None and z < sf.z_min_m:
+                raise ConfigError(name, value, f"above the ceiling safety.z_min_m = {sf.z_min_m:g} (z {z:g}, NED)")
+        if not 1.0 / self.carrier.rate_hz <= m.carrier_timeout_s / 2:
+            raise ConfigError("carrier.rate_hz", self.carrier.rate_hz,
+                              f"too slow for mission.carrier_timeout_s = {m.carrier_timeout_s:g} s "
+                              "(at least two states per timeout)")
 
 
 def _error_from_validation(exc: ValidationError) -> ConfigError:
@@ -300,9 +477,17 @@ def load_config(path: str | Path) -> Config:
     """Read and validate a TOML file. Raises :class:`ConfigError` naming the field."""
     path = Path(path)
     try:
-        data = tomllib.loads(path.read_text())
+        raw = path.read_bytes()
     except FileNotFoundError:
         raise ConfigError("config", str(path), "file not found") from None
+    except OSError as exc:  # a directory, no permission, a name too long...
+        raise ConfigError("config", str(path)[:200], f"cannot read: {exc.strerror or exc}") from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ConfigError("config", str(path), f"not UTF-8 (byte {exc.start}: {raw[exc.start:exc.start + 1]!r})") from None
+    try:
+        data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError("config", str(path), f"not valid TOML: {exc}") from None
     return from_dict(data)

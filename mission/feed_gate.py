@@ -26,7 +26,11 @@ reason          rejected when
 ``stale_seq``   JSON: ``seq <= prev.seq`` (CDR has no sequence number)
 ``stale_stamp`` ``stamp < prev.stamp`` (CDR: ``<=``)
 ``seq_jump``    ``seq - prev.seq > MAX_SEQ_RATE_HZ * max(dt, drx) + SEQ_SLACK``
-``stamp_jump``  ``dt > STAMP_RATE * drx + stamp_slack_s`` (stamped ahead of time)
+``stamp_jump``  ``stamp - rx > lead + stamp_slack_s``: stamped ahead of time. ``lead`` is the
+                largest ``stamp - rx`` of the accepted track (the sender's clock lead over
+                ours, minus its quickest delivery); transport delay only ever lowers
+                ``stamp - rx``, so a burst of late samples never trips it, a stamp an hour
+                ahead always does
 ``speed``       ``|velocity| > speed_margin * max_speed + SPEED_SLACK_M_S``
 ``jump``        ``|position - prev.position| > speed_margin * max_speed * dt + position_slack_m``
 ``velocity``    ``|v - prev.v| > max_accel * dt + max_speed`` (a stop or a start is always
@@ -51,7 +55,6 @@ MAX_CANDIDATES = 8  # candidate sources tracked while unbound (more are dropped 
 MAX_REJECTED_SOURCES = 16  # distinct foreign sources counted by name; the rest under "other"
 MAX_SEQ_RATE_HZ = 1000.0  # fastest plausible publishing rate [Hz]
 SEQ_SLACK = 100
-STAMP_RATE = 1.5  # the sender's clock may run this much faster than ours over a gap
 SPEED_SLACK_M_S = 0.5
 ANONYMOUS = "anonymous"
 
@@ -70,7 +73,7 @@ class GateLimits:
     max_speed_m_s: float
     speed_margin: float = 1.5
     position_slack_m: float = 0.5
-    stamp_slack_s: float = 1.0
+    stamp_slack_s: float = 2.0
     max_accel_m_s2: float | None = None
     bind_samples: int = 3
     resync_samples: int = 5
@@ -95,9 +98,15 @@ class Sample:
     velocity_ned_m_s: np.ndarray
     rx_s: float
 
+    @property
+    def lead_s(self) -> float:
+        """How far the sender's stamp is ahead of our receive time [s]."""
+        return self.stamp_s - self.rx_s
 
-def implausible(prev: Sample, new: Sample, limits: GateLimits, use_seq: bool) -> str | None:
-    """The reason ``new`` cannot follow ``prev`` from one carrier (see the module table), or None."""
+
+def implausible(prev: Sample, new: Sample, limits: GateLimits, use_seq: bool, lead_s: float | None = None) -> str | None:
+    """The reason ``new`` cannot follow ``prev`` from one carrier (see the module table), or
+    None. ``lead_s``: the track's largest ``stamp - rx`` so far (default ``prev.lead_s``)."""
     if use_seq and new.seq <= prev.seq:
         return "stale_seq"
     if new.stamp_s < prev.stamp_s or (not use_seq and new.stamp_s == prev.stamp_s):
@@ -106,7 +115,7 @@ def implausible(prev: Sample, new: Sample, limits: GateLimits, use_seq: bool) ->
     drx = max(new.rx_s - prev.rx_s, 0.0)
     if use_seq and new.seq - prev.seq > MAX_SEQ_RATE_HZ * max(dt, drx) + SEQ_SLACK:
         return "seq_jump"
-    if dt > STAMP_RATE * drx + limits.stamp_slack_s:
+    if new.lead_s > (prev.lead_s if lead_s is None else lead_s) + limits.stamp_slack_s:
         return "stamp_jump"
     v_max = limits.speed_margin * limits.max_speed_m_s
     v = new.velocity_ned_m_s
@@ -126,8 +135,20 @@ def implausible(prev: Sample, new: Sample, limits: GateLimits, use_seq: bool) ->
 
 @dataclass
 class _Track:
+    """A run of mutually plausible samples: the last one, how many, the largest lead [s]."""
+
     last: Sample
     length: int = 1
+    lead_s: float = -math.inf
+
+    def __post_init__(self) -> None:
+        self.lead_s = max(self.lead_s, self.last.lead_s)
+
+    def fits(self, sample: Sample, limits: GateLimits, use_seq: bool) -> str | None:
+        return implausible(self.last, sample, limits, use_seq, self.lead_s)
+
+    def extend(self, sample: Sample) -> None:
+        self.last, self.length, self.lead_s = sample, self.length + 1, max(self.lead_s, sample.lead_s)
 
 
 class FeedGate:
@@ -141,7 +162,7 @@ class FeedGate:
         self.bound: str | None = None
         self.resyncs = 0
         self.rejected_sources: dict[str, int] = {}
-        self._reference: Sample | None = None
+        self._reference: _Track | None = None
         self._candidates: dict[str, _Track] = {}
         self._resync: _Track | None = None
 
@@ -158,31 +179,32 @@ class FeedGate:
             self.rejected_sources[name] = self.rejected_sources.get(name, 0) + 1
             return "source"
         assert self._reference is not None
-        reason = implausible(self._reference, sample, self.limits, self.use_seq)
+        reason = self._reference.fits(sample, self.limits, self.use_seq)
         if reason is None:
-            self._reference, self._resync = sample, None
+            self._reference.extend(sample)
+            self._resync = None
             return None
         track = self._resync
-        if track is not None and implausible(track.last, sample, self.limits, self.use_seq) is None:
-            track.last, track.length = sample, track.length + 1
+        if track is not None and track.fits(sample, self.limits, self.use_seq) is None:
+            track.extend(sample)
         else:
             self._resync = track = _Track(sample)
         if track.length >= self.limits.resync_samples:
-            self._reference, self._resync = sample, None
+            self._reference, self._resync = track, None
             self.resyncs += 1
             return None
         return reason
 
     def _offer_unbound(self, source: str, sample: Sample) -> str | None:
         track = self._candidates.get(source)
-        if track is not None and implausible(track.last, sample, self.limits, self.use_seq) is None:
-            track.last, track.length = sample, track.length + 1
+        if track is not None and track.fits(sample, self.limits, self.use_seq) is None:
+            track.extend(sample)
         elif track is not None or len(self._candidates) < MAX_CANDIDATES:
             self._candidates[source] = track = _Track(sample)
         else:
             return "unbound"
         if track.length < self.limits.bind_samples:
             return "unbound"
-        self.bound, self._reference = source, sample
+        self.bound, self._reference = source, track
         self._candidates.clear()
         return None

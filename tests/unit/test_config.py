@@ -23,7 +23,7 @@ def test_shipped_configs_load(path):
     ({"scenario": {"target": [1.0, 2.0]}}, "scenario.target", "3 components"),
     ({"scenario": {"target": [5.0, 0.0, 0.0]}}, "scenario.eta", "b*c"),
     ({"scenario": {"target": [40.0, 0.0, -9.0]}}, "scenario.target", "height"),
-    ({"mission": {"rate_hz": 0}}, "mission.rate_hz", "greater than 0"),
+    ({"mission": {"rate_hz": 0}}, "mission.rate_hz", "greater than or equal to 10"),
     ({"mission": {"final_action": "crash"}}, "mission.final_action", "'hold' or 'land'"),
     ({"zenoh": {"pair": "a/b"}}, "zenoh.pair", "pattern"),
     ({"safety": {"margin_m": float("nan")}}, "safety.margin_m", "finite"),
@@ -68,7 +68,7 @@ def _rule_cases() -> list[tuple[str, object, str]]:
     import types
     import typing
 
-    from annotated_types import Ge, Gt, Le, Lt
+    from annotated_types import Ge, Gt, Le, Lt, MaxLen, MinLen
 
     from mission.config import Config
 
@@ -92,6 +92,14 @@ def _rule_cases() -> list[tuple[str, object, str]]:
                     cases.append((dotted, m.le + 1, f"less than or equal to {m.le}"))
                 elif isinstance(m, Lt):
                     cases.append((dotted, m.lt, f"less than {m.lt}"))
+                elif isinstance(m, MaxLen):
+                    if origin is list:
+                        item = {"center": [0.0, 0.0, 0.0], "radius": 1.0} if name == "obstacles" else "tcp/127.0.0.1:1"
+                        cases.append((dotted, [item] * (m.max_length + 1), f"at most {m.max_length} items"))
+                    else:
+                        cases.append((dotted, "a" * (m.max_length + 1), f"at most {m.max_length} characters"))
+                elif isinstance(m, MinLen):
+                    cases.append((dotted, "", f"at least {m.min_length} character"))
                 elif getattr(m, "pattern", None):
                     cases.append((dotted, "a/b c", "pattern"))
             if typing.get_origin(f.annotation) is typing.Literal:
