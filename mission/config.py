@@ -230,7 +230,8 @@ class MissionSection(_Model):
 
     rate_hz: float = Field(50.0, ge=10, le=1000, description="[Hz] PX4 needs > 2 Hz in OFFBOARD; >= 10 Hz also "
                            "keeps SIGTERM answered within 0.1 s")
-    dock_offset_ned_m: list[float] = Field([0.0, 0.0, -1.5], description="[m] NED from the carrier; down < 0")
+    dock_offset_ned_m: list[Annotated[float, Field(ge=-100, le=100)]] = Field(
+        [0.0, 0.0, -1.5], description="[m] NED from the carrier; down < 0")
     dock_tolerance_m: float = Field(0.5, gt=0, le=5)
     track_gain: float = Field(1.0, gt=0, le=50, description="[1/s] pull of the vehicle to the reference")
     join_speed_m_s: float = Field(1.0, gt=0, le=20)

@@ -13,7 +13,7 @@ from typing import Any, Iterator
 import click
 import numpy as np
 
-from mission.carrier_bridge import CarrierFeed, PassengerPublisher, open_session
+from mission.carrier_bridge import CarrierFeed, PassengerPublisher, open_session, zenoh_config
 from mission.clock import Clock, LockstepClock, ScaledClock
 from mission.config import Config, load_config, with_overrides
 from mission.controller import MissionController, MissionOutcome, mission_info, mission_model
@@ -69,6 +69,16 @@ def mission_io(cfg: Config, clock: Clock, tlog_path: str | Path | None = None) -
         yield feed, publisher, link
 
 
+def check_config(cfg: Config) -> None:
+    """What a mission needs of ``cfg`` beyond the file's own rules, checked before anything is
+    opened or written: a 3D mission model, a readable signing key, a Zenoh configuration Zenoh
+    accepts. Raises :class:`ConfigError` naming the field."""
+    mission_model(cfg)
+    if cfg.mavlink.signing_key_file:
+        read_signing_key(cfg.mavlink.signing_key_file)
+    zenoh_config(cfg.zenoh)
+
+
 def fly(cfg: Config, *, speed: float = 1.0, log_dir: str | Path | None = None, stop: threading.Event | None = None,
         on_event=None, on_start=None, clock: Clock | None = None) -> MissionOutcome:
     """Fly one mission with ``cfg`` (the library entry point of ``marsupial run``).
@@ -80,9 +90,7 @@ def fly(cfg: Config, *, speed: float = 1.0, log_dir: str | Path | None = None, s
     ``clock`` replaces the scaled clock, e.g. a :class:`LockstepClock` (made in the calling
     thread) that steps on the mock vehicle's simulated time.
     """
-    mission_model(cfg)  # validate before anything is opened
-    if cfg.mavlink.signing_key_file:
-        read_signing_key(cfg.mavlink.signing_key_file)
+    check_config(cfg)
     clock = clock or ScaledClock(speed)
     directory = Path(log_dir) if log_dir else Path(cfg.mission.log_dir) / f"{time.strftime('%Y%m%d-%H%M%S')}-{cfg.zenoh.pair}"
     recorder = FlightRecorder(directory, mission_info(cfg))

@@ -1,0 +1,191 @@
+"""Hostile configuration files: >= 200 mutations of configs/demo.toml, each given to
+``marsupial run``. Every one must exit 2 with the mutated field named on stderr and no
+traceback, before anything is opened (the configuration is refused at load).
+
+Mutations are written as TOML text (what a user types), one per file: wrong types (strings and
+booleans as numbers, fractions as integers, tables as scalars), non-finite and absurd numbers
+(1e300 timeouts, 0.001 Hz rates), bad URLs, ports, Zenoh endpoints and key expressions, control
+characters and over-long strings, broken geometry across fields, and broken files (not UTF-8,
+not TOML, a directory, a name too long).
+"""
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from mission.cli import main
+from mission.config import load_config
+from mission.errors import ConfigError
+from mission.run_cli import check_config
+from tests.conftest import CONFIGS
+
+DEMO = (CONFIGS / "demo.toml").read_text()
+
+# Numeric fields of demo.toml and of the sections' defaults: (section, key, is_int)
+NUMERIC = [
+    ("law", k, False) for k in ("k_c", "k_p", "b", "c", "d")
+] + [
+    ("safety", k, False) for k in ("cbf_gain", "margin_m", "passenger_max_speed_m_s", "passenger_max_accel_m_s2",
+                                   "carrier_max_speed_m_s", "carrier_max_accel_m_s2", "z_min_m", "z_max_m")
+] + [
+    ("sim", k, False) for k in ("dt_s", "duration_s", "departure_margin_m", "p1_tolerance_m", "p2_tolerance_m")
+] + [
+    ("mission", k, False) for k in ("rate_hz", "dock_tolerance_m", "track_gain", "join_speed_m_s", "arrival_radius_m",
+                                    "arrival_dwell_s", "carrier_timeout_s", "heartbeat_timeout_s", "prestream_s",
+                                    "max_duration_s", "connect_timeout_s")
+] + [("mission", "command_retries", True), ("scenario", "eta", False),
+     ("mavlink", "target_system", True), ("mavlink", "target_component", True), ("mavlink", "source_system", True),
+     ("mavlink", "source_component", True), ("carrier", "rate_hz", False), ("carrier", "max_speed_m_s", False),
+     ("carrier", "passenger_timeout_s", False), ("vehicle", "velocity_tau_s", False)]
+
+BAD_FOR_NUMBERS = ['"1.0"', "true", "nan", "inf", "-inf", "1e300", "-1e300", "[1.0]", "{ x = 1 }"]
+BAD_FOR_INTS = ["2.5", '"1"', "false", "1e300", "-1", "256"]
+BAD_FOR_VECTORS = ['[0.0, "0", 0.0]', "[0.0, true, 0.0]", "[0.0, nan, 0.0]", "[1e300, 0.0, 0.0]", "[0.0, 0.0]",
+                   '"0,0,0"', "[]", "[0.0, 0.0, 0.0, 0.0]"]
+
+
+def mutated(section: str, key: str, raw: str) -> str:
+    """demo.toml with ``key = raw`` in ``[section]`` (replacing the key's line if present)."""
+    lines = DEMO.splitlines()
+    try:
+        start = lines.index(f"[{section}]")
+    except ValueError:
+        return DEMO + f"\n[{section}]\n{key} = {raw}\n"
+    end = next((i for i in range(start + 1, len(lines)) if lines[i].startswith("[")), len(lines))
+    for i in range(start + 1, end):
+        if re.match(rf"{re.escape(key)}\s*=", lines[i]):
+            lines[i] = f"{key} = {raw}"
+            break
+    else:
+        lines.insert(start + 1, f"{key} = {raw}")
+    return "\n".join(lines) + "\n"
+
+
+def _cases() -> list[tuple[str, str, str]]:
+    """(id, TOML text, the field the error must name)."""
+    cases: list[tuple[str, str, str]] = []
+
+    def add(section: str, key: str, raw: str, field: str | None = None) -> None:
+        cases.append((f"{section}.{key}={raw}", mutated(section, key, raw), field or f"{section}.{key}"))
+
+    for section, key, is_int in NUMERIC:
+        for raw in BAD_FOR_INTS if is_int else BAD_FOR_NUMBERS:
+            add(section, key, raw)
+    for key in ("carrier_start", "target", "passenger_start"):
+        for raw in BAD_FOR_VECTORS:
+            add("scenario", key, raw)
+    for raw in BAD_FOR_VECTORS:
+        add("mission", "dock_offset_ned_m", raw)
+    # absurd but finite values that would switch a failsafe off or stall the loop
+    for section, key, raw in [("mission", "carrier_timeout_s", "1e3"), ("mission", "heartbeat_timeout_s", "3600"),
+                              ("mission", "connect_timeout_s", "1e9"), ("mission", "rate_hz", "0.001"),
+                              ("mission", "rate_hz", "1"), ("carrier", "rate_hz", "0.5"),
+                              ("sim", "departure_margin_m", "1e-300"), ("sim", "departure_margin_m", "8.0"),
+                              ("safety", "margin_m", "1e9"), ("mission", "max_duration_s", "1e12"),
+                              ("mission", "command_retries", "1000000"), ("law", "b", "1.0")]:
+        add(section, key, raw)
+    # strings: URLs, ports, endpoints, key expressions, choices, lengths, control characters
+    for raw in ['"bogus"', '"udpin:127.0.0.1:99999"', '"udpin:127.0.0.1:-1"', '"udpout:127.0.0.1:0"', '"tcp:host"',
+                '"tcp:127.0.0.1:http"', '"udp:"', '""', '"/dev/ttyACM0:fast"', '"ftp://x"', "14540", "true",
+                '"' + "u" * 300 + '"']:
+        add("mavlink", "url", raw)
+    for raw in ['"a/b"', '"a b"', '"*"', '""', '"pair#0"', '"' + "p" * 65 + '"', "7", '"p\\u0000"', '"p?x"', '"$*"']:
+        add("zenoh", "pair", raw)
+    for raw in ['"a//b"', '"/a"', '"a/"', '"a#b"', '"a?b"', '""', "1"]:
+        add("zenoh", "carrier_key", raw)
+    for key in ("listen", "connect"):
+        for raw in ['["tcp/127.0.0.1:99999"]', '["bogus"]', '["tcp/127.0.0.1"]', '["tcp/:7447"]', '"tcp/127.0.0.1:7447"',
+                    "[7447]", '["tcp/127.0.0.1:x"]']:
+            add("zenoh", key, raw)
+    add("zenoh", "connect", '["tcp/127.0.0.1:0"]')
+    add("zenoh", "rendezvous", '"tcp/127.0.0.1:70000"')
+    for section, key, raws in [("zenoh", "mode", ['"server"', "1"]), ("zenoh", "encoding", ['"xml"', '""']),
+                               ("zenoh", "multicast_scouting", ['"yes"', "1"]), ("mission", "final_action", ['"crash"']),
+                               ("scenario", "dim", ["4", '"3"']), ("scenario", "frame", ['"enu"']),
+                               ("scenario", "carrier_mode", ['"fast"']), ("scenario", "planar_carrier", ['"true"', "0"]),
+                               ("safety", "filter_carrier", ['"no"'])]:
+        for raw in raws:
+            add(section, key, raw)
+    for raw in ['""', '"logs\\u0007"', '"' + "d" * 2000 + '"', "3"]:
+        add("mission", "log_dir", raw)
+    for raw in ['""', '"key\\nfile"', '"/nonexistent/key"', "1"]:
+        add("mavlink", "signing_key_file", raw)
+    for raw in ['""', '"/nonexistent/zenoh.json5"', '"a\\tb"']:
+        add("zenoh", "config_file", raw)
+    add("monte_carlo", "distance_m", "[60.0, 12.0]")
+    add("monte_carlo", "height_m", '["0", 6.0]')
+    add("monte_carlo", "distance_m", "[1.0, 2.0, 3.0]")
+    # unknown fields and wrong shapes of whole sections
+    add("law", "kc", "0.5", "law.kc")
+    add("mission", "rate", "50.0", "mission.rate")
+    cases.append(("law-not-a-table", DEMO.replace("[law]\n", "law = 3\n[law_x]\n", 1), "law"))
+    cases.append(("unknown-section", DEMO + "\n[extra]\nx = 1\n", "extra"))
+    # geometry across fields
+    add("safety", "z_min_m", "-0.5", "safety.z_min_m")  # empty band: ceiling == floor
+    add("safety", "z_min_m", "-3.0", "scenario.target")  # target (z -5) above the ceiling
+    add("safety", "z_max_m", "-6.0", "mission.dock_offset_ned_m")  # floor above the dock (z -1.5) and target
+    add("mission", "dock_offset_ned_m", "[0.0, 0.0, 1.5]")  # dock point underground
+    add("scenario", "target", "[24.0, 18.0, 2.0]")  # target underground
+    cases.append(("target-in-obstacle", DEMO + "\n[[scenario.obstacles]]\ncenter = [24.0, 18.0, -4.0]\nradius = 2.0\n",
+                  "scenario.target"))
+    cases.append(("start-in-obstacle", DEMO + "\n[[scenario.obstacles]]\ncenter = [0.5, 0.0, 0.0]\nradius = 1.0\n",
+                  "scenario.carrier_start"))
+    cases.append(("obstacle-radius-0", DEMO + "\n[[scenario.obstacles]]\ncenter = [10.0, 0.0, -2.0]\nradius = 0\n",
+                  "scenario.obstacles"))
+    cases.append(("obstacle-center-2d", DEMO + "\n[[scenario.obstacles]]\ncenter = [10.0, 0.0]\nradius = 1.0\n",
+                  "scenario.obstacles"))
+    add("mission", "carrier_timeout_s", "0.05", "carrier.rate_hz")  # 30 Hz carrier: < 2 states per timeout
+    add("scenario", "target", "[4.0, 3.0, -1.0]", "scenario.eta")  # within b c at the start
+    add("scenario", "target", "[24.0, 18.0, -12.0]", "scenario.target")  # too high to ever separate
+    add("scenario", "dim", "2", "scenario.carrier_start")
+    return cases
+
+
+CASES = _cases()
+
+
+def test_there_are_at_least_200_mutations() -> None:
+    assert len(CASES) >= 200, len(CASES)
+    assert len({text for _, text, _ in CASES}) == len(CASES)  # all distinct
+
+
+@pytest.mark.parametrize("text, field", [(t, f) for _, t, f in CASES], ids=[i[:60] for i, _, _ in CASES])
+def test_run_refuses_the_mutation_with_exit_2_naming_the_field(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                               text: str, field: str) -> None:
+    path = tmp_path / "mutated.toml"
+    path.write_text(text)
+    with pytest.raises(ConfigError):  # refused at load, before anything is opened (else: fail, never fly)
+        check_config(load_config(path))
+    code = main(["run", str(path), "--log-dir", str(tmp_path / "log")])
+    err = capsys.readouterr().err
+    assert code == 2, err
+    assert f"error: {field}" in err, (field, err[:300])
+    assert "Traceback" not in err
+    assert not (tmp_path / "log").exists()  # nothing was started
+
+
+def test_broken_files_exit_2_naming_the_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    not_utf8 = tmp_path / "latin1.toml"
+    not_utf8.write_bytes(DEMO.replace("# The demo", "# Th\xe9 demo").encode("latin-1"))
+    not_toml = tmp_path / "broken.toml"
+    not_toml.write_text(DEMO + "\n[law\n")
+    for path in (not_utf8, not_toml, tmp_path, tmp_path / ("x" * 5000 + ".toml"), tmp_path / "missing.toml"):
+        code = main(["run", str(path)])
+        err = capsys.readouterr().err
+        named = err.startswith("error: config = ") or "Invalid value for 'CONFIG'" in err  # click: a directory
+        assert code == 2 and named and "Traceback" not in err, err[:300]
+
+
+@pytest.mark.parametrize("text, field", [(t, f) for i, t, f in CASES if i.startswith(("mavlink.url=\"bogus\"",
+                                                                                        "law.b=\"1.0\"",
+                                                                                        "mission.rate_hz=0.001"))])
+def test_the_real_process_exits_2(tmp_path: Path, text: str, field: str) -> None:
+    path = tmp_path / "mutated.toml"
+    path.write_text(text)
+    out = subprocess.run([sys.executable, "-m", "mission.cli", "run", str(path)], capture_output=True, text=True,
+                         timeout=60)
+    assert out.returncode == 2 and f"error: {field}" in out.stderr and "Traceback" not in out.stderr, out.stderr
