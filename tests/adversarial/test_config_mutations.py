@@ -27,12 +27,12 @@ DEMO = (CONFIGS / "demo.toml").read_text()
 
 # Numeric fields of demo.toml and of the sections' defaults: (section, key, is_int)
 NUMERIC = [
-    ("law", k, False) for k in ("k_c", "k_p", "b", "c", "d")
+    ("law", k, False) for k in ("k_c", "k_p", "b", "c", "d", "departure_margin_m")
 ] + [
     ("safety", k, False) for k in ("cbf_gain", "margin_m", "passenger_max_speed_m_s", "passenger_max_accel_m_s2",
                                    "carrier_max_speed_m_s", "carrier_max_accel_m_s2", "z_min_m", "z_max_m")
 ] + [
-    ("sim", k, False) for k in ("dt_s", "duration_s", "departure_margin_m", "p1_tolerance_m", "p2_tolerance_m")
+    ("sim", k, False) for k in ("dt_s", "duration_s", "p1_tolerance_m", "p2_tolerance_m")
 ] + [
     ("mission", k, False) for k in ("rate_hz", "dock_tolerance_m", "track_gain", "join_speed_m_s", "arrival_radius_m",
                                     "arrival_dwell_s", "carrier_timeout_s", "heartbeat_timeout_s", "prestream_s",
@@ -84,7 +84,7 @@ def _cases() -> list[tuple[str, str, str]]:
     for section, key, raw in [("mission", "carrier_timeout_s", "1e3"), ("mission", "heartbeat_timeout_s", "3600"),
                               ("mission", "connect_timeout_s", "1e9"), ("mission", "rate_hz", "0.001"),
                               ("mission", "rate_hz", "1"), ("carrier", "rate_hz", "0.5"),
-                              ("sim", "departure_margin_m", "1e-300"), ("sim", "departure_margin_m", "8.0"),
+                              ("law", "departure_margin_m", "1e-300"), ("law", "departure_margin_m", "8.0"),
                               ("safety", "margin_m", "1e9"), ("mission", "max_duration_s", "1e12"),
                               ("mission", "command_retries", "1000000"), ("law", "b", "1.0")]:
         add(section, key, raw)

@@ -18,8 +18,8 @@ from mission.carrier_bridge import (
     zenoh_config,
 )
 from mission.clock import ManualClock, ScaledClock
-from mission.config import ZenohSection
-from mission.errors import BusError, ConfigError
+from mission.config import ZenohSection, from_dict
+from mission.errors import BusError, ConfigError, PortInUse
 from mission.wire import CarrierState, GeoOrigin, PassengerStatus, encode_odometry_cdr, ros2dds_odom_key
 from tests.integration.zenoh_util import LENIENT, endpoint, free_port, peer, peer_pair, wait_for, wait_matched
 
@@ -250,13 +250,15 @@ def test_config_file_is_the_base_and_endpoint_flags_replace_its_endpoints(tmp_pa
 
 
 def test_errors_are_translated_at_the_boundary() -> None:
-    with pytest.raises(ConfigError, match="zenoh.listen"):
-        zenoh_config(ZenohSection(listen=["not an endpoint"]))
+    with pytest.raises(ConfigError, match="zenoh.listen"):  # the schema refuses it at load
+        from_dict({"zenoh": {"listen": ["not an endpoint"]}})
+    with pytest.raises(ConfigError, match="zenoh.listen"):  # and what gets past it, Zenoh's refusal is translated
+        zenoh_config(ZenohSection.model_construct(listen=["not an endpoint"]))
     port = free_port()
     first = peer(listen=[endpoint(port)])
     try:
-        with pytest.raises(BusError):
-            peer(listen=[endpoint(port)])  # port taken: a peer refuses to start
+        with pytest.raises(PortInUse):
+            peer(listen=[endpoint(port)])  # port taken: a peer refuses to start, naming the holder
     finally:
         first.close()
     with pytest.raises(ConfigError, match="zenoh.pair"):
