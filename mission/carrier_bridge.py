@@ -39,6 +39,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Generic, Literal, TypeVar
 
+import numpy as np
 import zenoh
 
 from mission.clock import Clock
@@ -331,7 +332,7 @@ class _Feed(Generic[T]):
                 self._accepted += 1
         if reason is not None:
             seq, stamp = self._order_of(value)
-            self._drop(reason, key, f"seq {seq} stamp {stamp} from {source}")
+            self._drop(reason, key, f"seq {seq} stamp {stamp} rx {rx:.3f} from {source}{self._describe(value)}")
             return
         for listener in self._listeners:
             listener(value)
@@ -360,6 +361,10 @@ class _Feed(Generic[T]):
 
     def _forget_sender(self) -> None:
         """Lock held: the sender's liveliness token went away."""
+
+    def _describe(self, value: T) -> str:
+        """More of a dropped sample for the log (default nothing)."""
+        return ""
 
     # -- caller's thread
     def latest(self) -> Received[T] | None:
@@ -458,6 +463,10 @@ class CarrierFeed(_Feed[CarrierState]):
         if self.gate.bound != was:
             log.info("carrier feed bound to source %s on %s", self.gate.bound, key)
         return reason
+
+    def _describe(self, value: CarrierState) -> str:
+        return f" at {np.round(value.position, 2).tolist()} m, {np.round(value.velocity_ned_m_s, 2).tolist()} m/s; " \
+               f"reference {self.gate.describe_reference()}"
 
     def _forget_sender(self) -> None:
         if self.gate.bound is not None:

@@ -253,7 +253,7 @@ class MavlinkSection(_Model):
     url: str = Field("udpin:127.0.0.1:14540", max_length=MAX_URL_CHARS)
     target_system: int | None = Field(None, ge=1, le=255, description="fly only this system; unset: adopt a PX4 "
                                       "autopilot after 3 consistent HEARTBEATs (mission.link)")
-    target_component: int = Field(1, ge=0, le=255, description="the autopilot's component id (0: any)")
+    target_component: int = Field(1, ge=0, le=255, description="[-] the autopilot's component id (0: any)")
     source_system: int = Field(1, ge=1, le=255)
     source_component: int = Field(191, ge=1, le=255)
     signing_key_file: Path_ | None = None

@@ -166,6 +166,15 @@ class FeedGate:
         self._candidates: dict[str, _Track] = {}
         self._resync: _Track | None = None
 
+    def describe_reference(self) -> str:
+        """The last accepted sample, for logs."""
+        ref = self._reference
+        if ref is None:
+            return "none"
+        last = ref.last
+        return (f"seq {last.seq} stamp {last.stamp_s:.3f} rx {last.rx_s:.3f} at "
+                f"{np.round(last.position_ned_m, 2).tolist()} m, lead {ref.lead_s:.3f} s")
+
     def unbind(self) -> None:
         """Forget the bound source and the reference (the carrier went away)."""
         self.bound, self._reference, self._resync = None, None, None

@@ -96,11 +96,13 @@ MAV_COMP_ID_ONBOARD_COMPUTER = 191
 MAV_AUTOPILOT_INVALID = 8
 MAV_RESULT_IN_PROGRESS = 5
 MAV_STATE_ACTIVE = 4
-#: MAV_TYPEs of an aerial vehicle a passenger can be: fixed wing 1, quadrotor 2, coaxial 3,
-#: helicopter 4, airship 7, hexa 13, octo 14, tricopter 15, flapping wing 16, VTOLs 19-25,
-#: dodeca 29, deca 35, generic multirotor 43, VTOL gyrodyne 47. Anything else (a GCS, an
-#: onboard controller, a gimbal, a camera, a rover...) is never adopted as the vehicle.
-VEHICLE_TYPES = frozenset({1, 2, 3, 4, 7, 13, 14, 15, 16, 19, 20, 21, 22, 23, 24, 25, 29, 35, 43, 47})
+#: MAV_TYPEs of a vehicle (what PX4 flies or drives; the passenger UAV and a PX4 rover or boat
+#: carrier share this link code): fixed wing 1, quadrotor 2, coaxial 3, helicopter 4, airship 7,
+#: balloon 8, rocket 9, ground rover 10, surface boat 11, submarine 12, hexa 13, octo 14, tricopter
+#: 15, flapping wing 16, kite 17, VTOLs 19-25, parafoil 28, dodeca 29, deca 35, generic multirotor
+#: 43, quadruped 46, VTOL gyrodyne 47. Anything else (a GCS 6, an onboard controller 18, a gimbal,
+#: a camera, an ADS-B receiver...) is never adopted as the vehicle.
+VEHICLE_TYPES = frozenset({1, 2, 3, 4, *range(7, 18), *range(19, 26), 28, 29, 35, 43, 46, 47})
 #: Consistent HEARTBEATs needed to adopt a vehicle when ``target_system`` is not configured.
 ADOPT_HEARTBEATS = 3
 _STATUSTEXT_CHUNK_LEN = 50

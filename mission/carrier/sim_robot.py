@@ -34,8 +34,10 @@ class SimRobot:
         self.yaw_rad = math.atan2(e_tc[1], e_tc[0]) if start_yaw is None else float(start_yaw)
         self.speed_m_s = 0.0
         self.yaw_rate_rad_s = 0.0
+        self.t_s = clock.now()  # [s] the clock time the integrated state refers to
 
     def advance(self, dt_s: float) -> None:
+        self.t_s += dt_s
         if self.kind == "holonomic":
             self.position_m = self.position_m + self.velocity_m_s * dt_s
             return
@@ -47,7 +49,12 @@ class SimRobot:
         self.velocity_m_s[:2] = heading_of(self.speed_m_s, self.yaw_rad)
 
     def own_state(self) -> OwnState:
-        return OwnState(self.clock.now(), _pad3(self.position_m), _pad3(self.velocity_m_s), self.yaw_rad)
+        # The state at the time it is stamped with: moved on under the held command from the time
+        # it was integrated to (a loop stalled between its tick and its publication would
+        # otherwise stamp a position of the tick with a later time, and a receiver sees it jump).
+        now = self.clock.now()
+        position = self.position_m + self.velocity_m_s * max(now - self.t_s, 0.0)
+        return OwnState(now, _pad3(position), _pad3(self.velocity_m_s), self.yaw_rad)
 
     def engage(self) -> None:
         pass

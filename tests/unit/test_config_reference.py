@@ -32,7 +32,7 @@ def test_readme_table_is_the_generated_one():
 def test_config_command_prints_reference_schema_and_effective_values():
     runner = CliRunner()
     out = runner.invoke(config_command, [], standalone_mode=False).output
-    assert "mission.connect_timeout_s  (float, default 20.0, > 0)" in out and "[s] how long `run` waits" in out
+    assert "mission.connect_timeout_s  (float, default 20.0, > 0, <= 600)" in out and "[s] how long `run` waits" in out
     assert '"$defs"' in runner.invoke(config_command, ["--schema"], standalone_mode=False).output
     eff = runner.invoke(config_command, [str(CONFIGS / "demo.toml")], standalone_mode=False).output
     assert "scenario.target = [24.0, 18.0, -5.0]" in eff and "mission.connect_timeout_s = 20.0" in eff
