@@ -333,13 +333,16 @@ class _Feed(Generic[T]):
         if reason is not None:
             seq, stamp = self._order_of(value)
             self._drop(reason, key, f"seq {seq} stamp {stamp} rx {rx:.3f} from {source}{self._describe(value)}")
-            return
+            if reason == "source":
+                return
         for listener in self._listeners:
             listener(value)
 
     def add_listener(self, callback: Callable[[T], None]) -> None:
-        """Call ``callback(value)`` on Zenoh's thread after each accepted sample (it must not
-        block); e.g. the lockstep relay waits for the sample of a step."""
+        """Call ``callback(value)`` on Zenoh's thread after each valid sample of the sender (it
+        must not block); e.g. the lockstep relay waits for the sample of a step. Valid: decoded
+        and not from a foreign source, whether the ordering or plausibility check accepted it or
+        not (a carrier binding, or one the gate doubts, still steps)."""
         self._listeners.append(callback)
 
     def _drop(self, reason: str, key: str, detail: str) -> None:

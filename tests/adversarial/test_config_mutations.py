@@ -40,7 +40,7 @@ NUMERIC = [
 ] + [("mission", "command_retries", True), ("scenario", "eta", False),
      ("mavlink", "target_system", True), ("mavlink", "target_component", True), ("mavlink", "source_system", True),
      ("mavlink", "source_component", True), ("carrier", "rate_hz", False), ("carrier", "max_speed_m_s", False),
-     ("carrier", "passenger_timeout_s", False), ("vehicle", "velocity_tau_s", False)]
+     ("carrier", "passenger_timeout_s", False)]
 
 BAD_FOR_NUMBERS = ['"1.0"', "true", "nan", "inf", "-inf", "1e300", "-1e300", "[1.0]", "{ x = 1 }"]
 BAD_FOR_INTS = ["2.5", '"1"', "false", "1e300", "-1", "256"]
