@@ -32,6 +32,9 @@ def end_with_parent() -> bool:
         parent = int(value)
     except ValueError:
         return False
+    if parent == os.getpid():  # the supervisor runs a command in its own process (a test calling main())
+        os.environ[PARENT_PID_ENV] = value
+        return False
     threading.Thread(target=_watch, args=(parent,), name="end-with-parent", daemon=True).start()
     return True
 
