@@ -304,7 +304,7 @@ class MissionController:
         if isinstance(feed_counters, dict):
             out["carrier_feed"] = feed_counters
         link_counters = getattr(self.link, "counters", None)
-        if dataclasses.is_dataclass(link_counters):
+        if dataclasses.is_dataclass(link_counters) and not isinstance(link_counters, type):
             out["link"] = dataclasses.asdict(link_counters)
         return out
 
