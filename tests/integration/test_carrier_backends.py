@@ -229,3 +229,24 @@ def test_ros2_keys_of_both_forms() -> None:
                                "RIHS01_9c45bf16fe0983d80e3cfe750d6835843d265a9a6c46bd2e609fcddde6fb8d2a")
     assert zenoh.KeyExpr(rmw.cmd_vel_sub).intersects(zenoh.KeyExpr(rmw.cmd_vel_pub))
     assert zenoh.KeyExpr(rmw.odom_sub).intersects(zenoh.KeyExpr(rmw.odom_pub))
+
+
+def test_px4_carrier_in_the_shared_frame_through_its_ekf_origin() -> None:
+    """carrier.mavlink.shared_origin: the rover's EKF origin lies 10 m north and 5 m east of the
+    shared frame's origin, so its LOCAL_POSITION_NED (0, 0) is (10, 5) in the shared frame."""
+    from mission.wire import GeoOrigin, ned_to_geodetic
+
+    shared = (47.397742, 8.545594, 488.0)
+    home = ned_to_geodetic(np.array([10.0, 5.0, 0.0]), GeoOrigin(*shared))
+    cfg = _cfg("mavlink", "ackermann", mavlink={"url": "udpin:127.0.0.1:0", "target_system": 2,
+                                                "shared_origin": list(shared)})
+    clock = ScaledClock(SPEED)
+    backend = MavlinkCarrier(cfg, clock)
+    try:
+        with MockVehicle(VehicleOptions(target=f"127.0.0.1:{backend.link.port}", speed=SPEED, sysid=2, frame="rover",
+                                        home=home)):
+            state = wait_for(backend.own_state, 20, "the rover's state in the shared frame")
+            np.testing.assert_allclose(state.position_ned_m[:2], [10.0, 5.0], atol=0.01)
+            assert backend.control_fault() == "waiting for the passenger (not armed)"  # origin known
+    finally:
+        backend.close()
