@@ -129,7 +129,8 @@ class Flight:
 
     def start_carrier(self) -> None:
         self._popen("carrier", cli("-v", "carrier", str(self.config), "--speed", str(self.speed), "--pair", self.pair,
-                                   "--zenoh-connect", self.router.endpoint, *self._mode))
+                                   "--zenoh-connect", self.router.endpoint, "--summary", str(self.dir / "carrier.json"),
+                                   *self._mode))
 
     @property
     def _mode(self) -> list[str]:
@@ -230,6 +231,10 @@ class Flight:
 
     def summary(self) -> dict[str, Any]:
         return json.loads((self.log_dir / "summary.json").read_text())
+
+    def carrier_summary(self) -> dict[str, Any]:
+        """The carrier's own account (written when it stops): closest approach to the target [m]..."""
+        return json.loads((self.dir / "carrier.json").read_text())
 
     def vehicle_counters(self) -> dict[str, int]:
         """The counters of the vehicle's last status line (``key=value`` pairs)."""
