@@ -33,6 +33,10 @@ reason          rejected when
                 ahead always does
 ``speed``       ``|velocity| > speed_margin * max_speed + SPEED_SLACK_M_S``
 ``jump``        ``|position - prev.position| > speed_margin * max_speed * dt + position_slack_m``
+``gap``         more than ``max_gap_s`` of receive time since ``prev``: after a silence the
+                carrier may be anywhere within ``max_speed * dt``, so one sample proves
+                nothing; the first states after it must form a plausible track of
+                ``resync_samples`` (below) before one is accepted
 ``velocity``    ``|v - prev.v| > max_accel * dt + max_speed`` (a stop or a start is always
                 plausible, a reversal at speed is not), or
                 ``|dp - (prev.v + v) / 2 * dt| > max_speed * dt + position_slack_m``
@@ -66,7 +70,8 @@ class GateLimits:
     max_speed_m_s [m/s] the carrier's top speed; speed_margin (>= 1) factor on it;
     position_slack_m [m] localisation noise allowed on top; stamp_slack_s [s] how far the
     sender's stamp may run ahead of the receive-time difference (transport latency variation);
-    max_accel_m_s2 [m/s^2] (default: top speed reached in 0.5 s); bind_samples / resync_samples: plausible states in a row needed to bind a source / replace
+    max_accel_m_s2 [m/s^2] (default: top speed reached in 0.5 s); max_gap_s [s] a silence
+    after which a single state is not believed (see ``gap``); bind_samples / resync_samples: plausible states in a row needed to bind a source / replace
     the reference.
     """
 
@@ -75,6 +80,7 @@ class GateLimits:
     position_slack_m: float = 0.5
     stamp_slack_s: float = 2.0
     max_accel_m_s2: float | None = None
+    max_gap_s: float = 1.0
     bind_samples: int = 3
     resync_samples: int = 5
 
@@ -188,7 +194,10 @@ class FeedGate:
             self.rejected_sources[name] = self.rejected_sources.get(name, 0) + 1
             return "source"
         assert self._reference is not None
-        reason = self._reference.fits(sample, self.limits, self.use_seq)
+        if sample.rx_s - self._reference.last.rx_s > self.limits.max_gap_s:
+            reason: str | None = "gap"
+        else:
+            reason = self._reference.fits(sample, self.limits, self.use_seq)
         if reason is None:
             self._reference.extend(sample)
             self._resync = None

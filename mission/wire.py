@@ -69,12 +69,12 @@ PHASES: tuple[str, ...] = (
 #: Reasons a sample is rejected (keys of the bridge's drop counters). ``size`` is checked by the
 #: bridge before decoding; ``stale_seq`` and ``stale_stamp`` come from its ordering check, the
 #: carrier feed's binding and plausibility gate add ``unbound``, ``source``, ``seq_jump``,
-#: ``stamp_jump``, ``speed``, ``jump`` and ``velocity`` (:mod:`mission.feed_gate`), and
+#: ``stamp_jump``, ``speed``, ``jump``, ``velocity`` and ``gap`` (:mod:`mission.feed_gate`), and
 #: ``internal`` comes from a bug in a decoder, not from the codecs.
 REASONS: tuple[str, ...] = (
     "size", "decode", "missing", "type", "shape", "nonfinite", "frame", "range", "orientation", "phase",
     "origin", "stale_seq", "stale_stamp", "unbound", "source", "seq_jump", "stamp_jump", "speed", "jump",
-    "velocity", "internal",
+    "velocity", "gap", "internal",
 )
 
 SEQ_MAX = 2**63 - 1  # sequence numbers are int64, as in ROS 2 / DDS

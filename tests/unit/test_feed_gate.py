@@ -118,3 +118,17 @@ def test_implausible_accepts_a_carrier_at_its_top_speed_after_a_silence() -> Non
     assert implausible(a, b, LIMITS, use_seq=True) is None
     with pytest.raises(ValueError):
         GateLimits(max_speed_m_s=0.0)
+
+
+def test_after_a_silence_one_state_is_not_believed_a_track_of_five_is() -> None:
+    """A spoofed state 20 m on right after a 4 s silence is within top speed x elapsed, so only a
+    consistent track may follow a gap: the spoof and the honest states after it are held back
+    until five agree, and the spoof never becomes the reference."""
+    gate = FeedGate(LIMITS)
+    offer_all(gate, "c", track(10))
+    after = track(10, start=130)  # 4 s later, honest, 4 m on
+    spoof = Sample(after[0].seq - 1, after[0].stamp_s - 0.01, after[0].position_ned_m + [20.0, 0, 0],
+                   after[0].velocity_ned_m_s, after[0].rx_s - 0.01)
+    assert gate.offer("c", spoof) == "gap"
+    assert offer_all(gate, "c", after) == ["gap"] * 4 + [None] * 6
+    assert gate.resyncs == 1 and gate.describe_reference().startswith(f"seq {after[-1].seq} ")
