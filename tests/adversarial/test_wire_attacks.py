@@ -33,7 +33,7 @@ import zenoh
 
 from mission import px4
 from mission.mavlink_env import mavlink
-from tests.faults.procs import DEMO, Flight, assert_log_complete, assert_safe_end, flight, wait_for
+from tests.faults.procs import DEMO, Flight, assert_safe_end, flight, wait_for
 from tests.faults.test_matrix import assert_completed, assert_exit, assert_never_disarmed_in_the_air, concurrently
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(200)]
