@@ -36,6 +36,10 @@ def test_two_lockstep_runs_give_the_same_flight(tmp_path):
         assert out.returncode in (0, 1), out.stdout + out.stderr  # 1: P1 does not hold on the PX4-like mock (issue 10)
         runs.append(tmp_path / name / "logs" / "pair0")
     a, b = (json.loads((d / "summary.json").read_text()) for d in runs)
+    for summary in (a, b):
+        summary.get("carrier_feed", {}).pop("bound_source", None)  # a Zenoh session id: new in every run
+        for counter in ("rx_bytes", "rx_messages"):  # they count the vehicle's hellos before time starts
+            summary.get("link", {}).pop(counter, None)
     assert a["ticks"] > 500 and a["phase"] == "DONE" and a["p2"] and a["p3"]
     assert {k: v for k, v in a.items() if k not in _numbers(a)} == {k: v for k, v in b.items() if k not in _numbers(b)}
     assert _numbers(a).keys() == _numbers(b).keys()
