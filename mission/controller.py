@@ -31,6 +31,7 @@ from mission.wire import GeoOrigin, PassengerStatus
 
 log = logging.getLogger(__name__)
 
+LOCAL_POSITION_NED_ID = 32  # MAVLink message id
 ABORT_GRACE_S = 15.0  # longest the loop keeps asking for Hold after an abort [s]
 
 
@@ -149,12 +150,20 @@ def _vehicle_obs(state: Any) -> VehicleObs | None:
         return None
     pos = state.position_ned_m
     vel = state.velocity_ned_m_s
+    age = float("inf") if state.position_rx_s is None else state.t_s - state.position_rx_s
+    sample_t = getattr(state, "position_t_s", None)
+    if pos is not None and vel is not None and age <= phases.TELEMETRY_SILENT_S and sample_t is not None:
+        # The vehicle's position now: its last LOCAL_POSITION_NED moved on by its velocity since
+        # the vehicle took it (by its own clock), as the dock point is; a late sample, or a burst
+        # of old ones read after a stall, would otherwise count speed x delay as offset.
+        ahead = min(max(state.t_s - sample_t, 0.0), phases.TELEMETRY_SILENT_S)
+        pos = np.asarray(pos, dtype=float) + np.asarray(vel, dtype=float) * ahead
     return VehicleObs(
         position_ned_m=np.zeros(3) if pos is None else np.asarray(pos, dtype=float),
         velocity_ned_m_s=np.zeros(3) if vel is None else np.asarray(vel, dtype=float),
         armed=state.armed, mode=state.mode, heartbeat_age_s=state.heartbeat_age_s,
         position_valid=bool(state.position_valid and pos is not None),
-        position_age_s=float("inf") if state.position_rx_s is None else state.t_s - state.position_rx_s,
+        position_age_s=age,
         in_failsafe=state.system_status == px4.MAV_STATE_CRITICAL,
     )
 
@@ -213,6 +222,8 @@ class MissionController:
         self._seq = 0
         self._origin_given = False
         self._received: Any = None
+        self._rates: list[float] = []  # LOCAL_POSITION_NED rate seen each flying tick [Hz]
+        self._rate_asked = cfg.mission.telemetry_rate_hz is None
 
     def _observe(self, t: float, worker: CommandWorker) -> Observation:
         vstate = self.link.state
@@ -226,6 +237,36 @@ class MissionController:
             failed["signing"] = signing  # no vehicle yet, and the reason is the key
         return Observation(t_s=t, vehicle=_vehicle_obs(vstate), carrier=_carrier_obs(self._received, self.feed.alive),
                            failed=failed, interrupted=self.stop.is_set())
+
+    def _ask_telemetry_rate(self) -> None:
+        """Once the preflight checks passed: ask the vehicle for LOCAL_POSITION_NED at ``mission.telemetry_rate_hz``
+        (PX4 streams 30 Hz to a 50 Hz loop by default), off the loop. A refusal is logged and the
+        mission flies at the rate that comes (the summary's ``position_rate_hz`` says which)."""
+        rate = self.cfg.mission.telemetry_rate_hz
+        if self._rate_asked or rate is None or self.state.phase in (Phase.PREFLIGHT, Phase.ABORT, Phase.DONE):
+            return  # after the preflight checks only: a refused start sends the vehicle nothing
+        self._rate_asked = True
+
+        def ask() -> None:
+            try:
+                self.link.set_message_interval(LOCAL_POSITION_NED_ID, rate)
+                log.info("asked the vehicle for LOCAL_POSITION_NED at %g Hz", rate)
+            except (CommandRejected, LinkError) as exc:
+                log.warning("vehicle did not take LOCAL_POSITION_NED at %g Hz (%s); flying at the rate it streams", rate, exc)
+
+        threading.Thread(target=ask, name="mission-telemetry-rate", daemon=True).start()
+
+    def _send(self, dec: Decision) -> bool:
+        """Send the decision's setpoint (full when it has a position); False if withheld."""
+        sp = np.asarray(dec.setpoint, dtype=float)
+        if not np.all(np.isfinite(sp)):  # never reached: the filter's output is finite; refuse rather than send
+            log.error("non-finite setpoint %s withheld", sp)
+            return False
+        if dec.position_sp is not None and dec.acceleration_sp is not None:
+            self.link.send_setpoint_ned(dec.position_sp, sp, dec.acceleration_sp)
+        else:
+            self.link.send_velocity_ned(sp)
+        return True
 
     def _publish(self, t: float, obs: Observation) -> None:
         if self.publisher is None or obs.vehicle is None:
@@ -261,16 +302,15 @@ class MissionController:
                 t = periodic.wait()
                 start_ns = stamp()
                 obs = self._observe(t, worker)
+                self._ask_telemetry_rate()
+                if self.cfg.mission.telemetry_rate_hz is not None and self.state.phase in phases.FLYING:
+                    self._rates.append(self.link.message_rate_hz())
                 observed_ns = send_ns = sent_ns = stamp()
                 self.state, dec = phases.step(self.state, obs, self.model)
                 if dec.setpoint is not None:
-                    sp = np.asarray(dec.setpoint, dtype=float)
-                    if np.all(np.isfinite(sp)):
-                        send_ns = stamp()
-                        self.link.send_velocity_ned(sp)
-                        sent_ns = stamp()
-                    else:  # never reached: the filter's output is finite; refuse rather than send
-                        log.error("non-finite setpoint %s withheld", sp)
+                    send_ns = stamp()
+                    self._send(dec)
+                    sent_ns = stamp()
                 if dec.request is not None:
                     worker.submit(dec.request)
                 if self.state.phase != last_phase:
@@ -316,7 +356,8 @@ class MissionController:
             info = {"separation_time_s": st.separation_time_s,
                     "anchor_ned_m": None if st.anchor is None else st.anchor.tolist()}
             outcome = {"phase": st.phase.value, "reason": st.reason, "detail": st.detail,
-                       "ticks": self.ticks, "loop_overruns": self.overruns, **self._counters()}
+                       "ticks": self.ticks, "loop_overruns": self.overruns, **self._counters(),
+                       "position_rate_hz": round(float(np.median(self._rates)), 2) if self._rates else None}
             summary = self.recorder.close(outcome, info)
             log_dir = str(self.recorder.dir)
         return MissionOutcome(phase=st.phase.value, reason=st.reason, detail=st.detail, log_dir=log_dir, summary=summary)

@@ -162,6 +162,11 @@ class VehicleState:
     """Text of the latest (reassembled) STATUSTEXT from the vehicle, ``""`` if none."""
     yaw_rad: float | None = None
     """Heading [rad] from north towards east, from ATTITUDE; None before the first (or non-finite)."""
+    position_t_s: float | None = None
+    """Clock time the vehicle took that sample [s]: its ``time_boot_ms`` mapped onto the link
+    clock (:class:`_VehicleClock`); earlier than ``position_rx_s`` by the transport delay and
+    by however long the sample waited to be read (a stalled process reads a burst of old
+    samples at once)."""
 
     @property
     def heartbeat_age_s(self) -> float:
@@ -469,6 +474,29 @@ class _Ack:
     result: int
 
 
+class _VehicleClock:
+    """Maps the vehicle's ``time_boot_ms`` [s] onto the link clock [s].
+
+    The offset ``t_link - t_vehicle`` is the smallest one seen (the least-delayed sample), allowed
+    to grow by ``drift`` seconds per second so a vehicle clock running slower than ours (PX4 SITL
+    at 0.9x) is followed; a vehicle reboot (time going backwards) starts afresh.
+    """
+
+    def __init__(self, drift: float = 0.1) -> None:
+        self.drift = drift
+        self._offset: float | None = None
+        self._last: tuple[float, float] | None = None  # (vehicle time, link time) of the last sample
+
+    def to_link(self, t_vehicle_s: float, t_rx_s: float) -> float:
+        offset = t_rx_s - t_vehicle_s
+        if self._offset is None or self._last is None or t_vehicle_s < self._last[0]:
+            self._offset = offset
+        else:
+            self._offset = min(self._offset + self.drift * max(t_rx_s - self._last[1], 0.0), offset)
+        self._last = (t_vehicle_s, t_rx_s)
+        return t_vehicle_s + self._offset
+
+
 class _Telemetry:
     """Mutable telemetry behind the link's lock (the receiver writes, snapshots read)."""
 
@@ -477,6 +505,8 @@ class _Telemetry:
         self.velocity_ned_m_s: np.ndarray | None = None
         self.position_finite = False  # position and velocity all finite (checked once per message)
         self.position_rx_s: float | None = None
+        self.position_t_s: float | None = None
+        self.vehicle_clock = _VehicleClock()
         self.heartbeat_rx_s: float | None = None
         self.base_mode = 0
         self.custom_mode = 0
@@ -589,6 +619,7 @@ class VehicleLink:
         self._tx_codec: Any = None
         self._vehicle: tuple[int, int] | None = None
         self._telemetry = _Telemetry()
+        self._position_stamps: collections.deque[float] = collections.deque(maxlen=256)
         self._statustexts: collections.deque[tuple[float, int, str]] = collections.deque(maxlen=500)
         self._assembler = _StatusTextAssembler()
         self._acks: collections.deque[_Ack] = collections.deque(maxlen=64)
@@ -744,6 +775,7 @@ class VehicleLink:
             position_ned_m=tm.position_ned_m,
             velocity_ned_m_s=tm.velocity_ned_m_s,
             position_rx_s=tm.position_rx_s,
+            position_t_s=tm.position_t_s,
             heartbeat_rx_s=tm.heartbeat_rx_s,
             armed=bool(tm.base_mode & px4.MAV_MODE_FLAG_SAFETY_ARMED),
             mode=tm.mode,
@@ -966,6 +998,46 @@ class VehicleLink:
         """Send any pymavlink message as is (e.g. the lockstep TIMESYNC answer); False if there
         is no peer yet. Raises LinkError on socket errors or a closed link."""
         return self._send(msg, None)
+
+    def send_setpoint_ned(self, position_ned_m: np.ndarray, velocity_ned_m_s: np.ndarray,
+                          acceleration_ned_m_s2: np.ndarray) -> None:
+        """Send one full setpoint in LOCAL_NED: position [m], velocity [m/s] and acceleration
+        [m/s^2] (type_mask 3072: yaw and yaw rate ignored; PX4 closes position itself and takes
+        velocity and acceleration as feed-forward). Bit 512 is never set: PX4 reads it as
+        *force* and drops the setpoint. ValueError for a wrong shape or a non-finite value,
+        before anything is sent."""
+        values: list[float] = []
+        for name, vec in (("position", position_ned_m), ("velocity", velocity_ned_m_s), ("acceleration", acceleration_ned_m_s2)):
+            v = np.asarray(vec, dtype=float)
+            if v.shape != (3,):
+                raise ValueError(f"{name} must have shape (3,), got {v.shape}")
+            parts = v.tolist()
+            if not all(math.isfinite(c) and abs(c) <= _FLOAT32_MAX for c in parts):
+                raise ValueError(f"refusing non-finite {name} setpoint {parts}")
+            values += parts
+        target = self._require_vehicle()
+        time_boot_ms = int(self._clock.now() * 1000.0) & 0xFFFFFFFF
+        msg = mavlink.MAVLink_set_position_target_local_ned_message(
+            time_boot_ms, target[0], target[1], px4.MAV_FRAME_LOCAL_NED, px4.TYPE_MASK_POSITION_VELOCITY_ACCELERATION,
+            *values, 0.0, 0.0)
+        self._send(msg, "tx_setpoints")
+
+    def set_message_interval(self, message_id: int, rate_hz: float, timeout_s: float = 0.5, retries: int = 2) -> None:
+        """Ask the vehicle to stream ``message_id`` at ``rate_hz`` [Hz] (MAV_CMD_SET_MESSAGE_INTERVAL).
+        Raises CommandRejected or LinkTimeout like :meth:`command_long`; the rate that actually
+        arrives is :meth:`message_rate_hz`."""
+        if not rate_hz > 0:
+            raise ValueError(f"rate_hz must be > 0, got {rate_hz!r}")
+        self.command_long(px4.MAV_CMD_SET_MESSAGE_INTERVAL, float(message_id), 1e6 / rate_hz,
+                          timeout_s=timeout_s, retries=retries)
+
+    def message_rate_hz(self, kind: str = "LOCAL_POSITION_NED", window_s: float = 1.0) -> float:
+        """Rate [Hz of link clock] at which ``kind`` arrived over the last ``window_s`` [s]
+        (kept for LOCAL_POSITION_NED only); 0 when none."""
+        now = self._clock.now()
+        with self._lock:
+            stamps = [t for t in self._position_stamps if now - t <= window_s]
+        return 0.0 if len(stamps) < 2 else (len(stamps) - 1) / max(stamps[-1] - stamps[0], 1e-9)
 
     # ---------------------------------------------------------------- transmit
 
@@ -1244,6 +1316,8 @@ class VehicleLink:
         tm.velocity_ned_m_s = _readonly_vector(msg.vx, msg.vy, msg.vz)
         tm.position_finite = bool(np.isfinite(tm.position_ned_m).all() and np.isfinite(tm.velocity_ned_m_s).all())
         tm.position_rx_s = t_rx
+        tm.position_t_s = tm.vehicle_clock.to_link(msg.time_boot_ms * 1e-3, t_rx)
+        self._position_stamps.append(t_rx)
 
     def _on_extended_sys_state(self, msg: Any, t_rx: float) -> None:
         self._telemetry.landed_state = int(msg.landed_state)

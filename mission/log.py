@@ -168,6 +168,11 @@ def summarise(directory: str | Path) -> dict[str, Any]:
     offset_riding = norm(x_p[riding] - dock[riding]).max() if riding.any() else np.inf
     out["max_offset_before_separation_m"] = _num(offset_riding)
     out["max_relative_command_step_m_s"] = _nanmax(norm(np.diff(rel_cmd[riding | sep_phases], axis=0))) if (riding | sep_phases).sum() > 1 else None
+    # Arrival without a swing: once the vehicle has come within the arrival radius of the target,
+    # the farthest it got from it again (None if it never came that close).
+    dist_t = norm(x_p - target)
+    near = np.flatnonzero(np.isfinite(dist_t) & (dist_t <= float(info.get("arrival_radius_m", 0.5))))
+    out["max_target_distance_after_arrival_m"] = _nanmax(dist_t[near[0]:]) if len(near) else None
     out["p1"] = bool(riding.any() and offset_riding <= tol and out["departure_delay_s"] is not None)
     out["p2"] = bool(np.isin(r.phase, ["ARRIVED"]).any() and out["final_passenger_target_distance_m"] is not None
                      and out["final_passenger_target_distance_m"] <= float(info.get("arrival_radius_m", 0.5)))

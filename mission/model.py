@@ -14,6 +14,7 @@ from mission.errors import ConfigError
 from mission.phases import MissionModel
 from mission.safety import SafetyConfig
 from mission.tick import TickModel
+from mission.tracking import TrackingGains
 
 COMMAND_MARGIN_FACTOR = 0.5  # the command filter's obstacle margin, of safety.margin_m
 COMMAND_SPEED_FACTOR = 1.25  # its speed limit, of the reference's (room to pull onto the reference)
@@ -56,4 +57,11 @@ def mission_model(cfg: Config) -> MissionModel:
         arrival_radius_m=m.arrival_radius_m, arrival_dwell_s=m.arrival_dwell_s, final_action=m.final_action,
         carrier_timeout_s=m.carrier_timeout_s, heartbeat_timeout_s=m.heartbeat_timeout_s, prestream_s=m.prestream_s,
         connect_timeout_s=m.connect_timeout_s, max_duration_s=m.max_duration_s, dt_s=1.0 / m.rate_hz,
+        tracking=TrackingGains(kind=m.setpoint, position_gain_per_s=m.track_gain, position_lead=m.position_lead,
+                               integral_gain=m.integral_gain, integral_limit=m.integral_limit,
+                               drag_ff_per_s=m.drag_ff_per_s, integral_window_m=m.integral_window_m,
+                               slow_lag_m=m.reference_slow_lag_m, stop_lag_m=m.reference_stop_lag_m),
+        carrier_dt_s=1.0 / cfg.carrier.rate_hz,
+        join_settle_m=min(m.dock_tolerance_m, m.join_settle_m if m.join_settle_m is not None else m.dock_tolerance_m),
+        join_settle_s=m.join_settle_s, arrival_max_speed_m_s=m.arrival_max_speed_m_s,
     )

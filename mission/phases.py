@@ -7,7 +7,7 @@
     STREAMING --zero-velocity setpoints for prestream_s--> ARMING (or OFFBOARD if armed)
     ARMING    --armed--> OFFBOARD           refused after retries --> ABORT(arming_refused)
     OFFBOARD  --mode is OFFBOARD--> JOIN    refused after retries --> ABORT(offboard_refused)
-    JOIN      --reference reached the dock point, vehicle within dock tolerance--> RIDING
+    JOIN      --reference on the dock point, vehicle within join_settle_m for join_settle_s--> RIDING
     RIDING    --docked carrier within b c - margin of the target (latched)--> SEPARATED
     SEPARATED --passenger left the dock (> 0.1 m)--> NAVIGATING
     NAVIGATING --within arrival radius for arrival dwell--> ARRIVED
@@ -24,7 +24,9 @@
 
 The passenger is flown through a *reference*: the paper's closed loop (``mission.tick``, the
 same functions as the simulator) integrated in error coordinates about the dock point, which the
-vehicle tracks with ``u = u_ref + track_gain (x_ref - x_p)``. The reference sits exactly on the
+vehicle tracks (:mod:`mission.tracking`: velocity ``u_ref + track_gain (x_ref - x_p)``, and for
+full setpoints also the reference position and an acceleration feed-forward: the reference's own
+acceleration, which while riding is the carrier law's, plus drag feed-forward and integral). The reference sits exactly on the
 dock while riding, so separation happens at ``b c`` whatever the vehicle's tracking lag
 (README, "Facts about the law" 3), and its departure is smooth. The carrier's state is needed until
 separation; afterwards the anchor is latched and a lost carrier only costs P3 monitoring.
@@ -42,7 +44,8 @@ from mission.law import check_assumptions, norm
 from mission.ports import Request
 from mission.errors import AssumptionError
 from mission.safety import SafetyConfig, filter_velocity
-from mission.tick import DEPARTURE_THRESHOLD_M, TickModel, latch_point, passenger_tick, separation_due
+from mission.tick import DEPARTURE_THRESHOLD_M, TickModel, carrier_tick, latch_point, passenger_tick, separation_due
+from mission.tracking import TrackingGains, progress, setpoint as tracking_setpoint, update_integral, velocity_demand
 
 TELEMETRY_SILENT_S = 0.4  # position older than this (PX4 streams it at 30 Hz): the link went quiet [s]
 
@@ -138,6 +141,11 @@ class MissionModel:
     connect_timeout_s: float
     max_duration_s: float
     dt_s: float
+    tracking: TrackingGains = TrackingGains()
+    join_settle_m: float = float("inf")  # JOIN -> RIDING within this of the dock point [m] (min with the tolerance)...
+    join_settle_s: float = 0.0  # ... for this long [s]
+    arrival_max_speed_m_s: float | None = None  # arrival also needs the vehicle this slow [m/s]
+    carrier_dt_s: float = 1.0 / 30.0  # the carrier's control period [s] (its acceleration over one step)
 
 
 @dataclass(frozen=True)
@@ -157,6 +165,8 @@ class MissionState:
     arrived_since_s: float | None = None
     u_ref: np.ndarray | None = None
     u_cmd: np.ndarray | None = None
+    integral: np.ndarray | None = None  # tracking integral (mission.tracking)
+    settled_since_s: float | None = None  # JOIN: since when the vehicle has been on the dock point
 
 
 @dataclass(frozen=True)
@@ -167,6 +177,8 @@ class Decision:
 
     setpoint: np.ndarray | None
     request: Request | None = None
+    position_sp: np.ndarray | None = None  # [m] NED: with acceleration_sp, a full setpoint
+    acceleration_sp: np.ndarray | None = None  # [m/s^2] NED
     dock: np.ndarray | None = None
     P: float = float("nan")
     relative: np.ndarray | None = None
@@ -366,16 +378,60 @@ def _offboard(state, obs, m):
     return state, Decision(setpoint=ZERO.copy(), request=Request.OFFBOARD)
 
 
-def _track(state: MissionState, obs: Observation, m: MissionModel, x_ref: np.ndarray, u_ref: np.ndarray) -> tuple[np.ndarray, bool]:
-    """Vehicle command [m/s]: reference velocity plus a pull to the reference, filtered at the
-    vehicle's real position (obstacles, floor, speed and acceleration of the vehicle)."""
+@dataclass(frozen=True)
+class Tracked:
+    """One tick of tracking: what to send (velocity [m/s]; for a full setpoint also position [m]
+    and acceleration [m/s^2]), whether the filter changed the velocity, and what the state keeps
+    (the velocity sent, the integral)."""
+
+    setpoint: np.ndarray
+    position_sp: np.ndarray | None
+    acceleration_sp: np.ndarray | None
+    acted: bool
+    integral: np.ndarray
+
+    def decision(self, **kw) -> Decision:
+        return Decision(setpoint=self.setpoint, position_sp=self.position_sp, acceleration_sp=self.acceleration_sp, **kw)
+
+    def kept(self) -> dict[str, np.ndarray]:
+        return {"u_cmd": self.setpoint, "integral": self.integral}
+
+
+def _track(state: MissionState, obs: Observation, m: MissionModel, x_ref: np.ndarray, u_ref: np.ndarray,
+           a_ref: np.ndarray) -> Tracked:
+    """The setpoint that makes the vehicle follow the reference (:mod:`mission.tracking`): the
+    velocity demand filtered at the vehicle's real position (obstacles, floor, speed and
+    acceleration of the vehicle); a full setpoint adds the reference position and the
+    acceleration feed-forward, unless the filter changed the velocity (then the filtered
+    velocity alone is sent: the filter wins over the reference)."""
     v = obs.vehicle
     assert v is not None  # tracking happens only with a vehicle
     x_p = v.position_ned_m
-    desired = u_ref + m.track_gain * (x_ref - x_p)
+    g = m.tracking
+    integral = state.integral if state.integral is not None else np.zeros(3)
+    desired = velocity_demand(x_ref, u_ref, x_p, integral, g)
     prev = state.u_cmd if state.u_cmd is not None else v.velocity_ned_m_s
     safe = filter_velocity(x_p, desired, m.tick.obstacles, m.command_safety, prev, m.dt_s)
-    return safe.u, bool(safe.changed)
+    acted = bool(safe.changed)
+    sp = tracking_setpoint(x_ref, u_ref, a_ref, x_p, safe.u, integral, g)
+    full = sp.full and not acted
+    if not acted or g.kind == "velocity":
+        integral = update_integral(integral, x_ref, x_p, g, m.dt_s)
+    return Tracked(sp.velocity_ned_m_s, sp.position_ned_m if full else None, sp.acceleration_ned_m_s2 if full else None,
+                   acted, integral)
+
+
+def _carrier_acceleration(obs: Observation, m: MissionModel) -> np.ndarray:
+    """The docked carrier's acceleration [m/s^2] NED as its law asks it: the change of the
+    carrier's command (``mission.tick.carrier_tick``, with its speed and acceleration limits)
+    over one carrier step from the sample's state. Analytic in the sample (no differences of
+    samples): ``a_max`` along the command while the carrier speeds up, 0 at its speed limit,
+    ``-k_c v_c`` on the final approach."""
+    c = obs.carrier
+    assert c is not None  # riding: the carrier was checked
+    h = m.carrier_dt_s
+    nxt = carrier_tick(c.position_ned_m + c.velocity_ned_m_s * h, False, m.tick, u_prev=c.velocity_ned_m_s, dt_s=h)
+    return (np.asarray(nxt.u, dtype=float) - c.velocity_ned_m_s) / h
 
 
 def _join(state, obs, m):
@@ -391,12 +447,19 @@ def _join(state, obs, m):
     else:
         u_ref = gap / dist * m.join_speed_m_s + v_dock
         x_ref = state.x_ref + u_ref * m.dt_s
-    u, acted = _track(state, obs, m, x_ref, u_ref)
-    docked = dist <= step_len and norm(obs.vehicle.position_ned_m - dock) <= m.dock_tolerance_m
-    if docked:
-        new = _to(state, Phase.RIDING, t, x_ref=dock.copy(), e_ref=ZERO.copy(), prev_dock=dock.copy(), u_cmd=u, u_ref=v_dock.copy())
-        return new, Decision(setpoint=u, dock=dock, desired=u_ref, safety_acted=acted, events=("docked: riding the carrier",))
-    return replace(state, x_ref=x_ref, u_cmd=u, u_ref=u_ref), Decision(setpoint=u, dock=dock, desired=u_ref, safety_acted=acted)
+    tr = _track(state, obs, m, x_ref, u_ref, ZERO)
+    # Docked once the vehicle has settled on the dock point (within join_settle_m for
+    # join_settle_s): the carrier starts its approach then, so what is left of the climb is not
+    # counted as riding offset (on PX4 the climb overshoots the dock by ~0.3 m when first within
+    # tolerance, and its velocity estimate is too noisy to judge rest by).
+    v = obs.vehicle
+    near = dist <= step_len and norm(v.position_ned_m - dock) <= m.join_settle_m
+    settled = (state.settled_since_s if state.settled_since_s is not None else t) if near else None
+    if settled is not None and t - settled >= m.join_settle_s:
+        new = _to(state, Phase.RIDING, t, x_ref=dock.copy(), e_ref=ZERO.copy(), prev_dock=dock.copy(), u_ref=v_dock.copy(), **tr.kept())
+        return new, tr.decision(dock=dock, desired=u_ref, safety_acted=tr.acted, events=("docked: riding the carrier",))
+    return (replace(state, x_ref=x_ref, u_ref=u_ref, settled_since_s=settled, **tr.kept()),
+            tr.decision(dock=dock, desired=u_ref, safety_acted=tr.acted))
 
 
 def _riding(state, obs, m):
@@ -410,32 +473,55 @@ def _riding(state, obs, m):
                   separation_time_s=t - (1 - float(theta)) * m.dt_s)
         return _navigate(new, obs, m, events=(f"separated at |e_tc| = {norm(m.tick.target - anchor):.3f} m",))
     tick = passenger_tick(dock, v_dock, ZERO, False, m.tick, state.u_ref, m.dt_s)
-    u, acted = _track(state, obs, m, dock, tick.u)
-    new = replace(state, x_ref=dock.copy(), e_ref=ZERO.copy(), prev_dock=dock.copy(), u_ref=tick.u, u_cmd=u)
-    return new, Decision(setpoint=u, dock=dock, P=float(tick.P), relative=tick.relative, desired=tick.desired,
+    a_ref = _carrier_acceleration(obs, m) if m.tracking.kind == "full" else ZERO  # velocity setpoints carry none
+    tr = _track(state, obs, m, dock, tick.u, a_ref)
+    acted = tr.acted
+    new = replace(state, x_ref=dock.copy(), e_ref=ZERO.copy(), prev_dock=dock.copy(), u_ref=tick.u, **tr.kept())
+    return new, tr.decision(dock=dock, P=float(tick.P), relative=tick.relative, desired=tick.desired,
                          safety_acted=acted or bool(tick.safety.changed))
+
+
+def _lag_m(state: MissionState, obs: Observation) -> float:
+    """How far [m] the vehicle is behind the reference along the reference's direction of motion
+    (0 when it is level or ahead, or the reference is still)."""
+    if state.x_ref is None or state.u_ref is None or obs.vehicle is None:
+        return 0.0
+    speed = float(norm(state.u_ref))
+    if speed < 1e-6:
+        return 0.0
+    return max(0.0, float(np.dot(state.x_ref - obs.vehicle.position_ned_m, state.u_ref)) / speed)
 
 
 def _navigate(state, obs, m, events=()):
     """Equilibria (ii)->(iii): integrate the reference with the latched anchor, track it."""
     t = obs.t_s
     tick = passenger_tick(state.anchor, ZERO, state.e_ref, True, m.tick, state.u_ref, m.dt_s)
-    e_ref = state.e_ref + tick.u * m.dt_s
+    # The reference advances at the rate the vehicle can follow (mission.tracking.progress); its
+    # acceleration is its own velocity's change over the tick (a signal we generate: no noise).
+    rate = progress(_lag_m(state, obs), m.tracking)
+    u_ref = tick.u * rate
+    e_ref = state.e_ref + u_ref * m.dt_s
     x_ref = state.anchor + e_ref
-    u, acted = _track(state, obs, m, x_ref, tick.u)
+    u_prev = state.u_ref if state.u_ref is not None else u_ref
+    a_ref = (u_ref - u_prev) / m.dt_s
+    tr = _track(state, obs, m, x_ref, u_ref, a_ref)
+    acted = tr.acted
     phase, since, arrived = state.phase, state.since_s, state.arrived_since_s
     evs = list(events)
     if phase == Phase.SEPARATED and norm(e_ref) > DEPARTURE_THRESHOLD_M:
         phase, since = Phase.NAVIGATING, t
         evs.append("left the carrier: navigating")
-    at_target = norm(obs.vehicle.position_ned_m - m.tick.target) <= m.arrival_radius_m
+    # Arrived: within the arrival radius (and, if set, slower than arrival_max_speed_m_s) for the
+    # dwell (a vehicle handed to Hold while still moving brakes past the radius: seen on PX4, 0.84 m).
+    at_target = bool(norm(obs.vehicle.position_ned_m - m.tick.target) <= m.arrival_radius_m) and (
+        m.arrival_max_speed_m_s is None or bool(norm(obs.vehicle.velocity_ned_m_s) <= m.arrival_max_speed_m_s))
     if phase in (Phase.NAVIGATING,):
         arrived = (arrived if arrived is not None else t) if at_target else None
         if arrived is not None and t - arrived >= m.arrival_dwell_s:
             phase, since = Phase.ARRIVED, t
             evs.append("arrived at the target")
-    new = replace(state, phase=phase, since_s=since, e_ref=e_ref, x_ref=x_ref, u_ref=tick.u, u_cmd=u, arrived_since_s=arrived)
-    dec = Decision(setpoint=u, dock=_dock(obs, m) if obs.carrier is not None else None, P=float(tick.P),
+    new = replace(state, phase=phase, since_s=since, e_ref=e_ref, x_ref=x_ref, u_ref=u_ref, arrived_since_s=arrived, **tr.kept())
+    dec = tr.decision(dock=_dock(obs, m) if obs.carrier is not None else None, P=float(tick.P),
                    relative=tick.relative, desired=tick.desired, safety_acted=acted or bool(tick.safety.changed), events=tuple(evs))
     if phase == Phase.ARRIVED:
         dec = replace(dec, request=Request(m.final_action))

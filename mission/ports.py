@@ -4,7 +4,8 @@
 Protocol below, so a MAVLink link to PX4, the mock vehicle or a test's in-process fake are
 interchangeable (as are a Zenoh feed and a scripted one):
 
-* a :class:`Vehicle`: its newest telemetry snapshot, a velocity setpoint, and four commands
+* a :class:`Vehicle`: its newest telemetry snapshot, a velocity or full setpoint, the position
+  stream's rate (asked and seen), and four commands
   (arm, set mode, hold, land), each blocking until the vehicle confirmed it or raising
   :class:`mission.errors.CommandRejected` / :class:`mission.errors.LinkError`;
 * a :class:`CarrierSource`: the newest carrier state with its receive time and age, the
@@ -47,6 +48,20 @@ class Vehicle(Protocol):
 
     def send_velocity_ned(self, v_ned_m_s: np.ndarray, yaw_rad: float | None = None) -> None:
         """One velocity setpoint [m/s] NED (yaw [rad] or keep the current heading)."""
+        ...
+
+    def send_setpoint_ned(self, position_ned_m: np.ndarray, velocity_ned_m_s: np.ndarray,
+                          acceleration_ned_m_s2: np.ndarray) -> None:
+        """One full setpoint: position [m], velocity [m/s], acceleration [m/s^2] NED (PX4 closes
+        position itself; velocity and acceleration are feed-forward)."""
+        ...
+
+    def set_message_interval(self, message_id: int, rate_hz: float) -> None:
+        """Ask the vehicle to stream ``message_id`` at ``rate_hz`` [Hz] (may raise CommandRejected)."""
+        ...
+
+    def message_rate_hz(self) -> float:
+        """Rate [Hz] at which LOCAL_POSITION_NED arrived over the last second."""
         ...
 
     def arm(self) -> None: ...

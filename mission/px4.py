@@ -113,6 +113,7 @@ TYPE_MASK_VELOCITY = 0x0DC7  # 3527: velocity only
 TYPE_MASK_VELOCITY_YAW = 2503  # velocity + yaw (MAVSDK set_velocity_ned)
 TYPE_MASK_VELOCITY_YAW_RATE = 1479  # velocity + yaw rate (MAVSDK set_velocity_body)
 TYPE_MASK_POSITION = 2552
+TYPE_MASK_POSITION_VELOCITY_ACCELERATION = 3072  # ignore yaw and yaw rate only (never bit 512: force)
 
 # EXTENDED_SYS_STATE.landed_state
 LANDED_ON_GROUND = mavlink.MAV_LANDED_STATE_ON_GROUND

@@ -42,6 +42,7 @@ class FakeWorld:
     commands: list[tuple[float, str]] = field(default_factory=list)
     statuses: list[PassengerStatus] = field(default_factory=list)
     origin_given: GeoOrigin | None = None
+    intervals: list[tuple[int, float]] = field(default_factory=list)  # SET_MESSAGE_INTERVAL asked (id, Hz)
 
     def __post_init__(self) -> None:
         self._v_p = np.zeros(3)
@@ -76,6 +77,17 @@ class FakeWorld:
         now = self._advance()
         self.setpoints.append((now, np.array(v_ned_m_s, dtype=float)))
         self._v_p = np.array(v_ned_m_s, dtype=float) if self.mode == "OFFBOARD" else np.zeros(3)
+
+    def send_setpoint_ned(self, position_ned_m: np.ndarray, velocity_ned_m_s: np.ndarray,
+                          acceleration_ned_m_s2: np.ndarray) -> None:
+        """A full setpoint flies its velocity here (the fake has no position loop)."""
+        self.send_velocity_ned(velocity_ned_m_s)
+
+    def set_message_interval(self, message_id: int, rate_hz: float) -> None:
+        self.intervals.append((message_id, rate_hz))
+
+    def message_rate_hz(self) -> float:
+        return 0.0
 
     def _command(self, name: str) -> None:
         self._advance()

@@ -1,0 +1,87 @@
+"""The mission flown on a real PX4 SITL (SIH quadrotor), each flight a fresh PX4 in its own
+network namespace, stopped by its pid (:mod:`sim.px4_sitl`). About 40 s of wall time each.
+
+PX4's clock is measured against ours in every flight (from the flight's tlog) and must stay near
+wall time: ``PX4_SIM_SPEED_FACTOR`` 1.03 makes up for SIH's loop falling behind here.
+"""
+from __future__ import annotations
+
+import json
+import signal
+from pathlib import Path
+
+import pytest
+
+from mission import px4
+from mission.config import load_config
+from sim.px4_sitl import clock_ratio, px4_flight
+from sim.net import wait_for
+from tests.conftest import CONFIGS
+
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(240)]
+PX4_SITL = CONFIGS / "px4_sitl.toml"
+SPEED_FACTOR = 1.03
+
+
+def _check_clock(log_dir: Path) -> dict[str, float]:
+    clock = clock_ratio(log_dir / "flight.tlog")
+    assert clock is not None, "no LOCAL_POSITION_NED in the flight's tlog"
+    print(f"PX4 clock / wall {clock['ratio']:.3f}, LOCAL_POSITION_NED {clock['rate_hz']:.1f} Hz")
+    assert 0.9 <= clock["ratio"] <= 1.12, f"PX4 ran at {clock['ratio']:.3f}x wall time: the flight is not a real-time one"
+    return clock
+
+
+def _flown(f, config: Path) -> dict:
+    rc = f.wait_mission(180.0)
+    assert rc == 0, f"mission exit {rc}: {f.text('mission.out')[-1500:]}{f.text('mission.err')[-1500:]}"
+    target = load_config(config).scenario.target
+    after = f.watch_after(target, 2.0)  # PX4's own Hold once the mission has ended
+    s = f.summary()
+    print(json.dumps({k: s.get(k) for k in ("p1", "p2", "p3", "max_offset_before_separation_m",
+                                            "max_target_distance_after_arrival_m", "relative_input_jump_m_s",
+                                            "carrier_target_distance_at_separation_m", "position_rate_hz")}), f"hold {after:.2f} m")
+    assert s["p1"] and s["p2"] and s["p3"], s
+    assert abs(s["carrier_target_distance_at_separation_m"] - 8.0) < 0.01
+    assert s["relative_input_jump_m_s"] <= 0.1  # the law's command is continuous at separation
+    assert s["position_rate_hz"] >= 40.0, "PX4 did not stream LOCAL_POSITION_NED at the rate asked (50 Hz)"
+    assert after <= 0.5, f"PX4's Hold drifted {after:.2f} m from the target"
+    _check_clock(f.log_dir)
+    return s
+
+
+def test_px4_sitl_config_flies_p1_to_p3(tmp_path: Path, px4_build: Path) -> None:
+    with px4_flight(tmp_path / "f", PX4_SITL, build=px4_build, speed_factor=SPEED_FACTOR) as f:
+        s = _flown(f, PX4_SITL)
+    assert s["max_offset_before_separation_m"] <= 0.5
+
+
+def test_remark1_carrier_keeps_its_plan_and_never_reaches_the_target(tmp_path: Path, px4_build: Path) -> None:
+    config = tmp_path / "remark1.toml"
+    text = PX4_SITL.read_text()
+    assert 'carrier_mode = "stop"' in text
+    config.write_text(text.replace('carrier_mode = "stop"', 'carrier_mode = "remark1"'))
+    with px4_flight(tmp_path / "f", config, build=px4_build, speed_factor=SPEED_FACTOR) as f:
+        s = _flown(f, config)
+    assert s["min_carrier_target_distance_m"] > 0.0
+
+
+def test_controller_killed_while_riding_px4_offboard_loss_failsafe_takes_over(tmp_path: Path, px4_build: Path) -> None:
+    with px4_flight(tmp_path / "f", PX4_SITL, build=px4_build, speed_factor=SPEED_FACTOR) as f:
+        wait_for(lambda: "phase RIDING" in f.text("mission.out") or f.procs["mission"].poll() is not None, 60.0,
+                 "the mission riding the carrier")
+        assert f.procs["mission"].poll() is None, f.text("mission.out")
+        assert f.gcs.mode() == "OFFBOARD"
+        mark = f.gcs.mark()
+        f.procs["mission"].send_signal(signal.SIGKILL)  # no Hold, no goodbye: the setpoint stream just stops
+        f.procs["mission"].wait()
+        left = f.gcs.wait_for("HEARTBEAT", lambda m: px4.mode_name(m.custom_mode) != "OFFBOARD", timeout_s=5.0, after=mark)
+        assert left is not None, "PX4 stayed in OFFBOARD after its setpoint stream stopped"
+        mode = px4.mode_name(left.custom_mode)
+        print(f"PX4 switched to {mode} (system_status {left.system_status}); STATUSTEXT:",
+              [m.text for m in f.gcs.messages("STATUSTEXT", after=mark)])
+        assert left.base_mode & px4.MAV_MODE_FLAG_SAFETY_ARMED, "PX4 disarmed in the air"
+        lp = f.gcs.wait_for("LOCAL_POSITION_NED", timeout_s=2.0)
+        assert lp is not None and lp.z < -0.5, "the vehicle is not in the air under PX4's failsafe"
+        texts = " ".join(m.text.lower() for m in f.gcs.messages("STATUSTEXT", after=mark))
+        assert "offboard" in texts or "failsafe" in texts, texts
+        _check_clock(f.log_dir)

@@ -1,0 +1,53 @@
+"""The tracking loop (mission.tracking): what is sent for each setpoint kind, the integral's
+window and clamp, the reference's progress when the vehicle lags."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mission.tracking import TrackingGains, progress, setpoint, update_integral, velocity_demand
+
+X_REF = np.array([10.0, 5.0, -2.0])
+U_REF = np.array([1.6, 1.2, 0.0])
+A_REF = np.array([0.8, 0.6, 0.0])
+X_P = np.array([9.8, 5.1, -2.0])  # 0.2 m behind north, 0.1 m ahead east
+
+
+def test_velocity_setpoint_is_the_law_plus_our_pull_and_integral() -> None:
+    g = TrackingGains(kind="velocity", position_gain_per_s=1.5)
+    integral = np.array([0.1, 0.0, 0.0])
+    v = velocity_demand(X_REF, U_REF, X_P, integral, g)
+    np.testing.assert_allclose(v, U_REF + 1.5 * (X_REF - X_P) + integral)
+    sp = setpoint(X_REF, U_REF, A_REF, X_P, v, integral, g)
+    assert not sp.full and sp.acceleration_ned_m_s2 is None
+    assert sp.velocity_ned_m_s is v
+
+
+def test_full_setpoint_sends_the_law_velocity_lead_position_and_feed_forward() -> None:
+    g = TrackingGains(kind="full", position_gain_per_s=0.0, position_lead=2.0, drag_ff_per_s=1.0)
+    integral = np.array([0.0, 0.2, 0.0])
+    v = velocity_demand(X_REF, U_REF, X_P, integral, g)
+    np.testing.assert_allclose(v, U_REF)  # the law's own command, not the integral (an acceleration)
+    sp = setpoint(X_REF, U_REF, A_REF, X_P, v, integral, g)
+    assert sp.full
+    np.testing.assert_allclose(sp.position_ned_m, X_REF + 2.0 * (X_REF - X_P))
+    np.testing.assert_allclose(sp.acceleration_ned_m_s2, A_REF + 1.0 * U_REF + integral)
+
+
+def test_integral_integrates_inside_its_window_and_is_clamped() -> None:
+    g = TrackingGains(kind="full", integral_gain=2.0, integral_limit=0.5, integral_window_m=0.5)
+    zero = np.zeros(3)
+    step = update_integral(zero, X_REF, X_P, g, 0.02)
+    np.testing.assert_allclose(step, 2.0 * (X_REF - X_P) * 0.02)
+    far = X_REF - np.array([0.6, 0.0, 0.0])  # catching up, not a steady deficit: left alone
+    assert update_integral(step, X_REF, far, g, 0.02) is step
+    big = update_integral(np.array([0.49, 0.0, 0.0]), X_REF, X_P, g, 1.0)
+    assert np.linalg.norm(big) == pytest.approx(0.5)
+    assert update_integral(zero, X_REF, X_P, TrackingGains(kind="full"), 0.02) is zero  # no gain: never integrates
+
+
+@pytest.mark.parametrize(("lag", "rate"), [(0.0, 1.0), (0.3, 1.0), (0.65, 0.5), (1.0, 0.0), (2.0, 0.0)])
+def test_reference_slows_then_waits_for_a_lagging_vehicle(lag: float, rate: float) -> None:
+    g = TrackingGains(slow_lag_m=0.3, stop_lag_m=1.0)
+    assert progress(lag, g) == pytest.approx(rate)
+    assert progress(lag, TrackingGains()) == 1.0  # unset: the reference never waits
