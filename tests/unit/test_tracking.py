@@ -14,7 +14,7 @@ X_P = np.array([9.8, 5.1, -2.0])  # 0.2 m behind north, 0.1 m ahead east
 
 
 def test_velocity_setpoint_is_the_law_plus_our_pull_and_integral() -> None:
-    g = TrackingGains(kind="velocity", position_gain_per_s=1.5)
+    g = TrackingGains(kind="velocity", position_gain_per_s=1.5, integral_gain=0.5)
     integral = np.array([0.1, 0.0, 0.0])
     v = velocity_demand(X_REF, U_REF, X_P, integral, g)
     np.testing.assert_allclose(v, U_REF + 1.5 * (X_REF - X_P) + integral)
