@@ -21,6 +21,7 @@ import ctypes
 import itertools
 import json
 import os
+import shlex
 import shutil
 import signal
 import struct
@@ -54,8 +55,8 @@ def unavailable_reason(build: Path | None = None) -> str | None:
         return f"{ENV_VAR} is not set (point it at a PX4 SITL build: a folder with bin/px4 and etc/)"
     if not (build / "bin" / "px4").is_file() or not (build / "etc").is_dir():
         return f"{ENV_VAR}={build} has no bin/px4 and etc/"
-    if os.geteuid() != 0 or shutil.which("ip") is None:
-        return "PX4 flights run each PX4 in its own network namespace: needs root and iproute2 (ip)"
+    if os.geteuid() != 0 or shutil.which("ip") is None or shutil.which("unshare") is None:
+        return "PX4 flights run each PX4 in its own network and mount namespace: needs root, ip and unshare"
     return None
 
 
@@ -126,8 +127,8 @@ class Px4Sitl:
     """One fresh PX4 SITL process in ``ns``; ``start()`` launches it, ``stop()`` ends it by pid.
 
     speed_factor: ``PX4_SIM_SPEED_FACTOR`` (SIH's lockstep rate over wall time; here its loop
-    falls a little behind, so 1.05-1.1 brings PX4's clock near wall time). Output goes to
-    ``rootfs/../px4.out``.
+    falls a little behind, so 1.03 brings PX4's clock near wall time). Output goes to
+    ``out_dir/px4-<instance>.out``; ``rootfs`` must not be under /tmp (PX4 gets a private /tmp).
     """
 
     build: Path
@@ -136,6 +137,7 @@ class Px4Sitl:
     instance: int = 0
     airframe: int = QUAD_AIRFRAME
     speed_factor: float = 1.0
+    out_dir: Path = Path(".")
     proc: subprocess.Popen[bytes] | None = None
     _out: Any = None
 
@@ -145,10 +147,14 @@ class Px4Sitl:
         env = {**os.environ, "PATH": f"{self.rootfs / 'bin'}:{self.build / 'bin'}:{os.environ.get('PATH', '')}",
                "PX4_SYS_AUTOSTART": str(self.airframe), "PX4_SIMULATOR": "sihsim", "PX4_SIM_MODEL": model,
                "HEADLESS": "1", "PX4_SIM_SPEED_FACTOR": f"{self.speed_factor:g}"}
-        self._out = open(self.rootfs.parent / f"px4-{self.instance}.out", "wb")
+        self._out = open(self.out_dir / f"px4-{self.instance}.out", "wb")
+        px4 = " ".join(shlex.quote(a) for a in [str(self.build / "bin" / "px4"), "-d", "-i", str(self.instance), "-w",
+                                                str(self.rootfs), "-s", "etc/init.d-posix/rcS", str(self.build / "etc")])
+        # PX4 keeps a lock socket per instance number in /tmp, which a network namespace does not
+        # separate: a private /tmp (its own mount namespace) keeps another PX4 of the same instance
+        # elsewhere on the machine from making ours exit. Every exec keeps the pid: PX4's own.
         self.proc = subprocess.Popen(
-            self.ns.command([str(self.build / "bin" / "px4"), "-d", "-i", str(self.instance), "-w", str(self.rootfs),
-                             "-s", "etc/init.d-posix/rcS", str(self.build / "etc")]),
+            self.ns.command(["unshare", "-m", "sh", "-c", f"mount -t tmpfs px4tmp /tmp && exec {px4}"]),
             cwd=self.rootfs, env=env, stdout=self._out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
 
     @property
@@ -254,6 +260,7 @@ class Px4Flight:
     gcs: Any = None
     procs: dict[str, subprocess.Popen[bytes]] = field(default_factory=dict)
     armable_after_s: float = float("nan")
+    _rootfs: Path | None = None
     settle_s: float = 0.0  # extra wall seconds after PX4 is armable before the carrier and the mission start
     _files: list[Any] = field(default_factory=list)
 
@@ -275,7 +282,9 @@ class Px4Flight:
         """PX4 first; once it is armable, the carrier and the mission."""
         self.dir.mkdir(parents=True, exist_ok=True)
         self.ns = NetNamespace()
-        self.px4 = Px4Sitl(self.build, self.dir / "rootfs", self.ns, speed_factor=self.speed_factor)
+        # ROOTFS outside /tmp: PX4 gets a private /tmp (see Px4Sitl.start), which would hide it
+        self._rootfs = Path(f"/var/tmp/{self.ns.name}") / "rootfs"
+        self.px4 = Px4Sitl(self.build, self._rootfs, self.ns, speed_factor=self.speed_factor, out_dir=self.dir)
         self.px4.start()
         self.gcs = gcs_probe(self.ns)
         from sim.vehicle_probe import connect
@@ -328,7 +337,8 @@ class Px4Flight:
             self.ns.close()
         for f in self._files:
             f.close()
-        shutil.rmtree(self.dir / "rootfs", ignore_errors=True)
+        if self._rootfs is not None:
+            shutil.rmtree(self._rootfs.parent, ignore_errors=True)
 
 
 @contextlib.contextmanager

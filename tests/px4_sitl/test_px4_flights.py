@@ -23,6 +23,15 @@ PX4_SITL = CONFIGS / "px4_sitl.toml"
 SPEED_FACTOR = 1.03
 
 
+def _px4(msg) -> bool:
+    """A HEARTBEAT of PX4's autopilot (the GCS link also forwards our controller's)."""
+    return msg.get_srcComponent() == 1 and msg.autopilot == px4.MAV_AUTOPILOT_PX4
+
+
+def _px4_in(mode: str):
+    return lambda m: _px4(m) and px4.mode_name(m.custom_mode) == mode
+
+
 def _check_clock(log_dir: Path) -> dict[str, float]:
     clock = clock_ratio(log_dir / "flight.tlog")
     assert clock is not None, "no LOCAL_POSITION_NED in the flight's tlog"
@@ -70,17 +79,19 @@ def test_controller_killed_while_riding_px4_offboard_loss_failsafe_takes_over(tm
         wait_for(lambda: "phase RIDING" in f.text("mission.out") or f.procs["mission"].poll() is not None, 60.0,
                  "the mission riding the carrier")
         assert f.procs["mission"].poll() is None, f.text("mission.out")
-        assert f.gcs.mode() == "OFFBOARD"
         mark = f.gcs.mark()
+        assert f.gcs.wait_for("HEARTBEAT", _px4_in("OFFBOARD"), timeout_s=3.0) is not None
         f.procs["mission"].send_signal(signal.SIGKILL)  # no Hold, no goodbye: the setpoint stream just stops
         f.procs["mission"].wait()
-        left = f.gcs.wait_for("HEARTBEAT", lambda m: px4.mode_name(m.custom_mode) != "OFFBOARD", timeout_s=5.0, after=mark)
+        mark = f.gcs.mark()
+        left = f.gcs.wait_for("HEARTBEAT", lambda m: _px4(m) and px4.mode_name(m.custom_mode) != "OFFBOARD", timeout_s=5.0,
+                              after=mark)
         assert left is not None, "PX4 stayed in OFFBOARD after its setpoint stream stopped"
         mode = px4.mode_name(left.custom_mode)
         print(f"PX4 switched to {mode} (system_status {left.system_status}); STATUSTEXT:",
               [m.text for m in f.gcs.messages("STATUSTEXT", after=mark)])
         assert left.base_mode & px4.MAV_MODE_FLAG_SAFETY_ARMED, "PX4 disarmed in the air"
-        lp = f.gcs.wait_for("LOCAL_POSITION_NED", timeout_s=2.0)
+        lp = f.gcs.wait_for("LOCAL_POSITION_NED", timeout_s=2.0, after=f.gcs.mark())
         assert lp is not None and lp.z < -0.5, "the vehicle is not in the air under PX4's failsafe"
         texts = " ".join(m.text.lower() for m in f.gcs.messages("STATUSTEXT", after=mark))
         assert "offboard" in texts or "failsafe" in texts, texts
