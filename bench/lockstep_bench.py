@@ -71,27 +71,28 @@ def run_demo(pairs: int, timeout_s: float) -> DemoRun:
     return DemoRun(pairs, wall, code, min(speeds) if speeds else 0.0, summaries)
 
 
-# Differ between runs by design: a Zenoh session id; the controller's receive counters, which
-# count the vehicle's hellos before time starts (resent every 50 ms of wall time until answered).
-RUN_IDENTITY = {"bound_source", "rx_bytes", "rx_messages"}
+# Differ between runs by design: a Zenoh session id; the controller's link counters that count the
+# lockstep handshake before time starts (the vehicle's hellos, resent every 50 ms of wall time
+# until answered, and the answers to them).
+RUN_IDENTITY = {"bound_source", "rx_bytes", "rx_messages", "tx_messages"}
 
 
-def max_difference(a: dict, b: dict) -> float:
-    """Largest |a - b| over the numbers of two summaries, nested ones included (inf if their keys
-    or texts differ); session identities are ignored."""
+def max_difference(a: dict, b: dict, prefix: str = "") -> tuple[float, str]:
+    """Largest |a - b| over the numbers of two summaries, nested ones included, and where it is
+    (inf if their keys or texts differ); session identities are ignored."""
     if a.keys() != b.keys():
-        return float("inf")
-    worst = 0.0
+        return float("inf"), f"{prefix}keys"
+    worst: tuple[float, str] = (0.0, "")
     for k, v in a.items():
         w = b[k]
         if k in RUN_IDENTITY:
             continue
         if isinstance(v, dict) and isinstance(w, dict):
-            worst = max(worst, max_difference(v, w))
+            worst = max(worst, max_difference(v, w, f"{prefix}{k}."))
         elif isinstance(v, (int, float)) and not isinstance(v, bool) and isinstance(w, (int, float)):
-            worst = max(worst, abs(float(v) - float(w)))
+            worst = max(worst, (abs(float(v) - float(w)), f"{prefix}{k}"))
         elif v != w:
-            return float("inf")
+            return float("inf"), f"{prefix}{k}"
     return worst
 
 
@@ -114,10 +115,10 @@ def main(pair_counts: str, runs: int, busy: int, timeout_s: float) -> None:
             for i in range(1, runs + 1):
                 r = run_demo(pairs, timeout_s)
                 reference = reference or r
-                diff = max((max_difference(reference.summaries.get(p, {}), s) for p, s in r.summaries.items()),
-                           default=float("inf"))
+                diff, where = max((max_difference(reference.summaries.get(p, {}), s) for p, s in r.summaries.items()),
+                                  default=(float("inf"), "no summary"))
                 click.echo(f"{pairs:>5} {i:>4} {r.speed_x:>19.1f} {r.wall_s:>14.1f} {r.exit_code:>5}  {r.held():<22} "
-                           f"{diff:>18.3g}")
+                           f"{diff:>18.3g} {where if diff else ''}")
         click.echo(f"load average {os.getloadavg()[0]:.1f} at the end")
     finally:
         for p in loops:

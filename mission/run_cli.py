@@ -56,12 +56,15 @@ def mission_io(cfg: Config, clock: Clock, tlog_path: str | Path | None = None) -
                            source_system=cfg.mavlink.source_system, source_component=cfg.mavlink.source_component,
                            tlog_path=None if tlog_path is None else str(tlog_path), signing_key=key,
                            heartbeat_timeout_s=cfg.mission.heartbeat_timeout_s)
+        if isinstance(clock, LockstepClock):  # before open: the vehicle's first barrier may come at once
+            from mission.lockstep import MavlinkUpstream
+
+            MavlinkUpstream(clock, link)
         link.open()
         stack.callback(link.close)
         if isinstance(clock, LockstepClock):  # step on the vehicle's time; bring the carrier along
-            from mission.lockstep import MavlinkUpstream, ZenohRelay
+            from mission.lockstep import ZenohRelay
 
-            MavlinkUpstream(clock, link)
             relay = ZenohRelay(session, cfg.zenoh.pair, feed, publisher)
             stack.callback(relay.close)
             clock.downstream = relay

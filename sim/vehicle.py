@@ -429,7 +429,7 @@ class MockVehicle:
                 if answer is not None:
                     break
                 now = time.monotonic()
-                if not joined and not onboard.latched and now - called > LOCKSTEP_HELLO_WALL_S:  # nobody heard yet
+                if not joined and now - called > LOCKSTEP_HELLO_WALL_S:  # nobody answered yet: hello again
                     with self._lock:  # (time has not started: no link faults yet, or latency would hold it forever)
                         heartbeat = tel.build("HEARTBEAT", self._telemetry_state(), self._geo, self._noise)
                         self._send_control(onboard, heartbeat)
