@@ -48,8 +48,6 @@ def test_full_mission_p2_p3_and_smooth_separation(full_mission):
     assert np.linalg.norm(snap.position_ned_m - np.array(pair.cfg.scenario.target)) < 1.0
 
 
-@pytest.mark.xfail(strict=True, reason="issue 10: on PX4's response (and now the mock's) the passenger strays "
-                                      "about 1 m from the dock while riding; the tracking loop must hold it")
 def test_full_mission_p1_holds_the_dock(full_mission):
     _, _, _, s = full_mission
     assert s["max_offset_before_separation_m"] <= 0.5
