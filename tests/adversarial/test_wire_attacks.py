@@ -14,7 +14,7 @@ on the ground disarmed; never disarmed in the air); the real carrier never came 
 guard, b c - carrier.p3_margin_m (7.5 m), of the target (its own summary; b c itself is crossed
 by design while it brakes after the separation at b c); the rogue input had no effect (the
 separation latched at b c on the real carrier, no pilot_override, nothing sent to the rogue)
-and was counted (summary.json); the flight log is complete. Speed 5, as the fault matrix.
+and was counted (summary.json); the flight log is complete.
 """
 from __future__ import annotations
 
@@ -38,8 +38,11 @@ from tests.faults.test_matrix import assert_completed, assert_exit, assert_never
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(200)]
 
-# Speed 2, not the fault matrix's 5: these flights check what is accepted, not timing, and at 5 a
-# loaded 2-core machine already loses the carrier (0.5 s simulated is 0.1 s of wall time).
+# The Zenoh attacks fly in lockstep (the three processes step on the vehicle's simulated time, so
+# a loaded machine cannot make the carrier look lost); the MAVLink ones in real time at speed 2
+# (in lockstep the vehicle's clock itself comes over the attacked link), not the fault matrix's 5:
+# they check what is accepted, not timing, and at 5 a loaded 2-core machine already loses the
+# carrier (0.5 s simulated is 0.1 s of wall time).
 SPEED = 2.0
 
 STATE_KEY = "marsupial/pair0/carrier/state"
@@ -129,7 +132,7 @@ def _state(seq: int, stamp: float, position: list[float], velocity: list[float] 
 
 
 def _rogue(tmp_path: Path, name: str, position: list[float]) -> None:
-    with flight(tmp_path, name, speed=SPEED) as f:
+    with flight(tmp_path, name, speed=SPEED, lockstep=True) as f:
         watch = CarrierWatch(f)
         try:
             f.wait_phase("RIDING")
@@ -141,7 +144,7 @@ def _rogue(tmp_path: Path, name: str, position: list[float]) -> None:
             watch.close()
         s = assert_completed(f)  # separated at b c (8.0 +- 0.05 m) of the *real* carrier, arrived
         feed = s["carrier_feed"]
-        assert sent > 50 and feed["dropped"]["source"] >= 0.8 * sent, (sent, feed)
+        assert sent >= 20 and feed["dropped"]["source"] >= 0.8 * sent, (sent, feed)
         assert sum(feed["rejected_sources"].values()) == feed["dropped"]["source"], feed
         assert feed["bound_source"] is not None and feed["bound_source"] not in feed["rejected_sources"]
     assert_real_carrier_kept_its_guard(f)
@@ -158,7 +161,7 @@ def test_a_rogue_publisher_with_higher_sequence_numbers_is_dropped_and_counted(t
 
 def _spoofed_outliers(tmp_path: Path) -> None:
     rng = random.Random(11)
-    with flight(tmp_path, "outliers", speed=SPEED) as f:
+    with flight(tmp_path, "outliers", speed=SPEED, lockstep=True) as f:
         watch = CarrierWatch(f)
         try:
             f.wait_phase("RIDING")
@@ -179,8 +182,8 @@ def _spoofed_outliers(tmp_path: Path) -> None:
                     return _state(st["seq"] + 2, stamp, pos, vel)  # ahead of its honest twin
                 return None
 
-            # ~0.6 outliers a wall second among the carrier's 60 (speed 2 x 30 Hz): 1 %
-            attacker = Attacker(f, outlier, 0.8, source=lambda: watch.source)
+            # a few outliers a wall second: about 1 % of the carrier's states in lockstep
+            attacker = Attacker(f, outlier, 0.25, source=lambda: watch.source)
             f.wait_phase("NAVIGATING", 60.0)
             sent = attacker.stop()
         finally:
@@ -196,7 +199,7 @@ def _spoofed_outliers(tmp_path: Path) -> None:
 
 
 def _oversized(tmp_path: Path) -> None:
-    with flight(tmp_path, "oversized", speed=SPEED) as f:
+    with flight(tmp_path, "oversized", speed=SPEED, lockstep=True) as f:
         f.wait_phase("RIDING")
         blob = b"{" + b" " * (10 * 1024 * 1024) + b"}"
         for _ in range(5):
