@@ -1,0 +1,11 @@
+"""MAVLink 2 to one PX4 vehicle, one concept per module.
+
+* :mod:`~mission.mavlink.transport`: bytes in and out (UDP listen/send, TCP, serial) behind one
+  small interface, and the one parser of link URLs (the mock vehicle uses it too);
+* :mod:`~mission.mavlink.codec`: pymavlink codecs, datagram-safe parsing and MAVLink 2 signing;
+* :mod:`~mission.mavlink.telemetry`: the vehicle's state as a pure reducer of received
+  messages, the STATUSTEXT assembler and the immutable :class:`VehicleState` snapshot;
+* :mod:`~mission.mavlink.commands`: COMMAND_LONG's ACK / IN_PROGRESS / retry cycle and the
+  HEARTBEAT confirmation of a mode or arming change, as state machines on the injected clock;
+* :mod:`mission.link`: the thin facade a mission uses (threads, identity, send, tlog).
+"""

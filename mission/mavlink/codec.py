@@ -1,0 +1,49 @@
+"""pymavlink codecs as both ends of our links use them: robust parsing, one datagram at a time,
+and MAVLink 2 signing."""
+from __future__ import annotations
+
+import time
+from collections.abc import Collection
+from typing import Any
+
+from mission.mavlink_env import mavlink
+
+SIGNING_EPOCH_S = 1420070400  # 2015-01-01T00:00:00Z, the MAVLink 2 signing epoch
+
+
+def new_codec(source_system: int, source_component: int) -> Any:
+    """A pymavlink MAVLink 2 encoder/decoder (our dialect) with robust parsing."""
+    codec = mavlink.MAVLink(None, srcSystem=source_system, srcComponent=source_component)
+    codec.robust_parsing = True
+    return codec
+
+
+def reset_parser(codec: Any) -> int:
+    """Drop a partial packet left in the parser (a datagram never continues in the next);
+    returns how many bytes were dropped."""
+    leftover = len(codec.buf) - codec.buf_index
+    codec.buf = bytearray()
+    codec.buf_index = 0
+    codec.expected_length = mavlink.HEADER_LEN_V1 + 2
+    return leftover
+
+
+def signing_timestamp_now() -> int:
+    """MAVLink 2 signing timestamp: 10 us units since 2015-01-01 UTC (a calendar value by spec)."""
+    return int((time.time_ns() / 1e9 - SIGNING_EPOCH_S) * 1e5)
+
+
+def setup_signing(codec: Any, key: bytes, *, sign_outgoing: bool, unsigned_ids: Collection[int]) -> None:
+    """Sign (``sign_outgoing``) and check with the 32-byte ``key``; packets with a message id in
+    ``unsigned_ids`` may arrive unsigned."""
+    allowed = frozenset(unsigned_ids)
+
+    def allow_unsigned(_codec: Any, msg_id: int) -> bool:
+        return msg_id in allowed
+
+    signing = codec.signing
+    signing.secret_key = bytes(key)
+    signing.sign_outgoing = sign_outgoing
+    signing.allow_unsigned_callback = allow_unsigned
+    signing.link_id = 0
+    signing.timestamp = signing_timestamp_now()

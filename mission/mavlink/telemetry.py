@@ -1,0 +1,191 @@
+"""What the vehicle told us, as a pure reducer of received messages.
+
+:func:`reduce` maps ``(telemetry, message, t_rx) -> telemetry`` for the messages a mission
+reads (HEARTBEAT, LOCAL_POSITION_NED, EXTENDED_SYS_STATE, SYS_STATUS, GPS_GLOBAL_ORIGIN); other
+messages leave it unchanged. :func:`snapshot` turns it into the immutable :class:`VehicleState`
+a caller sees at one clock time. :class:`StatusTextAssembler` joins chunked STATUSTEXTs. Times
+are link-clock seconds [s]; positions and velocities PX4's local NED frame.
+"""
+from __future__ import annotations
+
+import collections
+import math
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+
+from mission import px4
+from mission.mavlink_env import mavlink
+
+STATUSTEXT_CHUNK_LEN = 50
+
+
+@dataclass(frozen=True, eq=False)
+class VehicleState:
+    """Immutable snapshot of the vehicle's telemetry, as the link last heard it.
+
+    Times are link-clock seconds [s]. Positions and velocities are PX4's local NED frame
+    (x north, y east, z down) relative to the EKF origin; arrays are read-only.
+    """
+
+    t_s: float
+    """Clock time the snapshot was taken [s]."""
+    system_id: int | None
+    """Identified vehicle system id (None before identification)."""
+    component_id: int | None
+    """Identified autopilot component id (None before identification)."""
+    position_ned_m: np.ndarray | None
+    """Position [m] NED, shape (3,), from LOCAL_POSITION_NED; None before the first one."""
+    velocity_ned_m_s: np.ndarray | None
+    """Velocity [m/s] NED, shape (3,), from LOCAL_POSITION_NED; None before the first one."""
+    position_rx_s: float | None
+    """Clock time the last LOCAL_POSITION_NED was received [s]."""
+    heartbeat_rx_s: float | None
+    """Clock time the last vehicle HEARTBEAT was received [s]."""
+    armed: bool
+    """HEARTBEAT base_mode has MAV_MODE_FLAG_SAFETY_ARMED."""
+    mode: str
+    """PX4 mode name (:func:`mission.px4.mode_name`), e.g. ``"OFFBOARD"``; ``""`` before a HEARTBEAT."""
+    custom_mode: int
+    """Raw HEARTBEAT custom_mode."""
+    base_mode: int
+    """Raw HEARTBEAT base_mode."""
+    system_status: int
+    """HEARTBEAT system_status (MAV_STATE: 3 STANDBY, 4 ACTIVE, 5 CRITICAL...)."""
+    landed_state: int | None
+    """EXTENDED_SYS_STATE landed_state (1 ON_GROUND, 2 IN_AIR, 3 TAKEOFF, 4 LANDING) or None."""
+    position_valid: bool
+    """A fresh, finite LOCAL_POSITION_NED (age <= the link's position_timeout_s) and, when
+    SYS_STATUS reports the AHRS/estimator as present and enabled, that it is healthy."""
+    origin: tuple[float, float, float] | None
+    """EKF origin (lat [deg], lon [deg], alt [m] AMSL) from GPS_GLOBAL_ORIGIN, or None."""
+    last_statustext: str
+    """Text of the latest (reassembled) STATUSTEXT from the vehicle, ``""`` if none."""
+
+    @property
+    def heartbeat_age_s(self) -> float:
+        """Seconds since the last vehicle HEARTBEAT at snapshot time (inf if none) [s]."""
+        return math.inf if self.heartbeat_rx_s is None else self.t_s - self.heartbeat_rx_s
+
+    @property
+    def position_age_s(self) -> float:
+        """Seconds since the last LOCAL_POSITION_NED at snapshot time (inf if none) [s]."""
+        return math.inf if self.position_rx_s is None else self.t_s - self.position_rx_s
+
+
+@dataclass(frozen=True, eq=False)
+class Telemetry:
+    """Everything the reducer keeps (see :class:`VehicleState` for the fields' meaning);
+    ``position_finite``: position and velocity all finite; ``ahrs_healthy``: None when SYS_STATUS
+    does not report the estimator as present and enabled."""
+
+    position_ned_m: np.ndarray | None = None
+    velocity_ned_m_s: np.ndarray | None = None
+    position_finite: bool = False
+    position_rx_s: float | None = None
+    heartbeat_rx_s: float | None = None
+    base_mode: int = 0
+    custom_mode: int = 0
+    mode: str = ""
+    system_status: int = 0
+    landed_state: int | None = None
+    ahrs_healthy: bool | None = None
+    origin: tuple[float, float, float] | None = None
+    last_statustext: str = ""
+
+
+def _readonly_vector(x: float, y: float, z: float) -> np.ndarray:
+    v = np.array([x, y, z], dtype=float)
+    v.setflags(write=False)
+    return v
+
+
+def _heartbeat(tm: Telemetry, msg: Any, t_rx: float) -> Telemetry:
+    custom_mode = int(msg.custom_mode)
+    return replace(tm, heartbeat_rx_s=t_rx, base_mode=int(msg.base_mode), custom_mode=custom_mode,
+                   mode=px4.mode_name(custom_mode), system_status=int(msg.system_status))
+
+
+def _local_position(tm: Telemetry, msg: Any, t_rx: float) -> Telemetry:
+    position, velocity = (msg.x, msg.y, msg.z), (msg.vx, msg.vy, msg.vz)
+    finite = all(math.isfinite(c) for c in position + velocity)
+    return replace(tm, position_ned_m=_readonly_vector(*position), velocity_ned_m_s=_readonly_vector(*velocity),
+                   position_finite=finite, position_rx_s=t_rx)
+
+
+def _extended_sys_state(tm: Telemetry, msg: Any, t_rx: float) -> Telemetry:
+    return replace(tm, landed_state=int(msg.landed_state))
+
+
+def _sys_status(tm: Telemetry, msg: Any, t_rx: float) -> Telemetry:
+    bit = mavlink.MAV_SYS_STATUS_AHRS
+    reported = msg.onboard_control_sensors_present & bit and msg.onboard_control_sensors_enabled & bit
+    return replace(tm, ahrs_healthy=bool(msg.onboard_control_sensors_health & bit) if reported else None)
+
+
+def _origin(tm: Telemetry, msg: Any, t_rx: float) -> Telemetry:
+    return replace(tm, origin=(msg.latitude * 1e-7, msg.longitude * 1e-7, msg.altitude * 1e-3))
+
+
+_REDUCERS = {
+    "HEARTBEAT": _heartbeat,
+    "LOCAL_POSITION_NED": _local_position,
+    "EXTENDED_SYS_STATE": _extended_sys_state,
+    "SYS_STATUS": _sys_status,
+    "GPS_GLOBAL_ORIGIN": _origin,
+}
+KINDS = frozenset(_REDUCERS)
+"""Message types :func:`reduce` reads."""
+
+
+def reduce(tm: Telemetry, msg: Any, t_rx: float) -> Telemetry:
+    """The telemetry after ``msg`` (received at ``t_rx`` [s]); unchanged for other messages."""
+    reducer = _REDUCERS.get(msg.get_type())
+    return tm if reducer is None else reducer(tm, msg, t_rx)
+
+
+def snapshot(tm: Telemetry, now_s: float, vehicle: tuple[int, int] | None, position_timeout_s: float) -> VehicleState:
+    """What a caller sees at clock time ``now_s``: position valid while fresh (age <=
+    ``position_timeout_s``), finite and not reported unhealthy by SYS_STATUS."""
+    fresh = tm.position_rx_s is not None and now_s - tm.position_rx_s <= position_timeout_s and tm.position_finite
+    return VehicleState(
+        t_s=now_s,
+        system_id=None if vehicle is None else vehicle[0],
+        component_id=None if vehicle is None else vehicle[1],
+        position_ned_m=tm.position_ned_m,
+        velocity_ned_m_s=tm.velocity_ned_m_s,
+        position_rx_s=tm.position_rx_s,
+        heartbeat_rx_s=tm.heartbeat_rx_s,
+        armed=bool(tm.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED),
+        mode=tm.mode,
+        custom_mode=tm.custom_mode,
+        base_mode=tm.base_mode,
+        system_status=tm.system_status,
+        landed_state=tm.landed_state,
+        position_valid=bool(fresh) and tm.ahrs_healthy is not False,
+        origin=tm.origin,
+        last_statustext=tm.last_statustext,
+    )
+
+
+class StatusTextAssembler:
+    """Reassembles chunked STATUSTEXT (MAVLink 2 ``id``/``chunk_seq``); a chunk shorter than
+    50 characters ends a text. Keeps at most ``max_pending`` texts pending."""
+
+    def __init__(self, max_pending: int = 4) -> None:
+        self._pending: collections.OrderedDict[int, dict[int, str]] = collections.OrderedDict()
+        self._max_pending = max_pending
+
+    def feed(self, text: str, text_id: int, chunk_seq: int) -> str | None:
+        """Add one chunk; return the whole text when complete, else None."""
+        if text_id == 0:
+            return text
+        parts = self._pending.setdefault(text_id, {})
+        parts[chunk_seq] = text
+        if len(text) < STATUSTEXT_CHUNK_LEN:
+            del self._pending[text_id]
+            return "".join(parts[k] for k in sorted(parts))
+        while len(self._pending) > self._max_pending:
+            self._pending.popitem(last=False)
+        return None

@@ -1,0 +1,215 @@
+"""The MAVLink layers without sockets: URL parsing, the telemetry reducer, the STATUSTEXT
+assembler, and the command state machines on a manual clock with hand-built messages."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from mission import px4
+from mission.clock import ManualClock
+from mission.mavlink import telemetry
+from mission.mavlink.commands import (
+    AckLog,
+    CommandExchange,
+    Confirmed,
+    HeartbeatConfirmation,
+    Step,
+    refusal_reason,
+)
+from mission.mavlink.transport import Endpoint, parse_url
+from mission.mavlink_env import mavlink
+
+IN_PROGRESS, ACCEPTED, DENIED = mavlink.MAV_RESULT_IN_PROGRESS, mavlink.MAV_RESULT_ACCEPTED, mavlink.MAV_RESULT_DENIED
+SET_MODE = mavlink.MAV_CMD_DO_SET_MODE
+
+# ------------------------------------------------------------------------------ URLs
+
+
+@pytest.mark.parametrize(("url", "default", "expected"), [
+    ("udpin:127.0.0.1:14540", None, Endpoint("udpin", "127.0.0.1", 14540)),
+    ("udp://0.0.0.0:0", None, Endpoint("udpin", "0.0.0.0", 0)),
+    ("udpout:10.0.0.2:14550", None, Endpoint("udpout", "10.0.0.2", 14550)),
+    ("udpout://10.0.0.2:14550", None, Endpoint("udpout", "10.0.0.2", 14550)),
+    ("tcp:127.0.0.1:5760", None, Endpoint("tcp", "127.0.0.1", 5760)),
+    ("127.0.0.1:14580", "udpin", Endpoint("udpin", "127.0.0.1", 14580)),
+    (":14540", "udpout", Endpoint("udpout", "127.0.0.1", 14540)),
+    ("/dev/ttyACM0:921600", None, Endpoint("serial", device="/dev/ttyACM0", baud=921600)),
+    ("serial:/dev/ttyUSB1", None, Endpoint("serial", device="/dev/ttyUSB1", baud=57600)),
+    ("COM3,115200", None, Endpoint("serial", device="COM3", baud=115200)),
+])
+def test_url_forms(url, default, expected):
+    assert parse_url(url, default) == expected
+
+
+@pytest.mark.parametrize(("url", "message"), [
+    ("udpin:nonsense", "HOST:PORT"),
+    ("udpin:127.0.0.1:notaport", "not an integer"),
+    ("udpout:127.0.0.1:70000", "out of range"),
+    ("carrier-pigeon:1", "expected udpin"),
+    ("127.0.0.1:14540", "expected udpin"),  # a bare address needs a default scheme
+    ("udpin:host:port", "not an integer"),
+    ("/dev/ttyACM0:fast", "baud"),
+])
+def test_bad_urls_name_the_problem(url, message):
+    with pytest.raises(ValueError, match=message):
+        parse_url(url)
+
+
+# ------------------------------------------------------------------------------ telemetry
+
+def heartbeat(mode: str, armed: bool, status: int = mavlink.MAV_STATE_ACTIVE):
+    return mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_PX4,
+                                             px4.base_mode_of(mode, armed), px4.custom_mode_of(mode), status, 3)
+
+
+def position(x=1.0, y=2.0, z=-3.0, vx=0.1, vy=0.2, vz=0.3):
+    return mavlink.MAVLink_local_position_ned_message(0, x, y, z, vx, vy, vz)
+
+
+def sys_status(present: bool, enabled: bool, healthy: bool):
+    bit = mavlink.MAV_SYS_STATUS_AHRS
+    return mavlink.MAVLink_sys_status_message(bit if present else 0, bit if enabled else 0, bit if healthy else 0,
+                                              0, 0, -1, -1, 0, 0, 0, 0, 0, 0)
+
+
+def test_reducer_reads_heartbeat_position_origin_and_landed_state():
+    tm = telemetry.Telemetry()
+    tm = telemetry.reduce(tm, heartbeat("OFFBOARD", True), 1.0)
+    tm = telemetry.reduce(tm, position(), 1.1)
+    tm = telemetry.reduce(tm, mavlink.MAVLink_gps_global_origin_message(473977418, 85455939, 488000, 0), 1.2)
+    tm = telemetry.reduce(tm, mavlink.MAVLink_extended_sys_state_message(0, mavlink.MAV_LANDED_STATE_IN_AIR), 1.3)
+    s = telemetry.snapshot(tm, 1.4, (1, 1), position_timeout_s=0.5)
+    assert (s.mode, s.armed, s.heartbeat_rx_s, s.system_id) == ("OFFBOARD", True, 1.0, 1)
+    assert s.position_ned_m.tolist() == [1.0, 2.0, -3.0] and s.velocity_ned_m_s.tolist() == pytest.approx([0.1, 0.2, 0.3])
+    assert s.origin == pytest.approx((47.3977418, 8.5455939, 488.0))
+    assert s.landed_state == mavlink.MAV_LANDED_STATE_IN_AIR
+    assert s.position_valid and s.heartbeat_age_s == pytest.approx(0.4)
+    with pytest.raises(ValueError):
+        s.position_ned_m[0] = 5.0  # read-only
+
+
+def test_reducer_is_pure_and_ignores_other_messages():
+    before = telemetry.reduce(telemetry.Telemetry(), heartbeat("AUTO.LOITER", False), 0.0)
+    after = telemetry.reduce(before, heartbeat("OFFBOARD", True), 1.0)
+    assert (before.mode, before.heartbeat_rx_s) == ("AUTO.LOITER", 0.0)
+    assert after.mode == "OFFBOARD"
+    assert telemetry.reduce(after, mavlink.MAVLink_attitude_message(0, 0, 0, 0, 0, 0, 0), 2.0) is after
+
+
+def test_position_validity_age_finiteness_and_estimator_health():
+    tm = telemetry.reduce(telemetry.Telemetry(), position(), 1.0)
+    assert telemetry.snapshot(tm, 1.5, None, 0.5).position_valid
+    assert not telemetry.snapshot(tm, 1.51, None, 0.5).position_valid  # stale
+    assert not telemetry.snapshot(telemetry.reduce(tm, position(x=math.nan), 1.0), 1.0, None, 0.5).position_valid
+    unhealthy = telemetry.reduce(tm, sys_status(True, True, False), 1.0)
+    assert not telemetry.snapshot(unhealthy, 1.0, None, 0.5).position_valid
+    not_reported = telemetry.reduce(unhealthy, sys_status(True, False, False), 1.0)
+    assert telemetry.snapshot(not_reported, 1.0, None, 0.5).position_valid
+
+
+def test_statustext_chunks_are_joined():
+    a = telemetry.StatusTextAssembler()
+    head = "Preflight Fail: " + "x" * 34
+    assert len(head) == 50
+    assert a.feed("single", 0, 0) == "single"
+    assert a.feed(head, 7, 0) is None
+    assert a.feed("tail", 7, 1) == head + "tail"
+    assert a.feed("tail again", 7, 1) == "tail again"  # a finished id starts over
+
+
+# ------------------------------------------------------------------------------ commands
+
+
+def run_exchange(ex: CommandExchange, clock: ManualClock, acks: AckLog, answers: dict[int, list[int]], dt=0.01):
+    """Drive ``ex``: after send number k, the vehicle answers ``answers[k]`` (results) at once."""
+    sends = []
+    while True:
+        step = ex.step(clock.now(), acks)
+        if step is Step.SEND:
+            sends.append(ex.confirmation)
+            for result in answers.get(len(sends), []):
+                acks.add(clock.now(), ex.command, result)
+        elif step is Step.WAIT:
+            clock.advance(dt)
+        else:
+            return step, sends
+
+
+def test_exchange_accepted_at_once():
+    clock, acks = ManualClock(), AckLog()
+    step, sends = run_exchange(CommandExchange(SET_MODE, 0.5, 3, acks.seq), clock, acks, {1: [ACCEPTED]})
+    assert step is Step.DONE and sends == [0] and clock.now() == 0.0
+
+
+def test_exchange_retries_with_rising_confirmation_then_times_out():
+    clock, acks = ManualClock(), AckLog()
+    ex = CommandExchange(SET_MODE, 0.5, 3, acks.seq)
+    step, sends = run_exchange(ex, clock, acks, {})
+    assert step is Step.TIMED_OUT and sends == [0, 1, 2, 3] and ex.final is None
+    assert clock.now() == pytest.approx(4 * 0.5, abs=0.02)
+
+
+def test_exchange_in_progress_extends_the_wait_and_a_late_answer_counts():
+    clock, acks = ManualClock(), AckLog()
+    ex = CommandExchange(SET_MODE, 0.5, 0, acks.seq)
+    assert ex.step(clock.now(), acks) is Step.SEND
+    clock.advance(0.4)
+    acks.add(clock.now(), SET_MODE, IN_PROGRESS)
+    clock.advance(0.4)  # 0.8 s after the send: past the first deadline, inside the restarted one
+    assert ex.step(clock.now(), acks) is Step.WAIT
+    acks.add(clock.now(), SET_MODE, DENIED)
+    assert ex.step(clock.now(), acks) is Step.DONE and ex.final.result == DENIED
+
+
+def test_exchange_ignores_older_acks_and_other_commands():
+    clock, acks = ManualClock(), AckLog()
+    acks.add(0.0, SET_MODE, ACCEPTED)  # an answer to an earlier command
+    ex = CommandExchange(SET_MODE, 0.5, 0, acks.seq)
+    assert ex.step(0.0, acks) is Step.SEND
+    acks.add(0.1, mavlink.MAV_CMD_COMPONENT_ARM_DISARM, ACCEPTED)
+    assert ex.step(0.1, acks) is Step.WAIT
+    assert ex.step(0.6, acks) is Step.TIMED_OUT
+
+
+def state_at(t_s: float, mode: str, heartbeat_rx_s: float | None) -> telemetry.VehicleState:
+    tm = telemetry.Telemetry()
+    if heartbeat_rx_s is not None:
+        tm = telemetry.reduce(tm, heartbeat(mode, True), heartbeat_rx_s)
+    return telemetry.snapshot(tm, t_s, (1, 1), 0.5)
+
+
+def test_confirmation_needs_a_heartbeat_after_the_command():
+    acks = AckLog()
+    conf = HeartbeatConfirmation(SET_MODE, 1.0, acks.seq, lambda s: s.mode == "OFFBOARD", 2.5)
+    conf.start(1.1)
+    assert conf.step(1.2, acks, state_at(1.2, "OFFBOARD", 0.9)) is Confirmed.WAIT  # an older HEARTBEAT
+    assert conf.step(1.3, acks, state_at(1.3, "POSCTL", 1.25)) is Confirmed.WAIT
+    assert conf.step(1.4, acks, state_at(1.4, "OFFBOARD", 1.35)) is Confirmed.CONFIRMED
+    assert conf.step(3.7, acks, state_at(3.7, "POSCTL", 3.5)) is Confirmed.TIMED_OUT
+
+
+def test_confirmation_rejected_by_pxs_second_ack():
+    acks = AckLog()
+    acks.add(0.5, SET_MODE, ACCEPTED)  # before the command: not ours
+    conf = HeartbeatConfirmation(SET_MODE, 1.0, acks.seq, lambda s: s.mode == "OFFBOARD", 2.5)
+    acks.add(1.05, SET_MODE, ACCEPTED)  # the MAVLink layer's ACK
+    conf.start(1.05)
+    assert conf.step(1.1, acks, state_at(1.1, "POSCTL", 1.08)) is Confirmed.WAIT
+    acks.add(1.15, SET_MODE, mavlink.MAV_RESULT_TEMPORARILY_REJECTED)  # the commander's real answer
+    assert conf.step(1.2, acks, state_at(1.2, "POSCTL", 1.18)) is Confirmed.REJECTED
+    assert conf.rejection.result == mavlink.MAV_RESULT_TEMPORARILY_REJECTED
+
+
+def test_refusal_reason_prefers_a_serious_recent_text():
+    texts = [(0.5, 2, "old and serious"), (1.1, 6, "info"), (1.2, 3, "Arming denied: throttle"), (1.3, 6, "later info")]
+    assert refusal_reason(texts, 1.0) == ("Arming denied: throttle", "later info")
+    assert refusal_reason(texts[:2], 1.0) == (None, "info")
+    assert refusal_reason([], 1.0) == (None, "")
+
+
+def test_snapshot_arrays_are_shared_not_copied():
+    tm = telemetry.reduce(telemetry.Telemetry(), position(), 1.0)
+    a, b = telemetry.snapshot(tm, 1.0, None, 0.5), telemetry.snapshot(tm, 1.1, None, 0.5)
+    assert a.position_ned_m is b.position_ned_m and np.shares_memory(a.velocity_ned_m_s, tm.velocity_ned_m_s)
