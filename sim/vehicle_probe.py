@@ -17,7 +17,8 @@ from typing import TYPE_CHECKING, Any
 
 from mission import px4
 from mission.mavlink_env import mavlink
-from sim.vehicle_link import parse_endpoint, signing_timestamp_now
+from mission.mavlink.codec import new_codec, setup_signing
+from sim.vehicle_link import parse_endpoint
 
 NAN = float("nan")
 
@@ -38,13 +39,9 @@ class Probe:
         self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
         self.sock.bind(parse_endpoint(bind).address)
         self.vehicle = vehicle
-        self.mav = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=compid)
-        self.mav.robust_parsing = True
-        if signing_key is not None:
-            self.mav.signing.secret_key = bytes(signing_key)
-            self.mav.signing.sign_outgoing = True
-            self.mav.signing.link_id = 1
-            self.mav.signing.timestamp = signing_timestamp_now()
+        self.mav = new_codec(sysid, compid)
+        if signing_key is not None:  # a ground station's own link id; everything it receives must be signed
+            setup_signing(self.mav, signing_key, sign_outgoing=True, unsigned_ids=(), link_id=1)
         self.history: dict[str, collections.deque[tuple[int, float, Any]]] = collections.defaultdict(
             lambda: collections.deque(maxlen=history_len))
         self.received = 0

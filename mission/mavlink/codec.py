@@ -33,9 +33,10 @@ def signing_timestamp_now() -> int:
     return int((time.time_ns() / 1e9 - SIGNING_EPOCH_S) * 1e5)
 
 
-def setup_signing(codec: Any, key: bytes, *, sign_outgoing: bool, unsigned_ids: Collection[int]) -> None:
-    """Sign (``sign_outgoing``) and check with the 32-byte ``key``; packets with a message id in
-    ``unsigned_ids`` may arrive unsigned."""
+def setup_signing(codec: Any, key: bytes, *, sign_outgoing: bool, unsigned_ids: Collection[int],
+                  link_id: int = 0) -> None:
+    """Sign (``sign_outgoing``, as ``link_id``) and check with the 32-byte ``key``; packets with a
+    message id in ``unsigned_ids`` may arrive unsigned."""
     allowed = frozenset(unsigned_ids)
 
     def allow_unsigned(_codec: Any, msg_id: int) -> bool:
@@ -45,5 +46,5 @@ def setup_signing(codec: Any, key: bytes, *, sign_outgoing: bool, unsigned_ids: 
     signing.secret_key = bytes(key)
     signing.sign_outgoing = sign_outgoing
     signing.allow_unsigned_callback = allow_unsigned
-    signing.link_id = 0
+    signing.link_id = link_id
     signing.timestamp = signing_timestamp_now()

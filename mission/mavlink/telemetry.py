@@ -1,7 +1,8 @@
 """What the vehicle told us, as a pure reducer of received messages.
 
 :func:`reduce` maps ``(telemetry, message, t_rx) -> telemetry`` for the messages a mission
-reads (HEARTBEAT, LOCAL_POSITION_NED, EXTENDED_SYS_STATE, SYS_STATUS, GPS_GLOBAL_ORIGIN); other
+reads (HEARTBEAT, LOCAL_POSITION_NED, EXTENDED_SYS_STATE, SYS_STATUS, GPS_GLOBAL_ORIGIN,
+ATTITUDE); other
 messages leave it unchanged. :func:`snapshot` turns it into the immutable :class:`VehicleState`
 a caller sees at one clock time. :class:`StatusTextAssembler` joins chunked STATUSTEXTs. Times
 are link-clock seconds [s]; positions and velocities PX4's local NED frame.
@@ -62,6 +63,8 @@ class VehicleState:
     """EKF origin (lat [deg], lon [deg], alt [m] AMSL) from GPS_GLOBAL_ORIGIN, or None."""
     last_statustext: str
     """Text of the latest (reassembled) STATUSTEXT from the vehicle, ``""`` if none."""
+    yaw_rad: float | None = None
+    """Heading [rad] from north towards east, from ATTITUDE; None before the first (or non-finite)."""
 
     @property
     def heartbeat_age_s(self) -> float:
@@ -92,6 +95,7 @@ class Telemetry:
     landed_state: int | None = None
     ahrs_healthy: bool | None = None
     origin: tuple[float, float, float] | None = None
+    yaw_rad: float | None = None
     last_statustext: str = ""
 
 
@@ -128,12 +132,18 @@ def _origin(tm: Telemetry, msg: Any, t_rx: float) -> Telemetry:
     return replace(tm, origin=(msg.latitude * 1e-7, msg.longitude * 1e-7, msg.altitude * 1e-3))
 
 
+def _attitude(tm: Telemetry, msg: Any, t_rx: float) -> Telemetry:
+    yaw = float(msg.yaw)
+    return replace(tm, yaw_rad=yaw if math.isfinite(yaw) else None)
+
+
 _REDUCERS = {
     "HEARTBEAT": _heartbeat,
     "LOCAL_POSITION_NED": _local_position,
     "EXTENDED_SYS_STATE": _extended_sys_state,
     "SYS_STATUS": _sys_status,
     "GPS_GLOBAL_ORIGIN": _origin,
+    "ATTITUDE": _attitude,
 }
 KINDS = frozenset(_REDUCERS)
 """Message types :func:`reduce` reads."""
@@ -165,6 +175,7 @@ def snapshot(tm: Telemetry, now_s: float, vehicle: tuple[int, int] | None, posit
         landed_state=tm.landed_state,
         position_valid=bool(fresh) and tm.ahrs_healthy is not False,
         origin=tm.origin,
+        yaw_rad=tm.yaw_rad,
         last_statustext=tm.last_statustext,
     )
 
@@ -189,3 +200,8 @@ class StatusTextAssembler:
         while len(self._pending) > self._max_pending:
             self._pending.popitem(last=False)
         return None
+
+
+def with_statustext(tm: Telemetry, text: str) -> Telemetry:
+    """The telemetry with ``text`` as the latest whole STATUSTEXT."""
+    return replace(tm, last_statustext=text)

@@ -95,7 +95,10 @@ def test_reducer_is_pure_and_ignores_other_messages():
     after = telemetry.reduce(before, heartbeat("OFFBOARD", True), 1.0)
     assert (before.mode, before.heartbeat_rx_s) == ("AUTO.LOITER", 0.0)
     assert after.mode == "OFFBOARD"
-    assert telemetry.reduce(after, mavlink.MAVLink_attitude_message(0, 0, 0, 0, 0, 0, 0), 2.0) is after
+    assert telemetry.reduce(after, mavlink.MAVLink_vfr_hud_message(0, 0, 0, 0, 0, 0), 2.0) is after
+    yawed = telemetry.reduce(after, mavlink.MAVLink_attitude_message(0, 0.1, 0.2, 1.5, 0, 0, 0), 2.0)
+    assert telemetry.snapshot(yawed, 2.0, None, 0.5).yaw_rad == pytest.approx(1.5)
+    assert telemetry.reduce(yawed, mavlink.MAVLink_attitude_message(0, 0, 0, math.nan, 0, 0, 0), 2.1).yaw_rad is None
 
 
 def test_position_validity_age_finiteness_and_estimator_health():
@@ -164,7 +167,7 @@ def test_exchange_in_progress_extends_the_wait_and_a_late_answer_counts():
 
 
 def test_exchange_ignores_older_acks_and_other_commands():
-    clock, acks = ManualClock(), AckLog()
+    acks = AckLog()
     acks.add(0.0, SET_MODE, ACCEPTED)  # an answer to an earlier command
     ex = CommandExchange(SET_MODE, 0.5, 0, acks.seq)
     assert ex.step(0.0, acks) is Step.SEND

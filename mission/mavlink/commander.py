@@ -1,0 +1,174 @@
+"""Blocking vehicle commands over a link: the executor of :mod:`mission.mavlink.commands`.
+
+One command at a time (thread-safe). Each call sends through the link, waits on the session's
+clock for what the state machines need, and turns their verdicts into our errors:
+:class:`~mission.errors.CommandRejected` (with the vehicle's STATUSTEXT reason),
+:class:`~mission.errors.LinkTimeout`, :class:`~mission.errors.LinkError`.
+"""
+from __future__ import annotations
+
+import logging
+import math
+import threading
+from typing import Any, Callable
+
+from mission import px4
+from mission.errors import CommandRejected, LinkError, LinkTimeout
+from mission.mavlink.commands import CommandExchange, Confirmed, HeartbeatConfirmation, Step, refusal_reason
+from mission.mavlink.session import LinkSession
+from mission.mavlink.telemetry import VehicleState
+from mission.mavlink_env import mavlink
+
+log = logging.getLogger("mission.link")
+
+
+class Commander:
+    """COMMAND_LONG with ACK, retry and HEARTBEAT confirmation on ``session``.
+
+    ``send(msg, counter)`` sends a message (False: no peer yet); ``require_vehicle()`` returns
+    the identified (system, component) or raises; ``reason_grace_s``: after a refusal, how long
+    to wait for the vehicle's STATUSTEXT reason if it has not come yet [s].
+    """
+
+    def __init__(self, session: LinkSession, send: Callable[[Any, str], bool],
+                 require_vehicle: Callable[[], tuple[int, int]], reason_grace_s: float) -> None:
+        self.session, self.send, self.require_vehicle = session, send, require_vehicle
+        self.reason_grace_s = reason_grace_s
+        self._lock = threading.Lock()
+
+    def command_long(self, command: int, *params: float, timeout_s: float = 0.5, retries: int = 3) -> int:
+        """Send COMMAND_LONG and wait for its final COMMAND_ACK (:class:`CommandExchange`).
+
+        ``params`` are param1..param7 (missing ones are 0). Each attempt waits ``timeout_s``
+        [s of clock]; up to ``retries`` resends follow (``confirmation`` counts them); IN_PROGRESS
+        extends the wait. Returns MAV_RESULT_ACCEPTED (0); raises CommandRejected for any other
+        result, LinkTimeout when no ACK came, LinkError if the link is not ready.
+        """
+        if len(params) > 7:
+            raise ValueError(f"COMMAND_LONG has 7 params, got {len(params)}")
+        if retries < 0 or not timeout_s > 0:
+            raise ValueError("retries must be >= 0 and timeout_s > 0")
+        padded = [float(p) for p in params] + [0.0] * (7 - len(params))
+        target = self.require_vehicle()
+        s = self.session
+        with self._lock:
+            t_start = s.clock.now()
+            with s.lock:
+                exchange = CommandExchange(int(command), timeout_s, retries, s.acks.seq)
+            while True:
+                with s.changed:
+                    step = exchange.step(s.clock.now(), s.acks)
+                    if step is Step.WAIT:
+                        s.wait_locked(exchange.deadline_s)
+                        continue
+                if step is not Step.SEND:
+                    break
+                if exchange.sent > 1:
+                    s.count("command_retries")
+                    log.debug("no ACK for command %d (attempt %d of %d)", command, exchange.sent - 1, retries + 1)
+                self.send(mavlink.MAVLink_command_long_message(target[0], target[1], int(command),
+                                                               exchange.confirmation, *padded), "tx_commands")
+            ack = exchange.final
+            if ack is None:
+                s.count("command_timeouts")
+                raise LinkTimeout(f"no COMMAND_ACK for command {command} after {retries + 1} attempts of {timeout_s:g} s")
+            if ack.result == mavlink.MAV_RESULT_ACCEPTED:
+                return ack.result
+            s.count("command_rejections")
+            reason = self.reason_since(t_start)
+            log.warning("command %d rejected with MAV_RESULT %d: %s", command, ack.result, reason or "(no reason)")
+            raise CommandRejected(int(command), ack.result, reason)
+
+    def arm(self, timeout_s: float = 0.5, retries: int = 3, confirm_timeout_s: float = 2.5) -> None:
+        """Arm (MAV_CMD_COMPONENT_ARM_DISARM 1) and confirm it by HEARTBEAT."""
+        self.confirmed("arm", lambda s: s.armed, confirm_timeout_s, mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1.0,
+                       timeout_s=timeout_s, retries=retries)
+
+    def disarm(self, force: bool = False, timeout_s: float = 0.5, retries: int = 3,
+               confirm_timeout_s: float = 2.5) -> None:
+        """Disarm and confirm by HEARTBEAT; ``force`` adds 21196 (disarms even in the air)."""
+        self.confirmed("disarm", lambda s: not s.armed, confirm_timeout_s, mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0.0,
+                       float(px4.ARM_FORCE_MAGIC) if force else 0.0, timeout_s=timeout_s, retries=retries)
+
+    def set_mode(self, mode: str, timeout_s: float = 0.5, retries: int = 3, confirm_timeout_s: float = 2.5) -> None:
+        """Switch the PX4 mode (name as in :data:`mission.px4.MODES`) and confirm it by HEARTBEAT.
+
+        Sends MAV_CMD_DO_SET_MODE(CUSTOM_MODE_ENABLED, main, sub). A first ACCEPTED ACK is not
+        trusted: a later non-ACCEPTED ACK of the same command (PX4's double ACK) raises
+        CommandRejected, and only a HEARTBEAT received after the command and showing the mode
+        confirms it (LinkTimeout after ``confirm_timeout_s`` [s]).
+        """
+        if mode not in px4.MODES:
+            raise ValueError(f"unknown PX4 mode {mode!r}; known: {sorted(px4.MODES)}")
+        main, sub = px4.MODES[mode]
+        self.confirmed(f"mode {mode}", lambda s: s.mode == mode, confirm_timeout_s, mavlink.MAV_CMD_DO_SET_MODE,
+                       float(mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED), float(main), float(sub),
+                       timeout_s=timeout_s, retries=retries)
+
+    def takeoff(self, alt_m: float | None, origin: tuple[float, float, float] | None, timeout_s: float = 0.5,
+                retries: int = 3) -> int:
+        """MAV_CMD_NAV_TAKEOFF to ``alt_m`` [m] above the EKF ``origin`` (None: the vehicle's default).
+
+        PX4 reads param7 as altitude AMSL, so the origin altitude from GPS_GLOBAL_ORIGIN is added;
+        without a known origin a numeric ``alt_m`` raises LinkError. Acknowledged only (the
+        vehicle must already be armed; PX4 shows AUTO.TAKEOFF next).
+        """
+        nan = math.nan
+        if alt_m is None:
+            param7 = nan
+        else:
+            if not math.isfinite(alt_m):
+                raise ValueError(f"takeoff altitude must be finite, got {alt_m!r}")
+            if origin is None:
+                raise LinkError("takeoff altitude needs the EKF origin (no GPS_GLOBAL_ORIGIN received)")
+            param7 = origin[2] + float(alt_m)
+        return self.command_long(mavlink.MAV_CMD_NAV_TAKEOFF, 0.0, 0.0, 0.0, nan, nan, nan, param7,
+                                 timeout_s=timeout_s, retries=retries)
+
+    def confirmed(self, what: str, confirmed: Callable[[VehicleState], bool], confirm_timeout_s: float,
+                  command: int, *params: float, timeout_s: float, retries: int) -> None:
+        """Send a command, then wait for a HEARTBEAT after it that satisfies ``confirmed``
+        (:class:`HeartbeatConfirmation`). A later non-ACCEPTED ACK of the same command raises
+        CommandRejected; a lost ACK is forgiven if the HEARTBEAT confirms."""
+        s = self.session
+        t_sent = s.clock.now()
+        with s.lock:
+            confirmation = HeartbeatConfirmation(command, t_sent, s.acks.seq, confirmed, confirm_timeout_s)
+        ack_lost: LinkTimeout | None = None
+        try:
+            self.command_long(command, *params, timeout_s=timeout_s, retries=retries)
+        except LinkTimeout as exc:
+            ack_lost = exc
+        confirmation.start(s.clock.now())
+        with s.changed:
+            while True:
+                verdict = confirmation.step(s.clock.now(), s.acks, s.snapshot_locked())
+                if verdict is Confirmed.CONFIRMED:
+                    log.info("%s confirmed by HEARTBEAT", what)
+                    return
+                if verdict is Confirmed.REJECTED:
+                    break
+                if verdict is Confirmed.TIMED_OUT or not s.wait_locked(confirmation.deadline_s):
+                    if ack_lost is not None:
+                        raise ack_lost
+                    raise LinkTimeout(f"{what}: ACCEPTED but not confirmed by HEARTBEAT within {confirm_timeout_s:g} s")
+        rejection = confirmation.rejection
+        assert rejection is not None
+        s.count("command_rejections")
+        reason = self.reason_since(t_sent)
+        log.warning("%s: late ACK rejected it with MAV_RESULT %d: %s", what, rejection.result, reason or "(no reason)")
+        raise CommandRejected(command, rejection.result, reason)
+
+    def reason_since(self, t_from_s: float) -> str:
+        """The vehicle's reason for a refusal (:func:`refusal_reason`): waits up to
+        ``reason_grace_s`` for a STATUSTEXT of severity WARNING or worse since ``t_from_s`` (PX4
+        may send it just after the ACK); else the latest text of any severity, or ``""``."""
+        s = self.session
+        deadline = s.clock.now() + self.reason_grace_s
+        with s.changed:
+            while True:
+                serious, latest = refusal_reason(s.statustexts, t_from_s)
+                if serious is not None:
+                    return serious
+                if s.closed or not s.wait_locked(deadline):
+                    return latest

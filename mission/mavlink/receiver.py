@@ -1,0 +1,175 @@
+"""The receiving half of a link: bytes -> messages -> the vehicle's identity, telemetry, ACKs and
+STATUSTEXTs in the :class:`~mission.mavlink.session.LinkSession`.
+
+Identification: the first HEARTBEAT of a PX4 autopilot (autopilot 12, not a GCS, companion,
+gimbal or ADS-B type; ``target_system`` / ``target_component`` if given) fixes the vehicle; from
+then on only that system and component is applied (others are counted and ignored). The receiver
+never dies on bad input: every parse or handler error is caught and counted.
+"""
+from __future__ import annotations
+
+import logging
+import threading
+from typing import Any, Callable
+
+from mission.mavlink import telemetry
+from mission.mavlink.codec import reset_parser
+from mission.mavlink.session import LinkSession
+from mission.mavlink.telemetry import StatusTextAssembler
+from mission.mavlink.transport import Address, Transport
+from mission.mavlink_env import mavlink
+
+log = logging.getLogger("mission.link")
+
+WALL_SLICE_S = 0.05  # longest wall-clock block in the transport [s], so a stop is prompt
+# HEARTBEAT types that are never a vehicle's autopilot, whatever their autopilot field says.
+NON_VEHICLE_TYPES = frozenset({mavlink.MAV_TYPE_GCS, mavlink.MAV_TYPE_ONBOARD_CONTROLLER, mavlink.MAV_TYPE_GIMBAL,
+                               mavlink.MAV_TYPE_ADSB})
+
+
+def statustext_level(severity: int) -> int:
+    """Python log level of a MAV_SEVERITY (EMERGENCY 0 .. DEBUG 7)."""
+    if severity <= mavlink.MAV_SEVERITY_ERROR:
+        return logging.ERROR
+    if severity == mavlink.MAV_SEVERITY_WARNING:
+        return logging.WARNING
+    return logging.INFO if severity <= mavlink.MAV_SEVERITY_INFO else logging.DEBUG
+
+
+class Receiver:
+    """Parses what ``transport`` delivers with ``codec`` into ``session``.
+
+    ``source_system``: ours (ACKs for other clients are ignored). ``on_identified(source)`` runs
+    once, before the vehicle shows as identified (the link says hello with a HEARTBEAT);
+    ``on_packet(raw)`` gets every valid packet (the tlog); each of ``listeners`` is called with
+    every message from the identified vehicle after it was applied (outside the lock).
+    """
+
+    def __init__(self, session: LinkSession, codec: Any, *, source_system: int, target_system: int | None,
+                 target_component: int, on_identified: Callable[[tuple[int, int]], None],
+                 on_packet: Callable[[bytes], None], listeners: list[Callable[[Any], None]] | None = None) -> None:
+        self.session, self.codec = session, codec
+        self.source_system, self.target_system, self.target_component = source_system, target_system, target_component
+        self.on_identified, self.on_packet = on_identified, on_packet
+        self.listeners = listeners if listeners is not None else []
+        self._assembler = StatusTextAssembler()
+        self._ignored_autopilots: set[tuple[int, int]] = set()
+
+    def run(self, transport: Transport, stop: threading.Event) -> None:
+        """Receiver thread: block on the transport, parse every datagram, never die."""
+        failures = 0
+        while not stop.is_set():
+            try:
+                data, address = transport.read(WALL_SLICE_S)
+            except OSError as exc:
+                if stop.is_set():
+                    return
+                self.session.count("rx_errors")
+                failures += 1
+                if failures == 1:  # log once per outage, count every time
+                    log.warning("receive error on %s: %s", self.session.name, exc)
+                stop.wait(0.1)
+                continue
+            failures = 0
+            if data:
+                try:
+                    self.handle_bytes(data, address, transport)
+                except Exception:  # pragma: no cover - handle_bytes already guards each message
+                    self.session.count("rx_errors")
+                    log.exception("receiver error")
+
+    def handle_bytes(self, data: bytes, address: Address | None, transport: Transport) -> None:
+        """One datagram (or stream chunk) received now."""
+        t_rx = self.session.clock.now()
+        self.session.count("rx_bytes", amount=len(data))
+        codec = self.codec
+        chunk: bytes = data
+        while True:
+            try:
+                msg = codec.parse_char(chunk)
+            except Exception as exc:  # a parser error: drop what is buffered and go on
+                self.session.count("rx_bad")
+                log.debug("parse error: %s", exc)
+                reset_parser(codec)
+                break
+            chunk = b""
+            if msg is None:
+                break
+            try:
+                self.handle_message(msg, t_rx, address, transport)
+            except Exception:
+                self.session.count("rx_errors")
+                log.exception("error handling %s", msg.get_type())
+        if transport.datagram and codec.buf_len() > 0:
+            self.session.count("rx_bad")  # a truncated packet; it cannot continue in the next datagram
+            reset_parser(codec)
+
+    def handle_message(self, msg: Any, t_rx: float, address: Address | None, transport: Transport) -> None:
+        s = self.session
+        kind = msg.get_type()
+        if kind == "BAD_DATA":
+            bad_signature = "signature" in str(getattr(msg, "reason", ""))
+            s.count("rx_bad", "rx_bad_signature" if bad_signature else None)
+            return
+        s.count("rx_messages", "rx_unknown" if kind.startswith("UNKNOWN_") else None)
+        source = (msg.get_srcSystem(), msg.get_srcComponent())
+        self.on_packet(bytes(msg.get_msgbuf()))
+        with s.changed:
+            vehicle, found = s.vehicle, False
+            if vehicle is None:
+                if not (kind == "HEARTBEAT" and self._is_our_autopilot(msg, source)):
+                    s.counts["rx_ignored"] += 1
+                    return
+                vehicle, found = source, True
+            elif source[0] != vehicle[0]:
+                s.counts["rejected_foreign"] += 1
+                return
+            elif source[1] != vehicle[1]:
+                s.counts["rx_ignored"] += 1
+                return
+        if address is not None:
+            transport.set_peer(address)
+        if found:
+            log.info("vehicle identified: PX4 autopilot sysid %d compid %d", *source)
+            self.on_identified(source)
+        with s.changed:
+            if found:
+                s.vehicle = source
+            self._apply(msg, kind, t_rx)
+            s.notify_locked()
+        for listener in self.listeners:
+            listener(msg)
+
+    def _apply(self, msg: Any, kind: str, t_rx: float) -> None:
+        """Lock held: what a message from the vehicle changes."""
+        s = self.session
+        if kind in telemetry.KINDS:
+            before = s.telemetry.mode
+            s.telemetry = telemetry.reduce(s.telemetry, msg, t_rx)
+            if s.telemetry.mode != before:
+                log.info("vehicle mode %s -> %s (armed %s)", before or "-", s.telemetry.mode,
+                         bool(s.telemetry.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED))
+        elif kind == "STATUSTEXT":
+            text = self._assembler.feed(str(msg.text), int(getattr(msg, "id", 0)), int(getattr(msg, "chunk_seq", 0)))
+            if text is not None:
+                text = text.rstrip()
+                s.statustexts.append((t_rx, int(msg.severity), text))
+                s.telemetry = telemetry.with_statustext(s.telemetry, text)
+                log.log(statustext_level(int(msg.severity)), "vehicle: %s", text)
+        elif kind == "COMMAND_ACK" and msg.target_system in (0, self.source_system):  # else: another client's
+            s.acks.add(t_rx, msg.command, msg.result)
+
+    def _is_our_autopilot(self, msg: Any, source: tuple[int, int]) -> bool:
+        """Is this HEARTBEAT from the PX4 autopilot we are to fly (lock held)?"""
+        if msg.type in NON_VEHICLE_TYPES:
+            return False
+        if self.target_system is not None and source[0] != self.target_system:
+            return False
+        if self.target_component and source[1] != self.target_component:
+            return False
+        if msg.autopilot != mavlink.MAV_AUTOPILOT_PX4:
+            if source not in self._ignored_autopilots:
+                self._ignored_autopilots.add(source)
+                log.warning("ignoring non-PX4 autopilot %d at sysid %d compid %d", msg.autopilot, *source)
+            return False
+        return True

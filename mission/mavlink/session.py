@@ -1,0 +1,99 @@
+"""What a link's threads share, behind one lock: the identified vehicle, its telemetry, the ACKs
+and STATUSTEXTs it sent, and the counters. Waits read the injected clock."""
+from __future__ import annotations
+
+import collections
+import threading
+from dataclasses import dataclass, fields
+from typing import Callable
+
+from mission.clock import Clock
+from mission.errors import LinkError, LinkTimeout
+from mission.mavlink import telemetry
+from mission.mavlink.commands import AckLog
+from mission.mavlink.telemetry import VehicleState
+
+@dataclass(frozen=True)
+class LinkCounters:
+    """Snapshot of the link's packet counters (monotonic since ``open``)."""
+
+    rx_bytes: int = 0
+    rx_messages: int = 0
+    """Valid packets decoded (any sender, unknown ids included)."""
+    rx_bad: int = 0
+    """Garbage, CRC, length, signature and parse errors (the receiver survived each)."""
+    rx_bad_signature: int = 0
+    """Subset of rx_bad: packets refused for a missing or wrong signature."""
+    rx_unknown: int = 0
+    """Valid packets whose message id is not in the dialect (e.g. PX4's 380, 410, 411)."""
+    rx_ignored: int = 0
+    """Valid packets not applied: before identification, or from another component."""
+    rejected_foreign: int = 0
+    """Valid packets from a system other than the identified vehicle."""
+    rx_errors: int = 0
+    """Socket errors and unexpected handler exceptions in the receiver."""
+    tx_messages: int = 0
+    tx_heartbeats: int = 0
+    tx_setpoints: int = 0
+    tx_commands: int = 0
+    """COMMAND_LONG packets sent, retries included."""
+    tx_errors: int = 0
+    command_retries: int = 0
+    command_timeouts: int = 0
+    command_rejections: int = 0
+
+
+class LinkSession:
+    """The shared state of one link (``name``: its URL, for messages). Hold :attr:`lock` (or
+    :attr:`changed`, the same lock) to read or write the fields; call :meth:`notify_locked`
+    after a change so waiters re-check."""
+
+    def __init__(self, name: str, clock: Clock, position_timeout_s: float) -> None:
+        self.name, self.clock, self.position_timeout_s = name, clock, position_timeout_s
+        self.lock = threading.RLock()  # re-entrant: wait_until predicates may read link.state
+        self.changed = threading.Condition(self.lock)
+        self.closed = True
+        self.vehicle: tuple[int, int] | None = None
+        self.telemetry = telemetry.Telemetry()
+        self.statustexts: collections.deque[tuple[float, int, str]] = collections.deque(maxlen=500)
+        self.acks = AckLog()
+        self.counts: dict[str, int] = {f.name: 0 for f in fields(LinkCounters)}
+
+    def snapshot_locked(self) -> VehicleState:
+        return telemetry.snapshot(self.telemetry, self.clock.now(), self.vehicle, self.position_timeout_s)
+
+    def wait_locked(self, deadline_s: float) -> bool:
+        """Wait for a change (lock held) through the clock (which may wake early); False once past
+        ``deadline_s`` [s of clock]. Raises :class:`LinkError` if the link is closed."""
+        remaining = deadline_s - self.clock.now()
+        if remaining <= 0:
+            return False
+        if self.closed:
+            raise LinkError(f"link {self.name!r} is closed")
+        self.clock.wait(self.changed, remaining)
+        return True
+
+    def wait_until(self, predicate: Callable[[VehicleState], bool], timeout_s: float, what: str) -> VehicleState:
+        """Block until ``predicate(snapshot)`` holds; return that snapshot. Raises LinkTimeout
+        naming ``what`` after ``timeout_s`` [s of clock]."""
+        deadline = self.clock.now() + timeout_s
+        with self.changed:
+            while True:
+                snapshot = self.snapshot_locked()
+                if predicate(snapshot):
+                    return snapshot
+                if not self.wait_locked(deadline):
+                    raise LinkTimeout(f"{what} not seen within {timeout_s:g} s on {self.name}")
+
+    def notify_locked(self) -> None:
+        self.clock.notify(self.changed)
+
+    def count(self, *names: str | None, amount: int = 1) -> None:
+        with self.lock:
+            for name in names:
+                if name is not None:
+                    self.counts[name] += amount
+
+    def counters(self) -> LinkCounters:
+        with self.lock:
+            return LinkCounters(**self.counts)
