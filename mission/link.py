@@ -62,6 +62,7 @@ from mission.clock import Clock, ScaledClock
 from mission.errors import LinkError
 from mission.mavlink.codec import new_codec, setup_signing
 from mission.mavlink.commander import Commander
+from mission.mavlink.heartbeat import HeartbeatSender
 from mission.mavlink.receiver import Receiver
 from mission.mavlink.session import LinkCounters, LinkSession
 from mission.mavlink.setpoints import checked_velocity, velocity_ned_message
@@ -139,7 +140,7 @@ class VehicleLink:
         self._commander = Commander(self._session, self._send, self._require_vehicle, self.reason_grace_s)
         self._tx_lock = threading.Lock()
         self._stop = threading.Event()
-        self._heartbeat_cond = threading.Condition()
+        self._heartbeat = HeartbeatSender(self._send, self._clock, self.heartbeat_period_s, self._flush_tlog)
         self._listeners: list[Callable[[Any], None]] = []
         self._threads: list[threading.Thread] = []
         self._transport: Transport | None = None
@@ -173,13 +174,13 @@ class VehicleLink:
             transport.close()
             raise LinkError(f"cannot open tlog {self._tlog_path}: {exc}") from exc
         receiver = Receiver(self._session, rx_codec, source_system=self._source[0], target_system=self._target_system,
-                            target_component=self._target_component, on_identified=self._announce,
+                            target_component=self._target_component, on_identified=self._heartbeat.announce,
                             on_packet=self._log_packet, listeners=self._listeners)
         self._transport, self._opened, self._session.closed = transport, True, False
         self._threads = [
             threading.Thread(target=receiver.run, args=(transport, self._stop), name=f"marsupial-link-rx:{self.url}",
                              daemon=True),
-            threading.Thread(target=self._heartbeat_loop, name=f"marsupial-link-hb:{self.url}", daemon=True),
+            threading.Thread(target=self._heartbeat.run, name=f"marsupial-link-hb:{self.url}", daemon=True),
         ]
         for thread in self._threads:
             thread.start()
@@ -190,8 +191,7 @@ class VehicleLink:
     def close(self) -> None:
         """Stop the threads, close the socket and the tlog. Idempotent; sends nothing."""
         self._stop.set()
-        with self._heartbeat_cond:
-            self._clock.notify(self._heartbeat_cond)
+        self._heartbeat.stop()
         for thread in self._threads:
             thread.join(timeout=2.0)
             if thread.is_alive():  # pragma: no cover - would be a bug in a loop
@@ -365,38 +365,10 @@ class VehicleLink:
         if tlog is not None:
             tlog.write(packet)
 
-    def _heartbeat_loop(self) -> None:
-        """Send our HEARTBEAT every heartbeat_period_s of the link clock (until close)."""
-        while not self._stop.is_set():
-            try:
-                self._send(_our_heartbeat(), "tx_heartbeats")
-                tlog = self._tlog
-                if tlog is not None:
-                    tlog.flush()
-            except LinkError as exc:
-                if not self._stop.is_set():
-                    log.warning("heartbeat not sent: %s", exc)
-            except Exception:  # pragma: no cover - the heartbeat must keep beating
-                log.exception("heartbeat thread error")
-            deadline = self._clock.now() + self.heartbeat_period_s
-            with self._heartbeat_cond:
-                while not self._stop.is_set() and (remaining := deadline - self._clock.now()) > 0:
-                    self._clock.wait(self._heartbeat_cond, remaining)
-
-    def _announce(self, source: tuple[int, int]) -> None:
-        """The vehicle was just identified: send our HEARTBEAT before it shows as identified, so
-        it knows us before any command (PX4 sends STATUSTEXT reasons only to peers that sent one)."""
-        try:
-            self._send(_our_heartbeat(), "tx_heartbeats")
-        except LinkError as exc:
-            log.warning("heartbeat not sent: %s", exc)
-
-
-def _our_heartbeat() -> Any:
-    """Our HEARTBEAT: an onboard controller (18), no autopilot (8), active."""
-    return mavlink.MAVLink_heartbeat_message(
-        mavlink.MAV_TYPE_ONBOARD_CONTROLLER, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, mavlink.MAV_STATE_ACTIVE, 3
-    )
+    def _flush_tlog(self) -> None:
+        tlog = self._tlog
+        if tlog is not None:
+            tlog.flush()
 
 
 def _check_arguments(target_system: int | None, target_component: int, source_system: int, source_component: int,
