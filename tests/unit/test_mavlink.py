@@ -216,3 +216,77 @@ def test_snapshot_arrays_are_shared_not_copied():
     tm = telemetry.reduce(telemetry.Telemetry(), position(), 1.0)
     a, b = telemetry.snapshot(tm, 1.0, None, 0.5), telemetry.snapshot(tm, 1.1, None, 0.5)
     assert a.position_ned_m is b.position_ned_m and np.shares_memory(a.velocity_ned_m_s, tm.velocity_ned_m_s)
+
+
+# ------------------------------------------------------------------------------ receiver
+
+
+class FakeTransport:
+    datagram = True
+
+    def __init__(self) -> None:
+        self.peer = None
+
+    def set_peer(self, address):
+        self.peer = address
+
+
+def make_receiver(clock, target_system=None):
+    from mission.mavlink.codec import new_codec
+    from mission.mavlink.receiver import Receiver
+    from mission.mavlink.session import LinkSession
+
+    session = LinkSession("test", clock, position_timeout_s=0.5)
+    session.closed = False
+    identified, packets = [], []
+    receiver = Receiver(session, new_codec(1, 191), source_system=1, target_system=target_system, target_component=1,
+                        on_identified=identified.append, on_packet=packets.append)
+    return session, receiver, identified, packets
+
+
+def packet(msg, sysid=1, compid=1) -> bytes:
+    from mission.mavlink.codec import new_codec
+
+    return bytes(msg.pack(new_codec(sysid, compid)))
+
+
+def test_receiver_identifies_the_px4_autopilot_and_ignores_others():
+    clock = ManualClock(5.0)
+    session, receiver, identified, packets = make_receiver(clock)
+    t = FakeTransport()
+    receiver.handle_bytes(packet(position()), ("127.0.0.1", 1), t)  # before identification: ignored
+    gcs = mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0, 3)
+    receiver.handle_bytes(packet(gcs, sysid=255, compid=190), ("127.0.0.1", 2), t)
+    assert session.vehicle is None and t.peer is None and session.counts["rx_ignored"] == 2
+    receiver.handle_bytes(packet(heartbeat("AUTO.LOITER", False)), ("127.0.0.1", 3), t)
+    assert session.vehicle == (1, 1) and identified == [(1, 1)] and t.peer == ("127.0.0.1", 3)
+    receiver.handle_bytes(packet(position(x=9.0), sysid=42), ("127.0.0.1", 4), t)  # a rogue system
+    receiver.handle_bytes(packet(position(x=1.5)), ("127.0.0.1", 3), t)
+    state = session.snapshot_locked()
+    assert session.counts["rejected_foreign"] == 1 and state.position_ned_m[0] == 1.5 and state.position_rx_s == 5.0
+    assert state.mode == "AUTO.LOITER" and len(packets) == 5  # every valid packet reaches the tlog
+
+
+def test_receiver_keeps_acks_for_us_and_joins_statustext():
+    clock = ManualClock()
+    session, receiver, _, _ = make_receiver(clock)
+    t = FakeTransport()
+    receiver.handle_bytes(packet(heartbeat("AUTO.LOITER", False)), None, t)
+    receiver.handle_bytes(packet(mavlink.MAVLink_command_ack_message(SET_MODE, ACCEPTED, 0, 0, 1, 191)), None, t)
+    receiver.handle_bytes(packet(mavlink.MAVLink_command_ack_message(SET_MODE, DENIED, 0, 0, 7, 191)), None, t)  # not ours
+    assert [(a.command, a.result) for a in session.acks] == [(SET_MODE, ACCEPTED)]
+    receiver.handle_bytes(packet(mavlink.MAVLink_statustext_message(3, b"x" * 50, 9, 0)), None, t)
+    receiver.handle_bytes(packet(mavlink.MAVLink_statustext_message(3, b"end", 9, 1)), None, t)
+    assert [text for _, _, text in session.statustexts] == ["x" * 50 + "end"]
+    assert session.snapshot_locked().last_statustext == "x" * 50 + "end"
+
+
+def test_receiver_counts_garbage_and_a_truncated_datagram():
+    clock = ManualClock()
+    session, receiver, _, _ = make_receiver(clock)
+    t = FakeTransport()
+    whole = packet(heartbeat("AUTO.LOITER", False))
+    receiver.handle_bytes(whole[:-4], None, t)  # cut short: cannot continue in the next datagram
+    receiver.handle_bytes(b"\x00garbage", None, t)
+    receiver.handle_bytes(whole, None, t)
+    assert session.counts["rx_bad"] >= 1 and session.vehicle == (1, 1)
