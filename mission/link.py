@@ -60,12 +60,12 @@ import numpy as np
 from mission import px4
 from mission.clock import Clock, ScaledClock
 from mission.errors import LinkError
-from mission.mavlink.codec import new_codec, setup_signing
+from mission.mavlink.codec import link_codecs
 from mission.mavlink.commander import Commander
 from mission.mavlink.heartbeat import HeartbeatSender
 from mission.mavlink.receiver import Receiver
 from mission.mavlink.session import LinkCounters, LinkSession
-from mission.mavlink.setpoints import checked_velocity, velocity_ned_message
+from mission.mavlink.setpoints import checked_vectors, checked_velocity, full_setpoint_message, velocity_ned_message
 from mission.mavlink.telemetry import VehicleState
 from mission.mavlink.tlog import Tlog
 from mission.mavlink.transport import Transport, open_transport
@@ -88,7 +88,7 @@ class VehicleLink:
         talks first; port 0 binds an ephemeral port, see :attr:`port`), ``udpout:``, ``tcp:``, or
         a serial device ``/dev/ttyACM0[:BAUD]``.
     clock:
-        Injected clock for every timeout, period and receive stamp [s].
+        Injected clock for every timeout, period, wait and receive stamp [s].
     target_system, target_component:
         Accept only this vehicle (None: the first PX4 autopilot heard; component 0: any).
     source_system, source_component:
@@ -99,10 +99,9 @@ class VehicleLink:
     heartbeat_timeout_s, heartbeat_period_s:
         The vehicle counts as lost after this long without a HEARTBEAT [s]; period of our own [s]
         (PX4 drops a peer 2.5 s after its last one).
-    position_timeout_s:
-        LOCAL_POSITION_NED older than this makes ``state.position_valid`` False [s].
-    reason_grace_s:
-        After a refusal, how long to wait for the vehicle's STATUSTEXT reason [s].
+    position_timeout_s, reason_grace_s:
+        LOCAL_POSITION_NED older than this makes ``state.position_valid`` False [s]; after a
+        refusal, how long to wait for the vehicle's STATUSTEXT reason [s].
     """
 
     def __init__(
@@ -163,11 +162,7 @@ class VehicleLink:
         if self._opened:
             raise LinkError(f"link {self.url!r} was already opened; a VehicleLink opens once, make a new one")
         transport = open_transport(self.url)
-        rx_codec, self._tx_codec = new_codec(*self._source), new_codec(*self._source)
-        if self._signing_key is not None:  # only HEARTBEAT may come unsigned (so the vehicle can be found)
-            for codec, outgoing in ((rx_codec, False), (self._tx_codec, True)):
-                setup_signing(codec, self._signing_key, sign_outgoing=outgoing,
-                              unsigned_ids=(mavlink.MAVLINK_MSG_ID_HEARTBEAT,))
+        rx_codec, self._tx_codec = link_codecs(self._source, self._signing_key)
         try:
             self._tlog = None if self._tlog_path is None else Tlog(self._tlog_path, self._clock)
         except OSError as exc:
@@ -177,11 +172,9 @@ class VehicleLink:
                             target_component=self._target_component, on_identified=self._heartbeat.announce,
                             on_packet=self._log_packet, listeners=self._listeners)
         self._transport, self._opened, self._session.closed = transport, True, False
-        self._threads = [
-            threading.Thread(target=receiver.run, args=(transport, self._stop), name=f"marsupial-link-rx:{self.url}",
-                             daemon=True),
-            threading.Thread(target=self._heartbeat.run, name=f"marsupial-link-hb:{self.url}", daemon=True),
-        ]
+        self._threads = [threading.Thread(target=receiver.run, args=(transport, self._stop), daemon=True,
+                                          name=f"marsupial-link-rx:{self.url}"),
+                         threading.Thread(target=self._heartbeat.run, name=f"marsupial-link-hb:{self.url}", daemon=True)]
         for thread in self._threads:
             thread.start()
         log.info("MAVLink link open on %s (local port %s, sysid %d compid %d%s)", self.url, self.port,
@@ -200,10 +193,9 @@ class VehicleLink:
         with self._tx_lock:
             transport, self._transport = self._transport, None
             tlog, self._tlog = self._tlog, None
-        if transport is not None:
-            transport.close()
-        if tlog is not None:
-            tlog.close()
+        for resource in (transport, tlog):
+            if resource is not None:
+                resource.close()
         with self._session.changed:
             self._session.closed = True
             self._session.notify_locked()
@@ -211,9 +203,7 @@ class VehicleLink:
             log.info("MAVLink link %s closed: %s", self.url, self.counters)
 
     def __enter__(self) -> VehicleLink:
-        if not self.is_open:
-            self.open()
-        return self
+        return self if self.is_open else self.open()
 
     def __exit__(self, *exc_info: object) -> None:
         self.close()
@@ -318,8 +308,6 @@ class VehicleLink:
         msg = velocity_ned_message(self._require_vehicle(), velocity, yaw_rad, int(self._clock.now() * 1000.0))
         self._send(msg, "tx_setpoints")
 
-    # ---------------------------------------------------------------- transmit
-
     def _require_vehicle(self) -> tuple[int, int]:
         if self._transport is None:
             raise LinkError(f"link {self.url!r} is not open")
@@ -327,6 +315,26 @@ class VehicleLink:
         if vehicle is None:
             raise LinkError("no vehicle identified yet: call wait_vehicle() first")
         return vehicle
+
+    def send_setpoint_ned(self, position_ned_m: np.ndarray, velocity_ned_m_s: np.ndarray,
+                          acceleration_ned_m_s2: np.ndarray) -> None:
+        """Send one full setpoint in LOCAL_NED: position [m], velocity [m/s] and acceleration
+        [m/s^2] (:func:`mission.mavlink.setpoints.full_setpoint_message`; PX4 closes position
+        itself and takes velocity and acceleration as feed-forward). ValueError for a wrong shape
+        or a non-finite value, before anything is sent."""
+        values = checked_vectors(position=position_ned_m, velocity=velocity_ned_m_s, acceleration=acceleration_ned_m_s2)
+        msg = full_setpoint_message(self._require_vehicle(), values, int(self._clock.now() * 1000.0))
+        self._send(msg, "tx_setpoints")
+
+    def set_message_interval(self, message_id: int, rate_hz: float, timeout_s: float = 0.5, retries: int = 2) -> None:
+        """Ask the vehicle to stream ``message_id`` at ``rate_hz`` [Hz] (:meth:`Commander.set_message_interval`);
+        the rate that actually arrives is :meth:`message_rate_hz`."""
+        self._commander.set_message_interval(message_id, rate_hz, timeout_s, retries)
+
+    def message_rate_hz(self, kind: str = "LOCAL_POSITION_NED", window_s: float = 1.0) -> float:
+        """Rate [Hz of link clock] at which ``kind`` arrived over the last ``window_s`` [s]
+        (kept for LOCAL_POSITION_NED only); 0 when none."""
+        return self._session.position_rate_hz(window_s)
 
     def send_message(self, msg: Any) -> bool:
         """Send any pymavlink message as is (e.g. the lockstep TIMESYNC answer); False if there

@@ -48,3 +48,14 @@ def setup_signing(codec: Any, key: bytes, *, sign_outgoing: bool, unsigned_ids: 
     signing.allow_unsigned_callback = allow_unsigned
     signing.link_id = link_id
     signing.timestamp = signing_timestamp_now()
+
+
+def link_codecs(source: tuple[int, int], signing_key: bytes | None) -> tuple[Any, Any]:
+    """``(rx, tx)`` codecs of our end of a link as ``source`` (system, component). With a
+    ``signing_key`` outgoing packets are signed and incoming ones must be, except HEARTBEAT (so
+    the vehicle can be found before keys match)."""
+    rx, tx = new_codec(*source), new_codec(*source)
+    if signing_key is not None:
+        for codec, outgoing in ((rx, False), (tx, True)):
+            setup_signing(codec, signing_key, sign_outgoing=outgoing, unsigned_ids=(mavlink.MAVLINK_MSG_ID_HEARTBEAT,))
+    return rx, tx

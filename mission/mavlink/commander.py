@@ -105,6 +105,14 @@ class Commander:
                        float(mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED), float(main), float(sub),
                        timeout_s=timeout_s, retries=retries)
 
+    def set_message_interval(self, message_id: int, rate_hz: float, timeout_s: float = 0.5, retries: int = 2) -> None:
+        """Ask the vehicle to stream ``message_id`` at ``rate_hz`` [Hz] (MAV_CMD_SET_MESSAGE_INTERVAL);
+        raises CommandRejected or LinkTimeout like :meth:`command_long`."""
+        if not rate_hz > 0:
+            raise ValueError(f"rate_hz must be > 0, got {rate_hz!r}")
+        self.command_long(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, float(message_id), 1e6 / rate_hz,
+                          timeout_s=timeout_s, retries=retries)
+
     def takeoff(self, alt_m: float | None, origin: tuple[float, float, float] | None, timeout_s: float = 0.5,
                 retries: int = 3) -> int:
         """MAV_CMD_NAV_TAKEOFF to ``alt_m`` [m] above the EKF ``origin`` (None: the vehicle's default).

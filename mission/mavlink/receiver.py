@@ -144,6 +144,8 @@ class Receiver:
         """Lock held: what a message from the vehicle changes."""
         s = self.session
         if kind in telemetry.KINDS:
+            if kind == "LOCAL_POSITION_NED":
+                s.position_stamps.append(t_rx)
             before = s.telemetry.mode
             s.telemetry = telemetry.reduce(s.telemetry, msg, t_rx)
             if s.telemetry.mode != before:

@@ -56,6 +56,7 @@ class LinkSession:
         self.vehicle: tuple[int, int] | None = None
         self.telemetry = telemetry.Telemetry()
         self.statustexts: collections.deque[tuple[float, int, str]] = collections.deque(maxlen=500)
+        self.position_stamps: collections.deque[float] = collections.deque(maxlen=256)  # LOCAL_POSITION_NED rx [s]
         self.acks = AckLog()
         self.counts: dict[str, int] = {f.name: 0 for f in fields(LinkCounters)}
 
@@ -84,6 +85,13 @@ class LinkSession:
                     return snapshot
                 if not self.wait_locked(deadline):
                     raise LinkTimeout(f"{what} not seen within {timeout_s:g} s on {self.name}")
+
+    def position_rate_hz(self, window_s: float = 1.0) -> float:
+        """Rate [Hz of clock] at which LOCAL_POSITION_NED arrived over the last ``window_s`` [s]; 0 when none."""
+        now = self.clock.now()
+        with self.lock:
+            stamps = [t for t in self.position_stamps if now - t <= window_s]
+        return 0.0 if len(stamps) < 2 else (len(stamps) - 1) / max(stamps[-1] - stamps[0], 1e-9)
 
     def notify_locked(self) -> None:
         self.clock.notify(self.changed)

@@ -65,6 +65,11 @@ class VehicleState:
     """Text of the latest (reassembled) STATUSTEXT from the vehicle, ``""`` if none."""
     yaw_rad: float | None = None
     """Heading [rad] from north towards east, from ATTITUDE; None before the first (or non-finite)."""
+    position_t_s: float | None = None
+    """Clock time the vehicle took that sample [s]: its ``time_boot_ms`` mapped onto the link
+    clock (:func:`vehicle_time_to_link`); earlier than ``position_rx_s`` by the transport delay and
+    by however long the sample waited to be read (a stalled process reads a burst of old
+    samples at once)."""
 
     @property
     def heartbeat_age_s(self) -> float:
@@ -87,6 +92,8 @@ class Telemetry:
     velocity_ned_m_s: np.ndarray | None = None
     position_finite: bool = False
     position_rx_s: float | None = None
+    position_t_s: float | None = None
+    vehicle_clock: tuple[float, float, float] | None = None  # (offset, last vehicle time, last link time) [s]
     heartbeat_rx_s: float | None = None
     base_mode: int = 0
     custom_mode: int = 0
@@ -111,11 +118,30 @@ def _heartbeat(tm: Telemetry, msg: Any, t_rx: float) -> Telemetry:
                    mode=px4.mode_name(custom_mode), system_status=int(msg.system_status))
 
 
+VEHICLE_CLOCK_DRIFT = 0.1  # how fast the vehicle-to-link offset may grow [s/s]
+
+
+def vehicle_time_to_link(state: tuple[float, float, float] | None, t_vehicle_s: float, t_rx_s: float,
+                         drift: float = VEHICLE_CLOCK_DRIFT) -> tuple[float, tuple[float, float, float]]:
+    """Map the vehicle's ``time_boot_ms`` [s] onto the link clock [s]: ``(t_link, new state)``.
+
+    The offset ``t_link - t_vehicle`` is the smallest one seen (the least-delayed sample), allowed
+    to grow by ``drift`` seconds per second so a vehicle clock running slower than ours (PX4 SITL
+    at 0.9x) is followed; a vehicle reboot (time going backwards) starts afresh. ``state`` is
+    ``(offset, last vehicle time, last link time)`` or None before the first sample.
+    """
+    offset = t_rx_s - t_vehicle_s
+    if state is not None and t_vehicle_s >= state[1]:
+        offset = min(state[0] + drift * max(t_rx_s - state[2], 0.0), offset)
+    return t_vehicle_s + offset, (offset, t_vehicle_s, t_rx_s)
+
+
 def _local_position(tm: Telemetry, msg: Any, t_rx: float) -> Telemetry:
     position, velocity = (msg.x, msg.y, msg.z), (msg.vx, msg.vy, msg.vz)
     finite = all(math.isfinite(c) for c in position + velocity)
+    t_sample, clock_state = vehicle_time_to_link(tm.vehicle_clock, msg.time_boot_ms * 1e-3, t_rx)
     return replace(tm, position_ned_m=_readonly_vector(*position), velocity_ned_m_s=_readonly_vector(*velocity),
-                   position_finite=finite, position_rx_s=t_rx)
+                   position_finite=finite, position_rx_s=t_rx, position_t_s=t_sample, vehicle_clock=clock_state)
 
 
 def _extended_sys_state(tm: Telemetry, msg: Any, t_rx: float) -> Telemetry:
@@ -166,6 +192,7 @@ def snapshot(tm: Telemetry, now_s: float, vehicle: tuple[int, int] | None, posit
         position_ned_m=tm.position_ned_m,
         velocity_ned_m_s=tm.velocity_ned_m_s,
         position_rx_s=tm.position_rx_s,
+        position_t_s=tm.position_t_s,
         heartbeat_rx_s=tm.heartbeat_rx_s,
         armed=bool(tm.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED),
         mode=tm.mode,

@@ -290,3 +290,21 @@ def test_receiver_counts_garbage_and_a_truncated_datagram():
     receiver.handle_bytes(b"\x00garbage", None, t)
     receiver.handle_bytes(whole, None, t)
     assert session.counts["rx_bad"] >= 1 and session.vehicle == (1, 1)
+
+
+def test_vehicle_time_maps_onto_the_link_clock_by_the_least_delayed_sample():
+    t, st = telemetry.vehicle_time_to_link(None, 10.0, 100.2)  # first sample: 0.2 s late
+    assert t == pytest.approx(100.2)
+    t, st = telemetry.vehicle_time_to_link(st, 10.1, 100.25)  # a faster one: the offset shrinks
+    assert t == pytest.approx(100.25) and st[0] == pytest.approx(90.15)
+    t, st = telemetry.vehicle_time_to_link(st, 10.2, 100.9)  # read 0.55 s late (a stall): stamped when taken
+    assert t == pytest.approx(10.2 + 90.15 + 0.1 * 0.65)  # the offset may only creep up by the drift
+    t, st = telemetry.vehicle_time_to_link(st, 0.5, 101.0)  # the vehicle rebooted: start afresh
+    assert t == pytest.approx(101.0)
+
+
+def test_reducer_stamps_position_samples_on_the_link_clock():
+    tm = telemetry.reduce(telemetry.Telemetry(), mavlink.MAVLink_local_position_ned_message(5000, 0, 0, 0, 0, 0, 0), 7.0)
+    tm = telemetry.reduce(tm, mavlink.MAVLink_local_position_ned_message(5100, 0, 0, 0, 0, 0, 0), 7.3)
+    s = telemetry.snapshot(tm, 7.3, None, 0.5)
+    assert s.position_rx_s == 7.3 and s.position_t_s == pytest.approx(7.1 + 0.1 * 0.3)
