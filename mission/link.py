@@ -1,16 +1,17 @@
 """The controller's narrow MAVLink 2 link to one PX4 vehicle: the facade over :mod:`mission.mavlink`.
 
 One :class:`VehicleLink` talks to one autopilot; the transports, the telemetry reducer, the
-receiver and the command state machines are in :mod:`mission.mavlink`. It
+receiver, the vehicle's adoption and the command state machines are in :mod:`mission.mavlink`. It
 
 * opens a transport chosen by URL (``udpin:HOST:PORT`` listen, the default and PX4 SITL's
   onboard link; ``udpout:HOST:PORT``; ``tcp:HOST:PORT``; a serial device ``/dev/ttyX[:BAUD]`` or
   ``serial:/dev/ttyX[:BAUD]``, passed to pymavlink's ``mavserial``);
-* identifies the vehicle from its first PX4 HEARTBEAT (autopilot 12, component ``target_component``)
-  and from then on accepts telemetry and COMMAND_ACKs only from that system and component; other
-  systems are counted in ``counters.rejected_foreign`` and ignored. On ``udpin`` replies go only to
-  the address the vehicle last sent from (pymavlink's ``mavudp`` would send to every address
-  that ever talked to the port, a rogue sender included);
+* identifies the vehicle (see Vehicle identity below) and from then on accepts telemetry and
+  COMMAND_ACKs only from that system and component; other systems are counted in
+  ``counters.rejected_foreign`` and ignored. On ``udpin`` replies go only to the address the
+  vehicle last sent from, and only a message that passed every check (signature, identity)
+  moves it (pymavlink's ``mavudp`` would send to every address that ever talked to the port, a
+  rogue sender included);
 * sends its own 1 Hz (link clock) HEARTBEAT as an onboard controller (type 18, autopilot 8);
 * sends commands with ACK, retry and timeout; a non-ACCEPTED result raises
   :class:`~mission.errors.CommandRejected` carrying the vehicle's STATUSTEXT reason;
@@ -22,7 +23,16 @@ receiver and the command state machines are in :mod:`mission.mavlink`. It
 * writes a ``.tlog`` (8-byte big-endian microsecond stamp + raw packet) of every packet sent and
   every valid packet received, readable by ``mavlogdump.py``.
 
-Identity. By default the link uses system id 1 and component 191 (MAV_COMP_ID_ONBOARD_COMPUTER):
+Vehicle identity. With ``target_system`` set (``mavlink.target_system``), the first HEARTBEAT
+of a PX4 autopilot (autopilot 12) of a vehicle type (:data:`VEHICLE_TYPES`) from that system and
+``target_component`` identifies it. Unset, a vehicle is adopted only after
+:data:`~mission.mavlink.identity.ADOPT_HEARTBEATS` such HEARTBEATs from one system and component with the same type, none
+older than ``heartbeat_timeout_s``, while no other PX4 autopilot is heard (two at once: neither
+is adopted, a warning says to set ``mavlink.target_system``). What was adopted is logged. A
+stray HEARTBEAT of another system (a rogue sysid 42 talking first) is counted in
+``rejected_foreign`` and never becomes the vehicle.
+
+Our identity. By default the link uses system id 1 and component 191 (MAV_COMP_ID_ONBOARD_COMPUTER):
 a companion computer is a component of the UAV's own system, and PX4 only registers an
 ONBOARD_CONTROLLER heartbeat that comes from its own system id (``mavlink_receiver.cpp``,
 ``same_system``). PX4's default MAV_SYS_ID is 1; set ``source_system`` if the vehicle's differs.
@@ -43,10 +53,16 @@ link runs the same on a scaled wall clock and in lockstep (:mod:`mission.lockste
 The wall clock is read once at ``open`` only where a format defines a wall time: the tlog's
 epoch stamps and the MAVLink 2 signing timestamp.
 
-Signing (optional, ``signing_key`` of 32 bytes). Outgoing packets are signed; incoming packets
-must carry a valid signature, except HEARTBEAT, which may come unsigned (so the vehicle can be
-found before keys match). The key is never logged, never in ``repr`` and never in the tlog
-(signed packets carry only a 6-byte truncated SHA-256).
+Signing (optional, ``signing_key`` of 32 bytes). Outgoing packets are signed; every incoming
+packet, HEARTBEAT included, counts only with a valid signature made with our key: an unsigned
+one is dropped (``rx_unsigned``), one signed with another key or replayed is dropped
+(``rx_bad_signature``); neither identifies a vehicle, changes its state or moves the reply
+address. A PX4 HEARTBEAT signed with another key is remembered so that
+:meth:`VehicleLink.signing_problem` can say "wrong key" rather than "no vehicle". A refused
+packet never advances pymavlink's per-stream replay timestamp (pymavlink updates it before it
+checks the signature, so one forged packet stamped in the future would lock the real vehicle
+out). The key is never logged, never in ``repr`` and never in the tlog (signed packets carry
+only a 6-byte truncated SHA-256).
 """
 from __future__ import annotations
 
@@ -63,6 +79,7 @@ from mission.errors import LinkError
 from mission.mavlink.codec import link_codecs
 from mission.mavlink.commander import Commander
 from mission.mavlink.heartbeat import HeartbeatSender
+from mission.mavlink.identity import ADOPT_HEARTBEATS, VEHICLE_TYPES, Adoption
 from mission.mavlink.receiver import Receiver
 from mission.mavlink.session import LinkCounters, LinkSession
 from mission.mavlink.setpoints import checked_vectors, checked_velocity, full_setpoint_message, velocity_ned_message
@@ -71,7 +88,7 @@ from mission.mavlink.tlog import Tlog
 from mission.mavlink.transport import Transport, open_transport
 from mission.mavlink_env import mavlink
 
-__all__ = ["VehicleLink", "VehicleState", "LinkCounters", "DEFAULT_URL"]
+__all__ = ["VehicleLink", "VehicleState", "LinkCounters", "DEFAULT_URL", "VEHICLE_TYPES", "ADOPT_HEARTBEATS"]
 
 log = logging.getLogger(__name__)
 
@@ -90,12 +107,13 @@ class VehicleLink:
     clock:
         Injected clock for every timeout, period, wait and receive stamp [s].
     target_system, target_component:
-        Accept only this vehicle (None: the first PX4 autopilot heard; component 0: any).
+        Accept only this vehicle (None: adopt one after consistent HEARTBEATs, see the module
+        docstring; component 0: any).
     source_system, source_component:
         Our own ids: 1 (the vehicle's own system, see the module docstring) and 191 (onboard computer).
     tlog_path, signing_key:
         Write a ``.tlog`` of every packet sent and every valid packet received; a 32-byte MAVLink 2
-        signing key (outgoing packets signed, incoming ones must be, HEARTBEAT excepted).
+        signing key (outgoing packets signed, incoming ones must be, HEARTBEAT included).
     heartbeat_timeout_s, heartbeat_period_s:
         The vehicle counts as lost after this long without a HEARTBEAT [s]; period of our own [s]
         (PX4 drops a peer 2.5 s after its last one).
@@ -104,22 +122,11 @@ class VehicleLink:
         refusal, how long to wait for the vehicle's STATUSTEXT reason [s].
     """
 
-    def __init__(
-        self,
-        url: str = DEFAULT_URL,
-        clock: Clock | None = None,
-        *,
-        target_system: int | None = None,
-        target_component: int = mavlink.MAV_COMP_ID_AUTOPILOT1,
-        source_system: int = 1,
-        source_component: int = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER,
-        tlog_path: str | Path | None = None,
-        signing_key: bytes | None = None,
-        heartbeat_timeout_s: float = 3.0,
-        heartbeat_period_s: float = 1.0,
-        position_timeout_s: float = 0.5,
-        reason_grace_s: float = 1.0,
-    ) -> None:
+    def __init__(self, url: str = DEFAULT_URL, clock: Clock | None = None, *, target_system: int | None = None,
+                 target_component: int = mavlink.MAV_COMP_ID_AUTOPILOT1, source_system: int = 1,
+                 source_component: int = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER, tlog_path: str | Path | None = None,
+                 signing_key: bytes | None = None, heartbeat_timeout_s: float = 3.0, heartbeat_period_s: float = 1.0,
+                 position_timeout_s: float = 0.5, reason_grace_s: float = 1.0) -> None:
         _check_arguments(target_system, target_component, source_system, source_component, signing_key,
                          heartbeat_timeout_s=heartbeat_timeout_s, heartbeat_period_s=heartbeat_period_s,
                          position_timeout_s=position_timeout_s, reason_grace_s=reason_grace_s)
@@ -168,8 +175,9 @@ class VehicleLink:
         except OSError as exc:
             transport.close()
             raise LinkError(f"cannot open tlog {self._tlog_path}: {exc}") from exc
-        receiver = Receiver(self._session, rx_codec, source_system=self._source[0], target_system=self._target_system,
-                            target_component=self._target_component, on_identified=self._heartbeat.announce,
+        adoption = Adoption(self._target_system, self._target_component, self.heartbeat_timeout_s)
+        receiver = Receiver(self._session, rx_codec, source_system=self._source[0], adoption=adoption,
+                            signed=self._signing_key is not None, on_identified=self._heartbeat.announce,
                             on_packet=self._log_packet, listeners=self._listeners)
         self._transport, self._opened, self._session.closed = transport, True, False
         self._threads = [threading.Thread(target=receiver.run, args=(transport, self._stop), daemon=True,
@@ -258,6 +266,11 @@ class VehicleLink:
         """Reassembled vehicle STATUSTEXTs as (clock time [s], severity, text), oldest first."""
         with self._session.lock:
             return list(self._session.statustexts)
+
+    def signing_problem(self) -> str | None:
+        """Why no vehicle was identified on a signed link, if the reason is the key (a PX4
+        autopilot heard only with another key's signatures); None otherwise."""
+        return self._session.signing_problem()
 
     @property
     def counters(self) -> LinkCounters:

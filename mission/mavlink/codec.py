@@ -50,12 +50,34 @@ def setup_signing(codec: Any, key: bytes, *, sign_outgoing: bool, unsigned_ids: 
     signing.timestamp = signing_timestamp_now()
 
 
+def keep_replay_state_on_failure(codec: Any) -> None:
+    """Make ``codec``'s signature check leave its per-stream replay timestamp alone when the
+    check fails (pymavlink stores a packet's timestamp before verifying its signature, so one
+    forged packet stamped in the future would lock the real vehicle out)."""
+    check = codec.check_signature
+
+    def check_signature(msgbuf: bytearray, src_system: int, src_component: int) -> bool:
+        streams = codec.signing.stream_timestamps
+        stream = (msgbuf[-13], src_system, src_component)
+        before = streams.get(stream)
+        ok = bool(check(msgbuf, src_system, src_component))
+        if not ok:
+            if before is None:
+                streams.pop(stream, None)
+            else:
+                streams[stream] = before
+        return ok
+
+    codec.check_signature = check_signature
+
+
 def link_codecs(source: tuple[int, int], signing_key: bytes | None) -> tuple[Any, Any]:
     """``(rx, tx)`` codecs of our end of a link as ``source`` (system, component). With a
-    ``signing_key`` outgoing packets are signed and incoming ones must be, except HEARTBEAT (so
-    the vehicle can be found before keys match)."""
+    ``signing_key`` outgoing packets are signed and every incoming one must be, HEARTBEAT
+    included; a refused packet never advances the replay state (:func:`keep_replay_state_on_failure`)."""
     rx, tx = new_codec(*source), new_codec(*source)
     if signing_key is not None:
         for codec, outgoing in ((rx, False), (tx, True)):
-            setup_signing(codec, signing_key, sign_outgoing=outgoing, unsigned_ids=(mavlink.MAVLINK_MSG_ID_HEARTBEAT,))
+            setup_signing(codec, signing_key, sign_outgoing=outgoing, unsigned_ids=())
+        keep_replay_state_on_failure(rx)
     return rx, tx

@@ -1,9 +1,10 @@
 """The receiving half of a link: bytes -> messages -> the vehicle's identity, telemetry, ACKs and
 STATUSTEXTs in the :class:`~mission.mavlink.session.LinkSession`.
 
-Identification: the first HEARTBEAT of a PX4 autopilot (autopilot 12, not a GCS, companion,
-gimbal or ADS-B type; ``target_system`` / ``target_component`` if given) fixes the vehicle; from
-then on only that system and component is applied (others are counted and ignored). The receiver
+Identification: :class:`~mission.mavlink.identity.Adoption` decides which PX4 autopilot is the
+vehicle; from then on only that system and component is applied (others are counted and
+ignored), and only a message that passed every check (signature, identity) moves the reply
+address. On a signed link unsigned and badly signed packets are counted apart. The receiver
 never dies on bad input: every parse or handler error is caught and counted.
 """
 from __future__ import annotations
@@ -14,6 +15,7 @@ from typing import Any, Callable
 
 from mission.mavlink import telemetry
 from mission.mavlink.codec import reset_parser
+from mission.mavlink.identity import Adoption
 from mission.mavlink.session import LinkSession
 from mission.mavlink.telemetry import StatusTextAssembler
 from mission.mavlink.transport import Address, Transport
@@ -22,9 +24,6 @@ from mission.mavlink_env import mavlink
 log = logging.getLogger("mission.link")
 
 WALL_SLICE_S = 0.05  # longest wall-clock block in the transport [s], so a stop is prompt
-# HEARTBEAT types that are never a vehicle's autopilot, whatever their autopilot field says.
-NON_VEHICLE_TYPES = frozenset({mavlink.MAV_TYPE_GCS, mavlink.MAV_TYPE_ONBOARD_CONTROLLER, mavlink.MAV_TYPE_GIMBAL,
-                               mavlink.MAV_TYPE_ADSB})
 
 
 def statustext_level(severity: int) -> int:
@@ -45,15 +44,14 @@ class Receiver:
     every message from the identified vehicle after it was applied (outside the lock).
     """
 
-    def __init__(self, session: LinkSession, codec: Any, *, source_system: int, target_system: int | None,
-                 target_component: int, on_identified: Callable[[tuple[int, int]], None],
+    def __init__(self, session: LinkSession, codec: Any, *, source_system: int, adoption: Adoption, signed: bool,
+                 on_identified: Callable[[tuple[int, int]], None],
                  on_packet: Callable[[bytes], None], listeners: list[Callable[[Any], None]] | None = None) -> None:
         self.session, self.codec = session, codec
-        self.source_system, self.target_system, self.target_component = source_system, target_system, target_component
+        self.source_system, self.adoption, self.signed = source_system, adoption, signed
         self.on_identified, self.on_packet = on_identified, on_packet
         self.listeners = listeners if listeners is not None else []
         self._assembler = StatusTextAssembler()
-        self._ignored_autopilots: set[tuple[int, int]] = set()
 
     def run(self, transport: Transport, stop: threading.Event) -> None:
         """Receiver thread: block on the transport, parse every datagram, never die."""
@@ -108,8 +106,7 @@ class Receiver:
         s = self.session
         kind = msg.get_type()
         if kind == "BAD_DATA":
-            bad_signature = "signature" in str(getattr(msg, "reason", ""))
-            s.count("rx_bad", "rx_bad_signature" if bad_signature else None)
+            s.count("rx_bad", self._bad_packet(msg))
             return
         s.count("rx_messages", "rx_unknown" if kind.startswith("UNKNOWN_") else None)
         source = (msg.get_srcSystem(), msg.get_srcComponent())
@@ -117,9 +114,10 @@ class Receiver:
         with s.changed:
             vehicle, found = s.vehicle, False
             if vehicle is None:
-                if not (kind == "HEARTBEAT" and self._is_our_autopilot(msg, source)):
+                if not (kind == "HEARTBEAT" and self.adoption.offer(msg.type, msg.autopilot, source, t_rx)):
                     s.counts["rx_ignored"] += 1
                     return
+                s.counts["rejected_foreign"] += self.adoption.foreign_heartbeats
                 vehicle, found = source, True
             elif source[0] != vehicle[0]:
                 s.counts["rejected_foreign"] += 1
@@ -161,17 +159,19 @@ class Receiver:
         elif kind == "COMMAND_ACK" and msg.target_system in (0, self.source_system):  # else: another client's
             s.acks.add(t_rx, msg.command, msg.result)
 
-    def _is_our_autopilot(self, msg: Any, source: tuple[int, int]) -> bool:
-        """Is this HEARTBEAT from the PX4 autopilot we are to fly (lock held)?"""
-        if msg.type in NON_VEHICLE_TYPES:
-            return False
-        if self.target_system is not None and source[0] != self.target_system:
-            return False
-        if self.target_component and source[1] != self.target_component:
-            return False
-        if msg.autopilot != mavlink.MAV_AUTOPILOT_PX4:
-            if source not in self._ignored_autopilots:
-                self._ignored_autopilots.add(source)
-                log.warning("ignoring non-PX4 autopilot %d at sysid %d compid %d", msg.autopilot, *source)
-            return False
-        return True
+    def _bad_packet(self, msg: Any) -> str | None:
+        """The counter of a refused packet (BAD_DATA): unsigned, badly signed, or neither; a PX4
+        HEARTBEAT signed with another key is remembered (``session.wrong_key``)."""
+        if not self.signed or "signature" not in str(getattr(msg, "reason", "")):
+            return None
+        raw = bytes(getattr(msg, "data", b""))
+        if len(raw) < 10 or raw[0] != mavlink.PROTOCOL_MARKER_V2 or not raw[2] & mavlink.MAVLINK_IFLAG_SIGNED:
+            return "rx_unsigned"
+        msg_id = raw[7] | raw[8] << 8 | raw[9] << 16
+        if msg_id == mavlink.MAVLINK_MSG_ID_HEARTBEAT and len(raw) > 15 and raw[15] == mavlink.MAV_AUTOPILOT_PX4:
+            s = self.session
+            with s.lock:  # HEARTBEAT payload: custom_mode u32, type u8, autopilot u8 (byte 15)
+                wrong = s.wrong_key
+                seen = wrong[2] if wrong is not None and wrong[:2] == (raw[5], raw[6]) else 0
+                s.wrong_key = (raw[5], raw[6], seen + 1)
+        return "rx_bad_signature"

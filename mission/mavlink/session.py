@@ -23,13 +23,16 @@ class LinkCounters:
     rx_bad: int = 0
     """Garbage, CRC, length, signature and parse errors (the receiver survived each)."""
     rx_bad_signature: int = 0
-    """Subset of rx_bad: packets refused for a missing or wrong signature."""
+    """Subset of rx_bad: signed packets refused (another key, or a replayed timestamp)."""
+    rx_unsigned: int = 0
+    """Subset of rx_bad: unsigned packets refused by a signed link (HEARTBEAT included)."""
     rx_unknown: int = 0
     """Valid packets whose message id is not in the dialect (e.g. PX4's 380, 410, 411)."""
     rx_ignored: int = 0
     """Valid packets not applied: before identification, or from another component."""
     rejected_foreign: int = 0
-    """Valid packets from a system other than the identified vehicle."""
+    """Valid packets from a system other than the identified vehicle, and HEARTBEATs of other
+    autopilots heard while none was adopted yet."""
     rx_errors: int = 0
     """Socket errors and unexpected handler exceptions in the receiver."""
     tx_messages: int = 0
@@ -57,6 +60,7 @@ class LinkSession:
         self.telemetry = telemetry.Telemetry()
         self.statustexts: collections.deque[tuple[float, int, str]] = collections.deque(maxlen=500)
         self.position_stamps: collections.deque[float] = collections.deque(maxlen=256)  # LOCAL_POSITION_NED rx [s]
+        self.wrong_key: tuple[int, int, int] | None = None  # (sysid, compid, HEARTBEATs) signed with another key
         self.acks = AckLog()
         self.counts: dict[str, int] = {f.name: 0 for f in fields(LinkCounters)}
 
@@ -92,6 +96,16 @@ class LinkSession:
         with self.lock:
             stamps = [t for t in self.position_stamps if now - t <= window_s]
         return 0.0 if len(stamps) < 2 else (len(stamps) - 1) / max(stamps[-1] - stamps[0], 1e-9)
+
+    def signing_problem(self) -> str | None:
+        """Why no vehicle was identified on a signed link, if the reason is the key: a PX4
+        autopilot was heard, but only with signatures made with another key. None otherwise."""
+        with self.lock:
+            wrong, vehicle = self.wrong_key, self.vehicle
+        if vehicle is not None or wrong is None:
+            return None
+        return (f"PX4 autopilot sysid {wrong[0]} compid {wrong[1]} signs with another key "
+                f"({wrong[2]} HEARTBEATs refused): check mavlink.signing_key_file")
 
     def notify_locked(self) -> None:
         self.clock.notify(self.changed)

@@ -231,16 +231,17 @@ class FakeTransport:
         self.peer = address
 
 
-def make_receiver(clock, target_system=None):
+def make_receiver(clock, target_system=1):
     from mission.mavlink.codec import new_codec
+    from mission.mavlink.identity import Adoption
     from mission.mavlink.receiver import Receiver
     from mission.mavlink.session import LinkSession
 
     session = LinkSession("test", clock, position_timeout_s=0.5)
     session.closed = False
     identified, packets = [], []
-    receiver = Receiver(session, new_codec(1, 191), source_system=1, target_system=target_system, target_component=1,
-                        on_identified=identified.append, on_packet=packets.append)
+    receiver = Receiver(session, new_codec(1, 191), source_system=1, adoption=Adoption(target_system, 1, 3.0),
+                        signed=False, on_identified=identified.append, on_packet=packets.append)
     return session, receiver, identified, packets
 
 
@@ -308,3 +309,18 @@ def test_reducer_stamps_position_samples_on_the_link_clock():
     tm = telemetry.reduce(tm, mavlink.MAVLink_local_position_ned_message(5100, 0, 0, 0, 0, 0, 0), 7.3)
     s = telemetry.snapshot(tm, 7.3, None, 0.5)
     assert s.position_rx_s == 7.3 and s.position_t_s == pytest.approx(7.1 + 0.1 * 0.3)
+
+
+def test_without_a_target_system_a_vehicle_is_adopted_after_consistent_heartbeats_only():
+    from mission.mavlink.identity import ADOPT_HEARTBEATS, Adoption
+
+    adoption = Adoption(None, 1, heartbeat_timeout_s=3.0)
+    quad, px4_ap = mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_PX4
+    assert not adoption.offer(mavlink.MAV_TYPE_GCS, px4_ap, (1, 1), 0.0)  # not a vehicle type
+    assert not adoption.offer(quad, mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, (1, 1), 0.0)  # not PX4
+    assert [adoption.offer(quad, px4_ap, (1, 1), t) for t in (1.0, 2.0, 3.0)] == [False] * (ADOPT_HEARTBEATS - 1) + [True]
+    rogue = Adoption(None, 1, heartbeat_timeout_s=3.0)  # two autopilots at once: neither is adopted
+    answers = [rogue.offer(quad, px4_ap, src, t) for t in (1.0, 2.0, 3.0, 4.0) for src in ((1, 1), (42, 1))]
+    assert not any(answers)
+    late = Adoption(None, 1, heartbeat_timeout_s=3.0)  # gaps longer than the timeout start the count again
+    assert not any(late.offer(quad, px4_ap, (1, 1), t) for t in (0.0, 5.0, 10.0))
