@@ -2,7 +2,7 @@
 loopback-only defaults.
 
 The link-level cases (a rogue system on the controller's port, unsigned or wrongly signed
-telemetry refused by the link) are in tests/integration/test_link.py; the vehicle-level ones
+telemetry refused by the link) are in tests/integration/link/; the vehicle-level ones
 (unsigned commands refused, unsigned HEARTBEAT accepted) in test_vehicle_faults.py. Here the
 whole chain runs as real processes.
 """
