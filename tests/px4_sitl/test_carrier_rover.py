@@ -117,8 +117,10 @@ def test_quadrotor_and_rover_on_px4_each_in_offboard_p1_p3_and_the_rover_stops_o
     assert "carrier vehicle armed and in OFFBOARD" in carrier_err  # the rover under our controller
     assert s["phase"] == "DONE" and s["p2"] and s["p3"], s
     # P1 needs the passenger within mission.dock_tolerance_m (0.5 m) of the dock point while riding.
-    # On PX4 the quadrotor under velocity setpoints lags the rover's start by ~1.3 m (measured; the
-    # passenger's tracking on PX4 is issue 10's): held to what was measured, not to P1.
+    # With the tracking that holds a smoothly driven dock within ~0.2 m on PX4 (px4_sitl.toml), the
+    # SIH rover still shakes it off by ~1 m (measured 0.96 m): the rover's speed swings 0.3-1.4 m/s
+    # under its steering while the passenger's feed-forward predicts the carrier law's smooth motion
+    # (issue 14, open). Held to what was measured, not to P1.
     assert s["max_offset_before_separation_m"] < 2.0, s["max_offset_before_separation_m"]
     assert s["final_passenger_target_distance_m"] <= 0.5  # the passenger arrived
     assert c["backend"] == "mavlink" and c["mode"] == "separated"
