@@ -13,7 +13,12 @@ from tests.conftest import CONFIGS
 
 @pytest.fixture(scope="module")
 def model():
-    return mission_model(load_config(CONFIGS / "demo.toml"))
+    """demo.toml's mission flown by velocity setpoints: the synthetic world below integrates the
+    setpoint as a velocity (it has no position loop of PX4's to close a full setpoint's position)."""
+    cfg = load_config(CONFIGS / "demo.toml")
+    mission = cfg.mission.model_copy(update={"setpoint": "velocity", "track_gain": 1.5, "position_lead": 0.0,
+                                             "drag_ff_per_s": 0.0, "integral_gain": 0.0})
+    return mission_model(cfg.model_copy(update={"mission": mission}))
 
 
 def fly(model, *, ticks=4000, carrier_age=0.0, on_tick=None, vehicle_tau=0.0):
