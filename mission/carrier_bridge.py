@@ -99,26 +99,31 @@ def zenoh_config(section: ZenohSection) -> zenoh.Config:
         conf = zenoh.Config()
         _insert(conf, "mode", section.mode, "zenoh.mode")
         _insert(conf, "scouting/multicast/enabled", section.multicast_scouting, "zenoh.multicast_scouting")
-        listen, connect = list(section.listen), list(section.connect)
-        if section.mode == "router" and not listen:
-            listen = ["tcp/127.0.0.1:7447"]
-        elif section.mode == "client" and not connect:
-            connect = ["tcp/127.0.0.1:7447"]
-        elif section.mode == "peer" and not listen and not connect:
-            if section.rendezvous and not section.multicast_scouting:
-                listen, connect = [section.rendezvous, "tcp/127.0.0.1:0"], [section.rendezvous]
-                _insert(conf, "listen/exit_on_failure", False, "zenoh.rendezvous")
-            elif not section.multicast_scouting:
-                listen = ["tcp/127.0.0.1:0"]
-        elif section.mode == "peer" and not listen and not section.multicast_scouting:
-            # A peer given only connect endpoints would otherwise get Zenoh's default listener,
-            # tcp/[::]:0 on every interface; keep it on loopback like every other default.
-            listen = ["tcp/127.0.0.1:0"]
+        listen, connect, rendezvous = _default_endpoints(section)
+        if rendezvous:
+            _insert(conf, "listen/exit_on_failure", False, "zenoh.rendezvous")
     if listen:
         _insert(conf, "listen/endpoints", listen, "zenoh.listen")
     if connect:
         _insert(conf, "connect/endpoints", connect, "zenoh.connect")
     return conf
+
+
+def _default_endpoints(section: ZenohSection) -> tuple[list[str], list[str], bool]:
+    """The listen and connect endpoints of a section without a config file, our loopback defaults
+    filled in (see :func:`zenoh_config`), and whether they are the peer rendezvous pair."""
+    listen, connect = list(section.listen), list(section.connect)
+    if section.mode == "router" and not listen:
+        return ["tcp/127.0.0.1:7447"], connect, False
+    if section.mode == "client" and not connect:
+        return listen, ["tcp/127.0.0.1:7447"], False
+    if section.mode == "peer" and not listen and not section.multicast_scouting:
+        if not connect and section.rendezvous:
+            return [section.rendezvous, "tcp/127.0.0.1:0"], [section.rendezvous], True
+        # A peer given only connect endpoints would otherwise get Zenoh's default listener,
+        # tcp/[::]:0 on every interface; keep it on loopback like every other default.
+        return ["tcp/127.0.0.1:0"], connect, False
+    return listen, connect, False
 
 
 def _insert(conf: zenoh.Config, key: str, value: Any, field: str) -> None:
@@ -136,16 +141,11 @@ def describe_endpoints(section: ZenohSection) -> str:
         extra = [f"listen {', '.join(section.listen)}"] if section.listen else []
         extra += [f"connect {', '.join(section.connect)}"] if section.connect else []
         return f"Zenoh {base}" + (f" ({'; '.join(extra)})" if extra else "")
-    listen, connect = list(section.listen), list(section.connect)
-    if section.mode == "router" and not listen:
-        listen = ["tcp/127.0.0.1:7447"]
-    elif section.mode == "client" and not connect:
-        connect = ["tcp/127.0.0.1:7447"]
-    elif section.mode == "peer" and not listen and not connect:
-        if section.rendezvous and not section.multicast_scouting:
-            return f"Zenoh peer, loopback rendezvous {section.rendezvous} (zenoh.rendezvous)"
-        if section.multicast_scouting:
-            return "Zenoh peer, multicast scouting (all interfaces)"
+    listen, connect, rendezvous = _default_endpoints(section)
+    if rendezvous:
+        return f"Zenoh peer, loopback rendezvous {section.rendezvous} (zenoh.rendezvous)"
+    if section.mode == "peer" and not listen and not connect:
+        return "Zenoh peer, multicast scouting (all interfaces)"
     parts = [f"listen {', '.join(listen)}"] if listen else []
     parts += [f"connect {', '.join(connect)}"] if connect else []
     return f"Zenoh {section.mode}, " + ("; ".join(parts) or "ephemeral loopback listener")
