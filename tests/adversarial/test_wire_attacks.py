@@ -193,7 +193,12 @@ def _spoofed_outliers(tmp_path: Path) -> None:
         assert s["p1"], s  # P1-P3 all hold with ~1 % outliers
         feed = s["carrier_feed"]
         dropped = feed["dropped"]
-        assert sent >= 5 and dropped.get("stamp_jump", 0) >= 1 and dropped.get("jump", 0) >= 1, (sent, feed)
+        # The hour-ahead state is always a stamp_jump. The teleport is a "jump" unless its honest
+        # twin (stamp 1 ms earlier) arrived first and made it stale: which one Zenoh delivers first is
+        # not ours to choose, so the reason is checked deterministically in tests/unit/test_feed_gate.py
+        # and here only that it was dropped (gated == sent) and the latch held (P1, assert_completed).
+        assert sent >= 5 and dropped.get("stamp_jump", 0) >= 1, (sent, feed)
+        assert dropped.get("jump", 0) + dropped.get("stale_stamp", 0) >= 1, (sent, feed)
         gated = sum(n for reason, n in dropped.items() if reason != "unbound")
         assert gated == sent, (sent, feed)  # every outlier dropped (one overtaken by its honest twin as stale)
         assert feed["resyncs"] == 0 and feed["rejected_sources"] == {}
