@@ -181,11 +181,7 @@ class ZenohRelay:
             self._state, self._wake_ns = "joined", self._ready[1]
 
     def close(self) -> None:
-        for entity in (self._sub, self._pub):
-            try:
-                entity.undeclare()
-            except zenoh.ZError as exc:
-                log.debug("undeclare: %s", exc)
+        _undeclare(self._sub, self._pub)
 
 
 class ZenohUpstream:
@@ -229,8 +225,13 @@ class ZenohUpstream:
         self._pub.put(f"{t_ns} {wake_ns} {self._published()}")
 
     def close(self) -> None:
-        for entity in (self._sub, self._pub):
-            try:
-                entity.undeclare()
-            except zenoh.ZError as exc:
-                log.debug("undeclare: %s", exc)
+        _undeclare(self._sub, self._pub)
+
+
+def _undeclare(*entities: Any) -> None:
+    """Undeclare Zenoh subscribers and publishers; one already gone (session closed) is logged."""
+    for entity in entities:
+        try:
+            entity.undeclare()
+        except zenoh.ZError as exc:
+            log.debug("undeclare: %s", exc)
