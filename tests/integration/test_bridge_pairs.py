@@ -45,7 +45,7 @@ def test_three_pairs_publishing_at_once_have_no_crosstalk() -> None:
         # accepted (and show as a foreign marker or key) or make the next own sample "stale_seq"
         # (a counted drop). Publishers drop under congestion (newest wins), so counts are not exact.
         def seq_of(i: int, k: int) -> int:
-            return 1000 * (i + 1) + k
+            return 1_000_000 * (i + 1) + k  # room for many resends (one per poll)
 
         for k in range(N):
             for i, n in enumerate(PAIRS):  # interleaved: all pairs at once
@@ -53,17 +53,29 @@ def test_three_pairs_publishing_at_once_have_no_crosstalk() -> None:
                 cpubs[n].publish(CarrierState(0.01 * k, seq_of(i, k), "local_ned", [marker, 0.0, 0.0], [0.0, 0.0, 0.0]))
                 ppubs[n].publish(PassengerStatus("RIDING", 0.01 * k, seq_of(i, k), [marker, 1.0, 0.0], [0.0, 0.0, 0.0]))
 
-        def final_seen() -> bool:  # resend a last sample until it got through, for every pair
+        # Resend a fresh last sample until one got through, for every pair. Each resend has a new
+        # sequence number (never a repeat): a repeat of one already delivered is a legitimate
+        # "stale_seq" drop, which would hide the crosstalk this test looks for.
+        next_k = {(side, n): N for side in ("c", "p") for n in PAIRS}
+
+        def resend(side: str, i: int, n: str) -> None:
+            k = next_k[(side, n)]
+            next_k[(side, n)] = k + 1
+            s = seq_of(i, k)
+            if side == "c":
+                cpubs[n].publish(CarrierState(0.01 * k, s, "local_ned", [float(s), 0.0, 0.0], [0.0] * 3))
+            else:
+                ppubs[n].publish(PassengerStatus("RIDING", 0.01 * k, s, [float(s), 1.0, 0.0], [0.0] * 3))
+
+        def final_seen() -> bool:
             done = True
             for i, n in enumerate(PAIRS):
                 c, p = cfeeds[n].latest(), pfeeds[n].latest()
                 if c is None or c.state.seq < seq_of(i, N):
-                    k = N if c is None else max(N, c.state.seq - seq_of(i, 0) + 1)
-                    cpubs[n].publish(CarrierState(0.01 * k, seq_of(i, k), "local_ned", [float(seq_of(i, k)), 0.0, 0.0], [0.0] * 3))
+                    resend("c", i, n)
                     done = False
                 if p is None or p.status.seq < seq_of(i, N):
-                    k = N if p is None else max(N, p.status.seq - seq_of(i, 0) + 1)
-                    ppubs[n].publish(PassengerStatus("RIDING", 0.01 * k, seq_of(i, k), [float(seq_of(i, k)), 1.0, 0.0], [0.0] * 3))
+                    resend("p", i, n)
                     done = False
             return done
 
