@@ -233,36 +233,36 @@ class MissionSection(_Model):
     dock_offset_ned_m: list[Annotated[float, Field(ge=-100, le=100)]] = Field(
         [0.0, 0.0, -1.5], description="[m] NED from the carrier; down < 0")
     dock_tolerance_m: float = Field(0.5, gt=0, le=5)
-    track_gain: float = Field(1.0, ge=0, le=50, description="[1/s] pull of the vehicle to the reference (added to PX4's "
+    track_gain: float = Field(0.0, ge=0, le=50, description="[1/s] pull of the vehicle to the reference (added to PX4's "
                               "own position loop for full setpoints)")
     join_speed_m_s: float = Field(1.0, gt=0, le=20)
     arrival_radius_m: float = Field(0.5, gt=0, le=50)
     arrival_dwell_s: float = Field(2.0, ge=0, le=600)
     setpoint: Literal["velocity", "full"] = Field(
-        "velocity", description="[-] velocity-only setpoints (type_mask 3527), or position + velocity + acceleration "
+        "full", description="[-] velocity-only setpoints (type_mask 3527), or position + velocity + acceleration "
         "(type_mask 3072: PX4 closes position itself); see mission/tracking.py")
-    position_lead: float = Field(0.0, ge=0, le=20, description="[-] full setpoints: the position sent is x_ref + lead (x_ref - x_p), "
+    position_lead: float = Field(2.6, ge=0, le=20, description="[-] full setpoints: the position sent is x_ref + lead (x_ref - x_p), "
                                  "extra position feedback through PX4's own position loop (dimensionless)")
-    integral_gain: float = Field(0.0, ge=0, le=20, description="[1/s^2 or 1/s] integral action on the position error: [1/s^2] into the "
+    integral_gain: float = Field(1.0, ge=0, le=20, description="[1/s^2 or 1/s] integral action on the position error: [1/s^2] into the "
                                  "acceleration feed-forward (full), [1/s] into the velocity (velocity)")
     integral_limit: float = Field(2.0, gt=0, le=20, description="[m/s^2 or m/s] clamp of the integral term: [m/s^2] (full) or [m/s] (velocity)")
-    drag_ff_per_s: float = Field(0.0, ge=0, le=10, description="[1/s] feed-forward of the vehicle's velocity deficit: "
+    drag_ff_per_s: float = Field(1.0, ge=0, le=10, description="[1/s] feed-forward of the vehicle's velocity deficit: "
                                  "acceleration per m/s of reference velocity (full setpoints)")
     integral_window_m: float = Field(0.5, gt=0, le=10, description="[m] the integral integrates only while the vehicle is "
                                      "this close to the reference (anti-windup)")
     reference_slow_lag_m: float | None = Field(
-        None, gt=0, le=50, description="[m] after separation the reference slows down when the vehicle lags it by more "
+        0.3, gt=0, le=50, description="[m] after separation the reference slows down when the vehicle lags it by more "
         "than this, and waits at reference_stop_lag_m (None: never)")
-    reference_stop_lag_m: float | None = Field(None, gt=0, le=50, description="[m] see reference_slow_lag_m")
+    reference_stop_lag_m: float | None = Field(1.0, gt=0, le=50, description="[m] see reference_slow_lag_m")
     join_settle_m: float | None = Field(
-        None, gt=0, le=5, description="[m] JOIN ends (the carrier starts) once the vehicle is this close to the dock point "
+        0.15, gt=0, le=5, description="[m] JOIN ends (the carrier starts) once the vehicle is this close to the dock point "
         "(None: dock_tolerance_m) ...")
-    join_settle_s: float = Field(0.0, ge=0, le=60, description="[s] ... for this long")
+    join_settle_s: float = Field(0.5, ge=0, le=60, description="[s] ... for this long")
     arrival_max_speed_m_s: float | None = Field(
-        None, gt=0, le=20, description="[m/s] arrival also needs the vehicle this slow (None: any speed), so Hold is "
+        0.3, gt=0, le=20, description="[m/s] arrival also needs the vehicle this slow (None: any speed), so Hold is "
         "not handed a vehicle still moving")
     telemetry_rate_hz: float | None = Field(
-        None, gt=0, le=1000, description="[Hz] LOCAL_POSITION_NED rate asked of the vehicle (MAV_CMD_SET_MESSAGE_INTERVAL); "
+        50.0, gt=0, le=1000, description="[Hz] LOCAL_POSITION_NED rate asked of the vehicle (MAV_CMD_SET_MESSAGE_INTERVAL); "
         "None: leave the vehicle's default")
     final_action: Literal["hold", "land"] = "hold"
     carrier_timeout_s: float = Field(0.5, gt=0, le=10, description="[s] a carrier state older than this is lost")
