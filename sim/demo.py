@@ -294,8 +294,8 @@ def format_table(summaries: list[dict]) -> str:
               "factor. In lockstep: the pace after a participant is lost.")
 @click.option("--pairs", type=click.IntRange(1, 16), default=1, show_default=True,
               help="Number of marsupial pairs flying at once on one Zenoh network.")
-@click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default="logs/demo/flight.png", show_default=True,
-              help="Where to write the flight plot (one per pair, suffixed, with --pairs > 1).")
+@click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
+              help="Where to write the flight plot (one per pair, suffixed, with --pairs > 1)  [default: LOG_ROOT/flight.png]")
 @click.option("--log-root", type=click.Path(file_okay=False), default="logs/demo", show_default=True,
               help="Directory for the flight logs (one sub-directory per pair).")
 @click.option("--timeout", "timeout_s", type=float, default=120.0, show_default=True, help="Wall-clock limit [s].")
@@ -303,7 +303,7 @@ def format_table(summaries: list[dict]) -> str:
 @click.option("--carrier", "carrier_kind", type=click.Choice(["sim", "mavlink", "ros2"]), default="sim", show_default=True,
               help="The carrier robot: built-in kinematic robot; a mock PX4 Ackermann rover over MAVLink; a "
                    "ROS-2-shaped diff-drive robot over Zenoh (rmw_zenoh keys).")
-def demo(config: str, realtime: bool, speed: float, pairs: int, plot_path: str, log_root: str, timeout_s: float,
+def demo(config: str, realtime: bool, speed: float, pairs: int, plot_path: str | None, log_root: str, timeout_s: float,
          verbose_children: bool, carrier_kind: str) -> int:
     """Fly the whole system: mock PX4 vehicle + carrier simulator + mission controller.
 
@@ -312,6 +312,8 @@ def demo(config: str, realtime: bool, speed: float, pairs: int, plot_path: str, 
     the paper's P1-P3 held for every pair.
     """
     os.environ.setdefault("PYTHONUNBUFFERED", "1")
+    if plot_path is None:  # the plot goes with the logs it draws
+        plot_path = str(Path(log_root) / "flight.png")
     code, summaries = run_demo(config, speed, pairs, Path(log_root), plot_path, timeout_s, quiet=not verbose_children,
                                progress=True, carrier=carrier_kind, lockstep=not realtime)
     click.echo("times count from the start of riding (t = 0, as in the paper)")
