@@ -42,7 +42,7 @@ CARRIER_RATE_HZ = 30.0  # the demo carrier's rate: the cadence of the samples an
 
 @dataclass
 class Row:
-    """One line of the table: a figure, its value, the issue's target and whether it holds."""
+    """One line of the table: a figure, its value, its target and whether it holds."""
 
     section: str
     figure: str
@@ -130,7 +130,7 @@ class Bench:
             self.row("e2e", f"floor: MAVLink ping, {at}: p50 / p99 [ms]", _pair(mav))
             self.row("e2e", f"floor: Zenoh + MAVLink at {at}: p50 / p99 [ms]", f"{floor['p50_ms']:.3f} / {floor['p99_ms']:.3f}")
             self.row("e2e", f"{at} raw, publish -> arrival: p50 / p99 [ms]", _pair(raw))
-            on_target = rate == 50.0  # the issue's targets are at 50 Hz; 250 Hz is shown beside them
+            on_target = rate == 50.0  # the targets are at 50 Hz; 250 Hz is shown beside them
             have = seen["p50_ms"] is not None
             self.row("e2e", f"{at} after seen (raw - wait), n={seen['n']}: p50 [ms]", _ms(seen),
                      "<= 0.5" if on_target else "", (have and seen["p50_ms"] <= 0.5) if on_target else None)

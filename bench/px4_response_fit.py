@@ -1,4 +1,4 @@
-"""The mock vehicle against real PX4's recorded offboard responses (issue 10). Prints a table.
+"""The mock vehicle against real PX4's recorded offboard responses. Prints a table.
 
 Replays the setpoint sequence of each recording (``tests/data/px4_responses/``, copied from
 ../shared/px4_sitl/responses/: ``original`` and the held-out ``repeat``) into the mock's dynamics

@@ -1,4 +1,4 @@
-"""Adversaries on both wires, over the real processes (issue 11): the fault matrix's harness
+"""Adversaries on both wires, over the real processes: the fault matrix's harness
 (tests/faults/procs.py: carrier, ``marsupial run`` and the mock PX4 as subprocesses, a Zenoh
 router in this process, a GCS observer on the vehicle's second link) with an attacker added.
 

@@ -1,9 +1,9 @@
-"""The mock's dynamics against a real PX4 SITL's recorded offboard responses (issue 10).
+"""The mock's dynamics against a real PX4 SITL's recorded offboard responses.
 
 The recorded setpoint sequence (tests/data/px4_responses/, from ../shared/px4_sitl/responses/) is
 replayed into the dynamics on PX4's own clock and compared segment by segment. ``original`` is the
 recording the airframe constants were fitted to; ``repeat`` is the same sequence flown again on a
-fresh PX4 and was not used by the fit. Targets (issue 10): mean RMS velocity difference <= 0.15
+fresh PX4 and was not used by the fit. Targets: mean RMS velocity difference <= 0.15
 m/s over the step, ramp and sine segments (the two PX4 recordings differ from each other by 0.137);
 ramp lag within 25 % of PX4's. ``python -m bench.px4_response_fit`` prints the table.
 """
@@ -44,7 +44,7 @@ def test_mean_rms_velocity_difference_within_target(comparisons, name):
 
 
 def test_the_old_first_order_mock_misses_the_target(recordings):
-    """The test can fail: a fast first-order response without drag (the mock before issue 10:
+    """The test can fail: a fast first-order response without drag (the mock's first model:
     90 % in 0.67 s, no deficit) is far from PX4."""
     stiff = Limits(airframe=Airframe(drag_1_s=0.0, tilt_tau_s=0.05, thrust_tau_s=0.05, drag_z_1_s=0.0))
     assert compare(recordings["original"], stiff).mean_rms_m_s > 0.25
@@ -64,7 +64,7 @@ def test_full_setpoint_ramp_lag_within_25_percent_of_px4(recordings, comparisons
     decimetres. Its two recordings differ by 70 % (0.44 and 0.75 m: its position estimate drifts
     by 0.7-2 m in that segment), so no single value is within 25 % of both; the mock's lag
     (0.74 / 0.79 m) is within 25 % of the repeat's and an order of magnitude below the
-    velocity-only ramp's, as on PX4 (the note of issue 10 gives every ratio)."""
+    velocity-only ramp's, as on PX4 (``python -m bench.px4_response_fit`` prints every ratio)."""
     px4 = {name: ramp_lag_m(rec, "ramp_pos_vel_acc") for name, rec in recordings.items()}
     for name, c in comparisons.items():
         mock = c.lag_mock_m["ramp_pos_vel_acc"]
