@@ -8,7 +8,7 @@ on its ``cmd_vel``, both CDR (rosbags), under either key form (:func:`ros2_topic
   hash and publish ``cmd_vel`` with the Twist's RIHS01 hash and rmw_zenoh's attachment
   (sequence number, source timestamp [ns], a 16-byte source gid), which its subscribers read.
 
-Frames: Odometry is ENU (REP 103) with a body FLU twist; :func:`mission.wire.decode_odometry_cdr`
+Frames: Odometry is ENU (REP 103) with a body FLU twist; :func:`mission.wire_ros2.decode_odometry_cdr`
 turns it into NED. The odom frame's origin sits at ``carrier.ros2.offset_ned_m`` [m] in the
 shared frame (a robot's odometry usually starts at zero where it booted). The Twist is body FLU:
 a diff-drive/Ackermann robot gets ``linear.x`` = forward speed and ``angular.z`` = yaw rate
@@ -30,10 +30,11 @@ import zenoh.ext
 
 from mission.carrier.controller import OwnState
 from mission.carrier.tracking import Tracked
-from mission.carrier_bridge import _declare
+from mission.zenoh_session import declare
 from mission.clock import Clock
 from mission.config import CarrierRos2Section, Config
-from mission.wire import CarrierState, WireError, decode_odometry_cdr, encode_twist_cdr
+from mission.wire import CarrierState, WireError
+from mission.wire_ros2 import decode_odometry_cdr, encode_twist_cdr
 
 log = logging.getLogger(__name__)
 
@@ -110,10 +111,10 @@ class Ros2Carrier:
         self._latest: tuple[CarrierState, float] | None = None
         self.dropped: dict[str, int] = {}
         self._attachment = RmwAttachment() if self.topics.rmw_zenoh else None
-        self._pub = _declare(f"publisher on {self.topics.cmd_vel_pub}", lambda: session.declare_publisher(
+        self._pub = declare(f"publisher on {self.topics.cmd_vel_pub}", lambda: session.declare_publisher(
             self.topics.cmd_vel_pub, encoding=zenoh.Encoding.APPLICATION_CDR))
         try:
-            self._sub = _declare(f"subscriber on {self.topics.odom_sub}",
+            self._sub = declare(f"subscriber on {self.topics.odom_sub}",
                                  lambda: session.declare_subscriber(self.topics.odom_sub, self._on_odom))
         except Exception:
             self._pub.undeclare()
