@@ -28,7 +28,8 @@ from mission.carrier.tracking import wrap_pi
 from mission.carrier_bridge import open_session
 from mission.clock import Clock, Periodic, ScaledClock
 from mission.config import CarrierRos2Section, ZenohSection
-from mission.wire import CarrierState, WireError, decode_twist_cdr, encode_odometry_cdr
+from mission.wire import CarrierState, WireError
+from mission.wire_ros2 import decode_twist_cdr, encode_odometry_cdr
 
 log = logging.getLogger(__name__)
 

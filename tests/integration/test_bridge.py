@@ -20,7 +20,8 @@ from mission.carrier_bridge import (
 from mission.clock import ManualClock, ScaledClock
 from mission.config import ZenohSection, from_dict
 from mission.errors import BusError, ConfigError, PortInUse
-from mission.wire import CarrierState, GeoOrigin, PassengerStatus, encode_odometry_cdr, ros2dds_odom_key
+from mission.wire import CarrierState, GeoOrigin, PassengerStatus
+from mission.wire_ros2 import encode_odometry_cdr, ros2dds_odom_key
 from tests.integration.zenoh_util import LENIENT, endpoint, free_port, peer, peer_pair, wait_for, wait_matched
 
 pytestmark = pytest.mark.timeout(30)

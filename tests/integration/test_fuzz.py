@@ -26,7 +26,8 @@ from mission.carrier_bridge import CarrierFeed, keys
 from mission.clock import ManualClock, ScaledClock
 from mission.link import VehicleLink
 from mission.mavlink_env import mavlink
-from mission.wire import CarrierState, encode_carrier_json, encode_odometry_cdr
+from mission.wire import CarrierState, encode_carrier_json
+from mission.wire_ros2 import encode_odometry_cdr
 from sim.vehicle import MockVehicle, VehicleOptions
 from sim.vehicle_probe import Probe
 from tests.integration.zenoh_util import LENIENT, peer_pair, wait_for, wait_matched

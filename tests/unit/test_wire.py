@@ -15,17 +15,14 @@ from mission.wire import (
     PassengerStatus,
     WireError,
     decode_carrier_json,
-    decode_odometry_cdr,
     decode_passenger_json,
     encode_carrier_json,
-    encode_odometry_cdr,
     encode_passenger_json,
     geodetic_to_ned,
     ned_to_geodetic,
-    rmw_zenoh_odom_key,
-    ros2dds_odom_key,
     to_local_ned,
 )
+from mission.wire_ros2 import decode_odometry_cdr, encode_odometry_cdr, rmw_zenoh_odom_key, ros2dds_odom_key
 
 GOOD = {"stamp": 12.345, "seq": 7, "frame": "local_ned", "position": [1.0, 2.0, -3.0],
         "velocity": [0.5, -0.25, 0.0], "yaw": 0.1}
