@@ -21,110 +21,44 @@ the carrier timeout.
 from __future__ import annotations
 
 import math
-import re
 import tomllib
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import Field, ValidationError, field_validator, model_validator
 
+from mission.config_carrier import CarrierMavlinkSection, CarrierRos2Section, CarrierSection
+from mission.config_fields import (
+    COORD_LIMIT_M,
+    MAX_PATH_CHARS,
+    MAX_URL_CHARS,
+    Coord,
+    FloatPair,
+    Path_,
+    Section,
+    check_key_expr,
+    check_mavlink_url,
+    check_port,
+    check_zenoh_endpoint,
+    printable,
+)
 from mission.errors import ConfigError
 
 if TYPE_CHECKING:  # the schema imports no law: the converters below import it when called
     from mission.law import LawParams
     from mission.safety import Obstacles, SafetyConfig
 
-class _Model(BaseModel):
-    # strict: "3" and true are not numbers, 2.5 is not an integer (an int is still a float)
-    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False, strict=True)
+__all__ = [  # the sections and field checks in config_carrier / config_fields are importable from here too
+    "COORD_LIMIT_M", "MAX_PATH_CHARS", "MAX_URL_CHARS", "CarrierMavlinkSection", "CarrierRos2Section",
+    "CarrierSection", "Config", "Coord", "FloatPair", "LawSection", "MavlinkSection", "MissionSection",
+    "MonteCarloSection", "ObstacleSection", "Path_", "SafetySection", "ScenarioSection", "Section", "SimSection",
+    "ZenohSection", "check_key_expr", "check_mavlink_url", "check_port", "check_zenoh_endpoint", "from_dict",
+    "load_config", "with_overrides",
+]
 
 
-MAX_PATH_CHARS = 1024
-MAX_URL_CHARS = 256
-COORD_LIMIT_M = 1e6  # |component| of a position in the config [m]
-
-
-def _tuple_of_list(value: Any) -> Any:
-    """TOML has no tuples: a list is taken as one (its items stay strictly typed)."""
-    return tuple(value) if isinstance(value, list) else value
-
-
-FloatPair = Annotated[tuple[float, float], BeforeValidator(_tuple_of_list)]
-Coord = Annotated[float, Field(ge=-COORD_LIMIT_M, le=COORD_LIMIT_M)]
-Path_ = Annotated[str, Field(min_length=1, max_length=MAX_PATH_CHARS)]
-
-
-def _printable(value: str) -> str:
-    if any(ord(ch) < 32 or ord(ch) == 127 for ch in value):
-        raise ValueError("must not contain control characters")
-    return value
-
-
-_ZENOH_ENDPOINT = re.compile(r"^(?P<proto>[a-z][a-z0-9-]*)/(?P<address>[^#?\s]+?)(?P<rest>[#?].*)?$")
-_HOST_PORT_PROTOCOLS = {"tcp", "udp", "tls", "quic", "ws"}
-
-
-def check_port(text: str, *, allow_zero: bool) -> int:
-    """A port number 1..65535 (0 too if ``allow_zero``: an ephemeral listener); ValueError otherwise."""
-    if not text.isdigit():
-        raise ValueError(f"port {text!r} is not a number")
-    port = int(text)
-    if not (0 if allow_zero else 1) <= port <= 65535:
-        raise ValueError(f"port {port} out of range {0 if allow_zero else 1}..65535")
-    return port
-
-
-def _host_port(spec: str, *, allow_zero: bool) -> None:
-    host, sep, port = spec.rpartition(":")
-    if not sep or not host or host in ("[]",):
-        raise ValueError("expected HOST:PORT")
-    check_port(port, allow_zero=allow_zero)
-
-
-def check_mavlink_url(url: str) -> str:
-    """``udpin:HOST:PORT`` (port 0: ephemeral), ``udp:``, ``udpout:HOST:PORT``, ``tcp:HOST:PORT``,
-    or a serial device ``/dev/X[:BAUD]`` / ``serial:/dev/X[:BAUD]`` / ``COMn[:BAUD]``, as
-    :func:`mission.link._open_transport` takes them; ValueError naming what is wrong."""
-    scheme, sep, rest = url.partition(":")
-    if sep and scheme in ("udpin", "udp"):
-        _host_port(rest, allow_zero=True)
-    elif sep and scheme in ("udpout", "tcp"):
-        _host_port(rest, allow_zero=False)
-    else:
-        device = rest if scheme == "serial" else url
-        if not (device.startswith("/") or device.upper().startswith("COM")):
-            raise ValueError("expected udpin:HOST:PORT, udpout:HOST:PORT, tcp:HOST:PORT or a serial device "
-                             "(/dev/ttyX[:BAUD])")
-        _, _, baud = device.replace(",", ":").partition(":")
-        if baud and not (baud.isdigit() and 50 <= int(baud) <= 10_000_000):
-            raise ValueError(f"baud rate {baud!r} must be a number in 50..10000000")
-    return url
-
-
-def check_zenoh_endpoint(endpoint: str, *, listen: bool) -> str:
-    """A Zenoh locator ``PROTO/ADDRESS[#config]``; for tcp/udp/tls/quic/ws the address is
-    ``HOST:PORT`` (port 0 only for a listener). ValueError naming what is wrong."""
-    m = _ZENOH_ENDPOINT.match(endpoint)
-    if m is None:
-        raise ValueError("expected a Zenoh endpoint PROTO/ADDRESS, e.g. tcp/127.0.0.1:7447")
-    if m["proto"] in _HOST_PORT_PROTOCOLS:
-        _host_port(m["address"], allow_zero=listen)
-    return endpoint
-
-
-def check_key_expr(key: str) -> str:
-    """A Zenoh key expression (Zenoh's own parser decides); ValueError otherwise."""
-    import zenoh
-
-    try:
-        zenoh.KeyExpr(key)
-    except zenoh.ZError as exc:
-        raise ValueError(f"not a Zenoh key expression: {exc}") from None
-    return key
-
-
-class LawSection(_Model):
+class LawSection(Section):
     """Gains of the paper's law (paper values by default)."""
 
     k_c: float = Field(0.5, gt=0, le=100, description="carrier gain [1/s]")
@@ -142,12 +76,12 @@ class LawSection(_Model):
         return LawParams(k_c=self.k_c, k_p=self.k_p, b=self.b, c=self.c, d=self.d)
 
 
-class ObstacleSection(_Model):
+class ObstacleSection(Section):
     center: list[Coord]
     radius: float = Field(gt=0, le=100_000, description="[m]")
 
 
-class ScenarioSection(_Model):
+class ScenarioSection(Section):
     """Geometry: where the carrier, passenger and target are at t = 0 [m]."""
 
     dim: Literal[2, 3] = 3
@@ -177,7 +111,7 @@ class ScenarioSection(_Model):
         return Obstacles.of([(o.center, o.radius) for o in self.obstacles], self.dim)
 
 
-class SafetySection(_Model):
+class SafetySection(Section):
     """CBF filter and limits; a limit left out is off (the simulator's paper runs)."""
 
     cbf_gain: float = Field(1.0, gt=0, le=100, description="class-K gain [1/s]")
@@ -201,7 +135,7 @@ class SafetySection(_Model):
         return SafetyConfig(self.cbf_gain, self.margin_m, self.carrier_max_speed_m_s, self.carrier_max_accel_m_s2)
 
 
-class SimSection(_Model):
+class SimSection(Section):
     """Numeric closed loop: a fixed step with the command held over it (a digital controller)."""
 
     dt_s: float = Field(1e-3, gt=0, le=0.1)
@@ -210,7 +144,7 @@ class SimSection(_Model):
     p2_tolerance_m: float = Field(0.1, gt=0, le=10, description="final |e_pt| counted as 'at the target'")
 
 
-class MonteCarloSection(_Model):
+class MonteCarloSection(Section):
     """Random scenarios satisfying the assumptions (for --monte-carlo)."""
 
     distance_m: FloatPair = (12.0, 60.0)
@@ -225,7 +159,7 @@ class MonteCarloSection(_Model):
         return self
 
 
-class MissionSection(_Model):
+class MissionSection(Section):
     """The offboard controller (``marsupial run``)."""
 
     rate_hz: float = Field(50.0, ge=10, le=1000, description="[Hz] PX4 needs > 2 Hz in OFFBOARD; >= 10 Hz also "
@@ -273,10 +207,10 @@ class MissionSection(_Model):
     connect_timeout_s: float = Field(20.0, gt=0, le=600)
     log_dir: Path_ = "logs"
 
-    _log_dir_printable = field_validator("log_dir")(_printable)
+    _log_dir_printable = field_validator("log_dir")(printable)
 
 
-class MavlinkSection(_Model):
+class MavlinkSection(Section):
     url: str = Field("udpin:127.0.0.1:14540", max_length=MAX_URL_CHARS)
     target_system: int | None = Field(None, ge=1, le=255, description="fly only this system; unset: adopt a PX4 "
                                       "autopilot after 3 consistent HEARTBEATs (mission.link)")
@@ -286,10 +220,10 @@ class MavlinkSection(_Model):
     signing_key_file: Path_ | None = None
 
     _url_ok = field_validator("url")(check_mavlink_url)
-    _key_file_printable = field_validator("signing_key_file")(lambda v: v if v is None else _printable(v))
+    _key_file_printable = field_validator("signing_key_file")(lambda v: v if v is None else printable(v))
 
 
-class ZenohSection(_Model):
+class ZenohSection(Section):
     """Zenoh session: peer on loopback with multicast scouting off by default."""
 
     mode: Literal["peer", "client", "router"] = "peer"
@@ -329,85 +263,9 @@ class ZenohSection(_Model):
     def _key(cls, value: str | None) -> str | None:
         return None if value is None else check_key_expr(value)
 
-    _config_file_printable = field_validator("config_file")(lambda v: v if v is None else _printable(v))
+    _config_file_printable = field_validator("config_file")(lambda v: v if v is None else printable(v))
 
-
-class CarrierMavlinkSection(_Model):
-    """``carrier.backend = "mavlink"``: a PX4 rover or boat, flown through the passenger's link code."""
-
-    url: str = Field("udpin:127.0.0.1:14541", max_length=MAX_URL_CHARS,
-                     description="PX4 instance i sends its onboard link to 14540 + i")
-    target_system: int | None = Field(None, ge=1, le=255, description="the rover's MAV_SYS_ID (PX4 instance i: i + 1)")
-    source_system: int | None = Field(None, ge=1, le=255, description="our system id; default: target_system, "
-                                      "or 1 (PX4 registers an onboard controller of its own system only)")
-    source_component: int = Field(191, ge=1, le=255)
-    signing_key_file: Path_ | None = None
-    heartbeat_timeout_s: float = Field(3.0, gt=0, le=30)
-    prestream_s: float = Field(1.0, ge=0.2, description="[s] setpoints streamed before OFFBOARD is asked")
-    offset_ned_m: list[float] = Field([0.0, 0.0, 0.0], description="[m] the vehicle's local origin in the "
-                                      "shared frame (added to LOCAL_POSITION_NED)")
-    shared_origin: list[float] | None = Field(None, description="lat [deg], lon [deg], alt [m] of the shared "
-                                              "frame's origin: the offset then comes from the vehicle's EKF origin")
-
-    _url_ok = field_validator("url")(check_mavlink_url)
-
-
-class CarrierRos2Section(_Model):
-    """``carrier.backend = "ros2"``: a ROS 2 robot over Zenoh (nav_msgs/Odometry in, geometry_msgs/Twist out, CDR)."""
-
-    key_form: Literal["ros2dds", "rmw_zenoh"] = Field("ros2dds", description="zenoh-bridge-ros2dds keys "
-                                                      "('<ns>/odom') or rmw_zenoh keys ('<domain>/<ns>/odom/<type>/<hash>')")
-    namespace: str = Field("", pattern=r"^[A-Za-z0-9_/]*$")
-    domain_id: int = Field(0, ge=0, le=232)
-    odom_topic: str = Field("odom", pattern=r"^[A-Za-z0-9_/]+$")
-    cmd_vel_topic: str = Field("cmd_vel", pattern=r"^[A-Za-z0-9_/]+$")
-    offset_ned_m: list[float] = Field([0.0, 0.0, 0.0], description="[m] the odom frame's origin in the shared frame")
-
-
-class CarrierSection(_Model):
-    """The carrier-side controller (``marsupial carrier``) and its backend."""
-
-    backend: Literal["sim", "mavlink", "ros2"] = "sim"
-    rate_hz: float = Field(30.0, ge=5, le=1000)
-    max_speed_m_s: float = Field(3.0, gt=0, le=100, description="[m/s] the carrier's top speed (the passenger's "
-                                 "feed also gates carrier states against it)")
-    passenger_timeout_s: float = Field(
-        1.0, gt=0, le=10, description="[s] simulated; a passenger status older than this (or a lost "
-        "liveliness token) stops a carrier that is approaching the target")
-    state_timeout_s: float = Field(0.5, gt=0, le=10, description="[s] own state older than this stops the carrier")
-    p3_margin_m: float = Field(0.5, gt=0, description="[m] the P3 guard keeps the carrier at least b c - margin "
-                               "from the target, whatever the passenger does")
-    brake_decel_m_s2: float | None = Field(None, gt=0, description="[m/s^2] braking the guard plans with; "
-                                           "default safety.carrier_max_accel_m_s2, else 1")
-    brake_delay_s: float | None = Field(None, ge=0, le=5, description="[s] the carrier's response delay (command "
-                                        "to motion, plus the age of its state) the guard allows for; default 0 for "
-                                        "the built-in robot, 0.3 s for a real one (mavlink, ros2)")
-    kinematics: Literal["holonomic", "diff_drive", "ackermann"] = "holonomic"
-    heading_gain: float = Field(2.0, gt=0, description="[1/s] tracking law: yaw rate per heading error")
-    max_yaw_rate_rad_s: float = Field(1.0, gt=0)
-    min_speed_fraction: float = Field(0.3, ge=0, le=1, description="Ackermann: speed kept while misaligned")
-    wheelbase_m: float = Field(0.3, gt=0)
-    max_steer_rad: float = Field(0.5, gt=0, lt=1.5)
-    align_on_deck_m: float = Field(0.0, ge=0, le=5, description="[m] largest horizontal shift of the carrier's "
-                                   "estimate onto the passenger's while it stands on the deck (before take-off); 0 off")
-    speed_ratio_tau_s: float = Field(0.0, ge=0, le=30, description="[s] diff-drive/Ackermann: time constant of the "
-                                     "estimate r >= 1 of measured over asked forward speed; the vehicle is asked for v / r "
-                                     "(a speed loop that overshoots); 0 off")
-    start_yaw_rad: float | None = Field(None, description="[rad] sim backend: initial heading (default: towards the target)")
-    mavlink: CarrierMavlinkSection = CarrierMavlinkSection()
-    ros2: CarrierRos2Section = CarrierRos2Section()
-
-    @model_validator(mode="after")
-    def _vectors(self) -> "CarrierSection":
-        for name, v in (("mavlink.offset_ned_m", self.mavlink.offset_ned_m), ("ros2.offset_ned_m", self.ros2.offset_ned_m)):
-            if len(v) != 3:
-                raise ConfigError(f"carrier.{name}", v, "must have 3 components")
-        if self.mavlink.shared_origin is not None and len(self.mavlink.shared_origin) != 3:
-            raise ConfigError("carrier.mavlink.shared_origin", self.mavlink.shared_origin, "must be [lat, lon, alt]")
-        return self
-
-
-class Config(_Model):
+class Config(Section):
     law: LawSection = LawSection()
     scenario: ScenarioSection = ScenarioSection()
     safety: SafetySection = SafetySection()
