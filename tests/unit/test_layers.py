@@ -49,3 +49,36 @@ def test_every_subcommand_resolves_and_is_listed():
     help_text = CliRunner().invoke(cli, ["--help"]).output
     for name in specs:
         assert f"  {name} " in help_text
+
+
+MAX_MODULE_LINES = 500
+MAX_CLASS_LINES = 300
+# sim/vehicle.py (847 lines, MockVehicle 622) is being split by another piece of work (the mock's
+# link and streams versus its command state machine); remove it from here when that lands.
+SIZE_EXEMPT = {"sim/vehicle.py"}
+
+
+def oversized(name: str, text: str) -> list[str]:
+    """What is too big in the source ``text`` of file ``name``: the module (over MAX_MODULE_LINES)
+    and its classes (over MAX_CLASS_LINES, from the ``class`` line to the body's last line)."""
+    lines = len(text.splitlines())
+    found = [f"{name}: {lines} lines"] if lines > MAX_MODULE_LINES else []
+    for node in ast.walk(ast.parse(text)):
+        if isinstance(node, ast.ClassDef):
+            size = (node.end_lineno or node.lineno) - node.lineno + 1
+            if size > MAX_CLASS_LINES:
+                found.append(f"{name}: class {node.name} {size} lines")
+    return found
+
+
+def test_no_module_over_500_lines_and_no_class_over_300():
+    names = [str(p.relative_to(ROOT)) for top in ("mission", "sim", "bench") for p in sorted((ROOT / top).rglob("*.py"))]
+    assert len(names) > 50
+    assert [f for name in names if name not in SIZE_EXEMPT for f in oversized(name, (ROOT / name).read_text())] == []
+
+
+def test_the_size_guard_can_fail():
+    fits = "class Small:\n" + "    x = 1\n" * (MAX_CLASS_LINES - 1) + "y = 2\n" * (MAX_MODULE_LINES - MAX_CLASS_LINES)
+    assert oversized("fits.py", fits) == []
+    big = "class Big:\n" + "    x = 1\n" * MAX_CLASS_LINES + "y = 2\n" * (MAX_MODULE_LINES - MAX_CLASS_LINES)
+    assert oversized("big.py", big) == [f"big.py: {MAX_MODULE_LINES + 1} lines", f"big.py: class Big {MAX_CLASS_LINES + 1} lines"]
