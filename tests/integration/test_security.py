@@ -25,7 +25,7 @@ from mission.link import DEFAULT_URL, VehicleLink
 from mission.mavlink_env import mavlink
 from sim.vehicle import VehicleOptions
 from sim.vehicle_cli import mock_vehicle
-from tests.conftest import free_port
+from tests.conftest import ROOT, free_port
 from tests.faults.procs import assert_log_complete, flight, wait_for
 
 KEY = bytes.fromhex("5c1e" * 16)  # a throwaway 32-byte test key
@@ -288,6 +288,40 @@ def test_zenoh_access_control_denies_a_subject_the_carrier_state_key(certs: dict
             assert _delivered(rogue, passenger, "marsupial/pair0/carrier/state", denied=True) == 0
             assert _delivered(rogue, passenger, "marsupial/pair0/passenger/phase") == 3  # another key: allowed
             assert _delivered(carrier, passenger, "marsupial/pair0/carrier/state") == 3  # the carrier: allowed
+        finally:
+            for s in (rogue, carrier, passenger):
+                s.close()
+    finally:
+        router.close()
+
+
+@pytest.mark.timeout(60)
+def test_default_deny_router_acl_example_lets_each_robot_speak_only_for_its_own_side(certs: dict[str, str]) -> None:
+    """configs/zenoh/router_acl_example.json5, as shipped, on an mTLS router: the carrier and the
+    passenger of pair0 reach each other; a "rogue" certificate of the same fleet CA that may watch
+    pair0 (a ground station's, say: pair0-listen only) cannot publish either side's state, and
+    neither robot can publish the other's. The test adds one allowed marker key per subject, which
+    _delivered's counting of denied puts needs."""
+    acl = json.loads(zenoh.Config.from_file(str(ROOT / "configs/zenoh/router_acl_example.json5")).get_json("access_control"))
+    assert acl["enabled"] and acl["default_permission"] == "deny"
+    acl["rules"].append({"id": "test-marker", "permission": "allow", "flows": ["ingress", "egress"],
+                         "messages": ["put", "declare_subscriber"], "key_exprs": ["marsupial/test/**"]})
+    acl["subjects"].append({"id": "rogue", "cert_common_names": ["rogue"]})
+    acl["policies"].append({"rules": ["pair0-listen", "pair0-deliver"], "subjects": ["rogue"]})
+    for policy in acl["policies"]:
+        policy["rules"].append("test-marker")
+    port = free_port(socket.SOCK_STREAM)
+    router = _router(port, certs, mtls=True, acl=acl)
+    try:
+        rogue, carrier, passenger = (_client(port, certs, who) for who in ("rogue", "pair0-carrier", "pair0-passenger"))
+        try:
+            assert _delivered(carrier, passenger, "marsupial/pair0/carrier/state") == 3
+            assert _delivered(passenger, carrier, "marsupial/pair0/passenger/state") == 3
+            assert _delivered(passenger, carrier, "marsupial/pair0/passenger/phase") == 3
+            assert _delivered(rogue, passenger, "marsupial/pair0/carrier/state", denied=True) == 0
+            assert _delivered(rogue, carrier, "marsupial/pair0/passenger/phase", denied=True) == 0
+            assert _delivered(carrier, passenger, "marsupial/pair0/passenger/phase", denied=True) == 0
+            assert _delivered(passenger, carrier, "marsupial/pair0/carrier/state", denied=True) == 0
         finally:
             for s in (rogue, carrier, passenger):
                 s.close()
