@@ -19,7 +19,7 @@ import logging
 import math
 import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Protocol
 
 log = logging.getLogger(__name__)
@@ -207,7 +207,10 @@ class Downstream(Protocol):
 
 @dataclass(eq=False)
 class _Ticket:
-    """One thread parked on the clock until ``deadline_ns`` or, with ``cond``, a notify."""
+    """One thread parked on the clock until ``deadline_ns`` or, with ``cond``, a notify.
+
+    A sleeper blocks on its own ``gate`` (a lock the scheduler releases), a condition waiter on
+    ``cond``: a grant wakes exactly the thread it is for, never every parked thread."""
 
     thread: threading.Thread
     order: int
@@ -215,6 +218,16 @@ class _Ticket:
     cond: threading.Condition | None
     granted: bool = False
     dirty: bool = False  # notified by a participant during this step: runs again in this step
+    gate: threading.Lock = field(default_factory=threading.Lock)
+
+    def open(self) -> None:
+        """Wake the parked thread (the caller set ``granted`` or fell back)."""
+        if self.cond is None:
+            if self.gate.locked():
+                self.gate.release()
+        else:
+            with self.cond:
+                self.cond.notify_all()
 
 
 class LockstepClock:
@@ -287,9 +300,7 @@ class LockstepClock:
         ticket = self._park(deadline_ns, None)
         if ticket is None:
             return
-        with self._cv:
-            while not ticket.granted and self._fallback is None:
-                self._cv.wait()
+        ticket.gate.acquire()  # released by the grant, or by the fall-back
         fallback = self._fallback
         if fallback is not None and not ticket.granted:
             fallback.sleep(deadline_ns / NS_PER_S - fallback.now())
@@ -358,6 +369,8 @@ class LockstepClock:
                 return None
             order = self._order.setdefault(me, len(self._order))
             ticket = _Ticket(thread, order, deadline_ns, cond)
+            if cond is None:
+                ticket.gate.acquire()  # closed until the grant
             self._tickets[me] = ticket
             self._running.pop(me, None)
             self._cv.notify_all()
@@ -377,9 +390,7 @@ class LockstepClock:
             log.warning("%s: %s; time goes on at %gx the wall clock from t = %.3f s", self.name, reason, self.speed,
                         self._t_ns / NS_PER_S)
         for ticket in tickets:
-            if ticket.cond is not None:
-                with ticket.cond:
-                    ticket.cond.notify_all()
+            ticket.open()
 
     def _next_barrier(self) -> int | None:
         """Block until a barrier is due and no participant runs; None once fallen back."""
@@ -453,11 +464,7 @@ class LockstepClock:
             ticket.dirty = False
             self._running[me] = ticket.thread
             ticket.granted = True
-            if ticket.cond is None:
-                self._cv.notify_all()
-        if ticket.cond is not None:
-            with ticket.cond:
-                ticket.cond.notify_all()
+        ticket.open()  # (a condition is taken outside the clock's lock: waiters take it first)
         with self._cv:
             while me in self._running and self._fallback is None:
                 self._cv.wait(_WALL_SLICE_S)
