@@ -205,6 +205,7 @@ class MockVehicle:
         self._barrier_ns = -1  # lockstep: the step the vehicle waits at
         self._lockstep_answer: int | None = None  # the controller's answer (its next wake [ns])
         self._marked_steps = -1  # lockstep: last step announced by SYSTEM_TIME
+        self._batching = False  # lockstep: a step's packets go out as one datagram per link
         self._command_handlers: dict[int, Callable[[VehicleLink, list[float]], tuple[int, list[Any]]]] = {
             px4.MAV_CMD_DO_SET_MODE: self._cmd_set_mode,
             px4.MAV_CMD_COMPONENT_ARM_DISARM: self._cmd_arm_disarm,
@@ -413,7 +414,17 @@ class MockVehicle:
         """Own simulated time: at each barrier send TIMESYNC(0, t) and wait for the controller's
         answer (tc1 = its next wake) before integrating up to that wake, step by step, with the
         streams, faults and commands of every step. Returns when the controller leaves or is
-        silent for ``lockstep_watchdog_wall_s`` (the caller goes on in real time) or on stop()."""
+        silent for ``lockstep_watchdog_wall_s`` (the caller goes on in real time) or on stop().
+        Each step's packets go out as one datagram per link (SYSTEM_TIME first, the barrier last)."""
+        self._batching = True
+        try:
+            self._step_until_left()
+        finally:
+            with self._lock:
+                self._flush_links()
+                self._batching = False
+
+    def _step_until_left(self) -> None:
         onboard, joined = self._links[0], False
         watchdog_s = self.options.lockstep_watchdog_wall_s
         while not self._stop_event.is_set():
@@ -421,6 +432,7 @@ class MockVehicle:
                 self._service_step()
                 self._barrier_ns, self._lockstep_answer = self._t_ns, None
                 self._send_control(onboard, mavlink.MAVLink_timesync_message(0, self._t_ns))
+                self._flush_links()
             called = time.monotonic()
             answer = None
             while not self._stop_event.is_set():
@@ -434,6 +446,7 @@ class MockVehicle:
                         heartbeat = tel.build("HEARTBEAT", self._telemetry_state(), self._geo, self._noise)
                         self._send_control(onboard, heartbeat)
                         self._send_control(onboard, mavlink.MAVLink_timesync_message(0, self._t_ns))
+                        self._flush_links()
                     called = now
                 elif joined and now - called > watchdog_s:
                     log.warning("lockstep: no answer for step t = %.3f s within %.1f s (wall); the controller is "
@@ -451,6 +464,7 @@ class MockVehicle:
                 while self._steps < target - 1:
                     self._advance_steps(self._steps + 1)
                     self._service_step()
+                    self._flush_links()
                 self._advance_steps(target)
 
     @property
@@ -463,7 +477,9 @@ class MockVehicle:
 
     def _send_control(self, link: VehicleLink, msg: Any) -> None:
         """Send a lockstep clock message: never through the link faults, never counted."""
-        if link.target is not None:
+        if link.target is not None and self._batching:
+            link.queue(link.pack(msg), counted=False)
+        elif link.target is not None:
             link.sendto(link.pack(msg), link.target)
 
     def _mark_time(self, link: VehicleLink) -> None:
@@ -542,6 +558,7 @@ class MockVehicle:
                     self._clock_message(link, data, address)
                 else:
                     self._admit_in(link, data, address)
+                self._flush_links()
 
     def _clock_message(self, link: VehicleLink, data: bytes, address: tuple[str, int]) -> None:
         """A lockstep TIMESYNC: the simulation's own clock, so no link faults and no counters."""
@@ -569,9 +586,7 @@ class MockVehicle:
         else:
             link, data = item
             if link.target is not None and link in self._links:
-                self._mark_time(link)
-            if link.target is not None and link in self._links and not link.sendto(data, link.target):
-                self._counters["tx_errors"] += 1
+                self._emit(link, data)
 
     # ---- receiving -----------------------------------------------------------------------
     def _process(self, link: VehicleLink, data: bytes, address: tuple[str, int]) -> None:
@@ -759,9 +774,21 @@ class MockVehicle:
             self._counters["delayed_out"] += 1
             self._faults.hold(self._t_s + delay_s, "out", (link, data))
         elif link.target is not None:
-            self._mark_time(link)
-            if not link.sendto(data, link.target):
-                self._counters["tx_errors"] += 1
+            self._emit(link, data)
+
+    def _emit(self, link: VehicleLink, data: bytes) -> None:
+        """Send a packet that passed the faults: now (one per datagram, as PX4), or in lockstep
+        with the rest of its step (:meth:`_flush_links`), behind the step's SYSTEM_TIME."""
+        self._mark_time(link)
+        if self._batching:
+            link.queue(data)
+        elif not link.sendto(data, link.target):  # type: ignore[arg-type]  (the caller checked)
+            self._counters["tx_errors"] += 1
+
+    def _flush_links(self) -> None:
+        """Send each link's batch of this step as one datagram (lockstep)."""
+        for link in self._links:
+            self._counters["tx_errors"] += link.flush()
 
     def _telemetry_state(self) -> tel.TelemetryState:
         c, k = self._commander, self._kin

@@ -4,6 +4,9 @@ A :class:`VehicleLink` is one PX4-style MAVLink instance: a UDP socket bound to 
 sending to a target address from start-up and latching on the first peer that talks to it.
 It owns its own MAVLink 2 codec (sequence numbers, signing state), parses each datagram on its
 own (a truncated packet never poisons the next datagram) and classifies what it received.
+Sending is one message per datagram, as PX4 does, unless the caller batches: then
+:meth:`VehicleLink.queue` collects a step's packets and :meth:`VehicleLink.flush` sends them as
+one datagram (the lockstep vehicle: a step is one instant of simulated time).
 """
 from __future__ import annotations
 
@@ -51,6 +54,8 @@ class VehicleLink:
         self.latched = False
         self.last_peer_heartbeat_s = -1e9
         self.mav = new_codec(sysid, compid)
+        self._queued: list[bytes] = []
+        self._queued_counted = 0  # queued packets the caller counts as sent messages
         if signing_key is not None:
             setup_signing(self.mav, signing_key, sign_outgoing=True, unsigned_ids=UNSIGNED_ALLOWED_IDS)
 
@@ -89,6 +94,21 @@ class VehicleLink:
             return True
         except OSError:
             return False
+
+    def queue(self, data: bytes, counted: bool = True) -> None:
+        """Hold a packet for the next :meth:`flush` (``counted``: one of the caller's sent messages)."""
+        self._queued.append(data)
+        self._queued_counted += counted
+
+    def flush(self) -> int:
+        """Send the queued packets as one datagram to the target; the number of counted packets
+        lost to a socket error (or to no target), 0 when sent."""
+        if not self._queued:
+            return 0
+        data, lost = b"".join(self._queued), self._queued_counted
+        self._queued.clear()
+        self._queued_counted = 0
+        return 0 if self.target is not None and self.sendto(data, self.target) else lost
 
     def close(self) -> None:
         self.sock.close()

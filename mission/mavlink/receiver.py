@@ -77,8 +77,10 @@ class Receiver:
                     log.exception("receiver error")
 
     def handle_bytes(self, data: bytes, address: Address | None, transport: Transport) -> None:
-        """One datagram (or stream chunk) received now."""
-        t_rx = self.session.clock.now()
+        """One datagram (or stream chunk) received now. Each message is stamped with the clock's time
+        when it is handled: a lockstep vehicle's SYSTEM_TIME moves the clock for those after it in
+        the same datagram."""
+        clock = self.session.clock
         self.session.count("rx_bytes", amount=len(data))
         codec = self.codec
         chunk: bytes = data
@@ -94,7 +96,7 @@ class Receiver:
             if msg is None:
                 break
             try:
-                self.handle_message(msg, t_rx, address, transport)
+                self.handle_message(msg, clock.now(), address, transport)
             except Exception:
                 self.session.count("rx_errors")
                 log.exception("error handling %s", msg.get_type())
