@@ -29,29 +29,34 @@ Passenger status, JSON::
      "position": [n, e, d], "velocity": [vn, ve, vd],     # [m], [m/s] local NED
      "separated": false, "anchor": [n, e, d] | null}      # latched anchor [m] NED after separation
 
-A decode or validation failure raises :class:`WireError` whose ``reason`` is one of
-:data:`REASONS`; the bridge counts drops per reason.
+The messages are pydantic models (:class:`CarrierState`, :class:`PassengerStatus`): JSON is
+parsed and validated in one pass by pydantic's compiled validator (about 5 us a sample, see
+``python -m bench.wire_bench``). A decode or validation failure raises :class:`WireError` whose
+``reason`` is one of :data:`REASONS` (:func:`wire_error` maps pydantic's error types to them); the
+bridge counts drops per reason.
 """
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Annotated, Any, Literal, get_args
 
 import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError, model_validator
+from pydantic_core import PydanticCustomError, core_schema
 
 from mission import geodesy
 from mission.errors import MarsupialError
 
 Frame = Literal["local_ned", "wgs84"]
-FRAMES: tuple[str, ...] = ("local_ned", "wgs84")
+FRAMES: tuple[str, ...] = get_args(Frame)
 
 #: Mission phases the controller publishes, in mission order (ABORT can follow any).
-PHASES: tuple[str, ...] = (
+PhaseName = Literal[
     "PREFLIGHT", "STREAMING", "ARMING", "OFFBOARD", "JOIN", "RIDING", "SEPARATED", "NAVIGATING",
     "ARRIVED", "HOLD", "LAND", "DONE", "ABORT",
-)
+]
+PHASES: tuple[str, ...] = get_args(PhaseName)
 
 #: Reasons a sample is rejected (keys of the bridge's drop counters). ``size`` is checked by the
 #: bridge before decoding; ``stale_seq`` and ``stale_stamp`` come from its ordering check, the
@@ -79,61 +84,95 @@ class WireError(MarsupialError):
 
 
 # --------------------------------------------------------------------------- values
+#
+# The messages are pydantic models. On the wire (JSON) numbers are strict: a string or a boolean is
+# never a number, a fraction never an integer. In code, numpy scalars and arrays are taken as the
+# Python values they hold. Pydantic's error types map to the drop reasons (:func:`wire_error`).
 
 
-def _vec3(value: Any, name: str) -> np.ndarray:
-    """A read-only float array (3,) from a sequence of 3 real numbers (not bools)."""
+def _python_values(value: Any) -> Any:
+    """A numpy scalar or array as the Python value(s) it holds (built in code, never on the wire)."""
     if isinstance(value, np.ndarray):
-        if value.shape != (3,):
-            raise WireError("shape", f"{name} must have 3 components, got shape {value.shape}")
-        if not np.issubdtype(value.dtype, np.number) or np.issubdtype(value.dtype, np.bool_):
-            raise WireError("type", f"{name} must be numbers")
-        out = value.astype(float)
-    else:
-        if not isinstance(value, (list, tuple)):
-            raise WireError("type", f"{name} must be a list of 3 numbers, got {type(value).__name__}")
-        if len(value) != 3:
-            raise WireError("shape", f"{name} must have 3 components, got {len(value)}")
-        for v in value:
-            if isinstance(v, bool) or not isinstance(v, (int, float)):
-                raise WireError("type", f"{name} must be numbers, got {type(v).__name__}")
-        try:
-            out = np.array(value, dtype=float)
-        except OverflowError:
-            raise WireError("nonfinite", f"{name} overflows a float") from None
-    if not np.all(np.isfinite(out)):
-        raise WireError("nonfinite", f"{name} = {out.tolist()}")
+        if value.ndim != 1:
+            raise PydanticCustomError("shape", "must be a vector, got shape {shape}", {"shape": value.shape})
+        return value.tolist()
+    return value.item() if isinstance(value, np.generic) else value
+
+
+def _frozen_array(values: list[float]) -> np.ndarray:
+    out = np.array(values, dtype=float)
     out.flags.writeable = False
     return out
 
 
-def _real(value: Any, name: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
-        raise WireError("type", f"{name} must be a number, got {type(value).__name__}")
+class _Checked:
+    """Field annotation: ``Annotated[float, _Checked(core_schema.float_schema(...))]``. JSON input
+    goes straight to ``schema`` (validated in Rust); Python input first through
+    :func:`_python_values`."""
+
+    def __init__(self, schema: core_schema.CoreSchema) -> None:
+        self.schema = schema
+
+    def __get_pydantic_core_schema__(self, source: Any, handler: Any) -> core_schema.CoreSchema:
+        return core_schema.json_or_python_schema(
+            json_schema=self.schema,
+            python_schema=core_schema.no_info_before_validator_function(_python_values, self.schema))
+
+
+def _vec3(limit: float) -> _Checked:
+    """Exactly 3 finite numbers within +-``limit``, kept as a read-only float array (3,)."""
+    items = core_schema.list_schema(core_schema.float_schema(strict=True, allow_inf_nan=False, ge=-limit, le=limit),
+                                    min_length=3, max_length=3)
+    return _Checked(core_schema.no_info_after_validator_function(
+        _frozen_array, items, serialization=core_schema.plain_serializer_function_ser_schema(lambda a: a.tolist())))
+
+
+Real = Annotated[float, _Checked(core_schema.float_schema(strict=True, allow_inf_nan=False))]
+Seq = Annotated[int, _Checked(core_schema.int_schema(strict=True, ge=0, le=SEQ_MAX))]
+Flag = Annotated[bool, _Checked(core_schema.bool_schema(strict=True))]
+PositionNed = Annotated[np.ndarray, _vec3(POSITION_LIMIT_M)]
+VelocityNed = Annotated[np.ndarray, _vec3(VELOCITY_LIMIT_M_S)]
+
+#: Pydantic error types and the drop reason each means; a type error not listed here is "type".
+_REASON_OF_ERROR = {
+    "json_invalid": "decode", "json_type": "decode", "model_type": "decode", "model_attributes_type": "decode",
+    "missing": "missing", "finite_number": "nonfinite", "too_short": "shape", "too_long": "shape",
+    "greater_than_equal": "range", "less_than_equal": "range", "greater_than": "range", "less_than": "range",
+}
+
+
+def _reason(error: Any) -> str:
+    kind, value = error["type"], error.get("input")
+    if kind in REASONS:  # our own PydanticCustomError types are reasons already
+        return kind
+    if kind == "literal_error":  # an unknown frame or phase; a non-string is a type error
+        return str(error["loc"][0]) if isinstance(value, str) else "type"
+    if kind == "float_type" and isinstance(value, int) and not isinstance(value, bool):
+        return "nonfinite"  # an integer too large for a float
+    return _REASON_OF_ERROR.get(kind, "type")
+
+
+def wire_error(exc: ValidationError) -> WireError:
+    """The :class:`WireError` of a failed validation: a decode error first, then a missing field,
+    else the first error (fields are checked in wire order)."""
+    errors = exc.errors(include_url=False)
+    reasons = [_reason(e) for e in errors]
+    i = next((reasons.index(r) for r in ("decode", "missing") if r in reasons), 0)
+    where = ".".join(str(p) for p in errors[i]["loc"])
+    return WireError(reasons[i], f"{where}: {errors[i]['msg']}" if where else errors[i]["msg"])
+
+
+_VELOCITY = TypeAdapter(VelocityNed)
+
+
+def velocity3(value: Any, name: str) -> np.ndarray:
+    """``value`` as a read-only float array (3,) of finite numbers within +-:data:`VELOCITY_LIMIT_M_S`
+    (a velocity [m/s] or an angular rate [rad/s]); raises :class:`WireError` naming ``name``."""
     try:
-        out = float(value)
-    except OverflowError:
-        raise WireError("nonfinite", f"{name} overflows a float") from None
-    if not math.isfinite(out):
-        raise WireError("nonfinite", f"{name} = {out}")
-    return out
-
-
-def _int(value: Any, name: str) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise WireError("type", f"{name} must be an integer, got {type(value).__name__}")
-    if not 0 <= value <= SEQ_MAX:
-        raise WireError("range", f"{name} must be in 0..2**63-1, got {value}")
-    return int(value)
-
-
-def _bounded(v: np.ndarray, limit: float, name: str) -> np.ndarray:
-    """``v`` if every component is within +-``limit``; a finite but absurd number (a carrier
-    10 000 km away, or a sequence number that would make every later one look old) is a
-    corrupt sample, not a state."""
-    if np.any(np.abs(v) > limit):
-        raise WireError("range", f"{name} = {v.tolist()}: components must be within +-{limit:g}")
-    return v
+        return _VELOCITY.validate_python(value)
+    except ValidationError as exc:
+        err = wire_error(exc)
+        raise WireError(err.reason, f"{name}{err.detail}") from None
 
 
 def wrap_pi(angle_rad: float) -> float:
@@ -142,9 +181,40 @@ def wrap_pi(angle_rad: float) -> float:
     return math.pi if a == -math.pi else a
 
 
-@dataclass(frozen=True)
-class CarrierState:
-    """The carrier's state as sent on the wire (validated on construction).
+class _Message(BaseModel):
+    """A bus message: frozen, validated on construction (:class:`WireError` when invalid). Field
+    aliases are the JSON names; unknown JSON fields are ignored (forward compatibility).
+
+    Subclasses take their fields positionally too (``CarrierState(stamp, seq, ...)``): their
+    ``__init__`` only names the arguments and is marked ``__pydantic_base_init__``, the mark
+    pydantic's own ``RootModel.__init__`` carries, so that decoding JSON (``from_json``) does not
+    call it and stays in pydantic's compiled validator.
+    """
+
+    model_config = ConfigDict(frozen=True, extra="ignore", validate_by_name=True, validate_by_alias=True)
+
+    def _validated(self, **fields: Any) -> None:
+        try:
+            super().__init__(**fields)
+        except ValidationError as exc:
+            raise wire_error(exc) from None
+
+    @classmethod
+    def from_json(cls, raw: bytes | bytearray | memoryview | str) -> Any:
+        """The message of one JSON object (wire names only); raises :class:`WireError`."""
+        try:
+            return cls.model_validate_json(bytes(raw) if isinstance(raw, memoryview) else raw, by_alias=True,
+                                           by_name=False)
+        except ValidationError as exc:
+            raise wire_error(exc) from None
+
+    def to_json(self) -> bytes:
+        """The JSON bytes of this message (wire names)."""
+        return self.model_dump_json(by_alias=True).encode()
+
+
+class CarrierState(_Message):
+    """The carrier's state as sent on the wire.
 
     stamp_s [s] sender's clock; seq (>= 0) per-sender sequence number; frame "local_ned" or
     "wgs84"; position: local_ned [m] (n, e, d), wgs84 (lat [deg], lon [deg], alt [m] AMSL up);
@@ -152,63 +222,52 @@ class CarrierState:
     None. Arrays are read-only float (3,). Raises :class:`WireError` when invalid.
     """
 
-    stamp_s: float
-    seq: int
+    stamp_s: Real = Field(alias="stamp")
+    seq: Seq
     frame: Frame
-    position: np.ndarray
-    velocity_ned_m_s: np.ndarray
-    yaw_rad: float | None = None
+    position: PositionNed
+    velocity_ned_m_s: VelocityNed = Field(alias="velocity")
+    yaw_rad: Real | None = Field(None, alias="yaw")
 
-    def __post_init__(self) -> None:
-        if self.frame not in FRAMES:
-            raise WireError("frame", f"unknown frame {self.frame!r} (expected one of {FRAMES})")
-        object.__setattr__(self, "stamp_s", _real(self.stamp_s, "stamp"))
-        object.__setattr__(self, "seq", _int(self.seq, "seq"))
-        object.__setattr__(self, "position", _bounded(_vec3(self.position, "position"), POSITION_LIMIT_M, "position"))
-        object.__setattr__(self, "velocity_ned_m_s", _bounded(_vec3(self.velocity_ned_m_s, "velocity"),
-                                                              VELOCITY_LIMIT_M_S, "velocity"))
-        if self.yaw_rad is not None:
-            object.__setattr__(self, "yaw_rad", _real(self.yaw_rad, "yaw"))
+    def __init__(self, stamp_s: float, seq: int, frame: str, position: Any, velocity_ned_m_s: Any,
+                 yaw_rad: float | None = None) -> None:
+        self._validated(stamp_s=stamp_s, seq=seq, frame=frame, position=position, velocity_ned_m_s=velocity_ned_m_s,
+                        yaw_rad=yaw_rad)
+
+    __init__.__pydantic_base_init__ = True  # type: ignore[attr-defined]  # see _Message
+
+    @model_validator(mode="after")
+    def _lat_lon(self) -> CarrierState:
         if self.frame == "wgs84":
             lat, lon, _ = self.position
             if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
-                raise WireError("range", f"wgs84 lat/lon out of range: {lat}, {lon}")
+                raise PydanticCustomError("range", "wgs84 lat/lon out of range: {lat}, {lon}", {"lat": lat, "lon": lon})
+        return self
 
 
-@dataclass(frozen=True)
-class PassengerStatus:
-    """The passenger's mission phase and state (validated on construction).
+class PassengerStatus(_Message):
+    """The passenger's mission phase and state.
 
     phase one of :data:`PHASES`; stamp_s [s] sender's clock; seq (>= 0); position_ned_m [m] and
     velocity_ned_m_s [m/s] local NED; separated: the separation latch has fired; anchor_ned_m
-    [m] the latched anchor (carrier position at separation) or None.
+    [m] the latched anchor (carrier position at separation) or None. Raises :class:`WireError`
+    when invalid.
     """
 
-    phase: str
-    stamp_s: float
-    seq: int
-    position_ned_m: np.ndarray
-    velocity_ned_m_s: np.ndarray
-    separated: bool = False
-    anchor_ned_m: np.ndarray | None = None
+    phase: PhaseName
+    stamp_s: Real = Field(alias="stamp")
+    seq: Seq
+    position_ned_m: PositionNed = Field(alias="position")
+    velocity_ned_m_s: VelocityNed = Field(alias="velocity")
+    separated: Flag
+    anchor_ned_m: PositionNed | None = Field(None, alias="anchor")
 
-    def __post_init__(self) -> None:
-        if not isinstance(self.phase, str):
-            raise WireError("type", f"phase must be a string, got {type(self.phase).__name__}")
-        if self.phase not in PHASES:
-            raise WireError("phase", f"unknown phase {self.phase!r}")
-        if not isinstance(self.separated, (bool, np.bool_)):
-            raise WireError("type", f"separated must be a boolean, got {type(self.separated).__name__}")
-        object.__setattr__(self, "separated", bool(self.separated))
-        object.__setattr__(self, "stamp_s", _real(self.stamp_s, "stamp"))
-        object.__setattr__(self, "seq", _int(self.seq, "seq"))
-        object.__setattr__(self, "position_ned_m", _bounded(_vec3(self.position_ned_m, "position"), POSITION_LIMIT_M,
-                                                            "position"))
-        object.__setattr__(self, "velocity_ned_m_s", _bounded(_vec3(self.velocity_ned_m_s, "velocity"),
-                                                              VELOCITY_LIMIT_M_S, "velocity"))
-        if self.anchor_ned_m is not None:
-            object.__setattr__(self, "anchor_ned_m", _bounded(_vec3(self.anchor_ned_m, "anchor"), POSITION_LIMIT_M,
-                                                              "anchor"))
+    def __init__(self, phase: str, stamp_s: float, seq: int, position_ned_m: Any, velocity_ned_m_s: Any,
+                 separated: bool = False, anchor_ned_m: Any = None) -> None:
+        self._validated(phase=phase, stamp_s=stamp_s, seq=seq, position_ned_m=position_ned_m,
+                        velocity_ned_m_s=velocity_ned_m_s, separated=separated, anchor_ned_m=anchor_ned_m)
+
+    __init__.__pydantic_base_init__ = True  # type: ignore[attr-defined]  # see _Message
 
 
 # --------------------------------------------------------------------------- geodesy
@@ -251,40 +310,17 @@ def to_local_ned(state: CarrierState, origin: GeoOrigin | None) -> CarrierState:
         return state
     if origin is None:
         raise WireError("origin", "a wgs84 carrier state needs the vehicle's origin (GPS_GLOBAL_ORIGIN)")
-    ned = geodetic_to_ned(*(float(v) for v in state.position), origin)
+    lat, lon, alt = (float(v) for v in state.position)
+    ned = geodetic_to_ned(lat, lon, alt, origin)
     return CarrierState(state.stamp_s, state.seq, "local_ned", ned, state.velocity_ned_m_s, state.yaw_rad)
 
 
 # --------------------------------------------------------------------------- JSON
 
 
-def _load_object(raw: bytes | bytearray | memoryview | str) -> dict[str, Any]:
-    try:
-        text = raw if isinstance(raw, str) else bytes(raw).decode("utf-8")
-        obj = json.loads(text)
-    except (UnicodeDecodeError, ValueError, RecursionError) as exc:
-        raise WireError("decode", f"not UTF-8 JSON: {exc}") from None
-    if not isinstance(obj, dict):
-        raise WireError("decode", f"expected a JSON object, got {type(obj).__name__}")
-    return obj
-
-
-def _field(obj: dict[str, Any], name: str) -> Any:
-    if name not in obj:
-        raise WireError("missing", f"field {name!r} missing")
-    return obj[name]
-
-
 def encode_carrier_json(state: CarrierState) -> bytes:
     """The JSON bytes of ``state`` (schema in the module docstring)."""
-    return json.dumps({
-        "stamp": state.stamp_s,
-        "seq": state.seq,
-        "frame": state.frame,
-        "position": state.position.tolist(),
-        "velocity": state.velocity_ned_m_s.tolist(),
-        "yaw": state.yaw_rad,
-    }, allow_nan=False).encode()
+    return state.to_json()
 
 
 def decode_carrier_json(raw: bytes | bytearray | memoryview | str) -> CarrierState:
@@ -292,45 +328,17 @@ def decode_carrier_json(raw: bytes | bytearray | memoryview | str) -> CarrierSta
 
     JSON's non-standard ``NaN``/``Infinity`` literals are parsed, then rejected as "nonfinite".
     """
-    obj = _load_object(raw)
-    frame = _field(obj, "frame")
-    if not isinstance(frame, str):
-        raise WireError("type", f"frame must be a string, got {type(frame).__name__}")
-    return CarrierState(
-        stamp_s=_field(obj, "stamp"),
-        seq=_field(obj, "seq"),
-        frame=frame,  # type: ignore[arg-type]  # validated by CarrierState
-        position=_field(obj, "position"),
-        velocity_ned_m_s=_field(obj, "velocity"),
-        yaw_rad=obj.get("yaw"),
-    )
+    return CarrierState.from_json(raw)
 
 
 def encode_passenger_json(status: PassengerStatus) -> bytes:
     """The JSON bytes of ``status`` (schema in the module docstring)."""
-    return json.dumps({
-        "phase": status.phase,
-        "stamp": status.stamp_s,
-        "seq": status.seq,
-        "position": status.position_ned_m.tolist(),
-        "velocity": status.velocity_ned_m_s.tolist(),
-        "separated": status.separated,
-        "anchor": None if status.anchor_ned_m is None else status.anchor_ned_m.tolist(),
-    }, allow_nan=False).encode()
+    return status.to_json()
 
 
 def decode_passenger_json(raw: bytes | bytearray | memoryview | str) -> PassengerStatus:
     """A validated :class:`PassengerStatus` from JSON bytes; raises :class:`WireError`."""
-    obj = _load_object(raw)
-    return PassengerStatus(
-        phase=_field(obj, "phase"),
-        stamp_s=_field(obj, "stamp"),
-        seq=_field(obj, "seq"),
-        position_ned_m=_field(obj, "position"),
-        velocity_ned_m_s=_field(obj, "velocity"),
-        separated=_field(obj, "separated"),
-        anchor_ned_m=obj.get("anchor"),
-    )
+    return PassengerStatus.from_json(raw)
 
 
 def decode_carrier(raw: bytes | bytearray | memoryview, encoding: str, *, seq: int = 0) -> CarrierState:

@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from mission.wire import VELOCITY_LIMIT_M_S, CarrierState, WireError, _bounded, _vec3, wrap_pi
+from mission.wire import VELOCITY_LIMIT_M_S, CarrierState, WireError, velocity3, wrap_pi
 
 ODOMETRY_TYPE = "nav_msgs/msg/Odometry"
 
@@ -168,8 +168,7 @@ TWIST_TYPE = "geometry_msgs/msg/Twist"
 def encode_twist_cdr(linear_flu_m_s: np.ndarray, angular_flu_rad_s: np.ndarray) -> bytes:
     """A CDR ``geometry_msgs/msg/Twist`` (little endian, with header) of body FLU velocities:
     linear [m/s] (x forward, y left, z up) and angular [rad/s] (z: counter-clockwise from above)."""
-    lin = _bounded(_vec3(linear_flu_m_s, "linear"), VELOCITY_LIMIT_M_S, "linear")
-    ang = _bounded(_vec3(angular_flu_rad_s, "angular"), VELOCITY_LIMIT_M_S, "angular")
+    lin, ang = velocity3(linear_flu_m_s, "linear"), velocity3(angular_flu_rad_s, "angular")
     T = _ros().types
     msg = T[TWIST_TYPE](linear=T["geometry_msgs/msg/Vector3"](x=float(lin[0]), y=float(lin[1]), z=float(lin[2])),
                         angular=T["geometry_msgs/msg/Vector3"](x=float(ang[0]), y=float(ang[1]), z=float(ang[2])))
@@ -189,4 +188,4 @@ def decode_twist_cdr(raw: bytes | bytearray | memoryview) -> tuple[np.ndarray, n
     ang = np.array([msg.angular.x, msg.angular.y, msg.angular.z], dtype=float)
     if not (np.all(np.isfinite(lin)) and np.all(np.isfinite(ang))):
         raise WireError("nonfinite", "Twist has a non-finite number")
-    return _bounded(lin, VELOCITY_LIMIT_M_S, "linear"), _bounded(ang, VELOCITY_LIMIT_M_S, "angular")
+    return velocity3(lin, "linear"), velocity3(ang, "angular")

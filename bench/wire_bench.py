@@ -1,0 +1,79 @@
+"""Per-sample cost of the bus's codecs: decode + validate one message (prints a table).
+
+    python -m bench.wire_bench [--samples 20000]
+
+Each row times one call, ``samples`` times after a warm-up, and gives the median and p99 of the
+thread's CPU time in microseconds (CPU time leaves out what the scheduler gave to other processes
+on a loaded machine). Rows: a valid carrier state and passenger status in JSON (what a feed does
+per sample at 30-50 Hz), a CDR Odometry, building a :class:`CarrierState` in code (what a
+publisher does), and the rejection of hostile samples (NaN, a wrong type, 8 KB of nesting).
+"""
+from __future__ import annotations
+
+import json
+import time
+from typing import Callable
+
+import click
+import numpy as np
+
+from mission.wire import CarrierState, WireError, decode_carrier_json, decode_passenger_json, encode_passenger_json
+from mission.wire import PassengerStatus
+from mission.wire_ros2 import decode_odometry_cdr, encode_odometry_cdr
+
+CARRIER = json.dumps({"stamp": 12.345, "seq": 7, "frame": "local_ned", "position": [1.0, 2.0, -3.0],
+                      "velocity": [0.5, -0.25, 0.0], "yaw": 0.1}).encode()
+PASSENGER = encode_passenger_json(PassengerStatus("RIDING", 3.2, 41, np.array([1.0, 2.0, -1.5]),
+                                                  np.array([0.5, 0.0, 0.0]), False, None))
+NAN = CARRIER.replace(b"2.0", b"NaN")
+WRONG_TYPE = CARRIER.replace(b"7", b'"7"')
+NESTED = b"[" * 4000 + b"]" * 4000
+ODOMETRY = encode_odometry_cdr(CarrierState(12.345, 7, "local_ned", np.array([1.0, 2.0, -3.0]),
+                                            np.array([0.5, -0.25, 0.0]), 0.1))
+
+
+def _rejected(decode: Callable[[bytes], object], raw: bytes) -> Callable[[], object]:
+    def call() -> object:
+        try:
+            decode(raw)
+        except WireError as exc:
+            return exc.reason
+        raise AssertionError("accepted a hostile sample")
+    return call
+
+
+CASES: dict[str, Callable[[], object]] = {
+    "carrier JSON": lambda: decode_carrier_json(CARRIER),
+    "passenger JSON": lambda: decode_passenger_json(PASSENGER),
+    "carrier CDR Odometry": lambda: decode_odometry_cdr(ODOMETRY, seq=1),
+    "CarrierState(...) in code": lambda: CarrierState(12.345, 7, "local_ned", [1.0, 2.0, -3.0], [0.5, -0.25, 0.0], 0.1),
+    "reject NaN (JSON)": _rejected(decode_carrier_json, NAN),
+    "reject wrong type (JSON)": _rejected(decode_carrier_json, WRONG_TYPE),
+    "reject 8 KB nesting (JSON)": _rejected(decode_carrier_json, NESTED),
+}
+
+
+def cpu_us(call: Callable[[], object], samples: int) -> tuple[float, float]:
+    """Median and p99 [us] of the thread CPU time of ``call()``."""
+    for _ in range(min(samples, 500)):
+        call()
+    cpu = np.empty(samples)
+    for i in range(samples):
+        c0 = time.thread_time_ns()
+        call()
+        cpu[i] = time.thread_time_ns() - c0
+    return float(np.percentile(cpu, 50) / 1e3), float(np.percentile(cpu, 99) / 1e3)
+
+
+@click.command()
+@click.option("--samples", default=20000, show_default=True, help="calls timed per row")
+def main(samples: int) -> None:
+    """Print the table."""
+    print(f"{'message':<28} {'p50 us':>8} {'p99 us':>8}")
+    for name, call in CASES.items():
+        p50, p99 = cpu_us(call, samples)
+        print(f"{name:<28} {p50:8.2f} {p99:8.2f}", flush=True)
+
+
+if __name__ == "__main__":
+    main()
