@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import contextlib
 import threading
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterator
@@ -26,7 +25,7 @@ from mission.log import FlightRecorder
 from mission.phases import Phase
 from sim.carrier import CarrierSim
 from sim.vehicle import MockVehicle, VehicleOptions
-from sim.net import free_port, wait_for  # noqa: F401  (wait_for re-exported for the tests)
+from sim.net import free_port, wait_for
 from tests.conftest import CONFIGS
 
 
@@ -50,14 +49,14 @@ class Pair:
 
     def wait_phase(self, *phases: Phase, timeout_s: float = 20.0) -> Phase:
         """Wait (wall clock) until the mission is in one of ``phases``; fail on timeout/finish."""
-        deadline = time.monotonic() + timeout_s
-        while time.monotonic() < deadline:
-            if self.phase in phases:
-                return self.phase
+        def reached() -> Phase | None:
+            phase = self.phase
+            if phase in phases:
+                return phase
             if self.thread is not None and not self.thread.is_alive():
-                raise AssertionError(f"mission ended in {self.phase} ({self.controller.state.reason}) before {phases}")
-            time.sleep(0.002)
-        raise AssertionError(f"timed out waiting for {phases}; phase is {self.phase}")
+                raise AssertionError(f"mission ended in {phase} ({self.controller.state.reason}) before {phases}")
+            return None
+        return wait_for(reached, timeout_s, f"phase {' or '.join(p.value for p in phases)} (phase is {self.phase.value})")
 
     def finish(self, timeout_s: float = 30.0) -> MissionOutcome:
         assert self.thread is not None

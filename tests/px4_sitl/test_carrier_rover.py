@@ -24,6 +24,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from sim.net import wait_for
+
 ROOT = Path(__file__).resolve().parents[2]
 CONFIG = ROOT / "configs" / "px4_sitl_rover.toml"
 BUILD = os.environ.get("MARSUPIAL_PX4_SITL")
@@ -64,12 +66,8 @@ def _stop(proc: subprocess.Popen[bytes], timeout_s: float = 10.0) -> None:
 
 
 def _wait_text(path: Path, text: str, timeout_s: float) -> None:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if path.exists() and text in path.read_text(errors="replace"):
-            return
-        time.sleep(0.2)  # polling a log file PX4 writes; the event is the text, not the time
-    raise AssertionError(f"{text!r} not in {path} within {timeout_s} s")
+    """Wait for ``text`` in the log file ``path`` (PX4 writes it); the event is the text."""
+    wait_for(lambda: path.exists() and text in path.read_text(errors="replace"), timeout_s, f"{text!r} in {path}")
 
 
 @pytest.fixture
