@@ -6,6 +6,7 @@ model of every section, bounded field types, and the syntax checks of strings a 
 from __future__ import annotations
 
 import re
+from dataclasses import dataclass
 from typing import Annotated, Any
 
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field
@@ -56,11 +57,34 @@ def check_port(text: str, *, allow_zero: bool) -> int:
     return port
 
 
-def _host_port(spec: str, *, allow_zero: bool) -> None:
+def _host_port(spec: str, *, allow_zero: bool) -> tuple[str, int]:
     host, sep, port = spec.rpartition(":")
     if not sep or not host or host in ("[]",):
         raise ValueError("expected HOST:PORT")
-    check_port(port, allow_zero=allow_zero)
+    return host, check_port(port, allow_zero=allow_zero)
+
+
+@dataclass(frozen=True)
+class ZenohEndpoint:
+    """A parsed Zenoh locator ``PROTO/ADDRESS[?|#config]``: ``host`` and ``port`` for the
+    protocols whose address is ``HOST:PORT`` (tcp, udp, tls, quic, ws), else ``""`` and None."""
+
+    proto: str
+    address: str
+    host: str = ""
+    port: int | None = None
+
+
+def parse_zenoh_endpoint(endpoint: str, *, listen: bool) -> ZenohEndpoint:
+    """The parts of a Zenoh endpoint (port 0, an ephemeral port, only if ``listen``); ValueError
+    naming what is wrong."""
+    m = _ZENOH_ENDPOINT.match(endpoint)
+    if m is None:
+        raise ValueError("expected a Zenoh endpoint PROTO/ADDRESS, e.g. tcp/127.0.0.1:7447")
+    if m["proto"] not in _HOST_PORT_PROTOCOLS:
+        return ZenohEndpoint(m["proto"], m["address"])
+    host, port = _host_port(m["address"], allow_zero=listen)
+    return ZenohEndpoint(m["proto"], m["address"], host, port)
 
 
 def check_mavlink_url(url: str) -> str:
@@ -77,13 +101,8 @@ def check_mavlink_url(url: str) -> str:
 
 
 def check_zenoh_endpoint(endpoint: str, *, listen: bool) -> str:
-    """A Zenoh locator ``PROTO/ADDRESS[#config]``; for tcp/udp/tls/quic/ws the address is
-    ``HOST:PORT`` (port 0 only for a listener). ValueError naming what is wrong."""
-    m = _ZENOH_ENDPOINT.match(endpoint)
-    if m is None:
-        raise ValueError("expected a Zenoh endpoint PROTO/ADDRESS, e.g. tcp/127.0.0.1:7447")
-    if m["proto"] in _HOST_PORT_PROTOCOLS:
-        _host_port(m["address"], allow_zero=listen)
+    """``endpoint`` if :func:`parse_zenoh_endpoint` takes it; ValueError otherwise."""
+    parse_zenoh_endpoint(endpoint, listen=listen)
     return endpoint
 
 

@@ -16,6 +16,7 @@ from typing import Any, Callable, Literal
 import zenoh
 
 from mission.config import ZenohSection
+from mission.config_fields import parse_zenoh_endpoint
 from mission.errors import BusError, BusPortInUse, ConfigError
 from mission.port_holder import port_in_use
 
@@ -119,11 +120,13 @@ def _listen_in_use(section: ZenohSection, text: str) -> Exception | None:
     if "Address already in use" not in text:
         return None
     for endpoint in section.listen:
-        proto, _, address = endpoint.partition("/")
-        host, _, port = address.partition("?")[0].rpartition(":")
-        if port.isdigit() and address.split("?")[0] in text:
-            return port_in_use(f"Zenoh listen endpoint {endpoint}", host, int(port), "udp" if proto == "udp" else "tcp",
-                               cls=BusPortInUse)
+        try:
+            parts = parse_zenoh_endpoint(endpoint, listen=True)
+        except ValueError:  # the config refuses it at load; a section built without checks
+            continue
+        if parts.port is not None and parts.address in text:
+            return port_in_use(f"Zenoh listen endpoint {endpoint}", parts.host, parts.port,
+                               "udp" if parts.proto == "udp" else "tcp", cls=BusPortInUse)
     return None
 
 
