@@ -15,26 +15,38 @@ log = logging.getLogger("mission.carrier_bridge")  # one logger name for the who
 
 
 class _Publisher:
-    """Publishers plus one liveliness token; closing undeclares them all (idempotent).
+    """A state publisher (``matched`` says whether anyone listens), maybe more publishers, and one
+    liveliness token; closing undeclares them all (idempotent).
 
     States are streams where the newest wins: puts are express (not batched) and use congestion
     control DROP, so a congested link drops a sample instead of stalling the sender's loop.
     Publish at a steady rate, not only on change: a receiver treats silence as loss.
     """
 
-    def __init__(self, session: zenoh.Session, alive_key: str) -> None:
+    def __init__(self, session: zenoh.Session, alive_key: str, state_key: str, state_encoding: zenoh.Encoding) -> None:
         self._session = session
         self._entities: list[Any] = []
         self._closed = False
         self._sn = 0
         self._token = declare(f"liveliness token {alive_key}", lambda: session.liveliness().declare_token(alive_key))
         self._entities.append(self._token)
+        self._state = self._publisher(state_key, state_encoding)
 
     def _publisher(self, key: str, encoding: zenoh.Encoding) -> zenoh.Publisher:
-        pub = declare(f"publisher on {key}", lambda: self._session.declare_publisher(
-            key, encoding=encoding, congestion_control=zenoh.CongestionControl.DROP, express=True))
+        """Declare a publisher on ``key``; if Zenoh refuses, undeclare everything and raise."""
+        try:
+            pub = declare(f"publisher on {key}", lambda: self._session.declare_publisher(
+                key, encoding=encoding, congestion_control=zenoh.CongestionControl.DROP, express=True))
+        except BusError:
+            self.close()
+            raise
         self._entities.append(pub)
         return pub
+
+    @property
+    def matched(self) -> bool:
+        """True when a subscriber somewhere matches the state key (a put would be delivered)."""
+        return bool(self._state.matching_status.matching)  # type: ignore[attr-defined]  # stubs: bool
 
     def _put(self, pub: zenoh.Publisher, payload: bytes) -> None:
         """Put with our identity in ``source_info`` (the receiver binds to it)."""
@@ -71,23 +83,13 @@ class CarrierPublisher(_Publisher):
     def __init__(self, session: zenoh.Session, pair: str, encoding: Encoding = "json", *, key: str | None = None) -> None:
         check_encoding(encoding)
         k = keys(pair)
-        super().__init__(session, k.carrier_alive)
         self.encoding = encoding
         self.key = key or k.carrier_state
-        try:
-            self._pub = self._publisher(self.key, ZENOH_ENCODING[encoding])
-        except BusError:
-            self.close()
-            raise
-
-    @property
-    def matched(self) -> bool:
-        """True when a subscriber somewhere matches the state key (a put would be delivered)."""
-        return bool(self._pub.matching_status.matching)  # type: ignore[attr-defined]  # stubs: bool
+        super().__init__(session, k.carrier_alive, self.key, ZENOH_ENCODING[encoding])
 
     def publish(self, state: CarrierState) -> None:
         """Send ``state``; raises :class:`BusError` if Zenoh refuses."""
-        self._put(self._pub, encode_carrier(state, self.encoding))
+        self._put(self._state, encode_carrier(state, self.encoding))
 
 
 class PassengerPublisher(_Publisher):
@@ -96,19 +98,9 @@ class PassengerPublisher(_Publisher):
 
     def __init__(self, session: zenoh.Session, pair: str) -> None:
         k = keys(pair)
-        super().__init__(session, k.passenger_alive)
+        super().__init__(session, k.passenger_alive, k.passenger_state, zenoh.Encoding.APPLICATION_JSON)
         self.last_seq = -1  # seq of the last status sent
-        try:
-            self._state = self._publisher(k.passenger_state, zenoh.Encoding.APPLICATION_JSON)
-            self._phase = self._publisher(k.passenger_phase, zenoh.Encoding.TEXT_PLAIN)
-        except BusError:
-            self.close()
-            raise
-
-    @property
-    def matched(self) -> bool:
-        """True when a subscriber somewhere matches the state key (a put would be delivered)."""
-        return bool(self._state.matching_status.matching)  # type: ignore[attr-defined]  # stubs: bool
+        self._phase = self._publisher(k.passenger_phase, zenoh.Encoding.TEXT_PLAIN)
 
     def publish(self, status: PassengerStatus) -> None:
         """Send ``status`` on the state key and its phase on the phase key."""

@@ -54,7 +54,7 @@ def test_json_states_flow_and_are_returned_in_local_ned() -> None:
         assert wait_for(lambda: feed.alive, what="carrier token") is True
         c = feed.counters
         assert (c["received"], c["accepted"], c["dropped"]) == (1, 1, {})
-        assert c["bound_source"] == f"{a.zid()}/{pub._pub.id.eid}" and c["rejected_sources"] == {}
+        assert c["bound_source"] == f"{a.zid()}/{pub._state.id.eid}" and c["rejected_sources"] == {}
 
 
 def test_cdr_odometry_from_a_ros_bridge_key_is_converted_enu_to_ned() -> None:
