@@ -26,6 +26,7 @@ from pathlib import Path
 import click
 import numpy as np
 
+from sim.net import wait_for
 from sim.vehicle import PHYSICS_DT_S, MockVehicle, VehicleOptions, spawn_process
 from sim.vehicle_probe import Probe, connect, sleep_until, start_offboard
 
@@ -147,7 +148,7 @@ def scripted_flight(speed: float, flight_s: float, out: dict[float, FlightRow]) 
                 stream.set(send_now=True, velocity_ned_m_s=velocity)
             sleep_until(vehicle.clock, t_armed + flight_s)
             wall_s = time.monotonic() - wall0
-            end = vehicle.wait_for(lambda s: s.t_s >= t_armed + flight_s + 2.0, 10.0)
+            end = wait_for(vehicle.when(lambda s: s.t_s >= t_armed + flight_s + 2.0), 10.0, "s.t_s >= t_armed + flight_s + 2.0")
         assert end is not None and end.mode == "OFFBOARD" and end.armed, (end.mode if end else None)
         out[speed] = FlightRow(speed, flight_s, wall_s, tuple(float(x) for x in end.position_ned_m))  # type: ignore[arg-type]
 

@@ -127,6 +127,11 @@ class ManualClock:
         with self._lock:
             self._t += duration_s
 
+    def advance_to(self, t_s: float) -> None:
+        """Move the clock to ``t_s`` [s] (never back): a time owner's step times, exactly."""
+        with self._lock:
+            self._t = max(self._t, float(t_s))
+
     def sleep(self, duration_s: float) -> None:
         if duration_s > 0:
             self.advance(duration_s)

@@ -135,18 +135,6 @@ class Probe:
                     return None
                 self._cond.wait(min(remaining, 0.05))
 
-    def wait_until(self, condition: Callable[[], bool], timeout_s: float = 5.0) -> bool:
-        """Poll ``condition`` on every received message until true or the deadline."""
-        deadline = time.monotonic() + timeout_s
-        while True:
-            if condition():
-                return True
-            remaining = deadline - time.monotonic()
-            if remaining <= 0:
-                return False
-            with self._cond:
-                self._cond.wait(min(remaining, 0.02))
-
     # ---- vehicle state from telemetry ----------------------------------------------------
     def mode(self) -> str | None:
         hb = self.latest("HEARTBEAT")

@@ -78,7 +78,7 @@ def test_pilot_override_stops_commanding(tmp_path):
         t_override = pair.vehicle.clock.now()
         pair.vehicle.force_mode("POSCTL")
         out = pair.finish()
-        snap = pair.vehicle.wait_for(lambda s: s.t_s > t_override + 2.0)
+        snap = wait_for(pair.vehicle.when(lambda s: s.t_s > t_override + 2.0), 5.0, "s.t_s > t_override + 2.0")
         assert snap is not None
         # the controller learns the mode from the 1 Hz HEARTBEAT, as with PX4: no setpoint reached
         # the vehicle later than one HEARTBEAT period (plus a few ticks) after the takeover

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from mission import px4
+from sim.net import wait_for
 from sim.vehicle import PHYSICS_DT_S, MockVehicle
 from sim.vehicle_probe import Lockstep, Probe, SetpointStream, connect, sleep_until, start_offboard, vehicle_for
 
@@ -21,7 +22,7 @@ pytestmark = pytest.mark.timeout(30)
 
 def climb_to(v: MockVehicle, probe: Probe, altitude_m: float, stream: SetpointStream, timeout_s: float = 5.0) -> None:
     stream.set(velocity_ned_m_s=(0.0, 0.0, -2.0))
-    assert v.wait_for(lambda s: s.position_ned_m[2] <= -altitude_m, timeout_s), "did not climb"
+    wait_for(v.when(lambda s: s.position_ned_m[2] <= -altitude_m), timeout_s, "did not climb")
     stream.set(velocity_ned_m_s=(0.0, 0.0, 0.0))
 
 
@@ -66,7 +67,7 @@ def test_offboard_accepted_with_stream_then_armed_and_flying(probe: Probe) -> No
             assert probe.wait_mode("OFFBOARD") and probe.wait_armed(True)
             hb = probe.latest("HEARTBEAT")
             assert (hb.base_mode, hb.custom_mode, hb.system_status) == (145, 393216, px4.MAV_STATE_ACTIVE)
-            snap = v.wait_for(lambda s: s.position_ned_m[2] < -1.0, 3.0)
+            snap = wait_for(v.when(lambda s: s.position_ned_m[2] < -1.0), 3.0, "s.position_ned_m[2] < -1.0")
             assert snap is not None and snap.landed_state == px4.LANDED_IN_AIR
             assert probe.wait_for("EXTENDED_SYS_STATE", lambda m: m.landed_state == px4.LANDED_IN_AIR, 2.0)
 
@@ -77,7 +78,7 @@ def test_arming_in_offboard_without_fresh_stream_is_denied(probe: Probe) -> None
         stream = start_offboard(probe, arm=False)
         stream.stop()
         t_stop = v.snapshot().last_setpoint_t_s
-        assert v.wait_for(lambda s: s.t_s > t_stop + 1.2, 2.0)
+        wait_for(v.when(lambda s: s.t_s > t_stop + 1.2), 2.0, "s.t_s > t_stop + 1.2")
         mark = probe.mark()
         ack = probe.arm()
         assert ack is not None and ack.result == px4.MAV_RESULT_TEMPORARILY_REJECTED
@@ -91,7 +92,7 @@ def test_offboard_loss_failsafe_after_com_of_loss_t(probe: Probe, action: int, m
     with vehicle_for(probe, speed=20.0, params={"COM_OF_LOSS_T": loss_t_s, "COM_OBL_RC_ACT": action}) as v:
         connect(probe)
         stream = start_offboard(probe, (0.0, 0.0, -2.0))
-        assert v.wait_for(lambda s: s.position_ned_m[2] < -2.0, 3.0)
+        wait_for(v.when(lambda s: s.position_ned_m[2] < -2.0), 3.0, "s.position_ned_m[2] < -2.0")
         stream.stop()
         assert probe.wait_mode(mode, 3.0)
         snap = v.snapshot()
@@ -108,20 +109,20 @@ def test_failsafe_without_rc_descends_lands_and_disarms(probe: Probe) -> None:
     with vehicle_for(probe, speed=20.0) as v:
         connect(probe)
         stream = start_offboard(probe, (1.0, 0.0, -2.0))
-        assert v.wait_for(lambda s: s.position_ned_m[2] < -3.0, 3.0)
+        wait_for(v.when(lambda s: s.position_ned_m[2] < -3.0), 3.0, "s.position_ned_m[2] < -3.0")
         stream.stop()
-        assert v.wait_for(lambda s: s.mode == "POSCTL", 2.0)
+        wait_for(v.when(lambda s: s.mode == "POSCTL"), 2.0, "s.mode == 'POSCTL'")
         # let the velocity settle, then watch a descent at about MPC_LAND_SPEED (PX4 SITL: 0.5-0.7 m/s)
         # while it brakes from 1 m/s north and holds its position
-        start = v.wait_for(lambda s: abs(s.velocity_ned_m_s[2] - 0.7) < 0.05, 2.0)
+        start = wait_for(v.when(lambda s: abs(s.velocity_ned_m_s[2] - 0.7) < 0.05), 2.0, "abs(s.velocity_ned_m_s[2] - 0.7) < 0.05")
         assert start is not None
-        later = v.wait_for(lambda s: s.t_s > start.t_s + 1.0, 2.0)
+        later = wait_for(v.when(lambda s: s.t_s > start.t_s + 1.0), 2.0, "s.t_s > start.t_s + 1.0")
         assert later is not None
         rate = (later.position_ned_m[2] - start.position_ned_m[2]) / (later.t_s - start.t_s)
         assert rate == pytest.approx(0.68, abs=0.03)
         assert np.allclose(later.position_ned_m[:2], start.position_ned_m[:2], atol=0.4)
         assert np.hypot(*later.velocity_ned_m_s[:2]) < 0.4
-        landed = v.wait_for(lambda s: s.landed_state == px4.LANDED_ON_GROUND, 5.0)
+        landed = wait_for(v.when(lambda s: s.landed_state == px4.LANDED_ON_GROUND), 5.0, "s.landed_state == px4.LANDED_ON_GROUND")
         assert landed is not None and landed.position_ned_m[2] == 0.0
         assert probe.wait_armed(False, 3.0)
         t_landed = v.event_time("Landing detected")
@@ -135,13 +136,13 @@ def test_failsafe_returns_to_offboard_when_setpoints_resume(probe: Probe) -> Non
     with vehicle_for(probe, speed=5.0, params={"MPC_LAND_SPEED": 0.2}) as v:
         connect(probe)
         stream = start_offboard(probe, (0.0, 0.0, -3.0))
-        assert v.wait_for(lambda s: s.position_ned_m[2] < -2.0, 3.0)
+        wait_for(v.when(lambda s: s.position_ned_m[2] < -2.0), 3.0, "s.position_ned_m[2] < -2.0")
         stream.stop()
-        assert v.wait_for(lambda s: s.mode == "POSCTL", 2.0)
+        wait_for(v.when(lambda s: s.mode == "POSCTL"), 2.0, "s.mode == 'POSCTL'")
         t_failsafe = v.event_time("Failsafe activated")
         assert t_failsafe is not None
         probe.send(probe.setpoint_message((0.0, 0.0, 0.0)))  # a single setpoint: its arrival time is known
-        snap = v.wait_for(lambda s: s.mode == "OFFBOARD", 2.0)
+        snap = wait_for(v.when(lambda s: s.mode == "OFFBOARD"), 2.0, "s.mode == 'OFFBOARD'")
         assert snap is not None and not snap.in_failsafe and snap.armed
         t_back = v.event_time("Failsafe deactivated", after_s=t_failsafe)
         assert t_back is not None and 0.0 < t_back - snap.last_setpoint_t_s <= 0.2
@@ -163,11 +164,11 @@ def test_disarm_in_air_needs_force(probe: Probe) -> None:
     with vehicle_for(probe) as v:
         connect(probe)
         with start_offboard(probe, (0.0, 0.0, -2.0)):
-            assert v.wait_for(lambda s: s.position_ned_m[2] < -1.0, 3.0)
+            wait_for(v.when(lambda s: s.position_ned_m[2] < -1.0), 3.0, "s.position_ned_m[2] < -1.0")
             assert probe.arm(False).result == px4.MAV_RESULT_TEMPORARILY_REJECTED
             assert probe.arm(False, force=True).result == px4.MAV_RESULT_ACCEPTED
             # disarmed in the air: it falls to the ground
-            assert v.wait_for(lambda s: s.landed_state == px4.LANDED_ON_GROUND, 3.0)
+            wait_for(v.when(lambda s: s.landed_state == px4.LANDED_ON_GROUND), 3.0, "s.landed_state == px4.LANDED_ON_GROUND")
 
 
 def test_velocity_steps_answer_like_px4(probe: Probe) -> None:
@@ -177,21 +178,21 @@ def test_velocity_steps_answer_like_px4(probe: Probe) -> None:
     with vehicle_for(probe, speed=5.0, start_ned=(0.0, 0.0, -1.0)) as v:
         connect(probe)
         with start_offboard(probe, (0.0, 0.0, -0.5)) as stream:
-            assert v.wait_for(lambda s: s.position_ned_m[2] < -3.0, 5.0)
+            wait_for(v.when(lambda s: s.position_ned_m[2] < -3.0), 5.0, "s.position_ned_m[2] < -3.0")
             stream.set(velocity_ned_m_s=(0.0, 0.0, 0.0))
-            rest = v.wait_for(lambda s: s.t_s > 4.0 + v.event_time("Armed") and np.linalg.norm(s.velocity_ned_m_s) < 0.02, 5.0)
+            rest = wait_for(v.when(lambda s: s.t_s > 4.0 + v.event_time("Armed") and np.linalg.norm(s.velocity_ned_m_s) < 0.02), 5.0, "s.t_s > 4.0 + v.event_time('Armed') and np.linalg.norm(s.velocity_ned_m_s) < 0.02")
             assert rest is not None
             mark = probe.mark()
             stream.set(send_now=True, velocity_ned_m_s=(2.0, 0.0, 0.0))
             t_north = v.snapshot().t_s
-            assert v.wait_for(lambda s: s.t_s > t_north + 4.0, 3.0)
+            wait_for(v.when(lambda s: s.t_s > t_north + 4.0), 3.0, "s.t_s > t_north + 4.0")
             north = [(m.time_boot_ms / 1000.0 - t_north, m.vx) for m in probe.messages("LOCAL_POSITION_NED", after=mark)]
             stream.set(velocity_ned_m_s=(0.0, 0.0, 0.0))
-            assert v.wait_for(lambda s: s.t_s > t_north + 10.0 and np.linalg.norm(s.velocity_ned_m_s) < 0.3, 5.0)
+            wait_for(v.when(lambda s: s.t_s > t_north + 10.0 and np.linalg.norm(s.velocity_ned_m_s) < 0.3), 5.0, "s.t_s > t_north + 10.0 and np.linalg.norm(s.velocity_ned_m_s) < 0.3")
             mark = probe.mark()
             stream.set(send_now=True, velocity_ned_m_s=(0.0, 0.0, -1.0))
             t_up = v.snapshot().t_s
-            assert v.wait_for(lambda s: s.t_s > t_up + 3.0, 3.0)
+            wait_for(v.when(lambda s: s.t_s > t_up + 3.0), 3.0, "s.t_s > t_up + 3.0")
             up = [(m.time_boot_ms / 1000.0 - t_up, -m.vz) for m in probe.messages("LOCAL_POSITION_NED", after=mark)]
     peak = max(vx for t, vx in north if t <= 4.0) / 2.0
     assert 0.77 <= peak <= 0.86
@@ -205,14 +206,14 @@ def test_velocity_limits(probe: Probe) -> None:
         connect(probe)
         mark = probe.mark()
         with start_offboard(probe, (0.0, 0.0, -10.0)) as stream:
-            assert v.wait_for(lambda s: s.position_ned_m[2] < -15.0, 3.0)
+            wait_for(v.when(lambda s: s.position_ned_m[2] < -15.0), 3.0, "s.position_ned_m[2] < -15.0")
             climb = [-m.vz for m in probe.messages("LOCAL_POSITION_NED", after=mark)]
             assert max(climb) <= 3.0 * 1.07  # MPC_Z_VEL_MAX_UP limits the setpoint (PX4 overshoots steps by 3-7 %)
             assert climb[-1] == pytest.approx(3.0, abs=0.1)
             mark = probe.mark()
             stream.set(velocity_ned_m_s=(30.0, 30.0, 0.0))
             t0 = v.snapshot().t_s
-            assert v.wait_for(lambda s: s.t_s > t0 + 20.0, 5.0)
+            wait_for(v.when(lambda s: s.t_s > t0 + 20.0), 5.0, "s.t_s > t0 + 20.0")
         speeds = [np.hypot(m.vx, m.vy) for m in probe.messages("LOCAL_POSITION_NED", after=mark)]
         assert len(speeds) > 100
         assert max(speeds) <= 4.0 * 1.05  # MPC_XY_VEL_MAX limits the setpoint
@@ -225,13 +226,13 @@ def test_ground_does_not_slide_and_platform_start(probe: Probe) -> None:
         snap = v.snapshot()
         assert snap.landed_state == px4.LANDED_ON_GROUND and list(snap.position_ned_m) == [5.0, -3.0, -0.5]
         with start_offboard(probe, (2.0, 0.0, 0.0)) as stream:
-            assert v.wait_for(lambda s: s.t_s > snap.t_s + 1.0, 2.0)
+            wait_for(v.when(lambda s: s.t_s > snap.t_s + 1.0), 2.0, "s.t_s > snap.t_s + 1.0")
             assert list(v.snapshot().position_ned_m) == [5.0, -3.0, -0.5]  # no horizontal slide on the ground
             stream.set(velocity_ned_m_s=(0.0, 0.0, -1.0))
-            assert v.wait_for(lambda s: s.position_ned_m[2] < -1.0, 2.0)
+            wait_for(v.when(lambda s: s.position_ned_m[2] < -1.0), 2.0, "s.position_ned_m[2] < -1.0")
             stream.set(velocity_ned_m_s=(0.0, 0.0, 1.0))
             # the platform it started on is gone: it lands on the ground, d = 0
-            landed = v.wait_for(lambda s: s.landed_state == px4.LANDED_ON_GROUND, 5.0)
+            landed = wait_for(v.when(lambda s: s.landed_state == px4.LANDED_ON_GROUND), 5.0, "s.landed_state == px4.LANDED_ON_GROUND")
             assert landed is not None and landed.position_ned_m[2] == 0.0
 
 
@@ -241,15 +242,15 @@ def test_takeoff_hold_and_land_commands(probe: Probe) -> None:
         assert probe.arm().result == px4.MAV_RESULT_ACCEPTED
         assert probe.command(px4.MAV_CMD_NAV_TAKEOFF).result == px4.MAV_RESULT_ACCEPTED
         assert probe.wait_mode("AUTO.TAKEOFF", 2.0)
-        held = v.wait_for(lambda s: s.mode == "AUTO.LOITER" and s.landed_state == px4.LANDED_IN_AIR, 5.0)
+        held = wait_for(v.when(lambda s: s.mode == "AUTO.LOITER" and s.landed_state == px4.LANDED_IN_AIR), 5.0, "s.mode == 'AUTO.LOITER' and s.landed_state == px4.LANDED_IN_AIR")
         assert held is not None
-        later = v.wait_for(lambda s: s.t_s > held.t_s + 2.0, 2.0)
+        later = wait_for(v.when(lambda s: s.t_s > held.t_s + 2.0), 2.0, "s.t_s > held.t_s + 2.0")
         # MIS_TAKEOFF_ALT, overshot a little: the vertical integrator carries the climb's drag compensation
         assert later is not None and later.position_ned_m[2] == pytest.approx(-2.5, abs=0.1)
         assert probe.command(px4.MAV_CMD_NAV_LAND).result == px4.MAV_RESULT_ACCEPTED
         assert probe.wait_mode("AUTO.LAND", 2.0)
         assert probe.wait_for("EXTENDED_SYS_STATE", lambda m: m.landed_state == px4.LANDED_LANDING, 2.0)
-        assert v.wait_for(lambda s: not s.armed, 5.0)
+        wait_for(v.when(lambda s: not s.armed), 5.0, "not s.armed")
 
 
 def test_takeoff_to_param7_altitude_amsl(probe: Probe) -> None:
@@ -258,35 +259,35 @@ def test_takeoff_to_param7_altitude_amsl(probe: Probe) -> None:
         assert probe.arm().result == px4.MAV_RESULT_ACCEPTED
         ack = probe.command(px4.MAV_CMD_NAV_TAKEOFF, (math.nan,) * 6 + (404.0,))
         assert ack is not None and ack.result == px4.MAV_RESULT_ACCEPTED
-        held = v.wait_for(lambda s: s.mode == "AUTO.LOITER" and s.landed_state == px4.LANDED_IN_AIR, 5.0)
+        held = wait_for(v.when(lambda s: s.mode == "AUTO.LOITER" and s.landed_state == px4.LANDED_IN_AIR), 5.0, "s.mode == 'AUTO.LOITER' and s.landed_state == px4.LANDED_IN_AIR")
         assert held is not None
-        assert v.wait_for(lambda s: abs(s.position_ned_m[2] + 4.0) < 0.05, 3.0)
+        wait_for(v.when(lambda s: abs(s.position_ned_m[2] + 4.0) < 0.05), 3.0, "abs(s.position_ned_m[2] + 4.0) < 0.05")
 
 
 def test_return_to_launch_flies_home_and_lands(probe: Probe) -> None:
     with vehicle_for(probe, speed=20.0, params={"RTL_RETURN_ALT": 6.0}) as v:
         connect(probe)
         with start_offboard(probe, (4.0, 3.0, -2.0)):
-            assert v.wait_for(lambda s: s.position_ned_m[0] > 8.0, 5.0)
+            wait_for(v.when(lambda s: s.position_ned_m[0] > 8.0), 5.0, "s.position_ned_m[0] > 8.0")
             assert probe.command(px4.MAV_CMD_NAV_RETURN_TO_LAUNCH).result == px4.MAV_RESULT_ACCEPTED
             assert probe.wait_mode("AUTO.RTL", 2.0)
-            climbed = v.wait_for(lambda s: s.position_ned_m[2] <= -5.9, 5.0)
+            climbed = wait_for(v.when(lambda s: s.position_ned_m[2] <= -5.9), 5.0, "s.position_ned_m[2] <= -5.9")
             assert climbed is not None
-            landed = v.wait_for(lambda s: s.landed_state == px4.LANDED_ON_GROUND, 10.0)
+            landed = wait_for(v.when(lambda s: s.landed_state == px4.LANDED_ON_GROUND), 10.0, "s.landed_state == px4.LANDED_ON_GROUND")
             assert landed is not None and np.allclose(landed.position_ned_m, [0.0, 0.0, 0.0], atol=0.6)
-            assert v.wait_for(lambda s: not s.armed, 5.0)
+            wait_for(v.when(lambda s: not s.armed), 5.0, "not s.armed")
 
 
 def test_position_setpoint_and_body_frame_velocity(probe: Probe) -> None:
     with vehicle_for(probe, speed=20.0) as v:
         connect(probe)
         with start_offboard(probe, type_mask=px4.TYPE_MASK_POSITION, position_ned_m=(3.0, -2.0, -4.0), yaw_rad=math.pi / 2) as s:
-            snap = v.wait_for(lambda x: np.allclose(x.position_ned_m, [3.0, -2.0, -4.0], atol=0.02), 5.0)
+            snap = wait_for(v.when(lambda x: np.allclose(x.position_ned_m, [3.0, -2.0, -4.0], atol=0.02)), 5.0, "np.allclose(x.position_ned_m, [3.0, -2.0, -4.0], atol=0.02)")
             assert snap is not None and snap.yaw_rad == pytest.approx(math.pi / 2, abs=0.01)
             # BODY_NED forward at yaw 90 deg is east
             s.set(velocity_ned_m_s=(1.0, 0.0, 0.0), type_mask=px4.TYPE_MASK_VELOCITY_YAW_RATE,
                   frame=px4.MAV_FRAME_BODY_NED, yaw_rate_rad_s=0.0)
-            moving = v.wait_for(lambda x: x.velocity_ned_m_s[1] > 0.99, 3.0)
+            moving = wait_for(v.when(lambda x: x.velocity_ned_m_s[1] > 0.99), 3.0, "x.velocity_ned_m_s[1] > 0.99")
             assert moving is not None and abs(moving.velocity_ned_m_s[0]) < 0.02
 
 
@@ -303,7 +304,7 @@ def _fly_script(speed: float, result: dict[float, np.ndarray]) -> None:
             for t_change, velocity in script:
                 sleep_until(v.clock, t_armed + t_change)
                 stream.set(send_now=True, velocity_ned_m_s=velocity)
-            final = v.wait_for(lambda s: s.t_s >= t_armed + 5.0, 3.0)
+            final = wait_for(v.when(lambda s: s.t_s >= t_armed + 5.0), 3.0, "s.t_s >= t_armed + 5.0")
         assert final is not None and np.linalg.norm(final.velocity_ned_m_s) < 0.5  # PX4 leaves a slow residual
         result[speed] = np.concatenate((final.position_ned_m, final.velocity_ned_m_s))
 
@@ -336,7 +337,7 @@ def test_rover_frame_is_a_ground_rover_that_refuses_takeoff_and_drives_offboard(
         try:
             assert probe.arm().result == px4.MAV_RESULT_ACCEPTED
             assert probe.set_mode("OFFBOARD").result == px4.MAV_RESULT_ACCEPTED
-            snap = v.wait_for(lambda s: s.velocity_ned_m_s[0] > 0.9, timeout_s=10.0)
+            snap = wait_for(v.when(lambda s: s.velocity_ned_m_s[0] > 0.9), 10.0, "s.velocity_ned_m_s[0] > 0.9")
             assert snap is not None and snap.position_ned_m[2] == 0.0  # climb commands ignored: on the ground
             assert v.snapshot().armed  # no preflight auto-disarm for a rover (armed = not landed)
         finally:
@@ -369,3 +370,23 @@ def test_estimate_drift_wanders_the_reported_position_and_px4_flies_the_estimate
             assert 0.05 < reported_off < 0.6 and true_off > 2 * reported_off
         else:
             assert reported_off < 0.05 and true_off < 0.05
+
+
+def test_an_injected_clock_is_the_vehicles_time(probe: Probe) -> None:
+    """The vehicle flies on the clock it is given: on a ManualClock nothing happens until the
+    test moves it (HEARTBEAT at 1 Hz simulated: those of t = 0, 1, 2 s, and no more)."""
+    from mission.clock import ManualClock, ScaledClock
+    from sim.vehicle import VehicleOptions
+
+    clock = ManualClock()
+    options = VehicleOptions(bind="127.0.0.1:0", target=f"127.0.0.1:{probe.port}")
+    with MockVehicle(options, clock=clock) as v:
+        assert probe.wait_for("HEARTBEAT", timeout_s=2.0) is not None and v.snapshot().t_s == 0.0
+        for t_s in (1.0, 2.0):
+            clock.advance(1.0)
+            wait_for(v.when(lambda s: s.t_s == t_s), 2.0, f"the vehicle at t = {t_s} s")
+            wait_for(lambda: len(probe.messages("HEARTBEAT")) >= t_s + 1, 2.0, f"the HEARTBEAT of t = {t_s} s")
+        assert len(probe.messages("HEARTBEAT")) == 3
+        assert v.clock is clock
+    with pytest.raises(ValueError, match="owns its time"):
+        MockVehicle(VehicleOptions(lockstep=True), clock=ScaledClock(1.0))

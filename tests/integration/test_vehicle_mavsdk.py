@@ -60,5 +60,5 @@ def test_mavsdk_connects_arms_and_flies_offboard(sdk: Mavsdk) -> None:
 
         offboard.stop()
         wait_for(lambda: telemetry.flight_mode() == FlightMode.HOLD, 3.0, "flight mode Hold after offboard.stop()")
-        hold = vehicle.wait_for(lambda s: abs(s.velocity_ned_m_s).max() < 0.01, 5.0)
+        hold = wait_for(vehicle.when(lambda s: abs(s.velocity_ned_m_s).max() < 0.01), 5.0, "the vehicle at rest")
         assert hold is not None and hold.mode == "AUTO.LOITER" and hold.armed and not hold.in_failsafe

@@ -15,6 +15,7 @@ from click.testing import CliRunner
 
 from mission import geodesy, px4
 from mission.mavlink_env import mavlink
+from sim.net import wait_for
 from sim.vehicle import FaultOptions, MockVehicle, VehicleOptions, spawn_process
 from sim.vehicle_cli import mock_vehicle, read_signing_key
 from sim.vehicle_link import parse_endpoint
@@ -41,7 +42,7 @@ def test_setpoints_to_another_system_are_not_proof_of_life(probe: Probe) -> None
     with vehicle_for(probe) as v:
         connect(probe)
         with SetpointStream(probe, 0.01, target=(2, 1)):
-            assert v.wait_for(lambda s: s.counters["rx_wrong_target"] >= 5, 2.0)
+            wait_for(v.when(lambda s: s.counters["rx_wrong_target"] >= 5), 2.0, "s.counters['rx_wrong_target'] >= 5")
             assert probe.set_mode("OFFBOARD").result == px4.MAV_RESULT_TEMPORARILY_REJECTED
         assert v.counters["setpoints_accepted"] == 0
 
@@ -63,7 +64,7 @@ def test_set_mode_as_command_int(probe: Probe) -> None:
     with vehicle_for(probe) as v:
         connect(probe)
         with SetpointStream(probe, 0.01):
-            assert v.wait_for(lambda s: s.counters["setpoints_accepted"] > 2, 2.0)
+            wait_for(v.when(lambda s: s.counters["setpoints_accepted"] > 2), 2.0, "s.counters['setpoints_accepted'] > 2")
             ack = probe.command(px4.MAV_CMD_DO_SET_MODE, (129.0, 6.0, 0.0), as_int=True)
             assert ack is not None and ack.result == px4.MAV_RESULT_ACCEPTED
             assert probe.wait_mode("OFFBOARD", 2.0)
@@ -89,7 +90,7 @@ def test_parameter_protocol_list_read_set(probe: Probe) -> None:
         connect(probe)
         mark = probe.mark()
         probe.send(mavlink.MAVLink_param_request_list_message(1, 1))
-        assert probe.wait_until(lambda: len(probe.messages("PARAM_VALUE", after=mark)) >= len(PARAM_SPECS), 3.0)
+        wait_for(lambda: len(probe.messages("PARAM_VALUE", after=mark)) >= len(PARAM_SPECS), 3.0, "every PARAM_VALUE")
         values = {m.param_id: m for m in probe.messages("PARAM_VALUE", after=mark)}
         assert set(values) >= {"COM_OF_LOSS_T", "COM_OBL_RC_ACT", "COM_DISARM_PRFLT", "COM_DISARM_LAND", "MPC_XY_VEL_MAX",
                                "MPC_Z_VEL_MAX_UP", "MPC_Z_VEL_MAX_DN", "MPC_ACC_HOR", "MPC_TKO_SPEED", "MPC_LAND_SPEED",
@@ -187,7 +188,7 @@ def test_local_position_rate_up_to_what_px4_delivers(probe: Probe) -> None:
         for interval_us, expected_hz in ((20_000.0, 50), (2_000.0, 125)):
             assert probe.command(px4.MAV_CMD_SET_MESSAGE_INTERVAL, (lpn, interval_us)).result == px4.MAV_RESULT_ACCEPTED
             t0 = v.clock.now() + 0.1
-            assert v.wait_for(lambda s: s.t_s > t0 + 1.1, 3.0)
+            wait_for(v.when(lambda s: s.t_s > t0 + 1.1), 3.0, "s.t_s > t0 + 1.1")
             assert 0.75 * expected_hz <= count(probe, t0) <= expected_hz + 1, interval_us
             assert 20 <= count(gcs, t0) <= 31
 
@@ -204,7 +205,7 @@ def test_timesync_is_answered(probe: Probe) -> None:
 def test_onboard_streams_at_px4_rates_at_speed_1(probe: Probe) -> None:
     with vehicle_for(probe, speed=1.0) as v:
         connect(probe)
-        assert v.wait_for(lambda s: s.t_s > 1.2, 3.0)
+        wait_for(v.when(lambda s: s.t_s > 1.2), 3.0, "s.t_s > 1.2")
     expected_ms = {"LOCAL_POSITION_NED": 1000 / 30, "ATTITUDE": 10, "ATTITUDE_QUATERNION": 20, "GLOBAL_POSITION_INT": 20,
                    "POSITION_TARGET_LOCAL_NED": 100, "ATTITUDE_TARGET": 100, "SYS_STATUS": 200, "EXTENDED_SYS_STATE": 200}
     for name, period_ms in expected_ms.items():
@@ -266,7 +267,7 @@ def test_setpoint_frames_and_type_masks(probe: Probe, frame: int, mask: int, acc
         for _ in range(3):
             probe.send(probe.setpoint_message((1.0, 0.0, 0.0), mask, frame, position_ned_m=(1.0, 2.0, -3.0), yaw_rad=0.0,
                                               yaw_rate_rad_s=0.0, acceleration_ned_m_s2=(0.5, 0.0, 0.0)))
-        assert v.wait_for(lambda s: s.counters["setpoints_accepted"] + s.counters["setpoints_rejected"] == 3, 2.0)
+        wait_for(v.when(lambda s: s.counters["setpoints_accepted"] + s.counters["setpoints_rejected"] == 3), 2.0, "s.counters['setpoints_accepted'] + s.counters['setpoints_rejected'] == 3")
         assert v.counters["setpoints_accepted"] == (3 if accepted else 0)
         result = probe.set_mode("OFFBOARD").result
         assert result == (px4.MAV_RESULT_ACCEPTED if accepted else px4.MAV_RESULT_TEMPORARILY_REJECTED)
@@ -278,16 +279,16 @@ def test_non_finite_velocity_setpoint_is_proof_of_life_and_holds(probe: Probe) -
     with vehicle_for(probe, speed=10.0) as v:
         connect(probe)
         with start_offboard(probe, (1.0, 0.0, -1.0)) as stream:
-            assert v.wait_for(lambda s: s.position_ned_m[2] < -2.0, 3.0)
+            wait_for(v.when(lambda s: s.position_ned_m[2] < -2.0), 3.0, "s.position_ned_m[2] < -2.0")
             stream.set(velocity_ned_m_s=(NAN, 0.0, 0.0))
             accepted = v.counters["setpoints_accepted"]
             t0 = v.snapshot().t_s
-            snap = v.wait_for(lambda s: s.t_s > t0 + 5.0, 3.0)
+            snap = wait_for(v.when(lambda s: s.t_s > t0 + 5.0), 3.0, "s.t_s > t0 + 5.0")
             assert snap is not None and snap.mode == "OFFBOARD" and not snap.in_failsafe
             assert snap.counters["setpoints_accepted"] > accepted and snap.counters["setpoints_rejected"] == 0
             assert np.linalg.norm(snap.velocity_ned_m_s) < 0.2
             stream.set(velocity_ned_m_s=(math.inf, 0.0, 0.0))
-            later = v.wait_for(lambda s: s.t_s > snap.t_s + 2.0, 3.0)
+            later = wait_for(v.when(lambda s: s.t_s > snap.t_s + 2.0), 3.0, "s.t_s > snap.t_s + 2.0")
             assert later is not None and later.mode == "OFFBOARD" and np.linalg.norm(later.velocity_ned_m_s) < 0.2
 
 
@@ -300,11 +301,11 @@ def test_dropped_setpoint_is_not_proof_of_life_and_says_why(probe: Probe, mask: 
     with vehicle_for(probe, speed=10.0) as v:
         connect(probe)
         with start_offboard(probe, (0.0, 0.0, -1.0)) as stream:
-            assert v.wait_for(lambda s: s.position_ned_m[2] < -2.0, 3.0)
+            wait_for(v.when(lambda s: s.position_ned_m[2] < -2.0), 3.0, "s.position_ned_m[2] < -2.0")
             stream.set(type_mask=mask, frame=frame, velocity_ned_m_s=(1.0, 0.0, 0.0), acceleration_ned_m_s2=(0.5, 0.0, 0.0))
             msg = probe.wait_for("STATUSTEXT", lambda m: text in m.text, 2.0)
             assert msg is not None and msg.severity == px4.MAV_SEVERITY_CRITICAL
-            assert v.wait_for(lambda s: s.mode == "POSCTL" and s.in_failsafe, 3.0)  # the stream is lost: offboard loss
+            wait_for(v.when(lambda s: s.mode == "POSCTL" and s.in_failsafe), 3.0, "s.mode == 'POSCTL' and s.in_failsafe")  # the stream is lost: offboard loss
         counters = v.counters
         assert counters["setpoints_rejected"] >= 5
         # said at most once a second, not for every dropped message
