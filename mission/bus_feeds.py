@@ -23,7 +23,7 @@ from mission.config import ZenohSection
 from mission.errors import BusError
 from mission.feed_gate import ANONYMOUS, FeedGate, GateLimits, Sample
 from mission.wire import CarrierState, GeoOrigin, PassengerStatus, WireError, decode_carrier, decode_passenger_json, to_local_ned
-from mission.zenoh_session import Encoding, check_encoding, declare, keys
+from mission.zenoh_session import Encoding, check_encoding, declare, keys, undeclare
 
 log = logging.getLogger("mission.carrier_bridge")  # one logger name for the whole bus
 
@@ -95,7 +95,7 @@ class _Feed(Generic[T]):
                     lambda: session.liveliness().declare_subscriber(alive_key, self._on_alive, history=True),
                 )
             except BusError:
-                self._sub.undeclare()
+                undeclare(self._sub)
                 raise
 
     # -- on Zenoh's thread: never block, never call Zenoh
@@ -215,12 +215,7 @@ class _Feed(Generic[T]):
         if self._closed:
             return
         self._closed = True
-        for sub in (self._sub, self._alive_sub):
-            if sub is not None:
-                try:
-                    sub.undeclare()
-                except zenoh.ZError as exc:  # the session may be closed already
-                    log.debug("undeclare: %s", exc)
+        undeclare(self._sub, self._alive_sub)
 
     def __enter__(self) -> "_Feed[T]":
         return self

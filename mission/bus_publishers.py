@@ -2,16 +2,13 @@
 side's liveliness token (thin I/O). Key expressions: :mod:`mission.carrier_bridge`."""
 from __future__ import annotations
 
-import logging
 from typing import Any
 
 import zenoh
 
 from mission.errors import BusError
 from mission.wire import CarrierState, PassengerStatus, encode_carrier, encode_passenger_json
-from mission.zenoh_session import ZENOH_ENCODING, Encoding, check_encoding, declare, keys
-
-log = logging.getLogger("mission.carrier_bridge")  # one logger name for the whole bus
+from mission.zenoh_session import ZENOH_ENCODING, Encoding, check_encoding, declare, keys, undeclare
 
 
 class _Publisher:
@@ -61,11 +58,7 @@ class _Publisher:
         if self._closed:
             return
         self._closed = True
-        for entity in reversed(self._entities):
-            try:
-                entity.undeclare()
-            except zenoh.ZError as exc:
-                log.debug("undeclare: %s", exc)
+        undeclare(*reversed(self._entities))
 
     def __enter__(self) -> "_Publisher":
         return self

@@ -172,6 +172,18 @@ def keys(pair: str) -> Keys:
     )
 
 
+def undeclare(*entities: Any) -> None:
+    """Undeclare Zenoh entities (subscribers, publishers, tokens; None skipped) in order; one whose
+    session is closed already is logged, not raised (closing must not fail half way)."""
+    for entity in entities:
+        if entity is None:
+            continue
+        try:
+            entity.undeclare()
+        except zenoh.ZError as exc:
+            log.debug("undeclare: %s", exc)
+
+
 def declare(what: str, fn: Callable[[], Any]) -> Any:
     """``fn()``, a Zenoh declaration; its ``ZError`` becomes a :class:`BusError` naming ``what``."""
     try:

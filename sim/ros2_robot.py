@@ -26,6 +26,7 @@ import zenoh
 from mission.carrier.ros2_link import RmwAttachment, Ros2Topics, ros2_topics
 from mission.carrier.tracking import wrap_pi
 from mission.carrier_bridge import open_session
+from mission.zenoh_session import undeclare
 from mission.clock import Clock, Periodic, ScaledClock
 from mission.config import CarrierRos2Section, ZenohSection
 from mission.wire import CarrierState, WireError
@@ -107,8 +108,7 @@ class Ros2RobotSim:
             last = tick
 
     def close(self) -> None:
-        self._sub.undeclare()
-        self._pub.undeclare()
+        undeclare(self._sub, self._pub)
 
 
 def _floats(text: str, option: str) -> tuple[float, float, float]:

@@ -30,7 +30,7 @@ import zenoh.ext
 
 from mission.carrier.controller import OwnState
 from mission.carrier.tracking import Tracked
-from mission.zenoh_session import declare
+from mission.zenoh_session import declare, undeclare
 from mission.clock import Clock
 from mission.config import CarrierRos2Section, Config
 from mission.wire import CarrierState, WireError
@@ -170,5 +170,4 @@ class Ros2Carrier:
         try:
             self.command(Tracked(0.0, 0.0, 0.0, np.zeros(2), np.zeros(2)))
         finally:
-            self._sub.undeclare()
-            self._pub.undeclare()
+            undeclare(self._sub, self._pub)
