@@ -1,5 +1,6 @@
 """The mission flown on a real PX4 SITL (SIH quadrotor), each flight a fresh PX4 in its own
-network namespace, stopped by its pid (:mod:`sim.px4_sitl`). About 40 s of wall time each.
+network namespace, stopped by its pid (:mod:`sim.px4_sitl`). About 40 s of wall time each; the
+flights fly at once (``conftest.px4_jobs``), each test checks its own.
 
 PX4's clock is measured against ours in every flight (from the flight's tlog) and must stay near
 wall time: ``PX4_SIM_SPEED_FACTOR`` 1.03 makes up for SIH's loop falling behind here.
@@ -17,6 +18,7 @@ from mission.config import load_config
 from sim.px4_sitl import clock_ratio, px4_flight
 from sim.net import wait_for
 from tests.conftest import CONFIGS
+from tests.px4_sitl.conftest import px4_job
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(240)]
 PX4_SITL = CONFIGS / "px4_sitl.toml"
@@ -58,24 +60,25 @@ def _flown(f, config: Path) -> dict:
     return s
 
 
-def test_px4_sitl_config_flies_p1_to_p3(tmp_path: Path, px4_build: Path) -> None:
-    with px4_flight(tmp_path / "f", PX4_SITL, build=px4_build, speed_factor=SPEED_FACTOR) as f:
-        s = _flown(f, PX4_SITL)
-    assert s["max_offset_before_separation_m"] <= 0.5
+@px4_job("config")
+def _fly_config(directory: Path, build: Path) -> dict:
+    with px4_flight(directory / "f", PX4_SITL, build=build, speed_factor=SPEED_FACTOR) as f:
+        return _flown(f, PX4_SITL)
 
 
-def test_remark1_carrier_keeps_its_plan_and_never_reaches_the_target(tmp_path: Path, px4_build: Path) -> None:
-    config = tmp_path / "remark1.toml"
+@px4_job("remark1")
+def _fly_remark1(directory: Path, build: Path) -> dict:
+    config = directory / "remark1.toml"
     text = PX4_SITL.read_text()
     assert 'carrier_mode = "stop"' in text
     config.write_text(text.replace('carrier_mode = "stop"', 'carrier_mode = "remark1"'))
-    with px4_flight(tmp_path / "f", config, build=px4_build, speed_factor=SPEED_FACTOR) as f:
-        s = _flown(f, config)
-    assert s["min_carrier_target_distance_m"] > 0.0
+    with px4_flight(directory / "f", config, build=build, speed_factor=SPEED_FACTOR) as f:
+        return _flown(f, config)
 
 
-def test_controller_killed_while_riding_px4_offboard_loss_failsafe_takes_over(tmp_path: Path, px4_build: Path) -> None:
-    with px4_flight(tmp_path / "f", PX4_SITL, build=px4_build, speed_factor=SPEED_FACTOR) as f:
+@px4_job("killed")
+def _fly_and_kill_the_controller(directory: Path, build: Path) -> None:
+    with px4_flight(directory / "f", PX4_SITL, build=build, speed_factor=SPEED_FACTOR) as f:
         wait_for(lambda: "phase RIDING" in f.text("mission.out") or f.procs["mission"].poll() is not None, 60.0,
                  "the mission riding the carrier")
         assert f.procs["mission"].poll() is None, f.text("mission.out")
@@ -96,3 +99,20 @@ def test_controller_killed_while_riding_px4_offboard_loss_failsafe_takes_over(tm
         texts = " ".join(m.text.lower() for m in f.gcs.messages("STATUSTEXT", after=mark))
         assert "offboard" in texts or "failsafe" in texts, texts
         _check_clock(f.log_dir)
+
+
+@pytest.mark.px4_job("config")
+def test_px4_sitl_config_flies_p1_to_p3(px4_jobs) -> None:
+    s = px4_jobs["config"].result()
+    assert s["max_offset_before_separation_m"] <= 0.5
+
+
+@pytest.mark.px4_job("remark1")
+def test_remark1_carrier_keeps_its_plan_and_never_reaches_the_target(px4_jobs) -> None:
+    s = px4_jobs["remark1"].result()
+    assert s["min_carrier_target_distance_m"] > 0.0
+
+
+@pytest.mark.px4_job("killed")
+def test_controller_killed_while_riding_px4_offboard_loss_failsafe_takes_over(px4_jobs) -> None:
+    px4_jobs["killed"].result()
