@@ -190,8 +190,14 @@ def _preflight(state: MissionState, obs: Observation, m: MissionModel) -> tuple[
     ready = v is not None and v.heartbeat_age_s <= m.heartbeat_timeout_s and v.position_valid and _carrier_ok(obs, m)
     if not ready:
         if t - state.since_s > m.connect_timeout_s:
-            why = "no vehicle" if v is None else ("no carrier" if not _carrier_ok(obs, m) else "vehicle not ready")
-            reason = AbortReason.VEHICLE_LOST if v is None else AbortReason.CARRIER_LOST
+            if v is None:
+                why, reason = "no vehicle", AbortReason.VEHICLE_LOST
+            elif not _carrier_ok(obs, m):
+                why, reason = "no carrier", AbortReason.CARRIER_LOST
+            elif v.heartbeat_age_s > m.heartbeat_timeout_s:
+                why, reason = "vehicle silent", AbortReason.VEHICLE_LOST
+            else:  # heard, but its estimator has no local position yet
+                why, reason = "no vehicle position", AbortReason.POSITION_LOST
             if v is None and "signing" in obs.failed:
                 why, reason = obs.failed["signing"], AbortReason.SIGNING_MISMATCH
             new = _abort(state, t, reason, why)

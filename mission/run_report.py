@@ -135,7 +135,10 @@ def abort_hint(cfg: Config, reason: str, detail: str) -> str | None:
                 f"(mission.connect_timeout_s), {describe_endpoints(cfg.zenoh)}: start "
                 f"`marsupial carrier CONFIG` with the same pair ({cfg.zenoh.pair}) on the same Zenoh network "
                 f"(with no endpoints given, both meet on the loopback rendezvous)")
-    if detail == "vehicle not ready":
+    if detail == "vehicle silent":
+        return (f"the vehicle on {cfg.mavlink.url} was heard, then fell silent for over "
+                f"{cfg.mission.heartbeat_timeout_s:g} s (mission.heartbeat_timeout_s): check the link and the vehicle")
+    if detail == "no vehicle position":
         return (f"the vehicle on {cfg.mavlink.url} sends HEARTBEAT but no valid position within {limit:g} s: "
                 f"wait for its estimator (PX4: EKF2 aligned, a local position)")
     return None

@@ -345,6 +345,6 @@ def test_rogue_mavlink_system_spoofed_heartbeats_and_a_wrong_key(tmp_path: Path)
     """A sysid 42 PX4 HEARTBEAT first (on main: adopted as the vehicle, setpoints and arming sent
     to it); with signing on, unsigned HEARTBEATs claiming POSCTL or copying the vehicle (on main:
     pilot_override, reply address moved); a vehicle signing with another key (on main:
-    "carrier_lost: vehicle not ready", now its own reason)."""
+    a mislabelled "carrier_lost", now its own reason)."""
     concurrently(lambda: _rogue_sysid_first(tmp_path), lambda: _unsigned_spoofs(tmp_path))
     _wrong_key(tmp_path)

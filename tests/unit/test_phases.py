@@ -124,6 +124,34 @@ def test_geometry_refusal_sends_nothing(model):
     assert all(d.setpoint is None and d.request is None for _, _, d in log)
 
 
+@pytest.mark.parametrize("what, reason, detail", [
+    ("no vehicle", AbortReason.VEHICLE_LOST, "no vehicle"),
+    ("no carrier", AbortReason.CARRIER_LOST, "no carrier"),
+    ("silent vehicle", AbortReason.VEHICLE_LOST, "vehicle silent"),
+    ("no position", AbortReason.POSITION_LOST, "no vehicle position"),
+])
+def test_preflight_timeout_names_what_is_missing(model, what, reason, detail):
+    """Before anything is sent, the abort names the missing piece; a vehicle that is heard but has
+    no position is not the carrier's fault."""
+    def world(k, obs):
+        v, c = obs.vehicle, obs.carrier
+        if what == "no vehicle":
+            v = None
+        elif what == "silent vehicle":
+            v = VehicleObs(v.position_ned_m, v.velocity_ned_m_s, False, v.mode, heartbeat_age_s=10.0)
+        elif what == "no position":
+            v = VehicleObs(v.position_ned_m, v.velocity_ned_m_s, False, v.mode, 0.1, position_valid=False)
+        if what == "no carrier":
+            c = None
+        return Observation(obs.t_s, v, c)
+
+    ticks = int((model.connect_timeout_s + 1.0) / model.dt_s)
+    state, log, _, _ = fly(model, on_tick=world, ticks=ticks)
+    assert (state.phase, state.reason) == (Phase.ABORT, reason.value)
+    assert any(f"abort: preflight: {detail}" in d.events for _, _, d in log)
+    assert all(d.setpoint is None and d.request in (None, "hold") for _, _, d in log)
+
+
 def test_stale_carrier_before_separation_aborts_to_hold(model):
     def stale(k, obs):
         if k > 500:
