@@ -165,7 +165,11 @@ def summarise(directory: str | Path) -> dict[str, Any]:
         if left.any():
             out["departure_delay_s"] = _num(r.t[int(np.argmax(left))] - r.t[first_sep])
     tol = float(info.get("dock_tolerance_m", 0.5))
-    offset_riding = norm(x_p[riding] - dock[riding]).max() if riding.any() else np.inf
+    # A riding tick without a dock (the vehicle's own telemetry went silent: it hovered on a zero
+    # setpoint) measured no offset; one such tick made the maximum NaN and P1 unknowable.
+    offsets = norm(x_p[riding] - dock[riding]) if riding.any() else np.array([])
+    offsets = offsets[np.isfinite(offsets)]
+    offset_riding = float(offsets.max()) if offsets.size else np.inf
     out["max_offset_before_separation_m"] = _num(offset_riding)
     out["max_relative_command_step_m_s"] = _nanmax(norm(np.diff(rel_cmd[riding | sep_phases], axis=0))) if (riding | sep_phases).sum() > 1 else None
     # Arrival without a swing: once the vehicle has come within the arrival radius of the target,

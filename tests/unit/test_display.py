@@ -72,3 +72,20 @@ def test_plot_of_a_folder_of_pairs_plots_each_pair(tmp_path):
         assert f"plot written to {tmp_path / name / 'flight.png'}" in result.output
     summary = json.loads((tmp_path / "pair0" / "summary.json").read_text())
     assert summary["separation_time_s"] == 2.0  # 2.5 on the mission clock, riding from 0.5
+
+
+def test_a_riding_tick_without_a_dock_measures_no_offset_and_leaves_p1_decidable(tmp_path):
+    """A tick on which the vehicle's telemetry went silent decides no dock (NaN in the record):
+    the riding offset is the largest over the ticks that had one, not NaN (which made P1 false
+    and the offset None on a real-PX4 flight)."""
+    rec = FlightRecorder(tmp_path, {"target_ned_m": [20.0, 0.0, -5.0], "obstacles": [], "bc_m": 8.0,
+                                    "dock_offset_ned_m": [0, 0, -1.5], "dock_tolerance_m": 0.5, "arrival_radius_m": 0.5})
+    z, nan = np.zeros(3), np.full(3, np.nan)
+    for k in range(30):
+        phase = "RIDING" if k < 20 else "NAVIGATING"
+        x_c = np.array([k * 0.5, 0.0, 0.0])
+        dock = nan if k == 7 else x_c + [0, 0, -1.5]
+        x_p = x_c + [0.3 if k == 12 else 0.0, 0, -1.5]  # 0.3 m off the dock once
+        rec.record(k * 0.1, phase, x_p, z, x_c, z, dock, x_p, 0.0, z, z, z, False, 0.0, "OFFBOARD", True)
+    s = rec.close()
+    assert s["max_offset_before_separation_m"] == 0.3
