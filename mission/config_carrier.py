@@ -72,6 +72,9 @@ class CarrierSection(Section):
     speed_ratio_tau_s: float = Field(0.0, ge=0, le=30, description="[s] diff-drive/Ackermann: time constant of the "
                                      "estimate r >= 1 of measured over asked forward speed; the vehicle is asked for v / r "
                                      "(a speed loop that overshoots); 0 off")
+    acceleration_tau_s: float = Field(0.0, ge=0, le=5, description="[s] publish the carrier's measured acceleration "
+                                      "(its velocity's change, low-passed with this time constant) for the passenger's "
+                                      "feed-forward; 0: send none (the passenger predicts it from the carrier law)")
     start_yaw_rad: float | None = Field(None, description="[rad] sim backend: initial heading (default: towards the target)")
     mavlink: CarrierMavlinkSection = CarrierMavlinkSection()
     ros2: CarrierRos2Section = CarrierRos2Section()

@@ -173,7 +173,8 @@ def _carrier_obs(received: Any, alive: bool | None) -> CarrierObs | None:
         return None
     st = received.value
     return CarrierObs(position_ned_m=np.asarray(st.position, dtype=float),
-                      velocity_ned_m_s=np.asarray(st.velocity_ned_m_s, dtype=float), age_s=received.age_s, alive=alive)
+                      velocity_ned_m_s=np.asarray(st.velocity_ned_m_s, dtype=float), age_s=received.age_s, alive=alive,
+                      acceleration_ned_m_s2=st.acceleration_ned_m_s2)
 
 
 @dataclass(frozen=True)

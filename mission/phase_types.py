@@ -73,12 +73,14 @@ class VehicleObs:
 
 @dataclass(frozen=True)
 class CarrierObs:
-    """The carrier's newest state: position/velocity NED [m], [m/s]; age [s]; liveliness."""
+    """The carrier's newest state: position/velocity NED [m], [m/s]; age [s]; liveliness;
+    acceleration NED [m/s^2] as the carrier measured it, or None (it sent none)."""
 
     position_ned_m: np.ndarray
     velocity_ned_m_s: np.ndarray
     age_s: float
     alive: bool | None = True
+    acceleration_ned_m_s2: np.ndarray | None = None
 
 
 @dataclass(frozen=True)

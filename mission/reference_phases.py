@@ -65,13 +65,20 @@ def _track(state: MissionState, obs: Observation, m: MissionModel, x_ref: np.nda
 
 
 def _carrier_acceleration(obs: Observation, m: MissionModel) -> np.ndarray:
-    """The docked carrier's acceleration [m/s^2] NED as its law asks it: the change of the
-    carrier's command (``mission.tick.carrier_tick``, with its speed and acceleration limits)
-    over one carrier step from the sample's state. Analytic in the sample (no differences of
-    samples): ``a_max`` along the command while the carrier speeds up, 0 at its speed limit,
-    ``-k_c v_c`` on the final approach."""
+    """The docked carrier's acceleration [m/s^2] NED: the one it measured and sent, if it sent
+    one (a real vehicle does not follow its law exactly: a PX4 rover sticks, then leaps off);
+    else as its law asks it: the change of the carrier's command (``mission.tick.carrier_tick``,
+    with its speed and acceleration limits) over one carrier step from the sample's state.
+    Analytic in the sample (no differences of samples): ``a_max`` along the command while the
+    carrier speeds up, 0 at its speed limit, ``-k_c v_c`` on the final approach. A sent one is
+    capped at the passenger's own ``max_accel_m_s2`` (a feed-forward, not an order)."""
     c = obs.carrier
     assert c is not None  # riding: the carrier was checked
+    if c.acceleration_ned_m_s2 is not None:
+        a = np.asarray(c.acceleration_ned_m_s2, dtype=float)
+        cap = m.command_safety.max_accel_m_s2
+        size = float(norm(a))
+        return a * (cap / size) if cap is not None and size > cap else a
     h = m.carrier_dt_s
     nxt = carrier_tick(c.position_ned_m + c.velocity_ned_m_s * h, False, m.tick, u_prev=c.velocity_ned_m_s, dt_s=h)
     return (np.asarray(nxt.u, dtype=float) - c.velocity_ned_m_s) / h

@@ -12,10 +12,13 @@ Carrier state, JSON (the default encoding), one UTF-8 object per sample::
      "position": [n, e, d],      # local_ned: [m] north, east, down in the vehicle's local frame
                                  # wgs84: [lat deg, lon deg, alt m (AMSL, up)]
      "velocity": [vn, ve, vd],   # [m/s] NED, whatever the position frame
-     "yaw": 0.1}                 # [rad] heading from north towards east; optional, may be null
+     "yaw": 0.1,                 # [rad] heading from north towards east; optional, may be null
+     "acceleration": [an, ae, ad]}  # [m/s^2] NED, measured; optional, may be null (then the
+                                 # passenger predicts it from the carrier law)
 
-Every number must be finite; ``position``/``velocity`` have exactly 3 numbers, each within
-+-1e7 m and +-1e3 m/s (:data:`POSITION_LIMIT_M`, :data:`VELOCITY_LIMIT_M_S`: "range" beyond);
+Every number must be finite; ``position``/``velocity``/``acceleration`` have exactly 3 numbers,
+each within +-1e7 m, +-1e3 m/s and +-1e3 m/s^2 (:data:`POSITION_LIMIT_M`, :data:`VELOCITY_LIMIT_M_S`,
+:data:`ACCELERATION_LIMIT_M_S2`: "range" beyond);
 ``seq`` fits an int64; unknown fields are ignored (forward compatibility). A ``wgs84`` state is
 converted to local NED through the vehicle's origin (PX4's GPS_GLOBAL_ORIGIN) with
 :func:`geodetic_to_ned`.
@@ -72,6 +75,7 @@ REASONS: tuple[str, ...] = (
 SEQ_MAX = 2**63 - 1  # sequence numbers are int64, as in ROS 2 / DDS
 POSITION_LIMIT_M = 1e7  # |local NED component| or |wgs84 altitude| [m]: beyond this a sample is corrupt
 VELOCITY_LIMIT_M_S = 1e3  # |velocity component| [m/s]
+ACCELERATION_LIMIT_M_S2 = 1e3  # |acceleration component| [m/s^2]
 
 
 
@@ -132,6 +136,7 @@ Seq = Annotated[int, _Checked(core_schema.int_schema(strict=True, ge=0, le=SEQ_M
 Flag = Annotated[bool, _Checked(core_schema.bool_schema(strict=True))]
 PositionNed = Annotated[np.ndarray, _vec3(POSITION_LIMIT_M)]
 VelocityNed = Annotated[np.ndarray, _vec3(VELOCITY_LIMIT_M_S)]
+AccelerationNed = Annotated[np.ndarray, _vec3(ACCELERATION_LIMIT_M_S2)]
 
 #: Pydantic error types and the drop reason each means; a type error not listed here is "type".
 _REASON_OF_ERROR = {
@@ -219,7 +224,8 @@ class CarrierState(_Message):
     stamp_s [s] sender's clock; seq (>= 0) per-sender sequence number; frame "local_ned" or
     "wgs84"; position: local_ned [m] (n, e, d), wgs84 (lat [deg], lon [deg], alt [m] AMSL up);
     velocity_ned_m_s [m/s] NED in both frames; yaw_rad [rad] heading from north towards east, or
-    None. Arrays are read-only float (3,). Raises :class:`WireError` when invalid.
+    None; acceleration_ned_m_s2 [m/s^2] NED as measured by the carrier, or None (not sent). Arrays
+    are read-only float (3,). Raises :class:`WireError` when invalid.
     """
 
     stamp_s: Real = Field(alias="stamp")
@@ -228,11 +234,12 @@ class CarrierState(_Message):
     position: PositionNed
     velocity_ned_m_s: VelocityNed = Field(alias="velocity")
     yaw_rad: Real | None = Field(None, alias="yaw")
+    acceleration_ned_m_s2: AccelerationNed | None = Field(None, alias="acceleration")
 
     def __init__(self, stamp_s: float, seq: int, frame: str, position: Any, velocity_ned_m_s: Any,
-                 yaw_rad: float | None = None) -> None:
+                 yaw_rad: float | None = None, acceleration_ned_m_s2: Any = None) -> None:
         self._validated(stamp_s=stamp_s, seq=seq, frame=frame, position=position, velocity_ned_m_s=velocity_ned_m_s,
-                        yaw_rad=yaw_rad)
+                        yaw_rad=yaw_rad, acceleration_ned_m_s2=acceleration_ned_m_s2)
 
     __init__.__pydantic_base_init__ = True  # type: ignore[attr-defined]  # see _Message
 
@@ -312,7 +319,8 @@ def to_local_ned(state: CarrierState, origin: GeoOrigin | None) -> CarrierState:
         raise WireError("origin", "a wgs84 carrier state needs the vehicle's origin (GPS_GLOBAL_ORIGIN)")
     lat, lon, alt = (float(v) for v in state.position)
     ned = geodetic_to_ned(lat, lon, alt, origin)
-    return CarrierState(state.stamp_s, state.seq, "local_ned", ned, state.velocity_ned_m_s, state.yaw_rad)
+    return CarrierState(state.stamp_s, state.seq, "local_ned", ned, state.velocity_ned_m_s, state.yaw_rad,
+                        state.acceleration_ned_m_s2)
 
 
 # --------------------------------------------------------------------------- JSON

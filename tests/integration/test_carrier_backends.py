@@ -118,6 +118,7 @@ def test_px4_rover_arms_when_the_passenger_rides_and_stops_outside_the_guard_aft
             with carrier_running(cfg, clock, sa, backend) as ctl, CarrierFeed(sb, "cb", clock) as feed:
                 rx = wait_for(lambda: feed.latest(), what="carrier state")
                 np.testing.assert_allclose(rx.state.position, START, atol=1e-6)  # offset into the shared frame
+                assert rx.state.acceleration_ned_m_s2 is None  # carrier.acceleration_tau_s = 0: none sent
                 assert not rover.snapshot().armed  # waiting for the passenger: not armed for nothing
                 passenger.phase = "RIDING"
                 wait_for(lambda: rover.snapshot().mode == "OFFBOARD" and rover.snapshot().armed, 20, "armed in OFFBOARD")
@@ -136,6 +137,39 @@ def test_px4_rover_arms_when_the_passenger_rides_and_stops_outside_the_guard_aft
     assert summary["stopped_target_distance_m"] >= RADIUS
     assert snap.mode == "AUTO.LOITER" and snap.armed  # the carrier parked the rover in Hold when it was done
     assert all(b <= a + 0.05 for a, b in zip(d, d[1:]))  # the Ackermann rover closed in without loops
+
+
+def test_px4_rover_publishes_its_velocity_along_its_heading_and_its_measured_acceleration() -> None:
+    """carrier.acceleration_tau_s > 0: the state on Zenoh carries the acceleration the rover really
+    makes (the law ramps it at safety.carrier_max_accel_m_s2 = 1 m/s^2 once it rolls); its velocity
+    is along its heading."""
+    with rover_carrier(acceleration_tau_s=0.1) as (cfg, clock, sa, sb, backend, rover):
+        passenger = ScriptedPassenger(sb, clock)
+        samples: list[Any] = []
+        try:
+            with carrier_running(cfg, clock, sa, backend), CarrierFeed(sb, "cb", clock) as feed:
+                wait_for(lambda: feed.latest(), what="carrier state")
+                passenger.phase = "RIDING"
+
+                def rolling() -> bool:
+                    rx = feed.latest()
+                    if rx is not None and (not samples or rx.state.seq != samples[-1].seq):
+                        samples.append(rx.state)
+                    return rx is not None and float(np.linalg.norm(rx.state.velocity_ned_m_s)) > 1.5
+
+                wait_for(rolling, 30, "the rover at 1.5 m/s")
+        finally:
+            passenger.close()
+    ramp = [st for st in samples if 0.3 < float(np.linalg.norm(st.velocity_ned_m_s)) < 1.4]
+    assert len(ramp) >= 5, len(samples)
+    along = []
+    for st in ramp:
+        assert st.acceleration_ned_m_s2 is not None and st.yaw_rad is not None
+        heading = np.array([np.cos(st.yaw_rad), np.sin(st.yaw_rad), 0.0])
+        v = st.velocity_ned_m_s
+        assert abs(v[0] * heading[1] - v[1] * heading[0]) < 1e-9  # no sideways component
+        along.append(float(np.dot(st.acceleration_ned_m_s2, heading)))
+    assert 0.5 < float(np.median(along)) < 1.5, along
 
 
 def test_px4_rover_under_a_passenger_that_never_separates_stops_at_the_guard() -> None:

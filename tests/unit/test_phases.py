@@ -170,3 +170,26 @@ def test_mission_too_long_holds(model):
     assert state.reason == AbortReason.TIMEOUT.value
     assert any(d.request == "hold" for _, p, d in log if p == Phase.ABORT)
     assert log[-1][2].setpoint is None  # once Hold shows, nothing more is sent
+
+
+def test_riding_feeds_forward_the_acceleration_the_carrier_sent_capped_else_the_laws():
+    """A carrier that measures its acceleration sends it (a PX4 rover sticks, then leaps: not its
+    law); the passenger feeds that forward, capped at its own acceleration limit; without one it
+    predicts the law's: a_max along the command from rest."""
+    from mission.reference_phases import _carrier_acceleration
+
+    model = mission_model(load_config(CONFIGS / "demo.toml"))
+    cap = model.command_safety.max_accel_m_s2
+    assert cap is not None
+    vehicle = VehicleObs(np.zeros(3), np.zeros(3), True, "OFFBOARD", heartbeat_age_s=0.1)
+
+    def obs(accel):
+        return Observation(1.0, vehicle, CarrierObs(np.zeros(3), np.zeros(3), 0.0, acceleration_ned_m_s2=accel))
+
+    np.testing.assert_allclose(_carrier_acceleration(obs(np.array([0.3, -0.2, 0.0])), model), [0.3, -0.2, 0.0])
+    big = _carrier_acceleration(obs(np.array([0.0, 50.0, 0.0])), model)
+    np.testing.assert_allclose(big, [0.0, cap, 0.0])  # a feed-forward, never more than the passenger may do
+    law = _carrier_acceleration(obs(None), model)
+    assert norm(law) == pytest.approx(model.tick.carrier_safety.max_accel_m_s2, rel=1e-6)
+    e = model.tick.target - np.zeros(3)
+    assert float(np.dot(law, e)) > 0  # towards the target

@@ -57,6 +57,27 @@ def test_yaw_is_optional_and_unknown_fields_are_ignored() -> None:
     assert decode_carrier_json(_json(yaw=None)).yaw_rad is None
 
 
+def test_acceleration_is_optional_round_trips_and_is_none_when_absent_or_null() -> None:
+    assert decode_carrier_json(_json()).acceleration_ned_m_s2 is None  # an older carrier sends none
+    assert decode_carrier_json(_json(acceleration=None)).acceleration_ned_m_s2 is None
+    s = decode_carrier_json(_json(acceleration=[0.5, -1.25, 0.0]))
+    np.testing.assert_array_equal(s.acceleration_ned_m_s2, [0.5, -1.25, 0.0])
+    again = decode_carrier_json(encode_carrier_json(s))
+    np.testing.assert_array_equal(again.acceleration_ned_m_s2, [0.5, -1.25, 0.0])
+    assert json.loads(encode_carrier_json(decode_carrier_json(_json())))["acceleration"] is None
+    local = to_local_ned(decode_carrier_json(_json(frame="wgs84", position=[47.0, 8.0, 400.0], acceleration=[1, 2, 3])),
+                         GeoOrigin(47.0, 8.0, 400.0))
+    np.testing.assert_array_equal(local.acceleration_ned_m_s2, [1.0, 2.0, 3.0])
+
+
+@pytest.mark.parametrize(("value", "reason"), [([1.0, 2.0], "shape"), ("fast", "type"), ([0.0, "a", 0.0], "type"),
+                                               ([0.0, 2e3, 0.0], "range"), ([True, 0.0, 0.0], "type")])
+def test_a_bad_acceleration_is_rejected_naming_the_field(value: object, reason: str) -> None:
+    with pytest.raises(WireError) as info:
+        decode_carrier_json(_json(acceleration=value))
+    assert info.value.reason == reason and "acceleration" in str(info.value)
+
+
 def test_state_arrays_are_read_only() -> None:
     s = decode_carrier_json(_json())
     with pytest.raises(ValueError):
