@@ -39,9 +39,20 @@ pytestmark = [
 ]
 
 
-def _px4(ns: str, build: Path, out: Path, instance: int, airframe: int) -> subprocess.Popen[bytes]:
+# The rover's speed loop, tuned (PX4's rover tuning: RO_MAX_THR_SPEED, then RO_SPEED_P / RO_SPEED_I).
+# Airframe 10045 ships it open loop (P = I = 0.001: throttle = speed / RO_MAX_THR_SPEED): the SIH
+# rover then sticks below ~0.3 throttle and runs 1.7 m/s at 0.31, so asked for 1 m/s it swung
+# 0.3-1.7 m/s (measured). RO_ACCEL_LIM also slews the throttle (RO_ACCEL_LIM / RO_MAX_THR_SPEED
+# per second): 6 lets it break free sooner and leap less. PX4 SITL sets PX4_PARAM_<name> from the
+# environment at start.
+ROVER_PARAMS = {"RO_MAX_THR_SPEED": 4.0, "RO_SPEED_P": 0.5, "RO_SPEED_I": 0.1, "RO_ACCEL_LIM": 6.0}
+
+
+def _px4(ns: str, build: Path, out: Path, instance: int, airframe: int,
+         params: dict[str, float] | None = None) -> subprocess.Popen[bytes]:
     rootfs = out / f"rootfs{instance}"
-    script = (f"mount -t tmpfs px4tmp /tmp && exec env AIRFRAME={airframe} PX4_SIM_SPEED_FACTOR=1.08 "
+    env = " ".join(f"PX4_PARAM_{k}={v:g}" for k, v in (params or {}).items())
+    script = (f"mount -t tmpfs px4tmp /tmp && exec env AIRFRAME={airframe} PX4_SIM_SPEED_FACTOR=1.08 {env} "
               f"{build / 'run-sih.sh'} {rootfs} {instance}")
     with open(out / f"px4-{instance}.out", "wb") as log:  # the child keeps its own descriptor
         return subprocess.Popen(["ip", "netns", "exec", ns, "unshare", "-m", "sh", "-c", script], stdout=log,
@@ -81,7 +92,7 @@ def two_px4(tmp_path: Path) -> Iterator[tuple[str, Path]]:
     procs: list[subprocess.Popen[bytes]] = []
     try:
         subprocess.run(["ip", "netns", "exec", ns, "ip", "link", "set", "lo", "up"], check=True)
-        procs = [_px4(ns, build, tmp_path, 0, 10040), _px4(ns, build, tmp_path, 1, 10045)]
+        procs = [_px4(ns, build, tmp_path, 0, 10040), _px4(ns, build, tmp_path, 1, 10045, ROVER_PARAMS)]
         for i in (0, 1):  # PX4 prints this once its estimator has a home: armable
             _wait_text(tmp_path / f"px4-{i}.out", "home set", 60.0)
         yield ns, tmp_path
