@@ -43,9 +43,10 @@ pytestmark = [
 # Airframe 10045 ships it open loop (P = I = 0.001: throttle = speed / RO_MAX_THR_SPEED): the SIH
 # rover then sticks below ~0.3 throttle and runs 1.7 m/s at 0.31, so asked for 1 m/s it swung
 # 0.3-1.7 m/s (measured). RO_ACCEL_LIM also slews the throttle (RO_ACCEL_LIM / RO_MAX_THR_SPEED
-# per second): 6 lets it break free sooner and leap less. PX4 SITL sets PX4_PARAM_<name> from the
-# environment at start.
-ROVER_PARAMS = {"RO_MAX_THR_SPEED": 4.0, "RO_SPEED_P": 0.5, "RO_SPEED_I": 0.1, "RO_ACCEL_LIM": 6.0}
+# per second) and RO_DECEL_LIM its fall: 6 for both lets it break free sooner and cut its throttle
+# sooner once free, so it leaps less (rover-only ramps to 1 m/s at 1 m/s^2: peak 1.0 m/s with both
+# at 6, 1.09-1.34 with RO_ACCEL_LIM 6 alone, 1.26 with both at 3). PX4 SITL sets PX4_PARAM_<name> from the environment at start.
+ROVER_PARAMS = {"RO_MAX_THR_SPEED": 4.0, "RO_SPEED_P": 0.5, "RO_SPEED_I": 0.1, "RO_ACCEL_LIM": 6.0, "RO_DECEL_LIM": 6.0}
 
 
 def _px4(ns: str, build: Path, out: Path, instance: int, airframe: int,
@@ -126,11 +127,14 @@ def test_quadrotor_and_rover_on_px4_each_in_offboard_p1_p3_and_the_rover_stops_o
     assert "carrier vehicle armed and in OFFBOARD" in carrier_err  # the rover under our controller
     assert s["phase"] == "DONE" and s["p2"] and s["p3"], s
     # P1 needs the passenger within mission.dock_tolerance_m (0.5 m) of the dock point while riding.
-    # With the tracking that holds a smoothly driven dock within ~0.2 m on PX4 (px4_sitl.toml), the
-    # SIH rover still shakes it off by ~1 m (measured 0.96 m): the rover's speed swings 0.3-1.4 m/s
-    # under its steering while the passenger's feed-forward predicts the carrier law's smooth motion
-    # (issue 14, open). Held to what was measured, not to P1.
-    assert s["max_offset_before_separation_m"] < 2.0, s["max_offset_before_separation_m"]
+    # With the rover's speed loop closed, its velocity published along its heading and its measured
+    # acceleration fed forward, the ride itself stays within ~0.3 m; what is left is the start: the
+    # SIH rover sticks until its throttle breaks it free, then leaps to 0.7-1.2 m/s within ~0.3 s,
+    # and the quadrotor lags that by 0.34-0.68 m (P1 held, 0.42-0.45 m, in 3 of 4 flights at load
+    # 7-13). A loaded machine also stalls PX4 or our processes for 0.5-0.7 s, and the carrier's
+    # stale-state failsafe then stops the rover under the passenger (1.07 m). Held to what was
+    # measured, not to P1 (README "Driving a real carrier").
+    assert s["max_offset_before_separation_m"] < 1.5, s["max_offset_before_separation_m"]
     assert s["final_passenger_target_distance_m"] <= 0.5  # the passenger arrived
     assert c["backend"] == "mavlink" and c["mode"] == "separated"
     assert c["closest_target_distance_m"] >= 8.0 - 0.5  # b c - 0.5 m: the rover stops short of it
