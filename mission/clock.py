@@ -351,9 +351,10 @@ class LockstepClock:
 
     # ---- upstream events (I/O threads) ------------------------------------------------------
     def advance(self, t_ns: int) -> None:
-        """The upstream's time is ``t_ns`` (between barriers: messages that follow were sent then)."""
+        """The upstream's time is ``t_ns`` (between barriers: messages that follow were sent then).
+        Not proof that the upstream still steps with us (one that left goes on in real time, with
+        its time marks): only a barrier feeds the watchdog."""
         with self._cv:
-            self._last_upstream_wall = time.monotonic()
             if self._started and t_ns > self._t_ns and not self._running:
                 self._t_ns = t_ns
 

@@ -131,7 +131,7 @@ class MockVehicle:
         self._position_fault_done = False  # FaultOptions.position_lost_at_s applied
         self._events: collections.deque[tuple[float, int, str]] = collections.deque(maxlen=1000)
         self._unsent: list[tuple[float, int, str]] = []
-        self._lockstep = LockstepStepper(self, opts.lockstep_watchdog_wall_s, PHYSICS_DT_S) if opts.lockstep else None
+        self._lockstep = LockstepStepper(self, opts.lockstep_watchdog_wall_s, PHYSICS_DT_S, opts.lockstep_max_speed) if opts.lockstep else None
         self._handlers = MessageHandlers(self)
         self._io = LinkIO(self)
 

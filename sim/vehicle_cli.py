@@ -137,13 +137,17 @@ def _write_port_file(path: Path, port: int) -> None:
               help="Write the bound UDP port to PATH once listening (for a parent process).")
 @click.option("--lockstep", is_flag=True, help="Own simulated time and step in lockstep with the controller on the "
               "onboard link (marsupial run --lockstep); --speed is then the pace after the controller is gone.")
+@click.option("--lockstep-watchdog", "lockstep_watchdog_s", type=click.FloatRange(min=0.0, min_open=True), default=10.0,
+              show_default=True, metavar="SECONDS", help="With --lockstep: a controller silent this long (wall) is gone.")
+@click.option("--lockstep-max-speed", type=click.FloatRange(min=0.0, min_open=True), default=None, metavar="FACTOR",
+              help="With --lockstep: at most FACTOR simulated seconds per wall second (default: as fast as it goes).")
 @click.option("--status-every", type=click.FloatRange(min=0.0), default=5.0, show_default=True, metavar="SECONDS",
               help="Log a status line with mode, position and the counters every SECONDS of wall time (0: never).")
 def mock_vehicle(mavlink_url: str, target_url: str, gcs_url: str | None, speed: float, home: str, start_ned: str,
                  sysid: int, frame: str, params: tuple[str, ...], wind: str, estimate_drift: float, position_noise: float, loss_in: float,
                  loss_out: float, latency_ms: float, jitter_ms: float, blackouts: tuple[str, ...],
                  refuse_arming: str | None, refuse_offboard: str | None, lose_position_s: float | None, seed: int, signing_key: Path | None, port_file: Path | None,
-                 lockstep: bool, status_every: float) -> None:
+                 lockstep: bool, lockstep_watchdog_s: float, lockstep_max_speed: float | None, status_every: float) -> None:
     """Run the PX4-like MAVLink vehicle until SIGINT or SIGTERM.
 
     By default it mirrors PX4 SITL: it binds UDP 127.0.0.1:14580, sends HEARTBEAT and the
@@ -162,7 +166,8 @@ def mock_vehicle(mavlink_url: str, target_url: str, gcs_url: str | None, speed: 
         params=dict(_param(p) for p in params), faults=faults,
         signing_key=read_signing_key(signing_key) if signing_key else None,
         wind_ned_m_s=_floats(wind, 3, "--wind"), position_noise_m=position_noise,  # type: ignore[arg-type]
-        estimate_drift_m_s=estimate_drift, lockstep=lockstep)
+        estimate_drift_m_s=estimate_drift, lockstep=lockstep, lockstep_watchdog_wall_s=lockstep_watchdog_s,
+        lockstep_max_speed=lockstep_max_speed)
     run(options, port_file, status_every)
 
 

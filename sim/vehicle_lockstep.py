@@ -43,8 +43,10 @@ class LockstepStepper:
     """Runs a :class:`~sim.vehicle.MockVehicle`'s loop in lockstep with the controller on its
     onboard link, advancing the vehicle's clock (a :class:`~mission.clock.ManualClock`)."""
 
-    def __init__(self, vehicle: MockVehicle, watchdog_wall_s: float, step_s: float) -> None:
+    def __init__(self, vehicle: MockVehicle, watchdog_wall_s: float, step_s: float,
+                 max_speed: float | None = None) -> None:
         self.v = vehicle
+        self.max_speed = max_speed  # at most this many simulated seconds per wall second (None: no limit)
         self._step_ns = round(step_s * 1e9)  # the vehicle's physics step [ns]
         self.watchdog_wall_s = watchdog_wall_s
         self.batching = False  # a step's packets go out as one datagram per link
@@ -66,7 +68,12 @@ class LockstepStepper:
     def _step_until_left(self) -> None:
         v = self.v
         onboard, joined = v._links[0], False
+        start: tuple[int, float] | None = None  # (t [ns], wall [s]) when the controller first answered
         while not v._stop_event.is_set():
+            if start is not None and self.max_speed is not None:  # hold the barrier until the wall clock catches up
+                ahead_s = (self.t_ns - start[0]) / 1e9 / self.max_speed - (time.monotonic() - start[1])
+                if ahead_s > 0 and v._stop_event.wait(ahead_s):
+                    return
             with v._lock:
                 v._service_step()
                 self._barrier_ns, self._answer = self.t_ns, None
@@ -80,6 +87,7 @@ class LockstepStepper:
                          v._t_s, v.options.speed)
                 return
             joined = True
+            start = start or (self.t_ns, time.monotonic())
             target = max(v._steps + 1, math.ceil(answer / self._step_ns - 1e-6))
             with v._lock:
                 while v._steps < target - 1:

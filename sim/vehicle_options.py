@@ -32,7 +32,9 @@ class VehicleOptions:
     are rejected and everything sent is signed.
     lockstep: own simulated time and step in lockstep with the controller on the onboard link
     (:mod:`mission.lockstep`); ``speed`` is then the pace after the controller leaves or stays
-    silent for ``lockstep_watchdog_wall_s`` wall seconds.
+    silent for ``lockstep_watchdog_wall_s`` wall seconds. ``lockstep_max_speed``: in lockstep, fly at
+    most this many simulated seconds per wall second (None: as fast as the CPU allows), so that
+    a test acting from outside at a phase (a kill, a pilot) has a known margin.
     """
 
     bind: str = "127.0.0.1:0"
@@ -54,6 +56,7 @@ class VehicleOptions:
     frame: str = "quadrotor"  # or "rover": MAV_TYPE_GROUND_ROVER, Ackermann kinematics (sim.rover_physics)
     lockstep: bool = False
     lockstep_watchdog_wall_s: float = 10.0  # mission.lockstep.VEHICLE_WATCHDOG_WALL_S
+    lockstep_max_speed: float | None = None
 
     def __post_init__(self) -> None:
         if not self.speed > 0:
@@ -64,6 +67,10 @@ class VehicleOptions:
             raise ValueError(f"signing_key must be 32 bytes, got {len(self.signing_key)}")
         if not self.estimate_drift_m_s >= 0:
             raise ValueError(f"estimate_drift_m_s must be >= 0, got {self.estimate_drift_m_s!r}")
+        if self.lockstep_max_speed is not None and not self.lockstep_max_speed > 0:
+            raise ValueError(f"lockstep_max_speed must be > 0, got {self.lockstep_max_speed!r}")
+        if not self.lockstep_watchdog_wall_s > 0:
+            raise ValueError(f"lockstep_watchdog_wall_s must be > 0, got {self.lockstep_watchdog_wall_s!r}")
         if self.frame not in FRAMES:
             raise ValueError(f"frame must be one of {sorted(FRAMES)}, got {self.frame!r}")
 

@@ -127,10 +127,12 @@ class Flight:
         self.procs[name] = proc
         return proc
 
-    def start_carrier(self) -> None:
+    def start_carrier(self, lockstep: bool | None = None) -> None:
+        """Start (or restart) the carrier; ``lockstep`` None: as the flight (False: real time at ``speed``)."""
+        mode = self._mode if lockstep is None or lockstep else []
         self._popen("carrier", cli("-v", "carrier", str(self.config), "--speed", str(self.speed), "--pair", self.pair,
                                    "--zenoh-connect", self.router.endpoint, "--summary", str(self.dir / "carrier.json"),
-                                   *self._mode))
+                                   *mode))
 
     @property
     def _mode(self) -> list[str]:

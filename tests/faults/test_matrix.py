@@ -27,7 +27,7 @@ import pytest
 
 from mission import px4
 from mission.log import summarise
-from tests.faults.procs import Flight, Router, assert_log_complete, assert_safe_end, fleet_config, flight, wait_for
+from tests.faults.procs import SPEED, Flight, Router, assert_log_complete, assert_safe_end, fleet_config, flight, wait_for
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(120)]
 
@@ -145,8 +145,15 @@ def test_long_blackouts_before_and_after_separation_lose_the_vehicle_and_px4_lan
                  lambda: _long_blackout(tmp_path, "navigating", 17.95, True))
 
 
+# Lockstep flights acted on from outside at a phase the test reads (a kill, a pilot): at most
+# SPEED simulated seconds per wall second, so the flight never runs away from the test's reaction;
+# the vehicle drops a silent controller after 4 s (wall) rather than 10 (still longer than the 2 s
+# the controller waits for a dead carrier, mission.lockstep.CARRIER_WATCHDOG_WALL_S).
+PACED = ("--lockstep-max-speed", str(SPEED), "--lockstep-watchdog", "4")
+
+
 def _mission_killed(tmp_path: Path) -> None:
-    with flight(tmp_path, "killed") as f:
+    with flight(tmp_path, "killed", lockstep=True, vehicle_args=PACED) as f:
         f.wait_phase("RIDING")
         wait_for(lambda: len(f.record()) > 0 and f.record()[-1]["phase"] == "RIDING", 10.0, "RIDING in the record")
         rows_before = len(f.record())
@@ -169,7 +176,7 @@ def _mission_killed(tmp_path: Path) -> None:
 
 
 def _gcs_takeover(tmp_path: Path) -> None:
-    with flight(tmp_path, "takeover") as f:
+    with flight(tmp_path, "takeover", lockstep=True, vehicle_args=PACED) as f:
         f.wait_phase("RIDING")
         assert f.gcs is not None
         ack = f.gcs.set_mode(px4.HOLD)
@@ -187,7 +194,9 @@ def _gcs_takeover(tmp_path: Path) -> None:
 def test_mission_killed_falls_back_per_com_obl_rc_act_and_pilot_takeover_is_not_fought(tmp_path: Path) -> None:
     """SIGKILL of ``marsupial run`` while riding: no background resend survives it, so PX4's
     offboard-loss failsafe fires (POSCTL, descend, land, disarm). A pilot (here a ground
-    station) switching to Hold while riding: the mission stops commanding at once, exit 5."""
+    station) switching to Hold while riding: the mission stops commanding at once, exit 5.
+    Both fly in lockstep until the event; the killed controller's vehicle goes on in real time
+    after its watchdog (PX4's offboard-loss timer runs on the vehicle's simulated time)."""
     concurrently(lambda: _mission_killed(tmp_path), lambda: _gcs_takeover(tmp_path))
 
 
@@ -231,20 +240,21 @@ def _position_lost(tmp_path: Path) -> None:
 
 
 def _carrier_killed(tmp_path: Path, name: str, during: str) -> None:
-    with flight(tmp_path, name) as f:
+    with flight(tmp_path, name, lockstep=True, vehicle_args=PACED) as f:
         f.wait_phase(during)
         f.procs["carrier"].send_signal(signal.SIGKILL)
         f.procs["carrier"].wait(timeout=5.0)
         wait_for(lambda: not f.carrier_alive(), 5.0, "carrier token gone")
-        f.start_carrier()  # restarted: counts from seq 0 at its start position
-        if during == "RIDING":
+        if during == "RIDING":  # the controller waits 2 s (wall) for the dead carrier's step, then flies on without it
             f.wait_mission(30.0)
+            f.start_carrier(lockstep=False)  # restarted, with no passenger riding: counts from seq 0 at its start
             assert_exit(f, 5, "carrier_lost")
             assert_log_complete(f, "ABORT", "carrier_lost")
             v = assert_safe_end(f, modes=("AUTO.LOITER",))  # Hold, armed, in the air
             assert v["ned"][2] < -0.5
             assert_never_disarmed_in_the_air(f)
         else:
+            f.start_carrier(lockstep=False)  # restarted while the passenger navigates (real time: not a participant)
             assert_completed(f)
         wait_for(f.carrier_alive, 15.0, "restarted carrier up")
         # the restarted carrier never drives at the target without a riding passenger
@@ -254,7 +264,7 @@ def _carrier_killed(tmp_path: Path, name: str, during: str) -> None:
 def test_carrier_killed_and_restarted_before_and_after_separation(tmp_path: Path) -> None:
     """SIGKILL of the carrier while riding: its liveliness token goes at once; abort
     carrier_lost to Hold (exit 5); the restarted carrier does not move. While navigating: the
-    anchor is latched, the mission completes (exit 0)."""
+    anchor is latched, the mission completes (exit 0). In lockstep until the kill."""
     concurrently(lambda: _carrier_killed(tmp_path, "carrier-riding", "RIDING"),
                  lambda: _carrier_killed(tmp_path, "carrier-navigating", "NAVIGATING"))
 
