@@ -42,7 +42,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Annotated, Any, Literal, get_args
+from typing import Annotated, Any, ClassVar, Literal, get_args
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError, model_validator
@@ -157,12 +157,20 @@ def _reason(error: Any) -> str:
     return _REASON_OF_ERROR.get(kind, "type")
 
 
-def wire_error(exc: ValidationError) -> WireError:
-    """The :class:`WireError` of a failed validation: a decode error first, then a missing field,
-    else the first error (fields are checked in wire order)."""
+def wire_error(exc: ValidationError, check_order: tuple[str, ...] = ()) -> WireError:
+    """The :class:`WireError` of a failed validation. Of several errors: a decode error, else a
+    missing field, else the error of the field that comes first in ``check_order`` (field names
+    or JSON names; the order the hand-written checks had), else the first."""
     errors = exc.errors(include_url=False)
     reasons = [_reason(e) for e in errors]
-    i = next((reasons.index(r) for r in ("decode", "missing") if r in reasons), 0)
+
+    def rank(i: int) -> tuple[int, int, int]:
+        loc = errors[i]["loc"]
+        field = loc[0] if loc else ""
+        order = check_order.index(field) if field in check_order else len(check_order)
+        return {"decode": 0, "missing": 1}.get(reasons[i], 2), order, i
+
+    i = min(range(len(errors)), key=rank)
     where = ".".join(str(p) for p in errors[i]["loc"])
     return WireError(reasons[i], f"{where}: {errors[i]['msg']}" if where else errors[i]["msg"])
 
@@ -198,11 +206,14 @@ class _Message(BaseModel):
 
     model_config = ConfigDict(frozen=True, extra="ignore", validate_by_name=True, validate_by_alias=True)
 
+    #: The order in which fields are judged when a message has several faults (wire_error).
+    _check_order: ClassVar[tuple[str, ...]] = ()
+
     def _validated(self, **fields: Any) -> None:
         try:
             super().__init__(**fields)
         except ValidationError as exc:
-            raise wire_error(exc) from None
+            raise wire_error(exc, self._check_order) from None
 
     @classmethod
     def from_json(cls, raw: bytes | bytearray | memoryview | str) -> Any:
@@ -211,7 +222,7 @@ class _Message(BaseModel):
             return cls.model_validate_json(bytes(raw) if isinstance(raw, memoryview) else raw, by_alias=True,
                                            by_name=False)
         except ValidationError as exc:
-            raise wire_error(exc) from None
+            raise wire_error(exc, cls._check_order) from None
 
     def to_json(self) -> bytes:
         """The JSON bytes of this message (wire names)."""
@@ -235,6 +246,8 @@ class CarrierState(_Message):
     velocity_ned_m_s: VelocityNed = Field(alias="velocity")
     yaw_rad: Real | None = Field(None, alias="yaw")
     acceleration_ned_m_s2: AccelerationNed | None = Field(None, alias="acceleration")
+
+    _check_order = ("frame", "stamp", "stamp_s", "seq", "position", "velocity", "velocity_ned_m_s", "yaw", "yaw_rad")
 
     def __init__(self, stamp_s: float, seq: int, frame: str, position: Any, velocity_ned_m_s: Any,
                  yaw_rad: float | None = None, acceleration_ned_m_s2: Any = None) -> None:
@@ -268,6 +281,9 @@ class PassengerStatus(_Message):
     velocity_ned_m_s: VelocityNed = Field(alias="velocity")
     separated: Flag
     anchor_ned_m: PositionNed | None = Field(None, alias="anchor")
+
+    _check_order = ("phase", "separated", "stamp", "stamp_s", "seq", "position", "position_ned_m", "velocity",
+                    "velocity_ned_m_s", "anchor", "anchor_ned_m")
 
     def __init__(self, phase: str, stamp_s: float, seq: int, position_ned_m: Any, velocity_ned_m_s: Any,
                  separated: bool = False, anchor_ned_m: Any = None) -> None:

@@ -257,3 +257,52 @@ def test_passenger_status_round_trip_and_validation() -> None:
         with pytest.raises(WireError) as info:
             decode_passenger_json(json.dumps(obj).encode())
         assert info.value.reason == reason, bad
+
+
+def test_values_built_in_code_take_numpy_and_are_checked_like_the_wire() -> None:
+    s = CarrierState(np.float32(1.5), np.int64(3), "local_ned", np.array([1, 2, 3], dtype=np.int32),
+                     (0.5, 0.0, 0.0), np.float64(0.25))
+    assert (s.stamp_s, s.seq, s.yaw_rad) == (1.5, 3, 0.25) and type(s.seq) is int
+    assert s.position.dtype == float and not s.position.flags.writeable
+    p = PassengerStatus("RIDING", 1.0, 1, np.zeros(3), np.zeros(3), np.bool_(True), None)
+    assert p.separated is True
+    for kwargs, reason in [
+        ({"position": np.zeros((3, 1))}, "shape"),
+        ({"position": np.zeros(4)}, "shape"),
+        ({"position": np.array([True, False, True])}, "type"),
+        ({"position": [0.0, math.nan, 0.0]}, "nonfinite"),
+        ({"velocity_ned_m_s": [0.0, 1e4, 0.0]}, "range"),
+        ({"seq": 2**63}, "range"),
+        ({"seq": 1.0}, "type"),
+        ({"stamp_s": 10**400}, "nonfinite"),
+        ({"frame": "enu"}, "frame"),
+    ]:
+        args = {"stamp_s": 1.0, "seq": 1, "frame": "local_ned", "position": [0.0] * 3, "velocity_ned_m_s": [0.0] * 3}
+        args.update(kwargs)
+        with pytest.raises(WireError) as info:
+            CarrierState(**args)  # type: ignore[arg-type]
+        assert info.value.reason == reason, kwargs
+
+
+def test_several_faults_name_a_missing_field_then_the_first_in_check_order() -> None:
+    for payload, reason in [
+        (b'{"stamp": NaN, "frame": "local_ned", "position": [0, 0, 0], "velocity": [0, 0, 0]}', "missing"),
+        (_json(stamp="x", position=[1, 2]), "type"),  # stamp before position
+        (_json(seq=-1, frame="enu"), "frame"),  # the frame is judged first
+        (_json(velocity=[1, 2], yaw=math.inf, position=[0, 0, 1e300]), "range"),  # position, velocity, yaw
+    ]:
+        with pytest.raises(WireError) as info:
+            decode_carrier_json(payload)
+        assert info.value.reason == reason, payload
+    with pytest.raises(WireError) as info:  # the phase is judged before the numbers
+        PassengerStatus("FLYING", math.nan, -1, [0, 0], [0, 0, 0], "no")  # type: ignore[arg-type]
+    assert info.value.reason == "phase"
+
+
+def test_the_wire_names_are_the_only_names_on_the_wire() -> None:
+    named_in_code = json.dumps({"stamp_s": 1.0, "seq": 1, "frame": "local_ned", "position": [0, 0, 0],
+                                "velocity_ned_m_s": [0, 0, 0]}).encode()
+    with pytest.raises(WireError) as info:
+        decode_carrier_json(named_in_code)
+    assert info.value.reason == "missing"
+    assert json.loads(encode_carrier_json(decode_carrier_json(_json()))).keys() == GOOD.keys()
