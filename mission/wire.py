@@ -247,7 +247,8 @@ class CarrierState(_Message):
     yaw_rad: Real | None = Field(None, alias="yaw")
     acceleration_ned_m_s2: AccelerationNed | None = Field(None, alias="acceleration")
 
-    _check_order = ("frame", "stamp", "stamp_s", "seq", "position", "velocity", "velocity_ned_m_s", "yaw", "yaw_rad")
+    _check_order = ("frame", "stamp", "stamp_s", "seq", "position", "velocity", "velocity_ned_m_s", "yaw", "yaw_rad",
+                    "acceleration", "acceleration_ned_m_s2")
 
     def __init__(self, stamp_s: float, seq: int, frame: str, position: Any, velocity_ned_m_s: Any,
                  yaw_rad: float | None = None, acceleration_ned_m_s2: Any = None) -> None:
