@@ -3,6 +3,8 @@
 Sections (``--section NAME``, repeatable; all by default):
 
 1. ``tick``   law + safety tick (:func:`bench.law_bench.tick_latency`), 0/1/8 obstacles.
+   ``wire``   decoding one bus sample (:mod:`bench.wire_bench`): JSON carrier state and
+              passenger status, CDR Odometry, a hostile JSON sample refused.
 2. ``e2e``    carrier sample published on Zenoh -> the setpoint computed from it arrives at the
               vehicle's socket, controller at 50 and 250 Hz, beside the transport floor (Zenoh-only
               and MAVLink-only pings) measured in the same run (:mod:`bench.e2e` tells how).
@@ -32,7 +34,7 @@ import click
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-SECTIONS = ("tick", "e2e", "stream", "demo", "batch", "memory")
+SECTIONS = ("tick", "wire", "e2e", "stream", "demo", "batch", "memory")
 E2E_RATES_HZ = (50.0, 250.0)
 STREAM_RATES_HZ = (50.0, 250.0, 1000.0)
 DEMO_SPEEDS = (1.0, 10.0, 20.0, 50.0)
@@ -108,6 +110,14 @@ class Bench:
             target, ok = ("p99 <= 50 us", t["p99_us"] <= 50.0) if n == 8 else ("", None)
             self.row("tick", f"{n} obstacles: p50 / p99 [us] (thread CPU)",
                      f"{t['p50_us']:.1f} / {t['p99_us']:.1f} ({t['cpu_p50_us']:.1f} / {t['cpu_p99_us']:.1f})", target, ok)
+
+    def wire(self) -> None:
+        from bench.wire_bench import decode_costs
+
+        costs = decode_costs(2000 if self.quick else 20000)
+        self.results["wire"] = costs
+        for c in costs:
+            self.row("wire", f"{c['message']}: p50 / p99 [us] (thread CPU)", f"{c['p50_us']:.1f} / {c['p99_us']:.1f}")
 
     def e2e(self) -> None:
         from bench.floor import mavlink_ping, zenoh_ping
