@@ -198,6 +198,10 @@ class MissionSection(Section):
     telemetry_rate_hz: float | None = Field(
         50.0, gt=0, le=1000, description="[Hz] LOCAL_POSITION_NED rate asked of the vehicle (MAV_CMD_SET_MESSAGE_INTERVAL); "
         "None: leave the vehicle's default")
+    unused_streams: Literal["keep", "stop"] = Field(
+        "keep", description="[-] `stop`: once the preflight checks passed, ask the vehicle to stop the onboard-profile "
+        "streams the mission never reads (SET_MESSAGE_INTERVAL -1 each; PX4 honours it on the link it came on), so "
+        "less telemetry is sent and parsed; `keep`: leave them streaming (the tlog then has them all)")
     final_action: Literal["hold", "land"] = "hold"
     carrier_timeout_s: float = Field(0.5, gt=0, le=10, description="[s] a carrier state older than this is lost")
     heartbeat_timeout_s: float = Field(3.0, gt=0, le=30, description="[s] MAVSDK also declares a vehicle lost after 3 s")

@@ -24,6 +24,7 @@ from mission.clock import Clock, Periodic, join_thread
 from mission.config import Config
 from mission.errors import CommandRejected, LinkError
 from mission.log import FlightRecorder
+from mission.mavlink_env import mavlink
 from mission.model import mission_model
 from mission.phases import CarrierObs, Decision, MissionState, Observation, Phase, VehicleObs
 from mission.ports import CarrierSource, Request, StatusSink, Vehicle
@@ -31,7 +32,11 @@ from mission.wire import GeoOrigin, PassengerStatus
 
 log = logging.getLogger(__name__)
 
-LOCAL_POSITION_NED_ID = 32  # MAVLink message id
+LOCAL_POSITION_NED_ID = mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED
+# PX4's onboard-profile streams the mission never reads (stopped with mission.unused_streams = "stop")
+UNUSED_STREAMS = tuple(getattr(mavlink, f"MAVLINK_MSG_ID_{name}") for name in (
+    "ATTITUDE_QUATERNION", "GLOBAL_POSITION_INT", "HIGHRES_IMU", "ODOMETRY", "POSITION_TARGET_LOCAL_NED",
+    "ATTITUDE_TARGET", "ALTITUDE", "VFR_HUD", "ESTIMATOR_STATUS", "HOME_POSITION"))
 ABORT_GRACE_S = 15.0  # longest the loop keeps asking for Hold after an abort [s]
 
 
@@ -224,7 +229,7 @@ class MissionController:
         self._origin_given = False
         self._received: Any = None
         self._rates: list[float] = []  # LOCAL_POSITION_NED rate seen each flying tick [Hz]
-        self._rate_asked = cfg.mission.telemetry_rate_hz is None
+        self._rate_asked = cfg.mission.telemetry_rate_hz is None and cfg.mission.unused_streams == "keep"
 
     def _observe(self, t: float, worker: CommandWorker) -> Observation:
         vstate = self.link.state
@@ -242,18 +247,30 @@ class MissionController:
     def _ask_telemetry_rate(self) -> None:
         """Once the preflight checks passed: ask the vehicle for LOCAL_POSITION_NED at ``mission.telemetry_rate_hz``
         (PX4 streams 30 Hz to a 50 Hz loop by default), off the loop. A refusal is logged and the
-        mission flies at the rate that comes (the summary's ``position_rate_hz`` says which)."""
+        mission flies at the rate that comes (the summary's ``position_rate_hz`` says which). Then, with
+        ``mission.unused_streams = "stop"``, ask it to stop the streams the mission never reads."""
         rate = self.cfg.mission.telemetry_rate_hz
-        if self._rate_asked or rate is None or self.state.phase in (Phase.PREFLIGHT, Phase.ABORT, Phase.DONE):
+        if self._rate_asked or self.state.phase in (Phase.PREFLIGHT, Phase.ABORT, Phase.DONE):
             return  # after the preflight checks only: a refused start sends the vehicle nothing
         self._rate_asked = True
 
         def ask() -> None:
             try:
-                self.link.set_message_interval(LOCAL_POSITION_NED_ID, rate)
-                log.info("asked the vehicle for LOCAL_POSITION_NED at %g Hz", rate)
+                if rate is not None:
+                    self.link.set_message_interval(LOCAL_POSITION_NED_ID, rate)
+                    log.info("asked the vehicle for LOCAL_POSITION_NED at %g Hz", rate)
             except (CommandRejected, LinkError) as exc:
                 log.warning("vehicle did not take LOCAL_POSITION_NED at %g Hz (%s); flying at the rate it streams", rate, exc)
+            if self.cfg.mission.unused_streams == "stop":
+                stopped = 0
+                for msg_id in UNUSED_STREAMS:
+                    try:
+                        self.link.set_message_interval(msg_id, 0.0)
+                        stopped += 1
+                    except (CommandRejected, LinkError) as exc:  # it streams what it streams
+                        log.debug("vehicle did not stop message %d: %s", msg_id, exc)
+                log.info("asked the vehicle to stop %d of %d streams the mission does not read", stopped,
+                         len(UNUSED_STREAMS))
 
         threading.Thread(target=ask, name="mission-telemetry-rate", daemon=True).start()
 

@@ -106,11 +106,11 @@ class Commander:
                        timeout_s=timeout_s, retries=retries)
 
     def set_message_interval(self, message_id: int, rate_hz: float, timeout_s: float = 0.5, retries: int = 2) -> None:
-        """Ask the vehicle to stream ``message_id`` at ``rate_hz`` [Hz] (MAV_CMD_SET_MESSAGE_INTERVAL);
-        raises CommandRejected or LinkTimeout like :meth:`command_long`."""
-        if not rate_hz > 0:
-            raise ValueError(f"rate_hz must be > 0, got {rate_hz!r}")
-        self.command_long(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, float(message_id), 1e6 / rate_hz,
+        """Ask the vehicle to stream ``message_id`` at ``rate_hz`` [Hz], 0: not at all (interval -1)
+        (MAV_CMD_SET_MESSAGE_INTERVAL); raises CommandRejected or LinkTimeout like :meth:`command_long`."""
+        if not rate_hz >= 0:
+            raise ValueError(f"rate_hz must be >= 0, got {rate_hz!r}")
+        self.command_long(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, float(message_id), 1e6 / rate_hz if rate_hz > 0 else -1.0,
                           timeout_s=timeout_s, retries=retries)
 
     def takeoff(self, alt_m: float | None, origin: tuple[float, float, float] | None, timeout_s: float = 0.5,
