@@ -126,15 +126,16 @@ def test_quadrotor_and_rover_on_px4_each_in_offboard_p1_p3_and_the_rover_stops_o
     assert code == 0, (out / "mission.err").read_text(errors="replace")[-3000:]
     assert "carrier vehicle armed and in OFFBOARD" in carrier_err  # the rover under our controller
     assert s["phase"] == "DONE" and s["p2"] and s["p3"], s
-    # P1 needs the passenger within mission.dock_tolerance_m (0.5 m) of the dock point while riding.
-    # With the rover's speed loop closed, its velocity published along its heading and its measured
-    # acceleration fed forward, the ride itself stays within ~0.3 m; what is left is the start: the
-    # SIH rover sticks until its throttle breaks it free, then leaps to 0.7-1.2 m/s within ~0.3 s,
-    # and the quadrotor lags that by 0.34-0.68 m (P1 held, 0.42-0.45 m, in 3 of 4 flights at load
-    # 7-13). A loaded machine also stalls PX4 or our processes for 0.5-0.7 s, and the carrier's
-    # stale-state failsafe then stops the rover under the passenger (1.07 m). Held to what was
-    # measured, not to P1 (README "Driving a real carrier").
-    assert s["max_offset_before_separation_m"] < 1.5, s["max_offset_before_separation_m"]
+    # P1: the passenger within mission.dock_tolerance_m (0.5 m) of the dock point while riding. It
+    # holds with the rover's speed loop closed (ROVER_PARAMS), its velocity published along its
+    # heading and its measured acceleration fed forward: 0.27-0.45 m in the 5 flights of this
+    # configuration that rode to separation, at load 6-15 (quadrotor-only pair beside: 0.27 m).
+    # The margin is the rover's start: it sticks until its throttle breaks it free, then leaps to
+    # ~1.1 m/s within ~0.3 s, and the quadrotor lags, then overshoots it (README "Driving a real
+    # carrier"). A machine stalled for 0.5-2 s (other jobs) stops the rover under its passenger
+    # (carrier.state_timeout_s) or aborts the flight (carrier_lost): that is not P1's to hold.
+    assert s["p1"], s["max_offset_before_separation_m"]
+    assert s["max_offset_before_separation_m"] <= 0.5
     assert s["final_passenger_target_distance_m"] <= 0.5  # the passenger arrived
     assert c["backend"] == "mavlink" and c["mode"] == "separated"
     assert c["closest_target_distance_m"] >= 8.0 - 0.5  # b c - 0.5 m: the rover stops short of it
