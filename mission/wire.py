@@ -96,11 +96,11 @@ class WireError(MarsupialError):
 
 def _python_values(value: Any) -> Any:
     """A numpy scalar or array as the Python value(s) it holds (built in code, never on the wire)."""
-    if isinstance(value, np.ndarray):
+    if isinstance(value, np.ndarray) and value.ndim != 0:
         if value.ndim != 1:
             raise PydanticCustomError("shape", "must be a vector, got shape {shape}", {"shape": value.shape})
         return value.tolist()
-    return value.item() if isinstance(value, np.generic) else value
+    return value.item() if isinstance(value, (np.generic, np.ndarray)) else value
 
 
 def _frozen_array(values: list[float]) -> np.ndarray:
@@ -185,7 +185,7 @@ def velocity3(value: Any, name: str) -> np.ndarray:
         return _VELOCITY.validate_python(value)
     except ValidationError as exc:
         err = wire_error(exc)
-        raise WireError(err.reason, f"{name}{err.detail}") from None
+        raise WireError(err.reason, f"{name}: {err.detail}") from None
 
 
 def wrap_pi(angle_rad: float) -> float:
