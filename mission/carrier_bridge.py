@@ -42,10 +42,10 @@ from mission.bus_feeds import (
     ReceivedPassengerStatus,
 )
 from mission.bus_publishers import CarrierPublisher, PassengerPublisher
-from mission.zenoh_session import Encoding, Keys, declare, describe_endpoints, keys, open_session, zenoh_config
+from mission.zenoh_session import Encoding, Keys, declare, describe_endpoints, keys, open_session, undeclare, zenoh_config
 
 __all__ = [
     "MAX_PAYLOAD_BYTES", "CarrierFeed", "CarrierPublisher", "Encoding", "Keys", "PassengerFeed", "PassengerPublisher",
     "Received", "ReceivedCarrierState", "ReceivedPassengerStatus", "declare", "describe_endpoints", "keys",
-    "open_session", "zenoh_config",
+    "open_session", "undeclare", "zenoh_config",
 ]
