@@ -1,7 +1,9 @@
 """MAVLink 2 to one PX4 vehicle, one concept per module.
 
+* :mod:`~mission.mavlink.urls`: the one parser of link URLs (the configuration and the mock
+  vehicle use it too);
 * :mod:`~mission.mavlink.transport`: bytes in and out (UDP listen/send, TCP, serial) behind one
-  small interface, and the one parser of link URLs (the mock vehicle uses it too);
+  small interface;
 * :mod:`~mission.mavlink.codec`: pymavlink codecs, datagram-safe parsing and MAVLink 2 signing;
 * :mod:`~mission.mavlink.telemetry`: the vehicle's state as a pure reducer of received
   messages, the STATUSTEXT assembler and the immutable :class:`VehicleState` snapshot;

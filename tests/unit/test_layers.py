@@ -80,3 +80,57 @@ def test_the_size_guard_can_fail():
     assert oversized("fits.py", fits) == []
     big = "class Big:\n" + "    x = 1\n" * MAX_CLASS_LINES + "y = 2\n" * (MAX_MODULE_LINES - MAX_CLASS_LINES)
     assert oversized("big.py", big) == [f"big.py: {MAX_MODULE_LINES + 1} lines", f"big.py: class Big {MAX_CLASS_LINES + 1} lines"]
+
+
+# The pure core: loading it imports no I/O (a function may still import what it needs when called,
+# e.g. the config's key-expression check asks Zenoh's parser).
+PURE = ("mission.law", "mission.safety", "mission.tick", "mission.tracking", "mission.phases", "mission.phase_types",
+        "mission.reference_phases", "mission.feed_gate", "mission.wire", "mission.config", "sim.closed_loop")
+IO_MODULES = {"socket", "select", "selectors", "threading", "time", "subprocess", "signal", "asyncio", "zenoh",
+              "pymavlink", "serial"}
+
+
+def module_level_imports(path: Path) -> set[str]:
+    """Modules a file imports when it is loaded: not inside functions, not under ``if TYPE_CHECKING``."""
+    names: set[str] = set()
+
+    def visit(node: ast.AST) -> None:
+        for child in ast.iter_child_nodes(node):
+            if isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda)):
+                continue
+            if isinstance(child, ast.If) and "TYPE_CHECKING" in ast.unparse(child.test):
+                continue
+            if isinstance(child, ast.Import):
+                names.update(alias.name for alias in child.names)
+            elif isinstance(child, ast.ImportFrom) and child.module and child.level == 0:
+                names.add(child.module)
+                names.update(f"{child.module}.{alias.name}" for alias in child.names)  # a submodule, maybe
+            visit(child)
+
+    visit(ast.parse(path.read_text()))
+    return names
+
+
+def io_loaded_by(module: str) -> dict[str, list[str]]:
+    """{our module: the I/O modules it imports} over everything ``module`` loads of mission/ and sim/."""
+    found: dict[str, list[str]] = {}
+    seen: set[str] = set()
+    todo = [module]
+    while todo:
+        name = todo.pop()
+        path = next((p for p in (ROOT / (name.replace(".", "/") + ".py"), ROOT / name.replace(".", "/") / "__init__.py")
+                     if p.exists()), None)
+        if name in seen or path is None:
+            continue
+        seen.add(name)
+        imports = module_level_imports(path)
+        io = sorted(m for m in imports if m.split(".")[0] in IO_MODULES)
+        if io:
+            found[name] = io
+        todo += [m for m in imports if m.split(".")[0] in ("mission", "sim")]
+    return found
+
+
+def test_the_pure_core_loads_no_io():
+    assert {m: io_loaded_by(m) for m in PURE if io_loaded_by(m)} == {}
+    assert io_loaded_by("mission.link")  # the check can see I/O: the link is made of it
