@@ -128,8 +128,8 @@ def test_quadrotor_and_rover_on_px4_each_in_offboard_p1_p3_and_the_rover_stops_o
     assert s["phase"] == "DONE" and s["p2"] and s["p3"], s
     # P1 needs the passenger within mission.dock_tolerance_m (0.5 m) of the dock point while riding.
     # With the rover's speed loop closed (ROVER_PARAMS), its velocity published along its heading
-    # and its measured acceleration fed forward, it held (0.27-0.45 m) in 8 of the 9 flights that
-    # rode to separation; the ninth 0.55 m (the quadrotor-only pair beside them: 0.27 m). What is
+    # and its measured acceleration fed forward, it held (0.27-0.45 m) in 8 of the 10 flights that
+    # rode to separation, the other two 0.55 m (the quadrotor-only pair beside them: 0.27 m). What is
     # left is the rover's start: it sticks until its throttle breaks it free, then leaps to 1.0-1.5
     # m/s within ~0.3 s, and the quadrotor lags, then overshoots it (README "Driving a real
     # carrier"). A machine stalled for 0.5-0.7 s (other jobs) stops the rover under its passenger
