@@ -39,6 +39,7 @@ def _selected(config: pytest.Config) -> list[str]:
 _SELECTED = pytest.StashKey[list[str]]()
 
 
+@pytest.hookimpl(trylast=True)  # after -k / -m deselected theirs: fly only what will be checked
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     config.stash[_SELECTED] = list(dict.fromkeys(m.args[0] for item in items for m in item.iter_markers("px4_job")))
 
