@@ -7,9 +7,11 @@ clock for what the state machines need, and turns their verdicts into our errors
 """
 from __future__ import annotations
 
+import contextlib
 import logging
 import math
 import threading
+from collections.abc import Iterator
 from typing import Any, Callable
 
 from mission import px4
@@ -34,7 +36,25 @@ class Commander:
                  require_vehicle: Callable[[], tuple[int, int]], reason_grace_s: float) -> None:
         self.session, self.send, self.require_vehicle = session, send, require_vehicle
         self.reason_grace_s = reason_grace_s
-        self._lock = threading.Lock()
+        # One command at a time. Waiting for our turn goes through the clock, as every wait does: a
+        # thread blocked on a plain lock held by another thread parked on a lockstep clock would
+        # hold the whole simulation (the holder only runs at the next barrier, which waits for it).
+        self._turn = threading.Condition()
+        self._busy = False
+
+    @contextlib.contextmanager
+    def _one_at_a_time(self) -> Iterator[None]:
+        clock = self.session.clock
+        with self._turn:
+            while self._busy:
+                clock.wait(self._turn, math.inf)
+            self._busy = True
+        try:
+            yield
+        finally:
+            with self._turn:
+                self._busy = False
+                clock.notify(self._turn)
 
     def command_long(self, command: int, *params: float, timeout_s: float = 0.5, retries: int = 3) -> int:
         """Send COMMAND_LONG and wait for its final COMMAND_ACK (:class:`CommandExchange`).
@@ -51,7 +71,7 @@ class Commander:
         padded = [float(p) for p in params] + [0.0] * (7 - len(params))
         target = self.require_vehicle()
         s = self.session
-        with self._lock:
+        with self._one_at_a_time():
             t_start = s.clock.now()
             with s.lock:
                 exchange = CommandExchange(int(command), timeout_s, retries, s.acks.seq)
