@@ -48,7 +48,7 @@ from typing import Any, Callable
 
 import zenoh
 
-from mission.carrier_bridge import keys
+from mission.carrier_bridge import keys, undeclare
 from mission.clock import LockstepClock
 from mission.mavlink_env import mavlink
 
@@ -181,7 +181,7 @@ class ZenohRelay:
             self._state, self._wake_ns = "joined", self._ready[1]
 
     def close(self) -> None:
-        _undeclare(self._sub, self._pub)
+        undeclare(self._sub, self._pub)
 
 
 class ZenohUpstream:
@@ -225,13 +225,4 @@ class ZenohUpstream:
         self._pub.put(f"{t_ns} {wake_ns} {self._published()}")
 
     def close(self) -> None:
-        _undeclare(self._sub, self._pub)
-
-
-def _undeclare(*entities: Any) -> None:
-    """Undeclare Zenoh subscribers and publishers; one already gone (session closed) is logged."""
-    for entity in entities:
-        try:
-            entity.undeclare()
-        except zenoh.ZError as exc:
-            log.debug("undeclare: %s", exc)
+        undeclare(self._sub, self._pub)
