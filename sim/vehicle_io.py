@@ -54,16 +54,23 @@ class LinkIO:
                 self.flush()
 
     def _admit_in(self, link: VehicleLink, data: bytes, address: tuple[str, int]) -> None:
-        fate, delay_s = self.v._faults.admit("in", self.v._t_s)
-        if fate == "blackout":
-            self.v._counters["blackout_in"] += 1
-        elif fate == "lost":
-            self.v._counters["dropped_in"] += 1
-        elif fate == "delay":
-            self.v._counters["delayed_in"] += 1
-            self.v._faults.hold(self.v._t_s + delay_s, "in", (link, data, address))
-        else:
+        if self._passes("in", (link, data, address)):
             self.v._handlers.process(link, data, address)
+
+    def _passes(self, direction: str, item: tuple) -> bool:
+        """Through the faults of ``direction`` ("in" or "out"): True to deliver ``item`` now;
+        otherwise it was lost, blacked out or held back for later (:meth:`release`), and counted."""
+        fate, delay_s = self.v._faults.admit(direction, self.v._t_s)
+        if fate == "blackout":
+            self.v._counters[f"blackout_{direction}"] += 1
+        elif fate == "lost":
+            self.v._counters[f"dropped_{direction}"] += 1
+        elif fate == "delay":
+            self.v._counters[f"delayed_{direction}"] += 1
+            self.v._faults.hold(self.v._t_s + delay_s, direction, item)
+        else:
+            return True
+        return False
 
     def release(self, kind: str, item: Any) -> None:
         if kind == "in":
@@ -77,15 +84,7 @@ class LinkIO:
         """Encode ``msg`` on ``link`` and send it through the outbound faults."""
         data = link.pack(msg)
         self.v._counters["tx_messages"] += 1
-        fate, delay_s = self.v._faults.admit("out", self.v._t_s)
-        if fate == "blackout":
-            self.v._counters["blackout_out"] += 1
-        elif fate == "lost":
-            self.v._counters["dropped_out"] += 1
-        elif fate == "delay":
-            self.v._counters["delayed_out"] += 1
-            self.v._faults.hold(self.v._t_s + delay_s, "out", (link, data))
-        elif link.target is not None:
+        if self._passes("out", (link, data)) and link.target is not None:
             self._emit(link, data)
 
     def _emit(self, link: VehicleLink, data: bytes) -> None:
