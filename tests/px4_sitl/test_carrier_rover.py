@@ -1,17 +1,19 @@
 """Both robots on real PX4 SITL: a SIH quadrotor passenger (instance 0, sysid 1) under
 ``marsupial run`` and a SIH Ackermann rover carrier (airframe 10045, instance 1, sysid 2) under
 ``marsupial carrier`` with the ``mavlink`` backend, each in OFFBOARD, in one network namespace of
-the test's own (``configs/px4_sitl_rover.toml``). Real time: about 70 s.
+the test's own (``configs/px4_sitl_rover.toml``). Real time: about 70 s, flown at once with the
+quadrotor flights of this folder (``conftest.px4_jobs``).
 
 Skipped unless ``MARSUPIAL_PX4_SITL`` names a PX4 SITL build (a folder with ``bin/px4`` and
 ``etc/``, e.g. ``../shared/px4_sitl``) and the test may create network namespaces (root, ``ip``).
 Each PX4 runs under ``unshare -m`` with a private ``/tmp``: PX4 keeps a lock socket per instance
 number in ``/tmp``, which network namespaces do not separate, so another PX4 of the same instance
-elsewhere on the machine would make ours exit at once. (Self-contained on purpose, to stay out of
-the way of the shared PX4 fixture in this folder; it can move onto it.)
+elsewhere on the machine would make ours exit at once. (It starts its two PX4s itself rather than
+through :mod:`sim.px4_sitl`, which flies one vehicle per namespace.)
 """
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import shutil
@@ -25,6 +27,7 @@ import numpy as np
 import pytest
 
 from sim.net import wait_for
+from tests.px4_sitl.conftest import px4_job
 
 ROOT = Path(__file__).resolve().parents[2]
 CONFIG = ROOT / "configs" / "px4_sitl_rover.toml"
@@ -82,43 +85,50 @@ def _wait_text(path: Path, text: str, timeout_s: float) -> None:
     wait_for(lambda: path.exists() and text in path.read_text(errors="replace"), timeout_s, f"{text!r} in {path}")
 
 
-@pytest.fixture
-def two_px4(tmp_path: Path) -> Iterator[tuple[str, Path]]:
+@contextlib.contextmanager
+def _two_px4(build: Path, out: Path) -> Iterator[str]:
     """A network namespace with a SIH quadrotor (instance 0) and a SIH Ackermann rover
     (instance 1), both armable; everything is stopped and the namespace deleted afterwards."""
-    assert BUILD is not None
-    build = Path(BUILD).resolve()
     ns = f"mcarrier-{os.getpid()}"
     subprocess.run(["ip", "netns", "add", ns], check=True)
     procs: list[subprocess.Popen[bytes]] = []
     try:
         subprocess.run(["ip", "netns", "exec", ns, "ip", "link", "set", "lo", "up"], check=True)
-        procs = [_px4(ns, build, tmp_path, 0, 10040), _px4(ns, build, tmp_path, 1, 10045, ROVER_PARAMS)]
+        procs = [_px4(ns, build, out, 0, 10040), _px4(ns, build, out, 1, 10045, ROVER_PARAMS)]
         for i in (0, 1):  # PX4 prints this once its estimator has a home: armable
-            _wait_text(tmp_path / f"px4-{i}.out", "home set", 60.0)
-        yield ns, tmp_path
+            _wait_text(out / f"px4-{i}.out", "home set", 60.0)
+        yield ns
     finally:
         for p in procs:
             _stop(p)
         subprocess.run(["ip", "netns", "delete", ns], check=False)
 
 
-def test_quadrotor_and_rover_on_px4_each_in_offboard_p1_p3_and_the_rover_stops_outside_b_c_minus_half_a_metre(
-        two_px4: tuple[str, Path]) -> None:
-    ns, out = two_px4
-    carrier = _cli(ns, out, "carrier", "carrier", str(CONFIG), "--zenoh-listen", "tcp/127.0.0.1:7450",
-                   "--summary", str(out / "carrier.json"))
-    try:
-        _wait_text(out / "carrier.err", "publishing on", 30.0)
-        mission = _cli(ns, out, "mission", "run", str(CONFIG), "--zenoh-connect", "tcp/127.0.0.1:7450",
-                       "--log-dir", str(out / "flight"))
+@px4_job("rover")
+def _fly_the_rover_pair(out: Path, build: Path) -> tuple[int, Path]:
+    """Both robots under our two controllers: the mission's exit code and ``out``, the folder of
+    the flight's logs."""
+    with _two_px4(build, out) as ns:
+        carrier = _cli(ns, out, "carrier", "carrier", str(CONFIG), "--zenoh-listen", "tcp/127.0.0.1:7450",
+                       "--summary", str(out / "carrier.json"))
         try:
-            code = mission.wait(180.0)
+            _wait_text(out / "carrier.err", "publishing on", 30.0)
+            mission = _cli(ns, out, "mission", "run", str(CONFIG), "--zenoh-connect", "tcp/127.0.0.1:7450",
+                           "--log-dir", str(out / "flight"))
+            try:
+                code = mission.wait(180.0)
+            finally:
+                _stop(mission)
+            time.sleep(3.0)  # let the rover settle in Hold before the carrier's account is closed
         finally:
-            _stop(mission)
-        time.sleep(3.0)  # let the rover settle in Hold before the carrier's account is closed
-    finally:
-        _stop(carrier)
+            _stop(carrier)
+    return code, out
+
+
+@pytest.mark.px4_job("rover")
+def test_quadrotor_and_rover_on_px4_each_in_offboard_p1_p3_and_the_rover_stops_outside_b_c_minus_half_a_metre(
+        px4_jobs) -> None:
+    code, out = px4_jobs["rover"].result()
     s = json.loads((out / "flight" / "summary.json").read_text())
     c = json.loads((out / "carrier.json").read_text())
     carrier_err = (out / "carrier.err").read_text(errors="replace")
