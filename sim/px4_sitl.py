@@ -23,7 +23,6 @@ import json
 import os
 import shlex
 import shutil
-import signal
 import struct
 import subprocess
 import sys
@@ -33,6 +32,8 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TypeVar
+
+from sim.net import stop_process
 
 ENV_VAR = "MARSUPIAL_PX4_SITL"
 QUAD_AIRFRAME = 10040  # sihsim_quadx
@@ -138,6 +139,7 @@ class Px4Sitl:
     airframe: int = QUAD_AIRFRAME
     speed_factor: float = 1.0
     out_dir: Path = Path(".")
+    params: dict[str, float] = field(default_factory=dict)  # PX4_PARAM_<name>: set by PX4 SITL at start
     proc: subprocess.Popen[bytes] | None = None
     _out: Any = None
 
@@ -146,7 +148,8 @@ class Px4Sitl:
         model = next((self.build / "etc" / "init.d-posix" / "airframes").glob(f"{self.airframe}_*")).name.split("_", 1)[1]
         env = {**os.environ, "PATH": f"{self.rootfs / 'bin'}:{self.build / 'bin'}:{os.environ.get('PATH', '')}",
                "PX4_SYS_AUTOSTART": str(self.airframe), "PX4_SIMULATOR": "sihsim", "PX4_SIM_MODEL": model,
-               "HEADLESS": "1", "PX4_SIM_SPEED_FACTOR": f"{self.speed_factor:g}"}
+               "HEADLESS": "1", "PX4_SIM_SPEED_FACTOR": f"{self.speed_factor:g}",
+               **{f"PX4_PARAM_{name}": f"{value:g}" for name, value in self.params.items()}}
         self._out = open(self.out_dir / f"px4-{self.instance}.out", "wb")
         px4 = " ".join(shlex.quote(a) for a in [str(self.build / "bin" / "px4"), "-d", "-i", str(self.instance), "-w",
                                                 str(self.rootfs), "-s", "etc/init.d-posix/rcS", str(self.build / "etc")])
@@ -163,13 +166,8 @@ class Px4Sitl:
 
     def stop(self, timeout_s: float = 5.0) -> None:
         """SIGTERM to PX4's pid (it stops within about a second), SIGKILL after ``timeout_s``."""
-        if self.proc is not None and self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGTERM)
-            try:
-                self.proc.wait(timeout=timeout_s)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
+        if self.proc is not None:
+            stop_process(self.proc, timeout_s)
         if self._out is not None:
             self._out.close()
             self._out = None
@@ -330,8 +328,6 @@ class Px4Flight:
     def close(self) -> None:
         for name in ("mission", "carrier"):
             if name in self.procs:
-                from sim.net import stop_process
-
                 stop_process(self.procs[name])
         if self.gcs is not None:
             self.gcs.close()

@@ -34,10 +34,6 @@ def px4_job(name: str) -> Callable[[Job], Job]:
     return register
 
 
-def _selected(config: pytest.Config) -> list[str]:
-    return config.stash.get(_SELECTED, [])
-
-
 _SELECTED = pytest.StashKey[list[str]]()
 AT_ONCE = 2  # flights in the air together (see above)
 
@@ -45,16 +41,6 @@ AT_ONCE = 2  # flights in the air together (see above)
 @pytest.hookimpl(trylast=True)  # after -k / -m deselected theirs: fly only what will be checked
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     config.stash[_SELECTED] = list(dict.fromkeys(m.args[0] for item in items for m in item.iter_markers("px4_job")))
-
-
-@pytest.fixture
-def px4_build() -> Path:
-    why = unavailable_reason()
-    if why:
-        pytest.skip(why)
-    from sim.px4_sitl import build_dir
-
-    return build_dir()
 
 
 @pytest.fixture(scope="session")
@@ -67,6 +53,6 @@ def px4_jobs(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFa
     from sim.px4_sitl import build_dir
 
     build = build_dir()
-    names = _selected(request.config)
+    names = request.config.stash.get(_SELECTED, [])
     with ThreadPoolExecutor(max_workers=AT_ONCE, thread_name_prefix="px4-job") as pool:
         yield {name: pool.submit(JOBS[name], tmp_path_factory.mktemp(f"px4-{name}"), build) for name in names}

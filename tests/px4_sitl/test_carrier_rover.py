@@ -26,20 +26,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sim.net import wait_for
+from sim.net import stop_process, wait_for
+from sim.px4_sitl import QUAD_AIRFRAME, NetNamespace, Px4Sitl
 from tests.px4_sitl.conftest import px4_job
 
 ROOT = Path(__file__).resolve().parents[2]
 CONFIG = ROOT / "configs" / "px4_sitl_rover.toml"
-BUILD = os.environ.get("MARSUPIAL_PX4_SITL")
-
-pytestmark = [
-    pytest.mark.slow,
-    pytest.mark.timeout(240),
-    pytest.mark.skipif(not BUILD, reason="MARSUPIAL_PX4_SITL is not set (a PX4 SITL build: bin/px4 and etc/)"),
-    pytest.mark.skipif(os.geteuid() != 0 or shutil.which("ip") is None or shutil.which("unshare") is None,
-                       reason="needs root, ip and unshare for a private network namespace"),
-]
+# Skipped, with the reason, by the px4_jobs fixture (sim.px4_sitl.unavailable_reason).
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(240)]
 
 
 # The rover's speed loop, tuned (PX4's rover tuning: RO_MAX_THR_SPEED, then RO_SPEED_P / RO_SPEED_I).
@@ -49,35 +43,15 @@ pytestmark = [
 # per second) and RO_DECEL_LIM its fall: 6 for both lets it break free sooner and cut its throttle
 # sooner once free (bench/px4_rover_ramp.py, ramps to 1 m/s at 1 m/s^2: the leap peaks at 1.0-1.49
 # m/s with both at 6, 1.09-1.34 with RO_ACCEL_LIM 6 alone, 1.26 with both at 3; it varies run to run). PX4 SITL sets PX4_PARAM_<name> from the environment at start.
+ROVER_AIRFRAME = 10045  # SIH Ackermann rover
 ROVER_PARAMS = {"RO_MAX_THR_SPEED": 4.0, "RO_SPEED_P": 0.5, "RO_SPEED_I": 0.1, "RO_ACCEL_LIM": 6.0, "RO_DECEL_LIM": 6.0}
 
 
-def _px4(ns: str, build: Path, out: Path, instance: int, airframe: int,
-         params: dict[str, float] | None = None) -> subprocess.Popen[bytes]:
-    rootfs = out / f"rootfs{instance}"
-    env = " ".join(f"PX4_PARAM_{k}={v:g}" for k, v in (params or {}).items())
-    script = (f"mount -t tmpfs px4tmp /tmp && exec env AIRFRAME={airframe} PX4_SIM_SPEED_FACTOR=1.08 {env} "
-              f"{build / 'run-sih.sh'} {rootfs} {instance}")
-    with open(out / f"px4-{instance}.out", "wb") as log:  # the child keeps its own descriptor
-        return subprocess.Popen(["ip", "netns", "exec", ns, "unshare", "-m", "sh", "-c", script], stdout=log,
-                                stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
-
-
-def _cli(ns: str, out: Path, name: str, *args: str) -> subprocess.Popen[bytes]:
+def _cli(ns: NetNamespace, out: Path, name: str, *args: str) -> subprocess.Popen[bytes]:
     env = {**os.environ, "PYTHONUNBUFFERED": "1", "PYTHONPATH": str(ROOT)}
     with open(out / f"{name}.out", "wb") as stdout, open(out / f"{name}.err", "wb") as stderr:
-        return subprocess.Popen(["ip", "netns", "exec", ns, sys.executable, "-m", "mission.cli", "-v", *args],
+        return subprocess.Popen(ns.command([sys.executable, "-m", "mission.cli", "-v", *args]),
                                 stdout=stdout, stderr=stderr, env=env, cwd=ROOT, stdin=subprocess.DEVNULL)
-
-
-def _stop(proc: subprocess.Popen[bytes], timeout_s: float = 10.0) -> None:
-    if proc.poll() is None:
-        proc.terminate()
-        try:
-            proc.wait(timeout_s)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
 
 
 def _wait_text(path: Path, text: str, timeout_s: float) -> None:
@@ -86,22 +60,24 @@ def _wait_text(path: Path, text: str, timeout_s: float) -> None:
 
 
 @contextlib.contextmanager
-def _two_px4(build: Path, out: Path) -> Iterator[str]:
+def _two_px4(build: Path, out: Path) -> Iterator[NetNamespace]:
     """A network namespace with a SIH quadrotor (instance 0) and a SIH Ackermann rover
     (instance 1), both armable; everything is stopped and the namespace deleted afterwards."""
-    ns = f"mcarrier-{os.getpid()}"
-    subprocess.run(["ip", "netns", "add", ns], check=True)
-    procs: list[subprocess.Popen[bytes]] = []
-    try:
-        subprocess.run(["ip", "netns", "exec", ns, "ip", "link", "set", "lo", "up"], check=True)
-        procs = [_px4(ns, build, out, 0, 10040), _px4(ns, build, out, 1, 10045, ROVER_PARAMS)]
-        for i in (0, 1):  # PX4 prints this once its estimator has a home: armable
-            _wait_text(out / f"px4-{i}.out", "home set", 60.0)
-        yield ns
-    finally:
-        for p in procs:
-            _stop(p)
-        subprocess.run(["ip", "netns", "delete", ns], check=False)
+    with NetNamespace() as ns:
+        rootfs = Path(f"/var/tmp/{ns.name}")  # not under /tmp: each PX4 gets a private /tmp
+        px4s = [Px4Sitl(build, rootfs / "rootfs0", ns, instance=0, airframe=QUAD_AIRFRAME, speed_factor=1.08, out_dir=out),
+                Px4Sitl(build, rootfs / "rootfs1", ns, instance=1, airframe=ROVER_AIRFRAME, speed_factor=1.08,
+                        out_dir=out, params=ROVER_PARAMS)]
+        try:
+            for px4 in px4s:
+                px4.start()
+            for i in (0, 1):  # PX4 prints this once its estimator has a home: armable
+                _wait_text(out / f"px4-{i}.out", "home set", 60.0)
+            yield ns
+        finally:
+            for px4 in px4s:
+                px4.stop()
+            shutil.rmtree(rootfs, ignore_errors=True)
 
 
 @px4_job("rover")
@@ -118,10 +94,10 @@ def _fly_the_rover_pair(out: Path, build: Path) -> tuple[int, Path]:
             try:
                 code = mission.wait(180.0)
             finally:
-                _stop(mission)
+                stop_process(mission, 10.0)
             time.sleep(3.0)  # let the rover settle in Hold before the carrier's account is closed
         finally:
-            _stop(carrier)
+            stop_process(carrier, 10.0)
     return code, out
 
 
