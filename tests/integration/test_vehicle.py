@@ -7,7 +7,6 @@ physics step where it happened), so they hold at any speed factor and on a loade
 from __future__ import annotations
 
 import math
-import threading
 
 import numpy as np
 import pytest
@@ -291,35 +290,81 @@ def test_position_setpoint_and_body_frame_velocity(probe: Probe) -> None:
             assert moving is not None and abs(moving.velocity_ned_m_s[0]) < 0.02
 
 
-def _fly_script(speed: float, result: dict[float, np.ndarray]) -> None:
-    """A 4 s simulated flight whose setpoints change at given simulated times since arming,
-    then 1.5 s to come to rest."""
-    script = [(1.0, (1.5, 0.5, -0.5)), (2.5, (-0.5, 1.0, 0.0)), (3.5, (0.0, 0.0, 0.0))]
+SCRIPT = ((1.0, (1.5, 0.5, -0.5)), (2.5, (-0.5, 1.0, 0.0)), (3.5, (0.0, 0.0, 0.0)))  # (t since armed [s], velocity NED [m/s])
+CLIMB = (0.0, 0.0, -1.5)  # the setpoint before the script [m/s NED]
+Velocity = tuple[float, float, float]
+
+
+def _send_accepted(probe: Probe, v: MockVehicle, velocity: Velocity) -> float:
+    """Send one velocity setpoint; wait until the vehicle took it. Returns the simulated time
+    [s] it took effect (nobody else sends, so the vehicle's last-setpoint time is this one's)."""
+    accepted = v.snapshot().counters["setpoints_accepted"]
+    probe.send(probe.setpoint_message(velocity_ned_m_s=velocity))
+    return wait_for(v.when(lambda s: s.counters["setpoints_accepted"] > accepted), 3.0, "the setpoint taken").last_setpoint_t_s
+
+
+def _fly_script(speed: float) -> tuple[float, list[tuple[float, Velocity]], np.ndarray]:
+    """Fly :data:`SCRIPT` in real time at ``speed``: velocity setpoints every 0.1 s simulated,
+    changing at given times since arming, then 1.5 s of rest.
+
+    Returns the arming time [s], every setpoint as (simulated time it took effect, velocity),
+    and the final snapshot's (t_s, position NED, velocity NED). When a setpoint takes effect
+    depends on the wall clock (at speed 10, a millisecond late is 10 ms of flight); what the
+    vehicle does with it must not."""
     with Probe() as probe, vehicle_for(probe, speed=speed) as v:
         connect(probe)
-        stream = start_offboard(probe, (0.0, 0.0, -1.5), period_s=0.1 / speed)
-        t_armed = v.event_time("Armed by external command")
-        assert t_armed is not None
-        with stream:
-            for t_change, velocity in script:
-                sleep_until(v.clock, t_armed + t_change)
-                stream.set(send_now=True, velocity_ned_m_s=velocity)
-            final = wait_for(v.when(lambda s: s.t_s >= t_armed + 5.0), 3.0, "s.t_s >= t_armed + 5.0")
-        assert final is not None and np.linalg.norm(final.velocity_ned_m_s) < 0.5  # PX4 leaves a slow residual
-        result[speed] = np.concatenate((final.position_ned_m, final.velocity_ned_m_s))
+        with start_offboard(probe, CLIMB, period_s=0.1 / speed):
+            t_armed = v.event_time("Armed by external command")
+            assert t_armed is not None
+            sleep_until(v.clock, t_armed + 0.5)
+        changes, velocity, taken = dict(SCRIPT), CLIMB, []
+        for k in range(6, 51):
+            sleep_until(v.clock, t_armed + 0.1 * k)
+            velocity = changes.get(round(0.1 * k, 1), velocity)
+            taken.append((_send_accepted(probe, v, velocity), velocity))
+        final = v.snapshot()
+    return t_armed, taken, np.concatenate(([final.t_s], final.position_ned_m, final.velocity_ned_m_s))
 
 
-def test_speed_factor_10_flies_the_same_trajectory() -> None:
-    result: dict[float, np.ndarray] = {}
-    threads = [threading.Thread(target=_fly_script, args=(speed, result)) for speed in (1.0, 10.0)]
-    for thread in threads:
-        thread.start()
-    for thread in threads:
-        thread.join(timeout=20.0)
-    assert set(result) == {1.0, 10.0}
-    assert np.linalg.norm(result[1.0][:3]) > 2.5  # it did fly somewhere
-    assert np.linalg.norm(result[10.0][:3] - result[1.0][:3]) < 0.05, result
-    assert np.linalg.norm(result[10.0][3:] - result[1.0][3:]) < 0.02, result
+def _replay(t_armed: float, taken: list[tuple[float, Velocity]], t_end: float) -> np.ndarray:
+    """The same setpoints at the same simulated times on a vehicle whose clock the test moves
+    (no wall clock at all): what simulated time alone prescribes. Returns (t_s, position, velocity)."""
+    from mission.clock import ManualClock
+    from sim.vehicle import VehicleOptions
+
+    clock = ManualClock()
+    with Probe() as probe, MockVehicle(VehicleOptions(bind="127.0.0.1:0", target=f"127.0.0.1:{probe.port}"), clock=clock) as v:
+        probe.vehicle = ("127.0.0.1", v.port)
+        connect(probe)
+
+        def at(t_s: float) -> None:  # the vehicle runs whole 5 ms steps up to the clock: half a step past
+            clock.advance_to(t_s + PHYSICS_DT_S / 2)
+            wait_for(v.when(lambda s: s.t_s >= t_s - 1e-9), 3.0, f"the vehicle at t = {t_s} s")
+
+        at(t_armed)
+        _send_accepted(probe, v, CLIMB)
+        assert probe.set_mode("OFFBOARD").result == px4.MAV_RESULT_ACCEPTED
+        assert probe.arm().result == px4.MAV_RESULT_ACCEPTED
+        for t_s, velocity in taken:
+            at(t_s)
+            assert abs(_send_accepted(probe, v, velocity) - t_s) < 1e-9
+        at(t_end)
+        final = v.snapshot()
+    return np.concatenate(([final.t_s], final.position_ned_m, final.velocity_ned_m_s))
+
+
+def test_speed_factor_10_flies_what_simulated_time_prescribes() -> None:
+    """At speed 10 the vehicle flies exactly what simulated time prescribes: the same setpoints,
+    taking effect at the same simulated times, on a clock the test moves by hand end in the same
+    state (physics, limits and the commander all run on simulated time; only when a setpoint
+    arrives depends on the wall clock, and that is replayed)."""
+    t_armed, taken, flown = _fly_script(10.0)
+    late_s = [t_s - (t_armed + 0.1 * k) for k, (t_s, _) in enumerate(taken, start=6)]
+    assert min(late_s) >= -PHYSICS_DT_S  # never before it was sent (the vehicle's 5 ms steps)
+    assert np.linalg.norm(flown[1:4]) > 2.5  # it did fly somewhere
+    replayed = _replay(t_armed, taken, flown[0])
+    assert abs(replayed[0] - flown[0]) < 1e-9
+    assert np.allclose(replayed, flown, rtol=0, atol=1e-9), (flown, replayed, max(late_s))
 
 
 def test_rover_frame_is_a_ground_rover_that_refuses_takeoff_and_drives_offboard() -> None:
