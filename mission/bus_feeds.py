@@ -84,6 +84,7 @@ class _Feed(Generic[T]):
         self._accepted = 0
         self._dropped: dict[str, int] = {}
         self._alive: bool | None = None
+        self._went_unseen = False  # the token went since the last alive_over_interval()
         self._closed = False
         self._listeners: list[Callable[[T], None]] = []
         self._sub = declare(f"subscriber on {key}", lambda: session.declare_subscriber(key, self._on_sample))
@@ -171,6 +172,7 @@ class _Feed(Generic[T]):
             changed = alive != self._alive
             self._alive = alive
             if not alive:
+                self._went_unseen = True
                 self._last_order.clear()  # a restarted sender may count from 0 again
                 self._forget_sender()
         if changed:
@@ -199,6 +201,15 @@ class _Feed(Generic[T]):
         """The sender's liveliness token: True present, False gone, None never seen."""
         with self._lock:
             return self._alive
+
+    def alive_over_interval(self) -> bool | None:
+        """The sender's liveliness since the previous call: False if the token went at any
+        moment in between, even if it is back now (a brief outage, or one while a lockstep
+        clock stood still, is still an outage); else :attr:`alive`. Each call starts a new
+        interval, so a feed has one such caller (its controller's tick)."""
+        with self._lock:
+            went, self._went_unseen = self._went_unseen, False
+            return False if went else self._alive
 
     @property
     def counters(self) -> dict[str, Any]:

@@ -241,7 +241,7 @@ class MissionController:
         signing = getattr(self.link, "signing_problem", lambda: None)()
         if signing:
             failed["signing"] = signing  # no vehicle yet, and the reason is the key
-        return Observation(t_s=t, vehicle=_vehicle_obs(vstate), carrier=_carrier_obs(self._received, self.feed.alive),
+        return Observation(t_s=t, vehicle=_vehicle_obs(vstate), carrier=_carrier_obs(self._received, self.feed.alive_over_interval()),
                            failed=failed, interrupted=self.stop.is_set())
 
     def _ask_telemetry_rate(self) -> None:

@@ -85,6 +85,10 @@ class CarrierSource(Protocol):
         """Carrier liveliness (True, False, or None when not known yet)."""
         ...
 
+    def alive_over_interval(self) -> bool | None:
+        """Liveliness since the previous call: False if it went at any moment in between."""
+        ...
+
     def set_origin(self, origin: GeoOrigin | None) -> None:
         """The vehicle's EKF origin, so geodetic carrier states map to local NED."""
         ...

@@ -165,7 +165,7 @@ class CarrierController:
     # ------------------------------------------------------------------ decisions
     def _view(self) -> PassengerView:
         rx = self.passenger.latest()
-        if self.passenger.alive is False:
+        if self.passenger.alive_over_interval() is False:
             lost: str | None = "its liveliness token is gone"
         elif rx is None:
             lost = "no status received"

@@ -280,7 +280,7 @@ def _router_restart(tmp_path: Path, name: str, during: str) -> None:
     router = Router()
     try:
         config = fleet_config(tmp_path / f"{name}.toml")
-        with flight(tmp_path, name, router=router, config=config) as f:
+        with flight(tmp_path, name, router=router, config=config, lockstep=True, vehicle_args=PACED) as f:
             f.wait_phase(during)
             router.close()
             router.open()  # same port; the clients reconnect within ~0.2 s
@@ -301,6 +301,8 @@ def test_zenoh_router_restart_in_the_fleet_configuration(tmp_path: Path) -> None
     """Every process a Zenoh client of one router (configs/zenoh/fleet_client.json5); the router
     is closed and reopened on the same port. A router outage drops the carrier's liveliness
     token at once, so before separation it is a lost carrier whatever its length: abort to
-    Hold (exit 5). After separation the mission completes (exit 0)."""
+    Hold (exit 5). After separation the mission completes (exit 0). In lockstep (paced): during
+    the outage simulated time stands still (the controller waits 2 s for the carrier's step),
+    and the token is back before the next tick, which must still see that it went."""
     concurrently(lambda: _router_restart(tmp_path, "router-riding", "RIDING"),
                  lambda: _router_restart(tmp_path, "router-navigating", "NAVIGATING"))

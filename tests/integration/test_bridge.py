@@ -179,6 +179,7 @@ def test_liveliness_goes_false_when_the_publishers_session_closes_and_ordering_r
             pub.publish(_state(10, stamp=100.0))
             wait_for(feed.latest)
             assert wait_for(lambda: feed.alive is True, what="alive") is True
+            assert feed.alive_over_interval() is True
             a.close()  # no undeclare: a closed (or killed) process drops its token
             wait_for(lambda: feed.alive is False, what="token gone")
             # A restarted carrier counts from 0 again on its own clock: accepted.
@@ -187,6 +188,8 @@ def test_liveliness_goes_false_when_the_publishers_session_closes_and_ordering_r
                 with CarrierPublisher(a2, "p") as pub2:
                     wait_for(lambda: pub2.matched)
                     wait_for(lambda: feed.alive is True, what="alive again")
+                    # a tick after the outage still learns of it, once (the token is back by then)
+                    assert feed.alive_over_interval() is False and feed.alive_over_interval() is True
                     pub2.publish(_state(0, stamp=0.0, north=-7.0))
                     rx = wait_for(lambda: (r := feed.latest()) is not None and r.state.seq == 0 and r)
                     assert rx.state.position[0] == -7.0

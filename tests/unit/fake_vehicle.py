@@ -127,6 +127,9 @@ class FakeWorld:
     def alive(self) -> bool | None:
         return self.clock.now() <= self.carrier_until_s
 
+    def alive_over_interval(self) -> bool | None:
+        return self.alive  # the fake's carrier goes once, for good
+
     def set_origin(self, origin: GeoOrigin | None) -> None:
         self.origin_given = origin
 
