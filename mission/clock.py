@@ -209,6 +209,10 @@ class Downstream(Protocol):
         """Earliest time [ns] a remote participant needs, or None."""
         ...
 
+    def leave(self) -> None:
+        """This clock left the lockstep (closed, or fell back to the wall clock)."""
+        ...
+
 
 @dataclass(eq=False)
 class _Ticket:
@@ -395,6 +399,8 @@ class LockstepClock:
         if reason != "closed":
             log.warning("%s: %s; time goes on at %gx the wall clock from t = %.3f s", self.name, reason, self.speed,
                         self._t_ns / NS_PER_S)
+        if self.downstream is not None:
+            self.downstream.leave()
         for ticket in tickets:
             ticket.open()
 

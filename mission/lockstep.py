@@ -29,6 +29,11 @@ Zenoh does not keep the order of samples across keys (measured: a put on one key
 put before it on another in 915 of 2000 tries), so each side waits for the *stamped sample*
 (its ``seq``) named in the clock message, not merely for the clock message.
 
+A carrier that drives a lockstep vehicle of its own (the mock PX4 rover, ``carrier.backend =
+"mavlink"``) brings it along the same way: its clock relays each step ``t`` to that vehicle
+(:class:`MavlinkRelay`: the barrier answer with wake ``t``) and waits for the vehicle's next
+barrier, so the carrier computes step ``t`` on the rover's state at ``t``.
+
 One barrier: the vehicle integrates to ``t`` and stops -> the controller relays ``t`` to the
 carrier if it is due and waits for its ready -> the controller's threads run their step ->
 the controller answers with ``min`` of every wake -> the vehicle integrates to that wake.
@@ -100,6 +105,69 @@ class MavlinkUpstream:
         self.link.send_message(mavlink.MAVLink_timesync_message(wake_ns, t_ns))
 
 
+class MavlinkRelay:
+    """A process brings its own lockstep vehicle on ``link`` along (a :class:`~mission.clock.Downstream`):
+    at each step ``t`` it answers the vehicle's barrier with wake ``t`` and waits until the
+    vehicle stopped at its next barrier (at or after ``t``: it integrates whole physics steps),
+    its telemetry up to then received ahead of that barrier on the same socket.
+
+    The vehicle is dropped after ``watchdog_wall_s`` without progress (``join_wall_s`` before it
+    first answered); it then goes on in real time after its own watchdog, and the state it
+    stops sending is what the carrier's own-state watchdog is for. ``link`` is a
+    :class:`mission.link.VehicleLink`."""
+
+    def __init__(self, link: Any, *, watchdog_wall_s: float = CARRIER_WATCHDOG_WALL_S, join_wall_s: float = 30.0) -> None:
+        self.link, self.watchdog_wall_s, self.join_wall_s = link, watchdog_wall_s, join_wall_s
+        self._cv = threading.Condition()
+        self._at_ns: int | None = None  # the barrier the vehicle waits at
+        self._joined = False
+        self.dropped = False  # it fell silent
+        self.left = False  # we left the lockstep
+        link.add_listener(self._on_message)
+
+    def _on_message(self, msg: Any) -> None:
+        if msg.get_type() == "TIMESYNC" and msg.tc1 == 0:
+            with self._cv:
+                self._at_ns = max(self._at_ns if self._at_ns is not None else -1, int(msg.ts1))
+                self._cv.notify_all()
+
+    def wake_ns(self) -> int | None:
+        return None  # the vehicle needs no step of its own: it is brought to each of ours
+
+    def run(self, t_ns: int) -> None:
+        if self.dropped or self.left:
+            return
+        limit = self.watchdog_wall_s if self._joined else self.join_wall_s
+        start, answered = time.monotonic(), None
+        with self._cv:
+            while self._at_ns is None or self._at_ns < t_ns:
+                if self._at_ns is not None and self._at_ns != answered:
+                    answered = self._at_ns
+                    self._cv.release()
+                    try:
+                        self.link.send_message(mavlink.MAVLink_timesync_message(t_ns, answered))
+                    finally:
+                        self._cv.acquire()
+                if time.monotonic() - start > limit:
+                    self.dropped = True
+                    log.warning("lockstep: the vehicle did not reach t = %.3f s within %.1f s (wall); going on "
+                                "without it", t_ns / 1e9, limit)
+                    return
+                self._cv.wait(HELLO_WALL_S)
+            self._joined = True
+
+    def leave(self) -> None:
+        """Let the vehicle go on in real time now (this process left the lockstep)."""
+        with self._cv:
+            at = self._at_ns
+        if at is not None and not (self.dropped or self.left):
+            self.left = True
+            try:
+                self.link.send_message(mavlink.MAVLink_timesync_message(-1, at))
+            except Exception as exc:  # noqa: BLE001 - leaving must not fail
+                log.debug("lockstep leave to the vehicle not sent: %s", exc)
+
+
 class ZenohRelay:
     """The controller brings the pair's carrier simulator along (a :class:`~mission.clock.Downstream`).
 
@@ -148,6 +216,9 @@ class ZenohRelay:
     def wake_ns(self) -> int | None:
         with self._cv:
             return self._wake_ns if self._state == "joined" else None
+
+    def leave(self) -> None:
+        """Nothing to send: the carrier notices a silent clock itself (its watchdog)."""
 
     def run(self, t_ns: int) -> None:
         with self._cv:

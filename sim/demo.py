@@ -114,15 +114,16 @@ def _follow(pair: PairRun, progress: PairProgress) -> None:
 
 
 def start_carrier_robot(kind: str, name: str, zenoh_ep: str, speed: float, start: str, stack: ExitStack,
-                        err: int | None) -> tuple[list[str], subprocess.Popen | None]:
+                        err: int | None, lockstep: bool = False) -> tuple[list[str], subprocess.Popen | None]:
     """The robot under a ``kind`` carrier ("sim": built in, none to start; "mavlink": a mock PX4
-    rover, sysid 2; "ros2": a ROS-2-shaped robot on rmw_zenoh keys in namespace ``name``) and the
-    carrier controller's arguments for it."""
+    rover, sysid 2, in lockstep on the carrier's clock with ``lockstep``; "ros2": a ROS-2-shaped
+    robot on rmw_zenoh keys in namespace ``name``) and the carrier controller's arguments for it."""
     if kind == "mavlink":
         port = free_port(socket.SOCK_DGRAM)
         robot = subprocess.Popen(_python_cli("mock-vehicle", "--frame", "rover", "--sysid", "2", "--mavlink",
                                              "udpin:127.0.0.1:0", "--target", f"udpout:127.0.0.1:{port}", "--speed",
-                                             str(speed), "--start-ned", start), stderr=err)
+                                             str(speed), "--start-ned", start, *(["--lockstep"] if lockstep else [])),
+                                 stderr=err)
         stack.callback(stop_process, robot)
         return ["--backend", "mavlink", "--mavlink", f"udpin:127.0.0.1:{port}", "--target-system", "2",
                 "--kinematics", "ackermann"], robot
@@ -139,15 +140,16 @@ def start_pair(config: str, name: str, zenoh_ep: str, speed: float, log_root: Pa
                quiet: bool, carrier_kind: str = "sim", lockstep: bool = False) -> PairRun:
     """Start the carrier (and its robot), the mock vehicle and the mission of one pair; register their cleanup.
 
-    ``lockstep`` (built-in carrier only): the three step on the mock vehicle's simulated time
-    (``speed`` is then the pace after a participant is lost); else wall clocks scaled by ``speed``."""
+    ``lockstep`` (built-in or mavlink carrier): the three step on the mock vehicle's simulated time,
+    a mock rover on the carrier's (``speed`` is then the pace after a participant is lost); else
+    wall clocks scaled by ``speed``."""
     cfg = load_config(config)
     pair = PairRun(name=name, log_dir=log_root / name)
     mav_port = free_port(socket.SOCK_DGRAM)
     err = subprocess.DEVNULL if quiet else None
     mode = ["--lockstep"] if lockstep else []
     start = ",".join(str(v) for v in cfg.scenario.carrier_start)
-    backend_args, robot = start_carrier_robot(carrier_kind, name, zenoh_ep, speed, start, stack, err)
+    backend_args, robot = start_carrier_robot(carrier_kind, name, zenoh_ep, speed, start, stack, err, lockstep)
     carrier = subprocess.Popen(_python_cli("carrier", config, "--speed", str(speed), "--pair", name,
                                            "--zenoh-connect", zenoh_ep, "--summary", str(pair.log_dir / "carrier.json"),
                                            *backend_args, *mode), stderr=err)
@@ -172,7 +174,7 @@ def run_demo(config: str, speed: float, pairs: int, log_root: Path, plot_path: s
              quiet: bool = True, progress: bool = True, carrier: str = "sim",
              lockstep: bool = True) -> tuple[int, list[dict]]:
     """Run ``pairs`` marsupial pairs, in lockstep on each mock vehicle's simulated time (built-in
-    carrier only) or at ``speed``; return the exit code and each pair's summary."""
+    or mavlink carrier) or at ``speed``; return the exit code and each pair's summary."""
     from mission.run_cli import plot as plot_command
 
     supervise_children()  # a demo killed outright takes its processes with it
@@ -182,7 +184,7 @@ def run_demo(config: str, speed: float, pairs: int, log_root: Path, plot_path: s
     with ExitStack() as stack:
         router = open_session(ZenohSection(mode="router", listen=[zenoh_ep]))
         stack.callback(router.close)
-        lockstep = lockstep and carrier == "sim"
+        lockstep = lockstep and carrier in ("sim", "mavlink")
         runs = [start_pair(config, f"pair{i}", zenoh_ep, speed, log_root, stack, quiet, carrier, lockstep)
                 for i in range(pairs)]
         display = PairProgress([p.name for p in runs], tty=progress and sys.stdout.isatty())
@@ -287,8 +289,8 @@ def format_table(summaries: list[dict]) -> str:
 @click.option("--config", type=click.Path(dir_okay=False, exists=True), default=str(DEFAULT_CONFIG), show_default=True,
               help="Mission configuration shared by every pair.")
 @click.option("--realtime", is_flag=True, help="Run on wall clocks scaled by --speed (to watch a run live) instead of "
-              "in lockstep on the mock vehicle's simulated time, as fast as the CPU allows. The mavlink and ros2 "
-              "carriers always run in real time.")
+              "in lockstep on the mock vehicle's simulated time, as fast as the CPU allows (the mavlink carrier's "
+              "mock rover steps on the carrier's clock). The ros2 carrier always runs in real time.")
 @click.option("--speed", type=click.FloatRange(min=0.1, max=100), default=10.0, show_default=True,
               help="With --realtime: speed factor of every clock (vehicle, carrier, mission), like PX4's SIH speed "
               "factor. In lockstep: the pace after a participant is lost.")

@@ -22,7 +22,7 @@ from mission.carrier.controller import CarrierBackend, CarrierController
 from mission.carrier_bridge import describe_endpoints, keys, open_session
 from mission.clock import Clock, LockstepClock, ScaledClock
 from mission.config import Config, load_config, with_overrides
-from mission.lockstep import ZenohUpstream
+from mission.lockstep import MavlinkRelay, ZenohUpstream
 
 log = logging.getLogger(__name__)
 
@@ -79,11 +79,20 @@ def main(cfg: Config, speed: float = 1.0, duration_s: float | None = None, stop_
                 if isinstance(clock, LockstepClock):
                     upstream = ZenohUpstream(clock, session, ctl.pair, ctl.passenger, published=lambda: ctl.seq - 1)
                     stack.callback(upstream.close)
+                    if cfg.carrier.backend == "mavlink":  # its (mock) vehicle steps on our clock
+                        from mission.carrier.mavlink_vehicle import MavlinkCarrier
+
+                        assert isinstance(backend, MavlinkCarrier)
+                        clock.downstream = MavlinkRelay(backend.link)
                     stack.callback(clock.close)
                 try:
                     ctl.run(stop, duration_s)
                 finally:
                     summary = ctl.summary()
+                    if isinstance(clock, LockstepClock):
+                        relay = clock.downstream
+                        summary["lockstep"] = {"barriers": clock.barriers,
+                                               "vehicle_dropped": isinstance(relay, MavlinkRelay) and relay.dropped}
                     log.info("carrier %s stopped in mode %s; closest approach to the target %s m, braking distance %s m",
                              ctl.pair, summary["mode"], _fmt(summary["closest_target_distance_m"]),
                              _fmt(summary["braking_distance_m"]))
