@@ -1,6 +1,11 @@
 """The carrier controller on real robots' interfaces, over real sockets: a PX4-like Ackermann
 rover (the mock vehicle's rover frame) through MAVLink, and a ROS-2-shaped robot through Zenoh
-under both key forms. A scripted passenger talks to the carrier over Zenoh; clocks run at 3x."""
+under both key forms. A scripted passenger talks to the carrier over Zenoh.
+
+The rover flights run in lockstep: the test is the carrier clock's upstream (:class:`Stepper`,
+what the mission's clock relay is in a flight) and the rover steps on the carrier's clock
+(:class:`mission.lockstep.MavlinkRelay`), so they do not depend on the machine's load. The ROS 2
+robot runs in real time at 3x."""
 from __future__ import annotations
 
 import contextlib
@@ -17,7 +22,8 @@ from mission.carrier.modes import CarrierMode
 from mission.carrier.mavlink_vehicle import MavlinkCarrier
 from mission.carrier.ros2_link import Ros2Carrier, ros2_topics
 from mission.carrier_bridge import CarrierFeed, PassengerPublisher
-from mission.clock import ScaledClock
+from mission.clock import Clock, LockstepClock, ScaledClock
+from mission.lockstep import MavlinkRelay
 from mission.config import Config, from_dict
 from mission.wire import PassengerStatus
 from sim.ros2_robot import Ros2RobotSim
@@ -45,7 +51,7 @@ def _cfg(backend: str, kinematics: str, **carrier: Any) -> Config:
 class ScriptedPassenger:
     """Publishes a phase at 20 Hz (clock) from its own thread: ``phase`` can be changed at any time."""
 
-    def __init__(self, session: zenoh.Session, clock: ScaledClock) -> None:
+    def __init__(self, session: zenoh.Session, clock: Clock) -> None:
         self.pub = PassengerPublisher(session, "cb")
         self.clock, self.phase, self.seq = clock, "JOIN", 0
         self.stop = threading.Event()
@@ -65,8 +71,47 @@ class ScriptedPassenger:
         self.pub.close()
 
 
+class Stepper:
+    """The test as the upstream of the carrier's lockstep clock: it moves the clock to each step
+    the carrier's threads need and waits for the step's report. Conditions are checked between
+    steps, with timeouts in simulated seconds."""
+
+    def __init__(self, clock: LockstepClock) -> None:
+        self.clock = clock
+        clock.upstream = self
+        self._cv = threading.Condition()
+        self._done_ns, self._wake_ns = -1, 0
+
+    def report(self, t_ns: int, wake_ns: int) -> None:
+        with self._cv:
+            self._done_ns, self._wake_ns = t_ns, wake_ns
+            self._cv.notify_all()
+
+    def step(self) -> None:
+        with self._cv:
+            t_ns = max(self._wake_ns, self._done_ns + 1)
+        self.clock.barrier(t_ns)
+        with self._cv:
+            if not self._cv.wait_for(lambda: self._done_ns >= t_ns, timeout=10.0):
+                raise AssertionError(f"the carrier did not finish its step at t = {t_ns / 1e9:.3f} s")
+
+    def until(self, predicate: Any, timeout_s: float, what: str) -> Any:
+        """Step until ``predicate()`` is truthy (returned); at most ``timeout_s`` simulated seconds."""
+        end_s = self.clock.now() + timeout_s
+        while not (value := predicate()):
+            if self.clock.now() > end_s:
+                raise AssertionError(f"not within {timeout_s} s (simulated): {what}")
+            self.step()
+        return value
+
+    def run_for(self, duration_s: float) -> None:
+        end_s = self.clock.now() + duration_s
+        while self.clock.now() < end_s:
+            self.step()
+
+
 @contextlib.contextmanager
-def carrier_running(cfg: Config, clock: ScaledClock, session: zenoh.Session, backend: Any) -> Iterator[CarrierController]:
+def carrier_running(cfg: Config, clock: Clock, session: zenoh.Session, backend: Any) -> Iterator[CarrierController]:
     ctl = CarrierController(cfg, clock, session, backend)
     stop = threading.Event()
     thread = threading.Thread(target=ctl.run, args=(stop,), daemon=True)
@@ -75,6 +120,8 @@ def carrier_running(cfg: Config, clock: ScaledClock, session: zenoh.Session, bac
         yield ctl
     finally:
         stop.set()
+        if isinstance(clock, LockstepClock):
+            clock.close()  # its sleeps end now
         thread.join(5.0)
         assert not thread.is_alive()
         ctl.close()
@@ -85,47 +132,54 @@ def _distance(position: np.ndarray) -> float:
 
 
 @contextlib.contextmanager
-def rover_carrier(**carrier: Any) -> Iterator[tuple[Config, ScaledClock, zenoh.Session, zenoh.Session, MavlinkCarrier, MockVehicle]]:
+def rover_carrier(**carrier: Any) -> Iterator[tuple[Config, Stepper, zenoh.Session, zenoh.Session, MavlinkCarrier, MockVehicle]]:
+    """The carrier's backend on a lockstep mock rover; the carrier's clock driven by a :class:`Stepper`."""
     cfg = _cfg("mavlink", "ackermann", mavlink={"url": "udpin:127.0.0.1:0", "target_system": 2,
                                                 "offset_ned_m": START.tolist()}, **carrier)
-    clock = ScaledClock(SPEED)
+    clock = LockstepClock(speed=SPEED, name="carrier", creator_runs=False)
+    stepper = Stepper(clock)
     with peer_pair() as (sa, sb):
         backend = MavlinkCarrier(cfg, clock)
         try:
-            opts = VehicleOptions(target=f"127.0.0.1:{backend.link.port}", speed=SPEED, sysid=2, frame="rover")
+            clock.downstream = relay = MavlinkRelay(backend.link)
+            opts = VehicleOptions(target=f"127.0.0.1:{backend.link.port}", speed=SPEED, sysid=2, frame="rover",
+                                  lockstep=True)
             with MockVehicle(opts) as rover:
-                yield cfg, clock, sa, sb, backend, rover
+                yield cfg, stepper, sa, sb, backend, rover
+                assert clock.fallback_reason in (None, "closed") and not relay.dropped, clock.fallback_reason  # lockstep to the end
         finally:
+            clock.close()
             backend.close()
 
 
-def _watch(rover: MockVehicle, ctl: CarrierController, until: Any, timeout_s: float, what: str) -> list[float]:
-    """Distances [m] of the rover's true position (shared frame) until ``until()`` holds."""
+def _watch(rover: MockVehicle, stepper: Stepper, until: Any, timeout_s: float, what: str) -> list[float]:
+    """Distances [m] of the rover's true position (shared frame), step by step until ``until()`` holds."""
     distances: list[float] = []
 
     def check() -> bool:
         distances.append(_distance(rover.snapshot().position_ned_m + START))
         return bool(until())
 
-    wait_for(check, timeout_s, what)
+    stepper.until(check, timeout_s, what)
     return distances
 
 
 def test_px4_rover_arms_when_the_passenger_rides_and_stops_outside_the_guard_after_separation() -> None:
-    with rover_carrier() as (cfg, clock, sa, sb, backend, rover):
+    with rover_carrier() as (cfg, stepper, sa, sb, backend, rover):
+        clock = stepper.clock
         passenger = ScriptedPassenger(sb, clock)
         try:
             with carrier_running(cfg, clock, sa, backend) as ctl, CarrierFeed(sb, "cb", clock) as feed:
-                rx = wait_for(lambda: feed.latest(), what="carrier state")
+                rx = stepper.until(feed.latest, 5, "carrier state")
                 np.testing.assert_allclose(rx.state.position, START, atol=1e-6)  # offset into the shared frame
                 assert rx.state.acceleration_ned_m_s2 is None  # carrier.acceleration_tau_s = 0: none sent
                 assert not rover.snapshot().armed  # waiting for the passenger: not armed for nothing
                 passenger.phase = "RIDING"
-                wait_for(lambda: rover.snapshot().mode == "OFFBOARD" and rover.snapshot().armed, 20, "armed in OFFBOARD")
-                d = _watch(rover, ctl, lambda: _distance(rover.snapshot().position_ned_m + START) < 8.3, 30, "near 8 m")
+                stepper.until(lambda: rover.snapshot().mode == "OFFBOARD" and rover.snapshot().armed, 20, "armed in OFFBOARD")
+                d = _watch(rover, stepper, lambda: _distance(rover.snapshot().position_ned_m + START) < 8.3, 30, "near 8 m")
                 passenger.phase = "SEPARATED"
-                wait_for(lambda: ctl.mode is CarrierMode.SEPARATED, what="separated heard")
-                d += _watch(rover, ctl, lambda: rover.snapshot().mode == "AUTO.LOITER"
+                stepper.until(lambda: ctl.mode is CarrierMode.SEPARATED, 5, "separated heard")
+                d += _watch(rover, stepper, lambda: rover.snapshot().mode == "AUTO.LOITER"
                             and np.linalg.norm(rover.snapshot().velocity_ned_m_s) < 1e-3, 20, "stopped in Hold")
                 summary = ctl.summary()
                 assert (ctl.hold_reason or "").startswith("parked")
@@ -143,12 +197,13 @@ def test_px4_rover_publishes_its_velocity_along_its_heading_and_its_measured_acc
     """carrier.acceleration_tau_s > 0: the state on Zenoh carries the acceleration the rover really
     makes (the law ramps it at safety.carrier_max_accel_m_s2 = 1 m/s^2 once it rolls); its velocity
     is along its heading."""
-    with rover_carrier(acceleration_tau_s=0.1) as (cfg, clock, sa, sb, backend, rover):
+    with rover_carrier(acceleration_tau_s=0.1) as (cfg, stepper, sa, sb, backend, rover):
+        clock = stepper.clock
         passenger = ScriptedPassenger(sb, clock)
         samples: list[Any] = []
         try:
             with carrier_running(cfg, clock, sa, backend), CarrierFeed(sb, "cb", clock) as feed:
-                wait_for(lambda: feed.latest(), what="carrier state")
+                stepper.until(feed.latest, 5, "carrier state")
                 passenger.phase = "RIDING"
 
                 def rolling() -> bool:
@@ -157,7 +212,7 @@ def test_px4_rover_publishes_its_velocity_along_its_heading_and_its_measured_acc
                         samples.append(rx.state)
                     return rx is not None and float(np.linalg.norm(rx.state.velocity_ned_m_s)) > 1.5
 
-                wait_for(rolling, 30, "the rover at 1.5 m/s")
+                stepper.until(rolling, 30, "the rover at 1.5 m/s")
         finally:
             passenger.close()
     ramp = [st for st in samples if 0.3 < float(np.linalg.norm(st.velocity_ned_m_s)) < 1.4]
@@ -173,13 +228,14 @@ def test_px4_rover_publishes_its_velocity_along_its_heading_and_its_measured_acc
 
 
 def test_px4_rover_under_a_passenger_that_never_separates_stops_at_the_guard() -> None:
-    with rover_carrier() as (cfg, clock, sa, sb, backend, rover):
+    with rover_carrier() as (cfg, stepper, sa, sb, backend, rover):
+        clock = stepper.clock
         passenger = ScriptedPassenger(sb, clock)
         passenger.phase = "RIDING"
         try:
             with carrier_running(cfg, clock, sa, backend) as ctl:
-                wait_for(lambda: rover.snapshot().armed, 20, "armed")
-                d = _watch(rover, ctl, lambda: ctl.summary()["guard_active_ticks"] > 30
+                stepper.until(lambda: rover.snapshot().armed, 20, "armed")
+                d = _watch(rover, stepper, lambda: ctl.summary()["guard_active_ticks"] > 30
                            and np.linalg.norm(rover.snapshot().velocity_ned_m_s) < 1e-3, 60, "held at the guard")
                 assert ctl.mode is CarrierMode.APPROACHING
         finally:
@@ -191,20 +247,22 @@ def test_px4_rover_under_a_passenger_that_never_separates_stops_at_the_guard() -
 def test_stale_own_state_stops_the_carrier_and_its_publishing() -> None:
     """A blackout of the rover's link: no LOCAL_POSITION_NED. The carrier stops commanding motion
     and publishes nothing (a stale carrier state must never look fresh to the passenger)."""
-    with rover_carrier() as (cfg, clock, sa, sb, backend, rover):
+    with rover_carrier() as (cfg, stepper, sa, sb, backend, rover):
+        clock = stepper.clock
         passenger = ScriptedPassenger(sb, clock)
         passenger.phase = "RIDING"
         try:
             with carrier_running(cfg, clock, sa, backend) as ctl, CarrierFeed(sb, "cb", clock) as feed:
-                wait_for(lambda: np.linalg.norm(rover.snapshot().velocity_ned_m_s) > 0.5, 30, "moving")
+                stepper.until(lambda: np.linalg.norm(rover.snapshot().velocity_ned_m_s) > 0.5, 30, "moving")
                 t0 = rover.snapshot().t_s
                 rover.set_faults(blackouts=((t0, 3.0),))
-                wait_for(lambda: (ctl.hold_reason or "").startswith("own state"), 10, "stale own state seen")
-                seq_stale = wait_for(lambda: feed.latest()).state.seq
-                clock.sleep(1.0)
+                stepper.until(lambda: (ctl.hold_reason or "").startswith("own state"), 10, "stale own state seen")
+                stepper.run_for(0.1)  # the last state published before it went stale has arrived
+                seq_stale = feed.latest().state.seq
+                stepper.run_for(1.0)
                 assert feed.latest().state.seq == seq_stale  # nothing published while stale
                 assert ctl.summary()["stale_ticks"] > 0
-                wait_for(lambda: ctl.hold_reason is None, 20, "back in control after the blackout")
+                stepper.until(lambda: ctl.hold_reason is None, 20, "back in control after the blackout")
         finally:
             passenger.close()
 
