@@ -33,9 +33,10 @@ from mission.wire import GeoOrigin, PassengerStatus
 log = logging.getLogger(__name__)
 
 LOCAL_POSITION_NED_ID = mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED
-# PX4's onboard-profile streams the mission never reads (stopped with mission.unused_streams = "stop")
+# PX4's onboard-profile streams the mission never reads (stopped with mission.unused_streams = "stop");
+# ATTITUDE (100 Hz, the busiest) only gives the yaw, which the passenger's mission does not use
 UNUSED_STREAMS = tuple(getattr(mavlink, f"MAVLINK_MSG_ID_{name}") for name in (
-    "ATTITUDE_QUATERNION", "GLOBAL_POSITION_INT", "HIGHRES_IMU", "ODOMETRY", "POSITION_TARGET_LOCAL_NED",
+    "ATTITUDE", "ATTITUDE_QUATERNION", "GLOBAL_POSITION_INT", "HIGHRES_IMU", "ODOMETRY", "POSITION_TARGET_LOCAL_NED",
     "ATTITUDE_TARGET", "ALTITUDE", "VFR_HUD", "ESTIMATOR_STATUS", "HOME_POSITION"))
 ABORT_GRACE_S = 15.0  # longest the loop keeps asking for Hold after an abort [s]
 
