@@ -194,7 +194,7 @@ class CarrierController:
             return False
         return not (self.mode is CarrierMode.SEPARATED and self.model.carrier_mode == "remark1")
 
-    def _decide(self, state: OwnState, dt_s: float) -> Tracked:
+    def _decide(self, state: OwnState, dt_s: float, age_s: float) -> Tracked:
         x_c = state.position_ned_m[:self.dim]
         if self._stopping() and getattr(self.backend, "brakes_itself", False):
             # A real vehicle brakes with its own limits: ramping the command down at
@@ -211,12 +211,12 @@ class CarrierController:
         yaw = state.yaw_rad if state.yaw_rad is not None else 0.0
         t, v_meas = state.t_s, state.velocity_ned_m_s[:self.dim]
         if self.tracking.kind == "holonomic":
-            g = self.p3_guard.limit(t, x_c, u, v_meas)
+            g = self.p3_guard.limit(t, x_c, u, v_meas, age_s)
             cmd, active = track(g.u, yaw, self.tracking), g.active
             self.velocity_m_s = g.u
         else:
             cmd = track(u, yaw, self.tracking)
-            speed, active = self.p3_guard.limit_heading(t, x_c, cmd.speed_m_s, yaw, v_meas)
+            speed, active = self.p3_guard.limit_heading(t, x_c, cmd.speed_m_s, yaw, v_meas, age_s)
             if active:
                 scale = speed / cmd.speed_m_s if cmd.speed_m_s > 0 else 0.0
                 cmd = Tracked(speed, cmd.yaw_rate_rad_s, cmd.bearing_rad, heading_of(speed, yaw),
@@ -346,7 +346,7 @@ class CarrierController:
             self.velocity_m_s = np.zeros(self.dim)
             self.backend.command(STOP)
             return None
-        cmd = self._decide(state, dt_s) if why is None else STOP
+        cmd = self._decide(state, dt_s, now - state.t_s) if why is None else STOP
         if why is not None:
             self.velocity_m_s = np.zeros(self.dim)
         self.backend.command(cmd)

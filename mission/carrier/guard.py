@@ -8,12 +8,14 @@ the speed from which the carrier can still stop before the guard circle::
 
     h      = |e_tc| - r_guard                   (|e_tc| as the law measures it: a planar carrier's
                                                  distance to a target above its plane counts the height)
-    v_fly  = max(measured inward speed, inward commands sent within the last delay_s)
-    h_pred = h - v_fly delay_s                  (where the vehicle is when this command acts)
+    v_fly  = max(measured inward speed, inward commands sent since t_s - delay_s)
+    h_pred = h - v_fly (age_s + delay_s)        (where the vehicle is when this command acts)
     v_in  <= a (sqrt(T^2 + 2 h_pred / a) - T),  0 if h_pred <= 0   (v T + v^2 / 2a = h_pred)
 
 ``a`` [m/s^2] is the braking deceleration, ``delay_s`` [s] the vehicle's response delay (commands
-already on their way still act during it), ``T`` [s] the control period (a command is held that
+already on their way still act during it), ``age_s`` [s] how old the own state is now (a state
+measured a while ago, e.g. after a stall of the machine, left the carrier moving on meanwhile:
+the guard counts that way as already driven), ``T`` [s] the control period (a command is held that
 long). A vehicle that brakes at ``a`` and obeys each command after ``delay_s`` then never crosses
 the circle (tested with a transport-delayed, deceleration-limited vehicle in the unit tests).
 
@@ -87,54 +89,61 @@ class P3Guard:
         dist = float(math.sqrt(float(e @ e)))
         return (None if dist < 1e-9 else e / dist), dist - self.p.radius_m
 
-    def cap(self, t_s: float, x_c: np.ndarray, velocity_m_s: np.ndarray | None) -> tuple[float, float, np.ndarray | None]:
-        """(inward speed cap [m/s], clearance h [m], unit vector towards the target or None).
-        The cap is 0 while the measured inward speed is over it by more than :data:`OVERSPEED_M_S`."""
+    def cap(self, t_s: float, x_c: np.ndarray, velocity_m_s: np.ndarray | None,
+            age_s: float = 0.0) -> tuple[float, float, np.ndarray | None]:
+        """(inward speed cap [m/s], clearance h [m], unit vector towards the target or None) for a
+        state measured at ``t_s`` [s] and ``age_s`` [s] old now. The cap is 0 while the measured
+        inward speed is over it by more than :data:`OVERSPEED_M_S`."""
         n, h = self._geometry(x_c)
-        while self._sent and self._sent[0][0] < t_s - self.p.delay_s - 1e-9:
+        horizon = max(age_s, 0.0) + self.p.delay_s  # from the measurement to when this command acts
+        while self._sent and self._sent[0][0] < t_s - self.p.delay_s - 1e-9:  # (sent times are t_s + age)
             self._sent.popleft()
         if n is None:
             return 0.0, h, None
         measured = 0.0 if velocity_m_s is None else float(np.asarray(velocity_m_s, dtype=float)[:self.k] @ n)
         v_fly = max(0.0, measured)
-        if self._sent and self.p.delay_s > 0:
+        if self._sent and horizon > 0:
             v_fly = max(v_fly, max(v for _, v in self._sent))
-        h_pred = h - v_fly * self.p.delay_s
+        h_pred = h - v_fly * horizon
         cap = stopping_speed(h_pred, self.p.brake_decel_m_s2, self.p.period_s)
         return (0.0 if measured > cap + OVERSPEED_M_S else cap), h, n
 
-    def limit(self, t_s: float, x_c: np.ndarray, u: np.ndarray, velocity_m_s: np.ndarray | None = None) -> GuardResult:
+    def limit(self, t_s: float, x_c: np.ndarray, u: np.ndarray, velocity_m_s: np.ndarray | None = None,
+              age_s: float = 0.0) -> GuardResult:
         """Cap the inward component of the velocity command ``u`` [m/s] ((2,) or (3,)) of a
-        carrier at ``x_c`` [m] moving at ``velocity_m_s`` [m/s] (measured; None: unknown)."""
+        carrier at ``x_c`` [m] moving at ``velocity_m_s`` [m/s] (measured; None: unknown), a state
+        ``age_s`` [s] old."""
         u = np.asarray(u, dtype=float)
-        cap, h, n = self.cap(t_s, x_c, velocity_m_s)
+        cap, h, n = self.cap(t_s, x_c, velocity_m_s, age_s)
+        now = t_s + max(age_s, 0.0)
         if n is None:  # on the target: no inward direction; stop (the guard was already broken)
-            self._sent.append((t_s, 0.0))
+            self._sent.append((now, 0.0))
             return GuardResult(np.zeros_like(u), 0.0, h, bool(np.any(u != 0.0)))
         inward = float(u[:self.k] @ n)
         if inward <= cap:
-            self._sent.append((t_s, inward))
+            self._sent.append((now, inward))
             return GuardResult(u, cap, h, False)
         out = u.copy()
         m = n.copy()
         if self.planar:
             m[2:] = 0.0  # u . n changes only through the plane's components
         out[:self.k] = u[:self.k] - (inward - cap) * m / float(m @ m)  # m @ m > 0: inward > cap >= 0
-        self._sent.append((t_s, cap))
+        self._sent.append((now, cap))
         return GuardResult(out, cap, h, True)
 
     def limit_heading(self, t_s: float, x_c: np.ndarray, speed_m_s: float, yaw_rad: float,
-                      velocity_m_s: np.ndarray | None = None) -> tuple[float, bool]:
+                      velocity_m_s: np.ndarray | None = None, age_s: float = 0.0) -> tuple[float, bool]:
         """For a robot that moves only along its heading ``yaw_rad`` [rad]: the largest forward
         speed [m/s] (<= ``speed_m_s``) whose inward component respects the cap, and whether it was cut."""
-        cap, _, n = self.cap(t_s, x_c, velocity_m_s)
+        cap, _, n = self.cap(t_s, x_c, velocity_m_s, age_s)
+        now = t_s + max(age_s, 0.0)
         if n is None:
-            self._sent.append((t_s, 0.0))
+            self._sent.append((now, 0.0))
             return 0.0, speed_m_s != 0.0
         cos_in = math.cos(yaw_rad) * n[0] + math.sin(yaw_rad) * n[1]
         inward = speed_m_s * cos_in
         if inward <= cap:
-            self._sent.append((t_s, inward))
+            self._sent.append((now, inward))
             return speed_m_s, False
-        self._sent.append((t_s, cap))
+        self._sent.append((now, cap))
         return cap / cos_in, True  # cos_in > 0 here (inward > cap >= 0 with speed >= 0)

@@ -141,3 +141,40 @@ def test_along_heading_keeps_the_forward_speed_and_drops_the_sideslip() -> None:
     np.testing.assert_allclose(along_heading(out, yaw), out, atol=1e-12)  # already along it: unchanged
     backwards = along_heading(np.array([-0.5, 0.0, 0.0]), 0.0)
     np.testing.assert_allclose(backwards, [-0.5, 0.0, 0.0])  # reversing stays reversing
+
+
+def test_guard_counts_a_stale_own_state_s_age_as_distance_already_driven() -> None:
+    g = P3Guard(GuardParams(7.5, 1.0, 0.0, 1e-9), TARGET)
+    x = TARGET - np.array([10.0, 0.0, 0.0])  # clearance 2.5
+    fresh = g.cap(0.0, x, np.array([1.0, 0.0, 0.0]))[0]
+    stale = g.cap(0.0, x, np.array([1.0, 0.0, 0.0]), age_s=0.5)[0]  # measured 0.5 s ago: 0.5 m closer now
+    assert fresh == pytest.approx(math.sqrt(5.0)) and stale == pytest.approx(2.0)
+    assert g.cap(0.0, x, np.zeros(3), age_s=0.5)[0] == pytest.approx(math.sqrt(5.0))  # standing: nothing driven
+
+
+@pytest.mark.parametrize("count_age", [True, False])
+def test_a_vehicle_whose_own_state_arrives_stale_never_crosses_the_guard_circle_when_its_age_is_counted(
+        count_age: bool) -> None:
+    """1D: the law wants 5 m/s inwards; the vehicle obeys at once, brakes at 1 m/s^2, but its own
+    state reaches the guard only every 0.6 s (a machine that stalls): between two states the guard
+    plans from a position up to 0.6 s old. Counting the age it stays outside; ignoring it (the
+    guard as it was), it crosses the circle."""
+    dt, every = 0.01, 60
+    guard = P3Guard(GuardParams(7.5, 1.0, 0.0, dt), np.array([7.5 + 6.0, 0.0]))
+    x = v = 0.0
+    seen = (0.0, x, v)
+    worst = math.inf
+    for k in range(int(20.0 / dt)):
+        t = k * dt
+        if k % every == 0:
+            seen = (t, x, v)
+        t_s, x_s, v_s = seen
+        age = t - t_s if count_age else 0.0
+        wanted = guard.limit(t_s, np.array([x_s, 0.0]), np.array([5.0, 0.0]), np.array([v_s, 0.0]), age_s=age).u[0]
+        v = max(wanted, v - 1.0 * dt) if wanted < v else wanted
+        x += v * dt
+        worst = min(worst, 6.0 - x)
+    if count_age:
+        assert worst >= -1e-9, worst
+    else:
+        assert worst < -0.1, worst  # the test can fail: the stale state alone carries it in
