@@ -75,6 +75,9 @@ class CarrierSection(Section):
     acceleration_tau_s: float = Field(0.0, ge=0, le=5, description="[s] publish the carrier's measured acceleration "
                                       "(its velocity's change, low-passed with this time constant) for the passenger's "
                                       "feed-forward; 0: send none (the passenger predicts it from the carrier law)")
+    start_accel_m_s2: float = Field(0.0, ge=0, le=100, description="[m/s^2] while the carrier is measured "
+                                    "slower than 0.15 m/s, its command's speed grows by at most this (a rover with "
+                                    "stiction breaks free at a low command instead of leaping to a high one); 0 off")
     start_yaw_rad: float | None = Field(None, description="[rad] sim backend: initial heading (default: towards the target)")
     mavlink: CarrierMavlinkSection = CarrierMavlinkSection()
     ros2: CarrierRos2Section = CarrierRos2Section()

@@ -7,8 +7,9 @@ Every period ``1 / carrier.rate_hz`` [s] of the injected clock the controller
    vehicle moves on its own) and reads the carrier's own state (shared local NED frame);
 2. updates its mode from the passenger's newest status (:mod:`mission.carrier.modes`);
 3. decides the command: :func:`mission.tick.carrier_tick` (paper eq. 4, CBF filter, speed and
-   acceleration limits), then :func:`~mission.carrier.tracking.track` (what the robot can do),
-   then the P3 guard (:mod:`mission.carrier.guard`), whatever the mode;
+   acceleration limits), sped up gently while the carrier stands (``carrier.start_accel_m_s2``,
+   :mod:`mission.carrier.start`), then :func:`~mission.carrier.tracking.track` (what the robot
+   can do), then the P3 guard (:mod:`mission.carrier.guard`), whatever the mode;
 4. sends it to the backend and publishes a :class:`~mission.wire.CarrierState` for the passenger:
    a diff-drive or Ackermann carrier's velocity along its heading (no sideslip,
    :func:`~mission.carrier.tracking.along_heading`), and with ``carrier.acceleration_tau_s`` its
@@ -37,6 +38,7 @@ import zenoh
 from mission.carrier.acceleration import AccelerationEstimate
 from mission.carrier.guard import GuardParams, P3Guard
 from mission.carrier.modes import CarrierMode, PassengerView, next_mode
+from mission.carrier.start import gentle_start
 from mission.carrier.tracking import Tracked, TrackingParams, along_heading, heading_of, track
 from mission.carrier_bridge import CarrierPublisher, PassengerFeed
 from mission.clock import Clock, Periodic
@@ -210,6 +212,8 @@ class CarrierController:
         u = np.asarray(res.u, dtype=float)
         yaw = state.yaw_rad if state.yaw_rad is not None else 0.0
         t, v_meas = state.t_s, state.velocity_ned_m_s[:self.dim]
+        # A carrier that stands speeds its command up gently until it moves (stiction: mission.carrier.start)
+        u = gentle_start(u, self.velocity_m_s, float(np.linalg.norm(v_meas[:2])), self.cfg.carrier.start_accel_m_s2, dt_s)
         if self.tracking.kind == "holonomic":
             g = self.p3_guard.limit(t, x_c, u, v_meas, age_s)
             cmd, active = track(g.u, yaw, self.tracking), g.active

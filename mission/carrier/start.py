@@ -1,0 +1,33 @@
+"""The carrier's gentle start (pure): how fast its command may grow while it has not moved yet.
+
+A rover with static friction stands until its throttle overcomes it, then leaps: SIH's Ackermann
+rover (``sih.cpp``: static friction 0.5 m g, rolling 0.3 m g) breaks free at ~0.25 throttle and
+then accelerates at ~2 m/s^2 on the difference alone. PX4's speed loop raises the throttle with
+the asked speed, so under the law's 1 m/s^2 ramp it broke free only once it was asked 0.6-0.8
+m/s, and leapt 0 -> 0.7-1.5 m/s within ~0.3 s (measured): the passenger riding its dock lagged,
+then overshot, 0.4-0.55 m. Asked to speed up gently while it stands, it breaks free at a low
+speed instead, and from there the law's own acceleration limit applies.
+
+Rule: while the vehicle's measured speed is below ``moving_m_s`` [m/s], the command's speed
+[m/s] grows by at most ``accel_m_s2 * dt_s`` per step (its direction kept, never turned); it may
+always shrink. Scaling a command down never breaks a satisfied barrier (the CBF filter's
+constraints hold for every speed between 0 and the filtered one along its direction), and the
+P3 guard acts after it.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+MOVING_M_S = 0.15  # [m/s] measured speed above which the carrier counts as moving (SIH rover's EKF at rest: <= 0.05)
+
+
+def gentle_start(u: np.ndarray, u_prev: np.ndarray, measured_speed_m_s: float, accel_m_s2: float, dt_s: float,
+                 moving_m_s: float = MOVING_M_S) -> np.ndarray:
+    """The command ``u`` [m/s] with its speed capped at ``|u_prev| + accel_m_s2 * dt_s`` while the
+    vehicle's ``measured_speed_m_s`` [m/s] is below ``moving_m_s``; ``u`` itself otherwise (or
+    when ``accel_m_s2 <= 0``: off)."""
+    if accel_m_s2 <= 0 or measured_speed_m_s >= moving_m_s:
+        return u
+    speed = float(np.linalg.norm(u))
+    cap = float(np.linalg.norm(u_prev)) + accel_m_s2 * max(dt_s, 0.0)
+    return u * (cap / speed) if speed > cap else u
