@@ -184,6 +184,8 @@ class MissionSection(Section):
                                  "acceleration per m/s of reference velocity (full setpoints)")
     integral_window_m: float = Field(0.5, gt=0, le=10, description="[m] the integral integrates only while the vehicle is "
                                      "this close to the reference (anti-windup)")
+    damping_per_s: float = Field(0.0, ge=0, le=20, description="[1/s] full setpoints: velocity damping in the acceleration "
+                                 "feed-forward, -k (v_p - u_ref): damps the ringing of PX4's position loop stiffened by the lead; 0 off")
     reference_slow_lag_m: float | None = Field(
         0.3, gt=0, le=50, description="[m] after separation the reference slows down when the vehicle lags it by more "
         "than this, and waits at reference_stop_lag_m (None: never)")

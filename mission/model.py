@@ -60,6 +60,7 @@ def mission_model(cfg: Config) -> MissionModel:
         tracking=TrackingGains(kind=m.setpoint, position_gain_per_s=m.track_gain, position_lead=m.position_lead,
                                integral_gain=m.integral_gain, integral_limit=m.integral_limit,
                                drag_ff_per_s=m.drag_ff_per_s, integral_window_m=m.integral_window_m,
+                               damping_per_s=m.damping_per_s,
                                slow_lag_m=m.reference_slow_lag_m, stop_lag_m=m.reference_stop_lag_m),
         carrier_dt_s=1.0 / cfg.carrier.rate_hz,
         join_settle_m=min(m.dock_tolerance_m, m.join_settle_m if m.join_settle_m is not None else m.dock_tolerance_m),

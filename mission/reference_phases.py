@@ -56,7 +56,7 @@ def _track(state: MissionState, obs: Observation, m: MissionModel, x_ref: np.nda
     prev = state.u_cmd if state.u_cmd is not None else v.velocity_ned_m_s
     safe = filter_velocity(x_p, desired, m.tick.obstacles, m.command_safety, prev, m.dt_s)
     acted = bool(safe.changed)
-    sp = tracking_setpoint(x_ref, u_ref, a_ref, x_p, safe.u, integral, g)
+    sp = tracking_setpoint(x_ref, u_ref, a_ref, x_p, safe.u, integral, g, v.velocity_ned_m_s)
     full = sp.full and not acted
     if not acted or g.kind == "velocity":
         integral = update_integral(integral, x_ref, x_p, g, m.dt_s)

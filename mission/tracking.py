@@ -30,6 +30,15 @@ acceleration roughly proportional to its velocity, which PX4's small velocity in
   not suffering a steady deficit: integrating then is what made PX4 overshoot the target by
   1.8 m and ring).
 
+The lead stiffens the loop PX4 closes: its velocity loop (``MPC_XY_VEL_P_ACC`` 1.8/s) then
+drives a position gain of ``MPC_XY_P (1 + l)`` = 3.4/s through the airframe's tilt lag (~0.28 s
+fitted on SIH), ``tau s^3 + s^2 + 1.8 s + 3.4 = 0``, which is only just stable (Routh: 1.8 >
+0.28 x 3.4 = 0.96 ... and less with the command's own delays): the passenger rings about a
+steadily moving dock (period ~2.6 s, +-0.25 m seen on PX4 behind the SIH rover).
+``damping_per_s`` [1/s] adds velocity damping through the acceleration feed-forward (full
+setpoints): ``- k_d (v_p - u_ref)``, the vehicle's velocity ``v_p`` against the reference's, as if
+PX4's velocity gain were ``1.8 + k_d`` about the reference velocity.
+
 After separation the reference is the law integrated in time; when the vehicle lags it by more
 than ``slow_lag_m`` [m] the reference's progress is slowed, and it waits at ``stop_lag_m`` [m]
 (:func:`progress`). The law is autonomous, so this only rescales time along the law's own path:
@@ -59,6 +68,7 @@ class TrackingGains:
     integral_limit: float = 2.0
     drag_ff_per_s: float = 0.0
     integral_window_m: float = 0.5
+    damping_per_s: float = 0.0
     slow_lag_m: float | None = None
     stop_lag_m: float | None = None
 
@@ -99,13 +109,16 @@ def update_integral(integral: np.ndarray, x_ref: np.ndarray, x_p: np.ndarray, ga
 
 
 def setpoint(x_ref: np.ndarray, u_ref: np.ndarray, a_ref: np.ndarray, x_p: np.ndarray, velocity: np.ndarray,
-             integral: np.ndarray, gains: TrackingGains) -> Setpoint:
+             integral: np.ndarray, gains: TrackingGains, v_p: np.ndarray | None = None) -> Setpoint:
     """The setpoint to send: ``velocity`` [m/s] is the (safety-filtered) velocity demand; a full
     setpoint adds the reference position and the acceleration feed-forward (reference
-    acceleration, drag feed-forward, integral)."""
+    acceleration, drag feed-forward, integral and, given the vehicle's velocity ``v_p`` [m/s],
+    damping)."""
     if gains.kind == "velocity":
         return Setpoint(velocity)
     accel = a_ref + gains.drag_ff_per_s * u_ref + integral
+    if gains.damping_per_s > 0 and v_p is not None:
+        accel = accel - gains.damping_per_s * (v_p - u_ref)
     return Setpoint(velocity, x_ref + gains.position_lead * (x_ref - x_p), accel)
 
 

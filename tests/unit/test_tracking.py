@@ -51,3 +51,17 @@ def test_reference_slows_then_waits_for_a_lagging_vehicle(lag: float, rate: floa
     g = TrackingGains(slow_lag_m=0.3, stop_lag_m=1.0)
     assert progress(lag, g) == pytest.approx(rate)
     assert progress(lag, TrackingGains()) == 1.0  # unset: the reference never waits
+
+
+def test_damping_feeds_the_velocity_error_against_the_reference_back_into_the_acceleration() -> None:
+    """damping_per_s: a full setpoint's acceleration carries -k (v_p - u_ref); nothing without the
+    vehicle's velocity, with k = 0, or for velocity setpoints."""
+    x, u, a, i = np.zeros(3), np.array([1.0, 0.0, 0.0]), np.array([0.5, 0.0, 0.0]), np.zeros(3)
+    g = TrackingGains(kind="full", drag_ff_per_s=1.0, damping_per_s=2.0)
+    sp = setpoint(x, u, a, x, u, i, g, v_p=np.array([1.3, -0.1, 0.0]))
+    np.testing.assert_allclose(sp.acceleration_ned_m_s2, [0.5 + 1.0 - 2.0 * 0.3, 0.2, 0.0])
+    np.testing.assert_allclose(setpoint(x, u, a, x, u, i, g).acceleration_ned_m_s2, [1.5, 0.0, 0.0])
+    off = TrackingGains(kind="full", drag_ff_per_s=1.0)
+    np.testing.assert_allclose(setpoint(x, u, a, x, u, i, off, v_p=np.array([1.3, -0.1, 0.0])).acceleration_ned_m_s2,
+                               [1.5, 0.0, 0.0])
+    assert setpoint(x, u, a, x, u, i, TrackingGains(kind="velocity", damping_per_s=2.0), v_p=u).acceleration_ned_m_s2 is None
