@@ -75,6 +75,9 @@ class CarrierSection(Section):
     acceleration_tau_s: float = Field(0.0, ge=0, le=5, description="[s] publish the carrier's measured acceleration "
                                       "(its velocity's change, low-passed with this time constant) for the passenger's "
                                       "feed-forward; 0: send none (the passenger predicts it from the carrier law)")
+    velocity_bias_tau_s: float = Field(0.0, ge=0, le=60, description="[s] publish the velocity corrected by the "
+                                       "low-passed (this time constant) difference between its position's rate and its "
+                                       "estimator's velocity (a PX4 rover's EKF position ran 0.1-0.3 m/s faster); 0 off")
     start_accel_m_s2: float = Field(0.0, ge=0, le=100, description="[m/s^2] while the carrier is measured "
                                     "slower than 0.15 m/s, its command's speed grows by at most this (a rover with "
                                     "stiction breaks free at a low command instead of leaping to a high one); 0 off")

@@ -84,6 +84,7 @@ DOCS: dict[str, str] = {
     "carrier.max_yaw_rate_rad_s": "[rad/s] tracking law: yaw rate limit",
     "carrier.min_speed_fraction": "[-] tracking law, Ackermann: fraction of the speed kept while misaligned (it turns only while moving)",
     "carrier.wheelbase_m": "[m] tracking law, Ackermann: wheelbase (yaw rate <= v tan(max_steer) / wheelbase)",
+    "carrier.velocity_bias_tau_s": "[s] the carrier publishes its velocity plus the low-passed (this time constant) difference between its position's rate and its estimator's velocity, so the passenger's feed-forward moves as the dock does (a PX4 rover's EKF position ran 0.1-0.3 m/s faster than its velocity); 0 off",
     "carrier.start_accel_m_s2": "[m/s^2] the carrier's gentle start: while it is measured slower than 0.15 m/s its command's speed grows at most this fast (stiction: it breaks free at a low command, not leaping to a high one); 0 off",
     "carrier.max_steer_rad": "[rad] tracking law, Ackermann: steering angle limit",
     "carrier.mavlink": "[-] table: the PX4 vehicle of the `mavlink` backend",

@@ -12,8 +12,9 @@ Every period ``1 / carrier.rate_hz`` [s] of the injected clock the controller
    can do), then the P3 guard (:mod:`mission.carrier.guard`), whatever the mode;
 4. sends it to the backend and publishes a :class:`~mission.wire.CarrierState` for the passenger:
    a diff-drive or Ackermann carrier's velocity along its heading (no sideslip,
-   :func:`~mission.carrier.tracking.along_heading`), and with ``carrier.acceleration_tau_s`` its
-   measured acceleration (:mod:`mission.carrier.acceleration`).
+   :func:`~mission.carrier.tracking.along_heading`), with ``carrier.velocity_bias_tau_s`` made
+   consistent with its position (:mod:`mission.carrier.velocity`), and with
+   ``carrier.acceleration_tau_s`` its measured acceleration (:mod:`mission.carrier.acceleration`).
 
 Failsafes (each a stop: a zero command, still sent, so a PX4 vehicle stays in OFFBOARD and brakes)::
 
@@ -40,6 +41,7 @@ from mission.carrier.guard import GuardParams, P3Guard
 from mission.carrier.modes import CarrierMode, PassengerView, next_mode
 from mission.carrier.start import gentle_start
 from mission.carrier.tracking import Tracked, TrackingParams, along_heading, heading_of, track
+from mission.carrier.velocity import PositionConsistentVelocity
 from mission.carrier_bridge import CarrierPublisher, PassengerFeed
 from mission.clock import Clock, Periodic
 from mission.config import Config
@@ -156,6 +158,8 @@ class CarrierController:
         self._last_speed_cmd = 0.0
         tau = cfg.carrier.acceleration_tau_s
         self._acceleration = AccelerationEstimate(tau) if tau > 0 else None  # published when set
+        bias_tau = cfg.carrier.velocity_bias_tau_s
+        self._velocity_fix = PositionConsistentVelocity(bias_tau) if bias_tau > 0 else None
         self.passenger = PassengerFeed(session, self.pair, clock, max_age_s=cfg.carrier.passenger_timeout_s)
         try:
             self.publisher = CarrierPublisher(session, self.pair, encoding or cfg.zenoh.encoding,  # type: ignore[arg-type]
@@ -346,6 +350,8 @@ class CarrierController:
         if state is None or now - state.t_s > self.cfg.carrier.state_timeout_s:
             if self._acceleration is not None:
                 self._acceleration.reset()
+            if self._velocity_fix is not None:
+                self._velocity_fix.reset()
             self._stats["stale_ticks"] += 1
             self.velocity_m_s = np.zeros(self.dim)
             self.backend.command(STOP)
@@ -359,6 +365,8 @@ class CarrierController:
         velocity = _pad3(fresh.velocity_ned_m_s[:self.dim])
         if self.tracking.kind != "holonomic" and fresh.yaw_rad is not None:
             velocity = along_heading(velocity, fresh.yaw_rad)  # no sideslip: the estimator's wander removed
+        if self._velocity_fix is not None:  # consistent with its position (mission.carrier.velocity)
+            velocity = self._velocity_fix.update(fresh.t_s, _pad3(fresh.position_ned_m[:self.dim]), velocity)
         accel = None if self._acceleration is None else self._acceleration.update(fresh.t_s, velocity)
         out = CarrierState(fresh.t_s, self.seq, "local_ned", _pad3(fresh.position_ned_m[:self.dim]), velocity,
                            fresh.yaw_rad, accel)

@@ -1,0 +1,52 @@
+"""The carrier's velocity made consistent with its own position (pure): what it publishes.
+
+The passenger feeds the dock's velocity forward and holds the dock's position. A PX4 rover's
+estimator (EKF2 on SIH's GPS) moved its *position* 0.1-0.3 m/s faster than its *velocity* said,
+for 10 s and more (1 s windows, nine flights of the SIH rover pair: mean +0.02 to +0.19 m/s
+along the route, up to +-0.3 m/s along and +-0.2 m/s across). Fed that velocity, the passenger
+lagged the dock by the difference over the loop's position gain, 0.15-0.4 m.
+
+The correction is a complementary filter: the bias ``b`` is the difference between the
+position's rate between two successive samples and their mean velocity (exact for a velocity
+linear in time), low-passed with time constant ``tau_s`` [s] (first order, exact for any sample
+spacing); the velocity published is ``v + b``. Fast changes come from the estimator's velocity,
+the slow drift from its position. Frames: NED [m], [m/s]; times [s] on the carrier's clock.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+
+class PositionConsistentVelocity:
+    """The velocity plus the low-passed bias of its position's rate; :meth:`update` once a tick."""
+
+    def __init__(self, tau_s: float) -> None:
+        if tau_s <= 0:
+            raise ValueError(f"tau_s must be > 0, got {tau_s!r}")
+        self.tau_s = tau_s
+        self._last: tuple[float, np.ndarray, np.ndarray] | None = None
+        self.bias: np.ndarray | None = None  # [m/s]; None until two samples were seen
+
+    def update(self, t_s: float, position_m: np.ndarray, velocity_m_s: np.ndarray) -> np.ndarray:
+        """Take the sample (time ``t_s`` [s], position [m], velocity [m/s]); returns the velocity
+        corrected by the bias so far. A sample no newer than the last one changes nothing."""
+        x = np.asarray(position_m, dtype=float).copy()
+        v = np.asarray(velocity_m_s, dtype=float).copy()
+        if self._last is not None:
+            t0, x0, v0 = self._last
+            dt = t_s - t0
+            if dt <= 0:
+                return v if self.bias is None else v + self.bias
+            raw = (x - x0) / dt - 0.5 * (v + v0)
+            if self.bias is None:
+                self.bias = np.zeros_like(raw)
+            self.bias = self.bias + (1.0 - math.exp(-dt / self.tau_s)) * (raw - self.bias)
+        self._last = (t_s, x, v)
+        return v if self.bias is None else v + self.bias
+
+    def reset(self) -> None:
+        """Forget the last sample (the own state went stale: the next difference would span the
+        gap); the bias is kept (it drifts slowly)."""
+        self._last = None

@@ -1,0 +1,48 @@
+"""The carrier's velocity made consistent with its position (mission.carrier.velocity): a biased
+velocity is corrected to the position's rate with the time constant; an exact one is untouched."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from mission.carrier.velocity import PositionConsistentVelocity
+
+
+def test_a_velocity_that_says_less_than_the_position_moves_is_corrected_to_the_position_s_rate() -> None:
+    """Position moving at 1.25 m/s north, velocity saying 1.0: the bias estimate approaches 0.25
+    as 1 - exp(-t / tau) (first order), whatever the sample spacing."""
+    fix = PositionConsistentVelocity(1.0)
+    t, out = 0.0, None
+    rng = np.random.default_rng(1)
+    while t < 3.0:
+        out = fix.update(t, np.array([1.25 * t, 0.0, 0.0]), np.array([1.0, 0.0, 0.0]))
+        t += float(rng.uniform(0.02, 0.05))  # PX4's ~29 Hz with jitter
+    first = fix.update(t, np.array([1.25 * t, 0.0, 0.0]), np.array([1.0, 0.0, 0.0]))
+    assert fix.bias is not None and out is not None
+    # the first difference comes after the first sample: the filter ran for t minus that sample
+    assert float(first[0]) == pytest.approx(1.0 + 0.25 * (1.0 - math.exp(-t)), abs=1e-9)
+    assert first[1] == first[2] == 0.0
+
+
+def test_a_consistent_accelerating_state_gets_no_correction_and_repeats_change_nothing() -> None:
+    fix = PositionConsistentVelocity(0.5)
+    for k in range(60):
+        t = k / 29.0
+        v = fix.update(t, np.array([0.5 * t * t, 0.0, 0.0]), np.array([t, 0.0, 0.0]))  # 1 m/s^2
+        assert float(v[0]) == pytest.approx(t, abs=1e-12)
+        again = fix.update(t, np.array([9.0, 9.0, 9.0]), np.array([t, 0.0, 0.0]))  # the same state on the next tick
+        assert float(again[0]) == pytest.approx(t, abs=1e-12)
+
+
+def test_reset_forgets_the_last_sample_not_the_bias_and_tau_must_be_positive() -> None:
+    fix = PositionConsistentVelocity(0.1)
+    fix.update(0.0, np.zeros(3), np.zeros(3))
+    fix.update(0.1, np.array([0.05, 0.0, 0.0]), np.zeros(3))
+    bias = fix.bias.copy()
+    fix.reset()
+    v = fix.update(5.0, np.array([100.0, 0.0, 0.0]), np.zeros(3))  # a jump across the gap is not a rate
+    np.testing.assert_array_equal(v, bias)
+    with pytest.raises(ValueError):
+        PositionConsistentVelocity(0.0)
