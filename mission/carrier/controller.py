@@ -216,8 +216,11 @@ class CarrierController:
         u = np.asarray(res.u, dtype=float)
         yaw = state.yaw_rad if state.yaw_rad is not None else 0.0
         t, v_meas = state.t_s, state.velocity_ned_m_s[:self.dim]
-        # A carrier that stands speeds its command up gently until it moves (stiction: mission.carrier.start)
-        u = gentle_start(u, self.velocity_m_s, float(np.linalg.norm(v_meas[:2])), self.cfg.carrier.start_accel_m_s2, dt_s)
+        # A carrier that stands speeds its command up gently until it moves (stiction: mission.carrier.start);
+        # a robot that moves along its heading by its forward speed (its estimator's sideways wander is no motion)
+        moving = (float(np.linalg.norm(v_meas[:2])) if self.tracking.kind == "holonomic" or state.yaw_rad is None
+                  else abs(math.cos(yaw) * float(v_meas[0]) + math.sin(yaw) * float(v_meas[1])))
+        u = gentle_start(u, self.velocity_m_s, moving, self.cfg.carrier.start_accel_m_s2, dt_s)
         if self.tracking.kind == "holonomic":
             g = self.p3_guard.limit(t, x_c, u, v_meas, age_s)
             cmd, active = track(g.u, yaw, self.tracking), g.active
