@@ -184,6 +184,9 @@ class MissionSection(Section):
                                  "acceleration per m/s of reference velocity (full setpoints)")
     integral_window_m: float = Field(0.5, gt=0, le=10, description="[m] the integral integrates only while the vehicle is "
                                      "this close to the reference (anti-windup)")
+    velocity_bias_tau_s: float = Field(0.0, ge=0, le=60, description="[s] the vehicle's velocity as the mission uses it "
+                                       "is corrected by the low-passed (this time constant) difference between its position's "
+                                       "rate and its estimator's velocity (PX4's EKF on SIH: 0.3-0.5 m/s apart for seconds); 0 off")
     damping_per_s: float = Field(0.0, ge=0, le=20, description="[1/s] full setpoints: velocity damping in the acceleration "
                                  "feed-forward, -k (v_p - u_ref): damps the ringing of PX4's position loop stiffened by the lead; 0 off")
     reference_slow_lag_m: float | None = Field(

@@ -20,6 +20,7 @@ from typing import Any, Callable
 import numpy as np
 
 from mission import phases, px4
+from mission.consistent_velocity import PositionConsistentVelocity
 from mission.clock import Clock, Periodic, join_thread
 from mission.config import Config
 from mission.errors import CommandRejected, LinkError
@@ -151,13 +152,17 @@ def _no_stamp() -> int:
     return 0
 
 
-def _vehicle_obs(state: Any) -> VehicleObs | None:
+def _vehicle_obs(state: Any, velocity_fix: PositionConsistentVelocity | None = None) -> VehicleObs | None:
+    """The vehicle as the phases see it; with ``velocity_fix`` its velocity made consistent with
+    its position (``mission.velocity_bias_tau_s``, :mod:`mission.consistent_velocity`)."""
     if state.heartbeat_rx_s is None:
         return None
     pos = state.position_ned_m
     vel = state.velocity_ned_m_s
     age = float("inf") if state.position_rx_s is None else state.t_s - state.position_rx_s
     sample_t = getattr(state, "position_t_s", None)
+    if velocity_fix is not None and pos is not None and vel is not None and sample_t is not None:
+        vel = velocity_fix.update(sample_t, np.asarray(pos, dtype=float), np.asarray(vel, dtype=float))
     if pos is not None and vel is not None and age <= phases.TELEMETRY_SILENT_S and sample_t is not None:
         # The vehicle's position now: its last LOCAL_POSITION_NED moved on by its velocity since
         # the vehicle took it (by its own clock), as the dock point is; a late sample, or a burst
@@ -231,6 +236,8 @@ class MissionController:
         self._received: Any = None
         self._rates: list[float] = []  # LOCAL_POSITION_NED rate seen each flying tick [Hz]
         self._rate_asked = cfg.mission.telemetry_rate_hz is None and cfg.mission.unused_streams == "keep"
+        tau = cfg.mission.velocity_bias_tau_s
+        self._velocity_fix = PositionConsistentVelocity(tau) if tau > 0 else None
 
     def _observe(self, t: float, worker: CommandWorker) -> Observation:
         vstate = self.link.state
@@ -242,7 +249,7 @@ class MissionController:
         signing = getattr(self.link, "signing_problem", lambda: None)()
         if signing:
             failed["signing"] = signing  # no vehicle yet, and the reason is the key
-        return Observation(t_s=t, vehicle=_vehicle_obs(vstate), carrier=_carrier_obs(self._received, self.feed.alive_over_interval()),
+        return Observation(t_s=t, vehicle=_vehicle_obs(vstate, self._velocity_fix), carrier=_carrier_obs(self._received, self.feed.alive_over_interval()),
                            failed=failed, interrupted=self.stop.is_set())
 
     def _ask_telemetry_rate(self) -> None:

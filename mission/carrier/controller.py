@@ -13,7 +13,7 @@ Every period ``1 / carrier.rate_hz`` [s] of the injected clock the controller
 4. sends it to the backend and publishes a :class:`~mission.wire.CarrierState` for the passenger:
    a diff-drive or Ackermann carrier's velocity along its heading (no sideslip,
    :func:`~mission.carrier.tracking.along_heading`), with ``carrier.velocity_bias_tau_s`` made
-   consistent with its position (:mod:`mission.carrier.velocity`), and with
+   consistent with its position (:mod:`mission.consistent_velocity`), and with
    ``carrier.acceleration_tau_s`` its measured acceleration (:mod:`mission.carrier.acceleration`).
 
 Failsafes (each a stop: a zero command, still sent, so a PX4 vehicle stays in OFFBOARD and brakes)::
@@ -41,7 +41,7 @@ from mission.carrier.guard import GuardParams, P3Guard
 from mission.carrier.modes import CarrierMode, PassengerView, next_mode
 from mission.carrier.start import gentle_start
 from mission.carrier.tracking import Tracked, TrackingParams, along_heading, heading_of, track
-from mission.carrier.velocity import PositionConsistentVelocity
+from mission.consistent_velocity import PositionConsistentVelocity
 from mission.carrier_bridge import CarrierPublisher, PassengerFeed
 from mission.clock import Clock, Periodic
 from mission.config import Config
@@ -368,7 +368,7 @@ class CarrierController:
         velocity = _pad3(fresh.velocity_ned_m_s[:self.dim])
         if self.tracking.kind != "holonomic" and fresh.yaw_rad is not None:
             velocity = along_heading(velocity, fresh.yaw_rad)  # no sideslip: the estimator's wander removed
-        if self._velocity_fix is not None:  # consistent with its position (mission.carrier.velocity)
+        if self._velocity_fix is not None:  # consistent with its position (mission.consistent_velocity)
             velocity = self._velocity_fix.update(fresh.t_s, _pad3(fresh.position_ned_m[:self.dim]), velocity)
         accel = None if self._acceleration is None else self._acceleration.update(fresh.t_s, velocity)
         out = CarrierState(fresh.t_s, self.seq, "local_ned", _pad3(fresh.position_ned_m[:self.dim]), velocity,

@@ -1,4 +1,4 @@
-"""The carrier's velocity made consistent with its position (mission.carrier.velocity): a biased
+"""A velocity made consistent with its position (mission.consistent_velocity): a biased
 velocity is corrected to the position's rate with the time constant; an exact one is untouched."""
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from mission.carrier.velocity import PositionConsistentVelocity
+from mission.consistent_velocity import PositionConsistentVelocity
 
 
 def test_a_velocity_that_says_less_than_the_position_moves_is_corrected_to_the_position_s_rate() -> None:
@@ -46,3 +46,26 @@ def test_reset_forgets_the_last_sample_not_the_bias_and_tau_must_be_positive() -
     np.testing.assert_array_equal(v, bias)
     with pytest.raises(ValueError):
         PositionConsistentVelocity(0.0)
+
+
+def test_the_mission_observes_its_vehicle_s_velocity_made_consistent_with_its_position() -> None:
+    """mission.velocity_bias_tau_s: the controller's vehicle observation carries the corrected
+    velocity (an EKF that says 0.44 m/s east while its position moves 0.12 m/s west, as PX4's did
+    on SIH), each LOCAL_POSITION_NED sample counted once."""
+    from types import SimpleNamespace
+
+    from mission.controller import _vehicle_obs
+
+    fix = PositionConsistentVelocity(0.5)
+    obs = None
+    for k in range(150):  # 3 s at 50 Hz
+        t = k * 0.02
+        state = SimpleNamespace(heartbeat_rx_s=t, position_ned_m=[0.0, -0.12 * t, -1.5], velocity_ned_m_s=[0.0, 0.44, 0.0],
+                                position_rx_s=t, t_s=t, position_t_s=t, position_valid=True, armed=True,
+                                mode="OFFBOARD", heartbeat_age_s=0.0, system_status=4)
+        obs = _vehicle_obs(state, fix)
+        assert _vehicle_obs(state) is not None
+    assert obs is not None
+    assert float(obs.velocity_ned_m_s[1]) == pytest.approx(-0.12 + 0.56 * math.exp(-2.98 / 0.5), abs=1e-6)
+    raw = _vehicle_obs(state)  # without the fix: the estimator's velocity as it came
+    assert raw is not None and float(raw.velocity_ned_m_s[1]) == pytest.approx(0.44)

@@ -1,4 +1,9 @@
-"""The carrier's velocity made consistent with its own position (pure): what it publishes.
+"""A vehicle's estimated velocity made consistent with its own estimated position (pure).
+
+Both PX4 estimators of the rover pair (EKF2 on SIH's GPS) let velocity and position disagree for
+seconds: the passenger's EKF said 0.44 m/s east while its position moved 0.12 m/s west (a
+real-PX4 flight), so velocity feedback on it pushed the passenger off the dock. The carrier
+publishes, the passenger observes, its velocity corrected as below.
 
 The passenger feeds the dock's velocity forward and holds the dock's position. A PX4 rover's
 estimator (EKF2 on SIH's GPS) moved its *position* 0.1-0.3 m/s faster than its *velocity* said,
