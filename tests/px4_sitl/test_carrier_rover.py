@@ -112,15 +112,14 @@ def test_quadrotor_and_rover_on_px4_each_in_offboard_p1_p3_and_the_rover_stops_o
     assert code == 0, (out / "mission.err").read_text(errors="replace")[-3000:]
     assert "carrier vehicle armed and in OFFBOARD" in carrier_err  # the rover under our controller
     assert s["phase"] == "DONE" and s["p2"] and s["p3"], s
-    # P1 needs the passenger within mission.dock_tolerance_m (0.5 m) of the dock point while riding.
-    # With the rover's speed loop closed (ROVER_PARAMS), its velocity published along its heading
-    # and its measured acceleration fed forward, it held (0.27-0.45 m) in 8 of the 10 flights that
-    # rode to separation, the other two 0.55 m (the quadrotor-only pair beside them: 0.27 m). What is
-    # left is the rover's start: it sticks until its throttle breaks it free, then leaps to 1.0-1.5
-    # m/s within ~0.3 s, and the quadrotor lags, then overshoots it (README "Driving a real
-    # carrier"). A machine stalled for 0.5-0.7 s (other jobs) stops the rover under its passenger
-    # (carrier.state_timeout_s): 0.75-1.07 m at load 11-14. Held to what was measured, not to P1.
-    assert s["max_offset_before_separation_m"] < 1.2, s["max_offset_before_separation_m"]
+    # P1: the passenger within mission.dock_tolerance_m (0.5 m) of the dock point while riding. It
+    # takes (configs/px4_sitl_rover.toml, README "Driving a real carrier") the rover's speed loop
+    # closed (ROVER_PARAMS), a gentle start (the SIH rover sticks, then leaps off), both vehicles'
+    # velocities made consistent with their EKF positions (which ran 0.1-0.5 m/s apart for
+    # seconds) and velocity damping of the passenger's loop (it rang +-0.25 m without).
+    # A machine stalled for 0.5-1 s (other jobs) freezes the passenger's setpoint or stops the
+    # rover under it (carrier.state_timeout_s): that alone can cost 0.6-1 m.
+    assert s["p1"], s["max_offset_before_separation_m"]
     assert s["final_passenger_target_distance_m"] <= 0.5  # the passenger arrived
     assert c["backend"] == "mavlink" and c["mode"] == "separated"
     assert c["closest_target_distance_m"] >= 8.0 - 0.5  # b c - 0.5 m: the rover stops short of it
