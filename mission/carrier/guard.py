@@ -9,13 +9,14 @@ the speed from which the carrier can still stop before the guard circle::
     h      = |e_tc| - r_guard                   (|e_tc| as the law measures it: a planar carrier's
                                                  distance to a target above its plane counts the height)
     v_fly  = max(measured inward speed, inward commands sent since t_s - delay_s)
-    h_pred = h - v_fly (age_s + delay_s)        (where the vehicle is when this command acts)
+    h_pred = h - v_fly max(delay_s, age_s)      (where the vehicle is when this command acts)
     v_in  <= a (sqrt(T^2 + 2 h_pred / a) - T),  0 if h_pred <= 0   (v T + v^2 / 2a = h_pred)
 
 ``a`` [m/s^2] is the braking deceleration, ``delay_s`` [s] the vehicle's response delay (commands
-already on their way still act during it), ``age_s`` [s] how old the own state is now (a state
-measured a while ago, e.g. after a stall of the machine, left the carrier moving on meanwhile:
-the guard counts that way as already driven), ``T`` [s] the control period (a command is held that
+already on their way still act during it; it includes the age of a fresh own state), ``age_s``
+[s] how old the own state is now: a state older than ``delay_s`` (e.g. after a stall of the
+machine) left the carrier moving on meanwhile, and the guard counts its whole age as already
+driven, ``T`` [s] the control period (a command is held that
 long). A vehicle that brakes at ``a`` and obeys each command after ``delay_s`` then never crosses
 the circle (tested with a transport-delayed, deceleration-limited vehicle in the unit tests).
 
@@ -95,7 +96,7 @@ class P3Guard:
         state measured at ``t_s`` [s] and ``age_s`` [s] old now. The cap is 0 while the measured
         inward speed is over it by more than :data:`OVERSPEED_M_S`."""
         n, h = self._geometry(x_c)
-        horizon = max(age_s, 0.0) + self.p.delay_s  # from the measurement to when this command acts
+        horizon = max(self.p.delay_s, age_s)  # from the measurement to when this command acts
         while self._sent and self._sent[0][0] < t_s - self.p.delay_s - 1e-9:  # (sent times are t_s + age)
             self._sent.popleft()
         if n is None:

@@ -150,6 +150,9 @@ def test_guard_counts_a_stale_own_state_s_age_as_distance_already_driven() -> No
     stale = g.cap(0.0, x, np.array([1.0, 0.0, 0.0]), age_s=0.5)[0]  # measured 0.5 s ago: 0.5 m closer now
     assert fresh == pytest.approx(math.sqrt(5.0)) and stale == pytest.approx(2.0)
     assert g.cap(0.0, x, np.zeros(3), age_s=0.5)[0] == pytest.approx(math.sqrt(5.0))  # standing: nothing driven
+    delayed = P3Guard(GuardParams(7.5, 1.0, 0.5, 1e-9), TARGET)  # brake_delay_s covers a fresh state's age
+    assert delayed.cap(0.0, x, np.array([1.0, 0.0, 0.0]), age_s=0.3)[0] == pytest.approx(2.0)  # as fresh: 0.5 s
+    assert delayed.cap(0.0, x, np.array([1.0, 0.0, 0.0]), age_s=1.0)[0] == pytest.approx(math.sqrt(3.0))  # 1 m driven
 
 
 @pytest.mark.parametrize("count_age", [True, False])
