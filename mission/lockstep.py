@@ -169,18 +169,22 @@ class MavlinkRelay:
 
 
 class ZenohRelay:
-    """The controller brings the pair's carrier simulator along (a :class:`~mission.clock.Downstream`).
+    """The controller brings the pair's carrier simulator along (a :class:`~mission.clock.Downstream`),
+    on the ``keys`` (time, ready) of :func:`clock_keys`; ``feed`` calls back with each sample it
+    receives (``.seq``), ``publisher.last_seq`` is the seq of the last sample sent. The same relay
+    brings a ROS-2-shaped robot along for the ros2 carrier (``name`` "robot", keys
+    :func:`mission.carrier.ros2_link.robot_clock_keys`, rmw_zenoh sequence numbers).
 
     Before the first barrier completes it calls the carrier every :data:`HELLO_WALL_S` until it
     answers (for at most ``join_wall_s``); later it waits ``watchdog_wall_s`` at most, then drops
     the carrier until it answers again (a restarted carrier rejoins at a later barrier).
     """
 
-    def __init__(self, session: zenoh.Session, pair: str, feed: Any, publisher: Any, *,
+    def __init__(self, session: zenoh.Session, keys: tuple[str, str], feed: Any, publisher: Any, *,
                  watchdog_wall_s: float = CARRIER_WATCHDOG_WALL_S,
-                 join_wall_s: float = 30.0) -> None:
-        time_key, ready_key = clock_keys(pair)
-        self.watchdog_wall_s, self.join_wall_s = watchdog_wall_s, join_wall_s
+                 join_wall_s: float = 30.0, name: str = "carrier") -> None:
+        time_key, ready_key = keys
+        self.watchdog_wall_s, self.join_wall_s, self.name = watchdog_wall_s, join_wall_s, name
         self._publisher = publisher  # PassengerPublisher: last_seq
         self._cv = threading.Condition()
         self._ready: tuple[int, int, int] | None = None
@@ -206,11 +210,11 @@ class ZenohRelay:
             self._ready = (values[0], values[1], values[2])
             if values[1] < 0:  # it left
                 if self._state != "dropped":
-                    log.info("lockstep: the carrier left at t = %.3f s", values[0] / 1e9)
+                    log.info("lockstep: the %s left at t = %.3f s", self.name, values[0] / 1e9)
                 self._state = "dropped"
             elif self._state == "dropped":
                 self._state, self._wake_ns = "joined", values[1]
-                log.warning("lockstep: the carrier is back (ready at t = %.3f s)", values[0] / 1e9)
+                log.warning("lockstep: the %s is back (ready at t = %.3f s)", self.name, values[0] / 1e9)
             self._cv.notify_all()
 
     def wake_ns(self) -> int | None:
@@ -238,8 +242,8 @@ class ZenohRelay:
                 if now - start > limit:
                     self._state = "dropped"
                     self.dropped += 1
-                    log.warning("lockstep: the carrier did not answer step t = %.3f s within %.1f s (wall); "
-                                "going on without it", t_ns / 1e9, limit)
+                    log.warning("lockstep: the %s did not answer step t = %.3f s within %.1f s (wall); "
+                                "going on without it", self.name, t_ns / 1e9, limit)
                     return
                 if self._state == "joining" and now - last_put > HELLO_WALL_S:
                     self._cv.release()
@@ -257,12 +261,13 @@ class ZenohRelay:
 
 class ZenohUpstream:
     """The carrier simulator's side: steps on ``clock/time`` once the passenger status it names
-    has arrived on ``feed`` (a PassengerFeed), answers on ``clock/ready`` with the seq of its
-    last state sample (``published()``)."""
+    has arrived on ``feed`` (a PassengerFeed: callbacks with ``.seq``), answers on ``clock/ready``
+    with the seq of its last state sample (``published()``). ``keys``: (time, ready) of
+    :func:`clock_keys` (the ROS-2-shaped robot steps on the ros2 carrier's the same way)."""
 
-    def __init__(self, clock: LockstepClock, session: zenoh.Session, pair: str, feed: Any,
+    def __init__(self, clock: LockstepClock, session: zenoh.Session, keys: tuple[str, str], feed: Any,
                  published: Callable[[], int]) -> None:
-        time_key, ready_key = clock_keys(pair)
+        time_key, ready_key = keys
         self.clock, self._published = clock, published
         self._lock = threading.Lock()
         self._seen_seq = -1  # newest passenger status seq received

@@ -116,8 +116,8 @@ def _follow(pair: PairRun, progress: PairProgress) -> None:
 def start_carrier_robot(kind: str, name: str, zenoh_ep: str, speed: float, start: str, stack: ExitStack,
                         err: int | None, lockstep: bool = False) -> tuple[list[str], subprocess.Popen | None]:
     """The robot under a ``kind`` carrier ("sim": built in, none to start; "mavlink": a mock PX4
-    rover, sysid 2, in lockstep on the carrier's clock with ``lockstep``; "ros2": a ROS-2-shaped
-    robot on rmw_zenoh keys in namespace ``name``) and the carrier controller's arguments for it."""
+    rover, sysid 2; "ros2": a ROS-2-shaped robot on rmw_zenoh keys in namespace ``name``; with
+    ``lockstep`` both step on the carrier's clock) and the carrier controller's arguments for it."""
     if kind == "mavlink":
         port = free_port(socket.SOCK_DGRAM)
         robot = subprocess.Popen(_python_cli("mock-vehicle", "--frame", "rover", "--sysid", "2", "--mavlink",
@@ -129,7 +129,8 @@ def start_carrier_robot(kind: str, name: str, zenoh_ep: str, speed: float, start
                 "--kinematics", "ackermann"], robot
     if kind == "ros2":
         robot = subprocess.Popen(_python_cli("ros2-robot", "--key-form", "rmw_zenoh", "--namespace", name,
-                                             "--zenoh-connect", zenoh_ep, "--speed", str(speed)), stderr=err)
+                                             "--zenoh-connect", zenoh_ep, "--speed", str(speed),
+                                             *(["--lockstep"] if lockstep else [])), stderr=err)
         stack.callback(stop_process, robot)
         return ["--backend", "ros2", "--key-form", "rmw_zenoh", "--ros2-namespace", name, "--kinematics",
                 "diff_drive", "--offset-ned", start], robot  # its odometry starts at zero where it stands
@@ -140,9 +141,9 @@ def start_pair(config: str, name: str, zenoh_ep: str, speed: float, log_root: Pa
                quiet: bool, carrier_kind: str = "sim", lockstep: bool = False) -> PairRun:
     """Start the carrier (and its robot), the mock vehicle and the mission of one pair; register their cleanup.
 
-    ``lockstep`` (built-in or mavlink carrier): the three step on the mock vehicle's simulated time,
-    a mock rover on the carrier's (``speed`` is then the pace after a participant is lost); else
-    wall clocks scaled by ``speed``."""
+    ``lockstep``: the three step on the mock vehicle's simulated time, the carrier's robot on the
+    carrier's (``speed`` is then the pace after a participant is lost); else wall clocks scaled
+    by ``speed``."""
     cfg = load_config(config)
     pair = PairRun(name=name, log_dir=log_root / name)
     mav_port = free_port(socket.SOCK_DGRAM)
@@ -173,8 +174,8 @@ def start_pair(config: str, name: str, zenoh_ep: str, speed: float, log_root: Pa
 def run_demo(config: str, speed: float, pairs: int, log_root: Path, plot_path: str | None, timeout_s: float,
              quiet: bool = True, progress: bool = True, carrier: str = "sim",
              lockstep: bool = True) -> tuple[int, list[dict]]:
-    """Run ``pairs`` marsupial pairs, in lockstep on each mock vehicle's simulated time (built-in
-    or mavlink carrier) or at ``speed``; return the exit code and each pair's summary."""
+    """Run ``pairs`` marsupial pairs, in lockstep on each mock vehicle's simulated time or at
+    ``speed``; return the exit code and each pair's summary."""
     from mission.run_cli import plot as plot_command
 
     supervise_children()  # a demo killed outright takes its processes with it
@@ -184,7 +185,6 @@ def run_demo(config: str, speed: float, pairs: int, log_root: Path, plot_path: s
     with ExitStack() as stack:
         router = open_session(ZenohSection(mode="router", listen=[zenoh_ep]))
         stack.callback(router.close)
-        lockstep = lockstep and carrier in ("sim", "mavlink")
         runs = [start_pair(config, f"pair{i}", zenoh_ep, speed, log_root, stack, quiet, carrier, lockstep)
                 for i in range(pairs)]
         display = PairProgress([p.name for p in runs], tty=progress and sys.stdout.isatty())
@@ -289,8 +289,8 @@ def format_table(summaries: list[dict]) -> str:
 @click.option("--config", type=click.Path(dir_okay=False, exists=True), default=str(DEFAULT_CONFIG), show_default=True,
               help="Mission configuration shared by every pair.")
 @click.option("--realtime", is_flag=True, help="Run on wall clocks scaled by --speed (to watch a run live) instead of "
-              "in lockstep on the mock vehicle's simulated time, as fast as the CPU allows (the mavlink carrier's "
-              "mock rover steps on the carrier's clock). The ros2 carrier always runs in real time.")
+              "in lockstep on the mock vehicle's simulated time, as fast as the CPU allows (the mavlink and ros2 "
+              "carriers' robots step on the carrier's clock).")
 @click.option("--speed", type=click.FloatRange(min=0.1, max=100), default=10.0, show_default=True,
               help="With --realtime: speed factor of every clock (vehicle, carrier, mission), like PX4's SIH speed "
               "factor. In lockstep: the pace after a participant is lost.")

@@ -17,17 +17,18 @@ import logging
 import math
 import signal
 import threading
+from collections.abc import Callable
 from types import FrameType
 
 import click
 import numpy as np
 import zenoh
 
-from mission.carrier.ros2_link import RmwAttachment, Ros2Topics, ros2_topics
+from mission.carrier.ros2_link import Received, RmwAttachment, Ros2Topics, rmw_sequence, robot_clock_keys, ros2_topics
 from mission.carrier.tracking import wrap_pi
 from mission.carrier_bridge import open_session
 from mission.zenoh_session import undeclare
-from mission.clock import Clock, Periodic, ScaledClock
+from mission.clock import Clock, LockstepClock, Periodic, ScaledClock
 from mission.config import CarrierRos2Section, ZenohSection
 from mission.wire import CarrierState, WireError
 from mission.wire_ros2 import decode_twist_cdr, encode_odometry_cdr
@@ -53,6 +54,7 @@ class Ros2RobotSim:
         self._cmd: tuple[np.ndarray, float, float] | None = None  # (forward, right), yaw rate NED, rx time
         self.commands, self.dropped, self.seq = 0, 0, 0
         self._attachment = RmwAttachment() if topics.rmw_zenoh else None
+        self._listeners: list[Callable[[Received], None]] = []
         self._pub = session.declare_publisher(topics.odom_pub, encoding=zenoh.Encoding.APPLICATION_CDR)
         self._sub = session.declare_subscriber(topics.cmd_vel_sub, self._on_cmd)
 
@@ -67,6 +69,20 @@ class Ros2RobotSim:
         with self._lock:
             self._cmd = (body, -float(angular[2]), self.clock.now())
             self.commands += 1
+        seq = rmw_sequence(sample.attachment)
+        if seq is not None:
+            for callback in self._listeners:
+                callback(Received(seq - 1))
+
+    def add_listener(self, callback: Callable[[Received], None]) -> None:
+        """Call ``callback`` (Zenoh's thread) with each command taken that carries an rmw_zenoh
+        sequence number (lockstep: a step waits for the command the carrier names)."""
+        self._listeners.append(callback)
+
+    @property
+    def published_seq(self) -> int:
+        """Index of the last odometry sent (rmw_zenoh sequence number - 1)."""
+        return self._attachment.seq - 1 if self._attachment is not None else self.seq - 1
 
     def step(self, dt_s: float) -> CarrierState:
         now = self.clock.now()
@@ -129,29 +145,48 @@ def _floats(text: str, option: str) -> tuple[float, float, float]:
 @click.option("--yaw-deg", type=float, default=0.0, show_default=True, help="Initial heading [deg] from north.")
 @click.option("--rate", "rate_hz", type=click.FloatRange(1.0, 200.0), default=30.0, show_default=True)
 @click.option("--speed", type=click.FloatRange(min=0, min_open=True), default=1.0, show_default=True)
+@click.option("--lockstep", is_flag=True, help="Simulation: step on the ros2 carrier's lockstep clock (carrier "
+              "--lockstep) instead of a scaled wall clock; rmw_zenoh keys only (their sequence numbers order the "
+              "steps). --speed is then the pace once the carrier falls silent.")
 @click.option("--zenoh-connect", "connect", multiple=True, metavar="ENDPOINT")
 @click.option("--zenoh-listen", "listen", multiple=True, metavar="ENDPOINT")
 def ros2_robot(key_form: str, namespace: str, domain_id: int, kinematics: str, yaw_deg: float, rate_hz: float,
-               speed: float, connect: tuple[str, ...], listen: tuple[str, ...]) -> int:
+               speed: float, lockstep: bool, connect: tuple[str, ...], listen: tuple[str, ...]) -> int:
     """Run a ROS-2-shaped robot: Twist on cmd_vel in, Odometry on odom out (CDR over Zenoh).
 
     Its odometry starts at zero (the odom frame's origin is where it starts). SIGINT/SIGTERM stop it.
     """
-    topics = ros2_topics(CarrierRos2Section(key_form=key_form, namespace=namespace, domain_id=domain_id))  # type: ignore[arg-type]
+    if lockstep and key_form != "rmw_zenoh":
+        raise click.BadParameter("lockstep needs --key-form rmw_zenoh (its sequence numbers order the steps)",
+                                 param_hint="--lockstep")
+    ros2 = CarrierRos2Section(key_form=key_form, namespace=namespace, domain_id=domain_id)  # type: ignore[arg-type]
+    topics = ros2_topics(ros2)
     section = ZenohSection(listen=list(listen), connect=list(connect), rendezvous=None if (listen or connect) else "tcp/127.0.0.1:7448")
     stop = threading.Event()
+    clock: Clock = LockstepClock(speed=speed, name="robot-lockstep") if lockstep else ScaledClock(speed)
 
     def on_signal(signum: int, _frame: FrameType | None) -> None:
         stop.set()
+        if isinstance(clock, LockstepClock):
+            threading.Thread(target=clock.close, daemon=True).start()  # a lockstep sleep ends now
 
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, on_signal)
     with open_session(section) as session:
-        robot = Ros2RobotSim(session, topics, ScaledClock(speed), holonomic=kinematics == "holonomic",
+        robot = Ros2RobotSim(session, topics, clock, holonomic=kinematics == "holonomic",
                              yaw_rad=math.radians(yaw_deg))
-        log.info("ROS 2 robot: %s in, %s out", topics.cmd_vel_sub, topics.odom_pub)
+        upstream = None
+        if isinstance(clock, LockstepClock):
+            from mission.lockstep import ZenohUpstream
+
+            upstream = ZenohUpstream(clock, session, robot_clock_keys(ros2), robot, published=lambda: robot.published_seq)
+        log.info("ROS 2 robot: %s in, %s out%s", topics.cmd_vel_sub, topics.odom_pub, " (lockstep)" if lockstep else "")
         try:
             robot.run(stop, rate_hz)
         finally:
+            if upstream is not None:
+                upstream.close()
+            if isinstance(clock, LockstepClock):
+                clock.close()
             robot.close()
     return 0

@@ -20,9 +20,9 @@ import zenoh
 
 from mission.carrier.controller import CarrierBackend, CarrierController
 from mission.carrier_bridge import describe_endpoints, keys, open_session
-from mission.clock import Clock, LockstepClock, ScaledClock
+from mission.clock import Clock, Downstream, LockstepClock, ScaledClock
 from mission.config import Config, load_config, with_overrides
-from mission.lockstep import MavlinkRelay, ZenohUpstream
+from mission.lockstep import MavlinkRelay, ZenohRelay, ZenohUpstream, clock_keys
 
 log = logging.getLogger(__name__)
 
@@ -44,6 +44,28 @@ def open_backend(cfg: Config, clock: Clock, session: zenoh.Session, stack: ExitS
         backend = Ros2Carrier(cfg, clock, session)
     stack.callback(backend.close)
     return backend
+
+
+def robot_relay(cfg: Config, session: zenoh.Session, backend: CarrierBackend) -> Downstream | None:
+    """In lockstep, how the carrier brings its own robot along, if that robot is simulated: a
+    mock PX4 rover (``mock-vehicle --lockstep``) through its barriers, a ROS-2-shaped robot
+    (``ros2-robot --lockstep``, rmw_zenoh keys) through its clock keys. None for the built-in
+    robot (it is the carrier's own code)."""
+    if cfg.carrier.backend == "mavlink":
+        from mission.carrier.mavlink_vehicle import MavlinkCarrier
+
+        assert isinstance(backend, MavlinkCarrier)
+        return MavlinkRelay(backend.link)
+    if cfg.carrier.backend == "ros2":
+        from mission.carrier.ros2_link import Ros2Carrier, robot_clock_keys
+
+        assert isinstance(backend, Ros2Carrier)
+        if not backend.topics.rmw_zenoh:
+            log.warning("lockstep: a ros2dds robot carries no sequence numbers and cannot step with us; "
+                        "it runs on its own clock")
+            return None
+        return ZenohRelay(session, robot_clock_keys(cfg.carrier.ros2), backend, backend, name="robot")
+    return None
 
 
 def main(cfg: Config, speed: float = 1.0, duration_s: float | None = None, stop_event: threading.Event | None = None,
@@ -77,22 +99,19 @@ def main(cfg: Config, speed: float = 1.0, duration_s: float | None = None, stop_
             backend = open_backend(cfg, clock, session, stack)
             with CarrierController(cfg, clock, session, backend) as ctl:
                 if isinstance(clock, LockstepClock):
-                    upstream = ZenohUpstream(clock, session, ctl.pair, ctl.passenger, published=lambda: ctl.seq - 1)
+                    upstream = ZenohUpstream(clock, session, clock_keys(ctl.pair), ctl.passenger,
+                                             published=lambda: ctl.seq - 1)
                     stack.callback(upstream.close)
-                    if cfg.carrier.backend == "mavlink":  # its (mock) vehicle steps on our clock
-                        from mission.carrier.mavlink_vehicle import MavlinkCarrier
-
-                        assert isinstance(backend, MavlinkCarrier)
-                        clock.downstream = MavlinkRelay(backend.link)
+                    clock.downstream = robot_relay(cfg, session, backend)
                     stack.callback(clock.close)
                 try:
                     ctl.run(stop, duration_s)
                 finally:
                     summary = ctl.summary()
                     if isinstance(clock, LockstepClock):
-                        relay = clock.downstream
+                        relay: Any = clock.downstream
                         summary["lockstep"] = {"barriers": clock.barriers,
-                                               "vehicle_dropped": isinstance(relay, MavlinkRelay) and relay.dropped}
+                                               "robot_dropped": None if relay is None else bool(relay.dropped)}
                     log.info("carrier %s stopped in mode %s; closest approach to the target %s m, braking distance %s m",
                              ctl.pair, summary["mode"], _fmt(summary["closest_target_distance_m"]),
                              _fmt(summary["braking_distance_m"]))

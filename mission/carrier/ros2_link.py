@@ -22,7 +22,9 @@ import math
 import os
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import zenoh
@@ -70,8 +72,16 @@ def ros2_topics(section: CarrierRos2Section) -> Ros2Topics:
                       f"{d}/{cmd}/{TWIST_DDS}/*", f"{d}/{cmd}/{TWIST_DDS}/{TWIST_HASH}", True)
 
 
+def robot_clock_keys(section: CarrierRos2Section) -> tuple[str, str]:
+    """The (time, ready) lockstep keys of the robot of ``section`` (simulation only: the ros2
+    carrier brings a ROS-2-shaped robot along, :class:`mission.lockstep.ZenohRelay`)."""
+    ns = section.namespace.strip("/") or "-"
+    root = f"marsupial/robot_clock/{section.domain_id}/{ns}"
+    return f"{root}/time", f"{root}/ready"
+
+
 class RmwAttachment:
-    """rmw_zenoh's per-message attachment: sequence number, source timestamp [ns], gid (16 bytes)."""
+    """rmw_zenoh's per-message attachment: sequence number (from 1), source timestamp [ns], gid (16 bytes)."""
 
     def __init__(self) -> None:
         self.gid = os.urandom(16)
@@ -81,6 +91,27 @@ class RmwAttachment:
         self.seq += 1
         return zenoh.ext.z_serialize(("sequence_number", zenoh.ext.Int64(self.seq), "source_timestamp",
                                       zenoh.ext.Int64(time.time_ns()), "source_gid", self.gid)).to_bytes()
+
+
+_RMW_ATTACHMENT: Any = tuple[str, zenoh.ext.Int64, str, zenoh.ext.Int64, str, bytes]
+
+
+def rmw_sequence(attachment: zenoh.ZBytes | None) -> int | None:
+    """The sequence number of an rmw_zenoh attachment, or None (none, or not rmw_zenoh's)."""
+    if attachment is None:
+        return None
+    try:
+        fields: Any = zenoh.ext.z_deserialize(_RMW_ATTACHMENT, attachment)
+    except Exception:  # noqa: BLE001 - a foreign attachment is no sequence number
+        return None
+    return int(fields[1]) if fields[0] == "sequence_number" else None
+
+
+@dataclass(frozen=True)
+class Received:
+    """A sample taken, by its index in its publisher's stream (rmw_zenoh sequence number - 1)."""
+
+    seq: int
 
 
 def body_twist(cmd: Tracked, yaw_rad: float | None, holonomic: bool) -> tuple[np.ndarray, np.ndarray]:
@@ -111,6 +142,7 @@ class Ros2Carrier:
         self._latest: tuple[CarrierState, float] | None = None
         self.dropped: dict[str, int] = {}
         self._attachment = RmwAttachment() if self.topics.rmw_zenoh else None
+        self._listeners: list[Callable[[Received], None]] = []
         self._pub = declare(f"publisher on {self.topics.cmd_vel_pub}", lambda: session.declare_publisher(
             self.topics.cmd_vel_pub, encoding=zenoh.Encoding.APPLICATION_CDR))
         try:
@@ -136,6 +168,20 @@ class Ros2Carrier:
             return
         with self._lock:
             self._latest = (state, rx)
+        seq = rmw_sequence(sample.attachment)
+        if seq is not None:
+            for callback in self._listeners:
+                callback(Received(seq - 1))
+
+    def add_listener(self, callback: Callable[[Received], None]) -> None:
+        """Call ``callback`` (Zenoh's thread) with each odometry sample taken that carries an
+        rmw_zenoh sequence number (lockstep waits for the one the robot names)."""
+        self._listeners.append(callback)
+
+    @property
+    def last_seq(self) -> int:
+        """Index of the last cmd_vel sent (rmw_zenoh sequence number - 1; -1: none, or ros2dds)."""
+        return self._attachment.seq - 1 if self._attachment is not None else -1
 
     def own_state(self) -> OwnState | None:
         with self._lock:

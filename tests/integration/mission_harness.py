@@ -20,7 +20,7 @@ from mission.config import Config, load_config, with_overrides
 from mission.controller import MissionController, MissionOutcome, mission_info
 from mission.link import VehicleLink
 from mission.run_cli import mission_io
-from mission.lockstep import ZenohUpstream
+from mission.lockstep import ZenohUpstream, clock_keys
 from mission.log import FlightRecorder
 from mission.phases import Phase
 from sim.carrier import CarrierSim
@@ -87,7 +87,7 @@ def flying_pair(tmp_path: Path, *, speed: float = 5.0, config: str = "demo.toml"
         carrier = CarrierSim(ccfg, cclock, carrier_session)
         stack.callback(carrier.close)
         if isinstance(cclock, LockstepClock):
-            upstream = ZenohUpstream(cclock, carrier_session, carrier.pair, carrier.passenger,
+            upstream = ZenohUpstream(cclock, carrier_session, clock_keys(carrier.pair), carrier.passenger,
                                      published=lambda: carrier.seq - 1)
             stack.callback(upstream.close)
         carrier_stop = threading.Event()

@@ -20,14 +20,15 @@ import zenoh
 from mission.carrier.controller import CarrierController
 from mission.carrier.modes import CarrierMode
 from mission.carrier.mavlink_vehicle import MavlinkCarrier
-from mission.carrier.ros2_link import Ros2Carrier, ros2_topics
+from mission.carrier.ros2_link import RmwAttachment, Ros2Carrier, rmw_sequence, robot_clock_keys, ros2_topics
 from mission.carrier_bridge import CarrierFeed, PassengerPublisher
 from mission.clock import Clock, LockstepClock, ScaledClock
-from mission.lockstep import MavlinkRelay
+from mission.lockstep import MavlinkRelay, ZenohRelay, ZenohUpstream
 from mission.config import Config, from_dict
 from mission.wire import PassengerStatus
 from sim.ros2_robot import Ros2RobotSim
 from sim.vehicle import MockVehicle, VehicleOptions
+from tests.integration.stepper import Stepper
 from tests.integration.zenoh_util import peer_pair, wait_for
 
 pytestmark = pytest.mark.timeout(90)
@@ -60,10 +61,10 @@ class ScriptedPassenger:
 
     def _run(self) -> None:
         while not self.stop.is_set():
+            self.clock.sleep(0.05)  # first: in lockstep every status goes out in a step
             self.seq += 1
             sep = self.phase in ("SEPARATED", "NAVIGATING")
             self.pub.publish(PassengerStatus(self.phase, self.clock.now(), self.seq, [0, 0, -1.5], [0, 0, 0], sep))
-            self.clock.sleep(0.05)
 
     def close(self) -> None:
         self.stop.set()
@@ -71,48 +72,20 @@ class ScriptedPassenger:
         self.pub.close()
 
 
-class Stepper:
-    """The test as the upstream of the carrier's lockstep clock: it moves the clock to each step
-    the carrier's threads need and waits for the step's report. Conditions are checked between
-    steps, with timeouts in simulated seconds."""
-
-    def __init__(self, clock: LockstepClock) -> None:
-        self.clock = clock
-        clock.upstream = self
-        self._cv = threading.Condition()
-        self._done_ns, self._wake_ns = -1, 0
-
-    def report(self, t_ns: int, wake_ns: int) -> None:
-        with self._cv:
-            self._done_ns, self._wake_ns = t_ns, wake_ns
-            self._cv.notify_all()
-
-    def step(self) -> None:
-        with self._cv:
-            t_ns = max(self._wake_ns, self._done_ns + 1)
-        self.clock.barrier(t_ns)
-        with self._cv:
-            if not self._cv.wait_for(lambda: self._done_ns >= t_ns, timeout=10.0):
-                raise AssertionError(f"the carrier did not finish its step at t = {t_ns / 1e9:.3f} s")
-
-    def until(self, predicate: Any, timeout_s: float, what: str) -> Any:
-        """Step until ``predicate()`` is truthy (returned); at most ``timeout_s`` simulated seconds."""
-        end_s = self.clock.now() + timeout_s
-        while not (value := predicate()):
-            if self.clock.now() > end_s:
-                raise AssertionError(f"not within {timeout_s} s (simulated): {what}")
-            self.step()
-        return value
-
-    def run_for(self, duration_s: float) -> None:
-        end_s = self.clock.now() + duration_s
-        while self.clock.now() < end_s:
-            self.step()
-
-
 @contextlib.contextmanager
-def carrier_running(cfg: Config, clock: Clock, session: zenoh.Session, backend: Any) -> Iterator[CarrierController]:
+def carrier_running(cfg: Config, clock: Clock, session: zenoh.Session, backend: Any, *,
+                    stepper: Stepper | None = None, passenger: ScriptedPassenger | None = None) -> Iterator[CarrierController]:
+    """The carrier controller in its own thread; with a ``stepper``, each step waits for the
+    scripted ``passenger``'s last status to have reached the carrier (Zenoh delivers it on its
+    own time; the mission's clock relay waits for it in a flight)."""
     ctl = CarrierController(cfg, clock, session, backend)
+    if stepper is not None and passenger is not None:
+        def delivered() -> bool:
+            rx = ctl.passenger.latest()
+            return passenger.seq == 0 or (rx is not None and rx.status.seq >= passenger.seq)
+
+        wait_for(lambda: passenger.pub.matched, 10.0, "the carrier subscribed to the passenger")
+        stepper.settle = lambda: wait_for(delivered, 10.0, "the passenger's status at the carrier")
     stop = threading.Event()
     thread = threading.Thread(target=ctl.run, args=(stop,), daemon=True)
     thread.start()
@@ -169,7 +142,7 @@ def test_px4_rover_arms_when_the_passenger_rides_and_stops_outside_the_guard_aft
         clock = stepper.clock
         passenger = ScriptedPassenger(sb, clock)
         try:
-            with carrier_running(cfg, clock, sa, backend) as ctl, CarrierFeed(sb, "cb", clock) as feed:
+            with carrier_running(cfg, clock, sa, backend, stepper=stepper, passenger=passenger) as ctl, CarrierFeed(sb, "cb", clock) as feed:
                 rx = stepper.until(feed.latest, 5, "carrier state")
                 np.testing.assert_allclose(rx.state.position, START, atol=1e-6)  # offset into the shared frame
                 assert rx.state.acceleration_ned_m_s2 is None  # carrier.acceleration_tau_s = 0: none sent
@@ -202,7 +175,7 @@ def test_px4_rover_publishes_its_velocity_along_its_heading_and_its_measured_acc
         passenger = ScriptedPassenger(sb, clock)
         samples: list[Any] = []
         try:
-            with carrier_running(cfg, clock, sa, backend), CarrierFeed(sb, "cb", clock) as feed:
+            with carrier_running(cfg, clock, sa, backend, stepper=stepper, passenger=passenger), CarrierFeed(sb, "cb", clock) as feed:
                 stepper.until(feed.latest, 5, "carrier state")
                 passenger.phase = "RIDING"
 
@@ -233,7 +206,7 @@ def test_px4_rover_under_a_passenger_that_never_separates_stops_at_the_guard() -
         passenger = ScriptedPassenger(sb, clock)
         passenger.phase = "RIDING"
         try:
-            with carrier_running(cfg, clock, sa, backend) as ctl:
+            with carrier_running(cfg, clock, sa, backend, stepper=stepper, passenger=passenger) as ctl:
                 stepper.until(lambda: rover.snapshot().armed, 20, "armed")
                 d = _watch(rover, stepper, lambda: ctl.summary()["guard_active_ticks"] > 30
                            and np.linalg.norm(rover.snapshot().velocity_ned_m_s) < 1e-3, 60, "held at the guard")
@@ -252,7 +225,7 @@ def test_stale_own_state_stops_the_carrier_and_its_publishing() -> None:
         passenger = ScriptedPassenger(sb, clock)
         passenger.phase = "RIDING"
         try:
-            with carrier_running(cfg, clock, sa, backend) as ctl, CarrierFeed(sb, "cb", clock) as feed:
+            with carrier_running(cfg, clock, sa, backend, stepper=stepper, passenger=passenger) as ctl, CarrierFeed(sb, "cb", clock) as feed:
                 stepper.until(lambda: np.linalg.norm(rover.snapshot().velocity_ned_m_s) > 0.5, 30, "moving")
                 t0 = rover.snapshot().t_s
                 rover.set_faults(blackouts=((t0, 3.0),))
@@ -269,44 +242,62 @@ def test_stale_own_state_stops_the_carrier_and_its_publishing() -> None:
 
 @pytest.mark.parametrize(("key_form", "kinematics"), [("rmw_zenoh", "diff_drive"), ("ros2dds", "holonomic")])
 def test_ros2_robot_follows_the_law_and_stops_outside_the_guard(key_form: str, kinematics: str) -> None:
+    """rmw_zenoh: the robot steps on the carrier's clock (lockstep; rmw_zenoh's sequence numbers
+    order the steps). zenoh-bridge-ros2dds keys carry none: real time at 3x."""
     cfg = _cfg("ros2", kinematics, ros2={"key_form": key_form, "namespace": "robot1", "offset_ned_m": START.tolist()})
-    clock = ScaledClock(SPEED)
     topics = ros2_topics(cfg.carrier.ros2)
-    with peer_pair() as (sa, sb):
-        robot = Ros2RobotSim(sb, topics, clock, holonomic=kinematics == "holonomic", yaw_rad=-1.0)
+    lockstep = key_form == "rmw_zenoh"
+    clock: Clock
+    if lockstep:
+        clock = LockstepClock(speed=SPEED, name="carrier", creator_runs=False)
+        robot_clock: Clock = LockstepClock(speed=SPEED, name="robot", creator_runs=False)
+        stepper: Stepper | None = Stepper(clock)
+        wait: Any = stepper.until
+    else:
+        clock = robot_clock = ScaledClock(SPEED)
+        stepper, wait = None, wait_for
+    with peer_pair() as (sa, sb), contextlib.ExitStack() as stack:
+        robot = Ros2RobotSim(sb, topics, robot_clock, holonomic=kinematics == "holonomic", yaw_rad=-1.0)
+        stack.callback(robot.close)
+        if isinstance(clock, LockstepClock) and isinstance(robot_clock, LockstepClock):
+            keys = robot_clock_keys(cfg.carrier.ros2)
+            stack.callback(ZenohUpstream(robot_clock, sb, keys, robot, published=lambda: robot.published_seq).close)
         stop_robot = threading.Event()
         robot_thread = threading.Thread(target=robot.run, args=(stop_robot,), daemon=True)
         robot_thread.start()
+        stack.callback(robot_thread.join, 5.0)
+        stack.callback(robot_clock.close if isinstance(robot_clock, LockstepClock) else lambda: None)
+        stack.callback(stop_robot.set)
         backend = Ros2Carrier(cfg, clock, sa)
+        stack.callback(backend.close)
+        relay = None
+        if isinstance(clock, LockstepClock):
+            clock.downstream = relay = ZenohRelay(sa, robot_clock_keys(cfg.carrier.ros2), backend, backend, name="robot")
+            stack.callback(relay.close)
         passenger = ScriptedPassenger(sb, clock)
-        try:
-            with carrier_running(cfg, clock, sa, backend) as ctl:
-                wait_for(lambda: ctl.hold_reason is None, 10, "odometry received")
-                state = backend.own_state()
-                np.testing.assert_allclose(state.position_ned_m, START, atol=1e-9)  # odom origin + offset
-                assert state.yaw_rad == pytest.approx(-1.0)  # ENU quaternion back to the NED heading
-                passenger.phase = "RIDING"
-                d: list[float] = []
+        stack.callback(passenger.close)
+        with carrier_running(cfg, clock, sa, backend, stepper=stepper, passenger=passenger) as ctl:
+            wait(lambda: ctl.hold_reason is None, 10, "odometry received")
+            state = backend.own_state()
+            np.testing.assert_allclose(state.position_ned_m, START, atol=1e-9)  # odom origin + offset
+            assert state.yaw_rad == pytest.approx(-1.0)  # ENU quaternion back to the NED heading
+            passenger.phase = "RIDING"
+            d: list[float] = []
 
-                def near() -> bool:
-                    d.append(_distance(robot.position_m + START))
-                    return d[-1] < 8.3
+            def near() -> bool:
+                d.append(_distance(robot.position_m + START))
+                return d[-1] < 8.3
 
-                wait_for(near, 40, "near 8 m")
-                passenger.phase = "SEPARATED"
+            wait(near, 40, "near 8 m")
+            passenger.phase = "SEPARATED"
 
-                def stopped() -> bool:
-                    d.append(_distance(robot.position_m + START))
-                    return ctl.mode is CarrierMode.SEPARATED and np.linalg.norm(robot.body_velocity) < 1e-6
+            def stopped() -> bool:
+                d.append(_distance(robot.position_m + START))
+                return ctl.mode is CarrierMode.SEPARATED and np.linalg.norm(robot.body_velocity) < 1e-6
 
-                wait_for(stopped, 20, "stopped")
-                assert robot.commands > 30 and backend.dropped == {}
-        finally:
-            passenger.close()
-            stop_robot.set()
-            robot_thread.join(5.0)
-            backend.close()
-            robot.close()
+            wait(stopped, 20, "stopped")
+            assert robot.commands > 30 and backend.dropped == {}
+            assert relay is None or not relay.dropped  # in lockstep to the end
     assert min(d) >= RADIUS, min(d)
 
 
@@ -321,6 +312,12 @@ def test_ros2_keys_of_both_forms() -> None:
                                "RIHS01_9c45bf16fe0983d80e3cfe750d6835843d265a9a6c46bd2e609fcddde6fb8d2a")
     assert zenoh.KeyExpr(rmw.cmd_vel_sub).intersects(zenoh.KeyExpr(rmw.cmd_vel_pub))
     assert zenoh.KeyExpr(rmw.odom_sub).intersects(zenoh.KeyExpr(rmw.odom_pub))
+    # lockstep (simulation): the robot's clock keys, and rmw_zenoh's sequence numbers that order its steps
+    assert robot_clock_keys(CarrierRos2Section(namespace="/robot1/", domain_id=3)) == (
+        "marsupial/robot_clock/3/robot1/time", "marsupial/robot_clock/3/robot1/ready")
+    attachment = RmwAttachment()
+    assert [rmw_sequence(zenoh.ZBytes(attachment.next())) for _ in range(3)] == [1, 2, 3]
+    assert rmw_sequence(None) is None and rmw_sequence(zenoh.ZBytes(b"\x00foreign")) is None
 
 
 def test_px4_carrier_in_the_shared_frame_through_its_ekf_origin() -> None:

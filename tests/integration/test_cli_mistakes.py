@@ -72,3 +72,9 @@ def test_carrier_with_a_taken_zenoh_port_names_it_and_says_who_it_is():
     assert f"Zenoh peer, listen tcp/127.0.0.1:{port}" in first and "mode stop" in first
     assert f"Zenoh listen endpoint tcp/127.0.0.1:{port}: TCP port 127.0.0.1:{port} is already in use, " \
            f"held by process {os.getpid()}" in out.stderr
+
+
+def test_ros2_robot_in_lockstep_on_ros2dds_keys_says_why_not():
+    out = _cli("ros2-robot", "--key-form", "ros2dds", "--lockstep", timeout=30)
+    assert out.returncode == 2 and "Traceback" not in out.stderr
+    assert "lockstep needs --key-form rmw_zenoh" in out.stderr
