@@ -18,10 +18,11 @@ import zenoh
 
 from mission.carrier_bridge import CarrierFeed, PassengerPublisher, keys
 from mission.cli import main as cli_main
-from mission.clock import ManualClock, ScaledClock
+from mission.clock import Clock, LockstepClock, ManualClock, ScaledClock
 from mission.config import Config, from_dict
 from mission.wire import CarrierState, PassengerStatus, decode_carrier_json
 from sim.carrier import CarrierMode, CarrierSim
+from tests.integration.stepper import Stepper
 from tests.integration.zenoh_util import endpoint, free_port, peer, wait_for
 
 pytestmark = pytest.mark.timeout(30)
@@ -40,7 +41,7 @@ def _cfg(pair: str = "sim", **scenario: object) -> Config:
 class Passenger:
     """The test's stand-in for the mission controller: publishes statuses with its own seq."""
 
-    def __init__(self, session: zenoh.Session, pair: str, clock: ManualClock | ScaledClock) -> None:
+    def __init__(self, session: zenoh.Session, pair: str, clock: Clock) -> None:
         self.pub = PassengerPublisher(session, pair)
         self.clock, self.seq = clock, 0
 
@@ -87,7 +88,7 @@ def sessions(n_clients: int = 2) -> Iterator[list[zenoh.Session]]:
 
 
 @contextlib.contextmanager
-def running(sim: CarrierSim) -> Iterator[threading.Event]:
+def running(sim: CarrierSim, clock: Clock | None = None) -> Iterator[threading.Event]:
     stop = threading.Event()
     thread = threading.Thread(target=sim.run, args=(stop,), name="carrier-sim")
     thread.start()
@@ -95,6 +96,8 @@ def running(sim: CarrierSim) -> Iterator[threading.Event]:
         yield stop
     finally:
         stop.set()
+        if isinstance(clock, LockstepClock):
+            clock.close()  # its sleep ends now
         thread.join(timeout=5)
         assert not thread.is_alive()
 
@@ -266,32 +269,36 @@ def test_cdr_carrier_on_a_ros_key_reaches_a_feed_configured_the_same_way() -> No
 
 
 def test_running_carrier_stops_within_one_period_after_separated() -> None:
-    clock = ScaledClock(speed=2.0)
+    """In lockstep (the test steps the carrier's clock): the status arrives between two steps,
+    and the carrier's next step is its last in motion."""
+    clock = LockstepClock(speed=2.0, name="carrier", creator_runs=False)
+    stepper = Stepper(clock)
     with sessions(1) as (sa, sb), CarrierSim(_cfg(), clock, sa) as sim:
         period = sim.period_s
         recorder = Recorder(sb, "sim")
         passenger = Passenger(sb, "sim", clock)
         try:
             wait_for(lambda: sim.publisher.matched, what="recorder subscribed")
-            with running(sim):
+            with running(sim, clock):
                 wait_for(lambda: passenger.pub.matched)
 
-                def moving() -> bool:
-                    passenger.say("RIDING")
+                def riding_and_moving() -> bool:  # a status each step, there before the next one
+                    seq = passenger.say("RIDING")
+                    wait_for(lambda: _seen(sim, seq), what="RIDING received")
                     st = recorder.states
                     return len(st) > 0 and np.linalg.norm(st[-1].position) > 0.5
 
-                wait_for(moving, what="carrier moving")
+                stepper.until(riding_and_moving, 30, "carrier moving")
                 seq = passenger.say("SEPARATED")
-                wait_for(lambda: _seen(sim, seq), what="SEPARATED received")
+                wait_for(lambda: _seen(sim, seq), what="SEPARATED received")  # between two steps: time stands still
                 rx_time = sim.passenger.latest().rx_time_s  # type: ignore[union-attr]
-                wait_for(lambda: sum(s.stamp_s > rx_time + 4 * period for s in recorder.states) >= 3,
-                         what="states after the stop")
+                stepper.until(lambda: sum(s.stamp_s > rx_time + 4 * period for s in recorder.states) >= 3, 5,
+                              "states after the stop")
             states = recorder.states
         finally:
             recorder.sub.undeclare()
             passenger.pub.close()
-    before = [s for s in states if s.stamp_s < rx_time]
+    before = [s for s in states if s.stamp_s <= rx_time]
     after = [s for s in states if s.stamp_s >= rx_time + period]
     assert before[-1].velocity_ned_m_s.any()
     stop_position = after[0].position
@@ -303,34 +310,44 @@ def test_running_carrier_stops_within_one_period_after_separated() -> None:
 
 
 def test_running_carrier_stops_when_the_passenger_goes_silent_or_vanishes() -> None:
-    clock = ScaledClock(speed=10.0)  # passenger_timeout_s 1.0 simulated = 0.1 s wall
+    """In lockstep: silence is measured in simulated time; a vanished token is seen (a Zenoh
+    event, waited for while time stands still) before the next step."""
+    clock = LockstepClock(speed=2.0, name="carrier", creator_runs=False)
+    stepper = Stepper(clock)
     with sessions(2) as (sa, sb, sc), CarrierSim(_cfg(), clock, sa) as sim:
         recorder = Recorder(sb, "sim")
         passenger = Passenger(sc, "sim", clock)
+
+        def say_riding() -> None:
+            seq = passenger.say("RIDING")
+            wait_for(lambda: _seen(sim, seq), what="RIDING received")
+
         try:
             wait_for(lambda: sim.publisher.matched, what="recorder subscribed")
-            with running(sim):
+            with running(sim, clock):
                 wait_for(lambda: passenger.pub.matched)
-                wait_for(lambda: passenger.say("RIDING") and sim.mode is CarrierMode.APPROACHING, what="approaching")
-                last = passenger.say("RIDING")
-                wait_for(lambda: _seen(sim, last))
+                say_riding()
+                stepper.until(lambda: sim.mode is CarrierMode.APPROACHING, 5, "approaching")
                 last_rx = sim.passenger.latest().rx_time_s  # type: ignore[union-attr]
                 # silence (the token stays): the status goes stale after passenger_timeout_s
-                wait_for(lambda: sim.mode is CarrierMode.PAUSED, timeout_s=5.0, what="paused on silence")
+                stepper.until(lambda: sim.mode is CarrierMode.PAUSED, 5, "paused on silence")
                 paused_at = clock.now()
-                assert paused_at - last_rx >= 1.0  # not before the timeout
-                wait_for(lambda: any(s.stamp_s > paused_at and not s.velocity_ned_m_s.any() for s in recorder.states))
+                assert 1.0 <= paused_at - last_rx <= 1.0 + 2 * sim.period_s  # at the timeout, not before
+                stepper.until(lambda: any(s.stamp_s > paused_at and not s.velocity_ned_m_s.any()
+                                          for s in recorder.states), 5, "published stop")
                 # the passenger speaks again while riding: the approach resumes
-                wait_for(lambda: passenger.say("RIDING") and sim.mode is CarrierMode.APPROACHING, what="resumed")
+                say_riding()
+                stepper.until(lambda: sim.mode is CarrierMode.APPROACHING, 5, "resumed")
                 # the passenger's process dies: its token goes at once, well before a timeout
                 passenger.pub.close()
                 sc.close()
                 gone_at = clock.now()
-                wait_for(lambda: sim.mode is CarrierMode.PAUSED, timeout_s=5.0, what="paused on lost token")
-                assert sim.passenger.alive is False
-                assert clock.now() - gone_at < 1.0
-                wait_for(lambda: any(s.stamp_s > clock.now() - 0.01 and not s.velocity_ned_m_s.any()
-                                     for s in recorder.states[-3:]), what="published stop")
+                wait_for(lambda: sim.passenger.alive is False, what="token gone")
+                stepper.until(lambda: sim.mode is CarrierMode.PAUSED, 5, "paused on lost token")
+                assert clock.now() - gone_at <= 2 * sim.period_s  # its next step, not a timeout later
+                stop_at = clock.now()
+                stepper.until(lambda: any(s.stamp_s >= stop_at and not s.velocity_ned_m_s.any()
+                                          for s in recorder.states), 5, "published stop")
         finally:
             recorder.sub.undeclare()
             passenger.pub.close()
