@@ -82,6 +82,8 @@ class LinkIO:
 
     def send(self, link: VehicleLink, msg: Any) -> None:
         """Encode ``msg`` on ``link`` and send it through the outbound faults."""
+        if self.v._lockstep is not None:  # the step's SYSTEM_TIME goes first: encode (and sign) it first, or
+            self.v._lockstep.mark_time(link)  # a signing peer takes this packet's older timestamp for a replay
         data = link.pack(msg)
         self.v._counters["tx_messages"] += 1
         if self._passes("out", (link, data)) and link.target is not None:

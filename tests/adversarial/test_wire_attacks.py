@@ -38,12 +38,15 @@ from tests.faults.test_matrix import assert_completed, assert_exit, assert_never
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(200)]
 
-# The Zenoh attacks fly in lockstep (the three processes step on the vehicle's simulated time, so
-# a loaded machine cannot make the carrier look lost); the MAVLink ones in real time at speed 2
-# (in lockstep the vehicle's clock itself comes over the attacked link), not the fault matrix's 5:
-# they check what is accepted, not timing, and at 5 a loaded 2-core machine already loses the
-# carrier (0.5 s simulated is 0.1 s of wall time).
+# The attacks fly in lockstep (the three processes step on the vehicle's simulated time, so a
+# loaded machine can make neither the carrier look lost nor the vehicle see offboard loss), the
+# MAVLink ones paced at SPEED (at most SPEED simulated seconds per wall second) so that an attack
+# sent when the test reads a phase lands in that phase. Two MAVLink flights are real time at
+# SPEED: the wrong key (the vehicle's clock itself, its signed barriers, is what the mission
+# refuses) and the rogue sysid (adoption waits on the mission's clock for the rival to fall
+# silent, and in lockstep that clock starts only at the adopted vehicle's first barrier).
 SPEED = 2.0
+PACED = ("--lockstep-max-speed", str(SPEED))
 
 STATE_KEY = "marsupial/pair0/carrier/state"
 TARGET = (24.0, 18.0, -5.0)
@@ -269,22 +272,19 @@ class RogueMavlink:
         self.sock.close()
 
 
-def _mavlink_attack_config(path: Path, *, adopt: bool = False) -> Path:
-    """demo.toml for the real-time MAVLink attacks: the carrier may be 1.5 s old rather than 0.5
-    (these flights check what the link accepts, not how fast a stalled carrier is noticed: at
-    speed 2 a 0.25 s stall of one process on a busy machine aborted them as carrier_lost); with
-    ``adopt``, no target_system, so the vehicle is adopted from its HEARTBEATs."""
-    lines = []
-    for line in DEMO.read_text().splitlines():
-        if adopt and line.startswith("target_system"):
-            continue
-        lines.append("carrier_timeout_s = 1.5" if line.startswith("carrier_timeout_s") else line)
+def _adopting_config(path: Path) -> Path:
+    """demo.toml without target_system (the vehicle is adopted from its HEARTBEATs), for a real-time
+    flight: the carrier may be 1.5 s old rather than 0.5 (the flight checks what the link
+    accepts, not how fast a stalled carrier is noticed: at speed 2 a 0.25 s stall of one process
+    on a busy machine aborted it as carrier_lost)."""
+    lines = [("carrier_timeout_s = 1.5" if line.startswith("carrier_timeout_s") else line)
+             for line in DEMO.read_text().splitlines() if not line.startswith("target_system")]
     path.write_text("\n".join(lines) + "\n")
     return path
 
 
 def _rogue_sysid_first(tmp_path: Path) -> None:
-    config = _mavlink_attack_config(tmp_path / "adopt.toml", adopt=True)
+    config = _adopting_config(tmp_path / "adopt.toml")
     rogue = RogueMavlink(sysid=42)
     stop = threading.Event()
     f_holder: list[Flight] = []
@@ -319,8 +319,8 @@ def _unsigned_spoofs(tmp_path: Path) -> None:
     key.write_text(KEY_A.hex())
     spoofer = RogueMavlink(sysid=1)
     try:
-        with flight(tmp_path, "spoofed", config=_mavlink_attack_config(tmp_path / "spoofed.toml"),
-                    vehicle_args=("--signing-key", str(key)), mission_args=("--signing-key", str(key)), speed=SPEED) as f:
+        with flight(tmp_path, "spoofed", vehicle_args=("--signing-key", str(key), *PACED), mission_args=("--signing-key", str(key)),
+                    speed=SPEED, lockstep=True) as f:
             f.wait_phase("RIDING")
             for _ in range(5):  # claiming a pilot took over (on main: pilot_override)
                 spoofer.heartbeat(f.mav_port, "POSCTL", armed=True)
@@ -329,6 +329,7 @@ def _unsigned_spoofs(tmp_path: Path) -> None:
                 time.sleep(0.02)
             s = assert_completed(f)
             assert s["link"]["rx_unsigned"] >= 25, s["link"]
+            assert s["link"]["rx_bad_signature"] == 0, s["link"]  # each lockstep step's SYSTEM_TIME is signed before what follows it
             assert spoofer.received() == 0
         assert_real_carrier_kept_its_guard(f)
     finally:
