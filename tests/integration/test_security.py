@@ -26,7 +26,7 @@ from mission.mavlink_env import mavlink
 from sim.vehicle import VehicleOptions
 from sim.vehicle_cli import mock_vehicle
 from tests.conftest import ROOT, free_port
-from tests.faults.procs import assert_log_complete, flight, wait_for
+from tests.faults.procs import SPEED, assert_log_complete, flight, wait_for
 
 KEY = bytes.fromhex("5c1e" * 16)  # a throwaway 32-byte test key
 
@@ -51,8 +51,9 @@ def _tlog_packets(path: Path) -> list[bytes]:
 def test_signed_mission_flies_unsigned_commands_are_refused_and_the_key_is_never_logged(tmp_path: Path) -> None:
     key_file = tmp_path / "mavlink.key"
     key_file.write_text(KEY.hex() + "\n")
-    with flight(tmp_path, "signed", vehicle_args=("--signing-key", str(key_file)),
-                mission_args=("--signing-key", str(key_file)), mission_verbose=True) as f:
+    # in lockstep, paced at the flight's speed so the ground station's attempts land while riding
+    with flight(tmp_path, "signed", vehicle_args=("--signing-key", str(key_file), "--lockstep-max-speed", str(SPEED)),
+                mission_args=("--signing-key", str(key_file)), mission_verbose=True, lockstep=True) as f:
         f.wait_phase("RIDING")
         gcs = f.gcs
         assert gcs is not None  # an unsigned ground station on the vehicle's (signed) GCS link
