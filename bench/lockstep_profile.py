@@ -12,13 +12,16 @@ demo's stdout, so start-up and shutdown are left out) it prints, per 20 ms contr
 
 The steps are sequential (the vehicle waits for the controller, which waits for the carrier), so
 on an idle machine the wall time of a step is about the CPU of the three processes plus the
-wake-ups between them; the CPU figures do not depend on what else the machine runs, the wall
-figure does (the load average is printed).
+wake-ups between them. Both figures grow with what else the machine runs (the wall time much
+more; the CPU up to 1.5x at load 7: cold caches), so the load average is printed, and
+``--against DIR`` compares two checkouts fairly: each run flies this checkout's demo and DIR's
+(e.g. a worktree of main) at the same moment, under the same load, and prints their ratios.
 """
 from __future__ import annotations
 
 import os
 import re
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -32,6 +35,7 @@ import click
 LINE = re.compile(r"^(pair\d+): \[mission\s+([0-9.]+) s")
 STEP_S = 0.02  # the demo's controller period [s]
 TCK = os.sysconf("SC_CLK_TCK")
+ROOT = Path(__file__).resolve().parents[1]
 SHIM = Path(__file__).resolve().parent / "thread_names"
 ROLE = re.compile(r"mission\.cli (mock-vehicle|carrier|run|demo)")
 
@@ -101,14 +105,14 @@ class Sampler:
         return out
 
 
-def profile_once(threads: bool) -> dict[str, float]:
-    """One demo; per-step figures (see the module docstring)."""
+def profile_once(threads: bool, root: Path = ROOT) -> dict[str, float]:
+    """One demo of the checkout at ``root``; per-step figures (see the module docstring)."""
     with tempfile.TemporaryDirectory(prefix="lockstep-profile-") as tmp:
         cmd = [sys.executable, "-m", "mission.cli", "demo", "--pairs", "1", "--log-root", f"{tmp}/logs", "--plot", ""]
-        env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+        env = {**os.environ, "PYTHONUNBUFFERED": "1", "PYTHONPATH": str(root)}
         if threads:
-            env["PYTHONPATH"] = os.pathsep.join(filter(None, [env.get("PYTHONPATH"), str(SHIM)]))
-        proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, env=env)
+            env["PYTHONPATH"] = os.pathsep.join([str(root), str(SHIM)])
+        proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, env=env, cwd=root)
         sampler = Sampler(proc.pid, threads)
         thread = threading.Thread(target=sampler.run, daemon=True)
         thread.start()
@@ -137,13 +141,52 @@ def profile_once(threads: bool) -> dict[str, float]:
     return out
 
 
+def _median(values: list[float]) -> float:
+    return statistics.median(values)
+
+
+def _all_cpu(result: dict[str, float]) -> float:
+    return sum(v for k, v in result.items() if k.endswith("CPU us"))
+
+
+def paired(runs: int, other: Path) -> None:
+    """``runs`` pairs of demos, this checkout's and ``other``'s flown at the same moment: per pair
+    the ratio (this / other) of all CPU and of the wall time per step, and each side's figures."""
+    click.echo(f"paired runs: this checkout ({ROOT}) / {other}; per 20 ms step")
+    ratios: dict[str, list[float]] = {"all CPU": [], "wall": []}
+    for i in range(runs):
+        out: dict[Path, dict[str, float]] = {}
+        workers = [threading.Thread(target=lambda r=r: out.__setitem__(r, profile_once(False, r))) for r in (ROOT, other)]
+        for w in workers:
+            w.start()
+        for w in workers:
+            w.join()
+        if len(out) < 2:
+            raise click.ClickException("a demo of the pair failed (see above)")
+        mine, theirs = out[ROOT], out[other]
+        ratios["all CPU"].append(_all_cpu(mine) / _all_cpu(theirs))
+        ratios["wall"].append(mine["wall_us"] / theirs["wall_us"])
+        click.echo(f"  pair {i + 1} (load {os.getloadavg()[0]:.1f}): all CPU {_all_cpu(mine):.0f} / {_all_cpu(theirs):.0f} us, "
+                   f"wall {mine['wall_us']:.0f} / {theirs['wall_us']:.0f} us, " + ", ".join(
+                       f"{k.split()[0]} {mine.get(k, 0.0):.0f} / {theirs.get(k, 0.0):.0f}" for k in sorted(mine)
+                       if k.endswith("CPU us") and not k.startswith("demo")))
+    for name, values in ratios.items():
+        click.echo(f"{name} ratio (this / other): " + " ".join(f"{v:.2f}" for v in values) + f"; median {_median(values):.3f}")
+
+
 @click.command()
 @click.option("--runs", type=click.IntRange(1), default=3, show_default=True, help="Demo runs (the table shows each and the median).")
 @click.option("--threads", is_flag=True, help="Per thread (names each OS thread after its Python thread, "
               "bench/thread_names/sitecustomize.py).")
-def main(runs: int, threads: bool) -> None:
+@click.option("--against", "other", type=click.Path(exists=True, file_okay=False, path_type=Path),
+              help="Another checkout (e.g. a worktree of main): fly both at the same moment, print the ratios.")
+def main(runs: int, threads: bool, other: Path | None) -> None:
     """Profile the one-pair lockstep demo per step and print a table (see the module docstring)."""
     click.echo(f"machine: {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f} at start")
+    if other is not None:
+        paired(runs, other.resolve())
+        click.echo(f"load average {os.getloadavg()[0]:.1f} at the end")
+        return
     results = []
     for i in range(runs):
         results.append(profile_once(threads))
@@ -152,11 +195,11 @@ def main(runs: int, threads: bool) -> None:
     keys = [k for k in keys if k.endswith("_us") or k == "x_real_time" or max(r.get(k, 0.0) for r in results) >= 1.0]
     click.echo(f"per 20 ms step, over the flight ({results[0]['steps']:.0f} steps); columns: each run, min, median")
     rows = [(k, [r.get(k, 0.0) for r in results]) for k in keys]
-    rows.append(("all CPU us", [sum(v for k, v in r.items() if k.endswith("CPU us")) for r in results]))
+    rows.append(("all CPU us", [_all_cpu(r) for r in results]))
     width = max(len(k) for k, _ in rows) + 2
     for k, values in rows:
         click.echo(f"{k:<{width}}" + "".join(f"{v:>9.1f}" for v in values)
-                   + f"{min(values):>10.1f}{sorted(values)[len(values) // 2]:>9.1f}")
+                   + f"{min(values):>10.1f}{_median(values):>9.1f}")
     click.echo(f"load average {os.getloadavg()[0]:.1f} at the end")
 
 
