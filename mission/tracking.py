@@ -32,9 +32,10 @@ acceleration roughly proportional to its velocity, which PX4's small velocity in
 
 The lead stiffens the loop PX4 closes: its velocity loop (``MPC_XY_VEL_P_ACC`` 1.8/s) then
 drives a position gain of ``MPC_XY_P (1 + l)`` = 3.4/s through the airframe's tilt lag (~0.28 s
-fitted on SIH), ``tau s^3 + s^2 + 1.8 s + 3.4 = 0``, which is only just stable (Routh: 1.8 >
-0.28 x 3.4 = 0.96 ... and less with the command's own delays): the passenger rings about a
-steadily moving dock (period ~2.6 s, +-0.25 m seen on PX4 behind the SIH rover).
+fitted on SIH): ``tau s^3 + s^2 + 1.8 s + 1.8 x 3.4 = 0``, which is only just stable (Routh:
+1.8 > 0.28 x 6.2 = 1.7, and less with the command's own delays): the passenger rings about a
+steadily moving dock (period ~2.6 s, +-0.25 m seen on PX4 behind the SIH rover). With ``k_d``
+below the Routh condition reads ``1.8 + k_d > 1.7``.
 ``damping_per_s`` [1/s] adds velocity damping through the acceleration feed-forward (full
 setpoints): ``- k_d (v_p - u_ref)``, the vehicle's velocity ``v_p`` against the reference's, as if
 PX4's velocity gain were ``1.8 + k_d`` about the reference velocity.
