@@ -7,13 +7,14 @@ physics step where it happened), so they hold at any speed factor and on a loade
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 import pytest
 
 from mission import px4
 from sim.net import wait_for
-from sim.vehicle import PHYSICS_DT_S, MockVehicle
+from sim.vehicle import PHYSICS_DT_S, MockVehicle, VehicleSnapshot
 from sim.vehicle_probe import Lockstep, Probe, SetpointStream, connect, sleep_until, start_offboard, vehicle_for
 
 pytestmark = pytest.mark.timeout(30)
@@ -178,26 +179,49 @@ def test_disarm_in_air_needs_force(probe: Probe) -> None:
 def test_velocity_steps_answer_like_px4(probe: Probe) -> None:
     """PX4 SITL's recorded steps (../shared/px4_sitl/responses): a 2 m/s horizontal step peaks at
     79-84 % within 4 s (never 90 %: the small integrator against drag); a 1 m/s vertical step
-    reaches 90 % in 0.5-0.9 s and peaks at 95-107 %. Measured on LOCAL_POSITION_NED."""
-    with vehicle_for(probe, speed=5.0, start_ned=(0.0, 0.0, -1.0)) as v:
+    reaches 90 % in 0.5-0.9 s and peaks at 95-107 %. Measured on LOCAL_POSITION_NED. In lockstep
+    (the probe moves the vehicle's time and streams the setpoint at 50 Hz simulated), so each step
+    starts at a known simulated time whatever the machine's load."""
+    with vehicle_for(probe, lockstep=True, start_ned=(0.0, 0.0, -1.0)) as v:
+        clock = Lockstep(probe)
         connect(probe)
-        with start_offboard(probe, (0.0, 0.0, -0.5)) as stream:
-            wait_for(v.when(lambda s: s.position_ned_m[2] < -3.0), 5.0, "s.position_ned_m[2] < -3.0")
-            stream.set(velocity_ned_m_s=(0.0, 0.0, 0.0))
-            rest = wait_for(v.when(lambda s: s.t_s > 4.0 + v.event_time("Armed") and np.linalg.norm(s.velocity_ned_m_s) < 0.02), 5.0, "s.t_s > 4.0 + v.event_time('Armed') and np.linalg.norm(s.velocity_ned_m_s) < 0.02")
-            assert rest is not None
+        clock.barrier()
+        setpoint = [(0.0, 0.0, -0.5)]
+
+        def send() -> None:
+            probe.send(probe.setpoint_message(velocity_ned_m_s=setpoint[0]))
+
+        def now() -> float:
+            return clock.t_ns / 1e9
+
+        def step_to(velocity: tuple[float, float, float]) -> tuple[int, float]:
+            """Change the setpoint at the current barrier: (probe mark, simulated time)."""
+            setpoint[0] = velocity
             mark = probe.mark()
-            stream.set(send_now=True, velocity_ned_m_s=(2.0, 0.0, 0.0))
-            t_north = v.snapshot().t_s
-            wait_for(v.when(lambda s: s.t_s > t_north + 4.0), 3.0, "s.t_s > t_north + 4.0")
-            north = [(m.time_boot_ms / 1000.0 - t_north, m.vx) for m in probe.messages("LOCAL_POSITION_NED", after=mark)]
-            stream.set(velocity_ned_m_s=(0.0, 0.0, 0.0))
-            wait_for(v.when(lambda s: s.t_s > t_north + 10.0 and np.linalg.norm(s.velocity_ned_m_s) < 0.3), 5.0, "s.t_s > t_north + 10.0 and np.linalg.norm(s.velocity_ned_m_s) < 0.3")
-            mark = probe.mark()
-            stream.set(send_now=True, velocity_ned_m_s=(0.0, 0.0, -1.0))
-            t_up = v.snapshot().t_s
-            wait_for(v.when(lambda s: s.t_s > t_up + 3.0), 3.0, "s.t_s > t_up + 3.0")
-            up = [(m.time_boot_ms / 1000.0 - t_up, -m.vz) for m in probe.messages("LOCAL_POSITION_NED", after=mark)]
+            send()
+            return mark, now()
+
+        def fly_until(done: Callable[[VehicleSnapshot], bool], limit_s: float) -> None:
+            end_s = now() + limit_s
+            while not done(v.snapshot()):
+                assert now() < end_s, v.snapshot()
+                clock.run_for(0.02, send, period_s=0.02)
+
+        send()
+        assert probe.set_mode("OFFBOARD").result == px4.MAV_RESULT_ACCEPTED
+        assert probe.arm().result == px4.MAV_RESULT_ACCEPTED
+        t_armed = now()
+        fly_until(lambda s: s.position_ned_m[2] < -3.0, 10.0)
+        step_to((0.0, 0.0, 0.0))
+        fly_until(lambda s: s.t_s > t_armed + 4.0 and np.linalg.norm(s.velocity_ned_m_s) < 0.02, 10.0)
+        mark, t_north = step_to((2.0, 0.0, 0.0))
+        clock.run_for(4.0, send, period_s=0.02)
+        north = [(m.time_boot_ms / 1000.0 - t_north, m.vx) for m in probe.messages("LOCAL_POSITION_NED", after=mark)]
+        step_to((0.0, 0.0, 0.0))
+        fly_until(lambda s: s.t_s > t_north + 10.0 and np.linalg.norm(s.velocity_ned_m_s) < 0.3, 10.0)
+        mark, t_up = step_to((0.0, 0.0, -1.0))
+        clock.run_for(3.0, send, period_s=0.02)
+        up = [(m.time_boot_ms / 1000.0 - t_up, -m.vz) for m in probe.messages("LOCAL_POSITION_NED", after=mark)]
     peak = max(vx for t, vx in north if t <= 4.0) / 2.0
     assert 0.77 <= peak <= 0.86
     t90 = next(t for t, vz in up if vz >= 0.9)
