@@ -54,9 +54,8 @@ def test_full_mission_p1_holds_the_dock(full_mission):
     assert s["p1"]
 
 
-def test_flight_log_is_complete_and_tlog_readable(tmp_path):
-    with flying_pair(tmp_path) as pair:
-        out = pair.finish()
+def test_flight_log_is_complete_and_tlog_readable(full_mission):
+    pair, out, _, _ = full_mission
     assert out.phase == "DONE", (out.reason, out.detail)
     rec = read_record(pair.log_dir)
     phases_seen = [p for p in dict.fromkeys(rec.phase) if p != "PREFLIGHT"]  # the record holds each tick's outcome
