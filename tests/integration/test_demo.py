@@ -27,14 +27,23 @@ def _numbers(summary: dict) -> dict:
     return {k: v for k, v in summary.items() if isinstance(v, (int, float)) and not isinstance(v, bool)}
 
 
-def test_two_lockstep_runs_give_the_same_flight(tmp_path):
+@pytest.fixture(scope="module")
+def demo_flight(tmp_path_factory):
+    """One plain demo (one pair, lockstep, with its plot), shared by the tests that read its
+    outcome: the folder it flew in and the finished process."""
+    root = tmp_path_factory.mktemp("demo")
+    return root, _demo(root)
+
+
+def test_two_lockstep_runs_give_the_same_flight(tmp_path, demo_flight):
     """Same configuration, same seed: the same summary to 1e-9 and the same flight record, tick for
-    tick, whatever the machine's load (every participant waits for the others' stamped step)."""
-    runs = []
-    for name in ("a", "b"):
-        out = _demo(tmp_path / name, "--plot", "")
-        assert out.returncode == 0, out.stdout + out.stderr
-        runs.append(tmp_path / name / "logs" / "pair0")
+    tick, whatever the machine's load (every participant waits for the others' stamped step). The
+    second run is the shared demo flight (the plot is drawn after the flight, from its log)."""
+    out = _demo(tmp_path / "a", "--plot", "")
+    assert out.returncode == 0, out.stdout + out.stderr
+    shared, shared_out = demo_flight
+    assert shared_out.returncode == 0, shared_out.stdout + shared_out.stderr
+    runs = [tmp_path / "a" / "logs" / "pair0", shared / "logs" / "pair0"]
     a, b = (json.loads((d / "summary.json").read_text()) for d in runs)
     for summary in (a, b):
         summary.get("carrier_feed", {}).pop("bound_source", None)  # a Zenoh session id: new in every run
@@ -48,9 +57,9 @@ def test_two_lockstep_runs_give_the_same_flight(tmp_path):
     assert (runs[0] / "record.csv").read_text() == (runs[1] / "record.csv").read_text()
 
 
-def test_demo_flies_p1_p3_with_plot(tmp_path):
+def test_demo_flies_p1_p3_with_plot(demo_flight):
     """The demo holds P1-P3 on the PX4-like mock (the tracking loop that holds the dock on PX4)."""
-    out = _demo(tmp_path)
+    tmp_path, out = demo_flight
     s = json.loads((tmp_path / "logs" / "pair0" / "summary.json").read_text())
     assert s["p1"] and s["p2"] and s["p3"] and s["phase"] == "DONE", s
     assert out.returncode == 0, out.stdout + out.stderr
