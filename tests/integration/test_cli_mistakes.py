@@ -31,7 +31,7 @@ def test_run_with_a_taken_mavlink_port_names_it():
         taken.bind(("127.0.0.1", 0))
         port = taken.getsockname()[1]
         out = _cli("run", str(CONFIGS / "demo.toml"), "--mavlink", f"udpin:127.0.0.1:{port}",
-                   "--zenoh-listen", f"tcp/127.0.0.1:{free_port()}")
+                   "--zenoh-listen", "tcp/127.0.0.1:0")
     assert out.returncode == 6 and "Traceback" not in out.stderr
     assert f"127.0.0.1:{port} is already in use, held by process {os.getpid()}" in out.stderr
 
@@ -42,7 +42,7 @@ def test_run_without_a_vehicle_says_what_it_waits_for_and_what_to_do(tmp_path):
     assert "connect_timeout_s = 1.5" in text
     cfg.write_text(text)
     mav = free_port(socket.SOCK_DGRAM)
-    out = _cli("run", str(cfg), "--mavlink", f"udpin:127.0.0.1:{mav}", "--zenoh-listen", f"tcp/127.0.0.1:{free_port()}",
+    out = _cli("run", str(cfg), "--mavlink", f"udpin:127.0.0.1:{mav}", "--zenoh-listen", "tcp/127.0.0.1:0",
                "--pair", "lonely", "--log-dir", str(tmp_path / "log"))
     assert out.returncode == 3, out.stdout + out.stderr
     assert "Traceback" not in out.stderr and "Warning" not in out.stderr
