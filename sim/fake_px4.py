@@ -151,14 +151,14 @@ class FakePx4:
         next_hb = next_pos = time.monotonic()
         while not self._stop.is_set():
             now = time.monotonic()
-            if self.heartbeat_hz and now >= next_hb:
+            heartbeat_hz, position_hz = self.heartbeat_hz, self.position_hz  # once: a test may zero them meanwhile
+            if heartbeat_hz and now >= next_hb:
                 self.heartbeat()
-                next_hb = now + 1.0 / self.heartbeat_hz
-            if self.position_hz and now >= next_pos:
+                next_hb = now + 1.0 / heartbeat_hz
+            if position_hz and now >= next_pos:
                 self.local_position()
-                next_pos = now + 1.0 / self.position_hz
-            due = min(t for t, on in ((next_hb, self.heartbeat_hz), (next_pos, self.position_hz), (now + 0.05, True))
-                      if on)
+                next_pos = now + 1.0 / position_hz
+            due = min(t for t, on in ((next_hb, heartbeat_hz), (next_pos, position_hz), (now + 0.05, True)) if on)
             if self.conn.select(min(max(due - time.monotonic(), 0.0), 0.05)):
                 self._drain()
 
