@@ -1,17 +1,23 @@
 """Real PX4 SITL flights: skipped, with the reason, unless ``MARSUPIAL_PX4_SITL`` names a PX4
 SITL build (a folder with ``bin/px4`` and ``etc/``) and we may make network namespaces.
 
-The flights fly two at a time. Each is real time (about 40-70 s of wall time) but light (about a
-quarter of a core: PX4 SIH, our controller and the carrier), and each has a network namespace and
-a private ``/tmp`` of its own, so nothing is shared but the CPU. Not all at once: with the four
-flights' six PX4s and eight of our processes starting together on two cores, SIH's sensors timed
-out in one run of three (``MAG #0 failed: TIMEOUT``, no baro) and PX4 failed over to ALTCTL. A flight is a *job* (a function of
-its folder and the PX4 build that returns what the test checks), registered with
-:func:`px4_job` and named by the test with ``@pytest.mark.px4_job(NAME)``; the session fixture
-``px4_jobs`` starts every selected test's job when the first of them asks, and each test waits
-for its own (an assertion error in a job fails that job's test)."""
+The flights fly with at most :data:`PX4S_AT_ONCE` PX4 instances running together: two quadrotor
+flights at once, the rover pair (two PX4s of its own) alone. Each flight is real time (about
+40-70 s of wall time) but light (about a quarter of a core per PX4 with our controller and
+carrier), and each has a network namespace and a private ``/tmp`` of its own, so nothing is
+shared but the CPU. Not more: with six PX4s and eight of our processes starting together on two
+cores SIH's sensors timed out in one run of three (``MAG #0 failed: TIMEOUT``, no baro) and PX4
+failed over to ALTCTL; with three (the rover pair beside a quadrotor flight) a CI run on a quiet
+machine lost baro and compass data just after take-off and PX4 fell back to ALTCTL.
+
+A flight is a *job* (a function of its folder and the PX4 build that returns what the test
+checks), registered with :func:`px4_job` and named by the test with
+``@pytest.mark.px4_job(NAME)``; the session fixture ``px4_jobs`` starts every selected test's job
+when the first of them asks, and each test waits for its own (an assertion error in a job fails
+that job's test)."""
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
@@ -22,20 +28,21 @@ import pytest
 from sim.px4_sitl import unavailable_reason
 
 Job = Callable[[Path, Path], Any]
-JOBS: dict[str, Job] = {}
+JOBS: dict[str, tuple[Job, int]] = {}  # name -> (flight, PX4 instances it runs)
 
 
-def px4_job(name: str) -> Callable[[Job], Job]:
-    """Register ``fn(directory, build)`` as the flight named ``name``."""
+def px4_job(name: str, px4s: int = 1) -> Callable[[Job], Job]:
+    """Register ``fn(directory, build)`` as the flight named ``name``; it runs ``px4s`` PX4 instances."""
     def register(fn: Job) -> Job:
         assert name not in JOBS, f"two PX4 jobs named {name}"
-        JOBS[name] = fn
+        assert 1 <= px4s <= PX4S_AT_ONCE, px4s
+        JOBS[name] = (fn, px4s)
         return fn
     return register
 
 
 _SELECTED = pytest.StashKey[list[str]]()
-AT_ONCE = 2  # flights in the air together (see above)
+PX4S_AT_ONCE = 2  # PX4 instances running together (see above)
 
 
 @pytest.hookimpl(trylast=True)  # after -k / -m deselected theirs: fly only what will be checked
@@ -45,8 +52,8 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
 
 @pytest.fixture(scope="session")
 def px4_jobs(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, Future]]:
-    """Every selected PX4 job, :data:`AT_ONCE` at a time in the order the tests come; leaving
-    waits for all of them."""
+    """Every selected PX4 job in the order the tests come, with at most :data:`PX4S_AT_ONCE` PX4
+    instances running; leaving waits for all of them."""
     why = unavailable_reason()
     if why:
         pytest.skip(why)
@@ -54,5 +61,19 @@ def px4_jobs(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFa
 
     build = build_dir()
     names = request.config.stash.get(_SELECTED, [])
-    with ThreadPoolExecutor(max_workers=AT_ONCE, thread_name_prefix="px4-job") as pool:
-        yield {name: pool.submit(JOBS[name], tmp_path_factory.mktemp(f"px4-{name}"), build) for name in names}
+    slots = threading.Condition()
+    free = [PX4S_AT_ONCE]
+
+    def fly(job: Job, px4s: int, directory: Path) -> Any:
+        with slots:  # a job waits until all the PX4s it needs are free
+            slots.wait_for(lambda: free[0] >= px4s)
+            free[0] -= px4s
+        try:
+            return job(directory, build)
+        finally:
+            with slots:
+                free[0] += px4s
+                slots.notify_all()
+
+    with ThreadPoolExecutor(max_workers=PX4S_AT_ONCE, thread_name_prefix="px4-job") as pool:
+        yield {name: pool.submit(fly, *JOBS[name], tmp_path_factory.mktemp(f"px4-{name}")) for name in names}

@@ -80,7 +80,7 @@ def _two_px4(build: Path, out: Path) -> Iterator[NetNamespace]:
             shutil.rmtree(rootfs, ignore_errors=True)
 
 
-@px4_job("rover")
+@px4_job("rover", px4s=2)
 def _fly_the_rover_pair(out: Path, build: Path) -> tuple[int, Path]:
     """Both robots under our two controllers: the mission's exit code and ``out``, the folder of
     the flight's logs."""
