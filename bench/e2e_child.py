@@ -22,7 +22,7 @@ from typing import Any
 
 import click
 
-from mission.clock import MonotonicClock
+from mission.monotonic_clock import MonotonicClock
 
 ROOT = Path(__file__).resolve().parents[1]
 DEMO_CONFIG = ROOT / "configs" / "demo.toml"

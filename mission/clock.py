@@ -19,6 +19,7 @@ import logging
 import math
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -87,27 +88,6 @@ class ScaledClock:
     def wall(self, duration_s: float) -> float:
         """Wall-clock seconds that ``duration_s`` simulated seconds take."""
         return duration_s / self.speed
-
-
-class MonotonicClock(ScaledClock):
-    """A :class:`ScaledClock` at speed 1 whose times convert to and from CLOCK_MONOTONIC [ns], for
-    benches and tools that stamp events with ``time.monotonic_ns()`` (as the controller's
-    ``on_tick`` reports do). ``now()`` starts at 0 when the clock is made."""
-
-    def __init__(self) -> None:
-        super().__init__(1.0)
-        self._t0_ns = time.monotonic_ns()
-
-    def now(self) -> float:
-        return (time.monotonic_ns() - self._t0_ns) * 1e-9
-
-    def to_monotonic_ns(self, t_s: float) -> int:
-        """CLOCK_MONOTONIC [ns] of clock time ``t_s`` [s]."""
-        return self._t0_ns + round(t_s * 1e9)
-
-    def from_monotonic_ns(self, monotonic_ns: int) -> float:
-        """Clock time [s] of a CLOCK_MONOTONIC stamp [ns]."""
-        return (monotonic_ns - self._t0_ns) * 1e-9
 
 
 class ManualClock:
@@ -184,6 +164,15 @@ def join_thread(clock: Clock, thread: threading.Thread, timeout_s: float) -> boo
     while thread.is_alive() and clock.now() < deadline:
         clock.sleep(min(0.01, max(deadline - clock.now(), 0.0)))
     return not thread.is_alive()
+
+
+def start_thread(clock: Clock, target: Callable[[], None], name: str) -> threading.Thread:
+    """Start ``target`` in a daemon thread ``name``; in lockstep a participant from its start."""
+    if isinstance(clock, LockstepClock) and clock.lockstep:
+        return clock.start_thread(target, name)
+    thread = threading.Thread(target=target, name=name, daemon=True)
+    thread.start()
+    return thread
 
 
 # ------------------------------------------------------------------------------------- lockstep
@@ -353,6 +342,30 @@ class LockstepClock:
                 log.debug("lockstep leave not sent: %s", exc)
         self._fall_back("closed")
 
+    def start_thread(self, target: Callable[[], None], name: str) -> threading.Thread:
+        """Start ``target`` in a daemon thread that takes part from its first instruction: its step
+        waits until it waits on this clock (or ends). A plain thread started by a participant runs
+        unseen until its first wait, so what it sends before that lands at a load-dependent step."""
+        registered = threading.Event()
+
+        def run() -> None:
+            me = threading.current_thread()
+            with self._cv:
+                if self._fallback is None:
+                    self._running[me.ident or 0] = me
+            registered.set()
+            try:
+                target()
+            finally:
+                with self._cv:
+                    self._running.pop(me.ident or 0, None)
+                    self._cv.notify_all()
+
+        thread = threading.Thread(target=run, name=name, daemon=True)
+        thread.start()
+        registered.wait()
+        return thread
+
     # ---- upstream events (I/O threads) ------------------------------------------------------
     def advance(self, t_ns: int) -> None:
         """The upstream's time is ``t_ns`` (between barriers: messages that follow were sent then).
@@ -449,6 +462,8 @@ class LockstepClock:
                     ticket.dirty = True
         for _ in range(10_000):
             with self._cv:
+                while self._running and self._fallback is None:  # started in this step (start_thread): until it waits
+                    self._cv.wait(_WALL_SLICE_S)
                 due = sorted((k for k in self._tickets.values() if k.deadline_ns <= t_ns or k.dirty),
                              key=lambda k: (k.thread.name, k.order))
             if not due:

@@ -21,7 +21,7 @@ import numpy as np
 
 from mission import phases, px4
 from mission.consistent_velocity import PositionConsistentVelocity
-from mission.clock import Clock, Periodic, join_thread
+from mission.clock import Clock, Periodic, join_thread, start_thread
 from mission.config import Config
 from mission.errors import CommandRejected, LinkError
 from mission.log import FlightRecorder
@@ -280,7 +280,7 @@ class MissionController:
                 log.info("asked the vehicle to stop %d of %d streams the mission does not read", stopped,
                          len(UNUSED_STREAMS))
 
-        threading.Thread(target=ask, name="mission-telemetry-rate", daemon=True).start()
+        start_thread(self.clock, ask, "mission-telemetry-rate")
 
     def _send(self, dec: Decision) -> bool:
         """Send the decision's setpoint (full when it has a position); False if withheld."""
