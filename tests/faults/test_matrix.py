@@ -163,6 +163,10 @@ def _mission_killed(tmp_path: Path) -> None:
     with flight(tmp_path, "killed", lockstep=True, vehicle_args=PACED) as f:
         f.wait_phase("RIDING")
         wait_for(lambda: len(f.record()) > 0 and f.record()[-1]["phase"] == "RIDING", 10.0, "RIDING in the record")
+        # and the carrier drives: it heard RIDING at a step of its own (the mission printing it is
+        # not enough: under two busy loops the kill came first 2 times in 3, and a carrier that
+        # never moved has nothing to pause)
+        wait_for(lambda: "-> approaching" in f.text("carrier.err"), 10.0, "carrier approaching")
         rows_before = len(f.record())
         f.procs["mission"].send_signal(signal.SIGKILL)
         assert f.procs["mission"].wait(timeout=5.0) == -signal.SIGKILL
