@@ -113,12 +113,10 @@ class ManualClock:
             self._t = max(self._t, float(t_s))
 
     def sleep(self, duration_s: float) -> None:
-        if duration_s > 0:
-            self.advance(duration_s)
+        self.advance(max(duration_s, 0.0))
 
     def wait(self, cond: threading.Condition, timeout_s: float) -> None:
-        if timeout_s > 0:
-            cond.wait(min(timeout_s, _WALL_SLICE_S))
+        cond.wait(min(max(timeout_s, 0.0), _WALL_SLICE_S))
 
     def notify(self, cond: threading.Condition) -> None:
         cond.notify_all()
@@ -138,8 +136,7 @@ class Periodic:
         if not period_s > 0:
             raise ValueError(f"period must be > 0, got {period_s!r}")
         self.clock, self.period_s = clock, float(period_s)
-        self._next = clock.now() + self.period_s
-        self.overruns = 0
+        self._next, self.overruns = clock.now() + self.period_s, 0
 
     def wait(self) -> float:
         """Sleep until the next tick; return the clock time of the tick."""
@@ -182,8 +179,7 @@ class Upstream(Protocol):
     """Where a :class:`LockstepClock` reports that this process finished a step."""
 
     def report(self, t_ns: int, wake_ns: int) -> None:
-        """This process is done at simulated time ``t_ns`` and next needs ``wake_ns`` [ns];
-        ``wake_ns < 0``: it leaves the lockstep."""
+        """Done at simulated time ``t_ns``, next needs ``wake_ns`` [ns]; ``wake_ns < 0``: it leaves."""
         ...
 
 
@@ -342,6 +338,12 @@ class LockstepClock:
                 log.debug("lockstep leave not sent: %s", exc)
         self._fall_back("closed")
 
+    @property
+    def counters(self) -> dict[str, object]:
+        """Barriers, why it fell back to the wall clock (None: never, or closed), downstream drops."""
+        return {"barriers": self.barriers, "fallback": None if self.fallback_reason == "closed" else self.fallback_reason,
+                "downstream_dropped": int(getattr(self.downstream, "dropped", 0) or 0)}
+
     def start_thread(self, target: Callable[[], None], name: str) -> threading.Thread:
         """Start ``target`` in a daemon thread that takes part from its first instruction: its step
         waits until it waits on this clock (or ends). A plain thread started by a participant runs
@@ -368,9 +370,8 @@ class LockstepClock:
 
     # ---- upstream events (I/O threads) ------------------------------------------------------
     def advance(self, t_ns: int) -> None:
-        """The upstream's time is ``t_ns`` (between barriers: messages that follow were sent then).
-        Not proof that the upstream still steps with us (one that left goes on in real time, with
-        its time marks): only a barrier feeds the watchdog."""
+        """The upstream's time is ``t_ns`` (between barriers: messages that follow were sent then); not
+        proof that it still steps with us (one that left goes on in real time): only a barrier is."""
         with self._cv:
             if self._started and t_ns > self._t_ns and not self._running:
                 self._t_ns = t_ns

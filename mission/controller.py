@@ -364,7 +364,8 @@ class MissionController:
 
     def _counters(self) -> dict[str, Any]:
         """What was dropped and why, for summary.json: the carrier feed's counters (received,
-        accepted, dropped per reason, bound and rejected sources, resyncs) and the link's."""
+        accepted, dropped per reason, bound and rejected sources, resyncs), the link's, and in
+        lockstep the clock's (barriers, fall-back, carriers dropped as silent)."""
         out: dict[str, Any] = {}
         feed_counters = getattr(self.feed, "counters", None)
         if isinstance(feed_counters, dict):
@@ -372,6 +373,9 @@ class MissionController:
         link_counters = getattr(self.link, "counters", None)
         if dataclasses.is_dataclass(link_counters) and not isinstance(link_counters, type):
             out["link"] = dataclasses.asdict(link_counters)
+        clock_counters = getattr(self.clock, "counters", None)  # a lockstep clock's: was every step in step?
+        if isinstance(clock_counters, dict):
+            out["lockstep"] = clock_counters
         return out
 
     def _outcome(self) -> MissionOutcome:

@@ -109,9 +109,7 @@ def main(cfg: Config, speed: float = 1.0, duration_s: float | None = None, stop_
                 finally:
                     summary = ctl.summary()
                     if isinstance(clock, LockstepClock):
-                        relay: Any = clock.downstream
-                        summary["lockstep"] = {"barriers": clock.barriers,
-                                               "robot_dropped": None if relay is None else bool(relay.dropped)}
+                        summary["lockstep"] = clock.counters
                     log.info("carrier %s stopped in mode %s; closest approach to the target %s m, braking distance %s m",
                              ctl.pair, summary["mode"], _fmt(summary["closest_target_distance_m"]),
                              _fmt(summary["braking_distance_m"]))

@@ -50,6 +50,8 @@ def test_two_lockstep_runs_give_the_same_flight(tmp_path, demo_flight):
         for counter in ("rx_bytes", "rx_messages", "rx_ignored", "tx_messages", "tx_heartbeats"):  # + the handshake
             summary.get("link", {}).pop(counter, None)
     assert a["ticks"] > 500 and a["phase"] == "DONE" and a["p1"] and a["p2"] and a["p3"]
+    for summary in (a, b):  # every step in step: no participant dropped as silent, no fall-back to the wall clock
+        assert summary["lockstep"]["fallback"] is None and summary["lockstep"]["downstream_dropped"] == 0, summary["lockstep"]
     assert {k: v for k, v in a.items() if k not in _numbers(a)} == {k: v for k, v in b.items() if k not in _numbers(b)}
     assert _numbers(a).keys() == _numbers(b).keys()
     for key, value in _numbers(a).items():
@@ -104,4 +106,5 @@ def test_demo_with_a_real_carrier_interface_holds_p1_p3_and_the_guard(tmp_path, 
     assert c["closest_target_distance_m"] >= 8.0 - 0.5  # b c - p3_margin_m: the carrier's own guard
     assert 0.0 < c["braking_distance_m"] < 3.0
     # the robot stepped on the carrier's clock to the end of the flight
-    assert c["lockstep"]["barriers"] > 500 and c["lockstep"]["robot_dropped"] is False, c["lockstep"]
+    assert c["lockstep"]["barriers"] > 500 and c["lockstep"]["downstream_dropped"] == 0, c["lockstep"]
+    assert c["lockstep"]["fallback"] is None and s["lockstep"]["fallback"] is None, (c["lockstep"], s["lockstep"])
