@@ -43,6 +43,13 @@ goes on in real time at its ``--speed`` after :data:`VEHICLE_WATCHDOG_WALL_S` wi
 carrier after :data:`CARRIER_WATCHDOG_WALL_S` (its silence is then carrier loss) and goes on in
 real time after :data:`CONTROLLER_WATCHDOG_WALL_S` without the vehicle (vehicle loss). The
 carrier's limit is the shortest, so a lost carrier never makes the vehicle drop the controller.
+
+Slow is not gone. A carrier whose Zenoh liveliness token is present is alive, only slow (a busy
+machine: one step took 2.5 s of wall); dropping it would let simulated time run on without it,
+so the outcome would depend on the machine's load (a lost carrier in a simulated flight). The
+controller waits for such a carrier up to :data:`ALIVE_CARRIER_WATCHDOG_WALL_S` (still below the
+vehicle's limit). A killed carrier's token goes at once, and the controller stops waiting then (a
+carrier restarted meanwhile has a token of its own but steps on no one's clock).
 """
 from __future__ import annotations
 
@@ -61,6 +68,7 @@ log = logging.getLogger(__name__)
 
 HELLO_WALL_S = 0.05  # resend period of a call nobody has answered yet [s, wall]
 CARRIER_WATCHDOG_WALL_S = 2.0  # the controller drops a carrier silent this long [s, wall]
+ALIVE_CARRIER_WATCHDOG_WALL_S = 6.0  # ... or this long while its liveliness token is present [s, wall]
 CONTROLLER_WATCHDOG_WALL_S = 5.0  # the controller's clock falls back to the wall clock [s, wall]
 VEHICLE_WATCHDOG_WALL_S = 10.0  # the vehicle drops a controller silent this long [s, wall]
 
@@ -176,15 +184,22 @@ class ZenohRelay:
     :func:`mission.carrier.ros2_link.robot_clock_keys`, rmw_zenoh sequence numbers).
 
     Before the first barrier completes it calls the carrier every :data:`HELLO_WALL_S` until it
-    answers (for at most ``join_wall_s``); later it waits ``watchdog_wall_s`` at most, then drops
-    the carrier until it answers again (a restarted carrier rejoins at a later barrier).
+    answers (for at most ``join_wall_s``); later it waits ``watchdog_wall_s`` at most, or
+    ``alive_watchdog_wall_s`` while ``alive()`` (the carrier's liveliness token) is True, and not at
+    all once it is False; then it drops the carrier until it answers again (a restarted carrier
+    rejoins at a later barrier).
+    :attr:`dropped` counts the drops.
     """
 
     def __init__(self, session: zenoh.Session, keys: tuple[str, str], feed: Any, publisher: Any, *,
+                 alive: Callable[[], bool | None] | None = None,
                  watchdog_wall_s: float = CARRIER_WATCHDOG_WALL_S,
+                 alive_watchdog_wall_s: float = ALIVE_CARRIER_WATCHDOG_WALL_S,
                  join_wall_s: float = 30.0, name: str = "carrier") -> None:
         time_key, ready_key = keys
         self.watchdog_wall_s, self.join_wall_s, self.name = watchdog_wall_s, join_wall_s, name
+        self.alive_watchdog_wall_s = max(alive_watchdog_wall_s, watchdog_wall_s)
+        self._alive = alive
         self._publisher = publisher  # PassengerPublisher: last_seq
         self._cv = threading.Condition()
         self._ready: tuple[int, int, int] | None = None
@@ -233,18 +248,27 @@ class ZenohRelay:
             return
         if state == "joined" and wake > t_ns:
             return
-        limit = self.join_wall_s if state == "joining" else self.watchdog_wall_s
         start = last_put = time.monotonic()
+        slow_logged = False
         self._pub.put(call)
         with self._cv:
             while not (self._ready is not None and self._ready[0] >= t_ns and self._seen_seq >= self._ready[2]):
                 now = time.monotonic()
-                if now - start > limit:
+                token = None if self._alive is None or state == "joining" else self._alive()
+                limit = self.join_wall_s if state == "joining" else (
+                    self.alive_watchdog_wall_s if token else self.watchdog_wall_s)
+                if token is False or now - start > limit:
                     self._state = "dropped"
                     self.dropped += 1
-                    log.warning("lockstep: the %s did not answer step t = %.3f s within %.1f s (wall); "
-                                "going on without it", self.name, t_ns / 1e9, limit)
+                    why = "its liveliness token is gone" if token is False else f"no answer within {limit:.1f} s (wall)"
+                    log.warning("lockstep: the %s dropped at step t = %.3f s (%s); going on without it", self.name,
+                                t_ns / 1e9, why)
                     return
+                if token and not slow_logged and now - start > self.watchdog_wall_s:
+                    slow_logged = True
+                    log.warning("lockstep: the %s has not finished step t = %.3f s after %.1f s (wall), but its "
+                                "liveliness token is present: waiting up to %.1f s", self.name, t_ns / 1e9,
+                                now - start, limit)
                 if self._state == "joining" and now - last_put > HELLO_WALL_S:
                     self._cv.release()
                     try:

@@ -65,7 +65,7 @@ def mission_io(cfg: Config, clock: Clock, tlog_path: str | Path | None = None) -
         if isinstance(clock, LockstepClock):  # step on the vehicle's time; bring the carrier along
             from mission.lockstep import ZenohRelay, clock_keys
 
-            relay = ZenohRelay(session, clock_keys(cfg.zenoh.pair), feed, publisher)
+            relay = ZenohRelay(session, clock_keys(cfg.zenoh.pair), feed, publisher, alive=lambda: feed.alive)
             stack.callback(relay.close)
             clock.downstream = relay
             stack.callback(clock.close)  # before the link closes: its threads wait on the clock

@@ -155,7 +155,9 @@ def test_long_blackouts_before_and_after_separation_lose_the_vehicle_and_px4_lan
 # Lockstep flights acted on from outside at a phase the test reads (a kill, a pilot): at most
 # SPEED simulated seconds per wall second, so the flight never runs away from the test's reaction;
 # the vehicle drops a silent controller after 4 s (wall) rather than 10 (still longer than the 2 s
-# the controller waits for a dead carrier, mission.lockstep.CARRIER_WATCHDOG_WALL_S).
+# the controller waits for a dead carrier, mission.lockstep.CARRIER_WATCHDOG_WALL_S; a slow one,
+# its liveliness token present, is waited for up to ALIVE_CARRIER_WATCHDOG_WALL_S, and no test here
+# slows the carrier).
 PACED = ("--lockstep-max-speed", str(SPEED), "--lockstep-watchdog", "4")
 
 
