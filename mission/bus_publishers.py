@@ -16,12 +16,14 @@ class _Publisher:
     liveliness token; closing undeclares them all (idempotent).
 
     States are streams where the newest wins: puts are express (not batched) and use congestion
-    control DROP, so a congested link drops a sample instead of stalling the sender's loop.
+    control DROP, so a congested link drops a sample instead of stalling the sender's loop (BLOCK
+    in lockstep, ``congestion_control``: :func:`mission.zenoh_session.congestion_for`).
     Publish at a steady rate, not only on change: a receiver treats silence as loss.
     """
 
-    def __init__(self, session: zenoh.Session, alive_key: str, state_key: str, state_encoding: zenoh.Encoding) -> None:
-        self._session = session
+    def __init__(self, session: zenoh.Session, alive_key: str, state_key: str, state_encoding: zenoh.Encoding,
+                 congestion_control: zenoh.CongestionControl = zenoh.CongestionControl.DROP) -> None:
+        self._session, self._congestion = session, congestion_control
         self._entities: list[Any] = []
         self._closed = False
         self._sn = 0
@@ -33,12 +35,17 @@ class _Publisher:
         """Declare a publisher on ``key``; if Zenoh refuses, undeclare everything and raise."""
         try:
             pub = declare(f"publisher on {key}", lambda: self._session.declare_publisher(
-                key, encoding=encoding, congestion_control=zenoh.CongestionControl.DROP, express=True))
+                key, encoding=encoding, congestion_control=self._congestion, express=True))
         except BusError:
             self.close()
             raise
         self._entities.append(pub)
         return pub
+
+    @property
+    def congestion_control(self) -> zenoh.CongestionControl:
+        """What a put does on a congested link: DROP the sample, or BLOCK until it is sent."""
+        return self._congestion
 
     @property
     def matched(self) -> bool:
@@ -73,12 +80,13 @@ class CarrierPublisher(_Publisher):
     encoding "json" or "cdr" (Odometry, ENU, twist in ``base_link``); key overrides the state key.
     """
 
-    def __init__(self, session: zenoh.Session, pair: str, encoding: Encoding = "json", *, key: str | None = None) -> None:
+    def __init__(self, session: zenoh.Session, pair: str, encoding: Encoding = "json", *, key: str | None = None,
+                 congestion_control: zenoh.CongestionControl = zenoh.CongestionControl.DROP) -> None:
         check_encoding(encoding)
         k = keys(pair)
         self.encoding = encoding
         self.key = key or k.carrier_state
-        super().__init__(session, k.carrier_alive, self.key, ZENOH_ENCODING[encoding])
+        super().__init__(session, k.carrier_alive, self.key, ZENOH_ENCODING[encoding], congestion_control)
 
     def publish(self, state: CarrierState) -> None:
         """Send ``state``; raises :class:`BusError` if Zenoh refuses."""
@@ -89,9 +97,11 @@ class PassengerPublisher(_Publisher):
     """Publishes the passenger's status (state key, JSON) and phase (phase key, text) on pair
     ``pair`` and holds the passenger's liveliness token."""
 
-    def __init__(self, session: zenoh.Session, pair: str) -> None:
+    def __init__(self, session: zenoh.Session, pair: str,
+                 congestion_control: zenoh.CongestionControl = zenoh.CongestionControl.DROP) -> None:
         k = keys(pair)
-        super().__init__(session, k.passenger_alive, k.passenger_state, zenoh.Encoding.APPLICATION_JSON)
+        super().__init__(session, k.passenger_alive, k.passenger_state, zenoh.Encoding.APPLICATION_JSON,
+                         congestion_control)
         self.last_seq = -1  # seq of the last status sent
         self._phase = self._publisher(k.passenger_phase, zenoh.Encoding.TEXT_PLAIN)
 

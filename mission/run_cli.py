@@ -14,6 +14,7 @@ import click
 import numpy as np
 
 from mission.carrier_bridge import CarrierFeed, PassengerPublisher, open_session, zenoh_config
+from mission.zenoh_session import congestion_for
 from mission.clock import Clock, LockstepClock, ScaledClock
 from mission.config import Config, load_config, with_overrides
 from mission.controller import MissionController, MissionOutcome, mission_info, mission_model
@@ -49,7 +50,7 @@ def mission_io(cfg: Config, clock: Clock, tlog_path: str | Path | None = None) -
         feed = CarrierFeed.from_section(session, cfg.zenoh, clock, max_age_s=cfg.mission.carrier_timeout_s,
                                         limits=carrier_limits(cfg))
         stack.callback(feed.close)
-        publisher = PassengerPublisher(session, cfg.zenoh.pair)
+        publisher = PassengerPublisher(session, cfg.zenoh.pair, congestion_for(clock))
         stack.callback(publisher.close)
         link = VehicleLink(cfg.mavlink.url, clock, target_system=cfg.mavlink.target_system,
                            target_component=cfg.mavlink.target_component,

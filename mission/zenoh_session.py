@@ -15,6 +15,7 @@ from typing import Any, Callable, Literal
 
 import zenoh
 
+from mission.clock import Clock, LockstepClock
 from mission.config import ZenohSection
 from mission.config_fields import parse_zenoh_endpoint
 from mission.errors import BusError, BusPortInUse, ConfigError
@@ -25,6 +26,17 @@ log = logging.getLogger("mission.carrier_bridge")  # one logger name for the who
 Encoding = Literal["json", "cdr"]
 #: The Zenoh encoding a sample of each of our carrier encodings is put with.
 ZENOH_ENCODING = {"json": zenoh.Encoding.APPLICATION_JSON, "cdr": zenoh.Encoding.APPLICATION_CDR}
+
+
+def congestion_for(clock: Clock) -> zenoh.CongestionControl:
+    """Congestion control of the state streams (carrier state, passenger status, a robot's
+    odometry and commands) for a process on ``clock``. Real time: DROP, so a congested link
+    drops a state instead of stalling the sender's loop. Lockstep: BLOCK, never drop. Each step
+    waits for the sample that a clock message names, so a dropped sample would hold the whole
+    simulation. Zenoh drops a DROP sample that waits more than about 1 ms for room in its queue;
+    under two busy loops a passenger status was lost this way, and the carrier and the
+    controller then waited for each other until both watchdogs fired."""
+    return zenoh.CongestionControl.BLOCK if isinstance(clock, LockstepClock) else zenoh.CongestionControl.DROP
 
 
 def check_encoding(encoding: str) -> None:

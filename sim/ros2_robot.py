@@ -27,7 +27,7 @@ import zenoh
 from mission.carrier.ros2_link import Received, RmwAttachment, Ros2Topics, rmw_sequence, robot_clock_keys, ros2_topics
 from mission.carrier.tracking import wrap_pi
 from mission.carrier_bridge import open_session
-from mission.zenoh_session import undeclare
+from mission.zenoh_session import congestion_for, undeclare
 from mission.clock import Clock, LockstepClock, Periodic, ScaledClock
 from mission.config import CarrierRos2Section, ZenohSection
 from mission.wire import CarrierState, WireError
@@ -55,7 +55,8 @@ class Ros2RobotSim:
         self.commands, self.dropped, self.seq = 0, 0, 0
         self._attachment = RmwAttachment() if topics.rmw_zenoh else None
         self._listeners: list[Callable[[Received], None]] = []
-        self._pub = session.declare_publisher(topics.odom_pub, encoding=zenoh.Encoding.APPLICATION_CDR)
+        self._pub = session.declare_publisher(topics.odom_pub, encoding=zenoh.Encoding.APPLICATION_CDR,
+                                              congestion_control=congestion_for(clock))
         self._sub = session.declare_subscriber(topics.cmd_vel_sub, self._on_cmd)
 
     def _on_cmd(self, sample: zenoh.Sample) -> None:

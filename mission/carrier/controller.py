@@ -46,6 +46,7 @@ from mission.carrier_bridge import CarrierPublisher, PassengerFeed
 from mission.clock import Clock, Periodic
 from mission.config import Config
 from mission.model import model_from_config
+from mission.zenoh_session import congestion_for
 from mission.tick import TickModel, carrier_tick
 from mission.wire import CarrierState
 
@@ -163,7 +164,7 @@ class CarrierController:
         self.passenger = PassengerFeed(session, self.pair, clock, max_age_s=cfg.carrier.passenger_timeout_s)
         try:
             self.publisher = CarrierPublisher(session, self.pair, encoding or cfg.zenoh.encoding,  # type: ignore[arg-type]
-                                              key=cfg.zenoh.carrier_key)
+                                              key=cfg.zenoh.carrier_key, congestion_control=congestion_for(clock))
         except Exception:
             self.passenger.close()
             raise

@@ -32,7 +32,7 @@ import zenoh.ext
 
 from mission.carrier.controller import OwnState
 from mission.carrier.tracking import Tracked
-from mission.zenoh_session import declare, undeclare
+from mission.zenoh_session import congestion_for, declare, undeclare
 from mission.clock import Clock
 from mission.config import CarrierRos2Section, Config
 from mission.wire import CarrierState, WireError
@@ -144,7 +144,7 @@ class Ros2Carrier:
         self._attachment = RmwAttachment() if self.topics.rmw_zenoh else None
         self._listeners: list[Callable[[Received], None]] = []
         self._pub = declare(f"publisher on {self.topics.cmd_vel_pub}", lambda: session.declare_publisher(
-            self.topics.cmd_vel_pub, encoding=zenoh.Encoding.APPLICATION_CDR))
+            self.topics.cmd_vel_pub, encoding=zenoh.Encoding.APPLICATION_CDR, congestion_control=congestion_for(clock)))
         try:
             self._sub = declare(f"subscriber on {self.topics.odom_sub}",
                                  lambda: session.declare_subscriber(self.topics.odom_sub, self._on_odom))

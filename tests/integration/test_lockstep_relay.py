@@ -1,7 +1,9 @@
-"""The controller's lockstep relay to the carrier (:class:`mission.lockstep.ZenohRelay`) over real
-Zenoh sessions on loopback: a slow carrier whose liveliness token is present is waited for, so a
-busy machine cannot change a simulated flight; a silent one whose token is gone (or unknown) is
-dropped after the short watchdog, so a dead carrier is carrier loss.
+"""Lockstep over real Zenoh sessions on loopback, against a busy machine.
+
+The controller's relay to the carrier (:class:`mission.lockstep.ZenohRelay`): a slow carrier whose
+liveliness token is present is waited for, so a busy machine cannot change a simulated flight; a
+silent one whose token is gone is dropped at once, one with no token known after the short
+watchdog, so a dead carrier is carrier loss. The state streams never drop a sample in lockstep.
 
 The scripted carrier answers the relay's clock calls on its own session; its state samples reach
 the relay through a stand-in feed (the carrier feed itself has its own tests)."""
@@ -13,8 +15,16 @@ import time
 from types import SimpleNamespace
 
 import pytest
+import zenoh
 
+from mission.carrier.controller import CarrierController
+from mission.carrier.sim_robot import SimRobot
+from mission.carrier_bridge import open_session
+from mission.clock import LockstepClock, ScaledClock
+from mission.config import load_config, with_overrides
 from mission.lockstep import ZenohRelay, clock_keys
+from mission.run_cli import mission_io
+from tests.conftest import CONFIGS
 from tests.integration.zenoh_util import peer_pair
 
 WATCHDOG_S = 0.3  # the relay's short limit in these tests [s, wall]
@@ -102,3 +112,28 @@ def test_a_slow_carrier_is_waited_for_while_its_liveliness_token_is_present(aliv
         finally:
             relay.close()
             carrier.close()
+
+
+@pytest.mark.parametrize("lockstep, expected", [(True, zenoh.CongestionControl.BLOCK), (False, zenoh.CongestionControl.DROP)],
+                         ids=["lockstep-blocks", "real-time-drops"])
+def test_state_streams_never_drop_a_sample_in_lockstep(tmp_path, lockstep, expected) -> None:
+    """In lockstep each step waits for the sample a clock message names (the passenger status a
+    call names, the carrier state a ready names): a sample Zenoh dropped on a congested link (it
+    drops a DROP sample that waits over about 1 ms for its queue) held both sides until their
+    watchdogs fired, under two busy loops. So the state streams block there; in real time they
+    drop, so a congested link never stalls the loop."""
+    cfg = with_overrides(load_config(CONFIGS / "demo.toml"), {
+        "zenoh.listen": ["tcp/127.0.0.1:0"], "zenoh.connect": [], "zenoh.rendezvous": None,
+        "mavlink.url": "udpin:127.0.0.1:0"})
+    clock = LockstepClock(name="test", creator_runs=False) if lockstep else ScaledClock()
+    try:
+        with mission_io(cfg, clock) as (_feed, passenger, _link):  # what `marsupial run` opens
+            assert passenger.congestion_control == expected
+        session = open_session(cfg.zenoh)
+        try:
+            with CarrierController(cfg, clock, session, SimRobot(cfg, clock)) as carrier:  # `marsupial carrier`
+                assert carrier.publisher.congestion_control == expected
+        finally:
+            session.close()
+    finally:
+        clock.close()
