@@ -55,14 +55,18 @@ class _ScriptedCarrier:
         self.answered: list[int] = []
         self._threads: list[threading.Thread] = []
         self._lock = threading.Lock()
+        self._closed = False
         self._ready = session.declare_publisher(keys[1])
         self._sub = session.declare_subscriber(keys[0], self._on_call)
 
     def _on_call(self, sample) -> None:
         t_ns = int(sample.payload.to_bytes().decode().split()[0])
         thread = threading.Thread(target=self._answer, args=(t_ns,), daemon=True)  # never block Zenoh's thread
-        self._threads.append(thread)
-        thread.start()
+        with self._lock:  # close() joins only threads that started: a call racing close() is not answered
+            if self._closed:
+                return
+            thread.start()
+            self._threads.append(thread)
 
     def _answer(self, t_ns: int) -> None:
         if t_ns == self.slow_at_ns:
@@ -77,7 +81,10 @@ class _ScriptedCarrier:
 
     def close(self) -> None:
         self._sub.undeclare()
-        for thread in list(self._threads):  # a late answer still goes out before its publisher goes
+        with self._lock:
+            self._closed = True
+            threads = list(self._threads)
+        for thread in threads:  # a late answer still goes out before its publisher goes
             thread.join(2 * SLOW_S)
         self._ready.undeclare()
 
