@@ -2,9 +2,9 @@
 
 Every timeout, watchdog, stream period and integration step reads a :class:`Clock`, never
 ``time.time()``. A :class:`ScaledClock` runs ``speed`` times faster than the wall clock, like
-PX4's SIH speed factor, so processes that share a speed factor agree on rates and timeouts
-while a test flies a minute in seconds. A :class:`ManualClock` is driven by hand in unit tests; a :class:`MonotonicClock` (speed 1)
-converts to and from CLOCK_MONOTONIC stamps.
+PX4's SIH speed factor, so processes that share a speed factor agree on rates and timeouts while a test
+flies a minute in seconds. A :class:`ManualClock` is driven by hand in unit tests; a :class:`MonotonicClock`
+(speed 1) converts to and from CLOCK_MONOTONIC stamps.
 A :class:`LockstepClock` follows simulated time owned by another process (the mock vehicle) and
 holds it until every thread of this process that waits on the clock has finished its step, as
 PX4 SITL does with its simulator (see :mod:`mission.lockstep` for the wire protocol).
@@ -266,8 +266,7 @@ class LockstepClock:
         self._running: dict[int, threading.Thread] = {me.ident or 0: me} if creator_runs else {}
         self._barrier_ns: int | None = None
         self._notified: set[threading.Condition] = set()  # by I/O threads since the last barrier
-        self._done_ns = -1
-        self._wake_ns = 0
+        self._done_ns, self._wake_ns = -1, 0
         self._fallback: ScaledClock | None = None
         self._closed = False
         self._last_upstream_wall = time.monotonic()
@@ -340,9 +339,10 @@ class LockstepClock:
 
     @property
     def counters(self) -> dict[str, object]:
-        """Barriers, why it fell back to the wall clock (None: never, or closed), downstream drops."""
+        """Barriers, fall-back to the wall clock (None: never, or closed), downstream drops, samples lost."""
         return {"barriers": self.barriers, "fallback": None if self.fallback_reason == "closed" else self.fallback_reason,
-                "downstream_dropped": int(getattr(self.downstream, "dropped", 0) or 0)}
+                "downstream_dropped": int(getattr(self.downstream, "dropped", 0) or 0),
+                "samples_lost": sum(int(getattr(end, "missed", 0) or 0) for end in (self.upstream, self.downstream))}
 
     def start_thread(self, target: Callable[[], None], name: str) -> threading.Thread:
         """Start ``target`` in a daemon thread that takes part from its first instruction: its step

@@ -50,6 +50,16 @@ so the outcome would depend on the machine's load (a lost carrier in a simulated
 controller waits for such a carrier up to :data:`ALIVE_CARRIER_WATCHDOG_WALL_S` (still below the
 vehicle's limit). A killed carrier's token goes at once, and the controller stops waiting then (a
 carrier restarted meanwhile has a token of its own but steps on no one's clock).
+
+A Zenoh outage (a router restarted, a link that came back) can lose a message on the clock keys
+or a state sample, reliable or not: a call sent as the route came back was lost, the controller
+waited for the carrier, and the vehicle dropped the controller (offboard loss in a simulated
+flight). So the relay calls again every :data:`RESEND_WALL_S` while unanswered (a carrier that
+already finished that step reports it again), and a sample that a clock message names but that
+never comes is given up after :data:`LOST_WALL_S` and :data:`LOST_AFTER_REPEATS` repeats of that
+message (the relay's ``missed``, the carrier's upstream ``missed``: ``samples_lost`` in the
+lockstep counters). A run that lost a sample went on with the sample before it: it is no longer
+deterministic, and its summary says so.
 """
 from __future__ import annotations
 
@@ -67,6 +77,9 @@ from mission.mavlink_env import mavlink
 log = logging.getLogger(__name__)
 
 HELLO_WALL_S = 0.05  # resend period of a call nobody has answered yet [s, wall]
+RESEND_WALL_S = 0.5  # resend period of an unanswered call once joined (an outage lost it) [s, wall]
+LOST_WALL_S = 2.0  # a named sample still missing this long ... [s, wall]
+LOST_AFTER_REPEATS = 3  # ... after this many repeats of the message naming it is given up
 CARRIER_WATCHDOG_WALL_S = 2.0  # the controller drops a carrier silent this long [s, wall]
 ALIVE_CARRIER_WATCHDOG_WALL_S = 6.0  # ... or this long while its liveliness token is present [s, wall]
 CONTROLLER_WATCHDOG_WALL_S = 5.0  # the controller's clock falls back to the wall clock [s, wall]
@@ -187,8 +200,10 @@ class ZenohRelay:
     answers (for at most ``join_wall_s``); later it waits ``watchdog_wall_s`` at most, or
     ``alive_watchdog_wall_s`` while ``alive()`` (the carrier's liveliness token) is True, and not at
     all once it is False; then it drops the carrier until it answers again (a restarted carrier
-    rejoins at a later barrier).
-    :attr:`dropped` counts the drops.
+    rejoins at a later barrier). Once joined it calls again every :data:`RESEND_WALL_S` while
+    unanswered, and gives up a state sample a ready names after :data:`LOST_WALL_S` and
+    :data:`LOST_AFTER_REPEATS` readies naming it. :attr:`dropped` counts the drops,
+    :attr:`missed` the samples given up.
     """
 
     def __init__(self, session: zenoh.Session, keys: tuple[str, str], feed: Any, publisher: Any, *,
@@ -206,7 +221,9 @@ class ZenohRelay:
         self._seen_seq = -1  # newest carrier state seq received
         self._state = "joining"  # -> joined -> dropped -> joined ...
         self._wake_ns = 0
+        self._step_ns, self._step_readies = 0, 0  # the step run() waits for, readies for it so far
         self.dropped = 0
+        self.missed = 0  # state samples given up (lost in an outage)
         self._pub = _publisher(session, time_key)
         self._sub = session.declare_subscriber(ready_key, self._on_ready)
         feed.add_listener(self._on_state)
@@ -223,6 +240,8 @@ class ZenohRelay:
             return
         with self._cv:
             self._ready = (values[0], values[1], values[2])
+            if values[0] >= self._step_ns:
+                self._step_readies += 1
             if values[1] < 0:  # it left
                 if self._state != "dropped":
                     log.info("lockstep: the %s left at t = %.3f s", self.name, values[0] / 1e9)
@@ -250,10 +269,19 @@ class ZenohRelay:
             return
         start = last_put = time.monotonic()
         slow_logged = False
+        with self._cv:
+            self._step_ns, self._step_readies = t_ns, 0
         self._pub.put(call)
         with self._cv:
             while not (self._ready is not None and self._ready[0] >= t_ns and self._seen_seq >= self._ready[2]):
                 now = time.monotonic()
+                if (self._ready is not None and self._ready[0] >= t_ns and now - start > LOST_WALL_S
+                        and self._step_readies >= LOST_AFTER_REPEATS):
+                    self.missed += 1
+                    log.warning("lockstep: the %s's state sample %d never came (step t = %.3f s, %d readies in "
+                                "%.1f s, wall); going on without it", self.name, self._ready[2], t_ns / 1e9,
+                                self._step_readies, now - start)
+                    break
                 token = None if self._alive is None or state == "joining" else self._alive()
                 limit = self.join_wall_s if state == "joining" else (
                     self.alive_watchdog_wall_s if token else self.watchdog_wall_s)
@@ -269,7 +297,7 @@ class ZenohRelay:
                     log.warning("lockstep: the %s has not finished step t = %.3f s after %.1f s (wall), but its "
                                 "liveliness token is present: waiting up to %.1f s", self.name, t_ns / 1e9,
                                 now - start, limit)
-                if self._state == "joining" and now - last_put > HELLO_WALL_S:
+                if now - last_put > (HELLO_WALL_S if self._state == "joining" else RESEND_WALL_S):
                     self._cv.release()
                     try:
                         self._pub.put(call)
@@ -278,6 +306,7 @@ class ZenohRelay:
                     last_put = now
                 self._cv.wait(HELLO_WALL_S)
             self._state, self._wake_ns = "joined", self._ready[1]
+            self._step_ns = t_ns + 1  # later readies are repeats of this step's
 
     def close(self) -> None:
         undeclare(self._sub, self._pub)
@@ -287,7 +316,11 @@ class ZenohUpstream:
     """The carrier simulator's side: steps on ``clock/time`` once the passenger status it names
     has arrived on ``feed`` (a PassengerFeed: callbacks with ``.seq``), answers on ``clock/ready``
     with the seq of its last state sample (``published()``). ``keys``: (time, ready) of
-    :func:`clock_keys` (the ROS-2-shaped robot steps on the ros2 carrier's the same way)."""
+    :func:`clock_keys` (the ROS-2-shaped robot steps on the ros2 carrier's the same way).
+
+    A status that never comes (lost in an outage) is given up after :data:`LOST_WALL_S` and
+    :data:`LOST_AFTER_REPEATS` repeated calls naming it (:attr:`missed`); a repeated call for a
+    step already taken is passed on at once (the clock reports that step again)."""
 
     def __init__(self, clock: LockstepClock, session: zenoh.Session, keys: tuple[str, str], feed: Any,
                  published: Callable[[], int]) -> None:
@@ -296,6 +329,9 @@ class ZenohUpstream:
         self._lock = threading.Lock()
         self._seen_seq = -1  # newest passenger status seq received
         self._pending: tuple[int, int] | None = None  # (t, status seq) waiting for that status
+        self._pending_since, self._pending_calls = 0.0, 0  # wall time of its first call [s], calls since
+        self._stepped_ns = -1  # the latest step passed to the clock
+        self.missed = 0  # passenger statuses given up (lost in an outage)
         self._pub = _publisher(session, ready_key)
         feed.add_listener(self._on_status)
         self._sub = session.declare_subscriber(time_key, self._on_time)
@@ -308,6 +344,7 @@ class ZenohUpstream:
             if pending is None or self._seen_seq < pending[1]:
                 return
             self._pending = None
+            self._stepped_ns = max(self._stepped_ns, pending[0])
         self.clock.barrier(pending[0])
 
     def _on_time(self, sample: zenoh.Sample) -> None:
@@ -315,11 +352,23 @@ class ZenohUpstream:
         if values is None:
             log.warning("lockstep: malformed time on %s dropped", sample.key_expr)
             return
+        t_ns, seq = values
         with self._lock:
-            if self._seen_seq < values[1]:
-                self._pending = (values[0], values[1])
-                return
-        self.clock.barrier(values[0])
+            if self._seen_seq < seq and t_ns > self._stepped_ns:
+                now = time.monotonic()
+                if self._pending is None or self._pending[0] != t_ns:
+                    self._pending, self._pending_since, self._pending_calls = (t_ns, seq), now, 0
+                    return
+                self._pending_calls += 1  # the same call again: its status may be lost
+                if now - self._pending_since < LOST_WALL_S or self._pending_calls < LOST_AFTER_REPEATS:
+                    return
+                self.missed += 1
+                log.warning("lockstep: the passenger status %d never came (step t = %.3f s, %d calls in %.1f s, "
+                            "wall); stepping without it", seq, t_ns / 1e9, self._pending_calls + 1,
+                            now - self._pending_since)
+            self._pending = None
+            self._stepped_ns = max(self._stepped_ns, t_ns)
+        self.clock.barrier(t_ns)
 
     def report(self, t_ns: int, wake_ns: int) -> None:
         self._pub.put(f"{t_ns} {wake_ns} {self._published()}")

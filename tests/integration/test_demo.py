@@ -50,8 +50,9 @@ def test_two_lockstep_runs_give_the_same_flight(tmp_path, demo_flight):
         for counter in ("rx_bytes", "rx_messages", "rx_ignored", "tx_messages", "tx_heartbeats"):  # + the handshake
             summary.get("link", {}).pop(counter, None)
     assert a["ticks"] > 500 and a["phase"] == "DONE" and a["p1"] and a["p2"] and a["p3"]
-    for summary in (a, b):  # every step in step: no participant dropped as silent, no fall-back to the wall clock
-        assert summary["lockstep"]["fallback"] is None and summary["lockstep"]["downstream_dropped"] == 0, summary["lockstep"]
+    for summary in (a, b):  # every step in step: no participant dropped as silent, no fall-back, no sample lost
+        lock = summary["lockstep"]
+        assert lock["fallback"] is None and lock["downstream_dropped"] == 0 and lock["samples_lost"] == 0, lock
     assert {k: v for k, v in a.items() if k not in _numbers(a)} == {k: v for k, v in b.items() if k not in _numbers(b)}
     assert _numbers(a).keys() == _numbers(b).keys()
     for key, value in _numbers(a).items():

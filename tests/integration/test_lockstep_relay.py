@@ -22,7 +22,8 @@ from mission.carrier.sim_robot import SimRobot
 from mission.carrier_bridge import open_session
 from mission.clock import LockstepClock, ScaledClock
 from mission.config import load_config, with_overrides
-from mission.lockstep import ZenohRelay, clock_keys
+from mission import lockstep
+from mission.lockstep import LOST_WALL_S, RESEND_WALL_S, ZenohRelay, ZenohUpstream, clock_keys
 from mission.run_cli import mission_io
 from tests.conftest import CONFIGS
 from tests.integration.zenoh_util import peer_pair
@@ -47,11 +48,14 @@ class _StateFeed:
 
 
 class _ScriptedCarrier:
-    """Answers each clock call ``"t seq"``: publishes a state sample, then ``"t wake seq"``;
-    the calls at ``slow_at_ns`` are answered ``SLOW_S`` late (wall)."""
+    """Answers each clock call ``"t seq"``: publishes a state sample, then ``"t wake seq"``; a
+    repeated call for a step it answered gets the same ready again (as a carrier's clock does).
+    The calls at ``slow_at_ns`` are answered ``SLOW_S`` late (wall). ``lose`` (what, t): the
+    outage loses the first call at ``t``, its first ready, or its state sample."""
 
-    def __init__(self, session, keys: tuple[str, str], feed: _StateFeed, slow_at_ns: int) -> None:
-        self.feed, self.slow_at_ns, self.seq = feed, slow_at_ns, -1
+    def __init__(self, session, keys: tuple[str, str], feed: _StateFeed, slow_at_ns: int = -1,
+                 lose: tuple[str, int] | None = None) -> None:
+        self.feed, self.slow_at_ns, self.seq, self.lose = feed, slow_at_ns, -1, lose
         self.answered: list[int] = []
         self._threads: list[threading.Thread] = []
         self._lock = threading.Lock()
@@ -72,12 +76,18 @@ class _ScriptedCarrier:
         if t_ns == self.slow_at_ns:
             time.sleep(SLOW_S)
         with self._lock:
-            if t_ns in self.answered:  # a repeated join call
+            lose, self.lose = (self.lose, None) if self.lose is not None and self.lose[1] == t_ns else (None, self.lose)
+            if lose is not None and lose[0] == "call":
+                return
+            if t_ns in self.answered:  # a repeated call: the same ready again
+                self._ready.put(f"{t_ns} {t_ns + WAKE_NS} {self.answered.index(t_ns)}")
                 return
             self.answered.append(t_ns)
             self.seq += 1
-            self.feed.deliver(self.seq)
-            self._ready.put(f"{t_ns} {t_ns + WAKE_NS} {self.seq}")
+            if not (lose is not None and lose[0] == "sample"):
+                self.feed.deliver(self.seq)
+            if not (lose is not None and lose[0] == "ready"):
+                self._ready.put(f"{t_ns} {t_ns + WAKE_NS} {self.seq}")
 
     def close(self) -> None:
         self._sub.undeclare()
@@ -144,3 +154,86 @@ def test_state_streams_never_drop_a_sample_in_lockstep(tmp_path, lockstep, expec
             session.close()
     finally:
         clock.close()
+
+
+@pytest.mark.parametrize("lost", ["call", "ready", "sample"])
+def test_a_call_an_answer_or_a_sample_lost_in_an_outage_is_asked_again_or_given_up(lost, caplog) -> None:
+    """A Zenoh outage (a router restarted) lost a call sent as the route came back: the relay
+    waited for a carrier that never heard it, and the vehicle dropped the controller. The relay
+    calls again every RESEND_WALL_S while unanswered (the carrier reports a step it took again),
+    and gives up a state sample a ready names after LOST_WALL_S and LOST_AFTER_REPEATS readies;
+    the carrier stays in the lockstep either way."""
+    caplog.set_level(logging.WARNING, logger="mission.lockstep")
+    keys = clock_keys("outage-test")
+    feed = _StateFeed()
+    with peer_pair() as (controller, carrier_session):
+        carrier = _ScriptedCarrier(carrier_session, keys, feed, lose=(lost, WAKE_NS))
+        relay = ZenohRelay(controller, keys, feed, SimpleNamespace(last_seq=-1), alive=lambda: True,
+                           watchdog_wall_s=WATCHDOG_S, alive_watchdog_wall_s=10 * LOST_WALL_S, join_wall_s=10.0)
+        try:
+            relay.run(0)
+            start = time.monotonic()
+            relay.run(WAKE_NS)  # the step the outage hit
+            waited = time.monotonic() - start
+            assert relay.dropped == 0 and relay.wake_ns() == 2 * WAKE_NS  # this step's answer: still in step
+            if lost == "sample":
+                assert relay.missed == 1 and waited >= LOST_WALL_S
+                assert "state sample 1 never came" in caplog.text
+            else:
+                assert relay.missed == 0 and waited >= RESEND_WALL_S  # asked again, not given up
+            relay.run(2 * WAKE_NS)  # the next step is in step again, at once
+            assert relay.dropped == 0 and relay.wake_ns() == 3 * WAKE_NS and carrier.answered == [0, WAKE_NS, 2 * WAKE_NS]
+        finally:
+            relay.close()
+            carrier.close()
+
+
+class _Barriers:
+    """The carrier's clock as its upstream sees it: records each barrier."""
+
+    def __init__(self) -> None:
+        self.upstream = None
+        self.at: list[int] = []
+        self.cv = threading.Condition()
+
+    def barrier(self, t_ns: int) -> None:
+        with self.cv:
+            self.at.append(t_ns)
+            self.cv.notify_all()
+
+
+def test_a_passenger_status_lost_in_an_outage_is_given_up_after_repeated_calls(monkeypatch, caplog) -> None:
+    """The carrier steps on a call once the passenger status it names has come; one that never
+    comes (lost in an outage) is given up after LOST_WALL_S and LOST_AFTER_REPEATS repeated
+    calls, never after one call; a repeated call for a step taken is passed on at once."""
+    monkeypatch.setattr(lockstep, "LOST_WALL_S", 0.4)
+    caplog.set_level(logging.WARNING, logger="mission.lockstep")
+    keys = clock_keys("status-test")
+    statuses, clock = _StateFeed(), _Barriers()
+    with peer_pair() as (carrier_session, controller):
+        upstream = ZenohUpstream(clock, carrier_session, keys, statuses, published=lambda: 0)  # type: ignore[arg-type]
+        calls = controller.declare_publisher(keys[0])
+        try:
+            def call_until(t_ns: int, seq: int, period_s: float) -> tuple[int, float]:
+                start, sent = time.monotonic(), 0
+                with clock.cv:
+                    while t_ns not in clock.at:
+                        calls.put(f"{t_ns} {seq}")  # the relay's call, repeated while unanswered
+                        sent += 1
+                        clock.cv.wait(period_s)
+                        assert time.monotonic() - start < 10.0, clock.at
+                return sent, time.monotonic() - start
+
+            statuses.deliver(0)
+            call_until(0, 0, 0.05)  # the route is up, status 0 came: stepped
+            sent, waited = call_until(WAKE_NS, 1, 0.1)  # status 1 is lost
+            assert upstream.missed == 1 and waited >= 0.4 and sent >= lockstep.LOST_AFTER_REPEATS + 1
+            assert "passenger status 1 never came" in caplog.text
+            clock.at.clear()
+            call_until(WAKE_NS, 1, 0.05)  # the same call again: passed on, not waited for again
+            statuses.deliver(2)
+            call_until(2 * WAKE_NS, 2, 0.05)
+            assert upstream.missed == 1 and clock.at[-1] == 2 * WAKE_NS  # in step again
+        finally:
+            calls.undeclare()
+            upstream.close()
