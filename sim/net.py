@@ -1,10 +1,13 @@
 """Small helpers for processes and tests that talk over loopback."""
 from __future__ import annotations
 
+import os
+import random
 import signal
 import socket
 import struct
 import subprocess
+import threading
 import time
 from collections.abc import Callable
 from typing import TypeVar
@@ -12,12 +15,60 @@ from typing import TypeVar
 T = TypeVar("T")
 
 
-def free_port(kind: int = socket.SOCK_STREAM) -> int:
-    """A port the OS just handed out on 127.0.0.1 (TCP by default; ``socket.SOCK_DGRAM`` for
-    UDP), for an endpoint that must be named before the process that binds it starts."""
+#: Ports :func:`free_port` hands out: below Linux's ephemeral range (32768-60999), so no socket
+#: bound to port 0 and no outgoing connection's source port takes one between its pick and its bind.
+PORT_RANGE = (20000, 32768)
+#: ``"i/n"``: this process picks in lane ``i`` of ``n`` equal lanes of :data:`PORT_RANGE` (one per
+#: pytest-xdist worker, so parallel workers never pick the same port); inherited by children.
+LANE_ENV = "MARSUPIAL_PORT_LANE"
+_MIN_LANE_WIDTH = 64
+
+_cursor: dict[tuple[int, int], int] = {}  # lane -> next port to try
+_cursor_lock = threading.Lock()
+
+
+def port_lane() -> tuple[int, int]:
+    """This process's lane ``[lo, hi)`` of :data:`PORT_RANGE` (all of it without :data:`LANE_ENV`);
+    ``ValueError`` naming the variable if it is malformed."""
+    lo, hi = PORT_RANGE
+    spec = os.environ.get(LANE_ENV, "").strip()
+    if not spec:
+        return lo, hi
+    try:
+        index, count = (int(v) for v in spec.split("/"))
+    except ValueError:
+        raise ValueError(f"{LANE_ENV}={spec!r}: expected 'i/n' (lane i of n, 0 <= i < n)") from None
+    width = (hi - lo) // max(count, 1)
+    if not (count >= 1 and 0 <= index < count and width >= _MIN_LANE_WIDTH):
+        raise ValueError(f"{LANE_ENV}={spec!r}: expected 0 <= i < n and n <= {(hi - lo) // _MIN_LANE_WIDTH}")
+    return lo + index * width, lo + (index + 1) * width
+
+
+def _bindable(port: int, kind: int) -> bool:
     with socket.socket(socket.AF_INET, kind) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+        try:
+            s.bind(("127.0.0.1", port))
+        except OSError:
+            return False
+    return True
+
+
+def free_port(kind: int = socket.SOCK_STREAM) -> int:
+    """A free port on 127.0.0.1 (TCP by default; ``socket.SOCK_DGRAM`` for UDP), for an endpoint
+    that must be named before the process that binds it starts.
+
+    Taken in turn from a random start in this process's :func:`port_lane` (never one it handed
+    out recently), and checked free by binding it."""
+    lo, hi = port_lane()
+    width = hi - lo
+    with _cursor_lock:
+        start = _cursor.get((lo, hi), lo + random.randrange(width))
+        for step in range(width):
+            port = lo + (start - lo + step) % width
+            if _bindable(port, kind):
+                _cursor[(lo, hi)] = lo + (port - lo + 1) % width
+                return port
+    raise OSError(f"no free {'UDP' if kind == socket.SOCK_DGRAM else 'TCP'} port in {lo}-{hi - 1} on 127.0.0.1")
 
 
 def wait_for(predicate: Callable[[], T], timeout_s: float = 10.0, what: str = "condition") -> T:

@@ -1,18 +1,33 @@
 """Shared fixtures: free loopback ports, config paths."""
 from __future__ import annotations
 
+import os
+from collections.abc import Mapping
 from pathlib import Path
 
 import pytest
 
 import mission.mavlink_env  # noqa: F401  (sets MAVLINK20 before anything imports pymavlink's mavutil)
 from mission.lifetime import supervise_children
-from sim.net import free_port  # noqa: F401  (re-exported for the tests)
+from sim.net import LANE_ENV, free_port  # noqa: F401  (re-exported for the tests)
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIGS = ROOT / "configs"
 
 supervise_children()  # every command a test starts ends with the test run, even one killed outright
+
+
+def xdist_port_lane(env: Mapping[str, str]) -> str | None:
+    """The port lane ``"i/n"`` of a pytest-xdist worker (``gw<i>`` of n), None outside xdist."""
+    worker, count = env.get("PYTEST_XDIST_WORKER", ""), env.get("PYTEST_XDIST_WORKER_COUNT", "")
+    if not (worker.startswith("gw") and worker[2:].isdigit() and count.isdigit()):
+        return None
+    return f"{int(worker[2:])}/{int(count)}"
+
+
+_lane = xdist_port_lane(os.environ)
+if _lane is not None:  # parallel workers (and the commands they start) never pick the same port
+    os.environ[LANE_ENV] = _lane
 
 
 @pytest.fixture
