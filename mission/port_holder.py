@@ -37,12 +37,20 @@ def port_holder(port: int, proto: str = "udp") -> tuple[int, str] | None:
         if not pid_dir.name.isdigit():
             continue
         try:
-            for fd in (pid_dir / "fd").iterdir():
-                if os.readlink(fd) in inodes:
-                    cmd = (pid_dir / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace").strip()
-                    return int(pid_dir.name), cmd
-        except OSError:
+            fds = list((pid_dir / "fd").iterdir())
+        except OSError:  # gone, or another user's
             continue
+        for fd in fds:
+            try:  # one fd closed meanwhile (a busy holder) must not hide the others
+                held = os.readlink(fd) in inodes
+            except OSError:
+                continue
+            if held:
+                try:
+                    cmd = (pid_dir / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace").strip()
+                except OSError:
+                    cmd = ""
+                return int(pid_dir.name), cmd
     return None
 
 

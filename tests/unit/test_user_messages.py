@@ -61,3 +61,27 @@ def test_port_in_use_names_the_port_and_this_process():
     assert f"127.0.0.1:{port} is already in use" in text
     import os
     assert f"process {os.getpid()}" in text
+
+
+def test_port_holder_is_found_although_one_of_its_fds_closes_meanwhile(monkeypatch):
+    """An fd of the holder that closes between listing and reading (another thread's socket in
+    a busy process) must not hide the holder: under load the message said "not found" for the
+    test's own process."""
+    import os
+
+    from mission import port_holder as ph
+
+    real_readlink = os.readlink
+    gone: list[str] = []
+
+    def readlink(path):
+        if str(path).startswith(f"/proc/{os.getpid()}/fd/") and not gone:  # the first fd we look at: closed
+            gone.append(str(path))
+            raise FileNotFoundError(path)
+        return real_readlink(path)
+
+    monkeypatch.setattr(ph.os, "readlink", readlink)
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        holder = ph.port_holder(s.getsockname()[1])
+    assert gone and holder is not None and holder[0] == os.getpid()
