@@ -230,18 +230,26 @@ def test_velocity_steps_answer_like_px4(probe: Probe) -> None:
 
 
 def test_velocity_limits(probe: Probe) -> None:
-    with vehicle_for(probe, speed=10.0, params={"MPC_XY_VEL_MAX": 4.0}) as v:
+    """In lockstep (setpoints at 50 Hz simulated): at speed 10 in real time a setpoint stream
+    stalled by a loaded machine slowed the vehicle (3.34 m/s at the end, not > 3.5)."""
+    with vehicle_for(probe, lockstep=True, params={"MPC_XY_VEL_MAX": 4.0}) as v:
+        clock = Lockstep(probe)
         connect(probe)
-        mark = probe.mark()
-        with start_offboard(probe, (0.0, 0.0, -10.0)) as stream:
-            wait_for(v.when(lambda s: s.position_ned_m[2] < -15.0), 3.0, "s.position_ned_m[2] < -15.0")
-            climb = [-m.vz for m in probe.messages("LOCAL_POSITION_NED", after=mark)]
-            assert max(climb) <= 3.0 * 1.07  # MPC_Z_VEL_MAX_UP limits the setpoint (PX4 overshoots steps by 3-7 %)
-            assert climb[-1] == pytest.approx(3.0, abs=0.1)
-            mark = probe.mark()
-            stream.set(velocity_ned_m_s=(30.0, 30.0, 0.0))
-            t0 = v.snapshot().t_s
-            wait_for(v.when(lambda s: s.t_s > t0 + 20.0), 5.0, "s.t_s > t0 + 20.0")
+        clock.barrier()
+        setpoint = [(0.0, 0.0, -10.0)]
+        send = lambda: probe.send(probe.setpoint_message(velocity_ned_m_s=setpoint[0]))  # noqa: E731
+        send()
+        assert probe.set_mode("OFFBOARD").result == px4.MAV_RESULT_ACCEPTED
+        assert probe.arm().result == px4.MAV_RESULT_ACCEPTED
+        mark, end_ns = probe.mark(), clock.t_ns + 20 * 10**9
+        while v.snapshot().position_ned_m[2] >= -15.0:
+            assert clock.t_ns < end_ns, v.snapshot()
+            clock.run_for(0.02, send)
+        climb = [-m.vz for m in probe.messages("LOCAL_POSITION_NED", after=mark)]
+        assert max(climb) <= 3.0 * 1.07  # MPC_Z_VEL_MAX_UP limits the setpoint (PX4 overshoots steps by 3-7 %)
+        assert climb[-1] == pytest.approx(3.0, abs=0.1)
+        mark, setpoint[0] = probe.mark(), (30.0, 30.0, 0.0)
+        clock.run_for(20.0, send)
         speeds = [np.hypot(m.vx, m.vy) for m in probe.messages("LOCAL_POSITION_NED", after=mark)]
         assert len(speeds) > 100
         assert max(speeds) <= 4.0 * 1.05  # MPC_XY_VEL_MAX limits the setpoint
