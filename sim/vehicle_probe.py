@@ -49,6 +49,7 @@ class Probe:
         self._cond = threading.Condition()
         self._stop = threading.Event()
         self._periodic: list[threading.Thread] = []
+        self.pacer: Pacer | None = None  # moves a paced vehicle's time (vehicle_for(..., paced=True))
         self._rx = threading.Thread(target=self._receive_loop, name="probe-rx", daemon=True)
         self._rx.start()
 
@@ -223,14 +224,19 @@ class Probe:
 
 
 class SetpointStream:
-    """Resend the current setpoint every ``period_s`` wall seconds (like MAVSDK's offboard)."""
+    """Resend the current setpoint every ``period_s`` wall seconds (like MAVSDK's offboard); to
+    a paced vehicle (the probe has a :class:`Pacer`), at every step of its simulated time."""
 
     def __init__(self, probe: Probe, period_s: float, **setpoint: Any) -> None:
         self.probe, self.period_s = probe, period_s
         self._lock = threading.Lock()
         self._msg = probe.setpoint_message(**setpoint)
         self.sent = 0
-        self._done = probe.every(period_s, self._send_one)
+        if probe.pacer is not None:
+            self._done = threading.Event()
+            probe.pacer.add(self)
+        else:
+            self._done = probe.every(period_s, self._send_one)
 
     def set(self, send_now: bool = False, **setpoint: Any) -> None:
         """Change the setpoint; with ``send_now`` send it at once instead of at the next period."""
@@ -248,6 +254,8 @@ class SetpointStream:
 
     def stop(self) -> None:
         self._done.set()
+        if self.probe.pacer is not None:
+            self.probe.pacer.remove(self)
 
     def __enter__(self) -> SetpointStream:
         return self
@@ -291,10 +299,56 @@ class Lockstep:
             self.barrier()
 
 
-def vehicle_for(probe: Probe, speed: float = 10.0, **options: Any) -> "MockVehicle":
-    """A :class:`sim.vehicle.MockVehicle` on an ephemeral port that talks to ``probe``."""
+class Pacer:
+    """Moves a lockstep vehicle's simulated time from a thread of the probe, ``step_s`` at a time
+    (at most as fast as the vehicle's ``lockstep_max_speed``), and sends the setpoint of every
+    :class:`SetpointStream` at each step. The vehicle then flies as a real-time one at that speed
+    would, but a stalled machine only slows its time: at speed 10 a real-time stream stalled 0.1 s
+    of wall was 1 s without setpoints, PX4's offboard loss."""
+
+    def __init__(self, probe: Probe, step_s: float = 0.01) -> None:
+        self.probe, self.step_ns = probe, round(step_s * 1e9)
+        self._clock = Lockstep(probe, timeout_s=0.2)
+        self._streams: list[SetpointStream] = []
+        self._lock = threading.Lock()
+        thread = threading.Thread(target=self._run, name="probe-pacer", daemon=True)
+        probe._periodic.append(thread)
+        thread.start()
+
+    def add(self, stream: SetpointStream) -> None:
+        with self._lock:
+            self._streams.append(stream)
+
+    def remove(self, stream: SetpointStream) -> None:
+        with self._lock:
+            if stream in self._streams:
+                self._streams.remove(stream)
+
+    def _run(self) -> None:
+        while not self.probe._stop.is_set():
+            try:
+                t_ns = self._clock.barrier()
+            except TimeoutError:  # no vehicle yet, or it stopped: look again until the probe closes
+                continue
+            with self._lock:
+                streams = list(self._streams)
+            try:
+                for stream in streams:
+                    stream._send_one()
+                self._clock.release(t_ns + self.step_ns)
+            except OSError:  # the probe closed
+                return
+
+
+def vehicle_for(probe: Probe, speed: float = 10.0, paced: bool = False, **options: Any) -> "MockVehicle":
+    """A :class:`sim.vehicle.MockVehicle` on an ephemeral port that talks to ``probe``. ``paced``:
+    in lockstep, its time moved by the probe's :class:`Pacer` at most ``speed`` times the wall clock."""
     from sim.vehicle import MockVehicle, VehicleOptions
 
+    if paced:
+        options.update(lockstep=True, lockstep_max_speed=speed)
+        if probe.pacer is None:
+            probe.pacer = Pacer(probe)
     return MockVehicle(VehicleOptions(bind="127.0.0.1:0", target=f"127.0.0.1:{probe.port}", speed=speed, **options))
 
 

@@ -27,7 +27,7 @@ def climb_to(v: MockVehicle, probe: Probe, altitude_m: float, stream: SetpointSt
 
 
 def test_heartbeat_identity_and_initial_hold(probe: Probe) -> None:
-    with vehicle_for(probe, speed=10.0):
+    with vehicle_for(probe, paced=True, speed=10.0):
         hb = probe.wait_for("HEARTBEAT", timeout_s=2.0)
         assert hb is not None
         header = hb.get_header()
@@ -53,7 +53,7 @@ def test_heartbeat_rate_is_1hz_simulated(probe: Probe) -> None:
 
 
 def test_offboard_rejected_without_setpoint_stream(probe: Probe) -> None:
-    with vehicle_for(probe) as v:
+    with vehicle_for(probe, paced=True) as v:
         connect(probe)
         ack = probe.set_mode("OFFBOARD")
         assert ack is not None and ack.result == px4.MAV_RESULT_TEMPORARILY_REJECTED
@@ -65,7 +65,7 @@ def test_offboard_rejected_without_setpoint_stream(probe: Probe) -> None:
 
 
 def test_offboard_accepted_with_stream_then_armed_and_flying(probe: Probe) -> None:
-    with vehicle_for(probe) as v:
+    with vehicle_for(probe, paced=True) as v:
         connect(probe)
         stream = start_offboard(probe, (0.0, 0.0, -1.0))
         with stream:
@@ -78,7 +78,7 @@ def test_offboard_accepted_with_stream_then_armed_and_flying(probe: Probe) -> No
 
 
 def test_arming_in_offboard_without_fresh_stream_is_denied(probe: Probe) -> None:
-    with vehicle_for(probe, speed=20.0) as v:
+    with vehicle_for(probe, paced=True, speed=20.0) as v:
         connect(probe)
         stream = start_offboard(probe, arm=False)
         stream.stop()
@@ -94,7 +94,7 @@ def test_arming_in_offboard_without_fresh_stream_is_denied(probe: Probe) -> None
 @pytest.mark.parametrize(("action", "mode"), [(0, "POSCTL"), (4, "AUTO.LAND"), (5, "AUTO.LOITER")])
 def test_offboard_loss_failsafe_after_com_of_loss_t(probe: Probe, action: int, mode: str) -> None:
     loss_t_s = 1.0
-    with vehicle_for(probe, speed=20.0, params={"COM_OF_LOSS_T": loss_t_s, "COM_OBL_RC_ACT": action}) as v:
+    with vehicle_for(probe, paced=True, speed=20.0, params={"COM_OF_LOSS_T": loss_t_s, "COM_OBL_RC_ACT": action}) as v:
         connect(probe)
         stream = start_offboard(probe, (0.0, 0.0, -2.0))
         wait_for(v.when(lambda s: s.position_ned_m[2] < -2.0), 3.0, "s.position_ned_m[2] < -2.0")
@@ -111,7 +111,7 @@ def test_offboard_loss_failsafe_after_com_of_loss_t(probe: Probe, action: int, m
 
 
 def test_failsafe_without_rc_descends_lands_and_disarms(probe: Probe) -> None:
-    with vehicle_for(probe, speed=20.0) as v:
+    with vehicle_for(probe, paced=True, speed=20.0) as v:
         connect(probe)
         stream = start_offboard(probe, (1.0, 0.0, -2.0))
         wait_for(v.when(lambda s: s.position_ned_m[2] < -3.0), 3.0, "s.position_ned_m[2] < -3.0")
@@ -138,7 +138,7 @@ def test_failsafe_without_rc_descends_lands_and_disarms(probe: Probe) -> None:
 
 def test_failsafe_returns_to_offboard_when_setpoints_resume(probe: Probe) -> None:
     # a slow failsafe descent, so that it cannot land and disarm first on a loaded machine
-    with vehicle_for(probe, speed=5.0, params={"MPC_LAND_SPEED": 0.2}) as v:
+    with vehicle_for(probe, paced=True, speed=5.0, params={"MPC_LAND_SPEED": 0.2}) as v:
         connect(probe)
         stream = start_offboard(probe, (0.0, 0.0, -3.0))
         wait_for(v.when(lambda s: s.position_ned_m[2] < -2.0), 3.0, "s.position_ned_m[2] < -2.0")
@@ -156,7 +156,7 @@ def test_failsafe_returns_to_offboard_when_setpoints_resume(probe: Probe) -> Non
 
 
 def test_auto_disarm_preflight_when_not_taking_off(probe: Probe) -> None:
-    with vehicle_for(probe, speed=20.0) as v:
+    with vehicle_for(probe, paced=True, speed=20.0) as v:
         connect(probe)
         assert probe.arm().result == px4.MAV_RESULT_ACCEPTED
         assert probe.wait_armed(False, 3.0)
@@ -166,7 +166,7 @@ def test_auto_disarm_preflight_when_not_taking_off(probe: Probe) -> None:
 
 
 def test_disarm_in_air_needs_force(probe: Probe) -> None:
-    with vehicle_for(probe) as v:
+    with vehicle_for(probe, paced=True) as v:
         connect(probe)
         with start_offboard(probe, (0.0, 0.0, -2.0)):
             wait_for(v.when(lambda s: s.position_ned_m[2] < -1.0), 3.0, "s.position_ned_m[2] < -1.0")
@@ -257,7 +257,7 @@ def test_velocity_limits(probe: Probe) -> None:
 
 
 def test_ground_does_not_slide_and_platform_start(probe: Probe) -> None:
-    with vehicle_for(probe, speed=20.0, start_ned=(5.0, -3.0, -0.5)) as v:
+    with vehicle_for(probe, paced=True, speed=20.0, start_ned=(5.0, -3.0, -0.5)) as v:
         connect(probe)
         snap = v.snapshot()
         assert snap.landed_state == px4.LANDED_ON_GROUND and list(snap.position_ned_m) == [5.0, -3.0, -0.5]
@@ -273,7 +273,7 @@ def test_ground_does_not_slide_and_platform_start(probe: Probe) -> None:
 
 
 def test_takeoff_hold_and_land_commands(probe: Probe) -> None:
-    with vehicle_for(probe, speed=20.0) as v:
+    with vehicle_for(probe, paced=True, speed=20.0) as v:
         connect(probe)
         assert probe.arm().result == px4.MAV_RESULT_ACCEPTED
         assert probe.command(px4.MAV_CMD_NAV_TAKEOFF).result == px4.MAV_RESULT_ACCEPTED
@@ -290,7 +290,7 @@ def test_takeoff_hold_and_land_commands(probe: Probe) -> None:
 
 
 def test_takeoff_to_param7_altitude_amsl(probe: Probe) -> None:
-    with vehicle_for(probe, speed=20.0, home=(47.0, 8.0, 400.0)) as v:
+    with vehicle_for(probe, paced=True, speed=20.0, home=(47.0, 8.0, 400.0)) as v:
         connect(probe)
         assert probe.arm().result == px4.MAV_RESULT_ACCEPTED
         ack = probe.command(px4.MAV_CMD_NAV_TAKEOFF, (math.nan,) * 6 + (404.0,))
@@ -301,7 +301,7 @@ def test_takeoff_to_param7_altitude_amsl(probe: Probe) -> None:
 
 
 def test_return_to_launch_flies_home_and_lands(probe: Probe) -> None:
-    with vehicle_for(probe, speed=20.0, params={"RTL_RETURN_ALT": 6.0}) as v:
+    with vehicle_for(probe, paced=True, speed=20.0, params={"RTL_RETURN_ALT": 6.0}) as v:
         connect(probe)
         with start_offboard(probe, (4.0, 3.0, -2.0)):
             wait_for(v.when(lambda s: s.position_ned_m[0] > 8.0), 5.0, "s.position_ned_m[0] > 8.0")
@@ -315,7 +315,7 @@ def test_return_to_launch_flies_home_and_lands(probe: Probe) -> None:
 
 
 def test_position_setpoint_and_body_frame_velocity(probe: Probe) -> None:
-    with vehicle_for(probe, speed=20.0) as v:
+    with vehicle_for(probe, paced=True, speed=20.0) as v:
         connect(probe)
         with start_offboard(probe, type_mask=px4.TYPE_MASK_POSITION, position_ned_m=(3.0, -2.0, -4.0), yaw_rad=math.pi / 2) as s:
             snap = wait_for(v.when(lambda x: np.allclose(x.position_ned_m, [3.0, -2.0, -4.0], atol=0.02)), 5.0, "np.allclose(x.position_ned_m, [3.0, -2.0, -4.0], atol=0.02)")

@@ -27,7 +27,7 @@ def _frame(probe: Probe, msg: object) -> bytearray:
 
 def test_garbage_bytes_are_counted_and_never_crash_it(probe: Probe) -> None:
     rng = random.Random(1234)
-    with vehicle_for(probe) as v:
+    with vehicle_for(probe, paced=True) as v:
         connect(probe)
         arm = _frame(probe, mavlink.MAVLink_command_long_message(1, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0))
         good = _frame(probe, mavlink.MAVLink_heartbeat_message(6, 8, 0, 0, 0, 3))
@@ -55,7 +55,7 @@ def test_random_structured_fields_never_crash_it(probe: Probe) -> None:
     """Valid frames with random payload values (NaN, huge ints, odd modes, strings)."""
     rng = random.Random(99)
     floats = [float("nan"), float("inf"), -float("inf"), 0.0, 1.0, -1.0, 1e38, 21196.0, 176.0, 400.0, 6.0, 129.0]
-    with vehicle_for(probe) as v:
+    with vehicle_for(probe, paced=True) as v:
         connect(probe)
         for _ in range(300):
             p = [rng.choice(floats) for _ in range(7)]
@@ -77,7 +77,7 @@ def test_random_structured_fields_never_crash_it(probe: Probe) -> None:
 
 def test_packet_loss_each_way(probe: Probe) -> None:
     faults = FaultOptions(loss_in=0.5, loss_out=0.3, seed=7)
-    with vehicle_for(probe, speed=10.0, faults=faults) as v:
+    with vehicle_for(probe, paced=True, speed=10.0, faults=faults) as v:
         assert probe.wait_for("HEARTBEAT", timeout_s=3.0)
         for _ in range(400):
             probe.heartbeat()
@@ -94,7 +94,7 @@ def test_packet_loss_each_way(probe: Probe) -> None:
 
 def test_latency_and_jitter_delay_both_ways(probe: Probe) -> None:
     speed, latency_s = 5.0, 0.4
-    with vehicle_for(probe, speed=speed, faults=FaultOptions(latency_s=latency_s, jitter_s=0.1, seed=3)) as v:
+    with vehicle_for(probe, paced=True, speed=speed, faults=FaultOptions(latency_s=latency_s, jitter_s=0.1, seed=3)) as v:
         assert probe.wait_for("HEARTBEAT", timeout_s=3.0)
         t_sent = time.monotonic()
         ack = probe.arm(timeout_s=3.0)
@@ -110,7 +110,7 @@ def test_latency_and_jitter_delay_both_ways(probe: Probe) -> None:
 
 
 def test_blackout_window_silences_both_ways(probe: Probe) -> None:
-    with vehicle_for(probe, speed=10.0, faults=FaultOptions(blackouts=((1.0, 2.0),))) as v:
+    with vehicle_for(probe, paced=True, speed=10.0, faults=FaultOptions(blackouts=((1.0, 2.0),))) as v:
         connect(probe)
         wait_for(v.when(lambda s: s.t_s > 4.0), 3.0, "s.t_s > 4.0")
         stamps = np.array([m.time_boot_ms for m in probe.messages("LOCAL_POSITION_NED")])
@@ -121,7 +121,7 @@ def test_blackout_window_silences_both_ways(probe: Probe) -> None:
 
 
 def test_blackout_in_flight_triggers_offboard_loss(probe: Probe) -> None:
-    with vehicle_for(probe, speed=10.0) as v:
+    with vehicle_for(probe, paced=True, speed=10.0) as v:
         connect(probe)
         with start_offboard(probe, (0.0, 0.0, -2.0)):
             wait_for(v.when(lambda s: s.position_ned_m[2] < -2.0), 3.0, "s.position_ned_m[2] < -2.0")
@@ -133,7 +133,7 @@ def test_blackout_in_flight_triggers_offboard_loss(probe: Probe) -> None:
 
 
 def test_pilot_takeover_forces_mode_and_holds(probe: Probe) -> None:
-    with vehicle_for(probe, speed=10.0) as v:
+    with vehicle_for(probe, paced=True, speed=10.0) as v:
         connect(probe)
         with start_offboard(probe, (1.0, 0.0, -2.0)):
             wait_for(v.when(lambda s: s.position_ned_m[2] < -3.0), 3.0, "s.position_ned_m[2] < -3.0")
@@ -151,7 +151,7 @@ def test_pilot_takeover_forces_mode_and_holds(probe: Probe) -> None:
 
 
 def test_position_estimate_loss_exits_and_refuses_offboard(probe: Probe) -> None:
-    with vehicle_for(probe, speed=10.0) as v:
+    with vehicle_for(probe, paced=True, speed=10.0) as v:
         connect(probe)
         with start_offboard(probe, (1.0, 0.0, -2.0)):
             wait_for(v.when(lambda s: s.position_ned_m[2] < -3.0), 3.0, "s.position_ned_m[2] < -3.0")
@@ -172,7 +172,7 @@ def test_position_estimate_loss_exits_and_refuses_offboard(probe: Probe) -> None
 
 def test_arming_refusal_with_reason(probe: Probe) -> None:
     reason = "Arming denied: Preflight Fail: Accel uncalibrated"
-    with vehicle_for(probe, faults=FaultOptions(refuse_arming_reason=reason)) as v:
+    with vehicle_for(probe, paced=True, faults=FaultOptions(refuse_arming_reason=reason)) as v:
         connect(probe)
         status = probe.wait_for("SYS_STATUS", timeout_s=2.0)
         assert status is not None and not status.onboard_control_sensors_health & px4.SENSOR_PREARM_CHECK
@@ -188,7 +188,7 @@ def test_arming_refusal_with_reason(probe: Probe) -> None:
 
 def test_offboard_refusal_with_reason(probe: Probe) -> None:
     reason = "Mode OFFBOARD rejected: test"
-    with vehicle_for(probe, faults=FaultOptions(refuse_offboard_reason=reason)) as v:
+    with vehicle_for(probe, paced=True, faults=FaultOptions(refuse_offboard_reason=reason)) as v:
         connect(probe)
         with pytest.raises(TimeoutError):
             start_offboard(probe, timeout_s=0.5)
@@ -199,7 +199,7 @@ def test_offboard_refusal_with_reason(probe: Probe) -> None:
 
 
 def test_signing_rejects_unsigned_commands_but_accepts_unsigned_heartbeat(probe: Probe) -> None:
-    with vehicle_for(probe, signing_key=KEY) as v:
+    with vehicle_for(probe, paced=True, signing_key=KEY) as v:
         hb = probe.wait_for("HEARTBEAT", timeout_s=2.0)
         assert hb is not None and hb.get_msgbuf()[2] & 0x01  # the vehicle signs what it sends
         probe.heartbeat()  # unsigned HEARTBEAT: accepted
@@ -229,3 +229,21 @@ def test_fault_options_are_validated() -> None:
     with pytest.raises(ValueError):
         FaultOptions(blackouts=((1.0, -1.0),))
     assert struct.calcsize("<f") == 4
+
+
+def test_a_stalled_machine_slows_a_paced_vehicle_and_never_starves_it_of_setpoints(probe: Probe) -> None:
+    """The probe's pacer stalled for 0.5 s of wall (as a loaded machine stalls a thread): at speed
+    10 in real time that is 5 s without setpoints, PX4's offboard loss; a paced vehicle's time
+    stands still meanwhile, so it stays in OFFBOARD."""
+    with vehicle_for(probe, paced=True, speed=10.0) as v:
+        connect(probe)
+        with start_offboard(probe, (0.0, 0.0, -1.0)):
+            wait_for(v.when(lambda s: s.position_ned_m[2] < -1.0), 5.0, "the vehicle climbing")
+            assert probe.pacer is not None
+            with probe.pacer._lock:  # the pacer blocks at its next step, the vehicle waits at its barrier
+                t_stalled = v.snapshot().t_s
+                time.sleep(0.5)
+                assert v.snapshot().t_s - t_stalled <= 0.011  # at most the step that was under way
+            wait_for(v.when(lambda s: s.t_s > t_stalled + 2.0), 5.0, "time going on")
+            snap = v.snapshot()
+            assert snap.mode == "OFFBOARD" and not snap.in_failsafe

@@ -39,7 +39,7 @@ def test_command_with_wrong_target_gets_no_ack(probe: Probe, target: tuple[int, 
 
 
 def test_setpoints_to_another_system_are_not_proof_of_life(probe: Probe) -> None:
-    with vehicle_for(probe) as v:
+    with vehicle_for(probe, paced=True) as v:
         connect(probe)
         with SetpointStream(probe, 0.01, target=(2, 1)):
             wait_for(v.when(lambda s: s.counters["rx_wrong_target"] >= 5), 2.0, "s.counters['rx_wrong_target'] >= 5")
@@ -61,7 +61,7 @@ def test_nan_parameters_are_tolerated(probe: Probe) -> None:
 
 
 def test_set_mode_as_command_int(probe: Probe) -> None:
-    with vehicle_for(probe) as v:
+    with vehicle_for(probe, paced=True) as v:
         connect(probe)
         with SetpointStream(probe, 0.01):
             wait_for(v.when(lambda s: s.counters["setpoints_accepted"] > 2), 2.0, "s.counters['setpoints_accepted'] > 2")
@@ -285,7 +285,7 @@ def test_setpoint_frames_and_type_masks(probe: Probe, frame: int, mask: int, acc
 def test_non_finite_velocity_setpoint_is_proof_of_life_and_holds(probe: Probe) -> None:
     """PX4 forwards a setpoint whose used fields are NaN or inf (it is proof of life); its
     position controller finds it invalid and stops ("Failsafe: stop and wait")."""
-    with vehicle_for(probe, speed=10.0) as v:
+    with vehicle_for(probe, paced=True, speed=10.0) as v:
         connect(probe)
         with start_offboard(probe, (1.0, 0.0, -1.0)) as stream:
             wait_for(v.when(lambda s: s.position_ned_m[2] < -2.0), 3.0, "s.position_ned_m[2] < -2.0")
@@ -307,7 +307,7 @@ def test_non_finite_velocity_setpoint_is_proof_of_life_and_holds(probe: Probe) -
     (px4.TYPE_MASK_VELOCITY, 9, "coordinate frame 9"),  # (the text is longer than one STATUSTEXT chunk)
 ])
 def test_dropped_setpoint_is_not_proof_of_life_and_says_why(probe: Probe, mask: int, frame: int, text: str) -> None:
-    with vehicle_for(probe, speed=10.0) as v:
+    with vehicle_for(probe, paced=True, speed=10.0) as v:
         connect(probe)
         with start_offboard(probe, (0.0, 0.0, -1.0)) as stream:
             wait_for(v.when(lambda s: s.position_ned_m[2] < -2.0), 3.0, "s.position_ned_m[2] < -2.0")
