@@ -122,19 +122,21 @@ class Probe:
             return sum(1 for i, _, _ in self.history.get(kind, ()) if first < i < last)
 
     def wait_for(self, kind: str, predicate: Callable[[Any], bool] | None = None, timeout_s: float = 5.0,
-                 after: int = 0) -> Any | None:
+                 after: int = 0, *, wall: bool = False) -> Any | None:
         """First message of type ``kind`` received after index ``after`` that satisfies
-        ``predicate``; None at the deadline."""
-        deadline = time.monotonic() + timeout_s
+        ``predicate``; None at the deadline (``timeout_s`` wall seconds; to a paced vehicle, unless
+        ``wall``, the simulated time that takes at its speed, see :func:`flight_deadline`)."""
+        pacer = None if wall else self.pacer
+        passed = flight_deadline(timeout_s, lambda: pacer.t_ns / 1e9, pacer.speed) if pacer else \
+            flight_deadline(timeout_s)
         with self._cond:
             while True:
                 for index, _, msg in self.history.get(kind, ()):
                     if index > after and (predicate is None or predicate(msg)):
                         return msg
-                remaining = deadline - time.monotonic()
-                if remaining <= 0:
+                if passed():
                     return None
-                self._cond.wait(min(remaining, 0.05))
+                self._cond.wait(0.01)
 
     # ---- vehicle state from telemetry ----------------------------------------------------
     def mode(self) -> str | None:
@@ -281,7 +283,8 @@ class Lockstep:
         self.probe, self.mark, self.t_ns = probe, 0, -1
 
     def barrier(self) -> int:
-        msg = self.probe.wait_for("TIMESYNC", lambda m: m.tc1 == 0 and m.ts1 > self.t_ns, self.timeout_s, self.mark)
+        msg = self.probe.wait_for("TIMESYNC", lambda m: m.tc1 == 0 and m.ts1 > self.t_ns, self.timeout_s, self.mark,
+                                  wall=True)
         if msg is None:
             raise TimeoutError("the vehicle never reached its next barrier")
         self.mark, self.t_ns = self.probe.mark(), int(msg.ts1)
@@ -299,6 +302,38 @@ class Lockstep:
             self.barrier()
 
 
+PACED_WALL_CAP_S = 60.0  # longest wall wait on a paced vehicle whose time has stopped [s]
+
+
+def flight_deadline(timeout_s: float, sim_now: Callable[[], float] | None = None,
+                    speed: float = 1.0) -> Callable[[], bool]:
+    """A deadline check: ``timeout_s`` wall seconds; with ``sim_now`` (a paced vehicle's time [s]),
+    the ``timeout_s * speed`` simulated seconds that is at full pace, so a loaded machine that
+    slows the vehicle's time does not shorten its flight (never longer than
+    :data:`PACED_WALL_CAP_S` of wall)."""
+    wall_end = time.monotonic() + (timeout_s if sim_now is None else max(timeout_s, PACED_WALL_CAP_S))
+    if sim_now is None:
+        return lambda: time.monotonic() > wall_end
+    sim_end = sim_now() + timeout_s * speed
+    return lambda: sim_now() > sim_end or time.monotonic() > wall_end
+
+
+def wait_flight(v: "MockVehicle", predicate: Callable[[Any], bool], timeout_s: float, what: str) -> Any:
+    """The vehicle's snapshot once ``predicate`` holds for it; ``AssertionError`` naming ``what``
+    after ``timeout_s`` wall seconds at its speed, counted on its simulated time when it is paced
+    (lockstep): :func:`flight_deadline`."""
+    paced = v.options.lockstep
+    passed = flight_deadline(timeout_s, lambda: v.snapshot().t_s, v.options.speed) if paced else \
+        flight_deadline(timeout_s)
+    while True:
+        snap = v.snapshot()
+        if predicate(snap):
+            return snap
+        if passed():
+            raise AssertionError(f"timed out after {timeout_s} s (at speed {v.options.speed:g}) waiting for {what}")
+        time.sleep(0.002)
+
+
 class Pacer:
     """Moves a lockstep vehicle's simulated time from a thread of the probe, ``step_s`` at a time
     (at most as fast as the vehicle's ``lockstep_max_speed``), and sends the setpoint of every
@@ -306,8 +341,9 @@ class Pacer:
     would, but a stalled machine only slows its time: at speed 10 a real-time stream stalled 0.1 s
     of wall was 1 s without setpoints, PX4's offboard loss."""
 
-    def __init__(self, probe: Probe, step_s: float = 0.01) -> None:
-        self.probe, self.step_ns = probe, round(step_s * 1e9)
+    def __init__(self, probe: Probe, speed: float, step_s: float = 0.01) -> None:
+        self.probe, self.speed, self.step_ns = probe, speed, round(step_s * 1e9)
+        self.t_ns = 0  # the vehicle's time at its last barrier [ns]
         self._clock = Lockstep(probe, timeout_s=0.2)
         self._streams: list[SetpointStream] = []
         self._lock = threading.Lock()
@@ -327,7 +363,7 @@ class Pacer:
     def _run(self) -> None:
         while not self.probe._stop.is_set():
             try:
-                t_ns = self._clock.barrier()
+                t_ns = self.t_ns = self._clock.barrier()
             except TimeoutError:  # no vehicle yet, or it stopped: look again until the probe closes
                 continue
             with self._lock:
@@ -348,7 +384,7 @@ def vehicle_for(probe: Probe, speed: float = 10.0, paced: bool = False, **option
     if paced:
         options.update(lockstep=True, lockstep_max_speed=speed)
         if probe.pacer is None:
-            probe.pacer = Pacer(probe)
+            probe.pacer = Pacer(probe, speed)
     return MockVehicle(VehicleOptions(bind="127.0.0.1:0", target=f"127.0.0.1:{probe.port}", speed=speed, **options))
 
 

@@ -15,14 +15,14 @@ import pytest
 from mission import px4
 from sim.net import wait_for
 from sim.vehicle import PHYSICS_DT_S, MockVehicle, VehicleSnapshot
-from sim.vehicle_probe import Lockstep, Probe, SetpointStream, connect, sleep_until, start_offboard, vehicle_for
+from sim.vehicle_probe import Lockstep, Probe, SetpointStream, connect, sleep_until, start_offboard, vehicle_for, wait_flight
 
 pytestmark = pytest.mark.timeout(30)
 
 
 def climb_to(v: MockVehicle, probe: Probe, altitude_m: float, stream: SetpointStream, timeout_s: float = 5.0) -> None:
     stream.set(velocity_ned_m_s=(0.0, 0.0, -2.0))
-    wait_for(v.when(lambda s: s.position_ned_m[2] <= -altitude_m), timeout_s, "did not climb")
+    wait_flight(v, lambda s: s.position_ned_m[2] <= -altitude_m, timeout_s, "did not climb")
     stream.set(velocity_ned_m_s=(0.0, 0.0, 0.0))
 
 
@@ -72,7 +72,7 @@ def test_offboard_accepted_with_stream_then_armed_and_flying(probe: Probe) -> No
             assert probe.wait_mode("OFFBOARD") and probe.wait_armed(True)
             hb = probe.latest("HEARTBEAT")
             assert (hb.base_mode, hb.custom_mode, hb.system_status) == (145, 393216, px4.MAV_STATE_ACTIVE)
-            snap = wait_for(v.when(lambda s: s.position_ned_m[2] < -1.0), 3.0, "s.position_ned_m[2] < -1.0")
+            snap = wait_flight(v, lambda s: s.position_ned_m[2] < -1.0, 3.0, "s.position_ned_m[2] < -1.0")
             assert snap is not None and snap.landed_state == px4.LANDED_IN_AIR
             assert probe.wait_for("EXTENDED_SYS_STATE", lambda m: m.landed_state == px4.LANDED_IN_AIR, 2.0)
 
@@ -83,7 +83,7 @@ def test_arming_in_offboard_without_fresh_stream_is_denied(probe: Probe) -> None
         stream = start_offboard(probe, arm=False)
         stream.stop()
         t_stop = v.snapshot().last_setpoint_t_s
-        wait_for(v.when(lambda s: s.t_s > t_stop + 1.2), 2.0, "s.t_s > t_stop + 1.2")
+        wait_flight(v, lambda s: s.t_s > t_stop + 1.2, 2.0, "s.t_s > t_stop + 1.2")
         mark = probe.mark()
         ack = probe.arm()
         assert ack is not None and ack.result == px4.MAV_RESULT_TEMPORARILY_REJECTED
@@ -97,7 +97,7 @@ def test_offboard_loss_failsafe_after_com_of_loss_t(probe: Probe, action: int, m
     with vehicle_for(probe, paced=True, speed=20.0, params={"COM_OF_LOSS_T": loss_t_s, "COM_OBL_RC_ACT": action}) as v:
         connect(probe)
         stream = start_offboard(probe, (0.0, 0.0, -2.0))
-        wait_for(v.when(lambda s: s.position_ned_m[2] < -2.0), 3.0, "s.position_ned_m[2] < -2.0")
+        wait_flight(v, lambda s: s.position_ned_m[2] < -2.0, 3.0, "s.position_ned_m[2] < -2.0")
         stream.stop()
         assert probe.wait_mode(mode, 3.0)
         snap = v.snapshot()
@@ -114,20 +114,20 @@ def test_failsafe_without_rc_descends_lands_and_disarms(probe: Probe) -> None:
     with vehicle_for(probe, paced=True, speed=20.0) as v:
         connect(probe)
         stream = start_offboard(probe, (1.0, 0.0, -2.0))
-        wait_for(v.when(lambda s: s.position_ned_m[2] < -3.0), 3.0, "s.position_ned_m[2] < -3.0")
+        wait_flight(v, lambda s: s.position_ned_m[2] < -3.0, 3.0, "s.position_ned_m[2] < -3.0")
         stream.stop()
-        wait_for(v.when(lambda s: s.mode == "POSCTL"), 2.0, "s.mode == 'POSCTL'")
+        wait_flight(v, lambda s: s.mode == "POSCTL", 2.0, "s.mode == 'POSCTL'")
         # let the velocity settle, then watch a descent at about MPC_LAND_SPEED (PX4 SITL: 0.5-0.7 m/s)
         # while it brakes from 1 m/s north and holds its position
-        start = wait_for(v.when(lambda s: abs(s.velocity_ned_m_s[2] - 0.7) < 0.05), 2.0, "abs(s.velocity_ned_m_s[2] - 0.7) < 0.05")
+        start = wait_flight(v, lambda s: abs(s.velocity_ned_m_s[2] - 0.7) < 0.05, 2.0, "abs(s.velocity_ned_m_s[2] - 0.7) < 0.05")
         assert start is not None
-        later = wait_for(v.when(lambda s: s.t_s > start.t_s + 1.0), 2.0, "s.t_s > start.t_s + 1.0")
+        later = wait_flight(v, lambda s: s.t_s > start.t_s + 1.0, 2.0, "s.t_s > start.t_s + 1.0")
         assert later is not None
         rate = (later.position_ned_m[2] - start.position_ned_m[2]) / (later.t_s - start.t_s)
         assert rate == pytest.approx(0.68, abs=0.03)
         assert np.allclose(later.position_ned_m[:2], start.position_ned_m[:2], atol=0.4)
         assert np.hypot(*later.velocity_ned_m_s[:2]) < 0.4
-        landed = wait_for(v.when(lambda s: s.landed_state == px4.LANDED_ON_GROUND), 5.0, "s.landed_state == px4.LANDED_ON_GROUND")
+        landed = wait_flight(v, lambda s: s.landed_state == px4.LANDED_ON_GROUND, 5.0, "s.landed_state == px4.LANDED_ON_GROUND")
         assert landed is not None and landed.position_ned_m[2] == 0.0
         assert probe.wait_armed(False, 3.0)
         t_landed = v.event_time("Landing detected")
@@ -141,13 +141,13 @@ def test_failsafe_returns_to_offboard_when_setpoints_resume(probe: Probe) -> Non
     with vehicle_for(probe, paced=True, speed=5.0, params={"MPC_LAND_SPEED": 0.2}) as v:
         connect(probe)
         stream = start_offboard(probe, (0.0, 0.0, -3.0))
-        wait_for(v.when(lambda s: s.position_ned_m[2] < -2.0), 3.0, "s.position_ned_m[2] < -2.0")
+        wait_flight(v, lambda s: s.position_ned_m[2] < -2.0, 3.0, "s.position_ned_m[2] < -2.0")
         stream.stop()
-        wait_for(v.when(lambda s: s.mode == "POSCTL"), 2.0, "s.mode == 'POSCTL'")
+        wait_flight(v, lambda s: s.mode == "POSCTL", 2.0, "s.mode == 'POSCTL'")
         t_failsafe = v.event_time("Failsafe activated")
         assert t_failsafe is not None
         probe.send(probe.setpoint_message((0.0, 0.0, 0.0)))  # a single setpoint: its arrival time is known
-        snap = wait_for(v.when(lambda s: s.mode == "OFFBOARD"), 2.0, "s.mode == 'OFFBOARD'")
+        snap = wait_flight(v, lambda s: s.mode == "OFFBOARD", 2.0, "s.mode == 'OFFBOARD'")
         assert snap is not None and not snap.in_failsafe and snap.armed
         t_back = v.event_time("Failsafe deactivated", after_s=t_failsafe)
         assert t_back is not None and 0.0 < t_back - snap.last_setpoint_t_s <= 0.2
@@ -169,11 +169,11 @@ def test_disarm_in_air_needs_force(probe: Probe) -> None:
     with vehicle_for(probe, paced=True) as v:
         connect(probe)
         with start_offboard(probe, (0.0, 0.0, -2.0)):
-            wait_for(v.when(lambda s: s.position_ned_m[2] < -1.0), 3.0, "s.position_ned_m[2] < -1.0")
+            wait_flight(v, lambda s: s.position_ned_m[2] < -1.0, 3.0, "s.position_ned_m[2] < -1.0")
             assert probe.arm(False).result == px4.MAV_RESULT_TEMPORARILY_REJECTED
             assert probe.arm(False, force=True).result == px4.MAV_RESULT_ACCEPTED
             # disarmed in the air: it falls to the ground
-            wait_for(v.when(lambda s: s.landed_state == px4.LANDED_ON_GROUND), 3.0, "s.landed_state == px4.LANDED_ON_GROUND")
+            wait_flight(v, lambda s: s.landed_state == px4.LANDED_ON_GROUND, 3.0, "s.landed_state == px4.LANDED_ON_GROUND")
 
 
 def test_velocity_steps_answer_like_px4(probe: Probe) -> None:
@@ -262,13 +262,13 @@ def test_ground_does_not_slide_and_platform_start(probe: Probe) -> None:
         snap = v.snapshot()
         assert snap.landed_state == px4.LANDED_ON_GROUND and list(snap.position_ned_m) == [5.0, -3.0, -0.5]
         with start_offboard(probe, (2.0, 0.0, 0.0)) as stream:
-            wait_for(v.when(lambda s: s.t_s > snap.t_s + 1.0), 2.0, "s.t_s > snap.t_s + 1.0")
+            wait_flight(v, lambda s: s.t_s > snap.t_s + 1.0, 2.0, "s.t_s > snap.t_s + 1.0")
             assert list(v.snapshot().position_ned_m) == [5.0, -3.0, -0.5]  # no horizontal slide on the ground
             stream.set(velocity_ned_m_s=(0.0, 0.0, -1.0))
-            wait_for(v.when(lambda s: s.position_ned_m[2] < -1.0), 2.0, "s.position_ned_m[2] < -1.0")
+            wait_flight(v, lambda s: s.position_ned_m[2] < -1.0, 2.0, "s.position_ned_m[2] < -1.0")
             stream.set(velocity_ned_m_s=(0.0, 0.0, 1.0))
             # the platform it started on is gone: it lands on the ground, d = 0
-            landed = wait_for(v.when(lambda s: s.landed_state == px4.LANDED_ON_GROUND), 5.0, "s.landed_state == px4.LANDED_ON_GROUND")
+            landed = wait_flight(v, lambda s: s.landed_state == px4.LANDED_ON_GROUND, 5.0, "s.landed_state == px4.LANDED_ON_GROUND")
             assert landed is not None and landed.position_ned_m[2] == 0.0
 
 
@@ -278,15 +278,15 @@ def test_takeoff_hold_and_land_commands(probe: Probe) -> None:
         assert probe.arm().result == px4.MAV_RESULT_ACCEPTED
         assert probe.command(px4.MAV_CMD_NAV_TAKEOFF).result == px4.MAV_RESULT_ACCEPTED
         assert probe.wait_mode("AUTO.TAKEOFF", 2.0)
-        held = wait_for(v.when(lambda s: s.mode == "AUTO.LOITER" and s.landed_state == px4.LANDED_IN_AIR), 5.0, "s.mode == 'AUTO.LOITER' and s.landed_state == px4.LANDED_IN_AIR")
+        held = wait_flight(v, lambda s: s.mode == "AUTO.LOITER" and s.landed_state == px4.LANDED_IN_AIR, 5.0, "s.mode == 'AUTO.LOITER' and s.landed_state == px4.LANDED_IN_AIR")
         assert held is not None
-        later = wait_for(v.when(lambda s: s.t_s > held.t_s + 2.0), 2.0, "s.t_s > held.t_s + 2.0")
+        later = wait_flight(v, lambda s: s.t_s > held.t_s + 2.0, 2.0, "s.t_s > held.t_s + 2.0")
         # MIS_TAKEOFF_ALT, overshot a little: the vertical integrator carries the climb's drag compensation
         assert later is not None and later.position_ned_m[2] == pytest.approx(-2.5, abs=0.1)
         assert probe.command(px4.MAV_CMD_NAV_LAND).result == px4.MAV_RESULT_ACCEPTED
         assert probe.wait_mode("AUTO.LAND", 2.0)
         assert probe.wait_for("EXTENDED_SYS_STATE", lambda m: m.landed_state == px4.LANDED_LANDING, 2.0)
-        wait_for(v.when(lambda s: not s.armed), 5.0, "not s.armed")
+        wait_flight(v, lambda s: not s.armed, 5.0, "not s.armed")
 
 
 def test_takeoff_to_param7_altitude_amsl(probe: Probe) -> None:
@@ -295,35 +295,35 @@ def test_takeoff_to_param7_altitude_amsl(probe: Probe) -> None:
         assert probe.arm().result == px4.MAV_RESULT_ACCEPTED
         ack = probe.command(px4.MAV_CMD_NAV_TAKEOFF, (math.nan,) * 6 + (404.0,))
         assert ack is not None and ack.result == px4.MAV_RESULT_ACCEPTED
-        held = wait_for(v.when(lambda s: s.mode == "AUTO.LOITER" and s.landed_state == px4.LANDED_IN_AIR), 5.0, "s.mode == 'AUTO.LOITER' and s.landed_state == px4.LANDED_IN_AIR")
+        held = wait_flight(v, lambda s: s.mode == "AUTO.LOITER" and s.landed_state == px4.LANDED_IN_AIR, 5.0, "s.mode == 'AUTO.LOITER' and s.landed_state == px4.LANDED_IN_AIR")
         assert held is not None
-        wait_for(v.when(lambda s: abs(s.position_ned_m[2] + 4.0) < 0.05), 3.0, "abs(s.position_ned_m[2] + 4.0) < 0.05")
+        wait_flight(v, lambda s: abs(s.position_ned_m[2] + 4.0) < 0.05, 3.0, "abs(s.position_ned_m[2] + 4.0) < 0.05")
 
 
 def test_return_to_launch_flies_home_and_lands(probe: Probe) -> None:
     with vehicle_for(probe, paced=True, speed=20.0, params={"RTL_RETURN_ALT": 6.0}) as v:
         connect(probe)
         with start_offboard(probe, (4.0, 3.0, -2.0)):
-            wait_for(v.when(lambda s: s.position_ned_m[0] > 8.0), 5.0, "s.position_ned_m[0] > 8.0")
+            wait_flight(v, lambda s: s.position_ned_m[0] > 8.0, 5.0, "s.position_ned_m[0] > 8.0")
             assert probe.command(px4.MAV_CMD_NAV_RETURN_TO_LAUNCH).result == px4.MAV_RESULT_ACCEPTED
             assert probe.wait_mode("AUTO.RTL", 2.0)
-            climbed = wait_for(v.when(lambda s: s.position_ned_m[2] <= -5.9), 5.0, "s.position_ned_m[2] <= -5.9")
+            climbed = wait_flight(v, lambda s: s.position_ned_m[2] <= -5.9, 5.0, "s.position_ned_m[2] <= -5.9")
             assert climbed is not None
-            landed = wait_for(v.when(lambda s: s.landed_state == px4.LANDED_ON_GROUND), 10.0, "s.landed_state == px4.LANDED_ON_GROUND")
+            landed = wait_flight(v, lambda s: s.landed_state == px4.LANDED_ON_GROUND, 10.0, "s.landed_state == px4.LANDED_ON_GROUND")
             assert landed is not None and np.allclose(landed.position_ned_m, [0.0, 0.0, 0.0], atol=0.6)
-            wait_for(v.when(lambda s: not s.armed), 5.0, "not s.armed")
+            wait_flight(v, lambda s: not s.armed, 5.0, "not s.armed")
 
 
 def test_position_setpoint_and_body_frame_velocity(probe: Probe) -> None:
     with vehicle_for(probe, paced=True, speed=20.0) as v:
         connect(probe)
         with start_offboard(probe, type_mask=px4.TYPE_MASK_POSITION, position_ned_m=(3.0, -2.0, -4.0), yaw_rad=math.pi / 2) as s:
-            snap = wait_for(v.when(lambda x: np.allclose(x.position_ned_m, [3.0, -2.0, -4.0], atol=0.02)), 5.0, "np.allclose(x.position_ned_m, [3.0, -2.0, -4.0], atol=0.02)")
+            snap = wait_flight(v, lambda x: np.allclose(x.position_ned_m, [3.0, -2.0, -4.0], atol=0.02), 5.0, "np.allclose(x.position_ned_m, [3.0, -2.0, -4.0], atol=0.02)")
             assert snap is not None and snap.yaw_rad == pytest.approx(math.pi / 2, abs=0.01)
             # BODY_NED forward at yaw 90 deg is east
             s.set(velocity_ned_m_s=(1.0, 0.0, 0.0), type_mask=px4.TYPE_MASK_VELOCITY_YAW_RATE,
                   frame=px4.MAV_FRAME_BODY_NED, yaw_rate_rad_s=0.0)
-            moving = wait_for(v.when(lambda x: x.velocity_ned_m_s[1] > 0.99), 3.0, "x.velocity_ned_m_s[1] > 0.99")
+            moving = wait_flight(v, lambda x: x.velocity_ned_m_s[1] > 0.99, 3.0, "x.velocity_ned_m_s[1] > 0.99")
             assert moving is not None and abs(moving.velocity_ned_m_s[0]) < 0.02
 
 
@@ -337,7 +337,7 @@ def _send_accepted(probe: Probe, v: MockVehicle, velocity: Velocity) -> float:
     [s] it took effect (nobody else sends, so the vehicle's last-setpoint time is this one's)."""
     accepted = v.snapshot().counters["setpoints_accepted"]
     probe.send(probe.setpoint_message(velocity_ned_m_s=velocity))
-    return wait_for(v.when(lambda s: s.counters["setpoints_accepted"] > accepted), 3.0, "the setpoint taken").last_setpoint_t_s
+    return wait_flight(v, lambda s: s.counters["setpoints_accepted"] > accepted, 3.0, "the setpoint taken").last_setpoint_t_s
 
 
 def _fly_script(speed: float) -> tuple[float, list[tuple[float, Velocity]], np.ndarray]:
@@ -376,7 +376,7 @@ def _replay(t_armed: float, taken: list[tuple[float, Velocity]], t_end: float) -
 
         def at(t_s: float) -> None:  # the vehicle runs whole 5 ms steps up to the clock: half a step past
             clock.advance_to(t_s + PHYSICS_DT_S / 2)
-            wait_for(v.when(lambda s: s.t_s >= t_s - 1e-9), 3.0, f"the vehicle at t = {t_s} s")
+            wait_flight(v, lambda s: s.t_s >= t_s - 1e-9, 3.0, f"the vehicle at t = {t_s} s")
 
         at(t_armed)
         _send_accepted(probe, v, CLIMB)
@@ -466,7 +466,7 @@ def test_an_injected_clock_is_the_vehicles_time(probe: Probe) -> None:
         assert probe.wait_for("HEARTBEAT", timeout_s=2.0) is not None and v.snapshot().t_s == 0.0
         for t_s in (1.0, 2.0):
             clock.advance(1.0)
-            wait_for(v.when(lambda s: s.t_s == t_s), 2.0, f"the vehicle at t = {t_s} s")
+            wait_flight(v, lambda s: s.t_s == t_s, 2.0, f"the vehicle at t = {t_s} s")
             wait_for(lambda: len(probe.messages("HEARTBEAT")) >= t_s + 1, 2.0, f"the HEARTBEAT of t = {t_s} s")
         assert len(probe.messages("HEARTBEAT")) == 3
         assert v.clock is clock

@@ -13,7 +13,7 @@ from mission import px4
 from mission.mavlink_env import mavlink
 from sim.net import wait_for
 from sim.vehicle import FaultOptions, VehicleOptions
-from sim.vehicle_probe import Probe, connect, start_offboard, vehicle_for
+from sim.vehicle_probe import Probe, connect, start_offboard, vehicle_for, wait_flight
 
 pytestmark = pytest.mark.timeout(30)
 KEY = bytes(range(32))
@@ -41,7 +41,7 @@ def test_garbage_bytes_are_counted_and_never_crash_it(probe: Probe) -> None:
         corpus += [b"\xfd" + bytes(rng.getrandbits(8) for _ in range(rng.randint(8, 280))) for _ in range(200)]
         for data in corpus:
             probe.send_raw(data)
-        wait_for(v.when(lambda s: s.counters["rx_datagrams"] >= len(corpus)), 5.0, "s.counters['rx_datagrams'] >= len(corpus)")
+        wait_flight(v, lambda s: s.counters["rx_datagrams"] >= len(corpus), 5.0, "s.counters['rx_datagrams'] >= len(corpus)")
         counters = v.counters
         assert counters["rx_malformed"] >= 500 and counters["rx_unknown_ids"] >= 1
         assert counters["internal_errors"] == 0 and not v.snapshot().armed  # the bad-CRC arm was refused
@@ -69,7 +69,7 @@ def test_random_structured_fields_never_crash_it(probe: Probe) -> None:
                                                       rng.choice(floats), rng.randrange(256)),
                     mavlink.MAVLink_param_request_read_message(1, 1, b"\xff\xfe", rng.randrange(-32768, 32768))]
             probe.send(rng.choice(msgs))
-        wait_for(v.when(lambda s: s.counters["rx_messages"] >= 300), 5.0, "s.counters['rx_messages'] >= 300")
+        wait_flight(v, lambda s: s.counters["rx_messages"] >= 300, 5.0, "s.counters['rx_messages'] >= 300")
         assert v.counters["internal_errors"] == 0
         v.force_mode("AUTO.LOITER")
         assert probe.wait_for("HEARTBEAT", after=probe.mark(), timeout_s=2.0) is not None
@@ -81,8 +81,8 @@ def test_packet_loss_each_way(probe: Probe) -> None:
         assert probe.wait_for("HEARTBEAT", timeout_s=3.0)
         for _ in range(400):
             probe.heartbeat()
-        wait_for(v.when(lambda s: s.counters["dropped_in"] + s.counters["rx_messages"] >= 400
-                          and s.counters["tx_messages"] >= 400), 3.0, "s.counters['dropped_in'] + s.counters['rx_messages'] >= 400 and s.counters['tx_messages'] >= 400")
+        wait_flight(v, lambda s: s.counters["dropped_in"] + s.counters["rx_messages"] >= 400
+                          and s.counters["tx_messages"] >= 400, 3.0, "s.counters['dropped_in'] + s.counters['rx_messages'] >= 400 and s.counters['tx_messages'] >= 400")
         counters = v.counters
         assert counters["dropped_in"] / 400 == pytest.approx(0.5, abs=0.08)
         assert counters["dropped_out"] / counters["tx_messages"] == pytest.approx(0.3, abs=0.06)
@@ -112,7 +112,7 @@ def test_latency_and_jitter_delay_both_ways(probe: Probe) -> None:
 def test_blackout_window_silences_both_ways(probe: Probe) -> None:
     with vehicle_for(probe, paced=True, speed=10.0, faults=FaultOptions(blackouts=((1.0, 2.0),))) as v:
         connect(probe)
-        wait_for(v.when(lambda s: s.t_s > 4.0), 3.0, "s.t_s > 4.0")
+        wait_flight(v, lambda s: s.t_s > 4.0, 3.0, "s.t_s > 4.0")
         stamps = np.array([m.time_boot_ms for m in probe.messages("LOCAL_POSITION_NED")])
         assert (stamps < 1000).any() and (stamps >= 3000).any()
         assert not ((stamps >= 1000) & (stamps < 3000)).any()
@@ -124,26 +124,26 @@ def test_blackout_in_flight_triggers_offboard_loss(probe: Probe) -> None:
     with vehicle_for(probe, paced=True, speed=10.0) as v:
         connect(probe)
         with start_offboard(probe, (0.0, 0.0, -2.0)):
-            wait_for(v.when(lambda s: s.position_ned_m[2] < -2.0), 3.0, "s.position_ned_m[2] < -2.0")
+            wait_flight(v, lambda s: s.position_ned_m[2] < -2.0, 3.0, "s.position_ned_m[2] < -2.0")
             t_now = v.clock.now()
             v.set_faults(blackouts=[(t_now, 2.0)])
-            wait_for(v.when(lambda s: s.mode == "POSCTL" and s.in_failsafe), 2.0, "s.mode == 'POSCTL' and s.in_failsafe")
+            wait_flight(v, lambda s: s.mode == "POSCTL" and s.in_failsafe, 2.0, "s.mode == 'POSCTL' and s.in_failsafe")
             # the link comes back while the stream still runs: PX4 returns to OFFBOARD by itself
-            wait_for(v.when(lambda s: s.mode == "OFFBOARD" and not s.in_failsafe), 3.0, "s.mode == 'OFFBOARD' and not s.in_failsafe")
+            wait_flight(v, lambda s: s.mode == "OFFBOARD" and not s.in_failsafe, 3.0, "s.mode == 'OFFBOARD' and not s.in_failsafe")
 
 
 def test_pilot_takeover_forces_mode_and_holds(probe: Probe) -> None:
     with vehicle_for(probe, paced=True, speed=10.0) as v:
         connect(probe)
         with start_offboard(probe, (1.0, 0.0, -2.0)):
-            wait_for(v.when(lambda s: s.position_ned_m[2] < -3.0), 3.0, "s.position_ned_m[2] < -3.0")
+            wait_flight(v, lambda s: s.position_ned_m[2] < -3.0, 3.0, "s.position_ned_m[2] < -3.0")
             v.force_mode("POSCTL")
             assert probe.wait_mode("POSCTL", 2.0)
             hb = probe.latest("HEARTBEAT")
             assert hb.system_status == px4.MAV_STATE_ACTIVE and hb.base_mode == 209  # no failsafe: a pilot flies
-            settled = wait_for(v.when(lambda s: np.allclose(s.velocity_ned_m_s, 0.0, atol=0.01)), 3.0, "np.allclose(s.velocity_ned_m_s, 0.0, atol=0.01)")
+            settled = wait_flight(v, lambda s: np.allclose(s.velocity_ned_m_s, 0.0, atol=0.01), 3.0, "np.allclose(s.velocity_ned_m_s, 0.0, atol=0.01)")
             assert settled is not None
-            later = wait_for(v.when(lambda s: s.t_s > settled.t_s + 2.0), 2.0, "s.t_s > settled.t_s + 2.0")
+            later = wait_flight(v, lambda s: s.t_s > settled.t_s + 2.0, 2.0, "s.t_s > settled.t_s + 2.0")
             assert later is not None and np.allclose(later.position_ned_m, settled.position_ned_m, atol=0.02)
             assert later.mode == "POSCTL"  # setpoints still arrive, but it does not return to OFFBOARD
         with pytest.raises(ValueError):
@@ -154,7 +154,7 @@ def test_position_estimate_loss_exits_and_refuses_offboard(probe: Probe) -> None
     with vehicle_for(probe, paced=True, speed=10.0) as v:
         connect(probe)
         with start_offboard(probe, (1.0, 0.0, -2.0)):
-            wait_for(v.when(lambda s: s.position_ned_m[2] < -3.0), 3.0, "s.position_ned_m[2] < -3.0")
+            wait_flight(v, lambda s: s.position_ned_m[2] < -3.0, 3.0, "s.position_ned_m[2] < -3.0")
             v.lose_position_estimate(True)
             assert probe.wait_mode("AUTO.LAND", 2.0)
             snap = v.snapshot()
@@ -165,9 +165,9 @@ def test_position_estimate_loss_exits_and_refuses_offboard(probe: Probe) -> None
             status = probe.wait_for("SYS_STATUS", lambda m: not m.onboard_control_sensors_health & px4.SENSOR_GPS,
                                     after=probe.mark(), timeout_s=2.0)
             assert status is not None and not status.onboard_control_sensors_health & px4.SENSOR_PREARM_CHECK
-            wait_for(v.when(lambda s: not s.armed), 10.0, "not s.armed")  # descends, lands, disarms
+            wait_flight(v, lambda s: not s.armed, 10.0, "not s.armed")  # descends, lands, disarms
         v.lose_position_estimate(False)
-        wait_for(v.when(lambda s: s.position_valid), 1.0, "s.position_valid")
+        wait_flight(v, lambda s: s.position_valid, 1.0, "s.position_valid")
 
 
 def test_arming_refusal_with_reason(probe: Probe) -> None:
@@ -199,14 +199,14 @@ def test_offboard_refusal_with_reason(probe: Probe) -> None:
 
 
 def test_signing_rejects_unsigned_commands_but_accepts_unsigned_heartbeat(probe: Probe) -> None:
-    with vehicle_for(probe, paced=True, signing_key=KEY) as v:
+    with vehicle_for(probe, signing_key=KEY) as v:  # real time: the probe signs nothing, so it could not pace it
         hb = probe.wait_for("HEARTBEAT", timeout_s=2.0)
         assert hb is not None and hb.get_msgbuf()[2] & 0x01  # the vehicle signs what it sends
         probe.heartbeat()  # unsigned HEARTBEAT: accepted
-        wait_for(v.when(lambda s: s.counters["rx_messages"] >= 1), 2.0, "s.counters['rx_messages'] >= 1")
+        wait_flight(v, lambda s: s.counters["rx_messages"] >= 1, 2.0, "s.counters['rx_messages'] >= 1")
         assert probe.arm(timeout_s=0.3) is None
         probe.send(probe.setpoint_message())
-        wait_for(v.when(lambda s: s.counters["rx_unsigned_rejected"] >= 2), 2.0, "s.counters['rx_unsigned_rejected'] >= 2")
+        wait_flight(v, lambda s: s.counters["rx_unsigned_rejected"] >= 2, 2.0, "s.counters['rx_unsigned_rejected'] >= 2")
         assert v.counters["setpoints_accepted"] == 0
         with Probe(vehicle=("127.0.0.1", v.port), signing_key=bytes(32)) as wrong_key:
             assert wrong_key.arm(timeout_s=0.3) is None
@@ -238,12 +238,12 @@ def test_a_stalled_machine_slows_a_paced_vehicle_and_never_starves_it_of_setpoin
     with vehicle_for(probe, paced=True, speed=10.0) as v:
         connect(probe)
         with start_offboard(probe, (0.0, 0.0, -1.0)):
-            wait_for(v.when(lambda s: s.position_ned_m[2] < -1.0), 5.0, "the vehicle climbing")
+            wait_flight(v, lambda s: s.position_ned_m[2] < -1.0, 5.0, "the vehicle climbing")
             assert probe.pacer is not None
             with probe.pacer._lock:  # the pacer blocks at its next step, the vehicle waits at its barrier
                 t_stalled = v.snapshot().t_s
                 time.sleep(0.5)
                 assert v.snapshot().t_s - t_stalled <= 0.011  # at most the step that was under way
-            wait_for(v.when(lambda s: s.t_s > t_stalled + 2.0), 5.0, "time going on")
+            wait_flight(v, lambda s: s.t_s > t_stalled + 2.0, 5.0, "time going on")
             snap = v.snapshot()
             assert snap.mode == "OFFBOARD" and not snap.in_failsafe

@@ -20,7 +20,7 @@ from sim.vehicle import FaultOptions, MockVehicle, VehicleOptions, spawn_process
 from sim.vehicle_cli import mock_vehicle, read_signing_key
 from sim.vehicle_link import parse_endpoint
 from sim.vehicle_params import PARAM_SPECS, pack_int32, unpack_int32
-from sim.vehicle_probe import Lockstep, Probe, SetpointStream, connect, start_offboard, vehicle_for
+from sim.vehicle_probe import Lockstep, Probe, SetpointStream, connect, start_offboard, vehicle_for, wait_flight
 
 pytestmark = pytest.mark.timeout(30)
 NAN = math.nan
@@ -42,7 +42,7 @@ def test_setpoints_to_another_system_are_not_proof_of_life(probe: Probe) -> None
     with vehicle_for(probe, paced=True) as v:
         connect(probe)
         with SetpointStream(probe, 0.01, target=(2, 1)):
-            wait_for(v.when(lambda s: s.counters["rx_wrong_target"] >= 5), 2.0, "s.counters['rx_wrong_target'] >= 5")
+            wait_flight(v, lambda s: s.counters["rx_wrong_target"] >= 5, 2.0, "s.counters['rx_wrong_target'] >= 5")
             assert probe.set_mode("OFFBOARD").result == px4.MAV_RESULT_TEMPORARILY_REJECTED
         assert v.counters["setpoints_accepted"] == 0
 
@@ -64,7 +64,7 @@ def test_set_mode_as_command_int(probe: Probe) -> None:
     with vehicle_for(probe, paced=True) as v:
         connect(probe)
         with SetpointStream(probe, 0.01):
-            wait_for(v.when(lambda s: s.counters["setpoints_accepted"] > 2), 2.0, "s.counters['setpoints_accepted'] > 2")
+            wait_flight(v, lambda s: s.counters["setpoints_accepted"] > 2, 2.0, "s.counters['setpoints_accepted'] > 2")
             ack = probe.command(px4.MAV_CMD_DO_SET_MODE, (129.0, 6.0, 0.0), as_int=True)
             assert ack is not None and ack.result == px4.MAV_RESULT_ACCEPTED
             assert probe.wait_mode("OFFBOARD", 2.0)
@@ -195,7 +195,7 @@ def test_local_position_rate_up_to_what_px4_delivers(probe: Probe) -> None:
         for interval_us, expected_hz in ((20_000.0, 50), (2_000.0, 125)):
             assert probe.command(px4.MAV_CMD_SET_MESSAGE_INTERVAL, (lpn, interval_us)).result == px4.MAV_RESULT_ACCEPTED
             t0 = v.clock.now() + 0.1
-            wait_for(v.when(lambda s: s.t_s > t0 + 1.1), 3.0, "s.t_s > t0 + 1.1")
+            wait_flight(v, lambda s: s.t_s > t0 + 1.1, 3.0, "s.t_s > t0 + 1.1")
             assert 0.75 * expected_hz <= count(probe, t0) <= expected_hz + 1, interval_us
             assert 20 <= count(gcs, t0) <= 31
 
@@ -212,7 +212,7 @@ def test_timesync_is_answered(probe: Probe) -> None:
 def test_onboard_streams_at_px4_rates_at_speed_1(probe: Probe) -> None:
     with vehicle_for(probe, speed=1.0) as v:
         connect(probe)
-        wait_for(v.when(lambda s: s.t_s > 1.2), 3.0, "s.t_s > 1.2")
+        wait_flight(v, lambda s: s.t_s > 1.2, 3.0, "s.t_s > 1.2")
     expected_ms = {"LOCAL_POSITION_NED": 1000 / 30, "ATTITUDE": 10, "ATTITUDE_QUATERNION": 20, "GLOBAL_POSITION_INT": 20,
                    "POSITION_TARGET_LOCAL_NED": 100, "ATTITUDE_TARGET": 100, "SYS_STATUS": 200, "EXTENDED_SYS_STATE": 200}
     for name, period_ms in expected_ms.items():
@@ -276,7 +276,7 @@ def test_setpoint_frames_and_type_masks(probe: Probe, frame: int, mask: int, acc
         for _ in range(3):
             probe.send(probe.setpoint_message((1.0, 0.0, 0.0), mask, frame, position_ned_m=(1.0, 2.0, -3.0), yaw_rad=0.0,
                                               yaw_rate_rad_s=0.0, acceleration_ned_m_s2=(0.5, 0.0, 0.0)))
-        wait_for(v.when(lambda s: s.counters["setpoints_accepted"] + s.counters["setpoints_rejected"] == 3), 2.0, "s.counters['setpoints_accepted'] + s.counters['setpoints_rejected'] == 3")
+        wait_flight(v, lambda s: s.counters["setpoints_accepted"] + s.counters["setpoints_rejected"] == 3, 2.0, "s.counters['setpoints_accepted'] + s.counters['setpoints_rejected'] == 3")
         assert v.counters["setpoints_accepted"] == (3 if accepted else 0)
         result = probe.set_mode("OFFBOARD").result
         assert result == (px4.MAV_RESULT_ACCEPTED if accepted else px4.MAV_RESULT_TEMPORARILY_REJECTED)
@@ -288,16 +288,16 @@ def test_non_finite_velocity_setpoint_is_proof_of_life_and_holds(probe: Probe) -
     with vehicle_for(probe, paced=True, speed=10.0) as v:
         connect(probe)
         with start_offboard(probe, (1.0, 0.0, -1.0)) as stream:
-            wait_for(v.when(lambda s: s.position_ned_m[2] < -2.0), 3.0, "s.position_ned_m[2] < -2.0")
+            wait_flight(v, lambda s: s.position_ned_m[2] < -2.0, 3.0, "s.position_ned_m[2] < -2.0")
             stream.set(velocity_ned_m_s=(NAN, 0.0, 0.0))
             accepted = v.counters["setpoints_accepted"]
             t0 = v.snapshot().t_s
-            snap = wait_for(v.when(lambda s: s.t_s > t0 + 5.0), 3.0, "s.t_s > t0 + 5.0")
+            snap = wait_flight(v, lambda s: s.t_s > t0 + 5.0, 3.0, "s.t_s > t0 + 5.0")
             assert snap is not None and snap.mode == "OFFBOARD" and not snap.in_failsafe
             assert snap.counters["setpoints_accepted"] > accepted and snap.counters["setpoints_rejected"] == 0
             assert np.linalg.norm(snap.velocity_ned_m_s) < 0.2
             stream.set(velocity_ned_m_s=(math.inf, 0.0, 0.0))
-            later = wait_for(v.when(lambda s: s.t_s > snap.t_s + 2.0), 3.0, "s.t_s > snap.t_s + 2.0")
+            later = wait_flight(v, lambda s: s.t_s > snap.t_s + 2.0, 3.0, "s.t_s > snap.t_s + 2.0")
             assert later is not None and later.mode == "OFFBOARD" and np.linalg.norm(later.velocity_ned_m_s) < 0.2
 
 
@@ -310,11 +310,11 @@ def test_dropped_setpoint_is_not_proof_of_life_and_says_why(probe: Probe, mask: 
     with vehicle_for(probe, paced=True, speed=10.0) as v:
         connect(probe)
         with start_offboard(probe, (0.0, 0.0, -1.0)) as stream:
-            wait_for(v.when(lambda s: s.position_ned_m[2] < -2.0), 3.0, "s.position_ned_m[2] < -2.0")
+            wait_flight(v, lambda s: s.position_ned_m[2] < -2.0, 3.0, "s.position_ned_m[2] < -2.0")
             stream.set(type_mask=mask, frame=frame, velocity_ned_m_s=(1.0, 0.0, 0.0), acceleration_ned_m_s2=(0.5, 0.0, 0.0))
             msg = probe.wait_for("STATUSTEXT", lambda m: text in m.text, 2.0)
             assert msg is not None and msg.severity == px4.MAV_SEVERITY_CRITICAL
-            wait_for(v.when(lambda s: s.mode == "POSCTL" and s.in_failsafe), 3.0, "s.mode == 'POSCTL' and s.in_failsafe")  # the stream is lost: offboard loss
+            wait_flight(v, lambda s: s.mode == "POSCTL" and s.in_failsafe, 3.0, "s.mode == 'POSCTL' and s.in_failsafe")  # the stream is lost: offboard loss
         counters = v.counters
         assert counters["setpoints_rejected"] >= 5
         # said at most once a second, not for every dropped message
