@@ -306,7 +306,6 @@ class ZenohRelay:
                     last_put = now
                 self._cv.wait(HELLO_WALL_S)
             self._state, self._wake_ns = "joined", self._ready[1]
-            self._step_ns = t_ns + 1  # later readies are repeats of this step's
 
     def close(self) -> None:
         undeclare(self._sub, self._pub)

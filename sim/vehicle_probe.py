@@ -127,8 +127,7 @@ class Probe:
         ``predicate``; None at the deadline (``timeout_s`` wall seconds; to a paced vehicle, unless
         ``wall``, the simulated time that takes at its speed, see :func:`flight_deadline`)."""
         pacer = None if wall else self.pacer
-        passed = flight_deadline(timeout_s, lambda: pacer.t_ns / 1e9, pacer.speed) if pacer else \
-            flight_deadline(timeout_s)
+        passed = flight_deadline(timeout_s, pacer and (lambda: pacer.t_ns / 1e9), pacer.speed if pacer else 1.0)
         with self._cond:
             while True:
                 for index, _, msg in self.history.get(kind, ()):
@@ -321,10 +320,9 @@ def flight_deadline(timeout_s: float, sim_now: Callable[[], float] | None = None
 def wait_flight(v: "MockVehicle", predicate: Callable[[Any], bool], timeout_s: float, what: str) -> Any:
     """The vehicle's snapshot once ``predicate`` holds for it; ``AssertionError`` naming ``what``
     after ``timeout_s`` wall seconds at its speed, counted on its simulated time when it is paced
-    (lockstep): :func:`flight_deadline`."""
-    paced = v.options.lockstep
-    passed = flight_deadline(timeout_s, lambda: v.snapshot().t_s, v.options.speed) if paced else \
-        flight_deadline(timeout_s)
+    (lockstep at most ``lockstep_max_speed``): :func:`flight_deadline`."""
+    pace = v.options.lockstep_max_speed if v.options.lockstep else None
+    passed = flight_deadline(timeout_s, pace and (lambda: v.snapshot().t_s), pace or 1.0)
     while True:
         snap = v.snapshot()
         if predicate(snap):
