@@ -21,7 +21,7 @@ import threading
 import time
 from pathlib import Path
 
-from mission.log import read_record
+from mission.record import read_record
 from sim.demo import DEFAULT_CONFIG, run_demo
 
 
@@ -70,7 +70,7 @@ class PeakRss:
 
 def failsafe_texts(tlog: Path) -> list[str]:
     """STATUSTEXTs in a flight's tlog that announce a failsafe ("Failsafe activated...")."""
-    from mission.mavlink_env import mavutil
+    from mission.mavlink.env import mavutil
 
     if not tlog.exists():
         return []

@@ -5,11 +5,11 @@ Method
 Two processes on loopback, as deployed:
 
 * **This process plays the carrier and the vehicle.** The carrier is a
-  :class:`~mission.carrier_bridge.CarrierPublisher` on its own Zenoh session (listening on a
-  free 127.0.0.1 port). It publishes a :class:`~mission.wire.CarrierState` at random intervals
+  :class:`~mission.bus.bridge.CarrierPublisher` on its own Zenoh session (listening on a
+  free 127.0.0.1 port). It publishes a :class:`~mission.bus.wire.CarrierState` at random intervals
   (uniform in 0.5..1.5 times ``1 / carrier_rate_hz``, 30 Hz by default like the demo's carrier,
   so samples fall at every phase of the controller's tick grid) with ``seq`` = the sample's
-  number, and stamps ``t_pub`` (CLOCK_REALTIME) just before ``publish`` (JSON encoding + put). The vehicle is :class:`sim.fake_px4.FakePx4` (armed in
+  number, and stamps ``t_pub`` (CLOCK_REALTIME) just before ``publish`` (JSON encoding + put). The vehicle is :class:`sim.testing.fake_px4.FakePx4` (armed in
   OFFBOARD, LOCAL_POSITION_NED at the dock point, every command ACCEPTED and shown at once) with
   the kernel's receive stamp of every datagram (SO_TIMESTAMPNS, CLOCK_REALTIME): the arrival at
   the vehicle's socket, free of this process's own scheduling.
@@ -67,8 +67,8 @@ import zenoh
 
 from bench.e2e_child import PAIR
 from bench.floor import mavlink_ping, percentiles_ms, zenoh_ping
-from mission import px4
-from sim.fake_px4 import FakePx4
+from mission.mavlink import px4
+from sim.testing.fake_px4 import FakePx4
 from sim.net import free_port
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -90,7 +90,7 @@ class ScriptedCarrier:
     """Publishes a still carrier's state at random intervals; ``published[seq]`` = t_pub [ns realtime]."""
 
     def __init__(self, session: zenoh.Session, rate_hz: float, seed: int = 1) -> None:
-        from mission.carrier_bridge import CarrierPublisher
+        from mission.bus.bridge import CarrierPublisher
 
         self.publisher = CarrierPublisher(session, PAIR)
         self.rate_hz = rate_hz
@@ -108,7 +108,7 @@ class ScriptedCarrier:
         self.publisher.close()
 
     def _run(self) -> None:
-        from mission.wire import CarrierState
+        from mission.bus.wire import CarrierState
 
         t0, seq, still = time.monotonic(), 0, np.zeros(3)
         while not self._stop.is_set():
@@ -141,8 +141,8 @@ def run_controller(rate_hz: float, duration_s: float, carrier_rate_hz: float = 3
 
     ``profile``: a path where the child writes cProfile statistics of its loop.
     """
-    from mission.carrier_bridge import open_session
-    from mission.config import ZenohSection
+    from mission.bus.bridge import open_session
+    from mission.config.schema import ZenohSection
 
     endpoint = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
     dock = (CARRIER_NED_M[0], CARRIER_NED_M[1], CARRIER_NED_M[2] - 1.5)  # demo.toml dock offset

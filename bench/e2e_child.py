@@ -1,7 +1,7 @@
 """The controller process of the end-to-end bench (``python -m bench.e2e_child``; internal).
 
 It runs the real :class:`~mission.controller.MissionController` with ``marsupial run``'s wiring
-(:func:`mission.run_cli.mission_io`: VehicleLink, CarrierFeed, PassengerPublisher,
+(:func:`mission.cli.run.mission_io`: VehicleLink, CarrierFeed, PassengerPublisher,
 FlightRecorder) on the demo configuration at the asked rate, and records every tick that sent a
 setpoint through the controller's ``on_tick`` observer: when the tick started, when its
 observation ended, which carrier sample it used (``seq`` and when the feed's Zenoh callback
@@ -22,7 +22,7 @@ from typing import Any
 
 import click
 
-from mission.monotonic_clock import MonotonicClock
+from mission.time.monotonic import MonotonicClock
 
 ROOT = Path(__file__).resolve().parents[1]
 DEMO_CONFIG = ROOT / "configs" / "demo.toml"
@@ -44,7 +44,7 @@ def realtime_offset_ns() -> int:
 
 
 class RealtimeMonotonicClock(MonotonicClock):
-    """The controller's clock here: :class:`mission.clock.MonotonicClock`, whose times and
+    """The controller's clock here: :class:`mission.time.clock.MonotonicClock`, whose times and
     stamps also convert to CLOCK_REALTIME [ns] (the kernel's receive stamps are realtime)."""
 
     def __init__(self) -> None:
@@ -89,10 +89,10 @@ class SendLog:
 def child_main(rate_hz: float, duration_s: float, zenoh_connect: str, log_dir: str, out: str,
                profile: str = "") -> None:
     """The controller process: ``marsupial run``'s wiring with the tick observer."""
-    from mission.config import load_config, with_overrides
+    from mission.config.schema import load_config, with_overrides
     from mission.controller import MissionController, mission_info
-    from mission.log import FlightRecorder
-    from mission.run_cli import mission_io
+    from mission.record import FlightRecorder
+    from mission.cli.run import mission_io
 
     cfg = with_overrides(load_config(DEMO_CONFIG), {
         "mission.rate_hz": rate_hz, "mission.max_duration_s": duration_s + 120.0, "zenoh.pair": PAIR,

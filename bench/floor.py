@@ -30,8 +30,8 @@ import click
 import numpy as np
 import zenoh
 
-from mission import px4
-from mission.mavlink_env import mavlink
+from mission.mavlink import px4
+from mission.mavlink.env import mavlink
 from sim.net import enable_rx_stamps, free_port, recv_stamped, wait_for
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -89,8 +89,8 @@ def zenoh_ping(samples: int, mean_interval_s: float = 0.004, payload_bytes: int 
     The subscriber's session is in a child process (as the controller's is) unless
     ``two_processes`` is False (both sessions in this process).
     """
-    from mission.carrier_bridge import open_session
-    from mission.config import ZenohSection
+    from mission.bus.bridge import open_session
+    from mission.config.schema import ZenohSection
 
     endpoint = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
     arrivals: dict[int, int] = {}
@@ -142,8 +142,8 @@ def cli() -> None:
 @click.option("--out", required=True, type=click.Path(dir_okay=False), help="Where to write the arrivals (JSON).")
 def ping_subscriber(endpoint: str, out: str) -> None:
     """The child of :func:`zenoh_ping`: stamp every ping until stdin closes, then write them."""
-    from mission.carrier_bridge import open_session
-    from mission.config import ZenohSection
+    from mission.bus.bridge import open_session
+    from mission.config.schema import ZenohSection
 
     arrivals: dict[int, int] = {}
     session = open_session(ZenohSection(connect=[endpoint], rendezvous=None))

@@ -2,11 +2,11 @@
 
     python -m bench.law_bench [--json out/bench_law.json] [--quick]
 
-Tick: one realtime passenger tick (``mission.tick.passenger_tick``: law + CBF-QP filter + limits)
+Tick: one realtime passenger tick (``mission.core.tick.passenger_tick``: law + CBF-QP filter + limits)
 for one vector, with 0, 1 and 8 obstacles, p50/p99 in microseconds of wall-clock time and, beside
 it, of the thread's CPU time (which leaves out the time the scheduler gave to other processes: on
 a shared, loaded machine the wall-clock p99 is mostly that). Batch: the closed loop
-(``sim.closed_loop.simulate``) in scenario-steps per second for 1, 100 and 10 000 scenarios,
+(``sim.batch.closed_loop.simulate``) in scenario-steps per second for 1, 100 and 10 000 scenarios,
 beside a compiled baseline of the same integrator (numba, if installed) measured in the same run.
 """
 from __future__ import annotations
@@ -19,12 +19,12 @@ from pathlib import Path
 import click
 import numpy as np
 
-from mission.config import load_config
-from mission.law import LawParams
-from mission.safety import Obstacles, SafetyConfig
-from mission.tick import TickModel, passenger_tick
+from mission.config.schema import load_config
+from mission.core.law import LawParams
+from mission.core.safety import Obstacles, SafetyConfig
+from mission.core.tick import TickModel, passenger_tick
 from mission.model import model_from_config
-from sim.closed_loop import random_scenarios, simulate
+from sim.batch.closed_loop import random_scenarios, simulate
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -119,7 +119,7 @@ def step_warm_cold(gap_s: float = 0.02, samples: int = 150) -> dict:
     is): p50/p99 [us]. The difference is what a mostly idle periodic loop pays on this machine
     (caches, branch predictors and the core's idle state), not what the code does."""
     from mission import phases
-    from mission.config import load_config
+    from mission.config.schema import load_config
     from mission.model import mission_model
     from mission.phases import CarrierObs, MissionState, Observation, Phase, VehicleObs
 

@@ -1,7 +1,7 @@
 """Fly the mission on real PX4 SITL N times in a row and print the table of the real-PX4 targets (README "Flying real PX4").
 
 Each flight is a fresh PX4 (SIH quadrotor) in its own network namespace with the carrier
-simulator and ``marsupial run`` beside it (:mod:`sim.px4_sitl`). Per flight: P1-P3, the riding
+simulator and ``marsupial run`` beside it (:mod:`sim.sitl.px4`). Per flight: P1-P3, the riding
 offset (largest distance from the dock point while RIDING), the swing at the target (farthest
 from it after first coming within the arrival radius, until the mission handed the vehicle to
 PX4's Hold), the relative command jump at separation, where PX4's own Hold took it over the next
@@ -26,8 +26,8 @@ from typing import Any
 
 import click
 
-from mission.config import load_config
-from sim.px4_sitl import build_dir, clock_ratio, px4_flight, unavailable_reason
+from mission.config.schema import load_config
+from sim.sitl.px4 import build_dir, clock_ratio, px4_flight, unavailable_reason
 
 ROOT = Path(__file__).resolve().parents[1]
 TARGETS = {"riding_offset_m": 0.25, "swing_m": 0.5, "jump_m_s": 0.05}

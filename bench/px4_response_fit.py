@@ -2,15 +2,15 @@
 
 Replays the setpoint sequence of each recording (``tests/data/px4_responses/``, copied from
 ../shared/px4_sitl/responses/: ``original`` and the held-out ``repeat``) into the mock's dynamics
-(:mod:`sim.px4_replay`) and prints, per step / ramp / sine segment, the RMS velocity difference
+(:mod:`sim.sitl.replay`) and prints, per step / ramp / sine segment, the RMS velocity difference
 from PX4, the mean over the segments, the ramp lags, and PX4 against itself (the two
 recordings). PX4's ramp lag is given from its positions and from the integral of its velocities:
 its position estimate drifts by 1-2 m from that integral over a ramp (EKF, SIH's GPS noise),
 which no deterministic mock reproduces.
 
-``--fit`` refits the free airframe constants (:class:`sim.vehicle_physics.Airframe`: drag, tilt
+``--fit`` refits the free airframe constants (:class:`sim.vehicle.physics.multicopter.Airframe`: drag, tilt
 lag, thrust lag, vertical drag) to the ``original`` recording only by Nelder-Mead on the mean RMS, and prints them
-beside :data:`sim.vehicle_physics.FITTED_AIRFRAME`; ``repeat`` stays a held-out check.
+beside :data:`sim.vehicle.physics.multicopter.FITTED_AIRFRAME`; ``repeat`` stays a held-out check.
 
 Usage: ``python -m bench.px4_response_fit [--fit] [--json out.json]``.
 """
@@ -25,8 +25,8 @@ from typing import Any
 import click
 import numpy as np
 
-from sim.px4_replay import Comparison, Recording, compare, load_recording, px4_vs_px4_rms, ramp_lag_m
-from sim.vehicle_physics import FITTED_AIRFRAME, Airframe, Limits
+from sim.sitl.replay import Comparison, Recording, compare, load_recording, px4_vs_px4_rms, ramp_lag_m
+from sim.vehicle.physics.multicopter import FITTED_AIRFRAME, Airframe, Limits
 
 DATA = Path(__file__).resolve().parents[1] / "tests" / "data" / "px4_responses"
 RECORDINGS = ("original", "repeat")

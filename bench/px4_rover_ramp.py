@@ -24,9 +24,9 @@ from typing import Any
 import click
 import numpy as np
 
-from mission import px4
-from sim.px4_sitl import NetNamespace, Px4Sitl, build_dir, unavailable_reason, wait_armable
-from sim.vehicle_probe import Probe, SetpointStream
+from mission.mavlink import px4
+from sim.sitl.px4 import NetNamespace, Px4Sitl, build_dir, unavailable_reason, wait_armable
+from sim.testing.probe import Probe, SetpointStream
 
 BEARING_RAD = math.atan2(18.0, 24.0)  # configs/px4_sitl_rover.toml: target [24, 18] from the origin
 TARGET = (2, 1)  # instance 1: sysid 2

@@ -4,7 +4,7 @@
    fixed rate for a second; the vehicle (in this process, speed 1) must accept every one of them
    and keep its 30 Hz LOCAL_POSITION_NED stream on time meanwhile. The highest rate with
    >= 99.5 % accepted and >= 27 Hz of LOCAL_POSITION_NED is "processed without falling behind".
-2. CPU use of a vehicle process (``python -m sim.vehicle_cli``) at the default stream rates,
+2. CPU use of a vehicle process (``python -m sim.vehicle.cli``) at the default stream rates,
    for several speed factors, with a 20 Hz (simulated) setpoint stream and a client heartbeat.
 3. The same scripted offboard flight (60 s simulated by default) at speed 20 and at speed 1,
    one after the other: wall time of each and the distance between their end positions. The
@@ -27,14 +27,14 @@ import click
 import numpy as np
 
 from sim.net import wait_for
-from sim.vehicle import PHYSICS_DT_S, MockVehicle, VehicleOptions, spawn_process
-from sim.vehicle_probe import Probe, connect, sleep_until, start_offboard
+from sim.vehicle.mock import PHYSICS_DT_S, MockVehicle, VehicleOptions, spawn_process
+from sim.testing.probe import Probe, connect, sleep_until, start_offboard
 
 CLOCK_TICKS_PER_S = os.sysconf("SC_CLK_TCK")
 
 SENDER = r"""
 import socket, sys, time
-from mission.mavlink_env import mavlink
+from mission.mavlink.env import mavlink
 port, rate, duration = int(sys.argv[1]), float(sys.argv[2]), float(sys.argv[3])
 mav = mavlink.MAVLink(None, 255, 190)
 nan = float("nan")

@@ -17,9 +17,9 @@ from typing import Callable
 import click
 import numpy as np
 
-from mission.wire import CarrierState, WireError, decode_carrier_json, decode_passenger_json, encode_passenger_json
-from mission.wire import PassengerStatus
-from mission.wire_ros2 import decode_odometry_cdr, encode_odometry_cdr
+from mission.bus.wire import CarrierState, WireError, decode_carrier_json, decode_passenger_json, encode_passenger_json
+from mission.bus.wire import PassengerStatus
+from mission.bus.ros2 import decode_odometry_cdr, encode_odometry_cdr
 
 CARRIER = json.dumps({"stamp": 12.345, "seq": 7, "frame": "local_ned", "position": [1.0, 2.0, -3.0],
                       "velocity": [0.5, -0.25, 0.0], "yaw": 0.1}).encode()

@@ -1,7 +1,7 @@
 """The mission loop: read the newest states, run the phases, send the setpoint, record.
 
 Wiring only: the decisions are in :mod:`mission.phases` (pure), the law and filter in
-:mod:`mission.tick`; this module reads the link and the Zenoh feed, executes vehicle commands
+:mod:`mission.core.tick`; this module reads the link and the Zenoh feed, executes vehicle commands
 on a worker thread (so arming and mode switches never stall the setpoint stream), and writes
 the flight record. The setpoint is sent from the loop itself and from nowhere else: when the
 loop stops, the stream stops, and PX4's offboard-loss failsafe sees it.
@@ -19,17 +19,19 @@ from typing import Any, Callable
 
 import numpy as np
 
-from mission import phases, px4
-from mission.consistent_velocity import PositionConsistentVelocity
-from mission.clock import Clock, Periodic, join_thread, start_thread
-from mission.config import Config
+from mission import phases
+
+from mission.mavlink import px4
+from mission.core.consistent_velocity import PositionConsistentVelocity
+from mission.time.clock import Clock, Periodic, join_thread, start_thread
+from mission.config.schema import Config
 from mission.errors import CommandRejected, LinkError
-from mission.log import FlightRecorder
-from mission.mavlink_env import mavlink
+from mission.record import FlightRecorder
+from mission.mavlink.env import mavlink
 from mission.model import mission_model
 from mission.phases import CarrierObs, Decision, MissionState, Observation, Phase, VehicleObs
 from mission.ports import CarrierSource, Request, StatusSink, Vehicle
-from mission.wire import GeoOrigin, PassengerStatus
+from mission.bus.wire import GeoOrigin, PassengerStatus
 
 log = logging.getLogger(__name__)
 
@@ -154,7 +156,7 @@ def _no_stamp() -> int:
 
 def _vehicle_obs(state: Any, velocity_fix: PositionConsistentVelocity | None = None) -> VehicleObs | None:
     """The vehicle as the phases see it; with ``velocity_fix`` its velocity made consistent with
-    its position (``mission.velocity_bias_tau_s``, :mod:`mission.consistent_velocity`)."""
+    its position (``mission.velocity_bias_tau_s``, :mod:`mission.core.consistent_velocity`)."""
     if state.heartbeat_rx_s is None:
         return None
     pos = state.position_ned_m
@@ -208,10 +210,10 @@ class TickReport:
 class MissionController:
     """One mission: ``run()`` ticks at ``mission.rate_hz`` until DONE or ABORT.
 
-    link: the :class:`~mission.ports.Vehicle` (a :class:`mission.link.VehicleLink`, opened,
+    link: the :class:`~mission.ports.Vehicle` (a :class:`mission.mavlink.link.VehicleLink`, opened,
     vehicle identified or not yet); feed: the :class:`~mission.ports.CarrierSource` (a
-    :class:`mission.carrier_bridge.CarrierFeed`); publisher: a :class:`~mission.ports.StatusSink`
-    (or None); recorder: a :class:`mission.log.FlightRecorder` (or None). ``on_event(phase,
+    :class:`mission.bus.bridge.CarrierFeed`); publisher: a :class:`~mission.ports.StatusSink`
+    (or None); recorder: a :class:`mission.record.FlightRecorder` (or None). ``on_event(phase,
     text)`` is called on every phase change and event (the CLI prints them), ``on_tick(report)``
     after every tick (:class:`TickReport`; keep it short: it runs in the loop).
     ``command_thread=False`` runs vehicle commands inside the tick (unit tests only).

@@ -1,20 +1,20 @@
 """The fixed parameters of a flight and of a simulation, built from a configuration.
 
-:func:`model_from_config` gives the :class:`mission.tick.TickModel` (law, target, obstacles,
+:func:`model_from_config` gives the :class:`mission.core.tick.TickModel` (law, target, obstacles,
 both safety filters, separation latch) that the realtime controller and the batch simulator
-(:mod:`sim.closed_loop`) share; :func:`mission_model` adds what only a flight has (docking,
+(:mod:`sim.batch.closed_loop`) share; :func:`mission_model` adds what only a flight has (docking,
 tracking, arrival, timeouts, the command filter) as a :class:`mission.phases.MissionModel`.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from mission.config import Config
+from mission.config.schema import Config
 from mission.errors import ConfigError
 from mission.phases import MissionModel
-from mission.safety import SafetyConfig
-from mission.tick import TickModel
-from mission.tracking import TrackingGains
+from mission.core.safety import SafetyConfig
+from mission.core.tick import TickModel
+from mission.core.tracking import TrackingGains
 
 COMMAND_MARGIN_FACTOR = 0.5  # the command filter's obstacle margin, of safety.margin_m
 COMMAND_SPEED_FACTOR = 1.25  # its speed limit, of the reference's (room to pull onto the reference)

@@ -15,7 +15,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.patches import Circle  # noqa: E402
 
-from mission.law import norm  # noqa: E402
+from mission.core.law import norm  # noqa: E402
 
 
 @dataclass(frozen=True)

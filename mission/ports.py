@@ -12,8 +12,8 @@ interchangeable (as are a Zenoh feed and a scripted one):
   carrier's liveliness, and the EKF origin for geodetic carrier states;
 * a :class:`StatusSink`: where the passenger's phase and state go (the carrier listens).
 
-Implementations: :class:`mission.link.VehicleLink`, :class:`mission.carrier_bridge.CarrierFeed`,
-:class:`mission.carrier_bridge.PassengerPublisher`; ``tests/unit/fake_vehicle.py`` fakes all
+Implementations: :class:`mission.mavlink.link.VehicleLink`, :class:`mission.bus.bridge.CarrierFeed`,
+:class:`mission.bus.bridge.PassengerPublisher`; ``tests/unit/fake_vehicle.py`` fakes all
 three without sockets.
 """
 from __future__ import annotations
@@ -24,9 +24,9 @@ from typing import TYPE_CHECKING, Protocol
 import numpy as np
 
 if TYPE_CHECKING:
-    from mission.carrier_bridge import ReceivedCarrierState
-    from mission.link import VehicleState
-    from mission.wire import GeoOrigin, PassengerStatus
+    from mission.bus.bridge import ReceivedCarrierState
+    from mission.mavlink.link import VehicleState
+    from mission.bus.wire import GeoOrigin, PassengerStatus
 
 
 class Request(StrEnum):
@@ -67,7 +67,7 @@ class Vehicle(Protocol):
     def arm(self) -> None: ...
 
     def set_mode(self, mode: str) -> None:
-        """Switch to PX4 mode ``mode`` (a name of :data:`mission.px4.MODES`)."""
+        """Switch to PX4 mode ``mode`` (a name of :data:`mission.mavlink.px4.MODES`)."""
         ...
 
     def hold(self) -> None: ...

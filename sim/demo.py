@@ -24,8 +24,8 @@ from pathlib import Path
 import click
 from tqdm import tqdm
 
-from mission.carrier_bridge import open_session
-from mission.config import ZenohSection, load_config
+from mission.bus.bridge import open_session
+from mission.config.schema import ZenohSection, load_config
 from mission.errors import MarsupialError
 from mission.lifetime import supervise_children
 from mission.phases import Phase
@@ -176,7 +176,7 @@ def run_demo(config: str, speed: float, pairs: int, log_root: Path, plot_path: s
              lockstep: bool = True) -> tuple[int, list[dict]]:
     """Run ``pairs`` marsupial pairs, in lockstep on each mock vehicle's simulated time or at
     ``speed``; return the exit code and each pair's summary."""
-    from mission.run_cli import plot as plot_command
+    from mission.cli.run import plot as plot_command
 
     supervise_children()  # a demo killed outright takes its processes with it
     log_root.mkdir(parents=True, exist_ok=True)

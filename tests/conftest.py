@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-import mission.mavlink_env  # noqa: F401  (sets MAVLINK20 before anything imports pymavlink's mavutil)
+import mission.mavlink.env  # noqa: F401  (sets MAVLINK20 before anything imports pymavlink's mavutil)
 from mission.lifetime import supervise_children
 from sim.net import LANE_ENV, free_port  # noqa: F401  (re-exported for the tests)
 

@@ -19,10 +19,10 @@ import numpy as np
 import zenoh
 
 from mission.carrier.controller import CarrierBackend, CarrierController
-from mission.carrier_bridge import describe_endpoints, keys, open_session
-from mission.clock import Clock, Downstream, LockstepClock, ScaledClock
-from mission.config import Config, load_config, with_overrides
-from mission.lockstep import MavlinkRelay, ZenohRelay, ZenohUpstream, clock_keys
+from mission.bus.bridge import describe_endpoints, keys, open_session
+from mission.time.clock import Clock, Downstream, LockstepClock, ScaledClock
+from mission.config.schema import Config, load_config, with_overrides
+from mission.time.lockstep import MavlinkRelay, ZenohRelay, ZenohUpstream, clock_keys
 
 log = logging.getLogger(__name__)
 
@@ -31,15 +31,15 @@ def open_backend(cfg: Config, clock: Clock, session: zenoh.Session, stack: ExitS
     """The backend of ``cfg.carrier.backend``, opened; closed by ``stack``."""
     backend: CarrierBackend
     if cfg.carrier.backend == "sim":
-        from mission.carrier.sim_robot import SimRobot
+        from mission.carrier.backends.sim import SimRobot
 
         backend = SimRobot(cfg, clock)
     elif cfg.carrier.backend == "mavlink":
-        from mission.carrier.mavlink_vehicle import MavlinkCarrier
+        from mission.carrier.backends.mavlink import MavlinkCarrier
 
         backend = MavlinkCarrier(cfg, clock)
     else:
-        from mission.carrier.ros2_link import Ros2Carrier
+        from mission.carrier.backends.ros2 import Ros2Carrier
 
         backend = Ros2Carrier(cfg, clock, session)
     stack.callback(backend.close)
@@ -52,12 +52,12 @@ def robot_relay(cfg: Config, session: zenoh.Session, backend: CarrierBackend) ->
     (``ros2-robot --lockstep``, rmw_zenoh keys) through its clock keys. None for the built-in
     robot (it is the carrier's own code)."""
     if cfg.carrier.backend == "mavlink":
-        from mission.carrier.mavlink_vehicle import MavlinkCarrier
+        from mission.carrier.backends.mavlink import MavlinkCarrier
 
         assert isinstance(backend, MavlinkCarrier)
         return MavlinkRelay(backend.link)
     if cfg.carrier.backend == "ros2":
-        from mission.carrier.ros2_link import Ros2Carrier, robot_clock_keys
+        from mission.carrier.backends.ros2 import Ros2Carrier, robot_clock_keys
 
         assert isinstance(backend, Ros2Carrier)
         if not backend.topics.rmw_zenoh:
@@ -74,7 +74,7 @@ def main(cfg: Config, speed: float = 1.0, duration_s: float | None = None, stop_
     write the summary (JSON) to ``summary_path`` if given; return exit code 0.
 
     ``lockstep`` (simulation): step on the mission controller's clock relay
-    (:mod:`mission.lockstep`) instead of a wall clock scaled by ``speed``; ``speed`` is then the
+    (:mod:`mission.time.lockstep`) instead of a wall clock scaled by ``speed``; ``speed`` is then the
     pace once the relay falls silent.
 
     SIGINT/SIGTERM set the stop event when called from the main thread. Raises
@@ -229,7 +229,7 @@ def startup_line(cfg: Config, speed: float) -> str:
 
 
 def ros2_keys_text(cfg: Config) -> str:
-    from mission.carrier.ros2_link import ros2_topics
+    from mission.carrier.backends.ros2 import ros2_topics
 
     t = ros2_topics(cfg.carrier.ros2)
     return f"odom {t.odom_sub}, cmd_vel {t.cmd_vel_pub}"

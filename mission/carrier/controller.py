@@ -6,14 +6,14 @@ Every period ``1 / carrier.rate_hz`` [s] of the injected clock the controller
 1. lets the backend advance (the built-in kinematic robot integrates its held command; a real
    vehicle moves on its own) and reads the carrier's own state (shared local NED frame);
 2. updates its mode from the passenger's newest status (:mod:`mission.carrier.modes`);
-3. decides the command: :func:`mission.tick.carrier_tick` (paper eq. 4, CBF filter, speed and
+3. decides the command: :func:`mission.core.tick.carrier_tick` (paper eq. 4, CBF filter, speed and
    acceleration limits), sped up gently while the carrier stands (``carrier.start_accel_m_s2``,
    :mod:`mission.carrier.start`), then :func:`~mission.carrier.tracking.track` (what the robot
    can do), then the P3 guard (:mod:`mission.carrier.guard`), whatever the mode;
-4. sends it to the backend and publishes a :class:`~mission.wire.CarrierState` for the passenger:
+4. sends it to the backend and publishes a :class:`~mission.bus.wire.CarrierState` for the passenger:
    a diff-drive or Ackermann carrier's velocity along its heading (no sideslip,
    :func:`~mission.carrier.tracking.along_heading`), with ``carrier.velocity_bias_tau_s`` made
-   consistent with its position (:mod:`mission.consistent_velocity`), and with
+   consistent with its position (:mod:`mission.core.consistent_velocity`), and with
    ``carrier.acceleration_tau_s`` its measured acceleration (:mod:`mission.carrier.acceleration`).
 
 Failsafes (each a stop: a zero command, still sent, so a PX4 vehicle stays in OFFBOARD and brakes)::
@@ -41,14 +41,14 @@ from mission.carrier.guard import GuardParams, P3Guard
 from mission.carrier.modes import CarrierMode, PassengerView, next_mode
 from mission.carrier.start import gentle_start
 from mission.carrier.tracking import Tracked, TrackingParams, along_heading, heading_of, track
-from mission.consistent_velocity import PositionConsistentVelocity
-from mission.carrier_bridge import CarrierPublisher, PassengerFeed
-from mission.clock import Clock, Periodic
-from mission.config import Config
+from mission.core.consistent_velocity import PositionConsistentVelocity
+from mission.bus.bridge import CarrierPublisher, PassengerFeed
+from mission.time.clock import Clock, Periodic
+from mission.config.schema import Config
 from mission.model import model_from_config
-from mission.zenoh_session import congestion_for
-from mission.tick import TickModel, carrier_tick
-from mission.wire import CarrierState
+from mission.bus.session import congestion_for
+from mission.core.tick import TickModel, carrier_tick
+from mission.bus.wire import CarrierState
 
 log = logging.getLogger(__name__)
 
@@ -369,7 +369,7 @@ class CarrierController:
         velocity = _pad3(fresh.velocity_ned_m_s[:self.dim])
         if self.tracking.kind != "holonomic" and fresh.yaw_rad is not None:
             velocity = along_heading(velocity, fresh.yaw_rad)  # no sideslip: the estimator's wander removed
-        if self._velocity_fix is not None:  # consistent with its position (mission.consistent_velocity)
+        if self._velocity_fix is not None:  # consistent with its position (mission.core.consistent_velocity)
             velocity = self._velocity_fix.update(fresh.t_s, _pad3(fresh.position_ned_m[:self.dim]), velocity)
         accel = None if self._acceleration is None else self._acceleration.update(fresh.t_s, velocity)
         out = CarrierState(fresh.t_s, self.seq, "local_ned", _pad3(fresh.position_ned_m[:self.dim]), velocity,

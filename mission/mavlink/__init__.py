@@ -9,5 +9,5 @@
   messages, the STATUSTEXT assembler and the immutable :class:`VehicleState` snapshot;
 * :mod:`~mission.mavlink.commands`: COMMAND_LONG's ACK / IN_PROGRESS / retry cycle and the
   HEARTBEAT confirmation of a mode or arming change, as state machines on the injected clock;
-* :mod:`mission.link`: the thin facade a mission uses (threads, identity, send, tlog).
+* :mod:`mission.mavlink.link`: the thin facade a mission uses (threads, identity, send, tlog).
 """

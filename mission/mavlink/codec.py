@@ -6,7 +6,7 @@ import time
 from collections.abc import Collection
 from typing import Any
 
-from mission.mavlink_env import mavlink
+from mission.mavlink.env import mavlink
 
 SIGNING_EPOCH_S = 1420070400  # 2015-01-01T00:00:00Z, the MAVLink 2 signing epoch
 

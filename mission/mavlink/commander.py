@@ -14,14 +14,14 @@ import threading
 from collections.abc import Iterator
 from typing import Any, Callable
 
-from mission import px4
+from mission.mavlink import px4
 from mission.errors import CommandRejected, LinkError, LinkTimeout
 from mission.mavlink.commands import CommandExchange, Confirmed, HeartbeatConfirmation, Step, refusal_reason
 from mission.mavlink.session import LinkSession
 from mission.mavlink.telemetry import VehicleState
-from mission.mavlink_env import mavlink
+from mission.mavlink.env import mavlink
 
-log = logging.getLogger("mission.link")
+log = logging.getLogger("mission.mavlink.link")
 
 
 class Commander:
@@ -111,7 +111,7 @@ class Commander:
                        float(px4.ARM_FORCE_MAGIC) if force else 0.0, timeout_s=timeout_s, retries=retries)
 
     def set_mode(self, mode: str, timeout_s: float = 0.5, retries: int = 3, confirm_timeout_s: float = 2.5) -> None:
-        """Switch the PX4 mode (name as in :data:`mission.px4.MODES`) and confirm it by HEARTBEAT.
+        """Switch the PX4 mode (name as in :data:`mission.mavlink.px4.MODES`) and confirm it by HEARTBEAT.
 
         Sends MAV_CMD_DO_SET_MODE(CUSTOM_MODE_ENABLED, main, sub). A first ACCEPTED ACK is not
         trusted: a later non-ACCEPTED ACK of the same command (PX4's double ACK) raises

@@ -15,7 +15,7 @@ twice (ACCEPTED from the MAVLink layer, then the real result), so an ACK alone i
       |  --a later non-ACCEPTED ACK of the same command------------> REJECTED
       `--confirm_timeout_s---------------------------------------> TIMED_OUT
 
-The caller (:class:`mission.link.VehicleLink`) sends, waits and raises; these only decide, from
+The caller (:class:`mission.mavlink.link.VehicleLink`) sends, waits and raises; these only decide, from
 the clock time, the ACKs received (an :class:`AckLog`) and the vehicle's state.
 """
 from __future__ import annotations
@@ -27,7 +27,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 from mission.mavlink.telemetry import VehicleState
-from mission.mavlink_env import mavlink
+from mission.mavlink.env import mavlink
 
 MAV_RESULT_ACCEPTED = mavlink.MAV_RESULT_ACCEPTED
 MAV_RESULT_IN_PROGRESS = mavlink.MAV_RESULT_IN_PROGRESS

@@ -8,11 +8,11 @@ import logging
 import threading
 from typing import Any, Callable
 
-from mission.clock import Clock
+from mission.time.clock import Clock
 from mission.errors import LinkError
-from mission.mavlink_env import mavlink
+from mission.mavlink.env import mavlink
 
-log = logging.getLogger("mission.link")
+log = logging.getLogger("mission.mavlink.link")
 
 
 def our_heartbeat() -> Any:

@@ -12,9 +12,9 @@ from __future__ import annotations
 
 import logging
 
-from mission.mavlink_env import mavlink
+from mission.mavlink.env import mavlink
 
-log = logging.getLogger("mission.link")
+log = logging.getLogger("mission.mavlink.link")
 
 #: MAV_TYPEs of a vehicle (what PX4 flies or drives; the passenger UAV and a PX4 rover or boat
 #: carrier share this link code): fixed wing 1, quadrotor 2, coaxial 3, helicopter 4, airship 7,

@@ -19,9 +19,9 @@ from mission.mavlink.identity import Adoption
 from mission.mavlink.session import LinkSession
 from mission.mavlink.telemetry import StatusTextAssembler
 from mission.mavlink.transport import Address, Transport
-from mission.mavlink_env import mavlink
+from mission.mavlink.env import mavlink
 
-log = logging.getLogger("mission.link")
+log = logging.getLogger("mission.mavlink.link")
 
 WALL_SLICE_S = 0.05  # longest wall-clock block in the transport [s], so a stop is prompt
 

@@ -7,7 +7,7 @@ import threading
 from dataclasses import dataclass, fields
 from typing import Callable
 
-from mission.clock import Clock
+from mission.time.clock import Clock
 from mission.errors import LinkError, LinkTimeout
 from mission.mavlink import telemetry
 from mission.mavlink.commands import AckLog

@@ -6,8 +6,8 @@ from typing import Any
 
 import numpy as np
 
-from mission import px4
-from mission.mavlink_env import mavlink
+from mission.mavlink import px4
+from mission.mavlink.env import mavlink
 
 FLOAT32_MAX = float(np.finfo(np.float32).max)
 

@@ -16,8 +16,8 @@ from typing import Any
 
 import numpy as np
 
-from mission import px4
-from mission.mavlink_env import mavlink
+from mission.mavlink import px4
+from mission.mavlink.env import mavlink
 
 STATUSTEXT_CHUNK_LEN = 50
 
@@ -47,7 +47,7 @@ class VehicleState:
     armed: bool
     """HEARTBEAT base_mode has MAV_MODE_FLAG_SAFETY_ARMED."""
     mode: str
-    """PX4 mode name (:func:`mission.px4.mode_name`), e.g. ``"OFFBOARD"``; ``""`` before a HEARTBEAT."""
+    """PX4 mode name (:func:`mission.mavlink.px4.mode_name`), e.g. ``"OFFBOARD"``; ``""`` before a HEARTBEAT."""
     custom_mode: int
     """Raw HEARTBEAT custom_mode."""
     base_mode: int

@@ -8,7 +8,7 @@ import time
 from pathlib import Path
 from typing import IO
 
-from mission.clock import Clock
+from mission.time.clock import Clock
 
 
 class Tlog:

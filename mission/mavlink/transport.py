@@ -131,7 +131,7 @@ class SerialTransport:
     datagram = False
 
     def __init__(self, device: str, baud: int) -> None:
-        from mission.mavlink_env import mavutil
+        from mission.mavlink.env import mavutil
 
         self._conn: Any = mavutil.mavlink_connection(device, baud=baud, autoreconnect=False)
 

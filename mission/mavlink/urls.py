@@ -5,7 +5,7 @@
 ``HOST:PORT`` alone takes a default scheme; an empty host (``:14540``) is 127.0.0.1; a serial
 device ``/dev/ttyACM0[:BAUD]``, ``serial:/dev/ttyACM0[:BAUD]`` or ``COM3`` (57600 baud by
 default). The transports that open them are in :mod:`mission.mavlink.transport`; the
-configuration checks them with the same parser (:mod:`mission.config_fields`).
+configuration checks them with the same parser (:mod:`mission.config.fields`).
 """
 from __future__ import annotations
 

@@ -22,9 +22,9 @@ from pathlib import Path
 import pytest
 
 from mission.cli import main
-from mission.config import load_config
+from mission.config.schema import load_config
 from mission.errors import ConfigError
-from mission.run_cli import check_config
+from mission.cli.run import check_config
 from tests.conftest import CONFIGS
 
 DEMO = (CONFIGS / "demo.toml").read_text()

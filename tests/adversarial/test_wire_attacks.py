@@ -31,8 +31,8 @@ from typing import Any
 import pytest
 import zenoh
 
-from mission import px4
-from mission.mavlink_env import mavlink
+from mission.mavlink import px4
+from mission.mavlink.env import mavlink
 from tests.faults.procs import DEMO, Flight, assert_safe_end, flight, wait_for
 from tests.faults.test_matrix import assert_completed, assert_exit, assert_never_disarmed_in_the_air, concurrently
 

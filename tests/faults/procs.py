@@ -27,12 +27,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from mission import px4
-from mission.carrier_bridge import open_session
-from mission.config import ZenohSection
+from mission.mavlink import px4
+from mission.bus.bridge import open_session
+from mission.config.schema import ZenohSection
 from sim.net import stop_process, wait_for
-from sim.vehicle import spawn_process
-from sim.vehicle_probe import Probe, connect
+from sim.vehicle.mock import spawn_process
+from sim.testing.probe import Probe, connect
 from tests.conftest import CONFIGS, free_port
 
 SPEED = 5.0

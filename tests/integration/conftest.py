@@ -5,7 +5,7 @@ from collections.abc import Iterator
 
 import pytest
 
-from sim.vehicle_probe import Probe
+from sim.testing.probe import Probe
 
 
 @pytest.fixture

@@ -14,17 +14,17 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterator
 
-from mission.carrier_bridge import open_session
-from mission.clock import LockstepClock, ScaledClock
-from mission.config import Config, load_config, with_overrides
+from mission.bus.bridge import open_session
+from mission.time.clock import LockstepClock, ScaledClock
+from mission.config.schema import Config, load_config, with_overrides
 from mission.controller import MissionController, MissionOutcome, mission_info
-from mission.link import VehicleLink
-from mission.run_cli import mission_io
-from mission.lockstep import ZenohUpstream, clock_keys
-from mission.log import FlightRecorder
+from mission.mavlink.link import VehicleLink
+from mission.cli.run import mission_io
+from mission.time.lockstep import ZenohUpstream, clock_keys
+from mission.record import FlightRecorder
 from mission.phases import Phase
-from sim.carrier import CarrierSim
-from sim.vehicle import MockVehicle, VehicleOptions
+from sim.robots.carrier import CarrierSim
+from sim.vehicle.mock import MockVehicle, VehicleOptions
 from sim.net import free_port, wait_for
 from tests.conftest import CONFIGS
 

@@ -1,4 +1,4 @@
-"""The test as the upstream of a process's lockstep clock (:class:`mission.clock.LockstepClock`):
+"""The test as the upstream of a process's lockstep clock (:class:`mission.time.clock.LockstepClock`):
 what the mission's clock relay is to the carrier in a flight, for tests that drive one
 component in simulated time."""
 from __future__ import annotations
@@ -7,7 +7,7 @@ import threading
 from collections.abc import Callable
 from typing import Any
 
-from mission.clock import LockstepClock
+from mission.time.clock import LockstepClock
 
 
 class Stepper:

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from mission.carrier_bridge import (
+from mission.bus.bridge import (
     CarrierFeed,
     CarrierPublisher,
     PassengerFeed,
@@ -17,11 +17,11 @@ from mission.carrier_bridge import (
     open_session,
     zenoh_config,
 )
-from mission.clock import ManualClock, ScaledClock
-from mission.config import ZenohSection, from_dict
+from mission.time.clock import ManualClock, ScaledClock
+from mission.config.schema import ZenohSection, from_dict
 from mission.errors import BusError, ConfigError, PortInUse
-from mission.wire import CarrierState, GeoOrigin, PassengerStatus
-from mission.wire_ros2 import encode_odometry_cdr, ros2dds_odom_key
+from mission.bus.wire import CarrierState, GeoOrigin, PassengerStatus
+from mission.bus.ros2 import encode_odometry_cdr, ros2dds_odom_key
 from tests.integration.zenoh_util import LENIENT, endpoint, free_port, peer, peer_pair, wait_for, wait_matched
 
 pytestmark = pytest.mark.timeout(30)

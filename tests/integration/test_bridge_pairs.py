@@ -11,9 +11,9 @@ import contextlib
 
 import pytest
 
-from mission.carrier_bridge import CarrierFeed, CarrierPublisher, PassengerFeed, PassengerPublisher
-from mission.clock import ManualClock
-from mission.wire import CarrierState, PassengerStatus
+from mission.bus.bridge import CarrierFeed, CarrierPublisher, PassengerFeed, PassengerPublisher
+from mission.time.clock import ManualClock
+from mission.bus.wire import CarrierState, PassengerStatus
 from tests.integration.zenoh_util import LENIENT, endpoint, free_port, peer, wait_for
 
 pytestmark = pytest.mark.timeout(30)

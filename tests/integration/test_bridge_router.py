@@ -6,9 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mission.carrier_bridge import CarrierFeed, CarrierPublisher, PassengerFeed, PassengerPublisher
-from mission.clock import ManualClock
-from mission.wire import CarrierState, PassengerStatus
+from mission.bus.bridge import CarrierFeed, CarrierPublisher, PassengerFeed, PassengerPublisher
+from mission.time.clock import ManualClock
+from mission.bus.wire import CarrierState, PassengerStatus
 from tests.integration.zenoh_util import LENIENT, endpoint, free_port, peer, wait_for
 
 pytestmark = pytest.mark.timeout(30)

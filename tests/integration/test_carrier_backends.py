@@ -4,7 +4,7 @@ under both key forms. A scripted passenger talks to the carrier over Zenoh.
 
 The rover flights run in lockstep: the test is the carrier clock's upstream (:class:`Stepper`,
 what the mission's clock relay is in a flight) and the rover steps on the carrier's clock
-(:class:`mission.lockstep.MavlinkRelay`), so they do not depend on the machine's load. The ROS 2
+(:class:`mission.time.lockstep.MavlinkRelay`), so they do not depend on the machine's load. The ROS 2
 robot runs in real time at 3x."""
 from __future__ import annotations
 
@@ -19,15 +19,15 @@ import zenoh
 
 from mission.carrier.controller import CarrierController
 from mission.carrier.modes import CarrierMode
-from mission.carrier.mavlink_vehicle import MavlinkCarrier
-from mission.carrier.ros2_link import RmwAttachment, Ros2Carrier, rmw_sequence, robot_clock_keys, ros2_topics
-from mission.carrier_bridge import CarrierFeed, PassengerPublisher
-from mission.clock import Clock, LockstepClock, ScaledClock
-from mission.lockstep import MavlinkRelay, ZenohRelay, ZenohUpstream
-from mission.config import Config, from_dict
-from mission.wire import PassengerStatus
-from sim.ros2_robot import Ros2RobotSim
-from sim.vehicle import MockVehicle, VehicleOptions
+from mission.carrier.backends.mavlink import MavlinkCarrier
+from mission.carrier.backends.ros2 import RmwAttachment, Ros2Carrier, rmw_sequence, robot_clock_keys, ros2_topics
+from mission.bus.bridge import CarrierFeed, PassengerPublisher
+from mission.time.clock import Clock, LockstepClock, ScaledClock
+from mission.time.lockstep import MavlinkRelay, ZenohRelay, ZenohUpstream
+from mission.config.schema import Config, from_dict
+from mission.bus.wire import PassengerStatus
+from sim.robots.ros2 import Ros2RobotSim
+from sim.vehicle.mock import MockVehicle, VehicleOptions
 from tests.integration.stepper import Stepper
 from tests.integration.zenoh_util import peer_pair, wait_for
 
@@ -302,7 +302,7 @@ def test_ros2_robot_follows_the_law_and_stops_outside_the_guard(key_form: str, k
 
 
 def test_ros2_keys_of_both_forms() -> None:
-    from mission.config import CarrierRos2Section
+    from mission.config.schema import CarrierRos2Section
 
     dds = ros2_topics(CarrierRos2Section(namespace="/robot1/"))
     assert (dds.odom_sub, dds.cmd_vel_pub) == ("robot1/odom", "robot1/cmd_vel")
@@ -323,7 +323,7 @@ def test_ros2_keys_of_both_forms() -> None:
 def test_px4_carrier_in_the_shared_frame_through_its_ekf_origin() -> None:
     """carrier.mavlink.shared_origin: the rover's EKF origin lies 10 m north and 5 m east of the
     shared frame's origin, so its LOCAL_POSITION_NED (0, 0) is (10, 5) in the shared frame."""
-    from mission.wire import GeoOrigin, ned_to_geodetic
+    from mission.bus.wire import GeoOrigin, ned_to_geodetic
 
     shared = (47.397742, 8.545594, 488.0)
     home = ned_to_geodetic(np.array([10.0, 5.0, 0.0]), GeoOrigin(*shared))

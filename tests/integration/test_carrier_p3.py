@@ -7,12 +7,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mission.clock import ManualClock
-from mission.config import Config, from_dict
-from mission.wire import PassengerStatus
+from mission.time.clock import ManualClock
+from mission.config.schema import Config, from_dict
+from mission.bus.wire import PassengerStatus
 from mission.carrier.controller import CarrierController
-from mission.carrier.sim_robot import SimRobot
-from sim.carrier import CarrierMode, CarrierSim
+from mission.carrier.backends.sim import SimRobot
+from sim.robots.carrier import CarrierMode, CarrierSim
 from tests.integration.test_carrier_sim import TARGET, Passenger, _seen, sessions
 from tests.integration.zenoh_util import wait_for
 

@@ -16,12 +16,12 @@ import numpy as np
 import pytest
 import zenoh
 
-from mission.carrier_bridge import CarrierFeed, PassengerPublisher, keys
+from mission.bus.bridge import CarrierFeed, PassengerPublisher, keys
 from mission.cli import main as cli_main
-from mission.clock import Clock, LockstepClock, ManualClock, ScaledClock
-from mission.config import Config, from_dict
-from mission.wire import CarrierState, PassengerStatus, decode_carrier_json
-from sim.carrier import CarrierMode, CarrierSim
+from mission.time.clock import Clock, LockstepClock, ManualClock, ScaledClock
+from mission.config.schema import Config, from_dict
+from mission.bus.wire import CarrierState, PassengerStatus, decode_carrier_json
+from sim.robots.carrier import CarrierMode, CarrierSim
 from tests.integration.stepper import Stepper
 from tests.integration.zenoh_util import endpoint, free_port, peer, wait_for
 

@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from mission.carrier.controller import CarrierController
-from mission.carrier.sim_robot import SimRobot
+from mission.carrier.backends.sim import SimRobot
 from mission.carrier.tracking import Tracked
-from mission.clock import ManualClock
-from mission.config import Config, from_dict
+from mission.time.clock import ManualClock
+from mission.config.schema import Config, from_dict
 from tests.integration.test_carrier_sim import TARGET, Passenger, _seen, sessions
 from tests.integration.zenoh_util import wait_for
 

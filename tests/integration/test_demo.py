@@ -8,8 +8,8 @@ import sys
 
 import pytest
 
-from mission.config import load_config
-from sim.closed_loop import simulate_config
+from mission.config.schema import load_config
+from sim.batch.closed_loop import simulate_config
 from tests.conftest import CONFIGS
 
 DEMO = CONFIGS / "demo.toml"

@@ -21,15 +21,15 @@ from collections.abc import Callable, Iterator
 
 import pytest
 
-from mission import px4
-from mission.carrier_bridge import CarrierFeed, keys
-from mission.clock import ManualClock, ScaledClock
-from mission.link import VehicleLink
-from mission.mavlink_env import mavlink
-from mission.wire import CarrierState, encode_carrier_json
-from mission.wire_ros2 import encode_odometry_cdr
-from sim.vehicle import MockVehicle, VehicleOptions
-from sim.vehicle_probe import Probe
+from mission.mavlink import px4
+from mission.bus.bridge import CarrierFeed, keys
+from mission.time.clock import ManualClock, ScaledClock
+from mission.mavlink.link import VehicleLink
+from mission.mavlink.env import mavlink
+from mission.bus.wire import CarrierState, encode_carrier_json
+from mission.bus.ros2 import encode_odometry_cdr
+from sim.vehicle.mock import MockVehicle, VehicleOptions
+from sim.testing.probe import Probe
 from tests.integration.zenoh_util import LENIENT, peer_pair, wait_for, wait_matched
 
 SCALE = max(1, int(os.environ.get("MARSUPIAL_FUZZ_SCALE", "1")))

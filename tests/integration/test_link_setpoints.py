@@ -6,12 +6,12 @@ import math
 import numpy as np
 import pytest
 
-from mission import px4
-from mission.clock import ManualClock, ScaledClock
+from mission.mavlink import px4
+from mission.time.clock import ManualClock, ScaledClock
 from mission.errors import CommandRejected
-from mission.link import VehicleLink
+from mission.mavlink.link import VehicleLink
 from sim.net import wait_for as eventually
-from sim.fake_px4 import FakePx4 as Px4Peer
+from sim.testing.fake_px4 import FakePx4 as Px4Peer
 
 ANY_PORT = "udpin:127.0.0.1:0"
 

@@ -1,4 +1,4 @@
-"""VehicleLink flying the PX4-like mock vehicle (sim/vehicle.py) over real loopback UDP.
+"""VehicleLink flying the PX4-like mock vehicle (sim/vehicle/mock.py) over real loopback UDP.
 
 Both ends share the speed factor, so times below are simulated seconds of the link clock.
 Setpoints are streamed from a thread of the test, as the controller's loop would, while the
@@ -12,11 +12,11 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from mission import px4
-from mission.clock import Periodic, ScaledClock
+from mission.mavlink import px4
+from mission.time.clock import Periodic, ScaledClock
 from mission.errors import CommandRejected
-from mission.link import VehicleLink
-from sim.vehicle import MockVehicle, VehicleOptions
+from mission.mavlink.link import VehicleLink
+from sim.vehicle.mock import MockVehicle, VehicleOptions
 from sim.net import wait_for as eventually
 
 SPEED = 10.0

@@ -11,11 +11,11 @@ import json
 
 import numpy as np
 import pytest
-from mission.mavlink_env import mavutil
+from mission.mavlink.env import mavutil
 
-from mission.log import read_record
+from mission.record import read_record
 from mission.phases import AbortReason, Phase
-from sim.vehicle import FaultOptions
+from sim.vehicle.mock import FaultOptions
 from tests.integration.mission_harness import flying_pair, wait_for
 
 pytestmark = pytest.mark.slow

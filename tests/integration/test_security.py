@@ -18,13 +18,13 @@ from typing import Any
 import pytest
 import zenoh
 
-from mission import px4
-from mission.carrier_bridge import zenoh_config
-from mission.config import Config, MavlinkSection, ZenohSection
-from mission.link import DEFAULT_URL, VehicleLink
-from mission.mavlink_env import mavlink
-from sim.vehicle import VehicleOptions
-from sim.vehicle_cli import mock_vehicle
+from mission.mavlink import px4
+from mission.bus.bridge import zenoh_config
+from mission.config.schema import Config, MavlinkSection, ZenohSection
+from mission.mavlink.link import DEFAULT_URL, VehicleLink
+from mission.mavlink.env import mavlink
+from sim.vehicle.mock import VehicleOptions
+from sim.vehicle.cli import mock_vehicle
 from tests.conftest import ROOT, free_port
 from tests.faults.procs import SPEED, assert_log_complete, flight, wait_for
 

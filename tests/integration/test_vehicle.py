@@ -12,10 +12,10 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from mission import px4
+from mission.mavlink import px4
 from sim.net import wait_for
-from sim.vehicle import PHYSICS_DT_S, MockVehicle, VehicleSnapshot
-from sim.vehicle_probe import Lockstep, Probe, SetpointStream, connect, sleep_until, start_offboard, vehicle_for, wait_flight
+from sim.vehicle.mock import PHYSICS_DT_S, MockVehicle, VehicleSnapshot
+from sim.testing.probe import Lockstep, Probe, SetpointStream, connect, sleep_until, start_offboard, vehicle_for, wait_flight
 
 pytestmark = pytest.mark.timeout(30)
 
@@ -366,8 +366,8 @@ def _fly_script(speed: float) -> tuple[float, list[tuple[float, Velocity]], np.n
 def _replay(t_armed: float, taken: list[tuple[float, Velocity]], t_end: float) -> np.ndarray:
     """The same setpoints at the same simulated times on a vehicle whose clock the test moves
     (no wall clock at all): what simulated time alone prescribes. Returns (t_s, position, velocity)."""
-    from mission.clock import ManualClock
-    from sim.vehicle import VehicleOptions
+    from mission.time.clock import ManualClock
+    from sim.vehicle.mock import VehicleOptions
 
     clock = ManualClock()
     with Probe() as probe, MockVehicle(VehicleOptions(bind="127.0.0.1:0", target=f"127.0.0.1:{probe.port}"), clock=clock) as v:
@@ -457,8 +457,8 @@ def test_estimate_drift_wanders_the_reported_position_and_px4_flies_the_estimate
 def test_an_injected_clock_is_the_vehicles_time(probe: Probe) -> None:
     """The vehicle flies on the clock it is given: on a ManualClock nothing happens until the
     test moves it (HEARTBEAT at 1 Hz simulated: those of t = 0, 1, 2 s, and no more)."""
-    from mission.clock import ManualClock, ScaledClock
-    from sim.vehicle import VehicleOptions
+    from mission.time.clock import ManualClock, ScaledClock
+    from sim.vehicle.mock import VehicleOptions
 
     clock = ManualClock()
     options = VehicleOptions(bind="127.0.0.1:0", target=f"127.0.0.1:{probe.port}")

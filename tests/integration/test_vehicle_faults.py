@@ -9,11 +9,11 @@ import time
 import numpy as np
 import pytest
 
-from mission import px4
-from mission.mavlink_env import mavlink
+from mission.mavlink import px4
+from mission.mavlink.env import mavlink
 from sim.net import wait_for
-from sim.vehicle import FaultOptions, VehicleOptions
-from sim.vehicle_probe import Probe, connect, start_offboard, vehicle_for, wait_flight
+from sim.vehicle.mock import FaultOptions, VehicleOptions
+from sim.testing.probe import Probe, connect, start_offboard, vehicle_for, wait_flight
 
 pytestmark = pytest.mark.timeout(30)
 KEY = bytes(range(32))

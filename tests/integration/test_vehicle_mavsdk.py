@@ -8,7 +8,7 @@ from collections.abc import Iterator
 import pytest
 
 from sim.net import free_port, wait_for
-from sim.vehicle import MockVehicle, VehicleOptions
+from sim.vehicle.mock import MockVehicle, VehicleOptions
 
 mavsdk = pytest.importorskip("mavsdk")
 from mavsdk import ComponentType, Configuration, ConnectionResult, Mavsdk  # noqa: E402

@@ -13,14 +13,16 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from mission import geodesy, px4
-from mission.mavlink_env import mavlink
+from mission.core import geodesy
+
+from mission.mavlink import px4
+from mission.mavlink.env import mavlink
 from sim.net import wait_for
-from sim.vehicle import FaultOptions, MockVehicle, VehicleOptions, spawn_process
-from sim.vehicle_cli import mock_vehicle, read_signing_key
-from sim.vehicle_link import parse_endpoint
-from sim.vehicle_params import PARAM_SPECS, pack_int32, unpack_int32
-from sim.vehicle_probe import Lockstep, Probe, SetpointStream, connect, start_offboard, vehicle_for, wait_flight
+from sim.vehicle.mock import FaultOptions, MockVehicle, VehicleOptions, spawn_process
+from sim.vehicle.cli import mock_vehicle, read_signing_key
+from sim.vehicle.endpoints import parse_endpoint
+from sim.vehicle.params import PARAM_SPECS, pack_int32, unpack_int32
+from sim.testing.probe import Lockstep, Probe, SetpointStream, connect, start_offboard, vehicle_for, wait_flight
 
 pytestmark = pytest.mark.timeout(30)
 NAN = math.nan

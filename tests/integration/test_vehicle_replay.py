@@ -15,11 +15,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mission import px4
-from mission.mavlink_env import mavlink
-from sim.px4_replay import FIRST_REPLAYED_SEGMENT, Recording, compare, load_recording, rms_by_segment
-from sim.vehicle_physics import Limits
-from sim.vehicle_probe import Lockstep, Probe, connect, vehicle_for
+from mission.mavlink import px4
+from mission.mavlink.env import mavlink
+from sim.sitl.replay import FIRST_REPLAYED_SEGMENT, Recording, compare, load_recording, rms_by_segment
+from sim.vehicle.physics.multicopter import Limits
+from sim.testing.probe import Lockstep, Probe, connect, vehicle_for
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(120)]
 

@@ -7,9 +7,9 @@ from collections.abc import Iterator
 
 import zenoh
 
-from mission.carrier_bridge import open_session
-from mission.config import ZenohSection
-from mission.feed_gate import GateLimits
+from mission.bus.bridge import open_session
+from mission.config.schema import ZenohSection
+from mission.bus.gate import GateLimits
 from sim.net import free_port, wait_for  # noqa: F401  (re-exported for the tests)
 
 

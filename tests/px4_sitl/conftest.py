@@ -25,7 +25,7 @@ from typing import Any
 
 import pytest
 
-from sim.px4_sitl import unavailable_reason
+from sim.sitl.px4 import unavailable_reason
 
 Job = Callable[[Path, Path], Any]
 JOBS: dict[str, tuple[Job, int]] = {}  # name -> (flight, PX4 instances it runs)
@@ -57,7 +57,7 @@ def px4_jobs(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFa
     why = unavailable_reason()
     if why:
         pytest.skip(why)
-    from sim.px4_sitl import build_dir
+    from sim.sitl.px4 import build_dir
 
     build = build_dir()
     names = request.config.stash.get(_SELECTED, [])

@@ -9,7 +9,7 @@ Skipped unless ``MARSUPIAL_PX4_SITL`` names a PX4 SITL build (a folder with ``bi
 Each PX4 runs under ``unshare -m`` with a private ``/tmp``: PX4 keeps a lock socket per instance
 number in ``/tmp``, which network namespaces do not separate, so another PX4 of the same instance
 elsewhere on the machine would make ours exit at once. (It starts its two PX4s itself rather than
-through :mod:`sim.px4_sitl`, which flies one vehicle per namespace.)
+through :mod:`sim.sitl.px4`, which flies one vehicle per namespace.)
 """
 from __future__ import annotations
 
@@ -27,12 +27,12 @@ import numpy as np
 import pytest
 
 from sim.net import stop_process, wait_for
-from sim.px4_sitl import QUAD_AIRFRAME, NetNamespace, Px4Sitl
+from sim.sitl.px4 import QUAD_AIRFRAME, NetNamespace, Px4Sitl
 from tests.px4_sitl.conftest import px4_job
 
 ROOT = Path(__file__).resolve().parents[2]
 CONFIG = ROOT / "configs" / "px4_sitl_rover.toml"
-# Skipped, with the reason, by the px4_jobs fixture (sim.px4_sitl.unavailable_reason).
+# Skipped, with the reason, by the px4_jobs fixture (sim.sitl.px4.unavailable_reason).
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(240)]
 
 

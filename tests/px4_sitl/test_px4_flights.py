@@ -1,5 +1,5 @@
 """The mission flown on a real PX4 SITL (SIH quadrotor), each flight a fresh PX4 in its own
-network namespace, stopped by its pid (:mod:`sim.px4_sitl`). About 40 s of wall time each; the
+network namespace, stopped by its pid (:mod:`sim.sitl.px4`). About 40 s of wall time each; the
 flights fly at once (``conftest.px4_jobs``), each test checks its own.
 
 PX4's clock is measured against ours in every flight (from the flight's tlog) and must stay near
@@ -13,9 +13,9 @@ from pathlib import Path
 
 import pytest
 
-from mission import px4
-from mission.config import load_config
-from sim.px4_sitl import clock_ratio, px4_flight
+from mission.mavlink import px4
+from mission.config.schema import load_config
+from sim.sitl.px4 import clock_ratio, px4_flight
 from sim.net import wait_for
 from tests.conftest import CONFIGS
 from tests.px4_sitl.conftest import px4_job

@@ -2,7 +2,7 @@
 
 In the spirit of the PX4 ROS 2 Interface Library's fake autopilot: the controller talks to it
 through the same narrow ports (:mod:`mission.ports`) as to the MAVLink link and the Zenoh feed,
-on a :class:`~mission.clock.ManualClock`, so a whole mission runs in a fraction of a second and
+on a :class:`~mission.time.clock.ManualClock`, so a whole mission runs in a fraction of a second and
 every test is deterministic. Physics are the simplest that fly: the vehicle's velocity is the last
 setpoint while in OFFBOARD (zero otherwise), the carrier drives at ``carrier_speed_m_s`` towards
 the target while the passenger's published phase is RIDING and stands otherwise (as the carrier
@@ -15,12 +15,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from mission import px4
-from mission.carrier_bridge import ReceivedCarrierState
-from mission.clock import ManualClock
+from mission.mavlink import px4
+from mission.bus.bridge import ReceivedCarrierState
+from mission.time.clock import ManualClock
 from mission.errors import CommandRejected
-from mission.link import VehicleState
-from mission.wire import CarrierState, GeoOrigin, PassengerStatus
+from mission.mavlink.link import VehicleState
+from mission.bus.wire import CarrierState, GeoOrigin, PassengerStatus
 
 
 @dataclass

@@ -6,11 +6,11 @@ import json
 import numpy as np
 import pytest
 
-from mission.config import from_dict, load_config
-from mission.law import LawParams, norm
-from mission.safety import Obstacles, SafetyConfig
-from mission.tick import TickModel
-from sim.closed_loop import model_from_config, random_scenarios, simulate, simulate_config
+from mission.config.schema import from_dict, load_config
+from mission.core.law import LawParams, norm
+from mission.core.safety import Obstacles, SafetyConfig
+from mission.core.tick import TickModel
+from sim.batch.closed_loop import model_from_config, random_scenarios, simulate, simulate_config
 from tests.conftest import CONFIGS
 
 

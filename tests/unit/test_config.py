@@ -6,7 +6,7 @@ import sys
 
 import pytest
 
-from mission.config import from_dict, load_config, with_overrides
+from mission.config.schema import from_dict, load_config, with_overrides
 from mission.errors import ConfigError
 from tests.conftest import CONFIGS
 
@@ -70,7 +70,7 @@ def _rule_cases() -> list[tuple[str, object, str]]:
 
     from annotated_types import Ge, Gt, Le, Lt, MaxLen, MinLen
 
-    from mission.config import Config
+    from mission.config.schema import Config
 
     cases: list[tuple[str, object, str]] = []
     for section, sfield in Config.model_fields.items():
@@ -120,7 +120,7 @@ RULE_CASES = _rule_cases()
 
 
 def test_rule_table_covers_every_constrained_field():
-    from mission.config import Config
+    from mission.config.schema import Config
 
     constrained = {f"{s}.{n}" for s, sf in Config.model_fields.items() for n, f in sf.annotation.model_fields.items()  # type: ignore[union-attr]
                    if f.metadata}

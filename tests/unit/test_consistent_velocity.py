@@ -1,4 +1,4 @@
-"""A velocity made consistent with its position (mission.consistent_velocity): a biased
+"""A velocity made consistent with its position (mission.core.consistent_velocity): a biased
 velocity is corrected to the position's rate with the time constant; an exact one is untouched."""
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from mission.consistent_velocity import PositionConsistentVelocity
+from mission.core.consistent_velocity import PositionConsistentVelocity
 
 
 def test_a_velocity_that_says_less_than_the_position_moves_is_corrected_to_the_position_s_rate() -> None:

@@ -4,11 +4,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mission.clock import ManualClock
-from mission.config import load_config, with_overrides
+from mission.time.clock import ManualClock
+from mission.config.schema import load_config, with_overrides
 from mission.controller import CommandWorker, MissionController, TickReport
 from mission.errors import LinkError
-from mission.law import norm
+from mission.core.law import norm
 from mission.phases import AbortReason, Phase
 from mission.ports import Request
 from tests.conftest import CONFIGS

@@ -7,9 +7,9 @@ import json
 import numpy as np
 from click.testing import CliRunner
 
-from mission.log import FlightRecorder
-from mission.run_cli import plot
-from mission.run_report import event_line
+from mission.record import FlightRecorder
+from mission.cli.run import plot
+from mission.report import event_line
 from sim.demo import PHASE_STEPS, PairProgress, phase_step
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mission.feed_gate import FeedGate, GateLimits, Sample, implausible
+from mission.bus.gate import FeedGate, GateLimits, Sample, implausible
 
 LIMITS = GateLimits(max_speed_m_s=2.0)
 RATE_HZ = 30.0

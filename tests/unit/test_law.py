@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from mission.errors import AssumptionError, ConfigError
-from mission.law import LawParams, carrier_command, check_assumptions, norm, passenger_command, potential, project_planar
+from mission.core.law import LawParams, carrier_command, check_assumptions, norm, passenger_command, potential, project_planar
 
 P = LawParams()
 

@@ -33,7 +33,7 @@ def test_mission_imports_nothing_from_sim_or_bench():
 
 
 def test_flying_loads_no_simulator_module():
-    code = ("import sys, mission.cli, mission.run_cli, mission.controller, mission.link, mission.carrier_bridge; "
+    code = ("import sys, mission.cli, mission.cli.run, mission.controller, mission.mavlink.link, mission.bus.bridge; "
             "print(sorted(m for m in sys.modules if m.split('.')[0] in ('sim', 'bench')))")
     out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
@@ -84,8 +84,8 @@ def test_the_size_guard_can_fail():
 
 # The pure core: loading it imports no I/O (a function may still import what it needs when called,
 # e.g. the config's key-expression check asks Zenoh's parser).
-PURE = ("mission.law", "mission.safety", "mission.tick", "mission.tracking", "mission.phases", "mission.phase_types",
-        "mission.reference_phases", "mission.feed_gate", "mission.wire", "mission.config", "sim.closed_loop")
+PURE = ("mission.core.law", "mission.core.safety", "mission.core.tick", "mission.core.tracking", "mission.phases", "mission.phases.types",
+        "mission.phases.flying", "mission.bus.gate", "mission.bus.wire", "mission.config.schema", "sim.batch.closed_loop")
 IO_MODULES = {"socket", "select", "selectors", "threading", "time", "subprocess", "signal", "asyncio", "zenoh",
               "pymavlink", "serial"}
 
@@ -133,4 +133,4 @@ def io_loaded_by(module: str) -> dict[str, list[str]]:
 
 def test_the_pure_core_loads_no_io():
     assert {m: io_loaded_by(m) for m in PURE if io_loaded_by(m)} == {}
-    assert io_loaded_by("mission.link")  # the check can see I/O: the link is made of it
+    assert io_loaded_by("mission.mavlink.link")  # the check can see I/O: the link is made of it

@@ -4,7 +4,7 @@ from __future__ import annotations
 import threading
 import time
 
-from mission.clock import LockstepClock, start_thread
+from mission.time.clock import LockstepClock, start_thread
 from tests.integration.stepper import Stepper
 
 

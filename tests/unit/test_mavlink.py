@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from mission import px4
-from mission.clock import ManualClock
+from mission.mavlink import px4
+from mission.time.clock import ManualClock
 from mission.mavlink import telemetry
 from mission.mavlink.commands import (
     AckLog,
@@ -19,7 +19,7 @@ from mission.mavlink.commands import (
     refusal_reason,
 )
 from mission.mavlink.urls import Endpoint, parse_url
-from mission.mavlink_env import mavlink
+from mission.mavlink.env import mavlink
 
 IN_PROGRESS, ACCEPTED, DENIED = mavlink.MAV_RESULT_IN_PROGRESS, mavlink.MAV_RESULT_ACCEPTED, mavlink.MAV_RESULT_DENIED
 SET_MODE = mavlink.MAV_CMD_DO_SET_MODE

@@ -5,8 +5,8 @@ import math
 
 import pytest
 
-from sim.mc_position_control import GRAVITY_M_S2, ControllerState, Gains, Setpoint3, constrain_xy, control, velocity_setpoint
-from sim.vehicle_physics import Command, KinState, Limits, initial_state, step
+from sim.vehicle.physics.mc_position_control import GRAVITY_M_S2, ControllerState, Gains, Setpoint3, constrain_xy, control, velocity_setpoint
+from sim.vehicle.physics.multicopter import Command, KinState, Limits, initial_state, step
 
 NAN = math.nan
 ZERO = (0.0, 0.0, 0.0)

@@ -4,7 +4,7 @@ from __future__ import annotations
 import threading
 import time
 
-from mission.monotonic_clock import MonotonicClock
+from mission.time.monotonic import MonotonicClock
 
 
 def test_times_and_monotonic_stamps_convert_both_ways():

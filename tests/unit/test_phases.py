@@ -4,9 +4,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mission.config import load_config
+from mission.config.schema import load_config
 from mission.controller import mission_model
-from mission.law import norm
+from mission.core.law import norm
 from mission.phases import AbortReason, CarrierObs, MissionState, Observation, Phase, VehicleObs, finished, step
 from tests.conftest import CONFIGS
 
@@ -176,7 +176,7 @@ def test_riding_feeds_forward_the_acceleration_the_carrier_sent_capped_else_the_
     """A carrier that measures its acceleration sends it (a PX4 rover sticks, then leaps: not its
     law); the passenger feeds that forward, capped at its own acceleration limit; without one it
     predicts the law's: a_max along the command from rest."""
-    from mission.reference_phases import _carrier_acceleration
+    from mission.phases.flying import _carrier_acceleration
 
     model = mission_model(load_config(CONFIGS / "demo.toml"))
     cap = model.command_safety.max_accel_m_s2

@@ -10,8 +10,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from mission.law import LawParams, norm, passenger_command
-from mission.safety import Obstacles, SafetyConfig, barrier_constraints, filter_velocity
+from mission.core.law import LawParams, norm, passenger_command
+from mission.core.safety import Obstacles, SafetyConfig, barrier_constraints, filter_velocity
 
 coord = st.floats(min_value=-200.0, max_value=200.0, allow_nan=False, allow_infinity=False)
 vec3 = arrays(np.float64, 3, elements=coord)

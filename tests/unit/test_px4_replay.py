@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sim.px4_replay import Comparison, compare, load_recording, px4_vs_px4_rms, ramp_lag_m
-from sim.vehicle_physics import Airframe, Limits
+from sim.sitl.replay import Comparison, compare, load_recording, px4_vs_px4_rms, ramp_lag_m
+from sim.vehicle.physics.multicopter import Airframe, Limits
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "px4_responses"
 

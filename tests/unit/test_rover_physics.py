@@ -5,8 +5,8 @@ import math
 
 import pytest
 
-from sim.rover_physics import RoverLimits, rover_step, rover_stepper
-from sim.vehicle_physics import Command, KinState
+from sim.vehicle.physics.rover import RoverLimits, rover_step, rover_stepper
+from sim.vehicle.physics.multicopter import Command, KinState
 
 DT = 0.005
 LIM = RoverLimits(speed_max_m_s=3.0, accel_m_s2=1.0, decel_m_s2=1.5, yaw_gain=2.0, wheelbase_m=0.32, max_steer_rad=0.5)

@@ -4,8 +4,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mission.law import norm
-from mission.safety import Obstacles, SafetyConfig, _solve_qp, barrier_constraints, filter_velocity, project_cbf
+from mission.core.law import norm
+from mission.core.safety import Obstacles, SafetyConfig, _solve_qp, barrier_constraints, filter_velocity, project_cbf
 
 
 def test_no_constraint_active_leaves_command_unchanged():

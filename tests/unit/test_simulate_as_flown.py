@@ -4,10 +4,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mission.config import load_config, with_overrides
+from mission.config.schema import load_config, with_overrides
 from mission.errors import ConfigError
-from sim.closed_loop import is_mission_config, random_scenarios, simulate_config, target_reachable
-from sim.simulate_cli import format_case, run_monte_carlo
+from sim.batch.closed_loop import is_mission_config, random_scenarios, simulate_config, target_reachable
+from sim.batch.simulate import format_case, run_monte_carlo
 from tests.conftest import CONFIGS
 
 

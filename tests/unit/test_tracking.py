@@ -1,11 +1,11 @@
-"""The tracking loop (mission.tracking): what is sent for each setpoint kind, the integral's
+"""The tracking loop (mission.core.tracking): what is sent for each setpoint kind, the integral's
 window and clamp, the reference's progress when the vehicle lags."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from mission.tracking import TrackingGains, progress, setpoint, update_integral, velocity_demand
+from mission.core.tracking import TrackingGains, progress, setpoint, update_integral, velocity_demand
 
 X_REF = np.array([10.0, 5.0, -2.0])
 U_REF = np.array([1.6, 1.2, 0.0])

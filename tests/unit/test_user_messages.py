@@ -6,7 +6,7 @@ import socket
 import numpy as np
 import pytest
 
-from mission.config import load_config
+from mission.config.schema import load_config
 from mission.controller import mission_model
 from mission.errors import PortInUse
 from mission.phases import AbortReason, CarrierObs, MissionState, Observation, Phase, VehicleObs, live_geometry_problem, step
@@ -70,7 +70,6 @@ def test_port_holder_is_found_although_one_of_its_fds_closes_meanwhile(monkeypat
     import os
 
     from mission import port_holder as ph
-
     real_readlink = os.readlink
     gone: list[str] = []
 

@@ -1,4 +1,4 @@
-"""The wander of PX4's position estimate (sim/vehicle_estimator.py), off by default."""
+"""The wander of PX4's position estimate (sim/vehicle/estimator.py), off by default."""
 from __future__ import annotations
 
 import math
@@ -6,8 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from sim.vehicle_estimator import PX4_SITL_DRIFT_SIGMA_M_S, PX4_SITL_DRIFT_TAU_S, EstimateDrift, flown_on_estimate
-from sim.vehicle_physics import Command
+from sim.vehicle.estimator import PX4_SITL_DRIFT_SIGMA_M_S, PX4_SITL_DRIFT_TAU_S, EstimateDrift, flown_on_estimate
+from sim.vehicle.physics.multicopter import Command
 
 
 def test_drift_rate_has_the_measured_spread_and_correlation_time():

@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from mission.wire import (
+from mission.bus.wire import (
     CarrierState,
     GeoOrigin,
     PassengerStatus,
@@ -22,7 +22,7 @@ from mission.wire import (
     ned_to_geodetic,
     to_local_ned,
 )
-from mission.wire_ros2 import decode_odometry_cdr, encode_odometry_cdr, rmw_zenoh_odom_key, ros2dds_odom_key
+from mission.bus.ros2 import decode_odometry_cdr, encode_odometry_cdr, rmw_zenoh_odom_key, ros2dds_odom_key
 
 GOOD = {"stamp": 12.345, "seq": 7, "frame": "local_ned", "position": [1.0, 2.0, -3.0],
         "velocity": [0.5, -0.25, 0.0], "yaw": 0.1}

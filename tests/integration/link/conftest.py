@@ -7,9 +7,9 @@ from collections.abc import Iterator
 
 import pytest
 
-from mission.clock import ScaledClock
-from mission.link import VehicleLink
-from sim.fake_px4 import FakePx4 as Px4Peer
+from mission.time.clock import ScaledClock
+from mission.mavlink.link import VehicleLink
+from sim.testing.fake_px4 import FakePx4 as Px4Peer
 
 ANY_PORT = "udpin:127.0.0.1:0"
 

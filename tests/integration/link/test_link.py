@@ -14,12 +14,12 @@ import struct
 import numpy as np
 import pytest
 
-from mission import px4
-from mission.clock import ManualClock, ScaledClock
+from mission.mavlink import px4
+from mission.time.clock import ManualClock, ScaledClock
 from mission.errors import CommandRejected, LinkError, LinkTimeout
-from mission.link import VehicleLink, VehicleState
-from mission.mavlink_env import mavlink
-from sim.fake_px4 import FakePx4 as Px4Peer
+from mission.mavlink.link import VehicleLink, VehicleState
+from mission.mavlink.env import mavlink
+from sim.testing.fake_px4 import FakePx4 as Px4Peer
 from sim.net import wait_for as eventually
 from tests.integration.link.conftest import ANY_PORT, link_threads
 from tests.integration.link.conftest import connected as _connected

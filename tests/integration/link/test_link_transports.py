@@ -9,12 +9,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mission import px4
-from mission.clock import ScaledClock
+from mission.mavlink import px4
+from mission.time.clock import ScaledClock
 from mission.errors import LinkError
-from mission.link import LinkCounters, VehicleLink
-from mission.mavlink_env import mavlink, mavutil
-from sim.fake_px4 import FakePx4 as Px4Peer
+from mission.mavlink.link import LinkCounters, VehicleLink
+from mission.mavlink.env import mavlink, mavutil
+from sim.testing.fake_px4 import FakePx4 as Px4Peer
 from sim.net import wait_for as eventually
 from tests.integration.link.conftest import ANY_PORT, link_threads
 

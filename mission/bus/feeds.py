@@ -1,0 +1,338 @@
+"""Receiving on the bus: the newest valid carrier state and passenger status (thin I/O).
+
+A callback on Zenoh's thread checks the payload size before anything else
+(:data:`MAX_PAYLOAD_BYTES`, drop reason "size": a 10 MB sample costs a length read, not a copy
+and a parse), decodes and validates each sample (:mod:`mission.bus.wire`), stamps its receive time
+with the injected clock and keeps only the newest accepted one under a lock (it never blocks and
+never calls Zenoh). A rejected sample is dropped and counted per reason (``feed.counters``),
+never a crash and never returned. Ordering, binding and staleness: see
+:mod:`mission.bus.bridge`.
+"""
+from __future__ import annotations
+
+import logging
+import threading
+from dataclasses import dataclass
+from typing import Any, Callable, Generic, TypeVar
+
+import numpy as np
+import zenoh
+
+from mission.time.clock import Clock
+from mission.config.schema import ZenohSection
+from mission.errors import BusError
+from mission.bus.gate import ANONYMOUS, FeedGate, GateLimits, Sample
+from mission.bus.wire import CarrierState, GeoOrigin, PassengerStatus, WireError, decode_carrier, decode_passenger_json, to_local_ned
+from mission.bus.session import Encoding, check_encoding, declare, keys, undeclare
+
+log = logging.getLogger("mission.bus.bridge")  # one logger name for the whole bus
+
+#: Largest sample a feed decodes [bytes]; a carrier state is ~200 B in JSON, ~750 B as CDR Odometry.
+MAX_PAYLOAD_BYTES = 8192
+
+T = TypeVar("T")
+
+
+@dataclass(frozen=True)
+class Received(Generic[T]):
+    """The newest accepted message with its receive time.
+
+    value: the decoded message; key: the key expression it came on; rx_time_s [s] receive time
+    on the local injected clock; age_s [s] ``clock.now() - rx_time_s`` when ``latest()`` was
+    called; stale: ``age_s > max_age_s`` (the caller decides what that means).
+    """
+
+    value: T
+    key: str
+    rx_time_s: float
+    age_s: float
+    stale: bool
+
+
+@dataclass(frozen=True)
+class ReceivedCarrierState(Received[CarrierState]):
+    """A carrier state, always in local NED (``value.frame == "local_ned"``)."""
+
+    @property
+    def state(self) -> CarrierState:
+        return self.value
+
+
+@dataclass(frozen=True)
+class ReceivedPassengerStatus(Received[PassengerStatus]):
+    """A passenger status."""
+
+    @property
+    def status(self) -> PassengerStatus:
+        return self.value
+
+
+class _Feed(Generic[T]):
+    """Newest-sample subscriber with validation, ordering, drop counters and liveliness."""
+
+    _received_type: type[Received[Any]] = Received
+    _use_seq = True
+
+    def __init__(self, session: zenoh.Session, key: str, alive_key: str | None, clock: Clock, max_age_s: float) -> None:
+        if not max_age_s > 0:
+            raise ValueError(f"max_age_s must be > 0, got {max_age_s!r}")
+        self.key, self.alive_key, self.clock, self.max_age_s = key, alive_key, clock, float(max_age_s)
+        self._lock = threading.Lock()
+        self._latest: tuple[T, str, float] | None = None
+        self._last_order: dict[str, tuple[int, float]] = {}
+        self._received = 0
+        self._accepted = 0
+        self._dropped: dict[str, int] = {}
+        self._alive: bool | None = None
+        self._went_unseen = False  # the token went since the last alive_over_interval()
+        self._closed = False
+        self._listeners: list[Callable[[T], None]] = []
+        self._sub = declare(f"subscriber on {key}", lambda: session.declare_subscriber(key, self._on_sample))
+        self._alive_sub = None
+        if alive_key is not None:
+            try:
+                self._alive_sub = declare(
+                    f"liveliness subscriber on {alive_key}",
+                    lambda: session.liveliness().declare_subscriber(alive_key, self._on_alive, history=True),
+                )
+            except BusError:
+                undeclare(self._sub)
+                raise
+
+    # -- on Zenoh's thread: never block, never call Zenoh
+    def _decode(self, payload: bytes) -> T:
+        raise NotImplementedError
+
+    def _order_of(self, value: T) -> tuple[int, float]:
+        raise NotImplementedError
+
+    def _admit(self, value: T, key: str, source: str, rx: float) -> str | None:
+        """Lock held: the drop reason for ``value``, or None to accept it. Default: newer than
+        the last accepted sample on the same key (sequence number and stamp)."""
+        seq, stamp = self._order_of(value)
+        last = self._last_order.get(key)
+        if last is not None:
+            if self._use_seq and seq <= last[0]:
+                return "stale_seq"
+            if stamp < last[1] or (stamp == last[1] and not self._use_seq):
+                return "stale_stamp"
+        self._last_order[key] = (seq, stamp)
+        return None
+
+    def _on_sample(self, sample: zenoh.Sample) -> None:
+        rx = self.clock.now()
+        key = str(sample.key_expr)
+        with self._lock:
+            self._received += 1
+        try:
+            if sample.kind != zenoh.SampleKind.PUT:
+                raise WireError("decode", "DELETE sample")
+            size = len(sample.payload)
+            if size > MAX_PAYLOAD_BYTES:
+                raise WireError("size", f"{size} bytes > {MAX_PAYLOAD_BYTES}")
+            value = self._decode(sample.payload.to_bytes())
+        except WireError as exc:
+            self._drop(exc.reason, key, str(exc))
+            return
+        except Exception:  # a bug, not a bad sample: keep Zenoh's thread alive, say it loudly
+            log.exception("unexpected error decoding a sample on %s", key)
+            self._drop("internal", key, "unexpected error")
+            return
+        info = sample.source_info
+        source = ANONYMOUS if info is None else f"{info.source_id.zid}/{info.source_id.eid}"
+        with self._lock:
+            reason = self._admit(value, key, source, rx)
+            if reason is None:
+                self._latest = (value, key, rx)
+                self._accepted += 1
+        if reason is not None:
+            seq, stamp = self._order_of(value)
+            self._drop(reason, key, f"seq {seq} stamp {stamp} rx {rx:.3f} from {source}{self._describe(value)}")
+            if reason == "source":
+                return
+        for listener in self._listeners:
+            listener(value)
+
+    def add_listener(self, callback: Callable[[T], None]) -> None:
+        """Call ``callback(value)`` on Zenoh's thread after each valid sample of the sender (it
+        must not block); e.g. the lockstep relay waits for the sample of a step. Valid: decoded
+        and not from a foreign source, whether the ordering or plausibility check accepted it or
+        not (a carrier binding, or one the gate doubts, still steps)."""
+        self._listeners.append(callback)
+
+    def _drop(self, reason: str, key: str, detail: str) -> None:
+        with self._lock:
+            first = reason not in self._dropped
+            self._dropped[reason] = self._dropped.get(reason, 0) + 1
+        (log.warning if first else log.debug)("dropped a sample on %s (%s): %s", key, reason, detail)
+
+    def _on_alive(self, sample: zenoh.Sample) -> None:
+        alive = sample.kind == zenoh.SampleKind.PUT
+        with self._lock:
+            changed = alive != self._alive
+            self._alive = alive
+            if not alive:
+                self._went_unseen = True
+                self._last_order.clear()  # a restarted sender may count from 0 again
+                self._forget_sender()
+        if changed:
+            (log.info if alive else log.warning)("%s is %s", self.alive_key, "alive" if alive else "gone")
+
+    def _forget_sender(self) -> None:
+        """Lock held: the sender's liveliness token went away."""
+
+    def _describe(self, value: T) -> str:
+        """More of a dropped sample for the log (default nothing)."""
+        return ""
+
+    # -- caller's thread
+    def latest(self) -> Received[T] | None:
+        """The newest accepted message with its age, or None if none was accepted yet."""
+        with self._lock:
+            item = self._latest
+        if item is None:
+            return None
+        value, key, rx = item
+        age = self.clock.now() - rx
+        return self._received_type(value=value, key=key, rx_time_s=rx, age_s=age, stale=age > self.max_age_s)
+
+    @property
+    def alive(self) -> bool | None:
+        """The sender's liveliness token: True present, False gone, None never seen."""
+        with self._lock:
+            return self._alive
+
+    def alive_over_interval(self) -> bool | None:
+        """The sender's liveliness since the previous call: False if the token went at any
+        moment in between, even if it is back now (a brief outage, or one while a lockstep
+        clock stood still, is still an outage); else :attr:`alive`. Each call starts a new
+        interval, so a feed has one such caller (its controller's tick)."""
+        with self._lock:
+            went, self._went_unseen = self._went_unseen, False
+            return False if went else self._alive
+
+    @property
+    def counters(self) -> dict[str, Any]:
+        """Snapshot: ``{"received": n, "accepted": n, "dropped": {reason: n}}``."""
+        with self._lock:
+            return {"received": self._received, "accepted": self._accepted, "dropped": dict(self._dropped),
+                    **self._extra_counters()}
+
+    def _extra_counters(self) -> dict[str, Any]:
+        return {}
+
+    def close(self) -> None:
+        """Undeclare the subscribers (idempotent)."""
+        if self._closed:
+            return
+        self._closed = True
+        undeclare(self._sub, self._alive_sub)
+
+    def __enter__(self) -> "_Feed[T]":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+class CarrierFeed(_Feed[CarrierState]):
+    """The newest valid carrier state of pair ``pair``, in local NED.
+
+    encoding: "json" (default) or "cdr" (ROS 2 Odometry); key: override of the state key (e.g.
+    :func:`mission.bus.ros2.ros2dds_odom_key`); origin: the vehicle's geodetic origin, needed to
+    accept wgs84 states (drop reason "origin" without it; see :meth:`set_origin`); max_age_s
+    [s] on ``clock``; limits: the carrier's own limits for the plausibility gate (default: 3 m/s
+    top speed). The liveliness of ``marsupial/<pair>/carrier/alive`` gives ``alive``; when it
+    goes away the feed unbinds its source. ``counters`` add ``bound_source``,
+    ``rejected_sources`` ({source: n}) and ``resyncs``.
+    """
+
+    _received_type = ReceivedCarrierState
+
+    def __init__(
+        self,
+        session: zenoh.Session,
+        pair: str,
+        clock: Clock,
+        *,
+        encoding: Encoding = "json",
+        key: str | None = None,
+        origin: GeoOrigin | None = None,
+        max_age_s: float = 0.5,
+        limits: GateLimits | None = None,
+    ) -> None:
+        check_encoding(encoding)
+        self.encoding = encoding
+        self._use_seq = encoding == "json"  # Odometry has no sequence number: order by stamp
+        self.gate = FeedGate(limits or GateLimits(max_speed_m_s=3.0), use_seq=self._use_seq)
+        self._origin = origin
+        self._cdr_count = 0
+        k = keys(pair)
+        super().__init__(session, key or k.carrier_state, k.carrier_alive, clock, max_age_s)
+
+    @classmethod
+    def from_section(
+        cls, session: zenoh.Session, section: ZenohSection, clock: Clock, *, max_age_s: float,
+        origin: GeoOrigin | None = None, limits: GateLimits | None = None,
+    ) -> "CarrierFeed":
+        """The feed a :class:`ZenohSection` describes (pair, encoding, carrier_key)."""
+        return cls(session, section.pair, clock, encoding=section.encoding, key=section.carrier_key,
+                   origin=origin, max_age_s=max_age_s, limits=limits)
+
+    def _admit(self, value: CarrierState, key: str, source: str, rx: float) -> str | None:
+        was = self.gate.bound
+        reason = self.gate.offer(source, Sample(value.seq, value.stamp_s, value.position, value.velocity_ned_m_s, rx))
+        if self.gate.bound != was:
+            log.info("carrier feed bound to source %s on %s", self.gate.bound, key)
+        return reason
+
+    def _describe(self, value: CarrierState) -> str:
+        return f" at {np.round(value.position, 2).tolist()} m, {np.round(value.velocity_ned_m_s, 2).tolist()} m/s; " \
+               f"reference {self.gate.describe_reference()}"
+
+    def _forget_sender(self) -> None:
+        if self.gate.bound is not None:
+            log.warning("carrier feed: source %s unbound (liveliness token gone)", self.gate.bound)
+        self.gate.unbind()
+
+    def _extra_counters(self) -> dict[str, Any]:
+        return {"bound_source": self.gate.bound, "rejected_sources": dict(self.gate.rejected_sources),
+                "resyncs": self.gate.resyncs}
+
+    def set_origin(self, origin: GeoOrigin | None) -> None:
+        """Set the geodetic origin used for wgs84 states from now on."""
+        with self._lock:
+            self._origin = origin
+
+    def _decode(self, payload: bytes) -> CarrierState:
+        with self._lock:
+            self._cdr_count += 1
+            seq, origin = self._cdr_count, self._origin
+        return to_local_ned(decode_carrier(payload, self.encoding, seq=seq), origin)
+
+    def _order_of(self, value: CarrierState) -> tuple[int, float]:
+        return value.seq, value.stamp_s
+
+    def latest(self) -> ReceivedCarrierState | None:  # type: ignore[override]
+        """The newest accepted carrier state (local NED) with its age, or None."""
+        return super().latest()  # type: ignore[return-value]
+
+
+class PassengerFeed(_Feed[PassengerStatus]):
+    """The newest valid passenger status of pair ``pair`` (for the carrier), with liveliness."""
+
+    _received_type = ReceivedPassengerStatus
+
+    def __init__(self, session: zenoh.Session, pair: str, clock: Clock, *, max_age_s: float = 1.0) -> None:
+        k = keys(pair)
+        super().__init__(session, k.passenger_state, k.passenger_alive, clock, max_age_s)
+
+    def _decode(self, payload: bytes) -> PassengerStatus:
+        return decode_passenger_json(payload)
+
+    def _order_of(self, value: PassengerStatus) -> tuple[int, float]:
+        return value.seq, value.stamp_s
+
+    def latest(self) -> ReceivedPassengerStatus | None:  # type: ignore[override]
+        """The newest accepted passenger status with its age, or None."""
+        return super().latest()  # type: ignore[return-value]

@@ -1,0 +1,228 @@
+"""Plausibility gate and source binding of the carrier feed (pure: no Zenoh, no clock).
+
+The carrier feed (:class:`mission.bus.bridge.CarrierFeed`) hands every decoded carrier
+state to a :class:`FeedGate` with the Zenoh source it came from and its receive time [s] on the
+local clock. The gate decides, in O(1) and without blocking, whether the state is accepted.
+
+Source binding. One carrier per pair: the gate binds to the first source that sends
+``bind_samples`` mutually plausible states in a row (a candidate track per source, at most
+:data:`MAX_CANDIDATES` at once). States sent while no source is bound are dropped as ``unbound``;
+once bound, states from any other source are dropped as ``source`` and counted per source in
+:attr:`FeedGate.rejected_sources`. :meth:`FeedGate.unbind` (the carrier's liveliness token went
+away: a restarted carrier is a new source) starts the binding again. The source is the
+publisher's Zenoh ``EntityGlobalId`` as it puts it in the sample's ``source_info`` (our
+:class:`~mission.bus.bridge.CarrierPublisher` always does), or ``"anonymous"`` for a
+publisher that sends none (a ROS bridge). Zenoh does not authenticate ``source_info``: binding
+stops a second, faulty or naive publisher; against a deliberate one, Zenoh access control with
+mTLS (only the carrier's certificate may put on the pair's key) is the defence, and the
+plausibility gate bounds what a spoofer can do meanwhile.
+
+Plausibility, each state against the last accepted one of the bound source (``prev``), with
+``dt`` the sender's stamp difference and ``drx`` the receive-time difference [s]:
+
+==============  ================================================================================
+reason          rejected when
+==============  ================================================================================
+``stale_seq``   JSON: ``seq <= prev.seq`` (CDR has no sequence number)
+``stale_stamp`` ``stamp < prev.stamp`` (CDR: ``<=``)
+``seq_jump``    ``seq - prev.seq > MAX_SEQ_RATE_HZ * max(dt, drx) + SEQ_SLACK``
+``stamp_jump``  ``stamp - rx > lead + stamp_slack_s``: stamped ahead of time. ``lead`` is the
+                largest ``stamp - rx`` of the accepted track (the sender's clock lead over
+                ours, minus its quickest delivery); transport delay only ever lowers
+                ``stamp - rx``, so a burst of late samples never trips it, a stamp an hour
+                ahead always does
+``speed``       ``|velocity| > speed_margin * max_speed + SPEED_SLACK_M_S``
+``jump``        ``|position - prev.position| > speed_margin * max_speed * dt + position_slack_m``
+``gap``         more than ``max_gap_s`` of receive time since ``prev``: after a silence the
+                carrier may be anywhere within ``max_speed * dt``, so one sample proves
+                nothing; the first states after it must form a plausible track of
+                ``resync_samples`` (below) before one is accepted
+``velocity``    ``|v - prev.v| > max_accel * dt + max_speed`` (a stop or a start is always
+                plausible, a reversal at speed is not), or
+                ``|dp - (prev.v + v) / 2 * dt| > max_speed * dt + position_slack_m``
+==============  ================================================================================
+
+An outlier never becomes the reference, so it cannot poison later states. If the reference
+itself was the outlier (or the carrier was really relocalised), the stream disagrees with it
+for good: rejected states that form a plausible track of their own, ``resync_samples`` long,
+replace the reference (counted in ``resyncs``). The separation latch only ever sees accepted
+states, i.e. the feed's consistent estimate, never a single sample.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+MAX_CANDIDATES = 8  # candidate sources tracked while unbound (more are dropped uncounted per source)
+MAX_REJECTED_SOURCES = 16  # distinct foreign sources counted by name; the rest under "other"
+MAX_SEQ_RATE_HZ = 1000.0  # fastest plausible publishing rate [Hz]
+SEQ_SLACK = 100
+SPEED_SLACK_M_S = 0.5
+ANONYMOUS = "anonymous"
+
+
+@dataclass(frozen=True)
+class GateLimits:
+    """The carrier's own limits as the gate applies them.
+
+    max_speed_m_s [m/s] the carrier's top speed; speed_margin (>= 1) factor on it;
+    position_slack_m [m] localisation noise allowed on top; stamp_slack_s [s] how far the
+    sender's stamp may run ahead of the receive-time difference (transport latency variation);
+    max_accel_m_s2 [m/s^2] (default: top speed reached in 0.5 s); max_gap_s [s] a silence
+    after which a single state is not believed (see ``gap``); bind_samples / resync_samples: plausible states in a row needed to bind a source / replace
+    the reference.
+    """
+
+    max_speed_m_s: float
+    speed_margin: float = 1.5
+    position_slack_m: float = 0.5
+    stamp_slack_s: float = 2.0
+    max_accel_m_s2: float | None = None
+    max_gap_s: float = 1.0
+    bind_samples: int = 3
+    resync_samples: int = 5
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.max_speed_m_s) and self.max_speed_m_s > 0):
+            raise ValueError(f"max_speed_m_s must be > 0, got {self.max_speed_m_s!r}")
+        if not self.speed_margin >= 1 or not self.position_slack_m >= 0 or not self.stamp_slack_s > 0:
+            raise ValueError("speed_margin >= 1, position_slack_m >= 0 and stamp_slack_s > 0 required")
+        if self.bind_samples < 1 or self.resync_samples < 2:
+            raise ValueError("bind_samples >= 1 and resync_samples >= 2 required")
+
+
+@dataclass(frozen=True)
+class Sample:
+    """What the gate needs of one state: seq, stamp_s [s] sender clock, position_ned_m [m],
+    velocity_ned_m_s [m/s] (local NED, arrays (3,)), rx_s [s] receive time on our clock."""
+
+    seq: int
+    stamp_s: float
+    position_ned_m: np.ndarray
+    velocity_ned_m_s: np.ndarray
+    rx_s: float
+
+    @property
+    def lead_s(self) -> float:
+        """How far the sender's stamp is ahead of our receive time [s]."""
+        return self.stamp_s - self.rx_s
+
+
+def implausible(prev: Sample, new: Sample, limits: GateLimits, use_seq: bool, lead_s: float | None = None) -> str | None:
+    """The reason ``new`` cannot follow ``prev`` from one carrier (see the module table), or
+    None. ``lead_s``: the track's largest ``stamp - rx`` so far (default ``prev.lead_s``)."""
+    if use_seq and new.seq <= prev.seq:
+        return "stale_seq"
+    if new.stamp_s < prev.stamp_s or (not use_seq and new.stamp_s == prev.stamp_s):
+        return "stale_stamp"
+    dt = new.stamp_s - prev.stamp_s
+    drx = max(new.rx_s - prev.rx_s, 0.0)
+    if use_seq and new.seq - prev.seq > MAX_SEQ_RATE_HZ * max(dt, drx) + SEQ_SLACK:
+        return "seq_jump"
+    if new.lead_s > (prev.lead_s if lead_s is None else lead_s) + limits.stamp_slack_s:
+        return "stamp_jump"
+    v_max = limits.speed_margin * limits.max_speed_m_s
+    v = new.velocity_ned_m_s
+    if math.sqrt(float(v @ v)) > v_max + SPEED_SLACK_M_S:
+        return "speed"
+    dp = new.position_ned_m - prev.position_ned_m
+    if math.sqrt(float(dp @ dp)) > v_max * dt + limits.position_slack_m:
+        return "jump"
+    dv = v - prev.velocity_ned_m_s
+    a_max = limits.max_accel_m_s2 if limits.max_accel_m_s2 is not None else 2.0 * limits.max_speed_m_s
+    err = dp - 0.5 * (prev.velocity_ned_m_s + v) * dt
+    if (math.sqrt(float(dv @ dv)) > a_max * dt + limits.max_speed_m_s
+            or math.sqrt(float(err @ err)) > limits.max_speed_m_s * dt + limits.position_slack_m):
+        return "velocity"
+    return None
+
+
+@dataclass
+class _Track:
+    """A run of mutually plausible samples: the last one, how many, the largest lead [s]."""
+
+    last: Sample
+    length: int = 1
+    lead_s: float = -math.inf
+
+    def __post_init__(self) -> None:
+        self.lead_s = max(self.lead_s, self.last.lead_s)
+
+    def fits(self, sample: Sample, limits: GateLimits, use_seq: bool) -> str | None:
+        return implausible(self.last, sample, limits, use_seq, self.lead_s)
+
+    def extend(self, sample: Sample) -> None:
+        self.last, self.length, self.lead_s = sample, self.length + 1, max(self.lead_s, sample.lead_s)
+
+
+class FeedGate:
+    """Source binding and plausibility for one carrier feed (not thread-safe: the feed locks).
+
+    ``offer(source, sample)`` returns None when the sample is accepted, else the drop reason.
+    """
+
+    def __init__(self, limits: GateLimits, use_seq: bool = True) -> None:
+        self.limits, self.use_seq = limits, use_seq
+        self.bound: str | None = None
+        self.resyncs = 0
+        self.rejected_sources: dict[str, int] = {}
+        self._reference: _Track | None = None
+        self._candidates: dict[str, _Track] = {}
+        self._resync: _Track | None = None
+
+    def describe_reference(self) -> str:
+        """The last accepted sample, for logs."""
+        ref = self._reference
+        if ref is None:
+            return "none"
+        last = ref.last
+        return (f"seq {last.seq} stamp {last.stamp_s:.3f} rx {last.rx_s:.3f} at "
+                f"{np.round(last.position_ned_m, 2).tolist()} m, lead {ref.lead_s:.3f} s")
+
+    def unbind(self) -> None:
+        """Forget the bound source and the reference (the carrier went away)."""
+        self.bound, self._reference, self._resync = None, None, None
+        self._candidates.clear()
+
+    def offer(self, source: str, sample: Sample) -> str | None:
+        if self.bound is None:
+            return self._offer_unbound(source, sample)
+        if source != self.bound:
+            name = source if source in self.rejected_sources or len(self.rejected_sources) < MAX_REJECTED_SOURCES else "other"
+            self.rejected_sources[name] = self.rejected_sources.get(name, 0) + 1
+            return "source"
+        assert self._reference is not None
+        if sample.rx_s - self._reference.last.rx_s > self.limits.max_gap_s:
+            reason: str | None = "gap"
+        else:
+            reason = self._reference.fits(sample, self.limits, self.use_seq)
+        if reason is None:
+            self._reference.extend(sample)
+            self._resync = None
+            return None
+        track = self._resync
+        if track is not None and track.fits(sample, self.limits, self.use_seq) is None:
+            track.extend(sample)
+        else:
+            self._resync = track = _Track(sample)
+        if track.length >= self.limits.resync_samples:
+            self._reference, self._resync = track, None
+            self.resyncs += 1
+            return None
+        return reason
+
+    def _offer_unbound(self, source: str, sample: Sample) -> str | None:
+        track = self._candidates.get(source)
+        if track is not None and track.fits(sample, self.limits, self.use_seq) is None:
+            track.extend(sample)
+        elif track is not None or len(self._candidates) < MAX_CANDIDATES:
+            self._candidates[source] = track = _Track(sample)
+        else:
+            return "unbound"
+        if track.length < self.limits.bind_samples:
+            return "unbound"
+        self.bound, self._reference = source, track
+        self._candidates.clear()
+        return None

@@ -1,0 +1,266 @@
+"""``marsupial run`` (fly the mission) and ``marsupial plot`` (figures from a flight log)."""
+from __future__ import annotations
+
+import json
+import logging
+import signal
+import threading
+import time
+from contextlib import ExitStack, contextmanager
+from pathlib import Path
+from typing import Any, Iterator
+
+import click
+import numpy as np
+
+from mission.bus.bridge import CarrierFeed, PassengerPublisher, open_session, zenoh_config
+from mission.bus.session import congestion_for
+from mission.time.clock import Clock, LockstepClock, ScaledClock
+from mission.config.schema import Config, load_config, with_overrides
+from mission.controller import MissionController, MissionOutcome, mission_info, mission_model
+from mission.errors import ConfigError
+from mission.bus.gate import GateLimits
+from mission.mavlink.link import VehicleLink
+from mission.mavlink.env import read_signing_key
+from mission.record import FlightRecorder, read_record
+from mission.phases import AbortReason
+from mission.report import WaitReporter, abort_hint, phase_printer, startup_lines
+
+log = logging.getLogger(__name__)
+
+EXIT_CODES = {AbortReason.GEOMETRY.value: 2, AbortReason.VEHICLE_LOST.value: 3}
+EXIT_ABORT = 5
+
+
+def carrier_limits(cfg: Config) -> GateLimits:
+    """The carrier's own limits the feed's plausibility gate checks states against: its top
+    speed (``carrier.max_speed_m_s``, or ``safety.carrier_max_speed_m_s`` if larger)."""
+    return GateLimits(max_speed_m_s=max(cfg.carrier.max_speed_m_s, cfg.safety.carrier_max_speed_m_s or 0.0))
+
+
+@contextmanager
+def mission_io(cfg: Config, clock: Clock, tlog_path: str | Path | None = None) -> Iterator[tuple[CarrierFeed, PassengerPublisher, VehicleLink]]:
+    """Open what a mission talks through, per ``cfg``: the Zenoh session with the carrier feed
+    and the passenger publisher, and the MAVLink link (opened, signing per
+    ``mavlink.signing_key_file``). Everything is closed in reverse order on exit."""
+    key = read_signing_key(cfg.mavlink.signing_key_file) if cfg.mavlink.signing_key_file else None
+    with ExitStack() as stack:
+        session = open_session(cfg.zenoh)
+        stack.callback(session.close)
+        feed = CarrierFeed.from_section(session, cfg.zenoh, clock, max_age_s=cfg.mission.carrier_timeout_s,
+                                        limits=carrier_limits(cfg))
+        stack.callback(feed.close)
+        publisher = PassengerPublisher(session, cfg.zenoh.pair, congestion_for(clock))
+        stack.callback(publisher.close)
+        link = VehicleLink(cfg.mavlink.url, clock, target_system=cfg.mavlink.target_system,
+                           target_component=cfg.mavlink.target_component,
+                           source_system=cfg.mavlink.source_system, source_component=cfg.mavlink.source_component,
+                           tlog_path=None if tlog_path is None else str(tlog_path), signing_key=key,
+                           heartbeat_timeout_s=cfg.mission.heartbeat_timeout_s)
+        if isinstance(clock, LockstepClock):  # before open: the vehicle's first barrier may come at once
+            from mission.time.lockstep import MavlinkUpstream
+
+            MavlinkUpstream(clock, link)
+        link.open()
+        stack.callback(link.close)
+        if isinstance(clock, LockstepClock):  # step on the vehicle's time; bring the carrier along
+            from mission.time.lockstep import ZenohRelay, clock_keys
+
+            relay = ZenohRelay(session, clock_keys(cfg.zenoh.pair), feed, publisher, alive=lambda: feed.alive)
+            stack.callback(relay.close)
+            clock.downstream = relay
+            stack.callback(clock.close)  # before the link closes: its threads wait on the clock
+        yield feed, publisher, link
+
+
+def check_config(cfg: Config) -> None:
+    """What a mission needs of ``cfg`` beyond the file's own rules, checked before anything is
+    opened or written: a 3D mission model, a readable signing key, a Zenoh configuration Zenoh
+    accepts. Raises :class:`ConfigError` naming the field."""
+    mission_model(cfg)
+    if cfg.mavlink.signing_key_file:
+        read_signing_key(cfg.mavlink.signing_key_file)
+    zenoh_config(cfg.zenoh)
+
+
+def fly(cfg: Config, *, speed: float = 1.0, log_dir: str | Path | None = None, stop: threading.Event | None = None,
+        on_event=None, on_start=None, clock: Clock | None = None) -> MissionOutcome:
+    """Fly one mission with ``cfg`` (the library entry point of ``marsupial run``).
+
+    Opens the Zenoh session and the MAVLink link (:func:`mission_io`), runs
+    :class:`MissionController` and closes everything in reverse order. ``speed`` is the clock
+    speed factor (simulation only). ``on_start(controller, link, feed, clock)`` is called once
+    everything is open, just before the loop starts (the CLI watches the wait for the vehicle).
+    ``clock`` replaces the scaled clock, e.g. a :class:`LockstepClock` (made in the calling
+    thread) that steps on the mock vehicle's simulated time.
+    """
+    check_config(cfg)
+    clock = clock or ScaledClock(speed)
+    directory = Path(log_dir) if log_dir else Path(cfg.mission.log_dir) / f"{time.strftime('%Y%m%d-%H%M%S')}-{cfg.zenoh.pair}"
+    recorder = FlightRecorder(directory, mission_info(cfg))
+    with mission_io(cfg, clock, recorder.tlog_path) as (feed, publisher, link):
+        controller = MissionController(cfg, link, feed, clock, publisher=publisher, recorder=recorder,
+                                       on_event=on_event, stop=stop)
+        if on_start is not None:
+            on_start(controller, link, feed, clock)
+        try:
+            return controller.run()
+        finally:
+            clock.close()
+
+
+def exit_code(outcome: MissionOutcome) -> int:
+    if outcome.ok:
+        return 0
+    return EXIT_CODES.get(outcome.reason, EXIT_ABORT)
+
+
+@click.command("run")
+@click.argument("config", type=click.Path(dir_okay=False))
+@click.option("--mavlink", "mavlink_url", help="MAVLink endpoint (overrides mavlink.url), e.g. udpin:127.0.0.1:14540, "
+              "udpout:10.0.0.2:14540, tcp:127.0.0.1:5760, /dev/ttyACM0:921600.")
+@click.option("--zenoh-listen", multiple=True, help="Zenoh endpoint to listen on, e.g. tcp/127.0.0.1:7450 (repeatable).")
+@click.option("--zenoh-connect", multiple=True, help="Zenoh endpoint to connect to, e.g. tcp/127.0.0.1:7447 (repeatable).")
+@click.option("--zenoh-mode", type=click.Choice(["peer", "client"]), help="Zenoh session mode (overrides zenoh.mode).")
+@click.option("--pair", help="Name of the marsupial pair: the Zenoh key namespace marsupial/<pair>/...")
+@click.option("--speed", type=click.FloatRange(min=0.01), default=1.0, show_default=True,
+              help="Clock speed factor. Simulation only: must equal the mock vehicle's and carrier's --speed.")
+@click.option("--lockstep", is_flag=True, help="Simulation only: step on the mock vehicle's simulated time (its "
+              "--lockstep) and bring the carrier simulator (--lockstep) along; --speed is then the pace after a "
+              "participant is lost.")
+@click.option("--log-dir", type=click.Path(file_okay=False), help="Where to write the flight log (default mission.log_dir/<time>-<pair>).")
+@click.option("--signing-key", "signing_key_file", type=click.Path(dir_okay=False),
+              help="MAVLink 2 signing key file, 64 hex digits or 32 raw bytes (overrides mavlink.signing_key_file): "
+              "everything sent is signed, and only HEARTBEAT may arrive unsigned.")
+@click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON at the end.")
+def run(config: str, mavlink_url: str | None, zenoh_listen: tuple[str, ...], zenoh_connect: tuple[str, ...],
+        zenoh_mode: str | None, pair: str | None, speed: float, lockstep: bool, log_dir: str | None,
+        signing_key_file: str | None, as_json: bool) -> int:
+    """Fly the marsupial mission described by CONFIG on a PX4 vehicle.
+
+    The passenger takes off from the carrier, joins the dock point, rides while the carrier
+    approaches the target, separates smoothly when the carrier is within b*c of it, flies to the
+    target and ends in Hold or Land (mission.final_action). Carrier states arrive over Zenoh;
+    velocity setpoints go to the vehicle over MAVLink 2 in OFFBOARD mode.
+
+    \b
+    Phase changes are printed as they happen. On Ctrl-C or SIGTERM the vehicle is put in Hold
+    (never disarmed in the air) and the program exits once it shows Hold.
+    Until the vehicle and the carrier are both seen it says what it waits for, with a countdown
+    to mission.connect_timeout_s. Phase lines show the mission clock and, from the start of
+    riding, t (the paper's t = 0; summary.json and plots count from there).
+    Exit codes: 0 mission complete; 2 bad configuration or geometry that breaks the paper's
+    assumptions (nothing was sent to the vehicle); 3 vehicle lost (or never found); 4 Zenoh
+    cannot start; 5 other abort (the reason is printed: pilot_override, vehicle_failsafe,
+    carrier_lost, position_lost, arming_refused, offboard_refused, interrupted, timeout);
+    6 a port to bind is in use (the holder is named).
+    """
+    cfg = load_config(config)
+    overrides: dict[str, Any] = {"mavlink.url": mavlink_url, "zenoh.pair": pair, "zenoh.mode": zenoh_mode,
+                                 "mavlink.signing_key_file": signing_key_file}
+    if zenoh_listen:
+        overrides["zenoh.listen"] = list(zenoh_listen)
+    if zenoh_connect:
+        overrides["zenoh.connect"] = list(zenoh_connect)
+    cfg = with_overrides(cfg, overrides)
+    stop = threading.Event()
+    for line in startup_lines(cfg, speed):
+        click.echo(line)
+
+    def on_signal(signum: int, _frame: Any) -> None:
+        click.echo(f"signal {signal.Signals(signum).name}: asking the vehicle to Hold", err=True)
+        stop.set()
+
+    previous = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+    on_event, remember, seen = phase_printer(click.echo)
+
+    def on_start(controller: Any, link: Any, feed: Any, clock: Any) -> None:
+        remember(controller, link, feed, clock)
+        seen["reporter"] = WaitReporter(cfg, controller, link, feed, clock).start()
+
+    try:
+        clock: Clock = LockstepClock(speed=speed, name="mission-lockstep") if lockstep else ScaledClock(speed)
+        outcome = fly(cfg, speed=speed, log_dir=log_dir, stop=stop, on_event=on_event, on_start=on_start, clock=clock)
+    finally:
+        if seen.get("reporter") is not None:
+            seen["reporter"].stop()
+            seen["reporter"].clear()
+        for s, h in previous.items():
+            signal.signal(s, h)
+    if as_json:
+        click.echo(json.dumps(outcome.summary, indent=2))
+    elif seen["riding_start_s"] is not None:
+        click.echo("summary (times since the start of riding, t = 0):")
+        for key in ("separation_time_s", "carrier_target_distance_at_separation_m", "relative_input_jump_m_s",
+                    "final_passenger_target_distance_m", "min_carrier_target_distance_m", "p1", "p2", "p3"):
+            click.echo(f"  {key:<42} {outcome.summary.get(key)}")
+    if outcome.log_dir:
+        click.echo(f"flight log: {outcome.log_dir}")
+    if not outcome.ok:
+        click.echo(f"mission aborted: {outcome.reason}: {outcome.detail}", err=True)
+        hint = abort_hint(cfg, outcome.reason, outcome.detail)
+        if hint:
+            click.echo(hint, err=True)
+    return exit_code(outcome)
+
+
+@click.command("plot")
+@click.argument("log_dir", type=click.Path(file_okay=False, exists=True))
+@click.option("--out", "out_path", type=click.Path(dir_okay=False),
+              help="Output image (default LOG_DIR/flight.png; with a folder of flight logs, one per log).")
+def plot(log_dir: str, out_path: str | None) -> int:
+    """Draw the paper-style figures (trajectories; |e_pc|, |e_tc|, |e_pt| over t, the time since
+    the start of riding) from a flight log directory written by ``marsupial run`` or
+    ``marsupial demo`` (e.g. logs/demo/pair0). Given a folder of flight logs (logs/demo), it
+    plots each one into its own directory. Exit code 2 when LOG_DIR holds no flight log."""
+    directory = Path(log_dir)
+    if (directory / "mission.json").is_file():
+        out = plot_flight(directory, out_path or directory / "flight.png")
+        click.echo(f"plot written to {out}")
+        return 0
+    logs = sorted(d for d in directory.iterdir() if (d / "mission.json").is_file())
+    if not logs:
+        raise ConfigError("LOG_DIR", log_dir, "holds no flight log (mission.json and record.csv): give a directory "
+                          "written by `marsupial run` (mission.log_dir/<time>-<pair>, printed at the end of the run) "
+                          "or by the demo (logs/demo/pair0)")
+    if out_path and len(logs) > 1:
+        raise ConfigError("--out", out_path, f"one output file for {len(logs)} flight logs; leave --out out "
+                          "(each plot goes to its own log directory) or give one log directory")
+    plotted = 0
+    for d in logs:
+        try:
+            out = plot_flight(d, out_path or d / "flight.png")
+        except ConfigError as exc:  # one aborted flight does not hide the others
+            click.echo(f"{d}: no plot: {exc.rule}", err=True)
+            continue
+        click.echo(f"plot written to {out}")
+        plotted += 1
+    if not plotted:
+        raise ConfigError("LOG_DIR", log_dir, f"none of its {len(logs)} flight logs has a flight to plot")
+    return 0
+
+
+def plot_flight(log_dir: Path, out_path: str | Path) -> Path:
+    """The paper-style figure of one flight log; times from the start of riding (t = 0)."""
+    from mission.plots import Trajectories, plot_run
+
+    if not (log_dir / "record.csv").is_file():
+        raise ConfigError("LOG_DIR", str(log_dir), "has mission.json but no record.csv: the flight never started")
+    rec = read_record(log_dir)
+    # The law's carrier position for the passenger is the dock point (carrier + offset).
+    x_p, x_c = rec.vec("x_p"), rec.vec("dock")
+    ok = np.isfinite(x_p).all(axis=1) & np.isfinite(x_c).all(axis=1)
+    if not ok.any():
+        raise ConfigError("LOG_DIR", str(log_dir), "the record holds no tick with both vehicle and carrier positions "
+                          "(the mission ended before it flew: see its summary.json)")
+    info = rec.info
+    riding = np.flatnonzero(rec.phase == "RIDING")
+    t0 = rec.t[riding[0]] if len(riding) else rec.t[ok][0]
+    sep = info.get("separation_time_s")
+    origin = "start of riding" if len(riding) else "first tick with both positions (never rode)"
+    tr = Trajectories(t=rec.t[ok] - t0, x_c=x_c[ok], x_p=x_p[ok], target=np.asarray(info["target_ned_m"]),
+                      separation_time_s=None if sep is None else sep - t0,
+                      obstacles=[(np.asarray(o["center"]), o["radius"]) for o in info.get("obstacles", [])],
+                      frame="local_ned", title=f"flight {log_dir.name} (carrier = its dock point; t = 0 at the {origin}, "
+                      f"mission clock {t0:.2f} s)", bc_m=info.get("bc_m"))
+    return plot_run(tr, out_path)

@@ -1,0 +1,402 @@
+"""Typed, validated configuration from TOML (pydantic models; errors name the field).
+
+One file describes a whole marsupial pair: the law, the scenario geometry, the safety filter,
+the simulator, the mission controller, the MAVLink and Zenoh endpoints and the carrier
+simulator. Every section has safe defaults, so a file only states what differs. Layering: file,
+then command-line overrides (:func:`with_overrides`).
+
+Frames: ``scenario`` vectors are in the local frame of the flight, PX4's local NED [m] (z down)
+for missions; the simulator is frame-agnostic (``scenario.frame`` only affects plots).
+
+Everything is checked at load and a bad value raises :class:`ConfigError` naming the field (the
+CLI exits 2): the file must be UTF-8 TOML; numbers are strict (a string or a boolean is never a
+number, an integer field takes no fraction); every margin, timeout, rate, speed, gain and
+string length has bounds (a 1e300 timeout would switch a failsafe off, a 0.001 Hz loop would not
+hear SIGTERM for 1000 s); URLs, ports and Zenoh endpoints and key expressions are parsed; and the
+geometry is checked across fields (:meth:`Config._cross_fields`): altitude band not empty, dock
+point above the carrier and inside the band, target inside the band and above ground, starts and
+target outside every obstacle, departure margin well inside b c, carrier rate fast enough for
+the carrier timeout.
+"""
+from __future__ import annotations
+
+import math
+import tomllib
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated, Any, Literal
+
+import numpy as np
+from pydantic import Field, ValidationError, field_validator, model_validator
+
+from mission.config.carrier import CarrierMavlinkSection, CarrierRos2Section, CarrierSection
+from mission.config.fields import (
+    COORD_LIMIT_M,
+    MAX_PATH_CHARS,
+    MAX_URL_CHARS,
+    Coord,
+    FloatPair,
+    Path_,
+    Section,
+    check_key_expr,
+    check_mavlink_url,
+    check_port,
+    check_zenoh_endpoint,
+    printable,
+)
+from mission.errors import ConfigError
+
+if TYPE_CHECKING:  # the schema imports no law: the converters below import it when called
+    from mission.core.law import LawParams
+    from mission.core.safety import Obstacles, SafetyConfig
+
+__all__ = [  # the sections and field checks in config_carrier / config_fields are importable from here too
+    "COORD_LIMIT_M", "MAX_PATH_CHARS", "MAX_URL_CHARS", "CarrierMavlinkSection", "CarrierRos2Section",
+    "CarrierSection", "Config", "Coord", "FloatPair", "LawSection", "MavlinkSection", "MissionSection",
+    "MonteCarloSection", "ObstacleSection", "Path_", "SafetySection", "ScenarioSection", "Section", "SimSection",
+    "ZenohSection", "check_key_expr", "check_mavlink_url", "check_port", "check_zenoh_endpoint", "from_dict",
+    "load_config", "with_overrides",
+]
+
+
+class LawSection(Section):
+    """Gains of the paper's law (paper values by default)."""
+
+    k_c: float = Field(0.5, gt=0, le=100, description="carrier gain [1/s]")
+    k_p: float = Field(1.0, gt=0, le=100, description="passenger gain")
+    b: float = Field(8.0, gt=1, le=1000, description="b > 1")
+    c: float = Field(1.0, gt=0, le=1000, description="[m]")
+    d: float = Field(1.0, gt=0, le=1000, description="[m]")
+    departure_margin_m: float = Field(
+        1e-3, gt=0, le=0.5, description="[m] separation fires at |e_tc| = b c - this (mission/core/tick.py), in flights "
+        "and simulations (below 1e-6 m the departure drowns in rounding; also < b c / 10)")
+
+    def params(self) -> LawParams:
+        from mission.core.law import LawParams
+
+        return LawParams(k_c=self.k_c, k_p=self.k_p, b=self.b, c=self.c, d=self.d)
+
+
+class ObstacleSection(Section):
+    center: list[Coord]
+    radius: float = Field(gt=0, le=100_000, description="[m]")
+
+
+class ScenarioSection(Section):
+    """Geometry: where the carrier, passenger and target are at t = 0 [m]."""
+
+    dim: Literal[2, 3] = 3
+    frame: Literal["local_ned", "xyz"] = "local_ned"
+    carrier_start: list[Coord] = [0.0, 0.0, 0.0]
+    target: list[Coord] = [20.0, 15.0, -4.0]
+    passenger_start: list[Coord] | None = None
+    planar_carrier: bool = True
+    eta: float | None = Field(None, gt=0, le=10_000_000, description="Assumption 1 lower bound [m]; default |e_tc(0)|")
+    carrier_mode: Literal["stop", "remark1"] = "stop"
+    obstacles: list[ObstacleSection] = Field([], max_length=1000)
+
+    @model_validator(mode="after")
+    def _dims(self) -> "ScenarioSection":
+        for name in ("carrier_start", "target", "passenger_start"):
+            v = getattr(self, name)
+            if v is not None and len(v) != self.dim:
+                raise ConfigError(f"scenario.{name}", v, f"must have {self.dim} components (scenario.dim)")
+        for i, ob in enumerate(self.obstacles):
+            if len(ob.center) != self.dim:
+                raise ConfigError(f"scenario.obstacles[{i}].center", ob.center, f"must have {self.dim} components")
+        return self
+
+    def obstacle_set(self) -> Obstacles:
+        from mission.core.safety import Obstacles
+
+        return Obstacles.of([(o.center, o.radius) for o in self.obstacles], self.dim)
+
+
+class SafetySection(Section):
+    """CBF filter and limits; a limit left out is off (the simulator's paper runs)."""
+
+    cbf_gain: float = Field(1.0, gt=0, le=100, description="class-K gain [1/s]")
+    margin_m: float = Field(0.5, ge=0, le=100)
+    passenger_max_speed_m_s: float | None = Field(None, gt=0, le=100)
+    passenger_max_accel_m_s2: float | None = Field(None, gt=0, le=100)
+    carrier_max_speed_m_s: float | None = Field(None, gt=0, le=100)
+    carrier_max_accel_m_s2: float | None = Field(None, gt=0, le=100)
+    z_min_m: float | None = Field(None, ge=-100_000, le=100_000, description="[m] NED: ceiling (most negative z)")
+    z_max_m: float | None = Field(None, ge=-100_000, le=100_000, description="[m] NED: floor (z <= z_max_m once flying)")
+    filter_carrier: bool = True
+
+    def passenger(self) -> SafetyConfig:
+        from mission.core.safety import SafetyConfig
+
+        return SafetyConfig(self.cbf_gain, self.margin_m, self.passenger_max_speed_m_s, self.passenger_max_accel_m_s2, self.z_min_m, self.z_max_m)
+
+    def carrier(self) -> SafetyConfig:
+        from mission.core.safety import SafetyConfig
+
+        return SafetyConfig(self.cbf_gain, self.margin_m, self.carrier_max_speed_m_s, self.carrier_max_accel_m_s2)
+
+
+class SimSection(Section):
+    """Numeric closed loop: a fixed step with the command held over it (a digital controller)."""
+
+    dt_s: float = Field(1e-3, gt=0, le=0.1)
+    duration_s: float = Field(30.0, gt=0, le=100_000)
+    p1_tolerance_m: float = Field(1e-6, gt=0, le=10, description="|e_pc| counted as 'on the carrier' before T")
+    p2_tolerance_m: float = Field(0.1, gt=0, le=10, description="final |e_pt| counted as 'at the target'")
+
+
+class MonteCarloSection(Section):
+    """Random scenarios satisfying the assumptions (for --monte-carlo)."""
+
+    distance_m: FloatPair = (12.0, 60.0)
+    height_m: FloatPair = (0.0, 6.0)
+
+    @model_validator(mode="after")
+    def _ranges(self) -> "MonteCarloSection":
+        for name in ("distance_m", "height_m"):
+            lo, hi = getattr(self, name)
+            if not (0 <= lo <= hi <= COORD_LIMIT_M):
+                raise ConfigError(f"monte_carlo.{name}", [lo, hi], f"must be 0 <= low <= high <= {COORD_LIMIT_M:g}")
+        return self
+
+
+class MissionSection(Section):
+    """The offboard controller (``marsupial run``)."""
+
+    rate_hz: float = Field(50.0, ge=10, le=1000, description="[Hz] PX4 needs > 2 Hz in OFFBOARD; >= 10 Hz also "
+                           "keeps SIGTERM answered within 0.1 s")
+    dock_offset_ned_m: list[Annotated[float, Field(ge=-100, le=100)]] = Field(
+        [0.0, 0.0, -1.5], description="[m] NED from the carrier; down < 0")
+    dock_tolerance_m: float = Field(0.5, gt=0, le=5)
+    track_gain: float = Field(0.0, ge=0, le=50, description="[1/s] pull of the vehicle to the reference (added to PX4's "
+                              "own position loop for full setpoints)")
+    join_speed_m_s: float = Field(1.0, gt=0, le=20)
+    arrival_radius_m: float = Field(0.5, gt=0, le=50)
+    arrival_dwell_s: float = Field(2.0, ge=0, le=600)
+    setpoint: Literal["velocity", "full"] = Field(
+        "full", description="[-] velocity-only setpoints (type_mask 3527), or position + velocity + acceleration "
+        "(type_mask 3072: PX4 closes position itself); see mission/core/tracking.py")
+    position_lead: float = Field(2.6, ge=0, le=20, description="[-] full setpoints: the position sent is x_ref + lead (x_ref - x_p), "
+                                 "extra position feedback through PX4's own position loop (dimensionless)")
+    integral_gain: float = Field(1.0, ge=0, le=20, description="[1/s^2 or 1/s] integral action on the position error: [1/s^2] into the "
+                                 "acceleration feed-forward (full), [1/s] into the velocity (velocity)")
+    integral_limit: float = Field(2.0, gt=0, le=20, description="[m/s^2 or m/s] clamp of the integral term: [m/s^2] (full) or [m/s] (velocity)")
+    drag_ff_per_s: float = Field(1.0, ge=0, le=10, description="[1/s] feed-forward of the vehicle's velocity deficit: "
+                                 "acceleration per m/s of reference velocity (full setpoints)")
+    integral_window_m: float = Field(0.5, gt=0, le=10, description="[m] the integral integrates only while the vehicle is "
+                                     "this close to the reference (anti-windup)")
+    velocity_bias_tau_s: float = Field(0.0, ge=0, le=60, description="[s] the vehicle's velocity as the mission uses it "
+                                       "is corrected by the low-passed (this time constant) difference between its position's "
+                                       "rate and its estimator's velocity (PX4's EKF on SIH: 0.3-0.5 m/s apart for seconds); 0 off")
+    damping_per_s: float = Field(0.0, ge=0, le=20, description="[1/s] full setpoints: velocity damping in the acceleration "
+                                 "feed-forward, -k (v_p - u_ref): damps the ringing of PX4's position loop stiffened by the lead; 0 off")
+    reference_slow_lag_m: float | None = Field(
+        0.3, gt=0, le=50, description="[m] after separation the reference slows down when the vehicle lags it by more "
+        "than this, and waits at reference_stop_lag_m (None: never)")
+    reference_stop_lag_m: float | None = Field(1.0, gt=0, le=50, description="[m] see reference_slow_lag_m")
+    join_settle_m: float | None = Field(
+        0.15, gt=0, le=5, description="[m] JOIN ends (the carrier starts) once the vehicle is this close to the dock point "
+        "(None: dock_tolerance_m) ...")
+    join_settle_s: float = Field(0.5, ge=0, le=60, description="[s] ... for this long")
+    arrival_max_speed_m_s: float | None = Field(
+        0.3, gt=0, le=20, description="[m/s] arrival also needs the vehicle this slow (None: any speed), so Hold is "
+        "not handed a vehicle still moving")
+    telemetry_rate_hz: float | None = Field(
+        50.0, gt=0, le=1000, description="[Hz] LOCAL_POSITION_NED rate asked of the vehicle (MAV_CMD_SET_MESSAGE_INTERVAL); "
+        "None: leave the vehicle's default")
+    unused_streams: Literal["keep", "stop"] = Field(
+        "keep", description="[-] `stop`: once the preflight checks passed, ask the vehicle to stop the onboard-profile "
+        "streams the mission never reads (SET_MESSAGE_INTERVAL -1 each; PX4 honours it on the link it came on), so "
+        "less telemetry is sent and parsed; `keep`: leave them streaming (the tlog then has them all)")
+    final_action: Literal["hold", "land"] = "hold"
+    carrier_timeout_s: float = Field(0.5, gt=0, le=10, description="[s] a carrier state older than this is lost")
+    heartbeat_timeout_s: float = Field(3.0, gt=0, le=30, description="[s] MAVSDK also declares a vehicle lost after 3 s")
+    prestream_s: float = Field(1.0, ge=0.2, le=10)
+    command_retries: int = Field(3, ge=1, le=10)
+    max_duration_s: float = Field(300.0, gt=0, le=86400)
+    connect_timeout_s: float = Field(20.0, gt=0, le=600)
+    log_dir: Path_ = "logs"
+
+    _log_dir_printable = field_validator("log_dir")(printable)
+
+
+class MavlinkSection(Section):
+    url: str = Field("udpin:127.0.0.1:14540", max_length=MAX_URL_CHARS)
+    target_system: int | None = Field(None, ge=1, le=255, description="fly only this system; unset: adopt a PX4 "
+                                      "autopilot after 3 consistent HEARTBEATs (mission.mavlink.link)")
+    target_component: int = Field(1, ge=0, le=255, description="[-] the autopilot's component id (0: any)")
+    source_system: int = Field(1, ge=1, le=255)
+    source_component: int = Field(191, ge=1, le=255)
+    signing_key_file: Path_ | None = None
+
+    _url_ok = field_validator("url")(check_mavlink_url)
+    _key_file_printable = field_validator("signing_key_file")(lambda v: v if v is None else printable(v))
+
+
+class ZenohSection(Section):
+    """Zenoh session: peer on loopback with multicast scouting off by default."""
+
+    mode: Literal["peer", "client", "router"] = "peer"
+    listen: list[Annotated[str, Field(max_length=MAX_URL_CHARS)]] = Field([], max_length=16)
+    connect: list[Annotated[str, Field(max_length=MAX_URL_CHARS)]] = Field([], max_length=16)
+    multicast_scouting: bool = False
+    config_file: Path_ | None = None
+    pair: str = Field("pair0", pattern=r"^[A-Za-z0-9_\-]+$", max_length=64,
+                      description="one chunk of the key expressions marsupial/<pair>/...")
+    encoding: Literal["json", "cdr"] = "json"
+    rendezvous: str | None = Field(
+        "tcp/127.0.0.1:7448",
+        description="peer mode with no listen/connect endpoints and no config_file: every process "
+        "listens on this loopback endpoint if it is free (the first one wins) and on an ephemeral "
+        "loopback port, and connects to it; gossip then meshes the peers. None: loopback ephemeral "
+        "listener only (useful with multicast scouting)",
+    )
+    carrier_key: str | None = Field(
+        None, max_length=MAX_URL_CHARS,
+        description="override of the carrier state key, e.g. 'robot1/odom' (zenoh-bridge-ros2dds) or "
+        "'0/odom/nav_msgs::msg::dds_::Odometry_/*' (rmw_zenoh) with encoding 'cdr'")
+
+    @field_validator("listen", "connect")
+    @classmethod
+    def _endpoints(cls, value: list[str], info: Any) -> list[str]:
+        for endpoint in value:
+            check_zenoh_endpoint(endpoint, listen=info.field_name == "listen")
+        return value
+
+    @field_validator("rendezvous")
+    @classmethod
+    def _rendezvous(cls, value: str | None) -> str | None:
+        return None if value is None else check_zenoh_endpoint(value, listen=False)
+
+    @field_validator("carrier_key")
+    @classmethod
+    def _key(cls, value: str | None) -> str | None:
+        return None if value is None else check_key_expr(value)
+
+    _config_file_printable = field_validator("config_file")(lambda v: v if v is None else printable(v))
+
+class Config(Section):
+    law: LawSection = LawSection()
+    scenario: ScenarioSection = ScenarioSection()
+    safety: SafetySection = SafetySection()
+    sim: SimSection = SimSection()
+    monte_carlo: MonteCarloSection = MonteCarloSection()
+    mission: MissionSection = MissionSection()
+    mavlink: MavlinkSection = MavlinkSection()
+    zenoh: ZenohSection = ZenohSection()
+    carrier: CarrierSection = CarrierSection()
+
+    @model_validator(mode="after")
+    def _assumptions(self) -> "Config":
+        s = self.scenario
+        from mission.core.law import check_assumptions  # the geometry the law needs, checked at load
+
+        check_assumptions(
+            np.array(s.carrier_start),
+            np.array(s.target),
+            self.law.params(),
+            planar_carrier=s.planar_carrier and s.dim == 3,
+            eta=s.eta,
+            passenger_start=None if s.passenger_start is None else np.array(s.passenger_start),
+        )
+        if not self.carrier.p3_margin_m > self.law.departure_margin_m:
+            raise ConfigError("carrier.p3_margin_m", self.carrier.p3_margin_m,
+                              "must exceed law.departure_margin_m, or the carrier never reaches the separation distance")
+        if self.carrier.p3_margin_m >= self.law.b * self.law.c:
+            raise ConfigError("carrier.p3_margin_m", self.carrier.p3_margin_m, "must be < b c")
+        if len(self.mission.dock_offset_ned_m) != 3:
+            raise ConfigError("mission.dock_offset_ned_m", self.mission.dock_offset_ned_m, "must have 3 components")
+        self._cross_fields()
+        return self
+
+    def _cross_fields(self) -> None:
+        """Checks that need several fields (raise ConfigError naming the field to change)."""
+        s, sf, m = self.scenario, self.safety, self.mission
+        bc = self.law.params().separation_distance_m
+        if not self.law.departure_margin_m >= 1e-6:
+            raise ConfigError("law.departure_margin_m", self.law.departure_margin_m,
+                              "must be >= 1e-6 m (a smaller departure drowns in float rounding: the passenger stays)")
+        if not self.law.departure_margin_m < bc / 10:
+            raise ConfigError("law.departure_margin_m", self.law.departure_margin_m,
+                              f"must be < b*c/10 = {bc / 10:g} m (at >= b*c the passenger never separates)")
+        if sf.z_min_m is not None and sf.z_max_m is not None and not sf.z_min_m < sf.z_max_m:
+            raise ConfigError("safety.z_min_m", sf.z_min_m, f"empty altitude band: must be < safety.z_max_m = {sf.z_max_m:g}")
+        for i, ob in enumerate(s.obstacles):
+            for name in ("carrier_start", "target", "passenger_start"):
+                point = getattr(s, name)
+                if point is not None and math.dist(point, ob.center) <= ob.radius:
+                    raise ConfigError(f"scenario.{name}", point, f"inside scenario.obstacles[{i}] "
+                                      f"(center {ob.center}, radius {ob.radius:g} m)")
+        if s.dim != 3 or s.frame != "local_ned":
+            return
+        # local NED, z down: the carrier drives on the ground at carrier_start's z
+        ground = s.carrier_start[2]
+        dock_z = ground + m.dock_offset_ned_m[2]
+        if not m.dock_offset_ned_m[2] < 0:
+            raise ConfigError("mission.dock_offset_ned_m", m.dock_offset_ned_m,
+                              "the dock point must be above the carrier (down component < 0): it is underground")
+        if not s.target[2] <= ground:
+            raise ConfigError("scenario.target", s.target, f"below the ground (z {s.target[2]:g} > carrier z {ground:g}, NED)")
+        for name, z in (("mission.dock_offset_ned_m", dock_z), ("scenario.target", s.target[2])):
+            value = m.dock_offset_ned_m if name.startswith("mission") else s.target
+            if sf.z_max_m is not None and z > sf.z_max_m:
+                raise ConfigError(name, value, f"below the altitude floor safety.z_max_m = {sf.z_max_m:g} (z {z:g}, NED)")
+            if sf.z_min_m is not None and z < sf.z_min_m:
+                raise ConfigError(name, value, f"above the ceiling safety.z_min_m = {sf.z_min_m:g} (z {z:g}, NED)")
+        if not 1.0 / self.carrier.rate_hz <= m.carrier_timeout_s / 2:
+            raise ConfigError("carrier.rate_hz", self.carrier.rate_hz,
+                              f"too slow for mission.carrier_timeout_s = {m.carrier_timeout_s:g} s "
+                              "(at least two states per timeout)")
+
+
+def _error_from_validation(exc: ValidationError) -> ConfigError:
+    err = exc.errors()[0]
+    loc = ".".join(str(p) for p in err["loc"] if p != "__root__")
+    ctx_error = (err.get("ctx") or {}).get("error")
+    if isinstance(ctx_error, ConfigError):
+        return ctx_error
+    rule = err["msg"].removeprefix("Value error, ")
+    if err["type"] == "extra_forbidden":
+        rule = "unknown field (check spelling; see configs/ for examples)"
+    return ConfigError(loc or "config", err.get("input"), rule)
+
+
+def from_dict(data: dict[str, Any]) -> Config:
+    """Validate a nested dict into a :class:`Config`, raising :class:`ConfigError`."""
+    try:
+        return Config.model_validate(data)
+    except ValidationError as exc:
+        raise _error_from_validation(exc) from None
+
+
+def load_config(path: str | Path) -> Config:
+    """Read and validate a TOML file. Raises :class:`ConfigError` naming the field."""
+    path = Path(path)
+    try:
+        raw = path.read_bytes()
+    except FileNotFoundError:
+        raise ConfigError("config", str(path), "file not found") from None
+    except OSError as exc:  # a directory, no permission, a name too long...
+        raise ConfigError("config", str(path)[:200], f"cannot read: {exc.strerror or exc}") from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ConfigError("config", str(path), f"not UTF-8 (byte {exc.start}: {raw[exc.start:exc.start + 1]!r})") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError("config", str(path), f"not valid TOML: {exc}") from None
+    return from_dict(data)
+
+
+def with_overrides(cfg: Config, overrides: dict[str, Any]) -> Config:
+    """A copy of ``cfg`` with dotted-key overrides (``{"mavlink.url": "udpin:..."}``), revalidated."""
+    data = cfg.model_dump()
+    for key, value in overrides.items():
+        if value is None:
+            continue
+        node = data
+        *parents, leaf = key.split(".")
+        for p in parents:
+            node = node[p]
+        node[leaf] = value
+    return from_dict(data)

@@ -1,0 +1,270 @@
+"""Safety filter (pure, numpy): CBF-QP obstacle and altitude constraints, accel and speed limits.
+
+A desired velocity ``u_des`` [m/s] at position ``x`` [m] (arrays ``(..., n)``) is changed as
+little as possible (least squares) so that every barrier stays non-negative:
+
+- obstacle i (circle in 2D, sphere in 3D): ``h_i = |x - o_i|^2 - (r_i + margin)^2``,
+  constraint ``dh_i/dt = 2 (x - o_i) . u >= -gain * h_i``;
+- optional bounds on the third coordinate (``z_min_m <= z <= z_max_m``; in PX4's NED frame
+  an altitude floor of 2 m is ``z_max_m = -2``): ``+-u_z >= -gain * (distance to the bound)``.
+
+The QP is solved in closed form where that is exact (no constraint violated, or a projection on
+one violated constraint that satisfies all others: it meets the KKT conditions, so it is the
+optimum) and by DAQP otherwise. If the QP is infeasible the fallback is zero velocity (hold
+position) and ``feasible`` is false.
+
+Order: the change of command is first limited to ``max_accel_m_s2 * dt_s`` (along the change),
+then the barriers act, then the speed is limited to ``max_speed_m_s`` by scaling (the direction is
+kept, and scaling towards zero never breaks a satisfied barrier constraint). So the barriers have
+the last word: when an obstacle demands a harder stop than the acceleration limit allows, safety
+wins over comfort (``cbf_active`` says so).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import daqp
+import numpy as np
+
+from mission.core.law import dot, norm
+
+_TOL = 1e-9
+
+
+@dataclass(frozen=True)
+class Obstacles:
+    """Circular (2D) or spherical (3D) obstacles: centers [m] shape (m, n) (or (B, m, n) for a
+    batch with per-scenario obstacles), radii [m] shape (m,).
+
+    Treat the arrays as immutable: values derived from them (the planar view, squared keep-out
+    radii) are computed once per instance and cached, since the filter needs them every tick.
+    """
+
+    centers: np.ndarray
+    radii: np.ndarray
+    _cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+
+    @classmethod
+    def none(cls, n: int) -> "Obstacles":
+        return cls(np.zeros((0, n)), np.zeros(0))
+
+    @classmethod
+    def of(cls, items: list[tuple[list[float], float]], n: int) -> "Obstacles":
+        if not items:
+            return cls.none(n)
+        centers = np.array([c for c, _ in items], dtype=float).reshape(-1, n)
+        return cls(centers, np.array([r for _, r in items], dtype=float))
+
+    def __len__(self) -> int:
+        return int(self.radii.shape[0])
+
+    def planar(self) -> "Obstacles":
+        """The same obstacles seen by a planar robot: their first two coordinates (circles)."""
+        view = self._cache.get("planar")
+        if view is None:
+            view = self._cache["planar"] = Obstacles(self.centers[..., :2], self.radii)
+        return view
+
+    def keepout_sq(self, margin_m: float) -> np.ndarray:
+        """Squared keep-out radii ``(r_i + margin)^2`` [m^2], shape (m,) (cached per margin)."""
+        key = ("keepout_sq", margin_m)
+        r2 = self._cache.get(key)
+        if r2 is None:
+            r2 = self._cache[key] = (self.radii + margin_m) ** 2
+        return r2
+
+    def clearance(self, x: np.ndarray) -> np.ndarray:
+        """Distance [m] from ``x`` (..., n) to each obstacle's surface: shape (..., m)."""
+        diff = x[..., None, :] - self.centers
+        return norm(diff) - self.radii
+
+
+@dataclass(frozen=True)
+class SafetyConfig:
+    """Parameters of the filter. None disables a limit.
+
+    cbf_gain [1/s] class-K gain; margin_m [m] added to every radius; max_speed_m_s [m/s];
+    max_accel_m_s2 [m/s^2]; z_min_m / z_max_m [m] bounds on the third coordinate. (``_cache``
+    holds the constant constraint rows of the bounds, built on first use.)
+    """
+
+    cbf_gain: float = 1.0
+    margin_m: float = 0.5
+    max_speed_m_s: float | None = None
+    max_accel_m_s2: float | None = None
+    z_min_m: float | None = None
+    z_max_m: float | None = None
+    _cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+
+
+@dataclass(frozen=True)
+class FilterResult:
+    """Output of :func:`filter_velocity` (arrays broadcast like the input's leading shape).
+
+    u [m/s] the safe command; changed: the filter changed the command; correction_m_s: ``|u -
+    u_des|``; feasible: the CBF-QP had a solution (else ``u`` is the zero-velocity fallback);
+    cbf_active: a barrier constraint was active.
+    """
+
+    u: np.ndarray
+    changed: np.ndarray
+    correction_m_s: np.ndarray
+    feasible: np.ndarray
+    cbf_active: np.ndarray
+
+
+def _bound_rows(cfg: SafetyConfig, n: int) -> tuple[tuple[tuple[float, float], ...], np.ndarray]:
+    """The active bounds on the third coordinate as ((bound [m], sign), ...) and their constant
+    constraint rows (k, n): ``sign * e_z`` (built once per configuration and n, read-only)."""
+    cached = cfg._cache.get(n)
+    if cached is None:
+        bounds = tuple((bound, sign) for bound, sign in ((cfg.z_min_m, 1.0), (cfg.z_max_m, -1.0))
+                       if bound is not None and n >= 3)
+        rows = np.zeros((len(bounds), n))
+        for i, (_, sign) in enumerate(bounds):
+            rows[i, 2] = sign
+        rows.setflags(write=False)
+        cached = cfg._cache[n] = (bounds, rows)
+    return cached
+
+
+def barrier_constraints(x: np.ndarray, obstacles: Obstacles, cfg: SafetyConfig) -> tuple[np.ndarray, np.ndarray]:
+    """Linear constraints ``A u >= b`` of the CBF condition at ``x``: A (..., m, n), b (..., m).
+
+    Rows: the obstacles first, then the lower and the upper bound on the third coordinate.
+    """
+    n = x.shape[-1]
+    lead = x.shape[:-1]
+    bounds, bound_rows = _bound_rows(cfg, n)
+    m = len(obstacles)
+    if obstacles.centers.ndim > 2:  # per-scenario obstacles (B, m, n)
+        lead = np.broadcast_shapes(lead, obstacles.centers.shape[:-2])
+    A = np.empty(lead + (m + len(bounds), n))
+    b = np.empty(lead + (m + len(bounds),))
+    if m:
+        diff = x[..., None, :] - obstacles.centers
+        h = dot(diff, diff) - obstacles.keepout_sq(cfg.margin_m)
+        np.multiply(2.0, diff, out=A[..., :m, :])
+        np.multiply(-cfg.cbf_gain, h, out=b[..., :m])
+    if bounds:
+        A[..., m:, :] = bound_rows
+        for i, (bound, sign) in enumerate(bounds):
+            b[..., m + i] = -cfg.cbf_gain * sign * (x[..., 2] - bound)
+    return A, b
+
+
+def _solve_qp(u_des: np.ndarray, A: np.ndarray, b: np.ndarray) -> np.ndarray | None:
+    """min |u - u_des|^2 s.t. A u >= b for one vector, by DAQP; None if infeasible."""
+    n = u_des.shape[0]
+    upper = np.full(b.shape, 1e30)
+    u, _, exitflag, _ = daqp.solve(np.eye(n), -u_des.astype(float), np.ascontiguousarray(A, dtype=float), upper, b.astype(float))
+    return np.asarray(u, dtype=float) if exitflag >= 1 else None
+
+
+def project_cbf(u_des: np.ndarray, A: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Least-squares correction of ``u_des`` (..., n) onto ``A u >= b``.
+
+    Returns (u, feasible, active); ``u`` is a new array. Closed form when exact, DAQP for the
+    rows that need it.
+    """
+    # (np.logical_*.reduce and np.count_nonzero instead of .any()/.all()/.sum(): same results,
+    # a fraction of the call overhead, which dominates for one vector.)
+    u = np.asarray(u_des, dtype=float)
+    lead = u.shape[:-1]
+    feasible = np.empty(lead, dtype=bool)
+    feasible.fill(True)
+    if A.shape[-2] == 0:
+        return u.copy(), feasible, np.zeros(lead, dtype=bool)
+    slack = dot(A, u[..., None, :]) - b
+    violated = slack < -_TOL
+    active = np.logical_or.reduce(violated, axis=-1)
+    n_active = np.count_nonzero(active)
+    if not n_active:
+        return u.copy(), feasible, active
+    # Candidate projections onto each violated constraint, then keep one satisfying all others.
+    a2 = dot(A, A)
+    step = np.where(violated, -slack / np.maximum(a2, 1e-300), 0.0)
+    tol = -1e-7 * (1.0 + np.abs(b))
+    if np.count_nonzero(violated) == n_active:
+        # Common case, one violated constraint per vector: its projection is the only candidate.
+        # step is zero on the other rows, so the product step A is exactly step_j * A_j.
+        chosen = u + (step[..., None, :] @ A)[..., 0, :]
+        has = np.logical_and.reduce(dot(A, chosen[..., None, :]) - b >= tol, axis=-1)
+        positive = a2 > 0
+        if np.count_nonzero(positive) < positive.size:  # a zero row is never a valid candidate
+            has &= np.logical_and.reduce(positive | ~violated, axis=-1)
+    else:
+        cand = u[..., None, :] + step[..., None] * A  # (..., m, n)
+        cand_slack = dot(A[..., None, :, :], cand[..., :, None, :]) - b[..., None, :]  # (..., m cand, k cons)
+        ok = violated & np.logical_and.reduce(cand_slack >= tol[..., None, :], axis=-1) & (a2 > 0)
+        has = np.logical_or.reduce(ok, axis=-1)
+        first = np.argmax(ok, axis=-1)
+        chosen = np.take_along_axis(cand, first[..., None, None], axis=-2)[..., 0, :]
+    take = active & has
+    u = np.where(take[..., None], chosen, u) if take.ndim else (chosen if take else u.copy())
+    need_qp = active & ~has
+    if np.count_nonzero(need_qp):
+        for idx in zip(*np.nonzero(need_qp)) if lead else [()]:
+            sol = _solve_qp(u_des[idx], A[idx], b[idx])
+            if sol is None:
+                u[idx] = 0.0
+                feasible[idx] = False
+            else:
+                u[idx] = sol
+    return u, feasible, active
+
+
+def limit_accel(u: np.ndarray, u_prev: np.ndarray, max_accel_m_s2: float, dt_s: float) -> np.ndarray:
+    """Limit the change ``u - u_prev`` [m/s] to ``max_accel * dt`` along its own direction."""
+    du = u - u_prev
+    mag = norm(du)
+    scale = np.minimum(1.0, max_accel_m_s2 * dt_s / np.maximum(mag, 1e-300))
+    return u_prev + du * scale[..., None]
+
+
+def limit_speed(u: np.ndarray, max_speed_m_s: float) -> np.ndarray:
+    """Scale ``u`` [m/s] down to at most ``max_speed`` keeping its direction.
+
+    Returns ``u`` itself when no vector is too fast (the scale would be exactly 1)."""
+    mag = norm(u)
+    if (mag <= max_speed_m_s).all():
+        return u
+    scale = np.minimum(1.0, max_speed_m_s / np.maximum(mag, 1e-300))
+    return u * scale[..., None]
+
+
+def filter_velocity(
+    x: np.ndarray,
+    u_des: np.ndarray,
+    obstacles: Obstacles,
+    cfg: SafetyConfig,
+    u_prev: np.ndarray | None = None,
+    dt_s: float | None = None,
+    *,
+    copy: bool = True,
+) -> FilterResult:
+    """Safe velocity near ``u_des`` at position ``x`` (arrays ``(..., n)``); see module doc.
+
+    ``u_prev`` [m/s] and ``dt_s`` [s] enable the acceleration limit. ``u`` of the result is a
+    new array, except with ``copy=False`` when nothing changed the command: then it is
+    ``u_des`` itself (for callers that own ``u_des`` and never write into either).
+    """
+    u_des = np.asarray(u_des, dtype=float)
+    u = u_des
+    if cfg.max_accel_m_s2 is not None and u_prev is not None and dt_s is not None:
+        u = limit_accel(u, u_prev, cfg.max_accel_m_s2, dt_s)
+    if len(obstacles) or _bound_rows(cfg, u.shape[-1])[0]:
+        A, b = barrier_constraints(np.asarray(x, dtype=float), obstacles, cfg)
+        u, feasible, active = project_cbf(u, A, b)
+    else:  # no barrier at all
+        feasible = np.empty(u.shape[:-1], dtype=bool)
+        feasible.fill(True)
+        active = np.zeros(u.shape[:-1], dtype=bool)
+    if cfg.max_speed_m_s is not None:
+        u = limit_speed(u, cfg.max_speed_m_s)
+    if u is u_des:  # no limit and no barrier applied: the command passes unchanged
+        unchanged = np.zeros(u.shape[:-1])[()]  # (a numpy scalar for one vector, as norm gives)
+        return FilterResult(u=u.copy() if copy else u, changed=unchanged > 0.0, correction_m_s=unchanged,
+                            feasible=feasible, cbf_active=active)
+    correction = norm(u - u_des)
+    return FilterResult(u=u, changed=correction > 1e-12, correction_m_s=correction, feasible=feasible, cbf_active=active)

@@ -1,0 +1,191 @@
+"""One control tick of the marsupial pair: law, separation latch, safety (pure, numpy).
+
+The same functions serve the realtime controller (arrays of shape ``(n,)``) and the batch
+simulator (``(B, n)``); neither knows how time advances or where states come from.
+
+Anchor and separation latch (design decisions; README, "Facts about the law" 2 and 3):
+
+- Before separation the *anchor* is the carrier's dock point; the passenger's law works in error
+  coordinates ``e_pc = x_p - anchor``, and feeds forward the anchor's velocity.
+- The separation event is the docked carrier reaching ``|e_tc| = b c - departure_margin``. At
+  ``|e_tc| = b c`` exactly, ``e_pc = 0`` is an equilibrium (``P = 0``) that an exactly-docked
+  passenger never leaves; the margin is the paper's ``T+``: the carrier coasts a hair past the
+  unstable equilibrium so the separating branch has a (tiny) non-zero input. With the default
+  1 mm the relative input starts at about 8 mm/s instead of jumping.
+- At the event the anchor is latched: the passenger's law keeps using the carrier position and
+  ``|e_tc|`` of that instant (paper Remark 1) whatever the carrier does next (it stops in the
+  paper; it keeps its own plan under Remark 1; a real carrier also brakes over some distance).
+  Latching only ``|e_tc|`` would let a carrier that drives away make ``P`` positive again and
+  pull the passenger back, so the position is latched.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from mission.core.law import LawParams, carrier_command, norm, passenger_command, uniform, where_rows
+from mission.core.safety import FilterResult, Obstacles, SafetyConfig, filter_velocity
+
+
+DEPARTURE_THRESHOLD_M = 0.1  # |e_pc| [m] beyond which the passenger counts as having left the carrier
+
+
+@dataclass(frozen=True)
+class TickModel:
+    """Everything a tick needs besides the state.
+
+    target [m] shape (n,) or (B, n); obstacles seen by the passenger (the carrier sees their
+    planar projection when ``planar_carrier``); carrier_mode "stop" (paper eq. 4) or "remark1"
+    (the carrier keeps its velocity of the separation instant); departure_margin_m [m].
+    """
+
+    law: LawParams
+    target: np.ndarray
+    obstacles: Obstacles
+    passenger_safety: SafetyConfig
+    carrier_safety: SafetyConfig
+    planar_carrier: bool = False
+    carrier_mode: Literal["stop", "remark1"] = "stop"
+    departure_margin_m: float = 1e-3
+    filter_carrier: bool = True
+    carrier_obstacles: Obstacles | None = None  # default: obstacles (planar) + target keep-out
+
+    def __post_init__(self) -> None:
+        if self.carrier_obstacles is None:
+            keepout = 0.5 * self.law.separation_distance_m if self.carrier_mode == "remark1" else 0.0
+            object.__setattr__(self, "carrier_obstacles", default_carrier_obstacles(
+                self.obstacles, np.asarray(self.target), self.planar_carrier, keepout))
+
+    @property
+    def event_distance_m(self) -> float:
+        """Carrier-target distance [m] at which the separation event fires: ``b c - margin``."""
+        return self.law.separation_distance_m - self.departure_margin_m
+
+
+@dataclass(frozen=True)
+class PassengerTick:
+    """Passenger command of one tick. u [m/s] safe command; relative [m/s] the law's ``u_p -
+    u_c`` before the filter; desired [m/s] the law's ``u_p`` (``u`` may be this very array when
+    the filter changed nothing: read, never write into them); P [1/s]; leaving: separating
+    branch; e_pc_norm_m [m] ``|e_pc|``."""
+
+    u: np.ndarray
+    desired: np.ndarray
+    relative: np.ndarray
+    P: np.ndarray
+    leaving: np.ndarray
+    safety: FilterResult
+    e_pc_norm_m: np.ndarray
+
+
+def passenger_tick(
+    anchor: np.ndarray,
+    anchor_velocity: np.ndarray,
+    e_pc: np.ndarray,
+    separated: np.ndarray | bool,
+    model: TickModel,
+    u_prev: np.ndarray | None = None,
+    dt_s: float | None = None,
+    e_tc_norm_m: np.ndarray | None = None,
+) -> PassengerTick:
+    """Law + safety for the passenger at ``anchor + e_pc`` [m].
+
+    anchor_velocity [m/s] is fed forward while docked (the carrier command, or a measured dock
+    velocity); after separation nothing is fed forward (the anchor is latched).
+    ``e_tc_norm_m`` [m]: ``|target - anchor|`` when the caller has it already (else computed).
+    """
+    sep = np.asarray(separated, dtype=bool)
+    e_tc = model.target - anchor
+    u_ff = where_rows(sep, 0.0, anchor_velocity)
+    cmd = passenger_command(e_pc, e_tc, u_ff, model.law, e_tc_norm_m)
+    desired = cmd.u_p
+    a_max = model.passenger_safety.max_accel_m_s2
+    shaped = False if a_max is None else uniform(sep)  # True: all separated, None: some
+    if shaped is not False:  # (the scale below is exactly 1 where docked: skipped if all are)
+        # Arrival shaping: never faster than the speed from which the acceleration limit can
+        # still stop at the target, sqrt(2 a_max |e_pt|); keeps the direction. Without it the
+        # saturated law reaches the target at full speed and circles it (seen in the 2D run).
+        stop_speed = np.sqrt(2.0 * a_max * norm(e_pc - e_tc))
+        speed = norm(desired)
+        scale = np.minimum(1.0, stop_speed / np.maximum(speed, 1e-300))
+        if shaped is None:
+            scale = np.where(sep, scale, 1.0)
+        desired = desired * scale[..., None]
+    safe = filter_velocity(anchor + e_pc, desired, model.obstacles, model.passenger_safety, u_prev, dt_s, copy=False)
+    return PassengerTick(u=safe.u, desired=desired, relative=cmd.relative, P=cmd.P, leaving=cmd.leaving, safety=safe,
+                         e_pc_norm_m=cmd.e_pc_norm_m)
+
+
+def carrier_tick(
+    x_c: np.ndarray,
+    separated: np.ndarray | bool,
+    model: TickModel,
+    own_plan_velocity: np.ndarray | None = None,
+    u_prev: np.ndarray | None = None,
+    dt_s: float | None = None,
+) -> FilterResult:
+    """Carrier command [m/s] at ``x_c`` [m]: the paper's approach while docked; after
+    separation zero ("stop") or ``own_plan_velocity`` ("remark1"), filtered for obstacles."""
+    sep = np.asarray(separated, dtype=bool)
+    u = carrier_command(model.target - x_c, ~sep, model.law, planar=model.planar_carrier)  # a new array
+    if model.carrier_mode == "remark1" and own_plan_velocity is not None and uniform(sep) is not False:
+        u = np.where(sep[..., None], own_plan_velocity, u)  # a new array too
+    obstacles = model.carrier_obstacles if model.filter_carrier else Obstacles.none(2 if model.planar_carrier else x_c.shape[-1])
+    if model.planar_carrier and x_c.shape[-1] == 3:
+        in_plane = u[..., :2]
+        planar = filter_velocity(x_c[..., :2], in_plane, obstacles, model.carrier_safety,
+                                 None if u_prev is None else u_prev[..., :2], dt_s, copy=False)
+        if planar.u is not in_plane:  # u is ours: reuse it as the 3D command, in the plane
+            u[..., :2] = planar.u
+        u[..., 2:] = 0.0
+        return FilterResult(u, planar.changed, planar.correction_m_s, planar.feasible, planar.cbf_active)
+    return filter_velocity(x_c, u, obstacles, model.carrier_safety, u_prev, dt_s, copy=False)
+
+
+def default_carrier_obstacles(obstacles: Obstacles, target: np.ndarray, planar: bool, keepout_m: float) -> Obstacles:
+    """What the carrier avoids: the obstacles (their planar projection for a planar carrier)
+    plus, when ``keepout_m > 0``, a keep-out disc of that radius [m] around the target, so that a
+    carrier that keeps its own plan after separation (Remark 1) still never reaches the target
+    (P3). A batch of targets (B, n) gives per-scenario obstacle centres (B, m + 1, n)."""
+    obs = obstacles.planar() if planar else obstacles
+    if keepout_m <= 0:
+        return obs
+    centre = target[..., :2] if planar else target
+    centers = np.broadcast_to(obs.centers, centre.shape[:-1] + obs.centers.shape[-2:])
+    return Obstacles(np.concatenate([centers, centre[..., None, :]], axis=-2), np.append(obs.radii, keepout_m))
+
+
+def separation_due(anchor: np.ndarray, separated: np.ndarray | bool, model: TickModel,
+                   distance_m: np.ndarray | None = None) -> np.ndarray:
+    """True where a docked pair has reached the event distance (the latch fires).
+
+    ``distance_m`` [m]: ``|target - anchor|`` when the caller has it already (else computed)."""
+    if distance_m is None:
+        distance_m = norm(model.target - anchor)
+    return ~np.asarray(separated, dtype=bool) & (distance_m <= model.event_distance_m)
+
+
+def latch_point(previous: np.ndarray, anchor: np.ndarray, target: np.ndarray, model: TickModel) -> tuple[np.ndarray, np.ndarray]:
+    """Where the latch fired inside the step ``previous -> anchor`` [m] (a straight segment: the
+    anchor moved at constant velocity over the tick): (theta in [0, 1], the anchor at the event).
+    Shared by the realtime phases and the batch simulator."""
+    step = anchor - previous
+    theta = crossing_fraction(previous, step, target, model.event_distance_m)
+    return theta, previous + theta[..., None] * step
+
+
+def crossing_fraction(start: np.ndarray, step: np.ndarray, target: np.ndarray, radius: float) -> np.ndarray:
+    """Fraction theta in [0, 1] of a straight step ``start -> start + step`` [m] at which the
+    distance to ``target`` first equals ``radius`` [m] (exact: a quadratic in theta).
+    Returns 1 where the step does not reach the sphere."""
+    w = start - target
+    a = np.einsum("...i,...i->...", step, step)
+    b = 2.0 * np.einsum("...i,...i->...", w, step)
+    c = np.einsum("...i,...i->...", w, w) - radius**2
+    disc = np.maximum(b * b - 4 * a * c, 0.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        theta = (-b - np.sqrt(disc)) / (2 * a)
+    theta = np.where((a > 0) & np.isfinite(theta), theta, 1.0)
+    return np.clip(theta, 0.0, 1.0)

@@ -1,0 +1,52 @@
+"""The one place where pymavlink is imported, after selecting MAVLink 2.
+
+pymavlink's ``mavutil`` picks its wire protocol from the ``MAVLINK20`` environment variable at
+import time (global state we cannot avoid). Every module of this package imports pymavlink
+through here::
+
+    from mission.mavlink.env import mavutil, mavlink
+
+``mavlink`` is the generated dialect module (message classes, ``MAVLink`` codec, enums) of
+pymavlink's default dialect, MAVLink 2 wire format.
+"""
+from __future__ import annotations
+
+import os
+import sys
+
+os.environ["MAVLINK20"] = "1"
+
+_already_imported = "pymavlink.mavutil" in sys.modules
+
+from pymavlink import mavutil  # noqa: E402  (must follow the environment variable)
+
+if _already_imported and not mavutil.mavlink20():
+    # Somebody imported mavutil before us without MAVLINK20: reload the dialect as MAVLink 2.
+    mavutil.set_dialect(mavutil.current_dialect)
+
+mavlink = mavutil.mavlink
+
+
+def read_signing_key(path: str | os.PathLike[str], field: str = "mavlink.signing_key_file") -> bytes:
+    """A 32-byte MAVLink 2 signing key from a file holding 64 hex digits or 32 raw bytes.
+
+    Raises :class:`mission.errors.ConfigError` naming ``field`` if the file cannot be read or
+    holds anything else. The key itself never appears in the message.
+    """
+    from pathlib import Path
+
+    from mission.errors import ConfigError
+
+    try:
+        raw = Path(path).read_bytes()
+    except OSError as exc:
+        raise ConfigError(field, str(path), f"cannot read the key file: {exc.strerror}") from None
+    try:
+        key = bytes.fromhex(raw.strip().decode("ascii"))
+    except (UnicodeDecodeError, ValueError):
+        key = raw
+    if len(key) != 32:
+        raise ConfigError(field, str(path), "must hold 32 bytes (raw) or 64 hex digits")
+    return key
+
+__all__ = ["mavutil", "mavlink", "read_signing_key"]

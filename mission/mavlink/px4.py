@@ -1,0 +1,178 @@
+"""PX4's own MAVLink encodings, shared by the link (client) and the mock vehicle (server).
+
+PX4's mode encoding (``custom_mode``, the modes' ``base_mode`` flags, the offboard-loss actions)
+and the setpoint type masks PX4 and MAVSDK use, as PX4 main (2026) and a real PX4 SITL on the
+wire show them. Pure constants and encoders; no I/O. The MAVLink numbers below the modes are
+the pymavlink dialect's (one source): new code reads them from
+:data:`mission.mavlink.env.mavlink` directly.
+"""
+from __future__ import annotations
+
+from enum import IntEnum
+
+from mission.mavlink.env import mavlink
+
+
+class MainMode(IntEnum):
+    MANUAL = 1
+    ALTCTL = 2
+    POSCTL = 3
+    AUTO = 4
+    ACRO = 5
+    OFFBOARD = 6
+    STABILIZED = 7
+
+
+class AutoSubMode(IntEnum):
+    READY = 1
+    TAKEOFF = 2
+    LOITER = 3
+    MISSION = 4
+    RTL = 5
+    LAND = 6
+    FOLLOW_TARGET = 8
+    PRECLAND = 9
+
+
+def encode_custom_mode(main: int, sub: int = 0) -> int:
+    """HEARTBEAT.custom_mode = (main << 16) | (sub << 24)."""
+    return (int(main) << 16) | (int(sub) << 24)
+
+
+def decode_custom_mode(custom_mode: int) -> tuple[int, int]:
+    """Inverse of :func:`encode_custom_mode`: (main mode, sub mode)."""
+    return (custom_mode >> 16) & 0xFF, (custom_mode >> 24) & 0xFF
+
+
+# Named modes as (main, sub) pairs and their names as pymavlink's interpret_px4_mode prints them.
+MODES: dict[str, tuple[int, int]] = {
+    "MANUAL": (MainMode.MANUAL, 0),
+    "ALTCTL": (MainMode.ALTCTL, 0),
+    "POSCTL": (MainMode.POSCTL, 0),
+    "OFFBOARD": (MainMode.OFFBOARD, 0),
+    "STABILIZED": (MainMode.STABILIZED, 0),
+    "ACRO": (MainMode.ACRO, 0),
+    "AUTO.READY": (MainMode.AUTO, AutoSubMode.READY),
+    "AUTO.TAKEOFF": (MainMode.AUTO, AutoSubMode.TAKEOFF),
+    "AUTO.LOITER": (MainMode.AUTO, AutoSubMode.LOITER),
+    "AUTO.MISSION": (MainMode.AUTO, AutoSubMode.MISSION),
+    "AUTO.RTL": (MainMode.AUTO, AutoSubMode.RTL),
+    "AUTO.LAND": (MainMode.AUTO, AutoSubMode.LAND),
+}
+HOLD = "AUTO.LOITER"
+
+
+def mode_name(custom_mode: int) -> str:
+    """Readable PX4 mode name of a HEARTBEAT custom_mode (``"UNKNOWN(0x..)"`` otherwise)."""
+    pair = decode_custom_mode(custom_mode)
+    for name, (main, sub) in MODES.items():
+        if (int(main), int(sub)) == pair:
+            return name
+    return f"UNKNOWN(0x{custom_mode:08x})"
+
+
+def custom_mode_of(name: str) -> int:
+    main, sub = MODES[name]
+    return encode_custom_mode(main, sub)
+
+
+# COM_OBL_RC_ACT value -> mode entered on offboard loss (6 Terminate, 7 Disarm handled apart).
+OFFBOARD_LOSS_ACTION_MODE = {0: "POSCTL", 1: "ALTCTL", 2: "STABILIZED", 3: "AUTO.RTL", 4: "AUTO.LAND", 5: "AUTO.LOITER"}
+
+# HEARTBEAT
+MAV_AUTOPILOT_PX4 = mavlink.MAV_AUTOPILOT_PX4
+MAV_TYPE_QUADROTOR = mavlink.MAV_TYPE_QUADROTOR
+MAV_TYPE_GROUND_ROVER = mavlink.MAV_TYPE_GROUND_ROVER
+MAV_TYPE_ONBOARD_CONTROLLER = mavlink.MAV_TYPE_ONBOARD_CONTROLLER
+MAV_MODE_FLAG_CUSTOM_MODE_ENABLED = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+MAV_MODE_FLAG_SAFETY_ARMED = mavlink.MAV_MODE_FLAG_SAFETY_ARMED
+MAV_STATE_STANDBY = mavlink.MAV_STATE_STANDBY
+MAV_STATE_ACTIVE = mavlink.MAV_STATE_ACTIVE
+MAV_STATE_CRITICAL = mavlink.MAV_STATE_CRITICAL
+
+# Commands and results
+MAV_CMD_DO_SET_MODE = mavlink.MAV_CMD_DO_SET_MODE
+MAV_CMD_COMPONENT_ARM_DISARM = mavlink.MAV_CMD_COMPONENT_ARM_DISARM
+MAV_CMD_NAV_TAKEOFF = mavlink.MAV_CMD_NAV_TAKEOFF
+MAV_CMD_NAV_LAND = mavlink.MAV_CMD_NAV_LAND
+MAV_CMD_NAV_RETURN_TO_LAUNCH = mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH
+MAV_CMD_REQUEST_MESSAGE = mavlink.MAV_CMD_REQUEST_MESSAGE
+MAV_CMD_SET_MESSAGE_INTERVAL = mavlink.MAV_CMD_SET_MESSAGE_INTERVAL
+MAV_CMD_GET_MESSAGE_INTERVAL = mavlink.MAV_CMD_GET_MESSAGE_INTERVAL
+ARM_FORCE_MAGIC = 21196
+MAV_RESULT_ACCEPTED = mavlink.MAV_RESULT_ACCEPTED
+MAV_RESULT_TEMPORARILY_REJECTED = mavlink.MAV_RESULT_TEMPORARILY_REJECTED
+MAV_RESULT_DENIED = mavlink.MAV_RESULT_DENIED
+MAV_RESULT_UNSUPPORTED = mavlink.MAV_RESULT_UNSUPPORTED
+MAV_RESULT_FAILED = mavlink.MAV_RESULT_FAILED
+
+# SET_POSITION_TARGET_LOCAL_NED
+MAV_FRAME_LOCAL_NED = mavlink.MAV_FRAME_LOCAL_NED
+MAV_FRAME_BODY_NED = mavlink.MAV_FRAME_BODY_NED
+TYPE_MASK_VELOCITY = 0x0DC7  # 3527: velocity only
+TYPE_MASK_VELOCITY_YAW = 2503  # velocity + yaw (MAVSDK set_velocity_ned)
+TYPE_MASK_VELOCITY_YAW_RATE = 1479  # velocity + yaw rate (MAVSDK set_velocity_body)
+TYPE_MASK_POSITION = 2552
+TYPE_MASK_POSITION_VELOCITY_ACCELERATION = 3072  # ignore yaw and yaw rate only (never bit 512: force)
+
+# EXTENDED_SYS_STATE.landed_state
+LANDED_ON_GROUND = mavlink.MAV_LANDED_STATE_ON_GROUND
+LANDED_IN_AIR = mavlink.MAV_LANDED_STATE_IN_AIR
+LANDED_TAKEOFF = mavlink.MAV_LANDED_STATE_TAKEOFF
+LANDED_LANDING = mavlink.MAV_LANDED_STATE_LANDING
+
+# HEARTBEAT.base_mode flags beyond CUSTOM_MODE_ENABLED and SAFETY_ARMED, as PX4 sets them
+# (seen on SITL: Hold disarmed 29, OFFBOARD armed 145, POSCTL armed 209).
+MAV_MODE_FLAG_AUTO_ENABLED = mavlink.MAV_MODE_FLAG_AUTO_ENABLED
+MAV_MODE_FLAG_GUIDED_ENABLED = mavlink.MAV_MODE_FLAG_GUIDED_ENABLED
+MAV_MODE_FLAG_STABILIZE_ENABLED = mavlink.MAV_MODE_FLAG_STABILIZE_ENABLED
+MAV_MODE_FLAG_MANUAL_INPUT_ENABLED = mavlink.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED
+MANUAL_MODES = frozenset({"MANUAL", "ALTCTL", "POSCTL", "STABILIZED", "ACRO"})
+
+
+def base_mode_of(name: str, armed: bool) -> int:
+    """HEARTBEAT.base_mode that PX4 reports for mode ``name`` (a key of :data:`MODES`)."""
+    flags = MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+    if name.startswith("AUTO."):
+        flags |= MAV_MODE_FLAG_AUTO_ENABLED | MAV_MODE_FLAG_GUIDED_ENABLED | MAV_MODE_FLAG_STABILIZE_ENABLED
+    elif name in MANUAL_MODES:
+        flags |= MAV_MODE_FLAG_MANUAL_INPUT_ENABLED
+        if name not in ("MANUAL", "ACRO"):
+            flags |= MAV_MODE_FLAG_STABILIZE_ENABLED
+    else:  # OFFBOARD
+        flags |= MAV_MODE_FLAG_STABILIZE_ENABLED
+    if armed:
+        flags |= MAV_MODE_FLAG_SAFETY_ARMED
+    return flags
+
+
+# SYS_STATUS onboard_control_sensors_* bits (MAV_SYS_STATUS_SENSOR)
+SENSOR_3D_GYRO = mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO
+SENSOR_3D_ACCEL = mavlink.MAV_SYS_STATUS_SENSOR_3D_ACCEL
+SENSOR_3D_MAG = mavlink.MAV_SYS_STATUS_SENSOR_3D_MAG
+SENSOR_ABSOLUTE_PRESSURE = mavlink.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE
+SENSOR_GPS = mavlink.MAV_SYS_STATUS_SENSOR_GPS
+SENSOR_ANGULAR_RATE_CONTROL = mavlink.MAV_SYS_STATUS_SENSOR_ANGULAR_RATE_CONTROL
+SENSOR_ATTITUDE_STABILIZATION = mavlink.MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION
+SENSOR_YAW_POSITION = mavlink.MAV_SYS_STATUS_SENSOR_YAW_POSITION
+SENSOR_Z_ALTITUDE_CONTROL = mavlink.MAV_SYS_STATUS_SENSOR_Z_ALTITUDE_CONTROL
+SENSOR_XY_POSITION_CONTROL = mavlink.MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL
+SENSOR_MOTOR_OUTPUTS = mavlink.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
+SENSOR_AHRS = mavlink.MAV_SYS_STATUS_AHRS
+SENSOR_PREARM_CHECK = mavlink.MAV_SYS_STATUS_PREARM_CHECK
+SYS_STATUS_EXTENSION_USED = mavlink.MAV_SYS_STATUS_EXTENSION_USED  # PX4 ORs this into present/enabled/health
+
+# Messages, parameters, STATUSTEXT
+MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES = mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES
+MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT = mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT
+MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT = mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
+MAV_PROTOCOL_CAPABILITY_MISSION_INT = mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_INT
+MAV_PROTOCOL_CAPABILITY_COMMAND_INT = mavlink.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
+MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED = mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
+MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_GLOBAL_INT = mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_GLOBAL_INT
+MAV_PROTOCOL_CAPABILITY_MAVLINK2 = mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2
+MAV_PARAM_TYPE_INT32 = mavlink.MAV_PARAM_TYPE_INT32
+MAV_PARAM_TYPE_REAL32 = mavlink.MAV_PARAM_TYPE_REAL32
+MAV_SEVERITY_CRITICAL = mavlink.MAV_SEVERITY_CRITICAL
+MAV_SEVERITY_WARNING = mavlink.MAV_SEVERITY_WARNING
+MAV_SEVERITY_INFO = mavlink.MAV_SEVERITY_INFO

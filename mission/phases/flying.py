@@ -1,0 +1,188 @@
+"""The phases that fly the reference (pure): JOIN, RIDING, SEPARATED/NAVIGATING and ARRIVED.
+
+The reference is the paper's closed loop (:mod:`mission.core.tick`) integrated in error coordinates
+about the dock point; the vehicle tracks it (:mod:`mission.core.tracking`) through the safety filter.
+Each handler takes ``(state, obs, model)`` and returns ``(state, decision)``; the vehicle and,
+before separation, the carrier have been checked by :func:`mission.phases.step`'s failsafes.
+
+Frames: local NED [m], [m/s]; times [s] on the controller's clock.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from mission.core.law import norm
+from mission.phases.types import ZERO, Decision, MissionModel, MissionState, Observation, Phase, dock_point, enter
+from mission.ports import Request
+from mission.core.safety import filter_velocity
+from mission.core.tick import DEPARTURE_THRESHOLD_M, carrier_tick, latch_point, passenger_tick, separation_due
+from mission.core.tracking import progress, setpoint as tracking_setpoint, update_integral, velocity_demand
+
+
+@dataclass(frozen=True)
+class Tracked:
+    """One tick of tracking: what to send (velocity [m/s]; for a full setpoint also position [m]
+    and acceleration [m/s^2]), whether the filter changed the velocity, and what the state keeps
+    (the velocity sent, the integral)."""
+
+    setpoint: np.ndarray
+    position_sp: np.ndarray | None
+    acceleration_sp: np.ndarray | None
+    acted: bool
+    integral: np.ndarray
+
+    def decision(self, **kw) -> Decision:
+        return Decision(setpoint=self.setpoint, position_sp=self.position_sp, acceleration_sp=self.acceleration_sp, **kw)
+
+    def kept(self) -> dict[str, np.ndarray]:
+        return {"u_cmd": self.setpoint, "integral": self.integral}
+
+
+def _track(state: MissionState, obs: Observation, m: MissionModel, x_ref: np.ndarray, u_ref: np.ndarray,
+           a_ref: np.ndarray) -> Tracked:
+    """The setpoint that makes the vehicle follow the reference (:mod:`mission.core.tracking`): the
+    velocity demand filtered at the vehicle's real position (obstacles, floor, speed and
+    acceleration of the vehicle); a full setpoint adds the reference position and the
+    acceleration feed-forward, unless the filter changed the velocity (then the filtered
+    velocity alone is sent: the filter wins over the reference)."""
+    v = obs.vehicle
+    assert v is not None  # tracking happens only with a vehicle
+    x_p = v.position_ned_m
+    g = m.tracking
+    integral = state.integral if state.integral is not None else np.zeros(3)
+    desired = velocity_demand(x_ref, u_ref, x_p, integral, g)
+    prev = state.u_cmd if state.u_cmd is not None else v.velocity_ned_m_s
+    safe = filter_velocity(x_p, desired, m.tick.obstacles, m.command_safety, prev, m.dt_s)
+    acted = bool(safe.changed)
+    sp = tracking_setpoint(x_ref, u_ref, a_ref, x_p, safe.u, integral, g, v.velocity_ned_m_s)
+    full = sp.full and not acted
+    if not acted or g.kind == "velocity":
+        integral = update_integral(integral, x_ref, x_p, g, m.dt_s)
+    return Tracked(sp.velocity_ned_m_s, sp.position_ned_m if full else None, sp.acceleration_ned_m_s2 if full else None,
+                   acted, integral)
+
+
+def _carrier_acceleration(obs: Observation, m: MissionModel) -> np.ndarray:
+    """The docked carrier's acceleration [m/s^2] NED: the one it measured and sent, if it sent
+    one (a real vehicle does not follow its law exactly: a PX4 rover sticks, then leaps off);
+    else as its law asks it: the change of the carrier's command (``mission.core.tick.carrier_tick``,
+    with its speed and acceleration limits) over one carrier step from the sample's state.
+    Analytic in the sample (no differences of samples): ``a_max`` along the command while the
+    carrier speeds up, 0 at its speed limit, ``-k_c v_c`` on the final approach. A sent one is
+    capped at the passenger's own ``max_accel_m_s2`` (a feed-forward, not an order)."""
+    c = obs.carrier
+    assert c is not None  # riding: the carrier was checked
+    if c.acceleration_ned_m_s2 is not None:
+        a = np.asarray(c.acceleration_ned_m_s2, dtype=float)
+        cap = m.command_safety.max_accel_m_s2
+        size = float(norm(a))
+        return a * (cap / size) if cap is not None and size > cap else a
+    h = m.carrier_dt_s
+    nxt = carrier_tick(c.position_ned_m + c.velocity_ned_m_s * h, False, m.tick, u_prev=c.velocity_ned_m_s, dt_s=h)
+    return (np.asarray(nxt.u, dtype=float) - c.velocity_ned_m_s) / h
+
+
+def join(state, obs, m):
+    """Move the reference from where the vehicle took over to the dock point at join speed."""
+    t = obs.t_s
+    dock = dock_point(obs, m)
+    v_dock = obs.carrier.velocity_ned_m_s
+    gap = dock - state.x_ref
+    dist = float(norm(gap))
+    step_len = m.join_speed_m_s * m.dt_s
+    if dist <= step_len:
+        x_ref, u_ref = dock.copy(), v_dock.copy()
+    else:
+        u_ref = gap / dist * m.join_speed_m_s + v_dock
+        x_ref = state.x_ref + u_ref * m.dt_s
+    tr = _track(state, obs, m, x_ref, u_ref, ZERO)
+    # Docked once the vehicle has settled on the dock point (within join_settle_m for
+    # join_settle_s): the carrier starts its approach then, so what is left of the climb is not
+    # counted as riding offset (on PX4 the climb overshoots the dock by ~0.3 m when first within
+    # tolerance, and its velocity estimate is too noisy to judge rest by).
+    v = obs.vehicle
+    near = dist <= step_len and norm(v.position_ned_m - dock) <= m.join_settle_m
+    settled = (state.settled_since_s if state.settled_since_s is not None else t) if near else None
+    if settled is not None and t - settled >= m.join_settle_s:
+        new = enter(state, Phase.RIDING, t, x_ref=dock.copy(), e_ref=ZERO.copy(), prev_dock=dock.copy(), u_ref=v_dock.copy(), **tr.kept())
+        return new, tr.decision(dock=dock, desired=u_ref, safety_acted=tr.acted, events=("docked: riding the carrier",))
+    return (replace(state, x_ref=x_ref, u_ref=u_ref, settled_since_s=settled, **tr.kept()),
+            tr.decision(dock=dock, desired=u_ref, safety_acted=tr.acted))
+
+
+def riding(state, obs, m):
+    """Equilibrium (i): the reference stays exactly on the dock; the latch fires at b c - margin."""
+    t = obs.t_s
+    dock = dock_point(obs, m)
+    v_dock = obs.carrier.velocity_ned_m_s
+    if separation_due(dock, False, m.tick):
+        theta, anchor = latch_point(state.prev_dock, dock, m.tick.target, m.tick)
+        new = enter(state, Phase.SEPARATED, t, anchor=anchor, e_ref=ZERO.copy(), x_ref=anchor.copy(),
+                  separation_time_s=t - (1 - float(theta)) * m.dt_s)
+        return navigate(new, obs, m, events=(f"separated at |e_tc| = {norm(m.tick.target - anchor):.3f} m",))
+    tick = passenger_tick(dock, v_dock, ZERO, False, m.tick, state.u_ref, m.dt_s)
+    a_ref = _carrier_acceleration(obs, m) if m.tracking.kind == "full" else ZERO  # velocity setpoints carry none
+    tr = _track(state, obs, m, dock, tick.u, a_ref)
+    acted = tr.acted
+    new = replace(state, x_ref=dock.copy(), e_ref=ZERO.copy(), prev_dock=dock.copy(), u_ref=tick.u, **tr.kept())
+    return new, tr.decision(dock=dock, P=float(tick.P), relative=tick.relative, desired=tick.desired,
+                         safety_acted=acted or bool(tick.safety.changed))
+
+
+def _lag_m(state: MissionState, obs: Observation) -> float:
+    """How far [m] the vehicle is behind the reference along the reference's direction of motion
+    (0 when it is level or ahead, or the reference is still)."""
+    if state.x_ref is None or state.u_ref is None or obs.vehicle is None:
+        return 0.0
+    speed = float(norm(state.u_ref))
+    if speed < 1e-6:
+        return 0.0
+    return max(0.0, float(np.dot(state.x_ref - obs.vehicle.position_ned_m, state.u_ref)) / speed)
+
+
+def navigate(state, obs, m, events=()):
+    """Equilibria (ii)->(iii): integrate the reference with the latched anchor, track it."""
+    t = obs.t_s
+    tick = passenger_tick(state.anchor, ZERO, state.e_ref, True, m.tick, state.u_ref, m.dt_s)
+    # The reference advances at the rate the vehicle can follow (mission.core.tracking.progress); its
+    # acceleration is its own velocity's change over the tick (a signal we generate: no noise).
+    rate = progress(_lag_m(state, obs), m.tracking)
+    u_ref = tick.u * rate
+    e_ref = state.e_ref + u_ref * m.dt_s
+    x_ref = state.anchor + e_ref
+    u_prev = state.u_ref if state.u_ref is not None else u_ref
+    a_ref = (u_ref - u_prev) / m.dt_s
+    tr = _track(state, obs, m, x_ref, u_ref, a_ref)
+    acted = tr.acted
+    phase, since, arrived = state.phase, state.since_s, state.arrived_since_s
+    evs = list(events)
+    if phase == Phase.SEPARATED and norm(e_ref) > DEPARTURE_THRESHOLD_M:
+        phase, since = Phase.NAVIGATING, t
+        evs.append("left the carrier: navigating")
+    # Arrived: within the arrival radius (and, if set, slower than arrival_max_speed_m_s) for the
+    # dwell (a vehicle handed to Hold while still moving brakes past the radius: seen on PX4, 0.84 m).
+    at_target = bool(norm(obs.vehicle.position_ned_m - m.tick.target) <= m.arrival_radius_m) and (
+        m.arrival_max_speed_m_s is None or bool(norm(obs.vehicle.velocity_ned_m_s) <= m.arrival_max_speed_m_s))
+    if phase in (Phase.NAVIGATING,):
+        arrived = (arrived if arrived is not None else t) if at_target else None
+        if arrived is not None and t - arrived >= m.arrival_dwell_s:
+            phase, since = Phase.ARRIVED, t
+            evs.append("arrived at the target")
+    new = replace(state, phase=phase, since_s=since, e_ref=e_ref, x_ref=x_ref, u_ref=u_ref, arrived_since_s=arrived, **tr.kept())
+    dec = tr.decision(dock=dock_point(obs, m) if obs.carrier is not None else None, P=float(tick.P),
+                   relative=tick.relative, desired=tick.desired, safety_acted=acted or bool(tick.safety.changed), events=tuple(evs))
+    if phase == Phase.ARRIVED:
+        dec = replace(dec, request=Request(m.final_action))
+    return new, dec
+
+
+def arrived(state, obs, m):
+    t, v = obs.t_s, obs.vehicle
+    want = "AUTO.LOITER" if m.final_action == Request.HOLD else "AUTO.LAND"
+    if v.mode == want:
+        nxt = Phase.HOLD if m.final_action == Request.HOLD else Phase.LAND
+        return enter(state, nxt, t), Decision(setpoint=None, events=(f"vehicle in {want}",))
+    new, dec = navigate(state, obs, m)
+    return replace(new, phase=Phase.ARRIVED, since_s=state.since_s), replace(dec, request=Request(m.final_action))

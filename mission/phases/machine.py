@@ -1,0 +1,272 @@
+"""The mission state machine (pure): observations in, phase + setpoint + request out.
+
+::
+
+    PREFLIGHT --vehicle, position, carrier fresh; geometry ok--> STREAMING
+        |  geometry breaks the paper's assumptions --> ABORT(geometry)  (nothing was sent)
+    STREAMING --zero-velocity setpoints for prestream_s--> ARMING (or OFFBOARD if armed)
+    ARMING    --armed--> OFFBOARD           refused after retries --> ABORT(arming_refused)
+    OFFBOARD  --mode is OFFBOARD--> JOIN    refused after retries --> ABORT(offboard_refused)
+    JOIN      --reference on the dock point, vehicle within join_settle_m for join_settle_s--> RIDING
+    RIDING    --docked carrier within b c - margin of the target (latched)--> SEPARATED
+    SEPARATED --passenger left the dock (> 0.1 m)--> NAVIGATING
+    NAVIGATING --within arrival radius for arrival dwell--> ARRIVED
+    ARRIVED   --request Hold or Land--> HOLD | LAND --vehicle shows that mode--> DONE
+
+    any phase --> ABORT(reason): vehicle_lost, pilot_override, vehicle_failsafe (PX4 left
+                  OFFBOARD for one of its own failsafes), carrier_lost, position_lost,
+                  arming_refused, offboard_refused, geometry, interrupted, timeout,
+                  signing_mismatch (no vehicle by connect_timeout_s, but a PX4 autopilot was
+                  heard signing with another key: ``failed["signing"]`` says which)
+    ABORT requests Hold (never disarm in the air) unless the vehicle is lost or a pilot took
+    over or PX4 runs its own failsafe (then nothing is sent: never fight either); setpoints stop
+    once Hold is shown.
+
+The passenger is flown through a *reference*: the paper's closed loop (``mission.core.tick``, the
+same functions as the simulator) integrated in error coordinates about the dock point, which the
+vehicle tracks (:mod:`mission.core.tracking`: velocity ``u_ref + track_gain (x_ref - x_p)``, and for
+full setpoints also the reference position and an acceleration feed-forward: the reference's own
+acceleration, which while riding is the carrier law's, plus drag feed-forward and integral). The reference sits exactly on the
+dock while riding, so separation happens at ``b c`` whatever the vehicle's tracking lag
+(README, "Facts about the law" 3), and its departure is smooth. The carrier's state is needed until
+separation; afterwards the anchor is latched and a lost carrier only costs P3 monitoring.
+
+Frames: local NED [m], [m/s]; times [s] on the controller's clock.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from mission.errors import AssumptionError
+from mission.core.law import check_assumptions, norm
+from mission.phases.types import (
+    BEFORE_SEPARATION,
+    FLYING,
+    TELEMETRY_SILENT_S,
+    ZERO,
+    AbortReason,
+    CarrierObs,
+    Decision,
+    MissionModel,
+    MissionState,
+    Observation,
+    Phase,
+    VehicleObs,
+    dock_point,
+    enter,
+)
+from mission.ports import Request
+from mission.phases.flying import arrived, join, navigate, riding
+
+__all__ = [
+    "BEFORE_SEPARATION", "FLYING", "TELEMETRY_SILENT_S", "AbortReason", "CarrierObs", "Decision", "MissionModel",
+    "MissionState", "Observation", "Phase", "VehicleObs", "finished", "live_geometry_problem", "step",
+]
+
+
+def _abort(state: MissionState, t: float, reason: AbortReason, detail: str = "") -> MissionState:
+    return replace(state, phase=Phase.ABORT, since_s=t, reason=reason.value, detail=detail)
+
+
+def _vehicle_lost(v: VehicleObs | None, m: MissionModel) -> bool:
+    """No HEARTBEAT for heartbeat_timeout_s while the position stream is silent too. PX4 sends
+    HEARTBEAT at 1 Hz: on a link losing 30% of its packets three in a row go missing in most
+    flights, while the 30 Hz LOCAL_POSITION_NED shows the vehicle is there (its mode is then
+    up to a few seconds old, which only delays noticing a pilot's takeover)."""
+    return v is None or (v.heartbeat_age_s > m.heartbeat_timeout_s and v.position_age_s > TELEMETRY_SILENT_S)
+
+
+def _carrier_ok(obs: Observation, m: MissionModel) -> bool:
+    c = obs.carrier
+    return c is not None and c.age_s <= m.carrier_timeout_s and c.alive is not False
+
+
+def _hold_decision(state: MissionState, obs: Observation) -> Decision:
+    """Ask for Hold; keep zero-velocity setpoints flowing until the vehicle shows it (so a
+    switch that is slow to take effect never leaves OFFBOARD without setpoints)."""
+    v = obs.vehicle
+    if v is not None and v.mode == "OFFBOARD":
+        return Decision(setpoint=ZERO.copy(), request=Request.HOLD)
+    return Decision(setpoint=None, request=Request.HOLD if v is not None and v.mode != "AUTO.LOITER" and v.armed else None)
+
+
+def step(state: MissionState, obs: Observation, m: MissionModel) -> tuple[MissionState, Decision]:
+    """Advance the mission by one tick. Pure: same inputs, same outputs."""
+    t = obs.t_s
+    if state.start_s is None:
+        state = replace(state, start_s=t, since_s=t)
+    state, early = _failsafes(state, obs, m)
+    if early is not None:
+        return state, early
+    handler = _HANDLERS[state.phase]
+    return handler(state, obs, m)
+
+
+def _failsafes(state: MissionState, obs: Observation, m: MissionModel) -> tuple[MissionState, Decision | None]:
+    """Transitions that any phase can take, checked before the phase's own logic."""
+    t, v, ph = obs.t_s, obs.vehicle, state.phase
+    if ph in (Phase.DONE,):
+        return state, Decision(setpoint=None)
+    if ph == Phase.ABORT:
+        if _vehicle_lost(v, m):
+            return state, Decision(setpoint=None)  # nobody to talk to: PX4's own failsafe acts
+        if state.reason in (AbortReason.VEHICLE_LOST.value, AbortReason.PILOT_OVERRIDE.value,
+                            AbortReason.VEHICLE_FAILSAFE.value, AbortReason.GEOMETRY.value):
+            return state, Decision(setpoint=None)
+        return state, _hold_decision(state, obs)
+    if obs.interrupted:
+        new = _abort(state, t, AbortReason.INTERRUPTED, "signal")
+        return new, _decided(new, obs, "abort: interrupted")
+    if ph != Phase.PREFLIGHT and _vehicle_lost(v, m):
+        new = _abort(state, t, AbortReason.VEHICLE_LOST, "no HEARTBEAT")
+        return new, Decision(setpoint=None, events=("abort: vehicle heartbeat lost",))
+    final_modes = ("AUTO.LOITER", "AUTO.LAND")
+    if ph in FLYING and v is not None and v.mode != "OFFBOARD" and not (ph == Phase.ARRIVED and v.mode in final_modes):
+        reason = AbortReason.VEHICLE_FAILSAFE if v.in_failsafe else AbortReason.PILOT_OVERRIDE
+        new = _abort(state, t, reason, f"vehicle switched to {v.mode}")
+        return new, Decision(setpoint=None, events=(f"abort: vehicle left OFFBOARD ({v.mode}); not fighting it",))
+    if ph not in (Phase.PREFLIGHT,) and v is not None and not v.position_valid:
+        if TELEMETRY_SILENT_S < v.position_age_s <= m.heartbeat_timeout_s:
+            # The position stream went quiet (a link blackout, not an estimator failure): hover
+            # until the heartbeat timeout decides whether the vehicle is lost.
+            return state, Decision(setpoint=ZERO.copy(), events=("telemetry silent",))
+        new = _abort(state, t, AbortReason.POSITION_LOST, "position estimate invalid")
+        return new, _decided(new, obs, "abort: position estimate lost")
+    if ph in BEFORE_SEPARATION - {Phase.PREFLIGHT} and not _carrier_ok(obs, m):
+        new = _abort(state, t, AbortReason.CARRIER_LOST, _carrier_detail(obs, m))
+        return new, _decided(new, obs, "abort: carrier state lost before separation")
+    if state.start_s is not None and t - state.start_s > m.max_duration_s and ph not in (Phase.HOLD, Phase.LAND):
+        new = _abort(state, t, AbortReason.TIMEOUT, f"mission longer than {m.max_duration_s:g} s")
+        return new, _decided(new, obs, "abort: mission timeout")
+    return state, None
+
+
+def _decided(state: MissionState, obs: Observation, event: str) -> Decision:
+    d = _hold_decision(state, obs)
+    return replace(d, events=(event,))
+
+
+def _carrier_detail(obs: Observation, m: MissionModel) -> str:
+    c = obs.carrier
+    if c is None:
+        return "no carrier state received"
+    if c.alive is False:
+        return "carrier liveliness token gone"
+    return f"carrier state {c.age_s:.2f} s old (limit {m.carrier_timeout_s:g} s)"
+
+
+def live_geometry_problem(dock: np.ndarray, vehicle_ned_m: np.ndarray, m: MissionModel) -> str | None:
+    """What is wrong with the live geometry at start-up, in terms of what the user controls (the
+    carrier's and the vehicle's positions, config fields), or None. The paper's conditions on the
+    states the controller sees: the docked carrier farther than ``b c`` from the target, the target
+    within ``b c`` of the planar carrier's plane, the vehicle on the carrier (Assumptions 1-2)."""
+    bc = m.tick.law.separation_distance_m
+    target = m.tick.target
+    dist = float(norm(target - dock))
+    where = np.round(dock - m.dock_offset_ned_m, 2).tolist()
+    if dist <= bc:
+        return (f"the carrier (at {where} NED) is already {dist:.2f} m from the target, inside b*c = {bc:g} m "
+                f"(its dock point would separate the passenger at once): restart the carrier "
+                f"(`marsupial carrier` starts at scenario.carrier_start) or move it more than {bc:g} m from the target")
+    if m.tick.planar_carrier:
+        height = abs(float(target[2] - dock[2]))
+        if height > bc:
+            return (f"the target is {height:.2f} m above the dock point, more than b*c = {bc:g} m: the carrier can never "
+                    f"come within b*c of it; lower scenario.target or change mission.dock_offset_ned_m")
+    horizontal = float(norm((vehicle_ned_m - dock)[:2]))
+    if horizontal > m.dock_tolerance_m:
+        return (f"the vehicle (at {np.round(vehicle_ned_m, 2).tolist()} NED) is {horizontal:.2f} m from the carrier's "
+                f"dock point horizontally, more than mission.dock_tolerance_m = {m.dock_tolerance_m:g} m "
+                f"(Assumption 2: the passenger starts on the carrier): put the vehicle on the carrier (land it there; "
+                f"a mock vehicle: restart `marsupial mock-vehicle`, --start-ned N,E,D) or restart the carrier "
+                f"under it (scenario.carrier_start)")
+    return None
+
+
+def _preflight(state: MissionState, obs: Observation, m: MissionModel) -> tuple[MissionState, Decision]:
+    t, v = obs.t_s, obs.vehicle
+    ready = v is not None and v.heartbeat_age_s <= m.heartbeat_timeout_s and v.position_valid and _carrier_ok(obs, m)
+    if not ready:
+        if t - state.since_s > m.connect_timeout_s:
+            if v is None:
+                why, reason = "no vehicle", AbortReason.VEHICLE_LOST
+            elif not _carrier_ok(obs, m):
+                why, reason = "no carrier", AbortReason.CARRIER_LOST
+            elif v.heartbeat_age_s > m.heartbeat_timeout_s:
+                why, reason = "vehicle silent", AbortReason.VEHICLE_LOST
+            else:  # heard, but its estimator has no local position yet
+                why, reason = "no vehicle position", AbortReason.POSITION_LOST
+            if v is None and "signing" in obs.failed:
+                why, reason = obs.failed["signing"], AbortReason.SIGNING_MISMATCH
+            new = _abort(state, t, reason, why)
+            return new, Decision(setpoint=None, events=(f"abort: preflight: {why}",))
+        return state, Decision(setpoint=None)
+    assert v is not None  # ready
+    dock = dock_point(obs, m)
+    problem = live_geometry_problem(dock, v.position_ned_m, m)
+    if problem is None:
+        try:
+            check_assumptions(dock, m.tick.target, m.tick.law, planar_carrier=m.tick.planar_carrier, field_prefix="mission")
+        except AssumptionError as exc:
+            problem = str(exc)
+    if problem is not None:
+        new = _abort(state, t, AbortReason.GEOMETRY, problem)
+        return new, Decision(setpoint=None, events=(f"abort: geometry: {problem}",))
+    new = enter(state, Phase.STREAMING, t)
+    return new, Decision(setpoint=ZERO.copy(), dock=dock, events=("preflight ok",))
+
+
+def _streaming(state, obs, m):
+    t = obs.t_s
+    if t - state.since_s >= m.prestream_s:
+        nxt = Phase.OFFBOARD if obs.vehicle.armed else Phase.ARMING
+        return enter(state, nxt, t), Decision(setpoint=ZERO.copy(), request=Request.OFFBOARD if nxt == Phase.OFFBOARD else Request.ARM)
+    return state, Decision(setpoint=ZERO.copy())
+
+
+def _arming(state, obs, m):
+    t = obs.t_s
+    if Request.ARM in obs.failed:
+        new = _abort(state, t, AbortReason.ARMING_REFUSED, obs.failed[Request.ARM])
+        return new, Decision(setpoint=None, events=(f"abort: arming refused: {obs.failed['arm']}",))
+    if obs.vehicle.armed:
+        return enter(state, Phase.OFFBOARD, t), Decision(setpoint=ZERO.copy(), request=Request.OFFBOARD)
+    return state, Decision(setpoint=ZERO.copy(), request=Request.ARM)
+
+
+def _offboard(state, obs, m):
+    t, v = obs.t_s, obs.vehicle
+    if Request.OFFBOARD in obs.failed:
+        new = _abort(state, t, AbortReason.OFFBOARD_REFUSED, obs.failed[Request.OFFBOARD])
+        return new, _decided(new, obs, f"abort: OFFBOARD refused: {obs.failed['offboard']}")
+    if v.mode == "OFFBOARD":
+        new = enter(state, Phase.JOIN, t, x_ref=v.position_ned_m.copy(), u_cmd=ZERO.copy())
+        return new, Decision(setpoint=ZERO.copy())
+    return state, Decision(setpoint=ZERO.copy(), request=Request.OFFBOARD)
+
+def _final(state, obs, m):
+    return enter(state, Phase.DONE, obs.t_s), Decision(setpoint=None, events=("mission complete",))
+
+
+def finished(state: MissionState, decision: Decision) -> bool:
+    """True when the controller loop may stop: DONE, or ABORT with nothing left to send."""
+    if state.phase == Phase.DONE:
+        return True
+    return state.phase == Phase.ABORT and decision.setpoint is None and decision.request is None
+
+
+_HANDLERS = {
+    Phase.PREFLIGHT: _preflight,
+    Phase.STREAMING: _streaming,
+    Phase.ARMING: _arming,
+    Phase.OFFBOARD: _offboard,
+    Phase.JOIN: join,
+    Phase.RIDING: riding,
+    Phase.SEPARATED: navigate,
+    Phase.NAVIGATING: navigate,
+    Phase.ARRIVED: arrived,
+    Phase.HOLD: _final,
+    Phase.LAND: _final,
+}

@@ -1,0 +1,184 @@
+"""Flight record: a CSV row per controller tick, a summary JSON, beside the link's ``.tlog``.
+
+A log directory holds ``record.csv`` (the controller's own record), ``summary.json`` (the same
+keys as ``marsupial simulate --json``, computed from the record, plus how the mission ended and
+the drop counters: ``carrier_feed`` = received, accepted, ``dropped`` per reason,
+``bound_source``, ``rejected_sources`` per source, ``resyncs``; ``link`` = the MAVLink link's
+counters, e.g. ``rejected_foreign``, ``rx_unsigned``, ``rx_bad_signature``), ``mission.json`` (target,
+obstacles, b c: what a plot needs) and ``flight.tlog`` (every MAVLink packet, written by the
+link; readable by pymavlink's ``mavlogdump.py``). Frames: local NED [m], [m/s]; time [s] on the
+controller's clock.
+"""
+from __future__ import annotations
+
+import csv
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from mission.core.law import norm
+
+VEC = ("n", "e", "d")
+COLUMNS = (
+    ["t_s", "phase"]
+    + [f"x_p_{a}" for a in VEC] + [f"v_p_{a}" for a in VEC]
+    + [f"x_c_{a}" for a in VEC] + [f"v_c_{a}" for a in VEC]
+    + [f"dock_{a}" for a in VEC] + [f"x_ref_{a}" for a in VEC]
+    + ["P"] + [f"relative_{a}" for a in VEC] + [f"desired_{a}" for a in VEC] + [f"u_cmd_{a}" for a in VEC]
+    + ["safety_acted", "carrier_age_s", "mode", "armed"]
+)
+
+
+CLOCK_NOTE = ("times here and in record.csv (t_s) are on the mission clock [s] since the controller started; "
+              "summary.json counts from riding_start_s, the start of riding (t = 0 as in the paper)")
+
+
+def _vec(v: np.ndarray | None) -> list[float]:
+    return [float("nan")] * 3 if v is None else [float(x) for x in v]
+
+
+class FlightRecorder:
+    """Writes one row per tick to ``record.csv`` and keeps the numbers for the summary."""
+
+    def __init__(self, directory: str | Path, mission_info: dict[str, Any]) -> None:
+        self.dir = Path(directory)
+        self.dir.mkdir(parents=True, exist_ok=True)
+        (self.dir / "mission.json").write_text(json.dumps(mission_info, indent=2))
+        self._file = open(self.dir / "record.csv", "w", newline="")
+        self._csv = csv.writer(self._file)
+        self._csv.writerow(COLUMNS)
+        self.rows = 0
+
+    @property
+    def tlog_path(self) -> Path:
+        return self.dir / "flight.tlog"
+
+    def record(self, t_s: float, phase: str, x_p, v_p, x_c, v_c, dock, x_ref, P: float, relative, desired, u_cmd,
+               safety_acted: bool, carrier_age_s: float, mode: str, armed: bool) -> None:
+        row = [f"{t_s:.4f}", phase, *_vec(x_p), *_vec(v_p), *_vec(x_c), *_vec(v_c), *_vec(dock), *_vec(x_ref), P,
+               *_vec(relative), *_vec(desired), *_vec(u_cmd), int(safety_acted), carrier_age_s, mode, int(armed)]
+        self._csv.writerow(row)
+        self.rows += 1
+        self._file.flush()  # one write per tick: a killed controller leaves every tick it ran on disk
+
+    def close(self, outcome: dict[str, Any] | None = None, info_update: dict[str, Any] | None = None) -> dict[str, Any]:
+        """Close the CSV, add ``info_update`` (e.g. the latched anchor) to ``mission.json`` and
+        write ``summary.json`` (returned)."""
+        self._file.close()
+        info = json.loads((self.dir / "mission.json").read_text())
+        info.update(info_update or {})
+        (self.dir / "mission.json").write_text(json.dumps(info, indent=2))
+        summary = summarise(self.dir)
+        info["clock"] = CLOCK_NOTE
+        info["riding_start_s"] = summary.get("riding_start_s")
+        (self.dir / "mission.json").write_text(json.dumps(info, indent=2))
+        if outcome:
+            summary.update(outcome)
+        (self.dir / "summary.json").write_text(json.dumps(summary, indent=2))
+        return summary
+
+
+@dataclass(frozen=True)
+class FlightRecord:
+    """A ``record.csv`` read back as arrays: t (K,); phase (K,) str; vectors (K, 3)."""
+
+    t: np.ndarray
+    phase: np.ndarray
+    cols: dict[str, np.ndarray]
+    info: dict[str, Any]
+
+    def vec(self, name: str) -> np.ndarray:
+        return np.stack([self.cols[f"{name}_{a}"] for a in VEC], axis=-1)
+
+
+def read_record(directory: str | Path) -> FlightRecord:
+    directory = Path(directory)
+    info = json.loads((directory / "mission.json").read_text())
+    with open(directory / "record.csv", newline="") as f:
+        reader = csv.reader(f)
+        header = next(reader, list(COLUMNS))
+        columns: list[list[str]] = [[] for _ in header]
+        for row in reader:  # column lists, not a dict per row: a long flight stays small
+            if len(row) == len(header):
+                for column, value in zip(columns, row):
+                    column.append(value)
+    text = {"phase", "mode"}
+    cols = {name: np.array(values, dtype=float) for name, values in zip(header, columns) if name not in text}
+    phase = np.array(columns[header.index("phase")], dtype=str)
+    return FlightRecord(t=cols["t_s"], phase=phase, cols=cols, info=info)
+
+
+def _num(x: float | None) -> float | None:
+    return None if x is None or not np.isfinite(x) else round(float(x), 6)
+
+
+def _nanmax(values: np.ndarray) -> float | None:
+    """Largest finite value, or None when there is none (a flight that never saw the vehicle)."""
+    finite = values[np.isfinite(values)]
+    return _num(finite.max()) if finite.size else None
+
+
+def summarise(directory: str | Path) -> dict[str, Any]:
+    """The summary of a flight, with the keys of ``marsupial simulate --json``.
+
+    Times are counted from the first RIDING tick (the carrier starts its approach), as t = 0 in
+    the paper. P1: during RIDING the vehicle stayed within the dock tolerance of the dock point,
+    the latch fired and the vehicle left; P2: the vehicle ended within the arrival radius; P3:
+    the carrier was never at the target (and its closest approach is reported).
+    """
+    r = read_record(directory)
+    info = r.info
+    target = np.asarray(info["target_ned_m"])
+    x_p, x_c, v_p, v_c = r.vec("x_p"), r.vec("x_c"), r.vec("v_p"), r.vec("v_c")
+    u_cmd, dock = r.vec("u_cmd"), r.vec("dock")
+    riding = r.phase == "RIDING"
+    sep_phases = np.isin(r.phase, ["SEPARATED", "NAVIGATING", "ARRIVED", "HOLD", "LAND", "DONE"])
+    t0 = r.t[riding][0] if riding.any() else (r.t[0] if len(r.t) else 0.0)
+    out: dict[str, Any] = {k: None for k in (
+        "separation_time_s", "carrier_target_distance_at_separation_m", "relative_speed_at_separation_m_s",
+        "relative_input_jump_m_s", "departure_delay_s", "final_passenger_target_distance_m",
+        "min_carrier_target_distance_m", "min_obstacle_clearance_m", "max_passenger_speed_m_s")}
+    out["riding_start_s"] = _num(t0) if riding.any() else None  # on the mission clock (record.csv t_s)
+    have_c = np.isfinite(x_c).all(axis=1)
+    if have_c.any():
+        out["min_carrier_target_distance_m"] = _num(norm(target - x_c[have_c]).min())
+    if len(r.t):
+        out["final_passenger_target_distance_m"] = _num(norm(x_p[-1] - target))
+        out["max_passenger_speed_m_s"] = _nanmax(norm(v_p))
+    obstacles = info.get("obstacles", [])
+    if obstacles and len(r.t):
+        clear = min(float((norm(x_p - np.asarray(o["center"])) - o["radius"]).min()) for o in obstacles)
+        out["min_obstacle_clearance_m"] = _num(clear)
+    rel_cmd = u_cmd - np.nan_to_num(v_c)
+    first_sep = int(np.argmax(sep_phases)) if sep_phases.any() else None
+    if first_sep is not None and first_sep > 0:
+        out["separation_time_s"] = _num(info.get("separation_time_s", r.t[first_sep]) - t0)
+        anchor = info.get("anchor_ned_m")
+        if anchor is not None:
+            out["carrier_target_distance_at_separation_m"] = _num(norm(target - np.asarray(anchor)))
+        out["relative_speed_at_separation_m_s"] = _num(norm(rel_cmd[first_sep]))
+        out["relative_input_jump_m_s"] = _num(norm(rel_cmd[first_sep] - rel_cmd[first_sep - 1]))
+        left = np.isin(r.phase, ["NAVIGATING", "ARRIVED", "HOLD", "LAND", "DONE"])
+        if left.any():
+            out["departure_delay_s"] = _num(r.t[int(np.argmax(left))] - r.t[first_sep])
+    tol = float(info.get("dock_tolerance_m", 0.5))
+    # A riding tick without a dock (the vehicle's own telemetry went silent: it hovered on a zero
+    # setpoint) measured no offset; one such tick made the maximum NaN and P1 unknowable.
+    offsets = norm(x_p[riding] - dock[riding]) if riding.any() else np.array([])
+    offsets = offsets[np.isfinite(offsets)]
+    offset_riding = float(offsets.max()) if offsets.size else np.inf
+    out["max_offset_before_separation_m"] = _num(offset_riding)
+    out["max_relative_command_step_m_s"] = _nanmax(norm(np.diff(rel_cmd[riding | sep_phases], axis=0))) if (riding | sep_phases).sum() > 1 else None
+    # Arrival without a swing: once the vehicle has come within the arrival radius of the target,
+    # the farthest it got from it again (None if it never came that close).
+    dist_t = norm(x_p - target)
+    near = np.flatnonzero(np.isfinite(dist_t) & (dist_t <= float(info.get("arrival_radius_m", 0.5))))
+    out["max_target_distance_after_arrival_m"] = _nanmax(dist_t[near[0]:]) if len(near) else None
+    out["p1"] = bool(riding.any() and offset_riding <= tol and out["departure_delay_s"] is not None)
+    out["p2"] = bool(np.isin(r.phase, ["ARRIVED"]).any() and out["final_passenger_target_distance_m"] is not None
+                     and out["final_passenger_target_distance_m"] <= float(info.get("arrival_radius_m", 0.5)))
+    out["p3"] = bool(out["min_carrier_target_distance_m"] is not None and out["min_carrier_target_distance_m"] > 0.0)
+    return out

@@ -1,0 +1,173 @@
+"""``marsupial simulate``: the paper's closed loop from a config (one run, or a Monte-Carlo batch)."""
+from __future__ import annotations
+
+import json
+import logging
+import sys
+from pathlib import Path
+
+import click
+import numpy as np
+from tqdm import tqdm
+
+from mission.config.schema import Config, load_config
+from sim.batch import closed_loop
+from sim.batch.closed_loop import ClosedLoopResult, as_flown, is_mission_config, model_from_config, random_scenarios, simulate_config
+from mission.plots import Trajectories, plot_run
+
+log = logging.getLogger(__name__)
+
+
+def trajectories_of(result: ClosedLoopResult, cfg: Config, i: int = 0, title: str = "") -> Trajectories:
+    """The figure input of scenario ``i`` of a simulation result."""
+    T = result.separation_time_s[i]
+    return Trajectories(
+        t=result.t, x_c=result.x_c[:, i], x_p=result.x_p[:, i], target=result.target[i],
+        separation_time_s=None if np.isnan(T) else float(T),
+        obstacles=[(np.array(o.center), o.radius) for o in cfg.scenario.obstacles],
+        frame=cfg.scenario.frame, title=title, bc_m=cfg.law.params().separation_distance_m,
+    )
+
+
+def _progress_bar(total_steps: int, desc: str, enabled: bool):
+    bar = tqdm(total=total_steps, desc=desc, unit="step", disable=not enabled, leave=False)
+    done = [0]
+
+    def update(k: int) -> None:
+        bar.update(k - done[0])
+        done[0] = k
+
+    return bar, update
+
+
+def run_monte_carlo(cfg: Config, count: int, seed: int, show_progress: bool) -> dict:
+    """Simulate ``count`` random scenarios in one batch and summarise P1-P3 over them.
+
+    ``worst_cases``: the failing scenarios first, then the largest final passenger-target
+    distances (at most :data:`WORST_SHOWN`), each with its id (``index``; the same seed gives the
+    same scenarios), its parameters (carrier start, target, the target's distance to the nearest
+    obstacle surface) and its summary."""
+    starts, targets = random_scenarios(cfg, count, seed)
+    p2_tol = cfg.sim.p2_tolerance_m
+    if is_mission_config(cfg):
+        start, p2_tol = as_flown(cfg)
+        starts = starts + start  # the law's carrier is the dock point, as flown
+    steps = int(round(cfg.sim.duration_s / cfg.sim.dt_s))
+    bar, update = _progress_bar(steps, f"{count} scenarios", show_progress)
+    with bar:
+        res = closed_loop.simulate(model_from_config(cfg, target=targets), starts, duration_s=cfg.sim.duration_s,
+                       dt_s=cfg.sim.dt_s, record_every=max(steps // 200, 1), p1_tolerance_m=cfg.sim.p1_tolerance_m,
+                       p2_tolerance_m=p2_tol, progress=update)
+    ok = res.p1 & res.p2 & res.p3
+    failing = np.flatnonzero(~ok)
+    by_distance = [int(i) for i in np.argsort(-res.final_passenger_target_distance_m) if ok[i]]
+    worst = [int(i) for i in failing[:WORST_SHOWN]] if len(failing) else by_distance[:3]
+    obstacles = cfg.scenario.obstacle_set()
+    target_clear = obstacles.clearance(res.target).min(axis=-1) if len(obstacles) else np.full(count, np.nan)
+    return {
+        "scenarios": count,
+        "seed": seed,
+        "fraction_p1": float(res.p1.mean()),
+        "fraction_p2": float(res.p2.mean()),
+        "fraction_p3": float(res.p3.mean()),
+        "fraction_all": float(ok.mean()),
+        "failing": len(failing),
+        "max_relative_input_jump_m_s": _finite_max(res.relative_input_jump_m_s),
+        "max_departure_delay_s": _finite_max(res.departure_delay_s),
+        "min_carrier_target_distance_m": float(res.min_carrier_target_distance_m.min()),
+        "worst_cases": [
+            {"index": i, "carrier_start": starts[i].round(3).tolist(), "target": res.target[i].round(3).tolist(),
+             "target_obstacle_clearance_m": None if np.isnan(target_clear[i]) else round(float(target_clear[i]), 3),
+             **res.summary(i)} for i in worst
+        ],
+    }
+
+
+WORST_SHOWN = 10
+
+
+def _finite_max(values: np.ndarray) -> float | None:
+    """Largest finite value (None when no scenario has one, e.g. none separated)."""
+    finite = values[np.isfinite(values)]
+    return float(finite.max()) if finite.size else None
+
+
+def format_case(w: dict) -> str:
+    """One worst case on one line: id, parameters, verdict."""
+    held = " ".join(f"{p.upper()} {'ok' if w[p] else 'FAILED'}" for p in ("p1", "p2", "p3"))
+    clear = "" if w["target_obstacle_clearance_m"] is None else f", target {w['target_obstacle_clearance_m']:.2f} m from an obstacle"
+    sep = w["separation_time_s"]
+    return (f"  #{w['index']:<5} carrier start {w['carrier_start']}, target {w['target']}{clear}: "
+            f"separation {'never' if sep is None else f'at t = {sep:.2f} s'}, "
+            f"final |e_pt| {w['final_passenger_target_distance_m']:.4f} m; {held}")
+
+
+@click.command("simulate")
+@click.argument("config", type=click.Path(dir_okay=False))
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object (the summary) on stdout.")
+@click.option("--plot", "plot_path", type=click.Path(dir_okay=False), help="Write the paper's figures (PNG/PDF/SVG by suffix).")
+@click.option("--monte-carlo", "count", type=click.IntRange(min=1), help="Simulate N random scenarios that satisfy the assumptions.")
+@click.option("--seed", type=int, default=0, show_default=True, help="Random seed of --monte-carlo.")
+@click.option("--no-progress", is_flag=True, help="Hide the progress bar.")
+def simulate(config: str, as_json: bool, plot_path: str | None, count: int | None, seed: int, no_progress: bool) -> int:
+    """Integrate the closed loop of the paper for CONFIG (a TOML file, see configs/).
+
+    Reports the separation time, the carrier-target distance at separation, the relative input
+    just after separation and its jump across it, the final passenger-target distance, the
+    closest carrier-target approach, obstacle clearance, peak speed, and P1-P3 of the paper's
+    Definition 1: P1 |e_pc| <= sim.p1_tolerance_m before separation and the passenger leaves
+    (> 0.1 m) after it; P2 the final |e_pt| <= sim.p2_tolerance_m; P3 |e_tc| > 0 throughout.
+    Time t = 0 is the start of riding (the passenger docked), as in the paper and in `run`'s
+    summary.
+
+    \b
+    A file with a [mission] section describes a flight: simulate then models what `run` flies
+    (the passenger rides the dock point, carrier + mission.dock_offset_ned_m, from the start of
+    riding; P2 within mission.arrival_radius_m), so both give the same P1-P3 verdict.
+    With --monte-carlo, random targets the passenger cannot reach (inside an obstacle's keep-out
+    disc: radius + safety.margin_m + sim.p2_tolerance_m) are drawn again; the failing scenarios
+    (or else the worst) are printed with their id and parameters.
+
+    Exit code 0 when P1-P3 hold (for every scenario with --monte-carlo), 1 otherwise, 2 on a bad
+    config.
+    """
+    cfg = load_config(config)
+    if is_mission_config(cfg) and not as_json:
+        start, p2_tol = as_flown(cfg)
+        click.echo(f"{Path(config).name} has a [mission] section: simulating what `marsupial run` flies: the passenger "
+                   f"rides the dock point (carrier + mission.dock_offset_ned_m, starting at {np.round(start, 3).tolist()}) "
+                   f"from t = 0, the start of riding (take-off and JOIN are not simulated); P2 = within "
+                   f"mission.arrival_radius_m = {p2_tol:g} m", err=True)
+    show = not no_progress and sys.stderr.isatty() and not as_json or (not no_progress and count is not None)
+    if count is not None:
+        report = run_monte_carlo(cfg, count, seed, show)
+        if as_json:
+            click.echo(json.dumps(report, indent=2))
+        else:
+            click.echo(f"{count} scenarios (seed {seed}): P1 {report['fraction_p1']:.1%}  P2 {report['fraction_p2']:.1%}  "
+                       f"P3 {report['fraction_p3']:.1%}  all {report['fraction_all']:.1%}")
+            if report["failing"]:
+                shown = min(report["failing"], WORST_SHOWN)
+                click.echo(f"{report['failing']} failing scenarios (first {shown}; id = index, same --seed replays them):")
+            else:
+                click.echo("largest final passenger-target distances (id = index, same --seed replays them):")
+            for w in report["worst_cases"]:
+                click.echo(format_case(w))
+        return 0 if report["fraction_all"] == 1.0 else 1
+    steps = int(round(cfg.sim.duration_s / cfg.sim.dt_s))
+    bar, update = _progress_bar(steps, Path(config).stem, show)
+    with bar:
+        result = simulate_config(cfg, progress=update)
+    summary = result.summary()
+    if plot_path:
+        out = plot_run(trajectories_of(result, cfg, title=f"{Path(config).stem}: separation and navigation"), plot_path)
+        log.info("wrote %s", out)
+    if as_json:
+        click.echo(json.dumps(summary, indent=2))
+    else:
+        width = max(len(k) for k in summary)
+        for key, value in summary.items():
+            click.echo(f"{key:<{width}}  {value}")
+        if plot_path:
+            click.echo(f"plot written to {plot_path}")
+    return 0 if summary["p1"] and summary["p2"] and summary["p3"] else 1

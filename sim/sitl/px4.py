@@ -1,0 +1,353 @@
+"""A real PX4 SITL (SIH quadrotor) in a network namespace of its own, and a mission flown on it.
+
+For the tests (``tests/px4_sitl/``) and the bench (``bench/px4_flights.py``); never imported by
+``mission/``. A PX4 build is a folder with ``bin/px4`` (and its ``px4-alias.sh``) and ``etc/``:
+``../shared/px4_sitl`` here, a user's ``build/px4_sitl_default`` elsewhere, named by the
+environment variable ``MARSUPIAL_PX4_SITL``.
+
+Every PX4 is fresh (its ``ROOTFS`` is wiped: default parameters), runs in a network namespace
+made for it (its fixed UDP ports 14540/14580/18570/14550 can never collide with another PX4 or a
+test), and is stopped by its own pid. Everything that talks to it (carrier, mission) runs in the
+same namespace with ``ip netns exec``; the GCS-link observer's socket is made inside the
+namespace by a thread that entered it (``setns`` acts on the calling thread only).
+
+Needs root (``ip netns``). PX4's clock is not wall time (SIH steps it from a sleep-paced loop):
+:func:`clock_ratio` measures it from a flight's tlog.
+"""
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import itertools
+import json
+import os
+import shlex
+import shutil
+import struct
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, TypeVar
+
+from sim.net import stop_process
+
+ENV_VAR = "MARSUPIAL_PX4_SITL"
+QUAD_AIRFRAME = 10040  # sihsim_quadx
+CLONE_NEWNET = 0x40000000
+GCS_PORT = 14550  # PX4's GCS link (it listens on 18570 + instance) sends here
+_counter = itertools.count()
+T = TypeVar("T")
+
+
+def build_dir() -> Path | None:
+    """The PX4 build named by ``MARSUPIAL_PX4_SITL`` (None if unset)."""
+    value = os.environ.get(ENV_VAR)
+    return Path(value).resolve() if value else None
+
+
+def unavailable_reason(build: Path | None = None) -> str | None:
+    """Why real PX4 flights cannot run here (None when they can)."""
+    build = build or build_dir()
+    if build is None:
+        return f"{ENV_VAR} is not set (point it at a PX4 SITL build: a folder with bin/px4 and etc/)"
+    if not (build / "bin" / "px4").is_file() or not (build / "etc").is_dir():
+        return f"{ENV_VAR}={build} has no bin/px4 and etc/"
+    if os.geteuid() != 0 or shutil.which("ip") is None or shutil.which("unshare") is None:
+        return "PX4 flights run each PX4 in its own network and mount namespace: needs root, ip and unshare"
+    return None
+
+
+class NetNamespace:
+    """A network namespace with its loopback up; ``close`` deletes it."""
+
+    def __init__(self, name: str | None = None) -> None:
+        self.name = name or f"mpx4-{os.getpid()}-{next(_counter)}"
+        subprocess.run(["ip", "netns", "add", self.name], check=True, capture_output=True)
+        try:
+            self.run_checked(["ip", "link", "set", "lo", "up"])
+        except Exception:
+            self.close()
+            raise
+
+    def command(self, args: list[str]) -> list[str]:
+        """``args`` to run inside the namespace (``ip netns exec`` then execs them: same pid)."""
+        return ["ip", "netns", "exec", self.name, *args]
+
+    def run_checked(self, args: list[str]) -> None:
+        subprocess.run(self.command(args), check=True, capture_output=True)
+
+    def inside(self, fn: Callable[[], T]) -> T:
+        """Run ``fn`` on a thread that entered the namespace; sockets it makes live there."""
+        result: list[Any] = []
+
+        def target() -> None:
+            try:
+                libc = ctypes.CDLL(None, use_errno=True)
+                with open(f"/var/run/netns/{self.name}") as ns:
+                    if libc.setns(ns.fileno(), CLONE_NEWNET) != 0:
+                        raise OSError(ctypes.get_errno(), f"setns into {self.name}")
+                result.append((True, fn()))
+            except BaseException as exc:  # handed back to the caller's thread
+                result.append((False, exc))
+
+        thread = threading.Thread(target=target, name=f"netns-{self.name}")
+        thread.start()
+        thread.join()
+        ok, value = result[0]
+        if not ok:
+            raise value
+        return value
+
+    def close(self) -> None:
+        subprocess.run(["ip", "netns", "delete", self.name], capture_output=True)
+
+    def __enter__(self) -> NetNamespace:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def _prepare_rootfs(build: Path, rootfs: Path) -> None:
+    """Wipe ``rootfs`` and give it PX4's module links (what ``run-sih.sh`` does)."""
+    shutil.rmtree(rootfs, ignore_errors=True)
+    (rootfs / "bin").mkdir(parents=True)
+    alias = build / "bin" / "px4-alias.sh"
+    shutil.copy(alias, rootfs / "bin")
+    import re
+    for name in sorted(set(re.findall(r"px4-[a-z0-9_]*", alias.read_text()))):
+        (rootfs / "bin" / name).symlink_to(build / "bin" / "px4")
+
+
+@dataclass
+class Px4Sitl:
+    """One fresh PX4 SITL process in ``ns``; ``start()`` launches it, ``stop()`` ends it by pid.
+
+    speed_factor: ``PX4_SIM_SPEED_FACTOR`` (SIH's lockstep rate over wall time; here its loop
+    falls a little behind, so 1.03 brings PX4's clock near wall time). Output goes to
+    ``out_dir/px4-<instance>.out``; ``rootfs`` must not be under /tmp (PX4 gets a private /tmp).
+    """
+
+    build: Path
+    rootfs: Path
+    ns: NetNamespace
+    instance: int = 0
+    airframe: int = QUAD_AIRFRAME
+    speed_factor: float = 1.0
+    out_dir: Path = Path(".")
+    params: dict[str, float] = field(default_factory=dict)  # PX4_PARAM_<name>: set by PX4 SITL at start
+    proc: subprocess.Popen[bytes] | None = None
+    _out: Any = None
+
+    def start(self) -> None:
+        _prepare_rootfs(self.build, self.rootfs)
+        model = next((self.build / "etc" / "init.d-posix" / "airframes").glob(f"{self.airframe}_*")).name.split("_", 1)[1]
+        env = {**os.environ, "PATH": f"{self.rootfs / 'bin'}:{self.build / 'bin'}:{os.environ.get('PATH', '')}",
+               "PX4_SYS_AUTOSTART": str(self.airframe), "PX4_SIMULATOR": "sihsim", "PX4_SIM_MODEL": model,
+               "HEADLESS": "1", "PX4_SIM_SPEED_FACTOR": f"{self.speed_factor:g}",
+               **{f"PX4_PARAM_{name}": f"{value:g}" for name, value in self.params.items()}}
+        self._out = open(self.out_dir / f"px4-{self.instance}.out", "wb")
+        px4 = " ".join(shlex.quote(a) for a in [str(self.build / "bin" / "px4"), "-d", "-i", str(self.instance), "-w",
+                                                str(self.rootfs), "-s", "etc/init.d-posix/rcS", str(self.build / "etc")])
+        # PX4 keeps a lock socket per instance number in /tmp, which a network namespace does not
+        # separate: a private /tmp (its own mount namespace) keeps another PX4 of the same instance
+        # elsewhere on the machine from making ours exit. Every exec keeps the pid: PX4's own.
+        self.proc = subprocess.Popen(
+            self.ns.command(["unshare", "-m", "sh", "-c", f"mount -t tmpfs px4tmp /tmp && exec {px4}"]),
+            cwd=self.rootfs, env=env, stdout=self._out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+
+    @property
+    def pid(self) -> int | None:
+        return None if self.proc is None else self.proc.pid
+
+    def stop(self, timeout_s: float = 5.0) -> None:
+        """SIGTERM to PX4's pid (it stops within about a second), SIGKILL after ``timeout_s``."""
+        if self.proc is not None:
+            stop_process(self.proc, timeout_s)
+        if self._out is not None:
+            self._out.close()
+            self._out = None
+
+
+def gcs_probe(ns: NetNamespace, instance: int = 0) -> Any:
+    """A :class:`sim.testing.probe.Probe` on PX4's GCS link in ``ns`` (bound to 14550)."""
+    from sim.testing.probe import Probe
+
+    return ns.inside(lambda: Probe(bind=f"127.0.0.1:{GCS_PORT}", vehicle=("127.0.0.1", 18570 + instance)))
+
+
+def wait_armable(probe: Any, timeout_s: float = 30.0) -> float:
+    """Wait until PX4 says its pre-arm checks pass (SYS_STATUS health bit
+    MAV_SYS_STATUS_PREARM_CHECK) and it has a home position; returns the wall seconds waited.
+    Raises TimeoutError."""
+    from mission.mavlink.env import mavlink
+
+    bit = mavlink.MAV_SYS_STATUS_PREARM_CHECK
+
+    def armable() -> bool:
+        status = probe.latest("SYS_STATUS")
+        return status is not None and bool(status.onboard_control_sensors_health & bit) and probe.latest("HOME_POSITION") is not None
+
+    from sim.net import wait_for
+
+    t0 = time.monotonic()
+    try:
+        wait_for(armable, timeout_s, "PX4 armable")
+    except AssertionError:
+        raise TimeoutError(f"PX4 not armable within {timeout_s} s") from None
+    return time.monotonic() - t0
+
+
+def clock_ratio(tlog: Path, message: str = "LOCAL_POSITION_NED") -> dict[str, float] | None:
+    """PX4's clock against the receiver's over a ``.tlog``: the slope of ``time_boot_ms`` over the
+    tlog's receive stamps (a least-squares fit; 1.0 = real time), with the rate the message arrived
+    at [Hz of receive time] and the span [s]. None if fewer than 10 such messages."""
+    import numpy as np
+
+    from mission.mavlink.env import mavlink
+
+    mav = mavlink.MAVLink(None)
+    mav.robust_parsing = True
+    data = Path(tlog).read_bytes()
+    rx, boot = [], []
+    i = 0
+    while i + 8 <= len(data):
+        (usec,) = struct.unpack(">Q", data[i:i + 8])
+        i += 8
+        if i >= len(data):
+            break
+        magic = data[i]
+        if magic == 0xFD:
+            length = 12 + data[i + 1] + (13 if data[i + 2] & 1 else 0)
+        elif magic == 0xFE:
+            length = 8 + data[i + 1]
+        else:
+            break
+        packet = data[i:i + length]
+        i += length
+        try:
+            msgs = mav.parse_buffer(packet) or []
+        except Exception:
+            continue
+        for m in msgs:
+            if m.get_type() == message and m.get_srcComponent() == 1:
+                rx.append(usec * 1e-6)
+                boot.append(m.time_boot_ms * 1e-3)
+    if len(rx) < 10:
+        return None
+    rx_a, boot_a = np.asarray(rx), np.asarray(boot)
+    slope = float(np.polyfit(rx_a - rx_a[0], boot_a - boot_a[0], 1)[0])
+    span = float(rx_a[-1] - rx_a[0])
+    return {"ratio": slope, "rate_hz": (len(rx) - 1) / span if span > 0 else float("nan"), "span_s": span}
+
+
+@dataclass
+class Px4Flight:
+    """The mission flown on a fresh PX4 in its own namespace: PX4, the carrier simulator and
+    ``marsupial run`` as processes (``python -m mission.cli``), and an observer on PX4's GCS
+    link. Outputs in ``dir`` (``mission.out``, ``carrier.out``, ``px4-0.out``, ``flight/``)."""
+
+    dir: Path
+    config: Path
+    build: Path = field(default_factory=lambda: build_dir() or Path("."))
+    speed_factor: float = 1.08
+    mission_args: tuple[str, ...] = ()
+    carrier_args: tuple[str, ...] = ()
+    ns: NetNamespace | None = None
+    px4: Px4Sitl | None = None
+    gcs: Any = None
+    procs: dict[str, subprocess.Popen[bytes]] = field(default_factory=dict)
+    armable_after_s: float = float("nan")
+    _rootfs: Path | None = None
+    settle_s: float = 0.0  # extra wall seconds after PX4 is armable before the carrier and the mission start
+    _files: list[Any] = field(default_factory=list)
+
+    @property
+    def log_dir(self) -> Path:
+        return self.dir / "flight"
+
+    def _popen(self, name: str, args: list[str]) -> subprocess.Popen[bytes]:
+        out, err = open(self.dir / f"{name}.out", "ab"), open(self.dir / f"{name}.err", "ab")
+        self._files += [out, err]
+        root = Path(__file__).resolve().parents[1]
+        env = {**os.environ, "PYTHONUNBUFFERED": "1", "PYTHONPATH": f"{root}{os.pathsep}{os.environ.get('PYTHONPATH', '')}"}
+        proc = subprocess.Popen(self.ns.command([sys.executable, "-m", "mission.cli", *args]), stdout=out, stderr=err,
+                                env=env, cwd=root, stdin=subprocess.DEVNULL)
+        self.procs[name] = proc
+        return proc
+
+    def start(self, zenoh_port: int = 7450) -> None:
+        """PX4 first; once it is armable, the carrier and the mission."""
+        self.dir.mkdir(parents=True, exist_ok=True)
+        self.ns = NetNamespace()
+        # ROOTFS outside /tmp: PX4 gets a private /tmp (see Px4Sitl.start), which would hide it
+        self._rootfs = Path(f"/var/tmp/{self.ns.name}") / "rootfs"
+        self.px4 = Px4Sitl(self.build, self._rootfs, self.ns, speed_factor=self.speed_factor, out_dir=self.dir)
+        self.px4.start()
+        self.gcs = gcs_probe(self.ns)
+        from sim.testing.probe import connect
+
+        connect(self.gcs, timeout_s=20.0, heartbeat_period_s=0.5)
+        self.armable_after_s = wait_armable(self.gcs)
+        if self.settle_s > 0:
+            time.sleep(self.settle_s)  # real-time PX4's estimator keeps converging (the probe keeps receiving)
+        endpoint = f"tcp/127.0.0.1:{zenoh_port}"
+        self._popen("carrier", ["-v", "carrier", str(self.config), "--zenoh-listen", endpoint, *self.carrier_args])
+        self._popen("mission", ["-v", "run", str(self.config), "--zenoh-connect", endpoint, "--log-dir",
+                                str(self.log_dir), "--json", *self.mission_args])
+
+    def wait_mission(self, timeout_s: float = 120.0) -> int:
+        try:
+            return self.procs["mission"].wait(timeout=timeout_s)
+        except subprocess.TimeoutExpired:
+            raise AssertionError(f"mission still running after {timeout_s} s: {self.text('mission.out')[-2000:]}") from None
+
+    def watch_after(self, target_ned_m: Any, duration_s: float = 3.0) -> float:
+        """After the mission has ended: the farthest [m] PX4's LOCAL_POSITION_NED on the GCS link
+        gets from ``target_ned_m`` over the next ``duration_s`` wall seconds (its own Hold)."""
+        import numpy as np
+
+        mark = self.gcs.mark()
+        time.sleep(duration_s)  # PX4 holds on its own, in real time; the probe's thread records it
+        pts = [(m.x, m.y, m.z) for m in self.gcs.messages("LOCAL_POSITION_NED", after=mark)]
+        if not pts:
+            return float("nan")
+        return float(np.linalg.norm(np.asarray(pts) - np.asarray(target_ned_m, dtype=float), axis=1).max())
+
+    def text(self, name: str) -> str:
+        path = self.dir / name
+        return path.read_text(errors="replace") if path.exists() else ""
+
+    def summary(self) -> dict[str, Any]:
+        return json.loads((self.log_dir / "summary.json").read_text())
+
+    def close(self) -> None:
+        for name in ("mission", "carrier"):
+            if name in self.procs:
+                stop_process(self.procs[name])
+        if self.gcs is not None:
+            self.gcs.close()
+        if self.px4 is not None:
+            self.px4.stop()
+        if self.ns is not None:
+            self.ns.close()
+        for f in self._files:
+            f.close()
+        if self._rootfs is not None:
+            shutil.rmtree(self._rootfs.parent, ignore_errors=True)
+
+
+@contextlib.contextmanager
+def px4_flight(directory: Path, config: Path, *, start: bool = True, **kwargs: Any) -> Iterator[Px4Flight]:
+    """A :class:`Px4Flight` in ``directory``; everything it started is stopped on exit."""
+    f = Px4Flight(dir=Path(directory), config=Path(config), **kwargs)
+    try:
+        if start:
+            f.start()
+        yield f
+    finally:
+        f.close()

@@ -1,0 +1,203 @@
+"""``marsupial mock-vehicle``: run the PX4-like kinematic MAVLink vehicle in the foreground.
+
+Also runnable as ``python -m sim.vehicle.cli ...``. SIGINT and SIGTERM stop it cleanly (exit 0).
+A parent process learns the bound port from ``--port-file`` (see ``sim.vehicle.mock.spawn_process``).
+"""
+from __future__ import annotations
+
+import logging
+import os
+import signal
+import threading
+from pathlib import Path
+from types import FrameType
+
+import click
+
+from mission.errors import ConfigError
+from mission.mavlink.env import read_signing_key as read_key_file
+from sim.vehicle.mock import MockVehicle, VehicleOptions
+from sim.vehicle.faults import FaultOptions
+from sim.vehicle.endpoints import parse_endpoint
+from sim.vehicle.params import SPECS_BY_NAME
+
+log = logging.getLogger(__name__)
+
+
+def _floats(text: str, count: int, option: str) -> tuple[float, ...]:
+    try:
+        values = tuple(float(part) for part in text.split(","))
+    except ValueError:
+        values = ()
+    if len(values) != count:
+        raise click.BadParameter(f"expected {count} comma-separated numbers, got {text!r}", param_hint=option)
+    return values
+
+
+def _param(text: str) -> tuple[str, float]:
+    name, sep, value = text.partition("=")
+    if not sep or name not in SPECS_BY_NAME:
+        raise click.BadParameter(f"expected NAME=VALUE with NAME one of {', '.join(sorted(SPECS_BY_NAME))}; got {text!r}",
+                                 param_hint="--param")
+    try:
+        return name, float(value)
+    except ValueError:
+        raise click.BadParameter(f"{name}: {value!r} is not a number", param_hint="--param") from None
+
+
+def _blackout(text: str) -> tuple[float, float]:
+    start, sep, duration = text.partition(":")
+    try:
+        window = (float(start), float(duration))
+    except ValueError:
+        window = (-1.0, -1.0)
+    if not sep or window[0] < 0 or window[1] < 0:
+        raise click.BadParameter(f"expected START:DURATION in simulated seconds, got {text!r}", param_hint="--blackout")
+    return window
+
+
+def read_signing_key(path: Path) -> bytes:
+    """The key file of --signing-key (see :func:`mission.mavlink.env.read_signing_key`)."""
+    try:
+        return read_key_file(path, field="--signing-key")
+    except ConfigError as exc:
+        raise click.BadParameter(f"{path}: {exc.rule}", param_hint="--signing-key") from None
+
+
+def _endpoints(mavlink_url: str, target_url: str) -> tuple[str, str]:
+    """(bind, target) from --mavlink and --target; a udpout URL given to --mavlink is the target."""
+    try:
+        endpoint = parse_endpoint(mavlink_url, "udpin")
+        parse_endpoint(target_url, "udpout")
+    except ValueError as exc:
+        raise click.BadParameter(str(exc)) from None
+    if endpoint.scheme == "udpout":
+        return "127.0.0.1:14580", f"{endpoint.host}:{endpoint.port}"
+    return f"{endpoint.host}:{endpoint.port}", target_url
+
+
+def _write_port_file(path: Path, port: int) -> None:
+    """Write the port atomically so a reader never sees a partial number."""
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(f"{port}\n", encoding="ascii")
+    os.replace(tmp, path)
+
+
+@click.command("mock-vehicle", context_settings={"help_option_names": ["-h", "--help"]})
+@click.option("--mavlink", "mavlink_url", default="udpin:127.0.0.1:14580", show_default=True, metavar="ENDPOINT",
+              help="Local UDP address to bind, in pymavlink URL form (udpin:HOST:PORT, udp://HOST:PORT or HOST:PORT; "
+                   "port 0 = ephemeral). A udpout:HOST:PORT URL here sets the target instead (bind stays 14580).")
+@click.option("--target", "target_url", default="udpout:127.0.0.1:14540", show_default=True, metavar="ENDPOINT",
+              help="Where the onboard link sends from start-up, like PX4 SITL; it then latches on the first peer "
+                   "that talks to it.")
+@click.option("--gcs", "gcs_url", is_flag=False, flag_value="127.0.0.1:14550", default=None, metavar="[ENDPOINT]",
+              help="Also run a GCS link sending to ENDPOINT (bare --gcs: 127.0.0.1:14550), from an ephemeral port.")
+@click.option("--speed", type=click.FloatRange(min=0.0, min_open=True), default=1.0, show_default=True, metavar="FACTOR",
+              help="Clock speed factor: simulated seconds per wall second. Every rate and timeout scales with it.")
+@click.option("--home", default="47.397742,8.545594,488.0", show_default=True, metavar="LAT,LON,ALT",
+              help="EKF origin of the local NED frame: latitude [deg], longitude [deg], altitude [m AMSL].")
+@click.option("--start-ned", default="0,0,0", show_default=True, metavar="N,E,D",
+              help="Start position [m] in local NED. D >= 0: on the ground; D < 0: standing on a platform at that "
+                   "height (a carrier deck) until it lifts off.")
+@click.option("--sysid", type=click.IntRange(1, 255), default=1, show_default=True, help="MAVLink system id.")
+@click.option("--frame", type=click.Choice(["quadrotor", "rover"]), default="quadrotor", show_default=True,
+              help="quadrotor: point-mass multicopter; rover: MAV_TYPE_GROUND_ROVER on the ground, Ackermann "
+                   "kinematics, PX4's rover offboard rules (speed |v| towards bearing atan2(v)).")
+@click.option("--param", "params", multiple=True, metavar="NAME=VALUE",
+              help="Override a PX4 parameter, e.g. --param COM_OF_LOSS_T=1.0 (repeatable).")
+@click.option("--wind", default="0,0,0", show_default=True, metavar="N,E,D",
+              help="Wind [m/s] NED: a drag force in the air (PX4's velocity integrator slowly compensates it).")
+@click.option("--estimate-drift", type=click.FloatRange(min=0.0), default=0.0, show_default=True, metavar="M_S",
+              help="The reported position wanders as PX4's estimate does: std of the drift rate [m/s] (PX4 SITL: "
+                   "0.18; seeded by --seed). 0: no wander.")
+@click.option("--position-noise", type=click.FloatRange(min=0.0), default=0.0, show_default=True, metavar="METRES",
+              help="Sigma [m] of Gaussian noise on the reported position (seeded by --seed).")
+@click.option("--loss-in", type=click.FloatRange(0.0, 1.0), default=0.0, show_default=True, metavar="FRACTION",
+              help="Fault: fraction of received datagrams dropped.")
+@click.option("--loss-out", type=click.FloatRange(0.0, 1.0), default=0.0, show_default=True, metavar="FRACTION",
+              help="Fault: fraction of sent datagrams dropped.")
+@click.option("--latency-ms", type=click.FloatRange(min=0.0), default=0.0, show_default=True, metavar="MS",
+              help="Fault: one-way latency added in each direction [ms of simulated time].")
+@click.option("--jitter-ms", type=click.FloatRange(min=0.0), default=0.0, show_default=True, metavar="MS",
+              help="Fault: uniform extra delay in [0, MS] per datagram [ms simulated]; may reorder datagrams.")
+@click.option("--blackout", "blackouts", multiple=True, metavar="START:DURATION",
+              help="Fault: no datagram in or out during this window [s simulated since start] (repeatable).")
+@click.option("--refuse-arming", metavar="REASON", default=None,
+              help="Fault: deny arming with this STATUSTEXT reason (a failing preflight check).")
+@click.option("--refuse-offboard", metavar="REASON", default=None,
+              help="Fault: reject every switch to OFFBOARD (TEMPORARILY_REJECTED) with this STATUSTEXT.")
+@click.option("--lose-position", "lose_position_s", type=click.FloatRange(min=0.0), default=None, metavar="SECONDS",
+              help="Fault: the position estimate is lost for good at this time [s simulated since start]; PX4 "
+                   "leaves the modes that need it (failsafe Descend, shown as AUTO.LAND).")
+@click.option("--seed", type=int, default=0, show_default=True, help="Seed of the loss, jitter and noise draws.")
+@click.option("--signing-key", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
+              metavar="FILE", help="Enable MAVLink 2 signing with this key (64 hex digits or 32 raw bytes): "
+                                   "unsigned messages other than HEARTBEAT are rejected, everything sent is signed.")
+@click.option("--port-file", type=click.Path(dir_okay=False, path_type=Path), default=None, metavar="PATH",
+              help="Write the bound UDP port to PATH once listening (for a parent process).")
+@click.option("--lockstep", is_flag=True, help="Own simulated time and step in lockstep with the controller on the "
+              "onboard link (marsupial run --lockstep); --speed is then the pace after the controller is gone.")
+@click.option("--lockstep-watchdog", "lockstep_watchdog_s", type=click.FloatRange(min=0.0, min_open=True), default=10.0,
+              show_default=True, metavar="SECONDS", help="With --lockstep: a controller silent this long (wall) is gone.")
+@click.option("--lockstep-max-speed", type=click.FloatRange(min=0.0, min_open=True), default=None, metavar="FACTOR",
+              help="With --lockstep: at most FACTOR simulated seconds per wall second (default: as fast as it goes).")
+@click.option("--status-every", type=click.FloatRange(min=0.0), default=5.0, show_default=True, metavar="SECONDS",
+              help="Log a status line with mode, position and the counters every SECONDS of wall time (0: never).")
+def mock_vehicle(mavlink_url: str, target_url: str, gcs_url: str | None, speed: float, home: str, start_ned: str,
+                 sysid: int, frame: str, params: tuple[str, ...], wind: str, estimate_drift: float, position_noise: float, loss_in: float,
+                 loss_out: float, latency_ms: float, jitter_ms: float, blackouts: tuple[str, ...],
+                 refuse_arming: str | None, refuse_offboard: str | None, lose_position_s: float | None, seed: int, signing_key: Path | None, port_file: Path | None,
+                 lockstep: bool, lockstep_watchdog_s: float, lockstep_max_speed: float | None, status_every: float) -> None:
+    """Run the PX4-like MAVLink vehicle until SIGINT or SIGTERM.
+
+    By default it mirrors PX4 SITL: it binds UDP 127.0.0.1:14580, sends HEARTBEAT and the
+    onboard-profile streams to 127.0.0.1:14540 from start-up, and answers the first peer that
+    talks to it. MAVSDK (udpin://127.0.0.1:14540) or `marsupial run` can connect, arm it and fly
+    it in OFFBOARD. Counters of received, malformed, unknown and dropped messages appear in the
+    status line.
+    """
+    bind, target = _endpoints(mavlink_url, target_url)
+    faults = FaultOptions(loss_in=loss_in, loss_out=loss_out, latency_s=latency_ms / 1000.0, jitter_s=jitter_ms / 1000.0,
+                          blackouts=tuple(_blackout(b) for b in blackouts), refuse_arming_reason=refuse_arming, seed=seed,
+                          refuse_offboard_reason=refuse_offboard, position_lost_at_s=lose_position_s)
+    options = VehicleOptions(
+        bind=bind, target=target, gcs_target=gcs_url, speed=speed, sysid=sysid, frame=frame,
+        home=_floats(home, 3, "--home"), start_ned=_floats(start_ned, 3, "--start-ned"),  # type: ignore[arg-type]
+        params=dict(_param(p) for p in params), faults=faults,
+        signing_key=read_signing_key(signing_key) if signing_key else None,
+        wind_ned_m_s=_floats(wind, 3, "--wind"), position_noise_m=position_noise,  # type: ignore[arg-type]
+        estimate_drift_m_s=estimate_drift, lockstep=lockstep, lockstep_watchdog_wall_s=lockstep_watchdog_s,
+        lockstep_max_speed=lockstep_max_speed)
+    run(options, port_file, status_every)
+
+
+def run(options: VehicleOptions, port_file: Path | None = None, status_every_s: float = 5.0) -> None:
+    """Run a vehicle until SIGINT/SIGTERM, logging a status line every ``status_every_s`` wall seconds."""
+    if not logging.getLogger().handlers:
+        logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    log.setLevel(logging.INFO)
+    stop = threading.Event()
+
+    def on_signal(signum: int, frame: FrameType | None) -> None:
+        stop.set()
+
+    previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        with MockVehicle(options) as vehicle:
+            if port_file is not None:
+                _write_port_file(port_file, vehicle.port)
+            log.info("mock vehicle on UDP %d -> %s, %s", vehicle.port, options.target,
+                     "lockstep" if options.lockstep else f"speed {options.speed:g}")
+            while not stop.wait(status_every_s if status_every_s > 0 else None):
+                log.info("%s", vehicle.status_line())
+            log.info("stopping: %s", vehicle.status_line())
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
+if __name__ == "__main__":
+    from mission.lifetime import end_with_parent
+
+    end_with_parent()
+    mock_vehicle()

@@ -1,0 +1,99 @@
+"""What a :class:`sim.vehicle.mock.MockVehicle` is made with (:class:`VehicleOptions`) and what it
+reports of itself (:class:`VehicleSnapshot`)."""
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from mission.mavlink import px4
+from sim.vehicle.faults import FaultOptions
+
+FRAMES = {"quadrotor": px4.MAV_TYPE_QUADROTOR, "rover": px4.MAV_TYPE_GROUND_ROVER}
+
+@dataclass(frozen=True)
+class VehicleOptions:
+    """How to run a :class:`MockVehicle`. Units: [s] simulated, [m] NED, [m/s], [deg] for lat/lon.
+
+    bind: local UDP address (``HOST:PORT`` or a pymavlink ``udpin:`` URL); port 0 = ephemeral.
+    target: where it sends from start-up (onboard link); it latches on the first peer that talks.
+    gcs_target / gcs_bind: optional second link (PX4's GCS link sends to 14550).
+    speed: clock speed factor; all rates and timeouts scale with it.
+    home: EKF origin (lat [deg], lon [deg], alt [m AMSL]) of the local NED frame.
+    start_ned: start position [m] NED; on the ground when ``d >= 0``, on a platform when ``d < 0``.
+    params: PX4 parameter overrides, e.g. ``{"COM_OF_LOSS_T": 1.0}``.
+    wind_ned_m_s: wind [m/s] NED: a drag force in the air, which PX4's velocity integrator slowly
+    compensates. position_noise_m: sigma of the Gaussian noise on the reported position [m]
+    (seeded by ``faults.seed``). estimate_drift_m_s: the reported position wanders as PX4's
+    estimate does (std of the drift rate [m/s]; PX4 SITL: 0.18, :mod:`sim.vehicle.estimator`);
+    0 (default): no wander.
+    signing_key: 32-byte MAVLink 2 signing key; then unsigned messages other than HEARTBEAT
+    are rejected and everything sent is signed.
+    lockstep: own simulated time and step in lockstep with the controller on the onboard link
+    (:mod:`mission.time.lockstep`); ``speed`` is then the pace after the controller leaves or stays
+    silent for ``lockstep_watchdog_wall_s`` wall seconds. ``lockstep_max_speed``: in lockstep, fly at
+    most this many simulated seconds per wall second (None: as fast as the CPU allows), so that
+    a test acting from outside at a phase (a kill, a pilot) has a known margin.
+    """
+
+    bind: str = "127.0.0.1:0"
+    target: str | None = "127.0.0.1:14540"
+    gcs_target: str | None = None
+    gcs_bind: str = "127.0.0.1:0"
+    speed: float = 1.0
+    sysid: int = 1
+    compid: int = 1
+    home: tuple[float, float, float] = (47.397742, 8.545594, 488.0)
+    start_ned: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    params: dict[str, float] = field(default_factory=dict)
+    faults: FaultOptions = field(default_factory=FaultOptions)
+    signing_key: bytes | None = None
+    wind_ned_m_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    position_noise_m: float = 0.0
+    estimate_drift_m_s: float = 0.0
+    statustext_needs_heartbeat: bool = True
+    frame: str = "quadrotor"  # or "rover": MAV_TYPE_GROUND_ROVER, Ackermann kinematics (sim.vehicle.physics.rover)
+    lockstep: bool = False
+    lockstep_watchdog_wall_s: float = 10.0  # mission.time.lockstep.VEHICLE_WATCHDOG_WALL_S
+    lockstep_max_speed: float | None = None
+
+    def __post_init__(self) -> None:
+        if not self.speed > 0:
+            raise ValueError(f"speed must be > 0, got {self.speed!r}")
+        if not 1 <= self.sysid <= 255 or not 1 <= self.compid <= 255:
+            raise ValueError(f"sysid and compid must be in 1..255, got {self.sysid}, {self.compid}")
+        if self.signing_key is not None and len(self.signing_key) != 32:
+            raise ValueError(f"signing_key must be 32 bytes, got {len(self.signing_key)}")
+        if not self.estimate_drift_m_s >= 0:
+            raise ValueError(f"estimate_drift_m_s must be >= 0, got {self.estimate_drift_m_s!r}")
+        if self.lockstep_max_speed is not None and not self.lockstep_max_speed > 0:
+            raise ValueError(f"lockstep_max_speed must be > 0, got {self.lockstep_max_speed!r}")
+        if not self.lockstep_watchdog_wall_s > 0:
+            raise ValueError(f"lockstep_watchdog_wall_s must be > 0, got {self.lockstep_watchdog_wall_s!r}")
+        if self.frame not in FRAMES:
+            raise ValueError(f"frame must be one of {sorted(FRAMES)}, got {self.frame!r}")
+
+
+@dataclass(frozen=True)
+class VehicleSnapshot:
+    """The vehicle's true state at simulated time ``t_s`` [s] (read-only arrays, NED)."""
+
+    t_s: float
+    position_ned_m: np.ndarray
+    velocity_ned_m_s: np.ndarray
+    yaw_rad: float
+    armed: bool
+    mode: str
+    landed_state: int
+    in_failsafe: bool
+    position_valid: bool
+    home_ned_m: np.ndarray
+    last_setpoint_t_s: float
+    counters: dict[str, int]
+
+
+def frozen(values: Sequence[float]) -> np.ndarray:
+    array = np.array(values, dtype=float)
+    array.flags.writeable = False
+    return array
