@@ -19,6 +19,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from mission.flight_mode import FlightMode
 from mission import phases
 
 from mission.mavlink import px4
@@ -29,7 +30,7 @@ from mission.errors import CommandRejected, LinkError
 from mission.record import FlightRecorder
 from mission.mavlink.env import mavlink
 from mission.model import mission_model
-from mission.phases import CarrierObs, Decision, MissionState, Observation, Phase, VehicleObs
+from mission.phases import AbortReason, CarrierObs, Decision, MissionState, Observation, Phase, VehicleObs
 from mission.ports import CarrierSource, Request, StatusSink, Vehicle
 from mission.bus.wire import GeoOrigin, PassengerStatus
 
@@ -97,7 +98,7 @@ class CommandWorker:
         if request is Request.ARM:
             self.link.arm()
         elif request is Request.OFFBOARD:
-            self.link.set_mode("OFFBOARD")
+            self.link.set_mode(FlightMode.OFFBOARD)
         elif request is Request.HOLD:
             self.link.hold()
         elif request is Request.LAND:
@@ -139,15 +140,15 @@ class CommandWorker:
 class MissionOutcome:
     """How the mission ended: phase (DONE or ABORT), reason and detail, log directory, summary."""
 
-    phase: str
-    reason: str
+    phase: Phase
+    reason: AbortReason | None
     detail: str
     log_dir: str | None
     summary: dict[str, Any]
 
     @property
     def ok(self) -> bool:
-        return self.phase == Phase.DONE.value
+        return self.phase is Phase.DONE
 
 
 def _no_stamp() -> int:
@@ -387,12 +388,12 @@ class MissionController:
         if self.recorder is not None:
             info = {"separation_time_s": st.separation_time_s,
                     "anchor_ned_m": None if st.anchor is None else st.anchor.tolist()}
-            outcome = {"phase": st.phase.value, "reason": st.reason, "detail": st.detail,
+            outcome = {"phase": st.phase, "reason": st.reason, "detail": st.detail,
                        "ticks": self.ticks, "loop_overruns": self.overruns, **self._counters(),
                        "position_rate_hz": round(float(np.median(self._rates)), 2) if self._rates else None}
             summary = self.recorder.close(outcome, info)
             log_dir = str(self.recorder.dir)
-        return MissionOutcome(phase=st.phase.value, reason=st.reason, detail=st.detail, log_dir=log_dir, summary=summary)
+        return MissionOutcome(phase=st.phase, reason=st.reason, detail=st.detail, log_dir=log_dir, summary=summary)
 
 
 def mission_info(cfg: Config) -> dict[str, Any]:

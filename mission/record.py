@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from mission.core.law import norm
+from mission.phases.phase import AFTER_SEPARATION, Phase
 
 VEC = ("n", "e", "d")
 COLUMNS = (
@@ -134,8 +135,8 @@ def summarise(directory: str | Path) -> dict[str, Any]:
     target = np.asarray(info["target_ned_m"])
     x_p, x_c, v_p, v_c = r.vec("x_p"), r.vec("x_c"), r.vec("v_p"), r.vec("v_c")
     u_cmd, dock = r.vec("u_cmd"), r.vec("dock")
-    riding = r.phase == "RIDING"
-    sep_phases = np.isin(r.phase, ["SEPARATED", "NAVIGATING", "ARRIVED", "HOLD", "LAND", "DONE"])
+    riding = r.phase == Phase.RIDING
+    sep_phases = np.isin(r.phase, sorted(AFTER_SEPARATION))
     t0 = r.t[riding][0] if riding.any() else (r.t[0] if len(r.t) else 0.0)
     out: dict[str, Any] = {k: None for k in (
         "separation_time_s", "carrier_target_distance_at_separation_m", "relative_speed_at_separation_m_s",
@@ -161,7 +162,7 @@ def summarise(directory: str | Path) -> dict[str, Any]:
             out["carrier_target_distance_at_separation_m"] = _num(norm(target - np.asarray(anchor)))
         out["relative_speed_at_separation_m_s"] = _num(norm(rel_cmd[first_sep]))
         out["relative_input_jump_m_s"] = _num(norm(rel_cmd[first_sep] - rel_cmd[first_sep - 1]))
-        left = np.isin(r.phase, ["NAVIGATING", "ARRIVED", "HOLD", "LAND", "DONE"])
+        left = np.isin(r.phase, sorted(AFTER_SEPARATION - {Phase.SEPARATED}))  # the passenger has left the dock
         if left.any():
             out["departure_delay_s"] = _num(r.t[int(np.argmax(left))] - r.t[first_sep])
     tol = float(info.get("dock_tolerance_m", 0.5))
@@ -178,7 +179,7 @@ def summarise(directory: str | Path) -> dict[str, Any]:
     near = np.flatnonzero(np.isfinite(dist_t) & (dist_t <= float(info.get("arrival_radius_m", 0.5))))
     out["max_target_distance_after_arrival_m"] = _nanmax(dist_t[near[0]:]) if len(near) else None
     out["p1"] = bool(riding.any() and offset_riding <= tol and out["departure_delay_s"] is not None)
-    out["p2"] = bool(np.isin(r.phase, ["ARRIVED"]).any() and out["final_passenger_target_distance_m"] is not None
+    out["p2"] = bool((r.phase == Phase.ARRIVED).any() and out["final_passenger_target_distance_m"] is not None
                      and out["final_passenger_target_distance_m"] <= float(info.get("arrival_radius_m", 0.5)))
     out["p3"] = bool(out["min_carrier_target_distance_m"] is not None and out["min_carrier_target_distance_m"] > 0.0)
     return out

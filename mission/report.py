@@ -123,7 +123,7 @@ def event_line(text: str, mission_s: float, riding_start_s: float | None) -> str
     return f"[mission {mission_s:7.2f} s | t {mission_s - riding_start_s:7.2f} s] {text}"
 
 
-def abort_hint(cfg: Config, reason: str, detail: str) -> str | None:
+def abort_hint(cfg: Config, detail: str) -> str | None:
     """What to do after an abort the user can fix, or None."""
     limit = cfg.mission.connect_timeout_s
     if detail == "no vehicle":

@@ -49,17 +49,11 @@ from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError,
 from pydantic_core import PydanticCustomError, core_schema
 
 from mission.core import geodesy
+from mission.phases.phase import Phase
 from mission.errors import MarsupialError
 
 Frame = Literal["local_ned", "wgs84"]
 FRAMES: tuple[str, ...] = get_args(Frame)
-
-#: Mission phases the controller publishes, in mission order (ABORT can follow any).
-PhaseName = Literal[
-    "PREFLIGHT", "STREAMING", "ARMING", "OFFBOARD", "JOIN", "RIDING", "SEPARATED", "NAVIGATING",
-    "ARRIVED", "HOLD", "LAND", "DONE", "ABORT",
-]
-PHASES: tuple[str, ...] = get_args(PhaseName)
 
 #: Reasons a sample is rejected (keys of the bridge's drop counters). ``size`` is checked by the
 #: bridge before decoding; ``stale_seq`` and ``stale_stamp`` come from its ordering check, the
@@ -150,7 +144,7 @@ def _reason(error: Any) -> str:
     kind, value = error["type"], error.get("input")
     if kind in REASONS:  # our own PydanticCustomError types are reasons already
         return kind
-    if kind == "literal_error":  # an unknown frame or phase; a non-string is a type error
+    if kind in ("literal_error", "enum"):  # an unknown frame or phase; a non-string is a type error
         return str(error["loc"][0]) if isinstance(value, str) else "type"
     if kind == "float_type" and isinstance(value, int) and not isinstance(value, bool):
         return "nonfinite"  # an integer too large for a float
@@ -269,13 +263,13 @@ class CarrierState(_Message):
 class PassengerStatus(_Message):
     """The passenger's mission phase and state.
 
-    phase one of :data:`PHASES`; stamp_s [s] sender's clock; seq (>= 0); position_ned_m [m] and
+    phase a :class:`~mission.phases.phase.Phase` (its name on the wire); stamp_s [s] sender's clock; seq (>= 0); position_ned_m [m] and
     velocity_ned_m_s [m/s] local NED; separated: the separation latch has fired; anchor_ned_m
     [m] the latched anchor (carrier position at separation) or None. Raises :class:`WireError`
     when invalid.
     """
 
-    phase: PhaseName
+    phase: Phase
     stamp_s: Real = Field(alias="stamp")
     seq: Seq
     position_ned_m: PositionNed = Field(alias="position")
@@ -286,7 +280,7 @@ class PassengerStatus(_Message):
     _check_order = ("phase", "separated", "stamp", "stamp_s", "seq", "position", "position_ned_m", "velocity",
                     "velocity_ned_m_s", "anchor", "anchor_ned_m")
 
-    def __init__(self, phase: str, stamp_s: float, seq: int, position_ned_m: Any, velocity_ned_m_s: Any,
+    def __init__(self, phase: Phase | str, stamp_s: float, seq: int, position_ned_m: Any, velocity_ned_m_s: Any,
                  separated: bool = False, anchor_ned_m: Any = None) -> None:
         self._validated(phase=phase, stamp_s=stamp_s, seq=seq, position_ned_m=position_ned_m,
                         velocity_ned_m_s=velocity_ned_m_s, separated=separated, anchor_ned_m=anchor_ned_m)

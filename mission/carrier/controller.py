@@ -52,7 +52,6 @@ from mission.bus.wire import CarrierState
 
 log = logging.getLogger(__name__)
 
-ON_DECK = frozenset({"PREFLIGHT", "STREAMING", "ARMING"})  # passenger phases before it lifts off the deck
 STOP = Tracked(0.0, 0.0, 0.0, np.zeros(2), np.zeros(2))
 REAL_DELAY_S = 0.3  # [s] default response delay of a real carrier for the P3 guard (carrier.brake_delay_s)
 
@@ -284,7 +283,7 @@ class CarrierController:
         if limit <= 0 or self._aligned or self.mode is not CarrierMode.WAITING:
             return
         rx = self.passenger.latest()
-        if rx is None or rx.stale or rx.status.phase not in ON_DECK:
+        if rx is None or rx.stale or not rx.status.phase.on_deck:
             return
         own = self.backend.own_state()
         if own is None:

@@ -28,7 +28,7 @@ from mission.report import WaitReporter, abort_hint, phase_printer, startup_line
 
 log = logging.getLogger(__name__)
 
-EXIT_CODES = {AbortReason.GEOMETRY.value: 2, AbortReason.VEHICLE_LOST.value: 3}
+EXIT_CODES: dict[AbortReason | None, int] = {AbortReason.GEOMETRY: 2, AbortReason.VEHICLE_LOST: 3}
 EXIT_ABORT = 5
 
 
@@ -198,7 +198,7 @@ def run(config: str, mavlink_url: str | None, zenoh_listen: tuple[str, ...], zen
         click.echo(f"flight log: {outcome.log_dir}")
     if not outcome.ok:
         click.echo(f"mission aborted: {outcome.reason}: {outcome.detail}", err=True)
-        hint = abort_hint(cfg, outcome.reason, outcome.detail)
+        hint = abort_hint(cfg, outcome.detail)
         if hint:
             click.echo(hint, err=True)
     return exit_code(outcome)

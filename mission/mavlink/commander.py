@@ -14,6 +14,7 @@ import threading
 from collections.abc import Iterator
 from typing import Any, Callable
 
+from mission.flight_mode import FlightMode
 from mission.mavlink import px4
 from mission.errors import CommandRejected, LinkError, LinkTimeout
 from mission.mavlink.commands import CommandExchange, Confirmed, HeartbeatConfirmation, Step, refusal_reason
@@ -120,7 +121,7 @@ class Commander:
         """
         if mode not in px4.MODES:
             raise ValueError(f"unknown PX4 mode {mode!r}; known: {sorted(px4.MODES)}")
-        main, sub = px4.MODES[mode]
+        main, sub = px4.MODES[FlightMode(mode)]
         self.confirmed(f"mode {mode}", lambda s: s.mode == mode, confirm_timeout_s, mavlink.MAV_CMD_DO_SET_MODE,
                        float(mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED), float(main), float(sub),
                        timeout_s=timeout_s, retries=retries)

@@ -73,6 +73,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from mission.flight_mode import FlightMode
 from mission.mavlink import px4
 from mission.time.clock import Clock, ScaledClock
 from mission.errors import LinkError
@@ -303,7 +304,7 @@ class VehicleLink:
     def land(self, timeout_s: float = 0.5, retries: int = 3, confirm_timeout_s: float = 2.5) -> None:
         """Land where the vehicle is (AUTO.LAND, which PX4 also enters for NAV_LAND), confirmed
         by HEARTBEAT (see :meth:`set_mode`)."""
-        self.set_mode("AUTO.LAND", timeout_s=timeout_s, retries=retries, confirm_timeout_s=confirm_timeout_s)
+        self.set_mode(FlightMode.LAND, timeout_s=timeout_s, retries=retries, confirm_timeout_s=confirm_timeout_s)
 
     def takeoff(self, alt_m: float | None, timeout_s: float = 0.5, retries: int = 3) -> int:
         """MAV_CMD_NAV_TAKEOFF to ``alt_m`` [m] above the EKF origin (None: the vehicle's default),

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from enum import IntEnum
 
+from mission.flight_mode import MANUAL_MODES, FlightMode
 from mission.mavlink.env import mavlink
 
 
@@ -44,22 +45,22 @@ def decode_custom_mode(custom_mode: int) -> tuple[int, int]:
     return (custom_mode >> 16) & 0xFF, (custom_mode >> 24) & 0xFF
 
 
-# Named modes as (main, sub) pairs and their names as pymavlink's interpret_px4_mode prints them.
-MODES: dict[str, tuple[int, int]] = {
-    "MANUAL": (MainMode.MANUAL, 0),
-    "ALTCTL": (MainMode.ALTCTL, 0),
-    "POSCTL": (MainMode.POSCTL, 0),
-    "OFFBOARD": (MainMode.OFFBOARD, 0),
-    "STABILIZED": (MainMode.STABILIZED, 0),
-    "ACRO": (MainMode.ACRO, 0),
-    "AUTO.READY": (MainMode.AUTO, AutoSubMode.READY),
-    "AUTO.TAKEOFF": (MainMode.AUTO, AutoSubMode.TAKEOFF),
-    "AUTO.LOITER": (MainMode.AUTO, AutoSubMode.LOITER),
-    "AUTO.MISSION": (MainMode.AUTO, AutoSubMode.MISSION),
-    "AUTO.RTL": (MainMode.AUTO, AutoSubMode.RTL),
-    "AUTO.LAND": (MainMode.AUTO, AutoSubMode.LAND),
+# Each named mode as its (main, sub) pair.
+MODES: dict[FlightMode, tuple[int, int]] = {
+    FlightMode.MANUAL: (MainMode.MANUAL, 0),
+    FlightMode.ALTCTL: (MainMode.ALTCTL, 0),
+    FlightMode.POSCTL: (MainMode.POSCTL, 0),
+    FlightMode.OFFBOARD: (MainMode.OFFBOARD, 0),
+    FlightMode.STABILIZED: (MainMode.STABILIZED, 0),
+    FlightMode.ACRO: (MainMode.ACRO, 0),
+    FlightMode.READY: (MainMode.AUTO, AutoSubMode.READY),
+    FlightMode.TAKEOFF: (MainMode.AUTO, AutoSubMode.TAKEOFF),
+    FlightMode.HOLD: (MainMode.AUTO, AutoSubMode.LOITER),
+    FlightMode.MISSION: (MainMode.AUTO, AutoSubMode.MISSION),
+    FlightMode.RTL: (MainMode.AUTO, AutoSubMode.RTL),
+    FlightMode.LAND: (MainMode.AUTO, AutoSubMode.LAND),
 }
-HOLD = "AUTO.LOITER"
+HOLD = FlightMode.HOLD
 
 
 def mode_name(custom_mode: int) -> str:
@@ -72,12 +73,14 @@ def mode_name(custom_mode: int) -> str:
 
 
 def custom_mode_of(name: str) -> int:
-    main, sub = MODES[name]
+    """HEARTBEAT.custom_mode of the mode ``name`` (a :class:`FlightMode` or its name)."""
+    main, sub = MODES[FlightMode(name)]
     return encode_custom_mode(main, sub)
 
 
 # COM_OBL_RC_ACT value -> mode entered on offboard loss (6 Terminate, 7 Disarm handled apart).
-OFFBOARD_LOSS_ACTION_MODE = {0: "POSCTL", 1: "ALTCTL", 2: "STABILIZED", 3: "AUTO.RTL", 4: "AUTO.LAND", 5: "AUTO.LOITER"}
+OFFBOARD_LOSS_ACTION_MODE = {0: FlightMode.POSCTL, 1: FlightMode.ALTCTL, 2: FlightMode.STABILIZED, 3: FlightMode.RTL,
+                             4: FlightMode.LAND, 5: FlightMode.HOLD}
 
 # HEARTBEAT
 MAV_AUTOPILOT_PX4 = mavlink.MAV_AUTOPILOT_PX4
@@ -127,7 +130,6 @@ MAV_MODE_FLAG_AUTO_ENABLED = mavlink.MAV_MODE_FLAG_AUTO_ENABLED
 MAV_MODE_FLAG_GUIDED_ENABLED = mavlink.MAV_MODE_FLAG_GUIDED_ENABLED
 MAV_MODE_FLAG_STABILIZE_ENABLED = mavlink.MAV_MODE_FLAG_STABILIZE_ENABLED
 MAV_MODE_FLAG_MANUAL_INPUT_ENABLED = mavlink.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED
-MANUAL_MODES = frozenset({"MANUAL", "ALTCTL", "POSCTL", "STABILIZED", "ACRO"})
 
 
 def base_mode_of(name: str, armed: bool) -> int:
@@ -137,7 +139,7 @@ def base_mode_of(name: str, armed: bool) -> int:
         flags |= MAV_MODE_FLAG_AUTO_ENABLED | MAV_MODE_FLAG_GUIDED_ENABLED | MAV_MODE_FLAG_STABILIZE_ENABLED
     elif name in MANUAL_MODES:
         flags |= MAV_MODE_FLAG_MANUAL_INPUT_ENABLED
-        if name not in ("MANUAL", "ACRO"):
+        if name not in (FlightMode.MANUAL, FlightMode.ACRO):
             flags |= MAV_MODE_FLAG_STABILIZE_ENABLED
     else:  # OFFBOARD
         flags |= MAV_MODE_FLAG_STABILIZE_ENABLED

@@ -13,6 +13,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from mission.flight_mode import FlightMode
 from mission.core.law import norm
 from mission.phases.types import ZERO, Decision, MissionModel, MissionState, Observation, Phase, dock_point, enter
 from mission.ports import Request
@@ -180,7 +181,7 @@ def navigate(state, obs, m, events=()):
 
 def arrived(state, obs, m):
     t, v = obs.t_s, obs.vehicle
-    want = "AUTO.LOITER" if m.final_action == Request.HOLD else "AUTO.LAND"
+    want = FlightMode.HOLD if m.final_action == Request.HOLD else FlightMode.LAND
     if v.mode == want:
         nxt = Phase.HOLD if m.final_action == Request.HOLD else Phase.LAND
         return enter(state, nxt, t), Decision(setpoint=None, events=(f"vehicle in {want}",))

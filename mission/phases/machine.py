@@ -39,11 +39,11 @@ from dataclasses import replace
 
 import numpy as np
 
+from mission.flight_mode import FlightMode
 from mission.errors import AssumptionError
 from mission.core.law import check_assumptions, norm
+from mission.phases.phase import BEFORE_SEPARATION, FLYING, Phase
 from mission.phases.types import (
-    BEFORE_SEPARATION,
-    FLYING,
     TELEMETRY_SILENT_S,
     ZERO,
     AbortReason,
@@ -52,7 +52,6 @@ from mission.phases.types import (
     MissionModel,
     MissionState,
     Observation,
-    Phase,
     VehicleObs,
     dock_point,
     enter,
@@ -67,7 +66,7 @@ __all__ = [
 
 
 def _abort(state: MissionState, t: float, reason: AbortReason, detail: str = "") -> MissionState:
-    return replace(state, phase=Phase.ABORT, since_s=t, reason=reason.value, detail=detail)
+    return replace(state, phase=Phase.ABORT, since_s=t, reason=reason, detail=detail)
 
 
 def _vehicle_lost(v: VehicleObs | None, m: MissionModel) -> bool:
@@ -87,9 +86,9 @@ def _hold_decision(state: MissionState, obs: Observation) -> Decision:
     """Ask for Hold; keep zero-velocity setpoints flowing until the vehicle shows it (so a
     switch that is slow to take effect never leaves OFFBOARD without setpoints)."""
     v = obs.vehicle
-    if v is not None and v.mode == "OFFBOARD":
+    if v is not None and v.mode == FlightMode.OFFBOARD:
         return Decision(setpoint=ZERO.copy(), request=Request.HOLD)
-    return Decision(setpoint=None, request=Request.HOLD if v is not None and v.mode != "AUTO.LOITER" and v.armed else None)
+    return Decision(setpoint=None, request=Request.HOLD if v is not None and v.mode != FlightMode.HOLD and v.armed else None)
 
 
 def step(state: MissionState, obs: Observation, m: MissionModel) -> tuple[MissionState, Decision]:
@@ -100,7 +99,7 @@ def step(state: MissionState, obs: Observation, m: MissionModel) -> tuple[Missio
     state, early = _failsafes(state, obs, m)
     if early is not None:
         return state, early
-    handler = _HANDLERS[state.phase]
+    handler = HANDLERS[state.phase]
     return handler(state, obs, m)
 
 
@@ -112,8 +111,8 @@ def _failsafes(state: MissionState, obs: Observation, m: MissionModel) -> tuple[
     if ph == Phase.ABORT:
         if _vehicle_lost(v, m):
             return state, Decision(setpoint=None)  # nobody to talk to: PX4's own failsafe acts
-        if state.reason in (AbortReason.VEHICLE_LOST.value, AbortReason.PILOT_OVERRIDE.value,
-                            AbortReason.VEHICLE_FAILSAFE.value, AbortReason.GEOMETRY.value):
+        if state.reason in (AbortReason.VEHICLE_LOST, AbortReason.PILOT_OVERRIDE,
+                            AbortReason.VEHICLE_FAILSAFE, AbortReason.GEOMETRY):
             return state, Decision(setpoint=None)
         return state, _hold_decision(state, obs)
     if obs.interrupted:
@@ -122,8 +121,8 @@ def _failsafes(state: MissionState, obs: Observation, m: MissionModel) -> tuple[
     if ph != Phase.PREFLIGHT and _vehicle_lost(v, m):
         new = _abort(state, t, AbortReason.VEHICLE_LOST, "no HEARTBEAT")
         return new, Decision(setpoint=None, events=("abort: vehicle heartbeat lost",))
-    final_modes = ("AUTO.LOITER", "AUTO.LAND")
-    if ph in FLYING and v is not None and v.mode != "OFFBOARD" and not (ph == Phase.ARRIVED and v.mode in final_modes):
+    final_modes = (FlightMode.HOLD, FlightMode.LAND)
+    if ph in FLYING and v is not None and v.mode != FlightMode.OFFBOARD and not (ph == Phase.ARRIVED and v.mode in final_modes):
         reason = AbortReason.VEHICLE_FAILSAFE if v.in_failsafe else AbortReason.PILOT_OVERRIDE
         new = _abort(state, t, reason, f"vehicle switched to {v.mode}")
         return new, Decision(setpoint=None, events=(f"abort: vehicle left OFFBOARD ({v.mode}); not fighting it",))
@@ -241,7 +240,7 @@ def _offboard(state, obs, m):
     if Request.OFFBOARD in obs.failed:
         new = _abort(state, t, AbortReason.OFFBOARD_REFUSED, obs.failed[Request.OFFBOARD])
         return new, _decided(new, obs, f"abort: OFFBOARD refused: {obs.failed['offboard']}")
-    if v.mode == "OFFBOARD":
+    if v.mode == FlightMode.OFFBOARD:
         new = enter(state, Phase.JOIN, t, x_ref=v.position_ned_m.copy(), u_cmd=ZERO.copy())
         return new, Decision(setpoint=ZERO.copy())
     return state, Decision(setpoint=ZERO.copy(), request=Request.OFFBOARD)
@@ -257,7 +256,7 @@ def finished(state: MissionState, decision: Decision) -> bool:
     return state.phase == Phase.ABORT and decision.setpoint is None and decision.request is None
 
 
-_HANDLERS = {
+HANDLERS = {
     Phase.PREFLIGHT: _preflight,
     Phase.STREAMING: _streaming,
     Phase.ARMING: _arming,

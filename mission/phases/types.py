@@ -9,10 +9,11 @@ Frames: local NED [m], [m/s]; times [s] on the controller's clock.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from enum import Enum
+from enum import StrEnum
 
 import numpy as np
 
+from mission.phases.phase import Phase
 from mission.ports import Request
 from mission.core.safety import SafetyConfig
 from mission.core.tick import TickModel
@@ -21,23 +22,7 @@ from mission.core.tracking import TrackingGains
 TELEMETRY_SILENT_S = 0.4  # position older than this (PX4 streams it at 30 Hz): the link went quiet [s]
 
 
-class Phase(str, Enum):
-    PREFLIGHT = "PREFLIGHT"
-    STREAMING = "STREAMING"
-    ARMING = "ARMING"
-    OFFBOARD = "OFFBOARD"
-    JOIN = "JOIN"
-    RIDING = "RIDING"
-    SEPARATED = "SEPARATED"
-    NAVIGATING = "NAVIGATING"
-    ARRIVED = "ARRIVED"
-    HOLD = "HOLD"
-    LAND = "LAND"
-    DONE = "DONE"
-    ABORT = "ABORT"
-
-
-class AbortReason(str, Enum):
+class AbortReason(StrEnum):
     VEHICLE_LOST = "vehicle_lost"
     PILOT_OVERRIDE = "pilot_override"
     VEHICLE_FAILSAFE = "vehicle_failsafe"
@@ -51,9 +36,6 @@ class AbortReason(str, Enum):
     SIGNING_MISMATCH = "signing_mismatch"
 
 
-# Phases in which the vehicle is ours in OFFBOARD and must stay there.
-FLYING = {Phase.JOIN, Phase.RIDING, Phase.SEPARATED, Phase.NAVIGATING, Phase.ARRIVED}
-BEFORE_SEPARATION = {Phase.PREFLIGHT, Phase.STREAMING, Phase.ARMING, Phase.OFFBOARD, Phase.JOIN, Phase.RIDING}
 
 
 @dataclass(frozen=True)
@@ -128,7 +110,7 @@ class MissionState:
     phase: Phase = Phase.PREFLIGHT
     since_s: float = 0.0
     start_s: float | None = None
-    reason: str = ""
+    reason: AbortReason | None = None  # why the mission aborted (ABORT only)
     detail: str = ""
     x_ref: np.ndarray | None = None  # reference passenger position [m] NED
     e_ref: np.ndarray | None = None  # reference error to the anchor [m]

@@ -9,12 +9,12 @@ from __future__ import annotations
 import zenoh
 
 from mission.carrier.controller import CarrierController, carrier_model
-from mission.carrier.modes import AFTER_SEPARATION, BEFORE_RIDING, CarrierMode
+from mission.carrier.modes import CarrierMode
 from mission.carrier.backends.sim import SimRobot
 from mission.time.clock import Clock
 from mission.config.schema import Config
 
-__all__ = ["CarrierSim", "CarrierMode", "carrier_model", "AFTER_SEPARATION", "BEFORE_RIDING"]
+__all__ = ["CarrierSim", "CarrierMode", "carrier_model"]
 
 
 class CarrierSim(CarrierController):

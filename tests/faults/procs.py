@@ -281,7 +281,7 @@ def assert_safe_end(f: Flight, *, modes: tuple[str, ...], timeout_s: float = 15.
     return state
 
 
-def assert_log_complete(f: Flight, phase: str, reason: str) -> dict[str, Any]:
+def assert_log_complete(f: Flight, phase: str, reason: str | None) -> dict[str, Any]:
     """record.csv has rows to the end (its last row is the final phase) and summary.json says
     how the mission ended."""
     rows = f.record()

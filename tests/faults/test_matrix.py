@@ -81,7 +81,7 @@ def assert_completed(f: Flight, *, p2: bool = True) -> dict[str, Any]:
     False only within 1 m of the target); vehicle in Hold."""
     f.wait_mission(60.0)
     assert_exit(f, 0, None)
-    s = assert_log_complete(f, "DONE", "")
+    s = assert_log_complete(f, "DONE", None)
     assert (s["p2"] or not p2 and s["final_passenger_target_distance_m"] < 1.0) and s["p3"], s
     assert s["carrier_target_distance_at_separation_m"] == pytest.approx(8.0, abs=0.05)
     v = assert_safe_end(f, modes=("AUTO.LOITER",))

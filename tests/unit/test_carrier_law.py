@@ -10,6 +10,7 @@ from hypothesis import strategies as st
 
 from mission.carrier.guard import GuardParams, P3Guard, stopping_speed
 from mission.carrier.modes import CarrierMode, PassengerView, next_mode
+from mission.phases.phase import Phase
 from mission.carrier.tracking import TrackingParams, along_heading, track
 
 TARGET = np.array([20.0, 15.0, -4.0])
@@ -116,15 +117,15 @@ def test_holonomic_tracking_passes_the_command_through() -> None:
 
 @pytest.mark.parametrize(("mode", "view", "expected"), [
     (CarrierMode.WAITING, PassengerView(None, False, "no status received"), CarrierMode.WAITING),
-    (CarrierMode.WAITING, PassengerView("JOIN"), CarrierMode.WAITING),
-    (CarrierMode.WAITING, PassengerView("RIDING"), CarrierMode.APPROACHING),
-    (CarrierMode.APPROACHING, PassengerView("RIDING", lost="stale"), CarrierMode.PAUSED),
-    (CarrierMode.PAUSED, PassengerView("RIDING"), CarrierMode.APPROACHING),
-    (CarrierMode.APPROACHING, PassengerView("RIDING", separated=True), CarrierMode.SEPARATED),
-    (CarrierMode.PAUSED, PassengerView("NAVIGATING", lost="stale"), CarrierMode.SEPARATED),
-    (CarrierMode.APPROACHING, PassengerView("ABORT"), CarrierMode.STOPPED),
-    (CarrierMode.SEPARATED, PassengerView("RIDING"), CarrierMode.SEPARATED),
-    (CarrierMode.STOPPED, PassengerView("RIDING"), CarrierMode.STOPPED),
+    (CarrierMode.WAITING, PassengerView(Phase.JOIN), CarrierMode.WAITING),
+    (CarrierMode.WAITING, PassengerView(Phase.RIDING), CarrierMode.APPROACHING),
+    (CarrierMode.APPROACHING, PassengerView(Phase.RIDING, lost="stale"), CarrierMode.PAUSED),
+    (CarrierMode.PAUSED, PassengerView(Phase.RIDING), CarrierMode.APPROACHING),
+    (CarrierMode.APPROACHING, PassengerView(Phase.RIDING, separated=True), CarrierMode.SEPARATED),
+    (CarrierMode.PAUSED, PassengerView(Phase.NAVIGATING, lost="stale"), CarrierMode.SEPARATED),
+    (CarrierMode.APPROACHING, PassengerView(Phase.ABORT), CarrierMode.STOPPED),
+    (CarrierMode.SEPARATED, PassengerView(Phase.RIDING), CarrierMode.SEPARATED),
+    (CarrierMode.STOPPED, PassengerView(Phase.RIDING), CarrierMode.STOPPED),
 ])
 def test_mode_transitions(mode: CarrierMode, view: PassengerView, expected: CarrierMode) -> None:
     assert next_mode(mode, view)[0] is expected

@@ -70,7 +70,7 @@ def test_tick_report_stamps_only_ticks_that_sent(cfg):
 
 def test_arming_refused_aborts_with_the_vehicles_reason(cfg):
     outcome, world, reports, _ = fly(cfg, refuse={"arm": "Arming denied: resolve system health failures first"})
-    assert outcome.phase == "ABORT" and outcome.reason == AbortReason.ARMING_REFUSED.value
+    assert outcome.phase == "ABORT" and outcome.reason == AbortReason.ARMING_REFUSED
     assert "resolve system health" in outcome.detail
     assert [name for _, name in world.commands].count("arm") == cfg.mission.command_retries
     assert not world.armed
@@ -78,20 +78,20 @@ def test_arming_refused_aborts_with_the_vehicles_reason(cfg):
 
 def test_offboard_refused_aborts(cfg):
     outcome, world, _, _ = fly(cfg, refuse={"OFFBOARD": "Switching to Offboard is currently not available"})
-    assert outcome.reason == AbortReason.OFFBOARD_REFUSED.value
+    assert outcome.reason == AbortReason.OFFBOARD_REFUSED
     assert world.mode != "OFFBOARD"
 
 
 def test_vehicle_silent_while_riding_aborts_as_lost(cfg):
     outcome, world, reports, _ = fly(cfg, heartbeat_until_s=8.0)
-    assert outcome.reason == AbortReason.VEHICLE_LOST.value
+    assert outcome.reason == AbortReason.VEHICLE_LOST
     lost_at = next(r.t_s for r in reports if r.phase == Phase.ABORT)
     assert lost_at == pytest.approx(8.0 + cfg.mission.heartbeat_timeout_s, abs=2.0 / cfg.mission.rate_hz)
 
 
 def test_carrier_silent_before_separation_aborts(cfg):
     outcome, world, reports, _ = fly(cfg, carrier_until_s=12.0)
-    assert outcome.reason == AbortReason.CARRIER_LOST.value
+    assert outcome.reason == AbortReason.CARRIER_LOST
     # the abort asks for Hold and the fake shows it
     assert world.mode == "AUTO.LOITER"
 

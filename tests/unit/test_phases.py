@@ -6,6 +6,7 @@ import pytest
 
 from mission.config.schema import load_config
 from mission.controller import mission_model
+from mission.bus.wire import WireError
 from mission.core.law import norm
 from mission.phases import AbortReason, CarrierObs, MissionState, Observation, Phase, VehicleObs, finished, step
 from tests.conftest import CONFIGS
@@ -110,7 +111,7 @@ def test_pilot_override_sends_nothing_more(model):
                                obs.carrier)
 
     state, log, _, _ = fly(model, on_tick=pilot)
-    assert state.phase == Phase.ABORT and state.reason == AbortReason.PILOT_OVERRIDE.value
+    assert state.phase == Phase.ABORT and state.reason == AbortReason.PILOT_OVERRIDE
     assert log[-1][2].setpoint is None and log[-1][2].request is None
 
 
@@ -120,7 +121,7 @@ def test_geometry_refusal_sends_nothing(model):
         return Observation(obs.t_s, VehicleObs(v.position_ned_m + [3.0, 0, 0], v.velocity_ned_m_s, False, v.mode, 0.1), obs.carrier)
 
     state, log, _, _ = fly(model, on_tick=far, ticks=10)
-    assert state.reason == AbortReason.GEOMETRY.value
+    assert state.reason == AbortReason.GEOMETRY
     assert all(d.setpoint is None and d.request is None for _, _, d in log)
 
 
@@ -159,7 +160,7 @@ def test_stale_carrier_before_separation_aborts_to_hold(model):
             return Observation(obs.t_s, obs.vehicle, CarrierObs(c.position_ned_m, c.velocity_ned_m_s, age_s=2.0))
 
     state, log, _, _ = fly(model, on_tick=stale, ticks=700)
-    assert state.reason == AbortReason.CARRIER_LOST.value
+    assert state.reason == AbortReason.CARRIER_LOST
     assert any(d.request == "hold" for _, p, d in log if p == Phase.ABORT)
 
 
@@ -167,7 +168,7 @@ def test_mission_too_long_holds(model):
     from dataclasses import replace
 
     state, log, _, _ = fly(replace(model, max_duration_s=8.0))
-    assert state.reason == AbortReason.TIMEOUT.value
+    assert state.reason == AbortReason.TIMEOUT
     assert any(d.request == "hold" for _, p, d in log if p == Phase.ABORT)
     assert log[-1][2].setpoint is None  # once Hold shows, nothing more is sent
 
@@ -193,3 +194,22 @@ def test_riding_feeds_forward_the_acceleration_the_carrier_sent_capped_else_the_
     assert norm(law) == pytest.approx(model.tick.carrier_safety.max_accel_m_s2, rel=1e-6)
     e = model.tick.target - np.zeros(3)
     assert float(np.dot(law, e)) > 0  # towards the target
+
+
+def test_a_phase_is_defined_once_and_every_part_knows_it():
+    """The Phase enum is the one list: the machine handles each (DONE and ABORT in its failsafes),
+    the wire carries each by name, the carrier has a duty for each."""
+    from mission.bus.wire import PassengerStatus
+    from mission.carrier.modes import CarrierMode, PassengerView, next_mode
+    from mission.phases.machine import HANDLERS
+
+    assert set(HANDLERS) | {Phase.DONE, Phase.ABORT} == set(Phase)
+    for phase in Phase:
+        status = PassengerStatus(phase, 1.0, 1, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], separated=phase.separated)
+        assert PassengerStatus.from_json(status.to_json()).phase is phase
+        mode, _ = next_mode(CarrierMode.WAITING, PassengerView(phase, phase.separated))
+        assert mode in CarrierMode
+    with pytest.raises(WireError) as err:
+        PassengerStatus.from_json(b'{"phase": "FLYING", "stamp": 1, "seq": 1, "position": [0,0,0], '
+                                  b'"velocity": [0,0,0], "separated": false}')
+    assert err.value.reason == "phase"

@@ -36,6 +36,7 @@ import math
 
 import numpy as np
 
+from mission.flight_mode import FlightMode
 from mission.carrier.controller import OwnState
 from mission.carrier.tracking import Tracked
 from mission.time.clock import Clock
@@ -111,7 +112,7 @@ class MavlinkCarrier:
         st = self.link.state
         v = st.velocity_ned_m_s
         rolling = v is None or math.hypot(float(v[0]), float(v[1])) >= PARK_SPEED_M_S
-        if st.armed and st.mode == "OFFBOARD" and not rolling:
+        if st.armed and st.mode == FlightMode.OFFBOARD and not rolling:
             self._parked = True
             log.info("carrier vehicle: stopped for good, asking for Hold")
             self._ensure_worker().submit("hold")
@@ -130,11 +131,11 @@ class MavlinkCarrier:
             return "waiting for the vehicle's EKF origin (GPS_GLOBAL_ORIGIN)"
         if not st.position_valid:
             return "no valid position estimate"
-        if self._engaged and st.armed and st.mode != "OFFBOARD":
+        if self._engaged and st.armed and st.mode != FlightMode.OFFBOARD:
             self._override = f"pilot took over (mode {st.mode}); not commanding the carrier again"
             log.warning("carrier vehicle: %s", self._override)
             return self._override
-        if st.armed and st.mode == "OFFBOARD":
+        if st.armed and st.mode == FlightMode.OFFBOARD:
             if not self._engaged:
                 log.info("carrier vehicle armed and in OFFBOARD")
             self._engaged = True
@@ -185,7 +186,7 @@ class MavlinkCarrier:
             return
         try:
             st = self.link.state
-            if self._engaged and not self._parked and st.armed and st.mode == "OFFBOARD" and self.link.vehicle_alive():
+            if self._engaged and not self._parked and st.armed and st.mode == FlightMode.OFFBOARD and self.link.vehicle_alive():
                 self.link.hold(timeout_s=0.3, retries=1, confirm_timeout_s=1.0)
         except LinkError as exc:
             log.warning("carrier vehicle: Hold on exit not confirmed: %s", exc)

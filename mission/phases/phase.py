@@ -1,0 +1,69 @@
+"""The mission's phases: the one list, and what each phase means to the vehicle, the carrier and
+the flight record (pure; imports nothing of ours).
+
+A phase is added here (its member and its three properties) and in the machine's handler table
+(:data:`mission.phases.machine.HANDLERS`); the wire's phase names (:mod:`mission.bus.wire`), the
+carrier's reaction (:mod:`mission.carrier.modes`) and the record's figures (:mod:`mission.record`)
+are derived from this enum.
+"""
+from __future__ import annotations
+
+from enum import StrEnum
+
+
+class Duty(StrEnum):
+    """What the carrier does while the passenger is in a phase."""
+
+    WAIT = "wait"  # the passenger is not riding yet: stand still
+    CARRY = "carry"  # the passenger rides: drive towards the target (u_c = k_c e_tc)
+    RELEASED = "released"  # the passenger has left: stop, or keep its own plan (the paper's Remark 1)
+    STOP = "stop"  # the passenger aborted: stop
+
+
+class Phase(StrEnum):
+    """A phase of the mission, equal to its name (the name travels on the bus and in the record).
+
+    Properties (fixed per phase):
+
+    - ``flying``: the vehicle is ours in OFFBOARD and must stay there (leaving it is a pilot's or
+      PX4's takeover);
+    - ``separated``: the separation latch has fired (the paper's ``t > T``): the carrier's state is
+      no longer needed to fly, the anchor is latched;
+    - ``duty``: what the carrier does meanwhile (:class:`Duty`);
+    - ``on_deck``: the vehicle still stands on the deck, not yet lifted off (the carrier may align
+      its estimate onto the passenger's).
+    """
+
+    flying: bool
+    separated: bool
+    duty: Duty
+    on_deck: bool
+
+    def __new__(cls, name: str, flying: bool, separated: bool, duty: Duty, on_deck: bool) -> Phase:
+        member = str.__new__(cls, name)
+        member._value_ = name
+        member.flying, member.separated, member.duty, member.on_deck = flying, separated, duty, on_deck
+        return member
+
+    #            name          flying separated duty           on_deck
+    PREFLIGHT = ("PREFLIGHT", False, False, Duty.WAIT, True)
+    STREAMING = ("STREAMING", False, False, Duty.WAIT, True)
+    ARMING = ("ARMING", False, False, Duty.WAIT, True)
+    OFFBOARD = ("OFFBOARD", False, False, Duty.WAIT, False)
+    JOIN = ("JOIN", True, False, Duty.WAIT, False)
+    RIDING = ("RIDING", True, False, Duty.CARRY, False)
+    SEPARATED = ("SEPARATED", True, True, Duty.RELEASED, False)
+    NAVIGATING = ("NAVIGATING", True, True, Duty.RELEASED, False)
+    ARRIVED = ("ARRIVED", True, True, Duty.RELEASED, False)
+    HOLD = ("HOLD", False, True, Duty.RELEASED, False)
+    LAND = ("LAND", False, True, Duty.RELEASED, False)
+    DONE = ("DONE", False, True, Duty.RELEASED, False)
+    ABORT = ("ABORT", False, False, Duty.STOP, False)
+
+
+#: Phases in which the vehicle is ours in OFFBOARD and must stay there.
+FLYING = frozenset(p for p in Phase if p.flying)
+#: Phases before the separation latch fired (ABORT excluded): the carrier's state is needed.
+BEFORE_SEPARATION = frozenset(p for p in Phase if not p.separated and p is not Phase.ABORT)
+#: Phases after the separation latch fired.
+AFTER_SEPARATION = frozenset(p for p in Phase if p.separated)
