@@ -16,56 +16,15 @@ from typing import Any
 
 import click
 import numpy as np
-import zenoh
 
-from mission.carrier.controller import CarrierBackend, CarrierController
+from mission.carrier.backends import KINDS, describe, open_backend
+from mission.carrier.controller import CarrierController
 from mission.bus.bridge import describe_endpoints, keys, open_session
-from mission.time.clock import Clock, Downstream, LockstepClock, ScaledClock
+from mission.time.clock import Clock, LockstepClock, ScaledClock
 from mission.config.schema import Config, load_config, with_overrides
-from mission.time.lockstep import MavlinkRelay, ZenohRelay, ZenohUpstream, clock_keys
+from mission.time.lockstep import ZenohUpstream, clock_keys
 
 log = logging.getLogger(__name__)
-
-
-def open_backend(cfg: Config, clock: Clock, session: zenoh.Session, stack: ExitStack) -> CarrierBackend:
-    """The backend of ``cfg.carrier.backend``, opened; closed by ``stack``."""
-    backend: CarrierBackend
-    if cfg.carrier.backend == "sim":
-        from mission.carrier.backends.sim import SimRobot
-
-        backend = SimRobot(cfg, clock)
-    elif cfg.carrier.backend == "mavlink":
-        from mission.carrier.backends.mavlink import MavlinkCarrier
-
-        backend = MavlinkCarrier(cfg, clock)
-    else:
-        from mission.carrier.backends.ros2 import Ros2Carrier
-
-        backend = Ros2Carrier(cfg, clock, session)
-    stack.callback(backend.close)
-    return backend
-
-
-def robot_relay(cfg: Config, session: zenoh.Session, backend: CarrierBackend) -> Downstream | None:
-    """In lockstep, how the carrier brings its own robot along, if that robot is simulated: a
-    mock PX4 rover (``mock-vehicle --lockstep``) through its barriers, a ROS-2-shaped robot
-    (``ros2-robot --lockstep``, rmw_zenoh keys) through its clock keys. None for the built-in
-    robot (it is the carrier's own code)."""
-    if cfg.carrier.backend == "mavlink":
-        from mission.carrier.backends.mavlink import MavlinkCarrier
-
-        assert isinstance(backend, MavlinkCarrier)
-        return MavlinkRelay(backend.link)
-    if cfg.carrier.backend == "ros2":
-        from mission.carrier.backends.ros2 import Ros2Carrier, robot_clock_keys
-
-        assert isinstance(backend, Ros2Carrier)
-        if not backend.topics.rmw_zenoh:
-            log.warning("lockstep: a ros2dds robot carries no sequence numbers and cannot step with us; "
-                        "it runs on its own clock")
-            return None
-        return ZenohRelay(session, robot_clock_keys(cfg.carrier.ros2), backend, backend, name="robot")
-    return None
 
 
 def main(cfg: Config, speed: float = 1.0, duration_s: float | None = None, stop_event: threading.Event | None = None,
@@ -96,13 +55,14 @@ def main(cfg: Config, speed: float = 1.0, duration_s: float | None = None, stop_
         with ExitStack() as stack:
             session = open_session(cfg.zenoh)
             stack.callback(session.close)
-            backend = open_backend(cfg, clock, session, stack)
+            backend = open_backend(cfg, clock, session)
+            stack.callback(backend.close)
             with CarrierController(cfg, clock, session, backend) as ctl:
                 if isinstance(clock, LockstepClock):
                     upstream = ZenohUpstream(clock, session, clock_keys(ctl.pair), ctl.passenger,
                                              published=lambda: ctl.seq - 1)
                     stack.callback(upstream.close)
-                    clock.downstream = robot_relay(cfg, session, backend)
+                    clock.downstream = backend.lockstep_relay(session)
                     stack.callback(clock.close)
                 try:
                     ctl.run(stop, duration_s)
@@ -134,9 +94,9 @@ def _jsonable(value: Any) -> Any:
 
 @click.command("carrier", context_settings={"help_option_names": ["-h", "--help"]})
 @click.argument("config", type=click.Path(dir_okay=False))
-@click.option("--backend", type=click.Choice(["sim", "mavlink", "ros2"]), default=None,
-              help="The carrier robot: built-in kinematic robot, PX4 rover/boat over MAVLink, ROS 2 robot over "
-                   "Zenoh [default: carrier.backend, sim].")
+@click.option("--backend", type=click.Choice(list(KINDS)), default=None,
+              help="The carrier robot: " + ", ".join(f"{k.name} ({k.summary})" for k in KINDS.values())
+              + " [default: carrier.backend, sim].")
 @click.option("--speed", type=click.FloatRange(min=0, min_open=True), default=1.0, show_default=True,
               help="Clock speed factor (like PX4's SIH speed factor); use the mock vehicle's.")
 @click.option("--pair", default=None, help="Pair name: keys marsupial/<pair>/... [default: zenoh.pair]")
@@ -217,19 +177,10 @@ def startup_line(cfg: Config, speed: float) -> str:
     k = keys(cfg.zenoh.pair)
     c = cfg.carrier
     plan = {"stop": "stops at separation", "remark1": "keeps its own plan after separation (Remark 1)"}
-    robot = {"sim": "built-in kinematic robot",
-             "mavlink": f"PX4 vehicle on {c.mavlink.url} (sysid {c.mavlink.target_system or 'first PX4 heard'})",
-             "ros2": f"ROS 2 robot, {c.ros2.key_form} keys {ros2_keys_text(cfg)}"}[c.backend]
+    robot = describe(cfg)
     start = np.round(np.asarray(cfg.scenario.carrier_start, dtype=float), 2).tolist()
     return (f"carrier {cfg.zenoh.pair}: {robot} ({c.kinematics}); publishing {k.carrier_state} ({cfg.zenoh.encoding}, "
             f"{c.rate_hz:g} Hz) on {describe_endpoints(cfg.zenoh)}; mode {cfg.scenario.carrier_mode} "
             f"({plan[cfg.scenario.carrier_mode]}); P3 guard at {cfg.law.b * cfg.law.c - c.p3_margin_m:g} m from the "
             f"target; at {start} NED [m], waiting for the passenger to ride (phase RIDING on {k.passenger_phase}); "
             f"clock x{speed:g}")
-
-
-def ros2_keys_text(cfg: Config) -> str:
-    from mission.carrier.backends.ros2 import ros2_topics
-
-    t = ros2_topics(cfg.carrier.ros2)
-    return f"odom {t.odom_sub}, cmd_vel {t.cmd_vel_pub}"

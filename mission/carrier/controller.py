@@ -37,13 +37,14 @@ import numpy as np
 import zenoh
 
 from mission.carrier.acceleration import AccelerationEstimate
+from mission.carrier.backends import KINDS
 from mission.carrier.guard import GuardParams, P3Guard
 from mission.carrier.modes import CarrierMode, PassengerView, next_mode
 from mission.carrier.start import gentle_start
 from mission.carrier.tracking import Tracked, TrackingParams, along_heading, heading_of, track
 from mission.core.consistent_velocity import PositionConsistentVelocity
 from mission.bus.bridge import CarrierPublisher, PassengerFeed
-from mission.time.clock import Clock, Periodic
+from mission.time.clock import Clock, Downstream, Periodic
 from mission.config.schema import Config
 from mission.model import model_from_config
 from mission.bus.session import congestion_for
@@ -68,9 +69,10 @@ class OwnState:
 
 
 class CarrierBackend(Protocol):
-    """What the controller needs of a carrier robot (sim, mavlink, ros2)."""
+    """What the controller needs of a carrier robot (the kinds: :mod:`mission.carrier.backends`)."""
 
     name: str
+    brakes_itself: bool  # a real vehicle brakes with its own limits: "stop" is sent at once, not ramped
 
     def advance(self, dt_s: float) -> None:
         """Move ``dt_s`` [s] under the held command (the built-in robot; no-op for real ones)."""
@@ -86,6 +88,13 @@ class CarrierBackend(Protocol):
 
     def command(self, cmd: Tracked) -> None:
         """Send (or hold) the command: a setpoint velocity, or forward speed and yaw rate."""
+
+    def park(self) -> None:
+        """The carrier is stopped for good: hand the vehicle to its own position hold, if it has one."""
+
+    def lockstep_relay(self, session: zenoh.Session) -> Downstream | None:
+        """In lockstep, how the carrier brings its robot along if that robot is simulated in a
+        process of its own (None: it is not, or it cannot step)."""
 
     def close(self) -> None:
         """Leave the vehicle safe and release what was opened."""
@@ -106,7 +115,7 @@ def guard_params(cfg: Config) -> GuardParams:
     carrier's response delay plus one control period (a command is held that long)."""
     c = cfg.carrier
     decel = c.brake_decel_m_s2 or cfg.safety.carrier_max_accel_m_s2 or 1.0
-    delay = c.brake_delay_s if c.brake_delay_s is not None else (0.0 if c.backend == "sim" else REAL_DELAY_S)
+    delay = c.brake_delay_s if c.brake_delay_s is not None else (REAL_DELAY_S if KINDS[c.backend].real else 0.0)
     return GuardParams(cfg.law.b * cfg.law.c - c.p3_margin_m, decel, delay, 1.0 / c.rate_hz)
 
 
@@ -202,7 +211,7 @@ class CarrierController:
 
     def _decide(self, state: OwnState, dt_s: float, age_s: float) -> Tracked:
         x_c = state.position_ned_m[:self.dim]
-        if self._stopping() and getattr(self.backend, "brakes_itself", False):
+        if self._stopping() and self.backend.brakes_itself:
             # A real vehicle brakes with its own limits: ramping the command down at
             # safety.carrier_max_accel_m_s2 (the built-in robot's braking) would keep it driving.
             self.velocity_m_s = np.zeros(self.dim)
@@ -330,9 +339,7 @@ class CarrierController:
         if self.mode is CarrierMode.APPROACHING:
             self.backend.engage()
         elif self.mode in (CarrierMode.SEPARATED, CarrierMode.STOPPED) and self._stopping():
-            park = getattr(self.backend, "park", None)
-            if park is not None:
-                park()  # stopped for good: a PX4 vehicle holds position in Hold
+            self.backend.park()  # stopped for good: a PX4 vehicle holds position in Hold
         state = self._in_plane(self.backend.own_state())
         now = self.clock.now()
         why: str | None

@@ -7,26 +7,34 @@ from typing import Literal
 
 from pydantic import Field, field_validator, model_validator
 
+from mission.carrier.backends import KINDS
 from mission.config.fields import MAX_URL_CHARS, Path_, Section, check_mavlink_url
 from mission.errors import ConfigError
+
+
+BackendName = Literal.__getitem__(tuple(KINDS))  # the registry's names
 
 
 class CarrierMavlinkSection(Section):
     """``carrier.backend = "mavlink"``: a PX4 rover or boat, flown through the passenger's link code."""
 
     url: str = Field("udpin:127.0.0.1:14541", max_length=MAX_URL_CHARS,
-                     description="PX4 instance i sends its onboard link to 14540 + i")
-    target_system: int | None = Field(None, ge=1, le=255, description="the rover's MAV_SYS_ID (PX4 instance i: i + 1)")
-    source_system: int | None = Field(None, ge=1, le=255, description="our system id; default: target_system, "
-                                      "or 1 (PX4 registers an onboard controller of its own system only)")
-    source_component: int = Field(191, ge=1, le=255)
-    signing_key_file: Path_ | None = None
-    heartbeat_timeout_s: float = Field(3.0, gt=0, le=30)
+                     description="[-] the carrier vehicle's endpoint (as mavlink.url); PX4 SITL instance i sends to 14540 + i")
+    target_system: int | None = Field(None, ge=1, le=255,
+        description=("[-] MAVLink system id of the carrier vehicle (PX4 SITL instance i: i + 1); default: the first "
+                     "PX4 heard"))
+    source_system: int | None = Field(None, ge=1, le=255,
+        description="[-] our MAVLink system id on that link (default: target_system, else 1)")
+    source_component: int = Field(191, ge=1, le=255, description="[-] our MAVLink component id (191: onboard computer)")
+    signing_key_file: Path_ | None = Field(None, description="[-] MAVLink 2 signing key file of the carrier's link")
+    heartbeat_timeout_s: float = Field(3.0, gt=0, le=30,
+        description="[s] the carrier vehicle counts as lost after this long without HEARTBEAT (stop)")
     prestream_s: float = Field(1.0, ge=0.2, description="[s] setpoints streamed before OFFBOARD is asked")
     offset_ned_m: list[float] = Field([0.0, 0.0, 0.0], description="[m] the vehicle's local origin in the "
                                       "shared frame (added to LOCAL_POSITION_NED)")
-    shared_origin: list[float] | None = Field(None, description="lat [deg], lon [deg], alt [m] of the shared "
-                                              "frame's origin: the offset then comes from the vehicle's EKF origin")
+    shared_origin: list[float] | None = Field(None,
+        description=("[deg, deg, m] lat, lon, alt AMSL of the shared frame's origin; when set the offset comes from "
+                     "the vehicle's EKF origin (GPS_GLOBAL_ORIGIN)"))
 
     _url_ok = field_validator("url")(check_mavlink_url)
 
@@ -34,25 +42,31 @@ class CarrierMavlinkSection(Section):
 class CarrierRos2Section(Section):
     """``carrier.backend = "ros2"``: a ROS 2 robot over Zenoh (nav_msgs/Odometry in, geometry_msgs/Twist out, CDR)."""
 
-    key_form: Literal["ros2dds", "rmw_zenoh"] = Field("ros2dds", description="zenoh-bridge-ros2dds keys "
-                                                      "('<ns>/odom') or rmw_zenoh keys ('<domain>/<ns>/odom/<type>/<hash>')")
-    namespace: str = Field("", pattern=r"^[A-Za-z0-9_/]*$")
-    domain_id: int = Field(0, ge=0, le=232)
-    odom_topic: str = Field("odom", pattern=r"^[A-Za-z0-9_/]+$")
-    cmd_vel_topic: str = Field("cmd_vel", pattern=r"^[A-Za-z0-9_/]+$")
+    key_form: Literal["ros2dds", "rmw_zenoh"] = Field("ros2dds",
+        description=("[-] `ros2dds` (zenoh-bridge-ros2dds: `<ns>/odom`) or `rmw_zenoh` "
+                     "(`<domain>/<ns>/odom/<type>/<hash>`)"))
+    namespace: str = Field("", pattern=r"^[A-Za-z0-9_/]*$", description="[-] ROS namespace of the robot's topics")
+    domain_id: int = Field(0, ge=0, le=232, description="[-] ROS_DOMAIN_ID (rmw_zenoh keys start with it)")
+    odom_topic: str = Field("odom", pattern=r"^[A-Za-z0-9_/]+$",
+        description="[-] nav_msgs/Odometry topic (ENU, REP 103) the carrier reads")
+    cmd_vel_topic: str = Field("cmd_vel", pattern=r"^[A-Za-z0-9_/]+$",
+        description="[-] geometry_msgs/Twist topic (body FLU) the carrier commands")
     offset_ned_m: list[float] = Field([0.0, 0.0, 0.0], description="[m] the odom frame's origin in the shared frame")
 
 
 class CarrierSection(Section):
     """The carrier-side controller (``marsupial carrier``) and its backend."""
 
-    backend: Literal["sim", "mavlink", "ros2"] = "sim"
-    rate_hz: float = Field(30.0, ge=5, le=1000)
-    max_speed_m_s: float = Field(3.0, gt=0, le=100, description="[m/s] the carrier's top speed (the passenger's "
-                                 "feed also gates carrier states against it)")
+    backend: BackendName = Field("sim", description="[-] the carrier robot `marsupial carrier` drives: " + ", ".join(  # type: ignore[valid-type]
+        f"`{k.name}` ({k.summary})" for k in KINDS.values()))
+    rate_hz: float = Field(30.0, ge=5, le=1000,
+        description=("[Hz] carrier controller's tick and publish rate (the built-in robot integrates at it; simulated "
+                     "time)"))
+    max_speed_m_s: float = Field(3.0, gt=0, le=100,
+        description="[m/s] carrier speed limit in the law's command (with safety.carrier_max_speed_m_s)")
     passenger_timeout_s: float = Field(
-        1.0, gt=0, le=10, description="[s] simulated; a passenger status older than this (or a lost "
-        "liveliness token) stops a carrier that is approaching the target")
+        1.0, gt=0, le=10,
+            description="[s] a passenger status older than this (or a lost liveliness token) stops an approaching carrier")
     state_timeout_s: float = Field(0.5, gt=0, le=10, description="[s] own state older than this stops the carrier")
     p3_margin_m: float = Field(0.5, gt=0, description="[m] the P3 guard keeps the carrier at least b c - margin "
                                "from the target, whatever the passenger does")
@@ -61,12 +75,17 @@ class CarrierSection(Section):
     brake_delay_s: float | None = Field(None, ge=0, le=5, description="[s] the carrier's response delay (command "
                                         "to motion, plus the age of its state) the guard allows for; default 0 for "
                                         "the built-in robot, 0.3 s for a real one (mavlink, ros2)")
-    kinematics: Literal["holonomic", "diff_drive", "ackermann"] = "holonomic"
+    kinematics: Literal["holonomic", "diff_drive", "ackermann"] = Field("holonomic",
+        description=("[-] what the carrier can follow: `holonomic` (any planar velocity), `diff_drive` or `ackermann` "
+                     "(tracking law: speed scaled by the heading error, yaw rate to the bearing)"))
     heading_gain: float = Field(2.0, gt=0, description="[1/s] tracking law: yaw rate per heading error")
-    max_yaw_rate_rad_s: float = Field(1.0, gt=0)
-    min_speed_fraction: float = Field(0.3, ge=0, le=1, description="Ackermann: speed kept while misaligned")
-    wheelbase_m: float = Field(0.3, gt=0)
-    max_steer_rad: float = Field(0.5, gt=0, lt=1.5)
+    max_yaw_rate_rad_s: float = Field(1.0, gt=0, description="[rad/s] tracking law: yaw rate limit")
+    min_speed_fraction: float = Field(0.3, ge=0, le=1,
+        description=("[-] tracking law, Ackermann: fraction of the speed kept while misaligned (it turns only while "
+                     "moving)"))
+    wheelbase_m: float = Field(0.3, gt=0,
+        description="[m] tracking law, Ackermann: wheelbase (yaw rate <= v tan(max_steer) / wheelbase)")
+    max_steer_rad: float = Field(0.5, gt=0, lt=1.5, description="[rad] tracking law, Ackermann: steering angle limit")
     align_on_deck_m: float = Field(0.0, ge=0, le=5, description="[m] largest horizontal shift of the carrier's "
                                    "estimate onto the passenger's while it stands on the deck (before take-off); 0 off")
     speed_ratio_tau_s: float = Field(0.0, ge=0, le=30, description="[s] diff-drive/Ackermann: time constant of the "
@@ -75,15 +94,20 @@ class CarrierSection(Section):
     acceleration_tau_s: float = Field(0.0, ge=0, le=5, description="[s] publish the carrier's measured acceleration "
                                       "(its velocity's change, low-passed with this time constant) for the passenger's "
                                       "feed-forward; 0: send none (the passenger predicts it from the carrier law)")
-    velocity_bias_tau_s: float = Field(0.0, ge=0, le=60, description="[s] publish the velocity corrected by the "
-                                       "low-passed (this time constant) difference between its position's rate and its "
-                                       "estimator's velocity (a PX4 rover's EKF position ran 0.1-0.3 m/s faster); 0 off")
-    start_accel_m_s2: float = Field(0.0, ge=0, le=100, description="[m/s^2] while the carrier is measured "
-                                    "slower than 0.15 m/s, its command's speed grows by at most this (a rover with "
-                                    "stiction breaks free at a low command instead of leaping to a high one); 0 off")
-    start_yaw_rad: float | None = Field(None, description="[rad] sim backend: initial heading (default: towards the target)")
-    mavlink: CarrierMavlinkSection = CarrierMavlinkSection()
-    ros2: CarrierRos2Section = CarrierRos2Section()
+    velocity_bias_tau_s: float = Field(0.0, ge=0, le=60,
+        description=("[s] the carrier publishes its velocity plus the low-passed (this time constant) difference "
+                     "between its position's rate and its estimator's velocity, so the passenger's feed-forward moves "
+                     "as the dock does (a PX4 rover's EKF position ran 0.1-0.3 m/s faster than its velocity); 0 off"))
+    start_accel_m_s2: float = Field(0.0, ge=0, le=100,
+        description=("[m/s^2] the carrier's gentle start: while it is measured slower than 0.15 m/s its command's "
+                     "speed grows at most this fast (stiction: it breaks free at a low command, not leaping to a high "
+                     "one); 0 off"))
+    start_yaw_rad: float | None = Field(None,
+        description="[rad] sim backend: initial heading (default: towards the target)")
+    mavlink: CarrierMavlinkSection = Field(CarrierMavlinkSection(),
+        description="[-] table: the PX4 vehicle of the `mavlink` backend")
+    ros2: CarrierRos2Section = Field(CarrierRos2Section(),
+        description="[-] table: the ROS 2 robot of the `ros2` backend")
 
     @model_validator(mode="after")
     def _vectors(self) -> "CarrierSection":

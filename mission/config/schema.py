@@ -61,14 +61,18 @@ __all__ = [  # the sections and field checks in config_carrier / config_fields a
 class LawSection(Section):
     """Gains of the paper's law (paper values by default)."""
 
-    k_c: float = Field(0.5, gt=0, le=100, description="carrier gain [1/s]")
-    k_p: float = Field(1.0, gt=0, le=100, description="passenger gain")
-    b: float = Field(8.0, gt=1, le=1000, description="b > 1")
-    c: float = Field(1.0, gt=0, le=1000, description="[m]")
-    d: float = Field(1.0, gt=0, le=1000, description="[m]")
+    k_c: float = Field(0.5, gt=0, le=100,
+        description="[1/s] carrier gain: u_c = k_c e_tc while the passenger is docked (paper eq. 4)")
+    k_p: float = Field(1.0, gt=0, le=100,
+        description="[1/(m^3 s)] passenger gain: P = k_p (a - L)(a + d)(a - L/b + c) is in 1/s (paper eq. 6)")
+    b: float = Field(8.0, gt=1, le=1000,
+        description="[-] shape of the potential, > 1; separation when the carrier is within b c of the target")
+    c: float = Field(1.0, gt=0, le=1000,
+        description="[m] shape of the potential; b c is the separation distance (8 m with the paper's values)")
+    d: float = Field(1.0, gt=0, le=1000, description="[m] shape of the potential (paper eq. 6)")
     departure_margin_m: float = Field(
-        1e-3, gt=0, le=0.5, description="[m] separation fires at |e_tc| = b c - this (mission/core/tick.py), in flights "
-        "and simulations (below 1e-6 m the departure drowns in rounding; also < b c / 10)")
+        1e-3, gt=0, le=0.5,
+            description="[m] separation fires at |e_tc| = b c - this (the paper's T+), in flights and simulations")
 
     def params(self) -> LawParams:
         from mission.core.law import LawParams
@@ -77,22 +81,34 @@ class LawSection(Section):
 
 
 class ObstacleSection(Section):
-    center: list[Coord]
-    radius: float = Field(gt=0, le=100_000, description="[m]")
+    center: list[Coord] = Field(description="[m] obstacle centre (dim components)")
+    radius: float = Field(gt=0, le=100_000, description="[m] obstacle radius")
 
 
 class ScenarioSection(Section):
     """Geometry: where the carrier, passenger and target are at t = 0 [m]."""
 
-    dim: Literal[2, 3] = 3
-    frame: Literal["local_ned", "xyz"] = "local_ned"
-    carrier_start: list[Coord] = [0.0, 0.0, 0.0]
-    target: list[Coord] = [20.0, 15.0, -4.0]
-    passenger_start: list[Coord] | None = None
-    planar_carrier: bool = True
-    eta: float | None = Field(None, gt=0, le=10_000_000, description="Assumption 1 lower bound [m]; default |e_tc(0)|")
-    carrier_mode: Literal["stop", "remark1"] = "stop"
-    obstacles: list[ObstacleSection] = Field([], max_length=1000)
+    dim: Literal[2, 3] = Field(3, description="[-] 2 (planar) or 3; a flight needs 3")
+    frame: Literal["local_ned", "xyz"] = Field("local_ned",
+        description="[-] `local_ned` (PX4's local NED, z down; plots show altitude) or `xyz` (plots only)")
+    carrier_start: list[Coord] = Field([0.0, 0.0, 0.0],
+        description="[m] carrier position at t = 0 (dim components; the carrier simulator starts here)")
+    target: list[Coord] = Field([20.0, 15.0, -4.0],
+        description=("[m] target position (dim components); in 3D with a planar carrier at most b c above the "
+                     "carrier's plane"))
+    passenger_start: list[Coord] | None = Field(None,
+        description=("[m] passenger start for `simulate` (default: docked on the carrier, Assumption 2); `run` uses "
+                     "the vehicle's real position"))
+    planar_carrier: bool = Field(True,
+        description="[-] the carrier moves in its horizontal plane (u_c projected onto it) in 3D")
+    eta: float | None = Field(None, gt=0, le=10_000_000,
+        description="[m] Assumption 1 lower bound, b c < eta <= |e_tc(0)| (default |e_tc(0)|)")
+    carrier_mode: Literal["stop", "remark1"] = Field("stop",
+        description=("[-] after separation the carrier `stop`s, or keeps its own plan (`remark1`: its velocity of the "
+                     "separation instant, CBF-filtered)"))
+    obstacles: list[ObstacleSection] = Field([], max_length=1000,
+        description=("[-] list of `{ center = [m], radius = m }` circles (2D) or spheres (3D); the carrier avoids "
+                     "their planar circles"))
 
     @model_validator(mode="after")
     def _dims(self) -> "ScenarioSection":
@@ -114,15 +130,22 @@ class ScenarioSection(Section):
 class SafetySection(Section):
     """CBF filter and limits; a limit left out is off (the simulator's paper runs)."""
 
-    cbf_gain: float = Field(1.0, gt=0, le=100, description="class-K gain [1/s]")
-    margin_m: float = Field(0.5, ge=0, le=100)
-    passenger_max_speed_m_s: float | None = Field(None, gt=0, le=100)
-    passenger_max_accel_m_s2: float | None = Field(None, gt=0, le=100)
-    carrier_max_speed_m_s: float | None = Field(None, gt=0, le=100)
-    carrier_max_accel_m_s2: float | None = Field(None, gt=0, le=100)
-    z_min_m: float | None = Field(None, ge=-100_000, le=100_000, description="[m] NED: ceiling (most negative z)")
-    z_max_m: float | None = Field(None, ge=-100_000, le=100_000, description="[m] NED: floor (z <= z_max_m once flying)")
-    filter_carrier: bool = True
+    cbf_gain: float = Field(1.0, gt=0, le=100, description="[1/s] class-K gain of the control barrier functions")
+    margin_m: float = Field(0.5, ge=0, le=100,
+        description="[m] clearance kept from every obstacle surface (reference; the command filter keeps half)")
+    passenger_max_speed_m_s: float | None = Field(None, gt=0, le=100,
+        description="[m/s] passenger speed limit, direction kept (off when left out: the paper's unsaturated law)")
+    passenger_max_accel_m_s2: float | None = Field(None, gt=0, le=100,
+        description="[m/s^2] passenger acceleration limit; also shapes arrival (speed <= sqrt(2 a |e_pt|))")
+    carrier_max_speed_m_s: float | None = Field(None, gt=0, le=100,
+        description="[m/s] carrier speed limit in the law's command")
+    carrier_max_accel_m_s2: float | None = Field(None, gt=0, le=100,
+        description="[m/s^2] carrier acceleration limit in the law's command")
+    z_min_m: float | None = Field(None, ge=-100_000, le=100_000,
+        description="[m] NED z lower bound for the passenger (a ceiling: z >= z_min_m)")
+    z_max_m: float | None = Field(None, ge=-100_000, le=100_000,
+        description="[m] NED z upper bound for the passenger (an altitude floor: z <= z_max_m, e.g. -0.5 = 0.5 m up)")
+    filter_carrier: bool = Field(True, description="[-] pass the carrier's command through the CBF filter too")
 
     def passenger(self) -> SafetyConfig:
         from mission.core.safety import SafetyConfig
@@ -138,17 +161,22 @@ class SafetySection(Section):
 class SimSection(Section):
     """Numeric closed loop: a fixed step with the command held over it (a digital controller)."""
 
-    dt_s: float = Field(1e-3, gt=0, le=0.1)
-    duration_s: float = Field(30.0, gt=0, le=100_000)
-    p1_tolerance_m: float = Field(1e-6, gt=0, le=10, description="|e_pc| counted as 'on the carrier' before T")
-    p2_tolerance_m: float = Field(0.1, gt=0, le=10, description="final |e_pt| counted as 'at the target'")
+    dt_s: float = Field(1e-3, gt=0, le=0.1,
+        description="[s] step of the simulated digital controller (command held over it)")
+    duration_s: float = Field(30.0, gt=0, le=100_000, description="[s] simulated time from the start of riding (t = 0)")
+    p1_tolerance_m: float = Field(1e-6, gt=0, le=10,
+        description="[m] |e_pc| counted as 'on the carrier' before separation (P1)")
+    p2_tolerance_m: float = Field(0.1, gt=0, le=10,
+        description="[m] final |e_pt| counted as 'at the target' (P2); a mission config uses mission.arrival_radius_m")
 
 
 class MonteCarloSection(Section):
     """Random scenarios satisfying the assumptions (for --monte-carlo)."""
 
-    distance_m: FloatPair = (12.0, 60.0)
-    height_m: FloatPair = (0.0, 6.0)
+    distance_m: FloatPair = Field((12.0, 60.0),
+        description="[m] range of the random targets' horizontal distance from the carrier (raised above b c)")
+    height_m: FloatPair = Field((0.0, 6.0),
+        description="[m] range of the random targets' height above the carrier's plane (3D; clipped to 0.95 b c)")
 
     @model_validator(mode="after")
     def _ranges(self) -> "MonteCarloSection":
@@ -162,16 +190,23 @@ class MonteCarloSection(Section):
 class MissionSection(Section):
     """The offboard controller (``marsupial run``)."""
 
-    rate_hz: float = Field(50.0, ge=10, le=1000, description="[Hz] PX4 needs > 2 Hz in OFFBOARD; >= 10 Hz also "
-                           "keeps SIGTERM answered within 0.1 s")
+    rate_hz: float = Field(50.0, ge=10, le=1000,
+        description="[Hz] controller tick and setpoint rate (PX4 needs > 2 Hz in OFFBOARD)")
     dock_offset_ned_m: list[Annotated[float, Field(ge=-100, le=100)]] = Field(
-        [0.0, 0.0, -1.5], description="[m] NED from the carrier; down < 0")
-    dock_tolerance_m: float = Field(0.5, gt=0, le=5)
-    track_gain: float = Field(0.0, ge=0, le=50, description="[1/s] pull of the vehicle to the reference (added to PX4's "
-                              "own position loop for full setpoints)")
-    join_speed_m_s: float = Field(1.0, gt=0, le=20)
-    arrival_radius_m: float = Field(0.5, gt=0, le=50)
-    arrival_dwell_s: float = Field(2.0, ge=0, le=600)
+        [0.0, 0.0, -1.5],
+            description=("[m] NED offset of the dock point from the carrier's reported position (the passenger rides "
+                         "there; -1.5 = 1.5 m above)"))
+    dock_tolerance_m: float = Field(0.5, gt=0, le=5,
+        description=("[m] how far from the dock point the vehicle may be at start-up (horizontally) and while riding "
+                     "(P1)"))
+    track_gain: float = Field(0.0, ge=0, le=50,
+        description="[1/s] pull of the vehicle onto the reference: u = u_ref + gain (x_ref - x_p)")
+    join_speed_m_s: float = Field(1.0, gt=0, le=20,
+        description="[m/s] speed of the reference from take-over to the dock point (JOIN)")
+    arrival_radius_m: float = Field(0.5, gt=0, le=50,
+        description="[m] distance to the target that counts as arrived (P2)")
+    arrival_dwell_s: float = Field(2.0, ge=0, le=600,
+        description="[s] time the vehicle must stay within the arrival radius")
     setpoint: Literal["velocity", "full"] = Field(
         "full", description="[-] velocity-only setpoints (type_mask 3527), or position + velocity + acceleration "
         "(type_mask 3072: PX4 closes position itself); see mission/core/tracking.py")
@@ -179,7 +214,8 @@ class MissionSection(Section):
                                  "extra position feedback through PX4's own position loop (dimensionless)")
     integral_gain: float = Field(1.0, ge=0, le=20, description="[1/s^2 or 1/s] integral action on the position error: [1/s^2] into the "
                                  "acceleration feed-forward (full), [1/s] into the velocity (velocity)")
-    integral_limit: float = Field(2.0, gt=0, le=20, description="[m/s^2 or m/s] clamp of the integral term: [m/s^2] (full) or [m/s] (velocity)")
+    integral_limit: float = Field(2.0, gt=0, le=20,
+        description="[m/s^2 or m/s] clamp of the integral term: [m/s^2] (full) or [m/s] (velocity)")
     drag_ff_per_s: float = Field(1.0, ge=0, le=10, description="[1/s] feed-forward of the vehicle's velocity deficit: "
                                  "acceleration per m/s of reference velocity (full setpoints)")
     integral_window_m: float = Field(0.5, gt=0, le=10, description="[m] the integral integrates only while the vehicle is "
@@ -207,26 +243,36 @@ class MissionSection(Section):
         "keep", description="[-] `stop`: once the preflight checks passed, ask the vehicle to stop the onboard-profile "
         "streams the mission never reads (SET_MESSAGE_INTERVAL -1 each; PX4 honours it on the link it came on), so "
         "less telemetry is sent and parsed; `keep`: leave them streaming (the tlog then has them all)")
-    final_action: Literal["hold", "land"] = "hold"
-    carrier_timeout_s: float = Field(0.5, gt=0, le=10, description="[s] a carrier state older than this is lost")
-    heartbeat_timeout_s: float = Field(3.0, gt=0, le=30, description="[s] MAVSDK also declares a vehicle lost after 3 s")
-    prestream_s: float = Field(1.0, ge=0.2, le=10)
-    command_retries: int = Field(3, ge=1, le=10)
-    max_duration_s: float = Field(300.0, gt=0, le=86400)
-    connect_timeout_s: float = Field(20.0, gt=0, le=600)
-    log_dir: Path_ = "logs"
+    final_action: Literal["hold", "land"] = Field("hold",
+        description="[-] after arrival: `hold` (PX4 Hold, armed in the air) or `land`")
+    carrier_timeout_s: float = Field(0.5, gt=0, le=10,
+        description="[s] a carrier state older than this before separation aborts (carrier_lost)")
+    heartbeat_timeout_s: float = Field(3.0, gt=0, le=30,
+        description="[s] vehicle lost when HEARTBEAT and telemetry are silent this long (MAVSDK: 3 s)")
+    prestream_s: float = Field(1.0, ge=0.2, le=10,
+        description=("[s] zero-velocity setpoints streamed before asking for OFFBOARD (PX4 refuses OFFBOARD without a "
+                     "stream)"))
+    command_retries: int = Field(3, ge=1, le=10,
+        description="[-] tries of each vehicle command (arm, OFFBOARD, Hold, Land) before giving up")
+    max_duration_s: float = Field(300.0, gt=0, le=86400, description="[s] mission timeout: Hold after this long")
+    connect_timeout_s: float = Field(20.0, gt=0, le=600,
+        description="[s] how long `run` waits for the vehicle and the carrier before giving up (it counts down)")
+    log_dir: Path_ = Field("logs", description="[-] directory of flight logs (`<log_dir>/<time>-<pair>/`)")
 
     _log_dir_printable = field_validator("log_dir")(printable)
 
 
 class MavlinkSection(Section):
-    url: str = Field("udpin:127.0.0.1:14540", max_length=MAX_URL_CHARS)
-    target_system: int | None = Field(None, ge=1, le=255, description="fly only this system; unset: adopt a PX4 "
-                                      "autopilot after 3 consistent HEARTBEATs (mission.mavlink.link)")
+    url: str = Field("udpin:127.0.0.1:14540", max_length=MAX_URL_CHARS,
+        description=("[-] vehicle endpoint: udpin:HOST:PORT, udpout:HOST:PORT, tcp:HOST:PORT or a serial device "
+                     "/dev/ttyACM0:921600"))
+    target_system: int | None = Field(None, ge=1, le=255,
+        description="[-] MAVLink system id of the vehicle (default: the first that sends HEARTBEAT)")
     target_component: int = Field(1, ge=0, le=255, description="[-] the autopilot's component id (0: any)")
-    source_system: int = Field(1, ge=1, le=255)
-    source_component: int = Field(191, ge=1, le=255)
-    signing_key_file: Path_ | None = None
+    source_system: int = Field(1, ge=1, le=255, description="[-] our MAVLink system id")
+    source_component: int = Field(191, ge=1, le=255, description="[-] our MAVLink component id (191: onboard computer)")
+    signing_key_file: Path_ | None = Field(None,
+        description="[-] MAVLink 2 signing key file (64 hex digits or 32 bytes); everything sent is signed")
 
     _url_ok = field_validator("url")(check_mavlink_url)
     _key_file_printable = field_validator("signing_key_file")(lambda v: v if v is None else printable(v))
@@ -235,25 +281,29 @@ class MavlinkSection(Section):
 class ZenohSection(Section):
     """Zenoh session: peer on loopback with multicast scouting off by default."""
 
-    mode: Literal["peer", "client", "router"] = "peer"
-    listen: list[Annotated[str, Field(max_length=MAX_URL_CHARS)]] = Field([], max_length=16)
-    connect: list[Annotated[str, Field(max_length=MAX_URL_CHARS)]] = Field([], max_length=16)
-    multicast_scouting: bool = False
-    config_file: Path_ | None = None
+    mode: Literal["peer", "client", "router"] = Field("peer",
+        description="[-] Zenoh session mode: `peer`, `client` or `router`")
+    listen: list[Annotated[str, Field(max_length=MAX_URL_CHARS)]] = Field([], max_length=16,
+        description="[-] Zenoh endpoints to listen on, e.g. `tcp/127.0.0.1:7450`")
+    connect: list[Annotated[str, Field(max_length=MAX_URL_CHARS)]] = Field([], max_length=16,
+        description="[-] Zenoh endpoints to connect to, e.g. `tcp/127.0.0.1:7447` (a router)")
+    multicast_scouting: bool = Field(False,
+        description="[-] find peers by UDP multicast (off: loopback only, explicit endpoints)")
+    config_file: Path_ | None = Field(None,
+        description="[-] a Zenoh JSON5 config file as the base (see configs/zenoh/); listen/connect still override")
     pair: str = Field("pair0", pattern=r"^[A-Za-z0-9_\-]+$", max_length=64,
-                      description="one chunk of the key expressions marsupial/<pair>/...")
-    encoding: Literal["json", "cdr"] = "json"
+                      description="[-] pair name: the key namespace `marsupial/<pair>/...` (letters, digits, _ and -)")
+    encoding: Literal["json", "cdr"] = Field("json",
+        description="[-] carrier state encoding: `json` or `cdr` (ROS 2 nav_msgs/Odometry)")
     rendezvous: str | None = Field(
         "tcp/127.0.0.1:7448",
-        description="peer mode with no listen/connect endpoints and no config_file: every process "
-        "listens on this loopback endpoint if it is free (the first one wins) and on an ephemeral "
-        "loopback port, and connects to it; gossip then meshes the peers. None: loopback ephemeral "
-        "listener only (useful with multicast scouting)",
+        description=("[-] peers with no endpoints meet on this loopback endpoint (the first process listens); none: "
+            "ephemeral listener only"),
     )
     carrier_key: str | None = Field(
         None, max_length=MAX_URL_CHARS,
-        description="override of the carrier state key, e.g. 'robot1/odom' (zenoh-bridge-ros2dds) or "
-        "'0/odom/nav_msgs::msg::dds_::Odometry_/*' (rmw_zenoh) with encoding 'cdr'")
+        description=("[-] override of the carrier state key, e.g. `robot1/odom` (zenoh-bridge-ros2dds) or "
+            "`0/odom/nav_msgs::msg::dds_::Odometry_/*` (rmw_zenoh)"))
 
     @field_validator("listen", "connect")
     @classmethod

@@ -39,7 +39,8 @@ import numpy as np
 from mission.flight_mode import FlightMode
 from mission.carrier.controller import OwnState
 from mission.carrier.tracking import Tracked
-from mission.time.clock import Clock
+from mission.time.clock import Clock, Downstream
+from mission.time.lockstep import MavlinkRelay
 from mission.config.schema import Config
 from mission.controller import CommandWorker
 from mission.errors import LinkError
@@ -51,6 +52,16 @@ log = logging.getLogger(__name__)
 
 STOP_SPEED_M_S = 1e-3  # [m/s] "stop" to a PX4 rover: this speed along its own heading (see command)
 PARK_SPEED_M_S = 0.2  # [m/s] below this the stopped carrier is handed to PX4's Hold
+
+
+def open_backend(cfg: Config, clock: Clock, session: object) -> MavlinkCarrier:
+    """The PX4 vehicle of ``cfg.carrier.mavlink``, its link opened (``session`` unused)."""
+    return MavlinkCarrier(cfg, clock)
+
+
+def describe(cfg: Config) -> str:
+    m = cfg.carrier.mavlink
+    return f"PX4 vehicle on {m.url} (sysid {m.target_system or 'first PX4 heard'})"
 
 
 class MavlinkCarrier:
@@ -179,6 +190,11 @@ class MavlinkCarrier:
             return
         if self._streaming_since is None:
             self._streaming_since = self.clock.now()
+
+    def lockstep_relay(self, session: object) -> Downstream:
+        """In lockstep, a simulated PX4 (``mock-vehicle --lockstep``) steps with the carrier
+        through its barriers on this link."""
+        return MavlinkRelay(self.link)
 
     def close(self) -> None:
         """Ask for Hold if we had control (best effort), stop the worker, close the link. Idempotent."""

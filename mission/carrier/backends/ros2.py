@@ -33,7 +33,8 @@ import zenoh.ext
 from mission.carrier.controller import OwnState
 from mission.carrier.tracking import Tracked
 from mission.bus.session import congestion_for, declare, undeclare
-from mission.time.clock import Clock
+from mission.time.clock import Clock, Downstream
+from mission.time.lockstep import ZenohRelay
 from mission.config.schema import CarrierRos2Section, Config
 from mission.bus.wire import CarrierState, WireError
 from mission.bus.ros2 import decode_odometry_cdr, encode_twist_cdr
@@ -127,6 +128,16 @@ def body_twist(cmd: Tracked, yaw_rad: float | None, holonomic: bool) -> tuple[np
     return np.array([forward, -right, 0.0]), np.zeros(3)
 
 
+def open_backend(cfg: Config, clock: Clock, session: zenoh.Session) -> Ros2Carrier:
+    """The ROS 2 robot of ``cfg.carrier.ros2`` on ``session``."""
+    return Ros2Carrier(cfg, clock, session)
+
+
+def describe(cfg: Config) -> str:
+    t = ros2_topics(cfg.carrier.ros2)
+    return f"ROS 2 robot, {cfg.carrier.ros2.key_form} keys odom {t.odom_sub}, cmd_vel {t.cmd_vel_pub}"
+
+
 class Ros2Carrier:
     """The ROS 2 robot of ``cfg.carrier.ros2`` on an open Zenoh ``session`` (owned by the caller)."""
 
@@ -135,6 +146,7 @@ class Ros2Carrier:
 
     def __init__(self, cfg: Config, clock: Clock, session: zenoh.Session) -> None:
         self.clock = clock
+        self.section = cfg.carrier.ros2
         self.topics = ros2_topics(cfg.carrier.ros2)
         self.holonomic = cfg.carrier.kinematics == "holonomic"
         self._offset = np.array(cfg.carrier.ros2.offset_ned_m, dtype=float)
@@ -193,6 +205,19 @@ class Ros2Carrier:
 
     def engage(self) -> None:
         pass
+
+    def park(self) -> None:
+        pass
+
+    def lockstep_relay(self, session: zenoh.Session) -> Downstream | None:
+        """In lockstep, a ROS-2-shaped robot with rmw_zenoh keys (``ros2-robot --lockstep``) steps
+        with the carrier through its clock keys; a ros2dds robot carries no sequence numbers and
+        runs on its own clock (None)."""
+        if not self.topics.rmw_zenoh:
+            log.warning("lockstep: a ros2dds robot carries no sequence numbers and cannot step with us; "
+                        "it runs on its own clock")
+            return None
+        return ZenohRelay(session, robot_clock_keys(self.section), self, self, name="robot")
 
     def control_fault(self) -> str | None:
         return None

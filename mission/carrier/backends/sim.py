@@ -18,11 +18,21 @@ from mission.time.clock import Clock
 from mission.config.schema import Config
 
 
+def open_backend(cfg: Config, clock: Clock, session: object) -> SimRobot:
+    """The built-in robot of ``cfg`` (``session`` unused)."""
+    return SimRobot(cfg, clock)
+
+
+def describe(cfg: Config) -> str:
+    return "built-in kinematic robot"
+
+
 class SimRobot:
     """Kinematic carrier at ``scenario.carrier_start`` [m], heading ``carrier.start_yaw_rad``
     (default: towards the target)."""
 
     name = "sim"
+    brakes_itself = False  # braking is the law's acceleration limit
 
     def __init__(self, cfg: Config, clock: Clock) -> None:
         self.clock = clock
@@ -58,6 +68,12 @@ class SimRobot:
 
     def engage(self) -> None:
         pass
+
+    def park(self) -> None:
+        pass
+
+    def lockstep_relay(self, session: object) -> None:
+        return None  # the robot is the carrier's own code: it steps with it
 
     def control_fault(self) -> str | None:
         return None
