@@ -29,6 +29,7 @@ from mission.config.schema import Config
 from mission.errors import CommandRejected, LinkError
 from mission.record import FlightRecorder
 from mission.mavlink.env import mavlink
+from mission.mavlink.telemetry import VehicleState
 from mission.model import mission_model
 from mission.phases import AbortReason, CarrierObs, Decision, MissionState, Observation, Phase, VehicleObs
 from mission.ports import CarrierSource, Request, StatusSink, Vehicle
@@ -43,6 +44,15 @@ UNUSED_STREAMS = tuple(getattr(mavlink, f"MAVLINK_MSG_ID_{name}") for name in (
     "ATTITUDE", "ATTITUDE_QUATERNION", "GLOBAL_POSITION_INT", "HIGHRES_IMU", "ODOMETRY", "POSITION_TARGET_LOCAL_NED",
     "ATTITUDE_TARGET", "ALTITUDE", "VFR_HUD", "ESTIMATOR_STATUS", "HOME_POSITION"))
 ABORT_GRACE_S = 15.0  # longest the loop keeps asking for Hold after an abort [s]
+
+
+#: How each request the phases make is carried out on the vehicle (blocking until confirmed).
+COMMANDS: dict[Request, Callable[[Vehicle], None]] = {
+    Request.ARM: lambda vehicle: vehicle.arm(),
+    Request.OFFBOARD: lambda vehicle: vehicle.set_mode(FlightMode.OFFBOARD),
+    Request.HOLD: lambda vehicle: vehicle.hold(),
+    Request.LAND: lambda vehicle: vehicle.land(),
+}
 
 
 class CommandWorker:
@@ -94,16 +104,6 @@ class CommandWorker:
                 self.clock.wait(self._cond, math.inf)
             return self._requests.popleft()
 
-    def _execute(self, request: Request) -> None:
-        if request is Request.ARM:
-            self.link.arm()
-        elif request is Request.OFFBOARD:
-            self.link.set_mode(FlightMode.OFFBOARD)
-        elif request is Request.HOLD:
-            self.link.hold()
-        elif request is Request.LAND:
-            self.link.land()
-
     def _run(self) -> None:
         while True:
             request = self._next()
@@ -115,7 +115,7 @@ class CommandWorker:
         reason = ""
         for attempt in range(1, self.retries + 1):
             try:
-                self._execute(request)
+                COMMANDS[request](self.link)
                 log.info("vehicle accepted %s", request)
                 reason = ""
                 break
@@ -155,7 +155,7 @@ def _no_stamp() -> int:
     return 0
 
 
-def _vehicle_obs(state: Any, velocity_fix: PositionConsistentVelocity | None = None) -> VehicleObs | None:
+def _vehicle_obs(state: VehicleState, velocity_fix: PositionConsistentVelocity | None = None) -> VehicleObs | None:
     """The vehicle as the phases see it; with ``velocity_fix`` its velocity made consistent with
     its position (``mission.velocity_bias_tau_s``, :mod:`mission.core.consistent_velocity`)."""
     if state.heartbeat_rx_s is None:
@@ -163,7 +163,7 @@ def _vehicle_obs(state: Any, velocity_fix: PositionConsistentVelocity | None = N
     pos = state.position_ned_m
     vel = state.velocity_ned_m_s
     age = float("inf") if state.position_rx_s is None else state.t_s - state.position_rx_s
-    sample_t = getattr(state, "position_t_s", None)
+    sample_t = state.position_t_s
     if velocity_fix is not None and pos is not None and vel is not None and sample_t is not None:
         vel = velocity_fix.update(sample_t, np.asarray(pos, dtype=float), np.asarray(vel, dtype=float))
     if pos is not None and vel is not None and age <= phases.TELEMETRY_SILENT_S and sample_t is not None:
@@ -249,7 +249,7 @@ class MissionController:
             self._origin_given = True
         self._received = self.feed.latest()
         failed = dict(worker.failed)
-        signing = getattr(self.link, "signing_problem", lambda: None)()
+        signing = self.link.signing_problem()
         if signing:
             failed["signing"] = signing  # no vehicle yet, and the reason is the key
         return Observation(t_s=t, vehicle=_vehicle_obs(vstate, self._velocity_fix), carrier=_carrier_obs(self._received, self.feed.alive_over_interval()),
@@ -369,16 +369,9 @@ class MissionController:
         """What was dropped and why, for summary.json: the carrier feed's counters (received,
         accepted, dropped per reason, bound and rejected sources, resyncs), the link's, and in
         lockstep the clock's (barriers, fall-back, carriers dropped as silent)."""
-        out: dict[str, Any] = {}
-        feed_counters = getattr(self.feed, "counters", None)
-        if isinstance(feed_counters, dict):
-            out["carrier_feed"] = feed_counters
-        link_counters = getattr(self.link, "counters", None)
-        if dataclasses.is_dataclass(link_counters) and not isinstance(link_counters, type):
-            out["link"] = dataclasses.asdict(link_counters)
-        clock_counters = getattr(self.clock, "counters", None)  # a lockstep clock's: was every step in step?
-        if isinstance(clock_counters, dict):
-            out["lockstep"] = clock_counters
+        out: dict[str, Any] = {"carrier_feed": self.feed.counters, "link": dataclasses.asdict(self.link.counters)}
+        if self.clock.counters is not None:  # a lockstep clock's: was every step in step?
+            out["lockstep"] = self.clock.counters
         return out
 
     def _outcome(self) -> MissionOutcome:

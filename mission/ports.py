@@ -19,12 +19,13 @@ three without sockets.
 from __future__ import annotations
 
 from enum import StrEnum
-from typing import TYPE_CHECKING, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
 if TYPE_CHECKING:
     from mission.bus.bridge import ReceivedCarrierState
+    from mission.mavlink.session import LinkCounters
     from mission.mavlink.link import VehicleState
     from mission.bus.wire import GeoOrigin, PassengerStatus
 
@@ -74,6 +75,15 @@ class Vehicle(Protocol):
 
     def land(self) -> None: ...
 
+    def signing_problem(self) -> str | None:
+        """Why no vehicle is identified although a PX4 was heard (it signs with another key), or None."""
+        ...
+
+    @property
+    def counters(self) -> LinkCounters:
+        """What the link received, sent and refused (for the summary)."""
+        ...
+
 
 class CarrierSource(Protocol):
     """The carrier's state as received (newest only, with its age on the mission clock)."""
@@ -91,6 +101,11 @@ class CarrierSource(Protocol):
 
     def set_origin(self, origin: GeoOrigin | None) -> None:
         """The vehicle's EKF origin, so geodetic carrier states map to local NED."""
+        ...
+
+    @property
+    def counters(self) -> dict[str, Any]:
+        """Samples received, accepted and dropped per reason (for the summary)."""
         ...
 
 

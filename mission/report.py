@@ -83,7 +83,7 @@ class WaitReporter:
             return None
         limit = self.cfg.mission.connect_timeout_s
         left = max(limit - (self.clock.now() - state.since_s), 0.0)
-        speed = float(getattr(self.clock, "speed", 1.0))
+        speed = float(self.clock.speed)
         wall = "" if speed == 1.0 else f", {left / speed:.1f} s wall at clock x{speed:g}"
         return (f"waiting for {' and '.join(missing)}; giving up in {left:.0f} s{wall} "
                 f"(mission.connect_timeout_s = {limit:g} s)")

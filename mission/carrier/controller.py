@@ -395,7 +395,7 @@ class CarrierController:
         periodic = Periodic(self.clock, self.period_s)
         self.step(0.0)
         log.info("carrier %s (%s backend) publishing on %s at %.1f Hz (clock speed %g)", self.pair,
-                 self.backend.name, self.publisher.key, self.cfg.carrier.rate_hz, getattr(self.clock, "speed", 1.0))
+                 self.backend.name, self.publisher.key, self.cfg.carrier.rate_hz, self.clock.speed)
         while not stop_event.is_set():
             tick = periodic.wait()
             if duration_s is not None and tick - t0 >= duration_s:

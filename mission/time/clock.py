@@ -52,6 +52,11 @@ class Clock(Protocol):
         """``cond.notify_all()`` (its lock held) for threads waiting through :meth:`wait`."""
         ...
 
+    @property
+    def counters(self) -> dict[str, object] | None:
+        """A lockstep clock's health (was every step in step?); None for other clocks."""
+        ...
+
     def close(self) -> None: ...
 
 
@@ -61,6 +66,8 @@ class ScaledClock:
     ``now()`` starts at ``start_s`` when the clock is made. ``sleep(d)`` blocks ``d / speed``
     wall seconds.
     """
+
+    counters = None  # only a lockstep clock keeps counters
 
     def __init__(self, speed: float = 1.0, start_s: float = 0.0) -> None:
         if not speed > 0:
@@ -93,6 +100,8 @@ class ScaledClock:
 class ManualClock:
     """A clock advanced explicitly (unit tests); ``sleep`` advances it instantly, ``wait``
     blocks at most one short wall slice (deadlines never pass by themselves)."""
+
+    counters = None  # only a lockstep clock keeps counters
 
     def __init__(self, start_s: float = 0.0) -> None:
         self.speed = 1.0

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -20,13 +21,14 @@ from mission.bus.bridge import ReceivedCarrierState
 from mission.time.clock import ManualClock
 from mission.errors import CommandRejected
 from mission.mavlink.link import VehicleState
+from mission.mavlink.session import LinkCounters
 from mission.bus.wire import CarrierState, GeoOrigin, PassengerStatus
 
 
 @dataclass
 class FakeWorld:
-    """Implements :class:`~mission.ports.Vehicle`, :class:`~mission.ports.CarrierSource` and
-    :class:`~mission.ports.StatusSink` at once; lists what the controller did."""
+    """Implements :class:`~mission.ports.Vehicle` and :class:`~mission.ports.StatusSink`, and
+    :class:`~mission.ports.CarrierSource` as :attr:`feed`; lists what the controller did."""
 
     clock: ManualClock
     target_ned_m: np.ndarray
@@ -112,7 +114,19 @@ class FakeWorld:
     def land(self) -> None:
         self.set_mode("AUTO.LAND")
 
-    # ------------------------------------------------------------------ CarrierSource
+    def signing_problem(self) -> str | None:
+        return None
+
+    @property
+    def counters(self) -> LinkCounters:
+        return LinkCounters()
+
+    @property
+    def feed(self) -> FakeFeed:
+        """The world as a :class:`~mission.ports.CarrierSource`."""
+        return FakeFeed(self)
+
+    # ------------------------------------------------------------------ CarrierSource (through FakeFeed)
     def latest(self) -> ReceivedCarrierState | None:
         now = self._advance()
         if now <= self.carrier_until_s:
@@ -143,3 +157,27 @@ class FakeWorld:
             self._v_c = e / float(np.linalg.norm(e)) * self.carrier_speed_m_s
         else:
             self._v_c = np.zeros(3)
+
+
+@dataclass
+class FakeFeed:
+    """The fake world's carrier as the controller's :class:`~mission.ports.CarrierSource`."""
+
+    world: FakeWorld
+
+    def latest(self) -> ReceivedCarrierState | None:
+        return self.world.latest()
+
+    @property
+    def alive(self) -> bool | None:
+        return self.world.alive
+
+    def alive_over_interval(self) -> bool | None:
+        return self.world.alive_over_interval()
+
+    def set_origin(self, origin: GeoOrigin | None) -> None:
+        self.world.set_origin(origin)
+
+    @property
+    def counters(self) -> dict[str, Any]:
+        return {"received": self.world._seq, "accepted": self.world._seq, "dropped": {}}

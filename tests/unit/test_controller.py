@@ -24,7 +24,7 @@ def fly(cfg, **world_kwargs):
     clock = ManualClock()
     world = FakeWorld(clock, target_ned_m=np.asarray(cfg.scenario.target, dtype=float), **world_kwargs)
     reports: list[TickReport] = []
-    controller = MissionController(cfg, world, world, clock, publisher=world, on_tick=reports.append,
+    controller = MissionController(cfg, world, world.feed, clock, publisher=world, on_tick=reports.append,
                                    command_thread=False)
     outcome = controller.run()
     return outcome, world, reports, controller
