@@ -32,7 +32,7 @@ from mission.mavlink.env import mavlink
 from mission.mavlink.telemetry import VehicleState
 from mission.model import mission_model
 from mission.phases import AbortReason, CarrierObs, Decision, MissionState, Observation, Phase, VehicleObs
-from mission.ports import CarrierSource, Request, StatusSink, Vehicle
+from mission.interfaces import CarrierSource, Request, StatusSink, Vehicle
 from mission.bus.wire import GeoOrigin, PassengerStatus
 
 log = logging.getLogger(__name__)
@@ -211,9 +211,9 @@ class TickReport:
 class MissionController:
     """One mission: ``run()`` ticks at ``mission.rate_hz`` until DONE or ABORT.
 
-    link: the :class:`~mission.ports.Vehicle` (a :class:`mission.mavlink.link.VehicleLink`, opened,
-    vehicle identified or not yet); feed: the :class:`~mission.ports.CarrierSource` (a
-    :class:`mission.bus.bridge.CarrierFeed`); publisher: a :class:`~mission.ports.StatusSink`
+    link: the :class:`~mission.interfaces.Vehicle` (a :class:`mission.mavlink.link.VehicleLink`, opened,
+    vehicle identified or not yet); feed: the :class:`~mission.interfaces.CarrierSource` (a
+    :class:`mission.bus.bridge.CarrierFeed`); publisher: a :class:`~mission.interfaces.StatusSink`
     (or None); recorder: a :class:`mission.record.FlightRecorder` (or None). ``on_event(phase,
     text)`` is called on every phase change and event (the CLI prints them), ``on_tick(report)``
     after every tick (:class:`TickReport`; keep it short: it runs in the loop).

@@ -17,7 +17,7 @@ from mission.bus.bridge import describe_endpoints, keys
 from mission.time.clock import Clock
 from mission.config.schema import Config
 from mission.phases import Phase
-from mission.ports import CarrierSource, Vehicle
+from mission.interfaces import CarrierSource, Vehicle
 
 CLOCKS_NOTE = ("times: [mission X s] = the controller's clock since it started (record.csv t_s); "
                "t = time since the start of riding, the paper's t = 0 (summary.json, plots)")

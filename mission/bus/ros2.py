@@ -24,7 +24,8 @@ from typing import Any
 
 import numpy as np
 
-from mission.bus.wire import VELOCITY_LIMIT_M_S, CarrierState, WireError, velocity3, wrap_pi
+from mission.bus.wire import VELOCITY_LIMIT_M_S, CarrierState, WireError, velocity3
+from mission.core.geodesy import wrap_pi
 
 ODOMETRY_TYPE = "nav_msgs/msg/Odometry"
 

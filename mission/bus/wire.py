@@ -182,12 +182,6 @@ def velocity3(value: Any, name: str) -> np.ndarray:
         raise WireError(err.reason, f"{name}: {err.detail}") from None
 
 
-def wrap_pi(angle_rad: float) -> float:
-    """Angle wrapped to (-pi, pi] [rad]."""
-    a = math.remainder(angle_rad, 2 * math.pi)
-    return math.pi if a == -math.pi else a
-
-
 class _Message(BaseModel):
     """A bus message: frozen, validated on construction (:class:`WireError` when invalid). Field
     aliases are the JSON names; unknown JSON fields are ignored (forward compatibility).

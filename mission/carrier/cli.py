@@ -125,7 +125,7 @@ def _jsonable(value: Any) -> Any:
               "(marsupial run --lockstep, the mock vehicle's simulated time) instead of a scaled wall clock.")
 @click.option("--summary", "summary_path", type=click.Path(dir_okay=False), default=None, metavar="PATH",
               help="Write the carrier's summary (closest approach, braking distance, guard activity) as JSON.")
-def carrier_command(config: str, backend: str | None, speed: float, pair: str | None, listen: tuple[str, ...],
+def carrier_cli(config: str, backend: str | None, speed: float, pair: str | None, listen: tuple[str, ...],
                     connect: tuple[str, ...], encoding: str | None, rate: float | None, mavlink_url: str | None,
                     target_system: int | None, kinematics: str | None, offset_ned: str | None,
                     ros2_namespace: str | None, key_form: str | None, duration: float | None,

@@ -26,6 +26,8 @@ from typing import Literal
 
 import numpy as np
 
+from mission.core.geodesy import wrap_pi
+
 Kinematics = Literal["holonomic", "diff_drive", "ackermann"]
 
 
@@ -53,11 +55,6 @@ class Tracked:
     bearing_rad: float
     velocity_ned_m_s: np.ndarray
     setpoint_ned_m_s: np.ndarray
-
-
-def wrap_pi(angle_rad: float) -> float:
-    """Angle wrapped to [-pi, pi) [rad]."""
-    return (angle_rad + math.pi) % (2.0 * math.pi) - math.pi
 
 
 def heading_of(speed_m_s: float, yaw_rad: float) -> np.ndarray:

@@ -22,7 +22,7 @@ from mission.lifetime import end_with_parent
 from mission.cli.subcommands import Subcommand, registered
 
 PRODUCT: dict[str, Subcommand] = {
-    "carrier": Subcommand("mission.carrier.cli:carrier_command",
+    "carrier": Subcommand("mission.carrier.cli:carrier_cli",
                           "Run the carrier-side controller (built-in robot, PX4 rover, ROS 2 robot)."),
     "run": Subcommand("mission.cli.run:run", "Fly the offboard mission on a PX4 vehicle (mock, SITL or real)."),
     "plot": Subcommand("mission.cli.run:plot", "Draw the paper-style figures from a flight log directory."),

@@ -40,3 +40,9 @@ def reproject(north_m: float, east_m: float, lat0_deg: float, lon0_deg: float) -
     else:
         lat, lon = lat0, lon0
     return math.degrees(lat), math.degrees(lon)
+
+
+def wrap_pi(angle_rad: float) -> float:
+    """Angle wrapped to (-pi, pi] [rad]."""
+    a = math.remainder(angle_rad, 2 * math.pi)
+    return math.pi if a == -math.pi else a

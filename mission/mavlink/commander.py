@@ -25,7 +25,7 @@ from mission.mavlink.env import mavlink
 log = logging.getLogger("mission.mavlink.link")
 
 
-class Commander:
+class CommandClient:
     """COMMAND_LONG with ACK, retry and HEARTBEAT confirmation on ``session``.
 
     ``send(msg, counter)`` sends a message (False: no peer yet); ``require_vehicle()`` returns

@@ -78,7 +78,7 @@ from mission.mavlink import px4
 from mission.time.clock import Clock, ScaledClock
 from mission.errors import LinkError
 from mission.mavlink.codec import link_codecs
-from mission.mavlink.commander import Commander
+from mission.mavlink.commander import CommandClient
 from mission.mavlink.heartbeat import HeartbeatSender
 from mission.mavlink.identity import ADOPT_HEARTBEATS, VEHICLE_TYPES, Adoption
 from mission.mavlink.receiver import Receiver
@@ -144,7 +144,7 @@ class VehicleLink:
         self.reason_grace_s = float(reason_grace_s)
 
         self._session = LinkSession(url, self._clock, self.position_timeout_s)
-        self._commander = Commander(self._session, self._send, self._require_vehicle, self.reason_grace_s)
+        self._commander = CommandClient(self._session, self._send, self._require_vehicle, self.reason_grace_s)
         self._tx_lock = threading.Lock()
         self._stop = threading.Event()
         self._heartbeat = HeartbeatSender(self._send, self._clock, self.heartbeat_period_s, self._flush_tlog)
@@ -280,21 +280,21 @@ class VehicleLink:
     # ---------------------------------------------------------------- commands (mission.mavlink.commander)
 
     def command_long(self, command: int, *params: float, timeout_s: float = 0.5, retries: int = 3) -> int:
-        """Send COMMAND_LONG and wait for its COMMAND_ACK (:meth:`Commander.command_long`)."""
+        """Send COMMAND_LONG and wait for its COMMAND_ACK (:meth:`CommandClient.command_long`)."""
         return self._commander.command_long(command, *params, timeout_s=timeout_s, retries=retries)
 
     def arm(self, timeout_s: float = 0.5, retries: int = 3, confirm_timeout_s: float = 2.5) -> None:
-        """Arm and confirm it by HEARTBEAT (:meth:`Commander.arm`)."""
+        """Arm and confirm it by HEARTBEAT (:meth:`CommandClient.arm`)."""
         self._commander.arm(timeout_s, retries, confirm_timeout_s)
 
     def disarm(self, force: bool = False, timeout_s: float = 0.5, retries: int = 3,
                confirm_timeout_s: float = 2.5) -> None:
-        """Disarm (``force``: even in the air) and confirm it by HEARTBEAT (:meth:`Commander.disarm`)."""
+        """Disarm (``force``: even in the air) and confirm it by HEARTBEAT (:meth:`CommandClient.disarm`)."""
         self._commander.disarm(force, timeout_s, retries, confirm_timeout_s)
 
     def set_mode(self, mode: str, timeout_s: float = 0.5, retries: int = 3, confirm_timeout_s: float = 2.5) -> None:
         """Switch the PX4 mode (a name of :data:`mission.mavlink.px4.MODES`) and confirm it by HEARTBEAT
-        (:meth:`Commander.set_mode`: PX4's double ACK handled)."""
+        (:meth:`CommandClient.set_mode`: PX4's double ACK handled)."""
         self._commander.set_mode(mode, timeout_s, retries, confirm_timeout_s)
 
     def hold(self, timeout_s: float = 0.5, retries: int = 3, confirm_timeout_s: float = 2.5) -> None:
@@ -308,7 +308,7 @@ class VehicleLink:
 
     def takeoff(self, alt_m: float | None, timeout_s: float = 0.5, retries: int = 3) -> int:
         """MAV_CMD_NAV_TAKEOFF to ``alt_m`` [m] above the EKF origin (None: the vehicle's default),
-        acknowledged only (:meth:`Commander.takeoff`)."""
+        acknowledged only (:meth:`CommandClient.takeoff`)."""
         return self._commander.takeoff(alt_m, self.state.origin, timeout_s, retries)
 
     # ---------------------------------------------------------------- setpoints
@@ -341,7 +341,7 @@ class VehicleLink:
         self._send(msg, "tx_setpoints")
 
     def set_message_interval(self, message_id: int, rate_hz: float, timeout_s: float = 0.5, retries: int = 2) -> None:
-        """Ask the vehicle to stream ``message_id`` at ``rate_hz`` [Hz] (:meth:`Commander.set_message_interval`);
+        """Ask the vehicle to stream ``message_id`` at ``rate_hz`` [Hz] (:meth:`CommandClient.set_message_interval`);
         the rate that actually arrives is :meth:`message_rate_hz`."""
         self._commander.set_message_interval(message_id, rate_hz, timeout_s, retries)
 

@@ -16,7 +16,7 @@ import numpy as np
 from mission.flight_mode import FlightMode
 from mission.core.law import norm
 from mission.phases.types import ZERO, Decision, MissionModel, MissionState, Observation, Phase, dock_point, enter
-from mission.ports import Request
+from mission.interfaces import Request
 from mission.core.safety import filter_velocity
 from mission.core.tick import DEPARTURE_THRESHOLD_M, carrier_tick, latch_point, passenger_tick, separation_due
 from mission.core.tracking import progress, setpoint as tracking_setpoint, update_integral, velocity_demand

@@ -56,7 +56,7 @@ from mission.phases.types import (
     dock_point,
     enter,
 )
-from mission.ports import Request
+from mission.interfaces import Request
 from mission.phases.flying import arrived, join, navigate, riding
 
 __all__ = [

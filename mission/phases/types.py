@@ -14,7 +14,7 @@ from enum import StrEnum
 import numpy as np
 
 from mission.phases.phase import Phase
-from mission.ports import Request
+from mission.interfaces import Request
 from mission.core.safety import SafetyConfig
 from mission.core.tick import TickModel
 from mission.core.tracking import TrackingGains
@@ -127,7 +127,7 @@ class MissionState:
 @dataclass(frozen=True)
 class Decision:
     """What the controller does this tick. setpoint [m/s] NED or None (send nothing);
-    request: the vehicle command to have in flight (:class:`~mission.ports.Request`) or None.
+    request: the vehicle command to have in flight (:class:`~mission.interfaces.Request`) or None.
     Diagnostics for the flight log: dock, P, relative (law's u_p - u_c), desired, safety_acted."""
 
     setpoint: np.ndarray | None

@@ -25,7 +25,7 @@ import numpy as np
 import zenoh
 
 from mission.carrier.backends.ros2 import Received, RmwAttachment, Ros2Topics, rmw_sequence, robot_clock_keys, ros2_topics
-from mission.carrier.tracking import wrap_pi
+from mission.core.geodesy import wrap_pi
 from mission.bus.bridge import open_session
 from mission.bus.session import congestion_for, undeclare
 from mission.time.clock import Clock, LockstepClock, Periodic, ScaledClock

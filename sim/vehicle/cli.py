@@ -15,7 +15,7 @@ from types import FrameType
 import click
 
 from mission.errors import ConfigError
-from mission.mavlink.env import read_signing_key as read_key_file
+from mission.mavlink.env import read_signing_key
 from sim.vehicle.mock import MockVehicle, VehicleOptions
 from sim.vehicle.faults import FaultOptions
 from sim.vehicle.endpoints import parse_endpoint
@@ -56,10 +56,10 @@ def _blackout(text: str) -> tuple[float, float]:
     return window
 
 
-def read_signing_key(path: Path) -> bytes:
+def signing_key_option(path: Path) -> bytes:
     """The key file of --signing-key (see :func:`mission.mavlink.env.read_signing_key`)."""
     try:
-        return read_key_file(path, field="--signing-key")
+        return read_signing_key(path, field="--signing-key")
     except ConfigError as exc:
         raise click.BadParameter(f"{path}: {exc.rule}", param_hint="--signing-key") from None
 
@@ -164,7 +164,7 @@ def mock_vehicle(mavlink_url: str, target_url: str, gcs_url: str | None, speed: 
         bind=bind, target=target, gcs_target=gcs_url, speed=speed, sysid=sysid, frame=frame,
         home=_floats(home, 3, "--home"), start_ned=_floats(start_ned, 3, "--start-ned"),  # type: ignore[arg-type]
         params=dict(_param(p) for p in params), faults=faults,
-        signing_key=read_signing_key(signing_key) if signing_key else None,
+        signing_key=signing_key_option(signing_key) if signing_key else None,
         wind_ned_m_s=_floats(wind, 3, "--wind"), position_noise_m=position_noise,  # type: ignore[arg-type]
         estimate_drift_m_s=estimate_drift, lockstep=lockstep, lockstep_watchdog_wall_s=lockstep_watchdog_s,
         lockstep_max_speed=lockstep_max_speed)

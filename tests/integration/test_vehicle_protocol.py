@@ -19,7 +19,7 @@ from mission.mavlink import px4
 from mission.mavlink.env import mavlink
 from sim.net import wait_for
 from sim.vehicle.mock import FaultOptions, MockVehicle, VehicleOptions, spawn_process
-from sim.vehicle.cli import mock_vehicle, read_signing_key
+from sim.vehicle.cli import mock_vehicle, signing_key_option
 from sim.vehicle.endpoints import parse_endpoint
 from sim.vehicle.params import PARAM_SPECS, pack_int32, unpack_int32
 from sim.testing.probe import Lockstep, Probe, SetpointStream, connect, start_offboard, vehicle_for, wait_flight
@@ -408,6 +408,6 @@ def test_signing_key_file_hex_or_raw(tmp_path: Path) -> None:
     (tmp_path / "hex").write_text(key.hex() + "\n")
     (tmp_path / "raw").write_bytes(key)
     (tmp_path / "bad").write_text("abc")
-    assert read_signing_key(tmp_path / "hex") == key == read_signing_key(tmp_path / "raw")
+    assert signing_key_option(tmp_path / "hex") == key == signing_key_option(tmp_path / "raw")
     with pytest.raises(click.BadParameter):
-        read_signing_key(tmp_path / "bad")
+        signing_key_option(tmp_path / "bad")

@@ -1,7 +1,7 @@
 """An in-process fake world for the mission loop: vehicle, carrier feed and status sink, no sockets.
 
 In the spirit of the PX4 ROS 2 Interface Library's fake autopilot: the controller talks to it
-through the same narrow ports (:mod:`mission.ports`) as to the MAVLink link and the Zenoh feed,
+through the same narrow interfaces (:mod:`mission.interfaces`) as to the MAVLink link and the Zenoh feed,
 on a :class:`~mission.time.clock.ManualClock`, so a whole mission runs in a fraction of a second and
 every test is deterministic. Physics are the simplest that fly: the vehicle's velocity is the last
 setpoint while in OFFBOARD (zero otherwise), the carrier drives at ``carrier_speed_m_s`` towards
@@ -27,8 +27,8 @@ from mission.bus.wire import CarrierState, GeoOrigin, PassengerStatus
 
 @dataclass
 class FakeWorld:
-    """Implements :class:`~mission.ports.Vehicle` and :class:`~mission.ports.StatusSink`, and
-    :class:`~mission.ports.CarrierSource` as :attr:`feed`; lists what the controller did."""
+    """Implements :class:`~mission.interfaces.Vehicle` and :class:`~mission.interfaces.StatusSink`, and
+    :class:`~mission.interfaces.CarrierSource` as :attr:`feed`; lists what the controller did."""
 
     clock: ManualClock
     target_ned_m: np.ndarray
@@ -123,7 +123,7 @@ class FakeWorld:
 
     @property
     def feed(self) -> FakeFeed:
-        """The world as a :class:`~mission.ports.CarrierSource`."""
+        """The world as a :class:`~mission.interfaces.CarrierSource`."""
         return FakeFeed(self)
 
     # ------------------------------------------------------------------ CarrierSource (through FakeFeed)
@@ -161,7 +161,7 @@ class FakeWorld:
 
 @dataclass
 class FakeFeed:
-    """The fake world's carrier as the controller's :class:`~mission.ports.CarrierSource`."""
+    """The fake world's carrier as the controller's :class:`~mission.interfaces.CarrierSource`."""
 
     world: FakeWorld
 

@@ -10,7 +10,7 @@ from mission.controller import CommandWorker, MissionController, TickReport
 from mission.errors import LinkError
 from mission.core.law import norm
 from mission.phases import AbortReason, Phase
-from mission.ports import Request
+from mission.interfaces import Request
 from tests.conftest import CONFIGS
 from tests.unit.fake_vehicle import FakeWorld
 

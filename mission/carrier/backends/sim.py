@@ -13,7 +13,8 @@ import math
 import numpy as np
 
 from mission.carrier.controller import OwnState, _pad3
-from mission.carrier.tracking import Tracked, heading_of, wrap_pi
+from mission.carrier.tracking import Tracked, heading_of
+from mission.core.geodesy import wrap_pi
 from mission.time.clock import Clock
 from mission.config.schema import Config
 

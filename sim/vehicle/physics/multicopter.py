@@ -25,6 +25,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from mission.core.geodesy import wrap_pi
 from sim.vehicle.physics.mc_position_control import GRAVITY_M_S2, ControllerState, Gains, Setpoint3, control_at_rate
 
 YAW_TIME_CONSTANT_S = 0.3
@@ -116,11 +117,6 @@ def initial_state(start_ned_m: tuple[float, float, float]) -> KinState:
     n, e, d = (float(x) for x in start_ned_m)
     ground = min(d, 0.0)
     return KinState(n_m=n, e_m=e, d_m=ground, ground_d_m=ground, on_ground=True)
-
-
-def wrap_pi(angle_rad: float) -> float:
-    """Angle wrapped to [-pi, pi)."""
-    return (angle_rad + math.pi) % (2.0 * math.pi) - math.pi
 
 
 def _yaw_rate(state: KinState, command: Command, limits: Limits) -> float:

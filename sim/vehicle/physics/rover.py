@@ -21,7 +21,8 @@ import math
 from dataclasses import dataclass
 from typing import Callable
 
-from sim.vehicle.physics.multicopter import Command, KinState, wrap_pi
+from mission.core.geodesy import wrap_pi
+from sim.vehicle.physics.multicopter import Command, KinState
 
 STOP = Command(0.0, 0.0, 0.0)
 

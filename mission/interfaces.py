@@ -1,4 +1,4 @@
-"""What the mission loop needs from the world, as narrow interfaces (ports).
+"""What the mission loop needs from the world, as narrow interfaces.
 
 :class:`mission.controller.MissionController` talks to three things and knows each only by the
 Protocol below, so a MAVLink link to PX4, the mock vehicle or a test's in-process fake are
