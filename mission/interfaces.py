@@ -13,7 +13,7 @@ interchangeable (as are a Zenoh feed and a scripted one):
 * a :class:`StatusSink`: where the passenger's phase and state go (the carrier listens).
 
 Implementations: :class:`mission.mavlink.link.VehicleLink`, :class:`mission.bus.bridge.CarrierFeed`,
-:class:`mission.bus.bridge.PassengerPublisher`; ``tests/unit/fake_vehicle.py`` fakes all
+:class:`mission.bus.bridge.PassengerPublisher`; ``tests/support/fake_vehicle.py`` fakes all
 three without sockets.
 """
 from __future__ import annotations

@@ -2,7 +2,7 @@
 
 Everything comes from the pydantic JSON schema of :class:`mission.config.schema.Config`: names,
 types, defaults and constraints, and the meaning and unit of each field from its ``description=``
-(the one place a field is documented). A test (``tests/unit/test_config_reference.py``) fails when
+(the one place a field is documented). A test (``tests/unit/config/test_config_reference.py``) fails when
 a field's description does not start with its unit, and keeps the documented table identical to
 :func:`markdown_table`. Units in square brackets; ``[-]`` is dimensionless.
 """

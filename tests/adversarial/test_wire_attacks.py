@@ -211,7 +211,7 @@ def _spoofed_outliers(tmp_path: Path) -> None:
         dropped = feed["dropped"]
         # The hour-ahead state is always a stamp_jump. The teleport is a "jump" unless its honest
         # twin (stamp 1 ms earlier) arrived first and made it stale: which one Zenoh delivers first is
-        # not ours to choose, so the reason is checked deterministically in tests/unit/test_feed_gate.py
+        # not ours to choose, so the reason is checked deterministically in tests/unit/bus/test_feed_gate.py
         # and here only that it was dropped (gated == sent) and the latch held (P1, assert_completed).
         assert sent >= 5 and dropped.get("stamp_jump", 0) >= 1, (sent, feed)
         assert dropped.get("jump", 0) + dropped.get("stale_stamp", 0) >= 1, (sent, feed)

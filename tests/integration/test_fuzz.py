@@ -30,7 +30,7 @@ from mission.bus.wire import CarrierState, encode_carrier_json
 from mission.bus.ros2 import encode_odometry_cdr
 from sim.vehicle.mock import MockVehicle, VehicleOptions
 from sim.testing.probe import Probe
-from tests.integration.zenoh_util import LENIENT, peer_pair, wait_for, wait_matched
+from tests.support.zenoh_util import LENIENT, peer_pair, wait_for, wait_matched
 
 SCALE = max(1, int(os.environ.get("MARSUPIAL_FUZZ_SCALE", "1")))
 MAVLINK_FRAMES = 100_000 * SCALE

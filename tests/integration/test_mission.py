@@ -16,7 +16,7 @@ from mission.mavlink.env import mavutil
 from mission.record import read_record
 from mission.phases import AbortReason, Phase
 from sim.vehicle.mock import FaultOptions
-from tests.integration.mission_harness import flying_pair, wait_for
+from tests.support.mission_harness import flying_pair, wait_for
 
 pytestmark = pytest.mark.slow
 

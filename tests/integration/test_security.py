@@ -2,7 +2,7 @@
 loopback-only defaults.
 
 The link-level cases (a rogue system on the controller's port, unsigned or wrongly signed
-telemetry refused by the link) are in tests/integration/link/; the vehicle-level ones
+telemetry refused by the link) are in tests/integration/mavlink/; the vehicle-level ones
 (unsigned commands refused, unsigned HEARTBEAT accepted) in test_vehicle_faults.py. Here the
 whole chain runs as real processes.
 """
@@ -69,7 +69,7 @@ def test_signed_mission_flies_unsigned_commands_are_refused_and_the_key_is_never
         wait_for(lambda: f.vehicle_counters()["unsigned"] >= 10, 10.0, "10 unsigned messages counted by the vehicle")
         f.wait_mission(40.0)
         assert f.procs["mission"].returncode == 0, f.text("mission.err")[-2000:]
-        assert_log_complete(f, "DONE", "")
+        assert_log_complete(f, "DONE", None)
         assert f.vehicle()["armed"] and f.vehicle()["mode"] == "AUTO.LOITER"
         # everything the controller sent is signed (incompat flag 0x01 + 13-byte trailer)
         sent = [p for p in _tlog_packets(f.log_dir / "flight.tlog") if p[5:7] == bytes([1, 191])]

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import json
 
-from tests.integration.mission_harness import flying_pair
+from tests.support.mission_harness import flying_pair
 
 
 def test_full_setpoints_hold_the_dock_and_arrive_without_a_swing_on_the_px4_like_mock(tmp_path):

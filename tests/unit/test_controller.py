@@ -12,7 +12,7 @@ from mission.core.law import norm
 from mission.phases import AbortReason, Phase
 from mission.interfaces import Request
 from tests.conftest import CONFIGS
-from tests.unit.fake_vehicle import FakeWorld
+from tests.support.fake_vehicle import FakeWorld
 
 
 @pytest.fixture(scope="module")

@@ -28,8 +28,8 @@ from mission.config.schema import Config, from_dict
 from mission.bus.wire import PassengerStatus
 from sim.robots.ros2 import Ros2RobotSim
 from sim.vehicle.mock import MockVehicle, VehicleOptions
-from tests.integration.stepper import Stepper
-from tests.integration.zenoh_util import peer_pair, wait_for
+from tests.support.stepper import Stepper
+from tests.support.zenoh_util import peer_pair, wait_for
 
 pytestmark = pytest.mark.timeout(90)
 

@@ -21,8 +21,8 @@ from mission.mavlink.link import VehicleLink, VehicleState
 from mission.mavlink.env import mavlink
 from sim.testing.fake_px4 import FakePx4 as Px4Peer
 from sim.net import wait_for as eventually
-from tests.integration.link.conftest import ANY_PORT, link_threads
-from tests.integration.link.conftest import connected as _connected
+from tests.integration.mavlink.conftest import ANY_PORT, link_threads
+from tests.integration.mavlink.conftest import connected as _connected
 
 
 # ------------------------------------------------------------------------------ identity, state

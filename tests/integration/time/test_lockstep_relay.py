@@ -26,7 +26,7 @@ from mission.time import lockstep
 from mission.time.lockstep import LOST_WALL_S, RESEND_WALL_S, ZenohRelay, ZenohUpstream, clock_keys
 from mission.cli.run import mission_io
 from tests.conftest import CONFIGS
-from tests.integration.zenoh_util import peer_pair
+from tests.support.zenoh_util import peer_pair
 
 WATCHDOG_S = 0.3  # the relay's short limit in these tests [s, wall]
 SLOW_S = 1.0  # the slow step's answer comes this late [s, wall]: beyond WATCHDOG_S

@@ -22,7 +22,8 @@ from mission.config.schema import ZenohSection, from_dict
 from mission.errors import BusError, ConfigError, PortInUse
 from mission.bus.wire import CarrierState, GeoOrigin, PassengerStatus
 from mission.bus.ros2 import encode_odometry_cdr, ros2dds_odom_key
-from tests.integration.zenoh_util import LENIENT, endpoint, free_port, peer, peer_pair, wait_for, wait_matched
+from tests.support.zenoh_util import LENIENT, endpoint, free_port, peer, peer_pair, wait_for, wait_matched
+from tests.conftest import ROOT
 
 pytestmark = pytest.mark.timeout(30)
 
@@ -237,9 +238,8 @@ def test_session_configuration_is_loopback_only_by_default() -> None:
 
 
 def test_config_file_is_the_base_and_endpoint_flags_replace_its_endpoints(tmp_path) -> None:
-    from pathlib import Path
 
-    fleet = Path(__file__).resolve().parents[2] / "configs" / "zenoh" / "fleet_client.json5"
+    fleet = ROOT / "configs" / "zenoh" / "fleet_client.json5"
     conf = zenoh_config(ZenohSection(config_file=str(fleet)))
     assert json.loads(conf.get_json("mode")) == "client"
     assert json.loads(conf.get_json("connect/endpoints")) == ["tcp/127.0.0.1:7447"]

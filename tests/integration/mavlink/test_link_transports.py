@@ -16,7 +16,7 @@ from mission.mavlink.link import LinkCounters, VehicleLink
 from mission.mavlink.env import mavlink, mavutil
 from sim.testing.fake_px4 import FakePx4 as Px4Peer
 from sim.net import wait_for as eventually
-from tests.integration.link.conftest import ANY_PORT, link_threads
+from tests.integration.mavlink.conftest import ANY_PORT, link_threads
 
 
 # ------------------------------------------------------------------------------ tlog, transports

@@ -22,8 +22,9 @@ from mission.time.clock import Clock, LockstepClock, ManualClock, ScaledClock
 from mission.config.schema import Config, from_dict
 from mission.bus.wire import CarrierState, PassengerStatus, decode_carrier_json
 from sim.robots.carrier import CarrierMode, CarrierSim
-from tests.integration.stepper import Stepper
-from tests.integration.zenoh_util import endpoint, free_port, peer, wait_for
+from tests.support.stepper import Stepper
+from tests.support.zenoh_util import endpoint, free_port, peer, wait_for
+from tests.conftest import ROOT
 
 pytestmark = pytest.mark.timeout(30)
 
@@ -353,7 +354,7 @@ def test_running_carrier_stops_when_the_passenger_goes_silent_or_vanishes() -> N
             passenger.pub.close()
 
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = ROOT
 
 
 def test_cli_config_error_exits_2(tmp_path: Path) -> None:

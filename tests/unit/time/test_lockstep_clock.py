@@ -5,7 +5,7 @@ import threading
 import time
 
 from mission.time.clock import LockstepClock, start_thread
-from tests.integration.stepper import Stepper
+from tests.support.stepper import Stepper
 
 
 def test_a_thread_started_in_a_step_acts_in_that_step_whatever_its_start_up_takes() -> None:

@@ -6,11 +6,10 @@ setpoint as the recorder sent it (type_mask 3527 velocity only, or 3072 position
 acceleration) and releases the vehicle to the next change. It first climbs to PX4's hover height
 and asks, with SET_MESSAGE_INTERVAL, for LOCAL_POSITION_NED at 100 Hz and for nothing it does not
 read. The velocities the vehicle reports are compared with PX4's, segment by segment, exactly as
-the replay into the dynamics (tests/unit/test_px4_replay.py) compares them.
+the replay into the dynamics (tests/unit/sitl/test_px4_replay.py) compares them.
 """
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -20,10 +19,11 @@ from mission.mavlink.env import mavlink
 from sim.sitl.replay import FIRST_REPLAYED_SEGMENT, Recording, compare, load_recording, rms_by_segment
 from sim.vehicle.physics.multicopter import Limits
 from sim.testing.probe import Lockstep, Probe, connect, vehicle_for
+from tests.conftest import ROOT
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(120)]
 
-DATA = Path(__file__).resolve().parents[1] / "data" / "px4_responses"
+DATA = ROOT / "tests" / "data" / "px4_responses"
 NAN = float("nan")
 UNREAD_STREAMS = ("ATTITUDE", "ATTITUDE_QUATERNION", "GLOBAL_POSITION_INT", "HIGHRES_IMU", "ODOMETRY", "ALTITUDE",
                   "VFR_HUD", "ATTITUDE_TARGET", "POSITION_TARGET_LOCAL_NED", "ESTIMATOR_STATUS")

@@ -9,7 +9,7 @@ import pytest
 from mission.bus.bridge import CarrierFeed, CarrierPublisher, PassengerFeed, PassengerPublisher
 from mission.time.clock import ManualClock
 from mission.bus.wire import CarrierState, PassengerStatus
-from tests.integration.zenoh_util import LENIENT, endpoint, free_port, peer, wait_for
+from tests.support.zenoh_util import LENIENT, endpoint, free_port, peer, wait_for
 
 pytestmark = pytest.mark.timeout(30)
 

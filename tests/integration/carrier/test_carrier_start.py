@@ -11,8 +11,8 @@ from mission.carrier.backends.sim import SimRobot
 from mission.carrier.tracking import Tracked
 from mission.time.clock import ManualClock
 from mission.config.schema import Config, from_dict
-from tests.integration.test_carrier_sim import TARGET, Passenger, _seen, sessions
-from tests.integration.zenoh_util import wait_for
+from tests.integration.carrier.test_carrier_sim import TARGET, Passenger, _seen, sessions
+from tests.support.zenoh_util import wait_for
 
 pytestmark = pytest.mark.timeout(60)
 

@@ -9,15 +9,15 @@ ramp lag within 25 % of PX4's. ``python -m bench.px4_response_fit`` prints the t
 """
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from sim.sitl.replay import Comparison, compare, load_recording, px4_vs_px4_rms, ramp_lag_m
 from sim.vehicle.physics.multicopter import Airframe, Limits
+from tests.conftest import ROOT
 
-DATA = Path(__file__).resolve().parents[1] / "data" / "px4_responses"
+DATA = ROOT / "tests" / "data" / "px4_responses"
 
 
 @pytest.fixture(scope="module")
