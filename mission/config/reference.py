@@ -3,7 +3,7 @@
 Names, types, defaults and constraints come from the pydantic JSON schema of
 :class:`mission.config.schema.Config`; the meaning and unit of a field come from its schema
 ``description`` when it has a complete one, else from :data:`DOCS` below. A test
-(``tests/unit/test_config_reference.py``) fails when a field has neither, and keeps the README's
+(``tests/unit/test_config_reference.py``) fails when a field has neither, and keeps docs/configuration.md's
 table identical to :func:`markdown_table`. Units in square brackets; ``[-]`` is dimensionless.
 """
 from __future__ import annotations
@@ -166,7 +166,7 @@ def _cell(text: str) -> str:
 
 
 def markdown_table() -> str:
-    """The reference as a Markdown table (the README's *Configuration reference*)."""
+    """The reference as a Markdown table (docs/configuration.md's *Configuration reference*)."""
     lines = ["| field | type | default | rule | meaning [unit] |", "|---|---|---|---|---|"]
     for r in fields():
         lines.append(f"| `{r['key']}` | {r['type']} | `{r['default']}` | {_cell(r['rule'])} | {_cell(r['doc'])} |")

@@ -28,7 +28,7 @@ vehicle tracks (:mod:`mission.core.tracking`: velocity ``u_ref + track_gain (x_r
 full setpoints also the reference position and an acceleration feed-forward: the reference's own
 acceleration, which while riding is the carrier law's, plus drag feed-forward and integral). The reference sits exactly on the
 dock while riding, so separation happens at ``b c`` whatever the vehicle's tracking lag
-(README, "Facts about the law" 3), and its departure is smooth. The carrier's state is needed until
+(docs/how-it-works.md, facts about the law 3), and its departure is smooth. The carrier's state is needed until
 separation; afterwards the anchor is latched and a lost carrier only costs P3 monitoring.
 
 Frames: local NED [m], [m/s]; times [s] on the controller's clock.
