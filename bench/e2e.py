@@ -1,51 +1,16 @@
 """End-to-end latency and setpoint stream of the real controller loop (``bench`` sections e2e, stream).
 
-Method
-------
-Two processes on loopback, as deployed:
-
-* **This process plays the carrier and the vehicle.** The carrier is a
-  :class:`~mission.bus.bridge.CarrierPublisher` on its own Zenoh session (listening on a
-  free 127.0.0.1 port). It publishes a :class:`~mission.bus.wire.CarrierState` at random intervals
-  (uniform in 0.5..1.5 times ``1 / carrier_rate_hz``, 30 Hz by default like the demo's carrier,
-  so samples fall at every phase of the controller's tick grid) with ``seq`` = the sample's
-  number, and stamps ``t_pub`` (CLOCK_REALTIME) just before ``publish`` (JSON encoding + put). The vehicle is :class:`sim.testing.fake_px4.FakePx4` (armed in
-  OFFBOARD, LOCAL_POSITION_NED at the dock point, every command ACCEPTED and shown at once) with
-  the kernel's receive stamp of every datagram (SO_TIMESTAMPNS, CLOCK_REALTIME): the arrival at
-  the vehicle's socket, free of this process's own scheduling.
-* **A child process** (:mod:`bench.e2e_child`) runs the real
-  :class:`~mission.controller.MissionController` with ``marsupial run``'s wiring at the asked
-  rate, on the demo configuration, and records every tick through the controller's ``on_tick``
-  observer: when it started, which carrier sample it used (its ``seq`` and when the feed's Zenoh
-  callback received it) and when ``send_velocity_ned`` was called and returned.
-
-Matching. The k-th setpoint to arrive at the vehicle is the k-th the loop sent (loopback UDP does
-not drop or reorder at these rates); the setpoint's ``time_boot_ms`` (the link clock at send) is
-checked against the child's record and mismatches are counted. For every carrier sample, the
-first tick that used it gives::
-
-    raw  = arrival of that tick's setpoint - t_pub        what a user sees
-    wait = tick start - receipt by the feed                the periodic loop's wait: 0..1 period
-    seen = raw - wait                                      Zenoh leg + compute + send + MAVLink leg
-
-``seen`` splits into the Zenoh leg (t_pub -> receipt) and ``tick -> arrival``, which splits
-again into *observe* (``link.state`` .. ``feed.latest()``), *step* (the phases, law and filters,
-until ``send_velocity_ned`` is called) and *send -> arrival* (message, encode, ``sendto``: on
-loopback the kernel delivers, and stamps, inside ``sendto``).
-
-``seen`` ("after the sample was seen") is the figure held against the targets (p50 <= 0.5 ms,
-p99 <= 2 ms at 50 Hz, and at most twice the transport floor): ``raw`` cannot be lower than the
-tick wait (half a period on average, 10 ms at 50 Hz), whatever the code does. Only samples
-first used while the mission is RIDING (its steady phase: the law, the CBF filter, the passenger
-status on Zenoh and the flight record run every tick) count.
-
-Transport floor: :mod:`bench.floor`, measured in the same run, the Zenoh ping at the carrier's
-rate and the MAVLink ping at the controller's.
-
-Stream. From the same runs: the kernel arrival stamps of the setpoints sent while RIDING give
-the achieved rate (count / span) and the jitter, ``|interval - 1/rate|`` (p99, ms). The child's
-CPU share is ``time.process_time()`` over wall time in that window: all of its threads (loop,
-link receiver and heartbeat, command worker, Zenoh's).
+This process plays the carrier (a :class:`~mission.bus.bridge.CarrierPublisher` putting a
+:class:`~mission.bus.wire.CarrierState` at random intervals around ``1 / carrier_rate_hz``, each
+stamped ``t_pub`` just before publishing) and the vehicle (:class:`sim.testing.fake_px4.FakePx4`
+with the kernel's receive stamp of every datagram); a child process (:mod:`bench.e2e_child`) runs
+the real :class:`~mission.controller.MissionController` with ``marsupial run``'s wiring and records
+every tick through ``on_tick``. The k-th setpoint to arrive is the k-th sent (checked by its
+``time_boot_ms``). Per carrier sample, the first tick that used it gives ``raw`` (arrival - t_pub),
+``wait`` (tick start - receipt) and ``seen = raw - wait`` [ms], the figure held against the
+targets, split into the Zenoh leg, observe, step and send -> arrival; only samples first used
+while RIDING count. The stream figures (rate, jitter p99, CPU share) come from the same runs.
+Method in full: docs/benchmarks.md.
 """
 from __future__ import annotations
 

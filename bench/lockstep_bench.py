@@ -1,4 +1,4 @@
-"""Lockstep demo benchmark (issue 12): speed, reliability under load, and determinism.
+"""Lockstep demo benchmark: speed, reliability under load, and determinism.
 
 ``python -m bench.lockstep_bench`` runs ``marsupial demo`` (lockstep, the default) as a subprocess
 for each pair count, ``--runs`` times, optionally with ``--busy N`` busy-loop processes loading

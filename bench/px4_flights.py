@@ -1,4 +1,4 @@
-"""Fly the mission on real PX4 SITL N times in a row and print the table of the real-PX4 targets (README "Flying real PX4").
+"""Fly the mission on real PX4 SITL N times in a row and print the table of the real-PX4 targets (docs/flying-px4.md).
 
 Each flight is a fresh PX4 (SIH quadrotor) in its own network namespace with the carrier
 simulator and ``marsupial run`` beside it (:mod:`sim.sitl.px4`). Per flight: P1-P3, the riding

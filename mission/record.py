@@ -167,7 +167,7 @@ def summarise(directory: str | Path) -> dict[str, Any]:
             out["departure_delay_s"] = _num(r.t[int(np.argmax(left))] - r.t[first_sep])
     tol = float(info.get("dock_tolerance_m", 0.5))
     # A riding tick without a dock (the vehicle's own telemetry went silent: it hovered on a zero
-    # setpoint) measured no offset; one such tick made the maximum NaN and P1 unknowable.
+    # setpoint) measures no offset: left out, so the maximum stays finite and P1 decidable.
     offsets = norm(x_p[riding] - dock[riding]) if riding.any() else np.array([])
     offsets = offsets[np.isfinite(offsets)]
     offset_riding = float(offsets.max()) if offsets.size else np.inf

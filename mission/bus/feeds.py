@@ -1,12 +1,16 @@
 """Receiving on the bus: the newest valid carrier state and passenger status (thin I/O).
 
 A callback on Zenoh's thread checks the payload size before anything else
-(:data:`MAX_PAYLOAD_BYTES`, drop reason "size": a 10 MB sample costs a length read, not a copy
-and a parse), decodes and validates each sample (:mod:`mission.bus.wire`), stamps its receive time
-with the injected clock and keeps only the newest accepted one under a lock (it never blocks and
-never calls Zenoh). A rejected sample is dropped and counted per reason (``feed.counters``),
-never a crash and never returned. Ordering, binding and staleness: see
-:mod:`mission.bus.bridge`.
+(:data:`MAX_PAYLOAD_BYTES`, drop reason "size"), decodes and validates each sample
+(:mod:`mission.bus.wire`), stamps its receive time with the injected clock and keeps only the
+newest accepted one under a lock (it never blocks and never calls Zenoh). A rejected sample is
+dropped and counted per reason (``feed.counters``), never a crash and never returned.
+:class:`CarrierFeed` binds to one source and gates each state (:mod:`mission.bus.gate`);
+:class:`PassengerFeed` accepts only a strictly greater ``seq`` with a stamp not older. When the
+sender's liveliness token goes away the ordering and the binding are forgotten (a restarted
+sender counts from 0 again). ``latest()`` returns the newest accepted sample with its age on the
+local clock (``age_s``, ``stale = age_s > max_age_s``); the caller decides what stale means.
+More: docs/wire.md.
 """
 from __future__ import annotations
 

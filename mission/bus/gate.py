@@ -1,52 +1,19 @@
 """Plausibility gate and source binding of the carrier feed (pure: no Zenoh, no clock).
 
-The carrier feed (:class:`mission.bus.bridge.CarrierFeed`) hands every decoded carrier
-state to a :class:`FeedGate` with the Zenoh source it came from and its receive time [s] on the
-local clock. The gate decides, in O(1) and without blocking, whether the state is accepted.
+The carrier feed hands every decoded carrier state to a :class:`FeedGate` with the Zenoh source
+it came from and its receive time [s] on the local clock; the gate decides, in O(1) and without
+blocking, whether it is accepted.
 
-Source binding. One carrier per pair: the gate binds to the first source that sends
-``bind_samples`` mutually plausible states in a row (a candidate track per source, at most
-:data:`MAX_CANDIDATES` at once). States sent while no source is bound are dropped as ``unbound``;
-once bound, states from any other source are dropped as ``source`` and counted per source in
-:attr:`FeedGate.rejected_sources`. :meth:`FeedGate.unbind` (the carrier's liveliness token went
-away: a restarted carrier is a new source) starts the binding again. The source is the
-publisher's Zenoh ``EntityGlobalId`` as it puts it in the sample's ``source_info`` (our
-:class:`~mission.bus.bridge.CarrierPublisher` always does), or ``"anonymous"`` for a
-publisher that sends none (a ROS bridge). Zenoh does not authenticate ``source_info``: binding
-stops a second, faulty or naive publisher; against a deliberate one, Zenoh access control with
-mTLS (only the carrier's certificate may put on the pair's key) is the defence, and the
-plausibility gate bounds what a spoofer can do meanwhile.
-
-Plausibility, each state against the last accepted one of the bound source (``prev``), with
-``dt`` the sender's stamp difference and ``drx`` the receive-time difference [s]:
-
-==============  ================================================================================
-reason          rejected when
-==============  ================================================================================
-``stale_seq``   JSON: ``seq <= prev.seq`` (CDR has no sequence number)
-``stale_stamp`` ``stamp < prev.stamp`` (CDR: ``<=``)
-``seq_jump``    ``seq - prev.seq > MAX_SEQ_RATE_HZ * max(dt, drx) + SEQ_SLACK``
-``stamp_jump``  ``stamp - rx > lead + stamp_slack_s``: stamped ahead of time. ``lead`` is the
-                largest ``stamp - rx`` of the accepted track (the sender's clock lead over
-                ours, minus its quickest delivery); transport delay only ever lowers
-                ``stamp - rx``, so a burst of late samples never trips it, a stamp an hour
-                ahead always does
-``speed``       ``|velocity| > speed_margin * max_speed + SPEED_SLACK_M_S``
-``jump``        ``|position - prev.position| > speed_margin * max_speed * dt + position_slack_m``
-``gap``         more than ``max_gap_s`` of receive time since ``prev``: after a silence the
-                carrier may be anywhere within ``max_speed * dt``, so one sample proves
-                nothing; the first states after it must form a plausible track of
-                ``resync_samples`` (below) before one is accepted
-``velocity``    ``|v - prev.v| > max_accel * dt + max_speed`` (a stop or a start is always
-                plausible, a reversal at speed is not), or
-                ``|dp - (prev.v + v) / 2 * dt| > max_speed * dt + position_slack_m``
-==============  ================================================================================
-
-An outlier never becomes the reference, so it cannot poison later states. If the reference
-itself was the outlier (or the carrier was really relocalised), the stream disagrees with it
-for good: rejected states that form a plausible track of their own, ``resync_samples`` long,
-replace the reference (counted in ``resyncs``). The separation latch only ever sees accepted
-states, i.e. the feed's consistent estimate, never a single sample.
+- Binding: the gate binds to the first source that sends ``bind_samples`` mutually plausible
+  states in a row (at most :data:`MAX_CANDIDATES` candidate tracks); until then states drop as
+  ``unbound``, afterwards other sources' as ``source`` (counted in :attr:`FeedGate.rejected_sources`).
+  :meth:`FeedGate.unbind` starts over. The source is the publisher's Zenoh ``EntityGlobalId`` from
+  ``source_info``, or ``"anonymous"``; Zenoh does not authenticate it (mTLS and access control do).
+- Plausibility, against the last accepted state of the bound source: ``stale_seq``,
+  ``stale_stamp``, ``seq_jump``, ``stamp_jump``, ``speed``, ``jump``, ``gap``, ``velocity``
+  (the rules: docs/wire.md). An outlier never becomes the reference; rejected states that form a
+  plausible track of ``resync_samples`` replace it (``resyncs``). The separation latch only ever
+  sees accepted states.
 """
 from __future__ import annotations
 

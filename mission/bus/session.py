@@ -33,9 +33,8 @@ def congestion_for(clock: Clock) -> zenoh.CongestionControl:
     odometry and commands) for a process on ``clock``. Real time: DROP, so a congested link
     drops a state instead of stalling the sender's loop. Lockstep: BLOCK, never drop. Each step
     waits for the sample that a clock message names, so a dropped sample would hold the whole
-    simulation. Zenoh drops a DROP sample that waits more than about 1 ms for room in its queue;
-    under two busy loops a passenger status was lost this way, and the carrier and the
-    controller then waited for each other until both watchdogs fired."""
+    simulation (Zenoh drops a DROP sample that waits more than about 1 ms for room in its
+    queue: docs/lockstep.md)."""
     return zenoh.CongestionControl.BLOCK if isinstance(clock, LockstepClock) else zenoh.CongestionControl.DROP
 
 

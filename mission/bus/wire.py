@@ -1,42 +1,17 @@
 """Wire formats of the carrier-passenger bus (pure: no Zenoh, no sockets).
 
-Two robots talk over Zenoh: the carrier publishes its state, the passenger publishes its mission
-phase and state. This module defines those messages, their codecs and their validation; the
-transport (:mod:`mission.bus.bridge`) only moves bytes.
-
-Carrier state, JSON (the default encoding), one UTF-8 object per sample::
-
-    {"stamp": 12.345,            # [s] sender's clock (any monotonic epoch; only its order is used)
-     "seq": 7,                   # integer >= 0, strictly increasing per sender
-     "frame": "local_ned",       # "local_ned" or "wgs84"
-     "position": [n, e, d],      # local_ned: [m] north, east, down in the vehicle's local frame
-                                 # wgs84: [lat deg, lon deg, alt m (AMSL, up)]
-     "velocity": [vn, ve, vd],   # [m/s] NED, whatever the position frame
-     "yaw": 0.1,                 # [rad] heading from north towards east; optional, may be null
-     "acceleration": [an, ae, ad]}  # [m/s^2] NED, measured; optional, may be null (then the
-                                 # passenger predicts it from the carrier law)
-
-Every number must be finite; ``position``/``velocity``/``acceleration`` have exactly 3 numbers,
-each within +-1e7 m, +-1e3 m/s and +-1e3 m/s^2 (:data:`POSITION_LIMIT_M`, :data:`VELOCITY_LIMIT_M_S`,
-:data:`ACCELERATION_LIMIT_M_S2`: "range" beyond);
-``seq`` fits an int64; unknown fields are ignored (forward compatibility). A ``wgs84`` state is
-converted to local NED through the vehicle's origin (PX4's GPS_GLOBAL_ORIGIN) with
-:func:`geodetic_to_ned`.
-
-Carrier state as ROS 2 ``nav_msgs/msg/Odometry`` in CDR (``encoding = "cdr"``): see
-:mod:`mission.bus.ros2`, which also has the Twist of a ROS 2 carrier's velocity command.
-
-Passenger status, JSON::
-
-    {"phase": "RIDING", "stamp": 3.2, "seq": 41,
-     "position": [n, e, d], "velocity": [vn, ve, vd],     # [m], [m/s] local NED
-     "separated": false, "anchor": [n, e, d] | null}      # latched anchor [m] NED after separation
-
-The messages are pydantic models (:class:`CarrierState`, :class:`PassengerStatus`): JSON is
-parsed and validated in one pass by pydantic's compiled validator (about 5 us a sample, see
-``python -m bench.wire_bench``). A decode or validation failure raises :class:`WireError` whose
-``reason`` is one of :data:`REASONS` (:func:`wire_error` maps pydantic's error types to them); the
-bridge counts drops per reason.
+The carrier publishes its state (:class:`CarrierState`: ``stamp`` [s] on the sender's clock,
+``seq`` strictly increasing per sender, ``frame`` ``"local_ned"`` or ``"wgs84"``, ``position``
+[m] NED or [deg, deg, m AMSL], ``velocity`` [m/s] NED, optional ``yaw`` [rad] from north and
+``acceleration`` [m/s^2] NED), the passenger its status (:class:`PassengerStatus`: phase, stamp,
+seq, position [m] and velocity [m/s] NED, ``separated`` and the latched ``anchor`` [m] NED). Both
+are pydantic models parsed and validated from JSON in one pass; unknown fields are ignored.
+Invariants: every number finite, vectors of exactly 3 within :data:`POSITION_LIMIT_M`,
+:data:`VELOCITY_LIMIT_M_S` and :data:`ACCELERATION_LIMIT_M_S2`, ``seq`` an int64. A failure raises
+:class:`WireError` whose ``reason`` is one of :data:`REASONS` (:func:`wire_error` maps pydantic's
+error types). A ``wgs84`` state is converted to local NED through the vehicle's origin with
+:func:`geodetic_to_ned`. The CDR (ROS 2) codecs are in :mod:`mission.bus.ros2`. The JSON layout
+with an example: docs/wire.md.
 """
 from __future__ import annotations
 

@@ -1,11 +1,10 @@
 """The carrier's measured acceleration (pure): what it publishes for the passenger's feed-forward.
 
 The passenger rides the dock point and feeds its acceleration forward to PX4. It can predict it
-from the carrier law, but a real carrier does not follow its law exactly: a PX4 Ackermann rover
-sticks at rest until its throttle breaks it free, then leaps from 0 to ~1.2 m/s in ~0.4 s (SIH,
-measured). So the carrier sends what it measures: the change of its own velocity between
-successive own-state samples, low-passed with time constant ``tau_s`` [s] (first order, exact
-for any sample spacing). Frames: NED [m/s], [m/s^2]; times [s] on the carrier's clock.
+from the carrier law, but a real carrier does not follow its law exactly (a PX4 rover sticks at
+rest, then leaps: docs/carrier.md). So the carrier sends what it measures: the change of its own
+velocity between successive own-state samples, low-passed with time constant ``tau_s`` [s] (first
+order, exact for any sample spacing). Frames: NED [m/s], [m/s^2]; times [s] on the carrier's clock.
 """
 from __future__ import annotations
 

@@ -251,10 +251,9 @@ class CarrierController:
         return cmd
 
     def _calibrated(self, cmd: Tracked, yaw: float, v_meas: np.ndarray, dt_s: float) -> Tracked:
-        """carrier.speed_ratio_tau_s > 0: a vehicle whose own speed loop runs fast (PX4's SIH
-        rover: 2.7 m/s for 2) is asked for ``v / r``, where ``r`` >= 1 is its measured forward speed
-        over the speed last asked, low-passed with that time constant (a feedback on the speed
-        error itself oscillated: the vehicle answers within a period). Never more than asked."""
+        """carrier.speed_ratio_tau_s > 0: a vehicle whose own speed loop runs fast is asked for
+        ``v / r``, where ``r`` >= 1 is its measured forward speed over the speed last asked,
+        low-passed with that time constant (docs/carrier.md). Never more than asked."""
         tau = self.cfg.carrier.speed_ratio_tau_s
         if tau <= 0:
             return cmd

@@ -1,10 +1,10 @@
 """The P3 guard of the carrier: the carrier never comes closer to the target than
 ``r_guard = b c - margin`` [m], whatever the passenger does (never separates, vanishes, lies).
 
-It sits after the law, the CBF filter and the tracking law, and is independent of the
-passenger's phase: it only reads the carrier's own position and velocity, the target and the
-velocity about to be commanded. The component of the command towards the target is capped at
-the speed from which the carrier can still stop before the guard circle::
+It acts last (after the law, the CBF filter and the tracking law), independent of the passenger's
+phase, on the carrier's own position and velocity, the target and the command about to be sent.
+The command's component towards the target is capped at the speed from which the carrier can
+still stop before the guard circle::
 
     h      = |e_tc| - r_guard                   (|e_tc| as the law measures it: a planar carrier's
                                                  distance to a target above its plane counts the height)
@@ -12,21 +12,13 @@ the speed from which the carrier can still stop before the guard circle::
     h_pred = h - v_fly max(delay_s, age_s)      (where the vehicle is when this command acts)
     v_in  <= a (sqrt(T^2 + 2 h_pred / a) - T),  0 if h_pred <= 0   (v T + v^2 / 2a = h_pred)
 
-``a`` [m/s^2] is the braking deceleration, ``delay_s`` [s] the vehicle's response delay (commands
-already on their way still act during it; it includes the age of a fresh own state), ``age_s``
-[s] how old the own state is now: a state older than ``delay_s`` (e.g. after a stall of the
-machine) left the carrier moving on meanwhile, and the guard counts its whole age as already
-driven, ``T`` [s] the control period (a command is held that
-long). A vehicle that brakes at ``a`` and obeys each command after ``delay_s`` then never crosses
-the circle (tested with a transport-delayed, deceleration-limited vehicle in the unit tests).
-
-A vehicle that does not slow down as told (a PX4 rover overshoots its speed setpoint, and
-brakes late) is caught by its measured speed: once its measured inward speed exceeds the cap by
-:data:`OVERSPEED_M_S`, the guard commands no inward motion at all until it is back under.
-
-Only the inward component is cut: motion along the guard circle or away from the target is
-untouched, so a carrier that keeps its own plan (Remark 1) slides around the circle. The cap
-falls at rate ``a`` while the carrier closes in at the cap: the guard brakes, it does not slam.
+``a`` [m/s^2] braking deceleration, ``delay_s`` [s] the vehicle's response delay (including a
+fresh own state's age), ``age_s`` [s] the own state's age now (counted as already driven), ``T``
+[s] the control period. A vehicle that brakes at ``a`` and obeys each command after ``delay_s``
+never crosses the circle. A measured inward speed above the cap by :data:`OVERSPEED_M_S` (a
+vehicle that overshoots its speed setpoint) brakes outright: no inward motion until it is back
+under. Only the inward component is cut (a Remark-1 carrier slides along the circle), and the
+cap falls at rate ``a`` as the carrier closes in: the guard brakes, it does not slam.
 """
 from __future__ import annotations
 

@@ -1,12 +1,8 @@
 """The carrier's gentle start (pure): how fast its command may grow while it has not moved yet.
 
-A rover with static friction stands until its throttle overcomes it, then leaps: SIH's Ackermann
-rover (``sih.cpp``: static friction 0.5 m g, rolling 0.3 m g) breaks free at ~0.25 throttle and
-then accelerates at ~2 m/s^2 on the difference alone. PX4's speed loop raises the throttle with
-the asked speed, so under the law's 1 m/s^2 ramp it broke free only once it was asked 0.6-0.8
-m/s, and leapt 0 -> 0.7-1.5 m/s within ~0.3 s (measured): the passenger riding its dock lagged,
-then overshot, 0.4-0.55 m. Asked to speed up gently while it stands, it breaks free at a low
-speed instead, and from there the law's own acceleration limit applies.
+A rover with static friction stands until its throttle overcomes it, then leaps; asked to speed
+up gently while it stands, it breaks free at a low speed instead, and from there the law's own
+acceleration limit applies (what was measured on PX4's SIH rover: docs/carrier.md, a gentle start).
 
 Rule: while the vehicle's measured speed is below ``moving_m_s`` [m/s], the command's speed
 [m/s] grows by at most ``accel_m_s2 * dt_s`` per step (its direction kept, never turned); it may

@@ -65,9 +65,8 @@ def heading_of(speed_m_s: float, yaw_rad: float) -> np.ndarray:
 def along_heading(v_ned_m_s: np.ndarray, yaw_rad: float) -> np.ndarray:
     """The velocity [m/s] NED a robot without sideslip has: the planar part of ``v_ned_m_s``
     projected on the heading ``yaw_rad`` [rad] (its forward speed along it); any third component
-    is kept. What a diff-drive or Ackermann carrier publishes: a PX4 rover's EKF velocity swung
-    +-25 deg off its steady heading (errors up to 0.46 m/s against SIH's truth at 1 m/s, measured),
-    its heading within 1 deg."""
+    is kept. What a diff-drive or Ackermann carrier publishes: its heading is a better estimate
+    than its estimator's velocity direction (docs/carrier.md, what the passenger rides on)."""
     out = np.array(v_ned_m_s, dtype=float)
     c, s = math.cos(yaw_rad), math.sin(yaw_rad)
     forward = c * out[0] + s * out[1]

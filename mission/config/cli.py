@@ -10,7 +10,8 @@ from mission.config.reference import effective, json_schema, markdown_table, tex
 @click.command("config")
 @click.argument("config", required=False, type=click.Path(dir_okay=False))
 @click.option("--schema", "fmt", flag_value="schema", help="Print the JSON schema.")
-@click.option("--markdown", "fmt", flag_value="markdown", help="Print the reference as a Markdown table (the README's).")
+@click.option("--markdown", "fmt", flag_value="markdown",
+              help="Print the reference as a Markdown table (docs/configuration.md's).")
 def config_command(config: str | None, fmt: str | None) -> int:
     """Every configuration field with its type, default, rule and meaning [unit].
 

@@ -3,7 +3,7 @@
 Everything comes from the pydantic JSON schema of :class:`mission.config.schema.Config`: names,
 types, defaults and constraints, and the meaning and unit of each field from its ``description=``
 (the one place a field is documented). A test (``tests/unit/config/test_config_reference.py``) fails when
-a field's description does not start with its unit, and keeps the documented table identical to
+a field's description does not start with its unit, and keeps docs/configuration.md's table identical to
 :func:`markdown_table`. Units in square brackets; ``[-]`` is dimensionless.
 """
 from __future__ import annotations
@@ -74,7 +74,7 @@ def _cell(text: str) -> str:
 
 
 def markdown_table() -> str:
-    """The reference as a Markdown table (the README's *Configuration reference*)."""
+    """The reference as a Markdown table (docs/configuration.md's *Configuration reference*)."""
     lines = ["| field | type | default | rule | meaning [unit] |", "|---|---|---|---|---|"]
     for r in fields():
         lines.append(f"| `{r['key']}` | {r['type']} | `{r['default']}` | {_cell(r['rule'])} | {_cell(r['doc'])} |")

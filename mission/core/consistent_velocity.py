@@ -1,21 +1,13 @@
 """A vehicle's estimated velocity made consistent with its own estimated position (pure).
 
-Both PX4 estimators of the rover pair (EKF2 on SIH's GPS) let velocity and position disagree for
-seconds: the passenger's EKF said 0.44 m/s east while its position moved 0.12 m/s west (a
-real-PX4 flight), so velocity feedback on it pushed the passenger off the dock. The carrier
-publishes, the passenger observes, its velocity corrected as below.
-
-The passenger feeds the dock's velocity forward and holds the dock's position. A PX4 rover's
-estimator (EKF2 on SIH's GPS) moved its *position* 0.1-0.3 m/s faster than its *velocity* said,
-for 10 s and more (1 s windows, nine flights of the SIH rover pair: mean +0.02 to +0.19 m/s
-along the route, up to +-0.3 m/s along and +-0.2 m/s across). Fed that velocity, the passenger
-lagged the dock by the difference over the loop's position gain, 0.15-0.4 m.
-
-The correction is a complementary filter: the bias ``b`` is the difference between the
-position's rate between two successive samples and their mean velocity (exact for a velocity
-linear in time), low-passed with time constant ``tau_s`` [s] (first order, exact for any sample
-spacing); the velocity published is ``v + b``. Fast changes come from the estimator's velocity,
-the slow drift from its position. Frames: NED [m], [m/s]; times [s] on the carrier's clock.
+An estimator (PX4's EKF2) can let velocity and position disagree for seconds; a vehicle that feeds
+such a velocity forward lags what the position does. The carrier publishes, and the passenger
+observes, its velocity corrected by a complementary filter: the bias ``b`` is the difference
+between the position's rate between two successive samples and their mean velocity (exact for a
+velocity linear in time), low-passed with time constant ``tau_s`` [s] (first order, exact for any
+sample spacing); the velocity used is ``v + b``. Fast changes come from the estimator's velocity,
+the slow drift from its position. Frames: NED [m], [m/s]; times [s] on the caller's clock. What
+was measured on PX4 SITL: docs/carrier.md (velocities consistent with positions).
 """
 from __future__ import annotations
 

@@ -3,7 +3,7 @@
 The same functions serve the realtime controller (arrays of shape ``(n,)``) and the batch
 simulator (``(B, n)``); neither knows how time advances or where states come from.
 
-Anchor and separation latch (design decisions; README, "Facts about the law" 2 and 3):
+Anchor and separation latch (design decisions; docs/how-it-works.md, facts about the law 2 and 3):
 
 - Before separation the *anchor* is the carrier's dock point; the passenger's law works in error
   coordinates ``e_pc = x_p - anchor``, and feeds forward the anchor's velocity.

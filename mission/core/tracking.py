@@ -1,52 +1,21 @@
 """How the vehicle is made to follow the mission's reference (pure, numpy).
 
 The mission integrates a *reference* (position ``x_ref``, the law's velocity ``u_ref`` and its
-acceleration ``a_ref``, local NED); this module turns it into the setpoint sent to PX4.
+acceleration ``a_ref``); this module turns it into the setpoint sent to PX4 (``mission.setpoint``):
 
-Two kinds of setpoint (``mission.setpoint``):
+- ``"velocity"`` (type_mask 3527): ``v = u_ref + k_p (x_ref - x_p) + i_v``;
+- ``"full"`` (type_mask 3072; never bit 512, *force*): ``p = x_ref + l (x_ref - x_p)``,
+  ``v = u_ref + k_p (x_ref - x_p)``, ``a = a_ref + c_drag u_ref - k_d (v_p - u_ref) + i_a``, where
+  ``l`` is the dimensionless lead, ``c_drag`` [1/s] the drag feed-forward and ``k_d`` [1/s] the
+  damping.
 
-- ``"velocity"``: velocity only (type_mask 3527). Our own outer loop closes position:
-  ``v = u_ref + k_p (x_ref - x_p) + i_v``. PX4's velocity loop then lags a moving reference
-  (on PX4 SITL a 2 m/s step never reaches 90 % in 4 s) and drifts sideways: 0.8-1.2 m off the
-  dock on real PX4.
-- ``"full"``: position + velocity + acceleration (type_mask 3072; never bit 512, which PX4
-  reads as *force* and drops). PX4 closes position itself at its own rate (``MPC_XY_P``) with
-  velocity and acceleration as feed-forward: ``p = x_ref + l (x_ref - x_p)``,
-  ``v = u_ref + k_p (x_ref - x_p)``, ``a = a_ref + c_drag u_ref + i_a``. Our extra position
-  feedback goes through the position (the lead ``l``, dimensionless: PX4 multiplies it by its own
-  ``MPC_XY_P``) rather than the velocity, so that with ``k_p = 0`` the velocity sent is the law's
-  own command, whose smoothness at separation is what the paper promises.
+The integral ``i`` ([m/s^2] full, [m/s] velocity) acts on the position error, clamped to
+``integral_limit``, and integrates only within ``integral_window_m`` [m] of the reference. After
+separation the reference's progress slows when the vehicle lags it by more than ``slow_lag_m``
+and stops at ``stop_lag_m`` [m] (:func:`progress`): only time along the law's own path is rescaled.
 
-What PX4's loop cannot know is its own steady velocity deficit: a multicopter's drag costs an
-acceleration roughly proportional to its velocity, which PX4's small velocity integrator
-(``MPC_XY_VEL_I_ACC``) wins back only over many seconds. Two terms supply it:
-
-- ``drag_ff_per_s`` [1/s]: the known part, a feed-forward ``c_drag u_ref`` of the reference
-  velocity (SIH's quadrotor: linear drag ``SIH_KDV / SIH_MASS`` = 1/s);
-- ``integral_gain`` [1/s^2 for "full", 1/s for "velocity"]: integral action on the position
-  error for the rest, clamped to ``integral_limit`` (acceleration [m/s^2] or velocity [m/s]),
-  so it cannot wind up while a limit holds the vehicle back; and it integrates only while the
-  error is within ``integral_window_m`` [m] (a vehicle far from the reference is catching up,
-  not suffering a steady deficit: integrating then is what made PX4 overshoot the target by
-  1.8 m and ring).
-
-The lead stiffens the loop PX4 closes: its velocity loop (``MPC_XY_VEL_P_ACC`` 1.8/s) then
-drives a position gain of ``MPC_XY_P (1 + l)`` = 3.4/s through the airframe's tilt lag (~0.28 s
-fitted on SIH): ``tau s^3 + s^2 + 1.8 s + 1.8 x 3.4 = 0``, which is only just stable (Routh:
-1.8 > 0.28 x 6.2 = 1.7, and less with the command's own delays): the passenger rings about a
-steadily moving dock (period ~2.6 s, +-0.25 m seen on PX4 behind the SIH rover). With ``k_d``
-below the Routh condition reads ``1.8 + k_d > 1.7``.
-``damping_per_s`` [1/s] adds velocity damping through the acceleration feed-forward (full
-setpoints): ``- k_d (v_p - u_ref)``, the vehicle's velocity ``v_p`` against the reference's, as if
-PX4's velocity gain were ``1.8 + k_d`` about the reference velocity.
-
-After separation the reference is the law integrated in time; when the vehicle lags it by more
-than ``slow_lag_m`` [m] the reference's progress is slowed, and it waits at ``stop_lag_m`` [m]
-(:func:`progress`). The law is autonomous, so this only rescales time along the law's own path:
-the reference never runs away from a vehicle that cannot follow (on PX4 the reference stopped at
-the target 0.7 m ahead of a vehicle still doing 2 m/s, which then overshot).
-
-Frames: local NED [m], [m/s], [m/s^2]. Times [s].
+Frames: local NED [m], [m/s], [m/s^2]. Times [s]. Why each term, the stability check of the lead
+and what each was measured against on PX4: docs/tracking.md.
 """
 from __future__ import annotations
 

@@ -1,68 +1,18 @@
 """The controller's narrow MAVLink 2 link to one PX4 vehicle: the facade over :mod:`mission.mavlink`.
 
-One :class:`VehicleLink` talks to one autopilot; the transports, the telemetry reducer, the
-receiver, the vehicle's adoption and the command state machines are in :mod:`mission.mavlink`. It
-
-* opens a transport chosen by URL (``udpin:HOST:PORT`` listen, the default and PX4 SITL's
-  onboard link; ``udpout:HOST:PORT``; ``tcp:HOST:PORT``; a serial device ``/dev/ttyX[:BAUD]`` or
-  ``serial:/dev/ttyX[:BAUD]``, passed to pymavlink's ``mavserial``);
-* identifies the vehicle (see Vehicle identity below) and from then on accepts telemetry and
-  COMMAND_ACKs only from that system and component; other systems are counted in
-  ``counters.rejected_foreign`` and ignored. On ``udpin`` replies go only to the address the
-  vehicle last sent from, and only a message that passed every check (signature, identity)
-  moves it (pymavlink's ``mavudp`` would send to every address that ever talked to the port, a
-  rogue sender included);
-* sends its own 1 Hz (link clock) HEARTBEAT as an onboard controller (type 18, autopilot 8);
-* sends commands with ACK, retry and timeout; a non-ACCEPTED result raises
-  :class:`~mission.errors.CommandRejected` carrying the vehicle's STATUSTEXT reason;
-* confirms mode changes and arming by HEARTBEAT, not by an ACK alone (PX4 of 2025 ACKs
-  DO_SET_MODE twice: ACCEPTED from the MAVLink layer, then the real result);
-* sends velocity setpoints (SET_POSITION_TARGET_LOCAL_NED, LOCAL_NED, velocity-only mask) only
-  when asked: there is deliberately no background resend, so a dead control loop lets PX4's
-  offboard-loss failsafe fire;
-* writes a ``.tlog`` (8-byte big-endian microsecond stamp + raw packet) of every packet sent and
-  every valid packet received, readable by ``mavlogdump.py``.
-
-Vehicle identity. With ``target_system`` set (``mavlink.target_system``), the first HEARTBEAT
-of a PX4 autopilot (autopilot 12) of a vehicle type (:data:`VEHICLE_TYPES`) from that system and
-``target_component`` identifies it. Unset, a vehicle is adopted only after
-:data:`~mission.mavlink.identity.ADOPT_HEARTBEATS` such HEARTBEATs from one system and component with the same type, none
-older than ``heartbeat_timeout_s``, while no other PX4 autopilot is heard (two at once: neither
-is adopted, a warning says to set ``mavlink.target_system``). What was adopted is logged. A
-stray HEARTBEAT of another system (a rogue sysid 42 talking first) is counted in
-``rejected_foreign`` and never becomes the vehicle.
-
-Our identity. By default the link uses system id 1 and component 191 (MAV_COMP_ID_ONBOARD_COMPUTER):
-a companion computer is a component of the UAV's own system, and PX4 only registers an
-ONBOARD_CONTROLLER heartbeat that comes from its own system id (``mavlink_receiver.cpp``,
-``same_system``). PX4's default MAV_SYS_ID is 1; set ``source_system`` if the vehicle's differs.
-
-Blocking calls. ``command_long``, ``arm``, ``disarm``, ``set_mode``, ``hold``, ``land`` and
-``takeoff`` block until ACKed (and confirmed by HEARTBEAT); they are thread-safe (one command at a
-time). PX4 needs setpoints during and after a switch to OFFBOARD, so a control loop calls them
-from a worker thread while it keeps calling ``send_velocity_ned``.
-
-Threads. A receiver thread blocks in ``select`` (50 ms wall slices, so ``close`` is prompt) and
-parses each datagram at once; a heartbeat thread sends HEARTBEAT and flushes the tlog. Telemetry
-is kept under one lock; :attr:`VehicleLink.state` returns an immutable snapshot. The receiver
-never dies on bad input: every parse or handler error is caught and counted.
-
-Time. Every timeout, deadline and receive stamp reads the injected clock (``clock.now()``, in
-seconds of simulated time); every wait goes through it (``clock.wait``, ``clock.notify``), so the
-link runs the same on a scaled wall clock and in lockstep (:mod:`mission.time.lockstep`).
-The wall clock is read once at ``open`` only where a format defines a wall time: the tlog's
-epoch stamps and the MAVLink 2 signing timestamp.
-
-Signing (optional, ``signing_key`` of 32 bytes). Outgoing packets are signed; every incoming
-packet, HEARTBEAT included, counts only with a valid signature made with our key: an unsigned
-one is dropped (``rx_unsigned``), one signed with another key or replayed is dropped
-(``rx_bad_signature``); neither identifies a vehicle, changes its state or moves the reply
-address. A PX4 HEARTBEAT signed with another key is remembered so that
-:meth:`VehicleLink.signing_problem` can say "wrong key" rather than "no vehicle". A refused
-packet never advances pymavlink's per-stream replay timestamp (pymavlink updates it before it
-checks the signature, so one forged packet stamped in the future would lock the real vehicle
-out). The key is never logged, never in ``repr`` and never in the tlog (signed packets carry
-only a 6-byte truncated SHA-256).
+One :class:`VehicleLink` talks to one autopilot through a transport chosen by URL. It identifies
+the vehicle (``target_system`` set: its first PX4 HEARTBEAT; unset: :data:`ADOPT_HEARTBEATS`
+consistent PX4 HEARTBEATs from one system while no other PX4 is heard) and from then on accepts
+telemetry and ACKs only from it, replying only to the address it last sent from (foreign systems
+are counted in ``rejected_foreign``). It sends our 1 Hz HEARTBEAT as an onboard controller of the
+vehicle's own system (default system 1, component 191: PX4 registers an onboard controller of its
+own system only), commands with ACK, retry and HEARTBEAT confirmation (blocking, one at a time,
+thread-safe; a non-ACCEPTED result raises :class:`~mission.errors.CommandRejected`), and setpoints
+only when asked: there is no background resend, so a dead control loop lets PX4's offboard-loss
+failsafe fire. Every timeout, wait and receive stamp reads the injected clock (the wall clock
+only for the tlog's and signing's timestamps). With a signing key every incoming packet must be
+signed with it, and the key appears in no log, ``repr`` or tlog. Threads, the tlog format and the
+signing rules: docs/mavlink.md.
 """
 from __future__ import annotations
 

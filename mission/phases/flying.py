@@ -163,7 +163,7 @@ def navigate(state, obs, m, events=()):
         phase, since = Phase.NAVIGATING, t
         evs.append("left the carrier: navigating")
     # Arrived: within the arrival radius (and, if set, slower than arrival_max_speed_m_s) for the
-    # dwell (a vehicle handed to Hold while still moving brakes past the radius: seen on PX4, 0.84 m).
+    # dwell (a vehicle handed to Hold while still moving brakes past the radius: docs/flying-px4.md).
     at_target = bool(norm(obs.vehicle.position_ned_m - m.tick.target) <= m.arrival_radius_m) and (
         m.arrival_max_speed_m_s is None or bool(norm(obs.vehicle.velocity_ned_m_s) <= m.arrival_max_speed_m_s))
     if phase in (Phase.NAVIGATING,):

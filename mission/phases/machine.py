@@ -22,14 +22,12 @@
     over or PX4 runs its own failsafe (then nothing is sent: never fight either); setpoints stop
     once Hold is shown.
 
-The passenger is flown through a *reference*: the paper's closed loop (``mission.core.tick``, the
-same functions as the simulator) integrated in error coordinates about the dock point, which the
-vehicle tracks (:mod:`mission.core.tracking`: velocity ``u_ref + track_gain (x_ref - x_p)``, and for
-full setpoints also the reference position and an acceleration feed-forward: the reference's own
-acceleration, which while riding is the carrier law's, plus drag feed-forward and integral). The reference sits exactly on the
-dock while riding, so separation happens at ``b c`` whatever the vehicle's tracking lag
-(README, "Facts about the law" 3), and its departure is smooth. The carrier's state is needed until
-separation; afterwards the anchor is latched and a lost carrier only costs P3 monitoring.
+The passenger is flown through a *reference*: the paper's closed loop (:mod:`mission.core.tick`,
+the same functions as the simulator) integrated in error coordinates about the dock point, which
+the vehicle tracks (:mod:`mission.core.tracking`). The reference sits exactly on the dock while
+riding, so separation happens at ``b c`` whatever the vehicle's tracking lag (docs/how-it-works.md,
+facts about the law 3). The carrier's state is needed until separation; afterwards the anchor is
+latched and a lost carrier only costs P3 monitoring.
 
 Frames: local NED [m], [m/s]; times [s] on the controller's clock.
 """

@@ -1,65 +1,23 @@
 """Lockstep simulated time over the real transports (the wire side of :class:`~mission.time.clock.LockstepClock`).
 
-The mock vehicle owns simulated time, like PX4 SITL's simulator; the mission controller and the
-carrier simulator step on it. Nothing else changes: the controller's code is the same in lockstep
-and in real time, only its injected clock differs.
+The mock vehicle owns simulated time; the controller and the carrier step on it, and their code is
+the same as in real time (only the injected clock differs). Messages (times in [ns]):
 
-MAVLink, vehicle <-> controller (the vehicle's onboard link):
+- vehicle -> controller, MAVLink: ``SYSTEM_TIME`` (time_boot_ms ``t``: what follows was sampled at
+  ``t``), then a barrier ``TIMESYNC(tc1 0, ts1 t)``: integrated to ``t``, no further until answered;
+- controller -> vehicle: ``TIMESYNC(tc1 wake, ts1 t)``: step ``t`` done (its setpoint and commands
+  sent before, on the same socket), next needed at ``wake`` (``wake < 0``: leaving the lockstep);
+- controller -> carrier, Zenoh ``marsupial/<pair>/clock/time`` ``"t seq"``: step to ``t`` once you
+  have passenger status ``seq``; carrier -> controller, ``clock/ready`` ``"t wake seq"``: done at
+  ``t``, next at ``wake``, its last state sample is ``seq``. Zenoh does not order samples across
+  keys, so each side waits for the sample named, not only for the clock message.
 
-- ``SYSTEM_TIME`` (time_unix_usec 0, time_boot_ms ``t``) from the vehicle: its time is ``t``;
-  the telemetry that follows was sampled then. Sent before each burst between barriers.
-- ``TIMESYNC`` request (tc1 0, ts1 ``t`` [ns]) from the vehicle: a *barrier*. The vehicle has
-  integrated up to ``t``, sent everything due at ``t`` and will not integrate further until the
-  controller answers.
-- ``TIMESYNC`` answer (tc1 ``wake`` [ns], ts1 ``t``) from the controller: it has finished step
-  ``t`` (its setpoint and commands were sent before, on the same socket, so the vehicle has them)
-  and next needs the vehicle at ``wake``; ``wake < 0``: it leaves the lockstep.
-  These messages are the simulation's own clock, so the vehicle's link faults (loss, latency,
-  blackout) never touch them; every other message suffers the faults in simulated time.
-
-Zenoh, controller <-> carrier simulator (``marsupial/<pair>/clock/...``, reliable, blocking):
-
-- ``clock/time`` ``"t seq"`` from the controller: step to ``t`` [ns] (sent at a barrier when the
-  carrier is due, before the controller computes that step) once you have the passenger status
-  ``seq`` (the last one the controller published).
-- ``clock/ready`` ``"t wake seq"`` from the carrier: done at ``t``, next needs ``wake`` [ns]; its
-  last state sample is ``seq``, and the controller waits for that sample before its own step.
-
-Zenoh does not keep the order of samples across keys (measured: a put on one key overtook the
-put before it on another in 915 of 2000 tries), so each side waits for the *stamped sample*
-(its ``seq``) named in the clock message, not merely for the clock message.
-
-A carrier that drives a lockstep vehicle of its own (the mock PX4 rover, ``carrier.backend =
-"mavlink"``) brings it along the same way: its clock relays each step ``t`` to that vehicle
-(:class:`MavlinkRelay`: the barrier answer with wake ``t``) and waits for the vehicle's next
-barrier, so the carrier computes step ``t`` on the rover's state at ``t``.
-
-One barrier: the vehicle integrates to ``t`` and stops -> the controller relays ``t`` to the
-carrier if it is due and waits for its ready -> the controller's threads run their step ->
-the controller answers with ``min`` of every wake -> the vehicle integrates to that wake.
-A participant silent for a few wall seconds (a killed or hung process) is dropped: the vehicle
-goes on in real time at its ``--speed`` after :data:`VEHICLE_WATCHDOG_WALL_S` without an answer
-(the controller's silence is then offboard loss, as in PX4); the controller stops waiting for a
-carrier after :data:`CARRIER_WATCHDOG_WALL_S` (its silence is then carrier loss) and goes on in
-real time after :data:`CONTROLLER_WATCHDOG_WALL_S` without the vehicle (vehicle loss). The
-carrier's limit is the shortest, so a lost carrier never makes the vehicle drop the controller.
-
-Slow is not gone. A carrier whose Zenoh liveliness token is present is alive, only slow (a busy
-machine: one step took 2.5 s of wall); dropping it would let simulated time run on without it,
-so the outcome would depend on the machine's load (a lost carrier in a simulated flight). The
-controller waits for such a carrier up to :data:`ALIVE_CARRIER_WATCHDOG_WALL_S` (still below the
-vehicle's limit). A killed carrier's token goes at once, and the controller stops waiting then (a
-carrier restarted meanwhile has a token of its own but steps on no one's clock).
-
-A Zenoh outage (a router restarted, a link that came back) can lose a message on the clock keys
-or a state sample, reliable or not: a call sent as the route came back was lost, the controller
-waited for the carrier, and the vehicle dropped the controller (offboard loss in a simulated
-flight). So the relay calls again every :data:`RESEND_WALL_S` while unanswered (a carrier that
-already finished that step reports it again), and a sample that a clock message names but that
-never comes is given up after :data:`LOST_WALL_S` and :data:`LOST_AFTER_REPEATS` repeats of that
-message (the relay's ``missed``, the carrier's upstream ``missed``: ``samples_lost`` in the
-lockstep counters). A run that lost a sample went on with the sample before it: it is no longer
-deterministic, and its summary says so.
+:class:`MavlinkRelay` brings a carrier's own lockstep vehicle (the mock rover) along the same way.
+Watchdogs (``*_WATCHDOG_WALL_S``, wall seconds) drop a silent participant, a carrier whose
+liveliness token is present gets longer; an unanswered call is resent every
+:data:`RESEND_WALL_S`, and a named sample that never comes is given up after :data:`LOST_WALL_S`
+and :data:`LOST_AFTER_REPEATS` repeats (``samples_lost``: the run is no longer deterministic).
+Why each rule, and what was measured: docs/lockstep.md.
 """
 from __future__ import annotations
 

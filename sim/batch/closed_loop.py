@@ -3,7 +3,7 @@
 The loop is what a digital controller does: every ``dt_s`` the tick of :mod:`mission.core.tick`
 computes the carrier's and the passenger's commands (law, latch, safety filter), which are held
 over the step (zero-order hold, so positions advance exactly along straight segments). The
-passenger is integrated in error coordinates ``e_pc = x_p - anchor`` (README, "Facts about the law" 2): an
+passenger is integrated in error coordinates ``e_pc = x_p - anchor`` (docs/how-it-works.md, facts about the law 2): an
 exactly-docked passenger stays at ``e_pc = 0`` bit for bit, and leaves by increments that are not
 lost below one ULP of an absolute position. The separation event (docked carrier reaching
 ``b c - departure_margin``) is located exactly inside its step (the step is a straight segment,

@@ -1,51 +1,19 @@
-"""A PX4-like kinematic MAVLink vehicle for SITL-free testing (issue 3).
+"""A PX4-like kinematic MAVLink vehicle for SITL-free testing.
 
-It speaks MAVLink 2 over UDP like a PX4 SITL on its onboard link (../shared/REFERENCE.md is the
-specification): HEARTBEAT and the onboard-profile streams from start-up, DO_SET_MODE and
-COMPONENT_ARM_DISARM with PX4's checks and ACKs, OFFBOARD with its setpoint rules and failsafes,
-NAV_TAKEOFF / NAV_LAND / NAV_RETURN_TO_LAUNCH / Hold, the parameter protocol, REQUEST_MESSAGE,
-SET_MESSAGE_INTERVAL and TIMESYNC. MAVSDK connects to it, arms it and flies it offboard.
+It speaks MAVLink 2 over UDP like a PX4 SITL on its onboard link: HEARTBEAT and the
+onboard-profile streams, DO_SET_MODE and COMPONENT_ARM_DISARM with PX4's checks and ACKs,
+OFFBOARD with its setpoint rules and failsafes, take-off, land, return and Hold, parameters,
+REQUEST_MESSAGE, SET_MESSAGE_INTERVAL and TIMESYNC. MAVSDK connects to it, arms it and flies it.
 
-Structure: one thread runs the loop. Each pass it (1) advances the physics in fixed steps of
+One thread runs the loop. Each pass it (1) advances the physics in fixed steps of
 :data:`PHYSICS_DT_S` simulated seconds up to the clock's time, running the commander's timers at
 every step, (2) releases datagrams held by the latency fault, (3) sends the streams that are due,
-and (4) waits on the sockets until the next thing is due. Because physics and timers run on
-simulated time in fixed steps, a flight at ``speed`` 20 follows the same trajectory as at 1.
-
-In lockstep (``VehicleOptions.lockstep``) the vehicle owns simulated time instead and steps with
-the controller (:mod:`sim.vehicle.lockstep`). Its clock is injected or its own (:mod:`mission.time.clock`).
-
-Modules: :mod:`sim.vehicle.options` (options, snapshot), :mod:`sim.vehicle.physics.multicopter` (PX4's position
-controller on an SIH-like airframe), :mod:`sim.vehicle.modes` (modes, arming, failsafes),
-:mod:`sim.vehicle.handlers` (what it does with each received message and command),
-:mod:`sim.vehicle.io` (receiving and sending through the faults), :mod:`sim.vehicle.streams` (when
-each stream is due, per link), :mod:`sim.vehicle.telemetry` (messages, geodesy),
-:mod:`sim.vehicle.params` (parameter table), :mod:`sim.vehicle.protocol` (what PX4 makes of a
-command or setpoint), :mod:`sim.vehicle.faults` (loss, latency, blackouts), :mod:`sim.vehicle.endpoints`
-(UDP endpoints, codec, signing), :mod:`sim.vehicle.lockstep` (lockstep time),
-:mod:`sim.vehicle.process` (the vehicle as a process), :mod:`sim.testing.probe` (a pymavlink peer
-for tests and the bench).
-
-Choices where PX4 leaves room, or where the mock simplifies (see also the commander's docstring):
-- Setpoints are read as PX4 reads them (:func:`sim.vehicle.protocol.setpoint_of`): any
-  combination of position, velocity and acceleration in LOCAL_NED, velocity and acceleration in
-  BODY_NED, flown by PX4's position controller (:mod:`sim.vehicle.physics.mc_position_control`). Another frame, the
-  FORCE bit with an acceleration, or nothing to control: dropped with PX4's STATUSTEXT (*at most
-  once a second per text), counted in ``setpoints_rejected``, and not proof of life.
-- Latency is one-way and applies in each direction; loss and blackouts too. All fault times are
-  simulated seconds.
-- STATUSTEXT goes only to a link whose peer sent a HEARTBEAT within 2.5 s (as PX4 does);
-  ``VehicleOptions.statustext_needs_heartbeat=False`` sends them regardless.
-- Ground: ``d = 0`` of the local frame (the origin's altitude, ``home``). A start with ``d < 0``
-  stands on a platform at that height (a passenger on its carrier's deck) until it lifts off.
-- Home is set where the vehicle arms on the ground; ``home`` (lat, lon, alt) is the EKF origin.
-- ``snapshot()`` reports the true state; ``position_noise_m`` only affects the telemetry.
-- Streams: PX4's onboard profile at its rates (:mod:`sim.vehicle.telemetry`), kept per link and
-  changed by SET_MESSAGE_INTERVAL on the link it arrives on, as PX4 does. Stream rates scale with
-  ``speed`` up to wall-clock caps (LOCAL_POSITION_NED and HEARTBEAT 300 Hz, ATTITUDE
-  100 Hz, the others 50 Hz). The vehicle's own TIMESYNC requests are not streamed.
-- Offboard loss with COM_OBL_RC_ACT = 0 and no RC: POSCTL that holds position and descends, as
-  seen on a 2025 SITL; not PX4 2026's fall-through to NAV_RCL_ACT (PR #26289).
+and (4) waits on the sockets until the next thing is due. Physics and timers run on simulated
+time in fixed steps, so a flight at ``speed`` 20 follows the same trajectory as at 1. In lockstep
+(``VehicleOptions.lockstep``) the vehicle owns simulated time and steps with the controller
+(:mod:`sim.vehicle.lockstep`). ``snapshot()`` reports the true state; all fault times are
+simulated seconds. The modules of the package, and where the mock simplifies PX4:
+docs/mock-vehicle.md.
 """
 from __future__ import annotations
 

@@ -20,7 +20,7 @@ State machine (PX4 behaviour from ../shared/REFERENCE.md; choices of this mock m
   failsafe is active and nobody changed the mode, back to OFFBOARD at the next step (PX4 does so
   within ~0.2 s).
 - Manual mode without pilot (the offboard-loss failsafe): hold the horizontal position, descend
-  at MPC_LAND_SPEED, land, disarm after COM_DISARM_LAND (as seen on SITL).
+  at MPC_LAND_SPEED, land, disarm after COM_DISARM_LAND (as PX4 SITL does).
 - Position estimate lost while armed in a mode that needs it: failsafe to AUTO.LAND (PX4's
   Descend reports as AUTO.LAND): no horizontal hold, descend at MPC_LAND_SPEED.
 - Auto-disarm: COM_DISARM_PRFLT after arming if not taken off; COM_DISARM_LAND after landing.

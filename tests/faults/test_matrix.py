@@ -1,7 +1,7 @@
 """The fault matrix: the real processes of a pair (mock PX4, carrier simulator, ``marsupial run``)
 over real UDP and Zenoh, one fault (or several whose reactions do not interfere) per flight.
 
-For each fault the expected reaction is asserted (README, "Safety behaviour"): the vehicle ends
+For each fault the expected reaction is asserted (docs/safety.md): the vehicle ends
 safe (Hold armed in the air, or landed and disarmed, never disarmed in the air), the flight log
 is complete (record.csv to the last tick, summary.json with phase and reason), and the exit code
 and the message say what happened. Flights that do not compete for the same resource run

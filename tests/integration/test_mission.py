@@ -2,7 +2,7 @@
 
 Each test flies a whole pair at 5x real time and asserts on behaviour and numbers: P1-P3 from the
 flight log, the smoothness of the relative command at separation, and one defined reaction per
-failsafe (the README's safety table). Timeouts scale with the speed: at 5x, PX4's 1 s
+failsafe (docs/safety.md's table). Timeouts scale with the speed: at 5x, PX4's 1 s
 offboard-loss timeout is 0.2 s of wall time, which a loaded 2-core CI machine still keeps.
 """
 from __future__ import annotations

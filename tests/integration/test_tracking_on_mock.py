@@ -1,6 +1,6 @@
 """The PX4 tracking of ``configs/px4_sitl.toml`` (full setpoints, lead, drag feed-forward, integral,
 settled join and arrival) holds the dock on the mock vehicle that answers like PX4 (a velocity-only loop strays about 1 m
-there, as on PX4: README "Flying real PX4")."""
+there, as on PX4: docs/flying-px4.md)."""
 from __future__ import annotations
 
 import json

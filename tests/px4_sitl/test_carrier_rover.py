@@ -113,7 +113,7 @@ def test_quadrotor_and_rover_on_px4_each_in_offboard_p1_p3_and_the_rover_stops_o
     assert "carrier vehicle armed and in OFFBOARD" in carrier_err  # the rover under our controller
     assert s["phase"] == "DONE" and s["p2"] and s["p3"], s
     # P1: the passenger within mission.dock_tolerance_m (0.5 m) of the dock point while riding. It
-    # takes (configs/px4_sitl_rover.toml, README "Driving a real carrier") the rover's speed loop
+    # takes (configs/px4_sitl_rover.toml, docs/carrier.md) the rover's speed loop
     # closed (ROVER_PARAMS), a gentle start (the SIH rover sticks, then leaps off), both vehicles'
     # velocities made consistent with their EKF positions (which ran 0.1-0.5 m/s apart for
     # seconds) and velocity damping of the passenger's loop (it rang +-0.25 m without).

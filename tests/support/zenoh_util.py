@@ -14,7 +14,7 @@ from sim.net import free_port, wait_for  # noqa: F401  (re-exported for the test
 
 
 #: Carrier-feed limits for transport and codec tests: one sample binds its source and no speed
-#: limit bites (binding and plausibility have their own tests, test_feed_trust.py).
+#: limit bites (binding and plausibility have their own tests, tests/unit/bus/test_feed_gate.py).
 LENIENT = GateLimits(max_speed_m_s=1000.0, bind_samples=1)
 
 

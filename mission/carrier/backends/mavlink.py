@@ -20,11 +20,10 @@ zero until it wants motion, as PX4 needs before and during OFFBOARD)::
         PARK_SPEED_M_S --------------------------------------------> Hold (AUTO.LOITER): PX4 holds
                                                                        position where it stopped
 
-A zero velocity setpoint does not stop a PX4 rover well: its bearing atan2(0, 0) = 0 steers it
-north while it brakes, and its speed loop lets it creep; "stop" is therefore a tiny speed along
-its own heading while in OFFBOARD, and Hold once the carrier is done and has come to rest. Not
-before: PX4's Ackermann Hold drives back to the point where Hold began, and a rover still
-rolling at 2 m/s overshoots that point and loops back towards it at up to 3 m/s (seen on SITL).
+A zero velocity setpoint does not stop a PX4 rover well (its bearing atan2(0, 0) = 0 steers it
+north while it brakes): "stop" is a tiny speed along its own heading while in OFFBOARD, and Hold
+only once the carrier is done and at rest, since PX4's Ackermann Hold drives back to the point
+where Hold began (docs/carrier.md).
 
 The vehicle is armed only when the carrier first has to move (the passenger rides), so a
 carrier waiting for its passenger is not armed for nothing. On close it asks for Hold.

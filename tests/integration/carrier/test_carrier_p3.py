@@ -1,4 +1,4 @@
-"""Issue 11 item 3: the carrier enforces P3 itself. Whatever the passenger does (never separates,
+"""The carrier enforces P3 itself. Whatever the passenger does (never separates,
 lies about its phase, vanishes), the carrier's own controller never brings it closer to the
 target than b c - carrier.p3_margin_m. Real Zenoh between the carrier and a scripted passenger;
 the carrier steps on a manual clock."""

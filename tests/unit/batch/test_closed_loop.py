@@ -53,12 +53,12 @@ def test_relative_input_continuous_at_separation(paper3d):
 
 
 def test_unsaturated_law_is_violent_as_measured(paper3d):
-    _, r = paper3d  # README law fact 1: above 300 m/s in the 3D run
+    _, r = paper3d  # law fact 1 (docs/how-it-works.md): above 300 m/s in the 3D run
     assert r.max_passenger_speed_m_s[0] > 300
 
 
 def test_decay_after_separation_is_algebraic(paper3d):
-    _, r = paper3d  # README law fact 4: ~1/t, so doubling time roughly halves the distance
+    _, r = paper3d  # law fact 4: ~1/t, so doubling time roughly halves the distance
     d = r.distances()["e_pt"]
     at = lambda t: d[np.argmin(abs(r.t - t))]  # noqa: E731
     ratio = at(5.0) / at(10.0)
@@ -76,7 +76,7 @@ def test_exactly_docked_on_axis_departs_within_1_s():
 
 
 def test_departure_survives_where_absolute_coordinates_would_lose_it():
-    # README law fact 2: 1000 km from the origin, with a 1 nm departure margin, the passenger's
+    # law fact 2: 1000 km from the origin, with a 1 nm departure margin, the passenger's
     # first increments are below one ULP of its absolute position; error coordinates keep them.
     far = np.array([1e6, 0.0])
     model = TickModel(law=LawParams(), target=far + [30.0, 0.0], obstacles=Obstacles.none(2),

@@ -1,4 +1,4 @@
-"""The configuration reference: every field documented with a unit, the README in step."""
+"""The configuration reference: every field documented with a unit, docs/configuration.md in step."""
 from __future__ import annotations
 
 import re
@@ -18,10 +18,13 @@ def test_every_field_has_a_meaning_with_a_unit():
                          f"mission/config/: {missing}")
 
 
-def test_readme_table_is_the_generated_one():
-    text = (ROOT / "README.md").read_text()
-    block = text.split("<!-- config-reference:start -->\n", 1)[1].split("\n<!-- config-reference:end -->", 1)[0]
-    assert block == markdown_table(), "README out of step: paste `marsupial config --markdown` between the markers"
+def test_documented_table_is_the_generated_one():
+    text = (ROOT / "docs" / "configuration.md").read_text()
+    start, end = "<!-- config-reference:start -->\n", "\n<!-- config-reference:end -->"
+    assert text.count(start) == 1 and text.count(end) == 1, "docs/configuration.md: one pair of config-reference markers"
+    block = text.split(start, 1)[1].split(end, 1)[0]
+    assert block == markdown_table(), ("docs/configuration.md out of step: paste `marsupial config --markdown` "
+                                       "between the markers")
 
 
 def test_config_command_prints_reference_schema_and_effective_values():
