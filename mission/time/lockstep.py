@@ -182,9 +182,21 @@ class ZenohRelay:
         self._step_ns, self._step_readies = 0, 0  # the step run() waits for, readies for it so far
         self.dropped = 0
         self.missed = 0  # state samples given up (lost in an outage)
+        self._closed = False
         self._pub = _publisher(session, time_key)
         self._sub = session.declare_subscriber(ready_key, self._on_ready)
         feed.add_listener(self._on_state)
+
+    def _call(self, call: str) -> bool:
+        """Put the clock call; False once :meth:`close` undeclared the publisher (a step still in
+        flight while the process shuts down ends there)."""
+        try:
+            self._pub.put(call)
+            return True
+        except zenoh.ZError:
+            if self._closed:
+                return False
+            raise
 
     def _on_state(self, state: Any) -> None:
         with self._cv:
@@ -221,7 +233,7 @@ class ZenohRelay:
             state, wake = self._state, self._wake_ns
         call = f"{t_ns} {self._publisher.last_seq}"
         if state == "dropped":
-            self._pub.put(call)  # lets a restarted carrier find the clock
+            self._call(call)  # lets a restarted carrier find the clock
             return
         if state == "joined" and wake > t_ns:
             return
@@ -229,9 +241,12 @@ class ZenohRelay:
         slow_logged = False
         with self._cv:
             self._step_ns, self._step_readies = t_ns, 0
-        self._pub.put(call)
+        if not self._call(call):
+            return
         with self._cv:
             while not (self._ready is not None and self._ready[0] >= t_ns and self._seen_seq >= self._ready[2]):
+                if self._closed:
+                    return
                 now = time.monotonic()
                 if (self._ready is not None and self._ready[0] >= t_ns and now - start > LOST_WALL_S
                         and self._step_readies >= LOST_AFTER_REPEATS):
@@ -258,14 +273,19 @@ class ZenohRelay:
                 if now - last_put > (HELLO_WALL_S if self._state == "joining" else RESEND_WALL_S):
                     self._cv.release()
                     try:
-                        self._pub.put(call)
+                        sent = self._call(call)
                     finally:
                         self._cv.acquire()
+                    if not sent:
+                        return
                     last_put = now
                 self._cv.wait(HELLO_WALL_S)
             self._state, self._wake_ns = "joined", self._ready[1]
 
     def close(self) -> None:
+        with self._cv:
+            self._closed = True
+            self._cv.notify_all()
         undeclare(self._sub, self._pub)
 
 
