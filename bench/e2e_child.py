@@ -5,7 +5,7 @@ It runs the real :class:`~mission.controller.MissionController` with ``marsupial
 FlightRecorder) on the demo configuration at the asked rate, and records every tick that sent a
 setpoint through the controller's ``on_tick`` observer: when the tick started, when its
 observation ended, which carrier sample it used (``seq`` and when the feed's Zenoh callback
-received it), and when ``send_velocity_ned`` was called and returned. Its clock is
+received it), and when ``send`` was called and returned. Its clock is
 CLOCK_MONOTONIC at speed 1; stamps are converted to CLOCK_REALTIME with an offset sampled at
 start (the two do not drift apart measurably in a run of seconds). It prints ``PORT <n>`` (the
 link's UDP port) first, then writes its record as JSON to ``--out``.

@@ -24,6 +24,7 @@ from mission import phases
 
 from mission.mavlink import px4
 from mission.core.consistent_velocity import PositionConsistentVelocity
+from mission.core.setpoint import Setpoint
 from mission.time.clock import Clock, Periodic, join_thread, start_thread
 from mission.config.schema import Config
 from mission.errors import CommandRejected, LinkError
@@ -285,16 +286,12 @@ class MissionController:
 
         start_thread(self.clock, ask, "mission-telemetry-rate")
 
-    def _send(self, dec: Decision) -> bool:
-        """Send the decision's setpoint (full when it has a position); False if withheld."""
-        sp = np.asarray(dec.setpoint, dtype=float)
-        if not np.all(np.isfinite(sp)):  # never reached: the filter's output is finite; refuse rather than send
-            log.error("non-finite setpoint %s withheld", sp)
+    def _send(self, setpoint: Setpoint) -> bool:
+        """Send the decision's setpoint as it is; False if withheld."""
+        if not setpoint.is_finite():  # never reached: the filter's output is finite; refuse rather than send
+            log.error("non-finite setpoint %s withheld", setpoint)
             return False
-        if dec.position_sp is not None and dec.acceleration_sp is not None:
-            self.link.send_setpoint_ned(dec.position_sp, sp, dec.acceleration_sp)
-        else:
-            self.link.send_velocity_ned(sp)
+        self.link.send(setpoint)
         return True
 
     def _publish(self, t: float, obs: Observation) -> None:
@@ -316,7 +313,7 @@ class MissionController:
         self.recorder.record(
             t, self.state.phase.value, None if v is None else v.position_ned_m, None if v is None else v.velocity_ned_m_s,
             None if c is None else c.position_ned_m, None if c is None else c.velocity_ned_m_s, dec.dock, self.state.x_ref,
-            dec.P, dec.relative, dec.desired, dec.setpoint, dec.safety_acted,
+            dec.P, dec.relative, dec.desired, None if dec.setpoint is None else dec.setpoint.velocity_ned_m_s, dec.safety_acted,
             float("nan") if c is None else c.age_s, "" if v is None else v.mode, bool(v is not None and v.armed))
 
     def run(self) -> MissionOutcome:
@@ -338,7 +335,7 @@ class MissionController:
                 self.state, dec = phases.step(self.state, obs, self.model)
                 if dec.setpoint is not None:
                     send_ns = stamp()
-                    self._send(dec)
+                    self._send(dec.setpoint)
                     sent_ns = stamp()
                 if dec.request is not None:
                     worker.submit(dec.request)

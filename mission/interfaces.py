@@ -4,8 +4,8 @@
 Protocol below, so a MAVLink link to PX4, the mock vehicle or a test's in-process fake are
 interchangeable (as are a Zenoh feed and a scripted one):
 
-* a :class:`Vehicle`: its newest telemetry snapshot, a velocity or full setpoint, the position
-  stream's rate (asked and seen), and four commands
+* a :class:`Vehicle`: its newest telemetry snapshot, one setpoint at a time
+  (:class:`mission.core.setpoint.Setpoint`), the position stream's rate (asked and seen), and four commands
   (arm, set mode, hold, land), each blocking until the vehicle confirmed it or raising
   :class:`mission.errors.CommandRejected` / :class:`mission.errors.LinkError`;
 * a :class:`CarrierSource`: the newest carrier state with its receive time and age, the
@@ -21,9 +21,8 @@ from __future__ import annotations
 from enum import StrEnum
 from typing import TYPE_CHECKING, Any, Protocol
 
-import numpy as np
-
 if TYPE_CHECKING:
+    from mission.core.setpoint import Setpoint
     from mission.bus.bridge import ReceivedCarrierState
     from mission.mavlink.session import LinkCounters
     from mission.mavlink.link import VehicleState
@@ -47,14 +46,9 @@ class Vehicle(Protocol):
         """Newest telemetry snapshot (never blocks)."""
         ...
 
-    def send_velocity_ned(self, v_ned_m_s: np.ndarray, yaw_rad: float | None = None) -> None:
-        """One velocity setpoint [m/s] NED (yaw [rad] or keep the current heading)."""
-        ...
-
-    def send_setpoint_ned(self, position_ned_m: np.ndarray, velocity_ned_m_s: np.ndarray,
-                          acceleration_ned_m_s2: np.ndarray) -> None:
-        """One full setpoint: position [m], velocity [m/s], acceleration [m/s^2] NED (PX4 closes
-        position itself; velocity and acceleration are feed-forward)."""
+    def send(self, setpoint: Setpoint) -> None:
+        """Send one setpoint as it is (velocity only or full, yaw or not: the setpoint says which).
+        ValueError for a non-finite one, before anything is sent."""
         ...
 
     def set_message_interval(self, message_id: int, rate_hz: float) -> None:

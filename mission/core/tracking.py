@@ -24,6 +24,8 @@ from typing import Literal
 
 import numpy as np
 
+from mission.core.setpoint import Setpoint
+
 SetpointKind = Literal["velocity", "full"]
 
 
@@ -41,20 +43,6 @@ class TrackingGains:
     damping_per_s: float = 0.0
     slow_lag_m: float | None = None
     stop_lag_m: float | None = None
-
-
-@dataclass(frozen=True)
-class Setpoint:
-    """One setpoint for the vehicle: velocity [m/s] always; position [m] and acceleration
-    [m/s^2] for a full setpoint (None: velocity only)."""
-
-    velocity_ned_m_s: np.ndarray
-    position_ned_m: np.ndarray | None = None
-    acceleration_ned_m_s2: np.ndarray | None = None
-
-    @property
-    def full(self) -> bool:
-        return self.position_ned_m is not None
 
 
 def velocity_demand(x_ref: np.ndarray, u_ref: np.ndarray, x_p: np.ndarray, integral: np.ndarray,
@@ -79,17 +67,21 @@ def update_integral(integral: np.ndarray, x_ref: np.ndarray, x_p: np.ndarray, ga
 
 
 def setpoint(x_ref: np.ndarray, u_ref: np.ndarray, a_ref: np.ndarray, x_p: np.ndarray, velocity: np.ndarray,
-             integral: np.ndarray, gains: TrackingGains, v_p: np.ndarray | None = None) -> Setpoint:
-    """The setpoint to send: ``velocity`` [m/s] is the (safety-filtered) velocity demand; a full
+             integral: np.ndarray, gains: TrackingGains, v_p: np.ndarray | None = None,
+             filtered: bool = False) -> Setpoint:
+    """The setpoint to send; the one place that decides velocity-only or full. ``velocity`` [m/s]
+    is the (safety-filtered) velocity demand. Velocity only for velocity gains, or when the
+    safety filter changed the velocity (``filtered``: the filter wins over the reference, so
+    neither the reference position nor its feed-forward may pull the vehicle back); else a full
     setpoint adds the reference position and the acceleration feed-forward (reference
     acceleration, drag feed-forward, integral and, given the vehicle's velocity ``v_p`` [m/s],
     damping)."""
-    if gains.kind == "velocity":
-        return Setpoint(velocity)
+    if gains.kind == "velocity" or filtered:
+        return Setpoint.velocity_only(velocity)
     accel = a_ref + gains.drag_ff_per_s * u_ref + integral
     if gains.damping_per_s > 0 and v_p is not None:
         accel = accel - gains.damping_per_s * (v_p - u_ref)
-    return Setpoint(velocity, x_ref + gains.position_lead * (x_ref - x_p), accel)
+    return Setpoint.triple(x_ref + gains.position_lead * (x_ref - x_p), velocity, accel)
 
 
 def progress(lag_m: float, gains: TrackingGains) -> float:

@@ -9,5 +9,7 @@
   messages, the STATUSTEXT assembler and the immutable :class:`VehicleState` snapshot;
 * :mod:`~mission.mavlink.commands`: COMMAND_LONG's ACK / IN_PROGRESS / retry cycle and the
   HEARTBEAT confirmation of a mode or arming change, as state machines on the injected clock;
+* :mod:`~mission.mavlink.setpoints`: the one encoding of a :class:`~mission.core.setpoint.Setpoint`
+  (SET_POSITION_TARGET_LOCAL_NED, type masks) and its decoding, which the mock vehicle reads through;
 * :mod:`mission.mavlink.link`: the thin facade a mission uses (threads, identity, send, tlog).
 """

@@ -21,8 +21,7 @@ import threading
 from pathlib import Path
 from typing import Any, Callable
 
-import numpy as np
-
+from mission.core.setpoint import Setpoint
 from mission.flight_mode import FlightMode
 from mission.mavlink import px4
 from mission.time.clock import Clock, ScaledClock
@@ -33,7 +32,7 @@ from mission.mavlink.heartbeat import HeartbeatSender
 from mission.mavlink.identity import ADOPT_HEARTBEATS, VEHICLE_TYPES, Adoption
 from mission.mavlink.receiver import Receiver
 from mission.mavlink.session import LinkCounters, LinkSession
-from mission.mavlink.setpoints import checked_vectors, checked_velocity, full_setpoint_message, velocity_ned_message
+from mission.mavlink.setpoints import encode
 from mission.mavlink.telemetry import VehicleState
 from mission.mavlink.tlog import Tlog
 from mission.mavlink.transport import Transport, open_transport
@@ -263,13 +262,12 @@ class VehicleLink:
 
     # ---------------------------------------------------------------- setpoints
 
-    def send_velocity_ned(self, v_ned_m_s: np.ndarray, yaw_rad: float | None = None) -> None:
-        """Send one velocity setpoint [m/s] in LOCAL_NED (frame 1), optionally with yaw [rad]
-        (:func:`mission.mavlink.setpoints.velocity_ned_message`; ``time_boot_ms`` is the link
-        clock). Nothing is resent in the background. Raises ValueError for a wrong shape or a
-        non-finite (or float32-overflowing) value, before anything is sent."""
-        velocity = checked_velocity(v_ned_m_s, yaw_rad)
-        msg = velocity_ned_message(self._require_vehicle(), velocity, yaw_rad, int(self._clock.now() * 1000.0))
+    def send(self, setpoint: Setpoint) -> None:
+        """Send one setpoint as SET_POSITION_TARGET_LOCAL_NED (:func:`mission.mavlink.setpoints.encode`:
+        velocity only or full, yaw or not, as the setpoint says; ``time_boot_ms`` is the link
+        clock). Nothing is resent in the background. Raises ValueError for a non-finite (or
+        float32-overflowing) value, before anything is sent."""
+        msg = encode(setpoint, self._require_vehicle(), int(self._clock.now() * 1000.0))
         self._send(msg, "tx_setpoints")
 
     def _require_vehicle(self) -> tuple[int, int]:
@@ -279,16 +277,6 @@ class VehicleLink:
         if vehicle is None:
             raise LinkError("no vehicle identified yet: call wait_vehicle() first")
         return vehicle
-
-    def send_setpoint_ned(self, position_ned_m: np.ndarray, velocity_ned_m_s: np.ndarray,
-                          acceleration_ned_m_s2: np.ndarray) -> None:
-        """Send one full setpoint in LOCAL_NED: position [m], velocity [m/s] and acceleration
-        [m/s^2] (:func:`mission.mavlink.setpoints.full_setpoint_message`; PX4 closes position
-        itself and takes velocity and acceleration as feed-forward). ValueError for a wrong shape
-        or a non-finite value, before anything is sent."""
-        values = checked_vectors(position=position_ned_m, velocity=velocity_ned_m_s, acceleration=acceleration_ned_m_s2)
-        msg = full_setpoint_message(self._require_vehicle(), values, int(self._clock.now() * 1000.0))
-        self._send(msg, "tx_setpoints")
 
     def set_message_interval(self, message_id: int, rate_hz: float, timeout_s: float = 0.5, retries: int = 2) -> None:
         """Ask the vehicle to stream ``message_id`` at ``rate_hz`` [Hz] (:meth:`CommandClient.set_message_interval`);

@@ -15,6 +15,7 @@ import numpy as np
 
 from mission.flight_mode import FlightMode
 from mission.core.law import norm
+from mission.core.setpoint import Setpoint
 from mission.phases.types import ZERO, Decision, MissionModel, MissionState, Observation, Phase, dock_point, enter
 from mission.interfaces import Request
 from mission.core.safety import filter_velocity
@@ -24,30 +25,26 @@ from mission.core.tracking import progress, setpoint as tracking_setpoint, updat
 
 @dataclass(frozen=True)
 class Tracked:
-    """One tick of tracking: what to send (velocity [m/s]; for a full setpoint also position [m]
-    and acceleration [m/s^2]), whether the filter changed the velocity, and what the state keeps
-    (the velocity sent, the integral)."""
+    """One tick of tracking: the setpoint to send, whether the safety filter changed its
+    velocity, and the tracking integral the state keeps."""
 
-    setpoint: np.ndarray
-    position_sp: np.ndarray | None
-    acceleration_sp: np.ndarray | None
+    setpoint: Setpoint
     acted: bool
     integral: np.ndarray
 
     def decision(self, **kw) -> Decision:
-        return Decision(setpoint=self.setpoint, position_sp=self.position_sp, acceleration_sp=self.acceleration_sp, **kw)
+        return Decision(setpoint=self.setpoint, **kw)
 
     def kept(self) -> dict[str, np.ndarray]:
-        return {"u_cmd": self.setpoint, "integral": self.integral}
+        """What the state keeps: the velocity sent [m/s] (the filter's previous command) and the integral."""
+        return {"u_cmd": self.setpoint.velocity_ned_m_s, "integral": self.integral}
 
 
 def _track(state: MissionState, obs: Observation, m: MissionModel, x_ref: np.ndarray, u_ref: np.ndarray,
            a_ref: np.ndarray) -> Tracked:
-    """The setpoint that makes the vehicle follow the reference (:mod:`mission.core.tracking`): the
-    velocity demand filtered at the vehicle's real position (obstacles, floor, speed and
-    acceleration of the vehicle); a full setpoint adds the reference position and the
-    acceleration feed-forward, unless the filter changed the velocity (then the filtered
-    velocity alone is sent: the filter wins over the reference)."""
+    """The setpoint that makes the vehicle follow the reference (:func:`mission.core.tracking.setpoint`):
+    the velocity demand filtered at the vehicle's real position (obstacles, floor, speed and
+    acceleration of the vehicle), full or velocity only as tracking decides it."""
     v = obs.vehicle
     assert v is not None  # tracking happens only with a vehicle
     x_p = v.position_ned_m
@@ -57,12 +54,10 @@ def _track(state: MissionState, obs: Observation, m: MissionModel, x_ref: np.nda
     prev = state.u_cmd if state.u_cmd is not None else v.velocity_ned_m_s
     safe = filter_velocity(x_p, desired, m.tick.obstacles, m.command_safety, prev, m.dt_s)
     acted = bool(safe.changed)
-    sp = tracking_setpoint(x_ref, u_ref, a_ref, x_p, safe.u, integral, g, v.velocity_ned_m_s)
-    full = sp.full and not acted
+    sp = tracking_setpoint(x_ref, u_ref, a_ref, x_p, safe.u, integral, g, v.velocity_ned_m_s, filtered=acted)
     if not acted or g.kind == "velocity":
         integral = update_integral(integral, x_ref, x_p, g, m.dt_s)
-    return Tracked(sp.velocity_ned_m_s, sp.position_ned_m if full else None, sp.acceleration_ned_m_s2 if full else None,
-                   acted, integral)
+    return Tracked(sp, acted, integral)
 
 
 def _carrier_acceleration(obs: Observation, m: MissionModel) -> np.ndarray:

@@ -40,6 +40,7 @@ import numpy as np
 from mission.flight_mode import FlightMode
 from mission.errors import AssumptionError
 from mission.core.law import check_assumptions, norm
+from mission.core.setpoint import Setpoint
 from mission.phases.phase import BEFORE_SEPARATION, FLYING, Phase
 from mission.phases.types import (
     TELEMETRY_SILENT_S,
@@ -85,7 +86,7 @@ def _hold_decision(state: MissionState, obs: Observation) -> Decision:
     switch that is slow to take effect never leaves OFFBOARD without setpoints)."""
     v = obs.vehicle
     if v is not None and v.mode == FlightMode.OFFBOARD:
-        return Decision(setpoint=ZERO.copy(), request=Request.HOLD)
+        return Decision(setpoint=Setpoint.hold_still(), request=Request.HOLD)
     return Decision(setpoint=None, request=Request.HOLD if v is not None and v.mode != FlightMode.HOLD and v.armed else None)
 
 
@@ -128,7 +129,7 @@ def _failsafes(state: MissionState, obs: Observation, m: MissionModel) -> tuple[
         if TELEMETRY_SILENT_S < v.position_age_s <= m.heartbeat_timeout_s:
             # The position stream went quiet (a link blackout, not an estimator failure): hover
             # until the heartbeat timeout decides whether the vehicle is lost.
-            return state, Decision(setpoint=ZERO.copy(), events=("telemetry silent",))
+            return state, Decision(setpoint=Setpoint.hold_still(), events=("telemetry silent",))
         new = _abort(state, t, AbortReason.POSITION_LOST, "position estimate invalid")
         return new, _decided(new, obs, "abort: position estimate lost")
     if ph in BEFORE_SEPARATION - {Phase.PREFLIGHT} and not _carrier_ok(obs, m):
@@ -212,15 +213,15 @@ def _preflight(state: MissionState, obs: Observation, m: MissionModel) -> tuple[
         new = _abort(state, t, AbortReason.GEOMETRY, problem)
         return new, Decision(setpoint=None, events=(f"abort: geometry: {problem}",))
     new = enter(state, Phase.STREAMING, t)
-    return new, Decision(setpoint=ZERO.copy(), dock=dock, events=("preflight ok",))
+    return new, Decision(setpoint=Setpoint.hold_still(), dock=dock, events=("preflight ok",))
 
 
 def _streaming(state, obs, m):
     t = obs.t_s
     if t - state.since_s >= m.prestream_s:
         nxt = Phase.OFFBOARD if obs.vehicle.armed else Phase.ARMING
-        return enter(state, nxt, t), Decision(setpoint=ZERO.copy(), request=Request.OFFBOARD if nxt == Phase.OFFBOARD else Request.ARM)
-    return state, Decision(setpoint=ZERO.copy())
+        return enter(state, nxt, t), Decision(setpoint=Setpoint.hold_still(), request=Request.OFFBOARD if nxt == Phase.OFFBOARD else Request.ARM)
+    return state, Decision(setpoint=Setpoint.hold_still())
 
 
 def _arming(state, obs, m):
@@ -229,8 +230,8 @@ def _arming(state, obs, m):
         new = _abort(state, t, AbortReason.ARMING_REFUSED, obs.failed[Request.ARM])
         return new, Decision(setpoint=None, events=(f"abort: arming refused: {obs.failed['arm']}",))
     if obs.vehicle.armed:
-        return enter(state, Phase.OFFBOARD, t), Decision(setpoint=ZERO.copy(), request=Request.OFFBOARD)
-    return state, Decision(setpoint=ZERO.copy(), request=Request.ARM)
+        return enter(state, Phase.OFFBOARD, t), Decision(setpoint=Setpoint.hold_still(), request=Request.OFFBOARD)
+    return state, Decision(setpoint=Setpoint.hold_still(), request=Request.ARM)
 
 
 def _offboard(state, obs, m):
@@ -240,8 +241,8 @@ def _offboard(state, obs, m):
         return new, _decided(new, obs, f"abort: OFFBOARD refused: {obs.failed['offboard']}")
     if v.mode == FlightMode.OFFBOARD:
         new = enter(state, Phase.JOIN, t, x_ref=v.position_ned_m.copy(), u_cmd=ZERO.copy())
-        return new, Decision(setpoint=ZERO.copy())
-    return state, Decision(setpoint=ZERO.copy(), request=Request.OFFBOARD)
+        return new, Decision(setpoint=Setpoint.hold_still())
+    return state, Decision(setpoint=Setpoint.hold_still(), request=Request.OFFBOARD)
 
 def _final(state, obs, m):
     return enter(state, Phase.DONE, obs.t_s), Decision(setpoint=None, events=("mission complete",))

@@ -16,6 +16,7 @@ import numpy as np
 from mission.phases.phase import Phase
 from mission.interfaces import Request
 from mission.core.safety import SafetyConfig
+from mission.core.setpoint import Setpoint
 from mission.core.tick import TickModel
 from mission.core.tracking import TrackingGains
 
@@ -126,14 +127,13 @@ class MissionState:
 
 @dataclass(frozen=True)
 class Decision:
-    """What the controller does this tick. setpoint [m/s] NED or None (send nothing);
-    request: the vehicle command to have in flight (:class:`~mission.interfaces.Request`) or None.
+    """What the controller does this tick. setpoint: what to send (velocity only or full, as
+    tracking decided; None: send nothing); request: the vehicle command to have in flight
+    (:class:`~mission.interfaces.Request`) or None.
     Diagnostics for the flight log: dock, P, relative (law's u_p - u_c), desired, safety_acted."""
 
-    setpoint: np.ndarray | None
+    setpoint: Setpoint | None
     request: Request | None = None
-    position_sp: np.ndarray | None = None  # [m] NED: with acceleration_sp, a full setpoint
-    acceleration_sp: np.ndarray | None = None  # [m/s^2] NED
     dock: np.ndarray | None = None
     P: float = float("nan")
     relative: np.ndarray | None = None

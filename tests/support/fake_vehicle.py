@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from mission.core.setpoint import Setpoint
 from mission.mavlink import px4
 from mission.bus.bridge import ReceivedCarrierState
 from mission.time.clock import ManualClock
@@ -75,15 +76,13 @@ class FakeWorld:
             system_status=px4.MAV_STATE_ACTIVE if self.armed else px4.MAV_STATE_STANDBY, landed_state=None,
             position_valid=True, origin=None, last_statustext="")
 
-    def send_velocity_ned(self, v_ned_m_s: np.ndarray, yaw_rad: float | None = None) -> None:
+    def send(self, setpoint: Setpoint) -> None:
+        """The vehicle flies the setpoint's velocity while in OFFBOARD (the fake has no position
+        loop, so a full setpoint flies its velocity too)."""
         now = self._advance()
-        self.setpoints.append((now, np.array(v_ned_m_s, dtype=float)))
-        self._v_p = np.array(v_ned_m_s, dtype=float) if self.mode == "OFFBOARD" else np.zeros(3)
-
-    def send_setpoint_ned(self, position_ned_m: np.ndarray, velocity_ned_m_s: np.ndarray,
-                          acceleration_ned_m_s2: np.ndarray) -> None:
-        """A full setpoint flies its velocity here (the fake has no position loop)."""
-        self.send_velocity_ned(velocity_ned_m_s)
+        velocity = np.array(setpoint.velocity_ned_m_s, dtype=float)
+        self.setpoints.append((now, velocity))
+        self._v_p = velocity.copy() if self.mode == "OFFBOARD" else np.zeros(3)
 
     def set_message_interval(self, message_id: int, rate_hz: float) -> None:
         self.intervals.append((message_id, rate_hz))

@@ -38,6 +38,7 @@ import numpy as np
 from mission.flight_mode import FlightMode
 from mission.carrier.controller import OwnState
 from mission.carrier.tracking import Tracked
+from mission.core.setpoint import Setpoint
 from mission.time.clock import Clock, Downstream
 from mission.time.lockstep import MavlinkRelay
 from mission.config.schema import Config
@@ -181,7 +182,7 @@ class MavlinkCarrier:
             # PX4's rover steers to atan2(v): a zero setpoint would turn it north while it brakes.
             v[0], v[1] = STOP_SPEED_M_S * math.cos(yaw), STOP_SPEED_M_S * math.sin(yaw)
         try:
-            self.link.send_velocity_ned(v)
+            self.link.send(Setpoint.velocity_only(v))
         except LinkError as exc:
             self.send_errors += 1
             if self.send_errors == 1:

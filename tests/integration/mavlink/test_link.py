@@ -14,6 +14,7 @@ import struct
 import numpy as np
 import pytest
 
+from mission.core.setpoint import Setpoint
 from mission.mavlink import px4
 from mission.time.clock import ManualClock, ScaledClock
 from mission.errors import CommandRejected, LinkError, LinkTimeout
@@ -113,7 +114,7 @@ def test_rogue_system_on_the_same_port_is_counted_and_ignored(link: VehicleLink)
             rogue.armed, rogue.custom_mode = True, px4.custom_mode_of("OFFBOARD")
             eventually(lambda: link.counters.rejected_foreign >= 20, what="rogue packets counted")
             link.command_long(px4.MAV_CMD_REQUEST_MESSAGE, 148.0)
-            link.send_velocity_ned(np.array([0.5, 0.0, 0.0]))
+            link.send(Setpoint.velocity_only(np.array([0.5, 0.0, 0.0])))
             eventually(lambda: vehicle.received("SET_POSITION_TARGET_LOCAL_NED"), what="setpoint at vehicle")
             s = link.state
             np.testing.assert_allclose(s.position_ned_m, [1.0, 2.0, -3.0], rtol=1e-6)
@@ -279,8 +280,8 @@ def test_velocity_setpoint_encoding() -> None:
     clock = ManualClock(12.345)
     with VehicleLink(ANY_PORT, clock) as link, Px4Peer(link.port) as peer:
         link.wait_vehicle(5.0)
-        link.send_velocity_ned(np.array([1.5, -2.0, 0.25]))
-        link.send_velocity_ned([0.0, 1.0, -0.5], yaw_rad=0.75)  # type: ignore[arg-type]
+        link.send(Setpoint.velocity_only(np.array([1.5, -2.0, 0.25])))
+        link.send(Setpoint.velocity_only(np.array([0.0, 1.0, -0.5]), yaw_rad=0.75))
         first, second = eventually(lambda: len(peer.received("SET_POSITION_TARGET_LOCAL_NED")) == 2
                                    and peer.received("SET_POSITION_TARGET_LOCAL_NED"), what="2 setpoints")
         assert first.time_boot_ms == 12345
@@ -301,8 +302,8 @@ def test_nonfinite_or_malformed_setpoint_is_refused(link: VehicleLink, velocity:
     with _connected(link) as peer:
         link.wait_vehicle(5.0)
         with pytest.raises(ValueError):
-            link.send_velocity_ned(np.array(velocity, dtype=float), yaw_rad=yaw)
-        link.send_velocity_ned(np.zeros(3))  # a marker that does get through
+            link.send(Setpoint.velocity_only(np.array(velocity, dtype=float), yaw_rad=yaw))
+        link.send(Setpoint.hold_still())  # a marker that does get through
         got = eventually(lambda: peer.received("SET_POSITION_TARGET_LOCAL_NED"), what="marker setpoint")
         assert len(got) == 1 and (got[0].vx, got[0].vy, got[0].vz) == (0.0, 0.0, 0.0)
         assert link.counters.tx_setpoints == 1
@@ -311,7 +312,7 @@ def test_nonfinite_or_malformed_setpoint_is_refused(link: VehicleLink, velocity:
 def test_no_background_resend_of_setpoints() -> None:
     with VehicleLink(ANY_PORT, ScaledClock(20.0)) as link, Px4Peer(link.port) as peer:
         link.wait_vehicle(5.0)
-        link.send_velocity_ned(np.array([1.0, 0.0, 0.0]))
+        link.send(Setpoint.velocity_only(np.array([1.0, 0.0, 0.0])))
         beats = len(peer.received("HEARTBEAT"))
         eventually(lambda: len(peer.received("HEARTBEAT")) >= beats + 4, what="4 more heartbeats")
         assert len(peer.received("SET_POSITION_TARGET_LOCAL_NED")) == 1
@@ -319,12 +320,12 @@ def test_no_background_resend_of_setpoints() -> None:
 
 def test_setpoints_and_commands_need_an_open_link_and_a_vehicle(link: VehicleLink) -> None:
     with pytest.raises(LinkError, match="no vehicle identified"):
-        link.send_velocity_ned(np.zeros(3))
+        link.send(Setpoint.hold_still())
     with pytest.raises(LinkError, match="no vehicle identified"):
         link.arm()
     closed = VehicleLink(ANY_PORT, ScaledClock(1.0))
     with pytest.raises(LinkError, match="not open"):
-        closed.send_velocity_ned(np.zeros(3))
+        closed.send(Setpoint.hold_still())
     with pytest.raises(LinkTimeout, match="PX4 autopilot HEARTBEAT"):
         link.wait_vehicle(timeout_s=0.1)
 

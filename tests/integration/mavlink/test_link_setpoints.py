@@ -6,6 +6,7 @@ import math
 import numpy as np
 import pytest
 
+from mission.core.setpoint import Setpoint
 from mission.mavlink import px4
 from mission.time.clock import ManualClock, ScaledClock
 from mission.errors import CommandRejected
@@ -20,7 +21,7 @@ def test_full_setpoint_encoding_never_sets_the_force_bit() -> None:
     clock = ManualClock(3.5)
     with VehicleLink(ANY_PORT, clock) as link, Px4Peer(link.port) as peer:
         link.wait_vehicle(5.0)
-        link.send_setpoint_ned(np.array([1.0, 2.0, -3.0]), np.array([0.5, -0.25, 0.0]), np.array([0.1, 0.2, -0.3]))
+        link.send(Setpoint.triple(np.array([1.0, 2.0, -3.0]), np.array([0.5, -0.25, 0.0]), np.array([0.1, 0.2, -0.3])))
         (msg,) = eventually(lambda: peer.received("SET_POSITION_TARGET_LOCAL_NED"), what="one setpoint")
         assert msg.type_mask == 3072 and not msg.type_mask & 512  # 512 is *force*: PX4 drops those
         assert msg.coordinate_frame == px4.MAV_FRAME_LOCAL_NED and msg.time_boot_ms == 3500
@@ -28,9 +29,9 @@ def test_full_setpoint_encoding_never_sets_the_force_bit() -> None:
         assert (msg.vx, msg.vy, msg.vz) == (0.5, -0.25, 0.0)
         assert (msg.afx, msg.afy, msg.afz) == pytest.approx((0.1, 0.2, -0.3))
         with pytest.raises(ValueError, match="acceleration"):
-            link.send_setpoint_ned(np.zeros(3), np.zeros(3), np.array([0.0, math.nan, 0.0]))
+            link.send(Setpoint.triple(np.zeros(3), np.zeros(3), np.array([0.0, math.nan, 0.0])))
         with pytest.raises(ValueError, match="position"):
-            link.send_setpoint_ned(np.zeros(2), np.zeros(3), np.zeros(3))
+            link.send(Setpoint.triple(np.zeros(2), np.zeros(3), np.zeros(3)))
         assert link.counters.tx_setpoints == 1
 
 

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from mission.core.setpoint import Setpoint
 from mission.mavlink import px4
 from mission.time.clock import ScaledClock
 from mission.errors import LinkError
@@ -27,7 +28,7 @@ def test_tlog_holds_everything_and_is_readable_by_pymavlink(tmp_path: Path) -> N
     with VehicleLink(ANY_PORT, ScaledClock(1.0), tlog_path=tlog) as link, Px4Peer(link.port) as peer:
         link.wait_vehicle(5.0)
         link.wait_until(lambda s: s.position_ned_m is not None, 5.0)
-        link.send_velocity_ned(np.array([0.5, -0.5, 0.0]))
+        link.send(Setpoint.velocity_only(np.array([0.5, -0.5, 0.0])))
         link.set_mode("OFFBOARD")
         eventually(lambda: peer.received("SET_POSITION_TARGET_LOCAL_NED"), what="setpoint")
         sent = link.counters.tx_messages
@@ -114,7 +115,7 @@ def test_signed_link_signs_everything_and_keeps_the_key_out_of_the_tlog(
         link.wait_vehicle(5.0)
         assert link.command_long(px4.MAV_CMD_REQUEST_MESSAGE, 148.0) == 0  # signed ACK accepted
         link.wait_until(lambda s: s.position_ned_m is not None, 5.0)  # signed telemetry accepted
-        link.send_velocity_ned(np.array([1.0, 0.0, 0.0]))
+        link.send(Setpoint.velocity_only(np.array([1.0, 0.0, 0.0])))
         eventually(lambda: peer.received("SET_POSITION_TARGET_LOCAL_NED"), what="signed setpoint")
         from_link = peer.received()
         assert from_link and all(m.get_signed() for m in from_link)  # verified with the key
@@ -142,7 +143,7 @@ def test_signed_link_follows_the_signed_vehicle_and_ignores_unsigned_spoofs() ->
             spoofer.custom_mode = px4.custom_mode_of("POSCTL")
             eventually(lambda: link.counters.rx_unsigned >= 20, what="spoofed HEARTBEATs refused")
             assert link.state.mode == "AUTO.LOITER"
-            link.send_velocity_ned(np.array([0.5, 0.0, 0.0]))
+            link.send(Setpoint.velocity_only(np.array([0.5, 0.0, 0.0])))
             eventually(lambda: vehicle.received("SET_POSITION_TARGET_LOCAL_NED"), what="setpoint at the vehicle")
             assert spoofer.received() == []
 

@@ -12,6 +12,7 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
+from mission.core.setpoint import Setpoint
 from mission.mavlink import px4
 from mission.time.clock import Periodic, ScaledClock
 from mission.errors import CommandRejected
@@ -45,7 +46,7 @@ class Streamer:
     def _run(self) -> None:
         tick = Periodic(self.link.clock, self.period_s)
         while not self._stop.is_set():
-            self.link.send_velocity_ned(self.velocity)
+            self.link.send(Setpoint.velocity_only(self.velocity))
             self.sent += 1
             self.last_sent_s = self.link.clock.now()
             tick.wait()

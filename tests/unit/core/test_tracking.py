@@ -34,6 +34,16 @@ def test_full_setpoint_sends_the_law_velocity_lead_position_and_feed_forward() -
     np.testing.assert_allclose(sp.acceleration_ned_m_s2, A_REF + 1.0 * U_REF + integral)
 
 
+def test_a_filtered_velocity_goes_alone_even_with_full_gains() -> None:
+    """The safety filter wins over the reference: once it changed the velocity, neither the
+    reference position nor the feed-forward is sent (decided here, nowhere downstream)."""
+    g = TrackingGains(kind="full", position_lead=2.0, drag_ff_per_s=1.0)
+    safe = np.array([0.3, 0.0, 0.0])
+    sp = setpoint(X_REF, U_REF, A_REF, X_P, safe, np.zeros(3), g, filtered=True)
+    assert not sp.full and sp.position_ned_m is None and sp.acceleration_ned_m_s2 is None
+    assert sp.velocity_ned_m_s is safe
+
+
 def test_integral_integrates_inside_its_window_and_is_clamped() -> None:
     g = TrackingGains(kind="full", integral_gain=2.0, integral_limit=0.5, integral_window_m=0.5)
     zero = np.zeros(3)

@@ -49,8 +49,9 @@ def fly(model, *, ticks=4000, carrier_age=0.0, on_tick=None, vehicle_tau=0.0):
         elif dec.request == "hold":
             mode = "AUTO.LOITER"
         if dec.setpoint is not None and mode == "OFFBOARD":
-            assert np.isfinite(dec.setpoint).all()
-            v_p = dec.setpoint if vehicle_tau == 0 else v_p + (dec.setpoint - v_p) * dt / vehicle_tau
+            assert dec.setpoint.is_finite() and not dec.setpoint.full
+            v_sp = dec.setpoint.velocity_ned_m_s
+            v_p = v_sp if vehicle_tau == 0 else v_p + (v_sp - v_p) * dt / vehicle_tau
         elif mode != "OFFBOARD":
             v_p = np.zeros(3)
         x_p = x_p + v_p * dt
@@ -85,7 +86,7 @@ def test_relative_command_continuous_across_separation(model):
     assert norm(after.relative) < 0.02
     # the command sent changes by at most one tick of the command's acceleration limit
     a_max = model.command_safety.max_accel_m_s2
-    assert norm(after.setpoint - before.setpoint) <= a_max * model.dt_s + 1e-9
+    assert norm(after.setpoint.velocity_ned_m_s - before.setpoint.velocity_ned_m_s) <= a_max * model.dt_s + 1e-9
 
 
 def test_late_carrier_samples_are_extrapolated(model):
