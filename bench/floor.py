@@ -30,7 +30,7 @@ import click
 import numpy as np
 import zenoh
 
-from mission.mavlink import px4
+from mission.mavlink import setpoints
 from mission.mavlink.env import mavlink
 from sim.net import enable_rx_stamps, free_port, recv_stamped, wait_for
 
@@ -61,7 +61,7 @@ def mavlink_ping(samples: int, mean_interval_s: float = 0.004) -> dict:
         for i in range(samples + WARMUP_PINGS):
             t0 = time.time_ns()
             msg = mavlink.MAVLink_set_position_target_local_ned_message(
-                i, 1, 1, mavlink.MAV_FRAME_LOCAL_NED, px4.TYPE_MASK_VELOCITY, 0.0, 0.0, 0.0, 0.5, -0.25, 0.0,
+                i, 1, 1, mavlink.MAV_FRAME_LOCAL_NED, setpoints.TYPE_MASK_VELOCITY, 0.0, 0.0, 0.0, 0.5, -0.25, 0.0,
                 0.0, 0.0, 0.0, 0.0, 0.0)
             tx.sendto(msg.pack(codec), address)
             _, t_rx, _ = recv_stamped(rx)

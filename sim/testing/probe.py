@@ -15,7 +15,7 @@ import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
-from mission.mavlink import px4
+from mission.mavlink import px4, setpoints
 from mission.mavlink.env import mavlink
 from mission.mavlink.codec import new_codec, setup_signing
 from sim.vehicle.endpoints import parse_endpoint
@@ -192,7 +192,7 @@ class Probe:
                             (1.0 if arm else 0.0, float(px4.ARM_FORCE_MAGIC) if force else NAN), timeout_s=timeout_s)
 
     def setpoint_message(self, velocity_ned_m_s: tuple[float, float, float] = (0.0, 0.0, 0.0),
-                         type_mask: int = px4.TYPE_MASK_VELOCITY, frame: int = px4.MAV_FRAME_LOCAL_NED,
+                         type_mask: int = setpoints.TYPE_MASK_VELOCITY, frame: int = px4.MAV_FRAME_LOCAL_NED,
                          position_ned_m: tuple[float, float, float] = (NAN, NAN, NAN), yaw_rad: float = NAN,
                          yaw_rate_rad_s: float = NAN, target: tuple[int, int] = (1, 1),
                          acceleration_ned_m_s2: tuple[float, float, float] = (NAN, NAN, NAN)) -> Any:

@@ -31,7 +31,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from mission.mavlink import px4
+from mission.mavlink import px4, setpoints
 from sim.vehicle.params import ParamTable
 from sim.vehicle.physics.multicopter import Command, KinState
 
@@ -47,7 +47,7 @@ NAN3 = (math.nan, math.nan, math.nan)
 
 
 @dataclass(frozen=True)
-class Setpoint:
+class TrajectorySetpoint:
     """An accepted offboard setpoint in local NED, as PX4's trajectory setpoint: position [m],
     velocity [m/s], acceleration [m/s^2]; NaN components are not controlled. An absolute yaw
     [rad] or a yaw rate [rad/s] (both None: keep the yaw)."""
@@ -57,7 +57,7 @@ class Setpoint:
     acceleration: tuple[float, float, float] = NAN3
     yaw_rad: float | None = None
     yaw_rate_rad_s: float | None = None
-    type_mask: int = px4.TYPE_MASK_VELOCITY
+    type_mask: int = setpoints.TYPE_MASK_VELOCITY
 
 
 class Commander:
@@ -75,7 +75,7 @@ class Commander:
         self.position_valid = True
         self.refuse_arming_reason: str | None = None
         self.refuse_offboard_reason: str | None = None
-        self.setpoint: Setpoint | None = None
+        self.setpoint: TrajectorySetpoint | None = None
         self.last_setpoint_t_s = -math.inf
         self.setpoints_received = 0
         self.setpoints_at_failsafe = 0
@@ -116,7 +116,7 @@ class Commander:
         return name in px4.MANUAL_MODES and not self.pilot_present
 
     # ---- inputs --------------------------------------------------------------------------
-    def accept_setpoint(self, t_s: float, setpoint: Setpoint) -> None:
+    def accept_setpoint(self, t_s: float, setpoint: TrajectorySetpoint) -> None:
         """A valid setpoint arrived (proof of life in any mode; acted on in OFFBOARD)."""
         self.setpoint = setpoint
         self.last_setpoint_t_s = t_s
@@ -288,7 +288,7 @@ class Commander:
         return self._hold_command(kin, self.hold_ned_m)
 
     @staticmethod
-    def _offboard_command(kin: KinState, sp: Setpoint) -> Command:
+    def _offboard_command(kin: KinState, sp: TrajectorySetpoint) -> Command:
         """The trajectory setpoint as it is: PX4's position controller flies it unsmoothed."""
         vn, ve, vd = sp.velocity
         return Command(vn, ve, vd, sp.yaw_rad, sp.yaw_rate_rad_s, position_ned_m=sp.position,

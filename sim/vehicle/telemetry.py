@@ -25,9 +25,9 @@ from typing import Any
 
 from mission.core import geodesy
 
-from mission.mavlink import px4
+from mission.mavlink import px4, setpoints
 from mission.mavlink.env import mavlink
-from sim.vehicle.modes import Setpoint
+from sim.vehicle.modes import TrajectorySetpoint
 from sim.vehicle.estimator import EstimateDrift
 from sim.vehicle.physics.multicopter import GRAVITY_M_S2, KinState, attitude_rad, quaternion
 
@@ -133,7 +133,7 @@ class TelemetryState:
     landed_state: int
     armable: bool
     position_valid: bool
-    setpoint: Setpoint | None
+    setpoint: TrajectorySetpoint | None
     home_ned_m: tuple[float, float, float]
     mav_type: int = px4.MAV_TYPE_QUADROTOR
 
@@ -200,7 +200,7 @@ def position_target_local_ned(s: TelemetryState) -> Any:
     fields flagged in the mask. Before takeoff: the current position."""
     k, nan = s.kin, math.nan
     if not s.armed or k.on_ground:
-        return mavlink.MAVLink_position_target_local_ned_message(_ms(s.t_s), px4.MAV_FRAME_LOCAL_NED, px4.TYPE_MASK_POSITION,
+        return mavlink.MAVLink_position_target_local_ned_message(_ms(s.t_s), px4.MAV_FRAME_LOCAL_NED, setpoints.TYPE_MASK_POSITION,
                                                                  k.n_m, k.e_m, k.d_m, nan, nan, nan, nan, nan, nan, k.yaw_rad, nan)
     sp = s.setpoint if s.mode == "OFFBOARD" else None
     position = sp.position if sp is not None else (nan, nan, nan)

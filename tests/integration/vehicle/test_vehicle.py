@@ -12,7 +12,7 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from mission.mavlink import px4
+from mission.mavlink import px4, setpoints
 from sim.net import wait_for
 from sim.vehicle.mock import PHYSICS_DT_S, MockVehicle, VehicleSnapshot
 from sim.testing.probe import Lockstep, Probe, SetpointStream, connect, sleep_until, start_offboard, vehicle_for, wait_flight
@@ -317,11 +317,11 @@ def test_return_to_launch_flies_home_and_lands(probe: Probe) -> None:
 def test_position_setpoint_and_body_frame_velocity(probe: Probe) -> None:
     with vehicle_for(probe, paced=True, speed=20.0) as v:
         connect(probe)
-        with start_offboard(probe, type_mask=px4.TYPE_MASK_POSITION, position_ned_m=(3.0, -2.0, -4.0), yaw_rad=math.pi / 2) as s:
+        with start_offboard(probe, type_mask=setpoints.TYPE_MASK_POSITION, position_ned_m=(3.0, -2.0, -4.0), yaw_rad=math.pi / 2) as s:
             snap = wait_flight(v, lambda x: np.allclose(x.position_ned_m, [3.0, -2.0, -4.0], atol=0.02), 5.0, "np.allclose(x.position_ned_m, [3.0, -2.0, -4.0], atol=0.02)")
             assert snap is not None and snap.yaw_rad == pytest.approx(math.pi / 2, abs=0.01)
             # BODY_NED forward at yaw 90 deg is east
-            s.set(velocity_ned_m_s=(1.0, 0.0, 0.0), type_mask=px4.TYPE_MASK_VELOCITY_YAW_RATE,
+            s.set(velocity_ned_m_s=(1.0, 0.0, 0.0), type_mask=setpoints.TYPE_MASK_VELOCITY_YAW_RATE,
                   frame=px4.MAV_FRAME_BODY_NED, yaw_rate_rad_s=0.0)
             moving = wait_flight(v, lambda x: x.velocity_ned_m_s[1] > 0.99, 3.0, "x.velocity_ned_m_s[1] > 0.99")
             assert moving is not None and abs(moving.velocity_ned_m_s[0]) < 0.02
@@ -436,7 +436,7 @@ def test_estimate_drift_wanders_the_reported_position_and_px4_flies_the_estimate
             clock = Lockstep(p)
             connect(p)
             clock.barrier()
-            send = lambda: p.send(p.setpoint_message(type_mask=px4.TYPE_MASK_POSITION, position_ned_m=target))  # noqa: E731
+            send = lambda: p.send(p.setpoint_message(type_mask=setpoints.TYPE_MASK_POSITION, position_ned_m=target))  # noqa: E731
             send()
             assert p.set_mode("OFFBOARD").result == px4.MAV_RESULT_ACCEPTED
             assert p.arm().result == px4.MAV_RESULT_ACCEPTED

@@ -15,7 +15,7 @@ from click.testing import CliRunner
 
 from mission.core import geodesy
 
-from mission.mavlink import px4
+from mission.mavlink import px4, setpoints
 from mission.mavlink.env import mavlink
 from sim.net import wait_for
 from sim.vehicle.mock import FaultOptions, MockVehicle, VehicleOptions, spawn_process
@@ -259,13 +259,13 @@ def test_global_position_consistent_with_local_ned(probe: Probe) -> None:
 
 
 @pytest.mark.parametrize(("frame", "mask", "accepted"), [
-    (px4.MAV_FRAME_LOCAL_NED, px4.TYPE_MASK_VELOCITY, True),
-    (px4.MAV_FRAME_LOCAL_NED, px4.TYPE_MASK_VELOCITY_YAW, True),
-    (px4.MAV_FRAME_BODY_NED, px4.TYPE_MASK_VELOCITY_YAW_RATE, True),
-    (px4.MAV_FRAME_BODY_NED, px4.TYPE_MASK_VELOCITY, True),
-    (px4.MAV_FRAME_LOCAL_NED, px4.TYPE_MASK_POSITION, True),
-    (px4.MAV_FRAME_BODY_NED, px4.TYPE_MASK_POSITION, False),
-    (9, px4.TYPE_MASK_VELOCITY, False),  # MAV_FRAME_BODY_OFFSET_NED: unsupported
+    (px4.MAV_FRAME_LOCAL_NED, setpoints.TYPE_MASK_VELOCITY, True),
+    (px4.MAV_FRAME_LOCAL_NED, setpoints.TYPE_MASK_VELOCITY_YAW, True),
+    (px4.MAV_FRAME_BODY_NED, setpoints.TYPE_MASK_VELOCITY_YAW_RATE, True),
+    (px4.MAV_FRAME_BODY_NED, setpoints.TYPE_MASK_VELOCITY, True),
+    (px4.MAV_FRAME_LOCAL_NED, setpoints.TYPE_MASK_POSITION, True),
+    (px4.MAV_FRAME_BODY_NED, setpoints.TYPE_MASK_POSITION, False),
+    (9, setpoints.TYPE_MASK_VELOCITY, False),  # MAV_FRAME_BODY_OFFSET_NED: unsupported
     (px4.MAV_FRAME_LOCAL_NED, 0, True),  # everything used, as PX4 takes it
     (px4.MAV_FRAME_LOCAL_NED, 3072, True),  # position + velocity + acceleration feed-forward
     (px4.MAV_FRAME_BODY_NED, 3072, True),  # velocity + acceleration (a position has no body frame)
@@ -306,7 +306,7 @@ def test_non_finite_velocity_setpoint_is_proof_of_life_and_holds(probe: Probe) -
 @pytest.mark.parametrize(("mask", "frame", "text"), [
     (3072 | 512, px4.MAV_FRAME_LOCAL_NED, "force not supported"),
     (0x0FFF, px4.MAV_FRAME_LOCAL_NED, "SET_POSITION_TARGET_LOCAL_NED invalid"),
-    (px4.TYPE_MASK_VELOCITY, 9, "coordinate frame 9"),  # (the text is longer than one STATUSTEXT chunk)
+    (setpoints.TYPE_MASK_VELOCITY, 9, "coordinate frame 9"),  # (the text is longer than one STATUSTEXT chunk)
 ])
 def test_dropped_setpoint_is_not_proof_of_life_and_says_why(probe: Probe, mask: int, frame: int, text: str) -> None:
     with vehicle_for(probe, paced=True, speed=10.0) as v:

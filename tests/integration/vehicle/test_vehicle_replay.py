@@ -14,8 +14,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from mission.core.setpoint import Setpoint
 from mission.mavlink import px4
 from mission.mavlink.env import mavlink
+from mission.mavlink.setpoints import encode
 from sim.sitl.replay import FIRST_REPLAYED_SEGMENT, Recording, compare, load_recording, rms_by_segment
 from sim.vehicle.physics.multicopter import Limits
 from sim.testing.probe import Lockstep, Probe, connect, vehicle_for
@@ -25,18 +27,18 @@ pytestmark = [pytest.mark.slow, pytest.mark.timeout(120)]
 
 DATA = ROOT / "tests" / "data" / "px4_responses"
 NAN = float("nan")
+VEHICLE = (1, 1)  # the mock vehicle: system 1, autopilot component 1
 UNREAD_STREAMS = ("ATTITUDE", "ATTITUDE_QUATERNION", "GLOBAL_POSITION_INT", "HIGHRES_IMU", "ODOMETRY", "ALTITUDE",
                   "VFR_HUD", "ATTITUDE_TARGET", "POSITION_TARGET_LOCAL_NED", "ESTIMATOR_STATUS")
 
 
-def setpoint_message(probe: Probe, rec: Recording, i: int, shift: np.ndarray) -> object:
-    """Row ``i``'s setpoint as the recorder sent it; positions moved by ``shift`` [m]."""
-    v = tuple(float(x) for x in rec.sp_vel[i])
+def setpoint_message(rec: Recording, i: int, shift: np.ndarray) -> object:
+    """Row ``i``'s setpoint as the recorder sent it (:func:`mission.mavlink.setpoints.encode`);
+    positions moved by ``shift`` [m]."""
+    v = rec.sp_vel[i]
     if rec.kind[i] == "velocity":
-        return probe.setpoint_message(v)  # type: ignore[arg-type]
-    p = tuple(float(x) for x in rec.sp_pos[i] + shift)
-    a = tuple(float(x) for x in rec.sp_acc[i])
-    return probe.setpoint_message(v, 3072, position_ned_m=p, acceleration_ned_m_s2=a)  # type: ignore[arg-type]
+        return encode(Setpoint.velocity_only(v), VEHICLE, 0)
+    return encode(Setpoint.triple(rec.sp_pos[i] + shift, v, rec.sp_acc[i]), VEHICLE, 0)
 
 
 def fly_recording(rec: Recording) -> np.ndarray:
@@ -72,7 +74,7 @@ def fly_recording(rec: Recording) -> np.ndarray:
             if i > first and rec.segment[i] != rec.segment[i - 1]:
                 latest = probe.latest("LOCAL_POSITION_NED")
                 shift = np.array((latest.x, latest.y, latest.z)) - rec.pos[i]
-            probe.send(setpoint_message(probe, rec, i, shift))
+            probe.send(setpoint_message(rec, i, shift))
             wake_s = 0.5 * (rec.t_s[i] + rec.t_s[i + 1]) if i + 1 < last else rec.t_s[i] + 0.1
             clock.release(t0_ns + round(wake_s * 1e9))
             clock.barrier()
