@@ -170,7 +170,7 @@ class MockVehicle:
                 velocity_ned_m_s=frozen((k.vn_m_s, k.ve_m_s, k.vd_m_s)), yaw_rad=k.yaw_rad, armed=c.armed,
                 mode=c.mode, landed_state=c.landed_state(k), in_failsafe=c.in_failsafe,
                 position_valid=c.position_valid, home_ned_m=frozen(c.home_ned_m),
-                last_setpoint_t_s=c.last_setpoint_t_s, counters=self.counters)
+                last_setpoint_t_s=c.last_setpoint_t_s, counters=self.counters, setpoint=c.setpoint)
 
     def when(self, predicate: Callable[[VehicleSnapshot], bool]) -> Callable[[], VehicleSnapshot | None]:
         """A check for :func:`sim.net.wait_for`: the snapshot once ``predicate`` holds for it, else None."""

@@ -9,6 +9,7 @@ import numpy as np
 
 from mission.mavlink import px4
 from sim.vehicle.faults import FaultOptions
+from sim.vehicle.modes import TrajectorySetpoint
 
 FRAMES = {"quadrotor": px4.MAV_TYPE_QUADROTOR, "rover": px4.MAV_TYPE_GROUND_ROVER}
 
@@ -91,6 +92,7 @@ class VehicleSnapshot:
     home_ned_m: np.ndarray
     last_setpoint_t_s: float
     counters: dict[str, int]
+    setpoint: TrajectorySetpoint | None = None  # the last offboard setpoint accepted, as decoded
 
 
 def frozen(values: Sequence[float]) -> np.ndarray:
