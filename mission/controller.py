@@ -180,6 +180,7 @@ def _vehicle_obs(state: VehicleState, velocity_fix: PositionConsistentVelocity |
         position_valid=bool(state.position_valid and pos is not None),
         position_age_s=age,
         in_failsafe=state.system_status == px4.MAV_STATE_CRITICAL,
+        battery_pct=state.battery_pct,
     )
 
 
@@ -189,7 +190,7 @@ def _carrier_obs(received: Any, alive: bool | None) -> CarrierObs | None:
     st = received.value
     return CarrierObs(position_ned_m=np.asarray(st.position, dtype=float),
                       velocity_ned_m_s=np.asarray(st.velocity_ned_m_s, dtype=float), age_s=received.age_s, alive=alive,
-                      acceleration_ned_m_s2=st.acceleration_ned_m_s2)
+                      acceleration_ned_m_s2=st.acceleration_ned_m_s2, yaw_rad=st.yaw_rad)
 
 
 @dataclass(frozen=True)
@@ -377,13 +378,23 @@ class MissionController:
         log_dir = None
         if self.recorder is not None:
             info = {"separation_time_s": st.separation_time_s,
-                    "anchor_ned_m": None if st.anchor is None else st.anchor.tolist()}
+                    "anchor_ned_m": None if st.anchor is None else st.anchor.tolist(),
+                    "recovered": _recovered(st)}
             outcome = {"phase": st.phase, "reason": st.reason, "detail": st.detail,
                        "ticks": self.ticks, "loop_overruns": self.overruns, **self._counters(),
                        "position_rate_hz": round(float(np.median(self._rates)), 2) if self._rates else None}
             summary = self.recorder.close(outcome, info)
             log_dir = str(self.recorder.dir)
         return MissionOutcome(phase=st.phase, reason=st.reason, detail=st.detail, log_dir=log_dir, summary=summary)
+
+
+def _recovered(st: MissionState) -> dict[str, Any] | None:
+    """How the recovery went, for mission.json (None: the mission did not try one)."""
+    rec = st.recovery
+    if rec is None:
+        return None
+    return {"why": rec.why, "attempts": rec.attempts, "contact": rec.contact, "fallback": rec.fallback_why or None,
+            "started_s": rec.started_s}
 
 
 def mission_info(cfg: Config) -> dict[str, Any]:
@@ -397,5 +408,7 @@ def mission_info(cfg: Config) -> dict[str, Any]:
         "arrival_radius_m": cfg.mission.arrival_radius_m,
         "pair": cfg.zenoh.pair,
         "rate_hz": cfg.mission.rate_hz,
+        "final_action": cfg.mission.final_action,
+        "recovery": cfg.recovery.model_dump(mode="json") if cfg.mission.final_action == "return" else None,
     }
 

@@ -7,11 +7,16 @@ tracking, arrival, timeouts, the command filter) as a :class:`mission.phases.Mis
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from mission.config.schema import Config
 from mission.errors import ConfigError
+from mission.core.docking import DockingGeometry
+from mission.core.pursuit import PursuitLimits
 from mission.phases import MissionModel
+from mission.phases.types import RecoveryModel
 from mission.core.safety import SafetyConfig
 from mission.core.tick import TickModel
 from mission.core.tracking import TrackingGains
@@ -65,4 +70,30 @@ def mission_model(cfg: Config) -> MissionModel:
         carrier_dt_s=1.0 / cfg.carrier.rate_hz,
         join_settle_m=min(m.dock_tolerance_m, m.join_settle_m if m.join_settle_m is not None else m.dock_tolerance_m),
         join_settle_s=m.join_settle_s, arrival_max_speed_m_s=m.arrival_max_speed_m_s,
+        recovery=recovery_model(cfg) if m.final_action == "return" else None,
     )
+
+
+def recovery_model(cfg: Config) -> RecoveryModel:
+    """The recovery's fixed parameters from ``[recovery]`` (angles to radians; the keep-out is b c)."""
+    r = cfg.recovery
+    geometry = DockingGeometry(
+        holdoff_distance_m=r.holdoff_distance_m, glide_angle_rad=math.radians(r.glide_angle_deg),
+        cone_half_angle_rad=math.radians(r.cone_half_angle_deg), cone_min_radius_m=r.cone_min_radius_m,
+        decision_height_m=r.decision_height_m, contact_radius_m=r.contact_radius_m, contact_height_m=r.contact_height_m,
+        contact_max_horizontal_speed_m_s=r.contact_max_horizontal_speed_m_s,
+        contact_max_vertical_speed_m_s=r.contact_max_vertical_speed_m_s)
+    return RecoveryModel(
+        geometry=geometry,
+        returning=PursuitLimits(r.return_speed_m_s, r.accel_m_s2),
+        approach=PursuitLimits(r.approach_speed_m_s, r.accel_m_s2),
+        descent_speed_m_s=r.descent_speed_m_s, gate_timeout_s=r.gate_timeout_s, settle_radius_m=r.settle_radius_m, settle_speed_m_s=r.settle_speed_m_s, settle_dwell_s=r.settle_dwell_s,
+        docked_dwell_s=r.docked_dwell_s, carrier_max_age_s=r.carrier_max_age_s,
+        carrier_max_accel_m_s2=r.carrier_max_accel_m_s2,
+        carrier_max_turn_rate_rad_s=math.radians(r.carrier_max_turn_rate_deg_s), carrier_lost_s=r.carrier_lost_s,
+        max_attempts=r.max_attempts, timeout_s=r.timeout_s, fallback=r.fallback,
+        fallback_point_ned_m=None if r.fallback_point_ned_m is None else np.asarray(r.fallback_point_ned_m, dtype=float),
+        fallback_height_m=r.fallback_height_m, fallback_offset_m=r.fallback_offset_m,
+        battery_reserve_pct=r.battery_reserve_pct, docking_budget_s=r.docking_budget_s,
+        at_target_s=cfg.mission.at_target_s, deck_radius_m=r.deck_radius_m,
+        keep_out_m=cfg.law.b * cfg.law.c)

@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from mission.core.law import norm
-from mission.phases.phase import AFTER_SEPARATION, Phase
+from mission.phases.phase import AFTER_SEPARATION, FLYING, Phase
 
 VEC = ("n", "e", "d")
 COLUMNS = (
@@ -147,7 +147,10 @@ def summarise(directory: str | Path) -> dict[str, Any]:
     if have_c.any():
         out["min_carrier_target_distance_m"] = _num(norm(target - x_c[have_c]).min())
     if len(r.t):
-        out["final_passenger_target_distance_m"] = _num(norm(x_p[-1] - target))
+        # at the end of the flight, or, for a passenger that came home, at the end of its stay at the target
+        arrived = np.flatnonzero(r.phase == Phase.ARRIVED)
+        final = arrived[-1] if info.get("final_action") == "return" and len(arrived) else -1
+        out["final_passenger_target_distance_m"] = _num(norm(x_p[final] - target))
         out["max_passenger_speed_m_s"] = _nanmax(norm(v_p))
     obstacles = info.get("obstacles", [])
     if obstacles and len(r.t):
@@ -182,4 +185,44 @@ def summarise(directory: str | Path) -> dict[str, Any]:
     out["p2"] = bool((r.phase == Phase.ARRIVED).any() and out["final_passenger_target_distance_m"] is not None
                      and out["final_passenger_target_distance_m"] <= float(info.get("arrival_radius_m", 0.5)))
     out["p3"] = bool(out["min_carrier_target_distance_m"] is not None and out["min_carrier_target_distance_m"] > 0.0)
+    out["max_phase_switch_jump_m_s"] = _switch_jump(r.phase, u_cmd)
+    out.update(_recovery_summary(r, x_p, v_p, v_c, dock))
+    return out
+
+
+def _switch_jump(phase: np.ndarray, u_cmd: np.ndarray) -> float | None:
+    """The largest change [m/s] of the commanded velocity from one tick to the next where the
+    phase changed between two flying phases (None: no such switch)."""
+    flying = np.isin(phase, sorted(FLYING))
+    switch = np.flatnonzero((phase[1:] != phase[:-1]) & flying[1:] & flying[:-1]) + 1
+    jumps = norm(u_cmd[switch] - u_cmd[switch - 1]) if len(switch) else np.array([])
+    return _nanmax(jumps) if len(jumps) else None
+
+
+def _recovery_summary(r: FlightRecord, x_p: np.ndarray, v_p: np.ndarray, v_c: np.ndarray,
+                      dock: np.ndarray) -> dict[str, Any]:
+    """The recovery's figures (mission.final_action = "return"): docked_again, recovery_outcome,
+    contact (from mission.json's ``recovered``) and deck_violations: ticks of the recovery's
+    flying phases before contact where the vehicle was at or below the dock point's height within
+    the deck (recovery.deck_radius_m) without meeting the contact conditions."""
+    rec, params = r.info.get("recovered"), r.info.get("recovery")
+    if r.info.get("final_action") != "return" or params is None:
+        return {}
+    contact = None if rec is None else rec.get("contact")
+    out: dict[str, Any] = {"docked_again": contact is not None}
+    if contact is not None:
+        out["recovery_outcome"] = "docked"
+    elif rec is not None and rec.get("fallback"):
+        out["recovery_outcome"] = f"fallback: {rec['fallback']}"
+    else:
+        out["recovery_outcome"] = "not begun" if rec is None else "unfinished"
+    out["contact"] = contact
+    before = np.isin(r.phase, [Phase.RETURNING, Phase.HOLDOFF, Phase.APPROACH, Phase.GO_AROUND])
+    e, dv = x_p - dock, v_p - v_c
+    horizontal, below = np.hypot(e[:, 0], e[:, 1]), e[:, 2] >= -params["contact_height_m"]
+    out_of_contact = ((horizontal > params["contact_radius_m"])
+                      | (np.hypot(dv[:, 0], dv[:, 1]) > params["contact_max_horizontal_speed_m_s"])
+                      | (np.abs(dv[:, 2]) > params["contact_max_vertical_speed_m_s"]))
+    on_deck = before & below & (horizontal <= params["deck_radius_m"]) & out_of_contact
+    out["deck_violations"] = int(np.count_nonzero(on_deck & np.isfinite(e).all(axis=1)))
     return out

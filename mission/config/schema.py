@@ -29,6 +29,7 @@ import numpy as np
 from pydantic import Field, ValidationError, field_validator, model_validator
 
 from mission.config.carrier import CarrierMavlinkSection, CarrierRos2Section, CarrierSection
+from mission.config.recovery import RecoverySection
 from mission.config.fields import (
     COORD_LIMIT_M,
     MAX_PATH_CHARS,
@@ -243,8 +244,11 @@ class MissionSection(Section):
         "keep", description="[-] `stop`: once the preflight checks passed, ask the vehicle to stop the onboard-profile "
         "streams the mission never reads (SET_MESSAGE_INTERVAL -1 each; PX4 honours it on the link it came on), so "
         "less telemetry is sent and parsed; `keep`: leave them streaming (the tlog then has them all)")
-    final_action: Literal["hold", "land"] = Field("hold",
-        description="[-] after arrival: `hold` (PX4 Hold, armed in the air) or `land`")
+    final_action: Literal["hold", "land", "return"] = Field("hold",
+        description=("[-] after arrival: `hold` (PX4 Hold, armed in the air), `land`, or `return` to the carrier and "
+                     "dock on it ([recovery])"))
+    at_target_s: float = Field(0.0, ge=0, le=86400,
+        description="[s] with final_action = `return`: time spent at the target (the task) before coming home")
     carrier_timeout_s: float = Field(0.5, gt=0, le=10,
         description="[s] a carrier state older than this before separation aborts (carrier_lost)")
     heartbeat_timeout_s: float = Field(3.0, gt=0, le=30,
@@ -334,6 +338,7 @@ class Config(Section):
     mavlink: MavlinkSection = MavlinkSection()
     zenoh: ZenohSection = ZenohSection()
     carrier: CarrierSection = CarrierSection()
+    recovery: RecoverySection = RecoverySection()
 
     @model_validator(mode="after")
     def _assumptions(self) -> "Config":
@@ -392,6 +397,11 @@ class Config(Section):
                 raise ConfigError(name, value, f"below the altitude floor safety.z_max_m = {sf.z_max_m:g} (z {z:g}, NED)")
             if sf.z_min_m is not None and z < sf.z_min_m:
                 raise ConfigError(name, value, f"above the ceiling safety.z_min_m = {sf.z_min_m:g} (z {z:g}, NED)")
+        point = self.recovery.fallback_point_ned_m
+        if point is not None and math.dist(point[:2], s.target[:2]) <= bc:
+            raise ConfigError("recovery.fallback_point_ned_m", point,
+                              f"inside the target's keep-out ({math.dist(point[:2], s.target[:2]):.2f} m from it "
+                              f"horizontally, b*c = {bc:g} m)")
         if not 1.0 / self.carrier.rate_hz <= m.carrier_timeout_s / 2:
             raise ConfigError("carrier.rate_hz", self.carrier.rate_hz,
                               f"too slow for mission.carrier_timeout_s = {m.carrier_timeout_s:g} s "

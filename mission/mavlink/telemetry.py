@@ -70,6 +70,8 @@ class VehicleState:
     clock (:func:`vehicle_time_to_link`); earlier than ``position_rx_s`` by the transport delay and
     by however long the sample waited to be read (a stalled process reads a burst of old
     samples at once)."""
+    battery_pct: float | None = None
+    """Battery remaining [%] the vehicle reports, or None (not reported)."""
 
     @property
     def heartbeat_age_s(self) -> float:

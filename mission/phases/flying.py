@@ -169,7 +169,7 @@ def navigate(state, obs, m, events=()):
     new = replace(state, phase=phase, since_s=since, e_ref=e_ref, x_ref=x_ref, u_ref=u_ref, arrived_since_s=arrived, **tr.kept())
     dec = tr.decision(dock=dock_point(obs, m) if obs.carrier is not None else None, P=float(tick.P),
                    relative=tick.relative, desired=tick.desired, safety_acted=acted or bool(tick.safety.changed), events=tuple(evs))
-    if phase == Phase.ARRIVED:
+    if phase == Phase.ARRIVED and m.recovery is None:
         dec = replace(dec, request=Request(m.final_action))
     return new, dec
 

@@ -56,6 +56,7 @@ from mission.phases.types import (
     enter,
 )
 from mission.interfaces import Request
+from mission.phases import recovery
 from mission.phases.flying import arrived, join, navigate, riding
 
 __all__ = [
@@ -98,8 +99,15 @@ def step(state: MissionState, obs: Observation, m: MissionModel) -> tuple[Missio
     state, early = _failsafes(state, obs, m)
     if early is not None:
         return state, early
+    v = obs.vehicle
+    if state.battery_start is None and v is not None and v.battery_pct is not None:
+        state = replace(state, battery_start=(t, v.battery_pct))  # the drain rate counts from here
     handler = HANDLERS[state.phase]
-    return handler(state, obs, m)
+    state, decision = handler(state, obs, m)
+    c = obs.carrier
+    if c is not None and c.age_s <= m.carrier_timeout_s and state.phase.flying:
+        decision = replace(decision, home_ned_m=c.position_ned_m + c.velocity_ned_m_s * c.age_s)
+    return state, decision
 
 
 def _failsafes(state: MissionState, obs: Observation, m: MissionModel) -> tuple[MissionState, Decision | None]:
@@ -121,7 +129,7 @@ def _failsafes(state: MissionState, obs: Observation, m: MissionModel) -> tuple[
         new = _abort(state, t, AbortReason.VEHICLE_LOST, "no HEARTBEAT")
         return new, Decision(setpoint=None, events=("abort: vehicle heartbeat lost",))
     final_modes = (FlightMode.HOLD, FlightMode.LAND)
-    if ph in FLYING and v is not None and v.mode != FlightMode.OFFBOARD and not (ph == Phase.ARRIVED and v.mode in final_modes):
+    if ph in FLYING and v is not None and v.mode != FlightMode.OFFBOARD and not (ph in HANDING_OVER and v.mode in final_modes):
         reason = AbortReason.VEHICLE_FAILSAFE if v.in_failsafe else AbortReason.PILOT_OVERRIDE
         new = _abort(state, t, reason, f"vehicle switched to {v.mode}")
         return new, Decision(setpoint=None, events=(f"abort: vehicle left OFFBOARD ({v.mode}); not fighting it",))
@@ -248,6 +256,33 @@ def _final(state, obs, m):
     return enter(state, Phase.DONE, obs.t_s), Decision(setpoint=None, events=("mission complete",))
 
 
+#: Phases that hand the vehicle to PX4's Hold or Land: the vehicle may show those modes.
+HANDING_OVER = frozenset({Phase.ARRIVED, Phase.HOME, Phase.FALLBACK})
+
+
+def _navigating(state: MissionState, obs: Observation, m: MissionModel) -> tuple[MissionState, Decision]:
+    """SEPARATED/NAVIGATING: the paper's navigation, unless the battery calls the passenger home."""
+    if m.recovery is not None and state.phase is Phase.NAVIGATING:
+        why = recovery.battery_recall(state, obs, m)
+        if why is not None:
+            return recovery.begin(state, obs, m, why)
+    return navigate(state, obs, m)
+
+
+def _arrived(state: MissionState, obs: Observation, m: MissionModel) -> tuple[MissionState, Decision]:
+    """ARRIVED: hand over to Hold or Land; with final_action "return", hold the target for the
+    task (mission.at_target_s), or less if the battery says so, then come home."""
+    if m.recovery is None:
+        return arrived(state, obs, m)
+    if obs.t_s - state.since_s >= m.recovery.at_target_s:
+        return recovery.begin(state, obs, m, "task done")
+    why = recovery.battery_recall(state, obs, m)
+    if why is not None:
+        return recovery.begin(state, obs, m, why)
+    new, dec = navigate(state, obs, m)
+    return replace(new, phase=Phase.ARRIVED, since_s=state.since_s), dec
+
+
 def finished(state: MissionState, decision: Decision) -> bool:
     """True when the controller loop may stop: DONE, or ABORT with nothing left to send."""
     if state.phase == Phase.DONE:
@@ -262,9 +297,16 @@ HANDLERS = {
     Phase.OFFBOARD: _offboard,
     Phase.JOIN: join,
     Phase.RIDING: riding,
-    Phase.SEPARATED: navigate,
-    Phase.NAVIGATING: navigate,
-    Phase.ARRIVED: arrived,
+    Phase.SEPARATED: _navigating,
+    Phase.NAVIGATING: _navigating,
+    Phase.ARRIVED: _arrived,
+    Phase.RETURNING: recovery.returning,
+    Phase.HOLDOFF: recovery.holdoff,
+    Phase.APPROACH: recovery.approach,
+    Phase.GO_AROUND: recovery.go_around_phase,
+    Phase.DOCKED: recovery.docked,
+    Phase.HOME: recovery.home,
+    Phase.FALLBACK: recovery.fallback_phase,
     Phase.HOLD: _final,
     Phase.LAND: _final,
 }

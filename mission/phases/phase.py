@@ -17,6 +17,8 @@ class Duty(StrEnum):
     WAIT = "wait"  # the passenger is not riding yet: stand still
     CARRY = "carry"  # the passenger rides: drive towards the target (u_c = k_c e_tc)
     RELEASED = "released"  # the passenger has left: stop, or keep its own plan (the paper's Remark 1)
+    RECOVER = "recover"  # the passenger comes home: hold a steady recovery course
+    PARK = "park"  # the passenger is home for good: stop and stay
     STOP = "stop"  # the passenger aborted: stop
 
 
@@ -55,6 +57,13 @@ class Phase(StrEnum):
     SEPARATED = ("SEPARATED", True, True, Duty.RELEASED, False)
     NAVIGATING = ("NAVIGATING", True, True, Duty.RELEASED, False)
     ARRIVED = ("ARRIVED", True, True, Duty.RELEASED, False)
+    RETURNING = ("RETURNING", True, True, Duty.RECOVER, False)
+    HOLDOFF = ("HOLDOFF", True, True, Duty.RECOVER, False)
+    APPROACH = ("APPROACH", True, True, Duty.RECOVER, False)
+    GO_AROUND = ("GO_AROUND", True, True, Duty.RECOVER, False)
+    DOCKED = ("DOCKED", True, True, Duty.RECOVER, False)
+    HOME = ("HOME", True, True, Duty.PARK, False)
+    FALLBACK = ("FALLBACK", True, True, Duty.RELEASED, False)
     HOLD = ("HOLD", False, True, Duty.RELEASED, False)
     LAND = ("LAND", False, True, Duty.RELEASED, False)
     DONE = ("DONE", False, True, Duty.RELEASED, False)
@@ -67,3 +76,5 @@ FLYING = frozenset(p for p in Phase if p.flying)
 BEFORE_SEPARATION = frozenset(p for p in Phase if not p.separated and p is not Phase.ABORT)
 #: Phases after the separation latch fired.
 AFTER_SEPARATION = frozenset(p for p in Phase if p.separated)
+#: The phases that bring the passenger home to the carrier (mission.final_action = "return").
+RECOVERY = frozenset({Phase.RETURNING, Phase.HOLDOFF, Phase.APPROACH, Phase.GO_AROUND, Phase.DOCKED})

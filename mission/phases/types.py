@@ -16,6 +16,8 @@ import numpy as np
 from mission.phases.phase import Phase
 from mission.interfaces import Request
 from mission.core.safety import SafetyConfig
+from mission.core.docking import DockingGeometry
+from mission.core.pursuit import PursuitLimits
 from mission.core.setpoint import Setpoint
 from mission.core.tick import TickModel
 from mission.core.tracking import TrackingGains
@@ -52,6 +54,7 @@ class VehicleObs:
     position_valid: bool = True
     position_age_s: float = 0.0
     in_failsafe: bool = False  # HEARTBEAT system_status CRITICAL: PX4 runs one of its failsafes
+    battery_pct: float | None = None  # battery remaining [%] as the vehicle reports it (None: not reported)
 
 
 @dataclass(frozen=True)
@@ -64,6 +67,7 @@ class CarrierObs:
     age_s: float
     alive: bool | None = True
     acceleration_ned_m_s2: np.ndarray | None = None
+    yaw_rad: float | None = None  # [rad] its heading, if it sent one
 
 
 @dataclass(frozen=True)
@@ -102,6 +106,75 @@ class MissionModel:
     join_settle_s: float = 0.0  # ... for this long [s]
     arrival_max_speed_m_s: float | None = None  # arrival also needs the vehicle this slow [m/s]
     carrier_dt_s: float = 1.0 / 30.0  # the carrier's control period [s] (its acceleration over one step)
+    recovery: RecoveryModel | None = None  # with final_action "return"
+
+
+@dataclass(frozen=True)
+class RecoveryModel:
+    """How the passenger comes home (``mission.final_action = "return"``; docs/recovery.md).
+
+    geometry: holdoff, glide path, gate, cone, contact; ``returning``/``approach``: the reference's
+    limits relative to the carrier [m/s], [m/s^2]; the final descent's speed [m/s] and how long
+    [s] the vehicle may take to line up at the gate; settle radius [m] / speed [m/s] / dwell [s]
+    (HOLDOFF -> APPROACH); carrier limits on the approach: state age [s], acceleration [m/s^2],
+    turn rate [rad/s]; ``carrier_lost_s`` [s] without a fresh state: fall back; attempts and
+    timeout [s]; fallback "hold" (at ``fallback_height_m`` [m] above the dock,
+    ``fallback_offset_m`` [m] off the carrier's path) or "land" (at ``fallback_point_ned_m``);
+    battery reserve [%] and the flight time [s] allowed for docking; ``at_target_s`` [s] of task;
+    ``keep_out_m`` [m]: the target's keep-out (b c) that no recovery point may lie in."""
+
+    geometry: DockingGeometry
+    returning: PursuitLimits
+    approach: PursuitLimits
+    descent_speed_m_s: float
+    gate_timeout_s: float
+    settle_radius_m: float
+    settle_speed_m_s: float
+    settle_dwell_s: float
+    docked_dwell_s: float
+    carrier_max_age_s: float
+    carrier_max_accel_m_s2: float
+    carrier_max_turn_rate_rad_s: float
+    carrier_lost_s: float
+    max_attempts: int
+    timeout_s: float
+    fallback: str  # "hold" | "land"
+    fallback_point_ned_m: np.ndarray | None
+    fallback_height_m: float
+    fallback_offset_m: float
+    battery_reserve_pct: float
+    docking_budget_s: float
+    at_target_s: float
+    deck_radius_m: float
+    keep_out_m: float
+
+
+@dataclass(frozen=True)
+class RecoveryState:
+    """What the recovery remembers (frozen; phases return a new one).
+
+    started_s [s] on the mission clock; why it began ("task done" | "battery"); approaches begun;
+    course: the carrier's course (horizontal unit vector NED); ``s``: progress on the glide path
+    [0, 1], then ``descent`` on the vertical descent from the gate; ``climb_to`` [m]: a go-around's climb goal relative to the dock point (None: climbed);
+    the carrier's last velocity [m/s] and its time [s] (its acceleration and turn rate); the last
+    time a fresh carrier state was seen [s]; since when the vehicle has settled or held contact [s];
+    the contact figures at docking; the fallback's reason and goal [m]; the battery when the flight
+    began (t [s], remaining [%]): its drain rate."""
+
+    started_s: float
+    why: str
+    attempts: int = 0
+    course: np.ndarray = field(default_factory=lambda: np.array([1.0, 0.0, 0.0]))
+    s: float = 0.0
+    descent: float | None = None  # progress [0, 1] of the vertical descent from the gate (None: not begun)
+    climb_to: np.ndarray | None = None
+    carrier_v: np.ndarray | None = None
+    carrier_t_s: float | None = None
+    carrier_seen_s: float | None = None
+    settled_since_s: float | None = None
+    contact: dict[str, float] | None = None
+    fallback_why: str = ""
+    fallback_goal: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -123,6 +196,8 @@ class MissionState:
     u_cmd: np.ndarray | None = None
     integral: np.ndarray | None = None  # tracking integral (mission.core.tracking)
     settled_since_s: float | None = None  # JOIN: since when the vehicle has been on the dock point
+    recovery: RecoveryState | None = None  # bringing the passenger home (RECOVERY phases, FALLBACK, HOME)
+    battery_start: tuple[float, float] | None = None  # (t [s], remaining [%]) at the first battery reading
 
 
 @dataclass(frozen=True)
@@ -140,6 +215,7 @@ class Decision:
     desired: np.ndarray | None = None
     safety_acted: bool = False
     events: tuple[str, ...] = ()
+    home_ned_m: np.ndarray | None = None  # [m] NED: where PX4's home should be now (the dock point), or None
 
 
 ZERO = np.zeros(3)

@@ -24,6 +24,10 @@ from mission.errors import CommandRejected
 from mission.mavlink.link import VehicleState
 from mission.mavlink.session import LinkCounters
 from mission.bus.wire import CarrierState, GeoOrigin, PassengerStatus
+from mission.phases.phase import Duty
+
+
+POSITION_GAIN_PER_S = 0.95  # PX4's MPC_XY_P: the fake's position loop on full setpoints [1/s]
 
 
 @dataclass
@@ -46,6 +50,9 @@ class FakeWorld:
     statuses: list[PassengerStatus] = field(default_factory=list)
     origin_given: GeoOrigin | None = None
     intervals: list[tuple[int, float]] = field(default_factory=list)  # SET_MESSAGE_INTERVAL asked (id, Hz)
+    recovery_velocity_ned_m_s: np.ndarray = field(default_factory=lambda: np.zeros(3))  # the carrier's recovery course
+    battery_pct: float | None = None  # remaining at t = 0 [%] (None: not reported) ...
+    drain_pct_s: float = 0.0  # ... falling this fast while armed [%/s]
 
     def __post_init__(self) -> None:
         self._v_p = np.zeros(3)
@@ -74,14 +81,21 @@ class FakeWorld:
             velocity_ned_m_s=self._v_p.copy(), position_rx_s=beat, heartbeat_rx_s=beat, armed=self.armed,
             mode=self.mode, custom_mode=px4.custom_mode_of(self.mode), base_mode=px4.base_mode_of(self.mode, self.armed),
             system_status=px4.MAV_STATE_ACTIVE if self.armed else px4.MAV_STATE_STANDBY, landed_state=None,
-            position_valid=True, origin=None, last_statustext="")
+            position_valid=True, origin=None, last_statustext="", battery_pct=self._battery(now))
+
+    def _battery(self, now: float) -> float | None:
+        if self.battery_pct is None:
+            return None
+        return max(self.battery_pct - self.drain_pct_s * now, 0.0)
 
     def send(self, setpoint: Setpoint) -> None:
-        """The vehicle flies the setpoint's velocity while in OFFBOARD (the fake has no position
-        loop, so a full setpoint flies its velocity too)."""
+        """The vehicle flies the setpoint's velocity while in OFFBOARD; a full setpoint adds a
+        position loop as PX4's (``POSITION_GAIN_PER_S`` x the position error)."""
         now = self._advance()
         velocity = np.array(setpoint.velocity_ned_m_s, dtype=float)
         self.setpoints.append((now, velocity))
+        if setpoint.position_ned_m is not None:
+            velocity = velocity + POSITION_GAIN_PER_S * (setpoint.position_ned_m - self.vehicle_ned_m)
         self._v_p = velocity.copy() if self.mode == "OFFBOARD" else np.zeros(3)
 
     def set_message_interval(self, message_id: int, rate_hz: float) -> None:
@@ -150,10 +164,13 @@ class FakeWorld:
     def publish(self, status: PassengerStatus) -> None:
         self._advance()
         self.statuses.append(status)
-        if status.phase == "RIDING" and self.clock.now() <= self.carrier_until_s:
+        live = self.clock.now() <= self.carrier_until_s
+        if status.phase.duty is Duty.CARRY and live:
             e = np.asarray(self.target_ned_m, dtype=float) - self.carrier_ned_m
             e[2] = 0.0
             self._v_c = e / float(np.linalg.norm(e)) * self.carrier_speed_m_s
+        elif status.phase.duty is Duty.RECOVER and live:
+            self._v_c = np.asarray(self.recovery_velocity_ned_m_s, dtype=float)
         else:
             self._v_c = np.zeros(3)
 

@@ -1,0 +1,96 @@
+"""``[recovery]``: bringing the passenger home to the moving carrier (``mission.final_action =
+"return"``): the return, the holdoff, the approach on the glide path, go-arounds, the fallback and
+the battery's say. Part of the schema in :mod:`mission.config.schema`; the phases are described in
+docs/recovery.md.
+"""
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import Field, model_validator
+
+from mission.config.fields import Coord, Section
+from mission.errors import ConfigError
+
+
+class RecoverySection(Section):
+    """How the passenger comes home (used only with ``mission.final_action = "return"``)."""
+
+    return_speed_m_s: float = Field(2.0, gt=0, le=20,
+        description="[m/s] top speed of the recovery's reference relative to the carrier (returning, going around)")
+    approach_speed_m_s: float = Field(0.6, gt=0, le=5,
+        description="[m/s] speed along the glide path relative to the carrier")
+    accel_m_s2: float = Field(1.5, gt=0, le=10,
+        description=("[m/s^2] acceleration limit of the recovery's reference: a phase switch changes the commanded "
+                     "velocity by at most this times the tick"))
+    holdoff_distance_m: float = Field(4.0, gt=0, le=100,
+        description="[m] the holdoff point sits this far behind the final gate along the carrier's course")
+    glide_angle_deg: float = Field(25.0, gt=0, lt=90,
+        description=("[deg] descent angle of the glide path from the holdoff point onto the final gate, "
+                     "decision_height_m above the dock point"))
+    descent_speed_m_s: float = Field(0.3, gt=0, le=2,
+        description="[m/s] speed of the final, vertical descent from the gate onto the dock point, relative to the carrier")
+    gate_timeout_s: float = Field(5.0, gt=0, le=60,
+        description="[s] at the gate, the vehicle has this long to line up over the dock point, else it goes around")
+    deck_radius_m: float = Field(0.5, gt=0, le=20,
+        description="[m] radius of the carrier's deck round the dock point (touching it outside contact is a violation)")
+    settle_radius_m: float = Field(0.3, gt=0, le=10,
+        description="[m] HOLDOFF -> APPROACH once the vehicle is this close to the holdoff point ...")
+    settle_speed_m_s: float = Field(0.25, gt=0, le=5,
+        description="[m/s] ... and its velocity this close to the carrier's ...")
+    settle_dwell_s: float = Field(1.0, ge=0, le=60, description="[s] ... for this long")
+    cone_half_angle_deg: float = Field(20.0, gt=0, lt=90,
+        description="[deg] half angle of the cone round the glide path (apex at the dock point); outside it: go around")
+    cone_min_radius_m: float = Field(0.3, gt=0, le=10, description="[m] the cone's radius at the dock point")
+    decision_height_m: float = Field(0.6, gt=0, le=10,
+        description=("[m] height above the dock point of the final gate: the vehicle descends below it only lined up "
+                     "(the horizontal contact conditions), else it goes around"))
+    contact_radius_m: float = Field(0.15, gt=0, le=5,
+        description="[m] contact: horizontal distance from the dock point at most this")
+    contact_height_m: float = Field(0.1, gt=0, le=5,
+        description="[m] contact: vertical distance from the dock point at most this")
+    contact_max_horizontal_speed_m_s: float = Field(0.2, gt=0, le=5,
+        description="[m/s] contact: horizontal speed relative to the carrier at most this")
+    contact_max_vertical_speed_m_s: float = Field(0.5, gt=0, le=5,
+        description="[m/s] contact: vertical speed relative to the carrier at most this")
+    docked_dwell_s: float = Field(1.0, ge=0, le=60, description="[s] contact held this long counts as docked")
+    carrier_max_age_s: float = Field(0.3, gt=0, le=10,
+        description="[s] on the approach, a carrier state older than this: go around")
+    carrier_max_accel_m_s2: float = Field(1.5, gt=0, le=50,
+        description="[m/s^2] on the approach, the carrier accelerating harder than this: go around")
+    carrier_max_turn_rate_deg_s: float = Field(20.0, gt=0, le=360,
+        description="[deg/s] on the approach, the carrier's course turning faster than this: go around")
+    carrier_lost_s: float = Field(3.0, gt=0, le=60,
+        description="[s] no fresh carrier state for this long during the recovery: fall back")
+    max_attempts: int = Field(3, ge=1, le=20, description="[-] approaches before falling back")
+    timeout_s: float = Field(180.0, gt=0, le=3600, description="[s] a recovery not docked this long after it began: fall back")
+    fallback: Literal["hold", "land"] = Field("hold",
+        description=("[-] when the recovery gives up: `hold` at fallback_height_m, fallback_offset_m off the carrier's "
+                     "path, or `land` at fallback_point_ned_m"))
+    fallback_point_ned_m: list[Coord] | None = Field(None,
+        description="[m] NED point to land at with fallback = `land` (outside the target's b c keep-out)")
+    fallback_height_m: float = Field(5.0, gt=0, le=500,
+        description="[m] height above the dock point at which the fallback holds (or flies to its landing point)")
+    fallback_offset_m: float = Field(6.0, ge=0, le=1000,
+        description="[m] the `hold` fallback moves this far off the carrier's path, sideways to its course")
+    battery_reserve_pct: float = Field(25.0, ge=0, le=100,
+        description=("[%] the passenger is recalled when the battery left, less what returning and docking would use, "
+                     "falls to this"))
+    docking_budget_s: float = Field(30.0, ge=0, le=600,
+        description="[s] flight time the battery rule allows for the holdoff, the approach and one go-around")
+
+    @model_validator(mode="after")
+    def _geometry(self) -> RecoverySection:
+        if not self.holdoff_distance_m > self.deck_radius_m + self.cone_min_radius_m:
+            raise ConfigError("recovery.holdoff_distance_m", self.holdoff_distance_m,
+                              f"inside the deck: must exceed recovery.deck_radius_m + recovery.cone_min_radius_m "
+                              f"= {self.deck_radius_m + self.cone_min_radius_m:g} m")
+        if not self.contact_radius_m <= self.deck_radius_m:
+            raise ConfigError("recovery.contact_radius_m", self.contact_radius_m,
+                              f"larger than the deck (recovery.deck_radius_m = {self.deck_radius_m:g} m)")
+        if self.fallback == "land" and self.fallback_point_ned_m is None:
+            raise ConfigError("recovery.fallback_point_ned_m", None, "required with recovery.fallback = \"land\"")
+        if self.fallback_point_ned_m is not None and len(self.fallback_point_ned_m) != 3:
+            raise ConfigError("recovery.fallback_point_ned_m", self.fallback_point_ned_m, "must have 3 components (NED)")
+        return self
+

@@ -1,0 +1,397 @@
+"""The phases that bring the passenger home (pure): RETURNING, HOLDOFF, APPROACH, GO_AROUND,
+DOCKED, HOME and FALLBACK (``mission.final_action = "return"``).
+
+::
+
+    ARRIVED    --task done (mission.at_target_s), or the battery rule-----------------> RETURNING
+    NAVIGATING --the battery rule (energy home + reserve > what is left)--------------> RETURNING
+    RETURNING  --reference on the holdoff point, moving with the carrier--------------> HOLDOFF
+    HOLDOFF    --vehicle within settle radius/speed of the holdoff point for the dwell--> APPROACH
+               (attempts used up: FALLBACK)
+    APPROACH   --glide path flown, vehicle meets the contact conditions---------------> DOCKED
+               --outside the cone; carrier state late; carrier accelerating or turning
+                 beyond its limits; below the decision height not lined up------------> GO_AROUND
+    GO_AROUND  --climbed to the holdoff height------------------------------------------> HOLDOFF
+    DOCKED     --contact held for the dwell--------------------------------------------> HOME
+               --contact lost (beyond the dock tolerance)----------------------------------> GO_AROUND
+    HOME       --the carrier has parked (slower than 0.1 m/s for the dwell)-------------> Hold -> HOLD
+    any recovery phase --recovery.timeout_s, or no fresh carrier state for
+                 recovery.carrier_lost_s---------------------------------------------------> FALLBACK
+    FALLBACK   --at its point (off the carrier's path, or the landing point)------------> Hold | Land
+
+Every reference here comes from :func:`mission.core.pursuit.pursue` (a goal chased with bounded
+relative speed and acceleration) and then the reference-level safety filter, so no phase switch
+makes the commanded velocity jump by more than ``recovery.accel_m_s2 * dt``. Geometry:
+:mod:`mission.core.docking`. Frames: local NED [m], [m/s]; times [s] on the controller's clock.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+
+from mission.core.docking import (
+    cone_radius_m,
+    contact,
+    course,
+    gate_point,
+    glide_point,
+    holdoff_point,
+    path_length_m,
+)
+from mission.core.law import norm
+from mission.core.pursuit import PursuitLimits, pursue
+from mission.core.safety import filter_velocity
+from mission.flight_mode import FlightMode
+from mission.interfaces import Request
+from mission.phases.flying import _track
+from mission.phases.phase import Phase
+from mission.phases.types import (
+    Decision,
+    MissionModel,
+    MissionState,
+    Observation,
+    RecoveryModel,
+    RecoveryState,
+    dock_point,
+    enter,
+)
+
+PARKED_SPEED_M_S = 0.1  # [m/s] the carrier counts as parked below this
+REFERENCE_AT_GOAL_M = 0.2  # [m] a reference this close to its goal has reached it
+CARRIER_RATE_WINDOW_S = 0.25  # [s] the carrier's acceleration and turn rate are measured over this
+
+
+def _model(m: MissionModel) -> RecoveryModel:
+    assert m.recovery is not None  # these phases exist only with final_action "return"
+    return m.recovery
+
+
+def begin(state: MissionState, obs: Observation, m: MissionModel, why: str) -> tuple[MissionState, Decision]:
+    """Start the recovery (from NAVIGATING or ARRIVED): the reference goes on from where it is."""
+    t = obs.t_s
+    c = obs.carrier
+    away = np.zeros(3)
+    if c is not None:
+        away = c.position_ned_m - m.tick.target
+        away[2] = 0.0
+    first = away / float(norm(away)) if float(norm(away)) > 1e-6 else np.array([1.0, 0.0, 0.0])
+    if c is not None and c.yaw_rad is not None:
+        first = np.array([math.cos(c.yaw_rad), math.sin(c.yaw_rad), 0.0])
+    rec = RecoveryState(started_s=t, why=why, course=first, carrier_seen_s=t if c is not None else None)
+    new = enter(state, Phase.RETURNING, t, recovery=rec, u_ref=state.u_ref if state.u_ref is not None else np.zeros(3))
+    return returning(new, obs, m, events=(f"returning to the carrier ({why})",))
+
+
+def _carrier_fresh(obs: Observation, limit_s: float) -> bool:
+    c = obs.carrier
+    return c is not None and c.age_s <= limit_s and c.alive is not False
+
+
+def _fly(state: MissionState, obs: Observation, m: MissionModel, goal_x: np.ndarray, goal_v: np.ndarray,
+         limits: PursuitLimits, rec: RecoveryState, events: tuple[str, ...] = (),
+         request: Request | None = None) -> tuple[MissionState, Decision]:
+    """One tick towards a goal: pursue it, pass the reference through the reference's safety filter
+    (obstacles, floor, the passenger's limits), track the reference; the state keeps ``rec``."""
+    assert state.x_ref is not None and state.u_ref is not None
+    _, u_next = pursue(state.x_ref, state.u_ref, goal_x, goal_v, limits, m.dt_s)
+    safe = filter_velocity(state.x_ref, u_next, m.tick.obstacles, m.tick.passenger_safety, state.u_ref, m.dt_s)
+    u_ref = np.asarray(safe.u, dtype=float)
+    x_ref = state.x_ref + u_ref * m.dt_s
+    a_ref = (u_ref - state.u_ref) / m.dt_s
+    tr = _track(state, obs, m, x_ref, u_ref, a_ref)
+    dock = dock_point(obs, m) if obs.carrier is not None else None
+    kept = tr.kept()
+    new = replace(state, x_ref=x_ref, u_ref=u_ref, recovery=rec, u_cmd=kept["u_cmd"], integral=kept["integral"])
+    return new, tr.decision(dock=dock, desired=u_ref, safety_acted=tr.acted or bool(safe.changed), events=events,
+                            request=request)
+
+
+def _observe_carrier(rec: RecoveryState, obs: Observation, r: RecoveryModel, t: float) -> RecoveryState:
+    """The recovery's view of the carrier updated: course, last fresh time, velocity history."""
+    c = obs.carrier
+    if c is None:
+        return rec
+    rec = replace(rec, course=course(c.velocity_ned_m_s, rec.course))
+    if _carrier_fresh(obs, r.carrier_max_age_s):
+        rec = replace(rec, carrier_seen_s=t)
+    if rec.carrier_t_s is None or t - rec.carrier_t_s >= CARRIER_RATE_WINDOW_S:
+        rec = replace(rec, carrier_v=np.array(c.velocity_ned_m_s, dtype=float), carrier_t_s=t)
+    return rec
+
+
+def _carrier_unsteady(rec: RecoveryState, obs: Observation, r: RecoveryModel, t: float) -> str | None:
+    """Why the carrier is not steady enough to land on (None: it is): accelerating or turning
+    beyond the recovery's limits, measured over :data:`CARRIER_RATE_WINDOW_S`."""
+    c = obs.carrier
+    if c is None or rec.carrier_v is None or rec.carrier_t_s is None:
+        return None
+    if c.acceleration_ned_m_s2 is not None:
+        accel = float(norm(np.asarray(c.acceleration_ned_m_s2)[:2]))
+    else:
+        dt = t - rec.carrier_t_s
+        accel = float(norm((c.velocity_ned_m_s - rec.carrier_v)[:2])) / dt if dt >= CARRIER_RATE_WINDOW_S / 2 else 0.0
+    if accel > r.carrier_max_accel_m_s2:
+        return f"the carrier accelerates at {accel:.2f} m/s^2 (limit {r.carrier_max_accel_m_s2:g})"
+    v0, v1 = rec.carrier_v[:2], np.asarray(c.velocity_ned_m_s)[:2]
+    dt = t - rec.carrier_t_s
+    if float(norm(v0)) >= 0.3 and float(norm(v1)) >= 0.3 and dt >= CARRIER_RATE_WINDOW_S / 2:
+        turn = abs(math.remainder(math.atan2(v1[1], v1[0]) - math.atan2(v0[1], v0[0]), 2 * math.pi)) / dt
+        if turn > r.carrier_max_turn_rate_rad_s:
+            return f"the carrier turns at {math.degrees(turn):.1f} deg/s (limit {math.degrees(r.carrier_max_turn_rate_rad_s):g})"
+    return None
+
+
+def _give_up(state: MissionState, obs: Observation, m: MissionModel, rec: RecoveryState) -> str | None:
+    """Why the recovery must fall back now (None: it goes on)."""
+    r, t = _model(m), obs.t_s
+    if t - rec.started_s > r.timeout_s:
+        return f"not docked within recovery.timeout_s = {r.timeout_s:g} s"
+    seen = rec.carrier_seen_s if rec.carrier_seen_s is not None else rec.started_s
+    if obs.carrier is None or t - seen > r.carrier_lost_s:
+        return f"no fresh carrier state for {t - seen:.1f} s"
+    return None
+
+
+def fallback(state: MissionState, obs: Observation, m: MissionModel, why: str,
+             events: tuple[str, ...] = ()) -> tuple[MissionState, Decision]:
+    """Enter FALLBACK: its goal is ``recovery.fallback_point_ned_m`` (land) or a point
+    ``fallback_offset_m`` sideways off the carrier's path (hold), at ``fallback_height_m`` above the
+    dock's height, pushed out of the target's keep-out."""
+    r, t = _model(m), obs.t_s
+    rec = state.recovery
+    assert rec is not None and obs.vehicle is not None
+    dock_z = (dock_point(obs, m)[2] if obs.carrier is not None else obs.vehicle.position_ned_m[2])
+    if r.fallback == "land" and r.fallback_point_ned_m is not None:
+        goal = np.array([r.fallback_point_ned_m[0], r.fallback_point_ned_m[1], dock_z - r.fallback_height_m])
+    else:
+        x_p = obs.vehicle.position_ned_m
+        side = np.array([-rec.course[1], rec.course[0], 0.0])
+        if obs.carrier is not None and float(np.dot(x_p - obs.carrier.position_ned_m, side)) < 0:
+            side = -side
+        goal = np.array([x_p[0], x_p[1], dock_z - r.fallback_height_m]) + r.fallback_offset_m * side
+    off = goal - m.tick.target
+    off[2] = 0.0
+    if float(norm(off)) < r.keep_out_m:  # never inside the target's keep-out
+        unit = off / float(norm(off)) if float(norm(off)) > 1e-6 else np.array([1.0, 0.0, 0.0])
+        goal[:2] = m.tick.target[:2] + unit[:2] * r.keep_out_m
+    rec = replace(rec, fallback_why=why, fallback_goal=goal)
+    new = enter(state, Phase.FALLBACK, t, recovery=rec)
+    return fallback_phase(new, obs, m, events=(*events, f"recovery falls back: {why}"))
+
+
+def fallback_phase(state, obs, m, events=()):
+    """Fly to the fallback's point, then hand the vehicle to PX4's Hold or Land there."""
+    r = _model(m)
+    rec = state.recovery
+    assert rec is not None and rec.fallback_goal is not None
+    v = obs.vehicle
+    want = Request.LAND if r.fallback == "land" else Request.HOLD
+    mode = FlightMode.LAND if want is Request.LAND else FlightMode.HOLD
+    if v.mode == mode:
+        return enter(state, Phase.LAND if want is Request.LAND else Phase.HOLD, obs.t_s), Decision(
+            setpoint=None, events=(*events, f"vehicle in {mode}"))
+    there = float(norm(v.position_ned_m - rec.fallback_goal)) <= 0.5 and float(norm(v.velocity_ned_m_s)) <= 0.3
+    return _fly(state, obs, m, rec.fallback_goal, np.zeros(3), r.returning, rec, events,
+                request=want if there else None)
+
+
+def returning(state, obs, m, events=()):
+    """Chase the holdoff point (behind and above the dock point, moving with the carrier)."""
+    r, t = _model(m), obs.t_s
+    rec = _observe_carrier(state.recovery, obs, r, t)
+    why = _give_up(state, obs, m, rec)
+    if why is not None:
+        return fallback(replace(state, recovery=rec), obs, m, why, events)
+    dock = dock_point(obs, m)
+    h = holdoff_point(dock, rec.course, r.geometry)
+    v_c = obs.carrier.velocity_ned_m_s
+    evs = tuple(events)
+    if float(norm(state.x_ref - h)) <= REFERENCE_AT_GOAL_M and float(norm(state.u_ref - v_c)) <= r.settle_speed_m_s:
+        state = enter(state, Phase.HOLDOFF, t)
+        rec = replace(rec, settled_since_s=None)
+        evs += ("at the holdoff point",)
+    return _fly(state, obs, m, h, v_c, r.returning, rec, evs)
+
+
+def holdoff(state, obs, m, events=()):
+    """Hold the holdoff point with the carrier's velocity until the vehicle has settled on it."""
+    r, t = _model(m), obs.t_s
+    rec = _observe_carrier(state.recovery, obs, r, t)
+    why = _give_up(state, obs, m, rec)
+    if why is not None:
+        return fallback(replace(state, recovery=rec), obs, m, why, events)
+    dock = dock_point(obs, m)
+    h = holdoff_point(dock, rec.course, r.geometry)
+    v_c = obs.carrier.velocity_ned_m_s
+    v = obs.vehicle
+    settled = (float(norm(v.position_ned_m - h)) <= r.settle_radius_m
+               and float(norm(v.velocity_ned_m_s - v_c)) <= r.settle_speed_m_s
+               and _carrier_fresh(obs, r.carrier_max_age_s) and _carrier_unsteady(rec, obs, r, t) is None)
+    since = (rec.settled_since_s if rec.settled_since_s is not None else t) if settled else None
+    rec = replace(rec, settled_since_s=since)
+    evs = tuple(events)
+    if since is not None and t - since >= r.settle_dwell_s:
+        if rec.attempts >= r.max_attempts:
+            return fallback(replace(state, recovery=rec), obs, m, f"{rec.attempts} approaches without docking", events)
+        rec = replace(rec, attempts=rec.attempts + 1, s=0.0, descent=None, settled_since_s=None)
+        state = enter(state, Phase.APPROACH, t)
+        evs += (f"approach {rec.attempts} begins",)
+    return _fly(state, obs, m, h, v_c, r.returning, rec, evs)
+
+
+def go_around(state, obs, m, why: str, events=()):
+    """Enter GO_AROUND: climb to the holdoff height where the vehicle is (relative to the dock
+    point), then back to the holdoff point."""
+    r = _model(m)
+    rec = state.recovery
+    assert rec is not None
+    dock = dock_point(obs, m)
+    rel = obs.vehicle.position_ned_m - dock
+    climb = np.array([rel[0], rel[1], -r.geometry.holdoff_height_m])
+    rec = replace(rec, climb_to=climb, settled_since_s=None, descent=None)
+    new = enter(state, Phase.GO_AROUND, obs.t_s, recovery=rec)
+    v_c = obs.carrier.velocity_ned_m_s if obs.carrier is not None else np.zeros(3)
+    return _fly(new, obs, m, dock + climb, v_c, r.returning, rec, (*events, f"go-around: {why}"))
+
+
+def go_around_phase(state, obs, m, events=()):
+    r, t = _model(m), obs.t_s
+    rec = _observe_carrier(state.recovery, obs, r, t)
+    why = _give_up(state, obs, m, rec)
+    if why is not None:
+        return fallback(replace(state, recovery=rec), obs, m, why, events)
+    dock = dock_point(obs, m)
+    v_c = obs.carrier.velocity_ned_m_s
+    assert rec.climb_to is not None
+    goal = dock + rec.climb_to
+    if float(norm(state.x_ref - goal)) <= REFERENCE_AT_GOAL_M:
+        return holdoff(enter(state, Phase.HOLDOFF, t, recovery=replace(rec, climb_to=None)), obs, m,
+                       events=(*events, "climbed: back to the holdoff point"))
+    return _fly(state, obs, m, goal, v_c, r.returning, rec, events)
+
+
+def approach(state, obs, m, events=()):
+    """Fly the glide path onto the gate with the carrier's motion fed forward, wait there until the
+    vehicle is lined up over the dock point, then descend vertically onto it."""
+    r, t = _model(m), obs.t_s
+    rec = _observe_carrier(state.recovery, obs, r, t)
+    why = _give_up(state, obs, m, rec)
+    if why is not None:
+        return fallback(replace(state, recovery=rec), obs, m, why, events)
+    state = replace(state, recovery=rec)
+    if not _carrier_fresh(obs, r.carrier_max_age_s):
+        return go_around(state, obs, m, f"carrier state {obs.carrier.age_s:.2f} s old "
+                         f"(recovery.carrier_max_age_s = {r.carrier_max_age_s:g})", events)
+    unsteady = _carrier_unsteady(rec, obs, r, t)
+    if unsteady is not None:
+        return go_around(state, obs, m, unsteady, events)
+    g = r.geometry
+    dock = dock_point(obs, m)
+    gate = gate_point(dock, g)
+    v_c = obs.carrier.velocity_ned_m_s
+    v = obs.vehicle
+    here = contact(v.position_ned_m, v.velocity_ned_m_s, dock, v_c)
+    if rec.descent is None:  # on the glide path, or waiting at the gate
+        ref_point = glide_point(dock, rec.course, rec.s, g)
+        off = float(norm(v.position_ned_m - ref_point))
+        if off > cone_radius_m(ref_point, dock, g):
+            return go_around(state, obs, m, f"{off:.2f} m off the glide path "
+                             f"(cone {cone_radius_m(ref_point, dock, g):.2f} m)", events)
+        length = path_length_m(g)
+        s = min(1.0, rec.s + r.approach.speed_m_s * m.dt_s / length)
+        goal = glide_point(dock, rec.course, s, g)
+        along = (gate - holdoff_point(dock, rec.course, g)) / length
+        goal_v = v_c + (along * r.approach.speed_m_s if s < 1.0 else 0.0)
+        rec = replace(rec, s=s)
+        if s >= 1.0:
+            at_gate = rec.settled_since_s if rec.settled_since_s is not None else t
+            rec = replace(rec, settled_since_s=at_gate)
+            lined_up = here.horizontally_within(g) and float(norm(state.x_ref - gate)) <= REFERENCE_AT_GOAL_M
+            if lined_up:
+                rec = replace(rec, descent=0.0, settled_since_s=None)
+                events = (*events, "lined up over the deck: descending")
+            elif t - at_gate > r.gate_timeout_s:
+                return go_around(state, obs, m, f"not lined up over the deck within {r.gate_timeout_s:g} s "
+                                 f"({here.horizontal_error_m:.2f} m, {here.horizontal_relative_speed_m_s:.2f} m/s)", events)
+        return _fly(state, obs, m, goal, goal_v, r.approach, rec, events)
+    if not here.horizontally_within(g):
+        return go_around(state, obs, m, f"off the deck on the descent ({here.horizontal_error_m:.2f} m, "
+                         f"{here.horizontal_relative_speed_m_s:.2f} m/s)", events)
+    descent = min(1.0, rec.descent + r.descent_speed_m_s * m.dt_s / g.decision_height_m)
+    goal = gate + descent * (dock - gate)
+    goal_v = v_c + ((dock - gate) / g.decision_height_m * r.descent_speed_m_s if descent < 1.0 else 0.0)
+    rec = replace(rec, descent=descent)
+    if descent >= 1.0 and here.within(g):
+        figures = {"horizontal_error_m": round(here.horizontal_error_m, 4),
+                   "height_error_m": round(here.height_error_m, 4),
+                   "horizontal_relative_speed_m_s": round(here.horizontal_relative_speed_m_s, 4),
+                   "vertical_relative_speed_m_s": round(here.vertical_relative_speed_m_s, 4),
+                   "attempts": rec.attempts, "time_s": round(t, 4)}
+        rec = replace(rec, contact=figures, settled_since_s=t)
+        state = enter(state, Phase.DOCKED, t)
+        events = (*events, f"contact: {here.horizontal_error_m:.3f} m, {here.horizontal_relative_speed_m_s:.2f} m/s")
+    return _fly(state, obs, m, goal, goal_v, r.approach, rec, events)
+
+
+def docked(state, obs, m, events=()):
+    """On the dock point with the carrier's velocity: after the dwell, the passenger is home."""
+    r, t = _model(m), obs.t_s
+    rec = _observe_carrier(state.recovery, obs, r, t)
+    dock = dock_point(obs, m)
+    v_c = obs.carrier.velocity_ned_m_s
+    if float(norm(obs.vehicle.position_ned_m - dock)) > m.dock_tolerance_m:
+        return go_around(replace(state, recovery=rec), obs, m, "lost the dock after contact", events)
+    evs = tuple(events)
+    if rec.settled_since_s is not None and t - rec.settled_since_s >= r.docked_dwell_s:
+        state = enter(state, Phase.HOME, t)
+        rec = replace(rec, settled_since_s=None)
+        evs += ("docked: riding home",)
+    return _fly(state, obs, m, dock, v_c, r.approach, rec, evs)
+
+
+def home(state, obs, m, events=()):
+    """Ride the dock point while the carrier parks; once it has parked and the vehicle sits on the
+    dock point again (the contact conditions) for the dwell, hand the vehicle to PX4's Hold."""
+    r, t = _model(m), obs.t_s
+    v = obs.vehicle
+    if v.mode == FlightMode.HOLD:
+        return enter(state, Phase.HOLD, t), Decision(setpoint=None, events=(*events, "vehicle in Hold above the carrier"))
+    rec = _observe_carrier(state.recovery, obs, r, t)
+    if obs.carrier is None:
+        return _fly(state, obs, m, state.x_ref, np.zeros(3), r.approach, rec, events, request=Request.HOLD)
+    dock = dock_point(obs, m)
+    v_c = obs.carrier.velocity_ned_m_s
+    on_it = contact(v.position_ned_m, v.velocity_ned_m_s, dock, v_c)
+    parked = float(norm(v_c[:2])) <= PARKED_SPEED_M_S and on_it.within(r.geometry)
+    since = (rec.settled_since_s if rec.settled_since_s is not None else t) if parked else None
+    rec = replace(rec, settled_since_s=since)
+    done = since is not None and t - since >= r.docked_dwell_s
+    return _fly(state, obs, m, dock, v_c, r.approach, rec, events, request=Request.HOLD if done else None)
+
+
+def battery_recall(state: MissionState, obs: Observation, m: MissionModel) -> str | None:
+    """Why the battery calls the passenger home now (None: it does not, or nothing is known).
+
+    The drain rate [%/s] is the average since the first reading (``state.battery_start``, after
+    at least 10 s); coming home takes the distance to the holdoff point at the return speed less the
+    carrier's speed away, plus ``recovery.docking_budget_s``. The passenger is recalled when what is
+    left, less what that would use, falls to ``recovery.battery_reserve_pct``."""
+    r, v, c = _model(m), obs.vehicle, obs.carrier
+    if v is None or v.battery_pct is None or state.battery_start is None or c is None:
+        return None
+    t0, pct0 = state.battery_start
+    if obs.t_s - t0 < 10.0:
+        return None
+    rate = max((pct0 - v.battery_pct) / (obs.t_s - t0), 0.0)
+    dock = dock_point(obs, m)
+    to_carrier = dock - v.position_ned_m
+    dist = float(norm(to_carrier))
+    away = float(np.dot(c.velocity_ned_m_s, to_carrier)) / dist if dist > 1e-6 else 0.0
+    closing = max(r.returning.speed_m_s - max(away, 0.0), 0.3)
+    needed = rate * (dist / closing + r.docking_budget_s)
+    if v.battery_pct - needed <= r.battery_reserve_pct:
+        return (f"battery: {v.battery_pct:.0f} % left, coming home uses about {needed:.0f} % "
+                f"(reserve {r.battery_reserve_pct:g} %)")
+    return None
