@@ -24,7 +24,7 @@ def test_shipped_configs_load(path):
     ({"scenario": {"target": [5.0, 0.0, 0.0]}}, "scenario.eta", "b*c"),
     ({"scenario": {"target": [40.0, 0.0, -9.0]}}, "scenario.target", "height"),
     ({"mission": {"rate_hz": 0}}, "mission.rate_hz", "greater than or equal to 10"),
-    ({"mission": {"final_action": "crash"}}, "mission.final_action", "'hold' or 'land'"),
+    ({"mission": {"final_action": "crash"}}, "mission.final_action", "'hold', 'land' or 'return'"),
     ({"zenoh": {"pair": "a/b"}}, "zenoh.pair", "pattern"),
     ({"safety": {"margin_m": float("nan")}}, "safety.margin_m", "finite"),
 ])
