@@ -7,6 +7,7 @@ tracking, arrival, timeouts, the command filter) as a :class:`mission.phases.Mis
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -56,7 +57,7 @@ def mission_model(cfg: Config) -> MissionModel:
         z_min_m=s.z_min_m, z_max_m=s.z_max_m,
     )
     m = cfg.mission
-    return MissionModel(
+    model = MissionModel(
         tick=tick, command_safety=command, dock_offset_ned_m=np.asarray(m.dock_offset_ned_m, dtype=float),
         dock_tolerance_m=m.dock_tolerance_m, track_gain=m.track_gain, join_speed_m_s=m.join_speed_m_s,
         arrival_radius_m=m.arrival_radius_m, arrival_dwell_s=m.arrival_dwell_s, final_action=m.final_action,
@@ -71,7 +72,16 @@ def mission_model(cfg: Config) -> MissionModel:
         join_settle_m=min(m.dock_tolerance_m, m.join_settle_m if m.join_settle_m is not None else m.dock_tolerance_m),
         join_settle_s=m.join_settle_s, arrival_max_speed_m_s=m.arrival_max_speed_m_s,
         recovery=recovery_model(cfg) if m.final_action == "return" else None,
+        leg_start_m=cfg.law.b * cfg.law.c + m.leg_start_margin_m,
     )
+    legs = cfg.scenario.legs()
+    if len(legs) == 1:
+        return model
+    targets = [np.asarray(t, dtype=float) for t in legs]
+    per_leg = tuple(dataclasses.replace(model, tick=model_from_config(cfg, target=t),
+                                        next_target=targets[k + 1] if k + 1 < len(targets) else None)
+                    for k, t in enumerate(targets))
+    return dataclasses.replace(model, legs=per_leg)
 
 
 def recovery_model(cfg: Config) -> RecoveryModel:

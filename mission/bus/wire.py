@@ -234,7 +234,8 @@ class PassengerStatus(_Message):
 
     phase a :class:`~mission.phases.phase.Phase` (its name on the wire); stamp_s [s] sender's clock; seq (>= 0); position_ned_m [m] and
     velocity_ned_m_s [m/s] local NED; separated: the separation latch has fired; anchor_ned_m
-    [m] the latched anchor (carrier position at separation) or None. Raises :class:`WireError`
+    [m] the latched anchor (carrier position at separation) or None; leg: the index of the target
+    served (``scenario.targets``; 0 with one target). Raises :class:`WireError`
     when invalid.
     """
 
@@ -245,14 +246,15 @@ class PassengerStatus(_Message):
     velocity_ned_m_s: VelocityNed = Field(alias="velocity")
     separated: Flag
     anchor_ned_m: PositionNed | None = Field(None, alias="anchor")
+    leg: int = Field(0, ge=0, le=1000, strict=True)
 
     _check_order = ("phase", "separated", "stamp", "stamp_s", "seq", "position", "position_ned_m", "velocity",
-                    "velocity_ned_m_s", "anchor", "anchor_ned_m")
+                    "velocity_ned_m_s", "anchor", "anchor_ned_m", "leg")
 
     def __init__(self, phase: Phase | str, stamp_s: float, seq: int, position_ned_m: Any, velocity_ned_m_s: Any,
-                 separated: bool = False, anchor_ned_m: Any = None) -> None:
+                 separated: bool = False, anchor_ned_m: Any = None, leg: int = 0) -> None:
         self._validated(phase=phase, stamp_s=stamp_s, seq=seq, position_ned_m=position_ned_m,
-                        velocity_ned_m_s=velocity_ned_m_s, separated=separated, anchor_ned_m=anchor_ned_m)
+                        velocity_ned_m_s=velocity_ned_m_s, separated=separated, anchor_ned_m=anchor_ned_m, leg=leg)
 
     __init__.__pydantic_base_init__ = True  # type: ignore[attr-defined]  # see _Message
 

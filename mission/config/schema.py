@@ -86,6 +86,9 @@ class ObstacleSection(Section):
     radius: float = Field(gt=0, le=100_000, description="[m] obstacle radius")
 
 
+MAX_TARGETS = 100  # scenario.targets
+
+
 class ScenarioSection(Section):
     """Geometry: where the carrier, passenger and target are at t = 0 [m]."""
 
@@ -97,6 +100,9 @@ class ScenarioSection(Section):
     target: list[Coord] = Field([20.0, 15.0, -4.0],
         description=("[m] target position (dim components); in 3D with a planar carrier at most b c above the "
                      "carrier's plane"))
+    targets: list[list[Coord]] | None = Field(None,
+        description=("[m] several targets, visited in order, one leg each (ride, separate, target, return, dock, ride "
+                     "on); `target` is then the first of them; needs mission.final_action = `return` for more than one"))
     passenger_start: list[Coord] | None = Field(None,
         description=("[m] passenger start for `simulate` (default: docked on the carrier, Assumption 2); `run` uses "
                      "the vehicle's real position"))
@@ -111,12 +117,33 @@ class ScenarioSection(Section):
         description=("[-] list of `{ center = [m], radius = m }` circles (2D) or spheres (3D); the carrier avoids "
                      "their planar circles"))
 
+    @model_validator(mode="before")
+    @classmethod
+    def _first_target(cls, data: Any) -> Any:
+        """With ``targets``, ``target`` is the first of them (and may be left out)."""
+        if isinstance(data, dict) and isinstance(data.get("targets"), list):
+            if not 1 <= len(data["targets"]) <= MAX_TARGETS:
+                raise ConfigError("scenario.targets", data["targets"], f"must list 1 to {MAX_TARGETS} targets")
+            first = data["targets"][0]
+            if "target" in data and data["target"] != first:
+                raise ConfigError("scenario.target", data["target"], f"differs from scenario.targets[0] = {first}: "
+                                  "give one of them")
+            data = {**data, "target": first}
+        return data
+
+    def legs(self) -> list[list[float]]:
+        """The targets in the order they are visited (one leg each)."""
+        return [list(t) for t in self.targets] if self.targets is not None else [list(self.target)]
+
     @model_validator(mode="after")
     def _dims(self) -> "ScenarioSection":
         for name in ("carrier_start", "target", "passenger_start"):
             v = getattr(self, name)
             if v is not None and len(v) != self.dim:
                 raise ConfigError(f"scenario.{name}", v, f"must have {self.dim} components (scenario.dim)")
+        for i, t in enumerate(self.targets or []):
+            if len(t) != self.dim:
+                raise ConfigError(f"scenario.targets[{i}]", t, f"must have {self.dim} components (scenario.dim)")
         for i, ob in enumerate(self.obstacles):
             if len(ob.center) != self.dim:
                 raise ConfigError(f"scenario.obstacles[{i}].center", ob.center, f"must have {self.dim} components")
@@ -247,6 +274,10 @@ class MissionSection(Section):
     final_action: Literal["hold", "land", "return"] = Field("hold",
         description=("[-] after arrival: `hold` (PX4 Hold, armed in the air), `land`, or `return` to the carrier and "
                      "dock on it ([recovery])"))
+    leg_start_margin_m: float = Field(2.0, gt=0, le=1000,
+        description=("[m] with several targets: a leg starts (the passenger rides under the law again) once the "
+                     "carrier is b c + this from the leg's target (the paper's Assumption 1); nearer, the carrier "
+                     "first drives out (TRANSIT)"))
     at_target_s: float = Field(0.0, ge=0, le=86400,
         description="[s] with final_action = `return`: time spent at the target (the task) before coming home")
     carrier_timeout_s: float = Field(0.5, gt=0, le=10,
@@ -397,6 +428,21 @@ class Config(Section):
                 raise ConfigError(name, value, f"below the altitude floor safety.z_max_m = {sf.z_max_m:g} (z {z:g}, NED)")
             if sf.z_min_m is not None and z < sf.z_min_m:
                 raise ConfigError(name, value, f"above the ceiling safety.z_min_m = {sf.z_min_m:g} (z {z:g}, NED)")
+        legs = s.legs()
+        if len(legs) > 1 and m.final_action != "return":
+            raise ConfigError("mission.final_action", m.final_action,
+                              f"must be \"return\" with {len(legs)} scenario.targets (the passenger comes home between them)")
+        for j, later in enumerate(legs[1:], start=1):
+            for i, earlier in enumerate(legs[:j]):
+                apart = math.dist(later[:2], earlier[:2])
+                if apart <= bc:
+                    raise ConfigError(f"scenario.targets[{j}]", later, f"inside the keep-out of scenario.targets[{i}] "
+                                      f"({apart:.2f} m from it horizontally, b*c = {bc:g} m)")
+            if s.planar_carrier and abs(later[2] - ground) > bc:
+                raise ConfigError(f"scenario.targets[{j}]", later, f"{abs(later[2] - ground):.2f} m above the carrier's "
+                                  f"plane, more than b*c = {bc:g} m: the carrier can never come within b*c of it")
+            if sf.z_max_m is not None and later[2] > sf.z_max_m:
+                raise ConfigError(f"scenario.targets[{j}]", later, f"below the altitude floor safety.z_max_m = {sf.z_max_m:g}")
         point = self.recovery.fallback_point_ned_m
         if point is not None and math.dist(point[:2], s.target[:2]) <= bc:
             raise ConfigError("recovery.fallback_point_ned_m", point,

@@ -102,8 +102,9 @@ def step(state: MissionState, obs: Observation, m: MissionModel) -> tuple[Missio
     v = obs.vehicle
     if state.battery_start is None and v is not None and v.battery_pct is not None:
         state = replace(state, battery_start=(t, v.battery_pct))  # the drain rate counts from here
+    leg_model = m.legs[state.leg] if m.legs else m  # the leg's target (scenario.targets)
     handler = HANDLERS[state.phase]
-    state, decision = handler(state, obs, m)
+    state, decision = handler(state, obs, leg_model)
     c = obs.carrier
     if c is not None and c.age_s <= m.carrier_timeout_s and state.phase.flying:
         decision = replace(decision, home_ned_m=c.position_ned_m + c.velocity_ned_m_s * c.age_s)
@@ -306,6 +307,7 @@ HANDLERS = {
     Phase.GO_AROUND: recovery.go_around_phase,
     Phase.DOCKED: recovery.docked,
     Phase.HOME: recovery.home,
+    Phase.TRANSIT: recovery.transit,
     Phase.FALLBACK: recovery.fallback_phase,
     Phase.HOLD: _final,
     Phase.LAND: _final,

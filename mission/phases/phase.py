@@ -18,6 +18,7 @@ class Duty(StrEnum):
     CARRY = "carry"  # the passenger rides: drive towards the target (u_c = k_c e_tc)
     RELEASED = "released"  # the passenger has left: stop, or keep its own plan (the paper's Remark 1)
     RECOVER = "recover"  # the passenger comes home: hold a steady recovery course
+    REPOSITION = "reposition"  # the passenger rides; drive out until the next leg's target is far enough (Assumption 1)
     PARK = "park"  # the passenger is home for good: stop and stay
     STOP = "stop"  # the passenger aborted: stop
 
@@ -54,6 +55,7 @@ class Phase(StrEnum):
     OFFBOARD = ("OFFBOARD", False, False, Duty.WAIT, False)
     JOIN = ("JOIN", True, False, Duty.WAIT, False)
     RIDING = ("RIDING", True, False, Duty.CARRY, False)
+    TRANSIT = ("TRANSIT", True, False, Duty.REPOSITION, False)
     SEPARATED = ("SEPARATED", True, True, Duty.RELEASED, False)
     NAVIGATING = ("NAVIGATING", True, True, Duty.RELEASED, False)
     ARRIVED = ("ARRIVED", True, True, Duty.RELEASED, False)

@@ -90,7 +90,7 @@ def _carrier_fresh(obs: Observation, limit_s: float) -> bool:
 
 
 def _fly(state: MissionState, obs: Observation, m: MissionModel, goal_x: np.ndarray, goal_v: np.ndarray,
-         limits: PursuitLimits, rec: RecoveryState, events: tuple[str, ...] = (),
+         limits: PursuitLimits, rec: RecoveryState | None, events: tuple[str, ...] = (),
          request: Request | None = None) -> tuple[MissionState, Decision]:
     """One tick towards a goal: pursue it, pass the reference through the reference's safety filter
     (obstacles, floor, the passenger's limits), track the reference; the state keeps ``rec``."""
@@ -177,7 +177,8 @@ def fallback(state: MissionState, obs: Observation, m: MissionModel, why: str,
         unit = off / float(norm(off)) if float(norm(off)) > 1e-6 else np.array([1.0, 0.0, 0.0])
         goal[:2] = m.tick.target[:2] + unit[:2] * r.keep_out_m
     rec = replace(rec, fallback_why=why, fallback_goal=goal)
-    new = enter(state, Phase.FALLBACK, t, recovery=rec)
+    new = finish_leg(replace(state, recovery=rec), obs, f"fallback: {why}")
+    new = enter(new, Phase.FALLBACK, t, legs_skipped="the recovery fell back" if m.next_target is not None else None)
     return fallback_phase(new, obs, m, events=(*events, f"recovery falls back: {why}"))
 
 
@@ -345,9 +346,16 @@ def docked(state, obs, m, events=()):
         return go_around(replace(state, recovery=rec), obs, m, "lost the dock after contact", events)
     evs = tuple(events)
     if rec.settled_since_s is not None and t - rec.settled_since_s >= r.docked_dwell_s:
-        state = enter(state, Phase.HOME, t)
-        rec = replace(rec, settled_since_s=None)
-        evs += ("docked: riding home",)
+        outcome = "done" if rec.why == "task done" else f"docked after a recall: {rec.why}"
+        state = finish_leg(replace(state, recovery=rec), obs, outcome)
+        skip = None if m.next_target is None else next_leg_problem(state, obs, m)
+        if m.next_target is None or skip is not None:
+            state = replace(state, legs_skipped=skip)
+            rec = replace(rec, settled_since_s=None)
+            state = enter(state, Phase.HOME, t)
+            evs += ("docked: riding home" if skip is None else f"docked: riding home; the next leg is skipped ({skip})",)
+            return _fly(state, obs, m, dock, v_c, r.approach, rec, evs)
+        return begin_next_leg(state, obs, m, events=(*evs, "docked: on to the next target"))
     return _fly(state, obs, m, dock, v_c, r.approach, rec, evs)
 
 
@@ -395,3 +403,61 @@ def battery_recall(state: MissionState, obs: Observation, m: MissionModel) -> st
         return (f"battery: {v.battery_pct:.0f} % left, coming home uses about {needed:.0f} % "
                 f"(reserve {r.battery_reserve_pct:g} %)")
     return None
+
+
+def finish_leg(state: MissionState, obs: Observation, outcome: str) -> MissionState:
+    """``state`` with the current leg's record appended to ``legs_done``."""
+    rec = state.recovery
+    leg = {"leg": state.leg, "outcome": outcome, "end_s": obs.t_s,
+           "separation_time_s": state.separation_time_s,
+           "anchor_ned_m": None if state.anchor is None else [float(x) for x in state.anchor],
+           "contact": None if rec is None else rec.contact,
+           "recovery_why": None if rec is None else rec.why}
+    return replace(state, legs_done=(*state.legs_done, leg))
+
+
+def next_leg_problem(state: MissionState, obs: Observation, m: MissionModel) -> str | None:
+    """Why the next leg cannot be flown and recovered with the battery's reserve (None: it can).
+
+    The next leg costs, at the drain rate so far (as :func:`battery_recall` measures it): the ride
+    until the carrier is b c from its target (at the carrier's top speed), the flight out and back
+    (2 b c at the return speed), the task, and the docking budget."""
+    r, v, c = _model(m), obs.vehicle, obs.carrier
+    if m.next_target is None or v is None or v.battery_pct is None or state.battery_start is None or c is None:
+        return None
+    t0, pct0 = state.battery_start
+    if obs.t_s - t0 < 10.0:
+        return None
+    rate = max((pct0 - v.battery_pct) / (obs.t_s - t0), 0.0)
+    bc = m.tick.law.separation_distance_m
+    carrier_speed = m.tick.carrier_safety.max_speed_m_s or 1.0
+    ride = max(float(norm(m.next_target - dock_point(obs, m))) - bc, 0.0) / carrier_speed
+    needed = rate * (ride + 2 * bc / r.returning.speed_m_s + r.at_target_s + r.docking_budget_s)
+    if v.battery_pct - needed <= r.battery_reserve_pct:
+        return (f"battery: {v.battery_pct:.0f} % left, the next leg uses about {needed:.0f} % "
+                f"(reserve {r.battery_reserve_pct:g} %)")
+    return None
+
+
+def begin_next_leg(state: MissionState, obs: Observation, m: MissionModel,
+                   events: tuple[str, ...] = ()) -> tuple[MissionState, Decision]:
+    """After a dock: the next target's leg begins, riding the dock point; TRANSIT first while the
+    carrier is nearer to that target than ``mission.leg_start_margin_m`` beyond b c."""
+    assert obs.carrier is not None and state.recovery is not None  # docked just now
+    new = enter(state, Phase.TRANSIT, obs.t_s, leg=state.leg + 1, anchor=None, separation_time_s=None,
+                arrived_since_s=None, e_ref=np.zeros(3), prev_dock=None, legs_skipped=None)
+    return _fly(new, obs, m, dock_point(obs, m), obs.carrier.velocity_ned_m_s, _model(m).approach,
+                replace(state.recovery, settled_since_s=None), events)
+
+
+def transit(state, obs, m, events=()):
+    """Ride the dock point (a leg after the first) until the carrier is far enough from the leg's
+    target for the paper's Assumption 1 (b c + ``mission.leg_start_margin_m``), then RIDING: the
+    reference sits on the dock point again and the law takes over."""
+    r, t = _model(m), obs.t_s
+    dock = dock_point(obs, m)
+    v_c = obs.carrier.velocity_ned_m_s
+    if float(norm(m.tick.target - dock)) >= m.leg_start_m and float(norm(state.x_ref - dock)) <= 0.05:
+        new = enter(state, Phase.RIDING, t, x_ref=dock.copy(), prev_dock=dock.copy())
+        return _fly(new, obs, m, dock, v_c, r.approach, None, (*events, f"leg {state.leg + 1}: riding"))
+    return _fly(state, obs, m, dock, v_c, r.approach, state.recovery, events)

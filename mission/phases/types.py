@@ -9,6 +9,7 @@ Frames: local NED [m], [m/s]; times [s] on the controller's clock.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from typing import Any
 from enum import StrEnum
 
 import numpy as np
@@ -107,6 +108,9 @@ class MissionModel:
     arrival_max_speed_m_s: float | None = None  # arrival also needs the vehicle this slow [m/s]
     carrier_dt_s: float = 1.0 / 30.0  # the carrier's control period [s] (its acceleration over one step)
     recovery: RecoveryModel | None = None  # with final_action "return"
+    legs: tuple[MissionModel, ...] = ()  # one model per target, in order (the leg's tick has its target)
+    next_target: np.ndarray | None = None  # a leg's model: the target of the leg after it [m] NED, or None (the last)
+    leg_start_m: float = 0.0  # a leg after the first starts once the carrier is this far from its target [m]
 
 
 @dataclass(frozen=True)
@@ -197,6 +201,9 @@ class MissionState:
     integral: np.ndarray | None = None  # tracking integral (mission.core.tracking)
     settled_since_s: float | None = None  # JOIN: since when the vehicle has been on the dock point
     recovery: RecoveryState | None = None  # bringing the passenger home (RECOVERY phases, FALLBACK, HOME)
+    leg: int = 0  # index of the target being served (scenario.targets)
+    legs_done: tuple[dict[str, Any], ...] = ()  # what each finished leg did (target, separation, contact, outcome)
+    legs_skipped: str | None = None  # why the legs after the last one flown were skipped (None: none were)
     battery_start: tuple[float, float] | None = None  # (t [s], remaining [%]) at the first battery reading
 
 

@@ -51,6 +51,7 @@ class FakeWorld:
     origin_given: GeoOrigin | None = None
     intervals: list[tuple[int, float]] = field(default_factory=list)  # SET_MESSAGE_INTERVAL asked (id, Hz)
     recovery_velocity_ned_m_s: np.ndarray = field(default_factory=lambda: np.zeros(3))  # the carrier's recovery course
+    targets: list[list[float]] | None = None  # several targets: the carrier drives at the status's leg's
     battery_pct: float | None = None  # remaining at t = 0 [%] (None: not reported) ...
     drain_pct_s: float = 0.0  # ... falling this fast while armed [%/s]
 
@@ -165,10 +166,13 @@ class FakeWorld:
         self._advance()
         self.statuses.append(status)
         live = self.clock.now() <= self.carrier_until_s
+        target = np.asarray(self.targets[status.leg] if self.targets is not None else self.target_ned_m, dtype=float)
+        e = target - self.carrier_ned_m
+        e[2] = 0.0
         if status.phase.duty is Duty.CARRY and live:
-            e = np.asarray(self.target_ned_m, dtype=float) - self.carrier_ned_m
-            e[2] = 0.0
             self._v_c = e / float(np.linalg.norm(e)) * self.carrier_speed_m_s
+        elif status.phase.duty is Duty.REPOSITION and live:
+            self._v_c = -e / float(np.linalg.norm(e)) * self.carrier_speed_m_s
         elif status.phase.duty is Duty.RECOVER and live:
             self._v_c = np.asarray(self.recovery_velocity_ned_m_s, dtype=float)
         else:

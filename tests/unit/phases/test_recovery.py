@@ -162,3 +162,44 @@ def test_the_summary_tells_how_the_recovery_went(cfg, tmp_path):
     assert s["deck_violations"] == 0
     assert s["max_phase_switch_jump_m_s"] <= 0.05
     assert s["p1"] and s["p2"] and s["p3"]
+
+
+def two_targets(cfg, second):
+    first = list(cfg.scenario.target)
+    return with_overrides(cfg, {"scenario.targets": [first, second]}), [first, second]
+
+
+def test_two_targets_one_after_the_other(cfg):
+    """Ride, separate, target 1, return, dock, then ride on: the carrier is still within b c + the
+    leg margin of target 2, so it first drives out (TRANSIT), then carries the passenger under the
+    law again, which separates at b c of target 2, and so on to the second dock."""
+    two, targets = two_targets(cfg, [30.0, 5.0, -5.0])
+    outcome, world, reports, controller = fly(two, targets=targets, recovery_velocity_ned_m_s=np.array([0.8, 0.0, 0.0]))
+    assert outcome.ok, (outcome.reason, outcome.detail)
+    order = phase_order(reports)
+    leg2 = order.index(Phase.TRANSIT)
+    assert order[leg2:] == [Phase.TRANSIT, Phase.RIDING, Phase.SEPARATED, Phase.NAVIGATING, Phase.ARRIVED,
+                            Phase.RETURNING, Phase.HOLDOFF, Phase.APPROACH, Phase.DOCKED, Phase.HOME, Phase.HOLD,
+                            Phase.DONE], order
+    legs = controller.state.legs_done
+    assert [leg["outcome"] for leg in legs] == ["done", "done"]
+    bc = two.law.b * two.law.c
+    for leg, target in zip(legs, targets):
+        assert abs(norm(np.asarray(target) - np.asarray(leg["anchor_ned_m"])) - (bc - two.law.departure_margin_m)) < 1e-6
+        assert leg["contact"]["horizontal_error_m"] <= 0.10
+    assert max(switch_jumps(reports).values()) <= 0.05
+    # the second leg began with the carrier at least b c + the margin from its target (Assumption 1)
+    start2 = next(r for r in reports if r.phase is Phase.RIDING and r.t_s > legs[0]["end_s"])
+    assert norm(np.asarray(targets[1]) - start2.decision.dock) >= bc + two.mission.leg_start_margin_m - 0.1
+
+
+def test_a_battery_too_small_for_the_second_leg_skips_it(cfg):
+    two, targets = two_targets(cfg, [30.0, 5.0, -5.0])
+    outcome, world, reports, controller = fly(two, targets=targets, recovery_velocity_ned_m_s=np.array([0.8, 0.0, 0.0]),
+                                              battery_pct=100.0, drain_pct_s=1.0)
+    assert outcome.ok, (outcome.reason, outcome.detail)
+    state = controller.state
+    assert [leg["outcome"] for leg in state.legs_done] == ["done"]
+    assert state.legs_skipped is not None and state.legs_skipped.startswith("battery")
+    assert Phase.TRANSIT not in phase_order(reports)
+    assert world._battery(world.clock.now()) >= two.recovery.battery_reserve_pct  # it never stranded itself
