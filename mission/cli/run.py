@@ -22,7 +22,8 @@ from mission.errors import ConfigError
 from mission.bus.gate import GateLimits
 from mission.mavlink.link import VehicleLink
 from mission.mavlink.env import read_signing_key
-from mission.record import FlightRecorder, read_record
+from mission.flightdata.writer import DEFAULT_LIVE, LiveAddress, is_loopback, parse_live
+from mission.record import CLOCK_NOTE, FlightRecorder, RecordSink, read_record
 from mission.phases import AbortReason
 from mission.report import WaitReporter, abort_hint, phase_printer, startup_lines
 
@@ -83,8 +84,29 @@ def check_config(cfg: Config) -> None:
     zenoh_config(cfg.zenoh)
 
 
+def clock_metadata(clock: Clock) -> dict[str, str]:
+    """The ``clock`` metadata of ``flight.mcap``: what its timestamps are."""
+    if isinstance(clock, LockstepClock):
+        source = "lockstep: the mock vehicle's simulated time (run --lockstep)"
+    else:
+        source = f"{type(clock).__name__}: the wall clock (monotonic) x{getattr(clock, 'speed', 1.0):g}"
+    return {"clock": "mission", "unit": "ns since the controller started (record.csv t_s x 1e9)",
+            "source": source, "note": CLOCK_NOTE,
+            "wall_start_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
+
+
+def flight_data(cfg: Config, directory: Path, info: dict[str, Any], clock: Clock,
+                live: LiveAddress | None) -> list[RecordSink]:
+    """The flight record's sinks besides the CSV: ``flight.mcap`` (with the live view at
+    ``live``, if given) (:class:`mission.flightdata.mission_log.MissionLog`)."""
+    from mission.flightdata.mission_log import MissionLog
+
+    directory.mkdir(parents=True, exist_ok=True)
+    return [MissionLog(directory / "flight.mcap", info, pair=cfg.zenoh.pair, clock=clock_metadata(clock), live=live)]
+
+
 def fly(cfg: Config, *, speed: float = 1.0, log_dir: str | Path | None = None, stop: threading.Event | None = None,
-        on_event=None, on_start=None, clock: Clock | None = None) -> MissionOutcome:
+        on_event=None, on_start=None, clock: Clock | None = None, live: LiveAddress | None = None) -> MissionOutcome:
     """Fly one mission with ``cfg`` (the library entry point of ``marsupial run``).
 
     Opens the Zenoh session and the MAVLink link (:func:`mission_io`), runs
@@ -92,21 +114,28 @@ def fly(cfg: Config, *, speed: float = 1.0, log_dir: str | Path | None = None, s
     speed factor (simulation only). ``on_start(controller, link, feed, clock)`` is called once
     everything is open, just before the loop starts (the CLI watches the wait for the vehicle).
     ``clock`` replaces the scaled clock, e.g. a :class:`LockstepClock` (made in the calling
-    thread) that steps on the mock vehicle's simulated time.
+    thread) that steps on the mock vehicle's simulated time. The flight log gets ``flight.mcap``
+    beside ``record.csv``; ``live``: also serve it to Foxglove on that address.
     """
     check_config(cfg)
     clock = clock or ScaledClock(speed)
     directory = Path(log_dir) if log_dir else Path(cfg.mission.log_dir) / f"{time.strftime('%Y%m%d-%H%M%S')}-{cfg.zenoh.pair}"
-    recorder = FlightRecorder(directory, mission_info(cfg))
-    with mission_io(cfg, clock, recorder.tlog_path) as (feed, publisher, link):
-        controller = MissionController(cfg, link, feed, clock, publisher=publisher, recorder=recorder,
-                                       on_event=on_event, stop=stop)
-        if on_start is not None:
-            on_start(controller, link, feed, clock)
-        try:
-            return controller.run()
-        finally:
-            clock.close()
+    info = mission_info(cfg)
+    sinks = flight_data(cfg, directory, info, clock, live)
+    try:
+        recorder = FlightRecorder(directory, info, sinks)
+        with mission_io(cfg, clock, recorder.tlog_path) as (feed, publisher, link):
+            controller = MissionController(cfg, link, feed, clock, publisher=publisher, recorder=recorder,
+                                           on_event=on_event, stop=stop)
+            if on_start is not None:
+                on_start(controller, link, feed, clock)
+            try:
+                return controller.run()
+            finally:
+                clock.close()
+    finally:
+        for sink in sinks:  # the flight closed them; an error before it flew did not
+            sink.close({}, {})
 
 
 def exit_code(outcome: MissionOutcome) -> int:
@@ -133,9 +162,12 @@ def exit_code(outcome: MissionOutcome) -> int:
               help="MAVLink 2 signing key file, 64 hex digits or 32 raw bytes (overrides mavlink.signing_key_file): "
               "everything sent is signed, and only HEARTBEAT may arrive unsigned.")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON at the end.")
+@click.option("--live", is_flag=False, flag_value=DEFAULT_LIVE, default=None, metavar="[HOST:PORT]",
+              help=f"Serve the flight live to Foxglove (the foxglove-sdk WebSocket server) on HOST:PORT "
+              f"[{DEFAULT_LIVE} when given alone; loopback unless told otherwise]. Off by default.")
 def run(config: str, mavlink_url: str | None, zenoh_listen: tuple[str, ...], zenoh_connect: tuple[str, ...],
         zenoh_mode: str | None, pair: str | None, speed: float, lockstep: bool, log_dir: str | None,
-        signing_key_file: str | None, as_json: bool) -> int:
+        signing_key_file: str | None, as_json: bool, live: str | None) -> int:
     """Fly the marsupial mission described by CONFIG on a PX4 vehicle.
 
     The passenger takes off from the carrier, joins the dock point, rides while the carrier
@@ -163,9 +195,13 @@ def run(config: str, mavlink_url: str | None, zenoh_listen: tuple[str, ...], zen
     if zenoh_connect:
         overrides["zenoh.connect"] = list(zenoh_connect)
     cfg = with_overrides(cfg, overrides)
+    live_address = parse_live(live) if live is not None else None
     stop = threading.Event()
     for line in startup_lines(cfg, speed):
         click.echo(line)
+    if live_address is not None and not is_loopback(live_address.host):
+        click.echo(f"warning: the live view binds {live_address.host}, not loopback: anyone who can reach "
+                   f"{live_address.url} sees the flight", err=True)
 
     def on_signal(signum: int, _frame: Any) -> None:
         click.echo(f"signal {signal.Signals(signum).name}: asking the vehicle to Hold", err=True)
@@ -176,11 +212,17 @@ def run(config: str, mavlink_url: str | None, zenoh_listen: tuple[str, ...], zen
 
     def on_start(controller: Any, link: Any, feed: Any, clock: Any) -> None:
         remember(controller, link, feed, clock)
+        for sink in controller.recorder.sinks:
+            if getattr(sink, "live_port", None) is not None:
+                host = live_address.host if live_address is not None else "127.0.0.1"
+                click.echo(f"live view: {LiveAddress(host, sink.live_port).url} (Foxglove: Open connection, "
+                           f"Foxglove WebSocket; layout configs/foxglove/marsupial.json)")
         seen["reporter"] = WaitReporter(cfg, controller, link, feed, clock).start()
 
     try:
         clock: Clock = LockstepClock(speed=speed, name="mission-lockstep") if lockstep else ScaledClock(speed)
-        outcome = fly(cfg, speed=speed, log_dir=log_dir, stop=stop, on_event=on_event, on_start=on_start, clock=clock)
+        outcome = fly(cfg, speed=speed, log_dir=log_dir, stop=stop, on_event=on_event, on_start=on_start, clock=clock,
+                      live=live_address)
     finally:
         if seen.get("reporter") is not None:
             seen["reporter"].stop()
