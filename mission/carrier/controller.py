@@ -68,6 +68,30 @@ class OwnState:
     yaw_rad: float | None
 
 
+@dataclass(frozen=True)
+class CarrierStep:
+    """One step of the carrier controller, for its flight data: t_s [s] clock time; mode;
+    hold_reason (None: in control); state the own state used (None: none, or stale); command
+    the command sent; law_velocity_m_s [m/s] the filtered law command; guard_active whether the P3
+    guard cut it; published the state sent to the passenger (None: nothing went out)."""
+
+    t_s: float
+    mode: str
+    hold_reason: str | None
+    state: OwnState | None
+    command: Tracked
+    law_velocity_m_s: np.ndarray
+    guard_active: bool
+    published: CarrierState | None
+
+
+class StepSink(Protocol):
+    """Where the carrier's steps go (:class:`mission.flightdata.carrier_log.CarrierLog`): ``step``
+    runs in the control loop and must return at once."""
+
+    def step(self, step: CarrierStep) -> None: ...
+
+
 class CarrierBackend(Protocol):
     """What the controller needs of a carrier robot (the kinds: :mod:`mission.carrier.backends`)."""
 
@@ -139,8 +163,8 @@ class CarrierController:
     """
 
     def __init__(self, cfg: Config, clock: Clock, session: zenoh.Session, backend: CarrierBackend, *,
-                 pair: str | None = None, encoding: str | None = None) -> None:
-        self.cfg, self.clock, self.backend = cfg, clock, backend
+                 pair: str | None = None, encoding: str | None = None, steps: StepSink | None = None) -> None:
+        self.cfg, self.clock, self.backend, self.steps = cfg, clock, backend, steps
         self.pair = pair or cfg.zenoh.pair
         self.model = carrier_model(cfg)
         self.guard = guard_params(cfg)
@@ -153,6 +177,7 @@ class CarrierController:
         self.mode = CarrierMode.WAITING
         self.seq = 0
         self.hold_reason: str | None = "no valid own state"
+        self.guard_active = False
         self._plan_velocity = np.zeros(self.dim)
         self._stats: dict[str, Any] = {"closest_target_distance_m": math.inf, "guard_active_ticks": 0,
                                        "stale_ticks": 0, "ticks": 0, "distance_at_separation_m": None,
@@ -246,6 +271,7 @@ class CarrierController:
             # acceleration limit and Remark 1 act on: tying it to the heading would let the
             # command turn only as fast as the robot already does (a heading lock).
             self.velocity_m_s = u
+        self.guard_active = active
         if active:
             self._stats["guard_active_ticks"] += 1
         return cmd
@@ -364,7 +390,9 @@ class CarrierController:
             self._stats["stale_ticks"] += 1
             self.velocity_m_s = np.zeros(self.dim)
             self.backend.command(STOP)
+            self._trace(now, None, STOP, None)
             return None
+        self.guard_active = False
         cmd = self._decide(state, dt_s, now - state.t_s) if why is None else STOP
         if why is not None:
             self.velocity_m_s = np.zeros(self.dim)
@@ -380,10 +408,17 @@ class CarrierController:
         out = CarrierState(fresh.t_s, self.seq, "local_ned", _pad3(fresh.position_ned_m[:self.dim]), velocity,
                            fresh.yaw_rad, accel)
         if self.cfg.carrier.align_on_deck_m > 0 and not self._aligned:
+            self._trace(now, state, cmd, None)
             return out  # not yet placed in the passenger's frame: nothing the passenger should use
         self.publisher.publish(out)
         self.seq += 1
+        self._trace(now, state, cmd, out)
         return out
+
+    def _trace(self, t_s: float, state: OwnState | None, cmd: Tracked, published: CarrierState | None) -> None:
+        if self.steps is not None:
+            self.steps.step(CarrierStep(t_s, self.mode.value, self.hold_reason, state, cmd, self.velocity_m_s,
+                                        self.guard_active, published))
 
     def run(self, stop_event: threading.Event, duration_s: float | None = None) -> None:
         """Step at ``carrier.rate_hz`` on the clock until ``stop_event`` is set or ``duration_s``

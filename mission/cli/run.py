@@ -22,7 +22,7 @@ from mission.errors import ConfigError
 from mission.bus.gate import GateLimits
 from mission.mavlink.link import VehicleLink
 from mission.mavlink.env import read_signing_key
-from mission.flightdata.writer import DEFAULT_LIVE, LiveAddress, is_loopback, parse_live
+from mission.flightdata.writer import DEFAULT_LIVE, LiveAddress, clock_metadata, is_loopback, parse_live
 from mission.record import CLOCK_NOTE, FlightRecorder, RecordSink, read_record
 from mission.phases import AbortReason
 from mission.report import WaitReporter, abort_hint, phase_printer, startup_lines
@@ -84,17 +84,6 @@ def check_config(cfg: Config) -> None:
     zenoh_config(cfg.zenoh)
 
 
-def clock_metadata(clock: Clock) -> dict[str, str]:
-    """The ``clock`` metadata of ``flight.mcap``: what its timestamps are."""
-    if isinstance(clock, LockstepClock):
-        source = "lockstep: the mock vehicle's simulated time (run --lockstep)"
-    else:
-        source = f"{type(clock).__name__}: the wall clock (monotonic) x{getattr(clock, 'speed', 1.0):g}"
-    return {"clock": "mission", "unit": "ns since the controller started (record.csv t_s x 1e9)",
-            "source": source, "note": CLOCK_NOTE,
-            "wall_start_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
-
-
 def flight_data(cfg: Config, directory: Path, info: dict[str, Any], clock: Clock,
                 live: LiveAddress | None) -> list[RecordSink]:
     """The flight record's sinks besides the CSV: ``flight.mcap`` (with the live view at
@@ -102,7 +91,8 @@ def flight_data(cfg: Config, directory: Path, info: dict[str, Any], clock: Clock
     from mission.flightdata.mission_log import MissionLog
 
     directory.mkdir(parents=True, exist_ok=True)
-    return [MissionLog(directory / "flight.mcap", info, pair=cfg.zenoh.pair, clock=clock_metadata(clock), live=live)]
+    clock_info = clock_metadata(clock, CLOCK_NOTE, "the mock vehicle's simulated time (run --lockstep)")
+    return [MissionLog(directory / "flight.mcap", info, pair=cfg.zenoh.pair, clock=clock_info, live=live)]
 
 
 def fly(cfg: Config, *, speed: float = 1.0, log_dir: str | Path | None = None, stop: threading.Event | None = None,

@@ -19,6 +19,7 @@ import ipaddress
 import logging
 import queue
 import threading
+import time
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -74,6 +75,19 @@ def is_loopback(host: str) -> bool:
 def ns(t_s: float) -> int:
     """Mission-clock time [s] as MCAP/Foxglove nanoseconds (never negative)."""
     return max(int(round(t_s * 1e9)), 0)
+
+
+def clock_metadata(clock: Any, note: str, lockstep_source: str) -> dict[str, str]:
+    """The ``clock`` metadata of a flight data file: its timestamps are ``clock``'s (the
+    mission clock), in ns; ``lockstep_source`` says what a lockstep clock follows."""
+    from mission.time.clock import LockstepClock
+
+    if isinstance(clock, LockstepClock):
+        source = f"lockstep: {lockstep_source}"
+    else:
+        source = f"{type(clock).__name__}: the wall clock (monotonic) x{getattr(clock, 'speed', 1.0):g}"
+    return {"clock": "mission", "unit": "ns since the controller started", "source": source, "note": note,
+            "wall_start_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
 
 
 def timestamp(t_s: float) -> Any:
