@@ -236,25 +236,40 @@ def run(config: str, mavlink_url: str | None, zenoh_listen: tuple[str, ...], zen
     return exit_code(outcome)
 
 
+def _is_flight_log(directory: Path) -> bool:
+    return (directory / "mission.json").is_file() or (directory / "flight.mcap").is_file()
+
+
 @click.command("plot")
-@click.argument("log_dir", type=click.Path(file_okay=False, exists=True))
+@click.argument("log_dir", metavar="LOG", type=click.Path(exists=True))
 @click.option("--out", "out_path", type=click.Path(dir_okay=False),
               help="Output image (default LOG_DIR/flight.png; with a folder of flight logs, one per log).")
 def plot(log_dir: str, out_path: str | None) -> int:
     """Draw the paper-style figures (trajectories; |e_pc|, |e_tc|, |e_pt| over t, the time since
-    the start of riding) from a flight log directory written by ``marsupial run`` or
-    ``marsupial demo`` (e.g. logs/demo/pair0). Given a folder of flight logs (logs/demo), it
-    plots each one into its own directory. Exit code 2 when LOG_DIR holds no flight log."""
-    directory = Path(log_dir)
-    if (directory / "mission.json").is_file():
+    the start of riding) from a flight log written by ``marsupial run`` or ``marsupial demo``.
+
+    \b
+    LOG is a flight log directory (e.g. logs/demo/pair0: its record.csv, or its flight.mcap when
+    it has no CSV), an MCAP file itself (logs/demo/pair0/flight.mcap), or a folder of flight logs
+    (logs/demo: each one is plotted into its own directory). Exit code 2 when LOG holds no flight log."""
+    path = Path(log_dir)
+    if path.is_file():
+        if path.suffix != ".mcap":
+            raise ConfigError("LOG", log_dir, "is a file but not an MCAP flight log (flight.mcap); give it, or "
+                              "the flight log directory")
+        out = plot_flight(path, out_path or path.parent / "flight.png")
+        click.echo(f"plot written to {out}")
+        return 0
+    directory = path
+    if _is_flight_log(directory):
         out = plot_flight(directory, out_path or directory / "flight.png")
         click.echo(f"plot written to {out}")
         return 0
-    logs = sorted(d for d in directory.iterdir() if (d / "mission.json").is_file())
+    logs = sorted(d for d in directory.iterdir() if d.is_dir() and _is_flight_log(d))
     if not logs:
-        raise ConfigError("LOG_DIR", log_dir, "holds no flight log (mission.json and record.csv): give a directory "
-                          "written by `marsupial run` (mission.log_dir/<time>-<pair>, printed at the end of the run) "
-                          "or by the demo (logs/demo/pair0)")
+        raise ConfigError("LOG_DIR", log_dir, "holds no flight log (mission.json and record.csv, or flight.mcap): give a "
+                          "directory written by `marsupial run` (mission.log_dir/<time>-<pair>, printed at the end of "
+                          "the run) or by the demo (logs/demo/pair0)")
     if out_path and len(logs) > 1:
         raise ConfigError("--out", out_path, f"one output file for {len(logs)} flight logs; leave --out out "
                           "(each plot goes to its own log directory) or give one log directory")
@@ -273,10 +288,11 @@ def plot(log_dir: str, out_path: str | None) -> int:
 
 
 def plot_flight(log_dir: Path, out_path: str | Path) -> Path:
-    """The paper-style figure of one flight log; times from the start of riding (t = 0)."""
+    """The paper-style figure of one flight log (a directory, or its flight.mcap); times from
+    the start of riding (t = 0)."""
     from mission.plots import Trajectories, plot_run
 
-    if not (log_dir / "record.csv").is_file():
+    if log_dir.is_dir() and not (log_dir / "record.csv").is_file() and not (log_dir / "flight.mcap").is_file():
         raise ConfigError("LOG_DIR", str(log_dir), "has mission.json but no record.csv: the flight never started")
     rec = read_record(log_dir)
     # The law's carrier position for the passenger is the dock point (carrier + offset).
@@ -286,6 +302,7 @@ def plot_flight(log_dir: Path, out_path: str | Path) -> Path:
         raise ConfigError("LOG_DIR", str(log_dir), "the record holds no tick with both vehicle and carrier positions "
                           "(the mission ended before it flew: see its summary.json)")
     info = rec.info
+    name = log_dir.name if log_dir.is_dir() else f"{log_dir.parent.name}/{log_dir.name}"
     riding = np.flatnonzero(rec.phase == "RIDING")
     t0 = rec.t[riding[0]] if len(riding) else rec.t[ok][0]
     sep = info.get("separation_time_s")
@@ -293,6 +310,6 @@ def plot_flight(log_dir: Path, out_path: str | Path) -> Path:
     tr = Trajectories(t=rec.t[ok] - t0, x_c=x_c[ok], x_p=x_p[ok], target=np.asarray(info["target_ned_m"]),
                       separation_time_s=None if sep is None else sep - t0,
                       obstacles=[(np.asarray(o["center"]), o["radius"]) for o in info.get("obstacles", [])],
-                      frame="local_ned", title=f"flight {log_dir.name} (carrier = its dock point; t = 0 at the {origin}, "
+                      frame="local_ned", title=f"flight {name} (carrier = its dock point; t = 0 at the {origin}, "
                       f"mission clock {t0:.2f} s)", bc_m=info.get("bc_m"))
     return plot_run(tr, out_path)

@@ -1,0 +1,114 @@
+"""flight.mcap as a sink of the flight record (no sockets): the same rows as record.csv, read back
+by ``marsupial plot``; the live address rules."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from mcap.reader import make_reader
+from mcap_protobuf.decoder import DecoderFactory
+
+from mission.cli.run import plot
+from mission.errors import ConfigError
+from mission.flightdata.mission_log import MissionLog, bc_circle
+from mission.flightdata.read import read_messages
+from mission.flightdata.topics import MISSION_CHANNELS, topics
+from mission.flightdata.writer import LiveAddress, is_loopback, parse_live
+from mission.record import FlightRecorder, TickRow, read_record
+
+INFO = {"target_ned_m": [20.0, 0.0, -5.0], "obstacles": [{"center": [10.0, 3.0, -2.0], "radius": 1.0}], "bc_m": 8.0,
+        "carrier_start_ned_m": [0.0, 0.0, 0.0], "dock_offset_ned_m": [0, 0, -1.5], "dock_tolerance_m": 0.5,
+        "arrival_radius_m": 0.5, "pair": "pairX"}
+
+
+def _fly(directory, ticks: int = 150) -> None:
+    """A made-up flight of ``ticks`` rows at 10 Hz through a recorder with a MissionLog sink."""
+    log = MissionLog(directory / "flight.mcap", INFO, pair="pairX", clock={"clock": "mission"})
+    rec = FlightRecorder(directory, INFO, [log])
+    rec.set_counters(lambda: {"carrier_feed": {"received": 3, "accepted": 3, "dropped": {}}, "link": {"rx_messages": 9}})
+    z = np.zeros(3)
+    anchor = None
+    phase = None
+    for k in range(ticks):
+        new = "JOIN" if k < 10 else ("RIDING" if k < 100 else "NAVIGATING")
+        x_c = np.array([k * 0.1, 0.0, 0.0])
+        dock = x_c + [0, 0, -1.5]
+        x_p = dock if k < 100 else dock + [(k - 100) * 0.2, 0, -0.05 * (k - 100)]
+        if k == 100:
+            anchor = dock.copy()
+        events = (f"phase {new}",) if new != phase else ()
+        phase = new
+        rec.record_row(TickRow(k * 0.1, new, x_p, z, x_c, z, dock, x_p, 0.5 if k >= 10 else float("nan"), z,
+                               np.array([0.3, 0.0, 0.0]), np.array([0.2, 0.0, 0.0]), k % 7 == 0, 0.01, "OFFBOARD", True,
+                               u_ref=z, position_sp=x_p, acceleration_sp=z, anchor=anchor, events=events))
+    rec.close({"phase": "NAVIGATING"}, {"separation_time_s": 10.0, "anchor_ned_m": anchor.tolist()})
+
+
+def test_the_mcap_holds_the_csv_rows_and_the_foxglove_channels(tmp_path):
+    _fly(tmp_path)
+    csv_rec, mcap_rec = read_record(tmp_path), read_record(tmp_path / "flight.mcap")
+    assert csv_rec.cols.keys() == mcap_rec.cols.keys()
+    for name, values in csv_rec.cols.items():
+        assert np.array_equal(values, mcap_rec.cols[name], equal_nan=True), name
+    assert (csv_rec.phase == mcap_rec.phase).all()
+    assert mcap_rec.info["anchor_ned_m"] == [10.0, 0.0, -1.5] and mcap_rec.info["target_ned_m"] == INFO["target_ned_m"]
+    with open(tmp_path / "flight.mcap", "rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        summary = reader.get_summary()
+        assert summary is not None
+        assert sorted(c.topic for c in summary.channels.values()) == sorted(topics("pairX").values())
+        logs = [m.message for *_, m in reader.iter_decoded_messages(topics=["/pairX/log"])]
+        dock = [m for *_, m in reader.iter_decoded_messages(topics=["/pairX/tf/dock"])][0]
+    assert logs == ["phase JOIN", "phase RIDING", "phase NAVIGATING"]
+    assert (dock.parent_frame_id, dock.child_frame_id, dock.translation.z) == ("pairX/carrier", "pairX/dock", -1.5)
+    content = read_messages(tmp_path / "flight.mcap")
+    assert content.complete
+    distances = [json.loads(d) for t, s, _, d in content.messages if t == "/pairX/distances"]
+    assert distances[0]["P"] is None and distances[-1]["e_pc_m"] == pytest.approx(np.hypot(49 * 0.2, 49 * 0.05))
+    safety = [json.loads(d) for t, s, _, d in content.messages if t == "/pairX/safety"]
+    assert safety[-1]["acted_ticks"] == sum(1 for k in range(150) if k % 7 == 0)
+    setpoints = [json.loads(d) for t, s, _, d in content.messages if t == "/pairX/setpoint"]
+    assert setpoints[0]["kind"] == "full" and setpoints[0]["velocity"] == {"n": 0.2, "e": 0.0, "d": 0.0}
+    feed = [json.loads(d) for t, s, _, d in content.messages if t == "/pairX/carrier_feed"]
+    assert len(feed) == 15 and feed[0]["received"] == 3  # once a second of mission clock
+    assert len(MISSION_CHANNELS) == len(topics("pairX")) == 14
+
+
+def test_plot_reads_the_mcap_as_it_reads_the_csv(tmp_path):
+    _fly(tmp_path)
+    (tmp_path / "record.csv").rename(tmp_path / "record.csv.bak")  # the directory's MCAP, then the file itself
+    for target, out in ((tmp_path, tmp_path / "dir.png"), (tmp_path / "flight.mcap", tmp_path / "file.png")):
+        result = CliRunner().invoke(plot, [str(target), "--out", str(out)], standalone_mode=False)
+        assert result.exception is None, result.output
+        assert out.stat().st_size > 20_000
+    result = CliRunner().invoke(plot, [str(tmp_path / "mission.json")], standalone_mode=False)
+    assert isinstance(result.exception, ConfigError) and "not an MCAP" in str(result.exception)
+
+
+def test_the_bc_circle_lies_in_the_docks_plane_b_c_from_the_target():
+    pts = bc_circle(INFO)
+    assert np.allclose(pts[:, 2], -1.5)
+    assert np.allclose(np.linalg.norm(pts - np.asarray(INFO["target_ned_m"]), axis=1), 8.0)
+
+
+@pytest.mark.parametrize("text,address", [
+    ("127.0.0.1:8765", LiveAddress("127.0.0.1", 8765)), ("8765", LiveAddress("127.0.0.1", 8765)),
+    (":0", LiveAddress("127.0.0.1", 0)), ("[::1]:9000", LiveAddress("::1", 9000)),
+    ("0.0.0.0:8765", LiveAddress("0.0.0.0", 8765)), ("localhost:1", LiveAddress("localhost", 1))])
+def test_live_addresses(text, address):
+    assert parse_live(text) == address
+
+
+@pytest.mark.parametrize("text", ["nope", "127.0.0.1:http", "127.0.0.1:70000", "1.2.3.4:-1"])
+def test_a_bad_live_address_names_the_option(text):
+    with pytest.raises(ConfigError) as err:
+        parse_live(text)
+    assert err.value.field == "--live"
+
+
+def test_loopback_hosts():
+    assert is_loopback("127.0.0.1") and is_loopback("127.5.0.1") and is_loopback("::1") and is_loopback("localhost")
+    assert not is_loopback("0.0.0.0") and not is_loopback("192.168.1.2") and not is_loopback("example.org")
+    assert LiveAddress("::1", 8765).url == "ws://[::1]:8765"
