@@ -112,3 +112,40 @@ def test_loopback_hosts():
     assert is_loopback("127.0.0.1") and is_loopback("127.5.0.1") and is_loopback("::1") and is_loopback("localhost")
     assert not is_loopback("0.0.0.0") and not is_loopback("192.168.1.2") and not is_loopback("example.org")
     assert LiveAddress("::1", 8765).url == "ws://[::1]:8765"
+
+
+def test_the_shipped_layout_is_the_generated_one_and_names_only_real_topics_and_fields():
+    """configs/foxglove/marsupial.json = mission.flightdata.layout (regenerate with
+    ``python -m mission.flightdata.layout``); each message path in it is a pair0 topic with a
+    field its schema has."""
+    from mission.flightdata.layout import LAYOUT_FILE, layout_text
+    from mission.flightdata.topics import JSON_SCHEMAS
+
+    assert LAYOUT_FILE.read_text() == layout_text()
+    text = LAYOUT_FILE.read_text()
+    schema_of = {topic: schema for (_, name, schema), topic in zip(MISSION_CHANNELS, topics("pair0").values())}
+    paths = _paths(json.loads(text))
+    assert len(paths) >= 12
+    for path in paths:
+        topic, _, field = path.partition(".")
+        assert topic in schema_of, path
+        if field:
+            assert field.split(".")[0] in JSON_SCHEMAS[schema_of[topic]]["properties"], path
+    assert {"/pair0/scene", "/pair0/log", "/pair0/distances.e_pc_m", "/pair0/command.safe.n"} <= set(paths)
+
+
+def _paths(node) -> list[str]:
+    """Every message path (series values, the log's topic, topic settings' keys) in a layout."""
+    out = []
+    if isinstance(node, dict):
+        for key, value in node.items():
+            if key in ("value", "topicToRender") and isinstance(value, str):
+                out.append(value)
+            elif key == "topics" and isinstance(value, dict):
+                out.extend(value)
+            else:
+                out.extend(_paths(value))
+    elif isinstance(node, list):
+        for item in node:
+            out.extend(_paths(item))
+    return out
