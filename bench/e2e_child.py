@@ -72,9 +72,11 @@ class SendLog:
     def __init__(self, clock: RealtimeMonotonicClock) -> None:
         self.clock = clock
         self.rows: list[tuple[int, int, int, int, int, bool, int, int]] = []
+        self.ticks: list[tuple[int, int]] = []  # every tick: [start [ns] realtime, start -> on_tick [ns]]
         self._seq, self._rx_s = -1, 0.0
 
     def __call__(self, report: Any) -> None:
+        self.ticks.append((self.clock.real_of_monotonic_ns(report.start_ns), time.monotonic_ns() - report.start_ns))
         if report.carrier is not None:  # the sample stays "used" until a newer one arrives
             self._seq, self._rx_s = report.carrier.value.seq, report.carrier.rx_time_s
         if not report.send_ns:
@@ -87,12 +89,16 @@ class SendLog:
 
 
 def child_main(rate_hz: float, duration_s: float, zenoh_connect: str, log_dir: str, out: str,
-               profile: str = "") -> None:
-    """The controller process: ``marsupial run``'s wiring with the tick observer."""
+               profile: str = "", flight_data: str = "none") -> None:
+    """The controller process: ``marsupial run``'s wiring with the tick observer.
+
+    ``flight_data``: "none" (record.csv only), "mcap" (and flight.mcap, as ``marsupial run``),
+    "live" (and the live server on a free loopback port, printed as ``LIVE <port>``)."""
     from mission.config.schema import load_config, with_overrides
     from mission.controller import MissionController, mission_info
+    from mission.flightdata.writer import LiveAddress
     from mission.record import FlightRecorder
-    from mission.cli.run import mission_io
+    from mission.cli.run import flight_data as flight_data_sinks, mission_io
 
     cfg = with_overrides(load_config(DEMO_CONFIG), {
         "mission.rate_hz": rate_hz, "mission.max_duration_s": duration_s + 120.0, "zenoh.pair": PAIR,
@@ -102,11 +108,15 @@ def child_main(rate_hz: float, duration_s: float, zenoh_connect: str, log_dir: s
     stop = threading.Event()
     window: dict[str, Any] = {}
     with ExitStack() as stack:
-        recorder = FlightRecorder(Path(log_dir) / "flight", mission_info(cfg))
+        info, directory = mission_info(cfg), Path(log_dir) / "flight"
+        live = LiveAddress("127.0.0.1", 0) if flight_data == "live" else None
+        sinks = flight_data_sinks(cfg, directory, info, clock, live) if flight_data != "none" else []
+        recorder = FlightRecorder(directory, info, sinks)
         feed, publisher, link = stack.enter_context(mission_io(cfg, clock, recorder.tlog_path))
         controller = MissionController(cfg, link, feed, clock, publisher=publisher, recorder=recorder, stop=stop,
                                        on_tick=sends)
-        print(f"PORT {link.port}", flush=True)
+        live_port = next((s.live_port for s in sinks if getattr(s, "live_port", None) is not None), 0)
+        print(f"PORT {link.port} {live_port}", flush=True)
 
         def measure_window() -> None:
             deadline = time.monotonic() + 30.0
@@ -139,6 +149,7 @@ def child_main(rate_hz: float, duration_s: float, zenoh_connect: str, log_dir: s
     wall_s = (e_ns - s_ns) / 1e9
     result = {
         "sends": sends.rows,
+        "ticks": sends.ticks,
         "window_ns": [s_ns, e_ns],
         "wall_s": wall_s,
         "cpu_share": (e_cpu - s_cpu) / wall_s,
@@ -159,9 +170,11 @@ def child_main(rate_hz: float, duration_s: float, zenoh_connect: str, log_dir: s
 @click.option("--log-dir", required=True, type=click.Path(file_okay=False), help="Flight record directory.")
 @click.option("--out", required=True, type=click.Path(dir_okay=False), help="Where to write the record (JSON).")
 @click.option("--profile", default="", help="Write cProfile statistics of the loop here.")
-def main(rate: float, duration: float, zenoh_connect: str, log_dir: str, out: str, profile: str) -> None:
+@click.option("--flight-data", type=click.Choice(["none", "mcap", "live"]), default="none", show_default=True,
+              help="Beside record.csv: nothing, flight.mcap, or flight.mcap and the live server.")
+def main(rate: float, duration: float, zenoh_connect: str, log_dir: str, out: str, profile: str, flight_data: str) -> None:
     """Run the controller for the end-to-end bench (internal: started by bench.e2e)."""
-    child_main(rate, duration, zenoh_connect, log_dir, out, profile)
+    child_main(rate, duration, zenoh_connect, log_dir, out, profile, flight_data)
 
 
 if __name__ == "__main__":

@@ -244,7 +244,10 @@ def _is_flight_log(directory: Path) -> bool:
 @click.argument("log_dir", metavar="LOG", type=click.Path(exists=True))
 @click.option("--out", "out_path", type=click.Path(dir_okay=False),
               help="Output image (default LOG_DIR/flight.png; with a folder of flight logs, one per log).")
-def plot(log_dir: str, out_path: str | None) -> int:
+@click.option("--panels", is_flag=True, help="Instead: the panels of the Foxglove layout (configs/foxglove/"
+              "marsupial.json) drawn from the flight's MCAP: 3D scene, phase, distances, command, log "
+              "[default LOG_DIR/flight-panels.png].")
+def plot(log_dir: str, out_path: str | None, panels: bool = False) -> int:
     """Draw the paper-style figures (trajectories; |e_pc|, |e_tc|, |e_pt| over t, the time since
     the start of riding) from a flight log written by ``marsupial run`` or ``marsupial demo``.
 
@@ -253,6 +256,16 @@ def plot(log_dir: str, out_path: str | None) -> int:
     it has no CSV), an MCAP file itself (logs/demo/pair0/flight.mcap), or a folder of flight logs
     (logs/demo: each one is plotted into its own directory). Exit code 2 when LOG holds no flight log."""
     path = Path(log_dir)
+    if panels:
+        from mission.flightdata.view import draw_panels
+
+        mcap = path if path.is_file() else path / "flight.mcap"
+        if not mcap.is_file() or mcap.suffix != ".mcap":
+            raise ConfigError("LOG", log_dir, "--panels draws from a flight.mcap: give a flight log directory that has "
+                              "one (written by `marsupial run`), or the file")
+        out = draw_panels(mcap, out_path or mcap.parent / "flight-panels.png")
+        click.echo(f"panels written to {out}")
+        return 0
     if path.is_file():
         if path.suffix != ".mcap":
             raise ConfigError("LOG", log_dir, "is a file but not an MCAP flight log (flight.mcap); give it, or "

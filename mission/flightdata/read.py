@@ -72,3 +72,52 @@ def read_mcap_record(path: str | Path) -> tuple[list[str], list[list[Any]], dict
     for name in ("mission", "mission_end"):
         info.update({k: json.loads(v) for k, v in content.metadata.get(name, {}).items()})
     return header, columns, info
+
+
+def _varint(data: bytes, i: int) -> tuple[int, int]:
+    value, shift = 0, 0
+    while True:
+        b = data[i]
+        i += 1
+        value |= (b & 0x7F) << shift
+        shift += 7
+        if not b & 0x80:
+            return value, i
+
+
+def _fields(data: bytes) -> Iterator[tuple[int, int | bytes]]:
+    """(field number, value) of a protobuf message: varints as int, length-delimited as bytes
+    (fixed-size fields skipped)."""
+    i = 0
+    while i < len(data):
+        key, i = _varint(data, i)
+        number, wire = key >> 3, key & 7
+        if wire == 0:
+            value, i = _varint(data, i)
+            yield number, value
+        elif wire == 2:
+            size, i = _varint(data, i)
+            yield number, data[i:i + size]
+            i += size
+        elif wire in (1, 5):
+            i += 8 if wire == 1 else 4
+        else:
+            raise ValueError(f"protobuf wire type {wire} not expected in foxglove.Log")
+
+
+def log_lines(content: McapContent, topic: str) -> list[tuple[float, int, str]]:
+    """The ``foxglove.Log`` messages of ``topic``: (time [s], level, text). The Log schema is
+    small and fixed (timestamp = 1 {sec = 1, nsec = 2}, level = 2, message = 3): read by hand,
+    so reading needs no protobuf runtime."""
+    out = []
+    for t, schema, log_time, data in content.messages:
+        if t != topic or schema != "foxglove.Log":
+            continue
+        level, text = 0, ""
+        for number, value in _fields(data):
+            if number == 2 and isinstance(value, int):
+                level = value
+            elif number == 3 and isinstance(value, bytes):
+                text = value.decode("utf-8", errors="replace")
+        out.append((log_time / 1e9, level, text))
+    return out

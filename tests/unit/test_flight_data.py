@@ -85,6 +85,9 @@ def test_plot_reads_the_mcap_as_it_reads_the_csv(tmp_path):
         assert out.stat().st_size > 20_000
     result = CliRunner().invoke(plot, [str(tmp_path / "mission.json")], standalone_mode=False)
     assert isinstance(result.exception, ConfigError) and "not an MCAP" in str(result.exception)
+    result = CliRunner().invoke(plot, [str(tmp_path), "--panels"], standalone_mode=False)  # the layout's panels
+    assert result.exception is None, result.output
+    assert (tmp_path / "flight-panels.png").stat().st_size > 50_000
 
 
 def test_the_bc_circle_lies_in_the_docks_plane_b_c_from_the_target():
