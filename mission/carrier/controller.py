@@ -72,8 +72,9 @@ class OwnState:
 class CarrierStep:
     """One step of the carrier controller, for its flight data: t_s [s] clock time; mode;
     hold_reason (None: in control); state the own state used (None: none, or stale); command
-    the command sent; law_velocity_m_s [m/s] the filtered law command; guard_active whether the P3
-    guard cut it; published the state sent to the passenger (None: nothing went out)."""
+    the command sent; law_velocity_m_s [m/s] the filtered law command; guard_active_ticks the
+    steps so far on which the P3 guard cut the command; published the state sent to the passenger
+    (None: nothing went out)."""
 
     t_s: float
     mode: str
@@ -81,7 +82,7 @@ class CarrierStep:
     state: OwnState | None
     command: Tracked
     law_velocity_m_s: np.ndarray
-    guard_active: bool
+    guard_active_ticks: int
     published: CarrierState | None
 
 
@@ -177,7 +178,6 @@ class CarrierController:
         self.mode = CarrierMode.WAITING
         self.seq = 0
         self.hold_reason: str | None = "no valid own state"
-        self.guard_active = False
         self._plan_velocity = np.zeros(self.dim)
         self._stats: dict[str, Any] = {"closest_target_distance_m": math.inf, "guard_active_ticks": 0,
                                        "stale_ticks": 0, "ticks": 0, "distance_at_separation_m": None,
@@ -271,7 +271,6 @@ class CarrierController:
             # acceleration limit and Remark 1 act on: tying it to the heading would let the
             # command turn only as fast as the robot already does (a heading lock).
             self.velocity_m_s = u
-        self.guard_active = active
         if active:
             self._stats["guard_active_ticks"] += 1
         return cmd
@@ -390,9 +389,8 @@ class CarrierController:
             self._stats["stale_ticks"] += 1
             self.velocity_m_s = np.zeros(self.dim)
             self.backend.command(STOP)
-            self._trace(now, None, STOP, None)
+            trace(self, now, None, STOP, None)
             return None
-        self.guard_active = False
         cmd = self._decide(state, dt_s, now - state.t_s) if why is None else STOP
         if why is not None:
             self.velocity_m_s = np.zeros(self.dim)
@@ -408,17 +406,12 @@ class CarrierController:
         out = CarrierState(fresh.t_s, self.seq, "local_ned", _pad3(fresh.position_ned_m[:self.dim]), velocity,
                            fresh.yaw_rad, accel)
         if self.cfg.carrier.align_on_deck_m > 0 and not self._aligned:
-            self._trace(now, state, cmd, None)
+            trace(self, now, state, cmd, None)
             return out  # not yet placed in the passenger's frame: nothing the passenger should use
         self.publisher.publish(out)
         self.seq += 1
-        self._trace(now, state, cmd, out)
+        trace(self, now, state, cmd, out)
         return out
-
-    def _trace(self, t_s: float, state: OwnState | None, cmd: Tracked, published: CarrierState | None) -> None:
-        if self.steps is not None:
-            self.steps.step(CarrierStep(t_s, self.mode.value, self.hold_reason, state, cmd, self.velocity_m_s,
-                                        self.guard_active, published))
 
     def run(self, stop_event: threading.Event, duration_s: float | None = None) -> None:
         """Step at ``carrier.rate_hz`` on the clock until ``stop_event`` is set or ``duration_s``
@@ -461,3 +454,11 @@ class CarrierController:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def trace(ctl: CarrierController, t_s: float, state: OwnState | None, cmd: Tracked,
+          published: CarrierState | None) -> None:
+    """Hand the step just taken to the controller's :class:`StepSink`, if it has one."""
+    if ctl.steps is not None:
+        ctl.steps.step(CarrierStep(t_s, ctl.mode.value, ctl.hold_reason, state, cmd, ctl.velocity_m_s,
+                                   ctl._stats["guard_active_ticks"], published))

@@ -39,6 +39,7 @@ class CarrierLog(DataLog):
         self._counters: Callable[[], dict[str, Any]] | None = None
         self._said: tuple[str, str | None] | None = None
         self._next_counters_s: float | None = None
+        self._guard_ticks = 0
 
     def set_counters(self, counters: Callable[[], dict[str, Any]]) -> None:
         """How to read the passenger feed's counters (logged once a second, off the loop)."""
@@ -72,9 +73,10 @@ class CarrierLog(DataLog):
             "yaw_rad": None if st is None or st.yaw_rad is None else clean(float(st.yaw_rad)),
             "law_velocity": vector(_pad3(step.law_velocity_m_s)), "setpoint": vector(_pad3(cmd.setpoint_ned_m_s)),
             "speed_m_s": clean(float(cmd.speed_m_s)), "yaw_rate_rad_s": clean(float(cmd.yaw_rate_rad_s)),
-            "guard_active": step.guard_active,
+            "guard_active": step.guard_active_ticks > self._guard_ticks, "guard_active_ticks": step.guard_active_ticks,
             "target_distance_m": None if st is None else clean(float(np.linalg.norm(self.target - _pad3(st.position_ned_m))))},
             log_time=t)
+        self._guard_ticks = step.guard_active_ticks
         if self._counters is not None and (self._next_counters_s is None or t_s >= self._next_counters_s):
             self.ch["passenger_feed"].log(self._counters(), log_time=t)
             self._next_counters_s = t_s + 1.0
