@@ -151,7 +151,7 @@ def analyse(rate_hz: float, child: dict, published: dict[int, int], arrivals: li
     #  feed read, send called] (times [ns] realtime)
     sends = child.pop("sends")
     start_ns, end_ns = child["window_ns"]
-    ticks = [duration for start, duration in child.pop("ticks", []) if start_ns <= start <= end_ns]
+    window_ticks = [t for t in child.pop("ticks", []) if start_ns <= t[0] <= end_ns]
     n = min(len(sends), len(arrivals))
     notes = []
     if len(sends) != len(arrivals):
@@ -199,8 +199,9 @@ def analyse(rate_hz: float, child: dict, published: dict[int, int], arrivals: li
             (("zenoh", zen), ("wait", wait), ("tick_to_arrival", compute),
              # every tick of the window: where tick_to_arrival goes
              ("observe", observe), ("step", step), ("send_to_arrival", send), ("send_call", send_call),
-             # every tick of the window, start to the end of its record (on_tick)
-             ("tick", ticks))}
+             # every tick of the window, start to the end of its record (on_tick), and the loop
+             # thread's CPU time per period (other processes' load excluded)
+             ("tick", [t[1] for t in window_ticks]), ("tick_cpu", [t[2] for t in window_ticks]))}
     return ControllerRun(rate_hz=rate_hz, e2e_raw=percentiles_ms(raw), e2e_seen=percentiles_ms(seen), legs=legs,
                          stream=stream, child=child, mismatches=mismatches, samples_unused=unused, notes=notes)
 

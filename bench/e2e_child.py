@@ -72,11 +72,17 @@ class SendLog:
     def __init__(self, clock: RealtimeMonotonicClock) -> None:
         self.clock = clock
         self.rows: list[tuple[int, int, int, int, int, bool, int, int]] = []
-        self.ticks: list[tuple[int, int]] = []  # every tick: [start [ns] realtime, start -> on_tick [ns]]
+        # every tick: [start [ns] realtime, start -> on_tick [ns], the loop thread's CPU time since the
+        # previous on_tick [ns] (one period: its wait, nearly free, and the tick; other processes excluded)]
+        self.ticks: list[tuple[int, int, int]] = []
+        self._cpu_ns: int | None = None
         self._seq, self._rx_s = -1, 0.0
 
     def __call__(self, report: Any) -> None:
-        self.ticks.append((self.clock.real_of_monotonic_ns(report.start_ns), time.monotonic_ns() - report.start_ns))
+        cpu = time.thread_time_ns()
+        self.ticks.append((self.clock.real_of_monotonic_ns(report.start_ns), time.monotonic_ns() - report.start_ns,
+                           0 if self._cpu_ns is None else cpu - self._cpu_ns))
+        self._cpu_ns = cpu
         if report.carrier is not None:  # the sample stays "used" until a newer one arrives
             self._seq, self._rx_s = report.carrier.value.seq, report.carrier.rx_time_s
         if not report.send_ns:

@@ -13,7 +13,9 @@ three ways:
   (:class:`sim.testing.foxglove_viewer.LiveViewer`, in this process).
 
 The tick is measured from its start to the end of its record (the ``on_tick`` observer, called
-after the row went to every sink): every tick of the riding window. The runs are interleaved
+after the row went to every sink): every tick of the riding window, in wall time (the target's
+figure; on a loaded machine it is mostly the scheduler's), and as the loop thread's CPU time per
+period (``time.thread_time_ns`` between two ticks: what the loop itself spent, whatever else runs). The runs are interleaved
 (csv, mcap, live, csv, ...) so that the machine's load drifts over all three alike; the table gives
 each way's median over its runs of the tick's p50 and p99, the largest tick, and the p99's ratio
 to ``csv``'s. Target: p99 within 10 % of ``csv``. The end-to-end ``seen`` latency p99 (sample
@@ -42,8 +44,9 @@ def measure(rate_hz: float, duration_s: float, repeats: int) -> dict[str, Any]:
         for way in WAYS:
             run = run_controller(rate_hz, duration_s, flight_data=_CHILD_WAY[way])
             tick = run.legs["tick"]
-            runs[way].append({"tick": tick, "seen_p99_ms": run.e2e_seen["p99_ms"], "cpu_share": run.child["cpu_share"],
-                              "overruns": run.child["overruns"], "loop_hz": run.child["loop_hz"]})
+            runs[way].append({"tick": tick, "tick_cpu": run.legs["tick_cpu"], "seen_p99_ms": run.e2e_seen["p99_ms"],
+                              "cpu_share": run.child["cpu_share"], "overruns": run.child["overruns"],
+                              "loop_hz": run.child["loop_hz"]})
             click.echo(f"  run {r + 1}/{repeats} {way:<4}: tick p50 {tick['p50_ms']:.3f} ms, p99 {tick['p99_ms']:.3f} ms, "
                        f"max {tick['max_ms']:.3f} ms ({tick['n']} ticks), seen p99 {run.e2e_seen['p99_ms']:.3f} ms, "
                        f"cpu {run.child['cpu_share']:.2f}", err=True)
@@ -53,26 +56,29 @@ def measure(rate_hz: float, duration_s: float, repeats: int) -> dict[str, Any]:
 def table(result: dict[str, Any]) -> tuple[str, bool]:
     """The table and whether every way met the target."""
     runs = result["runs"]
-    base = statistics.median(r["tick"]["p99_ms"] for r in runs["csv"])
-    lines = [f"tick = start -> its record written (every tick of {result['duration_s']:g} s riding at "
-             f"{result['rate_hz']:g} Hz, {result['repeats']} interleaved runs per way; load "
-             f"{' '.join(f'{x:.1f}' for x in os.getloadavg())})",
-             f"{'way':<5} {'ticks':>6} {'p50 ms':>8} {'p99 ms':>8} {'max ms':>8} {'p99/csv':>8} {'seen p99 ms':>12} "
-             f"{'cpu':>5}  target p99 <= {TARGET:.2f} x csv"]
+
+    def med(way: str, leg: str, key: str) -> float:
+        return statistics.median(r[leg][key] for r in runs[way])
+
+    base, base_cpu = med("csv", "tick", "p99_ms"), med("csv", "tick_cpu", "p99_ms")
+    lines = [f"tick = its start -> its record written, wall; tick cpu = the loop thread's CPU time per period "
+             f"({result['duration_s']:g} s riding at {result['rate_hz']:g} Hz, {result['repeats']} interleaved runs "
+             f"per way; load {' '.join(f'{x:.1f}' for x in os.getloadavg())})",
+             f"{'way':<5} {'ticks':>6} {'p50 ms':>7} {'p99 ms':>7} {'max ms':>7} {'p99/csv':>7} {'cpu p50':>8} "
+             f"{'cpu p99':>8} {'/csv':>5} {'seen p99':>9} {'share':>5}  target: p99 <= {TARGET:.2f} x csv"]
     ok_all = True
     for way in WAYS:
-        p50 = statistics.median(r["tick"]["p50_ms"] for r in runs[way])
-        p99 = statistics.median(r["tick"]["p99_ms"] for r in runs[way])
+        p99, cpu99 = med(way, "tick", "p99_ms"), med(way, "tick_cpu", "p99_ms")
         mx = max(r["tick"]["max_ms"] for r in runs[way])
         n = sum(r["tick"]["n"] for r in runs[way])
         seen = statistics.median(r["seen_p99_ms"] for r in runs[way])
-        cpu = statistics.median(r["cpu_share"] for r in runs[way])
-        ratio = p99 / base
-        ok = ratio <= TARGET
+        share = statistics.median(r["cpu_share"] for r in runs[way])
+        ok = p99 / base <= TARGET
         ok_all &= ok
-        lines.append(f"{way:<5} {n:>6} {p50:>8.3f} {p99:>8.3f} {mx:>8.3f} {ratio:>8.2f} {seen:>12.3f} {cpu:>5.2f}  "
-                     f"{'pass' if ok else 'MISS'}")
-    lines.append("(p50, p99, seen, cpu: median over the runs; max: over all ticks)")
+        lines.append(f"{way:<5} {n:>6} {med(way, 'tick', 'p50_ms'):>7.3f} {p99:>7.3f} {mx:>7.2f} {p99 / base:>7.2f} "
+                     f"{med(way, 'tick_cpu', 'p50_ms'):>8.3f} {cpu99:>8.3f} {cpu99 / base_cpu:>5.2f} {seen:>9.3f} "
+                     f"{share:>5.2f}  {'pass' if ok else 'MISS'}")
+    lines.append("(p50, p99, seen [ms] and the process's CPU share: median over the runs; max: over all ticks)")
     return "\n".join(lines), ok_all
 
 

@@ -39,7 +39,9 @@ CLOCK_NOTE = ("times here and in record.csv (t_s) are on the mission clock [s] s
 
 
 def _vec(v: np.ndarray | None) -> list[float]:
-    return [float("nan")] * 3 if v is None else [float(x) for x in v]
+    if v is None:
+        return [float("nan")] * 3
+    return v.tolist() if isinstance(v, np.ndarray) and v.dtype == np.float64 else [float(x) for x in v]
 
 
 @dataclass(frozen=True)

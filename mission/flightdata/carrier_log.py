@@ -48,6 +48,10 @@ class CarrierLog(DataLog):
     def step(self, step: CarrierStep) -> None:
         self.submit(step.t_s, step)
 
+    def close(self) -> None:
+        """Finish the file (idempotent)."""
+        self.finish()
+
     def handle(self, t_s: float, step: CarrierStep) -> None:
         from foxglove.messages import FrameTransform, Log, LogLevel, Quaternion, Vector3
 

@@ -34,25 +34,33 @@ PHASES = [p.value for p in Phase]
 NED_IN_ENU = (math.sqrt(0.5), math.sqrt(0.5), 0.0, 0.0)  # (x, y, z, w): (n, e, d) -> (e, n, -d)
 
 
+# Plain Python on lists below, not numpy on 3-vectors: the worker shares the GIL with the control
+# loop, and per-call numpy overhead on tiny arrays was most of its time.
+_finite = math.isfinite
+
+
 def clean(value: Any) -> Any:
     """A JSON-safe value: NaN and infinities become None (JSON has no NaN)."""
-    if isinstance(value, float) and not math.isfinite(value):
+    if isinstance(value, float) and not _finite(value):
         return None
     return value
 
 
-def vector(v: np.ndarray | None) -> dict[str, float] | None:
-    """``{"n", "e", "d"}`` of a NED vector, or None when it is missing or not finite."""
-    if v is None or not np.all(np.isfinite(v)):
+def vector(v: Any) -> dict[str, float] | None:
+    """``{"n", "e", "d"}`` of a NED vector (array or sequence), or None when it is missing or not finite."""
+    if v is None:
         return None
-    return {"n": float(v[0]), "e": float(v[1]), "d": float(v[2])}
+    n, e, d = v.tolist() if hasattr(v, "tolist") else v
+    if not (_finite(n) and _finite(e) and _finite(d)):
+        return None
+    return {"n": float(n), "e": float(e), "d": float(d)}
 
 
-def _distance(a: np.ndarray | None, b: np.ndarray | None) -> float | None:
+def _distance(a: Any, b: Any) -> float | None:
     if a is None or b is None:
         return None
-    d = float(np.linalg.norm(np.asarray(a) - np.asarray(b)))
-    return d if math.isfinite(d) else None
+    d = math.dist(a.tolist() if hasattr(a, "tolist") else a, b.tolist() if hasattr(b, "tolist") else b)
+    return d if _finite(d) else None
 
 
 def bc_circle(info: dict[str, Any], points: int = 72) -> np.ndarray:
@@ -89,6 +97,7 @@ class MissionLog(DataLog):
         self._next_periodic_s: float | None = None
         self._anchor: np.ndarray | None = None
         self._circle = bc_circle(info)
+        self._target = [float(x) for x in info["target_ned_m"]]
 
     # ---------------------------------------------------------------- RecordSink
     def tick(self, row: TickRow) -> None:
@@ -97,10 +106,11 @@ class MissionLog(DataLog):
     def set_counters(self, counters: Callable[[], dict[str, Any]]) -> None:
         self._counters = counters
 
-    def close(self, info: dict[str, Any] | None = None, summary: dict[str, Any] | None = None,  # type: ignore[override]
-              timeout_s: float = 10.0) -> None:
-        end = {**(info or {}), **{k: v for k, v in (summary or {}).items() if k in ("phase", "reason", "detail", "p1", "p2", "p3")}}
-        super().close({"mission_end": _json_values(end)} if end else None, timeout_s)
+    def close(self, info: dict[str, Any], summary: dict[str, Any]) -> None:
+        """Finish the file with ``mission_end``: ``info`` (the final ``mission.json``) and how the
+        mission ended (``summary``'s phase, reason, detail and P1-P3). Idempotent."""
+        end = {**info, **{k: v for k, v in summary.items() if k in ("phase", "reason", "detail", "p1", "p2", "p3")}}
+        self.finish({"mission_end": _json_values(end)} if end else None)
 
     # ---------------------------------------------------------------- worker
     def handle(self, t_s: float, row: TickRow) -> None:
@@ -109,16 +119,18 @@ class MissionLog(DataLog):
         t, stamp = ns(t_s), timestamp(t_s)
         identity = Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)
 
-        def transform(key: str, parent: str, child: str, v: np.ndarray | None) -> None:
-            if v is not None and np.all(np.isfinite(v)):
+        def transform(key: str, parent: str, child: str, v: dict[str, float] | None) -> None:
+            if v is not None:
                 self.ch[key].log(FrameTransform(timestamp=stamp, parent_frame_id=parent, child_frame_id=child,
-                                                translation=Vector3(x=float(v[0]), y=float(v[1]), z=float(v[2])),
+                                                translation=Vector3(x=v["n"], y=v["e"], z=v["d"]),
                                                 rotation=identity), log_time=t)
 
-        transform("carrier_tf", WORLD_FRAME, self.frames["carrier"], row.x_c)
-        transform("passenger_tf", WORLD_FRAME, self.frames["passenger"], row.x_p)
-        if row.dock is not None and row.x_c is not None:
-            transform("dock_tf", self.frames["carrier"], self.frames["dock"], np.asarray(row.dock) - np.asarray(row.x_c))
+        x_c, x_p, dock = vector(row.x_c), vector(row.x_p), vector(row.dock)
+        transform("carrier_tf", WORLD_FRAME, self.frames["carrier"], x_c)
+        transform("passenger_tf", WORLD_FRAME, self.frames["passenger"], x_p)
+        if dock is not None and x_c is not None:
+            transform("dock_tf", self.frames["carrier"], self.frames["dock"],
+                      {k: dock[k] - x_c[k] for k in ("n", "e", "d")})
         anchor_new = row.anchor is not None and self._anchor is None
         if anchor_new:
             self._anchor = np.asarray(row.anchor, dtype=float)
@@ -131,7 +143,7 @@ class MissionLog(DataLog):
         self.ch["phase"].log({"phase": row.phase, "index": PHASES.index(row.phase) if row.phase in PHASES else -1,
                               "mode": row.mode, "armed": row.armed, "carrier_age_s": clean(row.carrier_age_s)},
                              log_time=t)
-        target = np.asarray(self.info["target_ned_m"], dtype=float)
+        target = self._target
         self.ch["distances"].log({"e_pc_m": _distance(row.x_p, row.dock), "e_tc_m": _distance(target, row.dock),
                                   "e_pt_m": _distance(row.x_p, target), "carrier_target_m": _distance(target, row.x_c),
                                   "bc_m": self.info.get("bc_m"), "P": clean(float(row.P))}, log_time=t)
@@ -146,7 +158,8 @@ class MissionLog(DataLog):
                                  "acceleration": vector(row.acceleration_sp)}, log_time=t)
         values = row.values()
         values[0] = round(row.t_s, 4)  # as record.csv writes it
-        self.ch["record"].log({name: clean(v) for name, v in zip(COLUMNS, values)}, log_time=t)
+        self.ch["record"].log(dict(zip(COLUMNS, [None if type(v) is float and not _finite(v) else v for v in values])),
+                              log_time=t)
 
     def _periodic(self, t: int, stamp: Any) -> None:
         """``map -> world``, the scene and the counters: rarely changing, sent again each second

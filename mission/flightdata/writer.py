@@ -124,7 +124,8 @@ class DataLog:
     thread makes from what :meth:`submit` queues.
 
     ``metadata``: MCAP metadata records written first (name -> string map). Subclasses create
-    their channels with :meth:`channel` and implement :meth:`handle` (runs on the worker).
+    their channels with :meth:`channel` and implement :meth:`handle` (runs on the worker);
+    :meth:`finish` ends it all.
     Errors in the worker are logged, counted (``errors``) and never reach the caller.
     """
 
@@ -197,7 +198,7 @@ class DataLog:
                 if self.errors <= 3:
                     log.warning("flight data %s: %s: %s", self.path.name, type(exc).__name__, exc)
 
-    def close(self, metadata: dict[str, dict[str, str]] | None = None, timeout_s: float = 10.0) -> None:
+    def finish(self, metadata: dict[str, dict[str, str]] | None = None, timeout_s: float = 10.0) -> None:
         """Let the worker finish what was queued, write ``metadata``, finish the file (summary,
         footer) and stop the live server. Idempotent."""
         if self._closed:
