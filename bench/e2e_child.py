@@ -7,8 +7,9 @@ setpoint through the controller's ``on_tick`` observer: when the tick started, w
 observation ended, which carrier sample it used (``seq`` and when the feed's Zenoh callback
 received it), and when ``send`` was called and returned. Its clock is
 CLOCK_MONOTONIC at speed 1; stamps are converted to CLOCK_REALTIME with an offset sampled at
-start (the two do not drift apart measurably in a run of seconds). It prints ``PORT <n>`` (the
-link's UDP port) first, then writes its record as JSON to ``--out``.
+start (the two do not drift apart measurably in a run of seconds). It prints ``PORT <n> <live>`` (the
+link's UDP port; the live server's TCP port, or 0) first, then writes its record as JSON to ``--out``.
+``--flight-data`` adds flight.mcap, or flight.mcap and the live server, to the record.
 """
 from __future__ import annotations
 
