@@ -312,14 +312,13 @@ class MissionController:
     def _record(self, t: float, obs: Observation, dec: phases.Decision, events: tuple[str, ...]) -> None:
         if self.recorder is None:
             return
-        v, c, st, sp = obs.vehicle, obs.carrier, self.state, dec.setpoint
+        v, c, st = obs.vehicle, obs.carrier, self.state
         self.recorder.record_row(TickRow(
             t, st.phase.value, None if v is None else v.position_ned_m, None if v is None else v.velocity_ned_m_s,
             None if c is None else c.position_ned_m, None if c is None else c.velocity_ned_m_s, dec.dock, st.x_ref,
-            dec.P, dec.relative, dec.desired, None if sp is None else sp.velocity_ned_m_s, dec.safety_acted,
+            dec.P, dec.relative, dec.desired, dec.setpoint, dec.safety_acted,
             float("nan") if c is None else c.age_s, "" if v is None else v.mode, bool(v is not None and v.armed),
-            u_ref=st.u_ref, position_sp=None if sp is None else sp.position_ned_m,
-            acceleration_sp=None if sp is None else sp.acceleration_ned_m_s2, anchor=st.anchor, events=events))
+            u_ref=st.u_ref, anchor=st.anchor, events=events))
 
     def run(self) -> MissionOutcome:
         """Fly the mission; returns its outcome (never raises for a vehicle-side failure)."""

@@ -21,6 +21,7 @@ from typing import Any, Callable, Protocol, Sequence
 import numpy as np
 
 from mission.core.law import norm
+from mission.core.setpoint import Setpoint
 from mission.phases.phase import AFTER_SEPARATION, FLYING, Phase
 
 VEC = ("n", "e", "d")
@@ -52,9 +53,9 @@ class TickRow:
     x_p, v_p the vehicle and x_c, v_c the carrier sample used [m], [m/s] NED (None: none seen);
     dock the dock point the law treats as the carrier [m]; x_ref, u_ref the reference [m], [m/s];
     P the law's potential gradient (NaN outside riding and navigation); relative the law's
-    ``u_p - u_c`` and desired its command [m/s]; u_cmd the velocity setpoint sent [m/s] (None:
-    nothing sent), with position_sp [m] and acceleration_sp [m/s^2] when a full setpoint went
-    out; safety_acted whether a filter changed the command; carrier_age_s [s] the sample's age;
+    ``u_p - u_c`` and desired its command [m/s]; setpoint the :class:`~mission.core.setpoint.Setpoint`
+    sent (None: nothing sent; its velocity is the CSV's u_cmd); safety_acted whether a filter
+    changed the command; carrier_age_s [s] the sample's age;
     mode, armed the vehicle's; anchor the latched separation point [m] (None before);
     events what happened on this tick (phase change first), as text.
     The CSV holds the columns of :data:`COLUMNS`; the arrays are never written to after the row
@@ -72,14 +73,12 @@ class TickRow:
     P: float
     relative: np.ndarray | None
     desired: np.ndarray | None
-    u_cmd: np.ndarray | None
+    setpoint: Setpoint | None
     safety_acted: bool
     carrier_age_s: float
     mode: str
     armed: bool
     u_ref: np.ndarray | None = None
-    position_sp: np.ndarray | None = None
-    acceleration_sp: np.ndarray | None = None
     anchor: np.ndarray | None = None
     events: tuple[str, ...] = ()
 
@@ -88,6 +87,11 @@ class TickRow:
         return [self.t_s, self.phase, *_vec(self.x_p), *_vec(self.v_p), *_vec(self.x_c), *_vec(self.v_c),
                 *_vec(self.dock), *_vec(self.x_ref), self.P, *_vec(self.relative), *_vec(self.desired),
                 *_vec(self.u_cmd), int(self.safety_acted), self.carrier_age_s, self.mode, int(self.armed)]
+
+    @property
+    def u_cmd(self) -> np.ndarray | None:
+        """The velocity sent [m/s] NED (None: nothing sent)."""
+        return None if self.setpoint is None else self.setpoint.velocity_ned_m_s
 
 
 class RecordSink(Protocol):
@@ -129,9 +133,9 @@ class FlightRecorder:
 
     def record(self, t_s: float, phase: str, x_p, v_p, x_c, v_c, dock, x_ref, P: float, relative, desired, u_cmd,
                safety_acted: bool, carrier_age_s: float, mode: str, armed: bool) -> None:
-        """Record a row given field by field (see :class:`TickRow`)."""
-        self.record_row(TickRow(t_s, phase, x_p, v_p, x_c, v_c, dock, x_ref, P, relative, desired, u_cmd,
-                                safety_acted, carrier_age_s, mode, armed))
+        """Record a row given field by field (see :class:`TickRow`; ``u_cmd`` a velocity setpoint [m/s])."""
+        self.record_row(TickRow(t_s, phase, x_p, v_p, x_c, v_c, dock, x_ref, P, relative, desired,
+                                None if u_cmd is None else Setpoint(u_cmd), safety_acted, carrier_age_s, mode, armed))
 
     def record_row(self, row: TickRow) -> None:
         values = row.values()

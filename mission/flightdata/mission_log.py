@@ -153,9 +153,12 @@ class MissionLog(DataLog):
         self._acted += int(row.safety_acted)
         self.ch["safety"].log({"acted": row.safety_acted, "acted_ticks": self._acted,
                                "change_m_s": _distance(row.u_cmd, row.desired)}, log_time=t)
-        kind = "none" if row.u_cmd is None else ("full" if row.position_sp is not None else "velocity")
-        self.ch["setpoint"].log({"kind": kind, "velocity": vector(row.u_cmd), "position": vector(row.position_sp),
-                                 "acceleration": vector(row.acceleration_sp)}, log_time=t)
+        sp = row.setpoint
+        self.ch["setpoint"].log({"kind": "none" if sp is None else ("full" if sp.full else "velocity"),
+                                 "velocity": None if sp is None else vector(sp.velocity_ned_m_s),
+                                 "position": None if sp is None else vector(sp.position_ned_m),
+                                 "acceleration": None if sp is None else vector(sp.acceleration_ned_m_s2),
+                                 "yaw_rad": None if sp is None else clean(sp.yaw_rad)}, log_time=t)
         values = row.values()
         values[0] = round(row.t_s, 4)  # as record.csv writes it
         self.ch["record"].log(dict(zip(COLUMNS, [None if type(v) is float and not _finite(v) else v for v in values])),

@@ -97,7 +97,8 @@ JSON_SCHEMAS: dict[str, dict[str, Any]] = {
         "kind": {"type": "string", "description": "full (position, velocity, acceleration), velocity, or none (nothing sent)"},
         "velocity": _vector("[m/s] velocity"),
         "position": _vector("[m] position (full setpoints)"),
-        "acceleration": _vector("[m/s^2] acceleration feed-forward (full setpoints)")}),
+        "acceleration": _vector("[m/s^2] acceleration feed-forward (full setpoints)"),
+        "yaw_rad": _number("[rad] absolute heading asked (null: keep the vehicle's)")}),
     "marsupial.CarrierFeed": _object("marsupial.CarrierFeed", "The carrier feed's counters (summary.json carrier_feed)", {
         "received": {"type": "integer"}, "accepted": {"type": "integer"}, "dropped": _COUNTERS,
         "rejected_sources": _COUNTERS, "resyncs": {"type": "integer"}}),

@@ -11,6 +11,7 @@ from mcap.reader import make_reader
 from mcap_protobuf.decoder import DecoderFactory
 
 from mission.cli.run import plot
+from mission.core.setpoint import Setpoint
 from mission.errors import ConfigError
 from mission.flightdata.mission_log import MissionLog, bc_circle
 from mission.flightdata.read import read_messages
@@ -41,8 +42,8 @@ def _fly(directory, ticks: int = 150) -> None:
         events = (f"phase {new}",) if new != phase else ()
         phase = new
         rec.record_row(TickRow(k * 0.1, new, x_p, z, x_c, z, dock, x_p, 0.5 if k >= 10 else float("nan"), z,
-                               np.array([0.3, 0.0, 0.0]), np.array([0.2, 0.0, 0.0]), k % 7 == 0, 0.01, "OFFBOARD", True,
-                               u_ref=z, position_sp=x_p, acceleration_sp=z, anchor=anchor, events=events))
+                               np.array([0.3, 0.0, 0.0]), Setpoint.triple(x_p, np.array([0.2, 0.0, 0.0]), z),
+                               k % 7 == 0, 0.01, "OFFBOARD", True, u_ref=z, anchor=anchor, events=events))
     rec.close({"phase": "NAVIGATING"}, {"separation_time_s": 10.0, "anchor_ned_m": anchor.tolist()})
 
 
@@ -71,6 +72,7 @@ def test_the_mcap_holds_the_csv_rows_and_the_foxglove_channels(tmp_path):
     assert safety[-1]["acted_ticks"] == sum(1 for k in range(150) if k % 7 == 0)
     setpoints = [json.loads(d) for t, s, _, d in content.messages if t == "/pairX/setpoint"]
     assert setpoints[0]["kind"] == "full" and setpoints[0]["velocity"] == {"n": 0.2, "e": 0.0, "d": 0.0}
+    assert setpoints[0]["position"] == {"n": 0.0, "e": 0.0, "d": -1.5} and setpoints[0]["yaw_rad"] is None
     feed = [json.loads(d) for t, s, _, d in content.messages if t == "/pairX/carrier_feed"]
     assert len(feed) == 15 and feed[0]["received"] == 3  # once a second of mission clock
     assert len(MISSION_CHANNELS) == len(topics("pairX")) == 14
