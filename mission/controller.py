@@ -318,7 +318,8 @@ class MissionController:
             None if c is None else c.position_ned_m, None if c is None else c.velocity_ned_m_s, dec.dock, st.x_ref,
             dec.P, dec.relative, dec.desired, dec.setpoint, dec.safety_acted,
             float("nan") if c is None else c.age_s, "" if v is None else v.mode, bool(v is not None and v.armed),
-            u_ref=st.u_ref, anchor=st.anchor, events=events))
+            u_ref=st.u_ref, anchor=st.anchor, course=None if st.recovery is None else st.recovery.course,
+            events=events))
 
     def run(self) -> MissionOutcome:
         """Fly the mission; returns its outcome (never raises for a vehicle-side failure)."""

@@ -56,8 +56,9 @@ class TickRow:
     ``u_p - u_c`` and desired its command [m/s]; setpoint the :class:`~mission.core.setpoint.Setpoint`
     sent (None: nothing sent; its velocity is the CSV's u_cmd); safety_acted whether a filter
     changed the command; carrier_age_s [s] the sample's age;
-    mode, armed the vehicle's; anchor the latched separation point [m] (None before);
-    events what happened on this tick (phase change first), as text.
+    mode, armed the vehicle's; anchor the latched separation point [m] (None before); course the
+    carrier's course (horizontal unit vector NED) while a recovery brings the passenger home
+    (None otherwise); events what happened on this tick (phase change first), as text.
     The CSV holds the columns of :data:`COLUMNS`; the arrays are never written to after the row
     is made (a sink may read them on another thread).
     """
@@ -80,6 +81,7 @@ class TickRow:
     armed: bool
     u_ref: np.ndarray | None = None
     anchor: np.ndarray | None = None
+    course: np.ndarray | None = None
     events: tuple[str, ...] = ()
 
     def values(self) -> list[Any]:

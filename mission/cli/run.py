@@ -87,12 +87,15 @@ def check_config(cfg: Config) -> None:
 def flight_data(cfg: Config, directory: Path, info: dict[str, Any], clock: Clock,
                 live: LiveAddress | None) -> list[RecordSink]:
     """The flight record's sinks besides the CSV: ``flight.mcap`` (with the live view at
-    ``live``, if given) (:class:`mission.flightdata.mission_log.MissionLog`)."""
+    ``live``, if given; with the recovery's docking geometry when the mission comes home)
+    (:class:`mission.flightdata.mission_log.MissionLog`)."""
     from mission.flightdata.mission_log import MissionLog
 
     directory.mkdir(parents=True, exist_ok=True)
     clock_info = clock_metadata(clock, CLOCK_NOTE, "the mock vehicle's simulated time (run --lockstep)")
-    return [MissionLog(directory / "flight.mcap", info, pair=cfg.zenoh.pair, clock=clock_info, live=live)]
+    recovery = mission_model(cfg).recovery
+    return [MissionLog(directory / "flight.mcap", info, pair=cfg.zenoh.pair, clock=clock_info, live=live,
+                       docking=None if recovery is None else recovery.geometry)]
 
 
 def fly(cfg: Config, *, speed: float = 1.0, log_dir: str | Path | None = None, stop: threading.Event | None = None,

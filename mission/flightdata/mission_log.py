@@ -11,10 +11,11 @@ Each :class:`~mission.record.TickRow` becomes, at the row's mission-clock time:
   (the CSV row itself, column by column: what :func:`mission.flightdata.read.read_mcap_record`
   reads back);
 
-and once a second of mission clock (and when the anchor latches): ``map -> world`` (NED under an
-ENU frame), the scene (target, obstacles with their radii, the b c circle in the dock's plane, the
-dock point, both robots, the latched anchor: ``foxglove.SceneUpdate``), and the carrier feed's and
-the link's counters. Topics and schemas: :mod:`mission.flightdata.topics`.
+and once a second of mission clock (and when the anchor latches, or the recovery's course turns):
+``map -> world`` (NED under an ENU frame), the scene (target, obstacles with their radii, the b c
+circle in the dock's plane, the dock point, both robots, the latched anchor, and while a recovery
+brings the passenger home its holdoff point and glide path: ``foxglove.SceneUpdate``), and the
+carrier feed's and the link's counters. Topics and schemas: :mod:`mission.flightdata.topics`.
 """
 from __future__ import annotations
 
@@ -25,12 +26,14 @@ from typing import Any, Callable
 
 import numpy as np
 
+from mission.core.docking import DockingGeometry, gate_point, holdoff_point
 from mission.flightdata.topics import MAP_FRAME, MISSION_CHANNELS, WORLD_FRAME, frame, topics
 from mission.flightdata.writer import DataLog, LiveAddress, ns, timestamp
 from mission.phases import Phase
 from mission.record import COLUMNS, TickRow
 
 PHASES = [p.value for p in Phase]
+COURSE_REDRAW_COS = math.cos(math.radians(2.0))  # the recovery's course turned this much: draw the scene again
 NED_IN_ENU = (math.sqrt(0.5), math.sqrt(0.5), 0.0, 0.0)  # (x, y, z, w): (n, e, d) -> (e, n, -d)
 
 
@@ -86,7 +89,7 @@ class MissionLog(DataLog):
     """
 
     def __init__(self, path: str | Path, info: dict[str, Any], *, pair: str, clock: dict[str, str],
-                 live: LiveAddress | None = None) -> None:
+                 live: LiveAddress | None = None, docking: DockingGeometry | None = None) -> None:
         super().__init__(path, name=pair, metadata={"clock": clock, "mission": _json_values(info)}, live=live)
         self.pair, self.info = pair, info
         self.topics = topics(pair)
@@ -98,6 +101,8 @@ class MissionLog(DataLog):
         self._anchor: np.ndarray | None = None
         self._circle = bc_circle(info)
         self._target = [float(x) for x in info["target_ned_m"]]
+        self._docking = docking
+        self._course: np.ndarray | None = None  # the recovery's course the scene was last drawn for
 
     # ---------------------------------------------------------------- RecordSink
     def tick(self, row: TickRow) -> None:
@@ -134,7 +139,12 @@ class MissionLog(DataLog):
         anchor_new = row.anchor is not None and self._anchor is None
         if anchor_new:
             self._anchor = np.asarray(row.anchor, dtype=float)
-        if self._next_periodic_s is None or t_s >= self._next_periodic_s or anchor_new:
+        course = None if row.course is None or self._docking is None else np.asarray(row.course, dtype=float)
+        turned = (course is None) != (self._course is None) or (
+            course is not None and self._course is not None and float(course @ self._course) < COURSE_REDRAW_COS)
+        if turned:
+            self._course = course
+        if self._next_periodic_s is None or t_s >= self._next_periodic_s or anchor_new or turned:
             self._periodic(t, stamp)
             self._next_periodic_s = t_s + 1.0
         for text in row.events:
@@ -220,11 +230,34 @@ class MissionLog(DataLog):
             c = list(o["center"]) + [0.0] * (3 - len(o["center"]))
             entities.append(entity(f"obstacle{i}", spheres=[SpherePrimitive(
                 pose=pose(c), size=size(2.0 * float(o["radius"])), color=Color(r=0.95, g=0.4, b=0.1, a=0.35))]))
+        if self._course is not None and self._docking is not None:
+            entities += self._recovery_entities(entity, pose, size, label)
         if self._anchor is not None:
             entities.append(entity("anchor", spheres=[SpherePrimitive(pose=pose(self._anchor), size=size(0.35),
                                                                       color=Color(r=0.1, g=0.8, b=0.3, a=1.0))],
                                    texts=[label(self._anchor, "anchor")]))
         return SceneUpdate(entities=entities)
+
+    def _recovery_entities(self, entity: Any, pose: Any, size: Any, label: Any) -> list[Any]:
+        """The holdoff point H and the glide path H -> gate -> dock of the recovery, in the dock's
+        frame (they move with the carrier; they turn with its course). They live 1.5 s: the scene
+        is sent again each second while the recovery lasts, and they vanish after it."""
+        from foxglove.messages import Color, Duration, LinePrimitive, LinePrimitiveLineType, Point3, SpherePrimitive
+
+        assert self._docking is not None and self._course is not None
+        origin = np.zeros(3)
+        h = holdoff_point(origin, self._course, self._docking)
+        gate = gate_point(origin, self._docking)
+        path = [Point3(x=float(p[0]), y=float(p[1]), z=float(p[2])) for p in (h, gate, origin)]
+        lifetime = Duration.from_secs(1.5)
+        cyan = {"r": 0.3, "g": 0.85, "b": 0.95}
+        return [
+            entity("holdoff", self.frames["dock"], lifetime=lifetime, texts=[label(h, "holdoff")],
+                   spheres=[SpherePrimitive(pose=pose(h), size=size(0.3), color=Color(**cyan, a=1.0))]),
+            entity("glide_path", self.frames["dock"], lifetime=lifetime, lines=[LinePrimitive(
+                type=LinePrimitiveLineType.LineStrip, pose=pose(), thickness=2.0, scale_invariant=True, points=path,
+                color=Color(**cyan, a=0.9))]),
+        ]
 
 
 def _json_values(values: dict[str, Any]) -> dict[str, str]:

@@ -11,6 +11,7 @@ from mcap.reader import make_reader
 from mcap_protobuf.decoder import DecoderFactory
 
 from mission.cli.run import plot
+from mission.core.docking import DockingGeometry, holdoff_point
 from mission.core.setpoint import Setpoint
 from mission.errors import ConfigError
 from mission.flightdata.mission_log import MissionLog, bc_circle
@@ -154,3 +155,37 @@ def _paths(node) -> list[str]:
         for item in node:
             out.extend(_paths(item))
     return out
+
+
+def test_a_recovery_draws_its_holdoff_point_and_glide_path_in_the_docks_frame(tmp_path):
+    """While a recovery runs (the row has the carrier's course) the scene holds the holdoff point
+    and the glide path, relative to the dock point, turned with the course; they live 1.5 s."""
+    g = DockingGeometry()
+    log = MissionLog(tmp_path / "flight.mcap", INFO, pair="pairX", clock={"clock": "mission"}, docking=g)
+    rec = FlightRecorder(tmp_path, INFO, [log])
+    z = np.zeros(3)
+    east = np.array([0.0, 1.0, 0.0])
+    for k in range(30):
+        x_c = np.array([0.0, k * 0.1, 0.0])
+        dock = x_c + [0, 0, -1.5]
+        rec.record_row(TickRow(k * 0.1, "HOLDOFF" if k >= 10 else "ARRIVED", dock + [0, -2, -2], z, x_c, z, dock,
+                               dock, float("nan"), None, None, Setpoint(z), False, 0.01, "OFFBOARD", True,
+                               course=east if k >= 10 else None))
+    rec.close({"phase": "HOLD"}, {})
+    with open(tmp_path / "flight.mcap", "rb") as f:
+        scenes = [(msg.log_time, m) for _, _, msg, m in make_reader(f, decoder_factories=[DecoderFactory()])
+                  .iter_decoded_messages(topics=["/pairX/scene"])]
+    before = [m for t, m in scenes if t < 1.0e9]
+    during = [m for t, m in scenes if t >= 1.0e9]
+    assert before and not {"holdoff", "glide_path"} & {e.id for m in before for e in m.entities}
+    assert [t for t, _ in scenes if t >= 1.0e9][0] == 1_000_000_000  # drawn again when the recovery began
+    holdoff = next(e for e in during[0].entities if e.id == "holdoff")
+    glide = next(e for e in during[0].entities if e.id == "glide_path")
+    assert holdoff.frame_id == glide.frame_id == "pairX/dock" and holdoff.frame_locked
+    assert holdoff.lifetime.seconds == 1 and holdoff.lifetime.nanos == 500_000_000
+    h = holdoff_point(z, east, g)
+    p = holdoff.spheres[0].pose.position
+    assert (p.x, p.y, p.z) == pytest.approx(tuple(h))
+    assert h[1] == pytest.approx(-g.holdoff_distance_m) and h[2] < 0  # behind (course east) and above
+    points = [c for q in glide.lines[0].points for c in (q.x, q.y, q.z)]
+    assert points == pytest.approx([*h, 0, 0, -g.decision_height_m, 0, 0, 0])  # H -> gate -> dock
