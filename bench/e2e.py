@@ -101,10 +101,13 @@ class ControllerRun:
     notes: list[str] = field(default_factory=list)
 
 
-def run_controller(rate_hz: float, duration_s: float, carrier_rate_hz: float = 30.0, profile: str = "") -> ControllerRun:
+def run_controller(rate_hz: float, duration_s: float, carrier_rate_hz: float = 30.0, profile: str = "",
+                   flight_data: str = "none") -> ControllerRun:
     """Fly the real controller loop at ``rate_hz`` for ``duration_s`` of RIDING; measure it.
 
-    ``profile``: a path where the child writes cProfile statistics of its loop.
+    ``profile``: a path where the child writes cProfile statistics of its loop. ``flight_data``:
+    what the flight record feeds besides record.csv ("none", "mcap", or "live": flight.mcap and
+    the live server, with a Foxglove viewer subscribed to every channel).
     """
     from mission.bus.bridge import open_session
     from mission.config.schema import ZenohSection
@@ -120,13 +123,18 @@ def run_controller(rate_hz: float, duration_s: float, carrier_rate_hz: float = 3
         stack.callback(carrier.close)
         child = subprocess.Popen(
             [sys.executable, "-m", "bench.e2e_child", "--rate", str(rate_hz), "--duration", str(duration_s),
-             "--zenoh-connect", endpoint, "--log-dir", tmp, "--out", str(out_path), "--profile", profile],
+             "--zenoh-connect", endpoint, "--log-dir", tmp, "--out", str(out_path), "--profile", profile,
+             "--flight-data", flight_data],
             stdout=subprocess.PIPE, text=True, cwd=ROOT)
         stack.callback(lambda: (child.kill(), child.wait()) if child.poll() is None else None)
         assert child.stdout is not None
         line = child.stdout.readline().split()
-        if len(line) != 2 or line[0] != "PORT":
+        if len(line) != 3 or line[0] != "PORT":
             raise RuntimeError(f"controller child did not report its port (got {line!r})")
+        if int(line[2]):
+            from sim.testing.foxglove_viewer import LiveViewer
+
+            stack.enter_context(LiveViewer(f"ws://127.0.0.1:{int(line[2])}"))
         vehicle = stack.enter_context(stamping_vehicle(int(line[1]), dock))
         child.wait(timeout=duration_s + 60.0)
         if child.returncode != 0:
@@ -143,6 +151,7 @@ def analyse(rate_hz: float, child: dict, published: dict[int, int], arrivals: li
     #  feed read, send called] (times [ns] realtime)
     sends = child.pop("sends")
     start_ns, end_ns = child["window_ns"]
+    window_ticks = [t for t in child.pop("ticks", []) if start_ns <= t[0] <= end_ns]
     n = min(len(sends), len(arrivals))
     notes = []
     if len(sends) != len(arrivals):
@@ -189,7 +198,10 @@ def analyse(rate_hz: float, child: dict, published: dict[int, int], arrivals: li
     legs = {name: percentiles_ms(v) for name, v in
             (("zenoh", zen), ("wait", wait), ("tick_to_arrival", compute),
              # every tick of the window: where tick_to_arrival goes
-             ("observe", observe), ("step", step), ("send_to_arrival", send), ("send_call", send_call))}
+             ("observe", observe), ("step", step), ("send_to_arrival", send), ("send_call", send_call),
+             # every tick of the window, start to the end of its record (on_tick), and the loop
+             # thread's CPU time per period (other processes' load excluded)
+             ("tick", [t[1] for t in window_ticks]), ("tick_cpu", [t[2] for t in window_ticks]))}
     return ControllerRun(rate_hz=rate_hz, e2e_raw=percentiles_ms(raw), e2e_seen=percentiles_ms(seen), legs=legs,
                          stream=stream, child=child, mismatches=mismatches, samples_unused=unused, notes=notes)
 

@@ -7,8 +7,9 @@ setpoint through the controller's ``on_tick`` observer: when the tick started, w
 observation ended, which carrier sample it used (``seq`` and when the feed's Zenoh callback
 received it), and when ``send`` was called and returned. Its clock is
 CLOCK_MONOTONIC at speed 1; stamps are converted to CLOCK_REALTIME with an offset sampled at
-start (the two do not drift apart measurably in a run of seconds). It prints ``PORT <n>`` (the
-link's UDP port) first, then writes its record as JSON to ``--out``.
+start (the two do not drift apart measurably in a run of seconds). It prints ``PORT <n> <live>`` (the
+link's UDP port; the live server's TCP port, or 0) first, then writes its record as JSON to ``--out``.
+``--flight-data`` adds flight.mcap, or flight.mcap and the live server, to the record.
 """
 from __future__ import annotations
 
@@ -72,9 +73,17 @@ class SendLog:
     def __init__(self, clock: RealtimeMonotonicClock) -> None:
         self.clock = clock
         self.rows: list[tuple[int, int, int, int, int, bool, int, int]] = []
+        # every tick: [start [ns] realtime, start -> on_tick [ns], the loop thread's CPU time since the
+        # previous on_tick [ns] (one period: its wait, nearly free, and the tick; other processes excluded)]
+        self.ticks: list[tuple[int, int, int]] = []
+        self._cpu_ns: int | None = None
         self._seq, self._rx_s = -1, 0.0
 
     def __call__(self, report: Any) -> None:
+        cpu = time.thread_time_ns()
+        self.ticks.append((self.clock.real_of_monotonic_ns(report.start_ns), time.monotonic_ns() - report.start_ns,
+                           0 if self._cpu_ns is None else cpu - self._cpu_ns))
+        self._cpu_ns = cpu
         if report.carrier is not None:  # the sample stays "used" until a newer one arrives
             self._seq, self._rx_s = report.carrier.value.seq, report.carrier.rx_time_s
         if not report.send_ns:
@@ -87,12 +96,16 @@ class SendLog:
 
 
 def child_main(rate_hz: float, duration_s: float, zenoh_connect: str, log_dir: str, out: str,
-               profile: str = "") -> None:
-    """The controller process: ``marsupial run``'s wiring with the tick observer."""
+               profile: str = "", flight_data: str = "none") -> None:
+    """The controller process: ``marsupial run``'s wiring with the tick observer.
+
+    ``flight_data``: "none" (record.csv only), "mcap" (and flight.mcap, as ``marsupial run``),
+    "live" (and the live server on a free loopback port, printed as ``LIVE <port>``)."""
     from mission.config.schema import load_config, with_overrides
     from mission.controller import MissionController, mission_info
+    from mission.flightdata.writer import LiveAddress
     from mission.record import FlightRecorder
-    from mission.cli.run import mission_io
+    from mission.cli.run import flight_data as flight_data_sinks, mission_io
 
     cfg = with_overrides(load_config(DEMO_CONFIG), {
         "mission.rate_hz": rate_hz, "mission.max_duration_s": duration_s + 120.0, "zenoh.pair": PAIR,
@@ -102,11 +115,15 @@ def child_main(rate_hz: float, duration_s: float, zenoh_connect: str, log_dir: s
     stop = threading.Event()
     window: dict[str, Any] = {}
     with ExitStack() as stack:
-        recorder = FlightRecorder(Path(log_dir) / "flight", mission_info(cfg))
+        info, directory = mission_info(cfg), Path(log_dir) / "flight"
+        live = LiveAddress("127.0.0.1", 0) if flight_data == "live" else None
+        sinks = flight_data_sinks(cfg, directory, info, clock, live) if flight_data != "none" else []
+        recorder = FlightRecorder(directory, info, sinks)
         feed, publisher, link = stack.enter_context(mission_io(cfg, clock, recorder.tlog_path))
         controller = MissionController(cfg, link, feed, clock, publisher=publisher, recorder=recorder, stop=stop,
                                        on_tick=sends)
-        print(f"PORT {link.port}", flush=True)
+        live_port = next((s.live_port for s in sinks if getattr(s, "live_port", None) is not None), 0)
+        print(f"PORT {link.port} {live_port}", flush=True)
 
         def measure_window() -> None:
             deadline = time.monotonic() + 30.0
@@ -139,6 +156,7 @@ def child_main(rate_hz: float, duration_s: float, zenoh_connect: str, log_dir: s
     wall_s = (e_ns - s_ns) / 1e9
     result = {
         "sends": sends.rows,
+        "ticks": sends.ticks,
         "window_ns": [s_ns, e_ns],
         "wall_s": wall_s,
         "cpu_share": (e_cpu - s_cpu) / wall_s,
@@ -159,9 +177,11 @@ def child_main(rate_hz: float, duration_s: float, zenoh_connect: str, log_dir: s
 @click.option("--log-dir", required=True, type=click.Path(file_okay=False), help="Flight record directory.")
 @click.option("--out", required=True, type=click.Path(dir_okay=False), help="Where to write the record (JSON).")
 @click.option("--profile", default="", help="Write cProfile statistics of the loop here.")
-def main(rate: float, duration: float, zenoh_connect: str, log_dir: str, out: str, profile: str) -> None:
+@click.option("--flight-data", type=click.Choice(["none", "mcap", "live"]), default="none", show_default=True,
+              help="Beside record.csv: nothing, flight.mcap, or flight.mcap and the live server.")
+def main(rate: float, duration: float, zenoh_connect: str, log_dir: str, out: str, profile: str, flight_data: str) -> None:
     """Run the controller for the end-to-end bench (internal: started by bench.e2e)."""
-    child_main(rate, duration, zenoh_connect, log_dir, out, profile)
+    child_main(rate, duration, zenoh_connect, log_dir, out, profile, flight_data)
 
 
 if __name__ == "__main__":

@@ -28,7 +28,7 @@ from mission.core.setpoint import Setpoint
 from mission.time.clock import Clock, Periodic, join_thread, start_thread
 from mission.config.schema import Config
 from mission.errors import CommandRejected, LinkError
-from mission.record import FlightRecorder
+from mission.record import FlightRecorder, TickRow
 from mission.mavlink.env import mavlink
 from mission.mavlink.telemetry import VehicleState
 from mission.model import mission_model
@@ -243,6 +243,8 @@ class MissionController:
         self._rate_asked = cfg.mission.telemetry_rate_hz is None and cfg.mission.unused_streams == "keep"
         tau = cfg.mission.velocity_bias_tau_s
         self._velocity_fix = PositionConsistentVelocity(tau) if tau > 0 else None
+        if recorder is not None:
+            recorder.set_counters(self._counters)  # read by the record's sinks, off the loop
 
     def _observe(self, t: float, worker: CommandWorker) -> Observation:
         vstate = self.link.state
@@ -308,15 +310,17 @@ class MissionController:
         except Exception as exc:  # a bus hiccup must never stop the flight loop
             log.warning("could not publish passenger status: %s", exc)
 
-    def _record(self, t: float, obs: Observation, dec: phases.Decision) -> None:
+    def _record(self, t: float, obs: Observation, dec: phases.Decision, events: tuple[str, ...]) -> None:
         if self.recorder is None:
             return
-        v, c = obs.vehicle, obs.carrier
-        self.recorder.record(
-            t, self.state.phase.value, None if v is None else v.position_ned_m, None if v is None else v.velocity_ned_m_s,
-            None if c is None else c.position_ned_m, None if c is None else c.velocity_ned_m_s, dec.dock, self.state.x_ref,
-            dec.P, dec.relative, dec.desired, None if dec.setpoint is None else dec.setpoint.velocity_ned_m_s, dec.safety_acted,
-            float("nan") if c is None else c.age_s, "" if v is None else v.mode, bool(v is not None and v.armed))
+        v, c, st = obs.vehicle, obs.carrier, self.state
+        self.recorder.record_row(TickRow(
+            t, st.phase.value, None if v is None else v.position_ned_m, None if v is None else v.velocity_ned_m_s,
+            None if c is None else c.position_ned_m, None if c is None else c.velocity_ned_m_s, dec.dock, st.x_ref,
+            dec.P, dec.relative, dec.desired, dec.setpoint, dec.safety_acted,
+            float("nan") if c is None else c.age_s, "" if v is None else v.mode, bool(v is not None and v.armed),
+            u_ref=st.u_ref, anchor=st.anchor, course=None if st.recovery is None else st.recovery.course,
+            events=events))
 
     def run(self) -> MissionOutcome:
         """Fly the mission; returns its outcome (never raises for a vehicle-side failure)."""
@@ -341,14 +345,16 @@ class MissionController:
                     sent_ns = stamp()
                 if dec.request is not None:
                     worker.submit(dec.request)
+                events = dec.events
                 if self.state.phase != last_phase:
                     last_phase = self.state.phase
                     detail = f" ({self.state.reason}: {self.state.detail})" if self.state.phase == Phase.ABORT else ""
                     self.on_event(last_phase.value, f"phase {last_phase.value}{detail}")
+                    events = (f"phase {last_phase.value}{detail}", *events)
                 for text in dec.events:
                     log.info(text)
                 self._publish(t, obs)
-                self._record(t, obs, dec)
+                self._record(t, obs, dec, events)
                 self.ticks += 1
                 if self.on_tick is not None:
                     self.on_tick(TickReport(t, self.state.phase, dec, self._received, start_ns, observed_ns,
@@ -404,6 +410,7 @@ def mission_info(cfg: Config) -> dict[str, Any]:
         "target_ned_m": list(cfg.scenario.target),
         "obstacles": [{"center": o.center, "radius": o.radius} for o in cfg.scenario.obstacles],
         "bc_m": cfg.law.params().separation_distance_m,
+        "carrier_start_ned_m": list(cfg.scenario.carrier_start),
         "dock_offset_ned_m": list(cfg.mission.dock_offset_ned_m),
         "dock_tolerance_m": cfg.mission.dock_tolerance_m,
         "arrival_radius_m": cfg.mission.arrival_radius_m,

@@ -1,4 +1,4 @@
-"""Flight record: a CSV row per controller tick, a summary JSON, beside the link's ``.tlog``.
+"""Flight record: one row per controller tick, fed to its sinks, and a summary JSON.
 
 A log directory holds ``record.csv`` (the controller's own record), ``summary.json`` (the same
 keys as ``marsupial simulate --json``, computed from the record, plus how the mission ended and
@@ -6,8 +6,9 @@ the drop counters: ``carrier_feed`` = received, accepted, ``dropped`` per reason
 ``bound_source``, ``rejected_sources`` per source, ``resyncs``; ``link`` = the MAVLink link's
 counters, e.g. ``rejected_foreign``, ``rx_unsigned``, ``rx_bad_signature``), ``mission.json`` (target,
 obstacles, b c: what a plot needs) and ``flight.tlog`` (every MAVLink packet, written by the
-link; readable by pymavlink's ``mavlogdump.py``). Frames: local NED [m], [m/s]; time [s] on the
-controller's clock.
+link; readable by pymavlink's ``mavlogdump.py``). ``marsupial run`` adds ``flight.mcap``
+(:mod:`mission.flightdata`): a :class:`RecordSink` fed the same :class:`TickRow` as the CSV.
+Frames: local NED [m], [m/s]; time [s] on the controller's clock.
 """
 from __future__ import annotations
 
@@ -15,11 +16,12 @@ import csv
 import json
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable, Protocol, Sequence
 
 import numpy as np
 
 from mission.core.law import norm
+from mission.core.setpoint import Setpoint
 from mission.phases.phase import AFTER_SEPARATION, FLYING, Phase
 
 VEC = ("n", "e", "d")
@@ -38,36 +40,117 @@ CLOCK_NOTE = ("times here and in record.csv (t_s) are on the mission clock [s] s
 
 
 def _vec(v: np.ndarray | None) -> list[float]:
-    return [float("nan")] * 3 if v is None else [float(x) for x in v]
+    if v is None:
+        return [float("nan")] * 3
+    return v.tolist() if isinstance(v, np.ndarray) and v.dtype == np.float64 else [float(x) for x in v]
+
+
+@dataclass(frozen=True)
+class TickRow:
+    """What one controller tick did: the flight record's row, as every sink receives it.
+
+    t_s [s] mission clock; phase (a :class:`~mission.phases.Phase` value) after the tick;
+    x_p, v_p the vehicle and x_c, v_c the carrier sample used [m], [m/s] NED (None: none seen);
+    dock the dock point the law treats as the carrier [m]; x_ref, u_ref the reference [m], [m/s];
+    P the law's potential gradient (NaN outside riding and navigation); relative the law's
+    ``u_p - u_c`` and desired its command [m/s]; setpoint the :class:`~mission.core.setpoint.Setpoint`
+    sent (None: nothing sent; its velocity is the CSV's u_cmd); safety_acted whether a filter
+    changed the command; carrier_age_s [s] the sample's age;
+    mode, armed the vehicle's; anchor the latched separation point [m] (None before); course the
+    carrier's course (horizontal unit vector NED) while a recovery brings the passenger home
+    (None otherwise); events what happened on this tick (phase change first), as text.
+    The CSV holds the columns of :data:`COLUMNS`; the arrays are never written to after the row
+    is made (a sink may read them on another thread).
+    """
+
+    t_s: float
+    phase: str
+    x_p: np.ndarray | None
+    v_p: np.ndarray | None
+    x_c: np.ndarray | None
+    v_c: np.ndarray | None
+    dock: np.ndarray | None
+    x_ref: np.ndarray | None
+    P: float
+    relative: np.ndarray | None
+    desired: np.ndarray | None
+    setpoint: Setpoint | None
+    safety_acted: bool
+    carrier_age_s: float
+    mode: str
+    armed: bool
+    u_ref: np.ndarray | None = None
+    anchor: np.ndarray | None = None
+    course: np.ndarray | None = None
+    events: tuple[str, ...] = ()
+
+    def values(self) -> list[Any]:
+        """The row's values in the order of :data:`COLUMNS` (vectors flattened, NaN for None)."""
+        return [self.t_s, self.phase, *_vec(self.x_p), *_vec(self.v_p), *_vec(self.x_c), *_vec(self.v_c),
+                *_vec(self.dock), *_vec(self.x_ref), self.P, *_vec(self.relative), *_vec(self.desired),
+                *_vec(self.u_cmd), int(self.safety_acted), self.carrier_age_s, self.mode, int(self.armed)]
+
+    @property
+    def u_cmd(self) -> np.ndarray | None:
+        """The velocity sent [m/s] NED (None: nothing sent)."""
+        return None if self.setpoint is None else self.setpoint.velocity_ned_m_s
+
+
+class RecordSink(Protocol):
+    """Where a flight record goes besides ``record.csv`` (e.g. :class:`mission.flightdata.MissionLog`).
+
+    ``tick`` runs in the control loop: it must return at once (queue the row, work elsewhere).
+    ``counters`` gives the sink a way to read the feed's and link's counters when it wants them
+    (off the loop). ``close`` gets ``mission.json``'s final content and the summary."""
+
+    def tick(self, row: TickRow) -> None: ...
+
+    def set_counters(self, counters: Callable[[], dict[str, Any]]) -> None: ...
+
+    def close(self, info: dict[str, Any], summary: dict[str, Any]) -> None: ...
 
 
 class FlightRecorder:
-    """Writes one row per tick to ``record.csv`` and keeps the numbers for the summary."""
+    """Writes one row per tick to ``record.csv`` (and to each of ``sinks``) and keeps the
+    numbers for the summary."""
 
-    def __init__(self, directory: str | Path, mission_info: dict[str, Any]) -> None:
+    def __init__(self, directory: str | Path, mission_info: dict[str, Any], sinks: Sequence[RecordSink] = ()) -> None:
         self.dir = Path(directory)
         self.dir.mkdir(parents=True, exist_ok=True)
         (self.dir / "mission.json").write_text(json.dumps(mission_info, indent=2))
         self._file = open(self.dir / "record.csv", "w", newline="")
         self._csv = csv.writer(self._file)
         self._csv.writerow(COLUMNS)
+        self.sinks = list(sinks)
         self.rows = 0
 
     @property
     def tlog_path(self) -> Path:
         return self.dir / "flight.tlog"
 
+    def set_counters(self, counters: Callable[[], dict[str, Any]]) -> None:
+        """How the sinks read the drop and link counters (the controller's)."""
+        for sink in self.sinks:
+            sink.set_counters(counters)
+
     def record(self, t_s: float, phase: str, x_p, v_p, x_c, v_c, dock, x_ref, P: float, relative, desired, u_cmd,
                safety_acted: bool, carrier_age_s: float, mode: str, armed: bool) -> None:
-        row = [f"{t_s:.4f}", phase, *_vec(x_p), *_vec(v_p), *_vec(x_c), *_vec(v_c), *_vec(dock), *_vec(x_ref), P,
-               *_vec(relative), *_vec(desired), *_vec(u_cmd), int(safety_acted), carrier_age_s, mode, int(armed)]
-        self._csv.writerow(row)
+        """Record a row given field by field (see :class:`TickRow`; ``u_cmd`` a velocity setpoint [m/s])."""
+        self.record_row(TickRow(t_s, phase, x_p, v_p, x_c, v_c, dock, x_ref, P, relative, desired,
+                                None if u_cmd is None else Setpoint(u_cmd), safety_acted, carrier_age_s, mode, armed))
+
+    def record_row(self, row: TickRow) -> None:
+        values = row.values()
+        values[0] = f"{row.t_s:.4f}"
+        self._csv.writerow(values)
         self.rows += 1
         self._file.flush()  # one write per tick: a killed controller leaves every tick it ran on disk
+        for sink in self.sinks:
+            sink.tick(row)
 
     def close(self, outcome: dict[str, Any] | None = None, info_update: dict[str, Any] | None = None) -> dict[str, Any]:
-        """Close the CSV, add ``info_update`` (e.g. the latched anchor) to ``mission.json`` and
-        write ``summary.json`` (returned)."""
+        """Close the CSV, add ``info_update`` (e.g. the latched anchor) to ``mission.json``,
+        write ``summary.json`` (returned) and close the sinks."""
         self._file.close()
         info = json.loads((self.dir / "mission.json").read_text())
         info.update(info_update or {})
@@ -79,6 +162,8 @@ class FlightRecorder:
         if outcome:
             summary.update(outcome)
         (self.dir / "summary.json").write_text(json.dumps(summary, indent=2))
+        for sink in self.sinks:
+            sink.close(info, summary)
         return summary
 
 
@@ -95,17 +180,26 @@ class FlightRecord:
         return np.stack([self.cols[f"{name}_{a}"] for a in VEC], axis=-1)
 
 
-def read_record(directory: str | Path) -> FlightRecord:
-    directory = Path(directory)
-    info = json.loads((directory / "mission.json").read_text())
-    with open(directory / "record.csv", newline="") as f:
-        reader = csv.reader(f)
-        header = next(reader, list(COLUMNS))
-        columns: list[list[str]] = [[] for _ in header]
-        for row in reader:  # column lists, not a dict per row: a long flight stays small
-            if len(row) == len(header):
-                for column, value in zip(columns, row):
-                    column.append(value)
+def read_record(path: str | Path) -> FlightRecord:
+    """A flight record read back: a log directory's ``record.csv`` with its ``mission.json``;
+    a log directory with no ``record.csv`` but a ``flight.mcap``, or an MCAP file itself, through
+    :func:`mission.flightdata.read.read_mcap_record` (the same columns, same values)."""
+    path = Path(path)
+    mcap = path if path.is_file() else path / "flight.mcap"
+    if path.is_file() or (not (path / "record.csv").is_file() and mcap.is_file()):
+        from mission.flightdata.read import read_mcap_record
+
+        header, columns, info = read_mcap_record(mcap)
+    else:
+        info = json.loads((path / "mission.json").read_text())
+        with open(path / "record.csv", newline="") as f:
+            reader = csv.reader(f)
+            header = next(reader, list(COLUMNS))
+            columns = [[] for _ in header]
+            for row in reader:  # column lists, not a dict per row: a long flight stays small
+                if len(row) == len(header):
+                    for column, value in zip(columns, row):
+                        column.append(value)
     text = {"phase", "mode"}
     cols = {name: np.array(values, dtype=float) for name, values in zip(header, columns) if name not in text}
     phase = np.array(columns[header.index("phase")], dtype=str)

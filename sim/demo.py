@@ -27,6 +27,7 @@ from tqdm import tqdm
 from mission.bus.bridge import open_session
 from mission.config.schema import ZenohSection, load_config
 from mission.errors import MarsupialError
+from mission.flightdata.writer import DEFAULT_LIVE, LiveAddress, is_loopback, parse_live
 from mission.lifetime import supervise_children
 from mission.phases import Phase
 from sim.net import free_port, stop_process
@@ -138,12 +139,12 @@ def start_carrier_robot(kind: str, name: str, zenoh_ep: str, speed: float, start
 
 
 def start_pair(config: str, name: str, zenoh_ep: str, speed: float, log_root: Path, stack: ExitStack,
-               quiet: bool, carrier_kind: str = "sim", lockstep: bool = False) -> PairRun:
+               quiet: bool, carrier_kind: str = "sim", lockstep: bool = False, live: LiveAddress | None = None) -> PairRun:
     """Start the carrier (and its robot), the mock vehicle and the mission of one pair; register their cleanup.
 
     ``lockstep``: the three step on the mock vehicle's simulated time, the carrier's robot on the
     carrier's (``speed`` is then the pace after a participant is lost); else wall clocks scaled
-    by ``speed``."""
+    by ``speed``. ``live``: the mission serves its flight to Foxglove there (``run --live``)."""
     cfg = load_config(config)
     pair = PairRun(name=name, log_dir=log_root / name)
     mav_port = free_port(socket.SOCK_DGRAM)
@@ -153,16 +154,18 @@ def start_pair(config: str, name: str, zenoh_ep: str, speed: float, log_root: Pa
     backend_args, robot = start_carrier_robot(carrier_kind, name, zenoh_ep, speed, start, stack, err, lockstep)
     carrier = subprocess.Popen(_python_cli("carrier", config, "--speed", str(speed), "--pair", name,
                                            "--zenoh-connect", zenoh_ep, "--summary", str(pair.log_dir / "carrier.json"),
-                                           *backend_args, *mode), stderr=err)
+                                           "--mcap", str(pair.log_dir / "carrier.mcap"), *backend_args, *mode),
+                               stderr=err)
     stack.callback(stop_process, carrier)
     vehicle = subprocess.Popen(_python_cli("mock-vehicle", "--mavlink", "udpin:127.0.0.1:0", "--target",
                                            f"udpout:127.0.0.1:{mav_port}", "--speed", str(speed), "--start-ned", start,
                                            *mode),
                                stderr=err)
     stack.callback(stop_process, vehicle)
+    live_args = [] if live is None else ["--live", f"{live.host}:{live.port}"]
     mission = subprocess.Popen(_python_cli("run", config, "--mavlink", f"udpin:127.0.0.1:{mav_port}", "--zenoh-connect",
                                            zenoh_ep, "--pair", name, "--speed", str(speed), "--log-dir", str(pair.log_dir),
-                                           *mode),
+                                           *mode, *live_args),
                                stdout=subprocess.PIPE, stderr=err, text=True)
     stack.callback(stop_process, mission, 30.0)
     pair.procs = {"carrier": carrier, "vehicle": vehicle, "mission": mission}
@@ -171,11 +174,19 @@ def start_pair(config: str, name: str, zenoh_ep: str, speed: float, log_root: Pa
     return pair
 
 
+def live_addresses(live: LiveAddress | None, pairs: int) -> list[LiveAddress | None]:
+    """Each pair's live view: pair i on ``live``'s port + i (port 0: each any free port)."""
+    if live is None:
+        return [None] * pairs
+    return [LiveAddress(live.host, live.port + i if live.port else 0) for i in range(pairs)]
+
+
 def run_demo(config: str, speed: float, pairs: int, log_root: Path, plot_path: str | None, timeout_s: float,
              quiet: bool = True, progress: bool = True, carrier: str = "sim",
-             lockstep: bool = True) -> tuple[int, list[dict]]:
+             lockstep: bool = True, live: LiveAddress | None = None) -> tuple[int, list[dict]]:
     """Run ``pairs`` marsupial pairs, in lockstep on each mock vehicle's simulated time or at
-    ``speed``; return the exit code and each pair's summary."""
+    ``speed``; return the exit code and each pair's summary. ``live``: pair i serves its flight
+    to Foxglove on ``live``'s port + i (topics ``/pair<i>/...``)."""
     from mission.cli.run import plot as plot_command
 
     supervise_children()  # a demo killed outright takes its processes with it
@@ -185,8 +196,8 @@ def run_demo(config: str, speed: float, pairs: int, log_root: Path, plot_path: s
     with ExitStack() as stack:
         router = open_session(ZenohSection(mode="router", listen=[zenoh_ep]))
         stack.callback(router.close)
-        runs = [start_pair(config, f"pair{i}", zenoh_ep, speed, log_root, stack, quiet, carrier, lockstep)
-                for i in range(pairs)]
+        runs = [start_pair(config, f"pair{i}", zenoh_ep, speed, log_root, stack, quiet, carrier, lockstep, address)
+                for i, address in enumerate(live_addresses(live, pairs))]
         display = PairProgress([p.name for p in runs], tty=progress and sys.stdout.isatty())
         stack.callback(display.close)
         readers = [threading.Thread(target=_follow, args=(p, display), daemon=True) for p in runs]
@@ -305,8 +316,11 @@ def format_table(summaries: list[dict]) -> str:
 @click.option("--carrier", "carrier_kind", type=click.Choice(["sim", "mavlink", "ros2"]), default="sim", show_default=True,
               help="The carrier robot: built-in kinematic robot; a mock PX4 Ackermann rover over MAVLink; a "
                    "ROS-2-shaped diff-drive robot over Zenoh (rmw_zenoh keys).")
+@click.option("--live", is_flag=False, flag_value=DEFAULT_LIVE, default=None, metavar="[HOST:PORT]",
+              help=f"Serve each pair's flight live to Foxglove: pair i on PORT + i, topics /pair<i>/... "
+              f"[{DEFAULT_LIVE} when given alone]. Watch at the real pace with --realtime --speed 1.")
 def demo(config: str, realtime: bool, speed: float, pairs: int, plot_path: str | None, log_root: str, timeout_s: float,
-         verbose_children: bool, carrier_kind: str) -> int:
+         verbose_children: bool, carrier_kind: str, live: str | None) -> int:
     """Fly the whole system: mock PX4 vehicle + carrier simulator + mission controller.
 
     Each runs as its own process, talking over real UDP (MAVLink 2) and Zenoh on loopback; no
@@ -316,8 +330,16 @@ def demo(config: str, realtime: bool, speed: float, pairs: int, plot_path: str |
     os.environ.setdefault("PYTHONUNBUFFERED", "1")
     if plot_path is None:  # the plot goes with the logs it draws
         plot_path = str(Path(log_root) / "flight.png")
+    address = parse_live(live) if live is not None else None
+    for i, a in enumerate(live_addresses(address, pairs)):
+        if a is not None:
+            click.echo(f"live view of pair{i}: {a.url} (Foxglove: Open connection, Foxglove WebSocket; "
+                       f"layout configs/foxglove/marsupial.json)")
+    if address is not None and not is_loopback(address.host):
+        click.echo(f"warning: the live views bind {address.host}, not loopback: anyone who can reach them sees "
+                   "the flights", err=True)
     code, summaries = run_demo(config, speed, pairs, Path(log_root), plot_path, timeout_s, quiet=not verbose_children,
-                               progress=True, carrier=carrier_kind, lockstep=not realtime)
+                               progress=True, carrier=carrier_kind, lockstep=not realtime, live=address)
     click.echo("times count from the start of riding (t = 0, as in the paper)")
     click.echo(format_table(summaries))
     for s in summaries:

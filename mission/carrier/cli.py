@@ -28,9 +28,10 @@ log = logging.getLogger(__name__)
 
 
 def main(cfg: Config, speed: float = 1.0, duration_s: float | None = None, stop_event: threading.Event | None = None,
-         summary_path: str | Path | None = None, lockstep: bool = False) -> int:
+         summary_path: str | Path | None = None, lockstep: bool = False, mcap_path: str | Path | None = None) -> int:
     """Open the session of ``cfg.zenoh`` and the backend, run the controller until stopped;
-    write the summary (JSON) to ``summary_path`` if given; return exit code 0.
+    write the summary (JSON) to ``summary_path`` if given, and the carrier's flight data to the
+    MCAP file ``mcap_path`` (:class:`mission.flightdata.carrier_log.CarrierLog`); return exit code 0.
 
     ``lockstep`` (simulation): step on the mission controller's clock relay
     (:mod:`mission.time.lockstep`) instead of a wall clock scaled by ``speed``; ``speed`` is then the
@@ -57,7 +58,10 @@ def main(cfg: Config, speed: float = 1.0, duration_s: float | None = None, stop_
             stack.callback(session.close)
             backend = open_backend(cfg, clock, session)
             stack.callback(backend.close)
-            with CarrierController(cfg, clock, session, backend) as ctl:
+            steps = open_flight_data(cfg, clock, mcap_path, stack)
+            with CarrierController(cfg, clock, session, backend, steps=steps) as ctl:
+                if steps is not None:
+                    steps.set_counters(lambda: ctl.passenger.counters)
                 if isinstance(clock, LockstepClock):
                     upstream = ZenohUpstream(clock, session, clock_keys(ctl.pair), ctl.passenger,
                                              published=lambda: ctl.seq - 1)
@@ -80,6 +84,21 @@ def main(cfg: Config, speed: float = 1.0, duration_s: float | None = None, stop_
         for signum, handler in restore.items():
             signal.signal(signum, handler)
     return 0
+
+
+def open_flight_data(cfg: Config, clock: Clock, mcap_path: str | Path | None, stack: ExitStack) -> Any:
+    """The carrier's MCAP log at ``mcap_path`` (None: none), closed by ``stack``."""
+    if mcap_path is None:
+        return None
+    from mission.flightdata.carrier_log import CarrierLog
+    from mission.flightdata.writer import clock_metadata
+
+    Path(mcap_path).parent.mkdir(parents=True, exist_ok=True)
+    note = "times are the carrier's clock [s] (in lockstep the mission's, relayed to the carrier)"
+    steps = CarrierLog(mcap_path, pair=cfg.zenoh.pair, target=cfg.scenario.target,
+                       clock=clock_metadata(clock, note, "the mission controller's relay of the mock vehicle's time"))
+    stack.callback(steps.close)
+    return steps
 
 
 def _fmt(value: float | None) -> str:
@@ -125,11 +144,13 @@ def _jsonable(value: Any) -> Any:
               "(marsupial run --lockstep, the mock vehicle's simulated time) instead of a scaled wall clock.")
 @click.option("--summary", "summary_path", type=click.Path(dir_okay=False), default=None, metavar="PATH",
               help="Write the carrier's summary (closest approach, braking distance, guard activity) as JSON.")
+@click.option("--mcap", "mcap_path", type=click.Path(dir_okay=False), default=None, metavar="PATH",
+              help="Write the carrier's flight data (its pose, mode, commands, P3 guard) to this MCAP file.")
 def carrier_cli(config: str, backend: str | None, speed: float, pair: str | None, listen: tuple[str, ...],
                     connect: tuple[str, ...], encoding: str | None, rate: float | None, mavlink_url: str | None,
                     target_system: int | None, kinematics: str | None, offset_ned: str | None,
                     ros2_namespace: str | None, key_form: str | None, duration: float | None,
-                    lockstep: bool, summary_path: str | None) -> int:
+                    lockstep: bool, summary_path: str | None, mcap_path: str | None) -> int:
     """Run the carrier-side controller of CONFIG (a TOML file).
 
     The carrier waits until the passenger's published phase is RIDING, then drives towards
@@ -169,7 +190,7 @@ def carrier_cli(config: str, backend: str | None, speed: float, pair: str | None
         "carrier.mavlink.url": mavlink_url,
     })
     click.echo(startup_line(cfg, speed), err=True)
-    return main(cfg, speed, duration, summary_path=summary_path, lockstep=lockstep)
+    return main(cfg, speed, duration, summary_path=summary_path, lockstep=lockstep, mcap_path=mcap_path)
 
 
 def startup_line(cfg: Config, speed: float) -> str:

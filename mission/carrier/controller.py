@@ -68,6 +68,31 @@ class OwnState:
     yaw_rad: float | None
 
 
+@dataclass(frozen=True)
+class CarrierStep:
+    """One step of the carrier controller, for its flight data: t_s [s] clock time; mode;
+    hold_reason (None: in control); state the own state used (None: none, or stale); command
+    the command sent; law_velocity_m_s [m/s] the filtered law command; guard_active_ticks the
+    steps so far on which the P3 guard cut the command; published the state sent to the passenger
+    (None: nothing went out)."""
+
+    t_s: float
+    mode: str
+    hold_reason: str | None
+    state: OwnState | None
+    command: Tracked
+    law_velocity_m_s: np.ndarray
+    guard_active_ticks: int
+    published: CarrierState | None
+
+
+class StepSink(Protocol):
+    """Where the carrier's steps go (:class:`mission.flightdata.carrier_log.CarrierLog`): ``step``
+    runs in the control loop and must return at once."""
+
+    def step(self, step: CarrierStep) -> None: ...
+
+
 class CarrierBackend(Protocol):
     """What the controller needs of a carrier robot (the kinds: :mod:`mission.carrier.backends`)."""
 
@@ -139,8 +164,8 @@ class CarrierController:
     """
 
     def __init__(self, cfg: Config, clock: Clock, session: zenoh.Session, backend: CarrierBackend, *,
-                 pair: str | None = None, encoding: str | None = None) -> None:
-        self.cfg, self.clock, self.backend = cfg, clock, backend
+                 pair: str | None = None, encoding: str | None = None, steps: StepSink | None = None) -> None:
+        self.cfg, self.clock, self.backend, self.steps = cfg, clock, backend, steps
         self.pair = pair or cfg.zenoh.pair
         self.model = carrier_model(cfg)
         self.guard = guard_params(cfg)
@@ -364,6 +389,7 @@ class CarrierController:
             self._stats["stale_ticks"] += 1
             self.velocity_m_s = np.zeros(self.dim)
             self.backend.command(STOP)
+            trace(self, now, None, STOP, None)
             return None
         cmd = self._decide(state, dt_s, now - state.t_s) if why is None else STOP
         if why is not None:
@@ -380,9 +406,11 @@ class CarrierController:
         out = CarrierState(fresh.t_s, self.seq, "local_ned", _pad3(fresh.position_ned_m[:self.dim]), velocity,
                            fresh.yaw_rad, accel)
         if self.cfg.carrier.align_on_deck_m > 0 and not self._aligned:
+            trace(self, now, state, cmd, None)
             return out  # not yet placed in the passenger's frame: nothing the passenger should use
         self.publisher.publish(out)
         self.seq += 1
+        trace(self, now, state, cmd, out)
         return out
 
     def run(self, stop_event: threading.Event, duration_s: float | None = None) -> None:
@@ -426,3 +454,11 @@ class CarrierController:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def trace(ctl: CarrierController, t_s: float, state: OwnState | None, cmd: Tracked,
+          published: CarrierState | None) -> None:
+    """Hand the step just taken to the controller's :class:`StepSink`, if it has one."""
+    if ctl.steps is not None:
+        ctl.steps.step(CarrierStep(t_s, ctl.mode.value, ctl.hold_reason, state, cmd, ctl.velocity_m_s,
+                                   ctl._stats["guard_active_ticks"], published))

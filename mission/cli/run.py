@@ -22,7 +22,8 @@ from mission.errors import ConfigError
 from mission.bus.gate import GateLimits
 from mission.mavlink.link import VehicleLink
 from mission.mavlink.env import read_signing_key
-from mission.record import FlightRecorder, read_record
+from mission.flightdata.writer import DEFAULT_LIVE, LiveAddress, clock_metadata, is_loopback, parse_live
+from mission.record import CLOCK_NOTE, FlightRecorder, RecordSink, read_record
 from mission.phases import AbortReason
 from mission.report import WaitReporter, abort_hint, phase_printer, startup_lines
 
@@ -83,8 +84,22 @@ def check_config(cfg: Config) -> None:
     zenoh_config(cfg.zenoh)
 
 
+def flight_data(cfg: Config, directory: Path, info: dict[str, Any], clock: Clock,
+                live: LiveAddress | None) -> list[RecordSink]:
+    """The flight record's sinks besides the CSV: ``flight.mcap`` (with the live view at
+    ``live``, if given; with the recovery's docking geometry when the mission comes home)
+    (:class:`mission.flightdata.mission_log.MissionLog`)."""
+    from mission.flightdata.mission_log import MissionLog
+
+    directory.mkdir(parents=True, exist_ok=True)
+    clock_info = clock_metadata(clock, CLOCK_NOTE, "the mock vehicle's simulated time (run --lockstep)")
+    recovery = mission_model(cfg).recovery
+    return [MissionLog(directory / "flight.mcap", info, pair=cfg.zenoh.pair, clock=clock_info, live=live,
+                       docking=None if recovery is None else recovery.geometry)]
+
+
 def fly(cfg: Config, *, speed: float = 1.0, log_dir: str | Path | None = None, stop: threading.Event | None = None,
-        on_event=None, on_start=None, clock: Clock | None = None) -> MissionOutcome:
+        on_event=None, on_start=None, clock: Clock | None = None, live: LiveAddress | None = None) -> MissionOutcome:
     """Fly one mission with ``cfg`` (the library entry point of ``marsupial run``).
 
     Opens the Zenoh session and the MAVLink link (:func:`mission_io`), runs
@@ -92,21 +107,28 @@ def fly(cfg: Config, *, speed: float = 1.0, log_dir: str | Path | None = None, s
     speed factor (simulation only). ``on_start(controller, link, feed, clock)`` is called once
     everything is open, just before the loop starts (the CLI watches the wait for the vehicle).
     ``clock`` replaces the scaled clock, e.g. a :class:`LockstepClock` (made in the calling
-    thread) that steps on the mock vehicle's simulated time.
+    thread) that steps on the mock vehicle's simulated time. The flight log gets ``flight.mcap``
+    beside ``record.csv``; ``live``: also serve it to Foxglove on that address.
     """
     check_config(cfg)
     clock = clock or ScaledClock(speed)
     directory = Path(log_dir) if log_dir else Path(cfg.mission.log_dir) / f"{time.strftime('%Y%m%d-%H%M%S')}-{cfg.zenoh.pair}"
-    recorder = FlightRecorder(directory, mission_info(cfg))
-    with mission_io(cfg, clock, recorder.tlog_path) as (feed, publisher, link):
-        controller = MissionController(cfg, link, feed, clock, publisher=publisher, recorder=recorder,
-                                       on_event=on_event, stop=stop)
-        if on_start is not None:
-            on_start(controller, link, feed, clock)
-        try:
-            return controller.run()
-        finally:
-            clock.close()
+    info = mission_info(cfg)
+    sinks = flight_data(cfg, directory, info, clock, live)
+    try:
+        recorder = FlightRecorder(directory, info, sinks)
+        with mission_io(cfg, clock, recorder.tlog_path) as (feed, publisher, link):
+            controller = MissionController(cfg, link, feed, clock, publisher=publisher, recorder=recorder,
+                                           on_event=on_event, stop=stop)
+            if on_start is not None:
+                on_start(controller, link, feed, clock)
+            try:
+                return controller.run()
+            finally:
+                clock.close()
+    finally:
+        for sink in sinks:  # the flight closed them; an error before it flew did not
+            sink.close({}, {})
 
 
 def exit_code(outcome: MissionOutcome) -> int:
@@ -133,9 +155,12 @@ def exit_code(outcome: MissionOutcome) -> int:
               help="MAVLink 2 signing key file, 64 hex digits or 32 raw bytes (overrides mavlink.signing_key_file): "
               "everything sent is signed, and only HEARTBEAT may arrive unsigned.")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON at the end.")
+@click.option("--live", is_flag=False, flag_value=DEFAULT_LIVE, default=None, metavar="[HOST:PORT]",
+              help=f"Serve the flight live to Foxglove (the foxglove-sdk WebSocket server) on HOST:PORT "
+              f"[{DEFAULT_LIVE} when given alone; loopback unless told otherwise]. Off by default.")
 def run(config: str, mavlink_url: str | None, zenoh_listen: tuple[str, ...], zenoh_connect: tuple[str, ...],
         zenoh_mode: str | None, pair: str | None, speed: float, lockstep: bool, log_dir: str | None,
-        signing_key_file: str | None, as_json: bool) -> int:
+        signing_key_file: str | None, as_json: bool, live: str | None) -> int:
     """Fly the marsupial mission described by CONFIG on a PX4 vehicle.
 
     The passenger takes off from the carrier, joins the dock point, rides while the carrier
@@ -163,9 +188,13 @@ def run(config: str, mavlink_url: str | None, zenoh_listen: tuple[str, ...], zen
     if zenoh_connect:
         overrides["zenoh.connect"] = list(zenoh_connect)
     cfg = with_overrides(cfg, overrides)
+    live_address = parse_live(live) if live is not None else None
     stop = threading.Event()
     for line in startup_lines(cfg, speed):
         click.echo(line)
+    if live_address is not None and not is_loopback(live_address.host):
+        click.echo(f"warning: the live view binds {live_address.host}, not loopback: anyone who can reach "
+                   f"{live_address.url} sees the flight", err=True)
 
     def on_signal(signum: int, _frame: Any) -> None:
         click.echo(f"signal {signal.Signals(signum).name}: asking the vehicle to Hold", err=True)
@@ -176,11 +205,17 @@ def run(config: str, mavlink_url: str | None, zenoh_listen: tuple[str, ...], zen
 
     def on_start(controller: Any, link: Any, feed: Any, clock: Any) -> None:
         remember(controller, link, feed, clock)
+        for sink in controller.recorder.sinks:
+            if getattr(sink, "live_port", None) is not None:
+                host = live_address.host if live_address is not None else "127.0.0.1"
+                click.echo(f"live view: {LiveAddress(host, sink.live_port).url} (Foxglove: Open connection, "
+                           f"Foxglove WebSocket; layout configs/foxglove/marsupial.json)")
         seen["reporter"] = WaitReporter(cfg, controller, link, feed, clock).start()
 
     try:
         clock: Clock = LockstepClock(speed=speed, name="mission-lockstep") if lockstep else ScaledClock(speed)
-        outcome = fly(cfg, speed=speed, log_dir=log_dir, stop=stop, on_event=on_event, on_start=on_start, clock=clock)
+        outcome = fly(cfg, speed=speed, log_dir=log_dir, stop=stop, on_event=on_event, on_start=on_start, clock=clock,
+                      live=live_address)
     finally:
         if seen.get("reporter") is not None:
             seen["reporter"].stop()
@@ -204,25 +239,53 @@ def run(config: str, mavlink_url: str | None, zenoh_listen: tuple[str, ...], zen
     return exit_code(outcome)
 
 
+def _is_flight_log(directory: Path) -> bool:
+    return (directory / "mission.json").is_file() or (directory / "flight.mcap").is_file()
+
+
 @click.command("plot")
-@click.argument("log_dir", type=click.Path(file_okay=False, exists=True))
+@click.argument("log_dir", metavar="LOG", type=click.Path(exists=True))
 @click.option("--out", "out_path", type=click.Path(dir_okay=False),
               help="Output image (default LOG_DIR/flight.png; with a folder of flight logs, one per log).")
-def plot(log_dir: str, out_path: str | None) -> int:
+@click.option("--panels", is_flag=True, help="Instead: the panels of the Foxglove layout (configs/foxglove/"
+              "marsupial.json) drawn from the flight's MCAP: 3D scene, phase, distances, command, log "
+              "[default LOG_DIR/flight-panels.png].")
+def plot(log_dir: str, out_path: str | None, panels: bool = False) -> int:
     """Draw the paper-style figures (trajectories; |e_pc|, |e_tc|, |e_pt| over t, the time since
-    the start of riding) from a flight log directory written by ``marsupial run`` or
-    ``marsupial demo`` (e.g. logs/demo/pair0). Given a folder of flight logs (logs/demo), it
-    plots each one into its own directory. Exit code 2 when LOG_DIR holds no flight log."""
-    directory = Path(log_dir)
-    if (directory / "mission.json").is_file():
+    the start of riding) from a flight log written by ``marsupial run`` or ``marsupial demo``.
+
+    \b
+    LOG is a flight log directory (e.g. logs/demo/pair0: its record.csv, or its flight.mcap when
+    it has no CSV), an MCAP file itself (logs/demo/pair0/flight.mcap), or a folder of flight logs
+    (logs/demo: each one is plotted into its own directory). Exit code 2 when LOG holds no flight log."""
+    path = Path(log_dir)
+    if panels:
+        from mission.flightdata.view import draw_panels
+
+        mcap = path if path.is_file() else path / "flight.mcap"
+        if not mcap.is_file() or mcap.suffix != ".mcap":
+            raise ConfigError("LOG", log_dir, "--panels draws from a flight.mcap: give a flight log directory that has "
+                              "one (written by `marsupial run`), or the file")
+        out = draw_panels(mcap, out_path or mcap.parent / "flight-panels.png")
+        click.echo(f"panels written to {out}")
+        return 0
+    if path.is_file():
+        if path.suffix != ".mcap":
+            raise ConfigError("LOG", log_dir, "is a file but not an MCAP flight log (flight.mcap); give it, or "
+                              "the flight log directory")
+        out = plot_flight(path, out_path or path.parent / "flight.png")
+        click.echo(f"plot written to {out}")
+        return 0
+    directory = path
+    if _is_flight_log(directory):
         out = plot_flight(directory, out_path or directory / "flight.png")
         click.echo(f"plot written to {out}")
         return 0
-    logs = sorted(d for d in directory.iterdir() if (d / "mission.json").is_file())
+    logs = sorted(d for d in directory.iterdir() if d.is_dir() and _is_flight_log(d))
     if not logs:
-        raise ConfigError("LOG_DIR", log_dir, "holds no flight log (mission.json and record.csv): give a directory "
-                          "written by `marsupial run` (mission.log_dir/<time>-<pair>, printed at the end of the run) "
-                          "or by the demo (logs/demo/pair0)")
+        raise ConfigError("LOG_DIR", log_dir, "holds no flight log (mission.json and record.csv, or flight.mcap): give a "
+                          "directory written by `marsupial run` (mission.log_dir/<time>-<pair>, printed at the end of "
+                          "the run) or by the demo (logs/demo/pair0)")
     if out_path and len(logs) > 1:
         raise ConfigError("--out", out_path, f"one output file for {len(logs)} flight logs; leave --out out "
                           "(each plot goes to its own log directory) or give one log directory")
@@ -241,10 +304,11 @@ def plot(log_dir: str, out_path: str | None) -> int:
 
 
 def plot_flight(log_dir: Path, out_path: str | Path) -> Path:
-    """The paper-style figure of one flight log; times from the start of riding (t = 0)."""
+    """The paper-style figure of one flight log (a directory, or its flight.mcap); times from
+    the start of riding (t = 0)."""
     from mission.plots import Trajectories, plot_run
 
-    if not (log_dir / "record.csv").is_file():
+    if log_dir.is_dir() and not (log_dir / "record.csv").is_file() and not (log_dir / "flight.mcap").is_file():
         raise ConfigError("LOG_DIR", str(log_dir), "has mission.json but no record.csv: the flight never started")
     rec = read_record(log_dir)
     # The law's carrier position for the passenger is the dock point (carrier + offset).
@@ -254,6 +318,7 @@ def plot_flight(log_dir: Path, out_path: str | Path) -> Path:
         raise ConfigError("LOG_DIR", str(log_dir), "the record holds no tick with both vehicle and carrier positions "
                           "(the mission ended before it flew: see its summary.json)")
     info = rec.info
+    name = log_dir.name if log_dir.is_dir() else f"{log_dir.parent.name}/{log_dir.name}"
     riding = np.flatnonzero(rec.phase == "RIDING")
     t0 = rec.t[riding[0]] if len(riding) else rec.t[ok][0]
     sep = info.get("separation_time_s")
@@ -261,6 +326,6 @@ def plot_flight(log_dir: Path, out_path: str | Path) -> Path:
     tr = Trajectories(t=rec.t[ok] - t0, x_c=x_c[ok], x_p=x_p[ok], target=np.asarray(info["target_ned_m"]),
                       separation_time_s=None if sep is None else sep - t0,
                       obstacles=[(np.asarray(o["center"]), o["radius"]) for o in info.get("obstacles", [])],
-                      frame="local_ned", title=f"flight {log_dir.name} (carrier = its dock point; t = 0 at the {origin}, "
+                      frame="local_ned", title=f"flight {name} (carrier = its dock point; t = 0 at the {origin}, "
                       f"mission clock {t0:.2f} s)", bc_m=info.get("bc_m"))
     return plot_run(tr, out_path)

@@ -25,8 +25,11 @@ from typing import Any
 
 import pytest
 
+import numpy as np
+
+from mission.flightdata.read import read_messages
 from mission.mavlink import px4
-from mission.record import summarise
+from mission.record import read_record, summarise
 from tests.faults.procs import DEMO, SPEED, Flight, Router, assert_log_complete, assert_safe_end, fleet_config, flight, wait_for
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(120)]
@@ -197,8 +200,31 @@ def _mission_killed(tmp_path: Path) -> None:
         assert len(rows) >= rows_before and rows[-1]["phase"] == "RIDING"
         assert not (f.log_dir / "summary.json").exists()
         assert summarise(f.log_dir)["max_offset_before_separation_m"] is not None
+        _assert_mcap_up_to_the_last_second(f.log_dir, float(rows[-1]["t_s"]))
         # the carrier stops when the passenger's liveliness token disappears
         wait_for(lambda: "-> paused" in f.text("carrier.err"), 10.0, "carrier paused")
+
+
+def _assert_mcap_up_to_the_last_second(log_dir: Path, last_tick_s: float) -> None:
+    """A killed mission's flight.mcap: no footer, an unfinished last chunk, and every message up
+    to the last chunk it finished (one per second of mission clock), the record's rows among
+    them, the same as record.csv's."""
+    from mcap.exceptions import McapError
+    from mcap.reader import NonSeekingReader
+
+    content = read_messages(log_dir / "flight.mcap")
+    assert not content.complete and content.metadata["clock"]["clock"] == "mission"
+    mcap_rec, csv_rec = read_record(log_dir / "flight.mcap"), read_record(log_dir)
+    assert last_tick_s - 1.1 <= mcap_rec.t[-1] <= last_tick_s, (mcap_rec.t[-1], last_tick_s)
+    n = len(mcap_rec.t)
+    assert (mcap_rec.t == csv_rec.t[:n]).all() and (mcap_rec.phase == csv_rec.phase[:n]).all()
+    assert np.array_equal(mcap_rec.vec("x_p"), csv_rec.vec("x_p")[:n], equal_nan=True)
+    seen = 0  # the mcap package's own reader reads it too, up to the chunk the writer never finished
+    with open(log_dir / "flight.mcap", "rb") as fh:
+        with pytest.raises(McapError):
+            for _ in NonSeekingReader(fh).iter_messages(log_time_order=False):
+                seen += 1
+    assert seen == len(content.messages)
 
 
 def _gcs_takeover(tmp_path: Path) -> None:

@@ -54,6 +54,30 @@ def test_run_without_a_vehicle_says_what_it_waits_for_and_what_to_do(tmp_path):
     assert "separation_time_s" not in out.stdout  # no table of None for a mission that never rode
 
 
+def test_run_live_with_a_bad_address_a_taken_port_or_off_loopback_says_so(tmp_path):
+    """--live: a malformed address is exit 2 before anything is written; a taken port is named
+    with its holder (exit 6); an address off loopback flies with a warning."""
+    demo = str(CONFIGS / "demo.toml")
+    out = _cli("run", demo, "--live", "127.0.0.1:http", "--log-dir", str(tmp_path / "a"))
+    assert out.returncode == 2 and "Traceback" not in out.stderr and "--live" in out.stderr
+    assert not (tmp_path / "a").exists()
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        out = _cli("run", demo, "--live", f"127.0.0.1:{port}", "--mavlink", f"udpin:127.0.0.1:{free_port(socket.SOCK_DGRAM)}",
+                   "--zenoh-listen", "tcp/127.0.0.1:0", "--log-dir", str(tmp_path / "b"))
+    assert out.returncode == 6 and "Traceback" not in out.stderr, out.stderr
+    assert f"Foxglove live view ws://127.0.0.1:{port}" in out.stderr and f"held by process {os.getpid()}" in out.stderr
+    cfg = tmp_path / "short.toml"
+    cfg.write_text((CONFIGS / "demo.toml").read_text().replace("connect_timeout_s = 20.0", "connect_timeout_s = 1.0"))
+    out = _cli("run", str(cfg), "--live", f"0.0.0.0:{free_port()}", "--mavlink", f"udpin:127.0.0.1:{free_port(socket.SOCK_DGRAM)}",
+               "--zenoh-listen", "tcp/127.0.0.1:0", "--log-dir", str(tmp_path / "c"))
+    assert out.returncode == 3 and "Traceback" not in out.stderr, out.stderr
+    assert "warning: the live view binds 0.0.0.0, not loopback" in out.stderr
+    assert "live view: ws://0.0.0.0:" in out.stdout and (tmp_path / "c" / "flight.mcap").stat().st_size > 0
+
+
 def test_plot_of_a_folder_without_logs_says_which_folder_to_give(tmp_path):
     out = _cli("plot", str(tmp_path))
     assert out.returncode == 2 and "Traceback" not in out.stderr

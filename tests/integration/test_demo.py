@@ -6,9 +6,13 @@ import json
 import subprocess
 import sys
 
+import numpy as np
 import pytest
+from mcap.reader import make_reader
+from mcap_protobuf.decoder import DecoderFactory
 
 from mission.config.schema import load_config
+from mission.record import read_record
 from sim.batch.closed_loop import simulate_config
 from tests.conftest import CONFIGS
 
@@ -77,6 +81,52 @@ def test_demo_flies_p1_p3_with_plot(demo_flight):
     assert (sim["p1"], sim["p2"], sim["p3"]) == (s["p1"], s["p2"], s["p3"])
     assert sim["separation_time_s"] == pytest.approx(s["separation_time_s"], abs=0.5)
     assert sim["carrier_target_distance_at_separation_m"] == pytest.approx(s["carrier_target_distance_at_separation_m"], abs=0.01)
+
+
+def test_demo_flight_mcap_reads_back_with_foxglove_schemas(demo_flight):
+    """logs/demo/pair0/flight.mcap, read with the mcap package (Foxglove's protobuf messages
+    decoded from the schemas in the file): the Foxglove schemas, messages spanning the record,
+    the phase changes in order, the clock it is on; and the carrier's own carrier.mcap."""
+    root, out = demo_flight
+    d = root / "logs" / "pair0"
+    rec = read_record(d)
+    with open(d / "flight.mcap", "rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        summary = reader.get_summary()
+        assert summary is not None
+        schemas = {summary.schemas[c.schema_id].name for c in summary.channels.values()}
+        logs = [m.message for *_, m in reader.iter_decoded_messages(topics=["/pair0/log"])]
+        last_tf = [m for *_, m in reader.iter_decoded_messages(topics=["/pair0/tf/passenger"])][-1]
+        scene = [m for *_, m in reader.iter_decoded_messages(topics=["/pair0/scene"])][-1]
+        metadata = {m.name: m.metadata for m in reader.iter_metadata()}
+    assert len(summary.channels) >= 8, sorted(c.topic for c in summary.channels.values())
+    assert {"foxglove.FrameTransform", "foxglove.SceneUpdate", "foxglove.Log"} <= schemas
+    stats = summary.statistics
+    assert stats is not None
+    assert stats.message_start_time / 1e9 == pytest.approx(rec.t[0], abs=0.1)
+    assert stats.message_end_time / 1e9 == pytest.approx(rec.t[-1], abs=0.1)
+    changes = [str(p) for i, p in enumerate(rec.phase) if i == 0 or p != rec.phase[i - 1]]
+    assert [text.split()[1] for text in logs if text.startswith("phase ")] == changes
+    assert changes[:1] == ["PREFLIGHT"] and changes[-3:] == ["ARRIVED", "HOLD", "DONE"] and "SEPARATED" in changes
+    assert metadata["clock"]["clock"] == "mission" and metadata["clock"]["source"].startswith("lockstep")
+    # the last passenger pose is the record's last position, at the record's last time
+    x_p = rec.vec("x_p")[-1]
+    assert (last_tf.translation.x, last_tf.translation.y, last_tf.translation.z) == pytest.approx(tuple(x_p))
+    assert last_tf.timestamp.seconds + last_tf.timestamp.nanos / 1e9 == pytest.approx(rec.t[-1], abs=1e-6)
+    assert {"target", "bc_circle", "carrier", "passenger", "dock", "anchor"} <= {e.id for e in scene.entities}
+    # marsupial plot reads the MCAP as it reads the CSV: the same record
+    from_mcap = read_record(d / "flight.mcap")
+    assert (from_mcap.t == rec.t).all() and (from_mcap.phase == rec.phase).all()
+    assert np.array_equal(from_mcap.vec("dock"), rec.vec("dock"), equal_nan=True)
+    assert from_mcap.info["anchor_ned_m"] == json.loads((d / "mission.json").read_text())["anchor_ned_m"]
+    with open(d / "carrier.mcap", "rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        modes = [m.message for *_, m in reader.iter_decoded_messages(topics=["/pair0/carrier/log"])]
+        statuses = [json.loads(msg.data) for _, _, msg in reader.iter_messages(topics=["/pair0/carrier/status"])]
+    assert modes[0].startswith("mode waiting") and "mode approaching" in modes and modes[-1] == "mode separated"
+    closest = min(s["target_distance_m"] for s in statuses if s["target_distance_m"] is not None)
+    carrier = json.loads((d / "carrier.json").read_text())
+    assert closest == pytest.approx(carrier["closest_target_distance_m"], abs=1e-6)
 
 
 def test_three_pairs_fly_at_once_on_one_network(tmp_path):

@@ -1,0 +1,86 @@
+"""``carrier.mcap``: the carrier controller's own flight data (a
+:class:`~mission.carrier.controller.StepSink`).
+
+Each :class:`~mission.carrier.controller.CarrierStep` becomes, at its clock time: the transform
+``world -> <pair>/carrier_own`` (the carrier's own state, as it used it; the mission's log has
+``<pair>/carrier``, the state the passenger received), its ``status`` (mode, why it holds, the
+law's command, what it sent, the P3 guard, the distance to the target: JSON) and a
+``foxglove.Log`` line when the mode or the hold reason changes; once a second, the passenger
+feed's counters. Topics: :data:`mission.flightdata.topics.CARRIER_CHANNELS`.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from mission.carrier.controller import CarrierStep
+from mission.flightdata.mission_log import clean, vector
+from mission.flightdata.topics import CARRIER_CHANNELS, WORLD_FRAME, frame, topics
+from mission.flightdata.writer import DataLog, LiveAddress, ns, timestamp
+
+
+def _pad3(v: np.ndarray) -> np.ndarray:
+    v = np.asarray(v, dtype=float)
+    return np.concatenate([v, np.zeros(3 - v.shape[0])]) if v.shape[0] < 3 else v
+
+
+class CarrierLog(DataLog):
+    """``carrier.mcap`` of pair ``pair``: ``target`` [m] NED; ``clock``: the ``clock`` metadata."""
+
+    def __init__(self, path: str | Path, *, pair: str, target: Any, clock: dict[str, str],
+                 live: LiveAddress | None = None) -> None:
+        super().__init__(path, name=f"{pair}-carrier", metadata={"clock": clock}, live=live)
+        self.pair = pair
+        self.target = _pad3(np.asarray(target, dtype=float))
+        self.topics = topics(pair, CARRIER_CHANNELS)
+        self.ch = {key: self.channel(self.topics[key], schema) for key, _, schema in CARRIER_CHANNELS}
+        self._counters: Callable[[], dict[str, Any]] | None = None
+        self._said: tuple[str, str | None] | None = None
+        self._next_counters_s: float | None = None
+        self._guard_ticks = 0
+
+    def set_counters(self, counters: Callable[[], dict[str, Any]]) -> None:
+        """How to read the passenger feed's counters (logged once a second, off the loop)."""
+        self._counters = counters
+
+    def step(self, step: CarrierStep) -> None:
+        self.submit(step.t_s, step)
+
+    def close(self) -> None:
+        """Finish the file (idempotent)."""
+        self.finish()
+
+    def handle(self, t_s: float, step: CarrierStep) -> None:
+        from foxglove.messages import FrameTransform, Log, LogLevel, Quaternion, Vector3
+
+        t, stamp = ns(t_s), timestamp(t_s)
+        st = step.state
+        if st is not None:
+            p = _pad3(st.position_ned_m)
+            self.ch["tf"].log(FrameTransform(timestamp=stamp, parent_frame_id=WORLD_FRAME,
+                                             child_frame_id=frame(self.pair, "carrier_own"),
+                                             translation=Vector3(x=float(p[0]), y=float(p[1]), z=float(p[2])),
+                                             rotation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)), log_time=t)
+        said = (step.mode, step.hold_reason)
+        if said != self._said:
+            text = f"mode {step.mode}" + ("" if step.hold_reason is None else f" (holding: {step.hold_reason})")
+            level = LogLevel.Info if step.hold_reason is None else LogLevel.Warning
+            self.ch["log"].log(Log(timestamp=stamp, level=level, message=text, name=f"{self.pair}/carrier"), log_time=t)
+            self._said = said
+        cmd = step.command
+        self.ch["status"].log({
+            "mode": step.mode, "hold_reason": step.hold_reason, "published": step.published is not None,
+            "position": None if st is None else vector(_pad3(st.position_ned_m)),
+            "velocity": None if st is None else vector(_pad3(st.velocity_ned_m_s)),
+            "yaw_rad": None if st is None or st.yaw_rad is None else clean(float(st.yaw_rad)),
+            "law_velocity": vector(_pad3(step.law_velocity_m_s)), "setpoint": vector(_pad3(cmd.setpoint_ned_m_s)),
+            "speed_m_s": clean(float(cmd.speed_m_s)), "yaw_rate_rad_s": clean(float(cmd.yaw_rate_rad_s)),
+            "guard_active": step.guard_active_ticks > self._guard_ticks, "guard_active_ticks": step.guard_active_ticks,
+            "target_distance_m": None if st is None else clean(float(np.linalg.norm(self.target - _pad3(st.position_ned_m))))},
+            log_time=t)
+        self._guard_ticks = step.guard_active_ticks
+        if self._counters is not None and (self._next_counters_s is None or t_s >= self._next_counters_s):
+            self.ch["passenger_feed"].log(self._counters(), log_time=t)
+            self._next_counters_s = t_s + 1.0

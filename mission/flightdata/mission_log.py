@@ -1,0 +1,265 @@
+"""``flight.mcap``: the mission's flight record as Foxglove messages (a :class:`~mission.record.RecordSink`).
+
+Each :class:`~mission.record.TickRow` becomes, at the row's mission-clock time:
+
+- frame transforms ``world -> <pair>/carrier``, ``world -> <pair>/passenger`` and
+  ``<pair>/carrier -> <pair>/dock`` (``foxglove.FrameTransform``);
+- ``phase`` (JSON, every tick) and a ``foxglove.Log`` line per phase change and event;
+- ``distances`` (|e_pc|, |e_tc|, |e_pt| with the dock point as the law's carrier, the carrier's
+  own distance to the target, and P), ``command`` (the law's command, the safe command, the
+  reference), ``safety`` (the filter's activity), ``setpoint`` (what was sent), and ``record``
+  (the CSV row itself, column by column: what :func:`mission.flightdata.read.read_mcap_record`
+  reads back);
+
+and once a second of mission clock (and when the anchor latches, or the recovery's course turns):
+``map -> world`` (NED under an ENU frame), the scene (target, obstacles with their radii, the b c
+circle in the dock's plane, the dock point, both robots, the latched anchor, and while a recovery
+brings the passenger home its holdoff point and glide path: ``foxglove.SceneUpdate``), and the
+carrier feed's and the link's counters. Topics and schemas: :mod:`mission.flightdata.topics`.
+"""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from mission.core.docking import DockingGeometry, gate_point, holdoff_point
+from mission.flightdata.topics import MAP_FRAME, MISSION_CHANNELS, WORLD_FRAME, frame, topics
+from mission.flightdata.writer import DataLog, LiveAddress, ns, timestamp
+from mission.phases import Phase
+from mission.record import COLUMNS, TickRow
+
+PHASES = [p.value for p in Phase]
+COURSE_REDRAW_COS = math.cos(math.radians(2.0))  # the recovery's course turned this much: draw the scene again
+NED_IN_ENU = (math.sqrt(0.5), math.sqrt(0.5), 0.0, 0.0)  # (x, y, z, w): (n, e, d) -> (e, n, -d)
+
+
+# Plain Python on lists below, not numpy on 3-vectors: the worker shares the GIL with the control
+# loop, and per-call numpy overhead on tiny arrays was most of its time.
+_finite = math.isfinite
+
+
+def clean(value: Any) -> Any:
+    """A JSON-safe value: NaN and infinities become None (JSON has no NaN)."""
+    if isinstance(value, float) and not _finite(value):
+        return None
+    return value
+
+
+def vector(v: Any) -> dict[str, float] | None:
+    """``{"n", "e", "d"}`` of a NED vector (array or sequence), or None when it is missing or not finite."""
+    if v is None:
+        return None
+    n, e, d = v.tolist() if hasattr(v, "tolist") else v
+    if not (_finite(n) and _finite(e) and _finite(d)):
+        return None
+    return {"n": float(n), "e": float(e), "d": float(d)}
+
+
+def _distance(a: Any, b: Any) -> float | None:
+    if a is None or b is None:
+        return None
+    d = math.dist(a.tolist() if hasattr(a, "tolist") else a, b.tolist() if hasattr(b, "tolist") else b)
+    return d if _finite(d) else None
+
+
+def bc_circle(info: dict[str, Any], points: int = 72) -> np.ndarray:
+    """The points (points, 3) [m] NED where the dock point is b c from the target: the circle of
+    the sphere ``|x_t - dock| = b c`` in the dock's plane (carrier plane + dock offset), the
+    passenger's separation line; in the target's horizontal plane when the sphere misses it."""
+    target = np.asarray(info["target_ned_m"], dtype=float)
+    bc = float(info["bc_m"])
+    plane_d = float(info.get("carrier_start_ned_m", [0.0, 0.0, 0.0])[2]) + float(info.get("dock_offset_ned_m", [0, 0, 0])[2])
+    height = target[2] - plane_d
+    radius = math.sqrt(bc * bc - height * height) if abs(height) < bc else bc
+    d = plane_d if abs(height) < bc else target[2]
+    a = np.linspace(0.0, 2.0 * math.pi, points, endpoint=False)
+    return np.stack([target[0] + radius * np.cos(a), target[1] + radius * np.sin(a), np.full(points, d)], axis=-1)
+
+
+class MissionLog(DataLog):
+    """``flight.mcap`` of pair ``pair`` (and the live view at ``live``) from the flight record's rows.
+
+    ``info``: ``mission.json``'s content (target, obstacles, b c, dock offset); ``clock``: the
+    ``clock`` metadata (what the times are). The file also holds ``mission`` (``info``) and, at
+    close, ``mission_end`` (final ``mission.json`` and summary values) metadata; each value is JSON.
+    """
+
+    def __init__(self, path: str | Path, info: dict[str, Any], *, pair: str, clock: dict[str, str],
+                 live: LiveAddress | None = None, docking: DockingGeometry | None = None) -> None:
+        super().__init__(path, name=pair, metadata={"clock": clock, "mission": _json_values(info)}, live=live)
+        self.pair, self.info = pair, info
+        self.topics = topics(pair)
+        self.ch = {key: self.channel(self.topics[key], schema) for key, _, schema in MISSION_CHANNELS}
+        self.frames = {name: frame(pair, name) for name in ("carrier", "passenger", "dock")}
+        self._counters: Callable[[], dict[str, Any]] | None = None
+        self._acted = 0
+        self._next_periodic_s: float | None = None
+        self._anchor: np.ndarray | None = None
+        self._circle = bc_circle(info)
+        self._target = [float(x) for x in info["target_ned_m"]]
+        self._docking = docking
+        self._course: np.ndarray | None = None  # the recovery's course the scene was last drawn for
+
+    # ---------------------------------------------------------------- RecordSink
+    def tick(self, row: TickRow) -> None:
+        self.submit(row.t_s, row)
+
+    def set_counters(self, counters: Callable[[], dict[str, Any]]) -> None:
+        self._counters = counters
+
+    def close(self, info: dict[str, Any], summary: dict[str, Any]) -> None:
+        """Finish the file with ``mission_end``: ``info`` (the final ``mission.json``) and how the
+        mission ended (``summary``'s phase, reason, detail and P1-P3). Idempotent."""
+        end = {**info, **{k: v for k, v in summary.items() if k in ("phase", "reason", "detail", "p1", "p2", "p3")}}
+        self.finish({"mission_end": _json_values(end)} if end else None)
+
+    # ---------------------------------------------------------------- worker
+    def handle(self, t_s: float, row: TickRow) -> None:
+        from foxglove.messages import FrameTransform, Log, LogLevel, Quaternion, Vector3
+
+        t, stamp = ns(t_s), timestamp(t_s)
+        identity = Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)
+
+        def transform(key: str, parent: str, child: str, v: dict[str, float] | None) -> None:
+            if v is not None:
+                self.ch[key].log(FrameTransform(timestamp=stamp, parent_frame_id=parent, child_frame_id=child,
+                                                translation=Vector3(x=v["n"], y=v["e"], z=v["d"]),
+                                                rotation=identity), log_time=t)
+
+        x_c, x_p, dock = vector(row.x_c), vector(row.x_p), vector(row.dock)
+        transform("carrier_tf", WORLD_FRAME, self.frames["carrier"], x_c)
+        transform("passenger_tf", WORLD_FRAME, self.frames["passenger"], x_p)
+        if dock is not None and x_c is not None:
+            transform("dock_tf", self.frames["carrier"], self.frames["dock"],
+                      {k: dock[k] - x_c[k] for k in ("n", "e", "d")})
+        anchor_new = row.anchor is not None and self._anchor is None
+        if anchor_new:
+            self._anchor = np.asarray(row.anchor, dtype=float)
+        course = None if row.course is None or self._docking is None else np.asarray(row.course, dtype=float)
+        turned = (course is None) != (self._course is None) or (
+            course is not None and self._course is not None and float(course @ self._course) < COURSE_REDRAW_COS)
+        if turned:
+            self._course = course
+        if self._next_periodic_s is None or t_s >= self._next_periodic_s or anchor_new or turned:
+            self._periodic(t, stamp)
+            self._next_periodic_s = t_s + 1.0
+        for text in row.events:
+            level = LogLevel.Error if text.startswith(f"phase {Phase.ABORT.value}") else LogLevel.Info
+            self.ch["log"].log(Log(timestamp=stamp, level=level, message=text, name=f"{self.pair}/mission"), log_time=t)
+        self.ch["phase"].log({"phase": row.phase, "index": PHASES.index(row.phase) if row.phase in PHASES else -1,
+                              "mode": row.mode, "armed": row.armed, "carrier_age_s": clean(row.carrier_age_s)},
+                             log_time=t)
+        target = self._target
+        self.ch["distances"].log({"e_pc_m": _distance(row.x_p, row.dock), "e_tc_m": _distance(target, row.dock),
+                                  "e_pt_m": _distance(row.x_p, target), "carrier_target_m": _distance(target, row.x_c),
+                                  "bc_m": self.info.get("bc_m"), "P": clean(float(row.P))}, log_time=t)
+        self.ch["command"].log({"law": vector(row.desired), "relative": vector(row.relative), "safe": vector(row.u_cmd),
+                                "reference_position": vector(row.x_ref), "reference_velocity": vector(row.u_ref)},
+                               log_time=t)
+        self._acted += int(row.safety_acted)
+        self.ch["safety"].log({"acted": row.safety_acted, "acted_ticks": self._acted,
+                               "change_m_s": _distance(row.u_cmd, row.desired)}, log_time=t)
+        sp = row.setpoint
+        self.ch["setpoint"].log({"kind": "none" if sp is None else ("full" if sp.full else "velocity"),
+                                 "velocity": None if sp is None else vector(sp.velocity_ned_m_s),
+                                 "position": None if sp is None else vector(sp.position_ned_m),
+                                 "acceleration": None if sp is None else vector(sp.acceleration_ned_m_s2),
+                                 "yaw_rad": None if sp is None else clean(sp.yaw_rad)}, log_time=t)
+        values = row.values()
+        values[0] = round(row.t_s, 4)  # as record.csv writes it
+        self.ch["record"].log(dict(zip(COLUMNS, [None if type(v) is float and not _finite(v) else v for v in values])),
+                              log_time=t)
+
+    def _periodic(self, t: int, stamp: Any) -> None:
+        """``map -> world``, the scene and the counters: rarely changing, sent again each second
+        so a viewer that connects late (or seeks) has them."""
+        from foxglove.messages import FrameTransform, Quaternion, Vector3
+
+        x, y, z, w = NED_IN_ENU
+        self.ch["world_tf"].log(FrameTransform(timestamp=stamp, parent_frame_id=MAP_FRAME, child_frame_id=WORLD_FRAME,
+                                               translation=Vector3(x=0.0, y=0.0, z=0.0),
+                                               rotation=Quaternion(x=x, y=y, z=z, w=w)), log_time=t)
+        self.ch["scene"].log(self._scene(stamp), log_time=t)
+        counters = self._counters() if self._counters is not None else {}
+        if "carrier_feed" in counters:
+            self.ch["carrier_feed"].log(counters["carrier_feed"], log_time=t)
+        if "link" in counters:
+            self.ch["link"].log(counters["link"], log_time=t)
+
+    def _scene(self, stamp: Any) -> Any:
+        from foxglove.messages import (Color, CubePrimitive, CylinderPrimitive, LinePrimitive, LinePrimitiveLineType,
+                                       Point3, Pose, Quaternion, SceneEntity, SceneUpdate, SpherePrimitive,
+                                       TextPrimitive, Vector3)
+
+        def pose(p: Any = (0.0, 0.0, 0.0)) -> Pose:
+            return Pose(position=Vector3(x=float(p[0]), y=float(p[1]), z=float(p[2])),
+                        orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0))
+
+        def size(a: float, b: float | None = None, c: float | None = None) -> Vector3:
+            return Vector3(x=a, y=a if b is None else b, z=a if c is None else c)
+
+        def entity(name: str, frame_id: str = WORLD_FRAME, **shapes: Any) -> SceneEntity:
+            return SceneEntity(timestamp=stamp, frame_id=frame_id, id=name, frame_locked=frame_id != WORLD_FRAME, **shapes)
+
+        def label(p: Any, text: str) -> TextPrimitive:
+            return TextPrimitive(pose=pose((p[0], p[1], p[2] - 0.8)), billboard=True, font_size=14.0,
+                                 scale_invariant=True, color=Color(r=1.0, g=1.0, b=1.0, a=1.0), text=text)
+
+        target = self.info["target_ned_m"]
+        entities = [
+            entity("target", spheres=[SpherePrimitive(pose=pose(target), size=size(0.6), color=Color(r=0.9, g=0.1, b=0.1, a=1.0))],
+                   texts=[label(target, "target")]),
+            entity("bc_circle", lines=[LinePrimitive(type=LinePrimitiveLineType.LineLoop, pose=pose(), thickness=2.0,
+                                                     scale_invariant=True, points=[Point3(x=float(p[0]), y=float(p[1]), z=float(p[2]))
+                                                                                   for p in self._circle],
+                                                     color=Color(r=0.9, g=0.6, b=0.1, a=1.0))],
+                   texts=[label(self._circle[0], f"b c = {float(self.info['bc_m']):g} m")]),
+            entity("carrier", self.frames["carrier"],
+                   cubes=[CubePrimitive(pose=pose(), size=size(1.2, 0.8, 0.4), color=Color(r=0.55, g=0.55, b=0.6, a=1.0))]),
+            entity("passenger", self.frames["passenger"],
+                   cylinders=[CylinderPrimitive(pose=pose(), size=size(0.6, 0.6, 0.15), bottom_scale=1.0, top_scale=1.0,
+                                                color=Color(r=0.2, g=0.45, b=0.95, a=1.0))]),
+            entity("dock", self.frames["dock"],
+                   spheres=[SpherePrimitive(pose=pose(), size=size(0.25), color=Color(r=1.0, g=0.85, b=0.1, a=0.8))]),
+        ]
+        for i, o in enumerate(self.info.get("obstacles", [])):
+            c = list(o["center"]) + [0.0] * (3 - len(o["center"]))
+            entities.append(entity(f"obstacle{i}", spheres=[SpherePrimitive(
+                pose=pose(c), size=size(2.0 * float(o["radius"])), color=Color(r=0.95, g=0.4, b=0.1, a=0.35))]))
+        if self._course is not None and self._docking is not None:
+            entities += self._recovery_entities(entity, pose, size, label)
+        if self._anchor is not None:
+            entities.append(entity("anchor", spheres=[SpherePrimitive(pose=pose(self._anchor), size=size(0.35),
+                                                                      color=Color(r=0.1, g=0.8, b=0.3, a=1.0))],
+                                   texts=[label(self._anchor, "anchor")]))
+        return SceneUpdate(entities=entities)
+
+    def _recovery_entities(self, entity: Any, pose: Any, size: Any, label: Any) -> list[Any]:
+        """The holdoff point H and the glide path H -> gate -> dock of the recovery, in the dock's
+        frame (they move with the carrier; they turn with its course). They live 1.5 s: the scene
+        is sent again each second while the recovery lasts, and they vanish after it."""
+        from foxglove.messages import Color, Duration, LinePrimitive, LinePrimitiveLineType, Point3, SpherePrimitive
+
+        assert self._docking is not None and self._course is not None
+        origin = np.zeros(3)
+        h = holdoff_point(origin, self._course, self._docking)
+        gate = gate_point(origin, self._docking)
+        path = [Point3(x=float(p[0]), y=float(p[1]), z=float(p[2])) for p in (h, gate, origin)]
+        lifetime = Duration.from_secs(1.5)
+        cyan = {"r": 0.3, "g": 0.85, "b": 0.95}
+        return [
+            entity("holdoff", self.frames["dock"], lifetime=lifetime, texts=[label(h, "holdoff")],
+                   spheres=[SpherePrimitive(pose=pose(h), size=size(0.3), color=Color(**cyan, a=1.0))]),
+            entity("glide_path", self.frames["dock"], lifetime=lifetime, lines=[LinePrimitive(
+                type=LinePrimitiveLineType.LineStrip, pose=pose(), thickness=2.0, scale_invariant=True, points=path,
+                color=Color(**cyan, a=0.9))]),
+        ]
+
+
+def _json_values(values: dict[str, Any]) -> dict[str, str]:
+    """MCAP metadata is a string map: each value as JSON."""
+    return {k: json.dumps(v, default=str) for k, v in values.items()}

@@ -1,0 +1,121 @@
+"""Topics, frames and JSON schemas of the flight data (one place: the logs, the layout and the
+readers take them from here).
+
+Every topic of a pair starts with ``/<pair>/`` (``/pair0/tf/passenger``), so the files of
+several pairs open together and the live servers of ``demo --pairs N`` never clash. Frames:
+``world`` is the mission's local NED frame [m] (PX4's), ``map`` an ENU frame (z up) above it for
+viewers that draw z up; a robot's frame is ``<pair>/carrier``, ``<pair>/passenger``, and the dock
+point ``<pair>/dock`` (child of the carrier). Vectors in JSON messages are ``{"n", "e", "d"}``
+objects in ``world`` (NED); a value that does not exist on a tick is ``null``.
+"""
+from __future__ import annotations
+
+from typing import Any
+
+MAP_FRAME = "map"
+WORLD_FRAME = "world"
+
+# (key, topic after the pair prefix, schema: a Foxglove schema name or a key of JSON_SCHEMAS)
+MISSION_CHANNELS = (
+    ("world_tf", "tf/world", "foxglove.FrameTransform"),
+    ("carrier_tf", "tf/carrier", "foxglove.FrameTransform"),
+    ("passenger_tf", "tf/passenger", "foxglove.FrameTransform"),
+    ("dock_tf", "tf/dock", "foxglove.FrameTransform"),
+    ("scene", "scene", "foxglove.SceneUpdate"),
+    ("log", "log", "foxglove.Log"),
+    ("record", "record", "marsupial.FlightRecord"),
+    ("phase", "phase", "marsupial.Phase"),
+    ("distances", "distances", "marsupial.Distances"),
+    ("command", "command", "marsupial.Command"),
+    ("safety", "safety", "marsupial.SafetyFilter"),
+    ("setpoint", "setpoint", "marsupial.Setpoint"),
+    ("carrier_feed", "carrier_feed", "marsupial.CarrierFeed"),
+    ("link", "link", "marsupial.LinkStatistics"),
+)
+CARRIER_CHANNELS = (
+    ("tf", "carrier/tf", "foxglove.FrameTransform"),
+    ("status", "carrier/status", "marsupial.CarrierStatus"),
+    ("log", "carrier/log", "foxglove.Log"),
+    ("passenger_feed", "carrier/passenger_feed", "marsupial.PassengerFeed"),
+)
+
+
+def topics(pair: str, channels: tuple[tuple[str, str, str], ...] = MISSION_CHANNELS) -> dict[str, str]:
+    """``{key: "/<pair>/<topic>"}`` of ``channels``."""
+    return {key: f"/{pair}/{name}" for key, name, _ in channels}
+
+
+def frame(pair: str, name: str) -> str:
+    """A pair's frame id: ``<pair>/<name>`` (carrier, passenger, dock, carrier_own)."""
+    return f"{pair}/{name}"
+
+
+def _number(description: str) -> dict[str, Any]:
+    return {"type": ["number", "null"], "description": description}
+
+
+def _vector(description: str) -> dict[str, Any]:
+    return {"type": ["object", "null"], "description": description + " (world, NED)",
+            "properties": {a: {"type": "number"} for a in ("n", "e", "d")}}
+
+
+def _object(title: str, description: str, properties: dict[str, Any]) -> dict[str, Any]:
+    return {"title": title, "description": description, "type": "object", "properties": properties}
+
+
+_COUNTERS = {"type": "object", "additionalProperties": True}
+
+JSON_SCHEMAS: dict[str, dict[str, Any]] = {
+    "marsupial.FlightRecord": _object(
+        "marsupial.FlightRecord", "One row of record.csv, column by column (mission.record.COLUMNS)",
+        {"t_s": _number("[s] mission clock"), "phase": {"type": "string"}}),
+    "marsupial.Phase": _object("marsupial.Phase", "The mission phase after the tick, and the vehicle", {
+        "phase": {"type": "string", "description": "mission phase (PREFLIGHT .. DONE, ABORT)"},
+        "index": {"type": "integer", "description": "the phase's place in mission.phases.Phase (0 = PREFLIGHT)"},
+        "mode": {"type": "string", "description": "the vehicle's flight mode"},
+        "armed": {"type": "boolean"},
+        "carrier_age_s": _number("[s] age of the carrier sample used")}),
+    "marsupial.Distances": _object(
+        "marsupial.Distances", "The paper's distances; the law's carrier is the dock point (carrier + dock offset)", {
+            "e_pc_m": _number("[m] |x_p - dock|: passenger to dock point"),
+            "e_tc_m": _number("[m] |x_t - dock|: target to dock point"),
+            "e_pt_m": _number("[m] |x_p - x_t|: passenger to target"),
+            "carrier_target_m": _number("[m] |x_t - x_c|: target to the carrier itself (P3)"),
+            "bc_m": _number("[m] b c: |e_tc| at which the passenger separates"),
+            "P": _number("the law's potential gradient P (null outside riding and navigation)")}),
+    "marsupial.Command": _object("marsupial.Command", "The law's command, the safe command and the reference", {
+        "law": _vector("[m/s] the law's command u_p (before the safety filter)"),
+        "relative": _vector("[m/s] the law's u_p - u_c"),
+        "safe": _vector("[m/s] the velocity setpoint after the safety filter and tracking"),
+        "reference_position": _vector("[m] the reference the vehicle tracks"),
+        "reference_velocity": _vector("[m/s] the reference's velocity")}),
+    "marsupial.SafetyFilter": _object("marsupial.SafetyFilter", "What the safety filter did", {
+        "acted": {"type": "boolean", "description": "a filter (CBF, speed, acceleration, floor) changed the command"},
+        "acted_ticks": {"type": "integer", "description": "ticks on which it acted so far"},
+        "change_m_s": _number("[m/s] |safe - law| (null when either is missing)")}),
+    "marsupial.Setpoint": _object("marsupial.Setpoint", "The setpoint sent to the vehicle (SET_POSITION_TARGET_LOCAL_NED)", {
+        "kind": {"type": "string", "description": "full (position, velocity, acceleration), velocity, or none (nothing sent)"},
+        "velocity": _vector("[m/s] velocity"),
+        "position": _vector("[m] position (full setpoints)"),
+        "acceleration": _vector("[m/s^2] acceleration feed-forward (full setpoints)"),
+        "yaw_rad": _number("[rad] absolute heading asked (null: keep the vehicle's)")}),
+    "marsupial.CarrierFeed": _object("marsupial.CarrierFeed", "The carrier feed's counters (summary.json carrier_feed)", {
+        "received": {"type": "integer"}, "accepted": {"type": "integer"}, "dropped": _COUNTERS,
+        "rejected_sources": _COUNTERS, "resyncs": {"type": "integer"}}),
+    "marsupial.LinkStatistics": _object("marsupial.LinkStatistics", "The MAVLink link's counters (summary.json link)",
+                                        {"rx_messages": {"type": "integer"}, "tx_setpoints": {"type": "integer"}}),
+    "marsupial.CarrierStatus": _object("marsupial.CarrierStatus", "The carrier controller's step", {
+        "mode": {"type": "string", "description": "waiting, approaching, separated, paused, stopped"},
+        "hold_reason": {"type": ["string", "null"], "description": "why it does not drive (null: in control)"},
+        "published": {"type": "boolean", "description": "its state went out to the passenger"},
+        "position": _vector("[m] own position"), "velocity": _vector("[m/s] own velocity"),
+        "yaw_rad": _number("[rad] heading"),
+        "law_velocity": _vector("[m/s] the filtered law command u_c"),
+        "setpoint": _vector("[m/s] the velocity sent to the robot"),
+        "speed_m_s": _number("[m/s] forward speed asked"), "yaw_rate_rad_s": _number("[rad/s] yaw rate asked"),
+        "guard_active": {"type": "boolean", "description": "the P3 guard cut the command on this step"},
+        "guard_active_ticks": {"type": "integer", "description": "steps so far on which it did"},
+        "target_distance_m": _number("[m] |x_t - x_c|")}),
+    "marsupial.PassengerFeed": _object("marsupial.PassengerFeed", "The carrier's passenger feed counters",
+                                       {"received": {"type": "integer"}, "accepted": {"type": "integer"}}),
+}
