@@ -386,7 +386,7 @@ class MissionController:
         if self.recorder is not None:
             info = {"separation_time_s": st.separation_time_s,
                     "anchor_ned_m": None if st.anchor is None else st.anchor.tolist(),
-                    "recovered": _recovered(st)}
+                    "recovered": _recovered(st), "legs_done": list(st.legs_done), "legs_skipped": st.legs_skipped}
             outcome = {"phase": st.phase, "reason": st.reason, "detail": st.detail,
                        "ticks": self.ticks, "loop_overruns": self.overruns, **self._counters(),
                        "position_rate_hz": round(float(np.median(self._rates)), 2) if self._rates else None}
@@ -417,6 +417,7 @@ def mission_info(cfg: Config) -> dict[str, Any]:
         "pair": cfg.zenoh.pair,
         "rate_hz": cfg.mission.rate_hz,
         "final_action": cfg.mission.final_action,
+        "targets": cfg.scenario.legs(),
         "recovery": cfg.recovery.model_dump(mode="json") if cfg.mission.final_action == "return" else None,
     }
 

@@ -179,6 +179,12 @@ class FlightRecord:
     def vec(self, name: str) -> np.ndarray:
         return np.stack([self.cols[f"{name}_{a}"] for a in VEC], axis=-1)
 
+    def between(self, start_s: float, end_s: float, info: dict[str, Any]) -> FlightRecord:
+        """The ticks with ``start_s < t <= end_s`` [s, mission clock], with ``info`` as its mission info."""
+        keep = (self.t > start_s) & (self.t <= end_s)
+        return FlightRecord(t=self.t[keep], phase=self.phase[keep], cols={k: v[keep] for k, v in self.cols.items()},
+                            info=info)
+
 
 def read_record(path: str | Path) -> FlightRecord:
     """A flight record read back: a log directory's ``record.csv`` with its ``mission.json``;
@@ -217,14 +223,46 @@ def _nanmax(values: np.ndarray) -> float | None:
 
 
 def summarise(directory: str | Path) -> dict[str, Any]:
-    """The summary of a flight, with the keys of ``marsupial simulate --json``.
+    """The summary of a flight (:func:`figures` of the whole record), and with several targets
+    ``legs``: the figures of each leg (its slice of the record, judged against its own target) with
+    its outcome; the flight's P1-P3 then hold only if every leg flown holds them."""
+    r = read_record(directory)
+    out = figures(r)
+    done = r.info.get("legs_done") or []
+    targets = r.info.get("targets") or []
+    if len(targets) > 1:
+        legs, start = [], -np.inf
+        for k, target in enumerate(targets):
+            if k < len(done):
+                leg = done[k]
+                info = {**r.info, "target_ned_m": target, "separation_time_s": leg["separation_time_s"],
+                        "anchor_ned_m": leg["anchor_ned_m"],
+                        "recovered": {"contact": leg["contact"], "fallback": None}}
+                end = leg["end_s"] if k + 1 < len(targets) else np.inf
+                fig = figures(r.between(start, end, info))
+                fig.update(leg=k, target_ned_m=target, outcome=leg["outcome"])
+                start = leg["end_s"]
+            elif k == len(done) and r.info.get("legs_skipped") is None and len(r.t) and r.t[-1] > start:
+                fig = {"leg": k, "target_ned_m": target, **figures(r.between(start, np.inf, {**r.info, "target_ned_m": target})),
+                       "outcome": "unfinished"}
+            else:
+                fig = {"leg": k, "target_ned_m": target, "outcome": f"skipped: {r.info.get('legs_skipped') or 'not reached'}"}
+            legs.append(fig)
+        out["legs"] = legs
+        flown = [leg for leg in legs if "p1" in leg]
+        for p in ("p1", "p2", "p3"):
+            out[p] = bool(flown) and all(leg[p] for leg in flown)
+    return out
+
+
+def figures(r: FlightRecord) -> dict[str, Any]:
+    """The figures of a flight record, with the keys of ``marsupial simulate --json``.
 
     Times are counted from the first RIDING tick (the carrier starts its approach), as t = 0 in
     the paper. P1: during RIDING the vehicle stayed within the dock tolerance of the dock point,
     the latch fired and the vehicle left; P2: the vehicle ended within the arrival radius; P3:
     the carrier was never at the target (and its closest approach is reported).
     """
-    r = read_record(directory)
     info = r.info
     target = np.asarray(info["target_ned_m"])
     x_p, x_c, v_p, v_c = r.vec("x_p"), r.vec("x_c"), r.vec("v_p"), r.vec("v_c")

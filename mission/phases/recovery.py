@@ -451,13 +451,15 @@ def begin_next_leg(state: MissionState, obs: Observation, m: MissionModel,
 
 
 def transit(state, obs, m, events=()):
-    """Ride the dock point (a leg after the first) until the carrier is far enough from the leg's
-    target for the paper's Assumption 1 (b c + ``mission.leg_start_margin_m``), then RIDING: the
-    reference sits on the dock point again and the law takes over."""
+    """Ride the dock point (a leg after the first) until the carrier stands far enough from the
+    leg's target for the paper's Assumption 1 (b c + ``mission.leg_start_margin_m``, and slower
+    than 0.1 m/s: the law starts from rest), then RIDING: the reference sits on the dock point
+    again and the law takes over."""
     r, t = _model(m), obs.t_s
     dock = dock_point(obs, m)
     v_c = obs.carrier.velocity_ned_m_s
-    if float(norm(m.tick.target - dock)) >= m.leg_start_m and float(norm(state.x_ref - dock)) <= 0.05:
+    if (float(norm(m.tick.target - dock)) >= m.leg_start_m and float(norm(v_c[:2])) <= PARKED_SPEED_M_S
+            and float(norm(state.x_ref - dock)) <= 0.05):
         new = enter(state, Phase.RIDING, t, x_ref=dock.copy(), prev_dock=dock.copy())
         return _fly(new, obs, m, dock, v_c, r.approach, None, (*events, f"leg {state.leg + 1}: riding"))
     return _fly(state, obs, m, dock, v_c, r.approach, state.recovery, events)

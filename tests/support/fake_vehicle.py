@@ -52,6 +52,8 @@ class FakeWorld:
     intervals: list[tuple[int, float]] = field(default_factory=list)  # SET_MESSAGE_INTERVAL asked (id, Hz)
     recovery_velocity_ned_m_s: np.ndarray = field(default_factory=lambda: np.zeros(3))  # the carrier's recovery course
     targets: list[list[float]] | None = None  # several targets: the carrier drives at the status's leg's
+    reposition_m: float = 10.5  # REPOSITION: the carrier drives out until this far from the leg's target [m]
+    carrier_accel_m_s2: float = math.inf  # the carrier's acceleration limit [m/s^2] (inf: instant)
     battery_pct: float | None = None  # remaining at t = 0 [%] (None: not reported) ...
     drain_pct_s: float = 0.0  # ... falling this fast while armed [%/s]
 
@@ -61,6 +63,7 @@ class FakeWorld:
         self._t = self.clock.now()
         self._carrier_rx_s = self._t
         self._seq = 0
+        self._last_status_s = self._t
 
     # ------------------------------------------------------------------ the world
     def _advance(self) -> float:
@@ -169,14 +172,20 @@ class FakeWorld:
         target = np.asarray(self.targets[status.leg] if self.targets is not None else self.target_ned_m, dtype=float)
         e = target - self.carrier_ned_m
         e[2] = 0.0
+        distance = float(np.linalg.norm(e))
         if status.phase.duty is Duty.CARRY and live:
-            self._v_c = e / float(np.linalg.norm(e)) * self.carrier_speed_m_s
-        elif status.phase.duty is Duty.REPOSITION and live:
-            self._v_c = -e / float(np.linalg.norm(e)) * self.carrier_speed_m_s
+            wanted = e / distance * self.carrier_speed_m_s
+        elif status.phase.duty is Duty.REPOSITION and live and distance < self.reposition_m:
+            wanted = -e / distance * self.carrier_speed_m_s
         elif status.phase.duty is Duty.RECOVER and live:
-            self._v_c = np.asarray(self.recovery_velocity_ned_m_s, dtype=float)
+            wanted = np.asarray(self.recovery_velocity_ned_m_s, dtype=float)
         else:
-            self._v_c = np.zeros(3)
+            wanted = np.zeros(3)
+        step = wanted - self._v_c  # the carrier's velocity changes at most carrier_accel_m_s2
+        cap = self.carrier_accel_m_s2 * max(self.clock.now() - self._last_status_s, 0.0)
+        size = float(np.linalg.norm(step))
+        self._v_c = self._v_c + (step * (cap / size) if size > cap else step)
+        self._last_status_s = self.clock.now()
 
 
 @dataclass

@@ -203,3 +203,43 @@ def test_a_battery_too_small_for_the_second_leg_skips_it(cfg):
     assert state.legs_skipped is not None and state.legs_skipped.startswith("battery")
     assert Phase.TRANSIT not in phase_order(reports)
     assert world._battery(world.clock.now()) >= two.recovery.battery_reserve_pct  # it never stranded itself
+
+
+def test_the_summary_has_a_column_per_leg(cfg, tmp_path):
+    from mission.controller import mission_info
+    from mission.record import FlightRecorder
+
+    two, targets = two_targets(cfg, [30.0, 5.0, -5.0])
+    clock = ManualClock()
+    world = FakeWorld(clock, target_ned_m=np.asarray(targets[0], dtype=float), targets=targets,
+                      recovery_velocity_ned_m_s=np.array([0.8, 0.0, 0.0]), carrier_accel_m_s2=1.0)
+    controller = MissionController(two, world, world.feed, clock, publisher=world,
+                                   recorder=FlightRecorder(tmp_path, mission_info(two)), command_thread=False)
+    s = controller.run().summary
+    legs = s["legs"]
+    assert [leg["outcome"] for leg in legs] == ["done", "done"] and [leg["leg"] for leg in legs] == [0, 1]
+    bc = two.law.b * two.law.c
+    for leg, target in zip(legs, targets):
+        assert leg["target_ned_m"] == target
+        assert leg["p1"] and leg["p2"] and leg["p3"], leg
+        assert abs(leg["carrier_target_distance_at_separation_m"] - bc) < 0.01
+        assert leg["relative_input_jump_m_s"] <= 0.05
+        assert leg["final_passenger_target_distance_m"] <= two.mission.arrival_radius_m
+        assert leg["contact"]["horizontal_error_m"] <= 0.10 and leg["deck_violations"] == 0
+        assert leg["separation_time_s"] > 0  # counted from the leg's own start of riding
+    assert s["p1"] and s["p2"] and s["p3"]
+
+
+def test_a_skipped_leg_is_reported_with_its_reason(cfg, tmp_path):
+    from mission.controller import mission_info
+    from mission.record import FlightRecorder
+
+    two, targets = two_targets(cfg, [30.0, 5.0, -5.0])
+    clock = ManualClock()
+    world = FakeWorld(clock, target_ned_m=np.asarray(targets[0], dtype=float), targets=targets,
+                      recovery_velocity_ned_m_s=np.array([0.8, 0.0, 0.0]), battery_pct=100.0, drain_pct_s=1.0)
+    controller = MissionController(two, world, world.feed, clock, publisher=world,
+                                   recorder=FlightRecorder(tmp_path, mission_info(two)), command_thread=False)
+    legs = controller.run().summary["legs"]
+    assert legs[0]["outcome"] == "done" and legs[1]["outcome"].startswith("skipped: battery")
+    assert "p1" not in legs[1]
