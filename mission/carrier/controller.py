@@ -6,7 +6,8 @@ Every period ``1 / carrier.rate_hz`` [s] of the injected clock the controller
 1. lets the backend advance (the built-in kinematic robot integrates its held command; a real
    vehicle moves on its own) and reads the carrier's own state (shared local NED frame);
 2. updates its mode from the passenger's newest status (:mod:`mission.carrier.modes`);
-3. decides the command: :func:`mission.core.tick.carrier_tick` (paper eq. 4, CBF filter, speed and
+3. decides the command: :func:`mission.core.tick.carrier_tick` (paper eq. 4, or while the passenger
+   comes home the recovery course of :mod:`mission.carrier.course`; CBF filter, speed and
    acceleration limits), sped up gently while the carrier stands (``carrier.start_accel_m_s2``,
    :mod:`mission.carrier.start`), then :func:`~mission.carrier.tracking.track` (what the robot
    can do), then the P3 guard (:mod:`mission.carrier.guard`), whatever the mode;
@@ -38,10 +39,11 @@ import zenoh
 
 from mission.carrier.acceleration import AccelerationEstimate
 from mission.carrier.backends import KINDS
+from mission.carrier.course import RecoveryCourse, away_heading_deg
 from mission.carrier.guard import GuardParams, P3Guard
 from mission.carrier.modes import CarrierMode, PassengerView, next_mode
 from mission.carrier.start import gentle_start
-from mission.carrier.tracking import Tracked, TrackingParams, along_heading, heading_of, track
+from mission.carrier.tracking import SpeedCalibration, Tracked, TrackingParams, along_heading, heading_of, track
 from mission.core.consistent_velocity import PositionConsistentVelocity
 from mission.bus.bridge import CarrierPublisher, PassengerFeed
 from mission.time.clock import Clock, Downstream, Periodic
@@ -179,6 +181,9 @@ class CarrierController:
         self.seq = 0
         self.hold_reason: str | None = "no valid own state"
         self._plan_velocity = np.zeros(self.dim)
+        c = cfg.carrier
+        self.course = RecoveryCourse.from_lists(c.recovery_course, c.recovery_heading_deg, c.recovery_speed_m_s)
+        self._course_start: tuple[float, float] | None = None  # (clock time [s], away heading [deg]) of the recovery
         self._stats: dict[str, Any] = {"closest_target_distance_m": math.inf, "guard_active_ticks": 0,
                                        "stale_ticks": 0, "ticks": 0, "distance_at_separation_m": None,
                                        "braking_distance_m": None, "braking_displacement_m": None,
@@ -188,8 +193,7 @@ class CarrierController:
         self._separation_position = np.zeros(self.dim)
         self._alignment = np.zeros(3)
         self._aligned = False
-        self._speed_ratio = 1.0  # measured / asked forward speed (carrier.speed_ratio_tau_s)
-        self._last_speed_cmd = 0.0
+        self._calibration = SpeedCalibration(cfg.carrier.speed_ratio_tau_s)
         tau = cfg.carrier.acceleration_tau_s
         self._acceleration = AccelerationEstimate(tau) if tau > 0 else None  # published when set
         bias_tau = cfg.carrier.velocity_bias_tau_s
@@ -223,14 +227,16 @@ class CarrierController:
             return
         level = logging.WARNING if mode in (CarrierMode.PAUSED, CarrierMode.STOPPED) else logging.INFO
         log.log(level, "carrier %s: %s -> %s (%s)", self.pair, self.mode.value, mode.value, why)
-        if mode is CarrierMode.SEPARATED:
+        if mode is CarrierMode.SEPARATED and self.mode is not CarrierMode.RECOVERING:  # after a recovery: the same plan
             self._plan_velocity = (self.velocity_m_s.copy() if self.mode is CarrierMode.APPROACHING
                                    else np.zeros_like(self.velocity_m_s))
+        if mode not in (CarrierMode.RECOVERING, CarrierMode.PAUSED):
+            self._course_start = None  # the next recovery drives its course from its own start
         self.mode = mode
 
     def _stopping(self) -> bool:
-        """A stop for good or for now: not approaching, and no own plan (Remark 1) to follow."""
-        if self.mode is CarrierMode.APPROACHING:
+        """A stop for good or for now: not approaching or recovering, and no own plan (Remark 1) to follow."""
+        if self.mode in (CarrierMode.APPROACHING, CarrierMode.RECOVERING):
             return False
         return not (self.mode is CarrierMode.SEPARATED and self.model.carrier_mode == "remark1")
 
@@ -244,7 +250,7 @@ class CarrierController:
         separated = self.mode is not CarrierMode.APPROACHING
         plan = self._plan_velocity if self.mode is CarrierMode.SEPARATED else None
         res = carrier_tick(x_c, separated, self.model, own_plan_velocity=plan, u_prev=self.velocity_m_s,
-                           dt_s=dt_s if dt_s > 0 else None)
+                           dt_s=dt_s if dt_s > 0 else None, course_velocity=self._course_velocity(x_c))
         if not bool(np.all(res.feasible)):
             log.warning("carrier %s: CBF filter infeasible at %s; holding still", self.pair, x_c.tolist())
         u = np.asarray(res.u, dtype=float)
@@ -266,7 +272,7 @@ class CarrierController:
                 scale = speed / cmd.speed_m_s if cmd.speed_m_s > 0 else 0.0
                 cmd = Tracked(speed, cmd.yaw_rate_rad_s, cmd.bearing_rad, heading_of(speed, yaw),
                               cmd.setpoint_ned_m_s * scale)
-            cmd = self._calibrated(cmd, yaw, v_meas, dt_s)  # what to ask for so that it does ``cmd``
+            cmd = self._calibration.asked(cmd, yaw, v_meas, dt_s)  # what to ask for so that it does ``cmd``
             # The law's planar command (not the motion along the heading) is what the
             # acceleration limit and Remark 1 act on: tying it to the heading would let the
             # command turn only as fast as the robot already does (a heading lock).
@@ -275,23 +281,15 @@ class CarrierController:
             self._stats["guard_active_ticks"] += 1
         return cmd
 
-    def _calibrated(self, cmd: Tracked, yaw: float, v_meas: np.ndarray, dt_s: float) -> Tracked:
-        """carrier.speed_ratio_tau_s > 0: a vehicle whose own speed loop runs fast is asked for
-        ``v / r``, where ``r`` >= 1 is its measured forward speed over the speed last asked,
-        low-passed with that time constant (docs/carrier.md). Never more than asked."""
-        tau = self.cfg.carrier.speed_ratio_tau_s
-        if tau <= 0:
-            return cmd
-        forward = math.cos(yaw) * float(v_meas[0]) + math.sin(yaw) * float(v_meas[1])
-        if self._last_speed_cmd > 0.3 and dt_s > 0:  # a ratio of small speeds is noise
-            alpha = 1.0 - math.exp(-dt_s / tau)
-            self._speed_ratio += alpha * (forward / self._last_speed_cmd - self._speed_ratio)
-        ratio = min(max(self._speed_ratio, 1.0), 3.0)
-        self._last_speed_cmd = cmd.speed_m_s / ratio
-        if ratio == 1.0:
-            return cmd
-        asked = cmd.speed_m_s / ratio  # the motion (velocity_ned_m_s) stays what the vehicle will do
-        return Tracked(asked, cmd.yaw_rate_rad_s, cmd.bearing_rad, cmd.velocity_ned_m_s, cmd.setpoint_ned_m_s / ratio)
+    def _course_velocity(self, x_c: np.ndarray) -> np.ndarray | None:
+        """RECOVERING: the recovery course's velocity now [m/s] (dim,), its clock and its default
+        heading (away from the target) taken at the first tick of the recovery; else None."""
+        if self.mode is not CarrierMode.RECOVERING:
+            return None
+        if self._course_start is None:
+            self._course_start = (self.clock.now(), away_heading_deg(x_c, np.asarray(self.model.target)))
+        t0, away = self._course_start
+        return _pad3(self.course.velocity_ned_m_s(self.clock.now() - t0, away))[:self.dim]
 
     def _in_plane(self, state: OwnState | None) -> OwnState | None:
         """The own state as the controller uses it: shifted by the deck alignment (if any), and,
@@ -360,10 +358,11 @@ class CarrierController:
         self._stats["ticks"] += 1
         self._update_mode()
         self._align_on_deck()
-        if self.mode is CarrierMode.APPROACHING:
+        if self.mode in (CarrierMode.APPROACHING, CarrierMode.RECOVERING):
             self.backend.engage()
-        elif self.mode in (CarrierMode.SEPARATED, CarrierMode.STOPPED) and self._stopping():
-            self.backend.park()  # stopped for good: a PX4 vehicle holds position in Hold
+        elif self.mode in (CarrierMode.SEPARATED, CarrierMode.STOPPED, CarrierMode.PARKED) and self._stopping() and not (
+                self.mode is CarrierMode.SEPARATED and self.cfg.mission.final_action == "return"):
+            self.backend.park()  # stopped for good (with a recovery to come it keeps control): PX4 holds in Hold
         state = self._in_plane(self.backend.own_state())
         now = self.clock.now()
         why: str | None

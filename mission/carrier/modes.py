@@ -2,25 +2,42 @@
 
 The passenger's phase says what the carrier's duty is (:class:`~mission.phases.phase.Duty`, a
 property of each :class:`~mission.phases.phase.Phase`). Transitions, evaluated once per carrier
-tick from :class:`PassengerView`::
+tick from :class:`PassengerView`, in this order (the first that applies)::
 
-    WAITING     --duty CARRY, not lost---------------------------> APPROACHING
+    STOPPED     --anything---------------------------------------> STOPPED    (latched)
+    any         --duty PARK--------------------------------------> PARKED     (latched: only CARRY leaves it)
+    PARKED      --duty CARRY, not lost---------------------------> APPROACHING (the next target)
+    PARKED      --anything else----------------------------------> PARKED
+    SEPARATED/PAUSED --duty RECOVER, not lost--------------------> RECOVERING
+    SEPARATED/PAUSED --duty RECOVER, lost--------------------------> unchanged
+    RECOVERING  --duty STOP----------------------------------------> STOPPED
+    RECOVERING  --passenger lost (as below)------------------------> PAUSED     (stop)
+    RECOVERING  --duty RELEASED (the recovery fell back)-----------> SEPARATED
+    SEPARATED   --anything else----------------------------------> SEPARATED  (latched otherwise)
+    any         --duty RELEASED, or the status says separated------> SEPARATED
+    WAITING/APPROACHING/PAUSED --duty STOP-------------------------> STOPPED    (latched)
     APPROACHING --passenger lost (status older than passenger_timeout_s,
                   no status, or its liveliness token gone)--------> PAUSED     (stop; a safe reaction)
-    PAUSED      --duty CARRY, not lost---------------------------> APPROACHING
-    any but SEPARATED/STOPPED --duty RELEASED, or the
-                  status says separated---------------------------> SEPARATED  (latched)
-    WAITING/APPROACHING/PAUSED --duty STOP------------------------> STOPPED    (latched)
+    WAITING/PAUSED --duty CARRY, not lost------------------------> APPROACHING
 
 - WAITING (duty WAIT: the passenger has not joined yet, or no status yet): stationary.
 - APPROACHING: ``u_c = k_c e_tc`` (planar), filtered.
-- PAUSED / STOPPED: command zero (through the filter, so an acceleration limit still applies).
+- PAUSED / STOPPED / PARKED: command zero (through the filter, so an acceleration limit still
+  applies). PARKED: the passenger came home (its phase HOME, duty PARK); a PX4 vehicle is handed to
+  its own Hold once at rest; HOLD or DONE after it (duty RELEASED) never unpark it, whatever
+  ``scenario.carrier_mode`` says.
 - SEPARATED: ``scenario.carrier_mode = "stop"``: zero; ``"remark1"``: the velocity commanded at the
   instant of separation (the carrier's own plan), still filtered. Passenger silence no longer
   matters once separated: the passenger has left.
+- RECOVERING (duty RECOVER: the passenger returns, holds off, approaches, docks): the steady
+  recovery course (:mod:`mission.carrier.course`: ``carrier.recovery_course`` legs, then
+  ``carrier.recovery_heading_deg`` at ``carrier.recovery_speed_m_s``), filtered. A passenger lost
+  meanwhile stops the carrier (PAUSED) until it is heard again: a carrier driving on with nobody
+  coming home would only run away from PX4's home.
 
 Whatever the mode, the P3 guard (:mod:`mission.carrier.guard`) still caps the command: a
-passenger that lies (RIDING forever) cannot bring the carrier closer than ``b c - margin``.
+passenger that lies (RIDING forever, RETURNING towards the target) cannot bring the carrier closer
+than ``b c - margin``.
 """
 from __future__ import annotations
 
@@ -37,6 +54,8 @@ class CarrierMode(enum.Enum):
     APPROACHING = "approaching"
     PAUSED = "paused"
     SEPARATED = "separated"
+    RECOVERING = "recovering"
+    PARKED = "parked"
     STOPPED = "stopped"
 
 
@@ -52,16 +71,33 @@ class PassengerView:
 
 def next_mode(mode: CarrierMode, view: PassengerView) -> tuple[CarrierMode, str]:
     """The mode after ``mode`` given ``view``, and why (``""`` when unchanged)."""
-    if mode in (CarrierMode.SEPARATED, CarrierMode.STOPPED):
+    if mode is CarrierMode.STOPPED:
         return mode, ""
     duty = view.phase.duty if view.phase is not None else Duty.WAIT
+    if duty is Duty.PARK:
+        return (mode, "") if mode is CarrierMode.PARKED else (CarrierMode.PARKED, f"passenger phase {view.phase}")
+    if mode is CarrierMode.PARKED:
+        if duty is Duty.CARRY and not view.lost:
+            return CarrierMode.APPROACHING, "passenger riding again"
+        return mode, ""
+    if duty is Duty.RECOVER and mode in (CarrierMode.SEPARATED, CarrierMode.PAUSED):
+        return (mode, "") if view.lost else (CarrierMode.RECOVERING, f"passenger phase {view.phase}")
+    if mode is CarrierMode.RECOVERING:
+        if duty is Duty.STOP:
+            return CarrierMode.STOPPED, "passenger aborted"
+        if view.lost:
+            return CarrierMode.PAUSED, f"passenger lost: {view.lost}"
+        if duty is Duty.RELEASED:
+            return CarrierMode.SEPARATED, f"passenger phase {view.phase}"
+        return mode, ""
+    if mode is CarrierMode.SEPARATED:
+        return mode, ""
     if view.phase is not None and (duty is Duty.RELEASED or view.separated):
         return CarrierMode.SEPARATED, f"passenger phase {view.phase}"
     if duty is Duty.STOP:
         return CarrierMode.STOPPED, "passenger aborted"
-    riding = duty is Duty.CARRY
     if mode is CarrierMode.APPROACHING and view.lost:
         return CarrierMode.PAUSED, f"passenger lost: {view.lost}"
-    if mode in (CarrierMode.WAITING, CarrierMode.PAUSED) and riding and not view.lost:
+    if mode in (CarrierMode.WAITING, CarrierMode.PAUSED) and duty is Duty.CARRY and not view.lost:
         return CarrierMode.APPROACHING, "passenger riding"
     return mode, ""

@@ -94,3 +94,30 @@ def track(u_ned_m_s: np.ndarray, yaw_rad: float, p: TrackingParams) -> Tracked:
         rate_max = min(rate_max, speed * math.tan(p.max_steer_rad) / p.wheelbase_m)
     omega = min(max(p.heading_gain * err, -rate_max), rate_max)
     return Tracked(speed, omega, bearing, heading_of(speed, yaw_rad), heading_of(speed, bearing))
+
+
+class SpeedCalibration:
+    """``carrier.speed_ratio_tau_s`` > 0: a vehicle whose own speed loop runs fast is asked for
+    ``v / r``, where ``r`` in [1, 3] is its measured forward speed over the speed last asked,
+    low-passed with that time constant ``tau_s`` [s] (docs/carrier.md). Never more than asked."""
+
+    def __init__(self, tau_s: float) -> None:
+        self.tau_s = tau_s
+        self.ratio = 1.0  # measured / asked forward speed, low-passed
+        self._last_speed_cmd = 0.0  # [m/s] the forward speed last asked
+
+    def asked(self, cmd: Tracked, yaw: float, v_meas: np.ndarray, dt_s: float) -> Tracked:
+        """What to ask of the vehicle at heading ``yaw`` [rad], measured velocity ``v_meas``
+        [m/s] NED, so that it does ``cmd`` (``cmd`` itself when off or ``r`` is 1)."""
+        if self.tau_s <= 0:
+            return cmd
+        forward = math.cos(yaw) * float(v_meas[0]) + math.sin(yaw) * float(v_meas[1])
+        if self._last_speed_cmd > 0.3 and dt_s > 0:  # a ratio of small speeds is noise
+            alpha = 1.0 - math.exp(-dt_s / self.tau_s)
+            self.ratio += alpha * (forward / self._last_speed_cmd - self.ratio)
+        ratio = min(max(self.ratio, 1.0), 3.0)
+        self._last_speed_cmd = cmd.speed_m_s / ratio
+        if ratio == 1.0:
+            return cmd
+        asked = cmd.speed_m_s / ratio  # the motion (velocity_ned_m_s) stays what the vehicle will do
+        return Tracked(asked, cmd.yaw_rate_rad_s, cmd.bearing_rad, cmd.velocity_ned_m_s, cmd.setpoint_ned_m_s / ratio)

@@ -13,6 +13,7 @@ from mission.errors import ConfigError
 
 
 BackendName = Literal.__getitem__(tuple(KINDS))  # the registry's names
+MAX_COURSE_LEGS = 100  # legs of carrier.recovery_course
 
 
 class CarrierMavlinkSection(Section):
@@ -102,6 +103,17 @@ class CarrierSection(Section):
         description=("[m/s^2] the carrier's gentle start: while it is measured slower than 0.15 m/s its command's "
                      "speed grows at most this fast (stiction: it breaks free at a low command, not leaping to a high "
                      "one); 0 off"))
+    recovery_speed_m_s: float = Field(0.0, ge=0, le=100,
+        description=("[m/s] while the passenger comes home (returns, holds off, approaches, docks) the carrier drives "
+                     "its steady recovery course at this speed, after the legs of recovery_course; 0: it stops and waits "
+                     "(at most max_speed_m_s)"))
+    recovery_heading_deg: float | None = Field(None, ge=-360, le=360,
+        description=("[deg] NED heading (0 north, 90 east) of the steady recovery course; default: away from the target "
+                     "(the bearing from the target to where the carrier is when the recovery begins)"))
+    recovery_course: list[list[float]] = Field([], max_length=MAX_COURSE_LEGS,
+        description=("[deg, m/s, s] scripted legs `[heading_deg, speed_m_s, duration_s]` the carrier drives in order "
+                     "from the start of the recovery, before the steady course (e.g. a 90 deg turn mid-approach); "
+                     "heading NED in -360..360, speed 0..max_speed_m_s, duration in (0, 3600]"))
     start_yaw_rad: float | None = Field(None,
         description="[rad] sim backend: initial heading (default: towards the target)")
     mavlink: CarrierMavlinkSection = Field(CarrierMavlinkSection(),
@@ -116,4 +128,18 @@ class CarrierSection(Section):
                 raise ConfigError(f"carrier.{name}", v, "must have 3 components")
         if self.mavlink.shared_origin is not None and len(self.mavlink.shared_origin) != 3:
             raise ConfigError("carrier.mavlink.shared_origin", self.mavlink.shared_origin, "must be [lat, lon, alt]")
+        if self.recovery_speed_m_s > self.max_speed_m_s:
+            raise ConfigError("carrier.recovery_speed_m_s", self.recovery_speed_m_s,
+                              f"above carrier.max_speed_m_s = {self.max_speed_m_s:g}")
+        for i, leg in enumerate(self.recovery_course):
+            name = f"carrier.recovery_course[{i}]"
+            if len(leg) != 3:
+                raise ConfigError(name, leg, "must be [heading_deg, speed_m_s, duration_s]")
+            heading, speed, duration = leg
+            if not -360.0 <= heading <= 360.0:
+                raise ConfigError(name, leg, "heading_deg must be in -360..360")
+            if not 0.0 <= speed <= self.max_speed_m_s:
+                raise ConfigError(name, leg, f"speed_m_s must be in 0..carrier.max_speed_m_s = {self.max_speed_m_s:g}")
+            if not 0.0 < duration <= 3600.0:
+                raise ConfigError(name, leg, "duration_s must be in (0, 3600]")
         return self

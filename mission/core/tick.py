@@ -125,12 +125,20 @@ def carrier_tick(
     own_plan_velocity: np.ndarray | None = None,
     u_prev: np.ndarray | None = None,
     dt_s: float | None = None,
+    course_velocity: np.ndarray | None = None,
 ) -> FilterResult:
     """Carrier command [m/s] at ``x_c`` [m]: the paper's approach while docked; after
-    separation zero ("stop") or ``own_plan_velocity`` ("remark1"), filtered for obstacles."""
+    separation zero ("stop") or ``own_plan_velocity`` ("remark1"); ``course_velocity`` [m/s]
+    instead when given (the recovery course: :mod:`mission.carrier.course`); filtered for
+    obstacles, speed and acceleration alike."""
     sep = np.asarray(separated, dtype=bool)
-    u = carrier_command(model.target - x_c, ~sep, model.law, planar=model.planar_carrier)  # a new array
-    if model.carrier_mode == "remark1" and own_plan_velocity is not None and uniform(sep) is not False:
+    if course_velocity is not None:
+        u = np.array(np.broadcast_to(np.asarray(course_velocity, dtype=float), x_c.shape))  # a new array
+        if model.planar_carrier and x_c.shape[-1] == 3:
+            u[..., 2:] = 0.0
+    else:
+        u = carrier_command(model.target - x_c, ~sep, model.law, planar=model.planar_carrier)  # a new array
+    if course_velocity is None and model.carrier_mode == "remark1" and own_plan_velocity is not None and uniform(sep) is not False:
         u = np.where(sep[..., None], own_plan_velocity, u)  # a new array too
     obstacles = model.carrier_obstacles if model.filter_carrier else Obstacles.none(2 if model.planar_carrier else x_c.shape[-1])
     if model.planar_carrier and x_c.shape[-1] == 3:

@@ -21,6 +21,7 @@ from mission.cli import main as cli_main
 from mission.time.clock import Clock, LockstepClock, ManualClock, ScaledClock
 from mission.config.schema import Config, from_dict
 from mission.bus.wire import CarrierState, PassengerStatus, decode_carrier_json
+from mission.phases.phase import Phase
 from sim.robots.carrier import CarrierMode, CarrierSim
 from tests.support.stepper import Stepper
 from tests.support.zenoh_util import endpoint, free_port, peer, wait_for
@@ -48,7 +49,7 @@ class Passenger:
 
     def say(self, phase: str) -> int:
         self.seq += 1
-        separated = phase in ("SEPARATED", "NAVIGATING", "ARRIVED", "HOLD", "LAND", "DONE")
+        separated = Phase(phase).separated
         self.pub.publish(PassengerStatus(phase, self.clock.now(), self.seq, [0, 0, -1.5], [0, 0, 0], separated))
         return self.seq
 
