@@ -334,7 +334,8 @@ def _switch_jump(phase: np.ndarray, u_cmd: np.ndarray) -> float | None:
 def _recovery_summary(r: FlightRecord, x_p: np.ndarray, v_p: np.ndarray, v_c: np.ndarray,
                       dock: np.ndarray) -> dict[str, Any]:
     """The recovery's figures (mission.final_action = "return"): docked_again, recovery_outcome,
-    contact (from mission.json's ``recovered``) and deck_violations: ticks of the recovery's
+    contact (from mission.json's ``recovered``), carrier_speed_on_approach_m_s ([min, max] [m/s] of
+    the carrier's horizontal speed during APPROACH) and deck_violations: ticks of the recovery's
     flying phases before contact where the vehicle was at or below the dock point's height within
     the deck (recovery.deck_radius_m) without meeting the contact conditions."""
     rec, params = r.info.get("recovered"), r.info.get("recovery")
@@ -349,6 +350,10 @@ def _recovery_summary(r: FlightRecord, x_p: np.ndarray, v_p: np.ndarray, v_c: np
     else:
         out["recovery_outcome"] = "not begun" if rec is None else "unfinished"
     out["contact"] = contact
+    approach = (r.phase == Phase.APPROACH) & np.isfinite(v_c).all(axis=1)
+    carrier_speed = np.hypot(v_c[approach, 0], v_c[approach, 1])  # [min, max] of the carrier's, on the approach
+    out["carrier_speed_on_approach_m_s"] = ([_num(carrier_speed.min()), _num(carrier_speed.max())]
+                                            if carrier_speed.size else None)
     before = np.isin(r.phase, [Phase.RETURNING, Phase.HOLDOFF, Phase.APPROACH, Phase.GO_AROUND])
     e, dv = x_p - dock, v_p - v_c
     horizontal, below = np.hypot(e[:, 0], e[:, 1]), e[:, 2] >= -params["contact_height_m"]
