@@ -28,6 +28,7 @@ from mission.cli.run import check_config
 from tests.conftest import CONFIGS
 
 DEMO = (CONFIGS / "demo.toml").read_text()
+RECOVERY = (CONFIGS / "recovery.toml").read_text()
 
 # Numeric fields of demo.toml and of the sections' defaults: (section, key, is_int)
 NUMERIC = [
@@ -54,11 +55,16 @@ BAD_FOR_VECTORS = ['[0.0, "0", 0.0]', "[0.0, true, 0.0]", "[0.0, nan, 0.0]", "[1
 
 def mutated(section: str, key: str, raw: str) -> str:
     """demo.toml with ``key = raw`` in ``[section]`` (replacing the key's line if present)."""
-    lines = DEMO.splitlines()
+    return mutated_text(DEMO, section, key, raw)
+
+
+def mutated_text(text: str, section: str, key: str, raw: str) -> str:
+    """The configuration ``text`` with ``key = raw`` in ``[section]`` (replacing the key's line if present)."""
+    lines = text.splitlines()
     try:
         start = lines.index(f"[{section}]")
     except ValueError:
-        return DEMO + f"\n[{section}]\n{key} = {raw}\n"
+        return text + f"\n[{section}]\n{key} = {raw}\n"
     end = next((i for i in range(start + 1, len(lines)) if lines[i].startswith("[")), len(lines))
     for i in range(start + 1, end):
         if re.match(rf"{re.escape(key)}\s*=", lines[i]):
@@ -146,7 +152,22 @@ def _cases() -> list[tuple[str, str, str]]:
     add("scenario", "target", "[4.0, 3.0, -1.0]", "scenario.eta")  # within b c at the start
     add("scenario", "target", "[24.0, 18.0, -12.0]", "scenario.target")  # too high to ever separate
     add("scenario", "dim", "2", "scenario.carrier_start")
+    # the recovery and the carrier's course in it (validated whatever mission.final_action says)
+    for key, raw, field in RECOVERY_MISTAKES:
+        add(*key.split("."), raw, field)
     return cases
+
+
+# (field, TOML value, the field the error names): bad recovery configurations
+RECOVERY_MISTAKES = [
+    ("recovery.glide_angle_deg", "0.0", "recovery.glide_angle_deg"),
+    ("recovery.holdoff_distance_m", "0.5", "recovery.holdoff_distance_m"),  # inside the deck
+    ("recovery.battery_reserve_pct", "101.0", "recovery.battery_reserve_pct"),
+    ("carrier.recovery_speed_m_s", "50.0", "carrier.recovery_speed_m_s"),  # above carrier.max_speed_m_s
+    ("carrier.recovery_heading_deg", "nan", "carrier.recovery_heading_deg"),
+    ("carrier.recovery_course", "[[90.0, 1.0]]", "carrier.recovery_course[0]"),
+    ("carrier.recovery_course", "[[90.0, 1.0, 0.0]]", "carrier.recovery_course[0]"),
+]
 
 
 CASES = _cases()
@@ -211,3 +232,28 @@ def test_the_real_process_exits_2(tmp_path: Path, text: str, field: str) -> None
     out = subprocess.run([sys.executable, "-m", "mission.cli", "run", str(path)], capture_output=True, text=True,
                          timeout=60)
     assert out.returncode == 2 and f"error: {field}" in out.stderr and "Traceback" not in out.stderr, out.stderr
+
+
+@pytest.mark.parametrize("command", ["run", "carrier"])
+def test_bad_recovery_configurations_stop_run_and_carrier_with_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                                      command: str) -> None:
+    """A glide angle of 0, a holdoff inside the deck, a reserve above 100 %, a carrier course it
+    cannot drive: ``marsupial run`` and ``marsupial carrier`` refuse configs/recovery.toml so
+    mutated before anything moves, naming the field (exit 2). In process; the real processes below."""
+    for key, raw, field in RECOVERY_MISTAKES:
+        path = tmp_path / "mutated.toml"
+        path.write_text(mutated_text(RECOVERY, *key.split("."), raw))
+        code = main([command, str(path), *(["--log-dir", str(tmp_path / "log")] if command == "run" else [])])
+        err = capsys.readouterr().err
+        assert code == 2 and f"error: {field}" in err and "Traceback" not in err, (key, raw, err[:300])
+        assert not (tmp_path / "log").exists()
+
+
+@pytest.mark.parametrize("command", ["run", "carrier"])
+def test_the_real_processes_refuse_a_flat_glide_path(tmp_path: Path, command: str) -> None:
+    path = tmp_path / "mutated.toml"
+    path.write_text(mutated_text(RECOVERY, "recovery", "glide_angle_deg", "0.0"))
+    out = subprocess.run([sys.executable, "-m", "mission.cli", command, str(path)], capture_output=True, text=True,
+                         timeout=60)
+    assert out.returncode == 2 and "error: recovery.glide_angle_deg" in out.stderr, out.stderr
+    assert "Traceback" not in out.stderr
