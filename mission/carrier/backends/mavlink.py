@@ -16,9 +16,11 @@ zero until it wants motion, as PX4 needs before and during OFFBOARD)::
     armed and OFFBOARD ---------------------------------------------> in control (engaged)
     engaged, then a mode other than OFFBOARD -----------------------> pilot took over: fault for
                                                                        good, never re-taken
-    park() (the carrier is done: separated, or the passenger aborted), once its speed is below
-        PARK_SPEED_M_S --------------------------------------------> Hold (AUTO.LOITER): PX4 holds
+    park() (the carrier is done: separated, parked under a passenger come home, or the passenger
+        aborted), once its speed is below PARK_SPEED_M_S ---------> Hold (AUTO.LOITER): PX4 holds
                                                                        position where it stopped
+    parked, then engage() (the passenger rides again: the next target) -> not engaged: set OFFBOARD
+                                                                       again (Hold is ours, not a pilot's)
 
 A zero velocity setpoint does not stop a PX4 rover well (its bearing atan2(0, 0) = 0 steers it
 north while it brakes): "stop" is a tiny speed along its own heading while in OFFBOARD, and Hold
@@ -112,8 +114,18 @@ class MavlinkCarrier:
 
     # ------------------------------------------------------------------ control
     def engage(self) -> None:
-        """The carrier has to move: take control (arm, OFFBOARD) when the rules allow."""
+        """The carrier has to move: take control (arm, OFFBOARD) when the rules allow; a vehicle we
+        parked in Hold is taken back (a Hold a pilot chose is an override, never taken back)."""
         self._want_control = True
+        if self._parked:
+            st = self.link.state
+            if st.armed and st.mode not in (FlightMode.HOLD, FlightMode.OFFBOARD):  # moved out of our Hold
+                self._override = f"pilot took over (mode {st.mode}) while parked; not commanding the carrier again"
+                log.warning("carrier vehicle: %s", self._override)
+            elif st.mode == FlightMode.HOLD:
+                log.info("carrier vehicle: driving again, leaving the Hold we asked for")
+                self._engaged = False  # OFFBOARD is asked again, as at the start
+            self._parked = False
 
     def park(self) -> None:
         """The carrier is done (separated and stopping, or the passenger aborted): once it is at

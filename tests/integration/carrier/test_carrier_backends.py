@@ -26,6 +26,7 @@ from mission.time.clock import Clock, LockstepClock, ScaledClock
 from mission.time.lockstep import MavlinkRelay, ZenohRelay, ZenohUpstream
 from mission.config.schema import Config, from_dict
 from mission.bus.wire import PassengerStatus
+from mission.phases.phase import Phase
 from sim.robots.ros2 import Ros2RobotSim
 from sim.vehicle.mock import MockVehicle, VehicleOptions
 from tests.support.stepper import Stepper
@@ -39,9 +40,10 @@ START = np.array([2.0, 1.0, 0.0])
 RADIUS = 8.0 - 0.5
 
 
-def _cfg(backend: str, kinematics: str, **carrier: Any) -> Config:
+def _cfg(backend: str, kinematics: str, mission: dict[str, Any] | None = None, **carrier: Any) -> Config:
     return from_dict({
         "zenoh": {"pair": "cb"},
+        "mission": mission or {},
         "scenario": {"carrier_start": START.tolist(), "target": TARGET.tolist()},
         "safety": {"carrier_max_accel_m_s2": 1.0},
         "carrier": {"backend": backend, "kinematics": kinematics, "max_speed_m_s": 2.0, "passenger_timeout_s": 1.0,
@@ -63,7 +65,7 @@ class ScriptedPassenger:
         while not self.stop.is_set():
             self.clock.sleep(0.05)  # first: in lockstep every status goes out in a step
             self.seq += 1
-            sep = self.phase in ("SEPARATED", "NAVIGATING")
+            sep = Phase(self.phase).separated
             self.pub.publish(PassengerStatus(self.phase, self.clock.now(), self.seq, [0, 0, -1.5], [0, 0, 0], sep))
 
     def close(self) -> None:
@@ -105,10 +107,11 @@ def _distance(position: np.ndarray) -> float:
 
 
 @contextlib.contextmanager
-def rover_carrier(**carrier: Any) -> Iterator[tuple[Config, Stepper, zenoh.Session, zenoh.Session, MavlinkCarrier, MockVehicle]]:
+def rover_carrier(mission: dict[str, Any] | None = None,
+                  **carrier: Any) -> Iterator[tuple[Config, Stepper, zenoh.Session, zenoh.Session, MavlinkCarrier, MockVehicle]]:
     """The carrier's backend on a lockstep mock rover; the carrier's clock driven by a :class:`Stepper`."""
-    cfg = _cfg("mavlink", "ackermann", mavlink={"url": "udpin:127.0.0.1:0", "target_system": 2,
-                                                "offset_ned_m": START.tolist()}, **carrier)
+    cfg = _cfg("mavlink", "ackermann", mission, mavlink={"url": "udpin:127.0.0.1:0", "target_system": 2,
+                                                         "offset_ned_m": START.tolist()}, **carrier)
     clock = LockstepClock(speed=SPEED, name="carrier", creator_runs=False)
     stepper = Stepper(clock)
     with peer_pair() as (sa, sb):
@@ -164,6 +167,49 @@ def test_px4_rover_arms_when_the_passenger_rides_and_stops_outside_the_guard_aft
     assert summary["stopped_target_distance_m"] >= RADIUS
     assert snap.mode == "AUTO.LOITER" and snap.armed  # the carrier parked the rover in Hold when it was done
     assert all(b <= a + 0.05 for a, b in zip(d, d[1:]))  # the Ackermann rover closed in without loops
+
+
+def test_px4_rover_drives_its_recovery_course_parks_in_hold_and_drives_again_for_the_next_target() -> None:
+    """mission.final_action = "return": after separation the rover stops but stays ours (OFFBOARD,
+    not Hold: it must drive again); while the passenger comes home it drives its recovery course
+    (away from the target at 1 m/s); once the passenger is home it parks in Hold, which Hold and
+    DONE leave alone; the passenger riding again (the next target) takes it back into OFFBOARD."""
+    with rover_carrier({"final_action": "return"}, recovery_speed_m_s=1.0) as (cfg, stepper, sa, sb, backend, rover):
+        clock = stepper.clock
+        passenger = ScriptedPassenger(sb, clock)
+        try:
+            with carrier_running(cfg, clock, sa, backend, stepper=stepper, passenger=passenger) as ctl:
+                passenger.phase = "RIDING"
+                stepper.until(lambda: rover.snapshot().mode == "OFFBOARD" and rover.snapshot().armed, 20, "armed in OFFBOARD")
+                d = _watch(rover, stepper, lambda: _distance(rover.snapshot().position_ned_m + START) < 8.3, 30, "near 8 m")
+                passenger.phase = "NAVIGATING"
+                d += _watch(rover, stepper, lambda: np.linalg.norm(rover.snapshot().velocity_ned_m_s) < 0.05, 20, "stopped")
+                stepper.run_for(1.0)
+                assert rover.snapshot().mode == "OFFBOARD" and ctl.mode is CarrierMode.SEPARATED  # not parked: a recovery comes
+                stood = rover.snapshot().position_ned_m + START
+                passenger.phase = "RETURNING"
+                d += _watch(rover, stepper, lambda: np.linalg.norm(rover.snapshot().velocity_ned_m_s) > 0.95, 20, "on course")
+                passenger.phase = "APPROACH"
+                d += _watch(rover, stepper, lambda: _distance(rover.snapshot().position_ned_m + START) > _distance(stood) + 3.0,
+                            20, "3 m further away")
+                snap = rover.snapshot()
+                away = (stood - TARGET)[:2] / np.linalg.norm((stood - TARGET)[:2])
+                assert float(np.dot(snap.velocity_ned_m_s[:2], away)) > 0.9  # ~1 m/s straight away from the target
+                passenger.phase = "HOME"
+                d += _watch(rover, stepper, lambda: rover.snapshot().mode == "AUTO.LOITER", 20, "parked in Hold")
+                assert ctl.mode is CarrierMode.PARKED
+                for phase in ("HOLD", "DONE"):
+                    passenger.phase = phase
+                    stepper.until(lambda: ctl.passenger.latest().status.phase == phase, 5, f"{phase} heard")
+                    stepper.run_for(1.0)
+                assert rover.snapshot().mode == "AUTO.LOITER" and ctl.mode is CarrierMode.PARKED
+                passenger.phase = "RIDING"
+                stepper.until(lambda: rover.snapshot().mode == "OFFBOARD", 20, "OFFBOARD again")
+                d += _watch(rover, stepper, lambda: np.linalg.norm(rover.snapshot().velocity_ned_m_s) > 0.5, 20, "driving again")
+                assert ctl.mode is CarrierMode.APPROACHING
+        finally:
+            passenger.close()
+    assert min(d) >= RADIUS, min(d)
 
 
 def test_px4_rover_publishes_its_velocity_along_its_heading_and_its_measured_acceleration() -> None:
