@@ -13,6 +13,8 @@ tick from :class:`PassengerView`, in this order (the first that applies)::
     RECOVERING  --duty STOP----------------------------------------> STOPPED
     RECOVERING  --passenger lost (as below)------------------------> PAUSED     (stop)
     RECOVERING  --duty RELEASED (the recovery fell back)-----------> SEPARATED
+    RECOVERING  --duty CARRY (riding again: the next target)-------> APPROACHING
+    RECOVERING  --anything else (duty RECOVER; REPOSITION)----------> RECOVERING
     SEPARATED   --anything else----------------------------------> SEPARATED  (latched otherwise)
     any         --duty RELEASED, or the status says separated------> SEPARATED
     WAITING/APPROACHING/PAUSED --duty STOP-------------------------> STOPPED    (latched)
@@ -29,7 +31,8 @@ tick from :class:`PassengerView`, in this order (the first that applies)::
 - SEPARATED: ``scenario.carrier_mode = "stop"``: zero; ``"remark1"``: the velocity commanded at the
   instant of separation (the carrier's own plan), still filtered. Passenger silence no longer
   matters once separated: the passenger has left.
-- RECOVERING (duty RECOVER: the passenger returns, holds off, approaches, docks): the steady
+- RECOVERING (duty RECOVER: the passenger returns, holds off, approaches, docks; and, for now,
+  REPOSITION: a next leg's TRANSIT, which has no carrier-side plan of its own yet): the steady
   recovery course (:mod:`mission.carrier.course`: ``carrier.recovery_course`` legs, then
   ``carrier.recovery_heading_deg`` at ``carrier.recovery_speed_m_s``), filtered. A passenger lost
   meanwhile stops the carrier (PAUSED) until it is heard again: a carrier driving on with nobody
@@ -89,6 +92,8 @@ def next_mode(mode: CarrierMode, view: PassengerView) -> tuple[CarrierMode, str]
             return CarrierMode.PAUSED, f"passenger lost: {view.lost}"
         if duty is Duty.RELEASED:
             return CarrierMode.SEPARATED, f"passenger phase {view.phase}"
+        if duty is Duty.CARRY:
+            return CarrierMode.APPROACHING, "passenger riding again"
         return mode, ""
     if mode is CarrierMode.SEPARATED:
         return mode, ""

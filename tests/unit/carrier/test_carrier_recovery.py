@@ -43,6 +43,9 @@ RECOVER = [p for p in Phase if p.duty is Duty.RECOVER]
     # ... only the passenger riding again (the next target) does
     (M.PARKED, PassengerView(Phase.RIDING), M.APPROACHING),
     (M.PARKED, PassengerView(Phase.RIDING, lost="stale"), M.PARKED),
+    # several targets: after a dock the passenger rides on (TRANSIT, then RIDING under the law)
+    (M.RECOVERING, PassengerView(Phase.TRANSIT), M.RECOVERING),
+    (M.RECOVERING, PassengerView(Phase.RIDING), M.APPROACHING),
     # the deploy's transitions stand
     (M.SEPARATED, PassengerView(Phase.RIDING), M.SEPARATED),
     (M.SEPARATED, PassengerView(Phase.ABORT), M.SEPARATED),
