@@ -285,9 +285,26 @@ PROPERTY_TEXT = {
 }
 
 
+def columns(summaries: list[dict]) -> list[dict]:
+    """The table's columns: a pair's summary, or with several targets one column per leg (its
+    own figures, judged against its own target, and its outcome)."""
+    out = []
+    for s in summaries:
+        legs = s.get("legs") or []
+        if len(legs) < 2:
+            out.append(s)
+            continue
+        for leg in legs:
+            out.append({**leg, **recovery_cells(leg), "pair": f"{s['pair']} leg {leg['leg'] + 1}",
+                        "leg_outcome": leg["outcome"], "mission_exit_code": s.get("mission_exit_code")})
+    return out
+
+
 def outcome_text(s: dict) -> str:
     """``done (0)`` or ``<reason> (<code>)``: the mission process's own verdict, which is about
-    the flight (it completed or aborted), not about P1-P3."""
+    the flight (it completed or aborted), not about P1-P3; a leg's column: the leg's outcome."""
+    if "leg_outcome" in s:
+        return str(s["leg_outcome"])
     code = s.get("mission_exit_code")
     phase = s.get("phase")
     if phase == "DONE":
@@ -317,6 +334,7 @@ def verdict_lines(summaries: list[dict]) -> list[str]:
 
 
 def format_table(summaries: list[dict]) -> str:
+    summaries = columns(summaries)
     recovery = any("recovery_outcome" in s for s in summaries)
     rows = [r for r in ROWS if recovery or r[1] not in RECOVERY_KEYS]
     width = max(len(r[0]) for r in rows)

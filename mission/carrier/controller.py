@@ -40,8 +40,10 @@ import zenoh
 from mission.carrier.acceleration import AccelerationEstimate
 from mission.carrier.backends import KINDS
 from mission.carrier.course import RecoveryCourse, away_heading_deg
-from mission.carrier.guard import GuardParams, P3Guard
+from mission.carrier.guard import GuardParams
+from mission.carrier.legs import Legs
 from mission.carrier.modes import CarrierMode, PassengerView, next_mode
+from mission.phases.phase import Duty
 from mission.carrier.start import gentle_start
 from mission.carrier.tracking import SpeedCalibration, Tracked, TrackingParams, along_heading, heading_of, track
 from mission.core.consistent_velocity import PositionConsistentVelocity
@@ -57,6 +59,7 @@ log = logging.getLogger(__name__)
 
 STOP = Tracked(0.0, 0.0, 0.0, np.zeros(2), np.zeros(2))
 REAL_DELAY_S = 0.3  # [s] default response delay of a real carrier for the P3 guard (carrier.brake_delay_s)
+DRIVING = (CarrierMode.APPROACHING, CarrierMode.RECOVERING, CarrierMode.REPOSITIONING)  # modes that drive on
 
 
 @dataclass(frozen=True)
@@ -127,10 +130,10 @@ class CarrierBackend(Protocol):
         """Leave the vehicle safe and release what was opened."""
 
 
-def carrier_model(cfg: Config) -> TickModel:
-    """The tick model of the carrier: the config's, with the carrier's speed limit
-    ``min(carrier.max_speed_m_s, safety.carrier_max_speed_m_s)`` [m/s]."""
-    model = model_from_config(cfg)
+def carrier_model(cfg: Config, target: np.ndarray | None = None) -> TickModel:
+    """The tick model of the carrier: the config's (for ``target``, a leg's: default the first),
+    with the carrier's speed limit ``min(carrier.max_speed_m_s, safety.carrier_max_speed_m_s)`` [m/s]."""
+    model = model_from_config(cfg, target=target)
     limit = cfg.carrier.max_speed_m_s
     if model.carrier_safety.max_speed_m_s is not None:
         limit = min(limit, model.carrier_safety.max_speed_m_s)
@@ -158,6 +161,23 @@ def _pad3(v: np.ndarray) -> np.ndarray:
     return np.concatenate([v, np.zeros(3 - v.shape[0])]) if v.shape[0] < 3 else v
 
 
+def passenger_view(feed: PassengerFeed) -> PassengerView:
+    """The passenger as the carrier sees it now (:class:`~mission.carrier.modes.PassengerView`):
+    its newest status, and why it counts as lost (liveliness gone, nothing received, stale)."""
+    rx = feed.latest()
+    if feed.alive_over_interval() is False:
+        lost: str | None = "its liveliness token is gone"
+    elif rx is None:
+        lost = "no status received"
+    elif rx.stale:
+        lost = f"its status is {rx.age_s:.2f} s old (> {feed.max_age_s} s)"
+    else:
+        lost = None
+    if rx is None:
+        return PassengerView(None, False, lost)
+    return PassengerView(rx.status.phase, rx.status.separated, lost, rx.status.leg)
+
+
 class CarrierController:
     """The carrier of the pair ``cfg.zenoh.pair`` driving ``backend``, on an open Zenoh ``session``.
 
@@ -169,12 +189,16 @@ class CarrierController:
                  pair: str | None = None, encoding: str | None = None, steps: StepSink | None = None) -> None:
         self.cfg, self.clock, self.backend, self.steps = cfg, clock, backend, steps
         self.pair = pair or cfg.zenoh.pair
-        self.model = carrier_model(cfg)
+        targets = [np.asarray(t, dtype=float) for t in cfg.scenario.legs()]
         self.guard = guard_params(cfg)
         self.tracking = tracking_params(cfg)
         self.dim = cfg.scenario.dim
-        self.planar = self.model.planar_carrier or self.dim == 2
-        self.p3_guard = P3Guard(self.guard, np.asarray(self.model.target), planar=self.planar)
+        first = carrier_model(cfg)
+        self.planar = first.planar_carrier or self.dim == 2
+        self.legs = Legs(targets, [carrier_model(cfg, target=t) for t in targets], self.guard, self.planar,
+                         np.asarray(cfg.mission.dock_offset_ned_m, dtype=float)[:self.dim],
+                         cfg.law.b * cfg.law.c + cfg.mission.leg_start_margin_m)
+        self.model = self.legs.model
         self.period_s = 1.0 / cfg.carrier.rate_hz
         self.velocity_m_s = np.zeros(self.dim)  # [m/s] the filtered (and, holonomic, guarded) law command
         self.mode = CarrierMode.WAITING
@@ -207,22 +231,12 @@ class CarrierController:
             raise
 
     # ------------------------------------------------------------------ decisions
-    def _view(self) -> PassengerView:
-        rx = self.passenger.latest()
-        if self.passenger.alive_over_interval() is False:
-            lost: str | None = "its liveliness token is gone"
-        elif rx is None:
-            lost = "no status received"
-        elif rx.stale:
-            lost = f"its status is {rx.age_s:.2f} s old (> {self.passenger.max_age_s} s)"
-        else:
-            lost = None
-        if rx is None:
-            return PassengerView(None, False, lost)
-        return PassengerView(rx.status.phase, rx.status.separated, lost)
-
     def _update_mode(self) -> None:
-        mode, why = next_mode(self.mode, self._view())
+        view = passenger_view(self.passenger)
+        if view.phase is not None and view.phase.duty in (Duty.REPOSITION, Duty.CARRY) and self.legs.follow(view.leg):
+            self.model = self.legs.model
+            log.info("carrier %s: leg %d, target %s", self.pair, view.leg + 1, self.model.target.tolist())
+        mode, why = next_mode(self.mode, view)
         if mode is self.mode:
             return
         level = logging.WARNING if mode in (CarrierMode.PAUSED, CarrierMode.STOPPED) else logging.INFO
@@ -235,10 +249,9 @@ class CarrierController:
         self.mode = mode
 
     def _stopping(self) -> bool:
-        """A stop for good or for now: not approaching or recovering, and no own plan (Remark 1) to follow."""
-        if self.mode in (CarrierMode.APPROACHING, CarrierMode.RECOVERING):
-            return False
-        return not (self.mode is CarrierMode.SEPARATED and self.model.carrier_mode == "remark1")
+        """A stop for good or for now: not driving (approaching, recovering, repositioning), and no
+        own plan (Remark 1) to follow."""
+        return self.mode not in DRIVING and not (self.mode is CarrierMode.SEPARATED and self.model.carrier_mode == "remark1")
 
     def _decide(self, state: OwnState, dt_s: float, age_s: float) -> Tracked:
         x_c = state.position_ned_m[:self.dim]
@@ -262,12 +275,18 @@ class CarrierController:
                   else abs(math.cos(yaw) * float(v_meas[0]) + math.sin(yaw) * float(v_meas[1])))
         u = gentle_start(u, self.velocity_m_s, moving, self.cfg.carrier.start_accel_m_s2, dt_s)
         if self.tracking.kind == "holonomic":
-            g = self.p3_guard.limit(t, x_c, u, v_meas, age_s)
-            cmd, active = track(g.u, yaw, self.tracking), g.active
-            self.velocity_m_s = g.u
+            active = False
+            for guard in self.legs.guards:
+                g = guard.limit(t, x_c, u, v_meas, age_s)
+                u, active = g.u, active or g.active
+            cmd = track(u, yaw, self.tracking)
+            self.velocity_m_s = u
         else:
             cmd = track(u, yaw, self.tracking)
-            speed, active = self.p3_guard.limit_heading(t, x_c, cmd.speed_m_s, yaw, v_meas, age_s)
+            speed, active = cmd.speed_m_s, False
+            for guard in self.legs.guards:
+                speed, acted = guard.limit_heading(t, x_c, speed, yaw, v_meas, age_s)
+                active = active or acted
             if active:
                 scale = speed / cmd.speed_m_s if cmd.speed_m_s > 0 else 0.0
                 cmd = Tracked(speed, cmd.yaw_rate_rad_s, cmd.bearing_rad, heading_of(speed, yaw),
@@ -283,7 +302,12 @@ class CarrierController:
 
     def _course_velocity(self, x_c: np.ndarray) -> np.ndarray | None:
         """RECOVERING: the recovery course's velocity now [m/s] (dim,), its clock and its default
-        heading (away from the target) taken at the first tick of the recovery; else None."""
+        heading (away from the target) taken at the first tick of the recovery; REPOSITIONING:
+        straight away from the leg's target at the carrier's top speed until its dock point is
+        ``b c + mission.leg_start_margin_m`` (and :data:`REPOSITION_SPARE_M`) from it, then zero;
+        else None."""
+        if self.mode is CarrierMode.REPOSITIONING:
+            return self.legs.reposition_velocity(x_c, float(self.model.carrier_safety.max_speed_m_s or 1.0))
         if self.mode is not CarrierMode.RECOVERING:
             return None
         if self._course_start is None:
@@ -336,7 +360,7 @@ class CarrierController:
         x = state.position_ned_m[:self.dim]
         dist = float(np.linalg.norm(np.asarray(self.model.target) - x))
         s = self._stats
-        s["closest_target_distance_m"] = min(s["closest_target_distance_m"], dist)
+        s["closest_target_distance_m"] = min(s["closest_target_distance_m"], self.legs.closest_m(x))  # to any target
         if self.mode is CarrierMode.SEPARATED:
             if s["distance_at_separation_m"] is None:
                 s["distance_at_separation_m"] = dist

@@ -14,7 +14,13 @@ tick from :class:`PassengerView`, in this order (the first that applies)::
     RECOVERING  --passenger lost (as below)------------------------> PAUSED     (stop)
     RECOVERING  --duty RELEASED (the recovery fell back)-----------> SEPARATED
     RECOVERING  --duty CARRY (riding again: the next target)-------> APPROACHING
-    RECOVERING  --anything else (duty RECOVER; REPOSITION)----------> RECOVERING
+    RECOVERING/PAUSED --duty REPOSITION, not lost------------------> REPOSITIONING (the next leg's start)
+    RECOVERING  --anything else (duty RECOVER)----------------------> RECOVERING
+    REPOSITIONING --duty STOP-------------------------------------> STOPPED
+    REPOSITIONING --passenger lost---------------------------------> PAUSED
+    REPOSITIONING --duty CARRY, not lost---------------------------> APPROACHING (the next target)
+    REPOSITIONING --duty RELEASED----------------------------------> SEPARATED
+    REPOSITIONING --anything else----------------------------------> REPOSITIONING
     SEPARATED   --anything else----------------------------------> SEPARATED  (latched otherwise)
     any         --duty RELEASED, or the status says separated------> SEPARATED
     WAITING/APPROACHING/PAUSED --duty STOP-------------------------> STOPPED    (latched)
@@ -31,8 +37,10 @@ tick from :class:`PassengerView`, in this order (the first that applies)::
 - SEPARATED: ``scenario.carrier_mode = "stop"``: zero; ``"remark1"``: the velocity commanded at the
   instant of separation (the carrier's own plan), still filtered. Passenger silence no longer
   matters once separated: the passenger has left.
-- RECOVERING (duty RECOVER: the passenger returns, holds off, approaches, docks; and, for now,
-  REPOSITION: a next leg's TRANSIT, which has no carrier-side plan of its own yet): the steady
+- REPOSITIONING (duty REPOSITION: the passenger, docked again, rides while the next leg waits for
+  the paper's Assumption 1): the carrier drives straight away from the next leg's target until it
+  is ``b c + mission.leg_start_margin_m`` from it (with a little to spare), then stands.
+- RECOVERING (duty RECOVER: the passenger returns, holds off, approaches, docks): the steady
   recovery course (:mod:`mission.carrier.course`: ``carrier.recovery_course`` legs, then
   ``carrier.recovery_heading_deg`` at ``carrier.recovery_speed_m_s``), filtered. A passenger lost
   meanwhile stops the carrier (PAUSED) until it is heard again: a carrier driving on with nobody
@@ -58,6 +66,7 @@ class CarrierMode(enum.Enum):
     PAUSED = "paused"
     SEPARATED = "separated"
     RECOVERING = "recovering"
+    REPOSITIONING = "repositioning"
     PARKED = "parked"
     STOPPED = "stopped"
 
@@ -65,11 +74,13 @@ class CarrierMode(enum.Enum):
 @dataclass(frozen=True)
 class PassengerView:
     """The passenger as the carrier sees it now: its newest phase (None: nothing received),
-    whether that status says the latch fired, and why it counts as lost (None if it does not)."""
+    whether that status says the latch fired, why it counts as lost (None if it does not), and
+    which target's leg it flies."""
 
     phase: Phase | None
     separated: bool = False
     lost: str | None = None
+    leg: int = 0  # the index of the target the passenger serves (scenario.targets)
 
 
 def next_mode(mode: CarrierMode, view: PassengerView) -> tuple[CarrierMode, str]:
@@ -85,6 +96,18 @@ def next_mode(mode: CarrierMode, view: PassengerView) -> tuple[CarrierMode, str]
         return mode, ""
     if duty is Duty.RECOVER and mode in (CarrierMode.SEPARATED, CarrierMode.PAUSED):
         return (mode, "") if view.lost else (CarrierMode.RECOVERING, f"passenger phase {view.phase}")
+    if duty is Duty.REPOSITION and mode in (CarrierMode.RECOVERING, CarrierMode.PAUSED) and not view.lost:
+        return CarrierMode.REPOSITIONING, f"passenger phase {view.phase}: leg {view.leg + 1} starts farther out"
+    if mode is CarrierMode.REPOSITIONING:
+        if duty is Duty.STOP:
+            return CarrierMode.STOPPED, "passenger aborted"
+        if view.lost:
+            return CarrierMode.PAUSED, f"passenger lost: {view.lost}"
+        if duty is Duty.CARRY:
+            return CarrierMode.APPROACHING, f"passenger riding: leg {view.leg + 1}"
+        if duty is Duty.RELEASED:
+            return CarrierMode.SEPARATED, f"passenger phase {view.phase}"
+        return mode, ""
     if mode is CarrierMode.RECOVERING:
         if duty is Duty.STOP:
             return CarrierMode.STOPPED, "passenger aborted"

@@ -43,8 +43,16 @@ RECOVER = [p for p in Phase if p.duty is Duty.RECOVER]
     # ... only the passenger riding again (the next target) does
     (M.PARKED, PassengerView(Phase.RIDING), M.APPROACHING),
     (M.PARKED, PassengerView(Phase.RIDING, lost="stale"), M.PARKED),
-    # several targets: after a dock the passenger rides on (TRANSIT, then RIDING under the law)
-    (M.RECOVERING, PassengerView(Phase.TRANSIT), M.RECOVERING),
+    # several targets: after a dock the passenger rides on (TRANSIT: the carrier drives out to the
+    # next leg's start; then RIDING under the law)
+    (M.RECOVERING, PassengerView(Phase.TRANSIT, leg=1), M.REPOSITIONING),
+    (M.PAUSED, PassengerView(Phase.TRANSIT, leg=1), M.REPOSITIONING),
+    (M.PAUSED, PassengerView(Phase.TRANSIT, lost="stale", leg=1), M.PAUSED),
+    (M.REPOSITIONING, PassengerView(Phase.TRANSIT, leg=1), M.REPOSITIONING),
+    (M.REPOSITIONING, PassengerView(Phase.RIDING, leg=1), M.APPROACHING),
+    (M.REPOSITIONING, PassengerView(Phase.TRANSIT, lost="stale", leg=1), M.PAUSED),
+    (M.REPOSITIONING, PassengerView(Phase.ABORT, leg=1), M.STOPPED),
+    (M.REPOSITIONING, PassengerView(Phase.HOME, True, leg=1), M.PARKED),
     (M.RECOVERING, PassengerView(Phase.RIDING), M.APPROACHING),
     # the deploy's transitions stand
     (M.SEPARATED, PassengerView(Phase.RIDING), M.SEPARATED),

@@ -1,0 +1,58 @@
+"""The carrier's side of a mission with several targets (``scenario.targets``; pure).
+
+The passenger's status names the leg it flies; the carrier follows it forward (never back), so the
+law drives at that leg's target. Every target is hazardous whichever leg is flown: each has its
+own P3 guard, and the command passes all of them. Before a leg after the first, the carrier drives
+straight out from the leg's target until its dock point is ``b c + mission.leg_start_margin_m``
+(and :data:`REPOSITION_SPARE_M`) from it: the paper's Assumption 1 at the leg's start.
+
+Frames: NED [m], [m/s], in the scenario's dimension (2 or 3).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from mission.carrier.guard import GuardParams, P3Guard
+from mission.core.tick import TickModel
+
+REPOSITION_SPARE_M = 0.5  # [m] repositioning goes this much beyond the next leg's start distance
+
+
+class Legs:
+    """``targets`` [m] (one per leg), the carrier's tick ``models`` for each, their P3 guards
+    (``guard`` params; ``planar``), the dock offset [m] and the leg-start distance [m]."""
+
+    def __init__(self, targets: list[np.ndarray], models: list[TickModel], guard: GuardParams, planar: bool,
+                 dock_offset_m: np.ndarray, leg_start_m: float) -> None:
+        self.targets, self.models = targets, models
+        self.guards = [P3Guard(guard, t, planar=planar) for t in targets]
+        self.planar, self.dock_offset_m, self.start_m = planar, dock_offset_m, leg_start_m + REPOSITION_SPARE_M
+        self.index = 0
+
+    @property
+    def model(self) -> TickModel:
+        """The tick model of the leg flown (its target is the law's)."""
+        return self.models[self.index]
+
+    def follow(self, leg: int) -> bool:
+        """Take the passenger's leg if it is a later one that exists; True when it changed."""
+        if self.index < leg < len(self.targets):
+            self.index = leg
+            return True
+        return False
+
+    def closest_m(self, x_c: np.ndarray) -> float:
+        """Distance [m] from ``x_c`` to the nearest target."""
+        return min(float(np.linalg.norm(t - x_c)) for t in self.targets)
+
+    def reposition_velocity(self, x_c: np.ndarray, speed_m_s: float) -> np.ndarray:
+        """Straight away from the leg's target at ``speed_m_s`` [m/s] until the dock point is far
+        enough for the leg to start; zero from there."""
+        target = self.targets[self.index]
+        away = np.asarray(x_c, dtype=float) - target
+        if self.planar:
+            away[2:] = 0.0
+        size = float(np.linalg.norm(away))
+        if float(np.linalg.norm(target - (x_c + self.dock_offset_m))) >= self.start_m or size < 1e-9:
+            return np.zeros_like(away)
+        return away / size * speed_m_s
