@@ -107,9 +107,9 @@ def _write_port_file(path: Path, port: int) -> None:
               help="Override a PX4 parameter, e.g. --param COM_OF_LOSS_T=1.0 (repeatable).")
 @click.option("--wind", default="0,0,0", show_default=True, metavar="N,E,D",
               help="Wind [m/s] NED: a drag force in the air (PX4's velocity integrator slowly compensates it).")
-@click.option("--estimate-drift", type=click.FloatRange(min=0.0), default=0.0, show_default=True, metavar="M_S",
-              help="The reported position wanders as PX4's estimate does: std of the drift rate [m/s] (PX4 SITL: "
-                   "0.18; seeded by --seed). 0: no wander.")
+@click.option("--estimate-error", type=click.FloatRange(min=0.0), default=0.0, show_default=True, metavar="SCALE",
+              help="The estimate errs as PX4 SITL's does (its velocity and position errors; PX4 flies it and reports "
+                   "it), this many times as much (1: PX4 SITL's; seeded by --seed). 0: an exact estimate.")
 @click.option("--position-noise", type=click.FloatRange(min=0.0), default=0.0, show_default=True, metavar="METRES",
               help="Sigma [m] of Gaussian noise on the reported position (seeded by --seed).")
 @click.option("--loss-in", type=click.FloatRange(0.0, 1.0), default=0.0, show_default=True, metavar="FRACTION",
@@ -144,7 +144,7 @@ def _write_port_file(path: Path, port: int) -> None:
 @click.option("--status-every", type=click.FloatRange(min=0.0), default=5.0, show_default=True, metavar="SECONDS",
               help="Log a status line with mode, position and the counters every SECONDS of wall time (0: never).")
 def mock_vehicle(mavlink_url: str, target_url: str, gcs_url: str | None, speed: float, home: str, start_ned: str,
-                 sysid: int, frame: str, params: tuple[str, ...], wind: str, estimate_drift: float, position_noise: float, loss_in: float,
+                 sysid: int, frame: str, params: tuple[str, ...], wind: str, estimate_error: float, position_noise: float, loss_in: float,
                  loss_out: float, latency_ms: float, jitter_ms: float, blackouts: tuple[str, ...],
                  refuse_arming: str | None, refuse_offboard: str | None, lose_position_s: float | None, seed: int, signing_key: Path | None, port_file: Path | None,
                  lockstep: bool, lockstep_watchdog_s: float, lockstep_max_speed: float | None, status_every: float) -> None:
@@ -166,7 +166,7 @@ def mock_vehicle(mavlink_url: str, target_url: str, gcs_url: str | None, speed: 
         params=dict(_param(p) for p in params), faults=faults,
         signing_key=signing_key_option(signing_key) if signing_key else None,
         wind_ned_m_s=_floats(wind, 3, "--wind"), position_noise_m=position_noise,  # type: ignore[arg-type]
-        estimate_drift_m_s=estimate_drift, lockstep=lockstep, lockstep_watchdog_wall_s=lockstep_watchdog_s,
+        estimate_error=estimate_error, lockstep=lockstep, lockstep_watchdog_wall_s=lockstep_watchdog_s,
         lockstep_max_speed=lockstep_max_speed)
     run(options, port_file, status_every)
 

@@ -1,58 +1,98 @@
-"""The wander of PX4's position estimate, as the mock vehicle can add it (off by default).
+"""The errors of PX4's state estimate, as the mock vehicle can add them (off by default).
 
-On PX4 SITL the reported position drifts away from the integral of the reported velocity by
-metres over a minute (../shared/px4_sitl/responses: 3-6 m range per axis over 130 s, a drift rate
-of 0.13-0.25 m/s with a correlation time of about 3-4 s; EKF2 fusing SIH's noisy GPS). PX4 flies
-its estimate, so under a position setpoint the true vehicle moves against the wander, and under
-velocity setpoints the reported track wanders while the vehicle does not.
+What PX4 SITL shows (SIH quadrotor, EKF2 on SIH's simulated GPS; its estimate against SIH's
+true state, streamed as HIL_STATE_QUATERNION, ``python -m bench.px4_hold``; docs/px4-hold.md):
 
-Model: the estimate's error ``offset`` [m] NED integrates a rate [m/s] that is an
-Ornstein-Uhlenbeck process of standard deviation ``sigma_m_s`` and correlation time ``tau_s``,
-seeded (same seed, same wander). Units SI; time in simulated seconds.
+- the estimate's *velocity* is off by 0.15-0.25 m/s RMS per horizontal axis (0.1-0.2 vertically),
+  an error that keeps its sign for seconds (autocorrelation 0.83 at 1 s, 0.6 at 2 s, 0.2 at
+  4 s) and that the estimate's *position* does not share: the reported velocity says 0.3 m/s
+  while the reported position stands still (their correlation is only ~0.3);
+- the estimate's position is off by 0.10-0.15 m RMS per horizontal axis (0.2-0.5 m vertically),
+  slower (autocorrelation 0.9 at 1 s, 0.7 at 2 s, 0.3 at 4 s), around a bias of a few decimetres.
+
+PX4 flies its estimate: its position controller is fed the estimated position and velocity, and
+its telemetry reports them. So under a position setpoint a velocity error ``e_v`` moves the held
+position estimate by ``e_v / k`` (``k`` the position loop's gain: 0.95/s for PX4 alone), and the
+true vehicle moves whenever the errors change.
+
+Model: per axis two independent second-order Gauss-Markov processes (white noise through two
+first-order lags: smooth, as an estimator's errors are), the velocity error (standard deviation
+``sigma_v`` [m/s], lag time constant ``tau_v`` [s]) and the position error (``sigma_p`` [m],
+``tau_p`` [s]); the vertical sigmas are the horizontal ones times the
+``vertical_*`` factors. Seeded: the same seed gives the same errors. :data:`PX4_SITL` holds
+the values fitted to PX4 SITL; ``scale`` multiplies both sigmas (0: an exact estimate). Units SI,
+NED; time in simulated seconds.
 """
 from __future__ import annotations
 
 import math
 import random
-from dataclasses import replace
-
-from sim.vehicle.physics.multicopter import Command
-
-PX4_SITL_DRIFT_SIGMA_M_S = 0.18  # std of the drift rate measured on the recordings (N 0.15, E 0.24, D 0.15)
-PX4_SITL_DRIFT_TAU_S = 3.5  # its correlation time (autocorrelation 0.6 at 2 s, 0.3 at 4 s)
+from dataclasses import dataclass
 
 
-class EstimateDrift:
-    """Seeded wander of the position estimate; :meth:`advance` once per physics step."""
+@dataclass(frozen=True)
+class ErrorModel:
+    """The statistics of the estimate's errors (see the module docstring)."""
 
-    def __init__(self, sigma_m_s: float, tau_s: float = PX4_SITL_DRIFT_TAU_S, seed: int | None = 0) -> None:
-        if sigma_m_s < 0 or not tau_s > 0:
-            raise ValueError(f"estimate drift: sigma must be >= 0 and tau > 0, got {sigma_m_s!r}, {tau_s!r}")
-        self.sigma_m_s, self.tau_s = float(sigma_m_s), float(tau_s)
+    sigma_v_m_s: float
+    tau_v_s: float
+    sigma_p_m: float
+    tau_p_s: float
+    vertical_v: float = 0.7  # vertical velocity error sigma over the horizontal one [-]
+    vertical_p: float = 2.0  # vertical position error sigma over the horizontal one [-]
+
+    def scaled(self, scale: float) -> ErrorModel:
+        return ErrorModel(self.sigma_v_m_s * scale, self.tau_v_s, self.sigma_p_m * scale, self.tau_p_s, self.vertical_v,
+                          self.vertical_p)
+
+
+# fitted to PX4 SITL (SIH quadrotor, hovering and holding a point: bench/px4_hold.py, docs/px4-hold.md)
+PX4_SITL = ErrorModel(sigma_v_m_s=0.25, tau_v_s=2.0, sigma_p_m=0.15, tau_p_s=1.7)
+
+
+class EstimateError:
+    """Seeded errors of the estimate; :meth:`advance` once per physics step, then
+    :attr:`position` [m] and :attr:`velocity` [m/s] NED are what the estimate adds to the truth."""
+
+    def __init__(self, scale: float, model: ErrorModel = PX4_SITL, seed: int | None = 0) -> None:
+        if not scale >= 0:
+            raise ValueError(f"estimate error scale must be >= 0, got {scale!r}")
+        self.model = m = model.scaled(float(scale))
         self._rng = random.Random(None if seed is None else seed + 104729)
-        self.rate = [0.0, 0.0, 0.0]
-        self.offset = (0.0, 0.0, 0.0)
+        sigma_v = (m.sigma_v_m_s, m.sigma_v_m_s, m.sigma_v_m_s * m.vertical_v)
+        sigma_p = (m.sigma_p_m, m.sigma_p_m, m.sigma_p_m * m.vertical_p)
+        self._v = [_GaussMarkov2(s, m.tau_v_s, self._rng) for s in sigma_v]
+        self._p = [_GaussMarkov2(s, m.tau_p_s, self._rng) for s in sigma_p]
+        self.velocity = tuple(x.value for x in self._v)
+        self.position = tuple(x.value for x in self._p)
 
     @property
     def enabled(self) -> bool:
-        return self.sigma_m_s > 0.0
+        return self.model.sigma_v_m_s > 0.0 or self.model.sigma_p_m > 0.0
 
     def advance(self, dt_s: float) -> None:
-        """One exact OU step of the rate, then the offset integrates it."""
+        """One step of ``dt_s`` [s] (much shorter than the correlation times) of every error."""
         if not self.enabled:
             return
+        self.velocity = tuple(x.advance(dt_s) for x in self._v)
+        self.position = tuple(x.advance(dt_s) for x in self._p)
+
+
+class _GaussMarkov2:
+    """A second-order Gauss-Markov process: white noise through two first-order lags of time
+    constant ``tau_s``; standard deviation ``sigma``, autocorrelation ``(1 + t/tau) exp(-t/tau)``
+    (smooth: its rate is finite, unlike a first-order process's). Starts stationary."""
+
+    def __init__(self, sigma: float, tau_s: float, rng: random.Random) -> None:
+        self.tau_s, self._rng = tau_s, rng
+        self._inner_sigma = sigma * math.sqrt(2.0)  # the second lag halves the variance
+        # a stationary start: (inner, value) jointly Gaussian with correlation 1/sqrt(2)
+        g1, g2 = rng.gauss(0.0, 1.0), rng.gauss(0.0, 1.0)
+        self._inner = self._inner_sigma * g1
+        self.value = sigma * (g1 / math.sqrt(2.0) + g2 / math.sqrt(2.0))
+
+    def advance(self, dt_s: float) -> float:
         decay = math.exp(-dt_s / self.tau_s)
-        spread = self.sigma_m_s * math.sqrt(1.0 - decay * decay)
-        gauss = self._rng.gauss
-        self.rate = [r * decay + spread * gauss(0.0, 1.0) for r in self.rate]
-        o = self.offset
-        self.offset = (o[0] + self.rate[0] * dt_s, o[1] + self.rate[1] * dt_s, o[2] + self.rate[2] * dt_s)
-
-
-def flown_on_estimate(command: Command, offset: tuple[float, float, float]) -> Command:
-    """The command as the true vehicle feels it when PX4 flies its estimate (true + ``offset``)
-    to a position setpoint: the setpoint moves by ``-offset`` (velocities are unaffected)."""
-    p = command.position_ned_m
-    if all(math.isnan(x) for x in p):
-        return command
-    return replace(command, position_ned_m=(p[0] - offset[0], p[1] - offset[1], p[2] - offset[2]))
+        self._inner = self._inner * decay + self._inner_sigma * math.sqrt(1.0 - decay * decay) * self._rng.gauss(0.0, 1.0)
+        self.value += (self._inner - self.value) * (1.0 - decay)
+        return self.value

@@ -29,7 +29,7 @@ from typing import Any
 from mission.time.clock import Clock, ManualClock, ScaledClock
 from sim.vehicle import telemetry as tel
 from sim.vehicle.modes import Commander
-from sim.vehicle.estimator import EstimateDrift, flown_on_estimate
+from sim.vehicle.estimator import EstimateError
 from sim.vehicle.faults import FaultInjector, FaultOptions
 from sim.vehicle.handlers import MessageHandlers
 from sim.vehicle.io import LinkIO
@@ -85,8 +85,8 @@ class MockVehicle:
         self._commander.refuse_arming_reason = opts.faults.refuse_arming_reason
         self._commander.refuse_offboard_reason = opts.faults.refuse_offboard_reason
         self._faults = FaultInjector(opts.faults)
-        self._drift = EstimateDrift(opts.estimate_drift_m_s, seed=opts.faults.seed)
-        self._noise = tel.PositionNoise(opts.position_noise_m, opts.faults.seed, self._drift if self._drift.enabled else None)
+        self._estimate = EstimateError(opts.estimate_error if opts.frame == "quadrotor" else 0.0, seed=opts.faults.seed)
+        self._noise = tel.PositionNoise(opts.position_noise_m, opts.faults.seed, self._estimate if self._estimate.enabled else None)
         self._schedule = StreamSchedule(LINK_NAMES, self.clock.speed)
         self._links: list[VehicleLink] = []
         self._lock = threading.RLock()
@@ -296,13 +296,14 @@ class MockVehicle:
         if target <= self._steps:
             return
         limits, wind, commander, kin = self._limits(), self.options.wind_ned_m_s, self._commander, self._kin
-        drift = self._drift if self._drift.enabled else None
+        estimate = self._estimate if self._estimate.enabled else None
         for k in range(self._steps + 1, target + 1):
             command = commander.step(k * PHYSICS_DT_S, kin)
-            if drift is not None:  # PX4 flies its (wandering) estimate to a position setpoint
-                drift.advance(PHYSICS_DT_S)
-                command = flown_on_estimate(command, drift.offset)
-            kin = self._physics(kin, command, limits, wind, PHYSICS_DT_S)
+            if estimate is not None:  # PX4's controller flies its estimate (sim.vehicle.estimator)
+                estimate.advance(PHYSICS_DT_S)
+                kin = self._physics(kin, command, limits, wind, PHYSICS_DT_S, (estimate.position, estimate.velocity))
+            else:
+                kin = self._physics(kin, command, limits, wind, PHYSICS_DT_S)
         self._counters["physics_steps"] += target - self._steps
         self._kin, self._steps = kin, target
         if self._lockstep is not None and isinstance(self.clock, ManualClock):

@@ -26,9 +26,10 @@ class VehicleOptions:
     params: PX4 parameter overrides, e.g. ``{"COM_OF_LOSS_T": 1.0}``.
     wind_ned_m_s: wind [m/s] NED: a drag force in the air, which PX4's velocity integrator slowly
     compensates. position_noise_m: sigma of the Gaussian noise on the reported position [m]
-    (seeded by ``faults.seed``). estimate_drift_m_s: the reported position wanders as PX4's
-    estimate does (std of the drift rate [m/s]; PX4 SITL: 0.18, :mod:`sim.vehicle.estimator`);
-    0 (default): no wander.
+    (seeded by ``faults.seed``). estimate_error: a quadrotor's estimate errs as PX4 SITL's does
+    (its velocity and position errors, :mod:`sim.vehicle.estimator`), this many times as much:
+    1 is PX4 SITL's, 0 (default) an exact estimate. PX4's controller flies the estimate and the
+    telemetry reports it.
     signing_key: 32-byte MAVLink 2 signing key; then unsigned messages other than HEARTBEAT
     are rejected and everything sent is signed.
     lockstep: own simulated time and step in lockstep with the controller on the onboard link
@@ -52,7 +53,7 @@ class VehicleOptions:
     signing_key: bytes | None = None
     wind_ned_m_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
     position_noise_m: float = 0.0
-    estimate_drift_m_s: float = 0.0
+    estimate_error: float = 0.0
     statustext_needs_heartbeat: bool = True
     frame: str = "quadrotor"  # or "rover": MAV_TYPE_GROUND_ROVER, Ackermann kinematics (sim.vehicle.physics.rover)
     lockstep: bool = False
@@ -66,8 +67,8 @@ class VehicleOptions:
             raise ValueError(f"sysid and compid must be in 1..255, got {self.sysid}, {self.compid}")
         if self.signing_key is not None and len(self.signing_key) != 32:
             raise ValueError(f"signing_key must be 32 bytes, got {len(self.signing_key)}")
-        if not self.estimate_drift_m_s >= 0:
-            raise ValueError(f"estimate_drift_m_s must be >= 0, got {self.estimate_drift_m_s!r}")
+        if not self.estimate_error >= 0:
+            raise ValueError(f"estimate_error must be >= 0, got {self.estimate_error!r}")
         if self.lockstep_max_speed is not None and not self.lockstep_max_speed > 0:
             raise ValueError(f"lockstep_max_speed must be > 0, got {self.lockstep_max_speed!r}")
         if not self.lockstep_watchdog_wall_s > 0:

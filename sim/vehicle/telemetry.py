@@ -28,7 +28,7 @@ from mission.core import geodesy
 from mission.mavlink import px4, setpoints
 from mission.mavlink.env import mavlink
 from sim.vehicle.modes import TrajectorySetpoint
-from sim.vehicle.estimator import EstimateDrift
+from sim.vehicle.estimator import EstimateError
 from sim.vehicle.physics.multicopter import GRAVITY_M_S2, KinState, attitude_rad, quaternion
 
 CAP_PRIMARY_WALL_HZ = 300.0
@@ -166,18 +166,17 @@ def extended_sys_state(s: TelemetryState) -> Any:
     return mavlink.MAVLink_extended_sys_state_message(0, s.landed_state)
 
 
-def local_position_ned(s: TelemetryState, noisy: tuple[float, float, float]) -> Any:
-    k = s.kin
-    return mavlink.MAVLink_local_position_ned_message(_ms(s.t_s), *noisy, k.vn_m_s, k.ve_m_s, k.vd_m_s)
+def local_position_ned(s: TelemetryState, noisy: tuple[float, float, float], velocity: tuple[float, float, float]) -> Any:
+    return mavlink.MAVLink_local_position_ned_message(_ms(s.t_s), *noisy, *velocity)
 
 
-def global_position_int(s: TelemetryState, geo: Geo, noisy: tuple[float, float, float]) -> Any:
-    k = s.kin
+def global_position_int(s: TelemetryState, geo: Geo, noisy: tuple[float, float, float],
+                        velocity: tuple[float, float, float]) -> Any:
     lat, lon, alt = geo.to_geodetic(*noisy)
-    heading_cdeg = int(round(math.degrees(k.yaw_rad) * 100.0)) % 36000
+    heading_cdeg = int(round(math.degrees(s.kin.yaw_rad) * 100.0)) % 36000
     return mavlink.MAVLink_global_position_int_message(
         _ms(s.t_s), int(round(lat * 1e7)), int(round(lon * 1e7)), int(round(alt * 1000.0)),
-        int(round((s.home_ned_m[2] - noisy[2]) * 1000.0)), _cm_s(k.vn_m_s), _cm_s(k.ve_m_s), _cm_s(k.vd_m_s), heading_cdeg)
+        int(round((s.home_ned_m[2] - noisy[2]) * 1000.0)), _cm_s(velocity[0]), _cm_s(velocity[1]), _cm_s(velocity[2]), heading_cdeg)
 
 
 def _cm_s(v_m_s: float) -> int:
@@ -223,7 +222,7 @@ def attitude_target(s: TelemetryState) -> Any:
                                                    k.yaw_rate_rad_s, thrust)
 
 
-def odometry(s: TelemetryState, noisy: tuple[float, float, float]) -> Any:
+def odometry(s: TelemetryState, noisy: tuple[float, float, float], velocity: tuple[float, float, float]) -> Any:
     """PX4's ODOMETRY: pose and velocity in local NED (frame_id = child_frame_id = 1), with
     diagonal covariances (the off-diagonal entries NaN, as PX4 sends them)."""
     k, nan = s.kin, math.nan
@@ -234,7 +233,7 @@ def odometry(s: TelemetryState, noisy: tuple[float, float, float]) -> Any:
     for i in (0, 6, 11):
         vel_cov[i] = 0.009
     return mavlink.MAVLink_odometry_message(_us(s.t_s), px4.MAV_FRAME_LOCAL_NED, px4.MAV_FRAME_LOCAL_NED, *noisy,
-                                            quaternion(*attitude_rad(k)), k.vn_m_s, k.ve_m_s, k.vd_m_s, 0.0, 0.0,
+                                            quaternion(*attitude_rad(k)), *velocity, 0.0, 0.0,
                                             k.yaw_rate_rad_s, pose_cov, vel_cov, 0, ESTIMATOR_TYPE_AUTOPILOT, 0)
 
 
@@ -309,22 +308,32 @@ def statustext_chunks(severity: int, text: str, chunk_id: int) -> list[Any]:
 
 
 class PositionNoise:
-    """What the reported position adds to the true one (never to the true state): seeded Gaussian
-    noise [m] and, when set, the estimate's wander ``drift`` (:mod:`sim.vehicle.estimator`)."""
+    """What the reported state adds to the true one (never to the true state): seeded Gaussian
+    noise [m] on the position and, when set, the estimate's errors ``estimate`` (position and
+    velocity, :mod:`sim.vehicle.estimator`)."""
 
-    def __init__(self, sigma_m: float, seed: int | None, drift: EstimateDrift | None = None) -> None:
+    def __init__(self, sigma_m: float, seed: int | None, estimate: EstimateError | None = None) -> None:
         self.sigma_m = float(sigma_m)
         self._rng = random.Random(None if seed is None else seed + 7919)
-        self.drift = drift
+        self.estimate = estimate
 
     def apply(self, kin: KinState) -> tuple[float, float, float]:
+        """The reported position [m] NED."""
         n, e, d = kin.n_m, kin.e_m, kin.d_m
-        if self.drift is not None:
-            n, e, d = n + self.drift.offset[0], e + self.drift.offset[1], d + self.drift.offset[2]
+        if self.estimate is not None:
+            ep = self.estimate.position
+            n, e, d = n + ep[0], e + ep[1], d + ep[2]
         if self.sigma_m <= 0.0:
             return n, e, d
         g = self._rng.gauss
         return n + g(0.0, self.sigma_m), e + g(0.0, self.sigma_m), d + g(0.0, self.sigma_m)
+
+    def velocity(self, kin: KinState) -> tuple[float, float, float]:
+        """The reported velocity [m/s] NED."""
+        if self.estimate is None:
+            return kin.vn_m_s, kin.ve_m_s, kin.vd_m_s
+        ev = self.estimate.velocity
+        return kin.vn_m_s + ev[0], kin.ve_m_s + ev[1], kin.vd_m_s + ev[2]
 
 
 def build(name: str, s: TelemetryState, geo: Geo, noise: PositionNoise) -> Any:
@@ -332,11 +341,11 @@ def build(name: str, s: TelemetryState, geo: Geo, noise: PositionNoise) -> Any:
     if name == "HEARTBEAT":
         return heartbeat(s)
     if name == "LOCAL_POSITION_NED":
-        return local_position_ned(s, noise.apply(s.kin))
+        return local_position_ned(s, noise.apply(s.kin), noise.velocity(s.kin))
     if name == "ODOMETRY":
-        return odometry(s, noise.apply(s.kin))
+        return odometry(s, noise.apply(s.kin), noise.velocity(s.kin))
     if name == "GLOBAL_POSITION_INT":
-        return global_position_int(s, geo, noise.apply(s.kin))
+        return global_position_int(s, geo, noise.apply(s.kin), noise.velocity(s.kin))
     if name in _GEO_BUILDERS:
         return _GEO_BUILDERS[name](s, geo)
     return _PLAIN_BUILDERS[name](s)

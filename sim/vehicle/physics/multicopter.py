@@ -26,7 +26,7 @@ import math
 from dataclasses import dataclass, field
 
 from mission.core.geodesy import wrap_pi
-from sim.vehicle.physics.mc_position_control import GRAVITY_M_S2, ControllerState, Gains, Setpoint3, control_at_rate
+from sim.vehicle.physics.mc_position_control import GRAVITY_M_S2, ControllerState, Gains, Setpoint3, Vec3, control_at_rate
 
 YAW_TIME_CONSTANT_S = 0.3
 NAN = math.nan
@@ -134,8 +134,11 @@ def _lag(value: float, target: float, dt_s: float, tau_s: float) -> float:
     return target if tau_s <= 0.0 else target + (value - target) * math.exp(-dt_s / tau_s)
 
 
-def step(state: KinState, command: Command, limits: Limits, wind_ned_m_s: tuple[float, float, float], dt_s: float) -> KinState:
-    """Advance the vehicle by ``dt_s`` [s] under ``command``; see the module docstring."""
+def step(state: KinState, command: Command, limits: Limits, wind_ned_m_s: tuple[float, float, float], dt_s: float,
+         estimate_error: tuple[Vec3, Vec3] | None = None) -> KinState:
+    """Advance the vehicle by ``dt_s`` [s] under ``command``; see the module docstring.
+    ``estimate_error``: (position [m], velocity [m/s]) NED that PX4's estimate adds to the true
+    state; the position controller flies the estimate (:mod:`sim.vehicle.estimator`)."""
     sp = command.setpoint()
     if state.on_ground and not (command.powered and sp.wants_climb(state.d_m)):
         # landed: at rest on its ground, the controller's integrator reset (as PX4's)
@@ -147,7 +150,12 @@ def step(state: KinState, command: Command, limits: Limits, wind_ned_m_s: tuple[
     vel = (state.vn_m_s, state.ve_m_s, state.vd_m_s)
     if command.powered:
         yaw_rate = _yaw_rate(state, command, limits)
-        acc_sp, ctrl = control_at_rate(sp, pos, vel, (state.dvn_m_s2, state.dve_m_s2, state.dvd_m_s2), state.ctrl,
+        seen_pos, seen_vel = pos, vel
+        if estimate_error is not None:
+            (ep, ev) = estimate_error
+            seen_pos = (pos[0] + ep[0], pos[1] + ep[1], pos[2] + ep[2])
+            seen_vel = (vel[0] + ev[0], vel[1] + ev[1], vel[2] + ev[2])
+        acc_sp, ctrl = control_at_rate(sp, seen_pos, seen_vel, (state.dvn_m_s2, state.dve_m_s2, state.dvd_m_s2), state.ctrl,
                                        limits.gains, dt_s)
         an = _lag(state.an_m_s2, acc_sp[0], dt_s, air.tilt_tau_s)
         ae = _lag(state.ae_m_s2, acc_sp[1], dt_s, air.tilt_tau_s)

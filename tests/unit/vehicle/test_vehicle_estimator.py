@@ -1,4 +1,4 @@
-"""The wander of PX4's position estimate (sim/vehicle/estimator.py), off by default."""
+"""The errors of PX4's estimate as the mock vehicle adds them (sim/vehicle/estimator.py), off by default."""
 from __future__ import annotations
 
 import math
@@ -6,36 +6,39 @@ import math
 import numpy as np
 import pytest
 
-from sim.vehicle.estimator import PX4_SITL_DRIFT_SIGMA_M_S, PX4_SITL_DRIFT_TAU_S, EstimateDrift, flown_on_estimate
-from sim.vehicle.physics.multicopter import Command
+from sim.vehicle.estimator import PX4_SITL, EstimateError
 
 
-def test_drift_rate_has_the_measured_spread_and_correlation_time():
-    drift, dt = EstimateDrift(PX4_SITL_DRIFT_SIGMA_M_S, seed=3), 0.05
-    rates = []
-    for _ in range(80_000):  # 4000 s
-        drift.advance(dt)
-        rates.append(drift.rate[0])
-    x = np.array(rates)
-    assert x.std() == pytest.approx(PX4_SITL_DRIFT_SIGMA_M_S, rel=0.1)
-    lag = round(PX4_SITL_DRIFT_TAU_S / dt)
-    assert np.corrcoef(x[:-lag], x[lag:])[0, 1] == pytest.approx(math.exp(-1.0), abs=0.08)
+def _run(error: EstimateError, steps: int, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    v, p = [], []
+    for _ in range(steps):
+        error.advance(dt)
+        v.append(error.velocity)
+        p.append(error.position)
+    return np.array(v), np.array(p)
 
 
-def test_same_seed_same_wander_and_off_means_none():
-    a, b, off = EstimateDrift(0.18, seed=7), EstimateDrift(0.18, seed=7), EstimateDrift(0.0, seed=7)
+def test_errors_have_the_fitted_spread_and_a_smooth_correlation():
+    dt = 0.05
+    v, p = _run(EstimateError(1.0, seed=3), 100_000, dt)  # 5000 s
+    assert v[:, :2].std() == pytest.approx(PX4_SITL.sigma_v_m_s, rel=0.1)
+    assert p[:, :2].std() == pytest.approx(PX4_SITL.sigma_p_m, rel=0.1)
+    assert v[:, 2].std() == pytest.approx(PX4_SITL.sigma_v_m_s * PX4_SITL.vertical_v, rel=0.15)
+    # second order: autocorrelation (1 + t/tau) exp(-t/tau), 2/e at one time constant
+    lag = round(PX4_SITL.tau_v_s / dt)
+    acf = np.mean([np.corrcoef(v[:-lag, i], v[lag:, i])[0, 1] for i in (0, 1)])
+    assert acf == pytest.approx(2 * math.exp(-1.0), abs=0.08)
+    # the velocity error is not the position error's rate: the estimate's velocity and position disagree
+    rate = np.diff(p[:, 0]) / dt
+    assert abs(np.corrcoef(rate, v[1:, 0])[0, 1]) < 0.1
+
+
+def test_same_seed_same_errors_and_zero_scale_means_none():
+    a, b, off = EstimateError(1.0, seed=7), EstimateError(1.0, seed=7), EstimateError(0.0, seed=7)
     for _ in range(1000):
-        for d in (a, b, off):
-            d.advance(0.005)
-    assert a.offset == b.offset and np.linalg.norm(a.offset) > 0.0
-    assert off.offset == (0.0, 0.0, 0.0) and not off.enabled
-    with pytest.raises(ValueError, match="sigma"):
-        EstimateDrift(-1.0)
-
-
-def test_position_setpoints_are_flown_on_the_estimate_velocities_are_not():
-    offset = (0.5, -1.0, 0.2)
-    held = flown_on_estimate(Command(math.nan, math.nan, math.nan, position_ned_m=(10.0, 0.0, -5.0)), offset)
-    assert held.position_ned_m == pytest.approx((9.5, 1.0, -5.2))
-    velocity = Command(1.0, 0.0, 0.0)
-    assert flown_on_estimate(velocity, offset) is velocity
+        for e in (a, b, off):
+            e.advance(0.005)
+    assert a.velocity == b.velocity and a.position == b.position and np.linalg.norm(a.velocity) > 0.0
+    assert off.velocity == off.position == (0.0, 0.0, 0.0) and not off.enabled
+    with pytest.raises(ValueError, match="scale"):
+        EstimateError(-1.0)
