@@ -173,11 +173,13 @@ class Px4Sitl:
             self._out = None
 
 
-def gcs_probe(ns: NetNamespace, instance: int = 0) -> Any:
-    """A :class:`sim.testing.probe.Probe` on PX4's GCS link in ``ns`` (bound to 14550)."""
+def gcs_probe(ns: NetNamespace, instance: int = 0, history_len: int = 4000) -> Any:
+    """A :class:`sim.testing.probe.Probe` on PX4's GCS link in ``ns`` (bound to 14550), keeping
+    the last ``history_len`` messages of each type."""
     from sim.testing.probe import Probe
 
-    return ns.inside(lambda: Probe(bind=f"127.0.0.1:{GCS_PORT}", vehicle=("127.0.0.1", 18570 + instance)))
+    return ns.inside(lambda: Probe(bind=f"127.0.0.1:{GCS_PORT}", vehicle=("127.0.0.1", 18570 + instance),
+                                   history_len=history_len))
 
 
 def wait_armable(probe: Any, timeout_s: float = 30.0) -> float:
@@ -206,7 +208,6 @@ def clock_ratio(tlog: Path, message: str = "LOCAL_POSITION_NED") -> dict[str, fl
     """PX4's clock against the receiver's over a ``.tlog``: the slope of ``time_boot_ms`` over the
     tlog's receive stamps (a least-squares fit; 1.0 = real time), with the rate the message arrived
     at [Hz of receive time] and the span [s]. None if fewer than 10 such messages."""
-    import numpy as np
 
     from mission.mavlink.env import mavlink
 
@@ -239,10 +240,17 @@ def clock_ratio(tlog: Path, message: str = "LOCAL_POSITION_NED") -> dict[str, fl
                 boot.append(m.time_boot_ms * 1e-3)
     if len(rx) < 10:
         return None
-    rx_a, boot_a = np.asarray(rx), np.asarray(boot)
-    slope = float(np.polyfit(rx_a - rx_a[0], boot_a - boot_a[0], 1)[0])
-    span = float(rx_a[-1] - rx_a[0])
-    return {"ratio": slope, "rate_hz": (len(rx) - 1) / span if span > 0 else float("nan"), "span_s": span}
+    span = float(rx[-1] - rx[0])
+    return {"ratio": clock_ratio_of(rx, boot), "rate_hz": (len(rx) - 1) / span if span > 0 else float("nan"), "span_s": span}
+
+
+def clock_ratio_of(rx_s: Any, boot_s: Any) -> float:
+    """PX4's clock against the receiver's: the least-squares slope of PX4's times ``boot_s`` [s]
+    over their receive times ``rx_s`` [s] (1.0 = real time)."""
+    import numpy as np
+
+    rx_a, boot_a = np.asarray(rx_s, dtype=float), np.asarray(boot_s, dtype=float)
+    return float(np.polyfit(rx_a - rx_a[0], boot_a - boot_a[0], 1)[0])
 
 
 @dataclass
@@ -264,6 +272,7 @@ class Px4Flight:
     armable_after_s: float = float("nan")
     _rootfs: Path | None = None
     settle_s: float = 0.0  # extra wall seconds after PX4 is armable before the carrier and the mission start
+    ground_truth_hz: float = 0.0  # > 0: record PX4's estimate and SIH's truth at this rate (``truth.csv``)
     _files: list[Any] = field(default_factory=list)
 
     @property
@@ -288,11 +297,15 @@ class Px4Flight:
         self._rootfs = Path(f"/var/tmp/{self.ns.name}") / "rootfs"
         self.px4 = Px4Sitl(self.build, self._rootfs, self.ns, speed_factor=self.speed_factor, out_dir=self.dir)
         self.px4.start()
-        self.gcs = gcs_probe(self.ns)
+        self.gcs = gcs_probe(self.ns, history_len=100_000 if self.ground_truth_hz > 0 else 4000)
         from sim.testing.probe import connect
 
         connect(self.gcs, timeout_s=20.0, heartbeat_period_s=0.5)
         self.armable_after_s = wait_armable(self.gcs)
+        if self.ground_truth_hz > 0:
+            from sim.sitl import ground_truth
+
+            ground_truth.ask(self.gcs, self.ground_truth_hz)
         if self.settle_s > 0:
             time.sleep(self.settle_s)  # real-time PX4's estimator keeps converging (the probe keeps receiving)
         endpoint = f"tcp/127.0.0.1:{zenoh_port}"
@@ -325,11 +338,25 @@ class Px4Flight:
     def summary(self) -> dict[str, Any]:
         return json.loads((self.log_dir / "summary.json").read_text())
 
+    def write_ground_truth(self) -> Path | None:
+        """Write what the GCS link received of PX4's estimate and SIH's truth to ``truth.csv``
+        (:mod:`sim.sitl.ground_truth`); None when not recorded."""
+        if self.gcs is None or self.ground_truth_hz <= 0:
+            return None
+        from sim.sitl import ground_truth
+
+        est, truth = ground_truth.series(self.gcs)
+        path = self.dir / "truth.csv"
+        ground_truth.write_csv(path, est, truth)
+        return path
+
     def close(self) -> None:
         for name in ("mission", "carrier"):
             if name in self.procs:
                 stop_process(self.procs[name])
         if self.gcs is not None:
+            with contextlib.suppress(LookupError):
+                self.write_ground_truth()
             self.gcs.close()
         if self.px4 is not None:
             self.px4.stop()

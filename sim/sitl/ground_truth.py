@@ -1,0 +1,87 @@
+"""SIH's true state beside PX4's estimate, from a PX4 SITL's own MAVLink streams.
+
+PX4's SIH publishes its true state on the ``vehicle_*_groundtruth`` topics, and PX4's MAVLink
+module streams them as HIL_STATE_QUATERNION (its ``GROUND_TRUTH`` stream: true latitude,
+longitude, altitude and NED velocity; ``time_usec`` is left 0) when asked with
+SET_MESSAGE_INTERVAL. Ask it together with LOCAL_POSITION_NED (the estimate) on one link and
+both arrive on the same socket: their receive times put them on one clock.
+
+The true position is projected about PX4's EKF origin (GPS_GLOBAL_ORIGIN) with PX4's own
+projection, so it lies in the estimate's local NED frame; what remains between them is the
+estimate's error (its origin's offset included). Units: [m], [m/s], NED; times [s] on the
+receiver's clock.
+"""
+from __future__ import annotations
+
+import csv
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from mission.core.geodesy import project
+from mission.mavlink import px4
+
+HIL_STATE_QUATERNION_ID = 115
+LOCAL_POSITION_NED_ID = 32
+GPS_GLOBAL_ORIGIN_ID = 49
+COLUMNS = ("t_rx_s", "boot_s", "x", "y", "z", "vx", "vy", "vz", "true_x", "true_y", "true_z", "true_vx", "true_vy", "true_vz")
+
+
+def ask(probe: Any, rate_hz: float) -> dict[int, Any]:
+    """Ask PX4 (over ``probe``'s link) for its estimate and its ground truth at ``rate_hz`` and for
+    its EKF origin; returns the COMMAND_ACK result per message id (None: no answer)."""
+    results: dict[int, Any] = {}
+    for msg_id in (LOCAL_POSITION_NED_ID, HIL_STATE_QUATERNION_ID):
+        ack = probe.command(px4.MAV_CMD_SET_MESSAGE_INTERVAL, (msg_id, 1e6 / rate_hz))
+        results[msg_id] = None if ack is None else ack.result
+    ack = probe.command(px4.MAV_CMD_REQUEST_MESSAGE, (GPS_GLOBAL_ORIGIN_ID,))
+    results[GPS_GLOBAL_ORIGIN_ID] = None if ack is None else ack.result
+    return results
+
+
+def series(probe: Any) -> tuple[np.ndarray, np.ndarray]:
+    """(estimate, truth) received so far: rows ``t_rx, boot, x, y, z, vx, vy, vz`` (the truth's
+    boot time NaN) in PX4's local NED frame. Raises LookupError without an EKF origin."""
+    with probe._cond:  # the probe's thread keeps receiving
+        lps = list(probe.history.get("LOCAL_POSITION_NED", ()))
+        hils = list(probe.history.get("HIL_STATE_QUATERNION", ()))
+        origin = probe.history.get("GPS_GLOBAL_ORIGIN")
+        origin_msg = origin[-1][2] if origin else None
+    est = np.array([(t, m.time_boot_ms * 1e-3, m.x, m.y, m.z, m.vx, m.vy, m.vz) for _, t, m in lps]).reshape(-1, 8)
+    if origin_msg is None:
+        raise LookupError("no GPS_GLOBAL_ORIGIN received: PX4's EKF origin is unknown")
+    lat0, lon0, alt0 = origin_msg.latitude * 1e-7, origin_msg.longitude * 1e-7, origin_msg.altitude * 1e-3
+    rows = []
+    for _, t, m in hils:
+        n, e = project(m.lat * 1e-7, m.lon * 1e-7, lat0, lon0)
+        rows.append((t, math.nan, n, e, -(m.alt * 1e-3 - alt0), m.vx * 0.01, m.vy * 0.01, m.vz * 0.01))
+    return est, np.array(rows).reshape(-1, 8)
+
+
+def aligned(est: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    """The truth interpolated to each estimate row's receive time: shape (len(est), 6)
+    ``x, y, z, vx, vy, vz`` (NaN without truth)."""
+    if len(truth) < 2:
+        return np.full((len(est), 6), math.nan)
+    return np.column_stack([np.interp(est[:, 0], truth[:, 0], truth[:, k]) for k in range(2, 8)])
+
+
+def write_csv(path: Path, est: np.ndarray, truth: np.ndarray) -> None:
+    """One row per estimate sample with the truth at its receive time (:data:`COLUMNS`)."""
+    tr = aligned(est, truth)
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(COLUMNS)
+        for row, t in zip(est, tr):
+            w.writerow([f"{row[0]:.4f}", f"{row[1]:.3f}", *[f"{v:.4f}" for v in row[2:]], *[f"{v:.4f}" for v in t]])
+
+
+def read_csv(path: Path) -> dict[str, np.ndarray]:
+    """A :func:`write_csv` file as columns."""
+    with open(path, newline="") as f:
+        reader = csv.reader(f)
+        header = next(reader)
+        data = np.array([[float(x) for x in row] for row in reader]).reshape(-1, len(header))
+    return {name: data[:, i] for i, name in enumerate(header)}
