@@ -222,6 +222,29 @@ def _nanmax(values: np.ndarray) -> float | None:
     return _num(finite.max()) if finite.size else None
 
 
+LAST_METRE_M = 1.0  # the last metre starts when the vehicle first comes this close to the target [m]
+ON_TARGET_M = 0.05  # the reference "sits on the target" within this [m]
+
+
+def _arrival_figures(r: FlightRecord, dist_t: np.ndarray, target: np.ndarray) -> dict[str, Any]:
+    """How the vehicle finished: ``last_metre_s`` [s], from its first tick within
+    :data:`LAST_METRE_M` of the target to the first ARRIVED tick; ``hover_speed_m_s`` [m/s], its
+    mean horizontal speed (as the vehicle reports it) over the ticks we still fly it (up to the
+    handover to Hold or Land) with the reference within :data:`ON_TARGET_M` of the target (None
+    without such ticks)."""
+    out: dict[str, Any] = {"last_metre_s": None, "hover_speed_m_s": None}
+    arrived = np.flatnonzero(r.phase == "ARRIVED")
+    close = np.flatnonzero(np.isfinite(dist_t) & (dist_t <= LAST_METRE_M))
+    if len(arrived) and len(close) and close[0] <= arrived[0]:
+        out["last_metre_s"] = _num(r.t[arrived[0]] - r.t[close[0]])
+    ref_on = norm(r.vec("x_ref") - target) <= ON_TARGET_M
+    ticks = np.flatnonzero(ref_on & np.isin(r.phase, ["SEPARATED", "NAVIGATING", "ARRIVED"]))
+    if len(ticks):
+        v = r.vec("v_p")[ticks]
+        out["hover_speed_m_s"] = _num(np.hypot(v[:, 0], v[:, 1]).mean())
+    return out
+
+
 def summarise(directory: str | Path) -> dict[str, Any]:
     """The summary of a flight (:func:`figures` of the whole record), and with several targets
     ``legs``: the figures of each leg (its slice of the record, judged against its own target) with
@@ -313,6 +336,7 @@ def figures(r: FlightRecord) -> dict[str, Any]:
     dist_t = norm(x_p - target)
     near = np.flatnonzero(np.isfinite(dist_t) & (dist_t <= float(info.get("arrival_radius_m", 0.5))))
     out["max_target_distance_after_arrival_m"] = _nanmax(dist_t[near[0]:]) if len(near) else None
+    out.update(_arrival_figures(r, dist_t, target))
     out["p1"] = bool(riding.any() and offset_riding <= tol and out["departure_delay_s"] is not None)
     out["p2"] = bool((r.phase == Phase.ARRIVED).any() and out["final_passenger_target_distance_m"] is not None
                      and out["final_passenger_target_distance_m"] <= float(info.get("arrival_radius_m", 0.5)))
