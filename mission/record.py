@@ -231,8 +231,9 @@ def _arrival_figures(r: FlightRecord, dist_t: np.ndarray, target: np.ndarray) ->
     :data:`LAST_METRE_M` of the target to the first ARRIVED tick; ``hover_speed_m_s`` [m/s], its
     mean horizontal speed (as the vehicle reports it) over the ticks we still fly it (up to the
     handover to Hold or Land) with the reference within :data:`ON_TARGET_M` of the target (None
-    without such ticks)."""
-    out: dict[str, Any] = {"last_metre_s": None, "hover_speed_m_s": None}
+    without such ticks); ``max_target_distance_at_target_m`` [m], its farthest from the target
+    over those ticks."""
+    out: dict[str, Any] = {"last_metre_s": None, "hover_speed_m_s": None, "max_target_distance_at_target_m": None}
     arrived = np.flatnonzero(r.phase == "ARRIVED")
     close = np.flatnonzero(np.isfinite(dist_t) & (dist_t <= LAST_METRE_M))
     if len(arrived) and len(close) and close[0] <= arrived[0]:
@@ -242,6 +243,7 @@ def _arrival_figures(r: FlightRecord, dist_t: np.ndarray, target: np.ndarray) ->
     if len(ticks):
         v = r.vec("v_p")[ticks]
         out["hover_speed_m_s"] = _num(np.hypot(v[:, 0], v[:, 1]).mean())
+        out["max_target_distance_at_target_m"] = _nanmax(dist_t[ticks])
     return out
 
 
