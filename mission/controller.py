@@ -158,15 +158,19 @@ def _no_stamp() -> int:
 
 def _vehicle_obs(state: VehicleState, velocity_fix: PositionConsistentVelocity | None = None) -> VehicleObs | None:
     """The vehicle as the phases see it; with ``velocity_fix`` its velocity made consistent with
-    its position (``mission.velocity_bias_tau_s``, :mod:`mission.core.consistent_velocity`)."""
+    its position (``mission.velocity_bias_tau_s``, :mod:`mission.core.consistent_velocity`), and
+    what that took off the estimator's velocity as ``velocity_bias_ned_m_s``."""
     if state.heartbeat_rx_s is None:
         return None
     pos = state.position_ned_m
     vel = state.velocity_ned_m_s
     age = float("inf") if state.position_rx_s is None else state.t_s - state.position_rx_s
     sample_t = state.position_t_s
+    bias = None
     if velocity_fix is not None and pos is not None and vel is not None and sample_t is not None:
-        vel = velocity_fix.update(sample_t, np.asarray(pos, dtype=float), np.asarray(vel, dtype=float))
+        raw = np.asarray(vel, dtype=float)
+        vel = velocity_fix.update(sample_t, np.asarray(pos, dtype=float), raw)
+        bias = raw - vel  # what the estimator's velocity says beyond its position's rate
     if pos is not None and vel is not None and age <= phases.TELEMETRY_SILENT_S and sample_t is not None:
         # The vehicle's position now: its last LOCAL_POSITION_NED moved on by its velocity since
         # the vehicle took it (by its own clock), as the dock point is; a late sample, or a burst
@@ -181,6 +185,7 @@ def _vehicle_obs(state: VehicleState, velocity_fix: PositionConsistentVelocity |
         position_age_s=age,
         in_failsafe=state.system_status == px4.MAV_STATE_CRITICAL,
         battery_pct=state.battery_pct,
+        velocity_bias_ned_m_s=bias,
     )
 
 

@@ -253,6 +253,16 @@ class MissionSection(Section):
                                        "rate and its estimator's velocity (PX4's EKF on SIH: 0.3-0.5 m/s apart for seconds); 0 off")
     damping_per_s: float = Field(0.0, ge=0, le=20, description="[1/s] full setpoints: velocity damping in the acceleration "
                                  "feed-forward, -k (v_p - u_ref): damps the ringing of PX4's position loop stiffened by the lead; 0 off")
+    bias_compensation_s: float = Field(0.0, ge=0, le=10, description="[s] full setpoints: the position sent also "
+                                       "carries this times the estimator's velocity bias (its velocity less its position's "
+                                       "rate, low-passed: needs velocity_bias_tau_s > 0), so PX4's velocity setpoint "
+                                       "carries the bias and it no longer moves the position PX4 holds; 1/MPC_XY_P "
+                                       "(1.05 s) cancels it; 0 off")
+    accel_lead_s: float = Field(0.0, ge=0, le=2, description="[s] full setpoints: the reference's acceleration is sent "
+                                "ahead of the vehicle's own acceleration lag, this time constant (SIH quadrotor: 0.28 s), "
+                                "through a lead-lag down to accel_lead_filter_s; 0 off")
+    accel_lead_filter_s: float = Field(0.1, gt=0, le=2, description="[s] the lag the vehicle's acceleration is left with "
+                                       "(see accel_lead_s)")
     reference_slow_lag_m: float | None = Field(
         0.3, gt=0, le=50, description="[m] after separation the reference slows down when the vehicle lags it by more "
         "than this, and waits at reference_stop_lag_m (None: never)")
@@ -404,6 +414,9 @@ class Config(Section):
         if not self.law.departure_margin_m < bc / 10:
             raise ConfigError("law.departure_margin_m", self.law.departure_margin_m,
                               f"must be < b*c/10 = {bc / 10:g} m (at >= b*c the passenger never separates)")
+        if m.bias_compensation_s > 0 and not m.velocity_bias_tau_s > 0:
+            raise ConfigError("mission.bias_compensation_s", m.bias_compensation_s,
+                              "needs mission.velocity_bias_tau_s > 0 (the bias it compensates is measured there)")
         if sf.z_min_m is not None and sf.z_max_m is not None and not sf.z_min_m < sf.z_max_m:
             raise ConfigError("safety.z_min_m", sf.z_min_m, f"empty altitude band: must be < safety.z_max_m = {sf.z_max_m:g}")
         for i, ob in enumerate(s.obstacles):

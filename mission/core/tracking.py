@@ -7,7 +7,10 @@ acceleration ``a_ref``); this module turns it into the setpoint sent to PX4 (``m
 - ``"full"`` (type_mask 3072; never bit 512, *force*): ``p = x_ref + l (x_ref - x_p)``,
   ``v = u_ref + k_p (x_ref - x_p)``, ``a = a_ref + c_drag u_ref - k_d (v_p - u_ref) + i_a``, where
   ``l`` is the dimensionless lead, ``c_drag`` [1/s] the drag feed-forward and ``k_d`` [1/s] the
-  damping.
+  damping; with ``bias_compensation_s`` ``s`` [s] the position also carries ``+ s b``, ``b`` the
+  estimator's velocity less its position's rate (its bias, ``mission.velocity_bias_tau_s``):
+  with ``s = 1 / MPC_XY_P`` PX4's velocity setpoint then carries ``+ b`` and the bias no longer
+  moves the position PX4 holds.
 
 The integral ``i`` ([m/s^2] full, [m/s] velocity) acts on the position error, clamped to
 ``integral_limit``, and integrates only within ``integral_window_m`` [m] of the reference. After
@@ -41,6 +44,9 @@ class TrackingGains:
     drag_ff_per_s: float = 0.0
     integral_window_m: float = 0.5
     damping_per_s: float = 0.0
+    bias_compensation_s: float = 0.0
+    accel_lead_s: float = 0.0
+    accel_lead_filter_s: float = 0.1
     slow_lag_m: float | None = None
     stop_lag_m: float | None = None
 
@@ -68,12 +74,13 @@ def update_integral(integral: np.ndarray, x_ref: np.ndarray, x_p: np.ndarray, ga
 
 def setpoint(x_ref: np.ndarray, u_ref: np.ndarray, a_ref: np.ndarray, x_p: np.ndarray, velocity: np.ndarray,
              integral: np.ndarray, gains: TrackingGains, v_p: np.ndarray | None = None,
-             filtered: bool = False) -> Setpoint:
+             filtered: bool = False, velocity_bias: np.ndarray | None = None) -> Setpoint:
     """The setpoint to send; the one place that decides velocity-only or full. ``velocity`` [m/s]
     is the (safety-filtered) velocity demand. Velocity only for velocity gains, or when the
     safety filter changed the velocity (``filtered``: the filter wins over the reference, so
     neither the reference position nor its feed-forward may pull the vehicle back); else a full
-    setpoint adds the reference position and the acceleration feed-forward (reference
+    setpoint adds the position (the reference, the lead and, given the estimator's velocity bias
+    ``velocity_bias`` [m/s], its compensation) and the acceleration feed-forward (reference
     acceleration, drag feed-forward, integral and, given the vehicle's velocity ``v_p`` [m/s],
     damping)."""
     if gains.kind == "velocity" or filtered:
@@ -81,7 +88,23 @@ def setpoint(x_ref: np.ndarray, u_ref: np.ndarray, a_ref: np.ndarray, x_p: np.nd
     accel = a_ref + gains.drag_ff_per_s * u_ref + integral
     if gains.damping_per_s > 0 and v_p is not None:
         accel = accel - gains.damping_per_s * (v_p - u_ref)
-    return Setpoint.triple(x_ref + gains.position_lead * (x_ref - x_p), velocity, accel)
+    position = x_ref + gains.position_lead * (x_ref - x_p)
+    if gains.bias_compensation_s > 0 and velocity_bias is not None:
+        position = position + gains.bias_compensation_s * velocity_bias
+    return Setpoint.triple(position, velocity, accel)
+
+
+def lead_acceleration(a_ref: np.ndarray, low_passed: np.ndarray | None, gains: TrackingGains,
+                      dt_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """The reference's acceleration [m/s^2] as sent, ahead of the vehicle's own acceleration lag,
+    and the filter's new state: the lead-lag ``(1 + tau s) / (1 + T s)`` (``tau``
+    ``accel_lead_s``, ``T`` ``accel_lead_filter_s``) that turns a vehicle whose acceleration
+    follows its setpoint through a first-order lag ``tau`` into one with lag ``T``:
+    ``a + (tau / T - 1) (a - lp_T(a))``, ``lp_T`` a first-order low-pass (exact step)."""
+    lp = a_ref if low_passed is None else low_passed + (1.0 - np.exp(-dt_s / gains.accel_lead_filter_s)) * (a_ref - low_passed)
+    if gains.accel_lead_s <= 0:
+        return a_ref, lp
+    return a_ref + (gains.accel_lead_s / gains.accel_lead_filter_s - 1.0) * (a_ref - lp), lp
 
 
 def progress(lag_m: float, gains: TrackingGains) -> float:

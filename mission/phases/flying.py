@@ -14,30 +14,33 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from mission.flight_mode import FlightMode
+from mission.core import arrival
 from mission.core.law import norm
 from mission.core.setpoint import Setpoint
 from mission.phases.types import ZERO, Decision, MissionModel, MissionState, Observation, Phase, dock_point, enter
 from mission.interfaces import Request
 from mission.core.safety import filter_velocity
 from mission.core.tick import DEPARTURE_THRESHOLD_M, carrier_tick, latch_point, passenger_tick, separation_due
-from mission.core.tracking import progress, setpoint as tracking_setpoint, update_integral, velocity_demand
+from mission.core.tracking import lead_acceleration, progress, setpoint as tracking_setpoint, update_integral, velocity_demand
 
 
 @dataclass(frozen=True)
 class Tracked:
     """One tick of tracking: the setpoint to send, whether the safety filter changed its
-    velocity, and the tracking integral the state keeps."""
+    velocity, and what the state keeps (the integral, the lead's low-passed acceleration)."""
 
     setpoint: Setpoint
     acted: bool
     integral: np.ndarray
+    accel_lp: np.ndarray
 
     def decision(self, **kw) -> Decision:
         return Decision(setpoint=self.setpoint, **kw)
 
     def kept(self) -> dict[str, np.ndarray]:
-        """What the state keeps: the velocity sent [m/s] (the filter's previous command) and the integral."""
-        return {"u_cmd": self.setpoint.velocity_ned_m_s, "integral": self.integral}
+        """What the state keeps: the velocity sent [m/s] (the filter's previous command), the
+        integral and the lead's low-passed acceleration."""
+        return {"u_cmd": self.setpoint.velocity_ned_m_s, "integral": self.integral, "accel_lp": self.accel_lp}
 
 
 def _track(state: MissionState, obs: Observation, m: MissionModel, x_ref: np.ndarray, u_ref: np.ndarray,
@@ -54,10 +57,12 @@ def _track(state: MissionState, obs: Observation, m: MissionModel, x_ref: np.nda
     prev = state.u_cmd if state.u_cmd is not None else v.velocity_ned_m_s
     safe = filter_velocity(x_p, desired, m.tick.obstacles, m.command_safety, prev, m.dt_s)
     acted = bool(safe.changed)
-    sp = tracking_setpoint(x_ref, u_ref, a_ref, x_p, safe.u, integral, g, v.velocity_ned_m_s, filtered=acted)
+    a_sent, accel_lp = lead_acceleration(a_ref, state.accel_lp, g, m.dt_s)
+    sp = tracking_setpoint(x_ref, u_ref, a_sent, x_p, safe.u, integral, g, v.velocity_ned_m_s, filtered=acted,
+                           velocity_bias=v.velocity_bias_ned_m_s)
     if not acted or g.kind == "velocity":
         integral = update_integral(integral, x_ref, x_p, g, m.dt_s)
-    return Tracked(sp, acted, integral)
+    return Tracked(sp, acted, integral, accel_lp)
 
 
 def _carrier_acceleration(obs: Observation, m: MissionModel) -> np.ndarray:
@@ -152,21 +157,21 @@ def navigate(state, obs, m, events=()):
     a_ref = (u_ref - u_prev) / m.dt_s
     tr = _track(state, obs, m, x_ref, u_ref, a_ref)
     acted = tr.acted
-    phase, since, arrived = state.phase, state.since_s, state.arrived_since_s
+    phase, since, window = state.phase, state.since_s, state.arrival_window
     evs = list(events)
     if phase == Phase.SEPARATED and norm(e_ref) > DEPARTURE_THRESHOLD_M:
         phase, since = Phase.NAVIGATING, t
         evs.append("left the carrier: navigating")
-    # Arrived: within the arrival radius (and, if set, slower than arrival_max_speed_m_s) for the
-    # dwell (a vehicle handed to Hold while still moving brakes past the radius: docs/flying-px4.md).
-    at_target = bool(norm(obs.vehicle.position_ned_m - m.tick.target) <= m.arrival_radius_m) and (
-        m.arrival_max_speed_m_s is None or bool(norm(obs.vehicle.velocity_ned_m_s) <= m.arrival_max_speed_m_s))
-    if phase in (Phase.NAVIGATING,):
-        arrived = (arrived if arrived is not None else t) if at_target else None
-        if arrived is not None and t - arrived >= m.arrival_dwell_s:
+    # Arrived: within the arrival radius for the dwell, and (if set) the positions of that window
+    # moving slower than arrival_max_speed_m_s: judged on positions, not on the velocity estimate
+    # (mission.core.arrival; a vehicle handed to Hold while still moving brakes past the radius).
+    if phase == Phase.NAVIGATING:
+        x_p = obs.vehicle.position_ned_m
+        window = arrival.extend(window, t, x_p, bool(norm(x_p - m.tick.target) <= m.arrival_radius_m), m.arrival_dwell_s)
+        if arrival.arrived(window, t, m.arrival_dwell_s, m.arrival_max_speed_m_s, m.dt_s):
             phase, since = Phase.ARRIVED, t
             evs.append("arrived at the target")
-    new = replace(state, phase=phase, since_s=since, e_ref=e_ref, x_ref=x_ref, u_ref=u_ref, arrived_since_s=arrived, **tr.kept())
+    new = replace(state, phase=phase, since_s=since, e_ref=e_ref, x_ref=x_ref, u_ref=u_ref, arrival_window=window, **tr.kept())
     dec = tr.decision(dock=dock_point(obs, m) if obs.carrier is not None else None, P=float(tick.P),
                    relative=tick.relative, desired=tick.desired, safety_acted=acted or bool(tick.safety.changed), events=tuple(evs))
     if phase == Phase.ARRIVED and m.recovery is None:

@@ -445,7 +445,7 @@ def begin_next_leg(state: MissionState, obs: Observation, m: MissionModel,
     carrier is nearer to that target than ``mission.leg_start_margin_m`` beyond b c."""
     assert obs.carrier is not None and state.recovery is not None  # docked just now
     new = enter(state, Phase.TRANSIT, obs.t_s, leg=state.leg + 1, anchor=None, separation_time_s=None,
-                arrived_since_s=None, e_ref=np.zeros(3), prev_dock=None, legs_skipped=None)
+                arrival_window=(), e_ref=np.zeros(3), prev_dock=None, legs_skipped=None)
     return _fly(new, obs, m, dock_point(obs, m), obs.carrier.velocity_ned_m_s, _model(m).approach,
                 replace(state.recovery, settled_since_s=None), events)
 

@@ -56,6 +56,9 @@ class VehicleObs:
     position_age_s: float = 0.0
     in_failsafe: bool = False  # HEARTBEAT system_status CRITICAL: PX4 runs one of its failsafes
     battery_pct: float | None = None  # battery remaining [%] as the vehicle reports it (None: not reported)
+    # [m/s] NED: the estimator's velocity less ``velocity_ned_m_s`` when that was made consistent
+    # with the position (mission.velocity_bias_tau_s; mission.core.consistent_velocity), else None
+    velocity_bias_ned_m_s: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -195,10 +198,11 @@ class MissionState:
     anchor: np.ndarray | None = None  # latched anchor after separation [m]
     prev_dock: np.ndarray | None = None
     separation_time_s: float | None = None
-    arrived_since_s: float | None = None
+    arrival_window: tuple[tuple[float, np.ndarray], ...] = ()  # recent positions within the arrival radius (mission.core.arrival)
     u_ref: np.ndarray | None = None
     u_cmd: np.ndarray | None = None
     integral: np.ndarray | None = None  # tracking integral (mission.core.tracking)
+    accel_lp: np.ndarray | None = None  # low-passed reference acceleration [m/s^2] (tracking.lead_acceleration)
     settled_since_s: float | None = None  # JOIN: since when the vehicle has been on the dock point
     recovery: RecoveryState | None = None  # bringing the passenger home (RECOVERY phases, FALLBACK, HOME)
     leg: int = 0  # index of the target being served (scenario.targets)

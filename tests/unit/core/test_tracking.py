@@ -75,3 +75,21 @@ def test_damping_feeds_the_velocity_error_against_the_reference_back_into_the_ac
     np.testing.assert_allclose(setpoint(x, u, a, x, u, i, off, v_p=np.array([1.3, -0.1, 0.0])).acceleration_ned_m_s2,
                                [1.5, 0.0, 0.0])
     assert setpoint(x, u, a, x, u, i, TrackingGains(kind="velocity", damping_per_s=2.0), v_p=u).acceleration_ned_m_s2 is None
+
+
+def test_bias_compensation_moves_the_position_by_the_estimators_velocity_bias() -> None:
+    """bias_compensation_s: the position sent carries s times the estimator's velocity bias, so
+    PX4's velocity setpoint (MPC_XY_P times the position error) carries the bias; nothing without
+    a bias, with s = 0, or for velocity setpoints."""
+    bias = np.array([0.0, -0.4, 0.1])
+    g = TrackingGains(kind="full", position_gain_per_s=0.0, position_lead=2.0, bias_compensation_s=1.05)
+    v = velocity_demand(X_REF, U_REF, X_P, np.zeros(3), g)
+    sp = setpoint(X_REF, U_REF, A_REF, X_P, v, np.zeros(3), g, velocity_bias=bias)
+    np.testing.assert_allclose(sp.position_ned_m, X_REF + 2.0 * (X_REF - X_P) + 1.05 * bias)
+    np.testing.assert_allclose(sp.velocity_ned_m_s, U_REF)  # the law's command is untouched
+    plain = setpoint(X_REF, U_REF, A_REF, X_P, v, np.zeros(3), g)
+    np.testing.assert_allclose(plain.position_ned_m, X_REF + 2.0 * (X_REF - X_P))
+    off = setpoint(X_REF, U_REF, A_REF, X_P, v, np.zeros(3), TrackingGains(kind="full", position_lead=2.0), velocity_bias=bias)
+    np.testing.assert_allclose(off.position_ned_m, plain.position_ned_m)
+    assert setpoint(X_REF, U_REF, A_REF, X_P, v, np.zeros(3), TrackingGains(kind="velocity", bias_compensation_s=1.0),
+                    velocity_bias=bias).position_ned_m is None
