@@ -10,6 +10,9 @@ then hold one point for ``--hold-s`` seconds under each *law* in turn. A law is 
 - ``lead=L``: the position ``x_ref + L (x_ref - x_p)`` on PX4's latest estimate ``x_p`` (our lead);
 - ``lead=L,int=K``: plus our windowed integral into the acceleration (``K`` [1/s^2]);
 - ``lead=L,damp=D``: plus our velocity damping ``-D v_p`` in the acceleration;
+- ``lead=L,bias=TAU`` (or ``px4,bias=TAU``: lead 0): the estimator's velocity less its position's
+  rate, low-passed with ``TAU`` [s] (:mod:`mission.core.consistent_velocity`), compensated
+  through the position (``mission.bias_compensation_s`` = 1 / MPC_XY_P);
 - ``slow=V``: the reference moves along north at ``V`` [m/s] back and forth over 3 m, flown
   as position + velocity (the slow motion of the last metre), with the shipped lead 2.6.
 
@@ -39,12 +42,14 @@ from typing import Any
 import click
 import numpy as np
 
+from mission.core.consistent_velocity import PositionConsistentVelocity
 from mission.core.tracking import TrackingGains, setpoint, update_integral
 from mission.mavlink import px4
 from sim.sitl import ground_truth
 from sim.sitl.px4 import NetNamespace, Px4Sitl, build_dir, clock_ratio_of, unavailable_reason
 
 RATE_HZ = 50.0
+PX4_XY_P = 0.95  # MPC_XY_P, PX4's default
 HOVER_D_M = -5.0
 BANDS_HZ = ((0.0, 0.1), (0.1, 0.3), (0.3, 1.0), (1.0, 3.0), (3.0, 25.0))
 
@@ -56,19 +61,21 @@ class Law:
     name: str
     gains: TrackingGains
     slow_m_s: float = 0.0  # the reference moves back and forth along north at this speed [m/s]
+    bias_tau_s: float = 0.0  # > 0: the estimator's velocity bias measured (this time constant) and compensated
 
 
 def parse_law(text: str) -> Law:
-    """``px4`` | ``lead=L[,int=K][,damp=D]`` | ``slow=V[,lead=L]`` -> :class:`Law`."""
-    if text == "px4":
-        return Law(text, TrackingGains(kind="full", position_gain_per_s=0.0))
+    """``px4`` | ``vel`` | ``lead=L[,int=K][,damp=D][,bias=TAU][,slow=V]`` (``px4,bias=TAU``: lead 0)
+    -> :class:`Law`."""
     if text == "vel":
         return Law(text, TrackingGains(kind="velocity", position_gain_per_s=0.0))
-    fields = dict(part.split("=", 1) for part in text.split(","))
-    lead = float(fields.get("lead", 2.6))
+    fields = dict(part.split("=", 1) if "=" in part else (part, "") for part in text.split(","))
+    lead = 0.0 if "px4" in fields else float(fields.get("lead", 2.6))
+    tau = float(fields.get("bias", 0.0))
     gains = TrackingGains(kind="full", position_gain_per_s=0.0, position_lead=lead,
-                          integral_gain=float(fields.get("int", 0.0)), damping_per_s=float(fields.get("damp", 0.0)))
-    return Law(text, gains, float(fields.get("slow", 0.0)))
+                          integral_gain=float(fields.get("int", 0.0)), damping_per_s=float(fields.get("damp", 0.0)),
+                          bias_compensation_s=1.0 / PX4_XY_P if tau > 0 else 0.0)
+    return Law(text, gains, float(fields.get("slow", 0.0)), tau)
 
 
 def reference(law: Law, point: np.ndarray, tau_s: float) -> tuple[np.ndarray, np.ndarray]:
@@ -93,6 +100,7 @@ class Flyer:
         self.law: Law | None = None
         self.point = np.array([0.0, 0.0, HOVER_D_M])
         self.integral = np.zeros(3)
+        self.fix: PositionConsistentVelocity | None = None
         self.segment = "climb"
         self.since = time.monotonic()
         self.marks: list[tuple[float, str]] = [(self.since, self.segment)]
@@ -110,13 +118,20 @@ class Flyer:
     def begin(self, segment: str, law: Law | None) -> None:
         self.law, self.segment, self.since = law, segment, time.monotonic()
         self.integral = np.zeros(3)
+        self.fix = PositionConsistentVelocity(law.bias_tau_s) if law is not None and law.bias_tau_s > 0 else None
         self.marks.append((self.since, segment))
 
-    def _estimate(self) -> tuple[np.ndarray, np.ndarray] | None:
+    def _estimate(self) -> tuple[np.ndarray, np.ndarray, np.ndarray | None] | None:
+        """PX4's latest position and velocity (made consistent with the position when the law
+        asks) and the velocity bias taken off (None without)."""
         lp = self.probe.latest("LOCAL_POSITION_NED")
         if lp is None:
             return None
-        return np.array([lp.x, lp.y, lp.z]), np.array([lp.vx, lp.vy, lp.vz])
+        x, v = np.array([lp.x, lp.y, lp.z]), np.array([lp.vx, lp.vy, lp.vz])
+        if self.fix is None:
+            return x, v, None
+        fixed = self.fix.update(lp.time_boot_ms * 1e-3, x, v)
+        return x, fixed, v - fixed
 
     def _run(self) -> None:
         period = 1.0 / RATE_HZ
@@ -129,9 +144,9 @@ class Flyer:
             elif law is None:
                 p, v, a = self.point, np.zeros(3), np.zeros(3)
             else:
-                x_p, v_p = est
+                x_p, v_p, bias = est
                 x_ref, u_ref = reference(law, self.point, time.monotonic() - self.since)
-                sp = setpoint(x_ref, u_ref, np.zeros(3), x_p, u_ref, self.integral, law.gains, v_p)
+                sp = setpoint(x_ref, u_ref, np.zeros(3), x_p, u_ref, self.integral, law.gains, v_p, bias)
                 p = x_ref if sp.position_ned_m is None else sp.position_ned_m
                 a = np.zeros(3) if sp.acceleration_ned_m_s2 is None else sp.acceleration_ned_m_s2
                 v = sp.velocity_ned_m_s
@@ -189,6 +204,10 @@ def analyse(est: np.ndarray, truth: np.ndarray, t0: float, t1: float, point: np.
                est_offset_max=float(off_e.max()), fs_hz=float(fs))
     out["est_pos_bands"] = [math.hypot(a, b) for a, b in zip(band_rms(e[:, 1], fs), band_rms(e[:, 2], fs))]
     out["est_vel_bands"] = [math.hypot(a, b) for a, b in zip(band_rms(e[:, 4], fs), band_rms(e[:, 5], fs))]
+    # the speed the mission sees with its velocity made consistent with the position (tau 1 s)
+    fix = PositionConsistentVelocity(1.0)
+    fixed = np.array([fix.update(row[0], row[1:4], row[4:7]) for row in e])
+    out["est_consistent_speed_mean"] = float(np.hypot(fixed[:, 0], fixed[:, 1]).mean())
     # the estimate's position rate (its jumps) against its own velocity
     dt = np.diff(e[:, 0])
     ok = dt > 1e-3
@@ -298,7 +317,7 @@ def main(laws: str, hold_s: float, out: str | None, speed_factor: float, json_pa
     res = fly(chosen, hold_s, base, speed_factor)
     click.echo(f"PX4 clock / wall {res['clock_ratio']:.3f}; ground truth samples {res['truth_samples']}; "
                f"bands [Hz] {'/'.join(f'{lo:g}-{hi:g}' for lo, hi in BANDS_HZ)}")
-    cols = ("est_speed_mean", "est_speed_max", "true_speed_mean", "true_speed_max", "est_offset_rms", "true_offset_rms",
+    cols = ("est_speed_mean", "est_consistent_speed_mean", "est_speed_max", "true_speed_mean", "true_speed_max", "est_offset_rms", "true_offset_rms",
             "err_pos_rms", "err_vel_rms", "est_position_rate_mean")
     click.echo(f"{'law':>22} " + " ".join(f"{c:>22}" for c in cols))
     for name, r in res["laws"].items():

@@ -93,3 +93,25 @@ def test_bias_compensation_moves_the_position_by_the_estimators_velocity_bias() 
     np.testing.assert_allclose(off.position_ned_m, plain.position_ned_m)
     assert setpoint(X_REF, U_REF, A_REF, X_P, v, np.zeros(3), TrackingGains(kind="velocity", bias_compensation_s=1.0),
                     velocity_bias=bias).position_ned_m is None
+
+
+def test_acceleration_lead_turns_a_vehicle_lag_tau_into_lag_t() -> None:
+    """accel_lead_s: a reference acceleration step, sent through the lead-lag and then through the
+    vehicle's own first-order lag tau, arrives as if through a lag T (accel_lead_filter_s); off, it
+    is sent as it is."""
+    from mission.core.tracking import lead_acceleration
+
+    tau, t_lag, dt = 0.28, 0.1, 0.002
+    g = TrackingGains(kind="full", accel_lead_s=tau, accel_lead_filter_s=t_lag)
+    lp, felt = None, 0.0
+    a_ref = np.zeros(3)
+    sent, lp = lead_acceleration(a_ref, lp, g, dt)
+    np.testing.assert_allclose(sent, a_ref)  # no kick at the start
+    step = np.array([1.0, 0.0, 0.0])
+    for k in range(1, 400):  # 0.8 s
+        sent, lp = lead_acceleration(step, lp, g, dt)
+        felt += (sent[0] - felt) * (1.0 - np.exp(-dt / tau))  # the vehicle's lag
+        if k in (50, 100, 200):  # 0.1, 0.2, 0.4 s
+            assert felt == pytest.approx(1.0 - np.exp(-k * dt / t_lag), abs=0.03)
+    off, _ = lead_acceleration(step, np.zeros(3), TrackingGains(kind="full"), dt)
+    np.testing.assert_allclose(off, step)
