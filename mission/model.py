@@ -68,6 +68,7 @@ def mission_model(cfg: Config) -> MissionModel:
                                drag_ff_per_s=m.drag_ff_per_s, integral_window_m=m.integral_window_m,
                                damping_per_s=m.damping_per_s, bias_compensation_s=m.bias_compensation_s,
                                accel_lead_s=m.accel_lead_s, accel_lead_filter_s=m.accel_lead_filter_s,
+                               accel_limit_m_s2=command.max_accel_m_s2,
                                slow_lag_m=m.reference_slow_lag_m, stop_lag_m=m.reference_stop_lag_m),
         carrier_dt_s=1.0 / cfg.carrier.rate_hz,
         join_settle_m=min(m.dock_tolerance_m, m.join_settle_m if m.join_settle_m is not None else m.dock_tolerance_m),

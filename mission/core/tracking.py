@@ -10,7 +10,8 @@ acceleration ``a_ref``); this module turns it into the setpoint sent to PX4 (``m
   damping; with ``bias_compensation_s`` ``s`` [s] the position also carries ``+ s b``, ``b`` the
   estimator's velocity less its position's rate (its bias, ``mission.velocity_bias_tau_s``):
   with ``s = 1 / MPC_XY_P`` PX4's velocity setpoint then carries ``+ b`` and the bias no longer
-  moves the position PX4 holds.
+  moves the position PX4 holds. The acceleration sent is clamped to ``accel_limit_m_s2``
+  (the command's acceleration limit): PX4 flies the last setpoint on through a stall of ours.
 
 The integral ``i`` ([m/s^2] full, [m/s] velocity) acts on the position error, clamped to
 ``integral_limit``, and integrates only within ``integral_window_m`` [m] of the reference. After
@@ -47,6 +48,7 @@ class TrackingGains:
     bias_compensation_s: float = 0.0
     accel_lead_s: float = 0.0
     accel_lead_filter_s: float = 0.1
+    accel_limit_m_s2: float | None = None
     slow_lag_m: float | None = None
     stop_lag_m: float | None = None
 
@@ -88,6 +90,10 @@ def setpoint(x_ref: np.ndarray, u_ref: np.ndarray, a_ref: np.ndarray, x_p: np.nd
     accel = a_ref + gains.drag_ff_per_s * u_ref + integral
     if gains.damping_per_s > 0 and v_p is not None:
         accel = accel - gains.damping_per_s * (v_p - u_ref)
+    limit = gains.accel_limit_m_s2
+    size = float(np.linalg.norm(accel))
+    if limit is not None and size > limit:  # PX4 holds the last setpoint through a stall of ours
+        accel = accel * (limit / size)
     position = x_ref + gains.position_lead * (x_ref - x_p)
     if gains.bias_compensation_s > 0 and velocity_bias is not None:
         position = position + gains.bias_compensation_s * velocity_bias

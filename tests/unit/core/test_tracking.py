@@ -115,3 +115,16 @@ def test_acceleration_lead_turns_a_vehicle_lag_tau_into_lag_t() -> None:
             assert felt == pytest.approx(1.0 - np.exp(-k * dt / t_lag), abs=0.03)
     off, _ = lead_acceleration(step, np.zeros(3), TrackingGains(kind="full"), dt)
     np.testing.assert_allclose(off, step)
+
+
+def test_the_acceleration_sent_is_clamped_to_the_commands_limit() -> None:
+    """PX4 flies the last setpoint on through a stall of ours: what we add to the acceleration
+    never exceeds the command's acceleration limit (its direction kept)."""
+    g = TrackingGains(kind="full", drag_ff_per_s=1.0, damping_per_s=2.0, accel_limit_m_s2=3.0)
+    v_p = U_REF + np.array([-2.0, -1.5, 0.0])  # 2.5 m/s slower than the reference: damping asks +5 m/s^2
+    sp = setpoint(X_REF, U_REF, A_REF, X_P, U_REF, np.zeros(3), g, v_p)
+    raw = A_REF + U_REF + 2.0 * (U_REF - v_p)
+    assert np.linalg.norm(sp.acceleration_ned_m_s2) == pytest.approx(3.0)
+    np.testing.assert_allclose(sp.acceleration_ned_m_s2 / 3.0, raw / np.linalg.norm(raw))
+    small = setpoint(X_REF, U_REF, np.zeros(3), X_P, U_REF, np.zeros(3), TrackingGains(kind="full", accel_limit_m_s2=3.0))
+    np.testing.assert_allclose(small.acceleration_ned_m_s2, np.zeros(3))
