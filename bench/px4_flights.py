@@ -3,14 +3,17 @@
 Each flight is a fresh PX4 (SIH quadrotor) in its own network namespace with the carrier
 simulator and ``marsupial run`` beside it (:mod:`sim.sitl.px4`); ``--parallel 2`` flies two at
 once (each PX4 in a namespace of its own). Per flight: P1-P3; the riding offset (largest distance
-from the dock point while RIDING); the last metre (from first within 1 m of the target to
+from the dock point while RIDING; ``riding_2tick_m`` that held for two ticks: a one-tick spike is a
+sample read late after a stall); the last metre (from first within 1 m of the target to
 ARRIVED); the hover speed (mean horizontal speed while the reference sits on the target, until
 the handover); the swing (farthest from the target after first coming within the arrival radius,
 until the mission handed the vehicle to PX4's Hold); the relative command jump at separation; the
 carrier's distance from the target at separation; where PX4's own Hold took it over the next 3 s
 (``hold_m``, farthest from the target; not ours to steer, reported beside); PX4's clock against
 wall time and the LOCAL_POSITION_NED rate that arrived [Hz of wall time]. A flight whose PX4 clock
-ran outside 0.97-1.06x wall time is marked ``clock`` and left out of the verdict. Needs root and
+ran outside 0.97-1.06x wall time is marked ``clock``, one whose controller or carrier process
+stalled for over 0.3 s while flying (``stall_s``: a late tick or an old carrier state; a loaded
+machine, not the loop) ``stall``; both are left out of the verdict. Needs root and
 ``MARSUPIAL_PX4_SITL``.
 
 ``--set section.key=VALUE`` changes the configuration (a TOML value; repeatable), e.g.
@@ -29,7 +32,6 @@ from __future__ import annotations
 
 import json
 import os
-import re
 import subprocess
 import sys
 import time
@@ -38,33 +40,48 @@ from pathlib import Path
 from typing import Any
 
 import click
+import numpy as np
 
 from mission.config.schema import load_config
-from sim.sitl.px4 import build_dir, clock_ratio, px4_flight, unavailable_reason
+from mission.record import read_record
+from sim.sitl.px4 import build_dir, clock_ratio, patched_config, px4_flight, unavailable_reason
 
 ROOT = Path(__file__).resolve().parents[1]
 TARGETS = {"riding_offset_m": 0.20, "last_metre_s": 4.0, "hover_m_s": 0.2, "swing_m": 0.5, "jump_m_s": 0.05, "sep_err_m": 0.01}
 CLOCK_OK = (0.97, 1.06)
-COLUMNS = ("rc", "p1", "p2", "p3", "riding_offset_m", "last_metre_s", "hover_m_s", "swing_m", "jump_m_s", "sep_err_m", "hold_m",
-           "clock", "position_hz", "wall_s")
+STALL_S = 0.3  # a controller tick later than this, or a carrier state this old, while flying: the machine stalled [s]
+COLUMNS = ("rc", "p1", "p2", "p3", "riding_offset_m", "riding_2tick_m", "last_metre_s", "hover_m_s", "swing_m", "jump_m_s", "sep_err_m", "hold_m",
+           "clock", "stall_s", "position_hz", "wall_s")
 
 
-def patched_config(text: str, overrides: dict[str, str]) -> str:
-    """``text`` (TOML) with ``section.key = value`` lines replaced, or added at the top of their
-    section (``value`` a TOML literal)."""
-    for dotted, value in overrides.items():
-        section, key = dotted.rsplit(".", 1)
-        header = re.search(rf"^\[{re.escape(section)}\]\s*$", text, flags=re.M)
-        if header is None:
-            text = f"{text.rstrip()}\n\n[{section}]\n{key} = {value}\n"
-            continue
-        nxt = re.search(r"^\[", text[header.end():], flags=re.M)
-        end = header.end() + (nxt.start() if nxt else len(text) - header.end())
-        body = text[header.end():end]
-        line = re.compile(rf"^{re.escape(key)}\s*=.*$", flags=re.M)
-        body = line.sub(f"{key} = {value}", body, count=1) if line.search(body) else f"\n{key} = {value}{body}"
-        text = text[:header.end()] + body + text[end:]
-    return text
+def stall_s(log_dir: Path) -> float | None:
+    """The longest the flight was stalled while RIDING to ARRIVED [s]: the larger of the longest
+    gap between controller ticks beyond one period and the oldest carrier state used while riding
+    (a stalled carrier or controller process, not the loop: such flights are left out)."""
+    if not (log_dir / "record.csv").exists():
+        return None
+    r = read_record(log_dir)
+    flying = np.isin(r.phase, ["RIDING", "SEPARATED", "NAVIGATING", "ARRIVED"])
+    if flying.sum() < 2:
+        return None
+    t = r.t[flying]
+    gap = float(np.diff(t).max() - np.median(np.diff(t)))
+    age = r.cols["carrier_age_s"][r.phase == "RIDING"]
+    age = age[np.isfinite(age)]
+    return round(max(gap, float(age.max()) if age.size else 0.0), 3)
+
+
+def riding_sustained_m(log_dir: Path) -> float | None:
+    """The riding offset held for at least two ticks [m]: the largest ``min(off[k], off[k+1])``
+    while RIDING. A one-tick spike is no vehicle's motion (0.3-0.6 m and back within 20 ms) but a
+    sample read late after a stall of the machine (the vehicle's or the carrier's)."""
+    if not (log_dir / "record.csv").exists():
+        return None
+    r = read_record(log_dir)
+    riding = r.phase == "RIDING"
+    off = np.linalg.norm(r.vec("x_p")[riding] - r.vec("dock")[riding], axis=1)
+    off = off[np.isfinite(off)]
+    return round(float(np.minimum(off[:-1], off[1:]).max()), 3) if off.size > 1 else None
 
 
 def _row(s: dict[str, Any], rc: int, t0: float, directory: Path) -> dict[str, Any]:
@@ -74,6 +91,7 @@ def _row(s: dict[str, Any], rc: int, t0: float, directory: Path) -> dict[str, An
             "hover_m_s": s.get("hover_speed_m_s"), "swing_m": s.get("max_target_distance_after_arrival_m"),
             "jump_m_s": s.get("relative_input_jump_m_s"), "sep_err_m": None if sep is None else round(abs(sep - 8.0), 4),
             "position_hz": s.get("position_rate_hz"), "dir": str(directory)}
+
 
 
 def fly_once(config: Path, directory: Path, speed_factor: float, ground_truth_hz: float = 0.0) -> dict[str, Any]:
@@ -86,7 +104,8 @@ def fly_once(config: Path, directory: Path, speed_factor: float, ground_truth_hz
     path = f.log_dir / "summary.json"
     s = json.loads(path.read_text()) if path.exists() else {}
     clock = clock_ratio(f.log_dir / "flight.tlog") if (f.log_dir / "flight.tlog").exists() else None
-    return {**_row(s, rc, t0, directory), "hold_m": round(after, 3), "clock": round((clock or {}).get("ratio", float("nan")), 3)}
+    return {**_row(s, rc, t0, directory), "hold_m": round(after, 3), "clock": round((clock or {}).get("ratio", float("nan")), 3),
+            "stall_s": stall_s(f.log_dir), "riding_2tick_m": riding_sustained_m(f.log_dir)}
 
 
 def fly_mock(config: Path, directory: Path, speed: float) -> dict[str, Any]:
@@ -98,11 +117,17 @@ def fly_mock(config: Path, directory: Path, speed: float) -> dict[str, Any]:
                            "--log-root", str(directory), "--plot", str(directory / "flight.png"), "--timeout", "300"],
                           capture_output=True, text=True, cwd=ROOT)
     s = json.loads((directory / "pair0" / "summary.json").read_text())
-    return {**_row(s, proc.returncode, t0, directory), "hold_m": None, "clock": None}
+    return {**_row(s, proc.returncode, t0, directory), "hold_m": None, "clock": None, "stall_s": stall_s(directory / "pair0"),
+            "riding_2tick_m": riding_sustained_m(directory / "pair0")}
 
 
 def clock_ok(row: dict[str, Any]) -> bool:
     return row["clock"] is None or CLOCK_OK[0] <= row["clock"] <= CLOCK_OK[1]
+
+
+def usable(row: dict[str, Any]) -> bool:
+    """PX4's clock near wall time and no stall of the machine (``STALL_S``) while flying."""
+    return clock_ok(row) and (row["stall_s"] is None or row["stall_s"] <= STALL_S)
 
 
 def meets(row: dict[str, Any]) -> bool:
@@ -127,8 +152,11 @@ def _fmt(value: Any) -> str:
               help="real PX4 SITL, or the mock vehicle (marsupial demo with the same config; 'clock' is its speed)")
 @click.option("--mock-speed", type=float, default=2.0, show_default=True)
 @click.option("--json", "json_path", type=click.Path(dir_okay=False), default=None)
+@click.option("--record-figures", type=click.Path(dir_okay=False), default=None,
+              help="Write the usable flights' riding offset, last metre and hover speed (and their means) to this "
+                   "JSON file: tests/data/px4_hold_figures.json, what the mock is held to.")
 def main(flights: int, config: str, sets: tuple[str, ...], out: str | None, speed_factor: float, parallel: int,
-         ground_truth: bool, vehicle: str, mock_speed: float, json_path: str | None) -> None:
+         ground_truth: bool, vehicle: str, mock_speed: float, json_path: str | None, record_figures: str | None) -> None:
     why = unavailable_reason() if vehicle == "px4" else None
     if why:
         raise click.ClickException(why)
@@ -159,15 +187,31 @@ def main(flights: int, config: str, sets: tuple[str, ...], out: str | None, spee
         for i, fut in enumerate(futures):
             row = fut.result()
             rows.append(row)
-            verdict = "clock" if not clock_ok(row) else ("met" if meets(row) else "MISSED")
+            verdict = "clock" if not clock_ok(row) else "stall" if not usable(row) else ("met" if meets(row) else "MISSED")
             click.echo(f"{i:>6} " + " ".join(f"{_fmt(row[c]):>15}" for c in COLUMNS) + f"  {verdict}")
-    good = [r for r in rows if clock_ok(r)]
+    good = [r for r in rows if usable(r)]
     ok = sum(meets(r) for r in good)
     worst = {k: max((r[k] for r in good if r[k] is not None), default=None) for k in TARGETS}
-    click.echo(f"{ok}/{len(good)} flights with PX4's clock within {CLOCK_OK} meet every target ({TARGETS}, P1-P3); "
-               f"worst: {worst}; logs in {base}")
+    click.echo(f"{ok}/{len(good)} flights with PX4's clock within {CLOCK_OK} and no stall over {STALL_S} s meet every target "
+               f"({TARGETS}, P1-P3); worst: {worst}; logs in {base}")
     if json_path:
         Path(json_path).write_text(json.dumps(rows, indent=2))
+    if record_figures:
+        write_figures(Path(record_figures), [json.loads((Path(r["dir"]) / "flight" / "summary.json").read_text()) for r in good],
+                      f"python -m bench.px4_flights -n {flights} --config {config} " + " ".join(f"--set {x}" for x in sets))
+
+
+FIGURES = ("max_offset_before_separation_m", "last_metre_s", "hover_speed_m_s")
+
+
+def write_figures(path: Path, summaries: list[dict[str, Any]], command: str) -> None:
+    """The figures the mock is held to: per flight and their means (``summary.json`` keys)."""
+    flights = [{k: s[k] for k in FIGURES} for s in summaries if all(s.get(k) is not None for k in FIGURES)]
+    path.write_text(json.dumps({
+        "what": "real PX4 SITL flights of configs/px4_sitl.toml (SIH quadrotor, PX4_SIM_SPEED_FACTOR 1.03); the flights "
+                "whose PX4 clock ran off or whose processes stalled left out (bench/px4_flights.py)",
+        "command": command, "flights": flights,
+        "mean": {k: round(float(np.mean([f[k] for f in flights])), 4) for k in FIGURES}}, indent=2) + "\n")
 
 
 if __name__ == "__main__":
