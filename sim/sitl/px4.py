@@ -253,6 +253,26 @@ def clock_ratio_of(rx_s: Any, boot_s: Any) -> float:
     return float(np.polyfit(rx_a - rx_a[0], boot_a - boot_a[0], 1)[0])
 
 
+def patched_config(text: str, overrides: dict[str, str]) -> str:
+    """``text`` (TOML) with ``section.key = value`` lines replaced, or added at the top of their
+    section (``value`` a TOML literal): a scenario beside a shipped config."""
+    import re
+
+    for dotted, value in overrides.items():
+        section, key = dotted.rsplit(".", 1)
+        header = re.search(rf"^\[{re.escape(section)}\]\s*$", text, flags=re.M)
+        if header is None:
+            text = f"{text.rstrip()}\n\n[{section}]\n{key} = {value}\n"
+            continue
+        nxt = re.search(r"^\[", text[header.end():], flags=re.M)
+        end = header.end() + (nxt.start() if nxt else len(text) - header.end())
+        body = text[header.end():end]
+        line = re.compile(rf"^{re.escape(key)}\s*=.*$", flags=re.M)
+        body = line.sub(f"{key} = {value}", body, count=1) if line.search(body) else f"\n{key} = {value}{body}"
+        text = text[:header.end()] + body + text[end:]
+    return text
+
+
 @dataclass
 class Px4Flight:
     """The mission flown on a fresh PX4 in its own namespace: PX4, the carrier simulator and

@@ -3,7 +3,9 @@ network namespace, stopped by its pid (:mod:`sim.sitl.px4`). About 40 s of wall 
 flights fly at once (``conftest.px4_jobs``), each test checks its own.
 
 PX4's clock is measured against ours in every flight (from the flight's tlog) and must stay near
-wall time: ``PX4_SIM_SPEED_FACTOR`` 1.03 makes up for SIH's loop falling behind here.
+wall time: ``PX4_SIM_SPEED_FACTOR`` 1.03 makes up for SIH's loop falling behind here. Three
+scenarios hold the dock and the target (docs/px4-hold.md): the shipped config, a Remark-1 carrier
+with the target at another bearing and height, and a carrier at 2.5 m/s.
 """
 from __future__ import annotations
 
@@ -15,7 +17,7 @@ import pytest
 
 from mission.mavlink import px4
 from mission.config.schema import load_config
-from sim.sitl.px4 import clock_ratio, px4_flight
+from sim.sitl.px4 import clock_ratio, patched_config, px4_flight
 from sim.net import wait_for
 from tests.conftest import CONFIGS
 from tests.px4_sitl.conftest import px4_job
@@ -42,22 +44,42 @@ def _check_clock(log_dir: Path) -> dict[str, float]:
     return clock
 
 
+# What holding a point on PX4 must give (docs/px4-hold.md; the issue's targets with a margin for a
+# loaded machine: riding 0.20 m, last metre 4 s, hover 0.2 m/s; measured 0.13-0.2 m, 1.7-2.5 s,
+# 0.15-0.25 m/s in quiet flights).
+RIDING_OFFSET_M = 0.25  # the largest distance from the dock point while riding
+LAST_METRE_S = 5.0  # first within 1 m of the target -> ARRIVED
+HOVER_SPEED_M_S = 0.3  # mean horizontal speed while the reference sits on the target
+ARRIVAL_RADIUS_M = 0.5  # once within it, never farther from the target again
+
+
+def _scenario(directory: Path, name: str, overrides: dict[str, str]) -> Path:
+    """``configs/px4_sitl.toml`` with ``section.key = value`` lines changed (TOML values)."""
+    config = directory / f"{name}.toml"
+    config.write_text(patched_config(PX4_SITL.read_text(), overrides))
+    load_config(config)
+    return config
+
+
 def _flown(f, config: Path) -> dict:
     rc = f.wait_mission(180.0)
     assert rc == 0, f"mission exit {rc}: {f.text('mission.out')[-1500:]}{f.text('mission.err')[-1500:]}"
     target = load_config(config).scenario.target
     after = f.watch_after(target, 2.0)  # PX4's own Hold once the mission has ended
     s = f.summary()
-    print(json.dumps({k: s.get(k) for k in ("p1", "p2", "p3", "max_offset_before_separation_m",
+    print(json.dumps({k: s.get(k) for k in ("p1", "p2", "p3", "max_offset_before_separation_m", "last_metre_s", "hover_speed_m_s",
                                             "max_target_distance_after_arrival_m", "relative_input_jump_m_s",
                                             "carrier_target_distance_at_separation_m", "position_rate_hz")}), f"hold {after:.2f} m")
     assert s["p1"] and s["p2"] and s["p3"], s
     assert abs(s["carrier_target_distance_at_separation_m"] - 8.0) < 0.01
-    assert s["relative_input_jump_m_s"] <= 0.1  # the law's command is continuous at separation
+    assert s["relative_input_jump_m_s"] <= 0.05  # the law's command is continuous at separation
     assert s["position_rate_hz"] >= 40.0, "PX4 did not stream LOCAL_POSITION_NED at the rate asked (50 Hz)"
+    assert s["max_offset_before_separation_m"] <= RIDING_OFFSET_M
+    assert s["last_metre_s"] is not None and s["last_metre_s"] <= LAST_METRE_S, s["last_metre_s"]
+    assert s["hover_speed_m_s"] is not None and s["hover_speed_m_s"] <= HOVER_SPEED_M_S, s["hover_speed_m_s"]
+    assert s["max_target_distance_after_arrival_m"] <= ARRIVAL_RADIUS_M  # once within 0.5 m, never outside
     # PX4's own Hold, after we handed the vehicle over inside the arrival radius: no swing back out
-    # (the 1-1.4 m swing of the velocity-only loop). Its SIH EKF wanders 0.1-0.3 m; handed over 0.08 m
-    # from the target at 0.3 m/s, it was once seen to hold 0.60 m away (usually 0.2-0.5 m).
+    # (its SIH EKF holds its own estimate 0.4 m RMS off a point: docs/px4-hold.md).
     assert after <= 0.75, f"PX4's Hold drifted {after:.2f} m from the target"
     _check_clock(f.log_dir)
     return s
@@ -70,11 +92,18 @@ def _fly_config(directory: Path, build: Path) -> dict:
 
 
 @px4_job("remark1")
-def _fly_remark1(directory: Path, build: Path) -> dict:
-    config = directory / "remark1.toml"
-    text = PX4_SITL.read_text()
-    assert 'carrier_mode = "stop"' in text
-    config.write_text(text.replace('carrier_mode = "stop"', 'carrier_mode = "remark1"'))
+def _fly_remark1_to_another_bearing_and_height(directory: Path, build: Path) -> dict:
+    """A Remark-1 carrier (keeps its plan after separation), and the target at another bearing
+    (north-west instead of north-east) and 3 m higher."""
+    config = _scenario(directory, "remark1", {"scenario.carrier_mode": '"remark1"', "scenario.target": "[-18.0, 24.0, -8.0]"})
+    with px4_flight(directory / "f", config, build=build, speed_factor=SPEED_FACTOR) as f:
+        return _flown(f, config)
+
+
+@px4_job("fast")
+def _fly_a_fast_carrier(directory: Path, build: Path) -> dict:
+    """The carrier at 2.5 m/s (the shipped config: 2.0)."""
+    config = _scenario(directory, "fast", {"carrier.max_speed_m_s": "2.5", "safety.carrier_max_speed_m_s": "2.5"})
     with px4_flight(directory / "f", config, build=build, speed_factor=SPEED_FACTOR) as f:
         return _flown(f, config)
 
@@ -105,15 +134,19 @@ def _fly_and_kill_the_controller(directory: Path, build: Path) -> None:
 
 
 @pytest.mark.px4_job("config")
-def test_px4_sitl_config_flies_p1_to_p3(px4_jobs) -> None:
-    s = px4_jobs["config"].result()
-    assert s["max_offset_before_separation_m"] <= 0.5
+def test_px4_sitl_config_holds_the_dock_and_the_target(px4_jobs) -> None:
+    px4_jobs["config"].result()
 
 
 @pytest.mark.px4_job("remark1")
-def test_remark1_carrier_keeps_its_plan_and_never_reaches_the_target(px4_jobs) -> None:
+def test_remark1_carrier_and_another_bearing_and_height(px4_jobs) -> None:
     s = px4_jobs["remark1"].result()
-    assert s["min_carrier_target_distance_m"] > 0.0
+    assert s["min_carrier_target_distance_m"] > 0.0  # the carrier kept its plan, never at the target
+
+
+@pytest.mark.px4_job("fast")
+def test_a_carrier_at_2_5_m_s(px4_jobs) -> None:
+    px4_jobs["fast"].result()
 
 
 @pytest.mark.px4_job("killed")
