@@ -121,6 +121,10 @@ def test_quadrotor_and_rover_on_px4_each_in_offboard_p1_p3_and_the_rover_stops_o
     # rover under it (carrier.state_timeout_s): that alone can cost 0.6-1 m.
     assert s["p1"], s["max_offset_before_separation_m"]
     assert s["final_passenger_target_distance_m"] <= 0.5  # the passenger arrived
+    # ... and held the target as on the quadrotor flights (test_px4_flights, docs/px4-hold.md)
+    assert s["last_metre_s"] is not None and s["last_metre_s"] <= 5.0, s["last_metre_s"]
+    assert s["hover_speed_m_s"] is not None and s["hover_speed_m_s"] <= 0.3, s["hover_speed_m_s"]
+    assert s["max_target_distance_after_arrival_m"] <= 0.5  # once within 0.5 m, never outside
     assert c["backend"] == "mavlink" and c["mode"] == "separated"
     assert c["closest_target_distance_m"] >= 8.0 - 0.5  # b c - 0.5 m: the rover stops short of it
     assert c["braking_displacement_m"] is not None and np.isfinite(c["braking_displacement_m"])
