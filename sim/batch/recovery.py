@@ -1,0 +1,554 @@
+"""Monte-Carlo of the recovery: whole missions flown in-process, the mission's own phase machine
+against the mock vehicle's own dynamics and a kinematic carrier (no sockets, threads or clocks).
+
+One scenario (:func:`fly`) is a whole mission of a ``final_action = "return"`` configuration,
+deploy, task, return and dock, ticked as the lockstep demo ticks it:
+
+- the passenger: :func:`mission.phases.step` every ``1 / mission.rate_hz`` [s], on what the
+  controller sees in lockstep (the vehicle's reported position and velocity sampled at the tick,
+  the carrier's newest state with its age); its setpoint goes to the vehicle at once, its
+  requests (arm, OFFBOARD, Hold, Land) are carried out at once;
+- the vehicle: the mock's commander (:class:`sim.vehicle.modes.Commander`) and PX4's position
+  controller on the fitted airframe (:func:`sim.vehicle.physics.multicopter.step`) in the mock's
+  fixed physics steps, the setpoint decoded by the mock's own MAVLink rules; optionally the
+  wander of PX4's estimate (:mod:`sim.vehicle.estimator`), seeded;
+- the carrier: the built-in kinematic robot (holonomic) at ``carrier.rate_hz``, following the
+  passenger's duty as ``marsupial carrier`` does: CARRY the paper's law, filtered, under the P3
+  guard; RECOVER the scenario's steady course (speed, heading), with its turn during the first
+  approach, filtered and guarded; otherwise it stops. It sees the status of the tick before.
+
+A :class:`Scenario` is replayable from its fields (the seed only drives the estimate's wander).
+:func:`monte_carlo` flies a list of them; its report holds the rates and the contact figures.
+The figures of each flight are those of the flight log's ``summary.json``
+(:func:`mission.record.summary_of` on the same columns). Frames: local NED [m], [m/s]; time [s]
+from the start of the mission.
+"""
+from __future__ import annotations
+
+import copy
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from mission.carrier.guard import GuardParams, P3Guard
+from mission.config.schema import Config
+from mission.controller import mission_info, recovered_info
+from mission.core.safety import filter_velocity
+from mission.core.setpoint import Setpoint
+from mission.core.tick import carrier_tick
+from mission.flight_mode import FlightMode
+from mission.interfaces import Request
+from mission.mavlink import setpoints
+from mission.model import mission_model, model_from_config
+from mission.phases import CarrierObs, Decision, MissionState, Observation, Phase, VehicleObs, finished, step
+from mission.phases.phase import Duty
+from mission.record import COLUMNS, VEC, FlightRecord, summary_of
+from sim.vehicle.estimator import EstimateDrift, flown_on_estimate
+from sim.vehicle.mock import PHYSICS_DT_S
+from sim.vehicle.modes import Commander
+from sim.vehicle.params import ParamTable, vehicle_limits
+from sim.vehicle.physics.multicopter import initial_state, step as physics_step
+from sim.vehicle.protocol import setpoint_of
+from sim.vehicle.telemetry import PositionNoise
+
+#: The mode each request of the phases switches to (as the controller's commands do).
+MODES_OF_REQUEST = {Request.OFFBOARD: FlightMode.OFFBOARD, Request.HOLD: FlightMode.HOLD, Request.LAND: FlightMode.LAND}
+SPEED_RANGE_M_S = (0.0, 2.0)  # [m/s] the carrier's speed on its recovery course
+TURN_MAX_DEG = 45.0  # [deg] largest turn during the approach
+TURN_RATE_RANGE_DEG_S = (5.0, 30.0)  # [deg/s] how fast it turns
+TURN_START_RANGE_S = (0.0, 8.0)  # [s] after the first approach began
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """One recovery: the carrier's recovery course ``speed_m_s`` [m/s] on ``heading_deg`` [deg]
+    (NED: 0 north, 90 east), and its turn of ``turn_deg`` [deg] (signed, clockwise positive) at
+    ``turn_rate_deg_s`` [deg/s] that begins ``turn_after_s`` [s] after the first approach
+    began; ``estimate_drift_m_s`` [m/s] the wander of the vehicle's estimate (0: exact), seeded
+    by ``seed``. ``index``: its place in its batch (the same seed gives the same batch)."""
+
+    speed_m_s: float
+    heading_deg: float
+    turn_deg: float = 0.0
+    turn_rate_deg_s: float = 10.0
+    turn_after_s: float = 0.0
+    estimate_drift_m_s: float = 0.0
+    seed: int = 0
+    index: int = 0
+
+    def course_heading_deg(self, since_approach_s: float | None) -> float:
+        """The course's heading [deg] ``since_approach_s`` [s] after the first approach began (None: not yet)."""
+        if since_approach_s is None or since_approach_s <= self.turn_after_s:
+            return self.heading_deg
+        turned = min(abs(self.turn_deg), self.turn_rate_deg_s * (since_approach_s - self.turn_after_s))
+        return self.heading_deg + math.copysign(turned, self.turn_deg)
+
+    def as_dict(self) -> dict[str, float]:
+        return {"index": self.index, "speed_m_s": round(self.speed_m_s, 3), "heading_deg": round(self.heading_deg, 1),
+                "turn_deg": round(self.turn_deg, 1), "turn_rate_deg_s": round(self.turn_rate_deg_s, 1),
+                "turn_after_s": round(self.turn_after_s, 2), "estimate_drift_m_s": self.estimate_drift_m_s,
+                "seed": self.seed}
+
+
+def random_scenarios(count: int, seed: int, estimate_drift_m_s: float = 0.0) -> list[Scenario]:
+    """``count`` scenarios drawn with ``seed``: speed uniform in :data:`SPEED_RANGE_M_S`, heading
+    uniform over the circle, a turn uniform in +-:data:`TURN_MAX_DEG` at a rate uniform in
+    :data:`TURN_RATE_RANGE_DEG_S` beginning uniformly in :data:`TURN_START_RANGE_S` after the
+    first approach began."""
+    rng = np.random.default_rng(seed)
+    return [Scenario(speed_m_s=float(rng.uniform(*SPEED_RANGE_M_S)), heading_deg=float(rng.uniform(0.0, 360.0)),
+                     turn_deg=float(rng.uniform(-TURN_MAX_DEG, TURN_MAX_DEG)),
+                     turn_rate_deg_s=float(rng.uniform(*TURN_RATE_RANGE_DEG_S)),
+                     turn_after_s=float(rng.uniform(*TURN_START_RANGE_S)), estimate_drift_m_s=estimate_drift_m_s,
+                     seed=int(rng.integers(0, 2**31 - 1)), index=i) for i in range(count)]
+
+
+# ---------------------------------------------------------------------------------------- carrier
+
+
+class KinematicCarrier:
+    """The built-in holonomic carrier robot and the part of ``marsupial carrier`` that drives it
+    (:mod:`mission.carrier.controller` with the ``sim`` backend): position [m], velocity [m/s]
+    NED in the plane of ``scenario.carrier_start``; yaw [rad] the heading of travel."""
+
+    def __init__(self, cfg: Config, scenario: Scenario) -> None:
+        self.cfg, self.scenario = cfg, scenario
+        model = model_from_config(cfg)
+        limit = cfg.carrier.max_speed_m_s
+        if model.carrier_safety.max_speed_m_s is not None:
+            limit = min(limit, model.carrier_safety.max_speed_m_s)
+        self.model = replace(model, carrier_safety=replace(model.carrier_safety, max_speed_m_s=limit))
+        c = cfg.carrier
+        decel = c.brake_decel_m_s2 or cfg.safety.carrier_max_accel_m_s2 or 1.0
+        delay = c.brake_delay_s if c.brake_delay_s is not None else 0.0  # the built-in robot obeys at once
+        self.guard = P3Guard(GuardParams(cfg.law.b * cfg.law.c - c.p3_margin_m, decel, delay, 1.0 / c.rate_hz),
+                             np.asarray(cfg.scenario.target, dtype=float), planar=True)
+        self.period_s = 1.0 / c.rate_hz
+        self.position = np.array(cfg.scenario.carrier_start, dtype=float)
+        self.velocity = np.zeros(3)
+        e_tc = np.asarray(cfg.scenario.target, dtype=float) - self.position
+        self.yaw_rad = math.atan2(e_tc[1], e_tc[0]) if c.start_yaw_rad is None else float(c.start_yaw_rad)
+        self.t_s = 0.0  # [s] the time of its state (its last step)
+        self.done = 0  # steps taken (the next is at done * period_s)
+        self.carrying = False  # the law's approach began (APPROACHING)
+        self.separated = False  # the latch fired (SEPARATED: stop, or Remark 1's plan)
+        self.course_begun = False  # it has driven the scenario's recovery course
+
+    def next_step_s(self) -> float:
+        """When [s] it steps next (every ``1 / carrier.rate_hz`` from 0)."""
+        return self.done * self.period_s
+
+    def step(self, phase: Phase | None, approach_s: float | None) -> None:
+        """Step at :meth:`next_step_s`: move there under the held command, then decide the next
+        command for the passenger's ``phase`` (None: none heard yet); ``approach_s`` [s]: when
+        the first approach began (None: not yet)."""
+        t_s = self.next_step_s()
+        dt = t_s - self.t_s
+        self.position = self.position + self.velocity * dt
+        self.t_s = t_s
+        self.done += 1
+        since_approach_s = None if approach_s is None else t_s - approach_s
+        duty = phase.duty if phase is not None else Duty.WAIT
+        if duty is Duty.CARRY and not self.separated:
+            self.carrying = True
+        if duty not in (Duty.WAIT, Duty.CARRY):
+            self.separated = True
+        x_c = self.position
+        if self.carrying and not self.separated:
+            u = np.asarray(carrier_tick(x_c, False, self.model, u_prev=self.velocity, dt_s=dt or None).u, dtype=float)
+        else:
+            want = np.zeros(3)
+            if duty is Duty.RECOVER:
+                self.course_begun = True
+                heading = math.radians(self.scenario.course_heading_deg(since_approach_s))
+                want[:2] = self.scenario.speed_m_s * np.array([math.cos(heading), math.sin(heading)])
+            safe = filter_velocity(x_c[:2], want[:2], self.model.carrier_obstacles, self.model.carrier_safety,
+                                   self.velocity[:2], dt or None)
+            u = np.zeros(3)
+            u[:2] = np.asarray(safe.u, dtype=float)
+        u = np.asarray(self.guard.limit(t_s, x_c, u, self.velocity, 0.0).u, dtype=float)
+        u[2] = 0.0
+        self.velocity = u
+        if math.hypot(u[0], u[1]) > 1e-6:
+            self.yaw_rad = math.atan2(u[1], u[0])
+
+    def observed(self, t_s: float) -> CarrierObs:
+        """The newest published state as the passenger sees it at ``t_s`` [s]."""
+        return CarrierObs(position_ned_m=self.position.copy(), velocity_ned_m_s=self.velocity.copy(),
+                          age_s=max(t_s - self.t_s, 0.0), alive=True, yaw_rad=self.yaw_rad)
+
+
+# ---------------------------------------------------------------------------------------- vehicle
+
+
+class MockDynamics:
+    """The mock vehicle without its sockets: the commander and the physics of
+    :class:`sim.vehicle.mock.MockVehicle`, stepped in its fixed physics steps (its
+    ``_advance_steps``), the estimate's wander when asked; what it reports is the estimate."""
+
+    def __init__(self, start_ned_m: Sequence[float], drift_m_s: float = 0.0, seed: int = 0,
+                 params: dict[str, float] | None = None) -> None:
+        self.kin = initial_state(tuple(float(x) for x in start_ned_m))  # type: ignore[arg-type]
+        self.params = ParamTable(dict(params or {}), 1)
+        self.limits = vehicle_limits(self.params)
+        self.commander = Commander(self.params, self.kin)
+        self.drift = EstimateDrift(drift_m_s, seed=seed) if drift_m_s > 0 else None
+        self.noise = PositionNoise(0.0, seed, self.drift)
+        self.steps = 0
+        self.wind = (0.0, 0.0, 0.0)
+
+    def advance_to_step(self, target: int) -> None:
+        """Run the commander and the physics up to physics step ``target``."""
+        commander, kin, limits, drift = self.commander, self.kin, self.limits, self.drift
+        for k in range(self.steps + 1, target + 1):
+            command = commander.step(k * PHYSICS_DT_S, kin)
+            if drift is not None:  # PX4 flies its (wandering) estimate to a position setpoint
+                drift.advance(PHYSICS_DT_S)
+                command = flown_on_estimate(command, drift.offset)
+            kin = physics_step(kin, command, limits, self.wind, PHYSICS_DT_S)
+        self.steps = max(self.steps, target)
+        self.kin = commander.kin = kin
+
+    def observed(self) -> VehicleObs:
+        """The vehicle as the controller sees it: its reported (estimated) position, its velocity."""
+        k, c = self.kin, self.commander
+        return VehicleObs(position_ned_m=np.array(self.noise.apply(k)), velocity_ned_m_s=np.array((k.vn_m_s, k.ve_m_s, k.vd_m_s)),
+                          armed=c.armed, mode=c.mode, heartbeat_age_s=0.0, position_valid=c.position_valid,
+                          position_age_s=0.0, in_failsafe=c.in_failsafe)
+
+    def send(self, t_s: float, sp: Setpoint) -> None:
+        """The setpoint through the one MAVLink encoding and the mock's decoding rules."""
+        trajectory, reason = setpoint_of(setpoints.encode(sp, (1, 1), int(t_s * 1000)), self.kin.yaw_rad)
+        if trajectory is None:
+            self.commander.reject_setpoint(t_s, reason)
+        else:
+            self.commander.accept_setpoint(t_s, trajectory)
+
+    def request(self, t_s: float, request: Request) -> str | None:
+        """Carry out a request; the vehicle's refusal (its STATUSTEXT), or None when accepted."""
+        c = self.commander
+        before = len(c.outbox)
+        result = c.arm(t_s) if request is Request.ARM else c.set_mode(t_s, MODES_OF_REQUEST[request])
+        return None if result == 0 else (c.outbox[-1][2] if len(c.outbox) > before else f"MAV_RESULT {result}")
+
+    @property
+    def true_position(self) -> np.ndarray:
+        return np.array((self.kin.n_m, self.kin.e_m, self.kin.d_m))
+
+
+# ----------------------------------------------------------------------------------------- flight
+
+
+@dataclass
+class Flight:
+    """One flown scenario: ``record`` the flight record (the columns of record.csv, plus
+    ``x_true`` the vehicle's true position [m] and ``course`` the recovery's view of the
+    carrier's course); ``summary`` what summary.json would say; ``state`` the phase machine's
+    last state; ``true_deck_violations`` the deck violations counted on the true position."""
+
+    scenario: Scenario
+    record: FlightRecord
+    summary: dict[str, Any]
+    state: MissionState
+    true_deck_violations: int = 0
+
+    @property
+    def docked(self) -> bool:
+        return bool(self.summary.get("docked_again"))
+
+    @property
+    def attempts(self) -> int:
+        rec = self.state.recovery
+        return 0 if rec is None else rec.attempts
+
+
+@dataclass
+class _Rows:
+    """The flight record's columns as the loop appends them."""
+
+    t: list[float] = field(default_factory=list)
+    phase: list[str] = field(default_factory=list)
+    vecs: dict[str, list[np.ndarray]] = field(default_factory=dict)
+
+    def add(self, t: float, phase: Phase, **vecs: np.ndarray | None) -> None:
+        self.t.append(t)
+        self.phase.append(phase.value)
+        for name, v in vecs.items():
+            self.vecs.setdefault(name, []).append(np.full(3, np.nan) if v is None else np.asarray(v, dtype=float))
+
+    def record(self, info: dict[str, Any]) -> FlightRecord:
+        cols: dict[str, np.ndarray] = {"t_s": np.asarray(self.t)}
+        for name, rows in self.vecs.items():
+            arr = np.asarray(rows, dtype=float).reshape(-1, 3)
+            for i, a in enumerate(VEC):
+                cols[f"{name}_{a}"] = arr[:, i]
+        for name in COLUMNS:  # the scalar columns the summary does not read
+            cols.setdefault(name, np.full(len(self.t), np.nan))
+        return FlightRecord(t=np.asarray(self.t), phase=np.asarray(self.phase, dtype=str), cols=cols, info=info)
+
+
+class World:
+    """A mission in flight: the phase machine's state, the vehicle, the carrier and the record so
+    far; :meth:`tick` advances it by one controller tick. :meth:`copy` branches it: the flights
+    of a batch share the part before the recovery (:func:`monte_carlo`)."""
+
+    def __init__(self, cfg: Config, scenario: Scenario, max_duration_s: float | None = None) -> None:
+        self.cfg, self.model = cfg, mission_model(cfg)
+        if self.model.recovery is None:
+            raise ValueError("the recovery simulation needs mission.final_action = \"return\"")
+        self.dt_s = self.model.dt_s
+        self.steps_per_tick = int(round(self.dt_s / PHYSICS_DT_S))
+        if abs(self.steps_per_tick * PHYSICS_DT_S - self.dt_s) > 1e-12:
+            raise ValueError(f"mission.rate_hz must divide the mock's physics rate ({1 / PHYSICS_DT_S:g} Hz)")
+        self.vehicle = MockDynamics(cfg.scenario.carrier_start, scenario.estimate_drift_m_s, scenario.seed)
+        self.carrier = KinematicCarrier(cfg, scenario)
+        self.state = MissionState()
+        self.rows = _Rows()
+        self.published: Phase | None = None  # the status the carrier hears
+        self.approach_s: float | None = None  # when the first approach began [s]
+        self.failed: dict[str, str] = {}
+        self.limit_s = max_duration_s if max_duration_s is not None else self.model.max_duration_s + 30.0
+        self.k = 0
+        self.done = False
+
+    @property
+    def scenario(self) -> Scenario:
+        return self.carrier.scenario
+
+    def copy(self) -> World:
+        """An independent copy (the configuration, the model and the vehicle's parameters,
+        which never change in flight, shared)."""
+        shared = (self.cfg, self.model, self.vehicle.params, self.vehicle.limits)
+        return copy.deepcopy(self, memo={id(x): x for x in shared})
+
+    def with_scenario(self, scenario: Scenario) -> World:
+        """This world flying ``scenario`` from now on; only before the carrier drives its recovery
+        course, and with the same estimate (what differs between scenarios)."""
+        if self.carrier.course_begun or scenario.estimate_drift_m_s != self.scenario.estimate_drift_m_s \
+                or (scenario.estimate_drift_m_s > 0 and scenario.seed != self.scenario.seed):
+            raise ValueError("a world takes another scenario only before the recovery, with the same estimate")
+        self.carrier.scenario = scenario
+        return self
+
+    def tick(self) -> None:
+        """One controller tick at ``k * dt``: the carrier's steps due, the vehicle brought to the
+        tick, the phase machine, its setpoint and request carried out, the row recorded."""
+        t = self.k * self.dt_s
+        carrier, vehicle = self.carrier, self.vehicle
+        while carrier.next_step_s() <= t + 1e-9:  # the carrier steps first, on the status of the tick before
+            carrier.step(self.published, self.approach_s)
+        vehicle.advance_to_step(self.k * self.steps_per_tick)
+        obs = Observation(t_s=t, vehicle=vehicle.observed(), carrier=carrier.observed(t), failed=dict(self.failed))
+        self.state, dec = step(self.state, obs, self.model)
+        if dec.setpoint is not None:
+            vehicle.send(t, dec.setpoint)
+        if dec.request is not None and dec.request.value not in self.failed:
+            why = vehicle.request(t, dec.request)
+            if why is not None and dec.request in (Request.ARM, Request.OFFBOARD):
+                self.failed[dec.request.value] = why
+        self.published = self.state.phase
+        if self.approach_s is None and self.state.phase is Phase.APPROACH:
+            self.approach_s = t
+        _record(self.rows, t, self.state, obs, dec, vehicle)
+        self.k += 1
+        self.done = finished(self.state, dec) or t >= self.limit_s
+
+    def run(self, until: Callable[[World], bool] | None = None) -> World:
+        """Tick until the mission ends (or ``until(self)`` holds)."""
+        while not self.done and not (until is not None and until(self)):
+            self.tick()
+        return self
+
+    def flight(self) -> Flight:
+        """The flight so far, with its summary."""
+        st = self.state
+        info = mission_info(self.cfg)
+        info.update(separation_time_s=st.separation_time_s,
+                    anchor_ned_m=None if st.anchor is None else st.anchor.tolist(), recovered=recovered_info(st))
+        record = self.rows.record(info)
+        summary = summary_of(record)
+        summary.update(phase=st.phase.value, reason=None if st.reason is None else st.reason.value, detail=st.detail,
+                       ticks=self.k)
+        true = summary_of(replace(record, cols={**record.cols, **{f"x_p_{a}": record.cols[f"x_true_{a}"] for a in VEC}}))
+        return Flight(self.scenario, record, summary, st, int(true.get("deck_violations") or 0))
+
+
+def fly(cfg: Config, scenario: Scenario, max_duration_s: float | None = None) -> Flight:
+    """Fly one whole mission of ``cfg`` (``mission.final_action = "return"``) in ``scenario``."""
+    return World(cfg, scenario, max_duration_s).run().flight()
+
+
+def before_recovery(cfg: Config, estimate_drift_m_s: float = 0.0, seed: int = 0) -> World:
+    """The mission flown up to the first tick of its recovery (the carrier not yet told): what
+    every scenario with this estimate shares."""
+    return World(cfg, Scenario(0.0, 0.0, estimate_drift_m_s=estimate_drift_m_s, seed=seed)).run(
+        lambda w: w.published is not None and w.published.duty is Duty.RECOVER)
+
+
+def _record(rows: _Rows, t: float, state: MissionState, obs: Observation, dec: Decision, vehicle: MockDynamics) -> None:
+    v, c = obs.vehicle, obs.carrier
+    rec = state.recovery
+    rows.add(t, state.phase, x_p=None if v is None else v.position_ned_m, v_p=None if v is None else v.velocity_ned_m_s,
+             x_c=None if c is None else c.position_ned_m, v_c=None if c is None else c.velocity_ned_m_s, dock=dec.dock,
+             x_ref=state.x_ref, u_cmd=None if dec.setpoint is None else dec.setpoint.velocity_ned_m_s,
+             x_true=vehicle.true_position, course=None if rec is None else rec.course)
+
+
+# ------------------------------------------------------------------------------------ Monte-Carlo
+
+
+@dataclass
+class MonteCarloReport:
+    """What a batch of recoveries gave: each flight's figures (``rows``) and the rates over them."""
+
+    rows: list[dict[str, Any]]
+    seed: int | None = None
+
+    @property
+    def count(self) -> int:
+        return len(self.rows)
+
+    def fraction(self, predicate: Callable[[dict[str, Any]], bool]) -> float:
+        return sum(1 for r in self.rows if predicate(r)) / self.count if self.count else float("nan")
+
+    @property
+    def docked_within_1(self) -> float:
+        return self.fraction(lambda r: r["docked"] and r["attempts"] <= 1)
+
+    @property
+    def docked_within_2(self) -> float:
+        return self.fraction(lambda r: r["docked"] and r["attempts"] <= 2)
+
+    @property
+    def docked(self) -> float:
+        return self.fraction(lambda r: r["docked"])
+
+    @property
+    def fallbacks(self) -> dict[str, int]:
+        """{reason: count} of the flights that fell back (reasons with their numbers dropped)."""
+        out: dict[str, int] = {}
+        for r in self.rows:
+            if not r["docked"]:
+                key = _reason_kind(r["outcome"])
+                out[key] = out.get(key, 0) + 1
+        return out
+
+    @property
+    def unsafe(self) -> list[dict[str, Any]]:
+        """Flights that neither docked nor ended safely (a fallback handed to Hold or Land)."""
+        return [r for r in self.rows if not r["docked"] and not r["safe_end"]]
+
+    def contact_percentiles(self, key: str) -> dict[str, float | None]:
+        values = np.array([r["contact"][key] for r in self.rows if r["contact"] is not None], dtype=float)
+        if not values.size:
+            return {"p50": None, "p95": None, "max": None}
+        return {"p50": float(np.percentile(values, 50)), "p95": float(np.percentile(values, 95)),
+                "max": float(values.max())}
+
+    def as_dict(self) -> dict[str, Any]:
+        keys = ("horizontal_error_m", "horizontal_relative_speed_m_s", "vertical_relative_speed_m_s")
+        return {
+            "scenarios": self.count, "seed": self.seed,
+            "docked_within_1_attempt": self.docked_within_1, "docked_within_2_attempts": self.docked_within_2,
+            "docked": self.docked, "fallbacks": self.fallbacks, "unsafe_ends": len(self.unsafe),
+            "contact": {k: self.contact_percentiles(k) for k in keys},
+            "deck_violations": sum(r["deck_violations"] for r in self.rows),
+            "true_deck_violations": sum(r["true_deck_violations"] for r in self.rows),
+            "max_phase_switch_jump_m_s": max((r["max_phase_switch_jump_m_s"] or 0.0) for r in self.rows) if self.rows else None,
+            "p3": all(r["p3"] for r in self.rows),
+            "rows": self.rows,
+        }
+
+
+def _reason_kind(outcome: str) -> str:
+    """A fallback's reason without its numbers (so that equal reasons count together)."""
+    words = [w for w in outcome.replace("fallback: ", "").split() if not any(ch.isdigit() for ch in w)]
+    return " ".join(words)
+
+
+def flight_row(f: Flight) -> dict[str, Any]:
+    """One flight's line of the Monte-Carlo report."""
+    s = f.summary
+    safe_end = f.state.phase is Phase.DONE
+    return {**f.scenario.as_dict(), "docked": f.docked, "attempts": f.attempts, "outcome": s.get("recovery_outcome"),
+            "contact": s.get("contact"), "deck_violations": int(s.get("deck_violations") or 0),
+            "true_deck_violations": f.true_deck_violations, "safe_end": safe_end,
+            "end_phase": f.state.phase.value, "abort": None if f.state.reason is None else f"{f.state.reason}: {f.state.detail}",
+            "max_phase_switch_jump_m_s": s.get("max_phase_switch_jump_m_s"), "p3": bool(s.get("p3")),
+            "flight_time_s": round(float(f.record.t[-1]), 2) if len(f.record.t) else 0.0}
+
+
+def badness(row: dict[str, Any]) -> tuple[int, int, float]:
+    """How bad a flight of the report went, for picking the worst: missed a target (not docked
+    within 2 attempts, an unsafe end, a deck violation) first, then the attempts, then the
+    contact's horizontal error."""
+    missed = (not (row["docked"] and row["attempts"] <= 2)) or not row["safe_end"] or row["deck_violations"] > 0
+    error = row["contact"]["horizontal_error_m"] if row["contact"] else float("inf")
+    return int(missed), row["attempts"], error
+
+
+def monte_carlo(cfg: Config, scenarios: Sequence[Scenario],
+                progress: Callable[[Flight], None] | None = None) -> tuple[MonteCarloReport, Flight | None]:
+    """Fly every scenario (``progress(flight)`` after each); the report and the worst flight
+    (:func:`badness`). Scenarios with an exact estimate share the flight up to the recovery
+    (:func:`before_recovery`: the same flight as :func:`fly` gives, tick for tick)."""
+    rows: list[dict[str, Any]] = []
+    shared: World | None = None
+    worst: tuple[tuple[int, int, float], Flight] | None = None
+    for sc in scenarios:
+        if sc.estimate_drift_m_s > 0:  # each wander is its own from the start
+            f = fly(cfg, sc)
+        else:
+            shared = shared or before_recovery(cfg)
+            f = shared.copy().with_scenario(sc).run().flight()
+        row = flight_row(f)
+        if worst is None or badness(row) > worst[0]:
+            worst = (badness(row), f)
+        rows.append(row)
+        if progress is not None:
+            progress(f)
+    return MonteCarloReport(rows), None if worst is None else worst[1]
+
+
+DOCKED_WITHIN_2_TARGET = 0.99  # the share of scenarios docked within 2 attempts
+
+
+def report_ok(report: MonteCarloReport) -> bool:
+    """The targets: >= :data:`DOCKED_WITHIN_2_TARGET` docked within 2 attempts, every other one
+    fell back safely, no deck violation."""
+    d = report.as_dict()
+    return (report.docked_within_2 >= DOCKED_WITHIN_2_TARGET and not report.unsafe
+            and d["deck_violations"] == 0 and d["true_deck_violations"] == 0)
+
+
+def format_report(report: MonteCarloReport) -> str:
+    """The Monte-Carlo table (what ``marsupial simulate CONFIG --monte-carlo N`` prints)."""
+    d = report.as_dict()
+    n = report.count
+
+    def pct(x: float) -> str:
+        return f"{x:.1%} ({round(x * n)}/{n})"
+
+    def spread(key: str, unit: str) -> str:
+        c = d["contact"][key]
+        return "-" if c["p50"] is None else f"p50 {c['p50']:.3f}  p95 {c['p95']:.3f}  max {c['max']:.3f} {unit}"
+
+    fallbacks = "; ".join(f"{k} x{v}" for k, v in sorted(d["fallbacks"].items())) or "none"
+    rows = [
+        ("docked at the first attempt", pct(report.docked_within_1)),
+        ("docked within 2 attempts", f"{pct(report.docked_within_2)}   target >= {DOCKED_WITHIN_2_TARGET:.0%}"),
+        ("docked at all", pct(report.docked)),
+        ("fell back (reasons)", f"{n - round(report.docked * n)}: {fallbacks}"),
+        ("ended neither docked nor safely", f"{len(report.unsafe)}   target 0"),
+        ("contact: horizontal error", spread("horizontal_error_m", "m")),
+        ("contact: horizontal relative speed", spread("horizontal_relative_speed_m_s", "m/s")),
+        ("contact: vertical relative speed", spread("vertical_relative_speed_m_s", "m/s")),
+        ("deck violations (reported / true position)", f"{d['deck_violations']} / {d['true_deck_violations']}   target 0"),
+        ("largest command jump at a phase switch", f"{d['max_phase_switch_jump_m_s']:.3f} m/s"),
+        ("P3 (the carrier never at the target)", "held" if d["p3"] else "BROKEN"),
+    ]
+    width = max(len(k) for k, _ in rows)
+    return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)
