@@ -27,8 +27,10 @@ from __future__ import annotations
 
 import copy
 import math
+import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -36,6 +38,7 @@ import numpy as np
 from mission.carrier.guard import GuardParams, P3Guard
 from mission.config.schema import Config
 from mission.controller import mission_info, recovered_info
+from mission.core.consistent_velocity import PositionConsistentVelocity
 from mission.core.safety import filter_velocity
 from mission.core.setpoint import Setpoint
 from mission.core.tick import carrier_tick
@@ -115,6 +118,9 @@ class KinematicCarrier:
     NED in the plane of ``scenario.carrier_start``; yaw [rad] the heading of travel."""
 
     def __init__(self, cfg: Config, scenario: Scenario) -> None:
+        if cfg.carrier.kinematics != "holonomic" or cfg.scenario.carrier_mode != "stop":
+            raise ValueError("the recovery simulation drives the built-in holonomic carrier that stops once the "
+                             "passenger has left (carrier.kinematics = \"holonomic\", scenario.carrier_mode = \"stop\")")
         self.cfg, self.scenario = cfg, scenario
         model = model_from_config(cfg)
         limit = cfg.carrier.max_speed_m_s
@@ -247,13 +253,20 @@ class Flight:
     """One flown scenario: ``record`` the flight record (the columns of record.csv, plus
     ``x_true`` the vehicle's true position [m] and ``course`` the recovery's view of the
     carrier's course); ``summary`` what summary.json would say; ``state`` the phase machine's
-    last state; ``true_deck_violations`` the deck violations counted on the true position."""
+    last state; ``true_deck_violations`` the deck violations counted on the true position;
+    ``events`` (t [s], text) what the phases said (the flight log's lines)."""
 
     scenario: Scenario
     record: FlightRecord
     summary: dict[str, Any]
     state: MissionState
     true_deck_violations: int = 0
+    events: list[tuple[float, str]] = field(default_factory=list)
+
+    @property
+    def go_arounds(self) -> list[str]:
+        """Why each go-around began."""
+        return [text.removeprefix("go-around: ") for _, text in self.events if text.startswith("go-around: ")]
 
     @property
     def docked(self) -> bool:
@@ -310,6 +323,9 @@ class World:
         self.published: Phase | None = None  # the status the carrier hears
         self.approach_s: float | None = None  # when the first approach began [s]
         self.failed: dict[str, str] = {}
+        self.events: list[tuple[float, str]] = []  # (t [s], what the phases said)
+        tau = cfg.mission.velocity_bias_tau_s  # the controller's view of the vehicle's velocity (mission.controller)
+        self.velocity_fix = PositionConsistentVelocity(tau) if tau > 0 else None
         self.limit_s = max_duration_s if max_duration_s is not None else self.model.max_duration_s + 30.0
         self.k = 0
         self.done = False
@@ -341,7 +357,10 @@ class World:
         while carrier.next_step_s() <= t + 1e-9:  # the carrier steps first, on the status of the tick before
             carrier.step(self.published, self.approach_s)
         vehicle.advance_to_step(self.k * self.steps_per_tick)
-        obs = Observation(t_s=t, vehicle=vehicle.observed(), carrier=carrier.observed(t), failed=dict(self.failed))
+        seen = vehicle.observed()
+        if self.velocity_fix is not None:
+            seen = replace(seen, velocity_ned_m_s=self.velocity_fix.update(t, seen.position_ned_m, seen.velocity_ned_m_s))
+        obs = Observation(t_s=t, vehicle=seen, carrier=carrier.observed(t), failed=dict(self.failed))
         self.state, dec = step(self.state, obs, self.model)
         if dec.setpoint is not None:
             vehicle.send(t, dec.setpoint)
@@ -349,6 +368,7 @@ class World:
             why = vehicle.request(t, dec.request)
             if why is not None and dec.request in (Request.ARM, Request.OFFBOARD):
                 self.failed[dec.request.value] = why
+        self.events.extend((t, text) for text in dec.events)
         self.published = self.state.phase
         if self.approach_s is None and self.state.phase is Phase.APPROACH:
             self.approach_s = t
@@ -373,7 +393,7 @@ class World:
         summary.update(phase=st.phase.value, reason=None if st.reason is None else st.reason.value, detail=st.detail,
                        ticks=self.k)
         true = summary_of(replace(record, cols={**record.cols, **{f"x_p_{a}": record.cols[f"x_true_{a}"] for a in VEC}}))
-        return Flight(self.scenario, record, summary, st, int(true.get("deck_violations") or 0))
+        return Flight(self.scenario, record, summary, st, int(true.get("deck_violations") or 0), list(self.events))
 
 
 def fly(cfg: Config, scenario: Scenario, max_duration_s: float | None = None) -> Flight:
@@ -395,6 +415,18 @@ def _record(rows: _Rows, t: float, state: MissionState, obs: Observation, dec: D
              x_c=None if c is None else c.position_ned_m, v_c=None if c is None else c.velocity_ned_m_s, dock=dec.dock,
              x_ref=state.x_ref, u_cmd=None if dec.setpoint is None else dec.setpoint.velocity_ned_m_s,
              x_true=vehicle.true_position, course=None if rec is None else rec.course)
+
+
+def draw(flight: Flight, path: str | Path, what: str) -> Path | None:
+    """The flight's recovery figure (:func:`mission.plots.plot_recovery`) at ``path``, titled
+    ``what`` and its scenario; None when it never began its recovery."""
+    from mission.plots import plot_recovery, recovery_track
+
+    sc = flight.scenario
+    track = recovery_track(flight.record, f"{what}: carrier {sc.speed_m_s:.2f} m/s on {sc.heading_deg:.0f} deg, turn "
+                           f"{sc.turn_deg:+.0f} deg at {sc.turn_rate_deg_s:.0f} deg/s {sc.turn_after_s:.1f} s into the "
+                           f"first approach")
+    return None if track is None else plot_recovery(track, path)
 
 
 # ------------------------------------------------------------------------------------ Monte-Carlo
@@ -437,6 +469,16 @@ class MonteCarloReport:
         return out
 
     @property
+    def go_around_reasons(self) -> dict[str, int]:
+        """{why (numbers dropped): count} over every go-around of every flight."""
+        out: dict[str, int] = {}
+        for r in self.rows:
+            for why in r["go_arounds"]:
+                key = _reason_kind(why)
+                out[key] = out.get(key, 0) + 1
+        return out
+
+    @property
     def unsafe(self) -> list[dict[str, Any]]:
         """Flights that neither docked nor ended safely (a fallback handed to Hold or Land)."""
         return [r for r in self.rows if not r["docked"] and not r["safe_end"]]
@@ -453,7 +495,8 @@ class MonteCarloReport:
         return {
             "scenarios": self.count, "seed": self.seed,
             "docked_within_1_attempt": self.docked_within_1, "docked_within_2_attempts": self.docked_within_2,
-            "docked": self.docked, "fallbacks": self.fallbacks, "unsafe_ends": len(self.unsafe),
+            "docked": self.docked, "fallbacks": self.fallbacks, "go_arounds": self.go_around_reasons,
+            "unsafe_ends": len(self.unsafe),
             "contact": {k: self.contact_percentiles(k) for k in keys},
             "deck_violations": sum(r["deck_violations"] for r in self.rows),
             "true_deck_violations": sum(r["true_deck_violations"] for r in self.rows),
@@ -463,10 +506,11 @@ class MonteCarloReport:
         }
 
 
-def _reason_kind(outcome: str) -> str:
-    """A fallback's reason without its numbers (so that equal reasons count together)."""
-    words = [w for w in outcome.replace("fallback: ", "").split() if not any(ch.isdigit() for ch in w)]
-    return " ".join(words)
+def _reason_kind(why: str) -> str:
+    """A reason with its numbers as ``x`` and its parentheses dropped, so that equal reasons count
+    together ("2.10 m off the glide path (cone 0.91 m)" -> "x m off the glide path")."""
+    text = re.sub(r"\s*\([^)]*\)", "", why.removeprefix("fallback: "))
+    return re.sub(r"[-+]?\d+(\.\d+)?", "x", text).strip()
 
 
 def flight_row(f: Flight) -> dict[str, Any]:
@@ -478,6 +522,7 @@ def flight_row(f: Flight) -> dict[str, Any]:
             "true_deck_violations": f.true_deck_violations, "safe_end": safe_end,
             "end_phase": f.state.phase.value, "abort": None if f.state.reason is None else f"{f.state.reason}: {f.state.detail}",
             "max_phase_switch_jump_m_s": s.get("max_phase_switch_jump_m_s"), "p3": bool(s.get("p3")),
+            "go_arounds": f.go_arounds,
             "flight_time_s": round(float(f.record.t[-1]), 2) if len(f.record.t) else 0.0}
 
 
@@ -537,11 +582,13 @@ def format_report(report: MonteCarloReport) -> str:
         return "-" if c["p50"] is None else f"p50 {c['p50']:.3f}  p95 {c['p95']:.3f}  max {c['max']:.3f} {unit}"
 
     fallbacks = "; ".join(f"{k} x{v}" for k, v in sorted(d["fallbacks"].items())) or "none"
+    go_arounds = "; ".join(f"{k} x{v}" for k, v in sorted(d["go_arounds"].items(), key=lambda kv: -kv[1])) or "none"
     rows = [
         ("docked at the first attempt", pct(report.docked_within_1)),
         ("docked within 2 attempts", f"{pct(report.docked_within_2)}   target >= {DOCKED_WITHIN_2_TARGET:.0%}"),
         ("docked at all", pct(report.docked)),
         ("fell back (reasons)", f"{n - round(report.docked * n)}: {fallbacks}"),
+        ("went around (reasons)", f"{sum(d['go_arounds'].values())}: {go_arounds}"),
         ("ended neither docked nor safely", f"{len(report.unsafe)}   target 0"),
         ("contact: horizontal error", spread("horizontal_error_m", "m")),
         ("contact: horizontal relative speed", spread("horizontal_relative_speed_m_s", "m/s")),

@@ -101,14 +101,7 @@ def run_recovery_monte_carlo(cfg: Config, name: str, count: int, seed: int, show
         report, worst = recovery.monte_carlo(cfg, scenarios, progress=lambda f: bar.update(1))
     report.seed = seed
     if plot_path and worst is not None:
-        from mission.plots import plot_recovery, recovery_track
-
-        sc = worst.scenario
-        track = recovery_track(worst.record, f"{name}, seed {seed}, scenario #{sc.index} (the worst): carrier "
-                               f"{sc.speed_m_s:.2f} m/s on {sc.heading_deg:.0f} deg, turn {sc.turn_deg:+.0f} deg "
-                               f"at {sc.turn_rate_deg_s:.0f} deg/s")
-        if track is not None:
-            plot_recovery(track, plot_path)
+        recovery.draw(worst, plot_path, f"{name}, seed {seed}, scenario #{worst.scenario.index} (the worst)")
     if as_json:
         click.echo(json.dumps(report.as_dict(), indent=2))
     else:

@@ -47,6 +47,7 @@ def test_a_sample_of_recoveries_meets_the_targets(cfg):
     assert d["contact"]["horizontal_relative_speed_m_s"]["max"] <= cfg.recovery.contact_max_horizontal_speed_m_s
     assert d["max_phase_switch_jump_m_s"] <= 0.05 and d["p3"]
     assert any(r["attempts"] == 2 for r in report.rows)  # a turn sent one round again: the sample tests go-arounds
+    assert set(d["go_arounds"]) <= {"the carrier turns at x deg/s", "x m off the glide path"}, d["go_arounds"]
     assert worst is not None and worst.attempts == max(r["attempts"] for r in report.rows)
     assert "docked within 2 attempts" in format_report(report)
 
