@@ -257,7 +257,10 @@ def plot(log_dir: str, out_path: str | None, panels: bool = False) -> int:
     \b
     LOG is a flight log directory (e.g. logs/demo/pair0: its record.csv, or its flight.mcap when
     it has no CSV), an MCAP file itself (logs/demo/pair0/flight.mcap), or a folder of flight logs
-    (logs/demo: each one is plotted into its own directory). Exit code 2 when LOG holds no flight log."""
+    (logs/demo: each one is plotted into its own directory). A flight that came home
+    (mission.final_action = "return") also gets its recovery's figure beside it
+    (flight-recovery.png: the approach in the carrier's frame, the distances with the phases
+    shaded). Exit code 2 when LOG holds no flight log."""
     path = Path(log_dir)
     if panels:
         from mission.flightdata.view import draw_panels

@@ -39,7 +39,7 @@ from mission.carrier.guard import GuardParams, P3Guard
 from mission.config.schema import Config
 from mission.controller import mission_info, recovered_info
 from mission.core.consistent_velocity import PositionConsistentVelocity
-from mission.core.safety import filter_velocity
+from mission.core.safety import Obstacles, filter_velocity
 from mission.core.setpoint import Setpoint
 from mission.core.tick import carrier_tick
 from mission.flight_mode import FlightMode
@@ -171,7 +171,9 @@ class KinematicCarrier:
                 self.course_begun = True
                 heading = math.radians(self.scenario.course_heading_deg(since_approach_s))
                 want[:2] = self.scenario.speed_m_s * np.array([math.cos(heading), math.sin(heading)])
-            safe = filter_velocity(x_c[:2], want[:2], self.model.carrier_obstacles, self.model.carrier_safety,
+            # as mission.core.tick.carrier_tick filters the law's command of a planar carrier
+            obstacles = self.model.carrier_obstacles if self.model.filter_carrier else None
+            safe = filter_velocity(x_c[:2], want[:2], obstacles or Obstacles.none(2), self.model.carrier_safety,
                                    self.velocity[:2], dt or None)
             u = np.zeros(3)
             u[:2] = np.asarray(safe.u, dtype=float)
