@@ -118,6 +118,8 @@ class KinematicCarrier:
     NED in the plane of ``scenario.carrier_start``; yaw [rad] the heading of travel."""
 
     def __init__(self, cfg: Config, scenario: Scenario) -> None:
+        if len(cfg.scenario.legs()) > 1:
+            raise ValueError("the recovery simulation flies one target (scenario.targets lists several)")
         if cfg.carrier.kinematics != "holonomic" or cfg.scenario.carrier_mode != "stop":
             raise ValueError("the recovery simulation drives the built-in holonomic carrier that stops once the "
                              "passenger has left (carrier.kinematics = \"holonomic\", scenario.carrier_mode = \"stop\")")
