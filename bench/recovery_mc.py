@@ -20,7 +20,7 @@ import click
 from tqdm import tqdm
 
 from mission.config.schema import load_config
-from sim.batch import recovery
+from sim.batch import recovery, recovery_mc
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -36,17 +36,17 @@ ROOT = Path(__file__).resolve().parents[1]
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), help="Draw the worst flight's recovery here.")
 def main(count: int, seed: int, config: str, estimate_drift: float, json_path: str | None, plot_path: str | None) -> int:
     cfg = load_config(config)
-    scenarios = recovery.random_scenarios(count, seed, estimate_drift)
+    scenarios = recovery_mc.random_scenarios(count, seed, estimate_drift)
     wall, cpu = time.monotonic(), time.process_time()
     with tqdm(total=count, desc=f"{count} recoveries", unit="flight") as bar:
-        report, worst = recovery.monte_carlo(cfg, scenarios, progress=lambda f: bar.update(1))
+        report, worst = recovery_mc.monte_carlo(cfg, scenarios, progress=lambda f: bar.update(1))
     wall, cpu = time.monotonic() - wall, time.process_time() - cpu
     report.seed = seed
     click.echo(f"python -m bench.recovery_mc -n {count} --seed {seed} --config {Path(config).name}"
                f"{f' --estimate-drift {estimate_drift:g}' if estimate_drift else ''}")
-    click.echo(recovery.format_report(report))
+    click.echo(recovery_mc.format_report(report))
     for r in report.rows:
-        if recovery.badness(r)[0]:
+        if recovery_mc.badness(r)[0]:
             click.echo(f"  missed #{r['index']}: {json.dumps({k: r[k] for k in ('speed_m_s', 'heading_deg', 'turn_deg', 'turn_rate_deg_s', 'turn_after_s', 'outcome', 'attempts', 'end_phase', 'deck_violations')})}")
     sim_s = sum(r["flight_time_s"] for r in report.rows)
     click.echo(f"cost: {cpu:.1f} s CPU ({cpu / count:.2f} s per scenario, {sim_s / cpu:.0f}x simulated time per CPU "
@@ -58,7 +58,7 @@ def main(count: int, seed: int, config: str, estimate_drift: float, json_path: s
     if plot_path and worst is not None:
         drawn = recovery.draw(worst, plot_path, f"scenario #{worst.scenario.index} of seed {seed} (the worst)")
         click.echo(f"the worst flight (#{worst.scenario.index}) drawn to {drawn}")
-    return 0 if recovery.report_ok(report) else 1
+    return 0 if recovery_mc.report_ok(report) else 1
 
 
 if __name__ == "__main__":

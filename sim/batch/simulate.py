@@ -11,7 +11,7 @@ import numpy as np
 from tqdm import tqdm
 
 from mission.config.schema import Config, load_config
-from sim.batch import closed_loop, recovery
+from sim.batch import closed_loop, recovery, recovery_mc
 from sim.batch.closed_loop import ClosedLoopResult, as_flown, is_mission_config, model_from_config, random_scenarios, simulate_config
 from mission.plots import Trajectories, plot_run
 
@@ -95,22 +95,22 @@ def run_recovery_monte_carlo(cfg: Config, name: str, count: int, seed: int, show
                              plot_path: str | None, as_json: bool) -> int:
     """``count`` recoveries of ``cfg`` in random scenarios (:mod:`sim.batch.recovery`): the table
     (or JSON), the worst flight's figure at ``plot_path``; 0 when the targets hold, else 1."""
-    scenarios = recovery.random_scenarios(count, seed)
+    scenarios = recovery_mc.random_scenarios(count, seed)
     bar = tqdm(total=count, desc=f"{count} recoveries", unit="flight", disable=not show_progress, leave=False)
     with bar:
-        report, worst = recovery.monte_carlo(cfg, scenarios, progress=lambda f: bar.update(1))
+        report, worst = recovery_mc.monte_carlo(cfg, scenarios, progress=lambda f: bar.update(1))
     report.seed = seed
     if plot_path and worst is not None:
         recovery.draw(worst, plot_path, f"{name}, seed {seed}, scenario #{worst.scenario.index} (the worst)")
     if as_json:
         click.echo(json.dumps(report.as_dict(), indent=2))
     else:
-        lo, hi = recovery.SPEED_RANGE_M_S
+        lo, hi = recovery_mc.SPEED_RANGE_M_S
         click.echo(f"{count} recoveries of {name} (seed {seed}; id = index, the same --seed replays them): the carrier "
-                   f"at {lo:g}-{hi:g} m/s on a random heading, turning up to {recovery.TURN_MAX_DEG:g} deg during the "
+                   f"at {lo:g}-{hi:g} m/s on a random heading, turning up to {recovery_mc.TURN_MAX_DEG:g} deg during the "
                    f"first approach")
-        click.echo(recovery.format_report(report))
-        missed = [r for r in report.rows if recovery.badness(r)[0]]
+        click.echo(recovery_mc.format_report(report))
+        missed = [r for r in report.rows if recovery_mc.badness(r)[0]]
         for r in missed[:WORST_SHOWN]:
             click.echo(f"  #{r['index']:<4} carrier {r['speed_m_s']:.2f} m/s on {r['heading_deg']:.0f} deg, turn "
                        f"{r['turn_deg']:+.0f} deg at {r['turn_rate_deg_s']:.0f} deg/s after {r['turn_after_s']:.1f} s: "
@@ -118,7 +118,7 @@ def run_recovery_monte_carlo(cfg: Config, name: str, count: int, seed: int, show
                        f"{'' if r['deck_violations'] == 0 else ', deck violations ' + str(r['deck_violations'])}")
         if plot_path and worst is not None:
             click.echo(f"the worst flight's recovery (#{worst.scenario.index}) drawn to {plot_path}")
-    return 0 if recovery.report_ok(report) else 1
+    return 0 if recovery_mc.report_ok(report) else 1
 
 
 def _finite_max(values: np.ndarray) -> float | None:

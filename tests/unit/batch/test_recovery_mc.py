@@ -1,4 +1,4 @@
-"""The recovery's Monte-Carlo (sim/batch/recovery.py): a small sample meets the targets, a
+"""The recovery's Monte-Carlo (sim/batch/recovery.py, recovery_mc.py): a small sample meets the targets, a
 scenario replays, the shared flight before the recovery changes nothing, and its vehicle is the
 mock's (the comparison with a lockstep demo flight: tests/integration/test_recovery_mc.py)."""
 from __future__ import annotations
@@ -10,17 +10,8 @@ from mission.config.schema import load_config
 from mission.interfaces import Request
 from mission.core.setpoint import Setpoint
 from mission.time.clock import ManualClock
-from sim.batch.recovery import (
-    DOCKED_WITHIN_2_TARGET,
-    MockDynamics,
-    Scenario,
-    before_recovery,
-    fly,
-    format_report,
-    monte_carlo,
-    random_scenarios,
-    report_ok,
-)
+from sim.batch.recovery import MockDynamics, Scenario, before_recovery, fly
+from sim.batch.recovery_mc import DOCKED_WITHIN_2_TARGET, format_report, monte_carlo, random_scenarios, report_ok
 from sim.vehicle.mock import PHYSICS_DT_S, MockVehicle, VehicleOptions
 from sim.vehicle.protocol import setpoint_of
 from mission.mavlink import setpoints
