@@ -86,8 +86,9 @@ class MonteCarloReport:
 
     @property
     def unsafe(self) -> list[dict[str, Any]]:
-        """Flights that neither docked nor ended safely (a fallback handed to Hold or Land)."""
-        return [r for r in self.rows if not r["docked"] and not r["safe_end"]]
+        """Flights that did not end safely: the mission did not complete (DONE: docked and handed to
+        Hold above the carrier, or fallen back to its point and handed to Hold or Land)."""
+        return [r for r in self.rows if not r["safe_end"]]
 
     def contact_percentiles(self, key: str) -> dict[str, float | None]:
         values = np.array([r["contact"][key] for r in self.rows if r["contact"] is not None], dtype=float)
@@ -195,7 +196,7 @@ def format_report(report: MonteCarloReport) -> str:
         ("docked at all", pct(report.docked)),
         ("fell back (reasons)", f"{n - round(report.docked * n)}: {fallbacks}"),
         ("went around (reasons)", f"{sum(d['go_arounds'].values())}: {go_arounds}"),
-        ("ended neither docked nor safely", f"{len(report.unsafe)}   target 0"),
+        ("ended unsafely (not DONE)", f"{len(report.unsafe)}   target 0"),
         ("contact: horizontal error", spread("horizontal_error_m", "m")),
         ("contact: horizontal relative speed", spread("horizontal_relative_speed_m_s", "m/s")),
         ("contact: vertical relative speed", spread("vertical_relative_speed_m_s", "m/s")),

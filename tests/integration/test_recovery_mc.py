@@ -1,7 +1,7 @@
 """The recovery's Monte-Carlo is true to the mock: one recovery flown both as a lockstep
 ``marsupial demo --config configs/recovery.toml`` (three processes over UDP and Zenoh) and in the
 in-process simulation (sim/batch/recovery.py) gives the same contact figures. The demo draws the
-recovery's figure beside its flight plot."""
+recovery's figure beside its flight plot, and `marsupial plot` draws it from the flight's MCAP too."""
 from __future__ import annotations
 
 import math
@@ -55,3 +55,8 @@ def test_the_simulation_docks_as_the_lockstep_demo_does(tmp_path):
     riding_sim = sim.record.t[int(np.argmax(sim.record.phase == Phase.RIDING))]
     assert ours["time_s"] - riding_sim == pytest.approx(demo["time_s"] - riding_demo, abs=TIME_TOLERANCE_S)
     assert sim.summary["deck_violations"] == 0
+    # the recovery's figure is drawn from the flight's MCAP as from its CSV
+    plotted = subprocess.run([sys.executable, "-m", "mission.cli", "plot", str(demo_dir / "flight.mcap"), "--out",
+                              str(tmp_path / "from-mcap.png")], capture_output=True, text=True, timeout=120)
+    assert plotted.returncode == 0, plotted.stdout + plotted.stderr
+    assert (tmp_path / "from-mcap-recovery.png").stat().st_size > 10_000
