@@ -373,7 +373,8 @@ class World:
         st = self.state
         info = mission_info(self.cfg)
         info.update(separation_time_s=st.separation_time_s,
-                    anchor_ned_m=None if st.anchor is None else st.anchor.tolist(), recovered=recovered_info(st))
+                    anchor_ned_m=None if st.anchor is None else st.anchor.tolist(), recovered=recovered_info(st),
+                    legs_done=list(st.legs_done), legs_skipped=st.legs_skipped)
         record = self.rows.record(info)
         summary = summary_of(record)
         summary.update(phase=st.phase.value, reason=None if st.reason is None else st.reason.value, detail=st.detail,
