@@ -37,7 +37,6 @@ from mission.carrier.guard import GuardParams, P3Guard
 from mission.config.schema import Config
 from mission.controller import mission_info, recovered_info
 from mission.core.consistent_velocity import PositionConsistentVelocity
-from mission.core.safety import Obstacles, filter_velocity
 from mission.core.setpoint import Setpoint
 from mission.core.tick import carrier_tick
 from mission.flight_mode import FlightMode
@@ -147,20 +146,14 @@ class KinematicCarrier:
         if duty not in (Duty.WAIT, Duty.CARRY):
             self.separated = True
         x_c = self.position
-        if self.carrying and not self.separated:
-            u = np.asarray(carrier_tick(x_c, False, self.model, u_prev=self.velocity, dt_s=dt or None).u, dtype=float)
-        else:
-            want = np.zeros(3)
-            if duty is Duty.RECOVER:
-                self.course_begun = True
-                heading = math.radians(self.scenario.course_heading_deg(since_approach_s))
-                want[:2] = self.scenario.speed_m_s * np.array([math.cos(heading), math.sin(heading)])
-            # as mission.core.tick.carrier_tick filters the law's command of a planar carrier
-            obstacles = self.model.carrier_obstacles if self.model.filter_carrier else None
-            safe = filter_velocity(x_c[:2], want[:2], obstacles or Obstacles.none(2), self.model.carrier_safety,
-                                   self.velocity[:2], dt or None)
-            u = np.zeros(3)
-            u[:2] = np.asarray(safe.u, dtype=float)
+        course: np.ndarray | None = None  # the recovery course, or None: the law (carrying) or stop
+        if duty is Duty.RECOVER:
+            self.course_begun = True
+            heading = math.radians(self.scenario.course_heading_deg(since_approach_s))
+            course = self.scenario.speed_m_s * np.array([math.cos(heading), math.sin(heading), 0.0])
+        carrying = self.carrying and not self.separated
+        u = np.array(carrier_tick(x_c, not carrying, self.model, u_prev=self.velocity, dt_s=dt or None,
+                                  course_velocity=course).u, dtype=float)
         u = np.asarray(self.guard.limit(t_s, x_c, u, self.velocity, 0.0).u, dtype=float)
         u[2] = 0.0
         self.velocity = u
