@@ -391,7 +391,7 @@ class MissionController:
         if self.recorder is not None:
             info = {"separation_time_s": st.separation_time_s,
                     "anchor_ned_m": None if st.anchor is None else st.anchor.tolist(),
-                    "recovered": _recovered(st), "legs_done": list(st.legs_done), "legs_skipped": st.legs_skipped}
+                    "recovered": recovered_info(st), "legs_done": list(st.legs_done), "legs_skipped": st.legs_skipped}
             outcome = {"phase": st.phase, "reason": st.reason, "detail": st.detail,
                        "ticks": self.ticks, "loop_overruns": self.overruns, **self._counters(),
                        "position_rate_hz": round(float(np.median(self._rates)), 2) if self._rates else None}
@@ -400,7 +400,7 @@ class MissionController:
         return MissionOutcome(phase=st.phase, reason=st.reason, detail=st.detail, log_dir=log_dir, summary=summary)
 
 
-def _recovered(st: MissionState) -> dict[str, Any] | None:
+def recovered_info(st: MissionState) -> dict[str, Any] | None:
     """How the recovery went, for mission.json (None: the mission did not try one)."""
     rec = st.recovery
     if rec is None:

@@ -1,10 +1,12 @@
-"""The paper's figures (trajectories; the three distances over time) from a simulation or a flight.
+"""The paper's figures (trajectories; the three distances over time) from a simulation or a
+flight, and the recovery's (the approach in the carrier's frame; distances with the phases).
 
 Input is plain arrays so that ``marsupial simulate --plot`` and ``marsupial plot LOG`` draw the
 same figure. In a ``local_ned`` frame the vertical axis is drawn as altitude (``-z``).
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -13,8 +15,9 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
-from matplotlib.patches import Circle  # noqa: E402
+from matplotlib.patches import Circle, Rectangle  # noqa: E402
 
+from mission.core.docking import DockingGeometry, course  # noqa: E402
 from mission.core.law import norm  # noqa: E402
 
 
@@ -107,6 +110,223 @@ def plot_run(tr: Trajectories, path: str | Path) -> Path:
     ax2.legend(fontsize=8)
     if tr.title:
         fig.suptitle(tr.title)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+# ----------------------------------------------------------------------------------------- recovery
+
+#: The colour a phase is shaded with in the recovery's distance panel.
+PHASE_COLOURS = {
+    "ARRIVED": "#e8e8e8", "RETURNING": "#cfe2f3", "HOLDOFF": "#fff2cc", "APPROACH": "#d9ead3",
+    "GO_AROUND": "#f4cccc", "DOCKED": "#b6d7a8", "HOME": "#d0e0e3", "FALLBACK": "#ead1dc",
+}
+RECOVERING = ("RETURNING", "HOLDOFF", "APPROACH", "GO_AROUND", "DOCKED", "HOME", "FALLBACK")
+ATTEMPT_COLOURS = ("tab:green", "tab:orange", "tab:purple", "tab:brown", "tab:pink")
+
+
+@dataclass(frozen=True)
+class RecoveryTrack:
+    """What the recovery's figure needs, from a flight log or a simulation.
+
+    t [s] (K,); phase (K,) the phase names; x_p [m] (K, 3) the vehicle, dock [m] (K, 3) the dock
+    point, both NED; course (K, 3) the carrier's course as the recovery saw it (a horizontal unit
+    vector NED; NaN before the recovery); geometry the recovery's
+    :class:`~mission.core.docking.DockingGeometry`; deck_radius_m [m]; contact the contact
+    figures (summary.json's ``contact``) or None; outcome ("docked", "fallback: ..."); title."""
+
+    t: np.ndarray
+    phase: np.ndarray
+    x_p: np.ndarray
+    dock: np.ndarray
+    course: np.ndarray
+    geometry: DockingGeometry
+    deck_radius_m: float
+    contact: dict | None = None
+    outcome: str = ""
+    title: str = ""
+
+    def in_carrier_frame(self) -> np.ndarray:
+        """(K, 3): the vehicle relative to the dock point along the course, to its right and up [m]."""
+        r = self.x_p - self.dock
+        c = self.course
+        along = r[:, 0] * c[:, 0] + r[:, 1] * c[:, 1]
+        right = -r[:, 0] * c[:, 1] + r[:, 1] * c[:, 0]
+        return np.stack([along, right, -r[:, 2]], axis=-1)
+
+    def attempts(self) -> np.ndarray:
+        """(K,) int: the approach each tick belongs to (1, 2, ...; the go-around and the holdoff
+        after an approach belong to it), 0 before the first."""
+        entered = (self.phase == "APPROACH") & np.concatenate([[True], self.phase[1:] != self.phase[:-1]])
+        return np.cumsum(entered)
+
+
+def recovery_track(rec, title: str = "") -> RecoveryTrack | None:
+    """The :class:`RecoveryTrack` of a :class:`mission.record.FlightRecord` (None: no recovery
+    in it). A flight log holds no course: it is rebuilt as the recovery keeps it, the direction
+    of the carrier's velocity while it moves faster than
+    :data:`~mission.core.docking.COURSE_MIN_SPEED_M_S`, else the last one, starting from the
+    direction the holdoff point lay in (behind the dock point) when the first approach began."""
+    params = rec.info.get("recovery")
+    recovering = np.isin(rec.phase, RECOVERING)
+    if params is None or not recovering.any():
+        return None
+    g = DockingGeometry(
+        holdoff_distance_m=params["holdoff_distance_m"], glide_angle_rad=math.radians(params["glide_angle_deg"]),
+        cone_half_angle_rad=math.radians(params["cone_half_angle_deg"]), cone_min_radius_m=params["cone_min_radius_m"],
+        decision_height_m=params["decision_height_m"], contact_radius_m=params["contact_radius_m"],
+        contact_height_m=params["contact_height_m"],
+        contact_max_horizontal_speed_m_s=params["contact_max_horizontal_speed_m_s"],
+        contact_max_vertical_speed_m_s=params["contact_max_vertical_speed_m_s"])
+    if "course_n" in rec.cols:
+        course_ned = rec.vec("course")
+    else:
+        course_ned = _rebuilt_course(rec, recovering, g)
+    start = max(int(np.argmax(recovering)) - int(2.0 / max(float(np.median(np.diff(rec.t))), 1e-3)), 0)
+    keep = np.arange(len(rec.t)) >= start
+    recovered = rec.info.get("recovered") or {}
+    contact = recovered.get("contact")
+    outcome = "docked" if contact else (f"fallback: {recovered['fallback']}" if recovered.get("fallback") else "")
+    return RecoveryTrack(t=rec.t[keep], phase=rec.phase[keep], x_p=rec.vec("x_p")[keep], dock=rec.vec("dock")[keep],
+                         course=course_ned[keep], geometry=g, deck_radius_m=params["deck_radius_m"], contact=contact,
+                         outcome=outcome, title=title)
+
+
+def _rebuilt_course(rec, recovering: np.ndarray, g: DockingGeometry) -> np.ndarray:
+    x_ref, dock, v_c = rec.vec("x_ref"), rec.vec("dock"), rec.vec("v_c")
+    first = np.flatnonzero(rec.phase == "APPROACH")
+    at = int(first[0]) - 1 if len(first) else int(np.flatnonzero(recovering)[-1])
+    behind = (dock[at] - x_ref[at])[:2]
+    c = np.array([behind[0], behind[1], 0.0]) / max(float(np.hypot(*behind)), 1e-9)
+    if not np.isfinite(c).all() or float(np.hypot(*behind)) < 0.5 * g.holdoff_distance_m:
+        c = np.array([1.0, 0.0, 0.0])
+    out = np.full((len(rec.t), 3), np.nan)
+    for i in range(at, -1, -1):  # before: the course the holdoff point was placed with, as flown back
+        if not recovering[i]:
+            break
+        out[i] = c
+    prev = c
+    for i in range(at, len(rec.t)):
+        if not recovering[i]:
+            continue
+        if np.isfinite(v_c[i]).all():
+            prev = course(v_c[i], prev)
+        out[i] = prev
+    return out
+
+
+def _side(ax, g: DockingGeometry, deck_radius_m: float) -> None:
+    """The glide path, the cone round it, the holdoff point, the gate and the deck, side view."""
+    h_d, h_up = -g.holdoff_distance_m, g.holdoff_height_m
+    s = np.linspace(0.0, 1.0, 60)
+    along, up = h_d * (1 - s), h_up + s * (g.decision_height_m - h_up)
+    to_gate = np.hypot(along, up - g.decision_height_m)
+    radius = g.cone_min_radius_m + to_gate * math.tan(g.cone_half_angle_rad)
+    normal = np.array([-(g.decision_height_m - h_up), -h_d]) / math.hypot(h_d, g.decision_height_m - h_up)
+    upper = np.stack([along + radius * normal[0], up + radius * normal[1]], axis=-1)
+    lower = np.stack([along - radius * normal[0], up - radius * normal[1]], axis=-1)
+    ax.fill(np.concatenate([upper[:, 0], lower[::-1, 0]]), np.concatenate([upper[:, 1], lower[::-1, 1]]),
+            color="tab:blue", alpha=0.08, label=f"cone ({math.degrees(g.cone_half_angle_rad):g} deg, "
+            f"{g.cone_min_radius_m:g} m at the gate)")
+    ax.plot([h_d, 0.0, 0.0], [h_up, g.decision_height_m, 0.0], color="tab:blue", lw=1.5, ls="--",
+            label=f"glide path ({math.degrees(g.glide_angle_rad):g} deg), then straight down")
+    ax.plot([-deck_radius_m, deck_radius_m], [0.0, 0.0], color="black", lw=4, solid_capstyle="butt",
+            label=f"deck ({deck_radius_m:g} m round the dock point)")
+    ax.add_patch(Rectangle((-g.contact_radius_m, -g.contact_height_m), 2 * g.contact_radius_m, 2 * g.contact_height_m,
+                           color="tab:green", alpha=0.25, label="contact conditions"))
+    ax.scatter([h_d], [h_up], marker="s", color="goldenrod", s=60, zorder=6, label="holdoff point")
+    ax.scatter([0.0], [g.decision_height_m], marker="^", color="tab:blue", s=60, zorder=6, label="gate")
+
+
+def _tracks(ax, tr: RecoveryTrack, rel: np.ndarray, x: int, y: int) -> None:
+    """Each attempt's track (the return in grey), columns ``x`` and ``y`` of ``rel``."""
+    attempt = tr.attempts()
+    flying = np.isin(tr.phase, RECOVERING)
+    back = flying & (attempt == 0)
+    ax.plot(rel[back, x], rel[back, y], color="grey", lw=1.0, label="return and holdoff")
+    for n in range(1, int(attempt.max()) + 1):
+        on = flying & (attempt == n) & ~np.isin(tr.phase, ("HOME",))
+        ax.plot(rel[on, x], rel[on, y], color=ATTEMPT_COLOURS[(n - 1) % len(ATTEMPT_COLOURS)], lw=1.6,
+                label=f"attempt {n}")
+    docked = np.flatnonzero(tr.phase == "DOCKED")
+    if len(docked):
+        ax.scatter(rel[docked[0], x], rel[docked[0], y], marker="X", color="red", s=90, zorder=7, label="contact")
+
+
+def plot_recovery(tr: RecoveryTrack, path: str | Path) -> Path:
+    """Write the recovery's figure (PNG/PDF/SVG by suffix): the approach in the carrier's frame,
+    from the side (along the course, up) and from above (along the course, to its right), and
+    the distances to the dock point over time with the phases shaded."""
+    path = Path(path)
+    g = tr.geometry
+    rel = tr.in_carrier_frame()
+    fig = plt.figure(figsize=(14, 8.5))
+    grid = fig.add_gridspec(2, 2, height_ratios=(1.15, 1.0))
+    side, top, dist = fig.add_subplot(grid[0, 0]), fig.add_subplot(grid[0, 1]), fig.add_subplot(grid[1, :])
+    reach = g.holdoff_distance_m + 1.5
+    _side(side, g, tr.deck_radius_m)
+    _tracks(side, tr, rel, 0, 2)
+    side.set_xlim(-reach, 1.5)
+    side.set_ylim(-0.4, g.holdoff_height_m + 1.2)
+    side.set_aspect("equal", adjustable="box")
+    side.set_xlabel("along the carrier's course from the dock point [m]")
+    side.set_ylabel("height above the dock point [m]")
+    side.set_title("approach in the carrier's frame, from the side")
+    side.grid(alpha=0.3)
+    side.legend(fontsize=7, loc="lower left")
+
+    along = np.linspace(-g.holdoff_distance_m, 0.0, 40)
+    half = g.cone_min_radius_m + np.hypot(along, (g.holdoff_height_m - g.decision_height_m) * along
+                                          / -g.holdoff_distance_m) * math.tan(g.cone_half_angle_rad)
+    top.fill_between(along, -half, half, color="tab:blue", alpha=0.08, label="cone")
+    top.plot([-g.holdoff_distance_m, 0.0], [0.0, 0.0], color="tab:blue", ls="--", lw=1.5, label="glide path")
+    top.add_patch(Circle((0.0, 0.0), tr.deck_radius_m, fill=False, color="black", lw=2, label="deck"))
+    top.add_patch(Circle((0.0, 0.0), g.contact_radius_m, color="tab:green", alpha=0.25, label="contact radius"))
+    top.scatter([-g.holdoff_distance_m], [0.0], marker="s", color="goldenrod", s=60, zorder=6, label="holdoff point")
+    _tracks(top, tr, rel, 0, 1)
+    top.set_xlim(-reach, 1.5)
+    top.set_ylim(-2.5, 2.5)
+    top.set_aspect("equal", adjustable="box")
+    top.set_xlabel("along the carrier's course from the dock point [m]")
+    top.set_ylabel("to the right of the course [m]")
+    top.set_title("from above (the carrier's course points right)")
+    top.grid(alpha=0.3)
+    top.legend(fontsize=7, loc="upper left")
+
+    r = tr.x_p - tr.dock
+    floor = 1e-3  # [m] the log scale's floor
+    dist.plot(tr.t, np.maximum(norm(r), floor), color="black", lw=1.6, label="distance to the dock point")
+    dist.plot(tr.t, np.maximum(np.hypot(r[:, 0], r[:, 1]), floor), color="tab:blue", lw=1.2, ls="--", label="horizontal")
+    dist.plot(tr.t, np.maximum(np.abs(r[:, 2]), floor), color="tab:red", lw=1.2, ls="-.", label="vertical")
+    dist.axhline(g.contact_radius_m, color="tab:green", lw=0.8, ls=":", label=f"contact radius {g.contact_radius_m:g} m")
+    dist.axhline(g.decision_height_m, color="tab:blue", lw=0.8, ls=":", label=f"gate height {g.decision_height_m:g} m")
+    shaded = set()
+    change = np.flatnonzero(np.concatenate([[True], tr.phase[1:] != tr.phase[:-1], [True]]))
+    for a, b in zip(change[:-1], change[1:]):
+        name = str(tr.phase[a])
+        colour = PHASE_COLOURS.get(name)
+        if colour is None:
+            continue
+        t1 = tr.t[b] if b < len(tr.t) else tr.t[-1]
+        dist.axvspan(tr.t[a], t1, color=colour, alpha=0.8, lw=0, label=None if name in shaded else name)
+        shaded.add(name)
+    if tr.contact is not None and tr.contact.get("time_s") is not None:
+        dist.axvline(tr.contact["time_s"], color="red", lw=1.0, label="contact")
+    dist.set_yscale("log")
+    dist.set_ylim(0.01, None)
+    dist.set_xlabel("t [s] on the mission clock")
+    dist.set_ylabel("distance [m]")
+    dist.set_title("distances over time, phases shaded")
+    dist.grid(alpha=0.3)
+    dist.legend(fontsize=7, ncol=4, loc="upper right")
+    c = tr.contact
+    figures = "" if c is None else (f": contact {c['horizontal_error_m']:.3f} m off, relative speed "
+                                    f"{c['horizontal_relative_speed_m_s']:.2f} / {c['vertical_relative_speed_m_s']:.2f} m/s "
+                                    f"(h / v), attempt {c['attempts']}")
+    fig.suptitle((tr.title + "\n" if tr.title else "") + f"recovery {tr.outcome or 'unfinished'}{figures}")
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)

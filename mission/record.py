@@ -248,10 +248,14 @@ def _arrival_figures(r: FlightRecord, dist_t: np.ndarray, target: np.ndarray) ->
 
 
 def summarise(directory: str | Path) -> dict[str, Any]:
-    """The summary of a flight (:func:`figures` of the whole record), and with several targets
-    ``legs``: the figures of each leg (its slice of the record, judged against its own target) with
-    its outcome; the flight's P1-P3 then hold only if every leg flown holds them."""
-    r = read_record(directory)
+    """The summary of the flight logged in ``directory`` (:func:`summary_of` its record)."""
+    return summary_of(read_record(directory))
+
+
+def summary_of(r: FlightRecord) -> dict[str, Any]:
+    """The summary of a flight record (:func:`figures` of the whole record), and with several
+    targets ``legs``: the figures of each leg (its slice of the record, judged against its own
+    target) with its outcome; the flight's P1-P3 then hold only if every leg flown holds them."""
     out = figures(r)
     done = r.info.get("legs_done") or []
     targets = r.info.get("targets") or []

@@ -229,6 +229,9 @@ def run_demo(config: str, speed: float, pairs: int, log_root: Path, plot_path: s
             try:
                 plot_command.callback(str(p.log_dir), out)  # type: ignore[misc]
                 s["plot"] = out
+                recovery = Path(out).with_stem(f"{Path(out).stem}-recovery")  # a flight that came home
+                if recovery.exists():
+                    s["recovery_plot"] = str(recovery)
             except MarsupialError as exc:
                 s["plot_error"] = str(exc)
     ok = all(s.get("p1") and s.get("p2") and s.get("p3") and s["mission_exit_code"] == 0
@@ -396,6 +399,7 @@ def demo(config: str, realtime: bool, speed: float, pairs: int, plot_path: str |
     click.echo(format_table(summaries))
     for s in summaries:
         plot = f", plot {s['plot']}" if s.get("plot") else (f", no plot: {s['plot_error']}" if s.get("plot_error") else "")
+        plot += f", recovery {s['recovery_plot']}" if s.get("recovery_plot") else ""
         click.echo(f"{s['pair']}: flight log {Path(log_root) / s['pair']}{plot}")
     for line in verdict_lines(summaries):
         click.echo(line, err=True)

@@ -23,7 +23,7 @@ from mission.bus.gate import GateLimits
 from mission.mavlink.link import VehicleLink
 from mission.mavlink.env import read_signing_key
 from mission.flightdata.writer import DEFAULT_LIVE, LiveAddress, clock_metadata, is_loopback, parse_live
-from mission.record import CLOCK_NOTE, FlightRecorder, RecordSink, read_record
+from mission.record import CLOCK_NOTE, FlightRecord, FlightRecorder, RecordSink, read_record
 from mission.phases import AbortReason
 from mission.report import WaitReporter, abort_hint, phase_printer, startup_lines
 
@@ -257,7 +257,10 @@ def plot(log_dir: str, out_path: str | None, panels: bool = False) -> int:
     \b
     LOG is a flight log directory (e.g. logs/demo/pair0: its record.csv, or its flight.mcap when
     it has no CSV), an MCAP file itself (logs/demo/pair0/flight.mcap), or a folder of flight logs
-    (logs/demo: each one is plotted into its own directory). Exit code 2 when LOG holds no flight log."""
+    (logs/demo: each one is plotted into its own directory). A flight that came home
+    (mission.final_action = "return") also gets its recovery's figure beside it
+    (flight-recovery.png: the approach in the carrier's frame, the distances with the phases
+    shaded). Exit code 2 when LOG holds no flight log."""
     path = Path(log_dir)
     if panels:
         from mission.flightdata.view import draw_panels
@@ -328,4 +331,17 @@ def plot_flight(log_dir: Path, out_path: str | Path) -> Path:
                       obstacles=[(np.asarray(o["center"]), o["radius"]) for o in info.get("obstacles", [])],
                       frame="local_ned", title=f"flight {name} (carrier = its dock point; t = 0 at the {origin}, "
                       f"mission clock {t0:.2f} s)", bc_m=info.get("bc_m"))
-    return plot_run(tr, out_path)
+    out = plot_run(tr, out_path)
+    plot_recovery_of(rec, out, f"flight {name}")
+    return out
+
+
+def plot_recovery_of(rec: FlightRecord, beside: Path, title: str) -> Path | None:
+    """A flight that came home: its recovery's figure beside ``beside`` (``<stem>-recovery<suffix>``);
+    None for a flight without a recovery."""
+    from mission.plots import plot_recovery, recovery_track
+
+    track = recovery_track(rec, title)
+    if track is None:
+        return None
+    return plot_recovery(track, beside.with_stem(f"{beside.stem}-recovery"))

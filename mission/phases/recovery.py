@@ -116,26 +116,28 @@ def _observe_carrier(rec: RecoveryState, obs: Observation, r: RecoveryModel, t: 
     rec = replace(rec, course=course(c.velocity_ned_m_s, rec.course))
     if _carrier_fresh(obs, r.carrier_max_age_s):
         rec = replace(rec, carrier_seen_s=t)
-    if rec.carrier_t_s is None or t - rec.carrier_t_s >= CARRIER_RATE_WINDOW_S:
-        rec = replace(rec, carrier_v=np.array(c.velocity_ned_m_s, dtype=float), carrier_t_s=t)
+    sampled = t - c.age_s  # when the carrier took this sample (the rates are measured between samples)
+    if rec.carrier_t_s is None or sampled - rec.carrier_t_s >= CARRIER_RATE_WINDOW_S:
+        rec = replace(rec, carrier_v=np.array(c.velocity_ned_m_s, dtype=float), carrier_t_s=sampled)
     return rec
 
 
 def _carrier_unsteady(rec: RecoveryState, obs: Observation, r: RecoveryModel, t: float) -> str | None:
     """Why the carrier is not steady enough to land on (None: it is): accelerating or turning
-    beyond the recovery's limits, measured over :data:`CARRIER_RATE_WINDOW_S`."""
+    beyond the recovery's limits, measured between its samples over :data:`CARRIER_RATE_WINDOW_S`
+    of their own time (the samples' times, ``t - age``: a 30 Hz carrier read by a 50 Hz tick
+    would otherwise seem to turn up to a fifth faster than it does)."""
     c = obs.carrier
     if c is None or rec.carrier_v is None or rec.carrier_t_s is None:
         return None
+    dt = t - c.age_s - rec.carrier_t_s
     if c.acceleration_ned_m_s2 is not None:
         accel = float(norm(np.asarray(c.acceleration_ned_m_s2)[:2]))
     else:
-        dt = t - rec.carrier_t_s
         accel = float(norm((c.velocity_ned_m_s - rec.carrier_v)[:2])) / dt if dt >= CARRIER_RATE_WINDOW_S / 2 else 0.0
     if accel > r.carrier_max_accel_m_s2:
         return f"the carrier accelerates at {accel:.2f} m/s^2 (limit {r.carrier_max_accel_m_s2:g})"
     v0, v1 = rec.carrier_v[:2], np.asarray(c.velocity_ned_m_s)[:2]
-    dt = t - rec.carrier_t_s
     if float(norm(v0)) >= 0.3 and float(norm(v1)) >= 0.3 and dt >= CARRIER_RATE_WINDOW_S / 2:
         turn = abs(math.remainder(math.atan2(v1[1], v1[0]) - math.atan2(v0[1], v0[0]), 2 * math.pi)) / dt
         if turn > r.carrier_max_turn_rate_rad_s:

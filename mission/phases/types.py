@@ -163,7 +163,7 @@ class RecoveryState:
     started_s [s] on the mission clock; why it began ("task done" | "battery"); approaches begun;
     course: the carrier's course (horizontal unit vector NED); ``s``: progress on the glide path
     [0, 1], then ``descent`` on the vertical descent from the gate; ``climb_to`` [m]: a go-around's climb goal relative to the dock point (None: climbed);
-    the carrier's last velocity [m/s] and its time [s] (its acceleration and turn rate); the last
+    the carrier's last velocity [m/s] and when it sampled it [s] (``t - age``; its acceleration and turn rate); the last
     time a fresh carrier state was seen [s]; since when the vehicle has settled or held contact [s];
     the contact figures at docking; the fallback's reason and goal [m]; the battery when the flight
     began (t [s], remaining [%]): its drain rate."""

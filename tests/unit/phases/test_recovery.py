@@ -243,3 +243,31 @@ def test_a_skipped_leg_is_reported_with_its_reason(cfg, tmp_path):
     legs = controller.run().summary["legs"]
     assert legs[0]["outcome"] == "done" and legs[1]["outcome"].startswith("skipped: battery")
     assert "p1" not in legs[1]
+
+
+@pytest.mark.parametrize("rate_deg_s, steady", [(18.0, True), (19.5, True), (21.0, False), (25.0, False)])
+def test_the_carriers_turn_is_measured_on_its_own_samples(cfg, rate_deg_s, steady):
+    """A carrier turning steadily, sampled at 30 Hz and read by the 50 Hz tick (its sample's age
+    between 0 and a period): its turn rate is measured between its samples' own times, so one
+    just under recovery.carrier_max_turn_rate_deg_s (20) is steady and one just over is not
+    (measured over tick times, 18 deg/s read as 21.4)."""
+    import math
+
+    from mission.model import mission_model
+    from mission.phases import recovery
+    from mission.phases.types import CarrierObs, Observation, RecoveryState
+
+    r = mission_model(cfg).recovery
+    rec, why = RecoveryState(started_s=0.0, why="task done"), []
+    for k in range(200):
+        t = k * 0.02
+        sampled = math.floor(t * 30.0 + 1e-9) / 30.0
+        heading = math.radians(rate_deg_s) * sampled
+        v = 1.6 * np.array([math.cos(heading), math.sin(heading), 0.0])
+        obs = Observation(t_s=t, vehicle=None, carrier=CarrierObs(v * sampled, v, age_s=t - sampled))
+        rec = recovery._observe_carrier(rec, obs, r, t)
+        why.append(recovery._carrier_unsteady(rec, obs, r, t))
+    turning = [w for w in why if w is not None]
+    assert (turning == []) is steady, turning[:1]
+    if not steady:
+        assert f"{rate_deg_s:.1f} deg/s" in turning[0]

@@ -1,0 +1,409 @@
+"""Monte-Carlo of the recovery: whole missions flown in-process, the mission's own phase machine
+against the mock vehicle's own dynamics and a kinematic carrier (no sockets, threads or clocks).
+
+One scenario (:func:`fly`) is a whole mission of a ``final_action = "return"`` configuration,
+deploy, task, return and dock, ticked as the lockstep demo ticks it:
+
+- the passenger: :func:`mission.phases.step` every ``1 / mission.rate_hz`` [s], on what the
+  controller sees in lockstep (the vehicle's reported position and velocity sampled at the tick,
+  the carrier's newest state with its age); its setpoint goes to the vehicle at once, its
+  requests (arm, OFFBOARD, Hold, Land) are carried out at once;
+- the vehicle: the mock's commander (:class:`sim.vehicle.modes.Commander`) and PX4's position
+  controller on the fitted airframe (:func:`sim.vehicle.physics.multicopter.step`) in the mock's
+  fixed physics steps, the setpoint decoded by the mock's own MAVLink rules; optionally the
+  wander of PX4's estimate (:mod:`sim.vehicle.estimator`), seeded;
+- the carrier: the built-in kinematic robot (holonomic) at ``carrier.rate_hz``, following the
+  passenger's duty as ``marsupial carrier`` does: CARRY the paper's law, filtered, under the P3
+  guard; RECOVER the scenario's steady course (speed, heading), with its turn during the first
+  approach, filtered and guarded; otherwise it stops. It sees the status of the tick before.
+
+A :class:`Scenario` is replayable from its fields (the seed only drives the estimate's wander);
+:mod:`sim.batch.recovery_mc` draws them, flies a batch and reports it. The figures of each flight are those of the flight log's ``summary.json``
+(:func:`mission.record.summary_of` on the same columns). Frames: local NED [m], [m/s]; time [s]
+from the start of the mission.
+"""
+from __future__ import annotations
+
+import copy
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from mission.carrier.guard import GuardParams, P3Guard
+from mission.config.schema import Config
+from mission.controller import mission_info, recovered_info
+from mission.core.consistent_velocity import PositionConsistentVelocity
+from mission.core.setpoint import Setpoint
+from mission.core.tick import carrier_tick
+from mission.flight_mode import FlightMode
+from mission.interfaces import Request
+from mission.mavlink import setpoints
+from mission.model import mission_model, model_from_config
+from mission.phases import CarrierObs, Decision, MissionState, Observation, Phase, VehicleObs, finished, step
+from mission.phases.phase import Duty
+from mission.record import COLUMNS, VEC, FlightRecord, summary_of
+from sim.vehicle.estimator import EstimateDrift, flown_on_estimate
+from sim.vehicle.mock import PHYSICS_DT_S
+from sim.vehicle.modes import Commander
+from sim.vehicle.params import ParamTable, vehicle_limits
+from sim.vehicle.physics.multicopter import initial_state, step as physics_step
+from sim.vehicle.protocol import setpoint_of
+from sim.vehicle.telemetry import PositionNoise
+
+#: The mode each request of the phases switches to (as the controller's commands do).
+MODES_OF_REQUEST = {Request.OFFBOARD: FlightMode.OFFBOARD, Request.HOLD: FlightMode.HOLD, Request.LAND: FlightMode.LAND}
+
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """One recovery: the carrier's recovery course ``speed_m_s`` [m/s] on ``heading_deg`` [deg]
+    (NED: 0 north, 90 east), and its turn of ``turn_deg`` [deg] (signed, clockwise positive) at
+    ``turn_rate_deg_s`` [deg/s] that begins ``turn_after_s`` [s] after the first approach
+    began; ``estimate_drift_m_s`` [m/s] the wander of the vehicle's estimate (0: exact), seeded
+    by ``seed``. ``index``: its place in its batch (the same seed gives the same batch)."""
+
+    speed_m_s: float
+    heading_deg: float
+    turn_deg: float = 0.0
+    turn_rate_deg_s: float = 10.0
+    turn_after_s: float = 0.0
+    estimate_drift_m_s: float = 0.0
+    seed: int = 0
+    index: int = 0
+
+    def course_heading_deg(self, since_approach_s: float | None) -> float:
+        """The course's heading [deg] ``since_approach_s`` [s] after the first approach began (None: not yet)."""
+        if since_approach_s is None or since_approach_s <= self.turn_after_s:
+            return self.heading_deg
+        turned = min(abs(self.turn_deg), self.turn_rate_deg_s * (since_approach_s - self.turn_after_s))
+        return self.heading_deg + math.copysign(turned, self.turn_deg)
+
+    def as_dict(self) -> dict[str, float]:
+        return {"index": self.index, "speed_m_s": round(self.speed_m_s, 3), "heading_deg": round(self.heading_deg, 1),
+                "turn_deg": round(self.turn_deg, 1), "turn_rate_deg_s": round(self.turn_rate_deg_s, 1),
+                "turn_after_s": round(self.turn_after_s, 2), "estimate_drift_m_s": self.estimate_drift_m_s,
+                "seed": self.seed}
+
+
+# ---------------------------------------------------------------------------------------- carrier
+
+
+class KinematicCarrier:
+    """The built-in holonomic carrier robot and the part of ``marsupial carrier`` that drives it
+    (:mod:`mission.carrier.controller` with the ``sim`` backend): position [m], velocity [m/s]
+    NED in the plane of ``scenario.carrier_start``; yaw [rad] the heading of travel."""
+
+    def __init__(self, cfg: Config, scenario: Scenario) -> None:
+        if len(cfg.scenario.legs()) > 1:
+            raise ValueError("the recovery simulation flies one target (scenario.targets lists several)")
+        if cfg.carrier.kinematics != "holonomic" or cfg.scenario.carrier_mode != "stop":
+            raise ValueError("the recovery simulation drives the built-in holonomic carrier that stops once the "
+                             "passenger has left (carrier.kinematics = \"holonomic\", scenario.carrier_mode = \"stop\")")
+        self.cfg, self.scenario = cfg, scenario
+        model = model_from_config(cfg)
+        limit = cfg.carrier.max_speed_m_s
+        if model.carrier_safety.max_speed_m_s is not None:
+            limit = min(limit, model.carrier_safety.max_speed_m_s)
+        self.model = replace(model, carrier_safety=replace(model.carrier_safety, max_speed_m_s=limit))
+        c = cfg.carrier
+        decel = c.brake_decel_m_s2 or cfg.safety.carrier_max_accel_m_s2 or 1.0
+        delay = c.brake_delay_s if c.brake_delay_s is not None else 0.0  # the built-in robot obeys at once
+        self.guard = P3Guard(GuardParams(cfg.law.b * cfg.law.c - c.p3_margin_m, decel, delay, 1.0 / c.rate_hz),
+                             np.asarray(cfg.scenario.target, dtype=float), planar=True)
+        self.period_s = 1.0 / c.rate_hz
+        self.position = np.array(cfg.scenario.carrier_start, dtype=float)
+        self.velocity = np.zeros(3)
+        e_tc = np.asarray(cfg.scenario.target, dtype=float) - self.position
+        self.yaw_rad = math.atan2(e_tc[1], e_tc[0]) if c.start_yaw_rad is None else float(c.start_yaw_rad)
+        self.t_s = 0.0  # [s] the time of its state (its last step)
+        self.done = 0  # steps taken (the next is at done * period_s)
+        self.carrying = False  # the law's approach began (APPROACHING)
+        self.separated = False  # the latch fired (SEPARATED: stop, or Remark 1's plan)
+        self.course_begun = False  # it has driven the scenario's recovery course
+
+    def next_step_s(self) -> float:
+        """When [s] it steps next (every ``1 / carrier.rate_hz`` from 0)."""
+        return self.done * self.period_s
+
+    def step(self, phase: Phase | None, approach_s: float | None) -> None:
+        """Step at :meth:`next_step_s`: move there under the held command, then decide the next
+        command for the passenger's ``phase`` (None: none heard yet); ``approach_s`` [s]: when
+        the first approach began (None: not yet)."""
+        t_s = self.next_step_s()
+        dt = t_s - self.t_s
+        self.position = self.position + self.velocity * dt
+        self.t_s = t_s
+        self.done += 1
+        since_approach_s = None if approach_s is None else t_s - approach_s
+        duty = phase.duty if phase is not None else Duty.WAIT
+        if duty is Duty.CARRY and not self.separated:
+            self.carrying = True
+        if duty not in (Duty.WAIT, Duty.CARRY):
+            self.separated = True
+        x_c = self.position
+        course: np.ndarray | None = None  # the recovery course, or None: the law (carrying) or stop
+        if duty is Duty.RECOVER:
+            self.course_begun = True
+            heading = math.radians(self.scenario.course_heading_deg(since_approach_s))
+            course = self.scenario.speed_m_s * np.array([math.cos(heading), math.sin(heading), 0.0])
+        carrying = self.carrying and not self.separated
+        u = np.array(carrier_tick(x_c, not carrying, self.model, u_prev=self.velocity, dt_s=dt or None,
+                                  course_velocity=course).u, dtype=float)
+        u = np.asarray(self.guard.limit(t_s, x_c, u, self.velocity, 0.0).u, dtype=float)
+        u[2] = 0.0
+        self.velocity = u
+        if math.hypot(u[0], u[1]) > 1e-6:
+            self.yaw_rad = math.atan2(u[1], u[0])
+
+    def observed(self, t_s: float) -> CarrierObs:
+        """The newest published state as the passenger sees it at ``t_s`` [s]."""
+        return CarrierObs(position_ned_m=self.position.copy(), velocity_ned_m_s=self.velocity.copy(),
+                          age_s=max(t_s - self.t_s, 0.0), alive=True, yaw_rad=self.yaw_rad)
+
+
+# ---------------------------------------------------------------------------------------- vehicle
+
+
+class MockDynamics:
+    """The mock vehicle without its sockets: the commander and the physics of
+    :class:`sim.vehicle.mock.MockVehicle`, stepped in its fixed physics steps (its
+    ``_advance_steps``), the estimate's wander when asked; what it reports is the estimate."""
+
+    def __init__(self, start_ned_m: Sequence[float], drift_m_s: float = 0.0, seed: int = 0,
+                 params: dict[str, float] | None = None) -> None:
+        self.kin = initial_state(tuple(float(x) for x in start_ned_m))  # type: ignore[arg-type]
+        self.params = ParamTable(dict(params or {}), 1)
+        self.limits = vehicle_limits(self.params)
+        self.commander = Commander(self.params, self.kin)
+        self.drift = EstimateDrift(drift_m_s, seed=seed) if drift_m_s > 0 else None
+        self.noise = PositionNoise(0.0, seed, self.drift)
+        self.steps = 0
+        self.wind = (0.0, 0.0, 0.0)
+
+    def advance_to_step(self, target: int) -> None:
+        """Run the commander and the physics up to physics step ``target``."""
+        commander, kin, limits, drift = self.commander, self.kin, self.limits, self.drift
+        for k in range(self.steps + 1, target + 1):
+            command = commander.step(k * PHYSICS_DT_S, kin)
+            if drift is not None:  # PX4 flies its (wandering) estimate to a position setpoint
+                drift.advance(PHYSICS_DT_S)
+                command = flown_on_estimate(command, drift.offset)
+            kin = physics_step(kin, command, limits, self.wind, PHYSICS_DT_S)
+        self.steps = max(self.steps, target)
+        self.kin = commander.kin = kin
+
+    def observed(self) -> VehicleObs:
+        """The vehicle as the controller sees it: its reported (estimated) position, its velocity."""
+        k, c = self.kin, self.commander
+        return VehicleObs(position_ned_m=np.array(self.noise.apply(k)), velocity_ned_m_s=np.array((k.vn_m_s, k.ve_m_s, k.vd_m_s)),
+                          armed=c.armed, mode=c.mode, heartbeat_age_s=0.0, position_valid=c.position_valid,
+                          position_age_s=0.0, in_failsafe=c.in_failsafe)
+
+    def send(self, t_s: float, sp: Setpoint) -> None:
+        """The setpoint through the one MAVLink encoding and the mock's decoding rules."""
+        trajectory, reason = setpoint_of(setpoints.encode(sp, (1, 1), int(t_s * 1000)), self.kin.yaw_rad)
+        if trajectory is None:
+            self.commander.reject_setpoint(t_s, reason)
+        else:
+            self.commander.accept_setpoint(t_s, trajectory)
+
+    def request(self, t_s: float, request: Request) -> str | None:
+        """Carry out a request; the vehicle's refusal (its STATUSTEXT), or None when accepted."""
+        c = self.commander
+        before = len(c.outbox)
+        result = c.arm(t_s) if request is Request.ARM else c.set_mode(t_s, MODES_OF_REQUEST[request])
+        return None if result == 0 else (c.outbox[-1][2] if len(c.outbox) > before else f"MAV_RESULT {result}")
+
+    @property
+    def true_position(self) -> np.ndarray:
+        return np.array((self.kin.n_m, self.kin.e_m, self.kin.d_m))
+
+
+# ----------------------------------------------------------------------------------------- flight
+
+
+@dataclass
+class Flight:
+    """One flown scenario: ``record`` the flight record (the columns of record.csv, plus
+    ``x_true`` the vehicle's true position [m] and ``course`` the recovery's view of the
+    carrier's course); ``summary`` what summary.json would say; ``state`` the phase machine's
+    last state; ``true_deck_violations`` the deck violations counted on the true position;
+    ``events`` (t [s], text) what the phases said (the flight log's lines)."""
+
+    scenario: Scenario
+    record: FlightRecord
+    summary: dict[str, Any]
+    state: MissionState
+    true_deck_violations: int = 0
+    events: list[tuple[float, str]] = field(default_factory=list)
+
+    @property
+    def go_arounds(self) -> list[str]:
+        """Why each go-around began."""
+        return [text.removeprefix("go-around: ") for _, text in self.events if text.startswith("go-around: ")]
+
+    @property
+    def docked(self) -> bool:
+        return bool(self.summary.get("docked_again"))
+
+    @property
+    def attempts(self) -> int:
+        rec = self.state.recovery
+        return 0 if rec is None else rec.attempts
+
+
+@dataclass
+class _Rows:
+    """The flight record's columns as the loop appends them."""
+
+    t: list[float] = field(default_factory=list)
+    phase: list[str] = field(default_factory=list)
+    vecs: dict[str, list[np.ndarray]] = field(default_factory=dict)
+
+    def add(self, t: float, phase: Phase, **vecs: np.ndarray | None) -> None:
+        self.t.append(t)
+        self.phase.append(phase.value)
+        for name, v in vecs.items():
+            self.vecs.setdefault(name, []).append(np.full(3, np.nan) if v is None else np.asarray(v, dtype=float))
+
+    def record(self, info: dict[str, Any]) -> FlightRecord:
+        cols: dict[str, np.ndarray] = {"t_s": np.asarray(self.t)}
+        for name, rows in self.vecs.items():
+            arr = np.asarray(rows, dtype=float).reshape(-1, 3)
+            for i, a in enumerate(VEC):
+                cols[f"{name}_{a}"] = arr[:, i]
+        for name in COLUMNS:  # the scalar columns the summary does not read
+            cols.setdefault(name, np.full(len(self.t), np.nan))
+        return FlightRecord(t=np.asarray(self.t), phase=np.asarray(self.phase, dtype=str), cols=cols, info=info)
+
+
+class World:
+    """A mission in flight: the phase machine's state, the vehicle, the carrier and the record so
+    far; :meth:`tick` advances it by one controller tick. :meth:`copy` branches it: the flights
+    of a batch share the part before the recovery (:func:`monte_carlo`)."""
+
+    def __init__(self, cfg: Config, scenario: Scenario, max_duration_s: float | None = None) -> None:
+        self.cfg, self.model = cfg, mission_model(cfg)
+        if self.model.recovery is None:
+            raise ValueError("the recovery simulation needs mission.final_action = \"return\"")
+        self.dt_s = self.model.dt_s
+        self.steps_per_tick = int(round(self.dt_s / PHYSICS_DT_S))
+        if abs(self.steps_per_tick * PHYSICS_DT_S - self.dt_s) > 1e-12:
+            raise ValueError(f"mission.rate_hz must divide the mock's physics rate ({1 / PHYSICS_DT_S:g} Hz)")
+        self.vehicle = MockDynamics(cfg.scenario.carrier_start, scenario.estimate_drift_m_s, scenario.seed)
+        self.carrier = KinematicCarrier(cfg, scenario)
+        self.state = MissionState()
+        self.rows = _Rows()
+        self.published: Phase | None = None  # the status the carrier hears
+        self.approach_s: float | None = None  # when the first approach began [s]
+        self.failed: dict[str, str] = {}
+        self.events: list[tuple[float, str]] = []  # (t [s], what the phases said)
+        tau = cfg.mission.velocity_bias_tau_s  # the controller's view of the vehicle's velocity (mission.controller)
+        self.velocity_fix = PositionConsistentVelocity(tau) if tau > 0 else None
+        self.limit_s = max_duration_s if max_duration_s is not None else self.model.max_duration_s + 30.0
+        self.k = 0
+        self.done = False
+
+    @property
+    def scenario(self) -> Scenario:
+        return self.carrier.scenario
+
+    def copy(self) -> World:
+        """An independent copy (the configuration, the model and the vehicle's parameters,
+        which never change in flight, shared)."""
+        shared = (self.cfg, self.model, self.vehicle.params, self.vehicle.limits)
+        return copy.deepcopy(self, memo={id(x): x for x in shared})
+
+    def with_scenario(self, scenario: Scenario) -> World:
+        """This world flying ``scenario`` from now on; only before the carrier drives its recovery
+        course, and with the same estimate (what differs between scenarios)."""
+        if self.carrier.course_begun or scenario.estimate_drift_m_s != self.scenario.estimate_drift_m_s \
+                or (scenario.estimate_drift_m_s > 0 and scenario.seed != self.scenario.seed):
+            raise ValueError("a world takes another scenario only before the recovery, with the same estimate")
+        self.carrier.scenario = scenario
+        return self
+
+    def tick(self) -> None:
+        """One controller tick at ``k * dt``: the carrier's steps due, the vehicle brought to the
+        tick, the phase machine, its setpoint and request carried out, the row recorded."""
+        t = self.k * self.dt_s
+        carrier, vehicle = self.carrier, self.vehicle
+        while carrier.next_step_s() <= t + 1e-9:  # the carrier steps first, on the status of the tick before
+            carrier.step(self.published, self.approach_s)
+        vehicle.advance_to_step(self.k * self.steps_per_tick)
+        seen = vehicle.observed()
+        if self.velocity_fix is not None:
+            seen = replace(seen, velocity_ned_m_s=self.velocity_fix.update(t, seen.position_ned_m, seen.velocity_ned_m_s))
+        obs = Observation(t_s=t, vehicle=seen, carrier=carrier.observed(t), failed=dict(self.failed))
+        self.state, dec = step(self.state, obs, self.model)
+        if dec.setpoint is not None:
+            vehicle.send(t, dec.setpoint)
+        if dec.request is not None and dec.request.value not in self.failed:
+            why = vehicle.request(t, dec.request)
+            if why is not None and dec.request in (Request.ARM, Request.OFFBOARD):
+                self.failed[dec.request.value] = why
+        self.events.extend((t, text) for text in dec.events)
+        self.published = self.state.phase
+        if self.approach_s is None and self.state.phase is Phase.APPROACH:
+            self.approach_s = t
+        _record(self.rows, t, self.state, obs, dec, vehicle)
+        self.k += 1
+        self.done = finished(self.state, dec) or t >= self.limit_s
+
+    def run(self, until: Callable[[World], bool] | None = None) -> World:
+        """Tick until the mission ends (or ``until(self)`` holds)."""
+        while not self.done and not (until is not None and until(self)):
+            self.tick()
+        return self
+
+    def flight(self) -> Flight:
+        """The flight so far, with its summary."""
+        st = self.state
+        info = mission_info(self.cfg)
+        info.update(separation_time_s=st.separation_time_s,
+                    anchor_ned_m=None if st.anchor is None else st.anchor.tolist(), recovered=recovered_info(st),
+                    legs_done=list(st.legs_done), legs_skipped=st.legs_skipped)
+        record = self.rows.record(info)
+        summary = summary_of(record)
+        summary.update(phase=st.phase.value, reason=None if st.reason is None else st.reason.value, detail=st.detail,
+                       ticks=self.k)
+        true = summary_of(replace(record, cols={**record.cols, **{f"x_p_{a}": record.cols[f"x_true_{a}"] for a in VEC}}))
+        return Flight(self.scenario, record, summary, st, int(true.get("deck_violations") or 0), list(self.events))
+
+
+def fly(cfg: Config, scenario: Scenario, max_duration_s: float | None = None) -> Flight:
+    """Fly one whole mission of ``cfg`` (``mission.final_action = "return"``) in ``scenario``."""
+    return World(cfg, scenario, max_duration_s).run().flight()
+
+
+def before_recovery(cfg: Config, estimate_drift_m_s: float = 0.0, seed: int = 0) -> World:
+    """The mission flown up to the first tick of its recovery (the carrier not yet told): what
+    every scenario with this estimate shares."""
+    return World(cfg, Scenario(0.0, 0.0, estimate_drift_m_s=estimate_drift_m_s, seed=seed)).run(
+        lambda w: w.published is not None and w.published.duty is Duty.RECOVER)
+
+
+def _record(rows: _Rows, t: float, state: MissionState, obs: Observation, dec: Decision, vehicle: MockDynamics) -> None:
+    v, c = obs.vehicle, obs.carrier
+    rec = state.recovery
+    rows.add(t, state.phase, x_p=None if v is None else v.position_ned_m, v_p=None if v is None else v.velocity_ned_m_s,
+             x_c=None if c is None else c.position_ned_m, v_c=None if c is None else c.velocity_ned_m_s, dock=dec.dock,
+             x_ref=state.x_ref, u_cmd=None if dec.setpoint is None else dec.setpoint.velocity_ned_m_s,
+             x_true=vehicle.true_position, course=None if rec is None else rec.course)
+
+
+def draw(flight: Flight, path: str | Path, what: str) -> Path | None:
+    """The flight's recovery figure (:func:`mission.plots.plot_recovery`) at ``path``, titled
+    ``what`` and its scenario; None when it never began its recovery."""
+    from mission.plots import plot_recovery, recovery_track
+
+    sc = flight.scenario
+    track = recovery_track(flight.record, f"{what}: carrier {sc.speed_m_s:.2f} m/s on {sc.heading_deg:.0f} deg, turn "
+                           f"{sc.turn_deg:+.0f} deg at {sc.turn_rate_deg_s:.0f} deg/s {sc.turn_after_s:.1f} s into the "
+                           f"first approach")
+    return None if track is None else plot_recovery(track, path)
