@@ -64,6 +64,16 @@ def signing_key_option(path: Path) -> bytes:
         raise click.BadParameter(f"{path}: {exc.rule}", param_hint="--signing-key") from None
 
 
+def _battery_params(drain_s: float | None, min_pct: float | None) -> dict[str, float]:
+    """The battery simulator's parameters of --battery-drain and --battery-min-pct."""
+    if drain_s is None:
+        if min_pct is not None:
+            raise click.BadParameter("needs --battery-drain (the battery is simulated only with it)",
+                                     param_hint="--battery-min-pct")
+        return {}
+    return {"SIM_BAT_ENABLE": 1, "SIM_BAT_DRAIN": drain_s, **({} if min_pct is None else {"SIM_BAT_MIN_PCT": min_pct})}
+
+
 def _endpoints(mavlink_url: str, target_url: str) -> tuple[str, str]:
     """(bind, target) from --mavlink and --target; a udpout URL given to --mavlink is the target."""
     try:
@@ -105,6 +115,11 @@ def _write_port_file(path: Path, port: int) -> None:
                    "kinematics, PX4's rover offboard rules (speed |v| towards bearing atan2(v)).")
 @click.option("--param", "params", multiple=True, metavar="NAME=VALUE",
               help="Override a PX4 parameter, e.g. --param COM_OF_LOSS_T=1.0 (repeatable).")
+@click.option("--battery-drain", "battery_drain_s", type=click.FloatRange(min=1.0), default=None, metavar="SECONDS",
+              help="Simulate the battery as PX4 SITL's battery simulator does: armed, it drains fully in SECONDS "
+                   "(SIM_BAT_ENABLE=1, SIM_BAT_DRAIN; PX4 SITL: 60). Without it the vehicle reports no battery.")
+@click.option("--battery-min-pct", type=click.FloatRange(0.0, 100.0), default=None, metavar="PERCENT",
+              help="With --battery-drain: the charge never falls below PERCENT (SIM_BAT_MIN_PCT; PX4 SITL: 50).")
 @click.option("--wind", default="0,0,0", show_default=True, metavar="N,E,D",
               help="Wind [m/s] NED: a drag force in the air (PX4's velocity integrator slowly compensates it).")
 @click.option("--estimate-drift", type=click.FloatRange(min=0.0), default=0.0, show_default=True, metavar="M_S",
@@ -144,7 +159,8 @@ def _write_port_file(path: Path, port: int) -> None:
 @click.option("--status-every", type=click.FloatRange(min=0.0), default=5.0, show_default=True, metavar="SECONDS",
               help="Log a status line with mode, position and the counters every SECONDS of wall time (0: never).")
 def mock_vehicle(mavlink_url: str, target_url: str, gcs_url: str | None, speed: float, home: str, start_ned: str,
-                 sysid: int, frame: str, params: tuple[str, ...], wind: str, estimate_drift: float, position_noise: float, loss_in: float,
+                 sysid: int, frame: str, params: tuple[str, ...], battery_drain_s: float | None,
+                 battery_min_pct: float | None, wind: str, estimate_drift: float, position_noise: float, loss_in: float,
                  loss_out: float, latency_ms: float, jitter_ms: float, blackouts: tuple[str, ...],
                  refuse_arming: str | None, refuse_offboard: str | None, lose_position_s: float | None, seed: int, signing_key: Path | None, port_file: Path | None,
                  lockstep: bool, lockstep_watchdog_s: float, lockstep_max_speed: float | None, status_every: float) -> None:
@@ -163,7 +179,7 @@ def mock_vehicle(mavlink_url: str, target_url: str, gcs_url: str | None, speed: 
     options = VehicleOptions(
         bind=bind, target=target, gcs_target=gcs_url, speed=speed, sysid=sysid, frame=frame,
         home=_floats(home, 3, "--home"), start_ned=_floats(start_ned, 3, "--start-ned"),  # type: ignore[arg-type]
-        params=dict(_param(p) for p in params), faults=faults,
+        params={**_battery_params(battery_drain_s, battery_min_pct), **dict(_param(p) for p in params)}, faults=faults,
         signing_key=signing_key_option(signing_key) if signing_key else None,
         wind_ned_m_s=_floats(wind, 3, "--wind"), position_noise_m=position_noise,  # type: ignore[arg-type]
         estimate_drift_m_s=estimate_drift, lockstep=lockstep, lockstep_watchdog_wall_s=lockstep_watchdog_s,

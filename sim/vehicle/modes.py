@@ -25,6 +25,21 @@ State machine (PX4 behaviour from ../shared/REFERENCE.md; choices of this mock m
   Descend reports as AUTO.LAND): no horizontal hold, descend at MPC_LAND_SPEED.
 - Auto-disarm: COM_DISARM_PRFLT after arming if not taken off; COM_DISARM_LAND after landing.
 - Disarming clears the failsafe; the mode stays (a new arm needs an armable mode).
+- Home: set where the vehicle arms on the ground, unless DO_SET_HOME set it (PX4's
+  ``manual_home``: it then stays until the next DO_SET_HOME). DO_SET_HOME (COMMAND_LONG or
+  COMMAND_INT; param1 = 1: here, else lat/lon/alt) is accepted armed or not, in flight too, with
+  a valid position estimate (else TEMPORARILY_REJECTED); non-finite coordinates: DENIED; COM_HOME_EN
+  = 0: DENIED. No rate limit (a PX4 SITL took 5 a second, each ACCEPTED).
+- RTL fixes its destination (the home) and its return altitude when it starts: a home moved
+  during the return is not followed (as on PX4 SITL, whose RTL also takes them at activation).
+  Return altitude as PX4's ``computeReturnAltitude`` for a multicopter: RTL_RETURN_ALT above the
+  home; within RTL_MIN_DIST, the RTL_CONE_ANG cone's height at that distance; at least 2 x
+  NAV_ACC_RAD; never lower than the vehicle is. *No descent to RTL_DESCEND_ALT and loiter: it
+  descends at MPC_LAND_SPEED all the way.
+- Battery (SIM_BAT_ENABLE, :mod:`sim.vehicle.battery`): below BAT_LOW_THR a warning; below
+  BAT_CRIT_THR, COM_LOW_BAT_ACT 3: failsafe Return, 2: failsafe Land; below BAT_EMERGEN_THR, 2 or
+  3: failsafe Land. *Each once, on the way down; PX4's failsafe framework adds a hold delay and
+  user takeover.
 """
 from __future__ import annotations
 
@@ -32,7 +47,8 @@ import math
 from dataclasses import dataclass
 
 from mission.mavlink import px4, setpoints
-from sim.vehicle.params import ParamTable
+from sim.vehicle import battery
+from sim.vehicle.params import ParamTable, battery_params
 from sim.vehicle.physics.multicopter import Command, KinState
 
 POSITION_GAIN_1_S = 1.0  # P gain of the position loops (Hold, position setpoints) [1/s]
@@ -84,9 +100,15 @@ class Commander:
         self.landed_t_s: float | None = None
         self.hold_ned_m = (kin.n_m, kin.e_m, kin.d_m)
         self.home_ned_m = (kin.n_m, kin.e_m, kin.d_m)
+        self.manual_home = False  # DO_SET_HOME set it: arming no longer moves it
         self.takeoff_d_m = kin.d_m
         self.rtl_phase = "climb"
         self.rtl_return_d_m = kin.d_m
+        self.rtl_home_ned_m = self.home_ned_m  # RTL's destination, fixed when it starts
+        self.battery = battery.BatteryState()
+        self.battery_warning = battery.BatteryWarning.NONE
+        self._battery_params: tuple[int, battery.BatteryParams] | None = None
+        self._battery_t_s = 0.0
         self.now_s = 0.0  # time of the latest step or command [s]
         self.outbox: list[tuple[float, int, str]] = []  # (t_s, severity, text) to send
         self._rejections: dict[str, float] = {}  # STATUSTEXT of a dropped setpoint -> when last said
@@ -104,9 +126,29 @@ class Commander:
             self.user_mode = name
         self.hold_ned_m = (kin.n_m, kin.e_m, kin.d_m)
         self.rtl_phase = "climb"
-        self.rtl_return_d_m = min(kin.d_m, self.home_ned_m[2] - self.params.get("RTL_RETURN_ALT"))
+        self.rtl_home_ned_m = self.home_ned_m
+        self.rtl_return_d_m = self._rtl_return_d_m(kin)
         if name == "AUTO.TAKEOFF":
             self.takeoff_d_m = self.home_ned_m[2] - self.params.get("MIS_TAKEOFF_ALT")
+
+    def _rtl_return_d_m(self, kin: KinState) -> float:
+        """RTL's return altitude as NED down [m] (PX4's ``computeReturnAltitude``, multicopter)."""
+        p = self.params.get
+        home_n, home_e, home_d = self.rtl_home_ned_m
+        dist_m = math.hypot(home_n - kin.n_m, home_e - kin.e_m)
+        highest = p("RTL_RETURN_ALT")
+        cone_deg = p("RTL_CONE_ANG")
+        if cone_deg <= 0:
+            return min(kin.d_m, home_d - highest)
+        acc_rad = p("NAV_ACC_RAD")
+        if dist_m <= acc_rad:
+            height = 2.0 * dist_m
+        else:
+            height = highest
+            if dist_m <= p("RTL_MIN_DIST"):
+                height = min(dist_m / math.tan(math.radians(min(max(cone_deg, 1.0), 89.0))), height)
+            height = max(height, 2.0 * acc_rad)
+        return min(max(home_d - height, home_d - highest), kin.d_m)  # no lower than the vehicle is
 
     def setpoint_fresh(self, t_s: float) -> bool:
         """A valid setpoint arrived within COM_OF_LOSS_T."""
@@ -167,7 +209,7 @@ class Commander:
             return px4.MAV_RESULT_TEMPORARILY_REJECTED
         kin = self.kin
         self.armed, self.arm_t_s, self.taken_off, self.landed_t_s = True, t_s, False, None
-        if kin.on_ground:
+        if kin.on_ground and not self.manual_home:
             self.home_ned_m = (kin.n_m, kin.e_m, kin.d_m)
         self.hold_ned_m = (kin.n_m, kin.e_m, kin.d_m)
         self._say("Armed by external command")
@@ -208,6 +250,21 @@ class Commander:
         self.takeoff_d_m = self.home_ned_m[2] - alt_m
         return px4.MAV_RESULT_ACCEPTED
 
+    def set_home(self, t_s: float, home_ned_m: tuple[float, float, float] | None) -> int:
+        """DO_SET_HOME: the home at ``home_ned_m`` [m] NED (None: where the vehicle is); return the
+        MAV_RESULT (see the module docstring)."""
+        self.now_s = max(self.now_s, t_s)
+        if not self.params.get("COM_HOME_EN"):
+            return px4.MAV_RESULT_DENIED
+        if home_ned_m is not None and not all(math.isfinite(c) for c in home_ned_m):
+            return px4.MAV_RESULT_DENIED
+        if not self.position_valid:
+            return px4.MAV_RESULT_TEMPORARILY_REJECTED
+        kin = self.kin
+        self.home_ned_m = (kin.n_m, kin.e_m, kin.d_m) if home_ned_m is None else tuple(home_ned_m)  # type: ignore[assignment]
+        self.manual_home = True
+        return px4.MAV_RESULT_ACCEPTED
+
     def force_mode(self, t_s: float, name: str) -> None:
         """A pilot takes over and switches to ``name`` (no checks; clears a failsafe)."""
         self.now_s = max(self.now_s, t_s)
@@ -222,6 +279,7 @@ class Commander:
         """Apply the timers and failsafes at time ``t_s`` and return the command for ``kin``."""
         self.now_s = max(self.now_s, t_s)
         self.kin = kin
+        self._step_battery(t_s)
         if self.armed:
             self._track_landing(t_s, kin)
             self._auto_disarm(t_s, kin)
@@ -259,6 +317,36 @@ class Commander:
             self.in_failsafe, self.failsafe_reason = False, None
             self._enter("OFFBOARD", by_user=False)
             self._say("Failsafe deactivated: offboard signal regained")
+
+    def battery_params(self) -> battery.BatteryParams | None:
+        """The battery's parameters (derived again only after a change); None: not simulated."""
+        if not self.params.get("SIM_BAT_ENABLE"):
+            return None
+        cached = self._battery_params
+        if cached is None or cached[0] != self.params.version:
+            cached = self._battery_params = (self.params.version, battery_params(self.params))
+        return cached[1]
+
+    def _step_battery(self, t_s: float) -> None:
+        p = self.battery_params()
+        dt_s, self._battery_t_s = t_s - self._battery_t_s, t_s
+        if p is None or dt_s <= 0:
+            return
+        self.battery = battery.step(self.battery, dt_s, self.armed, p)
+        level = battery.warning(self.battery, p)
+        if not self.armed:
+            self.battery_warning = level
+            return
+        if level <= self.battery_warning:
+            return
+        self.battery_warning = level
+        action = int(self.params.get("COM_LOW_BAT_ACT"))
+        if level == battery.BatteryWarning.LOW or action not in (2, 3):
+            self._say(f"Low battery level! ({battery.remaining_pct(self.battery, p)} %)", px4.MAV_SEVERITY_WARNING)
+        elif level == battery.BatteryWarning.CRITICAL:
+            self._activate_failsafe(t_s, "AUTO.RTL" if action == 3 else "AUTO.LAND", "battery critical")
+        else:
+            self._activate_failsafe(t_s, "AUTO.LAND", "battery emergency")
 
     def _offboard_lost(self, t_s: float) -> None:
         action = int(self.params.get("COM_OBL_RC_ACT"))
@@ -318,8 +406,9 @@ class Commander:
         return Command(hold.vn_m_s, hold.ve_m_s, -climb_m_s)
 
     def _rtl_command(self, kin: KinState) -> Command:
-        """Climb to the return altitude, fly home at MPC_XY_CRUISE, descend and land."""
-        home_n, home_e, _ = self.home_ned_m
+        """Climb to the return altitude, fly to the destination fixed at the start at
+        MPC_XY_CRUISE, descend and land."""
+        home_n, home_e, _ = self.rtl_home_ned_m
         dist_m = math.hypot(home_n - kin.n_m, home_e - kin.e_m)
         if self.rtl_phase == "climb":
             if dist_m <= 2 * ARRIVAL_RADIUS_M:

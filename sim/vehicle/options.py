@@ -93,6 +93,7 @@ class VehicleSnapshot:
     last_setpoint_t_s: float
     counters: dict[str, int]
     setpoint: TrajectorySetpoint | None = None  # the last offboard setpoint accepted, as decoded
+    battery_pct: float | None = None  # battery remaining [%] as reported (None: not simulated, SIM_BAT_ENABLE 0)
 
 
 def frozen(values: Sequence[float]) -> np.ndarray:
