@@ -27,7 +27,6 @@ from typing import Any
 
 
 from mission.time.clock import Clock, ManualClock, ScaledClock
-from sim.vehicle import battery
 from sim.vehicle import telemetry as tel
 from sim.vehicle.modes import Commander
 from sim.vehicle.estimator import EstimateDrift, flown_on_estimate
@@ -172,13 +171,7 @@ class MockVehicle:
                 mode=c.mode, landed_state=c.landed_state(k), in_failsafe=c.in_failsafe,
                 position_valid=c.position_valid, home_ned_m=frozen(c.home_ned_m),
                 last_setpoint_t_s=c.last_setpoint_t_s, counters=self.counters, setpoint=c.setpoint,
-                battery_pct=self._battery_pct())
-
-    def _battery_pct(self) -> float | None:
-        """The battery's remaining [%] as the vehicle reports it (None: not simulated)."""
-        c = self._commander
-        p = c.battery_params()
-        return None if p is None else float(battery.remaining_pct(c.battery, p))
+                battery_pct=None if (bat := c.battery.reading()) is None else float(bat[0]))
 
     def when(self, predicate: Callable[[VehicleSnapshot], bool]) -> Callable[[], VehicleSnapshot | None]:
         """A check for :func:`sim.net.wait_for`: the snapshot once ``predicate`` holds for it, else None."""
@@ -335,10 +328,8 @@ class MockVehicle:
 
     def _telemetry_state(self) -> tel.TelemetryState:
         c, k = self._commander, self._kin
-        bp = c.battery_params()
-        bat = None if bp is None else (battery.remaining_pct(c.battery, bp), battery.voltage_mv(c.battery, bp))
         return tel.TelemetryState(self._t_s, k, c.mode, c.armed, c.system_status(), c.landed_state(k), c.armable(),
-                                  c.position_valid, c.setpoint, c.home_ned_m, FRAMES[self.options.frame], bat)
+                                  c.position_valid, c.setpoint, c.home_ned_m, FRAMES[self.options.frame], c.battery.reading())
 
     def _service_streams(self, t_s: float) -> None:
         state: tel.TelemetryState | None = None

@@ -13,7 +13,6 @@ import threading
 from dataclasses import dataclass
 
 from mission.mavlink import px4
-from sim.vehicle.battery import BatteryParams
 from sim.vehicle.physics.mc_position_control import Gains
 from sim.vehicle.physics.multicopter import Limits
 
@@ -167,9 +166,3 @@ def vehicle_limits(table: ParamTable) -> Limits:
                   p("MPC_THR_MIN"), p("MPC_THR_MAX"), p("MPC_THR_XY_MARG"))
     return Limits(gains, yaw_rate_max_rad_s=math.radians(p("MPC_YAWRAUTO_MAX")))
 
-
-def battery_params(table: ParamTable) -> BatteryParams:
-    """The battery simulator's and estimate's parameters from the current values."""
-    p = table.get
-    return BatteryParams(max(p("SIM_BAT_DRAIN"), 1.0), p("SIM_BAT_MIN_PCT"), int(p("BAT1_N_CELLS")), p("BAT1_V_CHARGED"),
-                         p("BAT1_V_EMPTY"), p("BAT_LOW_THR"), p("BAT_CRIT_THR"), p("BAT_EMERGEN_THR"))

@@ -1,11 +1,11 @@
-"""The mock's battery against PX4 SITL's battery simulator and estimate (sim/vehicle/battery.py):
+"""The mock's battery against PX4 SITL's battery simulator and estimate (sim/vehicle/physics/battery.py):
 the drain, the 1 s lag of the estimate, the floor, a full battery when disarmed, the warnings."""
 from __future__ import annotations
 
 import pytest
 
-from sim.vehicle import battery
-from sim.vehicle.battery import BatteryParams, BatteryState, BatteryWarning
+from sim.vehicle.physics import battery
+from sim.vehicle.physics.battery import BatteryParams, BatteryState, BatteryWarning
 
 DT_S = 0.01  # PX4's battery simulator runs at 100 Hz
 

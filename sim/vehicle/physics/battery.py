@@ -27,6 +27,10 @@ from __future__ import annotations
 import enum
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from sim.vehicle.params import ParamTable
 
 FILTER_TAU_S = 1.0  # PX4's battery library: low-pass of the cell voltage [s]
 
@@ -100,3 +104,47 @@ def warning(state: BatteryState, p: BatteryParams) -> BatteryWarning:
     if left < p.low_thr:
         return BatteryWarning.LOW
     return BatteryWarning.NONE
+
+
+def params_of(table: ParamTable) -> BatteryParams | None:
+    """The battery's parameters from the vehicle's table; None: not simulated (SIM_BAT_ENABLE 0)."""
+    p = table.get
+    if not p("SIM_BAT_ENABLE"):
+        return None
+    return BatteryParams(max(p("SIM_BAT_DRAIN"), 1.0), p("SIM_BAT_MIN_PCT"), int(p("BAT1_N_CELLS")),  # PX4's minimum: 1 s
+                         p("BAT1_V_CHARGED"), p("BAT1_V_EMPTY"), p("BAT_LOW_THR"), p("BAT_CRIT_THR"), p("BAT_EMERGEN_THR"))
+
+
+class Battery:
+    """A vehicle's simulated battery, stepped with its commander at every physics step; its
+    parameters come from ``table`` (derived again only after a change)."""
+
+    def __init__(self, table: ParamTable) -> None:
+        self.table = table
+        self.state = BatteryState()
+        self.level = BatteryWarning.NONE
+        self._t_s = 0.0
+        self._params: tuple[int, BatteryParams | None] | None = None
+
+    @property
+    def params(self) -> BatteryParams | None:
+        cached = self._params
+        if cached is None or cached[0] != self.table.version:
+            cached = self._params = (self.table.version, params_of(self.table))
+        return cached[1]
+
+    def update(self, t_s: float, armed: bool) -> BatteryWarning | None:
+        """Step to ``t_s`` [s]; the warning level newly reached while armed, else None."""
+        p, dt_s = self.params, t_s - self._t_s
+        self._t_s = t_s
+        if p is None or dt_s <= 0:
+            return None
+        self.state = step(self.state, dt_s, armed, p)
+        level, before = warning(self.state, p), self.level
+        self.level = level
+        return level if armed and level > before else None
+
+    def reading(self) -> tuple[int, int] | None:
+        """(battery_remaining [%], voltage [mV]) as SYS_STATUS carries them; None: not simulated."""
+        p = self.params
+        return None if p is None else (remaining_pct(self.state, p), voltage_mv(self.state, p))
