@@ -14,6 +14,7 @@ import threading
 from collections.abc import Iterator
 from typing import Any, Callable
 
+from mission.core import geodesy
 from mission.flight_mode import FlightMode
 from mission.mavlink import px4
 from mission.errors import CommandRejected, LinkError, LinkTimeout
@@ -67,9 +68,24 @@ class CommandClient:
         """
         if len(params) > 7:
             raise ValueError(f"COMMAND_LONG has 7 params, got {len(params)}")
+        padded = [float(p) for p in params] + [0.0] * (7 - len(params))
+        return self._exchange(command, lambda target, confirmation: mavlink.MAVLink_command_long_message(
+            target[0], target[1], int(command), confirmation, *padded), timeout_s, retries)
+
+    def command_int(self, command: int, frame: int, params: tuple[float, float, float, float], x: int, y: int,
+                    z: float, timeout_s: float = 0.5, retries: int = 3) -> int:
+        """Send COMMAND_INT (``x``, ``y``: latitude and longitude in degrees x 1e7 in a global
+        ``frame``, exact where COMMAND_LONG's float32 params lose decimetres) and wait for its ACK,
+        as :meth:`command_long` does."""
+        return self._exchange(command, lambda target, confirmation: mavlink.MAVLink_command_int_message(
+            target[0], target[1], int(frame), int(command), 0, 0, *(float(p) for p in params), int(x), int(y), float(z)),
+            timeout_s, retries)
+
+    def _exchange(self, command: int, message: Callable[[tuple[int, int], int], Any], timeout_s: float,
+                  retries: int) -> int:
+        """One command's ACK cycle; ``message(target, confirmation)`` builds each attempt."""
         if retries < 0 or not timeout_s > 0:
             raise ValueError("retries must be >= 0 and timeout_s > 0")
-        padded = [float(p) for p in params] + [0.0] * (7 - len(params))
         target = self.require_vehicle()
         s = self.session
         with self._one_at_a_time():
@@ -87,8 +103,7 @@ class CommandClient:
                 if exchange.sent > 1:
                     s.count("command_retries")
                     log.debug("no ACK for command %d (attempt %d of %d)", command, exchange.sent - 1, retries + 1)
-                self.send(mavlink.MAVLink_command_long_message(target[0], target[1], int(command),
-                                                               exchange.confirmation, *padded), "tx_commands")
+                self.send(message(target, exchange.confirmation), "tx_commands")
             ack = exchange.final
             if ack is None:
                 s.count("command_timeouts")
@@ -99,6 +114,22 @@ class CommandClient:
             reason = self.reason_since(t_start)
             log.warning("command %d rejected with MAV_RESULT %d: %s", command, ack.result, reason or "(no reason)")
             raise CommandRejected(int(command), ack.result, reason)
+
+    def set_home(self, home_ned_m: Any, origin: tuple[float, float, float] | None, timeout_s: float = 0.5,
+                 retries: int = 0) -> int:
+        """MAV_CMD_DO_SET_HOME at ``home_ned_m`` [m] NED: latitude and longitude through the EKF
+        ``origin`` (PX4's projection), altitude AMSL (param1 = 0: not here), as COMMAND_INT in
+        MAV_FRAME_GLOBAL (degrees x 1e7: about a centimetre). One attempt by default: the caller
+        sends a newer home soon. Raises like :meth:`command_long`; LinkError without an origin."""
+        north, east, down = (float(c) for c in home_ned_m)
+        if not all(math.isfinite(c) for c in (north, east, down)):
+            raise ValueError(f"home must be finite, got {(north, east, down)}")
+        if origin is None:
+            raise LinkError("no EKF origin yet (GPS_GLOBAL_ORIGIN): the home cannot be placed")
+        lat_deg, lon_deg = geodesy.reproject(north, east, origin[0], origin[1])
+        alt_m = origin[2] - down
+        return self.command_int(mavlink.MAV_CMD_DO_SET_HOME, mavlink.MAV_FRAME_GLOBAL, (0.0, 0.0, 0.0, math.nan),
+                                round(lat_deg * 1e7), round(lon_deg * 1e7), alt_m, timeout_s=timeout_s, retries=retries)
 
     def arm(self, timeout_s: float = 0.5, retries: int = 3, confirm_timeout_s: float = 2.5) -> None:
         """Arm (MAV_CMD_COMPONENT_ARM_DISARM 1) and confirm it by HEARTBEAT."""

@@ -13,7 +13,7 @@ import logging
 import threading
 from typing import Any, Callable
 
-from mission.mavlink import telemetry
+from mission.mavlink import params, telemetry
 from mission.mavlink.codec import reset_parser
 from mission.mavlink.identity import Adoption
 from mission.mavlink.session import LinkSession
@@ -160,6 +160,9 @@ class Receiver:
                 log.log(statustext_level(int(msg.severity)), "vehicle: %s", text)
         elif kind == "COMMAND_ACK" and msg.target_system in (0, self.source_system):  # else: another client's
             s.acks.add(t_rx, msg.command, msg.result)
+        elif kind == "PARAM_VALUE":
+            value = params.received(msg, t_rx)
+            s.params[value.name] = value
 
     def _bad_packet(self, msg: Any) -> str | None:
         """The counter of a refused packet (BAD_DATA): unsigned, badly signed, or neither; a PX4

@@ -1,5 +1,5 @@
-"""What a link's threads share, behind one lock: the identified vehicle, its telemetry, the ACKs
-and STATUSTEXTs it sent, and the counters. Waits read the injected clock."""
+"""What a link's threads share, behind one lock: the identified vehicle, its telemetry, the ACKs,
+STATUSTEXTs and parameter values it sent, and the counters. Waits read the injected clock."""
 from __future__ import annotations
 
 import collections
@@ -11,6 +11,7 @@ from mission.time.clock import Clock
 from mission.errors import LinkError, LinkTimeout
 from mission.mavlink import telemetry
 from mission.mavlink.commands import AckLog
+from mission.mavlink.params import ParamValue
 from mission.mavlink.telemetry import VehicleState
 
 @dataclass(frozen=True)
@@ -39,7 +40,7 @@ class LinkCounters:
     tx_heartbeats: int = 0
     tx_setpoints: int = 0
     tx_commands: int = 0
-    """COMMAND_LONG packets sent, retries included."""
+    """COMMAND_LONG and COMMAND_INT packets sent, retries included."""
     tx_errors: int = 0
     command_retries: int = 0
     command_timeouts: int = 0
@@ -62,6 +63,7 @@ class LinkSession:
         self.position_stamps: collections.deque[float] = collections.deque(maxlen=256)  # LOCAL_POSITION_NED rx [s]
         self.wrong_key: tuple[int, int, int] | None = None  # (sysid, compid, HEARTBEATs) signed with another key
         self.acks = AckLog()
+        self.params: dict[str, ParamValue] = {}  # the latest PARAM_VALUE of each name
         self.counts: dict[str, int] = {f.name: 0 for f in fields(LinkCounters)}
 
     def snapshot_locked(self) -> VehicleState:

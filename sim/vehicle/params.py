@@ -8,11 +8,11 @@ reinterpreted as a float32, never converted.
 from __future__ import annotations
 
 import math
-import struct
 import threading
 from dataclasses import dataclass
 
 from mission.mavlink import px4
+from mission.mavlink.params import pack_int32, unpack_int32
 from sim.vehicle.physics.mc_position_control import Gains
 from sim.vehicle.physics.multicopter import Limits
 
@@ -83,16 +83,6 @@ PARAM_SPECS: tuple[ParamSpec, ...] = (
     ParamSpec("MAV_SYS_ID", 1, True, "MAVLink system id (reported only)"),
 )
 SPECS_BY_NAME = {spec.name: spec for spec in PARAM_SPECS}
-
-
-def pack_int32(value: int) -> float:
-    """The float32 whose bits are the int32 ``value`` (PX4's bytewise PARAM_VALUE encoding)."""
-    return struct.unpack("<f", struct.pack("<i", int(value)))[0]
-
-
-def unpack_int32(encoded: float) -> int:
-    """Inverse of :func:`pack_int32`."""
-    return struct.unpack("<i", struct.pack("<f", encoded))[0]
 
 
 class UnknownParam(KeyError):
