@@ -1,4 +1,6 @@
-"""Blocking vehicle commands over a link: the executor of :mod:`mission.mavlink.commands`.
+"""Blocking vehicle commands and parameters over a link: the executor of
+:mod:`mission.mavlink.commands`, and :class:`ParamClient` (PARAM_REQUEST_READ and PARAM_SET, each
+answered by the PARAM_VALUE PX4 sends back, integers bit-packed as :mod:`mission.mavlink.px4` says).
 
 One command at a time (thread-safe). Each call sends through the link, waits on the session's
 clock for what the state machines need, and turns their verdicts into our errors:
@@ -12,16 +14,19 @@ import logging
 import math
 import threading
 from collections.abc import Iterator
-from typing import Any, Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, Callable
 
 from mission.core import geodesy
 from mission.flight_mode import FlightMode
 from mission.mavlink import px4
 from mission.errors import CommandRejected, LinkError, LinkTimeout
 from mission.mavlink.commands import CommandExchange, Confirmed, HeartbeatConfirmation, Step, refusal_reason
-from mission.mavlink.session import LinkSession
 from mission.mavlink.telemetry import VehicleState
 from mission.mavlink.env import mavlink
+
+if TYPE_CHECKING:
+    from mission.mavlink.session import LinkSession
 
 log = logging.getLogger("mission.mavlink.link")
 
@@ -232,3 +237,71 @@ class CommandClient:
                     return serious
                 if s.closed or not s.wait_locked(deadline):
                     return latest
+
+
+@dataclass(frozen=True)
+class ParamValue:
+    """A parameter as the vehicle last reported it: name, value (decoded), MAV_PARAM_TYPE, and
+    the clock time it arrived [s]."""
+
+    name: str
+    value: float
+    param_type: int
+    rx_s: float
+
+
+def received_param(msg: Any, t_rx: float) -> ParamValue:
+    """The :class:`ParamValue` of a PARAM_VALUE received at ``t_rx`` [s]."""
+    return ParamValue(str(msg.param_id), px4.decode_param(float(msg.param_value), int(msg.param_type)), int(msg.param_type), t_rx)
+
+
+class ParamClient:
+    """Reads and writes one parameter at a time on ``session`` (which keeps every PARAM_VALUE
+    from the vehicle in ``session.params``); ``send(msg, counter)`` sends, ``require_vehicle()``
+    returns the identified (system, component) or raises LinkError."""
+
+    def __init__(self, session: LinkSession, send: Callable[[Any, str | None], bool],
+                 require_vehicle: Callable[[], tuple[int, int]]) -> None:
+        self.session, self.send, self.require_vehicle = session, send, require_vehicle
+
+    def get(self, name: str, timeout_s: float = 0.5, retries: int = 3) -> ParamValue:
+        """The vehicle's ``name`` (PARAM_REQUEST_READ); LinkTimeout if it never answers (PX4 does not
+        answer for a name it does not have)."""
+        target = self.require_vehicle()
+        request = mavlink.MAVLink_param_request_read_message(target[0], target[1], name.encode("ascii"), -1)
+        return self._exchange(name, request, lambda pv: True, timeout_s, retries)
+
+    def set(self, name: str, value: float, timeout_s: float = 0.5, retries: int = 3) -> ParamValue:
+        """Set ``name`` to ``value`` (its type read first if not yet known) and confirm it by the
+        PARAM_VALUE that follows; LinkError if the vehicle keeps another value."""
+        if not math.isfinite(value):
+            raise ValueError(f"{name}: value must be finite, got {value!r}")
+        with self.session.lock:
+            known = self.session.params.get(name)
+        param_type = (known or self.get(name, timeout_s, retries)).param_type
+        target = self.require_vehicle()
+        wanted = px4.decode_param(px4.encode_param(value, param_type), param_type)
+        msg = mavlink.MAVLink_param_set_message(target[0], target[1], name.encode("ascii"), px4.encode_param(value, param_type),
+                                                param_type)
+        kept = self._exchange(name, msg, lambda pv: True, timeout_s, retries)
+        if not math.isclose(kept.value, wanted, rel_tol=1e-6, abs_tol=1e-9):
+            raise LinkError(f"vehicle kept {name} = {kept.value:g} (asked {value:g})")
+        return kept
+
+    def _exchange(self, name: str, msg: Any, accept: Callable[[ParamValue], bool], timeout_s: float,
+                  retries: int) -> ParamValue:
+        """Send ``msg`` until a PARAM_VALUE of ``name`` arrives after it (``retries`` resends,
+        ``timeout_s`` [s of clock] each)."""
+        s = self.session
+        for _ in range(retries + 1):
+            t_sent = s.clock.now()
+            self.send(msg, None)
+            deadline = t_sent + timeout_s
+            with s.changed:
+                while True:
+                    pv = s.params.get(name)
+                    if pv is not None and pv.rx_s >= t_sent and accept(pv):
+                        return pv
+                    if s.closed or not s.wait_locked(deadline):
+                        break
+        raise LinkTimeout(f"no PARAM_VALUE {name} after {retries + 1} attempts of {timeout_s:g} s")

@@ -27,10 +27,9 @@ from mission.mavlink import px4
 from mission.time.clock import Clock, ScaledClock
 from mission.errors import LinkError
 from mission.mavlink.codec import link_codecs
-from mission.mavlink.commander import CommandClient
+from mission.mavlink.commander import CommandClient, ParamClient
 from mission.mavlink.heartbeat import HeartbeatSender
 from mission.mavlink.identity import ADOPT_HEARTBEATS, VEHICLE_TYPES, Adoption
-from mission.mavlink.params import ParamClient
 from mission.mavlink.receiver import Receiver
 from mission.mavlink.session import LinkCounters, LinkSession
 from mission.mavlink.setpoints import encode

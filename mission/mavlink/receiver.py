@@ -13,7 +13,8 @@ import logging
 import threading
 from typing import Any, Callable
 
-from mission.mavlink import params, telemetry
+from mission.mavlink import telemetry
+from mission.mavlink.commander import received_param
 from mission.mavlink.codec import reset_parser
 from mission.mavlink.identity import Adoption
 from mission.mavlink.session import LinkSession
@@ -161,7 +162,7 @@ class Receiver:
         elif kind == "COMMAND_ACK" and msg.target_system in (0, self.source_system):  # else: another client's
             s.acks.add(t_rx, msg.command, msg.result)
         elif kind == "PARAM_VALUE":
-            value = params.received(msg, t_rx)
+            value = received_param(msg, t_rx)
             s.params[value.name] = value
 
     def _bad_packet(self, msg: Any) -> str | None:

@@ -5,14 +5,16 @@ from __future__ import annotations
 import collections
 import threading
 from dataclasses import dataclass, fields
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 from mission.time.clock import Clock
 from mission.errors import LinkError, LinkTimeout
 from mission.mavlink import telemetry
 from mission.mavlink.commands import AckLog
-from mission.mavlink.params import ParamValue
 from mission.mavlink.telemetry import VehicleState
+
+if TYPE_CHECKING:
+    from mission.mavlink.commander import ParamValue
 
 @dataclass(frozen=True)
 class LinkCounters:

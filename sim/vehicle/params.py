@@ -12,7 +12,7 @@ import threading
 from dataclasses import dataclass
 
 from mission.mavlink import px4
-from mission.mavlink.params import pack_int32, unpack_int32
+from mission.mavlink.px4 import pack_int32, unpack_int32
 from sim.vehicle.physics.mc_position_control import Gains
 from sim.vehicle.physics.multicopter import Limits
 
