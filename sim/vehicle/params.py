@@ -68,6 +68,7 @@ PARAM_SPECS: tuple[ParamSpec, ...] = (
     ParamSpec("RTL_MIN_DIST", 10.0, False, "within this horizontal distance [m] of the destination RTL returns in the cone"),
     ParamSpec("RTL_CONE_ANG", 45, True, "half angle [deg] of RTL's altitude cone round the destination (0: none)"),
     ParamSpec("NAV_ACC_RAD", 2.0, False, "acceptance radius [m] (multicopter default): RTL's lowest return is twice it"),
+    ParamSpec("LNDMC_XY_VEL_MAX", 1.5, False, "land detector: no ground contact while moving faster horizontally [m/s]"),
     ParamSpec("COM_HOME_EN", 1, True, "home position enabled: DO_SET_HOME is refused (DENIED) when 0"),
     ParamSpec("SIM_BAT_ENABLE", 0, True, "simulate the battery (*PX4 SITL: 1; the mock: 0 unless asked)"),
     ParamSpec("SIM_BAT_DRAIN", 60.0, False, "battery simulator: time to drain a full battery while armed [s]"),
