@@ -124,13 +124,17 @@ class CommandClient:
                  retries: int = 0) -> int:
         """MAV_CMD_DO_SET_HOME at ``home_ned_m`` [m] NED: latitude and longitude through the EKF
         ``origin`` (PX4's projection), altitude AMSL (param1 = 0: not here), as COMMAND_INT in
-        MAV_FRAME_GLOBAL (degrees x 1e7: about a centimetre). One attempt by default: the caller
-        sends a newer home soon. Raises like :meth:`command_long`; LinkError without an origin."""
+        MAV_FRAME_GLOBAL (degrees x 1e7: about a centimetre). Without an ``origin`` it is asked for
+        first (REQUEST_MESSAGE). One attempt by default: the caller sends a newer home soon. Raises
+        like :meth:`command_long`."""
         north, east, down = (float(c) for c in home_ned_m)
         if not all(math.isfinite(c) for c in (north, east, down)):
             raise ValueError(f"home must be finite, got {(north, east, down)}")
-        if origin is None:
-            raise LinkError("no EKF origin yet (GPS_GLOBAL_ORIGIN): the home cannot be placed")
+        if origin is None:  # PX4 sends GPS_GLOBAL_ORIGIN when its origin is set, not periodically: ask
+            self.command_long(mavlink.MAV_CMD_REQUEST_MESSAGE, float(mavlink.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN),
+                              timeout_s=timeout_s, retries=retries)
+            origin = self.session.wait_until(lambda s: s.origin is not None, timeout_s, "GPS_GLOBAL_ORIGIN").origin
+            assert origin is not None
         lat_deg, lon_deg = geodesy.reproject(north, east, origin[0], origin[1])
         alt_m = origin[2] - down
         return self.command_int(mavlink.MAV_CMD_DO_SET_HOME, mavlink.MAV_FRAME_GLOBAL, (0.0, 0.0, 0.0, math.nan),
