@@ -162,7 +162,7 @@ class HomeKeeper:
 
     def __init__(self, vehicle: Vehicle, clock: Clock, threaded: bool = True) -> None:
         self.vehicle, self.clock = vehicle, clock
-        self.counters: dict[str, Any] = {"sent": 0, "accepted": 0, "refused": 0, "lost": 0, "last_sent_ned_m": None}
+        self.counters: dict[str, int] = {"sent": 0, "accepted": 0, "refused": 0, "lost": 0}
         self._last: tuple[float, np.ndarray] | None = None
         self._wanted: np.ndarray | None = None
         self._closed = False
@@ -203,7 +203,6 @@ class HomeKeeper:
             log.debug("home not moved: %s", exc)
         else:
             self.counters["accepted"] += 1
-            self.counters["last_sent_ned_m"] = np.round(home, 3).tolist()
         self.counters["sent"] += 1
         self._last = (self.clock.now(), home)
 
