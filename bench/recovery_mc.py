@@ -4,9 +4,9 @@ during the first approach), flown in-process on the mock's dynamics (:mod:`sim.b
 with the table of the targets and what it cost.
 
 Usage: ``python -m bench.recovery_mc [-n 200] [--seed 1] [--config configs/recovery.toml]
-[--estimate-drift 0.18] [--json F] [--plot F]`` (about 1 s of CPU per scenario; on a busy machine
-the wall time is several times that). ``--estimate-drift``: the vehicle's estimate wanders as
-PX4 SITL's does (0.18 m/s), each scenario with its own seed (no shared flight before the recovery).
+[--estimate-error 1] [--json F] [--plot F]`` (about 1 s of CPU per scenario; on a busy machine
+the wall time is several times that). ``--estimate-error``: the vehicle's estimate errs as
+PX4 SITL's does (1: as much), each scenario with its own seed (no shared flight before the recovery).
 Exit code 0 when the targets hold.
 """
 from __future__ import annotations
@@ -30,20 +30,20 @@ ROOT = Path(__file__).resolve().parents[1]
 @click.option("--seed", type=int, default=1, show_default=True, help="Random seed of the scenarios.")
 @click.option("--config", type=click.Path(dir_okay=False, exists=True), default=str(ROOT / "configs" / "recovery.toml"),
               show_default=True)
-@click.option("--estimate-drift", type=click.FloatRange(min=0.0), default=0.0, show_default=True,
-              help="[m/s] wander of the vehicle's estimate (PX4 SITL: 0.18; 0: exact, as the demo's mock).")
+@click.option("--estimate-error", type=click.FloatRange(min=0.0), default=0.0, show_default=True,
+              help="The vehicle's estimate errs as PX4 SITL's does, this many times as much (1: PX4 SITL's; 0: exact, as the demo's mock).")
 @click.option("--json", "json_path", type=click.Path(dir_okay=False), help="Write the report (every scenario's row) here.")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), help="Draw the worst flight's recovery here.")
-def main(count: int, seed: int, config: str, estimate_drift: float, json_path: str | None, plot_path: str | None) -> int:
+def main(count: int, seed: int, config: str, estimate_error: float, json_path: str | None, plot_path: str | None) -> int:
     cfg = load_config(config)
-    scenarios = recovery_mc.random_scenarios(count, seed, estimate_drift)
+    scenarios = recovery_mc.random_scenarios(count, seed, estimate_error)
     wall, cpu = time.monotonic(), time.process_time()
     with tqdm(total=count, desc=f"{count} recoveries", unit="flight") as bar:
         report, worst = recovery_mc.monte_carlo(cfg, scenarios, progress=lambda f: bar.update(1))
     wall, cpu = time.monotonic() - wall, time.process_time() - cpu
     report.seed = seed
     click.echo(f"python -m bench.recovery_mc -n {count} --seed {seed} --config {Path(config).name}"
-               f"{f' --estimate-drift {estimate_drift:g}' if estimate_drift else ''}")
+               f"{f' --estimate-error {estimate_error:g}' if estimate_error else ''}")
     click.echo(recovery_mc.format_report(report))
     for r in report.rows:
         if recovery_mc.badness(r)[0]:
@@ -53,7 +53,7 @@ def main(count: int, seed: int, config: str, estimate_drift: float, json_path: s
                f"second), {wall:.1f} s wall; load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs")
     if json_path:
         out = report.as_dict()
-        out.update(cpu_s=round(cpu, 2), wall_s=round(wall, 2), config=str(config), estimate_drift_m_s=estimate_drift)
+        out.update(cpu_s=round(cpu, 2), wall_s=round(wall, 2), config=str(config), estimate_error=estimate_error)
         Path(json_path).write_text(json.dumps(out, indent=2))
     if plot_path and worst is not None:
         drawn = recovery.draw(worst, plot_path, f"scenario #{worst.scenario.index} of seed {seed} (the worst)")

@@ -43,7 +43,7 @@ LOCAL_POSITION_NED_ID = mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED
 # ATTITUDE (100 Hz, the busiest) only gives the yaw, which the passenger's mission does not use
 UNUSED_STREAMS = tuple(getattr(mavlink, f"MAVLINK_MSG_ID_{name}") for name in (
     "ATTITUDE", "ATTITUDE_QUATERNION", "GLOBAL_POSITION_INT", "HIGHRES_IMU", "ODOMETRY", "POSITION_TARGET_LOCAL_NED",
-    "ATTITUDE_TARGET", "ALTITUDE", "VFR_HUD", "ESTIMATOR_STATUS", "HOME_POSITION"))
+    "ATTITUDE_TARGET", "ALTITUDE", "VFR_HUD", "ESTIMATOR_STATUS"))
 ABORT_GRACE_S = 15.0  # longest the loop keeps asking for Hold after an abort [s]
 
 
@@ -134,6 +134,83 @@ class CommandWorker:
     def close(self) -> None:
         if self._thread is not None:
             self._put(None)
+            join_thread(self.clock, self._thread, 5.0)
+
+
+HOME_PERIOD_S = 1.0  # PX4's home is moved at most this often [s] ...
+HOME_MIN_MOVE_M = 0.5  # ... and only when the carrier moved this far from it [m]
+OFFBOARD_LOSS_RETURN = 3  # COM_OBL_RC_ACT: Return
+
+
+def home_update_due(last: tuple[float, np.ndarray] | None, now_s: float, home_ned_m: np.ndarray,
+                    period_s: float = HOME_PERIOD_S, min_move_m: float = HOME_MIN_MOVE_M) -> bool:
+    """Should PX4's home move to ``home_ned_m`` [m] NED now? Yes if none was sent yet (``last``:
+    the time [s] and point of the last one sent), else once ``period_s`` [s] have passed and it
+    is ``min_move_m`` [m] or more from the last one."""
+    if last is None:
+        return True
+    return now_s - last[0] >= period_s and float(np.linalg.norm(home_ned_m - last[1])) >= min_move_m
+
+
+class HomeKeeper:
+    """Keeps PX4's home at the carrier (each flying decision's ``home_ned_m``), off the loop.
+
+    :meth:`offer` (from the loop, never blocks) leaves the newest home; a thread on the clock
+    sends it with one DO_SET_HOME attempt when :func:`home_update_due` says so, and counts what
+    the vehicle did with it (a missing EKF origin is waited out quietly). ``threaded=False``
+    sends inside :meth:`offer` (unit tests on a manual clock). docs/recovery.md, "PX4's home"."""
+
+    def __init__(self, vehicle: Vehicle, clock: Clock, threaded: bool = True) -> None:
+        self.vehicle, self.clock = vehicle, clock
+        self.counters: dict[str, int] = {"sent": 0, "accepted": 0, "refused": 0, "lost": 0}
+        self._last: tuple[float, np.ndarray] | None = None
+        self._wanted: np.ndarray | None = None
+        self._closed = False
+        self._cond = threading.Condition()
+        self._thread = start_thread(clock, self._run, "mission-home") if threaded else None
+
+    def offer(self, home_ned_m: np.ndarray | None) -> None:
+        if home_ned_m is None:
+            return
+        with self._cond:
+            self._wanted = np.array(home_ned_m, dtype=float)
+            self.clock.notify(self._cond)
+        if self._thread is None and home_update_due(self._last, self.clock.now(), self._wanted):
+            self._send(self._wanted)
+
+    def _run(self) -> None:
+        with self._cond:
+            while not self._closed:
+                wanted, now = self._wanted, self.clock.now()
+                if wanted is None or not home_update_due(self._last, now, wanted):
+                    wake = math.inf if self._last is None or wanted is None else self._last[0] + HOME_PERIOD_S - now
+                    self.clock.wait(self._cond, wake if wake > 0 else HOME_PERIOD_S)
+                    continue
+                self._cond.release()
+                try:
+                    self._send(wanted)
+                finally:
+                    self._cond.acquire()
+
+    def _send(self, home: np.ndarray) -> None:
+        try:
+            self.vehicle.set_home(home)
+        except CommandRejected as exc:
+            self.counters["refused"] += 1
+            log.warning("vehicle refused the home %s: %s", np.round(home, 2).tolist(), exc.reason or exc.result)
+        except LinkError as exc:  # no EKF origin yet, or the ACK lost: a newer home follows
+            self.counters["lost"] += 1
+            log.debug("home not moved: %s", exc)
+        else:
+            self.counters["accepted"] += 1
+        self.counters["sent"] += 1
+        self._last = (self.clock.now(), home)
+
+    def close(self) -> None:
+        with self._cond:
+            self._closed = True
+            self.clock.notify(self._cond)
+        if self._thread is not None:
             join_thread(self.clock, self._thread, 5.0)
 
 
@@ -248,6 +325,9 @@ class MissionController:
         self._rate_asked = cfg.mission.telemetry_rate_hz is None and cfg.mission.unused_streams == "keep"
         tau = cfg.mission.velocity_bias_tau_s
         self._velocity_fix = PositionConsistentVelocity(tau) if tau > 0 else None
+        self._home: HomeKeeper | None = None
+        self._px4_asked = False
+        self.px4_params: dict[str, Any] = {}  # PX4 parameters read, set and restored (for the summary)
         if recorder is not None:
             recorder.set_counters(self._counters)  # read by the record's sinks, off the loop
 
@@ -294,6 +374,47 @@ class MissionController:
 
         start_thread(self.clock, ask, "mission-telemetry-rate")
 
+    def _configure_px4(self) -> None:
+        """Once the preflight checks passed, off the loop, for a recovery (``final_action =
+        "return"``): PX4's offboard-loss action to Return (``recovery.offboard_loss_return``), so
+        that a controller that dies leaves the passenger flying to the home kept at the carrier;
+        and a warning if PX4's own battery failsafe (BAT_CRIT_THR) would act before our recall.
+        docs/recovery.md, "PX4's home"."""
+        if self._px4_asked or self.state.phase in (Phase.PREFLIGHT, Phase.ABORT, Phase.DONE):
+            return
+        self._px4_asked = True
+        if self.cfg.mission.final_action != "return":
+            return
+        reserve_pct = self.cfg.recovery.battery_reserve_pct
+
+        def ask() -> None:
+            try:
+                critical = self.link.get_param("BAT_CRIT_THR")
+                self.px4_params["BAT_CRIT_THR"] = critical
+                if reserve_pct <= 100.0 * critical:
+                    log.warning("recovery.battery_reserve_pct %g %% is at or below PX4's BAT_CRIT_THR (%g %%): PX4's "
+                                "own low-battery failsafe may act before the recall", reserve_pct, 100.0 * critical)
+                if self.cfg.recovery.offboard_loss_return:
+                    was = self.link.get_param("COM_OBL_RC_ACT")
+                    self.px4_params["COM_OBL_RC_ACT"] = {"was": was, "set": was}
+                    if was != OFFBOARD_LOSS_RETURN:
+                        self.px4_params["COM_OBL_RC_ACT"]["set"] = self.link.set_param("COM_OBL_RC_ACT", OFFBOARD_LOSS_RETURN)
+                        log.info("PX4's offboard-loss action COM_OBL_RC_ACT set to Return (was %g) for the recovery", was)
+            except LinkError as exc:
+                log.warning("PX4's parameters for the recovery not read or set: %s", exc)
+
+        start_thread(self.clock, ask, "mission-px4-params")
+
+    def _restore_px4(self) -> None:
+        """Put back the offboard-loss action :meth:`_configure_px4` changed."""
+        entry = self.px4_params.get("COM_OBL_RC_ACT")
+        if entry is None or entry["set"] == entry["was"]:
+            return
+        try:
+            entry["restored"] = self.link.set_param("COM_OBL_RC_ACT", entry["was"])
+        except LinkError as exc:
+            log.warning("PX4's COM_OBL_RC_ACT left at Return: %s", exc)
+
     def _send(self, setpoint: Setpoint) -> bool:
         """Send the decision's setpoint as it is; False if withheld."""
         if not setpoint.is_finite():  # never reached: the filter's output is finite; refuse rather than send
@@ -331,6 +452,7 @@ class MissionController:
         """Fly the mission; returns its outcome (never raises for a vehicle-side failure)."""
         worker = CommandWorker(self.link, self.clock, retries=self.cfg.mission.command_retries,
                                threaded=self.command_thread)
+        self._home = home = HomeKeeper(self.link, self.clock, threaded=self.command_thread)
         periodic = Periodic(self.clock, self.model.dt_s)
         last_phase = None
         stamp = time.monotonic_ns if self.on_tick is not None else _no_stamp
@@ -340,6 +462,7 @@ class MissionController:
                 start_ns = stamp()
                 obs = self._observe(t, worker)
                 self._ask_telemetry_rate()
+                self._configure_px4()
                 if self.cfg.mission.telemetry_rate_hz is not None and self.state.phase in phases.FLYING:
                     self._rates.append(self.link.message_rate_hz())
                 observed_ns = send_ns = sent_ns = stamp()
@@ -350,6 +473,7 @@ class MissionController:
                     sent_ns = stamp()
                 if dec.request is not None:
                     worker.submit(dec.request)
+                home.offer(dec.home_ned_m)
                 events = dec.events
                 if self.state.phase != last_phase:
                     last_phase = self.state.phase
@@ -372,6 +496,8 @@ class MissionController:
                     break
         finally:
             worker.close()
+            home.close()
+            self._restore_px4()
             self.overruns = periodic.overruns
         return self._outcome()
 
@@ -379,7 +505,8 @@ class MissionController:
         """What was dropped and why, for summary.json: the carrier feed's counters (received,
         accepted, dropped per reason, bound and rejected sources, resyncs), the link's, and in
         lockstep the clock's (barriers, fall-back, carriers dropped as silent)."""
-        out: dict[str, Any] = {"carrier_feed": self.feed.counters, "link": dataclasses.asdict(self.link.counters)}
+        out: dict[str, Any] = {"carrier_feed": self.feed.counters, "link": dataclasses.asdict(self.link.counters),
+                               "home": None if self._home is None else self._home.counters, "px4_params": self.px4_params}
         if self.clock.counters is not None:  # a lockstep clock's: was every step in step?
             out["lockstep"] = self.clock.counters
         return out

@@ -5,9 +5,9 @@ Protocol below, so a MAVLink link to PX4, the mock vehicle or a test's in-proces
 interchangeable (as are a Zenoh feed and a scripted one):
 
 * a :class:`Vehicle`: its newest telemetry snapshot, one setpoint at a time
-  (:class:`mission.core.setpoint.Setpoint`), the position stream's rate (asked and seen), and four commands
-  (arm, set mode, hold, land), each blocking until the vehicle confirmed it or raising
-  :class:`mission.errors.CommandRejected` / :class:`mission.errors.LinkError`;
+  (:class:`mission.core.setpoint.Setpoint`), the position stream's rate (asked and seen), four commands
+  (arm, set mode, hold, land), PX4's home and its parameters, each blocking until the vehicle
+  confirmed it or raising :class:`mission.errors.CommandRejected` / :class:`mission.errors.LinkError`;
 * a :class:`CarrierSource`: the newest carrier state with its receive time and age, the
   carrier's liveliness, and the EKF origin for geodetic carrier states;
 * a :class:`StatusSink`: where the passenger's phase and state go (the carrier listens).
@@ -68,6 +68,18 @@ class Vehicle(Protocol):
     def hold(self) -> None: ...
 
     def land(self) -> None: ...
+
+    def set_home(self, home_ned_m: Any) -> int:
+        """Move PX4's home to ``home_ned_m`` [m] NED (one attempt; LinkError without an EKF origin)."""
+        ...
+
+    def get_param(self, name: str) -> float:
+        """The vehicle's parameter ``name`` (LinkTimeout if it has none)."""
+        ...
+
+    def set_param(self, name: str, value: float) -> float:
+        """Set the vehicle's parameter ``name``; returns the value it kept."""
+        ...
 
     def signing_problem(self) -> str | None:
         """Why no vehicle is identified although a PX4 was heard (it signs with another key), or None."""

@@ -142,6 +142,8 @@ def start_carrier_robot(kind: str, name: str, zenoh_ep: str, speed: float, start
 def start_pair(config: str, name: str, zenoh_ep: str, speed: float, log_root: Path, stack: ExitStack,
                quiet: bool, carrier_kind: str = "sim", lockstep: bool = False, live: LiveAddress | None = None) -> PairRun:
     """Start the carrier (and its robot), the mock vehicle and the mission of one pair; register their cleanup.
+    The vehicle learns the carrier's motion from the pair's Zenoh state (``--deck``): it stands on
+    the carrier's deck until it takes off, and lands or crashes on it as it comes back.
 
     ``lockstep``: the three step on the mock vehicle's simulated time, the carrier's robot on the
     carrier's (``speed`` is then the pace after a participant is lost); else wall clocks scaled
@@ -160,7 +162,7 @@ def start_pair(config: str, name: str, zenoh_ep: str, speed: float, log_root: Pa
     stack.callback(stop_process, carrier)
     vehicle = subprocess.Popen(_python_cli("mock-vehicle", "--mavlink", "udpin:127.0.0.1:0", "--target",
                                            f"udpout:127.0.0.1:{mav_port}", "--speed", str(speed), "--start-ned", start,
-                                           *mode),
+                                           "--deck", name, "--zenoh-connect", zenoh_ep, *mode),
                                stderr=err)
     stack.callback(stop_process, vehicle)
     live_args = [] if live is None else ["--live", f"{live.host}:{live.port}"]

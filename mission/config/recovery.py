@@ -78,6 +78,10 @@ class RecoverySection(Section):
                      "falls to this"))
     docking_budget_s: float = Field(30.0, ge=0, le=600,
         description="[s] flight time the battery rule allows for the holdoff, the approach and one go-around")
+    offboard_loss_return: bool = Field(True,
+        description=("[-] while the mission flies, PX4's offboard-loss action (COM_OBL_RC_ACT) is Return, put back at "
+                     "the end: a controller that dies leaves the passenger flying to its home, kept at the carrier "
+                     "(false: the vehicle's own setting; PX4 of 2025 then descends where it is)"))
 
     @model_validator(mode="after")
     def _geometry(self) -> RecoverySection:

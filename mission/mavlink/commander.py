@@ -1,4 +1,6 @@
-"""Blocking vehicle commands over a link: the executor of :mod:`mission.mavlink.commands`.
+"""Blocking vehicle commands and parameters over a link: the executor of
+:mod:`mission.mavlink.commands`, and :class:`ParamClient` (PARAM_REQUEST_READ and PARAM_SET, each
+answered by the PARAM_VALUE PX4 sends back, integers bit-packed as :mod:`mission.mavlink.px4` says).
 
 One command at a time (thread-safe). Each call sends through the link, waits on the session's
 clock for what the state machines need, and turns their verdicts into our errors:
@@ -12,15 +14,19 @@ import logging
 import math
 import threading
 from collections.abc import Iterator
-from typing import Any, Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, Callable
 
+from mission.core import geodesy
 from mission.flight_mode import FlightMode
 from mission.mavlink import px4
 from mission.errors import CommandRejected, LinkError, LinkTimeout
 from mission.mavlink.commands import CommandExchange, Confirmed, HeartbeatConfirmation, Step, refusal_reason
-from mission.mavlink.session import LinkSession
 from mission.mavlink.telemetry import VehicleState
 from mission.mavlink.env import mavlink
+
+if TYPE_CHECKING:
+    from mission.mavlink.session import LinkSession
 
 log = logging.getLogger("mission.mavlink.link")
 
@@ -67,9 +73,24 @@ class CommandClient:
         """
         if len(params) > 7:
             raise ValueError(f"COMMAND_LONG has 7 params, got {len(params)}")
+        padded = [float(p) for p in params] + [0.0] * (7 - len(params))
+        return self._exchange(command, lambda target, confirmation: mavlink.MAVLink_command_long_message(
+            target[0], target[1], int(command), confirmation, *padded), timeout_s, retries)
+
+    def command_int(self, command: int, frame: int, params: tuple[float, float, float, float], x: int, y: int,
+                    z: float, timeout_s: float = 0.5, retries: int = 3) -> int:
+        """Send COMMAND_INT (``x``, ``y``: latitude and longitude in degrees x 1e7 in a global
+        ``frame``, exact where COMMAND_LONG's float32 params lose decimetres) and wait for its ACK,
+        as :meth:`command_long` does."""
+        return self._exchange(command, lambda target, confirmation: mavlink.MAVLink_command_int_message(
+            target[0], target[1], int(frame), int(command), 0, 0, *(float(p) for p in params), int(x), int(y), float(z)),
+            timeout_s, retries)
+
+    def _exchange(self, command: int, message: Callable[[tuple[int, int], int], Any], timeout_s: float,
+                  retries: int) -> int:
+        """One command's ACK cycle; ``message(target, confirmation)`` builds each attempt."""
         if retries < 0 or not timeout_s > 0:
             raise ValueError("retries must be >= 0 and timeout_s > 0")
-        padded = [float(p) for p in params] + [0.0] * (7 - len(params))
         target = self.require_vehicle()
         s = self.session
         with self._one_at_a_time():
@@ -87,8 +108,7 @@ class CommandClient:
                 if exchange.sent > 1:
                     s.count("command_retries")
                     log.debug("no ACK for command %d (attempt %d of %d)", command, exchange.sent - 1, retries + 1)
-                self.send(mavlink.MAVLink_command_long_message(target[0], target[1], int(command),
-                                                               exchange.confirmation, *padded), "tx_commands")
+                self.send(message(target, exchange.confirmation), "tx_commands")
             ack = exchange.final
             if ack is None:
                 s.count("command_timeouts")
@@ -99,6 +119,26 @@ class CommandClient:
             reason = self.reason_since(t_start)
             log.warning("command %d rejected with MAV_RESULT %d: %s", command, ack.result, reason or "(no reason)")
             raise CommandRejected(int(command), ack.result, reason)
+
+    def set_home(self, home_ned_m: Any, origin: tuple[float, float, float] | None, timeout_s: float = 0.5,
+                 retries: int = 0) -> int:
+        """MAV_CMD_DO_SET_HOME at ``home_ned_m`` [m] NED: latitude and longitude through the EKF
+        ``origin`` (PX4's projection), altitude AMSL (param1 = 0: not here), as COMMAND_INT in
+        MAV_FRAME_GLOBAL (degrees x 1e7: about a centimetre). Without an ``origin`` it is asked for
+        first (REQUEST_MESSAGE). One attempt by default: the caller sends a newer home soon. Raises
+        like :meth:`command_long`."""
+        north, east, down = (float(c) for c in home_ned_m)
+        if not all(math.isfinite(c) for c in (north, east, down)):
+            raise ValueError(f"home must be finite, got {(north, east, down)}")
+        if origin is None:  # PX4 sends GPS_GLOBAL_ORIGIN when its origin is set, not periodically: ask
+            self.command_long(mavlink.MAV_CMD_REQUEST_MESSAGE, float(mavlink.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN),
+                              timeout_s=timeout_s, retries=retries)
+            origin = self.session.wait_until(lambda s: s.origin is not None, timeout_s, "GPS_GLOBAL_ORIGIN").origin
+            assert origin is not None
+        lat_deg, lon_deg = geodesy.reproject(north, east, origin[0], origin[1])
+        alt_m = origin[2] - down
+        return self.command_int(mavlink.MAV_CMD_DO_SET_HOME, mavlink.MAV_FRAME_GLOBAL, (0.0, 0.0, 0.0, math.nan),
+                                round(lat_deg * 1e7), round(lon_deg * 1e7), alt_m, timeout_s=timeout_s, retries=retries)
 
     def arm(self, timeout_s: float = 0.5, retries: int = 3, confirm_timeout_s: float = 2.5) -> None:
         """Arm (MAV_CMD_COMPONENT_ARM_DISARM 1) and confirm it by HEARTBEAT."""
@@ -201,3 +241,71 @@ class CommandClient:
                     return serious
                 if s.closed or not s.wait_locked(deadline):
                     return latest
+
+
+@dataclass(frozen=True)
+class ParamValue:
+    """A parameter as the vehicle last reported it: name, value (decoded), MAV_PARAM_TYPE, and
+    the clock time it arrived [s]."""
+
+    name: str
+    value: float
+    param_type: int
+    rx_s: float
+
+
+def received_param(msg: Any, t_rx: float) -> ParamValue:
+    """The :class:`ParamValue` of a PARAM_VALUE received at ``t_rx`` [s]."""
+    return ParamValue(str(msg.param_id), px4.decode_param(float(msg.param_value), int(msg.param_type)), int(msg.param_type), t_rx)
+
+
+class ParamClient:
+    """Reads and writes one parameter at a time on ``session`` (which keeps every PARAM_VALUE
+    from the vehicle in ``session.params``); ``send(msg, counter)`` sends, ``require_vehicle()``
+    returns the identified (system, component) or raises LinkError."""
+
+    def __init__(self, session: LinkSession, send: Callable[[Any, str | None], bool],
+                 require_vehicle: Callable[[], tuple[int, int]]) -> None:
+        self.session, self.send, self.require_vehicle = session, send, require_vehicle
+
+    def get(self, name: str, timeout_s: float = 0.5, retries: int = 3) -> ParamValue:
+        """The vehicle's ``name`` (PARAM_REQUEST_READ); LinkTimeout if it never answers (PX4 does not
+        answer for a name it does not have)."""
+        target = self.require_vehicle()
+        request = mavlink.MAVLink_param_request_read_message(target[0], target[1], name.encode("ascii"), -1)
+        return self._exchange(name, request, lambda pv: True, timeout_s, retries)
+
+    def set(self, name: str, value: float, timeout_s: float = 0.5, retries: int = 3) -> ParamValue:
+        """Set ``name`` to ``value`` (its type read first if not yet known) and confirm it by the
+        PARAM_VALUE that follows; LinkError if the vehicle keeps another value."""
+        if not math.isfinite(value):
+            raise ValueError(f"{name}: value must be finite, got {value!r}")
+        with self.session.lock:
+            known = self.session.params.get(name)
+        param_type = (known or self.get(name, timeout_s, retries)).param_type
+        target = self.require_vehicle()
+        wanted = px4.decode_param(px4.encode_param(value, param_type), param_type)
+        msg = mavlink.MAVLink_param_set_message(target[0], target[1], name.encode("ascii"), px4.encode_param(value, param_type),
+                                                param_type)
+        kept = self._exchange(name, msg, lambda pv: True, timeout_s, retries)
+        if not math.isclose(kept.value, wanted, rel_tol=1e-6, abs_tol=1e-9):
+            raise LinkError(f"vehicle kept {name} = {kept.value:g} (asked {value:g})")
+        return kept
+
+    def _exchange(self, name: str, msg: Any, accept: Callable[[ParamValue], bool], timeout_s: float,
+                  retries: int) -> ParamValue:
+        """Send ``msg`` until a PARAM_VALUE of ``name`` arrives after it (``retries`` resends,
+        ``timeout_s`` [s of clock] each)."""
+        s = self.session
+        for _ in range(retries + 1):
+            t_sent = s.clock.now()
+            self.send(msg, None)
+            deadline = t_sent + timeout_s
+            with s.changed:
+                while True:
+                    pv = s.params.get(name)
+                    if pv is not None and pv.rx_s >= t_sent and accept(pv):
+                        return pv
+                    if s.closed or not s.wait_locked(deadline):
+                        break
+        raise LinkTimeout(f"no PARAM_VALUE {name} after {retries + 1} attempts of {timeout_s:g} s")

@@ -27,7 +27,7 @@ from mission.mavlink import px4
 from mission.time.clock import Clock, ScaledClock
 from mission.errors import LinkError
 from mission.mavlink.codec import link_codecs
-from mission.mavlink.commander import CommandClient
+from mission.mavlink.commander import CommandClient, ParamClient
 from mission.mavlink.heartbeat import HeartbeatSender
 from mission.mavlink.identity import ADOPT_HEARTBEATS, VEHICLE_TYPES, Adoption
 from mission.mavlink.receiver import Receiver
@@ -94,6 +94,7 @@ class VehicleLink:
 
         self._session = LinkSession(url, self._clock, self.position_timeout_s)
         self._commander = CommandClient(self._session, self._send, self._require_vehicle, self.reason_grace_s)
+        self._params = ParamClient(self._session, self._send, self._require_vehicle)
         self._tx_lock = threading.Lock()
         self._stop = threading.Event()
         self._heartbeat = HeartbeatSender(self._send, self._clock, self.heartbeat_period_s, self._flush_tlog)
@@ -259,6 +260,18 @@ class VehicleLink:
         """MAV_CMD_NAV_TAKEOFF to ``alt_m`` [m] above the EKF origin (None: the vehicle's default),
         acknowledged only (:meth:`CommandClient.takeoff`)."""
         return self._commander.takeoff(alt_m, self.state.origin, timeout_s, retries)
+
+    def set_home(self, home_ned_m: Any, timeout_s: float = 0.5, retries: int = 0) -> int:
+        """Move PX4's home to ``home_ned_m`` [m] NED (:meth:`CommandClient.set_home`)."""
+        return self._commander.set_home(home_ned_m, self.state.origin, timeout_s, retries)
+
+    def get_param(self, name: str, timeout_s: float = 0.5, retries: int = 3) -> float:
+        """The vehicle's parameter ``name`` (:meth:`ParamClient.get`)."""
+        return self._params.get(name, timeout_s, retries).value
+
+    def set_param(self, name: str, value: float, timeout_s: float = 0.5, retries: int = 3) -> float:
+        """Set the vehicle's parameter ``name``; the value it kept (:meth:`ParamClient.set`)."""
+        return self._params.set(name, value, timeout_s, retries).value
 
     # ---------------------------------------------------------------- setpoints
 

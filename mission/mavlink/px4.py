@@ -1,13 +1,16 @@
 """PX4's own MAVLink encodings, shared by the link (client) and the mock vehicle (server).
 
-PX4's mode encoding (``custom_mode``, the modes' ``base_mode`` flags, the offboard-loss actions)
-and the setpoint type masks PX4 and MAVSDK use, as PX4 main (2026) and a real PX4 SITL on the
+PX4's mode encoding (``custom_mode``, the modes' ``base_mode`` flags, the offboard-loss actions),
+its parameter encoding (an INT32 parameter's bits carried in PARAM_VALUE's and PARAM_SET's float
+field: "bytewise", reinterpreted, never converted; a REAL32 as the float) and the setpoint type
+masks PX4 and MAVSDK use, as PX4 main (2026) and a real PX4 SITL on the
 wire show them. Pure constants and encoders; no I/O. The MAVLink numbers below the modes are
 the pymavlink dialect's (one source): new code reads them from
 :data:`mission.mavlink.env.mavlink` directly.
 """
 from __future__ import annotations
 
+import struct
 from enum import IntEnum
 
 from mission.flight_mode import MANUAL_MODES, FlightMode
@@ -173,3 +176,26 @@ MAV_PARAM_TYPE_REAL32 = mavlink.MAV_PARAM_TYPE_REAL32
 MAV_SEVERITY_CRITICAL = mavlink.MAV_SEVERITY_CRITICAL
 MAV_SEVERITY_WARNING = mavlink.MAV_SEVERITY_WARNING
 MAV_SEVERITY_INFO = mavlink.MAV_SEVERITY_INFO
+
+
+# ---- parameters
+
+
+def pack_int32(value: int) -> float:
+    """The float32 whose bits are the int32 ``value`` (PX4's bytewise PARAM_VALUE encoding)."""
+    return struct.unpack("<f", struct.pack("<i", int(value)))[0]
+
+
+def unpack_int32(encoded: float) -> int:
+    """Inverse of :func:`pack_int32`."""
+    return struct.unpack("<i", struct.pack("<f", encoded))[0]
+
+
+def decode_param(wire_value: float, param_type: int) -> float:
+    """A PARAM_VALUE's value: integer types unpacked from the float's bits, mavlink.MAV_PARAM_TYPE_REAL32 as it is."""
+    return wire_value if param_type == mavlink.MAV_PARAM_TYPE_REAL32 else float(unpack_int32(wire_value))
+
+
+def encode_param(value: float, param_type: int) -> float:
+    """PARAM_SET's float field for ``value`` of ``param_type`` (integers rounded, then packed)."""
+    return float(value) if param_type == mavlink.MAV_PARAM_TYPE_REAL32 else pack_int32(int(round(value)))

@@ -14,6 +14,7 @@ import threading
 from typing import Any, Callable
 
 from mission.mavlink import telemetry
+from mission.mavlink.commander import received_param
 from mission.mavlink.codec import reset_parser
 from mission.mavlink.identity import Adoption
 from mission.mavlink.session import LinkSession
@@ -160,6 +161,9 @@ class Receiver:
                 log.log(statustext_level(int(msg.severity)), "vehicle: %s", text)
         elif kind == "COMMAND_ACK" and msg.target_system in (0, self.source_system):  # else: another client's
             s.acks.add(t_rx, msg.command, msg.result)
+        elif kind == "PARAM_VALUE":
+            value = received_param(msg, t_rx)
+            s.params[value.name] = value
 
     def _bad_packet(self, msg: Any) -> str | None:
         """The counter of a refused packet (BAD_DATA): unsigned, badly signed, or neither; a PX4

@@ -1,17 +1,20 @@
-"""What a link's threads share, behind one lock: the identified vehicle, its telemetry, the ACKs
-and STATUSTEXTs it sent, and the counters. Waits read the injected clock."""
+"""What a link's threads share, behind one lock: the identified vehicle, its telemetry, the ACKs,
+STATUSTEXTs and parameter values it sent, and the counters. Waits read the injected clock."""
 from __future__ import annotations
 
 import collections
 import threading
 from dataclasses import dataclass, fields
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 from mission.time.clock import Clock
 from mission.errors import LinkError, LinkTimeout
 from mission.mavlink import telemetry
 from mission.mavlink.commands import AckLog
 from mission.mavlink.telemetry import VehicleState
+
+if TYPE_CHECKING:
+    from mission.mavlink.commander import ParamValue
 
 @dataclass(frozen=True)
 class LinkCounters:
@@ -39,7 +42,7 @@ class LinkCounters:
     tx_heartbeats: int = 0
     tx_setpoints: int = 0
     tx_commands: int = 0
-    """COMMAND_LONG packets sent, retries included."""
+    """COMMAND_LONG and COMMAND_INT packets sent, retries included."""
     tx_errors: int = 0
     command_retries: int = 0
     command_timeouts: int = 0
@@ -62,6 +65,7 @@ class LinkSession:
         self.position_stamps: collections.deque[float] = collections.deque(maxlen=256)  # LOCAL_POSITION_NED rx [s]
         self.wrong_key: tuple[int, int, int] | None = None  # (sysid, compid, HEARTBEATs) signed with another key
         self.acks = AckLog()
+        self.params: dict[str, ParamValue] = {}  # the latest PARAM_VALUE of each name
         self.counts: dict[str, int] = {f.name: 0 for f in fields(LinkCounters)}
 
     def snapshot_locked(self) -> VehicleState:

@@ -1,8 +1,8 @@
 """What the vehicle told us, as a pure reducer of received messages.
 
 :func:`reduce` maps ``(telemetry, message, t_rx) -> telemetry`` for the messages a mission
-reads (HEARTBEAT, LOCAL_POSITION_NED, EXTENDED_SYS_STATE, SYS_STATUS, GPS_GLOBAL_ORIGIN,
-ATTITUDE); other
+reads (HEARTBEAT, LOCAL_POSITION_NED, EXTENDED_SYS_STATE, SYS_STATUS, BATTERY_STATUS,
+GPS_GLOBAL_ORIGIN, HOME_POSITION, ATTITUDE); other
 messages leave it unchanged. :func:`snapshot` turns it into the immutable :class:`VehicleState`
 a caller sees at one clock time. :class:`StatusTextAssembler` joins chunked STATUSTEXTs. Times
 are link-clock seconds [s]; positions and velocities PX4's local NED frame.
@@ -71,7 +71,13 @@ class VehicleState:
     by however long the sample waited to be read (a stalled process reads a burst of old
     samples at once)."""
     battery_pct: float | None = None
-    """Battery remaining [%] the vehicle reports, or None (not reported)."""
+    """Battery remaining [%] the vehicle reports, or None (not reported): the lowest of SYS_STATUS's
+    ``battery_remaining`` and every battery's BATTERY_STATUS (PX4 sends -1 when it does not know:
+    None); PX4 rounds its estimate up to a whole per cent."""
+    home_ned_m: np.ndarray | None = None
+    """PX4's home [m] NED, shape (3,), from HOME_POSITION's local x, y, z; None before the first."""
+    home_rx_s: float | None = None
+    """Clock time the last HOME_POSITION was received [s]."""
 
     @property
     def heartbeat_age_s(self) -> float:
@@ -106,6 +112,16 @@ class Telemetry:
     origin: tuple[float, float, float] | None = None
     yaw_rad: float | None = None
     last_statustext: str = ""
+    battery_sys_pct: float | None = None  # SYS_STATUS battery_remaining [%] (None: -1, unknown)
+    battery_ids_pct: tuple[tuple[int, float | None], ...] = ()  # BATTERY_STATUS (id, remaining [%]) per battery
+    home_ned_m: np.ndarray | None = None
+    home_rx_s: float | None = None
+
+    @property
+    def battery_pct(self) -> float | None:
+        """The lowest battery remaining [%] any message reported (None: none known)."""
+        known = [p for p in (self.battery_sys_pct, *(pct for _, pct in self.battery_ids_pct)) if p is not None]
+        return min(known) if known else None
 
 
 def _readonly_vector(x: float, y: float, z: float) -> np.ndarray:
@@ -150,10 +166,28 @@ def _extended_sys_state(tm: Telemetry, msg: Any, t_rx: float) -> Telemetry:
     return replace(tm, landed_state=int(msg.landed_state))
 
 
+def _remaining_pct(value: int) -> float | None:
+    """``battery_remaining`` [%] of SYS_STATUS / BATTERY_STATUS: -1 (or anything outside 0..100) is unknown."""
+    return float(value) if 0 <= value <= 100 else None
+
+
 def _sys_status(tm: Telemetry, msg: Any, t_rx: float) -> Telemetry:
     bit = mavlink.MAV_SYS_STATUS_AHRS
     reported = msg.onboard_control_sensors_present & bit and msg.onboard_control_sensors_enabled & bit
-    return replace(tm, ahrs_healthy=bool(msg.onboard_control_sensors_health & bit) if reported else None)
+    return replace(tm, ahrs_healthy=bool(msg.onboard_control_sensors_health & bit) if reported else None,
+                   battery_sys_pct=_remaining_pct(int(msg.battery_remaining)))
+
+
+def _battery_status(tm: Telemetry, msg: Any, t_rx: float) -> Telemetry:
+    others = tuple(pair for pair in tm.battery_ids_pct if pair[0] != int(msg.id))
+    return replace(tm, battery_ids_pct=(*others, (int(msg.id), _remaining_pct(int(msg.battery_remaining)))))
+
+
+def _home_position(tm: Telemetry, msg: Any, t_rx: float) -> Telemetry:
+    home = (float(msg.x), float(msg.y), float(msg.z))
+    if not all(math.isfinite(c) for c in home):
+        return tm
+    return replace(tm, home_ned_m=_readonly_vector(*home), home_rx_s=t_rx)
 
 
 def _origin(tm: Telemetry, msg: Any, t_rx: float) -> Telemetry:
@@ -170,7 +204,9 @@ _REDUCERS = {
     "LOCAL_POSITION_NED": _local_position,
     "EXTENDED_SYS_STATE": _extended_sys_state,
     "SYS_STATUS": _sys_status,
+    "BATTERY_STATUS": _battery_status,
     "GPS_GLOBAL_ORIGIN": _origin,
+    "HOME_POSITION": _home_position,
     "ATTITUDE": _attitude,
 }
 KINDS = frozenset(_REDUCERS)
@@ -206,6 +242,9 @@ def snapshot(tm: Telemetry, now_s: float, vehicle: tuple[int, int] | None, posit
         origin=tm.origin,
         yaw_rad=tm.yaw_rad,
         last_statustext=tm.last_statustext,
+        battery_pct=tm.battery_pct,
+        home_ned_m=tm.home_ned_m,
+        home_rx_s=tm.home_rx_s,
     )
 
 

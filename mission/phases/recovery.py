@@ -331,7 +331,7 @@ def approach(state, obs, m, events=()):
                    "height_error_m": round(here.height_error_m, 4),
                    "horizontal_relative_speed_m_s": round(here.horizontal_relative_speed_m_s, 4),
                    "vertical_relative_speed_m_s": round(here.vertical_relative_speed_m_s, 4),
-                   "attempts": rec.attempts, "time_s": round(t, 4)}
+                   "attempts": rec.attempts, "time_s": round(t, 4), "battery_pct": v.battery_pct}
         rec = replace(rec, contact=figures, settled_since_s=t)
         state = enter(state, Phase.DOCKED, t)
         events = (*events, f"contact: {here.horizontal_error_m:.3f} m, {here.horizontal_relative_speed_m_s:.2f} m/s")

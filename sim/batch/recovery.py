@@ -11,13 +11,13 @@ deploy, task, return and dock, ticked as the lockstep demo ticks it:
 - the vehicle: the mock's commander (:class:`sim.vehicle.modes.Commander`) and PX4's position
   controller on the fitted airframe (:func:`sim.vehicle.physics.multicopter.step`) in the mock's
   fixed physics steps, the setpoint decoded by the mock's own MAVLink rules; optionally the
-  wander of PX4's estimate (:mod:`sim.vehicle.estimator`), seeded;
+  errors of PX4's estimate (:mod:`sim.vehicle.estimator`), seeded;
 - the carrier: the built-in kinematic robot (holonomic) at ``carrier.rate_hz``, following the
   passenger's duty as ``marsupial carrier`` does: CARRY the paper's law, filtered, under the P3
   guard; RECOVER the scenario's steady course (speed, heading), with its turn during the first
   approach, filtered and guarded; otherwise it stops. It sees the status of the tick before.
 
-A :class:`Scenario` is replayable from its fields (the seed only drives the estimate's wander);
+A :class:`Scenario` is replayable from its fields (the seed only drives the estimate's errors);
 :mod:`sim.batch.recovery_mc` draws them, flies a batch and reports it. The figures of each flight are those of the flight log's ``summary.json``
 (:func:`mission.record.summary_of` on the same columns). Frames: local NED [m], [m/s]; time [s]
 from the start of the mission.
@@ -46,7 +46,7 @@ from mission.model import mission_model, model_from_config
 from mission.phases import CarrierObs, Decision, MissionState, Observation, Phase, VehicleObs, finished, step
 from mission.phases.phase import Duty
 from mission.record import COLUMNS, VEC, FlightRecord, summary_of
-from sim.vehicle.estimator import EstimateDrift, flown_on_estimate
+from sim.vehicle.estimator import EstimateError
 from sim.vehicle.mock import PHYSICS_DT_S
 from sim.vehicle.modes import Commander
 from sim.vehicle.params import ParamTable, vehicle_limits
@@ -64,7 +64,7 @@ class Scenario:
     """One recovery: the carrier's recovery course ``speed_m_s`` [m/s] on ``heading_deg`` [deg]
     (NED: 0 north, 90 east), and its turn of ``turn_deg`` [deg] (signed, clockwise positive) at
     ``turn_rate_deg_s`` [deg/s] that begins ``turn_after_s`` [s] after the first approach
-    began; ``estimate_drift_m_s`` [m/s] the wander of the vehicle's estimate (0: exact), seeded
+    began; ``estimate_error`` the vehicle's estimate errors as a multiple of PX4 SITL's (0: exact), seeded
     by ``seed``. ``index``: its place in its batch (the same seed gives the same batch)."""
 
     speed_m_s: float
@@ -72,7 +72,7 @@ class Scenario:
     turn_deg: float = 0.0
     turn_rate_deg_s: float = 10.0
     turn_after_s: float = 0.0
-    estimate_drift_m_s: float = 0.0
+    estimate_error: float = 0.0
     seed: int = 0
     index: int = 0
 
@@ -86,7 +86,7 @@ class Scenario:
     def as_dict(self) -> dict[str, float]:
         return {"index": self.index, "speed_m_s": round(self.speed_m_s, 3), "heading_deg": round(self.heading_deg, 1),
                 "turn_deg": round(self.turn_deg, 1), "turn_rate_deg_s": round(self.turn_rate_deg_s, 1),
-                "turn_after_s": round(self.turn_after_s, 2), "estimate_drift_m_s": self.estimate_drift_m_s,
+                "turn_after_s": round(self.turn_after_s, 2), "estimate_error": self.estimate_error,
                 "seed": self.seed}
 
 
@@ -172,15 +172,15 @@ class KinematicCarrier:
 class MockDynamics:
     """The mock vehicle without its sockets: the commander and the physics of
     :class:`sim.vehicle.mock.MockVehicle`, stepped in its fixed physics steps (its
-    ``_advance_steps``), the estimate's wander when asked; what it reports is the estimate."""
+    ``_advance_steps``), the estimate's errors when asked; what it reports is the estimate."""
 
-    def __init__(self, start_ned_m: Sequence[float], drift_m_s: float = 0.0, seed: int = 0,
+    def __init__(self, start_ned_m: Sequence[float], estimate_error: float = 0.0, seed: int = 0,
                  params: dict[str, float] | None = None) -> None:
         self.kin = initial_state(tuple(float(x) for x in start_ned_m))  # type: ignore[arg-type]
         self.params = ParamTable(dict(params or {}), 1)
         self.limits = vehicle_limits(self.params)
         self.commander = Commander(self.params, self.kin)
-        self.drift = EstimateDrift(drift_m_s, seed=seed) if drift_m_s > 0 else None
+        self.drift = EstimateError(estimate_error, seed=seed) if estimate_error > 0 else None
         self.noise = PositionNoise(0.0, seed, self.drift)
         self.steps = 0
         self.wind = (0.0, 0.0, 0.0)
@@ -190,17 +190,18 @@ class MockDynamics:
         commander, kin, limits, drift = self.commander, self.kin, self.limits, self.drift
         for k in range(self.steps + 1, target + 1):
             command = commander.step(k * PHYSICS_DT_S, kin)
-            if drift is not None:  # PX4 flies its (wandering) estimate to a position setpoint
+            if drift is not None:  # PX4's controller flies its estimate (sim.vehicle.estimator)
                 drift.advance(PHYSICS_DT_S)
-                command = flown_on_estimate(command, drift.offset)
-            kin = physics_step(kin, command, limits, self.wind, PHYSICS_DT_S)
+                kin = physics_step(kin, command, limits, self.wind, PHYSICS_DT_S, (drift.position, drift.velocity))
+            else:
+                kin = physics_step(kin, command, limits, self.wind, PHYSICS_DT_S)
         self.steps = max(self.steps, target)
         self.kin = commander.kin = kin
 
     def observed(self) -> VehicleObs:
         """The vehicle as the controller sees it: its reported (estimated) position, its velocity."""
         k, c = self.kin, self.commander
-        return VehicleObs(position_ned_m=np.array(self.noise.apply(k)), velocity_ned_m_s=np.array((k.vn_m_s, k.ve_m_s, k.vd_m_s)),
+        return VehicleObs(position_ned_m=np.array(self.noise.apply(k)), velocity_ned_m_s=np.array(self.noise.velocity(k)),
                           armed=c.armed, mode=c.mode, heartbeat_age_s=0.0, position_valid=c.position_valid,
                           position_age_s=0.0, in_failsafe=c.in_failsafe)
 
@@ -295,7 +296,7 @@ class World:
         self.steps_per_tick = int(round(self.dt_s / PHYSICS_DT_S))
         if abs(self.steps_per_tick * PHYSICS_DT_S - self.dt_s) > 1e-12:
             raise ValueError(f"mission.rate_hz must divide the mock's physics rate ({1 / PHYSICS_DT_S:g} Hz)")
-        self.vehicle = MockDynamics(cfg.scenario.carrier_start, scenario.estimate_drift_m_s, scenario.seed)
+        self.vehicle = MockDynamics(cfg.scenario.carrier_start, scenario.estimate_error, scenario.seed)
         self.carrier = KinematicCarrier(cfg, scenario)
         self.state = MissionState()
         self.rows = _Rows()
@@ -322,8 +323,8 @@ class World:
     def with_scenario(self, scenario: Scenario) -> World:
         """This world flying ``scenario`` from now on; only before the carrier drives its recovery
         course, and with the same estimate (what differs between scenarios)."""
-        if self.carrier.course_begun or scenario.estimate_drift_m_s != self.scenario.estimate_drift_m_s \
-                or (scenario.estimate_drift_m_s > 0 and scenario.seed != self.scenario.seed):
+        if self.carrier.course_begun or scenario.estimate_error != self.scenario.estimate_error \
+                or (scenario.estimate_error > 0 and scenario.seed != self.scenario.seed):
             raise ValueError("a world takes another scenario only before the recovery, with the same estimate")
         self.carrier.scenario = scenario
         return self
@@ -381,10 +382,10 @@ def fly(cfg: Config, scenario: Scenario, max_duration_s: float | None = None) ->
     return World(cfg, scenario, max_duration_s).run().flight()
 
 
-def before_recovery(cfg: Config, estimate_drift_m_s: float = 0.0, seed: int = 0) -> World:
+def before_recovery(cfg: Config, estimate_error: float = 0.0, seed: int = 0) -> World:
     """The mission flown up to the first tick of its recovery (the carrier not yet told): what
     every scenario with this estimate shares."""
-    return World(cfg, Scenario(0.0, 0.0, estimate_drift_m_s=estimate_drift_m_s, seed=seed)).run(
+    return World(cfg, Scenario(0.0, 0.0, estimate_error=estimate_error, seed=seed)).run(
         lambda w: w.published is not None and w.published.duty is Duty.RECOVER)
 
 

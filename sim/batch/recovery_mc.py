@@ -25,7 +25,7 @@ TURN_RATE_RANGE_DEG_S = (5.0, 30.0)  # [deg/s] how fast it turns
 TURN_START_RANGE_S = (0.0, 8.0)  # [s] after the first approach began
 
 
-def random_scenarios(count: int, seed: int, estimate_drift_m_s: float = 0.0) -> list[Scenario]:
+def random_scenarios(count: int, seed: int, estimate_error: float = 0.0) -> list[Scenario]:
     """``count`` scenarios drawn with ``seed``: speed uniform in :data:`SPEED_RANGE_M_S`, heading
     uniform over the circle, a turn uniform in +-:data:`TURN_MAX_DEG` at a rate uniform in
     :data:`TURN_RATE_RANGE_DEG_S` beginning uniformly in :data:`TURN_START_RANGE_S` after the
@@ -34,7 +34,7 @@ def random_scenarios(count: int, seed: int, estimate_drift_m_s: float = 0.0) -> 
     return [Scenario(speed_m_s=float(rng.uniform(*SPEED_RANGE_M_S)), heading_deg=float(rng.uniform(0.0, 360.0)),
                      turn_deg=float(rng.uniform(-TURN_MAX_DEG, TURN_MAX_DEG)),
                      turn_rate_deg_s=float(rng.uniform(*TURN_RATE_RANGE_DEG_S)),
-                     turn_after_s=float(rng.uniform(*TURN_START_RANGE_S)), estimate_drift_m_s=estimate_drift_m_s,
+                     turn_after_s=float(rng.uniform(*TURN_START_RANGE_S)), estimate_error=estimate_error,
                      seed=int(rng.integers(0, 2**31 - 1)), index=i) for i in range(count)]
 
 
@@ -151,7 +151,7 @@ def monte_carlo(cfg: Config, scenarios: Sequence[Scenario],
     shared: World | None = None
     worst: tuple[tuple[int, int, float], Flight] | None = None
     for sc in scenarios:
-        if sc.estimate_drift_m_s > 0:  # each wander is its own from the start
+        if sc.estimate_error > 0:  # each estimate errs its own way from the start
             f = fly(cfg, sc)
         else:
             shared = shared or before_recovery(cfg)

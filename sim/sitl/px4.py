@@ -293,6 +293,7 @@ class Px4Flight:
     _rootfs: Path | None = None
     settle_s: float = 0.0  # extra wall seconds after PX4 is armable before the carrier and the mission start
     ground_truth_hz: float = 0.0  # > 0: record PX4's estimate and SIH's truth at this rate (``truth.csv``)
+    px4_params: dict[str, float] = field(default_factory=dict)  # PX4_PARAM_<name>: set by PX4 SITL at start
     _files: list[Any] = field(default_factory=list)
 
     @property
@@ -315,7 +316,8 @@ class Px4Flight:
         self.ns = NetNamespace()
         # ROOTFS outside /tmp: PX4 gets a private /tmp (see Px4Sitl.start), which would hide it
         self._rootfs = Path(f"/var/tmp/{self.ns.name}") / "rootfs"
-        self.px4 = Px4Sitl(self.build, self._rootfs, self.ns, speed_factor=self.speed_factor, out_dir=self.dir)
+        self.px4 = Px4Sitl(self.build, self._rootfs, self.ns, speed_factor=self.speed_factor, out_dir=self.dir,
+                           params=self.px4_params)
         self.px4.start()
         self.gcs = gcs_probe(self.ns, history_len=100_000 if self.ground_truth_hz > 0 else 4000)
         from sim.testing.probe import connect

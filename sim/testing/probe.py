@@ -232,6 +232,7 @@ class SetpointStream:
         self.probe, self.period_s = probe, period_s
         self._lock = threading.Lock()
         self._msg = probe.setpoint_message(**setpoint)
+        self._schedule: Callable[[float], dict[str, Any]] | None = None
         self.sent = 0
         if probe.pacer is not None:
             self._done = threading.Event()
@@ -240,16 +241,28 @@ class SetpointStream:
             self._done = probe.every(period_s, self._send_one)
 
     def set(self, send_now: bool = False, **setpoint: Any) -> None:
-        """Change the setpoint; with ``send_now`` send it at once instead of at the next period."""
+        """Change the setpoint (ending a :meth:`follow`); with ``send_now`` send it at once instead
+        of at the next period."""
         msg = self.probe.setpoint_message(**setpoint)
         with self._lock:
-            self._msg = msg
+            self._msg, self._schedule = msg, None
         if send_now:
             self._send_one()
 
+    def follow(self, schedule: Callable[[float], dict[str, Any]]) -> None:
+        """From now on each setpoint is ``probe.setpoint_message(**schedule(t_s))`` for the paced
+        vehicle's simulated time ``t_s`` [s] at the step it is sent for: a moving goal flown the
+        same way however loaded the machine is. Needs a :class:`Pacer` (``vehicle_for(paced=True)``)."""
+        if self.probe.pacer is None:
+            raise RuntimeError("a scheduled setpoint needs a paced vehicle (vehicle_for(..., paced=True))")
+        with self._lock:
+            self._schedule = schedule
+
     def _send_one(self) -> None:
         with self._lock:
-            msg = self._msg
+            msg, schedule = self._msg, self._schedule
+        if schedule is not None and self.probe.pacer is not None:
+            msg = self.probe.setpoint_message(**schedule(self.probe.pacer.t_ns / 1e9))
         self.probe.send(msg)
         self.sent += 1
 

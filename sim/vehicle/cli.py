@@ -5,21 +5,28 @@ A parent process learns the bound port from ``--port-file`` (see ``sim.vehicle.m
 """
 from __future__ import annotations
 
+import contextlib
 import logging
+import math
 import os
 import signal
 import threading
 from pathlib import Path
 from types import FrameType
+from typing import Any
 
 import click
 
+from mission.bus.bridge import CarrierFeed, keys, open_session
+from mission.bus.wire import GeoOrigin
+from mission.config.schema import ZenohSection
 from mission.errors import ConfigError
 from mission.mavlink.env import read_signing_key
 from sim.vehicle.mock import MockVehicle, VehicleOptions
 from sim.vehicle.faults import FaultOptions
 from sim.vehicle.endpoints import parse_endpoint
 from sim.vehicle.params import SPECS_BY_NAME
+from sim.vehicle.physics.deck import DeckMotion, DeckSpec
 
 log = logging.getLogger(__name__)
 
@@ -64,6 +71,26 @@ def signing_key_option(path: Path) -> bytes:
         raise click.BadParameter(f"{path}: {exc.rule}", param_hint="--signing-key") from None
 
 
+def _battery_params(drain_s: float | None, min_pct: float | None) -> dict[str, float]:
+    """The battery simulator's parameters of --battery-drain and --battery-min-pct."""
+    if drain_s is None:
+        if min_pct is not None:
+            raise click.BadParameter("needs --battery-drain (the battery is simulated only with it)",
+                                     param_hint="--battery-min-pct")
+        return {}
+    return {"SIM_BAT_ENABLE": 1, "SIM_BAT_DRAIN": drain_s, **({} if min_pct is None else {"SIM_BAT_MIN_PCT": min_pct})}
+
+
+def _deck_bus(pair: str, connect: tuple[str, ...], listen: tuple[str, ...]) -> tuple[str, ZenohSection]:
+    """The pair and Zenoh session of --deck (no endpoints: the other processes' loopback rendezvous)."""
+    try:
+        keys(pair)
+        endpoints = {"connect": list(connect), "listen": list(listen)}
+        return pair, ZenohSection(**endpoints, **({"rendezvous": None} if connect or listen else {}))  # type: ignore[arg-type]
+    except (ConfigError, ValueError) as exc:
+        raise click.BadParameter(str(exc), param_hint="--deck / --zenoh-connect / --zenoh-listen") from None
+
+
 def _endpoints(mavlink_url: str, target_url: str) -> tuple[str, str]:
     """(bind, target) from --mavlink and --target; a udpout URL given to --mavlink is the target."""
     try:
@@ -105,6 +132,23 @@ def _write_port_file(path: Path, port: int) -> None:
                    "kinematics, PX4's rover offboard rules (speed |v| towards bearing atan2(v)).")
 @click.option("--param", "params", multiple=True, metavar="NAME=VALUE",
               help="Override a PX4 parameter, e.g. --param COM_OF_LOSS_T=1.0 (repeatable).")
+@click.option("--battery-drain", "battery_drain_s", type=click.FloatRange(min=1.0), default=None, metavar="SECONDS",
+              help="Simulate the battery as PX4 SITL's battery simulator does: armed, it drains fully in SECONDS "
+                   "(SIM_BAT_ENABLE=1, SIM_BAT_DRAIN; PX4 SITL: 60). Without it the vehicle reports no battery.")
+@click.option("--battery-min-pct", type=click.FloatRange(0.0, 100.0), default=None, metavar="PERCENT",
+              help="With --battery-drain: the charge never falls below PERCENT (SIM_BAT_MIN_PCT; PX4 SITL: 50).")
+@click.option("--deck", "deck_pair", metavar="PAIR", default=None,
+              help="Learn the carrier's motion from the Zenoh state of marsupial pair PAIR (marsupial/PAIR/carrier/"
+                   "state): touchdown on its moving deck, riding on it, crashes (--deck-height, --deck-radius; "
+                   "docs/mock-vehicle.md). Needs --zenoh-connect or --zenoh-listen.")
+@click.option("--deck-height", type=click.FloatRange(min=0.0), default=0.0, show_default=True, metavar="METRES",
+              help="With --deck: the deck's plane above the carrier's reported position [m].")
+@click.option("--deck-radius", type=click.FloatRange(min=0.0, min_open=True), default=0.5, show_default=True,
+              metavar="METRES", help="With --deck: the deck's radius round the carrier's position [m].")
+@click.option("--zenoh-connect", "zenoh_connect", multiple=True, metavar="ENDPOINT",
+              help="With --deck: Zenoh endpoint to connect to, e.g. tcp/127.0.0.1:7447 (repeatable).")
+@click.option("--zenoh-listen", "zenoh_listen", multiple=True, metavar="ENDPOINT",
+              help="With --deck: Zenoh endpoint to listen on (repeatable).")
 @click.option("--wind", default="0,0,0", show_default=True, metavar="N,E,D",
               help="Wind [m/s] NED: a drag force in the air (PX4's velocity integrator slowly compensates it).")
 @click.option("--estimate-error", type=click.FloatRange(min=0.0), default=0.0, show_default=True, metavar="SCALE",
@@ -144,7 +188,9 @@ def _write_port_file(path: Path, port: int) -> None:
 @click.option("--status-every", type=click.FloatRange(min=0.0), default=5.0, show_default=True, metavar="SECONDS",
               help="Log a status line with mode, position and the counters every SECONDS of wall time (0: never).")
 def mock_vehicle(mavlink_url: str, target_url: str, gcs_url: str | None, speed: float, home: str, start_ned: str,
-                 sysid: int, frame: str, params: tuple[str, ...], wind: str, estimate_error: float, position_noise: float, loss_in: float,
+                 sysid: int, frame: str, params: tuple[str, ...], battery_drain_s: float | None,
+                 battery_min_pct: float | None, deck_pair: str | None, deck_height: float, deck_radius: float,
+                 zenoh_connect: tuple[str, ...], zenoh_listen: tuple[str, ...], wind: str, estimate_error: float, position_noise: float, loss_in: float,
                  loss_out: float, latency_ms: float, jitter_ms: float, blackouts: tuple[str, ...],
                  refuse_arming: str | None, refuse_offboard: str | None, lose_position_s: float | None, seed: int, signing_key: Path | None, port_file: Path | None,
                  lockstep: bool, lockstep_watchdog_s: float, lockstep_max_speed: float | None, status_every: float) -> None:
@@ -163,16 +209,70 @@ def mock_vehicle(mavlink_url: str, target_url: str, gcs_url: str | None, speed: 
     options = VehicleOptions(
         bind=bind, target=target, gcs_target=gcs_url, speed=speed, sysid=sysid, frame=frame,
         home=_floats(home, 3, "--home"), start_ned=_floats(start_ned, 3, "--start-ned"),  # type: ignore[arg-type]
-        params=dict(_param(p) for p in params), faults=faults,
+        params={**_battery_params(battery_drain_s, battery_min_pct), **dict(_param(p) for p in params)}, faults=faults,
         signing_key=signing_key_option(signing_key) if signing_key else None,
         wind_ned_m_s=_floats(wind, 3, "--wind"), position_noise_m=position_noise,  # type: ignore[arg-type]
         estimate_error=estimate_error, lockstep=lockstep, lockstep_watchdog_wall_s=lockstep_watchdog_s,
-        lockstep_max_speed=lockstep_max_speed)
-    run(options, port_file, status_every)
+        lockstep_max_speed=lockstep_max_speed,
+        deck=None if deck_pair is None else DeckSpec(height_m=deck_height, radius_m=deck_radius))
+    run(options, port_file, status_every, deck=None if deck_pair is None else _deck_bus(deck_pair, zenoh_connect, zenoh_listen))
 
 
-def run(options: VehicleOptions, port_file: Path | None = None, status_every_s: float = 5.0) -> None:
-    """Run a vehicle until SIGINT/SIGTERM, logging a status line every ``status_every_s`` wall seconds."""
+class VehicleClock:
+    """The vehicle's clock as it is now (it changes once a lockstep vehicle is left alone), for a
+    carrier feed that stamps what it receives on the vehicle's time."""
+
+    def __init__(self, vehicle: MockVehicle) -> None:
+        self.vehicle = vehicle
+
+    @property
+    def speed(self) -> float:
+        return self.vehicle.clock.speed
+
+    @property
+    def counters(self) -> dict[str, object] | None:
+        return None
+
+    def now(self) -> float:
+        return self.vehicle.clock.now()
+
+    def sleep(self, duration_s: float) -> None:
+        self.vehicle.clock.sleep(duration_s)
+
+    def wait(self, cond: threading.Condition, timeout_s: float) -> None:
+        self.vehicle.clock.wait(cond, timeout_s)
+
+    def notify(self, cond: threading.Condition) -> None:
+        self.vehicle.clock.notify(cond)
+
+    def close(self) -> None:
+        pass
+
+
+def follow_carrier(vehicle: MockVehicle, session: Any, pair: str) -> CarrierFeed:
+    """Give ``vehicle``'s deck the motion of pair ``pair``'s carrier from its Zenoh state (a wgs84
+    state through the vehicle's origin); returns the feed (close it before the session)."""
+    feed = CarrierFeed(session, pair, VehicleClock(vehicle), origin=GeoOrigin(*vehicle.options.home), max_age_s=math.inf)
+
+    heard: list[bool] = []
+
+    def motion() -> DeckMotion | None:
+        got = feed.latest()
+        if got is None:
+            return None
+        if not heard:
+            heard.append(True)
+            log.info("deck: pair %s's carrier heard at %s m NED", pair, [round(float(c), 2) for c in got.value.position])
+        return DeckMotion(tuple(got.value.position), tuple(got.value.velocity_ned_m_s), got.rx_time_s)  # type: ignore[arg-type]
+
+    vehicle.follow_deck(motion)
+    return feed
+
+
+def run(options: VehicleOptions, port_file: Path | None = None, status_every_s: float = 5.0,
+        deck: tuple[str, ZenohSection] | None = None) -> None:
+    """Run a vehicle until SIGINT/SIGTERM, logging a status line every ``status_every_s`` wall
+    seconds; with ``deck`` (pair, Zenoh section) its deck follows that pair's carrier."""
     if not logging.getLogger().handlers:
         logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     log.setLevel(logging.INFO)
@@ -183,7 +283,12 @@ def run(options: VehicleOptions, port_file: Path | None = None, status_every_s: 
 
     previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
-        with MockVehicle(options) as vehicle:
+        with contextlib.ExitStack() as stack:
+            vehicle = stack.enter_context(MockVehicle(options))
+            if deck is not None:
+                session = open_session(deck[1])
+                stack.callback(session.close)
+                stack.callback(follow_carrier(vehicle, session, deck[0]).close)
             if port_file is not None:
                 _write_port_file(port_file, vehicle.port)
             log.info("mock vehicle on UDP %d -> %s, %s", vehicle.port, options.target,

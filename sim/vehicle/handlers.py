@@ -23,6 +23,7 @@ if TYPE_CHECKING:
     from sim.vehicle.mock import MockVehicle
 
 log = logging.getLogger("sim.vehicle.mock")
+INT32_MAX = 0x7FFFFFFF  # COMMAND_INT x / y: not given
 
 
 class MessageHandlers:
@@ -37,6 +38,7 @@ class MessageHandlers:
             px4.MAV_CMD_NAV_TAKEOFF: self._cmd_takeoff,
             px4.MAV_CMD_NAV_LAND: lambda link, p: (self.v._commander.set_mode(self.v._t_s, "AUTO.LAND"), []),
             px4.MAV_CMD_NAV_RETURN_TO_LAUNCH: lambda link, p: (self.v._commander.set_mode(self.v._t_s, "AUTO.RTL"), []),
+            mavlink.MAV_CMD_DO_SET_HOME: self._cmd_set_home,
             px4.MAV_CMD_REQUEST_MESSAGE: self._cmd_request_message,
             px4.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: lambda link, p: (px4.MAV_RESULT_ACCEPTED, [tel.autopilot_version(opts.sysid)]),
             px4.MAV_CMD_SET_MESSAGE_INTERVAL: self._cmd_set_message_interval,
@@ -100,8 +102,10 @@ class MessageHandlers:
             self._command(link, msg, [float(p) for p in params])
 
     def _on_command_int(self, link: VehicleLink, msg: Any) -> None:
+        """As PX4's receiver: x and y are degrees x 1e7 (INT32_MAX: not given, NaN), z as it is."""
         if self._targets_me(msg):
-            params = [msg.param1, msg.param2, msg.param3, msg.param4, msg.x, msg.y, msg.z]
+            lat, lon = (math.nan if v == INT32_MAX else v * 1e-7 for v in (msg.x, msg.y))
+            params = [msg.param1, msg.param2, msg.param3, msg.param4, lat, lon, msg.z]
             self._command(link, msg, [float(p) for p in params])
 
     def _command(self, link: VehicleLink, msg: Any, params: list[float]) -> None:
@@ -142,6 +146,16 @@ class MessageHandlers:
         altitude_m = p[6] - home_amsl_m if math.isfinite(p[6]) else None
         return self.v._commander.takeoff(self.v._t_s, altitude_m), []
 
+    def _cmd_set_home(self, link: VehicleLink, p: list[float]) -> tuple[int, list[Any]]:
+        """DO_SET_HOME: param1 = 1 here, else param5/6/7 latitude, longitude [deg], altitude
+        [m AMSL] through the EKF origin (PX4's projection). HOME_POSITION shows it at the stream's
+        next message (PX4 SITL: up to 2 s later, at 0.5 Hz; nothing is sent at once)."""
+        here = int_param(p[0]) == 1
+        home = None if here else self.v._geo.to_local(p[4], p[5], p[6])
+        result = self.v._commander.set_home(self.v._t_s, home)
+        log.debug("DO_SET_HOME %s -> %d", "here" if here else tuple(round(c, 2) for c in home or ()), result)
+        return result, []
+
     def _stream_of(self, link: VehicleLink, msg_id: int) -> tel.Stream | None:
         return self.v._schedule.of(link.name, msg_id)
 
@@ -152,7 +166,8 @@ class MessageHandlers:
         stream = self._stream_of(link, msg_id)
         if stream is None:
             return px4.MAV_RESULT_DENIED, []  # as PX4 when it cannot send the message
-        return px4.MAV_RESULT_ACCEPTED, [tel.build(stream.name, self.v._telemetry_state(), self.v._geo, self.v._noise)]
+        msg = tel.build(stream.name, self.v._telemetry_state(), self.v._geo, self.v._noise)
+        return (px4.MAV_RESULT_DENIED, []) if msg is None else (px4.MAV_RESULT_ACCEPTED, [msg])
 
     def _cmd_set_message_interval(self, link: VehicleLink, p: list[float]) -> tuple[int, list[Any]]:
         """PX4's rules (mavlink_receiver.cpp, and measured on SITL): FAILED for HEARTBEAT, for a

@@ -34,11 +34,12 @@ from sim.vehicle.faults import FaultInjector, FaultOptions
 from sim.vehicle.handlers import MessageHandlers
 from sim.vehicle.io import LinkIO
 from sim.vehicle.endpoints import VehicleLink, parse_endpoint
-from sim.vehicle.options import FRAMES, VehicleOptions, VehicleSnapshot, frozen
+from sim.vehicle.options import FRAMES, VehicleOptions, VehicleSnapshot, frozen, status_line
 from sim.vehicle.lockstep import LockstepStepper
 from sim.vehicle.process import spawn_process
 from sim.vehicle.streams import DUE_EPSILON, StreamSchedule
 from sim.vehicle.params import ParamTable, vehicle_limits
+from sim.vehicle.physics.deck import Deck, DeckMotion
 from sim.vehicle.physics.multicopter import KinState, Limits, initial_state, step
 from sim.vehicle.physics.rover import rover_stepper
 
@@ -82,6 +83,7 @@ class MockVehicle:
         self._kin: KinState = initial_state(opts.start_ned)
         self._commander = Commander(self.params, self._kin)
         self._physics = rover_stepper(lambda: self._commander.mode) if opts.frame == "rover" else step
+        self._deck = Deck(opts.deck, lambda: self.params.get("LNDMC_XY_VEL_MAX")) if opts.deck is not None else None
         self._commander.refuse_arming_reason = opts.faults.refuse_arming_reason
         self._commander.refuse_offboard_reason = opts.faults.refuse_offboard_reason
         self._faults = FaultInjector(opts.faults)
@@ -168,9 +170,12 @@ class MockVehicle:
             return VehicleSnapshot(
                 t_s=self._t_s, position_ned_m=frozen((k.n_m, k.e_m, k.d_m)),
                 velocity_ned_m_s=frozen((k.vn_m_s, k.ve_m_s, k.vd_m_s)), yaw_rad=k.yaw_rad, armed=c.armed,
-                mode=c.mode, landed_state=c.landed_state(k), in_failsafe=c.in_failsafe,
+                mode=c.mode, landed_state=c.landed_state(c.kin), in_failsafe=c.in_failsafe,
                 position_valid=c.position_valid, home_ned_m=frozen(c.home_ned_m),
-                last_setpoint_t_s=c.last_setpoint_t_s, counters=self.counters, setpoint=c.setpoint)
+                last_setpoint_t_s=c.last_setpoint_t_s, counters=self.counters, setpoint=c.setpoint,
+                battery_pct=None if (bat := c.battery.reading()) is None else float(bat[0]),
+                on_deck=bool(self._deck and self._deck.on_deck), crash=self._deck and self._deck.crash,
+                touchdowns=tuple(self._deck.touchdowns) if self._deck else ())
 
     def when(self, predicate: Callable[[VehicleSnapshot], bool]) -> Callable[[], VehicleSnapshot | None]:
         """A check for :func:`sim.net.wait_for`: the snapshot once ``predicate`` holds for it, else None."""
@@ -229,14 +234,14 @@ class MockVehicle:
 
     def status_line(self) -> str:
         """One line for the log: time, mode, position and the counters that reveal trouble."""
-        s = self.snapshot()
-        c = s.counters
-        n, e, d = s.position_ned_m
-        return (f"t={s.t_s:.1f}s {s.mode} {'ARMED' if s.armed else 'disarmed'}{' FAILSAFE' if s.in_failsafe else ''} "
-                f"ned=({n:.1f},{e:.1f},{d:.1f}) rx={c['rx_messages']} malformed={c['rx_malformed']} "
-                f"unknown_ids={c['rx_unknown_ids']} unsigned={c['rx_unsigned_rejected']} wrong_target={c['rx_wrong_target']} "
-                f"sp={c['setpoints_accepted']}/{c['setpoints_rejected']}rej tx={c['tx_messages']} "
-                f"drop_in={c['dropped_in'] + c['blackout_in']} drop_out={c['dropped_out'] + c['blackout_out']}")
+        return status_line(self.snapshot())
+
+    def follow_deck(self, source: Callable[[], DeckMotion | None]) -> None:
+        """Learn the carrier's motion from ``source`` (its newest, on this vehicle's clock; None:
+        nothing new), polled at every pass; needs ``options.deck`` (:mod:`sim.vehicle.physics.deck`)."""
+        if self._deck is None:
+            raise ValueError("this vehicle has no deck (VehicleOptions.deck)")
+        self._deck.source = source
 
     # ---- the loop ------------------------------------------------------------------------
     @property
@@ -295,20 +300,24 @@ class MockVehicle:
         """Run the physics and the commander up to step number ``target``."""
         if target <= self._steps:
             return
-        limits, wind, commander, kin = self._limits(), self.options.wind_ned_m_s, self._commander, self._kin
+        limits, wind, commander, kin, deck = self._limits(), self.options.wind_ned_m_s, self._commander, self._kin, self._deck
         estimate = self._estimate if self._estimate.enabled else None
+        crashed = deck is not None and deck.refresh()
         for k in range(self._steps + 1, target + 1):
-            command = commander.step(k * PHYSICS_DT_S, kin)
+            command = commander.step(k * PHYSICS_DT_S, kin if deck is None else deck.as_px4_sees(kin))
             if estimate is not None:  # PX4's controller flies its estimate (sim.vehicle.estimator)
                 estimate.advance(PHYSICS_DT_S)
-                kin = self._physics(kin, command, limits, wind, PHYSICS_DT_S, (estimate.position, estimate.velocity))
+                moved = self._physics(kin, command, limits, wind, PHYSICS_DT_S, (estimate.position, estimate.velocity))
             else:
-                kin = self._physics(kin, command, limits, wind, PHYSICS_DT_S)
+                moved = self._physics(kin, command, limits, wind, PHYSICS_DT_S)
+            kin = moved if deck is None else deck.step(k * PHYSICS_DT_S, PHYSICS_DT_S, kin, moved)
+        if deck is not None and deck.crash is not None and not crashed:
+            log.warning("crash on the deck at t=%.2f s: %s", deck.touchdowns[-1].t_s, deck.crash)
         self._counters["physics_steps"] += target - self._steps
         self._kin, self._steps = kin, target
         if self._lockstep is not None and isinstance(self.clock, ManualClock):
             self.clock.advance_to(self._t_s)  # the lockstep vehicle owns time
-        commander.kin = kin
+        commander.kin = kin if deck is None else deck.as_px4_sees(kin)
         self._collect_events()
 
     def _collect_events(self) -> None:
@@ -328,8 +337,9 @@ class MockVehicle:
 
     def _telemetry_state(self) -> tel.TelemetryState:
         c, k = self._commander, self._kin
-        return tel.TelemetryState(self._t_s, k, c.mode, c.armed, c.system_status(), c.landed_state(k), c.armable(),
-                                  c.position_valid, c.setpoint, c.home_ned_m, FRAMES[self.options.frame])
+        landed = c.landed_state(k if self._deck is None else self._deck.as_px4_sees(k))
+        return tel.TelemetryState(self._t_s, k, c.mode, c.armed, c.system_status(), landed, c.armable(),
+                                  c.position_valid, c.setpoint, c.home_ned_m, FRAMES[self.options.frame], c.battery.reading())
 
     def _service_streams(self, t_s: float) -> None:
         state: tel.TelemetryState | None = None
@@ -338,7 +348,8 @@ class MockVehicle:
             if stream.name not in built:
                 state = state or self._telemetry_state()
                 built[stream.name] = tel.build(stream.name, state, self._geo, self._noise)
-            self._io.send(link, built[stream.name])  # type: ignore[arg-type]  (one of self._links)
+            if built[stream.name] is not None:
+                self._io.send(link, built[stream.name])  # type: ignore[arg-type]  (one of self._links)
 
     def _flush_outbox(self) -> None:
         """Send the commander's STATUSTEXTs to the links whose peer is alive (PX4 rule)."""

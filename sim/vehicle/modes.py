@@ -25,6 +25,21 @@ State machine (PX4 behaviour from ../shared/REFERENCE.md; choices of this mock m
   Descend reports as AUTO.LAND): no horizontal hold, descend at MPC_LAND_SPEED.
 - Auto-disarm: COM_DISARM_PRFLT after arming if not taken off; COM_DISARM_LAND after landing.
 - Disarming clears the failsafe; the mode stays (a new arm needs an armable mode).
+- Home: set where the vehicle arms on the ground, unless DO_SET_HOME set it (PX4's
+  ``manual_home``: it then stays until the next DO_SET_HOME). DO_SET_HOME (COMMAND_LONG or
+  COMMAND_INT; param1 = 1: here, else lat/lon/alt) is accepted armed or not, in flight too, with
+  a valid position estimate (else TEMPORARILY_REJECTED); non-finite coordinates: DENIED; COM_HOME_EN
+  = 0: DENIED. No rate limit (a PX4 SITL took 5 a second, each ACCEPTED).
+- RTL fixes its destination (the home) and its return altitude when it starts: a home moved
+  during the return is not followed (as on PX4 SITL, whose RTL also takes them at activation).
+  Return altitude as PX4's ``computeReturnAltitude`` for a multicopter: RTL_RETURN_ALT above the
+  home; within RTL_MIN_DIST, the RTL_CONE_ANG cone's height at that distance; at least 2 x
+  NAV_ACC_RAD; never lower than the vehicle is. *No descent to RTL_DESCEND_ALT and loiter: it
+  descends at MPC_LAND_SPEED all the way.
+- Battery (SIM_BAT_ENABLE, :mod:`sim.vehicle.physics.battery`): below BAT_LOW_THR a warning; below
+  BAT_CRIT_THR, COM_LOW_BAT_ACT 3: failsafe Return, 2: failsafe Land; below BAT_EMERGEN_THR, 2 or
+  3: failsafe Land. *Each once, on the way down; PX4's failsafe framework adds a hold delay and
+  user takeover.
 """
 from __future__ import annotations
 
@@ -32,6 +47,7 @@ import math
 from dataclasses import dataclass
 
 from mission.mavlink import px4, setpoints
+from sim.vehicle.physics import battery
 from sim.vehicle.params import ParamTable
 from sim.vehicle.physics.multicopter import Command, KinState
 
@@ -84,9 +100,12 @@ class Commander:
         self.landed_t_s: float | None = None
         self.hold_ned_m = (kin.n_m, kin.e_m, kin.d_m)
         self.home_ned_m = (kin.n_m, kin.e_m, kin.d_m)
+        self.manual_home = False  # DO_SET_HOME set it: arming no longer moves it
         self.takeoff_d_m = kin.d_m
         self.rtl_phase = "climb"
         self.rtl_return_d_m = kin.d_m
+        self.rtl_home_ned_m = self.home_ned_m  # RTL's destination, fixed when it starts
+        self.battery = battery.Battery(params)
         self.now_s = 0.0  # time of the latest step or command [s]
         self.outbox: list[tuple[float, int, str]] = []  # (t_s, severity, text) to send
         self._rejections: dict[str, float] = {}  # STATUSTEXT of a dropped setpoint -> when last said
@@ -104,7 +123,8 @@ class Commander:
             self.user_mode = name
         self.hold_ned_m = (kin.n_m, kin.e_m, kin.d_m)
         self.rtl_phase = "climb"
-        self.rtl_return_d_m = min(kin.d_m, self.home_ned_m[2] - self.params.get("RTL_RETURN_ALT"))
+        self.rtl_home_ned_m = self.home_ned_m
+        self.rtl_return_d_m = rtl_return_d_m(self.params, self.rtl_home_ned_m, kin)
         if name == "AUTO.TAKEOFF":
             self.takeoff_d_m = self.home_ned_m[2] - self.params.get("MIS_TAKEOFF_ALT")
 
@@ -167,7 +187,7 @@ class Commander:
             return px4.MAV_RESULT_TEMPORARILY_REJECTED
         kin = self.kin
         self.armed, self.arm_t_s, self.taken_off, self.landed_t_s = True, t_s, False, None
-        if kin.on_ground:
+        if kin.on_ground and not self.manual_home:
             self.home_ned_m = (kin.n_m, kin.e_m, kin.d_m)
         self.hold_ned_m = (kin.n_m, kin.e_m, kin.d_m)
         self._say("Armed by external command")
@@ -208,6 +228,21 @@ class Commander:
         self.takeoff_d_m = self.home_ned_m[2] - alt_m
         return px4.MAV_RESULT_ACCEPTED
 
+    def set_home(self, t_s: float, home_ned_m: tuple[float, float, float] | None) -> int:
+        """DO_SET_HOME: the home at ``home_ned_m`` [m] NED (None: where the vehicle is); return the
+        MAV_RESULT (see the module docstring)."""
+        self.now_s = max(self.now_s, t_s)
+        if not self.params.get("COM_HOME_EN"):
+            return px4.MAV_RESULT_DENIED
+        if home_ned_m is not None and not all(math.isfinite(c) for c in home_ned_m):
+            return px4.MAV_RESULT_DENIED
+        if not self.position_valid:
+            return px4.MAV_RESULT_TEMPORARILY_REJECTED
+        kin = self.kin
+        self.home_ned_m = (kin.n_m, kin.e_m, kin.d_m) if home_ned_m is None else tuple(home_ned_m)  # type: ignore[assignment]
+        self.manual_home = True
+        return px4.MAV_RESULT_ACCEPTED
+
     def force_mode(self, t_s: float, name: str) -> None:
         """A pilot takes over and switches to ``name`` (no checks; clears a failsafe)."""
         self.now_s = max(self.now_s, t_s)
@@ -222,6 +257,7 @@ class Commander:
         """Apply the timers and failsafes at time ``t_s`` and return the command for ``kin``."""
         self.now_s = max(self.now_s, t_s)
         self.kin = kin
+        self._battery_failsafe(t_s, self.battery.update(t_s, self.armed))
         if self.armed:
             self._track_landing(t_s, kin)
             self._auto_disarm(t_s, kin)
@@ -260,6 +296,18 @@ class Commander:
             self._enter("OFFBOARD", by_user=False)
             self._say("Failsafe deactivated: offboard signal regained")
 
+    def _battery_failsafe(self, t_s: float, level: battery.BatteryWarning | None) -> None:
+        """PX4's reaction to a battery level newly reached in the air (COM_LOW_BAT_ACT)."""
+        if level is None:
+            return
+        action = int(self.params.get("COM_LOW_BAT_ACT"))
+        if level == battery.BatteryWarning.LOW or action not in (2, 3):
+            self._say(f"Low battery level! ({self.battery.reading()[0]} %)", px4.MAV_SEVERITY_WARNING)  # type: ignore[index]
+        elif level == battery.BatteryWarning.CRITICAL:
+            self._activate_failsafe(t_s, "AUTO.RTL" if action == 3 else "AUTO.LAND", "battery critical")
+        else:
+            self._activate_failsafe(t_s, "AUTO.LAND", "battery emergency")
+
     def _offboard_lost(self, t_s: float) -> None:
         action = int(self.params.get("COM_OBL_RC_ACT"))
         if action in (6, 7):
@@ -278,65 +326,30 @@ class Commander:
     def _mode_command(self, kin: KinState) -> Command:
         mode = self.mode
         if mode == "OFFBOARD" and self.setpoint is not None:
-            return self._offboard_command(kin, self.setpoint)
+            return offboard_command(kin, self.setpoint)
         if mode == "AUTO.LAND" or self._needs_pilot(mode):
-            return self._descend_command(kin)
+            return self.descend_command(kin)
         if mode == "AUTO.TAKEOFF":
             return self._takeoff_command(kin)
         if mode == "AUTO.RTL":
-            return self._rtl_command(kin)
-        return self._hold_command(kin, self.hold_ned_m)
+            return rtl_command(self, kin)
+        return hold_command(kin, self.hold_ned_m)
 
-    @staticmethod
-    def _offboard_command(kin: KinState, sp: TrajectorySetpoint) -> Command:
-        """The trajectory setpoint as it is: PX4's position controller flies it unsmoothed."""
-        vn, ve, vd = sp.velocity
-        return Command(vn, ve, vd, sp.yaw_rad, sp.yaw_rate_rad_s, position_ned_m=sp.position,
-                       acceleration_ned_m_s2=sp.acceleration)
-
-    @staticmethod
-    def _hold_command(kin: KinState, target_ned_m: tuple[float, float, float], yaw_rad: float | None = None) -> Command:
-        """Position P loop towards ``target_ned_m`` [m] (limits apply in the physics)."""
-        k = POSITION_GAIN_1_S
-        return Command(k * (target_ned_m[0] - kin.n_m), k * (target_ned_m[1] - kin.e_m),
-                       k * (target_ned_m[2] - kin.d_m), yaw_rad)
-
-    def _descend_command(self, kin: KinState) -> Command:
+    def descend_command(self, kin: KinState) -> Command:
         land_m_s = self.params.get("MPC_LAND_SPEED")
         if not self.position_valid:
             return Command(0.0, 0.0, land_m_s)
-        hold = self._hold_command(kin, self.hold_ned_m)
+        hold = hold_command(kin, self.hold_ned_m)
         return Command(hold.vn_m_s, hold.ve_m_s, land_m_s)
 
     def _takeoff_command(self, kin: KinState) -> Command:
-        hold = self._hold_command(kin, self.hold_ned_m)
+        hold = hold_command(kin, self.hold_ned_m)
         climb_m_s = min(self.params.get("MPC_TKO_SPEED"), POSITION_GAIN_1_S * (kin.d_m - self.takeoff_d_m) + 0.2)
         if kin.d_m <= self.takeoff_d_m + TAKEOFF_DONE_M:
             self._enter(px4.HOLD, by_user=False)
             self.hold_ned_m = (kin.n_m, kin.e_m, self.takeoff_d_m)
-            return self._hold_command(kin, self.hold_ned_m)
+            return hold_command(kin, self.hold_ned_m)
         return Command(hold.vn_m_s, hold.ve_m_s, -climb_m_s)
-
-    def _rtl_command(self, kin: KinState) -> Command:
-        """Climb to the return altitude, fly home at MPC_XY_CRUISE, descend and land."""
-        home_n, home_e, _ = self.home_ned_m
-        dist_m = math.hypot(home_n - kin.n_m, home_e - kin.e_m)
-        if self.rtl_phase == "climb":
-            if dist_m <= 2 * ARRIVAL_RADIUS_M:
-                self.rtl_phase = "land"
-            elif kin.d_m <= self.rtl_return_d_m + ARRIVAL_RADIUS_M:
-                self.rtl_phase = "return"
-            else:
-                return self._hold_command(kin, (self.hold_ned_m[0], self.hold_ned_m[1], self.rtl_return_d_m))
-        if self.rtl_phase == "return":
-            if dist_m > ARRIVAL_RADIUS_M:
-                gain = min(self.params.get("MPC_XY_CRUISE"), POSITION_GAIN_1_S * dist_m) / dist_m
-                return Command(gain * (home_n - kin.n_m), gain * (home_e - kin.e_m),
-                               POSITION_GAIN_1_S * (self.rtl_return_d_m - kin.d_m))
-            self.rtl_phase = "land"
-        if self.rtl_phase == "land" and self.hold_ned_m[:2] != (home_n, home_e) and dist_m <= 2 * ARRIVAL_RADIUS_M:
-            self.hold_ned_m = (home_n, home_e, kin.d_m)
-        return self._descend_command(kin)
 
     # ---- telemetry -----------------------------------------------------------------------
     def landed_state(self, kin: KinState) -> int:
@@ -357,3 +370,61 @@ class Commander:
     def armable(self) -> bool:
         """The PREARM_CHECK health bit: arming would pass the checks in the current mode."""
         return not self.refuse_arming_reason and self.position_valid and not self._needs_pilot(self.mode)
+
+
+def offboard_command(kin: KinState, sp: TrajectorySetpoint) -> Command:
+    """The trajectory setpoint as it is: PX4's position controller flies it unsmoothed."""
+    vn, ve, vd = sp.velocity
+    return Command(vn, ve, vd, sp.yaw_rad, sp.yaw_rate_rad_s, position_ned_m=sp.position,
+                   acceleration_ned_m_s2=sp.acceleration)
+
+
+def hold_command(kin: KinState, target_ned_m: tuple[float, float, float], yaw_rad: float | None = None) -> Command:
+    """Position P loop towards ``target_ned_m`` [m] (limits apply in the physics)."""
+    k = POSITION_GAIN_1_S
+    return Command(k * (target_ned_m[0] - kin.n_m), k * (target_ned_m[1] - kin.e_m),
+                   k * (target_ned_m[2] - kin.d_m), yaw_rad)
+
+
+def rtl_return_d_m(params: ParamTable, home_ned_m: tuple[float, float, float], kin: KinState) -> float:
+    """RTL's return altitude as NED down [m] towards ``home_ned_m`` from ``kin`` (PX4's
+    ``computeReturnAltitude`` for a multicopter; see the module docstring)."""
+    p = params.get
+    home_n, home_e, home_d = home_ned_m
+    dist_m = math.hypot(home_n - kin.n_m, home_e - kin.e_m)
+    highest = p("RTL_RETURN_ALT")
+    cone_deg = p("RTL_CONE_ANG")
+    if cone_deg <= 0:
+        return min(kin.d_m, home_d - highest)
+    acc_rad = p("NAV_ACC_RAD")
+    if dist_m <= acc_rad:
+        height = 2.0 * dist_m
+    else:
+        height = highest
+        if dist_m <= p("RTL_MIN_DIST"):
+            height = min(dist_m / math.tan(math.radians(min(max(cone_deg, 1.0), 89.0))), height)
+        height = max(height, 2.0 * acc_rad)
+    return min(max(home_d - height, home_d - highest), kin.d_m)  # no lower than the vehicle is
+
+
+def rtl_command(c: Commander, kin: KinState) -> Command:
+    """RTL: climb to the return altitude, fly to the destination fixed at the start at
+    MPC_XY_CRUISE, descend and land (``c.rtl_phase``: climb, return, land)."""
+    home_n, home_e, _ = c.rtl_home_ned_m
+    dist_m = math.hypot(home_n - kin.n_m, home_e - kin.e_m)
+    if c.rtl_phase == "climb":
+        if dist_m <= 2 * ARRIVAL_RADIUS_M:
+            c.rtl_phase = "land"
+        elif kin.d_m <= c.rtl_return_d_m + ARRIVAL_RADIUS_M:
+            c.rtl_phase = "return"
+        else:
+            return hold_command(kin, (c.hold_ned_m[0], c.hold_ned_m[1], c.rtl_return_d_m))
+    if c.rtl_phase == "return":
+        if dist_m > ARRIVAL_RADIUS_M:
+            gain = min(c.params.get("MPC_XY_CRUISE"), POSITION_GAIN_1_S * dist_m) / dist_m
+            return Command(gain * (home_n - kin.n_m), gain * (home_e - kin.e_m),
+                           POSITION_GAIN_1_S * (c.rtl_return_d_m - kin.d_m))
+        c.rtl_phase = "land"
+    if c.rtl_phase == "land" and c.hold_ned_m[:2] != (home_n, home_e) and dist_m <= 2 * ARRIVAL_RADIUS_M:
+        c.hold_ned_m = (home_n, home_e, kin.d_m)
+    return c.descend_command(kin)

@@ -10,6 +10,7 @@ import numpy as np
 from mission.mavlink import px4
 from sim.vehicle.faults import FaultOptions
 from sim.vehicle.modes import TrajectorySetpoint
+from sim.vehicle.physics.deck import DeckSpec, Touchdown
 
 FRAMES = {"quadrotor": px4.MAV_TYPE_QUADROTOR, "rover": px4.MAV_TYPE_GROUND_ROVER}
 
@@ -32,6 +33,9 @@ class VehicleOptions:
     telemetry reports it.
     signing_key: 32-byte MAVLink 2 signing key; then unsigned messages other than HEARTBEAT
     are rejected and everything sent is signed.
+    deck: the carrier's deck under the vehicle (:mod:`sim.vehicle.physics.deck`), its motion
+    given by :meth:`MockVehicle.follow_deck` (``mock-vehicle --deck PAIR``: the carrier's Zenoh
+    state); None: no deck.
     lockstep: own simulated time and step in lockstep with the controller on the onboard link
     (:mod:`mission.time.lockstep`); ``speed`` is then the pace after the controller leaves or stays
     silent for ``lockstep_watchdog_wall_s`` wall seconds. ``lockstep_max_speed``: in lockstep, fly at
@@ -56,6 +60,7 @@ class VehicleOptions:
     estimate_error: float = 0.0
     statustext_needs_heartbeat: bool = True
     frame: str = "quadrotor"  # or "rover": MAV_TYPE_GROUND_ROVER, Ackermann kinematics (sim.vehicle.physics.rover)
+    deck: DeckSpec | None = None
     lockstep: bool = False
     lockstep_watchdog_wall_s: float = 10.0  # mission.time.lockstep.VEHICLE_WATCHDOG_WALL_S
     lockstep_max_speed: float | None = None
@@ -94,6 +99,22 @@ class VehicleSnapshot:
     last_setpoint_t_s: float
     counters: dict[str, int]
     setpoint: TrajectorySetpoint | None = None  # the last offboard setpoint accepted, as decoded
+    battery_pct: float | None = None  # battery remaining [%] as reported (None: not simulated, SIM_BAT_ENABLE 0)
+    on_deck: bool = False  # standing (or lying, crashed) on the carrier's deck, carried with it
+    crash: str | None = None  # why the vehicle crashed on the deck (None: it has not)
+    touchdowns: tuple[Touchdown, ...] = ()  # every contact with the deck, in order
+
+
+def status_line(s: VehicleSnapshot) -> str:
+    """One line for the log: time, mode, position and the counters that reveal trouble."""
+    c = s.counters
+    n, e, d = s.position_ned_m
+    return (f"t={s.t_s:.1f}s {s.mode} {'ARMED' if s.armed else 'disarmed'}{' FAILSAFE' if s.in_failsafe else ''} "
+            f"{'CRASHED ' if s.crash else 'ON_DECK ' if s.on_deck else ''}ned=({n:.1f},{e:.1f},{d:.1f}) rx={c['rx_messages']} "
+            f"malformed={c['rx_malformed']} unknown_ids={c['rx_unknown_ids']} unsigned={c['rx_unsigned_rejected']} "
+            f"wrong_target={c['rx_wrong_target']} sp={c['setpoints_accepted']}/{c['setpoints_rejected']}rej "
+            f"tx={c['tx_messages']} drop_in={c['dropped_in'] + c['blackout_in']} "
+            f"drop_out={c['dropped_out'] + c['blackout_out']}")
 
 
 def frozen(values: Sequence[float]) -> np.ndarray:

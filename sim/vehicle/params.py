@@ -8,11 +8,11 @@ reinterpreted as a float32, never converted.
 from __future__ import annotations
 
 import math
-import struct
 import threading
 from dataclasses import dataclass
 
 from mission.mavlink import px4
+from mission.mavlink.px4 import pack_int32, unpack_int32
 from sim.vehicle.physics.mc_position_control import Gains
 from sim.vehicle.physics.multicopter import Limits
 
@@ -64,20 +64,26 @@ PARAM_SPECS: tuple[ParamSpec, ...] = (
     ParamSpec("MPC_LAND_SPEED", 0.7, False, "landing descent speed [m/s]"),
     ParamSpec("MPC_YAWRAUTO_MAX", 45.0, False, "yaw rate limit [deg/s]"),
     ParamSpec("MIS_TAKEOFF_ALT", 2.5, False, "default takeoff altitude above home [m]"),
-    ParamSpec("RTL_RETURN_ALT", 60.0, False, "RTL return altitude above home [m]"),
+    ParamSpec("RTL_RETURN_ALT", 30.0, False, "RTL return altitude above the destination [m] (multicopter default)"),
+    ParamSpec("RTL_MIN_DIST", 10.0, False, "within this horizontal distance [m] of the destination RTL returns in the cone"),
+    ParamSpec("RTL_CONE_ANG", 45, True, "half angle [deg] of RTL's altitude cone round the destination (0: none)"),
+    ParamSpec("NAV_ACC_RAD", 2.0, False, "acceptance radius [m] (multicopter default): RTL's lowest return is twice it"),
+    ParamSpec("LNDMC_XY_VEL_MAX", 1.5, False, "land detector: no ground contact while moving faster horizontally [m/s]"),
+    ParamSpec("COM_HOME_EN", 1, True, "home position enabled: DO_SET_HOME is refused (DENIED) when 0"),
+    ParamSpec("SIM_BAT_ENABLE", 0, True, "simulate the battery (*PX4 SITL: 1; the mock: 0 unless asked)"),
+    ParamSpec("SIM_BAT_DRAIN", 60.0, False, "battery simulator: time to drain a full battery while armed [s]"),
+    ParamSpec("SIM_BAT_MIN_PCT", 50.0, False, "battery simulator: the charge never falls below this [%]"),
+    ParamSpec("BAT1_N_CELLS", 4, True, "cells of battery 1 (PX4 SITL: 4)"),
+    ParamSpec("BAT1_V_CHARGED", 4.05, False, "full cell voltage [V]"),
+    ParamSpec("BAT1_V_EMPTY", 3.6, False, "empty cell voltage [V]"),
+    ParamSpec("BAT_LOW_THR", 0.15, False, "low battery threshold [fraction]: a warning"),
+    ParamSpec("BAT_CRIT_THR", 0.07, False, "critical battery threshold [fraction]: COM_LOW_BAT_ACT acts"),
+    ParamSpec("BAT_EMERGEN_THR", 0.05, False, "emergency battery threshold [fraction]: COM_LOW_BAT_ACT acts"),
+    ParamSpec("COM_LOW_BAT_ACT", 3, True, "low battery action: 0 warning, 2 Land, 3 Return at critical and Land at emergency "
+                                          "(PX4 SITL's rcS sets 3)"),
     ParamSpec("MAV_SYS_ID", 1, True, "MAVLink system id (reported only)"),
 )
 SPECS_BY_NAME = {spec.name: spec for spec in PARAM_SPECS}
-
-
-def pack_int32(value: int) -> float:
-    """The float32 whose bits are the int32 ``value`` (PX4's bytewise PARAM_VALUE encoding)."""
-    return struct.unpack("<f", struct.pack("<i", int(value)))[0]
-
-
-def unpack_int32(encoded: float) -> int:
-    """Inverse of :func:`pack_int32`."""
-    return struct.unpack("<i", struct.pack("<f", encoded))[0]
 
 
 class UnknownParam(KeyError):
@@ -150,3 +156,4 @@ def vehicle_limits(table: ParamTable) -> Limits:
                   p("MPC_Z_VEL_MAX_UP"), p("MPC_Z_VEL_MAX_DN"), math.radians(p("MPC_TILTMAX_AIR")), p("MPC_THR_HOVER"),
                   p("MPC_THR_MIN"), p("MPC_THR_MAX"), p("MPC_THR_XY_MARG"))
     return Limits(gains, yaw_rate_max_rad_s=math.radians(p("MPC_YAWRAUTO_MAX")))
+

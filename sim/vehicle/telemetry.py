@@ -55,6 +55,7 @@ STREAM_TABLE: tuple[tuple[str, float, float, float], ...] = (
     ("ESTIMATOR_STATUS", 1.0, CAP_OTHER_WALL_HZ, SOURCE_MAX_HZ),
     ("GPS_GLOBAL_ORIGIN", 1.0, CAP_OTHER_WALL_HZ, SOURCE_MAX_HZ),
     ("HOME_POSITION", 0.5, CAP_OTHER_WALL_HZ, SOURCE_MAX_HZ),
+    ("BATTERY_STATUS", 0.5, CAP_OTHER_WALL_HZ, SOURCE_MAX_HZ),
 )
 
 SENSORS_PRESENT = (px4.SENSOR_3D_GYRO | px4.SENSOR_3D_ACCEL | px4.SENSOR_3D_MAG | px4.SENSOR_ABSOLUTE_PRESSURE
@@ -65,6 +66,7 @@ CAPABILITIES = (px4.MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT | px4.MAV_PROTOCOL_CAP
                 | px4.MAV_PROTOCOL_CAPABILITY_MISSION_INT | px4.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
                 | px4.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
                 | px4.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_GLOBAL_INT | px4.MAV_PROTOCOL_CAPABILITY_MAVLINK2)
+NO_CURRENT_CA = -100  # [cA]: PX4's battery simulator has no current sensor (-1 A), as SITL sends it
 ESTIMATOR_TYPE_AUTOPILOT = 8  # MAV_ESTIMATOR_TYPE_AUTOPILOT, as PX4 fills ODOMETRY
 ESTIMATOR_FLAGS_HEALTHY = 895  # ESTIMATOR_STATUS.flags seen on a healthy PX4 SITL
 ESTIMATOR_FLAGS_ATTITUDE_ONLY = 0x3  # attitude and horizontal velocity only
@@ -120,6 +122,13 @@ class Geo:
         lat, lon = geodesy.reproject(n_m, e_m, self.lat0_deg, self.lon0_deg)
         return lat, lon, self.alt0_m - d_m
 
+    def to_local(self, lat_deg: float, lon_deg: float, alt_m: float) -> tuple[float, float, float]:
+        """(lat [deg], lon [deg], alt [m AMSL]) -> local NED [m] (NaN in, NaN out)."""
+        if not all(math.isfinite(c) for c in (lat_deg, lon_deg, alt_m)):
+            return math.nan, math.nan, math.nan
+        n, e = geodesy.project(lat_deg, lon_deg, self.lat0_deg, self.lon0_deg)
+        return n, e, self.alt0_m - alt_m
+
 
 @dataclass(frozen=True)
 class TelemetryState:
@@ -136,6 +145,7 @@ class TelemetryState:
     setpoint: TrajectorySetpoint | None
     home_ned_m: tuple[float, float, float]
     mav_type: int = px4.MAV_TYPE_QUADROTOR
+    battery: tuple[int, int] | None = None  # (remaining [%], voltage [mV]) of the simulated battery, None: none
 
 
 def _ms(t_s: float) -> int:
@@ -158,8 +168,20 @@ def sys_status(s: TelemetryState) -> Any:
         health &= ~px4.SENSOR_PREARM_CHECK
     if not s.position_valid:
         health &= ~(px4.SENSOR_GPS | px4.SENSOR_XY_POSITION_CONTROL)
-    return mavlink.MAVLink_sys_status_message(SENSORS_PRESENT, SENSORS_PRESENT, health, 150, 65535, -1, -1,
-                                              0, 0, 0, 0, 0, 0, 0, 0, 0)
+    voltage_mv, current_ca, remaining = (65535, -1, -1) if s.battery is None else (s.battery[1], NO_CURRENT_CA, s.battery[0])
+    return mavlink.MAVLink_sys_status_message(SENSORS_PRESENT, SENSORS_PRESENT, health, 150, voltage_mv, current_ca,
+                                              remaining, 0, 0, 0, 0, 0, 0, 0, 0, 0)
+
+
+def battery_status(s: TelemetryState) -> Any | None:
+    """PX4's BATTERY_STATUS of the simulated battery, as a PX4 SITL sends it (one pack, its voltage
+    in the first cell field, no current sensor, nothing consumed); None without a battery (PX4
+    publishes none)."""
+    if s.battery is None:
+        return None
+    return mavlink.MAVLink_battery_status_message(0, mavlink.MAV_BATTERY_FUNCTION_ALL, mavlink.MAV_BATTERY_TYPE_LIPO,
+                                                  32767, [s.battery[1]] + [65535] * 9, NO_CURRENT_CA, 0, -1,
+                                                  s.battery[0], 0, mavlink.MAV_BATTERY_CHARGE_STATE_OK)
 
 
 def extended_sys_state(s: TelemetryState) -> Any:
@@ -336,8 +358,9 @@ class PositionNoise:
         return kin.vn_m_s + ev[0], kin.ve_m_s + ev[1], kin.vd_m_s + ev[2]
 
 
-def build(name: str, s: TelemetryState, geo: Geo, noise: PositionNoise) -> Any:
-    """The message of stream ``name`` for state ``s``."""
+def build(name: str, s: TelemetryState, geo: Geo, noise: PositionNoise) -> Any | None:
+    """The message of stream ``name`` for state ``s`` (None: nothing to send, as BATTERY_STATUS
+    without a battery)."""
     if name == "HEARTBEAT":
         return heartbeat(s)
     if name == "LOCAL_POSITION_NED":
@@ -353,6 +376,6 @@ def build(name: str, s: TelemetryState, geo: Geo, noise: PositionNoise) -> Any:
 
 _GEO_BUILDERS = {"ALTITUDE": altitude, "VFR_HUD": vfr_hud, "HOME_POSITION": home_position, "GPS_GLOBAL_ORIGIN": gps_global_origin,
                  "HIGHRES_IMU": highres_imu}
-_PLAIN_BUILDERS = {"SYS_STATUS": sys_status, "EXTENDED_SYS_STATE": extended_sys_state, "ATTITUDE": attitude,
+_PLAIN_BUILDERS = {"SYS_STATUS": sys_status, "BATTERY_STATUS": battery_status, "EXTENDED_SYS_STATE": extended_sys_state, "ATTITUDE": attitude,
                    "ATTITUDE_QUATERNION": attitude_quaternion, "POSITION_TARGET_LOCAL_NED": position_target_local_ned,
                    "ATTITUDE_TARGET": attitude_target, "ESTIMATOR_STATUS": estimator_status}

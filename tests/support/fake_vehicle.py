@@ -20,7 +20,7 @@ from mission.core.setpoint import Setpoint
 from mission.mavlink import px4
 from mission.bus.bridge import ReceivedCarrierState
 from mission.time.clock import ManualClock
-from mission.errors import CommandRejected
+from mission.errors import CommandRejected, LinkTimeout
 from mission.mavlink.link import VehicleState
 from mission.mavlink.session import LinkCounters
 from mission.bus.wire import CarrierState, GeoOrigin, PassengerStatus
@@ -56,6 +56,9 @@ class FakeWorld:
     carrier_accel_m_s2: float = math.inf  # the carrier's acceleration limit [m/s^2] (inf: instant)
     battery_pct: float | None = None  # remaining at t = 0 [%] (None: not reported) ...
     drain_pct_s: float = 0.0  # ... falling this fast while armed [%/s]
+    homes: list[tuple[float, np.ndarray]] = field(default_factory=list)  # DO_SET_HOME asked (t [s], NED [m])
+    params: dict[str, float] = field(default_factory=lambda: {"COM_OBL_RC_ACT": 0.0, "BAT_CRIT_THR": 0.07})
+    param_sets: list[tuple[float, str, float]] = field(default_factory=list)  # (t [s], name, value) set
 
     def __post_init__(self) -> None:
         self._v_p = np.zeros(3)
@@ -130,6 +133,20 @@ class FakeWorld:
 
     def land(self) -> None:
         self.set_mode("AUTO.LAND")
+
+    def set_home(self, home_ned_m: Any) -> int:
+        self.homes.append((self._advance(), np.array(home_ned_m, dtype=float)))
+        return px4.MAV_RESULT_ACCEPTED
+
+    def get_param(self, name: str) -> float:
+        if name not in self.params:
+            raise LinkTimeout(f"no PARAM_VALUE {name}")
+        return self.params[name]
+
+    def set_param(self, name: str, value: float) -> float:
+        self.param_sets.append((self._advance(), name, float(value)))
+        self.params[name] = float(value)
+        return float(value)
 
     def signing_problem(self) -> str | None:
         return None

@@ -14,6 +14,7 @@ import struct
 import numpy as np
 import pytest
 
+from mission.core import geodesy
 from mission.core.setpoint import Setpoint
 from mission.mavlink import px4
 from mission.time.clock import ManualClock, ScaledClock
@@ -373,3 +374,24 @@ def test_chunked_statustext_is_reassembled(link: VehicleLink) -> None:
         peer.statustext("sensors\t", severity=3, text_id=7, chunk_seq=1)
         link.wait_until(lambda s: s.last_statustext.endswith("sensors"), 5.0)
         assert link.statustexts[-1][1:] == (3, head + "sensors")
+
+
+def test_set_home_asks_for_the_origin_px4_sends_only_when_it_is_set() -> None:
+    """PX4 sends GPS_GLOBAL_ORIGIN once, when its EKF origin is set (a PX4 SITL: none in 10 s after):
+    a link that came later asks for it (REQUEST_MESSAGE), then places the home through it as
+    COMMAND_INT (x, y in degrees x 1e7)."""
+    def answer(fake: Px4Peer, msg) -> None:
+        if msg.command == mavlink.MAV_CMD_REQUEST_MESSAGE and round(msg.param1) == mavlink.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN:
+            fake.ack(msg, mavlink.MAV_RESULT_ACCEPTED)
+            fake.send(mavlink.MAVLink_gps_global_origin_message(473977418, 85455939, 488000, 0))
+    with VehicleLink(ANY_PORT, ScaledClock(1.0)) as link, Px4Peer(link.port) as peer:
+        peer.on_command = answer
+        link.wait_vehicle(timeout_s=5.0)
+        assert link.state.origin is None
+        with pytest.raises(LinkTimeout):  # the fake answers no COMMAND_INT
+            link.set_home(np.array([10.0, -20.0, 1.0]), timeout_s=0.3)
+        assert link.state.origin == pytest.approx((47.3977418, 8.5455939, 488.0))
+        sent = [m for m in peer.received("COMMAND_INT") if m.command == mavlink.MAV_CMD_DO_SET_HOME]
+        assert len(sent) == 1 and sent[0].frame == mavlink.MAV_FRAME_GLOBAL and sent[0].param1 == 0.0
+        lat, lon = geodesy.reproject(10.0, -20.0, 47.3977418, 8.5455939)
+        assert (sent[0].x, sent[0].y) == (round(lat * 1e7), round(lon * 1e7)) and sent[0].z == pytest.approx(487.0)

@@ -15,7 +15,7 @@ import pytest
 from mission.core.setpoint import Setpoint
 from mission.mavlink import px4
 from mission.time.clock import Periodic, ScaledClock
-from mission.errors import CommandRejected
+from mission.errors import CommandRejected, LinkTimeout
 from mission.mavlink.link import VehicleLink
 from sim.vehicle.mock import MockVehicle, VehicleOptions
 from sim.net import wait_for as eventually
@@ -172,3 +172,28 @@ def test_signed_link_flies_a_signed_vehicle() -> None:
         assert not vehicle.snapshot().armed
         assert signed.counters.rx_bad_signature == 0
         assert vehicle.counters["rx_unsigned_rejected"] == 0
+
+
+def test_home_placed_through_the_ekf_origin_and_read_back(link: VehicleLink) -> None:
+    """DO_SET_HOME as COMMAND_INT lands within a centimetre of the NED point; HOME_POSITION brings
+    it back."""
+    with _vehicle(link, home=(47.1, 8.2, 410.0)) as vehicle:
+        link.wait_vehicle(20.0)
+        link.wait_until(lambda s: s.origin is not None, 20.0)
+        assert link.set_home(np.array([-12.5, 30.25, 0.5])) == px4.MAV_RESULT_ACCEPTED
+        assert vehicle.snapshot().home_ned_m == pytest.approx([-12.5, 30.25, 0.5], abs=0.015)
+        s = link.wait_until(lambda s: s.home_ned_m is not None and s.home_ned_m[0] < -12.0, 10.0)
+        assert s.home_ned_m == pytest.approx([-12.5, 30.25, 0.5], abs=0.015)
+        assert link.counters.tx_commands == 1
+
+
+def test_parameters_read_and_written_int_and_float(link: VehicleLink) -> None:
+    with _vehicle(link) as vehicle:
+        link.wait_vehicle(20.0)
+        assert link.get_param("COM_OBL_RC_ACT") == 0.0  # an INT32, bit-packed on the wire
+        assert link.set_param("COM_OBL_RC_ACT", 3) == 3.0
+        assert vehicle.params.get("COM_OBL_RC_ACT") == 3.0
+        assert link.set_param("COM_OF_LOSS_T", 1.5) == 1.5  # a REAL32
+        assert vehicle.params.get("COM_OF_LOSS_T") == 1.5
+        with pytest.raises(LinkTimeout, match="NO_SUCH_PARAM"):
+            link.get_param("NO_SUCH_PARAM", timeout_s=0.2, retries=1)  # PX4 does not answer for it

@@ -68,10 +68,16 @@ def position(x=1.0, y=2.0, z=-3.0, vx=0.1, vy=0.2, vz=0.3):
     return mavlink.MAVLink_local_position_ned_message(0, x, y, z, vx, vy, vz)
 
 
-def sys_status(present: bool, enabled: bool, healthy: bool):
+def sys_status(present: bool, enabled: bool, healthy: bool, remaining: int = -1):
     bit = mavlink.MAV_SYS_STATUS_AHRS
     return mavlink.MAVLink_sys_status_message(bit if present else 0, bit if enabled else 0, bit if healthy else 0,
-                                              0, 0, -1, -1, 0, 0, 0, 0, 0, 0)
+                                              0, 0, -1, remaining, 0, 0, 0, 0, 0, 0)
+
+
+def battery_status(battery_id: int, remaining: int):
+    """As PX4 SITL's battery simulator sends it (one 4S pack, no current sensor)."""
+    return mavlink.MAVLink_battery_status_message(battery_id, 1, 1, 32767, [16200] + [65535] * 9, -100, 0, -1,
+                                                  remaining)
 
 
 def test_reducer_reads_heartbeat_position_origin_and_landed_state():
@@ -110,6 +116,31 @@ def test_position_validity_age_finiteness_and_estimator_health():
     assert not telemetry.snapshot(unhealthy, 1.0, None, 0.5).position_valid
     not_reported = telemetry.reduce(unhealthy, sys_status(True, False, False), 1.0)
     assert telemetry.snapshot(not_reported, 1.0, None, 0.5).position_valid
+
+
+def test_battery_from_sys_status_and_battery_status_the_lowest_known_minus_one_unknown():
+    tm = telemetry.Telemetry()
+    assert telemetry.snapshot(tm, 0.0, None, 0.5).battery_pct is None
+    tm = telemetry.reduce(tm, sys_status(True, True, True, remaining=-1), 1.0)  # PX4 without a battery
+    assert telemetry.snapshot(tm, 1.0, None, 0.5).battery_pct is None
+    tm = telemetry.reduce(tm, sys_status(True, True, True, remaining=83), 2.0)
+    assert telemetry.snapshot(tm, 2.0, None, 0.5).battery_pct == 83.0
+    tm = telemetry.reduce(tm, battery_status(0, 84), 2.1)  # the same pack, a moment earlier: the lowest counts
+    tm = telemetry.reduce(tm, battery_status(1, 40), 2.2)  # a second pack
+    assert telemetry.snapshot(tm, 2.2, None, 0.5).battery_pct == 40.0
+    tm = telemetry.reduce(tm, battery_status(1, -1), 2.3)  # that pack no longer known
+    tm = telemetry.reduce(tm, sys_status(True, True, True, remaining=82), 2.4)
+    assert telemetry.snapshot(tm, 2.4, None, 0.5).battery_pct == 82.0
+
+
+def test_home_position_read_back_in_local_ned():
+    home = mavlink.MAVLink_home_position_message(473977462, 85455951, 489029, -9.99, 5.0, -0.98, [1, 0, 0, 0],
+                                                 0, 0, 0, 2652000)
+    tm = telemetry.reduce(telemetry.Telemetry(), home, 3.0)
+    s = telemetry.snapshot(tm, 3.5, None, 0.5)
+    assert s.home_ned_m.tolist() == pytest.approx([-9.99, 5.0, -0.98]) and s.home_rx_s == 3.0
+    nan_home = mavlink.MAVLink_home_position_message(0, 0, 0, math.nan, 0, 0, [1, 0, 0, 0], 0, 0, 0, 0)
+    assert telemetry.reduce(tm, nan_home, 4.0) is tm  # a non-finite one is not a home
 
 
 def test_statustext_chunks_are_joined():
