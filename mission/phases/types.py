@@ -38,6 +38,8 @@ class AbortReason(StrEnum):
     INTERRUPTED = "interrupted"
     TIMEOUT = "timeout"
     SIGNING_MISMATCH = "signing_mismatch"
+    VEHICLE_DISARMED = "vehicle_disarmed"
+    VEHICLE_AMBIGUOUS = "vehicle_ambiguous"
 
 
 
@@ -56,6 +58,7 @@ class VehicleObs:
     position_age_s: float = 0.0
     in_failsafe: bool = False  # HEARTBEAT system_status CRITICAL: PX4 runs one of its failsafes
     battery_pct: float | None = None  # battery remaining [%] as the vehicle reports it (None: not reported)
+    on_ground: bool = False  # EXTENDED_SYS_STATE landed_state ON_GROUND: PX4's land detector says landed
 
 
 @dataclass(frozen=True)
