@@ -181,6 +181,7 @@ def _vehicle_obs(state: VehicleState, velocity_fix: PositionConsistentVelocity |
         position_age_s=age,
         in_failsafe=state.system_status == px4.MAV_STATE_CRITICAL,
         battery_pct=state.battery_pct,
+        on_ground=state.landed_state == px4.LANDED_ON_GROUND,
     )
 
 
@@ -304,7 +305,7 @@ class MissionController:
             self.publisher.publish(PassengerStatus(
                 phase=st.phase.value, stamp_s=t, seq=self._seq, position_ned_m=obs.vehicle.position_ned_m,
                 velocity_ned_m_s=obs.vehicle.velocity_ned_m_s, separated=st.anchor is not None, anchor_ned_m=st.anchor,
-                leg=st.leg))
+                leg=st.leg, reason=st.reason if st.phase == Phase.ABORT else None))
         except Exception as exc:  # a bus hiccup must never stop the flight loop
             log.warning("could not publish passenger status: %s", exc)
 

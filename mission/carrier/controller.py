@@ -190,7 +190,7 @@ class CarrierController:
             lost = None
         if rx is None:
             return PassengerView(None, False, lost)
-        return PassengerView(rx.status.phase, rx.status.separated, lost)
+        return PassengerView(rx.status.phase, rx.status.separated, lost, rx.status.reason)
 
     def _update_mode(self) -> None:
         mode, why = next_mode(self.mode, self._view())
