@@ -24,7 +24,11 @@ State machine (PX4 behaviour from ../shared/REFERENCE.md; choices of this mock m
 - Position estimate lost while armed in a mode that needs it: failsafe to AUTO.LAND (PX4's
   Descend reports as AUTO.LAND): no horizontal hold, descend at MPC_LAND_SPEED.
 - Auto-disarm: COM_DISARM_PRFLT after arming if not taken off; COM_DISARM_LAND after landing.
-- Disarming clears the failsafe; the mode stays (a new arm needs an armable mode).
+- Disarming clears the failsafe; the mode stays (a new arm needs an armable mode). Disarmed in
+  the air (only by force) the motors stop and it falls.
+- Landed state: on the ground, or disarmed for LNDMC_TRIG_TIME / 3 (PX4's land detector counts a
+  disarmed vehicle as landed, through a hysteresis of that length): ON_GROUND even while a
+  force-disarmed vehicle is still falling.
 """
 from __future__ import annotations
 
@@ -80,6 +84,7 @@ class Commander:
         self.setpoints_received = 0
         self.setpoints_at_failsafe = 0
         self.arm_t_s = -math.inf
+        self.disarm_t_s = -math.inf
         self.taken_off = False
         self.landed_t_s: float | None = None
         self.hold_ned_m = (kin.n_m, kin.e_m, kin.d_m)
@@ -192,7 +197,7 @@ class Commander:
         if not force and not self.kin.on_ground:
             self._say("Disarming denied: not landed", px4.MAV_SEVERITY_CRITICAL)
             return px4.MAV_RESULT_TEMPORARILY_REJECTED
-        self.armed = False
+        self.armed, self.disarm_t_s = False, t_s
         self.in_failsafe, self.failsafe_reason = False, None
         self._say(reason)
         return px4.MAV_RESULT_ACCEPTED
@@ -341,7 +346,7 @@ class Commander:
     # ---- telemetry -----------------------------------------------------------------------
     def landed_state(self, kin: KinState) -> int:
         """EXTENDED_SYS_STATE.landed_state for the current mode and physics state."""
-        if kin.on_ground:
+        if kin.on_ground or (not self.armed and self.now_s - self.disarm_t_s >= self.params.get("LNDMC_TRIG_TIME") / 3):
             return px4.LANDED_ON_GROUND
         if self.mode == "AUTO.TAKEOFF":
             return px4.LANDED_TAKEOFF
