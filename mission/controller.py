@@ -45,6 +45,11 @@ UNUSED_STREAMS = tuple(getattr(mavlink, f"MAVLINK_MSG_ID_{name}") for name in (
     "ATTITUDE", "ATTITUDE_QUATERNION", "GLOBAL_POSITION_INT", "HIGHRES_IMU", "ODOMETRY", "POSITION_TARGET_LOCAL_NED",
     "ATTITUDE_TARGET", "ALTITUDE", "VFR_HUD", "ESTIMATOR_STATUS", "HOME_POSITION"))
 ABORT_GRACE_S = 15.0  # longest the loop keeps asking for Hold after an abort [s]
+EXTENDED_SYS_STATE_ID = mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE
+# EXTENDED_SYS_STATE (PX4's land detector) asked at this rate [Hz] (PX4 streams 5 Hz): a forced
+# disarm in the air shows as ON_GROUND LNDMC_TRIG_TIME / 3 (0.33 s) after it, so at 10 Hz within
+# about 0.43 s, where the 1 Hz HEARTBEAT can take a second (docs/security.md)
+LANDED_STATE_RATE_HZ = 10.0
 
 
 #: How each request the phases make is carried out on the vehicle (blocking until confirmed).
@@ -241,7 +246,7 @@ class MissionController:
         self._origin_given = False
         self._received: Any = None
         self._rates: list[float] = []  # LOCAL_POSITION_NED rate seen each flying tick [Hz]
-        self._rate_asked = cfg.mission.telemetry_rate_hz is None and cfg.mission.unused_streams == "keep"
+        self._rate_asked = False
         tau = cfg.mission.velocity_bias_tau_s
         self._velocity_fix = PositionConsistentVelocity(tau) if tau > 0 else None
 
@@ -261,8 +266,9 @@ class MissionController:
     def _ask_telemetry_rate(self) -> None:
         """Once the preflight checks passed: ask the vehicle for LOCAL_POSITION_NED at ``mission.telemetry_rate_hz``
         (PX4 streams 30 Hz to a 50 Hz loop by default), off the loop. A refusal is logged and the
-        mission flies at the rate that comes (the summary's ``position_rate_hz`` says which). Then, with
-        ``mission.unused_streams = "stop"``, ask it to stop the streams the mission never reads."""
+        mission flies at the rate that comes (the summary's ``position_rate_hz`` says which). Then for
+        EXTENDED_SYS_STATE at :data:`LANDED_STATE_RATE_HZ`, and, with ``mission.unused_streams =
+        "stop"``, to stop the streams the mission never reads."""
         rate = self.cfg.mission.telemetry_rate_hz
         if self._rate_asked or self.state.phase in (Phase.PREFLIGHT, Phase.ABORT, Phase.DONE):
             return  # after the preflight checks only: a refused start sends the vehicle nothing
@@ -275,6 +281,11 @@ class MissionController:
                     log.info("asked the vehicle for LOCAL_POSITION_NED at %g Hz", rate)
             except (CommandRejected, LinkError) as exc:
                 log.warning("vehicle did not take LOCAL_POSITION_NED at %g Hz (%s); flying at the rate it streams", rate, exc)
+            try:
+                self.link.set_message_interval(EXTENDED_SYS_STATE_ID, LANDED_STATE_RATE_HZ)
+            except (CommandRejected, LinkError) as exc:
+                log.warning("vehicle did not take EXTENDED_SYS_STATE at %g Hz (%s): a disarm in the air may take up "
+                            "to its HEARTBEAT period to notice", LANDED_STATE_RATE_HZ, exc)
             if self.cfg.mission.unused_streams == "stop":
                 stopped = 0
                 for msg_id in UNUSED_STREAMS:
