@@ -260,6 +260,9 @@ class MissionController:
         signing = self.link.signing_problem()
         if signing:
             failed["signing"] = signing  # no vehicle yet, and the reason is the key
+        identity = self.link.identity_problem()
+        if identity:
+            failed["identity"] = identity  # a second autopilot with mavlink.target_system unset
         return Observation(t_s=t, vehicle=_vehicle_obs(vstate, self._velocity_fix), carrier=_carrier_obs(self._received, self.feed.alive_over_interval()),
                            failed=failed, interrupted=self.stop.is_set())
 

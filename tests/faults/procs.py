@@ -110,6 +110,7 @@ class Flight:
     mission_verbose: bool = False  # -vv: debug logging (more output to search for leaks)
     lockstep: bool = False  # the three step on the vehicle's simulated time; speed: pace once one stops
     mav_port: int = 0
+    before_vehicle: Any = None  # called with the flight once carrier and mission are up, before the vehicle starts
     procs: dict[str, subprocess.Popen[Any]] = field(default_factory=dict)
     gcs: Probe | None = None
     _files: list[Any] = field(default_factory=list)
@@ -150,6 +151,8 @@ class Flight:
                                    str(self.speed), "--log-dir", str(self.log_dir), *self._mode, *self.mission_args))
         wait_for(lambda: self.carrier_alive() and self.router.has(f"marsupial/{self.pair}/passenger/alive")
                  and udp_bound(self.mav_port) or self._died(), 30.0, "carrier and mission up")
+        if self.before_vehicle is not None:
+            self.before_vehicle(self)
         self.gcs = Probe()
         out = open(self.dir / "vehicle.out", "ab")
         err = open(self.dir / "vehicle.err", "ab")
