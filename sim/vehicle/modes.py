@@ -14,7 +14,9 @@ State machine (PX4 behaviour from ../shared/REFERENCE.md; choices of this mock m
   present (:meth:`force_mode` = a pilot took over): the mock has no RC.
 - Arming: denied (TEMPORARILY_REJECTED + STATUSTEXT) when an arming refusal is injected, the
   position estimate is invalid, in OFFBOARD without a fresh setpoint, or in a manual mode with no
-  pilot. Force (param2 = 21196) skips the checks. Disarming in the air needs force.
+  pilot. Force (param2 = 21196) does not skip them for a MAVLink command: PX4's Commander skips
+  them only for a forced arm of its own (``commander arm -f``; docs/security.md). Disarming in
+  the air needs force.
 - Offboard loss (armed, OFFBOARD, no setpoint for COM_OF_LOSS_T): "Failsafe activated", mode of
   COM_OBL_RC_ACT (6 Terminate and 7 Disarm disarm), in_failsafe. When setpoints resume while that
   failsafe is active and nobody changed the mode, back to OFFBOARD at the next step (PX4 does so
@@ -162,7 +164,8 @@ class Commander:
         return ""
 
     def arm(self, t_s: float, force: bool = False) -> int:
-        """Handle an arm request; return the MAV_RESULT."""
+        """Handle an arm request; return the MAV_RESULT. ``force`` skips the checks (PX4's own
+        forced arm; a MAVLink command never does)."""
         self.now_s = max(self.now_s, t_s)
         if self.armed:
             return px4.MAV_RESULT_ACCEPTED
