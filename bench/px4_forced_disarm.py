@@ -1,4 +1,4 @@
-"""What a real PX4 SITL does when a ground station force-disarms it in the air (docs/security.md).
+"""What a real PX4 SITL does when a ground station force-disarms it in the air (docs/flying-px4.md).
 
 A fresh PX4 (SIH quadrotor) in its own network namespace (:mod:`sim.sitl.px4`). An offboard peer
 on the onboard link (14540, sysid 1 compid 191, as ``marsupial run``) climbs to 3 m and hovers

@@ -48,7 +48,7 @@ ABORT_GRACE_S = 15.0  # longest the loop keeps asking for Hold after an abort [s
 EXTENDED_SYS_STATE_ID = mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE
 # EXTENDED_SYS_STATE (PX4's land detector) asked at this rate [Hz] (PX4 streams 5 Hz): a forced
 # disarm in the air shows as ON_GROUND LNDMC_TRIG_TIME / 3 (0.33 s) after it, so at 10 Hz within
-# about 0.43 s, where the 1 Hz HEARTBEAT can take a second (docs/security.md)
+# about 0.43 s, where the 1 Hz HEARTBEAT can take a second (docs/flying-px4.md)
 LANDED_STATE_RATE_HZ = 10.0
 
 

@@ -15,7 +15,7 @@ State machine (PX4 behaviour from ../shared/REFERENCE.md; choices of this mock m
 - Arming: denied (TEMPORARILY_REJECTED + STATUSTEXT) when an arming refusal is injected, the
   position estimate is invalid, in OFFBOARD without a fresh setpoint, or in a manual mode with no
   pilot. Force (param2 = 21196) does not skip them for a MAVLink command: PX4's Commander skips
-  them only for a forced arm of its own (``commander arm -f``; docs/security.md). Disarming in
+  them only for a forced arm of its own (``commander arm -f``; docs/flying-px4.md). Disarming in
   the air needs force.
 - Offboard loss (armed, OFFBOARD, no setpoint for COM_OF_LOSS_T): "Failsafe activated", mode of
   COM_OBL_RC_ACT (6 Terminate and 7 Disarm disarm), in_failsafe. When setpoints resume while that

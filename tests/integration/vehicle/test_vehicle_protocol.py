@@ -74,7 +74,7 @@ def test_set_mode_as_command_int(probe: Probe) -> None:
 
 def test_a_forced_arm_from_a_ground_station_still_runs_the_checks(probe: Probe) -> None:
     """PX4's Commander runs the pre-arm checks for every external arm (``arm(reason, from_external
-    || !forced)``; docs/security.md has the real SITL refusing both)."""
+    || !forced)``; docs/flying-px4.md has the real SITL refusing both)."""
     with vehicle_for(probe, faults=FaultOptions(refuse_arming_reason="Arming denied: test")) as v:
         connect(probe)
         assert probe.arm().result == px4.MAV_RESULT_TEMPORARILY_REJECTED
