@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from mission.mavlink import px4
-from sim.vehicle.modes import Commander, Setpoint
+from sim.vehicle.modes import Commander, TrajectorySetpoint
 from sim.vehicle.params import ParamTable, vehicle_limits
 from sim.vehicle.physics.multicopter import KinState, step
 
@@ -23,11 +23,11 @@ def test_a_forced_disarm_in_the_air_stops_the_motors_and_pxs_land_detector_says_
     c = Commander(params, kin)
     t = 0.0
     assert c.arm(t) == px4.MAV_RESULT_ACCEPTED
-    c.accept_setpoint(t, Setpoint(velocity=(0.0, 0.0, 0.0)))
+    c.accept_setpoint(t, TrajectorySetpoint(velocity=(0.0, 0.0, 0.0)))
     assert c.set_mode(t, "OFFBOARD") == px4.MAV_RESULT_ACCEPTED
     for _ in range(200):  # hover 1 s
         t += DT
-        c.accept_setpoint(t, Setpoint(velocity=(0.0, 0.0, 0.0)))
+        c.accept_setpoint(t, TrajectorySetpoint(velocity=(0.0, 0.0, 0.0)))
         kin = step(kin, c.step(t, kin), limits, (0.0, 0.0, 0.0), DT)
     assert c.landed_state(kin) == px4.LANDED_IN_AIR
     assert c.disarm(t) == px4.MAV_RESULT_TEMPORARILY_REJECTED and c.armed  # not landed: needs force
@@ -35,7 +35,7 @@ def test_a_forced_disarm_in_the_air_stops_the_motors_and_pxs_land_detector_says_
     t_disarmed, landed_at = t, None
     while kin.d_m < 0.0 and t < t_disarmed + 5.0:
         t += DT
-        c.accept_setpoint(t, Setpoint(velocity=(0.0, 0.0, 0.0)))  # the stream goes on: no matter
+        c.accept_setpoint(t, TrajectorySetpoint(velocity=(0.0, 0.0, 0.0)))  # the stream goes on: no matter
         command = c.step(t, kin)
         assert not command.powered
         kin = step(kin, command, limits, (0.0, 0.0, 0.0), DT)
