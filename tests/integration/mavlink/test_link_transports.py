@@ -236,7 +236,7 @@ def test_the_vehicles_own_gcs_link_forwarded_to_our_port_moves_nothing() -> None
                 eventually(lambda: link.counters.rx_other_link >= 100, 10.0, "forwarded GCS-link packets counted")
                 before = link.state.position_rx_s
                 for _ in range(20):
-                    link.send_velocity_ned(np.zeros(3))
+                    link.send(Setpoint.hold_still())
                 eventually(lambda: v.counters["setpoints_accepted"] >= 20, 5.0, "our setpoints at the vehicle")
                 eventually(lambda: (link.state.position_rx_s or 0.0) > (before or 0.0), 5.0, "telemetry goes on")
                 c = link.counters
