@@ -45,6 +45,11 @@ UNUSED_STREAMS = tuple(getattr(mavlink, f"MAVLINK_MSG_ID_{name}") for name in (
     "ATTITUDE", "ATTITUDE_QUATERNION", "GLOBAL_POSITION_INT", "HIGHRES_IMU", "ODOMETRY", "POSITION_TARGET_LOCAL_NED",
     "ATTITUDE_TARGET", "ALTITUDE", "VFR_HUD", "ESTIMATOR_STATUS"))
 ABORT_GRACE_S = 15.0  # longest the loop keeps asking for Hold after an abort [s]
+EXTENDED_SYS_STATE_ID = mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE
+# EXTENDED_SYS_STATE (PX4's land detector) asked at this rate [Hz] (PX4 streams 5 Hz): a forced
+# disarm in the air shows as ON_GROUND LNDMC_TRIG_TIME / 3 (0.33 s) after it, so at 10 Hz within
+# about 0.43 s, where the 1 Hz HEARTBEAT can take a second (docs/flying-px4.md)
+LANDED_STATE_RATE_HZ = 10.0
 
 
 #: How each request the phases make is carried out on the vehicle (blocking until confirmed).
@@ -263,6 +268,7 @@ def _vehicle_obs(state: VehicleState, velocity_fix: PositionConsistentVelocity |
         in_failsafe=state.system_status == px4.MAV_STATE_CRITICAL,
         battery_pct=state.battery_pct,
         velocity_bias_ned_m_s=bias,
+        on_ground=state.landed_state == px4.LANDED_ON_GROUND,
     )
 
 
@@ -322,7 +328,7 @@ class MissionController:
         self._origin_given = False
         self._received: Any = None
         self._rates: list[float] = []  # LOCAL_POSITION_NED rate seen each flying tick [Hz]
-        self._rate_asked = cfg.mission.telemetry_rate_hz is None and cfg.mission.unused_streams == "keep"
+        self._rate_asked = False
         tau = cfg.mission.velocity_bias_tau_s
         self._velocity_fix = PositionConsistentVelocity(tau) if tau > 0 else None
         self._home: HomeKeeper | None = None
@@ -341,14 +347,18 @@ class MissionController:
         signing = self.link.signing_problem()
         if signing:
             failed["signing"] = signing  # no vehicle yet, and the reason is the key
+        identity = self.link.identity_problem()
+        if identity:
+            failed["identity"] = identity  # a second autopilot with mavlink.target_system unset
         return Observation(t_s=t, vehicle=_vehicle_obs(vstate, self._velocity_fix), carrier=_carrier_obs(self._received, self.feed.alive_over_interval()),
                            failed=failed, interrupted=self.stop.is_set())
 
     def _ask_telemetry_rate(self) -> None:
         """Once the preflight checks passed: ask the vehicle for LOCAL_POSITION_NED at ``mission.telemetry_rate_hz``
         (PX4 streams 30 Hz to a 50 Hz loop by default), off the loop. A refusal is logged and the
-        mission flies at the rate that comes (the summary's ``position_rate_hz`` says which). Then, with
-        ``mission.unused_streams = "stop"``, ask it to stop the streams the mission never reads."""
+        mission flies at the rate that comes (the summary's ``position_rate_hz`` says which). Then for
+        EXTENDED_SYS_STATE at :data:`LANDED_STATE_RATE_HZ`, and, with ``mission.unused_streams =
+        "stop"``, to stop the streams the mission never reads."""
         rate = self.cfg.mission.telemetry_rate_hz
         if self._rate_asked or self.state.phase in (Phase.PREFLIGHT, Phase.ABORT, Phase.DONE):
             return  # after the preflight checks only: a refused start sends the vehicle nothing
@@ -361,6 +371,11 @@ class MissionController:
                     log.info("asked the vehicle for LOCAL_POSITION_NED at %g Hz", rate)
             except (CommandRejected, LinkError) as exc:
                 log.warning("vehicle did not take LOCAL_POSITION_NED at %g Hz (%s); flying at the rate it streams", rate, exc)
+            try:
+                self.link.set_message_interval(EXTENDED_SYS_STATE_ID, LANDED_STATE_RATE_HZ)
+            except (CommandRejected, LinkError) as exc:
+                log.warning("vehicle did not take EXTENDED_SYS_STATE at %g Hz (%s): a disarm in the air may take up "
+                            "to its HEARTBEAT period to notice", LANDED_STATE_RATE_HZ, exc)
             if self.cfg.mission.unused_streams == "stop":
                 stopped = 0
                 for msg_id in UNUSED_STREAMS:
@@ -432,7 +447,7 @@ class MissionController:
             self.publisher.publish(PassengerStatus(
                 phase=st.phase.value, stamp_s=t, seq=self._seq, position_ned_m=obs.vehicle.position_ned_m,
                 velocity_ned_m_s=obs.vehicle.velocity_ned_m_s, separated=st.anchor is not None, anchor_ned_m=st.anchor,
-                leg=st.leg))
+                leg=st.leg, reason=st.reason if st.phase == Phase.ABORT else None))
         except Exception as exc:  # a bus hiccup must never stop the flight loop
             log.warning("could not publish passenger status: %s", exc)
 

@@ -85,6 +85,11 @@ class Vehicle(Protocol):
         """Why no vehicle is identified although a PX4 was heard (it signs with another key), or None."""
         ...
 
+    def identity_problem(self) -> str | None:
+        """Why the identified vehicle is ambiguous (a second PX4 autopilot heard with
+        ``mavlink.target_system`` unset), or None."""
+        ...
+
     @property
     def counters(self) -> LinkCounters:
         """What the link received, sent and refused (for the summary)."""

@@ -4,8 +4,9 @@ The carrier publishes its state (:class:`CarrierState`: ``stamp`` [s] on the sen
 ``seq`` strictly increasing per sender, ``frame`` ``"local_ned"`` or ``"wgs84"``, ``position``
 [m] NED or [deg, deg, m AMSL], ``velocity`` [m/s] NED, optional ``yaw`` [rad] from north and
 ``acceleration`` [m/s^2] NED), the passenger its status (:class:`PassengerStatus`: phase, stamp,
-seq, position [m] and velocity [m/s] NED, ``separated`` and the latched ``anchor`` [m] NED). Both
-are pydantic models parsed and validated from JSON in one pass; unknown fields are ignored.
+seq, position [m] and velocity [m/s] NED, ``separated``, the latched ``anchor`` [m] NED and, in
+ABORT, the ``reason``). Both are pydantic models parsed and validated from JSON in one pass;
+unknown fields are ignored.
 Invariants: every number finite, vectors of exactly 3 within :data:`POSITION_LIMIT_M`,
 :data:`VELOCITY_LIMIT_M_S` and :data:`ACCELERATION_LIMIT_M_S2`, ``seq`` an int64. A failure raises
 :class:`WireError` whose ``reason`` is one of :data:`REASONS` (:func:`wire_error` maps pydantic's
@@ -103,6 +104,8 @@ def _vec3(limit: float) -> _Checked:
 Real = Annotated[float, _Checked(core_schema.float_schema(strict=True, allow_inf_nan=False))]
 Seq = Annotated[int, _Checked(core_schema.int_schema(strict=True, ge=0, le=SEQ_MAX))]
 Flag = Annotated[bool, _Checked(core_schema.bool_schema(strict=True))]
+#: An abort reason (``mission.phases.AbortReason`` values, and any later one): a short identifier.
+AbortReasonName = Annotated[str, _Checked(core_schema.str_schema(strict=True, pattern=r"^[a-z_]{1,32}$"))]
 PositionNed = Annotated[np.ndarray, _vec3(POSITION_LIMIT_M)]
 VelocityNed = Annotated[np.ndarray, _vec3(VELOCITY_LIMIT_M_S)]
 AccelerationNed = Annotated[np.ndarray, _vec3(ACCELERATION_LIMIT_M_S2)]
@@ -235,8 +238,8 @@ class PassengerStatus(_Message):
     phase a :class:`~mission.phases.phase.Phase` (its name on the wire); stamp_s [s] sender's clock; seq (>= 0); position_ned_m [m] and
     velocity_ned_m_s [m/s] local NED; separated: the separation latch has fired; anchor_ned_m
     [m] the latched anchor (carrier position at separation) or None; leg: the index of the target
-    served (``scenario.targets``; 0 with one target). Raises :class:`WireError`
-    when invalid.
+    served (``scenario.targets``; 0 with one target); reason: why the mission aborted (phase
+    ABORT), or None. Raises :class:`WireError` when invalid.
     """
 
     phase: Phase
@@ -247,14 +250,16 @@ class PassengerStatus(_Message):
     separated: Flag
     anchor_ned_m: PositionNed | None = Field(None, alias="anchor")
     leg: int = Field(0, ge=0, le=1000, strict=True)
+    reason: AbortReasonName | None = None
 
     _check_order = ("phase", "separated", "stamp", "stamp_s", "seq", "position", "position_ned_m", "velocity",
-                    "velocity_ned_m_s", "anchor", "anchor_ned_m", "leg")
+                    "velocity_ned_m_s", "anchor", "anchor_ned_m", "leg", "reason")
 
     def __init__(self, phase: Phase | str, stamp_s: float, seq: int, position_ned_m: Any, velocity_ned_m_s: Any,
-                 separated: bool = False, anchor_ned_m: Any = None, leg: int = 0) -> None:
+                 separated: bool = False, anchor_ned_m: Any = None, leg: int = 0, reason: str | None = None) -> None:
         self._validated(phase=phase, stamp_s=stamp_s, seq=seq, position_ned_m=position_ned_m,
-                        velocity_ned_m_s=velocity_ned_m_s, separated=separated, anchor_ned_m=anchor_ned_m, leg=leg)
+                        velocity_ned_m_s=velocity_ned_m_s, separated=separated, anchor_ned_m=anchor_ned_m, leg=leg,
+                        reason=reason)
 
     __init__.__pydantic_base_init__ = True  # type: ignore[attr-defined]  # see _Message
 

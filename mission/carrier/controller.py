@@ -175,7 +175,7 @@ def passenger_view(feed: PassengerFeed) -> PassengerView:
         lost = None
     if rx is None:
         return PassengerView(None, False, lost)
-    return PassengerView(rx.status.phase, rx.status.separated, lost, rx.status.leg)
+    return PassengerView(rx.status.phase, rx.status.separated, lost, rx.status.leg, rx.status.reason)
 
 
 class CarrierController:

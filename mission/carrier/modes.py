@@ -75,12 +75,13 @@ class CarrierMode(enum.Enum):
 class PassengerView:
     """The passenger as the carrier sees it now: its newest phase (None: nothing received),
     whether that status says the latch fired, why it counts as lost (None if it does not), and
-    which target's leg it flies."""
+    which target's leg it flies, and why it aborted (phase ABORT; None if it did not say)."""
 
     phase: Phase | None
     separated: bool = False
     lost: str | None = None
     leg: int = 0  # the index of the target the passenger serves (scenario.targets)
+    reason: str | None = None
 
 
 def next_mode(mode: CarrierMode, view: PassengerView) -> tuple[CarrierMode, str]:
@@ -123,7 +124,7 @@ def next_mode(mode: CarrierMode, view: PassengerView) -> tuple[CarrierMode, str]
     if view.phase is not None and (duty is Duty.RELEASED or view.separated):
         return CarrierMode.SEPARATED, f"passenger phase {view.phase}"
     if duty is Duty.STOP:
-        return CarrierMode.STOPPED, "passenger aborted"
+        return CarrierMode.STOPPED, f"passenger aborted: {view.reason}" if view.reason else "passenger aborted"
     if mode is CarrierMode.APPROACHING and view.lost:
         return CarrierMode.PAUSED, f"passenger lost: {view.lost}"
     if mode in (CarrierMode.WAITING, CarrierMode.PAUSED) and duty is Duty.CARRY and not view.lost:

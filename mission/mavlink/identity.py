@@ -6,7 +6,10 @@ With ``target_system`` set (``mavlink.target_system``), the first HEARTBEAT of a
 :data:`ADOPT_HEARTBEATS` such HEARTBEATs from one system and component with the same type, none
 older than ``heartbeat_timeout_s``, while no other PX4 autopilot is heard (two at once: neither
 is adopted, a warning says to set ``mavlink.target_system``). A stray HEARTBEAT of another
-system (a rogue sysid 42 talking first) never becomes the vehicle.
+system (a rogue sysid 42 talking first) never becomes the vehicle. What is adopted without
+``target_system`` is logged as a warning (a rogue that talks alone first would be adopted), and
+once adopted, a HEARTBEAT of any other PX4 autopilot (:meth:`Adoption.rival`) is a conflict that
+the mission refuses to fly through; with ``target_system`` set, other systems are only counted.
 """
 from __future__ import annotations
 
@@ -59,8 +62,9 @@ class Adoption:
             return False
         return True
 
-    def offer(self, mav_type: int, autopilot: int, source: tuple[int, int], t_rx: float) -> bool:
-        """A HEARTBEAT from ``source`` received at ``t_rx`` [s]: does it adopt ``source`` now?"""
+    def offer(self, mav_type: int, autopilot: int, source: tuple[int, int], t_rx: float, address: object = None) -> bool:
+        """A HEARTBEAT from ``source`` (at ``address``, for the log) received at ``t_rx`` [s]:
+        does it adopt ``source`` now?"""
         if not self.is_candidate(mav_type, autopilot, source):
             return False
         if self.target_system is not None:
@@ -87,6 +91,19 @@ class Adoption:
             return False
         self._candidates.clear()
         self.foreign_heartbeats = sum(n for k, n in self._heard.items() if k[0] != source[0])
-        log.info("vehicle adopted after %d consistent HEARTBEATs: PX4 autopilot sysid %d compid %d, MAV_TYPE %d",
-                 cand[0], source[0], source[1], mav_type)
+        log.warning("vehicle adopted after %d consistent HEARTBEATs: PX4 autopilot sysid %d compid %d, MAV_TYPE %d, "
+                    "at %s, WITHOUT mavlink.target_system: the first PX4 that talks alone is flown; any other PX4 "
+                    "autopilot heard from now on aborts the mission; set mavlink.target_system for real flights",
+                    cand[0], source[0], source[1], mav_type, address if address is not None else "the link")
         return True
+
+    def rival(self, mav_type: int, autopilot: int, source: tuple[int, int], vehicle: tuple[int, int]) -> str | None:
+        """A HEARTBEAT from ``source`` after ``vehicle`` was adopted: why it makes the vehicle
+        ambiguous (another PX4 autopilot of a vehicle type, ``target_system`` unset), or None."""
+        if self.target_system is not None or source == vehicle or not self.is_candidate(mav_type, autopilot, source):
+            return None
+        text = (f"a second PX4 autopilot (sysid {source[0]} compid {source[1]}, MAV_TYPE {mav_type}) talks beside the "
+                f"adopted vehicle (sysid {vehicle[0]} compid {vehicle[1]}) and mavlink.target_system is unset: which "
+                f"one to fly is unknown; set mavlink.target_system to the vehicle's MAV_SYS_ID")
+        log.error("%s", text)
+        return text

@@ -3,8 +3,10 @@
 One :class:`VehicleLink` talks to one autopilot through a transport chosen by URL. It identifies
 the vehicle (``target_system`` set: its first PX4 HEARTBEAT; unset: :data:`ADOPT_HEARTBEATS`
 consistent PX4 HEARTBEATs from one system while no other PX4 is heard) and from then on accepts
-telemetry and ACKs only from it, replying only to the address it last sent from (foreign systems
-are counted in ``rejected_foreign``). It sends our 1 Hz HEARTBEAT as an onboard controller of the
+telemetry and ACKs only from it, replying only to the address (and signing link id) it was
+identified from (:class:`~mission.mavlink.receiver.ReplyPin`; foreign systems are counted in
+``rejected_foreign``); unset, a second PX4 autopilot heard after the adoption makes
+:meth:`VehicleLink.identity_problem` say so. It sends our 1 Hz HEARTBEAT as an onboard controller of the
 vehicle's own system (default system 1, component 191: PX4 registers an onboard controller of its
 own system only), commands with ACK, retry and HEARTBEAT confirmation (blocking, one at a time,
 thread-safe; a non-ACCEPTED result raises :class:`~mission.errors.CommandRejected`), and setpoints
@@ -222,6 +224,11 @@ class VehicleLink:
         """Why no vehicle was identified on a signed link, if the reason is the key (a PX4
         autopilot heard only with another key's signatures); None otherwise."""
         return self._session.signing_problem()
+
+    def identity_problem(self) -> str | None:
+        """Why the identified vehicle is ambiguous: ``target_system`` unset and a second PX4
+        autopilot heard after the adoption (:meth:`~mission.mavlink.identity.Adoption.rival`); None otherwise."""
+        return self._session.identity_problem()
 
     @property
     def counters(self) -> LinkCounters:

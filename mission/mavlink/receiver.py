@@ -3,9 +3,27 @@ STATUSTEXTs in the :class:`~mission.mavlink.session.LinkSession`.
 
 Identification: :class:`~mission.mavlink.identity.Adoption` decides which PX4 autopilot is the
 vehicle; from then on only that system and component is applied (others are counted and
-ignored), and only a message that passed every check (signature, identity) moves the reply
-address. On a signed link unsigned and badly signed packets are counted apart. The receiver
-never dies on bad input: every parse or handler error is caught and counted.
+ignored). With ``mavlink.target_system`` unset, a HEARTBEAT of a second PX4 autopilot after
+the adoption is an identity conflict (``session.identity_conflict``): the mission aborts.
+
+The reply address (:class:`ReplyPin`) is the address the identifying HEARTBEAT came from, and
+only the vehicle's packets that come over the same link count:
+
+* signed link: the signing link id of the identifying HEARTBEAT is pinned with it. A packet of
+  the vehicle with another link id (its GCS link's packets forwarded to our port, whose signing
+  timestamps run on their own) is counted (``rx_other_link``) and ignored; one with the pinned
+  link id moves the reply address if it comes from elsewhere (a valid signature and a fresh
+  timestamp on our stream are proof enough; ``peer_moves``);
+* unsigned link: anyone can claim the vehicle's ids, so the address itself is the link. A packet
+  from another address is counted (``rx_other_address``) and ignored while the pinned address
+  still talks; once it has been silent for :data:`PEER_SILENT_S`, the next one moves the reply
+  address there (a restarted vehicle), with a warning.
+
+Replay protection is pymavlink's: a signed packet's timestamp must exceed the last one seen on
+its stream, keyed by (link id, system, component) as the MAVLink 2 signing spec says; a refused
+packet leaves that state alone (:func:`mission.mavlink.codec.keep_replay_state_on_failure`).
+On a signed link unsigned and badly signed packets are counted apart. The receiver never dies
+on bad input: every parse or handler error is caught and counted.
 """
 from __future__ import annotations
 
@@ -25,6 +43,53 @@ from mission.mavlink.env import mavlink
 log = logging.getLogger("mission.mavlink.link")
 
 WALL_SLICE_S = 0.05  # longest wall-clock block in the transport [s], so a stop is prompt
+PEER_SILENT_S = 1.0  # unsigned link: the pinned address silent this long [s of link clock] before another may take over
+
+
+class ReplyPin:
+    """Which of the identified vehicle's packets count and where replies go (module docstring).
+
+    ``signed``: the link checks signatures. :meth:`admit` decides for each packet of the vehicle
+    (the first one pins); it returns None when the packet counts, else the counter that refuses it.
+    :attr:`moved` is the new address when the last admitted packet moved the pin (else None).
+    """
+
+    def __init__(self, signed: bool, silent_s: float = PEER_SILENT_S) -> None:
+        self.signed, self.silent_s = signed, silent_s
+        self.address: Address | None = None
+        self.link_id: int | None = None
+        self.pinned = False
+        self.last_rx_s = float("-inf")
+        self.moved: Address | None = None
+        self._warned: set[str] = set()
+
+    def admit(self, msg: Any, address: Address | None, t_rx: float) -> str | None:
+        self.moved = None
+        if not self.pinned:
+            self.pinned, self.address, self.last_rx_s = True, address, t_rx
+            self.link_id = msg.get_link_id() if self.signed else None
+            self.moved = address
+            return None
+        if self.signed and msg.get_link_id() != self.link_id:
+            self._warn_once("link", "vehicle packets with signing link id %s (ours: %s) from %s ignored: another link of "
+                            "the vehicle, forwarded", msg.get_link_id(), self.link_id, address)
+            return "rx_other_link"
+        if address is not None and address != self.address:
+            if not self.signed and t_rx - self.last_rx_s <= self.silent_s:
+                self._warn_once("address", "vehicle packets from %s ignored: the vehicle talks from %s (unsigned link: "
+                                "set mavlink.signing_key_file to tell them apart)", address, self.address)
+                return "rx_other_address"
+            log.log(logging.INFO if self.signed else logging.WARNING, "vehicle reply address moved from %s to %s (%s)",
+                    self.address, address, f"signed, link id {self.link_id}" if self.signed
+                    else f"the old one silent for {t_rx - self.last_rx_s:.1f} s")
+            self.address = self.moved = address
+        self.last_rx_s = t_rx
+        return None
+
+    def _warn_once(self, key: str, text: str, *args: Any) -> None:
+        if key not in self._warned:
+            self._warned.add(key)
+            log.warning(text, *args)
 
 
 def statustext_level(severity: int) -> int:
@@ -53,6 +118,7 @@ class Receiver:
         self.on_identified, self.on_packet = on_identified, on_packet
         self.listeners = listeners if listeners is not None else []
         self._assembler = StatusTextAssembler()
+        self.pin = ReplyPin(signed)
 
     def run(self, transport: Transport, stop: threading.Event) -> None:
         """Receiver thread: block on the transport, parse every datagram, never die."""
@@ -117,19 +183,24 @@ class Receiver:
         with s.changed:
             vehicle, found = s.vehicle, False
             if vehicle is None:
-                if not (kind == "HEARTBEAT" and self.adoption.offer(msg.type, msg.autopilot, source, t_rx)):
+                if not (kind == "HEARTBEAT" and self.adoption.offer(msg.type, msg.autopilot, source, t_rx, address)):
                     s.counts["rx_ignored"] += 1
                     return
                 s.counts["rejected_foreign"] += self.adoption.foreign_heartbeats
                 vehicle, found = source, True
-            elif source[0] != vehicle[0]:
-                s.counts["rejected_foreign"] += 1
+            elif source != vehicle:
+                s.counts["rejected_foreign" if source[0] != vehicle[0] else "rx_ignored"] += 1
+                if kind == "HEARTBEAT" and s.identity_conflict is None:
+                    s.identity_conflict = self.adoption.rival(msg.type, msg.autopilot, source, vehicle)
                 return
-            elif source[1] != vehicle[1]:
-                s.counts["rx_ignored"] += 1
+            refused = self.pin.admit(msg, address, t_rx)
+            if refused is not None:
+                s.counts[refused] += 1
                 return
-        if address is not None:
-            transport.set_peer(address)
+            if self.pin.moved is not None and not found:
+                s.counts["peer_moves"] += 1
+        if self.pin.moved is not None:
+            transport.set_peer(self.pin.moved)
         if found:
             log.info("vehicle identified: PX4 autopilot sysid %d compid %d", *source)
             self.on_identified(source)

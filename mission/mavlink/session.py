@@ -36,6 +36,15 @@ class LinkCounters:
     rejected_foreign: int = 0
     """Valid packets from a system other than the identified vehicle, and HEARTBEATs of other
     autopilots heard while none was adopted yet."""
+    rx_other_link: int = 0
+    """Signed packets of the vehicle on another signing link id than the one it was identified
+    on (another of its links, forwarded to our port): ignored."""
+    rx_other_address: int = 0
+    """Unsigned link: packets with the vehicle's ids from another address while its own still
+    talks: ignored."""
+    peer_moves: int = 0
+    """Times the reply address moved after identification (a signed packet of the same link, or
+    the old address silent on an unsigned link)."""
     rx_errors: int = 0
     """Socket errors and unexpected handler exceptions in the receiver."""
     tx_messages: int = 0
@@ -64,6 +73,7 @@ class LinkSession:
         self.statustexts: collections.deque[tuple[float, int, str]] = collections.deque(maxlen=500)
         self.position_stamps: collections.deque[float] = collections.deque(maxlen=256)  # LOCAL_POSITION_NED rx [s]
         self.wrong_key: tuple[int, int, int] | None = None  # (sysid, compid, HEARTBEATs) signed with another key
+        self.identity_conflict: str | None = None  # a second PX4 autopilot after adoption (target_system unset)
         self.acks = AckLog()
         self.params: dict[str, ParamValue] = {}  # the latest PARAM_VALUE of each name
         self.counts: dict[str, int] = {f.name: 0 for f in fields(LinkCounters)}
@@ -110,6 +120,12 @@ class LinkSession:
             return None
         return (f"PX4 autopilot sysid {wrong[0]} compid {wrong[1]} signs with another key "
                 f"({wrong[2]} HEARTBEATs refused): check mavlink.signing_key_file")
+
+    def identity_problem(self) -> str | None:
+        """Why the identified vehicle can no longer be told apart: with ``mavlink.target_system``
+        unset, a second PX4 autopilot was heard after one was adopted. None otherwise."""
+        with self.lock:
+            return self.identity_conflict
 
     def notify_locked(self) -> None:
         self.clock.notify(self.changed)

@@ -7,6 +7,8 @@ mission's model, and returns the next state and the tick's decision.
 - :mod:`.flying`: the phases that fly the reference (JOIN, RIDING, SEPARATED/NAVIGATING, ARRIVED).
 """
 from mission.phases.machine import (
+    AIRBORNE,
+    ARMED,
     BEFORE_SEPARATION,
     FLYING,
     TELEMETRY_SILENT_S,
@@ -24,6 +26,6 @@ from mission.phases.machine import (
 )
 
 __all__ = [
-    "BEFORE_SEPARATION", "FLYING", "TELEMETRY_SILENT_S", "AbortReason", "CarrierObs", "Decision", "MissionModel",
+    "AIRBORNE", "ARMED", "BEFORE_SEPARATION", "FLYING", "TELEMETRY_SILENT_S", "AbortReason", "CarrierObs", "Decision", "MissionModel",
     "MissionState", "Observation", "Phase", "VehicleObs", "finished", "live_geometry_problem", "step",
 ]

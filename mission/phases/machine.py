@@ -17,10 +17,16 @@
                   OFFBOARD for one of its own failsafes), carrier_lost, position_lost,
                   arming_refused, offboard_refused, geometry, interrupted, timeout,
                   signing_mismatch (no vehicle by connect_timeout_s, but a PX4 autopilot was
-                  heard signing with another key: ``failed["signing"]`` says which)
-    ABORT requests Hold (never disarm in the air) unless the vehicle is lost or a pilot took
-    over or PX4 runs its own failsafe (then nothing is sent: never fight either); setpoints stop
-    once Hold is shown.
+                  heard signing with another key: ``failed["signing"]`` says which),
+                  vehicle_ambiguous (a second PX4 autopilot was heard with
+                  mavlink.target_system unset: ``failed["identity"]`` says which)
+    ARMED phases (OFFBOARD and every flying one) --vehicle disarmed--> ABORT(vehicle_disarmed)
+    AIRBORNE phases (the flying ones but JOIN, DOCKED, HOME) --vehicle landed (ON_GROUND)-->
+                  ABORT(vehicle_disarmed)
+    ABORT requests Hold (never disarm in the air) unless the vehicle is lost or disarmed, a
+    pilot took over or PX4 runs its own failsafe (then nothing is sent: never fight, and never
+    stream to a vehicle that someone else disarmed); setpoints stop once Hold is shown. ABORT is
+    final: a vehicle re-armed by someone else is not flown again.
 
 The passenger is flown through a *reference*: the paper's closed loop (:mod:`mission.core.tick`,
 the same functions as the simulator) integrated in error coordinates about the dock point, which
@@ -41,7 +47,7 @@ from mission.flight_mode import FlightMode
 from mission.errors import AssumptionError
 from mission.core.law import check_assumptions, norm
 from mission.core.setpoint import Setpoint
-from mission.phases.phase import BEFORE_SEPARATION, FLYING, Phase
+from mission.phases.phase import AIRBORNE, ARMED, BEFORE_SEPARATION, FLYING, Phase
 from mission.phases.types import (
     TELEMETRY_SILENT_S,
     ZERO,
@@ -60,7 +66,7 @@ from mission.phases import recovery
 from mission.phases.flying import arrived, join, navigate, riding
 
 __all__ = [
-    "BEFORE_SEPARATION", "FLYING", "TELEMETRY_SILENT_S", "AbortReason", "CarrierObs", "Decision", "MissionModel",
+    "AIRBORNE", "ARMED", "BEFORE_SEPARATION", "FLYING", "TELEMETRY_SILENT_S", "AbortReason", "CarrierObs", "Decision", "MissionModel",
     "MissionState", "Observation", "Phase", "VehicleObs", "finished", "live_geometry_problem", "step",
 ]
 
@@ -84,8 +90,11 @@ def _carrier_ok(obs: Observation, m: MissionModel) -> bool:
 
 def _hold_decision(state: MissionState, obs: Observation) -> Decision:
     """Ask for Hold; keep zero-velocity setpoints flowing until the vehicle shows it (so a
-    switch that is slow to take effect never leaves OFFBOARD without setpoints)."""
+    switch that is slow to take effect never leaves OFFBOARD without setpoints). A disarmed
+    vehicle has nothing to hold: nothing is sent."""
     v = obs.vehicle
+    if v is not None and not v.armed:
+        return Decision(setpoint=None)
     if v is not None and v.mode == FlightMode.OFFBOARD:
         return Decision(setpoint=Setpoint.hold_still(), request=Request.HOLD)
     return Decision(setpoint=None, request=Request.HOLD if v is not None and v.mode != FlightMode.HOLD and v.armed else None)
@@ -119,8 +128,7 @@ def _failsafes(state: MissionState, obs: Observation, m: MissionModel) -> tuple[
     if ph == Phase.ABORT:
         if _vehicle_lost(v, m):
             return state, Decision(setpoint=None)  # nobody to talk to: PX4's own failsafe acts
-        if state.reason in (AbortReason.VEHICLE_LOST, AbortReason.PILOT_OVERRIDE,
-                            AbortReason.VEHICLE_FAILSAFE, AbortReason.GEOMETRY):
+        if state.reason in _HANDS_OFF:
             return state, Decision(setpoint=None)
         return state, _hold_decision(state, obs)
     if obs.interrupted:
@@ -129,6 +137,14 @@ def _failsafes(state: MissionState, obs: Observation, m: MissionModel) -> tuple[
     if ph != Phase.PREFLIGHT and _vehicle_lost(v, m):
         new = _abort(state, t, AbortReason.VEHICLE_LOST, "no HEARTBEAT")
         return new, Decision(setpoint=None, events=("abort: vehicle heartbeat lost",))
+    fault = _disarmed_in_flight(ph, v)
+    if fault:
+        new = _abort(state, t, AbortReason.VEHICLE_DISARMED, fault)
+        return new, Decision(setpoint=None, events=(f"abort: {fault}; streaming stopped",))
+    if "identity" in obs.failed:
+        new = _abort(state, t, AbortReason.VEHICLE_AMBIGUOUS, obs.failed["identity"])
+        event = f"abort: {obs.failed['identity']}"
+        return new, (Decision(setpoint=None, events=(event,)) if ph == Phase.PREFLIGHT else _decided(new, obs, event))
     final_modes = (FlightMode.HOLD, FlightMode.LAND)
     if ph in FLYING and v is not None and v.mode != FlightMode.OFFBOARD and not (ph in HANDING_OVER and v.mode in final_modes):
         reason = AbortReason.VEHICLE_FAILSAFE if v.in_failsafe else AbortReason.PILOT_OVERRIDE
@@ -148,6 +164,26 @@ def _failsafes(state: MissionState, obs: Observation, m: MissionModel) -> tuple[
         new = _abort(state, t, AbortReason.TIMEOUT, f"mission longer than {m.max_duration_s:g} s")
         return new, _decided(new, obs, "abort: mission timeout")
     return state, None
+
+
+# Aborts after which nothing more is sent: the vehicle is gone, someone else has it (a pilot,
+# PX4's own failsafe, whoever disarmed it), or nothing was ever sent (geometry).
+_HANDS_OFF = frozenset({AbortReason.VEHICLE_LOST, AbortReason.PILOT_OVERRIDE, AbortReason.VEHICLE_FAILSAFE,
+                        AbortReason.GEOMETRY, AbortReason.VEHICLE_DISARMED})
+
+
+def _disarmed_in_flight(ph: Phase, v: VehicleObs | None) -> str:
+    """Why the vehicle is not where the phase needs it ("" if it is): disarmed in a phase that
+    flies it (:data:`ARMED`), or landed by PX4's land detector (EXTENDED_SYS_STATE ON_GROUND;
+    PX4 reports a disarmed multicopter as landed within about LNDMC_TRIG_TIME / 3) in a phase
+    that needs it in the air (:data:`AIRBORNE`)."""
+    if v is None:
+        return ""
+    if ph in ARMED and not v.armed:
+        return f"vehicle disarmed in {ph.value} (HEARTBEAT)"
+    if ph in AIRBORNE and v.on_ground:
+        return f"vehicle landed in {ph.value} (EXTENDED_SYS_STATE ON_GROUND)"
+    return ""
 
 
 def _decided(state: MissionState, obs: Observation, event: str) -> Decision:

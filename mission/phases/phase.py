@@ -80,3 +80,9 @@ BEFORE_SEPARATION = frozenset(p for p in Phase if not p.separated and p is not P
 AFTER_SEPARATION = frozenset(p for p in Phase if p.separated)
 #: The phases that bring the passenger home to the carrier (mission.final_action = "return").
 RECOVERY = frozenset({Phase.RETURNING, Phase.HOLDOFF, Phase.APPROACH, Phase.GO_AROUND, Phase.DOCKED})
+#: Phases in which the vehicle must be armed: ours, switching to OFFBOARD or flying in it.
+ARMED = frozenset({Phase.OFFBOARD, *FLYING})
+#: Phases in which the vehicle must be in the air: not JOIN (it lifts off the deck, and PX4's land
+#: detector takes seconds to see the take-off), nor DOCKED and HOME (on a carrier with a real deck
+#: at the dock point the passenger touches it).
+AIRBORNE = FLYING - {Phase.JOIN, Phase.DOCKED, Phase.HOME}

@@ -38,6 +38,8 @@ class AbortReason(StrEnum):
     INTERRUPTED = "interrupted"
     TIMEOUT = "timeout"
     SIGNING_MISMATCH = "signing_mismatch"
+    VEHICLE_DISARMED = "vehicle_disarmed"
+    VEHICLE_AMBIGUOUS = "vehicle_ambiguous"
 
 
 
@@ -59,6 +61,7 @@ class VehicleObs:
     # [m/s] NED: the estimator's velocity less ``velocity_ned_m_s`` when that was made consistent
     # with the position (mission.velocity_bias_tau_s; mission.core.consistent_velocity), else None
     velocity_bias_ned_m_s: np.ndarray | None = None
+    on_ground: bool = False  # EXTENDED_SYS_STATE landed_state ON_GROUND: PX4's land detector says landed
 
 
 @dataclass(frozen=True)

@@ -13,13 +13,17 @@ from __future__ import annotations
 import socket
 from typing import Any
 
-from mission.mavlink.codec import new_codec, reset_parser, setup_signing
+from mission.mavlink.codec import keep_replay_state_on_failure, new_codec, reset_parser, setup_signing
 from mission.mavlink.urls import Endpoint, parse_url
 from mission.mavlink.env import mavlink
 from mission.errors import LinkError
 from mission.port_holder import is_addr_in_use, port_in_use
 
 UNSIGNED_ALLOWED_IDS = frozenset({mavlink.MAVLINK_MSG_ID_HEARTBEAT, mavlink.MAVLINK_MSG_ID_RADIO_STATUS})
+#: MAVLink 2 signing link id of each link: PX4 signs with its MAVLink instance number
+#: (``mavlink_sign_control.cpp``: ``link_id = instance id``), and PX4 SITL starts the GCS link
+#: first, then the onboard/API link (``px4-rc.mavlink``).
+LINK_IDS = {"gcs": 0, "onboard": 1}
 
 
 def parse_endpoint(text: str, default_scheme: str = "udpin") -> Endpoint:
@@ -33,10 +37,16 @@ def parse_endpoint(text: str, default_scheme: str = "udpin") -> Endpoint:
 
 
 class VehicleLink:
-    """One MAVLink instance: socket, target address (latched on the first peer), codec."""
+    """One MAVLink instance: socket, target address (latched on the first peer), codec.
+
+    Signing (``signing_key``): outgoing packets carry this link's id (:data:`LINK_IDS`);
+    incoming ones are checked against ``replay_streams``, the last signing timestamp seen per
+    (link id, system, component), which every link of the vehicle shares as PX4's instances share
+    one table (``global_mavlink_signing_streams``); a refused packet leaves it unchanged.
+    """
 
     def __init__(self, name: str, bind: Endpoint, target: Endpoint | None, sysid: int, compid: int,
-                 signing_key: bytes | None = None) -> None:
+                 signing_key: bytes | None = None, replay_streams: dict | None = None) -> None:
         self.name = name
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
@@ -57,7 +67,11 @@ class VehicleLink:
         self._queued: list[bytes] = []
         self._queued_counted = 0  # queued packets the caller counts as sent messages
         if signing_key is not None:
-            setup_signing(self.mav, signing_key, sign_outgoing=True, unsigned_ids=UNSIGNED_ALLOWED_IDS)
+            setup_signing(self.mav, signing_key, sign_outgoing=True, unsigned_ids=UNSIGNED_ALLOWED_IDS,
+                          link_id=LINK_IDS.get(name, 0))
+            if replay_streams is not None:
+                self.mav.signing.stream_timestamps = replay_streams
+            keep_replay_state_on_failure(self.mav)
 
     @property
     def port(self) -> int:

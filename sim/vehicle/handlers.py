@@ -130,8 +130,8 @@ class MessageHandlers:
 
     def _cmd_arm_disarm(self, link: VehicleLink, p: list[float]) -> tuple[int, list[Any]]:
         arm, force = int_param(p[0]), int_param(p[1]) == px4.ARM_FORCE_MAGIC
-        if arm == 1:
-            result = self.v._commander.arm(self.v._t_s, force)
+        if arm == 1:  # PX4 runs the checks for every external arm, forced or not (Commander.cpp)
+            result = self.v._commander.arm(self.v._t_s)
         elif arm == 0:
             result = self.v._commander.disarm(self.v._t_s, force)
         else:

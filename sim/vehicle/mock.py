@@ -118,12 +118,13 @@ class MockVehicle:
         if self._thread is not None:
             return
         opts = self.options
+        streams: dict = {}  # signing replay state, shared by the links (as PX4's instances share theirs)
         self._links.append(VehicleLink("onboard", parse_endpoint(opts.bind, "udpin"),
                                        parse_endpoint(opts.target, "udpout") if opts.target else None,
-                                       opts.sysid, opts.compid, opts.signing_key))
+                                       opts.sysid, opts.compid, opts.signing_key, streams))
         if opts.gcs_target:
             self._links.append(VehicleLink("gcs", parse_endpoint(opts.gcs_bind, "udpin"), parse_endpoint(opts.gcs_target, "udpout"),
-                                           opts.sysid, opts.compid, opts.signing_key))
+                                           opts.sysid, opts.compid, opts.signing_key, streams))
         if self._own_clock and not opts.lockstep:
             self.clock = ScaledClock(opts.speed)  # time starts now
         self._stop_event.clear()

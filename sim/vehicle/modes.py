@@ -14,7 +14,9 @@ State machine (PX4 behaviour from ../shared/REFERENCE.md; choices of this mock m
   present (:meth:`force_mode` = a pilot took over): the mock has no RC.
 - Arming: denied (TEMPORARILY_REJECTED + STATUSTEXT) when an arming refusal is injected, the
   position estimate is invalid, in OFFBOARD without a fresh setpoint, or in a manual mode with no
-  pilot. Force (param2 = 21196) skips the checks. Disarming in the air needs force.
+  pilot. Force (param2 = 21196) does not skip them for a MAVLink command: PX4's Commander skips
+  them only for a forced arm of its own (``commander arm -f``; docs/flying-px4.md). Disarming in
+  the air needs force.
 - Offboard loss (armed, OFFBOARD, no setpoint for COM_OF_LOSS_T): "Failsafe activated", mode of
   COM_OBL_RC_ACT (6 Terminate and 7 Disarm disarm), in_failsafe. When setpoints resume while that
   failsafe is active and nobody changed the mode, back to OFFBOARD at the next step (PX4 does so
@@ -24,7 +26,11 @@ State machine (PX4 behaviour from ../shared/REFERENCE.md; choices of this mock m
 - Position estimate lost while armed in a mode that needs it: failsafe to AUTO.LAND (PX4's
   Descend reports as AUTO.LAND): no horizontal hold, descend at MPC_LAND_SPEED.
 - Auto-disarm: COM_DISARM_PRFLT after arming if not taken off; COM_DISARM_LAND after landing.
-- Disarming clears the failsafe; the mode stays (a new arm needs an armable mode).
+- Disarming clears the failsafe; the mode stays (a new arm needs an armable mode). Disarmed in
+  the air (only by force) the motors stop and it falls.
+- Landed state: on the ground, or disarmed for LNDMC_TRIG_TIME / 3 (PX4's land detector counts a
+  disarmed vehicle as landed, through a hysteresis of that length): ON_GROUND even while a
+  force-disarmed vehicle is still falling.
 - Home: set where the vehicle arms on the ground, unless DO_SET_HOME set it (PX4's
   ``manual_home``: it then stays until the next DO_SET_HOME). DO_SET_HOME (COMMAND_LONG or
   COMMAND_INT; param1 = 1: here, else lat/lon/alt) is accepted armed or not, in flight too, with
@@ -96,6 +102,7 @@ class Commander:
         self.setpoints_received = 0
         self.setpoints_at_failsafe = 0
         self.arm_t_s = -math.inf
+        self.disarm_t_s = -math.inf
         self.taken_off = False
         self.landed_t_s: float | None = None
         self.hold_ned_m = (kin.n_m, kin.e_m, kin.d_m)
@@ -177,7 +184,8 @@ class Commander:
         return ""
 
     def arm(self, t_s: float, force: bool = False) -> int:
-        """Handle an arm request; return the MAV_RESULT."""
+        """Handle an arm request; return the MAV_RESULT. ``force`` skips the checks (PX4's own
+        forced arm; a MAVLink command never does)."""
         self.now_s = max(self.now_s, t_s)
         if self.armed:
             return px4.MAV_RESULT_ACCEPTED
@@ -212,7 +220,7 @@ class Commander:
         if not force and not self.kin.on_ground:
             self._say("Disarming denied: not landed", px4.MAV_SEVERITY_CRITICAL)
             return px4.MAV_RESULT_TEMPORARILY_REJECTED
-        self.armed = False
+        self.armed, self.disarm_t_s = False, t_s
         self.in_failsafe, self.failsafe_reason = False, None
         self._say(reason)
         return px4.MAV_RESULT_ACCEPTED
@@ -354,7 +362,7 @@ class Commander:
     # ---- telemetry -----------------------------------------------------------------------
     def landed_state(self, kin: KinState) -> int:
         """EXTENDED_SYS_STATE.landed_state for the current mode and physics state."""
-        if kin.on_ground:
+        if kin.on_ground or (not self.armed and self.now_s - self.disarm_t_s >= self.params.get("LNDMC_TRIG_TIME") / 3):
             return px4.LANDED_ON_GROUND
         if self.mode == "AUTO.TAKEOFF":
             return px4.LANDED_TAKEOFF

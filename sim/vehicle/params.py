@@ -33,6 +33,7 @@ PARAM_SPECS: tuple[ParamSpec, ...] = (
     ParamSpec("COM_DISARM_PRFLT", 10.0, False, "auto-disarm when armed but not taken off [s]; <= 0 disables"),
     ParamSpec("COM_DISARM_LAND", 2.0, False, "auto-disarm after landing [s]; <= 0 disables"),
     ParamSpec("COM_DL_LOSS_T", 10, True, "data link loss timeout [s] (reported only)"),
+    ParamSpec("LNDMC_TRIG_TIME", 1.0, False, "land detector trigger time [s]; a disarmed vehicle reports landed after a third of it"),
     ParamSpec("COM_RC_IN_MODE", 1, True, "RC input mode (reported only; the mock has no RC)"),
     ParamSpec("COM_ARM_WO_GPS", 1, True, "allow arming without GPS (reported only)"),
     ParamSpec("NAV_RCL_ACT", 2, True, "RC loss action (reported only)"),

@@ -6,8 +6,9 @@ Zenoh: a rogue publisher on the pair's carrier key with higher sequence numbers 
 7 m short of the target, where a believed state would fire the separation latch at once); states
 spoofed with the real carrier's own source id (one stamped an hour ahead, one 20 m teleport
 towards the target, then sporadic outliers); 10 MB payloads. MAVLink: a rogue sysid 42 PX4
-HEARTBEAT before the vehicle appears; unsigned spoofed HEARTBEATs (POSCTL, and copies of the
-real state) with signing on; a vehicle signing with another key.
+HEARTBEAT before the vehicle appears; a rogue that talks alone until it is adopted
+(``mavlink.target_system`` unset), then the real vehicle; unsigned spoofed HEARTBEATs (POSCTL,
+and copies of the real state) with signing on; a vehicle signing with another key.
 
 Each flight asserts: the vehicle ends safe, watched from the GCS link (Hold armed in the air, or
 on the ground disarmed; never disarmed in the air); the real carrier never came within its
@@ -314,6 +315,41 @@ def _rogue_sysid_first(tmp_path: Path) -> None:
         rogue.close()
 
 
+def _lone_rogue_adopted(tmp_path: Path) -> None:
+    """target_system unset; a rogue PX4 (sysid 42) talks alone, 5 HEARTBEATs a second, until the
+    mission has adopted it; then the real vehicle starts."""
+    config = _adopting_config(tmp_path / "adopt-lone.toml")
+    rogue = RogueMavlink(sysid=42)
+    stop = threading.Event()
+
+    def rogue_first(f: Flight) -> None:
+        def talk() -> None:
+            while not stop.wait(0.2):
+                rogue.heartbeat(f.mav_port)
+
+        threading.Thread(target=talk, daemon=True).start()
+        wait_for(lambda: "vehicle adopted" in f.text("mission.err"), 20.0, "the rogue adopted")
+
+    try:
+        with flight(tmp_path, "lone-rogue", config=config, mission_verbose=True, speed=SPEED,
+                    before_vehicle=rogue_first) as f:
+            f.wait_mission(30.0)
+            assert_exit(f, 5, "vehicle_ambiguous")
+            err = f.text("mission.err")
+            assert "sysid 42 compid 1" in err and "WITHOUT mavlink.target_system" in err  # adopted, loudly
+            assert "a second PX4 autopilot (sysid 1 compid 1" in err  # refused once the real one talked
+            rows, s = f.record(), f.summary()
+            assert (s["phase"], s["reason"]) == ("ABORT", "vehicle_ambiguous") and s["ticks"] == len(rows)
+            assert {r["phase"] for r in rows} == {"PREFLIGHT", "ABORT"}  # nothing flown: the rogue has no position
+            v = assert_safe_end(f, modes=("landed",))  # the real vehicle: never armed, never commanded
+            assert not v["armed"]
+        assert f.vehicle_counters()["sp"] == 0  # its last status line, written as it stopped
+        assert f.carrier_summary()["closest_target_distance_m"] > 20.0  # no passenger rode: it never moved
+    finally:
+        stop.set()
+        rogue.close()
+
+
 def _unsigned_spoofs(tmp_path: Path) -> None:
     key = tmp_path / "a.key"
     key.write_text(KEY_A.hex())
@@ -359,6 +395,9 @@ def test_rogue_mavlink_system_spoofed_heartbeats_and_a_wrong_key(tmp_path: Path)
     """A sysid 42 PX4 HEARTBEAT first (on main: adopted as the vehicle, setpoints and arming sent
     to it); with signing on, unsigned HEARTBEATs claiming POSCTL or copying the vehicle (on main:
     pilot_override, reply address moved); a vehicle signing with another key (on main:
-    a mislabelled "carrier_lost", now its own reason)."""
+    a mislabelled "carrier_lost", now its own reason); a rogue talking alone until adopted, then
+    the real vehicle (on main: 1654 setpoints and 48 commands went to a rogue adopted this way;
+    now adopted with a warning, and the mission aborts vehicle_ambiguous at the real vehicle's
+    first HEARTBEAT, having sent nothing but its own HEARTBEATs)."""
     concurrently(lambda: _rogue_sysid_first(tmp_path), lambda: _unsigned_spoofs(tmp_path))
-    _wrong_key(tmp_path)
+    concurrently(lambda: _wrong_key(tmp_path), lambda: _lone_rogue_adopted(tmp_path))

@@ -110,6 +110,7 @@ class Flight:
     mission_verbose: bool = False  # -vv: debug logging (more output to search for leaks)
     lockstep: bool = False  # the three step on the vehicle's simulated time; speed: pace once one stops
     mav_port: int = 0
+    before_vehicle: Any = None  # called with the flight once carrier and mission are up, before the vehicle starts
     procs: dict[str, subprocess.Popen[Any]] = field(default_factory=dict)
     gcs: Probe | None = None
     _files: list[Any] = field(default_factory=list)
@@ -150,6 +151,8 @@ class Flight:
                                    str(self.speed), "--log-dir", str(self.log_dir), *self._mode, *self.mission_args))
         wait_for(lambda: self.carrier_alive() and self.router.has(f"marsupial/{self.pair}/passenger/alive")
                  and udp_bound(self.mav_port) or self._died(), 30.0, "carrier and mission up")
+        if self.before_vehicle is not None:
+            self.before_vehicle(self)
         self.gcs = Probe()
         out = open(self.dir / "vehicle.out", "ab")
         err = open(self.dir / "vehicle.err", "ab")
@@ -233,6 +236,27 @@ class Flight:
 
     def summary(self) -> dict[str, Any]:
         return json.loads((self.log_dir / "summary.json").read_text())
+
+    def tlog(self) -> list[tuple[float, Any]]:
+        """The mission's flight.tlog as (mission clock [s], message): every packet it sent or
+        received. The tlog stamps wall epoch + mission clock; the epoch is read off the mission's
+        own setpoints, whose time_boot_ms is the mission clock when sent (to 1 ms)."""
+        from mission.mavlink.env import mavlink
+
+        data, i, stamped = (self.log_dir / "flight.tlog").read_bytes(), 0, []
+        codec = mavlink.MAVLink(None)
+        codec.robust_parsing = True
+        while i + 8 < len(data):
+            usec = int.from_bytes(data[i:i + 8], "big")
+            size = 12 + data[i + 9] + (13 if data[i + 10] & 0x01 else 0)
+            for msg in codec.parse_buffer(data[i + 8:i + 8 + size]) or []:
+                stamped.append((usec, msg))
+            i += 8 + size
+        epochs = sorted(usec - m.time_boot_ms * 1000 for usec, m in stamped
+                        if m.get_type() == "SET_POSITION_TARGET_LOCAL_NED" and m.get_srcComponent() == 191)
+        assert epochs, "no setpoint of the mission in its tlog"
+        epoch = epochs[len(epochs) // 2]
+        return [((usec - epoch) / 1e6, msg) for usec, msg in stamped]
 
     def carrier_summary(self) -> dict[str, Any]:
         """The carrier's own account (written when it stops): closest approach to the target [m]..."""

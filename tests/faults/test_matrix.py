@@ -243,13 +243,43 @@ def _gcs_takeover(tmp_path: Path) -> None:
         assert f.modes_seen()[-1] == "AUTO.LOITER"  # never switched back: no fight
 
 
-def test_mission_killed_falls_back_per_com_obl_rc_act_and_pilot_takeover_is_not_fought(tmp_path: Path) -> None:
+def _forced_disarm(tmp_path: Path) -> None:
+    with flight(tmp_path, "disarmed", lockstep=True, vehicle_args=PACED) as f:
+        f.wait_phase("RIDING")
+        wait_for(lambda: "-> approaching" in f.text("carrier.err"), 10.0, "carrier approaching")
+        assert f.gcs is not None  # a rogue ground station: COMPONENT_ARM_DISARM(0, 21196) in the air
+        ack = f.gcs.arm(False, force=True)
+        assert ack is not None and ack.result == px4.MAV_RESULT_ACCEPTED
+        f.wait_mission(20.0)
+        assert_exit(f, 5, "vehicle_disarmed")
+        assert_log_complete(f, "ABORT", "vehicle_disarmed")
+        tlog = f.tlog()
+        t_disarmed = next(t for t, m in tlog if m.get_type() == "STATUSTEXT" and "Disarmed by external command" in m.text)
+        rows = f.record()
+        t_abort = float(rows[-1]["t_s"])
+        assert rows[-2]["phase"] == "RIDING" and rows[-1]["u_cmd_n"] == "nan"
+        assert 0.0 < t_abort - t_disarmed <= 0.5, (t_disarmed, t_abort)  # on the mission clock
+        sent = [t for t, m in tlog if m.get_type() == "SET_POSITION_TARGET_LOCAL_NED" and m.get_srcComponent() == 191]
+        assert sent[-1] < t_abort  # streaming stopped with the abort
+        # the carrier stops, told why; the vehicle fell and lies on the ground, disarmed, still in OFFBOARD
+        wait_for(lambda: "-> stopped (passenger aborted: vehicle_disarmed)" in f.text("carrier.err"), 10.0, "carrier stopped")
+        assert_safe_end(f, modes=("landed",), timeout_s=20.0)
+        assert f.modes_seen()[-1] == "OFFBOARD"
+        print(f"forced disarm: seen by the mission {t_abort - t_disarmed:.3f} s after it (mission clock)")
+    assert f.carrier_summary()["mode"] == "stopped"
+
+
+def test_mission_killed_pilot_takeover_and_a_forced_disarm(tmp_path: Path) -> None:
     """SIGKILL of ``marsupial run`` while riding: no background resend survives it, so PX4's
     offboard-loss failsafe fires (POSCTL, descend, land, disarm). A pilot (here a ground
     station) switching to Hold while riding: the mission stops commanding at once, exit 5.
-    Both fly in lockstep until the event; the killed controller's vehicle goes on in real time
-    after its watchdog (PX4's offboard-loss timer runs on the vehicle's simulated time)."""
-    concurrently(lambda: _mission_killed(tmp_path), lambda: _gcs_takeover(tmp_path))
+    A rogue ground station's forced disarm while riding (the vehicle falls, as PX4's does): abort
+    vehicle_disarmed within 0.5 s of the disarm on the mission clock (PX4's land detector says
+    ON_GROUND 0.33 s after it; EXTENDED_SYS_STATE is asked at 10 Hz), nothing more sent, the
+    carrier stopped with the reason, exit 5. All fly in lockstep until the event; the killed
+    controller's vehicle goes on in real time after its watchdog (PX4's offboard-loss timer runs
+    on the vehicle's simulated time)."""
+    concurrently(lambda: _mission_killed(tmp_path), lambda: _gcs_takeover(tmp_path), lambda: _forced_disarm(tmp_path))
 
 
 def _refused(tmp_path: Path, name: str, flag: str, text: str, reason: str) -> None:

@@ -45,6 +45,7 @@ class FakeWorld:
     refuse: dict[str, str] = field(default_factory=dict)  # command name -> the vehicle's reason
     heartbeat_until_s: float = math.inf  # the vehicle falls silent after this [s]
     carrier_until_s: float = math.inf  # the carrier falls silent after this [s]
+    disarmed_at_s: float = math.inf  # someone else disarms the vehicle at this time [s] (it falls, motors off)
     setpoints: list[tuple[float, np.ndarray]] = field(default_factory=list)
     commands: list[tuple[float, str]] = field(default_factory=list)
     statuses: list[PassengerStatus] = field(default_factory=list)
@@ -83,6 +84,8 @@ class FakeWorld:
     def state(self) -> VehicleState:
         now = self._advance()
         beat = min(now, self.heartbeat_until_s)
+        if now >= self.disarmed_at_s:
+            self.armed = False
         return VehicleState(
             t_s=now, system_id=1, component_id=1, position_ned_m=self.vehicle_ned_m.copy(),
             velocity_ned_m_s=self._v_p.copy(), position_rx_s=beat, heartbeat_rx_s=beat, armed=self.armed,
@@ -149,6 +152,9 @@ class FakeWorld:
         return float(value)
 
     def signing_problem(self) -> str | None:
+        return None
+
+    def identity_problem(self) -> str | None:
         return None
 
     @property

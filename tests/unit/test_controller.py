@@ -150,3 +150,21 @@ def test_threaded_worker_runs_off_the_caller():
     finally:
         worker.close()  # drains the queue first
     assert vehicle.calls == 1
+
+
+def test_a_vehicle_disarmed_while_riding_ends_the_stream_and_tells_the_carrier_why(cfg):
+    """Someone disarms the vehicle while it rides: on the tick that sees it the mission aborts
+    vehicle_disarmed, sends no setpoint and no command from then on, and its last published status
+    is ABORT with that reason (the carrier stops on it). It asked for PX4's landed state at 10 Hz."""
+    from mission.controller import EXTENDED_SYS_STATE_ID, LANDED_STATE_RATE_HZ
+
+    outcome, world, reports, _ = fly(cfg, disarmed_at_s=8.0)
+    assert (outcome.phase, outcome.reason) == ("ABORT", AbortReason.VEHICLE_DISARMED.value)
+    riding = [r.t_s for r in reports if r.phase == Phase.RIDING]
+    assert riding and riding[0] < 8.0 <= reports[-1].t_s < 8.0 + 1.5 / cfg.mission.rate_hz
+    assert world.setpoints[-1][0] < 8.0 and [name for _, name in world.commands] == ["arm", "OFFBOARD"]
+    last = world.statuses[-1]
+    assert (last.phase, last.reason) == ("ABORT", "vehicle_disarmed")
+    assert all(s.reason is None for s in world.statuses[:-1])
+    assert (EXTENDED_SYS_STATE_ID, LANDED_STATE_RATE_HZ) in world.intervals
+

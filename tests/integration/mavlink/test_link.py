@@ -122,7 +122,28 @@ def test_rogue_system_on_the_same_port_is_counted_and_ignored(link: VehicleLink)
             assert s.system_id == 1 and not s.armed and s.mode == "AUTO.LOITER"
             # the link answers only the vehicle's address: the rogue hears nothing at all
             assert rogue.received() == []
+            # and with target_system unset, a second PX4 autopilot makes the vehicle ambiguous
+            problem = link.identity_problem()
+            assert problem is not None and "sysid 42 compid 1" in problem
         assert len(vehicle.received("COMMAND_LONG")) == 1
+
+
+def test_a_lone_rogue_is_adopted_with_a_warning_and_refused_once_the_real_vehicle_talks(
+        link: VehicleLink, caplog: pytest.LogCaptureFixture) -> None:
+    """mavlink.target_system unset and a rogue PX4 (sysid 42) talks alone first: it is adopted, and
+    the log says so as a warning; the real vehicle's first HEARTBEAT then makes the link report an
+    identity problem (the mission aborts vehicle_ambiguous), and the real vehicle is never answered."""
+    import logging
+
+    caplog.set_level(logging.WARNING, logger="mission.mavlink.link")
+    with Px4Peer(link.port, sysid=42, heartbeat_hz=5.0) as rogue:
+        assert link.wait_vehicle(5.0).system_id == 42
+        assert "WITHOUT mavlink.target_system" in caplog.text and link.identity_problem() is None
+        with Px4Peer(link.port, sysid=1) as vehicle:
+            eventually(lambda: link.identity_problem() is not None, what="the second autopilot noticed")
+            problem = link.identity_problem()
+            assert "sysid 1 compid 1" in problem and "set mavlink.target_system" in problem  # type: ignore[operator]
+            assert vehicle.received() == [] and rogue.received()  # we only ever spoke to the adopted one
 
 
 def test_target_system_selects_the_vehicle_among_several() -> None:

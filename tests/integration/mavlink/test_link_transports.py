@@ -182,3 +182,65 @@ def test_bad_signing_key_is_refused_without_echoing_it() -> None:
     with pytest.raises(ValueError) as info:
         VehicleLink(ANY_PORT, ScaledClock(1.0), signing_key=b"secret-too-short")
     assert "secret" not in str(info.value)
+
+
+class Relay:
+    """A UDP socket that forwards every datagram it receives to ``port`` on 127.0.0.1 (from its own
+    address), and counts what comes back to it: an attacker forwarding one link to another."""
+
+    def __init__(self, port: int) -> None:
+        import threading
+
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(("127.0.0.1", 0))
+        self.sock.settimeout(0.05)
+        self.port, self.target, self.forwarded, self.answers = self.sock.getsockname()[1], port, 0, 0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True, name="relay")
+        self._thread.start()
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            try:
+                data, (_, port) = self.sock.recvfrom(65535)
+            except OSError:
+                continue
+            if port == self.target:
+                self.answers += 1  # the link answered the relay: its reply address moved here
+            else:
+                self.sock.sendto(data, ("127.0.0.1", self.target))
+                self.forwarded += 1
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(2.0)
+        self.sock.close()
+
+
+def test_the_vehicles_own_gcs_link_forwarded_to_our_port_moves_nothing() -> None:
+    """The cross-link replay: the mock vehicle signs both its links with one key (as PX4 does); an
+    attacker forwards its GCS link's packets (link id 0, timestamps of their own) to our port. On
+    main they were accepted, each moved the reply address to the attacker, and the real link (then
+    behind on the one shared stream) was refused. Now: counted as another link and ignored, the
+    reply address stays with the vehicle's onboard link (id 1), which is never refused, and our
+    setpoints keep reaching the vehicle."""
+    from sim.vehicle.mock import MockVehicle, VehicleOptions
+
+    with VehicleLink(ANY_PORT, ScaledClock(5.0), signing_key=KEY) as link:
+        relay = Relay(link.port)
+        try:
+            opts = VehicleOptions(target=f"127.0.0.1:{link.port}", gcs_target=f"127.0.0.1:{relay.port}", signing_key=KEY,
+                                  speed=5.0)
+            with MockVehicle(opts) as v:
+                link.wait_vehicle(5.0)
+                eventually(lambda: link.counters.rx_other_link >= 100, 10.0, "forwarded GCS-link packets counted")
+                before = link.state.position_rx_s
+                for _ in range(20):
+                    link.send(Setpoint.hold_still())
+                eventually(lambda: v.counters["setpoints_accepted"] >= 20, 5.0, "our setpoints at the vehicle")
+                eventually(lambda: (link.state.position_rx_s or 0.0) > (before or 0.0), 5.0, "telemetry goes on")
+                c = link.counters
+                assert relay.forwarded >= 100 and relay.answers == 0, (relay.forwarded, relay.answers)
+                assert c.peer_moves == 0 and c.rx_bad_signature == 0 and c.rx_unsigned == 0, c
+        finally:
+            relay.close()

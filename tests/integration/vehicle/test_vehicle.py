@@ -172,8 +172,12 @@ def test_disarm_in_air_needs_force(probe: Probe) -> None:
             wait_flight(v, lambda s: s.position_ned_m[2] < -1.0, 3.0, "s.position_ned_m[2] < -1.0")
             assert probe.arm(False).result == px4.MAV_RESULT_TEMPORARILY_REJECTED
             assert probe.arm(False, force=True).result == px4.MAV_RESULT_ACCEPTED
-            # disarmed in the air: it falls to the ground
-            wait_flight(v, lambda s: s.landed_state == px4.LANDED_ON_GROUND, 3.0, "s.landed_state == px4.LANDED_ON_GROUND")
+            # disarmed in the air: it falls (the timing of its landed state: tests/unit/vehicle/test_vehicle_modes.py)
+            landed = wait_flight(v, lambda s: s.landed_state == px4.LANDED_ON_GROUND, 3.0, "landed state ON_GROUND")
+            t_disarmed = v.event_time("Disarmed by external command")
+            assert t_disarmed is not None and landed.t_s - t_disarmed >= 1.0 / 3.0 - PHYSICS_DT_S and not landed.armed
+            down = wait_flight(v, lambda s: s.position_ned_m[2] >= 0.0, 3.0, "on the ground")
+            assert down.mode == "OFFBOARD" and not down.armed and down.landed_state == px4.LANDED_ON_GROUND
 
 
 def test_velocity_steps_answer_like_px4(probe: Probe) -> None:

@@ -218,6 +218,30 @@ def test_signing_rejects_unsigned_commands_but_accepts_unsigned_heartbeat(probe:
         assert v.snapshot().armed
 
 
+def test_signed_links_sign_with_their_own_link_ids_and_share_one_replay_state() -> None:
+    """As PX4: each MAVLink instance signs with its instance number as link id (the GCS link 0 and
+    the onboard link 1, PX4 SITL's start order) and all check replays against one table keyed by
+    (link id, system, component): a signed command accepted on the GCS link and replayed, byte
+    for byte, on the onboard link is refused."""
+    from sim.vehicle.mock import MockVehicle
+
+    with Probe(signing_key=KEY) as onboard, Probe(signing_key=KEY) as gcs, \
+            MockVehicle(VehicleOptions(target=f"127.0.0.1:{onboard.port}", gcs_target=f"127.0.0.1:{gcs.port}",
+                                       signing_key=KEY, speed=5.0)) as v:
+        a, b = onboard.wait_for("HEARTBEAT", timeout_s=3.0), gcs.wait_for("HEARTBEAT", timeout_s=3.0)
+        assert a is not None and a.get_signed() and a.get_link_id() == 1
+        assert b is not None and b.get_signed() and b.get_link_id() == 0
+        command = bytes(mavlink.MAVLink_command_long_message(1, 1, px4.MAV_CMD_REQUEST_MESSAGE, 0, 148.0,
+                                                             0, 0, 0, 0, 0, 0).pack(gcs.mav))
+        mark_gcs, mark_onboard = gcs.mark(), onboard.mark()
+        gcs.send_raw(command)
+        assert gcs.wait_for("COMMAND_ACK", timeout_s=2.0, after=mark_gcs) is not None
+        refused = v.counters["rx_unsigned_rejected"]
+        onboard.send_raw(command)
+        wait_flight(v, lambda s: s.counters["rx_unsigned_rejected"] > refused, 2.0, "the replay refused")
+        assert onboard.wait_for("COMMAND_ACK", timeout_s=0.5, after=mark_onboard) is None
+
+
 def test_signing_key_must_be_32_bytes() -> None:
     with pytest.raises(ValueError, match="32 bytes"):
         VehicleOptions(signing_key=b"short")

@@ -244,11 +244,18 @@ def test_passenger_status_round_trip_and_validation() -> None:
     np.testing.assert_array_equal(back.anchor_ned_m, [4.0, 5.0, 0.0])
     riding = decode_passenger_json(encode_passenger_json(
         PassengerStatus("RIDING", 1.0, 1, [0, 0, 0], [0, 0, 0])))
-    assert riding.anchor_ned_m is None and riding.separated is False
+    assert riding.anchor_ned_m is None and riding.separated is False and riding.reason is None
+    aborted = decode_passenger_json(encode_passenger_json(
+        PassengerStatus("ABORT", 2.0, 3, [0, 0, 0], [0, 0, 0], reason="vehicle_disarmed")))
+    assert (aborted.phase, aborted.reason) == ("ABORT", "vehicle_disarmed")
+    assert json.loads(encode_passenger_json(aborted))["reason"] == "vehicle_disarmed"
     for bad, reason in [
         ({"phase": "FLYING"}, "phase"),
         ({"phase": 3}, "type"),
         ({"separated": "no"}, "type"),
+        ({"reason": "x" * 33}, "type"),
+        ({"reason": "Disarmed!\n"}, "type"),
+        ({"reason": 7}, "type"),
         ({"anchor": [1, 2]}, "shape"),
         ({"position": [0, float("nan"), 0]}, "nonfinite"),
     ]:

@@ -131,6 +131,11 @@ def test_mode_transitions(mode: CarrierMode, view: PassengerView, expected: Carr
     assert next_mode(mode, view)[0] is expected
 
 
+def test_an_abort_stops_the_carrier_and_names_the_passengers_reason() -> None:
+    view = PassengerView(Phase.ABORT, reason="vehicle_disarmed")
+    assert next_mode(CarrierMode.APPROACHING, view) == (CarrierMode.STOPPED, "passenger aborted: vehicle_disarmed")
+
+
 def test_along_heading_keeps_the_forward_speed_and_drops_the_sideslip() -> None:
     """A PX4 rover heading 37 deg whose EKF velocity points 12 deg (a 0.43 m/s sideways error at
     1 m/s, as measured on SIH): published as its speed along the heading."""

@@ -262,8 +262,8 @@ class FakeTransport:
         self.peer = address
 
 
-def make_receiver(clock, target_system=1):
-    from mission.mavlink.codec import new_codec
+def make_receiver(clock, target_system=1, key=None):
+    from mission.mavlink.codec import link_codecs
     from mission.mavlink.identity import Adoption
     from mission.mavlink.receiver import Receiver
     from mission.mavlink.session import LinkSession
@@ -271,8 +271,8 @@ def make_receiver(clock, target_system=1):
     session = LinkSession("test", clock, position_timeout_s=0.5)
     session.closed = False
     identified, packets = [], []
-    receiver = Receiver(session, new_codec(1, 191), source_system=1, adoption=Adoption(target_system, 1, 3.0),
-                        signed=False, on_identified=identified.append, on_packet=packets.append)
+    receiver = Receiver(session, link_codecs((1, 191), key)[0], source_system=1, adoption=Adoption(target_system, 1, 3.0),
+                        signed=key is not None, on_identified=identified.append, on_packet=packets.append)
     return session, receiver, identified, packets
 
 
@@ -355,3 +355,121 @@ def test_without_a_target_system_a_vehicle_is_adopted_after_consistent_heartbeat
     assert not any(answers)
     late = Adoption(None, 1, heartbeat_timeout_s=3.0)  # gaps longer than the timeout start the count again
     assert not any(late.offer(quad, px4_ap, (1, 1), t) for t in (0.0, 5.0, 10.0))
+
+
+# ------------------------------------------------------------------------------ identity: replay, reply address, adoption
+
+KEY = bytes(range(32))
+
+
+def signer(link_id, ahead, sysid=1, compid=1, base=None):
+    """A codec signing as ``sysid``/``compid`` on ``link_id``, its timestamp ``ahead`` ticks (10 us)
+    past ``base`` (default: now)."""
+    from mission.mavlink.codec import new_codec, setup_signing, signing_timestamp_now
+
+    codec = new_codec(sysid, compid)
+    setup_signing(codec, KEY, sign_outgoing=True, unsigned_ids=(), link_id=link_id)
+    codec.signing.timestamp = (signing_timestamp_now() if base is None else base) + ahead
+    return codec
+
+
+def test_signing_replay_protection_is_per_link_id_system_and_component():
+    """The MAVLink 2 signing spec keys the replay state by (link id, system, component), and so
+    does pymavlink (``stream_timestamps[(link_id, sys, comp)]``): a vehicle's two links each keep
+    their own clock; only an old timestamp on a packet's own stream is a replay."""
+    from mission.mavlink.codec import link_codecs, reset_parser
+
+    rx, _ = link_codecs((1, 191), KEY)
+    base = rx.signing.timestamp
+
+    def accepted(codec, msg=None):
+        data = bytes((msg or heartbeat("OFFBOARD", True)).pack(codec))
+        out = [m.get_type() for m in rx.parse_buffer(data) or []]
+        reset_parser(rx)
+        return out == ["HEARTBEAT"]
+
+    gcs = signer(0, 10**6, base=base)  # the vehicle's GCS link, 10 s ahead
+    onboard = signer(1, 10, base=base)
+    assert accepted(gcs) and accepted(onboard)  # link 1 is not refused for being behind link 0
+    assert sorted(rx.signing.stream_timestamps) == [(0, 1, 1), (1, 1, 1)]
+    assert not accepted(signer(1, 5, base=base))  # older on its own stream: a replay
+    assert accepted(signer(1, 5, base=base, compid=2)) and accepted(signer(1, 5, base=base, sysid=2))
+    assert accepted(onboard)  # the real stream goes on
+
+
+def test_signed_link_pins_the_reply_address_and_link_id_a_forwarded_link_moves_nothing():
+    """The attack: the vehicle's own GCS-link packets (signed, link id 0, timestamps ahead)
+    forwarded to our port from elsewhere. Counted as another link and ignored: the reply address
+    stays, the telemetry is not theirs, and the real link (id 1) is never refused. A packet of the
+    pinned link from a new address (the vehicle restarted on another port) moves the address."""
+    clock = ManualClock(5.0)
+    session, receiver, identified, _ = make_receiver(clock, key=KEY)
+    t = FakeTransport()
+    base = receiver.codec.signing.timestamp
+    onboard, gcs = signer(1, 10, base=base), signer(0, 10**6, base=base)
+    real, relay = ("127.0.0.1", 14580), ("127.0.0.1", 40000)
+    receiver.handle_bytes(bytes(heartbeat("OFFBOARD", True).pack(onboard)), real, t)
+    assert identified == [(1, 1)] and t.peer == real and receiver.pin.link_id == 1
+    for k in range(5):
+        receiver.handle_bytes(bytes(heartbeat("POSCTL", False).pack(gcs)), relay, t)
+        receiver.handle_bytes(bytes(position(x=9.0).pack(gcs)), relay, t)
+    state = session.snapshot_locked()
+    assert session.counts["rx_other_link"] == 10 and t.peer == real and state.mode == "OFFBOARD" and state.armed
+    assert state.position_ned_m is None
+    receiver.handle_bytes(bytes(position(x=1.5).pack(onboard)), real, t)
+    assert session.snapshot_locked().position_ned_m[0] == 1.5 and session.counts["rx_bad"] == 0
+    moved = ("127.0.0.1", 14581)
+    receiver.handle_bytes(bytes(position(x=2.5).pack(onboard)), moved, t)
+    assert t.peer == moved and session.counts["peer_moves"] == 1
+
+
+def test_unsigned_link_keeps_the_reply_address_while_the_vehicle_talks_from_it():
+    """Without signing, the address is the link: another address claiming the vehicle's ids is
+    ignored while the vehicle's own one talks; after PEER_SILENT_S of silence it may take over."""
+    from mission.mavlink.receiver import PEER_SILENT_S
+
+    clock = ManualClock(5.0)
+    session, receiver, _, _ = make_receiver(clock)
+    t = FakeTransport()
+    real, other = ("127.0.0.1", 14580), ("127.0.0.1", 40000)
+    receiver.handle_bytes(packet(heartbeat("OFFBOARD", True)), real, t)
+    receiver.handle_bytes(packet(heartbeat("POSCTL", True)), other, t)
+    receiver.handle_bytes(packet(position(x=9.0)), other, t)
+    assert session.counts["rx_other_address"] == 2 and t.peer == real and session.snapshot_locked().mode == "OFFBOARD"
+    clock.advance(PEER_SILENT_S * 0.9)
+    receiver.handle_bytes(packet(position(x=1.0)), real, t)
+    clock.advance(PEER_SILENT_S * 0.9)
+    receiver.handle_bytes(packet(position(x=9.0)), other, t)  # the vehicle spoke 0.9 s ago: still its address
+    assert session.counts["rx_other_address"] == 3 and session.snapshot_locked().position_ned_m[0] == 1.0
+    clock.advance(PEER_SILENT_S * 0.2)
+    receiver.handle_bytes(packet(position(x=2.0)), other, t)  # silent for 1.1 s: a restarted vehicle
+    assert t.peer == other and session.counts["peer_moves"] == 1 and session.snapshot_locked().position_ned_m[0] == 2.0
+
+
+def test_without_target_system_a_lone_rogue_is_adopted_loudly_and_refused_once_another_px4_talks(caplog):
+    """A rogue PX4 HEARTBEAT (sysid 42) talking alone for 3 HEARTBEATs is adopted, with a warning
+    that says so; the real vehicle's first HEARTBEAT is then an identity conflict (the mission
+    aborts vehicle_ambiguous). With target_system set, another system is only counted."""
+    import logging
+
+    caplog.set_level(logging.WARNING)
+    clock = ManualClock(0.0)
+    session, receiver, identified, _ = make_receiver(clock, target_system=None)
+    t = FakeTransport()
+    for _ in range(3):
+        clock.advance(1.0)
+        receiver.handle_bytes(packet(heartbeat("AUTO.LOITER", False), sysid=42), ("127.0.0.1", 6666), t)
+    assert identified == [(42, 1)] and session.identity_problem() is None
+    assert "WITHOUT mavlink.target_system" in caplog.text and "sysid 42 compid 1" in caplog.text
+    gcs = mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0, 3)
+    receiver.handle_bytes(packet(gcs, sysid=255, compid=190), ("127.0.0.1", 7777), t)  # not an autopilot: no conflict
+    assert session.identity_problem() is None
+    receiver.handle_bytes(packet(heartbeat("AUTO.LOITER", False)), ("127.0.0.1", 14580), t)  # the real vehicle
+    problem = session.identity_problem()
+    assert problem is not None and "sysid 1 compid 1" in problem and "target_system" in problem
+    assert t.peer == ("127.0.0.1", 6666)  # nothing more: the mission aborts on it
+    pinned_session, pinned, _, _ = make_receiver(ManualClock(), target_system=1)
+    pinned.handle_bytes(packet(heartbeat("AUTO.LOITER", False)), ("127.0.0.1", 14580), t)
+    pinned.handle_bytes(packet(heartbeat("AUTO.LOITER", False), sysid=42), ("127.0.0.1", 6666), t)
+    assert pinned_session.identity_problem() is None and pinned_session.counts["rejected_foreign"] == 1
+

@@ -1,6 +1,8 @@
 """The mission state machine, driven by synthetic observations (pure, no sockets)."""
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -166,8 +168,6 @@ def test_stale_carrier_before_separation_aborts_to_hold(model):
 
 
 def test_mission_too_long_holds(model):
-    from dataclasses import replace
-
     state, log, _, _ = fly(replace(model, max_duration_s=8.0))
     assert state.reason == AbortReason.TIMEOUT
     assert any(d.request == "hold" for _, p, d in log if p == Phase.ABORT)
@@ -214,3 +214,84 @@ def test_a_phase_is_defined_once_and_every_part_knows_it():
         PassengerStatus.from_json(b'{"phase": "FLYING", "stamp": 1, "seq": 1, "position": [0,0,0], '
                                   b'"velocity": [0,0,0], "separated": false}')
     assert err.value.reason == "phase"
+
+
+# ----------------------------------------------------------------------------- armed and landed
+
+
+def _first_tick(model, phase):
+    _, log, _, _ = fly(model)
+    return next(k for k, (_, p, _) in enumerate(log) if p == phase)
+
+
+@pytest.mark.parametrize("phase, fault", [(Phase.OFFBOARD, "disarmed"), (Phase.JOIN, "disarmed"),
+                                          (Phase.RIDING, "disarmed"), (Phase.NAVIGATING, "disarmed"),
+                                          (Phase.RIDING, "landed"), (Phase.NAVIGATING, "landed")])
+def test_a_vehicle_disarmed_or_landed_in_flight_aborts_at_once_and_is_never_flown_again(model, phase, fault):
+    """A forced disarm (a rogue ground station's COMPONENT_ARM_DISARM with 21196) or PX4's land
+    detector saying ON_GROUND where the mission needs the vehicle armed or in the air: abort
+    vehicle_disarmed on the tick that sees it, with nothing sent (no setpoint, no Hold request);
+    re-armed and put back in OFFBOARD by someone else, it stays aborted and nothing is sent."""
+    at = _first_tick(model, phase) + 1  # the first tick that runs in that phase
+
+    def rogue(k, obs):
+        if k >= at:
+            v = obs.vehicle
+            return replace(obs, vehicle=replace(v, armed=False) if fault == "disarmed" else replace(v, on_ground=True))
+
+    state, log, _, _ = fly(model, on_tick=rogue)
+    assert (state.phase, state.reason) == (Phase.ABORT, AbortReason.VEHICLE_DISARMED)
+    assert len(log) == at + 1 and log[at - 1][1] == phase  # the tick that saw it aborted
+    last = log[-1][2]
+    assert last.setpoint is None and last.request is None
+    assert any(e.startswith(f"abort: vehicle {fault} in {phase.value}") for e in last.events), last.events
+    # someone else re-arms it and puts it back in OFFBOARD, in the air: still aborted, hands off
+    again = VehicleObs(np.array([5.0, 5.0, -3.0]), np.zeros(3), True, "OFFBOARD", heartbeat_age_s=0.1)
+    carrier = CarrierObs(np.zeros(3), np.zeros(3), age_s=0.0)
+    for k in range(1, 50):
+        state, dec = step(state, Observation(log[-1][0] + k * model.dt_s, again, carrier), model)
+        assert state.phase == Phase.ABORT and dec.setpoint is None and dec.request is None
+
+
+def test_the_land_detector_on_the_deck_before_take_off_is_no_fault(model):
+    """PX4 says ON_GROUND until it has seen the take-off (2-2.5 s into JOIN on SITL): only the
+    phases after JOIN need the vehicle in the air."""
+    def detector(k, obs):
+        v = obs.vehicle
+        return replace(obs, vehicle=replace(v, on_ground=bool(v.position_ned_m[2] > -0.2)))
+
+    state, log, _, _ = fly(model, on_tick=detector)
+    assert state.phase == Phase.DONE
+    assert any(p == Phase.JOIN and d.setpoint is not None for _, p, d in log)
+
+
+def test_disarmed_during_an_abort_to_hold_stops_the_stream(model):
+    """Aborted (carrier lost) and streaming zero velocity until Hold shows: disarmed meanwhile,
+    the stream and the Hold request stop at once."""
+    state = MissionState(phase=Phase.ABORT, reason=AbortReason.CARRIER_LOST, start_s=0.0)
+    riding = VehicleObs(np.array([5.0, 5.0, -1.5]), np.zeros(3), True, "OFFBOARD", heartbeat_age_s=0.1)
+    carrier = CarrierObs(np.zeros(3), np.zeros(3), age_s=2.0)
+    state, dec = step(state, Observation(1.0, riding, carrier), model)
+    assert dec.request == "hold" and dec.setpoint is not None  # still OFFBOARD: zeros until Hold shows
+    state, dec = step(state, Observation(1.02, replace(riding, armed=False), carrier), model)
+    assert state.phase == Phase.ABORT and dec.setpoint is None and dec.request is None and finished(state, dec)
+
+
+@pytest.mark.parametrize("phase", [Phase.PREFLIGHT, Phase.RIDING])
+def test_a_second_autopilot_without_target_system_aborts(model, phase):
+    """The link reports a second PX4 autopilot (``failed["identity"]``, mavlink.target_system unset):
+    abort vehicle_ambiguous; before anything was sent nothing is, in flight Hold is asked."""
+    at = 0 if phase == Phase.PREFLIGHT else _first_tick(model, phase) + 3
+    text = "a second PX4 autopilot sysid 42 compid 1 talks"
+
+    def world(k, obs):
+        return replace(obs, failed={**obs.failed, "identity": text}) if k >= at else None
+
+    state, log, _, _ = fly(model, on_tick=world)
+    assert (state.phase, state.reason, state.detail) == (Phase.ABORT, AbortReason.VEHICLE_AMBIGUOUS, text)
+    first = log[at][2]
+    assert f"abort: {text}" in first.events
+    if phase == Phase.PREFLIGHT:
+        assert first.setpoint is None and first.request is None
+    else:
+        assert first.request == "hold"
