@@ -6,15 +6,20 @@ vehicle (MAVLink over UDP), the carrier simulator (Zenoh) and the mission contro
 a free loopback port and every process connects to it, each pair in its own key namespace
 ``marsupial/<pair>/...`` with its own MAVLink port. It shows the live phase of each mission,
 then prints a summary table, writes a plot per pair and exits 0 when P1-P3 held for every pair.
+The pairs sign their bus samples with a throwaway key (``zenoh.signing_key_file``,
+:mod:`mission.bus.signing`), made at the start and deleted at the end.
 """
 from __future__ import annotations
 
 import json
 import os
+import secrets
+import shutil
 import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from contextlib import ExitStack
@@ -114,10 +119,12 @@ def _follow(pair: PairRun, progress: PairProgress) -> None:
 
 
 def start_carrier_robot(kind: str, name: str, zenoh_ep: str, speed: float, start: str, stack: ExitStack,
-                        err: int | None, lockstep: bool = False) -> tuple[list[str], subprocess.Popen | None]:
+                        err: int | None, lockstep: bool = False,
+                        bus_key: Path | None = None) -> tuple[list[str], subprocess.Popen | None]:
     """The robot under a ``kind`` carrier ("sim": built in, none to start; "mavlink": a mock PX4
-    rover, sysid 2; "ros2": a ROS-2-shaped robot on rmw_zenoh keys in namespace ``name``; with
-    ``lockstep`` both step on the carrier's clock) and the carrier controller's arguments for it."""
+    rover, sysid 2; "ros2": a ROS-2-shaped robot on rmw_zenoh keys in namespace ``name``, taking
+    only commands signed with ``bus_key`` if given; with ``lockstep`` both step on the carrier's
+    clock) and the carrier controller's arguments for it."""
     if kind == "mavlink":
         port = free_port(socket.SOCK_DGRAM)
         robot = subprocess.Popen(_python_cli("mock-vehicle", "--frame", "rover", "--sysid", "2", "--mavlink",
@@ -128,8 +135,9 @@ def start_carrier_robot(kind: str, name: str, zenoh_ep: str, speed: float, start
         return ["--backend", "mavlink", "--mavlink", f"udpin:127.0.0.1:{port}", "--target-system", "2",
                 "--kinematics", "ackermann"], robot
     if kind == "ros2":
+        signed = ["--signing-key", str(bus_key), "--pair", name] if bus_key is not None else []
         robot = subprocess.Popen(_python_cli("ros2-robot", "--key-form", "rmw_zenoh", "--namespace", name,
-                                             "--zenoh-connect", zenoh_ep, "--speed", str(speed),
+                                             "--zenoh-connect", zenoh_ep, "--speed", str(speed), *signed,
                                              *(["--lockstep"] if lockstep else [])), stderr=err)
         stack.callback(stop_process, robot)
         return ["--backend", "ros2", "--key-form", "rmw_zenoh", "--ros2-namespace", name, "--kinematics",
@@ -137,9 +145,22 @@ def start_carrier_robot(kind: str, name: str, zenoh_ep: str, speed: float, start
     return ["--backend", "sim"], None
 
 
+def throwaway_key(stack: ExitStack) -> Path:
+    """A fresh random 32-byte bus signing key in a private temporary file (mode 0600), removed
+    when ``stack`` closes. Each pair signs with its own key derived from it (``mission.bus.signing``)."""
+    folder = Path(tempfile.mkdtemp(prefix="marsupial-demo-"))
+    stack.callback(shutil.rmtree, folder, True)
+    path = folder / "bus.key"
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+    with os.fdopen(fd, "w") as f:
+        f.write(secrets.token_hex(32) + "\n")
+    return path
+
+
 def start_pair(config: str, name: str, zenoh_ep: str, speed: float, log_root: Path, stack: ExitStack,
-               quiet: bool, carrier_kind: str = "sim", lockstep: bool = False) -> PairRun:
+               quiet: bool, carrier_kind: str = "sim", lockstep: bool = False, bus_key: Path | None = None) -> PairRun:
     """Start the carrier (and its robot), the mock vehicle and the mission of one pair; register their cleanup.
+    With ``bus_key`` (a key file) the pair signs its bus samples (``--zenoh-signing-key``).
 
     ``lockstep``: the three step on the mock vehicle's simulated time, the carrier's robot on the
     carrier's (``speed`` is then the pace after a participant is lost); else wall clocks scaled
@@ -150,10 +171,11 @@ def start_pair(config: str, name: str, zenoh_ep: str, speed: float, log_root: Pa
     err = subprocess.DEVNULL if quiet else None
     mode = ["--lockstep"] if lockstep else []
     start = ",".join(str(v) for v in cfg.scenario.carrier_start)
-    backend_args, robot = start_carrier_robot(carrier_kind, name, zenoh_ep, speed, start, stack, err, lockstep)
+    signed = ["--zenoh-signing-key", str(bus_key)] if bus_key is not None else []
+    backend_args, robot = start_carrier_robot(carrier_kind, name, zenoh_ep, speed, start, stack, err, lockstep, bus_key)
     carrier = subprocess.Popen(_python_cli("carrier", config, "--speed", str(speed), "--pair", name,
                                            "--zenoh-connect", zenoh_ep, "--summary", str(pair.log_dir / "carrier.json"),
-                                           *backend_args, *mode), stderr=err)
+                                           *backend_args, *signed, *mode), stderr=err)
     stack.callback(stop_process, carrier)
     vehicle = subprocess.Popen(_python_cli("mock-vehicle", "--mavlink", "udpin:127.0.0.1:0", "--target",
                                            f"udpout:127.0.0.1:{mav_port}", "--speed", str(speed), "--start-ned", start,
@@ -162,7 +184,7 @@ def start_pair(config: str, name: str, zenoh_ep: str, speed: float, log_root: Pa
     stack.callback(stop_process, vehicle)
     mission = subprocess.Popen(_python_cli("run", config, "--mavlink", f"udpin:127.0.0.1:{mav_port}", "--zenoh-connect",
                                            zenoh_ep, "--pair", name, "--speed", str(speed), "--log-dir", str(pair.log_dir),
-                                           *mode),
+                                           *signed, *mode),
                                stdout=subprocess.PIPE, stderr=err, text=True)
     stack.callback(stop_process, mission, 30.0)
     pair.procs = {"carrier": carrier, "vehicle": vehicle, "mission": mission}
@@ -173,9 +195,10 @@ def start_pair(config: str, name: str, zenoh_ep: str, speed: float, log_root: Pa
 
 def run_demo(config: str, speed: float, pairs: int, log_root: Path, plot_path: str | None, timeout_s: float,
              quiet: bool = True, progress: bool = True, carrier: str = "sim",
-             lockstep: bool = True) -> tuple[int, list[dict]]:
+             lockstep: bool = True, signed: bool = True) -> tuple[int, list[dict]]:
     """Run ``pairs`` marsupial pairs, in lockstep on each mock vehicle's simulated time or at
-    ``speed``; return the exit code and each pair's summary."""
+    ``speed``; return the exit code and each pair's summary. ``signed``: the pairs sign their
+    bus samples with a throwaway key (:func:`throwaway_key`), deleted at the end."""
     from mission.cli.run import plot as plot_command
 
     supervise_children()  # a demo killed outright takes its processes with it
@@ -183,9 +206,10 @@ def run_demo(config: str, speed: float, pairs: int, log_root: Path, plot_path: s
     zenoh_port = free_port(socket.SOCK_STREAM)
     zenoh_ep = f"tcp/127.0.0.1:{zenoh_port}"
     with ExitStack() as stack:
+        bus_key = throwaway_key(stack) if signed else None
         router = open_session(ZenohSection(mode="router", listen=[zenoh_ep]))
         stack.callback(router.close)
-        runs = [start_pair(config, f"pair{i}", zenoh_ep, speed, log_root, stack, quiet, carrier, lockstep)
+        runs = [start_pair(config, f"pair{i}", zenoh_ep, speed, log_root, stack, quiet, carrier, lockstep, bus_key)
                 for i in range(pairs)]
         display = PairProgress([p.name for p in runs], tty=progress and sys.stdout.isatty())
         stack.callback(display.close)
@@ -311,7 +335,7 @@ def demo(config: str, realtime: bool, speed: float, pairs: int, plot_path: str |
 
     Each runs as its own process, talking over real UDP (MAVLink 2) and Zenoh on loopback; no
     hardware, no PX4, no external router. Ends with a summary table and a plot; exit code 0 when
-    the paper's P1-P3 held for every pair.
+    the paper's P1-P3 held for every pair. The bus is signed with a throwaway key.
     """
     os.environ.setdefault("PYTHONUNBUFFERED", "1")
     if plot_path is None:  # the plot goes with the logs it draws

@@ -77,6 +77,13 @@ class Sample:
         return self.stamp_s - self.rx_s
 
 
+def count_rejected(rejected: dict[str, int], source: str) -> None:
+    """Count one sample of a foreign ``source`` in ``rejected`` (at most :data:`MAX_REJECTED_SOURCES`
+    names; the rest under ``"other"``)."""
+    name = source if source in rejected or len(rejected) < MAX_REJECTED_SOURCES else "other"
+    rejected[name] = rejected.get(name, 0) + 1
+
+
 def implausible(prev: Sample, new: Sample, limits: GateLimits, use_seq: bool, lead_s: float | None = None) -> str | None:
     """The reason ``new`` cannot follow ``prev`` from one carrier (see the module table), or
     None. ``lead_s``: the track's largest ``stamp - rx`` so far (default ``prev.lead_s``)."""
@@ -157,8 +164,7 @@ class FeedGate:
         if self.bound is None:
             return self._offer_unbound(source, sample)
         if source != self.bound:
-            name = source if source in self.rejected_sources or len(self.rejected_sources) < MAX_REJECTED_SOURCES else "other"
-            self.rejected_sources[name] = self.rejected_sources.get(name, 0) + 1
+            count_rejected(self.rejected_sources, source)
             return "source"
         assert self._reference is not None
         if sample.rx_s - self._reference.last.rx_s > self.limits.max_gap_s:

@@ -60,7 +60,7 @@ def main(cfg: Config, speed: float = 1.0, duration_s: float | None = None, stop_
             with CarrierController(cfg, clock, session, backend) as ctl:
                 if isinstance(clock, LockstepClock):
                     upstream = ZenohUpstream(clock, session, clock_keys(ctl.pair), ctl.passenger,
-                                             published=lambda: ctl.seq - 1)
+                                             published=lambda: ctl.seq - 1, auth=ctl.auth)
                     stack.callback(upstream.close)
                     clock.downstream = backend.lockstep_relay(session)
                     stack.callback(clock.close)
@@ -129,7 +129,7 @@ def carrier_cli(config: str, backend: str | None, speed: float, pair: str | None
                     connect: tuple[str, ...], encoding: str | None, rate: float | None, mavlink_url: str | None,
                     target_system: int | None, kinematics: str | None, offset_ned: str | None,
                     ros2_namespace: str | None, key_form: str | None, duration: float | None,
-                    lockstep: bool, summary_path: str | None) -> int:
+                    lockstep: bool, summary_path: str | None, bus_key_file: str | None) -> int:
     """Run the carrier-side controller of CONFIG (a TOML file).
 
     The carrier waits until the passenger's published phase is RIDING, then drives towards
@@ -167,6 +167,7 @@ def carrier_cli(config: str, backend: str | None, speed: float, pair: str | None
         "zenoh.encoding": encoding,
         "carrier.rate_hz": rate,
         "carrier.mavlink.url": mavlink_url,
+        "zenoh.signing_key_file": bus_key_file,
     })
     click.echo(startup_line(cfg, speed), err=True)
     return main(cfg, speed, duration, summary_path=summary_path, lockstep=lockstep)

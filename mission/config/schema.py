@@ -326,7 +326,14 @@ class ZenohSection(Section):
     def _key(cls, value: str | None) -> str | None:
         return None if value is None else check_key_expr(value)
 
+    signing_key_file: Path_ | None = Field(
+        None, description="[-] 32-byte key (64 hex digits or raw) the pair signs its bus samples with (carrier state, "
+        "passenger status, lockstep clock, ROS 2 commands; mission/bus/signing.py); unsigned or badly signed samples are "
+        "then dropped and counted. Both robots of a pair need the same file. None: unsigned (the mTLS + ACL router "
+        "is the fleet's answer)")
+
     _config_file_printable = field_validator("config_file")(lambda v: v if v is None else printable(v))
+    _signing_key_printable = field_validator("signing_key_file")(lambda v: v if v is None else printable(v))
 
 class Config(Section):
     law: LawSection = LawSection()
