@@ -56,7 +56,11 @@ class Received(Generic[T]):
 
 @dataclass(frozen=True)
 class ReceivedCarrierState(Received[CarrierState]):
-    """A carrier state, always in local NED (``value.frame == "local_ned"``)."""
+    """A carrier state, always in local NED (``value.frame == "local_ned"``); ``untrusted``: why
+    the feed does not trust it yet (just bound, a resync, a contested source:
+    :meth:`mission.bus.gate.FeedGate.distrust`), None when it does."""
+
+    untrusted: str | None = None
 
     @property
     def state(self) -> CarrierState:
@@ -192,13 +196,19 @@ class _Feed(Generic[T]):
     # -- caller's thread
     def latest(self) -> Received[T] | None:
         """The newest accepted message with its age, or None if none was accepted yet."""
+        now = self.clock.now()
         with self._lock:
             item = self._latest
+            extra = self._received_extra(now)
         if item is None:
             return None
         value, key, rx = item
-        age = self.clock.now() - rx
-        return self._received_type(value=value, key=key, rx_time_s=rx, age_s=age, stale=age > self.max_age_s)
+        age = now - rx
+        return self._received_type(value=value, key=key, rx_time_s=rx, age_s=age, stale=age > self.max_age_s, **extra)
+
+    def _received_extra(self, now: float) -> dict[str, Any]:
+        """Lock held: more fields of :meth:`latest`'s answer at clock time ``now`` [s]."""
+        return {}
 
     @property
     def alive(self) -> bool | None:
@@ -248,7 +258,8 @@ class CarrierFeed(_Feed[CarrierState]):
     [s] on ``clock``; limits: the carrier's own limits for the plausibility gate (default: 3 m/s
     top speed). The liveliness of ``marsupial/<pair>/carrier/alive`` gives ``alive``; when it
     goes away the feed unbinds its source. ``counters`` add ``bound_source``,
-    ``rejected_sources`` ({source: n}) and ``resyncs``.
+    ``rejected_sources`` ({source: n}), ``resyncs``, ``settles`` and ``contests`` (the gate's);
+    ``latest().untrusted`` says why the newest state is not trusted yet (the gate's trust).
     """
 
     _received_type = ReceivedCarrierState
@@ -303,7 +314,10 @@ class CarrierFeed(_Feed[CarrierState]):
 
     def _extra_counters(self) -> dict[str, Any]:
         return {"bound_source": self.gate.bound, "rejected_sources": dict(self.gate.rejected_sources),
-                "resyncs": self.gate.resyncs}
+                "resyncs": self.gate.resyncs, "settles": self.gate.settles, "contests": self.gate.contests}
+
+    def _received_extra(self, now: float) -> dict[str, Any]:
+        return {"untrusted": self.gate.distrust(now)}
 
     def set_origin(self, origin: GeoOrigin | None) -> None:
         """Set the geodetic origin used for wgs84 states from now on."""

@@ -35,8 +35,12 @@ EXIT_ABORT = 5
 
 def carrier_limits(cfg: Config) -> GateLimits:
     """The carrier's own limits the feed's plausibility gate checks states against: its top
-    speed (``carrier.max_speed_m_s``, or ``safety.carrier_max_speed_m_s`` if larger)."""
-    return GateLimits(max_speed_m_s=max(cfg.carrier.max_speed_m_s, cfg.safety.carrier_max_speed_m_s or 0.0))
+    speed (``carrier.max_speed_m_s``, or ``safety.carrier_max_speed_m_s`` if larger), its
+    acceleration (``safety.carrier_max_accel_m_s2``, or ``carrier.brake_decel_m_s2`` if larger),
+    and how long a new reference must keep to them (``mission.carrier_settle_s``)."""
+    accels = [a for a in (cfg.safety.carrier_max_accel_m_s2, cfg.carrier.brake_decel_m_s2) if a is not None]
+    return GateLimits(max_speed_m_s=max(cfg.carrier.max_speed_m_s, cfg.safety.carrier_max_speed_m_s or 0.0),
+                      max_accel_m_s2=max(accels) if accels else None, settle_s=cfg.mission.carrier_settle_s)
 
 
 @contextmanager

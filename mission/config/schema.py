@@ -251,6 +251,11 @@ class MissionSection(Section):
         description="[s] with final_action = `return`: time spent at the target (the task) before coming home")
     carrier_timeout_s: float = Field(0.5, gt=0, le=10,
         description="[s] a carrier state older than this before separation aborts (carrier_lost)")
+    carrier_settle_s: float = Field(
+        2.0, ge=0, le=30, description="[s] a carrier state the feed has just re-accepted (a newly bound carrier, a "
+        "resync after a jump) must stay within the carrier's own speed and acceleration limits this long, and its "
+        "source must not be contested, before the passenger rides on it or separates on it; until then it holds on "
+        "the dock point it had (mission/bus/gate.py)")
     heartbeat_timeout_s: float = Field(3.0, gt=0, le=30,
         description="[s] vehicle lost when HEARTBEAT and telemetry are silent this long (MAVSDK: 3 s)")
     prestream_s: float = Field(1.0, ge=0.2, le=10,

@@ -60,7 +60,8 @@ class VehicleObs:
 @dataclass(frozen=True)
 class CarrierObs:
     """The carrier's newest state: position/velocity NED [m], [m/s]; age [s]; liveliness;
-    acceleration NED [m/s^2] as the carrier measured it, or None (it sent none)."""
+    acceleration NED [m/s^2] as the carrier measured it, or None (it sent none); untrusted: why
+    the feed does not trust it yet (just bound, a resync, a contested source), None when it does."""
 
     position_ned_m: np.ndarray
     velocity_ned_m_s: np.ndarray
@@ -68,6 +69,7 @@ class CarrierObs:
     alive: bool | None = True
     acceleration_ned_m_s2: np.ndarray | None = None
     yaw_rad: float | None = None  # [rad] its heading, if it sent one
+    untrusted: str | None = None
 
 
 @dataclass(frozen=True)
@@ -198,6 +200,7 @@ class MissionState:
     settled_since_s: float | None = None  # JOIN: since when the vehicle has been on the dock point
     recovery: RecoveryState | None = None  # bringing the passenger home (RECOVERY phases, FALLBACK, HOME)
     battery_start: tuple[float, float] | None = None  # (t [s], remaining [%]) at the first battery reading
+    held_dock: np.ndarray | None = None  # [m] NED: holding on (then rejoining from) this dock point: the feed was untrusted
 
 
 @dataclass(frozen=True)

@@ -55,7 +55,7 @@ def fly(model, *, ticks=4000, carrier_age=0.0, on_tick=None, vehicle_tau=0.0):
         elif mode != "OFFBOARD":
             v_p = np.zeros(3)
         x_p = x_p + v_p * dt
-        if state.phase == Phase.RIDING:
+        if state.phase == Phase.RIDING and state.held_dock is None:  # a holding passenger pauses the carrier
             e = model.tick.target - x_c
             e[2] = 0.0
             v_c = e / norm(e) * 2.0
@@ -214,3 +214,43 @@ def test_a_phase_is_defined_once_and_every_part_knows_it():
         PassengerStatus.from_json(b'{"phase": "FLYING", "stamp": 1, "seq": 1, "position": [0,0,0], '
                                   b'"velocity": [0,0,0], "separated": false}')
     assert err.value.reason == "phase"
+
+
+def test_an_untrusted_carrier_state_never_fires_the_latch_the_passenger_holds_then_rejoins(model):
+    """Mid-approach the feed follows a track 7 m from the target (a spoofed burst, or a
+    relocalisation) that it does not trust yet: the passenger holds on the dock point it had (the
+    carrier pauses), never separates on it, and once the honest track is trusted again it goes
+    back to the dock point at join speed and separates at b c of the real carrier."""
+    target = model.tick.target
+    short = target - np.array([7.0, 0.0, target[2]])  # 7 m short of the target, on the ground plane
+    phase = {"spoof": 0, "settle": 0}
+    holding = []
+
+    def attack(k, obs):
+        c = obs.carrier
+        if norm(c.position_ned_m) < 3.0 or phase["settle"] >= 100:
+            return None
+        if phase["spoof"] < 150:  # 3 s on the spoofed track, untrusted
+            phase["spoof"] += 1
+            return Observation(obs.t_s, obs.vehicle, CarrierObs(short, np.zeros(3), 0.0, untrusted="settling: after a resync"))
+        phase["settle"] += 1  # the honest track again, settling for 2 s
+        return Observation(obs.t_s, obs.vehicle, CarrierObs(c.position_ned_m, c.velocity_ned_m_s, 0.0,
+                                                            untrusted="settling: after a resync"))
+
+    def watch(k, obs):
+        out = attack(k, obs)
+        holding.append((out or obs).carrier.untrusted is not None)
+        return out
+
+    state, log, x_p, x_c = fly(model, on_tick=watch, ticks=6000)
+    assert state.phase == Phase.DONE and phase["settle"] == 100
+    sep = next(k for k, (_, p, _) in enumerate(log) if p == Phase.SEPARATED)
+    assert not any(holding[sep - 1:sep + 1])  # the latch fired on a trusted state ...
+    assert norm(target - state.anchor) == pytest.approx(model.tick.event_distance_m, abs=1e-9)  # ... of the real carrier
+    held = [k for k, h in enumerate(holding) if h]
+    assert len(held) == 250 and sep > held[-1]
+    refs = [log[k][2].setpoint for k in held]  # holding: the reference stands still, the vehicle settles on it
+    assert norm(refs[-1]) < 0.05
+    events = [e for _, _, d in log for e in d.events]
+    assert any(e.startswith("carrier feed not trusted (settling: after a resync)") for e in events)
+    assert "carrier feed trusted again: back on the dock point, riding" in events
