@@ -350,7 +350,8 @@ class PassengerFeed(_Feed[PassengerStatus]):
     so a flood from elsewhere can neither pass for the passenger nor make its statuses stale.
     The bound source's statuses must be newer than its last accepted one (``stale_seq``,
     ``stale_stamp``). When the passenger's liveliness token goes away the feed unbinds (a
-    restarted passenger is a new source).
+    restarted passenger is a new source); the source it was bound to may bind again in any phase
+    (a brief outage of the token while it rides).
     """
 
     _received_type = ReceivedPassengerStatus
@@ -364,13 +365,14 @@ class PassengerFeed(_Feed[PassengerStatus]):
         self.rejected_sources: dict[str, int] = {}
         self._candidates: dict[str, tuple[int, float, int]] = {}  # source -> (seq, stamp, statuses in order)
         self._last: tuple[int, float] | None = None  # the bound source's last (seq, stamp)
+        self._previous: str | None = None  # the source bound before the token went
         k = keys(pair)
         super().__init__(session, k.passenger_state, k.passenger_alive, clock, max_age_s, auth)
 
     def _admit(self, value: PassengerStatus, key: str, source: str, rx: float) -> str | None:
         order = (value.seq, value.stamp_s)
         if self.bound is None:
-            if self.bind_phases is not None and value.phase not in self.bind_phases:
+            if self.bind_phases is not None and value.phase not in self.bind_phases and source != self._previous:
                 return "unbound"
             last = self._candidates.get(source)
             if last is None and len(self._candidates) >= MAX_CANDIDATES:
@@ -397,11 +399,13 @@ class PassengerFeed(_Feed[PassengerStatus]):
     def _notifies(self, reason: str | None, value: PassengerStatus) -> bool:
         # the bound passenger's statuses, and a candidate's while none is bound (the lockstep
         # clock waits for the status a step names); never a stranger's
-        return reason is None or (reason == "unbound" and (self.bind_phases is None or value.phase in self.bind_phases))
+        return reason is None or (reason == "unbound" and (self.bind_phases is None or value.phase in self.bind_phases
+                                                            or self._previous is not None))
 
     def _forget_sender(self) -> None:
         if self.bound is not None:
             log.warning("passenger feed: source %s unbound (liveliness token gone)", self.bound)
+            self._previous = self.bound
         self.bound, self._last = None, None
         self._candidates.clear()
 

@@ -19,8 +19,10 @@ import numpy as np
 
 from mission.carrier.backends import KINDS, describe, open_backend
 from mission.carrier.controller import CarrierController
+from mission.bus.auth import bus_auth
 from mission.bus.bridge import describe_endpoints, keys, open_session
 from mission.time.clock import Clock, LockstepClock, ScaledClock
+from mission.config.required import CARRIER_FIELDS, require_stated
 from mission.config.schema import Config, load_config, with_overrides
 from mission.time.lockstep import ZenohUpstream, clock_keys
 
@@ -37,9 +39,13 @@ def main(cfg: Config, speed: float = 1.0, duration_s: float | None = None, stop_
     pace once the relay falls silent.
 
     SIGINT/SIGTERM set the stop event when called from the main thread. Raises
+    :class:`~mission.errors.ConfigError` if the file does not state the target and the carrier's
+    limits (:mod:`mission.config.required`) or the bus key is unreadable,
     :class:`~mission.errors.BusError` if Zenoh cannot open, :class:`~mission.errors.LinkError`
     if the vehicle link cannot open.
     """
+    require_stated(cfg, CARRIER_FIELDS, "carrier")  # before anything is opened
+    bus_auth(cfg.zenoh)
     stop = stop_event or threading.Event()
     restore: dict[int, Any] = {}
     clock: Clock = LockstepClock(speed=speed, name="carrier-lockstep") if lockstep else ScaledClock(speed)
@@ -169,6 +175,7 @@ def carrier_cli(config: str, backend: str | None, speed: float, pair: str | None
         "carrier.mavlink.url": mavlink_url,
         "zenoh.signing_key_file": bus_key_file,
     })
+    require_stated(cfg, CARRIER_FIELDS, "carrier")  # refused before it says anything about flying
     click.echo(startup_line(cfg, speed), err=True)
     return main(cfg, speed, duration, summary_path=summary_path, lockstep=lockstep)
 

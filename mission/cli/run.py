@@ -17,6 +17,7 @@ from mission.bus.auth import bus_auth
 from mission.bus.bridge import CarrierFeed, PassengerPublisher, open_session, zenoh_config
 from mission.bus.session import congestion_for
 from mission.time.clock import Clock, LockstepClock, ScaledClock
+from mission.config.required import RUN_FIELDS, require_stated
 from mission.config.schema import Config, load_config, with_overrides
 from mission.controller import MissionController, MissionOutcome, mission_info, mission_model
 from mission.errors import ConfigError
@@ -82,8 +83,10 @@ def mission_io(cfg: Config, clock: Clock, tlog_path: str | Path | None = None) -
 
 def check_config(cfg: Config) -> None:
     """What a mission needs of ``cfg`` beyond the file's own rules, checked before anything is
-    opened or written: a 3D mission model, readable signing keys (MAVLink, bus), a Zenoh
-    configuration Zenoh accepts. Raises :class:`ConfigError` naming the field."""
+    opened or written: the target and limits stated in the file (:mod:`mission.config.required`),
+    a 3D mission model, readable signing keys (MAVLink, bus), a Zenoh configuration Zenoh
+    accepts. Raises :class:`ConfigError` naming the field."""
+    require_stated(cfg, RUN_FIELDS, "run")
     mission_model(cfg)
     if cfg.mavlink.signing_key_file:
         read_signing_key(cfg.mavlink.signing_key_file)
@@ -174,6 +177,7 @@ def run(config: str, mavlink_url: str | None, zenoh_listen: tuple[str, ...], zen
     if zenoh_connect:
         overrides["zenoh.connect"] = list(zenoh_connect)
     cfg = with_overrides(cfg, overrides)
+    check_config(cfg)  # refused before it says anything about flying (fly checks again)
     stop = threading.Event()
     for line in startup_lines(cfg, speed):
         click.echo(line)

@@ -461,14 +461,16 @@ def load_config(path: str | Path) -> Config:
 
 
 def with_overrides(cfg: Config, overrides: dict[str, Any]) -> Config:
-    """A copy of ``cfg`` with dotted-key overrides (``{"mavlink.url": "udpin:..."}``), revalidated."""
-    data = cfg.model_dump()
+    """A copy of ``cfg`` with dotted-key overrides (``{"mavlink.url": "udpin:..."}``, None: left
+    as is), revalidated. What the file left to its defaults stays unset in the copy
+    (:func:`mission.config.required.stated` still tells)."""
+    data = cfg.model_dump(exclude_unset=True)
     for key, value in overrides.items():
         if value is None:
             continue
         node = data
         *parents, leaf = key.split(".")
         for p in parents:
-            node = node[p]
+            node = node.setdefault(p, {})
         node[leaf] = value
     return from_dict(data)

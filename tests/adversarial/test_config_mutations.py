@@ -146,7 +146,28 @@ def _cases() -> list[tuple[str, str, str]]:
     add("scenario", "target", "[4.0, 3.0, -1.0]", "scenario.eta")  # within b c at the start
     add("scenario", "target", "[24.0, 18.0, -12.0]", "scenario.target")  # too high to ever separate
     add("scenario", "dim", "2", "scenario.carrier_start")
+    # what a flight must state itself (mission.config.required): on main an empty file flew to a
+    # default target, and one without [safety] flew the unsaturated law (5.8e20 m/s, a traceback)
+    cases.append(("empty-file", "", "scenario.target"))
+    cases.append(("no-scenario", without("scenario"), "scenario.target"))
+    cases.append(("no-safety", without("safety"), "safety.passenger_max_speed_m_s"))
+    for key in ("target", "passenger_max_speed_m_s", "passenger_max_accel_m_s2", "carrier_max_speed_m_s",
+                "carrier_max_accel_m_s2"):
+        section = "scenario" if key == "target" else "safety"
+        cases.append((f"no-{key}", without(section, key), f"{section}.{key}"))
     return cases
+
+
+def without(section: str, key: str | None = None) -> str:
+    """demo.toml without its ``[section]`` table, or without ``key``'s line in it."""
+    lines = DEMO.splitlines()
+    start = lines.index(f"[{section}]")
+    end = next((i for i in range(start + 1, len(lines)) if lines[i].startswith("[")), len(lines))
+    if key is None:
+        return "\n".join(lines[:start] + lines[end:]) + "\n"
+    kept = [line for i, line in enumerate(lines) if not (start < i < end and re.match(rf"{re.escape(key)}\s*=", line))]
+    assert len(kept) == len(lines) - 1, key
+    return "\n".join(kept) + "\n"
 
 
 CASES = _cases()
@@ -211,3 +232,18 @@ def test_the_real_process_exits_2(tmp_path: Path, text: str, field: str) -> None
     out = subprocess.run([sys.executable, "-m", "mission.cli", "run", str(path)], capture_output=True, text=True,
                          timeout=60)
     assert out.returncode == 2 and f"error: {field}" in out.stderr and "Traceback" not in out.stderr, out.stderr
+
+
+@pytest.mark.parametrize("case", ["empty-file", "no-safety", "no-target", "no-carrier_max_accel_m_s2"])
+def test_the_carrier_refuses_a_flight_without_its_target_or_limits(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                                   case: str) -> None:
+    """``marsupial carrier`` needs the target and the carrier's limits stated, like ``run``:
+    exit 2 naming the field, nothing opened (the passenger's limits are not its business)."""
+    text, field = next((t, f) for i, t, f in CASES if i == case)
+    field = {"safety.passenger_max_speed_m_s": "safety.carrier_max_speed_m_s"}.get(field, field)
+    path = tmp_path / "carrier.toml"
+    path.write_text(text)
+    code = main(["carrier", str(path), "--zenoh-listen", "tcp/127.0.0.1:9", "--summary", str(tmp_path / "c.json")])
+    err = capsys.readouterr().err
+    assert code == 2 and f"error: {field} = None: " in err and "Traceback" not in err, err[:300]
+    assert not (tmp_path / "c.json").exists()

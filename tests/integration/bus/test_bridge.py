@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 import pytest
+import zenoh
 
 from mission.bus.bridge import (
     CarrierFeed,
@@ -231,14 +232,15 @@ def test_the_carrier_binds_the_passenger_that_began_on_the_deck_and_a_flood_else
     statuses before riding), a flood of SEPARATED/ABORT with higher sequence numbers from another
     session is dropped as "source" and never makes the real statuses stale."""
     clock = ManualClock(1.0)
+    BLOCK = zenoh.CongestionControl.BLOCK
     before = frozenset({"PREFLIGHT", "STREAMING", "ARMING", "OFFBOARD", "JOIN"})
     with peer_pair() as (a, b), PassengerFeed(a, "p", clock, bind_phases=before, bind_samples=3) as feed, \
-            PassengerPublisher(b, "p") as pub:
+            PassengerPublisher(b, "p", zenoh.CongestionControl.BLOCK) as pub:  # counted exactly: nothing dropped
         wait_for(lambda: pub.matched)
         key = keys("p").passenger_state
         riding = PassengerStatus("RIDING", 0.5, 10**6, [0, 0, -1.5], [0, 0, 0])
         for k in range(5):  # a rogue that rides from the start (no source_info: "anonymous")
-            a.put(key, riding.model_copy(update={"seq": 10**6 + k}).to_json())
+            a.put(key, riding.model_copy(update={"seq": 10**6 + k}).to_json(), congestion_control=BLOCK)
         wait_for(lambda: feed.counters["dropped"].get("unbound", 0) == 5, what="5 unbound")
         for seq, phase in enumerate(["PREFLIGHT", "STREAMING", "STREAMING", "RIDING"], start=1):
             pub.publish(PassengerStatus(phase, 0.1 * seq, seq, [0, 0, -1.5], [0, 0, 0]))
@@ -246,7 +248,8 @@ def test_the_carrier_binds_the_passenger_that_began_on_the_deck_and_a_flood_else
                 wait_for(lambda: feed.counters["bound_source"] is not None, what="bound")
                 for k in range(50):  # the flood, between the real statuses
                     fake = "SEPARATED" if k % 2 else "ABORT"
-                    a.put(key, PassengerStatus(fake, 9.0, 10**7 + k, [0, 0, 0], [0, 0, 0], fake == "SEPARATED").to_json())
+                    a.put(key, PassengerStatus(fake, 9.0, 10**7 + k, [0, 0, 0], [0, 0, 0], fake == "SEPARATED").to_json(),
+                          congestion_control=BLOCK)
         wait_for(lambda: (r := feed.latest()) is not None and r.status.seq == 4, what="the real RIDING")
         wait_for(lambda: feed.counters["dropped"].get("source", 0) == 50, what="the flood counted")
         c = feed.counters

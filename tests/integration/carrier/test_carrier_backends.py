@@ -56,7 +56,7 @@ class ScriptedPassenger:
     it to the carrier's)."""
 
     def __init__(self, session: zenoh.Session, clock: Clock) -> None:
-        self.pub = PassengerPublisher(session, "cb")
+        self.pub = PassengerPublisher(session, "cb", zenoh.CongestionControl.BLOCK)  # the boarding goes out back to back
         self.clock, self.phase, self.seq = clock, "JOIN", 0
         self.at: Callable[[], Any] = lambda: None
         self.stop = threading.Event()

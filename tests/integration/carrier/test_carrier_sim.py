@@ -26,7 +26,7 @@ from mission.carrier.modes import BEFORE_RIDING
 from sim.robots.carrier import CarrierMode, CarrierSim
 from tests.support.stepper import Stepper
 from tests.support.zenoh_util import endpoint, free_port, peer, wait_for
-from tests.conftest import ROOT
+from tests.conftest import FLIGHT_TOML, ROOT
 
 pytestmark = pytest.mark.timeout(30)
 
@@ -48,7 +48,8 @@ class Passenger:
     carrier: 1.5 m above the origin)."""
 
     def __init__(self, session: zenoh.Session, pair: str, clock: Clock, carrier: CarrierController | None = None) -> None:
-        self.pub = PassengerPublisher(session, pair)
+        # blocking, never dropped: the statuses of a boarding go out back to back
+        self.pub = PassengerPublisher(session, pair, zenoh.CongestionControl.BLOCK)
         self.clock, self.seq, self.carrier = clock, 0, carrier
         self.on_deck = 0  # statuses sent before riding
 
@@ -378,14 +379,17 @@ def test_cli_config_error_exits_2(tmp_path: Path) -> None:
     bad = tmp_path / "bad.toml"
     bad.write_text("[carrier]\nrate_hz = -5\n")
     assert cli_main(["carrier", str(bad)]) == 2
+    empty = tmp_path / "empty.toml"
+    empty.write_text("")  # no target, no limits: refused
+    assert cli_main(["carrier", str(empty)]) == 2
     good = tmp_path / "good.toml"
-    good.write_text("")
+    good.write_text(FLIGHT_TOML)
     assert cli_main(["carrier", str(good), "--pair", "no/slash"]) == 2
 
 
 def test_cli_runs_publishes_and_exits_0_on_sigterm(tmp_path: Path) -> None:
     cfg = tmp_path / "carrier.toml"
-    cfg.write_text('[zenoh]\npair = "cli"\n[scenario]\ncarrier_start = [1.0, 2.0, 0.0]\n')
+    cfg.write_text(FLIGHT_TOML.replace("[scenario]\n", "[scenario]\ncarrier_start = [1.0, 2.0, 0.0]\n") + '[zenoh]\npair = "cli"\n')
     ep = endpoint(free_port())
     proc = subprocess.Popen(
         [sys.executable, "-m", "mission.cli", "-v", "carrier", str(cfg), "--zenoh-listen", ep, "--speed", "2"],
