@@ -37,6 +37,7 @@ class AbortReason(StrEnum):
     INTERRUPTED = "interrupted"
     TIMEOUT = "timeout"
     SIGNING_MISMATCH = "signing_mismatch"
+    NONFINITE = "nonfinite"
 
 
 

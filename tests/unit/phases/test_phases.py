@@ -254,3 +254,22 @@ def test_an_untrusted_carrier_state_never_fires_the_latch_the_passenger_holds_th
     events = [e for _, _, d in log for e in d.events]
     assert any(e.startswith("carrier feed not trusted (settling: after a resync)") for e in events)
     assert "carrier feed trusted again: back on the dock point, riding" in events
+
+
+@pytest.mark.parametrize("what", ["vehicle at infinity", "carrier at 1e308 m"])
+def test_a_non_finite_value_aborts_to_hold_naming_it(model, what):
+    """Nothing non-finite is ever sent: the tick that would compute one aborts (nonfinite) and
+    asks for Hold (the fly world asserts every setpoint it gets is finite)."""
+    def corrupt(k, obs):
+        v, c = obs.vehicle, obs.carrier
+        if norm(c.position_ned_m) < 5.0:
+            return None
+        if what == "vehicle at infinity":
+            return Observation(obs.t_s, VehicleObs(np.array([np.inf, 0, -1.5]), v.velocity_ned_m_s, v.armed, v.mode, 0.1), c)
+        return Observation(obs.t_s, v, CarrierObs(np.array([1e308, 1e308, 0.0]), c.velocity_ned_m_s, 0.0))
+
+    state, log, _, _ = fly(model, on_tick=corrupt, ticks=3000)
+    assert (state.phase, state.reason) == (Phase.ABORT, AbortReason.NONFINITE.value)
+    assert state.detail.startswith("non-finite ") and state.detail.endswith("in RIDING")
+    aborted = next(d for _, p, d in log if p == Phase.ABORT)
+    assert aborted.request == "hold" and any(e.startswith("abort: non-finite") for e in aborted.events)
