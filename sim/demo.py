@@ -30,6 +30,7 @@ import click
 from tqdm import tqdm
 
 from mission.bus.bridge import open_session
+from mission.bus.session import close_session
 from mission.config.schema import ZenohSection, load_config
 from mission.errors import MarsupialError
 from mission.lifetime import supervise_children
@@ -208,7 +209,7 @@ def run_demo(config: str, speed: float, pairs: int, log_root: Path, plot_path: s
     with ExitStack() as stack:
         bus_key = throwaway_key(stack) if signed else None
         router = open_session(ZenohSection(mode="router", listen=[zenoh_ep]))
-        stack.callback(router.close)
+        stack.callback(close_session, router)
         runs = [start_pair(config, f"pair{i}", zenoh_ep, speed, log_root, stack, quiet, carrier, lockstep, bus_key)
                 for i in range(pairs)]
         display = PairProgress([p.name for p in runs], tty=progress and sys.stdout.isatty())

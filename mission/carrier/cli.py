@@ -21,6 +21,7 @@ from mission.carrier.backends import KINDS, describe, open_backend
 from mission.carrier.controller import CarrierController
 from mission.bus.auth import bus_auth
 from mission.bus.bridge import describe_endpoints, keys, open_session
+from mission.bus.session import close_session
 from mission.time.clock import Clock, LockstepClock, ScaledClock
 from mission.config.required import CARRIER_FIELDS, require_stated
 from mission.config.schema import Config, load_config, with_overrides
@@ -60,7 +61,7 @@ def main(cfg: Config, speed: float = 1.0, duration_s: float | None = None, stop_
     try:
         with ExitStack() as stack:
             session = open_session(cfg.zenoh)
-            stack.callback(session.close)
+            stack.callback(close_session, session)  # never raises, bounded: the exit code stands
             backend = open_backend(cfg, clock, session)
             stack.callback(backend.close)
             with CarrierController(cfg, clock, session, backend) as ctl:

@@ -15,7 +15,7 @@ import numpy as np
 
 from mission.bus.auth import bus_auth
 from mission.bus.bridge import CarrierFeed, PassengerPublisher, open_session, zenoh_config
-from mission.bus.session import congestion_for
+from mission.bus.session import close_session, congestion_for
 from mission.time.clock import Clock, LockstepClock, ScaledClock
 from mission.config.required import RUN_FIELDS, require_stated
 from mission.config.schema import Config, load_config, with_overrides
@@ -53,7 +53,7 @@ def mission_io(cfg: Config, clock: Clock, tlog_path: str | Path | None = None) -
     auth = bus_auth(cfg.zenoh)
     with ExitStack() as stack:
         session = open_session(cfg.zenoh)
-        stack.callback(session.close)
+        stack.callback(close_session, session)  # never raises, bounded: the mission's outcome stands
         feed = CarrierFeed.from_section(session, cfg.zenoh, clock, max_age_s=cfg.mission.carrier_timeout_s,
                                         limits=carrier_limits(cfg), auth=auth)
         stack.callback(feed.close)

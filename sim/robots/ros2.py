@@ -28,7 +28,7 @@ from mission.carrier.backends.ros2 import Received, RmwAttachment, Ros2Topics, r
 from mission.core.geodesy import wrap_pi
 from mission.bus.auth import BusAuth, bus_auth
 from mission.bus.bridge import open_session
-from mission.bus.session import congestion_for, undeclare
+from mission.bus.session import close_session, congestion_for, undeclare
 from mission.time.clock import Clock, LockstepClock, Periodic, ScaledClock
 from mission.config.schema import CarrierRos2Section, ZenohSection
 from mission.bus.wire import CarrierState, WireError
@@ -187,7 +187,8 @@ def ros2_robot(key_form: str, namespace: str, domain_id: int, kinematics: str, y
 
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, on_signal)
-    with open_session(section) as session:
+    session = open_session(section)
+    try:
         robot = Ros2RobotSim(session, topics, clock, holonomic=kinematics == "holonomic",
                              yaw_rad=math.radians(yaw_deg), auth=auth)
         upstream = None
@@ -205,4 +206,6 @@ def ros2_robot(key_form: str, namespace: str, domain_id: int, kinematics: str, y
             if isinstance(clock, LockstepClock):
                 clock.close()
             robot.close()
+    finally:
+        close_session(session)
     return 0
