@@ -26,10 +26,11 @@ from __future__ import annotations
 import json
 import logging
 import queue
+import socket
 import threading
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import pytest
@@ -38,9 +39,10 @@ import zenoh
 from mission.bus.bridge import keys
 from mission.bus.wire import PassengerStatus
 from mission.carrier.controller import OwnState
-from tests.faults.test_matrix import concurrently
+from tests.faults.procs import assert_safe_end, flight
+from tests.faults.test_matrix import assert_never_disarmed_in_the_air, concurrently
 from tests.integration.mission_harness import Pair, flying_pair
-from tests.integration.zenoh_util import peer
+from tests.integration.zenoh_util import free_port, peer
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(240)]
 
@@ -65,19 +67,30 @@ def spoof(seq: int, stamp: float, position: Any, velocity: Any) -> bytes:
                        "velocity": list(map(float, velocity)), "yaw": None}).encode()
 
 
+class Put(NamedTuple):
+    """What an attacker puts: on ``key``, ``payload``, with the real carrier's source id copied
+    or not, with ``attachment`` (a captured tag, for a replay) or none."""
+
+    key: str
+    payload: bytes
+    copy_source: bool = False
+    attachment: bytes | None = None
+
+
 class Attacker:
     """A Zenoh session on the pair's network (its own, or ``session``) that sees every real
-    carrier state and answers it with ``react(state, source_id)`` -> a list of (key, payload,
-    copy the real source id?) to put, from its own thread (never from Zenoh's callback)."""
+    carrier state and answers it with ``react(state, source_id, attachment, payload)`` -> a list
+    of :class:`Put`, from its own thread (never from Zenoh's callback)."""
 
-    def __init__(self, react: Callable[[dict[str, Any], Any], list[tuple[str, bytes, bool]]], *,
+    def __init__(self, react: Callable[[dict[str, Any], Any, bytes | None, bytes], list[Put]], *,
                  endpoint: str | None = None, session: zenoh.Session | None = None) -> None:
         self.own = session is None
         self.session = session if session is not None else peer(connect=[endpoint or ""])
         self.react = react
         self.sent: dict[str, int] = {}
         self.real_states = 0
-        self._queue: queue.Queue[tuple[dict[str, Any], Any] | None] = queue.Queue()
+        self._queue: queue.Queue[tuple[dict[str, Any], Any, bytes | None, bytes] | None] = queue.Queue()
+        self._stopped = threading.Event()
         self._sub = self.session.declare_subscriber(PAIR_KEYS.carrier_state, self._on_state)
         self._thread = threading.Thread(target=self._run, daemon=True)
         self._thread.start()
@@ -90,22 +103,33 @@ class Attacker:
             state = json.loads(sample.payload.to_bytes())
         except ValueError:
             return
-        self._queue.put((state, info.source_id))
+        self._queue.put((state, info.source_id, None if sample.attachment is None else sample.attachment.to_bytes(),
+                         sample.payload.to_bytes()))
 
     def _run(self) -> None:
         sn = SN0
-        while (item := self._queue.get()) is not None:
+        while (item := self._queue.get()) is not None and not self._stopped.is_set():
             self.real_states += 1
-            for key, payload, copy_source in self.react(*item):
+            for put in self.react(*item):
                 sn += 1
-                kwargs = {"source_info": zenoh.SourceInfo(item[1], sn)} if copy_source else {}
+                kwargs: dict[str, Any] = {"source_info": zenoh.SourceInfo(item[1], sn)} if put.copy_source else {}
                 try:
-                    self.session.put(key, payload, congestion_control=zenoh.CongestionControl.BLOCK, **kwargs)
+                    self.session.put(put.key, put.payload, congestion_control=zenoh.CongestionControl.BLOCK,
+                                     attachment=put.attachment, **kwargs)
                 except zenoh.ZError:
                     return  # the network closed first: a failing test says why
-                self.sent[key] = self.sent.get(key, 0) + 1
+                kind = f"{put.key} replay" if put.attachment is not None else put.key
+                self.sent[kind] = self.sent.get(kind, 0) + 1
+
+    def stop(self) -> dict[str, int]:
+        """Stop attacking (what was sent stays counted); returns ``sent``."""
+        self._stopped.set()
+        self._queue.put(None)
+        self._thread.join(5.0)
+        return dict(self.sent)
 
     def close(self) -> None:
+        self._stopped.set()
         self._queue.put(None)
         self._thread.join(5.0)
         self._sub.undeclare()
@@ -115,7 +139,7 @@ class Attacker:
 
 class Campaign:
     """The unsigned attacks of one flight, paced on the real carrier's states (simulated time):
-    a flood of fake statuses all along; once the carrier has moved 2 m, a copier of its source id
+    a flood of fake statuses (SEPARATED, ABORT, RIDING) all along; once the carrier has moved 2 m, a copier of its source id
     walking at 1 m/s towards the target for 3 s; once it is 15 m from the target again after
     that, a burst of 5 states 7 m short of it."""
 
@@ -127,24 +151,24 @@ class Campaign:
         self.burst_at: float | None = None
         self.floods = 0
 
-    def __call__(self, st: dict[str, Any], source: Any) -> list[tuple[str, bytes, bool]]:
-        out: list[tuple[str, bytes, bool]] = []
+    def __call__(self, st: dict[str, Any], source: Any, attachment: bytes | None, raw: bytes) -> list[Put]:
+        out: list[Put] = []
         stamp, seq, pos, vel = st["stamp"], st["seq"], np.array(st["position"]), np.array(st["velocity"])
         if np.linalg.norm(pos) > 0.5:  # riding: the flood, a fake phase per state, never from the passenger's source
-            fake = ("SEPARATED", "ABORT")[self.floods % 2]
+            fake = ("SEPARATED", "ABORT", "RIDING")[self.floods % 3]
             self.floods += 1
-            out.append((PAIR_KEYS.passenger_state, PassengerStatus(fake, stamp, 10**7 + self.floods, pos + [0, 0, -1.5],
-                                                                   [0, 0, 0], fake == "SEPARATED").to_json(), False))
+            out.append(Put(PAIR_KEYS.passenger_state, PassengerStatus(fake, stamp, 10**7 + self.floods, pos + [0, 0, -1.5],
+                                                                      [0, 0, 0], fake == "SEPARATED").to_json()))
         if self.walk_from is None and np.linalg.norm(pos) > 2.0:
             self.walk_from = stamp
         if self.walk_from is not None and stamp - self.walk_from < self.WALK_S:
             ahead = (stamp - self.walk_from) * 1.0
-            out.append((PAIR_KEYS.carrier_state, spoof(seq + 1, stamp + 0.001, pos + TOWARDS * ahead, vel + TOWARDS), True))
+            out.append(Put(PAIR_KEYS.carrier_state, spoof(seq + 1, stamp + 0.001, pos + TOWARDS * ahead, vel + TOWARDS), True))
             self.walked += 1
         elif self.walk_from is not None and self.burst_at is None and distance(pos) < 15.5:
             self.burst_at = stamp
             short = TARGET * [1, 1, 0] - TOWARDS * 7.0
-            out += [(PAIR_KEYS.carrier_state, spoof(seq + 1 + k, stamp + 0.001 * (k + 1), short, [0, 0, 0]), True)
+            out += [Put(PAIR_KEYS.carrier_state, spoof(seq + 1 + k, stamp + 0.001 * (k + 1), short, [0, 0, 0]), True)
                     for k in range(5)]
         return out
 
@@ -217,3 +241,80 @@ def test_unsigned_spoofs_and_a_relocalised_carrier_never_fire_the_latch(tmp_path
     for text in ("carrier feed not trusted (contested", "carrier feed not trusted (settling: within the carrier's limits",
                  "carrier feed trusted again: back on the dock point, riding"):
         assert any(m.startswith(text) for m in said), (text, said)
+
+
+class Replays(Campaign):
+    """The campaign, and every 10th real (signed) state's payload and tag put again 30 states
+    later with the real source id: a recording replayed."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.recorded: list[tuple[bytes, bytes]] = []
+
+    def __call__(self, st: dict[str, Any], source: Any, attachment: bytes | None, raw: bytes) -> list[Put]:
+        out = super().__call__(st, source, attachment, raw)
+        if attachment is not None:
+            self.recorded.append((raw, attachment))
+        if len(self.recorded) > 30 and len(self.recorded) % 10 == 0:
+            payload, tag = self.recorded[-30]
+            out.append(Put(PAIR_KEYS.carrier_state, payload, True, tag))
+        return out
+
+
+class Slowloris:
+    """``count`` TCP connections to 127.0.0.1:``port`` that send one byte and then nothing."""
+
+    def __init__(self, port: int, count: int = 350) -> None:
+        self.conns: list[socket.socket] = []
+        for _ in range(count):
+            conn = socket.create_connection(("127.0.0.1", port), timeout=5.0)
+            conn.sendall(b"\x00")
+            self.conns.append(conn)
+
+    def close(self) -> None:
+        for conn in self.conns:
+            conn.close()
+
+
+def test_signed_bus_accepts_no_spoof_no_replay_and_exits_cleanly_under_a_slowloris(tmp_path: Path) -> None:
+    """With the pair's key (the three processes, in lockstep): the copier walk, the burst, the
+    status flood (SEPARATED, ABORT, RIDING) and replayed signed states are all dropped before
+    anything else looks at them; the feed never doubts its carrier (no contest, no resync), the
+    separation latches at b c and P1-P3 hold. 350 slowloris connections sit on the mission's
+    Zenoh listener from RIDING to the end: it exits 0, no traceback (the carrier too)."""
+    key = tmp_path / "bus.key"
+    key.write_text(KEY.hex())
+    port = free_port(socket.SOCK_STREAM)
+    signed = ("--zenoh-signing-key", str(key))
+    campaign = Replays()
+    with flight(tmp_path, "signed-bus", speed=SPEED, lockstep=True, carrier_args=signed,
+                mission_args=(*signed, "--zenoh-listen", f"tcp/127.0.0.1:{port}")) as f:
+        f.wait_phase("RIDING")
+        attacker = Attacker(campaign, session=f.router.session)
+        slow = None
+        try:
+            slow = Slowloris(port)
+            f.wait_phase("NAVIGATING", 90.0)
+            sent = attacker.stop()
+            code = f.wait_mission(60.0)
+        finally:
+            attacker.close()
+            if slow is not None:
+                slow.close()
+        assert code == 0, f.text("mission.err")[-3000:]
+        assert "Traceback" not in f.text("mission.err") + f.text("carrier.err")
+        s = f.summary()
+        assert_safe_end(f, modes=("AUTO.LOITER",))
+        assert_never_disarmed_in_the_air(f)
+    assert campaign.walked >= 60 and campaign.burst_at is not None and campaign.floods >= 200, vars(campaign)
+    feed = s["carrier_feed"]
+    spoofs, replays = sent[PAIR_KEYS.carrier_state], sent[f"{PAIR_KEYS.carrier_state} replay"]
+    assert feed["signed"] and feed["dropped"] == {"unbound": 2, "unsigned": spoofs, "replay": replays}, (sent, feed)
+    assert feed["contests"] == 0 and feed["resyncs"] == 0 and feed["bound_source"].startswith("signer:")
+    assert s["carrier_resync_before_separation"] is False and s["p1"] and s["p2"] and s["p3"], s
+    assert s["carrier_target_distance_at_separation_m"] == pytest.approx(BC, abs=0.05)
+    carrier = f.carrier_summary()
+    assert carrier["closest_target_distance_m"] >= GUARD_M - 0.05, carrier
+    pfeed = carrier["passenger_feed"]
+    assert pfeed["dropped"].get("unsigned", 0) == sent[PAIR_KEYS.passenger_state], (sent, pfeed)
+    assert set(pfeed["dropped"]) <= {"unbound", "unsigned"}, pfeed
