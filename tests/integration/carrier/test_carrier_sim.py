@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 import zenoh
 
+from mission.bus.auth import BusAuth
 from mission.bus.bridge import CarrierFeed, PassengerPublisher, keys
 from mission.cli import main as cli_main
 from mission.time.clock import Clock, LockstepClock, ManualClock, ScaledClock
@@ -47,9 +48,10 @@ class Passenger:
     binds only a passenger that began there) and says it is on ``carrier``'s dock point (without a
     carrier: 1.5 m above the origin)."""
 
-    def __init__(self, session: zenoh.Session, pair: str, clock: Clock, carrier: CarrierController | None = None) -> None:
+    def __init__(self, session: zenoh.Session, pair: str, clock: Clock, carrier: CarrierController | None = None,
+                 auth: BusAuth | None = None) -> None:
         # blocking, never dropped: the statuses of a boarding go out back to back
-        self.pub = PassengerPublisher(session, pair, zenoh.CongestionControl.BLOCK)
+        self.pub = PassengerPublisher(session, pair, zenoh.CongestionControl.BLOCK, auth=auth)
         self.clock, self.seq, self.carrier = clock, 0, carrier
         self.on_deck = 0  # statuses sent before riding
 
