@@ -132,6 +132,9 @@ def _jsonable(value: Any) -> Any:
               "(marsupial run --lockstep, the mock vehicle's simulated time) instead of a scaled wall clock.")
 @click.option("--summary", "summary_path", type=click.Path(dir_okay=False), default=None, metavar="PATH",
               help="Write the carrier's summary (closest approach, braking distance, guard activity) as JSON.")
+@click.option("--zenoh-signing-key", "bus_key_file", type=click.Path(dir_okay=False), default=None, metavar="FILE",
+              help="Bus signing key file of the pair (overrides zenoh.signing_key_file): the carrier's state is signed, "
+                   "the passenger's status must carry its tag.")
 def carrier_cli(config: str, backend: str | None, speed: float, pair: str | None, listen: tuple[str, ...],
                     connect: tuple[str, ...], encoding: str | None, rate: float | None, mavlink_url: str | None,
                     target_system: int | None, kinematics: str | None, offset_ned: str | None,

@@ -1,7 +1,7 @@
 """Attacks on the Zenoh bus without a router's access control (peer mode, the demo's case), and a
 faulty carrier: whole missions in lockstep, each ending safely.
 
-Unsigned (in one process, :func:`tests.integration.mission_harness.flying_pair`):
+Unsigned (in one process, :func:`tests.support.mission_harness.flying_pair`):
 
 - a publisher that copies the real carrier's source id and sends each state again with sequence
   + 1, walking away towards the target at 1 m/s (on main: every honest state dropped as
@@ -41,8 +41,8 @@ from mission.bus.wire import PassengerStatus
 from mission.carrier.controller import OwnState
 from tests.faults.procs import assert_safe_end, flight
 from tests.faults.test_matrix import assert_never_disarmed_in_the_air, concurrently
-from tests.integration.mission_harness import Pair, flying_pair
-from tests.integration.zenoh_util import free_port, peer
+from tests.support.mission_harness import Pair, flying_pair
+from tests.support.zenoh_util import free_port, peer
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(240)]
 

@@ -176,7 +176,7 @@ def test_a_non_finite_value_in_the_loop_aborts_to_hold_with_the_summary_written(
     clock = ManualClock()
     world = CorruptWorld(clock, target_ned_m=np.asarray(cfg.scenario.target, dtype=float))
     recorder = FlightRecorder(tmp_path / "log", mission_info(cfg))
-    outcome = MissionController(cfg, world, world, clock, publisher=world, recorder=recorder, command_thread=False).run()
+    outcome = MissionController(cfg, world, world.feed, clock, publisher=world, recorder=recorder, command_thread=False).run()
     assert (outcome.phase, outcome.reason) == ("ABORT", AbortReason.NONFINITE.value), outcome.detail
     assert "non-finite" in outcome.detail and "in RIDING" in outcome.detail
     assert all(np.isfinite(v).all() for _, v in world.setpoints)  # nothing non-finite ever went out

@@ -249,7 +249,7 @@ def test_an_untrusted_carrier_state_never_fires_the_latch_the_passenger_holds_th
     assert norm(target - state.anchor) == pytest.approx(model.tick.event_distance_m, abs=1e-9)  # ... of the real carrier
     held = [k for k, h in enumerate(holding) if h]
     assert len(held) == 250 and sep > held[-1]
-    refs = [log[k][2].setpoint for k in held]  # holding: the reference stands still, the vehicle settles on it
+    refs = [log[k][2].setpoint.velocity_ned_m_s for k in held]  # holding: the reference stands still, the vehicle settles on it
     assert norm(refs[-1]) < 0.05
     events = [e for _, _, d in log for e in d.events]
     assert any(e.startswith("carrier feed not trusted (settling: after a resync)") for e in events)

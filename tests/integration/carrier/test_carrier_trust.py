@@ -15,8 +15,8 @@ from mission.bus.wire import PassengerStatus
 from mission.config.schema import Config, from_dict
 from mission.time.clock import ManualClock
 from sim.robots.carrier import CarrierMode, CarrierSim
-from tests.integration.test_carrier_sim import TARGET, Passenger, _seen, sessions
-from tests.integration.zenoh_util import wait_for
+from tests.integration.carrier.test_carrier_sim import TARGET, Passenger, _seen, sessions
+from tests.support.zenoh_util import wait_for
 
 pytestmark = pytest.mark.timeout(60)
 

@@ -9,7 +9,7 @@ import time
 import pytest
 
 from mission.bus.session import CLOSE_TIMEOUT_S, close_session
-from tests.integration.zenoh_util import endpoint, free_port, peer
+from tests.support.zenoh_util import endpoint, free_port, peer
 
 pytestmark = pytest.mark.timeout(60)
 

@@ -1,7 +1,7 @@
 """close_session: a Zenoh close that fails or hangs never takes the command's exit with it
 (stand-ins for the session: Zenoh's close raising ZError("close operation timed out") after
 ~10 s is a known upstream behaviour, eclipse-zenoh/zenoh#2675; the real one under a slowloris
-is in tests/integration/test_bus_close.py)."""
+is in tests/integration/bus/test_bus_close.py)."""
 from __future__ import annotations
 
 import logging
