@@ -110,7 +110,8 @@ def step(state: MissionState, obs: Observation, m: MissionModel) -> tuple[Missio
 
 
 def _step(state: MissionState, obs: Observation, m: MissionModel) -> tuple[MissionState, Decision]:
-    """The failsafes, then the phase's handler; the carrier's position as the vehicle's home while flying."""
+    """The failsafes, then the phase's handler; the carrier's position (a fresh, trusted one) as the
+    vehicle's home while flying."""
     t = obs.t_s
     state, early = _failsafes(state, obs, m)
     if early is not None:
@@ -121,7 +122,7 @@ def _step(state: MissionState, obs: Observation, m: MissionModel) -> tuple[Missi
     handler = HANDLERS[state.phase]
     state, decision = handler(state, obs, m)
     c = obs.carrier
-    if c is not None and c.age_s <= m.carrier_timeout_s and state.phase.flying:
+    if c is not None and c.age_s <= m.carrier_timeout_s and c.untrusted is None and state.phase.flying:
         decision = replace(decision, home_ned_m=c.position_ned_m + c.velocity_ned_m_s * c.age_s)
     return state, decision
 
