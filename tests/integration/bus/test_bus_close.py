@@ -1,6 +1,7 @@
-"""A Zenoh session closes within a bound under a slowloris: 350 TCP connections to its listener
-that send one byte and then nothing (on main, a mission's close under such a load raised
-zenoh.ZError, exit 1 instead of its own code)."""
+"""A Zenoh session's close under a slowloris (350 TCP connections to its listener that send one
+byte and then nothing) raises nothing (on main, a mission's close under such a load raised
+zenoh.ZError, exit 1 instead of its own code). A close left running after CLOSE_TIMEOUT_S, and the
+process's exit code then: tests/adversarial/test_bus_attacks.py."""
 from __future__ import annotations
 
 import socket
@@ -8,7 +9,7 @@ import time
 
 import pytest
 
-from mission.bus.session import CLOSE_TIMEOUT_S, close_session
+from mission.bus.session import close_abandoned, close_session
 from tests.support.zenoh_util import endpoint, free_port, peer
 
 pytestmark = pytest.mark.timeout(60)
@@ -24,10 +25,11 @@ def test_close_under_a_slowloris_returns_within_its_bound_and_raises_nothing() -
             conn.sendall(b"\x00")  # a frame begun, never finished
             conns.append(conn)
         start = time.monotonic()
-        close_session(session)
+        close_session(session, timeout_s=30.0)  # let it finish here (an abandoned close would outlive the test)
         took = time.monotonic() - start
     finally:
         for conn in conns:
             conn.close()
-    assert len(conns) == 350 and took < CLOSE_TIMEOUT_S + 1.0, took
+    assert len(conns) == 350 and took < 20.0, took  # Zenoh's own close gives up after ~10 s
+    assert not close_abandoned()
     close_session(session)  # closing again is harmless too
