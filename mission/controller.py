@@ -368,11 +368,12 @@ class MissionController:
         return self._outcome()
 
     def _note_separation(self) -> None:
-        """At the tick the latch fired: how often the carrier feed had resynced onto a new track or
-        had its source contested by then (the separation may rest on such a track)."""
+        """At the tick the latch fired: how often the carrier feed had jumped onto a new track (a
+        resync beyond the carrier's limits) or had its source contested by then (the separation
+        may rest on such a track)."""
         if self._doubts_at_separation is None and self.state.anchor is not None:
             c = getattr(self.feed, "counters", None)
-            self._doubts_at_separation = int(c.get("resyncs", 0) + c.get("contests", 0)) if isinstance(c, dict) else 0
+            self._doubts_at_separation = int(c.get("jumps", 0) + c.get("contests", 0)) if isinstance(c, dict) else 0
 
     def _counters(self) -> dict[str, Any]:
         """What was dropped and why, for summary.json: the carrier feed's counters (received,
@@ -398,8 +399,8 @@ class MissionController:
                        else self._doubts_at_separation > 0}
             if self._doubts_at_separation:  # the latch may have fired on a relocalised (or spoofed) track
                 outcome.update(p1=None, p2=None, p3=None, p1_p3_note=(
-                    "not claimed: the carrier feed resynced onto a new track or its source was contested before "
-                    "the separation (carrier_feed.resyncs, carrier_feed.contests)"))
+                    "not claimed: the carrier feed jumped onto a new track or its source was contested before "
+                    "the separation (carrier_feed.jumps, carrier_feed.contests)"))
             summary = self.recorder.close(outcome, info)
             log_dir = str(self.recorder.dir)
         return MissionOutcome(phase=st.phase, reason=st.reason, detail=st.detail, log_dir=log_dir, summary=summary)

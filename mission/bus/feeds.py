@@ -258,7 +258,7 @@ class CarrierFeed(_Feed[CarrierState]):
     [s] on ``clock``; limits: the carrier's own limits for the plausibility gate (default: 3 m/s
     top speed). The liveliness of ``marsupial/<pair>/carrier/alive`` gives ``alive``; when it
     goes away the feed unbinds its source. ``counters`` add ``bound_source``,
-    ``rejected_sources`` ({source: n}), ``resyncs``, ``settles`` and ``contests`` (the gate's);
+    ``rejected_sources`` ({source: n}), ``resyncs``, ``jumps``, ``settles`` and ``contests`` (the gate's);
     ``latest().untrusted`` says why the newest state is not trusted yet (the gate's trust).
     """
 
@@ -314,7 +314,8 @@ class CarrierFeed(_Feed[CarrierState]):
 
     def _extra_counters(self) -> dict[str, Any]:
         return {"bound_source": self.gate.bound, "rejected_sources": dict(self.gate.rejected_sources),
-                "resyncs": self.gate.resyncs, "settles": self.gate.settles, "contests": self.gate.contests}
+                "resyncs": self.gate.resyncs, "jumps": self.gate.jumps, "settles": self.gate.settles,
+                "contests": self.gate.contests}
 
     def _received_extra(self, now: float) -> dict[str, Any]:
         return {"untrusted": self.gate.distrust(now)}

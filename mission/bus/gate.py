@@ -14,10 +14,12 @@ blocking, whether it is accepted.
   (the rules: docs/wire.md). An outlier never becomes the reference; rejected states that form a
   plausible track of ``resync_samples`` replace it (``resyncs``). The separation latch only ever
   sees accepted states.
-- Trust (:meth:`FeedGate.distrust`): a new reference (just bound, or a resync) is trusted only
-  once it has stayed within the carrier's own limits (no ``speed_margin``; acceleration
-  ``max_accel_m_s2``) for ``settle_s``; a state beyond them starts the settle again
-  (``settles``). A bound source whose states drop as stale ``contest_drops`` times within
+- Trust (:meth:`FeedGate.distrust`): a new reference (just bound, or a resync whose first state
+  does not follow the old reference within the carrier's own limits: a *jump*, counted in
+  ``jumps``; a resync after a silence or a burst of late states that does is the same carrier
+  moving on) is trusted only once it has stayed within the carrier's own limits (no
+  ``speed_margin``; acceleration ``max_accel_m_s2``) for ``settle_s``; a state beyond them starts
+  the settle again (``settles``). A bound source whose states drop as stale ``contest_drops`` times within
   ``contest_window_s`` is contested (a second publisher with its source id and a higher
   sequence: an honest ordered stream never does it) until ``settle_s`` after the last one
   (``contests``). The passenger neither rides nor separates on an untrusted state: it holds on the
@@ -158,12 +160,18 @@ class _Track:
     last: Sample
     length: int = 1
     lead_s: float = -math.inf
-    first_rx_s: float = math.nan  # receive time [s] of its first sample
+    first: Sample | None = None  # its first sample (default: ``last``)
 
     def __post_init__(self) -> None:
         self.lead_s = max(self.lead_s, self.last.lead_s)
-        if math.isnan(self.first_rx_s):
-            self.first_rx_s = self.last.rx_s
+        if self.first is None:
+            self.first = self.last
+
+    @property
+    def first_rx_s(self) -> float:
+        """Receive time [s] of its first sample."""
+        assert self.first is not None
+        return self.first.rx_s
 
     def fits(self, sample: Sample, limits: GateLimits, use_seq: bool) -> str | None:
         return implausible(self.last, sample, limits, use_seq, self.lead_s)
@@ -182,7 +190,8 @@ class FeedGate:
         self.limits, self.use_seq = limits, use_seq
         self.bound: str | None = None
         self.resyncs = 0
-        self.settles = 0  # new references that had to settle (bind, resync), and restarts of a settle
+        self.settles = 0  # new references that had to settle (bind, a jump), and restarts of a settle
+        self.jumps = 0  # resyncs onto a track that does not follow the old reference within the carrier's limits
         self.contests = 0  # times the bound source became contested
         self.rejected_sources: dict[str, int] = {}
         self._reference: _Track | None = None
@@ -269,9 +278,13 @@ class FeedGate:
         else:
             self._resync = track = _Track(sample)
         if track.length >= self.limits.resync_samples:
-            self._reference, self._resync = track, None
+            old, self._reference, self._resync = self._reference.last, track, None
             self.resyncs += 1
-            self._settle(track.first_rx_s, "after a resync")
+            assert track.first is not None
+            jumped = beyond_limits(old, track.first, self.limits)
+            if jumped is not None:  # not the same carrier moving on (a silence, a burst of late states): a jump
+                self.jumps += 1
+                self._settle(track.first_rx_s, f"after a resync: {jumped} beyond the carrier's limits")
             return None
         return reason
 

@@ -132,6 +132,9 @@ def test_after_a_silence_one_state_is_not_believed_a_track_of_five_is() -> None:
     assert gate.offer("c", spoof) == "gap"
     assert offer_all(gate, "c", after) == ["gap"] * 4 + [None] * 6
     assert gate.resyncs == 1 and gate.describe_reference().startswith(f"seq {after[-1].seq} ")
+    # the honest track after the silence follows the old reference within the carrier's limits (4 m
+    # in 4 s at 1 m/s): the same carrier moving on, trusted at once, not a jump
+    assert gate.jumps == 0 and gate.distrust(after[-1].rx_s) is None
 
 
 # ------------------------------------------------------------------------------------- trust
@@ -154,7 +157,7 @@ def test_after_a_relocalisation_the_new_track_is_not_trusted_for_settle_s() -> N
     assert gate.distrust(3.0) is None
     after = track(120, start=90, north0=20.0)  # the carrier's localisation jumped 20 m for good
     results = offer_all(gate, "c", after)
-    assert results[:4] == ["jump"] * 4 and gate.resyncs == 1
+    assert results[:4] == ["jump"] * 4 and gate.resyncs == 1 and gate.jumps == 1
     gate = FeedGate(LIMITS)  # again, asking after each state
     offer_all(gate, "c", track(90))
     trusted = [(gate.offer("c", s), gate.distrust(s.rx_s)) for s in after]
@@ -178,7 +181,7 @@ def test_a_burst_of_five_spoofed_states_never_leaves_a_trusted_reference_behind(
     assert gate.resyncs == 1 and gate.distrust(t + 0.01) is not None  # on the spoof, but not trusted
     trust = [(gate.offer("c", s), gate.distrust(s.rx_s)) for s in honest[91:]]
     back = next(i for i, (r, _) in enumerate(trust) if r is None)
-    assert gate.resyncs == 2 and all(d is not None for _, d in trust[:back + 55])
+    assert gate.resyncs == 2 and gate.jumps == 2 and all(d is not None for _, d in trust[:back + 55])
     assert trust[-1][1] is None  # the honest track, settled
 
 
