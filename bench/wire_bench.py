@@ -7,6 +7,10 @@ thread's CPU time in microseconds (CPU time leaves out what the scheduler gave t
 on a loaded machine). Rows: a valid carrier state and passenger status in JSON (what a feed does
 per sample at 30-50 Hz), a CDR Odometry, building a :class:`CarrierState` in code (what a
 publisher does), and the rejection of hostile samples (NaN, a wrong type, 8 KB of nesting).
+"signed" rows add the bus's authentication tag (:mod:`mission.bus.signing`): verify (MAC,
+replay window, the signer's counter) then decode, what a feed with ``zenoh.signing_key_file``
+does per sample; signing, what a publisher adds; and refusing an unsigned or forged sample
+(before any decoding).
 """
 from __future__ import annotations
 
@@ -20,6 +24,7 @@ import numpy as np
 from mission.bus.wire import CarrierState, WireError, decode_carrier_json, decode_passenger_json, encode_passenger_json
 from mission.bus.wire import PassengerStatus
 from mission.bus.ros2 import decode_odometry_cdr, encode_odometry_cdr
+from mission.bus.signing import Signer, Verifier, pair_key
 
 CARRIER = json.dumps({"stamp": 12.345, "seq": 7, "frame": "local_ned", "position": [1.0, 2.0, -3.0],
                       "velocity": [0.5, -0.25, 0.0], "yaw": 0.1}).encode()
@@ -30,6 +35,43 @@ WRONG_TYPE = CARRIER.replace(b"7", b'"7"')
 NESTED = b"[" * 4000 + b"]" * 4000
 ODOMETRY = encode_odometry_cdr(CarrierState(12.345, 7, "local_ned", np.array([1.0, 2.0, -3.0]),
                                             np.array([0.5, -0.25, 0.0]), 0.1))
+
+
+KEY_EXPR = "marsupial/pair0/carrier/state"
+PAIR_KEY = pair_key(bytes(range(32)), "pair0")
+NOW_US = 1_800_000_000_000_000
+
+
+class _Signed:
+    """Verify + decode of signed samples, each with a fresh counter (a replayed one is refused)."""
+
+    def __init__(self, raw: bytes, decode: Callable[[bytes], object]) -> None:
+        self.raw, self.decode = raw, decode
+        self.signer, self.verifier = Signer(PAIR_KEY), Verifier(PAIR_KEY)
+        self.tags: list[bytes] = []
+
+    def __call__(self) -> object:
+        if not self.tags:  # signed ahead, on the first (warm-up, untimed) call: enough for a whole row
+            self.tags = [self.signer.attachment(KEY_EXPR, self.raw, NOW_US) for _ in range(25_000)][::-1]
+        self.verifier.verify(KEY_EXPR, self.raw, self.tags.pop(), NOW_US)
+        return self.decode(self.raw)
+
+
+def _refused(attachment: bytes | None) -> Callable[[], object]:
+    verifier = Verifier(PAIR_KEY)
+
+    def call() -> object:
+        try:
+            verifier.verify(KEY_EXPR, CARRIER, attachment, NOW_US)
+        except WireError as exc:
+            return exc.reason
+        raise AssertionError("accepted an unsigned or forged sample")
+    return call
+
+
+_SIGNER = Signer(PAIR_KEY)
+FORGED = bytearray(Signer(PAIR_KEY).attachment(KEY_EXPR, CARRIER, NOW_US))
+FORGED[-1] ^= 1
 
 
 def _rejected(decode: Callable[[bytes], object], raw: bytes) -> Callable[[], object]:
@@ -50,6 +92,11 @@ CASES: dict[str, Callable[[], object]] = {
     "reject NaN (JSON)": _rejected(decode_carrier_json, NAN),
     "reject wrong type (JSON)": _rejected(decode_carrier_json, WRONG_TYPE),
     "reject 8 KB nesting (JSON)": _rejected(decode_carrier_json, NESTED),
+    "carrier JSON, signed": _Signed(CARRIER, decode_carrier_json),
+    "passenger JSON, signed": _Signed(PASSENGER, decode_passenger_json),
+    "sign a carrier state": lambda: _SIGNER.attachment(KEY_EXPR, CARRIER, NOW_US),
+    "reject unsigned": _refused(None),
+    "reject forged tag": _refused(bytes(FORGED)),
 }
 
 

@@ -278,7 +278,8 @@ def _carrier_obs(received: Any, alive: bool | None) -> CarrierObs | None:
     st = received.value
     return CarrierObs(position_ned_m=np.asarray(st.position, dtype=float),
                       velocity_ned_m_s=np.asarray(st.velocity_ned_m_s, dtype=float), age_s=received.age_s, alive=alive,
-                      acceleration_ned_m_s2=st.acceleration_ned_m_s2, yaw_rad=st.yaw_rad)
+                      acceleration_ned_m_s2=st.acceleration_ned_m_s2, yaw_rad=st.yaw_rad,
+                      untrusted=getattr(received, "untrusted", None))
 
 
 @dataclass(frozen=True)
@@ -336,6 +337,7 @@ class MissionController:
         self.px4_params: dict[str, Any] = {}  # PX4 parameters read, set and restored (for the summary)
         if recorder is not None:
             recorder.set_counters(self._counters)  # read by the record's sinks, off the loop
+        self._doubts_at_separation: int | None = None  # the carrier feed's resyncs + contests when the latch fired
 
     def _observe(self, t: float, worker: CommandWorker) -> Observation:
         vstate = self.link.state
@@ -447,7 +449,7 @@ class MissionController:
             self.publisher.publish(PassengerStatus(
                 phase=st.phase.value, stamp_s=t, seq=self._seq, position_ned_m=obs.vehicle.position_ned_m,
                 velocity_ned_m_s=obs.vehicle.velocity_ned_m_s, separated=st.anchor is not None, anchor_ned_m=st.anchor,
-                leg=st.leg, reason=st.reason if st.phase == Phase.ABORT else None))
+                leg=st.leg, reason=st.reason if st.phase == Phase.ABORT else None, holding=st.held_dock is not None))
         except Exception as exc:  # a bus hiccup must never stop the flight loop
             log.warning("could not publish passenger status: %s", exc)
 
@@ -499,6 +501,7 @@ class MissionController:
                     log.info(text)
                 self._publish(t, obs)
                 self._record(t, obs, dec, events)
+                self._note_separation()
                 self.ticks += 1
                 if self.on_tick is not None:
                     self.on_tick(TickReport(t, self.state.phase, dec, self._received, start_ns, observed_ns,
@@ -515,6 +518,14 @@ class MissionController:
             self._restore_px4()
             self.overruns = periodic.overruns
         return self._outcome()
+
+    def _note_separation(self) -> None:
+        """At the tick the latch fired: how often the carrier feed had jumped onto a new track (a
+        resync beyond the carrier's limits) or had its source contested by then (the separation
+        may rest on such a track)."""
+        if self._doubts_at_separation is None and self.state.anchor is not None:
+            c = getattr(self.feed, "counters", None)
+            self._doubts_at_separation = int(c.get("jumps", 0) + c.get("contests", 0)) if isinstance(c, dict) else 0
 
     def _counters(self) -> dict[str, Any]:
         """What was dropped and why, for summary.json: the carrier feed's counters (received,
@@ -536,7 +547,13 @@ class MissionController:
                     "recovered": recovered_info(st), "legs_done": list(st.legs_done), "legs_skipped": st.legs_skipped}
             outcome = {"phase": st.phase, "reason": st.reason, "detail": st.detail,
                        "ticks": self.ticks, "loop_overruns": self.overruns, **self._counters(),
-                       "position_rate_hz": round(float(np.median(self._rates)), 2) if self._rates else None}
+                       "position_rate_hz": round(float(np.median(self._rates)), 2) if self._rates else None,
+                       "carrier_resync_before_separation": None if self._doubts_at_separation is None
+                       else self._doubts_at_separation > 0}
+            if self._doubts_at_separation:  # the latch may have fired on a relocalised (or spoofed) track
+                outcome.update(p1=None, p2=None, p3=None, p1_p3_note=(
+                    "not claimed: the carrier feed jumped onto a new track or its source was contested before "
+                    "the separation (carrier_feed.jumps, carrier_feed.contests)"))
             summary = self.recorder.close(outcome, info)
             log_dir = str(self.recorder.dir)
         return MissionOutcome(phase=st.phase, reason=st.reason, detail=st.detail, log_dir=log_dir, summary=summary)

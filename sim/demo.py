@@ -7,15 +7,20 @@ a free loopback port and every process connects to it, each pair in its own key 
 ``marsupial/<pair>/...`` with its own MAVLink port. It shows the live phase of each mission,
 then prints a summary table, writes a plot per pair and exits 0 when P1-P3 held for every pair
 (and, with ``mission.final_action = "return"``, the passenger docked on its carrier again).
+The pairs sign their bus samples with a throwaway key (``zenoh.signing_key_file``,
+:mod:`mission.bus.signing`), made at the start and deleted at the end.
 """
 from __future__ import annotations
 
 import json
 import os
+import secrets
+import shutil
 import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from contextlib import ExitStack
@@ -26,6 +31,7 @@ import click
 from tqdm import tqdm
 
 from mission.bus.bridge import open_session
+from mission.bus.session import close_session
 from mission.config.schema import ZenohSection, load_config
 from mission.errors import MarsupialError
 from mission.flightdata.writer import DEFAULT_LIVE, LiveAddress, is_loopback, parse_live
@@ -116,10 +122,12 @@ def _follow(pair: PairRun, progress: PairProgress) -> None:
 
 
 def start_carrier_robot(kind: str, name: str, zenoh_ep: str, speed: float, start: str, stack: ExitStack,
-                        err: int | None, lockstep: bool = False) -> tuple[list[str], subprocess.Popen | None]:
+                        err: int | None, lockstep: bool = False,
+                        bus_key: Path | None = None) -> tuple[list[str], subprocess.Popen | None]:
     """The robot under a ``kind`` carrier ("sim": built in, none to start; "mavlink": a mock PX4
-    rover, sysid 2; "ros2": a ROS-2-shaped robot on rmw_zenoh keys in namespace ``name``; with
-    ``lockstep`` both step on the carrier's clock) and the carrier controller's arguments for it."""
+    rover, sysid 2; "ros2": a ROS-2-shaped robot on rmw_zenoh keys in namespace ``name``, taking
+    only commands signed with ``bus_key`` if given; with ``lockstep`` both step on the carrier's
+    clock) and the carrier controller's arguments for it."""
     if kind == "mavlink":
         port = free_port(socket.SOCK_DGRAM)
         robot = subprocess.Popen(_python_cli("mock-vehicle", "--frame", "rover", "--sysid", "2", "--mavlink",
@@ -130,8 +138,9 @@ def start_carrier_robot(kind: str, name: str, zenoh_ep: str, speed: float, start
         return ["--backend", "mavlink", "--mavlink", f"udpin:127.0.0.1:{port}", "--target-system", "2",
                 "--kinematics", "ackermann"], robot
     if kind == "ros2":
+        signed = ["--signing-key", str(bus_key), "--pair", name] if bus_key is not None else []
         robot = subprocess.Popen(_python_cli("ros2-robot", "--key-form", "rmw_zenoh", "--namespace", name,
-                                             "--zenoh-connect", zenoh_ep, "--speed", str(speed),
+                                             "--zenoh-connect", zenoh_ep, "--speed", str(speed), *signed,
                                              *(["--lockstep"] if lockstep else [])), stderr=err)
         stack.callback(stop_process, robot)
         return ["--backend", "ros2", "--key-form", "rmw_zenoh", "--ros2-namespace", name, "--kinematics",
@@ -139,11 +148,25 @@ def start_carrier_robot(kind: str, name: str, zenoh_ep: str, speed: float, start
     return ["--backend", "sim"], None
 
 
+def throwaway_key(stack: ExitStack) -> Path:
+    """A fresh random 32-byte bus signing key in a private temporary file (mode 0600), removed
+    when ``stack`` closes. Each pair signs with its own key derived from it (``mission.bus.signing``)."""
+    folder = Path(tempfile.mkdtemp(prefix="marsupial-demo-"))
+    stack.callback(shutil.rmtree, folder, True)
+    path = folder / "bus.key"
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+    with os.fdopen(fd, "w") as f:
+        f.write(secrets.token_hex(32) + "\n")
+    return path
+
+
 def start_pair(config: str, name: str, zenoh_ep: str, speed: float, log_root: Path, stack: ExitStack,
-               quiet: bool, carrier_kind: str = "sim", lockstep: bool = False, live: LiveAddress | None = None) -> PairRun:
+               quiet: bool, carrier_kind: str = "sim", lockstep: bool = False, live: LiveAddress | None = None,
+               bus_key: Path | None = None) -> PairRun:
     """Start the carrier (and its robot), the mock vehicle and the mission of one pair; register their cleanup.
     The vehicle learns the carrier's motion from the pair's Zenoh state (``--deck``): it stands on
     the carrier's deck until it takes off, and lands or crashes on it as it comes back.
+    With ``bus_key`` (a key file) the pair signs its bus samples (``--zenoh-signing-key``).
 
     ``lockstep``: the three step on the mock vehicle's simulated time, the carrier's robot on the
     carrier's (``speed`` is then the pace after a participant is lost); else wall clocks scaled
@@ -154,10 +177,11 @@ def start_pair(config: str, name: str, zenoh_ep: str, speed: float, log_root: Pa
     err = subprocess.DEVNULL if quiet else None
     mode = ["--lockstep"] if lockstep else []
     start = ",".join(str(v) for v in cfg.scenario.carrier_start)
-    backend_args, robot = start_carrier_robot(carrier_kind, name, zenoh_ep, speed, start, stack, err, lockstep)
+    signed = ["--zenoh-signing-key", str(bus_key)] if bus_key is not None else []
+    backend_args, robot = start_carrier_robot(carrier_kind, name, zenoh_ep, speed, start, stack, err, lockstep, bus_key)
     carrier = subprocess.Popen(_python_cli("carrier", config, "--speed", str(speed), "--pair", name,
                                            "--zenoh-connect", zenoh_ep, "--summary", str(pair.log_dir / "carrier.json"),
-                                           "--mcap", str(pair.log_dir / "carrier.mcap"), *backend_args, *mode),
+                                           "--mcap", str(pair.log_dir / "carrier.mcap"), *backend_args, *signed, *mode),
                                stderr=err)
     stack.callback(stop_process, carrier)
     vehicle = subprocess.Popen(_python_cli("mock-vehicle", "--mavlink", "udpin:127.0.0.1:0", "--target",
@@ -168,7 +192,7 @@ def start_pair(config: str, name: str, zenoh_ep: str, speed: float, log_root: Pa
     live_args = [] if live is None else ["--live", f"{live.host}:{live.port}"]
     mission = subprocess.Popen(_python_cli("run", config, "--mavlink", f"udpin:127.0.0.1:{mav_port}", "--zenoh-connect",
                                            zenoh_ep, "--pair", name, "--speed", str(speed), "--log-dir", str(pair.log_dir),
-                                           *mode, *live_args),
+                                           *signed, *mode, *live_args),
                                stdout=subprocess.PIPE, stderr=err, text=True)
     stack.callback(stop_process, mission, 30.0)
     pair.procs = {"carrier": carrier, "vehicle": vehicle, "mission": mission}
@@ -186,10 +210,11 @@ def live_addresses(live: LiveAddress | None, pairs: int) -> list[LiveAddress | N
 
 def run_demo(config: str, speed: float, pairs: int, log_root: Path, plot_path: str | None, timeout_s: float,
              quiet: bool = True, progress: bool = True, carrier: str = "sim",
-             lockstep: bool = True, live: LiveAddress | None = None) -> tuple[int, list[dict]]:
+             lockstep: bool = True, live: LiveAddress | None = None, signed: bool = True) -> tuple[int, list[dict]]:
     """Run ``pairs`` marsupial pairs, in lockstep on each mock vehicle's simulated time or at
     ``speed``; return the exit code and each pair's summary. ``live``: pair i serves its flight
-    to Foxglove on ``live``'s port + i (topics ``/pair<i>/...``)."""
+    to Foxglove on ``live``'s port + i (topics ``/pair<i>/...``). ``signed``: the pairs sign their
+    bus samples with a throwaway key (:func:`throwaway_key`), deleted at the end."""
     from mission.cli.run import plot as plot_command
 
     supervise_children()  # a demo killed outright takes its processes with it
@@ -197,9 +222,10 @@ def run_demo(config: str, speed: float, pairs: int, log_root: Path, plot_path: s
     zenoh_port = free_port(socket.SOCK_STREAM)
     zenoh_ep = f"tcp/127.0.0.1:{zenoh_port}"
     with ExitStack() as stack:
+        bus_key = throwaway_key(stack) if signed else None
         router = open_session(ZenohSection(mode="router", listen=[zenoh_ep]))
-        stack.callback(router.close)
-        runs = [start_pair(config, f"pair{i}", zenoh_ep, speed, log_root, stack, quiet, carrier, lockstep, address)
+        stack.callback(close_session, router)
+        runs = [start_pair(config, f"pair{i}", zenoh_ep, speed, log_root, stack, quiet, carrier, lockstep, address, bus_key)
                 for i, address in enumerate(live_addresses(live, pairs))]
         display = PairProgress([p.name for p in runs], tty=progress and sys.stdout.isatty())
         stack.callback(display.close)
@@ -382,7 +408,8 @@ def demo(config: str, realtime: bool, speed: float, pairs: int, plot_path: str |
 
     Each runs as its own process, talking over real UDP (MAVLink 2) and Zenoh on loopback; no
     hardware, no PX4, no external router. Ends with a summary table and a plot; exit code 0 when
-    the paper's P1-P3 held for every pair (and a passenger that returns docked again).
+    the paper's P1-P3 held for every pair (and a passenger that returns docked again). The bus is
+    signed with a throwaway key.
     """
     os.environ.setdefault("PYTHONUNBUFFERED", "1")
     if plot_path is None:  # the plot goes with the logs it draws

@@ -13,6 +13,10 @@ from sim.net import LANE_ENV, free_port  # noqa: F401  (re-exported for the test
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIGS = ROOT / "configs"
+#: The least a configuration file for `marsupial run` / `marsupial carrier` states
+#: (mission.config.required): a target and both robots' speed and acceleration limits.
+FLIGHT_TOML = ("[scenario]\ntarget = [20.0, 15.0, -4.0]\n[safety]\npassenger_max_speed_m_s = 3.0\n"
+               "passenger_max_accel_m_s2 = 2.0\ncarrier_max_speed_m_s = 2.0\ncarrier_max_accel_m_s2 = 1.0\n")
 
 supervise_children()  # every command a test starts ends with the test run, even one killed outright
 

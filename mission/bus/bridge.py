@@ -10,7 +10,8 @@ expressions are namespaced per marsupial pair (:func:`keys`)::
     marsupial/<pair>/passenger/phase    the phase alone, UTF-8 text (for humans and tools)
     marsupial/<pair>/passenger/alive    liveliness token of the passenger
 
-What a feed accepts, drops and counts, and how staleness is reported: docs/wire.md.
+What a feed accepts, drops and counts, and how staleness is reported: docs/wire.md; signed
+samples (``zenoh.signing_key_file``, :mod:`mission.bus.signing`): docs/security.md.
 """
 from mission.bus.feeds import (
     MAX_PAYLOAD_BYTES,

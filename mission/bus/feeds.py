@@ -25,7 +25,8 @@ import zenoh
 from mission.time.clock import Clock
 from mission.config.schema import ZenohSection
 from mission.errors import BusError
-from mission.bus.gate import ANONYMOUS, FeedGate, GateLimits, Sample
+from mission.bus.auth import BusAuth
+from mission.bus.gate import ANONYMOUS, MAX_CANDIDATES, FeedGate, GateLimits, Sample, count_rejected
 from mission.bus.wire import CarrierState, GeoOrigin, PassengerStatus, WireError, decode_carrier, decode_passenger_json, to_local_ned
 from mission.bus.session import Encoding, check_encoding, declare, keys, undeclare
 
@@ -55,7 +56,11 @@ class Received(Generic[T]):
 
 @dataclass(frozen=True)
 class ReceivedCarrierState(Received[CarrierState]):
-    """A carrier state, always in local NED (``value.frame == "local_ned"``)."""
+    """A carrier state, always in local NED (``value.frame == "local_ned"``); ``untrusted``: why
+    the feed does not trust it yet (just bound, a resync, a contested source:
+    :meth:`mission.bus.gate.FeedGate.distrust`), None when it does."""
+
+    untrusted: str | None = None
 
     @property
     def state(self) -> CarrierState:
@@ -77,13 +82,14 @@ class _Feed(Generic[T]):
     _received_type: type[Received[Any]] = Received
     _use_seq = True
 
-    def __init__(self, session: zenoh.Session, key: str, alive_key: str | None, clock: Clock, max_age_s: float) -> None:
+    def __init__(self, session: zenoh.Session, key: str, alive_key: str | None, clock: Clock, max_age_s: float,
+                 auth: BusAuth | None = None) -> None:
         if not max_age_s > 0:
             raise ValueError(f"max_age_s must be > 0, got {max_age_s!r}")
         self.key, self.alive_key, self.clock, self.max_age_s = key, alive_key, clock, float(max_age_s)
+        self._verifier = auth.verifier() if auth is not None else None
         self._lock = threading.Lock()
         self._latest: tuple[T, str, float] | None = None
-        self._last_order: dict[str, tuple[int, float]] = {}
         self._received = 0
         self._accepted = 0
         self._dropped: dict[str, int] = {}
@@ -111,17 +117,12 @@ class _Feed(Generic[T]):
         raise NotImplementedError
 
     def _admit(self, value: T, key: str, source: str, rx: float) -> str | None:
-        """Lock held: the drop reason for ``value``, or None to accept it. Default: newer than
-        the last accepted sample on the same key (sequence number and stamp)."""
-        seq, stamp = self._order_of(value)
-        last = self._last_order.get(key)
-        if last is not None:
-            if self._use_seq and seq <= last[0]:
-                return "stale_seq"
-            if stamp < last[1] or (stamp == last[1] and not self._use_seq):
-                return "stale_stamp"
-        self._last_order[key] = (seq, stamp)
-        return None
+        """Lock held: the drop reason for ``value`` from ``source``, or None to accept it."""
+        raise NotImplementedError
+
+    def _notifies(self, reason: str | None, value: T) -> bool:
+        """Whether the listeners hear a sample dropped for ``reason`` (None: accepted)."""
+        return reason != "source"
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
         rx = self.clock.now()
@@ -134,7 +135,13 @@ class _Feed(Generic[T]):
             size = len(sample.payload)
             if size > MAX_PAYLOAD_BYTES:
                 raise WireError("size", f"{size} bytes > {MAX_PAYLOAD_BYTES}")
-            value = self._decode(sample.payload.to_bytes())
+            raw = sample.payload.to_bytes()
+            if self._verifier is not None:  # the verified signer is the source (source_info is not authenticated)
+                source, _ = self._verifier.verify(sample, raw)
+            else:
+                info = sample.source_info
+                source = ANONYMOUS if info is None else f"{info.source_id.zid}/{info.source_id.eid}"
+            value = self._decode(raw)
         except WireError as exc:
             self._drop(exc.reason, key, str(exc))
             return
@@ -142,8 +149,6 @@ class _Feed(Generic[T]):
             log.exception("unexpected error decoding a sample on %s", key)
             self._drop("internal", key, "unexpected error")
             return
-        info = sample.source_info
-        source = ANONYMOUS if info is None else f"{info.source_id.zid}/{info.source_id.eid}"
         with self._lock:
             reason = self._admit(value, key, source, rx)
             if reason is None:
@@ -152,8 +157,8 @@ class _Feed(Generic[T]):
         if reason is not None:
             seq, stamp = self._order_of(value)
             self._drop(reason, key, f"seq {seq} stamp {stamp} rx {rx:.3f} from {source}{self._describe(value)}")
-            if reason == "source":
-                return
+        if not self._notifies(reason, value):
+            return
         for listener in self._listeners:
             listener(value)
 
@@ -177,8 +182,7 @@ class _Feed(Generic[T]):
             self._alive = alive
             if not alive:
                 self._went_unseen = True
-                self._last_order.clear()  # a restarted sender may count from 0 again
-                self._forget_sender()
+                self._forget_sender()  # a restarted sender is a new source that may count from 0 again
         if changed:
             (log.info if alive else log.warning)("%s is %s", self.alive_key, "alive" if alive else "gone")
 
@@ -192,13 +196,19 @@ class _Feed(Generic[T]):
     # -- caller's thread
     def latest(self) -> Received[T] | None:
         """The newest accepted message with its age, or None if none was accepted yet."""
+        now = self.clock.now()
         with self._lock:
             item = self._latest
+            extra = self._received_extra(now)
         if item is None:
             return None
         value, key, rx = item
-        age = self.clock.now() - rx
-        return self._received_type(value=value, key=key, rx_time_s=rx, age_s=age, stale=age > self.max_age_s)
+        age = now - rx
+        return self._received_type(value=value, key=key, rx_time_s=rx, age_s=age, stale=age > self.max_age_s, **extra)
+
+    def _received_extra(self, now: float) -> dict[str, Any]:
+        """Lock held: more fields of :meth:`latest`'s answer at clock time ``now`` [s]."""
+        return {}
 
     @property
     def alive(self) -> bool | None:
@@ -220,7 +230,7 @@ class _Feed(Generic[T]):
         """Snapshot: ``{"received": n, "accepted": n, "dropped": {reason: n}}``."""
         with self._lock:
             return {"received": self._received, "accepted": self._accepted, "dropped": dict(self._dropped),
-                    **self._extra_counters()}
+                    "signed": self._verifier is not None, **self._extra_counters()}
 
     def _extra_counters(self) -> dict[str, Any]:
         return {}
@@ -248,7 +258,8 @@ class CarrierFeed(_Feed[CarrierState]):
     [s] on ``clock``; limits: the carrier's own limits for the plausibility gate (default: 3 m/s
     top speed). The liveliness of ``marsupial/<pair>/carrier/alive`` gives ``alive``; when it
     goes away the feed unbinds its source. ``counters`` add ``bound_source``,
-    ``rejected_sources`` ({source: n}) and ``resyncs``.
+    ``rejected_sources`` ({source: n}), ``resyncs``, ``jumps``, ``settles`` and ``contests`` (the gate's);
+    ``latest().untrusted`` says why the newest state is not trusted yet (the gate's trust).
     """
 
     _received_type = ReceivedCarrierState
@@ -264,6 +275,7 @@ class CarrierFeed(_Feed[CarrierState]):
         origin: GeoOrigin | None = None,
         max_age_s: float = 0.5,
         limits: GateLimits | None = None,
+        auth: BusAuth | None = None,
     ) -> None:
         check_encoding(encoding)
         self.encoding = encoding
@@ -272,16 +284,17 @@ class CarrierFeed(_Feed[CarrierState]):
         self._origin = origin
         self._cdr_count = 0
         k = keys(pair)
-        super().__init__(session, key or k.carrier_state, k.carrier_alive, clock, max_age_s)
+        super().__init__(session, key or k.carrier_state, k.carrier_alive, clock, max_age_s, auth)
 
     @classmethod
     def from_section(
         cls, session: zenoh.Session, section: ZenohSection, clock: Clock, *, max_age_s: float,
-        origin: GeoOrigin | None = None, limits: GateLimits | None = None,
+        origin: GeoOrigin | None = None, limits: GateLimits | None = None, auth: BusAuth | None = None,
     ) -> "CarrierFeed":
-        """The feed a :class:`ZenohSection` describes (pair, encoding, carrier_key)."""
+        """The feed a :class:`ZenohSection` describes (pair, encoding, carrier_key); ``auth``: the
+        pair's signing key (:func:`mission.bus.auth.bus_auth`), None for unsigned."""
         return cls(session, section.pair, clock, encoding=section.encoding, key=section.carrier_key,
-                   origin=origin, max_age_s=max_age_s, limits=limits)
+                   origin=origin, max_age_s=max_age_s, limits=limits, auth=auth)
 
     def _admit(self, value: CarrierState, key: str, source: str, rx: float) -> str | None:
         was = self.gate.bound
@@ -301,7 +314,11 @@ class CarrierFeed(_Feed[CarrierState]):
 
     def _extra_counters(self) -> dict[str, Any]:
         return {"bound_source": self.gate.bound, "rejected_sources": dict(self.gate.rejected_sources),
-                "resyncs": self.gate.resyncs}
+                "resyncs": self.gate.resyncs, "jumps": self.gate.jumps, "settles": self.gate.settles,
+                "contests": self.gate.contests}
+
+    def _received_extra(self, now: float) -> dict[str, Any]:
+        return {"untrusted": self.gate.distrust(now)}
 
     def set_origin(self, origin: GeoOrigin | None) -> None:
         """Set the geodetic origin used for wgs84 states from now on."""
@@ -323,13 +340,78 @@ class CarrierFeed(_Feed[CarrierState]):
 
 
 class PassengerFeed(_Feed[PassengerStatus]):
-    """The newest valid passenger status of pair ``pair`` (for the carrier), with liveliness."""
+    """The newest valid passenger status of pair ``pair`` (for the carrier), with liveliness.
+
+    Source binding: the feed binds to the first source (the verified signer with ``auth``, else
+    Zenoh's ``source_info``) that sends ``bind_samples`` statuses in order (sequence number
+    rising, stamp not falling) whose phase is in ``bind_phases`` (None: any): the carrier passes
+    the phases before riding, so a source that starts by claiming RIDING (a passenger that never
+    stood on the deck) never binds. Until then statuses are dropped as ``unbound``; once bound,
+    every other source's as ``source`` (counted per source in ``counters["rejected_sources"]``),
+    so a flood from elsewhere can neither pass for the passenger nor make its statuses stale.
+    The bound source's statuses must be newer than its last accepted one (``stale_seq``,
+    ``stale_stamp``). When the passenger's liveliness token goes away the feed unbinds (a
+    restarted passenger is a new source); the source it was bound to may bind again in any phase
+    (a brief outage of the token while it rides).
+    """
 
     _received_type = ReceivedPassengerStatus
 
-    def __init__(self, session: zenoh.Session, pair: str, clock: Clock, *, max_age_s: float = 1.0) -> None:
+    def __init__(self, session: zenoh.Session, pair: str, clock: Clock, *, max_age_s: float = 1.0,
+                 auth: BusAuth | None = None, bind_phases: frozenset[str] | None = None, bind_samples: int = 1) -> None:
+        if bind_samples < 1:
+            raise ValueError(f"bind_samples must be >= 1, got {bind_samples!r}")
+        self.bind_phases, self.bind_samples = bind_phases, bind_samples
+        self.bound: str | None = None
+        self.rejected_sources: dict[str, int] = {}
+        self._candidates: dict[str, tuple[int, float, int]] = {}  # source -> (seq, stamp, statuses in order)
+        self._last: tuple[int, float] | None = None  # the bound source's last (seq, stamp)
+        self._previous: str | None = None  # the source bound before the token went
         k = keys(pair)
-        super().__init__(session, k.passenger_state, k.passenger_alive, clock, max_age_s)
+        super().__init__(session, k.passenger_state, k.passenger_alive, clock, max_age_s, auth)
+
+    def _admit(self, value: PassengerStatus, key: str, source: str, rx: float) -> str | None:
+        order = (value.seq, value.stamp_s)
+        if self.bound is None:
+            if self.bind_phases is not None and value.phase not in self.bind_phases and source != self._previous:
+                return "unbound"
+            last = self._candidates.get(source)
+            if last is None and len(self._candidates) >= MAX_CANDIDATES:
+                return "unbound"
+            count = last[2] + 1 if last is not None and order[0] > last[0] and order[1] >= last[1] else 1
+            self._candidates[source] = (*order, count)
+            if count < self.bind_samples:
+                return "unbound"
+            self.bound, self._last = source, order
+            self._candidates.clear()
+            log.info("passenger feed bound to source %s on %s", source, key)
+            return None
+        if source != self.bound:
+            count_rejected(self.rejected_sources, source)
+            return "source"
+        assert self._last is not None
+        if order[0] <= self._last[0]:
+            return "stale_seq"
+        if order[1] < self._last[1]:
+            return "stale_stamp"
+        self._last = order
+        return None
+
+    def _notifies(self, reason: str | None, value: PassengerStatus) -> bool:
+        # the bound passenger's statuses, and a candidate's while none is bound (the lockstep
+        # clock waits for the status a step names); never a stranger's
+        return reason is None or (reason == "unbound" and (self.bind_phases is None or value.phase in self.bind_phases
+                                                            or self._previous is not None))
+
+    def _forget_sender(self) -> None:
+        if self.bound is not None:
+            log.warning("passenger feed: source %s unbound (liveliness token gone)", self.bound)
+            self._previous = self.bound
+        self.bound, self._last = None, None
+        self._candidates.clear()
+
+    def _extra_counters(self) -> dict[str, Any]:
+        return {"bound_source": self.bound, "rejected_sources": dict(self.rejected_sources)}
 
     def _decode(self, payload: bytes) -> PassengerStatus:
         return decode_passenger_json(payload)

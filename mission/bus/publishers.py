@@ -6,6 +6,7 @@ from typing import Any
 
 import zenoh
 
+from mission.bus.auth import BusAuth
 from mission.errors import BusError
 from mission.bus.wire import CarrierState, PassengerStatus, encode_carrier, encode_passenger_json
 from mission.bus.session import ZENOH_ENCODING, Encoding, check_encoding, declare, keys, undeclare
@@ -22,8 +23,10 @@ class _Publisher:
     """
 
     def __init__(self, session: zenoh.Session, alive_key: str, state_key: str, state_encoding: zenoh.Encoding,
-                 congestion_control: zenoh.CongestionControl = zenoh.CongestionControl.DROP) -> None:
+                 congestion_control: zenoh.CongestionControl = zenoh.CongestionControl.DROP,
+                 auth: BusAuth | None = None) -> None:
         self._session, self._congestion = session, congestion_control
+        self._signer = auth.signer() if auth is not None else None
         self._entities: list[Any] = []
         self._closed = False
         self._sn = 0
@@ -55,8 +58,9 @@ class _Publisher:
     def _put(self, pub: zenoh.Publisher, payload: bytes) -> None:
         """Put with our identity in ``source_info`` (the receiver binds to it)."""
         self._sn += 1
+        attachment = None if self._signer is None else self._signer.attachment(str(pub.key_expr), payload)
         try:
-            pub.put(payload, source_info=zenoh.SourceInfo(pub.id, self._sn))
+            pub.put(payload, source_info=zenoh.SourceInfo(pub.id, self._sn), attachment=attachment)
         except zenoh.ZError as exc:
             raise BusError(f"cannot publish on {pub.key_expr}: {exc}") from None
 
@@ -77,16 +81,18 @@ class _Publisher:
 class CarrierPublisher(_Publisher):
     """Publishes the carrier's state on pair ``pair`` and holds the carrier's liveliness token.
 
-    encoding "json" or "cdr" (Odometry, ENU, twist in ``base_link``); key overrides the state key.
+    encoding "json" or "cdr" (Odometry, ENU, twist in ``base_link``); key overrides the state key;
+    auth: the pair's signing key (:func:`mission.bus.auth.bus_auth`): every sample carries its tag.
     """
 
     def __init__(self, session: zenoh.Session, pair: str, encoding: Encoding = "json", *, key: str | None = None,
-                 congestion_control: zenoh.CongestionControl = zenoh.CongestionControl.DROP) -> None:
+                 congestion_control: zenoh.CongestionControl = zenoh.CongestionControl.DROP,
+                 auth: BusAuth | None = None) -> None:
         check_encoding(encoding)
         k = keys(pair)
         self.encoding = encoding
         self.key = key or k.carrier_state
-        super().__init__(session, k.carrier_alive, self.key, ZENOH_ENCODING[encoding], congestion_control)
+        super().__init__(session, k.carrier_alive, self.key, ZENOH_ENCODING[encoding], congestion_control, auth)
 
     def publish(self, state: CarrierState) -> None:
         """Send ``state``; raises :class:`BusError` if Zenoh refuses."""
@@ -95,13 +101,14 @@ class CarrierPublisher(_Publisher):
 
 class PassengerPublisher(_Publisher):
     """Publishes the passenger's status (state key, JSON) and phase (phase key, text) on pair
-    ``pair`` and holds the passenger's liveliness token."""
+    ``pair`` and holds the passenger's liveliness token; signed with ``auth`` if given."""
 
     def __init__(self, session: zenoh.Session, pair: str,
-                 congestion_control: zenoh.CongestionControl = zenoh.CongestionControl.DROP) -> None:
+                 congestion_control: zenoh.CongestionControl = zenoh.CongestionControl.DROP,
+                 auth: BusAuth | None = None) -> None:
         k = keys(pair)
         super().__init__(session, k.passenger_alive, k.passenger_state, zenoh.Encoding.APPLICATION_JSON,
-                         congestion_control)
+                         congestion_control, auth)
         self.last_seq = -1  # seq of the last status sent
         self._phase = self._publisher(k.passenger_phase, zenoh.Encoding.TEXT_PLAIN)
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import logging
+import threading
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Literal
@@ -22,6 +23,12 @@ from mission.errors import BusError, BusPortInUse, ConfigError
 from mission.port_holder import port_in_use
 
 log = logging.getLogger("mission.bus.bridge")  # one logger name for the whole bus
+
+#: Longest a session's close may hold up an exit [s, wall]. Zenoh's own close gives up after
+#: ~10 s with ZError("close operation timed out") on a lossy link; under a slowloris of 350 TCP
+#: connections on its listener one took 8.7 s here.
+CLOSE_TIMEOUT_S = 3.0
+_abandoned = threading.Event()  # a close was left running (close_abandoned)
 
 Encoding = Literal["json", "cdr"]
 #: The Zenoh encoding a sample of each of our carrier encodings is put with.
@@ -156,6 +163,36 @@ def open_session(section: ZenohSection) -> zenoh.Session:
                        f"connect={section.connect}): {exc}") from None
     log.info("zenoh session %s open (%s)", session.zid(), section.mode)
     return session
+
+
+def close_session(session: zenoh.Session, timeout_s: float = CLOSE_TIMEOUT_S) -> None:
+    """Close ``session`` and return within ``timeout_s`` of wall time, never raising: a close
+    that fails (``zenoh.ZError``) is logged; one that takes longer is logged and left to itself (a
+    daemon thread; :func:`close_abandoned` then tells the process to end at once), so the
+    command's own outcome and exit code stand."""
+    done = threading.Event()
+    failed: list[BaseException] = []
+
+    def close() -> None:
+        try:
+            session.close()
+        except Exception as exc:  # noqa: BLE001 - Zenoh's ZError, or anything its teardown raises
+            failed.append(exc)
+        finally:
+            done.set()
+
+    threading.Thread(target=close, name="zenoh-close", daemon=True).start()
+    if not done.wait(timeout_s):
+        _abandoned.set()
+        log.warning("zenoh session close still running after %.1f s (wall); leaving it", timeout_s)
+    elif failed:
+        log.warning("zenoh session close failed: %s: %s", type(failed[0]).__name__, failed[0])
+
+
+def close_abandoned() -> bool:
+    """Whether a :func:`close_session` left a close running: the process must then end with
+    ``os._exit`` (the interpreter's shutdown would abort inside Zenoh; :func:`mission.cli.console`)."""
+    return _abandoned.is_set()
 
 
 @dataclass(frozen=True)

@@ -4,9 +4,10 @@ The carrier publishes its state (:class:`CarrierState`: ``stamp`` [s] on the sen
 ``seq`` strictly increasing per sender, ``frame`` ``"local_ned"`` or ``"wgs84"``, ``position``
 [m] NED or [deg, deg, m AMSL], ``velocity`` [m/s] NED, optional ``yaw`` [rad] from north and
 ``acceleration`` [m/s^2] NED), the passenger its status (:class:`PassengerStatus`: phase, stamp,
-seq, position [m] and velocity [m/s] NED, ``separated``, the latched ``anchor`` [m] NED and, in
-ABORT, the ``reason``). Both are pydantic models parsed and validated from JSON in one pass;
-unknown fields are ignored.
+seq, position [m] and velocity [m/s] NED, ``separated``, the latched ``anchor`` [m] NED, in
+ABORT the ``reason``, and ``holding``: it holds on the dock point it had, its carrier feed not
+trusted, so the carrier pauses). Both are pydantic models parsed and validated from JSON in one
+pass; unknown fields are ignored.
 Invariants: every number finite, vectors of exactly 3 within :data:`POSITION_LIMIT_M`,
 :data:`VELOCITY_LIMIT_M_S` and :data:`ACCELERATION_LIMIT_M_S2`, ``seq`` an int64. A failure raises
 :class:`WireError` whose ``reason`` is one of :data:`REASONS` (:func:`wire_error` maps pydantic's
@@ -32,12 +33,13 @@ Frame = Literal["local_ned", "wgs84"]
 FRAMES: tuple[str, ...] = get_args(Frame)
 
 #: Reasons a sample is rejected (keys of the bridge's drop counters). ``size`` is checked by the
-#: bridge before decoding; ``stale_seq`` and ``stale_stamp`` come from its ordering check, the
+#: bridge before decoding, then, with a signing key, ``unsigned``, ``signature`` and ``replay``
+#: (:mod:`mission.bus.signing`); ``stale_seq`` and ``stale_stamp`` come from its ordering check, the
 #: carrier feed's binding and plausibility gate add ``unbound``, ``source``, ``seq_jump``,
 #: ``stamp_jump``, ``speed``, ``jump``, ``velocity`` and ``gap`` (:mod:`mission.bus.gate`), and
 #: ``internal`` comes from a bug in a decoder, not from the codecs.
 REASONS: tuple[str, ...] = (
-    "size", "decode", "missing", "type", "shape", "nonfinite", "frame", "range", "orientation", "phase",
+    "size", "unsigned", "signature", "replay", "decode", "missing", "type", "shape", "nonfinite", "frame", "range", "orientation", "phase",
     "origin", "stale_seq", "stale_stamp", "unbound", "source", "seq_jump", "stamp_jump", "speed", "jump",
     "velocity", "gap", "internal",
 )
@@ -235,11 +237,14 @@ class CarrierState(_Message):
 class PassengerStatus(_Message):
     """The passenger's mission phase and state.
 
-    phase a :class:`~mission.phases.phase.Phase` (its name on the wire); stamp_s [s] sender's clock; seq (>= 0); position_ned_m [m] and
+    phase a :class:`~mission.phases.phase.Phase` (its name on the wire); stamp_s [s] sender's clock;
+    seq (>= 0); position_ned_m [m] and
     velocity_ned_m_s [m/s] local NED; separated: the separation latch has fired; anchor_ned_m
     [m] the latched anchor (carrier position at separation) or None; leg: the index of the target
     served (``scenario.targets``; 0 with one target); reason: why the mission aborted (phase
-    ABORT), or None. Raises :class:`WireError` when invalid.
+    ABORT), or None; holding: the passenger holds on the dock point it had because its carrier
+    feed is not consistent (a resync, a contested source): the carrier pauses until it rides
+    again. Raises :class:`WireError` when invalid.
     """
 
     phase: Phase
@@ -251,15 +256,17 @@ class PassengerStatus(_Message):
     anchor_ned_m: PositionNed | None = Field(None, alias="anchor")
     leg: int = Field(0, ge=0, le=1000, strict=True)
     reason: AbortReasonName | None = None
+    holding: Flag = False
 
-    _check_order = ("phase", "separated", "stamp", "stamp_s", "seq", "position", "position_ned_m", "velocity",
-                    "velocity_ned_m_s", "anchor", "anchor_ned_m", "leg", "reason")
+    _check_order = ("phase", "separated", "holding", "stamp", "stamp_s", "seq", "position", "position_ned_m",
+                    "velocity", "velocity_ned_m_s", "anchor", "anchor_ned_m", "leg", "reason")
 
     def __init__(self, phase: Phase | str, stamp_s: float, seq: int, position_ned_m: Any, velocity_ned_m_s: Any,
-                 separated: bool = False, anchor_ned_m: Any = None, leg: int = 0, reason: str | None = None) -> None:
+                 separated: bool = False, anchor_ned_m: Any = None, leg: int = 0, reason: str | None = None,
+                 holding: bool = False) -> None:
         self._validated(phase=phase, stamp_s=stamp_s, seq=seq, position_ned_m=position_ned_m,
                         velocity_ned_m_s=velocity_ned_m_s, separated=separated, anchor_ned_m=anchor_ned_m, leg=leg,
-                        reason=reason)
+                        reason=reason, holding=holding)
 
     __init__.__pydantic_base_init__ = True  # type: ignore[attr-defined]  # see _Message
 

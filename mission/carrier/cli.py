@@ -19,8 +19,11 @@ import numpy as np
 
 from mission.carrier.backends import KINDS, describe, open_backend
 from mission.carrier.controller import CarrierController
+from mission.bus.auth import bus_auth
 from mission.bus.bridge import describe_endpoints, keys, open_session
+from mission.bus.session import close_session
 from mission.time.clock import Clock, LockstepClock, ScaledClock
+from mission.config.required import CARRIER_FIELDS, require_stated
 from mission.config.schema import Config, load_config, with_overrides
 from mission.time.lockstep import ZenohUpstream, clock_keys
 
@@ -38,9 +41,13 @@ def main(cfg: Config, speed: float = 1.0, duration_s: float | None = None, stop_
     pace once the relay falls silent.
 
     SIGINT/SIGTERM set the stop event when called from the main thread. Raises
+    :class:`~mission.errors.ConfigError` if the file does not state the target and the carrier's
+    limits (:mod:`mission.config.required`) or the bus key is unreadable,
     :class:`~mission.errors.BusError` if Zenoh cannot open, :class:`~mission.errors.LinkError`
     if the vehicle link cannot open.
     """
+    require_stated(cfg, CARRIER_FIELDS, "carrier")  # before anything is opened
+    bus_auth(cfg.zenoh)
     stop = stop_event or threading.Event()
     restore: dict[int, Any] = {}
     clock: Clock = LockstepClock(speed=speed, name="carrier-lockstep") if lockstep else ScaledClock(speed)
@@ -55,7 +62,7 @@ def main(cfg: Config, speed: float = 1.0, duration_s: float | None = None, stop_
     try:
         with ExitStack() as stack:
             session = open_session(cfg.zenoh)
-            stack.callback(session.close)
+            stack.callback(close_session, session)  # never raises, bounded: the exit code stands
             backend = open_backend(cfg, clock, session)
             stack.callback(backend.close)
             steps = open_flight_data(cfg, clock, mcap_path, stack)
@@ -64,7 +71,7 @@ def main(cfg: Config, speed: float = 1.0, duration_s: float | None = None, stop_
                     steps.set_counters(lambda: ctl.passenger.counters)
                 if isinstance(clock, LockstepClock):
                     upstream = ZenohUpstream(clock, session, clock_keys(ctl.pair), ctl.passenger,
-                                             published=lambda: ctl.seq - 1)
+                                             published=lambda: ctl.seq - 1, auth=ctl.auth)
                     stack.callback(upstream.close)
                     clock.downstream = backend.lockstep_relay(session)
                     stack.callback(clock.close)
@@ -146,11 +153,14 @@ def _jsonable(value: Any) -> Any:
               help="Write the carrier's summary (closest approach, braking distance, guard activity) as JSON.")
 @click.option("--mcap", "mcap_path", type=click.Path(dir_okay=False), default=None, metavar="PATH",
               help="Write the carrier's flight data (its pose, mode, commands, P3 guard) to this MCAP file.")
+@click.option("--zenoh-signing-key", "bus_key_file", type=click.Path(dir_okay=False), default=None, metavar="FILE",
+              help="Bus signing key file of the pair (overrides zenoh.signing_key_file): the carrier's state is signed, "
+                   "the passenger's status must carry its tag.")
 def carrier_cli(config: str, backend: str | None, speed: float, pair: str | None, listen: tuple[str, ...],
                     connect: tuple[str, ...], encoding: str | None, rate: float | None, mavlink_url: str | None,
                     target_system: int | None, kinematics: str | None, offset_ned: str | None,
                     ros2_namespace: str | None, key_form: str | None, duration: float | None,
-                    lockstep: bool, summary_path: str | None, mcap_path: str | None) -> int:
+                    lockstep: bool, summary_path: str | None, mcap_path: str | None, bus_key_file: str | None) -> int:
     """Run the carrier-side controller of CONFIG (a TOML file).
 
     The carrier waits until the passenger's published phase is RIDING, then drives towards
@@ -188,7 +198,9 @@ def carrier_cli(config: str, backend: str | None, speed: float, pair: str | None
         "zenoh.encoding": encoding,
         "carrier.rate_hz": rate,
         "carrier.mavlink.url": mavlink_url,
+        "zenoh.signing_key_file": bus_key_file,
     })
+    require_stated(cfg, CARRIER_FIELDS, "carrier")  # refused before it says anything about flying
     click.echo(startup_line(cfg, speed), err=True)
     return main(cfg, speed, duration, summary_path=summary_path, lockstep=lockstep, mcap_path=mcap_path)
 

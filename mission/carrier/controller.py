@@ -42,11 +42,12 @@ from mission.carrier.backends import KINDS
 from mission.carrier.course import RecoveryCourse, away_heading_deg
 from mission.carrier.guard import GuardParams
 from mission.carrier.legs import Legs
-from mission.carrier.modes import CarrierMode, PassengerView, next_mode
+from mission.carrier.modes import BEFORE_RIDING, BIND_STATUSES, CarrierMode, PassengerView, lost_reason, next_mode, on_dock
 from mission.phases.phase import Duty
 from mission.carrier.start import gentle_start
 from mission.carrier.tracking import SpeedCalibration, Tracked, TrackingParams, along_heading, heading_of, track
 from mission.core.consistent_velocity import PositionConsistentVelocity
+from mission.bus.auth import bus_auth
 from mission.bus.bridge import CarrierPublisher, PassengerFeed
 from mission.time.clock import Clock, Downstream, Periodic
 from mission.config.schema import Config
@@ -155,27 +156,23 @@ def tracking_params(cfg: Config) -> TrackingParams:
                           c.max_steer_rad)
 
 
+def passenger_view(feed: PassengerFeed, dock_ned_m: np.ndarray | None, tolerance_m: float, dim: int) -> PassengerView:
+    """The passenger as the carrier sees it now: the newest status of the feed's bound source,
+    whether it counts as lost (its token went since the last call, no status, or a stale one),
+    and whether it is on the dock point ``dock_ned_m`` [m] NED (None: no own state; not on it)."""
+    rx = feed.latest()
+    lost = lost_reason(feed.alive_over_interval(), None if rx is None else rx.age_s, feed.max_age_s)
+    if rx is None:
+        return PassengerView(None, False, lost)
+    st = rx.status
+    near = dock_ned_m is not None and on_dock(st.position_ned_m, dock_ned_m, tolerance_m, dim)
+    return PassengerView(st.phase, st.separated, lost, st.leg, st.reason, st.holding, near)
+
+
 def _pad3(v: np.ndarray) -> np.ndarray:
     """A (2,) or (3,) vector as (3,) (a 2D scenario's carrier sits at down = 0)."""
     v = np.asarray(v, dtype=float)
     return np.concatenate([v, np.zeros(3 - v.shape[0])]) if v.shape[0] < 3 else v
-
-
-def passenger_view(feed: PassengerFeed) -> PassengerView:
-    """The passenger as the carrier sees it now (:class:`~mission.carrier.modes.PassengerView`):
-    its newest status, and why it counts as lost (liveliness gone, nothing received, stale)."""
-    rx = feed.latest()
-    if feed.alive_over_interval() is False:
-        lost: str | None = "its liveliness token is gone"
-    elif rx is None:
-        lost = "no status received"
-    elif rx.stale:
-        lost = f"its status is {rx.age_s:.2f} s old (> {feed.max_age_s} s)"
-    else:
-        lost = None
-    if rx is None:
-        return PassengerView(None, False, lost)
-    return PassengerView(rx.status.phase, rx.status.separated, lost, rx.status.leg, rx.status.reason)
 
 
 class CarrierController:
@@ -222,17 +219,26 @@ class CarrierController:
         self._acceleration = AccelerationEstimate(tau) if tau > 0 else None  # published when set
         bias_tau = cfg.carrier.velocity_bias_tau_s
         self._velocity_fix = PositionConsistentVelocity(bias_tau) if bias_tau > 0 else None
-        self.passenger = PassengerFeed(session, self.pair, clock, max_age_s=cfg.carrier.passenger_timeout_s)
+        self.auth = bus_auth(cfg.zenoh, self.pair)
+        self.passenger = PassengerFeed(session, self.pair, clock, max_age_s=cfg.carrier.passenger_timeout_s,
+                                       auth=self.auth, bind_phases=BEFORE_RIDING, bind_samples=BIND_STATUSES)
         try:
             self.publisher = CarrierPublisher(session, self.pair, encoding or cfg.zenoh.encoding,  # type: ignore[arg-type]
-                                              key=cfg.zenoh.carrier_key, congestion_control=congestion_for(clock))
+                                              key=cfg.zenoh.carrier_key, congestion_control=congestion_for(clock),
+                                              auth=self.auth)
         except Exception:
             self.passenger.close()
             raise
 
     # ------------------------------------------------------------------ decisions
+    def dock_point_ned_m(self) -> np.ndarray | None:
+        """This carrier's dock point [m] NED (3,): its own position (in the plane, aligned) plus
+        mission.dock_offset_ned_m; None without an own state."""
+        own = self._in_plane(self.backend.own_state())
+        return None if own is None else _pad3(own.position_ned_m[:self.dim]) + np.asarray(self.cfg.mission.dock_offset_ned_m)
+
     def _update_mode(self) -> None:
-        view = passenger_view(self.passenger)
+        view = passenger_view(self.passenger, self.dock_point_ned_m(), self.cfg.mission.dock_tolerance_m, self.dim)
         if view.phase is not None and view.phase.duty in (Duty.REPOSITION, Duty.CARRY) and self.legs.follow(view.leg):
             self.model = self.legs.model
             log.info("carrier %s: leg %d, target %s", self.pair, view.leg + 1, self.model.target.tolist())

@@ -13,7 +13,10 @@ none of their modules.
 from __future__ import annotations
 
 import logging
+import os
+import sys
 from functools import cache
+from typing import NoReturn
 
 import click
 
@@ -64,6 +67,22 @@ def cli(verbose: int) -> None:
     """
     level = [logging.WARNING, logging.INFO, logging.DEBUG][min(verbose, 2)]
     logging.basicConfig(level=level, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+
+
+def console() -> NoReturn:
+    """The process's entry point (the ``marsupial`` script, ``python -m mission.cli``): exit with
+    :func:`main`'s code. When a Zenoh session's close was left still running
+    (:func:`mission.bus.session.close_session`), the interpreter's own shutdown would tear that
+    thread down inside Zenoh and abort the process ("FATAL: exception not rethrown", exit -6 under
+    a slowloris): the logs and streams are flushed and the process ends at once with the code."""
+    code = main()
+    session = sys.modules.get("mission.bus.session")  # loaded only by commands that opened Zenoh
+    if session is not None and session.close_abandoned():
+        logging.shutdown()
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+    sys.exit(code)
 
 
 def main(argv: list[str] | None = None) -> int:

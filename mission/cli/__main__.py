@@ -1,6 +1,4 @@
 """``python -m mission.cli``: the ``marsupial`` command."""
-import sys
+from mission.cli import console
 
-from mission.cli import main
-
-sys.exit(main())
+console()

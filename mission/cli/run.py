@@ -13,9 +13,11 @@ from typing import Any, Iterator
 import click
 import numpy as np
 
+from mission.bus.auth import bus_auth
 from mission.bus.bridge import CarrierFeed, PassengerPublisher, open_session, zenoh_config
-from mission.bus.session import congestion_for
+from mission.bus.session import close_session, congestion_for
 from mission.time.clock import Clock, LockstepClock, ScaledClock
+from mission.config.required import RUN_FIELDS, require_stated
 from mission.config.schema import Config, load_config, with_overrides
 from mission.controller import MissionController, MissionOutcome, mission_info, mission_model
 from mission.errors import ConfigError
@@ -35,8 +37,12 @@ EXIT_ABORT = 5
 
 def carrier_limits(cfg: Config) -> GateLimits:
     """The carrier's own limits the feed's plausibility gate checks states against: its top
-    speed (``carrier.max_speed_m_s``, or ``safety.carrier_max_speed_m_s`` if larger)."""
-    return GateLimits(max_speed_m_s=max(cfg.carrier.max_speed_m_s, cfg.safety.carrier_max_speed_m_s or 0.0))
+    speed (``carrier.max_speed_m_s``, or ``safety.carrier_max_speed_m_s`` if larger), its
+    acceleration (``safety.carrier_max_accel_m_s2``, or ``carrier.brake_decel_m_s2`` if larger),
+    and how long a new reference must keep to them (``mission.carrier_settle_s``)."""
+    accels = [a for a in (cfg.safety.carrier_max_accel_m_s2, cfg.carrier.brake_decel_m_s2) if a is not None]
+    return GateLimits(max_speed_m_s=max(cfg.carrier.max_speed_m_s, cfg.safety.carrier_max_speed_m_s or 0.0),
+                      max_accel_m_s2=max(accels) if accels else None, settle_s=cfg.mission.carrier_settle_s)
 
 
 @contextmanager
@@ -45,13 +51,14 @@ def mission_io(cfg: Config, clock: Clock, tlog_path: str | Path | None = None) -
     and the passenger publisher, and the MAVLink link (opened, signing per
     ``mavlink.signing_key_file``). Everything is closed in reverse order on exit."""
     key = read_signing_key(cfg.mavlink.signing_key_file) if cfg.mavlink.signing_key_file else None
+    auth = bus_auth(cfg.zenoh)
     with ExitStack() as stack:
         session = open_session(cfg.zenoh)
-        stack.callback(session.close)
+        stack.callback(close_session, session)  # never raises, bounded: the mission's outcome stands
         feed = CarrierFeed.from_section(session, cfg.zenoh, clock, max_age_s=cfg.mission.carrier_timeout_s,
-                                        limits=carrier_limits(cfg))
+                                        limits=carrier_limits(cfg), auth=auth)
         stack.callback(feed.close)
-        publisher = PassengerPublisher(session, cfg.zenoh.pair, congestion_for(clock))
+        publisher = PassengerPublisher(session, cfg.zenoh.pair, congestion_for(clock), auth=auth)
         stack.callback(publisher.close)
         link = VehicleLink(cfg.mavlink.url, clock, target_system=cfg.mavlink.target_system,
                            target_component=cfg.mavlink.target_component,
@@ -67,7 +74,8 @@ def mission_io(cfg: Config, clock: Clock, tlog_path: str | Path | None = None) -
         if isinstance(clock, LockstepClock):  # step on the vehicle's time; bring the carrier along
             from mission.time.lockstep import ZenohRelay, clock_keys
 
-            relay = ZenohRelay(session, clock_keys(cfg.zenoh.pair), feed, publisher, alive=lambda: feed.alive)
+            relay = ZenohRelay(session, clock_keys(cfg.zenoh.pair), feed, publisher, alive=lambda: feed.alive,
+                               auth=auth)
             stack.callback(relay.close)
             clock.downstream = relay
             stack.callback(clock.close)  # before the link closes: its threads wait on the clock
@@ -76,11 +84,14 @@ def mission_io(cfg: Config, clock: Clock, tlog_path: str | Path | None = None) -
 
 def check_config(cfg: Config) -> None:
     """What a mission needs of ``cfg`` beyond the file's own rules, checked before anything is
-    opened or written: a 3D mission model, a readable signing key, a Zenoh configuration Zenoh
+    opened or written: the target and limits stated in the file (:mod:`mission.config.required`),
+    a 3D mission model, readable signing keys (MAVLink, bus), a Zenoh configuration Zenoh
     accepts. Raises :class:`ConfigError` naming the field."""
+    require_stated(cfg, RUN_FIELDS, "run")
     mission_model(cfg)
     if cfg.mavlink.signing_key_file:
         read_signing_key(cfg.mavlink.signing_key_file)
+    bus_auth(cfg.zenoh)
     zenoh_config(cfg.zenoh)
 
 
@@ -154,13 +165,16 @@ def exit_code(outcome: MissionOutcome) -> int:
 @click.option("--signing-key", "signing_key_file", type=click.Path(dir_okay=False),
               help="MAVLink 2 signing key file, 64 hex digits or 32 raw bytes (overrides mavlink.signing_key_file): "
               "everything sent is signed, and only HEARTBEAT may arrive unsigned.")
+@click.option("--zenoh-signing-key", "bus_key_file", type=click.Path(dir_okay=False),
+              help="Bus signing key file of the pair (overrides zenoh.signing_key_file): carrier states and clock "
+              "messages must carry its tag; the passenger's status is signed.")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON at the end.")
 @click.option("--live", is_flag=False, flag_value=DEFAULT_LIVE, default=None, metavar="[HOST:PORT]",
               help=f"Serve the flight live to Foxglove (the foxglove-sdk WebSocket server) on HOST:PORT "
               f"[{DEFAULT_LIVE} when given alone; loopback unless told otherwise]. Off by default.")
 def run(config: str, mavlink_url: str | None, zenoh_listen: tuple[str, ...], zenoh_connect: tuple[str, ...],
         zenoh_mode: str | None, pair: str | None, speed: float, lockstep: bool, log_dir: str | None,
-        signing_key_file: str | None, as_json: bool, live: str | None) -> int:
+        signing_key_file: str | None, bus_key_file: str | None, as_json: bool, live: str | None) -> int:
     """Fly the marsupial mission described by CONFIG on a PX4 vehicle.
 
     The passenger takes off from the carrier, joins the dock point, rides while the carrier
@@ -182,12 +196,13 @@ def run(config: str, mavlink_url: str | None, zenoh_listen: tuple[str, ...], zen
     """
     cfg = load_config(config)
     overrides: dict[str, Any] = {"mavlink.url": mavlink_url, "zenoh.pair": pair, "zenoh.mode": zenoh_mode,
-                                 "mavlink.signing_key_file": signing_key_file}
+                                 "mavlink.signing_key_file": signing_key_file, "zenoh.signing_key_file": bus_key_file}
     if zenoh_listen:
         overrides["zenoh.listen"] = list(zenoh_listen)
     if zenoh_connect:
         overrides["zenoh.connect"] = list(zenoh_connect)
     cfg = with_overrides(cfg, overrides)
+    check_config(cfg)  # refused before it says anything about flying (fly checks again)
     live_address = parse_live(live) if live is not None else None
     stop = threading.Event()
     for line in startup_lines(cfg, speed):

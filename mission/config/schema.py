@@ -292,6 +292,11 @@ class MissionSection(Section):
         description="[s] with final_action = `return`: time spent at the target (the task) before coming home")
     carrier_timeout_s: float = Field(0.5, gt=0, le=10,
         description="[s] a carrier state older than this before separation aborts (carrier_lost)")
+    carrier_settle_s: float = Field(
+        2.0, ge=0, le=30, description="[s] a carrier state the feed has just re-accepted (a newly bound carrier, a "
+        "resync after a jump) must stay within the carrier's own speed and acceleration limits this long, and its "
+        "source must not be contested, before the passenger rides on it or separates on it; until then it holds on "
+        "the dock point it had (mission/bus/gate.py)")
     heartbeat_timeout_s: float = Field(3.0, gt=0, le=30,
         description="[s] vehicle lost when HEARTBEAT and telemetry are silent this long (MAVSDK: 3 s)")
     prestream_s: float = Field(1.0, ge=0.2, le=10,
@@ -367,7 +372,14 @@ class ZenohSection(Section):
     def _key(cls, value: str | None) -> str | None:
         return None if value is None else check_key_expr(value)
 
+    signing_key_file: Path_ | None = Field(
+        None, description="[-] 32-byte key (64 hex digits or raw) the pair signs its bus samples with (carrier state, "
+        "passenger status, lockstep clock, ROS 2 commands; mission/bus/signing.py); unsigned or badly signed samples are "
+        "then dropped and counted. Both robots of a pair need the same file. None: unsigned (the mTLS + ACL router "
+        "is the fleet's answer)")
+
     _config_file_printable = field_validator("config_file")(lambda v: v if v is None else printable(v))
+    _signing_key_printable = field_validator("signing_key_file")(lambda v: v if v is None else printable(v))
 
 class Config(Section):
     law: LawSection = LawSection()
@@ -508,14 +520,16 @@ def load_config(path: str | Path) -> Config:
 
 
 def with_overrides(cfg: Config, overrides: dict[str, Any]) -> Config:
-    """A copy of ``cfg`` with dotted-key overrides (``{"mavlink.url": "udpin:..."}``), revalidated."""
-    data = cfg.model_dump()
+    """A copy of ``cfg`` with dotted-key overrides (``{"mavlink.url": "udpin:..."}``, None: left
+    as is), revalidated. What the file left to its defaults stays unset in the copy
+    (:func:`mission.config.required.stated` still tells)."""
+    data = cfg.model_dump(exclude_unset=True)
     for key, value in overrides.items():
         if value is None:
             continue
         node = data
         *parents, leaf = key.split(".")
         for p in parents:
-            node = node[p]
+            node = node.setdefault(p, {})
         node[leaf] = value
     return from_dict(data)

@@ -28,25 +28,11 @@ mavlink = mavutil.mavlink
 
 
 def read_signing_key(path: str | os.PathLike[str], field: str = "mavlink.signing_key_file") -> bytes:
-    """A 32-byte MAVLink 2 signing key from a file holding 64 hex digits or 32 raw bytes.
+    """A 32-byte MAVLink 2 signing key from a file holding 64 hex digits or 32 raw bytes
+    (:func:`mission.config.keys.read_key_file`; :class:`~mission.errors.ConfigError` names ``field``)."""
+    from mission.config.keys import read_key_file
 
-    Raises :class:`mission.errors.ConfigError` naming ``field`` if the file cannot be read or
-    holds anything else. The key itself never appears in the message.
-    """
-    from pathlib import Path
+    return read_key_file(path, field)
 
-    from mission.errors import ConfigError
-
-    try:
-        raw = Path(path).read_bytes()
-    except OSError as exc:
-        raise ConfigError(field, str(path), f"cannot read the key file: {exc.strerror}") from None
-    try:
-        key = bytes.fromhex(raw.strip().decode("ascii"))
-    except (UnicodeDecodeError, ValueError):
-        key = raw
-    if len(key) != 32:
-        raise ConfigError(field, str(path), "must hold 32 bytes (raw) or 64 hex digits")
-    return key
 
 __all__ = ["mavutil", "mavlink", "read_signing_key"]

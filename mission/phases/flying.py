@@ -85,39 +85,78 @@ def _carrier_acceleration(obs: Observation, m: MissionModel) -> np.ndarray:
     return (np.asarray(nxt.u, dtype=float) - c.velocity_ned_m_s) / h
 
 
+def _hold(state: MissionState, obs: Observation, m: MissionModel) -> tuple[MissionState, Decision]:
+    """The carrier feed is not trusted (``obs.carrier.untrusted``: just bound, a resync after a
+    jump, a contested source): the reference holds still where it is (riding: the dock point it
+    had), nothing is fed forward and the latch cannot fire; ``held_dock`` says so (the carrier
+    pauses: the status says ``holding``). What the feed says is still recorded as the dock."""
+    assert obs.carrier is not None and obs.carrier.untrusted is not None and state.x_ref is not None
+    held = state.x_ref.copy()
+    events = () if state.held_dock is not None else (
+        f"carrier feed not trusted ({obs.carrier.untrusted}): holding on the dock point it had",)
+    tr = _track(state, obs, m, held, ZERO, ZERO)
+    new = replace(state, x_ref=held, u_ref=ZERO.copy(), settled_since_s=None,
+                  held_dock=held if state.held_dock is None else state.held_dock,
+                  u_cmd=tr.setpoint.velocity_ned_m_s, integral=tr.integral)
+    return new, tr.decision(dock=dock_point(obs, m), desired=ZERO, safety_acted=tr.acted, events=events)
+
+
+def _toward_dock(x_ref: np.ndarray, dock: np.ndarray, v_dock: np.ndarray, m: MissionModel) -> tuple[np.ndarray, np.ndarray, bool]:
+    """One tick of the reference towards the dock point at join speed (plus the dock's own
+    velocity): (x_ref [m], u_ref [m/s], whether it is on the dock now)."""
+    gap = dock - x_ref
+    dist = float(norm(gap))
+    if dist <= m.join_speed_m_s * m.dt_s:
+        return dock.copy(), v_dock.copy(), True
+    u_ref = gap / dist * m.join_speed_m_s + v_dock
+    return x_ref + u_ref * m.dt_s, u_ref, False
+
+
 def join(state, obs, m):
     """Move the reference from where the vehicle took over to the dock point at join speed."""
     t = obs.t_s
+    if obs.carrier.untrusted is not None:
+        return _hold(state, obs, m)
+    state = replace(state, held_dock=None)  # trusted (again): joining goes on from where the reference is
     dock = dock_point(obs, m)
     v_dock = obs.carrier.velocity_ned_m_s
-    gap = dock - state.x_ref
-    dist = float(norm(gap))
-    step_len = m.join_speed_m_s * m.dt_s
-    if dist <= step_len:
-        x_ref, u_ref = dock.copy(), v_dock.copy()
-    else:
-        u_ref = gap / dist * m.join_speed_m_s + v_dock
-        x_ref = state.x_ref + u_ref * m.dt_s
+    x_ref, u_ref, on_dock = _toward_dock(state.x_ref, dock, v_dock, m)
     tr = _track(state, obs, m, x_ref, u_ref, ZERO)
     # Docked once the vehicle has settled on the dock point (within join_settle_m for
     # join_settle_s): the carrier starts its approach then, so what is left of the climb is not
     # counted as riding offset (on PX4 the climb overshoots the dock by ~0.3 m when first within
     # tolerance, and its velocity estimate is too noisy to judge rest by).
     v = obs.vehicle
-    near = dist <= step_len and norm(v.position_ned_m - dock) <= m.join_settle_m
+    near = on_dock and norm(v.position_ned_m - dock) <= m.join_settle_m
     settled = (state.settled_since_s if state.settled_since_s is not None else t) if near else None
     if settled is not None and t - settled >= m.join_settle_s:
-        new = enter(state, Phase.RIDING, t, x_ref=dock.copy(), e_ref=ZERO.copy(), prev_dock=dock.copy(), u_ref=v_dock.copy(), **tr.kept())
+        new = enter(state, Phase.RIDING, t, x_ref=dock.copy(), e_ref=ZERO.copy(), prev_dock=dock.copy(), u_ref=v_dock.copy(),
+                    held_dock=None, **tr.kept())
         return new, tr.decision(dock=dock, desired=u_ref, safety_acted=tr.acted, events=("docked: riding the carrier",))
     return (replace(state, x_ref=x_ref, u_ref=u_ref, settled_since_s=settled, **tr.kept()),
             tr.decision(dock=dock, desired=u_ref, safety_acted=tr.acted))
 
 
 def riding(state, obs, m):
-    """Equilibrium (i): the reference stays exactly on the dock; the latch fires at b c - margin."""
+    """Equilibrium (i): the reference stays exactly on the dock; the latch fires at b c - margin,
+    on a trusted carrier state only. An untrusted one holds the reference on the dock point it
+    had (:func:`_hold`); once the feed is trusted again the reference goes back to the dock
+    point at join speed, and only then rides (and may latch) again."""
     t = obs.t_s
+    if obs.carrier.untrusted is not None:
+        return _hold(state, obs, m)
     dock = dock_point(obs, m)
     v_dock = obs.carrier.velocity_ned_m_s
+    if state.held_dock is not None:
+        x_ref, u_ref, on_dock = _toward_dock(state.x_ref, dock, v_dock, m)
+        if not on_dock:
+            tr = _track(state, obs, m, x_ref, u_ref, ZERO)
+            return (replace(state, x_ref=x_ref, u_ref=u_ref, **tr.kept()),
+                    tr.decision(dock=dock, desired=u_ref, safety_acted=tr.acted))
+        state = replace(state, held_dock=None, prev_dock=dock.copy())
+        event: tuple[str, ...] = ("carrier feed trusted again: back on the dock point, riding",)
+    else:
+        event = ()
     if separation_due(dock, False, m.tick):
         theta, anchor = latch_point(state.prev_dock, dock, m.tick.target, m.tick)
         new = enter(state, Phase.SEPARATED, t, anchor=anchor, e_ref=ZERO.copy(), x_ref=anchor.copy(),
@@ -129,7 +168,7 @@ def riding(state, obs, m):
     acted = tr.acted
     new = replace(state, x_ref=dock.copy(), e_ref=ZERO.copy(), prev_dock=dock.copy(), u_ref=tick.u, **tr.kept())
     return new, tr.decision(dock=dock, P=float(tick.P), relative=tick.relative, desired=tick.desired,
-                         safety_acted=acted or bool(tick.safety.changed))
+                         safety_acted=acted or bool(tick.safety.changed), events=event)
 
 
 def _lag_m(state: MissionState, obs: Observation) -> float:

@@ -19,7 +19,9 @@
                   signing_mismatch (no vehicle by connect_timeout_s, but a PX4 autopilot was
                   heard signing with another key: ``failed["signing"]`` says which),
                   vehicle_ambiguous (a second PX4 autopilot was heard with
-                  mavlink.target_system unset: ``failed["identity"]`` says which)
+                  mavlink.target_system unset: ``failed["identity"]`` says which),
+                  nonfinite (a NaN or infinity in what the tick would send or keep: the
+                  reference, the setpoint; it names which, and the tick asks for Hold instead)
     ARMED phases (OFFBOARD and every flying one) --vehicle disarmed--> ABORT(vehicle_disarmed)
     AIRBORNE phases (the flying ones but JOIN, DOCKED, HOME) --vehicle landed (ON_GROUND)-->
                   ABORT(vehicle_disarmed)
@@ -101,10 +103,25 @@ def _hold_decision(state: MissionState, obs: Observation) -> Decision:
 
 
 def step(state: MissionState, obs: Observation, m: MissionModel) -> tuple[MissionState, Decision]:
-    """Advance the mission by one tick. Pure: same inputs, same outputs."""
+    """Advance the mission by one tick. Pure: same inputs, same outputs. A tick whose setpoint
+    or kept reference would hold a NaN or an infinity (a corrupt observation, an overflow of an
+    unsaturated law) aborts instead (``nonfinite``, naming it) and asks for Hold."""
     t = obs.t_s
     if state.start_s is None:
         state = replace(state, start_s=t, since_s=t)
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):  # judged below, not warned about
+        new, dec = _step(state, obs, m)
+    bad = _nonfinite(new, dec)
+    if bad is None:
+        return new, dec
+    aborted = _abort(state, t, AbortReason.NONFINITE, f"non-finite {bad} in {state.phase.value}")
+    return aborted, _decided(aborted, obs, f"abort: non-finite {bad}: asking for Hold")
+
+
+def _step(state: MissionState, obs: Observation, m: MissionModel) -> tuple[MissionState, Decision]:
+    """The failsafes, then the phase's handler; the carrier's position (a fresh, trusted one) as the
+    vehicle's home while flying."""
+    t = obs.t_s
     state, early = _failsafes(state, obs, m)
     if early is not None:
         return state, early
@@ -115,9 +132,29 @@ def step(state: MissionState, obs: Observation, m: MissionModel) -> tuple[Missio
     handler = HANDLERS[state.phase]
     state, decision = handler(state, obs, leg_model)
     c = obs.carrier
-    if c is not None and c.age_s <= m.carrier_timeout_s and state.phase.flying:
+    if c is not None and c.age_s <= m.carrier_timeout_s and c.untrusted is None and state.phase.flying:
         decision = replace(decision, home_ned_m=c.position_ned_m + c.velocity_ned_m_s * c.age_s)
     return state, decision
+
+
+_KEPT = ("x_ref", "u_ref", "e_ref", "u_cmd", "anchor", "integral")
+
+
+def _nonfinite(state: MissionState, dec: Decision) -> str | None:
+    """The first of the decision's setpoint parts (and home) and the state's kept vectors that is not finite."""
+    sp = dec.setpoint
+    if sp is not None:
+        for name in ("velocity_ned_m_s", "position_ned_m", "acceleration_ned_m_s2"):
+            v = getattr(sp, name)
+            if v is not None and not np.all(np.isfinite(v)):
+                return f"setpoint {name} {np.asarray(v).tolist()}"
+    if dec.home_ned_m is not None and not np.all(np.isfinite(dec.home_ned_m)):
+        return f"home_ned_m {np.asarray(dec.home_ned_m).tolist()}"
+    for name in _KEPT:
+        v = getattr(state, name)
+        if v is not None and not np.all(np.isfinite(v)):
+            return f"{name} {np.asarray(v).tolist()}"
+    return None
 
 
 def _failsafes(state: MissionState, obs: Observation, m: MissionModel) -> tuple[MissionState, Decision | None]:

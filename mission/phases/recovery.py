@@ -9,7 +9,7 @@ DOCKED, HOME and FALLBACK (``mission.final_action = "return"``).
     HOLDOFF    --vehicle within settle radius/speed of the holdoff point for the dwell--> APPROACH
                (attempts used up: FALLBACK)
     APPROACH   --glide path flown, vehicle meets the contact conditions---------------> DOCKED
-               --outside the cone; carrier state late; carrier accelerating or turning
+               --outside the cone; carrier state late or not trusted; carrier accelerating or turning
                  beyond its limits; below the decision height not lined up------------> GO_AROUND
     GO_AROUND  --climbed to the holdoff height------------------------------------------> HOLDOFF
     DOCKED     --contact held for the dwell--------------------------------------------> HOME
@@ -85,8 +85,10 @@ def begin(state: MissionState, obs: Observation, m: MissionModel, why: str) -> t
 
 
 def _carrier_fresh(obs: Observation, limit_s: float) -> bool:
+    """A carrier state to dock on: present, younger than ``limit_s`` [s], its token not gone, and
+    trusted by the feed (not just bound, resynced or contested: ``CarrierObs.untrusted``)."""
     c = obs.carrier
-    return c is not None and c.age_s <= limit_s and c.alive is not False
+    return c is not None and c.age_s <= limit_s and c.alive is not False and c.untrusted is None
 
 
 def _fly(state: MissionState, obs: Observation, m: MissionModel, goal_x: np.ndarray, goal_v: np.ndarray,
@@ -285,8 +287,9 @@ def approach(state, obs, m, events=()):
         return fallback(replace(state, recovery=rec), obs, m, why, events)
     state = replace(state, recovery=rec)
     if not _carrier_fresh(obs, r.carrier_max_age_s):
-        return go_around(state, obs, m, f"carrier state {obs.carrier.age_s:.2f} s old "
-                         f"(recovery.carrier_max_age_s = {r.carrier_max_age_s:g})", events)
+        why = (f"carrier feed not trusted ({obs.carrier.untrusted})" if obs.carrier.untrusted is not None else
+               f"carrier state {obs.carrier.age_s:.2f} s old (recovery.carrier_max_age_s = {r.carrier_max_age_s:g})")
+        return go_around(state, obs, m, why, events)
     unsteady = _carrier_unsteady(rec, obs, r, t)
     if unsteady is not None:
         return go_around(state, obs, m, unsteady, events)
@@ -346,6 +349,9 @@ def docked(state, obs, m, events=()):
     v_c = obs.carrier.velocity_ned_m_s
     if float(norm(obs.vehicle.position_ned_m - dock)) > m.dock_tolerance_m:
         return go_around(replace(state, recovery=rec), obs, m, "lost the dock after contact", events)
+    if obs.carrier.untrusted is not None:  # a resync or a contested source: not a dock to stay on
+        return go_around(replace(state, recovery=rec), obs, m, f"carrier feed not trusted ({obs.carrier.untrusted})",
+                         events)
     evs = tuple(events)
     if rec.settled_since_s is not None and t - rec.settled_since_s >= r.docked_dwell_s:
         outcome = "done" if rec.why == "task done" else f"docked after a recall: {rec.why}"
@@ -374,7 +380,7 @@ def home(state, obs, m, events=()):
     dock = dock_point(obs, m)
     v_c = obs.carrier.velocity_ned_m_s
     on_it = contact(v.position_ned_m, v.velocity_ned_m_s, dock, v_c)
-    parked = float(norm(v_c[:2])) <= PARKED_SPEED_M_S and on_it.within(r.geometry)
+    parked = float(norm(v_c[:2])) <= PARKED_SPEED_M_S and on_it.within(r.geometry) and obs.carrier.untrusted is None
     since = (rec.settled_since_s if rec.settled_since_s is not None else t) if parked else None
     rec = replace(rec, settled_since_s=since)
     done = since is not None and t - since >= r.docked_dwell_s

@@ -40,6 +40,7 @@ class AbortReason(StrEnum):
     SIGNING_MISMATCH = "signing_mismatch"
     VEHICLE_DISARMED = "vehicle_disarmed"
     VEHICLE_AMBIGUOUS = "vehicle_ambiguous"
+    NONFINITE = "nonfinite"
 
 
 
@@ -67,7 +68,8 @@ class VehicleObs:
 @dataclass(frozen=True)
 class CarrierObs:
     """The carrier's newest state: position/velocity NED [m], [m/s]; age [s]; liveliness;
-    acceleration NED [m/s^2] as the carrier measured it, or None (it sent none)."""
+    acceleration NED [m/s^2] as the carrier measured it, or None (it sent none); untrusted: why
+    the feed does not trust it yet (just bound, a resync, a contested source), None when it does."""
 
     position_ned_m: np.ndarray
     velocity_ned_m_s: np.ndarray
@@ -75,6 +77,7 @@ class CarrierObs:
     alive: bool | None = True
     acceleration_ned_m_s2: np.ndarray | None = None
     yaw_rad: float | None = None  # [rad] its heading, if it sent one
+    untrusted: str | None = None
 
 
 @dataclass(frozen=True)
@@ -212,6 +215,7 @@ class MissionState:
     legs_done: tuple[dict[str, Any], ...] = ()  # what each finished leg did (target, separation, contact, outcome)
     legs_skipped: str | None = None  # why the legs after the last one flown were skipped (None: none were)
     battery_start: tuple[float, float] | None = None  # (t [s], remaining [%]) at the first battery reading
+    held_dock: np.ndarray | None = None  # [m] NED: holding on (then rejoining from) this dock point: the feed was untrusted
 
 
 @dataclass(frozen=True)

@@ -17,7 +17,9 @@ Watchdogs (``*_WATCHDOG_WALL_S``, wall seconds) drop a silent participant, a car
 liveliness token is present gets longer; an unanswered call is resent every
 :data:`RESEND_WALL_S`, and a named sample that never comes is given up after :data:`LOST_WALL_S`
 and :data:`LOST_AFTER_REPEATS` repeats (``samples_lost``: the run is no longer deterministic).
-Why each rule, and what was measured: docs/lockstep.md.
+Why each rule, and what was measured: docs/lockstep.md. With ``zenoh.signing_key_file`` the clock
+messages carry the pair's authentication tag (:mod:`mission.bus.signing`); an unsigned or badly
+signed one is dropped like a malformed one.
 """
 from __future__ import annotations
 
@@ -28,7 +30,9 @@ from typing import Any, Callable
 
 import zenoh
 
+from mission.bus.auth import BusAuth
 from mission.bus.bridge import keys, undeclare
+from mission.bus.wire import WireError
 from mission.time.clock import LockstepClock
 from mission.mavlink.env import mavlink
 
@@ -50,18 +54,39 @@ def clock_keys(pair: str) -> tuple[str, str]:
     return f"{root}/clock/time", f"{root}/clock/ready"
 
 
-def _publisher(session: zenoh.Session, key: str) -> zenoh.Publisher:
-    # Reliable and blocking: a clock message must never be dropped; express keeps it in order
-    # with the (express) state samples of the same session.
-    return session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK, express=True)
+class _ClockWire:
+    """One side's clock messages: puts text on ``key`` and reads the integers of the other
+    side's; with ``auth`` (the pair's bus key) both signed, and an unsigned, badly signed or
+    replayed message is dropped and counted (:attr:`rejected`) like a malformed one."""
 
+    def __init__(self, session: zenoh.Session, key: str, auth: BusAuth | None) -> None:
+        # Reliable and blocking: a clock message must never be dropped; express keeps it in order
+        # with the (express) state samples of the same session.
+        self.key = key
+        self.pub = session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK, express=True)
+        self._signer = auth.signer() if auth is not None else None
+        self._verifier = auth.verifier() if auth is not None else None
+        self.rejected = 0
 
-def _ints(sample: zenoh.Sample, count: int) -> list[int] | None:
-    try:
-        values = [int(v) for v in sample.payload.to_bytes().decode("ascii").split()]
-    except (UnicodeDecodeError, ValueError):
-        return None
-    return values if len(values) == count else None
+    def put(self, text: str) -> None:
+        payload = text.encode()
+        self.pub.put(payload, attachment=None if self._signer is None else self._signer.attachment(self.key, payload))
+
+    def read(self, sample: zenoh.Sample, count: int) -> list[int] | None:
+        """The ``count`` integers of ``sample``, or None (dropped, logged)."""
+        raw = sample.payload.to_bytes()
+        try:
+            if self._verifier is not None:
+                self._verifier.verify(sample, raw)
+            values = [int(v) for v in raw.decode("ascii").split()]
+            if len(values) != count:
+                raise ValueError(f"{len(values)} numbers, not {count}")
+        except (WireError, UnicodeDecodeError, ValueError) as exc:
+            self.rejected += 1
+            (log.warning if self.rejected == 1 else log.debug)("lockstep: clock message on %s dropped: %s",
+                                                               sample.key_expr, exc)
+            return None
+        return values
 
 
 class MavlinkUpstream:
@@ -168,7 +193,7 @@ class ZenohRelay:
                  alive: Callable[[], bool | None] | None = None,
                  watchdog_wall_s: float = CARRIER_WATCHDOG_WALL_S,
                  alive_watchdog_wall_s: float = ALIVE_CARRIER_WATCHDOG_WALL_S,
-                 join_wall_s: float = 30.0, name: str = "carrier") -> None:
+                 join_wall_s: float = 30.0, name: str = "carrier", auth: BusAuth | None = None) -> None:
         time_key, ready_key = keys
         self.watchdog_wall_s, self.join_wall_s, self.name = watchdog_wall_s, join_wall_s, name
         self.alive_watchdog_wall_s = max(alive_watchdog_wall_s, watchdog_wall_s)
@@ -183,7 +208,7 @@ class ZenohRelay:
         self.dropped = 0
         self.missed = 0  # state samples given up (lost in an outage)
         self._closed = False
-        self._pub = _publisher(session, time_key)
+        self._wire = _ClockWire(session, time_key, auth)
         self._sub = session.declare_subscriber(ready_key, self._on_ready)
         feed.add_listener(self._on_state)
 
@@ -191,7 +216,7 @@ class ZenohRelay:
         """Put the clock call; False once :meth:`close` undeclared the publisher (a step still in
         flight while the process shuts down ends there)."""
         try:
-            self._pub.put(call)
+            self._wire.put(call)
             return True
         except zenoh.ZError:
             if self._closed:
@@ -204,9 +229,8 @@ class ZenohRelay:
             self._cv.notify_all()
 
     def _on_ready(self, sample: zenoh.Sample) -> None:
-        values = _ints(sample, 3)
+        values = self._wire.read(sample, 3)
         if values is None:
-            log.warning("lockstep: malformed ready on %s dropped", sample.key_expr)
             return
         with self._cv:
             self._ready = (values[0], values[1], values[2])
@@ -286,7 +310,7 @@ class ZenohRelay:
         with self._cv:
             self._closed = True
             self._cv.notify_all()
-        undeclare(self._sub, self._pub)
+        undeclare(self._sub, self._wire.pub)
 
 
 class ZenohUpstream:
@@ -300,7 +324,7 @@ class ZenohUpstream:
     step already taken is passed on at once (the clock reports that step again)."""
 
     def __init__(self, clock: LockstepClock, session: zenoh.Session, keys: tuple[str, str], feed: Any,
-                 published: Callable[[], int]) -> None:
+                 published: Callable[[], int], auth: BusAuth | None = None) -> None:
         time_key, ready_key = keys
         self.clock, self._published = clock, published
         self._lock = threading.Lock()
@@ -309,7 +333,7 @@ class ZenohUpstream:
         self._pending_since, self._pending_calls = 0.0, 0  # wall time of its first call [s], calls since
         self._stepped_ns = -1  # the latest step passed to the clock
         self.missed = 0  # passenger statuses given up (lost in an outage)
-        self._pub = _publisher(session, ready_key)
+        self._wire = _ClockWire(session, ready_key, auth)
         feed.add_listener(self._on_status)
         self._sub = session.declare_subscriber(time_key, self._on_time)
         clock.upstream = self
@@ -325,9 +349,8 @@ class ZenohUpstream:
         self.clock.barrier(pending[0])
 
     def _on_time(self, sample: zenoh.Sample) -> None:
-        values = _ints(sample, 2)
+        values = self._wire.read(sample, 2)
         if values is None:
-            log.warning("lockstep: malformed time on %s dropped", sample.key_expr)
             return
         t_ns, seq = values
         with self._lock:
@@ -348,7 +371,7 @@ class ZenohUpstream:
         self.clock.barrier(t_ns)
 
     def report(self, t_ns: int, wake_ns: int) -> None:
-        self._pub.put(f"{t_ns} {wake_ns} {self._published()}")
+        self._wire.put(f"{t_ns} {wake_ns} {self._published()}")
 
     def close(self) -> None:
-        undeclare(self._sub, self._pub)
+        undeclare(self._sub, self._wire.pub)

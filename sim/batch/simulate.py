@@ -173,10 +173,21 @@ def simulate(config: str, as_json: bool, plot_path: str | None, count: int | Non
     when >= 99 % docked within 2 attempts, every other one fell back safely and none touched
     the deck outside the contact conditions.
 
+    \b
+    A file that leaves a [safety] speed or acceleration limit unset is simulated with the paper's
+    unsaturated law there, and simulate says so on stderr.
+
     Exit code 0 when P1-P3 hold (for every scenario with --monte-carlo), 1 otherwise, 2 on a bad
     config.
     """
     cfg = load_config(config)
+    unsaturated = [f"safety.{name}" for name in ("passenger_max_speed_m_s", "passenger_max_accel_m_s2",
+                                                  "carrier_max_speed_m_s", "carrier_max_accel_m_s2")
+                   if getattr(cfg.safety, name) is None]
+    if unsaturated:  # on stderr, also with --json: the paper's runs are unsaturated on purpose
+        click.echo(f"{Path(config).name} leaves {', '.join(unsaturated)} unset: simulating the paper's unsaturated "
+                   "law there (its 3D run peaks above 300 m/s); `marsupial run` and `marsupial carrier` refuse such a "
+                   "file", err=True)
     if is_mission_config(cfg) and not as_json and not (count is not None and is_recovery_config(cfg)):
         start, p2_tol = as_flown(cfg)
         click.echo(f"{Path(config).name} has a [mission] section: simulating what `marsupial run` flies: the passenger "

@@ -26,8 +26,9 @@ import zenoh
 
 from mission.carrier.backends.ros2 import Received, RmwAttachment, Ros2Topics, rmw_sequence, robot_clock_keys, ros2_topics
 from mission.core.geodesy import wrap_pi
+from mission.bus.auth import BusAuth, bus_auth
 from mission.bus.bridge import open_session
-from mission.bus.session import congestion_for, undeclare
+from mission.bus.session import close_session, congestion_for, undeclare
 from mission.time.clock import Clock, LockstepClock, Periodic, ScaledClock
 from mission.config.schema import CarrierRos2Section, ZenohSection
 from mission.bus.wire import CarrierState, WireError
@@ -42,7 +43,7 @@ class Ros2RobotSim:
     def __init__(self, session: zenoh.Session, topics: Ros2Topics, clock: Clock, *, holonomic: bool = False,
                  start_ned: tuple[float, float, float] = (0.0, 0.0, 0.0), yaw_rad: float = 0.0,
                  accel_m_s2: float = 1.5, cmd_timeout_s: float = 0.5, max_speed_m_s: float = 3.0,
-                 max_yaw_rate_rad_s: float = 1.5) -> None:
+                 max_yaw_rate_rad_s: float = 1.5, auth: BusAuth | None = None) -> None:
         self.clock, self.topics, self.holonomic = clock, topics, holonomic
         self.position_m = np.array(start_ned, dtype=float)  # odom frame, NED [m]
         self.yaw_rad = float(yaw_rad)
@@ -54,23 +55,29 @@ class Ros2RobotSim:
         self._cmd: tuple[np.ndarray, float, float] | None = None  # (forward, right), yaw rate NED, rx time
         self.commands, self.dropped, self.seq = 0, 0, 0
         self._attachment = RmwAttachment() if topics.rmw_zenoh else None
+        self._verifier = auth.verifier() if auth is not None else None  # commands must carry the pair's tag
         self._listeners: list[Callable[[Received], None]] = []
         self._pub = session.declare_publisher(topics.odom_pub, encoding=zenoh.Encoding.APPLICATION_CDR,
                                               congestion_control=congestion_for(clock))
         self._sub = session.declare_subscriber(topics.cmd_vel_sub, self._on_cmd)
 
     def _on_cmd(self, sample: zenoh.Sample) -> None:
+        attachment = sample.attachment
         try:
-            linear, angular = decode_twist_cdr(sample.payload.to_bytes())
+            raw = sample.payload.to_bytes()
+            if self._verifier is not None:
+                _, inner = self._verifier.verify(sample, raw)
+                attachment = zenoh.ZBytes(inner) if inner else None
+            linear, angular = decode_twist_cdr(raw)
         except WireError as exc:
             self.dropped += 1
-            log.debug("dropped a cmd_vel (%s)", exc)
+            (log.warning if self.dropped == 1 else log.debug)("dropped a cmd_vel (%s)", exc)
             return
         body = np.array([linear[0], -linear[1] if self.holonomic else 0.0])
         with self._lock:
             self._cmd = (body, -float(angular[2]), self.clock.now())
             self.commands += 1
-        seq = rmw_sequence(sample.attachment)
+        seq = rmw_sequence(attachment)
         if seq is not None:
             for callback in self._listeners:
                 callback(Received(seq - 1))
@@ -151,8 +158,13 @@ def _floats(text: str, option: str) -> tuple[float, float, float]:
               "steps). --speed is then the pace once the carrier falls silent.")
 @click.option("--zenoh-connect", "connect", multiple=True, metavar="ENDPOINT")
 @click.option("--zenoh-listen", "listen", multiple=True, metavar="ENDPOINT")
+@click.option("--signing-key", "signing_key_file", type=click.Path(dir_okay=False), default=None,
+              help="Bus signing key file of the pair (zenoh.signing_key_file): take only commands (and lockstep clock "
+                   "messages) signed with it.")
+@click.option("--pair", default="pair0", show_default=True, help="The pair whose key signs (with --signing-key).")
 def ros2_robot(key_form: str, namespace: str, domain_id: int, kinematics: str, yaw_deg: float, rate_hz: float,
-               speed: float, lockstep: bool, connect: tuple[str, ...], listen: tuple[str, ...]) -> int:
+               speed: float, lockstep: bool, connect: tuple[str, ...], listen: tuple[str, ...],
+               signing_key_file: str | None, pair: str) -> int:
     """Run a ROS-2-shaped robot: Twist on cmd_vel in, Odometry on odom out (CDR over Zenoh).
 
     Its odometry starts at zero (the odom frame's origin is where it starts). SIGINT/SIGTERM stop it.
@@ -162,7 +174,9 @@ def ros2_robot(key_form: str, namespace: str, domain_id: int, kinematics: str, y
                                  param_hint="--lockstep")
     ros2 = CarrierRos2Section(key_form=key_form, namespace=namespace, domain_id=domain_id)  # type: ignore[arg-type]
     topics = ros2_topics(ros2)
-    section = ZenohSection(listen=list(listen), connect=list(connect), rendezvous=None if (listen or connect) else "tcp/127.0.0.1:7448")
+    section = ZenohSection(listen=list(listen), connect=list(connect), rendezvous=None if (listen or connect) else "tcp/127.0.0.1:7448",
+                           pair=pair, signing_key_file=signing_key_file)
+    auth = bus_auth(section)
     stop = threading.Event()
     clock: Clock = LockstepClock(speed=speed, name="robot-lockstep") if lockstep else ScaledClock(speed)
 
@@ -173,14 +187,16 @@ def ros2_robot(key_form: str, namespace: str, domain_id: int, kinematics: str, y
 
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, on_signal)
-    with open_session(section) as session:
+    session = open_session(section)
+    try:
         robot = Ros2RobotSim(session, topics, clock, holonomic=kinematics == "holonomic",
-                             yaw_rad=math.radians(yaw_deg))
+                             yaw_rad=math.radians(yaw_deg), auth=auth)
         upstream = None
         if isinstance(clock, LockstepClock):
             from mission.time.lockstep import ZenohUpstream
 
-            upstream = ZenohUpstream(clock, session, robot_clock_keys(ros2), robot, published=lambda: robot.published_seq)
+            upstream = ZenohUpstream(clock, session, robot_clock_keys(ros2), robot, published=lambda: robot.published_seq,
+                                     auth=auth)
         log.info("ROS 2 robot: %s in, %s out%s", topics.cmd_vel_sub, topics.odom_pub, " (lockstep)" if lockstep else "")
         try:
             robot.run(stop, rate_hz)
@@ -190,4 +206,6 @@ def ros2_robot(key_form: str, namespace: str, domain_id: int, kinematics: str, y
             if isinstance(clock, LockstepClock):
                 clock.close()
             robot.close()
+    finally:
+        close_session(session)
     return 0

@@ -155,6 +155,15 @@ def _cases() -> list[tuple[str, str, str]]:
     # the recovery and the carrier's course in it (validated whatever mission.final_action says)
     for key, raw, field in RECOVERY_MISTAKES:
         add(*key.split("."), raw, field)
+    # what a flight must state itself (mission.config.required): on main an empty file flew to a
+    # default target, and one without [safety] flew the unsaturated law (5.8e20 m/s, a traceback)
+    cases.append(("empty-file", "", "scenario.target"))
+    cases.append(("no-scenario", without("scenario"), "scenario.target"))
+    cases.append(("no-safety", without("safety"), "safety.passenger_max_speed_m_s"))
+    for key in ("target", "passenger_max_speed_m_s", "passenger_max_accel_m_s2", "carrier_max_speed_m_s",
+                "carrier_max_accel_m_s2"):
+        section = "scenario" if key == "target" else "safety"
+        cases.append((f"no-{key}", without(section, key), f"{section}.{key}"))
     return cases
 
 
@@ -168,6 +177,18 @@ RECOVERY_MISTAKES = [
     ("carrier.recovery_course", "[[90.0, 1.0]]", "carrier.recovery_course[0]"),
     ("carrier.recovery_course", "[[90.0, 1.0, 0.0]]", "carrier.recovery_course[0]"),
 ]
+
+
+def without(section: str, key: str | None = None) -> str:
+    """demo.toml without its ``[section]`` table, or without ``key``'s line in it."""
+    lines = DEMO.splitlines()
+    start = lines.index(f"[{section}]")
+    end = next((i for i in range(start + 1, len(lines)) if lines[i].startswith("[")), len(lines))
+    if key is None:
+        return "\n".join(lines[:start] + lines[end:]) + "\n"
+    kept = [line for i, line in enumerate(lines) if not (start < i < end and re.match(rf"{re.escape(key)}\s*=", line))]
+    assert len(kept) == len(lines) - 1, key
+    return "\n".join(kept) + "\n"
 
 
 CASES = _cases()
@@ -257,3 +278,18 @@ def test_the_real_processes_refuse_a_flat_glide_path(tmp_path: Path, command: st
                          timeout=60)
     assert out.returncode == 2 and "error: recovery.glide_angle_deg" in out.stderr, out.stderr
     assert "Traceback" not in out.stderr
+
+
+@pytest.mark.parametrize("case", ["empty-file", "no-safety", "no-target", "no-carrier_max_accel_m_s2"])
+def test_the_carrier_refuses_a_flight_without_its_target_or_limits(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                                   case: str) -> None:
+    """``marsupial carrier`` needs the target and the carrier's limits stated, like ``run``:
+    exit 2 naming the field, nothing opened (the passenger's limits are not its business)."""
+    text, field = next((t, f) for i, t, f in CASES if i == case)
+    field = {"safety.passenger_max_speed_m_s": "safety.carrier_max_speed_m_s"}.get(field, field)
+    path = tmp_path / "carrier.toml"
+    path.write_text(text)
+    code = main(["carrier", str(path), "--zenoh-listen", "tcp/127.0.0.1:9", "--summary", str(tmp_path / "c.json")])
+    err = capsys.readouterr().err
+    assert code == 2 and f"error: {field} = None: " in err and "Traceback" not in err, err[:300]
+    assert not (tmp_path / "c.json").exists()

@@ -107,6 +107,7 @@ class Flight:
     speed: float = SPEED
     vehicle_args: tuple[str, ...] = ()
     mission_args: tuple[str, ...] = ()
+    carrier_args: tuple[str, ...] = ()
     mission_verbose: bool = False  # -vv: debug logging (more output to search for leaks)
     lockstep: bool = False  # the three step on the vehicle's simulated time; speed: pace once one stops
     mav_port: int = 0
@@ -133,7 +134,7 @@ class Flight:
         mode = self._mode if lockstep is None or lockstep else []
         self._popen("carrier", cli("-v", "carrier", str(self.config), "--speed", str(self.speed), "--pair", self.pair,
                                    "--zenoh-connect", self.router.endpoint, "--summary", str(self.dir / "carrier.json"),
-                                   *mode))
+                                   *mode, *self.carrier_args))
 
     @property
     def _mode(self) -> list[str]:

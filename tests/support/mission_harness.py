@@ -39,6 +39,7 @@ class Pair:
     carrier_stop: threading.Event
     carrier_thread: threading.Thread
     log_dir: Path
+    endpoint: str = ""  # the carrier's Zenoh listen endpoint (the controller connects to it)
     outcome: MissionOutcome | None = None
     thread: threading.Thread | None = None
     events: list[tuple[float, str]] = field(default_factory=list)
@@ -73,8 +74,11 @@ class Pair:
 
 @contextlib.contextmanager
 def flying_pair(tmp_path: Path, *, speed: float = 5.0, config: str = "demo.toml", overrides: dict[str, Any] | None = None,
-                vehicle: dict[str, Any] | None = None, start: bool = True, lockstep: bool = True) -> Iterator[Pair]:
-    cfg = load_config(CONFIGS / config)
+                vehicle: dict[str, Any] | None = None, start: bool = True, lockstep: bool = True,
+                both: dict[str, Any] | None = None) -> Iterator[Pair]:
+    """``overrides`` change the controller's configuration, ``both`` the controller's and the
+    carrier's (e.g. ``zenoh.signing_key_file``)."""
+    cfg = with_overrides(load_config(CONFIGS / config), both or {})
     zport = free_port()
     ep = f"tcp/127.0.0.1:{zport}"
     base = {"zenoh.listen": [], "zenoh.connect": [ep], "zenoh.rendezvous": None, "mavlink.url": "udpin:127.0.0.1:0"}
@@ -88,7 +92,7 @@ def flying_pair(tmp_path: Path, *, speed: float = 5.0, config: str = "demo.toml"
         stack.callback(carrier.close)
         if isinstance(cclock, LockstepClock):
             upstream = ZenohUpstream(cclock, carrier_session, clock_keys(carrier.pair), carrier.passenger,
-                                     published=lambda: carrier.seq - 1)
+                                     published=lambda: carrier.seq - 1, auth=carrier.auth)
             stack.callback(upstream.close)
         carrier_stop = threading.Event()
         carrier_thread = threading.Thread(target=carrier.run, args=(carrier_stop,), daemon=True)
@@ -104,7 +108,7 @@ def flying_pair(tmp_path: Path, *, speed: float = 5.0, config: str = "demo.toml"
                  "lockstep": lockstep, **(vehicle or {})}
         v = stack.enter_context(MockVehicle(VehicleOptions(**vopts)))
         pair = Pair(cfg=mcfg, vehicle=v, link=link, controller=None, carrier=carrier, carrier_stop=carrier_stop,  # type: ignore[arg-type]
-                    carrier_thread=carrier_thread, log_dir=log_dir)
+                    carrier_thread=carrier_thread, log_dir=log_dir, endpoint=ep)
         stop = threading.Event()
         pair.controller = MissionController(mcfg, link, feed, clock, publisher=publisher, recorder=recorder,
                                             on_event=lambda p, text: pair.events.append((clock.now(), text)), stop=stop)

@@ -1,16 +1,20 @@
 """The mission loop and its command worker on a fake world (no sockets, manual clock)."""
 from __future__ import annotations
 
+import dataclasses
+import json
+
 import numpy as np
 import pytest
 
 from mission.time.clock import ManualClock
 from mission.config.schema import load_config, with_overrides
-from mission.controller import CommandWorker, MissionController, TickReport
+from mission.controller import CommandWorker, MissionController, TickReport, mission_info
 from mission.errors import LinkError
 from mission.core.law import norm
 from mission.phases import AbortReason, Phase
 from mission.interfaces import Request
+from mission.record import FlightRecorder
 from tests.conftest import CONFIGS
 from tests.support.fake_vehicle import FakeWorld
 
@@ -168,3 +172,31 @@ def test_a_vehicle_disarmed_while_riding_ends_the_stream_and_tells_the_carrier_w
     assert all(s.reason is None for s in world.statuses[:-1])
     assert (EXTENDED_SYS_STATE_ID, LANDED_STATE_RATE_HZ) in world.intervals
 
+
+class CorruptWorld(FakeWorld):
+    """From ``corrupt_after_s`` [s] on, the vehicle's position reads infinite (a corrupt estimate)."""
+
+    corrupt_after_s = 8.0
+
+    @property
+    def state(self):  # type: ignore[no-untyped-def]
+        st = super().state
+        if st.t_s > self.corrupt_after_s:
+            return dataclasses.replace(st, position_ned_m=np.array([np.inf, 0.0, -1.5]))
+        return st
+
+
+def test_a_non_finite_value_in_the_loop_aborts_to_hold_with_the_summary_written(cfg, tmp_path):
+    """On main an unsaturated law reached "refusing non-finite position setpoint 9e74" in the link:
+    a traceback, no summary.json. Now the tick that would hold a NaN or infinity aborts
+    (nonfinite, naming it), asks for Hold, and the flight log is complete."""
+    clock = ManualClock()
+    world = CorruptWorld(clock, target_ned_m=np.asarray(cfg.scenario.target, dtype=float))
+    recorder = FlightRecorder(tmp_path / "log", mission_info(cfg))
+    outcome = MissionController(cfg, world, world.feed, clock, publisher=world, recorder=recorder, command_thread=False).run()
+    assert (outcome.phase, outcome.reason) == ("ABORT", AbortReason.NONFINITE.value), outcome.detail
+    assert "non-finite" in outcome.detail and "in RIDING" in outcome.detail
+    assert all(np.isfinite(v).all() for _, v in world.setpoints)  # nothing non-finite ever went out
+    assert world.commands[-1][1] == "AUTO.LOITER"  # Hold asked
+    summary = json.loads((tmp_path / "log" / "summary.json").read_text())
+    assert (summary["phase"], summary["reason"]) == ("ABORT", "nonfinite")

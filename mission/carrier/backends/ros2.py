@@ -8,6 +8,10 @@ on its ``cmd_vel``, both CDR (rosbags), under either key form (:func:`ros2_topic
   hash and publish ``cmd_vel`` with the Twist's RIHS01 hash and rmw_zenoh's attachment
   (sequence number, source timestamp [ns], a 16-byte source gid), which its subscribers read.
 
+With ``zenoh.signing_key_file`` each Twist also carries the pair's authentication tag after that
+attachment (:mod:`mission.bus.signing`), for a robot that checks it (``marsupial ros2-robot
+--signing-key``, or a bridge of your own); the odometry of a ROS 2 robot is not signed.
+
 Frames: Odometry is ENU (REP 103) with a body FLU twist; :func:`mission.bus.ros2.decode_odometry_cdr`
 turns it into NED. The odom frame's origin sits at ``carrier.ros2.offset_ned_m`` [m] in the
 shared frame (a robot's odometry usually starts at zero where it booted). The Twist is body FLU:
@@ -32,6 +36,7 @@ import zenoh.ext
 
 from mission.carrier.controller import OwnState
 from mission.carrier.tracking import Tracked
+from mission.bus.auth import bus_auth
 from mission.bus.session import congestion_for, declare, undeclare
 from mission.time.clock import Clock, Downstream
 from mission.time.lockstep import ZenohRelay
@@ -154,6 +159,8 @@ class Ros2Carrier:
         self._latest: tuple[CarrierState, float] | None = None
         self.dropped: dict[str, int] = {}
         self._attachment = RmwAttachment() if self.topics.rmw_zenoh else None
+        self._auth = bus_auth(cfg.zenoh)
+        self._signer = self._auth.signer() if self._auth is not None else None  # a robot that verifies (ros2-robot --signing-key)
         self._listeners: list[Callable[[Received], None]] = []
         self._pub = declare(f"publisher on {self.topics.cmd_vel_pub}", lambda: session.declare_publisher(
             self.topics.cmd_vel_pub, encoding=zenoh.Encoding.APPLICATION_CDR, congestion_control=congestion_for(clock)))
@@ -217,7 +224,7 @@ class Ros2Carrier:
             log.warning("lockstep: a ros2dds robot carries no sequence numbers and cannot step with us; "
                         "it runs on its own clock")
             return None
-        return ZenohRelay(session, robot_clock_keys(self.section), self, self, name="robot")
+        return ZenohRelay(session, robot_clock_keys(self.section), self, self, name="robot", auth=self._auth)
 
     def control_fault(self) -> str | None:
         return None
@@ -230,9 +237,12 @@ class Ros2Carrier:
             latest = self._latest
         yaw = None if latest is None else latest[0].yaw_rad
         linear, angular = body_twist(cmd, yaw, self.holonomic)
+        payload = encode_twist_cdr(linear, angular)
         attachment = self._attachment.next() if self._attachment is not None else None
+        if self._signer is not None:  # our tag after rmw_zenoh's attachment (mission.bus.signing)
+            attachment = self._signer.attachment(self.topics.cmd_vel_pub, payload, attachment or b"")
         try:
-            self._pub.put(encode_twist_cdr(linear, angular), attachment=attachment)
+            self._pub.put(payload, attachment=attachment)
         except zenoh.ZError as exc:  # a closed session while stopping
             log.debug("cmd_vel not sent: %s", exc)
 

@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 import pytest
+import zenoh
 
 from mission.bus.bridge import (
     CarrierFeed,
@@ -219,9 +220,41 @@ def test_passenger_status_and_phase_flow_to_the_carrier_side() -> None:
                 assert rx.status.separated
                 np.testing.assert_array_equal(rx.status.anchor_ned_m, [1.0, 2.0, 0.0])
                 wait_for(lambda: phases == ["RIDING", "SEPARATED"], what="phase texts")
-                assert feed.counters == {"received": 2, "accepted": 2, "dropped": {}}
+                c = feed.counters
+                assert (c["received"], c["accepted"], c["dropped"], c["signed"]) == (2, 2, {}, False)
+                assert c["bound_source"] == f"{b.zid()}/{pub._state.id.eid}"
         finally:
             phase_sub.undeclare()
+
+
+def test_the_carrier_binds_the_passenger_that_began_on_the_deck_and_a_flood_elsewhere_changes_nothing() -> None:
+    """A source that starts by claiming RIDING never binds; once the real passenger is bound (3
+    statuses before riding), a flood of SEPARATED/ABORT with higher sequence numbers from another
+    session is dropped as "source" and never makes the real statuses stale."""
+    clock = ManualClock(1.0)
+    BLOCK = zenoh.CongestionControl.BLOCK
+    before = frozenset({"PREFLIGHT", "STREAMING", "ARMING", "OFFBOARD", "JOIN"})
+    with peer_pair() as (a, b), PassengerFeed(a, "p", clock, bind_phases=before, bind_samples=3) as feed, \
+            PassengerPublisher(b, "p", zenoh.CongestionControl.BLOCK) as pub:  # counted exactly: nothing dropped
+        wait_for(lambda: pub.matched)
+        key = keys("p").passenger_state
+        riding = PassengerStatus("RIDING", 0.5, 10**6, [0, 0, -1.5], [0, 0, 0])
+        for k in range(5):  # a rogue that rides from the start (no source_info: "anonymous")
+            a.put(key, riding.model_copy(update={"seq": 10**6 + k}).to_json(), congestion_control=BLOCK)
+        wait_for(lambda: feed.counters["dropped"].get("unbound", 0) == 5, what="5 unbound")
+        for seq, phase in enumerate(["PREFLIGHT", "STREAMING", "STREAMING", "RIDING"], start=1):
+            pub.publish(PassengerStatus(phase, 0.1 * seq, seq, [0, 0, -1.5], [0, 0, 0]))
+            if seq == 3:  # bound now
+                wait_for(lambda: feed.counters["bound_source"] is not None, what="bound")
+                for k in range(50):  # the flood, between the real statuses
+                    fake = "SEPARATED" if k % 2 else "ABORT"
+                    a.put(key, PassengerStatus(fake, 9.0, 10**7 + k, [0, 0, 0], [0, 0, 0], fake == "SEPARATED").to_json(),
+                          congestion_control=BLOCK)
+        wait_for(lambda: (r := feed.latest()) is not None and r.status.seq == 4, what="the real RIDING")
+        wait_for(lambda: feed.counters["dropped"].get("source", 0) == 50, what="the flood counted")
+        c = feed.counters
+        assert c["accepted"] == 2 and c["dropped"] == {"unbound": 7, "source": 50}, c
+        assert c["rejected_sources"] == {"anonymous": 50}
 
 
 def test_session_configuration_is_loopback_only_by_default() -> None:

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from typing import Any
 
 import numpy as np
@@ -52,25 +52,41 @@ def _cfg(backend: str, kinematics: str, mission: dict[str, Any] | None = None, *
 
 
 class ScriptedPassenger:
-    """Publishes a phase at 20 Hz (clock) from its own thread: ``phase`` can be changed at any time."""
+    """Publishes a phase at 20 Hz (clock) from its own thread: ``phase`` can be changed at any time.
+    It begins with three JOIN statuses whatever ``phase`` says (the carrier binds a passenger that
+    began on the deck) and says it is on the dock point ``at()`` [m] NED (``carrier_running`` sets
+    it to the carrier's)."""
 
     def __init__(self, session: zenoh.Session, clock: Clock) -> None:
-        self.pub = PassengerPublisher(session, "cb")
+        self.pub = PassengerPublisher(session, "cb", zenoh.CongestionControl.BLOCK)  # the boarding goes out back to back
         self.clock, self.phase, self.seq = clock, "JOIN", 0
+        self.at: Callable[[], Any] = lambda: None
         self.stop = threading.Event()
         self.thread = threading.Thread(target=self._run, daemon=True)
+
+    def start(self, at: Callable[[], Any]) -> None:
+        """Stand on the deck (three JOIN statuses, at once), then publish from the thread."""
+        self.at = at
+        for _ in range(3):
+            self._say("JOIN")
         self.thread.start()
+
+    def _say(self, phase: str) -> None:
+        self.seq += 1
+        dock = self.at()
+        at = [0.0, 0.0, -1.5] if dock is None else dock
+        self.pub.publish(PassengerStatus(phase, self.clock.now(), self.seq, at, [0, 0, 0],
+                                         Phase(phase).separated))
 
     def _run(self) -> None:
         while not self.stop.is_set():
             self.clock.sleep(0.05)  # first: in lockstep every status goes out in a step
-            self.seq += 1
-            sep = Phase(self.phase).separated
-            self.pub.publish(PassengerStatus(self.phase, self.clock.now(), self.seq, [0, 0, -1.5], [0, 0, 0], sep))
+            self._say(self.phase)
 
     def close(self) -> None:
         self.stop.set()
-        self.thread.join(5.0)
+        if self.thread.is_alive():
+            self.thread.join(5.0)
         self.pub.close()
 
 
@@ -81,12 +97,14 @@ def carrier_running(cfg: Config, clock: Clock, session: zenoh.Session, backend: 
     scripted ``passenger``'s last status to have reached the carrier (Zenoh delivers it on its
     own time; the mission's clock relay waits for it in a flight)."""
     ctl = CarrierController(cfg, clock, session, backend)
+    if passenger is not None:
+        wait_for(lambda: passenger.pub.matched, 10.0, "the carrier subscribed to the passenger")
+        passenger.start(ctl.dock_point_ned_m)
     if stepper is not None and passenger is not None:
         def delivered() -> bool:
             rx = ctl.passenger.latest()
             return passenger.seq == 0 or (rx is not None and rx.status.seq >= passenger.seq)
 
-        wait_for(lambda: passenger.pub.matched, 10.0, "the carrier subscribed to the passenger")
         stepper.settle = lambda: wait_for(delivered, 10.0, "the passenger's status at the carrier")
     stop = threading.Event()
     thread = threading.Thread(target=ctl.run, args=(stop,), daemon=True)

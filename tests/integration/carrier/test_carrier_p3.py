@@ -52,7 +52,7 @@ def _drive(sim: CarrierSim, clock: ManualClock, passenger: Passenger, script: di
 def test_a_passenger_that_never_separates_cannot_bring_the_carrier_inside_the_guard(kinematics: str) -> None:
     clock = ManualClock()
     with sessions(1) as (sa, sb), CarrierSim(_cfg(kinematics=kinematics), clock, sa) as sim:
-        passenger = Passenger(sb, "p3", clock)
+        passenger = Passenger(sb, "p3", clock, sim)
         try:
             wait_for(lambda: passenger.pub.matched)
             d = _drive(sim, clock, passenger, {0: "RIDING"}, 30 * 40, refresh="RIDING")
@@ -70,7 +70,7 @@ def test_a_lying_separated_phase_under_remark1_does_not_carry_the_carrier_into_t
     target; the guard stops it at the circle (it may slide along it, never inside)."""
     clock = ManualClock()
     with sessions(1) as (sa, sb), CarrierSim(_cfg(carrier_mode="remark1"), clock, sa) as sim:
-        passenger = Passenger(sb, "p3", clock)
+        passenger = Passenger(sb, "p3", clock, sim)
         try:
             wait_for(lambda: passenger.pub.matched)
             d = _drive(sim, clock, passenger, {0: "RIDING", 60: "SEPARATED"}, 30 * 30, refresh=None)
@@ -84,7 +84,7 @@ def test_a_lying_separated_phase_under_remark1_does_not_carry_the_carrier_into_t
 def test_a_phase_that_jumps_back_to_riding_does_not_restart_the_approach() -> None:
     clock = ManualClock()
     with sessions(1) as (sa, sb), CarrierSim(_cfg(), clock, sa) as sim:
-        passenger = Passenger(sb, "p3", clock)
+        passenger = Passenger(sb, "p3", clock, sim)
         try:
             wait_for(lambda: passenger.pub.matched)
             d = _drive(sim, clock, passenger, {0: "RIDING", 90: "SEPARATED", 100: "RIDING"}, 400, refresh="RIDING")
@@ -98,7 +98,7 @@ def test_a_phase_that_jumps_back_to_riding_does_not_restart_the_approach() -> No
 def test_a_passenger_that_vanishes_stops_the_carrier_outside_the_guard() -> None:
     clock = ManualClock()
     with sessions(1) as (sa, sb), CarrierSim(_cfg(), clock, sa) as sim:
-        passenger = Passenger(sb, "p3", clock)
+        passenger = Passenger(sb, "p3", clock, sim)
         try:
             wait_for(lambda: passenger.pub.matched)
             d = _drive(sim, clock, passenger, {0: "RIDING"}, 120, refresh="RIDING")
@@ -119,17 +119,18 @@ def test_deck_alignment_moves_the_carrier_onto_the_passenger_once_and_only_so_fa
     clock = ManualClock()
     cfg = from_dict({**_cfg().model_dump(), "carrier": {**_cfg().carrier.model_dump(), "align_on_deck_m": 1.0}})
     with sessions(1) as (sa, sb), CarrierSim(cfg, clock, sa) as sim:
-        passenger = Passenger(sb, "p3", clock)
+        passenger = Passenger(sb, "p3", clock, sim)
         try:
             wait_for(lambda: passenger.pub.matched)
             assert sim.step(0.0) is not None and sim.seq == 0  # not published: not aligned yet
-            passenger.pub.publish(PassengerStatus("PREFLIGHT", clock.now(), 1, [0.6, -0.3, 0.0], [0, 0, 0]))
-            wait_for(lambda: _seen(sim, 1))
+            for seq in (1, 2, 3):  # the passenger's first statuses bind it (mission.bus.feeds.PassengerFeed)
+                passenger.pub.publish(PassengerStatus("PREFLIGHT", clock.now(), seq, [0.6, -0.3, 0.0], [0, 0, 0]))
+            wait_for(lambda: _seen(sim, 3))
             clock.advance(DT)
             out = sim.step(DT)
             assert sim.seq == 1 and out.position.tolist() == pytest.approx([0.6, -0.3, 0.0])
-            passenger.pub.publish(PassengerStatus("ARMING", clock.now(), 2, [5.0, 5.0, 0.0], [0, 0, 0]))
-            wait_for(lambda: _seen(sim, 2))
+            passenger.pub.publish(PassengerStatus("ARMING", clock.now(), 4, [5.0, 5.0, 0.0], [0, 0, 0]))
+            wait_for(lambda: _seen(sim, 4))
             clock.advance(DT)
             assert sim.step(DT).position.tolist() == pytest.approx([0.6, -0.3, 0.0])  # once only
         finally:
@@ -137,11 +138,12 @@ def test_deck_alignment_moves_the_carrier_onto_the_passenger_once_and_only_so_fa
     far = from_dict({**cfg.model_dump(), "carrier": {**cfg.carrier.model_dump(), "align_on_deck_m": 0.5}})
     clock = ManualClock()
     with sessions(1) as (sa, sb), CarrierSim(far, clock, sa) as sim:
-        passenger = Passenger(sb, "p3", clock)
+        passenger = Passenger(sb, "p3", clock, sim)
         try:
             wait_for(lambda: passenger.pub.matched)
-            passenger.pub.publish(PassengerStatus("PREFLIGHT", clock.now(), 1, [0.6, -0.3, 0.0], [0, 0, 0]))
-            wait_for(lambda: _seen(sim, 1))
+            for seq in (1, 2, 3):
+                passenger.pub.publish(PassengerStatus("PREFLIGHT", clock.now(), seq, [0.6, -0.3, 0.0], [0, 0, 0]))
+            wait_for(lambda: _seen(sim, 3))
             assert sim.step(DT).position.tolist() == pytest.approx([0.0, 0.0, 0.0])  # 0.67 m > 0.5: refused
             assert sim.summary()["deck_alignment_m"] == [0.0, 0.0, 0.0]
         finally:
@@ -163,7 +165,7 @@ def test_speed_calibration_holds_an_overshooting_robot_at_the_law_s_speed_and_th
     with sessions(1) as (sa, sb):
         robot = OvershootingRobot(cfg, clock)
         with CarrierController(cfg, clock, sa, robot) as ctl:
-            passenger = Passenger(sb, "p3", clock)
+            passenger = Passenger(sb, "p3", clock, ctl)
             speeds, d = [], []
             try:
                 wait_for(lambda: passenger.pub.matched)

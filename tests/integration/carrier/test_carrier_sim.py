@@ -16,16 +16,19 @@ import numpy as np
 import pytest
 import zenoh
 
+from mission.bus.auth import BusAuth
 from mission.bus.bridge import CarrierFeed, PassengerPublisher, keys
 from mission.cli import main as cli_main
 from mission.time.clock import Clock, LockstepClock, ManualClock, ScaledClock
 from mission.config.schema import Config, from_dict
 from mission.bus.wire import CarrierState, PassengerStatus, decode_carrier_json
 from mission.phases.phase import Phase
+from mission.carrier.controller import CarrierController
+from mission.carrier.modes import BEFORE_RIDING
 from sim.robots.carrier import CarrierMode, CarrierSim
 from tests.support.stepper import Stepper
 from tests.support.zenoh_util import endpoint, free_port, peer, wait_for
-from tests.conftest import ROOT
+from tests.conftest import FLIGHT_TOML, ROOT
 
 pytestmark = pytest.mark.timeout(30)
 
@@ -41,16 +44,32 @@ def _cfg(pair: str = "sim", **scenario: object) -> Config:
 
 
 class Passenger:
-    """The test's stand-in for the mission controller: publishes statuses with its own seq."""
+    """The test's stand-in for the mission controller: publishes statuses with its own seq. It
+    stands on the deck first (three PREFLIGHT statuses before its first later phase: the carrier
+    binds only a passenger that began there) and says it is on ``carrier``'s dock point (without a
+    carrier: 1.5 m above the origin)."""
 
-    def __init__(self, session: zenoh.Session, pair: str, clock: Clock) -> None:
-        self.pub = PassengerPublisher(session, pair)
-        self.clock, self.seq = clock, 0
+    def __init__(self, session: zenoh.Session, pair: str, clock: Clock, carrier: CarrierController | None = None,
+                 auth: BusAuth | None = None) -> None:
+        # blocking, never dropped: the statuses of a boarding go out back to back
+        self.pub = PassengerPublisher(session, pair, zenoh.CongestionControl.BLOCK, auth=auth)
+        self.clock, self.seq, self.carrier = clock, 0, carrier
+        self.on_deck = 0  # statuses sent before riding
 
     def say(self, phase: str) -> int:
+        if phase in BEFORE_RIDING:
+            self.on_deck += 1
+        while self.on_deck < 3:
+            self.on_deck += 1
+            self._send("PREFLIGHT")
+        return self._send(phase)
+
+    def _send(self, phase: str) -> int:
         self.seq += 1
         separated = Phase(phase).separated
-        self.pub.publish(PassengerStatus(phase, self.clock.now(), self.seq, [0, 0, -1.5], [0, 0, 0], separated))
+        dock = self.carrier.dock_point_ned_m() if self.carrier is not None else None
+        at = [0.0, 0.0, -1.5] if dock is None else dock
+        self.pub.publish(PassengerStatus(phase, self.clock.now(), self.seq, at, [0, 0, 0], separated))
         return self.seq
 
 
@@ -114,7 +133,7 @@ def test_step_by_step_waits_drives_towards_the_target_and_stops_after_separation
     dt = 1.0 / 30.0
     with sessions(1) as (sa, sb), CarrierSim(_cfg(), clock, sa) as sim, \
             CarrierFeed(sb, "sim", clock) as observer:
-        passenger = Passenger(sb, "sim", clock)
+        passenger = Passenger(sb, "sim", clock, sim)
         try:
             wait_for(lambda: sim.publisher.matched, what="observer subscribed")
             first = sim.step(0.0)
@@ -174,7 +193,7 @@ def test_remark1_keeps_the_velocity_of_the_separation_instant() -> None:
     clock = ManualClock()
     dt = 1.0 / 30.0
     with sessions(1) as (sa, sb), CarrierSim(_cfg(carrier_mode="remark1"), clock, sa) as sim:
-        passenger = Passenger(sb, "sim", clock)
+        passenger = Passenger(sb, "sim", clock, sim)
         try:
             sim.step(0.0)
             wait_for(lambda: passenger.pub.matched)
@@ -201,7 +220,7 @@ def test_abort_before_separation_stops_for_good() -> None:
     clock = ManualClock()
     dt = 1.0 / 30.0
     with sessions(1) as (sa, sb), CarrierSim(_cfg(), clock, sa) as sim:
-        passenger = Passenger(sb, "sim", clock)
+        passenger = Passenger(sb, "sim", clock, sim)
         try:
             sim.step(0.0)
             wait_for(lambda: passenger.pub.matched)
@@ -225,7 +244,7 @@ def test_2d_scenario_publishes_3d_states_at_down_zero() -> None:
     clock = ManualClock()
     cfg = from_dict({"zenoh": {"pair": "flat"}, "scenario": {"dim": 2, "carrier_start": [1.0, 2.0], "target": [20.0, 15.0]}})
     with sessions(1) as (sa, sb), CarrierSim(cfg, clock, sa) as sim:
-        passenger = Passenger(sb, "flat", clock)
+        passenger = Passenger(sb, "flat", clock, sim)
         try:
             assert sim.step(0.0).position.tolist() == [1.0, 2.0, 0.0]
             wait_for(lambda: passenger.pub.matched)
@@ -244,7 +263,7 @@ def test_cdr_carrier_on_a_ros_key_reaches_a_feed_configured_the_same_way() -> No
                      "scenario": {"carrier_start": [3.0, 4.0, 0.0], "target": TARGET.tolist()}})
     with sessions(1) as (sa, sb), CarrierSim(cfg, clock, sa) as sim, \
             CarrierFeed.from_section(sb, cfg.zenoh, clock, max_age_s=0.5) as feed:
-        passenger = Passenger(sb, "ros", clock)
+        passenger = Passenger(sb, "ros", clock, sim)
         try:
             wait_for(lambda: sim.publisher.matched)
             wait_for(lambda: passenger.pub.matched)
@@ -278,7 +297,7 @@ def test_running_carrier_stops_within_one_period_after_separated() -> None:
     with sessions(1) as (sa, sb), CarrierSim(_cfg(), clock, sa) as sim:
         period = sim.period_s
         recorder = Recorder(sb, "sim")
-        passenger = Passenger(sb, "sim", clock)
+        passenger = Passenger(sb, "sim", clock, sim)
         try:
             wait_for(lambda: sim.publisher.matched, what="recorder subscribed")
             with running(sim, clock):
@@ -318,7 +337,7 @@ def test_running_carrier_stops_when_the_passenger_goes_silent_or_vanishes() -> N
     stepper = Stepper(clock)
     with sessions(2) as (sa, sb, sc), CarrierSim(_cfg(), clock, sa) as sim:
         recorder = Recorder(sb, "sim")
-        passenger = Passenger(sc, "sim", clock)
+        passenger = Passenger(sc, "sim", clock, sim)
 
         def say_riding() -> None:
             seq = passenger.say("RIDING")
@@ -363,14 +382,17 @@ def test_cli_config_error_exits_2(tmp_path: Path) -> None:
     bad = tmp_path / "bad.toml"
     bad.write_text("[carrier]\nrate_hz = -5\n")
     assert cli_main(["carrier", str(bad)]) == 2
+    empty = tmp_path / "empty.toml"
+    empty.write_text("")  # no target, no limits: refused
+    assert cli_main(["carrier", str(empty)]) == 2
     good = tmp_path / "good.toml"
-    good.write_text("")
+    good.write_text(FLIGHT_TOML)
     assert cli_main(["carrier", str(good), "--pair", "no/slash"]) == 2
 
 
 def test_cli_runs_publishes_and_exits_0_on_sigterm(tmp_path: Path) -> None:
     cfg = tmp_path / "carrier.toml"
-    cfg.write_text('[zenoh]\npair = "cli"\n[scenario]\ncarrier_start = [1.0, 2.0, 0.0]\n')
+    cfg.write_text(FLIGHT_TOML.replace("[scenario]\n", "[scenario]\ncarrier_start = [1.0, 2.0, 0.0]\n") + '[zenoh]\npair = "cli"\n')
     ep = endpoint(free_port())
     proc = subprocess.Popen(
         [sys.executable, "-m", "mission.cli", "-v", "carrier", str(cfg), "--zenoh-listen", ep, "--speed", "2"],

@@ -47,7 +47,7 @@ def _asked_speeds(start_accel: float) -> tuple[list[float], int]:
     with sessions(1) as (sa, sb):
         robot = StickyRobot(cfg, clock)
         with CarrierController(cfg, clock, sa, robot) as carrier:
-            passenger = Passenger(sb, "start", clock)
+            passenger = Passenger(sb, "start", clock, carrier)
             try:
                 wait_for(lambda: passenger.pub.matched)
                 seq = passenger.say("RIDING")

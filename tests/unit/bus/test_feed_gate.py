@@ -132,3 +132,92 @@ def test_after_a_silence_one_state_is_not_believed_a_track_of_five_is() -> None:
     assert gate.offer("c", spoof) == "gap"
     assert offer_all(gate, "c", after) == ["gap"] * 4 + [None] * 6
     assert gate.resyncs == 1 and gate.describe_reference().startswith(f"seq {after[-1].seq} ")
+    # the honest track after the silence follows the old reference within the carrier's limits (4 m
+    # in 4 s at 1 m/s): the same carrier moving on, trusted at once, not a jump
+    assert gate.jumps == 0 and gate.distrust(after[-1].rx_s) is None
+
+
+# ------------------------------------------------------------------------------------- trust
+
+
+def test_a_new_reference_is_trusted_only_after_settle_s_within_the_carrier_s_limits() -> None:
+    gate = FeedGate(LIMITS)  # settle_s 2 s
+    samples = track(120)  # 4 s at 1 m/s
+    offer_all(gate, "c", samples[:3])
+    assert (gate.distrust(samples[2].rx_s) or "").startswith("settling") and "just bound" in gate.distrust(0.1)
+    untrusted = [gate.offer("c", s) is None and gate.distrust(s.rx_s) is not None for s in samples[3:]]
+    first_trusted = untrusted.index(False) + 3
+    assert samples[first_trusted].rx_s - samples[0].rx_s == pytest.approx(2.0, abs=1 / RATE_HZ)
+    assert not any(untrusted[first_trusted - 3:])  # trusted for good from then on
+
+
+def test_after_a_relocalisation_the_new_track_is_not_trusted_for_settle_s() -> None:
+    gate = FeedGate(LIMITS)
+    offer_all(gate, "c", track(90))
+    assert gate.distrust(3.0) is None
+    after = track(120, start=90, north0=20.0)  # the carrier's localisation jumped 20 m for good
+    results = offer_all(gate, "c", after)
+    assert results[:4] == ["jump"] * 4 and gate.resyncs == 1 and gate.jumps == 1
+    gate = FeedGate(LIMITS)  # again, asking after each state
+    offer_all(gate, "c", track(90))
+    trusted = [(gate.offer("c", s), gate.distrust(s.rx_s)) for s in after]
+    assert all(d is None for _, d in trusted[:4])  # the jumps were dropped: the old reference stands
+    assert all("after a resync" in (d or "") for _, d in trusted[4:60])
+    assert all(d is None for _, d in trusted[61:])  # 2 s from the resync track's first state
+
+
+def test_a_burst_of_five_spoofed_states_never_leaves_a_trusted_reference_behind() -> None:
+    """The attack that fired the latch with the real carrier 25 m out: 5 spoofed states from the
+    carrier's own source id, 7 m short of the target, ahead in sequence. The gate follows them
+    (5 in a row are a track), then the honest states take the reference back; no state is
+    trusted until the honest track has settled, and the spoofed ones never are."""
+    gate = FeedGate(LIMITS)
+    honest = track(240)
+    offer_all(gate, "c", honest[:90])
+    t = honest[90].rx_s
+    burst = [Sample(honest[90].seq + 1 + k, t + 0.001 * k, np.array([60.0, 0.0, 0.0]), np.zeros(3), t + 0.001 * k)
+             for k in range(5)]
+    offer_all(gate, "c", burst)
+    assert gate.resyncs == 1 and gate.distrust(t + 0.01) is not None  # on the spoof, but not trusted
+    trust = [(gate.offer("c", s), gate.distrust(s.rx_s)) for s in honest[91:]]
+    back = next(i for i, (r, _) in enumerate(trust) if r is None)
+    assert gate.resyncs == 2 and gate.jumps == 2 and all(d is not None for _, d in trust[:back + 55])
+    assert trust[-1][1] is None  # the honest track, settled
+
+
+def test_a_copier_of_the_source_id_with_a_higher_sequence_makes_the_source_contested() -> None:
+    """Without a signing key a publisher can copy the carrier's source id and send seq + 1: the
+    honest states are then stale. Three in a second mark the source contested (untrusted) until
+    settle_s after the last one."""
+    gate = FeedGate(LIMITS)
+    honest = track(150)
+    offer_all(gate, "c", honest[:90])
+    assert gate.distrust(honest[89].rx_s) is None
+    for s in honest[90:120]:  # the copier's state just ahead of each honest one
+        copy = Sample(s.seq + 1, s.stamp_s, s.position_ned_m + [0.05, 0, 0], s.velocity_ned_m_s, s.rx_s)
+        assert gate.offer("c", copy) is None
+        assert gate.offer("c", s) == "stale_seq"
+    assert gate.contests == 1 and (gate.distrust(honest[119].rx_s) or "").startswith("contested")
+    results = offer_all(gate, "c", honest[120:])  # the copier stops
+    assert gate.distrust(honest[119].rx_s + 1.9) is not None and gate.distrust(honest[119].rx_s + 2.1) is None, results
+
+
+def test_sporadic_stale_states_and_outliers_never_contest_the_source() -> None:
+    gate = FeedGate(LIMITS)
+    samples = track(900)
+    offer_all(gate, "c", samples[:90])
+    for k, s in enumerate(samples[90:], start=90):
+        if k % 40 == 0:  # 2.5 %: an old state again, and a teleport
+            assert gate.offer("c", samples[k - 5]) == "stale_seq"
+            assert gate.offer("c", Sample(s.seq, s.stamp_s, s.position_ned_m + [20.0, 0, 0], s.velocity_ned_m_s, s.rx_s)) == "jump"
+        assert gate.offer("c", s) is None
+        assert gate.distrust(s.rx_s) is None
+    assert gate.contests == 0 and gate.resyncs == 0
+
+
+def test_while_settling_a_state_beyond_the_carrier_s_own_limits_starts_the_settle_again() -> None:
+    gate = FeedGate(LIMITS)  # max speed 2 m/s: the lax checks take up to 1.5 x 2 + 0.5 m/s
+    fast = track(150, v=3.2)  # plausible for the lax gate, beyond the carrier's own speed
+    results = offer_all(gate, "c", fast)
+    assert results[2:] == [None] * 148 and all(gate.distrust(s.rx_s) for s in fast)
+    assert gate.settles > 100  # every state restarted it

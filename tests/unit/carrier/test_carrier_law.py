@@ -126,6 +126,13 @@ def test_holonomic_tracking_passes_the_command_through() -> None:
     (CarrierMode.APPROACHING, PassengerView(Phase.ABORT), CarrierMode.STOPPED),
     (CarrierMode.SEPARATED, PassengerView(Phase.RIDING), CarrierMode.SEPARATED),
     (CarrierMode.STOPPED, PassengerView(Phase.RIDING), CarrierMode.STOPPED),
+    # a RIDING that does not put the passenger on the dock point starts nothing (a claim from the ground)
+    (CarrierMode.WAITING, PassengerView(Phase.RIDING, on_dock=False), CarrierMode.WAITING),
+    (CarrierMode.PAUSED, PassengerView(Phase.RIDING, on_dock=False), CarrierMode.PAUSED),
+    # the passenger holds (its carrier feed is not consistent): the approach pauses until it rides again
+    (CarrierMode.APPROACHING, PassengerView(Phase.RIDING, holding=True), CarrierMode.PAUSED),
+    (CarrierMode.PAUSED, PassengerView(Phase.RIDING, holding=True), CarrierMode.PAUSED),
+    (CarrierMode.WAITING, PassengerView(Phase.RIDING, holding=True), CarrierMode.WAITING),
 ])
 def test_mode_transitions(mode: CarrierMode, view: PassengerView, expected: CarrierMode) -> None:
     assert next_mode(mode, view)[0] is expected

@@ -8,7 +8,7 @@ import pytest
 
 from mission.config.schema import from_dict, load_config, with_overrides
 from mission.errors import ConfigError
-from tests.conftest import CONFIGS
+from tests.conftest import CONFIGS, FLIGHT_TOML
 
 
 @pytest.mark.parametrize("path", sorted(CONFIGS.glob("*.toml")), ids=lambda p: p.name)
@@ -174,12 +174,17 @@ def _run_cli_sending_to(tmp_path, config_text: str, *extra: str) -> tuple[int, s
 
 
 def test_run_with_a_bad_config_exits_2_and_sends_nothing(tmp_path):
-    code, err, got = _run_cli_sending_to(tmp_path, "[mission]\nrate_hz = -50\n")
+    code, err, got = _run_cli_sending_to(tmp_path, FLIGHT_TOML + "[mission]\nrate_hz = -50\n")
     assert code == 2 and "mission.rate_hz" in err and "-50" in err and got == []
-    code, err, got = _run_cli_sending_to(tmp_path, "[mavlink]\nsigning_key_file = \"/nonexistent/key\"\n")
+    code, err, got = _run_cli_sending_to(tmp_path, FLIGHT_TOML + "[mavlink]\nsigning_key_file = \"/nonexistent/key\"\n")
     assert code == 2 and "mavlink.signing_key_file" in err and got == []
-    code, err, got = _run_cli_sending_to(tmp_path, "", "--pair", "no/slash")
+    code, err, got = _run_cli_sending_to(tmp_path, FLIGHT_TOML + "[zenoh]\nsigning_key_file = \"/nonexistent/key\"\n")
+    assert code == 2 and "zenoh.signing_key_file" in err and got == []
+    code, err, got = _run_cli_sending_to(tmp_path, FLIGHT_TOML, "--pair", "no/slash")
     assert code == 2 and "zenoh.pair" in err and got == []
-    # control: with a good configuration the same socket does hear the mission (its HEARTBEAT)
+    # an empty file states no target and no limits: refused (on main it flew to a default target)
     code, err, got = _run_cli_sending_to(tmp_path, "")
+    assert code == 2 and "error: scenario.target = None: the file has no [scenario] section" in err and got == []
+    # control: with a good configuration the same socket does hear the mission (its HEARTBEAT)
+    code, err, got = _run_cli_sending_to(tmp_path, FLIGHT_TOML)
     assert got, err

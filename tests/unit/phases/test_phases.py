@@ -57,7 +57,7 @@ def fly(model, *, ticks=4000, carrier_age=0.0, on_tick=None, vehicle_tau=0.0):
         elif mode != "OFFBOARD":
             v_p = np.zeros(3)
         x_p = x_p + v_p * dt
-        if state.phase == Phase.RIDING:
+        if state.phase == Phase.RIDING and state.held_dock is None:  # a holding passenger pauses the carrier
             e = model.tick.target - x_c
             e[2] = 0.0
             v_c = e / norm(e) * 2.0
@@ -295,3 +295,62 @@ def test_a_second_autopilot_without_target_system_aborts(model, phase):
         assert first.setpoint is None and first.request is None
     else:
         assert first.request == "hold"
+
+
+def test_an_untrusted_carrier_state_never_fires_the_latch_the_passenger_holds_then_rejoins(model):
+    """Mid-approach the feed follows a track 7 m from the target (a spoofed burst, or a
+    relocalisation) that it does not trust yet: the passenger holds on the dock point it had (the
+    carrier pauses), never separates on it, and once the honest track is trusted again it goes
+    back to the dock point at join speed and separates at b c of the real carrier."""
+    target = model.tick.target
+    short = target - np.array([7.0, 0.0, target[2]])  # 7 m short of the target, on the ground plane
+    phase = {"spoof": 0, "settle": 0}
+    holding = []
+
+    def attack(k, obs):
+        c = obs.carrier
+        if norm(c.position_ned_m) < 3.0 or phase["settle"] >= 100:
+            return None
+        if phase["spoof"] < 150:  # 3 s on the spoofed track, untrusted
+            phase["spoof"] += 1
+            return Observation(obs.t_s, obs.vehicle, CarrierObs(short, np.zeros(3), 0.0, untrusted="settling: after a resync"))
+        phase["settle"] += 1  # the honest track again, settling for 2 s
+        return Observation(obs.t_s, obs.vehicle, CarrierObs(c.position_ned_m, c.velocity_ned_m_s, 0.0,
+                                                            untrusted="settling: after a resync"))
+
+    def watch(k, obs):
+        out = attack(k, obs)
+        holding.append((out or obs).carrier.untrusted is not None)
+        return out
+
+    state, log, x_p, x_c = fly(model, on_tick=watch, ticks=6000)
+    assert state.phase == Phase.DONE and phase["settle"] == 100
+    sep = next(k for k, (_, p, _) in enumerate(log) if p == Phase.SEPARATED)
+    assert not any(holding[sep - 1:sep + 1])  # the latch fired on a trusted state ...
+    assert norm(target - state.anchor) == pytest.approx(model.tick.event_distance_m, abs=1e-9)  # ... of the real carrier
+    held = [k for k, h in enumerate(holding) if h]
+    assert len(held) == 250 and sep > held[-1]
+    refs = [log[k][2].setpoint.velocity_ned_m_s for k in held]  # holding: the reference stands still, the vehicle settles on it
+    assert norm(refs[-1]) < 0.05
+    events = [e for _, _, d in log for e in d.events]
+    assert any(e.startswith("carrier feed not trusted (settling: after a resync)") for e in events)
+    assert "carrier feed trusted again: back on the dock point, riding" in events
+
+
+@pytest.mark.parametrize("what", ["vehicle at infinity", "carrier at 1e308 m"])
+def test_a_non_finite_value_aborts_to_hold_naming_it(model, what):
+    """Nothing non-finite is ever sent: the tick that would compute one aborts (nonfinite) and
+    asks for Hold (the fly world asserts every setpoint it gets is finite)."""
+    def corrupt(k, obs):
+        v, c = obs.vehicle, obs.carrier
+        if norm(c.position_ned_m) < 5.0:
+            return None
+        if what == "vehicle at infinity":
+            return Observation(obs.t_s, VehicleObs(np.array([np.inf, 0, -1.5]), v.velocity_ned_m_s, v.armed, v.mode, 0.1), c)
+        return Observation(obs.t_s, v, CarrierObs(np.array([1e308, 1e308, 0.0]), c.velocity_ned_m_s, 0.0))
+
+    state, log, _, _ = fly(model, on_tick=corrupt, ticks=3000)
+    assert (state.phase, state.reason) == (Phase.ABORT, AbortReason.NONFINITE.value)
+    assert state.detail.startswith("non-finite ") and state.detail.endswith("in RIDING")
+    aborted = next(d for _, p, d in log if p == Phase.ABORT)
+    assert aborted.request == "hold" and any(e.startswith("abort: non-finite") for e in aborted.events)

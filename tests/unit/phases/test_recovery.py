@@ -2,6 +2,8 @@
 switches without a jump, the contact, go-arounds, the fallback and the battery's recall."""
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -271,3 +273,51 @@ def test_the_carriers_turn_is_measured_on_its_own_samples(cfg, rate_deg_s, stead
     assert (turning == []) is steady, turning[:1]
     if not steady:
         assert f"{rate_deg_s:.1f} deg/s" in turning[0]
+
+
+class DoubtedFeed:
+    """The fake world's feed, whose states the feed does not trust between ``from_s`` and
+    ``until_s`` [s] (a relocalisation, a contested source: ``CarrierObs.untrusted``)."""
+
+    def __init__(self, world: FakeWorld, clock: ManualClock) -> None:
+        self.feed, self.clock = world.feed, clock
+        self.from_s: float | None = None
+        self.until_s = -1.0
+
+    def latest(self):  # type: ignore[no-untyped-def]
+        rx = self.feed.latest()
+        now = self.clock.now()
+        if rx is not None and self.from_s is not None and self.from_s <= now < self.until_s:
+            return dataclasses.replace(rx, untrusted="settling: after a resync")
+        return rx
+
+    def __getattr__(self, name: str):  # type: ignore[no-untyped-def]
+        return getattr(self.feed, name)
+
+
+def test_an_untrusted_carrier_state_on_the_approach_means_go_around_and_no_contact_on_it(cfg):
+    """The feed resyncs mid-approach (a relocalised or spoofed carrier): the approach is given up
+    at once (go around, the reason named), nothing docks and PX4's home does not follow the
+    carrier while the state is not trusted; once it is trusted again the passenger comes back
+    and docks."""
+    clock = ManualClock()
+    world = FakeWorld(clock, target_ned_m=np.asarray(cfg.scenario.target, dtype=float),
+                      recovery_velocity_ned_m_s=np.array([1.0, 0.0, 0.0]))
+    feed = DoubtedFeed(world, clock)
+    reports: list[TickReport] = []
+
+    def on_tick(r: TickReport) -> None:
+        reports.append(r)
+        if r.phase is Phase.APPROACH and feed.from_s is None:
+            feed.from_s, feed.until_s = r.t_s, r.t_s + 2.0
+
+    controller = MissionController(cfg, world, feed, clock, publisher=world, on_tick=on_tick, command_thread=False)  # type: ignore[arg-type]
+    outcome = controller.run()
+    assert outcome.ok, (outcome.reason, outcome.detail)
+    order = phase_order(reports)
+    assert Phase.GO_AROUND in order and order.count(Phase.APPROACH) == 2 and Phase.DOCKED in order, order
+    went = next(r for r in reports if r.phase is Phase.GO_AROUND)
+    assert went.t_s - feed.from_s <= 0.05  # the very next tick
+    doubted = [r for r in reports if feed.from_s < r.t_s < feed.until_s]  # from the tick after it began
+    assert doubted and all(r.phase is not Phase.DOCKED and r.decision.home_ned_m is None for r in doubted)
+    assert controller.state.recovery.contact is not None and controller.state.recovery.contact["time_s"] >= feed.until_s

@@ -1,0 +1,122 @@
+"""Signed bus samples over real loopback Zenoh sessions: the signed carrier state and passenger
+status flow and bind to their signer; unsigned copies (with the real source id and a higher
+sequence number), a wrong key and replayed samples are dropped and counted; the lockstep clock
+refuses an unsigned message. (Whole flights: tests/adversarial/test_bus_attacks.py.)"""
+from __future__ import annotations
+
+import json
+import threading
+from pathlib import Path
+
+import pytest
+import zenoh
+
+from mission.bus.auth import BusAuth, bus_auth
+from mission.bus.bridge import CarrierFeed, CarrierPublisher, PassengerFeed, PassengerPublisher, keys
+from mission.bus.wire import CarrierState, PassengerStatus
+from mission.config.schema import ZenohSection
+from mission.errors import ConfigError
+from mission.time.clock import ManualClock
+from mission.time.lockstep import _ClockWire, clock_keys
+from tests.support.zenoh_util import LENIENT, peer_pair, wait_for
+
+pytestmark = pytest.mark.timeout(30)
+
+KEY = bytes.fromhex("7e" * 32)
+AUTH = BusAuth(KEY, "p")
+
+
+def _state(seq: int) -> CarrierState:
+    return CarrierState(0.1 * seq, seq, "local_ned", [0.1 * seq, 0.0, 0.0], [1.0, 0.0, 0.0], None)
+
+
+class Capture:
+    """Every sample on ``key`` as (payload, attachment, source id)."""
+
+    def __init__(self, session: zenoh.Session, key: str) -> None:
+        self.samples: list[tuple[bytes, bytes | None, zenoh.EntityGlobalId | None]] = []
+        self._lock = threading.Lock()
+        self._sub = session.declare_subscriber(key, self._on)
+
+    def _on(self, sample: zenoh.Sample) -> None:
+        with self._lock:
+            self.samples.append((sample.payload.to_bytes(), None if sample.attachment is None else sample.attachment.to_bytes(),
+                                 None if sample.source_info is None else sample.source_info.source_id))
+
+    def close(self) -> None:
+        self._sub.undeclare()
+
+
+def test_signed_states_bind_to_their_signer_and_no_copy_replay_or_foreign_key_gets_in() -> None:
+    clock = ManualClock(1.0)
+    state_key = keys("p").carrier_state
+    with peer_pair() as (a, b), CarrierFeed(b, "p", clock, limits=LENIENT, auth=AUTH) as feed, \
+            CarrierPublisher(a, "p", auth=AUTH) as pub:
+        capture = Capture(b, state_key)
+        wait_for(lambda: pub.matched, what="publisher matched")
+        for seq in range(5):
+            pub.publish(_state(seq))
+        wait_for(lambda: feed.counters["accepted"] == 5 and len(capture.samples) == 5, what="5 signed states")
+        assert feed.counters["bound_source"].startswith("signer:") and feed.counters["signed"]
+        payload, attachment, source = capture.samples[-1]
+        # a copier: the real source id, sequence + 1, no tag (today's take-over without a key)
+        copy = json.loads(payload)
+        copy["seq"] += 1
+        a.put(state_key, json.dumps(copy).encode(), source_info=zenoh.SourceInfo(source, 10**6))
+        # another key, and a replay of a captured signed sample (payload and tag)
+        with CarrierPublisher(a, "p", key=state_key, auth=BusAuth(bytes(32), "p")) as rogue:
+            rogue.publish(_state(100))
+        a.put(state_key, payload, attachment=attachment, source_info=zenoh.SourceInfo(source, 10**6 + 1))
+        wait_for(lambda: sum(feed.counters["dropped"].values()) == 3, what="3 drops")
+        assert feed.counters["dropped"] == {"unsigned": 1, "signature": 1, "replay": 1}
+        for seq in range(5, 8):  # the honest stream goes on: its sequence is its own
+            pub.publish(_state(seq))
+        wait_for(lambda: feed.counters["accepted"] == 8, what="8 accepted")
+        assert feed.latest().state.seq == 7  # type: ignore[union-attr]
+        capture.close()
+
+
+def test_the_carrier_hears_only_signed_statuses() -> None:
+    clock = ManualClock(1.0)
+    status_key = keys("p").passenger_state
+    fake = PassengerStatus("SEPARATED", 9.0, 10**6, [0.0, 0.0, -1.5], [0.0, 0.0, 0.0], True, [0.0, 0.0, -1.5])
+    with peer_pair() as (a, b), PassengerFeed(b, "p", clock, auth=AUTH) as feed, \
+            PassengerPublisher(a, "p", auth=AUTH) as pub:
+        wait_for(lambda: pub.matched, what="publisher matched")
+        for seq in range(3):
+            pub.publish(PassengerStatus("PREFLIGHT", 0.1 * seq, seq, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]))
+        wait_for(lambda: feed.counters["accepted"] == 3, what="3 statuses")
+        a.put(status_key, fake.to_json())  # a flood of unsigned SEPARATED
+        a.put(status_key, fake.to_json())
+        wait_for(lambda: feed.counters["dropped"].get("unsigned") == 2, what="2 unsigned drops")
+        assert feed.latest().status.phase == "PREFLIGHT"  # type: ignore[union-attr]
+
+
+def test_lockstep_clock_messages_are_signed_and_an_unsigned_one_is_dropped() -> None:
+    time_key, _ = clock_keys("p")
+    got: list[list[int] | None] = []
+    with peer_pair() as (a, b):
+        sender, receiver = _ClockWire(a, time_key, AUTH), _ClockWire(b, "marsupial/p/clock/other", AUTH)
+        sub = b.declare_subscriber(time_key, lambda s: got.append(receiver.read(s, 2)))
+        wait_for(lambda: sender.pub.matching_status.matching, what="clock subscriber")
+        sender.put("100 3")
+        a.put(time_key, b"200 4")  # unsigned: a forged step
+        sender.put("300 5")
+        wait_for(lambda: len(got) == 3, what="3 clock messages")
+        assert got == [[100, 3], None, [300, 5]] and receiver.rejected == 1
+        sub.undeclare()
+        sender.pub.undeclare()
+        receiver.pub.undeclare()
+
+
+def test_a_missing_or_malformed_key_file_names_the_field(tmp_path: Path) -> None:
+    assert bus_auth(ZenohSection()) is None
+    bad = tmp_path / "bad.key"
+    bad.write_text("not a key")
+    for path in (tmp_path / "missing.key", bad):
+        with pytest.raises(ConfigError) as err:
+            bus_auth(ZenohSection(signing_key_file=str(path)))
+        assert err.value.field == "zenoh.signing_key_file"
+    good = tmp_path / "good.key"
+    good.write_text(KEY.hex())
+    assert isinstance(bus_auth(ZenohSection(signing_key_file=str(good))), BusAuth)

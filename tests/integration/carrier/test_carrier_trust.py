@@ -1,0 +1,105 @@
+"""The carrier trusts only its own passenger (real Zenoh, the carrier on a manual clock):
+fake RIDING statuses before any passenger exists, a flood of SEPARATED and ABORT from another
+session while the real passenger rides, and, with the pair's key, the same unsigned and with
+the passenger's own source id copied. The carrier ignores them all."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import zenoh
+
+from mission.bus.bridge import keys
+from mission.bus.wire import PassengerStatus
+from mission.config.schema import Config, from_dict
+from mission.time.clock import ManualClock
+from sim.robots.carrier import CarrierMode, CarrierSim
+from tests.integration.carrier.test_carrier_sim import TARGET, Passenger, _seen, sessions
+from tests.support.zenoh_util import wait_for
+
+pytestmark = pytest.mark.timeout(60)
+
+DT = 1.0 / 30.0
+KEY = keys("trust").passenger_state
+BLOCK = zenoh.CongestionControl.BLOCK
+
+
+def _cfg(key_file: Path | None = None) -> Config:
+    zenoh_section: dict[str, object] = {"pair": "trust"}
+    if key_file is not None:
+        zenoh_section["signing_key_file"] = str(key_file)
+    return from_dict({"zenoh": zenoh_section, "scenario": {"carrier_start": [0.0, 0.0, 0.0], "target": TARGET.tolist()},
+                      "safety": {"carrier_max_accel_m_s2": 1.0}, "carrier": {"rate_hz": 30.0, "max_speed_m_s": 2.0}})
+
+
+def _fake(phase: str, seq: int, at: list[float] | np.ndarray = (0.0, 0.0, -1.5)) -> bytes:
+    return PassengerStatus(phase, 0.0, seq, at, [0, 0, 0], phase == "SEPARATED").to_json()
+
+
+def _steps(sim: CarrierSim, clock: ManualClock, n: int) -> float:
+    """Step the carrier ``n`` times; its distance to the target after [m]."""
+    for _ in range(n):
+        clock.advance(DT)
+        sim.step(DT)
+    return float(np.linalg.norm(TARGET[:2] - sim.position_m[:2]))
+
+
+def test_fake_riding_before_any_passenger_and_a_flood_while_it_rides_are_ignored() -> None:
+    clock = ManualClock()
+    with sessions(2) as (sa, rogue, sb), CarrierSim(_cfg(), clock, sa) as sim:
+        start = _steps(sim, clock, 1)
+        # on main a RIDING from anyone, before any passenger existed, sent the carrier off alone;
+        # these claim to ride right on the dock point, from the first status on
+        for k in range(30):
+            rogue.put(KEY, _fake("RIDING", 10**6 + k), congestion_control=BLOCK)
+        wait_for(lambda: sim.passenger.counters["dropped"].get("unbound", 0) == 30, what="30 unbound")
+        assert _steps(sim, clock, 60) == start and sim.mode is CarrierMode.WAITING  # it never moved
+        passenger = Passenger(sb, "trust", clock, sim)
+        try:
+            wait_for(lambda: passenger.pub.matched)
+            seq = passenger.say("RIDING")  # stood on the deck first: bound, then rides
+            wait_for(lambda: _seen(sim, seq), what="the real RIDING")
+            before = _steps(sim, clock, 30)
+            assert sim.mode is CarrierMode.APPROACHING and before < start
+            # on main a flood of SEPARATED/ABORT stopped the carrier at 20-22 m and made 8309 real
+            # statuses stale: from another session now it is a foreign source, dropped and counted
+            for k in range(300):
+                rogue.put(KEY, _fake(("SEPARATED", "ABORT")[k % 2], 10**7 + k), congestion_control=BLOCK)
+                if k % 30 == 29:
+                    seq = passenger.say("RIDING")
+                    wait_for(lambda: _seen(sim, seq), what="the real RIDING among the flood")
+                    _steps(sim, clock, 10)
+            wait_for(lambda: sim.passenger.counters["dropped"].get("source", 0) == 300, what="the flood dropped")
+            assert sim.mode is CarrierMode.APPROACHING and _steps(sim, clock, 5) < before
+            c = sim.passenger.counters
+            assert set(c["dropped"]) == {"unbound", "source"} and c["rejected_sources"] == {"anonymous": 300}, c
+        finally:
+            passenger.pub.close()
+
+
+def test_with_the_key_unsigned_statuses_with_the_passenger_s_own_source_id_are_dropped(tmp_path: Path) -> None:
+    """A copier of the passenger's Zenoh source id (higher sequence numbers, SEPARATED or ABORT):
+    without a key it would pass as the passenger; with one, unsigned, it is dropped before the
+    feed looks at it, and the carrier approaches on."""
+    key_file = tmp_path / "bus.key"
+    key_file.write_text("a5" * 32)
+    cfg = _cfg(key_file)
+    clock = ManualClock()
+    with sessions(2) as (sa, rogue, sb), CarrierSim(cfg, clock, sa) as sim:
+        passenger = Passenger(sb, "trust", clock, sim, auth=sim.auth)  # the real one signs
+        try:
+            wait_for(lambda: passenger.pub.matched)
+            seq = passenger.say("RIDING")
+            wait_for(lambda: _seen(sim, seq), what="the signed RIDING")
+            before = _steps(sim, clock, 30)
+            source = zenoh.SourceInfo(passenger.pub._state.id, 10**6)  # copied, as anyone on the network sees it
+            for k in range(100):
+                rogue.put(KEY, _fake(("SEPARATED", "ABORT")[k % 2], 10**7 + k), source_info=source, congestion_control=BLOCK)
+            wait_for(lambda: sim.passenger.counters["dropped"].get("unsigned", 0) == 100, what="100 unsigned")
+            seq = passenger.say("RIDING")
+            wait_for(lambda: _seen(sim, seq), what="the signed RIDING after the copies")
+            assert _steps(sim, clock, 10) < before and sim.mode is CarrierMode.APPROACHING
+            assert sim.passenger.counters["bound_source"].startswith("signer:")
+        finally:
+            passenger.pub.close()

@@ -1,0 +1,89 @@
+"""Bus sample tags (pure): what verifies, what is refused and why, per-pair keys, replays."""
+from __future__ import annotations
+
+import pytest
+
+from mission.bus.signing import MAX_SIGNERS, TRAILER_BYTES, Signer, Verifier, pair_key
+from mission.bus.wire import WireError
+
+KEY = pair_key(bytes(range(32)), "pair0")
+STATE = "marsupial/pair0/carrier/state"
+NOW = 1_800_000_000_000_000  # [us] since the Unix epoch
+
+
+def reason(verifier: Verifier, key_expr: str, payload: bytes, attachment: bytes | None, now: int = NOW) -> str:
+    with pytest.raises(WireError) as err:
+        verifier.verify(key_expr, payload, attachment, now)
+    return err.value.reason
+
+
+def test_a_signed_sample_verifies_once_and_names_its_signer() -> None:
+    signer, verifier = Signer(KEY), Verifier(KEY)
+    tag = signer.attachment(STATE, b"{}", NOW)
+    assert len(tag) == TRAILER_BYTES
+    assert verifier.verify(STATE, b"{}", tag, NOW) == (signer.source, b"")
+    assert reason(verifier, STATE, b"{}", tag) == "replay"  # the same sample again
+    # counters are strictly increasing even when the wall clock stands still or steps back
+    later = [signer.attachment(STATE, b"{}", NOW - 5) for _ in range(3)]
+    assert [verifier.verify(STATE, b"{}", t, NOW)[0] for t in later] == [signer.source] * 3
+
+
+def test_an_inner_attachment_travels_before_the_tag_and_is_covered_by_it() -> None:
+    signer, verifier = Signer(KEY), Verifier(KEY)
+    tag = signer.attachment("0/cmd_vel/x", b"twist", NOW, inner=b"rmw-attachment")
+    assert verifier.verify("0/cmd_vel/x", b"twist", tag, NOW) == (signer.source, b"rmw-attachment")
+    forged = b"rmw-attachmenX" + tag[len(b"rmw-attachment"):]
+    assert reason(Verifier(KEY), "0/cmd_vel/x", b"twist", forged) == "signature"
+
+
+@pytest.mark.parametrize("what", ["payload", "key expression", "counter", "signer", "other pair", "other key"])
+def test_any_change_breaks_the_tag(what: str) -> None:
+    signer = Signer(KEY)
+    tag = bytearray(signer.attachment(STATE, b'{"seq": 1}', NOW))
+    payload, key_expr, key = b'{"seq": 1}', STATE, KEY
+    if what == "payload":
+        payload = b'{"seq": 2}'
+    elif what == "key expression":
+        key_expr = "marsupial/pair0/passenger/state"
+    elif what == "counter":
+        tag[12 + 7] ^= 1
+    elif what == "signer":
+        tag[4] ^= 1
+    elif what == "other pair":
+        key = pair_key(bytes(range(32)), "pair1")
+    else:
+        key = pair_key(bytes(32), "pair0")
+    assert reason(Verifier(key), key_expr, payload, bytes(tag)) == "signature"
+
+
+def test_unsigned_and_foreign_attachments_are_unsigned() -> None:
+    verifier = Verifier(KEY)
+    assert reason(verifier, STATE, b"{}", None) == "unsigned"
+    assert reason(verifier, STATE, b"{}", b"") == "unsigned"
+    assert reason(verifier, STATE, b"{}", b"x" * 100) == "unsigned"  # an rmw_zenoh attachment alone
+
+
+def test_a_new_signer_outside_the_replay_window_is_refused() -> None:
+    old = Signer(KEY).attachment(STATE, b"{}", NOW - 61_000_000)  # recorded 61 s ago
+    assert reason(Verifier(KEY), STATE, b"{}", old) == "replay"
+    ahead = Signer(KEY).attachment(STATE, b"{}", NOW + 61_000_000)  # a clock a minute ahead
+    assert reason(Verifier(KEY), STATE, b"{}", ahead) == "replay"
+    recent = Signer(KEY).attachment(STATE, b"{}", NOW - 59_000_000)
+    assert Verifier(KEY).verify(STATE, b"{}", recent, NOW)
+
+
+def test_each_signer_has_its_own_sequence_and_the_memory_is_bounded() -> None:
+    a, b, verifier = Signer(KEY), Signer(KEY), Verifier(KEY)
+    tag_a = a.attachment(STATE, b"a", NOW + 10)
+    tag_b = b.attachment(STATE, b"b", NOW)  # b's counter is lower than a's: still its own, accepted
+    assert verifier.verify(STATE, b"a", tag_a, NOW)[0] == a.source
+    assert verifier.verify(STATE, b"b", tag_b, NOW)[0] == b.source
+    for _ in range(MAX_SIGNERS + 5):  # many signers (key holders only): the oldest is forgotten
+        verifier.verify(STATE, b"c", Signer(KEY).attachment(STATE, b"c", NOW), NOW)
+    assert len(verifier._last) == MAX_SIGNERS
+
+
+def test_pair_keys_differ_and_a_key_has_32_bytes() -> None:
+    assert pair_key(bytes(32), "pair0") != pair_key(bytes(32), "pair1") and len(KEY) == 32
+    with pytest.raises(ValueError):
+        pair_key(b"short", "pair0")
