@@ -47,7 +47,7 @@ from mission.phases.phase import Duty
 from mission.carrier.start import gentle_start
 from mission.carrier.tracking import SpeedCalibration, Tracked, TrackingParams, along_heading, heading_of, track
 from mission.core.consistent_velocity import PositionConsistentVelocity
-from mission.bus.auth import bus_auth
+from mission.bus.auth import BusAuth, bus_auth
 from mission.bus.bridge import CarrierPublisher, PassengerFeed
 from mission.time.clock import Clock, Downstream, Periodic
 from mission.config.schema import Config
@@ -169,6 +169,23 @@ def passenger_view(feed: PassengerFeed, dock_ned_m: np.ndarray | None, tolerance
     return PassengerView(st.phase, st.separated, lost, st.leg, st.reason, st.holding, near)
 
 
+def open_bus(cfg: Config, session: zenoh.Session, pair: str, clock: Clock,
+             encoding: str | None) -> tuple[BusAuth | None, PassengerFeed, CarrierPublisher]:
+    """The carrier's end of pair ``pair``'s bus, signed with the pair's key when one is set
+    (``zenoh.signing_key_file``; the auth, else None): the passenger's feed, which binds only to a passenger that
+    began on the deck, and the carrier's state publisher (``encoding`` None: ``zenoh.encoding``)."""
+    auth = bus_auth(cfg.zenoh, pair)
+    passenger = PassengerFeed(session, pair, clock, max_age_s=cfg.carrier.passenger_timeout_s,
+                              auth=auth, bind_phases=BEFORE_RIDING, bind_samples=BIND_STATUSES)
+    try:
+        publisher = CarrierPublisher(session, pair, encoding or cfg.zenoh.encoding,  # type: ignore[arg-type]
+                                     key=cfg.zenoh.carrier_key, congestion_control=congestion_for(clock), auth=auth)
+    except Exception:
+        passenger.close()
+        raise
+    return auth, passenger, publisher
+
+
 def _pad3(v: np.ndarray) -> np.ndarray:
     """A (2,) or (3,) vector as (3,) (a 2D scenario's carrier sits at down = 0)."""
     v = np.asarray(v, dtype=float)
@@ -219,16 +236,7 @@ class CarrierController:
         self._acceleration = AccelerationEstimate(tau) if tau > 0 else None  # published when set
         bias_tau = cfg.carrier.velocity_bias_tau_s
         self._velocity_fix = PositionConsistentVelocity(bias_tau) if bias_tau > 0 else None
-        self.auth = bus_auth(cfg.zenoh, self.pair)
-        self.passenger = PassengerFeed(session, self.pair, clock, max_age_s=cfg.carrier.passenger_timeout_s,
-                                       auth=self.auth, bind_phases=BEFORE_RIDING, bind_samples=BIND_STATUSES)
-        try:
-            self.publisher = CarrierPublisher(session, self.pair, encoding or cfg.zenoh.encoding,  # type: ignore[arg-type]
-                                              key=cfg.zenoh.carrier_key, congestion_control=congestion_for(clock),
-                                              auth=self.auth)
-        except Exception:
-            self.passenger.close()
-            raise
+        self.auth, self.passenger, self.publisher = open_bus(cfg, session, self.pair, clock, encoding)
 
     # ------------------------------------------------------------------ decisions
     def dock_point_ned_m(self) -> np.ndarray | None:

@@ -259,8 +259,7 @@ class VehicleLink:
         self.set_mode(px4.HOLD, timeout_s=timeout_s, retries=retries, confirm_timeout_s=confirm_timeout_s)
 
     def land(self, timeout_s: float = 0.5, retries: int = 3, confirm_timeout_s: float = 2.5) -> None:
-        """Land where the vehicle is (AUTO.LAND, which PX4 also enters for NAV_LAND), confirmed
-        by HEARTBEAT (see :meth:`set_mode`)."""
+        """Land where the vehicle is (AUTO.LAND, as for NAV_LAND), confirmed by HEARTBEAT (:meth:`set_mode`)."""
         self.set_mode(FlightMode.LAND, timeout_s=timeout_s, retries=retries, confirm_timeout_s=confirm_timeout_s)
 
     def takeoff(self, alt_m: float | None, timeout_s: float = 0.5, retries: int = 3) -> int:
@@ -279,8 +278,6 @@ class VehicleLink:
     def set_param(self, name: str, value: float, timeout_s: float = 0.5, retries: int = 3) -> float:
         """Set the vehicle's parameter ``name``; the value it kept (:meth:`ParamClient.set`)."""
         return self._params.set(name, value, timeout_s, retries).value
-
-    # ---------------------------------------------------------------- setpoints
 
     def send(self, setpoint: Setpoint) -> None:
         """Send one setpoint as SET_POSITION_TARGET_LOCAL_NED (:func:`mission.mavlink.setpoints.encode`:

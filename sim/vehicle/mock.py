@@ -105,7 +105,6 @@ class MockVehicle:
         self._handlers = MessageHandlers(self)
         self._io = LinkIO(self)
 
-    # ---- lifetime ------------------------------------------------------------------------
     def __enter__(self) -> MockVehicle:
         self.start()
         return self
@@ -244,7 +243,6 @@ class MockVehicle:
             raise ValueError("this vehicle has no deck (VehicleOptions.deck)")
         self._deck.source = source
 
-    # ---- the loop ------------------------------------------------------------------------
     @property
     def _t_s(self) -> float:
         return self._steps * PHYSICS_DT_S
