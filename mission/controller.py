@@ -58,6 +58,7 @@ COMMANDS: dict[Request, Callable[[Vehicle], None]] = {
     Request.OFFBOARD: lambda vehicle: vehicle.set_mode(FlightMode.OFFBOARD),
     Request.HOLD: lambda vehicle: vehicle.hold(),
     Request.LAND: lambda vehicle: vehicle.land(),
+    Request.DISARM: lambda vehicle: vehicle.disarm(),
 }
 
 

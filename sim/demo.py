@@ -165,7 +165,8 @@ def start_pair(config: str, name: str, zenoh_ep: str, speed: float, log_root: Pa
                bus_key: Path | None = None) -> PairRun:
     """Start the carrier (and its robot), the mock vehicle and the mission of one pair; register their cleanup.
     The vehicle learns the carrier's motion from the pair's Zenoh state (``--deck``): it stands on
-    the carrier's deck until it takes off, and lands or crashes on it as it comes back.
+    the carrier's deck until it takes off, and lands or crashes on it as it comes back. With
+    ``mission.ride = "deck"`` the deck is the dock point (``--deck-height``) and the vehicle starts on it.
     With ``bus_key`` (a key file) the pair signs its bus samples (``--zenoh-signing-key``).
 
     ``lockstep``: the three step on the mock vehicle's simulated time, the carrier's robot on the
@@ -184,9 +185,15 @@ def start_pair(config: str, name: str, zenoh_ep: str, speed: float, log_root: Pa
                                            "--mcap", str(pair.log_dir / "carrier.mcap"), *backend_args, *signed, *mode),
                                stderr=err)
     stack.callback(stop_process, carrier)
+    # riding on the deck (mission.ride = "deck"): the deck is the dock point, the vehicle stands on it
+    on_deck = cfg.mission.ride == "deck"
+    deck_height = -cfg.mission.dock_offset_ned_m[2] if on_deck else 0.0
+    vehicle_start = ",".join(str(c + (o if on_deck else 0.0)) for c, o in
+                             zip(cfg.scenario.carrier_start, cfg.mission.dock_offset_ned_m))
     vehicle = subprocess.Popen(_python_cli("mock-vehicle", "--mavlink", "udpin:127.0.0.1:0", "--target",
-                                           f"udpout:127.0.0.1:{mav_port}", "--speed", str(speed), "--start-ned", start,
-                                           "--deck", name, "--zenoh-connect", zenoh_ep, *mode),
+                                           f"udpout:127.0.0.1:{mav_port}", "--speed", str(speed), "--start-ned",
+                                           vehicle_start, "--deck", name, "--deck-height", str(deck_height),
+                                           "--zenoh-connect", zenoh_ep, *mode),
                                stderr=err)
     stack.callback(stop_process, vehicle)
     live_args = [] if live is None else ["--live", f"{live.host}:{live.port}"]
