@@ -286,6 +286,7 @@ RECOVERY_ROWS = [
     ("deck touched outside contact [ticks]", "deck_violations"),
 ]
 RECOVERY_KEYS = {key for _, key in RECOVERY_ROWS}
+DECK_KEYS = {"takeoff_command_jump_m_s", "takeoff_clear_s"}  # shown when a pair rode the deck
 
 
 def recovery_cells(s: dict) -> dict:
@@ -304,6 +305,8 @@ ROWS = [
     ("separation time [s]", "separation_time_s"),
     ("carrier-target distance at separation [m]", "carrier_target_distance_at_separation_m"),
     ("relative command jump at separation [m/s]", "relative_input_jump_m_s"),
+    ("largest relative command step, take-off from the deck [m/s]", "takeoff_command_jump_m_s"),
+    ("from separation to clear of the deck [s]", "takeoff_clear_s"),
     ("closest carrier-target approach [m]", "min_carrier_target_distance_m"),
     ("carrier stopped at, from the target [m]", "carrier_stop_target_distance_m"),
     ("carrier braking distance [m]", "carrier_braking_distance_m"),
@@ -374,7 +377,8 @@ def verdict_lines(summaries: list[dict]) -> list[str]:
 def format_table(summaries: list[dict]) -> str:
     summaries = columns(summaries)
     recovery = any("recovery_outcome" in s for s in summaries)
-    rows = [r for r in ROWS if recovery or r[1] not in RECOVERY_KEYS]
+    deck = any("takeoff_command_jump_m_s" in s for s in summaries)  # riding on the deck (mission.ride)
+    rows = [r for r in ROWS if (recovery or r[1] not in RECOVERY_KEYS) and (deck or r[1] not in DECK_KEYS)]
     width = max(len(r[0]) for r in rows)
     cells = {key: [outcome_text(s) if key == "outcome" else s.get(key) for s in summaries] for _, key in rows}
     text = {key: [f"{v:.3f}" if isinstance(v, float) else str(v) for v in values] for key, values in cells.items()}

@@ -131,7 +131,7 @@ class DeckKeepOut:
         off = x[..., :2] - self.centre_ned_m[:2]
         r = np.sqrt(dot(off, off) + self.SMOOTH_M**2)
         height = self.height_m(x)
-        above = height > 0.0  # below the deck's plane (pressed into it on landing) only the radius holds
+        above = height >= 0.0  # below the deck's plane (pressed into it on landing) only the radius holds
         h = self.radius_m + self.slope * np.maximum(height, 0.0) - r
         grad = np.empty(x.shape)
         grad[..., :2] = -off / r[..., None]

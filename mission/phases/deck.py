@@ -106,7 +106,10 @@ def ride(state: MissionState, obs: Observation, m: MissionModel) -> tuple[Missio
         if v.armed:  # landed, not yet disarmed: press on the deck until PX4 lets it disarm
             x_press = dock + np.array([0.0, 0.0, _deck(m).press_m])
             return _sit(state, obs, m, x_press, v_dock, (), prev_dock=dock)
-        state = replace(state, x_ref=dock.copy(), e_ref=ZERO.copy(), prev_dock=dock.copy(), u_ref=v_dock.copy())
+        # the reference rides the deck; the command filter's last command is the deck's velocity,
+        # so the first setpoint streamed starts from it (tracking's integral starts afresh)
+        state = replace(state, x_ref=dock.copy(), e_ref=ZERO.copy(), prev_dock=dock.copy(), u_ref=v_dock.copy(),
+                        u_cmd=v_dock.copy(), integral=None, accel_lp=None)
         return state, Decision(setpoint=None, dock=dock)
     events: tuple[str, ...] = ()
     since = state.streaming_since_s

@@ -263,7 +263,12 @@ def follow_carrier(vehicle: MockVehicle, session: Any, pair: str) -> CarrierFeed
         if not heard:
             heard.append(True)
             log.info("deck: pair %s's carrier heard at %s m NED", pair, [round(float(c), 2) for c in got.value.position])
-        return DeckMotion(tuple(got.value.position), tuple(got.value.velocity_ned_m_s), got.rx_time_s)  # type: ignore[arg-type]
+        # The deck moves on from the sample's own stamp (the processes share one time origin), not
+        # from when it arrived: a sample delivered late (a loaded machine, in lockstep too) would
+        # otherwise put the deck back by speed x delay. A stamp on another clock (over 1 s apart): rx.
+        stamp = got.value.stamp_s
+        t_s = stamp if abs(stamp - got.rx_time_s) <= 1.0 else got.rx_time_s
+        return DeckMotion(tuple(got.value.position), tuple(got.value.velocity_ned_m_s), t_s)  # type: ignore[arg-type]
 
     vehicle.follow_deck(motion)
     return feed
