@@ -286,7 +286,7 @@ RECOVERY_ROWS = [
     ("deck touched outside contact [ticks]", "deck_violations"),
 ]
 RECOVERY_KEYS = {key for _, key in RECOVERY_ROWS}
-DECK_KEYS = {"takeoff_command_jump_m_s", "takeoff_clear_s"}  # shown when a pair rode the deck
+DECK_KEYS = {"takeoff_command_jump_m_s", "takeoff_max_command_step_m_s", "takeoff_clear_s"}  # shown when a pair rode the deck
 
 
 def recovery_cells(s: dict) -> dict:
@@ -305,7 +305,8 @@ ROWS = [
     ("separation time [s]", "separation_time_s"),
     ("carrier-target distance at separation [m]", "carrier_target_distance_at_separation_m"),
     ("relative command jump at separation [m/s]", "relative_input_jump_m_s"),
-    ("largest relative command step, take-off from the deck [m/s]", "takeoff_command_jump_m_s"),
+    ("relative command jump at a switch of the take-off from the deck [m/s]", "takeoff_command_jump_m_s"),
+    ("largest relative command step, take-off from the deck [m/s]", "takeoff_max_command_step_m_s"),
     ("from separation to clear of the deck [s]", "takeoff_clear_s"),
     ("closest carrier-target approach [m]", "min_carrier_target_distance_m"),
     ("carrier stopped at, from the target [m]", "carrier_stop_target_distance_m"),
