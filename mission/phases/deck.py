@@ -84,9 +84,15 @@ def ride(state: MissionState, obs: Observation, m: MissionModel) -> tuple[Missio
     """RIDING while seated (see the module docstring)."""
     t, v, c = obs.t_s, obs.vehicle, obs.carrier
     assert v is not None and c is not None  # the failsafes checked both
-    if c.untrusted is not None:  # not a deck to arm or separate on: follow the deck as the vehicle feels it
+    if c.untrusted is not None:
+        # not a deck to arm or separate on: hold (the status says so: the carrier pauses), follow
+        # the deck as the vehicle feels it if armed; the latch waits
         x_own = v.position_ned_m + np.array([0.0, 0.0, _deck(m).press_m])
-        return _sit(state, obs, m, x_own, v.velocity_ned_m_s, (), held=True)
+        events: tuple[str, ...] = () if state.held_dock is not None else (
+            f"carrier feed not trusted ({c.untrusted}): holding on the deck",)
+        held = replace(state, held_dock=dock_point(obs, m) if state.held_dock is None else state.held_dock)
+        return _sit(held, obs, m, x_own, v.velocity_ned_m_s, events)
+    state = replace(state, held_dock=None)
     dock = dock_point(obs, m)
     v_dock = np.asarray(c.velocity_ned_m_s, dtype=float)
     ready = v.armed and v.mode == FlightMode.OFFBOARD
@@ -111,7 +117,7 @@ def ride(state: MissionState, obs: Observation, m: MissionModel) -> tuple[Missio
         state = replace(state, x_ref=dock.copy(), e_ref=ZERO.copy(), prev_dock=dock.copy(), u_ref=v_dock.copy(),
                         u_cmd=v_dock.copy(), integral=None, accel_lp=None)
         return state, Decision(setpoint=None, dock=dock)
-    events: tuple[str, ...] = ()
+    events = ()
     since = state.streaming_since_s
     if since is None:
         since = t
@@ -134,14 +140,15 @@ def ride(state: MissionState, obs: Observation, m: MissionModel) -> tuple[Missio
 
 
 def _sit(state: MissionState, obs: Observation, m: MissionModel, x_ref: np.ndarray, u_ref: np.ndarray,
-         events: tuple[str, ...], held: bool = False, prev_dock: np.ndarray | None = None) -> tuple[MissionState, Decision]:
+         events: tuple[str, ...], prev_dock: np.ndarray | None = None) -> tuple[MissionState, Decision]:
     """Seated and armed, nothing due: press on the deck at ``x_ref`` [m] with ``u_ref`` [m/s]; ask
-    PX4 to disarm once its land detector says landed. Disarmed: nothing is sent."""
+    PX4 to disarm once its land detector says landed. Disarmed: nothing is sent. The dock recorded
+    is what the feed says."""
     v = obs.vehicle
     assert v is not None
     if not v.armed:
         return replace(state, prev_dock=prev_dock if prev_dock is not None else state.prev_dock), Decision(
-            setpoint=None, dock=None if held else dock_point(obs, m), events=events)
+            setpoint=None, dock=dock_point(obs, m), events=events)
     tr = _track(state, obs, m, x_ref, np.asarray(u_ref, dtype=float), ZERO)
     new = replace(state, x_ref=np.asarray(x_ref, dtype=float).copy(), u_ref=np.asarray(u_ref, dtype=float).copy(),
                   prev_dock=prev_dock if prev_dock is not None else state.prev_dock, **_kept(tr))
