@@ -91,7 +91,7 @@ def ride(state: MissionState, obs: Observation, m: MissionModel) -> tuple[Missio
         events: tuple[str, ...] = () if state.held_dock is not None else (
             f"carrier feed not trusted ({c.untrusted}): holding on the deck",)
         held = replace(state, held_dock=dock_point(obs, m) if state.held_dock is None else state.held_dock)
-        return _sit(held, obs, m, x_own, v.velocity_ned_m_s, events)
+        return _sit(held, obs, m, x_own, v.velocity_ned_m_s, events, may_disarm=state.streaming_since_s is None)
     state = replace(state, held_dock=None)
     dock = dock_point(obs, m)
     v_dock = np.asarray(c.velocity_ned_m_s, dtype=float)
@@ -140,10 +140,11 @@ def ride(state: MissionState, obs: Observation, m: MissionModel) -> tuple[Missio
 
 
 def _sit(state: MissionState, obs: Observation, m: MissionModel, x_ref: np.ndarray, u_ref: np.ndarray,
-         events: tuple[str, ...], prev_dock: np.ndarray | None = None) -> tuple[MissionState, Decision]:
+         events: tuple[str, ...], prev_dock: np.ndarray | None = None,
+         may_disarm: bool = True) -> tuple[MissionState, Decision]:
     """Seated and armed, nothing due: press on the deck at ``x_ref`` [m] with ``u_ref`` [m/s]; ask
-    PX4 to disarm once its land detector says landed. Disarmed: nothing is sent. The dock recorded
-    is what the feed says."""
+    PX4 to disarm once its land detector says landed (``may_disarm``: not while it waits, armed,
+    for a take-off). Disarmed: nothing is sent. The dock recorded is what the feed says."""
     v = obs.vehicle
     assert v is not None
     if not v.armed:
@@ -152,7 +153,7 @@ def _sit(state: MissionState, obs: Observation, m: MissionModel, x_ref: np.ndarr
     tr = _track(state, obs, m, x_ref, np.asarray(u_ref, dtype=float), ZERO)
     new = replace(state, x_ref=np.asarray(x_ref, dtype=float).copy(), u_ref=np.asarray(u_ref, dtype=float).copy(),
                   prev_dock=prev_dock if prev_dock is not None else state.prev_dock, **_kept(tr))
-    return new, tr.decision(request=Request.DISARM if v.on_ground else None, dock=dock_point(obs, m),
+    return new, tr.decision(request=Request.DISARM if v.on_ground and may_disarm else None, dock=dock_point(obs, m),
                             safety_acted=tr.acted, events=events)
 
 

@@ -255,6 +255,7 @@ def follow_carrier(vehicle: MockVehicle, session: Any, pair: str) -> CarrierFeed
     feed = CarrierFeed(session, pair, VehicleClock(vehicle), origin=GeoOrigin(*vehicle.options.home), max_age_s=math.inf)
 
     heard: list[bool] = []
+    lockstep = vehicle.options.lockstep
 
     def motion() -> DeckMotion | None:
         got = feed.latest()
@@ -263,11 +264,12 @@ def follow_carrier(vehicle: MockVehicle, session: Any, pair: str) -> CarrierFeed
         if not heard:
             heard.append(True)
             log.info("deck: pair %s's carrier heard at %s m NED", pair, [round(float(c), 2) for c in got.value.position])
-        # The deck moves on from the sample's own stamp (the processes share one time origin), not
-        # from when it arrived: a sample delivered late (a loaded machine, in lockstep too) would
-        # otherwise put the deck back by speed x delay. A stamp on another clock (over 1 s apart): rx.
+        # In lockstep the carrier and the vehicle step on one simulated time: the deck moves on from
+        # the sample's own stamp, not from when it arrived (a sample delivered late on a loaded
+        # machine would put the deck back by speed x delay). On wall clocks the two processes'
+        # clocks may be apart by more than the transport's delay: from its arrival.
         stamp = got.value.stamp_s
-        t_s = stamp if abs(stamp - got.rx_time_s) <= 1.0 else got.rx_time_s
+        t_s = stamp if lockstep and abs(stamp - got.rx_time_s) <= 1.0 else got.rx_time_s
         return DeckMotion(tuple(got.value.position), tuple(got.value.velocity_ned_m_s), t_s)  # type: ignore[arg-type]
 
     vehicle.follow_deck(motion)

@@ -161,3 +161,23 @@ def test_not_armed_when_the_separation_comes_aborts_and_stops_the_carrier(model)
     state, log = fly(model, on_tick=refuse)
     assert state.phase == Phase.ABORT and state.reason == AbortReason.ARMING_REFUSED
     assert "separation" in state.detail
+
+
+def test_an_untrusted_carrier_feed_holds_on_the_deck_and_never_disarms_a_waiting_passenger(model):
+    """While the feed does not trust the carrier (just bound, a resync): the passenger says it
+    holds (the carrier pauses), the latch waits, and a passenger armed for its take-off is not
+    asked to disarm (it follows the deck as it feels it)."""
+    window: dict[str, float] = {}
+
+    def distrust(k, obs, state, armed):
+        if state.phase == Phase.RIDING and state.streaming_since_s is not None and armed and "t0" not in window:
+            window["t0"] = obs.t_s
+        if "t0" in window and obs.t_s - window["t0"] < 1.0:
+            return replace(obs, carrier=replace(obs.carrier, untrusted="resync")), armed
+        return obs, armed
+
+    state, log = fly(model, on_tick=distrust)
+    held = [(s, d) for t, s, d, *_ in log if "t0" in window and window["t0"] <= t < window["t0"] + 1.0]
+    assert held and all(s.held_dock is not None for s, _ in held)
+    assert all(d.request != "disarm" and s.phase == Phase.RIDING for s, d in held)
+    assert any(s.phase == Phase.ARRIVED for _, s, *_ in log)  # trusted again: it separated and flew
