@@ -87,7 +87,7 @@ def ride(state: MissionState, obs: Observation, m: MissionModel) -> tuple[Missio
     if c.untrusted is not None:
         # not a deck to arm or separate on: hold (the status says so: the carrier pauses), follow
         # the deck as the vehicle feels it if armed; the latch waits
-        x_own = v.position_ned_m + np.array([0.0, 0.0, _deck(m).press_m])
+        x_own = pressed(v.position_ned_m, m)
         events: tuple[str, ...] = () if state.held_dock is not None else (
             f"carrier feed not trusted ({c.untrusted}): holding on the deck",)
         held = replace(state, held_dock=dock_point(obs, m) if state.held_dock is None else state.held_dock)
@@ -110,8 +110,7 @@ def ride(state: MissionState, obs: Observation, m: MissionModel) -> tuple[Missio
     due = seconds_to_latch(obs, m) <= _deck(m).arm_lead_s
     if state.streaming_since_s is None and not due:
         if v.armed:  # landed, not yet disarmed: press on the deck until PX4 lets it disarm
-            x_press = dock + np.array([0.0, 0.0, _deck(m).press_m])
-            return _sit(state, obs, m, x_press, v_dock, (), prev_dock=dock)
+            return _sit(state, obs, m, pressed(dock, m), v_dock, (), prev_dock=dock)
         # the reference rides the deck; the command filter's last command is the deck's velocity,
         # so the first setpoint streamed starts from it (tracking's integral starts afresh)
         state = replace(state, x_ref=dock.copy(), e_ref=ZERO.copy(), prev_dock=dock.copy(), u_ref=v_dock.copy(),
@@ -158,11 +157,11 @@ def _sit(state: MissionState, obs: Observation, m: MissionModel, x_ref: np.ndarr
 
 
 def pressed(dock: np.ndarray, m: MissionModel) -> np.ndarray:
-    """Where the reference sits on the deck after a landing [m] NED: ``press_m`` into it."""
+    """Where the reference sits on the deck at ``dock`` [m] NED after a landing: ``press_m`` into it."""
     return dock + np.array([0.0, 0.0, _deck(m).press_m])
 
 
-def after_landing(state: MissionState, obs: Observation, decision: Decision) -> Decision:
+def after_landing(obs: Observation, decision: Decision) -> Decision:
     """A seated phase's decision after a landing: nothing sent once PX4 disarmed; DISARM asked
     (PX4 accepts it only once its land detector says landed) while armed and ON_GROUND."""
     v = obs.vehicle

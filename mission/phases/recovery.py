@@ -377,7 +377,7 @@ def _on_dock(state: MissionState, obs: Observation, m: MissionModel, dock: np.nd
     if not state.seated:
         return _fly(state, obs, m, dock, v_c, _model(m).approach, rec, events, request=request)
     new, dec = _fly(state, obs, m, deck.pressed(dock, m), v_c, _model(m).approach, rec, events, request=request)
-    return new, deck.after_landing(new, obs, dec)
+    return new, deck.after_landing(obs, dec)
 
 
 def home(state, obs, m, events=()):
