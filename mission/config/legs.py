@@ -17,9 +17,10 @@ is refused is what makes the drive-out impossible wherever the carrier docked:
   ``b c`` of it);
 - no place to start the leg from: every point of the leg-start circle (the dock point's
   horizontal distance from ``targets[k]`` at which it is ``R`` from it; the shipped dock offsets
-  are vertical, so the carrier stands there too) lies inside another target's P3 circle (``b c - carrier.p3_margin_m``,
-  which the carrier never enters) or an obstacle (radius + ``safety.margin_m``, which its filter
-  keeps it out of).
+  are vertical, so the carrier stands there too) lies inside another target's P3 circle (where
+  the carrier is ``b c - carrier.p3_margin_m`` from it, its height above a planar carrier's plane
+  counted as the guard counts it; the carrier never enters it) or an obstacle (radius +
+  ``safety.margin_m``, which its filter keeps it out of).
 
 Frames: horizontal = the first two components (local NED north, east; a 2D scenario's plane) [m].
 """
@@ -37,6 +38,11 @@ if TYPE_CHECKING:
 def _h(a: list[float], b: list[float]) -> float:
     """Horizontal distance [m] between two points."""
     return math.dist(a[:2], b[:2])
+
+
+def _across(radius_m: float, height_m: float) -> float:
+    """The horizontal radius [m] of a sphere of ``radius_m`` [m] at ``height_m`` [m] from its centre."""
+    return math.sqrt(max(radius_m ** 2 - height_m ** 2, 0.0))
 
 
 def covered_circle(center: list[float], radius_m: float, discs: list[tuple[list[float], float]]) -> bool:
@@ -105,7 +111,8 @@ def check_legs(cfg: Config) -> None:
         if height >= start_m:
             continue  # Assumption 1 holds wherever the carrier stands
         ring_m = math.sqrt(start_m ** 2 - height ** 2)
-        discs = [(other, guard_m) for i, other in enumerate(legs) if i != k]
+        discs = [(other, _across(guard_m, other[2] - ground if dim == 3 and s.planar_carrier else 0.0))
+                 for i, other in enumerate(legs) if i != k]
         discs += [(list(ob.center), ob.radius + cfg.safety.margin_m) for ob in s.obstacles]
         if covered_circle(target, ring_m, discs):
             raise ConfigError(f"scenario.targets[{k}]", target, f"no place to start its leg: every point {ring_m:.2f} m "

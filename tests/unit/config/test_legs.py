@@ -60,17 +60,18 @@ def test_a_leg_ringed_by_obstacles_has_no_place_to_start(cycle):
 
 
 def test_two_targets_ringing_a_third_leave_it_no_place_to_start(cycle):
-    """Other targets' P3 circles (b c - carrier.p3_margin_m = 7.5 m, which the carrier never enters)
-    count as the obstacles do: a target between two others 9 m either side, its start circle
-    covered, save where a wider spacing leaves a gap."""
+    """Other targets' P3 circles (where the carrier is b c - carrier.p3_margin_m = 7.5 m from them,
+    their height counted: 7.48 m across at 0.5 m up) count as the obstacles do: a target with two
+    others and two obstacles 8.2 m round it has its start circle (10.45 m) covered; spaced 16 m
+    apart they leave gaps, and the file loads."""
     def three(gap_m: float) -> dict:
-        targets = [[40.0, 30.0 - gap_m, -5.0], [40.0, 30.0, -5.0], [40.0 - gap_m, 30.0, -5.0]]
+        targets = [[40.0, 30.0 - gap_m, -0.5], [40.0, 30.0, -0.5], [40.0 - gap_m, 30.0, -0.5]]
         return {"scenario.carrier_start": [0.0, -40.0, 0.0], "scenario.target": targets[0], "scenario.targets": targets,
-                "scenario.obstacles": [{"center": [40.0 + gap_m, 30.0, 0.0], "radius": 7.0},
-                                       {"center": [40.0, 30.0 + gap_m, 0.0], "radius": 7.0}]}
+                "scenario.obstacles": [{"center": [40.0 + gap_m, 30.0, 0.0], "radius": 8.0},
+                                       {"center": [40.0, 30.0 + gap_m, 0.0], "radius": 8.0}]}
     with pytest.raises(ConfigError) as exc:
-        with_overrides(cycle, three(9.0))
-    assert exc.value.field == "scenario.targets[1]" and "no place to start its leg" in str(exc.value)
+        with_overrides(cycle, three(8.2))
+    assert exc.value.field == "scenario.targets[1]" and "no place to start its leg: every point 10.45 m" in str(exc.value)
     with_overrides(cycle, three(16.0))
 
 
