@@ -13,6 +13,7 @@ from tqdm import tqdm
 from mission.config.schema import Config, load_config
 from sim.batch import closed_loop, recovery, recovery_mc
 from sim.batch.closed_loop import ClosedLoopResult, as_flown, is_mission_config, model_from_config, random_scenarios, simulate_config
+from mission.phases import Phase
 from mission.plots import Trajectories, plot_run
 
 log = logging.getLogger(__name__)
@@ -121,6 +122,95 @@ def run_recovery_monte_carlo(cfg: Config, name: str, count: int, seed: int, show
     return 0 if recovery_mc.report_ok(report) else 1
 
 
+def has_legs(cfg: Config) -> bool:
+    """A mission of several targets (``scenario.targets``): simulated whole, leg by leg."""
+    return is_mission_config(cfg) and len(cfg.scenario.legs()) > 1
+
+
+#: The rows of the per-leg table: (label, the leg's figure, its format).
+LEG_ROWS = [
+    ("outcome", "outcome", "{}"),
+    ("separation time (from its riding) [s]", "separation_time_s", "{:.3f}"),
+    ("carrier-target distance at separation [m]", "carrier_target_distance_at_separation_m", "{:.3f}"),
+    ("relative command jump at separation [m/s]", "relative_input_jump_m_s", "{:.3f}"),
+    ("final passenger-target distance [m]", "final_passenger_target_distance_m", "{:.3f}"),
+    ("closest carrier-target approach [m]", "min_carrier_target_distance_m", "{:.3f}"),
+    ("docking attempts", ("contact", "attempts"), "{}"),
+    ("contact: horizontal error [m]", ("contact", "horizontal_error_m"), "{:.3f}"),
+    ("contact: horizontal relative speed [m/s]", ("contact", "horizontal_relative_speed_m_s"), "{:.3f}"),
+    ("contact: vertical relative speed [m/s]", ("contact", "vertical_relative_speed_m_s"), "{:.3f}"),
+    ("P1 separation", "p1", "{}"),
+    ("P2 navigation", "p2", "{}"),
+    ("P3 carrier avoids target", "p3", "{}"),
+]
+
+
+def _leg_cell(leg: dict, key: str | tuple[str, str], fmt: str) -> str:
+    value = leg.get(key[0]) if isinstance(key, tuple) else leg.get(key)
+    if isinstance(key, tuple) and value is not None:
+        value = value.get(key[1])
+    return "-" if value is None else fmt.format(value)
+
+
+def format_legs(legs: list[dict]) -> str:
+    """The per-leg table: one column per target."""
+    head = [f"leg {leg['leg'] + 1}: {[round(float(x), 2) for x in leg['target_ned_m']]}" for leg in legs]
+    rows = [(label, [_leg_cell(leg, key, fmt) for leg in legs]) for label, key, fmt in LEG_ROWS]
+    width = max(len(label) for label, _ in rows)
+    cols = [max(len(h), *(len(cells[i]) for _, cells in rows)) for i, h in enumerate(head)]
+    lines = [" " * width + "  " + "  ".join(h.rjust(w) for h, w in zip(head, cols))]
+    lines += [f"{label:<{width}}  " + "  ".join(c.rjust(w) for c, w in zip(cells, cols)) for label, cells in rows]
+    return "\n".join(lines)
+
+
+def run_legs(cfg: Config, name: str, plot_path: str | None, as_json: bool) -> int:
+    """Fly the whole mission of several targets once, as configured (:func:`sim.batch.recovery.fly`
+    with the configured recovery course); print the per-leg table (or the summary as JSON),
+    draw each leg's figure; 0 when every leg held P1-P3 and the mission completed, else 1."""
+    flight = recovery.fly(cfg, recovery.configured())
+    s = flight.summary
+    legs = s.get("legs") or []
+    ok = bool(legs) and all(leg.get("p1") and leg.get("p2") and leg.get("p3") for leg in legs) \
+        and flight.state.phase is Phase.DONE
+    written = draw_legs(flight, cfg, plot_path, name) if plot_path else []
+    if as_json:
+        click.echo(json.dumps(s, indent=2, default=float))
+    else:
+        click.echo(format_legs(legs))
+        end = f"{s['phase']}" + ("" if s["reason"] is None else f" ({s['reason']}: {s['detail']})")
+        click.echo(f"mission ended {end} after {float(flight.record.t[-1]):.2f} s; largest command jump at a phase "
+                   f"switch {s.get('max_phase_switch_jump_m_s') or 0.0:.3f} m/s; deck violations "
+                   f"{s.get('deck_violations') or 0} (true position {flight.true_deck_violations})")
+        for out in written:
+            click.echo(f"plot written to {out}")
+    return 0 if ok else 1
+
+
+def draw_legs(flight: recovery.Flight, cfg: Config, plot_path: str, name: str) -> list[Path]:
+    """Each leg's paper figure (the carrier drawn as its dock point, as ``marsupial plot`` does;
+    time from the leg's start of riding) at ``<stem>-leg<k><suffix>`` beside ``plot_path``."""
+    rec, base = flight.record, Path(plot_path)
+    out: list[Path] = []
+    start = -np.inf
+    for k, leg in enumerate(flight.state.legs_done):
+        part = rec.between(start, leg["end_s"], rec.info)
+        start = leg["end_s"]
+        x_p, x_c = part.vec("x_p"), part.vec("dock")
+        ok = np.isfinite(x_p).all(axis=1) & np.isfinite(x_c).all(axis=1)
+        riding = np.flatnonzero(part.phase == "RIDING")
+        if not ok.any() or not len(riding):
+            continue
+        t0 = part.t[riding[0]]
+        sep = leg["separation_time_s"]
+        tr = Trajectories(t=part.t[ok] - t0, x_c=x_c[ok], x_p=x_p[ok], target=np.asarray(cfg.scenario.legs()[k]),
+                          separation_time_s=None if sep is None else sep - t0,
+                          obstacles=[(np.array(o.center), o.radius) for o in cfg.scenario.obstacles], frame=cfg.scenario.frame,
+                          title=f"{name}, leg {k + 1} (carrier = its dock point; t = 0 at the leg's start of riding)",
+                          bc_m=cfg.law.params().separation_distance_m)
+        out.append(plot_run(tr, base.with_name(f"{base.stem}-leg{k + 1}{base.suffix}")))
+    return out
+
+
 def _finite_max(values: np.ndarray) -> float | None:
     """Largest finite value (None when no scenario has one, e.g. none separated)."""
     finite = values[np.isfinite(values)]
@@ -174,6 +264,16 @@ def simulate(config: str, as_json: bool, plot_path: str | None, count: int | Non
     the deck outside the contact conditions.
 
     \b
+    A mission of several targets (scenario.targets) is simulated whole, every leg: ride,
+    separate, target, task, return, dock, ride on to the next target, by the mission's phase
+    machine on the mock vehicle's dynamics with the built-in holonomic carrier driving its
+    configured recovery course. It prints one column per leg (its separation, relative jump,
+    final distance, contact and P1-P3); --plot draws each leg's figure (<stem>-leg<k>). Exit
+    code 0 when every leg held P1-P3 and the mission completed. With --monte-carlo every flight
+    flies every leg, the carrier on a random recovery course (the turn comes in the first
+    approach), and the table adds the share of flights in which every leg held P1-P3.
+
+    \b
     A file that leaves a [safety] speed or acceleration limit unset is simulated with the paper's
     unsaturated law there, and simulate says so on stderr.
 
@@ -188,7 +288,13 @@ def simulate(config: str, as_json: bool, plot_path: str | None, count: int | Non
         click.echo(f"{Path(config).name} leaves {', '.join(unsaturated)} unset: simulating the paper's unsaturated "
                    "law there (its 3D run peaks above 300 m/s); `marsupial run` and `marsupial carrier` refuse such a "
                    "file", err=True)
-    if is_mission_config(cfg) and not as_json and not (count is not None and is_recovery_config(cfg)):
+    if has_legs(cfg) and not as_json:
+        click.echo(f"{Path(config).name} lists {len(cfg.scenario.legs())} targets: simulating the whole mission, every "
+                   "leg (ride, separate, target, task, return, dock, ride on), by the mission's phase machine on the mock "
+                   "vehicle's dynamics with the built-in holonomic carrier"
+                   + (" on random recovery courses" if count is not None else " driving its configured recovery course"),
+                   err=True)
+    elif is_mission_config(cfg) and not as_json and not (count is not None and is_recovery_config(cfg)):
         start, p2_tol = as_flown(cfg)
         click.echo(f"{Path(config).name} has a [mission] section: simulating what `marsupial run` flies: the passenger "
                    f"rides the dock point (carrier + mission.dock_offset_ned_m, starting at {np.round(start, 3).tolist()}) "
@@ -197,6 +303,8 @@ def simulate(config: str, as_json: bool, plot_path: str | None, count: int | Non
     show = not no_progress and sys.stderr.isatty() and not as_json or (not no_progress and count is not None)
     if count is not None and is_recovery_config(cfg):
         return run_recovery_monte_carlo(cfg, Path(config).name, count, seed, show, plot_path, as_json)
+    if has_legs(cfg):
+        return run_legs(cfg, Path(config).stem, plot_path, as_json)
     if count is not None:
         report = run_monte_carlo(cfg, count, seed, show)
         if as_json:
