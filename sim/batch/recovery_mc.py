@@ -161,9 +161,10 @@ def leg_row(leg: dict[str, Any]) -> dict[str, Any]:
 
 def badness(row: dict[str, Any]) -> tuple[int, int, float]:
     """How bad a flight of the report went, for picking the worst: missed a target (not docked
-    within 2 attempts, an unsafe end, a deck violation) first, then the attempts, then the
-    contact's horizontal error."""
-    missed = (not (row["docked"] and row["attempts"] <= 2)) or not row["safe_end"] or row["deck_violations"] > 0
+    within 2 attempts, an unsafe end, a deck violation, a leg that broke P1-P3) first, then the
+    attempts, then the contact's horizontal error."""
+    missed = (not (row["docked"] and row["attempts"] <= 2)) or not row["safe_end"] or row["deck_violations"] > 0 \
+        or not all(leg["p1"] and leg["p2"] and leg["p3"] for leg in row["legs"])
     error = row["contact"]["horizontal_error_m"] if row["contact"] else float("inf")
     return int(missed), row["attempts"], error
 

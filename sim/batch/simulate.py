@@ -107,7 +107,9 @@ def run_recovery_monte_carlo(cfg: Config, name: str, count: int, seed: int, show
         click.echo(json.dumps(report.as_dict(), indent=2))
     else:
         lo, hi = recovery_mc.SPEED_RANGE_M_S
-        click.echo(f"{count} recoveries of {name} (seed {seed}; id = index, the same --seed replays them): the carrier "
+        legs = len(cfg.scenario.legs())
+        what = f"missions of {legs} legs" if legs > 1 else "recoveries"
+        click.echo(f"{count} {what} of {name} (seed {seed}; id = index, the same --seed replays them): the carrier "
                    f"at {lo:g}-{hi:g} m/s on a random heading, turning up to {recovery_mc.TURN_MAX_DEG:g} deg during the "
                    f"first approach")
         click.echo(recovery_mc.format_report(report))
@@ -116,10 +118,17 @@ def run_recovery_monte_carlo(cfg: Config, name: str, count: int, seed: int, show
             click.echo(f"  #{r['index']:<4} carrier {r['speed_m_s']:.2f} m/s on {r['heading_deg']:.0f} deg, turn "
                        f"{r['turn_deg']:+.0f} deg at {r['turn_rate_deg_s']:.0f} deg/s after {r['turn_after_s']:.1f} s: "
                        f"{r['outcome']}, {r['attempts']} attempts, ended {r['end_phase']}"
-                       f"{'' if r['deck_violations'] == 0 else ', deck violations ' + str(r['deck_violations'])}")
+                       f"{'' if r['deck_violations'] == 0 else ', deck violations ' + str(r['deck_violations'])}"
+                       f"{''.join(f', leg {leg_broken_p(leg)}' for leg in r['legs'] if leg_broken_p(leg))}")
         if plot_path and worst is not None:
             click.echo(f"the worst flight's recovery (#{worst.scenario.index}) drawn to {plot_path}")
     return 0 if recovery_mc.report_ok(report) else 1
+
+
+def leg_broken_p(leg: dict) -> str:
+    """``"<k> broke P1"`` (the properties a leg of a flight's row did not hold), or ``""``."""
+    broken = [p.upper() for p in ("p1", "p2", "p3") if not leg.get(p)]
+    return f"{leg['leg'] + 1} broke {'/'.join(broken)}" if broken else ""
 
 
 def has_legs(cfg: Config) -> bool:
