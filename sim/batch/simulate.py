@@ -136,45 +136,9 @@ def has_legs(cfg: Config) -> bool:
     return is_mission_config(cfg) and len(cfg.scenario.legs()) > 1
 
 
-#: The rows of the per-leg table: (label, the leg's figure, its format).
-LEG_ROWS = [
-    ("outcome", "outcome", "{}"),
-    ("separation time (from its riding) [s]", "separation_time_s", "{:.3f}"),
-    ("carrier-target distance at separation [m]", "carrier_target_distance_at_separation_m", "{:.3f}"),
-    ("relative command jump at separation [m/s]", "relative_input_jump_m_s", "{:.3f}"),
-    ("final passenger-target distance [m]", "final_passenger_target_distance_m", "{:.3f}"),
-    ("closest carrier-target approach [m]", "min_carrier_target_distance_m", "{:.3f}"),
-    ("docking attempts", ("contact", "attempts"), "{}"),
-    ("contact: horizontal error [m]", ("contact", "horizontal_error_m"), "{:.3f}"),
-    ("contact: horizontal relative speed [m/s]", ("contact", "horizontal_relative_speed_m_s"), "{:.3f}"),
-    ("contact: vertical relative speed [m/s]", ("contact", "vertical_relative_speed_m_s"), "{:.3f}"),
-    ("P1 separation", "p1", "{}"),
-    ("P2 navigation", "p2", "{}"),
-    ("P3 carrier avoids target", "p3", "{}"),
-]
-
-
-def _leg_cell(leg: dict, key: str | tuple[str, str], fmt: str) -> str:
-    value = leg.get(key[0]) if isinstance(key, tuple) else leg.get(key)
-    if isinstance(key, tuple) and value is not None:
-        value = value.get(key[1])
-    return "-" if value is None else fmt.format(value)
-
-
-def format_legs(legs: list[dict]) -> str:
-    """The per-leg table: one column per target."""
-    head = [f"leg {leg['leg'] + 1}: {[round(float(x), 2) for x in leg['target_ned_m']]}" for leg in legs]
-    rows = [(label, [_leg_cell(leg, key, fmt) for leg in legs]) for label, key, fmt in LEG_ROWS]
-    width = max(len(label) for label, _ in rows)
-    cols = [max(len(h), *(len(cells[i]) for _, cells in rows)) for i, h in enumerate(head)]
-    lines = [" " * width + "  " + "  ".join(h.rjust(w) for h, w in zip(head, cols))]
-    lines += [f"{label:<{width}}  " + "  ".join(c.rjust(w) for c, w in zip(cells, cols)) for label, cells in rows]
-    return "\n".join(lines)
-
-
 def run_legs(cfg: Config, name: str, plot_path: str | None, as_json: bool) -> int:
     """Fly the whole mission of several targets once, as configured (:func:`sim.batch.recovery.fly`
-    with the configured recovery course); print the per-leg table (or the summary as JSON),
+    with the configured recovery course); print the demo's table, one column per leg (or the summary as JSON),
     draw each leg's figure; 0 when every leg held P1-P3 and the mission completed, else 1."""
     flight = recovery.fly(cfg, recovery.configured())
     s = flight.summary
@@ -185,7 +149,9 @@ def run_legs(cfg: Config, name: str, plot_path: str | None, as_json: bool) -> in
     if as_json:
         click.echo(json.dumps(s, indent=2, default=float))
     else:
-        click.echo(format_legs(legs))
+        from sim.demo import format_table  # the demo's table: one column per leg, the same rows
+
+        click.echo(format_table([{**s, "pair": name, "mission_exit_code": 0 if s["phase"] == "DONE" else None}]))
         end = f"{s['phase']}" + ("" if s["reason"] is None else f" ({s['reason']}: {s['detail']})")
         click.echo(f"mission ended {end} after {float(flight.record.t[-1]):.2f} s; largest command jump at a phase "
                    f"switch {s.get('max_phase_switch_jump_m_s') or 0.0:.3f} m/s; deck violations "
@@ -276,8 +242,8 @@ def simulate(config: str, as_json: bool, plot_path: str | None, count: int | Non
     A mission of several targets (scenario.targets) is simulated whole, every leg: ride,
     separate, target, task, return, dock, ride on to the next target, by the mission's phase
     machine on the mock vehicle's dynamics with the built-in holonomic carrier driving its
-    configured recovery course. It prints one column per leg (its separation, relative jump,
-    final distance, contact and P1-P3); --plot draws each leg's figure (<stem>-leg<k>). Exit
+    configured recovery course. It prints the demo's table, one column per leg (its separation,
+    relative jump, final distance, contact and P1-P3); --plot draws each leg's figure (<stem>-leg<k>). Exit
     code 0 when every leg held P1-P3 and the mission completed. With --monte-carlo every flight
     flies every leg, the carrier on a random recovery course (the turn comes in the first
     approach), and the table adds the share of flights in which every leg held P1-P3.
