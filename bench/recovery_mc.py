@@ -47,7 +47,8 @@ def main(count: int, seed: int, config: str, estimate_error: float, json_path: s
     click.echo(recovery_mc.format_report(report))
     for r in report.rows:
         if recovery_mc.badness(r)[0]:
-            click.echo(f"  missed #{r['index']}: {json.dumps({k: r[k] for k in ('speed_m_s', 'heading_deg', 'turn_deg', 'turn_rate_deg_s', 'turn_after_s', 'outcome', 'attempts', 'end_phase', 'deck_violations')})}")
+            broken = {"legs_broken": [leg["leg"] + 1 for leg in r["legs"] if not (leg["p1"] and leg["p2"] and leg["p3"])]}
+            click.echo(f"  missed #{r['index']}: {json.dumps({**{k: r[k] for k in ('speed_m_s', 'heading_deg', 'turn_deg', 'turn_rate_deg_s', 'turn_after_s', 'outcome', 'attempts', 'end_phase', 'deck_violations')}, **(broken if r['legs'] else {})})}")
     sim_s = sum(r["flight_time_s"] for r in report.rows)
     click.echo(f"cost: {cpu:.1f} s CPU ({cpu / count:.2f} s per scenario, {sim_s / cpu:.0f}x simulated time per CPU "
                f"second), {wall:.1f} s wall; load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs")

@@ -16,7 +16,8 @@ hear SIGTERM for 1000 s); URLs, ports and Zenoh endpoints and key expressions ar
 geometry is checked across fields (:meth:`Config._cross_fields`): altitude band not empty, dock
 point above the carrier and inside the band, target inside the band and above ground, starts and
 target outside every obstacle, departure margin well inside b c, carrier rate fast enough for
-the carrier timeout.
+the carrier timeout; with several targets, every leg can start under the paper's Assumption 1
+(:mod:`mission.config.legs`).
 """
 from __future__ import annotations
 
@@ -29,6 +30,7 @@ import numpy as np
 from pydantic import Field, ValidationError, field_validator, model_validator
 
 from mission.config.carrier import CarrierMavlinkSection, CarrierRos2Section, CarrierSection
+from mission.config.legs import check_legs
 from mission.config.recovery import RecoverySection
 from mission.config.fields import (
     COORD_LIMIT_M,
@@ -459,6 +461,7 @@ class Config(Section):
                 if point is not None and math.dist(point, ob.center) <= ob.radius:
                     raise ConfigError(f"scenario.{name}", point, f"inside scenario.obstacles[{i}] "
                                       f"(center {ob.center}, radius {ob.radius:g} m)")
+        check_legs(self)  # several targets: every leg can start under Assumption 1 (mission/config/legs.py)
         if s.dim != 3 or s.frame != "local_ned":
             return
         # local NED, z down: the carrier drives on the ground at carrier_start's z
@@ -477,26 +480,19 @@ class Config(Section):
                 raise ConfigError(name, value, f"above the ceiling safety.z_min_m = {sf.z_min_m:g} (z {z:g}, NED)")
         if m.ride == "deck":
             self._deck_fields(dock_z)
-        legs = s.legs()
-        if len(legs) > 1 and m.final_action != "return":
-            raise ConfigError("mission.final_action", m.final_action,
-                              f"must be \"return\" with {len(legs)} scenario.targets (the passenger comes home between them)")
-        for j, later in enumerate(legs[1:], start=1):
-            for i, earlier in enumerate(legs[:j]):
-                apart = math.dist(later[:2], earlier[:2])
-                if apart <= bc:
-                    raise ConfigError(f"scenario.targets[{j}]", later, f"inside the keep-out of scenario.targets[{i}] "
-                                      f"({apart:.2f} m from it horizontally, b*c = {bc:g} m)")
-            if s.planar_carrier and abs(later[2] - ground) > bc:
-                raise ConfigError(f"scenario.targets[{j}]", later, f"{abs(later[2] - ground):.2f} m above the carrier's "
-                                  f"plane, more than b*c = {bc:g} m: the carrier can never come within b*c of it")
+        for j, later in enumerate(s.legs()[1:], start=1):
+            if not later[2] <= ground:
+                raise ConfigError(f"scenario.targets[{j}]", later, f"below the ground (z {later[2]:g} > carrier z {ground:g}, NED)")
             if sf.z_max_m is not None and later[2] > sf.z_max_m:
                 raise ConfigError(f"scenario.targets[{j}]", later, f"below the altitude floor safety.z_max_m = {sf.z_max_m:g}")
+            if sf.z_min_m is not None and later[2] < sf.z_min_m:
+                raise ConfigError(f"scenario.targets[{j}]", later, f"above the ceiling safety.z_min_m = {sf.z_min_m:g}")
         point = self.recovery.fallback_point_ned_m
-        if point is not None and math.dist(point[:2], s.target[:2]) <= bc:
-            raise ConfigError("recovery.fallback_point_ned_m", point,
-                              f"inside the target's keep-out ({math.dist(point[:2], s.target[:2]):.2f} m from it "
-                              f"horizontally, b*c = {bc:g} m)")
+        for k, target in enumerate(s.legs()):
+            if point is not None and math.dist(point[:2], target[:2]) <= bc:
+                raise ConfigError("recovery.fallback_point_ned_m", point,
+                                  f"inside the keep-out of scenario.targets[{k}] ({math.dist(point[:2], target[:2]):.2f} m "
+                                  f"from it horizontally, b*c = {bc:g} m)")
         if not 1.0 / self.carrier.rate_hz <= m.carrier_timeout_s / 2:
             raise ConfigError("carrier.rate_hz", self.carrier.rate_hz,
                               f"too slow for mission.carrier_timeout_s = {m.carrier_timeout_s:g} s "

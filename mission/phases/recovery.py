@@ -85,11 +85,25 @@ def begin(state: MissionState, obs: Observation, m: MissionModel, why: str) -> t
     return returning(new, obs, m, events=(f"returning to the carrier ({why})",))
 
 
-def _carrier_fresh(obs: Observation, limit_s: float) -> bool:
-    """A carrier state to dock on: present, younger than ``limit_s`` [s], its token not gone, and
+def carrier_unfit(obs: Observation, limit_s: float) -> str | None:
+    """Why the carrier's state is no state to dock on, or None when it is one: present, its
+    liveliness token not gone, younger than ``limit_s`` [s] (recovery.carrier_max_age_s), and
     trusted by the feed (not just bound, resynced or contested: ``CarrierObs.untrusted``)."""
     c = obs.carrier
-    return c is not None and c.age_s <= limit_s and c.alive is not False and c.untrusted is None
+    if c is None:
+        return "no carrier state"
+    if c.alive is False:
+        return f"carrier liveliness token gone (its last state {c.age_s:.2f} s old)"
+    if c.age_s > limit_s:
+        return f"carrier state {c.age_s:.2f} s old (recovery.carrier_max_age_s = {limit_s:g})"
+    if c.untrusted is not None:
+        return f"carrier feed not trusted ({c.untrusted})"
+    return None
+
+
+def _carrier_fresh(obs: Observation, limit_s: float) -> bool:
+    """A carrier state to dock on (:func:`carrier_unfit` finds nothing wrong)."""
+    return carrier_unfit(obs, limit_s) is None
 
 
 def _fly(state: MissionState, obs: Observation, m: MissionModel, goal_x: np.ndarray, goal_v: np.ndarray,
@@ -288,9 +302,8 @@ def approach(state, obs, m, events=()):
     if why is not None:
         return fallback(replace(state, recovery=rec), obs, m, why, events)
     state = replace(state, recovery=rec)
-    if not _carrier_fresh(obs, r.carrier_max_age_s):
-        why = (f"carrier feed not trusted ({obs.carrier.untrusted})" if obs.carrier.untrusted is not None else
-               f"carrier state {obs.carrier.age_s:.2f} s old (recovery.carrier_max_age_s = {r.carrier_max_age_s:g})")
+    why = carrier_unfit(obs, r.carrier_max_age_s)
+    if why is not None:
         return go_around(state, obs, m, why, events)
     unsteady = _carrier_unsteady(rec, obs, r, t)
     if unsteady is not None:

@@ -13,9 +13,13 @@ deploy, task, return and dock, ticked as the lockstep demo ticks it:
   fixed physics steps, the setpoint decoded by the mock's own MAVLink rules; optionally the
   errors of PX4's estimate (:mod:`sim.vehicle.estimator`), seeded;
 - the carrier: the built-in kinematic robot (holonomic) at ``carrier.rate_hz``, following the
-  passenger's duty as ``marsupial carrier`` does: CARRY the paper's law, filtered, under the P3
-  guard; RECOVER the scenario's steady course (speed, heading), with its turn during the first
-  approach, filtered and guarded; otherwise it stops. It sees the status of the tick before.
+  passenger's phase and leg with ``marsupial carrier``'s own mode machine
+  (:func:`mission.carrier.modes.next_mode`) and legs (:class:`mission.carrier.legs.Legs`):
+  APPROACHING the paper's law towards the leg's target, filtered; RECOVERING the scenario's
+  steady course (speed, heading), with its turn during the first approach, or, for a scenario
+  ``configured``, the configuration's recovery course as ``marsupial carrier`` drives it;
+  REPOSITIONING (several targets) straight out from the next leg's target; otherwise it stops.
+  Every command passes the P3 guard of every target. It sees the status of the tick before.
 
 A :class:`Scenario` is replayable from its fields (the seed only drives the estimate's errors);
 :mod:`sim.batch.recovery_mc` draws them, flies a batch and reports it. The figures of each flight are those of the flight log's ``summary.json``
@@ -33,12 +37,16 @@ from typing import Any
 
 import numpy as np
 
-from mission.carrier.guard import GuardParams, P3Guard
+from mission.carrier.course import RecoveryCourse, away_heading_deg
+from mission.carrier.guard import GuardParams
+from mission.carrier.legs import Legs
+from mission.carrier.modes import CarrierMode, PassengerView, next_mode
 from mission.config.schema import Config
 from mission.controller import mission_info, recovered_info
+from mission.errors import ConfigError
 from mission.core.consistent_velocity import PositionConsistentVelocity
 from mission.core.setpoint import Setpoint
-from mission.core.tick import carrier_tick
+from mission.core.tick import TickModel, carrier_tick
 from mission.flight_mode import FlightMode
 from mission.interfaces import Request
 from mission.mavlink import setpoints
@@ -65,7 +73,9 @@ class Scenario:
     (NED: 0 north, 90 east), and its turn of ``turn_deg`` [deg] (signed, clockwise positive) at
     ``turn_rate_deg_s`` [deg/s] that begins ``turn_after_s`` [s] after the first approach
     began; ``estimate_error`` the vehicle's estimate errors as a multiple of PX4 SITL's (0: exact), seeded
-    by ``seed``. ``index``: its place in its batch (the same seed gives the same batch)."""
+    by ``seed``. ``index``: its place in its batch (the same seed gives the same batch).
+    ``configured``: the carrier drives the configuration's own recovery course instead
+    (``carrier.recovery_course``, ``recovery_heading_deg``, ``recovery_speed_m_s``; :func:`configured`)."""
 
     speed_m_s: float
     heading_deg: float
@@ -75,6 +85,7 @@ class Scenario:
     estimate_error: float = 0.0
     seed: int = 0
     index: int = 0
+    configured: bool = False  # the carrier drives the configured recovery course (carrier.recovery_*), not this one
 
     def course_heading_deg(self, since_approach_s: float | None) -> float:
         """The course's heading [deg] ``since_approach_s`` [s] after the first approach began (None: not yet)."""
@@ -90,7 +101,22 @@ class Scenario:
                 "seed": self.seed}
 
 
+def configured(estimate_error: float = 0.0, seed: int = 0) -> Scenario:
+    """The mission as configured: the carrier drives the configuration's recovery course."""
+    return Scenario(0.0, 0.0, estimate_error=estimate_error, seed=seed, configured=True)
+
+
 # ---------------------------------------------------------------------------------------- carrier
+
+
+def _speed_limited(cfg: Config, target: np.ndarray) -> TickModel:
+    """The carrier's tick model for ``target`` [m] with its speed limit, the smaller of
+    ``carrier.max_speed_m_s`` and ``safety.carrier_max_speed_m_s`` [m/s]."""
+    model = model_from_config(cfg, target=target)
+    limit = cfg.carrier.max_speed_m_s
+    if model.carrier_safety.max_speed_m_s is not None:
+        limit = min(limit, model.carrier_safety.max_speed_m_s)
+    return replace(model, carrier_safety=replace(model.carrier_safety, max_speed_m_s=limit))
 
 
 class KinematicCarrier:
@@ -99,66 +125,86 @@ class KinematicCarrier:
     NED in the plane of ``scenario.carrier_start``; yaw [rad] the heading of travel."""
 
     def __init__(self, cfg: Config, scenario: Scenario) -> None:
-        if len(cfg.scenario.legs()) > 1:
-            raise ValueError("the recovery simulation flies one target (scenario.targets lists several)")
-        if cfg.carrier.kinematics != "holonomic" or cfg.scenario.carrier_mode != "stop":
-            raise ValueError("the recovery simulation drives the built-in holonomic carrier that stops once the "
-                             "passenger has left (carrier.kinematics = \"holonomic\", scenario.carrier_mode = \"stop\")")
+        if cfg.carrier.kinematics != "holonomic":
+            raise ConfigError("carrier.kinematics", cfg.carrier.kinematics, "the simulation of a mission that comes home "
+                              "drives the built-in holonomic carrier: must be \"holonomic\" to simulate it")
+        if cfg.scenario.carrier_mode != "stop":
+            raise ConfigError("scenario.carrier_mode", cfg.scenario.carrier_mode, "the simulation of a mission that "
+                              "comes home drives a carrier that stops once the passenger has left: must be \"stop\" "
+                              "to simulate it")
         self.cfg, self.scenario = cfg, scenario
-        model = model_from_config(cfg)
-        limit = cfg.carrier.max_speed_m_s
-        if model.carrier_safety.max_speed_m_s is not None:
-            limit = min(limit, model.carrier_safety.max_speed_m_s)
-        self.model = replace(model, carrier_safety=replace(model.carrier_safety, max_speed_m_s=limit))
+        targets = [np.asarray(t, dtype=float) for t in cfg.scenario.legs()]
         c = cfg.carrier
         decel = c.brake_decel_m_s2 or cfg.safety.carrier_max_accel_m_s2 or 1.0
         delay = c.brake_delay_s if c.brake_delay_s is not None else 0.0  # the built-in robot obeys at once
-        self.guard = P3Guard(GuardParams(cfg.law.b * cfg.law.c - c.p3_margin_m, decel, delay, 1.0 / c.rate_hz),
-                             np.asarray(cfg.scenario.target, dtype=float), planar=True)
+        guard = GuardParams(cfg.law.b * cfg.law.c - c.p3_margin_m, decel, delay, 1.0 / c.rate_hz)
+        self.legs = Legs(targets, [_speed_limited(cfg, t) for t in targets], guard, True,
+                         np.asarray(cfg.mission.dock_offset_ned_m, dtype=float),
+                         cfg.law.b * cfg.law.c + cfg.mission.leg_start_margin_m)
+        self.course = RecoveryCourse.from_lists(c.recovery_course, c.recovery_heading_deg, c.recovery_speed_m_s)
         self.period_s = 1.0 / c.rate_hz
         self.position = np.array(cfg.scenario.carrier_start, dtype=float)
         self.velocity = np.zeros(3)
-        e_tc = np.asarray(cfg.scenario.target, dtype=float) - self.position
+        e_tc = targets[0] - self.position
         self.yaw_rad = math.atan2(e_tc[1], e_tc[0]) if c.start_yaw_rad is None else float(c.start_yaw_rad)
         self.t_s = 0.0  # [s] the time of its state (its last step)
         self.done = 0  # steps taken (the next is at done * period_s)
-        self.carrying = False  # the law's approach began (APPROACHING)
-        self.separated = False  # the latch fired (SEPARATED: stop, or Remark 1's plan)
+        self.mode = CarrierMode.WAITING
         self.course_begun = False  # it has driven the scenario's recovery course
+        self._course_start: tuple[float, float] | None = None  # (t [s], away heading [deg]) of this recovery
+
+    @property
+    def model(self) -> TickModel:
+        """The tick model of the leg the carrier serves."""
+        return self.legs.model
 
     def next_step_s(self) -> float:
         """When [s] it steps next (every ``1 / carrier.rate_hz`` from 0)."""
         return self.done * self.period_s
 
-    def step(self, phase: Phase | None, approach_s: float | None) -> None:
+    def step(self, phase: Phase | None, approach_s: float | None, leg: int = 0) -> None:
         """Step at :meth:`next_step_s`: move there under the held command, then decide the next
-        command for the passenger's ``phase`` (None: none heard yet); ``approach_s`` [s]: when
-        the first approach began (None: not yet)."""
+        command for the passenger's ``phase`` (None: none heard yet) on its ``leg`` (the index
+        of its target); ``approach_s`` [s]: when the first approach began (None: not yet)."""
         t_s = self.next_step_s()
         dt = t_s - self.t_s
         self.position = self.position + self.velocity * dt
         self.t_s = t_s
         self.done += 1
-        since_approach_s = None if approach_s is None else t_s - approach_s
-        duty = phase.duty if phase is not None else Duty.WAIT
-        if duty is Duty.CARRY and not self.separated:
-            self.carrying = True
-        if duty not in (Duty.WAIT, Duty.CARRY):
-            self.separated = True
+        if phase is not None and phase.duty in (Duty.REPOSITION, Duty.CARRY):
+            self.legs.follow(leg)
+        self.mode, _ = next_mode(self.mode, PassengerView(phase, separated=phase is not None and phase.separated,
+                                                          leg=leg))
+        if self.mode is not CarrierMode.RECOVERING:
+            self._course_start = None  # the next recovery drives its course from its own start
         x_c = self.position
-        course: np.ndarray | None = None  # the recovery course, or None: the law (carrying) or stop
-        if duty is Duty.RECOVER:
+        course: np.ndarray | None = None  # the recovery course or the drive-out, or None: the law (approaching) or stop
+        if self.mode is CarrierMode.RECOVERING:
             self.course_begun = True
-            heading = math.radians(self.scenario.course_heading_deg(since_approach_s))
-            course = self.scenario.speed_m_s * np.array([math.cos(heading), math.sin(heading), 0.0])
-        carrying = self.carrying and not self.separated
-        u = np.array(carrier_tick(x_c, not carrying, self.model, u_prev=self.velocity, dt_s=dt or None,
-                                  course_velocity=course).u, dtype=float)
-        u = np.asarray(self.guard.limit(t_s, x_c, u, self.velocity, 0.0).u, dtype=float)
+            course = self._recovery_course(t_s, x_c, approach_s)
+        elif self.mode is CarrierMode.REPOSITIONING:
+            course = self.legs.reposition_velocity(x_c, float(self.model.carrier_safety.max_speed_m_s or 1.0))
+        u = np.array(carrier_tick(x_c, self.mode is not CarrierMode.APPROACHING, self.model, u_prev=self.velocity,
+                                  dt_s=dt or None, course_velocity=course).u, dtype=float)
+        for guard in self.legs.guards:  # every target is hazardous, whichever leg is flown
+            u = np.asarray(guard.limit(t_s, x_c, u, self.velocity, 0.0).u, dtype=float)
         u[2] = 0.0
         self.velocity = u
         if math.hypot(u[0], u[1]) > 1e-6:
             self.yaw_rad = math.atan2(u[1], u[0])
+
+    def _recovery_course(self, t_s: float, x_c: np.ndarray, approach_s: float | None) -> np.ndarray:
+        """The recovery course's velocity [m/s] NED at ``t_s`` [s]: the scenario's, or (configured)
+        the configuration's, its clock and its default heading (away from the leg's target) taken
+        at the first step of this recovery, as ``marsupial carrier`` does."""
+        sc = self.scenario
+        if not sc.configured:
+            heading = math.radians(sc.course_heading_deg(None if approach_s is None else t_s - approach_s))
+            return sc.speed_m_s * np.array([math.cos(heading), math.sin(heading), 0.0])
+        if self._course_start is None:
+            self._course_start = (t_s, away_heading_deg(x_c, np.asarray(self.model.target)))
+        t0, away = self._course_start
+        return np.append(self.course.velocity_ned_m_s(t_s - t0, away), 0.0)
 
     def observed(self, t_s: float) -> CarrierObs:
         """The newest published state as the passenger sees it at ``t_s`` [s]."""
@@ -250,12 +296,18 @@ class Flight:
 
     @property
     def docked(self) -> bool:
+        """It docked again (with several targets: after every leg)."""
+        legs = self.summary.get("legs")
+        if legs:
+            return all(leg.get("contact") is not None for leg in legs)
         return bool(self.summary.get("docked_again"))
 
     @property
     def attempts(self) -> int:
+        """The approaches its recovery took (with several targets: the most any leg's took)."""
         rec = self.state.recovery
-        return 0 if rec is None else rec.attempts
+        done = [leg["contact"]["attempts"] for leg in self.state.legs_done if leg.get("contact")]
+        return max([0 if rec is None else rec.attempts, *done])
 
 
 @dataclass
@@ -295,12 +347,14 @@ class World:
         self.dt_s = self.model.dt_s
         self.steps_per_tick = int(round(self.dt_s / PHYSICS_DT_S))
         if abs(self.steps_per_tick * PHYSICS_DT_S - self.dt_s) > 1e-12:
-            raise ValueError(f"mission.rate_hz must divide the mock's physics rate ({1 / PHYSICS_DT_S:g} Hz)")
+            raise ConfigError("mission.rate_hz", cfg.mission.rate_hz,
+                              f"must divide the mock's physics rate ({1 / PHYSICS_DT_S:g} Hz) to simulate the mission")
         self.vehicle = MockDynamics(cfg.scenario.carrier_start, scenario.estimate_error, scenario.seed)
         self.carrier = KinematicCarrier(cfg, scenario)
         self.state = MissionState()
         self.rows = _Rows()
-        self.published: Phase | None = None  # the status the carrier hears
+        self.published: Phase | None = None  # the status the carrier hears: the phase and its leg
+        self.published_leg = 0
         self.approach_s: float | None = None  # when the first approach began [s]
         self.failed: dict[str, str] = {}
         self.events: list[tuple[float, str]] = []  # (t [s], what the phases said)
@@ -335,7 +389,7 @@ class World:
         t = self.k * self.dt_s
         carrier, vehicle = self.carrier, self.vehicle
         while carrier.next_step_s() <= t + 1e-9:  # the carrier steps first, on the status of the tick before
-            carrier.step(self.published, self.approach_s)
+            carrier.step(self.published, self.approach_s, self.published_leg)
         vehicle.advance_to_step(self.k * self.steps_per_tick)
         seen = vehicle.observed()
         if self.velocity_fix is not None:  # as the controller's _vehicle_obs: consistent velocity, and its bias
@@ -351,7 +405,7 @@ class World:
             if why is not None and dec.request in (Request.ARM, Request.OFFBOARD):
                 self.failed[dec.request.value] = why
         self.events.extend((t, text) for text in dec.events)
-        self.published = self.state.phase
+        self.published, self.published_leg = self.state.phase, self.state.leg
         if self.approach_s is None and self.state.phase is Phase.APPROACH:
             self.approach_s = t
         _record(self.rows, t, self.state, obs, dec, vehicle)

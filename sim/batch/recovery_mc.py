@@ -85,13 +85,29 @@ class MonteCarloReport:
         return out
 
     @property
+    def legs_held(self) -> float | None:
+        """The share of flights in which every leg held P1-P3 (None: one target per flight)."""
+        if not any(r["legs"] for r in self.rows):
+            return None
+        return self.fraction(lambda r: bool(r["legs"]) and all(leg["p1"] and leg["p2"] and leg["p3"] for leg in r["legs"]))
+
+    @property
+    def max_separation_jump_m_s(self) -> float | None:
+        """The largest jump of the relative command at a leg's separation [m/s] (None: one target per flight)."""
+        jumps = [leg["relative_input_jump_m_s"] for r in self.rows for leg in r["legs"]
+                 if leg.get("relative_input_jump_m_s") is not None]
+        return max(jumps) if jumps else None
+
+    @property
     def unsafe(self) -> list[dict[str, Any]]:
         """Flights that did not end safely: the mission did not complete (DONE: docked and handed to
         Hold above the carrier, or fallen back to its point and handed to Hold or Land)."""
         return [r for r in self.rows if not r["safe_end"]]
 
     def contact_percentiles(self, key: str) -> dict[str, float | None]:
-        values = np.array([r["contact"][key] for r in self.rows if r["contact"] is not None], dtype=float)
+        """p50, p95 and max of a contact figure over every docking (every leg's, with several targets)."""
+        contacts = [c for r in self.rows for c in ([leg["contact"] for leg in r["legs"]] if r["legs"] else [r["contact"]])]
+        values = np.array([c[key] for c in contacts if c is not None], dtype=float)
         if not values.size:
             return {"p50": None, "p95": None, "max": None}
         return {"p50": float(np.percentile(values, 50)), "p95": float(np.percentile(values, 95)),
@@ -109,6 +125,7 @@ class MonteCarloReport:
             "true_deck_violations": sum(r["true_deck_violations"] for r in self.rows),
             "max_phase_switch_jump_m_s": max((r["max_phase_switch_jump_m_s"] or 0.0) for r in self.rows) if self.rows else None,
             "p3": all(r["p3"] for r in self.rows),
+            "every_leg_p1_p3": self.legs_held, "max_separation_jump_m_s": self.max_separation_jump_m_s,
             "rows": self.rows,
         }
 
@@ -130,14 +147,24 @@ def flight_row(f: Flight) -> dict[str, Any]:
             "end_phase": f.state.phase.value, "abort": None if f.state.reason is None else f"{f.state.reason}: {f.state.detail}",
             "max_phase_switch_jump_m_s": s.get("max_phase_switch_jump_m_s"), "p3": bool(s.get("p3")),
             "go_arounds": f.go_arounds,
-            "flight_time_s": round(float(f.record.t[-1]), 2) if len(f.record.t) else 0.0}
+            "flight_time_s": round(float(f.record.t[-1]), 2) if len(f.record.t) else 0.0,
+            "legs": [leg_row(leg) for leg in s.get("legs") or []]}
+
+
+def leg_row(leg: dict[str, Any]) -> dict[str, Any]:
+    """One leg's figures in a flight's row (several targets): its outcome, P1-P3, its separation
+    (time from its riding, carrier-target distance, the relative command's jump) and contact."""
+    keys = ("leg", "outcome", "p1", "p2", "p3", "separation_time_s", "carrier_target_distance_at_separation_m",
+            "relative_input_jump_m_s", "final_passenger_target_distance_m", "contact")
+    return {k: leg.get(k) for k in keys}
 
 
 def badness(row: dict[str, Any]) -> tuple[int, int, float]:
     """How bad a flight of the report went, for picking the worst: missed a target (not docked
-    within 2 attempts, an unsafe end, a deck violation) first, then the attempts, then the
-    contact's horizontal error."""
-    missed = (not (row["docked"] and row["attempts"] <= 2)) or not row["safe_end"] or row["deck_violations"] > 0
+    within 2 attempts, an unsafe end, a deck violation, a leg that broke P1-P3) first, then the
+    attempts, then the contact's horizontal error."""
+    missed = (not (row["docked"] and row["attempts"] <= 2)) or not row["safe_end"] or row["deck_violations"] > 0 \
+        or not all(leg["p1"] and leg["p2"] and leg["p3"] for leg in row["legs"])
     error = row["contact"]["horizontal_error_m"] if row["contact"] else float("inf")
     return int(missed), row["attempts"], error
 
@@ -170,10 +197,12 @@ DOCKED_WITHIN_2_TARGET = 0.99  # the share of scenarios docked within 2 attempts
 
 def report_ok(report: MonteCarloReport) -> bool:
     """The targets: >= :data:`DOCKED_WITHIN_2_TARGET` docked within 2 attempts, every other one
-    fell back safely, no deck violation."""
+    fell back safely, no deck violation; with several targets also every leg's P1-P3 in every
+    flight."""
     d = report.as_dict()
     return (report.docked_within_2 >= DOCKED_WITHIN_2_TARGET and not report.unsafe
-            and d["deck_violations"] == 0 and d["true_deck_violations"] == 0)
+            and d["deck_violations"] == 0 and d["true_deck_violations"] == 0
+            and report.legs_held in (None, 1.0))
 
 
 def format_report(report: MonteCarloReport) -> str:
@@ -204,5 +233,9 @@ def format_report(report: MonteCarloReport) -> str:
         ("largest command jump at a phase switch", f"{d['max_phase_switch_jump_m_s']:.3f} m/s"),
         ("P3 (the carrier never at the target)", "held" if d["p3"] else "BROKEN"),
     ]
+    if report.legs_held is not None:  # several targets: each flight flies every leg
+        jump = report.max_separation_jump_m_s
+        rows[0:0] = [("every leg held P1-P3", pct(report.legs_held)),
+                     ("largest relative jump at a leg's separation", "-" if jump is None else f"{jump:.3f} m/s")]
     width = max(len(k) for k, _ in rows)
     return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)

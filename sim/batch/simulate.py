@@ -13,6 +13,7 @@ from tqdm import tqdm
 from mission.config.schema import Config, load_config
 from sim.batch import closed_loop, recovery, recovery_mc
 from sim.batch.closed_loop import ClosedLoopResult, as_flown, is_mission_config, model_from_config, random_scenarios, simulate_config
+from mission.phases import Phase
 from mission.plots import Trajectories, plot_run
 
 log = logging.getLogger(__name__)
@@ -106,7 +107,9 @@ def run_recovery_monte_carlo(cfg: Config, name: str, count: int, seed: int, show
         click.echo(json.dumps(report.as_dict(), indent=2))
     else:
         lo, hi = recovery_mc.SPEED_RANGE_M_S
-        click.echo(f"{count} recoveries of {name} (seed {seed}; id = index, the same --seed replays them): the carrier "
+        legs = len(cfg.scenario.legs())
+        what = f"missions of {legs} legs" if legs > 1 else "recoveries"
+        click.echo(f"{count} {what} of {name} (seed {seed}; id = index, the same --seed replays them): the carrier "
                    f"at {lo:g}-{hi:g} m/s on a random heading, turning up to {recovery_mc.TURN_MAX_DEG:g} deg during the "
                    f"first approach")
         click.echo(recovery_mc.format_report(report))
@@ -115,10 +118,72 @@ def run_recovery_monte_carlo(cfg: Config, name: str, count: int, seed: int, show
             click.echo(f"  #{r['index']:<4} carrier {r['speed_m_s']:.2f} m/s on {r['heading_deg']:.0f} deg, turn "
                        f"{r['turn_deg']:+.0f} deg at {r['turn_rate_deg_s']:.0f} deg/s after {r['turn_after_s']:.1f} s: "
                        f"{r['outcome']}, {r['attempts']} attempts, ended {r['end_phase']}"
-                       f"{'' if r['deck_violations'] == 0 else ', deck violations ' + str(r['deck_violations'])}")
+                       f"{'' if r['deck_violations'] == 0 else ', deck violations ' + str(r['deck_violations'])}"
+                       f"{''.join(f', leg {leg_broken_p(leg)}' for leg in r['legs'] if leg_broken_p(leg))}")
         if plot_path and worst is not None:
             click.echo(f"the worst flight's recovery (#{worst.scenario.index}) drawn to {plot_path}")
     return 0 if recovery_mc.report_ok(report) else 1
+
+
+def leg_broken_p(leg: dict) -> str:
+    """``"<k> broke P1"`` (the properties a leg of a flight's row did not hold), or ``""``."""
+    broken = [p.upper() for p in ("p1", "p2", "p3") if not leg.get(p)]
+    return f"{leg['leg'] + 1} broke {'/'.join(broken)}" if broken else ""
+
+
+def has_legs(cfg: Config) -> bool:
+    """A mission of several targets (``scenario.targets``): simulated whole, leg by leg."""
+    return is_mission_config(cfg) and len(cfg.scenario.legs()) > 1
+
+
+def run_legs(cfg: Config, name: str, plot_path: str | None, as_json: bool) -> int:
+    """Fly the whole mission of several targets once, as configured (:func:`sim.batch.recovery.fly`
+    with the configured recovery course); print the demo's table, one column per leg (or the summary as JSON),
+    draw each leg's figure; 0 when every leg held P1-P3 and the mission completed, else 1."""
+    flight = recovery.fly(cfg, recovery.configured())
+    s = flight.summary
+    legs = s.get("legs") or []
+    ok = bool(legs) and all(leg.get("p1") and leg.get("p2") and leg.get("p3") for leg in legs) \
+        and flight.state.phase is Phase.DONE
+    written = draw_legs(flight, cfg, plot_path, name) if plot_path else []
+    if as_json:
+        click.echo(json.dumps(s, indent=2, default=float))
+    else:
+        from sim.demo import format_table  # the demo's table: one column per leg, the same rows
+
+        click.echo(format_table([{**s, "pair": name, "mission_exit_code": 0 if s["phase"] == "DONE" else None}]))
+        end = f"{s['phase']}" + ("" if s["reason"] is None else f" ({s['reason']}: {s['detail']})")
+        click.echo(f"mission ended {end} after {float(flight.record.t[-1]):.2f} s; largest command jump at a phase "
+                   f"switch {s.get('max_phase_switch_jump_m_s') or 0.0:.3f} m/s; deck violations "
+                   f"{s.get('deck_violations') or 0} (true position {flight.true_deck_violations})")
+        for out in written:
+            click.echo(f"plot written to {out}")
+    return 0 if ok else 1
+
+
+def draw_legs(flight: recovery.Flight, cfg: Config, plot_path: str, name: str) -> list[Path]:
+    """Each leg's paper figure (the carrier drawn as its dock point, as ``marsupial plot`` does;
+    time from the leg's start of riding) at ``<stem>-leg<k><suffix>`` beside ``plot_path``."""
+    rec, base = flight.record, Path(plot_path)
+    out: list[Path] = []
+    start = -np.inf
+    for k, leg in enumerate(flight.state.legs_done):
+        part = rec.between(start, leg["end_s"], rec.info)
+        start = leg["end_s"]
+        x_p, x_c = part.vec("x_p"), part.vec("dock")
+        ok = np.isfinite(x_p).all(axis=1) & np.isfinite(x_c).all(axis=1)
+        riding = np.flatnonzero(part.phase == "RIDING")
+        if not ok.any() or not len(riding):
+            continue
+        t0 = part.t[riding[0]]
+        sep = leg["separation_time_s"]
+        tr = Trajectories(t=part.t[ok] - t0, x_c=x_c[ok], x_p=x_p[ok], target=np.asarray(cfg.scenario.legs()[k]),
+                          separation_time_s=None if sep is None else sep - t0,
+                          obstacles=[(np.array(o.center), o.radius) for o in cfg.scenario.obstacles], frame=cfg.scenario.frame,
+                          title=f"{name}, leg {k + 1} (carrier = its dock point; t = 0 at the leg's start of riding)",
+                          bc_m=cfg.law.params().separation_distance_m)
+        out.append(plot_run(tr, base.with_name(f"{base.stem}-leg{k + 1}{base.suffix}")))
+    return out
 
 
 def _finite_max(values: np.ndarray) -> float | None:
@@ -174,6 +239,16 @@ def simulate(config: str, as_json: bool, plot_path: str | None, count: int | Non
     the deck outside the contact conditions.
 
     \b
+    A mission of several targets (scenario.targets) is simulated whole, every leg: ride,
+    separate, target, task, return, dock, ride on to the next target, by the mission's phase
+    machine on the mock vehicle's dynamics with the built-in holonomic carrier driving its
+    configured recovery course. It prints the demo's table, one column per leg (its separation,
+    relative jump, final distance, contact and P1-P3); --plot draws each leg's figure (<stem>-leg<k>). Exit
+    code 0 when every leg held P1-P3 and the mission completed. With --monte-carlo every flight
+    flies every leg, the carrier on a random recovery course (the turn comes in the first
+    approach), and the table adds the share of flights in which every leg held P1-P3.
+
+    \b
     A file that leaves a [safety] speed or acceleration limit unset is simulated with the paper's
     unsaturated law there, and simulate says so on stderr.
 
@@ -188,7 +263,13 @@ def simulate(config: str, as_json: bool, plot_path: str | None, count: int | Non
         click.echo(f"{Path(config).name} leaves {', '.join(unsaturated)} unset: simulating the paper's unsaturated "
                    "law there (its 3D run peaks above 300 m/s); `marsupial run` and `marsupial carrier` refuse such a "
                    "file", err=True)
-    if is_mission_config(cfg) and not as_json and not (count is not None and is_recovery_config(cfg)):
+    if has_legs(cfg) and not as_json:
+        click.echo(f"{Path(config).name} lists {len(cfg.scenario.legs())} targets: simulating the whole mission, every "
+                   "leg (ride, separate, target, task, return, dock, ride on), by the mission's phase machine on the mock "
+                   "vehicle's dynamics with the built-in holonomic carrier"
+                   + (" on random recovery courses" if count is not None else " driving its configured recovery course"),
+                   err=True)
+    elif is_mission_config(cfg) and not as_json and not (count is not None and is_recovery_config(cfg)):
         start, p2_tol = as_flown(cfg)
         click.echo(f"{Path(config).name} has a [mission] section: simulating what `marsupial run` flies: the passenger "
                    f"rides the dock point (carrier + mission.dock_offset_ned_m, starting at {np.round(start, 3).tolist()}) "
@@ -197,6 +278,8 @@ def simulate(config: str, as_json: bool, plot_path: str | None, count: int | Non
     show = not no_progress and sys.stderr.isatty() and not as_json or (not no_progress and count is not None)
     if count is not None and is_recovery_config(cfg):
         return run_recovery_monte_carlo(cfg, Path(config).name, count, seed, show, plot_path, as_json)
+    if has_legs(cfg):
+        return run_legs(cfg, Path(config).stem, plot_path, as_json)
     if count is not None:
         report = run_monte_carlo(cfg, count, seed, show)
         if as_json:

@@ -14,6 +14,7 @@ not TOML, a directory, a name too long).
 """
 from __future__ import annotations
 
+import math
 import re
 import subprocess
 import sys
@@ -293,3 +294,54 @@ def test_the_carrier_refuses_a_flight_without_its_target_or_limits(tmp_path: Pat
     err = capsys.readouterr().err
     assert code == 2 and f"error: {field} = None: " in err and "Traceback" not in err, err[:300]
     assert not (tmp_path / "c.json").exists()
+
+
+CYCLE = (CONFIGS / "cycle.toml").read_text()
+CYCLE_TARGETS = "targets = [[24.0, 18.0, -5.0], [44.0, 4.0, -4.0]]"
+# the second target ringed by twelve obstacles 10.5 m from it: nowhere b c + leg margin from it to start its leg
+RING = "".join(f"\n[[scenario.obstacles]]\ncenter = [{44.0 + 10.5 * math.cos(a * math.pi / 6):.3f}, "
+               f"{4.0 + 10.5 * math.sin(a * math.pi / 6):.3f}, 0.0]\nradius = 3.5\n" for a in range(12))
+# (id, configs/cycle.toml so mutated, the field the error names): several targets that leave a leg no start
+CYCLE_MISTAKES = [
+    ("no-targets", CYCLE.replace(CYCLE_TARGETS, "targets = []"), "scenario.targets"),
+    ("target-in-keep-out", CYCLE.replace(CYCLE_TARGETS, "targets = [[24.0, 18.0, -5.0], [28.0, 20.0, -4.0]]"),
+     "scenario.targets[1]"),
+    ("first-in-keep-out", CYCLE.replace(CYCLE_TARGETS, "targets = [[24.0, 18.0, -5.0], [44.0, 4.0, -4.0], [20.0, 12.0, -4.0]]"),
+     "scenario.targets[2]"),
+    ("start-in-keep-out", CYCLE.replace(CYCLE_TARGETS, "targets = [[24.0, 18.0, -5.0], [5.0, -3.0, -4.0]]"),
+     "scenario.carrier_start"),
+    ("second-too-high", CYCLE.replace(CYCLE_TARGETS, "targets = [[24.0, 18.0, -5.0], [44.0, 4.0, -9.0]]"),
+     "scenario.targets[1]"),
+    ("second-in-obstacle", CYCLE + "\n[[scenario.obstacles]]\ncenter = [44.0, 4.0, -4.0]\nradius = 1.0\n",
+     "scenario.targets[1]"),
+    ("no-drive-out", CYCLE + RING, "scenario.targets[1]"),
+    ("several-without-return", mutated_text(CYCLE, "mission", "final_action", '"hold"'), "mission.final_action"),
+]
+
+
+@pytest.mark.parametrize("text, field", [(t, f) for _, t, f in CYCLE_MISTAKES], ids=[i for i, _, _ in CYCLE_MISTAKES])
+@pytest.mark.parametrize("command", ["run", "carrier", "simulate"])
+def test_a_cycle_without_a_start_for_every_leg_exits_2_naming_the_field(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                                        command: str, text: str, field: str) -> None:
+    """An empty target list, a target inside another's keep-out (or the carrier's start inside
+    one), a target it can never separate at, a leg with nowhere to start under the paper's
+    Assumption 1 (mission/config/legs.py): ``run``, ``carrier`` and ``simulate`` refuse
+    configs/cycle.toml so mutated before anything moves, naming the field (exit 2)."""
+    path = tmp_path / "cycle.toml"
+    path.write_text(text)
+    extra = {"run": ["--log-dir", str(tmp_path / "log")], "carrier": ["--summary", str(tmp_path / "c.json")],
+             "simulate": ["--json"]}[command]
+    code = main([command, str(path), *extra])
+    out, err = capsys.readouterr()
+    assert code == 2 and f"error: {field} = " in err and "Traceback" not in err, err[:400]
+    assert out == "" and not (tmp_path / "log").exists() and not (tmp_path / "c.json").exists()
+
+
+def test_the_real_processes_refuse_a_leg_with_no_drive_out(tmp_path: Path) -> None:
+    path = tmp_path / "cycle.toml"
+    path.write_text(CYCLE + RING)
+    for command in ("run", "carrier", "simulate"):
+        out = subprocess.run([sys.executable, "-m", "mission.cli", command, str(path)], capture_output=True, text=True,
+                             timeout=60)
+        assert out.returncode == 2 and "error: scenario.targets[1] = [44.0, 4.0, -4.0]: no place to start its leg" \
+            in out.stderr and "Traceback" not in out.stderr, (command, out.stderr)

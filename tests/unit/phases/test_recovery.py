@@ -132,6 +132,43 @@ def test_a_carrier_gone_quiet_on_the_approach_means_go_around_then_fallback(cfg)
     assert outcome.ok  # a fallback is a safe end, not an abort
 
 
+def test_a_go_around_names_why_the_carrier_state_is_unfit():
+    """The go-around's reason is the real one: the carrier's liveliness token gone (its state may
+    still be fresh), its state too old, no state, or a feed that does not trust it yet."""
+    from mission.phases import CarrierObs, Observation
+    from mission.phases.recovery import carrier_unfit
+
+    def seen(**kw) -> Observation:
+        c = CarrierObs(position_ned_m=np.zeros(3), velocity_ned_m_s=np.zeros(3), **{"age_s": 0.02, **kw})
+        return Observation(t_s=10.0, vehicle=None, carrier=c)
+
+    assert carrier_unfit(seen(), 0.3) is None
+    assert carrier_unfit(seen(alive=False), 0.3) == "carrier liveliness token gone (its last state 0.02 s old)"
+    assert carrier_unfit(seen(age_s=0.45), 0.3) == "carrier state 0.45 s old (recovery.carrier_max_age_s = 0.3)"
+    assert carrier_unfit(seen(untrusted="settling: after a resync"), 0.3) == \
+        "carrier feed not trusted (settling: after a resync)"
+    assert carrier_unfit(Observation(t_s=10.0, vehicle=None, carrier=None), 0.3) == "no carrier state"
+
+
+def test_a_carrier_whose_token_goes_on_the_approach_is_named_in_the_go_around(cfg):
+    """The carrier's token goes mid-approach while its last state is still 0.02 s old: the
+    go-around says the token is gone, not that a 0.02 s old state is stale."""
+    clock = ManualClock()
+    world = FakeWorld(clock, target_ned_m=np.asarray(cfg.scenario.target, dtype=float),
+                      recovery_velocity_ned_m_s=np.array([1.0, 0.0, 0.0]))
+    reports: list[TickReport] = []
+
+    def on_tick(r: TickReport) -> None:
+        reports.append(r)
+        if r.phase is Phase.APPROACH and world.carrier_until_s == float("inf"):
+            world.carrier_until_s = r.t_s
+
+    controller = MissionController(cfg, world, world.feed, clock, publisher=world, on_tick=on_tick, command_thread=False)
+    controller.run()
+    went = [e for r in reports for e in r.decision.events if e.startswith("go-around: ")]
+    assert went and went[0].startswith("go-around: carrier liveliness token gone (its last state 0.0"), went
+
+
 def test_the_battery_recalls_the_passenger_before_the_task_is_done(cfg):
     long_task = with_overrides(cfg, {"mission.at_target_s": 300.0})
     outcome, world, reports, controller = fly(long_task, recovery_velocity_ned_m_s=np.array([1.0, 0.0, 0.0]),

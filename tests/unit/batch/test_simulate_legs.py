@@ -1,0 +1,94 @@
+"""``marsupial simulate`` of a mission of several targets (sim/batch/simulate.py, recovery.py):
+every leg is flown, ride, separate, target, return, dock, ride on, by the mission's phase
+machine on the mock's dynamics with the built-in carrier following the passenger's legs as
+``marsupial carrier`` does; one column per leg, each leg's separation and P1-P3."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from mission.cli import main
+from mission.config.schema import load_config, with_overrides
+from mission.phases import Phase
+from sim.batch.recovery import configured, fly
+from sim.batch.recovery_mc import format_report, monte_carlo, random_scenarios
+from tests.conftest import CONFIGS
+
+pytestmark = pytest.mark.timeout(600)  # whole missions in-process: seconds of CPU each, longer on a busy machine
+
+
+@pytest.fixture(scope="module")
+def cycle():
+    return load_config(CONFIGS / "cycle.toml")
+
+
+def test_simulate_flies_every_leg_of_the_cycle(tmp_path, capsys):
+    """configs/cycle.toml: both legs separate at b c with no jump, reach their target, dock at the
+    first attempt within 0.10 m; the table has a column per leg; each leg's figure is drawn."""
+    code = main(["simulate", str(CONFIGS / "cycle.toml"), "--plot", str(tmp_path / "cycle.png"), "--no-progress"])
+    out, err = capsys.readouterr()
+    assert code == 0, out + err
+    assert "lists 2 targets: simulating the whole mission, every leg" in err
+    head, _, *rows = out.splitlines()
+    assert head.split() == ["cycle", "leg", "1", "cycle", "leg", "2"]  # the demo's table: a column per leg
+    table = {line[:44].strip(): line[44:].split() for line in rows}
+    assert table["P1 separation"] == table["P2 navigation"] == table["P3 carrier avoids target"] == ["True", "True"]
+    assert table["mission outcome (exit code)"] == ["done", "done"]
+    assert table["approaches flown to the dock (attempts)"] == ["1", "1"]
+    assert all(abs(float(x) - 7.999) <= 0.01 for x in table["carrier-target distance at separation [m]"])
+    assert all(float(x) <= 0.05 for x in table["relative command jump at separation [m/s]"])
+    assert all(float(x) <= 0.10 for x in table["horizontal error at contact [m]"])
+    assert "mission ended DONE" in out
+    assert (tmp_path / "cycle-leg1.png").stat().st_size > 10_000 and (tmp_path / "cycle-leg2.png").is_file()
+
+
+def test_simulate_json_has_the_legs(capsys):
+    code = main(["simulate", str(CONFIGS / "cycle.toml"), "--json"])
+    summary = json.loads(capsys.readouterr().out)
+    assert code == 0 and [leg["leg"] for leg in summary["legs"]] == [0, 1]
+    assert summary["phase"] == "DONE" and all(leg["p1"] and leg["p2"] and leg["p3"] for leg in summary["legs"])
+
+
+def test_a_carrier_docked_near_the_next_target_drives_out_first(cycle):
+    """The second target 14 m from the first, the carrier recovering towards it: after the dock
+    it is nearer than b c + mission.leg_start_margin_m, so the passenger rides the dock point
+    (TRANSIT) while the carrier drives straight out; the leg then starts from rest where
+    Assumption 1 holds and separates at b c with no jump."""
+    two = with_overrides(cycle, {"scenario.targets": [[24.0, 18.0, -5.0], [30.0, 5.0, -5.0]],
+                                 "carrier.recovery_heading_deg": -60.0, "carrier.recovery_speed_m_s": 0.5})
+    flight = fly(two, configured())
+    assert flight.state.phase is Phase.DONE and flight.docked, flight.events[-5:]
+    r = flight.record
+    end0 = flight.state.legs_done[0]["end_s"]
+    transit = (r.phase == Phase.TRANSIT.value) & (r.t > end0)
+    assert transit.sum() > 50  # a second of drive-out at least
+    riding = np.flatnonzero((r.phase == Phase.RIDING.value) & (r.t > end0))
+    dock = r.vec("dock")[riding[0]]
+    target = np.array([30.0, 5.0, -5.0])
+    leg_start_m = two.law.b * two.law.c + two.mission.leg_start_margin_m
+    assert float(np.linalg.norm(target - dock)) >= leg_start_m  # Assumption 1 at the leg's start
+    second = flight.summary["legs"][1]
+    assert second["p1"] and second["p2"] and second["p3"], second
+    assert second["relative_input_jump_m_s"] <= 0.05 and abs(second["carrier_target_distance_at_separation_m"] - 7.999) < 0.01
+
+
+def test_the_monte_carlo_of_the_cycle_flies_every_leg(cycle):
+    """Two random recovery courses: each flight's row holds both legs with their P1-P3, and the
+    table says how many flights held P1-P3 on every leg."""
+    report, _ = monte_carlo(cycle, random_scenarios(2, seed=1))
+    assert all(len(row["legs"]) == 2 for row in report.rows)
+    assert all(leg["outcome"] == "done" for row in report.rows for leg in row["legs"])
+    assert report.legs_held is not None and "every leg held P1-P3" in format_report(report)
+    assert report.max_separation_jump_m_s is not None and report.max_separation_jump_m_s <= 0.05
+
+
+def test_simulate_refuses_a_cycle_it_cannot_fly(tmp_path, capsys):
+    """The batch drives the built-in holonomic carrier: a multi-target mission on an Ackermann
+    carrier is refused naming the field (exit 2), not silently flown with its first target."""
+    path = tmp_path / "cycle.toml"
+    path.write_text((CONFIGS / "cycle.toml").read_text().replace("[carrier]\n", "[carrier]\nkinematics = \"ackermann\"\n"))
+    code = main(["simulate", str(path), "--no-progress"])
+    out, err = capsys.readouterr()
+    assert code == 2 and "error: carrier.kinematics = 'ackermann'" in err and out == "", err
