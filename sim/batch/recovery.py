@@ -335,12 +335,24 @@ class _Rows:
         return FlightRecord(t=np.asarray(self.t), phase=np.asarray(self.phase, dtype=str), cols=cols, info=info)
 
 
+def as_simulated(cfg: Config) -> Config:
+    """``cfg`` if this simulation can fly it; raises :class:`ConfigError` for ``mission.ride =
+    "deck"``: its mock dynamics have no deck (the vehicle cannot sit on the carrier, disarmed, and
+    take off from it), and hover riding on a deck-height dock point is another mission."""
+    if cfg.mission.ride == "deck":
+        raise ConfigError("mission.ride", cfg.mission.ride, "the simulation has no deck: fly the deck ride with "
+                          "`marsupial demo` (the mock vehicle rides the carrier's deck), or simulate a copy that "
+                          "rides hovering (mission.ride = \"hover\", the dock point above the deck)")
+    return cfg
+
+
 class World:
     """A mission in flight: the phase machine's state, the vehicle, the carrier and the record so
     far; :meth:`tick` advances it by one controller tick. :meth:`copy` branches it: the flights
     of a batch share the part before the recovery (:func:`monte_carlo`)."""
 
     def __init__(self, cfg: Config, scenario: Scenario, max_duration_s: float | None = None) -> None:
+        cfg = as_simulated(cfg)
         self.cfg, self.model = cfg, mission_model(cfg)
         if self.model.recovery is None:
             raise ValueError("the recovery simulation needs mission.final_action = \"return\"")

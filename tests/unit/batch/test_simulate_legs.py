@@ -1,7 +1,9 @@
 """``marsupial simulate`` of a mission of several targets (sim/batch/simulate.py, recovery.py):
 every leg is flown, ride, separate, target, return, dock, ride on, by the mission's phase
 machine on the mock's dynamics with the built-in carrier following the passenger's legs as
-``marsupial carrier`` does; one column per leg, each leg's separation and P1-P3."""
+``marsupial carrier`` does; one column per leg, each leg's separation and P1-P3. The simulation
+has no deck: it flies a copy of configs/cycle.toml that rides hovering 1.5 m above the deck
+(:data:`HOVER`), and refuses the deck ride itself."""
 from __future__ import annotations
 
 import json
@@ -19,15 +21,31 @@ from tests.conftest import CONFIGS
 pytestmark = pytest.mark.timeout(600)  # whole missions in-process: seconds of CPU each, longer on a busy machine
 
 
+CYCLE = CONFIGS / "cycle.toml"
+# configs/cycle.toml riding hovering 1.5 m above the deck instead of on it
+HOVER = (CYCLE.read_text().replace('ride = "deck"\n', 'ride = "hover"\n')
+         .replace("dock_offset_ned_m = [0.0, 0.0, -0.5]", "dock_offset_ned_m = [0.0, 0.0, -1.5]")
+         .replace("z_max_m = -0.3", "z_max_m = -0.5"))
+
+
 @pytest.fixture(scope="module")
-def cycle():
-    return load_config(CONFIGS / "cycle.toml")
+def hover_file(tmp_path_factory):
+    path = tmp_path_factory.mktemp("hover") / "cycle.toml"
+    path.write_text(HOVER)
+    return path
 
 
-def test_simulate_flies_every_leg_of_the_cycle(tmp_path, capsys):
+@pytest.fixture(scope="module")
+def cycle(hover_file):
+    cfg = load_config(hover_file)
+    assert cfg.mission.ride == "hover" and cfg.mission.dock_offset_ned_m[2] == -1.5
+    return cfg
+
+
+def test_simulate_flies_every_leg_of_the_cycle(hover_file, tmp_path, capsys):
     """configs/cycle.toml: both legs separate at b c with no jump, reach their target, dock at the
     first attempt within 0.10 m; the table has a column per leg; each leg's figure is drawn."""
-    code = main(["simulate", str(CONFIGS / "cycle.toml"), "--plot", str(tmp_path / "cycle.png"), "--no-progress"])
+    code = main(["simulate", str(hover_file), "--plot", str(tmp_path / "cycle.png"), "--no-progress"])
     out, err = capsys.readouterr()
     assert code == 0, out + err
     assert "lists 2 targets: simulating the whole mission, every leg" in err
@@ -44,8 +62,8 @@ def test_simulate_flies_every_leg_of_the_cycle(tmp_path, capsys):
     assert (tmp_path / "cycle-leg1.png").stat().st_size > 10_000 and (tmp_path / "cycle-leg2.png").is_file()
 
 
-def test_simulate_json_has_the_legs(capsys):
-    code = main(["simulate", str(CONFIGS / "cycle.toml"), "--json"])
+def test_simulate_json_has_the_legs(hover_file, capsys):
+    code = main(["simulate", str(hover_file), "--json"])
     summary = json.loads(capsys.readouterr().out)
     assert code == 0 and [leg["leg"] for leg in summary["legs"]] == [0, 1]
     assert summary["phase"] == "DONE" and all(leg["p1"] and leg["p2"] and leg["p3"] for leg in summary["legs"])
@@ -88,7 +106,15 @@ def test_simulate_refuses_a_cycle_it_cannot_fly(tmp_path, capsys):
     """The batch drives the built-in holonomic carrier: a multi-target mission on an Ackermann
     carrier is refused naming the field (exit 2), not silently flown with its first target."""
     path = tmp_path / "cycle.toml"
-    path.write_text((CONFIGS / "cycle.toml").read_text().replace("[carrier]\n", "[carrier]\nkinematics = \"ackermann\"\n"))
+    path.write_text(HOVER.replace("[carrier]\n", "[carrier]\nkinematics = \"ackermann\"\n"))
     code = main(["simulate", str(path), "--no-progress"])
     out, err = capsys.readouterr()
     assert code == 2 and "error: carrier.kinematics = 'ackermann'" in err and out == "", err
+
+
+def test_simulate_refuses_the_deck_ride(capsys):
+    """configs/cycle.toml rides the deck, which the simulation's mock dynamics cannot: exit 2 naming
+    mission.ride, nothing printed on stdout (hover riding at the deck's height would be another mission)."""
+    code = main(["simulate", str(CYCLE), "--no-progress"])
+    out, err = capsys.readouterr()
+    assert code == 2 and "error: mission.ride = 'deck'" in err and "marsupial demo" in err and out == "", err
