@@ -55,14 +55,14 @@ def test_a_leg_ringed_by_obstacles_has_no_place_to_start(cycle):
             for a in [k * math.pi / 6 for k in range(12)]]
     with pytest.raises(ConfigError) as exc:
         with_overrides(cycle, {"scenario.obstacles": ring})
-    assert exc.value.field == "scenario.targets[1]" and "no place to start its leg: every point 10.20 m" in str(exc.value)
+    assert exc.value.field == "scenario.targets[1]" and "no place to start its leg: every point 9.90 m" in str(exc.value)
     with_overrides(cycle, {"scenario.obstacles": ring[1:]})
 
 
 def test_two_targets_ringing_a_third_leave_it_no_place_to_start(cycle):
     """Other targets' P3 circles (where the carrier is b c - carrier.p3_margin_m = 7.5 m from them,
     their height counted: 7.48 m across at 0.5 m up) count as the obstacles do: a target with two
-    others and two obstacles 8.2 m round it has its start circle (10.45 m) covered; spaced 16 m
+    others and two obstacles 8.2 m round it has its start circle (10.50 m) covered; spaced 16 m
     apart they leave gaps, and the file loads."""
     def three(gap_m: float) -> dict:
         targets = [[40.0, 30.0 - gap_m, -0.5], [40.0, 30.0, -0.5], [40.0 - gap_m, 30.0, -0.5]]
@@ -71,7 +71,7 @@ def test_two_targets_ringing_a_third_leave_it_no_place_to_start(cycle):
                                        {"center": [40.0, 30.0 + gap_m, 0.0], "radius": 8.0}]}
     with pytest.raises(ConfigError) as exc:
         with_overrides(cycle, three(8.2))
-    assert exc.value.field == "scenario.targets[1]" and "no place to start its leg: every point 10.45 m" in str(exc.value)
+    assert exc.value.field == "scenario.targets[1]" and "no place to start its leg: every point 10.50 m" in str(exc.value)
     with_overrides(cycle, three(16.0))
 
 
