@@ -6,7 +6,8 @@ DOCKED, HOME and FALLBACK (``mission.final_action = "return"``).
     ARRIVED    --task done (mission.at_target_s), or the battery rule-----------------> RETURNING
     NAVIGATING --the battery rule (energy home + reserve > what is left)--------------> RETURNING
     RETURNING  --reference on the holdoff point, moving with the carrier--------------> HOLDOFF
-    HOLDOFF    --vehicle within settle radius/speed of the holdoff point for the dwell--> APPROACH
+    HOLDOFF    --vehicle within settle radius/speed of the holdoff point for the dwell,
+                 the carrier at least recovery.settle_carrier_speed_m_s fast------------> APPROACH
                (attempts used up: FALLBACK)
     APPROACH   --glide path flown, vehicle meets the contact conditions---------------> DOCKED
                --outside the cone; carrier state late or not trusted; carrier accelerating or turning
@@ -233,6 +234,7 @@ def holdoff(state, obs, m, events=()):
     v = obs.vehicle
     settled = (float(norm(v.position_ned_m - h)) <= r.settle_radius_m
                and float(norm(v.velocity_ned_m_s - v_c)) <= r.settle_speed_m_s
+               and float(norm(v_c[:2])) >= r.settle_carrier_speed_m_s
                and _carrier_fresh(obs, r.carrier_max_age_s) and _carrier_unsteady(rec, obs, r, t) is None)
     since = (rec.settled_since_s if rec.settled_since_s is not None else t) if settled else None
     rec = replace(rec, settled_since_s=since)

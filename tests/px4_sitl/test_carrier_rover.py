@@ -27,24 +27,13 @@ import numpy as np
 import pytest
 
 from sim.net import stop_process, wait_for
-from sim.sitl.px4 import QUAD_AIRFRAME, NetNamespace, Px4Sitl
+from sim.sitl.px4 import QUAD_AIRFRAME, ROVER_AIRFRAME, ROVER_PARAMS, NetNamespace, Px4Sitl
 from tests.px4_sitl.conftest import px4_job
 
 ROOT = Path(__file__).resolve().parents[2]
 CONFIG = ROOT / "configs" / "px4_sitl_rover.toml"
 # Skipped, with the reason, by the px4_jobs fixture (sim.sitl.px4.unavailable_reason).
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(240)]
-
-
-# The rover's speed loop, tuned (PX4's rover tuning: RO_MAX_THR_SPEED, then RO_SPEED_P / RO_SPEED_I).
-# Airframe 10045 ships it open loop (P = I = 0.001: throttle = speed / RO_MAX_THR_SPEED): the SIH
-# rover then sticks below ~0.3 throttle and runs 1.7 m/s at 0.31, so asked for 1 m/s it swung
-# 0.3-1.7 m/s (measured). RO_ACCEL_LIM also slews the throttle (RO_ACCEL_LIM / RO_MAX_THR_SPEED
-# per second) and RO_DECEL_LIM its fall: 6 for both lets it break free sooner and cut its throttle
-# sooner once free (bench/px4_rover_ramp.py, ramps to 1 m/s at 1 m/s^2: the leap peaks at 1.0-1.49
-# m/s with both at 6, 1.09-1.34 with RO_ACCEL_LIM 6 alone, 1.26 with both at 3; it varies run to run). PX4 SITL sets PX4_PARAM_<name> from the environment at start.
-ROVER_AIRFRAME = 10045  # SIH Ackermann rover
-ROVER_PARAMS = {"RO_MAX_THR_SPEED": 4.0, "RO_SPEED_P": 0.5, "RO_SPEED_I": 0.1, "RO_ACCEL_LIM": 6.0, "RO_DECEL_LIM": 6.0}
 
 
 def _cli(ns: NetNamespace, out: Path, name: str, *args: str) -> subprocess.Popen[bytes]:
