@@ -51,6 +51,7 @@ import click
 import numpy as np
 
 from mission.config.schema import load_config
+from mission.phases.phase import FLYING, Phase
 from mission.record import read_record
 from sim.sitl.px4 import build_dir, clock_ratio, patched_config, px4_flight, unavailable_reason
 
@@ -70,13 +71,14 @@ COLUMNS = ("rc", "p1", "p2", "p3", "riding_offset_m", "riding_2tick_m", "last_me
 
 
 def stall_s(log_dir: Path) -> float | None:
-    """The longest the flight was stalled while RIDING to ARRIVED [s]: the larger of the longest
-    gap between controller ticks beyond one period and the oldest carrier state used while riding
-    (a stalled carrier or controller process, not the loop: such flights are left out)."""
+    """The longest the flight was stalled while flying after JOIN [s] (RIDING to ARRIVED, and
+    every phase of coming home and of the next legs): the larger of the longest gap between
+    controller ticks beyond one period and the oldest carrier state used while riding (a stalled
+    carrier or controller process, not the loop: such flights are left out)."""
     if not (log_dir / "record.csv").exists():
         return None
     r = read_record(log_dir)
-    flying = np.isin(r.phase, ["RIDING", "SEPARATED", "NAVIGATING", "ARRIVED"])
+    flying = np.isin(r.phase, sorted(p.value for p in FLYING - {Phase.JOIN}))
     if flying.sum() < 2:
         return None
     t = r.t[flying]

@@ -10,6 +10,7 @@ DOCKED, HOME and FALLBACK (``mission.final_action = "return"``).
                  the carrier at least recovery.settle_carrier_speed_m_s fast------------> APPROACH
                (attempts used up: FALLBACK)
     APPROACH   --glide path flown, vehicle meets the contact conditions---------------> DOCKED
+                 (on the descent it goes down only lined up, else holds its height)
                --outside the cone; carrier state late or not trusted; carrier accelerating or turning
                  beyond its limits; below the decision height not lined up------------> GO_AROUND
     GO_AROUND  --climbed to the holdoff height------------------------------------------> HOLDOFF
@@ -324,9 +325,21 @@ def approach(state, obs, m, events=()):
                 return go_around(state, obs, m, f"not lined up over the deck within {r.gate_timeout_s:g} s "
                                  f"({here.horizontal_error_m:.2f} m, {here.horizontal_relative_speed_m_s:.2f} m/s)", events)
         return _fly(state, obs, m, goal, goal_v, r.approach, rec, events)
+    # On the descent the vehicle goes down only while lined up; out of line it holds its height
+    # over the dock point, at least twice the contact height over the deck (so the deck is never
+    # met outside the contact conditions), and goes around
+    # once it is off the deck, or out of line for gate_timeout_s. A relative speed that swings
+    # over the limit for a moment (PX4: two velocity estimates, a rover's speed loop) pauses it.
     if not here.horizontally_within(g):
-        return go_around(state, obs, m, f"off the deck on the descent ({here.horizontal_error_m:.2f} m, "
-                         f"{here.horizontal_relative_speed_m_s:.2f} m/s)", events)
+        out_since = rec.settled_since_s if rec.settled_since_s is not None else t
+        if here.horizontal_error_m > r.deck_radius_m or t - out_since > r.gate_timeout_s:
+            return go_around(state, obs, m, f"off the deck on the descent ({here.horizontal_error_m:.2f} m, "
+                             f"{here.horizontal_relative_speed_m_s:.2f} m/s)", events)
+        # held no lower than twice the contact height over the deck, so it does not sit on it
+        held = max(0.0, min(rec.descent, 1.0 - 2.0 * g.contact_height_m / g.decision_height_m))
+        rec = replace(rec, settled_since_s=out_since, descent=held)
+        return _fly(state, obs, m, gate + held * (dock - gate), v_c, r.approach, rec, events)
+    rec = replace(rec, settled_since_s=None)
     descent = min(1.0, rec.descent + r.descent_speed_m_s * m.dt_s / g.decision_height_m)
     goal = gate + descent * (dock - gate)
     goal_v = v_c + ((dock - gate) / g.decision_height_m * r.descent_speed_m_s if descent < 1.0 else 0.0)
