@@ -326,7 +326,7 @@ def approach(state, obs, m, events=()):
                                  f"({here.horizontal_error_m:.2f} m, {here.horizontal_relative_speed_m_s:.2f} m/s)", events)
         return _fly(state, obs, m, goal, goal_v, r.approach, rec, events)
     # On the descent the vehicle goes down only while lined up; out of line it holds its height
-    # over the dock point, at least twice the contact height over the deck (so the deck is never
+    # over the dock point, at least three contact heights over the deck (so the deck is never
     # met outside the contact conditions), and goes around
     # once it is off the deck, or out of line for gate_timeout_s. A relative speed that swings
     # over the limit for a moment (PX4: two velocity estimates, a rover's speed loop) pauses it.
@@ -335,8 +335,9 @@ def approach(state, obs, m, events=()):
         if here.horizontal_error_m > r.deck_radius_m or t - out_since > r.gate_timeout_s:
             return go_around(state, obs, m, f"off the deck on the descent ({here.horizontal_error_m:.2f} m, "
                              f"{here.horizontal_relative_speed_m_s:.2f} m/s)", events)
-        # held no lower than twice the contact height over the deck, so it does not sit on it
-        held = max(0.0, min(rec.descent, 1.0 - 2.0 * g.contact_height_m / g.decision_height_m))
+        # held no lower than three contact heights over the deck, so it does not sit on it (PX4
+        # dips 0.1 m below a descending reference)
+        held = max(0.0, min(rec.descent, 1.0 - 3.0 * g.contact_height_m / g.decision_height_m))
         rec = replace(rec, settled_since_s=out_since, descent=held)
         return _fly(state, obs, m, gate + held * (dock - gate), v_c, r.approach, rec, events)
     rec = replace(rec, settled_since_s=None)
@@ -344,7 +345,7 @@ def approach(state, obs, m, events=()):
     goal = gate + descent * (dock - gate)
     goal_v = v_c + ((dock - gate) / g.decision_height_m * r.descent_speed_m_s if descent < 1.0 else 0.0)
     rec = replace(rec, descent=descent)
-    if descent >= 1.0 and here.within(g):
+    if here.within(g):  # on the deck under the contact conditions (a vehicle ahead of its reference: at once)
         figures = {"horizontal_error_m": round(here.horizontal_error_m, 4),
                    "height_error_m": round(here.height_error_m, 4),
                    "horizontal_relative_speed_m_s": round(here.horizontal_relative_speed_m_s, 4),
