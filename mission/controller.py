@@ -58,6 +58,7 @@ COMMANDS: dict[Request, Callable[[Vehicle], None]] = {
     Request.OFFBOARD: lambda vehicle: vehicle.set_mode(FlightMode.OFFBOARD),
     Request.HOLD: lambda vehicle: vehicle.hold(),
     Request.LAND: lambda vehicle: vehicle.land(),
+    Request.DISARM: lambda vehicle: vehicle.disarm(),
 }
 
 
@@ -581,6 +582,8 @@ def mission_info(cfg: Config) -> dict[str, Any]:
         "pair": cfg.zenoh.pair,
         "rate_hz": cfg.mission.rate_hz,
         "final_action": cfg.mission.final_action,
+        "ride": cfg.mission.ride,
+        "deck_clear_height_m": cfg.mission.deck_clear_height_m,
         "targets": cfg.scenario.legs(),
         "recovery": cfg.recovery.model_dump(mode="json") if cfg.mission.final_action == "return" else None,
     }

@@ -36,6 +36,7 @@ class Request(StrEnum):
     OFFBOARD = "offboard"
     HOLD = "hold"
     LAND = "land"
+    DISARM = "disarm"  # on the deck only (mission.ride = "deck"): PX4 refuses it unless its land detector says landed
 
 
 class Vehicle(Protocol):
@@ -66,6 +67,10 @@ class Vehicle(Protocol):
         ...
 
     def hold(self) -> None: ...
+
+    def disarm(self) -> None:
+        """Disarm (not forced: PX4 refuses unless it has landed)."""
+        ...
 
     def land(self) -> None: ...
 

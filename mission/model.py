@@ -17,7 +17,7 @@ from mission.errors import ConfigError
 from mission.core.docking import DockingGeometry
 from mission.core.pursuit import PursuitLimits
 from mission.phases import MissionModel
-from mission.phases.types import RecoveryModel
+from mission.phases.types import DeckRide, RecoveryModel
 from mission.core.safety import SafetyConfig
 from mission.core.tick import TickModel
 from mission.core.tracking import TrackingGains
@@ -75,6 +75,8 @@ def mission_model(cfg: Config) -> MissionModel:
         join_settle_s=m.join_settle_s, arrival_max_speed_m_s=m.arrival_max_speed_m_s,
         recovery=recovery_model(cfg) if m.final_action == "return" else None,
         leg_start_m=cfg.law.b * cfg.law.c + m.leg_start_margin_m,
+        deck=DeckRide(arm_lead_s=m.arm_lead_s, keep_out_radius_m=m.deck_keep_out_radius_m, slope=m.deck_clear_slope,
+                      clear_height_m=m.deck_clear_height_m) if m.ride == "deck" else None,
     )
     legs = cfg.scenario.legs()
     if len(legs) == 1:

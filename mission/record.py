@@ -348,7 +348,48 @@ def figures(r: FlightRecord) -> dict[str, Any]:
                      and out["final_passenger_target_distance_m"] <= float(info.get("arrival_radius_m", 0.5)))
     out["p3"] = bool(out["min_carrier_target_distance_m"] is not None and out["min_carrier_target_distance_m"] > 0.0)
     out["max_phase_switch_jump_m_s"] = _switch_jump(r.phase, u_cmd)
+    if info.get("ride") == "deck":
+        out.update(_takeoff_figures(r, x_p, rel_cmd, riding, info))
     out.update(_recovery_summary(r, x_p, v_p, v_c, dock))
+    return out
+
+
+def _takeoff_figures(r: FlightRecord, x_p: np.ndarray, rel_cmd: np.ndarray, riding: np.ndarray,
+                     info: dict[str, Any]) -> dict[str, Any]:
+    """The take-off from the deck (mission.ride = "deck"), from the first setpoint streamed on the
+    deck until the vehicle is ``deck_clear_height_m`` above the deck's height at the separation (the
+    latched anchor), on the command relative to the carrier (``u_cmd - v_c``) [m/s]:
+
+    - ``takeoff_command_jump_m_s``: its largest change at a switch of the take-off: the first
+      setpoint streamed (against the vehicle's own velocity relative to the deck then: it sits on
+      it), arming or a disarm, and the separation (the latch: RIDING -> SEPARATED; SEPARATED ->
+      NAVIGATING only names the same law's progress);
+    - ``takeoff_max_command_step_m_s``: its largest tick-to-tick change anywhere in that window
+      (the ramp at the acceleration limits: at most their sum times the tick);
+    - ``takeoff_clear_s`` [s]: from the separation until the vehicle is clear (None: never)."""
+    out: dict[str, Any] = {"takeoff_command_jump_m_s": None, "takeoff_max_command_step_m_s": None,
+                           "takeoff_clear_s": None}
+    streamed = np.flatnonzero(riding & np.isfinite(rel_cmd).all(axis=1))
+    anchor = info.get("anchor_ned_m")
+    if not len(streamed) or anchor is None:
+        return out
+    start = int(streamed[0])
+    after = np.arange(len(r.t)) > start
+    above = after & (float(anchor[2]) - x_p[:, 2] > float(info.get("deck_clear_height_m", 1.0)))
+    end = int(np.argmax(above)) if above.any() else len(r.t) - 1
+    steps = norm(np.diff(rel_cmd[start:end + 1], axis=0))  # steps[j]: from tick start + j to start + j + 1
+    own = r.vec("v_p")[start] - r.vec("v_c")[start]
+    jumps = [float(norm(rel_cmd[start] - own))]
+    armed = r.cols.get("armed")
+    switch = (r.phase[start + 1:end + 1] == Phase.SEPARATED) & (r.phase[start:end] != Phase.SEPARATED)
+    if armed is not None:
+        switch |= armed[start + 1:end + 1] != armed[start:end]
+    jumps += [float(x) for x in steps[switch]]
+    out["takeoff_command_jump_m_s"] = _nanmax(np.array(jumps))
+    out["takeoff_max_command_step_m_s"] = _nanmax(steps) if len(steps) else None
+    sep = np.flatnonzero(np.isin(r.phase, sorted(AFTER_SEPARATION)))
+    if above.any() and len(sep):
+        out["takeoff_clear_s"] = _num(r.t[end] - r.t[sep[0]])
     return out
 
 

@@ -165,7 +165,8 @@ def start_pair(config: str, name: str, zenoh_ep: str, speed: float, log_root: Pa
                bus_key: Path | None = None) -> PairRun:
     """Start the carrier (and its robot), the mock vehicle and the mission of one pair; register their cleanup.
     The vehicle learns the carrier's motion from the pair's Zenoh state (``--deck``): it stands on
-    the carrier's deck until it takes off, and lands or crashes on it as it comes back.
+    the carrier's deck until it takes off, and lands or crashes on it as it comes back. With
+    ``mission.ride = "deck"`` the deck is the dock point (``--deck-height``) and the vehicle starts on it.
     With ``bus_key`` (a key file) the pair signs its bus samples (``--zenoh-signing-key``).
 
     ``lockstep``: the three step on the mock vehicle's simulated time, the carrier's robot on the
@@ -184,9 +185,15 @@ def start_pair(config: str, name: str, zenoh_ep: str, speed: float, log_root: Pa
                                            "--mcap", str(pair.log_dir / "carrier.mcap"), *backend_args, *signed, *mode),
                                stderr=err)
     stack.callback(stop_process, carrier)
+    # riding on the deck (mission.ride = "deck"): the deck is the dock point, the vehicle stands on it
+    on_deck = cfg.mission.ride == "deck"
+    deck_height = -cfg.mission.dock_offset_ned_m[2] if on_deck else 0.0
+    vehicle_start = ",".join(str(c + (o if on_deck else 0.0)) for c, o in
+                             zip(cfg.scenario.carrier_start, cfg.mission.dock_offset_ned_m))
     vehicle = subprocess.Popen(_python_cli("mock-vehicle", "--mavlink", "udpin:127.0.0.1:0", "--target",
-                                           f"udpout:127.0.0.1:{mav_port}", "--speed", str(speed), "--start-ned", start,
-                                           "--deck", name, "--zenoh-connect", zenoh_ep, *mode),
+                                           f"udpout:127.0.0.1:{mav_port}", "--speed", str(speed), "--start-ned",
+                                           vehicle_start, "--deck", name, "--deck-height", str(deck_height),
+                                           "--zenoh-connect", zenoh_ep, *mode),
                                stderr=err)
     stack.callback(stop_process, vehicle)
     live_args = [] if live is None else ["--live", f"{live.host}:{live.port}"]
@@ -279,6 +286,7 @@ RECOVERY_ROWS = [
     ("deck touched outside contact [ticks]", "deck_violations"),
 ]
 RECOVERY_KEYS = {key for _, key in RECOVERY_ROWS}
+DECK_KEYS = {"takeoff_command_jump_m_s", "takeoff_max_command_step_m_s", "takeoff_clear_s"}  # shown when a pair rode the deck
 
 
 def recovery_cells(s: dict) -> dict:
@@ -297,6 +305,9 @@ ROWS = [
     ("separation time [s]", "separation_time_s"),
     ("carrier-target distance at separation [m]", "carrier_target_distance_at_separation_m"),
     ("relative command jump at separation [m/s]", "relative_input_jump_m_s"),
+    ("relative command jump at a switch of the take-off from the deck [m/s]", "takeoff_command_jump_m_s"),
+    ("largest relative command step, take-off from the deck [m/s]", "takeoff_max_command_step_m_s"),
+    ("from separation to clear of the deck [s]", "takeoff_clear_s"),
     ("closest carrier-target approach [m]", "min_carrier_target_distance_m"),
     ("carrier stopped at, from the target [m]", "carrier_stop_target_distance_m"),
     ("carrier braking distance [m]", "carrier_braking_distance_m"),
@@ -367,7 +378,8 @@ def verdict_lines(summaries: list[dict]) -> list[str]:
 def format_table(summaries: list[dict]) -> str:
     summaries = columns(summaries)
     recovery = any("recovery_outcome" in s for s in summaries)
-    rows = [r for r in ROWS if recovery or r[1] not in RECOVERY_KEYS]
+    deck = any("takeoff_command_jump_m_s" in s for s in summaries)  # riding on the deck (mission.ride)
+    rows = [r for r in ROWS if (recovery or r[1] not in RECOVERY_KEYS) and (deck or r[1] not in DECK_KEYS)]
     width = max(len(r[0]) for r in rows)
     cells = {key: [outcome_text(s) if key == "outcome" else s.get(key) for s in summaries] for _, key in rows}
     text = {key: [f"{v:.3f}" if isinstance(v, float) else str(v) for v in values] for key, values in cells.items()}

@@ -284,6 +284,28 @@ class MissionSection(Section):
     final_action: Literal["hold", "land", "return"] = Field("hold",
         description=("[-] after arrival: `hold` (PX4 Hold, armed in the air), `land`, or `return` to the carrier and "
                      "dock on it ([recovery])"))
+    ride: Literal["hover", "deck"] = Field(
+        "hover", description=("[-] how the passenger is carried: `hover` flies in formation on the dock point; `deck` "
+                              "sits on the deck (the dock point is then the deck: mission.dock_offset_ned_m), disarmed, "
+                              "arms mission.arm_lead_s before the separation and takes off from the moving deck; after "
+                              "docking it lands on the deck and disarms (docs/deck-riding.md)"))
+    arm_lead_s: float = Field(
+        4.0, ge=1, le=8, description=("[s] with ride = `deck`: the passenger streams its setpoints, arms and enters "
+                                      "OFFBOARD this long before the separation it predicts from the carrier's closing "
+                                      "speed (PX4 disarms a vehicle that has not taken off COM_DISARM_PRFLT, 10 s, after "
+                                      "arming)"))
+    deck_clear_height_m: float = Field(
+        1.0, gt=0, le=10, description=("[m] with ride = `deck`: height above the deck below which the deck's keep-out "
+                                       "acts in the safety filter (the passenger may not move out sideways from the deck "
+                                       "faster than it climbs: see deck_clear_slope)"))
+    deck_clear_slope: float = Field(
+        3.0, gt=0, le=20, description=("[-] with ride = `deck`: the keep-out round the deck is everything low beside it: "
+                                       "below deck_clear_height_m, the passenger stays within deck_keep_out_radius_m + "
+                                       "this times its height above the deck, horizontally from the dock point "
+                                       "(a funnel; must exceed the glide path's horizontal per vertical)"))
+    deck_keep_out_radius_m: float = Field(
+        0.15, gt=0, le=5, description=("[m] with ride = `deck`: the funnel's radius at the deck (see deck_clear_slope): "
+                                       "how far the passenger may slide across the deck before it has climbed"))
     leg_start_margin_m: float = Field(2.0, gt=0, le=1000,
         description=("[m] with several targets: a leg starts (the passenger rides under the law again) once the "
                      "carrier is b c + this from the leg's target (the paper's Assumption 1); nearer, the carrier "
@@ -453,6 +475,8 @@ class Config(Section):
                 raise ConfigError(name, value, f"below the altitude floor safety.z_max_m = {sf.z_max_m:g} (z {z:g}, NED)")
             if sf.z_min_m is not None and z < sf.z_min_m:
                 raise ConfigError(name, value, f"above the ceiling safety.z_min_m = {sf.z_min_m:g} (z {z:g}, NED)")
+        if m.ride == "deck":
+            self._deck_fields(dock_z)
         legs = s.legs()
         if len(legs) > 1 and m.final_action != "return":
             raise ConfigError("mission.final_action", m.final_action,
@@ -477,6 +501,27 @@ class Config(Section):
             raise ConfigError("carrier.rate_hz", self.carrier.rate_hz,
                               f"too slow for mission.carrier_timeout_s = {m.carrier_timeout_s:g} s "
                               "(at least two states per timeout)")
+
+    def _deck_fields(self, deck_z: float) -> None:
+        """Riding on the deck (mission.ride = "deck"): the deck (the dock point) above the altitude floor, the arming
+        lead inside PX4's preflight auto-disarm with room for the prestream, the glide path inside the deck's funnel."""
+        m, sf, r = self.mission, self.safety, self.recovery
+        if sf.z_max_m is not None and deck_z > sf.z_max_m - 0.1:
+            raise ConfigError("mission.dock_offset_ned_m", m.dock_offset_ned_m,
+                              f"with mission.ride = \"deck\" the dock point is the deck, at z {deck_z:g} NED: it must be at "
+                              f"least 0.1 m above the altitude floor safety.z_max_m = {sf.z_max_m:g} (the landing "
+                              "presses the reference 0.1 m into the deck)")
+        if not m.arm_lead_s > m.prestream_s + 0.5:
+            raise ConfigError("mission.arm_lead_s", m.arm_lead_s,
+                              f"must exceed mission.prestream_s + 0.5 s = {m.prestream_s + 0.5:g} s (the stream, the arming "
+                              "and the switch to OFFBOARD come before the separation)")
+        if m.final_action == "return":
+            glide = 1.0 / math.tan(math.radians(r.glide_angle_deg))
+            if not m.deck_clear_slope > glide:
+                raise ConfigError("mission.deck_clear_slope", m.deck_clear_slope,
+                                  f"must exceed the glide path's {glide:.2f} m across per m down "
+                                  f"(recovery.glide_angle_deg = {r.glide_angle_deg:g}): the approach would cross the "
+                                  "deck's keep-out")
 
 
 def _error_from_validation(exc: ValidationError) -> ConfigError:

@@ -8,6 +8,12 @@ little as possible (least squares) so that every barrier stays non-negative:
 - optional bounds on the third coordinate (``z_min_m <= z <= z_max_m``; in PX4's NED frame
   an altitude floor of 2 m is ``z_max_m = -2``): ``+-u_z >= -gain * (distance to the bound)``.
 
+- optional keep-out round a moving deck (:class:`DeckKeepOut`, 3D NED): below ``clear_height_m``
+  above the deck and within the funnel's rim, ``h = radius + slope * max(height, 0) - r`` (``r`` the
+  horizontal distance from the deck's centre, ``height`` above its plane), with the deck's velocity
+  ``v_d``: ``dh/dt = grad h . (u - v_d) >= -gain * h``. The passenger may move out sideways
+  relative to the deck only as it climbs: it clears the deck first.
+
 The QP is solved in closed form where that is exact (no constraint violated, or a projection on
 one violated constraint that satisfies all others: it meets the KKT conditions, so it is the
 optimum) and by DAQP otherwise. If the QP is infeasible the fallback is zero velocity (hold
@@ -98,6 +104,44 @@ class SafetyConfig:
 
 
 @dataclass(frozen=True)
+class DeckKeepOut:
+    """The keep-out round the carrier's deck (3D, NED): everything low beside it.
+
+    centre_ned_m [m]: the deck's centre on its plane (the dock point); velocity_ned_m_s [m/s]: the
+    deck's; radius_m [m]: the funnel's radius on the deck; slope [-]: metres it widens per metre of
+    height; clear_height_m [m]: above this height over the deck the keep-out ends. The barrier acts
+    only inside the funnel's extent (below ``clear_height_m`` and within the rim's radius
+    ``radius_m + slope * clear_height_m``), so a passenger far from the deck never feels it."""
+
+    centre_ned_m: np.ndarray
+    velocity_ned_m_s: np.ndarray
+    radius_m: float
+    slope: float
+    clear_height_m: float
+
+    SMOOTH_M = 0.02  # [m] the horizontal distance is smoothed by this near the axis (a gradient everywhere)
+
+    def height_m(self, x: np.ndarray) -> np.ndarray:
+        """Height [m] of ``x`` (..., 3) NED above the deck's plane."""
+        return self.centre_ned_m[2] - x[..., 2]
+
+    def row(self, x: np.ndarray, gain: float) -> tuple[np.ndarray, np.ndarray]:
+        """The constraint ``A u >= b`` at ``x`` (..., 3): A (..., 3), b (...); a row that always
+        holds (0 >= -1) outside the keep-out's extent."""
+        off = x[..., :2] - self.centre_ned_m[:2]
+        r = np.sqrt(dot(off, off) + self.SMOOTH_M**2)
+        height = self.height_m(x)
+        above = height >= 0.0  # below the deck's plane (pressed into it on landing) only the radius holds
+        h = self.radius_m + self.slope * np.maximum(height, 0.0) - r
+        grad = np.empty(x.shape)
+        grad[..., :2] = -off / r[..., None]
+        grad[..., 2] = np.where(above, -self.slope, 0.0)  # NED: climbing (u_z < 0) raises h
+        b = dot(grad, np.broadcast_to(self.velocity_ned_m_s, x.shape)) - gain * h
+        near = (height < self.clear_height_m) & (r < self.radius_m + self.slope * self.clear_height_m)
+        return np.where(near[..., None], grad, 0.0), np.where(near, b, -1.0)
+
+
+@dataclass(frozen=True)
 class FilterResult:
     """Output of :func:`filter_velocity` (arrays broadcast like the input's leading shape).
 
@@ -128,11 +172,17 @@ def _bound_rows(cfg: SafetyConfig, n: int) -> tuple[tuple[tuple[float, float], .
     return cached
 
 
-def barrier_constraints(x: np.ndarray, obstacles: Obstacles, cfg: SafetyConfig) -> tuple[np.ndarray, np.ndarray]:
+def barrier_constraints(x: np.ndarray, obstacles: Obstacles, cfg: SafetyConfig,
+                        deck: DeckKeepOut | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Linear constraints ``A u >= b`` of the CBF condition at ``x``: A (..., m, n), b (..., m).
 
-    Rows: the obstacles first, then the lower and the upper bound on the third coordinate.
+    Rows: the obstacles first, then the lower and the upper bound on the third coordinate, then
+    the deck's keep-out (if any).
     """
+    if deck is not None:
+        A0, b0 = barrier_constraints(x, obstacles, cfg)
+        a_deck, b_deck = deck.row(x, cfg.cbf_gain)
+        return np.concatenate([A0, a_deck[..., None, :]], axis=-2), np.concatenate([b0, b_deck[..., None]], axis=-1)
     n = x.shape[-1]
     lead = x.shape[:-1]
     bounds, bound_rows = _bound_rows(cfg, n)
@@ -242,10 +292,12 @@ def filter_velocity(
     dt_s: float | None = None,
     *,
     copy: bool = True,
+    deck: DeckKeepOut | None = None,
 ) -> FilterResult:
     """Safe velocity near ``u_des`` at position ``x`` (arrays ``(..., n)``); see module doc.
 
-    ``u_prev`` [m/s] and ``dt_s`` [s] enable the acceleration limit. ``u`` of the result is a
+    ``u_prev`` [m/s] and ``dt_s`` [s] enable the acceleration limit; ``deck``: the keep-out round
+    a moving deck (3D). ``u`` of the result is a
     new array, except with ``copy=False`` when nothing changed the command: then it is
     ``u_des`` itself (for callers that own ``u_des`` and never write into either).
     """
@@ -253,8 +305,8 @@ def filter_velocity(
     u = u_des
     if cfg.max_accel_m_s2 is not None and u_prev is not None and dt_s is not None:
         u = limit_accel(u, u_prev, cfg.max_accel_m_s2, dt_s)
-    if len(obstacles) or _bound_rows(cfg, u.shape[-1])[0]:
-        A, b = barrier_constraints(np.asarray(x, dtype=float), obstacles, cfg)
+    if len(obstacles) or _bound_rows(cfg, u.shape[-1])[0] or deck is not None:
+        A, b = barrier_constraints(np.asarray(x, dtype=float), obstacles, cfg, deck)
         u, feasible, active = project_cbf(u, A, b)
     else:  # no barrier at all
         feasible = np.empty(u.shape[:-1], dtype=bool)

@@ -195,7 +195,8 @@ def _lag_m(state: MissionState, obs: Observation) -> float:
 def navigate(state, obs, m, events=()):
     """Equilibria (ii)->(iii): integrate the reference with the latched anchor, track it."""
     t = obs.t_s
-    tick = passenger_tick(state.anchor, ZERO, state.e_ref, True, m.tick, state.u_ref, m.dt_s)
+    deck = m.deck.keep_out(obs, m) if m.deck is not None else None
+    tick = passenger_tick(state.anchor, ZERO, state.e_ref, True, m.tick, state.u_ref, m.dt_s, deck=deck)
     # The reference advances at the rate the vehicle can follow (mission.core.tracking.progress); its
     # acceleration is its own velocity's change over the tick (a signal we generate: no noise).
     rate = progress(_lag_m(state, obs), m.tracking)
@@ -211,6 +212,11 @@ def navigate(state, obs, m, events=()):
     if phase == Phase.SEPARATED and norm(e_ref) > DEPARTURE_THRESHOLD_M:
         phase, since = Phase.NAVIGATING, t
         evs.append("left the carrier: navigating")
+    seated = state.seated
+    if seated and m.deck is not None and state.anchor is not None \
+            and float(state.anchor[2] - obs.vehicle.position_ned_m[2]) > m.deck.clear_height_m:
+        seated = False
+        evs.append("cleared the deck")
     # Arrived: within the arrival radius for the dwell, and (if set) the positions of that window
     # moving slower than arrival_max_speed_m_s: judged on positions, not on the velocity estimate
     # (mission.core.arrival; a vehicle handed to Hold while still moving brakes past the radius).
@@ -220,7 +226,8 @@ def navigate(state, obs, m, events=()):
         if arrival.arrived(window, t, m.arrival_dwell_s, m.arrival_max_speed_m_s, m.dt_s):
             phase, since = Phase.ARRIVED, t
             evs.append("arrived at the target")
-    new = replace(state, phase=phase, since_s=since, e_ref=e_ref, x_ref=x_ref, u_ref=u_ref, arrival_window=window, **tr.kept())
+    new = replace(state, phase=phase, since_s=since, e_ref=e_ref, x_ref=x_ref, u_ref=u_ref, arrival_window=window,
+                  seated=seated, **tr.kept())
     dec = tr.decision(dock=dock_point(obs, m) if obs.carrier is not None else None, P=float(tick.P),
                    relative=tick.relative, desired=tick.desired, safety_acted=acted or bool(tick.safety.changed), events=tuple(evs))
     if phase == Phase.ARRIVED and m.recovery is None:

@@ -25,6 +25,9 @@
     ARMED phases (OFFBOARD and every flying one) --vehicle disarmed--> ABORT(vehicle_disarmed)
     AIRBORNE phases (the flying ones but JOIN, DOCKED, HOME) --vehicle landed (ON_GROUND)-->
                   ABORT(vehicle_disarmed)
+    ... except while the passenger sits on the deck (mission.ride = "deck", state.seated;
+    mission.phases.deck): landed, disarmed and out of OFFBOARD are then where it is; taking off
+    (SEPARATED, NAVIGATING still seated) it must be armed and in OFFBOARD
     ABORT requests Hold (never disarm in the air) unless the vehicle is lost or disarmed, a
     pilot took over or PX4 runs its own failsafe (then nothing is sent: never fight, and never
     stream to a vehicle that someone else disarmed); setpoints stop once Hold is shown. ABORT is
@@ -64,7 +67,7 @@ from mission.phases.types import (
     enter,
 )
 from mission.interfaces import Request
-from mission.phases import recovery
+from mission.phases import deck, recovery
 from mission.phases.flying import arrived, join, navigate, riding
 
 __all__ = [
@@ -174,7 +177,7 @@ def _failsafes(state: MissionState, obs: Observation, m: MissionModel) -> tuple[
     if ph != Phase.PREFLIGHT and _vehicle_lost(v, m):
         new = _abort(state, t, AbortReason.VEHICLE_LOST, "no HEARTBEAT")
         return new, Decision(setpoint=None, events=("abort: vehicle heartbeat lost",))
-    fault = _disarmed_in_flight(ph, v)
+    fault = _disarmed_in_flight(ph, v, state.seated)
     if fault:
         new = _abort(state, t, AbortReason.VEHICLE_DISARMED, fault)
         return new, Decision(setpoint=None, events=(f"abort: {fault}; streaming stopped",))
@@ -183,7 +186,9 @@ def _failsafes(state: MissionState, obs: Observation, m: MissionModel) -> tuple[
         event = f"abort: {obs.failed['identity']}"
         return new, (Decision(setpoint=None, events=(event,)) if ph == Phase.PREFLIGHT else _decided(new, obs, event))
     final_modes = (FlightMode.HOLD, FlightMode.LAND)
-    if ph in FLYING and v is not None and v.mode != FlightMode.OFFBOARD and not (ph in HANDING_OVER and v.mode in final_modes):
+    sitting = state.seated and ph not in deck.TAKING_OFF  # on the deck, not taking off: PX4's mode is not ours yet
+    if ph in FLYING and not sitting and v is not None and v.mode != FlightMode.OFFBOARD \
+            and not (ph in HANDING_OVER and v.mode in final_modes):
         reason = AbortReason.VEHICLE_FAILSAFE if v.in_failsafe else AbortReason.PILOT_OVERRIDE
         new = _abort(state, t, reason, f"vehicle switched to {v.mode}")
         return new, Decision(setpoint=None, events=(f"abort: vehicle left OFFBOARD ({v.mode}); not fighting it",))
@@ -209,13 +214,17 @@ _HANDS_OFF = frozenset({AbortReason.VEHICLE_LOST, AbortReason.PILOT_OVERRIDE, Ab
                         AbortReason.GEOMETRY, AbortReason.VEHICLE_DISARMED})
 
 
-def _disarmed_in_flight(ph: Phase, v: VehicleObs | None) -> str:
+def _disarmed_in_flight(ph: Phase, v: VehicleObs | None, seated: bool = False) -> str:
     """Why the vehicle is not where the phase needs it ("" if it is): disarmed in a phase that
     flies it (:data:`ARMED`), or landed by PX4's land detector (EXTENDED_SYS_STATE ON_GROUND;
     PX4 reports a disarmed multicopter as landed within about LNDMC_TRIG_TIME / 3) in a phase
-    that needs it in the air (:data:`AIRBORNE`)."""
+    that needs it in the air (:data:`AIRBORNE`). ``seated`` (on the carrier's deck,
+    mission.ride = "deck"): landed is where it is, and disarmed too, except while it takes off."""
     if v is None:
         return ""
+    if seated:
+        return f"vehicle disarmed while taking off from the deck in {ph.value} (HEARTBEAT)" \
+            if ph in deck.TAKING_OFF and not v.armed else ""
     if ph in ARMED and not v.armed:
         return f"vehicle disarmed in {ph.value} (HEARTBEAT)"
     if ph in AIRBORNE and v.on_ground:
@@ -300,6 +309,10 @@ def _preflight(state: MissionState, obs: Observation, m: MissionModel) -> tuple[
 
 def _streaming(state, obs, m):
     t = obs.t_s
+    if m.deck is not None:  # riding on the deck: disarmed, nothing to stream yet (mission.phases.deck)
+        if t - state.since_s >= m.prestream_s:
+            return deck.seat(state, obs, m)
+        return state, Decision(setpoint=None)
     if t - state.since_s >= m.prestream_s:
         nxt = Phase.OFFBOARD if obs.vehicle.armed else Phase.ARMING
         return enter(state, nxt, t), Decision(setpoint=Setpoint.hold_still(), request=Request.OFFBOARD if nxt == Phase.OFFBOARD else Request.ARM)
@@ -370,7 +383,7 @@ HANDLERS = {
     Phase.ARMING: _arming,
     Phase.OFFBOARD: _offboard,
     Phase.JOIN: join,
-    Phase.RIDING: riding,
+    Phase.RIDING: lambda state, obs, m: deck.ride(state, obs, m) if state.seated else riding(state, obs, m),
     Phase.SEPARATED: _navigating,
     Phase.NAVIGATING: _navigating,
     Phase.ARRIVED: _arrived,

@@ -47,6 +47,7 @@ from mission.core.pursuit import PursuitLimits, pursue
 from mission.core.safety import filter_velocity
 from mission.flight_mode import FlightMode
 from mission.interfaces import Request
+from mission.phases import deck
 from mission.phases.flying import _track
 from mission.phases.phase import Phase
 from mission.phases.types import (
@@ -100,7 +101,8 @@ def _fly(state: MissionState, obs: Observation, m: MissionModel, goal_x: np.ndar
     (obstacles, floor, the passenger's limits), track the reference; the state keeps ``rec``."""
     assert state.x_ref is not None and state.u_ref is not None
     _, u_next = pursue(state.x_ref, state.u_ref, goal_x, goal_v, limits, m.dt_s)
-    safe = filter_velocity(state.x_ref, u_next, m.tick.obstacles, m.tick.passenger_safety, state.u_ref, m.dt_s)
+    deck = m.deck.keep_out(obs, m) if m.deck is not None else None
+    safe = filter_velocity(state.x_ref, u_next, m.tick.obstacles, m.tick.passenger_safety, state.u_ref, m.dt_s, deck=deck)
     u_ref = np.asarray(safe.u, dtype=float)
     x_ref = state.x_ref + u_ref * m.dt_s
     a_ref = (u_ref - state.u_ref) / m.dt_s
@@ -259,7 +261,7 @@ def go_around(state, obs, m, why: str, events=()):
     rel = obs.vehicle.position_ned_m - dock
     climb = np.array([rel[0], rel[1], -r.geometry.holdoff_height_m])
     rec = replace(rec, climb_to=climb, settled_since_s=None, descent=None)
-    new = enter(state, Phase.GO_AROUND, obs.t_s, recovery=rec)
+    new = enter(state, Phase.GO_AROUND, obs.t_s, recovery=rec, seated=False)
     v_c = obs.carrier.velocity_ned_m_s if obs.carrier is not None else np.zeros(3)
     return _fly(new, obs, m, dock + climb, v_c, r.returning, rec, (*events, f"go-around: {why}"))
 
@@ -352,7 +354,7 @@ def approach(state, obs, m, events=()):
                    "vertical_relative_speed_m_s": round(here.vertical_relative_speed_m_s, 4),
                    "attempts": rec.attempts, "time_s": round(t, 4), "battery_pct": v.battery_pct}
         rec = replace(rec, contact=figures, settled_since_s=t)
-        state = enter(state, Phase.DOCKED, t)
+        state = enter(state, Phase.DOCKED, t, seated=m.deck is not None)  # on a deck: it lands on it
         events = (*events, f"contact: {here.horizontal_error_m:.3f} m, {here.horizontal_relative_speed_m_s:.2f} m/s")
     return _fly(state, obs, m, goal, goal_v, r.approach, rec, events)
 
@@ -378,9 +380,20 @@ def docked(state, obs, m, events=()):
             rec = replace(rec, settled_since_s=None)
             state = enter(state, Phase.HOME, t)
             evs += ("docked: riding home" if skip is None else f"docked: riding home; the next leg is skipped ({skip})",)
-            return _fly(state, obs, m, dock, v_c, r.approach, rec, evs)
+            return _on_dock(state, obs, m, dock, v_c, rec, evs)
         return begin_next_leg(state, obs, m, events=(*evs, "docked: on to the next target"))
-    return _fly(state, obs, m, dock, v_c, r.approach, rec, evs)
+    return _on_dock(state, obs, m, dock, v_c, rec, evs)
+
+
+def _on_dock(state: MissionState, obs: Observation, m: MissionModel, dock: np.ndarray, v_c: np.ndarray,
+             rec: RecoveryState | None, events: tuple[str, ...] = (), request: Request | None = None
+             ) -> tuple[MissionState, Decision]:
+    """One tick on the dock point with the carrier's velocity; seated on a deck (mission.ride =
+    "deck"), pressed into it and disarmed once PX4 has seen it land (:mod:`mission.phases.deck`)."""
+    if not state.seated:
+        return _fly(state, obs, m, dock, v_c, _model(m).approach, rec, events, request=request)
+    new, dec = _fly(state, obs, m, deck.pressed(dock, m), v_c, _model(m).approach, rec, events, request=request)
+    return new, deck.after_landing(obs, dec)
 
 
 def home(state, obs, m, events=()):
@@ -396,10 +409,16 @@ def home(state, obs, m, events=()):
     dock = dock_point(obs, m)
     v_c = obs.carrier.velocity_ned_m_s
     on_it = contact(v.position_ned_m, v.velocity_ned_m_s, dock, v_c)
-    parked = float(norm(v_c[:2])) <= PARKED_SPEED_M_S and on_it.within(r.geometry) and obs.carrier.untrusted is None
+    parked = float(norm(v_c[:2])) <= PARKED_SPEED_M_S and (on_it.within(r.geometry) or state.seated) \
+        and obs.carrier.untrusted is None
     since = (rec.settled_since_s if rec.settled_since_s is not None else t) if parked else None
     rec = replace(rec, settled_since_s=since)
     done = since is not None and t - since >= r.docked_dwell_s
+    if state.seated:  # on the deck: home once the carrier has parked and PX4 has disarmed the passenger
+        if parked and not v.armed:
+            return enter(state, Phase.DONE, t, recovery=rec), Decision(setpoint=None, events=(
+                *events, "disarmed on the parked carrier's deck", "mission complete"))
+        return _on_dock(state, obs, m, dock, v_c, rec, events)
     return _fly(state, obs, m, dock, v_c, r.approach, rec, events, request=Request.HOLD if done else None)
 
 
@@ -470,8 +489,8 @@ def begin_next_leg(state: MissionState, obs: Observation, m: MissionModel,
     assert obs.carrier is not None and state.recovery is not None  # docked just now
     new = enter(state, Phase.TRANSIT, obs.t_s, leg=state.leg + 1, anchor=None, separation_time_s=None,
                 arrival_window=(), e_ref=np.zeros(3), prev_dock=None, legs_skipped=None)
-    return _fly(new, obs, m, dock_point(obs, m), obs.carrier.velocity_ned_m_s, _model(m).approach,
-                replace(state.recovery, settled_since_s=None), events)
+    return _on_dock(new, obs, m, dock_point(obs, m), obs.carrier.velocity_ned_m_s,
+                    replace(state.recovery, settled_since_s=None), events)
 
 
 def transit(state, obs, m, events=()):
@@ -482,8 +501,13 @@ def transit(state, obs, m, events=()):
     r, t = _model(m), obs.t_s
     dock = dock_point(obs, m)
     v_c = obs.carrier.velocity_ned_m_s
+    rest = deck.pressed(dock, m) if state.seated else dock
     if (float(norm(m.tick.target - dock)) >= m.leg_start_m and float(norm(v_c[:2])) <= PARKED_SPEED_M_S
-            and float(norm(state.x_ref - dock)) <= 0.05):
+            and float(norm(state.x_ref - rest)) <= 0.05):
+        if state.seated:  # on the deck: the next leg rides it (mission.phases.deck.ride)
+            new, dec = deck.ride(enter(state, Phase.RIDING, t, x_ref=rest.copy(), prev_dock=dock.copy(),
+                                       e_ref=np.zeros(3), streaming_since_s=None, recovery=None), obs, m)
+            return new, replace(dec, events=(*events, f"leg {state.leg + 1}: riding on the deck", *dec.events))
         new = enter(state, Phase.RIDING, t, x_ref=dock.copy(), prev_dock=dock.copy())
         return _fly(new, obs, m, dock, v_c, r.approach, None, (*events, f"leg {state.leg + 1}: riding"))
-    return _fly(state, obs, m, dock, v_c, r.approach, state.recovery, events)
+    return _on_dock(state, obs, m, dock, v_c, state.recovery, events)

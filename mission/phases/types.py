@@ -16,7 +16,7 @@ import numpy as np
 
 from mission.phases.phase import Phase
 from mission.interfaces import Request
-from mission.core.safety import SafetyConfig
+from mission.core.safety import DeckKeepOut, SafetyConfig
 from mission.core.docking import DockingGeometry
 from mission.core.pursuit import PursuitLimits
 from mission.core.setpoint import Setpoint
@@ -120,6 +120,29 @@ class MissionModel:
     legs: tuple[MissionModel, ...] = ()  # one model per target, in order (the leg's tick has its target)
     next_target: np.ndarray | None = None  # a leg's model: the target of the leg after it [m] NED, or None (the last)
     leg_start_m: float = 0.0  # a leg after the first starts once the carrier is this far from its target [m]
+    deck: DeckRide | None = None  # mission.ride = "deck": the passenger sits on the deck (the dock point) when carried
+
+
+@dataclass(frozen=True)
+class DeckRide:
+    """Riding on the carrier's deck (``mission.ride = "deck"``; docs/deck-riding.md): the dock point is
+    the deck. ``arm_lead_s`` [s]: streaming, arming and OFFBOARD begin this long before the
+    predicted separation; the keep-out round the deck (:class:`mission.core.safety.DeckKeepOut`):
+    ``keep_out_radius_m`` [m], ``slope`` [-], ``clear_height_m`` [m]; ``press_m`` [m]: how far
+    below the deck's plane the landing presses the reference (so the vehicle settles on it)."""
+
+    arm_lead_s: float
+    keep_out_radius_m: float
+    slope: float
+    clear_height_m: float
+    press_m: float = 0.1
+
+    def keep_out(self, obs: Observation, m: MissionModel) -> DeckKeepOut | None:
+        """The deck's keep-out now (None without a carrier state)."""
+        if obs.carrier is None:
+            return None
+        return DeckKeepOut(dock_point(obs, m), np.asarray(obs.carrier.velocity_ned_m_s, dtype=float),
+                           self.keep_out_radius_m, self.slope, self.clear_height_m)
 
 
 @dataclass(frozen=True)
@@ -217,6 +240,10 @@ class MissionState:
     legs_skipped: str | None = None  # why the legs after the last one flown were skipped (None: none were)
     battery_start: tuple[float, float] | None = None  # (t [s], remaining [%]) at the first battery reading
     held_dock: np.ndarray | None = None  # [m] NED: holding on (then rejoining from) this dock point: the feed was untrusted
+    # ride = "deck": the passenger sits on the deck (carried, taking off or landed): PX4 may show it
+    # disarmed, landed or out of OFFBOARD without that being a fault (mission.phases.machine)
+    seated: bool = False
+    streaming_since_s: float | None = None  # seated: since when setpoints stream before arming [s] (None: not yet)
 
 
 @dataclass(frozen=True)

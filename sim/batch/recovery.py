@@ -338,8 +338,10 @@ class World:
             carrier.step(self.published, self.approach_s)
         vehicle.advance_to_step(self.k * self.steps_per_tick)
         seen = vehicle.observed()
-        if self.velocity_fix is not None:
-            seen = replace(seen, velocity_ned_m_s=self.velocity_fix.update(t, seen.position_ned_m, seen.velocity_ned_m_s))
+        if self.velocity_fix is not None:  # as the controller's _vehicle_obs: consistent velocity, and its bias
+            raw = seen.velocity_ned_m_s
+            fixed = self.velocity_fix.update(t, seen.position_ned_m, raw)
+            seen = replace(seen, velocity_ned_m_s=fixed, velocity_bias_ned_m_s=raw - fixed)
         obs = Observation(t_s=t, vehicle=seen, carrier=carrier.observed(t), failed=dict(self.failed))
         self.state, dec = step(self.state, obs, self.model)
         if dec.setpoint is not None:

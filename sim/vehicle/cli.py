@@ -255,6 +255,7 @@ def follow_carrier(vehicle: MockVehicle, session: Any, pair: str) -> CarrierFeed
     feed = CarrierFeed(session, pair, VehicleClock(vehicle), origin=GeoOrigin(*vehicle.options.home), max_age_s=math.inf)
 
     heard: list[bool] = []
+    lockstep = vehicle.options.lockstep
 
     def motion() -> DeckMotion | None:
         got = feed.latest()
@@ -263,7 +264,13 @@ def follow_carrier(vehicle: MockVehicle, session: Any, pair: str) -> CarrierFeed
         if not heard:
             heard.append(True)
             log.info("deck: pair %s's carrier heard at %s m NED", pair, [round(float(c), 2) for c in got.value.position])
-        return DeckMotion(tuple(got.value.position), tuple(got.value.velocity_ned_m_s), got.rx_time_s)  # type: ignore[arg-type]
+        # In lockstep the carrier and the vehicle step on one simulated time: the deck moves on from
+        # the sample's own stamp, not from when it arrived (a sample delivered late on a loaded
+        # machine would put the deck back by speed x delay). On wall clocks the two processes'
+        # clocks may be apart by more than the transport's delay: from its arrival.
+        stamp = got.value.stamp_s
+        t_s = stamp if lockstep and abs(stamp - got.rx_time_s) <= 1.0 else got.rx_time_s
+        return DeckMotion(tuple(got.value.position), tuple(got.value.velocity_ned_m_s), t_s)  # type: ignore[arg-type]
 
     vehicle.follow_deck(motion)
     return feed

@@ -1,7 +1,8 @@
 """The whole cycle with two targets on the mock, end to end: ``marsupial demo --config
-configs/cycle.toml`` (three processes over real UDP and Zenoh, in lockstep): ride, separate,
-target 1, return, dock on the moving carrier, ride on (the carrier first drives out to where
-target 2 satisfies the paper's Assumption 1), separate, target 2, return, dock, park."""
+configs/cycle.toml`` (three processes over real UDP and Zenoh, in lockstep): ride on the deck,
+disarmed; arm, separate and take off from the moving deck; target 1, return, dock on the moving
+carrier, land on its deck and disarm; ride on (the carrier first drives out to where target 2
+satisfies the paper's Assumption 1), take off again, target 2, return, dock, land, park."""
 from __future__ import annotations
 
 import json
@@ -44,6 +45,11 @@ def test_every_leg_holds_the_paper_and_docks(cycle_flight):
         assert leg["relative_input_jump_m_s"] <= 0.05, leg
         assert leg["contact"]["attempts"] == 1 and leg["contact"]["horizontal_error_m"] <= 0.10, leg
         assert leg["deck_violations"] == 0
+        # the take-off from the deck: no jump at any of its switches, a ramp within the limits
+        assert leg["takeoff_command_jump_m_s"] <= 0.05, leg
+        a_max = cfg.safety.passenger_max_accel_m_s2 * 1.5 + cfg.safety.carrier_max_accel_m_s2  # command's + deck's
+        assert leg["takeoff_max_command_step_m_s"] <= a_max / cfg.mission.rate_hz + 0.01, leg
+        assert leg["takeoff_clear_s"] is not None and leg["takeoff_clear_s"] < 5.0, leg
     assert s["max_phase_switch_jump_m_s"] <= 0.05
     c = json.loads((log / "carrier.json").read_text())
     assert c["closest_target_distance_m"] >= bc - cfg.carrier.p3_margin_m - 1e-9 and c["mode"] == "parked", c
@@ -65,3 +71,30 @@ def test_the_second_leg_starts_where_assumption_1_holds(cycle_flight):
     target2 = np.asarray(cfg.scenario.legs()[1])
     assert np.linalg.norm(target2 - dock) >= cfg.law.b * cfg.law.c + cfg.mission.leg_start_margin_m - 0.05
     assert np.linalg.norm(r.vec("v_c")[k][:2]) <= 0.15
+
+
+def test_the_passenger_rides_each_leg_disarmed_on_the_deck_and_arms_only_for_the_take_off(cycle_flight):
+    """Each leg's riding: carried disarmed with nothing sent, then armed (PX4's COM_DISARM_PRFLT,
+    10 s, never fires) within mission.arm_lead_s + a little of the separation; on the deck at the
+    dock point throughout (P1); after each docking the passenger is disarmed again on the deck."""
+    log, _ = cycle_flight
+    cfg = load_config(CYCLE)
+    r = read_record(log)
+    armed, u_cmd, dock, x_p = r.cols["armed"], r.vec("u_cmd"), r.vec("dock"), r.vec("x_p")
+    riding = np.flatnonzero(r.phase == "RIDING")
+    legs = np.split(riding, np.flatnonzero(np.diff(riding) > 1) + 1)
+    assert len(legs) == 2
+    for ticks in legs:
+        sent = ticks[np.isfinite(u_cmd[ticks]).all(axis=1)]
+        quiet = ticks[~np.isfinite(u_cmd[ticks]).all(axis=1) & (armed[ticks] == 0)]
+        assert len(quiet) and len(sent), "carried disarmed, then streamed"
+        sep = ticks[-1] + 1
+        assert r.phase[sep] == "SEPARATED" and armed[sep] == 1
+        first_armed = ticks[np.flatnonzero((armed[ticks] == 1) & (np.arange(len(ticks)) > np.searchsorted(ticks, quiet[-1])))[0]]
+        assert r.t[sep] - r.t[first_armed] < min(cfg.mission.arm_lead_s + 1.0, 10.0)
+        assert np.max(np.linalg.norm(x_p[ticks] - dock[ticks], axis=1)) <= 0.1  # on the deck, the dock point
+    # after the first docking: disarmed on the deck before the second leg's stream
+    between = np.flatnonzero((r.t > r.t[legs[0][-1]]) & (r.t < r.t[legs[1][0]]) | np.isin(np.arange(len(r.t)), legs[1]))
+    assert (armed[between] == 0).any()
+    # and at the end: disarmed on the parked carrier's deck
+    assert r.phase[-1] == "DONE" and armed[-1] == 0

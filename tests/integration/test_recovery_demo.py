@@ -1,29 +1,44 @@
 """Deploy and recover on the mock, end to end: ``marsupial demo --config configs/recovery.toml``
 (three processes over real UDP and Zenoh, in lockstep on the mock vehicle's simulated time). The
 carrier drives its recovery course at 1.5 m/s while the passenger returns, holds off, approaches
-and docks; one flight, shared by the tests that read it."""
+and docks; one flight, shared by the tests that read it. The recovery's Monte-Carlo is true to
+it: the same recovery flown in the in-process simulation (sim/batch/recovery.py) gives the same
+contact figures. The demo draws the recovery's figure beside its flight plot, and `marsupial
+plot` draws it from the flight's MCAP too."""
 from __future__ import annotations
 
 import json
+import math
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 from mission.config.schema import load_config
+from mission.phases import Phase
+from mission.record import read_record
+from sim.batch.recovery import Scenario, fly
 from tests.conftest import CONFIGS
 
 pytestmark = pytest.mark.slow
 
 RECOVERY = CONFIGS / "recovery.toml"
+# How close the simulated flight's contact is to the demo's (docs/recovery.md): the simulation
+# samples the carrier and the vehicle as the lockstep demo does, so they differ only by the wire's
+# float32 rounding and the moment the vehicle's first HEARTBEAT and the carrier's first sample arrive.
+TOLERANCE = {"horizontal_error_m": 0.01, "height_error_m": 0.01, "horizontal_relative_speed_m_s": 0.02,
+             "vertical_relative_speed_m_s": 0.02}
+TIME_TOLERANCE_S = 0.1  # contact time, counted from the start of riding [s]
 
 
 @pytest.fixture(scope="module")
 def recovery_flight(tmp_path_factory):
-    """The demo of configs/recovery.toml: (the pair's log folder, the finished process)."""
+    """The demo of configs/recovery.toml: (the pair's log folder, the finished process); its plots
+    in the log root's parent (``flight.png``, ``flight-recovery.png``)."""
     root = tmp_path_factory.mktemp("recovery")
     cmd = [sys.executable, "-m", "mission.cli", "demo", "--config", str(RECOVERY), "--log-root", str(root / "logs"),
-           "--plot", "", "--timeout", "150"]
+           "--plot", str(root / "flight.png"), "--timeout", "150"]
     return root / "logs" / "pair0", subprocess.run(cmd, capture_output=True, text=True, timeout=240)
 
 
@@ -63,3 +78,34 @@ def test_the_demo_table_shows_the_recovery(recovery_flight):
     row = next(line for line in table.splitlines() if line.startswith("horizontal error at contact"))
     assert row.split()[-1] == f"{s['contact']['horizontal_error_m']:.3f}"
     assert "P1-P3 held, and the passenger docked again" in out.stdout
+
+
+def steady_course(rec) -> tuple[float, float]:
+    """The carrier's recovery course in a flight record: (speed [m/s], heading [deg] NED) at the
+    first approach (steady by then)."""
+    i = int(np.flatnonzero(rec.phase == Phase.APPROACH)[0])
+    v = rec.vec("v_c")[i]
+    return float(math.hypot(v[0], v[1])), math.degrees(math.atan2(v[1], v[0])) % 360.0
+
+
+def test_the_simulation_docks_as_the_lockstep_demo_does(recovery_flight, tmp_path):
+    log, out = recovery_flight
+    assert out.returncode == 0, out.stdout + out.stderr
+    rec = read_record(log)
+    demo = rec.info["recovered"]["contact"]
+    assert demo is not None and (log.parent.parent / "flight-recovery.png").stat().st_size > 10_000
+    speed, heading = steady_course(rec)
+    sim = fly(load_config(RECOVERY), Scenario(speed_m_s=speed, heading_deg=heading))
+    ours = sim.summary["contact"]
+    assert sim.docked and ours["attempts"] == demo["attempts"]
+    for key, tolerance in TOLERANCE.items():
+        assert ours[key] == pytest.approx(demo[key], abs=tolerance), (key, ours, demo)
+    riding_demo = rec.t[int(np.argmax(rec.phase == Phase.RIDING))]
+    riding_sim = sim.record.t[int(np.argmax(sim.record.phase == Phase.RIDING))]
+    assert ours["time_s"] - riding_sim == pytest.approx(demo["time_s"] - riding_demo, abs=TIME_TOLERANCE_S)
+    assert sim.summary["deck_violations"] == 0
+    # the recovery's figure is drawn from the flight's MCAP as from its CSV
+    plotted = subprocess.run([sys.executable, "-m", "mission.cli", "plot", str(log / "flight.mcap"), "--out",
+                              str(tmp_path / "from-mcap.png")], capture_output=True, text=True, timeout=120)
+    assert plotted.returncode == 0, plotted.stdout + plotted.stderr
+    assert (tmp_path / "from-mcap-recovery.png").stat().st_size > 10_000

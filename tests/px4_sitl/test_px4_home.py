@@ -82,7 +82,8 @@ def _kill_during_the_approach(directory: Path, build: Path) -> dict:
         mark, t_kill = f.gcs.mark(), time.monotonic()
         rec = read_record(f.log_dir)
         carrier, passenger = rec.vec("x_c")[-1], rec.vec("x_p")[-1]
-        takeoff = rec.vec("x_p")[0]
+        seen = rec.vec("x_p")
+        takeoff = seen[np.isfinite(seen).all(axis=1)][0]  # the first row the vehicle's position was known
         rtl = f.gcs.wait_for("HEARTBEAT", lambda m: _px4_heartbeat(m) and px4.mode_name(m.custom_mode) == "AUTO.RTL",
                              timeout_s=6.0, after=mark)
         assert rtl is not None, [px4.mode_name(m.custom_mode) for m in f.gcs.messages("HEARTBEAT", after=mark)]

@@ -134,6 +134,10 @@ class FakeWorld:
     def hold(self) -> None:
         self.set_mode("AUTO.LOITER")
 
+    def disarm(self) -> None:
+        self._command("disarm")
+        self.armed = False
+
     def land(self) -> None:
         self.set_mode("AUTO.LAND")
 

@@ -27,6 +27,15 @@ def test_shipped_configs_load(path):
     ({"mission": {"final_action": "crash"}}, "mission.final_action", "'hold', 'land' or 'return'"),
     ({"zenoh": {"pair": "a/b"}}, "zenoh.pair", "pattern"),
     ({"safety": {"margin_m": float("nan")}}, "safety.margin_m", "finite"),
+    # riding on the deck: the deck above the floor (with room for the landing's press), the arming
+    # lead longer than the prestream, the glide path inside the deck's keep-out
+    ({"safety": {"z_max_m": -0.3}, "mission": {"ride": "deck", "dock_offset_ned_m": [0.0, 0.0, -0.35]}},
+     "mission.dock_offset_ned_m", "altitude floor"),
+    ({"mission": {"ride": "deck", "dock_offset_ned_m": [0.0, 0.0, -0.5], "prestream_s": 4.0, "arm_lead_s": 4.0}},
+     "mission.arm_lead_s", "prestream_s"),
+    ({"mission": {"ride": "deck", "dock_offset_ned_m": [0.0, 0.0, -0.5], "final_action": "return",
+                  "deck_clear_slope": 2.0}}, "mission.deck_clear_slope", "glide"),
+    ({"mission": {"ride": "carried"}}, "mission.ride", "'hover' or 'deck'"),
 ])
 def test_bad_fields_are_named(data, field, words):
     with pytest.raises(ConfigError) as exc:

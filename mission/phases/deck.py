@@ -1,0 +1,175 @@
+"""Riding on the carrier's deck (pure; ``mission.ride = "deck"``, docs/deck-riding.md).
+
+The dock point is the deck. While the passenger sits on it (``MissionState.seated``) PX4 may show it
+disarmed, landed (ON_GROUND) or out of OFFBOARD without that being a fault; the machine's
+failsafes (:mod:`mission.phases.machine`) read ``seated``. ::
+
+    STREAMING --prestream_s (nothing sent: the vehicle is disarmed)--> RIDING, seated
+    RIDING, seated: carried, disarmed, nothing sent
+        --the latch predicted within mission.arm_lead_s--> stream the deck's motion (full setpoints:
+          the deck point, its velocity and acceleration), after prestream_s ARM, then OFFBOARD
+          (PX4 auto-disarms a vehicle that has not taken off after COM_DISARM_PRFLT: it re-arms)
+        --latch, armed in OFFBOARD--> SEPARATED, seated: the paper's law from e_pc = 0; the deck's
+          keep-out in the safety filter (mission.core.safety.DeckKeepOut) lifts it off before it
+          moves sideways --higher than mission.deck_clear_height_m above the deck--> seated ends
+        --latch, not armed in OFFBOARD--> ABORT (arming_refused | offboard_refused)
+    DOCKED (contact) --> seated: the reference presses DeckRide.press_m into the deck; once PX4's
+          land detector says ON_GROUND, DISARM (PX4 refuses it before; on a deck faster than
+          LNDMC_XY_VEL_MAX it never says so: the passenger stays armed, pressing, until the carrier
+          slows) --> TRANSIT / HOME seated, then RIDING seated (the next leg) or DONE.
+
+Frames: local NED [m], [m/s]; times [s] on the controller's clock.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+
+from mission.core.law import norm
+from mission.core.tick import latch_point, passenger_tick, separation_due
+from mission.flight_mode import FlightMode
+from mission.interfaces import Request
+from mission.phases.flying import Tracked, _carrier_acceleration, _track, navigate
+from mission.phases.phase import Phase
+from mission.phases.types import (
+    ZERO,
+    AbortReason,
+    Decision,
+    DeckRide,
+    MissionModel,
+    MissionState,
+    Observation,
+    dock_point,
+    enter,
+)
+
+#: Phases of the take-off: seated, the vehicle must be armed and in OFFBOARD.
+TAKING_OFF = frozenset({Phase.SEPARATED, Phase.NAVIGATING})
+
+
+def _kept(tr: Tracked) -> dict[str, Any]:
+    """What the state keeps of a tick's tracking (typed for ``replace``)."""
+    return dict(tr.kept())
+
+
+def _deck(m: MissionModel) -> DeckRide:
+    assert m.deck is not None  # only with mission.ride = "deck"
+    return m.deck
+
+
+def seconds_to_latch(obs: Observation, m: MissionModel) -> float:
+    """When the latch will fire [s], at the carrier's present closing speed on the target (inf if
+    it is not closing)."""
+    assert obs.carrier is not None
+    e_tc = m.tick.target - dock_point(obs, m)
+    dist = float(norm(e_tc))
+    closing = float(np.dot(obs.carrier.velocity_ned_m_s, e_tc)) / max(dist, 1e-9)
+    if closing <= 0.05:
+        return float("inf")
+    return max(dist - m.tick.event_distance_m, 0.0) / closing
+
+
+def seat(state: MissionState, obs: Observation, m: MissionModel, events: tuple[str, ...] = ()) -> tuple[MissionState, Decision]:
+    """STREAMING -> RIDING, seated: the reference on the deck, nothing sent."""
+    dock = dock_point(obs, m)
+    v_dock = np.asarray(obs.carrier.velocity_ned_m_s, dtype=float)  # type: ignore[union-attr]
+    new = enter(state, Phase.RIDING, obs.t_s, seated=True, streaming_since_s=None, x_ref=dock.copy(), e_ref=ZERO.copy(),
+                prev_dock=dock.copy(), u_ref=v_dock.copy(), u_cmd=v_dock.copy())
+    return new, Decision(setpoint=None, dock=dock, events=(*events, "on the deck: riding the carrier"))
+
+
+def ride(state: MissionState, obs: Observation, m: MissionModel) -> tuple[MissionState, Decision]:
+    """RIDING while seated (see the module docstring)."""
+    t, v, c = obs.t_s, obs.vehicle, obs.carrier
+    assert v is not None and c is not None  # the failsafes checked both
+    if c.untrusted is not None:
+        # not a deck to arm or separate on: hold (the status says so: the carrier pauses), follow
+        # the deck as the vehicle feels it if armed; the latch waits
+        x_own = pressed(v.position_ned_m, m)
+        events: tuple[str, ...] = () if state.held_dock is not None else (
+            f"carrier feed not trusted ({c.untrusted}): holding on the deck",)
+        held = replace(state, held_dock=dock_point(obs, m) if state.held_dock is None else state.held_dock)
+        return _sit(held, obs, m, x_own, v.velocity_ned_m_s, events, may_disarm=state.streaming_since_s is None)
+    state = replace(state, held_dock=None)
+    dock = dock_point(obs, m)
+    v_dock = np.asarray(c.velocity_ned_m_s, dtype=float)
+    ready = v.armed and v.mode == FlightMode.OFFBOARD
+    if separation_due(dock, False, m.tick) and state.prev_dock is not None:
+        if not ready:
+            reason = AbortReason.ARMING_REFUSED if not v.armed else AbortReason.OFFBOARD_REFUSED
+            why = f"not {'armed' if not v.armed else 'in OFFBOARD'} on the deck when the separation came"
+            new = enter(state, Phase.ABORT, t, reason=reason, detail=why)
+            return new, Decision(setpoint=None, events=(f"abort: {why}",))
+        theta, anchor = latch_point(state.prev_dock, dock, m.tick.target, m.tick)
+        new = enter(state, Phase.SEPARATED, t, anchor=anchor, e_ref=ZERO.copy(), x_ref=anchor.copy(),
+                    separation_time_s=t - (1 - float(theta)) * m.dt_s)
+        return navigate(new, obs, m, events=(f"separated at |e_tc| = {norm(m.tick.target - anchor):.3f} m: taking off "
+                                              "from the deck",))
+    due = seconds_to_latch(obs, m) <= _deck(m).arm_lead_s
+    if state.streaming_since_s is None and not due:
+        if v.armed:  # landed, not yet disarmed: press on the deck until PX4 lets it disarm
+            return _sit(state, obs, m, pressed(dock, m), v_dock, (), prev_dock=dock)
+        # the reference rides the deck; the command filter's last command is the deck's velocity,
+        # so the first setpoint streamed starts from it (tracking's integral starts afresh)
+        state = replace(state, x_ref=dock.copy(), e_ref=ZERO.copy(), prev_dock=dock.copy(), u_ref=v_dock.copy(),
+                        u_cmd=v_dock.copy(), integral=None, accel_lp=None)
+        return state, Decision(setpoint=None, dock=dock)
+    events = ()
+    since = state.streaming_since_s
+    if since is None:
+        since = t
+        state = replace(state, streaming_since_s=t)
+        events = ("separation due: streaming the deck's motion, then arming",)
+    tick = passenger_tick(dock, v_dock, ZERO, False, m.tick, state.u_ref, m.dt_s)
+    a_ref = _carrier_acceleration(obs, m) if m.tracking.kind == "full" else ZERO
+    tr = _track(state, obs, m, dock, tick.u, a_ref)
+    request = None
+    if t - since >= m.prestream_s:
+        request = Request.ARM if not v.armed else (Request.OFFBOARD if v.mode != FlightMode.OFFBOARD else None)
+    failed = "arm" if "arm" in obs.failed else ("offboard" if "offboard" in obs.failed else None)
+    if failed is not None:
+        reason = AbortReason.ARMING_REFUSED if failed == "arm" else AbortReason.OFFBOARD_REFUSED
+        new = enter(state, Phase.ABORT, t, reason=reason, detail=obs.failed[failed])
+        return new, Decision(setpoint=None, events=(f"abort: {failed} refused on the deck: {obs.failed[failed]}",))
+    new = replace(state, x_ref=dock.copy(), e_ref=ZERO.copy(), prev_dock=dock.copy(), u_ref=tick.u, **_kept(tr))
+    return new, tr.decision(request=request, dock=dock, P=float(tick.P), relative=tick.relative, desired=tick.desired,
+                            safety_acted=tr.acted or bool(tick.safety.changed), events=events)
+
+
+def _sit(state: MissionState, obs: Observation, m: MissionModel, x_ref: np.ndarray, u_ref: np.ndarray,
+         events: tuple[str, ...], prev_dock: np.ndarray | None = None,
+         may_disarm: bool = True) -> tuple[MissionState, Decision]:
+    """Seated and armed, nothing due: press on the deck at ``x_ref`` [m] with ``u_ref`` [m/s]; ask
+    PX4 to disarm once its land detector says landed (``may_disarm``: not while it waits, armed,
+    for a take-off). Disarmed: nothing is sent. The dock recorded is what the feed says."""
+    v = obs.vehicle
+    assert v is not None
+    if not v.armed:
+        return replace(state, prev_dock=prev_dock if prev_dock is not None else state.prev_dock), Decision(
+            setpoint=None, dock=dock_point(obs, m), events=events)
+    tr = _track(state, obs, m, x_ref, np.asarray(u_ref, dtype=float), ZERO)
+    new = replace(state, x_ref=np.asarray(x_ref, dtype=float).copy(), u_ref=np.asarray(u_ref, dtype=float).copy(),
+                  prev_dock=prev_dock if prev_dock is not None else state.prev_dock, **_kept(tr))
+    return new, tr.decision(request=Request.DISARM if v.on_ground and may_disarm else None, dock=dock_point(obs, m),
+                            safety_acted=tr.acted, events=events)
+
+
+def pressed(dock: np.ndarray, m: MissionModel) -> np.ndarray:
+    """Where the reference sits on the deck at ``dock`` [m] NED after a landing: ``press_m`` into it."""
+    return dock + np.array([0.0, 0.0, _deck(m).press_m])
+
+
+def after_landing(obs: Observation, decision: Decision) -> Decision:
+    """A seated phase's decision after a landing: nothing sent once PX4 disarmed; DISARM asked
+    (PX4 accepts it only once its land detector says landed) while armed and ON_GROUND."""
+    v = obs.vehicle
+    if v is None:
+        return decision
+    if not v.armed:
+        return replace(decision, setpoint=None, request=None)
+    if v.on_ground and decision.request is None:
+        return replace(decision, request=Request.DISARM)
+    return decision
+
