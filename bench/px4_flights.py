@@ -24,8 +24,16 @@ machine, not the loop) ``stall``; both are left out of the verdict. Needs root a
 ``--vehicle mock`` flies the same configuration on the mock vehicle (``marsupial demo``) for the
 comparison "the mock predicts PX4".
 
+``--rover`` flies the carrier as a second PX4, the SIH Ackermann rover (``configs/px4_sitl_cycle.toml``,
+``carrier.backend = "mavlink"``), with a 10-minute battery on the quadrotor (``SIM_BAT_DRAIN``
+600 s: SITL's own empties in 60 s). A mission that comes home (``mission.final_action =
+"return"``) also prints one row per docking (each leg of several targets): its outcome, the
+approaches it took, the contact (horizontal error, horizontal and vertical relative speed), the
+carrier's speed on the approach, that leg's P1-P3, and whether PX4's home followed the carrier
+(:meth:`sim.sitl.px4.Px4Flight.home_following`); the targets ``RECOVERY_TARGETS``.
+
 Usage: ``python -m bench.px4_flights [-n 5] [--config configs/px4_sitl.toml] [--set K=V ...]
-[--parallel 1|2] [--vehicle px4|mock] [--out DIR] [--json F]`` (about 50-60 s of wall time per PX4
+[--parallel 1|2] [--vehicle px4|mock] [--rover] [--out DIR] [--json F]`` (about 50-60 s of wall time per PX4
 flight). Run it under ``flock /tmp/marsupial-px4.lock``.
 """
 from __future__ import annotations
@@ -43,6 +51,7 @@ import click
 import numpy as np
 
 from mission.config.schema import load_config
+from mission.phases.phase import FLYING, Phase
 from mission.record import read_record
 from sim.sitl.px4 import build_dir, clock_ratio, patched_config, px4_flight, unavailable_reason
 
@@ -50,18 +59,26 @@ ROOT = Path(__file__).resolve().parents[1]
 TARGETS = {"riding_offset_m": 0.20, "last_metre_s": 4.0, "hover_m_s": 0.2, "swing_m": 0.5, "jump_m_s": 0.05, "sep_err_m": 0.01}
 CLOCK_OK = (0.97, 1.06)
 STALL_S = 0.3  # a controller tick later than this, or a carrier state this old, while flying: the machine stalled [s]
+# A docking on real PX4 (docs/recovery.md, "On real PX4"): approaches, contact error [m], relative
+# horizontal speed [m/s], the carrier's slowest on the approach [m/s]; PX4's home within this of
+# the carrier's track (HOME_LAG_S) [m]
+RECOVERY_TARGETS = {"attempts": 2, "error_m": 0.2, "h_speed_m_s": 0.3}
+CARRIER_MIN_SPEED_M_S = 1.0
+HOME_M = 1.0
+ROVER_BATTERY = {"SIM_BAT_DRAIN": 600.0}
 COLUMNS = ("rc", "p1", "p2", "p3", "riding_offset_m", "riding_2tick_m", "last_metre_s", "hover_m_s", "swing_m", "jump_m_s", "sep_err_m", "hold_m",
            "clock", "stall_s", "position_hz", "wall_s")
 
 
 def stall_s(log_dir: Path) -> float | None:
-    """The longest the flight was stalled while RIDING to ARRIVED [s]: the larger of the longest
-    gap between controller ticks beyond one period and the oldest carrier state used while riding
-    (a stalled carrier or controller process, not the loop: such flights are left out)."""
+    """The longest the flight was stalled while flying after JOIN [s] (RIDING to ARRIVED, and
+    every phase of coming home and of the next legs): the larger of the longest gap between
+    controller ticks beyond one period and the oldest carrier state used while riding (a stalled
+    carrier or controller process, not the loop: such flights are left out)."""
     if not (log_dir / "record.csv").exists():
         return None
     r = read_record(log_dir)
-    flying = np.isin(r.phase, ["RIDING", "SEPARATED", "NAVIGATING", "ARRIVED"])
+    flying = np.isin(r.phase, sorted(p.value for p in FLYING - {Phase.JOIN}))
     if flying.sum() < 2:
         return None
     t = r.t[flying]
@@ -94,18 +111,47 @@ def _row(s: dict[str, Any], rc: int, t0: float, directory: Path) -> dict[str, An
 
 
 
-def fly_once(config: Path, directory: Path, speed_factor: float, ground_truth_hz: float = 0.0) -> dict[str, Any]:
+def dockings(s: dict[str, Any]) -> list[dict[str, Any]]:
+    """One row per docking of a mission that came home (each leg of several targets)."""
+    legs = s.get("legs") or [{**s, "leg": 0, "outcome": s.get("recovery_outcome")}]
+    rows = []
+    for leg in legs:
+        c = leg.get("contact") or {}
+        speed = leg.get("carrier_speed_on_approach_m_s") or [None, None]
+        rows.append({"leg": leg.get("leg"), "outcome": leg.get("outcome"), "docked": bool(c), "attempts": c.get("attempts"),
+                     "error_m": c.get("horizontal_error_m"), "h_speed_m_s": c.get("horizontal_relative_speed_m_s"),
+                     "v_speed_m_s": c.get("vertical_relative_speed_m_s"), "carrier_min_m_s": speed[0],
+                     "carrier_max_m_s": speed[1], "p1": leg.get("p1"), "p2": leg.get("p2"), "p3": leg.get("p3"),
+                     "riding_offset_m": leg.get("max_offset_before_separation_m"), "jump_m_s": leg.get("relative_input_jump_m_s"),
+                     "deck_violations": leg.get("deck_violations")})
+    return rows
+
+
+def docking_meets(d: dict[str, Any], home: dict[str, Any] | None) -> bool:
+    return bool(d["docked"] and d["p1"] and d["p2"] and d["p3"] and not d["deck_violations"]
+                and all(d[k] is not None and d[k] <= v for k, v in RECOVERY_TARGETS.items())
+                and d["carrier_min_m_s"] is not None and d["carrier_min_m_s"] >= CARRIER_MIN_SPEED_M_S - 0.05
+                and (home is None or (home["max_lagged_m"] is not None and home["max_lagged_m"] <= HOME_M)))
+
+
+def fly_once(config: Path, directory: Path, speed_factor: float, ground_truth_hz: float = 0.0,
+             rover: bool = False) -> dict[str, Any]:
     """One flight; its row of the table."""
     cfg = load_config(config)
     t0 = time.monotonic()
-    with px4_flight(directory, config, speed_factor=speed_factor, ground_truth_hz=ground_truth_hz) as f:
-        rc = f.wait_mission(240.0)
-        after = f.watch_after(cfg.scenario.target, 3.0) if rc == 0 else float("nan")
+    with px4_flight(directory, config, speed_factor=speed_factor, ground_truth_hz=ground_truth_hz, rover=rover,
+                    px4_params=ROVER_BATTERY if rover else {},
+                    carrier_args=("--summary", str(directory / "carrier.json")) if rover else ()) as f:
+        rc = f.wait_mission(400.0)
+        comes_home = cfg.mission.final_action == "return"
+        after = f.watch_after(cfg.scenario.target, 3.0) if rc == 0 and not comes_home else float("nan")
+        home = f.home_following() if rover else None
     path = f.log_dir / "summary.json"
     s = json.loads(path.read_text()) if path.exists() else {}
     clock = clock_ratio(f.log_dir / "flight.tlog") if (f.log_dir / "flight.tlog").exists() else None
     return {**_row(s, rc, t0, directory), "hold_m": round(after, 3), "clock": round((clock or {}).get("ratio", float("nan")), 3),
-            "stall_s": stall_s(f.log_dir), "riding_2tick_m": riding_sustained_m(f.log_dir)}
+            "stall_s": stall_s(f.log_dir), "riding_2tick_m": riding_sustained_m(f.log_dir), "home": home,
+            "dockings": dockings(s) if s.get("docked_again") is not None or s.get("legs") else None}
 
 
 def fly_mock(config: Path, directory: Path, speed: float) -> dict[str, Any]:
@@ -145,24 +191,28 @@ def _fmt(value: Any) -> str:
               show_default=True)
 @click.option("--set", "sets", multiple=True, metavar="SECTION.KEY=VALUE", help="Change the configuration (TOML value).")
 @click.option("--out", type=click.Path(file_okay=False), default=None, help="Where the flights' logs go (default a temp dir).")
-@click.option("--speed-factor", type=float, default=1.03, show_default=True, help="PX4_SIM_SPEED_FACTOR")
+@click.option("--speed-factor", type=float, default=None, help="PX4_SIM_SPEED_FACTOR [default: 1.03, 1.08 with --rover]")
 @click.option("--parallel", type=click.IntRange(1, 2), default=1, show_default=True, help="PX4 flights at once")
 @click.option("--ground-truth", is_flag=True, help="Record PX4's estimate and SIH's truth at 50 Hz (truth.csv per flight).")
 @click.option("--vehicle", type=click.Choice(["px4", "mock"]), default="px4", show_default=True,
               help="real PX4 SITL, or the mock vehicle (marsupial demo with the same config; 'clock' is its speed)")
 @click.option("--mock-speed", type=float, default=2.0, show_default=True)
+@click.option("--rover", is_flag=True, help="The carrier a second PX4, the SIH rover (configs/px4_sitl_cycle.toml); "
+              "PX4_SIM_SPEED_FACTOR 1.08 unless given")
 @click.option("--json", "json_path", type=click.Path(dir_okay=False), default=None)
 @click.option("--record-figures", type=click.Path(dir_okay=False), default=None,
               help="Write the usable flights' riding offset, last metre and hover speed (and their means) to this "
                    "JSON file: tests/data/px4_hold_figures.json, what the mock is held to.")
-def main(flights: int, config: str, sets: tuple[str, ...], out: str | None, speed_factor: float, parallel: int,
-         ground_truth: bool, vehicle: str, mock_speed: float, json_path: str | None, record_figures: str | None) -> None:
+def main(flights: int, config: str, sets: tuple[str, ...], out: str | None, speed_factor: float | None, parallel: int,
+         ground_truth: bool, vehicle: str, mock_speed: float, rover: bool, json_path: str | None,
+         record_figures: str | None) -> None:
     why = unavailable_reason() if vehicle == "px4" else None
     if why:
         raise click.ClickException(why)
+    speed_factor = speed_factor if speed_factor is not None else 1.08 if rover else 1.03
     base = Path(out or f"/tmp/px4-flights-{os.getpid()}")
     base.mkdir(parents=True, exist_ok=True)
-    cfg_path = Path(config)
+    cfg_path = Path(config).resolve()  # the flight's processes run from the repository
     if sets:
         overrides = dict(s.split("=", 1) for s in sets)
         cfg_path = base / "config.toml"
@@ -173,9 +223,16 @@ def main(flights: int, config: str, sets: tuple[str, ...], out: str | None, spee
     click.echo("flight " + " ".join(f"{c:>15}" for c in COLUMNS) + "  targets")
 
     def one(i: int) -> dict[str, Any]:
-        if vehicle == "px4":
-            return fly_once(cfg_path, base / f"flight{i}", speed_factor, 50.0 if ground_truth else 0.0)
-        return fly_mock(cfg_path, base / f"mock{i}", mock_speed)
+        try:
+            if vehicle == "px4":
+                row = fly_once(cfg_path, base / f"flight{i}", speed_factor, 50.0 if ground_truth else 0.0, rover)
+            else:
+                row = fly_mock(cfg_path, base / f"mock{i}", mock_speed)
+        except Exception as exc:  # a PX4 that did not start on a loaded machine: the flight is marked, the rest fly
+            row = {**{c: None for c in COLUMNS}, "clock": float("nan"), "error": f"{type(exc).__name__}: {exc}",
+                   "dir": str(base / f"flight{i}")}
+        (base / f"row{i}.json").write_text(json.dumps(row, indent=1, default=str))
+        return row
 
     rows: list[dict[str, Any]] = []
     with ThreadPoolExecutor(max_workers=parallel) as pool:
@@ -189,6 +246,8 @@ def main(flights: int, config: str, sets: tuple[str, ...], out: str | None, spee
             rows.append(row)
             verdict = "clock" if not clock_ok(row) else "stall" if not usable(row) else ("met" if meets(row) else "MISSED")
             click.echo(f"{i:>6} " + " ".join(f"{_fmt(row[c]):>15}" for c in COLUMNS) + f"  {verdict}")
+    if any(r.get("dockings") is not None for r in rows):
+        print_dockings(rows)
     good = [r for r in rows if usable(r)]
     ok = sum(meets(r) for r in good)
     worst = {k: max((r[k] for r in good if r[k] is not None), default=None) for k in TARGETS}
@@ -199,6 +258,25 @@ def main(flights: int, config: str, sets: tuple[str, ...], out: str | None, spee
     if record_figures:
         write_figures(Path(record_figures), [Path(r["dir"]) / "flight" for r in good],
                       f"python -m bench.px4_flights -n {flights} --config {config} " + " ".join(f"--set {x}" for x in sets))
+
+
+DOCKING_COLUMNS = ("leg", "outcome", "attempts", "error_m", "h_speed_m_s", "v_speed_m_s", "carrier_min_m_s", "carrier_max_m_s",
+                   "p1", "p2", "p3", "riding_offset_m", "jump_m_s", "deck_violations")
+
+
+def print_dockings(rows: list[dict[str, Any]]) -> None:
+    """The dockings' table: one row per docking, PX4's home per flight, and the verdict."""
+    click.echo("flight " + " ".join(f"{c:>15}" for c in DOCKING_COLUMNS) + "  home (homes, moved, max lagged, final m)  targets")
+    met = total = 0
+    for i, row in enumerate(rows):
+        home = row.get("home")
+        h = "-" if home is None else f"{home['homes']}, {home['moved_m']}, {home['max_lagged_m']}, {home['final_m']}"
+        for d in row.get("dockings") or []:
+            ok = docking_meets(d, home)
+            met, total = met + ok, total + 1
+            click.echo(f"{i:>6} " + " ".join(f"{_fmt(d[c]):>15}" for c in DOCKING_COLUMNS) + f"  {h:>40}  {'met' if ok else 'MISSED'}")
+    click.echo(f"{met}/{total} dockings meet every target ({RECOVERY_TARGETS}, the carrier at >= {CARRIER_MIN_SPEED_M_S} m/s "
+               f"on the approach, P1-P3 of the leg, no deck violation, PX4's home, when read, within {HOME_M} m of the carrier's track)")
 
 
 FIGURES = ("max_offset_before_separation_m", "last_metre_s", "hover_speed_m_s")

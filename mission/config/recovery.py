@@ -39,6 +39,10 @@ class RecoverySection(Section):
     settle_speed_m_s: float = Field(0.25, gt=0, le=5,
         description="[m/s] ... and its velocity this close to the carrier's ...")
     settle_dwell_s: float = Field(1.0, ge=0, le=60, description="[s] ... for this long")
+    settle_carrier_speed_m_s: float = Field(0.0, ge=0, le=50,
+        description=("[m/s] ... with the carrier moving at least this fast (0: any speed). A carrier that must first "
+                     "turn onto its recovery course from a stop (a PX4 Ackermann rover: 10-15 s) is not on it yet, and "
+                     "the holdoff point it gives lies behind its old course"))
     cone_half_angle_deg: float = Field(20.0, gt=0, lt=90,
         description="[deg] half angle of the cone round the glide path (apex at the dock point); outside it: go around")
     cone_min_radius_m: float = Field(0.3, gt=0, le=10, description="[m] the cone's radius at the dock point")

@@ -44,10 +44,11 @@ class Tracked:
 
 
 def _track(state: MissionState, obs: Observation, m: MissionModel, x_ref: np.ndarray, u_ref: np.ndarray,
-           a_ref: np.ndarray) -> Tracked:
+           a_ref: np.ndarray, taking_off: bool = False) -> Tracked:
     """The setpoint that makes the vehicle follow the reference (:func:`mission.core.tracking.setpoint`):
     the velocity demand filtered at the vehicle's real position (obstacles, floor, speed and
-    acceleration of the vehicle), full or velocity only as tracking decides it."""
+    acceleration of the vehicle), full or velocity only as tracking decides it. ``taking_off``
+    (JOIN): while the vehicle is still under the altitude floor (``z_max_m``) the floor is left out."""
     v = obs.vehicle
     assert v is not None  # tracking happens only with a vehicle
     x_p = v.position_ned_m
@@ -55,7 +56,10 @@ def _track(state: MissionState, obs: Observation, m: MissionModel, x_ref: np.nda
     integral = state.integral if state.integral is not None else np.zeros(3)
     desired = velocity_demand(x_ref, u_ref, x_p, integral, g)
     prev = state.u_cmd if state.u_cmd is not None else v.velocity_ned_m_s
-    safe = filter_velocity(x_p, desired, m.tick.obstacles, m.command_safety, prev, m.dt_s)
+    limits = m.command_safety
+    if taking_off and limits.z_max_m is not None and len(x_p) == 3 and x_p[2] > limits.z_max_m:
+        limits = replace(limits, z_max_m=None)
+    safe = filter_velocity(x_p, desired, m.tick.obstacles, limits, prev, m.dt_s)
     acted = bool(safe.changed)
     a_sent, accel_lp = lead_acceleration(a_ref, state.accel_lp, g, m.dt_s)
     sp = tracking_setpoint(x_ref, u_ref, a_sent, x_p, safe.u, integral, g, v.velocity_ned_m_s, filtered=acted,
@@ -121,7 +125,13 @@ def join(state, obs, m):
     dock = dock_point(obs, m)
     v_dock = obs.carrier.velocity_ned_m_s
     x_ref, u_ref, on_dock = _toward_dock(state.x_ref, dock, v_dock, m)
-    tr = _track(state, obs, m, x_ref, u_ref, ZERO)
+    # Taking off from the ground, under the altitude floor: the floor's barrier would replace the
+    # climb by its own approach to the floor (a climb rate that falls with the distance to it,
+    # sent as velocity only: the filter wins over the reference). PX4 SITL leaves the ground a
+    # second or two after the reference has climbed to the dock point, and then hovered 0.1-0.2 m
+    # under the floor, drifting, for 20 s (docs/recovery.md, "On real PX4"). The reference, which
+    # climbs to the dock point above the floor, leads the vehicle up instead.
+    tr = _track(state, obs, m, x_ref, u_ref, ZERO, taking_off=True)
     # Docked once the vehicle has settled on the dock point (within join_settle_m for
     # join_settle_s): the carrier starts its approach then, so what is left of the climb is not
     # counted as riding offset (on PX4 the climb overshoots the dock by ~0.3 m when first within

@@ -6,9 +6,11 @@ DOCKED, HOME and FALLBACK (``mission.final_action = "return"``).
     ARRIVED    --task done (mission.at_target_s), or the battery rule-----------------> RETURNING
     NAVIGATING --the battery rule (energy home + reserve > what is left)--------------> RETURNING
     RETURNING  --reference on the holdoff point, moving with the carrier--------------> HOLDOFF
-    HOLDOFF    --vehicle within settle radius/speed of the holdoff point for the dwell--> APPROACH
+    HOLDOFF    --vehicle within settle radius/speed of the holdoff point for the dwell,
+                 the carrier at least recovery.settle_carrier_speed_m_s fast------------> APPROACH
                (attempts used up: FALLBACK)
     APPROACH   --glide path flown, vehicle meets the contact conditions---------------> DOCKED
+                 (on the descent it goes down only lined up, else holds its height)
                --outside the cone; carrier state late or not trusted; carrier accelerating or turning
                  beyond its limits; below the decision height not lined up------------> GO_AROUND
     GO_AROUND  --climbed to the holdoff height------------------------------------------> HOLDOFF
@@ -249,6 +251,7 @@ def holdoff(state, obs, m, events=()):
     v = obs.vehicle
     settled = (float(norm(v.position_ned_m - h)) <= r.settle_radius_m
                and float(norm(v.velocity_ned_m_s - v_c)) <= r.settle_speed_m_s
+               and float(norm(v_c[:2])) >= r.settle_carrier_speed_m_s
                and _carrier_fresh(obs, r.carrier_max_age_s) and _carrier_unsteady(rec, obs, r, t) is None)
     since = (rec.settled_since_s if rec.settled_since_s is not None else t) if settled else None
     rec = replace(rec, settled_since_s=since)
@@ -337,14 +340,27 @@ def approach(state, obs, m, events=()):
                 return go_around(state, obs, m, f"not lined up over the deck within {r.gate_timeout_s:g} s "
                                  f"({here.horizontal_error_m:.2f} m, {here.horizontal_relative_speed_m_s:.2f} m/s)", events)
         return _fly(state, obs, m, goal, goal_v, r.approach, rec, events)
+    # On the descent the vehicle goes down only while lined up; out of line it holds its height
+    # over the dock point, at least three contact heights over the deck (so the deck is never
+    # met outside the contact conditions), and goes around
+    # once it is off the deck, or out of line for gate_timeout_s. A relative speed that swings
+    # over the limit for a moment (PX4: two velocity estimates, a rover's speed loop) pauses it.
     if not here.horizontally_within(g):
-        return go_around(state, obs, m, f"off the deck on the descent ({here.horizontal_error_m:.2f} m, "
-                         f"{here.horizontal_relative_speed_m_s:.2f} m/s)", events)
+        out_since = rec.settled_since_s if rec.settled_since_s is not None else t
+        if here.horizontal_error_m > r.deck_radius_m or t - out_since > r.gate_timeout_s:
+            return go_around(state, obs, m, f"off the deck on the descent ({here.horizontal_error_m:.2f} m, "
+                             f"{here.horizontal_relative_speed_m_s:.2f} m/s)", events)
+        # held no lower than three contact heights over the deck, so it does not sit on it (PX4
+        # dips 0.1 m below a descending reference)
+        held = max(0.0, min(rec.descent, 1.0 - 3.0 * g.contact_height_m / g.decision_height_m))
+        rec = replace(rec, settled_since_s=out_since, descent=held)
+        return _fly(state, obs, m, gate + held * (dock - gate), v_c, r.approach, rec, events)
+    rec = replace(rec, settled_since_s=None)
     descent = min(1.0, rec.descent + r.descent_speed_m_s * m.dt_s / g.decision_height_m)
     goal = gate + descent * (dock - gate)
     goal_v = v_c + ((dock - gate) / g.decision_height_m * r.descent_speed_m_s if descent < 1.0 else 0.0)
     rec = replace(rec, descent=descent)
-    if descent >= 1.0 and here.within(g):
+    if here.within(g):  # on the deck under the contact conditions (a vehicle ahead of its reference: at once)
         figures = {"horizontal_error_m": round(here.horizontal_error_m, 4),
                    "height_error_m": round(here.height_error_m, 4),
                    "horizontal_relative_speed_m_s": round(here.horizontal_relative_speed_m_s, 4),

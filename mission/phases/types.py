@@ -152,7 +152,7 @@ class RecoveryModel:
     geometry: holdoff, glide path, gate, cone, contact; ``returning``/``approach``: the reference's
     limits relative to the carrier [m/s], [m/s^2]; the final descent's speed [m/s] and how long
     [s] the vehicle may take to line up at the gate; settle radius [m] / speed [m/s] / dwell [s]
-    (HOLDOFF -> APPROACH); carrier limits on the approach: state age [s], acceleration [m/s^2],
+    and the carrier's least speed [m/s] (HOLDOFF -> APPROACH); carrier limits on the approach: state age [s], acceleration [m/s^2],
     turn rate [rad/s]; ``carrier_lost_s`` [s] without a fresh state: fall back; attempts and
     timeout [s]; fallback "hold" (at ``fallback_height_m`` [m] above the dock,
     ``fallback_offset_m`` [m] off the carrier's path) or "land" (at ``fallback_point_ned_m``);
@@ -167,6 +167,7 @@ class RecoveryModel:
     settle_radius_m: float
     settle_speed_m_s: float
     settle_dwell_s: float
+    settle_carrier_speed_m_s: float
     docked_dwell_s: float
     carrier_max_age_s: float
     carrier_max_accel_m_s2: float

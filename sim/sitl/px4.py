@@ -37,8 +37,19 @@ from sim.net import stop_process
 
 ENV_VAR = "MARSUPIAL_PX4_SITL"
 QUAD_AIRFRAME = 10040  # sihsim_quadx
+ROVER_AIRFRAME = 10045  # SIH Ackermann rover: a carrier
+# The rover's speed loop, tuned (PX4's rover tuning: RO_MAX_THR_SPEED, then RO_SPEED_P / RO_SPEED_I).
+# Airframe 10045 ships it open loop (P = I = 0.001: throttle = speed / RO_MAX_THR_SPEED): the SIH
+# rover then sticks below ~0.3 throttle and runs 1.7 m/s at 0.31, so asked for 1 m/s it swung
+# 0.3-1.7 m/s (measured). RO_ACCEL_LIM also slews the throttle (RO_ACCEL_LIM / RO_MAX_THR_SPEED
+# per second) and RO_DECEL_LIM its fall: 6 for both lets it break free sooner and cut its throttle
+# sooner once free (bench/px4_rover_ramp.py, ramps to 1 m/s at 1 m/s^2: the leap peaks at 1.0-1.49
+# m/s with both at 6, 1.09-1.34 with RO_ACCEL_LIM 6 alone, 1.26 with both at 3; it varies run to
+# run). PX4 SITL sets PX4_PARAM_<name> from the environment at start.
+ROVER_PARAMS = {"RO_MAX_THR_SPEED": 4.0, "RO_SPEED_P": 0.5, "RO_SPEED_I": 0.1, "RO_ACCEL_LIM": 6.0, "RO_DECEL_LIM": 6.0}
 CLONE_NEWNET = 0x40000000
 GCS_PORT = 14550  # PX4's GCS link (it listens on 18570 + instance) sends here
+HOME_LAG_S = 3.5  # a home follows the carrier within this [s]: moved at most once a second, HOME_POSITION at 0.5 Hz
 _counter = itertools.count()
 T = TypeVar("T")
 
@@ -277,7 +288,12 @@ def patched_config(text: str, overrides: dict[str, str]) -> str:
 class Px4Flight:
     """The mission flown on a fresh PX4 in its own namespace: PX4, the carrier simulator and
     ``marsupial run`` as processes (``python -m mission.cli``), and an observer on PX4's GCS
-    link. Outputs in ``dir`` (``mission.out``, ``carrier.out``, ``px4-0.out``, ``flight/``)."""
+    link. Outputs in ``dir`` (``mission.out``, ``carrier.out``, ``px4-0.out``, ``flight/``).
+
+    ``rover=True``: the carrier is a second PX4 in the same namespace, the SIH Ackermann rover
+    (instance 1, sysid 2, :data:`ROVER_PARAMS`), driven by ``marsupial carrier`` with the config's
+    ``carrier.backend = "mavlink"``; both start at SIH's home, so their local frames coincide. The
+    GCS observer then hears both PX4s (sysid 1 and 2 on one port)."""
 
     dir: Path
     config: Path
@@ -294,6 +310,8 @@ class Px4Flight:
     settle_s: float = 0.0  # extra wall seconds after PX4 is armable before the carrier and the mission start
     ground_truth_hz: float = 0.0  # > 0: record PX4's estimate and SIH's truth at this rate (``truth.csv``)
     px4_params: dict[str, float] = field(default_factory=dict)  # PX4_PARAM_<name>: set by PX4 SITL at start
+    rover: bool = False  # the carrier a PX4 rover (instance 1) rather than the carrier simulator
+    rover_px4: Px4Sitl | None = None
     _files: list[Any] = field(default_factory=list)
 
     @property
@@ -319,11 +337,21 @@ class Px4Flight:
         self.px4 = Px4Sitl(self.build, self._rootfs, self.ns, speed_factor=self.speed_factor, out_dir=self.dir,
                            params=self.px4_params)
         self.px4.start()
-        self.gcs = gcs_probe(self.ns, history_len=100_000 if self.ground_truth_hz > 0 else 4000)
+        if self.rover:
+            self.rover_px4 = Px4Sitl(self.build, self._rootfs.parent / "rootfs1", self.ns, instance=1,
+                                     airframe=ROVER_AIRFRAME, speed_factor=self.speed_factor, out_dir=self.dir,
+                                     params=ROVER_PARAMS)
+            self.rover_px4.start()
+        self.gcs = gcs_probe(self.ns, history_len=100_000 if self.ground_truth_hz > 0 or self.rover else 4000)
         from sim.testing.probe import connect
 
         connect(self.gcs, timeout_s=20.0, heartbeat_period_s=0.5)
         self.armable_after_s = wait_armable(self.gcs)
+        if self.rover:  # the observer hears both: each PX4 says when its estimator has a home (armable)
+            from sim.net import wait_for
+
+            for name in ("px4-0.out", "px4-1.out"):
+                wait_for(lambda name=name: "home set" in self.text(name), 60.0, f"'home set' in {name}")
         if self.ground_truth_hz > 0:
             from sim.sitl import ground_truth
 
@@ -353,6 +381,34 @@ class Px4Flight:
             return float("nan")
         return float(np.linalg.norm(np.asarray(pts) - np.asarray(target_ned_m, dtype=float), axis=1).max())
 
+    def home_following(self, lag_s: float = HOME_LAG_S) -> dict[str, Any] | None:
+        """Did PX4's home follow the carrier (``rover=True``)? Each HOME_POSITION the passenger's
+        PX4 (sysid 1) sent on the GCS link, against the rover's LOCAL_POSITION_NED (sysid 2)
+        received on the same socket (one clock): ``homes`` (how many), ``moved_m`` (how far the home
+        travelled, first to last [m]), ``max_lagged_m`` (the largest over the homes of the distance
+        to the nearest point of the rover's track over the ``lag_s`` before it arrived [m]: the
+        home is moved at most once a second and streamed at 0.5 Hz), ``final_m`` (the last home
+        from the rover's position when it arrived [m]); horizontal. None without the rover's or the
+        homes' messages."""
+        import numpy as np
+
+        if self.gcs is None:
+            return None
+        homes = [(t, m.x, m.y) for t, m in self.gcs.timed("HOME_POSITION") if m.get_srcSystem() == 1]
+        track = [(t, m.x, m.y) for t, m in self.gcs.timed("LOCAL_POSITION_NED") if m.get_srcSystem() == 2]
+        if not homes or not track:
+            return None
+        h, r = np.asarray(homes), np.asarray(track)
+        lagged = []
+        for t, x, y in h:
+            window = r[(r[:, 0] <= t) & (r[:, 0] >= t - lag_s)]
+            if len(window):
+                lagged.append(float(np.hypot(window[:, 1] - x, window[:, 2] - y).min()))
+        last = r[np.searchsorted(r[:, 0], h[-1, 0], side="right") - 1]
+        return {"homes": len(h), "moved_m": round(float(np.hypot(*(h[-1, 1:] - h[0, 1:]))), 3),
+                "max_lagged_m": round(max(lagged), 3) if lagged else None,
+                "final_m": round(float(np.hypot(*(h[-1, 1:] - last[1:]))), 3)}
+
     def text(self, name: str) -> str:
         path = self.dir / name
         return path.read_text(errors="replace") if path.exists() else ""
@@ -380,8 +436,9 @@ class Px4Flight:
             with contextlib.suppress(LookupError):
                 self.write_ground_truth()
             self.gcs.close()
-        if self.px4 is not None:
-            self.px4.stop()
+        for px4 in (self.px4, self.rover_px4):
+            if px4 is not None:
+                px4.stop()
         if self.ns is not None:
             self.ns.close()
         for f in self._files:

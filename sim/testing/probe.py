@@ -109,6 +109,11 @@ class Probe:
         with self._cond:
             return [m for i, _, m in self.history.get(kind, ()) if i > after]
 
+    def timed(self, kind: str) -> list[tuple[float, Any]]:
+        """Every kept message of ``kind`` with its receive time (``time.monotonic()`` [s])."""
+        with self._cond:
+            return [(t, m) for _, t, m in self.history.get(kind, ())]
+
     def count_between(self, kind: str, t1_s: float, t2_s: float, timeout_s: float = 5.0) -> int:
         """How many ``kind`` messages the vehicle sent between its simulated times ``t1_s`` and
         ``t2_s``, using the time_boot_ms of LOCAL_POSITION_NED (received in the same order) as the

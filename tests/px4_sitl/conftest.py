@@ -3,9 +3,9 @@ SITL build (a folder with ``bin/px4`` and ``etc/``) and we may make network name
 
 The flights fly with at most :data:`PX4S_AT_ONCE` PX4 instances running together: two quadrotor
 flights at once, the rover pair (two PX4s of its own) alone. Each flight is real time (about
-40-70 s of wall time) but light (about a quarter of a core per PX4 with our controller and
-carrier), and each has a network namespace and a private ``/tmp`` of its own, so nothing is
-shared but the CPU. Not more: with six PX4s and eight of our processes starting together on two
+40-80 s of wall time, the rover pair's whole cycle about 120 s) but light (about a quarter of a
+core per PX4 with our controller and carrier), and each has a network namespace and a private
+``/tmp`` of its own, so nothing is shared but the CPU. Not more: with six PX4s and eight of our processes starting together on two
 cores SIH's sensors timed out in one run of three (``MAG #0 failed: TIMEOUT``, no baro) and PX4
 failed over to ALTCTL; with three (the rover pair beside a quadrotor flight) a CI run on a quiet
 machine lost baro and compass data just after take-off and PX4 fell back to ALTCTL.

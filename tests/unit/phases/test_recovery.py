@@ -358,3 +358,92 @@ def test_an_untrusted_carrier_state_on_the_approach_means_go_around_and_no_conta
     doubted = [r for r in reports if feed.from_s < r.t_s < feed.until_s]  # from the tick after it began
     assert doubted and all(r.phase is not Phase.DOCKED and r.decision.home_ned_m is None for r in doubted)
     assert controller.state.recovery.contact is not None and controller.state.recovery.contact["time_s"] >= feed.until_s
+
+
+def _fly_with(cfg, on_tick, **world_kwargs):
+    clock = ManualClock()
+    world = FakeWorld(clock, target_ned_m=np.asarray(cfg.scenario.target, dtype=float), **world_kwargs)
+    reports: list[TickReport] = []
+
+    def tick(r: TickReport) -> None:
+        reports.append(r)
+        on_tick(world, r)
+
+    controller = MissionController(cfg, world, world.feed, clock, publisher=world, on_tick=tick, command_thread=False)
+    return controller.run(), world, reports, controller
+
+
+def test_out_of_line_on_the_descent_the_passenger_holds_its_height_and_docks_at_the_same_approach(cfg):
+    """Pushed 0.25 m off the dock point (out of the 0.15 m contact radius, on the 0.5 m deck) just
+    after it began its descent, the passenger holds its height over the deck, lines up again and
+    docks at the same approach: no go-around."""
+    pushed: dict = {"t": None, "out": []}
+
+    def push(world: FakeWorld, r: TickReport) -> None:
+        if pushed["t"] is None and "lined up over the deck: descending" in r.decision.events:
+            pushed["t"] = r.t_s
+            world.vehicle_ned_m = world.vehicle_ned_m + np.array([0.0, 0.25, 0.0])
+        elif pushed["t"] is not None and r.phase is Phase.APPROACH and r.decision.dock is not None:
+            e = world.vehicle_ned_m - r.decision.dock
+            if float(norm(e[:2])) > cfg.recovery.contact_radius_m:
+                pushed["out"].append(float(e[2]))  # its height error while out of line [m] NED
+
+    outcome, world, reports, controller = _fly_with(cfg, push, recovery_velocity_ned_m_s=np.array([1.2, -0.9, 0.0]))
+    assert outcome.ok, (outcome.reason, outcome.detail)
+    assert pushed["t"] is not None and pushed["out"]
+    order = phase_order(reports)
+    assert Phase.GO_AROUND not in order and controller.state.recovery.attempts == 1, order
+    assert controller.state.recovery.contact is not None
+    # out of line, never down on the deck: always above the contact band
+    assert max(pushed["out"]) < -cfg.recovery.contact_height_m, max(pushed["out"])
+
+
+def test_the_holdoff_waits_for_the_carrier_to_move_when_told_to(cfg):
+    """recovery.settle_carrier_speed_m_s: a carrier that stands at first (a rover that must turn
+    onto its course) is not approached until it moves that fast."""
+    slow = with_overrides(cfg, {"recovery.settle_carrier_speed_m_s": 1.0})
+    started: dict = {"t": None, "track": []}
+
+    def start_late(world: FakeWorld, r: TickReport) -> None:
+        if r.phase is Phase.HOLDOFF and started["t"] is None:
+            started["t"] = r.t_s + 8.0  # it stands for 8 s after the passenger reached the holdoff point
+        if started["t"] is not None and r.t_s >= started["t"]:
+            world.recovery_velocity_ned_m_s = np.array([1.2, -0.9, 0.0])
+        started["track"].append((r.t_s, r.phase, world.carrier_ned_m.copy()))
+
+    outcome, world, reports, controller = _fly_with(slow, start_late, recovery_velocity_ned_m_s=np.zeros(3))
+    assert outcome.ok, (outcome.reason, outcome.detail)
+    track = started["track"]
+    k = next(i for i, (_, phase, _) in enumerate(track) if phase is Phase.APPROACH)
+    (t0, _, x0), (t1, _, x1) = track[k - 1], track[k]
+    assert t1 > started["t"]
+    assert float(norm((x1 - x0)[:2])) / (t1 - t0) >= 1.0 - 1e-6  # the carrier moved at least that fast
+    assert controller.state.recovery.attempts == 1 and controller.state.recovery.contact is not None
+
+
+def test_a_late_take_off_under_the_altitude_floor_is_led_by_the_reference(cfg):
+    """PX4 leaves the ground a second or two after the reference has climbed to the dock point.
+    Under the floor (safety.z_max_m) the floor's barrier must not take over the climb (it would
+    send velocity only, a climb rate falling with the distance to the floor, under which PX4
+    hovered just below it for 20 s): JOIN sends full setpoints there and the vehicle docks."""
+    floor = cfg.safety.z_max_m
+    assert floor is not None
+    seen: dict = {"join": 0, "full": 0, "riding_s": None}
+
+    def stuck_on_the_ground(world: FakeWorld, r: TickReport) -> None:
+        if r.phase is Phase.JOIN:
+            seen["t0"] = seen.get("t0", r.t_s)
+            if r.t_s - seen["t0"] < 3.0:  # it stays on the ground for 3 s
+                world.vehicle_ned_m = np.array([world.vehicle_ned_m[0], world.vehicle_ned_m[1], 0.0])
+            # the reference has reached the dock point (1.5 m at 1 m/s), the vehicle is still down
+            if r.t_s - seen["t0"] >= 2.0 and world.vehicle_ned_m[2] > floor and r.decision.setpoint is not None:
+                seen["join"] += 1
+                seen["full"] += r.decision.setpoint.position_ned_m is not None
+        if r.phase is Phase.RIDING and seen["riding_s"] is None:
+            seen["riding_s"] = r.t_s - seen["t0"]
+
+    outcome, world, reports, controller = _fly_with(cfg, stuck_on_the_ground,
+                                                    recovery_velocity_ned_m_s=np.array([1.2, -0.9, 0.0]))
+    assert outcome.ok, (outcome.reason, outcome.detail)
+    assert seen["join"] >= 40 and seen["full"] == seen["join"], seen
+    assert seen["riding_s"] is not None and seen["riding_s"] < 6.0, seen
