@@ -165,11 +165,12 @@ def open_session(section: ZenohSection) -> zenoh.Session:
     return session
 
 
-def close_session(session: zenoh.Session, timeout_s: float = CLOSE_TIMEOUT_S) -> None:
+def close_session(session: zenoh.Session, timeout_s: float = CLOSE_TIMEOUT_S) -> bool:
     """Close ``session`` and return within ``timeout_s`` of wall time, never raising: a close
     that fails (``zenoh.ZError``) is logged; one that takes longer is logged and left to itself (a
     daemon thread; :func:`close_abandoned` then tells the process to end at once), so the
-    command's own outcome and exit code stand."""
+    command's own outcome and exit code stand. Returns whether this close ended (failed or not)
+    within the bound."""
     done = threading.Event()
     failed: list[BaseException] = []
 
@@ -185,8 +186,10 @@ def close_session(session: zenoh.Session, timeout_s: float = CLOSE_TIMEOUT_S) ->
     if not done.wait(timeout_s):
         _abandoned.set()
         log.warning("zenoh session close still running after %.1f s (wall); leaving it", timeout_s)
-    elif failed:
+        return False
+    if failed:
         log.warning("zenoh session close failed: %s: %s", type(failed[0]).__name__, failed[0])
+    return True
 
 
 def close_abandoned() -> bool:
