@@ -8,7 +8,9 @@ core per PX4 with our controller and carrier), and each has a network namespace 
 ``/tmp`` of its own, so nothing is shared but the CPU. Not more: with six PX4s and eight of our processes starting together on two
 cores SIH's sensors timed out in one run of three (``MAG #0 failed: TIMEOUT``, no baro) and PX4
 failed over to ALTCTL; with three (the rover pair beside a quadrotor flight) a CI run on a quiet
-machine lost baro and compass data just after take-off and PX4 fell back to ALTCTL.
+machine lost baro and compass data just after take-off and PX4 fell back to ALTCTL; and once with
+two quadrotor flights that started together ("No valid data from Baro 0", "invalid setpoints",
+ALTCTL 4 s into OFFBOARD), so jobs start :data:`STAGGER_S` apart.
 
 A flight is a *job* (a function of its folder and the PX4 build that returns what the test
 checks), registered with :func:`px4_job` and named by the test with
@@ -17,7 +19,9 @@ when the first of them asks, and each test waits for its own (an assertion error
 that job's test)."""
 from __future__ import annotations
 
+import math
 import threading
+import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
@@ -43,6 +47,7 @@ def px4_job(name: str, px4s: int = 1) -> Callable[[Job], Job]:
 
 _SELECTED = pytest.StashKey[list[str]]()
 PX4S_AT_ONCE = 2  # PX4 instances running together (see above)
+STAGGER_S = 10.0  # [s] wall time between two jobs' starts (their PX4s' boot and take-off)
 
 
 @pytest.hookimpl(trylast=True)  # after -k / -m deselected theirs: fly only what will be checked
@@ -63,11 +68,18 @@ def px4_jobs(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFa
     names = request.config.stash.get(_SELECTED, [])
     slots = threading.Condition()
     free = [PX4S_AT_ONCE]
+    last_start = [-math.inf]
 
     def fly(job: Job, px4s: int, directory: Path) -> Any:
         with slots:  # a job waits until all the PX4s it needs are free
             slots.wait_for(lambda: free[0] >= px4s)
             free[0] -= px4s
+            # and starts its PX4 at least STAGGER_S after the last one started: two PX4s booting
+            # together starved SIH's simulated baro, and PX4 failed over to ALTCTL after take-off
+            wait_s = last_start[0] + STAGGER_S - time.monotonic()
+            last_start[0] = time.monotonic() + max(wait_s, 0.0)
+        if wait_s > 0:
+            time.sleep(wait_s)
         try:
             return job(directory, build)
         finally:
