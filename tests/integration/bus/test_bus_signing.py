@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import threading
+import time
 from pathlib import Path
 
 import pytest
@@ -54,9 +55,22 @@ def test_signed_states_bind_to_their_signer_and_no_copy_replay_or_foreign_key_ge
             CarrierPublisher(a, "p", auth=AUTH) as pub:
         capture = Capture(b, state_key)
         wait_for(lambda: pub.matched, what="publisher matched")
-        for seq in range(5):
+        # pub.matched says one subscription reached the publisher, not both (the feed's and the
+        # capture's): publish until both hear the stream, then until both have its newest state
+        seq, deadline = 0, time.monotonic() + 10.0
+        while not (feed.latest() is not None and capture.samples):
+            assert time.monotonic() < deadline, "no signed state reached both the feed and the capture"
             pub.publish(_state(seq))
-        wait_for(lambda: feed.counters["accepted"] == 5 and len(capture.samples) == 5, what="5 signed states")
+            seq += 1
+            time.sleep(0.05)
+        for _ in range(5):
+            pub.publish(_state(seq))
+            seq += 1
+        newest = seq - 1
+        wait_for(lambda: feed.latest().state.seq == newest and json.loads(capture.samples[-1][0])["seq"] == newest,  # type: ignore[union-attr]
+                 what="the newest signed state at both")
+        accepted = feed.counters["accepted"]
+        assert accepted >= 5 and not feed.counters["dropped"], feed.counters
         assert feed.counters["bound_source"].startswith("signer:") and feed.counters["signed"]
         payload, attachment, source = capture.samples[-1]
         # a copier: the real source id, sequence + 1, no tag (today's take-over without a key)
@@ -69,10 +83,10 @@ def test_signed_states_bind_to_their_signer_and_no_copy_replay_or_foreign_key_ge
         a.put(state_key, payload, attachment=attachment, source_info=zenoh.SourceInfo(source, 10**6 + 1))
         wait_for(lambda: sum(feed.counters["dropped"].values()) == 3, what="3 drops")
         assert feed.counters["dropped"] == {"unsigned": 1, "signature": 1, "replay": 1}
-        for seq in range(5, 8):  # the honest stream goes on: its sequence is its own
-            pub.publish(_state(seq))
-        wait_for(lambda: feed.counters["accepted"] == 8, what="8 accepted")
-        assert feed.latest().state.seq == 7  # type: ignore[union-attr]
+        for k in range(3):  # the honest stream goes on: its sequence is its own
+            pub.publish(_state(seq + k))
+        wait_for(lambda: feed.counters["accepted"] == accepted + 3, what="3 more accepted")
+        assert feed.latest().state.seq == seq + 2  # type: ignore[union-attr]
         capture.close()
 
 
