@@ -4,6 +4,8 @@ session while the real passenger rides, and, with the pair's key, the same unsig
 the passenger's own source id copied. The carrier ignores them all."""
 from __future__ import annotations
 
+import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -45,15 +47,29 @@ def _steps(sim: CarrierSim, clock: ManualClock, n: int) -> float:
     return float(np.linalg.norm(TARGET[:2] - sim.position_m[:2]))
 
 
+def _heard(sim: CarrierSim, reason: str, put: Callable[[int], None], timeout_s: float = 10.0) -> int:
+    """Put (``put(k)``, k = 0, 1, ...) until the carrier's passenger feed has dropped one for
+    ``reason``: the rogue's session has then learnt of the feed's subscription (a put before that
+    reaches nobody, and a fresh session learns it when it will). Returns that drop count."""
+    deadline, k = time.monotonic() + timeout_s, 0
+    while not sim.passenger.counters["dropped"].get(reason, 0):
+        assert time.monotonic() < deadline, f"no put of the rogue reached the carrier's feed ({reason})"
+        put(k)
+        k += 1
+        time.sleep(0.05)
+    return int(sim.passenger.counters["dropped"][reason])
+
+
 def test_fake_riding_before_any_passenger_and_a_flood_while_it_rides_are_ignored() -> None:
     clock = ManualClock()
     with sessions(2) as (sa, rogue, sb), CarrierSim(_cfg(), clock, sa) as sim:
         start = _steps(sim, clock, 1)
         # on main a RIDING from anyone, before any passenger existed, sent the carrier off alone;
         # these claim to ride right on the dock point, from the first status on
+        heard = _heard(sim, "unbound", lambda k: rogue.put(KEY, _fake("RIDING", 10**6 + k), congestion_control=BLOCK))
         for k in range(30):
-            rogue.put(KEY, _fake("RIDING", 10**6 + k), congestion_control=BLOCK)
-        wait_for(lambda: sim.passenger.counters["dropped"].get("unbound", 0) == 30, what="30 unbound")
+            rogue.put(KEY, _fake("RIDING", 10**6 + 1000 + k), congestion_control=BLOCK)
+        wait_for(lambda: sim.passenger.counters["dropped"].get("unbound", 0) >= heard + 30, what="30 more unbound")
         assert _steps(sim, clock, 60) == start and sim.mode is CarrierMode.WAITING  # it never moved
         passenger = Passenger(sb, "trust", clock, sim)
         try:
@@ -94,9 +110,13 @@ def test_with_the_key_unsigned_statuses_with_the_passenger_s_own_source_id_are_d
             wait_for(lambda: _seen(sim, seq), what="the signed RIDING")
             before = _steps(sim, clock, 30)
             source = zenoh.SourceInfo(passenger.pub._state.id, 10**6)  # copied, as anyone on the network sees it
-            for k in range(100):
+            def copy(k: int) -> None:
                 rogue.put(KEY, _fake(("SEPARATED", "ABORT")[k % 2], 10**7 + k), source_info=source, congestion_control=BLOCK)
-            wait_for(lambda: sim.passenger.counters["dropped"].get("unsigned", 0) == 100, what="100 unsigned")
+
+            heard = _heard(sim, "unsigned", copy)
+            for k in range(100):
+                copy(1000 + k)
+            wait_for(lambda: sim.passenger.counters["dropped"].get("unsigned", 0) >= heard + 100, what="100 more unsigned")
             seq = passenger.say("RIDING")
             wait_for(lambda: _seen(sim, seq), what="the signed RIDING after the copies")
             assert _steps(sim, clock, 10) < before and sim.mode is CarrierMode.APPROACHING
