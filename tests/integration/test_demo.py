@@ -53,6 +53,10 @@ def test_two_lockstep_runs_give_the_same_flight(tmp_path, demo_flight):
         summary.get("carrier_feed", {}).pop("bound_source", None)  # a Zenoh session id: new in every run
         for counter in ("rx_bytes", "rx_messages", "rx_ignored", "tx_messages", "tx_heartbeats"):  # + the handshake
             summary.get("link", {}).pop(counter, None)
+        # how many barrier rounds the processes' start took, and the PX4 home updates sent at most
+        # once a wall second from the command thread: how the run went, not the flight
+        summary.get("lockstep", {}).pop("barriers", None)
+        summary.pop("home", None)
     assert a["ticks"] > 500 and a["phase"] == "DONE" and a["p1"] and a["p2"] and a["p3"]
     for summary in (a, b):  # every step in step: no participant dropped as silent, no fall-back, no sample lost
         lock = summary["lockstep"]
