@@ -97,9 +97,15 @@ def test_the_carrier_hears_only_signed_statuses() -> None:
     with peer_pair() as (a, b), PassengerFeed(b, "p", clock, auth=AUTH) as feed, \
             PassengerPublisher(a, "p", auth=AUTH) as pub:
         wait_for(lambda: pub.matched, what="publisher matched")
-        for seq in range(3):
+        seq, deadline = 0, time.monotonic() + 10.0
+        while not feed.counters["accepted"]:  # until the feed hears the stream (its first may be lost)
+            assert time.monotonic() < deadline, "no signed status reached the feed"
             pub.publish(PassengerStatus("PREFLIGHT", 0.1 * seq, seq, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]))
-        wait_for(lambda: feed.counters["accepted"] == 3, what="3 statuses")
+            seq += 1
+            time.sleep(0.05)
+        for k in range(3):
+            pub.publish(PassengerStatus("PREFLIGHT", 0.1 * (seq + k), seq + k, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]))
+        wait_for(lambda: feed.latest().status.seq == seq + 2, what="3 more statuses")  # type: ignore[union-attr]
         a.put(status_key, fake.to_json())  # a flood of unsigned SEPARATED
         a.put(status_key, fake.to_json())
         wait_for(lambda: feed.counters["dropped"].get("unsigned") == 2, what="2 unsigned drops")
