@@ -124,6 +124,10 @@ def on_dock(position_ned_m: np.ndarray, dock_ned_m: np.ndarray, tolerance_m: flo
     return float(np.linalg.norm(gap)) <= tolerance_m + DOCK_SLACK_M
 
 
+def _aborted(view: PassengerView) -> str:
+    return f"passenger aborted: {view.reason}" if view.reason else "passenger aborted"
+
+
 def next_mode(mode: CarrierMode, view: PassengerView) -> tuple[CarrierMode, str]:
     """The mode after ``mode`` given ``view``, and why (``""`` when unchanged)."""
     if mode is CarrierMode.STOPPED:
@@ -139,9 +143,9 @@ def next_mode(mode: CarrierMode, view: PassengerView) -> tuple[CarrierMode, str]
         return (mode, "") if view.lost else (CarrierMode.RECOVERING, f"passenger phase {view.phase}")
     if duty is Duty.REPOSITION and mode in (CarrierMode.RECOVERING, CarrierMode.PAUSED) and not view.lost:
         return CarrierMode.REPOSITIONING, f"passenger phase {view.phase}: leg {view.leg + 1} starts farther out"
-    if mode is CarrierMode.REPOSITIONING:
+    if mode in (CarrierMode.REPOSITIONING, CarrierMode.RECOVERING):
         if duty is Duty.STOP:
-            return CarrierMode.STOPPED, "passenger aborted"
+            return CarrierMode.STOPPED, _aborted(view)
         if view.lost:
             return CarrierMode.PAUSED, f"passenger lost: {view.lost}"
         if duty is Duty.CARRY:
@@ -149,22 +153,12 @@ def next_mode(mode: CarrierMode, view: PassengerView) -> tuple[CarrierMode, str]
         if duty is Duty.RELEASED:
             return CarrierMode.SEPARATED, f"passenger phase {view.phase}"
         return mode, ""
-    if mode is CarrierMode.RECOVERING:
-        if duty is Duty.STOP:
-            return CarrierMode.STOPPED, "passenger aborted"
-        if view.lost:
-            return CarrierMode.PAUSED, f"passenger lost: {view.lost}"
-        if duty is Duty.RELEASED:
-            return CarrierMode.SEPARATED, f"passenger phase {view.phase}"
-        if duty is Duty.CARRY:
-            return CarrierMode.APPROACHING, "passenger riding again"
-        return mode, ""
     if mode is CarrierMode.SEPARATED:
         return mode, ""
     if view.phase is not None and (duty is Duty.RELEASED or view.separated):
         return CarrierMode.SEPARATED, f"passenger phase {view.phase}"
     if duty is Duty.STOP:
-        return CarrierMode.STOPPED, f"passenger aborted: {view.reason}" if view.reason else "passenger aborted"
+        return CarrierMode.STOPPED, _aborted(view)
     if mode is CarrierMode.APPROACHING and view.lost:
         return CarrierMode.PAUSED, f"passenger lost: {view.lost}"
     if mode is CarrierMode.APPROACHING and view.holding:
