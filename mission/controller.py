@@ -585,6 +585,7 @@ def mission_info(cfg: Config) -> dict[str, Any]:
         "ride": cfg.mission.ride,
         "deck_clear_height_m": cfg.mission.deck_clear_height_m,
         "targets": cfg.scenario.legs(),
+        "frame": cfg.scenario.frame,
         "recovery": cfg.recovery.model_dump(mode="json") if cfg.mission.final_action == "return" else None,
     }
 

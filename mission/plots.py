@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import matplotlib
 
@@ -20,11 +21,15 @@ from matplotlib.patches import Circle, Rectangle  # noqa: E402
 from mission.core.docking import DockingGeometry, course  # noqa: E402
 from mission.core.law import norm  # noqa: E402
 
+if TYPE_CHECKING:
+    from mission.record import FlightRecord
+
 
 @dataclass(frozen=True)
 class Trajectories:
-    """What a figure needs. t [s] (K,); x_c, x_p [m] (K, n); target [m] (n,); separation_time_s
-    (or None); obstacles as (center, radius) pairs; frame "local_ned" or "xyz"."""
+    """What a figure needs. t [s] (K,); x_c, x_p [m] (K, n); target [m] (n,), or (K, n) for a
+    flight of several targets (each tick's own leg's target: the distances are measured to it);
+    separation_time_s (or None); obstacles as (center, radius) pairs; frame "local_ned" or "xyz"."""
 
     t: np.ndarray
     x_c: np.ndarray
@@ -68,14 +73,18 @@ def plot_run(tr: Trajectories, path: str | Path) -> Path:
     n = tr.x_c.shape[-1]
     fig = plt.figure(figsize=(12, 5.2))
     ax = fig.add_subplot(1, 2, 1, projection="3d" if n == 3 else None)
-    c, p, tgt = _display(tr.x_c, tr.frame), _display(tr.x_p, tr.frame), _display(tr.target, tr.frame)
+    c, p = _display(tr.x_c, tr.frame), _display(tr.x_p, tr.frame)
+    targets = np.unique(np.atleast_2d(tr.target), axis=0)  # each target once, for drawing
+    several = len(targets) > 1
     labels = ("east [m]", "north [m]", "up [m]") if tr.frame == "local_ned" else ("x [m]", "y [m]", "z [m]")
     sep_i = None if tr.separation_time_s is None else int(np.searchsorted(tr.t, tr.separation_time_s))
     sep_i = None if sep_i is None or sep_i >= len(c) else sep_i
     z = {} if n == 3 else {"zorder": 5}
     ax.plot(*c.T, color="tab:blue", lw=2, label="carrier")
     ax.plot(*p.T, color="tab:orange", lw=1.5, ls="--", label="passenger")
-    ax.scatter(*tgt, color="red", marker="*", s=160, label="target", **z)
+    for i, target in enumerate(targets):
+        ax.scatter(*_display(target, tr.frame), color="red", marker="*", s=160,
+                   label=("targets" if several else "target") if i == 0 else None, **z)
     ax.scatter(*c[0], color="tab:blue", marker="s", s=50, label="carrier start", **z)
     ax.scatter(*c[-1], facecolor="white", edgecolor="tab:blue", marker="X", s=90, lw=1.5, label="carrier end", **z)
     if sep_i is not None:
@@ -86,9 +95,9 @@ def plot_run(tr: Trajectories, path: str | Path) -> Path:
         for i, (centre, radius) in enumerate(tr.obstacles):
             ax.add_patch(Circle(_display(np.asarray(centre), tr.frame)[:2], radius, color="grey", alpha=0.5,
                                 label="obstacle" if i == 0 else None))
-        if tr.bc_m:
-            ax.add_patch(Circle(tgt[:2], tr.bc_m, fill=False, ls=":", color="red", alpha=0.6,
-                                label=f"b·c = {tr.bc_m:g} m around the target"))
+        for i, target in enumerate(targets if tr.bc_m else []):
+            ax.add_patch(Circle(_display(target, tr.frame)[:2], tr.bc_m, fill=False, ls=":", color="red", alpha=0.6,
+                                label=f"b·c = {tr.bc_m:g} m around the target{'s' if several else ''}" if i == 0 else None))
         ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel(labels[0])
     ax.set_ylabel(labels[1])
@@ -98,7 +107,7 @@ def plot_run(tr: Trajectories, path: str | Path) -> Path:
     ax2 = fig.add_subplot(1, 2, 2)
     d = {"e_pc": norm(tr.x_p - tr.x_c), "e_tc": norm(tr.target - tr.x_c), "e_pt": norm(tr.x_p - tr.target)}
     for key, label, style in DISTANCE_STYLES:
-        ax2.plot(tr.t, d[key], label=label, **style)
+        ax2.plot(tr.t, d[key], label=label + (" (its leg's)" if several and key != "e_pc" else ""), **style)
     if tr.separation_time_s is not None:
         ax2.axvline(tr.separation_time_s, color="magenta", ls=":", label=f"separation, t = {tr.separation_time_s:.2f} s")
     if tr.bc_m:
@@ -115,6 +124,49 @@ def plot_run(tr: Trajectories, path: str | Path) -> Path:
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def record_trajectories(rec: FlightRecord, title: str, whole_flight: bool = False) -> Trajectories | None:
+    """The paper figure's input from a flight record (``record.csv`` of a flight, or a simulated
+    one): the carrier drawn as its dock point (the law's carrier position for the passenger),
+    its target (``info["target_ned_m"]``; ``whole_flight`` with several targets: each tick's own
+    leg's, cut at the legs' ends ``info["legs_done"][k]["end_s"]``), time from its first RIDING
+    tick (t = 0 as in the paper; the first tick with both positions if it never rode). None: no
+    tick has both."""
+    x_p, x_c = rec.vec("x_p"), rec.vec("dock")
+    ok = np.isfinite(x_p).all(axis=1) & np.isfinite(x_c).all(axis=1)
+    if not ok.any():
+        return None
+    riding = np.flatnonzero(rec.phase == "RIDING")
+    t0 = rec.t[riding[0]] if len(riding) else rec.t[ok][0]
+    origin = "start of riding" if len(riding) else "first tick with both positions (never rode)"
+    sep, info = rec.info.get("separation_time_s"), rec.info
+    target = np.asarray(info["target_ned_m"])
+    targets = info.get("targets") or []
+    if whole_flight and len(targets) > 1:
+        ends = [leg["end_s"] for leg in info.get("legs_done") or []]
+        leg = np.minimum(np.searchsorted(ends, rec.t[ok], side="left"), len(targets) - 1)
+        target = np.asarray(targets, dtype=float)[leg]
+    return Trajectories(t=rec.t[ok] - t0, x_c=x_c[ok], x_p=x_p[ok], target=target,
+                        separation_time_s=None if sep is None else sep - t0,
+                        obstacles=[(np.asarray(o["center"]), o["radius"]) for o in info.get("obstacles", [])],
+                        frame=info.get("frame", "local_ned"),
+                        title=f"{title} (carrier = its dock point; t = 0 at the {origin}, mission clock {t0:.2f} s)",
+                        bc_m=info.get("bc_m"))
+
+
+def plot_legs(rec: FlightRecord, beside: Path, title: str) -> list[Path]:
+    """A flight of several targets: each flown leg's paper figure, judged against its own target
+    (:meth:`~mission.record.FlightRecord.legs`), at ``<stem>-leg<k><suffix>`` beside ``beside``
+    (k from 1). Empty for a one-target flight."""
+    if len(rec.info.get("targets") or []) < 2:
+        return []
+    out: list[Path] = []
+    for leg in rec.legs():
+        tr = None if leg.record is None else record_trajectories(leg.record, f"{title}, leg {leg.k + 1}")
+        if tr is not None:
+            out.append(plot_run(tr, beside.with_name(f"{beside.stem}-leg{leg.k + 1}{beside.suffix}")))
+    return out
 
 
 # ----------------------------------------------------------------------------------------- recovery

@@ -185,6 +185,40 @@ class FlightRecord:
         return FlightRecord(t=self.t[keep], phase=self.phase[keep], cols={k: v[keep] for k, v in self.cols.items()},
                             info=info)
 
+    def legs(self) -> list[Leg]:
+        """The record cut into its legs, one per target of ``info["targets"]`` (one leg for a
+        one-target flight): each flown leg's ticks with its own target (and, once done, its
+        separation, anchor, contact and outcome) in its info; a leg not flown has no record."""
+        done = self.info.get("legs_done") or []
+        targets = self.info.get("targets") or [self.info["target_ned_m"]]
+        out: list[Leg] = []
+        start = -np.inf
+        for k, target in enumerate(targets):
+            if k < len(done):
+                leg = done[k]
+                info = {**self.info, "target_ned_m": target, "separation_time_s": leg["separation_time_s"],
+                        "anchor_ned_m": leg["anchor_ned_m"], "recovered": {"contact": leg["contact"], "fallback": None}}
+                end = leg["end_s"] if k + 1 < len(targets) else np.inf
+                out.append(Leg(k, list(target), self.between(start, end, info), leg["outcome"]))
+                start = leg["end_s"]
+            elif k == len(done) and self.info.get("legs_skipped") is None and len(self.t) and self.t[-1] > start:
+                out.append(Leg(k, list(target), self.between(start, np.inf, {**self.info, "target_ned_m": target}),
+                               "unfinished"))
+            else:
+                out.append(Leg(k, list(target), None, f"skipped: {self.info.get('legs_skipped') or 'not reached'}"))
+        return out
+
+
+@dataclass(frozen=True)
+class Leg:
+    """One leg of a flight record: its index k (from 0), its target [m] NED, its ticks (None: not
+    flown) and its outcome ("docked", "unfinished", "skipped: ...", ...)."""
+
+    k: int
+    target_ned_m: list[float]
+    record: FlightRecord | None
+    outcome: str
+
 
 def read_record(path: str | Path) -> FlightRecord:
     """A flight record read back: a log directory's ``record.csv`` with its ``mission.json``;
@@ -257,25 +291,13 @@ def summary_of(r: FlightRecord) -> dict[str, Any]:
     targets ``legs``: the figures of each leg (its slice of the record, judged against its own
     target) with its outcome; the flight's P1-P3 then hold only if every leg flown holds them."""
     out = figures(r)
-    done = r.info.get("legs_done") or []
-    targets = r.info.get("targets") or []
-    if len(targets) > 1:
-        legs, start = [], -np.inf
-        for k, target in enumerate(targets):
-            if k < len(done):
-                leg = done[k]
-                info = {**r.info, "target_ned_m": target, "separation_time_s": leg["separation_time_s"],
-                        "anchor_ned_m": leg["anchor_ned_m"],
-                        "recovered": {"contact": leg["contact"], "fallback": None}}
-                end = leg["end_s"] if k + 1 < len(targets) else np.inf
-                fig = figures(r.between(start, end, info))
-                fig.update(leg=k, target_ned_m=target, outcome=leg["outcome"])
-                start = leg["end_s"]
-            elif k == len(done) and r.info.get("legs_skipped") is None and len(r.t) and r.t[-1] > start:
-                fig = {"leg": k, "target_ned_m": target, **figures(r.between(start, np.inf, {**r.info, "target_ned_m": target})),
-                       "outcome": "unfinished"}
-            else:
-                fig = {"leg": k, "target_ned_m": target, "outcome": f"skipped: {r.info.get('legs_skipped') or 'not reached'}"}
+    if len(r.info.get("targets") or []) > 1:
+        legs = []
+        for leg in r.legs():
+            fig = {"leg": leg.k, "target_ned_m": leg.target_ned_m}
+            if leg.record is not None:
+                fig.update(figures(leg.record))
+            fig["outcome"] = leg.outcome
             legs.append(fig)
         out["legs"] = legs
         flown = [leg for leg in legs if "p1" in leg]

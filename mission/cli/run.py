@@ -11,7 +11,6 @@ from pathlib import Path
 from typing import Any, Iterator
 
 import click
-import numpy as np
 
 from mission.bus.auth import bus_auth
 from mission.bus.bridge import CarrierFeed, PassengerPublisher, open_session, zenoh_config
@@ -324,29 +323,18 @@ def plot(log_dir: str, out_path: str | None, panels: bool = False) -> int:
 def plot_flight(log_dir: Path, out_path: str | Path) -> Path:
     """The paper-style figure of one flight log (a directory, or its flight.mcap); times from
     the start of riding (t = 0)."""
-    from mission.plots import Trajectories, plot_run
+    from mission.plots import plot_legs, plot_run, record_trajectories
 
     if log_dir.is_dir() and not (log_dir / "record.csv").is_file() and not (log_dir / "flight.mcap").is_file():
         raise ConfigError("LOG_DIR", str(log_dir), "has mission.json but no record.csv: the flight never started")
     rec = read_record(log_dir)
-    # The law's carrier position for the passenger is the dock point (carrier + offset).
-    x_p, x_c = rec.vec("x_p"), rec.vec("dock")
-    ok = np.isfinite(x_p).all(axis=1) & np.isfinite(x_c).all(axis=1)
-    if not ok.any():
+    name = log_dir.name if log_dir.is_dir() else f"{log_dir.parent.name}/{log_dir.name}"
+    tr = record_trajectories(rec, f"flight {name}", whole_flight=True)
+    if tr is None:
         raise ConfigError("LOG_DIR", str(log_dir), "the record holds no tick with both vehicle and carrier positions "
                           "(the mission ended before it flew: see its summary.json)")
-    info = rec.info
-    name = log_dir.name if log_dir.is_dir() else f"{log_dir.parent.name}/{log_dir.name}"
-    riding = np.flatnonzero(rec.phase == "RIDING")
-    t0 = rec.t[riding[0]] if len(riding) else rec.t[ok][0]
-    sep = info.get("separation_time_s")
-    origin = "start of riding" if len(riding) else "first tick with both positions (never rode)"
-    tr = Trajectories(t=rec.t[ok] - t0, x_c=x_c[ok], x_p=x_p[ok], target=np.asarray(info["target_ned_m"]),
-                      separation_time_s=None if sep is None else sep - t0,
-                      obstacles=[(np.asarray(o["center"]), o["radius"]) for o in info.get("obstacles", [])],
-                      frame="local_ned", title=f"flight {name} (carrier = its dock point; t = 0 at the {origin}, "
-                      f"mission clock {t0:.2f} s)", bc_m=info.get("bc_m"))
     out = plot_run(tr, out_path)
+    plot_legs(rec, Path(out), f"flight {name}")
     plot_recovery_of(rec, out, f"flight {name}")
     return out
 

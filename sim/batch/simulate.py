@@ -14,7 +14,7 @@ from mission.config.schema import Config, load_config
 from sim.batch import closed_loop, recovery, recovery_mc
 from sim.batch.closed_loop import ClosedLoopResult, as_flown, is_mission_config, model_from_config, random_scenarios, simulate_config
 from mission.phases import Phase
-from mission.plots import Trajectories, plot_run
+from mission.plots import Trajectories, plot_legs, plot_run
 
 log = logging.getLogger(__name__)
 
@@ -145,7 +145,7 @@ def run_legs(cfg: Config, name: str, plot_path: str | None, as_json: bool) -> in
     legs = s.get("legs") or []
     ok = bool(legs) and all(leg.get("p1") and leg.get("p2") and leg.get("p3") for leg in legs) \
         and flight.state.phase is Phase.DONE
-    written = draw_legs(flight, cfg, plot_path, name) if plot_path else []
+    written = plot_legs(flight.record, Path(plot_path), name) if plot_path else []
     if as_json:
         click.echo(json.dumps(s, indent=2, default=float))
     else:
@@ -159,31 +159,6 @@ def run_legs(cfg: Config, name: str, plot_path: str | None, as_json: bool) -> in
         for out in written:
             click.echo(f"plot written to {out}")
     return 0 if ok else 1
-
-
-def draw_legs(flight: recovery.Flight, cfg: Config, plot_path: str, name: str) -> list[Path]:
-    """Each leg's paper figure (the carrier drawn as its dock point, as ``marsupial plot`` does;
-    time from the leg's start of riding) at ``<stem>-leg<k><suffix>`` beside ``plot_path``."""
-    rec, base = flight.record, Path(plot_path)
-    out: list[Path] = []
-    start = -np.inf
-    for k, leg in enumerate(flight.state.legs_done):
-        part = rec.between(start, leg["end_s"], rec.info)
-        start = leg["end_s"]
-        x_p, x_c = part.vec("x_p"), part.vec("dock")
-        ok = np.isfinite(x_p).all(axis=1) & np.isfinite(x_c).all(axis=1)
-        riding = np.flatnonzero(part.phase == "RIDING")
-        if not ok.any() or not len(riding):
-            continue
-        t0 = part.t[riding[0]]
-        sep = leg["separation_time_s"]
-        tr = Trajectories(t=part.t[ok] - t0, x_c=x_c[ok], x_p=x_p[ok], target=np.asarray(cfg.scenario.legs()[k]),
-                          separation_time_s=None if sep is None else sep - t0,
-                          obstacles=[(np.array(o.center), o.radius) for o in cfg.scenario.obstacles], frame=cfg.scenario.frame,
-                          title=f"{name}, leg {k + 1} (carrier = its dock point; t = 0 at the leg's start of riding)",
-                          bc_m=cfg.law.params().separation_distance_m)
-        out.append(plot_run(tr, base.with_name(f"{base.stem}-leg{k + 1}{base.suffix}")))
-    return out
 
 
 def _finite_max(values: np.ndarray) -> float | None:

@@ -118,3 +118,23 @@ def test_simulate_refuses_the_deck_ride(capsys):
     code = main(["simulate", str(CYCLE), "--no-progress"])
     out, err = capsys.readouterr()
     assert code == 2 and "error: mission.ride = 'deck'" in err and "marsupial demo" in err and out == "", err
+
+
+def test_the_flight_figure_measures_each_leg_against_its_own_target(cycle, tmp_path):
+    """The whole flight's figure (``marsupial plot``'s flight.png) measures |e_tc| and |e_pt| to
+    each tick's own leg's target, not to target 1 over the whole flight: at each leg's separation
+    the carrier's dock point is b c = 8 m from the figure's target; each leg gets its figure."""
+    from mission.plots import plot_legs, record_trajectories
+
+    flight = fly(cycle, configured())
+    rec = flight.record
+    tr = record_trajectories(rec, "cycle", whole_flight=True)
+    assert tr is not None and tr.target.shape == tr.x_c.shape
+    t0 = rec.t[np.flatnonzero(rec.phase == "RIDING")[0]]
+    for k, leg in enumerate(flight.state.legs_done):
+        i = int(np.searchsorted(tr.t, leg["separation_time_s"] - t0))
+        assert tr.target[i].tolist() == cycle.scenario.legs()[k]
+        assert abs(float(np.linalg.norm(tr.target[i] - tr.x_c[i])) - 8.0) <= 0.1
+    written = plot_legs(rec, tmp_path / "flight.png", "cycle")
+    assert [p.name for p in written] == ["flight-leg1.png", "flight-leg2.png"]
+    assert all(p.stat().st_size > 10_000 for p in written)
