@@ -565,6 +565,8 @@ def with_overrides(cfg: Config, overrides: dict[str, Any]) -> Config:
     as is), revalidated. What the file left to its defaults stays unset in the copy
     (:func:`mission.config.required.stated` still tells)."""
     data = cfg.model_dump(exclude_unset=True)
+    if overrides.get("scenario.targets") is not None and overrides.get("scenario.target") is None:
+        data.get("scenario", {}).pop("target", None)  # derived from the old targets: the new first one stands
     for key, value in overrides.items():
         if value is None:
             continue

@@ -66,7 +66,7 @@ def test_two_targets_ringing_a_third_leave_it_no_place_to_start(cycle):
     apart they leave gaps, and the file loads."""
     def three(gap_m: float) -> dict:
         targets = [[40.0, 30.0 - gap_m, -0.5], [40.0, 30.0, -0.5], [40.0 - gap_m, 30.0, -0.5]]
-        return {"scenario.carrier_start": [0.0, -40.0, 0.0], "scenario.target": targets[0], "scenario.targets": targets,
+        return {"scenario.carrier_start": [0.0, -40.0, 0.0], "scenario.targets": targets,
                 "scenario.obstacles": [{"center": [40.0 + gap_m, 30.0, 0.0], "radius": 8.0},
                                        {"center": [40.0, 30.0 + gap_m, 0.0], "radius": 8.0}]}
     with pytest.raises(ConfigError) as exc:
@@ -77,3 +77,15 @@ def test_two_targets_ringing_a_third_leave_it_no_place_to_start(cycle):
 
 def test_the_shipped_cycle_loads(cycle):
     assert cycle.scenario.legs() == [[24.0, 18.0, -5.0], [44.0, 4.0, -4.0]]
+
+
+def test_overriding_the_targets_moves_the_first_target_with_them(cycle):
+    """``scenario.target`` is the first of ``scenario.targets``: an override of the list alone
+    (``--set scenario.targets=...``, a Monte-Carlo's scenario) moves it too, where it used to be
+    refused as differing from the old first target; both given and different is still refused."""
+    new = [[30.0, 20.0, -5.0], [44.0, 4.0, -4.0]]
+    moved = with_overrides(cycle, {"scenario.targets": new})
+    assert moved.scenario.target == new[0] and moved.scenario.legs() == new
+    with pytest.raises(ConfigError) as exc:
+        with_overrides(cycle, {"scenario.targets": new, "scenario.target": [24.0, 18.0, -5.0]})
+    assert exc.value.field == "scenario.target"
