@@ -25,7 +25,7 @@ from mission.bus.session import close_session
 from mission.time.clock import Clock, LockstepClock, ScaledClock
 from mission.config.required import CARRIER_FIELDS, require_stated
 from mission.config.schema import Config, load_config, with_overrides
-from mission.time.lockstep import ZenohUpstream, clock_keys
+from mission.bus.lockstep import ZenohUpstream, clock_keys
 
 log = logging.getLogger(__name__)
 
@@ -37,7 +37,7 @@ def main(cfg: Config, speed: float = 1.0, duration_s: float | None = None, stop_
     MCAP file ``mcap_path`` (:class:`mission.flightdata.carrier_log.CarrierLog`); return exit code 0.
 
     ``lockstep`` (simulation): step on the mission controller's clock relay
-    (:mod:`mission.time.lockstep`) instead of a wall clock scaled by ``speed``; ``speed`` is then the
+    (:mod:`mission.bus.lockstep`) instead of a wall clock scaled by ``speed``; ``speed`` is then the
     pace once the relay falls silent.
 
     SIGINT/SIGTERM set the stop event when called from the main thread. Raises

@@ -18,7 +18,7 @@ from mission.core import arrival
 from mission.core.law import norm
 from mission.core.setpoint import Setpoint
 from mission.phases.types import ZERO, Decision, MissionModel, MissionState, Observation, Phase, dock_point, enter
-from mission.interfaces import Request
+from mission.phases.phase import Request
 from mission.core.safety import filter_velocity
 from mission.core.tick import DEPARTURE_THRESHOLD_M, carrier_tick, latch_point, passenger_tick, separation_due
 from mission.core.tracking import lead_acceleration, progress, setpoint as tracking_setpoint, update_integral, velocity_demand

@@ -1,5 +1,6 @@
 """The mission's phases: the one list, and what each phase means to the vehicle, the carrier and
-the flight record (pure; imports nothing of ours).
+the flight record; and the vehicle commands a phase asks for (:class:`Request`). Pure; imports
+nothing of ours.
 
 A phase is added here (its member and its three properties) and in the machine's handler table
 (:data:`mission.phases.machine.HANDLERS`); the wire's phase names (:mod:`mission.bus.wire`), the
@@ -9,6 +10,16 @@ are derived from this enum.
 from __future__ import annotations
 
 from enum import StrEnum
+
+
+class Request(StrEnum):
+    """A vehicle command the mission phases ask to have in flight (equal to its lower-case name)."""
+
+    ARM = "arm"
+    OFFBOARD = "offboard"
+    HOLD = "hold"
+    LAND = "land"
+    DISARM = "disarm"  # on the deck only (mission.ride = "deck"): PX4 refuses it unless its land detector says landed
 
 
 class Duty(StrEnum):

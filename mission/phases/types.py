@@ -14,8 +14,7 @@ from enum import StrEnum
 
 import numpy as np
 
-from mission.phases.phase import Phase
-from mission.interfaces import Request
+from mission.phases.phase import Phase, Request
 from mission.core.safety import DeckKeepOut, SafetyConfig
 from mission.core.docking import DockingGeometry
 from mission.core.pursuit import PursuitLimits
@@ -250,7 +249,7 @@ class MissionState:
 class Decision:
     """What the controller does this tick. setpoint: what to send (velocity only or full, as
     tracking decided; None: send nothing); request: the vehicle command to have in flight
-    (:class:`~mission.interfaces.Request`) or None.
+    (:class:`~mission.phases.phase.Request`) or None.
     Diagnostics for the flight log: dock, P, relative (law's u_p - u_c), desired, safety_acted."""
 
     setpoint: Setpoint | None

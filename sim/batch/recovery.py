@@ -48,7 +48,7 @@ from mission.core.consistent_velocity import PositionConsistentVelocity
 from mission.core.setpoint import Setpoint
 from mission.core.tick import TickModel, carrier_tick
 from mission.flight_mode import FlightMode
-from mission.interfaces import Request
+from mission.phases.phase import Request
 from mission.mavlink import setpoints
 from mission.model import mission_model, model_from_config
 from mission.phases import CarrierObs, Decision, MissionState, Observation, Phase, VehicleObs, finished, step
