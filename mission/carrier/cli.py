@@ -214,6 +214,6 @@ def startup_line(cfg: Config, speed: float) -> str:
     start = np.round(np.asarray(cfg.scenario.carrier_start, dtype=float), 2).tolist()
     return (f"carrier {cfg.zenoh.pair}: {robot} ({c.kinematics}); publishing {k.carrier_state} ({cfg.zenoh.encoding}, "
             f"{c.rate_hz:g} Hz) on {describe_endpoints(cfg.zenoh)}; mode {cfg.scenario.carrier_mode} "
-            f"({plan[cfg.scenario.carrier_mode]}); P3 guard at {cfg.law.b * cfg.law.c - c.p3_margin_m:g} m from the "
-            f"target; at {start} NED [m], waiting for the passenger to ride (phase RIDING on {k.passenger_phase}); "
-            f"clock x{speed:g}")
+            f"({plan[cfg.scenario.carrier_mode]}); P3 guard at "
+            f"{cfg.law.params().separation_distance_m - c.p3_margin_m:g} m from the target; at {start} NED [m], "
+            f"waiting for the passenger to ride (phase RIDING on {k.passenger_phase}); clock x{speed:g}")

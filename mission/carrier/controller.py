@@ -104,7 +104,7 @@ def guard_params(cfg: Config) -> GuardParams:
     c = cfg.carrier
     decel = c.brake_decel_m_s2 or cfg.safety.carrier_max_accel_m_s2 or 1.0
     delay = c.brake_delay_s if c.brake_delay_s is not None else (REAL_DELAY_S if KINDS[c.backend].real else 0.0)
-    return GuardParams(cfg.law.b * cfg.law.c - c.p3_margin_m, decel, delay, 1.0 / c.rate_hz)
+    return GuardParams(cfg.law.params().separation_distance_m - c.p3_margin_m, decel, delay, 1.0 / c.rate_hz)
 
 
 def tracking_params(cfg: Config) -> TrackingParams:
@@ -168,7 +168,7 @@ class CarrierController:
         self.planar = first.planar_carrier or self.dim == 2
         self.legs = Legs(targets, [carrier_model(cfg, target=t) for t in targets], self.guard, self.planar,
                          np.asarray(cfg.mission.dock_offset_ned_m, dtype=float)[:self.dim],
-                         cfg.law.b * cfg.law.c + cfg.mission.leg_start_margin_m)
+                         first.law.separation_distance_m + cfg.mission.leg_start_margin_m)
         self.model = self.legs.model
         self.period_s = 1.0 / cfg.carrier.rate_hz
         self.velocity_m_s = np.zeros(self.dim)  # [m/s] the filtered (and, holonomic, guarded) law command

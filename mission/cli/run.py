@@ -26,7 +26,7 @@ from mission.mavlink.link import VehicleLink
 from mission.mavlink.env import read_signing_key
 from mission.flightdata.writer import DEFAULT_LIVE, LiveAddress, clock_metadata, is_loopback, parse_live
 from mission.record import CLOCK_NOTE, FlightRecord, FlightRecorder, RecordSink, read_record
-from mission.phases import AbortReason
+from mission.phases import AbortReason, Phase
 from mission.report import WaitReporter, abort_hint, phase_printer, startup_lines
 
 log = logging.getLogger(__name__)
@@ -337,7 +337,7 @@ def plot_flight(log_dir: Path, out_path: str | Path) -> Path:
                           "(the mission ended before it flew: see its summary.json)")
     info = rec.info
     name = log_dir.name if log_dir.is_dir() else f"{log_dir.parent.name}/{log_dir.name}"
-    riding = np.flatnonzero(rec.phase == "RIDING")
+    riding = np.flatnonzero(rec.phase == Phase.RIDING)
     t0 = rec.t[riding[0]] if len(riding) else rec.t[ok][0]
     sep = info.get("separation_time_s")
     origin = "start of riding" if len(riding) else "first tick with both positions (never rode)"

@@ -361,7 +361,7 @@ class Config(Section):
         if not self.carrier.p3_margin_m > self.law.departure_margin_m:
             raise ConfigError("carrier.p3_margin_m", self.carrier.p3_margin_m,
                               "must exceed law.departure_margin_m, or the carrier never reaches the separation distance")
-        if self.carrier.p3_margin_m >= self.law.b * self.law.c:
+        if self.carrier.p3_margin_m >= self.law.params().separation_distance_m:
             raise ConfigError("carrier.p3_margin_m", self.carrier.p3_margin_m, "must be < b c")
         if len(self.mission.dock_offset_ned_m) != 3:
             raise ConfigError("mission.dock_offset_ned_m", self.mission.dock_offset_ned_m, "must have 3 components")

@@ -172,7 +172,7 @@ def draw_legs(flight: recovery.Flight, cfg: Config, plot_path: str, name: str) -
         start = leg["end_s"]
         x_p, x_c = part.vec("x_p"), part.vec("dock")
         ok = np.isfinite(x_p).all(axis=1) & np.isfinite(x_c).all(axis=1)
-        riding = np.flatnonzero(part.phase == "RIDING")
+        riding = np.flatnonzero(part.phase == Phase.RIDING)
         if not ok.any() or not len(riding):
             continue
         t0 = part.t[riding[0]]
