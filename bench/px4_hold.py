@@ -79,7 +79,8 @@ def parse_law(text: str) -> Law:
     lead = 0.0 if "px4" in fields else float(fields.get("lead", 2.6))
     tau = float(fields.get("bias", 0.0))
     gains = TrackingGains(**{**BASE_GAINS, "kind": "full", "position_lead": lead,
-                             "integral_gain": float(fields.get("int", 0.0)), "damping_per_s": float(fields.get("damp", 0.0)),
+                             "integral_gain": float(fields.get("int", 0.0)),
+                             "damping_per_s": float(fields.get("damp", 0.0)),
                              "bias_compensation_s": 1.0 / PX4_XY_P if tau > 0 else 0.0})
     return Law(text, gains, float(fields.get("slow", 0.0)), tau)
 

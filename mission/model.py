@@ -71,8 +71,8 @@ def mission_model(cfg: Config) -> MissionModel:
                        accel_limit_m_s2=command.max_accel_m_s2, slow_lag_m=m.reference_slow_lag_m,
                        stop_lag_m=m.reference_stop_lag_m)
     model = derived(
-        MissionModel, m, tick=tick, command_safety=command, dock_offset_ned_m=np.asarray(m.dock_offset_ned_m, dtype=float),
-        dt_s=1.0 / m.rate_hz, tracking=tracking, carrier_dt_s=1.0 / cfg.carrier.rate_hz,
+        MissionModel, m, tick=tick, command_safety=command,
+        dock_offset_ned_m=np.asarray(m.dock_offset_ned_m, dtype=float), dt_s=1.0 / m.rate_hz, tracking=tracking, carrier_dt_s=1.0 / cfg.carrier.rate_hz,
         join_settle_m=min(m.dock_tolerance_m, m.join_settle_m if m.join_settle_m is not None else m.dock_tolerance_m),
         recovery=recovery_model(cfg) if m.final_action == "return" else None,
         leg_start_m=tick.law.separation_distance_m + m.leg_start_margin_m,

@@ -308,7 +308,8 @@ def plot_recovery(tr: RecoveryTrack, path: str | Path) -> Path:
         if name not in SHADED:
             continue
         t1 = tr.t[b] if b < len(tr.t) else tr.t[-1]
-        dist.axvspan(tr.t[a], t1, color=Phase[name].colour, alpha=SHADE_ALPHA, lw=0, label=None if name in shaded else name)
+        dist.axvspan(tr.t[a], t1, color=Phase[name].colour, alpha=SHADE_ALPHA, lw=0,
+                     label=None if name in shaded else name)
         shaded.add(name)
     if tr.contact is not None and tr.contact.get("time_s") is not None:
         dist.axvline(tr.contact["time_s"], color="red", lw=1.0, label="contact")

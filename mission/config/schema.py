@@ -391,7 +391,8 @@ class Config(Section):
                                       f"(center {ob.center}, radius {ob.radius:g} m)")
         # several targets: every leg can start under Assumption 1 (mission/config/legs.py)
         check_legs(s, final_action=m.final_action, bc_m=bc, leg_start_margin_m=m.leg_start_margin_m,
-                   dock_offset_ned_m=m.dock_offset_ned_m, p3_margin_m=self.carrier.p3_margin_m, safety_margin_m=sf.margin_m)
+                   dock_offset_ned_m=m.dock_offset_ned_m, p3_margin_m=self.carrier.p3_margin_m,
+                   safety_margin_m=sf.margin_m)
         if s.dim != 3 or s.frame != "local_ned":
             return
         # local NED, z down: the carrier drives on the ground at carrier_start's z

@@ -83,8 +83,9 @@ def import_edges(files: list[Path]) -> dict[str, dict[str, int]]:
                 targets = [alias.name for alias in node.names]
             elif isinstance(node, ast.ImportFrom):
                 base = node.module or ""
-                if node.level:
-                    base = ".".join([*package.split(".")[:len(package.split(".")) - node.level + 1], *filter(None, [base])])
+                if node.level:  # relative: from the package, up level - 1
+                    parts = package.split(".")
+                    base = ".".join([*parts[:len(parts) - node.level + 1], *filter(None, [base])])
                 targets = [f"{base}.{alias.name}" for alias in node.names]
             else:
                 continue
@@ -181,12 +182,14 @@ def test_imports_point_down_the_layer_table():
 def test_the_layer_check_can_fail(tmp_path, monkeypatch):
     table = [("top", ["pkg/top.py"]), ("bottom", ["pkg/"])]
     (tmp_path / "pkg").mkdir()
-    (tmp_path / "pkg" / "top.py").write_text("from pkg import low\n")
-    (tmp_path / "pkg" / "low.py").write_text("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from pkg.top import X\n")
+    (tmp_path / "pkg" / "top.py").write_text("from . import low\n")  # a relative import too
+    (tmp_path / "pkg" / "low.py").write_text(
+        "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from pkg.top import X\n")
     monkeypatch.setattr(sys.modules[__name__], "ROOT", tmp_path)
     files = sorted((tmp_path / "pkg").glob("*.py"))
+    assert import_edges(files) == {"pkg.low": {"pkg.top": 3}, "pkg.top": {"pkg.low": 1}}
     assert upward_imports(files, table) == ["pkg.low (bottom) -> pkg.top (top), line 3"]
-    assert layer_of("pkg/top.py", table) == 0 and layer_of("pkg/low.py", table) == 1 and layer_of("x/y.py", table) is None
+    assert (layer_of("pkg/top.py", table), layer_of("pkg/low.py", table), layer_of("x/y.py", table)) == (0, 1, None)
 
 
 def test_mission_has_no_import_circle():
