@@ -36,7 +36,7 @@ def tick_latency(n_obstacles: int, samples: int = 20000) -> dict:
         centers[0] = ([3.0, 0.3, -1.5], 1.0)  # one obstacle right ahead: the filter works every tick
     model = TickModel(law=LawParams(), target=np.array([30.0, 10.0, -5.0]), obstacles=Obstacles.of(centers, 3),
                       passenger_safety=SafetyConfig(max_speed_m_s=3.0, max_accel_m_s2=2.0, z_max_m=-0.5),
-                      carrier_safety=SafetyConfig())
+                      carrier_safety=SafetyConfig(), planar_carrier=False)
     anchor = np.array([0.0, 0.0, -1.5])
     e_pc = np.array([0.5, 0.0, 0.0])
     u_prev = np.array([1.0, 0.0, 0.0])

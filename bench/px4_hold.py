@@ -64,17 +64,24 @@ class Law:
     bias_tau_s: float = 0.0  # > 0: the estimator's velocity bias measured (this time constant) and compensated
 
 
+# The gains every law starts from: no pull, no term on; a law sets what it names.
+BASE_GAINS = dict(kind="velocity", position_gain_per_s=0.0, position_lead=0.0, integral_gain=0.0, integral_limit=2.0,
+                  drag_ff_per_s=0.0, integral_window_m=0.5, damping_per_s=0.0, bias_compensation_s=0.0,
+                  accel_lead_s=0.0, accel_lead_filter_s=0.1, accel_limit_m_s2=None, slow_lag_m=None, stop_lag_m=None)
+
+
 def parse_law(text: str) -> Law:
     """``px4`` | ``vel`` | ``lead=L[,int=K][,damp=D][,bias=TAU][,slow=V]`` (``px4,bias=TAU``: lead 0)
     -> :class:`Law`."""
     if text == "vel":
-        return Law(text, TrackingGains(kind="velocity", position_gain_per_s=0.0))
+        return Law(text, TrackingGains(**BASE_GAINS))
     fields = dict(part.split("=", 1) if "=" in part else (part, "") for part in text.split(","))
     lead = 0.0 if "px4" in fields else float(fields.get("lead", 2.6))
     tau = float(fields.get("bias", 0.0))
-    gains = TrackingGains(kind="full", position_gain_per_s=0.0, position_lead=lead,
-                          integral_gain=float(fields.get("int", 0.0)), damping_per_s=float(fields.get("damp", 0.0)),
-                          bias_compensation_s=1.0 / PX4_XY_P if tau > 0 else 0.0)
+    gains = TrackingGains(**{**BASE_GAINS, "kind": "full", "position_lead": lead,
+                             "integral_gain": float(fields.get("int", 0.0)),
+                             "damping_per_s": float(fields.get("damp", 0.0)),
+                             "bias_compensation_s": 1.0 / PX4_XY_P if tau > 0 else 0.0})
     return Law(text, gains, float(fields.get("slow", 0.0)), tau)
 
 

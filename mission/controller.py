@@ -33,7 +33,8 @@ from mission.mavlink.env import mavlink
 from mission.mavlink.telemetry import VehicleState
 from mission.model import mission_model
 from mission.phases import AbortReason, CarrierObs, Decision, MissionState, Observation, Phase, VehicleObs
-from mission.interfaces import CarrierSource, Request, StatusSink, Vehicle
+from mission.interfaces import CarrierSource, StatusSink, Vehicle
+from mission.phases.phase import Request
 from mission.bus.wire import GeoOrigin, PassengerStatus
 
 log = logging.getLogger(__name__)

@@ -18,7 +18,6 @@ three without sockets.
 """
 from __future__ import annotations
 
-from enum import StrEnum
 from typing import TYPE_CHECKING, Any, Protocol
 
 if TYPE_CHECKING:
@@ -27,16 +26,6 @@ if TYPE_CHECKING:
     from mission.mavlink.session import LinkCounters
     from mission.mavlink.link import VehicleState
     from mission.bus.wire import GeoOrigin, PassengerStatus
-
-
-class Request(StrEnum):
-    """A vehicle command the mission phases ask to have in flight (equal to its lower-case name)."""
-
-    ARM = "arm"
-    OFFBOARD = "offboard"
-    HOLD = "hold"
-    LAND = "land"
-    DISARM = "disarm"  # on the deck only (mission.ride = "deck"): PX4 refuses it unless its land detector says landed
 
 
 class Vehicle(Protocol):

@@ -20,6 +20,7 @@ from matplotlib.patches import Circle, Rectangle  # noqa: E402
 
 from mission.core.docking import DockingGeometry, course  # noqa: E402
 from mission.core.law import norm  # noqa: E402
+from mission.phases.phase import HOMEWARD, Phase  # noqa: E402
 
 if TYPE_CHECKING:
     from mission.record import FlightRecord
@@ -171,12 +172,9 @@ def plot_legs(rec: FlightRecord, beside: Path, title: str) -> list[Path]:
 
 # ----------------------------------------------------------------------------------------- recovery
 
-#: The colour a phase is shaded with in the recovery's distance panel.
-PHASE_COLOURS = {
-    "ARRIVED": "#e8e8e8", "RETURNING": "#cfe2f3", "HOLDOFF": "#fff2cc", "APPROACH": "#d9ead3",
-    "GO_AROUND": "#f4cccc", "DOCKED": "#b6d7a8", "HOME": "#d0e0e3", "FALLBACK": "#ead1dc",
-}
-RECOVERING = ("RETURNING", "HOLDOFF", "APPROACH", "GO_AROUND", "DOCKED", "HOME", "FALLBACK")
+#: The phases shaded (in their :attr:`~mission.phases.phase.Phase.colour`) in the recovery's distance panel.
+SHADED = HOMEWARD | {Phase.ARRIVED}
+SHADE_ALPHA = 0.35  # the shading's opacity: the curves stay readable over it
 ATTEMPT_COLOURS = ("tab:green", "tab:orange", "tab:purple", "tab:brown", "tab:pink")
 
 
@@ -212,7 +210,7 @@ class RecoveryTrack:
     def attempts(self) -> np.ndarray:
         """(K,) int: the approach each tick belongs to (1, 2, ...; the go-around and the holdoff
         after an approach belong to it), 0 before the first."""
-        entered = (self.phase == "APPROACH") & np.concatenate([[True], self.phase[1:] != self.phase[:-1]])
+        entered = (self.phase == Phase.APPROACH) & np.concatenate([[True], self.phase[1:] != self.phase[:-1]])
         return np.cumsum(entered)
 
 
@@ -223,7 +221,7 @@ def recovery_track(rec, title: str = "") -> RecoveryTrack | None:
     :data:`~mission.core.docking.COURSE_MIN_SPEED_M_S`, else the last one, starting from the
     direction the holdoff point lay in (behind the dock point) when the first approach began."""
     params = rec.info.get("recovery")
-    recovering = np.isin(rec.phase, RECOVERING)
+    recovering = np.isin(rec.phase, sorted(HOMEWARD))
     if params is None or not recovering.any():
         return None
     g = DockingGeometry(
@@ -249,7 +247,7 @@ def recovery_track(rec, title: str = "") -> RecoveryTrack | None:
 
 def _rebuilt_course(rec, recovering: np.ndarray, g: DockingGeometry) -> np.ndarray:
     x_ref, dock, v_c = rec.vec("x_ref"), rec.vec("dock"), rec.vec("v_c")
-    first = np.flatnonzero(rec.phase == "APPROACH")
+    first = np.flatnonzero(rec.phase == Phase.APPROACH)
     at = int(first[0]) - 1 if len(first) else int(np.flatnonzero(recovering)[-1])
     behind = (dock[at] - x_ref[at])[:2]
     c = np.array([behind[0], behind[1], 0.0]) / max(float(np.hypot(*behind)), 1e-9)
@@ -296,14 +294,14 @@ def _side(ax, g: DockingGeometry, deck_radius_m: float) -> None:
 def _tracks(ax, tr: RecoveryTrack, rel: np.ndarray, x: int, y: int) -> None:
     """Each attempt's track (the return in grey), columns ``x`` and ``y`` of ``rel``."""
     attempt = tr.attempts()
-    flying = np.isin(tr.phase, RECOVERING)
+    flying = np.isin(tr.phase, sorted(HOMEWARD))
     back = flying & (attempt == 0)
     ax.plot(rel[back, x], rel[back, y], color="grey", lw=1.0, label="return and holdoff")
     for n in range(1, int(attempt.max()) + 1):
-        on = flying & (attempt == n) & ~np.isin(tr.phase, ("HOME",))
+        on = flying & (attempt == n) & (tr.phase != Phase.HOME)
         ax.plot(rel[on, x], rel[on, y], color=ATTEMPT_COLOURS[(n - 1) % len(ATTEMPT_COLOURS)], lw=1.6,
                 label=f"attempt {n}")
-    docked = np.flatnonzero(tr.phase == "DOCKED")
+    docked = np.flatnonzero(tr.phase == Phase.DOCKED)
     if len(docked):
         ax.scatter(rel[docked[0], x], rel[docked[0], y], marker="X", color="red", s=90, zorder=7, label="contact")
 
@@ -359,11 +357,11 @@ def plot_recovery(tr: RecoveryTrack, path: str | Path) -> Path:
     change = np.flatnonzero(np.concatenate([[True], tr.phase[1:] != tr.phase[:-1], [True]]))
     for a, b in zip(change[:-1], change[1:]):
         name = str(tr.phase[a])
-        colour = PHASE_COLOURS.get(name)
-        if colour is None:
+        if name not in SHADED:
             continue
         t1 = tr.t[b] if b < len(tr.t) else tr.t[-1]
-        dist.axvspan(tr.t[a], t1, color=colour, alpha=0.8, lw=0, label=None if name in shaded else name)
+        dist.axvspan(tr.t[a], t1, color=Phase[name].colour, alpha=SHADE_ALPHA, lw=0,
+                     label=None if name in shaded else name)
         shaded.add(name)
     if tr.contact is not None and tr.contact.get("time_s") is not None:
         dist.axvline(tr.contact["time_s"], color="red", lw=1.0, label="contact")

@@ -22,7 +22,7 @@ import numpy as np
 
 from mission.core.law import norm
 from mission.core.setpoint import Setpoint
-from mission.phases.phase import AFTER_SEPARATION, FLYING, Phase
+from mission.phases.phase import AFTER_SEPARATION, FLYING, OUTBOUND, Phase
 
 VEC = ("n", "e", "d")
 COLUMNS = (
@@ -268,12 +268,12 @@ def _arrival_figures(r: FlightRecord, dist_t: np.ndarray, target: np.ndarray) ->
     without such ticks); ``max_target_distance_at_target_m`` [m], its farthest from the target
     over those ticks."""
     out: dict[str, Any] = {"last_metre_s": None, "hover_speed_m_s": None, "max_target_distance_at_target_m": None}
-    arrived = np.flatnonzero(r.phase == "ARRIVED")
+    arrived = np.flatnonzero(r.phase == Phase.ARRIVED)
     close = np.flatnonzero(np.isfinite(dist_t) & (dist_t <= LAST_METRE_M))
     if len(arrived) and len(close) and close[0] <= arrived[0]:
         out["last_metre_s"] = _num(r.t[arrived[0]] - r.t[close[0]])
     ref_on = norm(r.vec("x_ref") - target) <= ON_TARGET_M
-    ticks = np.flatnonzero(ref_on & np.isin(r.phase, ["SEPARATED", "NAVIGATING", "ARRIVED"]))
+    ticks = np.flatnonzero(ref_on & np.isin(r.phase, sorted(OUTBOUND)))
     if len(ticks):
         v = r.vec("v_p")[ticks]
         out["hover_speed_m_s"] = _num(np.hypot(v[:, 0], v[:, 1]).mean())

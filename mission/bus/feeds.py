@@ -27,7 +27,8 @@ from mission.config.schema import ZenohSection
 from mission.errors import BusError
 from mission.bus.auth import BusAuth
 from mission.bus.gate import ANONYMOUS, MAX_CANDIDATES, FeedGate, GateLimits, Sample, count_rejected
-from mission.bus.wire import CarrierState, GeoOrigin, PassengerStatus, WireError, decode_carrier, decode_passenger_json, to_local_ned
+from mission.bus.encodings import decode_carrier
+from mission.bus.wire import CarrierState, GeoOrigin, PassengerStatus, WireError, decode_passenger_json, to_local_ned
 from mission.bus.session import Encoding, check_encoding, declare, keys, undeclare
 
 log = logging.getLogger("mission.bus.bridge")  # one logger name for the whole bus

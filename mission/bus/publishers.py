@@ -8,7 +8,8 @@ import zenoh
 
 from mission.bus.auth import BusAuth
 from mission.errors import BusError
-from mission.bus.wire import CarrierState, PassengerStatus, encode_carrier, encode_passenger_json
+from mission.bus.encodings import encode_carrier
+from mission.bus.wire import CarrierState, PassengerStatus, encode_passenger_json
 from mission.bus.session import ZENOH_ENCODING, Encoding, check_encoding, declare, keys, undeclare
 
 

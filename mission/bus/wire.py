@@ -12,8 +12,9 @@ Invariants: every number finite, vectors of exactly 3 within :data:`POSITION_LIM
 :data:`VELOCITY_LIMIT_M_S` and :data:`ACCELERATION_LIMIT_M_S2`, ``seq`` an int64. A failure raises
 :class:`WireError` whose ``reason`` is one of :data:`REASONS` (:func:`wire_error` maps pydantic's
 error types). A ``wgs84`` state is converted to local NED through the vehicle's origin with
-:func:`geodetic_to_ned`. The CDR (ROS 2) codecs are in :mod:`mission.bus.ros2`. The JSON layout
-with an example: docs/wire.md.
+:func:`geodetic_to_ned`. The CDR (ROS 2) codecs are in :mod:`mission.bus.ros2`, the choice
+between the two by ``zenoh.encoding`` in :mod:`mission.bus.encodings`. The JSON layout with an
+example: docs/wire.md.
 """
 from __future__ import annotations
 
@@ -341,25 +342,3 @@ def encode_passenger_json(status: PassengerStatus) -> bytes:
 def decode_passenger_json(raw: bytes | bytearray | memoryview | str) -> PassengerStatus:
     """A validated :class:`PassengerStatus` from JSON bytes; raises :class:`WireError`."""
     return PassengerStatus.from_json(raw)
-
-
-def decode_carrier(raw: bytes | bytearray | memoryview, encoding: str, *, seq: int = 0) -> CarrierState:
-    """Dispatch on ``encoding`` ("json" or "cdr"); ``seq`` is used by CDR only."""
-    if encoding == "json":
-        return decode_carrier_json(raw)
-    if encoding == "cdr":
-        from mission.bus.ros2 import decode_odometry_cdr  # it imports this module
-
-        return decode_odometry_cdr(raw, seq=seq)
-    raise ValueError(f"unknown encoding {encoding!r}")
-
-
-def encode_carrier(state: CarrierState, encoding: str) -> bytes:
-    """Dispatch on ``encoding`` ("json" or "cdr")."""
-    if encoding == "json":
-        return encode_carrier_json(state)
-    if encoding == "cdr":
-        from mission.bus.ros2 import encode_odometry_cdr  # it imports this module
-
-        return encode_odometry_cdr(state)
-    raise ValueError(f"unknown encoding {encoding!r}")

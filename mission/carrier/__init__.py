@@ -4,6 +4,8 @@ simulated carrier robot.
 Pure parts: :mod:`.modes` (what the carrier does, from the passenger's published phase),
 :mod:`.guard` (the P3 guard: never closer to the target than ``b c - margin``, whatever the
 passenger says), :mod:`.tracking` (a planar velocity command made into what a unicycle,
-differential-drive or Ackermann robot can do). I/O: :mod:`.controller` (the loop),
-the backends :mod:`.sim_robot`, :mod:`.mavlink_vehicle`, :mod:`.ros2_robot`, and :mod:`.cli`.
+differential-drive or Ackermann robot can do), :mod:`.legs` (several targets), :mod:`.course`
+(the recovery course), :mod:`.start` (the gentle start), :mod:`.acceleration` (its measured
+acceleration). I/O: :mod:`.controller` (the loop), the robots it drives
+(:mod:`.backends`: ``sim``, ``mavlink``, ``ros2``), and :mod:`.cli`.
 """

@@ -25,7 +25,7 @@ from mission.bus.session import close_session
 from mission.time.clock import Clock, LockstepClock, ScaledClock
 from mission.config.required import CARRIER_FIELDS, require_stated
 from mission.config.schema import Config, load_config, with_overrides
-from mission.time.lockstep import ZenohUpstream, clock_keys
+from mission.bus.lockstep import ZenohUpstream, clock_keys
 
 log = logging.getLogger(__name__)
 
@@ -37,7 +37,7 @@ def main(cfg: Config, speed: float = 1.0, duration_s: float | None = None, stop_
     MCAP file ``mcap_path`` (:class:`mission.flightdata.carrier_log.CarrierLog`); return exit code 0.
 
     ``lockstep`` (simulation): step on the mission controller's clock relay
-    (:mod:`mission.time.lockstep`) instead of a wall clock scaled by ``speed``; ``speed`` is then the
+    (:mod:`mission.bus.lockstep`) instead of a wall clock scaled by ``speed``; ``speed`` is then the
     pace once the relay falls silent.
 
     SIGINT/SIGTERM set the stop event when called from the main thread. Raises
@@ -214,6 +214,6 @@ def startup_line(cfg: Config, speed: float) -> str:
     start = np.round(np.asarray(cfg.scenario.carrier_start, dtype=float), 2).tolist()
     return (f"carrier {cfg.zenoh.pair}: {robot} ({c.kinematics}); publishing {k.carrier_state} ({cfg.zenoh.encoding}, "
             f"{c.rate_hz:g} Hz) on {describe_endpoints(cfg.zenoh)}; mode {cfg.scenario.carrier_mode} "
-            f"({plan[cfg.scenario.carrier_mode]}); P3 guard at {cfg.law.b * cfg.law.c - c.p3_margin_m:g} m from the "
-            f"target; at {start} NED [m], waiting for the passenger to ride (phase RIDING on {k.passenger_phase}); "
-            f"clock x{speed:g}")
+            f"({plan[cfg.scenario.carrier_mode]}); P3 guard at "
+            f"{cfg.law.params().separation_distance_m - c.p3_margin_m:g} m from the target; at {start} NED [m], "
+            f"waiting for the passenger to ride (phase RIDING on {k.passenger_phase}); clock x{speed:g}")

@@ -38,7 +38,7 @@ import numpy as np
 import zenoh
 
 from mission.carrier.acceleration import AccelerationEstimate
-from mission.carrier.backends import KINDS
+from mission.carrier.backends import KINDS, CarrierBackend, OwnState
 from mission.carrier.course import RecoveryCourse, away_heading_deg
 from mission.carrier.guard import GuardParams
 from mission.carrier.legs import Legs
@@ -49,7 +49,7 @@ from mission.carrier.tracking import SpeedCalibration, Tracked, TrackingParams, 
 from mission.core.consistent_velocity import PositionConsistentVelocity
 from mission.bus.auth import BusAuth, bus_auth
 from mission.bus.bridge import CarrierPublisher, PassengerFeed
-from mission.time.clock import Clock, Downstream, Periodic
+from mission.time.clock import Clock, Periodic
 from mission.config.schema import Config
 from mission.model import model_from_config
 from mission.bus.session import congestion_for
@@ -61,17 +61,6 @@ log = logging.getLogger(__name__)
 STOP = Tracked(0.0, 0.0, 0.0, np.zeros(2), np.zeros(2))
 REAL_DELAY_S = 0.3  # [s] default response delay of a real carrier for the P3 guard (carrier.brake_delay_s)
 DRIVING = (CarrierMode.APPROACHING, CarrierMode.RECOVERING, CarrierMode.REPOSITIONING)  # modes that drive on
-
-
-@dataclass(frozen=True)
-class OwnState:
-    """The carrier's own state: t_s [s] clock time of the measurement; position_ned_m (3,) [m]
-    and velocity_ned_m_s (3,) [m/s] in the shared local NED frame; yaw_rad [rad] or None."""
-
-    t_s: float
-    position_ned_m: np.ndarray
-    velocity_ned_m_s: np.ndarray
-    yaw_rad: float | None
 
 
 @dataclass(frozen=True)
@@ -99,38 +88,6 @@ class StepSink(Protocol):
     def step(self, step: CarrierStep) -> None: ...
 
 
-class CarrierBackend(Protocol):
-    """What the controller needs of a carrier robot (the kinds: :mod:`mission.carrier.backends`)."""
-
-    name: str
-    brakes_itself: bool  # a real vehicle brakes with its own limits: "stop" is sent at once, not ramped
-
-    def advance(self, dt_s: float) -> None:
-        """Move ``dt_s`` [s] under the held command (the built-in robot; no-op for real ones)."""
-
-    def own_state(self) -> OwnState | None:
-        """The newest own state, or None before the first."""
-
-    def engage(self) -> None:
-        """The carrier has to move now: take control of the vehicle (arm, OFFBOARD) if needed."""
-
-    def control_fault(self) -> str | None:
-        """Why the vehicle does not take our commands now (None: it does)."""
-
-    def command(self, cmd: Tracked) -> None:
-        """Send (or hold) the command: a setpoint velocity, or forward speed and yaw rate."""
-
-    def park(self) -> None:
-        """The carrier is stopped for good: hand the vehicle to its own position hold, if it has one."""
-
-    def lockstep_relay(self, session: zenoh.Session) -> Downstream | None:
-        """In lockstep, how the carrier brings its robot along if that robot is simulated in a
-        process of its own (None: it is not, or it cannot step)."""
-
-    def close(self) -> None:
-        """Leave the vehicle safe and release what was opened."""
-
-
 def carrier_model(cfg: Config, target: np.ndarray | None = None) -> TickModel:
     """The tick model of the carrier: the config's (for ``target``, a leg's: default the first),
     with the carrier's speed limit ``min(carrier.max_speed_m_s, safety.carrier_max_speed_m_s)`` [m/s]."""
@@ -147,7 +104,7 @@ def guard_params(cfg: Config) -> GuardParams:
     c = cfg.carrier
     decel = c.brake_decel_m_s2 or cfg.safety.carrier_max_accel_m_s2 or 1.0
     delay = c.brake_delay_s if c.brake_delay_s is not None else (REAL_DELAY_S if KINDS[c.backend].real else 0.0)
-    return GuardParams(cfg.law.b * cfg.law.c - c.p3_margin_m, decel, delay, 1.0 / c.rate_hz)
+    return GuardParams(cfg.law.params().separation_distance_m - c.p3_margin_m, decel, delay, 1.0 / c.rate_hz)
 
 
 def tracking_params(cfg: Config) -> TrackingParams:
@@ -211,7 +168,7 @@ class CarrierController:
         self.planar = first.planar_carrier or self.dim == 2
         self.legs = Legs(targets, [carrier_model(cfg, target=t) for t in targets], self.guard, self.planar,
                          np.asarray(cfg.mission.dock_offset_ned_m, dtype=float)[:self.dim],
-                         cfg.law.b * cfg.law.c + cfg.mission.leg_start_margin_m)
+                         first.law.separation_distance_m + cfg.mission.leg_start_margin_m)
         self.model = self.legs.model
         self.period_s = 1.0 / cfg.carrier.rate_hz
         self.velocity_m_s = np.zeros(self.dim)  # [m/s] the filtered (and, holonomic, guarded) law command

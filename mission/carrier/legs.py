@@ -4,7 +4,7 @@ The passenger's status names the leg it flies; the carrier follows it forward (n
 law drives at that leg's target. Every target is hazardous whichever leg is flown: each has its
 own P3 guard, and the command passes all of them. Before a leg after the first, the carrier drives
 straight out from the leg's target until its dock point is ``b c + mission.leg_start_margin_m``
-(and :data:`REPOSITION_SPARE_M`) from it: the paper's Assumption 1 at the leg's start.
+(and :data:`mission.config.legs.REPOSITION_SPARE_M`) from it: the paper's Assumption 1 at the leg's start.
 
 Frames: NED [m], [m/s], in the scenario's dimension (2 or 3).
 """
@@ -13,9 +13,8 @@ from __future__ import annotations
 import numpy as np
 
 from mission.carrier.guard import GuardParams, P3Guard
+from mission.config.legs import REPOSITION_SPARE_M
 from mission.core.tick import TickModel
-
-REPOSITION_SPARE_M = 0.5  # [m] repositioning goes this much beyond the next leg's start distance
 
 
 class Legs:

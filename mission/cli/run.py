@@ -65,13 +65,13 @@ def mission_io(cfg: Config, clock: Clock, tlog_path: str | Path | None = None) -
                            tlog_path=None if tlog_path is None else str(tlog_path), signing_key=key,
                            heartbeat_timeout_s=cfg.mission.heartbeat_timeout_s)
         if isinstance(clock, LockstepClock):  # before open: the vehicle's first barrier may come at once
-            from mission.time.lockstep import MavlinkUpstream
+            from mission.mavlink.lockstep import MavlinkUpstream
 
             MavlinkUpstream(clock, link)
         link.open()
         stack.callback(link.close)
         if isinstance(clock, LockstepClock):  # step on the vehicle's time; bring the carrier along
-            from mission.time.lockstep import ZenohRelay, clock_keys
+            from mission.bus.lockstep import ZenohRelay, clock_keys
 
             relay = ZenohRelay(session, clock_keys(cfg.zenoh.pair), feed, publisher, alive=lambda: feed.alive,
                                auth=auth)

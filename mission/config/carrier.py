@@ -1,16 +1,40 @@
 """The carrier's configuration: ``[carrier]`` (the carrier-side controller, ``marsupial
 carrier``) and its backends ``[carrier.mavlink]`` (a PX4 rover or boat) and ``[carrier.ros2]``
-(a ROS 2 robot over Zenoh). Part of the schema in :mod:`mission.config.schema`."""
+(a ROS 2 robot over Zenoh). Part of the schema in :mod:`mission.config.schema`.
+
+:data:`KINDS` is the one list of carrier backends: the configuration's choices, ``--backend``'s
+choices, the configuration reference and :mod:`mission.carrier.backends` (which opens them)
+derive from it. It lives here, in the pure configuration, so that the schema reads it without
+importing the carrier's loop.
+"""
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Literal
 
 from pydantic import Field, field_validator, model_validator
 
-from mission.carrier.backends import KINDS
 from mission.config.fields import MAX_URL_CHARS, Path_, Section, check_mavlink_url
 from mission.errors import ConfigError
 
+
+@dataclass(frozen=True)
+class BackendKind:
+    """A kind of carrier robot: its name, what it is (``--help``, the configuration reference),
+    whether it is a real vehicle (its response delay, ``REAL_DELAY_S``, is allowed for by the P3
+    guard), and the module that drives it."""
+
+    name: str
+    summary: str
+    real: bool
+    module: str
+
+
+KINDS: dict[str, BackendKind] = {k.name: k for k in (
+    BackendKind("sim", "built-in kinematic robot", False, "mission.carrier.backends.sim"),
+    BackendKind("mavlink", "PX4 rover/boat over MAVLink", True, "mission.carrier.backends.mavlink"),
+    BackendKind("ros2", "ROS 2 robot over Zenoh", True, "mission.carrier.backends.ros2"),
+)}
 
 BackendName = Literal.__getitem__(tuple(KINDS))  # the registry's names
 MAX_COURSE_LEGS = 100  # legs of carrier.recovery_course

@@ -11,7 +11,7 @@ from typing import Annotated, Any
 
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field
 
-from mission.mavlink.urls import parse_url
+from mission.config.urls import parse_url
 
 
 class Section(BaseModel):
@@ -88,7 +88,7 @@ def parse_zenoh_endpoint(endpoint: str, *, listen: bool) -> ZenohEndpoint:
 
 
 def check_mavlink_url(url: str) -> str:
-    """A link URL as the link reads it (:func:`mission.mavlink.urls.parse_url`: ``udpin:``,
+    """A link URL as the link reads it (:func:`mission.config.urls.parse_url`: ``udpin:``,
     ``udp:``, ``udpout:``, ``tcp:HOST:PORT`` or a serial device ``/dev/X[:BAUD]``,
     ``serial:/dev/X[:BAUD]``, ``COMn[:BAUD]``), and one that can work: port 0 (ephemeral) only to
     listen on, a baud rate in 50..10000000. ValueError naming what is wrong."""

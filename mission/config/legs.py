@@ -5,7 +5,7 @@ the field (pure; part of :meth:`mission.config.schema.Config._cross_fields`).
 Leg k >= 1 starts where the passenger docked after leg k - 1, which no static check knows (the
 recovery's course and its timing decide it). There the carrier first drives straight out from
 ``targets[k]`` until its dock point is ``R = b c + mission.leg_start_margin_m`` (and
-:data:`mission.carrier.legs.REPOSITION_SPARE_M`) from it (TRANSIT), every target's P3 guard and
+:data:`REPOSITION_SPARE_M`) from it (TRANSIT), every target's P3 guard and
 the obstacles' CBF acting on that drive: the guard and the CBF cut the inward part of the
 command, so the carrier slides along a keep-out circle or an obstacle rather than stopping. What
 is refused is what makes the drive-out impossible wherever the carrier docked:
@@ -32,7 +32,9 @@ from typing import TYPE_CHECKING
 from mission.errors import ConfigError
 
 if TYPE_CHECKING:
-    from mission.config.schema import Config
+    from mission.config.scenario import ScenarioSection
+
+REPOSITION_SPARE_M = 0.5  # [m] the carrier's repositioning goes this much beyond the next leg's start distance
 
 
 def _h(a: list[float], b: list[float]) -> float:
@@ -72,26 +74,26 @@ def covered_circle(center: list[float], radius_m: float, discs: list[tuple[list[
     return reach >= math.pi - 1e-12
 
 
-def check_legs(cfg: Config) -> None:
-    """Refuse targets that leave a leg no start under Assumption 1 (the rules of the module
-    docstring); raises :class:`ConfigError` naming the field to change."""
-    from mission.carrier.legs import REPOSITION_SPARE_M  # (imports the law: only when called)
-
-    s, m = cfg.scenario, cfg.mission
+def check_legs(s: ScenarioSection, *, final_action: str, bc_m: float, leg_start_margin_m: float,
+               dock_offset_ned_m: list[float], p3_margin_m: float, safety_margin_m: float) -> None:
+    """Refuse targets of scenario ``s`` that leave a leg no start under Assumption 1 (the rules of
+    the module docstring), given the fields of the other sections they depend on (each named as
+    its field: ``mission.final_action``, ``b c`` [m], ``mission.leg_start_margin_m`` [m],
+    ``mission.dock_offset_ned_m`` [m], ``carrier.p3_margin_m`` [m], ``safety.margin_m`` [m]);
+    raises :class:`ConfigError` naming the field to change."""
     legs = s.legs()
-    bc = cfg.law.b * cfg.law.c
-    if len(legs) > 1 and m.final_action != "return":
-        raise ConfigError("mission.final_action", m.final_action,
+    if len(legs) > 1 and final_action != "return":
+        raise ConfigError("mission.final_action", final_action,
                           f"must be \"return\" with {len(legs)} scenario.targets (the passenger comes home between them)")
     for j, later in enumerate(legs[1:], start=1):
         for i, earlier in enumerate(legs[:j]):
-            if _h(later, earlier) <= bc:
+            if _h(later, earlier) <= bc_m:
                 raise ConfigError(f"scenario.targets[{j}]", later, f"inside the keep-out of scenario.targets[{i}] "
-                                  f"({_h(later, earlier):.2f} m from it horizontally, b*c = {bc:g} m)")
+                                  f"({_h(later, earlier):.2f} m from it horizontally, b*c = {bc_m:g} m)")
     for k, target in enumerate(legs[1:], start=1):
-        if _h(s.carrier_start, target) <= bc:
+        if _h(s.carrier_start, target) <= bc_m:
             raise ConfigError("scenario.carrier_start", s.carrier_start, f"inside the keep-out of scenario.targets[{k}] "
-                              f"({_h(s.carrier_start, target):.2f} m from it horizontally, b*c = {bc:g} m)")
+                              f"({_h(s.carrier_start, target):.2f} m from it horizontally, b*c = {bc_m:g} m)")
         for i, ob in enumerate(s.obstacles):
             if math.dist(target, ob.center) <= ob.radius:
                 raise ConfigError(f"scenario.targets[{k}]", target, f"inside scenario.obstacles[{i}] "
@@ -100,20 +102,20 @@ def check_legs(cfg: Config) -> None:
         return
     dim = s.dim
     ground = s.carrier_start[2] if dim == 3 else 0.0
-    start_m = bc + m.leg_start_margin_m + REPOSITION_SPARE_M
-    guard_m = bc - cfg.carrier.p3_margin_m
+    start_m = bc_m + leg_start_margin_m + REPOSITION_SPARE_M
+    guard_m = bc_m - p3_margin_m
     for k, target in enumerate(legs[1:], start=1):
         # the dock point's height below or above the target: the leg may start nearer horizontally
-        height = abs(target[2] - (ground + m.dock_offset_ned_m[2])) if dim == 3 and s.planar_carrier else 0.0
-        if dim == 3 and s.planar_carrier and abs(target[2] - ground) > bc:
+        height = abs(target[2] - (ground + dock_offset_ned_m[2])) if dim == 3 and s.planar_carrier else 0.0
+        if dim == 3 and s.planar_carrier and abs(target[2] - ground) > bc_m:
             raise ConfigError(f"scenario.targets[{k}]", target, f"{abs(target[2] - ground):.2f} m above the carrier's "
-                              f"plane, more than b*c = {bc:g} m: the carrier can never come within b*c of it")
+                              f"plane, more than b*c = {bc_m:g} m: the carrier can never come within b*c of it")
         if height >= start_m:
             continue  # Assumption 1 holds wherever the carrier stands
         ring_m = math.sqrt(start_m ** 2 - height ** 2)
         discs = [(other, _across(guard_m, other[2] - ground if dim == 3 and s.planar_carrier else 0.0))
                  for i, other in enumerate(legs) if i != k]
-        discs += [(list(ob.center), ob.radius + cfg.safety.margin_m) for ob in s.obstacles]
+        discs += [(list(ob.center), ob.radius + safety_margin_m) for ob in s.obstacles]
         if covered_circle(target, ring_m, discs):
             raise ConfigError(f"scenario.targets[{k}]", target, f"no place to start its leg: every point {ring_m:.2f} m "
                               f"from it horizontally (the dock point b*c + mission.leg_start_margin_m + {REPOSITION_SPARE_M:g} m "

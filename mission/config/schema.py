@@ -32,6 +32,8 @@ from pydantic import Field, ValidationError, field_validator, model_validator
 from mission.config.carrier import CarrierMavlinkSection, CarrierRos2Section, CarrierSection
 from mission.config.legs import check_legs
 from mission.config.recovery import RecoverySection
+from mission.config.scenario import ObstacleSection, ScenarioSection
+from mission.config.urls import DEFAULT_URL
 from mission.config.fields import (
     COORD_LIMIT_M,
     MAX_PATH_CHARS,
@@ -50,7 +52,7 @@ from mission.errors import ConfigError
 
 if TYPE_CHECKING:  # the schema imports no law: the converters below import it when called
     from mission.core.law import LawParams
-    from mission.core.safety import Obstacles, SafetyConfig
+    from mission.core.safety import SafetyConfig
 
 __all__ = [  # the sections and field checks in config_carrier / config_fields are importable from here too
     "COORD_LIMIT_M", "MAX_PATH_CHARS", "MAX_URL_CHARS", "CarrierMavlinkSection", "CarrierRos2Section",
@@ -81,80 +83,6 @@ class LawSection(Section):
         from mission.core.law import LawParams
 
         return LawParams(k_c=self.k_c, k_p=self.k_p, b=self.b, c=self.c, d=self.d)
-
-
-class ObstacleSection(Section):
-    center: list[Coord] = Field(description="[m] obstacle centre (dim components)")
-    radius: float = Field(gt=0, le=100_000, description="[m] obstacle radius")
-
-
-MAX_TARGETS = 100  # scenario.targets
-
-
-class ScenarioSection(Section):
-    """Geometry: where the carrier, passenger and target are at t = 0 [m]."""
-
-    dim: Literal[2, 3] = Field(3, description="[-] 2 (planar) or 3; a flight needs 3")
-    frame: Literal["local_ned", "xyz"] = Field("local_ned",
-        description="[-] `local_ned` (PX4's local NED, z down; plots show altitude) or `xyz` (plots only)")
-    carrier_start: list[Coord] = Field([0.0, 0.0, 0.0],
-        description="[m] carrier position at t = 0 (dim components; the carrier simulator starts here)")
-    target: list[Coord] = Field([20.0, 15.0, -4.0],
-        description=("[m] target position (dim components); in 3D with a planar carrier at most b c above the "
-                     "carrier's plane"))
-    targets: list[list[Coord]] | None = Field(None,
-        description=("[m] several targets, visited in order, one leg each (ride, separate, target, return, dock, ride "
-                     "on); `target` is then the first of them; needs mission.final_action = `return` for more than one"))
-    passenger_start: list[Coord] | None = Field(None,
-        description=("[m] passenger start for `simulate` (default: docked on the carrier, Assumption 2); `run` uses "
-                     "the vehicle's real position"))
-    planar_carrier: bool = Field(True,
-        description="[-] the carrier moves in its horizontal plane (u_c projected onto it) in 3D")
-    eta: float | None = Field(None, gt=0, le=10_000_000,
-        description="[m] Assumption 1 lower bound, b c < eta <= |e_tc(0)| (default |e_tc(0)|)")
-    carrier_mode: Literal["stop", "remark1"] = Field("stop",
-        description=("[-] after separation the carrier `stop`s, or keeps its own plan (`remark1`: its velocity of the "
-                     "separation instant, CBF-filtered)"))
-    obstacles: list[ObstacleSection] = Field([], max_length=1000,
-        description=("[-] list of `{ center = [m], radius = m }` circles (2D) or spheres (3D); the carrier avoids "
-                     "their planar circles"))
-
-    @model_validator(mode="before")
-    @classmethod
-    def _first_target(cls, data: Any) -> Any:
-        """With ``targets``, ``target`` is the first of them (and may be left out)."""
-        if isinstance(data, dict) and isinstance(data.get("targets"), list):
-            if not 1 <= len(data["targets"]) <= MAX_TARGETS:
-                raise ConfigError("scenario.targets", data["targets"], f"must list 1 to {MAX_TARGETS} targets")
-            first = data["targets"][0]
-            if "target" in data and data["target"] != first:
-                raise ConfigError("scenario.target", data["target"], f"differs from scenario.targets[0] = {first}: "
-                                  "give one of them")
-            data = {**data, "target": first}
-        return data
-
-    def legs(self) -> list[list[float]]:
-        """The targets in the order they are visited (one leg each)."""
-        return [list(t) for t in self.targets] if self.targets is not None else [list(self.target)]
-
-    @model_validator(mode="after")
-    def _dims(self) -> "ScenarioSection":
-        for name in ("carrier_start", "target", "passenger_start"):
-            v = getattr(self, name)
-            if v is not None and len(v) != self.dim:
-                raise ConfigError(f"scenario.{name}", v, f"must have {self.dim} components (scenario.dim)")
-        for i, t in enumerate(self.targets or []):
-            if len(t) != self.dim:
-                raise ConfigError(f"scenario.targets[{i}]", t, f"must have {self.dim} components (scenario.dim)")
-        for i, ob in enumerate(self.obstacles):
-            if len(ob.center) != self.dim:
-                raise ConfigError(f"scenario.obstacles[{i}].center", ob.center, f"must have {self.dim} components")
-        return self
-
-    def obstacle_set(self) -> Obstacles:
-        from mission.core.safety import Obstacles
-
-        return Obstacles.of([(o.center, o.radius) for o in self.obstacles], self.dim)
 
 
 class SafetySection(Section):
@@ -337,7 +265,7 @@ class MissionSection(Section):
 
 
 class MavlinkSection(Section):
-    url: str = Field("udpin:127.0.0.1:14540", max_length=MAX_URL_CHARS,
+    url: str = Field(DEFAULT_URL, max_length=MAX_URL_CHARS,
         description=("[-] vehicle endpoint: udpin:HOST:PORT, udpout:HOST:PORT, tcp:HOST:PORT or a serial device "
                      "/dev/ttyACM0:921600"))
     target_system: int | None = Field(None, ge=1, le=255,
@@ -433,7 +361,7 @@ class Config(Section):
         if not self.carrier.p3_margin_m > self.law.departure_margin_m:
             raise ConfigError("carrier.p3_margin_m", self.carrier.p3_margin_m,
                               "must exceed law.departure_margin_m, or the carrier never reaches the separation distance")
-        if self.carrier.p3_margin_m >= self.law.b * self.law.c:
+        if self.carrier.p3_margin_m >= self.law.params().separation_distance_m:
             raise ConfigError("carrier.p3_margin_m", self.carrier.p3_margin_m, "must be < b c")
         if len(self.mission.dock_offset_ned_m) != 3:
             raise ConfigError("mission.dock_offset_ned_m", self.mission.dock_offset_ned_m, "must have 3 components")
@@ -461,7 +389,10 @@ class Config(Section):
                 if point is not None and math.dist(point, ob.center) <= ob.radius:
                     raise ConfigError(f"scenario.{name}", point, f"inside scenario.obstacles[{i}] "
                                       f"(center {ob.center}, radius {ob.radius:g} m)")
-        check_legs(self)  # several targets: every leg can start under Assumption 1 (mission/config/legs.py)
+        # several targets: every leg can start under Assumption 1 (mission/config/legs.py)
+        check_legs(s, final_action=m.final_action, bc_m=bc, leg_start_margin_m=m.leg_start_margin_m,
+                   dock_offset_ned_m=m.dock_offset_ned_m, p3_margin_m=self.carrier.p3_margin_m,
+                   safety_margin_m=sf.margin_m)
         if s.dim != 3 or s.frame != "local_ned":
             return
         # local NED, z down: the carrier drives on the ground at carrier_start's z

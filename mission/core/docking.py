@@ -32,17 +32,19 @@ class DockingGeometry:
     cone_half_angle_rad [rad] and cone_min_radius_m [m]: how far off the glide path the vehicle may
     be; decision_height_m [m]: the gate's height above the dock point, below which only a vehicle
     meeting the contact conditions horizontally goes on; contact_radius_m, contact_height_m [m];
-    contact_max_horizontal_speed_m_s, contact_max_vertical_speed_m_s [m/s] relative to the carrier."""
+    contact_max_horizontal_speed_m_s, contact_max_vertical_speed_m_s [m/s] relative to the carrier.
+    No defaults: built from ``[recovery]`` (:func:`mission.model.docking_geometry`), whose schema
+    holds the one default of each."""
 
-    holdoff_distance_m: float = 4.0
-    glide_angle_rad: float = math.radians(25.0)
-    cone_half_angle_rad: float = math.radians(20.0)
-    cone_min_radius_m: float = 0.3
-    decision_height_m: float = 0.6
-    contact_radius_m: float = 0.15
-    contact_height_m: float = 0.1
-    contact_max_horizontal_speed_m_s: float = 0.2
-    contact_max_vertical_speed_m_s: float = 0.5
+    holdoff_distance_m: float
+    glide_angle_rad: float
+    cone_half_angle_rad: float
+    cone_min_radius_m: float
+    decision_height_m: float
+    contact_radius_m: float
+    contact_height_m: float
+    contact_max_horizontal_speed_m_s: float
+    contact_max_vertical_speed_m_s: float
 
     @property
     def holdoff_height_m(self) -> float:

@@ -46,7 +46,7 @@ class TickModel:
     obstacles: Obstacles
     passenger_safety: SafetyConfig
     carrier_safety: SafetyConfig
-    planar_carrier: bool = False
+    planar_carrier: bool
     carrier_mode: Literal["stop", "remark1"] = "stop"
     departure_margin_m: float = 1e-3
     filter_carrier: bool = True
@@ -107,12 +107,10 @@ def passenger_tick(
     shaped = False if a_max is None else uniform(sep)  # True: all separated, None: some
     if shaped is not False:  # (the scale below is exactly 1 where docked: skipped if all are)
         # Arrival shaping: never faster than the speed from which the acceleration limit can
-        # still stop at the target; keeps the direction. Without it the saturated law reaches
-        # the target at full speed and circles it (seen in the 2D run). With ticks of dt the
-        # speed that stops exactly at the target, braking by a_max dt per tick and moving by the
-        # new speed each tick, is sqrt((a_max dt / 2)^2 + 2 a_max d) - a_max dt / 2 (d the
-        # distance left); the continuous sqrt(2 a_max d) let a 50 Hz reference reach the target
-        # at 0.37 m/s, overshoot it and come back (docs/px4-hold.md).
+        # still stop at the target; keeps the direction. With ticks of dt the speed that stops
+        # exactly at the target, braking by a_max dt per tick and moving by the new speed each
+        # tick, is sqrt((a_max dt / 2)^2 + 2 a_max d) - a_max dt / 2 (d the distance left).
+        # Why, and what the continuous sqrt(2 a_max d) did: docs/how-it-works.md, arrival shaping.
         half_step = 0.0 if dt_s is None else 0.5 * a_max * dt_s
         stop_speed = np.sqrt(half_step * half_step + 2.0 * a_max * norm(e_pc - e_tc)) - half_step
         speed = norm(desired)

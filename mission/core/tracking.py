@@ -35,22 +35,24 @@ SetpointKind = Literal["velocity", "full"]
 
 @dataclass(frozen=True)
 class TrackingGains:
-    """Gains of the tracking loop (see the module docstring)."""
+    """Gains of the tracking loop (see the module docstring). No defaults: they are built from
+    the configuration (``[mission]``, :func:`mission.model.mission_model`), whose schema holds
+    the one default of each."""
 
-    kind: SetpointKind = "velocity"
-    position_gain_per_s: float = 1.0
-    position_lead: float = 0.0
-    integral_gain: float = 0.0
-    integral_limit: float = 2.0
-    drag_ff_per_s: float = 0.0
-    integral_window_m: float = 0.5
-    damping_per_s: float = 0.0
-    bias_compensation_s: float = 0.0
-    accel_lead_s: float = 0.0
-    accel_lead_filter_s: float = 0.1
-    accel_limit_m_s2: float | None = None
-    slow_lag_m: float | None = None
-    stop_lag_m: float | None = None
+    kind: SetpointKind
+    position_gain_per_s: float
+    position_lead: float
+    integral_gain: float
+    integral_limit: float
+    drag_ff_per_s: float
+    integral_window_m: float
+    damping_per_s: float
+    bias_compensation_s: float
+    accel_lead_s: float
+    accel_lead_filter_s: float
+    accel_limit_m_s2: float | None
+    slow_lag_m: float | None
+    stop_lag_m: float | None
 
 
 def velocity_demand(x_ref: np.ndarray, u_ref: np.ndarray, x_p: np.ndarray, integral: np.ndarray,

@@ -16,11 +16,10 @@ import numpy as np
 
 from mission.flightdata.mission_log import bc_circle
 from mission.flightdata.read import RECORD_SCHEMA, log_lines, read_messages
+from mission.phases.phase import Phase
 from mission.record import read_record
 
 BG, PANEL, GRID, TEXT = "#16161d", "#1f1f29", "#33334a", "#e6e6f0"
-PHASE_COLORS = ["#5b5b7a", "#6b6b8f", "#7a6bb0", "#8f6bc4", "#4e98e2", "#3fb37f", "#f7df71", "#f5a54d",
-                "#61cbff", "#9cd86b", "#9cd86b", "#cfcfe0", "#f05b5b"]
 
 
 def _json_series(content: Any, topic: str) -> tuple[np.ndarray, list[dict[str, Any]]]:
@@ -119,8 +118,8 @@ def draw_panels(mcap_path: str | Path, out_path: str | Path) -> Path:
     starts = [i for i in range(len(names)) if i == 0 or names[i] != names[i - 1]]
     for k, i in enumerate(starts):
         end = t_ph[starts[k + 1]] if k + 1 < len(starts) else t_ph[-1]
-        index = phase_rows[i]["index"]
-        ax.broken_barh([(t_ph[i], end - t_ph[i])], (1.1, 0.8), color=PHASE_COLORS[index % len(PHASE_COLORS)])
+        colour = Phase[names[i]].colour if names[i] in Phase.__members__ else GRID  # (a phase we no longer have)
+        ax.broken_barh([(t_ph[i], end - t_ph[i])], (1.1, 0.8), color=colour)
         if end - t_ph[i] > 0.08 * (t_ph[-1] - t_ph[0]):  # room for the name
             ax.text(t_ph[i] + 0.1, 1.5, names[i], fontsize=6.5, va="center", color="black")
     t_sf, safety = _json_series(content, f"/{pair}/safety")

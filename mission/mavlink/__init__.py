@@ -1,7 +1,7 @@
 """MAVLink 2 to one PX4 vehicle, one concept per module.
 
-* :mod:`~mission.mavlink.urls`: the one parser of link URLs (the configuration and the mock
-  vehicle use it too);
+* link URLs are parsed by :mod:`mission.config.urls` (the one parser: the configuration and the
+  mock vehicle use it too);
 * :mod:`~mission.mavlink.transport`: bytes in and out (UDP listen/send, TCP, serial) behind one
   small interface;
 * :mod:`~mission.mavlink.codec`: pymavlink codecs, datagram-safe parsing and MAVLink 2 signing;

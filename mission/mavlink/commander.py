@@ -14,19 +14,16 @@ import logging
 import math
 import threading
 from collections.abc import Iterator
-from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Callable
+from typing import Any, Callable
 
 from mission.core import geodesy
 from mission.flight_mode import FlightMode
 from mission.mavlink import px4
 from mission.errors import CommandRejected, LinkError, LinkTimeout
 from mission.mavlink.commands import CommandExchange, Confirmed, HeartbeatConfirmation, Step, refusal_reason
+from mission.mavlink.session import LinkSession, ParamValue
 from mission.mavlink.telemetry import VehicleState
 from mission.mavlink.env import mavlink
-
-if TYPE_CHECKING:
-    from mission.mavlink.session import LinkSession
 
 log = logging.getLogger("mission.mavlink.link")
 
@@ -241,17 +238,6 @@ class CommandClient:
                     return serious
                 if s.closed or not s.wait_locked(deadline):
                     return latest
-
-
-@dataclass(frozen=True)
-class ParamValue:
-    """A parameter as the vehicle last reported it: name, value (decoded), MAV_PARAM_TYPE, and
-    the clock time it arrived [s]."""
-
-    name: str
-    value: float
-    param_type: int
-    rx_s: float
 
 
 def received_param(msg: Any, t_rx: float) -> ParamValue:

@@ -27,6 +27,7 @@ from mission.core.setpoint import Setpoint
 from mission.flight_mode import FlightMode
 from mission.mavlink import px4
 from mission.time.clock import Clock, ScaledClock
+from mission.config.urls import DEFAULT_URL
 from mission.errors import LinkError
 from mission.mavlink.codec import link_codecs
 from mission.mavlink.commander import CommandClient, ParamClient
@@ -43,8 +44,6 @@ from mission.mavlink.env import mavlink
 __all__ = ["VehicleLink", "VehicleState", "LinkCounters", "DEFAULT_URL", "VEHICLE_TYPES", "ADOPT_HEARTBEATS"]
 
 log = logging.getLogger(__name__)
-
-DEFAULT_URL = "udpin:127.0.0.1:14540"
 
 
 class VehicleLink:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import collections
 import threading
 from dataclasses import dataclass, fields
-from typing import TYPE_CHECKING, Callable
+from typing import Callable
 
 from mission.time.clock import Clock
 from mission.errors import LinkError, LinkTimeout
@@ -13,8 +13,17 @@ from mission.mavlink import telemetry
 from mission.mavlink.commands import AckLog
 from mission.mavlink.telemetry import VehicleState
 
-if TYPE_CHECKING:
-    from mission.mavlink.commander import ParamValue
+
+@dataclass(frozen=True)
+class ParamValue:
+    """A parameter as the vehicle last reported it: name, value (decoded), MAV_PARAM_TYPE, and
+    the clock time it arrived [s]."""
+
+    name: str
+    value: float
+    param_type: int
+    rx_s: float
+
 
 @dataclass(frozen=True)
 class LinkCounters:

@@ -1,4 +1,4 @@
-"""The transports a link URL names (:mod:`mission.mavlink.urls`): UDP listen/send, TCP and
+"""The transports a link URL names (:mod:`mission.config.urls`): UDP listen/send, TCP and
 serial, bytes in and out, nothing MAVLink-specific.
 """
 from __future__ import annotations
@@ -10,7 +10,7 @@ import threading
 from typing import Any, Protocol
 
 from mission.errors import LinkError, LinkPortInUse, PortInUse
-from mission.mavlink.urls import Address, parse_url
+from mission.config.urls import Address, parse_url
 from mission.port_holder import is_addr_in_use, port_in_use
 
 

@@ -1,10 +1,15 @@
 """The mission state machine (pure): :func:`step` takes the state, one tick's observation and the
 mission's model, and returns the next state and the tick's decision.
 
-- :mod:`.types`: the one :class:`Phase` enum, abort reasons, the phase sets, what a tick observes,
-  keeps and decides;
+- :mod:`.phase`: the one :class:`Phase` enum with what each phase means (flying, separated, the
+  carrier's duty, on the deck, its colour), the phase sets, and the vehicle commands a phase asks
+  for (:class:`~mission.phases.phase.Request`);
+- :mod:`.types`: abort reasons, what a tick observes, keeps and decides, the mission's model;
 - :mod:`.machine`: :func:`step`, the failsafes any phase takes, and the phases before flight;
-- :mod:`.flying`: the phases that fly the reference (JOIN, RIDING, SEPARATED/NAVIGATING, ARRIVED).
+- :mod:`.flying`: the phases that fly the reference (JOIN, RIDING, SEPARATED/NAVIGATING, ARRIVED);
+- :mod:`.deck`: riding seated on the carrier's deck (``mission.ride = "deck"``);
+- :mod:`.recovery`: bringing the passenger home (RETURNING, HOLDOFF, APPROACH, GO_AROUND, DOCKED,
+  HOME, FALLBACK) and on to the next target (TRANSIT).
 """
 from mission.phases.machine import (
     AIRBORNE,

@@ -30,9 +30,8 @@ import numpy as np
 from mission.core.law import norm
 from mission.core.tick import latch_point, passenger_tick, separation_due
 from mission.flight_mode import FlightMode
-from mission.interfaces import Request
 from mission.phases.flying import Tracked, _carrier_acceleration, _track, navigate
-from mission.phases.phase import Phase
+from mission.phases.phase import Phase, Request
 from mission.phases.types import (
     ZERO,
     AbortReason,

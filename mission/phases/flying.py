@@ -18,7 +18,7 @@ from mission.core import arrival
 from mission.core.law import norm
 from mission.core.setpoint import Setpoint
 from mission.phases.types import ZERO, Decision, MissionModel, MissionState, Observation, Phase, dock_point, enter
-from mission.interfaces import Request
+from mission.phases.phase import Request
 from mission.core.safety import filter_velocity
 from mission.core.tick import DEPARTURE_THRESHOLD_M, carrier_tick, latch_point, passenger_tick, separation_due
 from mission.core.tracking import lead_acceleration, progress, setpoint as tracking_setpoint, update_integral, velocity_demand
@@ -127,15 +127,15 @@ def join(state, obs, m):
     x_ref, u_ref, on_dock = _toward_dock(state.x_ref, dock, v_dock, m)
     # Taking off from the ground, under the altitude floor: the floor's barrier would replace the
     # climb by its own approach to the floor (a climb rate that falls with the distance to it,
-    # sent as velocity only: the filter wins over the reference). PX4 SITL leaves the ground a
-    # second or two after the reference has climbed to the dock point, and then hovered 0.1-0.2 m
-    # under the floor, drifting, for 20 s (docs/recovery.md, "On real PX4"). The reference, which
-    # climbs to the dock point above the floor, leads the vehicle up instead.
+    # sent as velocity only: the filter wins over the reference), and a vehicle that leaves the
+    # ground after the reference has climbed would hover under the floor (measured on PX4:
+    # docs/recovery.md, "On real PX4"). The reference, which climbs to the dock point above the
+    # floor, leads the vehicle up instead.
     tr = _track(state, obs, m, x_ref, u_ref, ZERO, taking_off=True)
     # Docked once the vehicle has settled on the dock point (within join_settle_m for
-    # join_settle_s): the carrier starts its approach then, so what is left of the climb is not
-    # counted as riding offset (on PX4 the climb overshoots the dock by ~0.3 m when first within
-    # tolerance, and its velocity estimate is too noisy to judge rest by).
+    # join_settle_s): the carrier starts its approach then, so what is left of the climb (its
+    # overshoot) is not counted as riding offset; rest is judged on positions, not on the velocity
+    # estimate (why, measured on PX4: docs/flying-px4.md, "JOIN waits until settled").
     v = obs.vehicle
     near = on_dock and norm(v.position_ned_m - dock) <= m.join_settle_m
     settled = (state.settled_since_s if state.settled_since_s is not None else t) if near else None

@@ -52,7 +52,7 @@ from mission.flight_mode import FlightMode
 from mission.errors import AssumptionError
 from mission.core.law import check_assumptions, norm
 from mission.core.setpoint import Setpoint
-from mission.phases.phase import AIRBORNE, ARMED, BEFORE_SEPARATION, FLYING, Phase
+from mission.phases.phase import AIRBORNE, ARMED, BEFORE_SEPARATION, FLYING, Phase, Request
 from mission.phases.types import (
     TELEMETRY_SILENT_S,
     ZERO,
@@ -66,7 +66,6 @@ from mission.phases.types import (
     dock_point,
     enter,
 )
-from mission.interfaces import Request
 from mission.phases import deck, recovery
 from mission.phases.flying import arrived, join, navigate, riding
 

@@ -1,14 +1,26 @@
 """The mission's phases: the one list, and what each phase means to the vehicle, the carrier and
-the flight record (pure; imports nothing of ours).
+the flight record; and the vehicle commands a phase asks for (:class:`Request`). Pure; imports
+nothing of ours.
 
-A phase is added here (its member and its three properties) and in the machine's handler table
+A phase is added here (its member and its properties) and in the machine's handler table
 (:data:`mission.phases.machine.HANDLERS`); the wire's phase names (:mod:`mission.bus.wire`), the
-carrier's reaction (:mod:`mission.carrier.modes`) and the record's figures (:mod:`mission.record`)
-are derived from this enum.
+carrier's reaction (:mod:`mission.carrier.modes`), the record's figures (:mod:`mission.record`)
+and the colours of the plots (:mod:`mission.plots`, :mod:`mission.flightdata.view`) are derived
+from this enum.
 """
 from __future__ import annotations
 
 from enum import StrEnum
+
+
+class Request(StrEnum):
+    """A vehicle command the mission phases ask to have in flight (equal to its lower-case name)."""
+
+    ARM = "arm"
+    OFFBOARD = "offboard"
+    HOLD = "hold"
+    LAND = "land"
+    DISARM = "disarm"  # on the deck only (mission.ride = "deck"): PX4 refuses it unless its land detector says landed
 
 
 class Duty(StrEnum):
@@ -34,42 +46,45 @@ class Phase(StrEnum):
       no longer needed to fly, the anchor is latched;
     - ``duty``: what the carrier does meanwhile (:class:`Duty`);
     - ``on_deck``: the vehicle still stands on the deck, not yet lifted off (the carrier may align
-      its estimate onto the passenger's).
+      its estimate onto the passenger's);
+    - ``colour``: how plots and the flight-data view draw it (``#rrggbb``, one per phase).
     """
 
     flying: bool
     separated: bool
     duty: Duty
     on_deck: bool
+    colour: str
 
-    def __new__(cls, name: str, flying: bool, separated: bool, duty: Duty, on_deck: bool) -> Phase:
+    def __new__(cls, name: str, flying: bool, separated: bool, duty: Duty, on_deck: bool, colour: str) -> Phase:
         member = str.__new__(cls, name)
         member._value_ = name
         member.flying, member.separated, member.duty, member.on_deck = flying, separated, duty, on_deck
+        member.colour = colour
         return member
 
-    #            name          flying separated duty           on_deck
-    PREFLIGHT = ("PREFLIGHT", False, False, Duty.WAIT, True)
-    STREAMING = ("STREAMING", False, False, Duty.WAIT, True)
-    ARMING = ("ARMING", False, False, Duty.WAIT, True)
-    OFFBOARD = ("OFFBOARD", False, False, Duty.WAIT, False)
-    JOIN = ("JOIN", True, False, Duty.WAIT, False)
-    RIDING = ("RIDING", True, False, Duty.CARRY, False)
-    TRANSIT = ("TRANSIT", True, False, Duty.REPOSITION, False)
-    SEPARATED = ("SEPARATED", True, True, Duty.RELEASED, False)
-    NAVIGATING = ("NAVIGATING", True, True, Duty.RELEASED, False)
-    ARRIVED = ("ARRIVED", True, True, Duty.RELEASED, False)
-    RETURNING = ("RETURNING", True, True, Duty.RECOVER, False)
-    HOLDOFF = ("HOLDOFF", True, True, Duty.RECOVER, False)
-    APPROACH = ("APPROACH", True, True, Duty.RECOVER, False)
-    GO_AROUND = ("GO_AROUND", True, True, Duty.RECOVER, False)
-    DOCKED = ("DOCKED", True, True, Duty.RECOVER, False)
-    HOME = ("HOME", True, True, Duty.PARK, False)
-    FALLBACK = ("FALLBACK", True, True, Duty.RELEASED, False)
-    HOLD = ("HOLD", False, True, Duty.RELEASED, False)
-    LAND = ("LAND", False, True, Duty.RELEASED, False)
-    DONE = ("DONE", False, True, Duty.RELEASED, False)
-    ABORT = ("ABORT", False, False, Duty.STOP, False)
+    #            name          flying separated duty           on_deck colour
+    PREFLIGHT = ("PREFLIGHT", False, False, Duty.WAIT, True, "#5b5b7a")
+    STREAMING = ("STREAMING", False, False, Duty.WAIT, True, "#6b6b8f")
+    ARMING = ("ARMING", False, False, Duty.WAIT, True, "#7a6bb0")
+    OFFBOARD = ("OFFBOARD", False, False, Duty.WAIT, False, "#8f6bc4")
+    JOIN = ("JOIN", True, False, Duty.WAIT, False, "#4e98e2")
+    RIDING = ("RIDING", True, False, Duty.CARRY, False, "#3fb37f")
+    TRANSIT = ("TRANSIT", True, False, Duty.REPOSITION, False, "#2e8b57")
+    SEPARATED = ("SEPARATED", True, True, Duty.RELEASED, False, "#f7df71")
+    NAVIGATING = ("NAVIGATING", True, True, Duty.RELEASED, False, "#f5a54d")
+    ARRIVED = ("ARRIVED", True, True, Duty.RELEASED, False, "#9cd86b")
+    RETURNING = ("RETURNING", True, True, Duty.RECOVER, False, "#61cbff")
+    HOLDOFF = ("HOLDOFF", True, True, Duty.RECOVER, False, "#f1c232")
+    APPROACH = ("APPROACH", True, True, Duty.RECOVER, False, "#6fa8dc")
+    GO_AROUND = ("GO_AROUND", True, True, Duty.RECOVER, False, "#e06666")
+    DOCKED = ("DOCKED", True, True, Duty.RECOVER, False, "#93c47d")
+    HOME = ("HOME", True, True, Duty.PARK, False, "#76a5af")
+    FALLBACK = ("FALLBACK", True, True, Duty.RELEASED, False, "#c27ba0")
+    HOLD = ("HOLD", False, True, Duty.RELEASED, False, "#cfcfe0")
+    LAND = ("LAND", False, True, Duty.RELEASED, False, "#b4a7d6")
+    DONE = ("DONE", False, True, Duty.RELEASED, False, "#a8a8b8")
+    ABORT = ("ABORT", False, False, Duty.STOP, False, "#f05b5b")
 
 
 #: Phases in which the vehicle is ours in OFFBOARD and must stay there.
@@ -80,6 +95,10 @@ BEFORE_SEPARATION = frozenset(p for p in Phase if not p.separated and p is not P
 AFTER_SEPARATION = frozenset(p for p in Phase if p.separated)
 #: The phases that bring the passenger home to the carrier (mission.final_action = "return").
 RECOVERY = frozenset({Phase.RETURNING, Phase.HOLDOFF, Phase.APPROACH, Phase.GO_AROUND, Phase.DOCKED})
+#: The recovery and how it ends (home on the deck, or the fallback): the recovery's figure.
+HOMEWARD = RECOVERY | {Phase.HOME, Phase.FALLBACK}
+#: The flight to the target, from the separation to the handover (the arrival's figures).
+OUTBOUND = frozenset({Phase.SEPARATED, Phase.NAVIGATING, Phase.ARRIVED})
 #: Phases in which the vehicle must be armed: ours, switching to OFFBOARD or flying in it.
 ARMED = frozenset({Phase.OFFBOARD, *FLYING})
 #: Phases in which the vehicle must be in the air: not JOIN (it lifts off the deck, and PX4's land

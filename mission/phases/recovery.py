@@ -46,10 +46,9 @@ from mission.core.law import norm
 from mission.core.pursuit import PursuitLimits, pursue
 from mission.core.safety import filter_velocity
 from mission.flight_mode import FlightMode
-from mission.interfaces import Request
 from mission.phases import deck
 from mission.phases.flying import _track
-from mission.phases.phase import Phase
+from mission.phases.phase import Phase, Request
 from mission.phases.types import (
     Decision,
     MissionModel,

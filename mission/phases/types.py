@@ -14,8 +14,7 @@ from enum import StrEnum
 
 import numpy as np
 
-from mission.phases.phase import Phase
-from mission.interfaces import Request
+from mission.phases.phase import Phase, Request
 from mission.core.safety import DeckKeepOut, SafetyConfig
 from mission.core.docking import DockingGeometry
 from mission.core.pursuit import PursuitLimits
@@ -94,7 +93,8 @@ class Observation:
 
 @dataclass(frozen=True)
 class MissionModel:
-    """Fixed parameters of a mission (built from the config by the controller)."""
+    """Fixed parameters of a mission, built from the configuration (:func:`mission.model.mission_model`):
+    no field taken from it has a default here, the schema holds the one default of each."""
 
     tick: TickModel
     command_safety: SafetyConfig  # limits on what is sent to the vehicle
@@ -111,16 +111,16 @@ class MissionModel:
     connect_timeout_s: float
     max_duration_s: float
     dt_s: float
-    tracking: TrackingGains = TrackingGains()
-    join_settle_m: float = float("inf")  # JOIN -> RIDING within this of the dock point [m] (min with the tolerance)...
-    join_settle_s: float = 0.0  # ... for this long [s]
-    arrival_max_speed_m_s: float | None = None  # arrival also needs the vehicle this slow [m/s]
-    carrier_dt_s: float = 1.0 / 30.0  # the carrier's control period [s] (its acceleration over one step)
-    recovery: RecoveryModel | None = None  # with final_action "return"
+    tracking: TrackingGains
+    join_settle_m: float  # JOIN -> RIDING within this of the dock point [m] (min with the tolerance)...
+    join_settle_s: float  # ... for this long [s]
+    arrival_max_speed_m_s: float | None  # arrival also needs the vehicle this slow [m/s]
+    carrier_dt_s: float  # the carrier's control period [s] (its acceleration over one step)
+    recovery: RecoveryModel | None  # with final_action "return"
+    leg_start_m: float  # a leg after the first starts once the carrier is this far from its target [m]
+    deck: DeckRide | None  # mission.ride = "deck": the passenger sits on the deck (the dock point) when carried
     legs: tuple[MissionModel, ...] = ()  # one model per target, in order (the leg's tick has its target)
     next_target: np.ndarray | None = None  # a leg's model: the target of the leg after it [m] NED, or None (the last)
-    leg_start_m: float = 0.0  # a leg after the first starts once the carrier is this far from its target [m]
-    deck: DeckRide | None = None  # mission.ride = "deck": the passenger sits on the deck (the dock point) when carried
 
 
 @dataclass(frozen=True)
@@ -250,7 +250,7 @@ class MissionState:
 class Decision:
     """What the controller does this tick. setpoint: what to send (velocity only or full, as
     tracking decided; None: send nothing); request: the vehicle command to have in flight
-    (:class:`~mission.interfaces.Request`) or None.
+    (:class:`~mission.phases.phase.Request`) or None.
     Diagnostics for the flight log: dock, P, relative (law's u_p - u_c), desired, safety_acted."""
 
     setpoint: Setpoint | None

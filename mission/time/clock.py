@@ -7,7 +7,7 @@ flies a minute in seconds. A :class:`ManualClock` is driven by hand in unit test
 (speed 1) converts to and from CLOCK_MONOTONIC stamps.
 A :class:`LockstepClock` follows simulated time owned by another process (the mock vehicle) and
 holds it until every thread of this process that waits on the clock has finished its step, as
-PX4 SITL does with its simulator (see :mod:`mission.time.lockstep` for the wire protocol).
+PX4 SITL does with its simulator (the wire protocol: :mod:`mission.bus.lockstep`, :mod:`mission.mavlink.lockstep`).
 
 Waiting: a thread that blocks for a time or on a condition does so through the clock
 (``sleep``, ``wait``) and wakes others with ``notify``, so the same code runs on a scaled wall
@@ -183,6 +183,17 @@ def start_thread(clock: Clock, target: Callable[[], None], name: str) -> threadi
 
 # ------------------------------------------------------------------------------------- lockstep
 
+# The lockstep protocol's limits on the wall clock, for the relays over Zenoh (mission.bus.lockstep)
+# and MAVLink (mission.mavlink.lockstep); why each: docs/lockstep.md.
+HELLO_WALL_S = 0.05  # resend period of a call nobody has answered yet [s, wall]
+RESEND_WALL_S = 0.5  # resend period of an unanswered call once joined (an outage lost it) [s, wall]
+LOST_WALL_S = 2.0  # a named sample still missing this long ... [s, wall]
+LOST_AFTER_REPEATS = 3  # ... after this many repeats of the message naming it is given up
+CARRIER_WATCHDOG_WALL_S = 2.0  # the controller drops a carrier silent this long [s, wall]
+ALIVE_CARRIER_WATCHDOG_WALL_S = 6.0  # ... or this long while its liveliness token is present [s, wall]
+CONTROLLER_WATCHDOG_WALL_S = 5.0  # the controller's clock falls back to the wall clock [s, wall]
+VEHICLE_WATCHDOG_WALL_S = 10.0  # the vehicle drops a controller silent this long [s, wall]
+
 
 class Upstream(Protocol):
     """Where a :class:`LockstepClock` reports that this process finished a step."""
@@ -256,8 +267,8 @@ class LockstepClock:
     and every participant is released.
     """
 
-    def __init__(self, *, speed: float = 1.0, watchdog_wall_s: float = 5.0, join_wall_s: float = 60.0,
-                 name: str = "lockstep", creator_runs: bool = True) -> None:
+    def __init__(self, *, speed: float = 1.0, watchdog_wall_s: float = CONTROLLER_WATCHDOG_WALL_S,
+                 join_wall_s: float = 60.0, name: str = "lockstep", creator_runs: bool = True) -> None:
         if not speed > 0:
             raise ValueError(f"speed must be > 0, got {speed!r}")
         self.speed = float(speed)

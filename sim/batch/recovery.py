@@ -48,7 +48,7 @@ from mission.core.consistent_velocity import PositionConsistentVelocity
 from mission.core.setpoint import Setpoint
 from mission.core.tick import TickModel, carrier_tick
 from mission.flight_mode import FlightMode
-from mission.interfaces import Request
+from mission.phases.phase import Request
 from mission.mavlink import setpoints
 from mission.model import mission_model, model_from_config
 from mission.phases import CarrierObs, Decision, MissionState, Observation, Phase, VehicleObs, finished, step
@@ -137,10 +137,10 @@ class KinematicCarrier:
         c = cfg.carrier
         decel = c.brake_decel_m_s2 or cfg.safety.carrier_max_accel_m_s2 or 1.0
         delay = c.brake_delay_s if c.brake_delay_s is not None else 0.0  # the built-in robot obeys at once
-        guard = GuardParams(cfg.law.b * cfg.law.c - c.p3_margin_m, decel, delay, 1.0 / c.rate_hz)
+        guard = GuardParams(cfg.law.params().separation_distance_m - c.p3_margin_m, decel, delay, 1.0 / c.rate_hz)
         self.legs = Legs(targets, [_speed_limited(cfg, t) for t in targets], guard, True,
                          np.asarray(cfg.mission.dock_offset_ned_m, dtype=float),
-                         cfg.law.b * cfg.law.c + cfg.mission.leg_start_margin_m)
+                         cfg.law.params().separation_distance_m + cfg.mission.leg_start_margin_m)
         self.course = RecoveryCourse.from_lists(c.recovery_course, c.recovery_heading_deg, c.recovery_speed_m_s)
         self.period_s = 1.0 / c.rate_hz
         self.position = np.array(cfg.scenario.carrier_start, dtype=float)

@@ -193,7 +193,7 @@ def ros2_robot(key_form: str, namespace: str, domain_id: int, kinematics: str, y
                              yaw_rad=math.radians(yaw_deg), auth=auth)
         upstream = None
         if isinstance(clock, LockstepClock):
-            from mission.time.lockstep import ZenohUpstream
+            from mission.bus.lockstep import ZenohUpstream
 
             upstream = ZenohUpstream(clock, session, robot_clock_keys(ros2), robot, published=lambda: robot.published_seq,
                                      auth=auth)

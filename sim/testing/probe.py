@@ -292,7 +292,7 @@ def sleep_until(clock: Any, t_s: float, spin_wall_s: float = 0.001) -> None:
 
 
 class Lockstep:
-    """The probe's side of the vehicle's lockstep clock (mission/time/lockstep.py): wait at a barrier
+    """The probe's side of the vehicle's lockstep clock (mission/mavlink/lockstep.py): wait at a barrier
     (the vehicle's TIMESYNC request), act, release the vehicle up to a wake time."""
 
     def __init__(self, probe: Probe, timeout_s: float = 10.0) -> None:

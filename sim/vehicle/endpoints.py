@@ -14,7 +14,7 @@ import socket
 from typing import Any
 
 from mission.mavlink.codec import keep_replay_state_on_failure, new_codec, reset_parser, setup_signing
-from mission.mavlink.urls import Endpoint, parse_url
+from mission.config.urls import Endpoint, parse_url
 from mission.mavlink.env import mavlink
 from mission.errors import LinkError
 from mission.port_holder import is_addr_in_use, port_in_use
@@ -27,7 +27,7 @@ LINK_IDS = {"gcs": 0, "onboard": 1}
 
 
 def parse_endpoint(text: str, default_scheme: str = "udpin") -> Endpoint:
-    """A UDP endpoint in the URL forms pymavlink and MAVSDK use (:func:`mission.mavlink.urls.parse_url`:
+    """A UDP endpoint in the URL forms pymavlink and MAVSDK use (:func:`mission.config.urls.parse_url`:
     ``HOST:PORT`` with ``default_scheme``, ``udpin:``, ``udpout:``, ``udp:`` = udpin, ``://``, an empty
     host = 127.0.0.1). Raises ValueError for anything else (the mock vehicle speaks UDP only)."""
     endpoint = parse_url(text, default_scheme)

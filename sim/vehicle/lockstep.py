@@ -1,4 +1,4 @@
-"""The mock vehicle's side of lockstep simulated time (:mod:`mission.time.lockstep` is the protocol).
+"""The mock vehicle's side of lockstep simulated time (:mod:`mission.bus.lockstep` is the protocol).
 
 The vehicle owns simulated time. At each barrier ``t`` it sends ``TIMESYNC(0, t)`` and waits for
 the controller's answer (``tc1`` = the controller's next wake) before it integrates, step by

@@ -37,7 +37,7 @@ class VehicleOptions:
     given by :meth:`MockVehicle.follow_deck` (``mock-vehicle --deck PAIR``: the carrier's Zenoh
     state); None: no deck.
     lockstep: own simulated time and step in lockstep with the controller on the onboard link
-    (:mod:`mission.time.lockstep`); ``speed`` is then the pace after the controller leaves or stays
+    (:mod:`mission.bus.lockstep`); ``speed`` is then the pace after the controller leaves or stays
     silent for ``lockstep_watchdog_wall_s`` wall seconds. ``lockstep_max_speed``: in lockstep, fly at
     most this many simulated seconds per wall second (None: as fast as the CPU allows), so that
     a test acting from outside at a phase (a kill, a pilot) has a known margin.
@@ -62,7 +62,7 @@ class VehicleOptions:
     frame: str = "quadrotor"  # or "rover": MAV_TYPE_GROUND_ROVER, Ackermann kinematics (sim.vehicle.physics.rover)
     deck: DeckSpec | None = None
     lockstep: bool = False
-    lockstep_watchdog_wall_s: float = 10.0  # mission.time.lockstep.VEHICLE_WATCHDOG_WALL_S
+    lockstep_watchdog_wall_s: float = 10.0  # mission.time.clock.VEHICLE_WATCHDOG_WALL_S
     lockstep_max_speed: float | None = None
 
     def __post_init__(self) -> None:

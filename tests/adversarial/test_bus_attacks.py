@@ -38,7 +38,7 @@ import zenoh
 
 from mission.bus.bridge import keys
 from mission.bus.wire import PassengerStatus
-from mission.carrier.controller import OwnState
+from mission.carrier.backends import OwnState
 from tests.faults.procs import assert_safe_end, flight
 from tests.faults.test_matrix import assert_never_disarmed_in_the_air, concurrently
 from tests.support.mission_harness import Pair, flying_pair

@@ -171,7 +171,7 @@ def test_long_blackouts_before_and_after_separation_lose_the_vehicle_and_px4_lan
 # Lockstep flights acted on from outside at a phase the test reads (a kill, a pilot): at most
 # SPEED simulated seconds per wall second, so the flight never runs away from the test's reaction;
 # the vehicle drops a silent controller after 8 s (wall) rather than 10: longer than the controller
-# waits for its carrier (2 s for a dead one, mission.time.lockstep.CARRIER_WATCHDOG_WALL_S; up to
+# waits for its carrier (2 s for a dead one, mission.time.clock.CARRIER_WATCHDOG_WALL_S; up to
 # ALIVE_CARRIER_WATCHDOG_WALL_S = 6 s for a slow one whose liveliness token is present, or one that
 # an outage made lose a message, LOST_WALL_S), so a carrier fault never looks like offboard loss.
 PACED = ("--lockstep-max-speed", str(SPEED), "--lockstep-watchdog", "8")

@@ -20,7 +20,7 @@ from mission.config.schema import Config, load_config, with_overrides
 from mission.controller import MissionController, MissionOutcome, mission_info
 from mission.mavlink.link import VehicleLink
 from mission.cli.run import mission_io
-from mission.time.lockstep import ZenohUpstream, clock_keys
+from mission.bus.lockstep import ZenohUpstream, clock_keys
 from mission.record import FlightRecorder
 from mission.phases import Phase
 from sim.robots.carrier import CarrierSim

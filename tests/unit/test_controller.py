@@ -13,7 +13,7 @@ from mission.controller import CommandWorker, MissionController, TickReport, mis
 from mission.errors import LinkError
 from mission.core.law import norm
 from mission.phases import AbortReason, Phase
-from mission.interfaces import Request
+from mission.phases.phase import Request
 from mission.record import FlightRecorder
 from tests.conftest import CONFIGS
 from tests.support.fake_vehicle import FakeWorld

@@ -1,8 +1,11 @@
-"""The layers point one way: the product (mission/) imports nothing from the simulator or the
-benchmarks, and still offers their subcommands through the registry."""
+"""The layers point one way: every import goes down the layer table of docs/how-it-works.md (read
+from the page itself, so the page and the check cannot drift apart), mission/ has no import
+circle, the product (mission/) imports nothing from the simulator or the benchmarks and still
+offers their subcommands through the registry."""
 from __future__ import annotations
 
 import ast
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -24,6 +27,181 @@ def imported_modules(path: Path) -> set[str]:
         elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
             names.add(node.module)
     return names
+
+
+LAYER_DOC = ROOT / "docs" / "how-it-works.md"
+LAYER_NAMES = ["tools", "simulator", "product wiring", "interfaces", "I/O adapters", "clocks", "pure core"]
+TOPS = ("mission", "sim", "bench", "tests")
+
+
+def layer_table(text: str) -> list[tuple[str, list[str]]]:
+    """The rows of the table under ``## Layers`` in ``text``, top layer first: (name, the paths
+    the row names: every backticked ``mission/``, ``sim/``, ``bench/`` or ``tests/`` file or folder)."""
+    section = text.split("\n## Layers\n", 1)[1].split("\n## ", 1)[0]
+    rows = [line for line in section.splitlines() if line.startswith("|")][2:]  # past the header and |---|
+    table = []
+    for row in rows:
+        name, modules = (cell.strip() for cell in row.strip("|").split("|")[:2])
+        table.append((name, [p for p in re.findall(r"`([^`]+)`", modules) if p.split("/")[0] in TOPS and "/" in p]))
+    return table
+
+
+def layer_of(path: str, table: list[tuple[str, list[str]]]) -> int | None:
+    """The index in ``table`` of the row naming the file ``path`` (relative to the repository) or,
+    failing that, its nearest folder; None: no row names it."""
+    best: tuple[int, int] | None = None
+    for index, (_, paths) in enumerate(table):
+        for p in paths:
+            if path == p or (p.endswith("/") and path.startswith(p)):
+                if best is None or len(p) > best[1]:
+                    best = (index, len(p))
+    return None if best is None else best[0]
+
+
+def module_name(path: Path) -> str:
+    parts = path.relative_to(ROOT).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def import_edges(files: list[Path]) -> dict[str, dict[str, int]]:
+    """{module: {a module of ``files`` it imports: the line}}, for every import of the file: at
+    the top, inside a function or under ``if TYPE_CHECKING`` alike. ``from package import name``
+    is an import of the submodule ``package.name`` when there is one, else of the package."""
+    modules = {module_name(p): p for p in files}
+
+    def resolve(name: str) -> str | None:
+        while name and name not in modules:
+            name = name.rpartition(".")[0]
+        return name or None
+
+    edges: dict[str, dict[str, int]] = {}
+    for name, path in modules.items():
+        package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+        found: dict[str, int] = {}
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Import):
+                targets = [alias.name for alias in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                base = node.module or ""
+                if node.level:  # relative: from the package, up level - 1
+                    parts = package.split(".")
+                    base = ".".join([*parts[:len(parts) - node.level + 1], *filter(None, [base])])
+                targets = [f"{base}.{alias.name}" for alias in node.names]
+            else:
+                continue
+            for target in targets:
+                hit = resolve(target)
+                if hit is not None and hit != name:
+                    found.setdefault(hit, node.lineno)
+        edges[name] = found
+    return edges
+
+
+def upward_imports(files: list[Path], table: list[tuple[str, list[str]]]) -> list[str]:
+    """Every import in ``files`` of a module of a layer above the importer's ("a.b (layer) ->
+    c.d (layer above), line n")."""
+    layers = {module_name(p): layer_of(str(p.relative_to(ROOT)), table) for p in files}
+    found = []
+    for importer, imported in import_edges(files).items():
+        for target, line in imported.items():
+            mine, theirs = layers[importer], layers[target]
+            if mine is not None and theirs is not None and theirs < mine:
+                found.append(f"{importer} ({table[mine][0]}) -> {target} ({table[theirs][0]}), line {line}")
+    return sorted(found)
+
+
+def cycles(edges: dict[str, dict[str, int]]) -> list[list[str]]:
+    """The import circles of ``edges``: each strongly connected set of more than one module, sorted
+    (Tarjan's algorithm, iterative)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    found = []
+    for root in sorted(edges):
+        if root in index:
+            continue
+        work = [(root, iter(sorted(edges[root])))]
+        index[root] = low[root] = len(index)
+        stack.append(root)
+        on_stack.add(root)
+        while work:
+            node, children = work[-1]
+            child = next(children, None)
+            if child is not None:
+                if child not in edges:
+                    continue
+                if child not in index:
+                    index[child] = low[child] = len(index)
+                    stack.append(child)
+                    on_stack.add(child)
+                    work.append((child, iter(sorted(edges[child]))))
+                elif child in on_stack:
+                    low[node] = min(low[node], index[child])
+                continue
+            work.pop()
+            if work:
+                low[work[-1][0]] = min(low[work[-1][0]], low[node])
+            if low[node] == index[node]:
+                members = []
+                while True:
+                    member = stack.pop()
+                    on_stack.discard(member)
+                    members.append(member)
+                    if member == node:
+                        break
+                if len(members) > 1:
+                    found.append(sorted(members))
+    return sorted(found)
+
+
+def _our_files() -> list[Path]:
+    return [p for top in TOPS for p in sorted((ROOT / top).rglob("*.py"))]
+
+
+def test_the_layer_table_is_read_from_the_docs_and_names_what_exists():
+    table = layer_table(LAYER_DOC.read_text())
+    assert [name for name, _ in table] == LAYER_NAMES
+    named = [p for _, paths in table for p in paths]
+    assert "mission/core/" in named and "mission/interfaces.py" in named
+    assert [p for p in named if not (ROOT / p).exists()] == []  # the page names no module that is gone
+
+
+def test_every_module_has_a_layer():
+    table = layer_table(LAYER_DOC.read_text())
+    files = [str(p.relative_to(ROOT)) for p in _our_files() if p != ROOT / "mission" / "__init__.py"]  # (empty)
+    assert [f for f in files if layer_of(f, table) is None] == []
+
+
+def test_imports_point_down_the_layer_table():
+    """Every edge of the table: no module imports one of a layer above its own, not even for a
+    type annotation (the reader and the type checker still need the other layer)."""
+    assert upward_imports(_our_files(), layer_table(LAYER_DOC.read_text())) == []
+
+
+def test_the_layer_check_can_fail(tmp_path, monkeypatch):
+    table = [("top", ["pkg/top.py"]), ("bottom", ["pkg/"])]
+    (tmp_path / "pkg").mkdir()
+    (tmp_path / "pkg" / "top.py").write_text("from . import low\n")  # a relative import too
+    (tmp_path / "pkg" / "low.py").write_text(
+        "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from pkg.top import X\n")
+    monkeypatch.setattr(sys.modules[__name__], "ROOT", tmp_path)
+    files = sorted((tmp_path / "pkg").glob("*.py"))
+    assert import_edges(files) == {"pkg.low": {"pkg.top": 3}, "pkg.top": {"pkg.low": 1}}
+    assert upward_imports(files, table) == ["pkg.low (bottom) -> pkg.top (top), line 3"]
+    assert (layer_of("pkg/top.py", table), layer_of("pkg/low.py", table), layer_of("x/y.py", table)) == (0, 1, None)
+
+
+def test_mission_has_no_import_circle():
+    """No module of mission/ imports itself back through others, counting every import: at the
+    top, inside a function and under ``if TYPE_CHECKING`` (a circle of type-only imports still
+    means neither module can be read, changed or moved without the other)."""
+    assert cycles(import_edges(sorted((ROOT / "mission").rglob("*.py")))) == []
+
+
+def test_the_circle_check_can_fail():
+    edges = {"a": {"b": 1}, "b": {"c": 1}, "c": {"a": 1, "d": 1}, "d": {}, "e": {"e": 1, "f": 1}, "f": {"e": 1}}
+    assert cycles(edges) == [["a", "b", "c"], ["e", "f"]]
 
 
 def test_mission_imports_nothing_from_sim_or_bench():
@@ -91,7 +269,7 @@ PURE = tuple(sorted(
      if p.name != "__init__.py"}
     | {"mission.bus.wire", "mission.bus.ros2", "mission.bus.gate", "mission.flight_mode", "mission.carrier.modes",
        "mission.carrier.guard", "mission.carrier.tracking", "mission.carrier.start", "mission.carrier.acceleration",
-       "mission.carrier.backends", "sim.batch.closed_loop"}))
+       "mission.carrier.backends", "mission.bus.encodings", "sim.batch.closed_loop"}))
 IO_MODULES = {"socket", "select", "selectors", "threading", "time", "subprocess", "signal", "asyncio", "zenoh",
               "pymavlink", "serial"}
 

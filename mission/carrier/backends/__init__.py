@@ -1,43 +1,74 @@
 """The carrier robots ``marsupial carrier`` drives, by the name ``carrier.backend`` gives.
 
 Each backend is a module of this package with ``open_backend(cfg, clock, session)`` (the backend,
-a :class:`~mission.carrier.controller.CarrierBackend`) and ``describe(cfg)`` (one line for the
-start-up message). :data:`KINDS` is the one list: the configuration's choices, ``--backend``'s
-choices and the configuration reference derive from it. Adding a backend is its module, its entry
-here, and its ``[carrier.<name>]`` section in :mod:`mission.config.carrier` if it has settings.
-Loading this package imports no backend (and nothing of I/O): a backend is imported when opened.
+a :class:`CarrierBackend`, whose own state is an :class:`OwnState`) and ``describe(cfg)`` (one
+line for the start-up message). :data:`~mission.config.carrier.KINDS` is the one list of them:
+the configuration's choices, ``--backend``'s choices and the configuration reference derive from
+it. Adding a backend is its module, and its entry in :data:`~mission.config.carrier.KINDS` with
+its ``[carrier.<name>]`` section in :mod:`mission.config.carrier` if it has settings. Loading
+this package imports no backend (and nothing of I/O): a backend is imported when opened.
 """
 from __future__ import annotations
 
 import importlib
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
+
+import numpy as np
+
+from mission.config.carrier import KINDS, BackendKind
 
 if TYPE_CHECKING:
     import zenoh
 
-    from mission.carrier.controller import CarrierBackend
+    from mission.carrier.tracking import Tracked
     from mission.config.schema import Config
-    from mission.time.clock import Clock
+    from mission.time.clock import Clock, Downstream
+
+__all__ = ["KINDS", "BackendKind", "CarrierBackend", "OwnState", "describe", "open_backend"]
 
 
 @dataclass(frozen=True)
-class BackendKind:
-    """A kind of carrier robot: its name, what it is (``--help``, the configuration reference),
-    whether it is a real vehicle (its response delay, ``REAL_DELAY_S``, is allowed for by the P3
-    guard), and the module that drives it."""
+class OwnState:
+    """The carrier's own state: t_s [s] clock time of the measurement; position_ned_m (3,) [m]
+    and velocity_ned_m_s (3,) [m/s] in the shared local NED frame; yaw_rad [rad] or None."""
+
+    t_s: float
+    position_ned_m: np.ndarray
+    velocity_ned_m_s: np.ndarray
+    yaw_rad: float | None
+
+
+class CarrierBackend(Protocol):
+    """What the controller needs of a carrier robot (the kinds: :mod:`mission.carrier.backends`)."""
 
     name: str
-    summary: str
-    real: bool
-    module: str
+    brakes_itself: bool  # a real vehicle brakes with its own limits: "stop" is sent at once, not ramped
 
+    def advance(self, dt_s: float) -> None:
+        """Move ``dt_s`` [s] under the held command (the built-in robot; no-op for real ones)."""
 
-KINDS: dict[str, BackendKind] = {k.name: k for k in (
-    BackendKind("sim", "built-in kinematic robot", False, "mission.carrier.backends.sim"),
-    BackendKind("mavlink", "PX4 rover/boat over MAVLink", True, "mission.carrier.backends.mavlink"),
-    BackendKind("ros2", "ROS 2 robot over Zenoh", True, "mission.carrier.backends.ros2"),
-)}
+    def own_state(self) -> OwnState | None:
+        """The newest own state, or None before the first."""
+
+    def engage(self) -> None:
+        """The carrier has to move now: take control of the vehicle (arm, OFFBOARD) if needed."""
+
+    def control_fault(self) -> str | None:
+        """Why the vehicle does not take our commands now (None: it does)."""
+
+    def command(self, cmd: Tracked) -> None:
+        """Send (or hold) the command: a setpoint velocity, or forward speed and yaw rate."""
+
+    def park(self) -> None:
+        """The carrier is stopped for good: hand the vehicle to its own position hold, if it has one."""
+
+    def lockstep_relay(self, session: zenoh.Session) -> Downstream | None:
+        """In lockstep, how the carrier brings its robot along if that robot is simulated in a
+        process of its own (None: it is not, or it cannot step)."""
+
+    def close(self) -> None:
+        """Leave the vehicle safe and release what was opened."""
 
 
 def _module(cfg: Config) -> Any:

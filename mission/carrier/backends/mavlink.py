@@ -38,11 +38,11 @@ import math
 import numpy as np
 
 from mission.flight_mode import FlightMode
-from mission.carrier.controller import OwnState
+from mission.carrier.backends import OwnState
 from mission.carrier.tracking import Tracked
 from mission.core.setpoint import Setpoint
 from mission.time.clock import Clock, Downstream
-from mission.time.lockstep import MavlinkRelay
+from mission.mavlink.lockstep import MavlinkRelay
 from mission.config.schema import Config
 from mission.controller import CommandWorker
 from mission.errors import LinkError

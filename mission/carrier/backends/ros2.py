@@ -34,12 +34,12 @@ import numpy as np
 import zenoh
 import zenoh.ext
 
-from mission.carrier.controller import OwnState
+from mission.carrier.backends import OwnState
 from mission.carrier.tracking import Tracked
 from mission.bus.auth import bus_auth
 from mission.bus.session import congestion_for, declare, undeclare
 from mission.time.clock import Clock, Downstream
-from mission.time.lockstep import ZenohRelay
+from mission.bus.lockstep import ZenohRelay
 from mission.config.schema import CarrierRos2Section, Config
 from mission.bus.wire import CarrierState, WireError
 from mission.bus.ros2 import decode_odometry_cdr, encode_twist_cdr
@@ -80,7 +80,7 @@ def ros2_topics(section: CarrierRos2Section) -> Ros2Topics:
 
 def robot_clock_keys(section: CarrierRos2Section) -> tuple[str, str]:
     """The (time, ready) lockstep keys of the robot of ``section`` (simulation only: the ros2
-    carrier brings a ROS-2-shaped robot along, :class:`mission.time.lockstep.ZenohRelay`)."""
+    carrier brings a ROS-2-shaped robot along, :class:`mission.bus.lockstep.ZenohRelay`)."""
     ns = section.namespace.strip("/") or "-"
     root = f"marsupial/robot_clock/{section.domain_id}/{ns}"
     return f"{root}/time", f"{root}/ready"

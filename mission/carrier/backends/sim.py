@@ -12,7 +12,8 @@ import math
 
 import numpy as np
 
-from mission.carrier.controller import OwnState, _pad3
+from mission.carrier.backends import OwnState
+from mission.carrier.controller import _pad3
 from mission.carrier.tracking import Tracked, heading_of
 from mission.core.geodesy import wrap_pi
 from mission.time.clock import Clock

@@ -18,7 +18,7 @@ from mission.bus.wire import CarrierState, PassengerStatus
 from mission.config.schema import ZenohSection
 from mission.errors import ConfigError
 from mission.time.clock import ManualClock
-from mission.time.lockstep import _ClockWire, clock_keys
+from mission.bus.lockstep import _ClockWire, clock_keys
 from tests.support.zenoh_util import LENIENT, peer_pair, wait_for
 
 pytestmark = pytest.mark.timeout(30)

@@ -4,7 +4,7 @@ under both key forms. A scripted passenger talks to the carrier over Zenoh.
 
 The rover flights run in lockstep: the test is the carrier clock's upstream (:class:`Stepper`,
 what the mission's clock relay is in a flight) and the rover steps on the carrier's clock
-(:class:`mission.time.lockstep.MavlinkRelay`), so they do not depend on the machine's load. The ROS 2
+(:class:`mission.mavlink.lockstep.MavlinkRelay`), so they do not depend on the machine's load. The ROS 2
 robot runs in real time at 3x."""
 from __future__ import annotations
 
@@ -23,7 +23,8 @@ from mission.carrier.backends.mavlink import MavlinkCarrier
 from mission.carrier.backends.ros2 import RmwAttachment, Ros2Carrier, rmw_sequence, robot_clock_keys, ros2_topics
 from mission.bus.bridge import CarrierFeed, PassengerPublisher
 from mission.time.clock import Clock, LockstepClock, ScaledClock
-from mission.time.lockstep import MavlinkRelay, ZenohRelay, ZenohUpstream
+from mission.bus.lockstep import ZenohRelay, ZenohUpstream
+from mission.mavlink.lockstep import MavlinkRelay
 from mission.config.schema import Config, from_dict
 from mission.bus.wire import PassengerStatus
 from mission.phases.phase import Phase

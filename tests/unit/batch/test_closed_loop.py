@@ -68,7 +68,7 @@ def test_decay_after_separation_is_algebraic(paper3d):
 def test_exactly_docked_on_axis_departs_within_1_s():
     p = LawParams()
     model = TickModel(law=p, target=np.array([30.0, 0.0]), obstacles=Obstacles.none(2),
-                      passenger_safety=SafetyConfig(), carrier_safety=SafetyConfig())
+                      passenger_safety=SafetyConfig(), carrier_safety=SafetyConfig(), planar_carrier=False)
     r = simulate(model, np.zeros(2), duration_s=6.0, dt_s=1e-3)
     assert r.p1[0]
     assert r.departure_delay_s[0] < 1.0
@@ -80,7 +80,8 @@ def test_departure_survives_where_absolute_coordinates_would_lose_it():
     # first increments are below one ULP of its absolute position; error coordinates keep them.
     far = np.array([1e6, 0.0])
     model = TickModel(law=LawParams(), target=far + [30.0, 0.0], obstacles=Obstacles.none(2),
-                      passenger_safety=SafetyConfig(), carrier_safety=SafetyConfig(), departure_margin_m=1e-9)
+                      passenger_safety=SafetyConfig(), carrier_safety=SafetyConfig(), planar_carrier=False,
+                      departure_margin_m=1e-9)
     r = simulate(model, far, duration_s=5.0, dt_s=1e-3)
     first_increment = r.relative_speed_at_separation_m_s[0] * 1e-3
     assert far[0] + first_increment == far[0]  # lost in absolute coordinates

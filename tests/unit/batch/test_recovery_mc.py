@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from mission.config.schema import load_config
-from mission.interfaces import Request
+from mission.phases.phase import Request
 from mission.core.setpoint import Setpoint
 from mission.time.clock import ManualClock
 from sim.batch.recovery import MockDynamics, Scenario, before_recovery, fly

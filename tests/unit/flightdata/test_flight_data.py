@@ -11,13 +11,15 @@ from mcap.reader import make_reader
 from mcap_protobuf.decoder import DecoderFactory
 
 from mission.cli.run import plot
-from mission.core.docking import DockingGeometry, holdoff_point
+from mission.config.recovery import RecoverySection
+from mission.core.docking import holdoff_point
 from mission.core.setpoint import Setpoint
 from mission.errors import ConfigError
 from mission.flightdata.mission_log import MissionLog, bc_circle
 from mission.flightdata.read import read_messages
 from mission.flightdata.topics import MISSION_CHANNELS, topics
 from mission.flightdata.writer import LiveAddress, is_loopback, parse_live
+from mission.model import docking_geometry
 from mission.record import FlightRecorder, TickRow, read_record
 
 INFO = {"target_ned_m": [20.0, 0.0, -5.0], "obstacles": [{"center": [10.0, 3.0, -2.0], "radius": 1.0}], "bc_m": 8.0,
@@ -160,7 +162,7 @@ def _paths(node) -> list[str]:
 def test_a_recovery_draws_its_holdoff_point_and_glide_path_in_the_docks_frame(tmp_path):
     """While a recovery runs (the row has the carrier's course) the scene holds the holdoff point
     and the glide path, relative to the dock point, turned with the course; they live 1.5 s."""
-    g = DockingGeometry()
+    g = docking_geometry(RecoverySection())
     log = MissionLog(tmp_path / "flight.mcap", INFO, pair="pairX", clock={"clock": "mission"}, docking=g)
     rec = FlightRecorder(tmp_path, INFO, [log])
     z = np.zeros(3)

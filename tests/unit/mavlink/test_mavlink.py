@@ -18,7 +18,7 @@ from mission.mavlink.commands import (
     Step,
     refusal_reason,
 )
-from mission.mavlink.urls import Endpoint, parse_url
+from mission.config.urls import Endpoint, parse_url
 from mission.mavlink.env import mavlink
 
 IN_PROGRESS, ACCEPTED, DENIED = mavlink.MAV_RESULT_IN_PROGRESS, mavlink.MAV_RESULT_ACCEPTED, mavlink.MAV_RESULT_DENIED

@@ -1,6 +1,6 @@
 """Lockstep over real Zenoh sessions on loopback, against a busy machine.
 
-The controller's relay to the carrier (:class:`mission.time.lockstep.ZenohRelay`): a slow carrier whose
+The controller's relay to the carrier (:class:`mission.bus.lockstep.ZenohRelay`): a slow carrier whose
 liveliness token is present is waited for, so a busy machine cannot change a simulated flight; a
 silent one whose token is gone is dropped at once, one with no token known after the short
 watchdog, so a dead carrier is carrier loss. The state streams never drop a sample in lockstep.
@@ -22,8 +22,8 @@ from mission.carrier.backends.sim import SimRobot
 from mission.bus.bridge import open_session
 from mission.time.clock import LockstepClock, ScaledClock
 from mission.config.schema import load_config, with_overrides
-from mission.time import lockstep
-from mission.time.lockstep import LOST_WALL_S, RESEND_WALL_S, ZenohRelay, ZenohUpstream, clock_keys
+from mission.bus import lockstep
+from mission.bus.lockstep import LOST_WALL_S, RESEND_WALL_S, ZenohRelay, ZenohUpstream, clock_keys
 from mission.cli.run import mission_io
 from tests.conftest import CONFIGS
 from tests.support.zenoh_util import peer_pair
@@ -105,7 +105,7 @@ class _ScriptedCarrier:
     (None, f"no answer within {WATCHDOG_S:.1f} s"),  # no token known: the short watchdog
 ], ids=["token-present-waits", "token-gone-drops-at-once", "no-token-known-drops-after-the-watchdog"])
 def test_a_slow_carrier_is_waited_for_while_its_liveliness_token_is_present(alive, dropped_because, caplog) -> None:
-    caplog.set_level(logging.WARNING, logger="mission.time.lockstep")
+    caplog.set_level(logging.WARNING, logger="mission.bus.lockstep")
     keys = clock_keys("relay-test")
     feed = _StateFeed()
     with peer_pair() as (controller, carrier_session):
@@ -163,7 +163,7 @@ def test_a_call_an_answer_or_a_sample_lost_in_an_outage_is_asked_again_or_given_
     calls again every RESEND_WALL_S while unanswered (the carrier reports a step it took again),
     and gives up a state sample a ready names after LOST_WALL_S and LOST_AFTER_REPEATS readies;
     the carrier stays in the lockstep either way."""
-    caplog.set_level(logging.WARNING, logger="mission.time.lockstep")
+    caplog.set_level(logging.WARNING, logger="mission.bus.lockstep")
     keys = clock_keys("outage-test")
     feed = _StateFeed()
     with peer_pair() as (controller, carrier_session):
@@ -207,7 +207,7 @@ def test_a_passenger_status_lost_in_an_outage_is_given_up_after_repeated_calls(m
     comes (lost in an outage) is given up after LOST_WALL_S and LOST_AFTER_REPEATS repeated
     calls, never after one call; a repeated call for a step taken is passed on at once."""
     monkeypatch.setattr(lockstep, "LOST_WALL_S", 0.4)
-    caplog.set_level(logging.WARNING, logger="mission.time.lockstep")
+    caplog.set_level(logging.WARNING, logger="mission.bus.lockstep")
     keys = clock_keys("status-test")
     statuses, clock = _StateFeed(), _Barriers()
     with peer_pair() as (carrier_session, controller):

@@ -4,14 +4,17 @@
 ``udpout:HOST:PORT`` (send to), ``tcp:HOST:PORT`` (connect), each also with ``://``;
 ``HOST:PORT`` alone takes a default scheme; an empty host (``:14540``) is 127.0.0.1; a serial
 device ``/dev/ttyACM0[:BAUD]``, ``serial:/dev/ttyACM0[:BAUD]`` or ``COM3`` (57600 baud by
-default). The transports that open them are in :mod:`mission.mavlink.transport`; the
-configuration checks them with the same parser (:mod:`mission.config.fields`).
+default). The configuration checks them (:mod:`mission.config.fields`), the transports that open
+them (:mod:`mission.mavlink.transport`) and the mock vehicle read them with this one parser.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 Address = tuple[str, int]
+#: The vehicle's endpoint by default (``mavlink.url``): PX4 SITL's onboard link, which sends to
+#: UDP 14540 on the local host.
+DEFAULT_URL = "udpin:127.0.0.1:14540"
 DEFAULT_BAUD = 57600
 _NETWORK_SCHEMES = ("udpin", "udpout", "udp", "tcp")
 

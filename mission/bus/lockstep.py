@@ -1,4 +1,4 @@
-"""Lockstep simulated time over the real transports (the wire side of :class:`~mission.time.clock.LockstepClock`).
+"""Lockstep simulated time over Zenoh, and the protocol (the wire side of :class:`~mission.time.clock.LockstepClock`).
 
 The mock vehicle owns simulated time; the controller and the carrier step on it, and their code is
 the same as in real time (only the injected clock differs). Messages (times in [ns]):
@@ -12,11 +12,13 @@ the same as in real time (only the injected clock differs). Messages (times in [
   ``t``, next at ``wake``, its last state sample is ``seq``. Zenoh does not order samples across
   keys, so each side waits for the sample named, not only for the clock message.
 
-:class:`MavlinkRelay` brings a carrier's own lockstep vehicle (the mock rover) along the same way.
-Watchdogs (``*_WATCHDOG_WALL_S``, wall seconds) drop a silent participant, a carrier whose
-liveliness token is present gets longer; an unanswered call is resent every
-:data:`RESEND_WALL_S`, and a named sample that never comes is given up after :data:`LOST_WALL_S`
-and :data:`LOST_AFTER_REPEATS` repeats (``samples_lost``: the run is no longer deterministic).
+The MAVLink side (the vehicle's clock, and :class:`~mission.mavlink.lockstep.MavlinkRelay`, which
+brings a carrier's own lockstep vehicle, the mock rover, along the same way) is
+:mod:`mission.mavlink.lockstep`. Watchdogs (``*_WATCHDOG_WALL_S``, wall seconds, with the other
+limits in :mod:`mission.time.clock`) drop a silent participant, a carrier whose liveliness token
+is present gets longer; an unanswered call is resent every :data:`RESEND_WALL_S`, and a named
+sample that never comes is given up after :data:`LOST_WALL_S` and :data:`LOST_AFTER_REPEATS`
+repeats (``samples_lost``: the run is no longer deterministic).
 Why each rule, and what was measured: docs/lockstep.md. With ``zenoh.signing_key_file`` the clock
 messages carry the pair's authentication tag (:mod:`mission.bus.signing`); an unsigned or badly
 signed one is dropped like a malformed one.
@@ -33,19 +35,17 @@ import zenoh
 from mission.bus.auth import BusAuth
 from mission.bus.bridge import keys, undeclare
 from mission.bus.wire import WireError
-from mission.time.clock import LockstepClock
-from mission.mavlink.env import mavlink
+from mission.time.clock import (
+    ALIVE_CARRIER_WATCHDOG_WALL_S,
+    CARRIER_WATCHDOG_WALL_S,
+    HELLO_WALL_S,
+    LOST_AFTER_REPEATS,
+    LOST_WALL_S,
+    RESEND_WALL_S,
+    LockstepClock,
+)
 
 log = logging.getLogger(__name__)
-
-HELLO_WALL_S = 0.05  # resend period of a call nobody has answered yet [s, wall]
-RESEND_WALL_S = 0.5  # resend period of an unanswered call once joined (an outage lost it) [s, wall]
-LOST_WALL_S = 2.0  # a named sample still missing this long ... [s, wall]
-LOST_AFTER_REPEATS = 3  # ... after this many repeats of the message naming it is given up
-CARRIER_WATCHDOG_WALL_S = 2.0  # the controller drops a carrier silent this long [s, wall]
-ALIVE_CARRIER_WATCHDOG_WALL_S = 6.0  # ... or this long while its liveliness token is present [s, wall]
-CONTROLLER_WATCHDOG_WALL_S = 5.0  # the controller's clock falls back to the wall clock [s, wall]
-VEHICLE_WATCHDOG_WALL_S = 10.0  # the vehicle drops a controller silent this long [s, wall]
 
 
 def clock_keys(pair: str) -> tuple[str, str]:
@@ -87,89 +87,6 @@ class _ClockWire:
                                                                sample.key_expr, exc)
             return None
         return values
-
-
-class MavlinkUpstream:
-    """The controller's side of the vehicle's clock: reads SYSTEM_TIME / TIMESYNC from ``link``
-    and answers the barriers. ``link`` is a :class:`mission.mavlink.link.VehicleLink`."""
-
-    def __init__(self, clock: LockstepClock, link: Any) -> None:
-        self.clock, self.link = clock, link
-        link.add_listener(self._on_message)
-        clock.upstream = self
-
-    def _on_message(self, msg: Any) -> None:
-        kind = msg.get_type()
-        if kind == "SYSTEM_TIME":
-            self.clock.advance(int(msg.time_boot_ms) * 1_000_000)
-        elif kind == "TIMESYNC" and msg.tc1 == 0:
-            self.clock.barrier(int(msg.ts1))
-
-    def report(self, t_ns: int, wake_ns: int) -> None:
-        self.link.send_message(mavlink.MAVLink_timesync_message(wake_ns, t_ns))
-
-
-class MavlinkRelay:
-    """A process brings its own lockstep vehicle on ``link`` along (a :class:`~mission.time.clock.Downstream`):
-    at each step ``t`` it answers the vehicle's barrier with wake ``t`` and waits until the
-    vehicle stopped at its next barrier (at or after ``t``: it integrates whole physics steps),
-    its telemetry up to then received ahead of that barrier on the same socket.
-
-    The vehicle is dropped after ``watchdog_wall_s`` without progress (``join_wall_s`` before it
-    first answered); it then goes on in real time after its own watchdog, and the state it
-    stops sending is what the carrier's own-state watchdog is for. ``link`` is a
-    :class:`mission.mavlink.link.VehicleLink`."""
-
-    def __init__(self, link: Any, *, watchdog_wall_s: float = CARRIER_WATCHDOG_WALL_S, join_wall_s: float = 30.0) -> None:
-        self.link, self.watchdog_wall_s, self.join_wall_s = link, watchdog_wall_s, join_wall_s
-        self._cv = threading.Condition()
-        self._at_ns: int | None = None  # the barrier the vehicle waits at
-        self._joined = False
-        self.dropped = False  # it fell silent
-        self.left = False  # we left the lockstep
-        link.add_listener(self._on_message)
-
-    def _on_message(self, msg: Any) -> None:
-        if msg.get_type() == "TIMESYNC" and msg.tc1 == 0:
-            with self._cv:
-                self._at_ns = max(self._at_ns if self._at_ns is not None else -1, int(msg.ts1))
-                self._cv.notify_all()
-
-    def wake_ns(self) -> int | None:
-        return None  # the vehicle needs no step of its own: it is brought to each of ours
-
-    def run(self, t_ns: int) -> None:
-        if self.dropped or self.left:
-            return
-        limit = self.watchdog_wall_s if self._joined else self.join_wall_s
-        start, answered = time.monotonic(), None
-        with self._cv:
-            while self._at_ns is None or self._at_ns < t_ns:
-                if self._at_ns is not None and self._at_ns != answered:
-                    answered = self._at_ns
-                    self._cv.release()
-                    try:
-                        self.link.send_message(mavlink.MAVLink_timesync_message(t_ns, answered))
-                    finally:
-                        self._cv.acquire()
-                if time.monotonic() - start > limit:
-                    self.dropped = True
-                    log.warning("lockstep: the vehicle did not reach t = %.3f s within %.1f s (wall); going on "
-                                "without it", t_ns / 1e9, limit)
-                    return
-                self._cv.wait(HELLO_WALL_S)
-            self._joined = True
-
-    def leave(self) -> None:
-        """Let the vehicle go on in real time now (this process left the lockstep)."""
-        with self._cv:
-            at = self._at_ns
-        if at is not None and not (self.dropped or self.left):
-            self.left = True
-            try:
-                self.link.send_message(mavlink.MAVLink_timesync_message(-1, at))
-            except Exception as exc:  # noqa: BLE001 - leaving must not fail
-                log.debug("lockstep leave to the vehicle not sent: %s", exc)
 
 
 class ZenohRelay:
