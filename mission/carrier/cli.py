@@ -79,6 +79,9 @@ def main(cfg: Config, speed: float = 1.0, duration_s: float | None = None, stop_
                     ctl.run(stop, duration_s)
                 finally:
                     summary = ctl.summary()
+                    report = getattr(backend, "report", None)
+                    if report is not None:
+                        summary[backend.name] = report()
                     if isinstance(clock, LockstepClock):
                         summary["lockstep"] = clock.counters
                     log.info("carrier %s stopped in mode %s; closest approach to the target %s m, braking distance %s m",
@@ -145,6 +148,8 @@ def _jsonable(value: Any) -> Any:
 @click.option("--ros2-namespace", default=None, help="ROS namespace of the robot (ros2) [default: carrier.ros2.namespace].")
 @click.option("--key-form", type=click.Choice(["ros2dds", "rmw_zenoh"]), default=None,
               help="ROS 2 key form (ros2) [default: carrier.ros2.key_form].")
+@click.option("--cmd-vel-type", type=click.Choice(["Twist", "TwistStamped"]), default=None,
+              help="ROS 2 velocity command type (ros2) [default: carrier.ros2.cmd_vel_type].")
 @click.option("--duration", type=click.FloatRange(min=0, min_open=True), default=None, metavar="S",
               help="Stop after this many simulated seconds [default: run until SIGINT/SIGTERM].")
 @click.option("--lockstep", is_flag=True, help="Simulation: step on the mission controller's lockstep clock "
@@ -159,7 +164,7 @@ def _jsonable(value: Any) -> Any:
 def carrier_cli(config: str, backend: str | None, speed: float, pair: str | None, listen: tuple[str, ...],
                     connect: tuple[str, ...], encoding: str | None, rate: float | None, mavlink_url: str | None,
                     target_system: int | None, kinematics: str | None, offset_ned: str | None,
-                    ros2_namespace: str | None, key_form: str | None, duration: float | None,
+                    ros2_namespace: str | None, key_form: str | None, cmd_vel_type: str | None, duration: float | None,
                     lockstep: bool, summary_path: str | None, mcap_path: str | None, bus_key_file: str | None) -> int:
     """Run the carrier-side controller of CONFIG (a TOML file).
 
@@ -191,6 +196,7 @@ def carrier_cli(config: str, backend: str | None, speed: float, pair: str | None
         "carrier.mavlink.target_system": target_system,
         "carrier.ros2.namespace": ros2_namespace,
         "carrier.ros2.key_form": key_form,
+        "carrier.ros2.cmd_vel_type": cmd_vel_type,
         f"carrier.{chosen if chosen != 'sim' else 'mavlink'}.offset_ned_m": offset,
         "zenoh.pair": pair,
         "zenoh.listen": list(listen) if listen else None,

@@ -163,3 +163,20 @@ def test_demo_with_a_real_carrier_interface_holds_p1_p3_and_the_guard(tmp_path, 
     # the robot stepped on the carrier's clock to the end of the flight
     assert c["lockstep"]["barriers"] > 500 and c["lockstep"]["downstream_dropped"] == 0, c["lockstep"]
     assert c["lockstep"]["fallback"] is None and s["lockstep"]["fallback"] is None, (c["lockstep"], s["lockstep"])
+
+
+@pytest.mark.parametrize(("cmd_vel_type", "attachment"), [("TwistStamped", "current"), ("Twist", "legacy")])
+def test_demo_drives_a_ros2_robot_of_either_command_type(tmp_path, cmd_vel_type, attachment):
+    """``carrier.ros2.cmd_vel_type`` and ``rmw_attachment`` in the config: the ROS-2-shaped robot
+    takes only that type (its subscription's key carries the type and its hash) and speaks that
+    attachment, and the flight holds P1-P3."""
+    config = tmp_path / "demo.toml"
+    config.write_text(DEMO.read_text()
+                      + f'\n[carrier.ros2]\ncmd_vel_type = "{cmd_vel_type}"\nrmw_attachment = "{attachment}"\n')
+    out = _demo(tmp_path, "--carrier", "ros2", "--config", str(config))
+    s = json.loads((tmp_path / "logs" / "pair0" / "summary.json").read_text())
+    assert s["p1"] and s["p2"] and s["p3"] and s["phase"] == "DONE", s
+    assert out.returncode == 0, out.stdout + out.stderr
+    ros2 = json.loads((tmp_path / "logs" / "pair0" / "carrier.json").read_text())["ros2"]
+    assert ros2["cmd_vel_type"] == f"geometry_msgs/msg/{cmd_vel_type}" and ros2["robot_attachment"] == attachment
+    assert ros2["robot_token_seen"] and ros2["dropped"] == {}, ros2
