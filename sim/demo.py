@@ -32,7 +32,7 @@ from tqdm import tqdm
 
 from mission.bus.bridge import open_session
 from mission.bus.session import close_session
-from mission.config.schema import CarrierRos2Section, ZenohSection, load_config
+from mission.config.schema import CarrierRos2Section, Config, ZenohSection, load_config
 from mission.errors import MarsupialError
 from mission.flightdata.writer import DEFAULT_LIVE, LiveAddress, is_loopback, parse_live
 from mission.lifetime import supervise_children
@@ -123,12 +123,13 @@ def _follow(pair: PairRun, progress: PairProgress) -> None:
 
 def start_carrier_robot(kind: str, name: str, zenoh_ep: str, speed: float, start: str, stack: ExitStack,
                         err: int | None, lockstep: bool = False, bus_key: Path | None = None,
-                        ros2: CarrierRos2Section | None = None) -> tuple[list[str], subprocess.Popen | None]:
+                        cfg: Config | None = None) -> tuple[list[str], subprocess.Popen | None]:
     """The robot under a ``kind`` carrier ("sim": built in, none to start; "mavlink": a mock PX4
     rover, sysid 2; "ros2": a ROS-2-shaped robot on rmw_zenoh keys in namespace ``name``, taking
-    the command type and sending the attachment form of ``ros2`` (the config's ``carrier.ros2``),
-    and only commands signed with ``bus_key`` if given; with ``lockstep`` both step on the
-    carrier's clock) and the carrier controller's arguments for it."""
+    the command type and sending the attachment form of ``cfg.carrier.ros2``, a Zenoh client of
+    the demo's router when ``cfg.zenoh.mode`` is "client" (as an rmw_zenoh node of its host's
+    ``rmw_zenohd``), and only commands signed with ``bus_key`` if given; with ``lockstep`` both
+    step on the carrier's clock) and the carrier controller's arguments for it."""
     if kind == "mavlink":
         port = free_port(socket.SOCK_DGRAM)
         robot = subprocess.Popen(_python_cli("mock-vehicle", "--frame", "rover", "--sysid", "2", "--mavlink",
@@ -140,8 +141,9 @@ def start_carrier_robot(kind: str, name: str, zenoh_ep: str, speed: float, start
                 "--kinematics", "ackermann"], robot
     if kind == "ros2":
         signed = ["--signing-key", str(bus_key), "--pair", name] if bus_key is not None else []
-        ros2 = ros2 or CarrierRos2Section()
-        robot = subprocess.Popen(_python_cli("ros2-robot", "--key-form", "rmw_zenoh", "--namespace", name,
+        ros2 = cfg.carrier.ros2 if cfg is not None else CarrierRos2Section()
+        client = ["--zenoh-mode", "client"] if cfg is not None and cfg.zenoh.mode == "client" else []
+        robot = subprocess.Popen(_python_cli("ros2-robot", "--key-form", "rmw_zenoh", "--namespace", name, *client,
                                              "--cmd-vel-type", ros2.cmd_vel_type, "--rmw-attachment", ros2.rmw_attachment,
                                              "--zenoh-connect", zenoh_ep, "--speed", str(speed), *signed,
                                              *(["--lockstep"] if lockstep else [])), stderr=err)
@@ -182,8 +184,7 @@ def start_pair(config: str, name: str, zenoh_ep: str, speed: float, log_root: Pa
     mode = ["--lockstep"] if lockstep else []
     start = ",".join(str(v) for v in cfg.scenario.carrier_start)
     signed = ["--zenoh-signing-key", str(bus_key)] if bus_key is not None else []
-    backend_args, robot = start_carrier_robot(carrier_kind, name, zenoh_ep, speed, start, stack, err, lockstep, bus_key,
-                                              cfg.carrier.ros2)
+    backend_args, robot = start_carrier_robot(carrier_kind, name, zenoh_ep, speed, start, stack, err, lockstep, bus_key, cfg)
     carrier = subprocess.Popen(_python_cli("carrier", config, "--speed", str(speed), "--pair", name,
                                            "--zenoh-connect", zenoh_ep, "--summary", str(pair.log_dir / "carrier.json"),
                                            "--mcap", str(pair.log_dir / "carrier.mcap"), *backend_args, *signed, *mode),

@@ -165,14 +165,17 @@ def test_demo_with_a_real_carrier_interface_holds_p1_p3_and_the_guard(tmp_path, 
     assert c["lockstep"]["fallback"] is None and s["lockstep"]["fallback"] is None, (c["lockstep"], s["lockstep"])
 
 
-@pytest.mark.parametrize(("cmd_vel_type", "attachment"), [("TwistStamped", "current"), ("Twist", "legacy")])
-def test_demo_drives_a_ros2_robot_of_either_command_type(tmp_path, cmd_vel_type, attachment):
+@pytest.mark.parametrize(("cmd_vel_type", "attachment", "mode"), [("TwistStamped", "current", "peer"),
+                                                                  ("Twist", "legacy", "client")])
+def test_demo_drives_a_ros2_robot_of_either_command_type(tmp_path, cmd_vel_type, attachment, mode):
     """``carrier.ros2.cmd_vel_type`` and ``rmw_attachment`` in the config: the ROS-2-shaped robot
     takes only that type (its subscription's key carries the type and its hash) and speaks that
-    attachment, and the flight holds P1-P3."""
+    attachment, and the flight holds P1-P3. ``zenoh.mode = "client"``: rmw_zenoh's topology, every
+    process a client of the demo's router (which plays ``rmw_zenohd``), the robot included."""
     config = tmp_path / "demo.toml"
-    config.write_text(DEMO.read_text()
-                      + f'\n[carrier.ros2]\ncmd_vel_type = "{cmd_vel_type}"\nrmw_attachment = "{attachment}"\n')
+    text = DEMO.read_text().replace('[zenoh]\nmode = "peer"\n', f'[zenoh]\nmode = "{mode}"\n', 1)
+    assert f'mode = "{mode}"' in text
+    config.write_text(text + f'\n[carrier.ros2]\ncmd_vel_type = "{cmd_vel_type}"\nrmw_attachment = "{attachment}"\n')
     out = _demo(tmp_path, "--carrier", "ros2", "--config", str(config))
     s = json.loads((tmp_path / "logs" / "pair0" / "summary.json").read_text())
     assert s["p1"] and s["p2"] and s["p3"] and s["phase"] == "DONE", s

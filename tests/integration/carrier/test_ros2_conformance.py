@@ -37,7 +37,7 @@ from mission.carrier.tracking import Tracked
 from mission.config.schema import Config, from_dict
 from mission.time.clock import ScaledClock
 from sim.robots.ros2 import Ros2RobotSim
-from tests.support.zenoh_util import peer_pair, wait_for, wait_matched
+from tests.support.zenoh_util import closing_all, endpoint, free_port, peer, peer_pair, wait_for, wait_matched
 
 pytestmark = pytest.mark.timeout(90)
 
@@ -231,3 +231,32 @@ def test_six_bytes_and_random_attachments_and_payloads_never_crash_the_backend()
         wait_for(lambda: (s := backend.own_state()) is not None and np.allclose(s.position_ned_m, LAST_NED_M), 20,
                  "the valid odometry after the fuzz")
         assert backend.dropped.get("attachment", 0) >= 50, backend.dropped
+
+
+def test_client_through_router_the_rmw_zenohd_topology_drives_the_robot() -> None:
+    """rmw_zenoh's topology: one router per host (``rmw_zenohd``, here a zenoh-python session in
+    router mode on a test port), the robot its client, the carrier a client from "another host".
+    Clients talk only through the router: neither has a peer, and commands and odometry still flow
+    and each sees the other's graph tokens."""
+    ep = endpoint(free_port())
+    router = peer(listen=[ep], mode="router")
+    with closing_all(router):
+        robot_session = peer(connect=[ep], mode="client")
+        carrier_session = peer(connect=[ep], mode="client")
+        with closing_all(robot_session, carrier_session):
+            cfg = _cfg(cmd_vel_type="TwistStamped")
+            robot = Ros2RobotSim(robot_session, ros2_topics(cfg.carrier.ros2), ScaledClock(1.0))
+            try:
+                with _carrier(carrier_session, cmd_vel_type="TwistStamped") as backend:
+                    wait_for(lambda: backend.report()["robot_token_seen"], 10, "the robot's token through the router")
+
+                    def flowing() -> bool:
+                        robot.step(0.05)
+                        backend.command(GO)
+                        return robot.commands > 5 and backend.own_state() is not None
+
+                    wait_for(flowing, 20, "commands and odometry through the router")
+                    for s in (robot_session, carrier_session):
+                        assert list(s.info.peers_zid()) == [] and list(s.info.routers_zid()) == [router.info.zid()]
+            finally:
+                robot.close()
