@@ -175,19 +175,22 @@ def start_pair(config: str, name: str, zenoh_ep: str, speed: float, log_root: Pa
     With ``bus_key`` (a key file) the pair signs its bus samples (``--zenoh-signing-key``).
 
     ``lockstep``: the three step on the mock vehicle's simulated time, the carrier's robot on the
-    carrier's (``speed`` is then the pace after a participant is lost); else wall clocks scaled
-    by ``speed``. ``live``: the mission serves its flight to Foxglove there (``run --live``)."""
+    carrier's (``speed`` is then the pace after a participant is lost), and the mission and the
+    carrier count their flight data's log times from one epoch (``--log-epoch-ns``); else wall
+    clocks scaled by ``speed``. ``live``: the mission serves its flight to Foxglove there (``run --live``)."""
     cfg = load_config(config)
     pair = PairRun(name=name, log_dir=log_root / name)
     mav_port = free_port(socket.SOCK_DGRAM)
     err = subprocess.DEVNULL if quiet else None
     mode = ["--lockstep"] if lockstep else []
+    # in lockstep the mission and the carrier log on one simulated clock: one epoch lines their files up
+    epoch = ["--log-epoch-ns", str(time.time_ns())] if lockstep else []
     start = ",".join(str(v) for v in cfg.scenario.carrier_start)
     signed = ["--zenoh-signing-key", str(bus_key)] if bus_key is not None else []
     backend_args, robot = start_carrier_robot(carrier_kind, name, zenoh_ep, speed, start, stack, err, lockstep, bus_key, cfg)
     carrier = subprocess.Popen(_python_cli("carrier", config, "--speed", str(speed), "--pair", name,
                                            "--zenoh-connect", zenoh_ep, "--summary", str(pair.log_dir / "carrier.json"),
-                                           "--mcap", str(pair.log_dir / "carrier.mcap"), *backend_args, *signed, *mode),
+                                           "--mcap", str(pair.log_dir / "carrier.mcap"), *backend_args, *signed, *mode, *epoch),
                                stderr=err)
     stack.callback(stop_process, carrier)
     # riding on the deck (mission.ride = "deck"): the deck is the dock point, the vehicle stands on it
@@ -204,7 +207,7 @@ def start_pair(config: str, name: str, zenoh_ep: str, speed: float, log_root: Pa
     live_args = [] if live is None else ["--live", f"{live.host}:{live.port}"]
     mission = subprocess.Popen(_python_cli("run", config, "--mavlink", f"udpin:127.0.0.1:{mav_port}", "--zenoh-connect",
                                            zenoh_ep, "--pair", name, "--speed", str(speed), "--log-dir", str(pair.log_dir),
-                                           *signed, *mode, *live_args),
+                                           *signed, *mode, *epoch, *live_args),
                                stdout=subprocess.PIPE, stderr=err, text=True)
     stack.callback(stop_process, mission, 30.0)
     pair.procs = {"carrier": carrier, "vehicle": vehicle, "mission": mission}

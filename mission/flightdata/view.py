@@ -24,7 +24,7 @@ PHASE_COLORS = ["#5b5b7a", "#6b6b8f", "#7a6bb0", "#8f6bc4", "#4e98e2", "#3fb37f"
 
 
 def _json_series(content: Any, topic: str) -> tuple[np.ndarray, list[dict[str, Any]]]:
-    rows = [(t / 1e9, json.loads(d)) for top, _, t, d in content.messages if top == topic]
+    rows = [((t - content.epoch_ns) / 1e9, json.loads(d)) for top, _, t, d in content.messages if top == topic]
     return np.array([t for t, _ in rows]), [r for _, r in rows]
 
 
