@@ -56,6 +56,7 @@ from mission.bus.ros2 import (CMD_VEL_TYPES, GID_BYTES, ODOMETRY, RmwAttachment,
 log = logging.getLogger(__name__)
 
 MAX_ODOMETRY_BYTES = 4096  # an Odometry is ~700 bytes; anything far larger is refused undecoded
+MAX_WATCHED_TOKENS = 64  # publisher tokens of the robot's odometry remembered (one robot has one)
 
 
 @dataclass(frozen=True)
@@ -171,6 +172,8 @@ class RosGraph:
         key = str(sample.key_expr)
         with self._lock:
             if sample.kind == zenoh.SampleKind.PUT:
+                if len(self._alive) >= MAX_WATCHED_TOKENS:
+                    return  # a flood of tokens is no more robots: the ones heard first are kept
                 if not self._alive:
                     log.info("ROS graph: the robot's publisher %s is there", key)
                 self._alive.add(key)
