@@ -260,3 +260,37 @@ def test_client_through_router_the_rmw_zenohd_topology_drives_the_robot() -> Non
                         assert list(s.info.peers_zid()) == [] and list(s.info.routers_zid()) == [router.info.zid()]
             finally:
                 robot.close()
+
+
+def test_a_carrier_process_announces_itself_while_it_runs_and_not_after() -> None:
+    """``marsupial carrier --backend ros2 --key-form rmw_zenoh`` as a process: its node, publisher
+    and subscription tokens (keys built here) exist while it runs and are gone once it stopped."""
+    import signal
+    import subprocess
+    import sys
+
+    from tests.conftest import CONFIGS
+
+    ep = endpoint(free_port())
+    carrier = subprocess.Popen([sys.executable, "-m", "mission.cli", "carrier", str(CONFIGS / "demo.toml"), "--pair", "tok",
+                                "--backend", "ros2", "--key-form", "rmw_zenoh", "--ros2-namespace", "robot1",
+                                "--cmd-vel-type", "TwistStamped", "--kinematics", "diff_drive", "--zenoh-listen", ep],
+                               stderr=subprocess.DEVNULL)
+    try:
+        with closing_all(peer(connect=[ep])) as (s,):
+            wait_for(lambda: len(list(s.info.peers_zid())) > 0, 30, "the carrier's session")
+            zid = str(next(iter(s.info.peers_zid())))
+            root = f"@ros2_lv/0/{zid}/0"
+            wanted = {f"{root}/0/NN/%/%robot1/marsupial_carrier",
+                      f"{root}/1/MP/%/%robot1/marsupial_carrier/%robot1%cmd_vel/geometry_msgs::msg::dds_::TwistStamped_/"
+                      f"{TWIST_STAMPED_HASH}/::,:,:,:,,",
+                      f"{root}/2/MS/%/%robot1/marsupial_carrier/%robot1%odom/nav_msgs::msg::dds_::Odometry_/"
+                      f"{ODOMETRY_HASH}/::,:,:,:,,"}
+            wait_for(lambda: wanted <= _tokens(s), 30, "the carrier's tokens")
+            carrier.send_signal(signal.SIGTERM)
+            assert carrier.wait(30) == 0
+            wait_for(lambda: not any(k.startswith(root) for k in _tokens(s)), 10, "the tokens gone")
+    finally:
+        if carrier.poll() is None:
+            carrier.kill()
+            carrier.wait()
