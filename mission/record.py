@@ -58,8 +58,9 @@ class TickRow:
     changed the command; carrier_age_s [s] the sample's age;
     mode, armed the vehicle's; anchor the latched separation point [m] (None before); course the
     carrier's course (horizontal unit vector NED) while a recovery brings the passenger home
-    (None otherwise); events what happened on this tick (phase change first), as text.
-    The CSV holds the columns of :data:`COLUMNS`; the arrays are never written to after the row
+    (None otherwise); events what happened on this tick (phase change first), as text; yaw_c,
+    yaw_p the carrier's and the vehicle's heading [rad] from north (None: not known; the flight
+    data's transforms, not the CSV). The CSV holds the columns of :data:`COLUMNS`; the arrays are never written to after the row
     is made (a sink may read them on another thread).
     """
 
@@ -83,6 +84,8 @@ class TickRow:
     anchor: np.ndarray | None = None
     course: np.ndarray | None = None
     events: tuple[str, ...] = ()
+    yaw_c: float | None = None
+    yaw_p: float | None = None
 
     def values(self) -> list[Any]:
         """The row's values in the order of :data:`COLUMNS` (vectors flattened, NaN for None)."""

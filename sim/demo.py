@@ -32,7 +32,7 @@ from tqdm import tqdm
 
 from mission.bus.bridge import open_session
 from mission.bus.session import close_session
-from mission.config.schema import ZenohSection, load_config
+from mission.config.schema import CarrierRos2Section, Config, ZenohSection, load_config
 from mission.errors import MarsupialError
 from mission.flightdata.writer import DEFAULT_LIVE, LiveAddress, is_loopback, parse_live
 from mission.lifetime import supervise_children
@@ -122,12 +122,14 @@ def _follow(pair: PairRun, progress: PairProgress) -> None:
 
 
 def start_carrier_robot(kind: str, name: str, zenoh_ep: str, speed: float, start: str, stack: ExitStack,
-                        err: int | None, lockstep: bool = False,
-                        bus_key: Path | None = None) -> tuple[list[str], subprocess.Popen | None]:
+                        err: int | None, lockstep: bool = False, bus_key: Path | None = None,
+                        cfg: Config | None = None) -> tuple[list[str], subprocess.Popen | None]:
     """The robot under a ``kind`` carrier ("sim": built in, none to start; "mavlink": a mock PX4
     rover, sysid 2; "ros2": a ROS-2-shaped robot on rmw_zenoh keys in namespace ``name``, taking
-    only commands signed with ``bus_key`` if given; with ``lockstep`` both step on the carrier's
-    clock) and the carrier controller's arguments for it."""
+    the command type and sending the attachment form of ``cfg.carrier.ros2``, a Zenoh client of
+    the demo's router when ``cfg.zenoh.mode`` is "client" (as an rmw_zenoh node of its host's
+    ``rmw_zenohd``), and only commands signed with ``bus_key`` if given; with ``lockstep`` both
+    step on the carrier's clock) and the carrier controller's arguments for it."""
     if kind == "mavlink":
         port = free_port(socket.SOCK_DGRAM)
         robot = subprocess.Popen(_python_cli("mock-vehicle", "--frame", "rover", "--sysid", "2", "--mavlink",
@@ -139,7 +141,10 @@ def start_carrier_robot(kind: str, name: str, zenoh_ep: str, speed: float, start
                 "--kinematics", "ackermann"], robot
     if kind == "ros2":
         signed = ["--signing-key", str(bus_key), "--pair", name] if bus_key is not None else []
-        robot = subprocess.Popen(_python_cli("ros2-robot", "--key-form", "rmw_zenoh", "--namespace", name,
+        ros2 = cfg.carrier.ros2 if cfg is not None else CarrierRos2Section()
+        client = ["--zenoh-mode", "client"] if cfg is not None and cfg.zenoh.mode == "client" else []
+        robot = subprocess.Popen(_python_cli("ros2-robot", "--key-form", "rmw_zenoh", "--namespace", name, *client,
+                                             "--cmd-vel-type", ros2.cmd_vel_type, "--rmw-attachment", ros2.rmw_attachment,
                                              "--zenoh-connect", zenoh_ep, "--speed", str(speed), *signed,
                                              *(["--lockstep"] if lockstep else [])), stderr=err)
         stack.callback(stop_process, robot)
@@ -170,19 +175,22 @@ def start_pair(config: str, name: str, zenoh_ep: str, speed: float, log_root: Pa
     With ``bus_key`` (a key file) the pair signs its bus samples (``--zenoh-signing-key``).
 
     ``lockstep``: the three step on the mock vehicle's simulated time, the carrier's robot on the
-    carrier's (``speed`` is then the pace after a participant is lost); else wall clocks scaled
-    by ``speed``. ``live``: the mission serves its flight to Foxglove there (``run --live``)."""
+    carrier's (``speed`` is then the pace after a participant is lost), and the mission and the
+    carrier count their flight data's log times from one epoch (``--log-epoch-ns``); else wall
+    clocks scaled by ``speed``. ``live``: the mission serves its flight to Foxglove there (``run --live``)."""
     cfg = load_config(config)
     pair = PairRun(name=name, log_dir=log_root / name)
     mav_port = free_port(socket.SOCK_DGRAM)
     err = subprocess.DEVNULL if quiet else None
     mode = ["--lockstep"] if lockstep else []
+    # in lockstep the mission and the carrier log on one simulated clock: one epoch lines their files up
+    epoch = ["--log-epoch-ns", str(time.time_ns())] if lockstep else []
     start = ",".join(str(v) for v in cfg.scenario.carrier_start)
     signed = ["--zenoh-signing-key", str(bus_key)] if bus_key is not None else []
-    backend_args, robot = start_carrier_robot(carrier_kind, name, zenoh_ep, speed, start, stack, err, lockstep, bus_key)
+    backend_args, robot = start_carrier_robot(carrier_kind, name, zenoh_ep, speed, start, stack, err, lockstep, bus_key, cfg)
     carrier = subprocess.Popen(_python_cli("carrier", config, "--speed", str(speed), "--pair", name,
                                            "--zenoh-connect", zenoh_ep, "--summary", str(pair.log_dir / "carrier.json"),
-                                           "--mcap", str(pair.log_dir / "carrier.mcap"), *backend_args, *signed, *mode),
+                                           "--mcap", str(pair.log_dir / "carrier.mcap"), *backend_args, *signed, *mode, *epoch),
                                stderr=err)
     stack.callback(stop_process, carrier)
     # riding on the deck (mission.ride = "deck"): the deck is the dock point, the vehicle stands on it
@@ -199,7 +207,7 @@ def start_pair(config: str, name: str, zenoh_ep: str, speed: float, log_root: Pa
     live_args = [] if live is None else ["--live", f"{live.host}:{live.port}"]
     mission = subprocess.Popen(_python_cli("run", config, "--mavlink", f"udpin:127.0.0.1:{mav_port}", "--zenoh-connect",
                                            zenoh_ep, "--pair", name, "--speed", str(speed), "--log-dir", str(pair.log_dir),
-                                           *signed, *mode, *live_args),
+                                           *signed, *mode, *epoch, *live_args),
                                stdout=subprocess.PIPE, stderr=err, text=True)
     stack.callback(stop_process, mission, 30.0)
     pair.procs = {"carrier": carrier, "vehicle": vehicle, "mission": mission}

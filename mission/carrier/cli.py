@@ -31,7 +31,8 @@ log = logging.getLogger(__name__)
 
 
 def main(cfg: Config, speed: float = 1.0, duration_s: float | None = None, stop_event: threading.Event | None = None,
-         summary_path: str | Path | None = None, lockstep: bool = False, mcap_path: str | Path | None = None) -> int:
+         summary_path: str | Path | None = None, lockstep: bool = False, mcap_path: str | Path | None = None,
+         log_epoch_ns: int | None = None) -> int:
     """Open the session of ``cfg.zenoh`` and the backend, run the controller until stopped;
     write the summary (JSON) to ``summary_path`` if given, and the carrier's flight data to the
     MCAP file ``mcap_path`` (:class:`mission.flightdata.carrier_log.CarrierLog`); return exit code 0.
@@ -65,7 +66,7 @@ def main(cfg: Config, speed: float = 1.0, duration_s: float | None = None, stop_
             stack.callback(close_session, session)  # never raises, bounded: the exit code stands
             backend = open_backend(cfg, clock, session)
             stack.callback(backend.close)
-            steps = open_flight_data(cfg, clock, mcap_path, stack)
+            steps = open_flight_data(cfg, clock, mcap_path, stack, log_epoch_ns)
             with CarrierController(cfg, clock, session, backend, steps=steps) as ctl:
                 if steps is not None:
                     steps.set_counters(lambda: ctl.passenger.counters)
@@ -79,6 +80,9 @@ def main(cfg: Config, speed: float = 1.0, duration_s: float | None = None, stop_
                     ctl.run(stop, duration_s)
                 finally:
                     summary = ctl.summary()
+                    report = getattr(backend, "report", None)
+                    if report is not None:
+                        summary[backend.name] = report()
                     if isinstance(clock, LockstepClock):
                         summary["lockstep"] = clock.counters
                     log.info("carrier %s stopped in mode %s; closest approach to the target %s m, braking distance %s m",
@@ -93,8 +97,10 @@ def main(cfg: Config, speed: float = 1.0, duration_s: float | None = None, stop_
     return 0
 
 
-def open_flight_data(cfg: Config, clock: Clock, mcap_path: str | Path | None, stack: ExitStack) -> Any:
-    """The carrier's MCAP log at ``mcap_path`` (None: none), closed by ``stack``."""
+def open_flight_data(cfg: Config, clock: Clock, mcap_path: str | Path | None, stack: ExitStack,
+                     epoch_ns: int | None = None) -> Any:
+    """The carrier's MCAP log at ``mcap_path`` (None: none), closed by ``stack``; its log times
+    from ``epoch_ns`` (:func:`mission.flightdata.writer.log_epoch_ns`)."""
     if mcap_path is None:
         return None
     from mission.flightdata.carrier_log import CarrierLog
@@ -103,7 +109,8 @@ def open_flight_data(cfg: Config, clock: Clock, mcap_path: str | Path | None, st
     Path(mcap_path).parent.mkdir(parents=True, exist_ok=True)
     note = "times are the carrier's clock [s] (in lockstep the mission's, relayed to the carrier)"
     steps = CarrierLog(mcap_path, pair=cfg.zenoh.pair, target=cfg.scenario.target,
-                       clock=clock_metadata(clock, note, "the mission controller's relay of the mock vehicle's time"))
+                       clock=clock_metadata(clock, note, "the mission controller's relay of the mock vehicle's time",
+                                            epoch_ns))
     stack.callback(steps.close)
     return steps
 
@@ -145,6 +152,8 @@ def _jsonable(value: Any) -> Any:
 @click.option("--ros2-namespace", default=None, help="ROS namespace of the robot (ros2) [default: carrier.ros2.namespace].")
 @click.option("--key-form", type=click.Choice(["ros2dds", "rmw_zenoh"]), default=None,
               help="ROS 2 key form (ros2) [default: carrier.ros2.key_form].")
+@click.option("--cmd-vel-type", type=click.Choice(["Twist", "TwistStamped"]), default=None,
+              help="ROS 2 velocity command type (ros2) [default: carrier.ros2.cmd_vel_type].")
 @click.option("--duration", type=click.FloatRange(min=0, min_open=True), default=None, metavar="S",
               help="Stop after this many simulated seconds [default: run until SIGINT/SIGTERM].")
 @click.option("--lockstep", is_flag=True, help="Simulation: step on the mission controller's lockstep clock "
@@ -153,14 +162,18 @@ def _jsonable(value: Any) -> Any:
               help="Write the carrier's summary (closest approach, braking distance, guard activity) as JSON.")
 @click.option("--mcap", "mcap_path", type=click.Path(dir_okay=False), default=None, metavar="PATH",
               help="Write the carrier's flight data (its pose, mode, commands, P3 guard) to this MCAP file.")
+@click.option("--log-epoch-ns", type=click.IntRange(min=0), default=None, metavar="NS",
+              help="Flight data log times count from this epoch [ns since the Unix epoch] (a demo gives its processes "
+                   "one in lockstep) [default: the wall clock at the carrier clock's zero].")
 @click.option("--zenoh-signing-key", "bus_key_file", type=click.Path(dir_okay=False), default=None, metavar="FILE",
               help="Bus signing key file of the pair (overrides zenoh.signing_key_file): the carrier's state is signed, "
                    "the passenger's status must carry its tag.")
 def carrier_cli(config: str, backend: str | None, speed: float, pair: str | None, listen: tuple[str, ...],
                     connect: tuple[str, ...], encoding: str | None, rate: float | None, mavlink_url: str | None,
                     target_system: int | None, kinematics: str | None, offset_ned: str | None,
-                    ros2_namespace: str | None, key_form: str | None, duration: float | None,
-                    lockstep: bool, summary_path: str | None, mcap_path: str | None, bus_key_file: str | None) -> int:
+                    ros2_namespace: str | None, key_form: str | None, cmd_vel_type: str | None, duration: float | None,
+                    lockstep: bool, summary_path: str | None, mcap_path: str | None, log_epoch_ns: int | None,
+                    bus_key_file: str | None) -> int:
     """Run the carrier-side controller of CONFIG (a TOML file).
 
     The carrier waits until the passenger's published phase is RIDING, then drives towards
@@ -191,6 +204,7 @@ def carrier_cli(config: str, backend: str | None, speed: float, pair: str | None
         "carrier.mavlink.target_system": target_system,
         "carrier.ros2.namespace": ros2_namespace,
         "carrier.ros2.key_form": key_form,
+        "carrier.ros2.cmd_vel_type": cmd_vel_type,
         f"carrier.{chosen if chosen != 'sim' else 'mavlink'}.offset_ned_m": offset,
         "zenoh.pair": pair,
         "zenoh.listen": list(listen) if listen else None,
@@ -202,7 +216,7 @@ def carrier_cli(config: str, backend: str | None, speed: float, pair: str | None
     })
     require_stated(cfg, CARRIER_FIELDS, "carrier")  # refused before it says anything about flying
     click.echo(startup_line(cfg, speed), err=True)
-    return main(cfg, speed, duration, summary_path=summary_path, lockstep=lockstep, mcap_path=mcap_path)
+    return main(cfg, speed, duration, summary_path=summary_path, lockstep=lockstep, mcap_path=mcap_path, log_epoch_ns=log_epoch_ns)
 
 
 def startup_line(cfg: Config, speed: float) -> str:

@@ -95,21 +95,23 @@ def check_config(cfg: Config) -> None:
 
 
 def flight_data(cfg: Config, directory: Path, info: dict[str, Any], clock: Clock,
-                live: LiveAddress | None) -> list[RecordSink]:
+                live: LiveAddress | None, epoch_ns: int | None = None) -> list[RecordSink]:
     """The flight record's sinks besides the CSV: ``flight.mcap`` (with the live view at
-    ``live``, if given; with the recovery's docking geometry when the mission comes home)
+    ``live``, if given; with the recovery's docking geometry when the mission comes home; its
+    log times from ``epoch_ns``, :func:`mission.flightdata.writer.log_epoch_ns`)
     (:class:`mission.flightdata.mission_log.MissionLog`)."""
     from mission.flightdata.mission_log import MissionLog
 
     directory.mkdir(parents=True, exist_ok=True)
-    clock_info = clock_metadata(clock, CLOCK_NOTE, "the mock vehicle's simulated time (run --lockstep)")
+    clock_info = clock_metadata(clock, CLOCK_NOTE, "the mock vehicle's simulated time (run --lockstep)", epoch_ns)
     recovery = mission_model(cfg).recovery
     return [MissionLog(directory / "flight.mcap", info, pair=cfg.zenoh.pair, clock=clock_info, live=live,
                        docking=None if recovery is None else recovery.geometry)]
 
 
 def fly(cfg: Config, *, speed: float = 1.0, log_dir: str | Path | None = None, stop: threading.Event | None = None,
-        on_event=None, on_start=None, clock: Clock | None = None, live: LiveAddress | None = None) -> MissionOutcome:
+        on_event=None, on_start=None, clock: Clock | None = None, live: LiveAddress | None = None,
+        log_epoch_ns: int | None = None) -> MissionOutcome:
     """Fly one mission with ``cfg`` (the library entry point of ``marsupial run``).
 
     Opens the Zenoh session and the MAVLink link (:func:`mission_io`), runs
@@ -118,13 +120,14 @@ def fly(cfg: Config, *, speed: float = 1.0, log_dir: str | Path | None = None, s
     everything is open, just before the loop starts (the CLI watches the wait for the vehicle).
     ``clock`` replaces the scaled clock, e.g. a :class:`LockstepClock` (made in the calling
     thread) that steps on the mock vehicle's simulated time. The flight log gets ``flight.mcap``
-    beside ``record.csv``; ``live``: also serve it to Foxglove on that address.
+    beside ``record.csv``; ``live``: also serve it to Foxglove on that address; ``log_epoch_ns``:
+    the epoch of its log times (default: the wall clock at the clock's zero).
     """
     check_config(cfg)
     clock = clock or ScaledClock(speed)
     directory = Path(log_dir) if log_dir else Path(cfg.mission.log_dir) / f"{time.strftime('%Y%m%d-%H%M%S')}-{cfg.zenoh.pair}"
     info = mission_info(cfg)
-    sinks = flight_data(cfg, directory, info, clock, live)
+    sinks = flight_data(cfg, directory, info, clock, live, log_epoch_ns)
     try:
         recorder = FlightRecorder(directory, info, sinks)
         with mission_io(cfg, clock, recorder.tlog_path) as (feed, publisher, link):
@@ -171,9 +174,13 @@ def exit_code(outcome: MissionOutcome) -> int:
 @click.option("--live", is_flag=False, flag_value=DEFAULT_LIVE, default=None, metavar="[HOST:PORT]",
               help=f"Serve the flight live to Foxglove (the foxglove-sdk WebSocket server) on HOST:PORT "
               f"[{DEFAULT_LIVE} when given alone; loopback unless told otherwise]. Off by default.")
+@click.option("--log-epoch-ns", type=click.IntRange(min=0), default=None, metavar="NS",
+              help="Flight data log times count from this epoch [ns since the Unix epoch] (a demo gives its processes "
+                   "one in lockstep) [default: the wall clock at the mission clock's zero].")
 def run(config: str, mavlink_url: str | None, zenoh_listen: tuple[str, ...], zenoh_connect: tuple[str, ...],
         zenoh_mode: str | None, pair: str | None, speed: float, lockstep: bool, log_dir: str | None,
-        signing_key_file: str | None, bus_key_file: str | None, as_json: bool, live: str | None) -> int:
+        signing_key_file: str | None, bus_key_file: str | None, as_json: bool, live: str | None,
+        log_epoch_ns: int | None) -> int:
     """Fly the marsupial mission described by CONFIG on a PX4 vehicle.
 
     The passenger takes off from the carrier, joins the dock point, rides while the carrier
@@ -229,7 +236,7 @@ def run(config: str, mavlink_url: str | None, zenoh_listen: tuple[str, ...], zen
     try:
         clock: Clock = LockstepClock(speed=speed, name="mission-lockstep") if lockstep else ScaledClock(speed)
         outcome = fly(cfg, speed=speed, log_dir=log_dir, stop=stop, on_event=on_event, on_start=on_start, clock=clock,
-                      live=live_address)
+                      live=live_address, log_epoch_ns=log_epoch_ns)
     finally:
         if seen.get("reporter") is not None:
             seen["reporter"].stop()

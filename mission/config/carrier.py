@@ -65,7 +65,7 @@ class CarrierMavlinkSection(Section):
 
 
 class CarrierRos2Section(Section):
-    """``carrier.backend = "ros2"``: a ROS 2 robot over Zenoh (nav_msgs/Odometry in, geometry_msgs/Twist out, CDR)."""
+    """``carrier.backend = "ros2"``: a ROS 2 robot over Zenoh (nav_msgs/Odometry in, geometry_msgs/Twist or TwistStamped out, CDR)."""
 
     key_form: Literal["ros2dds", "rmw_zenoh"] = Field("ros2dds",
         description=("[-] `ros2dds` (zenoh-bridge-ros2dds: `<ns>/odom`) or `rmw_zenoh` "
@@ -75,7 +75,15 @@ class CarrierRos2Section(Section):
     odom_topic: str = Field("odom", pattern=r"^[A-Za-z0-9_/]+$",
         description="[-] nav_msgs/Odometry topic (ENU, REP 103) the carrier reads")
     cmd_vel_topic: str = Field("cmd_vel", pattern=r"^[A-Za-z0-9_/]+$",
-        description="[-] geometry_msgs/Twist topic (body FLU) the carrier commands")
+        description="[-] velocity command topic (body FLU) the carrier commands")
+    cmd_vel_type: Literal["Twist", "TwistStamped"] = Field("Twist",
+        description=("[-] the command's type: `Twist` (geometry_msgs/msg/Twist) or `TwistStamped` (what ros2_control's "
+                     "diff_drive_controller takes since Jazzy)"))
+    rmw_attachment: Literal["current", "legacy"] = Field("current",
+        description=("[-] rmw_zenoh attachment sent: `current` (rmw_zenoh_cpp Jazzy >= 0.2.4, Humble >= 0.1.2, Kilted, "
+                     "Rolling) or `legacy` (labelled, Jazzy <= 0.2.3); both are read"))
+    node_name: str = Field("marsupial_carrier", pattern=r"^[A-Za-z_][A-Za-z0-9_]*$",
+        description="[-] ROS node name the carrier announces in rmw_zenoh's graph (liveliness tokens)")
     offset_ned_m: list[float] = Field([0.0, 0.0, 0.0], description="[m] the odom frame's origin in the shared frame")
 
 

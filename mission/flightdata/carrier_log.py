@@ -2,8 +2,9 @@
 :class:`~mission.carrier.controller.StepSink`).
 
 Each :class:`~mission.carrier.controller.CarrierStep` becomes, at its clock time: the transform
-``world -> <pair>/carrier_own`` (the carrier's own state, as it used it; the mission's log has
-``<pair>/carrier``, the state the passenger received), its ``status`` (mode, why it holds, the
+``map_ned -> <pair>/carrier_own/base_link_frd`` (the carrier's own state as it used it, rotated
+by its heading; the mission's log has ``<pair>/carrier/base_link_frd``, the state the passenger
+received), its ``status`` (mode, why it holds, the
 law's command, what it sent, the P3 guard, the distance to the target: JSON) and a
 ``foxglove.Log`` line when the mode or the hold reason changes; once a second, the passenger
 feed's counters. Topics: :data:`mission.flightdata.topics.CARRIER_CHANNELS`.
@@ -16,9 +17,9 @@ from typing import Any, Callable
 import numpy as np
 
 from mission.carrier.controller import CarrierStep
-from mission.flightdata.mission_log import clean, vector
+from mission.flightdata.mission_log import clean, vector, yaw_quaternion
 from mission.flightdata.topics import CARRIER_CHANNELS, WORLD_FRAME, frame, topics
-from mission.flightdata.writer import DataLog, LiveAddress, ns, timestamp
+from mission.flightdata.writer import DataLog, LiveAddress, timestamp
 
 
 def _pad3(v: np.ndarray) -> np.ndarray:
@@ -55,14 +56,16 @@ class CarrierLog(DataLog):
     def handle(self, t_s: float, step: CarrierStep) -> None:
         from foxglove.messages import FrameTransform, Log, LogLevel, Quaternion, Vector3
 
-        t, stamp = ns(t_s), timestamp(t_s)
+        t = self.log_ns(t_s)
+        stamp = timestamp(t)
         st = step.state
         if st is not None:
             p = _pad3(st.position_ned_m)
+            qx, qy, qz, qw = yaw_quaternion(st.yaw_rad)
             self.ch["tf"].log(FrameTransform(timestamp=stamp, parent_frame_id=WORLD_FRAME,
                                              child_frame_id=frame(self.pair, "carrier_own"),
                                              translation=Vector3(x=float(p[0]), y=float(p[1]), z=float(p[2])),
-                                             rotation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)), log_time=t)
+                                             rotation=Quaternion(x=qx, y=qy, z=qz, w=qw)), log_time=t)
         said = (step.mode, step.hold_reason)
         if said != self._said:
             text = f"mode {step.mode}" + ("" if step.hold_reason is None else f" (holding: {step.hold_reason})")

@@ -1,11 +1,13 @@
 """The Foxglove layout of a marsupial flight (``configs/foxglove/marsupial.json``), built with the
 foxglove-sdk's layout types from the topics of :mod:`mission.flightdata.topics`.
 
-Left, the 3D panel in the ENU ``map`` frame: both robots, the target, the obstacles, the b c
-circle, the dock point and the anchor (``scene``), moved by the frame transforms. Right, top to
-bottom: the phase and the safety filter's activity over time (State Transitions); the distances
-|e_pc|, |e_tc|, |e_pt| with b c; the law's command and the safe command (north and east) with the
-filter's change; the log (phase changes and events). ``python -m mission.flightdata.layout``
+Left, the 3D panel in the ENU ``map`` frame: both robots (turned by their heading), the target,
+the obstacles, the b c circle, the dock point and the anchor (``scene``), moved by the frame
+transforms. Right, top to bottom: the phase, the safety filter's activity and the carrier's mode
+over time (State Transitions); the distances |e_pc|, |e_tc|, |e_pt| with b c and the carrier's own
+distance to the target; the law's command and the safe command (north and east) with the
+filter's change; the log (phase changes and events). The carrier's rows come from
+``carrier.mcap``: open it with ``flight.mcap`` (their log times are both epoch time). ``python -m mission.flightdata.layout``
 rewrites the file (a test holds the two together).
 """
 from __future__ import annotations
@@ -15,7 +17,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from mission.flightdata.topics import MAP_FRAME, topics
+from mission.flightdata.topics import CARRIER_CHANNELS, MAP_FRAME, topics
 
 LAYOUT_FILE = Path(__file__).resolve().parents[2] / "configs" / "foxglove" / "marsupial.json"
 
@@ -25,7 +27,8 @@ def layout(pair: str = "pair0") -> dict[str, Any]:
     import foxglove.layouts as fl
 
     t = topics(pair)
-    three_d = fl.ThreeDeePanel(title="marsupial: carrier, passenger, target (map = ENU above world = NED)",
+    c = topics(pair, CARRIER_CHANNELS)
+    three_d = fl.ThreeDeePanel(title="marsupial: carrier, passenger, target (map = ENU above map_ned = NED)",
                                config=fl.ThreeDeeConfig(
                                    follow_tf=MAP_FRAME, fixed_frame=MAP_FRAME, follow_mode="follow-none",
                                    camera_state=fl.ThreeDeeCameraState(distance=45.0, phi=55.0, theta_offset=-60.0,
@@ -39,13 +42,15 @@ def layout(pair: str = "pair0") -> dict[str, Any]:
 
     states = fl.StateTransitionsPanel(title="phase and safety filter", config=fl.StateTransitionsConfig(
         paths=[fl.StateTransitionsSeries(value=f"{t['phase']}.phase", label="phase"),
-               fl.StateTransitionsSeries(value=f"{t['safety']}.acted", label="filter acted")],
+               fl.StateTransitionsSeries(value=f"{t['safety']}.acted", label="filter acted"),
+               fl.StateTransitionsSeries(value=f"{c['status']}.mode", label="carrier mode (carrier.mcap)")],
         is_synced=True, show_points=False))
     distances = fl.PlotPanel(title="distances [m]: the law's carrier is the dock point", config=fl.PlotConfig(
         paths=[series(f"{t['distances']}.e_pc_m", "|e_pc| passenger-dock", "#4e98e2"),
                series(f"{t['distances']}.e_tc_m", "|e_tc| target-dock", "#f5774d"),
                series(f"{t['distances']}.e_pt_m", "|e_pt| passenger-target", "#61cbff"),
-               series(f"{t['distances']}.bc_m", "b c", "#f7df71", "dashed")],
+               series(f"{t['distances']}.bc_m", "b c", "#f7df71", "dashed"),
+               series(f"{c['status']}.target_distance_m", "carrier-target (carrier.mcap)", "#cfcfe0", "dotted")],
         is_synced=True, show_legend=True, legend_display="top", y_axis_label="m"))
     command = fl.PlotPanel(title="command [m/s]: the law's and the safe (sent) one", config=fl.PlotConfig(
         paths=[series(f"{t['command']}.law.n", "law n", "#4e98e2", "dashed"),

@@ -2,8 +2,9 @@
 
 Each :class:`~mission.record.TickRow` becomes, at the row's mission-clock time:
 
-- frame transforms ``world -> <pair>/carrier``, ``world -> <pair>/passenger`` and
-  ``<pair>/carrier -> <pair>/dock`` (``foxglove.FrameTransform``);
+- frame transforms ``map_ned -> <pair>/carrier/base_link_frd`` and ``map_ned ->
+  <pair>/passenger/base_link_frd`` (rotated by the robot's heading when the row has one) and
+  ``map_ned -> <pair>/dock`` (``foxglove.FrameTransform``; frames: :mod:`mission.flightdata.topics`);
 - ``phase`` (JSON, every tick) and a ``foxglove.Log`` line per phase change and event;
 - ``distances`` (|e_pc|, |e_tc|, |e_pt| with the dock point as the law's carrier, the carrier's
   own distance to the target, and P), ``command`` (the law's command, the safe command, the
@@ -12,7 +13,8 @@ Each :class:`~mission.record.TickRow` becomes, at the row's mission-clock time:
   reads back);
 
 and once a second of mission clock (and when the anchor latches, or the recovery's course turns):
-``map -> world`` (NED under an ENU frame), the scene (target, obstacles with their radii, the b c
+``map -> map_ned`` (NED under the ENU frame), each robot's ``base_link_frd -> base_link`` (FRD
+to FLU), the scene (target, obstacles with their radii, the b c
 circle in the dock's plane, the dock point, both robots, the latched anchor, and while a recovery
 brings the passenger home its holdoff point and glide path: ``foxglove.SceneUpdate``), and the
 carrier feed's and the link's counters. Topics and schemas: :mod:`mission.flightdata.topics`.
@@ -27,14 +29,23 @@ from typing import Any, Callable
 import numpy as np
 
 from mission.core.docking import DockingGeometry, gate_point, holdoff_point
-from mission.flightdata.topics import MAP_FRAME, MISSION_CHANNELS, WORLD_FRAME, frame, topics
-from mission.flightdata.writer import DataLog, LiveAddress, ns, timestamp
+from mission.flightdata.topics import MAP_FRAME, MISSION_CHANNELS, WORLD_FRAME, flu_frame, frame, topics
+from mission.flightdata.writer import DataLog, LiveAddress, timestamp
 from mission.phases import Phase
 from mission.record import COLUMNS, TickRow
 
 PHASES = [p.value for p in Phase]
 COURSE_REDRAW_COS = math.cos(math.radians(2.0))  # the recovery's course turned this much: draw the scene again
 NED_IN_ENU = (math.sqrt(0.5), math.sqrt(0.5), 0.0, 0.0)  # (x, y, z, w): (n, e, d) -> (e, n, -d)
+FLU_IN_FRD = (1.0, 0.0, 0.0, 0.0)  # (x, y, z, w): half a turn about forward
+
+
+def yaw_quaternion(yaw_rad: float | None) -> tuple[float, float, float, float]:
+    """(x, y, z, w) of a heading ``yaw_rad`` [rad] from north, clockwise seen from above: a turn
+    about NED's down axis (identity when the heading is unknown or not finite)."""
+    if yaw_rad is None or not math.isfinite(yaw_rad):
+        return (0.0, 0.0, 0.0, 1.0)
+    return (0.0, 0.0, math.sin(yaw_rad / 2.0), math.cos(yaw_rad / 2.0))
 
 
 # Plain Python on lists below, not numpy on 3-vectors: the worker shares the GIL with the control
@@ -121,21 +132,20 @@ class MissionLog(DataLog):
     def handle(self, t_s: float, row: TickRow) -> None:
         from foxglove.messages import FrameTransform, Log, LogLevel, Quaternion, Vector3
 
-        t, stamp = ns(t_s), timestamp(t_s)
-        identity = Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)
+        t = self.log_ns(t_s)
+        stamp = timestamp(t)
 
-        def transform(key: str, parent: str, child: str, v: dict[str, float] | None) -> None:
+        def transform(key: str, child: str, v: dict[str, float] | None, yaw_rad: float | None = None) -> None:
             if v is not None:
-                self.ch[key].log(FrameTransform(timestamp=stamp, parent_frame_id=parent, child_frame_id=child,
+                x, y, z, w = yaw_quaternion(yaw_rad)
+                self.ch[key].log(FrameTransform(timestamp=stamp, parent_frame_id=WORLD_FRAME, child_frame_id=child,
                                                 translation=Vector3(x=v["n"], y=v["e"], z=v["d"]),
-                                                rotation=identity), log_time=t)
+                                                rotation=Quaternion(x=x, y=y, z=z, w=w)), log_time=t)
 
         x_c, x_p, dock = vector(row.x_c), vector(row.x_p), vector(row.dock)
-        transform("carrier_tf", WORLD_FRAME, self.frames["carrier"], x_c)
-        transform("passenger_tf", WORLD_FRAME, self.frames["passenger"], x_p)
-        if dock is not None and x_c is not None:
-            transform("dock_tf", self.frames["carrier"], self.frames["dock"],
-                      {k: dock[k] - x_c[k] for k in ("n", "e", "d")})
+        transform("carrier_tf", self.frames["carrier"], x_c, row.yaw_c)
+        transform("passenger_tf", self.frames["passenger"], x_p, row.yaw_p)
+        transform("dock_tf", self.frames["dock"], dock)
         anchor_new = row.anchor is not None and self._anchor is None
         if anchor_new:
             self._anchor = np.asarray(row.anchor, dtype=float)
@@ -175,14 +185,19 @@ class MissionLog(DataLog):
                               log_time=t)
 
     def _periodic(self, t: int, stamp: Any) -> None:
-        """``map -> world``, the scene and the counters: rarely changing, sent again each second
-        so a viewer that connects late (or seeks) has them."""
+        """``map -> map_ned``, the robots' ``base_link_frd -> base_link``, the scene and the
+        counters: rarely changing, sent again each second so a viewer that connects late (or
+        seeks) has them."""
         from foxglove.messages import FrameTransform, Quaternion, Vector3
 
-        x, y, z, w = NED_IN_ENU
-        self.ch["world_tf"].log(FrameTransform(timestamp=stamp, parent_frame_id=MAP_FRAME, child_frame_id=WORLD_FRAME,
-                                               translation=Vector3(x=0.0, y=0.0, z=0.0),
-                                               rotation=Quaternion(x=x, y=y, z=z, w=w)), log_time=t)
+        def fixed(parent: str, child: str, q: tuple[float, float, float, float]) -> None:
+            self.ch["world_tf"].log(FrameTransform(timestamp=stamp, parent_frame_id=parent, child_frame_id=child,
+                                                   translation=Vector3(x=0.0, y=0.0, z=0.0),
+                                                   rotation=Quaternion(x=q[0], y=q[1], z=q[2], w=q[3])), log_time=t)
+
+        fixed(MAP_FRAME, WORLD_FRAME, NED_IN_ENU)
+        for robot in ("carrier", "passenger"):
+            fixed(self.frames[robot], flu_frame(self.pair, robot), FLU_IN_FRD)
         self.ch["scene"].log(self._scene(stamp), log_time=t)
         counters = self._counters() if self._counters is not None else {}
         if "carrier_feed" in counters:

@@ -25,6 +25,15 @@ class McapContent:
     metadata: dict[str, dict[str, str]] = field(default_factory=dict)
     complete: bool = False
 
+    @property
+    def epoch_ns(self) -> int:
+        """The epoch of the log times [ns since the Unix epoch]: a log time minus it is the
+        mission clock's time (0 for a file without one)."""
+        try:
+            return int(self.metadata.get("clock", {}).get("epoch_ns", 0))
+        except ValueError:
+            return 0
+
 
 def read_messages(path: str | Path, topics: set[str] | None = None) -> McapContent:
     """Every message (of ``topics``, if given) and metadata record of the MCAP at ``path``, in
@@ -106,7 +115,7 @@ def _fields(data: bytes) -> Iterator[tuple[int, int | bytes]]:
 
 
 def log_lines(content: McapContent, topic: str) -> list[tuple[float, int, str]]:
-    """The ``foxglove.Log`` messages of ``topic``: (time [s], level, text). The Log schema is
+    """The ``foxglove.Log`` messages of ``topic``: (mission-clock time [s], level, text). The Log schema is
     small and fixed (timestamp = 1 {sec = 1, nsec = 2}, level = 2, message = 3): read by hand,
     so reading needs no protobuf runtime."""
     out = []
@@ -119,5 +128,5 @@ def log_lines(content: McapContent, topic: str) -> list[tuple[float, int, str]]:
                 level = value
             elif number == 3 and isinstance(value, bytes):
                 text = value.decode("utf-8", errors="replace")
-        out.append((log_time / 1e9, level, text))
+        out.append(((log_time - content.epoch_ns) / 1e9, level, text))
     return out

@@ -2,18 +2,23 @@
 readers take them from here).
 
 Every topic of a pair starts with ``/<pair>/`` (``/pair0/tf/passenger``), so the files of
-several pairs open together and the live servers of ``demo --pairs N`` never clash. Frames:
-``world`` is the mission's local NED frame [m] (PX4's), ``map`` an ENU frame (z up) above it for
-viewers that draw z up; a robot's frame is ``<pair>/carrier``, ``<pair>/passenger``, and the dock
-point ``<pair>/dock`` (child of the carrier). Vectors in JSON messages are ``{"n", "e", "d"}``
-objects in ``world`` (NED); a value that does not exist on a tick is ``null``.
+several pairs open together and the live servers of ``demo --pairs N`` never clash. Frames, named
+as MAVROS and PX4's ROS 2 interface name them: ``map_ned`` is the mission's local NED frame [m]
+(PX4's), ``map`` the ENU frame (z up, REP 103) above it that a ROS user and Foxglove's 3D panel
+expect; a robot's body is ``<pair>/<robot>/base_link_frd`` (forward-right-down, rotated by its
+heading when known) with ``<pair>/<robot>/base_link`` (forward-left-up) under it, for
+``<robot>`` ``carrier``, ``passenger`` and ``carrier_own`` (the carrier's state as it used it);
+the dock point is ``<pair>/dock`` (in ``map_ned``). Vectors in JSON messages are
+``{"n", "e", "d"}`` objects in ``map_ned``; a value that does not exist on a tick is ``null``.
 """
 from __future__ import annotations
 
 from typing import Any
 
 MAP_FRAME = "map"
-WORLD_FRAME = "world"
+WORLD_FRAME = "map_ned"
+BODY_FRD = "base_link_frd"
+BODY_FLU = "base_link"
 
 # (key, topic after the pair prefix, schema: a Foxglove schema name or a key of JSON_SCHEMAS)
 MISSION_CHANNELS = (
@@ -46,8 +51,14 @@ def topics(pair: str, channels: tuple[tuple[str, str, str], ...] = MISSION_CHANN
 
 
 def frame(pair: str, name: str) -> str:
-    """A pair's frame id: ``<pair>/<name>`` (carrier, passenger, dock, carrier_own)."""
-    return f"{pair}/{name}"
+    """A pair's frame id: ``<pair>/<name>`` (dock), or a robot's body ``<pair>/<robot>/base_link_frd``
+    for ``name`` carrier, passenger or carrier_own."""
+    return f"{pair}/{name}/{BODY_FRD}" if name in ("carrier", "passenger", "carrier_own") else f"{pair}/{name}"
+
+
+def flu_frame(pair: str, robot: str) -> str:
+    """A robot's forward-left-up body frame ``<pair>/<robot>/base_link`` (under its base_link_frd)."""
+    return f"{pair}/{robot}/{BODY_FLU}"
 
 
 def _number(description: str) -> dict[str, Any]:

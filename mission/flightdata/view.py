@@ -23,7 +23,7 @@ BG, PANEL, GRID, TEXT = "#16161d", "#1f1f29", "#33334a", "#e6e6f0"
 
 
 def _json_series(content: Any, topic: str) -> tuple[np.ndarray, list[dict[str, Any]]]:
-    rows = [(t / 1e9, json.loads(d)) for top, _, t, d in content.messages if top == topic]
+    rows = [((t - content.epoch_ns) / 1e9, json.loads(d)) for top, _, t, d in content.messages if top == topic]
     return np.array([t for t, _ in rows]), [r for _, r in rows]
 
 

@@ -10,8 +10,13 @@ Flush policy: the SDK writes a chunk's header before its messages and its length
 ends, so a killed process leaves an unfinished last chunk that a reader cannot open. The worker
 ends the chunk (``MCAPWriter.flush``) every ``flush_period_s`` of the mission clock (1 s): a
 killed process leaves every message up to the last flush readable
-(:func:`mission.flightdata.read.read_messages` stops at the unfinished chunk). Times are
-nanoseconds on the mission clock (:func:`ns`), and the file says so in its ``clock`` metadata.
+(:func:`mission.flightdata.read.read_messages` stops at the unfinished chunk).
+
+Times are nanoseconds since the Unix epoch, as Foxglove and ROS loggers write them: the file's
+epoch (its ``clock`` metadata's ``epoch_ns``, :func:`log_epoch_ns`) plus the mission clock's
+time. In real time the epoch is the wall clock at the clock's zero, so at speed 1 the times are
+wall-clock times and the files of a ``run`` and a ``carrier`` line up; in lockstep the demo gives
+its processes one epoch and the simulated clock they share does the rest.
 """
 from __future__ import annotations
 
@@ -73,29 +78,43 @@ def is_loopback(host: str) -> bool:
 
 
 def ns(t_s: float) -> int:
-    """Mission-clock time [s] as MCAP/Foxglove nanoseconds (never negative)."""
+    """Mission-clock time [s] as nanoseconds (never negative)."""
     return max(int(round(t_s * 1e9)), 0)
 
 
-def clock_metadata(clock: Any, note: str, lockstep_source: str) -> dict[str, str]:
-    """The ``clock`` metadata of a flight data file: its timestamps are ``clock``'s (the
-    mission clock), in ns; ``lockstep_source`` says what a lockstep clock follows."""
+def log_epoch_ns(clock: Any, shared_epoch_ns: int | None = None) -> int:
+    """[ns since the Unix epoch] the zero of ``clock``'s time is: ``shared_epoch_ns`` when given
+    (the demo's, one for all its processes in lockstep), else the wall clock when the clock read
+    zero (a real-time clock scaled by ``speed``: now minus its time over its speed; a lockstep
+    clock without a shared epoch: now minus its time)."""
+    from mission.time.clock import LockstepClock
+
+    if shared_epoch_ns is not None:
+        return int(shared_epoch_ns)
+    rate = 1.0 if isinstance(clock, LockstepClock) else getattr(clock, "speed", 1.0)
+    return time.time_ns() - int(round(clock.now() / rate * 1e9))
+
+
+def clock_metadata(clock: Any, note: str, lockstep_source: str, epoch_ns: int | None = None) -> dict[str, str]:
+    """The ``clock`` metadata of a flight data file: its log times are ``epoch_ns`` (see
+    :func:`log_epoch_ns`, given or taken now) plus ``clock``'s time (the mission clock), in ns;
+    ``lockstep_source`` says what a lockstep clock follows."""
     from mission.time.clock import LockstepClock
 
     if isinstance(clock, LockstepClock):
         source = f"lockstep: {lockstep_source}"
     else:
         source = f"{type(clock).__name__}: the wall clock (monotonic) x{getattr(clock, 'speed', 1.0):g}"
-    return {"clock": "mission", "unit": "ns since the controller started", "source": source, "note": note,
+    return {"clock": "mission", "unit": "ns since the Unix epoch: epoch_ns + the mission clock's time",
+            "epoch_ns": str(log_epoch_ns(clock, epoch_ns)), "source": source, "note": note,
             "wall_start_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
 
 
-def timestamp(t_s: float) -> Any:
-    """A ``foxglove.messages.Timestamp`` of mission-clock time ``t_s`` [s]."""
+def timestamp(t_ns: int) -> Any:
+    """A ``foxglove.messages.Timestamp`` of ``t_ns`` [ns since the Unix epoch]."""
     from foxglove.messages import Timestamp
 
-    t = ns(t_s)
-    return Timestamp(t // 1_000_000_000, t % 1_000_000_000)
+    return Timestamp(t_ns // 1_000_000_000, t_ns % 1_000_000_000)
 
 
 def start_live(address: LiveAddress, context: Any, name: str) -> Any:
@@ -123,7 +142,8 @@ class DataLog:
     """An MCAP file at ``path`` (and a live server at ``live``, if given) whose messages a worker
     thread makes from what :meth:`submit` queues.
 
-    ``metadata``: MCAP metadata records written first (name -> string map). Subclasses create
+    ``metadata``: MCAP metadata records written first (name -> string map; ``clock``'s ``epoch_ns``
+    is the epoch of the log times, 0 without one). Subclasses create
     their channels with :meth:`channel` and implement :meth:`handle` (runs on the worker);
     :meth:`finish` ends it all.
     Errors in the worker are logged, counted (``errors``) and never reach the caller.
@@ -147,6 +167,7 @@ class DataLog:
             raise
         for record_name, values in metadata.items():
             self.writer.write_metadata(record_name, values)
+        self.epoch_ns = int(metadata.get("clock", {}).get("epoch_ns", 0))
         self.flush_period_s = flush_period_s
         self.errors = 0
         self._closed = False
@@ -174,6 +195,10 @@ class DataLog:
         """Queue ``item`` of mission-clock time ``t_s`` [s] for the worker (returns at once)."""
         self._queue.put((t_s, item))
 
+    def log_ns(self, t_s: float) -> int:
+        """The log time [ns since the Unix epoch] of mission-clock time ``t_s`` [s]."""
+        return self.epoch_ns + ns(t_s)
+
     def handle(self, t_s: float, item: Any) -> None:
         """Make and log the messages of ``item`` (the worker's thread)."""
         raise NotImplementedError
@@ -187,7 +212,7 @@ class DataLog:
             try:
                 self.handle(t_s, item)
                 if self.server is not None:
-                    self.server.broadcast_time(ns(t_s))
+                    self.server.broadcast_time(self.log_ns(t_s))
                 if self._next_flush_s is None:
                     self._next_flush_s = t_s + self.flush_period_s
                 elif t_s >= self._next_flush_s:

@@ -2,9 +2,12 @@
 ``ros2`` carrier backend without ROS.
 
 It does what a ROS 2 base driver does, on the keys of zenoh-bridge-ros2dds or rmw_zenoh
-(:func:`mission.carrier.backends.ros2.ros2_topics`): it subscribes to ``geometry_msgs/msg/Twist`` on
-``cmd_vel`` and publishes ``nav_msgs/msg/Odometry`` on ``odom`` (CDR, frame ``odom``, child
-``base_link``, twist in the body frame, stamps on its clock), at ``rate_hz``.
+(:func:`mission.carrier.backends.ros2.ros2_topics`): it subscribes to ``geometry_msgs/msg/Twist``
+or ``TwistStamped`` (one of them, as a ROS subscription has one type) on ``cmd_vel`` and publishes
+``nav_msgs/msg/Odometry`` on ``odom`` (CDR, frame ``odom``, child ``base_link``, twist in the body
+frame, stamps on its clock), at ``rate_hz``. With rmw_zenoh keys it sends rmw_zenoh's attachment
+in the form asked and declares its node, publisher and subscription in the ROS graph
+(liveliness tokens, :class:`mission.carrier.backends.ros2.RosGraph`).
 
 Model (body FLU commands; state in NED): a unicycle (``linear.x`` forward speed, ``angular.z``
 yaw rate, counter-clockwise positive) or a holonomic base (``linear.x, linear.y``), each speed
@@ -24,7 +27,8 @@ import click
 import numpy as np
 import zenoh
 
-from mission.carrier.backends.ros2 import Received, RmwAttachment, Ros2Topics, rmw_sequence, robot_clock_keys, ros2_topics
+from mission.carrier.backends.ros2 import (AttachmentWriter, Received, RosGraph, Ros2Topics, read_attachment,
+                                           robot_clock_keys, ros2_topics)
 from mission.core.geodesy import wrap_pi
 from mission.bus.auth import BusAuth, bus_auth
 from mission.bus.bridge import open_session
@@ -32,7 +36,7 @@ from mission.bus.session import close_session, congestion_for, undeclare
 from mission.time.clock import Clock, LockstepClock, Periodic, ScaledClock
 from mission.config.schema import CarrierRos2Section, ZenohSection
 from mission.bus.wire import CarrierState, WireError
-from mission.bus.ros2 import decode_twist_cdr, encode_odometry_cdr
+from mission.bus.ros2 import ODOMETRY, decode_cmd_vel_cdr, encode_odometry_cdr
 
 log = logging.getLogger(__name__)
 
@@ -43,7 +47,8 @@ class Ros2RobotSim:
     def __init__(self, session: zenoh.Session, topics: Ros2Topics, clock: Clock, *, holonomic: bool = False,
                  start_ned: tuple[float, float, float] = (0.0, 0.0, 0.0), yaw_rad: float = 0.0,
                  accel_m_s2: float = 1.5, cmd_timeout_s: float = 0.5, max_speed_m_s: float = 3.0,
-                 max_yaw_rate_rad_s: float = 1.5, auth: BusAuth | None = None) -> None:
+                 max_yaw_rate_rad_s: float = 1.5, auth: BusAuth | None = None, attachment_form: str = "current",
+                 node_name: str = "base_driver") -> None:
         self.clock, self.topics, self.holonomic = clock, topics, holonomic
         self.position_m = np.array(start_ned, dtype=float)  # odom frame, NED [m]
         self.yaw_rad = float(yaw_rad)
@@ -54,21 +59,25 @@ class Ros2RobotSim:
         self._lock = threading.Lock()
         self._cmd: tuple[np.ndarray, float, float] | None = None  # (forward, right), yaw rate NED, rx time
         self.commands, self.dropped, self.seq = 0, 0, 0
-        self._attachment = RmwAttachment() if topics.rmw_zenoh else None
+        self._attachment = AttachmentWriter(attachment_form) if topics.rmw_zenoh else None
         self._verifier = auth.verifier() if auth is not None else None  # commands must carry the pair's tag
         self._listeners: list[Callable[[Received], None]] = []
         self._pub = session.declare_publisher(topics.odom_pub, encoding=zenoh.Encoding.APPLICATION_CDR,
                                               congestion_control=congestion_for(clock))
         self._sub = session.declare_subscriber(topics.cmd_vel_sub, self._on_cmd)
+        self.graph = RosGraph(session, topics.domain_id, topics.namespace, node_name,
+                              [("MP", topics.odom_name, ODOMETRY), ("MS", topics.cmd_vel_name, topics.cmd_vel_type)]
+                              ) if topics.rmw_zenoh else None
 
-    def _on_cmd(self, sample: zenoh.Sample) -> None:
+    def _on_cmd(self, sample: zenoh.Sample) -> None:  # Zenoh's thread: never raises
         attachment = sample.attachment
         try:
             raw = sample.payload.to_bytes()
             if self._verifier is not None:
                 _, inner = self._verifier.verify(sample, raw)
                 attachment = zenoh.ZBytes(inner) if inner else None
-            linear, angular = decode_twist_cdr(raw)
+            read = read_attachment(attachment) if self._attachment is not None else None
+            linear, angular = decode_cmd_vel_cdr(raw, self.topics.cmd_vel_type)
         except WireError as exc:
             self.dropped += 1
             (log.warning if self.dropped == 1 else log.debug)("dropped a cmd_vel (%s)", exc)
@@ -77,10 +86,9 @@ class Ros2RobotSim:
         with self._lock:
             self._cmd = (body, -float(angular[2]), self.clock.now())
             self.commands += 1
-        seq = rmw_sequence(attachment)
-        if seq is not None:
+        if read is not None:
             for callback in self._listeners:
-                callback(Received(seq - 1))
+                callback(Received(read.sequence_number - 1))
 
     def add_listener(self, callback: Callable[[Received], None]) -> None:
         """Call ``callback`` (Zenoh's thread) with each command taken that carries an rmw_zenoh
@@ -132,6 +140,8 @@ class Ros2RobotSim:
             last = tick
 
     def close(self) -> None:
+        if self.graph is not None:
+            self.graph.close()
         undeclare(self._sub, self._pub)
 
 
@@ -149,6 +159,12 @@ def _floats(text: str, option: str) -> tuple[float, float, float]:
 @click.option("--key-form", type=click.Choice(["ros2dds", "rmw_zenoh"]), default="ros2dds", show_default=True)
 @click.option("--namespace", default="", help="ROS namespace of the robot's topics.")
 @click.option("--domain-id", type=click.IntRange(0, 232), default=0, show_default=True)
+@click.option("--cmd-vel-type", type=click.Choice(["Twist", "TwistStamped"]), default="Twist", show_default=True,
+              help="The velocity command type its cmd_vel subscription takes.")
+@click.option("--rmw-attachment", type=click.Choice(["current", "legacy"]), default="current", show_default=True,
+              help="rmw_zenoh attachment form it sends (rmw_zenoh keys).")
+@click.option("--zenoh-mode", type=click.Choice(["peer", "client"]), default=None,
+              help="Zenoh mode (client: through a router given by --zenoh-connect, as an rmw_zenoh node) [default: peer].")
 @click.option("--kinematics", type=click.Choice(["diff_drive", "holonomic"]), default="diff_drive", show_default=True)
 @click.option("--yaw-deg", type=float, default=0.0, show_default=True, help="Initial heading [deg] from north.")
 @click.option("--rate", "rate_hz", type=click.FloatRange(1.0, 200.0), default=30.0, show_default=True)
@@ -162,7 +178,8 @@ def _floats(text: str, option: str) -> tuple[float, float, float]:
               help="Bus signing key file of the pair (zenoh.signing_key_file): take only commands (and lockstep clock "
                    "messages) signed with it.")
 @click.option("--pair", default="pair0", show_default=True, help="The pair whose key signs (with --signing-key).")
-def ros2_robot(key_form: str, namespace: str, domain_id: int, kinematics: str, yaw_deg: float, rate_hz: float,
+def ros2_robot(key_form: str, namespace: str, domain_id: int, cmd_vel_type: str, rmw_attachment: str,
+               zenoh_mode: str | None, kinematics: str, yaw_deg: float, rate_hz: float,
                speed: float, lockstep: bool, connect: tuple[str, ...], listen: tuple[str, ...],
                signing_key_file: str | None, pair: str) -> int:
     """Run a ROS-2-shaped robot: Twist on cmd_vel in, Odometry on odom out (CDR over Zenoh).
@@ -172,10 +189,11 @@ def ros2_robot(key_form: str, namespace: str, domain_id: int, kinematics: str, y
     if lockstep and key_form != "rmw_zenoh":
         raise click.BadParameter("lockstep needs --key-form rmw_zenoh (its sequence numbers order the steps)",
                                  param_hint="--lockstep")
-    ros2 = CarrierRos2Section(key_form=key_form, namespace=namespace, domain_id=domain_id)  # type: ignore[arg-type]
+    ros2 = CarrierRos2Section(key_form=key_form, namespace=namespace, domain_id=domain_id,  # type: ignore[arg-type]
+                              cmd_vel_type=cmd_vel_type, rmw_attachment=rmw_attachment)  # type: ignore[arg-type]
     topics = ros2_topics(ros2)
     section = ZenohSection(listen=list(listen), connect=list(connect), rendezvous=None if (listen or connect) else "tcp/127.0.0.1:7448",
-                           pair=pair, signing_key_file=signing_key_file)
+                           pair=pair, signing_key_file=signing_key_file, **({"mode": zenoh_mode} if zenoh_mode else {}))
     auth = bus_auth(section)
     stop = threading.Event()
     clock: Clock = LockstepClock(speed=speed, name="robot-lockstep") if lockstep else ScaledClock(speed)
@@ -190,7 +208,7 @@ def ros2_robot(key_form: str, namespace: str, domain_id: int, kinematics: str, y
     session = open_session(section)
     try:
         robot = Ros2RobotSim(session, topics, clock, holonomic=kinematics == "holonomic",
-                             yaw_rad=math.radians(yaw_deg), auth=auth)
+                             yaw_rad=math.radians(yaw_deg), auth=auth, attachment_form=rmw_attachment)
         upstream = None
         if isinstance(clock, LockstepClock):
             from mission.bus.lockstep import ZenohUpstream

@@ -107,8 +107,10 @@ def test_demo_flight_mcap_reads_back_with_foxglove_schemas(demo_flight):
     assert {"foxglove.FrameTransform", "foxglove.SceneUpdate", "foxglove.Log"} <= schemas
     stats = summary.statistics
     assert stats is not None
-    assert stats.message_start_time / 1e9 == pytest.approx(rec.t[0], abs=0.1)
-    assert stats.message_end_time / 1e9 == pytest.approx(rec.t[-1], abs=0.1)
+    epoch = int(metadata["clock"]["epoch_ns"])  # log times are epoch ns: the demo's epoch + the mission clock
+    assert epoch > 1.5e18
+    assert (stats.message_start_time - epoch) / 1e9 == pytest.approx(rec.t[0], abs=0.1)
+    assert (stats.message_end_time - epoch) / 1e9 == pytest.approx(rec.t[-1], abs=0.1)
     changes = [str(p) for i, p in enumerate(rec.phase) if i == 0 or p != rec.phase[i - 1]]
     assert [text.split()[1] for text in logs if text.startswith("phase ")] == changes
     assert changes[:1] == ["PREFLIGHT"] and changes[-3:] == ["ARRIVED", "HOLD", "DONE"] and "SEPARATED" in changes
@@ -116,7 +118,7 @@ def test_demo_flight_mcap_reads_back_with_foxglove_schemas(demo_flight):
     # the last passenger pose is the record's last position, at the record's last time
     x_p = rec.vec("x_p")[-1]
     assert (last_tf.translation.x, last_tf.translation.y, last_tf.translation.z) == pytest.approx(tuple(x_p))
-    assert last_tf.timestamp.seconds + last_tf.timestamp.nanos / 1e9 == pytest.approx(rec.t[-1], abs=1e-6)
+    assert (last_tf.timestamp.seconds * 10**9 + last_tf.timestamp.nanos - epoch) / 1e9 == pytest.approx(rec.t[-1], abs=1e-6)
     assert {"target", "bc_circle", "carrier", "passenger", "dock", "anchor"} <= {e.id for e in scene.entities}
     # marsupial plot reads the MCAP as it reads the CSV: the same record
     from_mcap = read_record(d / "flight.mcap")
@@ -127,6 +129,11 @@ def test_demo_flight_mcap_reads_back_with_foxglove_schemas(demo_flight):
         reader = make_reader(f, decoder_factories=[DecoderFactory()])
         modes = [m.message for *_, m in reader.iter_decoded_messages(topics=["/pair0/carrier/log"])]
         statuses = [json.loads(msg.data) for _, _, msg in reader.iter_messages(topics=["/pair0/carrier/status"])]
+        carrier_clock = {m.name: m.metadata for m in reader.iter_metadata()}["clock"]
+        carrier_stats = reader.get_summary().statistics
+    # one epoch for both files of the pair (lockstep: one simulated clock), so they line up in Foxglove
+    assert int(carrier_clock["epoch_ns"]) == epoch
+    assert abs(carrier_stats.message_start_time - stats.message_start_time) < 5e9
     assert modes[0].startswith("mode waiting") and "mode approaching" in modes and modes[-1] == "mode separated"
     closest = min(s["target_distance_m"] for s in statuses if s["target_distance_m"] is not None)
     carrier = json.loads((d / "carrier.json").read_text())
@@ -163,3 +170,23 @@ def test_demo_with_a_real_carrier_interface_holds_p1_p3_and_the_guard(tmp_path, 
     # the robot stepped on the carrier's clock to the end of the flight
     assert c["lockstep"]["barriers"] > 500 and c["lockstep"]["downstream_dropped"] == 0, c["lockstep"]
     assert c["lockstep"]["fallback"] is None and s["lockstep"]["fallback"] is None, (c["lockstep"], s["lockstep"])
+
+
+@pytest.mark.parametrize(("cmd_vel_type", "attachment", "mode"), [("TwistStamped", "current", "peer"),
+                                                                  ("Twist", "legacy", "client")])
+def test_demo_drives_a_ros2_robot_of_either_command_type(tmp_path, cmd_vel_type, attachment, mode):
+    """``carrier.ros2.cmd_vel_type`` and ``rmw_attachment`` in the config: the ROS-2-shaped robot
+    takes only that type (its subscription's key carries the type and its hash) and speaks that
+    attachment, and the flight holds P1-P3. ``zenoh.mode = "client"``: rmw_zenoh's topology, every
+    process a client of the demo's router (which plays ``rmw_zenohd``), the robot included."""
+    config = tmp_path / "demo.toml"
+    text = DEMO.read_text().replace('[zenoh]\nmode = "peer"\n', f'[zenoh]\nmode = "{mode}"\n', 1)
+    assert f'mode = "{mode}"' in text
+    config.write_text(text + f'\n[carrier.ros2]\ncmd_vel_type = "{cmd_vel_type}"\nrmw_attachment = "{attachment}"\n')
+    out = _demo(tmp_path, "--carrier", "ros2", "--config", str(config))
+    s = json.loads((tmp_path / "logs" / "pair0" / "summary.json").read_text())
+    assert s["p1"] and s["p2"] and s["p3"] and s["phase"] == "DONE", s
+    assert out.returncode == 0, out.stdout + out.stderr
+    ros2 = json.loads((tmp_path / "logs" / "pair0" / "carrier.json").read_text())["ros2"]
+    assert ros2["cmd_vel_type"] == f"geometry_msgs/msg/{cmd_vel_type}" and ros2["robot_attachment"] == attachment
+    assert ros2["robot_token_seen"] and ros2["dropped"] == {}, ros2

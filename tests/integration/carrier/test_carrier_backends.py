@@ -20,7 +20,7 @@ import zenoh
 from mission.carrier.controller import CarrierController
 from mission.carrier.modes import CarrierMode
 from mission.carrier.backends.mavlink import MavlinkCarrier
-from mission.carrier.backends.ros2 import RmwAttachment, Ros2Carrier, rmw_sequence, robot_clock_keys, ros2_topics
+from mission.carrier.backends.ros2 import AttachmentWriter, Ros2Carrier, rmw_sequence, robot_clock_keys, ros2_topics
 from mission.bus.bridge import CarrierFeed, PassengerPublisher
 from mission.time.clock import Clock, LockstepClock, ScaledClock
 from mission.bus.lockstep import ZenohRelay, ZenohUpstream
@@ -380,7 +380,7 @@ def test_ros2_keys_of_both_forms() -> None:
     # lockstep (simulation): the robot's clock keys, and rmw_zenoh's sequence numbers that order its steps
     assert robot_clock_keys(CarrierRos2Section(namespace="/robot1/", domain_id=3)) == (
         "marsupial/robot_clock/3/robot1/time", "marsupial/robot_clock/3/robot1/ready")
-    attachment = RmwAttachment()
+    attachment = AttachmentWriter()
     assert [rmw_sequence(zenoh.ZBytes(attachment.next())) for _ in range(3)] == [1, 2, 3]
     assert rmw_sequence(None) is None and rmw_sequence(zenoh.ZBytes(b"\x00foreign")) is None
 

@@ -3,6 +3,7 @@ by ``marsupial plot``; the live address rules."""
 from __future__ import annotations
 
 import json
+from typing import Any
 
 import numpy as np
 import pytest
@@ -17,7 +18,7 @@ from mission.core.setpoint import Setpoint
 from mission.errors import ConfigError
 from mission.flightdata.mission_log import MissionLog, bc_circle
 from mission.flightdata.read import read_messages
-from mission.flightdata.topics import MISSION_CHANNELS, topics
+from mission.flightdata.topics import CARRIER_CHANNELS, MISSION_CHANNELS, topics
 from mission.flightdata.writer import LiveAddress, is_loopback, parse_live
 from mission.model import docking_geometry
 from mission.record import FlightRecorder, TickRow, read_record
@@ -66,7 +67,7 @@ def test_the_mcap_holds_the_csv_rows_and_the_foxglove_channels(tmp_path):
         logs = [m.message for *_, m in reader.iter_decoded_messages(topics=["/pairX/log"])]
         dock = [m for *_, m in reader.iter_decoded_messages(topics=["/pairX/tf/dock"])][0]
     assert logs == ["phase JOIN", "phase RIDING", "phase NAVIGATING"]
-    assert (dock.parent_frame_id, dock.child_frame_id, dock.translation.z) == ("pairX/carrier", "pairX/dock", -1.5)
+    assert (dock.parent_frame_id, dock.child_frame_id, dock.translation.z) == ("map_ned", "pairX/dock", -1.5)
     content = read_messages(tmp_path / "flight.mcap")
     assert content.complete
     distances = [json.loads(d) for t, s, _, d in content.messages if t == "/pairX/distances"]
@@ -132,6 +133,8 @@ def test_the_shipped_layout_is_the_generated_one_and_names_only_real_topics_and_
     assert LAYOUT_FILE.read_text() == layout_text()
     text = LAYOUT_FILE.read_text()
     schema_of = {topic: schema for (_, name, schema), topic in zip(MISSION_CHANNELS, topics("pair0").values())}
+    schema_of |= {topic: schema for (_, name, schema), topic in zip(CARRIER_CHANNELS,
+                                                                    topics("pair0", CARRIER_CHANNELS).values())}
     paths = _paths(json.loads(text))
     assert len(paths) >= 12
     for path in paths:
@@ -139,7 +142,8 @@ def test_the_shipped_layout_is_the_generated_one_and_names_only_real_topics_and_
         assert topic in schema_of, path
         if field:
             assert field.split(".")[0] in JSON_SCHEMAS[schema_of[topic]]["properties"], path
-    assert {"/pair0/scene", "/pair0/log", "/pair0/distances.e_pc_m", "/pair0/command.safe.n"} <= set(paths)
+    assert {"/pair0/scene", "/pair0/log", "/pair0/distances.e_pc_m", "/pair0/command.safe.n",
+            "/pair0/carrier/status.mode", "/pair0/carrier/status.target_distance_m"} <= set(paths)
 
 
 def _paths(node) -> list[str]:
@@ -191,3 +195,89 @@ def test_a_recovery_draws_its_holdoff_point_and_glide_path_in_the_docks_frame(tm
     assert h[1] == pytest.approx(-g.holdoff_distance_m) and h[2] < 0  # behind (course east) and above
     points = [c for q in glide.lines[0].points for c in (q.x, q.y, q.z)]
     assert points == pytest.approx([*h, 0, 0, -g.decision_height_m, 0, 0, 0])  # H -> gate -> dock
+
+
+def _decoded(path, topic: str) -> list:
+    with open(path, "rb") as f:
+        return [(msg.log_time, m) for _, _, msg, m in make_reader(f, decoder_factories=[DecoderFactory()])
+                .iter_decoded_messages(topics=[topic])]
+
+
+def _carrier_step(t_s: float, yaw_rad: float | None) -> Any:
+    from mission.carrier.controller import CarrierStep, OwnState
+    from mission.carrier.tracking import Tracked
+
+    state = OwnState(t_s, np.array([1.0, 2.0, 0.0]), np.zeros(3), yaw_rad)
+    return CarrierStep(t_s, "approaching", None, state, Tracked(0.0, 0.0, 0.0, np.zeros(2), np.zeros(2)), np.zeros(2), 0, None)
+
+
+def test_a_flight_and_its_carrier_log_epoch_time_and_line_up_in_real_time(tmp_path):
+    """Two real-time processes, their clocks started 2.5 s apart: what each logs at one wall
+    instant carries one log time (epoch ns, the wall clock's) within 0.1 s; readers still get
+    mission-clock seconds back."""
+    import time
+
+    from mission.flightdata.carrier_log import CarrierLog
+    from mission.flightdata.read import log_lines
+    from mission.flightdata.writer import clock_metadata
+    from mission.time.clock import ScaledClock
+
+    mission_clock, carrier_clock = ScaledClock(1.0, start_s=2.5), ScaledClock(1.0)  # the mission started first
+    flight = MissionLog(tmp_path / "flight.mcap", INFO, pair="pairX", clock=clock_metadata(mission_clock, "", ""))
+    carrier = CarrierLog(tmp_path / "carrier.mcap", pair="pairX", target=INFO["target_ned_m"],
+                         clock=clock_metadata(carrier_clock, "", ""))
+    wall = time.time_ns()
+    t_m, t_c = mission_clock.now(), carrier_clock.now()
+    z = np.zeros(3)
+    flight.tick(TickRow(t_m, "RIDING", z, z, z, z, z, z, 0.5, z, z, None, False, 0.01, "OFFBOARD", True,
+                        events=("phase RIDING",), yaw_c=0.3))
+    carrier.step(_carrier_step(t_c, 0.3))
+    flight.close({}, {})
+    carrier.close()
+    (t_flight, _), = _decoded(tmp_path / "flight.mcap", "/pairX/tf/carrier")
+    (t_carrier, _), = _decoded(tmp_path / "carrier.mcap", "/pairX/carrier/tf")
+    assert abs(t_flight - t_carrier) < 0.1e9 and abs(t_flight - wall) < 0.1e9
+    assert abs(t_m - t_c - 2.5) < 0.1  # their own clocks differ by the 2.5 s
+    content = read_messages(tmp_path / "flight.mcap")
+    assert content.epoch_ns > 1.5e18 and log_lines(content, "/pairX/log")[0][0] == pytest.approx(t_m, abs=1e-6)
+
+
+def test_lockstep_processes_share_the_demos_epoch():
+    from mission.flightdata.writer import clock_metadata, log_epoch_ns
+    from mission.time.clock import LockstepClock
+
+    clock = LockstepClock(speed=1.0, name="t", creator_runs=False)
+    try:
+        assert clock_metadata(clock, "", "", 1_700_000_000_000_000_000)["epoch_ns"] == "1700000000000000000"
+        assert log_epoch_ns(clock, 42) == 42
+    finally:
+        clock.close()
+
+
+def test_transforms_carry_heading_in_ros_frames(tmp_path):
+    """map -> map_ned (NED under ENU), a robot's base_link_frd turned by its heading about down,
+    base_link (FLU) half a turn about forward under it; the carrier's own log too."""
+    import math
+
+    from mission.flightdata.carrier_log import CarrierLog
+
+    log = MissionLog(tmp_path / "flight.mcap", INFO, pair="pairX", clock={"clock": "mission"})
+    z = np.zeros(3)
+    log.tick(TickRow(0.0, "RIDING", z, z, z, z, z, z, 0.5, z, z, None, False, 0.01, "OFFBOARD", True, yaw_c=1.0))
+    log.close({}, {})
+    (_, carrier), = _decoded(tmp_path / "flight.mcap", "/pairX/tf/carrier")
+    (_, passenger), = _decoded(tmp_path / "flight.mcap", "/pairX/tf/passenger")
+    assert (carrier.parent_frame_id, carrier.child_frame_id) == ("map_ned", "pairX/carrier/base_link_frd")
+    q = carrier.rotation
+    assert (q.x, q.y, q.z, q.w) == pytest.approx((0.0, 0.0, math.sin(0.5), math.cos(0.5)))
+    assert passenger.rotation.w == 1.0  # the passenger's heading is not known: no rotation
+    fixed = {(m.parent_frame_id, m.child_frame_id): m.rotation for _, m in _decoded(tmp_path / "flight.mcap", "/pairX/tf/world")}
+    assert fixed[("map", "map_ned")].x == pytest.approx(math.sqrt(0.5))
+    assert fixed[("pairX/carrier/base_link_frd", "pairX/carrier/base_link")].x == 1.0
+    own = CarrierLog(tmp_path / "carrier.mcap", pair="pairX", target=INFO["target_ned_m"], clock={"clock": "mission"})
+    for k, yaw in enumerate((0.0, -2.0)):
+        own.step(_carrier_step(k * 0.1, yaw))
+    own.close()
+    tfs = [m for _, m in _decoded(tmp_path / "carrier.mcap", "/pairX/carrier/tf")]
+    assert tfs[-1].child_frame_id == "pairX/carrier_own/base_link_frd"
+    assert (tfs[0].rotation.z, tfs[-1].rotation.z) == pytest.approx((0.0, math.sin(-1.0)))
