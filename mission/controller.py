@@ -22,7 +22,7 @@ import numpy as np
 from mission.flight_mode import FlightMode
 from mission import phases
 
-from mission.mavlink import px4
+from mission.mavlink import px4, receiver
 from mission.core.consistent_velocity import PositionConsistentVelocity
 from mission.core.setpoint import Setpoint
 from mission.time.clock import Clock, Periodic, join_thread, start_thread
@@ -263,13 +263,13 @@ def _vehicle_obs(state: VehicleState, velocity_fix: PositionConsistentVelocity |
     return VehicleObs(
         position_ned_m=np.zeros(3) if pos is None else np.asarray(pos, dtype=float),
         velocity_ned_m_s=np.zeros(3) if vel is None else np.asarray(vel, dtype=float),
-        armed=state.armed, mode=state.mode, heartbeat_age_s=state.heartbeat_age_s,
+        armed=state.believed_armed, mode=state.mode, heartbeat_age_s=state.heartbeat_age_s,
         position_valid=bool(state.position_valid and pos is not None),
         position_age_s=age,
         in_failsafe=state.system_status == px4.MAV_STATE_CRITICAL,
         battery_pct=state.battery_pct,
         velocity_bias_ned_m_s=bias,
-        on_ground=state.landed_state == px4.LANDED_ON_GROUND,
+        on_ground=state.believed_on_ground,
     )
 
 
@@ -530,9 +530,11 @@ class MissionController:
 
     def _counters(self) -> dict[str, Any]:
         """What was dropped and why, for summary.json: the carrier feed's counters (received,
-        accepted, dropped per reason, bound and rejected sources, resyncs), the link's, and in
-        lockstep the clock's (barriers, fall-back, carriers dropped as silent)."""
+        accepted, dropped per reason, bound and rejected sources, resyncs), the link's, the
+        per-packet log lines held back by kind (:mod:`mission.mavlink.receiver`), and in lockstep
+        the clock's (barriers, fall-back, carriers dropped as silent)."""
         out: dict[str, Any] = {"carrier_feed": self.feed.counters, "link": dataclasses.asdict(self.link.counters),
+                               "log_lines_held": receiver.LIMITER.suppressed(),
                                "home": None if self._home is None else self._home.counters, "px4_params": self.px4_params}
         if self.clock.counters is not None:  # a lockstep clock's: was every step in step?
             out["lockstep"] = self.clock.counters
