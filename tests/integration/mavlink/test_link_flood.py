@@ -55,6 +55,7 @@ def test_a_flood_of_badly_signed_packets_logs_a_few_lines_and_counts_the_rest(ca
         assert held >= 2 * refused - len(lines) - 8 * logflood.BURST, (held, refused)
         assert link.counters.log_lines_held >= held
         assert any("held back" in r.getMessage() for r in lines) or held < 2 * refused  # the pause is reported
+        print(f"flood: {refused} of {FLOOD} read and refused, {len(lines)} lines logged, {held} held back")
         hb_before = link.state.heartbeat_rx_s
         eventually(lambda: link.state.heartbeat_rx_s != hb_before, 5.0, "the vehicle still heard")
         assert link.vehicle_alive() and link.counters.rx_other_link == 0
