@@ -39,6 +39,18 @@ def test_a_seated_passenger_disturbed_without_the_mission_asking_is_a_fault(mode
     assert all(dec.setpoint is None for _, s, dec, *_ in log[:abort] if s.phase == Phase.RIDING)  # nothing streamed to it
 
 
+def test_while_the_mission_arms_it_another_mode_or_a_lift_is_still_a_fault(model):  # noqa: F811
+    def rogue(k, obs, state, armed):
+        if state.phase == Phase.RIDING and state.streaming_since_s is not None and obs.t_s - state.streaming_since_s > 0.5:
+            return replace(obs, vehicle=replace(obs.vehicle, mode="AUTO.TAKEOFF")), armed
+        return obs, armed
+
+    state, log = fly(model, on_tick=rogue)
+    assert state.phase == Phase.ABORT and state.reason == AbortReason.DECK_DISTURBED
+    assert "to AUTO.TAKEOFF" in state.detail
+    assert not any(s.phase in (Phase.SEPARATED, Phase.NAVIGATING) for _, s, *_ in log)
+
+
 def test_the_mission_s_own_arming_and_take_off_are_no_fault(model):  # noqa: F811
     state, log = fly(model)
     assert any(s.phase == Phase.ARRIVED for _, s, *_ in log) and state.reason is None
