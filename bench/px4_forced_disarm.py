@@ -6,8 +6,11 @@ on zero-velocity setpoints; a "rogue" ground station on the GCS link (14550) sen
 MAV_CMD_COMPONENT_ARM_DISARM(0, 21196) while the stream goes on. Per trial, seen on the onboard
 link [s after the ACK, wall clock, PX4's clock measured beside]: the first HEARTBEAT without
 SAFETY_ARMED, the first EXTENDED_SYS_STATE ON_GROUND, the STATUSTEXTs, the mode, when the
-vehicle reached the ground. After the trials: the HEARTBEAT and EXTENDED_SYS_STATE rates, and
-whether an external *forced* arm skips the checks that refuse a plain one.
+vehicle reached the ground; and when the mission's reducer (:mod:`mission.mavlink.telemetry`, an
+unsigned link: no single sample decides) first believes it disarmed or landed, replayed on the
+same messages (``believed_s``). EXTENDED_SYS_STATE is asked at the mission's 10 Hz. After the
+trials: the HEARTBEAT and EXTENDED_SYS_STATE rates, and whether an external *forced* arm skips
+the checks that refuse a plain one.
 
 Usage (root, real time, one PX4 user at a time)::
 
@@ -26,7 +29,8 @@ from typing import Any
 
 import click
 
-from mission.mavlink import px4
+from mission.controller import EXTENDED_SYS_STATE_ID, LANDED_STATE_RATE_HZ
+from mission.mavlink import px4, telemetry
 from sim.net import wait_for
 from sim.sitl.px4 import NetNamespace, Px4Sitl, build_dir, gcs_probe, unavailable_reason, wait_armable
 from sim.testing.probe import Probe, SetpointStream
@@ -47,6 +51,21 @@ def _first(probe: Probe, kind: str, after: int, predicate: Any) -> tuple[float, 
         for index, t_wall, msg in probe.history.get(kind, ()):
             if index > after and _autopilot(msg) and predicate(msg):
                 return t_wall, msg
+    return None
+
+
+def _believed(probe: Probe, after: int) -> float | None:
+    """Wall time the mission's reducer first believes the vehicle disarmed or landed, replaying the
+    autopilot's HEARTBEATs and EXTENDED_SYS_STATEs (up to index ``after`` only to start from, armed
+    in the air) in the order received."""
+    with probe._cond:
+        msgs = sorted((i, t, m) for kind in ("HEARTBEAT", "EXTENDED_SYS_STATE")
+                      for i, t, m in probe.history.get(kind, ()) if _autopilot(m))
+    tm = telemetry.Telemetry()
+    for i, t, m in msgs:
+        tm = telemetry.reduce(tm, m, t)
+        if i > after and (not tm.believed_armed or tm.believed_on_ground):
+            return t
     return None
 
 
@@ -91,6 +110,7 @@ def _trial(onboard: Probe, gcs: Probe, stream: SetpointStream) -> dict[str, Any]
     ack = gcs.arm(False, force=True, timeout_s=2.0)
     t_ack = time.monotonic()
     time.sleep(5.0)  # falls 3 m in well under 1 s
+    believed = _believed(onboard, mark)
     hb = _first(onboard, "HEARTBEAT", mark, lambda m: not m.base_mode & ARMED)
     ess = _first(onboard, "EXTENDED_SYS_STATE", mark, lambda m: m.landed_state == px4.LANDED_ON_GROUND)
     with onboard._cond:  # on the ground: the first sample of the lowest point reached
@@ -105,6 +125,7 @@ def _trial(onboard: Probe, gcs: Probe, stream: SetpointStream) -> dict[str, Any]
         "ack_s": round(t_ack - t0, 3),
         "heartbeat_disarmed_s": None if hb is None else round(hb[0] - t_ack, 3),
         "landed_on_ground_s": None if ess is None else round(ess[0] - t_ack, 3),
+        "believed_s": None if believed is None else round(believed - t_ack, 3),
         "landed_height_m": None,
         "ground_s": None if ground is None else round(ground[0] - t_ack, 3),
         "ground_z_m": round(bottom, 2), "mode_after": px4.mode_name(last.custom_mode), "armed_after": bool(last.base_mode & ARMED),
@@ -161,6 +182,7 @@ def main(trials: int, out: Path | None, json_path: Path | None) -> None:
             onboard.every(0.5, onboard.heartbeat)
             gcs.every(0.5, gcs.heartbeat)
             wait_armable(gcs, 60.0)
+            onboard.command(px4.MAV_CMD_SET_MESSAGE_INTERVAL, (EXTENDED_SYS_STATE_ID, 1e6 / LANDED_STATE_RATE_HZ))
             stream = SetpointStream(onboard, 0.02)
             for k in range(trials):
                 row = _trial(onboard, gcs, stream)
@@ -181,7 +203,7 @@ def main(trials: int, out: Path | None, json_path: Path | None) -> None:
             gcs.close()
             sitl.stop()
     rows = result["trials"]
-    for key in ("heartbeat_disarmed_s", "landed_on_ground_s", "ground_s"):
+    for key in ("heartbeat_disarmed_s", "landed_on_ground_s", "believed_s", "ground_s"):
         values = [r[key] for r in rows if r[key] is not None]
         if values:
             result[f"{key}_median"] = statistics.median(values)

@@ -22,13 +22,15 @@ import numpy as np
 from mission.flight_mode import FlightMode
 from mission import phases
 
-from mission.mavlink import px4
+from mission.mavlink import px4, receiver
 from mission.core.consistent_velocity import PositionConsistentVelocity
 from mission.core.setpoint import Setpoint
 from mission.time.clock import Clock, Periodic, join_thread, start_thread
 from mission.config.schema import Config
 from mission.errors import CommandRejected, LinkError
 from mission.record import FlightRecorder, TickRow
+from mission.mavlink.commander import (  # noqa: F401  (HOME_*, home_update_due: re-exported)
+    HOME_MIN_MOVE_M, HOME_PERIOD_S, KEPT_PARAMS, OFFBOARD_LOSS_RETURN, HomeKeeper, ParamKeeper, home_update_due)
 from mission.mavlink.env import mavlink
 from mission.mavlink.telemetry import VehicleState
 from mission.model import mission_model
@@ -144,83 +146,6 @@ class CommandWorker:
             join_thread(self.clock, self._thread, 5.0)
 
 
-HOME_PERIOD_S = 1.0  # PX4's home is moved at most this often [s] ...
-HOME_MIN_MOVE_M = 0.5  # ... and only when the carrier moved this far from it [m]
-OFFBOARD_LOSS_RETURN = 3  # COM_OBL_RC_ACT: Return
-
-
-def home_update_due(last: tuple[float, np.ndarray] | None, now_s: float, home_ned_m: np.ndarray,
-                    period_s: float = HOME_PERIOD_S, min_move_m: float = HOME_MIN_MOVE_M) -> bool:
-    """Should PX4's home move to ``home_ned_m`` [m] NED now? Yes if none was sent yet (``last``:
-    the time [s] and point of the last one sent), else once ``period_s`` [s] have passed and it
-    is ``min_move_m`` [m] or more from the last one."""
-    if last is None:
-        return True
-    return now_s - last[0] >= period_s and float(np.linalg.norm(home_ned_m - last[1])) >= min_move_m
-
-
-class HomeKeeper:
-    """Keeps PX4's home at the carrier (each flying decision's ``home_ned_m``), off the loop.
-
-    :meth:`offer` (from the loop, never blocks) leaves the newest home; a thread on the clock
-    sends it with one DO_SET_HOME attempt when :func:`home_update_due` says so, and counts what
-    the vehicle did with it (a missing EKF origin is waited out quietly). ``threaded=False``
-    sends inside :meth:`offer` (unit tests on a manual clock). docs/recovery.md, "PX4's home"."""
-
-    def __init__(self, vehicle: Vehicle, clock: Clock, threaded: bool = True) -> None:
-        self.vehicle, self.clock = vehicle, clock
-        self.counters: dict[str, int] = {"sent": 0, "accepted": 0, "refused": 0, "lost": 0}
-        self._last: tuple[float, np.ndarray] | None = None
-        self._wanted: np.ndarray | None = None
-        self._closed = False
-        self._cond = threading.Condition()
-        self._thread = start_thread(clock, self._run, "mission-home") if threaded else None
-
-    def offer(self, home_ned_m: np.ndarray | None) -> None:
-        if home_ned_m is None:
-            return
-        with self._cond:
-            self._wanted = np.array(home_ned_m, dtype=float)
-            self.clock.notify(self._cond)
-        if self._thread is None and home_update_due(self._last, self.clock.now(), self._wanted):
-            self._send(self._wanted)
-
-    def _run(self) -> None:
-        with self._cond:
-            while not self._closed:
-                wanted, now = self._wanted, self.clock.now()
-                if wanted is None or not home_update_due(self._last, now, wanted):
-                    wake = math.inf if self._last is None or wanted is None else self._last[0] + HOME_PERIOD_S - now
-                    self.clock.wait(self._cond, wake if wake > 0 else HOME_PERIOD_S)
-                    continue
-                self._cond.release()
-                try:
-                    self._send(wanted)
-                finally:
-                    self._cond.acquire()
-
-    def _send(self, home: np.ndarray) -> None:
-        try:
-            self.vehicle.set_home(home)
-        except CommandRejected as exc:
-            self.counters["refused"] += 1
-            log.warning("vehicle refused the home %s: %s", np.round(home, 2).tolist(), exc.reason or exc.result)
-        except LinkError as exc:  # no EKF origin yet, or the ACK lost: a newer home follows
-            self.counters["lost"] += 1
-            log.debug("home not moved: %s", exc)
-        else:
-            self.counters["accepted"] += 1
-        self.counters["sent"] += 1
-        self._last = (self.clock.now(), home)
-
-    def close(self) -> None:
-        with self._cond:
-            self._closed = True
-            self.clock.notify(self._cond)
-        if self._thread is not None:
-            join_thread(self.clock, self._thread, 5.0)
-
-
 @dataclass
 class MissionOutcome:
     """How the mission ended: phase (DONE or ABORT), reason and detail, log directory, summary."""
@@ -264,13 +189,13 @@ def _vehicle_obs(state: VehicleState, velocity_fix: PositionConsistentVelocity |
     return VehicleObs(
         position_ned_m=np.zeros(3) if pos is None else np.asarray(pos, dtype=float),
         velocity_ned_m_s=np.zeros(3) if vel is None else np.asarray(vel, dtype=float),
-        armed=state.armed, mode=state.mode, heartbeat_age_s=state.heartbeat_age_s,
+        armed=state.believed_armed, mode=state.mode, heartbeat_age_s=state.heartbeat_age_s,
         position_valid=bool(state.position_valid and pos is not None),
         position_age_s=age,
         in_failsafe=state.system_status == px4.MAV_STATE_CRITICAL,
         battery_pct=state.battery_pct,
         velocity_bias_ned_m_s=bias,
-        on_ground=state.landed_state == px4.LANDED_ON_GROUND,
+        on_ground=state.believed_on_ground,
     )
 
 
@@ -335,6 +260,7 @@ class MissionController:
         tau = cfg.mission.velocity_bias_tau_s
         self._velocity_fix = PositionConsistentVelocity(tau) if tau > 0 else None
         self._home: HomeKeeper | None = None
+        self._params: ParamKeeper | None = None
         self._px4_asked = False
         self.px4_params: dict[str, Any] = {}  # PX4 parameters read, set and restored (for the summary)
         if recorder is not None:
@@ -398,22 +324,25 @@ class MissionController:
         "return"``): PX4's offboard-loss action to Return (``recovery.offboard_loss_return``), so
         that a controller that dies leaves the passenger flying to the home kept at the carrier;
         and a warning if PX4's own battery failsafe (BAT_CRIT_THR) would act before our recall.
-        docs/recovery.md, "PX4's home"."""
+        For every mission: the failsafe parameters of
+        :data:`~mission.mavlink.commander.KEPT_PARAMS`, as set or found, are kept (read back and
+        restored by :class:`HomeKeeper`). docs/recovery.md, "PX4's home"."""
         if self._px4_asked or self.state.phase in (Phase.PREFLIGHT, Phase.ABORT, Phase.DONE):
             return
         self._px4_asked = True
-        if self.cfg.mission.final_action != "return":
-            return
+        recovery = self.cfg.mission.final_action == "return"
         reserve_pct = self.cfg.recovery.battery_reserve_pct
+        keeper = self._params
 
         def ask() -> None:
             try:
-                critical = self.link.get_param("BAT_CRIT_THR")
-                self.px4_params["BAT_CRIT_THR"] = critical
-                if reserve_pct <= 100.0 * critical:
-                    log.warning("recovery.battery_reserve_pct %g %% is at or below PX4's BAT_CRIT_THR (%g %%): PX4's "
-                                "own low-battery failsafe may act before the recall", reserve_pct, 100.0 * critical)
-                if self.cfg.recovery.offboard_loss_return:
+                if recovery:
+                    critical = self.link.get_param("BAT_CRIT_THR")
+                    self.px4_params["BAT_CRIT_THR"] = critical
+                    if reserve_pct <= 100.0 * critical:
+                        log.warning("recovery.battery_reserve_pct %g %% is at or below PX4's BAT_CRIT_THR (%g %%): PX4's "
+                                    "own low-battery failsafe may act before the recall", reserve_pct, 100.0 * critical)
+                if recovery and self.cfg.recovery.offboard_loss_return:
                     was = self.link.get_param("COM_OBL_RC_ACT")
                     self.px4_params["COM_OBL_RC_ACT"] = {"was": was, "set": was}
                     if was != OFFBOARD_LOSS_RETURN:
@@ -421,6 +350,13 @@ class MissionController:
                         log.info("PX4's offboard-loss action COM_OBL_RC_ACT set to Return (was %g) for the recovery", was)
             except LinkError as exc:
                 log.warning("PX4's parameters for the recovery not read or set: %s", exc)
+            if keeper is None:
+                return
+            for name in KEPT_PARAMS:
+                try:
+                    keeper.keep(name, self.link.get_param(name))
+                except LinkError as exc:
+                    log.warning("PX4's %s not read: it is not kept (%s)", name, exc)
 
         start_thread(self.clock, ask, "mission-px4-params")
 
@@ -471,7 +407,8 @@ class MissionController:
         """Fly the mission; returns its outcome (never raises for a vehicle-side failure)."""
         worker = CommandWorker(self.link, self.clock, retries=self.cfg.mission.command_retries,
                                threaded=self.command_thread)
-        self._home = home = HomeKeeper(self.link, self.clock, threaded=self.command_thread)
+        self._params = ParamKeeper(self.link.get_param, self.link.set_param)
+        self._home = home = HomeKeeper(self.link, self.clock, threaded=self.command_thread, params=self._params)
         periodic = Periodic(self.clock, self.model.dt_s)
         last_phase = None
         stamp = time.monotonic_ns if self.on_tick is not None else _no_stamp
@@ -531,10 +468,14 @@ class MissionController:
 
     def _counters(self) -> dict[str, Any]:
         """What was dropped and why, for summary.json: the carrier feed's counters (received,
-        accepted, dropped per reason, bound and rejected sources, resyncs), the link's, and in
-        lockstep the clock's (barriers, fall-back, carriers dropped as silent)."""
+        accepted, dropped per reason, bound and rejected sources, resyncs), the link's, the
+        per-packet log lines held back by kind (:mod:`mission.mavlink.receiver`), and in lockstep
+        the clock's (barriers, fall-back, carriers dropped as silent)."""
         out: dict[str, Any] = {"carrier_feed": self.feed.counters, "link": dataclasses.asdict(self.link.counters),
-                               "home": None if self._home is None else self._home.counters, "px4_params": self.px4_params}
+                               "log_lines_held": receiver.LIMITER.suppressed(),
+                               "home": None if self._home is None else self._home.counters, "px4_params": self.px4_params,
+                               "px4_kept": None if self._params is None else {
+                                   "values": dict(self._params.kept), **self._params.counters, "moves": list(self._params.moves)}}
         if self.clock.counters is not None:  # a lockstep clock's: was every step in step?
             out["lockstep"] = self.clock.counters
         return out

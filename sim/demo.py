@@ -153,12 +153,13 @@ def start_carrier_robot(kind: str, name: str, zenoh_ep: str, speed: float, start
     return ["--backend", "sim"], None
 
 
-def throwaway_key(stack: ExitStack) -> Path:
-    """A fresh random 32-byte bus signing key in a private temporary file (mode 0600), removed
-    when ``stack`` closes. Each pair signs with its own key derived from it (``mission.bus.signing``)."""
+def throwaway_key(stack: ExitStack, name: str = "bus.key") -> Path:
+    """A fresh random 32-byte signing key in a private temporary file ``name`` (mode 0600), removed
+    when ``stack`` closes. The bus key: each pair signs with its own key derived from it
+    (``mission.bus.signing``); the MAVLink key (``mavlink.key``): every pair's vehicle and mission."""
     folder = Path(tempfile.mkdtemp(prefix="marsupial-demo-"))
     stack.callback(shutil.rmtree, folder, True)
-    path = folder / "bus.key"
+    path = folder / name
     fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
     with os.fdopen(fd, "w") as f:
         f.write(secrets.token_hex(32) + "\n")
@@ -167,12 +168,13 @@ def throwaway_key(stack: ExitStack) -> Path:
 
 def start_pair(config: str, name: str, zenoh_ep: str, speed: float, log_root: Path, stack: ExitStack,
                quiet: bool, carrier_kind: str = "sim", lockstep: bool = False, live: LiveAddress | None = None,
-               bus_key: Path | None = None) -> PairRun:
+               bus_key: Path | None = None, mav_key: Path | None = None) -> PairRun:
     """Start the carrier (and its robot), the mock vehicle and the mission of one pair; register their cleanup.
     The vehicle learns the carrier's motion from the pair's Zenoh state (``--deck``): it stands on
     the carrier's deck until it takes off, and lands or crashes on it as it comes back. With
     ``mission.ride = "deck"`` the deck is the dock point (``--deck-height``) and the vehicle starts on it.
-    With ``bus_key`` (a key file) the pair signs its bus samples (``--zenoh-signing-key``).
+    With ``bus_key`` (a key file) the pair signs its bus samples (``--zenoh-signing-key``); with
+    ``mav_key`` the vehicle and the mission sign their MAVLink link (``--signing-key``).
 
     ``lockstep``: the three step on the mock vehicle's simulated time, the carrier's robot on the
     carrier's (``speed`` is then the pace after a participant is lost), and the mission and the
@@ -187,6 +189,7 @@ def start_pair(config: str, name: str, zenoh_ep: str, speed: float, log_root: Pa
     epoch = ["--log-epoch-ns", str(time.time_ns())] if lockstep else []
     start = ",".join(str(v) for v in cfg.scenario.carrier_start)
     signed = ["--zenoh-signing-key", str(bus_key)] if bus_key is not None else []
+    mav_signed = ["--signing-key", str(mav_key)] if mav_key is not None else []
     backend_args, robot = start_carrier_robot(carrier_kind, name, zenoh_ep, speed, start, stack, err, lockstep, bus_key, cfg)
     carrier = subprocess.Popen(_python_cli("carrier", config, "--speed", str(speed), "--pair", name,
                                            "--zenoh-connect", zenoh_ep, "--summary", str(pair.log_dir / "carrier.json"),
@@ -201,13 +204,13 @@ def start_pair(config: str, name: str, zenoh_ep: str, speed: float, log_root: Pa
     vehicle = subprocess.Popen(_python_cli("mock-vehicle", "--mavlink", "udpin:127.0.0.1:0", "--target",
                                            f"udpout:127.0.0.1:{mav_port}", "--speed", str(speed), "--start-ned",
                                            vehicle_start, "--deck", name, "--deck-height", str(deck_height),
-                                           "--zenoh-connect", zenoh_ep, *mode),
+                                           "--zenoh-connect", zenoh_ep, *mav_signed, *mode),
                                stderr=err)
     stack.callback(stop_process, vehicle)
     live_args = [] if live is None else ["--live", f"{live.host}:{live.port}"]
     mission = subprocess.Popen(_python_cli("run", config, "--mavlink", f"udpin:127.0.0.1:{mav_port}", "--zenoh-connect",
                                            zenoh_ep, "--pair", name, "--speed", str(speed), "--log-dir", str(pair.log_dir),
-                                           *signed, *mode, *epoch, *live_args),
+                                           *signed, *mav_signed, *mode, *epoch, *live_args),
                                stdout=subprocess.PIPE, stderr=err, text=True)
     stack.callback(stop_process, mission, 30.0)
     pair.procs = {"carrier": carrier, "vehicle": vehicle, "mission": mission}
@@ -229,7 +232,8 @@ def run_demo(config: str, speed: float, pairs: int, log_root: Path, plot_path: s
     """Run ``pairs`` marsupial pairs, in lockstep on each mock vehicle's simulated time or at
     ``speed``; return the exit code and each pair's summary. ``live``: pair i serves its flight
     to Foxglove on ``live``'s port + i (topics ``/pair<i>/...``). ``signed``: the pairs sign their
-    bus samples with a throwaway key (:func:`throwaway_key`), deleted at the end."""
+    bus samples, and each vehicle and mission their MAVLink link, with throwaway keys
+    (:func:`throwaway_key`), deleted at the end."""
     from mission.cli.run import plot as plot_command
 
     supervise_children()  # a demo killed outright takes its processes with it
@@ -238,9 +242,11 @@ def run_demo(config: str, speed: float, pairs: int, log_root: Path, plot_path: s
     zenoh_ep = f"tcp/127.0.0.1:{zenoh_port}"
     with ExitStack() as stack:
         bus_key = throwaway_key(stack) if signed else None
+        mav_key = throwaway_key(stack, "mavlink.key") if signed else None
         router = open_session(ZenohSection(mode="router", listen=[zenoh_ep]))
         stack.callback(close_session, router)
-        runs = [start_pair(config, f"pair{i}", zenoh_ep, speed, log_root, stack, quiet, carrier, lockstep, address, bus_key)
+        runs = [start_pair(config, f"pair{i}", zenoh_ep, speed, log_root, stack, quiet, carrier, lockstep, address, bus_key,
+                           mav_key)
                 for i, address in enumerate(live_addresses(live, pairs))]
         display = PairProgress([p.name for p in runs], tty=progress and sys.stdout.isatty())
         stack.callback(display.close)
@@ -428,8 +434,8 @@ def demo(config: str, realtime: bool, speed: float, pairs: int, plot_path: str |
 
     Each runs as its own process, talking over real UDP (MAVLink 2) and Zenoh on loopback; no
     hardware, no PX4, no external router. Ends with a summary table and a plot; exit code 0 when
-    the paper's P1-P3 held for every pair (and a passenger that returns docked again). The bus is
-    signed with a throwaway key.
+    the paper's P1-P3 held for every pair (and a passenger that returns docked again). The bus and
+    each MAVLink link are signed with throwaway keys, as a real flight's must be.
     """
     os.environ.setdefault("PYTHONUNBUFFERED", "1")
     if plot_path is None:  # the plot goes with the logs it draws

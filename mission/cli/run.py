@@ -166,7 +166,7 @@ def exit_code(outcome: MissionOutcome) -> int:
 @click.option("--log-dir", type=click.Path(file_okay=False), help="Where to write the flight log (default mission.log_dir/<time>-<pair>).")
 @click.option("--signing-key", "signing_key_file", type=click.Path(dir_okay=False),
               help="MAVLink 2 signing key file, 64 hex digits or 32 raw bytes (overrides mavlink.signing_key_file): "
-              "everything sent is signed, and only HEARTBEAT may arrive unsigned.")
+              "everything sent is signed, and everything received must be, HEARTBEAT included.")
 @click.option("--zenoh-signing-key", "bus_key_file", type=click.Path(dir_okay=False),
               help="Bus signing key file of the pair (overrides zenoh.signing_key_file): carrier states and clock "
               "messages must carry its tag; the passenger's status is signed.")

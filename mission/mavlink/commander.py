@@ -1,6 +1,8 @@
 """Blocking vehicle commands and parameters over a link: the executor of
 :mod:`mission.mavlink.commands`, and :class:`ParamClient` (PARAM_REQUEST_READ and PARAM_SET, each
-answered by the PARAM_VALUE PX4 sends back, integers bit-packed as :mod:`mission.mavlink.px4` says).
+answered by the PARAM_VALUE PX4 sends back, integers bit-packed as :mod:`mission.mavlink.px4` says);
+:class:`HomeKeeper` and :class:`ParamKeeper`, which keep the vehicle's home and failsafe
+parameters where the mission set them (read back, and restored when someone else moved them).
 
 One command at a time (thread-safe). Each call sends through the link, waits on the session's
 clock for what the state machines need, and turns their verdicts into our errors:
@@ -12,18 +14,25 @@ from __future__ import annotations
 import contextlib
 import logging
 import math
+import collections
 import threading
 from collections.abc import Iterator
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable, Protocol
+
+import numpy as np
 
 from mission.core import geodesy
 from mission.flight_mode import FlightMode
 from mission.mavlink import px4
 from mission.errors import CommandRejected, LinkError, LinkTimeout
+from mission.time.clock import join_thread, start_thread
 from mission.mavlink.commands import CommandExchange, Confirmed, HeartbeatConfirmation, Step, refusal_reason
 from mission.mavlink.session import LinkSession, ParamValue
 from mission.mavlink.telemetry import VehicleState
 from mission.mavlink.env import mavlink
+
+if TYPE_CHECKING:
+    from mission.time.clock import Clock
 
 log = logging.getLogger("mission.mavlink.link")
 
@@ -295,3 +304,203 @@ class ParamClient:
                     if s.closed or not s.wait_locked(deadline):
                         break
         raise LinkTimeout(f"no PARAM_VALUE {name} after {retries + 1} attempts of {timeout_s:g} s")
+
+
+# ------------------------------------------------------------------------------ the vehicle's settings, kept
+
+HOME_MOVED_M = 1.0
+"""PX4's home read back (HOME_POSITION) this far [m] from every home we set lately: moved by someone else."""
+HOME_SETTLE_S = 0.2
+"""A HOME_POSITION received this long [s] after our last DO_SET_HOME shows it (PX4 applies it before the ACK)."""
+KEPT_PARAMS = ("COM_OBL_RC_ACT", "COM_OF_LOSS_T", "RTL_RETURN_ALT", "RTL_MIN_DIST", "RTL_CONE_ANG")
+"""PX4's failsafe parameters a mission relies on: the offboard-loss action and timeout, and how
+Return flies to the home (docs/recovery.md, "PX4's home")."""
+
+
+def home_moved(sent: list[tuple[float, Any]], reported_ned_m: Any, reported_rx_s: float | None,
+               moved_m: float = HOME_MOVED_M, settle_s: float = HOME_SETTLE_S) -> float | None:
+    """How far [m] PX4's home as read back (``reported_ned_m`` [m] NED, received at
+    ``reported_rx_s`` [s]) is from the nearest of the homes we ``sent`` lately ((time [s], point
+    [m] NED), oldest first), when that is more than ``moved_m``; None when it is not, or when the
+    report is older than the newest home sent plus ``settle_s``."""
+    if not sent or reported_ned_m is None or reported_rx_s is None or reported_rx_s < sent[-1][0] + settle_s:
+        return None
+    reported = np.asarray(reported_ned_m, dtype=float)
+    nearest = min(float(np.linalg.norm(reported - np.asarray(home, dtype=float))) for _, home in sent)
+    return nearest if nearest > moved_m else None
+
+
+class ParamKeeper:
+    """Keeps vehicle parameters at the values the mission chose (:meth:`keep`): :meth:`check_once`
+    reads the next one back (round robin) through ``get(name)`` and, if someone else changed it,
+    puts ours back through ``set(name, value)`` (the value kept) with a warning. ``counters``:
+    ``read``, ``unread`` (no answer), ``moved``, ``restored``, ``failed``; ``moves``: each change
+    found, with what became of it (for the summary)."""
+
+    def __init__(self, get: Callable[[str], float], set_: Callable[[str, float], float]) -> None:
+        self.get, self.set = get, set_
+        self.kept: dict[str, float] = {}
+        self.counters = {"read": 0, "unread": 0, "moved": 0, "restored": 0, "failed": 0}
+        self.moves: list[dict[str, Any]] = []
+        self._next = 0
+
+    def keep(self, name: str, value: float) -> None:
+        self.kept[name] = float(value)
+
+    def check_once(self) -> None:
+        if not self.kept:
+            return
+        names = sorted(self.kept)
+        name = names[self._next % len(names)]
+        self._next += 1
+        ours = self.kept[name]
+        try:
+            found = self.get(name)
+        except LinkError:
+            self.counters["unread"] += 1
+            return
+        self.counters["read"] += 1
+        if math.isclose(found, ours, rel_tol=1e-6, abs_tol=1e-6):
+            return
+        self.counters["moved"] += 1
+        move: dict[str, Any] = {"name": name, "found": found, "ours": ours}
+        try:
+            move["restored"] = self.set(name, ours)
+            self.counters["restored"] += 1
+            log.warning("PX4's %s was changed by someone else to %g (ours %g): restored", name, found, ours)
+        except LinkError as exc:
+            move["failed"] = str(exc)
+            self.counters["failed"] += 1
+            log.error("PX4's %s was changed by someone else to %g (ours %g) and could not be restored: %s",
+                      name, found, ours, exc)
+        self.moves.append(move)
+
+
+HOME_PERIOD_S = 1.0  # PX4's home is moved at most this often [s] ...
+HOME_MIN_MOVE_M = 0.5  # ... and only when the carrier moved this far from it [m]
+OFFBOARD_LOSS_RETURN = 3  # COM_OBL_RC_ACT: Return
+CHECK_PERIOD_S = 1.0  # PX4's home and one failsafe parameter read back this often [s]
+
+
+def home_update_due(last: tuple[float, np.ndarray] | None, now_s: float, home_ned_m: np.ndarray,
+                    period_s: float = HOME_PERIOD_S, min_move_m: float = HOME_MIN_MOVE_M) -> bool:
+    """Should PX4's home move to ``home_ned_m`` [m] NED now? Yes if none was sent yet (``last``:
+    the time [s] and point of the last one sent), else once ``period_s`` [s] have passed and it
+    is ``min_move_m`` [m] or more from the last one."""
+    if last is None:
+        return True
+    return now_s - last[0] >= period_s and float(np.linalg.norm(home_ned_m - last[1])) >= min_move_m
+
+
+class HomeVehicle(Protocol):
+    """What :class:`HomeKeeper` needs of a vehicle (a :class:`~mission.interfaces.Vehicle` has it)."""
+
+    @property
+    def state(self) -> VehicleState: ...
+
+    def set_home(self, home_ned_m: Any) -> int: ...
+
+
+class HomeKeeper:
+    """Keeps PX4's home at the carrier (each flying decision's ``home_ned_m``), and the failsafe
+    parameters the mission relies on (``params``), off the loop.
+
+    :meth:`offer` (from the loop, never blocks) leaves the newest home; a thread on the clock
+    sends it with one DO_SET_HOME attempt when :func:`home_update_due` says so, and counts what
+    the vehicle did with it (a missing EKF origin is waited out quietly). Every
+    :data:`CHECK_PERIOD_S` it reads the home back (HOME_POSITION): one moved by someone else
+    (:func:`~mission.mavlink.commander.home_moved`) is set again at once (``moved``,
+    ``restored``); and it reads one of ``params`` back, restoring it if changed
+    (:class:`~mission.mavlink.commander.ParamKeeper`). :meth:`close` checks the home a last time,
+    so the vehicle is never left with a home someone else moved. ``threaded=False`` sends inside
+    :meth:`offer` and checks in :meth:`check` (unit tests on a manual clock). docs/recovery.md,
+    "PX4's home"."""
+
+    def __init__(self, vehicle: HomeVehicle, clock: Clock, threaded: bool = True, params: ParamKeeper | None = None) -> None:
+        self.vehicle, self.clock, self.params = vehicle, clock, params
+        self.counters: dict[str, int] = {"sent": 0, "accepted": 0, "refused": 0, "lost": 0, "moved": 0, "restored": 0}
+        self._last: tuple[float, np.ndarray] | None = None
+        self._sent: collections.deque[tuple[float, np.ndarray]] = collections.deque(maxlen=4)
+        self._wanted: np.ndarray | None = None
+        self._closed = False
+        self._next_check_s = -math.inf
+        self._cond = threading.Condition()
+        self._thread = start_thread(clock, self._run, "mission-home") if threaded else None
+
+    def offer(self, home_ned_m: np.ndarray | None) -> None:
+        if home_ned_m is None:
+            return
+        with self._cond:
+            self._wanted = np.array(home_ned_m, dtype=float)
+            self.clock.notify(self._cond)
+        if self._thread is None and home_update_due(self._last, self.clock.now(), self._wanted):
+            self._send(self._wanted)
+
+    def _run(self) -> None:
+        with self._cond:
+            while not self._closed:
+                wanted, now = self._wanted, self.clock.now()
+                if wanted is not None and home_update_due(self._last, now, wanted):
+                    work: Callable[[], object] = lambda: self._send(wanted)  # noqa: E731
+                elif now >= self._next_check_s:
+                    self._next_check_s = now + CHECK_PERIOD_S
+                    work = self.check
+                else:
+                    wake = self._next_check_s - now
+                    if self._last is not None and wanted is not None:
+                        wake = min(wake, self._last[0] + HOME_PERIOD_S - now)
+                    self.clock.wait(self._cond, max(wake, 1e-3))
+                    continue
+                self._cond.release()
+                try:
+                    work()
+                finally:
+                    self._cond.acquire()
+
+    def check(self) -> None:
+        """Read the home back and set ours again if someone else moved it; read one parameter back."""
+        self._check_home()
+        if self.params is not None:
+            self.params.check_once()
+
+    def _check_home(self) -> None:
+        if self._sent:
+            st = self.vehicle.state
+            moved = home_moved(list(self._sent), st.home_ned_m, st.home_rx_s)
+            if moved is not None and self._last is not None:
+                ours = self._last[1]
+                self.counters["moved"] += 1
+                log.warning("PX4's home was moved by someone else to %s, %.1f m from ours %s: setting ours again",
+                            np.round(np.asarray(st.home_ned_m), 2).tolist(), moved, np.round(ours, 2).tolist())
+                if self._send(ours):
+                    self.counters["restored"] += 1
+
+    def _send(self, home: np.ndarray) -> bool:
+        """One DO_SET_HOME to ``home`` [m] NED; True if the vehicle accepted it."""
+        ok = False
+        try:
+            self.vehicle.set_home(home)
+            ok = True
+        except CommandRejected as exc:
+            self.counters["refused"] += 1
+            log.warning("vehicle refused the home %s: %s", np.round(home, 2).tolist(), exc.reason or exc.result)
+        except LinkError as exc:  # no EKF origin yet, or the ACK lost: a newer home follows
+            self.counters["lost"] += 1
+            log.debug("home not moved: %s", exc)
+        else:
+            self.counters["accepted"] += 1
+        self.counters["sent"] += 1
+        self._last = (self.clock.now(), home)
+        self._sent.append(self._last)
+        return ok
+
+    def close(self) -> None:
+        with self._cond:
+            self._closed = True
+            self.clock.notify(self._cond)
+        if self._thread is not None:
+            join_thread(self.clock, self._thread, 5.0)
+        try:
+            self._check_home()  # the last word on the home is ours
+        except LinkError as exc:
+            log.warning("PX4's home not checked at the end: %s", exc)

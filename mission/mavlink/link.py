@@ -18,6 +18,7 @@ signing rules: docs/mavlink.md.
 """
 from __future__ import annotations
 
+import dataclasses
 import logging
 import threading
 from pathlib import Path
@@ -33,7 +34,7 @@ from mission.mavlink.codec import link_codecs
 from mission.mavlink.commander import CommandClient, ParamClient
 from mission.mavlink.heartbeat import HeartbeatSender
 from mission.mavlink.identity import ADOPT_HEARTBEATS, VEHICLE_TYPES, Adoption
-from mission.mavlink.receiver import Receiver
+from mission.mavlink.receiver import LIMITER, Receiver, install_limiter
 from mission.mavlink.session import LinkCounters, LinkSession
 from mission.mavlink.setpoints import encode
 from mission.mavlink.telemetry import VehicleState
@@ -93,7 +94,7 @@ class VehicleLink:
         self.position_timeout_s = float(position_timeout_s)
         self.reason_grace_s = float(reason_grace_s)
 
-        self._session = LinkSession(url, self._clock, self.position_timeout_s)
+        self._session = LinkSession(url, self._clock, self.position_timeout_s, signed=signing_key is not None)
         self._commander = CommandClient(self._session, self._send, self._require_vehicle, self.reason_grace_s)
         self._params = ParamClient(self._session, self._send, self._require_vehicle)
         self._tx_lock = threading.Lock()
@@ -120,6 +121,7 @@ class VehicleLink:
         """Bind/connect, start the receiver and the HEARTBEAT threads. Raises LinkError."""
         if self._opened:
             raise LinkError(f"link {self.url!r} was already opened; a VehicleLink opens once, make a new one")
+        install_limiter()
         transport = open_transport(self.url)
         rx_codec, self._tx_codec = link_codecs(self._source, self._signing_key)
         try:
@@ -231,7 +233,7 @@ class VehicleLink:
 
     @property
     def counters(self) -> LinkCounters:
-        return self._session.counters()
+        return dataclasses.replace(self._session.counters(), log_lines_held=LIMITER.suppressed_total())
 
     # ---------------------------------------------------------------- commands (mission.mavlink.commander)
 

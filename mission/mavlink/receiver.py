@@ -24,11 +24,22 @@ its stream, keyed by (link id, system, component) as the MAVLink 2 signing spec 
 packet leaves that state alone (:func:`mission.mavlink.codec.keep_replay_state_on_failure`).
 On a signed link unsigned and badly signed packets are counted apart. The receiver never dies
 on bad input: every parse or handler error is caught and counted.
+
+Nor does bad input flood the log: pymavlink's generated dialect logs at INFO for every packet
+whose signature it refuses ("new stream", "bad new stream", "old timestamp", "sig mismatch"),
+and with ``-v`` a flood of badly signed packets became megabytes of log and stalled the
+receiver. :data:`LIMITER` lets each distinct line (logger and message template) through
+:data:`BURST` times, then at most once per :data:`PERIOD_S` of wall time; the first line let
+through after a pause says how many like it were held back. :func:`install_limiter` puts it on
+pymavlink's dialect logger and on the receiver's per-packet logger (:data:`packet_log`). The
+refused packets themselves are counted (``rx_bad_signature``, ``rx_unsigned``); the held-back
+lines by :meth:`LineLimiter.suppressed`.
 """
 from __future__ import annotations
 
 import logging
 import threading
+import time
 from typing import Any, Callable
 
 from mission.mavlink import telemetry
@@ -41,9 +52,76 @@ from mission.mavlink.transport import Address, Transport
 from mission.mavlink.env import mavlink
 
 log = logging.getLogger("mission.mavlink.link")
+packet_log = logging.getLogger("mission.mavlink.link.packets")  # lines about one packet: rate-limited (LIMITER)
 
 WALL_SLICE_S = 0.05  # longest wall-clock block in the transport [s], so a stop is prompt
 PEER_SILENT_S = 1.0  # unsigned link: the pinned address silent this long [s of link clock] before another may take over
+
+
+BURST = 5
+"""Lines of one kind let through before the limit starts."""
+PERIOD_S = 1.0
+"""Then at most one line of that kind per this much wall time [s]."""
+MAX_KINDS = 256
+"""Distinct kinds tracked; beyond it, new kinds share one budget."""
+
+
+class LineLimiter(logging.Filter):
+    """A :class:`logging.Filter` passing each kind of line (logger name, message template)
+    :data:`BURST` times, then once per ``period_s`` [s] of ``now`` (a monotonic wall clock);
+    thread-safe. The counts of what it held back are :meth:`suppressed`."""
+
+    def __init__(self, burst: int = BURST, period_s: float = PERIOD_S,
+                 now: Callable[[], float] = time.monotonic) -> None:
+        super().__init__()
+        self.burst, self.period_s, self.now = burst, period_s, now
+        self._lock = threading.Lock()
+        self._seen: dict[tuple[str, str], list[float]] = {}  # kind -> [lines passed, last passed [s], held since]
+        self._held: dict[str, int] = {}
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        kind = (record.name, str(record.msg))
+        with self._lock:
+            if kind not in self._seen and len(self._seen) >= MAX_KINDS:
+                kind = (record.name, "*")
+            entry = self._seen.setdefault(kind, [0.0, -float("inf"), 0.0])
+            now = self.now()
+            if entry[0] < self.burst or now - entry[1] >= self.period_s:
+                held = int(entry[2])
+                entry[0], entry[1], entry[2] = entry[0] + 1, now, 0.0
+                if held:
+                    record.msg = f"{record.msg} [{held} more like it held back]"
+                return True
+            entry[2] += 1
+            label = f"{record.name}: {kind[1]}"
+            self._held[label] = self._held.get(label, 0) + 1
+            return False
+
+    def suppressed(self) -> dict[str, int]:
+        """Lines held back since the start, per kind (``"logger: message template"``)."""
+        with self._lock:
+            return dict(self._held)
+
+    def suppressed_total(self) -> int:
+        """All lines held back since the start."""
+        with self._lock:
+            return sum(self._held.values())
+
+
+LIMITER = LineLimiter()
+"""The process's limiter (one: the loggers it guards are process-wide)."""
+
+GUARDED = (mavlink.__name__, "mission.mavlink.link.packets")
+"""The loggers that may speak per received packet: pymavlink's dialect, and the receiver's
+lines about one packet (:mod:`mission.mavlink.receiver`)."""
+
+
+def install_limiter(limiter: LineLimiter = LIMITER) -> None:
+    """Put ``limiter`` on each logger of :data:`GUARDED` (idempotent)."""
+    for name in GUARDED:
+        logger = logging.getLogger(name)
+        if limiter not in logger.filters:
+            logger.addFilter(limiter)
 
 
 class ReplyPin:
@@ -141,7 +219,7 @@ class Receiver:
                     self.handle_bytes(data, address, transport)
                 except Exception:  # pragma: no cover - handle_bytes already guards each message
                     self.session.count("rx_errors")
-                    log.exception("receiver error")
+                    packet_log.exception("receiver error")
 
     def handle_bytes(self, data: bytes, address: Address | None, transport: Transport) -> None:
         """One datagram (or stream chunk) received now. Each message is stamped with the clock's time
@@ -156,7 +234,7 @@ class Receiver:
                 msg = codec.parse_char(chunk)
             except Exception as exc:  # a parser error: drop what is buffered and go on
                 self.session.count("rx_bad")
-                log.debug("parse error: %s", exc)
+                packet_log.debug("parse error: %s", exc)
                 reset_parser(codec)
                 break
             chunk = b""
@@ -166,7 +244,7 @@ class Receiver:
                 self.handle_message(msg, clock.now(), address, transport)
             except Exception:
                 self.session.count("rx_errors")
-                log.exception("error handling %s", msg.get_type())
+                packet_log.exception("error handling %s", msg.get_type())
         if transport.datagram and codec.buf_len() > 0:
             self.session.count("rx_bad")  # a truncated packet; it cannot continue in the next datagram
             reset_parser(codec)

@@ -65,20 +65,23 @@ class LinkCounters:
     command_retries: int = 0
     command_timeouts: int = 0
     command_rejections: int = 0
+    log_lines_held: int = 0
+    """Per-packet log lines held back by the rate limit (:data:`mission.mavlink.receiver.LIMITER`), in this process."""
 
 
 class LinkSession:
     """The shared state of one link (``name``: its URL, for messages). Hold :attr:`lock` (or
     :attr:`changed`, the same lock) to read or write the fields; call :meth:`notify_locked`
-    after a change so waiters re-check."""
+    after a change so waiters re-check. ``signed``: the link refuses what is not signed with its
+    key, so each telemetry sample decides alone (:mod:`mission.mavlink.telemetry`)."""
 
-    def __init__(self, name: str, clock: Clock, position_timeout_s: float) -> None:
+    def __init__(self, name: str, clock: Clock, position_timeout_s: float, signed: bool = False) -> None:
         self.name, self.clock, self.position_timeout_s = name, clock, position_timeout_s
         self.lock = threading.RLock()  # re-entrant: wait_until predicates may read link.state
         self.changed = threading.Condition(self.lock)
         self.closed = True
         self.vehicle: tuple[int, int] | None = None
-        self.telemetry = telemetry.Telemetry()
+        self.telemetry = telemetry.Telemetry(signed=signed)
         self.statustexts: collections.deque[tuple[float, int, str]] = collections.deque(maxlen=500)
         self.position_stamps: collections.deque[float] = collections.deque(maxlen=256)  # LOCAL_POSITION_NED rx [s]
         self.wrong_key: tuple[int, int, int] | None = None  # (sysid, compid, HEARTBEATs) signed with another key

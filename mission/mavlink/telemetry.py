@@ -6,6 +6,15 @@ GPS_GLOBAL_ORIGIN, HOME_POSITION, ATTITUDE); other
 messages leave it unchanged. :func:`snapshot` turns it into the immutable :class:`VehicleState`
 a caller sees at one clock time. :class:`StatusTextAssembler` joins chunked STATUSTEXTs. Times
 are link-clock seconds [s]; positions and velocities PX4's local NED frame.
+
+No single sample decides that the vehicle is disarmed or landed (the verdicts a mission aborts
+on): on an unsigned link anyone who can put a packet on the vehicle's address can forge one.
+Once the vehicle was believed armed (or not landed), a disarmed HEARTBEAT is believed when
+EXTENDED_SYS_STATE says ON_GROUND too, or when HEARTBEATs have said disarmed for
+:data:`DISARMED_AGREE_S` with no armed one between; an ON_GROUND is believed when the
+HEARTBEAT says disarmed too, or when EXTENDED_SYS_STATEs have said ON_GROUND for
+:data:`LANDED_AGREE_S` with nothing else between. Armed and in the air are believed at once.
+On a signed link (``Telemetry.signed``) every sample is the vehicle's own and decides alone.
 """
 from __future__ import annotations
 
@@ -20,6 +29,12 @@ from mission.mavlink import px4
 from mission.mavlink.env import mavlink
 
 STATUSTEXT_CHUNK_LEN = 50
+LANDED_AGREE_S = 0.08
+"""Unsigned link: EXTENDED_SYS_STATE must say ON_GROUND this long [s] (at least two samples;
+the mission asks for it at 10 Hz) before it is believed alone."""
+DISARMED_AGREE_S = 0.5
+"""Unsigned link: HEARTBEAT must say disarmed this long [s] (at least two; PX4 sends it at 1 Hz)
+before it is believed alone."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -78,6 +93,10 @@ class VehicleState:
     """PX4's home [m] NED, shape (3,), from HOME_POSITION's local x, y, z; None before the first."""
     home_rx_s: float | None = None
     """Clock time the last HOME_POSITION was received [s]."""
+    believed_armed: bool = False
+    """Armed, unless a disarm was confirmed (module docstring): what a mission's disarmed verdict reads."""
+    believed_on_ground: bool = False
+    """Landed (ON_GROUND) as confirmed (module docstring): what a mission's landed verdict reads."""
 
     @property
     def heartbeat_age_s(self) -> float:
@@ -116,6 +135,12 @@ class Telemetry:
     battery_ids_pct: tuple[tuple[int, float | None], ...] = ()  # BATTERY_STATUS (id, remaining [%]) per battery
     home_ned_m: np.ndarray | None = None
     home_rx_s: float | None = None
+    signed: bool = False  # every sample was signed with the link's key: each decides alone
+    believed_armed: bool = False
+    disarmed_since_s: float | None = None  # first of the disarmed HEARTBEATs since the last armed one [s]
+    believed_on_ground: bool = False
+    on_ground_since_s: float | None = None  # first of the ON_GROUND samples since the last other one [s]
+    on_ground_rx_s: float | None = None  # the last of them [s]
 
     @property
     def battery_pct(self) -> float | None:
@@ -130,10 +155,30 @@ def _readonly_vector(x: float, y: float, z: float) -> np.ndarray:
     return v
 
 
+def _believed(tm: Telemetry) -> Telemetry:
+    """The armed and landed beliefs after a HEARTBEAT or EXTENDED_SYS_STATE (module docstring)."""
+    armed = bool(tm.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
+    on_ground = tm.landed_state == px4.LANDED_ON_GROUND
+    believed_armed, believed_on_ground = tm.believed_armed, tm.believed_on_ground
+    if armed:
+        believed_armed = True
+    elif believed_armed and tm.heartbeat_rx_s is not None and tm.disarmed_since_s is not None:
+        believed_armed = not (tm.signed or on_ground or tm.heartbeat_rx_s - tm.disarmed_since_s >= DISARMED_AGREE_S)
+    if not on_ground:
+        believed_on_ground = False
+    elif not believed_on_ground and tm.on_ground_since_s is not None and tm.on_ground_rx_s is not None:
+        disarmed = not armed and tm.heartbeat_rx_s is not None
+        believed_on_ground = tm.signed or disarmed or tm.on_ground_rx_s - tm.on_ground_since_s >= LANDED_AGREE_S
+    return replace(tm, believed_armed=believed_armed, believed_on_ground=believed_on_ground)
+
+
 def _heartbeat(tm: Telemetry, msg: Any, t_rx: float) -> Telemetry:
     custom_mode = int(msg.custom_mode)
-    return replace(tm, heartbeat_rx_s=t_rx, base_mode=int(msg.base_mode), custom_mode=custom_mode,
-                   mode=px4.mode_name(custom_mode), system_status=int(msg.system_status))
+    armed = bool(int(msg.base_mode) & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
+    since = None if armed else (t_rx if tm.disarmed_since_s is None else tm.disarmed_since_s)
+    return _believed(replace(tm, heartbeat_rx_s=t_rx, base_mode=int(msg.base_mode), custom_mode=custom_mode,
+                             mode=px4.mode_name(custom_mode), system_status=int(msg.system_status),
+                             disarmed_since_s=since))
 
 
 VEHICLE_CLOCK_DRIFT = 0.1  # how fast the vehicle-to-link offset may grow [s/s]
@@ -163,7 +208,10 @@ def _local_position(tm: Telemetry, msg: Any, t_rx: float) -> Telemetry:
 
 
 def _extended_sys_state(tm: Telemetry, msg: Any, t_rx: float) -> Telemetry:
-    return replace(tm, landed_state=int(msg.landed_state))
+    landed = int(msg.landed_state)
+    on_ground = landed == px4.LANDED_ON_GROUND
+    since = (t_rx if tm.on_ground_since_s is None else tm.on_ground_since_s) if on_ground else None
+    return _believed(replace(tm, landed_state=landed, on_ground_since_s=since, on_ground_rx_s=t_rx if on_ground else None))
 
 
 def _remaining_pct(value: int) -> float | None:
@@ -245,6 +293,8 @@ def snapshot(tm: Telemetry, now_s: float, vehicle: tuple[int, int] | None, posit
         battery_pct=tm.battery_pct,
         home_ned_m=tm.home_ned_m,
         home_rx_s=tm.home_rx_s,
+        believed_armed=tm.believed_armed,
+        believed_on_ground=tm.believed_on_ground,
     )
 
 

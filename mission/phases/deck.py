@@ -18,6 +18,12 @@ failsafes (:mod:`mission.phases.machine`) read ``seated``. ::
           LNDMC_XY_VEL_MAX it never says so: the passenger stays armed, pressing, until the carrier
           slows) --> TRANSIT / HOME seated, then RIDING seated (the next leg) or DONE.
 
+While seated and not taking off, the deck is watched (:func:`watch`): the vehicle armed after
+it was seen disarmed (unless the mission streams to arm it), a mode other than the one it sat in
+(or OFFBOARD, which the mission asks for when it arms), or the vehicle higher than
+``mission.deck_clear_height_m`` above the deck is someone else flying it: ABORT (``deck_disturbed``), nothing more sent, the carrier
+told (the status's reason) so it stops; that flight is never taken for a take-off.
+
 Frames: local NED [m], [m/s]; times [s] on the controller's clock.
 """
 from __future__ import annotations
@@ -46,6 +52,26 @@ from mission.phases.types import (
 
 #: Phases of the take-off: seated, the vehicle must be armed and in OFFBOARD.
 TAKING_OFF = frozenset({Phase.SEPARATED, Phase.NAVIGATING})
+
+
+def watch(state: MissionState, obs: Observation, m: MissionModel) -> tuple[MissionState, str]:
+    """The deck watch (module docstring): the state (what it saw kept in ``deck_watch``) and why
+    the seated vehicle was disturbed ("" if it was not). While the mission streams to arm it
+    (``streaming_since_s``), armed and OFFBOARD are what it asked for."""
+    v = obs.vehicle
+    if not state.seated or state.phase in TAKING_OFF or v is None or m.deck is None:
+        return (replace(state, deck_watch=None) if state.deck_watch is not None else state), ""
+    asking = state.streaming_since_s is not None
+    seen_disarmed, mode = state.deck_watch if state.deck_watch is not None else (False, v.mode)
+    if not asking and seen_disarmed and v.armed:
+        return state, f"armed on the deck without the mission asking (in {v.mode})"
+    if v.mode != mode and not (asking and v.mode == FlightMode.OFFBOARD):
+        return state, f"switched from {mode} to {v.mode} on the deck without the mission asking"
+    if obs.carrier is not None:
+        height = float(dock_point(obs, m)[2] - v.position_ned_m[2])
+        if height > m.deck.clear_height_m:
+            return state, f"{height:.2f} m above the deck without the mission asking"
+    return replace(state, deck_watch=(not asking and (seen_disarmed or not v.armed), mode)), ""
 
 
 def _kept(tr: Tracked) -> dict[str, Any]:

@@ -28,6 +28,8 @@
     ... except while the passenger sits on the deck (mission.ride = "deck", state.seated;
     mission.phases.deck): landed, disarmed and out of OFFBOARD are then where it is; taking off
     (SEPARATED, NAVIGATING still seated) it must be armed and in OFFBOARD
+    seated, the mission asking nothing --armed after disarmed, another mode, or off the deck-->
+                  ABORT(deck_disturbed) (mission.phases.deck.watch)
     ABORT requests Hold (never disarm in the air) unless the vehicle is lost or disarmed, a
     pilot took over or PX4 runs its own failsafe (then nothing is sent: never fight, and never
     stream to a vehicle that someone else disarmed); setpoints stop once Hold is shown. ABORT is
@@ -180,6 +182,10 @@ def _failsafes(state: MissionState, obs: Observation, m: MissionModel) -> tuple[
     if fault:
         new = _abort(state, t, AbortReason.VEHICLE_DISARMED, fault)
         return new, Decision(setpoint=None, events=(f"abort: {fault}; streaming stopped",))
+    state, disturbed = deck.watch(state, obs, m)
+    if disturbed:
+        new = _abort(state, t, AbortReason.DECK_DISTURBED, disturbed)
+        return new, Decision(setpoint=None, events=(f"abort: {disturbed}; someone else flies it, not the mission",))
     if "identity" in obs.failed:
         new = _abort(state, t, AbortReason.VEHICLE_AMBIGUOUS, obs.failed["identity"])
         event = f"abort: {obs.failed['identity']}"
@@ -210,7 +216,7 @@ def _failsafes(state: MissionState, obs: Observation, m: MissionModel) -> tuple[
 # Aborts after which nothing more is sent: the vehicle is gone, someone else has it (a pilot,
 # PX4's own failsafe, whoever disarmed it), or nothing was ever sent (geometry).
 _HANDS_OFF = frozenset({AbortReason.VEHICLE_LOST, AbortReason.PILOT_OVERRIDE, AbortReason.VEHICLE_FAILSAFE,
-                        AbortReason.GEOMETRY, AbortReason.VEHICLE_DISARMED})
+                        AbortReason.GEOMETRY, AbortReason.VEHICLE_DISARMED, AbortReason.DECK_DISTURBED})
 
 
 def _disarmed_in_flight(ph: Phase, v: VehicleObs | None, seated: bool = False) -> str:

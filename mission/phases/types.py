@@ -40,6 +40,7 @@ class AbortReason(StrEnum):
     VEHICLE_DISARMED = "vehicle_disarmed"
     VEHICLE_AMBIGUOUS = "vehicle_ambiguous"
     NONFINITE = "nonfinite"
+    DECK_DISTURBED = "deck_disturbed"
 
 
 
@@ -244,6 +245,8 @@ class MissionState:
     # disarmed, landed or out of OFFBOARD without that being a fault (mission.phases.machine)
     seated: bool = False
     streaming_since_s: float | None = None  # seated: since when setpoints stream before arming [s] (None: not yet)
+    # seated, the mission asking nothing of the vehicle: (seen disarmed since, PX4's mode then) (mission.phases.deck.watch)
+    deck_watch: tuple[bool, str] | None = None
 
 
 @dataclass(frozen=True)

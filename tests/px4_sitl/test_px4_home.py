@@ -123,3 +123,54 @@ def test_controller_killed_during_the_approach_px4_returns_to_the_moving_home_no
     assert back["COM_OBL_RC_ACT"] == 3.0  # set for the recovery; the dead controller never put it back
     assert np.allclose(back["home_ned_m"][:2], home[:2], atol=0.05)
     assert 0.0 <= back["battery_pct"] <= 100.0 and math.isfinite(back["battery_pct"])
+
+
+@px4_job("rogue_home")
+def _rogue_home_then_kill(directory: Path, build: Path) -> dict:
+    """A rogue ground station (the GCS link) moves PX4's home under the target and sets
+    COM_OBL_RC_ACT to 7 (Disarm) on the approach; once the vehicle shows our home again and the
+    mission has put the parameter back, the controller is killed."""
+    from mission.mavlink.env import mavlink
+    from tests.integration.vehicle.test_vehicle_home_battery import set_home
+
+    config = _recovery_config(directory)
+    target = (24.0, 18.0)
+    with px4_flight(directory / "f", config, build=build, speed_factor=SPEED_FACTOR, px4_params=BATTERY) as f:
+        mission = f.procs["mission"]
+        wait_for(lambda: "phase APPROACH" in f.text("mission.out") or mission.poll() is not None, 150.0,
+                 "the mission on the approach")
+        assert mission.poll() is None, f.text("mission.out")[-2000:] + f.text("mission.err")[-2000:]
+        rogue = set_home(f.gcs, *target)
+        f.gcs.send(mavlink.MAVLink_param_set_message(1, 1, b"COM_OBL_RC_ACT", px4.encode_param(7, mavlink.MAV_PARAM_TYPE_INT32),
+                                                     mavlink.MAV_PARAM_TYPE_INT32))
+        t_rogue = time.monotonic()
+        wait_for(lambda: "COM_OBL_RC_ACT was changed by someone else to 7" in f.text("mission.err"), 15.0,
+                 "COM_OBL_RC_ACT restored")
+        mark = f.gcs.mark()
+        ours = f.gcs.wait_for("HOME_POSITION", lambda m: math.hypot(m.x - target[0], m.y - target[1]) > 5.0, 5.0, mark)
+        t_restored = time.monotonic() - t_rogue
+        mission.send_signal(signal.SIGKILL)
+        mission.wait()
+        mark = f.gcs.mark()
+        rec = read_record(f.log_dir)
+        carrier = rec.vec("x_c")[-1]
+        landed = f.gcs.wait_for("EXTENDED_SYS_STATE", lambda m: m.landed_state == px4.LANDED_ON_GROUND,
+                                timeout_s=60.0, after=mark)
+        track = np.array([(m.x, m.y, m.z) for m in f.gcs.messages("LOCAL_POSITION_NED", after=mark)])
+        texts = [m.text for m in f.gcs.messages("STATUSTEXT", after=mark)]
+    out = {"rogue_ack": rogue, "restored_after_s": round(t_restored, 2), "home_shown": ours is not None,
+           "carrier_ned_m": carrier.tolist(), "landed": landed is not None, "landed_ned_m": track[-1].tolist(),
+           "closest_to_target_m": float(np.linalg.norm(track[:, :2] - np.array(target), axis=1).min()),
+           "lowest_disarm_text": [t for t in texts if "isarm" in t], "statustext": texts}
+    print(json.dumps(out))
+    return out
+
+
+@pytest.mark.px4_job("rogue_home")
+def test_a_rogue_home_and_offboard_loss_action_are_put_back_and_px4_returns_to_the_carrier(px4_jobs) -> None:
+    r = px4_jobs["rogue_home"].result()
+    assert r["rogue_ack"] == px4.MAV_RESULT_ACCEPTED and r["home_shown"], r  # unsigned: PX4 took the rogue's home
+    assert r["landed"], r
+    landed, carrier = np.asarray(r["landed_ned_m"]), np.asarray(r["carrier_ned_m"])
+    assert np.linalg.norm(landed[:2] - carrier[:2]) < 2.0, r  # PX4's Return landed at the carrier ...
+    assert not any("failsafe" in t.lower() and "disarm" in t.lower() for t in r["statustext"]), r  # ... not disarmed by 7

@@ -91,7 +91,8 @@ class FakeWorld:
             velocity_ned_m_s=self._v_p.copy(), position_rx_s=beat, heartbeat_rx_s=beat, armed=self.armed,
             mode=self.mode, custom_mode=px4.custom_mode_of(self.mode), base_mode=px4.base_mode_of(self.mode, self.armed),
             system_status=px4.MAV_STATE_ACTIVE if self.armed else px4.MAV_STATE_STANDBY, landed_state=None,
-            position_valid=True, origin=None, last_statustext="", battery_pct=self._battery(now))
+            position_valid=True, origin=None, last_statustext="", battery_pct=self._battery(now),
+            believed_armed=self.armed)
 
     def _battery(self, now: float) -> float | None:
         if self.battery_pct is None:

@@ -89,3 +89,58 @@ def test_a_vehicle_already_at_return_is_left_as_it_is(recovery_cfg):
     controller = MissionController(recovery_cfg, world, world.feed, clock, publisher=world, command_thread=False)
     assert controller.run().ok and world.param_sets == []
     assert controller.px4_params["COM_OBL_RC_ACT"] == {"was": 3.0, "set": 3.0}
+
+
+def test_a_home_moved_by_someone_else_is_found_and_set_again_and_a_changed_parameter_restored():
+    from mission.controller import HomeKeeper
+    from mission.mavlink.commander import ParamKeeper, home_moved
+    from mission.time.clock import ManualClock
+
+    sent = [(10.0, np.array([1.0, 2.0, 0.0]))]
+    assert home_moved(sent, [1.3, 2.0, 0.0], 12.0) is None  # our own, read back
+    assert home_moved(sent, [24.0, 18.0, 0.0], 10.1) is None  # a report from before ours took
+    assert home_moved(sent, [24.0, 18.0, 0.0], 12.0) == pytest.approx(np.hypot(23.0, 16.0))
+
+    class Vehicle:
+        def __init__(self):
+            self.home = None
+            self.params = {"COM_OBL_RC_ACT": 3.0}
+            self.homes = []
+
+        @property
+        def state(self):
+            from types import SimpleNamespace
+            return SimpleNamespace(home_ned_m=self.home, home_rx_s=clock.now())
+
+        def set_home(self, home):
+            self.homes.append(np.array(home))
+            self.home = np.array(home)
+            return 0
+
+        def get_param(self, name):
+            return self.params[name]
+
+        def set_param(self, name, value):
+            self.params[name] = value
+            return value
+
+    clock = ManualClock(0.0)
+    vehicle = Vehicle()
+    params = ParamKeeper(vehicle.get_param, vehicle.set_param)
+    params.keep("COM_OBL_RC_ACT", 3.0)
+    keeper = HomeKeeper(vehicle, clock, threaded=False, params=params)
+    keeper.offer(np.array([1.0, 2.0, 0.0]))
+    clock.advance(1.0)
+    keeper.check()
+    assert keeper.counters["moved"] == 0 and params.counters["read"] == 1
+    vehicle.home = np.array([24.0, 18.0, 0.0])  # a rogue's DO_SET_HOME
+    vehicle.params["COM_OBL_RC_ACT"] = 7.0  # and its offboard-loss action: Disarm
+    keeper.check()
+    assert keeper.counters["moved"] == 1 and keeper.counters["restored"] == 1
+    assert vehicle.home.tolist() == [1.0, 2.0, 0.0]
+    assert vehicle.params["COM_OBL_RC_ACT"] == 3.0 and params.moves == [{"name": "COM_OBL_RC_ACT", "found": 7.0, "ours": 3.0,
+                                                                          "restored": 3.0}]
+    clock.advance(1.0)
+    vehicle.home = np.array([24.0, 18.0, 0.0])  # moved again just before the mission ends
+    keeper.close()  # the last word is ours
+    assert vehicle.home.tolist() == [1.0, 2.0, 0.0]

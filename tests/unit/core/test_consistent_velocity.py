@@ -63,7 +63,7 @@ def test_the_mission_observes_its_vehicle_s_velocity_made_consistent_with_its_po
         state = SimpleNamespace(heartbeat_rx_s=t, position_ned_m=[0.0, -0.12 * t, -1.5], velocity_ned_m_s=[0.0, 0.44, 0.0],
                                 position_rx_s=t, t_s=t, position_t_s=t, position_valid=True, armed=True,
                                 mode="OFFBOARD", heartbeat_age_s=0.0, system_status=4, battery_pct=None,
-                                landed_state=2)
+                                landed_state=2, believed_armed=True, believed_on_ground=False)
         obs = _vehicle_obs(state, fix)
         assert _vehicle_obs(state) is not None
     assert obs is not None
