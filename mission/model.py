@@ -104,6 +104,7 @@ def recovery_model(cfg: Config) -> RecoveryModel:
         descent_speed_m_s=r.descent_speed_m_s, gate_timeout_s=r.gate_timeout_s, settle_radius_m=r.settle_radius_m, settle_speed_m_s=r.settle_speed_m_s, settle_dwell_s=r.settle_dwell_s,
         settle_carrier_speed_m_s=r.settle_carrier_speed_m_s,
         docked_dwell_s=r.docked_dwell_s, carrier_max_age_s=r.carrier_max_age_s,
+        carrier_return_max_age_s=r.carrier_return_max_age_s,
         carrier_max_accel_m_s2=r.carrier_max_accel_m_s2,
         carrier_max_turn_rate_rad_s=math.radians(r.carrier_max_turn_rate_deg_s), carrier_lost_s=r.carrier_lost_s,
         max_attempts=r.max_attempts, timeout_s=r.timeout_s, fallback=r.fallback,

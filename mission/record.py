@@ -405,7 +405,8 @@ def _switch_jump(phase: np.ndarray, u_cmd: np.ndarray) -> float | None:
 def _recovery_summary(r: FlightRecord, x_p: np.ndarray, v_p: np.ndarray, v_c: np.ndarray,
                       dock: np.ndarray) -> dict[str, Any]:
     """The recovery's figures (mission.final_action = "return"): docked_again, recovery_outcome,
-    contact (from mission.json's ``recovered``), carrier_speed_on_approach_m_s ([min, max] [m/s] of
+    contact (from mission.json's ``recovered``; riding on a deck, a contact counts only once the
+    passenger reported itself landed on it: ``confirmed_s``), carrier_speed_on_approach_m_s ([min, max] [m/s] of
     the carrier's horizontal speed during APPROACH) and deck_violations: ticks of the recovery's
     flying phases before contact where the vehicle was at or below the dock point's height within
     the deck (recovery.deck_radius_m) without meeting the contact conditions."""
@@ -413,8 +414,12 @@ def _recovery_summary(r: FlightRecord, x_p: np.ndarray, v_p: np.ndarray, v_c: np
     if r.info.get("final_action") != "return" or params is None:
         return {}
     contact = None if rec is None else rec.get("contact")
-    out: dict[str, Any] = {"docked_again": contact is not None}
-    if contact is not None:
+    # on a deck a dock is confirmed by the passenger's own landed state, never by the carrier's word
+    unconfirmed = contact is not None and r.info.get("ride") == "deck" and "confirmed_s" not in contact
+    out: dict[str, Any] = {"docked_again": contact is not None and not unconfirmed}
+    if unconfirmed:
+        out["recovery_outcome"] = "contact not confirmed: the passenger never reported itself landed on the deck"
+    elif contact is not None:
         out["recovery_outcome"] = "docked"
     elif rec is not None and rec.get("fallback"):
         out["recovery_outcome"] = f"fallback: {rec['fallback']}"

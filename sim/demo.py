@@ -193,7 +193,8 @@ def start_pair(config: str, name: str, zenoh_ep: str, speed: float, log_root: Pa
     vehicle = subprocess.Popen(_python_cli("mock-vehicle", "--mavlink", "udpin:127.0.0.1:0", "--target",
                                            f"udpout:127.0.0.1:{mav_port}", "--speed", str(speed), "--start-ned",
                                            vehicle_start, "--deck", name, "--deck-height", str(deck_height),
-                                           "--zenoh-connect", zenoh_ep, *mode),
+                                           "--zenoh-connect", zenoh_ep, "--summary", str(pair.log_dir / "vehicle.json"),
+                                           *mode),
                                stderr=err)
     stack.callback(stop_process, vehicle)
     live_args = [] if live is None else ["--live", f"{live.host}:{live.port}"]
@@ -257,6 +258,7 @@ def run_demo(config: str, speed: float, pairs: int, log_root: Path, plot_path: s
             c = json.loads(carrier_summary.read_text())
             s["carrier_stop_target_distance_m"] = c.get("stopped_target_distance_m")
             s["carrier_braking_distance_m"] = c.get("braking_distance_m")
+        s.update(deck_truth(p.log_dir / "vehicle.json"))
         s.update(recovery_cells(s))
         summaries.append(s)
         if plot_path and (p.log_dir / "record.csv").exists():
@@ -270,8 +272,33 @@ def run_demo(config: str, speed: float, pairs: int, log_root: Path, plot_path: s
             except MarsupialError as exc:
                 s["plot_error"] = str(exc)
     ok = all(s.get("p1") and s.get("p2") and s.get("p3") and s["mission_exit_code"] == 0
-             and s.get("docked_again", True) for s in summaries)
+             and s.get("docked_again", True) and not s.get("deck_crash") for s in summaries)
     return (0 if ok else 1), summaries
+
+
+def deck_truth(path: Path) -> dict:
+    """The world's truth beside the mission's belief, from the mock vehicle's ``--summary``: where
+    it last touched the deck, from the deck's true centre [m] (``deck_touchdown_m``), and a crash
+    (``deck_crash``: why). A crash overrides the mission's account: the recovery's outcome is
+    "crash", the passenger did not dock again."""
+    if not path.exists():
+        return {}
+    deck = json.loads(path.read_text()).get("deck") or {}
+    touchdowns = [t for t in deck.get("touchdowns") or [] if t.get("t_s", 0.0) > 0.5]  # not standing on it at the start
+    out: dict = {"deck_touchdown_m": touchdowns[-1]["horizontal_error_m"] if touchdowns else None,
+                 "deck_crash": deck.get("crash")}
+    if out["deck_crash"]:
+        out.update(recovery_outcome=f"crash: {out['deck_crash']}", docked_again=False,
+                   deck_crash_t_s=next(t["t_s"] for t in reversed(touchdowns) if t.get("crash")))
+    return out
+
+
+def _crashed_leg(s: dict, legs: list[dict]) -> int | None:
+    """The index of the leg whose contact came nearest the deck crash (simulated time), or None."""
+    at = s.get("deck_crash_t_s")
+    times = [(abs((leg.get("contact") or {}).get("time_s", float("inf")) - at), i) for i, leg in enumerate(legs)] \
+        if at is not None else []
+    return min(times)[1] if times else None
 
 
 # The recovery's rows (mission.final_action = "return"), shown when a pair tried one.
@@ -284,6 +311,7 @@ RECOVERY_ROWS = [
     ("carrier speed on the approach [m/s]", "carrier_speed_on_approach"),
     ("max command jump at a phase switch [m/s]", "max_phase_switch_jump_m_s"),
     ("deck touched outside contact [ticks]", "deck_violations"),
+    ("truth: last touchdown from the deck's centre [m]", "deck_touchdown_m"),
 ]
 RECOVERY_KEYS = {key for _, key in RECOVERY_ROWS}
 DECK_KEYS = {"takeoff_command_jump_m_s", "takeoff_max_command_step_m_s", "takeoff_clear_s"}  # shown when a pair rode the deck
@@ -336,9 +364,13 @@ def columns(summaries: list[dict]) -> list[dict]:
         if len(legs) < 2:
             out.append(s)
             continue
-        for leg in legs:
-            out.append({**leg, **recovery_cells(leg), "pair": f"{s['pair']} leg {leg['leg'] + 1}",
-                        "leg_outcome": leg["outcome"], "mission_exit_code": s.get("mission_exit_code")})
+        crashed = _crashed_leg(s, legs)
+        for i, leg in enumerate(legs):
+            crash = {"deck_crash": s["deck_crash"], "deck_touchdown_m": s.get("deck_touchdown_m"),
+                     "recovery_outcome": f"crash: {s['deck_crash']}"} if i == crashed else {}
+            out.append({**leg, **recovery_cells(leg), **crash, "pair": f"{s['pair']} leg {leg['leg'] + 1}",
+                        "leg_outcome": f"crash: {s['deck_crash']}" if crash else leg["outcome"],
+                        "mission_exit_code": s.get("mission_exit_code")})
     return out
 
 
@@ -349,6 +381,8 @@ def outcome_text(s: dict) -> str:
         return str(s["leg_outcome"])
     code = s.get("mission_exit_code")
     phase = s.get("phase")
+    if s.get("deck_crash"):
+        return f"crash ({code})"
     if phase == "DONE":
         return f"done ({code})"
     if s.get("reason"):
@@ -360,7 +394,10 @@ def verdict_lines(summaries: list[dict]) -> list[str]:
     """One line per pair that failed, naming the properties that did not hold and why."""
     lines = []
     for s in summaries:
-        if s.get("docked_again") is False:
+        if s.get("deck_crash"):
+            lines.append(f"{s['pair']}: the passenger CRASHED on the carrier's deck ({s['deck_crash']}), whatever the "
+                         f"mission believed (its contact: {(s.get('contact') or {}).get('horizontal_error_m')} m)")
+        elif s.get("docked_again") is False:
             lines.append(f"{s['pair']}: the passenger did not dock on the carrier again ({s.get('recovery_outcome')})")
         failed = [k for k in ("p1", "p2", "p3") if not s.get(k)]
         if not failed:

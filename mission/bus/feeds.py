@@ -14,15 +14,17 @@ More: docs/wire.md.
 """
 from __future__ import annotations
 
+import dataclasses
 import logging
 import threading
 from dataclasses import dataclass
-from typing import Any, Callable, Generic, TypeVar
+from typing import Any, Callable, Generic, Protocol, TypeVar
 
 import numpy as np
 import zenoh
 
 from mission.time.clock import Clock
+from mission.time.offset import OffsetEstimate, sample_age
 from mission.config.schema import ZenohSection
 from mission.errors import BusError
 from mission.bus.auth import BusAuth
@@ -36,6 +38,15 @@ log = logging.getLogger("mission.bus.bridge")  # one logger name for the whole b
 MAX_PAYLOAD_BYTES = 8192
 
 T = TypeVar("T")
+
+
+class OffsetSource(Protocol):
+    """Where the carrier's clock offset comes from: ``estimate()`` now (None: not known yet) and
+    ``snapshot()`` (counters for summary.json)."""
+
+    def estimate(self) -> OffsetEstimate | None: ...
+
+    def snapshot(self) -> dict[str, Any]: ...
 
 
 @dataclass(frozen=True)
@@ -58,9 +69,17 @@ class Received(Generic[T]):
 class ReceivedCarrierState(Received[CarrierState]):
     """A carrier state, always in local NED (``value.frame == "local_ned"``); ``untrusted``: why
     the feed does not trust it yet (just bound, a resync, a contested source:
-    :meth:`mission.bus.gate.FeedGate.distrust`), None when it does."""
+    :meth:`mission.bus.gate.FeedGate.distrust`), None when it does.
+
+    With the carrier's clock offset known (the feed's ``offset``), ``age_s`` [s] is the time since
+    the carrier *measured* the state (``now - (stamp - offset)``, :func:`mission.time.offset.sample_age`),
+    good to ``age_bound_s`` [s]; ``rx_age_s`` [s] is always the time since it arrived. Without it
+    (no round trip yet) ``age_s`` is the receive age and ``age_bound_s`` is None: the measurement
+    time is unknown."""
 
     untrusted: str | None = None
+    rx_age_s: float = 0.0
+    age_bound_s: float | None = None
 
     @property
     def state(self) -> CarrierState:
@@ -276,8 +295,10 @@ class CarrierFeed(_Feed[CarrierState]):
         max_age_s: float = 0.5,
         limits: GateLimits | None = None,
         auth: BusAuth | None = None,
+        offset: OffsetSource | None = None,
     ) -> None:
         check_encoding(encoding)
+        self._offset = offset
         self.encoding = encoding
         self._use_seq = encoding == "json"  # Odometry has no sequence number: order by stamp
         self.gate = FeedGate(limits or GateLimits(max_speed_m_s=3.0), use_seq=self._use_seq)
@@ -290,11 +311,14 @@ class CarrierFeed(_Feed[CarrierState]):
     def from_section(
         cls, session: zenoh.Session, section: ZenohSection, clock: Clock, *, max_age_s: float,
         origin: GeoOrigin | None = None, limits: GateLimits | None = None, auth: BusAuth | None = None,
+        offset: OffsetSource | None = None,
     ) -> "CarrierFeed":
         """The feed a :class:`ZenohSection` describes (pair, encoding, carrier_key); ``auth``: the
-        pair's signing key (:func:`mission.bus.auth.bus_auth`), None for unsigned."""
+        pair's signing key (:func:`mission.bus.auth.bus_auth`), None for unsigned; ``offset``: where
+        the carrier's clock offset comes from (:class:`mission.bus.timesync.ClockPing`, or
+        :class:`mission.time.offset.SharedClock` in lockstep), None: ages are receive ages."""
         return cls(session, section.pair, clock, encoding=section.encoding, key=section.carrier_key,
-                   origin=origin, max_age_s=max_age_s, limits=limits, auth=auth)
+                   origin=origin, max_age_s=max_age_s, limits=limits, auth=auth, offset=offset)
 
     def _admit(self, value: CarrierState, key: str, source: str, rx: float) -> str | None:
         was = self.gate.bound
@@ -315,7 +339,8 @@ class CarrierFeed(_Feed[CarrierState]):
     def _extra_counters(self) -> dict[str, Any]:
         return {"bound_source": self.gate.bound, "rejected_sources": dict(self.gate.rejected_sources),
                 "resyncs": self.gate.resyncs, "jumps": self.gate.jumps, "settles": self.gate.settles,
-                "contests": self.gate.contests}
+                "contests": self.gate.contests,
+                "clock_offset": None if self._offset is None else self._offset.snapshot()}
 
     def _received_extra(self, now: float) -> dict[str, Any]:
         return {"untrusted": self.gate.distrust(now)}
@@ -335,8 +360,17 @@ class CarrierFeed(_Feed[CarrierState]):
         return value.seq, value.stamp_s
 
     def latest(self) -> ReceivedCarrierState | None:  # type: ignore[override]
-        """The newest accepted carrier state (local NED) with its age, or None."""
-        return super().latest()  # type: ignore[return-value]
+        """The newest accepted carrier state (local NED) with its age (measurement age once the
+        carrier's clock offset is known; see :class:`ReceivedCarrierState`), or None."""
+        got: ReceivedCarrierState | None = super().latest()  # type: ignore[assignment]
+        if got is None:
+            return None
+        estimate = self._offset.estimate() if self._offset is not None else None
+        if estimate is None:
+            return dataclasses.replace(got, rx_age_s=got.age_s)
+        age = sample_age(got.rx_time_s + got.age_s, got.value.stamp_s, estimate)
+        return dataclasses.replace(got, age_s=age, rx_age_s=got.age_s, age_bound_s=estimate.bound_s,
+                                   stale=age + estimate.bound_s > self.max_age_s)
 
 
 class PassengerFeed(_Feed[PassengerStatus]):

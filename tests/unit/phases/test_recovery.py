@@ -143,8 +143,18 @@ def test_a_go_around_names_why_the_carrier_state_is_unfit():
         return Observation(t_s=10.0, vehicle=None, carrier=c)
 
     assert carrier_unfit(seen(), 0.3) is None
-    assert carrier_unfit(seen(alive=False), 0.3) == "carrier liveliness token gone (its last state 0.02 s old)"
-    assert carrier_unfit(seen(age_s=0.45), 0.3) == "carrier state 0.45 s old (recovery.carrier_max_age_s = 0.3)"
+    assert carrier_unfit(seen(alive=False), 0.3) == \
+        "carrier liveliness token gone (its last state 0.02 s old since the carrier measured it)"
+    assert carrier_unfit(seen(age_s=0.45), 0.3) == \
+        "carrier state 0.45 s old since the carrier measured it (recovery.carrier_max_age_s = 0.3)"
+    # the age is the measurement's, good to the clock offset's bound: the worst case decides
+    assert carrier_unfit(seen(age_s=0.25, age_bound_s=0.1), 0.3) == \
+        "carrier state 0.25 +- 0.100 s old since the carrier measured it (recovery.carrier_max_age_s = 0.3)"
+    assert carrier_unfit(seen(age_s=0.02, age_bound_s=None), 0.3) == \
+        "the carrier's clock is not known (no round trip yet): its state's age is unknown"
+    assert carrier_unfit(seen(age_s=-0.2, age_bound_s=0.01), 0.3) == (
+        "carrier state stamped 0.20 s ahead of the carrier's clock (bound 0.010 s): its stamps and its round trips "
+        "disagree")
     assert carrier_unfit(seen(untrusted="settling: after a resync"), 0.3) == \
         "carrier feed not trusted (settling: after a resync)"
     assert carrier_unfit(Observation(t_s=10.0, vehicle=None, carrier=None), 0.3) == "no carrier state"
