@@ -55,10 +55,11 @@ class TickRow:
     P the law's potential gradient (NaN outside riding and navigation); relative the law's
     ``u_p - u_c`` and desired its command [m/s]; setpoint the :class:`~mission.core.setpoint.Setpoint`
     sent (None: nothing sent; its velocity is the CSV's u_cmd); safety_acted whether a filter
-    changed the command; carrier_age_s [s] the sample's age;
-    mode, armed the vehicle's; anchor the latched separation point [m] (None before); course the
-    carrier's course (horizontal unit vector NED) while a recovery brings the passenger home
-    (None otherwise); events what happened on this tick (phase change first), as text.
+    changed the command; carrier_age_s [s] the sample's age (since the carrier measured it once
+    its clock offset is known, else since it arrived); mode, armed the vehicle's; anchor the
+    latched separation point [m] (None before); course the carrier's course (horizontal unit
+    vector NED) while a recovery brings the passenger home (None otherwise); events what
+    happened on this tick (phase change first), as text.
     The CSV holds the columns of :data:`COLUMNS`; the arrays are never written to after the row
     is made (a sink may read them on another thread).
     """

@@ -271,9 +271,15 @@ def run_demo(config: str, speed: float, pairs: int, log_root: Path, plot_path: s
                     s["recovery_plot"] = str(recovery)
             except MarsupialError as exc:
                 s["plot_error"] = str(exc)
-    ok = all(s.get("p1") and s.get("p2") and s.get("p3") and s["mission_exit_code"] == 0
+    return exit_code(summaries), summaries
+
+
+def exit_code(summaries: list[dict]) -> int:
+    """0 when every pair held P1-P3, its mission exited 0, a passenger that returned docked again,
+    and no deck crash was recorded by the world (whatever the mission believed); else 1."""
+    ok = all(s.get("p1") and s.get("p2") and s.get("p3") and s.get("mission_exit_code") == 0
              and s.get("docked_again", True) and not s.get("deck_crash") for s in summaries)
-    return (0 if ok else 1), summaries
+    return 0 if ok else 1
 
 
 def deck_truth(path: Path) -> dict:
@@ -284,7 +290,9 @@ def deck_truth(path: Path) -> dict:
     if not path.exists():
         return {}
     deck = json.loads(path.read_text()).get("deck") or {}
-    touchdowns = [t for t in deck.get("touchdowns") or [] if t.get("t_s", 0.0) > 0.5]  # not standing on it at the start
+    touchdowns = list(deck.get("touchdowns") or [])
+    if touchdowns and touchdowns[0].get("vertical_speed_m_s") == 0.0 and touchdowns[0].get("horizontal_speed_m_s") == 0.0:
+        touchdowns = touchdowns[1:]  # standing on it when the deck was first known, not a landing
     out: dict = {"deck_touchdown_m": touchdowns[-1]["horizontal_error_m"] if touchdowns else None,
                  "deck_crash": deck.get("crash")}
     if out["deck_crash"]:

@@ -8,8 +8,10 @@ dropped and counted per reason (``feed.counters``), never a crash and never retu
 :class:`CarrierFeed` binds to one source and gates each state (:mod:`mission.bus.gate`);
 :class:`PassengerFeed` accepts only a strictly greater ``seq`` with a stamp not older. When the
 sender's liveliness token goes away the ordering and the binding are forgotten (a restarted
-sender counts from 0 again). ``latest()`` returns the newest accepted sample with its age on the
-local clock (``age_s``, ``stale = age_s > max_age_s``); the caller decides what stale means.
+sender counts from 0 again). ``latest()`` returns the newest accepted sample with its age
+(``age_s``; a carrier state's since the carrier measured it, once its clock offset is known:
+:class:`ReceivedCarrierState`; ``stale``: older than ``max_age_s``); the caller decides what
+stale means.
 More: docs/wire.md.
 """
 from __future__ import annotations
@@ -24,7 +26,7 @@ import numpy as np
 import zenoh
 
 from mission.time.clock import Clock
-from mission.time.offset import OffsetEstimate, sample_age
+from mission.time.offset import DelayWatch, OffsetEstimate, sample_age
 from mission.config.schema import ZenohSection
 from mission.errors import BusError
 from mission.bus.auth import BusAuth
@@ -299,6 +301,7 @@ class CarrierFeed(_Feed[CarrierState]):
     ) -> None:
         check_encoding(encoding)
         self._offset = offset
+        self.delay = DelayWatch()  # the states' transit [s], once the offset is known
         self.encoding = encoding
         self._use_seq = encoding == "json"  # Odometry has no sequence number: order by stamp
         self.gate = FeedGate(limits or GateLimits(max_speed_m_s=3.0), use_seq=self._use_seq)
@@ -325,6 +328,11 @@ class CarrierFeed(_Feed[CarrierState]):
         reason = self.gate.offer(source, Sample(value.seq, value.stamp_s, value.position, value.velocity_ned_m_s, rx))
         if self.gate.bound != was:
             log.info("carrier feed bound to source %s on %s", self.gate.bound, key)
+        estimate = self._offset.estimate() if reason is None and self._offset is not None else None
+        if estimate is not None:
+            growing = self.delay.add(rx, sample_age(rx, value.stamp_s, estimate))
+            if growing is not None:
+                log.warning("carrier feed on %s: %s (a relay holding them? a congested link?)", key, growing)
         return reason
 
     def _describe(self, value: CarrierState) -> str:
@@ -340,7 +348,8 @@ class CarrierFeed(_Feed[CarrierState]):
         return {"bound_source": self.gate.bound, "rejected_sources": dict(self.gate.rejected_sources),
                 "resyncs": self.gate.resyncs, "jumps": self.gate.jumps, "settles": self.gate.settles,
                 "contests": self.gate.contests,
-                "clock_offset": None if self._offset is None else self._offset.snapshot()}
+                "clock_offset": None if self._offset is None else self._offset.snapshot(),
+                "delay_growths": self.delay.growths, "delay_growth_last": self.delay.last or None}
 
     def _received_extra(self, now: float) -> dict[str, Any]:
         return {"untrusted": self.gate.distrust(now)}

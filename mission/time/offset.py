@@ -119,3 +119,35 @@ def sample_age(now_s: float, stamp_s: float, offset: OffsetEstimate) -> float:
     """Age [s] at ``now_s`` (our clock) of a sample the carrier stamped ``stamp_s`` (its clock):
     the time since it measured it, good to ``offset.bound_s``."""
     return now_s - (stamp_s - offset.offset_s)
+
+
+@dataclass
+class DelayWatch:
+    """Whether the carrier's states arrive later than they did: each accepted state's transit
+    ``rx - (stamp - offset)`` [s] against the least of the last ``window_s`` [s]. A transit more
+    than ``growth_s`` [s] above that least is a growing delay (a relay holding the states, a
+    congested link): :meth:`add` returns its reason once per episode (it ends when the transit
+    falls back within ``growth_s / 2``), and counts it in :attr:`growths`."""
+
+    window_s: float = 10.0
+    growth_s: float = 0.1
+    growths: int = 0
+    last: str = ""
+    _recent: list[tuple[float, float]] = field(default_factory=list)  # (rx [s], transit [s])
+    _growing: bool = False
+
+    def add(self, rx_s: float, transit_s: float) -> str | None:
+        self._recent = [(t, d) for t, d in self._recent if rx_s - t <= self.window_s] + [(rx_s, transit_s)]
+        least = min(d for _, d in self._recent)
+        if transit_s - least > self.growth_s:
+            if self._growing:
+                return None
+            self._growing = True
+            self.growths += 1
+            self.last = (f"carrier states arrive {transit_s:.2f} s after the carrier measured them, "
+                         f"{transit_s - least:.2f} s later than within the last {self.window_s:g} s")
+            return self.last
+        if transit_s - least <= self.growth_s / 2:
+            self._growing = False
+        return None
+

@@ -84,6 +84,8 @@ def test_states_late_by_045_s_on_the_landing_never_crash(tmp_path: Path) -> None
     print(_report(out))
     deck, s = out["deck"], out["summary"]
     assert out["relay"]["max_delay_s"] >= 0.45 - 1e-6, out["relay"]
+    feed = s["carrier_feed"]
+    assert feed["delay_growths"] >= 1 and "0.4" in feed["delay_growth_last"], feed  # the growing delay, named
     assert deck["crash"] is None, _report(out)
     if s.get("docked_again"):
         assert deck["touchdowns"], _report(out)
@@ -102,3 +104,4 @@ def test_states_late_by_15_s_on_the_landing_fall_back(tmp_path: Path) -> None:
     assert deck["crash"] is None, _report(out)
     assert not s.get("docked_again"), _report(out)
     assert str(s.get("recovery_outcome", "")).startswith("fallback"), _report(out)
+    assert not deck["touchdowns"][1:], _report(out)  # the deck agrees: never touched after the start

@@ -57,3 +57,15 @@ def test_round_trips_that_cannot_be_are_refused_with_a_reason():
 def test_age_is_since_the_carrier_measured_the_sample():
     assert sample_age(10.0, 9.55 + OFFSET_S, OffsetEstimate(OFFSET_S, 0.0)) == pytest.approx(0.45)
     assert sample_age(10.0, 9.98, SHARED_CLOCK) == pytest.approx(0.02)  # lockstep: one clock
+
+
+def test_a_delay_that_grows_is_a_fault_with_a_reason_once_per_episode():
+    from mission.time.offset import DelayWatch
+
+    watch = DelayWatch(window_s=10.0, growth_s=0.1)
+    assert all(watch.add(0.1 * i, 0.02) is None for i in range(20))  # a steady 20 ms
+    why = watch.add(2.0, 0.47)  # a relay starts holding the states 0.45 s
+    assert why == "carrier states arrive 0.47 s after the carrier measured them, 0.45 s later than within the last 10 s"
+    assert watch.add(2.1, 0.47) is None and watch.growths == 1  # the same episode
+    assert watch.add(2.2, 0.03) is None  # back to normal ...
+    assert watch.add(2.3, 0.5) is not None and watch.growths == 2  # ... and a second episode
