@@ -16,8 +16,10 @@ on our simulated clock: the offset is 0 exactly (:data:`SHARED_CLOCK`).
 
 Faults (:meth:`OffsetEstimator.add` returns the reason, the round trip is not used): a round trip
 longer than ``max_round_trip_s`` (``rtt``), one that does not fit the round trips before it
-(``inconsistent``: the carrier's clock jumped, or an answer was forged or replayed), one that
-answers no ping of ours (``unknown``, counted by the I/O side). Times in [s].
+(``inconsistent``: the carrier's clock jumped, or an answer was forged or replayed; after
+``restart_after`` of them in a row the estimator starts over from the new ones: a restarted
+carrier's clock, counted as ``restarted``), one that answers no ping of ours (``unknown``, counted
+by the I/O side). Times in [s].
 """
 from __future__ import annotations
 
@@ -80,8 +82,10 @@ class OffsetEstimator:
     max_round_trip_s: float = 1.0
     drift: float = 1e-4
     slack_s: float = 0.002
+    restart_after: int = 4
     trips: list[RoundTrip] = field(default_factory=list)
     refused: dict[str, int] = field(default_factory=dict)
+    _inconsistent_run: int = 0
 
     def add(self, trip: RoundTrip) -> str | None:
         """Take ``trip``; the reason it was refused (``rtt``, ``inconsistent``), or None."""
@@ -93,7 +97,14 @@ class OffsetEstimator:
             current = self.estimate(trip.received_s)
             new = trip.estimate
             if current is not None and abs(new.offset_s - current.offset_s) > current.bound_s + new.bound_s + self.slack_s:
-                why = "inconsistent"
+                self._inconsistent_run += 1
+                if self._inconsistent_run < self.restart_after:
+                    why = "inconsistent"
+                else:  # the carrier's clock has moved for good (a restarted carrier): start over
+                    self.refused["restarted"] = self.refused.get("restarted", 0) + 1
+                    self.trips, self._inconsistent_run = [], 0
+            else:
+                self._inconsistent_run = 0
         if why is not None:
             self.refused[why] = self.refused.get(why, 0) + 1
             return why

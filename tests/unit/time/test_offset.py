@@ -54,6 +54,17 @@ def test_round_trips_that_cannot_be_are_refused_with_a_reason():
     assert est.refused == {"rtt": 2, "inconsistent": 1}
 
 
+def test_a_carrier_clock_that_moved_for_good_is_taken_after_a_few_round_trips():
+    """A restarted carrier counts from another origin: the first round trips that disagree are
+    refused (a forged answer would look the same), ``restart_after`` in a row start it over."""
+    est = OffsetEstimator(restart_after=4)
+    est.add(trip(1.0, 0.01, 0.01))
+    moved = [RoundTrip(2.0 + i, 2.0 + i + 0.01 + 50.0, 2.02 + i) for i in range(4)]  # its clock now 50 s ahead
+    assert [est.add(t) for t in moved] == ["inconsistent", "inconsistent", "inconsistent", None]
+    got = est.estimate(6.0)
+    assert got is not None and got.offset_s == pytest.approx(50.0) and est.refused["restarted"] == 1
+
+
 def test_age_is_since_the_carrier_measured_the_sample():
     assert sample_age(10.0, 9.55 + OFFSET_S, OffsetEstimate(OFFSET_S, 0.0)) == pytest.approx(0.45)
     assert sample_age(10.0, 9.98, SHARED_CLOCK) == pytest.approx(0.02)  # lockstep: one clock
