@@ -206,7 +206,7 @@ def _carrier_obs(received: Any, alive: bool | None) -> CarrierObs | None:
     return CarrierObs(position_ned_m=np.asarray(st.position, dtype=float),
                       velocity_ned_m_s=np.asarray(st.velocity_ned_m_s, dtype=float), age_s=received.age_s, alive=alive,
                       acceleration_ned_m_s2=st.acceleration_ned_m_s2, yaw_rad=st.yaw_rad,
-                      untrusted=getattr(received, "untrusted", None))
+                      untrusted=getattr(received, "untrusted", None), age_bound_s=getattr(received, "age_bound_s", 0.0))
 
 
 @dataclass(frozen=True)

@@ -55,12 +55,13 @@ class TickRow:
     P the law's potential gradient (NaN outside riding and navigation); relative the law's
     ``u_p - u_c`` and desired its command [m/s]; setpoint the :class:`~mission.core.setpoint.Setpoint`
     sent (None: nothing sent; its velocity is the CSV's u_cmd); safety_acted whether a filter
-    changed the command; carrier_age_s [s] the sample's age;
-    mode, armed the vehicle's; anchor the latched separation point [m] (None before); course the
-    carrier's course (horizontal unit vector NED) while a recovery brings the passenger home
-    (None otherwise); events what happened on this tick (phase change first), as text; yaw_c,
-    yaw_p the carrier's and the vehicle's heading [rad] from north (None: not known; the flight
-    data's transforms, not the CSV). The CSV holds the columns of :data:`COLUMNS`; the arrays are never written to after the row
+    changed the command; carrier_age_s [s] the sample's age (since the carrier measured it once
+    its clock offset is known, else since it arrived); mode, armed the vehicle's; anchor the
+    latched separation point [m] (None before); course the carrier's course (horizontal unit
+    vector NED) while a recovery brings the passenger home (None otherwise); events what
+    happened on this tick (phase change first), as text; yaw_c, yaw_p the carrier's and the
+    vehicle's heading [rad] from north (None: not known; the flight data's transforms, not the
+    CSV). The CSV holds the columns of :data:`COLUMNS`; the arrays are never written to after the row
     is made (a sink may read them on another thread).
     """
 
@@ -430,7 +431,8 @@ def _switch_jump(phase: np.ndarray, u_cmd: np.ndarray) -> float | None:
 def _recovery_summary(r: FlightRecord, x_p: np.ndarray, v_p: np.ndarray, v_c: np.ndarray,
                       dock: np.ndarray) -> dict[str, Any]:
     """The recovery's figures (mission.final_action = "return"): docked_again, recovery_outcome,
-    contact (from mission.json's ``recovered``), carrier_speed_on_approach_m_s ([min, max] [m/s] of
+    contact (from mission.json's ``recovered``; riding on a deck, a contact counts only once the
+    passenger reported itself landed on it: ``confirmed_s``), carrier_speed_on_approach_m_s ([min, max] [m/s] of
     the carrier's horizontal speed during APPROACH) and deck_violations: ticks of the recovery's
     flying phases before contact where the vehicle was at or below the dock point's height within
     the deck (recovery.deck_radius_m) without meeting the contact conditions."""
@@ -438,8 +440,12 @@ def _recovery_summary(r: FlightRecord, x_p: np.ndarray, v_p: np.ndarray, v_c: np
     if r.info.get("final_action") != "return" or params is None:
         return {}
     contact = None if rec is None else rec.get("contact")
-    out: dict[str, Any] = {"docked_again": contact is not None}
-    if contact is not None:
+    # on a deck a dock is confirmed by the passenger's own landed state, never by the carrier's word
+    unconfirmed = contact is not None and r.info.get("ride") == "deck" and "confirmed_s" not in contact
+    out: dict[str, Any] = {"docked_again": contact is not None and not unconfirmed}
+    if unconfirmed:
+        out["recovery_outcome"] = "contact not confirmed: the passenger never reported itself landed on the deck"
+    elif contact is not None:
         out["recovery_outcome"] = "docked"
     elif rec is not None and rec.get("fallback"):
         out["recovery_outcome"] = f"fallback: {rec['fallback']}"

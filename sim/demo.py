@@ -204,7 +204,8 @@ def start_pair(config: str, name: str, zenoh_ep: str, speed: float, log_root: Pa
     vehicle = subprocess.Popen(_python_cli("mock-vehicle", "--mavlink", "udpin:127.0.0.1:0", "--target",
                                            f"udpout:127.0.0.1:{mav_port}", "--speed", str(speed), "--start-ned",
                                            vehicle_start, "--deck", name, "--deck-height", str(deck_height),
-                                           "--zenoh-connect", zenoh_ep, *mav_signed, *mode),
+                                           "--zenoh-connect", zenoh_ep, "--summary", str(pair.log_dir / "vehicle.json"),
+                                           *mav_signed, *mode),
                                stderr=err)
     stack.callback(stop_process, vehicle)
     live_args = [] if live is None else ["--live", f"{live.host}:{live.port}"]
@@ -271,6 +272,7 @@ def run_demo(config: str, speed: float, pairs: int, log_root: Path, plot_path: s
             c = json.loads(carrier_summary.read_text())
             s["carrier_stop_target_distance_m"] = c.get("stopped_target_distance_m")
             s["carrier_braking_distance_m"] = c.get("braking_distance_m")
+        s.update(deck_truth(p.log_dir / "vehicle.json"))
         s.update(recovery_cells(s))
         summaries.append(s)
         if plot_path and (p.log_dir / "record.csv").exists():
@@ -283,9 +285,42 @@ def run_demo(config: str, speed: float, pairs: int, log_root: Path, plot_path: s
                     s["recovery_plot"] = str(recovery)
             except MarsupialError as exc:
                 s["plot_error"] = str(exc)
-    ok = all(s.get("p1") and s.get("p2") and s.get("p3") and s["mission_exit_code"] == 0
-             and s.get("docked_again", True) for s in summaries)
-    return (0 if ok else 1), summaries
+    return exit_code(summaries), summaries
+
+
+def exit_code(summaries: list[dict]) -> int:
+    """0 when every pair held P1-P3, its mission exited 0, a passenger that returned docked again,
+    and no deck crash was recorded by the world (whatever the mission believed); else 1."""
+    ok = all(s.get("p1") and s.get("p2") and s.get("p3") and s.get("mission_exit_code") == 0
+             and s.get("docked_again", True) and not s.get("deck_crash") for s in summaries)
+    return 0 if ok else 1
+
+
+def deck_truth(path: Path) -> dict:
+    """The world's truth beside the mission's belief, from the mock vehicle's ``--summary``: where
+    it last touched the deck, from the deck's true centre [m] (``deck_touchdown_m``), and a crash
+    (``deck_crash``: why). A crash overrides the mission's account: the recovery's outcome is
+    "crash", the passenger did not dock again."""
+    if not path.exists():
+        return {}
+    deck = json.loads(path.read_text()).get("deck") or {}
+    touchdowns = list(deck.get("touchdowns") or [])
+    if touchdowns and touchdowns[0].get("vertical_speed_m_s") == 0.0 and touchdowns[0].get("horizontal_speed_m_s") == 0.0:
+        touchdowns = touchdowns[1:]  # standing on it when the deck was first known, not a landing
+    out: dict = {"deck_touchdown_m": touchdowns[-1]["horizontal_error_m"] if touchdowns else None,
+                 "deck_crash": deck.get("crash")}
+    if out["deck_crash"]:
+        out.update(recovery_outcome=f"crash: {out['deck_crash']}", docked_again=False,
+                   deck_crash_t_s=next(t["t_s"] for t in reversed(touchdowns) if t.get("crash")))
+    return out
+
+
+def _crashed_leg(s: dict, legs: list[dict]) -> int | None:
+    """The index of the leg whose contact came nearest the deck crash (simulated time), or None."""
+    at = s.get("deck_crash_t_s")
+    times = [(abs((leg.get("contact") or {}).get("time_s", float("inf")) - at), i) for i, leg in enumerate(legs)] \
+        if at is not None else []
+    return min(times)[1] if times else None
 
 
 # The recovery's rows (mission.final_action = "return"), shown when a pair tried one.
@@ -298,6 +333,7 @@ RECOVERY_ROWS = [
     ("carrier speed on the approach [m/s]", "carrier_speed_on_approach"),
     ("max command jump at a phase switch [m/s]", "max_phase_switch_jump_m_s"),
     ("deck touched outside contact [ticks]", "deck_violations"),
+    ("truth: last touchdown from the deck's centre [m]", "deck_touchdown_m"),
 ]
 RECOVERY_KEYS = {key for _, key in RECOVERY_ROWS}
 DECK_KEYS = {"takeoff_command_jump_m_s", "takeoff_max_command_step_m_s", "takeoff_clear_s"}  # shown when a pair rode the deck
@@ -350,9 +386,13 @@ def columns(summaries: list[dict]) -> list[dict]:
         if len(legs) < 2:
             out.append(s)
             continue
-        for leg in legs:
-            out.append({**leg, **recovery_cells(leg), "pair": f"{s['pair']} leg {leg['leg'] + 1}",
-                        "leg_outcome": leg["outcome"], "mission_exit_code": s.get("mission_exit_code")})
+        crashed = _crashed_leg(s, legs)
+        for i, leg in enumerate(legs):
+            crash = {"deck_crash": s["deck_crash"], "deck_touchdown_m": s.get("deck_touchdown_m"),
+                     "recovery_outcome": f"crash: {s['deck_crash']}"} if i == crashed else {}
+            out.append({**leg, **recovery_cells(leg), **crash, "pair": f"{s['pair']} leg {leg['leg'] + 1}",
+                        "leg_outcome": f"crash: {s['deck_crash']}" if crash else leg["outcome"],
+                        "mission_exit_code": s.get("mission_exit_code")})
     return out
 
 
@@ -363,6 +403,8 @@ def outcome_text(s: dict) -> str:
         return str(s["leg_outcome"])
     code = s.get("mission_exit_code")
     phase = s.get("phase")
+    if s.get("deck_crash"):
+        return f"crash ({code})"
     if phase == "DONE":
         return f"done ({code})"
     if s.get("reason"):
@@ -374,7 +416,10 @@ def verdict_lines(summaries: list[dict]) -> list[str]:
     """One line per pair that failed, naming the properties that did not hold and why."""
     lines = []
     for s in summaries:
-        if s.get("docked_again") is False:
+        if s.get("deck_crash"):
+            lines.append(f"{s['pair']}: the passenger CRASHED on the carrier's deck ({s['deck_crash']}), whatever the "
+                         f"mission believed (its contact: {(s.get('contact') or {}).get('horizontal_error_m')} m)")
+        elif s.get("docked_again") is False:
             lines.append(f"{s['pair']}: the passenger did not dock on the carrier again ({s.get('recovery_outcome')})")
         failed = [k for k in ("p1", "p2", "p3") if not s.get(k)]
         if not failed:

@@ -8,21 +8,25 @@ dropped and counted per reason (``feed.counters``), never a crash and never retu
 :class:`CarrierFeed` binds to one source and gates each state (:mod:`mission.bus.gate`);
 :class:`PassengerFeed` accepts only a strictly greater ``seq`` with a stamp not older. When the
 sender's liveliness token goes away the ordering and the binding are forgotten (a restarted
-sender counts from 0 again). ``latest()`` returns the newest accepted sample with its age on the
-local clock (``age_s``, ``stale = age_s > max_age_s``); the caller decides what stale means.
+sender counts from 0 again). ``latest()`` returns the newest accepted sample with its age
+(``age_s``; a carrier state's since the carrier measured it, once its clock offset is known:
+:class:`ReceivedCarrierState`; ``stale``: older than ``max_age_s``); the caller decides what
+stale means.
 More: docs/wire.md.
 """
 from __future__ import annotations
 
+import dataclasses
 import logging
 import threading
 from dataclasses import dataclass
-from typing import Any, Callable, Generic, TypeVar
+from typing import Any, Callable, Generic, Protocol, TypeVar
 
 import numpy as np
 import zenoh
 
 from mission.time.clock import Clock
+from mission.time.offset import DelayWatch, OffsetEstimate, sample_age
 from mission.config.schema import ZenohSection
 from mission.errors import BusError
 from mission.bus.auth import BusAuth
@@ -37,6 +41,15 @@ log = logging.getLogger("mission.bus.bridge")  # one logger name for the whole b
 MAX_PAYLOAD_BYTES = 8192
 
 T = TypeVar("T")
+
+
+class OffsetSource(Protocol):
+    """Where the carrier's clock offset comes from: ``estimate()`` now (None: not known yet) and
+    ``snapshot()`` (counters for summary.json)."""
+
+    def estimate(self) -> OffsetEstimate | None: ...
+
+    def snapshot(self) -> dict[str, Any]: ...
 
 
 @dataclass(frozen=True)
@@ -59,9 +72,17 @@ class Received(Generic[T]):
 class ReceivedCarrierState(Received[CarrierState]):
     """A carrier state, always in local NED (``value.frame == "local_ned"``); ``untrusted``: why
     the feed does not trust it yet (just bound, a resync, a contested source:
-    :meth:`mission.bus.gate.FeedGate.distrust`), None when it does."""
+    :meth:`mission.bus.gate.FeedGate.distrust`), None when it does.
+
+    With the carrier's clock offset known (the feed's ``offset``), ``age_s`` [s] is the time since
+    the carrier *measured* the state (``now - (stamp - offset)``, :func:`mission.time.offset.sample_age`),
+    good to ``age_bound_s`` [s]; ``rx_age_s`` [s] is always the time since it arrived. Without it
+    (no round trip yet) ``age_s`` is the receive age and ``age_bound_s`` is None: the measurement
+    time is unknown."""
 
     untrusted: str | None = None
+    rx_age_s: float = 0.0
+    age_bound_s: float | None = None
 
     @property
     def state(self) -> CarrierState:
@@ -277,8 +298,11 @@ class CarrierFeed(_Feed[CarrierState]):
         max_age_s: float = 0.5,
         limits: GateLimits | None = None,
         auth: BusAuth | None = None,
+        offset: OffsetSource | None = None,
     ) -> None:
         check_encoding(encoding)
+        self._offset = offset
+        self.delay = DelayWatch()  # the states' transit [s], once the offset is known
         self.encoding = encoding
         self._use_seq = encoding == "json"  # Odometry has no sequence number: order by stamp
         self.gate = FeedGate(limits or GateLimits(max_speed_m_s=3.0), use_seq=self._use_seq)
@@ -291,17 +315,25 @@ class CarrierFeed(_Feed[CarrierState]):
     def from_section(
         cls, session: zenoh.Session, section: ZenohSection, clock: Clock, *, max_age_s: float,
         origin: GeoOrigin | None = None, limits: GateLimits | None = None, auth: BusAuth | None = None,
+        offset: OffsetSource | None = None,
     ) -> "CarrierFeed":
         """The feed a :class:`ZenohSection` describes (pair, encoding, carrier_key); ``auth``: the
-        pair's signing key (:func:`mission.bus.auth.bus_auth`), None for unsigned."""
+        pair's signing key (:func:`mission.bus.auth.bus_auth`), None for unsigned; ``offset``: where
+        the carrier's clock offset comes from (:class:`mission.bus.timesync.ClockPing`, or
+        :class:`mission.time.offset.SharedClock` in lockstep), None: ages are receive ages."""
         return cls(session, section.pair, clock, encoding=section.encoding, key=section.carrier_key,
-                   origin=origin, max_age_s=max_age_s, limits=limits, auth=auth)
+                   origin=origin, max_age_s=max_age_s, limits=limits, auth=auth, offset=offset)
 
     def _admit(self, value: CarrierState, key: str, source: str, rx: float) -> str | None:
         was = self.gate.bound
         reason = self.gate.offer(source, Sample(value.seq, value.stamp_s, value.position, value.velocity_ned_m_s, rx))
         if self.gate.bound != was:
             log.info("carrier feed bound to source %s on %s", self.gate.bound, key)
+        estimate = self._offset.estimate() if reason is None and self._offset is not None else None
+        if estimate is not None:
+            growing = self.delay.add(rx, sample_age(rx, value.stamp_s, estimate))
+            if growing is not None:
+                log.warning("carrier feed on %s: %s (a relay holding them? a congested link?)", key, growing)
         return reason
 
     def _describe(self, value: CarrierState) -> str:
@@ -316,7 +348,9 @@ class CarrierFeed(_Feed[CarrierState]):
     def _extra_counters(self) -> dict[str, Any]:
         return {"bound_source": self.gate.bound, "rejected_sources": dict(self.gate.rejected_sources),
                 "resyncs": self.gate.resyncs, "jumps": self.gate.jumps, "settles": self.gate.settles,
-                "contests": self.gate.contests}
+                "contests": self.gate.contests,
+                "clock_offset": None if self._offset is None else self._offset.snapshot(),
+                "delay_growths": self.delay.growths, "delay_growth_last": self.delay.last or None}
 
     def _received_extra(self, now: float) -> dict[str, Any]:
         return {"untrusted": self.gate.distrust(now)}
@@ -336,8 +370,17 @@ class CarrierFeed(_Feed[CarrierState]):
         return value.seq, value.stamp_s
 
     def latest(self) -> ReceivedCarrierState | None:  # type: ignore[override]
-        """The newest accepted carrier state (local NED) with its age, or None."""
-        return super().latest()  # type: ignore[return-value]
+        """The newest accepted carrier state (local NED) with its age (measurement age once the
+        carrier's clock offset is known; see :class:`ReceivedCarrierState`), or None."""
+        got: ReceivedCarrierState | None = super().latest()  # type: ignore[assignment]
+        if got is None:
+            return None
+        estimate = self._offset.estimate() if self._offset is not None else None
+        if estimate is None:
+            return dataclasses.replace(got, rx_age_s=got.age_s)
+        age = sample_age(got.rx_time_s + got.age_s, got.value.stamp_s, estimate)
+        return dataclasses.replace(got, age_s=age, rx_age_s=got.age_s, age_bound_s=estimate.bound_s,
+                                   stale=age + estimate.bound_s > self.max_age_s)
 
 
 class PassengerFeed(_Feed[PassengerStatus]):

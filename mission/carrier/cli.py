@@ -26,6 +26,7 @@ from mission.time.clock import Clock, LockstepClock, ScaledClock
 from mission.config.required import CARRIER_FIELDS, require_stated
 from mission.config.schema import Config, load_config, with_overrides
 from mission.bus.lockstep import ZenohUpstream, clock_keys
+from mission.bus.timesync import ClockEcho
 
 log = logging.getLogger(__name__)
 
@@ -68,6 +69,8 @@ def main(cfg: Config, speed: float = 1.0, duration_s: float | None = None, stop_
             stack.callback(backend.close)
             steps = open_flight_data(cfg, clock, mcap_path, stack, log_epoch_ns)
             with CarrierController(cfg, clock, session, backend, steps=steps) as ctl:
+                echo = ClockEcho(session, ctl.pair, clock, ctl.auth)  # the passenger measures our clock's offset
+                stack.callback(echo.close)
                 if steps is not None:
                     steps.set_counters(lambda: ctl.passenger.counters)
                 if isinstance(clock, LockstepClock):
@@ -83,6 +86,7 @@ def main(cfg: Config, speed: float = 1.0, duration_s: float | None = None, stop_
                     report = getattr(backend, "report", None)
                     if report is not None:
                         summary[backend.name] = report()
+                    summary["clock_echo"] = dict(echo.counters)
                     if isinstance(clock, LockstepClock):
                         summary["lockstep"] = clock.counters
                     log.info("carrier %s stopped in mode %s; closest approach to the target %s m, braking distance %s m",

@@ -20,7 +20,10 @@ from mission.config.required import RUN_FIELDS, require_stated
 from mission.config.schema import Config, load_config, with_overrides
 from mission.controller import MissionController, MissionOutcome, mission_info, mission_model
 from mission.errors import ConfigError
+from mission.bus.feeds import OffsetSource
 from mission.bus.gate import GateLimits
+from mission.bus.timesync import ClockPing
+from mission.time.offset import SharedClock
 from mission.mavlink.link import VehicleLink
 from mission.mavlink.env import read_signing_key
 from mission.flightdata.writer import DEFAULT_LIVE, LiveAddress, clock_metadata, is_loopback, parse_live
@@ -54,8 +57,15 @@ def mission_io(cfg: Config, clock: Clock, tlog_path: str | Path | None = None) -
     with ExitStack() as stack:
         session = open_session(cfg.zenoh)
         stack.callback(close_session, session)  # never raises, bounded: the mission's outcome stands
+        offset: OffsetSource
+        if isinstance(clock, LockstepClock):  # the carrier steps on our clock
+            offset = SharedClock()
+        else:
+            ping = ClockPing(session, cfg.zenoh.pair, clock, auth)
+            stack.callback(ping.close)
+            offset = ping
         feed = CarrierFeed.from_section(session, cfg.zenoh, clock, max_age_s=cfg.mission.carrier_timeout_s,
-                                        limits=carrier_limits(cfg), auth=auth)
+                                        limits=carrier_limits(cfg), auth=auth, offset=offset)
         stack.callback(feed.close)
         publisher = PassengerPublisher(session, cfg.zenoh.pair, congestion_for(clock), auth=auth)
         stack.callback(publisher.close)

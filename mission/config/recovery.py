@@ -59,7 +59,12 @@ class RecoverySection(Section):
         description="[m/s] contact: vertical speed relative to the carrier at most this")
     docked_dwell_s: float = Field(1.0, ge=0, le=60, description="[s] contact held this long counts as docked")
     carrier_max_age_s: float = Field(0.3, gt=0, le=10,
-        description="[s] on the approach, a carrier state older than this: go around")
+        description=("[s] the age budget of the approach and the contact: a carrier state measured longer ago than "
+                     "this (with the clock offset's bound) starts no approach, and on one goes around"))
+    carrier_return_max_age_s: float = Field(1.0, gt=0, le=10,
+        description=("[s] the age budget of the return, the holdoff and a go-around: a carrier state measured "
+                     "longer ago than this (with the clock offset's bound) does not count as fresh (its dock point "
+                     "is predicted with its known age until then); none fresh for carrier_lost_s: fall back"))
     carrier_max_accel_m_s2: float = Field(1.5, gt=0, le=50,
         description="[m/s^2] on the approach, the carrier accelerating harder than this: go around")
     carrier_max_turn_rate_deg_s: float = Field(20.0, gt=0, le=360,

@@ -65,6 +65,7 @@ from mission.phases.types import (
     MissionState,
     Observation,
     VehicleObs,
+    describe_age,
     dock_point,
     enter,
 )
@@ -91,7 +92,7 @@ def _vehicle_lost(v: VehicleObs | None, m: MissionModel) -> bool:
 
 def _carrier_ok(obs: Observation, m: MissionModel) -> bool:
     c = obs.carrier
-    return c is not None and c.age_s <= m.carrier_timeout_s and c.alive is not False
+    return c is not None and c.worst_age_s <= m.carrier_timeout_s and c.alive is not False
 
 
 def _hold_decision(state: MissionState, obs: Observation) -> Decision:
@@ -136,7 +137,7 @@ def _step(state: MissionState, obs: Observation, m: MissionModel) -> tuple[Missi
     handler = HANDLERS[state.phase]
     state, decision = handler(state, obs, leg_model)
     c = obs.carrier
-    if c is not None and c.age_s <= m.carrier_timeout_s and c.untrusted is None and state.phase.flying:
+    if c is not None and c.worst_age_s <= m.carrier_timeout_s and c.untrusted is None and state.phase.flying:
         decision = replace(decision, home_ned_m=c.position_ned_m + c.velocity_ned_m_s * c.age_s)
     return state, decision
 
@@ -248,7 +249,7 @@ def _carrier_detail(obs: Observation, m: MissionModel) -> str:
         return "no carrier state received"
     if c.alive is False:
         return "carrier liveliness token gone"
-    return f"carrier state {c.age_s:.2f} s old (limit {m.carrier_timeout_s:g} s)"
+    return f"carrier state {describe_age(c)} (limit {m.carrier_timeout_s:g} s)"
 
 
 def live_geometry_problem(dock: np.ndarray, vehicle_ned_m: np.ndarray, m: MissionModel) -> str | None:

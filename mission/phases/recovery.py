@@ -56,6 +56,7 @@ from mission.phases.types import (
     Observation,
     RecoveryModel,
     RecoveryState,
+    describe_age,
     dock_point,
     enter,
 )
@@ -63,6 +64,7 @@ from mission.phases.types import (
 PARKED_SPEED_M_S = 0.1  # [m/s] the carrier counts as parked below this
 REFERENCE_AT_GOAL_M = 0.2  # [m] a reference this close to its goal has reached it
 CARRIER_RATE_WINDOW_S = 0.25  # [s] the carrier's acceleration and turn rate are measured over this
+FUTURE_SLACK_S = 0.05  # [s] a carrier state stamped further ahead of its clock than the bound and this: a fault
 
 
 def _model(m: MissionModel) -> RecoveryModel:
@@ -88,15 +90,22 @@ def begin(state: MissionState, obs: Observation, m: MissionModel, why: str) -> t
 
 def carrier_unfit(obs: Observation, limit_s: float) -> str | None:
     """Why the carrier's state is no state to dock on, or None when it is one: present, its
-    liveliness token not gone, younger than ``limit_s`` [s] (recovery.carrier_max_age_s), and
-    trusted by the feed (not just bound, resynced or contested: ``CarrierObs.untrusted``)."""
+    liveliness token not gone, measured (its age known: a round trip gave the carrier's clock)
+    no longer than ``limit_s`` [s] ago (recovery.carrier_max_age_s) with the bound, not stamped
+    ahead of the carrier's clock beyond the bound (:data:`FUTURE_SLACK_S`), and trusted by the
+    feed (not just bound, resynced or contested: ``CarrierObs.untrusted``)."""
     c = obs.carrier
     if c is None:
         return "no carrier state"
     if c.alive is False:
-        return f"carrier liveliness token gone (its last state {c.age_s:.2f} s old)"
-    if c.age_s > limit_s:
-        return f"carrier state {c.age_s:.2f} s old (recovery.carrier_max_age_s = {limit_s:g})"
+        return f"carrier liveliness token gone (its last state {describe_age(c)})"
+    if c.age_bound_s is None:
+        return "the carrier's clock is not known (no round trip yet): its state's age is unknown"
+    if c.worst_age_s > limit_s:
+        return f"carrier state {describe_age(c)} (recovery.carrier_max_age_s = {limit_s:g})"
+    if c.age_s < -(c.age_bound_s + FUTURE_SLACK_S):
+        return (f"carrier state stamped {-c.age_s:.2f} s ahead of the carrier's clock (bound {c.age_bound_s:.3f} s): "
+                "its stamps and its round trips disagree")
     if c.untrusted is not None:
         return f"carrier feed not trusted ({c.untrusted})"
     return None
@@ -133,7 +142,7 @@ def _observe_carrier(rec: RecoveryState, obs: Observation, r: RecoveryModel, t: 
     if c is None:
         return rec
     rec = replace(rec, course=course(c.velocity_ned_m_s, rec.course))
-    if _carrier_fresh(obs, r.carrier_max_age_s):
+    if _carrier_fresh(obs, r.carrier_return_max_age_s):
         rec = replace(rec, carrier_seen_s=t)
     sampled = t - c.age_s  # when the carrier took this sample (the rates are measured between samples)
     if rec.carrier_t_s is None or sampled - rec.carrier_t_s >= CARRIER_RATE_WINDOW_S:
@@ -251,14 +260,23 @@ def holdoff(state, obs, m, events=()):
     settled = (float(norm(v.position_ned_m - h)) <= r.settle_radius_m
                and float(norm(v.velocity_ned_m_s - v_c)) <= r.settle_speed_m_s
                and float(norm(v_c[:2])) >= r.settle_carrier_speed_m_s
-               and _carrier_fresh(obs, r.carrier_max_age_s) and _carrier_unsteady(rec, obs, r, t) is None)
+               and _carrier_unsteady(rec, obs, r, t) is None)
+    refused = carrier_unfit(obs, r.carrier_max_age_s)
+    c = obs.carrier
+    if refused is not None and not (c.age_bound_s is None or c.worst_age_s > r.carrier_max_age_s):
+        settled = False  # not trusted, or its token gone: wait (an age beyond the approach's budget refuses one)
     since = (rec.settled_since_s if rec.settled_since_s is not None else t) if settled else None
     rec = replace(rec, settled_since_s=since)
     evs = tuple(events)
     if since is not None and t - since >= r.settle_dwell_s:
+        # settled: an approach begins, or is refused (and counts) on a carrier state older than its budget
         if rec.attempts >= r.max_attempts:
-            return fallback(replace(state, recovery=rec), obs, m, f"{rec.attempts} approaches without docking", events)
+            last = "" if refused is None else f"; the last refused: {refused}"
+            return fallback(replace(state, recovery=rec), obs, m, f"{rec.attempts} approaches without docking{last}",
+                            events)
         rec = replace(rec, attempts=rec.attempts + 1, s=0.0, descent=None, settled_since_s=None)
+        if refused is not None:
+            return _fly(state, obs, m, h, v_c, r.returning, rec, (*evs, f"approach {rec.attempts} refused: {refused}"))
         state = enter(state, Phase.APPROACH, t)
         evs += (f"approach {rec.attempts} begins",)
     return _fly(state, obs, m, h, v_c, r.returning, rec, evs)
@@ -379,6 +397,10 @@ def docked(state, obs, m, events=()):
     v_c = obs.carrier.velocity_ned_m_s
     if float(norm(obs.vehicle.position_ned_m - dock)) > m.dock_tolerance_m:
         return go_around(replace(state, recovery=rec), obs, m, "lost the dock after contact", events)
+    if not state.seated:  # holding contact on the carrier's word: as fresh as on the approach
+        unfit = carrier_unfit(obs, r.carrier_max_age_s)
+        if unfit is not None:
+            return go_around(replace(state, recovery=rec), obs, m, unfit, events)
     if obs.carrier.untrusted is not None:  # a resync or a contested source: not a dock to stay on
         return go_around(replace(state, recovery=rec), obs, m, f"carrier feed not trusted ({obs.carrier.untrusted})",
                          events)
@@ -404,8 +426,21 @@ def _on_dock(state: MissionState, obs: Observation, m: MissionModel, dock: np.nd
     "deck"), pressed into it and disarmed once PX4 has seen it land (:mod:`mission.phases.deck`)."""
     if not state.seated:
         return _fly(state, obs, m, dock, v_c, _model(m).approach, rec, events, request=request)
+    rec = _confirm_contact(rec, obs)
     new, dec = _fly(state, obs, m, deck.pressed(dock, m), v_c, _model(m).approach, rec, events, request=request)
     return new, deck.after_landing(obs, dec)
+
+
+def _confirm_contact(rec: RecoveryState | None, obs: Observation) -> RecoveryState | None:
+    """``rec`` with its contact confirmed (``confirmed_s``, ``confirmed_by``) the first tick the
+    passenger itself reports it has landed (PX4's land detector: EXTENDED_SYS_STATE ON_GROUND),
+    seated on the deck after a contact: what the passenger can check of its dock, not the
+    carrier's claimed position."""
+    if rec is None or rec.contact is None or "confirmed_s" in rec.contact or obs.vehicle is None \
+            or not obs.vehicle.on_ground:
+        return rec
+    return replace(rec, contact={**rec.contact, "confirmed_s": round(obs.t_s, 4),
+                                 "confirmed_by": "landed on the deck (EXTENDED_SYS_STATE ON_GROUND)"})
 
 
 def home(state, obs, m, events=()):

@@ -67,7 +67,9 @@ class VehicleObs:
 
 @dataclass(frozen=True)
 class CarrierObs:
-    """The carrier's newest state: position/velocity NED [m], [m/s]; age [s]; liveliness;
+    """The carrier's newest state: position/velocity NED [m], [m/s]; age [s] since the carrier
+    measured it, good to ``age_bound_s`` [s] (the clock offset's bound; None: the measurement time
+    is unknown, no round trip yet, and ``age_s`` is the time since it arrived); liveliness;
     acceleration NED [m/s^2] as the carrier measured it, or None (it sent none); untrusted: why
     the feed does not trust it yet (just bound, a resync, a contested source), None when it does."""
 
@@ -78,6 +80,12 @@ class CarrierObs:
     acceleration_ned_m_s2: np.ndarray | None = None
     yaw_rad: float | None = None  # [rad] its heading, if it sent one
     untrusted: str | None = None
+    age_bound_s: float | None = 0.0
+
+    @property
+    def worst_age_s(self) -> float:
+        """The oldest the state may be [s]: its age plus the bound (the receive age when unknown)."""
+        return self.age_s + (self.age_bound_s or 0.0)
 
 
 @dataclass(frozen=True)
@@ -185,6 +193,7 @@ class RecoveryModel:
     at_target_s: float
     deck_radius_m: float
     keep_out_m: float
+    carrier_return_max_age_s: float = 1.0  # [s] the age budget of RETURNING, HOLDOFF and GO_AROUND
 
 
 @dataclass(frozen=True)
@@ -210,7 +219,7 @@ class RecoveryState:
     carrier_t_s: float | None = None
     carrier_seen_s: float | None = None
     settled_since_s: float | None = None
-    contact: dict[str, float] | None = None
+    contact: dict[str, Any] | None = None
     fallback_why: str = ""
     fallback_goal: np.ndarray | None = None
 
@@ -272,6 +281,14 @@ ZERO = np.zeros(3)
 def enter(state: MissionState, phase: Phase, t: float, **kw) -> MissionState:
     """``state`` in ``phase`` since ``t`` [s], with the fields ``kw`` changed."""
     return replace(state, phase=phase, since_s=t, **kw)
+
+
+def describe_age(c: CarrierObs) -> str:
+    """``c``'s age in words: since the carrier measured it (with the bound), or since it arrived."""
+    if c.age_bound_s is None:
+        return f"{c.age_s:.2f} s old since it arrived (when the carrier measured it is not known)"
+    bound = f" +- {c.age_bound_s:.3f}" if c.age_bound_s > 0 else ""
+    return f"{c.age_s:.2f}{bound} s old since the carrier measured it"
 
 
 def dock_point(obs: Observation, m: MissionModel) -> np.ndarray:

@@ -6,6 +6,8 @@ A parent process learns the bound port from ``--port-file`` (see ``sim.vehicle.m
 from __future__ import annotations
 
 import contextlib
+import dataclasses
+import json
 import logging
 import math
 import os
@@ -23,6 +25,7 @@ from mission.config.schema import ZenohSection
 from mission.errors import ConfigError
 from mission.mavlink.env import read_signing_key
 from sim.vehicle.mock import MockVehicle, VehicleOptions
+from sim.vehicle.options import VehicleSnapshot
 from sim.vehicle.faults import FaultOptions
 from sim.vehicle.endpoints import parse_endpoint
 from sim.vehicle.params import SPECS_BY_NAME
@@ -187,13 +190,17 @@ def _write_port_file(path: Path, port: int) -> None:
               help="With --lockstep: at most FACTOR simulated seconds per wall second (default: as fast as it goes).")
 @click.option("--status-every", type=click.FloatRange(min=0.0), default=5.0, show_default=True, metavar="SECONDS",
               help="Log a status line with mode, position and the counters every SECONDS of wall time (0: never).")
+@click.option("--summary", "summary_path", type=click.Path(dir_okay=False, path_type=Path), default=None, metavar="PATH",
+              help="When it stops, write the world's truth to PATH as JSON: every touchdown on the deck (where "
+                   "from its true centre, how fast) and a crash (docs/mock-vehicle.md).")
 def mock_vehicle(mavlink_url: str, target_url: str, gcs_url: str | None, speed: float, home: str, start_ned: str,
                  sysid: int, frame: str, params: tuple[str, ...], battery_drain_s: float | None,
                  battery_min_pct: float | None, deck_pair: str | None, deck_height: float, deck_radius: float,
                  zenoh_connect: tuple[str, ...], zenoh_listen: tuple[str, ...], wind: str, estimate_error: float, position_noise: float, loss_in: float,
                  loss_out: float, latency_ms: float, jitter_ms: float, blackouts: tuple[str, ...],
                  refuse_arming: str | None, refuse_offboard: str | None, lose_position_s: float | None, seed: int, signing_key: Path | None, port_file: Path | None,
-                 lockstep: bool, lockstep_watchdog_s: float, lockstep_max_speed: float | None, status_every: float) -> None:
+                 lockstep: bool, lockstep_watchdog_s: float, lockstep_max_speed: float | None, status_every: float,
+                 summary_path: Path | None) -> None:
     """Run the PX4-like MAVLink vehicle until SIGINT or SIGTERM.
 
     By default it mirrors PX4 SITL: it binds UDP 127.0.0.1:14580, sends HEARTBEAT and the
@@ -215,7 +222,8 @@ def mock_vehicle(mavlink_url: str, target_url: str, gcs_url: str | None, speed: 
         estimate_error=estimate_error, lockstep=lockstep, lockstep_watchdog_wall_s=lockstep_watchdog_s,
         lockstep_max_speed=lockstep_max_speed,
         deck=None if deck_pair is None else DeckSpec(height_m=deck_height, radius_m=deck_radius))
-    run(options, port_file, status_every, deck=None if deck_pair is None else _deck_bus(deck_pair, zenoh_connect, zenoh_listen))
+    run(options, port_file, status_every, deck=None if deck_pair is None else _deck_bus(deck_pair, zenoh_connect, zenoh_listen),
+        summary_path=summary_path)
 
 
 class VehicleClock:
@@ -276,10 +284,20 @@ def follow_carrier(vehicle: MockVehicle, session: Any, pair: str) -> CarrierFeed
     return feed
 
 
+def truth(snapshot: VehicleSnapshot) -> dict[str, Any]:
+    """The world's truth of a flight for ``--summary``: the vehicle's simulated time [s], whether it
+    lies crashed on the deck (``crash``: why, else None) and every touchdown (time [s], horizontal
+    distance from the deck's true centre [m], speeds relative to the deck [m/s], crash)."""
+    return {"t_s": snapshot.t_s, "deck": {
+        "crash": snapshot.crash, "on_deck": snapshot.on_deck,
+        "touchdowns": [dataclasses.asdict(t) for t in snapshot.touchdowns]}}
+
+
 def run(options: VehicleOptions, port_file: Path | None = None, status_every_s: float = 5.0,
-        deck: tuple[str, ZenohSection] | None = None) -> None:
+        deck: tuple[str, ZenohSection] | None = None, summary_path: Path | None = None) -> None:
     """Run a vehicle until SIGINT/SIGTERM, logging a status line every ``status_every_s`` wall
-    seconds; with ``deck`` (pair, Zenoh section) its deck follows that pair's carrier."""
+    seconds; with ``deck`` (pair, Zenoh section) its deck follows that pair's carrier; with
+    ``summary_path`` the world's truth (:func:`truth`) is written there when it stops."""
     if not logging.getLogger().handlers:
         logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     log.setLevel(logging.INFO)
@@ -303,6 +321,9 @@ def run(options: VehicleOptions, port_file: Path | None = None, status_every_s: 
             while not stop.wait(status_every_s if status_every_s > 0 else None):
                 log.info("%s", vehicle.status_line())
             log.info("stopping: %s", vehicle.status_line())
+            if summary_path is not None:
+                summary_path.parent.mkdir(parents=True, exist_ok=True)
+                summary_path.write_text(json.dumps(truth(vehicle.snapshot()), indent=2) + "\n")
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)

@@ -112,6 +112,7 @@ class Flight:
     lockstep: bool = False  # the three step on the vehicle's simulated time; speed: pace once one stops
     mav_port: int = 0
     before_vehicle: Any = None  # called with the flight once carrier and mission are up, before the vehicle starts
+    mission_router: Router | None = None  # the mission on a router of its own (a relay between the two); None: ``router``
     procs: dict[str, subprocess.Popen[Any]] = field(default_factory=dict)
     gcs: Probe | None = None
     _files: list[Any] = field(default_factory=list)
@@ -148,8 +149,8 @@ class Flight:
         self.mav_port = free_port(socket.SOCK_DGRAM)
         self.start_carrier()
         self._popen("mission", cli(*(["-vv"] if self.mission_verbose else []), "run", str(self.config), "--mavlink", f"udpin:127.0.0.1:{self.mav_port}",
-                                   "--zenoh-connect", self.router.endpoint, "--pair", self.pair, "--speed",
-                                   str(self.speed), "--log-dir", str(self.log_dir), *self._mode, *self.mission_args))
+                                   "--zenoh-connect", (self.mission_router or self.router).endpoint, "--pair", self.pair,
+                                   "--speed", str(self.speed), "--log-dir", str(self.log_dir), *self._mode, *self.mission_args))
         wait_for(lambda: self.carrier_alive() and self.router.has(f"marsupial/{self.pair}/passenger/alive")
                  and udp_bound(self.mav_port) or self._died(), 30.0, "carrier and mission up")
         if self.before_vehicle is not None:

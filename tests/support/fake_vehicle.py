@@ -180,7 +180,7 @@ class FakeWorld:
         state = CarrierState(stamp_s=self._carrier_rx_s, seq=self._seq, frame="local_ned",
                              position=self.carrier_ned_m.copy(), velocity_ned_m_s=self._v_c.copy())
         return ReceivedCarrierState(value=state, key="fake/carrier", rx_time_s=self._carrier_rx_s,
-                                    age_s=now - self._carrier_rx_s, stale=False)
+                                    age_s=now - self._carrier_rx_s, stale=False, age_bound_s=0.0)  # one clock
 
     @property
     def alive(self) -> bool | None:

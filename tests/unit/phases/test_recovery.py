@@ -143,8 +143,18 @@ def test_a_go_around_names_why_the_carrier_state_is_unfit():
         return Observation(t_s=10.0, vehicle=None, carrier=c)
 
     assert carrier_unfit(seen(), 0.3) is None
-    assert carrier_unfit(seen(alive=False), 0.3) == "carrier liveliness token gone (its last state 0.02 s old)"
-    assert carrier_unfit(seen(age_s=0.45), 0.3) == "carrier state 0.45 s old (recovery.carrier_max_age_s = 0.3)"
+    assert carrier_unfit(seen(alive=False), 0.3) == \
+        "carrier liveliness token gone (its last state 0.02 s old since the carrier measured it)"
+    assert carrier_unfit(seen(age_s=0.45), 0.3) == \
+        "carrier state 0.45 s old since the carrier measured it (recovery.carrier_max_age_s = 0.3)"
+    # the age is the measurement's, good to the clock offset's bound: the worst case decides
+    assert carrier_unfit(seen(age_s=0.25, age_bound_s=0.1), 0.3) == \
+        "carrier state 0.25 +- 0.100 s old since the carrier measured it (recovery.carrier_max_age_s = 0.3)"
+    assert carrier_unfit(seen(age_s=0.02, age_bound_s=None), 0.3) == \
+        "the carrier's clock is not known (no round trip yet): its state's age is unknown"
+    assert carrier_unfit(seen(age_s=-0.2, age_bound_s=0.01), 0.3) == (
+        "carrier state stamped 0.20 s ahead of the carrier's clock (bound 0.010 s): its stamps and its round trips "
+        "disagree")
     assert carrier_unfit(seen(untrusted="settling: after a resync"), 0.3) == \
         "carrier feed not trusted (settling: after a resync)"
     assert carrier_unfit(Observation(t_s=10.0, vehicle=None, carrier=None), 0.3) == "no carrier state"
@@ -447,3 +457,25 @@ def test_a_late_take_off_under_the_altitude_floor_is_led_by_the_reference(cfg):
     assert outcome.ok, (outcome.reason, outcome.detail)
     assert seen["join"] >= 40 and seen["full"] == seen["join"], seen
     assert seen["riding_s"] is not None and seen["riding_s"] < 6.0, seen
+
+
+def test_a_contact_on_the_deck_is_confirmed_by_the_passengers_own_landed_state_only():
+    """Seated after a contact, the contact counts once the vehicle itself reports ON_GROUND (its
+    land detector), never on the carrier's word alone; the first such tick is kept."""
+    from mission.phases import Observation, VehicleObs
+    from mission.phases.recovery import _confirm_contact
+    from mission.phases.types import RecoveryState
+
+    def seen(t: float, on_ground: bool) -> Observation:
+        v = VehicleObs(position_ned_m=np.zeros(3), velocity_ned_m_s=np.zeros(3), armed=True, mode="OFFBOARD",
+                       heartbeat_age_s=0.0, on_ground=on_ground)
+        return Observation(t_s=t, vehicle=v, carrier=None)
+
+    rec = RecoveryState(started_s=0.0, why="task done", contact={"horizontal_error_m": 0.07})
+    assert _confirm_contact(rec, seen(40.0, False)) is rec  # in the air (or PX4 does not say): not confirmed
+    confirmed = _confirm_contact(rec, seen(41.5, True))
+    assert confirmed is not None and confirmed.contact == {
+        "horizontal_error_m": 0.07, "confirmed_s": 41.5, "confirmed_by": "landed on the deck (EXTENDED_SYS_STATE ON_GROUND)"}
+    assert _confirm_contact(confirmed, seen(43.0, True)) is confirmed
+    no_contact = RecoveryState(started_s=0.0, why="task done")
+    assert _confirm_contact(no_contact, seen(41.5, True)) is no_contact
