@@ -31,7 +31,7 @@ from pydantic import Field, ValidationError, field_validator, model_validator
 
 from mission.config.carrier import CarrierMavlinkSection, CarrierRos2Section, CarrierSection
 from mission.config.legs import check_legs
-from mission.config.recovery import RecoverySection
+from mission.config.recovery import RecoverySection, check_recovery
 from mission.config.fields import (
     COORD_LIMIT_M,
     MAX_PATH_CHARS,
@@ -462,6 +462,7 @@ class Config(Section):
                     raise ConfigError(f"scenario.{name}", point, f"inside scenario.obstacles[{i}] "
                                       f"(center {ob.center}, radius {ob.radius:g} m)")
         check_legs(self)  # several targets: every leg can start under Assumption 1 (mission/config/legs.py)
+        check_recovery(self)  # a recovery that can finish (mission/config/recovery.py)
         if s.dim != 3 or s.frame != "local_ned":
             return
         # local NED, z down: the carrier drives on the ground at carrier_start's z
@@ -522,7 +523,7 @@ class Config(Section):
 
 def _error_from_validation(exc: ValidationError) -> ConfigError:
     err = exc.errors()[0]
-    loc = ".".join(str(p) for p in err["loc"] if p != "__root__")
+    loc = "".join(f"[{p}]" if isinstance(p, int) else f".{p}" for p in err["loc"] if p != "__root__").lstrip(".")
     ctx_error = (err.get("ctx") or {}).get("error")
     if isinstance(ctx_error, ConfigError):
         return ctx_error
@@ -537,7 +538,21 @@ def from_dict(data: dict[str, Any]) -> Config:
     try:
         return Config.model_validate(data)
     except ValidationError as exc:
-        raise _error_from_validation(exc) from None
+        raise _first_target_named(_error_from_validation(exc), data) from None
+    except ConfigError as exc:
+        raise _first_target_named(exc, data) from None
+
+
+def _first_target_named(error: ConfigError, data: dict[str, Any]) -> ConfigError:
+    """``error`` naming ``scenario.targets[0]`` instead of ``scenario.target`` when the file gave
+    only ``scenario.targets`` (``target`` is then a copy of its first entry, a field the user never wrote)."""
+    scenario = data.get("scenario")
+    field = error.field
+    if not (isinstance(scenario, dict) and "targets" in scenario and "target" not in scenario):
+        return error
+    if field != "scenario.target" and not field.startswith(("scenario.target.", "scenario.target[")):
+        return error
+    return type(error)("scenario.targets[0]" + field.removeprefix("scenario.target"), error.value, error.rule)
 
 
 def load_config(path: str | Path) -> Config:
