@@ -93,6 +93,7 @@ class _Feed(Generic[T]):
         self._received = 0
         self._accepted = 0
         self._dropped: dict[str, int] = {}
+        self._contest: str | None = None  # why the feed refuses its sender for good (two signers, two passengers)
         self._alive: bool | None = None
         self._went_unseen = False  # the token went since the last alive_over_interval()
         self._closed = False
@@ -143,6 +144,12 @@ class _Feed(Generic[T]):
                 source = ANONYMOUS if info is None else f"{info.source_id.zid}/{info.source_id.eid}"
             value = self._decode(raw)
         except WireError as exc:
+            if exc.reason == "contest":
+                with self._lock:
+                    first = self._contest is None
+                    self._contest = self._contest or str(exc)
+                if first:
+                    log.error("two signers with the peer's key on %s: %s; its samples are refused from now on", key, exc)
             self._drop(exc.reason, key, str(exc))
             return
         except Exception:  # a bug, not a bad sample: keep Zenoh's thread alive, say it loudly
@@ -230,7 +237,7 @@ class _Feed(Generic[T]):
         """Snapshot: ``{"received": n, "accepted": n, "dropped": {reason: n}}``."""
         with self._lock:
             return {"received": self._received, "accepted": self._accepted, "dropped": dict(self._dropped),
-                    "signed": self._verifier is not None, **self._extra_counters()}
+                    "signed": self._verifier is not None, "contest": self._contest, **self._extra_counters()}
 
     def _extra_counters(self) -> dict[str, Any]:
         return {}
@@ -318,7 +325,7 @@ class CarrierFeed(_Feed[CarrierState]):
                 "contests": self.gate.contests}
 
     def _received_extra(self, now: float) -> dict[str, Any]:
-        return {"untrusted": self.gate.distrust(now)}
+        return {"untrusted": f"signer contest: {self._contest}" if self._contest else self.gate.distrust(now)}
 
     def set_origin(self, origin: GeoOrigin | None) -> None:
         """Set the geodetic origin used for wgs84 states from now on."""
@@ -386,8 +393,16 @@ class PassengerFeed(_Feed[PassengerStatus]):
             self._candidates.clear()
             log.info("passenger feed bound to source %s on %s", source, key)
             return None
+        if self._contest is not None:
+            return "contest"
         if source != self.bound:
             count_rejected(self.rejected_sources, source)
+            if self.bind_phases is not None and value.phase in self.bind_phases and self._second_passenger(source, order):
+                self._contest = (f"a second passenger {source} stood on the deck ({self.bind_samples} statuses before "
+                                 f"riding) while bound to {self.bound}")
+                self._latest = None
+                log.error("passenger feed on %s: %s; no passenger is trusted from now on", key, self._contest)
+                return "contest"
             return "source"
         assert self._last is not None
         if order[0] <= self._last[0]:
@@ -396,6 +411,16 @@ class PassengerFeed(_Feed[PassengerStatus]):
             return "stale_stamp"
         self._last = order
         return None
+
+    def _second_passenger(self, source: str, order: tuple[int, float]) -> bool:
+        """Lock held: whether ``source`` (not the bound one) has now sent ``bind_samples`` statuses
+        in order in a phase before riding, as a passenger that binds does."""
+        last = self._candidates.get(source)
+        if last is None and len(self._candidates) >= MAX_CANDIDATES:
+            return False
+        count = last[2] + 1 if last is not None and order[0] > last[0] and order[1] >= last[1] else 1
+        self._candidates[source] = (*order, count)
+        return count >= self.bind_samples
 
     def _notifies(self, reason: str | None, value: PassengerStatus) -> bool:
         # the bound passenger's statuses, and a candidate's while none is bound (the lockstep

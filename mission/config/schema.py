@@ -399,11 +399,29 @@ class ZenohSection(Section):
     signing_key_file: Path_ | None = Field(
         None, description="[-] 32-byte key (64 hex digits or raw) the pair signs its bus samples with (carrier state, "
         "passenger status, lockstep clock, ROS 2 commands; mission/bus/signing.py); unsigned or badly signed samples are "
-        "then dropped and counted. Both robots of a pair need the same file. None: unsigned (the mTLS + ACL router "
-        "is the fleet's answer)")
+        "then dropped and counted. Both robots of a pair need the same file, and either can sign as the other: prefer "
+        "private_key_file and peer_public_key_file. None: unsigned (the mTLS + ACL router is the fleet's answer)")
+
+    private_key_file: Path_ | None = Field(
+        None, description="[-] this robot's own Ed25519 private key (PEM, e.g. `openssl genpkey -algorithm ed25519`, or "
+        "its 32-byte seed as 64 hex digits or raw): it signs every sample this robot puts on the pair's bus. With "
+        "peer_public_key_file: one key per robot, and signing_key_file then only signs a carrier's own ROS 2 robot link")
+    peer_public_key_file: Path_ | None = Field(
+        None, description="[-] the other robot's Ed25519 public key (PEM, or 32 bytes as 64 hex digits or raw): the only "
+        "key its samples verify with; unsigned or badly signed samples are dropped and counted")
 
     _config_file_printable = field_validator("config_file")(lambda v: v if v is None else printable(v))
     _signing_key_printable = field_validator("signing_key_file")(lambda v: v if v is None else printable(v))
+    _robot_keys_printable = field_validator("private_key_file", "peer_public_key_file")(
+        lambda v: v if v is None else printable(v))
+
+    @model_validator(mode="after")
+    def _both_robot_keys(self) -> "ZenohSection":
+        if bool(self.private_key_file) != bool(self.peer_public_key_file):
+            missing = "peer_public_key_file" if self.private_key_file else "private_key_file"
+            raise ConfigError(f"zenoh.{missing}", None, "one key per robot needs both zenoh.private_key_file and "
+                              "zenoh.peer_public_key_file")
+        return self
 
 class Config(Section):
     law: LawSection = LawSection()

@@ -159,7 +159,7 @@ class Ros2Carrier:
         self._latest: tuple[CarrierState, float] | None = None
         self.dropped: dict[str, int] = {}
         self._attachment = RmwAttachment() if self.topics.rmw_zenoh else None
-        self._auth = bus_auth(cfg.zenoh)
+        self._auth = bus_auth(cfg.zenoh, robot_link=True)
         self._signer = self._auth.signer() if self._auth is not None else None  # a robot that verifies (ros2-robot --signing-key)
         self._listeners: list[Callable[[Received], None]] = []
         self._pub = declare(f"publisher on {self.topics.cmd_vel_pub}", lambda: session.declare_publisher(

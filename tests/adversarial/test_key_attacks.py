@@ -1,0 +1,119 @@
+"""An insider on the bus with a key (the three real processes in lockstep, the Zenoh router in
+the test): it signs carrier states under the real carrier's signer id with a counter 50 s ahead
+of the real stream, walking the claimed carrier towards the target at 1 m/s.
+
+- With the pair's shared key (``--zenoh-signing-key``) it can sign: on main the real states were
+  then dropped as ``replay``, silently, and the latch fired with the real carrier 12.98 m out.
+  Now a counter far ahead of its own stream is a contest: the signer is refused for good, the
+  real stream with it (``contest``), the feed says why, and the mission never separates on it.
+- With one key per robot (``--zenoh-private-key``, ``--zenoh-peer-key``) an insider holding the
+  passenger's own key cannot sign as the carrier at all: every forgery is dropped as
+  ``signature``, the feed never doubts its carrier, and P1-P3 hold.
+"""
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from mission.bus.signing import ED25519_TRAILER_BYTES, TRAILER_BYTES, Ed25519Signer, Signer, pair_key
+from mission.config.keys import read_private_key_file, write_key_pair
+from tests.adversarial.test_bus_attacks import (AT_SEPARATION_M, BC, GUARD_M, KEY, PAIR_KEYS, SPEED, TOWARDS, Attacker,
+                                                Put, spoof)
+from tests.faults.procs import assert_safe_end, flight
+from tests.faults.test_matrix import assert_never_disarmed_in_the_air, concurrently
+
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(240)]
+
+AHEAD_US = 50_000_000  # the insider's counter: 50 s ahead of the real carrier's
+
+
+class Insider:
+    """Once the real carrier has moved 2 m: for every real state, a forged one under the real
+    signer id (read from its tag), counter 50 s ahead, the claimed carrier walking towards the
+    target at 1 m/s, signed with ``make_signer(signer_id)``."""
+
+    def __init__(self, make_signer: Any, trailer_bytes: int) -> None:
+        self.make_signer, self.trailer_bytes = make_signer, trailer_bytes
+        self.signer: Signer | None = None
+        self.walk_from: float | None = None
+        self.forged = 0
+
+    def __call__(self, st: dict[str, Any], source: Any, attachment: bytes | None, raw: bytes) -> list[Put]:
+        stamp, seq, pos, vel = st["stamp"], st["seq"], np.array(st["position"]), np.array(st["velocity"])
+        if attachment is None or len(attachment) < self.trailer_bytes:
+            return []
+        if self.walk_from is None and np.linalg.norm(pos) > 2.0:
+            self.walk_from = stamp
+            self.signer = self.make_signer(attachment[-self.trailer_bytes:][4:12])
+        if self.walk_from is None or self.signer is None:
+            return []
+        payload = spoof(seq + 1, stamp + 0.001, pos + TOWARDS * (stamp - self.walk_from), vel + TOWARDS)
+        now_us = time.time_ns() // 1000 + AHEAD_US
+        self.forged += 1
+        return [Put(PAIR_KEYS.carrier_state, payload, True,
+                    self.signer.attachment(PAIR_KEYS.carrier_state, payload, now_us))]
+
+
+def _shared_key_insider(tmp_path: Path) -> None:
+    key = tmp_path / "bus.key"
+    key.write_text(KEY.hex())
+    signed = ("--zenoh-signing-key", str(key))
+    insider = Insider(lambda sid: Signer(pair_key(KEY, "pair0"), signer=sid), TRAILER_BYTES)
+    with flight(tmp_path, "shared-insider", speed=SPEED, lockstep=True, carrier_args=signed, mission_args=signed) as f:
+        f.wait_phase("RIDING")
+        attacker = Attacker(insider, session=f.router.session)
+        try:
+            code = f.wait_mission(120.0)
+        finally:
+            attacker.close()
+        s = f.summary()
+        assert "Traceback" not in f.text("mission.err") + f.text("carrier.err")
+        assert_never_disarmed_in_the_air(f)
+        assert_safe_end(f, modes=("AUTO.LOITER", "landed"))
+    carrier = f.carrier_summary()
+    assert insider.forged >= 1, vars(insider)
+    feed = s["carrier_feed"]
+    # the forgery ahead of the stream is a contest, and the real stream is refused with it (not "replay")
+    assert feed["dropped"].get("contest", 0) >= 2 and "ahead of its own stream" in (feed["contest"] or ""), feed
+    assert feed["dropped"].get("replay", 0) == 0, feed
+    # no separation on the walked track: none at all (the mission stops on a carrier it cannot trust)
+    assert code != 0 and s["separation_time_s"] is None, (code, s.get("abort_reason"), s.get("separation_time_s"))
+    assert carrier["closest_target_distance_m"] >= GUARD_M - 0.05, carrier
+
+
+def _per_robot_insider(tmp_path: Path) -> None:
+    folder = tmp_path / "keys"
+    folder.mkdir()
+    for robot in ("carrier", "passenger"):
+        write_key_pair(folder / f"{robot}.key", folder / f"{robot}.pub")
+    passenger_key = read_private_key_file(folder / "passenger.key", "passenger")
+    insider = Insider(lambda sid: Ed25519Signer(passenger_key, signer=sid), ED25519_TRAILER_BYTES)
+    carrier_args = ("--zenoh-private-key", str(folder / "carrier.key"), "--zenoh-peer-key", str(folder / "passenger.pub"))
+    mission_args = ("--zenoh-private-key", str(folder / "passenger.key"), "--zenoh-peer-key", str(folder / "carrier.pub"))
+    with flight(tmp_path, "robot-insider", speed=SPEED, lockstep=True, carrier_args=carrier_args,
+                mission_args=mission_args) as f:
+        f.wait_phase("RIDING")
+        attacker = Attacker(insider, session=f.router.session)
+        try:
+            f.wait_phase("NAVIGATING", 90.0)
+            sent = attacker.stop()
+            code = f.wait_mission(60.0)
+        finally:
+            attacker.close()
+        assert code == 0, f.text("mission.err")[-3000:]
+        s = f.summary()
+        assert_safe_end(f, modes=("AUTO.LOITER",))
+    carrier = f.carrier_summary()
+    feed = s["carrier_feed"]
+    assert insider.forged >= 30 and feed["dropped"].get("signature", 0) == sent[f"{PAIR_KEYS.carrier_state} replay"], (sent, feed)
+    assert feed["contests"] == 0 and feed["resyncs"] == 0 and feed["contest"] is None, feed
+    assert s["p1"] and s["p2"] and s["p3"] and s["carrier_target_distance_at_separation_m"] == pytest.approx(BC, abs=0.05)
+    assert AT_SEPARATION_M - 0.2 <= carrier["distance_at_separation_m"] <= AT_SEPARATION_M + 0.05, carrier
+
+
+def test_an_insider_signing_ahead_of_the_carrier_is_a_contest_or_cannot_sign_at_all(tmp_path: Path) -> None:
+    concurrently(lambda: _shared_key_insider(tmp_path), lambda: _per_robot_insider(tmp_path))
