@@ -147,9 +147,10 @@ class _Feed(Generic[T]):
             if exc.reason == "contest":
                 with self._lock:
                     first = self._contest is None
-                    self._contest = self._contest or str(exc)
+                    self._contest = self._contest or exc.detail
                 if first:
-                    log.error("two signers with the peer's key on %s: %s; its samples are refused from now on", key, exc)
+                    log.error("two signers with the peer's key on %s: %s; its samples are refused from now on", key,
+                              exc.detail)
             self._drop(exc.reason, key, str(exc))
             return
         except Exception:  # a bug, not a bad sample: keep Zenoh's thread alive, say it loudly
