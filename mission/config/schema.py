@@ -30,7 +30,7 @@ import numpy as np
 from pydantic import Field, ValidationError, field_validator, model_validator
 
 from mission.config.carrier import CarrierMavlinkSection, CarrierRos2Section, CarrierSection
-from mission.config.legs import check_legs
+from mission.config.legs import check_legs, first_target_named
 from mission.config.recovery import RecoverySection, check_recovery
 from mission.config.fields import (
     COORD_LIMIT_M,
@@ -556,21 +556,9 @@ def from_dict(data: dict[str, Any]) -> Config:
     try:
         return Config.model_validate(data)
     except ValidationError as exc:
-        raise _first_target_named(_error_from_validation(exc), data) from None
+        raise first_target_named(_error_from_validation(exc), data) from None
     except ConfigError as exc:
-        raise _first_target_named(exc, data) from None
-
-
-def _first_target_named(error: ConfigError, data: dict[str, Any]) -> ConfigError:
-    """``error`` naming ``scenario.targets[0]`` instead of ``scenario.target`` when the file gave
-    only ``scenario.targets`` (``target`` is then a copy of its first entry, a field the user never wrote)."""
-    scenario = data.get("scenario")
-    field = error.field
-    if not (isinstance(scenario, dict) and "targets" in scenario and "target" not in scenario):
-        return error
-    if field != "scenario.target" and not field.startswith(("scenario.target.", "scenario.target[")):
-        return error
-    return type(error)("scenario.targets[0]" + field.removeprefix("scenario.target"), error.value, error.rule)
+        raise first_target_named(exc, data) from None
 
 
 def load_config(path: str | Path) -> Config:
