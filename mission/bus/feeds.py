@@ -356,7 +356,10 @@ class PassengerFeed(_Feed[PassengerStatus]):
     the phases before riding, so a source that starts by claiming RIDING (a passenger that never
     stood on the deck) never binds. Until then statuses are dropped as ``unbound``; once bound,
     every other source's as ``source`` (counted per source in ``counters["rejected_sources"]``),
-    so a flood from elsewhere can neither pass for the passenger nor make its statuses stale.
+    so a flood from elsewhere can neither pass for the passenger nor make its statuses stale. A
+    status of another source in one of ``bind_phases`` while bound is a second passenger standing
+    on the deck: a contest (``counters["contest"]`` says why), and the feed trusts no status from
+    then on (``contest``), so the carrier stops rather than serve either.
     The bound source's statuses must be newer than its last accepted one (``stale_seq``,
     ``stale_stamp``). When the passenger's liveliness token goes away the feed unbinds (a
     restarted passenger is a new source); the source it was bound to may bind again in any phase
@@ -380,6 +383,8 @@ class PassengerFeed(_Feed[PassengerStatus]):
 
     def _admit(self, value: PassengerStatus, key: str, source: str, rx: float) -> str | None:
         order = (value.seq, value.stamp_s)
+        if self._contest is not None:
+            return "contest"
         if self.bound is None:
             if self.bind_phases is not None and value.phase not in self.bind_phases and source != self._previous:
                 return "unbound"
@@ -394,13 +399,11 @@ class PassengerFeed(_Feed[PassengerStatus]):
             self._candidates.clear()
             log.info("passenger feed bound to source %s on %s", source, key)
             return None
-        if self._contest is not None:
-            return "contest"
         if source != self.bound:
             count_rejected(self.rejected_sources, source)
-            if self.bind_phases is not None and value.phase in self.bind_phases and self._second_passenger(source, order):
-                self._contest = (f"a second passenger {source} stood on the deck ({self.bind_samples} statuses before "
-                                 f"riding) while bound to {self.bound}")
+            if self.bind_phases is not None and value.phase in self.bind_phases:
+                self._contest = (f"a second passenger {source} says {value.phase} (before riding) while bound to "
+                                 f"{self.bound}")
                 self._latest = None
                 log.error("passenger feed on %s: %s; no passenger is trusted from now on", key, self._contest)
                 return "contest"
@@ -412,16 +415,6 @@ class PassengerFeed(_Feed[PassengerStatus]):
             return "stale_stamp"
         self._last = order
         return None
-
-    def _second_passenger(self, source: str, order: tuple[int, float]) -> bool:
-        """Lock held: whether ``source`` (not the bound one) has now sent ``bind_samples`` statuses
-        in order in a phase before riding, as a passenger that binds does."""
-        last = self._candidates.get(source)
-        if last is None and len(self._candidates) >= MAX_CANDIDATES:
-            return False
-        count = last[2] + 1 if last is not None and order[0] > last[0] and order[1] >= last[1] else 1
-        self._candidates[source] = (*order, count)
-        return count >= self.bind_samples
 
     def _notifies(self, reason: str | None, value: PassengerStatus) -> bool:
         # the bound passenger's statuses, and a candidate's while none is bound (the lockstep

@@ -1,6 +1,7 @@
-"""An insider on the bus with a key (the three real processes in lockstep, the Zenoh router in
-the test): it signs carrier states under the real carrier's signer id with a counter 50 s ahead
-of the real stream, walking the claimed carrier towards the target at 1 m/s.
+"""Insiders and rogues on the bus (the three real processes, the Zenoh router in the test).
+
+An insider with a key signs carrier states under the real carrier's signer id with a counter 50 s
+ahead of the real stream, walking the claimed carrier towards the target at 1 m/s (lockstep):
 
 - With the pair's shared key (``--zenoh-signing-key``) it can sign: on main the real states were
   then dropped as ``replay``, silently, and the latch fired with the real carrier 12.98 m out.
@@ -9,22 +10,30 @@ of the real stream, walking the claimed carrier towards the target at 1 m/s.
 - With one key per robot (``--zenoh-private-key``, ``--zenoh-peer-key``) an insider holding the
   passenger's own key cannot sign as the carrier at all: every forgery is dropped as
   ``signature``, the feed never doubts its carrier, and P1-P3 hold.
+
+A rogue passenger says PREFLIGHT before the mission starts, then RIDING on the dock point: it
+takes an unsigned bus (said at start-up), and never binds with one key per robot.
 """
 from __future__ import annotations
 
+import json
+import threading
 import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
+import zenoh
 
+from mission.bus.wire import PassengerStatus
 from mission.bus.signing import ED25519_TRAILER_BYTES, TRAILER_BYTES, Ed25519Signer, Signer, pair_key
 from mission.config.keys import read_private_key_file, write_key_pair
 from tests.adversarial.test_bus_attacks import (AT_SEPARATION_M, BC, GUARD_M, KEY, PAIR_KEYS, SPEED, TOWARDS, Attacker,
                                                 Put, spoof)
 from tests.faults.procs import assert_safe_end, flight
 from tests.faults.test_matrix import assert_never_disarmed_in_the_air, concurrently
+from tests.support.zenoh_util import wait_for
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(240)]
 
@@ -118,3 +127,111 @@ def _per_robot_insider(tmp_path: Path) -> None:
 
 def test_an_insider_signing_ahead_of_the_carrier_is_a_contest_or_cannot_sign_at_all(tmp_path: Path) -> None:
     concurrently(lambda: _shared_key_insider(tmp_path), lambda: _per_robot_insider(tmp_path))
+
+
+class RoguePassenger:
+    """A passenger of its own on the pair's bus from before the mission starts: PREFLIGHT
+    statuses (it "stands on the deck") until five of them went out after the carrier was heard, then RIDING on the carrier's dock point (1.5 m above the
+    newest carrier state it heard), 20 per wall second, unsigned; the carrier's positions recorded."""
+
+    def __init__(self, session: Any) -> None:
+        self.session, self.sent, self.standing, self.positions = session, 0, 0, []
+        self._stop = threading.Event()
+        self._sub = session.declare_subscriber(PAIR_KEYS.carrier_state, self._on_state)
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _on_state(self, sample: Any) -> None:
+        try:
+            self.positions.append(json.loads(sample.payload.to_bytes())["position"])
+        except (ValueError, KeyError):
+            pass
+
+    def _run(self) -> None:
+        while not self._stop.wait(0.05):
+            at = np.add(self.positions[-1] if self.positions else [0.0, 0.0, 0.0], [0.0, 0.0, -1.5])
+            heard = bool(self.positions)  # the carrier is up (before: nobody hears the rogue)
+            phase = "RIDING" if self.standing >= 5 else "PREFLIGHT"
+            self.standing += heard and phase == "PREFLIGHT"
+            self.sent += 1
+            try:
+                self.session.put(PAIR_KEYS.passenger_state,
+                                 PassengerStatus(phase, 0.01 * self.sent, 10**6 + self.sent, at, [0, 0, 0], False).to_json())
+            except zenoh.ZError:
+                return
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(5.0)
+        self._sub.undeclare()
+
+
+def test_a_rogue_passenger_before_the_mission_takes_an_unsigned_bus_and_never_binds_signed(tmp_path: Path) -> None:
+    """The PREFLIGHT-then-RIDING rogue, speaking before the mission starts (real processes; real
+    time unsigned, lockstep signed). Unsigned it wins the binding: nothing tells it from the
+    passenger, and the start-up WARNING says so (the carrier-level contest, once the real
+    passenger stands on the deck too, is in tests/integration/carrier/test_carrier_trust.py). With
+    one key per robot it never binds: the real passenger does, and the mission flies P1-P3. On
+    main, unsigned, the carrier drove off empty to 9.9 m from the target and the real mission
+    refused to start."""
+    concurrently(lambda: _rogue_unsigned(tmp_path), lambda: _rogue_signed(tmp_path))
+
+
+def _start_without_carrier(f: Any) -> None:
+    """The mission and the vehicle of flight ``f`` whose carrier already runs."""
+    start_carrier = f.start_carrier
+    f.start_carrier = lambda *a, **k: None
+    try:
+        f.start()
+    finally:
+        f.start_carrier = start_carrier
+
+
+def _rogue_unsigned(tmp_path: Path) -> None:
+    """What an unsigned bus cannot prevent, and what it still does: the rogue binds and the carrier
+    drives off empty before the mission is up (both processes said at start-up that the bus can be
+    taken); the P3 guard still holds the carrier, and the real mission, its carrier gone from under
+    the vehicle, refuses to fly (Assumption 2) and never arms."""
+    with flight(tmp_path, "rogue-unsigned", speed=SPEED, start=False) as f:
+        rogue = RoguePassenger(f.router.session)
+        try:
+            f.start_carrier()
+            wait_for(lambda: rogue.standing >= 5 and "passenger feed bound" in f.text("carrier.err"), 30.0,
+                     "the rogue bound")
+            _start_without_carrier(f)
+            code = f.wait_mission(60.0)
+        finally:
+            rogue.close()
+        s = f.summary()
+        assert code != 0 and (s["phase"], s["reason"]) == ("ABORT", "geometry") and not f.vehicle()["armed"], s
+        for name in ("carrier.err", "mission.err"):
+            assert "WARNING: the bus of pair pair0 is unsigned" in f.text(name), name
+    carrier = f.carrier_summary()
+    assert carrier["closest_target_distance_m"] >= GUARD_M - 0.05, carrier
+
+
+def _rogue_signed(tmp_path: Path) -> None:
+    folder = tmp_path / "rogue-keys"
+    folder.mkdir()
+    for robot in ("carrier", "passenger"):
+        write_key_pair(folder / f"{robot}.key", folder / f"{robot}.pub")
+    carrier_args = ("--zenoh-private-key", str(folder / "carrier.key"), "--zenoh-peer-key", str(folder / "passenger.pub"))
+    mission_args = ("--zenoh-private-key", str(folder / "passenger.key"), "--zenoh-peer-key", str(folder / "carrier.pub"))
+    with flight(tmp_path, "rogue-signed", speed=SPEED, lockstep=True, start=False, carrier_args=carrier_args,
+                mission_args=mission_args) as f:
+        rogue = RoguePassenger(f.router.session)
+        try:
+            f.start_carrier()
+            wait_for(lambda: rogue.sent >= 10, 30.0, "the rogue's RIDING")
+            _start_without_carrier(f)
+            code = f.wait_mission(150.0)
+        finally:
+            rogue.close()
+        assert code == 0, f.text("mission.err")[-3000:]
+        s = f.summary()
+        assert "WARNING" not in f.text("carrier.err").replace("WARNING mission", "")
+        assert f.text("carrier.err").count("passenger feed bound to source signer:") == 1  # the real one, once
+    carrier = f.carrier_summary()
+    pfeed = carrier["passenger_feed"]
+    assert pfeed["dropped"].get("unsigned", 0) >= 10 and pfeed["contest"] is None, pfeed
+    assert s["p1"] and s["p2"] and s["p3"], s
