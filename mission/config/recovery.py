@@ -110,7 +110,7 @@ class RecoverySection(Section):
 def check_recovery(cfg: Config) -> None:
     """Refuse values that leave the recovery no way to finish (raises :class:`ConfigError` naming
     the field to change): a holdoff that waits for the carrier to drive faster than it ever can
-    (its top speed, or with ``mission.final_action = "return"`` its steady recovery course), a
+    (its top speed, or with ``mission.final_action = "return"`` its recovery course and legs), a
     carrier the passenger can never catch on that course, and a carrier state age limit on the
     approach shorter than two of the carrier's publish periods (every approach would go around)."""
     r, c, sf = cfg.recovery, cfg.carrier, cfg.safety
@@ -125,10 +125,11 @@ def check_recovery(cfg: Config) -> None:
                           "every approach would go around")
     if cfg.mission.final_action != "return":
         return
-    if r.settle_carrier_speed_m_s > c.recovery_speed_m_s:
+    fastest = max([c.recovery_speed_m_s] + [leg[1] for leg in c.recovery_course])
+    if r.settle_carrier_speed_m_s > fastest:
         raise ConfigError("recovery.settle_carrier_speed_m_s", r.settle_carrier_speed_m_s,
-                          f"above carrier.recovery_speed_m_s = {c.recovery_speed_m_s:g}, the speed of the carrier's "
-                          "steady recovery course: the holdoff would never settle")
+                          f"above {fastest:g} m/s, the fastest the carrier drives while the passenger comes home "
+                          "(carrier.recovery_speed_m_s, carrier.recovery_course): the holdoff would never settle")
     if sf.passenger_max_speed_m_s is not None and not c.recovery_speed_m_s < sf.passenger_max_speed_m_s:
         raise ConfigError("carrier.recovery_speed_m_s", c.recovery_speed_m_s,
                           f"must be below safety.passenger_max_speed_m_s = {sf.passenger_max_speed_m_s:g}: the "

@@ -67,7 +67,7 @@ def test_a_bad_entry_of_targets_is_named_as_the_file_wrote_it(targets, field, wo
 
 @pytest.mark.parametrize("overrides, field, words", [
     ({"recovery.settle_carrier_speed_m_s": 2.5}, "recovery.settle_carrier_speed_m_s", "top speed 2 m/s"),
-    ({"recovery.settle_carrier_speed_m_s": 1.8}, "recovery.settle_carrier_speed_m_s", "carrier.recovery_speed_m_s = 1.5"),
+    ({"recovery.settle_carrier_speed_m_s": 1.8}, "recovery.settle_carrier_speed_m_s", "above 1.5 m/s, the fastest"),
     ({"carrier.recovery_speed_m_s": 0.0, "recovery.settle_carrier_speed_m_s": 0.5}, "recovery.settle_carrier_speed_m_s",
      "never settle"),
     ({"safety.passenger_max_speed_m_s": 1.5}, "carrier.recovery_speed_m_s", "never catch"),
@@ -77,6 +77,11 @@ def test_a_recovery_that_cannot_finish_is_refused(cycle, overrides, field, words
     with pytest.raises(ConfigError) as exc:
         with_overrides(cycle, overrides)
     assert exc.value.field == field and words in str(exc.value), str(exc.value)
+
+
+def test_a_holdoff_may_wait_for_a_course_leg_faster_than_the_steady_course(cycle):
+    faster_leg = {"recovery.settle_carrier_speed_m_s": 1.8, "carrier.recovery_course": [[90.0, 2.0, 30.0]]}
+    assert with_overrides(cycle, faster_leg).recovery.settle_carrier_speed_m_s == 1.8
 
 
 def test_a_leg_ringed_by_obstacles_has_no_place_to_start(cycle):
