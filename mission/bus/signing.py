@@ -26,8 +26,10 @@ Verification (one verifier per subscription): no trailer of the verifier's kind 
 a tag that does not verify -> ``signature``; then the signer's stream (:class:`Streams`): a
 counter more than :data:`REPLAY_WINDOW_S` from the receiver's wall clock when the stream is new,
 older than that, a copy of a counter already accepted, or just behind the stream's last (within
-:data:`REORDER_S`) -> ``replay``. A counter that runs ahead of the stream's own clock by more than
-:data:`AHEAD_S`, or a sample never heard before that lies more than :data:`REORDER_S` behind the
+:data:`REORDER_S`) -> ``replay``. A counter that runs more than :data:`AHEAD_S` ahead of the
+stream's own clock and of the receiver's (the largest lead of the stream's counters over the
+receiver's wall clock so far, at least 0: a stream first heard on an old copy does not make the
+real samples look ahead), or a sample never heard before that lies more than :data:`REORDER_S` behind the
 stream's last, is a **contest**: two key holders sign under one signer id (an insider with the key
 ahead of the real stream). The stream is then refused for good, both signers alike (``contest``):
 the verifier cannot tell which is real, and silently keeping the one ahead is what let an insider
@@ -189,7 +191,7 @@ class Streams:
             st.remember(counter)
             return
         if counter > st.last:
-            ahead_us = (counter - now_us) - st.lead_us
+            ahead_us = (counter - now_us) - max(st.lead_us, 0)  # a stream that began on an old copy: from the clock
             if ahead_us > AHEAD_S * 1e6:
                 self._contest(st, f"counter {ahead_us / 1e6:.1f} s ahead of its own stream: a second signer with the key")
             st.last, st.lead_us = counter, max(st.lead_us, counter - now_us)

@@ -135,3 +135,14 @@ def test_one_key_per_robot_verifies_only_the_peer_s_signature() -> None:
     assert reason(verifier, STATE, b"{}", as_carrier) == "signature"  # the passenger's key cannot speak for it
     assert reason(verifier, STATE, b"{}", Signer(KEY).attachment(STATE, b"{}", NOW)) == "unsigned"  # a shared-key tag
     assert reason(Verifier(KEY), STATE, b"{}", tag) == "unsigned"
+
+
+def test_a_stream_first_heard_on_an_old_copy_is_not_contested_by_its_real_samples() -> None:
+    """A keyless replayer puts a 30 s old sample of the real signer before the verifier has heard
+    it: the real samples that follow are not 'ahead of their stream'."""
+    real, verifier = Signer(KEY), Verifier(KEY)
+    old = real.attachment(STATE, b"{}", NOW - 30_000_000)
+    verifier.verify(STATE, b"{}", old, NOW)
+    for k in range(3):
+        verifier.verify(STATE, b"{}", real.attachment(STATE, b"{}", NOW + k * 33_000), NOW + k * 33_000)
+    assert verifier.streams.contests == 0
