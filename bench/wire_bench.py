@@ -7,10 +7,11 @@ thread's CPU time in microseconds (CPU time leaves out what the scheduler gave t
 on a loaded machine). Rows: a valid carrier state and passenger status in JSON (what a feed does
 per sample at 30-50 Hz), a CDR Odometry, building a :class:`CarrierState` in code (what a
 publisher does), and the rejection of hostile samples (NaN, a wrong type, 8 KB of nesting).
-"signed" rows add the bus's authentication tag (:mod:`mission.bus.signing`): verify (MAC,
-replay window, the signer's counter) then decode, what a feed with ``zenoh.signing_key_file``
-does per sample; signing, what a publisher adds; and refusing an unsigned or forged sample
-(before any decoding).
+"signed" rows add the bus's authentication tag (:mod:`mission.bus.signing`): verify (the
+signature, replay window, the signer's counter) then decode, what a signed feed does per sample;
+signing, what a publisher adds; and refusing an unsigned or forged sample (before any
+decoding). "Ed25519" rows: one key per robot (``zenoh.private_key_file``); the others: the
+pair's shared key (``zenoh.signing_key_file``, a keyed BLAKE2b MAC).
 """
 from __future__ import annotations
 
@@ -24,7 +25,9 @@ import numpy as np
 from mission.bus.wire import CarrierState, WireError, decode_carrier_json, decode_passenger_json, encode_passenger_json
 from mission.bus.wire import PassengerStatus
 from mission.bus.ros2 import decode_odometry_cdr, encode_odometry_cdr
-from mission.bus.signing import Signer, Verifier, pair_key
+from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
+
+from mission.bus.signing import Ed25519Signer, Ed25519Verifier, Signer, Verifier, pair_key
 
 CARRIER = json.dumps({"stamp": 12.345, "seq": 7, "frame": "local_ned", "position": [1.0, 2.0, -3.0],
                       "velocity": [0.5, -0.25, 0.0], "yaw": 0.1}).encode()
@@ -40,14 +43,16 @@ ODOMETRY = encode_odometry_cdr(CarrierState(12.345, 7, "local_ned", np.array([1.
 KEY_EXPR = "marsupial/pair0/carrier/state"
 PAIR_KEY = pair_key(bytes(range(32)), "pair0")
 NOW_US = 1_800_000_000_000_000
+ROBOT_KEY = Ed25519PrivateKey.from_private_bytes(bytes(range(32)))
 
 
 class _Signed:
     """Verify + decode of signed samples, each with a fresh counter (a replayed one is refused)."""
 
-    def __init__(self, raw: bytes, decode: Callable[[bytes], object]) -> None:
+    def __init__(self, raw: bytes, decode: Callable[[bytes], object], ed25519: bool = False) -> None:
         self.raw, self.decode = raw, decode
-        self.signer, self.verifier = Signer(PAIR_KEY), Verifier(PAIR_KEY)
+        self.signer, self.verifier = ((Ed25519Signer(ROBOT_KEY), Ed25519Verifier(ROBOT_KEY.public_key())) if ed25519
+                                      else (Signer(PAIR_KEY), Verifier(PAIR_KEY)))
         self.tags: list[bytes] = []
 
     def __call__(self) -> object:
@@ -57,8 +62,8 @@ class _Signed:
         return self.decode(self.raw)
 
 
-def _refused(attachment: bytes | None) -> Callable[[], object]:
-    verifier = Verifier(PAIR_KEY)
+def _refused(attachment: bytes | None, ed25519: bool = False) -> Callable[[], object]:
+    verifier = Ed25519Verifier(ROBOT_KEY.public_key()) if ed25519 else Verifier(PAIR_KEY)
 
     def call() -> object:
         try:
@@ -72,6 +77,9 @@ def _refused(attachment: bytes | None) -> Callable[[], object]:
 _SIGNER = Signer(PAIR_KEY)
 FORGED = bytearray(Signer(PAIR_KEY).attachment(KEY_EXPR, CARRIER, NOW_US))
 FORGED[-1] ^= 1
+_ROBOT_SIGNER = Ed25519Signer(ROBOT_KEY)
+FORGED_ED25519 = bytearray(Ed25519Signer(ROBOT_KEY).attachment(KEY_EXPR, CARRIER, NOW_US))
+FORGED_ED25519[-1] ^= 1
 
 
 def _rejected(decode: Callable[[bytes], object], raw: bytes) -> Callable[[], object]:
@@ -97,6 +105,9 @@ CASES: dict[str, Callable[[], object]] = {
     "sign a carrier state": lambda: _SIGNER.attachment(KEY_EXPR, CARRIER, NOW_US),
     "reject unsigned": _refused(None),
     "reject forged tag": _refused(bytes(FORGED)),
+    "carrier JSON, Ed25519": _Signed(CARRIER, decode_carrier_json, ed25519=True),
+    "sign a state, Ed25519": lambda: _ROBOT_SIGNER.attachment(KEY_EXPR, CARRIER, NOW_US),
+    "reject forged, Ed25519": _refused(bytes(FORGED_ED25519), ed25519=True),
 }
 
 

@@ -7,8 +7,9 @@ a free loopback port and every process connects to it, each pair in its own key 
 ``marsupial/<pair>/...`` with its own MAVLink port. It shows the live phase of each mission,
 then prints a summary table, writes a plot per pair and exits 0 when P1-P3 held for every pair
 (and, with ``mission.final_action = "return"``, the passenger docked on its carrier again).
-The pairs sign their bus samples with a throwaway key (``zenoh.signing_key_file``,
-:mod:`mission.bus.signing`), made at the start and deleted at the end.
+The robots sign their bus samples, one throwaway Ed25519 key per robot (``zenoh.private_key_file``,
+``zenoh.peer_public_key_file``, :mod:`mission.bus.signing`; a ROS-2-shaped robot and its carrier
+share a throwaway key), made at the start and deleted at the end.
 """
 from __future__ import annotations
 
@@ -30,6 +31,7 @@ from pathlib import Path
 import click
 from tqdm import tqdm
 
+from mission.bus.auth import unsigned_warning
 from mission.bus.bridge import open_session
 from mission.bus.session import close_session
 from mission.config.schema import CarrierRos2Section, Config, ZenohSection, load_config
@@ -166,6 +168,18 @@ def throwaway_key(stack: ExitStack, name: str = "bus.key") -> Path:
     return path
 
 
+def robot_keys(folder: Path, pair: str) -> dict[str, tuple[Path, Path]]:
+    """A throwaway Ed25519 key pair for each robot of ``pair`` in the private ``folder``:
+    ``{"carrier": (private, public), "passenger": (private, public)}`` (private keys mode 0600)."""
+    from mission.config.keys import write_key_pair
+
+    made = {}
+    for robot in ("carrier", "passenger"):
+        made[robot] = (folder / f"{pair}-{robot}.key", folder / f"{pair}-{robot}.pub")
+        write_key_pair(*made[robot])
+    return made
+
+
 def start_pair(config: str, name: str, zenoh_ep: str, speed: float, log_root: Path, stack: ExitStack,
                quiet: bool, carrier_kind: str = "sim", lockstep: bool = False, live: LiveAddress | None = None,
                bus_key: Path | None = None, mav_key: Path | None = None) -> PairRun:
@@ -173,7 +187,9 @@ def start_pair(config: str, name: str, zenoh_ep: str, speed: float, log_root: Pa
     The vehicle learns the carrier's motion from the pair's Zenoh state (``--deck``): it stands on
     the carrier's deck until it takes off, and lands or crashes on it as it comes back. With
     ``mission.ride = "deck"`` the deck is the dock point (``--deck-height``) and the vehicle starts on it.
-    With ``bus_key`` (a key file) the pair signs its bus samples (``--zenoh-signing-key``); with
+    With ``bus_key`` (a key file) the pair signs its bus samples, each robot with a throwaway key of
+    its own made beside it (:func:`robot_keys`; a ROS-2-shaped robot and its carrier also with
+    ``bus_key``); with
     ``mav_key`` the vehicle and the mission sign their MAVLink link (``--signing-key``).
 
     ``lockstep``: the three step on the mock vehicle's simulated time, the carrier's robot on the
@@ -188,12 +204,18 @@ def start_pair(config: str, name: str, zenoh_ep: str, speed: float, log_root: Pa
     # in lockstep the mission and the carrier log on one simulated clock: one epoch lines their files up
     epoch = ["--log-epoch-ns", str(time.time_ns())] if lockstep else []
     start = ",".join(str(v) for v in cfg.scenario.carrier_start)
-    signed = ["--zenoh-signing-key", str(bus_key)] if bus_key is not None else []
+    signed, carrier_signed = [], []
+    if bus_key is not None:
+        keys_of = robot_keys(bus_key.parent, name)
+        signed = ["--zenoh-private-key", str(keys_of["passenger"][0]), "--zenoh-peer-key", str(keys_of["carrier"][1])]
+        carrier_signed = ["--zenoh-private-key", str(keys_of["carrier"][0]), "--zenoh-peer-key",
+                          str(keys_of["passenger"][1]), *(["--zenoh-signing-key", str(bus_key)] if carrier_kind == "ros2" else [])]
     mav_signed = ["--signing-key", str(mav_key)] if mav_key is not None else []
     backend_args, robot = start_carrier_robot(carrier_kind, name, zenoh_ep, speed, start, stack, err, lockstep, bus_key, cfg)
     carrier = subprocess.Popen(_python_cli("carrier", config, "--speed", str(speed), "--pair", name,
                                            "--zenoh-connect", zenoh_ep, "--summary", str(pair.log_dir / "carrier.json"),
-                                           "--mcap", str(pair.log_dir / "carrier.mcap"), *backend_args, *signed, *mode, *epoch),
+                                           "--mcap", str(pair.log_dir / "carrier.mcap"), *backend_args, *carrier_signed,
+                                           *mode, *epoch),
                                stderr=err)
     stack.callback(stop_process, carrier)
     # riding on the deck (mission.ride = "deck"): the deck is the dock point, the vehicle stands on it
@@ -244,6 +266,8 @@ def run_demo(config: str, speed: float, pairs: int, log_root: Path, plot_path: s
     with ExitStack() as stack:
         bus_key = throwaway_key(stack) if signed else None
         mav_key = throwaway_key(stack, "mavlink.key") if signed else None
+        if not signed:
+            print(unsigned_warning(ZenohSection()), file=sys.stderr)
         router = open_session(ZenohSection(mode="router", listen=[zenoh_ep]))
         stack.callback(close_session, router)
         runs = [start_pair(config, f"pair{i}", zenoh_ep, speed, log_root, stack, quiet, carrier, lockstep, address, bus_key,

@@ -115,6 +115,7 @@ class _Feed(Generic[T]):
         self._received = 0
         self._accepted = 0
         self._dropped: dict[str, int] = {}
+        self._contest: str | None = None  # why the feed refuses its sender for good (two signers, two passengers)
         self._alive: bool | None = None
         self._went_unseen = False  # the token went since the last alive_over_interval()
         self._closed = False
@@ -165,6 +166,13 @@ class _Feed(Generic[T]):
                 source = ANONYMOUS if info is None else f"{info.source_id.zid}/{info.source_id.eid}"
             value = self._decode(raw)
         except WireError as exc:
+            if exc.reason == "contest":
+                with self._lock:
+                    first = self._contest is None
+                    self._contest = self._contest or exc.detail
+                if first:
+                    log.error("two signers with the peer's key on %s: %s; its samples are refused from now on", key,
+                              exc.detail)
             self._drop(exc.reason, key, str(exc))
             return
         except Exception:  # a bug, not a bad sample: keep Zenoh's thread alive, say it loudly
@@ -252,7 +260,7 @@ class _Feed(Generic[T]):
         """Snapshot: ``{"received": n, "accepted": n, "dropped": {reason: n}}``."""
         with self._lock:
             return {"received": self._received, "accepted": self._accepted, "dropped": dict(self._dropped),
-                    "signed": self._verifier is not None, **self._extra_counters()}
+                    "signed": self._verifier is not None, "contest": self._contest, **self._extra_counters()}
 
     def _extra_counters(self) -> dict[str, Any]:
         return {}
@@ -353,7 +361,7 @@ class CarrierFeed(_Feed[CarrierState]):
                 "delay_growths": self.delay.growths, "delay_growth_last": self.delay.last or None}
 
     def _received_extra(self, now: float) -> dict[str, Any]:
-        return {"untrusted": self.gate.distrust(now)}
+        return {"untrusted": f"signer contest: {self._contest}" if self._contest else self.gate.distrust(now)}
 
     def set_origin(self, origin: GeoOrigin | None) -> None:
         """Set the geodetic origin used for wgs84 states from now on."""
@@ -392,7 +400,10 @@ class PassengerFeed(_Feed[PassengerStatus]):
     the phases before riding, so a source that starts by claiming RIDING (a passenger that never
     stood on the deck) never binds. Until then statuses are dropped as ``unbound``; once bound,
     every other source's as ``source`` (counted per source in ``counters["rejected_sources"]``),
-    so a flood from elsewhere can neither pass for the passenger nor make its statuses stale.
+    so a flood from elsewhere can neither pass for the passenger nor make its statuses stale. A
+    status of another source in one of ``bind_phases`` while bound is a second passenger standing
+    on the deck: a contest (``counters["contest"]`` says why), and the feed trusts no status from
+    then on (``contest``), so the carrier stops rather than serve either.
     The bound source's statuses must be newer than its last accepted one (``stale_seq``,
     ``stale_stamp``). When the passenger's liveliness token goes away the feed unbinds (a
     restarted passenger is a new source); the source it was bound to may bind again in any phase
@@ -416,6 +427,8 @@ class PassengerFeed(_Feed[PassengerStatus]):
 
     def _admit(self, value: PassengerStatus, key: str, source: str, rx: float) -> str | None:
         order = (value.seq, value.stamp_s)
+        if self._contest is not None:
+            return "contest"
         if self.bound is None:
             if self.bind_phases is not None and value.phase not in self.bind_phases and source != self._previous:
                 return "unbound"
@@ -432,6 +445,12 @@ class PassengerFeed(_Feed[PassengerStatus]):
             return None
         if source != self.bound:
             count_rejected(self.rejected_sources, source)
+            if self.bind_phases is not None and value.phase in self.bind_phases:
+                self._contest = (f"a second passenger {source} says {value.phase} (before riding) while bound to "
+                                 f"{self.bound}")
+                self._latest = None
+                log.error("passenger feed on %s: %s; no passenger is trusted from now on", key, self._contest)
+                return "contest"
             return "source"
         assert self._last is not None
         if order[0] <= self._last[0]:

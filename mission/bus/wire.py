@@ -34,13 +34,14 @@ Frame = Literal["local_ned", "wgs84"]
 FRAMES: tuple[str, ...] = get_args(Frame)
 
 #: Reasons a sample is rejected (keys of the bridge's drop counters). ``size`` is checked by the
-#: bridge before decoding, then, with a signing key, ``unsigned``, ``signature`` and ``replay``
-#: (:mod:`mission.bus.signing`); ``stale_seq`` and ``stale_stamp`` come from its ordering check, the
+#: bridge before decoding, then, with a signing key, ``unsigned``, ``signature``, ``replay`` and
+#: ``contest`` (:mod:`mission.bus.signing`; a contested passenger binding too); ``stale_seq`` and
+#: ``stale_stamp`` come from its ordering check, the
 #: carrier feed's binding and plausibility gate add ``unbound``, ``source``, ``seq_jump``,
 #: ``stamp_jump``, ``speed``, ``jump``, ``velocity`` and ``gap`` (:mod:`mission.bus.gate`), and
 #: ``internal`` comes from a bug in a decoder, not from the codecs.
 REASONS: tuple[str, ...] = (
-    "size", "unsigned", "signature", "replay", "decode", "missing", "type", "shape", "nonfinite", "frame", "range", "orientation", "phase",
+    "size", "unsigned", "signature", "replay", "contest", "decode", "missing", "type", "shape", "nonfinite", "frame", "range", "orientation", "phase",
     "origin", "stale_seq", "stale_stamp", "unbound", "source", "seq_jump", "stamp_jump", "speed", "jump",
     "velocity", "gap", "internal",
 )

@@ -19,7 +19,7 @@ import numpy as np
 
 from mission.carrier.backends import KINDS, describe, open_backend
 from mission.carrier.controller import CarrierController
-from mission.bus.auth import bus_auth
+from mission.bus.auth import bus_auth, unsigned_warning
 from mission.bus.bridge import describe_endpoints, keys, open_session
 from mission.bus.session import close_session
 from mission.time.clock import Clock, LockstepClock, ScaledClock
@@ -172,12 +172,19 @@ def _jsonable(value: Any) -> Any:
 @click.option("--zenoh-signing-key", "bus_key_file", type=click.Path(dir_okay=False), default=None, metavar="FILE",
               help="Bus signing key file of the pair (overrides zenoh.signing_key_file): the carrier's state is signed, "
                    "the passenger's status must carry its tag.")
+@click.option("--zenoh-private-key", "own_key_file", type=click.Path(dir_okay=False), default=None, metavar="FILE",
+              help="The carrier's own Ed25519 private key (overrides zenoh.private_key_file): its state and clock "
+                   "messages are signed with it. With --zenoh-peer-key: one key per robot.")
+@click.option("--zenoh-peer-key", "peer_key_file", type=click.Path(dir_okay=False), default=None, metavar="FILE",
+              help="The passenger's Ed25519 public key (overrides zenoh.peer_public_key_file): the passenger's status "
+                   "must verify with it.")
 def carrier_cli(config: str, backend: str | None, speed: float, pair: str | None, listen: tuple[str, ...],
                     connect: tuple[str, ...], encoding: str | None, rate: float | None, mavlink_url: str | None,
                     target_system: int | None, kinematics: str | None, offset_ned: str | None,
                     ros2_namespace: str | None, key_form: str | None, cmd_vel_type: str | None, duration: float | None,
                     lockstep: bool, summary_path: str | None, mcap_path: str | None, log_epoch_ns: int | None,
-                    bus_key_file: str | None) -> int:
+                    bus_key_file: str | None,
+                    own_key_file: str | None, peer_key_file: str | None) -> int:
     """Run the carrier-side controller of CONFIG (a TOML file).
 
     The carrier waits until the passenger's published phase is RIDING, then drives towards
@@ -217,9 +224,13 @@ def carrier_cli(config: str, backend: str | None, speed: float, pair: str | None
         "carrier.rate_hz": rate,
         "carrier.mavlink.url": mavlink_url,
         "zenoh.signing_key_file": bus_key_file,
+        "zenoh.private_key_file": own_key_file,
+        "zenoh.peer_public_key_file": peer_key_file,
     })
     require_stated(cfg, CARRIER_FIELDS, "carrier")  # refused before it says anything about flying
     click.echo(startup_line(cfg, speed), err=True)
+    if (unsigned := unsigned_warning(cfg.zenoh)) is not None:
+        click.echo(unsigned, err=True)
     return main(cfg, speed, duration, summary_path=summary_path, lockstep=lockstep, mcap_path=mcap_path, log_epoch_ns=log_epoch_ns)
 
 

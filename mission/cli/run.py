@@ -12,7 +12,7 @@ from typing import Any, Iterator
 
 import click
 
-from mission.bus.auth import bus_auth
+from mission.bus.auth import bus_auth, unsigned_warning
 from mission.bus.bridge import CarrierFeed, PassengerPublisher, open_session, zenoh_config
 from mission.bus.session import close_session, congestion_for
 from mission.time.clock import Clock, LockstepClock, ScaledClock
@@ -180,6 +180,12 @@ def exit_code(outcome: MissionOutcome) -> int:
 @click.option("--zenoh-signing-key", "bus_key_file", type=click.Path(dir_okay=False),
               help="Bus signing key file of the pair (overrides zenoh.signing_key_file): carrier states and clock "
               "messages must carry its tag; the passenger's status is signed.")
+@click.option("--zenoh-private-key", "own_key_file", type=click.Path(dir_okay=False),
+              help="The passenger's own Ed25519 private key (overrides zenoh.private_key_file): its statuses and "
+              "clock messages are signed with it. With --zenoh-peer-key: one key per robot.")
+@click.option("--zenoh-peer-key", "peer_key_file", type=click.Path(dir_okay=False),
+              help="The carrier's Ed25519 public key (overrides zenoh.peer_public_key_file): carrier states and clock "
+              "messages must verify with it.")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON at the end.")
 @click.option("--live", is_flag=False, flag_value=DEFAULT_LIVE, default=None, metavar="[HOST:PORT]",
               help=f"Serve the flight live to Foxglove (the foxglove-sdk WebSocket server) on HOST:PORT "
@@ -189,8 +195,8 @@ def exit_code(outcome: MissionOutcome) -> int:
                    "one in lockstep) [default: the wall clock at the mission clock's zero].")
 def run(config: str, mavlink_url: str | None, zenoh_listen: tuple[str, ...], zenoh_connect: tuple[str, ...],
         zenoh_mode: str | None, pair: str | None, speed: float, lockstep: bool, log_dir: str | None,
-        signing_key_file: str | None, bus_key_file: str | None, as_json: bool, live: str | None,
-        log_epoch_ns: int | None) -> int:
+        signing_key_file: str | None, bus_key_file: str | None, own_key_file: str | None, peer_key_file: str | None,
+        as_json: bool, live: str | None, log_epoch_ns: int | None) -> int:
     """Fly the marsupial mission described by CONFIG on a PX4 vehicle.
 
     The passenger takes off from the carrier, joins the dock point, rides while the carrier
@@ -212,7 +218,8 @@ def run(config: str, mavlink_url: str | None, zenoh_listen: tuple[str, ...], zen
     """
     cfg = load_config(config)
     overrides: dict[str, Any] = {"mavlink.url": mavlink_url, "zenoh.pair": pair, "zenoh.mode": zenoh_mode,
-                                 "mavlink.signing_key_file": signing_key_file, "zenoh.signing_key_file": bus_key_file}
+                                 "mavlink.signing_key_file": signing_key_file, "zenoh.signing_key_file": bus_key_file,
+                                 "zenoh.private_key_file": own_key_file, "zenoh.peer_public_key_file": peer_key_file}
     if zenoh_listen:
         overrides["zenoh.listen"] = list(zenoh_listen)
     if zenoh_connect:
@@ -223,6 +230,8 @@ def run(config: str, mavlink_url: str | None, zenoh_listen: tuple[str, ...], zen
     stop = threading.Event()
     for line in startup_lines(cfg, speed):
         click.echo(line)
+    if (unsigned := unsigned_warning(cfg.zenoh)) is not None:
+        click.echo(unsigned, err=True)
     if live_address is not None and not is_loopback(live_address.host):
         click.echo(f"warning: the live view binds {live_address.host}, not loopback: anyone who can reach "
                    f"{live_address.url} sees the flight", err=True)

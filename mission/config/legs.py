@@ -27,7 +27,7 @@ Frames: horizontal = the first two components (local NED north, east; a 2D scena
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from mission.errors import ConfigError
 
@@ -121,3 +121,16 @@ def check_legs(s: ScenarioSection, *, final_action: str, bc_m: float, leg_start_
                               f"from it horizontally (the dock point b*c + mission.leg_start_margin_m + {REPOSITION_SPARE_M:g} m "
                               f"= {start_m:g} m from it, the paper's Assumption 1) is inside another target's keep-out "
                               "or an obstacle, so the carrier cannot drive out to where the leg may start")
+
+
+def first_target_named(error: ConfigError, data: dict[str, Any]) -> ConfigError:
+    """``error`` naming ``scenario.targets[0]`` instead of ``scenario.target`` when the file gave
+    only ``scenario.targets`` (``target`` is then a copy of its first entry, a field the user never wrote)."""
+    scenario = data.get("scenario")
+    field = error.field
+    if not (isinstance(scenario, dict) and "targets" in scenario and "target" not in scenario):
+        return error
+    if field != "scenario.target" and not field.startswith(("scenario.target.", "scenario.target[")):
+        return error
+    return type(error)("scenario.targets[0]" + field.removeprefix("scenario.target"), error.value, error.rule)
+

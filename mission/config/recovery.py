@@ -5,12 +5,15 @@ docs/recovery.md.
 """
 from __future__ import annotations
 
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 from pydantic import Field, model_validator
 
 from mission.config.fields import Coord, Section
 from mission.errors import ConfigError
+
+if TYPE_CHECKING:
+    from mission.config.schema import Config
 
 
 class RecoverySection(Section):
@@ -107,3 +110,32 @@ class RecoverySection(Section):
             raise ConfigError("recovery.fallback_point_ned_m", self.fallback_point_ned_m, "must have 3 components (NED)")
         return self
 
+
+
+def check_recovery(cfg: Config) -> None:
+    """Refuse values that leave the recovery no way to finish (raises :class:`ConfigError` naming
+    the field to change): a holdoff that waits for the carrier to drive faster than it ever can
+    (its top speed, or with ``mission.final_action = "return"`` its recovery course and legs), a
+    carrier the passenger can never catch on that course, and a carrier state age limit on the
+    approach shorter than two of the carrier's publish periods (every approach would go around)."""
+    r, c, sf = cfg.recovery, cfg.carrier, cfg.safety
+    top = min(v for v in (c.max_speed_m_s, sf.carrier_max_speed_m_s) if v is not None)
+    if r.settle_carrier_speed_m_s > top:
+        raise ConfigError("recovery.settle_carrier_speed_m_s", r.settle_carrier_speed_m_s,
+                          f"above the carrier's top speed {top:g} m/s (carrier.max_speed_m_s, "
+                          "safety.carrier_max_speed_m_s): the holdoff would never settle")
+    if not r.carrier_max_age_s >= 2.0 / c.rate_hz:
+        raise ConfigError("recovery.carrier_max_age_s", r.carrier_max_age_s,
+                          f"must be at least two carrier states (2 / carrier.rate_hz = {2.0 / c.rate_hz:g} s): "
+                          "every approach would go around")
+    if cfg.mission.final_action != "return":
+        return
+    fastest = max([c.recovery_speed_m_s] + [leg[1] for leg in c.recovery_course])
+    if r.settle_carrier_speed_m_s > fastest:
+        raise ConfigError("recovery.settle_carrier_speed_m_s", r.settle_carrier_speed_m_s,
+                          f"above {fastest:g} m/s, the fastest the carrier drives while the passenger comes home "
+                          "(carrier.recovery_speed_m_s, carrier.recovery_course): the holdoff would never settle")
+    if sf.passenger_max_speed_m_s is not None and not c.recovery_speed_m_s < sf.passenger_max_speed_m_s:
+        raise ConfigError("carrier.recovery_speed_m_s", c.recovery_speed_m_s,
+                          f"must be below safety.passenger_max_speed_m_s = {sf.passenger_max_speed_m_s:g}: the "
+                          "passenger could never catch the carrier on its recovery course")

@@ -30,8 +30,8 @@ import numpy as np
 from pydantic import Field, ValidationError, field_validator, model_validator
 
 from mission.config.carrier import CarrierMavlinkSection, CarrierRos2Section, CarrierSection
-from mission.config.legs import check_legs
-from mission.config.recovery import RecoverySection
+from mission.config.legs import check_legs, first_target_named
+from mission.config.recovery import RecoverySection, check_recovery
 from mission.config.scenario import ObstacleSection, ScenarioSection
 from mission.config.urls import DEFAULT_URL
 from mission.config.fields import (
@@ -327,11 +327,29 @@ class ZenohSection(Section):
     signing_key_file: Path_ | None = Field(
         None, description="[-] 32-byte key (64 hex digits or raw) the pair signs its bus samples with (carrier state, "
         "passenger status, lockstep clock, ROS 2 commands; mission/bus/signing.py); unsigned or badly signed samples are "
-        "then dropped and counted. Both robots of a pair need the same file. None: unsigned (the mTLS + ACL router "
-        "is the fleet's answer)")
+        "then dropped and counted. Both robots of a pair need the same file, and either can sign as the other: prefer "
+        "private_key_file and peer_public_key_file. None: unsigned (the mTLS + ACL router is the fleet's answer)")
+
+    private_key_file: Path_ | None = Field(
+        None, description="[-] this robot's own Ed25519 private key (PEM, e.g. `openssl genpkey -algorithm ed25519`, or "
+        "its 32-byte seed as 64 hex digits or raw): it signs every sample this robot puts on the pair's bus. With "
+        "peer_public_key_file: one key per robot, and signing_key_file then only signs a carrier's own ROS 2 robot link")
+    peer_public_key_file: Path_ | None = Field(
+        None, description="[-] the other robot's Ed25519 public key (PEM, or 32 bytes as 64 hex digits or raw): the only "
+        "key its samples verify with; unsigned or badly signed samples are dropped and counted")
 
     _config_file_printable = field_validator("config_file")(lambda v: v if v is None else printable(v))
     _signing_key_printable = field_validator("signing_key_file")(lambda v: v if v is None else printable(v))
+    _robot_keys_printable = field_validator("private_key_file", "peer_public_key_file")(
+        lambda v: v if v is None else printable(v))
+
+    @model_validator(mode="after")
+    def _both_robot_keys(self) -> "ZenohSection":
+        if bool(self.private_key_file) != bool(self.peer_public_key_file):
+            missing = "peer_public_key_file" if self.private_key_file else "private_key_file"
+            raise ConfigError(f"zenoh.{missing}", None, "one key per robot needs both zenoh.private_key_file and "
+                              "zenoh.peer_public_key_file")
+        return self
 
 class Config(Section):
     law: LawSection = LawSection()
@@ -393,6 +411,7 @@ class Config(Section):
         check_legs(s, final_action=m.final_action, bc_m=bc, leg_start_margin_m=m.leg_start_margin_m,
                    dock_offset_ned_m=m.dock_offset_ned_m, p3_margin_m=self.carrier.p3_margin_m,
                    safety_margin_m=sf.margin_m)
+        check_recovery(self)  # a recovery that can finish (mission/config/recovery.py)
         if s.dim != 3 or s.frame != "local_ned":
             return
         # local NED, z down: the carrier drives on the ground at carrier_start's z
@@ -453,7 +472,7 @@ class Config(Section):
 
 def _error_from_validation(exc: ValidationError) -> ConfigError:
     err = exc.errors()[0]
-    loc = ".".join(str(p) for p in err["loc"] if p != "__root__")
+    loc = "".join(f"[{p}]" if isinstance(p, int) else f".{p}" for p in err["loc"] if p != "__root__").lstrip(".")
     ctx_error = (err.get("ctx") or {}).get("error")
     if isinstance(ctx_error, ConfigError):
         return ctx_error
@@ -468,7 +487,9 @@ def from_dict(data: dict[str, Any]) -> Config:
     try:
         return Config.model_validate(data)
     except ValidationError as exc:
-        raise _error_from_validation(exc) from None
+        raise first_target_named(_error_from_validation(exc), data) from None
+    except ConfigError as exc:
+        raise first_target_named(exc, data) from None
 
 
 def load_config(path: str | Path) -> Config:

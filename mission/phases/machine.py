@@ -249,7 +249,8 @@ def _carrier_detail(obs: Observation, m: MissionModel) -> str:
         return "no carrier state received"
     if c.alive is False:
         return "carrier liveliness token gone"
-    return f"carrier state {describe_age(c)} (limit {m.carrier_timeout_s:g} s)"
+    detail = f"carrier state {describe_age(c)} (limit {m.carrier_timeout_s:g} s)"
+    return detail if c.untrusted is None else f"{detail}; not trusted: {c.untrusted}"
 
 
 def live_geometry_problem(dock: np.ndarray, vehicle_ned_m: np.ndarray, m: MissionModel) -> str | None:

@@ -177,6 +177,15 @@ RECOVERY_MISTAKES = [
     ("carrier.recovery_heading_deg", "nan", "carrier.recovery_heading_deg"),
     ("carrier.recovery_course", "[[90.0, 1.0]]", "carrier.recovery_course[0]"),
     ("carrier.recovery_course", "[[90.0, 1.0, 0.0]]", "carrier.recovery_course[0]"),
+    ("recovery.settle_carrier_speed_m_s", "2.5", "recovery.settle_carrier_speed_m_s"),  # above the carrier's top speed
+    ("recovery.carrier_max_age_s", "0.05", "recovery.carrier_max_age_s"),  # under two carrier states (30 Hz)
+]
+
+# (field, TOML value, the field the error names): a recovery that cannot finish on configs/recovery.toml
+# (mission.final_action = "return", the carrier's recovery course at 1.5 m/s)
+RETURN_MISTAKES = [
+    ("recovery.settle_carrier_speed_m_s", "1.8", "recovery.settle_carrier_speed_m_s"),  # faster than its course
+    ("safety.passenger_max_speed_m_s", "1.5", "carrier.recovery_speed_m_s"),  # the passenger never catches it
 ]
 
 
@@ -272,6 +281,23 @@ def test_bad_recovery_configurations_stop_run_and_carrier_with_exit_2(tmp_path: 
 
 
 @pytest.mark.parametrize("command", ["run", "carrier"])
+def test_a_recovery_that_cannot_finish_stops_run_and_carrier_with_exit_2(tmp_path: Path,
+                                                                        capsys: pytest.CaptureFixture[str],
+                                                                        command: str) -> None:
+    """A holdoff waiting for a carrier faster than its top speed or than its recovery course, a
+    carrier the passenger can never catch, an approach age limit under two carrier states: refused
+    before anything moves, naming the field (exit 2). On main each was accepted and the recovery
+    could only go around until it fell back."""
+    for key, raw, field in RECOVERY_MISTAKES[-2:] + RETURN_MISTAKES:
+        path = tmp_path / "mutated.toml"
+        path.write_text(mutated_text(RECOVERY, *key.split("."), raw))
+        code = main([command, str(path), *(["--log-dir", str(tmp_path / "log")] if command == "run" else [])])
+        err = capsys.readouterr().err
+        assert code == 2 and f"error: {field} = " in err and "Traceback" not in err, (key, raw, err[:300])
+        assert not (tmp_path / "log").exists()
+
+
+@pytest.mark.parametrize("command", ["run", "carrier"])
 def test_the_real_processes_refuse_a_flat_glide_path(tmp_path: Path, command: str) -> None:
     path = tmp_path / "mutated.toml"
     path.write_text(mutated_text(RECOVERY, "recovery", "glide_angle_deg", "0.0"))
@@ -315,6 +341,19 @@ CYCLE_MISTAKES = [
     ("second-in-obstacle", CYCLE + "\n[[scenario.obstacles]]\ncenter = [44.0, 4.0, -4.0]\nradius = 1.0\n",
      "scenario.targets[1]"),
     ("no-drive-out", CYCLE + RING, "scenario.targets[1]"),
+    # a bad entry is named as the file wrote it, scenario.targets[i] (on main: scenario.target, a field not in the file)
+    ("first-underground", CYCLE.replace(CYCLE_TARGETS, "targets = [[24.0, 18.0, 5.0], [44.0, 4.0, -4.0]]"),
+     "scenario.targets[0]"),
+    ("first-too-high", CYCLE.replace(CYCLE_TARGETS, "targets = [[24.0, 18.0, -30.0], [44.0, 4.0, -4.0]]"),
+     "scenario.targets[0]"),
+    ("first-two-components", CYCLE.replace(CYCLE_TARGETS, "targets = [[24.0, 18.0], [44.0, 4.0, -4.0]]"),
+     "scenario.targets[0]"),
+    ("first-a-string", CYCLE.replace(CYCLE_TARGETS, 'targets = [[24.0, 18.0, "x"], [44.0, 4.0, -4.0]]'),
+     "scenario.targets[0][2]"),
+    ("second-nan", CYCLE.replace(CYCLE_TARGETS, "targets = [[24.0, 18.0, -5.0], [44.0, 4.0, nan]]"),
+     "scenario.targets[1][2]"),
+    ("first-in-obstacle", CYCLE + "\n[[scenario.obstacles]]\ncenter = [24.0, 18.0, -5.0]\nradius = 1.0\n",
+     "scenario.targets[0]"),
     ("several-without-return", mutated_text(CYCLE, "mission", "final_action", '"hold"'), "mission.final_action"),
 ]
 

@@ -243,7 +243,7 @@ class Ros2Carrier:
         self.received = 0  # odometry samples heard, taken or dropped
         self._attachment = AttachmentWriter(self.section.rmw_attachment) if self.topics.rmw_zenoh else None
         self.robot_attachment: str | None = None  # the form of the robot's rmw_zenoh attachments, once heard
-        self._auth = bus_auth(cfg.zenoh)
+        self._auth = bus_auth(cfg.zenoh, robot_link=True)
         self._signer = self._auth.signer() if self._auth is not None else None  # a robot that verifies (ros2-robot --signing-key)
         self._listeners: list[Callable[[Received], None]] = []
         self.graph: RosGraph | None = None

@@ -12,12 +12,16 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from mission.bus.auth import BusAuth, bus_auth
+from mission.bus.auth import BusAuth, bus_auth, unsigned_warning
 from mission.bus.bridge import CarrierFeed, CarrierPublisher, PassengerFeed, PassengerPublisher, keys
 from mission.bus.wire import CarrierState, PassengerStatus
+from mission.cli import main
+from mission.config.keys import write_key_pair
 from mission.config.schema import ZenohSection
 from mission.errors import ConfigError
 from mission.time.clock import ManualClock
+from sim.net import free_port
+from tests.conftest import CONFIGS
 from mission.bus.lockstep import _ClockWire, clock_keys
 from tests.support.zenoh_util import LENIENT, peer_pair, wait_for
 
@@ -140,3 +144,52 @@ def test_a_missing_or_malformed_key_file_names_the_field(tmp_path: Path) -> None
     good = tmp_path / "good.key"
     good.write_text(KEY.hex())
     assert isinstance(bus_auth(ZenohSection(signing_key_file=str(good))), BusAuth)
+
+
+def test_one_key_per_robot_needs_both_files_and_names_the_bad_one(tmp_path: Path) -> None:
+    """Keys of one robot: PEM (as openssl writes them) or 64 hex digits; a file alone, unreadable
+    or of another kind is refused naming its field (exit 2 at the CLI)."""
+    from cryptography.hazmat.primitives import serialization
+    from cryptography.hazmat.primitives.asymmetric.ec import SECP256R1, generate_private_key
+    from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
+
+    write_key_pair(tmp_path / "hex.key", tmp_path / "hex.pub")
+    key = Ed25519PrivateKey.generate()
+    (tmp_path / "pem.key").write_bytes(key.private_bytes(serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8,
+                                                         serialization.NoEncryption()))
+    (tmp_path / "pem.pub").write_bytes(key.public_key().public_bytes(serialization.Encoding.PEM,
+                                                                     serialization.PublicFormat.SubjectPublicKeyInfo))
+    (tmp_path / "ec.pub").write_bytes(generate_private_key(SECP256R1()).public_key().public_bytes(
+        serialization.Encoding.PEM, serialization.PublicFormat.SubjectPublicKeyInfo))
+    for own, peer in (("hex.key", "pem.pub"), ("pem.key", "hex.pub")):
+        auth = bus_auth(ZenohSection(private_key_file=str(tmp_path / own), peer_public_key_file=str(tmp_path / peer)))
+        assert auth is not None and auth.mode == "ed25519"
+    with pytest.raises(ConfigError) as err:
+        ZenohSection(private_key_file=str(tmp_path / "hex.key"))
+    assert err.value.field == "zenoh.peer_public_key_file"
+    for own, peer, field in (("missing.key", "hex.pub", "zenoh.private_key_file"),
+                             ("hex.pub", "hex.pub", None),  # 32 bytes: a seed like any other (its own key)
+                             ("hex.key", "ec.pub", "zenoh.peer_public_key_file"),
+                             ("hex.key", "missing.pub", "zenoh.peer_public_key_file")):
+        section = ZenohSection(private_key_file=str(tmp_path / own), peer_public_key_file=str(tmp_path / peer))
+        if field is None:
+            assert bus_auth(section) is not None
+            continue
+        with pytest.raises(ConfigError) as err:
+            bus_auth(section)
+        assert err.value.field == field and "BEGIN" not in str(err.value), str(err.value)
+
+
+def test_an_unsigned_bus_says_loudly_at_start_up_that_it_can_be_taken(tmp_path: Path,
+                                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    """``marsupial carrier`` (and ``run``, ``demo``: the same line) on an unsigned bus: a WARNING on
+    stderr naming the risk; with one key per robot, none."""
+    write_key_pair(tmp_path / "own.key", tmp_path / "own.pub")
+    signed = ["--zenoh-private-key", str(tmp_path / "own.key"), "--zenoh-peer-key", str(tmp_path / "own.pub")]
+    for extra, warned in (([], True), (signed, False)):
+        code = main(["carrier", str(CONFIGS / "demo.toml"), "--duration", "0.1", "--zenoh-listen",
+                     f"tcp/127.0.0.1:{free_port()}", "--summary", str(tmp_path / "c.json"), *extra])
+        err = capsys.readouterr().err
+        assert code == 0 and ("WARNING: the bus of pair pair0 is unsigned" in err) is warned, err[-2000:]
+    line = unsigned_warning(ZenohSection())
+    assert line is not None and "pose as the carrier or the passenger" in line and "passenger binding" in line

@@ -12,8 +12,10 @@ import numpy as np
 import pytest
 import zenoh
 
+from mission.bus.auth import BusAuth
 from mission.bus.bridge import keys
 from mission.bus.wire import PassengerStatus
+from mission.config.keys import read_private_key_file, read_public_key_file, write_key_pair
 from mission.config.schema import Config, from_dict
 from mission.time.clock import ManualClock
 from sim.robots.carrier import CarrierMode, CarrierSim
@@ -123,3 +125,71 @@ def test_with_the_key_unsigned_statuses_with_the_passenger_s_own_source_id_are_d
             assert sim.passenger.counters["bound_source"].startswith("signer:")
         finally:
             passenger.pub.close()
+
+
+def test_unsigned_a_rogue_that_stood_on_the_deck_first_is_contested_by_the_real_passenger() -> None:
+    """On an unsigned bus a rogue that says PREFLIGHT before the mission starts, then RIDING on the
+    dock point, binds: unsigned, nothing tells it from the real passenger (the start-up WARNING says
+    so). When the real passenger then stands on the deck too (its PREFLIGHT statuses), the binding
+    is contested: the carrier stops and trusts neither, whatever either says next. On main the real
+    statuses were dropped as a foreign source and the carrier drove on with the rogue, empty."""
+    clock = ManualClock()
+    with sessions(2) as (sa, rogue_session, sb), CarrierSim(_cfg(), clock, sa) as sim:
+        start = _steps(sim, clock, 1)
+        rogue = Passenger(rogue_session, "trust", clock, sim)
+        real = Passenger(sb, "trust", clock, sim)
+        try:
+            wait_for(lambda: rogue.pub.matched and real.pub.matched)
+            seq = rogue.say("RIDING")
+            wait_for(lambda: _seen(sim, seq), what="the rogue's RIDING")
+            moved = _steps(sim, clock, 30)
+            assert sim.mode is CarrierMode.APPROACHING and moved < start  # unsigned: the rogue won the binding
+            for _ in range(3):
+                real._send("PREFLIGHT")
+            wait_for(lambda: sim.passenger.counters["contest"] is not None, what="the contest")
+            stopped = _steps(sim, clock, 45)  # beyond carrier.passenger_timeout_s: both silent to it
+            for who in (rogue, real, rogue):
+                who.say("RIDING")
+            wait_for(lambda: sim.passenger.counters["dropped"].get("contest", 0) >= 3, what="both refused")
+            assert _steps(sim, clock, 30) == pytest.approx(stopped, abs=1e-9) and sim.mode is not CarrierMode.APPROACHING
+            assert "a second passenger" in sim.passenger.counters["contest"]
+        finally:
+            rogue.pub.close()
+            real.pub.close()
+
+
+def test_with_one_key_per_robot_a_rogue_never_binds_and_the_real_passenger_does(tmp_path: Path) -> None:
+    """The carrier verifies statuses with the passenger's public key only: a rogue that stands on
+    the deck first and rides on the dock point, unsigned or signed with a key of its own, never
+    binds (``unsigned``, ``signature``); the carrier never moves until the real passenger, signing
+    with its own key, stands on the deck and rides."""
+    for robot in ("carrier", "passenger", "rogue"):
+        write_key_pair(tmp_path / f"{robot}.key", tmp_path / f"{robot}.pub")
+    cfg = from_dict({**_cfg().model_dump(exclude_unset=True),
+                     "zenoh": {"pair": "trust", "private_key_file": str(tmp_path / "carrier.key"),
+                               "peer_public_key_file": str(tmp_path / "passenger.pub")}})
+    carrier_pub = read_public_key_file(tmp_path / "carrier.pub", "carrier")
+    clock = ManualClock()
+    with sessions(3) as (sa, unsigned_session, keyed_session, sb), CarrierSim(cfg, clock, sa) as sim:
+        start = _steps(sim, clock, 1)
+        rogues = [Passenger(unsigned_session, "trust", clock, sim),
+                  Passenger(keyed_session, "trust", clock, sim,
+                            auth=BusAuth.per_robot(read_private_key_file(tmp_path / "rogue.key", "rogue"), carrier_pub))]
+        real = Passenger(sb, "trust", clock, sim,
+                         auth=BusAuth.per_robot(read_private_key_file(tmp_path / "passenger.key", "passenger"), carrier_pub))
+        try:
+            wait_for(lambda: all(p.pub.matched for p in (*rogues, real)))
+            for rogue in rogues:
+                rogue.say("RIDING")
+            wait_for(lambda: sim.passenger.counters["dropped"].get("unsigned", 0) >= 4
+                     and sim.passenger.counters["dropped"].get("signature", 0) >= 4, what="the rogues refused")
+            assert _steps(sim, clock, 30) == start and sim.mode is CarrierMode.WAITING
+            assert sim.passenger.counters["bound_source"] is None
+            seq = real.say("RIDING")
+            wait_for(lambda: _seen(sim, seq), what="the real RIDING")
+            assert _steps(sim, clock, 20) < start and sim.mode is CarrierMode.APPROACHING
+            c = sim.passenger.counters
+            assert c["bound_source"].startswith("signer:") and c["contest"] is None, c
+        finally:
+            for p in (*rogues, real):
+                p.pub.close()

@@ -80,10 +80,69 @@ def test_each_signer_has_its_own_sequence_and_the_memory_is_bounded() -> None:
     assert verifier.verify(STATE, b"b", tag_b, NOW)[0] == b.source
     for _ in range(MAX_SIGNERS + 5):  # many signers (key holders only): the oldest is forgotten
         verifier.verify(STATE, b"c", Signer(KEY).attachment(STATE, b"c", NOW), NOW)
-    assert len(verifier._last) == MAX_SIGNERS
+    assert len(verifier.streams._streams) == MAX_SIGNERS
 
 
 def test_pair_keys_differ_and_a_key_has_32_bytes() -> None:
     assert pair_key(bytes(32), "pair0") != pair_key(bytes(32), "pair1") and len(KEY) == 32
     with pytest.raises(ValueError):
         pair_key(b"short", "pair0")
+
+
+def test_a_counter_far_ahead_of_its_stream_is_a_contest_and_the_stream_is_refused_for_good() -> None:
+    """An insider with the key signing under the real signer id 50 s ahead: on main the real
+    stream was then dropped as ``replay``, silently. Now the forgery is a contest, and so is every
+    later sample of that signer, the real ones too."""
+    real, verifier = Signer(KEY), Verifier(KEY)
+    for k in range(5):
+        verifier.verify(STATE, b"{}", real.attachment(STATE, b"{}", NOW + k * 33_000), NOW + k * 33_000)
+    insider = Signer(KEY, signer=real.signer)
+    assert reason(verifier, STATE, b"x", insider.attachment(STATE, b"x", NOW + 50_000_000), NOW + 200_000) == "contest"
+    assert reason(verifier, STATE, b"{}", real.attachment(STATE, b"{}", NOW + 233_000), NOW + 233_000) == "contest"
+    assert verifier.streams.contested(real.signer) and verifier.streams.contests == 1
+
+
+def test_a_second_signer_just_ahead_is_a_contest_once_the_real_stream_is_heard_behind_it() -> None:
+    real, verifier = Signer(KEY), Verifier(KEY)
+    verifier.verify(STATE, b"{}", real.attachment(STATE, b"{}", NOW), NOW)
+    insider = Signer(KEY, signer=real.signer)
+    verifier.verify(STATE, b"x", insider.attachment(STATE, b"x", NOW + 1_000_000), NOW + 10_000)  # 1 s ahead: accepted
+    assert reason(verifier, STATE, b"{}", real.attachment(STATE, b"{}", NOW + 40_000), NOW + 40_000) == "contest"
+
+
+def test_copies_and_late_samples_are_replays_not_contests() -> None:
+    signer, verifier = Signer(KEY), Verifier(KEY)
+    tags = [signer.attachment(STATE, b"{}", NOW + k * 20_000) for k in range(10)]
+    late = tags.pop(8)  # put 8 after 9: 20 ms late
+    for tag in tags:
+        verifier.verify(STATE, b"{}", tag, NOW + 200_000)
+    assert reason(verifier, STATE, b"{}", late, NOW + 200_000) == "replay"
+    assert reason(verifier, STATE, b"{}", tags[2], NOW + 5_000_000) == "replay"  # a copy, 5 s later
+    assert verifier.streams.contests == 0
+
+
+def test_one_key_per_robot_verifies_only_the_peer_s_signature() -> None:
+    from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
+
+    from mission.bus.signing import ED25519_TRAILER_BYTES, Ed25519Signer, Ed25519Verifier
+
+    carrier, passenger = Ed25519PrivateKey.generate(), Ed25519PrivateKey.generate()
+    verifier = Ed25519Verifier(carrier.public_key())  # the passenger's view of the carrier
+    signer = Ed25519Signer(carrier)
+    tag = signer.attachment(STATE, b"{}", NOW, inner=b"rmw")
+    assert len(tag) == 3 + ED25519_TRAILER_BYTES and verifier.verify(STATE, b"{}", tag, NOW) == (signer.source, b"rmw")
+    as_carrier = Ed25519Signer(passenger, signer=signer.signer).attachment(STATE, b"{}", NOW + 1)
+    assert reason(verifier, STATE, b"{}", as_carrier) == "signature"  # the passenger's key cannot speak for it
+    assert reason(verifier, STATE, b"{}", Signer(KEY).attachment(STATE, b"{}", NOW)) == "unsigned"  # a shared-key tag
+    assert reason(Verifier(KEY), STATE, b"{}", tag) == "unsigned"
+
+
+def test_a_stream_first_heard_on_an_old_copy_is_not_contested_by_its_real_samples() -> None:
+    """A keyless replayer puts a 30 s old sample of the real signer before the verifier has heard
+    it: the real samples that follow are not 'ahead of their stream'."""
+    real, verifier = Signer(KEY), Verifier(KEY)
+    old = real.attachment(STATE, b"{}", NOW - 30_000_000)
+    verifier.verify(STATE, b"{}", old, NOW)
+    for k in range(3):
+        verifier.verify(STATE, b"{}", real.attachment(STATE, b"{}", NOW + k * 33_000), NOW + k * 33_000)
+    assert verifier.streams.contests == 0

@@ -142,7 +142,7 @@ def test_every_rule_names_field_value_and_rule(field, value, words):
     section, name = field.split(".")
     with pytest.raises(ConfigError) as exc:
         from_dict({section: {name: value}})
-    assert exc.value.field == field or exc.value.field.startswith(field + ".")  # a list item: field.<index>
+    assert exc.value.field == field or exc.value.field.startswith(field + "[")  # a list item: field[<index>]
     assert words in str(exc.value)
     shown = value[0] if isinstance(value, list) else value  # the value, as given (the bad item of a list)
     assert repr(shown) in str(exc.value) or str(shown) in str(exc.value)

@@ -3,11 +3,12 @@ Assumption 1, or the file is refused naming the field."""
 from __future__ import annotations
 
 import math
+import tomllib
 
 import pytest
 
 from mission.config.legs import covered_circle
-from mission.config.schema import load_config, with_overrides
+from mission.config.schema import from_dict, load_config, with_overrides
 from mission.errors import ConfigError
 from tests.conftest import CONFIGS
 
@@ -45,6 +46,42 @@ def test_targets_that_leave_a_leg_no_start_are_refused(cycle, overrides, field, 
     with pytest.raises(ConfigError) as exc:
         with_overrides(cycle, overrides)
     assert exc.value.field == field and words in str(exc.value), str(exc.value)
+
+
+@pytest.mark.parametrize("targets, field, words", [
+    ([[24.0, 18.0, 5.0], [44.0, 4.0, -4.0]], "scenario.targets[0]", "below the ground"),
+    ([[24.0, 18.0], [44.0, 4.0, -4.0]], "scenario.targets[0]", "3 components"),
+    ([[24.0, 18.0, "x"], [44.0, 4.0, -4.0]], "scenario.targets[0][2]", "valid number"),
+    ([[24.0, 18.0, -5.0], [44.0, 4.0, float("nan")]], "scenario.targets[1][2]", "finite"),
+])
+def test_a_bad_entry_of_targets_is_named_as_the_file_wrote_it(targets, field, words):
+    """A file that gives only ``scenario.targets`` hears of its entries, not of ``scenario.target``
+    (the copy of the first entry it never wrote)."""
+    text = (CONFIGS / "cycle.toml").read_text()
+    data = tomllib.loads(text)
+    data["scenario"]["targets"] = targets
+    with pytest.raises(ConfigError) as exc:
+        from_dict(data)
+    assert exc.value.field == field and words in str(exc.value), str(exc.value)
+
+
+@pytest.mark.parametrize("overrides, field, words", [
+    ({"recovery.settle_carrier_speed_m_s": 2.5}, "recovery.settle_carrier_speed_m_s", "top speed 2 m/s"),
+    ({"recovery.settle_carrier_speed_m_s": 1.8}, "recovery.settle_carrier_speed_m_s", "above 1.5 m/s, the fastest"),
+    ({"carrier.recovery_speed_m_s": 0.0, "recovery.settle_carrier_speed_m_s": 0.5}, "recovery.settle_carrier_speed_m_s",
+     "never settle"),
+    ({"safety.passenger_max_speed_m_s": 1.5}, "carrier.recovery_speed_m_s", "never catch"),
+    ({"recovery.carrier_max_age_s": 0.05}, "recovery.carrier_max_age_s", "two carrier states"),
+])
+def test_a_recovery_that_cannot_finish_is_refused(cycle, overrides, field, words):
+    with pytest.raises(ConfigError) as exc:
+        with_overrides(cycle, overrides)
+    assert exc.value.field == field and words in str(exc.value), str(exc.value)
+
+
+def test_a_holdoff_may_wait_for_a_course_leg_faster_than_the_steady_course(cycle):
+    faster_leg = {"recovery.settle_carrier_speed_m_s": 1.8, "carrier.recovery_course": [[90.0, 2.0, 30.0]]}
+    assert with_overrides(cycle, faster_leg).recovery.settle_carrier_speed_m_s == 1.8
 
 
 def test_a_leg_ringed_by_obstacles_has_no_place_to_start(cycle):

@@ -411,7 +411,7 @@ def test_out_of_line_on_the_descent_the_passenger_holds_its_height_and_docks_at_
 def test_the_holdoff_waits_for_the_carrier_to_move_when_told_to(cfg):
     """recovery.settle_carrier_speed_m_s: a carrier that stands at first (a rover that must turn
     onto its course) is not approached until it moves that fast."""
-    slow = with_overrides(cfg, {"recovery.settle_carrier_speed_m_s": 1.0})
+    slow = with_overrides(cfg, {"recovery.settle_carrier_speed_m_s": 1.0, "carrier.recovery_speed_m_s": 1.5})
     started: dict = {"t": None, "track": []}
 
     def start_late(world: FakeWorld, r: TickReport) -> None:
