@@ -13,7 +13,7 @@ from mission.config.fields import Coord, Section
 from mission.errors import ConfigError
 
 if TYPE_CHECKING:
-    from mission.config.schema import Config
+    from mission.config.carrier import CarrierSection
 
 
 class RecoverySection(Section):
@@ -112,14 +112,16 @@ class RecoverySection(Section):
 
 
 
-def check_recovery(cfg: Config) -> None:
+def check_recovery(r: RecoverySection, c: CarrierSection, *, carrier_max_speed_m_s: float | None,
+                   passenger_max_speed_m_s: float | None, final_action: str) -> None:
     """Refuse values that leave the recovery no way to finish (raises :class:`ConfigError` naming
     the field to change): a holdoff that waits for the carrier to drive faster than it ever can
     (its top speed, or with ``mission.final_action = "return"`` its recovery course and legs), a
     carrier the passenger can never catch on that course, and a carrier state age limit on the
-    approach shorter than two of the carrier's publish periods (every approach would go around)."""
-    r, c, sf = cfg.recovery, cfg.carrier, cfg.safety
-    top = min(v for v in (c.max_speed_m_s, sf.carrier_max_speed_m_s) if v is not None)
+    approach shorter than two of the carrier's publish periods (every approach would go around).
+    ``carrier_max_speed_m_s``, ``passenger_max_speed_m_s``, ``final_action``: the config's
+    ``safety.*`` and ``mission.final_action``."""
+    top = min(v for v in (c.max_speed_m_s, carrier_max_speed_m_s) if v is not None)
     if r.settle_carrier_speed_m_s > top:
         raise ConfigError("recovery.settle_carrier_speed_m_s", r.settle_carrier_speed_m_s,
                           f"above the carrier's top speed {top:g} m/s (carrier.max_speed_m_s, "
@@ -128,14 +130,14 @@ def check_recovery(cfg: Config) -> None:
         raise ConfigError("recovery.carrier_max_age_s", r.carrier_max_age_s,
                           f"must be at least two carrier states (2 / carrier.rate_hz = {2.0 / c.rate_hz:g} s): "
                           "every approach would go around")
-    if cfg.mission.final_action != "return":
+    if final_action != "return":
         return
     fastest = max([c.recovery_speed_m_s] + [leg[1] for leg in c.recovery_course])
     if r.settle_carrier_speed_m_s > fastest:
         raise ConfigError("recovery.settle_carrier_speed_m_s", r.settle_carrier_speed_m_s,
                           f"above {fastest:g} m/s, the fastest the carrier drives while the passenger comes home "
                           "(carrier.recovery_speed_m_s, carrier.recovery_course): the holdoff would never settle")
-    if sf.passenger_max_speed_m_s is not None and not c.recovery_speed_m_s < sf.passenger_max_speed_m_s:
+    if passenger_max_speed_m_s is not None and not c.recovery_speed_m_s < passenger_max_speed_m_s:
         raise ConfigError("carrier.recovery_speed_m_s", c.recovery_speed_m_s,
-                          f"must be below safety.passenger_max_speed_m_s = {sf.passenger_max_speed_m_s:g}: the "
+                          f"must be below safety.passenger_max_speed_m_s = {passenger_max_speed_m_s:g}: the "
                           "passenger could never catch the carrier on its recovery course")

@@ -411,7 +411,8 @@ class Config(Section):
         check_legs(s, final_action=m.final_action, bc_m=bc, leg_start_margin_m=m.leg_start_margin_m,
                    dock_offset_ned_m=m.dock_offset_ned_m, p3_margin_m=self.carrier.p3_margin_m,
                    safety_margin_m=sf.margin_m)
-        check_recovery(self)  # a recovery that can finish (mission/config/recovery.py)
+        check_recovery(self.recovery, self.carrier, carrier_max_speed_m_s=sf.carrier_max_speed_m_s,  # it can finish
+                       passenger_max_speed_m_s=sf.passenger_max_speed_m_s, final_action=m.final_action)
         if s.dim != 3 or s.frame != "local_ned":
             return
         # local NED, z down: the carrier drives on the ground at carrier_start's z

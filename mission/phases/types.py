@@ -193,7 +193,7 @@ class RecoveryModel:
     at_target_s: float
     deck_radius_m: float
     keep_out_m: float
-    carrier_return_max_age_s: float = 1.0  # [s] the age budget of RETURNING, HOLDOFF and GO_AROUND
+    carrier_return_max_age_s: float  # [s] the age budget of RETURNING, HOLDOFF and GO_AROUND
 
 
 @dataclass(frozen=True)

@@ -72,7 +72,7 @@ def test_signed_states_bind_to_their_signer_and_no_copy_replay_or_foreign_key_ge
             seq += 1
         newest = seq - 1
         wait_for(lambda: feed.latest().state.seq == newest and json.loads(capture.samples[-1][0])["seq"] == newest,  # type: ignore[union-attr]
-                 what="the newest signed state at both")
+                 what="the newest signed state at both", timeout_s=30.0)  # an event: slow only on a loaded machine
         accepted = feed.counters["accepted"]
         assert accepted >= 5 and not feed.counters["dropped"], feed.counters
         assert feed.counters["bound_source"].startswith("signer:") and feed.counters["signed"]
