@@ -29,8 +29,7 @@ from mission.time.clock import Clock, Periodic, join_thread, start_thread
 from mission.config.schema import Config
 from mission.errors import CommandRejected, LinkError
 from mission.record import FlightRecorder, TickRow
-from mission.mavlink.commander import (  # noqa: F401  (HOME_*, home_update_due: re-exported)
-    HOME_MIN_MOVE_M, HOME_PERIOD_S, KEPT_PARAMS, OFFBOARD_LOSS_RETURN, HomeKeeper, ParamKeeper, home_update_due)
+from mission.mavlink.commander import KEPT_PARAMS, OFFBOARD_LOSS_RETURN, HomeKeeper, ParamKeeper
 from mission.mavlink.env import mavlink
 from mission.mavlink.telemetry import VehicleState
 from mission.model import mission_model

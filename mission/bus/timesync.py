@@ -16,7 +16,7 @@ import logging
 import math
 import threading
 import time
-from typing import Any
+from typing import Any, Callable
 
 import zenoh
 
@@ -40,14 +40,28 @@ def time_keys(pair: str) -> tuple[str, str]:
 
 
 class _Wire:
-    """Signed text put on ``key`` (:meth:`put`); the verified words of the other side's samples (:meth:`read`)."""
+    """Signed text put on ``key`` (:meth:`put`); the verified words of the other side's samples
+    (:meth:`read`), heard once :meth:`listen` declares their subscriber."""
 
     def __init__(self, session: zenoh.Session, key: str, auth: BusAuth | None) -> None:
-        self.key = key
-        self.pub = declare(f"publisher on {key}", lambda: session.declare_publisher(
-            key, congestion_control=zenoh.CongestionControl.DROP, express=True))
+        self.key, self._session = key, session
         self._signer = auth.signer() if auth is not None else None
         self._verifier = auth.verifier() if auth is not None else None
+        self.pub = declare(f"publisher on {key}", lambda: session.declare_publisher(
+            key, congestion_control=zenoh.CongestionControl.DROP, express=True))
+        self.sub: Any = None
+
+    def listen(self, key: str, on_sample: Callable[[zenoh.Sample], None]) -> None:
+        """Hand the samples of ``key`` to ``on_sample`` (on Zenoh's thread); on failure the
+        publisher is undeclared too."""
+        try:
+            self.sub = declare(f"subscriber on {key}", lambda: self._session.declare_subscriber(key, on_sample))
+        except Exception:
+            undeclare(self.pub)
+            raise
+
+    def close(self) -> None:
+        undeclare(self.sub, self.pub)
 
     def put(self, text: str) -> None:
         payload = text.encode()
@@ -81,11 +95,7 @@ class ClockEcho:
         self.counters: dict[str, Any] = {"pings": 0, "echoes": 0, "dropped": {}}
         self._window: tuple[float, int] = (time.monotonic(), 0)  # (wall second began, echoes in it)
         self._wire = _Wire(session, echo_key, auth)
-        try:
-            self._sub = declare(f"subscriber on {ping_key}", lambda: session.declare_subscriber(ping_key, self._on_ping))
-        except Exception:
-            undeclare(self._wire.pub)
-            raise
+        self._wire.listen(ping_key, self._on_ping)
 
     def _on_ping(self, sample: zenoh.Sample) -> None:
         now = self.clock.now()
@@ -113,7 +123,7 @@ class ClockEcho:
             log.debug("echo not sent: %s", exc)
 
     def close(self) -> None:
-        undeclare(self._sub, self._wire.pub)
+        self._wire.close()
 
 
 class ClockPing:
@@ -131,11 +141,7 @@ class ClockPing:
         self._seq = 0
         self.counters: dict[str, Any] = {"pings": 0, "echoes": 0, "dropped": {}}
         self._wire = _Wire(session, ping_key, auth)
-        try:
-            self._sub = declare(f"subscriber on {echo_key}", lambda: session.declare_subscriber(echo_key, self._on_echo))
-        except Exception:
-            undeclare(self._wire.pub)
-            raise
+        self._wire.listen(echo_key, self._on_echo)
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="mission-clock-ping", daemon=True)
         self._thread.start()
@@ -195,4 +201,4 @@ class ClockPing:
     def close(self) -> None:
         self._stop.set()
         self._thread.join(timeout=2.0)
-        undeclare(self._sub, self._wire.pub)
+        self._wire.close()

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from mission.config.schema import load_config, with_overrides
-from mission.controller import HOME_MIN_MOVE_M, HOME_PERIOD_S, MissionController, TickReport, home_update_due
+from mission.controller import MissionController, TickReport
+from mission.mavlink.commander import HOME_MIN_MOVE_M, HOME_PERIOD_S, home_update_due
 from mission.core.law import norm
 from mission.phases import Phase
 from mission.time.clock import ManualClock
@@ -92,7 +93,7 @@ def test_a_vehicle_already_at_return_is_left_as_it_is(recovery_cfg):
 
 
 def test_a_home_moved_by_someone_else_is_found_and_set_again_and_a_changed_parameter_restored():
-    from mission.controller import HomeKeeper
+    from mission.mavlink.commander import HomeKeeper
     from mission.mavlink.commander import ParamKeeper, home_moved
     from mission.time.clock import ManualClock
 
