@@ -102,7 +102,8 @@ def child_main(rate_hz: float, duration_s: float, zenoh_connect: str, log_dir: s
     ``flight_data``: "none" (record.csv only), "mcap" (and flight.mcap, as ``marsupial run``),
     "live" (and the live server on a free loopback port, printed as ``LIVE <port>``)."""
     from mission.config.schema import load_config, with_overrides
-    from mission.controller import MissionController, mission_info
+    from mission.controller import MissionController
+    from mission.record import mission_info
     from mission.flightdata.writer import LiveAddress
     from mission.record import FlightRecorder
     from mission.cli.run import flight_data as flight_data_sinks, mission_io

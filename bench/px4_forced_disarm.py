@@ -29,7 +29,7 @@ from typing import Any
 
 import click
 
-from mission.controller import EXTENDED_SYS_STATE_ID, LANDED_STATE_RATE_HZ
+from mission.mavlink.requests import EXTENDED_SYS_STATE_ID, LANDED_STATE_RATE_HZ
 from mission.mavlink import px4, telemetry
 from sim.net import wait_for
 from sim.sitl.px4 import NetNamespace, Px4Sitl, build_dir, gcs_probe, unavailable_reason, wait_armable

@@ -18,7 +18,8 @@ from mission.bus.session import close_session, congestion_for
 from mission.time.clock import Clock, LockstepClock, ScaledClock
 from mission.config.required import RUN_FIELDS, require_stated
 from mission.config.schema import Config, load_config, with_overrides
-from mission.controller import MissionController, MissionOutcome, mission_info, mission_model
+from mission.controller import MissionController, MissionOutcome
+from mission.model import mission_model
 from mission.errors import ConfigError
 from mission.bus.feeds import OffsetSource
 from mission.bus.gate import GateLimits
@@ -27,7 +28,7 @@ from mission.time.offset import SharedClock
 from mission.mavlink.link import VehicleLink
 from mission.mavlink.env import read_signing_key
 from mission.flightdata.writer import DEFAULT_LIVE, LiveAddress, clock_metadata, is_loopback, parse_live
-from mission.record import CLOCK_NOTE, FlightRecord, FlightRecorder, RecordSink, read_record
+from mission.record import CLOCK_NOTE, FlightRecord, FlightRecorder, RecordSink, mission_info, read_record
 from mission.phases import AbortReason
 from mission.report import WaitReporter, abort_hint, phase_printer, startup_lines
 

@@ -38,8 +38,7 @@ from mission.mavlink.receiver import LIMITER, Receiver, install_limiter
 from mission.mavlink.session import LinkCounters, LinkSession
 from mission.mavlink.setpoints import encode
 from mission.mavlink.telemetry import VehicleState
-from mission.mavlink.tlog import Tlog
-from mission.mavlink.transport import Transport, open_transport
+from mission.mavlink.transport import Tlog, Transport, open_transport
 from mission.mavlink.env import mavlink
 
 __all__ = ["VehicleLink", "VehicleState", "LinkCounters", "DEFAULT_URL", "VEHICLE_TYPES", "ADOPT_HEARTBEATS"]

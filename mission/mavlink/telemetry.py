@@ -27,6 +27,7 @@ import numpy as np
 
 from mission.mavlink import px4
 from mission.mavlink.env import mavlink
+from mission.passenger.inputs import VehicleReport
 
 STATUSTEXT_CHUNK_LEN = 50
 LANDED_AGREE_S = 0.08
@@ -107,6 +108,20 @@ class VehicleState:
     def position_age_s(self) -> float:
         """Seconds since the last LOCAL_POSITION_NED at snapshot time (inf if none) [s]."""
         return math.inf if self.position_rx_s is None else self.t_s - self.position_rx_s
+
+
+def vehicle_report(state: VehicleState) -> VehicleReport | None:
+    """What the passenger's step reads of ``state`` (None: no vehicle HEARTBEAT yet): its last
+    LOCAL_POSITION_NED with the vehicle's sample time and our receive time, the believed armed and
+    landed verdicts, and system_status CRITICAL as a failsafe."""
+    if state.heartbeat_rx_s is None:
+        return None
+    return VehicleReport(
+        t_s=state.t_s, position_ned_m=state.position_ned_m, velocity_ned_m_s=state.velocity_ned_m_s,
+        sample_t_s=state.position_t_s, rx_s=state.position_rx_s, armed=state.believed_armed, mode=state.mode,
+        heartbeat_age_s=state.heartbeat_age_s, valid=state.position_valid,
+        in_failsafe=state.system_status == px4.MAV_STATE_CRITICAL, battery_pct=state.battery_pct,
+        on_ground=state.believed_on_ground)
 
 
 @dataclass(frozen=True, eq=False)

@@ -1,17 +1,23 @@
 """The transports a link URL names (:mod:`mission.config.urls`): UDP listen/send, TCP and
-serial, bytes in and out, nothing MAVLink-specific.
+serial, bytes in and out, nothing MAVLink-specific; and :class:`Tlog`, the bytes' log as
+QGroundControl and ``mavlogdump.py`` read it (a ``.tlog``: each packet prefixed by an 8-byte
+big-endian microsecond timestamp, wall time from the injected clock and an epoch taken at open).
 """
 from __future__ import annotations
 
 import errno
 import select
 import socket
+import struct
 import threading
-from typing import Any, Protocol
+import time
+from pathlib import Path
+from typing import IO, Any, Protocol
 
 from mission.errors import LinkError, LinkPortInUse, PortInUse
 from mission.config.urls import Address, parse_url
 from mission.port_holder import is_addr_in_use, port_in_use
+from mission.time.clock import Clock
 
 
 class Transport(Protocol):
@@ -174,3 +180,31 @@ def open_transport(url: str) -> Transport:
         raise
     except Exception as exc:  # OSError, serial.SerialException and other foreign errors
         raise LinkError(f"cannot open MAVLink link {url!r}: {exc}") from exc
+
+
+class Tlog:
+    """Appends packets to ``path`` (thread-safe); :meth:`close` is idempotent."""
+
+    def __init__(self, path: str | Path, clock: Clock) -> None:
+        self.path, self._clock = Path(path), clock
+        self._file: IO[bytes] | None = open(self.path, "wb")
+        self._epoch_us = time.time_ns() // 1000 - int(clock.now() * 1e6)
+        self._lock = threading.Lock()
+
+    def write(self, packet: bytes | bytearray) -> None:
+        with self._lock:
+            if self._file is None:
+                return
+            usec = (self._epoch_us + int(self._clock.now() * 1e6)) & ~3
+            self._file.write(struct.pack(">Q", usec) + bytes(packet))
+
+    def flush(self) -> None:
+        with self._lock:
+            if self._file is not None:
+                self._file.flush()
+
+    def close(self) -> None:
+        with self._lock:
+            file, self._file = self._file, None
+        if file is not None:
+            file.close()

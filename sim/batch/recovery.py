@@ -4,9 +4,10 @@ against the mock vehicle's own dynamics and a kinematic carrier (no sockets, thr
 One scenario (:func:`fly`) is a whole mission of a ``final_action = "return"`` configuration,
 deploy, task, return and dock, ticked as the lockstep demo ticks it:
 
-- the passenger: :func:`mission.phases.step` every ``1 / mission.rate_hz`` [s], on what the
-  controller sees in lockstep (the vehicle's reported position and velocity sampled at the tick,
-  the carrier's newest state with its age); its setpoint goes to the vehicle at once, its
+- the passenger: the controller's own step (:class:`mission.passenger.step.PassengerStep`) every
+  ``1 / mission.rate_hz`` [s], on what the controller reads in lockstep (the vehicle's reported
+  position and velocity sampled at the tick, the carrier's newest state with its age); its
+  setpoint goes to the vehicle at once, its
   requests (arm, OFFBOARD, Hold, Land) are carried out at once;
 - the vehicle: the mock's commander (:class:`sim.vehicle.modes.Commander`) and PX4's position
   controller on the fitted airframe (:func:`sim.vehicle.physics.multicopter.step`) in the mock's
@@ -42,18 +43,18 @@ from mission.carrier.guard import GuardParams
 from mission.carrier.legs import Legs
 from mission.carrier.modes import CarrierMode, PassengerView, next_mode
 from mission.config.schema import Config
-from mission.controller import mission_info, recovered_info
 from mission.errors import ConfigError
-from mission.core.consistent_velocity import PositionConsistentVelocity
 from mission.core.setpoint import Setpoint
 from mission.core.tick import TickModel, carrier_tick
 from mission.flight_mode import FlightMode
 from mission.phases.phase import Request
 from mission.mavlink import setpoints
 from mission.model import mission_model, model_from_config
-from mission.phases import CarrierObs, Decision, MissionState, Observation, Phase, VehicleObs, finished, step
+from mission.passenger.inputs import PassengerInputs, VehicleReport
+from mission.passenger.step import PassengerStep
+from mission.phases import CarrierObs, Decision, MissionState, Observation, Phase, finished
 from mission.phases.phase import Duty
-from mission.record import COLUMNS, VEC, FlightRecord, summary_of
+from mission.record import COLUMNS, VEC, FlightRecord, flown_info, mission_info, summary_of
 from sim.vehicle.estimator import EstimateError
 from sim.vehicle.mock import PHYSICS_DT_S
 from sim.vehicle.modes import Commander
@@ -244,12 +245,13 @@ class MockDynamics:
         self.steps = max(self.steps, target)
         self.kin = commander.kin = kin
 
-    def observed(self) -> VehicleObs:
-        """The vehicle as the controller sees it: its reported (estimated) position, its velocity."""
+    def report(self, t_s: float) -> VehicleReport:
+        """The vehicle as the controller's link reports it at ``t_s`` [s] in lockstep: its reported
+        (estimated) position and velocity, sampled and received at ``t_s``, a HEARTBEAT just heard."""
         k, c = self.kin, self.commander
-        return VehicleObs(position_ned_m=np.array(self.noise.apply(k)), velocity_ned_m_s=np.array(self.noise.velocity(k)),
-                          armed=c.armed, mode=c.mode, heartbeat_age_s=0.0, position_valid=c.position_valid,
-                          position_age_s=0.0, in_failsafe=c.in_failsafe)
+        return VehicleReport(t_s=t_s, position_ned_m=np.array(self.noise.apply(k)),
+                             velocity_ned_m_s=np.array(self.noise.velocity(k)), sample_t_s=t_s, rx_s=t_s, armed=c.armed,
+                             mode=c.mode, heartbeat_age_s=0.0, valid=c.position_valid, in_failsafe=c.in_failsafe)
 
     def send(self, t_s: float, sp: Setpoint) -> None:
         """The setpoint through the one MAVLink encoding and the mock's decoding rules."""
@@ -370,8 +372,7 @@ class World:
         self.approach_s: float | None = None  # when the first approach began [s]
         self.failed: dict[str, str] = {}
         self.events: list[tuple[float, str]] = []  # (t [s], what the phases said)
-        tau = cfg.mission.velocity_bias_tau_s  # the controller's view of the vehicle's velocity (mission.controller)
-        self.velocity_fix = PositionConsistentVelocity(tau) if tau > 0 else None
+        self.step = PassengerStep(self.model, cfg.mission.velocity_bias_tau_s)  # the controller's own step
         self.limit_s = max_duration_s if max_duration_s is not None else self.model.max_duration_s + 30.0
         self.k = 0
         self.done = False
@@ -403,13 +404,8 @@ class World:
         while carrier.next_step_s() <= t + 1e-9:  # the carrier steps first, on the status of the tick before
             carrier.step(self.published, self.approach_s, self.published_leg)
         vehicle.advance_to_step(self.k * self.steps_per_tick)
-        seen = vehicle.observed()
-        if self.velocity_fix is not None:  # as the controller's _vehicle_obs: consistent velocity, and its bias
-            raw = seen.velocity_ned_m_s
-            fixed = self.velocity_fix.update(t, seen.position_ned_m, raw)
-            seen = replace(seen, velocity_ned_m_s=fixed, velocity_bias_ned_m_s=raw - fixed)
-        obs = Observation(t_s=t, vehicle=seen, carrier=carrier.observed(t), failed=dict(self.failed))
-        self.state, dec = step(self.state, obs, self.model)
+        result = self.step(self.state, PassengerInputs(t, vehicle.report(t), carrier.observed(t), dict(self.failed)))
+        self.state, obs, dec = result.state, result.observation, result.decision
         if dec.setpoint is not None:
             vehicle.send(t, dec.setpoint)
         if dec.request is not None and dec.request.value not in self.failed:
@@ -433,10 +429,7 @@ class World:
     def flight(self) -> Flight:
         """The flight so far, with its summary."""
         st = self.state
-        info = mission_info(self.cfg)
-        info.update(separation_time_s=st.separation_time_s,
-                    anchor_ned_m=None if st.anchor is None else st.anchor.tolist(), recovered=recovered_info(st),
-                    legs_done=list(st.legs_done), legs_skipped=st.legs_skipped)
+        info = {**mission_info(self.cfg), **flown_info(st)}
         record = self.rows.record(info)
         summary = summary_of(record)
         summary.update(phase=st.phase.value, reason=None if st.reason is None else st.reason.value, detail=st.detail,

@@ -17,7 +17,8 @@ from typing import Any, Iterator
 from mission.bus.bridge import open_session
 from mission.time.clock import LockstepClock, ScaledClock
 from mission.config.schema import Config, load_config, with_overrides
-from mission.controller import MissionController, MissionOutcome, mission_info
+from mission.controller import MissionController, MissionOutcome
+from mission.record import mission_info
 from mission.mavlink.link import VehicleLink
 from mission.cli.run import mission_io
 from mission.bus.lockstep import ZenohUpstream, clock_keys

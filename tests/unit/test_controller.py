@@ -9,7 +9,9 @@ import pytest
 
 from mission.time.clock import ManualClock
 from mission.config.schema import load_config, with_overrides
-from mission.controller import CommandWorker, MissionController, TickReport, mission_info
+from mission.controller import MissionController, TickReport
+from mission.mavlink.requests import CommandWorker
+from mission.record import mission_info
 from mission.errors import LinkError
 from mission.core.law import norm
 from mission.phases import AbortReason, Phase
@@ -160,7 +162,7 @@ def test_a_vehicle_disarmed_while_riding_ends_the_stream_and_tells_the_carrier_w
     """Someone disarms the vehicle while it rides: on the tick that sees it the mission aborts
     vehicle_disarmed, sends no setpoint and no command from then on, and its last published status
     is ABORT with that reason (the carrier stops on it). It asked for PX4's landed state at 10 Hz."""
-    from mission.controller import EXTENDED_SYS_STATE_ID, LANDED_STATE_RATE_HZ
+    from mission.mavlink.requests import EXTENDED_SYS_STATE_ID, LANDED_STATE_RATE_HZ
 
     outcome, world, reports, _ = fly(cfg, disarmed_at_s=8.0)
     assert (outcome.phase, outcome.reason) == ("ABORT", AbortReason.VEHICLE_DISARMED.value)

@@ -263,7 +263,7 @@ def test_the_size_guard_can_fail():
 # The pure parts: loading them imports no I/O (a function may still import what it needs when
 # called, e.g. the config's key-expression check asks Zenoh's parser). Whole packages, and the pure
 # modules of the packages that also hold I/O.
-PURE_PACKAGES = ("mission/core", "mission/phases", "mission/config")
+PURE_PACKAGES = ("mission/core", "mission/phases", "mission/config", "mission/passenger")
 PURE = tuple(sorted(
     {".".join(p.relative_to(ROOT).with_suffix("").parts) for d in PURE_PACKAGES for p in (ROOT / d).glob("*.py")
      if p.name != "__init__.py"}
@@ -345,7 +345,8 @@ def test_io_packages_know_nothing_of_the_law():
     """MAVLink, the bus, time and the mock vehicle move bytes: they import no law, safety filter,
     tick, tracking or phase machine (frames from mission.core.geodesy and the phase names are data)."""
     law = ("mission.core.law", "mission.core.safety", "mission.core.tick", "mission.core.tracking",
-           "mission.phases.machine", "mission.phases.flying", "mission.phases.types", "mission.controller")
+           "mission.phases.machine", "mission.phases.flying", "mission.phases.types", "mission.controller",
+           "mission.passenger.step")
     bad = {}
     for top in ("mission/mavlink", "mission/bus", "mission/time", "sim/vehicle"):
         for m, imps in _package_imports(top).items():

@@ -44,7 +44,7 @@ from mission.core.setpoint import Setpoint
 from mission.time.clock import Clock, Downstream
 from mission.mavlink.lockstep import MavlinkRelay
 from mission.config.schema import Config
-from mission.controller import CommandWorker
+from mission.mavlink.requests import CommandWorker
 from mission.errors import LinkError
 from mission.mavlink.link import VehicleLink
 from mission.mavlink.env import read_signing_key

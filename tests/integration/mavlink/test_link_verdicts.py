@@ -1,16 +1,23 @@
 """No single sample decides that the vehicle is disarmed or landed: forged EXTENDED_SYS_STATE and
 HEARTBEAT packets arriving on the vehicle's own address (a forwarding autopilot, a spoofed
 source) against VehicleLink over real loopback sockets, read as the mission reads them
-(``mission.controller._vehicle_obs``). docs/security.md, "Attacks tried"."""
+(the link's report, :func:`mission.mavlink.telemetry.vehicle_report`, observed by the passenger's
+step, :func:`mission.passenger.step.observe_vehicle`). docs/security.md, "Attacks tried"."""
 from __future__ import annotations
 
-from mission.controller import _vehicle_obs
 from mission.mavlink import px4
 from mission.mavlink.env import mavlink
 from mission.mavlink.link import VehicleLink
+from mission.mavlink.telemetry import VehicleState, vehicle_report
+from mission.passenger.step import observe_vehicle
+from mission.phases import VehicleObs
 from mission.time.clock import ManualClock
 from sim.testing.fake_px4 import FakePx4 as Px4Peer
 from tests.integration.mavlink.conftest import ANY_PORT
+
+
+def _vehicle_obs(state: VehicleState) -> VehicleObs | None:
+    return observe_vehicle(vehicle_report(state))
 
 
 def _landed(state: int) -> object:

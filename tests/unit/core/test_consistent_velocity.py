@@ -54,7 +54,11 @@ def test_the_mission_observes_its_vehicle_s_velocity_made_consistent_with_its_po
     on SIH), each LOCAL_POSITION_NED sample counted once."""
     from types import SimpleNamespace
 
-    from mission.controller import _vehicle_obs
+    from mission.mavlink.telemetry import vehicle_report
+    from mission.passenger.step import observe_vehicle
+
+    def _vehicle_obs(state, fix=None):  # type: ignore[no-untyped-def]
+        return observe_vehicle(vehicle_report(state), fix)
 
     fix = PositionConsistentVelocity(0.5)
     obs = None
