@@ -10,7 +10,9 @@ Every period ``1 / carrier.rate_hz`` [s] of the injected clock the controller
    comes home the recovery course of :mod:`mission.carrier.course`; CBF filter, speed and
    acceleration limits), sped up gently while the carrier stands (``carrier.start_accel_m_s2``,
    :mod:`mission.carrier.start`), then :func:`~mission.carrier.tracking.track` (what the robot
-   can do), then the P3 guard (:mod:`mission.carrier.guard`), whatever the mode;
+   can do), then the P3 guard (:mod:`mission.carrier.guard`), whatever the mode. Steps 2 and 3
+   are the carrier's one step, :class:`mission.carrier.step.CarrierStepper` (pure; the recovery
+   simulation runs the same); the controller adds what it reads and sends, and its log;
 4. sends it to the backend and publishes a :class:`~mission.bus.wire.CarrierState` for the passenger:
    a diff-drive or Ackermann carrier's velocity along its heading (no sideslip,
    :func:`~mission.carrier.tracking.along_heading`), with ``carrier.velocity_bias_tau_s`` made

@@ -12,9 +12,10 @@ deploy, task, return and dock, ticked as the lockstep demo ticks it:
   controller on the fitted airframe (:func:`sim.vehicle.physics.multicopter.step`) in the mock's
   fixed physics steps, the setpoint decoded by the mock's own MAVLink rules; optionally the
   errors of PX4's estimate (:mod:`sim.vehicle.estimator`), seeded;
-- the carrier: the built-in kinematic robot (holonomic) at ``carrier.rate_hz``, following the
-  passenger's phase and leg with ``marsupial carrier``'s own mode machine
-  (:func:`mission.carrier.modes.next_mode`) and legs (:class:`mission.carrier.legs.Legs`):
+- the carrier: the built-in kinematic robot (holonomic, the ``sim`` backend's
+  :class:`mission.carrier.backends.sim.KinematicRobot`) at ``carrier.rate_hz``, driven by
+  ``marsupial carrier``'s own step (:class:`mission.carrier.step.CarrierStepper`: its mode
+  machine, legs, law, recovery course and P3 guards, with the ``sim`` backend's parameters):
   APPROACHING the paper's law towards the leg's target, filtered; RECOVERING the scenario's
   steady course (speed, heading), with its turn during the first approach, or, for a scenario
   ``configured``, the configuration's recovery course as ``marsupial carrier`` drives it;
