@@ -6,6 +6,7 @@ Pure parts: :mod:`.modes` (what the carrier does, from the passenger's published
 passenger says), :mod:`.tracking` (a planar velocity command made into what a unicycle,
 differential-drive or Ackermann robot can do), :mod:`.legs` (several targets), :mod:`.course`
 (the recovery course), :mod:`.start` (the gentle start), :mod:`.acceleration` (its measured
-acceleration). I/O: :mod:`.controller` (the loop), the robots it drives
+acceleration), and :mod:`.step`, which puts them together into the carrier's one step (the
+controller and the recovery simulation both run it). I/O: :mod:`.controller` (the loop), the robots it drives
 (:mod:`.backends`: ``sim``, ``mavlink``, ``ros2``), and :mod:`.cli`.
 """

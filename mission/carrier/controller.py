@@ -10,7 +10,9 @@ Every period ``1 / carrier.rate_hz`` [s] of the injected clock the controller
    comes home the recovery course of :mod:`mission.carrier.course`; CBF filter, speed and
    acceleration limits), sped up gently while the carrier stands (``carrier.start_accel_m_s2``,
    :mod:`mission.carrier.start`), then :func:`~mission.carrier.tracking.track` (what the robot
-   can do), then the P3 guard (:mod:`mission.carrier.guard`), whatever the mode;
+   can do), then the P3 guard (:mod:`mission.carrier.guard`), whatever the mode. Steps 2 and 3
+   are the carrier's one step, :class:`mission.carrier.step.CarrierStepper` (pure; the recovery
+   simulation runs the same); the controller adds what it reads and sends, and its log;
 4. sends it to the backend and publishes a :class:`~mission.bus.wire.CarrierState` for the passenger:
    a diff-drive or Ackermann carrier's velocity along its heading (no sideslip,
    :func:`~mission.carrier.tracking.along_heading`), with ``carrier.velocity_bias_tau_s`` made
@@ -27,7 +29,6 @@ Failsafes (each a stop: a zero command, still sent, so a PX4 vehicle stays in OF
 """
 from __future__ import annotations
 
-import dataclasses
 import logging
 import math
 import threading
@@ -38,29 +39,26 @@ import numpy as np
 import zenoh
 
 from mission.carrier.acceleration import AccelerationEstimate
-from mission.carrier.backends import KINDS, CarrierBackend, OwnState
-from mission.carrier.course import RecoveryCourse, away_heading_deg
+from mission.carrier.backends import CarrierBackend, OwnState
 from mission.carrier.guard import GuardParams
 from mission.carrier.legs import Legs
-from mission.carrier.modes import BEFORE_RIDING, BIND_STATUSES, CarrierMode, PassengerView, lost_reason, next_mode, on_dock
-from mission.phases.phase import Duty
-from mission.carrier.start import gentle_start
-from mission.carrier.tracking import SpeedCalibration, Tracked, TrackingParams, along_heading, heading_of, track
+from mission.carrier.modes import BEFORE_RIDING, BIND_STATUSES, CarrierMode, PassengerView, lost_reason, on_dock
+from mission.carrier.step import (DRIVING, REAL_DELAY_S, STOP, CarrierStepper, carrier_model, guard_params, pad3,
+                                  tracking_params)
+from mission.carrier.tracking import Tracked, TrackingParams, along_heading
 from mission.core.consistent_velocity import PositionConsistentVelocity
 from mission.bus.auth import BusAuth, bus_auth
 from mission.bus.bridge import CarrierPublisher, PassengerFeed
 from mission.time.clock import Clock, Periodic
 from mission.config.schema import Config
-from mission.model import model_from_config
 from mission.bus.session import congestion_for
-from mission.core.tick import TickModel, carrier_tick
+from mission.core.tick import TickModel
 from mission.bus.wire import CarrierState
 
 log = logging.getLogger(__name__)
 
-STOP = Tracked(0.0, 0.0, 0.0, np.zeros(2), np.zeros(2))
-REAL_DELAY_S = 0.3  # [s] default response delay of a real carrier for the P3 guard (carrier.brake_delay_s)
-DRIVING = (CarrierMode.APPROACHING, CarrierMode.RECOVERING, CarrierMode.REPOSITIONING)  # modes that drive on
+__all__ = ["DRIVING", "REAL_DELAY_S", "STOP", "CarrierController", "CarrierStep", "StepSink", "carrier_model",
+           "guard_params", "open_bus", "passenger_view", "tracking_params"]
 
 
 @dataclass(frozen=True)
@@ -86,31 +84,6 @@ class StepSink(Protocol):
     runs in the control loop and must return at once."""
 
     def step(self, step: CarrierStep) -> None: ...
-
-
-def carrier_model(cfg: Config, target: np.ndarray | None = None) -> TickModel:
-    """The tick model of the carrier: the config's (for ``target``, a leg's: default the first),
-    with the carrier's speed limit ``min(carrier.max_speed_m_s, safety.carrier_max_speed_m_s)`` [m/s]."""
-    model = model_from_config(cfg, target=target)
-    limit = cfg.carrier.max_speed_m_s
-    if model.carrier_safety.max_speed_m_s is not None:
-        limit = min(limit, model.carrier_safety.max_speed_m_s)
-    return dataclasses.replace(model, carrier_safety=dataclasses.replace(model.carrier_safety, max_speed_m_s=limit))
-
-
-def guard_params(cfg: Config) -> GuardParams:
-    """The P3 guard of ``cfg``: radius ``b c - carrier.p3_margin_m`` [m]; it plans with the
-    carrier's response delay plus one control period (a command is held that long)."""
-    c = cfg.carrier
-    decel = c.brake_decel_m_s2 or cfg.safety.carrier_max_accel_m_s2 or 1.0
-    delay = c.brake_delay_s if c.brake_delay_s is not None else (REAL_DELAY_S if KINDS[c.backend].real else 0.0)
-    return GuardParams(cfg.law.params().separation_distance_m - c.p3_margin_m, decel, delay, 1.0 / c.rate_hz)
-
-
-def tracking_params(cfg: Config) -> TrackingParams:
-    c = cfg.carrier
-    return TrackingParams(c.kinematics, c.heading_gain, c.max_yaw_rate_rad_s, c.min_speed_fraction, c.wheelbase_m,
-                          c.max_steer_rad)
 
 
 def passenger_view(feed: PassengerFeed, dock_ned_m: np.ndarray | None, tolerance_m: float, dim: int) -> PassengerView:
@@ -143,12 +116,6 @@ def open_bus(cfg: Config, session: zenoh.Session, pair: str, clock: Clock,
     return auth, passenger, publisher
 
 
-def _pad3(v: np.ndarray) -> np.ndarray:
-    """A (2,) or (3,) vector as (3,) (a 2D scenario's carrier sits at down = 0)."""
-    v = np.asarray(v, dtype=float)
-    return np.concatenate([v, np.zeros(3 - v.shape[0])]) if v.shape[0] < 3 else v
-
-
 class CarrierController:
     """The carrier of the pair ``cfg.zenoh.pair`` driving ``backend``, on an open Zenoh ``session``.
 
@@ -160,25 +127,11 @@ class CarrierController:
                  pair: str | None = None, encoding: str | None = None, steps: StepSink | None = None) -> None:
         self.cfg, self.clock, self.backend, self.steps = cfg, clock, backend, steps
         self.pair = pair or cfg.zenoh.pair
-        targets = [np.asarray(t, dtype=float) for t in cfg.scenario.legs()]
-        self.guard = guard_params(cfg)
-        self.tracking = tracking_params(cfg)
+        self.stepper = CarrierStepper(cfg, backend.brakes_itself)  # the mode machine, the law, the guards
         self.dim = cfg.scenario.dim
-        first = carrier_model(cfg)
-        self.planar = first.planar_carrier or self.dim == 2
-        self.legs = Legs(targets, [carrier_model(cfg, target=t) for t in targets], self.guard, self.planar,
-                         np.asarray(cfg.mission.dock_offset_ned_m, dtype=float)[:self.dim],
-                         first.law.separation_distance_m + cfg.mission.leg_start_margin_m)
-        self.model = self.legs.model
         self.period_s = 1.0 / cfg.carrier.rate_hz
-        self.velocity_m_s = np.zeros(self.dim)  # [m/s] the filtered (and, holonomic, guarded) law command
-        self.mode = CarrierMode.WAITING
         self.seq = 0
         self.hold_reason: str | None = "no valid own state"
-        self._plan_velocity = np.zeros(self.dim)
-        c = cfg.carrier
-        self.course = RecoveryCourse.from_lists(c.recovery_course, c.recovery_heading_deg, c.recovery_speed_m_s)
-        self._course_start: tuple[float, float] | None = None  # (clock time [s], away heading [deg]) of the recovery
         self._stats: dict[str, Any] = {"closest_target_distance_m": math.inf, "guard_active_ticks": 0,
                                        "stale_ticks": 0, "ticks": 0, "distance_at_separation_m": None,
                                        "braking_distance_m": None, "braking_displacement_m": None,
@@ -188,7 +141,6 @@ class CarrierController:
         self._separation_position = np.zeros(self.dim)
         self._alignment = np.zeros(3)
         self._aligned = False
-        self._calibration = SpeedCalibration(cfg.carrier.speed_ratio_tau_s)
         tau = cfg.carrier.acceleration_tau_s
         self._acceleration = AccelerationEstimate(tau) if tau > 0 else None  # published when set
         bias_tau = cfg.carrier.velocity_bias_tau_s
@@ -200,91 +152,59 @@ class CarrierController:
         """This carrier's dock point [m] NED (3,): its own position (in the plane, aligned) plus
         mission.dock_offset_ned_m; None without an own state."""
         own = self._in_plane(self.backend.own_state())
-        return None if own is None else _pad3(own.position_ned_m[:self.dim]) + np.asarray(self.cfg.mission.dock_offset_ned_m)
+        return None if own is None else pad3(own.position_ned_m[:self.dim]) + np.asarray(self.cfg.mission.dock_offset_ned_m)
+
+    # The step's state, read through the controller (its flight data, summary, tests).
+    @property
+    def mode(self) -> CarrierMode:
+        return self.stepper.mode
+
+    @property
+    def model(self) -> TickModel:
+        """The tick model of the leg the carrier serves."""
+        return self.stepper.model
+
+    @property
+    def legs(self) -> Legs:
+        return self.stepper.legs
+
+    @property
+    def guard(self) -> GuardParams:
+        return self.stepper.guard
+
+    @property
+    def tracking(self) -> TrackingParams:
+        return self.stepper.tracking
+
+    @property
+    def planar(self) -> bool:
+        return self.stepper.planar
+
+    @property
+    def velocity_m_s(self) -> np.ndarray:
+        """[m/s] the filtered (and, holonomic, guarded) law command."""
+        return self.stepper.velocity_m_s
 
     def _update_mode(self) -> None:
         view = passenger_view(self.passenger, self.dock_point_ned_m(), self.cfg.mission.dock_tolerance_m, self.dim)
-        if view.phase is not None and view.phase.duty in (Duty.REPOSITION, Duty.CARRY) and self.legs.follow(view.leg):
-            self.model = self.legs.model
+        up = self.stepper.update_mode(view)
+        if up.leg_changed:
             log.info("carrier %s: leg %d, target %s", self.pair, view.leg + 1, self.model.target.tolist())
-        mode, why = next_mode(self.mode, view)
-        if mode is self.mode:
-            return
-        level = logging.WARNING if mode in (CarrierMode.PAUSED, CarrierMode.STOPPED) else logging.INFO
-        log.log(level, "carrier %s: %s -> %s (%s)", self.pair, self.mode.value, mode.value, why)
-        if mode is CarrierMode.SEPARATED and self.mode is not CarrierMode.RECOVERING:  # after a recovery: the same plan
-            self._plan_velocity = (self.velocity_m_s.copy() if self.mode is CarrierMode.APPROACHING
-                                   else np.zeros_like(self.velocity_m_s))
-        if mode not in (CarrierMode.RECOVERING, CarrierMode.PAUSED):
-            self._course_start = None  # the next recovery drives its course from its own start
-        self.mode = mode
+        if up.after is not up.before:
+            level = logging.WARNING if up.after in (CarrierMode.PAUSED, CarrierMode.STOPPED) else logging.INFO
+            log.log(level, "carrier %s: %s -> %s (%s)", self.pair, up.before.value, up.after.value, up.why)
 
     def _stopping(self) -> bool:
-        """A stop for good or for now: not driving (approaching, recovering, repositioning), and no
-        own plan (Remark 1) to follow."""
-        return self.mode not in DRIVING and not (self.mode is CarrierMode.SEPARATED and self.model.carrier_mode == "remark1")
+        return self.stepper.stopping()
 
     def _decide(self, state: OwnState, dt_s: float, age_s: float) -> Tracked:
-        x_c = state.position_ned_m[:self.dim]
-        if self._stopping() and self.backend.brakes_itself:
-            # A real vehicle brakes with its own limits: ramping the command down at
-            # safety.carrier_max_accel_m_s2 (the built-in robot's braking) would keep it driving.
-            self.velocity_m_s = np.zeros(self.dim)
-            return STOP
-        separated = self.mode is not CarrierMode.APPROACHING
-        plan = self._plan_velocity if self.mode is CarrierMode.SEPARATED else None
-        res = carrier_tick(x_c, separated, self.model, own_plan_velocity=plan, u_prev=self.velocity_m_s,
-                           dt_s=dt_s if dt_s > 0 else None, course_velocity=self._course_velocity(x_c))
-        if not bool(np.all(res.feasible)):
-            log.warning("carrier %s: CBF filter infeasible at %s; holding still", self.pair, x_c.tolist())
-        u = np.asarray(res.u, dtype=float)
-        yaw = state.yaw_rad if state.yaw_rad is not None else 0.0
-        t, v_meas = state.t_s, state.velocity_ned_m_s[:self.dim]
-        # A carrier that stands speeds its command up gently until it moves (stiction: mission.carrier.start);
-        # a robot that moves along its heading by its forward speed (its estimator's sideways wander is no motion)
-        moving = (float(np.linalg.norm(v_meas[:2])) if self.tracking.kind == "holonomic" or state.yaw_rad is None
-                  else abs(math.cos(yaw) * float(v_meas[0]) + math.sin(yaw) * float(v_meas[1])))
-        u = gentle_start(u, self.velocity_m_s, moving, self.cfg.carrier.start_accel_m_s2, dt_s)
-        if self.tracking.kind == "holonomic":
-            active = False
-            for guard in self.legs.guards:
-                g = guard.limit(t, x_c, u, v_meas, age_s)
-                u, active = g.u, active or g.active
-            cmd = track(u, yaw, self.tracking)
-            self.velocity_m_s = u
-        else:
-            cmd = track(u, yaw, self.tracking)
-            speed, active = cmd.speed_m_s, False
-            for guard in self.legs.guards:
-                speed, acted = guard.limit_heading(t, x_c, speed, yaw, v_meas, age_s)
-                active = active or acted
-            if active:
-                scale = speed / cmd.speed_m_s if cmd.speed_m_s > 0 else 0.0
-                cmd = Tracked(speed, cmd.yaw_rate_rad_s, cmd.bearing_rad, heading_of(speed, yaw),
-                              cmd.setpoint_ned_m_s * scale)
-            cmd = self._calibration.asked(cmd, yaw, v_meas, dt_s)  # what to ask for so that it does ``cmd``
-            # The law's planar command (not the motion along the heading) is what the
-            # acceleration limit and Remark 1 act on: tying it to the heading would let the
-            # command turn only as fast as the robot already does (a heading lock).
-            self.velocity_m_s = u
-        if active:
+        out = self.stepper.decide(state, dt_s, age_s, self.clock.now())
+        if not out.feasible:
+            log.warning("carrier %s: CBF filter infeasible at %s; holding still", self.pair,
+                        state.position_ned_m[:self.dim].tolist())
+        if out.guard_active:
             self._stats["guard_active_ticks"] += 1
-        return cmd
-
-    def _course_velocity(self, x_c: np.ndarray) -> np.ndarray | None:
-        """RECOVERING: the recovery course's velocity now [m/s] (dim,), its clock and its default
-        heading (away from the target) taken at the first tick of the recovery; REPOSITIONING:
-        straight away from the leg's target at the carrier's top speed until its dock point is
-        ``b c + mission.leg_start_margin_m`` (and :data:`REPOSITION_SPARE_M`) from it, then zero;
-        else None."""
-        if self.mode is CarrierMode.REPOSITIONING:
-            return self.legs.reposition_velocity(x_c, float(self.model.carrier_safety.max_speed_m_s or 1.0))
-        if self.mode is not CarrierMode.RECOVERING:
-            return None
-        if self._course_start is None:
-            self._course_start = (self.clock.now(), away_heading_deg(x_c, np.asarray(self.model.target)))
-        t0, away = self._course_start
-        return _pad3(self.course.velocity_ned_m_s(self.clock.now() - t0, away))[:self.dim]
+        return out.tracked
 
     def _in_plane(self, state: OwnState | None) -> OwnState | None:
         """The own state as the controller uses it: shifted by the deck alignment (if any), and,
@@ -381,23 +301,23 @@ class CarrierController:
             if self._velocity_fix is not None:
                 self._velocity_fix.reset()
             self._stats["stale_ticks"] += 1
-            self.velocity_m_s = np.zeros(self.dim)
+            self.stepper.hold()
             self.backend.command(STOP)
             trace(self, now, None, STOP, None)
             return None
         cmd = self._decide(state, dt_s, now - state.t_s) if why is None else STOP
         if why is not None:
-            self.velocity_m_s = np.zeros(self.dim)
+            self.stepper.hold()
         self.backend.command(cmd)
         self._account(state)
         fresh = self._in_plane(self.backend.own_state()) or state  # the built-in robot now holds the new command
-        velocity = _pad3(fresh.velocity_ned_m_s[:self.dim])
+        velocity = pad3(fresh.velocity_ned_m_s[:self.dim])
         if self.tracking.kind != "holonomic" and fresh.yaw_rad is not None:
             velocity = along_heading(velocity, fresh.yaw_rad)  # no sideslip: the estimator's wander removed
         if self._velocity_fix is not None:  # consistent with its position (mission.core.consistent_velocity)
-            velocity = self._velocity_fix.update(fresh.t_s, _pad3(fresh.position_ned_m[:self.dim]), velocity)
+            velocity = self._velocity_fix.update(fresh.t_s, pad3(fresh.position_ned_m[:self.dim]), velocity)
         accel = None if self._acceleration is None else self._acceleration.update(fresh.t_s, velocity)
-        out = CarrierState(fresh.t_s, self.seq, "local_ned", _pad3(fresh.position_ned_m[:self.dim]), velocity,
+        out = CarrierState(fresh.t_s, self.seq, "local_ned", pad3(fresh.position_ned_m[:self.dim]), velocity,
                            fresh.yaw_rad, accel)
         if self.cfg.carrier.align_on_deck_m > 0 and not self._aligned:
             trace(self, now, state, cmd, None)

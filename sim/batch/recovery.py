@@ -13,9 +13,10 @@ deploy, task, return and dock, ticked as the lockstep demo ticks it:
   controller on the fitted airframe (:func:`sim.vehicle.physics.multicopter.step`) in the mock's
   fixed physics steps, the setpoint decoded by the mock's own MAVLink rules; optionally the
   errors of PX4's estimate (:mod:`sim.vehicle.estimator`), seeded;
-- the carrier: the built-in kinematic robot (holonomic) at ``carrier.rate_hz``, following the
-  passenger's phase and leg with ``marsupial carrier``'s own mode machine
-  (:func:`mission.carrier.modes.next_mode`) and legs (:class:`mission.carrier.legs.Legs`):
+- the carrier: the built-in kinematic robot (holonomic, the ``sim`` backend's
+  :class:`mission.carrier.backends.sim.KinematicRobot`) at ``carrier.rate_hz``, driven by
+  ``marsupial carrier``'s own step (:class:`mission.carrier.step.CarrierStepper`: its mode
+  machine, legs, law, recovery course and P3 guards, with the ``sim`` backend's parameters):
   APPROACHING the paper's law towards the leg's target, filtered; RECOVERING the scenario's
   steady course (speed, heading), with its turn during the first approach, or, for a scenario
   ``configured``, the configuration's recovery course as ``marsupial carrier`` drives it;
@@ -38,18 +39,18 @@ from typing import Any
 
 import numpy as np
 
-from mission.carrier.course import RecoveryCourse, away_heading_deg
-from mission.carrier.guard import GuardParams
-from mission.carrier.legs import Legs
-from mission.carrier.modes import CarrierMode, PassengerView, next_mode
+from mission.carrier.backends.sim import KinematicRobot
+from mission.carrier.modes import CarrierMode, PassengerView
+from mission.carrier.step import CarrierStepper
+from mission.carrier.tracking import Tracked
 from mission.config.schema import Config
 from mission.errors import ConfigError
 from mission.core.setpoint import Setpoint
-from mission.core.tick import TickModel, carrier_tick
+from mission.core.tick import TickModel
 from mission.flight_mode import FlightMode
 from mission.phases.phase import Request
 from mission.mavlink import setpoints
-from mission.model import mission_model, model_from_config
+from mission.model import mission_model
 from mission.passenger.inputs import PassengerInputs, VehicleReport
 from mission.passenger.step import PassengerStep
 from mission.phases import CarrierObs, Decision, MissionState, Observation, Phase, finished
@@ -110,20 +111,22 @@ def configured(estimate_error: float = 0.0, seed: int = 0) -> Scenario:
 # ---------------------------------------------------------------------------------------- carrier
 
 
-def _speed_limited(cfg: Config, target: np.ndarray) -> TickModel:
-    """The carrier's tick model for ``target`` [m] with its speed limit, the smaller of
-    ``carrier.max_speed_m_s`` and ``safety.carrier_max_speed_m_s`` [m/s]."""
-    model = model_from_config(cfg, target=target)
-    limit = cfg.carrier.max_speed_m_s
-    if model.carrier_safety.max_speed_m_s is not None:
-        limit = min(limit, model.carrier_safety.max_speed_m_s)
-    return replace(model, carrier_safety=replace(model.carrier_safety, max_speed_m_s=limit))
+def sim_backend(cfg: Config) -> Config:
+    """``cfg`` as the carrier of this simulation sees it: driving the built-in robot
+    (``carrier.backend = "sim"``), whose declared properties (it obeys at once: the P3 guard's
+    default response delay is 0; it does not brake itself) set the step's parameters."""
+    if cfg.carrier.backend == "sim":
+        return cfg
+    return cfg.model_copy(update={"carrier": cfg.carrier.model_copy(update={"backend": "sim"})})
 
 
 class KinematicCarrier:
-    """The built-in holonomic carrier robot and the part of ``marsupial carrier`` that drives it
-    (:mod:`mission.carrier.controller` with the ``sim`` backend): position [m], velocity [m/s]
-    NED in the plane of ``scenario.carrier_start``; yaw [rad] the heading of travel."""
+    """The built-in holonomic carrier robot (:class:`mission.carrier.backends.sim.KinematicRobot`)
+    driven by the step of ``marsupial carrier`` (:class:`mission.carrier.step.CarrierStepper`, as
+    :mod:`mission.carrier.controller` drives it with the ``sim`` backend): position [m], velocity
+    [m/s] NED in the plane of ``scenario.carrier_start``; yaw [rad] the heading of travel. What
+    the simulation adds is the world: the passenger's phase and leg it hears, and the scenario's
+    drawn recovery course in place of the configured one (unless ``scenario.configured``)."""
 
     def __init__(self, cfg: Config, scenario: Scenario) -> None:
         if cfg.carrier.kinematics != "holonomic":
@@ -134,78 +137,66 @@ class KinematicCarrier:
                               "comes home drives a carrier that stops once the passenger has left: must be \"stop\" "
                               "to simulate it")
         self.cfg, self.scenario = cfg, scenario
-        targets = [np.asarray(t, dtype=float) for t in cfg.scenario.legs()]
-        c = cfg.carrier
-        decel = c.brake_decel_m_s2 or cfg.safety.carrier_max_accel_m_s2 or 1.0
-        delay = c.brake_delay_s if c.brake_delay_s is not None else 0.0  # the built-in robot obeys at once
-        guard = GuardParams(cfg.law.params().separation_distance_m - c.p3_margin_m, decel, delay, 1.0 / c.rate_hz)
-        self.legs = Legs(targets, [_speed_limited(cfg, t) for t in targets], guard, True,
-                         np.asarray(cfg.mission.dock_offset_ned_m, dtype=float),
-                         cfg.law.params().separation_distance_m + cfg.mission.leg_start_margin_m)
-        self.course = RecoveryCourse.from_lists(c.recovery_course, c.recovery_heading_deg, c.recovery_speed_m_s)
-        self.period_s = 1.0 / c.rate_hz
-        self.position = np.array(cfg.scenario.carrier_start, dtype=float)
-        self.velocity = np.zeros(3)
-        e_tc = targets[0] - self.position
-        self.yaw_rad = math.atan2(e_tc[1], e_tc[0]) if c.start_yaw_rad is None else float(c.start_yaw_rad)
+        own = sim_backend(cfg)
+        self.robot = KinematicRobot(own)
+        self.stepper = CarrierStepper(own, self.robot.brakes_itself)
+        self.period_s = 1.0 / cfg.carrier.rate_hz
         self.t_s = 0.0  # [s] the time of its state (its last step)
         self.done = 0  # steps taken (the next is at done * period_s)
-        self.mode = CarrierMode.WAITING
         self.course_begun = False  # it has driven the scenario's recovery course
-        self._course_start: tuple[float, float] | None = None  # (t [s], away heading [deg]) of this recovery
 
     @property
     def model(self) -> TickModel:
         """The tick model of the leg the carrier serves."""
-        return self.legs.model
+        return self.stepper.model
+
+    @property
+    def mode(self) -> CarrierMode:
+        return self.stepper.mode
+
+    @property
+    def position(self) -> np.ndarray:
+        """[m] NED (3,)."""
+        return self.robot.position_m
+
+    @property
+    def velocity(self) -> np.ndarray:
+        """[m/s] NED (3,): the command it holds."""
+        return self.robot.velocity_m_s
+
+    @property
+    def yaw_rad(self) -> float:
+        return self.robot.yaw_rad
 
     def next_step_s(self) -> float:
         """When [s] it steps next (every ``1 / carrier.rate_hz`` from 0)."""
         return self.done * self.period_s
 
-    def step(self, phase: Phase | None, approach_s: float | None, leg: int = 0) -> None:
+    def step(self, phase: Phase | None, approach_s: float | None, leg: int = 0) -> Tracked:
         """Step at :meth:`next_step_s`: move there under the held command, then decide the next
-        command for the passenger's ``phase`` (None: none heard yet) on its ``leg`` (the index
-        of its target); ``approach_s`` [s]: when the first approach began (None: not yet)."""
+        command (returned, and held) for the passenger's ``phase`` (None: none heard yet) on its
+        ``leg`` (the index of its target); ``approach_s`` [s]: when the first approach began (None: not yet)."""
         t_s = self.next_step_s()
         dt = t_s - self.t_s
-        self.position = self.position + self.velocity * dt
+        self.robot.advance(dt)
         self.t_s = t_s
         self.done += 1
-        if phase is not None and phase.duty in (Duty.REPOSITION, Duty.CARRY):
-            self.legs.follow(leg)
-        self.mode, _ = next_mode(self.mode, PassengerView(phase, separated=phase is not None and phase.separated,
-                                                          leg=leg))
-        if self.mode is not CarrierMode.RECOVERING:
-            self._course_start = None  # the next recovery drives its course from its own start
-        x_c = self.position
-        course: np.ndarray | None = None  # the recovery course or the drive-out, or None: the law (approaching) or stop
+        self.stepper.update_mode(PassengerView(phase, separated=phase is not None and phase.separated, leg=leg))
+        course: np.ndarray | None = None  # the scenario's course (None: the configured one)
         if self.mode is CarrierMode.RECOVERING:
             self.course_begun = True
-            course = self._recovery_course(t_s, x_c, approach_s)
-        elif self.mode is CarrierMode.REPOSITIONING:
-            course = self.legs.reposition_velocity(x_c, float(self.model.carrier_safety.max_speed_m_s or 1.0))
-        u = np.array(carrier_tick(x_c, self.mode is not CarrierMode.APPROACHING, self.model, u_prev=self.velocity,
-                                  dt_s=dt or None, course_velocity=course).u, dtype=float)
-        for guard in self.legs.guards:  # every target is hazardous, whichever leg is flown
-            u = np.asarray(guard.limit(t_s, x_c, u, self.velocity, 0.0).u, dtype=float)
-        u[2] = 0.0
-        self.velocity = u
-        if math.hypot(u[0], u[1]) > 1e-6:
-            self.yaw_rad = math.atan2(u[1], u[0])
+            if not self.scenario.configured:
+                course = self._scenario_course(t_s, approach_s)
+        cmd = self.stepper.decide(self.robot.state_at(t_s), dt, 0.0, t_s, course).tracked
+        self.robot.command(cmd)
+        return cmd
 
-    def _recovery_course(self, t_s: float, x_c: np.ndarray, approach_s: float | None) -> np.ndarray:
-        """The recovery course's velocity [m/s] NED at ``t_s`` [s]: the scenario's, or (configured)
-        the configuration's, its clock and its default heading (away from the leg's target) taken
-        at the first step of this recovery, as ``marsupial carrier`` does."""
+    def _scenario_course(self, t_s: float, approach_s: float | None) -> np.ndarray:
+        """The scenario's recovery course's velocity [m/s] NED at ``t_s`` [s] (its turn during the
+        first approach, which began at ``approach_s``)."""
         sc = self.scenario
-        if not sc.configured:
-            heading = math.radians(sc.course_heading_deg(None if approach_s is None else t_s - approach_s))
-            return sc.speed_m_s * np.array([math.cos(heading), math.sin(heading), 0.0])
-        if self._course_start is None:
-            self._course_start = (t_s, away_heading_deg(x_c, np.asarray(self.model.target)))
-        t0, away = self._course_start
-        return np.append(self.course.velocity_ned_m_s(t_s - t0, away), 0.0)
+        heading = math.radians(sc.course_heading_deg(None if approach_s is None else t_s - approach_s))
+        return sc.speed_m_s * np.array([math.cos(heading), math.sin(heading), 0.0])
 
     def observed(self, t_s: float) -> CarrierObs:
         """The newest published state as the passenger sees it at ``t_s`` [s]."""

@@ -1,0 +1,233 @@
+"""One step of the carrier (pure: no clock, no I/O, no log): its mode from the passenger's view,
+and the command for its own state.
+
+``marsupial carrier`` (:class:`mission.carrier.controller.CarrierController`: the backend, the
+bus, the deck alignment, the log, the accounting) and the in-process recovery simulation
+(:class:`sim.batch.recovery.KinematicCarrier`: the built-in robot's kinematics) drive their
+carrier with the same :class:`CarrierStepper`, built from the configuration by the same
+functions (:func:`carrier_model`, :func:`guard_params`, :func:`tracking_params`) and the
+backend's declared properties: its kind's ``real`` (:data:`mission.config.carrier.KINDS`) sets
+the guard's default response delay, its ``brakes_itself`` whether a stop is sent at once or
+ramped down by the law's acceleration limit.
+
+One step, every ``1 / carrier.rate_hz`` [s]:
+
+1. :meth:`CarrierStepper.update_mode`: the passenger's leg is followed (forward only,
+   :class:`~mission.carrier.legs.Legs`) while it rides or rides on, then the mode machine
+   (:func:`~mission.carrier.modes.next_mode`). Entering SEPARATED fixes the carrier's own plan
+   (Remark 1): the law's command of that instant after an approach, zero otherwise (a recovery
+   that falls back keeps the plan it had). Any mode but RECOVERING and PAUSED forgets the recovery
+   course's start: the next recovery drives its course from its own start.
+2. :meth:`CarrierStepper.decide`: a vehicle that brakes itself is sent a stop at once while the
+   carrier stops; otherwise :func:`mission.core.tick.carrier_tick` (the paper's law while
+   approaching; once separated a stop or the own plan; RECOVERING the recovery course of
+   :mod:`mission.carrier.course`, its clock and its away-from-the-target heading taken at its
+   first step; REPOSITIONING the drive out to the next leg's start; CBF filter, speed and
+   acceleration limits), sped up gently while the carrier stands (:mod:`mission.carrier.start`),
+   then for a holonomic carrier the P3 guard of every target on the planar command and
+   :func:`~mission.carrier.tracking.track`, for a diff-drive or Ackermann one
+   :func:`~mission.carrier.tracking.track`, the guards along its heading and the speed
+   calibration (:class:`~mission.carrier.tracking.SpeedCalibration`).
+
+Frames: local NED [m], [m/s], in the scenario's dimension (2 or 3); times [s] of the caller's clock.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from mission.carrier.backends import OwnState
+from mission.carrier.course import RecoveryCourse, away_heading_deg
+from mission.carrier.guard import GuardParams
+from mission.carrier.legs import Legs
+from mission.carrier.modes import CarrierMode, PassengerView, next_mode
+from mission.carrier.start import gentle_start
+from mission.carrier.tracking import SpeedCalibration, Tracked, TrackingParams, heading_of, track
+from mission.config.carrier import KINDS
+from mission.config.schema import Config
+from mission.core.tick import TickModel, carrier_tick
+from mission.model import model_from_config
+from mission.phases.phase import Duty
+
+STOP = Tracked(0.0, 0.0, 0.0, np.zeros(2), np.zeros(2))
+REAL_DELAY_S = 0.3  # [s] default response delay of a real carrier for the P3 guard (carrier.brake_delay_s)
+DRIVING = (CarrierMode.APPROACHING, CarrierMode.RECOVERING, CarrierMode.REPOSITIONING)  # modes that drive on
+
+
+def pad3(v: np.ndarray) -> np.ndarray:
+    """A (2,) or (3,) vector as (3,) (a 2D scenario's carrier sits at down = 0)."""
+    v = np.asarray(v, dtype=float)
+    return np.concatenate([v, np.zeros(3 - v.shape[0])]) if v.shape[0] < 3 else v
+
+
+def carrier_model(cfg: Config, target: np.ndarray | None = None) -> TickModel:
+    """The tick model of the carrier: the config's (for ``target``, a leg's: default the first),
+    with the carrier's speed limit ``min(carrier.max_speed_m_s, safety.carrier_max_speed_m_s)`` [m/s]."""
+    model = model_from_config(cfg, target=target)
+    limit = cfg.carrier.max_speed_m_s
+    if model.carrier_safety.max_speed_m_s is not None:
+        limit = min(limit, model.carrier_safety.max_speed_m_s)
+    return dataclasses.replace(model, carrier_safety=dataclasses.replace(model.carrier_safety, max_speed_m_s=limit))
+
+
+def guard_params(cfg: Config) -> GuardParams:
+    """The P3 guard of ``cfg``: radius ``b c - carrier.p3_margin_m`` [m]; it plans with the
+    carrier's response delay plus one control period (a command is held that long)."""
+    c = cfg.carrier
+    decel = c.brake_decel_m_s2 or cfg.safety.carrier_max_accel_m_s2 or 1.0
+    delay = c.brake_delay_s if c.brake_delay_s is not None else (REAL_DELAY_S if KINDS[c.backend].real else 0.0)
+    return GuardParams(cfg.law.params().separation_distance_m - c.p3_margin_m, decel, delay, 1.0 / c.rate_hz)
+
+
+def tracking_params(cfg: Config) -> TrackingParams:
+    """What the carrier can follow (``carrier.kinematics`` and its tracking law's settings)."""
+    c = cfg.carrier
+    return TrackingParams(c.kinematics, c.heading_gain, c.max_yaw_rate_rad_s, c.min_speed_fraction, c.wheelbase_m,
+                          c.max_steer_rad)
+
+
+@dataclass(frozen=True)
+class ModeUpdate:
+    """What :meth:`CarrierStepper.update_mode` did: the mode ``before`` and ``after`` it, why it
+    changed (``""``: it did not), and whether the carrier took a later leg (``leg_changed``)."""
+
+    before: CarrierMode
+    after: CarrierMode
+    why: str
+    leg_changed: bool
+
+
+@dataclass(frozen=True)
+class Command:
+    """What :meth:`CarrierStepper.decide` decided: ``tracked`` the command for the robot;
+    ``guard_active`` the P3 guard cut it; ``feasible`` False when the CBF filter found no
+    command (it holds still)."""
+
+    tracked: Tracked
+    guard_active: bool = False
+    feasible: bool = True
+
+
+class CarrierStepper:
+    """The carrier's mode, its law's last command and the memory of its guards, legs, recovery
+    course and speed calibration, for ``cfg`` on a backend that ``brakes_itself`` or not (see
+    the module docstring)."""
+
+    def __init__(self, cfg: Config, brakes_itself: bool) -> None:
+        c = cfg.carrier
+        self.guard = guard_params(cfg)
+        self.tracking = tracking_params(cfg)
+        self.brakes_itself = brakes_itself
+        self.dim = cfg.scenario.dim
+        targets = [np.asarray(t, dtype=float) for t in cfg.scenario.legs()]
+        first = carrier_model(cfg)
+        self.planar = first.planar_carrier or self.dim == 2
+        self.legs = Legs(targets, [carrier_model(cfg, target=t) for t in targets], self.guard, self.planar,
+                         np.asarray(cfg.mission.dock_offset_ned_m, dtype=float)[:self.dim],
+                         first.law.separation_distance_m + cfg.mission.leg_start_margin_m)
+        self.course = RecoveryCourse.from_lists(c.recovery_course, c.recovery_heading_deg, c.recovery_speed_m_s)
+        self.start_accel_m_s2 = c.start_accel_m_s2
+        self.mode = CarrierMode.WAITING
+        self.velocity_m_s = np.zeros(self.dim)  # [m/s] the filtered (and, holonomic, guarded) law command
+        self._plan_velocity = np.zeros(self.dim)  # [m/s] the own plan after separation (Remark 1)
+        self._course_start: tuple[float, float] | None = None  # (time [s], away heading [deg]) of the recovery
+        self._calibration = SpeedCalibration(c.speed_ratio_tau_s)
+
+    @property
+    def model(self) -> TickModel:
+        """The tick model of the leg the carrier serves (its target is the law's)."""
+        return self.legs.model
+
+    def update_mode(self, view: PassengerView) -> ModeUpdate:
+        """Follow the passenger's leg and take the mode after the current one given ``view``."""
+        leg_changed = (view.phase is not None and view.phase.duty in (Duty.REPOSITION, Duty.CARRY)
+                       and self.legs.follow(view.leg))
+        before = self.mode
+        mode, why = next_mode(before, view)
+        if mode is not before:
+            if mode is CarrierMode.SEPARATED and before is not CarrierMode.RECOVERING:  # after a recovery: the same plan
+                self._plan_velocity = (self.velocity_m_s.copy() if before is CarrierMode.APPROACHING
+                                       else np.zeros_like(self.velocity_m_s))
+            if mode not in (CarrierMode.RECOVERING, CarrierMode.PAUSED):
+                self._course_start = None  # the next recovery drives its course from its own start
+            self.mode = mode
+        return ModeUpdate(before, mode, why, leg_changed)
+
+    def stopping(self) -> bool:
+        """A stop for good or for now: not driving (approaching, recovering, repositioning), and no
+        own plan (Remark 1) to follow."""
+        return self.mode not in DRIVING and not (self.mode is CarrierMode.SEPARATED
+                                                 and self.model.carrier_mode == "remark1")
+
+    def hold(self) -> None:
+        """The carrier is sent a stop from outside the step (no own state, a fault): the law's
+        command starts again from rest."""
+        self.velocity_m_s = np.zeros(self.dim)
+
+    def decide(self, state: OwnState, dt_s: float, age_s: float, now_s: float,
+               recovery_velocity_m_s: np.ndarray | None = None) -> Command:
+        """The command for the own ``state`` (measured ``age_s`` [s] ago), ``dt_s`` [s] after the
+        last step, at ``now_s`` [s]. ``recovery_velocity_m_s`` [m/s] NED: a recovery course the
+        caller drives instead of the configured one while RECOVERING (a simulation's drawn course)."""
+        x_c = state.position_ned_m[:self.dim]
+        if self.stopping() and self.brakes_itself:
+            # A real vehicle brakes with its own limits: ramping the command down at
+            # safety.carrier_max_accel_m_s2 (the built-in robot's braking) would keep it driving.
+            self.velocity_m_s = np.zeros(self.dim)
+            return Command(STOP)
+        separated = self.mode is not CarrierMode.APPROACHING
+        plan = self._plan_velocity if self.mode is CarrierMode.SEPARATED else None
+        res = carrier_tick(x_c, separated, self.model, own_plan_velocity=plan, u_prev=self.velocity_m_s,
+                           dt_s=dt_s if dt_s > 0 else None,
+                           course_velocity=self.course_velocity(x_c, now_s, recovery_velocity_m_s))
+        u = np.asarray(res.u, dtype=float)
+        yaw = state.yaw_rad if state.yaw_rad is not None else 0.0
+        t, v_meas = state.t_s, state.velocity_ned_m_s[:self.dim]
+        # A carrier that stands speeds its command up gently until it moves (stiction: mission.carrier.start);
+        # a robot that moves along its heading by its forward speed (its estimator's sideways wander is no motion)
+        moving = (float(np.linalg.norm(v_meas[:2])) if self.tracking.kind == "holonomic" or state.yaw_rad is None
+                  else abs(math.cos(yaw) * float(v_meas[0]) + math.sin(yaw) * float(v_meas[1])))
+        u = gentle_start(u, self.velocity_m_s, moving, self.start_accel_m_s2, dt_s)
+        active = False
+        if self.tracking.kind == "holonomic":
+            for guard in self.legs.guards:  # every target is hazardous, whichever leg is flown
+                g = guard.limit(t, x_c, u, v_meas, age_s)
+                u, active = g.u, active or g.active
+            cmd = track(u, yaw, self.tracking)
+        else:
+            cmd = track(u, yaw, self.tracking)
+            speed = cmd.speed_m_s
+            for guard in self.legs.guards:
+                speed, acted = guard.limit_heading(t, x_c, speed, yaw, v_meas, age_s)
+                active = active or acted
+            if active:
+                scale = speed / cmd.speed_m_s if cmd.speed_m_s > 0 else 0.0
+                cmd = Tracked(speed, cmd.yaw_rate_rad_s, cmd.bearing_rad, heading_of(speed, yaw),
+                              cmd.setpoint_ned_m_s * scale)
+            cmd = self._calibration.asked(cmd, yaw, v_meas, dt_s)  # what to ask for so that it does ``cmd``
+        # The law's planar command (not the motion along the heading) is what the acceleration
+        # limit and Remark 1 act on: tying it to the heading would let the command turn only as
+        # fast as the robot already does (a heading lock).
+        self.velocity_m_s = u
+        return Command(cmd, active, bool(np.all(res.feasible)))
+
+    def course_velocity(self, x_c: np.ndarray, now_s: float,
+                        recovery_velocity_m_s: np.ndarray | None = None) -> np.ndarray | None:
+        """RECOVERING: the recovery course's velocity at ``now_s`` [m/s] (dim,) (``recovery_velocity_m_s``
+        when given), its clock and its default heading (away from the target) taken at the first
+        step of the recovery; REPOSITIONING: straight away from the leg's target at the carrier's
+        top speed until its dock point is ``b c + mission.leg_start_margin_m`` (and
+        :data:`~mission.config.legs.REPOSITION_SPARE_M`) from it, then zero; else None."""
+        if self.mode is CarrierMode.REPOSITIONING:
+            return self.legs.reposition_velocity(x_c, float(self.model.carrier_safety.max_speed_m_s or 1.0))
+        if self.mode is not CarrierMode.RECOVERING:
+            return None
+        if recovery_velocity_m_s is not None:
+            return pad3(recovery_velocity_m_s)[:self.dim]
+        if self._course_start is None:
+            self._course_start = (now_s, away_heading_deg(x_c, np.asarray(self.model.target)))
+        t0, away = self._course_start
+        return pad3(self.course.velocity_ned_m_s(now_s - t0, away))[:self.dim]

@@ -1,0 +1,137 @@
+"""The carrier's one step (mission/carrier/step.py), pure: the guard's parameters are built in one
+place and set by the backend's declared properties, a vehicle that brakes itself is sent a stop
+at once while the built-in robot ramps down, Remark 1 keeps the command of the separation
+instant, the recovery course keeps its start through a pause, and the recovery simulation's
+carrier (sim/batch/recovery.py) commands what the controller's loop on the built-in robot
+commands, step for step (over real Zenoh: tests/integration/carrier/test_carrier_step_agrees.py)."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from mission.carrier.backends.sim import SimRobot
+from mission.carrier.modes import CarrierMode, PassengerView
+from mission.carrier.step import REAL_DELAY_S, CarrierStepper, carrier_model, guard_params
+from mission.config.schema import Config, from_dict
+from mission.phases.phase import Phase
+from mission.time.clock import ManualClock
+from sim.batch.recovery import KinematicCarrier, configured, sim_backend
+
+TARGET = [20.0, 15.0, -4.0]
+DT = 1.0 / 30.0
+ACCEL = 1.0  # [m/s^2] safety.carrier_max_accel_m_s2 of _cfg
+RADIUS = 8.0 - 0.5  # [m] b c - carrier.p3_margin_m
+
+
+def _cfg(carrier_mode: str = "stop", **carrier: object) -> Config:
+    return from_dict({
+        "scenario": {"carrier_start": [0.0, 0.0, 0.0], "target": TARGET, "carrier_mode": carrier_mode},
+        "safety": {"carrier_max_accel_m_s2": ACCEL, "carrier_max_speed_m_s": 2.5},
+        "carrier": {"rate_hz": 30.0, "max_speed_m_s": 3.0, **carrier},
+    })
+
+
+def _view(phase: str) -> PassengerView:
+    p = Phase(phase)
+    return PassengerView(p, p.separated)
+
+
+def _step(stepper: CarrierStepper, robot: SimRobot, clock: ManualClock, phase: str | None) -> np.ndarray:
+    """One tick of the controller's loop on the built-in robot (without its bus): advance, the
+    mode, the own state, the command held; the command's velocity [m/s]."""
+    clock.advance(DT)
+    robot.advance(DT)
+    stepper.update_mode(PassengerView(None) if phase is None else _view(phase))
+    cmd = stepper.decide(robot.own_state(), DT, 0.0, clock.now()).tracked
+    robot.command(cmd)
+    return np.array(cmd.velocity_ned_m_s, dtype=float)
+
+
+def test_the_guard_s_parameters_are_built_once_and_the_backend_kind_sets_the_delay() -> None:
+    sim, px4 = guard_params(_cfg()), guard_params(_cfg(backend="mavlink"))
+    assert sim.delay_s == 0.0 and px4.delay_s == REAL_DELAY_S  # the built-in robot obeys at once
+    assert guard_params(_cfg(backend="mavlink", brake_delay_s=0.1)).delay_s == 0.1  # a stated delay wins
+    assert sim.radius_m == pytest.approx(RADIUS) and sim.brake_decel_m_s2 == ACCEL and sim.period_s == DT
+    assert CarrierStepper(_cfg(backend="mavlink"), True).guard == px4
+
+
+def test_the_simulation_s_carrier_steps_with_the_sim_backend_s_parameters() -> None:
+    """A configuration for a PX4 rover simulated: the robot simulated is the built-in one (no
+    response delay, braking by the law's limit), whatever carrier.backend says."""
+    cfg = _cfg(backend="mavlink")
+    carrier = KinematicCarrier(cfg, configured())
+    assert sim_backend(cfg).carrier.backend == "sim" and cfg.carrier.backend == "mavlink"
+    assert carrier.stepper.guard == guard_params(sim_backend(cfg)) != guard_params(cfg)
+    assert not carrier.stepper.brakes_itself and not SimRobot.brakes_itself
+    assert carrier.model.carrier_safety.max_speed_m_s == carrier_model(cfg).carrier_safety.max_speed_m_s == 2.5
+
+
+@pytest.mark.parametrize("brakes_itself", [True, False])
+def test_a_vehicle_that_brakes_itself_is_sent_a_stop_at_once_the_built_in_robot_ramps_down(brakes_itself: bool) -> None:
+    clock = ManualClock()
+    stepper, robot = CarrierStepper(_cfg(), brakes_itself), SimRobot(_cfg(), clock)
+    v = [_step(stepper, robot, clock, "RIDING") for _ in range(60)]
+    assert stepper.mode is CarrierMode.APPROACHING and np.linalg.norm(v[-1]) == pytest.approx(2.0 * ACCEL, rel=1e-6)
+    after = _step(stepper, robot, clock, "NAVIGATING")
+    assert stepper.mode is CarrierMode.SEPARATED and stepper.stopping()
+    if brakes_itself:
+        assert not after.any() and not stepper.velocity_m_s.any()
+    else:
+        assert np.linalg.norm(after) == pytest.approx(np.linalg.norm(v[-1]) - ACCEL * DT, rel=1e-6)
+
+
+def test_remark1_keeps_the_command_of_the_separation_instant() -> None:
+    clock = ManualClock()
+    cfg = _cfg(carrier_mode="remark1")
+    stepper, robot = CarrierStepper(cfg, False), SimRobot(cfg, clock)
+    v = [_step(stepper, robot, clock, "RIDING") for _ in range(30)]
+    after = [_step(stepper, robot, clock, "NAVIGATING") for _ in range(30)]
+    assert stepper.mode is CarrierMode.SEPARATED and not stepper.stopping()
+    for u in after:
+        np.testing.assert_allclose(u, v[-1], atol=1e-12)
+
+
+def test_the_recovery_course_keeps_its_start_through_a_pause_and_a_new_recovery_starts_its_own() -> None:
+    """1 s east, then the steady course north: paused 0.5 s into the course for 1 s, it comes
+    back to the steady course (its clock ran on); a recovery after a fall-back starts east again."""
+    stepper = CarrierStepper(_cfg(recovery_course=[[90.0, 1.0, 1.0]], recovery_heading_deg=0.0,
+                                  recovery_speed_m_s=1.0), False)
+    x = np.zeros(3)
+    stepper.mode = CarrierMode.SEPARATED
+    stepper.update_mode(_view("RETURNING"))
+    assert stepper.mode is CarrierMode.RECOVERING
+    np.testing.assert_allclose(stepper.course_velocity(x, 10.0), [0.0, 1.0, 0.0], atol=1e-12)  # its start: 10 s
+    stepper.update_mode(PassengerView(Phase.APPROACH, True, "its liveliness token is gone"))
+    assert stepper.mode is CarrierMode.PAUSED and stepper.course_velocity(x, 10.5) is None
+    stepper.update_mode(_view("APPROACH"))
+    np.testing.assert_allclose(stepper.course_velocity(x, 11.5), [1.0, 0.0, 0.0], atol=1e-12)  # 1.5 s in: steady
+    stepper.update_mode(_view("FALLBACK"))
+    assert stepper.mode is CarrierMode.SEPARATED
+    stepper.update_mode(_view("RETURNING"))
+    np.testing.assert_allclose(stepper.course_velocity(x, 20.0), [0.0, 1.0, 0.0], atol=1e-12)  # a new start
+
+
+def test_the_simulation_s_carrier_commands_what_the_controller_s_loop_commands() -> None:
+    """The same phases heard, step for step: the same command and the same motion. Gentle start,
+    a scripted course turn and a steady course into the guard's circle all in play."""
+    towards = math.degrees(math.atan2(TARGET[1], TARGET[0]))
+    cfg = _cfg(start_accel_m_s2=0.5, recovery_course=[[towards + 90.0, 1.0, 2.01]], recovery_heading_deg=towards,
+               recovery_speed_m_s=1.5)
+    clock = ManualClock()
+    stepper, robot = CarrierStepper(cfg, SimRobot.brakes_itself), SimRobot(cfg, clock)
+    carrier = KinematicCarrier(cfg, configured())
+    carrier.step(None, None)  # its first step, at 0 (the controller's loop: nothing to do before the first tick)
+    script = ["RIDING"] * 120 + ["NAVIGATING"] * 60 + ["RETURNING"] * 10 + ["APPROACH"] * 400 + ["HOME"] * 90 \
+        + ["RIDING"] * 30
+    closest = math.inf
+    for phase in script:
+        u = _step(stepper, robot, clock, phase)
+        cmd = carrier.step(Phase(phase), None)
+        assert carrier.mode is stepper.mode
+        np.testing.assert_allclose(cmd.velocity_ned_m_s, u, atol=1e-9)
+        np.testing.assert_allclose(carrier.position, robot.position_m, atol=1e-9)
+        closest = min(closest, float(np.linalg.norm(np.asarray(TARGET) - robot.position_m)))
+    assert stepper.mode is CarrierMode.APPROACHING
+    assert RADIUS - 1e-9 <= closest < RADIUS + 0.1  # the steady course ran into the guard's circle
