@@ -116,6 +116,9 @@ class CarrierSection(Section):
                                   "from a target it faces, which the P3 guard keeps in reserve (an Ackermann carrier "
                                   "that cannot reverse, as a PX4 rover in OFFBOARD, drives on while it turns round); "
                                   "below p3_margin_m; 0 off")
+    avoid_other_targets: bool = Field(True, description="[-] a mission with several targets: the carrier's CBF "
+                                      "filter (safety.filter_carrier) keeps it b c from the targets of the other legs, "
+                                      "so that it steers round them instead of its P3 guard braking it at them")
     kinematics: Literal["holonomic", "diff_drive", "ackermann"] = Field("holonomic",
         description=("[-] what the carrier can follow: `holonomic` (any planar velocity), `diff_drive` or `ackermann` "
                      "(tracking law: speed scaled by the heading error, yaw rate to the bearing)"))
