@@ -163,3 +163,13 @@ def test_with_a_turn_reserve_the_rover_stops_where_it_can_still_turn_away() -> N
     closest = _drive(guard, rover, target, bearing_of, 30.0, dt)
     assert closest >= R_GUARD - 1e-6, closest
     assert float(np.linalg.norm(rover.x)) > R_GUARD + 3.0  # it did turn round and drive away
+
+
+def test_a_turn_away_is_the_one_that_does_not_face_the_target_more_on_the_way() -> None:
+    from mission.carrier.guard import turns_away
+    north = 0.0  # the target due north of the robot
+    assert turns_away(0.2, math.pi, north)  # facing it, a little right of it: back round to the right
+    assert turns_away(-0.2, math.pi - 0.01, north)  # a little left of it: round to the left
+    assert not turns_away(-0.2, 2.0, north)  # left of it, to a bearing back right: the turn crosses it
+    assert not turns_away(0.2, 0.3, north)  # a bearing towards it is no turn away
+    assert turns_away(2.0, -2.0, north)  # facing away, the turn stays behind
