@@ -65,7 +65,7 @@ def allowed_path_m(phi_rad: float, clearance_m: float, radius_m: float, reserve_
     if clearance_m <= 0.0 or stop_closing_m(phi_rad, 0.0, radius_m, reserve_m) > clearance_m:
         return 0.0
     lo, hi = 0.0, clearance_m + math.pi * radius_m + 1.0  # closing(hi) >= hi - pi R > clearance
-    for _ in range(40):  # bisection: 1e-12 of hi
+    while hi - lo > 1e-4:  # bisection to 0.1 mm (lo is kept: on the safe side)
         mid = 0.5 * (lo + hi)
         if stop_closing_m(phi_rad, mid, radius_m, reserve_m) <= clearance_m:
             lo = mid
