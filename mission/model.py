@@ -27,7 +27,7 @@ from mission.core.pursuit import PursuitLimits
 from mission.phases import MissionModel
 from mission.phases.types import DeckRide, RecoveryModel
 from mission.core.safety import SafetyConfig
-from mission.core.tick import TickModel
+from mission.core.tick import TickModel, target_keep_outs
 from mission.core.tracking import TrackingGains
 
 T = TypeVar("T")
@@ -40,9 +40,18 @@ COMMAND_ACCEL_FACTOR = 1.5  # its acceleration limit, of the reference's
 def model_from_config(cfg: Config, target: np.ndarray | None = None) -> TickModel:
     """The :class:`TickModel` a configuration describes (``target`` overrides, e.g. a batch)."""
     s = cfg.scenario
+    law = cfg.law.params()
+    aim = np.asarray(s.target if target is None else target, dtype=float)
+    others = None
+    if cfg.carrier.avoid_other_targets and aim.ndim == 1 and len(s.legs()) > 1:
+        # the other legs' targets: kept b c away by the carrier's barrier rows (its P3 guard's
+        # circles lie inside), so that it steers round them instead of braking at them
+        rest = [np.asarray(t, dtype=float) for t in s.legs() if not np.allclose(np.asarray(t, dtype=float), aim)]
+        planar = bool(s.planar_carrier and s.dim == 3) or s.dim == 2
+        others = target_keep_outs(rest, law.separation_distance_m, planar, float(s.carrier_start[-1]) if s.dim == 3 else 0.0)
     return TickModel(
-        law=cfg.law.params(),
-        target=np.asarray(s.target if target is None else target, dtype=float),
+        law=law,
+        target=aim,
         obstacles=s.obstacle_set(),
         passenger_safety=cfg.safety.passenger(),
         carrier_safety=cfg.safety.carrier(),
@@ -50,6 +59,7 @@ def model_from_config(cfg: Config, target: np.ndarray | None = None) -> TickMode
         carrier_mode=s.carrier_mode,
         departure_margin_m=cfg.law.departure_margin_m,
         filter_carrier=cfg.safety.filter_carrier,
+        other_keep_outs=others,
     )
 
 

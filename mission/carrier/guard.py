@@ -19,6 +19,19 @@ never crosses the circle. A measured inward speed above the cap by :data:`OVERSP
 vehicle that overshoots its speed setpoint) brakes outright: no inward motion until it is back
 under. Only the inward component is cut (a Remark-1 carrier slides along the circle), and the
 cap falls at rate ``a`` as the carrier closes in: the guard brakes, it does not slam.
+
+A robot that moves along its heading (:meth:`P3Guard.limit_heading`) with a turning model
+(``turn_radius_m`` set) is guarded on its whole stopping path instead, a turn in progress
+included (:mod:`mission.carrier.stopping`): its forward speed ``v`` is capped so that the path it
+drives before it stands, ``s = v_fly max(delay_s, age_s) + v T + v^2 / 2a`` (``v_fly`` the
+largest of its measured forward speed and the forward speeds sent since ``t_s - delay_s``), closes
+on the target by at most the room left, in the plane (a target above the carrier's plane counted
+in ``r_guard``), however it steers within its turning radius, plus ``turn_reserve_m``'s turn away
+from where it then faces (a robot that cannot reverse drives on while it turns round). A command
+that turns it away from the target (:func:`turns_away`: its bearing at least sideways from the
+target, the turn the way that does not face it more), with every command in flight one too or a
+stop, is not capped while that turn, at radius ``turn_reserve_m``, stays out of the circle: the
+reserve kept for it is spent on it.
 """
 from __future__ import annotations
 
@@ -28,21 +41,30 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from mission.carrier.stopping import allowed_path_m, closing_m, turn_away_m
+from mission.core.geodesy import wrap_pi
+
 OVERSPEED_M_S = 0.1  # [m/s] measured inward speed above the cap at which the guard brakes outright
 
 
 @dataclass(frozen=True)
 class GuardParams:
     """radius_m [m] ``b c - margin``; brake_decel_m_s2 [m/s^2] > 0; delay_s [s] >= 0 the
-    vehicle's response delay; period_s [s] > 0 how long a command is held."""
+    vehicle's response delay; period_s [s] > 0 how long a command is held; turn_radius_m [m] >= 0
+    the tightest turn of a robot that moves along its heading (None: guard only the inward
+    component of its motion); turn_reserve_m [m] >= 0 the radius of its turn away from a target
+    it faces (0: it can turn on the spot or reverse)."""
 
     radius_m: float
     brake_decel_m_s2: float
     delay_s: float = 0.0
     period_s: float = 0.01
+    turn_radius_m: float | None = None
+    turn_reserve_m: float = 0.0
 
     def __post_init__(self) -> None:
-        if not (self.radius_m > 0 and self.brake_decel_m_s2 > 0 and self.delay_s >= 0 and self.period_s > 0):
+        if not (self.radius_m > 0 and self.brake_decel_m_s2 > 0 and self.delay_s >= 0 and self.period_s > 0
+                and (self.turn_radius_m is None or self.turn_radius_m >= 0) and self.turn_reserve_m >= 0):
             raise ValueError(f"invalid guard parameters {self}")
 
 
@@ -76,6 +98,7 @@ class P3Guard:
         self.k = self.target.shape[-1]
         self.planar = planar  # the carrier moves in the first two axes only: cut the command there
         self._sent: collections.deque[tuple[float, float]] = collections.deque()
+        self._sent_forward: collections.deque[tuple[float, float, bool]] = collections.deque()  # (t, v, away)
 
     def _geometry(self, x_c: np.ndarray) -> tuple[np.ndarray | None, float]:
         e = self.target[:self.k] - np.asarray(x_c, dtype=float)[:self.k]
@@ -125,9 +148,17 @@ class P3Guard:
         return GuardResult(out, cap, h, True)
 
     def limit_heading(self, t_s: float, x_c: np.ndarray, speed_m_s: float, yaw_rad: float,
-                      velocity_m_s: np.ndarray | None = None, age_s: float = 0.0) -> tuple[float, bool]:
+                      velocity_m_s: np.ndarray | None = None, age_s: float = 0.0,
+                      bearing_rad: float | None = None) -> tuple[float, bool]:
         """For a robot that moves only along its heading ``yaw_rad`` [rad]: the largest forward
-        speed [m/s] (<= ``speed_m_s``) whose inward component respects the cap, and whether it was cut."""
+        speed [m/s] (<= ``speed_m_s``) whose inward component respects the cap (with a turning
+        model: whose stopping path keeps out of the circle, or whose turn away does, steering
+        to ``bearing_rad`` [rad], the command's bearing, None: unknown), and whether it was cut."""
+        if self.p.turn_radius_m is not None:
+            cap, away = self.heading_cap(t_s, x_c, yaw_rad, velocity_m_s, age_s, bearing_rad)
+            out = min(speed_m_s, cap)
+            self._sent_forward.append((t_s + max(age_s, 0.0), out, away))
+            return out, out < speed_m_s
         cap, _, n = self.cap(t_s, x_c, velocity_m_s, age_s)
         now = t_s + max(age_s, 0.0)
         if n is None:
@@ -140,3 +171,59 @@ class P3Guard:
             return speed_m_s, False
         self._sent.append((now, cap))
         return cap / cos_in, True  # cos_in > 0 here (inward > cap >= 0 with speed >= 0)
+
+    def heading_cap(self, t_s: float, x_c: np.ndarray, yaw_rad: float, velocity_m_s: np.ndarray | None,
+                    age_s: float = 0.0, bearing_rad: float | None = None) -> tuple[float, bool]:
+        """The forward speed cap [m/s] of a robot with a turning model at ``x_c`` [m], heading
+        ``yaw_rad`` [rad], moving at ``velocity_m_s`` [m/s] (None: unknown), a state measured at
+        ``t_s`` [s] and ``age_s`` [s] old, and whether the command's bearing ``bearing_rad`` [rad]
+        turns it away from the target (module docstring). The cap is 0 while its measured forward
+        speed is over it by more than :data:`OVERSPEED_M_S`; inf where it cannot reach the
+        circle, or where it turns away (so have the commands in flight) with the room to."""
+        horizon = max(self.p.delay_s, age_s)
+        while self._sent_forward and self._sent_forward[0][0] < t_s - self.p.delay_s - 1e-9:
+            self._sent_forward.popleft()
+        e = self.target[:self.k] - np.asarray(x_c, dtype=float)[:self.k]
+        rho = math.hypot(float(e[0]), float(e[1]))
+        above2 = float(e[2:] @ e[2:])  # the target's height over the carrier's plane, squared
+        r2 = self.p.radius_m * self.p.radius_m
+        if above2 >= r2:
+            return math.inf, False
+        if rho < 1e-9:
+            return 0.0, False
+        clearance = rho - math.sqrt(r2 - above2)
+        c, s = math.cos(yaw_rad), math.sin(yaw_rad)
+        forward = 0.0 if velocity_m_s is None else c * float(velocity_m_s[0]) + s * float(velocity_m_s[1])
+        to_target = math.atan2(float(e[1]), float(e[0]))
+        phi = abs(wrap_pi(yaw_rad - to_target))
+        if forward < -OVERSPEED_M_S:  # moving backwards: it faces the target as its back does
+            phi = min(phi, math.pi - phi)
+        radius = float(self.p.turn_radius_m or 0.0)
+        away = (self.p.turn_reserve_m > 0 and bearing_rad is not None and forward >= -OVERSPEED_M_S
+                and turns_away(yaw_rad, bearing_rad, to_target))
+        if away and all(a or v == 0.0 for _, v, a in self._sent_forward):
+            # It turns round, as the commands in flight do (or they stop it): what it still rolls
+            # on its measured speed (all of it, if a stop is in flight), then the turn away.
+            roll = 0.0 if all(a for _, _, a in self._sent_forward) else (
+                abs(forward) * horizon + forward * forward / (2.0 * self.p.brake_decel_m_s2))
+            end = max(phi - roll / radius, 0.0) if radius > 0 else (0.0 if roll > 0 else phi)
+            if closing_m(phi, roll, radius) + turn_away_m(end, self.p.turn_reserve_m) <= clearance:
+                return math.inf, True
+        v_fly = abs(forward)
+        if self._sent_forward and horizon > 0:
+            v_fly = max(v_fly, max(v for _, v, _ in self._sent_forward))
+        path = allowed_path_m(phi, clearance, radius, self.p.turn_reserve_m)
+        cap = stopping_speed(path - v_fly * horizon, self.p.brake_decel_m_s2, self.p.period_s)
+        return (0.0 if abs(forward) > cap + OVERSPEED_M_S else cap), away
+
+
+def turns_away(yaw_rad: float, bearing_rad: float, to_target_rad: float) -> bool:
+    """Whether a robot at heading ``yaw_rad`` [rad] that steers the shortest way to
+    ``bearing_rad`` [rad] turns away from a target at bearing ``to_target_rad`` [rad]: the
+    bearing at least sideways from it, and the turn one that does not face it more on the way."""
+    if abs(wrap_pi(bearing_rad - to_target_rad)) < 0.5 * math.pi:
+        return False
+    rel = wrap_pi(yaw_rad - to_target_rad)  # its heading off the line to the target
+    if abs(rel) >= 0.5 * math.pi or abs(rel) < 1e-6:
+        return True  # facing away, the shortest turn stays in the back half; head-on, both ways are alike
+    return (wrap_pi(bearing_rad - yaw_rad) > 0.0) == (rel > 0.0)

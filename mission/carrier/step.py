@@ -75,11 +75,19 @@ def carrier_model(cfg: Config, target: np.ndarray | None = None) -> TickModel:
 
 def guard_params(cfg: Config) -> GuardParams:
     """The P3 guard of ``cfg``: radius ``b c - carrier.p3_margin_m`` [m]; it plans with the
-    carrier's response delay plus one control period (a command is held that long)."""
+    carrier's response delay plus one control period (a command is held that long), and for a
+    diff-drive or Ackermann carrier with its turning model (``carrier.turn_radius_m``, default
+    the Ackermann geometry's ``wheelbase_m / tan(max_steer_rad)``, diff-drive 0;
+    ``carrier.turn_reserve_m``)."""
     c = cfg.carrier
     decel = c.brake_decel_m_s2 or cfg.safety.carrier_max_accel_m_s2 or 1.0
     delay = c.brake_delay_s if c.brake_delay_s is not None else (REAL_DELAY_S if KINDS[c.backend].real else 0.0)
-    return GuardParams(cfg.law.params().separation_distance_m - c.p3_margin_m, decel, delay, 1.0 / c.rate_hz)
+    turn: float | None = None
+    if c.kinematics != "holonomic":
+        turn = c.turn_radius_m if c.turn_radius_m is not None else (
+            c.wheelbase_m / math.tan(c.max_steer_rad) if c.kinematics == "ackermann" else 0.0)
+    return GuardParams(cfg.law.params().separation_distance_m - c.p3_margin_m, decel, delay, 1.0 / c.rate_hz,
+                       turn_radius_m=turn, turn_reserve_m=c.turn_reserve_m)
 
 
 def tracking_params(cfg: Config) -> TrackingParams:
@@ -201,7 +209,7 @@ class CarrierStepper:
             cmd = track(u, yaw, self.tracking)
             speed = cmd.speed_m_s
             for guard in self.legs.guards:
-                speed, acted = guard.limit_heading(t, x_c, speed, yaw, v_meas, age_s)
+                speed, acted = guard.limit_heading(t, x_c, speed, yaw, v_meas, age_s, bearing_rad=cmd.bearing_rad)
                 active = active or acted
             if active:
                 scale = speed / cmd.speed_m_s if cmd.speed_m_s > 0 else 0.0

@@ -108,6 +108,17 @@ class CarrierSection(Section):
     brake_delay_s: float | None = Field(None, ge=0, le=5, description="[s] the carrier's response delay (command "
                                         "to motion, plus the age of its state) the guard allows for; default 0 for "
                                         "the built-in robot, 0.3 s for a real one (mavlink, ros2)")
+    turn_radius_m: float | None = Field(None, ge=0, description="[m] diff-drive/Ackermann: the tightest turn "
+                                        "the P3 guard allows for while the carrier stops (its whole stopping path, a turn "
+                                        "in progress included, keeps out of b c - margin); default: Ackermann "
+                                        "wheelbase_m / tan(max_steer_rad), diff-drive 0 (it turns on the spot)")
+    turn_reserve_m: float = Field(0.0, ge=0, description="[m] diff-drive/Ackermann: the radius of its turn away "
+                                  "from a target it faces, which the P3 guard keeps in reserve (an Ackermann carrier "
+                                  "that cannot reverse, as a PX4 rover in OFFBOARD, drives on while it turns round); "
+                                  "below p3_margin_m; 0 off")
+    avoid_other_targets: bool = Field(True, description="[-] a mission with several targets: the carrier's CBF "
+                                      "filter (safety.filter_carrier) keeps it b c from the targets of the other legs, "
+                                      "so that it steers round them instead of its P3 guard braking it at them")
     kinematics: Literal["holonomic", "diff_drive", "ackermann"] = Field("holonomic",
         description=("[-] what the carrier can follow: `holonomic` (any planar velocity), `diff_drive` or `ackermann` "
                      "(tracking law: speed scaled by the heading error, yaw rate to the bearing)"))
@@ -160,6 +171,10 @@ class CarrierSection(Section):
                 raise ConfigError(f"carrier.{name}", v, "must have 3 components")
         if self.mavlink.shared_origin is not None and len(self.mavlink.shared_origin) != 3:
             raise ConfigError("carrier.mavlink.shared_origin", self.mavlink.shared_origin, "must be [lat, lon, alt]")
+        if self.turn_reserve_m >= self.p3_margin_m:
+            raise ConfigError("carrier.turn_reserve_m", self.turn_reserve_m,
+                              f"must be below carrier.p3_margin_m = {self.p3_margin_m:g} (the carrier could not "
+                              "reach b c, where the passenger separates, and keep room to turn away)")
         if self.recovery_speed_m_s > self.max_speed_m_s:
             raise ConfigError("carrier.recovery_speed_m_s", self.recovery_speed_m_s,
                               f"above carrier.max_speed_m_s = {self.max_speed_m_s:g}")

@@ -51,12 +51,16 @@ class TickModel:
     departure_margin_m: float = 1e-3
     filter_carrier: bool = True
     carrier_obstacles: Obstacles | None = None  # default: obstacles (planar) + target keep-out
+    other_keep_outs: Obstacles | None = None  # other targets' keep-outs the carrier steers round (target_keep_outs)
 
     def __post_init__(self) -> None:
         if self.carrier_obstacles is None:
             keepout = 0.5 * self.law.separation_distance_m if self.carrier_mode == "remark1" else 0.0
-            object.__setattr__(self, "carrier_obstacles", default_carrier_obstacles(
-                self.obstacles, np.asarray(self.target), self.planar_carrier, keepout))
+            obs = default_carrier_obstacles(self.obstacles, np.asarray(self.target), self.planar_carrier, keepout)
+            others = self.other_keep_outs
+            if others is not None and others.radii.shape[0] and obs.centers.ndim == 2:
+                obs = Obstacles(np.concatenate([obs.centers, others.centers]), np.append(obs.radii, others.radii))
+            object.__setattr__(self, "carrier_obstacles", obs)
 
     @property
     def event_distance_m(self) -> float:
@@ -169,6 +173,26 @@ def default_carrier_obstacles(obstacles: Obstacles, target: np.ndarray, planar: 
     centre = target[..., :2] if planar else target
     centers = np.broadcast_to(obs.centers, centre.shape[:-1] + obs.centers.shape[-2:])
     return Obstacles(np.concatenate([centers, centre[..., None, :]], axis=-2), np.append(obs.radii, keepout_m))
+
+
+def target_keep_outs(targets: list[np.ndarray], radius_m: float, planar: bool, plane_down_m: float = 0.0) -> Obstacles:
+    """Keep-outs [m] round ``targets`` (each (n,), NED) that a carrier steers round with its
+    barrier rows (a multi-target mission: the targets of the other legs): spheres of
+    ``radius_m``, for a planar carrier their discs in its plane (down ``plane_down_m``),
+    ``sqrt(radius_m^2 - height^2)`` (none for a target higher above the plane than that)."""
+    n = 2 if planar else (targets[0].shape[-1] if targets else 2)
+    keep = []
+    for t in targets:
+        t = np.asarray(t, dtype=float)
+        if planar and t.shape[-1] == 3:
+            height2 = (float(t[2]) - plane_down_m) ** 2
+            if height2 < radius_m * radius_m:
+                keep.append((t[:2], float(np.sqrt(radius_m * radius_m - height2))))
+        else:
+            keep.append((t[:n], radius_m))
+    if not keep:
+        return Obstacles.none(n)
+    return Obstacles(np.array([c for c, _ in keep]), np.array([r for _, r in keep]))
 
 
 def separation_due(anchor: np.ndarray, separated: np.ndarray | bool, model: TickModel,

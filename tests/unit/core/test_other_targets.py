@@ -1,0 +1,51 @@
+"""A carrier on a mission with several targets steers round the other legs' targets (pure): its
+CBF rows keep it ``b c`` from them, so its P3 guards never have to brake it there."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from mission.carrier.controller import carrier_model, guard_params
+from mission.carrier.guard import P3Guard
+from mission.config.schema import load_config
+from mission.core.tick import carrier_tick, target_keep_outs
+from tests.conftest import CONFIGS
+
+
+def test_keep_outs_are_the_targets_discs_in_the_carrier_s_plane() -> None:
+    obs = target_keep_outs([np.array([10.0, 0.0, -5.0]), np.array([0.0, 0.0, -9.0])], 8.0, True, 0.0)
+    assert obs.centers.tolist() == [[10.0, 0.0]]  # the second is higher above the plane than 8 m
+    assert obs.radii[0] == math.sqrt(64.0 - 25.0)
+    assert target_keep_outs([np.array([1.0, 2.0])], 8.0, True).radii.tolist() == [8.0]
+
+
+def test_a_carrier_riding_to_target_2_past_target_1_steers_round_it_without_its_guard() -> None:
+    """configs/cycle.toml's leg 2, from the far side of target 1 (where a recovery course can
+    leave it): the law drives straight through target 1's circle; the filtered command goes round,
+    target 1's guard never cuts it, and it changes at no more than the carrier's acceleration limit."""
+    cfg = load_config(CONFIGS / "cycle.toml")
+    t1, t2 = (np.asarray(t, dtype=float) for t in cfg.scenario.legs())
+    model = carrier_model(cfg, target=t2)
+    guard = P3Guard(guard_params(cfg), t1)  # (its own target's guard slows it near separation, as it should)
+    x = t1 + 12.0 * (t1 - t2) / float(np.linalg.norm(t1 - t2))  # behind target 1, on the line to target 2
+    x[1] += 0.5
+    x[2] = 0.0
+    u, dt = np.zeros(3), 1.0 / cfg.carrier.rate_hz
+    accel = cfg.safety.carrier_max_accel_m_s2
+    closest, largest_step = math.inf, 0.0
+    for k in range(int(60.0 / dt)):
+        res = carrier_tick(x, False, model, u_prev=u, dt_s=dt)
+        new = np.asarray(res.u, dtype=float)
+        assert not guard.limit(k * dt, x, new, u).active, (k, x)
+        largest_step = max(largest_step, float(np.linalg.norm(new - u)))
+        u = new
+        x = x + u * dt
+        closest = min(closest, float(np.linalg.norm(t1 - x)))
+        if float(np.linalg.norm(t2 - x)) <= model.law.separation_distance_m:
+            break
+    assert float(np.linalg.norm(t2 - x)) <= model.law.separation_distance_m + 0.01, x  # it got there
+    assert closest >= model.law.separation_distance_m, closest
+    # no brake: the barrier turns the command at about the acceleration limit (it has the last
+    # word over that limit: 1.54 m/s^2 at its steepest here, against 1 m/s^2)
+    assert largest_step <= accel * dt * 2.0, largest_step
