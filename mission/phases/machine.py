@@ -69,7 +69,7 @@ from mission.phases.types import (
     dock_point,
     enter,
 )
-from mission.phases import deck, recovery
+from mission.phases import deck, recovery, stall
 from mission.phases.flying import arrived, join, navigate, riding
 
 __all__ = [
@@ -118,24 +118,28 @@ def step(state: MissionState, obs: Observation, m: MissionModel) -> tuple[Missio
         new, dec = _step(state, obs, m)
     bad = _nonfinite(new, dec)
     if bad is None:
-        return new, dec
+        return replace(new, tick_s=t), dec
     aborted = _abort(state, t, AbortReason.NONFINITE, f"non-finite {bad} in {state.phase.value}")
-    return aborted, _decided(aborted, obs, f"abort: non-finite {bad}: asking for Hold")
+    return replace(aborted, tick_s=t), _decided(aborted, obs, f"abort: non-finite {bad}: asking for Hold")
 
 
 def _step(state: MissionState, obs: Observation, m: MissionModel) -> tuple[MissionState, Decision]:
-    """The failsafes, then the phase's handler; the carrier's position (a fresh, trusted one) as the
+    """The failsafes, then (after a stall: :mod:`mission.phases.stall`) the reference restarted on
+    the vehicle, then the phase's handler; the carrier's position (a fresh, trusted one) as the
     vehicle's home while flying."""
     t = obs.t_s
     state, early = _failsafes(state, obs, m)
     if early is not None:
         return state, early
+    state, resumed = stall.resume(state, obs)
     v = obs.vehicle
     if state.battery_start is None and v is not None and v.battery_pct is not None:
         state = replace(state, battery_start=(t, v.battery_pct))  # the drain rate counts from here
     leg_model = m.legs[state.leg] if m.legs else m  # the leg's target (scenario.targets)
     handler = HANDLERS[state.phase]
     state, decision = handler(state, obs, leg_model)
+    if resumed:
+        decision = replace(decision, events=(*resumed, *decision.events))
     c = obs.carrier
     if c is not None and c.worst_age_s <= m.carrier_timeout_s and c.untrusted is None and state.phase.flying:
         decision = replace(decision, home_ned_m=c.position_ned_m + c.velocity_ned_m_s * c.age_s)

@@ -1,0 +1,72 @@
+"""After a stall (pure): the first tick after a gap with no tick goes on from where the vehicle is.
+
+A companion computer stalls (garbage collection, I/O, a busy CPU, a stopped process): for the
+gap nothing is sent and PX4 flies the last setpoint it has (its position, velocity and
+acceleration) until ``COM_OF_LOSS_T`` runs out, when its offboard-loss failsafe takes over
+(docs/safety.md). Meanwhile the reference, which advances one tick per tick, has stood still,
+and the vehicle has not: after 1 s it is a metre or more from it. Sent as it is, the reference's
+next setpoint would pull PX4 back to where it was (its position loop, ``MPC_XY_P`` x the
+distance: a jump in the velocity it flies). So:
+
+::
+
+    a gap between two ticks longer than STALL_S, in a flying phase (not seated on a deck):
+      JOIN, SEPARATED .. ARRIVED, RETURNING .. FALLBACK, HOME --the reference (x_ref, u_ref;
+          after separation e_ref) restarts on the vehicle's position and velocity
+      RIDING, TRANSIT --the reference stays on the dock point (the law's equilibrium)
+      every one --the last command (u_cmd, the safety filter's previous one) is the vehicle's
+          velocity, so the command goes on from what the vehicle does, within the passenger's
+          acceleration limit per tick; the dwell being timed (JOIN's, the holdoff's) restarts
+      APPROACH --GO_AROUND (mission.phases.recovery.approach): the approach was not watched
+          for the gap, and a new one starts from the holdoff point
+
+Frames: local NED [m], [m/s]; times [s] on the controller's clock.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+
+from mission.phases.phase import Phase
+from mission.phases.types import MissionState, Observation
+
+#: [s] a gap between two ticks longer than this is a stall (at 50 Hz, 12 ticks missed): longer
+#: than the loop's usual late ticks on a loaded machine (0.1-0.2 s, docs/recovery.md), shorter
+#: than a carrier state's budget on the approach (recovery.carrier_max_age_s, 0.3 s).
+STALL_S = 0.25
+
+#: Phases whose reference sits on the dock point: it is not moved, only the command restarts.
+ON_THE_DOCK = frozenset({Phase.RIDING, Phase.TRANSIT})
+
+#: Phases whose reference is the paper's law integrated about the anchor (``e_ref``).
+ABOUT_THE_ANCHOR = frozenset({Phase.SEPARATED, Phase.NAVIGATING, Phase.ARRIVED})
+
+
+def gap_s(state: MissionState, t_s: float) -> float:
+    """Time [s] since the last tick (0 before the first)."""
+    return 0.0 if state.tick_s is None else t_s - state.tick_s
+
+
+def stalled(state: MissionState, t_s: float) -> bool:
+    """True on the first tick after a stall: more than :data:`STALL_S` since the last tick."""
+    return gap_s(state, t_s) > STALL_S
+
+
+def resume(state: MissionState, obs: Observation) -> tuple[MissionState, tuple[str, ...]]:
+    """``state`` ready for the first tick after a stall (unchanged on any other tick), and the
+    event saying so. The reference restarts on the vehicle (see the module's table); the vehicle
+    must be known with a valid position (else the failsafes have acted already)."""
+    v = obs.vehicle
+    if not stalled(state, obs.t_s) or not state.phase.flying or state.seated or state.x_ref is None \
+            or v is None or not v.position_valid:
+        return state, ()
+    x_p, v_p = v.position_ned_m.copy(), v.velocity_ned_m_s.copy()
+    state = replace(state, u_cmd=v_p.copy(), settled_since_s=None)
+    if state.phase not in ON_THE_DOCK:
+        state = replace(state, x_ref=x_p.copy(), u_ref=v_p.copy())
+        if state.phase in ABOUT_THE_ANCHOR and state.anchor is not None:
+            state = replace(state, e_ref=x_p - state.anchor)
+    if state.recovery is not None and state.phase is Phase.HOLDOFF:
+        state = replace(state, recovery=replace(state.recovery, settled_since_s=None))
+    where = "on the dock point" if state.phase in ON_THE_DOCK else "from the vehicle"
+    return state, (f"stalled: no tick for {gap_s(state, obs.t_s):.2f} s; the reference goes on {where}, "
+                   "the command from the vehicle's velocity",)

@@ -1,0 +1,136 @@
+"""A stalled controller (a 1 s gap with no tick) on the fake world (manual clock, no sockets):
+on the approach it goes around and docks at the next approach; riding, navigating and at the
+target the mission carries on; the first setpoint after the gap goes on from the vehicle."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mission.config.schema import load_config, with_overrides
+from mission.controller import MissionController, TickReport
+from mission.core.law import norm
+from mission.phases import Phase
+from mission.phases.stall import STALL_S
+from mission.time.clock import ManualClock
+from tests.conftest import CONFIGS
+from tests.support.fake_vehicle import FakeWorld
+
+GAP_S = 1.0  # [s] the stall: no tick, nothing sent, the world goes on
+JUMP_M_S = 0.05  # [m/s] the most the command may change a tick (summary's max_phase_switch_jump_m_s bound)
+COURSE = np.array([1.2, -0.9, 0.0])  # the carrier's recovery course [m/s] NED (1.5 m/s)
+
+
+@pytest.fixture(scope="module")
+def cfg():
+    return with_overrides(load_config(CONFIGS / "demo.toml"), {"mission.final_action": "return", "mission.at_target_s": 2.0,
+                                                               "mission.max_duration_s": 600.0})
+
+
+def fly_with_a_stall(cfg, phase: Phase, after_s: float):
+    """Fly the mission; ``after_s`` [s] into ``phase`` the clock jumps ``GAP_S`` between two ticks
+    (the fake vehicle flies on at its last velocity meanwhile, the carrier drives on). Returns the
+    outcome, the tick reports, the controller, and (vehicle velocity [m/s], position [m]) just
+    after the gap, before the first tick after it."""
+    clock = ManualClock()
+    world = FakeWorld(clock, target_ned_m=np.asarray(cfg.scenario.target, dtype=float), recovery_velocity_ned_m_s=COURSE)
+    reports: list[TickReport] = []
+    seen: dict = {"since": None, "done": False, "after": None}
+
+    def tick(r: TickReport) -> None:
+        reports.append(r)
+        if r.phase is phase and seen["since"] is None:
+            seen["since"] = r.t_s
+        if not seen["done"] and seen["since"] is not None and r.t_s - seen["since"] >= after_s:
+            seen["done"] = True
+            clock.advance(GAP_S)
+            st = world.state
+            seen["after"] = (st.velocity_ned_m_s.copy(), st.position_ned_m.copy())
+
+    controller = MissionController(cfg, world, world.feed, clock, publisher=world, on_tick=tick, command_thread=False)
+    outcome = controller.run()
+    assert seen["done"], f"never {after_s} s into {phase}"
+    return outcome, reports, controller, seen["after"]
+
+
+def order(reports: list[TickReport]) -> list[Phase]:
+    out = [reports[0].phase]
+    for r in reports[1:]:
+        if r.phase != out[-1]:
+            out.append(r.phase)
+    return out
+
+
+def first_after_the_gap(reports: list[TickReport]) -> tuple[int, TickReport]:
+    i = next(i for i in range(1, len(reports)) if reports[i].t_s - reports[i - 1].t_s > STALL_S)
+    assert reports[i].t_s - reports[i - 1].t_s == pytest.approx(GAP_S, abs=1e-6)  # the tick is the time it is
+    return i, reports[i]
+
+
+def assert_goes_on_from_the_vehicle(cfg, reports, after) -> None:
+    """The first setpoint after the gap: its velocity within JUMP_M_S of the vehicle's (the
+    passenger's acceleration limit x one tick, 0.04 m/s, and the filter's rounding), its position
+    (a full setpoint) within 0.1 s of the vehicle's velocity and 2 cm of the vehicle (the
+    tracking's lead along its velocity: 0.15 m at 2 m/s; without the restart it lay 1.6 m behind
+    the vehicle, and PX4's position loop would pull it back); and the next 2 s of commands
+    change by at most JUMP_M_S a tick (no jump)."""
+    v_p, x_p = after
+    i, first = first_after_the_gap(reports)
+    assert any(e.startswith("stalled: no tick for 1.00 s") for e in first.decision.events), first.decision.events
+    sp = first.decision.setpoint
+    assert sp is not None and float(norm(sp.velocity_ned_m_s - v_p)) <= JUMP_M_S, (sp.velocity_ned_m_s, v_p)
+    if sp.position_ned_m is not None:
+        assert float(norm(sp.position_ned_m - x_p)) <= 0.1 * float(norm(v_p)) + 0.02, (sp.position_ned_m, x_p)
+    sent = [r.decision.setpoint.velocity_ned_m_s for r in reports[i:i + 100] if r.decision.setpoint is not None]
+    assert max(float(norm(b - a)) for a, b in zip(sent, sent[1:])) <= JUMP_M_S
+
+
+def test_a_stall_on_the_approach_goes_around_and_docks_at_the_next_approach(cfg):
+    outcome, reports, controller, after = fly_with_a_stall(cfg, Phase.APPROACH, 2.0)
+    assert outcome.ok, (outcome.reason, outcome.detail)
+    phases = order(reports)
+    i = phases.index(Phase.APPROACH)
+    assert phases[i:i + 6] == [Phase.APPROACH, Phase.GO_AROUND, Phase.HOLDOFF, Phase.APPROACH, Phase.DOCKED, Phase.HOME], phases
+    _, first = first_after_the_gap(reports)
+    assert first.phase is Phase.GO_AROUND
+    assert "go-around: no tick for 1.00 s (the controller stalled)" in first.decision.events, first.decision.events
+    rec = controller.state.recovery
+    assert rec is not None and rec.attempts == 2 and rec.contact is not None
+    assert rec.contact["horizontal_error_m"] <= 0.10
+    assert_goes_on_from_the_vehicle(cfg, reports, after)
+
+
+@pytest.mark.parametrize(("phase", "after_s"), [(Phase.RIDING, 3.0), (Phase.NAVIGATING, 1.0), (Phase.ARRIVED, 0.5),
+                                                 (Phase.HOLDOFF, 0.5), (Phase.RETURNING, 1.0)])
+def test_a_stall_riding_navigating_at_the_target_or_coming_home_and_the_mission_carries_on(cfg, phase, after_s):
+    outcome, reports, controller, after = fly_with_a_stall(cfg, phase, after_s)
+    assert outcome.ok, (outcome.reason, outcome.detail)
+    phases = order(reports)
+    assert phases[phases.index(Phase.ARRIVED):] == [Phase.ARRIVED, Phase.RETURNING, Phase.HOLDOFF, Phase.APPROACH,
+                                                    Phase.DOCKED, Phase.HOME, Phase.HOLD, Phase.DONE], phases
+    assert controller.state.recovery.attempts == 1
+    _, first = first_after_the_gap(reports)
+    assert first.phase is phase
+    if phase is Phase.RIDING:  # the reference stays on the dock; separation still at b c
+        latch = next(e for r in reports for e in r.decision.events if e.startswith("separated at |e_tc| = "))
+        assert float(latch.split("= ")[1].split()[0]) == pytest.approx(cfg.law.b * cfg.law.c, abs=0.01), latch
+        v_p, _ = after
+        assert float(norm(first.decision.setpoint.velocity_ned_m_s - v_p)) <= JUMP_M_S
+    else:
+        assert_goes_on_from_the_vehicle(cfg, reports, after)
+
+
+def test_without_a_stall_nothing_is_restarted(cfg):
+    """A tick late by less than STALL_S (0.2 s) is no stall: the reference is not touched."""
+    clock = ManualClock()
+    world = FakeWorld(clock, target_ned_m=np.asarray(cfg.scenario.target, dtype=float), recovery_velocity_ned_m_s=COURSE)
+    reports: list[TickReport] = []
+
+    def tick(r: TickReport) -> None:
+        reports.append(r)
+        if r.phase is Phase.APPROACH and not any(x.phase is Phase.APPROACH for x in reports[:-1]):
+            clock.advance(0.2)
+
+    controller = MissionController(cfg, world, world.feed, clock, publisher=world, on_tick=tick, command_thread=False)
+    assert controller.run().ok
+    assert not any(e.startswith("stalled") for r in reports for e in r.decision.events)
+    assert Phase.GO_AROUND not in order(reports)
