@@ -323,8 +323,9 @@ def approach(state, obs, m, events=()):
     if why is not None:
         return fallback(replace(state, recovery=rec), obs, m, why, events)
     state = replace(state, recovery=rec)
-    if stall.stalled(state, t):  # the approach went unwatched for the gap: a new one, from the holdoff point
-        return go_around(state, obs, m, f"no tick for {stall.gap_s(state, t):.2f} s (the controller stalled)", events)
+    if stall.settling(state, t):  # the approach went unwatched for the gap: a new one, from the holdoff point
+        assert state.last_stall is not None  # settling
+        return go_around(state, obs, m, f"no tick for {state.last_stall[1]:.2f} s (the controller stalled)", events)
     why = carrier_unfit(obs, r.carrier_max_age_s)
     if why is not None:
         return go_around(state, obs, m, why, events)
