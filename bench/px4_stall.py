@@ -12,7 +12,7 @@ what the mission did after it (its events: the restart, the go-around and why, t
 approach), how it ended (docked, at which approach, the contact), and the first commands after
 the gap against the vehicle's velocity (the jump).
 
-Usage: ``python -m bench.px4_stall [--stall 1.0]... [--after 2.0]`` (about 90-120 s a flight).
+Usage: ``python -m bench.px4_stall [--stall 1.0]... [--after 2.0] [--who mission|carrier]`` (about 90-120 s a flight).
 Needs root and ``MARSUPIAL_PX4_SITL``. Run it under ``flock /work/wt/px4.lock`` on a shared machine.
 """
 from __future__ import annotations
@@ -76,8 +76,9 @@ def _setpoint_gaps(log_dir: Path) -> list[float]:
     return [round(b - a, 3) for a, b in zip(times, times[1:]) if b - a > 0.1]
 
 
-def fly(directory: Path, stall_s: float, after_s: float) -> dict[str, Any]:
-    """One flight with one stall; its JSON row."""
+def fly(directory: Path, stall_s: float, after_s: float, who: str = "mission") -> dict[str, Any]:
+    """One flight with one stall of ``who`` (``mission``: ``marsupial run``; ``carrier``: the
+    carrier simulator); its JSON row."""
     directory.mkdir(parents=True, exist_ok=True)
     config = recovery_config(directory)
     t0 = time.monotonic()
@@ -89,9 +90,9 @@ def fly(directory: Path, stall_s: float, after_s: float) -> dict[str, Any]:
         assert mission.poll() is None, f.text("mission.out")[-2000:] + f.text("mission.err")[-2000:]
         time.sleep(after_s)  # the fault's own timing: into the approach (the stall is measured below)
         stopped = time.monotonic()
-        mission.send_signal(signal.SIGSTOP)
+        f.procs[who].send_signal(signal.SIGSTOP)
         time.sleep(stall_s)
-        mission.send_signal(signal.SIGCONT)
+        f.procs[who].send_signal(signal.SIGCONT)
         stopped_s = time.monotonic() - stopped
         rc = f.wait_mission(300.0)
         beats = [(t, px4.mode_name(m.custom_mode)) for t, m in f.gcs.timed("HEARTBEAT")
@@ -114,7 +115,7 @@ def fly(directory: Path, stall_s: float, after_s: float) -> dict[str, Any]:
     speeds = [(round(float(tt), 2), round(float(np.linalg.norm(v[:2])), 2)) for tt, v in lp]
     contact = s.get("contact") or {}
     return {
-        "stall_asked_s": stall_s, "stopped_s": round(stopped_s, 3), "tick_gap_s": round(float(np.diff(t).max()), 3),
+        "stalled": who, "stall_asked_s": stall_s, "stopped_s": round(stopped_s, 3), "tick_gap_s": round(float(np.diff(t).max()), 3),
         "setpoint_gaps_s": _setpoint_gaps(f.log_dir), "px4_modes_after_stop": modes, "statustext": texts,
         "px4_horizontal_speed_m_s": speeds[::5],  # (since the stop [s, wall], |v| [m/s]) from 1 s before to 1 s after
         "events_after_stop": [e for e in events if "approach 1 begins" not in e][:12],
@@ -134,14 +135,16 @@ def fly(directory: Path, stall_s: float, after_s: float) -> dict[str, Any]:
               help="How long the controller is stopped [s, wall] (repeatable: one flight each).")
 @click.option("--after", "after_s", type=float, default=2.0, show_default=True,
               help="How far into the first approach the stall comes [s, wall].")
+@click.option("--who", type=click.Choice(["mission", "carrier"]), default="mission", show_default=True,
+              help="Which process stalls: marsupial run, or the carrier simulator.")
 @click.option("--out", type=click.Path(), default=None, help="Keep the flights' folders here.")
-def main(stalls: tuple[float, ...], after_s: float, out: str | None) -> None:
+def main(stalls: tuple[float, ...], after_s: float, who: str, out: str | None) -> None:
     reason = unavailable_reason()
     if reason:
         raise click.ClickException(reason)
     root = Path(out) if out else Path(tempfile.mkdtemp(prefix="px4_stall_"))
     for i, stall in enumerate(stalls):
-        print(json.dumps(fly(root / f"stall{i}", stall, after_s)), flush=True)
+        print(json.dumps(fly(root / f"stall{i}", stall, after_s, who)), flush=True)
 
 
 if __name__ == "__main__":

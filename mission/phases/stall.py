@@ -17,8 +17,9 @@ distance: a jump in the velocity it flies). So:
       every one --the last command (u_cmd, the safety filter's previous one) is the vehicle's
           velocity, so the command goes on from what the vehicle does, within the passenger's
           acceleration limit per tick; the dwell being timed (JOIN's, the holdoff's) restarts
-      APPROACH --GO_AROUND (mission.phases.recovery.approach): the approach was not watched
-          for the gap, and a new one starts from the holdoff point
+      APPROACH, the gap longer than recovery.carrier_max_age_s --GO_AROUND
+          (mission.phases.recovery.approach): the approach went unwatched for longer than a
+          carrier state may be old on it, and a new one starts from the holdoff point
     for SETTLE_S after the gap --the same restart every tick, and the setpoint sent as velocity
           only (the command; no position for PX4 to pull the vehicle to); with no vehicle
           position read since the gap yet, the last command again (not the stop that a silent
