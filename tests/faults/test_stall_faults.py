@@ -33,8 +33,20 @@ AFTER_S = 2.0  # [s] into the approach (of ~11 s): the passenger on the glide pa
 JUMP_M_S = 0.05  # [m/s] the command's change a tick that counts as a jump (summary's max_phase_switch_jump_m_s)
 
 
+def _config(tmp_path: Path) -> Path:
+    """configs/recovery.toml with the carrier budgets of the PX4 configurations (a loaded 2-core
+    machine stalls a process of the pair 0.5 s at times, at x2 a second of the flight's clock:
+    with recovery.toml's 0.5 s the mission once lost the carrier while riding, before the stall)."""
+    text = (CONFIGS / "recovery.toml").read_text()
+    assert "carrier_timeout_s = 0.5\n" in text and "[recovery]\n" in text
+    path = tmp_path / "stall.toml"
+    path.write_text(text.replace("carrier_timeout_s = 0.5\n", "carrier_timeout_s = 1.0\n")
+                    .replace("[recovery]\n", "[recovery]\ncarrier_max_age_s = 0.6\n"))
+    return path
+
+
 def test_a_controller_stalled_1_s_on_the_approach_goes_around_and_docks_at_the_next(tmp_path: Path) -> None:
-    with flight(tmp_path, "stall", config=CONFIGS / "recovery.toml", speed=SPEED, mission_verbose=True,
+    with flight(tmp_path, "stall", config=_config(tmp_path), speed=SPEED, mission_verbose=True,
                 vehicle_args=("--param", "COM_OF_LOSS_T=1.5")) as f:
         f.wait_phase("APPROACH", timeout_s=90.0)
         wait_for(lambda: _approach_flown_s(f) >= AFTER_S, 30.0, "the passenger on the glide path")
@@ -53,7 +65,7 @@ def test_a_controller_stalled_1_s_on_the_approach_goes_around_and_docks_at_the_n
     assert STALL_S - 0.05 <= gap <= 1.5, gap  # the stall, seen by the mission's clock (not PX4's offboard loss)
     assert rows[i - 1]["phase"] == "APPROACH" and rows[i]["phase"] == "GO_AROUND", (rows[i - 1]["phase"], rows[i]["phase"])
     err = f.text("mission.err")
-    assert "go-around: no tick for" in err and "(the controller stalled; recovery.carrier_max_age_s = 0.3)" in err, err[-2000:]
+    assert "go-around: no tick for" in err and "(the controller stalled; recovery.carrier_max_age_s = 0.6)" in err, err[-2000:]
     phases = f.phases()
     k = phases.index("GO_AROUND")
     assert phases[k - 1:k + 5] == ["APPROACH", "GO_AROUND", "HOLDOFF", "APPROACH", "DOCKED", "HOME"], phases
