@@ -9,11 +9,11 @@ point. The pair runs on a scaled wall clock (``SPEED``), so the stall is ``1 / S
 seconds. The mock's offboard loss comes at ``COM_OF_LOSS_T`` to the dot, PX4 SITL's came 2 s
 after the last setpoint (docs/recovery.md, "PX4's home"): the mock here gets 1.5 s, so a 1 s gap
 and its scheduling slack stay inside it as on PX4 (a longer stall ends in PX4's own failsafe:
-docs/safety.md). Every wait is on an event of the flight (its record, its phases); about 38 s.
+docs/safety.md). Every wait is on an event of the flight (its record, its phases); 38-46 s.
 
 Real time, so a machine that starves the pair fails it however the stall is handled: it passed
-twice at load average 6-10 on 2 cores; at 14-27 (five test suites and PX4 flights beside it) it
-failed twice before or after the stall, on the machine's own stalls (a carrier state 0.82 s old
+at load average 5-10 on 2 cores; at 10-27 (five test suites and PX4 flights beside it) it failed
+4 times before or after the stall, on the machine's own stalls (a carrier state 0.8-2.1 s old
 while riding; the mock's offboard loss in NAVIGATING; the vehicle silent for 3 s).
 """
 from __future__ import annotations
