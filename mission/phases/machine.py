@@ -69,7 +69,7 @@ from mission.phases.types import (
     dock_point,
     enter,
 )
-from mission.phases import deck, recovery
+from mission.phases import deck, recovery, stall
 from mission.phases.flying import arrived, join, navigate, riding
 
 __all__ = [
@@ -114,28 +114,36 @@ def step(state: MissionState, obs: Observation, m: MissionModel) -> tuple[Missio
     t = obs.t_s
     if state.start_s is None:
         state = replace(state, start_s=t, since_s=t)
+    state = stall.begin(state, t)
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):  # judged below, not warned about
         new, dec = _step(state, obs, m)
     bad = _nonfinite(new, dec)
     if bad is None:
-        return new, dec
+        return replace(new, tick_s=t), dec
     aborted = _abort(state, t, AbortReason.NONFINITE, f"non-finite {bad} in {state.phase.value}")
-    return aborted, _decided(aborted, obs, f"abort: non-finite {bad}: asking for Hold")
+    return replace(aborted, tick_s=t), _decided(aborted, obs, f"abort: non-finite {bad}: asking for Hold")
 
 
 def _step(state: MissionState, obs: Observation, m: MissionModel) -> tuple[MissionState, Decision]:
-    """The failsafes, then the phase's handler; the carrier's position (a fresh, trusted one) as the
+    """The failsafes, then (after a stall: :mod:`mission.phases.stall`) the reference restarted on
+    the vehicle, then the phase's handler; the carrier's position (a fresh, trusted one) as the
     vehicle's home while flying."""
     t = obs.t_s
     state, early = _failsafes(state, obs, m)
     if early is not None:
         return state, early
+    settling = stall.settling(state, t)
+    state, resumed = stall.resume(state, obs)
     v = obs.vehicle
     if state.battery_start is None and v is not None and v.battery_pct is not None:
         state = replace(state, battery_start=(t, v.battery_pct))  # the drain rate counts from here
     leg_model = m.legs[state.leg] if m.legs else m  # the leg's target (scenario.targets)
     handler = HANDLERS[state.phase]
     state, decision = handler(state, obs, leg_model)
+    if resumed:
+        decision = replace(decision, events=(*resumed, *decision.events))
+    if settling and state.phase.flying and not state.seated:
+        decision = stall.by_velocity(decision)
     c = obs.carrier
     if c is not None and c.worst_age_s <= m.carrier_timeout_s and c.untrusted is None and state.phase.flying:
         decision = replace(decision, home_ned_m=c.position_ned_m + c.velocity_ned_m_s * c.age_s)
@@ -199,6 +207,8 @@ def _failsafes(state: MissionState, obs: Observation, m: MissionModel) -> tuple[
         new = _abort(state, t, reason, f"vehicle switched to {v.mode}")
         return new, Decision(setpoint=None, events=(f"abort: vehicle left OFFBOARD ({v.mode}); not fighting it",))
     if ph not in (Phase.PREFLIGHT,) and v is not None and not v.position_valid:
+        if TELEMETRY_SILENT_S < v.position_age_s <= m.heartbeat_timeout_s and stall.settling(state, t):
+            return state, stall.unread(state)  # the link's thread stalled with the loop: not read yet
         if TELEMETRY_SILENT_S < v.position_age_s <= m.heartbeat_timeout_s:
             # The position stream went quiet (a link blackout, not an estimator failure): hover
             # until the heartbeat timeout decides whether the vehicle is lost.

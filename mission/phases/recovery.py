@@ -12,7 +12,8 @@ DOCKED, HOME and FALLBACK (``mission.final_action = "return"``).
     APPROACH   --glide path flown, vehicle meets the contact conditions---------------> DOCKED
                  (on the descent it goes down only lined up, else holds its height)
                --outside the cone; carrier state late or not trusted; carrier accelerating or turning
-                 beyond its limits; below the decision height not lined up------------> GO_AROUND
+                 beyond its limits; below the decision height not lined up; the controller
+                 stalled (no tick for longer than recovery.carrier_max_age_s)-----------------> GO_AROUND
     GO_AROUND  --climbed to the holdoff height------------------------------------------> HOLDOFF
     DOCKED     --contact held for the dwell--------------------------------------------> HOME
                --contact lost (beyond the dock tolerance)----------------------------------> GO_AROUND
@@ -46,7 +47,7 @@ from mission.core.law import norm
 from mission.core.pursuit import PursuitLimits, pursue
 from mission.core.safety import filter_velocity
 from mission.flight_mode import FlightMode
-from mission.phases import deck
+from mission.phases import deck, stall
 from mission.phases.flying import _track
 from mission.phases.phase import Phase, Request
 from mission.phases.types import (
@@ -322,6 +323,10 @@ def approach(state, obs, m, events=()):
     if why is not None:
         return fallback(replace(state, recovery=rec), obs, m, why, events)
     state = replace(state, recovery=rec)
+    if stall.settling(state, t) and state.last_stall is not None and state.last_stall[1] > r.carrier_max_age_s:
+        # unwatched for longer than a carrier state may be old on the approach: a new one, from the holdoff point
+        return go_around(state, obs, m, f"no tick for {state.last_stall[1]:.2f} s (the controller stalled; "
+                         f"recovery.carrier_max_age_s = {r.carrier_max_age_s:g})", events)
     why = carrier_unfit(obs, r.carrier_max_age_s)
     if why is not None:
         return go_around(state, obs, m, why, events)

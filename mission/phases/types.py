@@ -256,6 +256,8 @@ class MissionState:
     streaming_since_s: float | None = None  # seated: since when setpoints stream before arming [s] (None: not yet)
     # seated, the mission asking nothing of the vehicle: (seen disarmed since, PX4's mode then) (mission.phases.deck.watch)
     deck_watch: tuple[bool, str] | None = None
+    tick_s: float | None = None  # the last tick's time [s]: a longer gap to this one is a stall (mission.phases.stall)
+    last_stall: tuple[float, float] | None = None  # (the first tick after the last stall [s], its gap [s]) (mission.phases.stall)
 
 
 @dataclass(frozen=True)

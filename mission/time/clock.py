@@ -138,7 +138,10 @@ class Periodic:
     """Deadline keeper for a fixed-rate loop: ``wait()`` sleeps until the next tick.
 
     Ticks are scheduled on an absolute grid (no drift); if the loop falls behind by more
-    than one period the grid is re-anchored and the overrun counted.
+    than one period the grid is re-anchored and the overrun counted. That includes a sleep
+    that ends more than a period late (the process was stopped or starved in it): the tick is
+    then the time it really is, not the grid time it overslept, so a tick's time is never
+    older than the observations read in it.
     """
 
     def __init__(self, clock: Clock, period_s: float) -> None:
@@ -150,11 +153,12 @@ class Periodic:
     def wait(self) -> float:
         """Sleep until the next tick; return the clock time of the tick."""
         now = self.clock.now()
+        if now <= self._next + self.period_s:
+            self.clock.sleep(self._next - now)
+            now = self.clock.now()
         if now > self._next + self.period_s:
             self.overruns += 1
             self._next = now
-        else:
-            self.clock.sleep(self._next - now)
         tick = self._next
         self._next += self.period_s
         return tick

@@ -1,0 +1,183 @@
+"""A stalled controller (a 1 s gap with no tick) on the fake world (manual clock, no sockets):
+on the approach it goes around and docks at the next approach; riding, navigating and at the
+target the mission carries on; the first setpoint after the gap goes on from the vehicle."""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from mission.config.schema import load_config, with_overrides
+from mission.controller import MissionController, TickReport
+from mission.core.law import norm
+from mission.phases import Phase
+from mission.phases.phase import FLYING
+from mission.phases.stall import SETTLE_S, STALL_S
+from mission.time.clock import ManualClock
+from tests.conftest import CONFIGS
+from tests.support.fake_vehicle import FakeWorld
+
+GAP_S = 1.0  # [s] the stall: no tick, nothing sent, the world goes on
+JUMP_M_S = 0.05  # [m/s] the most the command may change a tick (summary's max_phase_switch_jump_m_s bound)
+COURSE = np.array([1.2, -0.9, 0.0])  # the carrier's recovery course [m/s] NED (1.5 m/s)
+
+
+@pytest.fixture(scope="module")
+def cfg():
+    return with_overrides(load_config(CONFIGS / "demo.toml"), {"mission.final_action": "return", "mission.at_target_s": 2.0,
+                                                               "mission.max_duration_s": 600.0})
+
+
+class UnreadWorld(FakeWorld):
+    """The fake world whose link has not read the vehicle's position for ``unread_ticks`` ticks
+    after the gap (its reading thread stalled with the loop): position 1 s old, not valid."""
+
+    unread_ticks = 0
+
+    @property
+    def state(self):
+        st = super().state
+        if self.unread_ticks <= 0:
+            return st
+        return dataclasses.replace(st, position_rx_s=st.t_s - GAP_S, position_valid=False)
+
+
+def fly_with_a_stall(cfg, phase: Phase, after_s: float, unread_ticks: int = 0):
+    """Fly the mission; ``after_s`` [s] into ``phase`` the clock jumps ``GAP_S`` between two ticks
+    (the fake vehicle flies on at its last velocity meanwhile, the carrier drives on). Returns the
+    outcome, the tick reports, the controller, and the vehicle's (velocity [m/s], position [m])
+    after each tick (the one before the gap: just after it, before the next tick)."""
+    clock = ManualClock()
+    world = UnreadWorld(clock, target_ned_m=np.asarray(cfg.scenario.target, dtype=float), recovery_velocity_ned_m_s=COURSE)
+    reports: list[TickReport] = []
+    seen: dict = {"since": None, "done": False}
+    after: list[tuple[np.ndarray, np.ndarray]] = []
+
+    def tick(r: TickReport) -> None:
+        reports.append(r)
+        world.unread_ticks -= 1
+        if r.phase is phase and seen["since"] is None:
+            seen["since"] = r.t_s
+        if not seen["done"] and seen["since"] is not None and r.t_s - seen["since"] >= after_s:
+            seen["done"] = True
+            clock.advance(GAP_S)
+            world.unread_ticks = unread_ticks
+        st = FakeWorld.state.fget(world)
+        after.append((st.velocity_ned_m_s.copy(), st.position_ned_m.copy()))
+
+    controller = MissionController(cfg, world, world.feed, clock, publisher=world, on_tick=tick, command_thread=False)
+    outcome = controller.run()
+    assert seen["done"], f"never {after_s} s into {phase}"
+    return outcome, reports, controller, after
+
+
+def order(reports: list[TickReport]) -> list[Phase]:
+    out = [reports[0].phase]
+    for r in reports[1:]:
+        if r.phase != out[-1]:
+            out.append(r.phase)
+    return out
+
+
+def first_after_the_gap(reports: list[TickReport]) -> tuple[int, TickReport]:
+    i = next(i for i in range(1, len(reports)) if reports[i].t_s - reports[i - 1].t_s > STALL_S)
+    assert reports[i].t_s - reports[i - 1].t_s == pytest.approx(GAP_S, abs=1e-6)  # the tick is the time it is
+    return i, reports[i]
+
+
+def assert_goes_on_from_the_vehicle(reports, after) -> None:
+    """The first setpoint after the gap: its velocity within JUMP_M_S of the vehicle's (the
+    passenger's acceleration limit x one tick, 0.04 m/s, and the filter's rounding); velocity
+    only for SETTLE_S; then the first full one's position within 0.1 s of the vehicle's velocity
+    and 2 cm of the vehicle (the tracking's lead along its velocity: 0.15 m at 2 m/s; without
+    the restart it lay 1.6 m behind the vehicle, and PX4's position loop would pull it back);
+    and the next 2 s of commands change by at most JUMP_M_S a tick (no jump)."""
+    i, first = first_after_the_gap(reports)
+    v_p, _ = after[i - 1]
+    assert any(e.startswith("stalled: no tick for 1.00 s") for e in first.decision.events), first.decision.events
+    sp = first.decision.setpoint
+    assert sp is not None and float(norm(sp.velocity_ned_m_s - v_p)) <= JUMP_M_S, (sp.velocity_ned_m_s, v_p)
+    settling = [r for r in reports[i:] if r.t_s - first.t_s < SETTLE_S - 1e-9]
+    assert len(settling) == 10 and all(r.decision.setpoint.position_ned_m is None for r in settling)
+    j = next(k for k in range(i, len(reports)) if reports[k].decision.setpoint.position_ned_m is not None)
+    full = reports[j].decision.setpoint  # (while the safety filter limits the command it stays velocity only)
+    v_p, x_p = after[j - 1]
+    assert float(norm(full.position_ned_m - x_p)) <= 0.1 * float(norm(v_p)) + 0.02, (full.position_ned_m, x_p)
+    sent = [r.decision.setpoint.velocity_ned_m_s for r in reports[i:i + 100] if r.decision.setpoint is not None]
+    assert max(float(norm(b - a)) for a, b in zip(sent, sent[1:])) <= JUMP_M_S
+
+
+def test_a_stall_on_the_approach_goes_around_and_docks_at_the_next_approach(cfg):
+    outcome, reports, controller, after = fly_with_a_stall(cfg, Phase.APPROACH, 2.0)
+    assert outcome.ok, (outcome.reason, outcome.detail)
+    phases = order(reports)
+    i = phases.index(Phase.APPROACH)
+    assert phases[i:i + 6] == [Phase.APPROACH, Phase.GO_AROUND, Phase.HOLDOFF, Phase.APPROACH, Phase.DOCKED, Phase.HOME], phases
+    _, first = first_after_the_gap(reports)
+    assert first.phase is Phase.GO_AROUND
+    assert "go-around: no tick for 1.00 s (the controller stalled; recovery.carrier_max_age_s = 0.3)" in first.decision.events, first.decision.events
+    rec = controller.state.recovery
+    assert rec is not None and rec.attempts == 2 and rec.contact is not None
+    assert rec.contact["horizontal_error_m"] <= 0.10
+    assert_goes_on_from_the_vehicle(reports, after)
+
+
+@pytest.mark.parametrize(("phase", "after_s"), [(Phase.RIDING, 3.0), (Phase.NAVIGATING, 1.0), (Phase.ARRIVED, 0.5),
+                                                 (Phase.HOLDOFF, 0.5), (Phase.RETURNING, 1.0)])
+def test_a_stall_riding_navigating_at_the_target_or_coming_home_and_the_mission_carries_on(cfg, phase, after_s):
+    outcome, reports, controller, after = fly_with_a_stall(cfg, phase, after_s)
+    assert outcome.ok, (outcome.reason, outcome.detail)
+    phases = order(reports)
+    assert phases[phases.index(Phase.ARRIVED):] == [Phase.ARRIVED, Phase.RETURNING, Phase.HOLDOFF, Phase.APPROACH,
+                                                    Phase.DOCKED, Phase.HOME, Phase.HOLD, Phase.DONE], phases
+    assert controller.state.recovery.attempts == 1
+    _, first = first_after_the_gap(reports)
+    assert first.phase is phase
+    if phase is Phase.RIDING:  # the reference stays on the dock; separation still at b c
+        latch = next(e for r in reports for e in r.decision.events if e.startswith("separated at |e_tc| = "))
+        assert float(latch.split("= ")[1].split()[0]) == pytest.approx(cfg.law.b * cfg.law.c, abs=0.01), latch
+        i, _ = first_after_the_gap(reports)
+        assert float(norm(first.decision.setpoint.velocity_ned_m_s - after[i - 1][0])) <= JUMP_M_S
+    else:
+        assert_goes_on_from_the_vehicle(reports, after)
+
+
+def test_a_position_not_read_yet_after_the_stall_is_no_stop(cfg):
+    """The link's thread stalled with the loop: for 3 ticks after the gap the vehicle's position
+    is 1 s old. Those ticks resend the last command by velocity only (a silent link's stop would
+    be a jump of 1.5 m/s); then the restart, the go-around, the dock at the next approach."""
+    outcome, reports, controller, after = fly_with_a_stall(cfg, Phase.APPROACH, 2.0, unread_ticks=3)
+    assert outcome.ok, (outcome.reason, outcome.detail)
+    i, first = first_after_the_gap(reports)
+    before = reports[i - 1].decision.setpoint.velocity_ned_m_s
+    for r in reports[i:i + 3]:
+        assert r.phase is Phase.APPROACH and "no vehicle position read since the stall yet" in r.decision.events
+        assert r.decision.setpoint.position_ned_m is None
+        assert np.allclose(r.decision.setpoint.velocity_ned_m_s, before)
+    nxt = reports[i + 3]
+    assert nxt.phase is Phase.GO_AROUND and "go-around: no tick for 1.00 s (the controller stalled; recovery.carrier_max_age_s = 0.3)" in nxt.decision.events
+    assert float(norm(nxt.decision.setpoint.velocity_ned_m_s - after[i + 2][0])) <= JUMP_M_S
+    assert controller.state.recovery.attempts == 2 and controller.state.recovery.contact is not None
+    assert all(r.phase in FLYING for r in reports[i:i + 50])
+
+
+@pytest.mark.parametrize(("gap_s", "restarted"), [(0.2, False), (0.28, True)])
+def test_a_short_gap_on_the_approach_is_no_go_around(cfg, gap_s, restarted):
+    """A tick late by less than STALL_S (0.2 s) is no stall: nothing restarts. One late by more
+    but within the approach's carrier budget (recovery.carrier_max_age_s, 0.3 s) restarts the
+    reference and the approach goes on: docked at the first approach."""
+    clock = ManualClock()
+    world = FakeWorld(clock, target_ned_m=np.asarray(cfg.scenario.target, dtype=float), recovery_velocity_ned_m_s=COURSE)
+    reports: list[TickReport] = []
+
+    def tick(r: TickReport) -> None:
+        reports.append(r)
+        if r.phase is Phase.APPROACH and sum(x.phase is Phase.APPROACH for x in reports) == 100:
+            clock.advance(gap_s - 0.02)
+
+    controller = MissionController(cfg, world, world.feed, clock, publisher=world, on_tick=tick, command_thread=False)
+    assert controller.run().ok
+    stalls = [e for r in reports for e in r.decision.events if e.startswith("stalled")]
+    assert len(stalls) == int(restarted), stalls
+    assert Phase.GO_AROUND not in order(reports) and controller.state.recovery.attempts == 1
