@@ -220,43 +220,47 @@ def format_case(w: dict) -> str:
 @click.option("--seed", type=int, default=0, show_default=True, help="Random seed of --monte-carlo.")
 @click.option("--no-progress", is_flag=True, help="Hide the progress bar.")
 def simulate(config: str, as_json: bool, plot_path: str | None, count: int | None, seed: int, no_progress: bool) -> int:
-    """Integrate the closed loop of the paper for CONFIG (a TOML file, see configs/).
-
-    Reports the separation time, the carrier-target distance at separation, the relative input
-    just after separation and its jump across it, the final passenger-target distance, the
-    closest carrier-target approach, obstacle clearance, peak speed, and P1-P3 of the paper's
-    Definition 1: P1 |e_pc| <= sim.p1_tolerance_m before separation and the passenger leaves
-    (> 0.1 m) after it; P2 the final |e_pt| <= sim.p2_tolerance_m; P3 |e_tc| > 0 throughout.
-    Time t = 0 is the start of riding (the passenger docked), as in the paper and in `run`'s
-    summary.
+    """Fly CONFIG (a TOML file, see configs/) in-process: a mission config as the whole mission, the
+    paper's configs by the paper's closed loop; the output says which (JSON ``simulated``:
+    "mission" or "paper"; the table's last line).
 
     \b
-    A file with a [mission] section describes a flight: simulate then models what `run` flies
-    (the passenger rides the dock point, carrier + mission.dock_offset_ned_m, from the start of
-    riding; P2 within mission.arrival_radius_m), so both give the same P1-P3 verdict.
-    With --monte-carlo, random targets the passenger cannot reach (inside an obstacle's keep-out
-    disc: radius + safety.margin_m + sim.p2_tolerance_m) are drawn again; the failing scenarios
-    (or else the worst) are printed with their id and parameters.
+    A file with a [mission] section describes a flight (one target or several, any
+    mission.final_action): simulate flies the whole mission, as the lockstep demo flies it, by
+    the mission's phase machine on the mock vehicle's dynamics with the built-in holonomic carrier
+    driving its configured recovery course: join, ride, separate, target, then the final action
+    (for "return": task, return, dock, and ride on to the next target). It prints the demo's
+    table, one column per leg (separation, relative jump, final distance, contact, P1-P3);
+    --plot draws the paper's figure (each leg's: <stem>-leg<k>) and the recovery's
+    (<stem>-recovery). With several targets the top-level figures are per leg only, the largest of
+    the legs, or of the whole flight, never of target 1 alone (JSON ``top_level_figures``). Exit
+    code 0 when every leg held P1-P3, the mission completed and a passenger that comes home
+    docked again. The deck ride (mission.ride = "deck") and a carrier other than the built-in
+    holonomic one are refused (exit 2).
 
     \b
-    A mission that comes home (mission.final_action = "return") has the recovery's Monte-Carlo
-    instead: each scenario is the whole mission flown in-process by the mission's phase machine
-    on the mock vehicle's dynamics, the carrier on a random recovery course (0-2 m/s, any
-    heading) turning up to 45 deg during the first approach (docs/recovery.md). It prints the
-    share docked at the first attempt and within two, the fallbacks and their reasons, the
-    contact figures and deck violations; --plot draws the worst flight's approach. Exit code 0
-    when >= 99 % docked within 2 attempts, every other one fell back safely and none touched
+    A file without one (configs/paper_*.toml) is the paper's closed loop: the separation time,
+    the carrier-target distance at separation, the relative input just after separation and its
+    jump across it, the final passenger-target distance, the closest carrier-target approach,
+    obstacle clearance, peak speed, and P1-P3 of the paper's Definition 1: P1 |e_pc| <=
+    sim.p1_tolerance_m before separation and the passenger leaves (> 0.1 m) after it; P2 the
+    final |e_pt| <= sim.p2_tolerance_m; P3 |e_tc| > 0 throughout. Time t = 0 is the start of
+    riding (the passenger docked), as in the paper and in `run`'s summary.
+
+    \b
+    --monte-carlo N: random scenarios. The paper's closed loop draws random targets (those the
+    passenger cannot reach, inside an obstacle's keep-out disc: radius + safety.margin_m +
+    sim.p2_tolerance_m, are drawn again) and prints the failing scenarios (or else the worst)
+    with their id and parameters; for a mission that does not come home it models what `run`
+    flies (the passenger rides the dock point from the start of riding; P2 within
+    mission.arrival_radius_m). A mission that comes home (mission.final_action = "return") has
+    the recovery's Monte-Carlo: each scenario the whole mission, every leg, the carrier on a
+    random recovery course (0-2 m/s, any heading) turning up to 45 deg during the first approach
+    (docs/recovery.md): the share docked at the first attempt and within two, the fallbacks and
+    their reasons, the contact figures and deck violations (with several targets the share of
+    flights in which every leg held P1-P3); --plot draws the worst flight's approach. Exit code
+    0 when >= 99 % docked within 2 attempts, every other one fell back safely and none touched
     the deck outside the contact conditions.
-
-    \b
-    A mission of several targets (scenario.targets) is simulated whole, every leg: ride,
-    separate, target, task, return, dock, ride on to the next target, by the mission's phase
-    machine on the mock vehicle's dynamics with the built-in holonomic carrier driving its
-    configured recovery course. It prints the demo's table, one column per leg (its separation,
-    relative jump, final distance, contact and P1-P3); --plot draws each leg's figure (<stem>-leg<k>). Exit
-    code 0 when every leg held P1-P3 and the mission completed. With --monte-carlo every flight
-    flies every leg, the carrier on a random recovery course (the turn comes in the first
-    approach), and the table adds the share of flights in which every leg held P1-P3.
 
     \b
     A file that leaves a [safety] speed or acceleration limit unset is simulated with the paper's
