@@ -2,9 +2,9 @@
 in-process, sim/batch/recovery.py) and ``marsupial demo`` (three processes over real UDP and
 Zenoh, in lockstep) fly the same flight, leg by leg: docked or not, the approaches flown, the
 contact's error within 0.02 m, the separation within 0.1 s (tests/support/agreement.py). Here:
-configs/cycle.toml's hover copy (two targets), and it and configs/recovery.toml with
-configs/px4_sitl.toml's tracking terms; configs/recovery.toml itself is checked on the flight of
-test_recovery_demo.py."""
+configs/cycle.toml's hover copy (two targets), with its own tracking terms and with
+configs/px4_sitl.toml's; configs/recovery.toml, which flies px4_sitl.toml's loop, is checked on
+the flight of test_recovery_demo.py."""
 from __future__ import annotations
 
 import json
@@ -23,7 +23,6 @@ pytestmark = [pytest.mark.slow, pytest.mark.timeout(600)]  # a demo flight and a
 CASES = {
     "cycle-hover": hover_cycle,
     "cycle-hover-px4-tracking": lambda: with_px4_tracking(hover_cycle()),
-    "recovery-px4-tracking": lambda: with_px4_tracking((CONFIGS / "recovery.toml").read_text()),
 }
 
 
@@ -47,8 +46,10 @@ def test_simulate_flies_the_demos_flight_leg_by_leg(both):
 
 
 def test_the_px4_tracking_terms_are_px4_sitls():
-    """The cases' tracking terms are px4_sitl.toml's, whatever the base config says."""
+    """configs/recovery.toml flies configs/px4_sitl.toml's tracking loop, term for term, and so
+    does the cycle's case that says so."""
     px4 = load_config(CONFIGS / "px4_sitl.toml").mission
-    text = with_px4_tracking((CONFIGS / "recovery.toml").read_text())
-    mission = tomllib.loads(text)["mission"]
+    recovery = load_config(CONFIGS / "recovery.toml").mission
+    assert {k: getattr(recovery, k) for k in TRACKING_KEYS} == {k: getattr(px4, k) for k in TRACKING_KEYS}
+    mission = tomllib.loads(CASES["cycle-hover-px4-tracking"]())["mission"]
     assert {k: mission[k] for k in TRACKING_KEYS} == {k: getattr(px4, k) for k in TRACKING_KEYS}
