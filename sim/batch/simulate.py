@@ -146,6 +146,27 @@ def has_legs(cfg: Config) -> bool:
     return is_mission_config(cfg) and len(cfg.scenario.legs()) > 1
 
 
+def not_flown_whole(cfg: Config) -> str | None:
+    """Why the mission simulation cannot fly ``cfg`` whole (its carrier or its ride is not
+    modelled: :class:`sim.batch.recovery.KinematicCarrier`, :func:`sim.batch.recovery.as_simulated`),
+    or None when it can."""
+    if cfg.carrier.kinematics != "holonomic":
+        return f"carrier.kinematics = {cfg.carrier.kinematics!r} (the simulation drives the built-in holonomic carrier)"
+    if cfg.scenario.carrier_mode != "stop":
+        return f"scenario.carrier_mode = {cfg.scenario.carrier_mode!r} (the simulation's carrier stops once the passenger left)"
+    if cfg.mission.ride == "deck":
+        return "mission.ride = 'deck' (the simulation's mock dynamics have no deck)"
+    return None
+
+
+def flies_mission(cfg: Config) -> bool:
+    """``simulate`` (one run) flies ``cfg`` as the whole mission: a mission config, unless it has
+    one target and a carrier or ride the mission simulation does not model (then the paper's
+    closed loop of what ``run`` flies, as before; several targets are refused instead, naming
+    the field)."""
+    return is_mission_config(cfg) and (has_legs(cfg) or not_flown_whole(cfg) is None)
+
+
 def mission_ok(flight: recovery.Flight) -> bool:
     """The flown mission completed (DONE) and every leg (the one target) held P1-P3; a passenger
     that comes home docked again."""
@@ -277,7 +298,10 @@ def simulate(config: str, as_json: bool, plot_path: str | None, count: int | Non
         click.echo(f"{Path(config).name} leaves {', '.join(unsaturated)} unset: simulating the paper's unsaturated "
                    "law there (its 3D run peaks above 300 m/s); `marsupial run` and `marsupial carrier` refuse such a "
                    "file", err=True)
-    if is_mission_config(cfg) and count is None and not as_json:
+    if is_mission_config(cfg) and count is None and not flies_mission(cfg):
+        click.echo(f"{Path(config).name}: {not_flown_whole(cfg)}: simulating the paper's closed loop of what "
+                   f"`marsupial run` flies instead (simulated: {PAPER_FLOWN})", err=True)
+    elif is_mission_config(cfg) and count is None and not as_json:
         legs = len(cfg.scenario.legs())
         returns = cfg.mission.final_action == "return"
         what = (f"lists {legs} targets: simulating the whole mission, every leg (ride, separate, target, task, return, "
@@ -300,7 +324,7 @@ def simulate(config: str, as_json: bool, plot_path: str | None, count: int | Non
     show = not no_progress and sys.stderr.isatty() and not as_json or (not no_progress and count is not None)
     if count is not None and is_recovery_config(cfg):
         return run_recovery_monte_carlo(cfg, Path(config).name, count, seed, show, plot_path, as_json)
-    if is_mission_config(cfg) and count is None:
+    if flies_mission(cfg) and count is None:
         return run_mission(cfg, Path(config).stem, plot_path, as_json)
     if count is not None:
         report = run_monte_carlo(cfg, count, seed, show)

@@ -40,3 +40,13 @@ def test_the_papers_configs_keep_the_papers_law(capsys):
     s = json.loads(capsys.readouterr().out)
     assert code == 0 and s["simulated"] == "paper" and "phase" not in s
     assert s["separation_time_s"] == pytest.approx(2.40, abs=0.01)
+
+
+def test_a_one_target_mission_on_a_carrier_it_does_not_model_keeps_the_papers_law(capsys):
+    """configs/px4_sitl_rover.toml (an Ackermann rover): the mission simulation drives only the
+    built-in holonomic carrier, so one target is the paper's closed loop of what `run` flies, as
+    before, and the output says so (several targets are refused: test_simulate_legs.py)."""
+    code = main(["simulate", str(CONFIGS / "px4_sitl_rover.toml"), "--no-progress"])
+    out, err = capsys.readouterr()
+    assert code == 0 and "carrier.kinematics = 'ackermann'" in err and "paper's closed loop" in err, err
+    assert out.splitlines()[-1].split() == ["simulated", "paper"]
