@@ -309,6 +309,39 @@ def summary_of(r: FlightRecord) -> dict[str, Any]:
         flown = [leg for leg in legs if "p1" in leg]
         for p in ("p1", "p2", "p3"):
             out[p] = bool(flown) and all(leg[p] for leg in flown)
+        out.update(_whole_flight(r, flown))
+    return out
+
+
+#: With several targets, the top level's figures of one leg's separation: only in ``legs``.
+PER_LEG_ONLY = ("separation_time_s", "carrier_target_distance_at_separation_m")
+#: With several targets, the top level's figures that are the worst (largest) of the legs flown.
+WORST_OF_LEGS = ("relative_speed_at_separation_m_s", "relative_input_jump_m_s", "departure_delay_s",
+                 "final_passenger_target_distance_m", "max_offset_before_separation_m",
+                 "max_relative_command_step_m_s", "max_target_distance_after_arrival_m", "last_metre_s",
+                 "hover_speed_m_s", "max_target_distance_at_target_m", "takeoff_command_jump_m_s",
+                 "takeoff_max_command_step_m_s", "takeoff_clear_s")
+WHOLE_FLIGHT_NOTE = ("several targets: each leg's figures, against its own target, are in legs; at the top level "
+                     f"{', '.join(PER_LEG_ONLY)} are per leg only (None), {', '.join(WORST_OF_LEGS)} are the largest of "
+                     "the legs flown, min_carrier_target_distance_m is the carrier's closest approach to any target over "
+                     "the whole flight, the rest (speed, obstacle clearance, phase switches, deck, contact of the last "
+                     "recovery, P1-P3 of every leg) are of the whole flight")
+
+
+def _whole_flight(r: FlightRecord, flown: list[dict[str, Any]]) -> dict[str, Any]:
+    """The top level's target figures of a flight of several targets (:data:`WHOLE_FLIGHT_NOTE`),
+    none of them measured against target 1 alone."""
+    out: dict[str, Any] = {k: None for k in PER_LEG_ONLY}
+    for k in WORST_OF_LEGS:
+        if any(k in leg for leg in flown):  # the take-off's only riding on a deck
+            values = [leg[k] for leg in flown if leg.get(k) is not None]
+            out[k] = max(values) if values else None
+    x_c = r.vec("x_c")
+    have_c = np.isfinite(x_c).all(axis=1)
+    targets = np.asarray(r.info["targets"], dtype=float)
+    if have_c.any():
+        out["min_carrier_target_distance_m"] = _num(min(norm(t - x_c[have_c]).min() for t in targets))
+    out["top_level_figures"] = WHOLE_FLIGHT_NOTE
     return out
 
 

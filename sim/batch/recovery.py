@@ -347,8 +347,6 @@ class World:
     def __init__(self, cfg: Config, scenario: Scenario, max_duration_s: float | None = None) -> None:
         cfg = as_simulated(cfg)
         self.cfg, self.model = cfg, mission_model(cfg)
-        if self.model.recovery is None:
-            raise ValueError("the recovery simulation needs mission.final_action = \"return\"")
         self.dt_s = self.model.dt_s
         self.steps_per_tick = int(round(self.dt_s / PHYSICS_DT_S))
         if abs(self.steps_per_tick * PHYSICS_DT_S - self.dt_s) > 1e-12:

@@ -116,7 +116,7 @@ class MonteCarloReport:
     def as_dict(self) -> dict[str, Any]:
         keys = ("horizontal_error_m", "horizontal_relative_speed_m_s", "vertical_relative_speed_m_s")
         return {
-            "scenarios": self.count, "seed": self.seed,
+            "simulated": "mission", "scenarios": self.count, "seed": self.seed,
             "docked_within_1_attempt": self.docked_within_1, "docked_within_2_attempts": self.docked_within_2,
             "docked": self.docked, "fallbacks": self.fallbacks, "go_arounds": self.go_around_reasons,
             "unsafe_ends": len(self.unsafe),

@@ -1,4 +1,7 @@
-"""``marsupial simulate``: the paper's closed loop from a config (one run, or a Monte-Carlo batch)."""
+"""``marsupial simulate``: a config flown in-process: a mission config (a ``[mission]`` section) as
+the whole mission (:mod:`sim.batch.recovery`), the paper's configs by the paper's closed loop
+(:mod:`sim.batch.closed_loop`); one run, or a Monte-Carlo batch. The output names which was flown
+(``simulated``: :data:`MISSION_FLOWN` or :data:`PAPER_FLOWN`)."""
 from __future__ import annotations
 
 import json
@@ -14,7 +17,7 @@ from mission.config.schema import Config, load_config
 from sim.batch import closed_loop, recovery, recovery_mc
 from sim.batch.closed_loop import ClosedLoopResult, as_flown, is_mission_config, model_from_config, random_scenarios, simulate_config
 from mission.phases import Phase
-from mission.plots import Trajectories, plot_legs, plot_run
+from mission.plots import Trajectories, plot_legs, plot_run, record_trajectories
 
 log = logging.getLogger(__name__)
 
@@ -66,6 +69,7 @@ def run_monte_carlo(cfg: Config, count: int, seed: int, show_progress: bool) -> 
     obstacles = cfg.scenario.obstacle_set()
     target_clear = obstacles.clearance(res.target).min(axis=-1) if len(obstacles) else np.full(count, np.nan)
     return {
+        "simulated": PAPER_FLOWN,
         "scenarios": count,
         "seed": seed,
         "fraction_p1": float(res.p1.mean()),
@@ -113,6 +117,7 @@ def run_recovery_monte_carlo(cfg: Config, name: str, count: int, seed: int, show
                    f"at {lo:g}-{hi:g} m/s on a random heading, turning up to {recovery_mc.TURN_MAX_DEG:g} deg during the "
                    f"first approach")
         click.echo(recovery_mc.format_report(report))
+        click.echo(f"simulated: {MISSION_FLOWN} (the mission's phase machine on the mock's dynamics, the built-in carrier)")
         missed = [r for r in report.rows if recovery_mc.badness(r)[0]]
         for r in missed[:WORST_SHOWN]:
             click.echo(f"  #{r['index']:<4} carrier {r['speed_m_s']:.2f} m/s on {r['heading_deg']:.0f} deg, turn "
@@ -131,34 +136,85 @@ def leg_broken_p(leg: dict) -> str:
     return f"{leg['leg'] + 1} broke {'/'.join(broken)}" if broken else ""
 
 
+#: What ``simulate`` flew, named in its output (the JSON's ``simulated``, the table's last line).
+MISSION_FLOWN = "mission"  # the mission's phase machine on the mock's dynamics (sim.batch.recovery)
+PAPER_FLOWN = "paper"  # the paper's closed loop (sim.batch.closed_loop)
+
+
 def has_legs(cfg: Config) -> bool:
     """A mission of several targets (``scenario.targets``): simulated whole, leg by leg."""
     return is_mission_config(cfg) and len(cfg.scenario.legs()) > 1
 
 
-def run_legs(cfg: Config, name: str, plot_path: str | None, as_json: bool) -> int:
-    """Fly the whole mission of several targets once, as configured (:func:`sim.batch.recovery.fly`
-    with the configured recovery course); print the demo's table, one column per leg (or the summary as JSON),
-    draw each leg's figure; 0 when every leg held P1-P3 and the mission completed, else 1."""
-    flight = recovery.fly(cfg, recovery.configured())
+def not_flown_whole(cfg: Config) -> str | None:
+    """Why the mission simulation cannot fly ``cfg`` whole (its carrier or its ride is not
+    modelled: :class:`sim.batch.recovery.KinematicCarrier`, :func:`sim.batch.recovery.as_simulated`),
+    or None when it can."""
+    if cfg.carrier.kinematics != "holonomic":
+        return f"carrier.kinematics = {cfg.carrier.kinematics!r} (the simulation drives the built-in holonomic carrier)"
+    if cfg.scenario.carrier_mode != "stop":
+        return f"scenario.carrier_mode = {cfg.scenario.carrier_mode!r} (the simulation's carrier stops once the passenger left)"
+    if cfg.mission.ride == "deck":
+        return "mission.ride = 'deck' (the simulation's mock dynamics have no deck)"
+    return None
+
+
+def flies_mission(cfg: Config) -> bool:
+    """``simulate`` (one run) flies ``cfg`` as the whole mission: a mission config, unless it has
+    one target and a carrier or ride the mission simulation does not model (then the paper's
+    closed loop of what ``run`` flies, as before; several targets are refused instead, naming
+    the field)."""
+    return is_mission_config(cfg) and (has_legs(cfg) or not_flown_whole(cfg) is None)
+
+
+def mission_ok(flight: recovery.Flight) -> bool:
+    """The flown mission completed (DONE) and every leg (the one target) held P1-P3; a passenger
+    that comes home docked again."""
     s = flight.summary
-    legs = s.get("legs") or []
-    ok = bool(legs) and all(leg.get("p1") and leg.get("p2") and leg.get("p3") for leg in legs) \
-        and flight.state.phase is Phase.DONE
-    written = plot_legs(flight.record, Path(plot_path), name) if plot_path else []
+    legs = s.get("legs") or [s]
+    held = all(leg.get("p1") and leg.get("p2") and leg.get("p3") for leg in legs)
+    returns = flight.record.info.get("final_action") == "return"
+    return bool(held and (flight.docked or not returns) and flight.state.phase is Phase.DONE)
+
+
+def run_mission(cfg: Config, name: str, plot_path: str | None, as_json: bool) -> int:
+    """Fly the whole mission once, as configured (:func:`sim.batch.recovery.fly` with the
+    configured recovery course; one target or several, any final action); print the demo's
+    table, one column per leg (or the summary as JSON, ``simulated`` = :data:`MISSION_FLOWN`),
+    draw each leg's figure; 0 when every leg held P1-P3 and the mission completed (a passenger
+    that comes home docked again), else 1."""
+    flight = recovery.fly(cfg, recovery.configured())
+    s = {**flight.summary, "simulated": MISSION_FLOWN}
+    ok = mission_ok(flight)
+    written = plot_mission(flight, Path(plot_path), name) if plot_path else []
     if as_json:
         click.echo(json.dumps(s, indent=2, default=float))
     else:
-        from sim.demo import format_table  # the demo's table: one column per leg, the same rows
+        from sim.demo import format_table, recovery_cells  # the demo's table: one column per leg, the same rows
 
-        click.echo(format_table([{**s, "pair": name, "mission_exit_code": 0 if s["phase"] == "DONE" else None}]))
+        click.echo(format_table([{**s, **recovery_cells(s), "pair": name,
+                                  "mission_exit_code": 0 if s["phase"] == "DONE" else None}]))
         end = f"{s['phase']}" + ("" if s["reason"] is None else f" ({s['reason']}: {s['detail']})")
         click.echo(f"mission ended {end} after {float(flight.record.t[-1]):.2f} s; largest command jump at a phase "
                    f"switch {s.get('max_phase_switch_jump_m_s') or 0.0:.3f} m/s; deck violations "
                    f"{s.get('deck_violations') or 0} (true position {flight.true_deck_violations})")
+        click.echo(f"simulated: {MISSION_FLOWN} (the mission's phase machine on the mock's dynamics, the built-in carrier)")
         for out in written:
             click.echo(f"plot written to {out}")
     return 0 if ok else 1
+
+
+def plot_mission(flight: recovery.Flight, path: Path, name: str) -> list[Path]:
+    """The flown mission's figures: each leg's paper figure (``<stem>-leg<k>``) for several
+    targets, else the paper's figure at ``path``; and the recovery's figure
+    (``<stem>-recovery``) of a passenger that came home."""
+    written = plot_legs(flight.record, path, name)
+    if not written:
+        tr = record_trajectories(flight.record, f"{name}: separation and navigation")
+        if tr is not None:
+            written.append(plot_run(tr, path))
+    drawn = recovery.draw(flight, path.with_name(f"{path.stem}-recovery{path.suffix}"), name)
+    return written + ([] if drawn is None else [Path(drawn)])
 
 
 def _finite_max(values: np.ndarray) -> float | None:
@@ -185,43 +241,47 @@ def format_case(w: dict) -> str:
 @click.option("--seed", type=int, default=0, show_default=True, help="Random seed of --monte-carlo.")
 @click.option("--no-progress", is_flag=True, help="Hide the progress bar.")
 def simulate(config: str, as_json: bool, plot_path: str | None, count: int | None, seed: int, no_progress: bool) -> int:
-    """Integrate the closed loop of the paper for CONFIG (a TOML file, see configs/).
-
-    Reports the separation time, the carrier-target distance at separation, the relative input
-    just after separation and its jump across it, the final passenger-target distance, the
-    closest carrier-target approach, obstacle clearance, peak speed, and P1-P3 of the paper's
-    Definition 1: P1 |e_pc| <= sim.p1_tolerance_m before separation and the passenger leaves
-    (> 0.1 m) after it; P2 the final |e_pt| <= sim.p2_tolerance_m; P3 |e_tc| > 0 throughout.
-    Time t = 0 is the start of riding (the passenger docked), as in the paper and in `run`'s
-    summary.
+    """Fly CONFIG (a TOML file, see configs/) in-process: a mission config as the whole mission, the
+    paper's configs by the paper's closed loop; the output says which (JSON ``simulated``:
+    "mission" or "paper"; the table's last line).
 
     \b
-    A file with a [mission] section describes a flight: simulate then models what `run` flies
-    (the passenger rides the dock point, carrier + mission.dock_offset_ned_m, from the start of
-    riding; P2 within mission.arrival_radius_m), so both give the same P1-P3 verdict.
-    With --monte-carlo, random targets the passenger cannot reach (inside an obstacle's keep-out
-    disc: radius + safety.margin_m + sim.p2_tolerance_m) are drawn again; the failing scenarios
-    (or else the worst) are printed with their id and parameters.
+    A file with a [mission] section describes a flight (one target or several, any
+    mission.final_action): simulate flies the whole mission, as the lockstep demo flies it, by
+    the mission's phase machine on the mock vehicle's dynamics with the built-in holonomic carrier
+    driving its configured recovery course: join, ride, separate, target, then the final action
+    (for "return": task, return, dock, and ride on to the next target). It prints the demo's
+    table, one column per leg (separation, relative jump, final distance, contact, P1-P3);
+    --plot draws the paper's figure (each leg's: <stem>-leg<k>) and the recovery's
+    (<stem>-recovery). With several targets the top-level figures are per leg only, the largest of
+    the legs, or of the whole flight, never of target 1 alone (JSON ``top_level_figures``). Exit
+    code 0 when every leg held P1-P3, the mission completed and a passenger that comes home
+    docked again. The deck ride (mission.ride = "deck") and a carrier other than the built-in
+    holonomic one are refused (exit 2).
 
     \b
-    A mission that comes home (mission.final_action = "return") has the recovery's Monte-Carlo
-    instead: each scenario is the whole mission flown in-process by the mission's phase machine
-    on the mock vehicle's dynamics, the carrier on a random recovery course (0-2 m/s, any
-    heading) turning up to 45 deg during the first approach (docs/recovery.md). It prints the
-    share docked at the first attempt and within two, the fallbacks and their reasons, the
-    contact figures and deck violations; --plot draws the worst flight's approach. Exit code 0
-    when >= 99 % docked within 2 attempts, every other one fell back safely and none touched
+    A file without one (configs/paper_*.toml) is the paper's closed loop: the separation time,
+    the carrier-target distance at separation, the relative input just after separation and its
+    jump across it, the final passenger-target distance, the closest carrier-target approach,
+    obstacle clearance, peak speed, and P1-P3 of the paper's Definition 1: P1 |e_pc| <=
+    sim.p1_tolerance_m before separation and the passenger leaves (> 0.1 m) after it; P2 the
+    final |e_pt| <= sim.p2_tolerance_m; P3 |e_tc| > 0 throughout. Time t = 0 is the start of
+    riding (the passenger docked), as in the paper and in `run`'s summary.
+
+    \b
+    --monte-carlo N: random scenarios. The paper's closed loop draws random targets (those the
+    passenger cannot reach, inside an obstacle's keep-out disc: radius + safety.margin_m +
+    sim.p2_tolerance_m, are drawn again) and prints the failing scenarios (or else the worst)
+    with their id and parameters; for a mission that does not come home it models what `run`
+    flies (the passenger rides the dock point from the start of riding; P2 within
+    mission.arrival_radius_m). A mission that comes home (mission.final_action = "return") has
+    the recovery's Monte-Carlo: each scenario the whole mission, every leg, the carrier on a
+    random recovery course (0-2 m/s, any heading) turning up to 45 deg during the first approach
+    (docs/recovery.md): the share docked at the first attempt and within two, the fallbacks and
+    their reasons, the contact figures and deck violations (with several targets the share of
+    flights in which every leg held P1-P3); --plot draws the worst flight's approach. Exit code
+    0 when >= 99 % docked within 2 attempts, every other one fell back safely and none touched
     the deck outside the contact conditions.
-
-    \b
-    A mission of several targets (scenario.targets) is simulated whole, every leg: ride,
-    separate, target, task, return, dock, ride on to the next target, by the mission's phase
-    machine on the mock vehicle's dynamics with the built-in holonomic carrier driving its
-    configured recovery course. It prints the demo's table, one column per leg (its separation,
-    relative jump, final distance, contact and P1-P3); --plot draws each leg's figure (<stem>-leg<k>). Exit
-    code 0 when every leg held P1-P3 and the mission completed. With --monte-carlo every flight
-    flies every leg, the carrier on a random recovery course (the turn comes in the first
-    approach), and the table adds the share of flights in which every leg held P1-P3.
 
     \b
     A file that leaves a [safety] speed or acceleration limit unset is simulated with the paper's
@@ -238,23 +298,34 @@ def simulate(config: str, as_json: bool, plot_path: str | None, count: int | Non
         click.echo(f"{Path(config).name} leaves {', '.join(unsaturated)} unset: simulating the paper's unsaturated "
                    "law there (its 3D run peaks above 300 m/s); `marsupial run` and `marsupial carrier` refuse such a "
                    "file", err=True)
-    if has_legs(cfg) and not as_json:
+    if is_mission_config(cfg) and count is None and not flies_mission(cfg):
+        click.echo(f"{Path(config).name}: {not_flown_whole(cfg)}: simulating the paper's closed loop of what "
+                   f"`marsupial run` flies instead (simulated: {PAPER_FLOWN})", err=True)
+    elif is_mission_config(cfg) and count is None and not as_json:
+        legs = len(cfg.scenario.legs())
+        returns = cfg.mission.final_action == "return"
+        what = (f"lists {legs} targets: simulating the whole mission, every leg (ride, separate, target, task, return, "
+                "dock, ride on)" if legs > 1 else "has a [mission] section: simulating the whole mission (join, ride, "
+                "separate, target, " + ("task, return, dock)" if returns else f"then {cfg.mission.final_action})"))
+        click.echo(f"{Path(config).name} {what}, by the mission's phase machine on the mock vehicle's dynamics with "
+                   "the built-in holonomic carrier" + (" driving its configured recovery course" if returns else ""),
+                   err=True)
+    elif has_legs(cfg) and not as_json:
         click.echo(f"{Path(config).name} lists {len(cfg.scenario.legs())} targets: simulating the whole mission, every "
                    "leg (ride, separate, target, task, return, dock, ride on), by the mission's phase machine on the mock "
-                   "vehicle's dynamics with the built-in holonomic carrier"
-                   + (" on random recovery courses" if count is not None else " driving its configured recovery course"),
-                   err=True)
+                   "vehicle's dynamics with the built-in holonomic carrier on random recovery courses", err=True)
     elif is_mission_config(cfg) and not as_json and not (count is not None and is_recovery_config(cfg)):
         start, p2_tol = as_flown(cfg)
-        click.echo(f"{Path(config).name} has a [mission] section: simulating what `marsupial run` flies: the passenger "
+        click.echo(f"{Path(config).name} has a [mission] section: the paper's closed loop of what `marsupial run` "
+                   f"flies, for the Monte-Carlo: the passenger "
                    f"rides the dock point (carrier + mission.dock_offset_ned_m, starting at {np.round(start, 3).tolist()}) "
                    f"from t = 0, the start of riding (take-off and JOIN are not simulated); P2 = within "
                    f"mission.arrival_radius_m = {p2_tol:g} m", err=True)
     show = not no_progress and sys.stderr.isatty() and not as_json or (not no_progress and count is not None)
     if count is not None and is_recovery_config(cfg):
         return run_recovery_monte_carlo(cfg, Path(config).name, count, seed, show, plot_path, as_json)
-    if has_legs(cfg):
-        return run_legs(cfg, Path(config).stem, plot_path, as_json)
+    if flies_mission(cfg) and count is None:
+        return run_mission(cfg, Path(config).stem, plot_path, as_json)
     if count is not None:
         report = run_monte_carlo(cfg, count, seed, show)
         if as_json:
@@ -269,12 +340,13 @@ def simulate(config: str, as_json: bool, plot_path: str | None, count: int | Non
                 click.echo("largest final passenger-target distances (id = index, same --seed replays them):")
             for w in report["worst_cases"]:
                 click.echo(format_case(w))
+            click.echo(f"simulated: {PAPER_FLOWN} (the paper's closed loop)")
         return 0 if report["fraction_all"] == 1.0 else 1
     steps = int(round(cfg.sim.duration_s / cfg.sim.dt_s))
     bar, update = _progress_bar(steps, Path(config).stem, show)
     with bar:
         result = simulate_config(cfg, progress=update)
-    summary = result.summary()
+    summary = {**result.summary(), "simulated": PAPER_FLOWN}
     if plot_path:
         out = plot_run(trajectories_of(result, cfg, title=f"{Path(config).stem}: separation and navigation"), plot_path)
         log.info("wrote %s", out)
@@ -283,7 +355,7 @@ def simulate(config: str, as_json: bool, plot_path: str | None, count: int | Non
     else:
         width = max(len(k) for k in summary)
         for key, value in summary.items():
-            click.echo(f"{key:<{width}}  {value}")
+            click.echo(f"{key:<{width}}  {value}")  # the last row: simulated  paper
         if plot_path:
             click.echo(f"plot written to {plot_path}")
     return 0 if summary["p1"] and summary["p2"] and summary["p3"] else 1

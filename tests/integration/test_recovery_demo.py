@@ -20,6 +20,7 @@ from mission.phases import Phase
 from mission.record import read_record
 from sim.batch.recovery import Scenario, fly
 from tests.conftest import CONFIGS
+from tests.support.agreement import assert_same_flight, simulated
 
 pytestmark = pytest.mark.slow
 
@@ -109,3 +110,15 @@ def test_the_simulation_docks_as_the_lockstep_demo_does(recovery_flight, tmp_pat
                               str(tmp_path / "from-mcap.png")], capture_output=True, text=True, timeout=120)
     assert plotted.returncode == 0, plotted.stdout + plotted.stderr
     assert (tmp_path / "from-mcap-recovery.png").stat().st_size > 10_000
+
+
+def test_simulate_flies_the_demos_flight(recovery_flight):
+    """``marsupial simulate configs/recovery.toml --json`` flies the mission (not the paper's law
+    alone) and its flight is the demo's: docked at the same attempt, the contact within 0.02 m,
+    the separation within 0.1 s (tests/support/agreement.py); the carrier kept out of the guard."""
+    log, out = recovery_flight
+    assert out.returncode == 0, out.stdout + out.stderr
+    sim = simulated(RECOVERY)
+    assert_same_flight(json.loads((log / "summary.json").read_text()), sim)
+    cfg = load_config(RECOVERY)
+    assert sim["min_carrier_target_distance_m"] >= cfg.law.b * cfg.law.c - cfg.carrier.p3_margin_m - 1e-3

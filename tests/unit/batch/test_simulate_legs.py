@@ -67,6 +67,14 @@ def test_simulate_json_has_the_legs(hover_file, capsys):
     summary = json.loads(capsys.readouterr().out)
     assert code == 0 and [leg["leg"] for leg in summary["legs"]] == [0, 1]
     assert summary["phase"] == "DONE" and all(leg["p1"] and leg["p2"] and leg["p3"] for leg in summary["legs"])
+    # the top level is never target 1's alone: the separation per leg only, the worst of the legs, the whole flight
+    assert summary["simulated"] == "mission" and "top_level_figures" in summary
+    assert summary["separation_time_s"] is None and summary["carrier_target_distance_at_separation_m"] is None
+    legs = summary["legs"]
+    assert summary["relative_input_jump_m_s"] == max(leg["relative_input_jump_m_s"] for leg in legs)
+    assert summary["final_passenger_target_distance_m"] == max(leg["final_passenger_target_distance_m"] for leg in legs)
+    assert summary["min_carrier_target_distance_m"] <= min(leg["min_carrier_target_distance_m"] for leg in legs)
+    assert summary["min_carrier_target_distance_m"] >= 7.5 - 1e-3  # the guard of every target, all flight
 
 
 def test_a_carrier_docked_near_the_next_target_drives_out_first(cycle):

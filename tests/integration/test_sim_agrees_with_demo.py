@@ -1,0 +1,55 @@
+"""One step in one place: for the same config, ``marsupial simulate --json`` (the mission flown
+in-process, sim/batch/recovery.py) and ``marsupial demo`` (three processes over real UDP and
+Zenoh, in lockstep) fly the same flight, leg by leg: docked or not, the approaches flown, the
+contact's error within 0.02 m, the separation within 0.1 s (tests/support/agreement.py). Here:
+configs/cycle.toml's hover copy (two targets), with its own tracking terms and with
+configs/px4_sitl.toml's; configs/recovery.toml, which flies px4_sitl.toml's loop, is checked on
+the flight of test_recovery_demo.py."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import tomllib
+
+import pytest
+
+from mission.config.schema import load_config
+from tests.conftest import CONFIGS
+from tests.support.agreement import TRACKING_KEYS, assert_same_flight, hover_cycle, simulated, with_px4_tracking
+
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(600)]  # a demo flight and a simulated one per config
+
+CASES = {
+    "cycle-hover": hover_cycle,
+    "cycle-hover-px4-tracking": lambda: with_px4_tracking(hover_cycle()),
+}
+
+
+@pytest.fixture(scope="module", params=sorted(CASES))
+def both(request, tmp_path_factory):
+    """(the demo's summary.json, simulate --json's summary) of one case's config."""
+    root = tmp_path_factory.mktemp(request.param)
+    path = root / f"{request.param}.toml"
+    path.write_text(CASES[request.param]())
+    cmd = [sys.executable, "-m", "mission.cli", "demo", "--config", str(path), "--log-root", str(root / "logs"),
+           "--plot", "", "--timeout", "200"]
+    out = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stdout + out.stderr
+    return json.loads((root / "logs" / "pair0" / "summary.json").read_text()), simulated(path)
+
+
+def test_simulate_flies_the_demos_flight_leg_by_leg(both):
+    demo, sim = both
+    assert_same_flight(demo, sim)
+    assert all(leg["contact"] is not None for leg in sim.get("legs") or [sim])  # every leg docked
+
+
+def test_the_px4_tracking_terms_are_px4_sitls():
+    """configs/recovery.toml flies configs/px4_sitl.toml's tracking loop, term for term, and so
+    does the cycle's case that says so."""
+    px4 = load_config(CONFIGS / "px4_sitl.toml").mission
+    recovery = load_config(CONFIGS / "recovery.toml").mission
+    assert {k: getattr(recovery, k) for k in TRACKING_KEYS} == {k: getattr(px4, k) for k in TRACKING_KEYS}
+    mission = tomllib.loads(CASES["cycle-hover-px4-tracking"]())["mission"]
+    assert {k: mission[k] for k in TRACKING_KEYS} == {k: getattr(px4, k) for k in TRACKING_KEYS}
