@@ -292,7 +292,7 @@ def follow_carrier(vehicle: MockVehicle, session: Any, pair: str) -> CarrierFeed
     return feed
 
 
-def truth(snapshot: VehicleSnapshot, estimate_error: dict[str, float | int] | None = None) -> dict[str, Any]:
+def truth(snapshot: VehicleSnapshot, estimate_error: dict[str, Any] | None = None) -> dict[str, Any]:
     """The world's truth of a flight for ``--summary``: the vehicle's simulated time [s], how its
     estimate erred (``estimate_error``: :func:`estimate_of`), whether it
     lies crashed on the deck (``crash``: why, else None) and every touchdown (time [s], horizontal
@@ -302,7 +302,7 @@ def truth(snapshot: VehicleSnapshot, estimate_error: dict[str, float | int] | No
         "touchdowns": [dataclasses.asdict(t) for t in snapshot.touchdowns]}}
 
 
-def estimate_of(options: VehicleOptions) -> dict[str, float | int]:
+def estimate_of(options: VehicleOptions) -> dict[str, Any]:
     """How the vehicle's estimate errs: ``scale`` times PX4 SITL's errors (0: exact), drawn from ``seed``."""
     scale = options.estimate_error if options.frame == "quadrotor" else 0.0
     return {"scale": scale, "seed": options.faults.seed}

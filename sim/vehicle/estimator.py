@@ -29,6 +29,8 @@ import math
 import random
 from dataclasses import dataclass
 
+Vec3 = tuple[float, float, float]
+
 
 @dataclass(frozen=True)
 class ErrorModel:
@@ -64,8 +66,8 @@ class EstimateError:
         sigma_p = (m.sigma_p_m, m.sigma_p_m, m.sigma_p_m * m.vertical_p)
         self._v = [_GaussMarkov2(s, m.tau_v_s, self._rng) for s in sigma_v]
         self._p = [_GaussMarkov2(s, m.tau_p_s, self._rng) for s in sigma_p]
-        self.velocity = tuple(x.value for x in self._v)
-        self.position = tuple(x.value for x in self._p)
+        self.velocity: Vec3 = (self._v[0].value, self._v[1].value, self._v[2].value)
+        self.position: Vec3 = (self._p[0].value, self._p[1].value, self._p[2].value)
 
     @property
     def enabled(self) -> bool:
@@ -75,8 +77,9 @@ class EstimateError:
         """One step of ``dt_s`` [s] (much shorter than the correlation times) of every error."""
         if not self.enabled:
             return
-        self.velocity = tuple(x.advance(dt_s) for x in self._v)
-        self.position = tuple(x.advance(dt_s) for x in self._p)
+        v, p = self._v, self._p
+        self.velocity = (v[0].advance(dt_s), v[1].advance(dt_s), v[2].advance(dt_s))
+        self.position = (p[0].advance(dt_s), p[1].advance(dt_s), p[2].advance(dt_s))
 
 
 class _GaussMarkov2:
