@@ -154,13 +154,14 @@ def fly_once(config: Path, directory: Path, speed_factor: float, ground_truth_hz
             "dockings": dockings(s) if s.get("docked_again") is not None or s.get("legs") else None}
 
 
-def fly_mock(config: Path, directory: Path, speed: float) -> dict[str, Any]:
-    """The same mission on the mock vehicle (``marsupial demo --config``, three processes, ``speed``
-    its pace); its row."""
+def fly_mock(config: Path, directory: Path, speed: float, seed: int) -> dict[str, Any]:
+    """The same mission on the mock vehicle as shipped (``marsupial demo --config``, three processes,
+    ``speed`` its pace, its estimate's errors drawn from ``seed``); its row."""
     t0 = time.monotonic()
     directory.mkdir(parents=True, exist_ok=True)
     proc = subprocess.run([sys.executable, "-m", "mission.cli", "demo", "--config", str(config), "--speed", str(speed),
-                           "--log-root", str(directory), "--plot", str(directory / "flight.png"), "--timeout", "300"],
+                           "--log-root", str(directory), "--plot", str(directory / "flight.png"), "--timeout", "300",
+                           "--seed", str(seed)],
                           capture_output=True, text=True, cwd=ROOT)
     s = json.loads((directory / "pair0" / "summary.json").read_text())
     return {**_row(s, proc.returncode, t0, directory), "hold_m": None, "clock": None, "stall_s": stall_s(directory / "pair0"),
@@ -200,12 +201,15 @@ def _fmt(value: Any) -> str:
 @click.option("--rover", is_flag=True, help="The carrier a second PX4, the SIH rover (configs/px4_sitl_cycle.toml); "
               "PX4_SIM_SPEED_FACTOR 1.08 unless given")
 @click.option("--json", "json_path", type=click.Path(dir_okay=False), default=None)
+@click.option("--compare", "compare_path", type=click.Path(dir_okay=False, exists=True), default=None,
+              help="Print these flights' mean riding offset, last metre and hover speed against a figures file's "
+                   "(--record-figures; tests/data/px4_hold_figures.json) and the ratio, within +-30 %?")
 @click.option("--record-figures", type=click.Path(dir_okay=False), default=None,
               help="Write the usable flights' riding offset, last metre and hover speed (and their means) to this "
                    "JSON file: tests/data/px4_hold_figures.json, what the mock is held to.")
 def main(flights: int, config: str, sets: tuple[str, ...], out: str | None, speed_factor: float | None, parallel: int,
          ground_truth: bool, vehicle: str, mock_speed: float, rover: bool, json_path: str | None,
-         record_figures: str | None) -> None:
+         record_figures: str | None, compare_path: str | None) -> None:
     why = unavailable_reason() if vehicle == "px4" else None
     if why:
         raise click.ClickException(why)
@@ -227,7 +231,7 @@ def main(flights: int, config: str, sets: tuple[str, ...], out: str | None, spee
             if vehicle == "px4":
                 row = fly_once(cfg_path, base / f"flight{i}", speed_factor, 50.0 if ground_truth else 0.0, rover)
             else:
-                row = fly_mock(cfg_path, base / f"mock{i}", mock_speed)
+                row = fly_mock(cfg_path, base / f"mock{i}", mock_speed, seed=i + 1)
         except Exception as exc:  # a PX4 that did not start on a loaded machine: the flight is marked, the rest fly
             row = {**{c: None for c in COLUMNS}, "clock": float("nan"), "error": f"{type(exc).__name__}: {exc}",
                    "dir": str(base / f"flight{i}")}
@@ -255,6 +259,8 @@ def main(flights: int, config: str, sets: tuple[str, ...], out: str | None, spee
                f"({TARGETS}, P1-P3); worst: {worst}; logs in {base}")
     if json_path:
         Path(json_path).write_text(json.dumps(rows, indent=2))
+    if compare_path:
+        click.echo(compare_table(good, json.loads(Path(compare_path).read_text()), compare_path))
     if record_figures:
         write_figures(Path(record_figures), [Path(r["dir"]) / "flight" for r in good],
                       f"python -m bench.px4_flights -n {flights} --config {config} " + " ".join(f"--set {x}" for x in sets))
@@ -280,6 +286,26 @@ def print_dockings(rows: list[dict[str, Any]]) -> None:
 
 
 FIGURES = ("max_offset_before_separation_m", "last_metre_s", "hover_speed_m_s")
+
+
+ROW_OF_FIGURE = {"max_offset_before_separation_m": "riding_2tick_m", "last_metre_s": "last_metre_s",
+                 "hover_speed_m_s": "hover_m_s"}
+FIDELITY = 0.3  # the mock is PX4-faithful within this fraction of PX4's figure [-]
+
+
+def compare_table(rows: list[dict[str, Any]], figures: dict[str, Any], source: str) -> str:
+    """These flights' mean of each figure (the riding offset as held for two ticks) against the
+    mean of ``figures`` (:func:`write_figures`' file), their ratio and whether within ``FIDELITY``."""
+    lines = [f"{'figure':32s} {'these (mean)':>13s} {'reference':>10s} {'ratio':>6s}  within +-{FIDELITY:.0%}  "
+             f"({len(rows)} flights here, {len(figures['flights'])} in {source})"]
+    for name in FIGURES:
+        mine = [r[ROW_OF_FIGURE[name]] for r in rows if r.get(ROW_OF_FIGURE[name]) is not None]
+        ref = figures["mean"][name]
+        mean = float(np.mean(mine)) if mine else float("nan")
+        ratio = mean / ref
+        lines.append(f"{name:32s} {mean:13.3f} {ref:10.3f} {ratio:6.2f}  {'yes' if abs(ratio - 1) <= FIDELITY else 'NO'}"
+                     f"  (range {min(mine, default=float('nan')):.3f}-{max(mine, default=float('nan')):.3f})")
+    return "\n".join(lines)
 
 
 def write_figures(path: Path, log_dirs: list[Path], command: str) -> None:

@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from sim.vehicle.estimator import EstimateError
 from sim.vehicle.physics.multicopter import Command, KinState, Limits, step
 
 SCORED_PREFIXES = ("step_", "ramp_", "sine_")  # the segments the fit and the targets use
@@ -93,9 +94,12 @@ def command_of_row(rec: Recording, i: int) -> Command:
                    acceleration_ned_m_s2=(float(a[0]), float(a[1]), float(a[2])))
 
 
-def simulate(rec: Recording, limits: Limits, dt_s: float = 0.005, first_segment: str = FIRST_REPLAYED_SEGMENT) -> np.ndarray:
-    """Replay ``rec`` into the dynamics from ``first_segment`` on; the simulated velocity (N, 3)
-    [m/s] at every row (NaN before the first replayed row)."""
+def simulate(rec: Recording, limits: Limits, dt_s: float = 0.005, first_segment: str = FIRST_REPLAYED_SEGMENT,
+             estimate: EstimateError | None = None) -> np.ndarray:
+    """Replay ``rec`` into the dynamics from ``first_segment`` on; the velocity (N, 3) [m/s] the
+    vehicle reports at every row (NaN before the first replayed row). With ``estimate`` PX4's
+    controller flies the estimate, which errs so (:mod:`sim.vehicle.estimator`), and the
+    velocity reported is the estimate's; without, the estimate is exact."""
     start = int(rec.rows(first_segment)[0])
     n = len(rec.t_s)
     out = np.full((n, 3), np.nan)
@@ -106,19 +110,31 @@ def simulate(rec: Recording, limits: Limits, dt_s: float = 0.005, first_segment:
     t = float(rec.t_s[start])
     out[start] = v0
     command = command_of_row(rec, start)
+    est = estimate if estimate is not None and estimate.enabled else None
+
+    def advance(kin: KinState) -> KinState:
+        if est is None:
+            return step(kin, command, limits, wind, dt_s)
+        est.advance(dt_s)
+        return step(kin, command, limits, wind, dt_s, (est.position, est.velocity))
+
     for i in range(start + 1, n):
         t_switch = 0.5 * (rec.t_s[i - 1] + rec.t_s[i])
         while t + dt_s <= t_switch + 1e-9:
-            kin = step(kin, command, limits, wind, dt_s)
+            kin = advance(kin)
             t += dt_s
         if rec.segment[i] != rec.segment[i - 1]:  # align the position with PX4's (see the module docstring)
             shift = rec.pos[i] - np.array((kin.n_m, kin.e_m, kin.d_m)) - np.array((kin.vn_m_s, kin.ve_m_s, kin.vd_m_s)) * (rec.t_s[i] - t)
+            if est is not None:
+                shift -= np.array(est.position)  # PX4's is its estimate's position
             kin = _translated(kin, shift)
         command = command_of_row(rec, i)
         while t + dt_s <= rec.t_s[i] + 1e-9:
-            kin = step(kin, command, limits, wind, dt_s)
+            kin = advance(kin)
             t += dt_s
         out[i] = (kin.vn_m_s, kin.ve_m_s, kin.vd_m_s)
+        if est is not None:
+            out[i] += est.velocity
         if kin.on_ground:
             break
     return out
@@ -182,9 +198,9 @@ class Comparison:
         return self.lag_mock_m[segment] / self.lag_px4_m[segment]
 
 
-def compare(rec: Recording, limits: Limits, dt_s: float = 0.005) -> Comparison:
-    """Replay ``rec`` and score the mock against it."""
-    velocity = simulate(rec, limits, dt_s)
+def compare(rec: Recording, limits: Limits, dt_s: float = 0.005, estimate: EstimateError | None = None) -> Comparison:
+    """Replay ``rec`` (``estimate``: as :func:`simulate`) and score the mock against it."""
+    velocity = simulate(rec, limits, dt_s, estimate=estimate)
     rms = rms_by_segment(rec, velocity, rec.scored_segments())
     ramps = [s for s in RAMP_SEGMENTS if s in rec.segments()]
     return Comparison(rms, {s: ramp_lag_m(rec, s, velocity) for s in ramps}, {s: ramp_lag_m(rec, s) for s in ramps})

@@ -154,9 +154,11 @@ def _write_port_file(path: Path, port: int) -> None:
               help="With --deck: Zenoh endpoint to listen on (repeatable).")
 @click.option("--wind", default="0,0,0", show_default=True, metavar="N,E,D",
               help="Wind [m/s] NED: a drag force in the air (PX4's velocity integrator slowly compensates it).")
-@click.option("--estimate-error", type=click.FloatRange(min=0.0), default=0.0, show_default=True, metavar="SCALE",
-              help="The estimate errs as PX4 SITL's does (its velocity and position errors; PX4 flies it and reports "
-                   "it), this many times as much (1: PX4 SITL's; seeded by --seed). 0: an exact estimate.")
+@click.option("--estimate-error", type=click.FloatRange(min=0.0), default=VehicleOptions.estimate_error, show_default=True,
+              metavar="SCALE", help="The estimate errs as PX4 SITL's does (its velocity and position errors; PX4 flies "
+                                    "it and reports it), this many times as much (1: PX4 SITL's; seeded by --seed). "
+                                    "0: an exact estimate (--ideal).")
+@click.option("--ideal", is_flag=True, help="An exact estimate (--estimate-error 0): for tests of exactness.")
 @click.option("--position-noise", type=click.FloatRange(min=0.0), default=0.0, show_default=True, metavar="METRES",
               help="Sigma [m] of Gaussian noise on the reported position (seeded by --seed).")
 @click.option("--loss-in", type=click.FloatRange(0.0, 1.0), default=0.0, show_default=True, metavar="FRACTION",
@@ -196,7 +198,7 @@ def _write_port_file(path: Path, port: int) -> None:
 def mock_vehicle(mavlink_url: str, target_url: str, gcs_url: str | None, speed: float, home: str, start_ned: str,
                  sysid: int, frame: str, params: tuple[str, ...], battery_drain_s: float | None,
                  battery_min_pct: float | None, deck_pair: str | None, deck_height: float, deck_radius: float,
-                 zenoh_connect: tuple[str, ...], zenoh_listen: tuple[str, ...], wind: str, estimate_error: float, position_noise: float, loss_in: float,
+                 zenoh_connect: tuple[str, ...], zenoh_listen: tuple[str, ...], wind: str, estimate_error: float, ideal: bool, position_noise: float, loss_in: float,
                  loss_out: float, latency_ms: float, jitter_ms: float, blackouts: tuple[str, ...],
                  refuse_arming: str | None, refuse_offboard: str | None, lose_position_s: float | None, seed: int, signing_key: Path | None, port_file: Path | None,
                  lockstep: bool, lockstep_watchdog_s: float, lockstep_max_speed: float | None, status_every: float,
@@ -210,6 +212,12 @@ def mock_vehicle(mavlink_url: str, target_url: str, gcs_url: str | None, speed: 
     status line.
     """
     bind, target = _endpoints(mavlink_url, target_url)
+    if ideal:
+        given = click.get_current_context().get_parameter_source("estimate_error") is not click.core.ParameterSource.DEFAULT
+        if given and estimate_error != 0.0:
+            raise click.BadParameter(f"--ideal is an exact estimate; --estimate-error {estimate_error:g} is not",
+                                     param_hint="--ideal / --estimate-error")
+        estimate_error = 0.0
     faults = FaultOptions(loss_in=loss_in, loss_out=loss_out, latency_s=latency_ms / 1000.0, jitter_s=jitter_ms / 1000.0,
                           blackouts=tuple(_blackout(b) for b in blackouts), refuse_arming_reason=refuse_arming, seed=seed,
                           refuse_offboard_reason=refuse_offboard, position_lost_at_s=lose_position_s)
@@ -284,13 +292,26 @@ def follow_carrier(vehicle: MockVehicle, session: Any, pair: str) -> CarrierFeed
     return feed
 
 
-def truth(snapshot: VehicleSnapshot) -> dict[str, Any]:
-    """The world's truth of a flight for ``--summary``: the vehicle's simulated time [s], whether it
+def truth(snapshot: VehicleSnapshot, estimate_error: dict[str, Any] | None = None) -> dict[str, Any]:
+    """The world's truth of a flight for ``--summary``: the vehicle's simulated time [s], how its
+    estimate erred (``estimate_error``: :func:`estimate_of`), whether it
     lies crashed on the deck (``crash``: why, else None) and every touchdown (time [s], horizontal
     distance from the deck's true centre [m], speeds relative to the deck [m/s], crash)."""
-    return {"t_s": snapshot.t_s, "deck": {
+    return {"t_s": snapshot.t_s, "estimate_error": estimate_error, "deck": {
         "crash": snapshot.crash, "on_deck": snapshot.on_deck,
         "touchdowns": [dataclasses.asdict(t) for t in snapshot.touchdowns]}}
+
+
+def estimate_of(options: VehicleOptions) -> dict[str, Any]:
+    """How the vehicle's estimate errs: ``scale`` times PX4 SITL's errors (0: exact), drawn from ``seed``."""
+    scale = options.estimate_error if options.frame == "quadrotor" else 0.0
+    return {"scale": scale, "seed": options.faults.seed}
+
+
+def describe_estimate(options: VehicleOptions) -> str:
+    """The start-up log's words for :func:`estimate_of`."""
+    e = estimate_of(options)
+    return "exact estimate" if e["scale"] == 0 else f"estimate errs {e['scale']:g}x PX4 SITL's (seed {e['seed']})"
 
 
 def run(options: VehicleOptions, port_file: Path | None = None, status_every_s: float = 5.0,
@@ -316,14 +337,14 @@ def run(options: VehicleOptions, port_file: Path | None = None, status_every_s: 
                 stack.callback(follow_carrier(vehicle, session, deck[0]).close)
             if port_file is not None:
                 _write_port_file(port_file, vehicle.port)
-            log.info("mock vehicle on UDP %d -> %s, %s", vehicle.port, options.target,
-                     "lockstep" if options.lockstep else f"speed {options.speed:g}")
+            log.info("mock vehicle on UDP %d -> %s, %s, %s", vehicle.port, options.target,
+                     "lockstep" if options.lockstep else f"speed {options.speed:g}", describe_estimate(options))
             while not stop.wait(status_every_s if status_every_s > 0 else None):
                 log.info("%s", vehicle.status_line())
             log.info("stopping: %s", vehicle.status_line())
             if summary_path is not None:
                 summary_path.parent.mkdir(parents=True, exist_ok=True)
-                summary_path.write_text(json.dumps(truth(vehicle.snapshot()), indent=2) + "\n")
+                summary_path.write_text(json.dumps(truth(vehicle.snapshot(), estimate_of(options)), indent=2) + "\n")
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)

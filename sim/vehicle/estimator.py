@@ -1,4 +1,4 @@
-"""The errors of PX4's state estimate, as the mock vehicle can add them (off by default).
+"""The errors of PX4's state estimate, as the mock vehicle adds them (by default PX4 SITL's).
 
 What PX4 SITL shows (SIH quadrotor, EKF2 on SIH's simulated GPS; its estimate against SIH's
 true state, streamed as HIL_STATE_QUATERNION, ``python -m bench.px4_hold``; docs/px4-hold.md):
@@ -20,14 +20,16 @@ first-order lags: smooth, as an estimator's errors are), the velocity error (sta
 ``sigma_v`` [m/s], lag time constant ``tau_v`` [s]) and the position error (``sigma_p`` [m],
 ``tau_p`` [s]); the vertical sigmas are the horizontal ones times the
 ``vertical_*`` factors. Seeded: the same seed gives the same errors. :data:`PX4_SITL` holds
-the values fitted to PX4 SITL; ``scale`` multiplies both sigmas (0: an exact estimate). Units SI,
-NED; time in simulated seconds.
+the values fitted to PX4 SITL; ``scale`` multiplies both sigmas (:data:`PX4_SITL_SCALE`, the mock's
+default: PX4 SITL's; 0: an exact estimate). Units SI, NED; time in simulated seconds.
 """
 from __future__ import annotations
 
 import math
 import random
 from dataclasses import dataclass
+
+Vec3 = tuple[float, float, float]
 
 
 @dataclass(frozen=True)
@@ -48,6 +50,7 @@ class ErrorModel:
 
 # fitted to PX4 SITL (SIH quadrotor, hovering and holding a point: bench/px4_hold.py, docs/px4-hold.md)
 PX4_SITL = ErrorModel(sigma_v_m_s=0.25, tau_v_s=2.0, sigma_p_m=0.15, tau_p_s=1.7)
+PX4_SITL_SCALE = 1.0  # the mock vehicle's default scale of PX4_SITL: PX4 SITL's own errors [-]
 
 
 class EstimateError:
@@ -63,8 +66,8 @@ class EstimateError:
         sigma_p = (m.sigma_p_m, m.sigma_p_m, m.sigma_p_m * m.vertical_p)
         self._v = [_GaussMarkov2(s, m.tau_v_s, self._rng) for s in sigma_v]
         self._p = [_GaussMarkov2(s, m.tau_p_s, self._rng) for s in sigma_p]
-        self.velocity = tuple(x.value for x in self._v)
-        self.position = tuple(x.value for x in self._p)
+        self.velocity: Vec3 = (self._v[0].value, self._v[1].value, self._v[2].value)
+        self.position: Vec3 = (self._p[0].value, self._p[1].value, self._p[2].value)
 
     @property
     def enabled(self) -> bool:
@@ -74,8 +77,9 @@ class EstimateError:
         """One step of ``dt_s`` [s] (much shorter than the correlation times) of every error."""
         if not self.enabled:
             return
-        self.velocity = tuple(x.advance(dt_s) for x in self._v)
-        self.position = tuple(x.advance(dt_s) for x in self._p)
+        v, p = self._v, self._p
+        self.velocity = (v[0].advance(dt_s), v[1].advance(dt_s), v[2].advance(dt_s))
+        self.position = (p[0].advance(dt_s), p[1].advance(dt_s), p[2].advance(dt_s))
 
 
 class _GaussMarkov2:
@@ -85,6 +89,7 @@ class _GaussMarkov2:
 
     def __init__(self, sigma: float, tau_s: float, rng: random.Random) -> None:
         self.tau_s, self._rng = tau_s, rng
+        self._dt_s, self._decay, self._kick = math.nan, 0.0, 0.0  # the last step's constants
         self._inner_sigma = sigma * math.sqrt(2.0)  # the second lag halves the variance
         # a stationary start: (inner, value) jointly Gaussian with correlation 1/sqrt(2)
         g1, g2 = rng.gauss(0.0, 1.0), rng.gauss(0.0, 1.0)
@@ -92,7 +97,10 @@ class _GaussMarkov2:
         self.value = sigma * (g1 / math.sqrt(2.0) + g2 / math.sqrt(2.0))
 
     def advance(self, dt_s: float) -> float:
-        decay = math.exp(-dt_s / self.tau_s)
-        self._inner = self._inner * decay + self._inner_sigma * math.sqrt(1.0 - decay * decay) * self._rng.gauss(0.0, 1.0)
+        if dt_s != self._dt_s:  # the mock's steps are fixed: computed once
+            decay = math.exp(-dt_s / self.tau_s)
+            self._dt_s, self._decay, self._kick = dt_s, decay, self._inner_sigma * math.sqrt(1.0 - decay * decay)
+        decay = self._decay
+        self._inner = self._inner * decay + self._kick * self._rng.gauss(0.0, 1.0)
         self.value += (self._inner - self.value) * (1.0 - decay)
         return self.value

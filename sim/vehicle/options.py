@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from mission.mavlink import px4
+from sim.vehicle.estimator import PX4_SITL_SCALE
 from sim.vehicle.faults import FaultOptions
 from sim.vehicle.modes import TrajectorySetpoint
 from sim.vehicle.physics.deck import DeckSpec, Touchdown
@@ -28,9 +29,9 @@ class VehicleOptions:
     wind_ned_m_s: wind [m/s] NED: a drag force in the air, which PX4's velocity integrator slowly
     compensates. position_noise_m: sigma of the Gaussian noise on the reported position [m]
     (seeded by ``faults.seed``). estimate_error: a quadrotor's estimate errs as PX4 SITL's does
-    (its velocity and position errors, :mod:`sim.vehicle.estimator`), this many times as much:
-    1 is PX4 SITL's, 0 (default) an exact estimate. PX4's controller flies the estimate and the
-    telemetry reports it.
+    (its velocity and position errors, :mod:`sim.vehicle.estimator`, seeded by ``faults.seed``),
+    this many times as much: 1 (default) is PX4 SITL's, 0 an exact estimate.
+    PX4's controller flies the estimate and the telemetry reports it.
     signing_key: 32-byte MAVLink 2 signing key; then unsigned messages other than HEARTBEAT
     are rejected and everything sent is signed.
     deck: the carrier's deck under the vehicle (:mod:`sim.vehicle.physics.deck`), its motion
@@ -57,7 +58,7 @@ class VehicleOptions:
     signing_key: bytes | None = None
     wind_ned_m_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
     position_noise_m: float = 0.0
-    estimate_error: float = 0.0
+    estimate_error: float = PX4_SITL_SCALE
     statustext_needs_heartbeat: bool = True
     frame: str = "quadrotor"  # or "rover": MAV_TYPE_GROUND_ROVER, Ackermann kinematics (sim.vehicle.physics.rover)
     deck: DeckSpec | None = None

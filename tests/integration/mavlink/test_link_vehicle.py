@@ -75,7 +75,7 @@ def _vehicle(link: VehicleLink, **options: object) -> MockVehicle:
 
 
 def test_offboard_flight_follow_velocity_hold_and_land(link: VehicleLink) -> None:
-    with _vehicle(link) as vehicle:
+    with _vehicle(link, estimate_error=0.0) as vehicle:  # exact: at rest to 0.2 m/s
         link.wait_vehicle(20.0)
         s = link.wait_until(lambda s: s.position_valid and s.origin is not None, 20.0)
         assert s.mode == "AUTO.LOITER" and not s.armed and s.landed_state == px4.LANDED_ON_GROUND
@@ -149,7 +149,7 @@ def test_offboard_without_a_stream_is_refused(link: VehicleLink) -> None:
 
 
 def test_takeoff_to_altitude_then_land(link: VehicleLink) -> None:
-    with _vehicle(link) as vehicle:
+    with _vehicle(link, estimate_error=0.0) as vehicle:  # exact: the height reached, to 0.3 m
         link.wait_vehicle(20.0)
         link.wait_until(lambda s: s.position_valid and s.origin is not None, 20.0)
         link.arm()

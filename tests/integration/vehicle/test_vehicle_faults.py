@@ -133,7 +133,7 @@ def test_blackout_in_flight_triggers_offboard_loss(probe: Probe) -> None:
 
 
 def test_pilot_takeover_forces_mode_and_holds(probe: Probe) -> None:
-    with vehicle_for(probe, paced=True, speed=10.0) as v:
+    with vehicle_for(probe, paced=True, speed=10.0, estimate_error=0.0) as v:  # exact: holds to 0.02 m
         connect(probe)
         with start_offboard(probe, (1.0, 0.0, -2.0)):
             wait_flight(v, lambda s: s.position_ned_m[2] < -3.0, 3.0, "s.position_ned_m[2] < -3.0")

@@ -250,7 +250,7 @@ def test_stream_wall_rate_is_capped_at_high_speed(probe: Probe) -> None:
 
 
 def test_global_position_consistent_with_local_ned(probe: Probe) -> None:
-    with vehicle_for(probe, speed=20.0, start_ned=(100.0, -50.0, 0.0)):
+    with vehicle_for(probe, speed=20.0, start_ned=(100.0, -50.0, 0.0), estimate_error=0.0):  # the projection, to 0.02 m
         connect(probe)
         gpi = probe.wait_for("GLOBAL_POSITION_INT", timeout_s=2.0)
         assert gpi is not None
@@ -289,7 +289,7 @@ def test_setpoint_frames_and_type_masks(probe: Probe, frame: int, mask: int, acc
 def test_non_finite_velocity_setpoint_is_proof_of_life_and_holds(probe: Probe) -> None:
     """PX4 forwards a setpoint whose used fields are NaN or inf (it is proof of life); its
     position controller finds it invalid and stops ("Failsafe: stop and wait")."""
-    with vehicle_for(probe, paced=True, speed=10.0) as v:
+    with vehicle_for(probe, paced=True, speed=10.0, estimate_error=0.0) as v:  # exact: stopped to 0.01 m/s
         connect(probe)
         with start_offboard(probe, (1.0, 0.0, -1.0)) as stream:
             wait_flight(v, lambda s: s.position_ned_m[2] < -2.0, 3.0, "s.position_ned_m[2] < -2.0")

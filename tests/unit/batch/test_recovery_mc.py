@@ -77,7 +77,7 @@ def test_the_vehicle_is_the_mocks(cfg):
     (arm, OFFBOARD, a climb and a dash) give the same true state, bit for bit."""
     start = (1.0, 2.0, 0.0)
     mine = MockDynamics(start)
-    theirs = MockVehicle(VehicleOptions(start_ned=start), clock=ManualClock())  # never started: no socket
+    theirs = MockVehicle(VehicleOptions(start_ned=start, estimate_error=0.0), clock=ManualClock())  # never started: no socket
     plan = [Setpoint(np.array([0.0, 0.0, -1.0]))] * 60 + [
         Setpoint(np.array([1.5, -0.5, 0.0]), np.array([3.0, 1.0, -2.0]), np.array([0.5, 0.0, 0.0]))] * 200
     for k, sp in enumerate(plan):
