@@ -40,6 +40,7 @@ from mission.flightdata.writer import DEFAULT_LIVE, LiveAddress, is_loopback, pa
 from mission.lifetime import supervise_children
 from mission.phases import Phase
 from sim.net import free_port, stop_process
+from sim.vehicle.options import VehicleOptions
 
 DEFAULT_CONFIG = Path(__file__).resolve().parents[1] / "configs" / "demo.toml"
 # The nominal path of a mission; HOLD and LAND are alternatives of the same step.
@@ -182,7 +183,8 @@ def robot_keys(folder: Path, pair: str) -> dict[str, tuple[Path, Path]]:
 
 def start_pair(config: str, name: str, zenoh_ep: str, speed: float, log_root: Path, stack: ExitStack,
                quiet: bool, carrier_kind: str = "sim", lockstep: bool = False, live: LiveAddress | None = None,
-               bus_key: Path | None = None, mav_key: Path | None = None, seed: int | None = 0) -> PairRun:
+               bus_key: Path | None = None, mav_key: Path | None = None, seed: int = 0,
+               estimate_error: float = VehicleOptions.estimate_error) -> PairRun:
     """Start the carrier (and its robot), the mock vehicle and the mission of one pair; register their cleanup.
     The vehicle learns the carrier's motion from the pair's Zenoh state (``--deck``): it stands on
     the carrier's deck until it takes off, and lands or crashes on it as it comes back. With
@@ -196,8 +198,8 @@ def start_pair(config: str, name: str, zenoh_ep: str, speed: float, log_root: Pa
     carrier's (``speed`` is then the pace after a participant is lost), and the mission and the
     carrier count their flight data's log times from one epoch (``--log-epoch-ns``); else wall
     clocks scaled by ``speed``. ``live``: the mission serves its flight to Foxglove there (``run --live``).
-    ``seed``: the vehicle's (its estimate errs as PX4 SITL's does, drawn from it: ``mock-vehicle --seed``);
-    None: its estimate is exact (``mock-vehicle --ideal``)."""
+    ``estimate_error``: the vehicle's estimate errs this many times as PX4 SITL's does (0: exact;
+    ``mock-vehicle --estimate-error``), drawn from ``seed`` (``mock-vehicle --seed``)."""
     cfg = load_config(config)
     pair = PairRun(name=name, log_dir=log_root / name)
     mav_port = free_port(socket.SOCK_DGRAM)
@@ -229,7 +231,7 @@ def start_pair(config: str, name: str, zenoh_ep: str, speed: float, log_root: Pa
                                            f"udpout:127.0.0.1:{mav_port}", "--speed", str(speed), "--start-ned",
                                            vehicle_start, "--deck", name, "--deck-height", str(deck_height),
                                            "--zenoh-connect", zenoh_ep, "--summary", str(pair.log_dir / "vehicle.json"),
-                                           *(["--ideal"] if seed is None else ["--seed", str(seed)]), *mav_signed, *mode),
+                                           "--estimate-error", str(estimate_error), "--seed", str(seed), *mav_signed, *mode),
                                stderr=err)
     stack.callback(stop_process, vehicle)
     live_args = [] if live is None else ["--live", f"{live.host}:{live.port}"]
@@ -253,12 +255,13 @@ def live_addresses(live: LiveAddress | None, pairs: int) -> list[LiveAddress | N
 
 def run_demo(config: str, speed: float, pairs: int, log_root: Path, plot_path: str | None, timeout_s: float,
              quiet: bool = True, progress: bool = True, carrier: str = "sim",
-             lockstep: bool = True, live: LiveAddress | None = None, signed: bool = True, seed: int | None = 0) -> tuple[int, list[dict]]:
+             lockstep: bool = True, live: LiveAddress | None = None, signed: bool = True, seed: int = 0,
+             estimate_error: float = VehicleOptions.estimate_error) -> tuple[int, list[dict]]:
     """Run ``pairs`` marsupial pairs, in lockstep on each mock vehicle's simulated time or at
     ``speed``; return the exit code and each pair's summary. ``live``: pair i serves its flight
     to Foxglove on ``live``'s port + i (topics ``/pair<i>/...``). ``signed``: the pairs sign their
     bus samples, and each vehicle and mission their MAVLink link, with throwaway keys
-    (:func:`throwaway_key`), deleted at the end. ``seed``: pair i's vehicle's is ``seed + i`` (None: exact estimates)."""
+    (:func:`throwaway_key`), deleted at the end. ``seed``: pair i's vehicle's is ``seed + i``; ``estimate_error``: its estimate's errors as a multiple of PX4 SITL's (0: exact)."""
     from mission.cli.run import plot as plot_command
 
     supervise_children()  # a demo killed outright takes its processes with it
@@ -273,7 +276,7 @@ def run_demo(config: str, speed: float, pairs: int, log_root: Path, plot_path: s
         router = open_session(ZenohSection(mode="router", listen=[zenoh_ep]))
         stack.callback(close_session, router)
         runs = [start_pair(config, f"pair{i}", zenoh_ep, speed, log_root, stack, quiet, carrier, lockstep, address, bus_key,
-                           mav_key, None if seed is None else seed + i)
+                           mav_key, seed + i, estimate_error)
                 for i, address in enumerate(live_addresses(live, pairs))]
         display = PairProgress([p.name for p in runs], tty=progress and sys.stdout.isatty())
         stack.callback(display.close)
@@ -499,11 +502,14 @@ def format_table(summaries: list[dict]) -> str:
 @click.option("--live", is_flag=False, flag_value=DEFAULT_LIVE, default=None, metavar="[HOST:PORT]",
               help=f"Serve each pair's flight live to Foxglove: pair i on PORT + i, topics /pair<i>/... "
               f"[{DEFAULT_LIVE} when given alone]. Watch at the real pace with --realtime --speed 1.")
+@click.option("--estimate-error", type=click.FloatRange(min=0.0), default=VehicleOptions.estimate_error,
+              show_default=True, metavar="SCALE",
+              help="The vehicles' estimates err this many times as PX4 SITL's does (1: PX4 SITL's, the closest to "
+                   "real PX4; 0: exact; mock-vehicle --estimate-error).")
 @click.option("--seed", type=int, default=0, show_default=True,
-              help="Pair i's vehicle draws its estimate's errors (PX4 SITL's) from seed SEED + i.")
-@click.option("--ideal", is_flag=True, help="The vehicles' estimates are exact (mock-vehicle --ideal).")
+              help="Pair i's vehicle draws its estimate's errors from seed SEED + i.")
 def demo(config: str, realtime: bool, speed: float, pairs: int, plot_path: str | None, log_root: str, timeout_s: float,
-         verbose_children: bool, carrier_kind: str, live: str | None, seed: int, ideal: bool) -> int:
+         verbose_children: bool, carrier_kind: str, live: str | None, estimate_error: float, seed: int) -> int:
     """Fly the whole system: mock PX4 vehicle + carrier simulator + mission controller.
 
     Each runs as its own process, talking over real UDP (MAVLink 2) and Zenoh on loopback; no
@@ -524,7 +530,7 @@ def demo(config: str, realtime: bool, speed: float, pairs: int, plot_path: str |
                    "the flights", err=True)
     code, summaries = run_demo(config, speed, pairs, Path(log_root), plot_path, timeout_s, quiet=not verbose_children,
                                progress=True, carrier=carrier_kind, lockstep=not realtime, live=address,
-                               seed=None if ideal else seed)
+                               seed=seed, estimate_error=estimate_error)
     click.echo("times count from the start of riding (t = 0, as in the paper)")
     click.echo(format_table(summaries))
     for s in summaries:

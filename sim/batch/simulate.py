@@ -18,6 +18,7 @@ from sim.batch import closed_loop, recovery, recovery_mc
 from sim.batch.closed_loop import ClosedLoopResult, as_flown, is_mission_config, model_from_config, random_scenarios, simulate_config
 from mission.phases import Phase
 from mission.plots import Trajectories, plot_legs, plot_run, record_trajectories
+from sim.vehicle.options import VehicleOptions
 
 log = logging.getLogger(__name__)
 
@@ -177,13 +178,16 @@ def mission_ok(flight: recovery.Flight) -> bool:
     return bool(held and (flight.docked or not returns) and flight.state.phase is Phase.DONE)
 
 
-def run_mission(cfg: Config, name: str, plot_path: str | None, as_json: bool) -> int:
+def run_mission(cfg: Config, name: str, plot_path: str | None, as_json: bool, estimate_error: float = 0.0,
+                seed: int = 0) -> int:
     """Fly the whole mission once, as configured (:func:`sim.batch.recovery.fly` with the
-    configured recovery course; one target or several, any final action); print the demo's
+    configured recovery course; one target or several, any final action), the vehicle's estimate
+    erring ``estimate_error`` times PX4 SITL's, drawn from ``seed`` (as ``marsupial demo``'s
+    mock vehicle does: the same seed, the same flight); print the demo's
     table, one column per leg (or the summary as JSON, ``simulated`` = :data:`MISSION_FLOWN`),
     draw each leg's figure; 0 when every leg held P1-P3 and the mission completed (a passenger
     that comes home docked again), else 1."""
-    flight = recovery.fly(cfg, recovery.configured())
+    flight = recovery.fly(cfg, recovery.configured(estimate_error, seed))
     s = {**flight.summary, "simulated": MISSION_FLOWN}
     ok = mission_ok(flight)
     written = plot_mission(flight, Path(plot_path), name) if plot_path else []
@@ -238,9 +242,16 @@ def format_case(w: dict) -> str:
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object (the summary) on stdout.")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), help="Write the paper's figures (PNG/PDF/SVG by suffix).")
 @click.option("--monte-carlo", "count", type=click.IntRange(min=1), help="Simulate N random scenarios that satisfy the assumptions.")
-@click.option("--seed", type=int, default=0, show_default=True, help="Random seed of --monte-carlo.")
+@click.option("--seed", type=int, default=0, show_default=True,
+              help="Random seed: of --monte-carlo's scenarios; of a mission flight's vehicle estimate errors (as "
+                   "`marsupial demo --seed`: pair 1's vehicle draws from SEED).")
+@click.option("--estimate-error", type=click.FloatRange(min=0.0), default=VehicleOptions.estimate_error,
+              show_default=True, metavar="SCALE",
+              help="A mission flight's vehicle estimate errs this many times as PX4 SITL's does (as `marsupial demo "
+                   "--estimate-error`; 0: exact).")
 @click.option("--no-progress", is_flag=True, help="Hide the progress bar.")
-def simulate(config: str, as_json: bool, plot_path: str | None, count: int | None, seed: int, no_progress: bool) -> int:
+def simulate(config: str, as_json: bool, plot_path: str | None, count: int | None, seed: int, no_progress: bool,
+             estimate_error: float) -> int:
     """Fly CONFIG (a TOML file, see configs/) in-process: a mission config as the whole mission, the
     paper's configs by the paper's closed loop; the output says which (JSON ``simulated``:
     "mission" or "paper"; the table's last line).
@@ -325,7 +336,7 @@ def simulate(config: str, as_json: bool, plot_path: str | None, count: int | Non
     if count is not None and is_recovery_config(cfg):
         return run_recovery_monte_carlo(cfg, Path(config).name, count, seed, show, plot_path, as_json)
     if flies_mission(cfg) and count is None:
-        return run_mission(cfg, Path(config).stem, plot_path, as_json)
+        return run_mission(cfg, Path(config).stem, plot_path, as_json, estimate_error, seed)
     if count is not None:
         report = run_monte_carlo(cfg, count, seed, show)
         if as_json:

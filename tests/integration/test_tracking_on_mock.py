@@ -1,5 +1,5 @@
-"""``configs/px4_sitl.toml`` on the mock vehicle as shipped (PX4 SITL's estimate errors, its
-default: :mod:`sim.vehicle.estimator`) predicts real PX4: its riding offset, last
+"""``configs/px4_sitl.toml`` on the mock vehicle with PX4 SITL's estimate errors
+(``estimate_error`` 1, :mod:`sim.vehicle.estimator`) predicts real PX4: its riding offset, last
 metre and hover speed within 30 % of PX4's (``tests/data/px4_hold_figures.json``, five real PX4
 SITL flights of the same file; docs/px4-hold.md), and it holds the dock and the target as PX4
 does. Lockstep: the same flights whatever the machine's load."""
@@ -24,7 +24,7 @@ def test_the_mock_predicts_px4_holding_the_dock_and_the_target(tmp_path):
     flights = []
     for seed in SEEDS:
         with flying_pair(tmp_path / f"s{seed}", config="px4_sitl.toml",
-                         vehicle={"faults": FaultOptions(seed=seed)}) as pair:
+                         vehicle={"estimate_error": 1.0, "faults": FaultOptions(seed=seed)}) as pair:
             out = pair.finish()
         assert out.phase == "DONE", (out.reason, out.detail)
         s = json.loads((pair.log_dir / "summary.json").read_text())

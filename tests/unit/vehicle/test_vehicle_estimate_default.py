@@ -1,5 +1,5 @@
-"""The mock vehicle as shipped is PX4-faithful: its estimate errs as PX4 SITL's does, seeded, unless
-a test of exactness asks for ``--ideal`` (``--estimate-error 0``)."""
+"""The mock vehicle's estimate: exact by default; with ``--estimate-error 1`` it errs as PX4 SITL's
+does, seeded (docs/mock-vehicle.md, "How close to PX4": why the default is not yet PX4's)."""
 from __future__ import annotations
 
 from typing import Any
@@ -21,9 +21,11 @@ def _options(monkeypatch: pytest.MonkeyPatch, *args: str) -> tuple[int, VehicleO
     return result.exit_code, got.get("options"), result.output
 
 
-def test_px4_sitls_errors_by_default_and_exact_when_asked(monkeypatch):
-    assert VehicleOptions().estimate_error == PX4_SITL_SCALE == 1.0
+def test_exact_by_default_and_px4_sitls_errors_when_asked(monkeypatch):
+    assert VehicleOptions().estimate_error == 0.0 and PX4_SITL_SCALE == 1.0
     code, opts, _ = _options(monkeypatch, "--seed", "7")
+    assert code == 0 and opts is not None and cli.describe_estimate(opts) == "exact estimate"
+    code, opts, _ = _options(monkeypatch, "--seed", "7", "--estimate-error", "1")
     assert code == 0 and opts is not None and cli.estimate_of(opts) == {"scale": 1.0, "seed": 7}
     assert cli.describe_estimate(opts) == "estimate errs 1x PX4 SITL's (seed 7)"
     for args in (("--ideal",), ("--estimate-error", "0"), ("--ideal", "--estimate-error", "0")):
