@@ -267,8 +267,12 @@ def run(config: str, mavlink_url: str | None, zenoh_listen: tuple[str, ...], zen
         click.echo(json.dumps(outcome.summary, indent=2))
     elif seen["riding_start_s"] is not None:
         click.echo("summary (times since the start of riding, t = 0):")
-        for key in ("separation_time_s", "carrier_target_distance_at_separation_m", "relative_input_jump_m_s",
-                    "final_passenger_target_distance_m", "min_carrier_target_distance_m", "p1", "p2", "p3"):
+        keys = ("separation_time_s", "carrier_target_distance_at_separation_m", "relative_input_jump_m_s",
+                "final_passenger_target_distance_m", "min_carrier_target_distance_m", "p1", "p2", "p3")
+        legs = outcome.summary.get("legs") or []
+        for k, leg in enumerate(legs):  # several targets: the figures are per leg (summary.json's top_level_figures)
+            click.echo(f"  leg {k + 1}: " + ", ".join(f"{key} {leg.get(key)}" for key in keys if key in leg))
+        for key in keys if not legs else ("min_carrier_target_distance_m",):
             click.echo(f"  {key:<42} {outcome.summary.get(key)}")
     if outcome.log_dir:
         click.echo(f"flight log: {outcome.log_dir}")
