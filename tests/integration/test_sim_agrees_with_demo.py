@@ -26,12 +26,11 @@ CASES = {
 }
 
 
-@pytest.fixture(scope="module", params=sorted(CASES))
-def both(request, tmp_path_factory):
+def fly_both(case: str, tmp_path_factory: pytest.TempPathFactory) -> tuple[dict, dict]:
     """(the demo's summary.json, simulate --json's summary) of one case's config."""
-    root = tmp_path_factory.mktemp(request.param)
-    path = root / f"{request.param}.toml"
-    path.write_text(CASES[request.param]())
+    root = tmp_path_factory.mktemp(case)
+    path = root / f"{case}.toml"
+    path.write_text(CASES[case]())
     cmd = [sys.executable, "-m", "mission.cli", "demo", "--config", str(path), "--log-root", str(root / "logs"),
            "--plot", "", "--timeout", "200"]
     out = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
@@ -39,10 +38,22 @@ def both(request, tmp_path_factory):
     return json.loads((root / "logs" / "pair0" / "summary.json").read_text()), simulated(path)
 
 
-def test_simulate_flies_the_demos_flight_leg_by_leg(both):
-    demo, sim = both
+def assert_agree(case: str, tmp_path_factory: pytest.TempPathFactory) -> None:
+    demo, sim = fly_both(case, tmp_path_factory)
     assert_same_flight(demo, sim)
     assert all(leg["contact"] is not None for leg in sim.get("legs") or [sim])  # every leg docked
+
+
+# One class per case: `--dist loadscope` schedules a class as its own unit, so the two flights
+# (60-80 s each) go to two workers instead of queueing on one.
+class TestCycleHover:
+    def test_simulate_flies_the_demos_flight_leg_by_leg(self, tmp_path_factory):
+        assert_agree("cycle-hover", tmp_path_factory)
+
+
+class TestCycleHoverPx4Tracking:
+    def test_simulate_flies_the_demos_flight_leg_by_leg(self, tmp_path_factory):
+        assert_agree("cycle-hover-px4-tracking", tmp_path_factory)
 
 
 def test_the_px4_tracking_terms_are_px4_sitls():
