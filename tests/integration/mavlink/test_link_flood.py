@@ -50,9 +50,11 @@ def test_a_flood_of_badly_signed_packets_logs_a_few_lines_and_counts_the_rest(ca
         refused = link.counters.rx_bad_signature
         lines = [r for r in caplog.records if r.name == mavlink.__name__]
         held = logflood.LIMITER.suppressed_total() - held_before
-        # pymavlink logs two lines per refused packet ("new stream", "sig mismatch"): on main 2 x refused
+        # pymavlink logs one or two lines per refused packet: "new stream" and "sig mismatch", or
+        # "old timestamp" / "bad new stream" alone (pymavlink's check_signature); a suite run under
+        # load once held 9783 lines for 9790 packets, one each. Either way all but a few are held.
         assert len(lines) <= 4 * logflood.BURST, (len(lines), refused)
-        assert held >= 2 * refused - len(lines) - 8 * logflood.BURST, (held, refused)
+        assert held >= refused - len(lines) - 8 * logflood.BURST, (held, refused)
         assert link.counters.log_lines_held >= held
         assert any("held back" in r.getMessage() for r in lines) or held < 2 * refused  # the pause is reported
         print(f"flood: {refused} of {FLOOD} read and refused, {len(lines)} lines logged, {held} held back")
