@@ -18,6 +18,8 @@ import math
 import os
 import tempfile
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -37,14 +39,15 @@ def _asked(t_s: float, ramp: float) -> float:
     return min(1.0, ramp * t_s)
 
 
-def ramp_once(params: dict[str, str], ramp: float, directory: Path) -> dict[str, Any]:
-    """One rover, ``params`` set through PX4_PARAM_<name>; its row (and trace, for the plot)."""
-    load = os.getloadavg()[0]
-    saved = {k: os.environ.get(f"PX4_PARAM_{k}") for k in params}
-    os.environ.update({f"PX4_PARAM_{k}": v for k, v in params.items()})
+@contextmanager
+def rover_in_offboard(params: dict[str, float], directory: Path, intervals_us: dict[int, int]) -> Iterator[tuple[Probe, SetpointStream]]:
+    """A fresh SIH Ackermann rover (airframe 10045, instance 1, its own network namespace) with
+    ``params`` (PX4_PARAM_<name>), armed in OFFBOARD on 30 Hz velocity setpoints (1 mm/s north
+    until the caller sets others), its messages at ``intervals_us`` ({message id: [us]}): the
+    probe on its offboard link and the setpoint stream. Everything stops on leaving."""
     ns = NetNamespace()
     rover = Px4Sitl(build_dir() or Path("."), directory / "rootfs", ns, instance=1, airframe=10045, speed_factor=1.08,
-                    out_dir=directory)
+                    out_dir=directory, params=params)
     try:
         rover.start()
         probe = ns.inside(lambda: Probe(bind="127.0.0.1:14541", vehicle=("127.0.0.1", 14581)))
@@ -52,36 +55,42 @@ def ramp_once(params: dict[str, str], ramp: float, directory: Path) -> dict[str,
             probe.start_heartbeats()
             wait_armable(probe, 60.0)
             stream = SetpointStream(probe, 1 / 30, velocity_ned_m_s=(1e-3, 0.0, 0.0), target=TARGET)
-            time.sleep(1.0)  # setpoints before OFFBOARD, as PX4 needs
-            probe.command(px4.MAV_CMD_SET_MESSAGE_INTERVAL, (32, 20000), target=TARGET)  # LOCAL_POSITION_NED 50 Hz
-            probe.command(px4.MAV_CMD_COMPONENT_ARM_DISARM, (1.0,), target=TARGET)
-            main, sub = px4.MODES["OFFBOARD"]
-            probe.command(px4.MAV_CMD_DO_SET_MODE, (px4.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | 128, int(main), int(sub)),
-                          target=TARGET)
-            if not probe.wait_mode("OFFBOARD", 5.0):
-                raise RuntimeError(f"the rover did not take OFFBOARD (mode {probe.mode()})")
-            mark, t0 = probe.mark(), time.monotonic()
-            while (now := time.monotonic() - t0) < 12.0:
-                ask = max(_asked(now, ramp), 1e-3)
-                stream.set(velocity_ned_m_s=(ask * math.cos(BEARING_RAD), ask * math.sin(BEARING_RAD), 0.0), target=TARGET)
-                time.sleep(0.02)
-            samples = [(tw - t0, m.time_boot_ms / 1e3, math.hypot(m.vx, m.vy))
-                       for i, tw, m in probe.history["LOCAL_POSITION_NED"] if i > mark]
+            try:
+                time.sleep(1.0)  # setpoints before OFFBOARD, as PX4 needs
+                for msg_id, interval in intervals_us.items():
+                    probe.command(px4.MAV_CMD_SET_MESSAGE_INTERVAL, (msg_id, interval), target=TARGET)
+                probe.command(px4.MAV_CMD_COMPONENT_ARM_DISARM, (1.0,), target=TARGET)
+                main, sub = px4.MODES["OFFBOARD"]
+                probe.command(px4.MAV_CMD_DO_SET_MODE, (px4.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | 128, int(main), int(sub)),
+                              target=TARGET)
+                if not probe.wait_mode("OFFBOARD", 5.0):
+                    raise RuntimeError(f"the rover did not take OFFBOARD (mode {probe.mode()})")
+                yield probe, stream
+            finally:
+                stream.stop()
         finally:
             probe.close()
     finally:
         rover.stop()
         ns.close()
-        for name, old in saved.items():
-            if old is None:
-                os.environ.pop(f"PX4_PARAM_{name}", None)
-            else:
-                os.environ[f"PX4_PARAM_{name}"] = old
+
+
+def ramp_once(params: dict[str, float], ramp: float, directory: Path) -> dict[str, Any]:
+    """One rover, ``params`` set through PX4_PARAM_<name>; its row (and trace, for the plot)."""
+    load = os.getloadavg()[0]
+    with rover_in_offboard(params, directory, {32: 20000}) as (probe, stream):  # LOCAL_POSITION_NED 50 Hz
+        mark, t0 = probe.mark(), time.monotonic()
+        while (now := time.monotonic() - t0) < 12.0:
+            ask = max(_asked(now, ramp), 1e-3)
+            stream.set(velocity_ned_m_s=(ask * math.cos(BEARING_RAD), ask * math.sin(BEARING_RAD), 0.0), target=TARGET)
+            time.sleep(0.02)
+        samples = [(tw - t0, m.time_boot_ms / 1e3, math.hypot(m.vx, m.vy))
+                   for i, tw, m in probe.history["LOCAL_POSITION_NED"] if i > mark]
     a = np.array(samples)
     t, speed = a[:, 0], a[:, 2]
     moving = np.flatnonzero(speed > 0.3)
     cruise = speed[(t > 4.0) & (t < 12.0)]
-    return {"params": " ".join(f"{k}={v}" for k, v in params.items()) or "airframe 10045",
+    return {"params": " ".join(f"{k}={v:g}" for k, v in params.items()) or "airframe 10045",
             "free_s": round(float(t[moving[0]]), 2) if moving.size else None,
             "peak_m_s": round(float(speed[t < 4.0].max()), 2), "cruise_mean": round(float(cruise.mean()), 3),
             "cruise_min": round(float(cruise.min()), 2), "cruise_max": round(float(cruise.max()), 2),
@@ -100,7 +109,7 @@ def main(sets: tuple[str, ...], ramp: float, plot: Path | None) -> None:
     rows = []
     with tempfile.TemporaryDirectory(dir=Path.cwd()) as scratch:  # not /tmp: PX4 gets a private one
         for k, text in enumerate(sets or DEFAULT_SETS):
-            params = dict(item.split("=", 1) for item in text.split())
+            params = {name: float(value) for name, value in (item.split("=", 1) for item in text.split())}
             click.echo(f"run {k + 1}/{len(sets or DEFAULT_SETS)}: {text or 'airframe 10045'} ...", err=True)
             directory = Path(scratch) / f"run{k}"
             directory.mkdir()

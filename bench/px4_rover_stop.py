@@ -35,27 +35,17 @@ from typing import Any
 import click
 import numpy as np
 
-from mission.mavlink import px4
-from sim.sitl.px4 import ROVER_PARAMS, NetNamespace, Px4Sitl, build_dir, unavailable_reason, wait_armable
+from bench.px4_rover_ramp import TARGET, rover_in_offboard
+from sim.sitl.px4 import ROVER_PARAMS, unavailable_reason
 from sim.testing.probe import Probe, SetpointStream
 
-TARGET = (2, 1)  # instance 1: sysid 2
 STOP_AT_S, TURN_AT_S, END_S = 9.0, 15.0, 27.0
 RAMP_M_S2 = 0.25
 STOP_SPEED_M_S = 1e-3
 
 
-def _fly(probe: Probe, speed: float, turn_speed: float) -> tuple[float, int]:
-    stream = SetpointStream(probe, 1 / 30, velocity_ned_m_s=(1e-3, 0.0, 0.0), target=TARGET)
-    time.sleep(1.0)  # setpoints before OFFBOARD, as PX4 needs
-    probe.command(px4.MAV_CMD_SET_MESSAGE_INTERVAL, (32, 20000), target=TARGET)  # LOCAL_POSITION_NED 50 Hz
-    probe.command(px4.MAV_CMD_SET_MESSAGE_INTERVAL, (30, 20000), target=TARGET)  # ATTITUDE 50 Hz
-    probe.command(px4.MAV_CMD_COMPONENT_ARM_DISARM, (1.0,), target=TARGET)
-    main, sub = px4.MODES["OFFBOARD"]
-    probe.command(px4.MAV_CMD_DO_SET_MODE, (px4.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | 128, int(main), int(sub)),
-                  target=TARGET)
-    if not probe.wait_mode("OFFBOARD", 5.0):
-        raise RuntimeError(f"the rover did not take OFFBOARD (mode {probe.mode()})")
+def _fly(probe: Probe, stream: SetpointStream, speed: float, turn_speed: float) -> tuple[float, int]:
+    """Ramp, stop, turn away (the module's three parts) on a rover in OFFBOARD; (t0 wall [s], mark)."""
     mark, t0 = probe.mark(), time.monotonic()
     while (now := time.monotonic() - t0) < END_S:
         if now < STOP_AT_S:
@@ -68,7 +58,6 @@ def _fly(probe: Probe, speed: float, turn_speed: float) -> tuple[float, int]:
             v = (-turn_speed, 0.0)
         stream.set(velocity_ned_m_s=(v[0], v[1], 0.0), target=TARGET)
         time.sleep(0.02)
-    stream.stop()
     return t0, mark
 
 
@@ -118,29 +107,9 @@ def analyse(pos: np.ndarray, att: np.ndarray) -> dict[str, Any]:
 def run_once(speed: float, turn_speed: float, directory: Path) -> dict[str, Any]:
     """One rover with the CI test's speed-loop parameters; its row."""
     load = os.getloadavg()[0]
-    saved = {k: os.environ.get(f"PX4_PARAM_{k}") for k in ROVER_PARAMS}
-    os.environ.update({f"PX4_PARAM_{k}": str(v) for k, v in ROVER_PARAMS.items()})
-    ns = NetNamespace()
-    rover = Px4Sitl(build_dir() or Path("."), directory / "rootfs", ns, instance=1, airframe=10045, speed_factor=1.08,
-                    out_dir=directory)
-    try:
-        rover.start()
-        probe = ns.inside(lambda: Probe(bind="127.0.0.1:14541", vehicle=("127.0.0.1", 14581)))
-        try:
-            probe.start_heartbeats()
-            wait_armable(probe, 60.0)
-            t0, _ = _fly(probe, speed, turn_speed)
-            pos, att = _series(probe, t0)
-        finally:
-            probe.close()
-    finally:
-        rover.stop()
-        ns.close()
-        for name, old in saved.items():
-            if old is None:
-                os.environ.pop(f"PX4_PARAM_{name}", None)
-            else:
-                os.environ[f"PX4_PARAM_{name}"] = old
+    with rover_in_offboard(ROVER_PARAMS, directory, {32: 20000, 30: 20000}) as (probe, stream):  # LOCAL_POSITION_NED, ATTITUDE 50 Hz
+        t0, _ = _fly(probe, stream, speed, turn_speed)
+        pos, att = _series(probe, t0)
     np.savez(directory.parent.parent / f"px4_rover_stop_{int(time.time())}.npz", pos=pos, att=att)  # for a re-analysis
     row = analyse(pos, att)
     row["load"] = round(load, 1)

@@ -4,7 +4,7 @@ collection, I/O, a busy CPU). The facts behind docs/recovery.md ("A stalled cont
 
 One flight per stall length: a fresh SIH quadrotor (its own network namespace) with the carrier
 simulator, ``configs/px4_sitl.toml`` coming home (``final_action = "return"``, the holdoff's
-settling relaxed as in ``tests/px4_sitl/test_px4_home.py``). ``after`` wall seconds into the
+settling relaxed: ``tests/px4_sitl/conftest.py``'s ``px4_return_config``). ``after`` wall seconds into the
 first approach the controller is stopped for ``stall`` wall seconds. Printed as one JSON line per
 flight: what PX4 did in the gap (the modes its HEARTBEATs showed on the GCS link, the longest gap
 between the setpoints it received as the mission's tlog has them, how far and how fast it flew),
@@ -31,27 +31,9 @@ from mission.mavlink import px4
 from mission.record import read_record
 from sim.net import wait_for
 from sim.sitl.px4 import build_dir, px4_flight, unavailable_reason
-from tests.conftest import CONFIGS
+from tests.px4_sitl.conftest import TEN_MINUTE_BATTERY, px4_return_config
 
 SPEED_FACTOR = 1.03
-BATTERY = {"SIM_BAT_DRAIN": 600.0}  # a 10-minute battery (SITL's own empties in 60 s: docs/recovery.md)
-RECOVERY = """
-[recovery]
-settle_radius_m = 0.6
-settle_speed_m_s = 0.5
-settle_dwell_s = 0.5
-"""
-
-
-def recovery_config(directory: Path) -> Path:
-    """configs/px4_sitl.toml coming home, with the holdoff's settling relaxed for PX4 SITL."""
-    text = (CONFIGS / "px4_sitl.toml").read_text()
-    assert 'final_action = "hold"' in text
-    path = directory / "px4_sitl_return.toml"
-    path.write_text(text.replace('final_action = "hold"', 'final_action = "return"\nat_target_s = 0.0') + RECOVERY)
-    return path
-
-
 def _events(text: str) -> list[str]:
     keep = ("stalled", "go-around", "approach", "contact", "recovery falls back", "abort", "vehicle left OFFBOARD",
             "no vehicle position read")
@@ -80,10 +62,10 @@ def fly(directory: Path, stall_s: float, after_s: float, who: str = "mission") -
     """One flight with one stall of ``who`` (``mission``: ``marsupial run``; ``carrier``: the
     carrier simulator); its JSON row."""
     directory.mkdir(parents=True, exist_ok=True)
-    config = recovery_config(directory)
+    config = px4_return_config(directory)
     t0 = time.monotonic()
     with px4_flight(directory / "f", config, build=build_dir() or Path("."), speed_factor=SPEED_FACTOR,
-                    px4_params=BATTERY) as f:
+                    px4_params=TEN_MINUTE_BATTERY) as f:
         mission = f.procs["mission"]
         wait_for(lambda: "phase APPROACH" in f.text("mission.out") or mission.poll() is not None, 200.0,
                  "the mission on the approach")

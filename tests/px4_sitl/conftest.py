@@ -30,6 +30,7 @@ from typing import Any
 import pytest
 
 from sim.sitl.px4 import unavailable_reason
+from tests.conftest import CONFIGS
 
 Job = Callable[[Path, Path], Any]
 JOBS: dict[str, tuple[Job, int]] = {}  # name -> (flight, PX4 instances it runs)
@@ -89,3 +90,26 @@ def px4_jobs(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFa
 
     with ThreadPoolExecutor(max_workers=PX4S_AT_ONCE, thread_name_prefix="px4-job") as pool:
         yield {name: pool.submit(fly, *JOBS[name], tmp_path_factory.mktemp(f"px4-{name}")) for name in names}
+
+
+# PX4 SITL's battery simulator empties in 60 s (and stops at 50 %): a recall would bring the
+# passenger home from the way out (docs/recovery.md, "The battery"). A 10-minute battery.
+TEN_MINUTE_BATTERY = {"SIM_BAT_DRAIN": 600.0}
+# The holdoff's settling, relaxed for PX4 SITL's tracking (its SIH estimate wanders 0.1-0.3 m):
+# the flights that use it are about failsafes and stalls, not about docking precision.
+RELAXED_SETTLING = """
+[recovery]
+settle_radius_m = 0.6
+settle_speed_m_s = 0.5
+settle_dwell_s = 0.5
+"""
+
+
+def px4_return_config(directory: Path) -> Path:
+    """configs/px4_sitl.toml coming home (``final_action = "return"``), the holdoff's settling
+    relaxed (:data:`RELAXED_SETTLING`), written to ``directory``."""
+    text = (CONFIGS / "px4_sitl.toml").read_text()
+    assert 'final_action = "hold"' in text
+    path = directory / "px4_sitl_return.toml"
+    path.write_text(text.replace('final_action = "hold"', 'final_action = "return"\nat_target_s = 0.0') + RELAXED_SETTLING)
+    return path

@@ -27,30 +27,10 @@ from mission.record import read_record
 from mission.time.clock import ScaledClock
 from sim.net import wait_for
 from sim.sitl.px4 import px4_flight
-from tests.conftest import CONFIGS
-from tests.px4_sitl.conftest import px4_job
+from tests.px4_sitl.conftest import TEN_MINUTE_BATTERY, px4_job, px4_return_config
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(300)]
 SPEED_FACTOR = 1.03
-# The holdoff's settling, relaxed for PX4 SITL's tracking (its SIH estimate wanders 0.1-0.3 m):
-# this flight is about the failsafe, not about docking precision.
-# PX4 SITL's battery simulator empties in 60 s (and stops at 50 %): the recall would bring the
-# passenger home from the way out (docs/recovery.md, "The battery"). A 10-minute battery here.
-BATTERY = {"SIM_BAT_DRAIN": 600.0}
-RECOVERY = """
-[recovery]
-settle_radius_m = 0.6
-settle_speed_m_s = 0.5
-settle_dwell_s = 0.5
-"""
-
-
-def _recovery_config(directory: Path) -> Path:
-    text = (CONFIGS / "px4_sitl.toml").read_text()
-    assert 'final_action = "hold"' in text
-    path = directory / "px4_sitl_return.toml"
-    path.write_text(text.replace('final_action = "hold"', 'final_action = "return"\nat_target_s = 0.0') + RECOVERY)
-    return path
 
 
 def _px4_heartbeat(m) -> bool:
@@ -71,8 +51,8 @@ def _read_back(f) -> dict:
 
 @px4_job("home")
 def _kill_during_the_approach(directory: Path, build: Path) -> dict:
-    config = _recovery_config(directory)
-    with px4_flight(directory / "f", config, build=build, speed_factor=SPEED_FACTOR, px4_params=BATTERY) as f:
+    config = px4_return_config(directory)
+    with px4_flight(directory / "f", config, build=build, speed_factor=SPEED_FACTOR, px4_params=TEN_MINUTE_BATTERY) as f:
         mission = f.procs["mission"]
         wait_for(lambda: "phase APPROACH" in f.text("mission.out") or mission.poll() is not None, 150.0,
                  "the mission on the approach")
@@ -133,9 +113,9 @@ def _rogue_home_then_kill(directory: Path, build: Path) -> dict:
     from mission.mavlink.env import mavlink
     from tests.integration.vehicle.test_vehicle_home_battery import set_home
 
-    config = _recovery_config(directory)
+    config = px4_return_config(directory)
     target = (24.0, 18.0)
-    with px4_flight(directory / "f", config, build=build, speed_factor=SPEED_FACTOR, px4_params=BATTERY) as f:
+    with px4_flight(directory / "f", config, build=build, speed_factor=SPEED_FACTOR, px4_params=TEN_MINUTE_BATTERY) as f:
         mission = f.procs["mission"]
         wait_for(lambda: "phase APPROACH" in f.text("mission.out") or mission.poll() is not None, 150.0,
                  "the mission on the approach")
