@@ -130,11 +130,11 @@ class KinematicCarrier:
 
     def __init__(self, cfg: Config, scenario: Scenario) -> None:
         if cfg.carrier.kinematics != "holonomic":
-            raise ConfigError("carrier.kinematics", cfg.carrier.kinematics, "the simulation of a mission that comes home "
+            raise ConfigError("carrier.kinematics", cfg.carrier.kinematics, "the mission simulation "
                               "drives the built-in holonomic carrier: must be \"holonomic\" to simulate it")
         if cfg.scenario.carrier_mode != "stop":
-            raise ConfigError("scenario.carrier_mode", cfg.scenario.carrier_mode, "the simulation of a mission that "
-                              "comes home drives a carrier that stops once the passenger has left: must be \"stop\" "
+            raise ConfigError("scenario.carrier_mode", cfg.scenario.carrier_mode, "the mission simulation "
+                              "drives a carrier that stops once the passenger has left: must be \"stop\" "
                               "to simulate it")
         self.cfg, self.scenario = cfg, scenario
         own = sim_backend(cfg)
