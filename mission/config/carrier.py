@@ -61,6 +61,14 @@ class CarrierMavlinkSection(Section):
         description=("[deg, deg, m] lat, lon, alt AMSL of the shared frame's origin; when set the offset comes from "
                      "the vehicle's EKF origin (GPS_GLOBAL_ORIGIN)"))
 
+    stand: Literal["position", "creep"] = Field("position",
+        description=("[-] how the vehicle is told to stand while its command is a stop: `position`: once it is at rest "
+                     "(below stand_speed_m_s) a position setpoint at the point where it came to rest, which PX4 holds "
+                     "(bench/px4_rover_stand.py: 0.4 m in 70 s); `creep`: a 1 mm/s velocity along its own heading, on "
+                     "which PX4's SIH rover crept or drifted 1.9-2.2 m in 70-80 s"))
+    stand_speed_m_s: float = Field(0.1, gt=0, le=1.0,
+        description="[m/s] a stopped vehicle slower than this is at rest: where it is then is held (stand = position)")
+
     _url_ok = field_validator("url")(check_mavlink_url)
 
 

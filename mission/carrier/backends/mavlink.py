@@ -23,9 +23,14 @@ zero until it wants motion, as PX4 needs before and during OFFBOARD)::
                                                                        again (Hold is ours, not a pilot's)
 
 A zero velocity setpoint does not stop a PX4 rover well (its bearing atan2(0, 0) = 0 steers it
-north while it brakes): "stop" is a tiny speed along its own heading while in OFFBOARD, and Hold
-only once the carrier is done and at rest, since PX4's Ackermann Hold drives back to the point
-where Hold began (docs/carrier.md).
+north while it brakes): "stop" is a tiny speed along its own heading while in OFFBOARD until it is
+at rest (``carrier.mavlink.stand_speed_m_s``), then, with ``carrier.mavlink.stand = "position"``, a
+position setpoint at the point where it came to rest, still in OFFBOARD, which PX4's rover position
+control holds (``AckermannOffboardMode.cpp``: a position setpoint becomes PX4's own rover position
+setpoint); the first command that is not a stop drives again (velocity setpoints). On the 1 mm/s
+alone PX4's SIH rover crept or drifted 1.9-2.2 m in 70-80 s (bench/px4_rover_stand.py). Hold only
+once the carrier is done and at rest, since PX4's Ackermann Hold drives back to the point where
+Hold began (docs/carrier.md).
 
 The vehicle is armed only when the carrier first has to move (the passenger rides), so a
 carrier waiting for its passenger is not armed for nothing. On close it asks for Hold.
@@ -91,6 +96,9 @@ class MavlinkCarrier:
         self._engaged = False
         self._override: str | None = None
         self._parked = False
+        self._stand = m.stand
+        self._stand_speed_m_s = m.stand_speed_m_s
+        self.stand_at: np.ndarray | None = None  # [m] (3,) in the vehicle's own local NED: where it is held at rest
         self.send_errors = 0
 
     # ------------------------------------------------------------------ state
@@ -125,6 +133,7 @@ class MavlinkCarrier:
             elif st.mode == FlightMode.HOLD:
                 log.info("carrier vehicle: driving again, leaving the Hold we asked for")
                 self._engaged = False  # OFFBOARD is asked again, as at the start
+            self.stand_at = None  # Hold held it at its own point: a new rest point is taken
             self._parked = False
 
     def park(self) -> None:
@@ -189,12 +198,16 @@ class MavlinkCarrier:
         v = np.zeros(3)
         n = min(2, cmd.setpoint_ned_m_s.shape[0])
         v[:n] = cmd.setpoint_ned_m_s[:n]  # a ground or surface vehicle: no vertical command
+        stop = math.hypot(v[0], v[1]) < STOP_SPEED_M_S
+        if not stop:
+            self.stand_at = None
+        setpoint = self._stand_setpoint() if stop and self._stand == "position" else None
         yaw = self.link.state.yaw_rad
-        if self.kind != "holonomic" and math.hypot(v[0], v[1]) < STOP_SPEED_M_S and yaw is not None:
+        if setpoint is None and self.kind != "holonomic" and stop and yaw is not None:
             # PX4's rover steers to atan2(v): a zero setpoint would turn it north while it brakes.
             v[0], v[1] = STOP_SPEED_M_S * math.cos(yaw), STOP_SPEED_M_S * math.sin(yaw)
         try:
-            self.link.send(Setpoint.velocity_only(v))
+            self.link.send(setpoint or Setpoint.velocity_only(v))
         except LinkError as exc:
             self.send_errors += 1
             if self.send_errors == 1:
@@ -202,6 +215,20 @@ class MavlinkCarrier:
             return
         if self._streaming_since is None:
             self._streaming_since = self.clock.now()
+
+    def _stand_setpoint(self) -> Setpoint | None:
+        """A stopped vehicle at rest: a position setpoint at the point where it came to rest (its own
+        local NED, zero velocity and acceleration); None while it still rolls (or has no estimate)."""
+        if self.stand_at is None:
+            st = self.link.state
+            pos, vel = st.position_ned_m, st.velocity_ned_m_s
+            if pos is None or vel is None or not st.position_valid:
+                return None
+            if math.hypot(float(vel[0]), float(vel[1])) >= self._stand_speed_m_s:
+                return None
+            self.stand_at = np.array(pos, dtype=float)
+            log.info("carrier vehicle: at rest, held at %s m (its local NED)", np.round(self.stand_at, 2).tolist())
+        return Setpoint.triple(self.stand_at, np.zeros(3), np.zeros(3))
 
     def lockstep_relay(self, session: object) -> Downstream:
         """In lockstep, a simulated PX4 (``mock-vehicle --lockstep``) steps with the carrier

@@ -276,6 +276,11 @@ def test_px4_rover_under_a_passenger_that_never_separates_stops_at_the_guard() -
                 d = _watch(rover, stepper, lambda: ctl.summary()["guard_active_ticks"] > 30
                            and np.linalg.norm(rover.snapshot().velocity_ned_m_s) < 1e-3, 60, "held at the guard")
                 assert ctl.mode is CarrierMode.APPROACHING
+                # at rest it is held where it came to rest (carrier.mavlink.stand = "position"), and stays
+                assert backend.stand_at is not None
+                rest, until_s = rover.snapshot().position_ned_m, clock.now() + 5.0
+                d += _watch(rover, stepper, lambda: clock.now() >= until_s, 20, "5 s standing")
+                assert np.linalg.norm(rover.snapshot().position_ned_m - rest) <= 0.05
         finally:
             passenger.close()
     assert min(d) >= RADIUS, min(d)
