@@ -7,8 +7,10 @@ from the dock point while RIDING; ``riding_2tick_m`` that held for two ticks: a 
 sample read late after a stall); the last metre (from first within 1 m of the target to
 ARRIVED); the hover speed (mean horizontal speed while the reference sits on the target, until
 the handover); the swing (farthest from the target after first coming within the arrival radius,
-until the mission handed the vehicle to PX4's Hold); the relative command jump at separation; the
-carrier's distance from the target at separation; where PX4's own Hold took it over the next 3 s
+until the mission handed the vehicle to PX4's Hold; with several targets the worst leg's, each
+against its own target while the reference sat on it); the relative command jump at separation;
+the carrier's distance from the target at separation against b c (``sep_err_m``; with several
+targets the worst leg's); where PX4's own Hold took it over the next 3 s
 (``hold_m``, farthest from the target; not ours to steer, reported beside); PX4's clock against
 wall time and the LOCAL_POSITION_NED rate that arrived [Hz of wall time]. A flight whose PX4 clock
 ran outside 0.97-1.06x wall time is marked ``clock``, one whose controller or carrier process
@@ -24,12 +26,13 @@ machine, not the loop) ``stall``; both are left out of the verdict. Needs root a
 ``--vehicle mock`` flies the same configuration on the mock vehicle (``marsupial demo``) for the
 comparison "the mock predicts PX4".
 
-``--rover`` flies the carrier as a second PX4, the SIH Ackermann rover (``configs/px4_sitl_cycle.toml``,
-``carrier.backend = "mavlink"``), with a 10-minute battery on the quadrotor (``SIM_BAT_DRAIN``
+``--rover`` flies the carrier as a second PX4, the SIH Ackermann rover (``configs/px4_sitl_cycle.toml``
+unless ``--config`` names another, ``carrier.backend = "mavlink"``), with a 10-minute battery on the quadrotor (``SIM_BAT_DRAIN``
 600 s: SITL's own empties in 60 s). A mission that comes home (``mission.final_action =
 "return"``) also prints one row per docking (each leg of several targets): its outcome, the
 approaches it took, the contact (horizontal error, horizontal and vertical relative speed), the
-carrier's speed on the approach, that leg's P1-P3, and whether PX4's home followed the carrier
+carrier's speed on the approach, that leg's P1-P3, the carrier's closest approach to the leg's target, its swing and separation
+error (per leg: against the leg's own target), and whether PX4's home followed the carrier
 (:meth:`sim.sitl.px4.Px4Flight.home_following`); the targets ``RECOVERY_TARGETS``.
 
 Usage: ``python -m bench.px4_flights [-n 5] [--config configs/px4_sitl.toml] [--set K=V ...]
@@ -67,7 +70,7 @@ CARRIER_MIN_SPEED_M_S = 1.0
 HOME_M = 1.0
 ROVER_BATTERY = {"SIM_BAT_DRAIN": 600.0}
 COLUMNS = ("rc", "p1", "p2", "p3", "riding_offset_m", "riding_2tick_m", "last_metre_s", "hover_m_s", "swing_m", "jump_m_s", "sep_err_m", "hold_m",
-           "clock", "stall_s", "position_hz", "wall_s")
+           "carrier_closest_m", "clock", "stall_s", "position_hz", "wall_s")
 
 
 def stall_s(log_dir: Path) -> float | None:
@@ -101,29 +104,51 @@ def riding_sustained_m(log_dir: Path) -> float | None:
     return round(float(np.minimum(off[:-1], off[1:]).max()), 3) if off.size > 1 else None
 
 
-def _row(s: dict[str, Any], rc: int, t0: float, directory: Path) -> dict[str, Any]:
-    sep = s.get("carrier_target_distance_at_separation_m")
+def swing_and_sep_err(s: dict[str, Any], sep_m: float) -> tuple[float | None, float | None]:
+    """The swing [m] and the separation error [m] of a flight's summary ``s``, ``sep_m`` [m] (b c)
+    the separation distance promised. One target: the swing is the farthest from the target after
+    first coming within the arrival radius (until the handover to Hold). Several targets (``legs``):
+    each leg against its own target, the worst leg: its farthest from the target while the
+    reference sat on it (``max_target_distance_at_target_m``, until it left to come home: a leg's
+    record goes on through the return, tens of metres away), and its carrier's distance from the
+    target at separation against ``sep_m``."""
+    legs = [leg for leg in s.get("legs") or [] if "p1" in leg]
+    if not legs:
+        sep = s.get("carrier_target_distance_at_separation_m")
+        return s.get("max_target_distance_after_arrival_m"), None if sep is None else round(abs(sep - sep_m), 4)
+    swings = [leg["max_target_distance_at_target_m"] for leg in legs if leg.get("max_target_distance_at_target_m") is not None]
+    errs = [abs(leg["carrier_target_distance_at_separation_m"] - sep_m) for leg in legs
+            if leg.get("carrier_target_distance_at_separation_m") is not None]
+    return (round(max(swings), 4) if swings else None), (round(max(errs), 4) if errs else None)
+
+
+def _row(s: dict[str, Any], rc: int, t0: float, directory: Path, sep_m: float = 8.0) -> dict[str, Any]:
+    swing, sep_err = swing_and_sep_err(s, sep_m)
     return {"rc": rc, "wall_s": round(time.monotonic() - t0, 1), "p1": s.get("p1"), "p2": s.get("p2"), "p3": s.get("p3"),
             "riding_offset_m": s.get("max_offset_before_separation_m"), "last_metre_s": s.get("last_metre_s"),
-            "hover_m_s": s.get("hover_speed_m_s"), "swing_m": s.get("max_target_distance_after_arrival_m"),
-            "jump_m_s": s.get("relative_input_jump_m_s"), "sep_err_m": None if sep is None else round(abs(sep - 8.0), 4),
+            "hover_m_s": s.get("hover_speed_m_s"), "swing_m": swing,
+            "jump_m_s": s.get("relative_input_jump_m_s"), "sep_err_m": sep_err,
             "position_hz": s.get("position_rate_hz"), "dir": str(directory)}
 
 
 
-def dockings(s: dict[str, Any]) -> list[dict[str, Any]]:
-    """One row per docking of a mission that came home (each leg of several targets)."""
+def dockings(s: dict[str, Any], sep_m: float = 8.0) -> list[dict[str, Any]]:
+    """One row per docking of a mission that came home (each leg of several targets), its swing and
+    separation error against its own target (:func:`swing_and_sep_err`) and the carrier's closest
+    approach to that target [m] (``closest_m``)."""
     legs = s.get("legs") or [{**s, "leg": 0, "outcome": s.get("recovery_outcome")}]
     rows = []
     for leg in legs:
         c = leg.get("contact") or {}
         speed = leg.get("carrier_speed_on_approach_m_s") or [None, None]
+        swing, sep_err = swing_and_sep_err({"legs": [leg]} if "p1" in leg else {}, sep_m)
         rows.append({"leg": leg.get("leg"), "outcome": leg.get("outcome"), "docked": bool(c), "attempts": c.get("attempts"),
                      "error_m": c.get("horizontal_error_m"), "h_speed_m_s": c.get("horizontal_relative_speed_m_s"),
                      "v_speed_m_s": c.get("vertical_relative_speed_m_s"), "carrier_min_m_s": speed[0],
                      "carrier_max_m_s": speed[1], "p1": leg.get("p1"), "p2": leg.get("p2"), "p3": leg.get("p3"),
                      "riding_offset_m": leg.get("max_offset_before_separation_m"), "jump_m_s": leg.get("relative_input_jump_m_s"),
-                     "deck_violations": leg.get("deck_violations")})
+                     "deck_violations": leg.get("deck_violations"), "closest_m": leg.get("min_carrier_target_distance_m"),
+                     "swing_m": swing, "sep_err_m": sep_err})
     return rows
 
 
@@ -149,9 +174,13 @@ def fly_once(config: Path, directory: Path, speed_factor: float, ground_truth_hz
     path = f.log_dir / "summary.json"
     s = json.loads(path.read_text()) if path.exists() else {}
     clock = clock_ratio(f.log_dir / "flight.tlog") if (f.log_dir / "flight.tlog").exists() else None
-    return {**_row(s, rc, t0, directory), "hold_m": round(after, 3), "clock": round((clock or {}).get("ratio", float("nan")), 3),
+    sep_m = cfg.law.b * cfg.law.c
+    carrier_path = directory / "carrier.json"
+    carrier = json.loads(carrier_path.read_text()) if rover and carrier_path.exists() else {}
+    return {**_row(s, rc, t0, directory, sep_m), "hold_m": round(after, 3), "clock": round((clock or {}).get("ratio", float("nan")), 3),
             "stall_s": stall_s(f.log_dir), "riding_2tick_m": riding_sustained_m(f.log_dir), "home": home,
-            "dockings": dockings(s) if s.get("docked_again") is not None or s.get("legs") else None}
+            "carrier_closest_m": carrier.get("closest_target_distance_m"),
+            "dockings": dockings(s, sep_m) if s.get("docked_again") is not None or s.get("legs") else None}
 
 
 def fly_mock(config: Path, directory: Path, speed: float, seed: int) -> dict[str, Any]:
@@ -164,7 +193,8 @@ def fly_mock(config: Path, directory: Path, speed: float, seed: int) -> dict[str
                            "--seed", str(seed)],
                           capture_output=True, text=True, cwd=ROOT)
     s = json.loads((directory / "pair0" / "summary.json").read_text())
-    return {**_row(s, proc.returncode, t0, directory), "hold_m": None, "clock": None, "stall_s": stall_s(directory / "pair0"),
+    law = load_config(config).law
+    return {**_row(s, proc.returncode, t0, directory, law.b * law.c), "hold_m": None, "clock": None, "stall_s": stall_s(directory / "pair0"),
             "riding_2tick_m": riding_sustained_m(directory / "pair0")}
 
 
@@ -188,8 +218,8 @@ def _fmt(value: Any) -> str:
 
 @click.command()
 @click.option("-n", "flights", type=int, default=5, show_default=True)
-@click.option("--config", type=click.Path(dir_okay=False, exists=True), default=str(ROOT / "configs" / "px4_sitl.toml"),
-              show_default=True)
+@click.option("--config", type=click.Path(dir_okay=False, exists=True), default=None,
+              help="[default: configs/px4_sitl.toml, configs/px4_sitl_cycle.toml with --rover]")
 @click.option("--set", "sets", multiple=True, metavar="SECTION.KEY=VALUE", help="Change the configuration (TOML value).")
 @click.option("--out", type=click.Path(file_okay=False), default=None, help="Where the flights' logs go (default a temp dir).")
 @click.option("--speed-factor", type=float, default=None, help="PX4_SIM_SPEED_FACTOR [default: 1.03, 1.08 with --rover]")
@@ -207,13 +237,14 @@ def _fmt(value: Any) -> str:
 @click.option("--record-figures", type=click.Path(dir_okay=False), default=None,
               help="Write the usable flights' riding offset, last metre and hover speed (and their means) to this "
                    "JSON file: tests/data/px4_hold_figures.json, what the mock is held to.")
-def main(flights: int, config: str, sets: tuple[str, ...], out: str | None, speed_factor: float | None, parallel: int,
+def main(flights: int, config: str | None, sets: tuple[str, ...], out: str | None, speed_factor: float | None, parallel: int,
          ground_truth: bool, vehicle: str, mock_speed: float, rover: bool, json_path: str | None,
          record_figures: str | None, compare_path: str | None) -> None:
     why = unavailable_reason() if vehicle == "px4" else None
     if why:
         raise click.ClickException(why)
     speed_factor = speed_factor if speed_factor is not None else 1.08 if rover else 1.03
+    config = config or str(ROOT / "configs" / ("px4_sitl_cycle.toml" if rover else "px4_sitl.toml"))
     base = Path(out or f"/tmp/px4-flights-{os.getpid()}")
     base.mkdir(parents=True, exist_ok=True)
     cfg_path = Path(config).resolve()  # the flight's processes run from the repository
@@ -249,7 +280,7 @@ def main(flights: int, config: str, sets: tuple[str, ...], out: str | None, spee
             row = fut.result()
             rows.append(row)
             verdict = "clock" if not clock_ok(row) else "stall" if not usable(row) else ("met" if meets(row) else "MISSED")
-            click.echo(f"{i:>6} " + " ".join(f"{_fmt(row[c]):>15}" for c in COLUMNS) + f"  {verdict}")
+            click.echo(f"{i:>6} " + " ".join(f"{_fmt(row.get(c)):>15}" for c in COLUMNS) + f"  {verdict}")
     if any(r.get("dockings") is not None for r in rows):
         print_dockings(rows)
     good = [r for r in rows if usable(r)]
@@ -267,7 +298,7 @@ def main(flights: int, config: str, sets: tuple[str, ...], out: str | None, spee
 
 
 DOCKING_COLUMNS = ("leg", "outcome", "attempts", "error_m", "h_speed_m_s", "v_speed_m_s", "carrier_min_m_s", "carrier_max_m_s",
-                   "p1", "p2", "p3", "riding_offset_m", "jump_m_s", "deck_violations")
+                   "p1", "p2", "p3", "riding_offset_m", "jump_m_s", "deck_violations", "closest_m", "swing_m", "sep_err_m")
 
 
 def print_dockings(rows: list[dict[str, Any]]) -> None:
