@@ -44,7 +44,7 @@ from mission.carrier.course import RecoveryCourse, away_heading_deg
 from mission.carrier.guard import GuardParams
 from mission.carrier.legs import Legs
 from mission.carrier.modes import CarrierMode, PassengerView, next_mode
-from mission.carrier.start import gentle_start
+from mission.carrier.start import gentle_start, speed_lead
 from mission.carrier.tracking import SpeedCalibration, Tracked, TrackingParams, heading_of, track
 from mission.config.carrier import KINDS
 from mission.config.schema import Config
@@ -137,7 +137,7 @@ class CarrierStepper:
                          np.asarray(cfg.mission.dock_offset_ned_m, dtype=float)[:self.dim],
                          first.law.separation_distance_m + cfg.mission.leg_start_margin_m)
         self.course = RecoveryCourse.from_lists(c.recovery_course, c.recovery_heading_deg, c.recovery_speed_m_s)
-        self.start_accel_m_s2 = c.start_accel_m_s2
+        self.start_accel_m_s2, self.start_lead_m_s = c.start_accel_m_s2, c.start_lead_m_s
         self.mode = CarrierMode.WAITING
         self.velocity_m_s = np.zeros(self.dim)  # [m/s] the filtered (and, holonomic, guarded) law command
         self._plan_velocity = np.zeros(self.dim)  # [m/s] the own plan after separation (Remark 1)
@@ -198,7 +198,7 @@ class CarrierStepper:
         # a robot that moves along its heading by its forward speed (its estimator's sideways wander is no motion)
         moving = (float(np.linalg.norm(v_meas[:2])) if self.tracking.kind == "holonomic" or state.yaw_rad is None
                   else abs(math.cos(yaw) * float(v_meas[0]) + math.sin(yaw) * float(v_meas[1])))
-        u = gentle_start(u, self.velocity_m_s, moving, self.start_accel_m_s2, dt_s)
+        u = speed_lead(gentle_start(u, self.velocity_m_s, moving, self.start_accel_m_s2, dt_s), moving, self.start_lead_m_s)
         active = False
         if self.tracking.kind == "holonomic":
             for guard in self.legs.guards:  # every target is hazardous, whichever leg is flown

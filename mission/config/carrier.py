@@ -154,6 +154,10 @@ class CarrierSection(Section):
         description=("[m/s^2] the carrier's gentle start: while it is measured slower than 0.15 m/s its command's "
                      "speed grows at most this fast (stiction: it breaks free at a low command, not leaping to a high "
                      "one); 0 off"))
+    start_lead_m_s: float = Field(0.0, ge=0, le=100,
+        description=("[m/s] once it moves (measured at 0.15 m/s or more), its command's speed is at most its measured "
+                     "speed plus this: a rover that crawls while its command runs on winds up its speed loop and leaps "
+                     "(mission.carrier.start); 0 off"))
     recovery_speed_m_s: float = Field(0.0, ge=0, le=100,
         description=("[m/s] while the passenger comes home (returns, holds off, approaches, docks) the carrier drives "
                      "its steady recovery course at this speed, after the legs of recovery_course; 0: it stops and waits "
