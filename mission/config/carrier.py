@@ -68,9 +68,6 @@ class CarrierMavlinkSection(Section):
                      "which PX4's SIH rover crept or drifted 1.9-2.2 m in 70-80 s"))
     stand_speed_m_s: float = Field(0.1, gt=0, le=1.0,
         description="[m/s] a stopped vehicle slower than this is at rest: where it is then is held (stand = position)")
-    stand_after_s: float = Field(0.0, ge=0, le=60,
-        description=("[s] stand = position: the vehicle is held only once it has been at rest this long (a short stop "
-                     "stays on the 1 mm/s stop: a rover held still starts again from static friction)"))
 
     _url_ok = field_validator("url")(check_mavlink_url)
 

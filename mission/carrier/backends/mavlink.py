@@ -27,8 +27,7 @@ north while it brakes): "stop" is a tiny speed along its own heading while in OF
 at rest (``carrier.mavlink.stand_speed_m_s``), then, with ``carrier.mavlink.stand = "position"``, a
 position setpoint at the point where it came to rest, still in OFFBOARD, which PX4's rover position
 control holds (``AckermannOffboardMode.cpp``: a position setpoint becomes PX4's own rover position
-setpoint), once it has been at rest ``carrier.mavlink.stand_after_s``; the first command that is
-not a stop drives again (velocity setpoints). On the 1 mm/s
+setpoint); the first command that is not a stop drives again (velocity setpoints). On the 1 mm/s
 alone PX4's SIH rover crept or drifted 1.9-2.2 m in 70-80 s (bench/px4_rover_stand.py). Hold only
 once the carrier is done and at rest, since PX4's Ackermann Hold drives back to the point where
 Hold began (docs/carrier.md).
@@ -99,8 +98,6 @@ class MavlinkCarrier:
         self._parked = False
         self._stand = m.stand
         self._stand_speed_m_s = m.stand_speed_m_s
-        self._stand_after_s = m.stand_after_s
-        self._rest_since: float | None = None  # [s] link clock: since when the stopped vehicle has been at rest
         self.stand_at: np.ndarray | None = None  # [m] (3,) in the vehicle's own local NED: where it is held at rest
         self.send_errors = 0
 
@@ -136,7 +133,7 @@ class MavlinkCarrier:
             elif st.mode == FlightMode.HOLD:
                 log.info("carrier vehicle: driving again, leaving the Hold we asked for")
                 self._engaged = False  # OFFBOARD is asked again, as at the start
-            self.stand_at, self._rest_since = None, None  # Hold held it at its own point: a new rest point is taken
+            self.stand_at = None  # Hold held it at its own point: a new rest point is taken
             self._parked = False
 
     def park(self) -> None:
@@ -203,7 +200,7 @@ class MavlinkCarrier:
         v[:n] = cmd.setpoint_ned_m_s[:n]  # a ground or surface vehicle: no vertical command
         stop = math.hypot(v[0], v[1]) < STOP_SPEED_M_S
         if not stop:
-            self.stand_at, self._rest_since = None, None
+            self.stand_at = None
         setpoint = self._stand_setpoint() if stop and self._stand == "position" else None
         yaw = self.link.state.yaw_rad
         if setpoint is None and self.kind != "holonomic" and stop and yaw is not None:
@@ -228,11 +225,6 @@ class MavlinkCarrier:
             if pos is None or vel is None or not st.position_valid:
                 return None
             if math.hypot(float(vel[0]), float(vel[1])) >= self._stand_speed_m_s:
-                self._rest_since = None
-                return None
-            now = self.clock.now()
-            self._rest_since = now if self._rest_since is None else self._rest_since
-            if now - self._rest_since < self._stand_after_s:
                 return None
             self.stand_at = np.array(pos, dtype=float)
             log.info("carrier vehicle: at rest, held at %s m (its local NED)", np.round(self.stand_at, 2).tolist())
