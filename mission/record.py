@@ -380,8 +380,11 @@ def figures(r: FlightRecord) -> dict[str, Any]:
         out["min_obstacle_clearance_m"] = _num(clear)
     rel_cmd = u_cmd - np.nan_to_num(v_c)
     first_sep = int(np.argmax(sep_phases)) if sep_phases.any() else None
+    if "separation_time_s" in info and info["separation_time_s"] is None:
+        first_sep = None  # the mission says this leg never separated (e.g. it aborted, then fell back)
     if first_sep is not None and first_sep > 0:
-        out["separation_time_s"] = _num(info.get("separation_time_s", r.t[first_sep]) - t0)
+        sep_t = info.get("separation_time_s")
+        out["separation_time_s"] = _num((r.t[first_sep] if sep_t is None else sep_t) - t0)
         anchor = info.get("anchor_ned_m")
         if anchor is not None:
             out["carrier_target_distance_at_separation_m"] = _num(norm(target - np.asarray(anchor)))
