@@ -7,8 +7,8 @@ DOCKED, HOME and FALLBACK (``mission.final_action = "return"``).
     NAVIGATING --the battery rule (energy home + reserve > what is left)--------------> RETURNING
     RETURNING  --reference on the holdoff point, moving with the carrier--------------> HOLDOFF
     HOLDOFF    --vehicle within the settle radius of the holdoff point for the dwell, its
-                 mean speed relative to it over the dwell (from its positions) within the
-                 settle speed, the carrier at least recovery.settle_carrier_speed_m_s fast--> APPROACH
+                 offset from it moving no more than settle speed x dwell (its positions),
+                 the carrier at least recovery.settle_carrier_speed_m_s fast----------------> APPROACH
                (attempts used up: FALLBACK)
     APPROACH   --glide path flown, vehicle meets the contact conditions---------------> DOCKED
                  (on the descent it goes down only lined up, else holds its height)
@@ -284,25 +284,23 @@ def holdoff(state, obs, m, events=()):
 
 def _settled(rec: RecoveryState, t: float, offset: np.ndarray | None, r: RecoveryModel) -> tuple[RecoveryState, bool]:
     """HOLDOFF's settle rule: the vehicle has kept within ``recovery.settle_radius_m`` of the
-    holdoff point for ``recovery.settle_dwell_s`` (and at least one tick), and over that time its
-    offset from the point (``offset`` [m] NED, None: not near) moved by no more than
-    ``recovery.settle_speed_m_s`` times the time: its mean velocity relative to the carrier, from
-    its positions. Not from its velocity: PX4's velocity estimate errs by ~0.25 m/s for seconds
-    (docs/px4-hold.md), and holding a position PX4 flies that error as an offset, steady, while
-    the velocity it reports keeps the whole error. A window whose mean speed is too high starts
-    again where it ends. The recovery state with the window (``settled_since_s``,
-    ``settled_offset_m``), and whether the vehicle has settled."""
+    holdoff point for ``recovery.settle_dwell_s`` (and at least one tick), and all that time its
+    offset from the point (``offset`` [m] NED, None: not near) stayed within
+    ``recovery.settle_speed_m_s`` times the dwell of where it was at the start: it moved with the
+    carrier, as its positions tell. Not from its velocity: PX4's velocity estimate errs by
+    ~0.25 m/s for seconds (docs/px4-hold.md), and holding a position PX4 flies that error as an
+    offset, steady, while the velocity it reports keeps the whole error. An offset that strays
+    further starts the dwell again from there. The recovery state with the dwell's start
+    (``settled_since_s``, ``settled_offset_m``), and whether the vehicle has settled."""
     if offset is None:
         return replace(rec, settled_since_s=None, settled_offset_m=None), False
     since, start = rec.settled_since_s, rec.settled_offset_m
     if since is None or start is None:
         return replace(rec, settled_since_s=t, settled_offset_m=offset.copy()), False
     span = t - since
-    if span < r.settle_dwell_s or span <= 0.0:
-        return rec, False
-    if float(norm(offset - start)) <= r.settle_speed_m_s * span:
-        return rec, True
-    return replace(rec, settled_since_s=t, settled_offset_m=offset.copy()), False
+    if float(norm(offset - start)) > r.settle_speed_m_s * max(r.settle_dwell_s, span):
+        return replace(rec, settled_since_s=t, settled_offset_m=offset.copy()), False
+    return rec, span >= r.settle_dwell_s and span > 0.0
 
 
 def go_around(state, obs, m, why: str, events=()):
