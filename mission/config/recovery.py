@@ -40,7 +40,8 @@ class RecoverySection(Section):
     settle_radius_m: float = Field(0.3, gt=0, le=10,
         description="[m] HOLDOFF -> APPROACH once the vehicle is this close to the holdoff point ...")
     settle_speed_m_s: float = Field(0.25, gt=0, le=5,
-        description="[m/s] ... and its velocity this close to the carrier's ...")
+        description="[m/s] ... and its offset from that point moving no more than this times the dwell (from its "
+                    "positions, not PX4's velocity estimate) ...")
     settle_dwell_s: float = Field(1.0, ge=0, le=60, description="[s] ... for this long")
     settle_carrier_speed_m_s: float = Field(0.0, ge=0, le=50,
         description=("[m/s] ... with the carrier moving at least this fast (0: any speed). A carrier that must first "

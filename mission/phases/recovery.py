@@ -6,8 +6,9 @@ DOCKED, HOME and FALLBACK (``mission.final_action = "return"``).
     ARRIVED    --task done (mission.at_target_s), or the battery rule-----------------> RETURNING
     NAVIGATING --the battery rule (energy home + reserve > what is left)--------------> RETURNING
     RETURNING  --reference on the holdoff point, moving with the carrier--------------> HOLDOFF
-    HOLDOFF    --vehicle within settle radius/speed of the holdoff point for the dwell,
-                 the carrier at least recovery.settle_carrier_speed_m_s fast------------> APPROACH
+    HOLDOFF    --vehicle within the settle radius of the holdoff point for the dwell, its
+                 offset from it moving no more than settle speed x dwell (its positions),
+                 the carrier at least recovery.settle_carrier_speed_m_s fast----------------> APPROACH
                (attempts used up: FALLBACK)
     APPROACH   --glide path flown, vehicle meets the contact conditions---------------> DOCKED
                  (on the descent it goes down only lined up, else holds its height)
@@ -257,19 +258,17 @@ def holdoff(state, obs, m, events=()):
     dock = dock_point(obs, m)
     h = holdoff_point(dock, rec.course, r.geometry)
     v_c = obs.carrier.velocity_ned_m_s
-    v = obs.vehicle
-    settled = (float(norm(v.position_ned_m - h)) <= r.settle_radius_m
-               and float(norm(v.velocity_ned_m_s - v_c)) <= r.settle_speed_m_s
-               and float(norm(v_c[:2])) >= r.settle_carrier_speed_m_s
-               and _carrier_unsteady(rec, obs, r, t) is None)
+    offset = obs.vehicle.position_ned_m - h
+    near = (float(norm(offset)) <= r.settle_radius_m
+            and float(norm(v_c[:2])) >= r.settle_carrier_speed_m_s
+            and _carrier_unsteady(rec, obs, r, t) is None)
     refused = carrier_unfit(obs, r.carrier_max_age_s)
     c = obs.carrier
     if refused is not None and not (c.age_bound_s is None or c.worst_age_s > r.carrier_max_age_s):
-        settled = False  # not trusted, or its token gone: wait (an age beyond the approach's budget refuses one)
-    since = (rec.settled_since_s if rec.settled_since_s is not None else t) if settled else None
-    rec = replace(rec, settled_since_s=since)
+        near = False  # not trusted, or its token gone: wait (an age beyond the approach's budget refuses one)
+    rec, settled = _settled(rec, t, offset if near else None, r)
     evs = tuple(events)
-    if since is not None and t - since >= r.settle_dwell_s:
+    if settled:
         # settled: an approach begins, or is refused (and counts) on a carrier state older than its budget
         if rec.attempts >= r.max_attempts:
             last = "" if refused is None else f"; the last refused: {refused}"
@@ -281,6 +280,27 @@ def holdoff(state, obs, m, events=()):
         state = enter(state, Phase.APPROACH, t)
         evs += (f"approach {rec.attempts} begins",)
     return _fly(state, obs, m, h, v_c, r.returning, rec, evs)
+
+
+def _settled(rec: RecoveryState, t: float, offset: np.ndarray | None, r: RecoveryModel) -> tuple[RecoveryState, bool]:
+    """HOLDOFF's settle rule: the vehicle has kept within ``recovery.settle_radius_m`` of the
+    holdoff point for ``recovery.settle_dwell_s`` (and at least one tick), and all that time its
+    offset from the point (``offset`` [m] NED, None: not near) stayed within
+    ``recovery.settle_speed_m_s`` times the dwell of where it was at the start: it moved with the
+    carrier, as its positions tell. Not from its velocity: PX4's velocity estimate errs by
+    ~0.25 m/s for seconds (docs/px4-hold.md), and holding a position PX4 flies that error as an
+    offset, steady, while the velocity it reports keeps the whole error. An offset that strays
+    further starts the dwell again from there. The recovery state with the dwell's start
+    (``settled_since_s``, ``settled_offset_m``), and whether the vehicle has settled."""
+    if offset is None:
+        return replace(rec, settled_since_s=None, settled_offset_m=None), False
+    since, start = rec.settled_since_s, rec.settled_offset_m
+    if since is None or start is None:
+        return replace(rec, settled_since_s=t, settled_offset_m=offset.copy()), False
+    span = t - since
+    if float(norm(offset - start)) > r.settle_speed_m_s * max(r.settle_dwell_s, span):
+        return replace(rec, settled_since_s=t, settled_offset_m=offset.copy()), False
+    return rec, span >= r.settle_dwell_s and span > 0.0
 
 
 def go_around(state, obs, m, why: str, events=()):

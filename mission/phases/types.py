@@ -219,6 +219,7 @@ class RecoveryState:
     carrier_t_s: float | None = None
     carrier_seen_s: float | None = None
     settled_since_s: float | None = None
+    settled_offset_m: np.ndarray | None = None  # HOLDOFF: the vehicle's offset from the holdoff point at settled_since_s
     contact: dict[str, Any] | None = None
     fallback_why: str = ""
     fallback_goal: np.ndarray | None = None

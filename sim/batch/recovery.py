@@ -229,7 +229,7 @@ class MockDynamics:
         for k in range(self.steps + 1, target + 1):
             command = commander.step(k * PHYSICS_DT_S, kin)
             if drift is not None:  # PX4's controller flies its estimate (sim.vehicle.estimator)
-                drift.advance(PHYSICS_DT_S)
+                drift.advance(PHYSICS_DT_S, commander.taken_off)
                 kin = physics_step(kin, command, limits, self.wind, PHYSICS_DT_S, (drift.position, drift.velocity))
             else:
                 kin = physics_step(kin, command, limits, self.wind, PHYSICS_DT_S)

@@ -19,7 +19,10 @@ Model: per axis two independent second-order Gauss-Markov processes (white noise
 first-order lags: smooth, as an estimator's errors are), the velocity error (standard deviation
 ``sigma_v`` [m/s], lag time constant ``tau_v`` [s]) and the position error (``sigma_p`` [m],
 ``tau_p`` [s]); the vertical sigmas are the horizontal ones times the
-``vertical_*`` factors. Seeded: the same seed gives the same errors. :data:`PX4_SITL` holds
+``vertical_*`` factors. Seeded: the same seed gives the same errors. The errors' clock starts
+when the vehicle first takes off (before that they hold their first draw): a flight whose
+start-up takes longer (a link's round trips to arm and switch mode) meets the same errors from
+the same moment of its flight. :data:`PX4_SITL` holds
 the values fitted to PX4 SITL; ``scale`` multiplies both sigmas (:data:`PX4_SITL_SCALE`, the mock's
 default: PX4 SITL's; 0: an exact estimate). Units SI, NED; time in simulated seconds.
 """
@@ -55,7 +58,8 @@ PX4_SITL_SCALE = 1.0  # the mock vehicle's default scale of PX4_SITL: PX4 SITL's
 
 class EstimateError:
     """Seeded errors of the estimate; :meth:`advance` once per physics step, then
-    :attr:`position` [m] and :attr:`velocity` [m/s] NED are what the estimate adds to the truth."""
+    :attr:`position` [m] and :attr:`velocity` [m/s] NED are what the estimate adds to the truth.
+    :attr:`started`: the errors' clock runs (from the first step flown)."""
 
     def __init__(self, scale: float, model: ErrorModel = PX4_SITL, seed: int | None = 0) -> None:
         if not scale >= 0:
@@ -68,15 +72,19 @@ class EstimateError:
         self._p = [_GaussMarkov2(s, m.tau_p_s, self._rng) for s in sigma_p]
         self.velocity: Vec3 = (self._v[0].value, self._v[1].value, self._v[2].value)
         self.position: Vec3 = (self._p[0].value, self._p[1].value, self._p[2].value)
+        self.started = False
 
     @property
     def enabled(self) -> bool:
         return self.model.sigma_v_m_s > 0.0 or self.model.sigma_p_m > 0.0
 
-    def advance(self, dt_s: float) -> None:
-        """One step of ``dt_s`` [s] (much shorter than the correlation times) of every error."""
-        if not self.enabled:
+    def advance(self, dt_s: float, flown: bool = True) -> None:
+        """One step of ``dt_s`` [s] (much shorter than the correlation times) of every error;
+        ``flown``: the vehicle has taken off (PX4's land detector). Until the first step flown the
+        errors keep their first draw."""
+        if not self.enabled or not (self.started or flown):
             return
+        self.started = True
         v, p = self._v, self._p
         self.velocity = (v[0].advance(dt_s), v[1].advance(dt_s), v[2].advance(dt_s))
         self.position = (p[0].advance(dt_s), p[1].advance(dt_s), p[2].advance(dt_s))

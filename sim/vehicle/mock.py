@@ -305,7 +305,7 @@ class MockVehicle:
         for k in range(self._steps + 1, target + 1):
             command = commander.step(k * PHYSICS_DT_S, kin if deck is None else deck.as_px4_sees(kin))
             if estimate is not None:  # PX4's controller flies its estimate (sim.vehicle.estimator)
-                estimate.advance(PHYSICS_DT_S)
+                estimate.advance(PHYSICS_DT_S, commander.taken_off)
                 moved = self._physics(kin, command, limits, wind, PHYSICS_DT_S, (estimate.position, estimate.velocity))
             else:
                 moved = self._physics(kin, command, limits, wind, PHYSICS_DT_S)

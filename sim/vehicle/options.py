@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from mission.mavlink import px4
+from sim.vehicle.estimator import PX4_SITL_SCALE
 from sim.vehicle.faults import FaultOptions
 from sim.vehicle.modes import TrajectorySetpoint
 from sim.vehicle.physics.deck import DeckSpec, Touchdown
@@ -57,7 +58,7 @@ class VehicleOptions:
     signing_key: bytes | None = None
     wind_ned_m_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
     position_noise_m: float = 0.0
-    estimate_error: float = 0.0  # [-] x PX4 SITL's estimate errors (sim.vehicle.estimator); exact by default (docs/mock-vehicle.md, "How close to PX4")
+    estimate_error: float = PX4_SITL_SCALE  # [-] x PX4 SITL's estimate errors (sim.vehicle.estimator); 0: exact (docs/mock-vehicle.md)
     statustext_needs_heartbeat: bool = True
     frame: str = "quadrotor"  # or "rover": MAV_TYPE_GROUND_ROVER, Ackermann kinematics (sim.vehicle.physics.rover)
     deck: DeckSpec | None = None

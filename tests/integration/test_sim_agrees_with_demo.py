@@ -4,7 +4,8 @@ Zenoh, in lockstep) fly the same flight, leg by leg: docked or not, the approach
 contact's error within 0.02 m, the separation within 0.1 s (tests/support/agreement.py). Here:
 configs/cycle.toml's hover copy (two targets), with its own tracking terms and with
 configs/px4_sitl.toml's; configs/recovery.toml, which flies px4_sitl.toml's loop, is checked on
-the flight of test_recovery_demo.py."""
+the flight of test_recovery_demo.py. The vehicle's estimate errs as the mock's does by default,
+from seed 0, except in the case that asks for an exact one (below)."""
 from __future__ import annotations
 
 import json
@@ -16,7 +17,7 @@ import pytest
 
 from mission.config.schema import load_config
 from tests.conftest import CONFIGS
-from tests.support.agreement import TRACKING_KEYS, assert_same_flight, hover_cycle, simulated, with_px4_tracking
+from tests.support.agreement import EXACT, SEEDED, TRACKING_KEYS, assert_same_flight, hover_cycle, simulated, with_px4_tracking
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(600)]  # a demo flight and a simulated one per config
 
@@ -24,6 +25,10 @@ CASES = {
     "cycle-hover": hover_cycle,
     "cycle-hover-px4-tracking": lambda: with_px4_tracking(hover_cycle()),
 }
+# The vehicle's estimate of each case. configs/cycle.toml's own tracking terms have no velocity-bias
+# terms and do not hold the dock point on PX4's estimate errors (seed 0: three go-arounds, off the
+# glide path's 0.3 m cone, then the fallback; docs/mock-vehicle.md): that case asks for an exact estimate.
+ESTIMATE = {"cycle-hover": EXACT, "cycle-hover-px4-tracking": SEEDED}
 
 
 def fly_both(case: str, tmp_path_factory: pytest.TempPathFactory) -> tuple[dict, dict]:
@@ -32,10 +37,10 @@ def fly_both(case: str, tmp_path_factory: pytest.TempPathFactory) -> tuple[dict,
     path = root / f"{case}.toml"
     path.write_text(CASES[case]())
     cmd = [sys.executable, "-m", "mission.cli", "demo", "--config", str(path), "--log-root", str(root / "logs"),
-           "--plot", "", "--timeout", "200"]
+           "--plot", "", "--timeout", "200", *ESTIMATE[case]]
     out = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stdout + out.stderr
-    return json.loads((root / "logs" / "pair0" / "summary.json").read_text()), simulated(path)
+    return json.loads((root / "logs" / "pair0" / "summary.json").read_text()), simulated(path, *ESTIMATE[case])
 
 
 def assert_agree(case: str, tmp_path_factory: pytest.TempPathFactory) -> None:

@@ -20,6 +20,12 @@ from tests.conftest import CONFIGS
 CONTACT_TOLERANCE_M = 0.02  # horizontal and height error at contact [m]
 SEPARATION_TOLERANCE_S = 0.1  # separation time from the leg's start of riding [s]
 
+#: The vehicle's estimate as both fly it: the mock's default errors (PX4 SITL's), drawn from a fixed
+#: seed; both draw them on a clock that starts at take-off (sim.vehicle.estimator).
+SEEDED = ("--seed", "0")
+#: An exact estimate, for a config that asks for one.
+EXACT = ("--estimate-error", "0")
+
 #: The tracking terms of a [mission] section (mission/core/tracking.py): the loop that holds the dock.
 TRACKING_KEYS = ("setpoint", "track_gain", "position_lead", "drag_ff_per_s", "integral_gain", "integral_window_m",
                  "velocity_bias_tau_s", "bias_compensation_s", "accel_lead_s", "damping_per_s",
@@ -42,11 +48,12 @@ def with_px4_tracking(text: str) -> str:
     return text.replace("[mission]\n", "[mission]\n" + terms, 1)
 
 
-def simulated(path: str | Path) -> dict[str, Any]:
-    """``marsupial simulate PATH --json``, called in-process: (exit code, summary)."""
+def simulated(path: str | Path, *estimate: str) -> dict[str, Any]:
+    """``marsupial simulate PATH --json ESTIMATE...`` (the vehicle estimate's options, as
+    :data:`SEEDED`), called in-process: its summary."""
     out = io.StringIO()
     with contextlib.redirect_stdout(out):
-        code = main(["simulate", str(path), "--json", "--no-progress"])
+        code = main(["simulate", str(path), "--json", "--no-progress", *estimate])
     assert code == 0, out.getvalue()[-2000:]
     return json.loads(out.getvalue())
 

@@ -17,6 +17,7 @@ from mission.phases import Phase
 from sim.batch.recovery import configured, fly
 from sim.batch.recovery_mc import format_report, monte_carlo, random_scenarios
 from tests.conftest import CONFIGS
+from tests.support.agreement import EXACT
 
 pytestmark = pytest.mark.timeout(600)  # whole missions in-process: seconds of CPU each, longer on a busy machine
 
@@ -45,7 +46,8 @@ def cycle(hover_file):
 def test_simulate_flies_every_leg_of_the_cycle(hover_file, tmp_path, capsys):
     """configs/cycle.toml: both legs separate at b c with no jump, reach their target, dock at the
     first attempt within 0.10 m; the table has a column per leg; each leg's figure is drawn."""
-    code = main(["simulate", str(hover_file), "--plot", str(tmp_path / "cycle.png"), "--no-progress"])
+    # an exact estimate: cycle.toml's own tracking terms go around on PX4's errors (docs/mock-vehicle.md)
+    code = main(["simulate", str(hover_file), "--plot", str(tmp_path / "cycle.png"), "--no-progress", *EXACT])
     out, err = capsys.readouterr()
     assert code == 0, out + err
     assert "lists 2 targets: simulating the whole mission, every leg" in err
@@ -63,7 +65,7 @@ def test_simulate_flies_every_leg_of_the_cycle(hover_file, tmp_path, capsys):
 
 
 def test_simulate_json_has_the_legs(hover_file, capsys):
-    code = main(["simulate", str(hover_file), "--json"])
+    code = main(["simulate", str(hover_file), "--json", *EXACT])  # cycle.toml's terms: as above
     summary = json.loads(capsys.readouterr().out)
     assert code == 0 and [leg["leg"] for leg in summary["legs"]] == [0, 1]
     assert summary["phase"] == "DONE" and all(leg["p1"] and leg["p2"] and leg["p3"] for leg in summary["legs"])
