@@ -18,7 +18,18 @@ os.environ["MAVLINK20"] = "1"
 
 _already_imported = "pymavlink.mavutil" in sys.modules
 
-from pymavlink import mavutil  # noqa: E402  (must follow the environment variable)
+# mavutil imports the MAVLink 1 "all" dialect unconditionally (for pyinstaller, in a try/except),
+# start-up time of every process for a module never used: MAVLINK20 is set above, so set_dialect
+# takes the MAVLink 2 one. A None in sys.modules makes that one import fail at once; removed after.
+_V10_ALL = "pymavlink.dialects.v10.all"
+_skip_v10 = not _already_imported and _V10_ALL not in sys.modules
+if _skip_v10:
+    sys.modules[_V10_ALL] = None  # type: ignore[assignment]
+try:
+    from pymavlink import mavutil  # noqa: E402  (must follow the environment variable)
+finally:
+    if _skip_v10 and sys.modules.get(_V10_ALL, 0) is None:
+        del sys.modules[_V10_ALL]
 
 if _already_imported and not mavutil.mavlink20():
     # Somebody imported mavutil before us without MAVLINK20: reload the dialect as MAVLink 2.
