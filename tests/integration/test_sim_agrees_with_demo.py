@@ -15,6 +15,7 @@ import tomllib
 import pytest
 
 from mission.config.schema import load_config
+from sim.net import stop_process
 from tests.conftest import CONFIGS
 from tests.support.agreement import TRACKING_KEYS, assert_same_flight, hover_cycle, simulated, with_px4_tracking
 
@@ -27,15 +28,21 @@ CASES = {
 
 
 def fly_both(case: str, tmp_path_factory: pytest.TempPathFactory) -> tuple[dict, dict]:
-    """(the demo's summary.json, simulate --json's summary) of one case's config."""
+    """(the demo's summary.json, simulate --json's summary) of one case's config: the simulation
+    flies in this process while the demo flies (in lockstep, so neither changes the other)."""
     root = tmp_path_factory.mktemp(case)
     path = root / f"{case}.toml"
     path.write_text(CASES[case]())
     cmd = [sys.executable, "-m", "mission.cli", "demo", "--config", str(path), "--log-root", str(root / "logs"),
            "--plot", "", "--timeout", "200"]
-    out = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
-    assert out.returncode == 0, out.stdout + out.stderr
-    return json.loads((root / "logs" / "pair0" / "summary.json").read_text()), simulated(path)
+    with subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as demo:
+        try:
+            sim = simulated(path)
+            stdout, stderr = demo.communicate(timeout=300)
+        finally:
+            stop_process(demo)  # (a no-op unless the simulation failed or the demo overran)
+    assert demo.returncode == 0, stdout + stderr
+    return json.loads((root / "logs" / "pair0" / "summary.json").read_text()), sim
 
 
 def assert_agree(case: str, tmp_path_factory: pytest.TempPathFactory) -> None:
