@@ -20,7 +20,7 @@ from mission.phases import Phase
 from mission.record import read_record
 from sim.batch.recovery import Scenario, fly
 from tests.conftest import CONFIGS
-from tests.support.agreement import assert_same_flight, simulated
+from tests.support.agreement import assert_same_flight, demo_while_simulated, simulation
 
 pytestmark = pytest.mark.slow
 
@@ -34,13 +34,21 @@ TIME_TOLERANCE_S = 0.1  # contact time, counted from the start of riding [s]
 
 
 @pytest.fixture(scope="module")
-def recovery_flight(tmp_path_factory):
-    """The demo of configs/recovery.toml: (the pair's log folder, the finished process); its plots
+def recovery_flown(tmp_path_factory):
+    """The demo of configs/recovery.toml and, flown while it flies, ``simulate --json`` of the same
+    config: (the pair's log folder, the finished demo, the simulation's summary); the demo's plots
     in the log root's parent (``flight.png``, ``flight-recovery.png``)."""
     root = tmp_path_factory.mktemp("recovery")
     cmd = [sys.executable, "-m", "mission.cli", "demo", "--config", str(RECOVERY), "--log-root", str(root / "logs"),
            "--plot", str(root / "flight.png"), "--timeout", "150"]
-    return root / "logs" / "pair0", subprocess.run(cmd, capture_output=True, text=True, timeout=240)
+    out, sim = demo_while_simulated(cmd, RECOVERY, 240)
+    return root / "logs" / "pair0", out, sim
+
+
+@pytest.fixture(scope="module")
+def recovery_flight(recovery_flown):
+    """The demo of configs/recovery.toml: (the pair's log folder, the finished process)."""
+    return recovery_flown[:2]
 
 
 def test_the_passenger_docks_on_the_moving_carrier_at_the_first_attempt(recovery_flight):
@@ -112,13 +120,13 @@ def test_the_simulation_docks_as_the_lockstep_demo_does(recovery_flight, tmp_pat
     assert (tmp_path / "from-mcap-recovery.png").stat().st_size > 10_000
 
 
-def test_simulate_flies_the_demos_flight(recovery_flight):
+def test_simulate_flies_the_demos_flight(recovery_flown):
     """``marsupial simulate configs/recovery.toml --json`` flies the mission (not the paper's law
     alone) and its flight is the demo's: docked at the same attempt, the contact within 0.02 m,
     the separation within 0.1 s (tests/support/agreement.py); the carrier kept out of the guard."""
-    log, out = recovery_flight
+    log, out, simulated = recovery_flown
     assert out.returncode == 0, out.stdout + out.stderr
-    sim = simulated(RECOVERY)
+    sim = simulation(simulated)
     assert_same_flight(json.loads((log / "summary.json").read_text()), sim)
     cfg = load_config(RECOVERY)
     assert sim["min_carrier_target_distance_m"] >= cfg.law.b * cfg.law.c - cfg.carrier.p3_margin_m - 1e-3

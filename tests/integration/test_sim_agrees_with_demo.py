@@ -8,16 +8,15 @@ the flight of test_recovery_demo.py."""
 from __future__ import annotations
 
 import json
-import subprocess
 import sys
 import tomllib
 
 import pytest
 
 from mission.config.schema import load_config
-from sim.net import stop_process
 from tests.conftest import CONFIGS
-from tests.support.agreement import TRACKING_KEYS, assert_same_flight, hover_cycle, simulated, with_px4_tracking
+from tests.support.agreement import (TRACKING_KEYS, assert_same_flight, demo_while_simulated, hover_cycle,
+                                    simulation, with_px4_tracking)
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(600)]  # a demo flight and a simulated one per config
 
@@ -35,14 +34,9 @@ def fly_both(case: str, tmp_path_factory: pytest.TempPathFactory) -> tuple[dict,
     path.write_text(CASES[case]())
     cmd = [sys.executable, "-m", "mission.cli", "demo", "--config", str(path), "--log-root", str(root / "logs"),
            "--plot", "", "--timeout", "200"]
-    with subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as demo:
-        try:
-            sim = simulated(path)
-            stdout, stderr = demo.communicate(timeout=300)
-        finally:
-            stop_process(demo)  # (a no-op unless the simulation failed or the demo overran)
-    assert demo.returncode == 0, stdout + stderr
-    return json.loads((root / "logs" / "pair0" / "summary.json").read_text()), sim
+    out, sim = demo_while_simulated(cmd, path, 300)
+    assert out.returncode == 0, out.stdout + out.stderr
+    return json.loads((root / "logs" / "pair0" / "summary.json").read_text()), simulation(sim)
 
 
 def assert_agree(case: str, tmp_path_factory: pytest.TempPathFactory) -> None:

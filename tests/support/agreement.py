@@ -7,11 +7,13 @@ import contextlib
 import io
 import json
 import re
+import subprocess
 from pathlib import Path
 from typing import Any
 
 from mission.cli import main
 from mission.config.schema import load_config
+from sim.net import stop_process
 from tests.conftest import CONFIGS
 
 # What the two may differ by (docs/recovery.md): the wire's float32 rounding and the moment the
@@ -49,6 +51,32 @@ def simulated(path: str | Path) -> dict[str, Any]:
         code = main(["simulate", str(path), "--json", "--no-progress"])
     assert code == 0, out.getvalue()[-2000:]
     return json.loads(out.getvalue())
+
+
+def demo_while_simulated(cmd: list[str], path: str | Path,
+                         timeout_s: float) -> tuple[subprocess.CompletedProcess[str], dict[str, Any] | AssertionError]:
+    """Run the demo command ``cmd`` and, while it flies, :func:`simulated` of ``path`` in this
+    process (the demo in lockstep, the simulation in-process: neither changes the other's flight);
+    (the finished demo, the simulation's summary or its failure, for the test that checks it to
+    raise: the demo's own tests go on). ``timeout_s``: the demo's, wall clock."""
+    with subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as demo:
+        try:
+            sim: dict[str, Any] | AssertionError
+            try:
+                sim = simulated(path)
+            except AssertionError as exc:
+                sim = exc
+            stdout, stderr = demo.communicate(timeout=timeout_s)
+        finally:
+            stop_process(demo)  # (a no-op unless the demo overran or the test was interrupted)
+    return subprocess.CompletedProcess(cmd, demo.returncode, stdout, stderr), sim
+
+
+def simulation(sim: dict[str, Any] | AssertionError) -> dict[str, Any]:
+    """The simulation's summary from :func:`demo_while_simulated`; its failure raised here."""
+    if isinstance(sim, AssertionError):
+        raise sim
+    return sim
 
 
 def legs(summary: dict[str, Any]) -> list[dict[str, Any]]:
