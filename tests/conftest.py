@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 import os
-from collections.abc import Mapping
+from collections.abc import Mapping, MutableMapping
 from pathlib import Path
 
 import pytest
@@ -28,6 +28,26 @@ def xdist_port_lane(env: Mapping[str, str]) -> str | None:
         return None
     return f"{int(worker[2:])}/{int(count)}"
 
+
+def keep_bytecode(env: MutableMapping[str, str], cache: Path) -> bool:
+    """With ``PYTHONDONTWRITEBYTECODE`` set (no ``.pyc`` beside the sources) every command a test
+    starts (``python -m mission.cli ...``: hundreds in a run) would compile the whole package from
+    source again; keep its bytecode out of the source tree instead, in ``cache``
+    (``PYTHONPYCACHEPREFIX``). Nothing changes when bytecode is written anyway or a prefix is
+    already chosen. True when ``env`` was changed."""
+    if not env.get("PYTHONDONTWRITEBYTECODE") or env.get("PYTHONPYCACHEPREFIX"):
+        return False
+    del env["PYTHONDONTWRITEBYTECODE"]
+    env["PYTHONPYCACHEPREFIX"] = str(cache)
+    return True
+
+
+def user_cache() -> Path:
+    """This user's cache folder for the commands' bytecode (private: ``~/.cache``, not ``/tmp``)."""
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "marsupial" / "pycache"
+
+
+keep_bytecode(os.environ, user_cache())
 
 _lane = xdist_port_lane(os.environ)
 if _lane is not None:  # parallel workers (and the commands they start) never pick the same port

@@ -8,6 +8,7 @@ import json
 import logging
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 import numpy as np
@@ -17,14 +18,18 @@ from mission.config.schema import Config, load_config
 from sim.batch import closed_loop, recovery, recovery_mc
 from sim.batch.closed_loop import ClosedLoopResult, as_flown, is_mission_config, model_from_config, random_scenarios, simulate_config
 from mission.phases import Phase
-from mission.plots import Trajectories, plot_legs, plot_run, record_trajectories
 from sim.vehicle.options import VehicleOptions
+
+if TYPE_CHECKING:
+    from mission.plots import Trajectories
 
 log = logging.getLogger(__name__)
 
 
 def trajectories_of(result: ClosedLoopResult, cfg: Config, i: int = 0, title: str = "") -> Trajectories:
     """The figure input of scenario ``i`` of a simulation result."""
+    from mission.plots import Trajectories  # matplotlib is loaded only to draw
+
     T = result.separation_time_s[i]
     return Trajectories(
         t=result.t, x_c=result.x_c[:, i], x_p=result.x_p[:, i], target=result.target[i],
@@ -212,6 +217,8 @@ def plot_mission(flight: recovery.Flight, path: Path, name: str) -> list[Path]:
     """The flown mission's figures: each leg's paper figure (``<stem>-leg<k>``) for several
     targets, else the paper's figure at ``path``; and the recovery's figure
     (``<stem>-recovery``) of a passenger that came home."""
+    from mission.plots import plot_legs, plot_run, record_trajectories
+
     written = plot_legs(flight.record, path, name)
     if not written:
         tr = record_trajectories(flight.record, f"{name}: separation and navigation")
@@ -359,6 +366,8 @@ def simulate(config: str, as_json: bool, plot_path: str | None, count: int | Non
         result = simulate_config(cfg, progress=update)
     summary = {**result.summary(), "simulated": PAPER_FLOWN}
     if plot_path:
+        from mission.plots import plot_run
+
         out = plot_run(trajectories_of(result, cfg, title=f"{Path(config).stem}: separation and navigation"), plot_path)
         log.info("wrote %s", out)
     if as_json:
