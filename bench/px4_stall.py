@@ -108,6 +108,7 @@ def fly(directory: Path, stall_s: float, after_s: float, who: str = "mission") -
         "recovery_outcome": s.get("recovery_outcome"), "attempts": contact.get("attempts"),
         "contact_error_m": contact.get("horizontal_error_m"), "contact_speed_m_s": contact.get("horizontal_relative_speed_m_s"),
         "deck_violations": s.get("deck_violations"), "max_phase_switch_jump_m_s": s.get("max_phase_switch_jump_m_s"),
+        "max_stall_command_offset_m_s": s.get("max_stall_command_offset_m_s"),
         "loop_overruns": s.get("loop_overruns"), "wall_s": round(time.monotonic() - t0, 1), "dir": str(directory),
     }
 

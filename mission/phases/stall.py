@@ -13,7 +13,10 @@ distance: a jump in the velocity it flies). So:
     a gap between two ticks longer than STALL_S, in a flying phase (not seated on a deck):
       JOIN, SEPARATED .. ARRIVED, RETURNING .. FALLBACK, HOME --the reference (x_ref, u_ref;
           after separation e_ref) restarts on the vehicle's position and velocity
-      RIDING, TRANSIT --the reference stays on the dock point (the law's equilibrium)
+      RIDING, TRANSIT --the reference stays on the dock point (the law's equilibrium); the
+          carrier's state the loop finds may be older than mission.carrier_timeout_s (the feed's
+          thread stalled too): the ride goes on, on the dock point predicted with its age, and
+          the latch waits for a fresh one (mission.phases.machine)
       every one --the last command (u_cmd, the safety filter's previous one) is the vehicle's
           velocity, so the command goes on from what the vehicle does, within the passenger's
           acceleration limit per tick; the dwell being timed (JOIN's, the holdoff's) restarts
