@@ -253,7 +253,7 @@ def _failsafes(state: MissionState, obs: Observation, m: MissionModel) -> tuple[
         return new, Decision(setpoint=None, events=(f"abort: vehicle left OFFBOARD ({v.mode}); not fighting it",))
     if ph not in (Phase.PREFLIGHT,) and v is not None and not v.position_valid:
         if TELEMETRY_SILENT_S < v.position_age_s <= m.heartbeat_timeout_s and stall.settling(state, t):
-            return state, stall.unread(state)  # the link's thread stalled with the loop: not read yet
+            return state, stall.unread(state, t)  # the link's thread stalled with the loop: not read yet
         if TELEMETRY_SILENT_S < v.position_age_s <= m.heartbeat_timeout_s:
             # The position stream went quiet (a link blackout, not an estimator failure): hover
             # until the heartbeat timeout decides whether the vehicle is lost.
