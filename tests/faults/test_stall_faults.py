@@ -31,6 +31,7 @@ from typing import Any
 import pytest
 
 from mission.config.schema import load_config
+from mission.model import mission_model
 from mission.phases.stall import SETTLE_S as SETTLE_S_MISSION, STALL_S as STALL_S_MISSION
 from tests.conftest import CONFIGS
 from tests.faults.procs import assert_log_complete, assert_safe_end, flight, wait_for
@@ -159,6 +160,9 @@ def test_stalls_while_riding_and_at_the_target_and_the_mission_carries_on(tmp_pa
     path = tmp_path / "stalls.toml"
     path.write_text(text.replace("carrier_timeout_s = 0.5\n", f"carrier_timeout_s = 0.5\ncarrier_lost_s = {LOST_S}\n"))
     cfg = load_config(path)
+    model = mission_model(cfg)
+    assert model.command_safety.max_accel_m_s2 is not None
+    ramp = model.command_safety.max_accel_m_s2 * model.dt_s  # [m/s] the command's largest change a tick
     with flight(tmp_path, "stalls", config=path, speed=RIDE_SPEED, mission_verbose=True,
                 vehicle_args=("--param", "COM_OF_LOSS_T=1.5")) as f:
         for who, phase, after_s in STALLS:
@@ -226,7 +230,9 @@ def test_stalls_while_riding_and_at_the_target_and_the_mission_carries_on(tmp_pa
         for r in [r for r in rows[i:] if r["t_s"] - t0 < 0.2]:  # the settling, as on the approach
             cmd, vel = (r["u_cmd_n"], r["u_cmd_e"], r["u_cmd_d"]), (r["v_p_n"], r["v_p_e"], r["v_p_d"])
             assert math.dist(cmd, vel) <= 0.1, (r["t_s"], cmd, vel)
+        # then it ramps back to the law's command at most at the command's acceleration limit a
+        # tick (riding, measured: 0.060 m/s a tick for 0.2 s after the settling), never faster
         j = next(n for n in range(i, len(rows)) if rows[n]["t_s"] - t0 >= 0.2)
         for a, b in zip(rows[j:j + 100], rows[j + 1:j + 101]):
             step = math.dist((a["u_cmd_n"], a["u_cmd_e"], a["u_cmd_d"]), (b["u_cmd_n"], b["u_cmd_e"], b["u_cmd_d"]))
-            assert step <= JUMP_M_S, (b["t_s"], step)
+            assert step <= ramp + 1e-3, (b["t_s"], step, ramp)
