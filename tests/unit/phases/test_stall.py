@@ -43,7 +43,7 @@ class UnreadWorld(FakeWorld):
         return dataclasses.replace(st, position_rx_s=st.t_s - GAP_S, position_valid=False)
 
 
-def fly_with_a_stall(cfg, phase: Phase, after_s: float, unread_ticks: int = 0):
+def fly_with_a_stall(cfg, phase: Phase, after_s: float, unread_ticks: int = 0, recorder=None):
     """Fly the mission; ``after_s`` [s] into ``phase`` the clock jumps ``GAP_S`` between two ticks
     (the fake vehicle flies on at its last velocity meanwhile, the carrier drives on). Returns the
     outcome, the tick reports, the controller, and the vehicle's (velocity [m/s], position [m])
@@ -66,7 +66,8 @@ def fly_with_a_stall(cfg, phase: Phase, after_s: float, unread_ticks: int = 0):
         st = FakeWorld.state.fget(world)
         after.append((st.velocity_ned_m_s.copy(), st.position_ned_m.copy()))
 
-    controller = MissionController(cfg, world, world.feed, clock, publisher=world, on_tick=tick, command_thread=False)
+    controller = MissionController(cfg, world, world.feed, clock, publisher=world, on_tick=tick, command_thread=False,
+                                   recorder=recorder)
     outcome = controller.run()
     assert seen["done"], f"never {after_s} s into {phase}"
     return outcome, reports, controller, after
@@ -253,3 +254,18 @@ def test_a_carrier_quiet_for_good_while_riding_is_lost_after_carrier_lost_s(cfg)
     m = cfg.mission
     assert aborted - world.quiet[0] == pytest.approx(m.carrier_timeout_s + m.carrier_lost_s, abs=0.05)
     assert all(r.phase is Phase.RIDING for r in reports if world.quiet[0] <= r.t_s < aborted)
+
+
+def test_the_summary_measures_the_stall_apart_from_the_phase_switches(cfg, tmp_path):
+    """The go-around after a stall switches phase across the gap: the summary's switch jump leaves
+    that switch out (command to command across a gap is what the vehicle did meanwhile), and
+    max_stall_command_offset_m_s measures the command against the vehicle's velocity after it."""
+    from mission.record import FlightRecorder, mission_info
+
+    outcome, reports, _, after = fly_with_a_stall(cfg, Phase.APPROACH, 2.0,
+                                                  recorder=FlightRecorder(tmp_path, mission_info(cfg)))
+    s = outcome.summary
+    i, first = first_after_the_gap(reports)
+    assert first.phase is Phase.GO_AROUND and reports[i - 1].phase is Phase.APPROACH  # a switch across the gap
+    assert s["max_phase_switch_jump_m_s"] is not None and s["max_phase_switch_jump_m_s"] <= JUMP_M_S, s
+    assert s["max_stall_command_offset_m_s"] is not None and s["max_stall_command_offset_m_s"] <= JUMP_M_S, s
