@@ -12,7 +12,8 @@ what the mission did after it (its events: the restart, the go-around and why, t
 approach), how it ended (docked, at which approach, the contact), and the first commands after
 the gap against the vehicle's velocity (the jump).
 
-Usage: ``python -m bench.px4_stall [--stall 1.0]... [--after 2.0] [--who mission|carrier]`` (about 90-120 s a flight).
+Usage: ``python -m bench.px4_stall [--stall 1.0]... [--after 2.0] [--who mission|carrier] [--during APPROACH]``
+(about 90-120 s a flight; ``--during RIDING``: the stall while the passenger rides).
 Needs root and ``MARSUPIAL_PX4_SITL``. Run it under ``flock /work/wt/px4.lock`` on a shared machine.
 """
 from __future__ import annotations
@@ -36,7 +37,7 @@ from tests.px4_sitl.conftest import TEN_MINUTE_BATTERY, px4_return_config
 SPEED_FACTOR = 1.03
 def _events(text: str) -> list[str]:
     keep = ("stalled", "go-around", "approach", "contact", "recovery falls back", "abort", "vehicle left OFFBOARD",
-            "no vehicle position read")
+            "no vehicle position read", "carrier state", "separated at")
     return [line.split(": ", 1)[-1] for line in text.splitlines()
             if any(k in line for k in keep) and " INFO " in line or " WARNING " in line and "abort" in line]
 
@@ -58,19 +59,19 @@ def _setpoint_gaps(log_dir: Path) -> list[float]:
     return [round(b - a, 3) for a, b in zip(times, times[1:]) if b - a > 0.1]
 
 
-def fly(directory: Path, stall_s: float, after_s: float, who: str = "mission") -> dict[str, Any]:
+def fly(directory: Path, stall_s: float, after_s: float, who: str = "mission", during: str = "APPROACH") -> dict[str, Any]:
     """One flight with one stall of ``who`` (``mission``: ``marsupial run``; ``carrier``: the
-    carrier simulator); its JSON row."""
+    carrier simulator) ``after_s`` into the phase ``during``; its JSON row."""
     directory.mkdir(parents=True, exist_ok=True)
     config = px4_return_config(directory)
     t0 = time.monotonic()
     with px4_flight(directory / "f", config, build=build_dir() or Path("."), speed_factor=SPEED_FACTOR,
                     px4_params=TEN_MINUTE_BATTERY) as f:
         mission = f.procs["mission"]
-        wait_for(lambda: "phase APPROACH" in f.text("mission.out") or mission.poll() is not None, 200.0,
-                 "the mission on the approach")
+        wait_for(lambda: f"phase {during}" in f.text("mission.out") or mission.poll() is not None, 200.0,
+                 f"the mission in {during}")
         assert mission.poll() is None, f.text("mission.out")[-2000:] + f.text("mission.err")[-2000:]
-        time.sleep(after_s)  # the fault's own timing: into the approach (the stall is measured below)
+        time.sleep(after_s)  # the fault's own timing: into the phase (the stall is measured below)
         stopped = time.monotonic()
         f.procs[who].send_signal(signal.SIGSTOP)
         time.sleep(stall_s)
@@ -97,7 +98,7 @@ def fly(directory: Path, stall_s: float, after_s: float, who: str = "mission") -
     speeds = [(round(float(tt), 2), round(float(np.linalg.norm(v[:2])), 2)) for tt, v in lp]
     contact = s.get("contact") or {}
     return {
-        "stalled": who, "stall_asked_s": stall_s, "stopped_s": round(stopped_s, 3), "tick_gap_s": round(float(np.diff(t).max()), 3),
+        "stalled": who, "during": during, "stall_asked_s": stall_s, "stopped_s": round(stopped_s, 3), "tick_gap_s": round(float(np.diff(t).max()), 3),
         "setpoint_gaps_s": _setpoint_gaps(f.log_dir), "px4_modes_after_stop": modes, "statustext": texts,
         "px4_horizontal_speed_m_s": speeds[::5],  # (since the stop [s, wall], |v| [m/s]) from 1 s before to 1 s after
         "events_after_stop": [e for e in events if "approach 1 begins" not in e][:12],
@@ -108,6 +109,10 @@ def fly(directory: Path, stall_s: float, after_s: float, who: str = "mission") -
         "recovery_outcome": s.get("recovery_outcome"), "attempts": contact.get("attempts"),
         "contact_error_m": contact.get("horizontal_error_m"), "contact_speed_m_s": contact.get("horizontal_relative_speed_m_s"),
         "deck_violations": s.get("deck_violations"), "max_phase_switch_jump_m_s": s.get("max_phase_switch_jump_m_s"),
+        "max_stall_command_offset_m_s": s.get("max_stall_command_offset_m_s"),
+        "max_carrier_age_s": round(float(np.nanmax(rec.cols["carrier_age_s"])), 3) if len(t) else None,
+        "p1": s.get("p1"), "max_offset_before_separation_m": s.get("max_offset_before_separation_m"),
+        "carrier_target_distance_at_separation_m": s.get("carrier_target_distance_at_separation_m"),
         "loop_overruns": s.get("loop_overruns"), "wall_s": round(time.monotonic() - t0, 1), "dir": str(directory),
     }
 
@@ -119,14 +124,16 @@ def fly(directory: Path, stall_s: float, after_s: float, who: str = "mission") -
               help="How far into the first approach the stall comes [s, wall].")
 @click.option("--who", type=click.Choice(["mission", "carrier"]), default="mission", show_default=True,
               help="Which process stalls: marsupial run, or the carrier simulator.")
+@click.option("--during", default="APPROACH", show_default=True,
+              help="The phase the stall comes in (RIDING: before separation; ARRIVED: at the target).")
 @click.option("--out", type=click.Path(), default=None, help="Keep the flights' folders here.")
-def main(stalls: tuple[float, ...], after_s: float, who: str, out: str | None) -> None:
+def main(stalls: tuple[float, ...], after_s: float, who: str, during: str, out: str | None) -> None:
     reason = unavailable_reason()
     if reason:
         raise click.ClickException(reason)
     root = Path(out) if out else Path(tempfile.mkdtemp(prefix="px4_stall_"))
     for i, stall in enumerate(stalls):
-        print(json.dumps(fly(root / f"stall{i}", stall, after_s, who)), flush=True)
+        print(json.dumps(fly(root / f"stall{i}", stall, after_s, who, during)), flush=True)
 
 
 if __name__ == "__main__":

@@ -24,6 +24,7 @@ from mission.config.schema import Config
 from mission.core.law import norm
 from mission.core.setpoint import Setpoint
 from mission.phases.phase import AFTER_SEPARATION, FLYING, OUTBOUND, Phase
+from mission.phases.stall import SETTLE_S, STALL_S
 from mission.phases.types import MissionState
 
 VEC = ("n", "e", "d")
@@ -411,7 +412,8 @@ def figures(r: FlightRecord) -> dict[str, Any]:
     out["p2"] = bool((r.phase == Phase.ARRIVED).any() and out["final_passenger_target_distance_m"] is not None
                      and out["final_passenger_target_distance_m"] <= float(info.get("arrival_radius_m", 0.5)))
     out["p3"] = bool(out["min_carrier_target_distance_m"] is not None and out["min_carrier_target_distance_m"] > 0.0)
-    out["max_phase_switch_jump_m_s"] = _switch_jump(r.phase, u_cmd)
+    out["max_phase_switch_jump_m_s"] = _switch_jump(r.t, r.phase, u_cmd)
+    out["max_stall_command_offset_m_s"] = _stall_offset(r.t, r.phase, u_cmd, v_p)
     if info.get("ride") == "deck":
         out.update(_takeoff_figures(r, x_p, rel_cmd, riding, info))
     out.update(_recovery_summary(r, x_p, v_p, v_c, dock))
@@ -457,13 +459,27 @@ def _takeoff_figures(r: FlightRecord, x_p: np.ndarray, rel_cmd: np.ndarray, ridi
     return out
 
 
-def _switch_jump(phase: np.ndarray, u_cmd: np.ndarray) -> float | None:
+def _switch_jump(t: np.ndarray, phase: np.ndarray, u_cmd: np.ndarray) -> float | None:
     """The largest change [m/s] of the commanded velocity from one tick to the next where the
-    phase changed between two flying phases (None: no such switch)."""
+    phase changed between two flying phases (None: no such switch). Not across a stall (ticks
+    more than ``STALL_S`` apart): the vehicle flew on for the gap, and the command after it goes
+    on from the vehicle, not from the command before it (:func:`_stall_offset` measures that)."""
     flying = np.isin(phase, sorted(FLYING))
-    switch = np.flatnonzero((phase[1:] != phase[:-1]) & flying[1:] & flying[:-1]) + 1
+    switch = np.flatnonzero((phase[1:] != phase[:-1]) & flying[1:] & flying[:-1] & (np.diff(t) <= STALL_S)) + 1
     jumps = norm(u_cmd[switch] - u_cmd[switch - 1]) if len(switch) else np.array([])
     return _nanmax(jumps) if len(jumps) else None
+
+
+def _stall_offset(t: np.ndarray, phase: np.ndarray, u_cmd: np.ndarray, v_p: np.ndarray) -> float | None:
+    """After each stall (a gap between ticks longer than ``STALL_S``, flying on both sides): the
+    largest distance [m/s] between the command and the vehicle's velocity over the ``SETTLE_S``
+    from the first tick after it, where the command restarts on the vehicle
+    (:mod:`mission.phases.stall`); the jump a stall can make (None: no stall)."""
+    flying = np.isin(phase, sorted(FLYING))
+    after = np.flatnonzero((np.diff(t) > STALL_S) & flying[1:] & flying[:-1]) + 1
+    offsets = [norm(u_cmd[k] - v_p[k]) for i in after for k in [np.flatnonzero((t >= t[i]) & (t < t[i] + SETTLE_S))]]
+    values = np.concatenate(offsets) if offsets else np.array([])
+    return _nanmax(values) if len(values) else None
 
 
 def _recovery_summary(r: FlightRecord, x_p: np.ndarray, v_p: np.ndarray, v_c: np.ndarray,

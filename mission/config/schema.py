@@ -243,7 +243,13 @@ class MissionSection(Section):
     at_target_s: float = Field(0.0, ge=0, le=86400,
         description="[s] with final_action = `return`: time spent at the target (the task) before coming home")
     carrier_timeout_s: float = Field(0.5, gt=0, le=10,
-        description="[s] a carrier state older than this before separation aborts (carrier_lost)")
+        description=("[s] before separation, a carrier state older than this (since the carrier measured it, with the "
+                     "clock offset's bound) is not fresh: the passenger rides the dock point predicted with its age, "
+                     "but does not separate on it; none fresh for carrier_lost_s: abort (carrier_lost)"))
+    carrier_lost_s: float = Field(1.5, gt=0, le=60,
+        description=("[s] before separation, no fresh carrier state (see carrier_timeout_s) for this long: abort "
+                     "(carrier_lost), Hold. Covers a stalled carrier process or link (a 1 s SIGSTOP); a carrier whose "
+                     "liveliness token is gone aborts at once"))
     carrier_settle_s: float = Field(
         2.0, ge=0, le=30, description="[s] a carrier state the feed has just re-accepted (a newly bound carrier, a "
         "resync after a jump) must stay within the carrier's own speed and acceleration limits this long, and its "

@@ -46,6 +46,7 @@ from mission.phases.types import (
     MissionModel,
     MissionState,
     Observation,
+    carrier_fresh,
     dock_point,
     enter,
 )
@@ -121,7 +122,7 @@ def ride(state: MissionState, obs: Observation, m: MissionModel) -> tuple[Missio
     dock = dock_point(obs, m)
     v_dock = np.asarray(c.velocity_ned_m_s, dtype=float)
     ready = v.armed and v.mode == FlightMode.OFFBOARD
-    if separation_due(dock, False, m.tick) and state.prev_dock is not None:
+    if separation_due(dock, False, m.tick) and state.prev_dock is not None and carrier_fresh(obs, m):
         if not ready:
             reason = AbortReason.ARMING_REFUSED if not v.armed else AbortReason.OFFBOARD_REFUSED
             why = f"not {'armed' if not v.armed else 'in OFFBOARD'} on the deck when the separation came"

@@ -17,7 +17,7 @@ from mission.flight_mode import FlightMode
 from mission.core import arrival
 from mission.core.law import norm
 from mission.core.setpoint import Setpoint
-from mission.phases.types import ZERO, Decision, MissionModel, MissionState, Observation, Phase, dock_point, enter
+from mission.phases.types import ZERO, Decision, MissionModel, MissionState, Observation, Phase, carrier_fresh, dock_point, enter
 from mission.phases.phase import Request
 from mission.core.safety import filter_velocity
 from mission.core.tick import DEPARTURE_THRESHOLD_M, carrier_tick, latch_point, passenger_tick, separation_due
@@ -149,9 +149,12 @@ def join(state, obs, m):
 
 def riding(state, obs, m):
     """Equilibrium (i): the reference stays exactly on the dock; the latch fires at b c - margin,
-    on a trusted carrier state only. An untrusted one holds the reference on the dock point it
+    on a trusted, fresh carrier state only. An untrusted one holds the reference on the dock point it
     had (:func:`_hold`); once the feed is trusted again the reference goes back to the dock
-    point at join speed, and only then rides (and may latch) again."""
+    point at join speed, and only then rides (and may latch) again. A stale one (older than
+    mission.carrier_timeout_s: a stalled carrier) is ridden as the dock point predicted with its
+    age, with the carrier's velocity and no acceleration fed forward (the prediction's); the
+    latch waits for a fresh one (the machine aborts after mission.carrier_lost_s without)."""
     t = obs.t_s
     if obs.carrier.untrusted is not None:
         return _hold(state, obs, m)
@@ -167,13 +170,15 @@ def riding(state, obs, m):
         event: tuple[str, ...] = ("carrier feed trusted again: back on the dock point, riding",)
     else:
         event = ()
-    if separation_due(dock, False, m.tick):
+    fresh = carrier_fresh(obs, m)
+    if separation_due(dock, False, m.tick) and fresh:
         theta, anchor = latch_point(state.prev_dock, dock, m.tick.target, m.tick)
         new = enter(state, Phase.SEPARATED, t, anchor=anchor, e_ref=ZERO.copy(), x_ref=anchor.copy(),
                   separation_time_s=t - (1 - float(theta)) * m.dt_s)
         return navigate(new, obs, m, events=(f"separated at |e_tc| = {norm(m.tick.target - anchor):.3f} m",))
     tick = passenger_tick(dock, v_dock, ZERO, False, m.tick, state.u_ref, m.dt_s)
-    a_ref = _carrier_acceleration(obs, m) if m.tracking.kind == "full" else ZERO  # velocity setpoints carry none
+    # velocity setpoints carry no acceleration; a stale state's prediction has none
+    a_ref = _carrier_acceleration(obs, m) if m.tracking.kind == "full" and fresh else ZERO
     tr = _track(state, obs, m, dock, tick.u, a_ref)
     acted = tr.acted
     new = replace(state, x_ref=dock.copy(), e_ref=ZERO.copy(), prev_dock=dock.copy(), u_ref=tick.u, **tr.kept())

@@ -13,8 +13,14 @@
     NAVIGATING --within arrival radius for arrival dwell--> ARRIVED
     ARRIVED   --request Hold or Land--> HOLD | LAND --vehicle shows that mode--> DONE
 
+    before separation (JOIN .. RIDING, TRANSIT), a carrier state older than
+                  mission.carrier_timeout_s (a stalled carrier process or link) --the phase goes
+                  on, on the dock point predicted with the state's age; no separation on it
+                  (the latch waits for a fresh state)
     any phase --> ABORT(reason): vehicle_lost, pilot_override, vehicle_failsafe (PX4 left
-                  OFFBOARD for one of its own failsafes), carrier_lost, position_lost,
+                  OFFBOARD for one of its own failsafes), carrier_lost (before separation: the
+                  carrier's liveliness token gone, or no fresh state for mission.carrier_lost_s),
+                  position_lost,
                   arming_refused, offboard_refused, geometry, interrupted, timeout,
                   signing_mismatch (no vehicle by connect_timeout_s, but a PX4 autopilot was
                   heard signing with another key: ``failed["signing"]`` says which),
@@ -65,6 +71,7 @@ from mission.phases.types import (
     MissionState,
     Observation,
     VehicleObs,
+    carrier_fresh,
     describe_age,
     dock_point,
     enter,
@@ -115,13 +122,51 @@ def step(state: MissionState, obs: Observation, m: MissionModel) -> tuple[Missio
     if state.start_s is None:
         state = replace(state, start_s=t, since_s=t)
     state = stall.begin(state, t)
+    state, watched = _watch_carrier(state, obs, m)
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):  # judged below, not warned about
         new, dec = _step(state, obs, m)
+    if watched:
+        dec = replace(dec, events=(*watched, *dec.events))
     bad = _nonfinite(new, dec)
     if bad is None:
         return replace(new, tick_s=t), dec
     aborted = _abort(state, t, AbortReason.NONFINITE, f"non-finite {bad} in {state.phase.value}")
     return replace(aborted, tick_s=t), _decided(aborted, obs, f"abort: non-finite {bad}: asking for Hold")
+
+
+def _watch_carrier(state: MissionState, obs: Observation, m: MissionModel) -> tuple[MissionState, tuple[str, ...]]:
+    """``state`` with ``carrier_fresh_s`` moved to now on a tick with a fresh carrier state
+    (:func:`mission.phases.types.carrier_fresh`); before separation, the events of a carrier state
+    going stale and of a fresh one again."""
+    t, c = obs.t_s, obs.carrier
+    fresh = carrier_fresh(obs, m)
+    last, was_fresh = state.carrier_fresh_s, state.carrier_fresh_s is not None and state.carrier_fresh_s == state.tick_s
+    if fresh:
+        state = replace(state, carrier_fresh_s=t)
+    if state.phase not in BEFORE_SEPARATION or state.phase is Phase.PREFLIGHT or last is None or state.tick_s is None:
+        return state, ()
+    if not fresh and was_fresh and c is not None and c.alive is not False:
+        return state, (f"carrier state {describe_age(c)} (mission.carrier_timeout_s = {m.carrier_timeout_s:g}): riding "
+                       f"the dock point predicted with its age, no separation on it; carrier_lost after "
+                       f"{m.carrier_lost_s:g} s without a fresh one",)
+    if fresh and not was_fresh:
+        return state, (f"carrier state fresh again after {t - last:.2f} s",)
+    return state, ()
+
+
+def _carrier_lost(state: MissionState, obs: Observation, m: MissionModel) -> str | None:
+    """Why the carrier counts as lost before separation (None: it does not): no state, its
+    liveliness token gone, or no fresh state for ``mission.carrier_lost_s`` (an older one is
+    ridden meanwhile, predicted with its age)."""
+    if carrier_fresh(obs, m):
+        return None
+    c = obs.carrier
+    if c is None or c.alive is False or state.carrier_fresh_s is None:
+        return _carrier_detail(obs, m)
+    unfresh_s = obs.t_s - state.carrier_fresh_s
+    if unfresh_s <= m.carrier_lost_s:
+        return None
+    return f"{_carrier_detail(obs, m)}; none fresh for {unfresh_s:.2f} s (mission.carrier_lost_s = {m.carrier_lost_s:g})"
 
 
 def _step(state: MissionState, obs: Observation, m: MissionModel) -> tuple[MissionState, Decision]:
@@ -208,15 +253,16 @@ def _failsafes(state: MissionState, obs: Observation, m: MissionModel) -> tuple[
         return new, Decision(setpoint=None, events=(f"abort: vehicle left OFFBOARD ({v.mode}); not fighting it",))
     if ph not in (Phase.PREFLIGHT,) and v is not None and not v.position_valid:
         if TELEMETRY_SILENT_S < v.position_age_s <= m.heartbeat_timeout_s and stall.settling(state, t):
-            return state, stall.unread(state)  # the link's thread stalled with the loop: not read yet
+            return state, stall.unread(state, t)  # the link's thread stalled with the loop: not read yet
         if TELEMETRY_SILENT_S < v.position_age_s <= m.heartbeat_timeout_s:
             # The position stream went quiet (a link blackout, not an estimator failure): hover
             # until the heartbeat timeout decides whether the vehicle is lost.
             return state, Decision(setpoint=Setpoint.hold_still(), events=("telemetry silent",))
         new = _abort(state, t, AbortReason.POSITION_LOST, "position estimate invalid")
         return new, _decided(new, obs, "abort: position estimate lost")
-    if ph in BEFORE_SEPARATION - {Phase.PREFLIGHT} and not _carrier_ok(obs, m):
-        new = _abort(state, t, AbortReason.CARRIER_LOST, _carrier_detail(obs, m))
+    lost = _carrier_lost(state, obs, m) if ph in BEFORE_SEPARATION - {Phase.PREFLIGHT} else None
+    if lost is not None:
+        new = _abort(state, t, AbortReason.CARRIER_LOST, lost)
         return new, _decided(new, obs, "abort: carrier state lost before separation")
     if state.start_s is not None and t - state.start_s > m.max_duration_s and ph not in (Phase.HOLD, Phase.LAND):
         new = _abort(state, t, AbortReason.TIMEOUT, f"mission longer than {m.max_duration_s:g} s")

@@ -13,7 +13,10 @@ distance: a jump in the velocity it flies). So:
     a gap between two ticks longer than STALL_S, in a flying phase (not seated on a deck):
       JOIN, SEPARATED .. ARRIVED, RETURNING .. FALLBACK, HOME --the reference (x_ref, u_ref;
           after separation e_ref) restarts on the vehicle's position and velocity
-      RIDING, TRANSIT --the reference stays on the dock point (the law's equilibrium)
+      RIDING, TRANSIT --the reference stays on the dock point (the law's equilibrium); the
+          carrier's state the loop finds may be older than mission.carrier_timeout_s (the feed's
+          thread stalled too): the ride goes on, on the dock point predicted with its age, and
+          the latch waits for a fresh one (mission.phases.machine)
       every one --the last command (u_cmd, the safety filter's previous one) is the vehicle's
           velocity, so the command goes on from what the vehicle does, within the passenger's
           acceleration limit per tick; the dwell being timed (JOIN's, the holdoff's) restarts
@@ -99,21 +102,26 @@ def resume(state: MissionState, obs: Observation) -> tuple[MissionState, tuple[s
             state = replace(state, e_ref=x_p - state.anchor)
     if state.recovery is not None and state.phase is Phase.HOLDOFF:
         state = replace(state, recovery=replace(state.recovery, settled_since_s=None))
-    assert state.last_stall is not None  # settling
-    resumed_s, gap = state.last_stall
-    if resumed_s != t:
-        return state, ()
+    return state, _said(state, t)
+
+
+def _said(state: MissionState, t_s: float) -> tuple[str, ...]:
+    """The stall's event on the first tick after it (none on any other)."""
+    if state.last_stall is None or state.last_stall[0] != t_s:
+        return ()
     where = "on the dock point" if state.phase in ON_THE_DOCK else "from the vehicle"
-    return state, (f"stalled: no tick for {gap:.2f} s; the reference goes on {where}, "
-                   f"the command from the vehicle's velocity (by velocity only for {SETTLE_S:g} s)",)
+    return (f"stalled: no tick for {state.last_stall[1]:.2f} s; the reference goes on {where}, "
+            f"the command from the vehicle's velocity (by velocity only for {SETTLE_S:g} s)",)
 
 
-def unread(state: MissionState) -> Decision:
+def unread(state: MissionState, t_s: float) -> Decision:
     """While settling, the vehicle's position not read again yet (the link's thread stalled with
     the loop; its last position is older than TELEMETRY_SILENT_S): the last command, by velocity
-    only, not a stop (a stop would be the jump this module avoids)."""
+    only, not a stop (a stop would be the jump this module avoids); on the first tick after the
+    stall, its event too (the restart comes once a position is read)."""
     u = state.u_cmd if state.u_cmd is not None else ZERO
-    return Decision(setpoint=Setpoint(velocity_ned_m_s=u.copy()), events=("no vehicle position read since the stall yet",))
+    return Decision(setpoint=Setpoint(velocity_ned_m_s=u.copy()),
+                    events=(*_said(state, t_s), "no vehicle position read since the stall yet"))
 
 
 def by_velocity(decision: Decision) -> Decision:

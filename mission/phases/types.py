@@ -114,7 +114,8 @@ class MissionModel:
     arrival_radius_m: float
     arrival_dwell_s: float
     final_action: str  # "hold" | "land"
-    carrier_timeout_s: float
+    carrier_timeout_s: float  # [s] before separation, a carrier state older than this is not fresh (no latch on it)...
+    carrier_lost_s: float  # ... and none fresh for this long [s]: carrier_lost
     heartbeat_timeout_s: float
     prestream_s: float
     connect_timeout_s: float
@@ -259,6 +260,7 @@ class MissionState:
     deck_watch: tuple[bool, str] | None = None
     tick_s: float | None = None  # the last tick's time [s]: a longer gap to this one is a stall (mission.phases.stall)
     last_stall: tuple[float, float] | None = None  # (the first tick after the last stall [s], its gap [s]) (mission.phases.stall)
+    carrier_fresh_s: float | None = None  # the last tick [s] that saw a fresh carrier state (mission.carrier_timeout_s)
 
 
 @dataclass(frozen=True)
@@ -292,6 +294,16 @@ def describe_age(c: CarrierObs) -> str:
         return f"{c.age_s:.2f} s old since it arrived (when the carrier measured it is not known)"
     bound = f" +- {c.age_bound_s:.3f}" if c.age_bound_s > 0 else ""
     return f"{c.age_s:.2f}{bound} s old since the carrier measured it"
+
+
+def carrier_fresh(obs: Observation, m: MissionModel) -> bool:
+    """A carrier state fresh enough to ride on and separate on: present, its liveliness token not
+    gone, measured no longer than ``mission.carrier_timeout_s`` ago (with the bound). An older
+    one (a stalled carrier process or link) is still ridden, predicted with its age
+    (:func:`dock_point`), for ``mission.carrier_lost_s`` (:mod:`mission.phases.machine`), but
+    the latch waits for a fresh one."""
+    c = obs.carrier
+    return c is not None and c.worst_age_s <= m.carrier_timeout_s and c.alive is not False
 
 
 def dock_point(obs: Observation, m: MissionModel) -> np.ndarray:

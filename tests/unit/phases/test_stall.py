@@ -43,7 +43,7 @@ class UnreadWorld(FakeWorld):
         return dataclasses.replace(st, position_rx_s=st.t_s - GAP_S, position_valid=False)
 
 
-def fly_with_a_stall(cfg, phase: Phase, after_s: float, unread_ticks: int = 0):
+def fly_with_a_stall(cfg, phase: Phase, after_s: float, unread_ticks: int = 0, recorder=None):
     """Fly the mission; ``after_s`` [s] into ``phase`` the clock jumps ``GAP_S`` between two ticks
     (the fake vehicle flies on at its last velocity meanwhile, the carrier drives on). Returns the
     outcome, the tick reports, the controller, and the vehicle's (velocity [m/s], position [m])
@@ -66,7 +66,8 @@ def fly_with_a_stall(cfg, phase: Phase, after_s: float, unread_ticks: int = 0):
         st = FakeWorld.state.fget(world)
         after.append((st.velocity_ned_m_s.copy(), st.position_ned_m.copy()))
 
-    controller = MissionController(cfg, world, world.feed, clock, publisher=world, on_tick=tick, command_thread=False)
+    controller = MissionController(cfg, world, world.feed, clock, publisher=world, on_tick=tick, command_thread=False,
+                                   recorder=recorder)
     outcome = controller.run()
     assert seen["done"], f"never {after_s} s into {phase}"
     return outcome, reports, controller, after
@@ -181,3 +182,90 @@ def test_a_short_gap_on_the_approach_is_no_go_around(cfg, gap_s, restarted):
     stalls = [e for r in reports for e in r.decision.events if e.startswith("stalled")]
     assert len(stalls) == int(restarted), stalls
     assert Phase.GO_AROUND not in order(reports) and controller.state.recovery.attempts == 1
+
+
+class QuietCarrierWorld(FakeWorld):
+    """The fake world whose carrier falls quiet for ``quiet`` = (from, to) [s] (a stopped
+    carrier process): its last state ages, its liveliness token stays, and it drives on at its
+    velocity meanwhile (as the built-in carrier does: it integrates the gap on waking)."""
+
+    quiet: tuple[float, float] = (np.inf, np.inf)
+    _held = None
+
+    def latest(self):
+        received = super().latest()
+        now = self.clock.now()
+        if self.quiet[0] <= now < self.quiet[1] and self._held is not None:
+            return dataclasses.replace(self._held, age_s=now - self._held.rx_time_s)
+        self._held = received
+        return received
+
+
+def fly_with_a_quiet_carrier(cfg, after_s: float, quiet_s: float):
+    """Fly the mission; the carrier falls quiet ``after_s`` [s] into RIDING for ``quiet_s`` [s]."""
+    clock = ManualClock()
+    world = QuietCarrierWorld(clock, target_ned_m=np.asarray(cfg.scenario.target, dtype=float),
+                              recovery_velocity_ned_m_s=COURSE)
+    world.positions = []  # the vehicle's position [m] NED after each tick
+    reports: list[TickReport] = []
+
+    def tick(r: TickReport) -> None:
+        reports.append(r)
+        world.positions.append(FakeWorld.state.fget(world).position_ned_m.copy())
+        if r.phase is Phase.RIDING and world.quiet[0] == np.inf:
+            riding = next(x.t_s for x in reports if x.phase is Phase.RIDING)
+            if r.t_s - riding >= after_s:
+                world.quiet = (r.t_s, r.t_s + quiet_s)
+
+    controller = MissionController(cfg, world, world.feed, clock, publisher=world, on_tick=tick, command_thread=False)
+    return controller.run(), reports, controller, world
+
+
+def test_a_carrier_quiet_1_s_while_riding_and_the_ride_goes_on(cfg):
+    """The ride goes on on the dock point predicted with the state's age (no abort at
+    mission.carrier_timeout_s, 0.5 s), the latch at b c, the command smooth, docked at the first approach."""
+    outcome, reports, controller, world = fly_with_a_quiet_carrier(cfg, 3.0, GAP_S)
+    assert outcome.ok, (outcome.reason, outcome.detail)
+    events = [(r.t_s, e) for r in reports for e in r.decision.events]
+    stale = [t for t, e in events if "riding the dock point predicted with its age, no separation on it" in e]
+    again = [(t, e) for t, e in events if e.startswith("carrier state fresh again after ")]
+    assert len(stale) == 1 and len(again) == 1, (stale, again)
+    assert stale[0] - world.quiet[0] == pytest.approx(cfg.mission.carrier_timeout_s, abs=0.03)
+    assert float(again[0][1].split("after ")[1].split()[0]) == pytest.approx(GAP_S - cfg.mission.carrier_timeout_s, abs=0.05)
+    riding = [r for r in reports if r.phase is Phase.RIDING]
+    offsets = [float(norm(x - r.decision.dock)) for r, x in zip(reports, world.positions) if r.phase is Phase.RIDING]
+    assert max(offsets) <= cfg.mission.dock_tolerance_m, max(offsets)  # P1
+    latch = next(e for _, e in events if e.startswith("separated at |e_tc| = "))
+    assert float(latch.split("= ")[1].split()[0]) == pytest.approx(cfg.law.b * cfg.law.c, abs=0.01), latch
+    sent = [r.decision.setpoint.velocity_ned_m_s for r in riding]
+    assert max(float(norm(b - a)) for a, b in zip(sent, sent[1:])) <= JUMP_M_S
+    docks = [r.decision.dock for r in riding if world.quiet[0] - 0.5 <= r.t_s <= world.quiet[1] + 0.5]
+    steps = [float(norm(b - a)) for a, b in zip(docks, docks[1:])]
+    assert max(steps) <= cfg.carrier.max_speed_m_s * 0.02 + 1e-6, max(steps)  # the predicted dock never jumps
+    assert controller.state.recovery.attempts == 1
+
+
+def test_a_carrier_quiet_for_good_while_riding_is_lost_after_carrier_lost_s(cfg):
+    """Its liveliness token kept (a stopped process): carrier_lost once no fresh state came for
+    mission.carrier_lost_s, naming it; Hold."""
+    outcome, reports, _, world = fly_with_a_quiet_carrier(cfg, 3.0, np.inf)
+    assert outcome.reason == "carrier_lost" and "mission.carrier_lost_s = 1.5" in outcome.detail, outcome.detail
+    aborted = next(r.t_s for r in reports if r.phase is Phase.ABORT)
+    m = cfg.mission
+    assert aborted - world.quiet[0] == pytest.approx(m.carrier_timeout_s + m.carrier_lost_s, abs=0.05)
+    assert all(r.phase is Phase.RIDING for r in reports if world.quiet[0] <= r.t_s < aborted)
+
+
+def test_the_summary_measures_the_stall_apart_from_the_phase_switches(cfg, tmp_path):
+    """The go-around after a stall switches phase across the gap: the summary's switch jump leaves
+    that switch out (command to command across a gap is what the vehicle did meanwhile), and
+    max_stall_command_offset_m_s measures the command against the vehicle's velocity after it."""
+    from mission.record import FlightRecorder, mission_info
+
+    outcome, reports, _, after = fly_with_a_stall(cfg, Phase.APPROACH, 2.0,
+                                                  recorder=FlightRecorder(tmp_path, mission_info(cfg)))
+    s = outcome.summary
+    i, first = first_after_the_gap(reports)
+    assert first.phase is Phase.GO_AROUND and reports[i - 1].phase is Phase.APPROACH  # a switch across the gap
+    assert s["max_phase_switch_jump_m_s"] is not None and s["max_phase_switch_jump_m_s"] <= JUMP_M_S, s
+    assert s["max_stall_command_offset_m_s"] is not None and s["max_stall_command_offset_m_s"] <= JUMP_M_S, s
