@@ -260,6 +260,9 @@ class MissionSection(Section):
     connect_timeout_s: float = Field(20.0, gt=0, le=600,
         description="[s] how long `run` waits for the vehicle and the carrier before giving up (it counts down)")
     log_dir: Path_ = Field("logs", description="[-] directory of flight logs (`<log_dir>/<time>-<pair>/`)")
+    feeds: list[Annotated[str, Field(pattern=r"^[a-z0-9_\-]+$", max_length=64)]] = Field([], max_length=16,
+        description=("[-] measurement feeds to open, by name: `run` opens each registered in the entry-point group "
+                     "`marsupial.feeds`, `simulate` gives the world its sensor of the same name (`marsupial.sensors`)"))
 
     _log_dir_printable = field_validator("log_dir")(printable)
 

@@ -6,7 +6,8 @@ setpoint and its request) as a :class:`StepResult`.
 
 The observation of the vehicle: its velocity made consistent with its position
 (``mission.velocity_bias_tau_s``, :mod:`mission.core.consistent_velocity`), and its position
-moved on by that velocity over the sample's age. Frames: local NED [m], [m/s]; times [s] on the
+moved on by that velocity over the sample's age. The measurement feeds' readings pass through as
+they are (:class:`~mission.phases.measurements.Measurements`), with the newest of each kind kept. Frames: local NED [m], [m/s]; times [s] on the
 caller's clock.
 """
 from __future__ import annotations
@@ -21,7 +22,7 @@ from mission import phases
 from mission.core.consistent_velocity import PositionConsistentVelocity
 from mission.core.setpoint import Setpoint
 from mission.passenger.inputs import PassengerInputs, VehicleReport
-from mission.phases import CarrierObs, Decision, MissionModel, MissionState, Observation, VehicleObs
+from mission.phases import CarrierObs, Decision, Measurements, MissionModel, MissionState, Observation, VehicleObs
 from mission.phases.phase import Request
 
 
@@ -106,16 +107,21 @@ class StepResult:
 class PassengerStep:
     """The passenger's tick for ``model``; ``velocity_bias_tau_s`` [s] the time constant of the
     vehicle's consistent velocity (``mission.velocity_bias_tau_s``; 0: the estimator's velocity
-    as it comes). Its only memory is that filter's (the mission's state is the caller's)."""
+    as it comes). Its only memory is that filter's and the newest measurement of each kind (the
+    mission's state is the caller's)."""
 
     def __init__(self, model: MissionModel, velocity_bias_tau_s: float = 0.0) -> None:
         self.model = model
         self.velocity_fix = PositionConsistentVelocity(velocity_bias_tau_s) if velocity_bias_tau_s > 0 else None
+        self.measurements = Measurements()  # the measurement feeds' readings: the last tick's, the newest of each kind
 
     def observe(self, inputs: PassengerInputs) -> Observation:
-        """What the phases observe on this tick."""
+        """What the phases observe on this tick (the measurements: this tick's readings, and the
+        newest of each kind so far)."""
+        self.measurements = self.measurements.then(tuple(inputs.measurements))
         return Observation(t_s=inputs.t_s, vehicle=observe_vehicle(inputs.vehicle, self.velocity_fix),
-                           carrier=inputs.carrier, failed=dict(inputs.failed), interrupted=inputs.interrupted)
+                           carrier=inputs.carrier, failed=dict(inputs.failed), interrupted=inputs.interrupted,
+                           measurements=self.measurements)
 
     def __call__(self, state: MissionState, inputs: PassengerInputs) -> StepResult:
         """One tick: observe, then the phases."""

@@ -14,6 +14,7 @@ from enum import StrEnum
 
 import numpy as np
 
+from mission.phases.measurements import Measurements
 from mission.phases.phase import Phase, Request
 from mission.core.safety import DeckKeepOut, SafetyConfig
 from mission.core.docking import DockingGeometry
@@ -91,13 +92,15 @@ class CarrierObs:
 @dataclass(frozen=True)
 class Observation:
     """What one tick sees. ``failed`` maps a request ("arm", "offboard") to the vehicle's reason
-    once the controller gave up on it after its retries."""
+    once the controller gave up on it after its retries; ``measurements``: the measurement feeds'
+    readings (:mod:`mission.phases.measurements`: this tick's and the newest of each kind)."""
 
     t_s: float
     vehicle: VehicleObs | None
     carrier: CarrierObs | None
     failed: dict[str, str] = field(default_factory=dict)
     interrupted: bool = False
+    measurements: Measurements = Measurements()
 
 
 @dataclass(frozen=True)

@@ -6,8 +6,9 @@ deploy, task, return and dock, ticked as the lockstep demo ticks it:
 
 - the passenger: the controller's own step (:class:`mission.passenger.step.PassengerStep`) every
   ``1 / mission.rate_hz`` [s], on what the controller reads in lockstep (the vehicle's reported
-  position and velocity sampled at the tick, the carrier's newest state with its age); its
-  setpoint goes to the vehicle at once, its
+  position and velocity sampled at the tick, the carrier's newest state with its age, the
+  readings of the world's measurement sensors, :mod:`sim.batch.sensors`); its setpoint goes to
+  the vehicle at once, its
   requests (arm, OFFBOARD, Hold, Land) are carried out at once;
 - the vehicle: the mock's commander (:class:`sim.vehicle.modes.Commander`) and PX4's position
   controller on the fitted airframe (:func:`sim.vehicle.physics.multicopter.step`) in the mock's
@@ -51,11 +52,13 @@ from mission.flight_mode import FlightMode
 from mission.phases.phase import Request
 from mission.mavlink import setpoints
 from mission.model import mission_model
+from mission.interfaces import MeasurementSource
 from mission.passenger.inputs import PassengerInputs, VehicleReport
 from mission.passenger.step import PassengerStep
-from mission.phases import CarrierObs, Decision, MissionState, Observation, Phase, finished
+from mission.phases import CarrierObs, Decision, Measurement, MissionState, Observation, Phase, finished
 from mission.phases.phase import Duty
 from mission.record import COLUMNS, VEC, FlightRecord, flown_info, mission_info, summary_of
+from sim.batch.sensors import SensorFactory, sensors_for
 from sim.vehicle.estimator import EstimateError
 from sim.vehicle.mock import PHYSICS_DT_S
 from sim.vehicle.modes import Commander
@@ -342,9 +345,12 @@ def as_simulated(cfg: Config) -> Config:
 class World:
     """A mission in flight: the phase machine's state, the vehicle, the carrier and the record so
     far; :meth:`tick` advances it by one controller tick. :meth:`copy` branches it: the flights
-    of a batch share the part before the recovery (:func:`monte_carlo`)."""
+    of a batch share the part before the recovery (:func:`monte_carlo`). ``sensors``: the
+    world's measurement sensors (:mod:`sim.batch.sensors`; default: those of the feeds
+    ``mission.feeds`` names), polled every tick like the flight loop's feeds."""
 
-    def __init__(self, cfg: Config, scenario: Scenario, max_duration_s: float | None = None) -> None:
+    def __init__(self, cfg: Config, scenario: Scenario, max_duration_s: float | None = None,
+                 sensors: Sequence[SensorFactory] | None = None) -> None:
         cfg = as_simulated(cfg)
         self.cfg, self.model = cfg, mission_model(cfg)
         self.dt_s = self.model.dt_s
@@ -365,6 +371,7 @@ class World:
         self.limit_s = max_duration_s if max_duration_s is not None else self.model.max_duration_s + 30.0
         self.k = 0
         self.done = False
+        self.sources: list[MeasurementSource] = [make(self) for make in (sensors_for(cfg) if sensors is None else sensors)]
 
     @property
     def scenario(self) -> Scenario:
@@ -387,13 +394,16 @@ class World:
 
     def tick(self) -> None:
         """One controller tick at ``k * dt``: the carrier's steps due, the vehicle brought to the
-        tick, the phase machine, its setpoint and request carried out, the row recorded."""
+        tick, the sensors polled, the phase machine, its setpoint and request carried out, the row
+        recorded."""
         t = self.k * self.dt_s
         carrier, vehicle = self.carrier, self.vehicle
         while carrier.next_step_s() <= t + 1e-9:  # the carrier steps first, on the status of the tick before
             carrier.step(self.published, self.approach_s, self.published_leg)
         vehicle.advance_to_step(self.k * self.steps_per_tick)
-        result = self.step(self.state, PassengerInputs(t, vehicle.report(t), carrier.observed(t), dict(self.failed)))
+        measured: tuple[Measurement, ...] = tuple(m for source in self.sources for m in source.poll(t))
+        result = self.step(self.state, PassengerInputs(t, vehicle.report(t), carrier.observed(t), dict(self.failed),
+                                                       measurements=measured))
         self.state, obs, dec = result.state, result.observation, result.decision
         if dec.setpoint is not None:
             vehicle.send(t, dec.setpoint)
