@@ -36,5 +36,5 @@ def sensors_for(cfg: Config) -> list[SensorFactory]:
     if missing:
         raise ConfigError("mission.feeds", missing, f"the simulation has no sensor for these feeds (entry points "
                           f"{SENSORS_GROUP}: {sorted(known) or 'none'})")
-    found: list[Any] = [load(known[name]) for name in cfg.mission.feeds]
+    found: list[Any] = [load(known[name]) for name in dict.fromkeys(cfg.mission.feeds)]  # each once, as `run` opens them
     return found

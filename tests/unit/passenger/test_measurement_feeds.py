@@ -11,12 +11,14 @@ file's names standing in for ``pyproject.toml``'s lines.
 """
 from __future__ import annotations
 
+import tomllib
 from dataclasses import dataclass
 
 import numpy as np
 import pytest
 
 from mission.cli import run as run_cli
+from mission.cli.subcommands import entry_points
 from mission.config.schema import load_config, with_overrides
 from mission.controller import MissionController
 from mission.errors import ConfigError
@@ -26,7 +28,7 @@ from mission.phases import Measurement, MissionState, Observation, Phase
 from mission.time.clock import ManualClock
 from sim.batch import sensors as sim_sensors
 from sim.batch.recovery import World, configured
-from tests.conftest import CONFIGS
+from tests.conftest import CONFIGS, ROOT
 from tests.support.fake_vehicle import FakeWorld
 
 LATENCY_S = 0.05  # from capture to the reading's arrival [s]
@@ -66,6 +68,20 @@ class ToyCamera:
 
     def close(self) -> None:
         self.closed = True
+
+
+class BrokenFeed:
+    """A feed whose every poll raises (a camera driver's fault)."""
+
+    def __init__(self) -> None:
+        self.polls = 0
+
+    def poll(self, t_s: float) -> list[MarkerFix]:
+        self.polls += 1
+        raise OSError("camera unplugged")
+
+    def close(self) -> None:
+        pass
 
 
 class ToySensor:
@@ -111,19 +127,22 @@ def assert_every_fix_reached_the_step_once(sent: list[MarkerFix], seen: list[Obs
     assert min(ages) >= 0.0 and max(ages) < (EVERY + 1) * (seen[1].t_s - seen[0].t_s) + LATENCY_S
 
 
-def test_a_feed_reaches_the_step_of_the_flight_loop():
+def test_a_feed_reaches_the_step_of_the_flight_loop(caplog):
     """Handed to MissionController as it is: every fix is in the observation of the tick that
-    polled it, the consumer reads the offset the camera saw, and the mission flies as before."""
+    polled it, the consumer reads the offset the camera saw, and the mission flies as before; a
+    feed that raises beside it gives nothing, is logged once and stops neither the loop nor the
+    other feed."""
     cfg = load_config(CONFIGS / "demo.toml")
     clock = ManualClock()
     world = FakeWorld(clock, target_ned_m=np.asarray(cfg.scenario.target, dtype=float))
-    camera = ToyCamera(world)
+    camera, broken = ToyCamera(world), BrokenFeed()
     controller = MissionController(cfg, world, world.feed, clock, publisher=world, command_thread=False,
-                                   sources=[camera])
+                                   sources=[broken, camera])
     controller.step = watched = Watched(controller.step)  # type: ignore[assignment]
     outcome = controller.run()
     assert outcome.ok, (outcome.reason, outcome.detail)
-    assert camera.polls == controller.ticks == len(watched.seen)
+    assert camera.polls == broken.polls == controller.ticks == len(watched.seen)
+    assert sum("camera unplugged" in r.getMessage() for r in caplog.records) == 1
     assert_every_fix_reached_the_step_once(camera.sent, watched.seen)
     assert any(obs.measurements.arrived(MarkerFix) and obs.vehicle is not None and obs.vehicle.armed
                for obs in watched.seen)  # fixes arrived in flight, not only before arming
@@ -173,3 +192,11 @@ def test_the_registries_name_the_feed_and_its_sensor(monkeypatch):
         run_cli.check_config(unknown)
     with pytest.raises(ConfigError, match="mission.feeds"):
         World(unknown, configured())
+
+
+def test_the_registries_are_read_from_the_source_tree():
+    """Run from the source tree, the entry points are pyproject.toml's as written (a feed or a
+    sensor added there is found without reinstalling), in declaration order."""
+    table = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["entry-points"]
+    for group in ("marsupial.commands", run_cli.FEEDS_GROUP, sim_sensors.SENSORS_GROUP):
+        assert list(entry_points(group).items()) == list(table.get(group, {}).items())
