@@ -14,6 +14,15 @@ from mission.vision.frames import ROTATION_BODY_CAM_DOWN, euler_matrix
 
 
 @dataclass(frozen=True)
+class Frame:
+    """One grey frame ``image`` (H, W) uint8 and ``capture_t_s`` [s]: when it was exposed, on the
+    clock of its source (a real camera's grab time minus its latency, or the simulator's time)."""
+
+    image: np.ndarray
+    capture_t_s: float
+
+
+@dataclass(frozen=True)
 class Mount:
     """Where the camera sits on the vehicle: ``offset_body_m`` (3,) its optical centre in body FRD
     [m]; ``rotation_body_cam`` (3, 3) its axes in body FRD (camera -> body)."""

@@ -4,26 +4,16 @@ How to point it at a camera: docs/vision.md."""
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
 from typing import Callable
 
 import cv2
-import numpy as np
 
 from mission.errors import MarsupialError
+from mission.vision.camera import Frame
 
 
 class CameraError(MarsupialError):
     """The camera cannot be opened or stopped delivering frames."""
-
-
-@dataclass(frozen=True)
-class Frame:
-    """One grey frame ``image`` (H, W) uint8 and ``capture_t_s`` [s]: when it was exposed, on the
-    source's clock (the grab's time minus the camera's latency)."""
-
-    image: np.ndarray
-    capture_t_s: float
 
 
 def open_capture(source: str) -> cv2.VideoCapture:

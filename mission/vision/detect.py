@@ -18,13 +18,16 @@ from mission.vision.measurement import MarkerPose, RelativeMeasurement
 @dataclass(frozen=True)
 class DetectorSettings:
     """max_tilt_deg: the flip gate: a pose whose deck normal is further than this from the NED
-    vertical (through the attitude used) is rejected [deg]; max_reprojection_px: a pose whose RMS
+    vertical (through the attitude used) is rejected [deg]; ambiguity_ratio: when IPPE's second
+solution's reprojection error is within this factor of the first's, the pose is ambiguous (a far
+or frontal tag) and the more level of the two wins; max_reprojection_px: a pose whose RMS
     reprojection error is above this is rejected [px]; pixel_sigma_px: the corner noise floor the
     covariance assumes [px] (the RMS reprojection error when larger); min_side_px: tags whose
     shortest side is below this in the image are ignored [px]; subpixel: refine the corners to a
     sub-pixel (OpenCV's ``CORNER_REFINE_SUBPIX``)."""
 
     max_tilt_deg: float = 30.0
+    ambiguity_ratio: float = 3.0
     max_reprojection_px: float = 2.0
     pixel_sigma_px: float = 0.3
     min_side_px: float = 12.0
@@ -107,17 +110,20 @@ class MarkerDetector:
         assert tag is not None
         _, rvecs, tvecs, errors = cv2.solvePnPGeneric(tag.tag_points(), corners, self.camera.matrix,
                                                       self.camera.distortion, flags=cv2.SOLVEPNP_IPPE_SQUARE)
-        best = None
+        candidates = []  # (reprojection error [px], tilt [deg], rotation_cam_deck, tvec of the tag)
         for rvec, tvec, error in zip(rvecs, tvecs, np.ravel(errors)):
             rotation_cam_deck = cv2.Rodrigues(rvec)[0] @ ROTATION_DECK_TAG.T
-            if self._tilt_deg(rotation_ned_cam @ rotation_cam_deck) > self.settings.max_tilt_deg:
-                continue
-            if best is None or error < best[0]:
-                centre = np.array([*tag.centre_deck_m, 0.0])
-                best = (error, rotation_cam_deck, tvec.ravel() - rotation_cam_deck @ centre)
-        if best is None:
+            tilt = self._tilt_deg(rotation_ned_cam @ rotation_cam_deck)
+            if tilt <= self.settings.max_tilt_deg:
+                candidates.append((float(error), tilt, rotation_cam_deck, tvec.ravel()))
+        if not candidates:
             return None
-        return cv2.Rodrigues(best[1])[0], best[2].reshape(3, 1)
+        candidates.sort(key=lambda c: c[0])
+        if len(candidates) > 1 and candidates[1][0] < self.settings.ambiguity_ratio * max(candidates[0][0], 1e-9):
+            candidates.sort(key=lambda c: c[1])  # ambiguous: the deck is more nearly level than not
+        _, _, rotation_cam_deck, tvec = candidates[0]
+        centre = np.array([*tag.centre_deck_m, 0.0])
+        return cv2.Rodrigues(rotation_cam_deck)[0], (tvec - rotation_cam_deck @ centre).reshape(3, 1)
 
     @staticmethod
     def _tilt_deg(rotation_ned_deck: np.ndarray) -> float:
