@@ -24,7 +24,10 @@ or frontal tag) and the more level of the two wins; max_reprojection_px: a pose 
     reprojection error is above this is rejected [px]; pixel_sigma_px: the corner noise floor the
     covariance assumes [px] (the RMS reprojection error when larger); min_side_px: tags whose
     shortest side is below this in the image are ignored [px]; subpixel: refine the corners to a
-    sub-pixel (OpenCV's ``CORNER_REFINE_SUBPIX``)."""
+    sub-pixel (OpenCV's ``CORNER_REFINE_SUBPIX``); decimate: look for tags in an image this many
+    times smaller, then refine their corners at full resolution (1: off); threshold_windows_px:
+    the adaptive threshold's window sizes (smallest, largest, step) [px], one pass each (OpenCV's
+    ``adaptiveThreshWinSize*``)."""
 
     max_tilt_deg: float = 30.0
     ambiguity_ratio: float = 3.0
@@ -32,6 +35,8 @@ or frontal tag) and the more level of the two wins; max_reprojection_px: a pose 
     pixel_sigma_px: float = 0.3
     min_side_px: float = 12.0
     subpixel: bool = True
+    decimate: int = 1
+    threshold_windows_px: tuple[int, int, int] = (3, 23, 10)
 
 
 @dataclass(frozen=True)
@@ -51,7 +56,9 @@ class MarkerDetector:
         self.settings = settings or DetectorSettings()
         params = cv2.aruco.DetectorParameters()
         params.cornerRefinementMethod = (cv2.aruco.CORNER_REFINE_SUBPIX if self.settings.subpixel
-                                         else cv2.aruco.CORNER_REFINE_NONE)
+                                         and self.settings.decimate == 1 else cv2.aruco.CORNER_REFINE_NONE)
+        (params.adaptiveThreshWinSizeMin, params.adaptiveThreshWinSizeMax,
+         params.adaptiveThreshWinSizeStep) = self.settings.threshold_windows_px
         self._detector = cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, FAMILY)), params)
 
     def corners(self, grey: np.ndarray, roi: tuple[int, int, int, int] | None = None) -> Corners:
@@ -61,10 +68,20 @@ class MarkerDetector:
         if roi is not None:
             x0, y0, x1, y1 = roi
             grey = grey[y0:y1, x0:x1]
-        found, ids, _ = self._detector.detectMarkers(grey)
-        if ids is None:
+        k = self.settings.decimate
+        small = grey if k == 1 else cv2.resize(grey, (grey.shape[1] // k, grey.shape[0] // k), interpolation=cv2.INTER_AREA)
+        found, ids, _ = self._detector.detectMarkers(small)
+        if ids is None or len(ids) == 0:  # OpenCV 4: None; 5: empty
             return Corners(np.zeros(0, int), np.zeros((0, 4, 2)))
-        corners = np.asarray(found, dtype=float).reshape(-1, 4, 2) + np.array([x0, y0])
+        corners = np.asarray(found, dtype=float).reshape(-1, 4, 2)
+        if k > 1:
+            corners = (corners + 0.5) * k - 0.5  # pixel centres of the small image in the full one
+            if self.settings.subpixel:
+                refined = cv2.cornerSubPix(grey, np.ascontiguousarray(corners.reshape(-1, 1, 2), dtype=np.float32),
+                                           (k + 2, k + 2), (-1, -1),
+                                           (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 30, 0.01))
+                corners = refined.reshape(-1, 4, 2).astype(float)
+        corners = corners + np.array([x0, y0])
         ids = ids.ravel()
         sides = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).min(axis=1)
         keep = np.array([self.layout.tag(int(i)) is not None for i in ids], dtype=bool) & (sides >= self.settings.min_side_px)

@@ -44,7 +44,7 @@ class Sensor:
         if blur_px is not None and np.hypot(*blur_px) >= 1.0:
             frame = cv2.filter2D(frame, -1, line_kernel(blur_px))
         if self.model.noise_sigma > 0:
-            frame += self._rng.normal(0.0, self.model.noise_sigma, frame.shape).astype(np.float32)
+            frame += self._rng.standard_normal(frame.shape, dtype=np.float32) * np.float32(self.model.noise_sigma)
         return np.clip(frame + 0.5, 0, 255).astype(np.uint8)
 
 
