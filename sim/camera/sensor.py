@@ -7,6 +7,8 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
+from mission.config.vision import VisionSection
+from mission.model import derived
 from mission.vision.camera import CameraModel
 from mission.vision.measurement import MarkerPose
 
@@ -23,6 +25,11 @@ class SensorModel:
     dropout_probability: float = 0.02
     rate_hz: float = 30.0
     latency_s: float = 0.08
+
+
+def sensor_model(section: VisionSection) -> SensorModel:
+    """The simulated sensor of the configuration's ``[vision]`` section."""
+    return derived(SensorModel, section)
 
 
 @dataclass
