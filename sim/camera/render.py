@@ -6,12 +6,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import Any
 
 import cv2
 import numpy as np
 
 from mission.vision.camera import CameraModel
-from mission.vision.frames import ROTATION_DECK_TAG, quaternion_matrix
+from mission.core.geodesy import project
+from mission.vision.frames import ROTATION_DECK_TAG, quaternion_matrix, yaw_of
 from mission.vision.layout import FAMILY, TAG_BITS, MarkerLayout, Tag
 from mission.vision.measurement import MarkerPose
 
@@ -86,3 +88,26 @@ def _draw(image: np.ndarray, camera: CameraModel, tag: Tag, marker: MarkerPose) 
     alpha = mask.astype(np.float32) / 255.0
     box = image[y0:y1, x0:x1]
     box[:] = (box * (1 - alpha) + warped * alpha + 0.5).astype(np.uint8)
+
+
+def poses_from_ground_truth(vehicle: Any, carrier: Any, deck_offset_m=(0.0, 0.0, 0.0)) -> Poses:
+    """The truth of a frame from two PX4 SIH instances' HIL_STATE_QUATERNION messages (pymavlink
+    messages or anything with ``lat``, ``lon`` [degE7], ``alt`` [mm], ``attitude_quaternion``
+    (w, x, y, z), ``vx, vy, vz`` [cm/s]): both projected about the vehicle's own position, so the
+    deck's position is relative to the vehicle (the relative vector is all the camera needs). The
+    deck centre is ``deck_offset_m`` [m] from the carrier's reference point in the carrier's FRD;
+    the deck level at the carrier's yaw. The blur's relative velocity:
+    :func:`relative_velocity_from_ground_truth`."""
+    lat0, lon0 = vehicle.lat * 1e-7, vehicle.lon * 1e-7
+    north, east = project(carrier.lat * 1e-7, carrier.lon * 1e-7, lat0, lon0)
+    carrier_ned = np.array([north, east, -(carrier.alt - vehicle.alt) * 1e-3])
+    rotation_ned_carrier = quaternion_matrix(np.asarray(carrier.attitude_quaternion, float))
+    yaw = yaw_of(rotation_ned_carrier)
+    c, s = np.cos(yaw), np.sin(yaw)
+    deck_ned = carrier_ned + np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) @ np.asarray(deck_offset_m, float)
+    return Poses(np.zeros(3), np.asarray(vehicle.attitude_quaternion, float), deck_ned, float(yaw))
+
+
+def relative_velocity_from_ground_truth(vehicle: Any, carrier: Any) -> np.ndarray:
+    """The carrier's velocity minus the vehicle's [m/s] NED from their HIL_STATE_QUATERNION (cm/s)."""
+    return np.array([carrier.vx - vehicle.vx, carrier.vy - vehicle.vy, carrier.vz - vehicle.vz]) * 0.01

@@ -106,3 +106,23 @@ def test_the_real_camera_source_reads_a_file(tmp_path):
         assert m is not None and np.linalg.norm(m.deck_rel_ned_m - truth(p)) < 0.03
     with pytest.raises(CameraError):
         CameraSource(str(tmp_path / "none.avi"))
+
+
+def test_poses_from_two_sih_ground_truths():
+    """Two HIL_STATE_QUATERNIONs: the carrier 10 m north, 5 m east and 3 m below the vehicle,
+    heading east; the deck 0.5 m ahead of the carrier's reference point."""
+    from types import SimpleNamespace
+
+    from mission.vision.frames import euler_quaternion
+    from sim.camera.render import poses_from_ground_truth, relative_velocity_from_ground_truth
+
+    lat0, lon0 = 47.397742, 8.545594
+    north_deg = 10.0 / 6371000.0 * 180 / np.pi
+    east_deg = 5.0 / (6371000.0 * np.cos(np.radians(lat0))) * 180 / np.pi
+    vehicle = SimpleNamespace(lat=int(lat0 * 1e7), lon=int(lon0 * 1e7), alt=503000, vx=100, vy=0, vz=0,
+                              attitude_quaternion=euler_quaternion(0.0, 0.1, 0.0).tolist())
+    carrier = SimpleNamespace(lat=int(round((lat0 + north_deg) * 1e7)), lon=int(round((lon0 + east_deg) * 1e7)), alt=500000,
+                              vx=300, vy=0, vz=0, attitude_quaternion=euler_quaternion(0.0, 0.0, np.pi / 2).tolist())
+    poses = poses_from_ground_truth(vehicle, carrier, deck_offset_m=(0.5, 0.0, 0.0))
+    assert np.allclose(poses.deck_ned_m, [10.0, 5.5, 3.0], atol=0.02) and poses.deck_yaw_rad == pytest.approx(np.pi / 2)
+    assert np.allclose(relative_velocity_from_ground_truth(vehicle, carrier), [2.0, 0.0, 0.0])
