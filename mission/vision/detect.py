@@ -122,7 +122,8 @@ class MarkerDetector:
 
     def _square_pose(self, tag_id: int, corners: np.ndarray, rotation_ned_cam: np.ndarray):
         """The deck's pose (rvec, tvec) from one tag: of IPPE's two solutions, those whose deck
-        normal passes the tilt gate, the one with the smaller reprojection error; None if neither."""
+        normal passes the tilt gate; of those, the one with the smaller reprojection error, or the
+        more level one when their errors are within ``ambiguity_ratio``; None if neither passes."""
         tag = self.layout.tag(tag_id)
         assert tag is not None
         _, rvecs, tvecs, errors = cv2.solvePnPGeneric(tag.tag_points(), corners, self.camera.matrix,
