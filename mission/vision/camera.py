@@ -75,8 +75,9 @@ class CameraModel:
 
 def load_calibration(path: str | Path, mount: Mount | None = None) -> CameraModel:
     """A camera model from a calibration file: OpenCV's own (YAML, XML or JSON written by
-    ``cv2.FileStorage``, as OpenCV's calibration tools write it: ``camera_matrix``,
-    ``distortion_coefficients``, ``image_width``, ``image_height``), a plain JSON object with the
+    ``cv2.FileStorage``, as OpenCV's calibration tutorial and its interactive calibration tool
+    write it: ``camera_matrix``, ``distortion_coefficients``, ``image_width``, ``image_height``,
+    or their other spellings there), a plain JSON object with the
     same keys as lists, or ROS's ``camera_info`` YAML (``camera_matrix: {data: [...]}``,
     ``distortion_coefficients: {data: [...]}``). Raises ValueError naming what is missing."""
     path = Path(path)
@@ -102,16 +103,28 @@ def _plain_json(text: str) -> dict | None:
     return data
 
 
+# The names OpenCV's calibration programs write the same values under: its camera calibration
+# tutorial (old and new), its interactive calibration tool (``cameraResolution`` = [w, h]).
+_ALIASES = {"camera_matrix": ("camera_matrix", "Camera_Matrix", "cameraMatrix"),
+            "distortion_coefficients": ("distortion_coefficients", "Distortion_Coefficients", "dist_coeffs"),
+            "image_width": ("image_width", "image_Width"), "image_height": ("image_height", "image_Height")}
+
+
 def _opencv_storage(path: Path) -> dict:
     import cv2
     storage = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
     try:
         values = {}
-        for key in ("camera_matrix", "distortion_coefficients", "image_width", "image_height"):
-            node = storage.getNode(key)
-            if node.empty():
-                continue
-            values[key] = node.mat() if node.isMap() else node.real()
+        for key, names in _ALIASES.items():
+            for name in names:
+                node = storage.getNode(name)
+                if not node.empty():
+                    values[key] = node.mat() if node.isMap() else node.real()
+                    break
+        resolution = storage.getNode("cameraResolution")
+        if not resolution.empty() and "image_width" not in values:
+            size = resolution.mat() if resolution.isMap() else [resolution.at(i).real() for i in range(resolution.size())]
+            values["image_width"], values["image_height"] = np.ravel(size)[:2]
         return values
     finally:
         storage.release()

@@ -51,6 +51,16 @@ def test_opencv_calibration_files(tmp_path):
         _check(load_calibration(path))
 
 
+def test_the_interactive_calibration_tools_names(tmp_path):
+    path = tmp_path / "cameraParameters.xml"
+    storage = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
+    storage.write("cameraResolution", np.array([640, 480]))
+    storage.write("cameraMatrix", MATRIX)
+    storage.write("dist_coeffs", DISTORTION.reshape(5, 1))
+    storage.release()
+    _check(load_calibration(path))
+
+
 def test_plain_json_and_ros_calibration_files(tmp_path):
     plain = tmp_path / "cam.json"
     plain.write_text(json.dumps({"camera_matrix": MATRIX.tolist(), "distortion_coefficients": DISTORTION.tolist(),
