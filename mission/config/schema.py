@@ -34,6 +34,7 @@ from mission.config.legs import check_legs, first_target_named
 from mission.config.recovery import RecoverySection, check_recovery
 from mission.config.scenario import ObstacleSection, ScenarioSection
 from mission.config.urls import DEFAULT_URL
+from mission.config.vision import VisionSection, check_vision
 from mission.config.fields import (
     COORD_LIMIT_M,
     MAX_PATH_CHARS,
@@ -365,6 +366,7 @@ class Config(Section):
     zenoh: ZenohSection = ZenohSection()
     carrier: CarrierSection = CarrierSection()
     recovery: RecoverySection = RecoverySection()
+    vision: VisionSection = VisionSection()
 
     @model_validator(mode="after")
     def _assumptions(self) -> "Config":
@@ -416,6 +418,7 @@ class Config(Section):
                    safety_margin_m=sf.margin_m)
         check_recovery(self.recovery, self.carrier, carrier_max_speed_m_s=sf.carrier_max_speed_m_s,  # it can finish
                        passenger_max_speed_m_s=sf.passenger_max_speed_m_s, final_action=m.final_action)
+        check_vision(self.vision, self.recovery.decision_height_m)  # the marker in view at the gate
         if s.dim != 3 or s.frame != "local_ned":
             return
         # local NED, z down: the carrier drives on the ground at carrier_start's z

@@ -22,8 +22,11 @@ from mission.core.pursuit import PursuitLimits
 from mission.core.safety import SafetyConfig
 from mission.core.tick import TickModel
 from mission.core.tracking import TrackingGains
+from mission.config.vision import VisionSection
 from mission.model import derived, mission_model, same_named
 from mission.phases.types import DeckRide, MissionModel, RecoveryModel
+from mission.vision.detect import DetectorSettings
+from sim.camera.sensor import SensorModel
 
 # Every runtime model built from the configuration, with the sections it is built from.
 RUNTIME: list[tuple[type, tuple[type[BaseModel], ...]]] = [
@@ -38,6 +41,8 @@ RUNTIME: list[tuple[type, tuple[type[BaseModel], ...]]] = [
     (PursuitLimits, (RecoverySection,)),
     (GuardParams, (CarrierSection,)),
     (TrackingParams, (CarrierSection,)),
+    (DetectorSettings, (VisionSection,)),
+    (SensorModel, (VisionSection,)),
 ]
 
 
