@@ -31,7 +31,9 @@ from mission.relnav import kalman
 from mission.relnav.inputs import CarrierFix, Counts, MarkerObservation, OwnSample, RelativeEstimate
 
 KINDS = ("marker", "gnss_position", "gnss_velocity")
-_MEASUREMENT, _TICK = 0, 1  # at one time, measurements are fused before the tick's snapshot
+# at one time: the GNSS state, then the marker, then the tick's snapshot (a fixed order, so that the
+# result does not depend on the order of arrival)
+_GNSS, _MARKER, _TICK = 0, 1, 2
 
 
 @dataclass(frozen=True)
@@ -92,9 +94,10 @@ class RelativeEstimator:
         self._marker_t_s = -math.inf  # capture time of the newest marker fused
         self._done: tuple[float, int, int] | None = None  # the last event the state includes
         self._replay_from: tuple[float, int, int] | None = None  # the earliest event fused out of order
-        self._fused = dict.fromkeys(KINDS, 0)  # of the events pruned from the history
+        self._fused = dict.fromkeys(KINDS, 0)  # by each measurement's latest fusion
         self._rejected = dict.fromkeys(KINDS, 0)
         self._too_old = 0
+        self._models: dict[float, tuple[np.ndarray, np.ndarray]] = {}  # (transition, process noise) by step [s]
 
     def _prior(self) -> np.ndarray:
         p = self.params
@@ -116,12 +119,12 @@ class RelativeEstimator:
     def carrier(self, fix: CarrierFix) -> None:
         """The carrier's reported GNSS state, measured at ``fix.t_s`` [s]; fused at the next
         :meth:`tick` or :meth:`estimate`."""
-        self._add(_Event(self._key(fix.t_s, _MEASUREMENT), fix=fix))
+        self._add(_Event(self._key(fix.t_s, _GNSS), fix=fix))
 
     def marker(self, observation: MarkerObservation) -> None:
         """A marker's measurement captured at ``observation.capture_t_s`` [s]; fused at the next
         :meth:`tick` or :meth:`estimate`."""
-        self._add(_Event(self._key(observation.capture_t_s, _MEASUREMENT), marker=observation))
+        self._add(_Event(self._key(observation.capture_t_s, _MARKER), marker=observation))
 
     # --- output -----------------------------------------------------------------------------
 
@@ -139,11 +142,7 @@ class RelativeEstimator:
 
     def counts(self) -> Counts:
         """Measurements fused and rejected so far (each counted once, by its latest fusion)."""
-        fused, rejected = dict(self._fused), dict(self._rejected)
-        for e in self._events:
-            for kind, ok in e.outcome.items():
-                (fused if ok else rejected)[kind] += 1
-        return Counts(fused, rejected, self._too_old)
+        return Counts(dict(self._fused), dict(self._rejected), self._too_old)
 
     # --- the history --------------------------------------------------------------------------
 
@@ -193,11 +192,7 @@ class RelativeEstimator:
             return
         base = self._snapshots[i].key
         del self._snapshots[:i]
-        j = bisect.bisect_left(self._events, base, key=lambda e: e.key)
-        for e in self._events[:j]:
-            for kind, ok in e.outcome.items():
-                (self._fused if ok else self._rejected)[kind] += 1
-        del self._events[:j]
+        del self._events[:bisect.bisect_left(self._events, base, key=lambda e: e.key)]
         k = bisect.bisect_left(self._own, base[0], key=lambda o: o.t_s)
         del self._own[:max(k - 1, 0)]  # keep one before the base: the GNSS difference interpolates
 
@@ -205,6 +200,8 @@ class RelativeEstimator:
 
     def _fuse(self, e: _Event) -> None:
         self._predict_to(e.t_s)
+        for kind, ok in e.outcome.items():  # a replay: this measurement's earlier fusion no longer counts
+            (self._fused if ok else self._rejected)[kind] -= 1
         e.outcome = {}
         if e.tick is not None:
             self._snapshots.append(_Snapshot(e.key, self._x, self._p, self._marker_t_s))
@@ -222,6 +219,8 @@ class RelativeEstimator:
             e.outcome["gnss_position"] = self._update(z_p, kalman.H_GNSS_POSITION, kalman.I3 * prm.gnss_position_sigma_m ** 2)
             e.outcome["gnss_velocity"] = self._update(z_v, kalman.H_GNSS_VELOCITY,
                                                       kalman.I3 * prm.gnss_velocity_sigma_m_s ** 2)
+        for kind, ok in e.outcome.items():
+            (self._fused if ok else self._rejected)[kind] += 1
 
     def _predict_to(self, t_s: float) -> None:
         if self._t_s == -math.inf:
@@ -230,10 +229,14 @@ class RelativeEstimator:
         dt = t_s - self._t_s
         if dt <= 0.0:
             return
-        prm = self.params
-        f = kalman.transition(dt, prm.bias_tau_s)
-        q = kalman.process_noise(dt, prm.accel_noise_m_s2, prm.bias_sigma_m, prm.bias_tau_s)
-        self._x, self._p = kalman.predict(self._x, self._p, f, q)
+        model = self._models.get(dt)
+        if model is None:  # the steps repeat (the tick's, the sensors' periods): computed once each
+            prm = self.params
+            if len(self._models) > 256:
+                self._models.clear()
+            model = self._models[dt] = (kalman.transition(dt, prm.bias_tau_s),
+                                        kalman.process_noise(dt, prm.accel_noise_m_s2, prm.bias_sigma_m, prm.bias_tau_s))
+        self._x, self._p = kalman.predict(self._x, self._p, *model)
         self._t_s = t_s
 
     def _update(self, z: np.ndarray, h: np.ndarray, r: np.ndarray) -> bool:
