@@ -11,7 +11,7 @@ import pytest
 from mission.config.relnav import RelnavSection
 from mission.relnav.estimator import RelativeEstimator
 from mission.relnav.inputs import CarrierFix, MarkerFix, OwnSample
-from tests.unit.relnav.scenario import fly, make_world
+from sim.testing.relnav_world import fly, make_world
 
 PARAMS = RelnavSection().params()
 BIAS = (2.0, 0.0, 0.0)  # [m] the carrier's GNSS frame minus the passenger's

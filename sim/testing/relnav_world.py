@@ -1,4 +1,4 @@
-"""A seeded world for the relative estimator's tests: the truth, what the sensors measured and when
+"""A seeded world for the relative estimator's tests and bench: the truth, what the sensors measured and when
 each measurement arrives (units SI, NED, seconds).
 
 The truth follows the estimator's own model (:mod:`mission.relnav.kalman`): the relative position
