@@ -139,3 +139,17 @@ def test_the_covariance_matches_the_errors_nees():
     for dof, nees in ((9, nees9), (3, nees3)):
         lo, hi = _chi2_quantile(-2.576, dof * runs) / runs, _chi2_quantile(2.576, dof * runs) / runs
         assert np.all((nees > lo) & (nees < hi)), (dof, lo, hi, nees.round(2))
+
+
+def test_visions_measurement_is_a_marker_observation():
+    """vision's ``RelativeMeasurement`` feeds the estimator as it is (skipped where vision is not merged)."""
+    vision = pytest.importorskip("mission.vision.measurement")
+    est = RelativeEstimator(PARAMS)
+    est.tick(OwnSample(0.0, np.zeros(3), np.zeros(3)))
+    r = np.array([1.0, -2.0, 3.0])
+    est.marker(vision.RelativeMeasurement(
+        capture_t_s=0.05, deck_rel_ned_m=r, covariance_ned_m2=np.eye(3) * 1e-4, deck_body_frd_m=r,
+        attitude_q_wxyz=np.array([1.0, 0.0, 0.0, 0.0]), deck_yaw_ned_rad=0.0, tag_ids=(0,), reprojection_error_px=0.3,
+        marker=vision.MarkerPose(np.eye(3), r)))
+    e = est.tick(OwnSample(0.1, np.zeros(3), np.zeros(3)))
+    assert e.counts.fused["marker"] == 1 and np.allclose(e.position_ned_m, r, atol=0.01)
