@@ -106,10 +106,13 @@ class RelativeEstimator:
     # --- inputs -----------------------------------------------------------------------------
 
     def tick(self, own: OwnSample) -> RelativeEstimate:
-        """The passenger's own estimate at ``own.t_s`` [s] (later than the last tick's): the filter
-        moves on to that time, fusing what has arrived; returns the estimate then."""
+        """The passenger's own estimate at ``own.t_s`` [s] (later than the last tick's, finite; else
+        ValueError): the filter moves on to that time, fusing what has arrived; returns the
+        estimate then."""
         if self._own and not own.t_s > self._own[-1].t_s:
             raise ValueError(f"tick at {own.t_s!r} s is not after the last one at {self._own[-1].t_s!r} s")
+        if not (np.all(np.isfinite(own.position_ned_m)) and np.all(np.isfinite(own.velocity_ned_m_s))):
+            raise ValueError(f"the passenger's own estimate at {own.t_s!r} s is not finite")
         self._own.append(own)
         self._insert(_Event(self._key(own.t_s, _TICK), tick=own))
         self._catch_up()

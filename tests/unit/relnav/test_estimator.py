@@ -77,6 +77,18 @@ def test_late_and_out_of_order_measurements_give_the_in_order_result():
     assert a.counts == b.counts and a.counts.fused["marker"] > 50
 
 
+def test_ticks_go_forward_and_are_finite():
+    est = RelativeEstimator(PARAMS)
+    est.tick(OwnSample(1.0, np.zeros(3), np.zeros(3)))
+    with pytest.raises(ValueError, match="not after"):
+        est.tick(OwnSample(1.0, np.zeros(3), np.zeros(3)))
+    with pytest.raises(ValueError, match="not finite"):
+        est.tick(OwnSample(2.0, np.array([0.0, math.nan, 0.0]), np.zeros(3)))
+    est.marker(MarkerFix.isotropic(1.5, np.array([math.nan, 0.0, 0.0]), 0.03))  # a NaN measurement is gated
+    e = est.tick(OwnSample(2.0, np.zeros(3), np.zeros(3)))
+    assert e.counts.rejected["marker"] == 1 and np.all(np.isfinite(e.position_ned_m))
+
+
 def test_a_measurement_older_than_the_history_is_dropped_and_counted():
     est = RelativeEstimator(PARAMS)
     est.marker(MarkerFix.isotropic(0.0, np.zeros(3), 0.03))  # before the first tick
