@@ -134,3 +134,14 @@ def test_the_passengers_gnss_bias_is_smooth_seeded_and_of_its_statistics():
     again = estimate_error_of(VehicleOptions(passenger_gnss=gnss, estimate_error=0.0))
     assert again.position == start
     assert GaussMarkovBias(1.0, 10.0, 1.0, np.random.default_rng(0)).advance(0.0).shape == (3,)
+
+
+def test_mock_vehicle_takes_the_passengers_bias_from_a_configuration(tmp_path):
+    from sim.vehicle.cli import passenger_gnss_of
+
+    path = tmp_path / "world.toml"
+    path.write_text("[world.passenger_gnss]\nbias_sigma_m = 1.0\nseed = 9\n")
+    gnss = passenger_gnss_of(path)
+    assert gnss is not None and gnss.bias_sigma_m == 1.0 and gnss.seed == 9
+    path.write_text("[world.carrier_gnss]\nenabled = true\n")
+    assert passenger_gnss_of(path) is None and passenger_gnss_of(None) is None
