@@ -15,7 +15,8 @@ the last ``history_s`` of ticks and measurements with the state after each tick,
 restarts the filter from the newest state before it and replays everything after it in time
 order. So the result depends on what was measured, not on the order it arrived in; a
 measurement stamped after the newest tick waits for a tick to pass it, one older than the
-history is dropped (counted ``too_old``). Each measurement passes a chi-square gate on its
+history is dropped (counted ``too_old``), and so is one stamped more than ``history_s`` after
+the newest tick (``too_new``: its clock disagrees). Each measurement passes a chi-square gate on its
 normalised innovation squared (a flipped pose, another tag's detection), and the rejections are
 counted. Deterministic, no I/O, no clock: time is what the inputs say [s].
 """
@@ -97,6 +98,7 @@ class RelativeEstimator:
         self._fused = dict.fromkeys(KINDS, 0)  # by each measurement's latest fusion
         self._rejected = dict.fromkeys(KINDS, 0)
         self._too_old = 0
+        self._too_new = 0
         self._models: dict[float, tuple[np.ndarray, np.ndarray]] = {}  # (transition, process noise) by step [s]
 
     def _prior(self) -> np.ndarray:
@@ -113,8 +115,9 @@ class RelativeEstimator:
             raise ValueError(f"tick at {own.t_s!r} s is not after the last one at {self._own[-1].t_s!r} s")
         if not (np.all(np.isfinite(own.position_ned_m)) and np.all(np.isfinite(own.velocity_ned_m_s))):
             raise ValueError(f"the passenger's own estimate at {own.t_s!r} s is not finite")
+        event = _Event(self._key(own.t_s, _TICK), tick=own)
         self._own.append(own)
-        self._insert(_Event(self._key(own.t_s, _TICK), tick=own))
+        self._insert(event)
         self._catch_up()
         self._prune()
         return self.estimate()
@@ -145,7 +148,7 @@ class RelativeEstimator:
 
     def counts(self) -> Counts:
         """Measurements fused and rejected so far (each counted once, by its latest fusion)."""
-        return Counts(dict(self._fused), dict(self._rejected), self._too_old)
+        return Counts(dict(self._fused), dict(self._rejected), self._too_old, self._too_new)
 
     # --- the history --------------------------------------------------------------------------
 
@@ -159,6 +162,9 @@ class RelativeEstimator:
         base = self._snapshots[0].key if self._snapshots else None
         if base is None or event.key < base:
             self._too_old += 1  # before the first tick or older than the history
+            return
+        if event.t_s > self._own[-1].t_s + self.params.history_s:
+            self._too_new += 1  # a clock that disagrees with the passenger's
             return
         self._insert(event)
 

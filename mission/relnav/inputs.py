@@ -78,11 +78,13 @@ class MarkerFix:
 @dataclass(frozen=True)
 class Counts:
     """Measurements fused and rejected by the gate, by kind (``marker``, ``gnss_position``,
-    ``gnss_velocity``); ``too_old``: measurements older than the history (dropped unfused)."""
+    ``gnss_velocity``); ``too_old``: measurements older than the history, ``too_new``: stamped
+    more than the history after the newest tick (both dropped unfused)."""
 
     fused: dict[str, int]
     rejected: dict[str, int]
     too_old: int
+    too_new: int = 0
 
 
 @dataclass(frozen=True)

@@ -89,13 +89,17 @@ def test_ticks_go_forward_and_are_finite():
     assert e.counts.rejected["marker"] == 1 and np.all(np.isfinite(e.position_ned_m))
 
 
-def test_a_measurement_older_than_the_history_is_dropped_and_counted():
+def test_a_measurement_outside_the_history_is_dropped_and_counted():
     est = RelativeEstimator(PARAMS)
     est.marker(MarkerFix.isotropic(0.0, np.zeros(3), 0.03))  # before the first tick
     for k in range(40):
         est.tick(OwnSample(0.05 * k, np.zeros(3), np.zeros(3)))
     est.marker(MarkerFix.isotropic(0.0, np.zeros(3), 0.03))  # 1.95 s late, history 1 s
-    assert est.estimate().counts.too_old == 2 and est.estimate().counts.fused["marker"] == 0
+    est.marker(MarkerFix.isotropic(3.0, np.zeros(3), 0.03))  # 1.05 s ahead of the newest tick
+    est.marker(MarkerFix.isotropic(2.5, np.zeros(3), 0.03))  # 0.55 s ahead: waits for a tick to pass it
+    counts = est.tick(OwnSample(2.0, np.zeros(3), np.zeros(3))).counts
+    assert (counts.too_old, counts.too_new, counts.fused["marker"]) == (2, 1, 0)
+    assert est.tick(OwnSample(2.5, np.zeros(3), np.zeros(3))).counts.fused["marker"] == 1
 
 
 @pytest.mark.parametrize("gated", [True, False])
