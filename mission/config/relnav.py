@@ -26,12 +26,15 @@ class RelnavSection(Section):
         description=("[m/s^2/sqrt(Hz)] square root of the spectral density of the white relative acceleration "
                      "driving the constant-velocity model (per axis)"))
     bias_sigma_m: float = Field(2.0, gt=0, le=100,
-        description="[m] standard deviation of the bias between the carrier's and the passenger's GNSS frames (per axis)")
+        description=("[m] standard deviation of the bias between the carrier's and the passenger's GNSS frames (per "
+                     "horizontal axis)"))
     bias_tau_s: float = Field(300.0, gt=0, le=100_000,
         description="[s] correlation time of that bias (first-order Gauss-Markov)")
+    vertical_factor: float = Field(1.5, ge=0.1, le=10,
+        description="[-] the vertical bias and GNSS position noise over the horizontal ones")
     gnss_position_sigma_m: float = Field(0.35, gt=0, le=100,
         description=("[m] white noise of the GNSS relative position (the carrier's published position minus the "
-                     "passenger's own, per axis)"))
+                     "passenger's own, per horizontal axis)"))
     gnss_velocity_sigma_m_s: float = Field(0.3, gt=0, le=20,
         description="[m/s] white noise of the relative velocity (the carrier's published velocity minus the passenger's own)")
     initial_sigma_m: float = Field(100.0, gt=0, le=10_000,

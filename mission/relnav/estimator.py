@@ -44,6 +44,7 @@ class RelnavParams:
 
     accel_noise_m_s2: float
     bias_sigma_m: float
+    vertical_factor: float
     bias_tau_s: float
     gnss_position_sigma_m: float
     gnss_velocity_sigma_m_s: float
@@ -103,7 +104,12 @@ class RelativeEstimator:
 
     def _prior(self) -> np.ndarray:
         p = self.params
-        return np.diag([p.initial_sigma_m ** 2] * 3 + [p.initial_velocity_sigma_m_s ** 2] * 3 + [p.bias_sigma_m ** 2] * 3)
+        return np.diag([p.initial_sigma_m ** 2] * 3 + [p.initial_velocity_sigma_m_s ** 2] * 3
+                       + list(self._per_axis(p.bias_sigma_m) ** 2))
+
+    def _per_axis(self, horizontal: float) -> np.ndarray:
+        """A horizontal standard deviation per NED axis (the vertical one times ``vertical_factor``)."""
+        return np.array([horizontal, horizontal, horizontal * self.params.vertical_factor])
 
     # --- inputs -----------------------------------------------------------------------------
 
@@ -225,7 +231,8 @@ class RelativeEstimator:
             prm = self.params
             z_p = np.asarray(e.fix.position_ned_m, dtype=float) - own.position_ned_m
             z_v = np.asarray(e.fix.velocity_ned_m_s, dtype=float) - own.velocity_ned_m_s
-            e.outcome["gnss_position"] = self._update(z_p, kalman.H_GNSS_POSITION, kalman.I3 * prm.gnss_position_sigma_m ** 2)
+            e.outcome["gnss_position"] = self._update(z_p, kalman.H_GNSS_POSITION,
+                                                      np.diag(self._per_axis(prm.gnss_position_sigma_m) ** 2))
             e.outcome["gnss_velocity"] = self._update(z_v, kalman.H_GNSS_VELOCITY,
                                                       kalman.I3 * prm.gnss_velocity_sigma_m_s ** 2)
         for kind, ok in e.outcome.items():
@@ -244,7 +251,8 @@ class RelativeEstimator:
             if len(self._models) > 256:
                 self._models.clear()
             model = self._models[dt] = (kalman.transition(dt, prm.bias_tau_s),
-                                        kalman.process_noise(dt, prm.accel_noise_m_s2, prm.bias_sigma_m, prm.bias_tau_s))
+                                        kalman.process_noise(dt, prm.accel_noise_m_s2, self._per_axis(prm.bias_sigma_m),
+                                                             prm.bias_tau_s))
         self._x, self._p = kalman.predict(self._x, self._p, *model)
         self._t_s = t_s
 

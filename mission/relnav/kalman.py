@@ -7,7 +7,7 @@ independent and identical):
 - ``r`` and ``v``: constant velocity driven by a white relative acceleration of spectral density
   ``q = accel_noise^2`` [m^2/s^3];
 - ``b``: first-order Gauss-Markov, ``db/dt = -b / tau + w``, stationary standard deviation
-  ``sigma_b`` [m], so ``b(t+dt) = exp(-dt/tau) b(t) + n`` with ``var n = sigma_b^2 (1 - exp(-2 dt/tau))``.
+  ``sigma_b`` [m] (its own per axis), so ``b(t+dt) = exp(-dt/tau) b(t) + n`` with ``var n = sigma_b^2 (1 - exp(-2 dt/tau))``.
 
 Measurements: the marker sees ``r``; the GNSS difference sees ``r + b``; the velocity difference
 sees ``v``. PX4's vision target estimator keeps the same three parts per axis (relative position,
@@ -37,14 +37,15 @@ def transition(dt_s: float, bias_tau_s: float) -> np.ndarray:
     return f
 
 
-def process_noise(dt_s: float, accel_noise_m_s2: float, bias_sigma_m: float, bias_tau_s: float) -> np.ndarray:
-    """The (9, 9) process noise accumulated over ``dt_s`` [s] (see the module docstring)."""
+def process_noise(dt_s: float, accel_noise_m_s2: float, bias_sigma_m: np.ndarray, bias_tau_s: float) -> np.ndarray:
+    """The (9, 9) process noise accumulated over ``dt_s`` [s] (see the module docstring);
+    ``bias_sigma_m`` (3,) the bias's stationary standard deviation per NED axis [m]."""
     q = accel_noise_m_s2 ** 2
     out = np.zeros((N, N))
     out[R_, R_] = I3 * (q * dt_s ** 3 / 3.0)
     out[R_, V_] = out[V_, R_] = I3 * (q * dt_s ** 2 / 2.0)
     out[V_, V_] = I3 * (q * dt_s)
-    out[B_, B_] = I3 * (bias_sigma_m ** 2 * -math.expm1(-2.0 * dt_s / bias_tau_s))
+    out[B_, B_] = np.diag(np.asarray(bias_sigma_m, dtype=float) ** 2 * -math.expm1(-2.0 * dt_s / bias_tau_s))
     return out
 
 

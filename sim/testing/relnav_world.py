@@ -41,13 +41,15 @@ def make_world(params: RelnavParams, seed: int, *, duration_s: float = 30.0, dt_
     q = (params.accel_noise_m_s2 if truth_accel_m_s2 is None else truth_accel_m_s2) ** 2
     chol = np.linalg.cholesky(q * np.array([[dt_s ** 3 / 3, dt_s ** 2 / 2], [dt_s ** 2 / 2, dt_s]]))
     decay = math.exp(-dt_s / params.bias_tau_s)
-    kick = params.bias_sigma_m * math.sqrt(1 - decay ** 2)
+    axes = np.array([1.0, 1.0, params.vertical_factor])  # the vertical sigmas over the horizontal ones
+    bias_sigma = params.bias_sigma_m * axes
+    kick = bias_sigma * math.sqrt(1 - decay ** 2)
     if prior:
         r = rng.normal(0, params.initial_sigma_m, 3)
         v = rng.normal(0, params.initial_velocity_sigma_m_s, 3)
     else:
         r, v = np.array([10.0, -4.0, 1.0]), np.zeros(3)
-    b = np.array(constant_bias_m, dtype=float) if constant_bias_m is not None else rng.normal(0, params.bias_sigma_m, 3)
+    b = np.array(constant_bias_m, dtype=float) if constant_bias_m is not None else bias_sigma * rng.standard_normal(3)
     w = World()
     n = int(round(duration_s / dt_s))
     for k in range(n + 1):
@@ -65,7 +67,7 @@ def make_world(params: RelnavParams, seed: int, *, duration_s: float = 30.0, dt_
         if t > measure_until_s:
             continue
         if k % gnss_every == 0:
-            fix = CarrierFix(t, own_p + r + b + rng.normal(0, params.gnss_position_sigma_m, 3),
+            fix = CarrierFix(t, own_p + r + b + params.gnss_position_sigma_m * axes * rng.standard_normal(3),
                              own_v + v + rng.normal(0, params.gnss_velocity_sigma_m_s, 3))
             w.arrivals.append((t + rng.uniform(*gnss_delay_s), fix))
         if t >= marker_from_s and k % marker_every == 0:

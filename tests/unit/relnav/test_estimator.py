@@ -52,10 +52,11 @@ def test_the_marker_removes_the_bias():
     assert np.linalg.norm(steady.mean(axis=0)) <= 0.05, steady.mean(axis=0)
     assert np.all(np.sqrt((steady ** 2).mean(axis=0)) <= 0.05)  # RMS per axis
     last = est[-1]
-    # the bias is estimated within 3 sigma of its own covariance (~0.13 m: the GNSS noise against
-    # the drift the model allows), the relative position much better (the marker)
+    # the bias is estimated within 3 sigma of its own covariance (0.16 m, 0.24 m down: the GNSS
+    # noise against the drift the model allows), the relative position much better (the marker)
     bias_sigma = np.sqrt(np.diag(last.covariance)[6:])
-    assert np.all(np.abs(last.bias_ned_m - BIAS) < 3 * bias_sigma) and np.all(bias_sigma < 0.2), (last.bias_ned_m, bias_sigma)
+    assert np.all(np.abs(last.bias_ned_m - BIAS) < 3 * bias_sigma), (last.bias_ned_m, bias_sigma)
+    assert np.all(bias_sigma < 0.2 * np.array([1.0, 1.0, PARAMS.vertical_factor])), bias_sigma
     assert last.converged and last.position_sigma_m < PARAMS.converged_sigma_m
     assert last.since_marker_s <= 0.3
     # a 0.999 gate rejects about one good sample in a thousand (here 1 marker of ~300)
