@@ -32,6 +32,7 @@ from pydantic import Field, ValidationError, field_validator, model_validator
 from mission.config.carrier import CarrierMavlinkSection, CarrierRos2Section, CarrierSection
 from mission.config.legs import check_legs, first_target_named
 from mission.config.recovery import RecoverySection, check_recovery
+from mission.config.relnav import RelnavSection, WorldSection
 from mission.config.scenario import ObstacleSection, ScenarioSection
 from mission.config.urls import DEFAULT_URL
 from mission.config.vision import VisionSection, check_vision
@@ -367,6 +368,8 @@ class Config(Section):
     carrier: CarrierSection = CarrierSection()
     recovery: RecoverySection = RecoverySection()
     vision: VisionSection = VisionSection()
+    relnav: RelnavSection = RelnavSection()
+    world: WorldSection = WorldSection()
 
     @model_validator(mode="after")
     def _assumptions(self) -> "Config":
