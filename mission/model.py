@@ -25,7 +25,7 @@ from mission.errors import ConfigError
 from mission.core.docking import DockingGeometry
 from mission.core.pursuit import PursuitLimits
 from mission.phases import MissionModel
-from mission.phases.types import DeckRide, RecoveryModel
+from mission.phases.types import DeckRide, RecoveryModel, RelnavGates
 from mission.core.safety import SafetyConfig
 from mission.core.tick import TickModel, target_keep_outs
 from mission.core.tracking import TrackingGains
@@ -91,6 +91,7 @@ def mission_model(cfg: Config) -> MissionModel:
         leg_start_m=tick.law.separation_distance_m + m.leg_start_margin_m,
         deck=derived(DeckRide, m, keep_out_radius_m=m.deck_keep_out_radius_m, slope=m.deck_clear_slope,
                      clear_height_m=m.deck_clear_height_m) if m.ride == "deck" else None,
+        relnav=derived(RelnavGates, cfg.relnav, params=cfg.relnav.params()) if cfg.relnav.enabled else None,
     )
     legs = cfg.scenario.legs()
     if len(legs) == 1:

@@ -19,8 +19,33 @@ if TYPE_CHECKING:
     from mission.relnav.estimator import RelnavParams
 
 
+#: ``[relnav]``'s fields that tell the phases how to use the estimate (not the estimator's tuning).
+PHASE_FIELDS = ("enabled", "marker_timeout_s", "marker_memory_s", "search_s", "correction_rate_m_s", "seated_sigma_m")
+
+
 class RelnavSection(Section):
-    """The relative estimator's tuning: its models of the GNSS errors and of the marker, its gate."""
+    """The relative estimator's tuning: its models of the GNSS errors and of the marker, its gate;
+    and whether and how the phases use its estimate (``enabled`` and the fields after it)."""
+
+    enabled: bool = Field(False,
+        description=("[-] the passenger's step runs the relative estimator on the carrier's state, its own and the "
+                     "marker's readings (`mission.feeds`), and the phases fly the deck in the passenger's own frame "
+                     "(the carrier's state less the estimated GNSS-frame bias); the descent below "
+                     "`recovery.decision_height_m` then needs the marker in sight and the estimate converged"))
+    marker_timeout_s: float = Field(0.5, gt=0, le=10,
+        description="[s] the marker counts as in sight while its newest fused capture is no older than this")
+    marker_memory_s: float = Field(20.0, gt=0, le=600,
+        description=("[s] HOLDOFF begins an approach only with a marker fused this recently; else it searches for "
+                     "it over the deck at the holdoff height"))
+    search_s: float = Field(10.0, gt=0, le=120,
+        description=("[s] how long HOLDOFF searches over the deck for the marker before falling back, and how "
+                     "long the descent holds its height with the marker lost before it goes around"))
+    correction_rate_m_s: float = Field(0.5, gt=0, le=10,
+        description=("[m/s] the fastest the bias correction applied to the carrier's state may move (a new "
+                     "estimate of metres moves the deck smoothly, not in one tick)"))
+    seated_sigma_m: float = Field(0.3, gt=0, le=10,
+        description=("[m] before take-off the vehicle stands on the deck (Assumption 2): the estimator takes the "
+                     "deck as straight under it, horizontally, to this standard deviation per axis"))
 
     accel_noise_m_s2: float = Field(0.5, gt=0, le=50,
         description=("[m/s^2/sqrt(Hz)] square root of the spectral density of the white relative acceleration "
@@ -52,7 +77,7 @@ class RelnavSection(Section):
     def params(self) -> RelnavParams:
         from mission.relnav.estimator import RelnavParams
 
-        return RelnavParams(**{name: getattr(self, name) for name in type(self).model_fields})
+        return RelnavParams(**{name: getattr(self, name) for name in type(self).model_fields if name not in PHASE_FIELDS})
 
 
 class CarrierGnssSection(Section):
