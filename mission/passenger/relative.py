@@ -6,11 +6,12 @@ Each tick, in this order: the carrier's state, if it is a new sample (stamped ``
 measurement time), and this tick's marker readings
 (:class:`~mission.phases.measurements.RelativePosition`, by capture time: ``Measurements.arrived``)
 are handed to the estimator; then the vehicle's own sample (its position and velocity as the
-autopilot reports them, at their sample time) moves it on. The phases then see the carrier as
-the estimate has it (the vehicle's own position and velocity plus the relative ones: the raw
-fixes' noise filtered) in the carrier's frame, less a **correction** that follows the estimated bias at most at
-``relnav.correction_rate_m_s``: the bias's first estimate from the marker moves the deck by up
-to metres, and the phases' references would otherwise see it jump in one tick. Far away (no
+autopilot reports them, at their sample time) moves it on. The phases then see the carrier where
+the estimate has it from the vehicle (its own position and velocity plus the relative ones: the
+raw fixes' noise filtered), less the **pending** part of the estimate's jumps (its change beyond
+its own velocity's), let through at most at ``relnav.correction_rate_m_s``: the first marker
+moves the relative position by up to metres (the GNSS-frame bias), and the phases' references
+would otherwise see the deck jump in one tick. Far away (no
 marker) the bias estimate stays near its prior's mean (zero), so the carrier's state is used
 nearly as it comes: GNSS is enough there. Frames: local NED [m], [m/s]; times [s] on the
 caller's clock. docs/relnav.md, "In the phases".
@@ -39,7 +40,8 @@ class RelativeDeck:
         self.estimator = RelativeEstimator(gates.params)
         self.fix_t_s = -np.inf  # [s] the newest carrier sample handed to the estimator
         self.own_t_s = -np.inf  # [s] the newest own sample
-        self.correction: np.ndarray | None = None  # [m] NED, taken off the carrier's position
+        self.rel: tuple[np.ndarray, np.ndarray] | None = None  # the last tick's relative position [m], velocity [m/s]
+        self.pending = np.zeros(3)  # [m] NED, the part of the estimate's jumps not yet let through
         self.t_s: float | None = None  # [s] the last tick's time
 
     def observe(self, t_s: float, vehicle: VehicleReport | None, carrier: CarrierObs | None,
@@ -70,23 +72,26 @@ class RelativeDeck:
             return carrier, None
         else:
             e = est.estimate()
-        bias = np.asarray(e.bias_ned_m, float)
-        if self.correction is None or on_deck:  # standing on the deck, nothing flies on it: no slew
-            self.correction = bias.copy()
+        bias, r_hat, v_hat = (np.asarray(x, float) for x in (e.bias_ned_m, e.position_ned_m, e.velocity_ned_m_s))
+        if self.rel is None or on_deck:  # standing on the deck, nothing flies on it: no slew
+            self.pending = np.zeros(3)
         else:
-            step = self.gates.correction_rate_m_s * max(t_s - (self.t_s if self.t_s is not None else t_s), 0.0)
-            gap = bias - self.correction
-            size = float(np.linalg.norm(gap))
-            self.correction = bias.copy() if size <= step else self.correction + gap * (step / size)
+            dt = max(t_s - (self.t_s if self.t_s is not None else t_s), 0.0)
+            r_prev, v_prev = self.rel
+            self.pending = self.pending - (r_hat - (r_prev + v_prev * dt))  # the estimate's jumps, let through at the rate
+            size = float(np.linalg.norm(self.pending))
+            step = self.gates.correction_rate_m_s * dt
+            self.pending = np.zeros(3) if size <= step else self.pending * (1.0 - step / size)
+        self.rel = (r_hat, v_hat)
         self.t_s = t_s
         view = RelativeView(position_ned_m=np.asarray(e.position_ned_m, float), bias_ned_m=bias,
-                            correction_ned_m=self.correction.copy(), position_sigma_m=e.position_sigma_m,
+                            pending_ned_m=self.pending.copy(), position_sigma_m=e.position_sigma_m,
                             converged=e.converged, since_marker_s=e.since_marker_s)
         if carrier is None or e.counts.fused["gnss_position"] == 0:  # not in the passenger's frame before one fix is fused
             return None, view
         # the filtered carrier now, in the passenger's frame: its own position plus the estimate (the raw
-        # fixes' noise filtered), less the correction; stamped back by the sample's age so that its
+        # fixes' noise filtered), less what of its jumps is still pending; stamped back by the sample's age so that its
         # age (its freshness) stays the carrier's own
         velocity = vel + np.asarray(e.velocity_ned_m_s, float)
-        now = pos + vel * max(t_s - sample_t, 0.0) + np.asarray(e.position_ned_m, float) + bias - self.correction
+        now = pos + vel * max(t_s - sample_t, 0.0) + np.asarray(e.position_ned_m, float) + self.pending
         return replace(carrier, position_ned_m=now - velocity * carrier.age_s, velocity_ned_m_s=velocity), view

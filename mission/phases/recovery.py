@@ -281,6 +281,7 @@ def holdoff(state, obs, m, events=()):
     if gates is not None and rec.search_since_s is not None:
         rec = replace(rec, search_since_s=None)
         evs += ("marker acquired: back to the holdoff point",)
+    settled = settled and (gates is None or gates.taken_in(obs.relative))
     since = (rec.settled_since_s if rec.settled_since_s is not None else t) if settled else None
     rec = replace(rec, settled_since_s=since)
     if since is not None and t - since >= r.settle_dwell_s:

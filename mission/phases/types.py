@@ -111,17 +111,20 @@ class RelativeView:
     """The relative estimator's word on the deck this tick (``[relnav]`` enabled,
     :class:`mission.relnav.estimator.RelativeEstimator` run by the passenger's step):
     ``position_ned_m`` the deck minus the vehicle [m] NED; ``bias_ned_m`` the estimated bias of
-    the carrier's GNSS frame over the passenger's [m]; ``correction_ned_m`` the part of it taken
-    off the carrier's state this tick [m] (it follows the bias at most at
+    the carrier's GNSS frame over the passenger's [m]; ``pending_ned_m`` the part of the relative
+    position's jumps the carrier's state the phases see has not taken in yet [m] (let through at most at
     ``relnav.correction_rate_m_s``); ``position_sigma_m`` [m] and ``converged`` as the estimate's;
     ``since_marker_s`` [s] since the capture of the newest marker fused (inf: none yet)."""
 
     position_ned_m: np.ndarray
     bias_ned_m: np.ndarray
-    correction_ned_m: np.ndarray
+    pending_ned_m: np.ndarray
     position_sigma_m: float
     converged: bool
     since_marker_s: float
+
+
+PENDING_LIMIT_M = 0.1  # [m] an approach begins only with the estimate's jumps taken in to this
 
 
 @dataclass(frozen=True)
@@ -153,10 +156,13 @@ class RelnavGates:
         return None
 
     def acquired(self, rel: RelativeView | None) -> bool:
-        """The marker fused within ``marker_memory_s`` and the correction caught up with the bias
-        (within 0.25 m): an approach may begin."""
-        return (rel is not None and rel.since_marker_s <= self.marker_memory_s
-                and float(np.linalg.norm(rel.bias_ned_m - rel.correction_ned_m)) <= 0.25)
+        """The marker fused within ``marker_memory_s``: HOLDOFF need not search for it."""
+        return rel is not None and rel.since_marker_s <= self.marker_memory_s
+
+    def taken_in(self, rel: RelativeView | None) -> bool:
+        """The estimate's jumps taken in by the carrier's state the phases see (within
+        :data:`PENDING_LIMIT_M`): an approach may begin."""
+        return rel is not None and float(np.linalg.norm(rel.pending_ned_m)) <= PENDING_LIMIT_M
 
 
 @dataclass(frozen=True)
