@@ -26,7 +26,7 @@ from mission.passenger.inputs import VehicleReport
 from mission.phases.measurements import Measurements, RelativePosition
 from mission.phases.types import CarrierObs, RelativeView, RelnavGates
 from mission.relnav.estimator import RelativeEstimator
-from mission.relnav.inputs import CarrierFix, MarkerFix, OwnSample
+from mission.relnav.inputs import CarrierFix, MarkerFix, OwnSample, RelativeEstimate
 
 
 UNKNOWN_HEIGHT_M = 100.0  # [m] standing on the deck says nothing of the height of the vehicle's reference point over it
@@ -40,7 +40,7 @@ class RelativeDeck:
         self.estimator = RelativeEstimator(gates.params)
         self.fix_t_s = -np.inf  # [s] the newest carrier sample handed to the estimator
         self.own_t_s = -np.inf  # [s] the newest own sample
-        self.rel: tuple[np.ndarray, np.ndarray] | None = None  # the last tick's relative position [m], velocity [m/s]
+        self.last: tuple[np.ndarray, np.ndarray] | None = None  # the last tick's deck [m] and velocity [m/s], before pending
         self.pending = np.zeros(3)  # [m] NED, the part of the estimate's jumps not yet let through
         self.t_s: float | None = None  # [s] the last tick's time
 
@@ -72,26 +72,31 @@ class RelativeDeck:
             return carrier, None
         else:
             e = est.estimate()
-        bias, r_hat, v_hat = (np.asarray(x, float) for x in (e.bias_ned_m, e.position_ned_m, e.velocity_ned_m_s))
-        if self.rel is None or on_deck:  # standing on the deck, nothing flies on it: no slew
+        bias = np.asarray(e.bias_ned_m, float)
+        in_sight = e.since_marker_s <= self.gates.marker_timeout_s
+        if carrier is None or e.counts.fused["gnss_position"] == 0:  # not in the passenger's frame before one fix is fused
+            return None, self._view(e, bias)
+        velocity = vel + np.asarray(e.velocity_ned_m_s, float)  # its own plus the relative (the fixes' noise filtered)
+        if in_sight:  # the deck from the vehicle: its own position plus the estimate (no lag: the marker pins it)
+            now = pos + vel * max(t_s - sample_t, 0.0) + np.asarray(e.position_ned_m, float)
+        else:  # GNSS: the carrier's fix moved on by its age, less the estimated bias
+            now = np.asarray(carrier.position_ned_m, float) + velocity * carrier.age_s - bias
+        if self.last is None or on_deck:  # standing on the deck, nothing flies on it: no slew
             self.pending = np.zeros(3)
         else:
             dt = max(t_s - (self.t_s if self.t_s is not None else t_s), 0.0)
-            r_prev, v_prev = self.rel
-            self.pending = self.pending - (r_hat - (r_prev + v_prev * dt))  # the estimate's jumps, let through at the rate
+            was, was_v = self.last
+            self.pending = self.pending - (now - (was + 0.5 * (was_v + velocity) * dt))  # jumps, let through at the rate
             size = float(np.linalg.norm(self.pending))
             step = self.gates.correction_rate_m_s * dt
             self.pending = np.zeros(3) if size <= step else self.pending * (1.0 - step / size)
-        self.rel = (r_hat, v_hat)
+        self.last = (now, velocity)
         self.t_s = t_s
-        view = RelativeView(position_ned_m=np.asarray(e.position_ned_m, float), bias_ned_m=bias,
+        now = now + self.pending
+        return replace(carrier, position_ned_m=now - velocity * carrier.age_s, velocity_ned_m_s=velocity), \
+            self._view(e, bias)
+
+    def _view(self, e: RelativeEstimate, bias: np.ndarray) -> RelativeView:
+        return RelativeView(position_ned_m=np.asarray(e.position_ned_m, float), bias_ned_m=bias,
                             pending_ned_m=self.pending.copy(), position_sigma_m=e.position_sigma_m,
                             converged=e.converged, since_marker_s=e.since_marker_s)
-        if carrier is None or e.counts.fused["gnss_position"] == 0:  # not in the passenger's frame before one fix is fused
-            return None, view
-        # the filtered carrier now, in the passenger's frame: its own position plus the estimate (the raw
-        # fixes' noise filtered), less what of its jumps is still pending; stamped back by the sample's age so that its
-        # age (its freshness) stays the carrier's own
-        velocity = vel + np.asarray(e.velocity_ned_m_s, float)
-        now = pos + vel * max(t_s - sample_t, 0.0) + np.asarray(e.position_ned_m, float) + self.pending
-        return replace(carrier, position_ned_m=now - velocity * carrier.age_s, velocity_ned_m_s=velocity), view

@@ -124,7 +124,7 @@ class RelativeView:
     since_marker_s: float
 
 
-PENDING_LIMIT_M = 0.1  # [m] an approach begins only with the estimate's jumps taken in to this
+PENDING_LIMIT_M = 0.3  # [m] an approach begins only with the estimate's jumps taken in to this
 
 
 @dataclass(frozen=True)
