@@ -5,6 +5,8 @@ Sections (``--section NAME``, repeatable; all by default):
 1. ``tick``   law + safety tick (:func:`bench.law_bench.tick_latency`), 0/1/8 obstacles.
    ``wire``   decoding one bus sample (:mod:`bench.wire_bench`): JSON carrier state and
               passenger status, CDR Odometry, a hostile JSON sample refused.
+   ``vision`` one 640x480 frame (:mod:`bench.vision_cost`): render, the bare detector (the
+              floor), detection + pose, a region of interest, one threshold pass (thread CPU).
 2. ``e2e``    carrier sample published on Zenoh -> the setpoint computed from it arrives at the
               vehicle's socket, controller at 50 and 250 Hz, beside the transport floor (Zenoh-only
               and MAVLink-only pings) measured in the same run (:mod:`bench.e2e` tells how).
@@ -34,7 +36,7 @@ import click
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-SECTIONS = ("tick", "wire", "e2e", "stream", "demo", "batch", "memory")
+SECTIONS = ("tick", "wire", "vision", "e2e", "stream", "demo", "batch", "memory")
 E2E_RATES_HZ = (50.0, 250.0)
 STREAM_RATES_HZ = (50.0, 250.0, 1000.0)
 DEMO_SPEEDS = (1.0, 10.0, 20.0, 50.0)
@@ -118,6 +120,17 @@ class Bench:
         self.results["wire"] = costs
         for c in costs:
             self.row("wire", f"{c['message']}: p50 / p99 [us] (thread CPU)", f"{c['p50_us']:.1f} / {c['p99_us']:.1f}")
+
+    def vision(self) -> None:
+        from bench.vision_cost import TARGET_MS, run
+
+        rows = run(50 if self.quick else 200)
+        self.results["vision"] = rows
+        for r in rows:
+            target, ok = ((f"p50 <= {TARGET_MS:g} ms", r["cpu_p50_ms"] <= TARGET_MS) if r["figure"] == "detection + pose"
+                          else ("", None))
+            self.row("vision", f"{r['figure'].strip()}: p50 / p95 [ms] (thread CPU)",
+                     f"{r['cpu_p50_ms']:.2f} / {r['cpu_p95_ms']:.2f}", target, ok)
 
     def e2e(self) -> None:
         from bench.floor import mavlink_ping, zenoh_ping

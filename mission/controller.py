@@ -14,13 +14,14 @@ import logging
 import threading
 import time
 from dataclasses import dataclass
-from typing import Any, Callable
+from collections.abc import Callable, Sequence
+from typing import Any
 
 from mission import phases
 from mission.bus.wire import GeoOrigin, PassengerStatus
 from mission.config.schema import Config
 from mission.core.setpoint import Setpoint
-from mission.interfaces import CarrierSource, StatusSink, Vehicle
+from mission.interfaces import CarrierSource, MeasurementSource, StatusSink, Vehicle
 from mission.mavlink import receiver
 from mission.mavlink.commander import HomeKeeper, ParamKeeper
 from mission.mavlink.requests import CommandWorker, Px4Setup
@@ -28,7 +29,7 @@ from mission.mavlink.telemetry import vehicle_report
 from mission.model import mission_model
 from mission.passenger.inputs import PassengerInputs
 from mission.passenger.step import PassengerStep, observe_carrier
-from mission.phases import AbortReason, Decision, MissionState, Observation, Phase
+from mission.phases import AbortReason, Decision, Measurement, MissionState, Observation, Phase
 from mission.record import FlightRecorder, TickRow, flown_info, outcome_summary
 from mission.time.clock import Clock, Periodic
 
@@ -79,7 +80,9 @@ class MissionController:
     link: the :class:`~mission.interfaces.Vehicle` (a :class:`mission.mavlink.link.VehicleLink`, opened,
     vehicle identified or not yet); feed: the :class:`~mission.interfaces.CarrierSource` (a
     :class:`mission.bus.bridge.CarrierFeed`); publisher: a :class:`~mission.interfaces.StatusSink`
-    (or None); recorder: a :class:`mission.record.FlightRecorder` (or None). ``on_event(phase,
+    (or None); recorder: a :class:`mission.record.FlightRecorder` (or None); sources: the
+    measurement feeds (:class:`~mission.interfaces.MeasurementSource`, opened and closed by the
+    caller), each polled once a tick, their readings handed to the step as they are. ``on_event(phase,
     text)`` is called on every phase change and event (the CLI prints them), ``on_tick(report)``
     after every tick (:class:`TickReport`; keep it short: it runs in the loop).
     ``command_thread=False`` runs vehicle commands inside the tick (unit tests only).
@@ -88,8 +91,11 @@ class MissionController:
     def __init__(self, cfg: Config, link: Vehicle, feed: CarrierSource, clock: Clock, *,
                  publisher: StatusSink | None = None, recorder: FlightRecorder | None = None,
                  on_event: Callable[[str, str], None] | None = None, on_tick: Callable[[TickReport], None] | None = None,
-                 stop: threading.Event | None = None, command_thread: bool = True) -> None:
+                 stop: threading.Event | None = None, command_thread: bool = True,
+                 sources: Sequence[MeasurementSource] = ()) -> None:
         self.cfg, self.link, self.feed, self.clock = cfg, link, feed, clock
+        self.sources = tuple(sources)
+        self._source_failed: set[int] = set()  # the sources whose poll raised (logged once each)
         self.publisher, self.recorder = publisher, recorder
         self.model = mission_model(cfg)
         self.on_event = on_event or (lambda phase, text: None)
@@ -112,7 +118,8 @@ class MissionController:
         self._doubts_at_separation: int | None = None  # the carrier feed's resyncs + contests when the latch fired
 
     def _read(self, t: float, worker: CommandWorker) -> PassengerInputs:
-        """The tick's raw observations: the link's vehicle, the feed's newest carrier, what failed."""
+        """The tick's raw observations: the link's vehicle, the feed's newest carrier, the measurement
+        feeds' readings, what failed."""
         vstate = self.link.state
         if vstate.origin is not None and not self._origin_given:
             self.feed.set_origin(GeoOrigin(*vstate.origin))  # wgs84 carrier states become usable
@@ -127,7 +134,20 @@ class MissionController:
             failed["identity"] = identity  # a second autopilot with mavlink.target_system unset
         return PassengerInputs(t_s=t, vehicle=vehicle_report(vstate),
                                carrier=observe_carrier(self._received, self.feed.alive_over_interval()),
-                               failed=failed, interrupted=self.stop.is_set())
+                               failed=failed, interrupted=self.stop.is_set(), measurements=self._poll(t))
+
+    def _poll(self, t: float) -> tuple[Measurement, ...]:
+        """Every measurement feed's readings since the last tick; a feed that raises gives none
+        (logged once): a sensor's fault must never stop the setpoint stream."""
+        out: list[Measurement] = []
+        for i, source in enumerate(self.sources):
+            try:
+                out.extend(source.poll(t))
+            except Exception as exc:
+                if i not in self._source_failed:
+                    self._source_failed.add(i)
+                    log.warning("measurement feed %s failed, its readings are skipped: %s", type(source).__name__, exc)
+        return tuple(out)
 
     def _send(self, setpoint: Setpoint) -> bool:
         """Send the decision's setpoint as it is; False if withheld."""

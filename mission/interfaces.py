@@ -10,7 +10,10 @@ interchangeable (as are a Zenoh feed and a scripted one):
   confirmed it or raising :class:`mission.errors.CommandRejected` / :class:`mission.errors.LinkError`;
 * a :class:`CarrierSource`: the newest carrier state with its receive time and age, the
   carrier's liveliness, and the EKF origin for geodetic carrier states;
-* a :class:`StatusSink`: where the passenger's phase and state go (the carrier listens).
+* a :class:`StatusSink`: where the passenger's phase and state go (the carrier listens);
+* any number of :class:`MeasurementSource`: the measurement feeds (a camera that sees the deck's
+  marker, a relative estimator's sensors), each polled once a tick, their readings handed to the
+  passenger's step as they are.
 
 Implementations: :class:`mission.mavlink.link.VehicleLink`, :class:`mission.bus.bridge.CarrierFeed`,
 :class:`mission.bus.bridge.PassengerPublisher`; ``tests/support/fake_vehicle.py`` fakes all
@@ -21,6 +24,9 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any, Protocol
 
 if TYPE_CHECKING:
+    from collections.abc import Sequence
+
+    from mission.phases.measurements import Measurement
     from mission.core.setpoint import Setpoint
     from mission.bus.bridge import ReceivedCarrierState
     from mission.mavlink.session import LinkCounters
@@ -118,3 +124,20 @@ class StatusSink(Protocol):
     """Where the passenger's status goes each tick."""
 
     def publish(self, status: PassengerStatus) -> None: ...
+
+
+class MeasurementSource(Protocol):
+    """A measurement feed: what a sensor measured, for the passenger's step. In flight an I/O-side
+    module opened by ``marsupial run`` for a name of ``mission.feeds`` (entry-point group
+    ``marsupial.feeds``); in the in-process simulation the world's sensor of the same name
+    (``marsupial.sensors``, :mod:`sim.batch.sensors`)."""
+
+    def poll(self, t_s: float) -> Sequence[Measurement]:
+        """The readings that arrived since the last poll, as of ``t_s`` [s] on the mission clock,
+        each stamped at capture on that clock (:class:`mission.phases.measurements.Measurement`);
+        empty when none. Never blocks; a reading is returned once."""
+        ...
+
+    def close(self) -> None:
+        """Release what the feed holds (subscriptions, devices); the loop polls it no more."""
+        ...

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import numpy as np
 from pydantic import BaseModel
@@ -25,10 +25,13 @@ from mission.errors import ConfigError
 from mission.core.docking import DockingGeometry
 from mission.core.pursuit import PursuitLimits
 from mission.phases import MissionModel
-from mission.phases.types import DeckRide, RecoveryModel
+from mission.phases.types import DeckRide, RecoveryModel, RelnavGates
 from mission.core.safety import SafetyConfig
 from mission.core.tick import TickModel, target_keep_outs
 from mission.core.tracking import TrackingGains
+
+if TYPE_CHECKING:
+    from mission.vision.detect import MarkerDetector
 
 T = TypeVar("T")
 
@@ -88,6 +91,7 @@ def mission_model(cfg: Config) -> MissionModel:
         leg_start_m=tick.law.separation_distance_m + m.leg_start_margin_m,
         deck=derived(DeckRide, m, keep_out_radius_m=m.deck_keep_out_radius_m, slope=m.deck_clear_slope,
                      clear_height_m=m.deck_clear_height_m) if m.ride == "deck" else None,
+        relnav=derived(RelnavGates, cfg.relnav, params=cfg.relnav.params()) if cfg.relnav.enabled else None,
     )
     legs = cfg.scenario.legs()
     if len(legs) == 1:
@@ -129,3 +133,19 @@ def derived(model: type[T], section: BaseModel, **explicit: Any) -> T:
     gives the others (renamed, converted, computed)."""
     return model(**{name: getattr(section, name) for name in same_named(model, section) if name not in explicit},
                  **explicit)
+
+
+def vision_detector(cfg: Config) -> MarkerDetector:
+    """The marker detector of ``cfg.vision``: its camera (from the calibration file, else the
+    ideal pinhole of its field of view) on its mount, its marker layout and its gates."""
+    from mission.vision.camera import CameraModel, Mount, load_calibration  # OpenCV: loaded only when used
+    from mission.vision.detect import DetectorSettings, MarkerDetector
+    from mission.vision.layout import MarkerLayout
+
+    v = cfg.vision
+    mount = Mount.downward(v.mount_offset_body_m, *v.mount_rpy_deg)
+    camera = (load_calibration(v.calibration_file, mount) if v.calibration_file is not None
+              else CameraModel.from_fov(v.width_px, v.height_px, v.hfov_deg, mount))
+    layout = (MarkerLayout.bundle(v.tag_size_m, v.small_tag_size_m, big_id=v.tag_id, small_id=v.small_tag_id)
+              if v.layout == "bundle" else MarkerLayout.single(v.tag_size_m, v.tag_id))
+    return MarkerDetector(camera, layout, derived(DetectorSettings, v))

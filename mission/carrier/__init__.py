@@ -3,7 +3,7 @@ simulated carrier robot.
 
 Pure parts: :mod:`.modes` (what the carrier does, from the passenger's published phase),
 :mod:`.guard` (the P3 guard: never closer to the target than ``b c - margin``, whatever the
-passenger says), :mod:`.tracking` (a planar velocity command made into what a unicycle,
+passenger says; :mod:`.stopping`, where a heading robot can go while it stops), :mod:`.tracking` (a planar velocity command made into what a unicycle,
 differential-drive or Ackermann robot can do), :mod:`.legs` (several targets), :mod:`.course`
 (the recovery course), :mod:`.start` (the gentle start), :mod:`.acceleration` (its measured
 acceleration), and :mod:`.step`, which puts them together into the carrier's one step (the

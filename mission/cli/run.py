@@ -8,7 +8,7 @@ import threading
 import time
 from contextlib import ExitStack, contextmanager
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any, Iterator, NamedTuple
 
 import click
 
@@ -18,7 +18,9 @@ from mission.bus.session import close_session, congestion_for
 from mission.time.clock import Clock, LockstepClock, ScaledClock
 from mission.config.required import RUN_FIELDS, require_stated
 from mission.config.schema import Config, load_config, with_overrides
+from mission.cli.subcommands import entry_points, load
 from mission.controller import MissionController, MissionOutcome
+from mission.interfaces import MeasurementSource
 from mission.model import mission_model
 from mission.errors import ConfigError
 from mission.bus.feeds import OffsetSource
@@ -48,11 +50,38 @@ def carrier_limits(cfg: Config) -> GateLimits:
                       max_accel_m_s2=max(accels) if accels else None, settle_s=cfg.mission.carrier_settle_s)
 
 
+FEEDS_GROUP = "marsupial.feeds"  # entry points: a measurement feed's name -> its opener (below)
+
+
+def feed_openers(cfg: Config) -> dict[str, str]:
+    """The opener (``"module:attribute"``) of each measurement feed ``mission.feeds`` names,
+    registered in ``pyproject.toml``'s entry-point group ``marsupial.feeds``. An opener is called
+    as ``open(cfg, session, clock)`` and returns a :class:`~mission.interfaces.MeasurementSource`.
+    :class:`ConfigError` for a name nothing registered."""
+    known = entry_points(FEEDS_GROUP)
+    unknown = [name for name in cfg.mission.feeds if name not in known]
+    if unknown:
+        raise ConfigError("mission.feeds", unknown, f"no such measurement feed registered (entry points "
+                          f"{FEEDS_GROUP}: {sorted(known) or 'none'})")
+    return {name: known[name] for name in cfg.mission.feeds}
+
+
+class MissionIO(NamedTuple):
+    """What a mission talks through (:func:`mission_io`)."""
+
+    feed: CarrierFeed
+    publisher: PassengerPublisher
+    link: VehicleLink
+    sources: tuple[MeasurementSource, ...]  # the measurement feeds of mission.feeds
+
+
 @contextmanager
-def mission_io(cfg: Config, clock: Clock, tlog_path: str | Path | None = None) -> Iterator[tuple[CarrierFeed, PassengerPublisher, VehicleLink]]:
-    """Open what a mission talks through, per ``cfg``: the Zenoh session with the carrier feed
-    and the passenger publisher, and the MAVLink link (opened, signing per
+def mission_io(cfg: Config, clock: Clock, tlog_path: str | Path | None = None) -> Iterator[MissionIO]:
+    """Open what a mission talks through, per ``cfg``: the Zenoh session with the carrier feed,
+    the passenger publisher and the measurement feeds ``mission.feeds`` names
+    (:func:`feed_openers`), and the MAVLink link (opened, signing per
     ``mavlink.signing_key_file``). Everything is closed in reverse order on exit."""
+    openers = feed_openers(cfg)
     key = read_signing_key(cfg.mavlink.signing_key_file) if cfg.mavlink.signing_key_file else None
     auth = bus_auth(cfg.zenoh)
     with ExitStack() as stack:
@@ -70,6 +99,11 @@ def mission_io(cfg: Config, clock: Clock, tlog_path: str | Path | None = None) -
         stack.callback(feed.close)
         publisher = PassengerPublisher(session, cfg.zenoh.pair, congestion_for(clock), auth=auth)
         stack.callback(publisher.close)
+        sources: list[MeasurementSource] = []
+        for target in openers.values():
+            source = load(target)(cfg, session, clock)  # type: ignore[operator]
+            stack.callback(source.close)
+            sources.append(source)
         link = VehicleLink(cfg.mavlink.url, clock, target_system=cfg.mavlink.target_system,
                            target_component=cfg.mavlink.target_component,
                            source_system=cfg.mavlink.source_system, source_component=cfg.mavlink.source_component,
@@ -89,16 +123,17 @@ def mission_io(cfg: Config, clock: Clock, tlog_path: str | Path | None = None) -
             stack.callback(relay.close)
             clock.downstream = relay
             stack.callback(clock.close)  # before the link closes: its threads wait on the clock
-        yield feed, publisher, link
+        yield MissionIO(feed, publisher, link, tuple(sources))
 
 
 def check_config(cfg: Config) -> None:
     """What a mission needs of ``cfg`` beyond the file's own rules, checked before anything is
     opened or written: the target and limits stated in the file (:mod:`mission.config.required`),
     a 3D mission model, readable signing keys (MAVLink, bus), a Zenoh configuration Zenoh
-    accepts. Raises :class:`ConfigError` naming the field."""
+    accepts, registered measurement feeds. Raises :class:`ConfigError` naming the field."""
     require_stated(cfg, RUN_FIELDS, "run")
     mission_model(cfg)
+    feed_openers(cfg)
     if cfg.mavlink.signing_key_file:
         read_signing_key(cfg.mavlink.signing_key_file)
     bus_auth(cfg.zenoh)
@@ -141,9 +176,9 @@ def fly(cfg: Config, *, speed: float = 1.0, log_dir: str | Path | None = None, s
     sinks = flight_data(cfg, directory, info, clock, live, log_epoch_ns)
     try:
         recorder = FlightRecorder(directory, info, sinks)
-        with mission_io(cfg, clock, recorder.tlog_path) as (feed, publisher, link):
+        with mission_io(cfg, clock, recorder.tlog_path) as (feed, publisher, link, sources):
             controller = MissionController(cfg, link, feed, clock, publisher=publisher, recorder=recorder,
-                                           on_event=on_event, stop=stop)
+                                           on_event=on_event, stop=stop, sources=sources)
             if on_start is not None:
                 on_start(controller, link, feed, clock)
             try:

@@ -2,7 +2,8 @@
 
 A package declares a :class:`Subcommand` object and names it in ``pyproject.toml`` under the
 entry-point group ``marsupial.commands``; :func:`registered` finds them, so the product's CLI
-(:mod:`mission.cli`) never names the simulator's modules. Run from a source tree that is not
+(:mod:`mission.cli`) never names the simulator's modules. :func:`entry_points` reads any group
+(the measurement feeds' ``marsupial.feeds`` and the simulation's ``marsupial.sensors`` too). Run from a source tree that is not
 installed, the same table is read from ``pyproject.toml`` beside the package.
 """
 from __future__ import annotations
@@ -31,22 +32,28 @@ class Subcommand:
         return getattr(importlib.import_module(module), attr)
 
 
-def _entry_points() -> dict[str, str]:
-    """name -> ``"module:attribute"``: from ``pyproject.toml`` beside the package when running from
-    a source tree, else from the installed distribution's entry points (in declaration order)."""
-    pyproject = Path(__file__).resolve().parents[1] / "pyproject.toml"
+def entry_points(group: str = ENTRY_POINT_GROUP) -> dict[str, str]:
+    """name -> ``"module:attribute"`` of the entry-point ``group``: from ``pyproject.toml`` beside
+    the package when running from a source tree (in declaration order), else from the installed
+    distribution's entry points."""
+    pyproject = Path(__file__).resolve().parents[2] / "pyproject.toml"  # mission/cli/ -> the source tree
     if pyproject.is_file():
         table = tomllib.loads(pyproject.read_text()).get("project", {}).get("entry-points", {})
-        return dict(table.get(ENTRY_POINT_GROUP, {}))
-    return {ep.name: ep.value for ep in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP)}
+        return dict(table.get(group, {}))
+    return {ep.name: ep.value for ep in importlib.metadata.entry_points(group=group)}
+
+
+def load(target: str) -> object:
+    """The object a ``"module:attribute"`` target names (its module imported)."""
+    module, _, attr = target.partition(":")
+    return getattr(importlib.import_module(module), attr)
 
 
 def registered() -> dict[str, Subcommand]:
     """Every registered subcommand by name (imports only the small modules that declare them)."""
     found: dict[str, Subcommand] = {}
-    for name, value in _entry_points().items():
-        module, _, attr = value.partition(":")
-        spec = getattr(importlib.import_module(module), attr)
+    for name, value in entry_points().items():
+        spec = load(value)
         if not isinstance(spec, Subcommand):
             raise TypeError(f"entry point {ENTRY_POINT_GROUP}:{name} = {value!r} is not a Subcommand")
         found[name] = spec

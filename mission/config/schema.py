@@ -32,8 +32,10 @@ from pydantic import Field, ValidationError, field_validator, model_validator
 from mission.config.carrier import CarrierMavlinkSection, CarrierRos2Section, CarrierSection
 from mission.config.legs import check_legs, first_target_named
 from mission.config.recovery import RecoverySection, check_recovery
+from mission.config.relnav import RelnavSection, WorldSection
 from mission.config.scenario import ObstacleSection, ScenarioSection
 from mission.config.urls import DEFAULT_URL
+from mission.config.vision import VisionSection, check_vision
 from mission.config.fields import (
     COORD_LIMIT_M,
     MAX_PATH_CHARS,
@@ -266,6 +268,9 @@ class MissionSection(Section):
     connect_timeout_s: float = Field(20.0, gt=0, le=600,
         description="[s] how long `run` waits for the vehicle and the carrier before giving up (it counts down)")
     log_dir: Path_ = Field("logs", description="[-] directory of flight logs (`<log_dir>/<time>-<pair>/`)")
+    feeds: list[Annotated[str, Field(pattern=r"^[a-z0-9_\-]+$", max_length=64)]] = Field([], max_length=16,
+        description=("[-] measurement feeds to open, by name: `run` opens each registered in the entry-point group "
+                     "`marsupial.feeds`, `simulate` gives the world its sensor of the same name (`marsupial.sensors`)"))
 
     _log_dir_printable = field_validator("log_dir")(printable)
 
@@ -368,6 +373,9 @@ class Config(Section):
     zenoh: ZenohSection = ZenohSection()
     carrier: CarrierSection = CarrierSection()
     recovery: RecoverySection = RecoverySection()
+    vision: VisionSection = VisionSection()
+    relnav: RelnavSection = RelnavSection()
+    world: WorldSection = WorldSection()
 
     @model_validator(mode="after")
     def _assumptions(self) -> "Config":
@@ -419,6 +427,7 @@ class Config(Section):
                    safety_margin_m=sf.margin_m)
         check_recovery(self.recovery, self.carrier, carrier_max_speed_m_s=sf.carrier_max_speed_m_s,  # it can finish
                        passenger_max_speed_m_s=sf.passenger_max_speed_m_s, final_action=m.final_action)
+        check_vision(self.vision, self.recovery.decision_height_m)  # the marker in view at the gate
         if s.dim != 3 or s.frame != "local_ned":
             return
         # local NED, z down: the carrier drives on the ground at carrier_start's z

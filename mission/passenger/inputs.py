@@ -1,6 +1,7 @@
 """What the passenger's step reads, as pure records (numpy only, no link, no bus, no clock): the
 vehicle as a link or a simulated vehicle reports it (:class:`VehicleReport`), and one tick's raw
-observations (:class:`PassengerInputs`). The MAVLink side turns its
+observations (:class:`PassengerInputs`: the vehicle, the carrier, the measurement feeds'
+readings). The MAVLink side turns its
 :class:`~mission.mavlink.telemetry.VehicleState` into a :class:`VehicleReport`
 (:func:`mission.mavlink.telemetry.vehicle_report`); the simulator's vehicle makes one directly."""
 from __future__ import annotations
@@ -11,6 +12,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:
+    from mission.phases.measurements import Measurement
     from mission.phases.types import CarrierObs
 
 
@@ -47,10 +49,13 @@ class PassengerInputs:
     vehicle heard yet); the carrier's newest state with its age (None: none yet); ``failed``: the
     requests ("arm", "offboard") the vehicle refused after their retries, and other reasons the
     mission cannot go on (signing, identity), each with its reason; ``interrupted``: the user
-    asked the mission to stop."""
+    asked the mission to stop; ``measurements``: what the measurement feeds
+    (:class:`mission.interfaces.MeasurementSource`) gave since the last tick, each reading once,
+    stamped at capture (:mod:`mission.phases.measurements`)."""
 
     t_s: float
     vehicle: VehicleReport | None
     carrier: CarrierObs | None
     failed: dict[str, str] = field(default_factory=dict)
     interrupted: bool = False
+    measurements: tuple[Measurement, ...] = ()

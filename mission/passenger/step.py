@@ -6,7 +6,8 @@ setpoint and its request) as a :class:`StepResult`.
 
 The observation of the vehicle: its velocity made consistent with its position
 (``mission.velocity_bias_tau_s``, :mod:`mission.core.consistent_velocity`), and its position
-moved on by that velocity over the sample's age. Frames: local NED [m], [m/s]; times [s] on the
+moved on by that velocity over the sample's age. The measurement feeds' readings pass through as
+they are (:class:`~mission.phases.measurements.Measurements`), with the newest of each kind kept. Frames: local NED [m], [m/s]; times [s] on the
 caller's clock.
 """
 from __future__ import annotations
@@ -21,7 +22,8 @@ from mission import phases
 from mission.core.consistent_velocity import PositionConsistentVelocity
 from mission.core.setpoint import Setpoint
 from mission.passenger.inputs import PassengerInputs, VehicleReport
-from mission.phases import CarrierObs, Decision, MissionModel, MissionState, Observation, VehicleObs
+from mission.passenger.relative import RelativeDeck
+from mission.phases import CarrierObs, Decision, Measurements, MissionModel, MissionState, Observation, VehicleObs
 from mission.phases.phase import Request
 
 
@@ -106,19 +108,34 @@ class StepResult:
 class PassengerStep:
     """The passenger's tick for ``model``; ``velocity_bias_tau_s`` [s] the time constant of the
     vehicle's consistent velocity (``mission.velocity_bias_tau_s``; 0: the estimator's velocity
-    as it comes). Its only memory is that filter's (the mission's state is the caller's)."""
+    as it comes). Its only memory is that filter's, the newest measurement of each kind and, with
+    ``[relnav]`` enabled (``model.relnav``), the relative estimator
+    (:class:`mission.passenger.relative.RelativeDeck`: the carrier's state the phases see is
+    then in the passenger's frame, and the estimate is in ``Observation.relative``); the
+    mission's state is the caller's."""
 
     def __init__(self, model: MissionModel, velocity_bias_tau_s: float = 0.0) -> None:
         self.model = model
         self.velocity_fix = PositionConsistentVelocity(velocity_bias_tau_s) if velocity_bias_tau_s > 0 else None
+        self.measurements = Measurements()  # the measurement feeds' readings: the last tick's, the newest of each kind
+        # [relnav] enabled: the relative estimator and the carrier's state in the passenger's frame
+        self.relative = RelativeDeck(model.relnav) if model.relnav is not None else None
 
-    def observe(self, inputs: PassengerInputs) -> Observation:
-        """What the phases observe on this tick."""
+    def observe(self, inputs: PassengerInputs, on_deck: bool = False) -> Observation:
+        """What the phases observe on this tick (the measurements: this tick's readings, and the
+        newest of each kind so far); ``on_deck``: the vehicle still stands on the carrier's deck
+        (the phase's ``on_deck``), which the relative estimator takes as a measurement."""
+        self.measurements = self.measurements.then(tuple(inputs.measurements))
+        carrier, relative = inputs.carrier, None
+        if self.relative is not None:
+            carrier, relative = self.relative.observe(inputs.t_s, inputs.vehicle, carrier, self.measurements,
+                                                    on_deck)
         return Observation(t_s=inputs.t_s, vehicle=observe_vehicle(inputs.vehicle, self.velocity_fix),
-                           carrier=inputs.carrier, failed=dict(inputs.failed), interrupted=inputs.interrupted)
+                           carrier=carrier, failed=dict(inputs.failed), interrupted=inputs.interrupted,
+                           measurements=self.measurements, relative=relative)
 
     def __call__(self, state: MissionState, inputs: PassengerInputs) -> StepResult:
         """One tick: observe, then the phases."""
-        obs = self.observe(inputs)
+        obs = self.observe(inputs, state.phase.on_deck)
         state, decision = phases.step(state, obs, self.model)
         return StepResult(state, obs, decision)

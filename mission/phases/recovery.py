@@ -266,8 +266,23 @@ def holdoff(state, obs, m, events=()):
     c = obs.carrier
     if refused is not None and not (c.age_bound_s is None or c.worst_age_s > r.carrier_max_age_s):
         near = False  # not trusted, or its token gone: wait (an age beyond the approach's budget refuses one)
-    rec, settled = _settled(rec, t, offset if near else None, r)
     evs = tuple(events)
+    gates = m.relnav
+    if gates is not None and not gates.acquired(obs.relative):  # search for the marker over the deck
+        began = rec.search_since_s if rec.search_since_s is not None else t
+        if t - began > gates.search_s:
+            return fallback(replace(state, recovery=rec), obs, m, f"the marker not found over the deck within "
+                            f"relnav.search_s = {gates.search_s:g} s", events)
+        if rec.search_since_s is None:
+            evs += ("searching for the marker over the deck",)
+        rec = replace(rec, search_since_s=began, settled_since_s=None, settled_offset_m=None)
+        h = h + r.geometry.holdoff_distance_m * rec.course  # over the gate, at the holdoff height
+        return _fly(state, obs, m, h, v_c, r.returning, rec, evs)
+    if gates is not None and rec.search_since_s is not None:
+        rec = replace(rec, search_since_s=None)
+        evs += ("marker acquired: back to the holdoff point",)
+    near = near and (gates is None or gates.taken_in(obs.relative))
+    rec, settled = _settled(rec, t, offset if near else None, r)
     if settled:
         # settled: an approach begins, or is refused (and counts) on a carrier state older than its budget
         if rec.attempts >= r.max_attempts:
@@ -375,7 +390,11 @@ def approach(state, obs, m, events=()):
             at_gate = rec.settled_since_s if rec.settled_since_s is not None else t
             rec = replace(rec, settled_since_s=at_gate)
             lined_up = here.horizontally_within(g) and float(norm(state.x_ref - gate)) <= REFERENCE_AT_GOAL_M
-            if lined_up:
+            blocked = None if m.relnav is None else m.relnav.descent_blocked(obs.relative)
+            if lined_up and blocked is not None and t - at_gate > r.gate_timeout_s:
+                return go_around(state, obs, m, f"no descent below the decision height: {blocked} "
+                                 f"for {r.gate_timeout_s:g} s at the gate", events)
+            if lined_up and blocked is None:
                 rec = replace(rec, descent=0.0, settled_since_s=None)
                 events = (*events, "lined up over the deck: descending")
             elif t - at_gate > r.gate_timeout_s:
@@ -397,7 +416,15 @@ def approach(state, obs, m, events=()):
         held = max(0.0, min(rec.descent, 1.0 - 3.0 * g.contact_height_m / g.decision_height_m))
         rec = replace(rec, settled_since_s=out_since, descent=held)
         return _fly(state, obs, m, gate + held * (dock - gate), v_c, r.approach, rec, events)
-    rec = replace(rec, settled_since_s=None)
+    blocked = None if m.relnav is None else m.relnav.descent_blocked(obs.relative)
+    if blocked is not None:  # the marker lost or the estimate unsure: hold the height (a search), go around after search_s
+        lost = rec.marker_lost_s if rec.marker_lost_s is not None else t
+        if t - lost > m.relnav.search_s:
+            return go_around(state, obs, m, f"on the descent: {blocked} (relnav.search_s = {m.relnav.search_s:g})",
+                             events)
+        rec = replace(rec, marker_lost_s=lost)
+        return _fly(state, obs, m, gate + rec.descent * (dock - gate), v_c, r.approach, rec, events)
+    rec = replace(rec, settled_since_s=None, marker_lost_s=None)
     descent = min(1.0, rec.descent + r.descent_speed_m_s * m.dt_s / g.decision_height_m)
     goal = gate + descent * (dock - gate)
     goal_v = v_c + ((dock - gate) / g.decision_height_m * r.descent_speed_m_s if descent < 1.0 else 0.0)

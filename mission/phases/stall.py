@@ -30,11 +30,11 @@ distance: a jump in the velocity it flies). So:
 
 The settling: the link's receiving thread stalled with the loop, and the first ticks after the
 gap read its backlog, a second of telemetry, oldest first (the vehicle's position is moved on by
-its velocity over at most TELEMETRY_SILENT_S of its age). A reference restarted on such a
-position lies behind the vehicle; measured on the mock (configs/recovery.toml, a 1 s SIGSTOP on
-the approach), restarted once, PX4's position loop then braked the vehicle from 1.8 to 0.9 m/s
-within 0.1 s. Restarted every tick while the backlog drains (about 0.1 s), and flown by velocity
-meanwhile, it goes on from where the vehicle really is.
+its velocity over at most TELEMETRY_SILENT_S of its age). A reference restarted once on such a
+position lies behind the vehicle, and PX4's position loop brakes the vehicle towards it (what
+that did on the mock: docs/recovery.md, "A stalled controller"). Restarted every tick while the
+backlog drains (about 0.1 s), and flown by velocity meanwhile, it goes on from where the vehicle
+really is.
 
 Frames: local NED [m], [m/s]; times [s] on the controller's clock.
 """

@@ -8,12 +8,14 @@ Frames: local NED [m], [m/s]; times [s] on the controller's clock.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 from typing import Any
 from enum import StrEnum
 
 import numpy as np
 
+from mission.phases.measurements import Measurements
 from mission.phases.phase import Phase, Request
 from mission.core.safety import DeckKeepOut, SafetyConfig
 from mission.core.docking import DockingGeometry
@@ -21,6 +23,7 @@ from mission.core.pursuit import PursuitLimits
 from mission.core.setpoint import Setpoint
 from mission.core.tick import TickModel
 from mission.core.tracking import TrackingGains
+from mission.relnav.estimator import RelnavParams
 
 TELEMETRY_SILENT_S = 0.4  # position older than this (PX4 streams it at 30 Hz): the link went quiet [s]
 
@@ -91,13 +94,75 @@ class CarrierObs:
 @dataclass(frozen=True)
 class Observation:
     """What one tick sees. ``failed`` maps a request ("arm", "offboard") to the vehicle's reason
-    once the controller gave up on it after its retries."""
+    once the controller gave up on it after its retries; ``measurements``: the measurement feeds'
+    readings (:mod:`mission.phases.measurements`: this tick's and the newest of each kind)."""
 
     t_s: float
     vehicle: VehicleObs | None
     carrier: CarrierObs | None
     failed: dict[str, str] = field(default_factory=dict)
     interrupted: bool = False
+    measurements: Measurements = Measurements()
+    relative: RelativeView | None = None  # the relative estimator's word on the deck ([relnav] enabled)
+
+
+@dataclass(frozen=True)
+class RelativeView:
+    """The relative estimator's word on the deck this tick (``[relnav]`` enabled,
+    :class:`mission.relnav.estimator.RelativeEstimator` run by the passenger's step):
+    ``position_ned_m`` the deck minus the vehicle [m] NED; ``bias_ned_m`` the estimated bias of
+    the carrier's GNSS frame over the passenger's [m]; ``pending_ned_m`` the part of the relative
+    position's jumps the carrier's state the phases see has not taken in yet [m] (let through at most at
+    ``relnav.correction_rate_m_s``); ``position_sigma_m`` [m] and ``converged`` as the estimate's;
+    ``since_marker_s`` [s] since the capture of the newest marker fused (inf: none yet)."""
+
+    position_ned_m: np.ndarray
+    bias_ned_m: np.ndarray
+    pending_ned_m: np.ndarray
+    position_sigma_m: float
+    converged: bool
+    since_marker_s: float
+
+
+PENDING_LIMIT_M = 0.3  # [m] an approach begins only with the estimate's jumps taken in to this
+
+
+@dataclass(frozen=True)
+class RelnavGates:
+    """How the phases use the relative estimate (``[relnav]``, docs/relnav.md): ``params`` the
+    estimator's tuning; ``marker_timeout_s`` [s] the marker is in sight while its newest fused
+    capture is this recent; ``marker_memory_s`` [s] HOLDOFF begins an approach only with a marker
+    this recent; ``search_s`` [s] how long HOLDOFF searches for the marker, and how long the
+    descent holds with it lost; ``correction_rate_m_s`` [m/s] the bias correction's top rate;
+    ``seated_sigma_m`` [m] how well standing on the deck places the vehicle over it."""
+
+    params: RelnavParams
+    marker_timeout_s: float
+    marker_memory_s: float
+    search_s: float
+    correction_rate_m_s: float
+    seated_sigma_m: float
+
+    def descent_blocked(self, rel: RelativeView | None) -> str | None:
+        """Why the vehicle may not descend below the decision height now (None: it may): the
+        marker in sight and the estimate converged."""
+        if rel is None:
+            return "no relative estimate"
+        if rel.since_marker_s > self.marker_timeout_s:
+            return "marker not in sight" if math.isinf(rel.since_marker_s) else \
+                f"marker not in sight for {rel.since_marker_s:.1f} s"
+        if not rel.converged:
+            return f"relative estimate not converged (sigma {rel.position_sigma_m:.2f} m)"
+        return None
+
+    def acquired(self, rel: RelativeView | None) -> bool:
+        """The marker fused within ``marker_memory_s``: HOLDOFF need not search for it."""
+        return rel is not None and rel.since_marker_s <= self.marker_memory_s
+
+    def taken_in(self, rel: RelativeView | None) -> bool:
+        """The estimate's jumps taken in by the carrier's state the phases see (within
+        :data:`PENDING_LIMIT_M`): an approach may begin."""
+        return rel is not None and float(np.linalg.norm(rel.pending_ned_m)) <= PENDING_LIMIT_M
 
 
 @dataclass(frozen=True)
@@ -129,6 +194,7 @@ class MissionModel:
     recovery: RecoveryModel | None  # with final_action "return"
     leg_start_m: float  # a leg after the first starts once the carrier is this far from its target [m]
     deck: DeckRide | None  # mission.ride = "deck": the passenger sits on the deck (the dock point) when carried
+    relnav: RelnavGates | None  # [relnav] enabled: the phases fly the relative estimate
     legs: tuple[MissionModel, ...] = ()  # one model per target, in order (the leg's tick has its target)
     next_target: np.ndarray | None = None  # a leg's model: the target of the leg after it [m] NED, or None (the last)
 
@@ -224,6 +290,8 @@ class RecoveryState:
     contact: dict[str, Any] | None = None
     fallback_why: str = ""
     fallback_goal: np.ndarray | None = None
+    search_since_s: float | None = None  # [relnav] HOLDOFF searching for the marker since [s]
+    marker_lost_s: float | None = None  # [relnav] the descent has had the marker lost since [s]
 
 
 @dataclass(frozen=True)

@@ -6,8 +6,9 @@ deploy, task, return and dock, ticked as the lockstep demo ticks it:
 
 - the passenger: the controller's own step (:class:`mission.passenger.step.PassengerStep`) every
   ``1 / mission.rate_hz`` [s], on what the controller reads in lockstep (the vehicle's reported
-  position and velocity sampled at the tick, the carrier's newest state with its age); its
-  setpoint goes to the vehicle at once, its
+  position and velocity sampled at the tick, the carrier's newest state with its age, the
+  readings of the world's measurement sensors, :mod:`sim.batch.sensors`); its setpoint goes to
+  the vehicle at once, its
   requests (arm, OFFBOARD, Hold, Land) are carried out at once;
 - the vehicle: the mock's commander (:class:`sim.vehicle.modes.Commander`) and PX4's position
   controller on the fitted airframe (:func:`sim.vehicle.physics.multicopter.step`) in the mock's
@@ -51,12 +52,16 @@ from mission.flight_mode import FlightMode
 from mission.phases.phase import Request
 from mission.mavlink import setpoints
 from mission.model import mission_model
+from mission.interfaces import MeasurementSource
 from mission.passenger.inputs import PassengerInputs, VehicleReport
 from mission.passenger.step import PassengerStep
-from mission.phases import CarrierObs, Decision, MissionState, Observation, Phase, finished
+from mission.phases import CarrierObs, Decision, Measurement, MissionState, Observation, Phase, finished
 from mission.phases.phase import Duty
 from mission.record import COLUMNS, VEC, FlightRecord, flown_info, mission_info, summary_of
-from sim.vehicle.estimator import EstimateError
+from sim.batch.sensors import SensorFactory, sensors_for
+from sim.gnss import CarrierGnss, GnssFix
+from mission.config.relnav import PassengerGnssSection
+from sim.vehicle.estimator import BiasedEstimateError, EstimateError
 from sim.vehicle.mock import PHYSICS_DT_S
 from sim.vehicle.modes import Commander
 from sim.vehicle.params import ParamTable, vehicle_limits
@@ -144,6 +149,9 @@ class KinematicCarrier:
         self.t_s = 0.0  # [s] the time of its state (its last step)
         self.done = 0  # steps taken (the next is at done * period_s)
         self.course_begun = False  # it has driven the scenario's recovery course
+        # [world.carrier_gnss] enabled: what it publishes is its GNSS fixes, with their errors (it steers on its truth)
+        self.gnss = CarrierGnss(cfg.world.carrier_gnss) if cfg.world.carrier_gnss.enabled else None
+        self.fixes: list[GnssFix] = []
 
     @property
     def model(self) -> TickModel:
@@ -198,8 +206,22 @@ class KinematicCarrier:
         heading = math.radians(sc.course_heading_deg(None if approach_s is None else t_s - approach_s))
         return sc.speed_m_s * np.array([math.cos(heading), math.sin(heading), 0.0])
 
-    def observed(self, t_s: float) -> CarrierObs:
-        """The newest published state as the passenger sees it at ``t_s`` [s]."""
+    def true_at(self, t_s: float) -> tuple[np.ndarray, np.ndarray]:
+        """Its true position [m] and velocity [m/s] NED at ``t_s`` [s] (moving on under the held command)."""
+        return self.position + self.velocity * max(t_s - self.t_s, 0.0), self.velocity.copy()
+
+    def observed(self, t_s: float) -> CarrierObs | None:
+        """The newest published state as the passenger sees it at ``t_s`` [s]: with
+        ``world.carrier_gnss.enabled`` the newest GNSS fix published by then (:class:`sim.gnss.CarrierGnss`,
+        None before the first), else its state."""
+        if self.gnss is not None:
+            self.fixes.extend(self.gnss.observe(t_s, *self.true_at(t_s)))
+            if not self.fixes:
+                return None
+            fix = max(self.fixes, key=lambda f: f.t_s)
+            self.fixes = [fix]
+            return CarrierObs(position_ned_m=fix.position_ned_m.copy(), velocity_ned_m_s=fix.velocity_ned_m_s.copy(),
+                              age_s=max(t_s - fix.t_s, 0.0), alive=True, yaw_rad=self.yaw_rad)
         return CarrierObs(position_ned_m=self.position.copy(), velocity_ned_m_s=self.velocity.copy(),
                           age_s=max(t_s - self.t_s, 0.0), alive=True, yaw_rad=self.yaw_rad)
 
@@ -213,12 +235,14 @@ class MockDynamics:
     ``_advance_steps``), the estimate's errors when asked; what it reports is the estimate."""
 
     def __init__(self, start_ned_m: Sequence[float], estimate_error: float = 0.0, seed: int = 0,
-                 params: dict[str, float] | None = None) -> None:
+                 params: dict[str, float] | None = None, gnss: PassengerGnssSection | None = None) -> None:
         self.kin = initial_state(tuple(float(x) for x in start_ned_m))  # type: ignore[arg-type]
         self.params = ParamTable(dict(params or {}), 1)
         self.limits = vehicle_limits(self.params)
         self.commander = Commander(self.params, self.kin)
-        self.drift = EstimateError(estimate_error, seed=seed) if estimate_error > 0 else None
+        self.drift: EstimateError | None = EstimateError(estimate_error, seed=seed) if estimate_error > 0 else None
+        if gnss is not None and gnss.bias_sigma_m > 0:  # [world.passenger_gnss]: its estimate's own GNSS bias
+            self.drift = BiasedEstimateError(estimate_error, gnss, seed=seed)
         self.noise = PositionNoise(0.0, seed, self.drift)
         self.steps = 0
         self.wind = (0.0, 0.0, 0.0)
@@ -342,9 +366,12 @@ def as_simulated(cfg: Config) -> Config:
 class World:
     """A mission in flight: the phase machine's state, the vehicle, the carrier and the record so
     far; :meth:`tick` advances it by one controller tick. :meth:`copy` branches it: the flights
-    of a batch share the part before the recovery (:func:`monte_carlo`)."""
+    of a batch share the part before the recovery (:func:`monte_carlo`). ``sensors``: the
+    world's measurement sensors (:mod:`sim.batch.sensors`; default: those of the feeds
+    ``mission.feeds`` names), polled every tick like the flight loop's feeds."""
 
-    def __init__(self, cfg: Config, scenario: Scenario, max_duration_s: float | None = None) -> None:
+    def __init__(self, cfg: Config, scenario: Scenario, max_duration_s: float | None = None,
+                 sensors: Sequence[SensorFactory] | None = None) -> None:
         cfg = as_simulated(cfg)
         self.cfg, self.model = cfg, mission_model(cfg)
         self.dt_s = self.model.dt_s
@@ -352,7 +379,8 @@ class World:
         if abs(self.steps_per_tick * PHYSICS_DT_S - self.dt_s) > 1e-12:
             raise ConfigError("mission.rate_hz", cfg.mission.rate_hz,
                               f"must divide the mock's physics rate ({1 / PHYSICS_DT_S:g} Hz) to simulate the mission")
-        self.vehicle = MockDynamics(cfg.scenario.carrier_start, scenario.estimate_error, scenario.seed)
+        self.vehicle = MockDynamics(cfg.scenario.carrier_start, scenario.estimate_error, scenario.seed,
+                                    gnss=cfg.world.passenger_gnss)
         self.carrier = KinematicCarrier(cfg, scenario)
         self.state = MissionState()
         self.rows = _Rows()
@@ -365,6 +393,7 @@ class World:
         self.limit_s = max_duration_s if max_duration_s is not None else self.model.max_duration_s + 30.0
         self.k = 0
         self.done = False
+        self.sources: list[MeasurementSource] = [make(self) for make in (sensors_for(cfg) if sensors is None else sensors)]
 
     @property
     def scenario(self) -> Scenario:
@@ -387,13 +416,16 @@ class World:
 
     def tick(self) -> None:
         """One controller tick at ``k * dt``: the carrier's steps due, the vehicle brought to the
-        tick, the phase machine, its setpoint and request carried out, the row recorded."""
+        tick, the sensors polled, the phase machine, its setpoint and request carried out, the row
+        recorded."""
         t = self.k * self.dt_s
         carrier, vehicle = self.carrier, self.vehicle
         while carrier.next_step_s() <= t + 1e-9:  # the carrier steps first, on the status of the tick before
             carrier.step(self.published, self.approach_s, self.published_leg)
         vehicle.advance_to_step(self.k * self.steps_per_tick)
-        result = self.step(self.state, PassengerInputs(t, vehicle.report(t), carrier.observed(t), dict(self.failed)))
+        measured: tuple[Measurement, ...] = tuple(m for source in self.sources for m in source.poll(t))
+        result = self.step(self.state, PassengerInputs(t, vehicle.report(t), carrier.observed(t), dict(self.failed),
+                                                       measurements=measured))
         self.state, obs, dec = result.state, result.observation, result.decision
         if dec.setpoint is not None:
             vehicle.send(t, dec.setpoint)
@@ -405,7 +437,7 @@ class World:
         self.published, self.published_leg = self.state.phase, self.state.leg
         if self.approach_s is None and self.state.phase is Phase.APPROACH:
             self.approach_s = t
-        _record(self.rows, t, self.state, obs, dec, vehicle)
+        _record(self.rows, t, self.state, obs, dec, vehicle, carrier)
         self.k += 1
         self.done = finished(self.state, dec) or t >= self.limit_s
 
@@ -439,10 +471,15 @@ def before_recovery(cfg: Config, estimate_error: float = 0.0, seed: int = 0) -> 
         lambda w: w.published is not None and w.published.duty is Duty.RECOVER)
 
 
-def _record(rows: _Rows, t: float, state: MissionState, obs: Observation, dec: Decision, vehicle: MockDynamics) -> None:
+def _record(rows: _Rows, t: float, state: MissionState, obs: Observation, dec: Decision, vehicle: MockDynamics,
+            carrier: KinematicCarrier) -> None:
     v, c = obs.vehicle, obs.carrier
     rec = state.recovery
-    rows.add(t, state.phase, x_p=None if v is None else v.position_ned_m, v_p=None if v is None else v.velocity_ned_m_s,
+    deck_true = carrier.true_at(t)[0]
+    rel = obs.relative
+    rows.add(t, state.phase, x_c_true=deck_true, rel_true=deck_true - vehicle.true_position,
+             rel_est=None if rel is None else rel.position_ned_m, bias_est=None if rel is None else rel.bias_ned_m,
+             since_marker=None if rel is None else np.full(3, rel.since_marker_s), x_p=None if v is None else v.position_ned_m, v_p=None if v is None else v.velocity_ned_m_s,
              x_c=None if c is None else c.position_ned_m, v_c=None if c is None else c.velocity_ned_m_s, dock=dec.dock,
              x_ref=state.x_ref, u_cmd=None if dec.setpoint is None else dec.setpoint.velocity_ned_m_s,
              x_true=vehicle.true_position, course=None if rec is None else rec.course)

@@ -1,5 +1,7 @@
 """The simulated carrier: :class:`mission.carrier.controller.CarrierController` driving the
-built-in kinematic robot (:class:`mission.carrier.backends.sim.SimRobot`).
+built-in kinematic robot (:class:`mission.carrier.backends.sim.SimRobot`); with
+``world.carrier_gnss.enabled`` the carrier steers on and publishes its robot's state as an erring
+GNSS gives it (:class:`sim.gnss.ErringCarrier`).
 
 Kept for the simulator's tests and tools; the program is ``marsupial carrier`` in
 :mod:`mission.carrier.cli` (backend ``sim`` is this).
@@ -13,6 +15,7 @@ from mission.carrier.modes import CarrierMode
 from mission.carrier.backends.sim import SimRobot
 from mission.time.clock import Clock
 from mission.config.schema import Config
+from sim.gnss import ErringCarrier
 
 __all__ = ["CarrierSim", "CarrierMode", "carrier_model"]
 
@@ -23,7 +26,9 @@ class CarrierSim(CarrierController):
     def __init__(self, cfg: Config, clock: Clock, session: zenoh.Session, *, pair: str | None = None,
                  encoding: str | None = None) -> None:
         self.robot = SimRobot(cfg, clock)
-        super().__init__(cfg, clock, session, self.robot, pair=pair, encoding=encoding)
+        gnss = cfg.world.carrier_gnss
+        backend = ErringCarrier(self.robot, gnss) if gnss.enabled else self.robot
+        super().__init__(cfg, clock, session, backend, pair=pair, encoding=encoding)
 
     @property
     def position_m(self):  # type: ignore[no-untyped-def]

@@ -21,7 +21,8 @@ import click
 
 from mission.bus.bridge import CarrierFeed, keys, open_session
 from mission.bus.wire import GeoOrigin
-from mission.config.schema import ZenohSection
+from mission.config.relnav import PassengerGnssSection
+from mission.config.schema import ZenohSection, load_config
 from mission.errors import ConfigError
 from mission.mavlink.env import read_signing_key
 from sim.vehicle.mock import MockVehicle, VehicleOptions
@@ -159,6 +160,9 @@ def _write_port_file(path: Path, port: int) -> None:
                                     "it and reports it), this many times as much (1: PX4 SITL's; seeded by --seed). "
                                     "0: an exact estimate (--ideal).")
 @click.option("--ideal", is_flag=True, help="An exact estimate (--estimate-error 0): for tests of exactness.")
+@click.option("--world", "world_config", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
+              metavar="CONFIG", help="Take the world's errors from this configuration file: [world.passenger_gnss], "
+                                     "a slow GNSS bias on the estimate (docs/relnav.md).")
 @click.option("--position-noise", type=click.FloatRange(min=0.0), default=0.0, show_default=True, metavar="METRES",
               help="Sigma [m] of Gaussian noise on the reported position (seeded by --seed).")
 @click.option("--loss-in", type=click.FloatRange(0.0, 1.0), default=0.0, show_default=True, metavar="FRACTION",
@@ -202,7 +206,7 @@ def mock_vehicle(mavlink_url: str, target_url: str, gcs_url: str | None, speed: 
                  loss_out: float, latency_ms: float, jitter_ms: float, blackouts: tuple[str, ...],
                  refuse_arming: str | None, refuse_offboard: str | None, lose_position_s: float | None, seed: int, signing_key: Path | None, port_file: Path | None,
                  lockstep: bool, lockstep_watchdog_s: float, lockstep_max_speed: float | None, status_every: float,
-                 summary_path: Path | None) -> None:
+                 summary_path: Path | None, world_config: Path | None = None) -> None:
     """Run the PX4-like MAVLink vehicle until SIGINT or SIGTERM.
 
     By default it mirrors PX4 SITL: it binds UDP 127.0.0.1:14580, sends HEARTBEAT and the
@@ -228,10 +232,21 @@ def mock_vehicle(mavlink_url: str, target_url: str, gcs_url: str | None, speed: 
         signing_key=signing_key_option(signing_key) if signing_key else None,
         wind_ned_m_s=_floats(wind, 3, "--wind"), position_noise_m=position_noise,  # type: ignore[arg-type]
         estimate_error=estimate_error, lockstep=lockstep, lockstep_watchdog_wall_s=lockstep_watchdog_s,
-        lockstep_max_speed=lockstep_max_speed,
+        lockstep_max_speed=lockstep_max_speed, passenger_gnss=passenger_gnss_of(world_config),
         deck=None if deck_pair is None else DeckSpec(height_m=deck_height, radius_m=deck_radius))
     run(options, port_file, status_every, deck=None if deck_pair is None else _deck_bus(deck_pair, zenoh_connect, zenoh_listen),
         summary_path=summary_path)
+
+
+def passenger_gnss_of(path: Path | None) -> PassengerGnssSection | None:
+    """``[world.passenger_gnss]`` of the configuration file ``path`` (None: no file, or no bias asked)."""
+    if path is None:
+        return None
+    try:
+        gnss = load_config(path).world.passenger_gnss
+    except ConfigError as exc:
+        raise click.BadParameter(str(exc), param_hint="--world") from None
+    return gnss if gnss.bias_sigma_m > 0.0 else None
 
 
 class VehicleClock:

@@ -32,6 +32,8 @@ import math
 import random
 from dataclasses import dataclass
 
+from mission.config.relnav import PassengerGnssSection
+
 Vec3 = tuple[float, float, float]
 
 
@@ -112,3 +114,40 @@ class _GaussMarkov2:
         self._inner = self._inner * decay + self._kick * self._rng.gauss(0.0, 1.0)
         self.value += (self._inner - self.value) * (1.0 - decay)
         return self.value
+
+
+class BiasedEstimateError(EstimateError):
+    """:class:`EstimateError` plus the passenger's own slow GNSS bias on the position
+    (``[world.passenger_gnss]``, seeded by its own seed, independent of the carrier's): per axis a
+    second-order Gauss-Markov process (smooth, as an estimator's output is) of standard deviation
+    ``bias_sigma_m`` (times ``vertical_factor`` on down) and time constant ``bias_tau_s``: the
+    estimate's origin drifts by metres over minutes as a standalone receiver's does, and PX4
+    flies it. Always enabled; ``scale`` as :class:`EstimateError`'s."""
+
+    def __init__(self, scale: float, gnss: PassengerGnssSection, model: ErrorModel = PX4_SITL, seed: int | None = 0) -> None:
+        super().__init__(scale, model, seed)
+        rng = random.Random(gnss.seed + 7919)
+        sigma = (gnss.bias_sigma_m, gnss.bias_sigma_m, gnss.bias_sigma_m * gnss.vertical_factor)
+        self._bias = [_GaussMarkov2(s, gnss.bias_tau_s, rng) for s in sigma]
+        self._with_bias()
+
+    @property
+    def enabled(self) -> bool:
+        return True
+
+    @property
+    def gnss_bias(self) -> Vec3:
+        """The GNSS bias part of :attr:`position` [m] NED."""
+        b = self._bias
+        return (b[0].value, b[1].value, b[2].value)
+
+    def advance(self, dt_s: float, *args: bool) -> None:
+        super().advance(dt_s, *args)
+        if getattr(self, "started", True):  # the errors' clock runs (one that holds until take-off holds this too)
+            for b in self._bias:
+                b.advance(dt_s)
+        self._with_bias()
+
+    def _with_bias(self) -> None:
+        (b, p) = (self.gnss_bias, self._p)
+        self.position = (p[0].value + b[0], p[1].value + b[1], p[2].value + b[2])

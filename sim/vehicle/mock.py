@@ -29,7 +29,7 @@ from typing import Any
 from mission.time.clock import Clock, ManualClock, ScaledClock
 from sim.vehicle import telemetry as tel
 from sim.vehicle.modes import Commander
-from sim.vehicle.estimator import EstimateError
+from sim.vehicle.estimator import BiasedEstimateError, EstimateError
 from sim.vehicle.faults import FaultInjector, FaultOptions
 from sim.vehicle.handlers import MessageHandlers
 from sim.vehicle.io import LinkIO
@@ -87,7 +87,7 @@ class MockVehicle:
         self._commander.refuse_arming_reason = opts.faults.refuse_arming_reason
         self._commander.refuse_offboard_reason = opts.faults.refuse_offboard_reason
         self._faults = FaultInjector(opts.faults)
-        self._estimate = EstimateError(opts.estimate_error if opts.frame == "quadrotor" else 0.0, seed=opts.faults.seed)
+        self._estimate = estimate_error_of(opts)
         self._noise = tel.PositionNoise(opts.position_noise_m, opts.faults.seed, self._estimate if self._estimate.enabled else None)
         self._schedule = StreamSchedule(LINK_NAMES, self.clock.speed)
         self._links: list[VehicleLink] = []
@@ -362,3 +362,13 @@ class MockVehicle:
                 if peer_alive or not self.options.statustext_needs_heartbeat:
                     for chunk in tel.statustext_chunks(severity, text, self._chunk_id):
                         self._io.send(link, chunk)
+
+
+def estimate_error_of(opts: VehicleOptions) -> EstimateError:
+    """The errors of the estimate ``opts`` asks for: PX4 SITL's times ``estimate_error`` (a
+    quadrotor's), plus the passenger's slow GNSS bias of ``passenger_gnss`` (a quadrotor's, when given)."""
+    scale = opts.estimate_error if opts.frame == "quadrotor" else 0.0
+    gnss = opts.passenger_gnss
+    if gnss is None or gnss.bias_sigma_m <= 0.0 or opts.frame != "quadrotor":
+        return EstimateError(scale, seed=opts.faults.seed)
+    return BiasedEstimateError(scale, gnss, seed=opts.faults.seed)

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from mission.config.relnav import PassengerGnssSection
 from mission.mavlink import px4
 from sim.vehicle.estimator import PX4_SITL_SCALE
 from sim.vehicle.faults import FaultOptions
@@ -65,6 +66,7 @@ class VehicleOptions:
     lockstep: bool = False
     lockstep_watchdog_wall_s: float = 10.0  # mission.time.clock.VEHICLE_WATCHDOG_WALL_S
     lockstep_max_speed: float | None = None
+    passenger_gnss: PassengerGnssSection | None = None  # a slow GNSS bias on a quadrotor's estimate (sim.vehicle.estimator.BiasedEstimateError)
 
     def __post_init__(self) -> None:
         if not self.speed > 0:

@@ -127,6 +127,8 @@ def _cases() -> list[tuple[str, str, str]]:
         add("mavlink", "signing_key_file", raw)
     for raw in ['""', '"/nonexistent/zenoh.json5"', '"a\\tb"']:
         add("zenoh", "config_file", raw)
+    for raw in ['["lidar"]', '["Marker"]', '"marker"', '["a\\u0007"]', '["' + "f" * 100 + '"]', "[1]"]:
+        add("mission", "feeds", raw)  # a measurement feed nothing registered, or not a name
     add("monte_carlo", "distance_m", "[60.0, 12.0]")
     add("monte_carlo", "height_m", '["0", 6.0]')
     add("monte_carlo", "distance_m", "[1.0, 2.0, 3.0]")

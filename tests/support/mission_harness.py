@@ -104,7 +104,7 @@ def flying_pair(tmp_path: Path, *, speed: float = 5.0, config: str = "demo.toml"
         clock = LockstepClock(speed=speed, name="mission", creator_runs=False) if lockstep else ScaledClock(speed)
         log_dir = tmp_path / "flight"
         recorder = FlightRecorder(log_dir, mission_info(mcfg))
-        feed, publisher, link = stack.enter_context(mission_io(mcfg, clock, recorder.tlog_path))
+        feed, publisher, link, sources = stack.enter_context(mission_io(mcfg, clock, recorder.tlog_path))
         vopts = {"target": f"127.0.0.1:{link.port}", "speed": speed, "start_ned": tuple(cfg.scenario.carrier_start),
                  "lockstep": lockstep, **(vehicle or {})}
         v = stack.enter_context(MockVehicle(VehicleOptions(**vopts)))
@@ -112,7 +112,8 @@ def flying_pair(tmp_path: Path, *, speed: float = 5.0, config: str = "demo.toml"
                     carrier_thread=carrier_thread, log_dir=log_dir, endpoint=ep)
         stop = threading.Event()
         pair.controller = MissionController(mcfg, link, feed, clock, publisher=publisher, recorder=recorder,
-                                            on_event=lambda p, text: pair.events.append((clock.now(), text)), stop=stop)
+                                            on_event=lambda p, text: pair.events.append((clock.now(), text)), stop=stop,
+                                            sources=sources)
 
         def fly() -> None:
             pair.outcome = pair.controller.run()

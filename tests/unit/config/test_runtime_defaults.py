@@ -14,6 +14,7 @@ from mission.carrier.guard import GuardParams
 from mission.carrier.tracking import TrackingParams
 from mission.config.carrier import CarrierSection
 from mission.config.recovery import RecoverySection
+from mission.config.relnav import PHASE_FIELDS, RelnavSection
 from mission.config.scenario import ScenarioSection
 from mission.config.schema import Config, LawSection, MissionSection, SafetySection, from_dict
 from mission.core.docking import DockingGeometry
@@ -22,8 +23,12 @@ from mission.core.pursuit import PursuitLimits
 from mission.core.safety import SafetyConfig
 from mission.core.tick import TickModel
 from mission.core.tracking import TrackingGains
+from mission.config.vision import VisionSection
 from mission.model import derived, mission_model, same_named
 from mission.phases.types import DeckRide, MissionModel, RecoveryModel
+from mission.vision.detect import DetectorSettings
+from sim.camera.sensor import SensorModel
+from mission.relnav.estimator import RelnavParams
 
 # Every runtime model built from the configuration, with the sections it is built from.
 RUNTIME: list[tuple[type, tuple[type[BaseModel], ...]]] = [
@@ -38,6 +43,9 @@ RUNTIME: list[tuple[type, tuple[type[BaseModel], ...]]] = [
     (PursuitLimits, (RecoverySection,)),
     (GuardParams, (CarrierSection,)),
     (TrackingParams, (CarrierSection,)),
+    (DetectorSettings, (VisionSection,)),
+    (SensorModel, (VisionSection,)),
+    (RelnavParams, (RelnavSection,)),
 ]
 
 
@@ -65,9 +73,9 @@ def test_no_runtime_default_disagrees_with_the_schema():
 
 
 def test_the_models_built_from_the_configuration_carry_no_default_of_their_own():
-    """TrackingGains, DockingGeometry and the mission's model take every tunable from the schema:
+    """TrackingGains, DockingGeometry, RelnavParams and the mission's model take every tunable from the schema:
     none of those fields has a second default."""
-    for model in (TrackingGains, DockingGeometry, RecoveryModel):
+    for model in (TrackingGains, DockingGeometry, RecoveryModel, RelnavParams):
         assert [f.name for f in dataclasses.fields(model) if f.default is not dataclasses.MISSING] == []
     built_by_mission_model = {f.name for f in dataclasses.fields(MissionModel)} - {"legs", "next_target"}
     assert [f.name for f in dataclasses.fields(MissionModel)
@@ -130,3 +138,10 @@ def test_derived_takes_same_named_fields_and_lets_explicit_ones_convert():
     built = derived(Runtime, m, dock_offset_ned_m=tuple(m.dock_offset_ned_m), rate_s=1.0 / m.rate_hz)
     assert built == Runtime(0.7, (0.0, 0.0, -1.5), 0.02)
     assert same_named(Runtime, m) == ["track_gain", "dock_offset_ned_m"]
+
+
+def test_the_relative_estimators_params_are_the_sections():
+    section = RelnavSection(gate_nis=9.0)
+    tuning = {k: v for k, v in section.model_dump().items() if k not in PHASE_FIELDS}  # the rest tells the phases
+    assert dataclasses.asdict(section.params()) == tuning
+    assert set(PHASE_FIELDS) <= set(section.model_dump())

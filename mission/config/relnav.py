@@ -1,0 +1,143 @@
+"""``[relnav]`` (the relative estimator of the deck from the passenger, :mod:`mission.relnav`) and
+``[world]`` (the errors the simulated world adds to what the vehicles report of themselves: the
+carrier's published GNSS state, the passenger's own GNSS bias). Part of the schema in
+:mod:`mission.config.schema`; the models and the measurements are in docs/relnav.md.
+
+``[world]`` is read only by the simulators (``sim/``), never by the controller: the controller
+sees the errors only through what it is sent. Every error is off unless a configuration asks.
+"""
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Literal
+
+from pydantic import Field, model_validator
+
+from mission.config.fields import Section
+from mission.errors import ConfigError
+
+if TYPE_CHECKING:
+    from mission.relnav.estimator import RelnavParams
+
+
+#: ``[relnav]``'s fields that tell the phases how to use the estimate (not the estimator's tuning).
+PHASE_FIELDS = ("enabled", "marker_timeout_s", "marker_memory_s", "search_s", "correction_rate_m_s", "seated_sigma_m")
+
+
+class RelnavSection(Section):
+    """The relative estimator's tuning: its models of the GNSS errors and of the marker, its gate;
+    and whether and how the phases use its estimate (``enabled`` and the fields after it)."""
+
+    enabled: bool = Field(False,
+        description=("[-] the passenger's step runs the relative estimator on the carrier's state, its own and the "
+                     "marker's readings (`mission.feeds`), and the phases fly the deck in the passenger's own frame "
+                     "(the carrier's state less the estimated GNSS-frame bias); the descent below "
+                     "`recovery.decision_height_m` then needs the marker in sight and the estimate converged"))
+    marker_timeout_s: float = Field(0.5, gt=0, le=10,
+        description="[s] the marker counts as in sight while its newest fused capture is no older than this")
+    marker_memory_s: float = Field(20.0, gt=0, le=600,
+        description=("[s] HOLDOFF begins an approach only with a marker fused this recently; else it searches for "
+                     "it over the deck at the holdoff height"))
+    search_s: float = Field(10.0, gt=0, le=120,
+        description=("[s] how long HOLDOFF searches over the deck for the marker before falling back, and how "
+                     "long the descent holds its height with the marker lost before it goes around"))
+    correction_rate_m_s: float = Field(0.5, gt=0, le=10,
+        description=("[m/s] the fastest the bias correction applied to the carrier's state may move (a new "
+                     "estimate of metres moves the deck smoothly, not in one tick)"))
+    seated_sigma_m: float = Field(0.3, gt=0, le=10,
+        description=("[m] before take-off the vehicle stands on the deck (Assumption 2): the estimator takes the "
+                     "deck as straight under it, horizontally, to this standard deviation per axis"))
+
+    accel_noise_m_s2: float = Field(0.5, gt=0, le=50,
+        description=("[m/s^2/sqrt(Hz)] square root of the spectral density of the white relative acceleration "
+                     "driving the constant-velocity model (per axis)"))
+    bias_sigma_m: float = Field(2.0, gt=0, le=100,
+        description=("[m] standard deviation of the bias between the carrier's and the passenger's GNSS frames (per "
+                     "horizontal axis)"))
+    bias_tau_s: float = Field(300.0, gt=0, le=100_000,
+        description="[s] correlation time of that bias (first-order Gauss-Markov)")
+    vertical_factor: float = Field(1.5, ge=0.1, le=10,
+        description="[-] the vertical bias and GNSS position noise over the horizontal ones")
+    gnss_position_sigma_m: float = Field(0.35, gt=0, le=100,
+        description=("[m] white noise of the GNSS relative position (the carrier's published position minus the "
+                     "passenger's own, per horizontal axis)"))
+    gnss_velocity_sigma_m_s: float = Field(0.3, gt=0, le=20,
+        description="[m/s] white noise of the relative velocity (the carrier's published velocity minus the passenger's own)")
+    initial_sigma_m: float = Field(100.0, gt=0, le=10_000,
+        description="[m] the relative position's prior standard deviation before any measurement")
+    initial_velocity_sigma_m_s: float = Field(10.0, gt=0, le=1_000,
+        description="[m/s] the relative velocity's prior standard deviation before any measurement")
+    gate_nis: float = Field(16.27, gt=0, le=10_000,
+        description=("[-] a measurement whose normalised innovation squared exceeds this is rejected (16.27: "
+                     "chi-square, 3 degrees of freedom, 0.999)"))
+    history_s: float = Field(1.0, gt=0, le=30,
+        description="[s] how far back a late measurement is still fused (replayed from its capture time)")
+    converged_sigma_m: float = Field(0.1, gt=0, le=100,
+        description="[m] the estimate counts as converged when its position's largest standard deviation is below this")
+
+    def params(self) -> RelnavParams:
+        from mission.relnav.estimator import RelnavParams
+
+        return RelnavParams(**{name: getattr(self, name) for name in type(self).model_fields if name not in PHASE_FIELDS})
+
+
+class CarrierGnssSection(Section):
+    """The error of the carrier's published GNSS state, as the simulated world adds it (off by default)."""
+
+    enabled: bool = Field(False, description="[-] the simulated carrier publishes an erring GNSS state")
+    mode: Literal["standalone", "rtk"] = Field("standalone",
+        description=("[-] `standalone`: a drifting metre-level bias; `rtk`: moving-base RTK, centimetres with "
+                     "occasional float fallbacks"))
+    bias_sigma_m: float = Field(1.5, ge=0, le=100,
+        description="[m] standalone: standard deviation of the slowly drifting bias (per horizontal axis)")
+    bias_tau_s: float = Field(300.0, gt=0, le=100_000,
+        description="[s] standalone: the bias's correlation time (first-order Gauss-Markov)")
+    vertical_factor: float = Field(1.5, ge=0, le=10,
+        description="[-] the vertical bias and noise over the horizontal ones")
+    position_sigma_m: float = Field(0.3, ge=0, le=100,
+        description="[m] standalone: white noise of the published position (per horizontal axis)")
+    velocity_sigma_m_s: float = Field(0.2, ge=0, le=20,
+        description="[m/s] white noise of the published velocity (per axis)")
+    rtk_sigma_m: float = Field(0.02, ge=0, le=10,
+        description="[m] rtk, fixed: white noise of the published position (per horizontal axis)")
+    rtk_float_sigma_m: float = Field(0.3, ge=0, le=100,
+        description="[m] rtk, float: standard deviation of the float solution's wander (per horizontal axis)")
+    rtk_float_tau_s: float = Field(10.0, gt=0, le=10_000,
+        description="[s] rtk, float: correlation time of the float solution's wander")
+    rtk_fixed_mean_s: float = Field(120.0, gt=0, le=100_000,
+        description="[s] rtk: mean time between float fallbacks (exponential)")
+    rtk_float_mean_s: float = Field(5.0, gt=0, le=10_000,
+        description="[s] rtk: mean length of a float fallback (exponential)")
+    rate_hz: float = Field(10.0, gt=0, le=100, description="[Hz] how often the carrier's GNSS gives a fix")
+    latency_s: float = Field(0.2, ge=0, le=5,
+        description="[s] mean delay from a fix's measurement to its publication")
+    jitter_s: float = Field(0.05, ge=0, le=5,
+        description="[s] half-width of the uniform spread of that delay round its mean")
+    seed: int = Field(0, ge=0, le=2**31 - 1, description="[-] seed of the carrier's GNSS errors")
+
+    @model_validator(mode="after")
+    def _delay(self) -> CarrierGnssSection:
+        if self.jitter_s > self.latency_s:
+            raise ConfigError("world.carrier_gnss.jitter_s", self.jitter_s,
+                              f"must be <= world.carrier_gnss.latency_s = {self.latency_s:g} (a fix is never published before it is measured)")
+        return self
+
+
+class PassengerGnssSection(Section):
+    """The slow GNSS bias of the passenger's own estimate, which the mock vehicle adds (off by default)."""
+
+    bias_sigma_m: float = Field(0.0, ge=0, le=100,
+        description="[m] standard deviation of the passenger estimate's slow GNSS bias (per horizontal axis; 0: none)")
+    bias_tau_s: float = Field(300.0, gt=0, le=100_000,
+        description="[s] the bias's correlation time (first-order Gauss-Markov)")
+    vertical_factor: float = Field(1.5, ge=0, le=10, description="[-] the vertical bias over the horizontal one")
+    seed: int = Field(1, ge=0, le=2**31 - 1,
+        description="[-] seed of the passenger's GNSS bias (independent of the carrier's)")
+
+
+class WorldSection(Section):
+    """The simulated world's errors (read by the simulators only)."""
+
+    carrier_gnss: CarrierGnssSection = Field(CarrierGnssSection(),
+        description="[-] the error of the carrier's published GNSS state (`[world.carrier_gnss]`)")
+    passenger_gnss: PassengerGnssSection = Field(PassengerGnssSection(),
+        description="[-] the slow GNSS bias of the passenger's own estimate (`[world.passenger_gnss]`)")

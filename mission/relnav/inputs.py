@@ -1,0 +1,113 @@
+"""What the relative estimator reads and what it reports (pure records, SI units, NED axes).
+
+Frames. Every position is in local NED axes (north, east, down) [m]; what differs is the origin
+each vehicle's GNSS puts under it:
+
+- the **passenger's GNSS frame**: where the passenger's own estimate (PX4's local position) says
+  it is; it errs from the truth by the passenger's GNSS error;
+- the **carrier's GNSS frame**: where the carrier's published state says the carrier is; it errs
+  by the carrier's GNSS error, independent of the passenger's;
+- the **marker** needs no frame origin: the vision system measures the deck from the vehicle
+  (deck minus vehicle) in NED axes, a vector that no GNSS error touches.
+
+So the carrier's published position minus the passenger's own is the true relative position plus
+the bias between the two GNSS frames, ``b = e_carrier - e_passenger`` [m]; velocities share no
+bias (a frame offset does not move). Times are on the passenger's clock [s].
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class OwnSample:
+    """The passenger's own estimate at ``t_s`` [s]: ``position_ned_m`` (3,) [m] in the passenger's
+    GNSS frame and ``velocity_ned_m_s`` (3,) [m/s], as its autopilot reports them."""
+
+    t_s: float
+    position_ned_m: np.ndarray
+    velocity_ned_m_s: np.ndarray
+
+
+@dataclass(frozen=True)
+class CarrierFix:
+    """The carrier's reported GNSS state, measured at ``t_s`` [s] (its stamp, not its arrival):
+    ``position_ned_m`` (3,) [m] in the carrier's GNSS frame (of the deck's reference point) and
+    ``velocity_ned_m_s`` (3,) [m/s]."""
+
+    t_s: float
+    position_ned_m: np.ndarray
+    velocity_ned_m_s: np.ndarray
+
+
+class MarkerObservation(Protocol):
+    """A marker's measurement of the deck from the vehicle. ``mission.vision.measurement``'s
+    ``RelativeMeasurement`` is one (structurally: the estimator reads only these three).
+
+    capture_t_s: when the frame was exposed [s] (on the passenger's clock);
+    deck_rel_ned_m (3,): deck centre minus the vehicle's reference point, NED axes [m];
+    covariance_ned_m2 (3, 3): its covariance [m^2]."""
+
+    @property
+    def capture_t_s(self) -> float: ...
+
+    @property
+    def deck_rel_ned_m(self) -> np.ndarray: ...
+
+    @property
+    def covariance_ned_m2(self) -> np.ndarray: ...
+
+
+@dataclass(frozen=True)
+class MarkerFix:
+    """A plain :class:`MarkerObservation` (for a source without vision's full record)."""
+
+    capture_t_s: float
+    deck_rel_ned_m: np.ndarray
+    covariance_ned_m2: np.ndarray
+
+    @classmethod
+    def isotropic(cls, capture_t_s: float, deck_rel_ned_m: np.ndarray, sigma_m: float) -> MarkerFix:
+        """One with the same standard deviation ``sigma_m`` [m] on every axis."""
+        return cls(capture_t_s, np.asarray(deck_rel_ned_m, dtype=float), np.eye(3) * sigma_m ** 2)
+
+
+@dataclass(frozen=True)
+class Counts:
+    """Measurements fused and rejected by the gate, by kind (``marker``, ``gnss_position``,
+    ``gnss_velocity``); ``too_old``: measurements older than the history, ``too_new``: stamped
+    more than the history after the newest tick (both dropped unfused)."""
+
+    fused: dict[str, int]
+    rejected: dict[str, int]
+    too_old: int
+    too_new: int = 0
+
+
+@dataclass(frozen=True)
+class RelativeEstimate:
+    """The estimate at ``t_s`` [s].
+
+    position_ned_m (3,): the deck's reference point minus the vehicle's [m], NED axes (the truth's
+    estimate: what the marker measures, not what the GNSS difference says);
+    velocity_ned_m_s (3,): its rate, the deck's velocity minus the vehicle's [m/s];
+    bias_ned_m (3,): the carrier's GNSS frame minus the passenger's [m] (the GNSS difference
+    minus the relative position);
+    covariance (9, 9): of (position, velocity, bias) in that order [m^2, m^2/s, m^2/s^2 ...];
+    position_sigma_m: the position's largest standard deviation [m];
+    converged: ``position_sigma_m`` is below the configured threshold;
+    since_marker_s: time since the capture of the newest marker fused [s] (inf: none yet);
+    counts: what was fused and rejected."""
+
+    t_s: float
+    position_ned_m: np.ndarray
+    velocity_ned_m_s: np.ndarray
+    bias_ned_m: np.ndarray
+    covariance: np.ndarray
+    position_sigma_m: float
+    converged: bool
+    since_marker_s: float
+    counts: Counts

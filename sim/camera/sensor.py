@@ -1,0 +1,80 @@
+"""The sensor's effects on a rendered frame: motion blur along the image motion during the
+exposure, Gaussian read noise, and dropped frames, all from a seeded generator."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from mission.config.vision import VisionSection
+from mission.model import derived
+from mission.vision.camera import CameraModel
+from mission.vision.measurement import MarkerPose
+
+
+@dataclass(frozen=True)
+class SensorModel:
+    """noise_sigma: the read noise's standard deviation [grey levels, 0-255]; exposure_s: the
+    exposure time [s] (blur length = image speed x exposure); dropout_probability: the chance a
+    frame is lost [0-1]; rate_hz: frames a second; latency_s: from exposure to the frame's
+    delivery [s] (the consumer applies it: a frame carries its capture time)."""
+
+    noise_sigma: float = 2.0
+    exposure_s: float = 0.005
+    dropout_probability: float = 0.02
+    rate_hz: float = 30.0
+    latency_s: float = 0.08
+
+
+def sensor_model(section: VisionSection) -> SensorModel:
+    """The simulated sensor of the configuration's ``[vision]`` section."""
+    return derived(SensorModel, section)
+
+
+@dataclass
+class Sensor:
+    """A camera's sensor with its own seeded random stream."""
+
+    model: SensorModel = field(default_factory=SensorModel)
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        self._rng = np.random.default_rng(self.seed)
+
+    def expose(self, ideal: np.ndarray, blur_px: np.ndarray | None = None) -> np.ndarray | None:
+        """The frame the sensor delivers from the ideal one: None when dropped; else blurred
+        along ``blur_px`` (2,) (the image motion during the exposure [px]) and noisy, uint8."""
+        if self._rng.random() < self.model.dropout_probability:
+            return None
+        frame = ideal.astype(np.float32)
+        if blur_px is not None and np.hypot(*blur_px) >= 1.0:
+            frame = cv2.filter2D(frame, -1, line_kernel(blur_px))
+        if self.model.noise_sigma > 0:
+            frame += self._rng.standard_normal(frame.shape, dtype=np.float32) * np.float32(self.model.noise_sigma)
+        return np.clip(frame + 0.5, 0, 255).astype(np.uint8)
+
+
+def line_kernel(blur_px: np.ndarray) -> np.ndarray:
+    """A normalised line kernel along ``blur_px`` (dx, dy) [px], centred."""
+    length = float(np.hypot(*blur_px))
+    half = int(np.ceil(length / 2))
+    size = 2 * half + 1
+    kernel = np.zeros((size, size), np.float32)
+    steps = max(int(np.ceil(length * 2)), 2)
+    for s in np.linspace(-0.5, 0.5, steps):
+        x, y = half + s * blur_px[0], half + s * blur_px[1]
+        kernel[int(round(y)), int(round(x))] += 1.0
+    return kernel / kernel.sum()
+
+
+def image_motion_px(camera: CameraModel, marker: MarkerPose, velocity_cam_m_s: np.ndarray, exposure_s: float) -> np.ndarray:
+    """How far the deck centre moves in the image during one exposure [px] (dx, dy): the deck's
+    velocity relative to the camera ``velocity_cam_m_s`` (3,) in camera axes [m/s] times
+    ``exposure_s`` [s], through the pinhole at the deck's depth (the camera's rotation rate aside)."""
+    x, y, z = marker.deck_in_cam_m
+    vx, vy, vz = np.asarray(velocity_cam_m_s, float)
+    fx, fy = camera.matrix[0, 0], camera.matrix[1, 1]
+    du = fx * (vx * z - x * vz) / z ** 2
+    dv = fy * (vy * z - y * vz) / z ** 2
+    return np.array([du, dv]) * exposure_s

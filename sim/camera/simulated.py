@@ -1,0 +1,33 @@
+"""The simulated camera: the true poses in, the frame a real camera would deliver out (or None,
+dropped), stamped with its capture time."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from mission.vision.camera import CameraModel, Frame
+from mission.vision.frames import quaternion_matrix
+from mission.vision.layout import MarkerLayout
+from sim.camera.render import Poses, render, true_marker_pose
+from sim.camera.sensor import Sensor, image_motion_px
+
+
+@dataclass
+class SimulatedCamera:
+    """``camera`` (its intrinsics and mount) looking at ``layout`` through ``sensor``."""
+
+    camera: CameraModel
+    layout: MarkerLayout
+    sensor: Sensor = field(default_factory=Sensor)
+
+    def capture(self, poses: Poses, capture_t_s: float, relative_velocity_ned_m_s=(0.0, 0.0, 0.0)) -> Frame | None:
+        """The frame exposed at ``capture_t_s`` [s] from the true ``poses``; the deck's velocity
+        relative to the vehicle ``relative_velocity_ned_m_s`` [m/s] NED blurs it over the
+        exposure. None: the frame was dropped."""
+        marker = true_marker_pose(self.camera, poses)
+        rotation_ned_cam = quaternion_matrix(poses.attitude_q_wxyz) @ self.camera.mount.rotation_body_cam
+        velocity_cam = rotation_ned_cam.T @ np.asarray(relative_velocity_ned_m_s, float)
+        blur = image_motion_px(self.camera, marker, velocity_cam, self.sensor.model.exposure_s)
+        image = self.sensor.expose(render(self.camera, self.layout, marker), blur)
+        return None if image is None else Frame(image, capture_t_s)

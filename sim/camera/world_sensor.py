@@ -1,0 +1,97 @@
+"""The deck marker as a sensor of the in-process mission simulation (:class:`sim.batch.recovery.World`,
+feed name ``marker``): the passenger's downward camera of ``[vision]`` looking at the carrier's
+deck from the world's truth, each reading a :class:`~mission.phases.measurements.RelativePosition`
+(the deck centre less the vehicle, NED [m]) stamped at capture and delivered ``vision.latency_s``
+later.
+
+Two ways to measure, chosen by the entry point (``pyproject.toml``, ``marsupial.sensors``):
+
+- ``marker`` (:func:`modelled`): the detection-error model fitted to the real detector
+  (:class:`sim.camera.error_model.ModelledDetector`, ``FITTED``; no image; fast enough for batches);
+- ``marker_rendered`` (:func:`rendered`): a frame rendered from the true poses with the
+  sensor's noise, blur and dropouts (:class:`sim.camera.simulated.SimulatedCamera`) and the real
+  detector and pose (:class:`mission.vision.detect.MarkerDetector`): ~5-10 ms a frame.
+
+The vehicle's attitude is level at its yaw (the mock's physics keeps no tilt); the deck is level
+at the carrier's position (its reference point is the deck centre) and yaw. Captures happen on
+the world's ticks at ``vision.rate_hz`` at most; every draw is seeded by the scenario's seed.
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from mission.model import vision_detector
+from mission.phases.measurements import Measurement, RelativePosition
+from mission.vision.measurement import RelativeMeasurement
+from sim.camera.error_model import FITTED, ModelledDetector
+from sim.camera.render import Poses
+from sim.camera.sensor import Sensor, sensor_model
+from sim.camera.simulated import SimulatedCamera
+
+if TYPE_CHECKING:
+    from sim.batch.recovery import World
+
+SEED_OFFSET = 7717  # the marker's stream, apart from the other seeded streams of the scenario's seed
+
+
+class WorldMarker:
+    """The world's marker sensor: ``measure(poses, t)`` the measurement of one capture (None: not
+    seen); a :class:`mission.interfaces.MeasurementSource`."""
+
+    def __init__(self, world: World, measure: Callable[[Poses, float], RelativeMeasurement | None]) -> None:
+        v = world.cfg.vision
+        self.world, self.measure = world, measure
+        self.period_s, self.latency_s = 1.0 / v.rate_hz, v.latency_s
+        self.next_s = 0.0
+        self.pending: list[RelativePosition] = []  # captured, not yet delivered
+        self.captured = 0  # frames taken
+        self.seen = 0  # frames that gave a measurement
+
+    def poses(self, t_s: float) -> Poses:
+        """The truth at ``t_s`` [s]: the vehicle level at its yaw, the deck at the carrier."""
+        kin = self.world.vehicle.kin
+        half = kin.yaw_rad / 2
+        deck = self.world.carrier.true_at(t_s)[0]
+        return Poses(self.world.vehicle.true_position, np.array([math.cos(half), 0.0, 0.0, math.sin(half)]),
+                     deck, self.world.carrier.yaw_rad)
+
+    def poll(self, t_s: float) -> list[Measurement]:
+        """Capture if a frame is due at ``t_s`` [s]; deliver what is ``latency_s`` old."""
+        if t_s + 1e-9 >= self.next_s:
+            self.next_s = max(self.next_s + self.period_s, t_s)
+            self.captured += 1
+            m = self.measure(self.poses(t_s), t_s)
+            if m is not None:
+                self.seen += 1
+                self.pending.append(RelativePosition(capture_t_s=t_s, offset_ned_m=np.asarray(m.deck_rel_ned_m, float),
+                                                     sigma_m=float(m.sigma_m), marker=int(m.tag_ids[0])))
+        out = [m for m in self.pending if m.capture_t_s + self.latency_s <= t_s + 1e-9]
+        self.pending = [m for m in self.pending if m.capture_t_s + self.latency_s > t_s + 1e-9]
+        return list(out)
+
+    def close(self) -> None:
+        self.pending = []
+
+
+def modelled(world: World) -> WorldMarker:
+    """The marker through the fitted detection-error model (feed ``marker``)."""
+    detector = vision_detector(world.cfg)
+    model = ModelledDetector(detector.camera, detector.layout, FITTED, seed=world.scenario.seed + SEED_OFFSET)
+    return WorldMarker(world, model.measure)
+
+
+def rendered(world: World) -> WorldMarker:
+    """The marker rendered, exposed and detected (feed ``marker_rendered``)."""
+    detector = vision_detector(world.cfg)
+    camera = SimulatedCamera(detector.camera, detector.layout,
+                             Sensor(sensor_model(world.cfg.vision), seed=world.scenario.seed + SEED_OFFSET))
+
+    def measure(poses: Poses, t_s: float) -> RelativeMeasurement | None:
+        frame = camera.capture(poses, t_s)
+        return None if frame is None else detector.measure(frame.image, t_s, poses.attitude_q_wxyz)
+
+    return WorldMarker(world, measure)
