@@ -12,6 +12,7 @@ mission's model, and returns the next state and the tick's decision.
 - :mod:`.deck`: riding seated on the carrier's deck (``mission.ride = "deck"``);
 - :mod:`.recovery`: bringing the passenger home (RETURNING, HOLDOFF, APPROACH, GO_AROUND, DOCKED,
   HOME, FALLBACK) and on to the next target (TRANSIT);
+- :mod:`.battery`: whether the battery calls the passenger home, or forbids the next leg;
 - :mod:`.stall`: after a stall (a gap with no tick), the reference goes on from where the vehicle is.
 """
 from mission.phases.machine import (

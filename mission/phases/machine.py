@@ -76,7 +76,7 @@ from mission.phases.types import (
     dock_point,
     enter,
 )
-from mission.phases import deck, recovery, stall
+from mission.phases import battery, deck, recovery, stall
 from mission.phases.flying import arrived, join, navigate, riding
 
 __all__ = [
@@ -413,7 +413,7 @@ HANDING_OVER = frozenset({Phase.ARRIVED, Phase.HOME, Phase.FALLBACK})
 def _navigating(state: MissionState, obs: Observation, m: MissionModel) -> tuple[MissionState, Decision]:
     """SEPARATED/NAVIGATING: the paper's navigation, unless the battery calls the passenger home."""
     if m.recovery is not None and state.phase is Phase.NAVIGATING:
-        why = recovery.battery_recall(state, obs, m)
+        why = battery.battery_recall(state, obs, m)
         if why is not None:
             return recovery.begin(state, obs, m, why)
     return navigate(state, obs, m)
@@ -426,7 +426,7 @@ def _arrived(state: MissionState, obs: Observation, m: MissionModel) -> tuple[Mi
         return arrived(state, obs, m)
     if obs.t_s - state.since_s >= m.recovery.at_target_s:
         return recovery.begin(state, obs, m, "task done")
-    why = recovery.battery_recall(state, obs, m)
+    why = battery.battery_recall(state, obs, m)
     if why is not None:
         return recovery.begin(state, obs, m, why)
     new, dec = navigate(state, obs, m)
