@@ -140,7 +140,8 @@ def step(state: KinState, command: Command, limits: Limits, wind_ned_m_s: tuple[
     ``estimate_error``: (position [m], velocity [m/s]) NED that PX4's estimate adds to the true
     state; the position controller flies the estimate (:mod:`sim.vehicle.estimator`)."""
     sp = command.setpoint()
-    if state.on_ground and not (command.powered and sp.wants_climb(state.d_m)):
+    seen_d = state.d_m + (estimate_error[0][2] if estimate_error is not None else 0.0)  # PX4 reads its estimate
+    if state.on_ground and not (command.powered and sp.wants_climb(seen_d)):
         # landed: at rest on its ground, the controller's integrator reset (as PX4's)
         if state.ctrl.integral == (0.0, 0.0, 0.0) and state.an_m_s2 == state.ae_m_s2 == state.ad_m_s2 == 0.0:
             return state

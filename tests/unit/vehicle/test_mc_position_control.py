@@ -80,3 +80,20 @@ def test_on_the_ground_it_waits_for_a_climb_request():
     up = fly(Command(NAN, NAN, NAN, position_ned_m=(1.0, 2.0, -2.0)), 5.0, kin)
     assert not up.on_ground and up.d_m == pytest.approx(-2.0, abs=0.1)
     assert fly(Command(0.0, 0.0, 0.0, powered=False), 5.0, up).on_ground
+
+
+def test_landed_it_takes_off_when_the_setpoint_is_above_its_estimate_not_the_truth():
+    """PX4's offboard ``want_takeoff`` compares the setpoint with the estimated height
+    (``states.position(2)``): landed at d = -0.5 with the estimate reading 0.3 m lower (d -0.2), a
+    position setpoint at d -0.4 (above the estimate, below the truth) lifts it off, one at d -0.1
+    does not; with the estimate reading 0.3 m higher a setpoint at d -0.6 does not."""
+    nan = math.nan
+    landed = initial_state((0.0, 0.0, -0.5))
+    zero = (0.0, 0.0, 0.0)
+
+    def lifts(sp_d: float, est_d: float) -> bool:
+        command = Command(nan, nan, 0.0, position_ned_m=(0.0, 0.0, sp_d), acceleration_ned_m_s2=(nan, nan, nan))
+        after = step(landed, command, Limits(), zero, 0.004, ((0.0, 0.0, est_d), zero))
+        return not after.on_ground or after.vd_m_s < 0.0
+
+    assert lifts(-0.4, 0.3) and not lifts(-0.1, 0.3) and not lifts(-0.6, -0.3) and lifts(-0.9, -0.3)
