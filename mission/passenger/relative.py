@@ -18,6 +18,8 @@ caller's clock. docs/relnav.md, "In the phases".
 """
 from __future__ import annotations
 
+import math
+
 from dataclasses import replace
 
 import numpy as np
@@ -43,6 +45,7 @@ class RelativeDeck:
         self.last: tuple[np.ndarray, np.ndarray] | None = None  # the last tick's deck [m] and velocity [m/s], before pending
         self.pending = np.zeros(3)  # [m] NED, the part of the estimate's jumps not yet let through
         self.t_s: float | None = None  # [s] the last tick's time
+        self.refused = 0  # readings not fused: no stated sigma, or a non-finite time, offset or sigma
 
     def observe(self, t_s: float, vehicle: VehicleReport | None, carrier: CarrierObs | None,
                 measurements: Measurements, on_deck: bool = False) -> tuple[CarrierObs | None, RelativeView | None]:
@@ -56,8 +59,10 @@ class RelativeDeck:
             est.carrier(CarrierFix(self.fix_t_s, np.asarray(carrier.position_ned_m, float),
                                    np.asarray(carrier.velocity_ned_m_s, float)))
         for m in measurements.arrived(RelativePosition):
-            if m.sigma_m is not None and m.sigma_m > 0:  # a reading with no stated sigma is not fused
+            if _usable(m):
                 est.marker(MarkerFix.isotropic(m.capture_t_s, m.offset_ned_m, m.sigma_m))
+            else:
+                self.refused += 1
         if on_deck and vehicle is not None and vehicle.sample_t_s is not None and vehicle.sample_t_s > self.own_t_s:
             sigma = self.gates.seated_sigma_m
             est.marker(MarkerFix(vehicle.sample_t_s, np.zeros(3), np.diag([sigma ** 2, sigma ** 2, UNKNOWN_HEIGHT_M ** 2])))
@@ -100,3 +105,11 @@ class RelativeDeck:
         return RelativeView(position_ned_m=np.asarray(e.position_ned_m, float), bias_ned_m=bias,
                             pending_ned_m=self.pending.copy(), position_sigma_m=e.position_sigma_m,
                             converged=e.converged, since_marker_s=e.since_marker_s)
+
+
+def _usable(m: RelativePosition) -> bool:
+    """A reading the estimator can fuse: a finite capture time [s], a finite offset [m] and a
+    stated, finite, positive sigma [m]. Anything else (a faulty or hostile feed) is refused and
+    counted, never raised into the loop."""
+    return (m.sigma_m is not None and math.isfinite(m.sigma_m) and m.sigma_m > 0 and math.isfinite(m.capture_t_s)
+            and bool(np.all(np.isfinite(np.asarray(m.offset_ned_m, float)))))

@@ -49,3 +49,22 @@ def test_the_first_marker_moves_the_deck_at_the_rate_then_onto_the_truth():
     assert view.converged and gates.descent_blocked(view) is None and gates.taken_in(view)
     assert float(np.linalg.norm(carrier.position_ned_m)) < 0.05  # on the true deck
     assert float(np.linalg.norm(view.bias_ned_m[:2] - BIAS[:2])) < 0.2
+
+
+def test_a_malformed_reading_is_refused_and_counted_never_raised():
+    """A faulty or hostile feed: NaN or infinite capture time, offset or sigma, or no sigma. Each
+    reading is refused and counted; the loop goes on, and the estimate is the one without them."""
+    bad = (RelativePosition(capture_t_s=math.nan, offset_ned_m=np.array([0.0, 0.0, 1.5]), sigma_m=0.02),
+           RelativePosition(capture_t_s=1.0, offset_ned_m=np.array([math.inf, 0.0, 1.5]), sigma_m=0.02),
+           RelativePosition(capture_t_s=1.0, offset_ned_m=np.array([0.0, 0.0, 1.5]), sigma_m=math.inf),
+           RelativePosition(capture_t_s=1.0, offset_ned_m=np.array([0.0, 0.0, 1.5]), sigma_m=None))
+    clean, dirty = RelativeDeck(_gates()), RelativeDeck(_gates())
+    a = _fly(clean, 0.0, 2.0, False, Measurements())
+    _fly(dirty, 0.0, 1.0, False, Measurements())
+    report = VehicleReport(1.0, np.array([0.0, 0.0, -1.5]), np.zeros(3), 1.0, 1.0, True, "OFFBOARD", 0.0, True)
+    carrier = CarrierObs(position_ned_m=BIAS.copy(), velocity_ned_m_s=np.zeros(3), age_s=0.0, alive=True)
+    dirty.observe(1.0, report, carrier, Measurements().then(bad))  # the tick at t = 1.0 s, with the bad readings
+    b = _fly(dirty, 1.02, 2.0, False, Measurements())
+    a = [row for row in a if row[0] != 1.0]
+    assert dirty.refused == len(bad)
+    assert np.allclose(a[-1][1].position_ned_m, b[-1][1].position_ned_m)
