@@ -97,11 +97,6 @@ def _vehicle_lost(v: VehicleObs | None, m: MissionModel) -> bool:
     return v is None or (v.heartbeat_age_s > m.heartbeat_timeout_s and v.position_age_s > TELEMETRY_SILENT_S)
 
 
-def _carrier_ok(obs: Observation, m: MissionModel) -> bool:
-    c = obs.carrier
-    return c is not None and c.worst_age_s <= m.carrier_timeout_s and c.alive is not False
-
-
 def _hold_decision(state: MissionState, obs: Observation) -> Decision:
     """Ask for Hold; keep zero-velocity setpoints flowing until the vehicle shows it (so a
     switch that is slow to take effect never leaves OFFBOARD without setpoints). A disarmed
@@ -156,13 +151,13 @@ def _watch_carrier(state: MissionState, obs: Observation, m: MissionModel) -> tu
 
 def _carrier_lost(state: MissionState, obs: Observation, m: MissionModel) -> str | None:
     """Why the carrier counts as lost before separation (None: it does not): no state, its
-    liveliness token gone, or no fresh state for ``mission.carrier_lost_s`` (an older one is
-    ridden meanwhile, predicted with its age)."""
+    liveliness token gone, a stale state that is not trusted, or no fresh state for
+    ``mission.carrier_lost_s`` (an older, trusted one is ridden meanwhile, predicted with its age)."""
     if carrier_fresh(obs, m):
         return None
     c = obs.carrier
-    if c is None or c.alive is False or state.carrier_fresh_s is None:
-        return _carrier_detail(obs, m)
+    if c is None or c.alive is False or c.untrusted is not None or state.carrier_fresh_s is None:
+        return _carrier_detail(obs, m)  # gone, or stale and not trusted (a forgery, not a stall): at once
     unfresh_s = obs.t_s - state.carrier_fresh_s
     if unfresh_s <= m.carrier_lost_s:
         return None
@@ -339,12 +334,12 @@ def live_geometry_problem(dock: np.ndarray, vehicle_ned_m: np.ndarray, m: Missio
 
 def _preflight(state: MissionState, obs: Observation, m: MissionModel) -> tuple[MissionState, Decision]:
     t, v = obs.t_s, obs.vehicle
-    ready = v is not None and v.heartbeat_age_s <= m.heartbeat_timeout_s and v.position_valid and _carrier_ok(obs, m)
+    ready = v is not None and v.heartbeat_age_s <= m.heartbeat_timeout_s and v.position_valid and carrier_fresh(obs, m)
     if not ready:
         if t - state.since_s > m.connect_timeout_s:
             if v is None:
                 why, reason = "no vehicle", AbortReason.VEHICLE_LOST
-            elif not _carrier_ok(obs, m):
+            elif not carrier_fresh(obs, m):
                 why, reason = "no carrier", AbortReason.CARRIER_LOST
             elif v.heartbeat_age_s > m.heartbeat_timeout_s:
                 why, reason = "vehicle silent", AbortReason.VEHICLE_LOST
