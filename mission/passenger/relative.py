@@ -59,7 +59,7 @@ class RelativeDeck:
             est.carrier(CarrierFix(self.fix_t_s, np.asarray(carrier.position_ned_m, float),
                                    np.asarray(carrier.velocity_ned_m_s, float)))
         for m in measurements.arrived(RelativePosition):
-            if _usable(m):
+            if _usable(m) and m.sigma_m is not None:
                 est.marker(MarkerFix.isotropic(m.capture_t_s, m.offset_ned_m, m.sigma_m))
             else:
                 self.refused += 1
