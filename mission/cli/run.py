@@ -18,7 +18,7 @@ from mission.bus.session import close_session, congestion_for
 from mission.time.clock import Clock, LockstepClock, ScaledClock
 from mission.config.required import RUN_FIELDS, require_stated
 from mission.config.schema import Config, load_config, with_overrides
-from mission.cli.subcommands import entry_points, load
+from mission.cli.subcommands import SENSORS_GROUP, entry_points, load
 from mission.controller import MissionController, MissionOutcome
 from mission.interfaces import MeasurementSource
 from mission.model import mission_model
@@ -61,8 +61,11 @@ def feed_openers(cfg: Config) -> dict[str, str]:
     known = entry_points(FEEDS_GROUP)
     unknown = [name for name in cfg.mission.feeds if name not in known]
     if unknown:
+        simulated = sorted(set(unknown) & set(entry_points(SENSORS_GROUP)))
+        only = (f"; {', '.join(simulated)}: a simulated sensor only (marsupial simulate), with no flight feed yet"
+                if simulated else "")
         raise ConfigError("mission.feeds", unknown, f"no such measurement feed registered (entry points "
-                          f"{FEEDS_GROUP}: {sorted(known) or 'none'})")
+                          f"{FEEDS_GROUP}: {sorted(known) or 'none'}){only}")
     return {name: known[name] for name in cfg.mission.feeds}
 
 

@@ -32,6 +32,11 @@ class Subcommand:
         return getattr(importlib.import_module(module), attr)
 
 
+#: Entry points: the simulation's sensor standing in for the measurement feed of the same name
+#: (:mod:`sim.batch.sensors`).
+SENSORS_GROUP = "marsupial.sensors"
+
+
 def entry_points(group: str = ENTRY_POINT_GROUP) -> dict[str, str]:
     """name -> ``"module:attribute"`` of the entry-point ``group``: from ``pyproject.toml`` beside
     the package when running from a source tree (in declaration order), else from the installed

@@ -14,15 +14,13 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
-from mission.cli.subcommands import entry_points, load
+from mission.cli.subcommands import SENSORS_GROUP, entry_points, load
 from mission.config.schema import Config
 from mission.errors import ConfigError
 from mission.interfaces import MeasurementSource
 
 if TYPE_CHECKING:
     from sim.batch.recovery import World
-
-SENSORS_GROUP = "marsupial.sensors"
 
 #: A sensor of the simulated world: the world in, the measurement source that measures it out.
 SensorFactory = Callable[["World"], MeasurementSource]

@@ -200,3 +200,15 @@ def test_the_registries_are_read_from_the_source_tree():
     table = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["entry-points"]
     for group in ("marsupial.commands", run_cli.FEEDS_GROUP, sim_sensors.SENSORS_GROUP):
         assert list(entry_points(group).items()) == list(table.get(group, {}).items())
+
+
+def test_a_feed_that_only_the_simulation_has_is_refused_naming_it():
+    """configs/relnav.toml names the marker, which has a simulated sensor and no flight feed yet:
+    ``marsupial run`` refuses it naming ``mission.feeds`` and saying it is simulation-only."""
+    from mission.cli.run import feed_openers
+    from mission.config.schema import load_config
+    from mission.errors import ConfigError
+    from tests.conftest import CONFIGS
+
+    with pytest.raises(ConfigError, match=r"mission\.feeds.*marker: a simulated sensor only"):
+        feed_openers(load_config(CONFIGS / "relnav.toml"))
