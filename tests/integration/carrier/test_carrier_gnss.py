@@ -45,11 +45,14 @@ def test_the_carrier_publishes_its_gnss_late_and_biased() -> None:
                     assert out is None and sim.hold_reason == "no valid own state"
                 if out is not None:
                     published.append((clock.now(), out))
-            wait_for(lambda: len(heard.states) >= len(published), what="every state heard")
+            last = published[-1][1].seq  # the carrier's state is sent as a real-time stream (a loaded machine may drop one)
+            wait_for(lambda: bool(heard.states) and heard.states[-1].seq == last, 30.0, what="the last state heard")
         finally:
             passenger.pub.close()
             heard.sub.undeclare()
-    assert [s.seq for s in heard.states[-5:]] == [o.seq for _, o in published[-5:]]
+    sent = {o.seq: o for _, o in published}
+    assert len(heard.states) >= 0.9 * len(published) and all(
+        np.allclose(s.position, sent[s.seq].position) and s.stamp_s == sent[s.seq].stamp_s for s in heard.states)
     t, p = np.array(truth_t), np.array(truth_p)
     assert np.linalg.norm(p[-1] - p[0]) > 5.0  # it drove
     ages = np.array([now - o.stamp_s for now, o in published])
