@@ -16,7 +16,7 @@ from mission.config.relnav import CarrierGnssSection, PassengerGnssSection, Reln
 from mission.relnav.estimator import RelativeEstimator
 from mission.relnav.inputs import CarrierFix, MarkerFix, OwnSample
 from sim.gnss import CarrierGnss
-from sim.testing.relnav_world import fly, make_world
+from sim.testing.relnav_world import NEES_CHECKPOINTS_S, average_nees, fly, make_world
 from sim.vehicle.estimator import BiasedEstimateError
 
 PARAMS = RelnavSection().params()
@@ -52,18 +52,9 @@ def replay() -> None:
 
 
 def nees(runs: int) -> None:
-    checkpoints = (1.0, 3.0, 5.0, 7.5, 10.0)
-    n9, n3 = np.zeros(5), np.zeros(5)
-    for seed in range(runs):
-        w = make_world(PARAMS, seed=100 + seed, marker_from_s=3.0, duration_s=10.0, dt_s=0.1, gnss_every=1,
-                       marker_every=1, prior=True)
-        est = fly(RelativeEstimator(PARAMS), w)
-        for j, t in enumerate(checkpoints):
-            k = int(round(t / 0.1))
-            err = np.concatenate([est[k].position_ned_m, est[k].velocity_ned_m_s, est[k].bias_ned_m]) - w.truth[k]
-            n9[j] += err @ np.linalg.solve(est[k].covariance, err) / runs
-            n3[j] += err[:3] @ np.linalg.solve(est[k].covariance[:3, :3], err[:3]) / runs
-    print(f"NEES over {runs} runs at t = {checkpoints} s: whole state (expect 9) {n9.round(2)}, position (expect 3) {n3.round(2)}")
+    n9, n3 = average_nees(PARAMS, runs)
+    print(f"NEES over {runs} runs at t = {NEES_CHECKPOINTS_S} s: whole state (expect 9) {n9.round(2)}, "
+          f"position (expect 3) {n3.round(2)}")
 
 
 def cost() -> None:

@@ -10,6 +10,21 @@ from mission.core.law import norm
 from mission.phases.types import MissionModel, MissionState, Observation, RecoveryModel, dock_point
 
 
+DRAIN_AFTER_S = 10.0  # [s] the drain rate is measured once the first reading is this old
+
+
+def _drain_rate(state: MissionState, obs: Observation) -> float | None:
+    """The battery's drain rate [%/s]: the average since the first reading (``state.battery_start``),
+    once that is at least :data:`DRAIN_AFTER_S` old (None before, or with no reading)."""
+    v = obs.vehicle
+    if v is None or v.battery_pct is None or state.battery_start is None:
+        return None
+    t0, pct0 = state.battery_start
+    if obs.t_s - t0 < DRAIN_AFTER_S:
+        return None
+    return max((pct0 - v.battery_pct) / (obs.t_s - t0), 0.0)
+
+
 def _model(m: MissionModel) -> RecoveryModel:
     assert m.recovery is not None  # the battery recalls only with final_action "return"
     return m.recovery
@@ -23,12 +38,9 @@ def battery_recall(state: MissionState, obs: Observation, m: MissionModel) -> st
     carrier's speed away, plus ``recovery.docking_budget_s``. The passenger is recalled when what is
     left, less what that would use, falls to ``recovery.battery_reserve_pct``."""
     r, v, c = _model(m), obs.vehicle, obs.carrier
-    if v is None or v.battery_pct is None or state.battery_start is None or c is None:
+    rate = _drain_rate(state, obs)
+    if rate is None or v is None or v.battery_pct is None or c is None:
         return None
-    t0, pct0 = state.battery_start
-    if obs.t_s - t0 < 10.0:
-        return None
-    rate = max((pct0 - v.battery_pct) / (obs.t_s - t0), 0.0)
     dock = dock_point(obs, m)
     to_carrier = dock - v.position_ned_m
     dist = float(norm(to_carrier))
@@ -48,12 +60,9 @@ def next_leg_problem(state: MissionState, obs: Observation, m: MissionModel) -> 
     until the carrier is b c from its target (at the carrier's top speed), the flight out and back
     (2 b c at the return speed), the task, and the docking budget."""
     r, v, c = _model(m), obs.vehicle, obs.carrier
-    if m.next_target is None or v is None or v.battery_pct is None or state.battery_start is None or c is None:
+    rate = _drain_rate(state, obs)
+    if m.next_target is None or rate is None or v is None or v.battery_pct is None or c is None:
         return None
-    t0, pct0 = state.battery_start
-    if obs.t_s - t0 < 10.0:
-        return None
-    rate = max((pct0 - v.battery_pct) / (obs.t_s - t0), 0.0)
     bc = m.tick.law.separation_distance_m
     carrier_speed = m.tick.carrier_safety.max_speed_m_s or 1.0
     ride = max(float(norm(m.next_target - dock_point(obs, m))) - bc, 0.0) / carrier_speed

@@ -96,3 +96,25 @@ def fly(est: RelativeEstimator, world: World, *, extra: list[tuple[float, object
             i += 1
         out.append(est.tick(own))
     return out
+
+
+#: [s] the times the covariance's consistency is checked at (:func:`average_nees`)
+NEES_CHECKPOINTS_S = (1.0, 3.0, 5.0, 7.5, 10.0)
+
+
+def average_nees(params: RelnavParams, runs: int) -> tuple[np.ndarray, np.ndarray]:
+    """Over ``runs`` seeded runs of the estimator's own model (ticks and GNSS at 10 Hz, markers
+    from 3 s, all late), the average normalised estimation error squared at each of
+    :data:`NEES_CHECKPOINTS_S`: of the whole state (9 dof) and of the position alone (3 dof)."""
+    n9, n3 = np.zeros(len(NEES_CHECKPOINTS_S)), np.zeros(len(NEES_CHECKPOINTS_S))
+    for seed in range(runs):
+        world = make_world(params, seed=100 + seed, marker_from_s=3.0, duration_s=10.0, dt_s=0.1, gnss_every=1,
+                           marker_every=1, prior=True)
+        est = fly(RelativeEstimator(params), world)
+        for j, t in enumerate(NEES_CHECKPOINTS_S):
+            k = int(round(t / 0.1))
+            e = est[k]
+            err = np.concatenate([e.position_ned_m, e.velocity_ned_m_s, e.bias_ned_m]) - world.truth[k]
+            n9[j] += err @ np.linalg.solve(e.covariance, err) / runs
+            n3[j] += err[:3] @ np.linalg.solve(e.covariance[:3, :3], err[:3]) / runs
+    return n9, n3
