@@ -16,7 +16,6 @@ More: docs/wire.md.
 """
 from __future__ import annotations
 
-import dataclasses
 import logging
 import threading
 from dataclasses import dataclass
@@ -25,6 +24,7 @@ from typing import Any, Callable, Generic, Protocol, TypeVar
 import numpy as np
 import zenoh
 
+from mission.core.records import replace
 from mission.time.clock import Clock
 from mission.time.offset import DelayWatch, OffsetEstimate, sample_age
 from mission.config.schema import ZenohSection
@@ -385,9 +385,9 @@ class CarrierFeed(_Feed[CarrierState]):
             return None
         estimate = self._offset.estimate() if self._offset is not None else None
         if estimate is None:
-            return dataclasses.replace(got, rx_age_s=got.age_s)
+            return replace(got, rx_age_s=got.age_s)
         age = sample_age(got.rx_time_s + got.age_s, got.value.stamp_s, estimate)
-        return dataclasses.replace(got, age_s=age, rx_age_s=got.age_s, age_bound_s=estimate.bound_s,
+        return replace(got, age_s=age, rx_age_s=got.age_s, age_bound_s=estimate.bound_s,
                                    stale=age + estimate.bound_s > self.max_age_s)
 
 

@@ -20,11 +20,12 @@ from __future__ import annotations
 
 import collections
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from mission.core.records import replace
 from mission.mavlink import px4
 from mission.mavlink.env import mavlink
 from mission.passenger.inputs import VehicleReport

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 
-from dataclasses import replace
+from mission.core.records import replace
 
 import numpy as np
 

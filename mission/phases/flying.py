@@ -9,10 +9,11 @@ Frames: local NED [m], [m/s]; times [s] on the controller's clock.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
+from mission.core.records import replace
 from mission.flight_mode import FlightMode
 from mission.core import arrival
 from mission.core.law import norm

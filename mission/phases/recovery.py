@@ -31,7 +31,7 @@ makes the commanded velocity jump by more than ``recovery.accel_m_s2 * dt``. Geo
 from __future__ import annotations
 
 import math
-from dataclasses import replace
+from mission.core.records import replace
 
 import numpy as np
 

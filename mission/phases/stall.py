@@ -40,7 +40,7 @@ Frames: local NED [m], [m/s]; times [s] on the controller's clock.
 """
 from __future__ import annotations
 
-from dataclasses import replace
+from mission.core.records import replace
 
 from mission.core.setpoint import Setpoint
 from mission.phases.phase import Phase

@@ -9,12 +9,13 @@ Frames: local NED [m], [m/s]; times [s] on the controller's clock.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Any
 from enum import StrEnum
 
 import numpy as np
 
+from mission.core.records import replace
 from mission.phases.measurements import Measurements
 from mission.phases.phase import Phase, Request
 from mission.core.safety import DeckKeepOut, SafetyConfig

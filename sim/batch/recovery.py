@@ -34,12 +34,13 @@ from __future__ import annotations
 import copy
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from mission.core.records import replace
 from mission.carrier.backends.sim import KinematicRobot
 from mission.carrier.modes import CarrierMode, PassengerView
 from mission.carrier.step import CarrierStepper

@@ -13,8 +13,9 @@ import heapq
 import itertools
 import random
 import threading
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Any
+from mission.core.records import replace
 
 
 @dataclass(frozen=True)

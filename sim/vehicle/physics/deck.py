@@ -26,9 +26,10 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 from sim.vehicle.physics.multicopter import KinState
+from mission.core.records import replace
 
 START_ON_DECK_M = 0.05  # standing this close to the plane at the first deck state: on the deck [m]
 LAND_DETECT_XY_M_S = 1.5  # PX4's LNDMC_XY_VEL_MAX: faster than this horizontally, no ground contact [m/s]

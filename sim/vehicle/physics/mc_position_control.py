@@ -22,7 +22,8 @@ compensated).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
+from mission.core.records import replace
 
 GRAVITY_M_S2 = 9.80665
 # PX4 runs the position controller at each new estimate: 125 Hz on SITL (EKF2_PREDICT_US 10 ms on
