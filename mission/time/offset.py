@@ -23,6 +23,7 @@ by the I/O side). Times in [s].
 """
 from __future__ import annotations
 
+import collections
 import math
 from dataclasses import dataclass, field
 
@@ -144,12 +145,31 @@ class DelayWatch:
     growth_s: float = 0.1
     growths: int = 0
     last: str = ""
-    _recent: list[tuple[float, float]] = field(default_factory=list)  # (rx [s], transit [s])
+    _recent: collections.deque[tuple[float, float]] = field(default_factory=collections.deque)  # (rx [s], transit [s])
+    # those of them that no later one undercuts, oldest first: the first is the window's least
+    # (a sliding-window minimum: O(1) a state while the states arrive in order)
+    _least: collections.deque[tuple[float, float]] = field(default_factory=collections.deque)
+    _in_order: bool = True  # every state received at or after the one before
     _growing: bool = False
 
     def add(self, rx_s: float, transit_s: float) -> str | None:
-        self._recent = [(t, d) for t, d in self._recent if rx_s - t <= self.window_s] + [(rx_s, transit_s)]
-        least = min(d for _, d in self._recent)
+        recent, window = self._recent, self.window_s
+        if (recent and rx_s < recent[-1][0]) or math.isnan(rx_s) or math.isnan(transit_s):
+            self._in_order = False  # a clock stepped back (or a NaN): from now on the whole window is searched
+        if self._in_order:
+            least_of = self._least
+            while recent and rx_s - recent[0][0] > window:
+                recent.popleft()
+            while least_of and rx_s - least_of[0][0] > window:
+                least_of.popleft()
+            while least_of and least_of[-1][1] >= transit_s:
+                least_of.pop()
+            least_of.append((rx_s, transit_s))
+            recent.append((rx_s, transit_s))
+            least = least_of[0][1]
+        else:
+            self._recent = collections.deque([(t, d) for t, d in recent if rx_s - t <= window] + [(rx_s, transit_s)])
+            least = min(d for _, d in self._recent)
         if transit_s - least > self.growth_s:
             if self._growing:
                 return None

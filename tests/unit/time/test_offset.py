@@ -80,3 +80,42 @@ def test_a_delay_that_grows_is_a_fault_with_a_reason_once_per_episode():
     assert watch.add(2.1, 0.47) is None and watch.growths == 1  # the same episode
     assert watch.add(2.2, 0.03) is None  # back to normal ...
     assert watch.add(2.3, 0.5) is not None and watch.growths == 2  # ... and a second episode
+
+
+
+def _searched_watch(window_s: float, growth_s: float):
+    """DelayWatch.add as a search of the whole window each time (the reference)."""
+    recent: list[tuple[float, float]] = []
+    growing = [False]
+
+    def add(rx_s: float, transit_s: float) -> str | None:
+        recent[:] = [(t, d) for t, d in recent if rx_s - t <= window_s] + [(rx_s, transit_s)]
+        least = min(d for _, d in recent)
+        if transit_s - least > growth_s:
+            if growing[0]:
+                return None
+            growing[0] = True
+            return f"{transit_s:.2f} {transit_s - least:.2f}"
+        if transit_s - least <= growth_s / 2:
+            growing[0] = False
+        return None
+    return add
+
+
+def test_the_delay_watch_finds_the_least_of_its_window_as_a_search_of_it_would():
+    """The sliding-window minimum gives what searching the whole window gives: states in order,
+    equal times and transits, and after a clock that stepped back."""
+    import random
+
+    from mission.time.offset import DelayWatch
+
+    rng = random.Random(3)
+    for back in (False, True):
+        watch, searched, rx = DelayWatch(window_s=1.0, growth_s=0.05), _searched_watch(1.0, 0.05), 0.0
+        for i in range(3000):
+            rx += -0.7 if back and i in (1000, 2000) else rng.choice([0.0, 0.02, 0.05, 0.3])
+            transit = rng.choice([0.01, 0.02, 0.03, 0.2, rng.random()])
+            got, want = watch.add(rx, transit), searched(rx, transit)
+            assert (got is None) == (want is None), i
+            if got is not None:
+                assert got.startswith(f"carrier states arrive {want.split()[0]} s") and f", {want.split()[1]} s later" in got
