@@ -199,13 +199,13 @@ def _nonfinite(state: MissionState, dec: Decision) -> str | None:
     if sp is not None:
         for name in ("velocity_ned_m_s", "position_ned_m", "acceleration_ned_m_s2"):
             v = getattr(sp, name)
-            if v is not None and not np.all(np.isfinite(v)):
+            if v is not None and not np.isfinite(v).all():
                 return f"setpoint {name} {np.asarray(v).tolist()}"
-    if dec.home_ned_m is not None and not np.all(np.isfinite(dec.home_ned_m)):
+    if dec.home_ned_m is not None and not np.isfinite(dec.home_ned_m).all():
         return f"home_ned_m {np.asarray(dec.home_ned_m).tolist()}"
     for name in _KEPT:
         v = getattr(state, name)
-        if v is not None and not np.all(np.isfinite(v)):
+        if v is not None and not np.isfinite(v).all():
             return f"{name} {np.asarray(v).tolist()}"
     return None
 
