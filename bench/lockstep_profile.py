@@ -105,10 +105,12 @@ class Sampler:
         return out
 
 
-def profile_once(threads: bool, root: Path = ROOT) -> dict[str, float]:
-    """One demo of the checkout at ``root``; per-step figures (see the module docstring)."""
+def profile_once(threads: bool, root: Path = ROOT, demo_args: tuple[str, ...] = ()) -> dict[str, float]:
+    """One demo of the checkout at ``root`` (``demo_args``: more of ``marsupial demo``'s options,
+    e.g. ``--config``); per-step figures (see the module docstring)."""
     with tempfile.TemporaryDirectory(prefix="lockstep-profile-") as tmp:
-        cmd = [sys.executable, "-m", "mission.cli", "demo", "--pairs", "1", "--log-root", f"{tmp}/logs", "--plot", ""]
+        cmd = [sys.executable, "-m", "mission.cli", "demo", "--pairs", "1", "--log-root", f"{tmp}/logs", "--plot", "",
+               *demo_args]
         env = {**os.environ, "PYTHONUNBUFFERED": "1", "PYTHONPATH": str(root)}
         if threads:
             env["PYTHONPATH"] = os.pathsep.join([str(root), str(SHIM)])
