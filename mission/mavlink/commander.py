@@ -432,8 +432,10 @@ class HomeKeeper:
             return
         with self._cond:
             self._wanted = np.array(home_ned_m, dtype=float)
-            self.clock.notify(self._cond)
-        if self._thread is None and home_update_due(self._last, self.clock.now(), self._wanted):
+            due = home_update_due(self._last, self.clock.now(), self._wanted)
+            if due:  # else nothing for the thread to do until its own wake (a woken thread costs a lockstep hand-off)
+                self.clock.notify(self._cond)
+        if self._thread is None and due:
             self._send(self._wanted)
 
     def _run(self) -> None:
@@ -447,8 +449,8 @@ class HomeKeeper:
                     work = self.check
                 else:
                     wake = self._next_check_s - now
-                    if self._last is not None and wanted is not None:
-                        wake = min(wake, self._last[0] + HOME_PERIOD_S - now)
+                    if self._last is not None and wanted is not None and self._last[0] + HOME_PERIOD_S > now:
+                        wake = min(wake, self._last[0] + HOME_PERIOD_S - now)  # (past it, only a new home makes one due)
                     self.clock.wait(self._cond, max(wake, 1e-3))
                     continue
                 self._cond.release()
