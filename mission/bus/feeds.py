@@ -236,6 +236,13 @@ class _Feed(Generic[T]):
         age = now - rx
         return self._received_type(value=value, key=key, rx_time_s=rx, age_s=age, stale=age > self.max_age_s, **extra)
 
+    def newest(self) -> tuple[T, float] | None:
+        """The newest accepted message and its receive time [s] on the feed's clock (what
+        :meth:`latest` answers, without its age and trust), or None if none was accepted yet."""
+        with self._lock:
+            item = self._latest
+        return None if item is None else (item[0], item[2])
+
     def _received_extra(self, now: float) -> dict[str, Any]:
         """Lock held: more fields of :meth:`latest`'s answer at clock time ``now`` [s]."""
         return {}

@@ -20,7 +20,7 @@ from typing import Any
 import click
 
 from mission.bus.bridge import CarrierFeed, keys, open_session
-from mission.bus.wire import GeoOrigin
+from mission.bus.wire import CarrierState, GeoOrigin
 from mission.config.relnav import PassengerGnssSection
 from mission.config.schema import ZenohSection, load_config
 from mission.errors import ConfigError
@@ -287,21 +287,27 @@ def follow_carrier(vehicle: MockVehicle, session: Any, pair: str) -> CarrierFeed
 
     heard: list[bool] = []
     lockstep = vehicle.options.lockstep
+    made: list[tuple[CarrierState, float, DeckMotion]] = []  # the last sample's motion (asked for at every pass)
 
     def motion() -> DeckMotion | None:
-        got = feed.latest()
+        got = feed.newest()
         if got is None:
             return None
+        value, rx_s = got
+        if made and made[0][0] is value and made[0][1] == rx_s:
+            return made[0][2]
         if not heard:
             heard.append(True)
-            log.info("deck: pair %s's carrier heard at %s m NED", pair, [round(float(c), 2) for c in got.value.position])
+            log.info("deck: pair %s's carrier heard at %s m NED", pair, [round(float(c), 2) for c in value.position])
         # In lockstep the carrier and the vehicle step on one simulated time: the deck moves on from
         # the sample's own stamp, not from when it arrived (a sample delivered late on a loaded
         # machine would put the deck back by speed x delay). On wall clocks the two processes'
         # clocks may be apart by more than the transport's delay: from its arrival.
-        stamp = got.value.stamp_s
-        t_s = stamp if lockstep and abs(stamp - got.rx_time_s) <= 1.0 else got.rx_time_s
-        return DeckMotion(tuple(got.value.position), tuple(got.value.velocity_ned_m_s), t_s)  # type: ignore[arg-type]
+        stamp = value.stamp_s
+        t_s = stamp if lockstep and abs(stamp - rx_s) <= 1.0 else rx_s
+        new = DeckMotion(tuple(value.position), tuple(value.velocity_ned_m_s), t_s)  # type: ignore[arg-type]
+        made[:] = [(value, rx_s, new)]
+        return new
 
     vehicle.follow_deck(motion)
     return feed
