@@ -295,7 +295,7 @@ class Receiver:
         s = self.session
         if kind in telemetry.KINDS:
             if kind == "LOCAL_POSITION_NED":
-                s.position_stamps.append(t_rx)
+                s.note_position(t_rx)
             before = s.telemetry.mode
             s.telemetry = telemetry.reduce(s.telemetry, msg, t_rx)
             if s.telemetry.mode != before:

@@ -84,6 +84,7 @@ class LinkSession:
         self.telemetry = telemetry.Telemetry(signed=signed)
         self.statustexts: collections.deque[tuple[float, int, str]] = collections.deque(maxlen=500)
         self.position_stamps: collections.deque[float] = collections.deque(maxlen=256)  # LOCAL_POSITION_NED rx [s]
+        self.position_stamps_rise = True  # each stamp at or after the one before (a clock never stepped back)
         self.wrong_key: tuple[int, int, int] | None = None  # (sysid, compid, HEARTBEATs) signed with another key
         self.identity_conflict: str | None = None  # a second PX4 autopilot after adoption (target_system unset)
         self.acks = AckLog()
@@ -120,8 +121,24 @@ class LinkSession:
         """Rate [Hz of clock] at which LOCAL_POSITION_NED arrived over the last ``window_s`` [s]; 0 when none."""
         now = self.clock.now()
         with self.lock:
-            stamps = [t for t in self.position_stamps if now - t <= window_s]
-        return 0.0 if len(stamps) < 2 else (len(stamps) - 1) / max(stamps[-1] - stamps[0], 1e-9)
+            if not self.position_stamps_rise:
+                stamps = [t for t in self.position_stamps if now - t <= window_s]
+                n, first, last = len(stamps), stamps[0] if stamps else 0.0, stamps[-1] if stamps else 0.0
+            else:  # the window's stamps are the newest ones: counted from the end
+                n = 0
+                for t in reversed(self.position_stamps):
+                    if now - t > window_s:
+                        break
+                    n += 1
+                first = self.position_stamps[-n] if n else 0.0
+                last = self.position_stamps[-1] if n else 0.0
+        return 0.0 if n < 2 else (n - 1) / max(last - first, 1e-9)
+
+    def note_position(self, t_rx: float) -> None:
+        """Lock held: a LOCAL_POSITION_NED arrived at ``t_rx`` [s of clock]."""
+        if self.position_stamps and t_rx < self.position_stamps[-1]:
+            self.position_stamps_rise = False
+        self.position_stamps.append(t_rx)
 
     def signing_problem(self) -> str | None:
         """Why no vehicle was identified on a signed link, if the reason is the key: a PX4
