@@ -229,7 +229,8 @@ class Comparison:
         return self.lag_mock_m[segment] / self.lag_px4_m[segment]
 
 
-def compare(rec: Recording, limits: Limits, dt_s: float = 0.005, estimate: EstimateError | None = None) -> Comparison:
+def compare(rec: Recording, limits: Limits, dt_s: float = 0.005,
+            estimate: EstimateError | RecordedEstimateError | None = None) -> Comparison:
     """Replay ``rec`` (``estimate``: as :func:`simulate`) and score the mock against it."""
     velocity = simulate(rec, limits, dt_s, estimate=estimate)
     rms = rms_by_segment(rec, velocity, rec.scored_segments())
