@@ -174,6 +174,13 @@ def main(do_fit: bool, json_path: Path | None, seeds: int, px4_error: int) -> No
         payload_unseen["exact_rms_m_s"] = exact.rms_m_s
         click.echo(f"{UNSEEN} (no fit saw it), exact mock per segment: "
                    + ", ".join(f"{k} {v:.3f}" for k, v in exact.rms_m_s.items()) + f"; mean {exact.mean_rms_m_s:.3f}")
+        again = DATA / f"{UNSEEN}_repeat.csv.gz"
+        if again.exists():  # the same sequence on another fresh PX4
+            rep = load_recording(again)
+            self_unseen = float(np.mean(list(px4_vs_px4_rms(unseen, rep).values())))
+            payload_unseen["px4_vs_px4_m_s"] = self_unseen
+            click.echo(f"{UNSEEN}_repeat: exact mock {compare(rep, Limits()).mean_rms_m_s:.3f}; PX4 against itself "
+                       f"{self_unseen:.3f}")
     errs = with_estimate_errors({**recs, **({UNSEEN: unseen} if unseen is not None else {})}, seeds) if seeds else {}
     if px4_error and unseen is not None and unseen.true_vel is not None:
         own = with_px4_error(recs, unseen, px4_error)
