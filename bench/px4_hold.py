@@ -273,11 +273,7 @@ def fly(laws: list[Law], hold_s: float, out: Path, speed_factor: float) -> dict[
                 ack = probe.set_mode("OFFBOARD", timeout_s=0.5)
                 if ack is not None and ack.result == px4.MAV_RESULT_ACCEPTED:
                     break
-            for _ in range(20):  # a loaded machine: PX4's health checks may still be settling
-                ack = probe.arm()
-                if ack is not None and ack.result == px4.MAV_RESULT_ACCEPTED:
-                    break
-                time.sleep(1.0)
+            ack = probe.arm()
             if ack is None or ack.result != px4.MAV_RESULT_ACCEPTED:
                 raise RuntimeError(f"arming refused: {ack}")
             time.sleep(15.0)  # climb and settle on PX4 alone
