@@ -18,7 +18,14 @@ draws' mean velocity (the mock's prediction, as the closed-loop figures are the 
 single draw errs on its own, and PX4's recording on its own, so its RMS is above the exact
 estimate's (docs/mock-vehicle.md, "How close to PX4").
 
-Usage: ``python -m bench.px4_response_fit [--fit] [--seeds N] [--json out.json]``.
+``unseen`` (``tests/data/px4_responses/unseen.csv.gz``, :mod:`bench.px4_response_record`: another
+sequence, neither fit saw it, with SIH's true velocity beside PX4's) is scored on its own: the
+exact mock per segment and, with ``--seeds``, the draws. ``--px4-error N`` replays ``original`` and
+``repeat`` with PX4's own velocity error as the ``unseen`` flight measured it (estimate - truth,
+:class:`sim.sitl.replay.RecordedEstimateError`) from N starting points: a draw of PX4's own
+errors, the floor of what a draw of a faithful model can score.
+
+Usage: ``python -m bench.px4_response_fit [--fit] [--seeds N] [--px4-error N] [--json out.json]``.
 """
 from __future__ import annotations
 
@@ -31,16 +38,36 @@ from typing import Any
 import click
 import numpy as np
 
-from sim.sitl.replay import Comparison, Recording, compare, load_recording, px4_vs_px4_rms, ramp_lag_m, rms_by_segment, simulate
+from sim.sitl.replay import (Comparison, RecordedEstimateError, Recording, compare, load_recording, px4_vs_px4_rms, ramp_lag_m,
+                             rms_by_segment, simulate)
 from sim.vehicle.estimator import PX4_SITL_SCALE, EstimateError
 from sim.vehicle.physics.multicopter import FITTED_AIRFRAME, Airframe, Limits
 
 DATA = Path(__file__).resolve().parents[1] / "tests" / "data" / "px4_responses"
 RECORDINGS = ("original", "repeat")
+UNSEEN = "unseen"  # a sequence neither fit saw, with SIH's true velocity (bench/px4_response_record.py)
 
 
 def load_all() -> dict[str, Recording]:
     return {name: load_recording(DATA / f"{name}.csv.gz") for name in RECORDINGS}
+
+
+def load_unseen() -> Recording | None:
+    path = DATA / f"{UNSEEN}.csv.gz"
+    return load_recording(path) if path.exists() else None
+
+
+def with_px4_error(recs: dict[str, Recording], source: Recording, draws: int) -> dict[str, list[float]]:
+    """Per recording: the mean RMS [m/s] of its replay with PX4's own measured velocity error
+    (``source``'s), started at ``draws`` points evenly spread over it."""
+    out: dict[str, list[float]] = {}
+    for name, rec in recs.items():
+        span = RecordedEstimateError(source).span_s
+        out[name] = []
+        for i in range(draws):
+            v = simulate(rec, Limits(), estimate=RecordedEstimateError(source, offset_s=i * span / draws))
+            out[name].append(float(np.mean(list(rms_by_segment(rec, v, rec.scored_segments()).values()))))
+    return out
 
 
 def nelder_mead(f, x0: np.ndarray, step: np.ndarray, iterations: int = 60) -> tuple[np.ndarray, float]:
@@ -125,7 +152,9 @@ def with_estimate_errors(recs: dict[str, Recording], seeds: int) -> dict[str, di
               help="Also write the figures as JSON.")
 @click.option("--seeds", type=click.IntRange(min=0), default=0, show_default=True,
               help="Also replay with PX4 SITL's estimate errors (the mock as shipped), seeds 1..N.")
-def main(do_fit: bool, json_path: Path | None, seeds: int) -> None:
+@click.option("--px4-error", "px4_error", type=click.IntRange(min=0), default=0, show_default=True,
+              help="Also replay original and repeat with the unseen flight's measured velocity error, from N starts.")
+def main(do_fit: bool, json_path: Path | None, seeds: int, px4_error: int) -> None:
     """Print the mock-vs-PX4 table (and optionally refit)."""
     recs = load_all()
     airframes = {"mock": FITTED_AIRFRAME}
@@ -138,7 +167,27 @@ def main(do_fit: bool, json_path: Path | None, seeds: int) -> None:
     results = {name: {r: compare(recs[r], Limits(airframe=af)) for r in RECORDINGS} for name, af in airframes.items()}
     self_rms = px4_vs_px4_rms(recs["original"], recs["repeat"])
     click.echo(table(recs, results, self_rms))
-    errs = with_estimate_errors(recs, seeds) if seeds else {}
+    unseen = load_unseen()
+    payload_unseen: dict[str, Any] = {}
+    if unseen is not None:
+        exact = compare(unseen, Limits())
+        payload_unseen["exact_rms_m_s"] = exact.rms_m_s
+        click.echo(f"{UNSEEN} (no fit saw it), exact mock per segment: "
+                   + ", ".join(f"{k} {v:.3f}" for k, v in exact.rms_m_s.items()) + f"; mean {exact.mean_rms_m_s:.3f}")
+        again = DATA / f"{UNSEEN}_repeat.csv.gz"
+        if again.exists():  # the same sequence on another fresh PX4
+            rep = load_recording(again)
+            self_unseen = float(np.mean(list(px4_vs_px4_rms(unseen, rep).values())))
+            payload_unseen["px4_vs_px4_m_s"] = self_unseen
+            click.echo(f"{UNSEEN}_repeat: exact mock {compare(rep, Limits()).mean_rms_m_s:.3f}; PX4 against itself "
+                       f"{self_unseen:.3f}")
+    errs = with_estimate_errors({**recs, **({UNSEEN: unseen} if unseen is not None else {})}, seeds) if seeds else {}
+    if px4_error and unseen is not None and unseen.true_vel is not None:
+        own = with_px4_error(recs, unseen, px4_error)
+        payload_unseen["px4_own_error_m_s"] = own
+        for name, each in own.items():
+            click.echo(f"{name}: with PX4's own velocity error (the {UNSEEN} flight's, {px4_error} starts), mean RMS "
+                       f"{np.mean(each):.3f} ({min(each):.3f}-{max(each):.3f})")
     for name, e in errs.items():
         each = e["per_seed_m_s"]
         click.echo(f"{name}: with PX4 SITL's estimate errors, mean RMS per draw {np.mean(each):.3f} "
@@ -149,6 +198,7 @@ def main(do_fit: bool, json_path: Path | None, seeds: int) -> None:
                                  "lag_px4_m": c.lag_px4_m} for r, c in res.items()}} for name, res in results.items()}
         payload["px4_vs_px4_rms_m_s"] = self_rms
         payload["with_estimate_errors"] = errs
+        payload[UNSEEN] = payload_unseen
         json_path.write_text(json.dumps(payload, indent=1))
 
 

@@ -45,6 +45,7 @@ class Recording:
     sp_acc: np.ndarray  # (N, 3) [m/s^2], NaN when unused
     pos: np.ndarray  # (N, 3) [m] measured by PX4
     vel: np.ndarray  # (N, 3) [m/s] measured by PX4
+    true_vel: np.ndarray | None = None  # (N, 3) [m/s] SIH's true velocity at each row, if recorded (NaN before the first)
 
     def segments(self) -> list[str]:
         """Segment names in flight order."""
@@ -81,7 +82,37 @@ def load_recording(path: str | Path) -> Recording:
         kind=np.array([r["setpoint_kind"] for r in rows]),
         sp_pos=cols("sp_x_m", "sp_y_m", "sp_z_m"), sp_vel=cols("sp_vx_m_s", "sp_vy_m_s", "sp_vz_m_s"),
         sp_acc=cols("sp_ax_m_s2", "sp_ay_m_s2", "sp_az_m_s2"), pos=cols("x_m", "y_m", "z_m"),
-        vel=cols("vx_m_s", "vy_m_s", "vz_m_s"))
+        vel=cols("vx_m_s", "vy_m_s", "vz_m_s"),
+        true_vel=cols("true_vx_m_s", "true_vy_m_s", "true_vz_m_s") if "true_vx_m_s" in rows[0] else None)
+
+
+class RecordedEstimateError:
+    """PX4's own velocity estimate error as one flight measured it (estimate - SIH's truth, from a
+    recording with ``true_vel``, from its ``settle`` segment to its landing), replayed in place of
+    :class:`sim.vehicle.estimator.EstimateError`'s draw: :meth:`advance` moves along it, starting
+    ``offset_s`` [s] into it and wrapping round; :attr:`velocity` [m/s] NED is the error there,
+    :attr:`position` zero. Another flight's error is a draw of PX4's own errors."""
+
+    enabled = True
+
+    def __init__(self, source: Recording, offset_s: float = 0.0) -> None:
+        if source.true_vel is None:
+            raise ValueError("the recording has no true velocity")
+        first, last = int(source.rows(FIRST_REPLAYED_SEGMENT)[0]), int(source.rows("land")[0])
+        self._t = source.t_s[first:last] - source.t_s[first]
+        self._error = np.nan_to_num(source.vel[first:last] - source.true_vel[first:last])
+        self.span_s = float(self._t[-1])
+        self._u = offset_s % self.span_s
+        self.position: tuple[float, float, float] = (0.0, 0.0, 0.0)
+        self.velocity: tuple[float, float, float] = self._at(self._u)
+
+    def _at(self, u: float) -> tuple[float, float, float]:
+        e = [float(np.interp(u, self._t, self._error[:, k])) for k in range(3)]
+        return (e[0], e[1], e[2])
+
+    def advance(self, dt_s: float, flown: bool = True) -> None:
+        self._u = (self._u + dt_s) % self.span_s
+        self.velocity = self._at(self._u)
 
 
 def command_of_row(rec: Recording, i: int) -> Command:
@@ -95,7 +126,7 @@ def command_of_row(rec: Recording, i: int) -> Command:
 
 
 def simulate(rec: Recording, limits: Limits, dt_s: float = 0.005, first_segment: str = FIRST_REPLAYED_SEGMENT,
-             estimate: EstimateError | None = None) -> np.ndarray:
+             estimate: EstimateError | RecordedEstimateError | None = None) -> np.ndarray:
     """Replay ``rec`` into the dynamics from ``first_segment`` on; the velocity (N, 3) [m/s] the
     vehicle reports at every row (NaN before the first replayed row). With ``estimate`` PX4's
     controller flies the estimate, which errs so (:mod:`sim.vehicle.estimator`), and the
@@ -198,7 +229,8 @@ class Comparison:
         return self.lag_mock_m[segment] / self.lag_px4_m[segment]
 
 
-def compare(rec: Recording, limits: Limits, dt_s: float = 0.005, estimate: EstimateError | None = None) -> Comparison:
+def compare(rec: Recording, limits: Limits, dt_s: float = 0.005,
+            estimate: EstimateError | RecordedEstimateError | None = None) -> Comparison:
     """Replay ``rec`` (``estimate``: as :func:`simulate`) and score the mock against it."""
     velocity = simulate(rec, limits, dt_s, estimate=estimate)
     rms = rms_by_segment(rec, velocity, rec.scored_segments())
