@@ -20,7 +20,8 @@ if TYPE_CHECKING:
 
 
 #: ``[relnav]``'s fields that tell the phases how to use the estimate (not the estimator's tuning).
-PHASE_FIELDS = ("enabled", "marker_timeout_s", "marker_memory_s", "search_s", "correction_rate_m_s", "seated_sigma_m")
+PHASE_FIELDS = ("enabled", "marker_timeout_s", "marker_memory_s", "search_s", "correction_rate_m_s", "seated_sigma_m",
+                "pending_limit_m")
 
 
 class RelnavSection(Section):
@@ -45,7 +46,11 @@ class RelnavSection(Section):
                      "estimate of metres moves the deck smoothly, not in one tick)"))
     seated_sigma_m: float = Field(0.3, gt=0, le=10,
         description=("[m] before take-off the vehicle stands on the deck (Assumption 2): the estimator takes the "
-                     "deck as straight under it, horizontally, to this standard deviation per axis"))
+                     "deck as straight under it, horizontally, to this standard deviation per axis (the same error "
+                     "all the while it stands: the estimate is never made surer than this by it)"))
+    pending_limit_m: float = Field(0.3, gt=0, le=10,
+        description=("[m] HOLDOFF begins an approach only once the part of the estimate's jumps still held back "
+                     "(let through at `relnav.correction_rate_m_s`) is below this"))
 
     accel_noise_m_s2: float = Field(0.5, gt=0, le=50,
         description=("[m/s^2/sqrt(Hz)] square root of the spectral density of the white relative acceleration "

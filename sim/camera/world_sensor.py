@@ -13,7 +13,8 @@ Two ways to measure, chosen by the entry point (``pyproject.toml``, ``marsupial.
   detector and pose (:class:`mission.vision.detect.MarkerDetector`): ~5-10 ms a frame.
 
 The vehicle's attitude is level at its yaw (the mock's physics keeps no tilt); the deck is level
-at the carrier's position (its reference point is the deck centre) and yaw. Captures happen on
+at the carrier's yaw, its centre (the marker's) at the dock point: the carrier's reference point
+plus ``mission.dock_offset_ned_m``, where the vehicle sits when docked. Captures happen on
 the world's ticks at ``vision.rate_hz`` at most; every draw is seeded by the scenario's seed.
 """
 from __future__ import annotations
@@ -52,10 +53,12 @@ class WorldMarker:
         self.seen = 0  # frames that gave a measurement
 
     def poses(self, t_s: float) -> Poses:
-        """The truth at ``t_s`` [s]: the vehicle level at its yaw, the deck at the carrier."""
+        """The truth at ``t_s`` [s]: the vehicle level at its yaw, the marker on the deck at the
+        dock point (the carrier's reference point plus ``mission.dock_offset_ned_m``: where the
+        vehicle sits when docked)."""
         kin = self.world.vehicle.kin
         half = kin.yaw_rad / 2
-        deck = self.world.carrier.true_at(t_s)[0]
+        deck = self.world.carrier.true_at(t_s)[0] + np.asarray(self.world.cfg.mission.dock_offset_ned_m, float)
         return Poses(self.world.vehicle.true_position, np.array([math.cos(half), 0.0, 0.0, math.sin(half)]),
                      deck, self.world.carrier.yaw_rad)
 
