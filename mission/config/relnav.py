@@ -139,6 +139,23 @@ class PassengerGnssSection(Section):
         description="[-] seed of the passenger's GNSS bias (independent of the carrier's)")
 
 
+class MarkerOutagesSection(Section):
+    """Spells with no marker reading at all (the camera blinded, the deck's marker covered), drawn
+    by the simulated world's marker sensor (off by default)."""
+
+    fraction: float = Field(0.0, ge=0, lt=1,
+        description="[-] the share of the time with no marker reading, in spells (0: none)")
+    min_s: float = Field(0.3, gt=0, le=60, description="[s] the shortest spell (uniform between min_s and max_s)")
+    max_s: float = Field(1.0, gt=0, le=60, description="[s] the longest spell")
+
+    @model_validator(mode="after")
+    def _spells(self) -> MarkerOutagesSection:
+        if self.max_s < self.min_s:
+            raise ConfigError("world.marker_outages.max_s", self.max_s,
+                              f"must be >= world.marker_outages.min_s = {self.min_s:g}")
+        return self
+
+
 class WorldSection(Section):
     """The simulated world's errors (read by the simulators only)."""
 
@@ -146,3 +163,5 @@ class WorldSection(Section):
         description="[-] the error of the carrier's published GNSS state (`[world.carrier_gnss]`)")
     passenger_gnss: PassengerGnssSection = Field(PassengerGnssSection(),
         description="[-] the slow GNSS bias of the passenger's own estimate (`[world.passenger_gnss]`)")
+    marker_outages: MarkerOutagesSection = Field(MarkerOutagesSection(),
+        description="[-] spells with no marker reading (`[world.marker_outages]`)")
