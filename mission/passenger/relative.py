@@ -1,21 +1,22 @@
 """The deck in the passenger's own frame (pure; ``[relnav]`` enabled): the relative estimator
 (:class:`mission.relnav.estimator.RelativeEstimator`) run inside the passenger's step, and the
-carrier's state moved into the passenger's GNSS frame by the estimated bias.
+carrier's state moved into the passenger's GNSS frame.
 
 Each tick, in this order: the carrier's state, if it is a new sample (stamped ``t - age``, its
 measurement time), and this tick's marker readings
 (:class:`~mission.phases.measurements.RelativePosition`, by capture time: ``Measurements.arrived``)
 are handed to the estimator; then the vehicle's own sample (its position and velocity as the
-autopilot reports them, at their sample time) moves it on. The phases then see the carrier where
-the estimate has it (the carrier's position and velocity in the passenger's frame, a state of the
-filter: the raw fixes' noise filtered, the marker pinning it near the deck), less the **pending** part of the estimate's jumps (its change beyond
-its own velocity's), let through at most at ``relnav.correction_rate_m_s``: the first marker
-moves the relative position by up to metres (the GNSS-frame bias), and the phases' references
-would otherwise see the deck jump in one tick. Far away (no
-marker) the bias estimate stays near its prior's mean (zero), so the carrier's state is used
-nearly as it comes: GNSS is enough there. The marker lies on the deck at the dock point; the
-estimator tracks the carrier's reference point, ``mission.dock_offset_ned_m`` from it. Frames: local NED [m], [m/s]; times [s] on the
-caller's clock. docs/relnav.md, "In the phases".
+autopilot reports them, at their sample time) moves it on. The marker lies on the deck at the
+dock point; the estimator tracks the carrier's reference point, ``mission.dock_offset_ned_m``
+from it. The phases then see the carrier where the estimate has it (the carrier's position and
+velocity in the passenger's frame, the filter's state: the raw fixes' noise filtered, the marker
+pinning it near the deck, one estimate with no switch between sources), less the **pending**
+part of the estimate's jumps (its change beyond its own velocity's), let through at most at
+``relnav.correction_rate_m_s``: the first marker moves the carrier by up to metres (the
+GNSS-frame bias), and the phases' references would otherwise see the deck jump in one tick. Far
+away (no marker) the bias estimate stays near its prior's mean (zero), or where the last marker
+left it, so the carrier's state is used nearly as it comes. Frames: local NED [m], [m/s]; times
+[s] on the caller's clock. docs/relnav.md, "In the phases".
 """
 from __future__ import annotations
 

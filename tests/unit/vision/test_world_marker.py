@@ -19,7 +19,8 @@ def test_the_marker_lies_on_the_deck_at_the_dock_point():
     carrier_at = np.array([3.0, -2.0, 0.0])
     world = SimpleNamespace(
         cfg=cfg, vehicle=SimpleNamespace(kin=SimpleNamespace(yaw_rad=0.0), true_position=np.array([3.0, -2.0, -3.0])),
-        carrier=SimpleNamespace(true_at=lambda t: (carrier_at.copy(), np.zeros(3)), yaw_rad=0.0))
+        carrier=SimpleNamespace(true_at=lambda t: (carrier_at.copy(), np.zeros(3)), yaw_rad=0.0),
+        scenario=SimpleNamespace(seed=0))
     poses = WorldMarker(world, lambda poses, t: None).poses(1.0)  # type: ignore[arg-type]
     assert np.allclose(poses.deck_ned_m, carrier_at + np.asarray(cfg.mission.dock_offset_ned_m))
 
