@@ -1,59 +1,64 @@
-"""One mission of a ``[relnav]`` configuration flown in-process (:class:`sim.batch.recovery.World`) and
+"""Missions of a ``[relnav]`` configuration flown in-process (:class:`sim.batch.recovery.World`) and
 held against the world's truth: what the phases did, the true contact error and riding offset, the
-estimate's error at contact, the time with the marker in view.
+estimate's error at contact, the time with the marker in view, P1-P3 and the largest command jump
+at a phase switch.
 
-    PYTHONPATH=. python -m bench.relnav_flight configs/relnav.toml [--no-marker]
+    PYTHONPATH=. python -m bench.relnav_flight configs/relnav.toml [--no-marker] [--rendered]
+        [--seeds 0 1 2] [--set recovery.holdoff_distance_m=2.0 ...] [--quiet]
+
+A seed ``k`` draws the carrier's and the passenger's GNSS errors and the marker's stream anew
+(``world.carrier_gnss.seed`` and ``world.passenger_gnss.seed`` moved on by ``k``, the scenario's
+seed ``k``); seed 0 is the configuration as written.
 """
 from __future__ import annotations
 
 import argparse
+import json
 import time
-
-import numpy as np
-
-from mission.config.schema import load_config
-from mission.record import VEC
+from mission.config.schema import Config, load_config, with_overrides
 from sim.batch.recovery import World, configured
+from sim.batch.truth import relnav_truth
 
-SHOWN = ("approach", "go-around", "contact", "fallback", "docked", "separat", "leg", "abort", "holdoff", "returning")
+SHOWN = ("approach", "go-around", "contact", "fallback", "docked", "separat", "leg", "abort", "holdoff", "returning",
+         "marker", "search")
+
+
+def seeded(cfg: Config, seed: int) -> Config:
+    """``cfg`` with its world's GNSS errors drawn from seed ``seed`` (0: as written)."""
+    if seed == 0:
+        return cfg
+    w = cfg.world
+    return with_overrides(cfg, {"world.carrier_gnss.seed": w.carrier_gnss.seed + 1000 * seed,
+                                "world.passenger_gnss.seed": w.passenger_gnss.seed + 1000 * seed})
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("config")
     ap.add_argument("--no-marker", action="store_true", help="fly with no measurement feed (the camera off)")
+    ap.add_argument("--rendered", action="store_true", help="the marker rendered and detected (marker_rendered)")
+    ap.add_argument("--seeds", type=int, nargs="*", default=[0])
+    ap.add_argument("--set", nargs="*", default=[], metavar="KEY=JSON", help="configuration overrides")
+    ap.add_argument("--quiet", action="store_true", help="no event list, one JSON line a seed")
     args = ap.parse_args()
     cfg = load_config(args.config)
+    overrides = {k: json.loads(v) for k, v in (item.split("=", 1) for item in args.set)}
     if args.no_marker:
-        cfg = cfg.model_copy(update={"mission": cfg.mission.model_copy(update={"feeds": []})})
-    t0 = time.process_time()
-    w = World(cfg, configured()).run()
-    f = w.flight()
-    print(f"CPU {time.process_time() - t0:.1f} s; ended in {f.summary.get('phase')} {f.summary.get('reason')} "
-          f"{f.summary.get('detail')}")
-    for t, e in f.events:
-        if any(k in e for k in SHOWN):
-            print(f"{t:7.2f} {e}")
-    cols, t_s, phase = f.record.cols, f.record.t, f.record.phase
-
-    def vec(name: str) -> np.ndarray:
-        return np.stack([cols[f"{name}_{a}"] for a in VEC], axis=1)
-
-    off = vec("x_true") - (vec("x_c_true") + np.asarray(cfg.mission.dock_offset_ned_m))
-    est_err = np.linalg.norm(vec("rel_est") - vec("rel_true"), axis=1)
-    for leg in f.state.legs_done:
-        c = leg.get("contact")
-        print(f"leg {leg['leg']}: {leg['outcome']}")
-        if c:
-            k = int(np.argmin(abs(t_s - c["time_s"])))
-            print(f"  true contact error: horizontal {np.linalg.norm(off[k, :2]):.3f} m, vertical {off[k, 2]:+.3f} m; "
-                  f"estimate error {est_err[k]:.3f} m; attempts {c['attempts']}")
-    riding = phase == "RIDING"
-    if riding.any():
-        print(f"true riding offset: max {np.max(np.linalg.norm(off[riding], axis=1)):.3f} m, "
-              f"median {np.median(np.linalg.norm(off[riding], axis=1)):.3f} m")
-    seen = vec("since_marker")[:, 0] <= cfg.relnav.marker_timeout_s
-    print(f"marker in view {seen.sum() * w.dt_s:.1f} s of {t_s[-1]:.1f} s")
+        overrides["mission.feeds"] = []
+    elif args.rendered:
+        overrides["mission.feeds"] = ["marker_rendered"]
+    cfg = with_overrides(cfg, overrides) if overrides else cfg
+    for seed in args.seeds:
+        flown = seeded(cfg, seed)
+        t0 = time.process_time()
+        w = World(flown, configured(seed=seed)).run()
+        f = w.flight()
+        out = {"seed": seed, "cpu_s": round(time.process_time() - t0, 1), **relnav_truth(flown, f)}
+        if not args.quiet:
+            for t, e in f.events:
+                if any(k in e for k in SHOWN):
+                    print(f"{t:7.2f} {e}")
+        print(json.dumps(out), flush=True)
 
 
 if __name__ == "__main__":

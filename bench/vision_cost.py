@@ -24,7 +24,7 @@ import cv2
 import numpy as np
 
 from mission.vision.camera import CameraModel, Mount
-from mission.vision.detect import DetectorSettings, MarkerDetector, predicted_roi
+from mission.vision.detect import MarkerDetector, predicted_roi, schema_settings
 from mission.vision.frames import euler_quaternion, quaternion_matrix
 from mission.vision.layout import MarkerLayout
 from sim.camera.render import Poses, render, true_marker_pose
@@ -102,11 +102,11 @@ def run(count: int) -> list[dict]:
     cpu, wall, _ = timed(lambda i: bare.detectMarkers(frames[i].image), count)
     rows.append(row("bare detectMarkers (the floor)", cpu, wall))
     variants = {
-        "detection + pose": (DetectorSettings(), False),
-        "  with a region of interest": (DetectorSettings(), True),
-        "  decimated by 2": (DetectorSettings(decimate=2), False),
-        "  one threshold pass (7 px)": (DetectorSettings(threshold_windows_px=(7, 7, 10)), False),
-        "  ROI + one threshold pass": (DetectorSettings(threshold_windows_px=(7, 7, 10)), True),
+        "detection + pose": (schema_settings(), False),
+        "  with a region of interest": (schema_settings(), True),
+        "  decimated by 2": (schema_settings(decimate=2), False),
+        "  one threshold pass (7 px)": (schema_settings(threshold_windows_px=(7, 7, 10)), False),
+        "  ROI + one threshold pass": (schema_settings(threshold_windows_px=(7, 7, 10)), True),
     }
     for name, (settings, use_roi) in variants.items():
         d = MarkerDetector(CAMERA, layout, settings)

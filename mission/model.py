@@ -138,7 +138,8 @@ def derived(model: type[T], section: BaseModel, **explicit: Any) -> T:
 def vision_detector(cfg: Config) -> MarkerDetector:
     """The marker detector of ``cfg.vision``: its camera (from the calibration file, else the
     ideal pinhole of its field of view) on its mount, its marker layout and its gates."""
-    from mission.vision.camera import CameraModel, Mount, load_calibration  # OpenCV: loaded only when used
+    from mission.vision.camera import CameraModel, Mount  # OpenCV: loaded only when used
+    from mission.vision.capture import load_calibration
     from mission.vision.detect import DetectorSettings, MarkerDetector
     from mission.vision.layout import MarkerLayout
 

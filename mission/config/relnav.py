@@ -20,7 +20,8 @@ if TYPE_CHECKING:
 
 
 #: ``[relnav]``'s fields that tell the phases how to use the estimate (not the estimator's tuning).
-PHASE_FIELDS = ("enabled", "marker_timeout_s", "marker_memory_s", "search_s", "correction_rate_m_s", "seated_sigma_m")
+PHASE_FIELDS = ("enabled", "marker_timeout_s", "marker_memory_s", "search_s", "correction_rate_m_s", "seated_sigma_m",
+                "pending_limit_m")
 
 
 class RelnavSection(Section):
@@ -45,7 +46,11 @@ class RelnavSection(Section):
                      "estimate of metres moves the deck smoothly, not in one tick)"))
     seated_sigma_m: float = Field(0.3, gt=0, le=10,
         description=("[m] before take-off the vehicle stands on the deck (Assumption 2): the estimator takes the "
-                     "deck as straight under it, horizontally, to this standard deviation per axis"))
+                     "deck as straight under it, horizontally, to this standard deviation per axis (the same error "
+                     "all the while it stands: the estimate is never made surer than this by it)"))
+    pending_limit_m: float = Field(0.3, gt=0, le=10,
+        description=("[m] HOLDOFF begins an approach only once the part of the estimate's jumps still held back "
+                     "(let through at `relnav.correction_rate_m_s`) is below this"))
 
     accel_noise_m_s2: float = Field(0.5, gt=0, le=50,
         description=("[m/s^2/sqrt(Hz)] square root of the spectral density of the white relative acceleration "
@@ -134,6 +139,23 @@ class PassengerGnssSection(Section):
         description="[-] seed of the passenger's GNSS bias (independent of the carrier's)")
 
 
+class MarkerOutagesSection(Section):
+    """Spells with no marker reading at all (the camera blinded, the deck's marker covered), drawn
+    by the simulated world's marker sensor (off by default)."""
+
+    fraction: float = Field(0.0, ge=0, lt=1,
+        description="[-] the share of the time with no marker reading, in spells (0: none)")
+    min_s: float = Field(0.3, gt=0, le=60, description="[s] the shortest spell (uniform between min_s and max_s)")
+    max_s: float = Field(1.0, gt=0, le=60, description="[s] the longest spell")
+
+    @model_validator(mode="after")
+    def _spells(self) -> MarkerOutagesSection:
+        if self.max_s < self.min_s:
+            raise ConfigError("world.marker_outages.max_s", self.max_s,
+                              f"must be >= world.marker_outages.min_s = {self.min_s:g}")
+        return self
+
+
 class WorldSection(Section):
     """The simulated world's errors (read by the simulators only)."""
 
@@ -141,3 +163,5 @@ class WorldSection(Section):
         description="[-] the error of the carrier's published GNSS state (`[world.carrier_gnss]`)")
     passenger_gnss: PassengerGnssSection = Field(PassengerGnssSection(),
         description="[-] the slow GNSS bias of the passenger's own estimate (`[world.passenger_gnss]`)")
+    marker_outages: MarkerOutagesSection = Field(MarkerOutagesSection(),
+        description="[-] spells with no marker reading (`[world.marker_outages]`)")

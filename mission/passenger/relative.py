@@ -1,20 +1,22 @@
 """The deck in the passenger's own frame (pure; ``[relnav]`` enabled): the relative estimator
 (:class:`mission.relnav.estimator.RelativeEstimator`) run inside the passenger's step, and the
-carrier's state moved into the passenger's GNSS frame by the estimated bias.
+carrier's state moved into the passenger's GNSS frame.
 
 Each tick, in this order: the carrier's state, if it is a new sample (stamped ``t - age``, its
 measurement time), and this tick's marker readings
 (:class:`~mission.phases.measurements.RelativePosition`, by capture time: ``Measurements.arrived``)
 are handed to the estimator; then the vehicle's own sample (its position and velocity as the
-autopilot reports them, at their sample time) moves it on. The phases then see the carrier where
-the estimate has it from the vehicle (its own position and velocity plus the relative ones: the
-raw fixes' noise filtered), less the **pending** part of the estimate's jumps (its change beyond
-its own velocity's), let through at most at ``relnav.correction_rate_m_s``: the first marker
-moves the relative position by up to metres (the GNSS-frame bias), and the phases' references
-would otherwise see the deck jump in one tick. Far away (no
-marker) the bias estimate stays near its prior's mean (zero), so the carrier's state is used
-nearly as it comes: GNSS is enough there. Frames: local NED [m], [m/s]; times [s] on the
-caller's clock. docs/relnav.md, "In the phases".
+autopilot reports them, at their sample time) moves it on. The marker lies on the deck at the
+dock point; the estimator tracks the carrier's reference point, ``mission.dock_offset_ned_m``
+from it. The phases then see the carrier where the estimate has it (the carrier's position and
+velocity in the passenger's frame, the filter's state: the raw fixes' noise filtered, the marker
+pinning it near the deck, one estimate with no switch between sources), less the **pending**
+part of the estimate's jumps (its change beyond its own velocity's), let through at most at
+``relnav.correction_rate_m_s``: the first marker moves the carrier by up to metres (the
+GNSS-frame bias), and the phases' references would otherwise see the deck jump in one tick. Far
+away (no marker) the bias estimate stays near its prior's mean (zero), or where the last marker
+left it, so the carrier's state is used nearly as it comes. Frames: local NED [m], [m/s]; times
+[s] on the caller's clock. docs/relnav.md, "In the phases".
 """
 from __future__ import annotations
 
@@ -31,18 +33,18 @@ from mission.relnav.estimator import RelativeEstimator
 from mission.relnav.inputs import CarrierFix, MarkerFix, OwnSample, RelativeEstimate
 
 
-UNKNOWN_HEIGHT_M = 100.0  # [m] standing on the deck says nothing of the height of the vehicle's reference point over it
-
-
 class RelativeDeck:
-    """The estimator and the correction it drives, for the gates ``gates`` (``[relnav]``)."""
+    """The estimator and the correction it drives, for the gates ``gates`` (``[relnav]``); the
+    marker lies on the deck at the dock point, ``dock_offset_ned_m`` [m] NED from the carrier's
+    reference point (``mission.dock_offset_ned_m``), where the vehicle sits when docked."""
 
-    def __init__(self, gates: RelnavGates) -> None:
+    def __init__(self, gates: RelnavGates, dock_offset_ned_m: np.ndarray) -> None:
         self.gates = gates
+        self.dock_offset = np.asarray(dock_offset_ned_m, dtype=float)
         self.estimator = RelativeEstimator(gates.params)
         self.fix_t_s = -np.inf  # [s] the newest carrier sample handed to the estimator
         self.own_t_s = -np.inf  # [s] the newest own sample
-        self.last: tuple[np.ndarray, np.ndarray] | None = None  # the last tick's deck [m] and velocity [m/s], before pending
+        self.last: tuple[np.ndarray, np.ndarray] | None = None  # the last tick's carrier [m] and velocity [m/s], before pending
         self.pending = np.zeros(3)  # [m] NED, the part of the estimate's jumps not yet let through
         self.t_s: float | None = None  # [s] the last tick's time
         self.refused = 0  # readings not fused: no stated sigma, or a non-finite time, offset or sigma
@@ -51,21 +53,20 @@ class RelativeDeck:
                 measurements: Measurements, on_deck: bool = False) -> tuple[CarrierObs | None, RelativeView | None]:
         """This tick's readings in; the carrier's state in the passenger's frame and the
         estimate's view out (None until the vehicle's first sample). ``on_deck``: the vehicle
-        stands on the deck (before take-off: the paper's Assumption 2), so the deck is straight
-        under it: a horizontal measurement of zero, ``relnav.seated_sigma_m`` per axis, each tick."""
+        stands on the deck (before take-off: the paper's Assumption 2), so the dock point is
+        straight under it: :meth:`RelativeEstimator.seated` with ``relnav.seated_sigma_m``."""
         est = self.estimator
         if carrier is not None and t_s - carrier.age_s > self.fix_t_s:
             self.fix_t_s = t_s - carrier.age_s
             est.carrier(CarrierFix(self.fix_t_s, np.asarray(carrier.position_ned_m, float),
                                    np.asarray(carrier.velocity_ned_m_s, float)))
         for m in measurements.arrived(RelativePosition):
-            if _usable(m) and m.sigma_m is not None:
-                est.marker(MarkerFix.isotropic(m.capture_t_s, m.offset_ned_m, m.sigma_m))
+            if _usable(m) and m.sigma_m is not None:  # the marker at the dock point: the carrier's reference point is dock_offset from it
+                est.marker(MarkerFix.isotropic(m.capture_t_s, np.asarray(m.offset_ned_m, float) - self.dock_offset, m.sigma_m))
             else:
                 self.refused += 1
         if on_deck and vehicle is not None and vehicle.sample_t_s is not None and vehicle.sample_t_s > self.own_t_s:
-            sigma = self.gates.seated_sigma_m
-            est.marker(MarkerFix(vehicle.sample_t_s, np.zeros(3), np.diag([sigma ** 2, sigma ** 2, UNKNOWN_HEIGHT_M ** 2])))
+            est.seated(vehicle.sample_t_s, -self.dock_offset, self.gates.seated_sigma_m)
         if vehicle is None or vehicle.position_ned_m is None or vehicle.velocity_ned_m_s is None:
             return carrier, None
         sample_t = vehicle.sample_t_s if vehicle.sample_t_s is not None else t_s
@@ -78,14 +79,12 @@ class RelativeDeck:
         else:
             e = est.estimate()
         bias = np.asarray(e.bias_ned_m, float)
-        in_sight = e.since_marker_s <= self.gates.marker_timeout_s
         if carrier is None or e.counts.fused["gnss_position"] == 0:  # not in the passenger's frame before one fix is fused
             return None, self._view(e, bias)
-        velocity = vel + np.asarray(e.velocity_ned_m_s, float)  # its own plus the relative (the fixes' noise filtered)
-        if in_sight:  # the deck from the vehicle: its own position plus the estimate (no lag: the marker pins it)
-            now = pos + vel * max(t_s - sample_t, 0.0) + np.asarray(e.position_ned_m, float)
-        else:  # GNSS: the carrier's fix moved on by its age, less the estimated bias
-            now = np.asarray(carrier.position_ned_m, float) + velocity * carrier.age_s - bias
+        # the carrier's state filtered (GNSS far away, the marker near: one estimate, no switch),
+        # moved on from the vehicle's sample to now; its velocity is the carrier's own, not the vehicle's
+        velocity = np.asarray(e.carrier_velocity_ned_m_s, float)
+        now = np.asarray(e.carrier_position_ned_m, float) + velocity * max(t_s - sample_t, 0.0)
         if self.last is None or on_deck:  # standing on the deck, nothing flies on it: no slew
             self.pending = np.zeros(3)
         else:

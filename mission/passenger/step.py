@@ -119,7 +119,7 @@ class PassengerStep:
         self.velocity_fix = PositionConsistentVelocity(velocity_bias_tau_s) if velocity_bias_tau_s > 0 else None
         self.measurements = Measurements()  # the measurement feeds' readings: the last tick's, the newest of each kind
         # [relnav] enabled: the relative estimator and the carrier's state in the passenger's frame
-        self.relative = RelativeDeck(model.relnav) if model.relnav is not None else None
+        self.relative = RelativeDeck(model.relnav, model.dock_offset_ned_m) if model.relnav is not None else None
 
     def observe(self, inputs: PassengerInputs, on_deck: bool = False) -> Observation:
         """What the phases observe on this tick (the measurements: this tick's readings, and the

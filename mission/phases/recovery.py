@@ -328,7 +328,7 @@ def go_around(state, obs, m, why: str, events=()):
     dock = dock_point(obs, m)
     rel = obs.vehicle.position_ned_m - dock
     climb = np.array([rel[0], rel[1], -r.geometry.holdoff_height_m])
-    rec = replace(rec, climb_to=climb, settled_since_s=None, descent=None)
+    rec = replace(rec, climb_to=climb, settled_since_s=None, descent=None, marker_lost_s=None)
     new = enter(state, Phase.GO_AROUND, obs.t_s, recovery=rec, seated=False)
     v_c = obs.carrier.velocity_ned_m_s if obs.carrier is not None else np.zeros(3)
     return _fly(new, obs, m, dock + climb, v_c, r.returning, rec, (*events, f"go-around: {why}"))
@@ -418,13 +418,17 @@ def approach(state, obs, m, events=()):
         rec = replace(rec, settled_since_s=out_since, descent=held)
         return _fly(state, obs, m, gate + held * (dock - gate), v_c, r.approach, rec, events)
     blocked = None if m.relnav is None else m.relnav.descent_blocked(obs.relative)
-    if blocked is not None:  # the marker lost or the estimate unsure: hold the height (a search), go around after search_s
+    if blocked is not None and not here.within(g):
+        # the marker lost or the estimate unsure: hold the height (a search) no lower than three
+        # contact heights over the deck (never sitting on it outside the contact conditions), go
+        # around after search_s; a vehicle already meeting the contact conditions docks below
         lost = rec.marker_lost_s if rec.marker_lost_s is not None else t
         if t - lost > m.relnav.search_s:
             return go_around(state, obs, m, f"on the descent: {blocked} (relnav.search_s = {m.relnav.search_s:g})",
                              events)
-        rec = replace(rec, marker_lost_s=lost)
-        return _fly(state, obs, m, gate + rec.descent * (dock - gate), v_c, r.approach, rec, events)
+        held = max(0.0, min(rec.descent, 1.0 - 3.0 * g.contact_height_m / g.decision_height_m))
+        rec = replace(rec, marker_lost_s=lost, descent=held)
+        return _fly(state, obs, m, gate + held * (dock - gate), v_c, r.approach, rec, events)
     rec = replace(rec, settled_since_s=None, marker_lost_s=None)
     descent = min(1.0, rec.descent + r.descent_speed_m_s * m.dt_s / g.decision_height_m)
     goal = gate + descent * (dock - gate)

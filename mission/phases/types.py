@@ -125,9 +125,6 @@ class RelativeView:
     since_marker_s: float
 
 
-PENDING_LIMIT_M = 0.3  # [m] an approach begins only with the estimate's jumps taken in to this
-
-
 @dataclass(frozen=True)
 class RelnavGates:
     """How the phases use the relative estimate (``[relnav]``, docs/relnav.md): ``params`` the
@@ -135,7 +132,8 @@ class RelnavGates:
     capture is this recent; ``marker_memory_s`` [s] HOLDOFF begins an approach only with a marker
     this recent; ``search_s`` [s] how long HOLDOFF searches for the marker, and how long the
     descent holds with it lost; ``correction_rate_m_s`` [m/s] the bias correction's top rate;
-    ``seated_sigma_m`` [m] how well standing on the deck places the vehicle over it."""
+    ``seated_sigma_m`` [m] how well standing on the deck places the vehicle over it;
+    ``pending_limit_m`` [m] an approach begins only with the estimate's jumps taken in to this."""
 
     params: RelnavParams
     marker_timeout_s: float
@@ -143,6 +141,7 @@ class RelnavGates:
     search_s: float
     correction_rate_m_s: float
     seated_sigma_m: float
+    pending_limit_m: float
 
     def descent_blocked(self, rel: RelativeView | None) -> str | None:
         """Why the vehicle may not descend below the decision height now (None: it may): the
@@ -162,8 +161,8 @@ class RelnavGates:
 
     def taken_in(self, rel: RelativeView | None) -> bool:
         """The estimate's jumps taken in by the carrier's state the phases see (within
-        :data:`PENDING_LIMIT_M`): an approach may begin."""
-        return rel is not None and float(np.linalg.norm(rel.pending_ned_m)) <= PENDING_LIMIT_M
+        ``pending_limit_m``): an approach may begin."""
+        return rel is not None and float(np.linalg.norm(rel.pending_ned_m)) <= self.pending_limit_m
 
 
 @dataclass(frozen=True)

@@ -1,14 +1,19 @@
 """The relative estimator: where the deck is from the passenger, with no shared frame.
 
-:class:`RelativeEstimator` fuses, into the state of :mod:`mission.relnav.kalman` (relative
-position and velocity, and the bias between the carrier's and the passenger's GNSS frames):
+:class:`RelativeEstimator` fuses, into the state of :mod:`mission.relnav.kalman` (the carrier's
+reference point and velocity in the passenger's GNSS frame, and the bias between the carrier's
+and the passenger's GNSS frames):
 
-- the passenger's own estimate, every tick (:meth:`RelativeEstimator.tick`): it sets the time
-  and is what the carrier's GNSS state is differenced with;
+- the passenger's own estimate, every tick (:meth:`RelativeEstimator.tick`): it sets the time,
+  and the relative position is the carrier's less it (the vehicle's own manoeuvres are an input,
+  never a disturbance the model must absorb);
 - the carrier's reported GNSS state (:meth:`RelativeEstimator.carrier`), stamped with its
-  measurement time: its position minus the passenger's (at that time) sees ``r + b``, its velocity
-  minus the passenger's sees ``v``;
-- the marker (:meth:`RelativeEstimator.marker`), stamped with its capture time: it sees ``r``.
+  measurement time: its position sees ``c + b``, its velocity ``w``;
+- the marker (:meth:`RelativeEstimator.marker`), stamped with its capture time: the deck from the
+  vehicle plus the vehicle's own position then sees ``c``;
+- standing on the deck (:meth:`RelativeEstimator.seated`): the carrier horizontally where the
+  vehicle stands, an error that stays the same for as long as it stands, so fused only up to its
+  own standard deviation.
 
 Measurements arrive late and out of order. Each is fused at its own time: the estimator keeps
 the last ``history_s`` of ticks and measurements with the state after each tick, and a late one
@@ -29,9 +34,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from mission.relnav import kalman
-from mission.relnav.inputs import CarrierFix, Counts, MarkerObservation, OwnSample, RelativeEstimate
+from mission.relnav.inputs import CarrierFix, Counts, MarkerFix, MarkerObservation, OwnSample, RelativeEstimate
 
-KINDS = ("marker", "gnss_position", "gnss_velocity")
+UNKNOWN_M = 1e3  # [m] the standard deviation of what a measurement does not measure (the seated one's height)
+KINDS = ("marker", "gnss_position", "gnss_velocity", "seated")
 # at one time: the GNSS state, then the marker, then the tick's snapshot (a fixed order, so that the
 # result does not depend on the order of arrival)
 _GNSS, _MARKER, _TICK = 0, 1, 2
@@ -64,6 +70,7 @@ class _Event:
     tick: OwnSample | None = None
     fix: CarrierFix | None = None
     marker: MarkerObservation | None = None
+    seated: bool = False  # ``marker`` is the seated pseudo-measurement (fused up to its own sigma)
     outcome: dict[str, bool] = field(default_factory=dict)
 
     @property
@@ -134,9 +141,19 @@ class RelativeEstimator:
         self._add(_Event(self._key(fix.t_s, _GNSS), fix=fix))
 
     def marker(self, observation: MarkerObservation) -> None:
-        """A marker's measurement captured at ``observation.capture_t_s`` [s]; fused at the next
-        :meth:`tick` or :meth:`estimate`."""
+        """A marker's measurement captured at ``observation.capture_t_s`` [s] (the carrier's
+        reference point less the vehicle's, NED [m]); fused at the next :meth:`tick` or
+        :meth:`estimate`."""
         self._add(_Event(self._key(observation.capture_t_s, _MARKER), marker=observation))
+
+    def seated(self, t_s: float, carrier_rel_ned_m: np.ndarray, sigma_m: float) -> None:
+        """The vehicle stands on the deck at ``t_s`` [s]: the carrier's reference point is
+        ``carrier_rel_ned_m`` [m] from the vehicle horizontally (its height unknown), to
+        ``sigma_m`` [m] per horizontal axis. That error is one and the same for as long as the
+        vehicle stands there, so repeating it tells nothing new: it is fused only as far as it
+        brings the carrier's horizontal standard deviation down to ``sigma_m``, never below."""
+        fix = MarkerFix(float(t_s), np.asarray(carrier_rel_ned_m, dtype=float), np.diag([sigma_m ** 2] * 3))
+        self._add(_Event(self._key(t_s, _MARKER), marker=fix, seated=True))
 
     # --- output -----------------------------------------------------------------------------
 
@@ -144,13 +161,15 @@ class RelativeEstimator:
         """The estimate at the newest tick (NaN before the first)."""
         self._catch_up()
         x, p, prm = self._x, self._p, self.params
-        sigma = float(math.sqrt(max(float(np.max(np.linalg.eigvalsh(p[kalman.R_, kalman.R_]))), 0.0)))
-        now = self._own[-1].t_s if self._own else math.nan
+        sigma = float(math.sqrt(max(float(np.max(np.linalg.eigvalsh(p[kalman.C_, kalman.C_]))), 0.0)))
+        own = self._own[-1] if self._own else OwnSample(math.nan, np.full(3, math.nan), np.full(3, math.nan))
+        now = own.t_s
         return RelativeEstimate(
-            t_s=now, position_ned_m=x[kalman.R_].copy(), velocity_ned_m_s=x[kalman.V_].copy(),
+            t_s=now, position_ned_m=x[kalman.C_] - own.position_ned_m, velocity_ned_m_s=x[kalman.W_] - own.velocity_ned_m_s,
             bias_ned_m=x[kalman.B_].copy(), covariance=p.copy(), position_sigma_m=sigma,
             converged=bool(self._own) and sigma < prm.converged_sigma_m,
-            since_marker_s=now - self._marker_t_s if self._own else math.inf, counts=self.counts())
+            since_marker_s=now - self._marker_t_s if self._own else math.inf, counts=self.counts(),
+            carrier_position_ned_m=x[kalman.C_].copy(), carrier_velocity_ned_m_s=x[kalman.W_].copy())
 
     def counts(self) -> Counts:
         """Measurements fused and rejected so far (each counted once, by its latest fusion)."""
@@ -220,17 +239,21 @@ class RelativeEstimator:
         e.outcome = {}
         if e.tick is not None:
             self._snapshots.append(_Snapshot(e.key, self._x, self._p, self._marker_t_s))
+        elif e.marker is not None and e.seated:
+            r = self._seated_noise(float(e.marker.covariance_ned_m2[0, 0]))
+            if r is not None:
+                z = np.asarray(e.marker.deck_rel_ned_m, dtype=float) + self._own_at(e.t_s).position_ned_m
+                e.outcome["seated"] = self._update(z, kalman.H_MARKER, r)
         elif e.marker is not None:
             m = e.marker
-            z = np.asarray(m.deck_rel_ned_m, dtype=float)
+            z = np.asarray(m.deck_rel_ned_m, dtype=float) + self._own_at(e.t_s).position_ned_m
             e.outcome["marker"] = self._update(z, kalman.H_MARKER, np.asarray(m.covariance_ned_m2, dtype=float))
             if e.outcome["marker"]:
                 self._marker_t_s = max(self._marker_t_s, e.t_s)
         elif e.fix is not None:
-            own = self._own_at(e.t_s)
             prm = self.params
-            z_p = np.asarray(e.fix.position_ned_m, dtype=float) - own.position_ned_m
-            z_v = np.asarray(e.fix.velocity_ned_m_s, dtype=float) - own.velocity_ned_m_s
+            z_p = np.asarray(e.fix.position_ned_m, dtype=float)
+            z_v = np.asarray(e.fix.velocity_ned_m_s, dtype=float)
             e.outcome["gnss_position"] = self._update(z_p, kalman.H_GNSS_POSITION,
                                                       np.diag(self._per_axis(prm.gnss_position_sigma_m) ** 2))
             e.outcome["gnss_velocity"] = self._update(z_v, kalman.H_GNSS_VELOCITY,
@@ -255,6 +278,16 @@ class RelativeEstimator:
                                                              prm.bias_tau_s))
         self._x, self._p = kalman.predict(self._x, self._p, *model)
         self._t_s = t_s
+
+    def _seated_noise(self, variance_m2: float) -> np.ndarray | None:
+        """The seated measurement's noise covariance that brings the carrier's horizontal
+        variance per axis down to ``variance_m2`` [m^2] and no lower (the information it lacks
+        for that, per axis; the height unknown), or None: it is there already."""
+        prior = np.diag(self._p)[kalman.C_][:2]
+        if not np.any(prior > variance_m2 * 1.0001):
+            return None
+        lack = np.maximum(1.0 / variance_m2 - 1.0 / prior, 1e-12)  # [1/m^2] the information missing per axis
+        return np.diag([*(1.0 / lack), UNKNOWN_M ** 2])
 
     def _update(self, z: np.ndarray, h: np.ndarray, r: np.ndarray) -> bool:
         u = kalman.update(self._x, self._p, z, h, r, self.params.gate_nis)

@@ -48,7 +48,9 @@ class MarkerObservation(Protocol):
     ``RelativeMeasurement`` is one (structurally: the estimator reads only these three).
 
     capture_t_s: when the frame was exposed [s] (on the passenger's clock);
-    deck_rel_ned_m (3,): deck centre minus the vehicle's reference point, NED axes [m];
+    deck_rel_ned_m (3,): what the estimator tracks (the carrier's reference point) minus the
+    vehicle's reference point, NED axes [m] (a deck marker elsewhere on the carrier is moved onto
+    it by its caller);
     covariance_ned_m2 (3, 3): its covariance [m^2]."""
 
     @property
@@ -78,7 +80,7 @@ class MarkerFix:
 @dataclass(frozen=True)
 class Counts:
     """Measurements fused and rejected by the gate, by kind (``marker``, ``gnss_position``,
-    ``gnss_velocity``); ``too_old``: measurements older than the history, ``too_new``: stamped
+    ``gnss_velocity``, ``seated``); ``too_old``: measurements older than the history, ``too_new``: stamped
     more than the history after the newest tick (both dropped unfused)."""
 
     fused: dict[str, int]
@@ -91,16 +93,21 @@ class Counts:
 class RelativeEstimate:
     """The estimate at ``t_s`` [s].
 
-    position_ned_m (3,): the deck's reference point minus the vehicle's [m], NED axes (the truth's
-    estimate: what the marker measures, not what the GNSS difference says);
-    velocity_ned_m_s (3,): its rate, the deck's velocity minus the vehicle's [m/s];
+    position_ned_m (3,): the carrier's reference point minus the vehicle's [m], NED axes (the
+    truth's estimate: what the marker measures, not what the GNSS difference says);
+    velocity_ned_m_s (3,): its rate, the carrier's velocity minus the vehicle's [m/s];
     bias_ned_m (3,): the carrier's GNSS frame minus the passenger's [m] (the GNSS difference
     minus the relative position);
-    covariance (9, 9): of (position, velocity, bias) in that order [m^2, m^2/s, m^2/s^2 ...];
+    covariance (9, 9): of (position, velocity, bias) in that order [m^2, m^2/s, m^2/s^2 ...]
+    (the vehicle's own state is an input, known: the relative position's covariance is the
+    carrier's);
     position_sigma_m: the position's largest standard deviation [m];
     converged: ``position_sigma_m`` is below the configured threshold;
     since_marker_s: time since the capture of the newest marker fused [s] (inf: none yet);
-    counts: what was fused and rejected."""
+    counts: what was fused and rejected;
+    carrier_position_ned_m (3,), carrier_velocity_ned_m_s (3,): the carrier's reference point
+    [m] and velocity [m/s] in the passenger's GNSS frame (the filter's state: steady through the
+    vehicle's own manoeuvres)."""
 
     t_s: float
     position_ned_m: np.ndarray
@@ -111,3 +118,5 @@ class RelativeEstimate:
     converged: bool
     since_marker_s: float
     counts: Counts
+    carrier_position_ned_m: np.ndarray
+    carrier_velocity_ned_m_s: np.ndarray

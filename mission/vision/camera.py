@@ -1,12 +1,12 @@
 """The camera model: a pinhole with OpenCV's distortion, its image size, and where it is mounted on
-the vehicle. Made from a field of view (the simulated camera) or from a calibration file (a real
-one). The file formats: docs/vision.md."""
+the vehicle. Made from a field of view (the simulated camera) or from a calibration's values (a real one:
+the file is read by :func:`mission.vision.capture.load_calibration`). The file formats:
+docs/vision.md."""
 from __future__ import annotations
 
 import json
 import re
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
@@ -73,30 +73,24 @@ class CameraModel:
         return CameraModel(self.matrix, self.distortion, self.width, self.height, mount)
 
 
-def load_calibration(path: str | Path, mount: Mount | None = None) -> CameraModel:
-    """A camera model from a calibration file: OpenCV's own (YAML, XML or JSON written by
-    ``cv2.FileStorage``, as OpenCV's calibration tutorial and its interactive calibration tool
-    write it: ``camera_matrix``, ``distortion_coefficients``, ``image_width``, ``image_height``,
-    or their other spellings there), a plain JSON object with the
-    same keys as lists, or ROS's ``camera_info`` YAML (``camera_matrix: {data: [...]}``,
-    ``distortion_coefficients: {data: [...]}``). Raises ValueError naming what is missing."""
-    path = Path(path)
-    text = path.read_text()
-    values = _plain_json(text) if path.suffix == ".json" else None
-    if values is None:
-        values = _opencv_storage(path) if text.lstrip().startswith(("%YAML", "<?xml", "{")) else _ros_yaml(text)
+def calibrated(values: dict, mount: Mount | None = None, source: str = "the calibration") -> CameraModel:
+    """A camera model from a calibration's values (``camera_matrix``, ``distortion_coefficients``,
+    ``image_width``, ``image_height``: what :func:`plain_json`, :func:`ros_yaml` or OpenCV's
+    ``FileStorage`` read; the file itself is read by :func:`mission.vision.capture.load_calibration`).
+    Raises ValueError naming what is missing, and ``source``."""
     try:
         matrix = np.asarray(values["camera_matrix"], dtype=float).reshape(3, 3)
         distortion = np.asarray(values["distortion_coefficients"], dtype=float).ravel()
         width, height = int(values["image_width"]), int(values["image_height"])
     except KeyError as missing:
-        raise ValueError(f"{path}: no {missing.args[0]}") from None
+        raise ValueError(f"{source}: no {missing.args[0]}") from None
     if matrix[0, 0] <= 0 or matrix[1, 1] <= 0 or width <= 0 or height <= 0:
-        raise ValueError(f"{path}: camera_matrix and image size must be positive")
+        raise ValueError(f"{source}: camera_matrix and image size must be positive")
     return CameraModel(matrix, distortion, width, height, mount or Mount())
 
 
-def _plain_json(text: str) -> dict | None:
+def plain_json(text: str) -> dict | None:
+    """A plain JSON calibration's values; None: it is ``cv2.FileStorage``'s JSON (OpenCV reads it)."""
     data = json.loads(text)
     if isinstance(data.get("camera_matrix"), dict):  # cv2.FileStorage's JSON: {"rows", "cols", "data"}
         return None
@@ -105,32 +99,12 @@ def _plain_json(text: str) -> dict | None:
 
 # The names OpenCV's calibration programs write the same values under: its camera calibration
 # tutorial (old and new), its interactive calibration tool (``cameraResolution`` = [w, h]).
-_ALIASES = {"camera_matrix": ("camera_matrix", "Camera_Matrix", "cameraMatrix"),
-            "distortion_coefficients": ("distortion_coefficients", "Distortion_Coefficients", "dist_coeffs"),
-            "image_width": ("image_width", "image_Width"), "image_height": ("image_height", "image_Height")}
+OPENCV_ALIASES = {"camera_matrix": ("camera_matrix", "Camera_Matrix", "cameraMatrix"),
+                  "distortion_coefficients": ("distortion_coefficients", "Distortion_Coefficients", "dist_coeffs"),
+                  "image_width": ("image_width", "image_Width"), "image_height": ("image_height", "image_Height")}
 
 
-def _opencv_storage(path: Path) -> dict:
-    import cv2
-    storage = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
-    try:
-        values = {}
-        for key, names in _ALIASES.items():
-            for name in names:
-                node = storage.getNode(name)
-                if not node.empty():
-                    values[key] = node.mat() if node.isMap() else node.real()
-                    break
-        resolution = storage.getNode("cameraResolution")
-        if not resolution.empty() and "image_width" not in values:
-            size = resolution.mat() if resolution.isMap() else [resolution.at(i).real() for i in range(resolution.size())]
-            values["image_width"], values["image_height"] = np.ravel(size)[:2]
-        return values
-    finally:
-        storage.release()
-
-
-def _ros_yaml(text: str) -> dict:
+def ros_yaml(text: str) -> dict:
     """ROS's camera_info YAML, read without a YAML library: the keys this module needs only."""
     values: dict = {}
     for name in ("image_width", "image_height"):

@@ -1,15 +1,17 @@
 """A real camera: grey frames from ``cv2.VideoCapture`` (a device, a file or a GStreamer
-pipeline), each with its capture time. Thin I/O: no detection here (:mod:`mission.vision.detect`).
-How to point it at a camera: docs/vision.md."""
+pipeline), each with its capture time, and its calibration file read. Thin I/O: no detection
+here (:mod:`mission.vision.detect`). How to point it at a camera: docs/vision.md."""
 from __future__ import annotations
 
 import time
+from pathlib import Path
 from typing import Callable
 
 import cv2
+import numpy as np
 
 from mission.errors import MarsupialError
-from mission.vision.camera import Frame
+from mission.vision.camera import OPENCV_ALIASES, CameraModel, Frame, Mount, calibrated, plain_json, ros_yaml
 
 
 class CameraError(MarsupialError):
@@ -67,3 +69,37 @@ class CameraSource:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def load_calibration(path: str | Path, mount: Mount | None = None) -> CameraModel:
+    """A camera model from a calibration file: OpenCV's own (YAML, XML or JSON written by
+    ``cv2.FileStorage``, as OpenCV's calibration tutorial and its interactive calibration tool
+    write it: ``camera_matrix``, ``distortion_coefficients``, ``image_width``, ``image_height``,
+    or their other spellings there), a plain JSON object with the
+    same keys as lists, or ROS's ``camera_info`` YAML (``camera_matrix: {data: [...]}``,
+    ``distortion_coefficients: {data: [...]}``). Raises ValueError naming what is missing."""
+    path = Path(path)
+    text = path.read_text()
+    values = plain_json(text) if path.suffix == ".json" else None
+    if values is None:
+        values = _opencv_storage(path) if text.lstrip().startswith(("%YAML", "<?xml", "{")) else ros_yaml(text)
+    return calibrated(values, mount, str(path))
+
+
+def _opencv_storage(path: Path) -> dict:
+    storage = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
+    try:
+        values = {}
+        for key, names in OPENCV_ALIASES.items():
+            for name in names:
+                node = storage.getNode(name)
+                if not node.empty():
+                    values[key] = node.mat() if node.isMap() else node.real()
+                    break
+        resolution = storage.getNode("cameraResolution")
+        if not resolution.empty() and "image_width" not in values:
+            size = resolution.mat() if resolution.isMap() else [resolution.at(i).real() for i in range(resolution.size())]
+            values["image_width"], values["image_height"] = np.ravel(size)[:2]
+        return values
+    finally:
+        storage.release()

@@ -4,7 +4,8 @@ refined together) and the relative measurement (:mod:`mission.vision.measurement
 and an attitude in, a measurement or None out."""
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
+from typing import Any
 
 import cv2
 import numpy as np
@@ -27,11 +28,12 @@ or frontal tag) and the more level of the two wins; max_reprojection_px: a pose 
     sub-pixel (OpenCV's ``CORNER_REFINE_SUBPIX``); decimate: look for tags in an image this many
     times smaller, then refine their corners at full resolution (1: off); threshold_windows_px:
     the adaptive threshold's window sizes (smallest, largest, step) [px], one pass each (OpenCV's
-    ``adaptiveThreshWinSize*``)."""
+    ``adaptiveThreshWinSize*``). The gates ``[vision]`` configures (``max_tilt_deg``,
+    ``max_reprojection_px``) have no default here: the schema holds it (:func:`schema_settings`)."""
 
-    max_tilt_deg: float = 30.0
+    max_tilt_deg: float
+    max_reprojection_px: float
     ambiguity_ratio: float = 3.0
-    max_reprojection_px: float = 2.0
     pixel_sigma_px: float = 0.3
     min_side_px: float = 12.0
     subpixel: bool = True
@@ -47,13 +49,23 @@ class Corners:
     corners: np.ndarray
 
 
+def schema_settings(**overrides: Any) -> DetectorSettings:
+    """The settings of the schema's default ``[vision]`` (each field it has by the same name),
+    with ``overrides``; a configuration's own: ``mission.model.vision_detector``."""
+    from mission.config.vision import VisionSection
+
+    v = VisionSection()
+    named = {f.name: getattr(v, f.name) for f in fields(DetectorSettings) if f.name in type(v).model_fields}
+    return DetectorSettings(**{**named, **overrides})
+
+
 class MarkerDetector:
     """Detects ``layout``'s tags in ``camera``'s images and measures the deck from them."""
 
     def __init__(self, camera: CameraModel, layout: MarkerLayout, settings: DetectorSettings | None = None):
         self.camera = camera
         self.layout = layout
-        self.settings = settings or DetectorSettings()
+        self.settings = settings or schema_settings()
         params = cv2.aruco.DetectorParameters()
         params.cornerRefinementMethod = (cv2.aruco.CORNER_REFINE_SUBPIX if self.settings.subpixel
                                          and self.settings.decimate == 1 else cv2.aruco.CORNER_REFINE_NONE)

@@ -13,7 +13,8 @@ Two ways to measure, chosen by the entry point (``pyproject.toml``, ``marsupial.
   detector and pose (:class:`mission.vision.detect.MarkerDetector`): ~5-10 ms a frame.
 
 The vehicle's attitude is level at its yaw (the mock's physics keeps no tilt); the deck is level
-at the carrier's position (its reference point is the deck centre) and yaw. Captures happen on
+at the carrier's yaw, its centre (the marker's) at the dock point: the carrier's reference point
+plus ``mission.dock_offset_ned_m``, where the vehicle sits when docked. Captures happen on
 the world's ticks at ``vision.rate_hz`` at most; every draw is seeded by the scenario's seed.
 """
 from __future__ import annotations
@@ -50,12 +51,19 @@ class WorldMarker:
         self.pending: list[RelativePosition] = []  # captured, not yet delivered
         self.captured = 0  # frames taken
         self.seen = 0  # frames that gave a measurement
+        outages = world.cfg.world.marker_outages
+        self.outages = outages if outages.fraction > 0 else None
+        self.outage_rng = np.random.default_rng(world.scenario.seed + SEED_OFFSET + 1)
+        self.blind_until_s = -math.inf  # [s] the end of the current outage
+        self.checked_s: float | None = None  # [s] when an outage last could begin
 
     def poses(self, t_s: float) -> Poses:
-        """The truth at ``t_s`` [s]: the vehicle level at its yaw, the deck at the carrier."""
+        """The truth at ``t_s`` [s]: the vehicle level at its yaw, the marker on the deck at the
+        dock point (the carrier's reference point plus ``mission.dock_offset_ned_m``: where the
+        vehicle sits when docked)."""
         kin = self.world.vehicle.kin
         half = kin.yaw_rad / 2
-        deck = self.world.carrier.true_at(t_s)[0]
+        deck = self.world.carrier.true_at(t_s)[0] + np.asarray(self.world.cfg.mission.dock_offset_ned_m, float)
         return Poses(self.world.vehicle.true_position, np.array([math.cos(half), 0.0, 0.0, math.sin(half)]),
                      deck, self.world.carrier.yaw_rad)
 
@@ -64,7 +72,7 @@ class WorldMarker:
         if t_s + 1e-9 >= self.next_s:
             self.next_s = max(self.next_s + self.period_s, t_s)
             self.captured += 1
-            m = self.measure(self.poses(t_s), t_s)
+            m = None if self._blind(t_s) else self.measure(self.poses(t_s), t_s)
             if m is not None:
                 self.seen += 1
                 self.pending.append(RelativePosition(capture_t_s=t_s, offset_ned_m=np.asarray(m.deck_rel_ned_m, float),
@@ -72,6 +80,23 @@ class WorldMarker:
         out = [m for m in self.pending if m.capture_t_s + self.latency_s <= t_s + 1e-9]
         self.pending = [m for m in self.pending if m.capture_t_s + self.latency_s > t_s + 1e-9]
         return list(out)
+
+    def _blind(self, t_s: float) -> bool:
+        """In an outage at ``t_s`` [s] (``world.marker_outages``): spells of a length uniform in
+        [min_s, max_s] begin at a rate (Poisson) that makes them ``fraction`` of the time."""
+        o = self.outages
+        if o is None:
+            return False
+        dt = 0.0 if self.checked_s is None else t_s - self.checked_s
+        self.checked_s = t_s
+        if t_s < self.blind_until_s:
+            return True
+        mean_s = 0.5 * (o.min_s + o.max_s)
+        rate = o.fraction / ((1.0 - o.fraction) * mean_s)  # [1/s] outages begin, while not in one
+        if self.outage_rng.random() < -math.expm1(-rate * dt):
+            self.blind_until_s = t_s + self.outage_rng.uniform(o.min_s, o.max_s)
+            return True
+        return False
 
     def close(self) -> None:
         self.pending = []

@@ -1,10 +1,11 @@
 """A seeded world for the relative estimator's tests and bench: the truth, what the sensors measured and when
 each measurement arrives (units SI, NED, seconds).
 
-The truth follows the estimator's own model (:mod:`mission.relnav.kalman`): the relative position
-and velocity a constant velocity driven by white acceleration, the GNSS-frame bias a first-order
-Gauss-Markov process (or held constant), so that its covariance can be checked against the
-errors (NEES). The passenger flies a circle; the carrier is where the relative position puts it.
+The truth follows the estimator's own model (:mod:`mission.relnav.kalman`): the carrier's position
+and velocity in the passenger's frame a constant velocity driven by white acceleration, the
+GNSS-frame bias a first-order Gauss-Markov process (or held constant), so that its covariance can
+be checked against the errors (NEES). The passenger flies a circle (its own state an input of
+the estimator); the relative position is the carrier's less the passenger's.
 """
 from __future__ import annotations
 
@@ -19,7 +20,8 @@ from mission.relnav.inputs import CarrierFix, MarkerFix, OwnSample, RelativeEsti
 
 @dataclass
 class World:
-    """One run: ``ticks`` (the passenger's samples), ``truth`` (9,) per tick, ``arrivals``
+    """One run: ``ticks`` (the passenger's samples), ``truth`` (9,) per tick (the relative position,
+    the relative velocity, the bias), ``arrivals``
     (arrival time [s], measurement) sorted by arrival."""
 
     ticks: list[OwnSample] = field(default_factory=list)
@@ -32,11 +34,12 @@ def make_world(params: RelnavParams, seed: int, *, duration_s: float = 30.0, dt_
                marker_sigma_m: float = 0.03, constant_bias_m: tuple[float, float, float] | None = None,
                marker_delay_s: tuple[float, float] = (0.05, 0.15), gnss_delay_s: tuple[float, float] = (0.1, 0.3),
                prior: bool = False, measure_until_s: float = math.inf, truth_accel_m_s2: float | None = None) -> World:
-    """The world of ``params``'s model, seeded. ``prior``: the initial relative state drawn from the
-    estimator's prior (for a consistency check); else a fixed start 10 m away at rest. Markers
+    """The world of ``params``'s model, seeded. ``prior``: the carrier's initial state drawn from the
+    estimator's prior (for a consistency check); else a fixed start 10 m from the passenger, at its
+    velocity. Markers
     (isotropic ``marker_sigma_m``) from ``marker_from_s`` on; each measurement arrives a uniform
     delay in its range after it is taken; none is taken after ``measure_until_s``.
-    ``truth_accel_m_s2``: the truth's relative acceleration noise (default: the model's)."""
+    ``truth_accel_m_s2``: the truth's carrier acceleration noise (default: the model's)."""
     rng = np.random.default_rng(seed)
     q = (params.accel_noise_m_s2 if truth_accel_m_s2 is None else truth_accel_m_s2) ** 2
     chol = np.linalg.cholesky(q * np.array([[dt_s ** 3 / 3, dt_s ** 2 / 2], [dt_s ** 2 / 2, dt_s]]))
@@ -44,11 +47,15 @@ def make_world(params: RelnavParams, seed: int, *, duration_s: float = 30.0, dt_
     axes = np.array([1.0, 1.0, params.vertical_factor])  # the vertical sigmas over the horizontal ones
     bias_sigma = params.bias_sigma_m * axes
     kick = bias_sigma * math.sqrt(1 - decay ** 2)
-    if prior:
-        r = rng.normal(0, params.initial_sigma_m, 3)
-        v = rng.normal(0, params.initial_velocity_sigma_m_s, 3)
+    def own(t: float) -> tuple[np.ndarray, np.ndarray]:
+        return (np.array([20 * math.cos(0.1 * t), 20 * math.sin(0.1 * t), -5.0]),
+                np.array([-2 * math.sin(0.1 * t), 2 * math.cos(0.1 * t), 0.0]))
+
+    if prior:  # the carrier's position c and velocity u in the passenger's frame
+        c = rng.normal(0, params.initial_sigma_m, 3)
+        u = rng.normal(0, params.initial_velocity_sigma_m_s, 3)
     else:
-        r, v = np.array([10.0, -4.0, 1.0]), np.zeros(3)
+        c, u = own(0.0)[0] + np.array([10.0, -4.0, 1.0]), own(0.0)[1].copy()
     b = np.array(constant_bias_m, dtype=float) if constant_bias_m is not None else bias_sigma * rng.standard_normal(3)
     w = World()
     n = int(round(duration_s / dt_s))
@@ -56,12 +63,12 @@ def make_world(params: RelnavParams, seed: int, *, duration_s: float = 30.0, dt_
         t = k * dt_s
         if k > 0:
             for axis in range(3):
-                dr, dv = chol @ rng.standard_normal(2)
-                r[axis], v[axis] = r[axis] + dt_s * v[axis] + dr, v[axis] + dv
+                dc, du = chol @ rng.standard_normal(2)
+                c[axis], u[axis] = c[axis] + dt_s * u[axis] + dc, u[axis] + du
             if constant_bias_m is None:
                 b = decay * b + kick * rng.standard_normal(3)
-        own_p = np.array([20 * math.cos(0.1 * t), 20 * math.sin(0.1 * t), -5.0])
-        own_v = np.array([-2 * math.sin(0.1 * t), 2 * math.cos(0.1 * t), 0.0])
+        own_p, own_v = own(t)
+        r, v = c - own_p, u - own_v
         w.ticks.append(OwnSample(t, own_p, own_v))
         w.truth.append(np.concatenate([r, v, b]))
         if t > measure_until_s:

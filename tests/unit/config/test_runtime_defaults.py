@@ -77,6 +77,9 @@ def test_the_models_built_from_the_configuration_carry_no_default_of_their_own()
     none of those fields has a second default."""
     for model in (TrackingGains, DockingGeometry, RecoveryModel, RelnavParams):
         assert [f.name for f in dataclasses.fields(model) if f.default is not dataclasses.MISSING] == []
+    # the detector's gates that [vision] configures have no second default either
+    assert [f.name for f in dataclasses.fields(DetectorSettings)
+            if f.name in VisionSection.model_fields and f.default is not dataclasses.MISSING] == []
     built_by_mission_model = {f.name for f in dataclasses.fields(MissionModel)} - {"legs", "next_target"}
     assert [f.name for f in dataclasses.fields(MissionModel)
             if f.name in built_by_mission_model and f.default is not dataclasses.MISSING] == []

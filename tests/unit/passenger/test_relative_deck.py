@@ -11,7 +11,7 @@ from mission.model import derived
 from mission.passenger.inputs import VehicleReport
 from mission.passenger.relative import RelativeDeck
 from mission.phases import Measurements, RelativePosition
-from mission.phases.types import CarrierObs, RelnavGates
+from mission.phases.types import CarrierObs, RelativeView, RelnavGates
 
 BIAS = np.array([2.0, -1.0, 0.0])  # [m] the carrier's GNSS frame over the passenger's
 
@@ -37,7 +37,7 @@ def _fly(deck: RelativeDeck, t0: float, t1: float, marker: bool, measurements: M
 
 def test_the_first_marker_moves_the_deck_at_the_rate_then_onto_the_truth():
     gates = _gates()
-    deck = RelativeDeck(gates)
+    deck = RelativeDeck(gates, np.zeros(3))
     far = _fly(deck, 0.0, 20.0, False, Measurements())
     t, carrier, view = far[-1]
     assert not view.converged and gates.descent_blocked(view) == "marker not in sight"
@@ -58,7 +58,7 @@ def test_a_malformed_reading_is_refused_and_counted_never_raised():
            RelativePosition(capture_t_s=1.0, offset_ned_m=np.array([math.inf, 0.0, 1.5]), sigma_m=0.02),
            RelativePosition(capture_t_s=1.0, offset_ned_m=np.array([0.0, 0.0, 1.5]), sigma_m=math.inf),
            RelativePosition(capture_t_s=1.0, offset_ned_m=np.array([0.0, 0.0, 1.5]), sigma_m=None))
-    clean, dirty = RelativeDeck(_gates()), RelativeDeck(_gates())
+    clean, dirty = RelativeDeck(_gates(), np.zeros(3)), RelativeDeck(_gates(), np.zeros(3))
     a = _fly(clean, 0.0, 2.0, False, Measurements())
     _fly(dirty, 0.0, 1.0, False, Measurements())
     report = VehicleReport(1.0, np.array([0.0, 0.0, -1.5]), np.zeros(3), 1.0, 1.0, True, "OFFBOARD", 0.0, True)
@@ -68,3 +68,81 @@ def test_a_malformed_reading_is_refused_and_counted_never_raised():
     a = [row for row in a if row[0] != 1.0]
     assert dirty.refused == len(bad)
     assert np.allclose(a[-1][1].position_ned_m, b[-1][1].position_ned_m)
+
+
+def test_the_marker_on_the_deck_at_the_dock_point_puts_the_carrier_below_it():
+    """The marker lies on the deck at the dock point, ``dock_offset`` (1.5 m up) from the
+    carrier's reference point: a vehicle 1.5 m over the marker sees the carrier's reference point
+    3 m under it (the old code put the carrier at the marker: 1.5 m off)."""
+    dock_offset = np.array([0.0, 0.0, -1.5])
+    deck = RelativeDeck(_gates(), dock_offset)
+    out = []
+    measurements = Measurements()
+    for k in range(20 * 50):
+        t = k / 50
+        report = VehicleReport(t, np.array([0.0, 0.0, -3.0]), np.zeros(3), t, t, True, "OFFBOARD", 0.0, True)
+        fix_t = math.floor(t * 10) / 10
+        carrier = CarrierObs(position_ned_m=BIAS.copy(), velocity_ned_m_s=np.zeros(3), age_s=t - fix_t, alive=True)
+        measurements = measurements.then((RelativePosition(capture_t_s=t, offset_ned_m=np.array([0.0, 0.0, 1.5]),
+                                                           sigma_m=0.02),))
+        out.append(deck.observe(t, report, carrier, measurements))
+    carrier, view = out[-1]
+    assert view.converged
+    assert np.allclose(carrier.position_ned_m, np.zeros(3), atol=0.05), carrier.position_ned_m  # the truth: the origin
+    assert np.allclose(view.position_ned_m, [0.0, 0.0, 3.0], atol=0.05)  # the carrier's reference from the vehicle
+
+
+def test_the_carriers_velocity_is_the_carriers_not_the_vehicles():
+    """The vehicle swings about (its reported velocity +-1 m/s at 0.5 Hz, its position with it)
+    over a carrier driving north at 1.5 m/s: the carrier's velocity the phases see stays the
+    carrier's, within 0.1 m/s (the old code added the vehicle's own velocity to a lagging
+    relative one, and the vehicle's swings came through)."""
+    deck = RelativeDeck(_gates(), np.zeros(3))
+    v_c = np.array([1.5, 0.0, 0.0])
+    seen = []
+    measurements = Measurements()
+    for k in range(40 * 50):
+        t = k / 50
+        swing = np.array([0.0, 1.0 * math.sin(math.pi * t), 0.0])
+        pos = v_c * t + np.array([0.0, -1.0 / math.pi * math.cos(math.pi * t), -1.5])
+        report = VehicleReport(t, pos, v_c + swing, t, t, True, "OFFBOARD", 0.0, True)
+        fix_t = math.floor(t * 10) / 10
+        carrier = CarrierObs(position_ned_m=BIAS + v_c * fix_t, velocity_ned_m_s=v_c.copy(), age_s=t - fix_t,
+                             alive=True)
+        truth = v_c * t  # the deck under the vehicle's mean path, the marker on it
+        measurements = measurements.then((RelativePosition(capture_t_s=t, offset_ned_m=truth - pos, sigma_m=0.02),))
+        c, _ = deck.observe(t, report, carrier, measurements)
+        if t >= 20.0:
+            seen.append(c.velocity_ned_m_s)
+    err = np.linalg.norm(np.asarray(seen) - v_c, axis=1)
+    assert err.max() <= 0.1, err.max()
+
+
+def test_standing_on_the_deck_never_makes_the_estimate_surer_than_the_seat():
+    """Seated for 10 s (500 ticks), the deck straight under the vehicle to ``seated_sigma_m``
+    (0.3 m): the carrier's horizontal standard deviation stays at that, not 0.3 / sqrt(500) (the
+    old code fused it afresh every tick as if each were independent: 1.3 cm)."""
+    gates = _gates()
+    deck = RelativeDeck(gates, np.zeros(3))
+    for k in range(10 * 50):
+        t = k / 50
+        report = VehicleReport(t, np.zeros(3), np.zeros(3), t, t, False, "POSCTL", 0.0, True)
+        fix_t = math.floor(t * 10) / 10
+        carrier = CarrierObs(position_ned_m=BIAS.copy(), velocity_ned_m_s=np.zeros(3), age_s=t - fix_t, alive=True)
+        _, view = deck.observe(t, report, carrier, Measurements(), on_deck=True)
+    cov = deck.estimator.estimate().covariance
+    horizontal = np.sqrt(np.diag(cov)[:2])
+    assert np.all(horizontal >= 0.9 * gates.seated_sigma_m), horizontal
+    assert np.all(horizontal <= 1.05 * gates.seated_sigma_m), horizontal  # and it does take it in
+    assert view.since_marker_s == math.inf  # standing is not seeing the marker
+    assert np.linalg.norm(view.bias_ned_m[:2] - BIAS[:2]) < 0.5  # the bias known at take-off
+
+
+def test_the_approachs_pending_limit_is_the_configurations():
+    """``relnav.pending_limit_m`` (declared in the schema, once) decides when the estimate's jumps
+    count as taken in."""
+    section = RelnavSection(enabled=True, pending_limit_m=0.05)
+    gates = derived(RelnavGates, section, params=section.params())
+    view = lambda pending: RelativeView(np.zeros(3), np.zeros(3), np.array([pending, 0.0, 0.0]), 0.02, True, 0.0)  # noqa: E731
+    assert gates.taken_in(view(0.04)) and not gates.taken_in(view(0.1))
+    assert RelnavSection().pending_limit_m == 0.3

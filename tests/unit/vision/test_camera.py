@@ -8,7 +8,8 @@ import cv2
 import numpy as np
 import pytest
 
-from mission.vision.camera import CameraModel, Mount, load_calibration
+from mission.vision.camera import CameraModel, Mount
+from mission.vision.capture import load_calibration
 from mission.vision.capture import CameraError, CameraSource
 from mission.vision.detect import MarkerDetector
 from mission.vision.layout import MarkerLayout

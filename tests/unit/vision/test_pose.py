@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mission.vision.detect import DetectorSettings, MarkerDetector, predicted_roi
+from mission.vision.detect import MarkerDetector, predicted_roi, schema_settings
 from mission.vision.frames import euler_quaternion, quaternion_matrix
 from mission.vision.layout import MarkerLayout
 from sim.camera.render import render, true_marker_pose
@@ -129,7 +129,7 @@ def test_far_ambiguous_tags_take_the_level_solution():
 the deck's normal within 10 deg of the truth more often."""
     layout = MarkerLayout.single(0.5)
     detector = MarkerDetector(CAMERA, layout)
-    plain = MarkerDetector(CAMERA, layout, DetectorSettings(ambiguity_ratio=1.0))  # lower error wins
+    plain = MarkerDetector(CAMERA, layout, schema_settings(ambiguity_ratio=1.0))  # lower error wins
     camera = SimulatedCamera(CAMERA, layout, Sensor(SensorModel(noise_sigma=4.0, dropout_probability=0.0), seed=6))
     rng = np.random.default_rng(14)
     tilts: dict[str, list[float]] = {"gated": [], "plain": []}

@@ -1,0 +1,70 @@
+"""A flown mission (:class:`sim.batch.recovery.Flight`) held against the world's truth: the true
+contact error and riding offset (the vehicle's true position against the carrier's true dock
+point), the estimate's error at contact, deck touches outside the contact conditions counted on
+the truth, the time the marker was in view. With ``[relnav]`` and ``[world]`` errors the flight's
+own summary measures the vehicle's estimate against the phases' dock point, both in the
+passenger's frame; these are the world's. Frames: local NED [m], [m/s]."""
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from mission.config.schema import Config
+from mission.phases import Phase
+from mission.record import VEC
+from sim.batch.recovery import Flight
+
+BEFORE_CONTACT = (Phase.RETURNING, Phase.HOLDOFF, Phase.APPROACH, Phase.GO_AROUND)
+
+
+def _vec(f: Flight, name: str) -> np.ndarray:
+    return np.stack([f.record.cols[f"{name}_{a}"] for a in VEC], axis=1)
+
+
+def relnav_truth(cfg: Config, f: Flight) -> dict[str, Any]:
+    """The flight's figures against the truth: per leg its outcome and true contact error
+    (horizontal, vertical: the vehicle above the dock point negative) [m], the estimate's error
+    then [m] and the attempts; the true riding offset (3D, horizontal) max and median [m];
+    ``true_deck_touches``: ticks before contact with the vehicle truly within the deck's radius
+    and at or below the contact height over it while out of the contact conditions (its true
+    velocity against the carrier's); P1-P3 and the largest command jump at a phase switch
+    [m/s] from the summary; the go-arounds, the fallback's reason, the marker's time in view [s]."""
+    t, phase, r = f.record.t, f.record.phase, cfg.recovery
+    dock = _vec(f, "x_c_true") + np.asarray(cfg.mission.dock_offset_ned_m, float)
+    x = _vec(f, "x_true")
+    off = x - dock
+    dv = np.gradient(x, t, axis=0) - np.gradient(dock, t, axis=0)
+    est_err = np.linalg.norm(_vec(f, "rel_est") - _vec(f, "rel_true"), axis=1)
+    legs = []
+    for leg in f.state.legs_done:
+        c = leg.get("contact")
+        row: dict[str, Any] = {"leg": leg["leg"], "outcome": leg["outcome"]}
+        if c:
+            k = int(np.argmin(abs(t - c["time_s"])))
+            row.update(contact_horizontal_m=round(float(np.hypot(*off[k, :2])), 4),
+                       contact_vertical_m=round(float(off[k, 2]), 4), estimate_error_m=round(float(est_err[k]), 4),
+                       attempts=c["attempts"])
+        legs.append(row)
+    riding = phase == Phase.RIDING.value
+    ride, ride_h = np.linalg.norm(off[riding], axis=1), np.hypot(off[riding, 0], off[riding, 1])
+    horizontal = np.hypot(off[:, 0], off[:, 1])
+    out_of_contact = ((horizontal > r.contact_radius_m) | (np.hypot(dv[:, 0], dv[:, 1]) > r.contact_max_horizontal_speed_m_s)
+                      | (np.abs(dv[:, 2]) > r.contact_max_vertical_speed_m_s))
+    touches = (np.isin(phase, [p.value for p in BEFORE_CONTACT]) & (off[:, 2] >= -r.contact_height_m)
+               & (horizontal <= r.deck_radius_m) & out_of_contact)
+    seen = _vec(f, "since_marker")[:, 0] <= cfg.relnav.marker_timeout_s
+    s, rec = f.summary, f.state.recovery
+
+    def stat(v: np.ndarray, how) -> float | None:
+        return round(float(how(v)), 4) if v.size else None
+
+    return {"docked": f.docked, "legs": legs, "phase": s.get("phase"), "reason": s.get("reason"),
+            "riding_offset_max_m": stat(ride, np.max), "riding_offset_median_m": stat(ride, np.median),
+            "riding_horizontal_max_m": stat(ride_h, np.max), "riding_horizontal_median_m": stat(ride_h, np.median),
+            "p1": s.get("p1"), "p2": s.get("p2"), "p3": s.get("p3"),
+            "max_phase_switch_jump_m_s": s.get("max_phase_switch_jump_m_s"),
+            "true_deck_touches": int(np.count_nonzero(touches)), "go_arounds": f.go_arounds,
+            "fallback": (rec.fallback_why or None) if rec is not None else None,
+            "marker_in_view_s": round(float(seen.sum() * (t[1] - t[0])), 1) if len(t) > 1 else 0.0,
+            "duration_s": round(float(t[-1]), 1)}

@@ -1,0 +1,75 @@
+"""The descent's relative-navigation gate ([relnav] enabled): a marker lost on the descent holds
+the height above the deck, never on it; a vehicle already meeting the contact conditions docks;
+a go-around forgets when the marker was lost."""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from mission.config.schema import load_config
+from mission.core.docking import gate_point
+from mission.model import mission_model
+from mission.phases import Phase
+from mission.phases.recovery import approach, go_around
+from mission.phases.types import CarrierObs, MissionState, Observation, RecoveryState, RelativeView, VehicleObs
+from tests.conftest import CONFIGS
+
+T = 100.0  # [s] the tick's time
+LOST = RelativeView(position_ned_m=np.zeros(3), bias_ned_m=np.zeros(3), pending_ned_m=np.zeros(3),
+                    position_sigma_m=0.02, converged=True, since_marker_s=2.0)  # marker not seen for 2 s
+
+
+@pytest.fixture(scope="module")
+def model():
+    return mission_model(load_config(CONFIGS / "relnav.toml"))
+
+
+def _at(model, height_m: float, descent: float, lost_s: float | None = None):
+    """The vehicle on the descent, ``height_m`` [m] over the dock point, exactly over it, with
+    the carrier's velocity; the carrier at the origin moving north at 1.5 m/s."""
+    v_c = np.array([1.5, 0.0, 0.0])
+    dock = np.zeros(3) + model.dock_offset_ned_m
+    here = dock + np.array([0.0, 0.0, -height_m])
+    carrier = CarrierObs(position_ned_m=np.zeros(3), velocity_ned_m_s=v_c, age_s=0.0, alive=True, yaw_rad=0.0)
+    vehicle = VehicleObs(position_ned_m=here, velocity_ned_m_s=v_c.copy(), armed=True, mode="OFFBOARD",
+                         heartbeat_age_s=0.0)
+    rec = RecoveryState(started_s=0.0, why="task done", attempts=1, s=1.0, descent=descent, marker_lost_s=lost_s,
+                        carrier_v=v_c.copy(), carrier_t_s=T - 0.1, carrier_seen_s=T)
+    state = MissionState(phase=Phase.APPROACH, since_s=T - 5.0, start_s=0.0, x_ref=here.copy(), u_ref=v_c.copy(),
+                         recovery=rec, separation_time_s=10.0)
+    return state, Observation(t_s=T, vehicle=vehicle, carrier=carrier, relative=LOST), dock
+
+
+def test_a_marker_lost_in_the_last_centimetres_holds_above_the_deck_not_on_it(model):
+    """Lost with the vehicle 0.2 m over the dock point (out of the contact band, descent nearly
+    done): the reference is held at least three contact heights over the deck, not at deck
+    height (on the old code it was held where the descent had got to: on the deck)."""
+    g = model.recovery.geometry
+    state, obs, dock = _at(model, 0.2, descent=0.98)
+    new, dec = approach(state, obs, model)
+    assert new.phase is Phase.APPROACH and new.recovery.marker_lost_s == T
+    held = gate_point(dock, g) + new.recovery.descent * (dock - gate_point(dock, g))
+    assert dock[2] - held[2] >= 3 * g.contact_height_m - 1e-9, held - dock  # over the deck by >= 3 contact heights
+    assert new.recovery.contact is None
+
+
+def test_a_vehicle_meeting_the_contact_conditions_docks_even_with_the_marker_just_lost(model):
+    """Lost with the vehicle already within the contact band over the dock point: it docks (the
+    old code held it there, on the deck, and never checked the contact)."""
+    state, obs, _ = _at(model, 0.05, descent=1.0)
+    new, dec = approach(state, obs, model)
+    assert new.phase is Phase.DOCKED and new.recovery.contact is not None, dec.events
+
+
+def test_a_go_around_forgets_when_the_marker_was_lost(model):
+    """The marker lost on one descent: the go-around resets it, so the next descent's search
+    for the marker starts afresh (on the old code it went around at once on the next loss)."""
+    state, obs, _ = _at(model, 0.4, descent=0.3, lost_s=T - 1.0)
+    new, _ = go_around(state, obs, model, "test")
+    assert new.phase is Phase.GO_AROUND and new.recovery.marker_lost_s is None
+    # the next approach's descent loses the marker again: it holds (a search), no go-around at once
+    later, obs2, _ = _at(model, 0.4, descent=0.3)
+    again, dec = approach(replace(later, recovery=replace(new.recovery, s=1.0, descent=0.3)), obs2, model)
+    assert again.phase is Phase.APPROACH and again.recovery.marker_lost_s == T, dec.events
