@@ -430,7 +430,11 @@ def approach(state, obs, m, events=()):
     goal = gate + descent * (dock - gate)
     goal_v = v_c + ((dock - gate) / g.decision_height_m * r.descent_speed_m_s if descent < 1.0 else 0.0)
     rec = replace(rec, descent=descent)
-    if here.within(g):  # on the deck under the contact conditions (a vehicle ahead of its reference: at once)
+    # on the deck under the contact conditions (a vehicle ahead of its reference: at once); on a deck
+    # the vertical one is also met when PX4's land detector says landed, lined up: its estimate's
+    # height errs by decimetres, so a vehicle on the deck may read itself above it
+    landed = m.deck is not None and v.on_ground and here.horizontally_within(g)
+    if here.within(g) or landed:
         figures = {"horizontal_error_m": round(here.horizontal_error_m, 4),
                    "height_error_m": round(here.height_error_m, 4),
                    "horizontal_relative_speed_m_s": round(here.horizontal_relative_speed_m_s, 4),
@@ -448,8 +452,9 @@ def docked(state, obs, m, events=()):
     rec = _observe_carrier(state.recovery, obs, r, t)
     dock = dock_point(obs, m)
     v_c = obs.carrier.velocity_ned_m_s
-    if float(norm(obs.vehicle.position_ned_m - dock)) > m.dock_tolerance_m:
-        return go_around(replace(state, recovery=rec), obs, m, "lost the dock after contact", events)
+    lost = lost_dock(state, obs, m, dock)
+    if lost is not None:
+        return go_around(replace(state, recovery=rec), obs, m, f"lost the dock after contact: {lost}", events)
     if not state.seated:  # holding contact on the carrier's word: as fresh as on the approach
         unfit = carrier_unfit(obs, r.carrier_max_age_s)
         if unfit is not None:
@@ -472,6 +477,26 @@ def docked(state, obs, m, events=()):
     return _on_dock(state, obs, m, dock, v_c, rec, evs)
 
 
+def lost_dock(state: MissionState, obs: Observation, m: MissionModel, dock: np.ndarray) -> str | None:
+    """Why the vehicle has left the dock point ``dock`` [m] NED after its contact (None: it has
+    not), horizontally and vertically apart: farther than ``mission.dock_tolerance_m`` across;
+    higher or lower than that, except, seated on a deck, lower (pressed, its estimate's height
+    errs by decimetres; :func:`mission.phases.deck.landing` bounds it) or higher while PX4's land
+    detector says landed."""
+    v = obs.vehicle
+    assert v is not None  # the failsafes checked it
+    off = v.position_ned_m - dock
+    across, above = float(np.hypot(off[0], off[1])), -float(off[2])
+    tol = m.dock_tolerance_m
+    if across > tol:
+        return f"{across:.2f} m from the dock point across (mission.dock_tolerance_m = {tol:g})"
+    if state.seated and (above <= tol or v.on_ground):
+        return None
+    if abs(above) > tol:
+        return f"{above:+.2f} m above the dock point (mission.dock_tolerance_m = {tol:g})"
+    return None
+
+
 def _on_dock(state: MissionState, obs: Observation, m: MissionModel, dock: np.ndarray, v_c: np.ndarray,
              rec: RecoveryState | None, events: tuple[str, ...] = (), request: Request | None = None
              ) -> tuple[MissionState, Decision]:
@@ -479,9 +504,14 @@ def _on_dock(state: MissionState, obs: Observation, m: MissionModel, dock: np.nd
     "deck"), pressed into it and disarmed once PX4 has seen it land (:mod:`mission.phases.deck`)."""
     if not state.seated:
         return _fly(state, obs, m, dock, v_c, _model(m).approach, rec, events, request=request)
-    rec = _confirm_contact(rec, obs)
-    new, dec = _fly(state, obs, m, deck.pressed(dock, m), v_c, _model(m).approach, rec, events, request=request)
-    return new, deck.after_landing(obs, dec)
+    confirmed = _confirm_contact(rec, obs)
+    if rec is not None and confirmed is not None and confirmed is not rec and state.legs_done \
+            and state.legs_done[-1]["contact"] is rec.contact:
+        # landed after the leg was done (the dwell counts from the contact): its record says so too
+        state = replace(state, legs_done=(*state.legs_done[:-1], {**state.legs_done[-1], "contact": confirmed.contact}))
+    rec = confirmed
+    new, dec = _fly(state, obs, m, deck.landing(dock, obs, m), v_c, _model(m).approach, rec, events, request=request)
+    return new, deck.after_landing(obs, dec, dock, m)
 
 
 def _confirm_contact(rec: RecoveryState | None, obs: Observation) -> RecoveryState | None:
@@ -552,7 +582,7 @@ def transit(state, obs, m, events=()):
     r, t = _model(m), obs.t_s
     dock = dock_point(obs, m)
     v_c = obs.carrier.velocity_ned_m_s
-    rest = deck.pressed(dock, m) if state.seated else dock
+    rest = deck.landing(dock, obs, m) if state.seated else dock
     if (float(norm(m.tick.target - dock)) >= m.leg_start_m and float(norm(v_c[:2])) <= PARKED_SPEED_M_S
             and float(norm(state.x_ref - rest)) <= 0.05):
         if state.seated:  # on the deck: the next leg rides it (mission.phases.deck.ride)
