@@ -81,3 +81,28 @@ def test_a_vehicle_landed_on_the_deck_that_reads_itself_above_it_has_made_contac
     new, _ = approach(state, seen(model, [0.05, 0.0, -0.8], on_ground=True), model)
     assert new.phase == Phase.DOCKED and new.seated
     assert new.recovery.contact["height_error_m"] == pytest.approx(-0.3)
+
+
+def test_seated_no_setpoint_asks_for_a_climb(model):
+    """PX4's offboard want_takeoff lifts a landed vehicle on a position above its estimate, an
+    upward velocity or an upward acceleration: held down, none is left (the horizontal parts
+    stay), the position no higher than the landing's; a setpoint already pressing is unchanged.
+    After a landing, disarmed, nothing is sent at all."""
+    from mission.core.setpoint import Setpoint
+    from mission.phases.deck import after_landing, held_down
+    from mission.phases.types import Decision
+
+    dock = np.array([0.0, 0.0, -0.5])
+    obs = seen(model, [0.1, 0.0, -0.3])  # reads itself 0.2 m below the deck's plane
+    climbing = Setpoint(np.array([1.5, 0.1, -0.3]), np.array([0.0, 0.0, -0.5]), np.array([0.2, 0.0, -0.4]))
+    held = held_down(climbing, dock, obs, model)
+    assert held.velocity_ned_m_s == pytest.approx([1.5, 0.1, 0.0])
+    assert held.acceleration_ned_m_s2 == pytest.approx([0.2, 0.0, 0.0])
+    assert held.position_ned_m == pytest.approx([0.0, 0.0, -0.2])  # press_m below the reported height
+    pressing = Setpoint(np.array([1.5, 0.0, 0.1]), np.array([0.0, 0.0, -0.1]), np.array([0.0, 0.0, 0.3]))
+    again = held_down(pressing, dock, obs, model)
+    assert again.velocity_ned_m_s == pytest.approx(pressing.velocity_ned_m_s)
+    assert again.position_ned_m == pytest.approx(pressing.position_ned_m)
+    assert after_landing(obs, Decision(setpoint=climbing), dock, model).setpoint.velocity_ned_m_s[2] == 0.0
+    disarmed = seen(model, [0.1, 0.0, -0.3], armed=False)
+    assert after_landing(disarmed, Decision(setpoint=climbing), dock, model).setpoint is None
