@@ -139,10 +139,13 @@ def ride(state: MissionState, obs: Observation, m: MissionModel) -> tuple[Missio
     if state.streaming_since_s is None and not due:
         if v.armed:  # landed, not yet disarmed: press on the deck until PX4 lets it disarm
             return _sit(state, obs, m, landing(dock, obs, m), v_dock, (), prev_dock=dock)
-        # the reference rides the deck; the command filter's last command is the deck's velocity,
-        # so the first setpoint streamed starts from it (tracking's integral starts afresh)
+        # the reference rides the deck; the command filter's last command is the vehicle's velocity
+        # as it reports it (the deck's plus the estimate's error; never up from the deck), so the
+        # first setpoint streamed starts from it (tracking's integral starts afresh)
+        own = np.asarray(v.velocity_ned_m_s, dtype=float).copy()
+        own[2] = max(float(own[2]), float(v_dock[2]))
         state = replace(state, x_ref=dock.copy(), e_ref=ZERO.copy(), prev_dock=dock.copy(), u_ref=v_dock.copy(),
-                        u_cmd=v_dock.copy(), integral=None, accel_lp=None)
+                        u_cmd=own, integral=None, accel_lp=None)
         return state, Decision(setpoint=None, dock=dock)
     events = ()
     since = state.streaming_since_s
