@@ -10,14 +10,14 @@ DOCKED, HOME and FALLBACK (``mission.final_action = "return"``).
                  offset from it moving no more than settle speed x dwell (its positions),
                  the carrier at least recovery.settle_carrier_speed_m_s fast----------------> APPROACH
                (attempts used up: FALLBACK)
-    APPROACH   --glide path flown, vehicle meets the contact conditions---------------> DOCKED
+    APPROACH   --glide path flown, the contact conditions met (a deck: or landed on it)--> DOCKED
                  (on the descent it goes down only lined up, else holds its height)
                --outside the cone; carrier state late or not trusted; carrier accelerating or turning
                  beyond its limits; below the decision height not lined up; the controller
                  stalled (no tick for longer than recovery.carrier_max_age_s)-----------------> GO_AROUND
     GO_AROUND  --climbed to the holdoff height------------------------------------------> HOLDOFF
     DOCKED     --contact held for the dwell--------------------------------------------> HOME
-               --contact lost (beyond the dock tolerance)----------------------------------> GO_AROUND
+               --contact lost (beyond the dock tolerance, across or up: lost_dock)---------> GO_AROUND
     HOME       --the carrier has parked (slower than 0.1 m/s for the dwell)-------------> Hold -> HOLD
     any recovery phase --recovery.timeout_s, or no fresh carrier state for
                  recovery.carrier_lost_s---------------------------------------------------> FALLBACK
@@ -407,7 +407,11 @@ def approach(state, obs, m, events=()):
     # met outside the contact conditions), and goes around
     # once it is off the deck, or out of line for gate_timeout_s. A relative speed that swings
     # over the limit for a moment (PX4: two velocity estimates, a rover's speed loop) pauses it.
-    if not here.horizontally_within(g):
+    # On a deck PX4's land detector saying landed, over the deck by the estimate, is the contact:
+    # the estimate errs by decimetres, so a vehicle on the deck may read itself above it, out of line
+    landed = m.deck is not None and v.on_ground and here.horizontal_error_m <= r.deck_radius_m \
+        and here.horizontal_relative_speed_m_s <= g.contact_max_horizontal_speed_m_s
+    if not here.horizontally_within(g) and not landed:
         out_since = rec.settled_since_s if rec.settled_since_s is not None else t
         if here.horizontal_error_m > r.deck_radius_m or t - out_since > r.gate_timeout_s:
             return go_around(state, obs, m, f"off the deck on the descent ({here.horizontal_error_m:.2f} m, "
@@ -430,11 +434,7 @@ def approach(state, obs, m, events=()):
     goal = gate + descent * (dock - gate)
     goal_v = v_c + ((dock - gate) / g.decision_height_m * r.descent_speed_m_s if descent < 1.0 else 0.0)
     rec = replace(rec, descent=descent)
-    # on the deck under the contact conditions (a vehicle ahead of its reference: at once); on a deck
-    # the vertical one is also met when PX4's land detector says landed, lined up: its estimate's
-    # height errs by decimetres, so a vehicle on the deck may read itself above it
-    landed = m.deck is not None and v.on_ground and here.horizontally_within(g)
-    if here.within(g) or landed:
+    if here.within(g) or landed:  # on the deck under the contact conditions (ahead of its reference: at once)
         figures = {"horizontal_error_m": round(here.horizontal_error_m, 4),
                    "height_error_m": round(here.height_error_m, 4),
                    "horizontal_relative_speed_m_s": round(here.horizontal_relative_speed_m_s, 4),
