@@ -90,7 +90,8 @@ def mission_model(cfg: Config) -> MissionModel:
         recovery=recovery_model(cfg) if m.final_action == "return" else None,
         leg_start_m=tick.law.separation_distance_m + m.leg_start_margin_m,
         deck=derived(DeckRide, m, keep_out_radius_m=m.deck_keep_out_radius_m, slope=m.deck_clear_slope,
-                     clear_height_m=m.deck_clear_height_m) if m.ride == "deck" else None,
+                     clear_height_m=m.deck_clear_height_m, press_floor_m=m.deck_press_floor_m,
+                     radius_m=cfg.recovery.deck_radius_m) if m.ride == "deck" else None,
         relnav=derived(RelnavGates, cfg.relnav, params=cfg.relnav.params()) if cfg.relnav.enabled else None,
     )
     legs = cfg.scenario.legs()

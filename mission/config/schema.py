@@ -238,6 +238,13 @@ class MissionSection(Section):
     deck_keep_out_radius_m: float = Field(
         0.15, gt=0, le=5, description=("[m] with ride = `deck`: the funnel's radius at the deck (see deck_clear_slope): "
                                        "how far the passenger may slide across the deck before it has climbed"))
+    deck_press_floor_m: float = Field(
+        0.5, gt=0, le=5, description=("[m] with ride = `deck`: after a contact the landing presses the reference 0.1 m "
+                                      "below the height the passenger reports (PX4 flies its estimate, whose height errs "
+                                      "by decimetres), only while it reports itself over the deck "
+                                      "(recovery.deck_radius_m), and never deeper than this below the deck's plane: a "
+                                      "few sigma of PX4's vertical estimate error (SITL: 0.3 m); safety.z_max_m, when "
+                                      "shallower, bounds it further"))
     leg_start_margin_m: float = Field(2.0, gt=0, le=1000,
         description=("[m] with several targets: a leg starts (the passenger rides under the law again) once the "
                      "carrier is b c + this from the leg's target (the paper's Assumption 1); nearer, the carrier "

@@ -13,7 +13,8 @@ failsafes (:mod:`mission.phases.machine`) read ``seated``. ::
           keep-out in the safety filter (mission.core.safety.DeckKeepOut) lifts it off before it
           moves sideways --higher than mission.deck_clear_height_m above the deck--> seated ends
         --latch, not armed in OFFBOARD--> ABORT (arming_refused | offboard_refused)
-    DOCKED (contact) --> seated: the reference presses DeckRide.press_m into the deck; once PX4's
+    DOCKED (contact) --> seated: the reference presses DeckRide.press_m below the reported height
+          (over the deck, no deeper than DeckRide.press_floor_m below its plane: :func:`landing`); once PX4's
           land detector says ON_GROUND, DISARM (PX4 refuses it before; on a deck faster than
           LNDMC_XY_VEL_MAX it never says so: the passenger stays armed, pressing, until the carrier
           slows) --> TRANSIT / HOME seated, then RIDING seated (the next leg) or DONE.
@@ -35,6 +36,7 @@ import numpy as np
 
 from mission.core.law import norm
 from mission.core.tick import latch_point, passenger_tick, separation_due
+from mission.core.setpoint import Setpoint
 from mission.flight_mode import FlightMode
 from mission.phases.flying import Tracked, _carrier_acceleration, _track, navigate
 from mission.phases.phase import Phase, Request
@@ -136,11 +138,14 @@ def ride(state: MissionState, obs: Observation, m: MissionModel) -> tuple[Missio
     due = seconds_to_latch(obs, m) <= _deck(m).arm_lead_s
     if state.streaming_since_s is None and not due:
         if v.armed:  # landed, not yet disarmed: press on the deck until PX4 lets it disarm
-            return _sit(state, obs, m, pressed(dock, m), v_dock, (), prev_dock=dock)
-        # the reference rides the deck; the command filter's last command is the deck's velocity,
-        # so the first setpoint streamed starts from it (tracking's integral starts afresh)
+            return _sit(state, obs, m, landing(dock, obs, m), v_dock, (), prev_dock=dock)
+        # the reference rides the deck; the command filter's last command is the vehicle's velocity
+        # as it reports it (the deck's plus the estimate's error; never up from the deck), so the
+        # first setpoint streamed starts from it (tracking's integral starts afresh)
+        own = np.asarray(v.velocity_ned_m_s, dtype=float).copy()
+        own[2] = max(float(own[2]), float(v_dock[2]))
         state = replace(state, x_ref=dock.copy(), e_ref=ZERO.copy(), prev_dock=dock.copy(), u_ref=v_dock.copy(),
-                        u_cmd=v_dock.copy(), integral=None, accel_lp=None)
+                        u_cmd=own, integral=None, accel_lp=None)
         return state, Decision(setpoint=None, dock=dock)
     events = ()
     since = state.streaming_since_s
@@ -151,6 +156,8 @@ def ride(state: MissionState, obs: Observation, m: MissionModel) -> tuple[Missio
     tick = passenger_tick(dock, v_dock, ZERO, False, m.tick, state.u_ref, m.dt_s)
     a_ref = _carrier_acceleration(obs, m) if m.tracking.kind == "full" else ZERO
     tr = _track(state, obs, m, dock, tick.u, a_ref)
+    # before the latch: no take-off (armed or not as far as we know: PX4 arms before its HEARTBEAT says so)
+    tr = replace(tr, setpoint=held_down(tr.setpoint, dock, obs, m))
     request = None
     if t - since >= m.prestream_s:
         request = Request.ARM if not v.armed else (Request.OFFBOARD if v.mode != FlightMode.OFFBOARD else None)
@@ -176,6 +183,7 @@ def _sit(state: MissionState, obs: Observation, m: MissionModel, x_ref: np.ndarr
         return replace(state, prev_dock=prev_dock if prev_dock is not None else state.prev_dock), Decision(
             setpoint=None, dock=dock_point(obs, m), events=events)
     tr = _track(state, obs, m, x_ref, np.asarray(u_ref, dtype=float), ZERO)
+    tr = replace(tr, setpoint=held_down(tr.setpoint, dock_point(obs, m), obs, m))
     new = replace(state, x_ref=np.asarray(x_ref, dtype=float).copy(), u_ref=np.asarray(u_ref, dtype=float).copy(),
                   prev_dock=prev_dock if prev_dock is not None else state.prev_dock, **_kept(tr))
     return new, tr.decision(request=Request.DISARM if v.on_ground and may_disarm else None, dock=dock_point(obs, m),
@@ -187,14 +195,49 @@ def pressed(dock: np.ndarray, m: MissionModel) -> np.ndarray:
     return dock + np.array([0.0, 0.0, _deck(m).press_m])
 
 
-def after_landing(obs: Observation, decision: Decision) -> Decision:
-    """A seated phase's decision after a landing: nothing sent once PX4 disarmed; DISARM asked
-    (PX4 accepts it only once its land detector says landed) while armed and ON_GROUND."""
+def held_down(sp: Setpoint, dock: np.ndarray, obs: Observation, m: MissionModel) -> Setpoint:
+    """``sp`` asking the vehicle seated on the deck at ``dock`` [m] NED for no take-off: PX4's
+    offboard ``want_takeoff`` lifts a landed vehicle on a position above its estimate, an upward
+    velocity or an upward acceleration, so no vertical velocity or acceleration points up (NED:
+    none negative) and the position is at least as low as :func:`landing`'s (``press_m`` below the
+    reported height, never deeper than ``press_floor_m`` below the deck's plane)."""
+    vel = sp.velocity_ned_m_s.copy()
+    vel[2] = max(float(vel[2]), 0.0)
+    pos, acc = sp.position_ned_m, sp.acceleration_ned_m_s2
+    if pos is not None and acc is not None:
+        pos, acc = pos.copy(), acc.copy()
+        pos[2] = max(float(pos[2]), float(landing(dock, obs, m)[2]))
+        acc[2] = max(float(acc[2]), 0.0)
+    return replace(sp, velocity_ned_m_s=vel, position_ned_m=pos, acceleration_ned_m_s2=acc)
+
+
+def landing(dock: np.ndarray, obs: Observation, m: MissionModel) -> np.ndarray:
+    """Where the reference sits on the deck at ``dock`` [m] NED after a contact. PX4 flies its
+    estimate, whose height errs by decimetres, and its offboard take-off reads that estimate: a
+    reference pressed below the deck's plane leaves the vehicle hovering over the deck when the
+    estimate reads it low, and lifts it off again once landed when it reads it high. So, armed and
+    reporting itself over the deck (within ``radius_m`` of the dock point horizontally), the
+    reference is ``press_m`` below the height it reports (a steady push down until it touches, then
+    held down), never deeper than ``press_floor_m`` below the deck's plane; horizontally on the
+    dock point. Otherwise (disarmed, or off the deck by its report) :func:`pressed`."""
+    d, v = _deck(m), obs.vehicle
+    at = pressed(dock, m)
+    if v is None or not v.armed or float(np.hypot(*(v.position_ned_m[:2] - dock[:2]))) > d.radius_m:
+        return at
+    return np.array([at[0], at[1], min(float(v.position_ned_m[2]) + d.press_m, float(dock[2]) + d.press_floor_m)])
+
+
+def after_landing(obs: Observation, decision: Decision, dock: np.ndarray, m: MissionModel) -> Decision:
+    """A seated phase's decision after a landing on the deck at ``dock`` [m] NED: nothing sent once
+    PX4 disarmed; while armed the setpoint :func:`held_down` (never a climb), and DISARM asked (PX4
+    accepts it only once its land detector says landed) while ON_GROUND."""
     v = obs.vehicle
     if v is None:
         return decision
     if not v.armed:
         return replace(decision, setpoint=None, request=None)
+    if decision.setpoint is not None:
+        decision = replace(decision, setpoint=held_down(decision.setpoint, dock, obs, m))
     if v.on_ground and decision.request is None:
         return replace(decision, request=Request.DISARM)
     return decision

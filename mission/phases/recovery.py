@@ -10,14 +10,14 @@ DOCKED, HOME and FALLBACK (``mission.final_action = "return"``).
                  offset from it moving no more than settle speed x dwell (its positions),
                  the carrier at least recovery.settle_carrier_speed_m_s fast----------------> APPROACH
                (attempts used up: FALLBACK)
-    APPROACH   --glide path flown, vehicle meets the contact conditions---------------> DOCKED
+    APPROACH   --glide path flown, the contact conditions met (a deck: or landed on it)--> DOCKED
                  (on the descent it goes down only lined up, else holds its height)
                --outside the cone; carrier state late or not trusted; carrier accelerating or turning
                  beyond its limits; below the decision height not lined up; the controller
                  stalled (no tick for longer than recovery.carrier_max_age_s)-----------------> GO_AROUND
     GO_AROUND  --climbed to the holdoff height------------------------------------------> HOLDOFF
     DOCKED     --contact held for the dwell--------------------------------------------> HOME
-               --contact lost (beyond the dock tolerance)----------------------------------> GO_AROUND
+               --contact lost (beyond the dock tolerance, across or up: lost_dock)---------> GO_AROUND
     HOME       --the carrier has parked (slower than 0.1 m/s for the dwell)-------------> Hold -> HOLD
     any recovery phase --recovery.timeout_s, or no fresh carrier state for
                  recovery.carrier_lost_s---------------------------------------------------> FALLBACK
@@ -407,7 +407,11 @@ def approach(state, obs, m, events=()):
     # met outside the contact conditions), and goes around
     # once it is off the deck, or out of line for gate_timeout_s. A relative speed that swings
     # over the limit for a moment (PX4: two velocity estimates, a rover's speed loop) pauses it.
-    if not here.horizontally_within(g):
+    # On a deck PX4's land detector saying landed, over the deck by the estimate, is the contact:
+    # the estimate errs by decimetres, so a vehicle on the deck may read itself above it, out of line
+    landed = m.deck is not None and v.on_ground and here.horizontal_error_m <= r.deck_radius_m \
+        and here.horizontal_relative_speed_m_s <= g.contact_max_horizontal_speed_m_s
+    if not here.horizontally_within(g) and not landed:
         out_since = rec.settled_since_s if rec.settled_since_s is not None else t
         if here.horizontal_error_m > r.deck_radius_m or t - out_since > r.gate_timeout_s:
             return go_around(state, obs, m, f"off the deck on the descent ({here.horizontal_error_m:.2f} m, "
@@ -434,7 +438,7 @@ def approach(state, obs, m, events=()):
     goal = gate + descent * (dock - gate)
     goal_v = v_c + ((dock - gate) / g.decision_height_m * r.descent_speed_m_s if descent < 1.0 else 0.0)
     rec = replace(rec, descent=descent)
-    if here.within(g):  # on the deck under the contact conditions (a vehicle ahead of its reference: at once)
+    if here.within(g) or landed:  # on the deck under the contact conditions (ahead of its reference: at once)
         figures = {"horizontal_error_m": round(here.horizontal_error_m, 4),
                    "height_error_m": round(here.height_error_m, 4),
                    "horizontal_relative_speed_m_s": round(here.horizontal_relative_speed_m_s, 4),
@@ -452,8 +456,9 @@ def docked(state, obs, m, events=()):
     rec = _observe_carrier(state.recovery, obs, r, t)
     dock = dock_point(obs, m)
     v_c = obs.carrier.velocity_ned_m_s
-    if float(norm(obs.vehicle.position_ned_m - dock)) > m.dock_tolerance_m:
-        return go_around(replace(state, recovery=rec), obs, m, "lost the dock after contact", events)
+    lost = lost_dock(state, obs, m, dock)
+    if lost is not None:
+        return go_around(replace(state, recovery=rec), obs, m, f"lost the dock after contact: {lost}", events)
     if not state.seated:  # holding contact on the carrier's word: as fresh as on the approach
         unfit = carrier_unfit(obs, r.carrier_max_age_s)
         if unfit is not None:
@@ -476,6 +481,26 @@ def docked(state, obs, m, events=()):
     return _on_dock(state, obs, m, dock, v_c, rec, evs)
 
 
+def lost_dock(state: MissionState, obs: Observation, m: MissionModel, dock: np.ndarray) -> str | None:
+    """Why the vehicle has left the dock point ``dock`` [m] NED after its contact (None: it has
+    not), horizontally and vertically apart: farther than ``mission.dock_tolerance_m`` across;
+    higher or lower than that, except, seated on a deck, lower (pressed, its estimate's height
+    errs by decimetres; :func:`mission.phases.deck.landing` bounds it) or higher while PX4's land
+    detector says landed."""
+    v = obs.vehicle
+    assert v is not None  # the failsafes checked it
+    off = v.position_ned_m - dock
+    across, above = float(np.hypot(off[0], off[1])), -float(off[2])
+    tol = m.dock_tolerance_m
+    if across > tol:
+        return f"{across:.2f} m from the dock point across (mission.dock_tolerance_m = {tol:g})"
+    if state.seated and (above <= tol or v.on_ground):
+        return None
+    if abs(above) > tol:
+        return f"{above:+.2f} m above the dock point (mission.dock_tolerance_m = {tol:g})"
+    return None
+
+
 def _on_dock(state: MissionState, obs: Observation, m: MissionModel, dock: np.ndarray, v_c: np.ndarray,
              rec: RecoveryState | None, events: tuple[str, ...] = (), request: Request | None = None
              ) -> tuple[MissionState, Decision]:
@@ -483,9 +508,14 @@ def _on_dock(state: MissionState, obs: Observation, m: MissionModel, dock: np.nd
     "deck"), pressed into it and disarmed once PX4 has seen it land (:mod:`mission.phases.deck`)."""
     if not state.seated:
         return _fly(state, obs, m, dock, v_c, _model(m).approach, rec, events, request=request)
-    rec = _confirm_contact(rec, obs)
-    new, dec = _fly(state, obs, m, deck.pressed(dock, m), v_c, _model(m).approach, rec, events, request=request)
-    return new, deck.after_landing(obs, dec)
+    confirmed = _confirm_contact(rec, obs)
+    if rec is not None and confirmed is not None and confirmed is not rec and state.legs_done \
+            and state.legs_done[-1]["contact"] is rec.contact:
+        # landed after the leg was done (the dwell counts from the contact): its record says so too
+        state = replace(state, legs_done=(*state.legs_done[:-1], {**state.legs_done[-1], "contact": confirmed.contact}))
+    rec = confirmed
+    new, dec = _fly(state, obs, m, deck.landing(dock, obs, m), v_c, _model(m).approach, rec, events, request=request)
+    return new, deck.after_landing(obs, dec, dock, m)
 
 
 def _confirm_contact(rec: RecoveryState | None, obs: Observation) -> RecoveryState | None:
@@ -556,7 +586,7 @@ def transit(state, obs, m, events=()):
     r, t = _model(m), obs.t_s
     dock = dock_point(obs, m)
     v_c = obs.carrier.velocity_ned_m_s
-    rest = deck.pressed(dock, m) if state.seated else dock
+    rest = deck.landing(dock, obs, m) if state.seated else dock
     if (float(norm(m.tick.target - dock)) >= m.leg_start_m and float(norm(v_c[:2])) <= PARKED_SPEED_M_S
             and float(norm(state.x_ref - rest)) <= 0.05):
         if state.seated:  # on the deck: the next leg rides it (mission.phases.deck.ride)

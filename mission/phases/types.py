@@ -205,13 +205,18 @@ class DeckRide:
     the deck. ``arm_lead_s`` [s]: streaming, arming and OFFBOARD begin this long before the
     predicted separation; the keep-out round the deck (:class:`mission.core.safety.DeckKeepOut`):
     ``keep_out_radius_m`` [m], ``slope`` [-], ``clear_height_m`` [m]; ``press_m`` [m]: how far
-    below the deck's plane the landing presses the reference (so the vehicle settles on it)."""
+    below the vehicle's reported height (or, disarmed, the deck's plane) the landing presses the
+    reference (so the vehicle settles on it); ``press_floor_m`` [m]: never deeper than this below
+    the deck's plane; ``radius_m`` [m]: the deck's radius round the dock point (only over it does
+    the landing press below the reported height)."""
 
     arm_lead_s: float
     keep_out_radius_m: float
     slope: float
     clear_height_m: float
     press_m: float = 0.1
+    press_floor_m: float = 0.5
+    radius_m: float = 0.5
 
     def keep_out(self, obs: Observation, m: MissionModel) -> DeckKeepOut | None:
         """The deck's keep-out now (None without a carrier state)."""

@@ -6,8 +6,11 @@ step, up to that wake, with the streams, faults and commands of every step. Each
 go out as one datagram per link, ``SYSTEM_TIME`` first and the barrier last (a step is one
 instant of simulated time). The clock messages bypass the link faults and the counters.
 
-Before any controller answered, the vehicle says hello (HEARTBEAT + barrier, no faults) every
-:data:`HELLO_WALL_S`. A controller that leaves (``wake < 0``) or stays silent for the watchdog
+Before any controller answered, the vehicle says hello (HEARTBEAT + barrier, no faults) at
+once and then every :data:`HELLO_WALL_S`; the streams of that first step (t = 0) go to no one
+(their schedule moves on as if sent), so a controller bound before the vehicle's first datagram
+and one bound after it start from the same first samples (a race on the wall clock otherwise:
+with the estimate's errors the first position differs). A controller that leaves (``wake < 0``) or stays silent for the watchdog
 ends the lockstep: the vehicle goes on in real time (a killed controller is offboard loss, as
 in PX4).
 """
@@ -75,8 +78,13 @@ class LockstepStepper:
                 if ahead_s > 0 and v._stop_event.wait(ahead_s):
                     return
             with v._lock:
-                v._service_step()
+                if joined:
+                    v._service_step()
+                else:  # nobody listens for sure before the first answer: step 0's streams go to no one
+                    v._schedule.skip(v._links, v._t_s)
                 self._barrier_ns, self._answer = self.t_ns, None
+                if not joined:
+                    self._hello(onboard)
                 self.send_control(onboard, mavlink.MAVLink_timesync_message(0, self.t_ns))
                 v._io.flush()
             answer = self._wait_answer(onboard, joined)
@@ -107,8 +115,7 @@ class LockstepStepper:
             now = time.monotonic()
             if not joined and now - called > HELLO_WALL_S:  # nobody answered yet: hello again
                 with v._lock:  # (time has not started: no link faults yet, or latency would hold it forever)
-                    heartbeat = tel.build("HEARTBEAT", v._telemetry_state(), v._geo, v._noise)
-                    self.send_control(onboard, heartbeat)
+                    self._hello(onboard)
                     self.send_control(onboard, mavlink.MAVLink_timesync_message(0, self.t_ns))
                     v._io.flush()
                 called = now
@@ -117,6 +124,12 @@ class LockstepStepper:
                             "gone, going on in real time at speed %g", v._t_s, self.watchdog_wall_s, v.options.speed)
                 return None
         return None
+
+    def _hello(self, onboard: VehicleLink) -> None:
+        """A HEARTBEAT outside the streams and the faults, so a controller that has not answered yet
+        can adopt the vehicle."""
+        v = self.v
+        self.send_control(onboard, tel.build("HEARTBEAT", v._telemetry_state(), v._geo, v._noise))
 
     @property
     def t_ns(self) -> int:

@@ -53,6 +53,11 @@ class StreamSchedule:
                 if stream.next_due_s <= t_s:
                     stream.next_due_s = t_s + stream.period_s
 
+    def skip(self, links: Iterable[Named], t_s: float) -> None:
+        """Move the streams due at ``t_s`` on to their next due time, sending nothing."""
+        for _ in self.due(links, t_s):
+            pass
+
     def next_due_s(self, links: Iterable[Named]) -> float:
         """Earliest due time [s] of any running stream of ``links`` (inf: none runs)."""
         return min((s.next_due_s for link in links for s in self._streams[link.name].values() if s.period_s > 0),

@@ -24,11 +24,46 @@ CYCLE = CONFIGS / "cycle.toml"
 @pytest.fixture(scope="module")
 def cycle_flight(tmp_path_factory):
     root = tmp_path_factory.mktemp("cycle")
-    # an exact estimate: cycle.toml's own tracking terms (no velocity-bias terms) do not hold the dock
-    # point on PX4's estimate errors (seed 0: three go-arounds off the 0.3 m cone, then the fallback)
+    # an exact estimate: the figures below are the exact estimate's (contact within 0.10 m, riding
+    # within 0.1 m of the deck point, every take-off jump <= 0.05 m/s); the flight on PX4's errors is
+    # `errors_flight` (docs/mock-vehicle.md, "The cycle on the errors")
     cmd = [sys.executable, "-m", "mission.cli", "demo", "--config", str(CYCLE), "--log-root", str(root / "logs"),
            "--plot", "", "--timeout", "200", "--estimate-error", "0"]
     return root / "logs" / "pair0", subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+
+
+@pytest.fixture(scope="module")
+def errors_flight(tmp_path_factory):
+    """The cycle on the mock's default estimate (PX4 SITL's errors, seed 0)."""
+    root = tmp_path_factory.mktemp("cycle-errors")
+    cmd = [sys.executable, "-m", "mission.cli", "demo", "--config", str(CYCLE), "--log-root", str(root / "logs"),
+           "--plot", "", "--timeout", "200"]
+    return root / "logs" / "pair0", subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+
+
+def test_on_px4s_estimate_errors_every_leg_docks_at_once_and_lands(errors_flight):
+    """PX4's errors (the vehicle's height errs by decimetres): each leg docks at the first approach,
+    its landing confirmed by PX4's land detector, every touchdown on the deck (the world's truth:
+    the mock's deck, no crash), P1-P3. Measured on seed 0 (docs/mock-vehicle.md): the contacts
+    0.086/0.120 m off by the estimate (within the 0.15 m contact radius that docking asks), the
+    touchdowns 0.395, 0.403, 0.099 m from the deck's centre (radius 0.5 m), the phase switches'
+    jumps <= 0.04 m/s but the first separation's 0.21 m/s (the tracking's climb at the latch
+    towards a deck the estimate reads 0.1-0.2 m above it; held down before), so that one is held
+    to 0.25 here and to 0.05 on the exact estimate."""
+    log, out = errors_flight
+    assert out.returncode == 0, out.stdout + out.stderr
+    cfg = load_config(CYCLE)
+    s = json.loads((log / "summary.json").read_text())
+    assert s["phase"] == "DONE" and s["p1"] and s["p2"] and s["p3"], s
+    for leg in s["legs"]:
+        c = leg["contact"]
+        assert c["attempts"] == 1 and c["horizontal_error_m"] <= cfg.recovery.contact_radius_m, leg
+        assert "confirmed_s" in c, leg  # PX4 said ON_GROUND: it landed on the deck
+        assert leg["deck_violations"] == 0 and leg["relative_input_jump_m_s"] <= 0.25, leg
+    assert s["max_phase_switch_jump_m_s"] <= 0.25
+    deck = json.loads((log / "vehicle.json").read_text())["deck"]
+    assert deck["crash"] is None and deck["on_deck"], deck
+    assert all(t["horizontal_error_m"] <= cfg.recovery.deck_radius_m for t in deck["touchdowns"]), deck
 
 
 def test_every_leg_holds_the_paper_and_docks(cycle_flight):

@@ -52,6 +52,24 @@ def test_heartbeat_rate_is_1hz_simulated(probe: Probe) -> None:
         assert probe.count_between("HEARTBEAT", 0.5, 6.5) == 6
 
 
+def test_in_lockstep_nothing_but_the_hello_comes_before_the_first_answer(probe: Probe) -> None:
+    """A controller bound before the vehicle's first datagram and one bound after it must start
+    from the same samples: before any answer only the hello (HEARTBEAT, the barrier at t = 0) is
+    sent, step 0's streams go to no one. (They went out with the first barrier, so a controller up
+    in time read a first position that a later one never saw: with the estimate's errors two
+    lockstep demos of one seed differed from their first row.) The first position comes after
+    the first answer, stamped one physics step or more later."""
+    with vehicle_for(probe, lockstep=True):
+        clock = Lockstep(probe)
+        assert clock.barrier() == 0
+        before = {kind for kind in ("HEARTBEAT", "TIMESYNC", "LOCAL_POSITION_NED", "ATTITUDE", "SYSTEM_TIME")
+                  if probe.messages(kind)}
+        assert before == {"HEARTBEAT", "TIMESYNC"}, before
+        clock.run_for(0.04, lambda: None, period_s=0.02)
+        first = probe.messages("LOCAL_POSITION_NED")
+        assert first and first[0].time_boot_ms >= 4, first[:1]
+
+
 def test_offboard_rejected_without_setpoint_stream(probe: Probe) -> None:
     with vehicle_for(probe, paced=True) as v:
         connect(probe)

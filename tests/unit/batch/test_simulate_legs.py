@@ -46,7 +46,9 @@ def cycle(hover_file):
 def test_simulate_flies_every_leg_of_the_cycle(hover_file, tmp_path, capsys):
     """configs/cycle.toml: both legs separate at b c with no jump, reach their target, dock at the
     first attempt within 0.10 m; the table has a column per leg; each leg's figure is drawn."""
-    # an exact estimate: cycle.toml's own tracking terms go around on PX4's errors (docs/mock-vehicle.md)
+    # an exact estimate: a contact within 0.10 m is the exact estimate's figure; on PX4's errors the
+    # estimate's contact is within the 0.15 m contact radius (seeds 0-5: 0.020-0.146 m; seed 0 leg 2
+    # 0.131 m) and the truth's 0.17-0.30 m off (seeds 0-1; docs/mock-vehicle.md)
     code = main(["simulate", str(hover_file), "--plot", str(tmp_path / "cycle.png"), "--no-progress", *EXACT])
     out, err = capsys.readouterr()
     assert code == 0, out + err
@@ -65,7 +67,7 @@ def test_simulate_flies_every_leg_of_the_cycle(hover_file, tmp_path, capsys):
 
 
 def test_simulate_json_has_the_legs(hover_file, capsys):
-    code = main(["simulate", str(hover_file), "--json", *EXACT])  # cycle.toml's terms: as above
+    code = main(["simulate", str(hover_file), "--json"])  # the mock's default estimate: PX4 SITL's errors, seed 0
     summary = json.loads(capsys.readouterr().out)
     assert code == 0 and [leg["leg"] for leg in summary["legs"]] == [0, 1]
     assert summary["phase"] == "DONE" and all(leg["p1"] and leg["p2"] and leg["p3"] for leg in summary["legs"])
