@@ -101,18 +101,22 @@ class ZenohRelay:
     ``alive_watchdog_wall_s`` while ``alive()`` (the carrier's liveliness token) is True, and not at
     all once it is False; then it drops the carrier until it answers again (a restarted carrier
     rejoins at a later barrier). Once joined it calls again every :data:`RESEND_WALL_S` while
-    unanswered, and gives up a state sample a ready names after :data:`LOST_WALL_S` and
-    :data:`LOST_AFTER_REPEATS` readies naming it. :attr:`dropped` counts the drops,
-    :attr:`missed` the samples given up.
+    unanswered, and gives up a state sample a ready names after ``lost_wall_s`` (default
+    :data:`LOST_WALL_S`) and :data:`LOST_AFTER_REPEATS` readies naming it (the calls then repeated
+    every ``lost_wall_s / LOST_AFTER_REPEATS`` if that is shorter). :attr:`dropped` counts the
+    drops, :attr:`missed` the samples given up.
     """
 
     def __init__(self, session: zenoh.Session, keys: tuple[str, str], feed: Any, publisher: Any, *,
                  alive: Callable[[], bool | None] | None = None,
                  watchdog_wall_s: float = CARRIER_WATCHDOG_WALL_S,
                  alive_watchdog_wall_s: float = ALIVE_CARRIER_WATCHDOG_WALL_S,
-                 join_wall_s: float = 30.0, name: str = "carrier", auth: BusAuth | None = None) -> None:
+                 join_wall_s: float = 30.0, name: str = "carrier", auth: BusAuth | None = None,
+                 lost_wall_s: float = LOST_WALL_S) -> None:
         time_key, ready_key = keys
         self.watchdog_wall_s, self.join_wall_s, self.name = watchdog_wall_s, join_wall_s, name
+        self.lost_wall_s = lost_wall_s
+        self._resend_wall_s = min(RESEND_WALL_S, lost_wall_s / LOST_AFTER_REPEATS)
         self.alive_watchdog_wall_s = max(alive_watchdog_wall_s, watchdog_wall_s)
         self._alive = alive
         self._publisher = publisher  # PassengerPublisher: last_seq
@@ -189,7 +193,7 @@ class ZenohRelay:
                 if self._closed:
                     return
                 now = time.monotonic()
-                if (self._ready is not None and self._ready[0] >= t_ns and now - start > LOST_WALL_S
+                if (self._ready is not None and self._ready[0] >= t_ns and now - start > self.lost_wall_s
                         and self._step_readies >= LOST_AFTER_REPEATS):
                     self.missed += 1
                     log.warning("lockstep: the %s's state sample %d never came (step t = %.3f s, %d readies in "
@@ -211,7 +215,7 @@ class ZenohRelay:
                     log.warning("lockstep: the %s has not finished step t = %.3f s after %.1f s (wall), but its "
                                 "liveliness token is present: waiting up to %.1f s", self.name, t_ns / 1e9,
                                 now - start, limit)
-                if now - last_put > (HELLO_WALL_S if self._state == "joining" else RESEND_WALL_S):
+                if now - last_put > (HELLO_WALL_S if self._state == "joining" else self._resend_wall_s):
                     self._cv.release()
                     try:
                         sent = self._call(call)

@@ -15,7 +15,7 @@ import click
 from mission.bus.auth import bus_auth, unsigned_warning
 from mission.bus.bridge import CarrierFeed, PassengerPublisher, open_session, zenoh_config
 from mission.bus.session import close_session, congestion_for
-from mission.time.clock import Clock, LockstepClock, ScaledClock
+from mission.time.clock import LOST_WALL_S, Clock, LockstepClock, ScaledClock
 from mission.config.required import RUN_FIELDS, require_stated
 from mission.config.schema import Config, load_config, with_overrides
 from mission.cli.subcommands import SENSORS_GROUP, entry_points, load
@@ -79,11 +79,14 @@ class MissionIO(NamedTuple):
 
 
 @contextmanager
-def mission_io(cfg: Config, clock: Clock, tlog_path: str | Path | None = None) -> Iterator[MissionIO]:
+def mission_io(cfg: Config, clock: Clock, tlog_path: str | Path | None = None, *,
+               lockstep_lost_wall_s: float = LOST_WALL_S) -> Iterator[MissionIO]:
     """Open what a mission talks through, per ``cfg``: the Zenoh session with the carrier feed,
     the passenger publisher and the measurement feeds ``mission.feeds`` names
     (:func:`feed_openers`), and the MAVLink link (opened, signing per
-    ``mavlink.signing_key_file``). Everything is closed in reverse order on exit."""
+    ``mavlink.signing_key_file``); with a :class:`LockstepClock`, the carrier's lockstep relay
+    (a state sample it names that never comes given up after ``lockstep_lost_wall_s`` [s, wall],
+    :class:`~mission.bus.lockstep.ZenohRelay`). Everything is closed in reverse order on exit."""
     openers = feed_openers(cfg)
     key = read_signing_key(cfg.mavlink.signing_key_file) if cfg.mavlink.signing_key_file else None
     auth = bus_auth(cfg.zenoh)
@@ -122,7 +125,7 @@ def mission_io(cfg: Config, clock: Clock, tlog_path: str | Path | None = None) -
             from mission.bus.lockstep import ZenohRelay, clock_keys
 
             relay = ZenohRelay(session, clock_keys(cfg.zenoh.pair), feed, publisher, alive=lambda: feed.alive,
-                               auth=auth)
+                               auth=auth, lost_wall_s=lockstep_lost_wall_s)
             stack.callback(relay.close)
             clock.downstream = relay
             stack.callback(clock.close)  # before the link closes: its threads wait on the clock
@@ -160,7 +163,7 @@ def flight_data(cfg: Config, directory: Path, info: dict[str, Any], clock: Clock
 
 def fly(cfg: Config, *, speed: float = 1.0, log_dir: str | Path | None = None, stop: threading.Event | None = None,
         on_event=None, on_start=None, clock: Clock | None = None, live: LiveAddress | None = None,
-        log_epoch_ns: int | None = None) -> MissionOutcome:
+        log_epoch_ns: int | None = None, lockstep_lost_wall_s: float = LOST_WALL_S) -> MissionOutcome:
     """Fly one mission with ``cfg`` (the library entry point of ``marsupial run``).
 
     Opens the Zenoh session and the MAVLink link (:func:`mission_io`), runs
@@ -170,7 +173,9 @@ def fly(cfg: Config, *, speed: float = 1.0, log_dir: str | Path | None = None, s
     ``clock`` replaces the scaled clock, e.g. a :class:`LockstepClock` (made in the calling
     thread) that steps on the mock vehicle's simulated time. The flight log gets ``flight.mcap``
     beside ``record.csv``; ``live``: also serve it to Foxglove on that address; ``log_epoch_ns``:
-    the epoch of its log times (default: the wall clock at the clock's zero).
+    the epoch of its log times (default: the wall clock at the clock's zero);
+    ``lockstep_lost_wall_s``: in lockstep, how long [s, wall] a carrier state sample named but
+    never received is waited for (:func:`mission_io`).
     """
     check_config(cfg)
     clock = clock or ScaledClock(speed)
@@ -179,7 +184,8 @@ def fly(cfg: Config, *, speed: float = 1.0, log_dir: str | Path | None = None, s
     sinks = flight_data(cfg, directory, info, clock, live, log_epoch_ns)
     try:
         recorder = FlightRecorder(directory, info, sinks)
-        with mission_io(cfg, clock, recorder.tlog_path) as (feed, publisher, link, sources):
+        io = mission_io(cfg, clock, recorder.tlog_path, lockstep_lost_wall_s=lockstep_lost_wall_s)
+        with io as (feed, publisher, link, sources):
             controller = MissionController(cfg, link, feed, clock, publisher=publisher, recorder=recorder,
                                            on_event=on_event, stop=stop, sources=sources)
             if on_start is not None:
@@ -212,6 +218,10 @@ def exit_code(outcome: MissionOutcome) -> int:
 @click.option("--lockstep", is_flag=True, help="Simulation only: step on the mock vehicle's simulated time (its "
               "--lockstep) and bring the carrier simulator (--lockstep) along; --speed is then the pace after a "
               "participant is lost.")
+@click.option("--lockstep-lost-wall", "lockstep_lost_wall_s", type=click.FloatRange(min=0.05), default=LOST_WALL_S,
+              show_default=True, metavar="S", help="Simulation only, with --lockstep: a carrier state sample the "
+              "carrier's step names but that never reaches the mission (lost in an outage, or refused) is given up "
+              "after S wall seconds and 3 calls (a test of a refused carrier flies faster with less).")
 @click.option("--log-dir", type=click.Path(file_okay=False), help="Where to write the flight log (default mission.log_dir/<time>-<pair>).")
 @click.option("--signing-key", "signing_key_file", type=click.Path(dir_okay=False),
               help="MAVLink 2 signing key file, 64 hex digits or 32 raw bytes (overrides mavlink.signing_key_file): "
@@ -235,7 +245,7 @@ def exit_code(outcome: MissionOutcome) -> int:
 def run(config: str, mavlink_url: str | None, zenoh_listen: tuple[str, ...], zenoh_connect: tuple[str, ...],
         zenoh_mode: str | None, pair: str | None, speed: float, lockstep: bool, log_dir: str | None,
         signing_key_file: str | None, bus_key_file: str | None, own_key_file: str | None, peer_key_file: str | None,
-        as_json: bool, live: str | None, log_epoch_ns: int | None) -> int:
+        as_json: bool, live: str | None, log_epoch_ns: int | None, lockstep_lost_wall_s: float) -> int:
     """Fly the marsupial mission described by CONFIG on a PX4 vehicle.
 
     The passenger takes off from the carrier, joins the dock point, rides while the carrier
@@ -294,7 +304,7 @@ def run(config: str, mavlink_url: str | None, zenoh_listen: tuple[str, ...], zen
     try:
         clock: Clock = LockstepClock(speed=speed, name="mission-lockstep") if lockstep else ScaledClock(speed)
         outcome = fly(cfg, speed=speed, log_dir=log_dir, stop=stop, on_event=on_event, on_start=on_start, clock=clock,
-                      live=live_address, log_epoch_ns=log_epoch_ns)
+                      live=live_address, log_epoch_ns=log_epoch_ns, lockstep_lost_wall_s=lockstep_lost_wall_s)
     finally:
         if seen.get("reporter") is not None:
             seen["reporter"].stop()

@@ -36,8 +36,14 @@ from tests.faults.test_matrix import assert_never_disarmed_in_the_air, concurren
 from tests.support.zenoh_util import wait_for
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(240)]
+# A class per test: `--dist loadscope` schedules a class as its own unit, so the flights spread over the workers.
 
 AHEAD_US = 50_000_000  # the insider's counter: 50 s ahead of the real carrier's
+# Once the signer is refused for good, every real carrier state is refused too: the mission's lockstep
+# relay never sees the sample each carrier step names and gives it up after `run --lockstep-lost-wall`
+# (2 s of wall by default: ~45 steps, 90 s, between the contest and the mission's end). 0.3 s flies the
+# same simulated flight (the relay goes on without the sample either way), ~80 s sooner.
+LOST_WALL = ("--lockstep-lost-wall", "0.3")
 
 
 class Insider:
@@ -72,7 +78,8 @@ def _shared_key_insider(tmp_path: Path) -> None:
     key.write_text(KEY.hex())
     signed = ("--zenoh-signing-key", str(key))
     insider = Insider(lambda sid: Signer(pair_key(KEY, "pair0"), signer=sid), TRAILER_BYTES)
-    with flight(tmp_path, "shared-insider", speed=SPEED, lockstep=True, carrier_args=signed, mission_args=signed) as f:
+    with flight(tmp_path, "shared-insider", speed=SPEED, lockstep=True, carrier_args=signed,
+                mission_args=(*signed, *LOST_WALL)) as f:
         f.wait_phase("RIDING")
         attacker = Attacker(insider, session=f.router.session)
         try:
@@ -125,8 +132,9 @@ def _per_robot_insider(tmp_path: Path) -> None:
     assert AT_SEPARATION_M - 0.2 <= carrier["distance_at_separation_m"] <= AT_SEPARATION_M + 0.05, carrier
 
 
-def test_an_insider_signing_ahead_of_the_carrier_is_a_contest_or_cannot_sign_at_all(tmp_path: Path) -> None:
-    concurrently(lambda: _shared_key_insider(tmp_path), lambda: _per_robot_insider(tmp_path))
+class TestAnInsider:
+    def test_an_insider_signing_ahead_of_the_carrier_is_a_contest_or_cannot_sign_at_all(self, tmp_path: Path) -> None:
+        concurrently(lambda: _shared_key_insider(tmp_path), lambda: _per_robot_insider(tmp_path))
 
 
 class RoguePassenger:
@@ -166,15 +174,16 @@ class RoguePassenger:
         self._sub.undeclare()
 
 
-def test_a_rogue_passenger_before_the_mission_takes_an_unsigned_bus_and_never_binds_signed(tmp_path: Path) -> None:
-    """The PREFLIGHT-then-RIDING rogue, speaking before the mission starts (real processes; real
-    time unsigned, lockstep signed). Unsigned it wins the binding: nothing tells it from the
-    passenger, and the start-up WARNING says so (the carrier-level contest, once the real
-    passenger stands on the deck too, is in tests/integration/carrier/test_carrier_trust.py). With
-    one key per robot it never binds: the real passenger does, and the mission flies P1-P3. On
-    main, unsigned, the carrier drove off empty to 9.9 m from the target and the real mission
-    refused to start."""
-    concurrently(lambda: _rogue_unsigned(tmp_path), lambda: _rogue_signed(tmp_path))
+class TestARoguePassenger:
+    def test_a_rogue_passenger_before_the_mission_takes_an_unsigned_bus_and_never_binds_signed(self, tmp_path: Path) -> None:
+        """The PREFLIGHT-then-RIDING rogue, speaking before the mission starts (real processes; real
+        time unsigned, lockstep signed). Unsigned it wins the binding: nothing tells it from the
+        passenger, and the start-up WARNING says so (the carrier-level contest, once the real
+        passenger stands on the deck too, is in tests/integration/carrier/test_carrier_trust.py). With
+        one key per robot it never binds: the real passenger does, and the mission flies P1-P3. On
+        main, unsigned, the carrier drove off empty to 9.9 m from the target and the real mission
+        refused to start."""
+        concurrently(lambda: _rogue_unsigned(tmp_path), lambda: _rogue_signed(tmp_path))
 
 
 def _start_without_carrier(f: Any) -> None:

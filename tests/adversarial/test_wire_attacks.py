@@ -38,6 +38,7 @@ from tests.faults.procs import DEMO, Flight, assert_safe_end, flight, wait_for
 from tests.faults.test_matrix import assert_completed, assert_exit, assert_never_disarmed_in_the_air, concurrently
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(200)]
+# A class per test: `--dist loadscope` schedules a class as its own unit, so the flights spread over the workers.
 
 # The attacks fly in lockstep (the three processes step on the vehicle's simulated time, so a
 # loaded machine can make neither the carrier look lost nor the vehicle see offboard loss), the
@@ -168,13 +169,14 @@ def _rogue(tmp_path: Path, name: str, position: list[float]) -> None:
     assert_real_carrier_kept_its_guard(f)
 
 
-def test_a_rogue_publisher_with_higher_sequence_numbers_is_dropped_and_counted(tmp_path: Path) -> None:
-    """Measured on main before: every real sample dropped as stale_seq, the UAV flew to the
-    rogue's dock point; placed 7 m short of the target the latch fired at once on nothing."""
-    short = [24.0 - 4.9 * 0.8, 18.0 - 4.9 * 0.6, 0.0]  # 7.0 m from the target
-    assert math.dist(short, TARGET) == pytest.approx(7.0, abs=0.01)
-    concurrently(lambda: _rogue(tmp_path, "rogue-far", [-30.0, -40.0, 0.0]),
-                 lambda: _rogue(tmp_path, "rogue-short", short))
+class TestARoguePublisher:
+    def test_a_rogue_publisher_with_higher_sequence_numbers_is_dropped_and_counted(self, tmp_path: Path) -> None:
+        """Measured on main before: every real sample dropped as stale_seq, the UAV flew to the
+        rogue's dock point; placed 7 m short of the target the latch fired at once on nothing."""
+        short = [24.0 - 4.9 * 0.8, 18.0 - 4.9 * 0.6, 0.0]  # 7.0 m from the target
+        assert math.dist(short, TARGET) == pytest.approx(7.0, abs=0.01)
+        concurrently(lambda: _rogue(tmp_path, "rogue-far", [-30.0, -40.0, 0.0]),
+                     lambda: _rogue(tmp_path, "rogue-short", short))
 
 
 def _spoofed_outliers(tmp_path: Path) -> None:
@@ -234,12 +236,13 @@ def _oversized(tmp_path: Path) -> None:
     assert_real_carrier_kept_its_guard(f)
 
 
-def test_spoofed_outliers_and_oversized_payloads_never_move_the_latch(tmp_path: Path) -> None:
-    """States spoofed with the real carrier's own source id: one an hour ahead (on main it made
-    every later honest state stale_stamp: carrier_lost), one 20 m towards the target (on main it
-    fired the latch), then 2.5 % outliers; and five 10 MB payloads (on main: carrier_lost, the
-    state 2.45 s old). The mission completes, separating at b c of the real carrier."""
-    concurrently(lambda: _spoofed_outliers(tmp_path), lambda: _oversized(tmp_path))
+class TestSpoofedOutliers:
+    def test_spoofed_outliers_and_oversized_payloads_never_move_the_latch(self, tmp_path: Path) -> None:
+        """States spoofed with the real carrier's own source id: one an hour ahead (on main it made
+        every later honest state stale_stamp: carrier_lost), one 20 m towards the target (on main it
+        fired the latch), then 2.5 % outliers; and five 10 MB payloads (on main: carrier_lost, the
+        state 2.45 s old). The mission completes, separating at b c of the real carrier."""
+        concurrently(lambda: _spoofed_outliers(tmp_path), lambda: _oversized(tmp_path))
 
 
 # --------------------------------------------------------------------------------------------- MAVLink
@@ -391,13 +394,14 @@ def _wrong_key(tmp_path: Path) -> None:
     assert f.carrier_summary()["closest_target_distance_m"] > 20.0  # it never left: no passenger rode
 
 
-def test_rogue_mavlink_system_spoofed_heartbeats_and_a_wrong_key(tmp_path: Path) -> None:
-    """A sysid 42 PX4 HEARTBEAT first (on main: adopted as the vehicle, setpoints and arming sent
-    to it); with signing on, unsigned HEARTBEATs claiming POSCTL or copying the vehicle (on main:
-    pilot_override, reply address moved); a vehicle signing with another key (on main:
-    a mislabelled "carrier_lost", now its own reason); a rogue talking alone until adopted, then
-    the real vehicle (on main: 1654 setpoints and 48 commands went to a rogue adopted this way;
-    now adopted with a warning, and the mission aborts vehicle_ambiguous at the real vehicle's
-    first HEARTBEAT, having sent nothing but its own HEARTBEATs)."""
-    concurrently(lambda: _rogue_sysid_first(tmp_path), lambda: _unsigned_spoofs(tmp_path))
-    concurrently(lambda: _wrong_key(tmp_path), lambda: _lone_rogue_adopted(tmp_path))
+class TestRogueMavlink:
+    def test_rogue_mavlink_system_spoofed_heartbeats_and_a_wrong_key(self, tmp_path: Path) -> None:
+        """A sysid 42 PX4 HEARTBEAT first (on main: adopted as the vehicle, setpoints and arming sent
+        to it); with signing on, unsigned HEARTBEATs claiming POSCTL or copying the vehicle (on main:
+        pilot_override, reply address moved); a vehicle signing with another key (on main:
+        a mislabelled "carrier_lost", now its own reason); a rogue talking alone until adopted, then
+        the real vehicle (on main: 1654 setpoints and 48 commands went to a rogue adopted this way;
+        now adopted with a warning, and the mission aborts vehicle_ambiguous at the real vehicle's
+        first HEARTBEAT, having sent nothing but its own HEARTBEATs)."""
+        concurrently(lambda: _rogue_sysid_first(tmp_path), lambda: _unsigned_spoofs(tmp_path))
+        concurrently(lambda: _wrong_key(tmp_path), lambda: _lone_rogue_adopted(tmp_path))

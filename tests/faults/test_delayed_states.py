@@ -23,6 +23,7 @@ from tests.faults.procs import Router, assert_safe_end, flight
 from tests.faults.relay import DelayRelay
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(240)]
+# A class per test: `--dist loadscope` schedules a class as its own unit, so the two flights spread over the workers.
 
 CYCLE = CONFIGS / "cycle.toml"
 DECK_HEIGHT_M = 0.5  # configs/cycle.toml: the deck, 0.5 m above the carrier's reported position
@@ -79,29 +80,31 @@ def _report(out: dict[str, Any]) -> str:
                        "phase": s.get("phase"), "reason": s.get("reason")}, indent=1, default=str)
 
 
-def test_states_late_by_045_s_on_the_landing_never_crash(tmp_path: Path) -> None:
-    out = fly_delayed(tmp_path, 0.45)
-    print(_report(out))
-    deck, s = out["deck"], out["summary"]
-    assert out["relay"]["max_delay_s"] >= 0.45 - 1e-6, out["relay"]
-    feed = s["carrier_feed"]
-    assert feed["delay_growths"] >= 1 and "0.4" in feed["delay_growth_last"], feed  # the growing delay, named
-    assert deck["crash"] is None, _report(out)
-    if s.get("docked_again"):
-        assert deck["touchdowns"], _report(out)
-        assert deck["touchdowns"][-1]["horizontal_error_m"] <= 0.10, _report(out)
-    else:  # the approach went around, or was refused, on states older than its budget; then a safe fallback
-        assert out["code"] == 0 and out["phases"][-3:] == ["FALLBACK", "HOLD", "DONE"], _report(out)
-        assert "approaches without docking" in s["recovery_outcome"] and "carrier_max_age_s" in s["recovery_outcome"], \
-            _report(out)
-    assert not deck["touchdowns"][1:] or s.get("docked_again"), _report(out)  # the deck agrees with the summary
+class TestLate045:
+    def test_states_late_by_045_s_on_the_landing_never_crash(self, tmp_path: Path) -> None:
+        out = fly_delayed(tmp_path, 0.45)
+        print(_report(out))
+        deck, s = out["deck"], out["summary"]
+        assert out["relay"]["max_delay_s"] >= 0.45 - 1e-6, out["relay"]
+        feed = s["carrier_feed"]
+        assert feed["delay_growths"] >= 1 and "0.4" in feed["delay_growth_last"], feed  # the growing delay, named
+        assert deck["crash"] is None, _report(out)
+        if s.get("docked_again"):
+            assert deck["touchdowns"], _report(out)
+            assert deck["touchdowns"][-1]["horizontal_error_m"] <= 0.10, _report(out)
+        else:  # the approach went around, or was refused, on states older than its budget; then a safe fallback
+            assert out["code"] == 0 and out["phases"][-3:] == ["FALLBACK", "HOLD", "DONE"], _report(out)
+            assert "approaches without docking" in s["recovery_outcome"] and "carrier_max_age_s" in s["recovery_outcome"], \
+                _report(out)
+        assert not deck["touchdowns"][1:] or s.get("docked_again"), _report(out)  # the deck agrees with the summary
 
 
-def test_states_late_by_15_s_on_the_landing_fall_back(tmp_path: Path) -> None:
-    out = fly_delayed(tmp_path, 1.5)
-    print(_report(out))
-    deck, s = out["deck"], out["summary"]
-    assert deck["crash"] is None, _report(out)
-    assert not s.get("docked_again"), _report(out)
-    assert str(s.get("recovery_outcome", "")).startswith("fallback"), _report(out)
-    assert not deck["touchdowns"][1:], _report(out)  # the deck agrees: never touched after the start
+class TestLate15:
+    def test_states_late_by_15_s_on_the_landing_fall_back(self, tmp_path: Path) -> None:
+        out = fly_delayed(tmp_path, 1.5)
+        print(_report(out))
+        deck, s = out["deck"], out["summary"]
+        assert deck["crash"] is None, _report(out)
+        assert not s.get("docked_again"), _report(out)
+        assert str(s.get("recovery_outcome", "")).startswith("fallback"), _report(out)
+        assert not deck["touchdowns"][1:], _report(out)  # the deck agrees: never touched after the start

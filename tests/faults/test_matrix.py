@@ -33,6 +33,7 @@ from mission.record import read_record, summarise
 from tests.faults.procs import DEMO, SPEED, Flight, Router, assert_log_complete, assert_safe_end, fleet_config, flight, wait_for
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(120)]
+# A class per test: `--dist loadscope` schedules a class as its own unit, so the flights spread over the workers.
 
 FULL = os.environ.get("MARSUPIAL_FAULTS_FULL") == "1"
 
@@ -113,35 +114,37 @@ def _lossy(tmp_path: Path, name: str, loss: float, seed: int, extra: tuple[str, 
     return c
 
 
-def test_lossy_late_and_briefly_blacked_out_links_still_fly_the_mission(tmp_path: Path) -> None:
-    """10% loss each way with 100 ms latency, 50 ms jitter and 0.5 s blackouts before (RIDING)
-    and after separation (NAVIGATING); and 30% loss each way. Reaction: none needed, the
-    mission completes (exit 0): commands are retried, the 50 Hz stream outlives the 1 s
-    offboard-loss timeout, a silent position stream only makes the controller hover, and the
-    vehicle counts as lost only when its HEARTBEAT and its telemetry are both gone.
+class TestLossyLinks:
+    def test_lossy_late_and_briefly_blacked_out_links_still_fly_the_mission(self, tmp_path: Path) -> None:
+        """10% loss each way with 100 ms latency, 50 ms jitter and 0.5 s blackouts before (RIDING)
+        and after separation (NAVIGATING); and 30% loss each way. Reaction: none needed, the
+        mission completes (exit 0): commands are retried, the 50 Hz stream outlives the 1 s
+        offboard-loss timeout, a silent position stream only makes the controller hover, and the
+        vehicle counts as lost only when its HEARTBEAT and its telemetry are both gone.
 
-    With 100-150 ms of latency the passenger is only asked to end within 1 m of the target, not
-    inside the 0.5 m arrival radius (P2): the tracking loop, tuned on PX4's ~0 ms, rings at
-    arrival under that delay and once coasted out to 0.53 m while Hold was being confirmed.
+        With 100-150 ms of latency the passenger is only asked to end within 1 m of the target, not
+        inside the 0.5 m arrival radius (P2): the tracking loop, tuned on PX4's ~0 ms, rings at
+        arrival under that delay and once coasted out to 0.53 m while Hold was being confirmed.
 
-    The late flight's mission waits 5 s for a HEARTBEAT (mission.heartbeat_timeout_s), as a user of
-    such a link would set it: with the 3 s default, two HEARTBEATs lost in a row (1 % at 10 %
-    loss) and the next one 100-150 ms late, across a blackout that silences the telemetry too, is
-    a lost vehicle by design (seen once in about 20 runs: last HEARTBEAT at 6.105 s, abort at
-    9.12 s, the next one arriving at 9.13 s). Its loss pattern is not the same every run: with
-    latency the lockstep flight is not deterministic (mission ticks 2108-2358 in four runs)."""
-    late = ("--latency-ms", "100", "--jitter-ms", "50", "--blackout", "8.5:0.5", "--blackout", "18.5:0.5")
-    c10, c30 = concurrently(lambda: _lossy(tmp_path, "loss10", 0.1, 1, late, p2=False, heartbeat_timeout_s=5.0),
-                            lambda: _lossy(tmp_path, "loss30", 0.3, 2))
-    assert c10["drop_in"] > 0 and c10["drop_out"] > 0
-    assert 0.2 < c30["drop_out"] / c30["tx"] < 0.4
+        The late flight's mission waits 5 s for a HEARTBEAT (mission.heartbeat_timeout_s), as a user of
+        such a link would set it: with the 3 s default, two HEARTBEATs lost in a row (1 % at 10 %
+        loss) and the next one 100-150 ms late, across a blackout that silences the telemetry too, is
+        a lost vehicle by design (seen once in about 20 runs: last HEARTBEAT at 6.105 s, abort at
+        9.12 s, the next one arriving at 9.13 s). Its loss pattern is not the same every run: with
+        latency the lockstep flight is not deterministic (mission ticks 2108-2358 in four runs)."""
+        late = ("--latency-ms", "100", "--jitter-ms", "50", "--blackout", "8.5:0.5", "--blackout", "18.5:0.5")
+        c10, c30 = concurrently(lambda: _lossy(tmp_path, "loss10", 0.1, 1, late, p2=False, heartbeat_timeout_s=5.0),
+                                lambda: _lossy(tmp_path, "loss30", 0.3, 2))
+        assert c10["drop_in"] > 0 and c10["drop_out"] > 0
+        assert 0.2 < c30["drop_out"] / c30["tx"] < 0.4
 
 
-@pytest.mark.skipif(not FULL, reason="larger fault matrix: set MARSUPIAL_FAULTS_FULL=1")
-@pytest.mark.parametrize("loss", [0.05, 0.2, 0.3, 0.4])
-@pytest.mark.parametrize("seed", [11, 12, 13])
-def test_full_loss_matrix(tmp_path: Path, loss: float, seed: int) -> None:
-    _lossy(tmp_path, f"loss{loss}-{seed}", loss, seed, ("--latency-ms", "50", "--jitter-ms", "50"))
+class TestFullLossMatrix:
+    @pytest.mark.skipif(not FULL, reason="larger fault matrix: set MARSUPIAL_FAULTS_FULL=1")
+    @pytest.mark.parametrize("loss", [0.05, 0.2, 0.3, 0.4])
+    @pytest.mark.parametrize("seed", [11, 12, 13])
+    def test_full_loss_matrix(self, tmp_path: Path, loss: float, seed: int) -> None:
+        _lossy(tmp_path, f"loss{loss}-{seed}", loss, seed, ("--latency-ms", "50", "--jitter-ms", "50"))
 
 
 def _long_blackout(tmp_path: Path, name: str, start_s: float, after_separation: bool) -> None:
@@ -159,16 +162,17 @@ def _long_blackout(tmp_path: Path, name: str, start_s: float, after_separation: 
         assert_never_disarmed_in_the_air(f)  # (the failsafe STATUSTEXT fell in the blackout)
 
 
-def test_long_blackouts_before_and_after_separation_lose_the_vehicle_and_px4_lands(tmp_path: Path) -> None:
-    """3 s of silence both ways while riding and while navigating. The blackout starts just
-    before a whole second, so the last HEARTBEAT is ~1 s old and the 3 s timeout fires ~0.95 s
-    (simulated) before the link comes back. Reaction: abort vehicle_lost (exit 3), stop
-    streaming; PX4 leaves OFFBOARD after COM_OF_LOSS_T into POSCTL, descends, lands, disarms."""
-    # demo.toml on the mock's default estimate (seed 0) separates ~18.9 s into the vehicle's clock:
-    # simulated 16.92 s (riding 4.50 s + 12.42 s), exact 16.26 s, which the exact mock flew at
-    # 18.26 s; it arrives ~4.7 s later. 17.95 s fell before the separation with the errors.
-    concurrently(lambda: _long_blackout(tmp_path, "riding", 9.95, False),
-                 lambda: _long_blackout(tmp_path, "navigating", 20.95, True))
+class TestLongBlackouts:
+    def test_long_blackouts_before_and_after_separation_lose_the_vehicle_and_px4_lands(self, tmp_path: Path) -> None:
+        """3 s of silence both ways while riding and while navigating. The blackout starts just
+        before a whole second, so the last HEARTBEAT is ~1 s old and the 3 s timeout fires ~0.95 s
+        (simulated) before the link comes back. Reaction: abort vehicle_lost (exit 3), stop
+        streaming; PX4 leaves OFFBOARD after COM_OF_LOSS_T into POSCTL, descends, lands, disarms."""
+        # demo.toml on the mock's default estimate (seed 0) separates ~18.9 s into the vehicle's clock:
+        # simulated 16.92 s (riding 4.50 s + 12.42 s), exact 16.26 s, which the exact mock flew at
+        # 18.26 s; it arrives ~4.7 s later. 17.95 s fell before the separation with the errors.
+        concurrently(lambda: _long_blackout(tmp_path, "riding", 9.95, False),
+                     lambda: _long_blackout(tmp_path, "navigating", 20.95, True))
 
 
 # Lockstep flights acted on from outside at a phase the test reads (a kill, a pilot): at most
@@ -272,17 +276,18 @@ def _forced_disarm(tmp_path: Path) -> None:
     assert f.carrier_summary()["mode"] == "stopped"
 
 
-def test_mission_killed_pilot_takeover_and_a_forced_disarm(tmp_path: Path) -> None:
-    """SIGKILL of ``marsupial run`` while riding: no background resend survives it, so PX4's
-    offboard-loss failsafe fires (POSCTL, descend, land, disarm). A pilot (here a ground
-    station) switching to Hold while riding: the mission stops commanding at once, exit 5.
-    A rogue ground station's forced disarm while riding (the vehicle falls, as PX4's does): abort
-    vehicle_disarmed within 0.5 s of the disarm on the mission clock (PX4's land detector says
-    ON_GROUND 0.33 s after it; EXTENDED_SYS_STATE is asked at 10 Hz), nothing more sent, the
-    carrier stopped with the reason, exit 5. All fly in lockstep until the event; the killed
-    controller's vehicle goes on in real time after its watchdog (PX4's offboard-loss timer runs
-    on the vehicle's simulated time)."""
-    concurrently(lambda: _mission_killed(tmp_path), lambda: _gcs_takeover(tmp_path), lambda: _forced_disarm(tmp_path))
+class TestMissionKilled:
+    def test_mission_killed_pilot_takeover_and_a_forced_disarm(self, tmp_path: Path) -> None:
+        """SIGKILL of ``marsupial run`` while riding: no background resend survives it, so PX4's
+        offboard-loss failsafe fires (POSCTL, descend, land, disarm). A pilot (here a ground
+        station) switching to Hold while riding: the mission stops commanding at once, exit 5.
+        A rogue ground station's forced disarm while riding (the vehicle falls, as PX4's does): abort
+        vehicle_disarmed within 0.5 s of the disarm on the mission clock (PX4's land detector says
+        ON_GROUND 0.33 s after it; EXTENDED_SYS_STATE is asked at 10 Hz), nothing more sent, the
+        carrier stopped with the reason, exit 5. All fly in lockstep until the event; the killed
+        controller's vehicle goes on in real time after its watchdog (PX4's offboard-loss timer runs
+        on the vehicle's simulated time)."""
+        concurrently(lambda: _mission_killed(tmp_path), lambda: _gcs_takeover(tmp_path), lambda: _forced_disarm(tmp_path))
 
 
 def _refused(tmp_path: Path, name: str, flag: str, text: str, reason: str) -> None:
@@ -295,16 +300,17 @@ def _refused(tmp_path: Path, name: str, flag: str, text: str, reason: str) -> No
         assert_never_disarmed_in_the_air(f)
 
 
-def test_arming_and_offboard_refused_and_position_estimate_lost(tmp_path: Path) -> None:
-    """The vehicle refuses to arm, or to switch to OFFBOARD: bounded retries, then abort with
-    the vehicle's reason (exit 5); it never leaves the ground (an armed one disarms itself).
-    The vehicle loses its position estimate while riding: PX4's own failsafe takes it out of
-    OFFBOARD (Descend); the mission stops commanding and exits 5."""
-    concurrently(
-        lambda: _position_lost(tmp_path),
-        lambda: _refused(tmp_path, "arming", "--refuse-arming", "Arming denied: test preflight failure",
-                         "arming_refused"),
-        lambda: _refused(tmp_path, "offboard", "--refuse-offboard", "Offboard denied: test", "offboard_refused"))
+class TestRefusals:
+    def test_arming_and_offboard_refused_and_position_estimate_lost(self, tmp_path: Path) -> None:
+        """The vehicle refuses to arm, or to switch to OFFBOARD: bounded retries, then abort with
+        the vehicle's reason (exit 5); it never leaves the ground (an armed one disarms itself).
+        The vehicle loses its position estimate while riding: PX4's own failsafe takes it out of
+        OFFBOARD (Descend); the mission stops commanding and exits 5."""
+        concurrently(
+            lambda: _position_lost(tmp_path),
+            lambda: _refused(tmp_path, "arming", "--refuse-arming", "Arming denied: test preflight failure",
+                             "arming_refused"),
+            lambda: _refused(tmp_path, "offboard", "--refuse-offboard", "Offboard denied: test", "offboard_refused"))
 
 
 def _position_lost(tmp_path: Path) -> None:
@@ -347,12 +353,13 @@ def _carrier_killed(tmp_path: Path, name: str, during: str) -> None:
         assert "-> approaching" not in f.text("carrier.err")[first_log:]
 
 
-def test_carrier_killed_and_restarted_before_and_after_separation(tmp_path: Path) -> None:
-    """SIGKILL of the carrier while riding: its liveliness token goes at once; abort
-    carrier_lost to Hold (exit 5); the restarted carrier does not move. While navigating: the
-    anchor is latched, the mission completes (exit 0). In lockstep until the kill."""
-    concurrently(lambda: _carrier_killed(tmp_path, "carrier-riding", "RIDING"),
-                 lambda: _carrier_killed(tmp_path, "carrier-navigating", "NAVIGATING"))
+class TestCarrierKilled:
+    def test_carrier_killed_and_restarted_before_and_after_separation(self, tmp_path: Path) -> None:
+        """SIGKILL of the carrier while riding: its liveliness token goes at once; abort
+        carrier_lost to Hold (exit 5); the restarted carrier does not move. While navigating: the
+        anchor is latched, the mission completes (exit 0). In lockstep until the kill."""
+        concurrently(lambda: _carrier_killed(tmp_path, "carrier-riding", "RIDING"),
+                     lambda: _carrier_killed(tmp_path, "carrier-navigating", "NAVIGATING"))
 
 
 def _router_restart(tmp_path: Path, name: str, during: str) -> None:
@@ -377,14 +384,15 @@ def _router_restart(tmp_path: Path, name: str, during: str) -> None:
         router.close()
 
 
-def test_zenoh_router_restart_in_the_fleet_configuration(tmp_path: Path) -> None:
-    """Every process a Zenoh client of one router (configs/zenoh/fleet_client.json5); the router
-    is closed and reopened on the same port. A router outage drops the carrier's liveliness
-    token at once, so before separation it is a lost carrier whatever its length: abort to
-    Hold (exit 5). After separation the mission completes (exit 0). In lockstep (paced): during
-    the outage simulated time stands still (the controller waits for the carrier's step, and
-    calls again while unanswered: under ``-n 2`` a call sent as the route came back was lost, the
-    vehicle dropped the waiting controller and PX4's offboard-loss failsafe ended the flight), and
-    the token is back before the next tick, which must still see that it went."""
-    concurrently(lambda: _router_restart(tmp_path, "router-riding", "RIDING"),
-                 lambda: _router_restart(tmp_path, "router-navigating", "NAVIGATING"))
+class TestRouterRestart:
+    def test_zenoh_router_restart_in_the_fleet_configuration(self, tmp_path: Path) -> None:
+        """Every process a Zenoh client of one router (configs/zenoh/fleet_client.json5); the router
+        is closed and reopened on the same port. A router outage drops the carrier's liveliness
+        token at once, so before separation it is a lost carrier whatever its length: abort to
+        Hold (exit 5). After separation the mission completes (exit 0). In lockstep (paced): during
+        the outage simulated time stands still (the controller waits for the carrier's step, and
+        calls again while unanswered: under ``-n 2`` a call sent as the route came back was lost, the
+        vehicle dropped the waiting controller and PX4's offboard-loss failsafe ended the flight), and
+        the token is back before the next tick, which must still see that it went."""
+        concurrently(lambda: _router_restart(tmp_path, "router-riding", "RIDING"),
+                     lambda: _router_restart(tmp_path, "router-navigating", "NAVIGATING"))

@@ -20,6 +20,9 @@ DEMO = CONFIGS / "demo.toml"
 
 pytestmark = pytest.mark.slow
 
+# A class per flight (or per flights that share one): `--dist loadscope` schedules a class as its own
+# unit, so the module's eight demo flights spread over the workers instead of queueing on one.
+
 
 def _demo(tmp_path, *args: str) -> subprocess.CompletedProcess:
     cmd = [sys.executable, "-m", "mission.cli", "demo", "--log-root", str(tmp_path / "logs"),
@@ -39,159 +42,163 @@ def demo_flight(tmp_path_factory):
     return root, _demo(root)
 
 
-def test_two_lockstep_runs_give_the_same_flight(tmp_path):
-    """Same configuration, same seed: the same summary to 1e-9 and the same flight record, tick for
-    tick, whatever the machine's load (every participant waits for the others' stamped step).
-    On the mock's default estimate errors (PX4 SITL's, seed 0): the vehicle's first barrier carried
-    step 0's streams, which a mission bound in time read and a later one did not, so two runs
-    differed from their first row (the vehicle at 0.0 against 0.065 m north at t = 0.02 s);
-    before any answer the vehicle now sends only its hello (sim/vehicle/lockstep.py)."""
-    out, shared_out = _demo(tmp_path / "a", "--plot", ""), _demo(tmp_path / "b", "--plot", "")
-    assert out.returncode == 0, out.stdout + out.stderr
-    assert shared_out.returncode == 0, shared_out.stdout + shared_out.stderr
-    runs = [tmp_path / "a" / "logs" / "pair0", tmp_path / "b" / "logs" / "pair0"]
-    a, b = (json.loads((d / "summary.json").read_text()) for d in runs)
-    for summary in (a, b):
-        summary.get("carrier_feed", {}).pop("bound_source", None)  # a Zenoh session id: new in every run
-        # + the handshake; tx_commands counts the home updates (below)
-        for counter in ("rx_bytes", "rx_messages", "rx_ignored", "tx_messages", "tx_heartbeats", "tx_commands"):
-            summary.get("link", {}).pop(counter, None)
-        # how many barrier rounds the processes' start took, and the PX4 home updates sent at most
-        # once a wall second from the command thread: how the run went, not the flight
-        summary.get("lockstep", {}).pop("barriers", None)
-        summary.pop("home", None)
-        for counter in ("read", "unread"):  # the failsafe parameters read back by the same thread, as often
-            summary.get("px4_kept", {}).pop(counter, None)
-    assert a["ticks"] > 500 and a["phase"] == "DONE" and a["p1"] and a["p2"] and a["p3"]
-    for summary in (a, b):  # every step in step: no participant dropped as silent, no fall-back, no sample lost
-        lock = summary["lockstep"]
-        assert lock["fallback"] is None and lock["downstream_dropped"] == 0 and lock["samples_lost"] == 0, lock
-    assert {k: v for k, v in a.items() if k not in _numbers(a)} == {k: v for k, v in b.items() if k not in _numbers(b)}
-    assert _numbers(a).keys() == _numbers(b).keys()
-    for key, value in _numbers(a).items():
-        assert b[key] == pytest.approx(value, abs=1e-9), key
-    assert (runs[0] / "record.csv").read_text() == (runs[1] / "record.csv").read_text()
+class TestTwoLockstepRuns:
+    def test_two_lockstep_runs_give_the_same_flight(self, tmp_path):
+        """Same configuration, same seed: the same summary to 1e-9 and the same flight record, tick for
+        tick, whatever the machine's load (every participant waits for the others' stamped step).
+        On the mock's default estimate errors (PX4 SITL's, seed 0): the vehicle's first barrier carried
+        step 0's streams, which a mission bound in time read and a later one did not, so two runs
+        differed from their first row (the vehicle at 0.0 against 0.065 m north at t = 0.02 s);
+        before any answer the vehicle now sends only its hello (sim/vehicle/lockstep.py)."""
+        out, shared_out = _demo(tmp_path / "a", "--plot", ""), _demo(tmp_path / "b", "--plot", "")
+        assert out.returncode == 0, out.stdout + out.stderr
+        assert shared_out.returncode == 0, shared_out.stdout + shared_out.stderr
+        runs = [tmp_path / "a" / "logs" / "pair0", tmp_path / "b" / "logs" / "pair0"]
+        a, b = (json.loads((d / "summary.json").read_text()) for d in runs)
+        for summary in (a, b):
+            summary.get("carrier_feed", {}).pop("bound_source", None)  # a Zenoh session id: new in every run
+            # + the handshake; tx_commands counts the home updates (below)
+            for counter in ("rx_bytes", "rx_messages", "rx_ignored", "tx_messages", "tx_heartbeats", "tx_commands"):
+                summary.get("link", {}).pop(counter, None)
+            # how many barrier rounds the processes' start took, and the PX4 home updates sent at most
+            # once a wall second from the command thread: how the run went, not the flight
+            summary.get("lockstep", {}).pop("barriers", None)
+            summary.pop("home", None)
+            for counter in ("read", "unread"):  # the failsafe parameters read back by the same thread, as often
+                summary.get("px4_kept", {}).pop(counter, None)
+        assert a["ticks"] > 500 and a["phase"] == "DONE" and a["p1"] and a["p2"] and a["p3"]
+        for summary in (a, b):  # every step in step: no participant dropped as silent, no fall-back, no sample lost
+            lock = summary["lockstep"]
+            assert lock["fallback"] is None and lock["downstream_dropped"] == 0 and lock["samples_lost"] == 0, lock
+        assert {k: v for k, v in a.items() if k not in _numbers(a)} == {k: v for k, v in b.items() if k not in _numbers(b)}
+        assert _numbers(a).keys() == _numbers(b).keys()
+        for key, value in _numbers(a).items():
+            assert b[key] == pytest.approx(value, abs=1e-9), key
+        assert (runs[0] / "record.csv").read_text() == (runs[1] / "record.csv").read_text()
 
 
-def test_demo_flies_p1_p3_with_plot(demo_flight):
-    """The demo holds P1-P3 on the PX4-like mock (the tracking loop that holds the dock on PX4)."""
-    tmp_path, out = demo_flight
-    s = json.loads((tmp_path / "logs" / "pair0" / "summary.json").read_text())
-    assert s["p1"] and s["p2"] and s["p3"] and s["phase"] == "DONE", s
-    assert out.returncode == 0, out.stdout + out.stderr
-    assert s["max_offset_before_separation_m"] <= 0.35
-    assert s["relative_input_jump_m_s"] <= 0.05
-    assert s["carrier_target_distance_at_separation_m"] == pytest.approx(8.0, abs=0.01)
-    assert (tmp_path / "flight.png").stat().st_size > 20_000
-    assert "P1-P3 held" in out.stdout + out.stderr
-    assert (tmp_path / "logs" / "pair0" / "flight.tlog").stat().st_size > 10_000
-    # `simulate` of the same mission config models what was flown: same verdict, same separation
-    sim = simulate_config(load_config(DEMO)).summary()
-    assert (sim["p1"], sim["p2"], sim["p3"]) == (s["p1"], s["p2"], s["p3"])
-    assert sim["separation_time_s"] == pytest.approx(s["separation_time_s"], abs=0.5)
-    assert sim["carrier_target_distance_at_separation_m"] == pytest.approx(s["carrier_target_distance_at_separation_m"], abs=0.01)
+class TestTheDemoFlight:
+    def test_demo_flies_p1_p3_with_plot(self, demo_flight):
+        """The demo holds P1-P3 on the PX4-like mock (the tracking loop that holds the dock on PX4)."""
+        tmp_path, out = demo_flight
+        s = json.loads((tmp_path / "logs" / "pair0" / "summary.json").read_text())
+        assert s["p1"] and s["p2"] and s["p3"] and s["phase"] == "DONE", s
+        assert out.returncode == 0, out.stdout + out.stderr
+        assert s["max_offset_before_separation_m"] <= 0.35
+        assert s["relative_input_jump_m_s"] <= 0.05
+        assert s["carrier_target_distance_at_separation_m"] == pytest.approx(8.0, abs=0.01)
+        assert (tmp_path / "flight.png").stat().st_size > 20_000
+        assert "P1-P3 held" in out.stdout + out.stderr
+        assert (tmp_path / "logs" / "pair0" / "flight.tlog").stat().st_size > 10_000
+        # `simulate` of the same mission config models what was flown: same verdict, same separation
+        sim = simulate_config(load_config(DEMO)).summary()
+        assert (sim["p1"], sim["p2"], sim["p3"]) == (s["p1"], s["p2"], s["p3"])
+        assert sim["separation_time_s"] == pytest.approx(s["separation_time_s"], abs=0.5)
+        assert sim["carrier_target_distance_at_separation_m"] == pytest.approx(s["carrier_target_distance_at_separation_m"], abs=0.01)
+
+    def test_demo_flight_mcap_reads_back_with_foxglove_schemas(self, demo_flight):
+        """logs/demo/pair0/flight.mcap, read with the mcap package (Foxglove's protobuf messages
+        decoded from the schemas in the file): the Foxglove schemas, messages spanning the record,
+        the phase changes in order, the clock it is on; and the carrier's own carrier.mcap."""
+        root, out = demo_flight
+        d = root / "logs" / "pair0"
+        rec = read_record(d)
+        with open(d / "flight.mcap", "rb") as f:
+            reader = make_reader(f, decoder_factories=[DecoderFactory()])
+            summary = reader.get_summary()
+            assert summary is not None
+            schemas = {summary.schemas[c.schema_id].name for c in summary.channels.values()}
+            logs = [m.message for *_, m in reader.iter_decoded_messages(topics=["/pair0/log"])]
+            last_tf = [m for *_, m in reader.iter_decoded_messages(topics=["/pair0/tf/passenger"])][-1]
+            scene = [m for *_, m in reader.iter_decoded_messages(topics=["/pair0/scene"])][-1]
+            metadata = {m.name: m.metadata for m in reader.iter_metadata()}
+        assert len(summary.channels) >= 8, sorted(c.topic for c in summary.channels.values())
+        assert {"foxglove.FrameTransform", "foxglove.SceneUpdate", "foxglove.Log"} <= schemas
+        stats = summary.statistics
+        assert stats is not None
+        epoch = int(metadata["clock"]["epoch_ns"])  # log times are epoch ns: the demo's epoch + the mission clock
+        assert epoch > 1.5e18
+        assert (stats.message_start_time - epoch) / 1e9 == pytest.approx(rec.t[0], abs=0.1)
+        assert (stats.message_end_time - epoch) / 1e9 == pytest.approx(rec.t[-1], abs=0.1)
+        changes = [str(p) for i, p in enumerate(rec.phase) if i == 0 or p != rec.phase[i - 1]]
+        assert [text.split()[1] for text in logs if text.startswith("phase ")] == changes
+        assert changes[:1] == ["PREFLIGHT"] and changes[-3:] == ["ARRIVED", "HOLD", "DONE"] and "SEPARATED" in changes
+        assert metadata["clock"]["clock"] == "mission" and metadata["clock"]["source"].startswith("lockstep")
+        # the last passenger pose is the record's last position, at the record's last time
+        x_p = rec.vec("x_p")[-1]
+        assert (last_tf.translation.x, last_tf.translation.y, last_tf.translation.z) == pytest.approx(tuple(x_p))
+        assert (last_tf.timestamp.seconds * 10**9 + last_tf.timestamp.nanos - epoch) / 1e9 == pytest.approx(rec.t[-1], abs=1e-6)
+        assert {"target", "bc_circle", "carrier", "passenger", "dock", "anchor"} <= {e.id for e in scene.entities}
+        # marsupial plot reads the MCAP as it reads the CSV: the same record
+        from_mcap = read_record(d / "flight.mcap")
+        assert (from_mcap.t == rec.t).all() and (from_mcap.phase == rec.phase).all()
+        assert np.array_equal(from_mcap.vec("dock"), rec.vec("dock"), equal_nan=True)
+        assert from_mcap.info["anchor_ned_m"] == json.loads((d / "mission.json").read_text())["anchor_ned_m"]
+        with open(d / "carrier.mcap", "rb") as f:
+            reader = make_reader(f, decoder_factories=[DecoderFactory()])
+            modes = [m.message for *_, m in reader.iter_decoded_messages(topics=["/pair0/carrier/log"])]
+            statuses = [json.loads(msg.data) for _, _, msg in reader.iter_messages(topics=["/pair0/carrier/status"])]
+            carrier_clock = {m.name: m.metadata for m in reader.iter_metadata()}["clock"]
+            carrier_stats = reader.get_summary().statistics
+        # one epoch for both files of the pair (lockstep: one simulated clock), so they line up in Foxglove
+        assert int(carrier_clock["epoch_ns"]) == epoch
+        assert abs(carrier_stats.message_start_time - stats.message_start_time) < 5e9
+        assert modes[0].startswith("mode waiting") and "mode approaching" in modes and modes[-1] == "mode separated"
+        closest = min(s["target_distance_m"] for s in statuses if s["target_distance_m"] is not None)
+        carrier = json.loads((d / "carrier.json").read_text())
+        assert closest == pytest.approx(carrier["closest_target_distance_m"], abs=1e-6)
 
 
-def test_demo_flight_mcap_reads_back_with_foxglove_schemas(demo_flight):
-    """logs/demo/pair0/flight.mcap, read with the mcap package (Foxglove's protobuf messages
-    decoded from the schemas in the file): the Foxglove schemas, messages spanning the record,
-    the phase changes in order, the clock it is on; and the carrier's own carrier.mcap."""
-    root, out = demo_flight
-    d = root / "logs" / "pair0"
-    rec = read_record(d)
-    with open(d / "flight.mcap", "rb") as f:
-        reader = make_reader(f, decoder_factories=[DecoderFactory()])
-        summary = reader.get_summary()
-        assert summary is not None
-        schemas = {summary.schemas[c.schema_id].name for c in summary.channels.values()}
-        logs = [m.message for *_, m in reader.iter_decoded_messages(topics=["/pair0/log"])]
-        last_tf = [m for *_, m in reader.iter_decoded_messages(topics=["/pair0/tf/passenger"])][-1]
-        scene = [m for *_, m in reader.iter_decoded_messages(topics=["/pair0/scene"])][-1]
-        metadata = {m.name: m.metadata for m in reader.iter_metadata()}
-    assert len(summary.channels) >= 8, sorted(c.topic for c in summary.channels.values())
-    assert {"foxglove.FrameTransform", "foxglove.SceneUpdate", "foxglove.Log"} <= schemas
-    stats = summary.statistics
-    assert stats is not None
-    epoch = int(metadata["clock"]["epoch_ns"])  # log times are epoch ns: the demo's epoch + the mission clock
-    assert epoch > 1.5e18
-    assert (stats.message_start_time - epoch) / 1e9 == pytest.approx(rec.t[0], abs=0.1)
-    assert (stats.message_end_time - epoch) / 1e9 == pytest.approx(rec.t[-1], abs=0.1)
-    changes = [str(p) for i, p in enumerate(rec.phase) if i == 0 or p != rec.phase[i - 1]]
-    assert [text.split()[1] for text in logs if text.startswith("phase ")] == changes
-    assert changes[:1] == ["PREFLIGHT"] and changes[-3:] == ["ARRIVED", "HOLD", "DONE"] and "SEPARATED" in changes
-    assert metadata["clock"]["clock"] == "mission" and metadata["clock"]["source"].startswith("lockstep")
-    # the last passenger pose is the record's last position, at the record's last time
-    x_p = rec.vec("x_p")[-1]
-    assert (last_tf.translation.x, last_tf.translation.y, last_tf.translation.z) == pytest.approx(tuple(x_p))
-    assert (last_tf.timestamp.seconds * 10**9 + last_tf.timestamp.nanos - epoch) / 1e9 == pytest.approx(rec.t[-1], abs=1e-6)
-    assert {"target", "bc_circle", "carrier", "passenger", "dock", "anchor"} <= {e.id for e in scene.entities}
-    # marsupial plot reads the MCAP as it reads the CSV: the same record
-    from_mcap = read_record(d / "flight.mcap")
-    assert (from_mcap.t == rec.t).all() and (from_mcap.phase == rec.phase).all()
-    assert np.array_equal(from_mcap.vec("dock"), rec.vec("dock"), equal_nan=True)
-    assert from_mcap.info["anchor_ned_m"] == json.loads((d / "mission.json").read_text())["anchor_ned_m"]
-    with open(d / "carrier.mcap", "rb") as f:
-        reader = make_reader(f, decoder_factories=[DecoderFactory()])
-        modes = [m.message for *_, m in reader.iter_decoded_messages(topics=["/pair0/carrier/log"])]
-        statuses = [json.loads(msg.data) for _, _, msg in reader.iter_messages(topics=["/pair0/carrier/status"])]
-        carrier_clock = {m.name: m.metadata for m in reader.iter_metadata()}["clock"]
-        carrier_stats = reader.get_summary().statistics
-    # one epoch for both files of the pair (lockstep: one simulated clock), so they line up in Foxglove
-    assert int(carrier_clock["epoch_ns"]) == epoch
-    assert abs(carrier_stats.message_start_time - stats.message_start_time) < 5e9
-    assert modes[0].startswith("mode waiting") and "mode approaching" in modes and modes[-1] == "mode separated"
-    closest = min(s["target_distance_m"] for s in statuses if s["target_distance_m"] is not None)
-    carrier = json.loads((d / "carrier.json").read_text())
-    assert closest == pytest.approx(carrier["closest_target_distance_m"], abs=1e-6)
+class TestThreePairs:
+    def test_three_pairs_fly_at_once_on_one_network(self, tmp_path):
+        out = _demo(tmp_path, "--pairs", "3")
+        for i in range(3):
+            d = tmp_path / "logs" / f"pair{i}"
+            s = json.loads((d / "summary.json").read_text())
+            assert s["p1"] and s["p2"] and s["p3"] and s["phase"] == "DONE", (i, s)
+            info = json.loads((d / "mission.json").read_text())
+            assert info["pair"] == f"pair{i}"
+            assert info["anchor_ned_m"] is not None
+        assert out.returncode == 0, out.stdout + out.stderr
+        # Crosstalk on the bus itself is tested in test_bridge_pairs.py (distinct states per pair);
+        # here three full stacks share one Zenoh router and every one of them completes.
 
 
-def test_three_pairs_fly_at_once_on_one_network(tmp_path):
-    out = _demo(tmp_path, "--pairs", "3")
-    for i in range(3):
-        d = tmp_path / "logs" / f"pair{i}"
-        s = json.loads((d / "summary.json").read_text())
-        assert s["p1"] and s["p2"] and s["p3"] and s["phase"] == "DONE", (i, s)
-        info = json.loads((d / "mission.json").read_text())
-        assert info["pair"] == f"pair{i}"
-        assert info["anchor_ned_m"] is not None
-    assert out.returncode == 0, out.stdout + out.stderr
-    # Crosstalk on the bus itself is tested in test_bridge_pairs.py (distinct states per pair);
-    # here three full stacks share one Zenoh router and every one of them completes.
+class TestARealCarrierInterface:
+    @pytest.mark.parametrize("carrier", ["mavlink", "ros2"])
+    def test_demo_with_a_real_carrier_interface_holds_p1_p3_and_the_guard(self, tmp_path, carrier):
+        """--carrier mavlink: the carrier controller flies a mock PX4 Ackermann rover (sysid 2) in
+        OFFBOARD; --carrier ros2: it drives a ROS-2-shaped diff-drive robot on rmw_zenoh keys. Each
+        robot steps on the carrier's lockstep clock."""
+        out = _demo(tmp_path, "--carrier", carrier)
+        s = json.loads((tmp_path / "logs" / "pair0" / "summary.json").read_text())
+        assert s["p1"] and s["p2"] and s["p3"] and s["phase"] == "DONE", s
+        assert out.returncode == 0, out.stdout + out.stderr
+        c = json.loads((tmp_path / "logs" / "pair0" / "carrier.json").read_text())
+        assert c["backend"] == carrier and c["mode"] == "separated"
+        assert c["closest_target_distance_m"] >= 8.0 - 0.5  # b c - p3_margin_m: the carrier's own guard
+        assert 0.0 < c["braking_distance_m"] < 3.0
+        # the robot stepped on the carrier's clock to the end of the flight
+        assert c["lockstep"]["barriers"] > 500 and c["lockstep"]["downstream_dropped"] == 0, c["lockstep"]
+        assert c["lockstep"]["fallback"] is None and s["lockstep"]["fallback"] is None, (c["lockstep"], s["lockstep"])
 
 
-@pytest.mark.parametrize("carrier", ["mavlink", "ros2"])
-def test_demo_with_a_real_carrier_interface_holds_p1_p3_and_the_guard(tmp_path, carrier):
-    """--carrier mavlink: the carrier controller flies a mock PX4 Ackermann rover (sysid 2) in
-    OFFBOARD; --carrier ros2: it drives a ROS-2-shaped diff-drive robot on rmw_zenoh keys. Each
-    robot steps on the carrier's lockstep clock."""
-    out = _demo(tmp_path, "--carrier", carrier)
-    s = json.loads((tmp_path / "logs" / "pair0" / "summary.json").read_text())
-    assert s["p1"] and s["p2"] and s["p3"] and s["phase"] == "DONE", s
-    assert out.returncode == 0, out.stdout + out.stderr
-    c = json.loads((tmp_path / "logs" / "pair0" / "carrier.json").read_text())
-    assert c["backend"] == carrier and c["mode"] == "separated"
-    assert c["closest_target_distance_m"] >= 8.0 - 0.5  # b c - p3_margin_m: the carrier's own guard
-    assert 0.0 < c["braking_distance_m"] < 3.0
-    # the robot stepped on the carrier's clock to the end of the flight
-    assert c["lockstep"]["barriers"] > 500 and c["lockstep"]["downstream_dropped"] == 0, c["lockstep"]
-    assert c["lockstep"]["fallback"] is None and s["lockstep"]["fallback"] is None, (c["lockstep"], s["lockstep"])
-
-
-@pytest.mark.parametrize(("cmd_vel_type", "attachment", "mode"), [("TwistStamped", "current", "peer"),
-                                                                  ("Twist", "legacy", "client")])
-def test_demo_drives_a_ros2_robot_of_either_command_type(tmp_path, cmd_vel_type, attachment, mode):
-    """``carrier.ros2.cmd_vel_type`` and ``rmw_attachment`` in the config: the ROS-2-shaped robot
-    takes only that type (its subscription's key carries the type and its hash) and speaks that
-    attachment, and the flight holds P1-P3. ``zenoh.mode = "client"``: rmw_zenoh's topology, every
-    process a client of the demo's router (which plays ``rmw_zenohd``), the robot included."""
-    config = tmp_path / "demo.toml"
-    text = DEMO.read_text().replace('[zenoh]\nmode = "peer"\n', f'[zenoh]\nmode = "{mode}"\n', 1)
-    assert f'mode = "{mode}"' in text
-    config.write_text(text + f'\n[carrier.ros2]\ncmd_vel_type = "{cmd_vel_type}"\nrmw_attachment = "{attachment}"\n')
-    out = _demo(tmp_path, "--carrier", "ros2", "--config", str(config))
-    s = json.loads((tmp_path / "logs" / "pair0" / "summary.json").read_text())
-    assert s["p1"] and s["p2"] and s["p3"] and s["phase"] == "DONE", s
-    assert out.returncode == 0, out.stdout + out.stderr
-    ros2 = json.loads((tmp_path / "logs" / "pair0" / "carrier.json").read_text())["ros2"]
-    assert ros2["cmd_vel_type"] == f"geometry_msgs/msg/{cmd_vel_type}" and ros2["robot_attachment"] == attachment
-    assert ros2["robot_token_seen"] and ros2["dropped"] == {}, ros2
+class TestARos2Robot:
+    @pytest.mark.parametrize(("cmd_vel_type", "attachment", "mode"), [("TwistStamped", "current", "peer"),
+                                                                      ("Twist", "legacy", "client")])
+    def test_demo_drives_a_ros2_robot_of_either_command_type(self, tmp_path, cmd_vel_type, attachment, mode):
+        """``carrier.ros2.cmd_vel_type`` and ``rmw_attachment`` in the config: the ROS-2-shaped robot
+        takes only that type (its subscription's key carries the type and its hash) and speaks that
+        attachment, and the flight holds P1-P3. ``zenoh.mode = "client"``: rmw_zenoh's topology, every
+        process a client of the demo's router (which plays ``rmw_zenohd``), the robot included."""
+        config = tmp_path / "demo.toml"
+        text = DEMO.read_text().replace('[zenoh]\nmode = "peer"\n', f'[zenoh]\nmode = "{mode}"\n', 1)
+        assert f'mode = "{mode}"' in text
+        config.write_text(text + f'\n[carrier.ros2]\ncmd_vel_type = "{cmd_vel_type}"\nrmw_attachment = "{attachment}"\n')
+        out = _demo(tmp_path, "--carrier", "ros2", "--config", str(config))
+        s = json.loads((tmp_path / "logs" / "pair0" / "summary.json").read_text())
+        assert s["p1"] and s["p2"] and s["p3"] and s["phase"] == "DONE", s
+        assert out.returncode == 0, out.stdout + out.stderr
+        ros2 = json.loads((tmp_path / "logs" / "pair0" / "carrier.json").read_text())["ros2"]
+        assert ros2["cmd_vel_type"] == f"geometry_msgs/msg/{cmd_vel_type}" and ros2["robot_attachment"] == attachment
+        assert ros2["robot_token_seen"] and ros2["dropped"] == {}, ros2

@@ -20,7 +20,7 @@ import zenoh
 from mission.carrier.controller import CarrierController
 from mission.carrier.backends.sim import SimRobot
 from mission.bus.bridge import open_session
-from mission.time.clock import LockstepClock, ScaledClock
+from mission.time.clock import LOST_AFTER_REPEATS, LockstepClock, ScaledClock
 from mission.config.schema import load_config, with_overrides
 from mission.bus import lockstep
 from mission.bus.lockstep import LOST_WALL_S, RESEND_WALL_S, ZenohRelay, ZenohUpstream, clock_keys
@@ -183,6 +183,33 @@ def test_a_call_an_answer_or_a_sample_lost_in_an_outage_is_asked_again_or_given_
                 assert relay.missed == 0 and waited >= RESEND_WALL_S  # asked again, not given up
             relay.run(2 * WAKE_NS)  # the next step is in step again, at once
             assert relay.dropped == 0 and relay.wake_ns() == 3 * WAKE_NS and carrier.answered == [0, WAKE_NS, 2 * WAKE_NS]
+        finally:
+            relay.close()
+            carrier.close()
+
+
+def test_a_shorter_lost_wall_gives_a_missing_sample_up_after_it_and_the_repeats(caplog) -> None:
+    """``lost_wall_s`` (``run --lockstep-lost-wall``) below the 2 s default: a state sample that never
+    comes is given up after it, still only after LOST_AFTER_REPEATS readies (the calls repeated
+    sooner, every lost_wall_s / LOST_AFTER_REPEATS), and the next step is in step again."""
+    caplog.set_level(logging.WARNING, logger="mission.bus.lockstep")
+    keys = clock_keys("lost-wall-test")
+    feed = _StateFeed()
+    with peer_pair() as (controller, carrier_session):
+        carrier = _ScriptedCarrier(carrier_session, keys, feed, lose=("sample", WAKE_NS))
+        relay = ZenohRelay(controller, keys, feed, SimpleNamespace(last_seq=-1), alive=lambda: True,
+                           watchdog_wall_s=WATCHDOG_S, alive_watchdog_wall_s=10 * LOST_WALL_S, join_wall_s=10.0,
+                           lost_wall_s=0.3)
+        try:
+            relay.run(0)
+            start = time.monotonic()
+            relay.run(WAKE_NS)
+            waited = time.monotonic() - start
+            assert relay.missed == 1 and relay.dropped == 0 and waited >= 0.3
+            readies = int(caplog.text.split("state sample 1 never came")[1].split(" readies")[0].rsplit(" ", 1)[1])
+            assert readies >= LOST_AFTER_REPEATS, caplog.text
+            relay.run(2 * WAKE_NS)
+            assert relay.wake_ns() == 3 * WAKE_NS and carrier.answered == [0, WAKE_NS, 2 * WAKE_NS]
         finally:
             relay.close()
             carrier.close()

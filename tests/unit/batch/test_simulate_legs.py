@@ -14,6 +14,7 @@ import pytest
 from mission.cli import main
 from mission.config.schema import load_config, with_overrides
 from mission.phases import Phase
+from sim.batch import recovery
 from sim.batch.recovery import configured, fly
 from sim.batch.recovery_mc import format_report, monte_carlo, random_scenarios
 from tests.conftest import CONFIGS
@@ -43,7 +44,28 @@ def cycle(hover_file):
     return cfg
 
 
-def test_simulate_flies_every_leg_of_the_cycle(hover_file, tmp_path, capsys):
+@pytest.fixture(scope="module")
+def cycle_flight(cycle):
+    """The hover cycle flown once as configured, on an exact estimate: what ``simulate`` of
+    :data:`HOVER` with ``--estimate-error 0`` flies (the simulation is deterministic)."""
+    return fly(cycle, configured())
+
+
+@pytest.fixture
+def flown_once(cycle, cycle_flight, monkeypatch):
+    """``simulate`` of the hover file gets the module's one flight of it instead of flying the same
+    config and scenario again (each CLI test below checks what the command makes of the flight)."""
+    real = recovery.fly
+
+    def fly_once(cfg, scenario, *args, **kwargs):
+        if cfg == cycle and scenario == configured() and not args and not kwargs:
+            return cycle_flight
+        return real(cfg, scenario, *args, **kwargs)
+
+    monkeypatch.setattr(recovery, "fly", fly_once)
+
+
+def test_simulate_flies_every_leg_of_the_cycle(hover_file, tmp_path, capsys, flown_once):
     """configs/cycle.toml: both legs separate at b c with no jump, reach their target, dock at the
     first attempt within 0.10 m; the table has a column per leg; each leg's figure is drawn."""
     # an exact estimate: a contact within 0.10 m is the exact estimate's figure; on PX4's errors the
@@ -132,13 +154,13 @@ def test_simulate_refuses_the_deck_ride(capsys):
     assert code == 2 and "error: mission.ride = 'deck'" in err and "marsupial demo" in err and out == "", err
 
 
-def test_the_flight_figure_measures_each_leg_against_its_own_target(cycle, tmp_path):
+def test_the_flight_figure_measures_each_leg_against_its_own_target(cycle, cycle_flight, tmp_path):
     """The whole flight's figure (``marsupial plot``'s flight.png) measures |e_tc| and |e_pt| to
     each tick's own leg's target, not to target 1 over the whole flight: at each leg's separation
     the carrier's dock point is b c = 8 m from the figure's target; each leg gets its figure."""
     from mission.plots import plot_legs, record_trajectories
 
-    flight = fly(cycle, configured())
+    flight = cycle_flight
     rec = flight.record
     tr = record_trajectories(rec, "cycle", whole_flight=True)
     assert tr is not None and tr.target.shape == tr.x_c.shape
