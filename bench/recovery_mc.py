@@ -4,9 +4,11 @@ during the first approach), flown in-process on the mock's dynamics (:mod:`sim.b
 with the table of the targets and what it cost.
 
 Usage: ``python -m bench.recovery_mc [-n 200] [--seed 1] [--config configs/recovery.toml]
-[--estimate-error 1] [--json F] [--plot F]`` (about 1 s of CPU per scenario; on a busy machine
-the wall time is several times that). ``--estimate-error``: the vehicle's estimate errs as
-PX4 SITL's does (1: as much), each scenario with its own seed (no shared flight before the recovery).
+[--estimate-error 1] [--only 102,175] [--json F] [--plot F]`` (about 1 s of CPU per scenario, 5 s
+for the two-target cycle; on a busy machine the wall time is several times that).
+``--estimate-error``: the vehicle's estimate errs as PX4 SITL's does (1: as much), each scenario
+with its own seed (no shared flight before the recovery). ``--only``: fly only these scenarios
+(their numbers, ``#i`` in the report) of the ``-n`` drawn, to look at one again.
 Exit code 0 when the targets hold.
 """
 from __future__ import annotations
@@ -32,18 +34,28 @@ ROOT = Path(__file__).resolve().parents[1]
               show_default=True)
 @click.option("--estimate-error", type=click.FloatRange(min=0.0), default=0.0, show_default=True,
               help="The vehicle's estimate errs as PX4 SITL's does, this many times as much (1: PX4 SITL's; 0: exact, as the demo's mock).")
+@click.option("--only", type=str, default=None, help="Fly only these scenarios of the -n drawn (comma-separated numbers).")
 @click.option("--json", "json_path", type=click.Path(dir_okay=False), help="Write the report (every scenario's row) here.")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), help="Draw the worst flight's recovery here.")
-def main(count: int, seed: int, config: str, estimate_error: float, json_path: str | None, plot_path: str | None) -> int:
+def main(count: int, seed: int, config: str, estimate_error: float, only: str | None, json_path: str | None,
+         plot_path: str | None) -> int:
     cfg = load_config(config)
+    drawn = count
     scenarios = recovery_mc.random_scenarios(count, seed, estimate_error)
+    if only:
+        wanted = {int(i) for i in only.split(",")}
+        scenarios = [sc for sc in scenarios if sc.index in wanted]
+        if len(scenarios) != len(wanted):
+            raise click.BadParameter(f"scenarios are numbered 0..{count - 1}", param_hint="--only")
+        count = len(scenarios)
     wall, cpu = time.monotonic(), time.process_time()
     with tqdm(total=count, desc=f"{count} recoveries", unit="flight") as bar:
         report, worst = recovery_mc.monte_carlo(cfg, scenarios, progress=lambda f: bar.update(1))
     wall, cpu = time.monotonic() - wall, time.process_time() - cpu
     report.seed = seed
-    click.echo(f"python -m bench.recovery_mc -n {count} --seed {seed} --config {Path(config).name}"
-               f"{f' --estimate-error {estimate_error:g}' if estimate_error else ''}")
+    click.echo(f"python -m bench.recovery_mc -n {drawn} --seed {seed} "
+               f"--config {Path(config).name}{f' --estimate-error {estimate_error:g}' if estimate_error else ''}"
+               f"{f' --only {only}' if only else ''}")
     click.echo(recovery_mc.format_report(report))
     for r in report.rows:
         if recovery_mc.badness(r)[0]:

@@ -38,6 +38,7 @@ T = TypeVar("T")
 COMMAND_MARGIN_FACTOR = 0.5  # the command filter's obstacle margin, of safety.margin_m
 COMMAND_SPEED_FACTOR = 1.25  # its speed limit, of the reference's (room to pull onto the reference)
 COMMAND_ACCEL_FACTOR = 1.5  # its acceleration limit, of the reference's
+DOCK_CHASE_GAIN_PER_S = 4.0  # [1/s] the riding reference's pull per metre near the dock point it chases (flying.riding)
 
 
 def model_from_config(cfg: Config, target: np.ndarray | None = None) -> TickModel:
@@ -89,6 +90,7 @@ def mission_model(cfg: Config) -> MissionModel:
         join_settle_m=min(m.dock_tolerance_m, m.join_settle_m if m.join_settle_m is not None else m.dock_tolerance_m),
         recovery=recovery_model(cfg) if m.final_action == "return" else None,
         leg_start_m=tick.law.separation_distance_m + m.leg_start_margin_m,
+        dock_chase=PursuitLimits(m.dock_rejoin_speed_m_s, s.passenger_max_accel_m_s2 or math.inf, DOCK_CHASE_GAIN_PER_S),
         deck=derived(DeckRide, m, keep_out_radius_m=m.deck_keep_out_radius_m, slope=m.deck_clear_slope,
                      clear_height_m=m.deck_clear_height_m, press_floor_m=m.deck_press_floor_m,
                      radius_m=cfg.recovery.deck_radius_m) if m.ride == "deck" else None,

@@ -259,6 +259,11 @@ class MissionSection(Section):
         description=("[s] before separation, no fresh carrier state (see carrier_timeout_s) for this long: abort "
                      "(carrier_lost), Hold. Covers a stalled carrier process or link (a 1 s SIGSTOP); a carrier whose "
                      "liveliness token is gone aborts at once"))
+    dock_rejoin_speed_m_s: float = Field(1.0, gt=0, le=5,
+        description=("[m/s] before separation, riding a carrier state that is not fresh (see carrier_timeout_s) and "
+                     "back on a fresh one: the reference chases the dock point at most this fast relative to it, and "
+                     "its velocity changes at most at safety.passenger_max_accel_m_s2, so the dock point a fresh state "
+                     "puts elsewhere than the prediction (a carrier that braked in the gap) is taken back smoothly"))
     carrier_settle_s: float = Field(
         2.0, ge=0, le=30, description="[s] a carrier state the feed has just re-accepted (a newly bound carrier, a "
         "resync after a jump) must stay within the carrier's own speed and acceleration limits this long, and its "

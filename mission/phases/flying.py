@@ -17,6 +17,7 @@ from mission.core.records import replace
 from mission.flight_mode import FlightMode
 from mission.core import arrival
 from mission.core.law import norm
+from mission.core.pursuit import pursue
 from mission.core.setpoint import Setpoint
 from mission.phases.types import ZERO, Decision, MissionModel, MissionState, Observation, Phase, carrier_fresh, dock_point, enter
 from mission.phases.phase import Request
@@ -154,8 +155,10 @@ def riding(state, obs, m):
     had (:func:`_hold`); once the feed is trusted again the reference goes back to the dock
     point at join speed, and only then rides (and may latch) again. A stale one (older than
     mission.carrier_timeout_s: a stalled carrier) is ridden as the dock point predicted with its
-    age, with the carrier's velocity and no acceleration fed forward (the prediction's); the
-    latch waits for a fresh one (the machine aborts after mission.carrier_lost_s without)."""
+    age (the carrier's last velocity fed forward, no acceleration: the prediction has none),
+    the reference chasing it and, once a fresh state is back, the fresh dock point
+    (:func:`_chase`) until it is on it again; the latch waits for a fresh one (the machine
+    aborts after mission.carrier_lost_s without)."""
     t = obs.t_s
     if obs.carrier.untrusted is not None:
         return _hold(state, obs, m)
@@ -172,6 +175,11 @@ def riding(state, obs, m):
     else:
         event = ()
     fresh = carrier_fresh(obs, m)
+    if state.chasing_dock or not fresh:
+        chased = _chase(state, obs, m, dock, v_dock, fresh, event)
+        if chased is not None:
+            return chased
+        state, event = replace(state, chasing_dock=False), (*event, "back on the dock point after a stale carrier state")
     if separation_due(dock, False, m.tick) and fresh:
         theta, anchor = latch_point(state.prev_dock, dock, m.tick.target, m.tick)
         new = enter(state, Phase.SEPARATED, t, anchor=anchor, e_ref=ZERO.copy(), x_ref=anchor.copy(),
@@ -185,6 +193,48 @@ def riding(state, obs, m):
     new = replace(state, x_ref=dock.copy(), e_ref=ZERO.copy(), prev_dock=dock.copy(), u_ref=tick.u, **tr.kept())
     return new, tr.decision(dock=dock, P=float(tick.P), relative=tick.relative, desired=tick.desired,
                          safety_acted=acted or bool(tick.safety.changed), events=event)
+
+
+#: [m] riding, the reference that chases the dock point (:func:`_chase`) is back on it within
+#: this of it (and within one tick's acceleration of its velocity): what is left is dropped
+CHASE_DONE_M = 0.01
+
+
+def _chase(state: MissionState, obs: Observation, m: MissionModel, dock: np.ndarray, v_dock: np.ndarray, fresh: bool,
+           events: tuple[str, ...]) -> tuple[MissionState, Decision] | None:
+    """RIDING with the reference chasing the dock point instead of sitting on it: while the
+    carrier's state is stale, the dock point predicted with its age; once a fresh one is back,
+    the fresh dock point, which lies elsewhere when the carrier did not drive on as predicted (it
+    braked or turned in the gap: 1 m/s^2 of braking over a 1.5 s gap puts it 1.1 m behind the
+    prediction and 1.5 m/s slower). The reference pursues it (:func:`mission.core.pursuit.pursue`,
+    ``m.dock_chase``: the dock's velocity fed forward, at most mission.dock_rejoin_speed_m_s
+    relative to it, its velocity changing at most at the passenger's acceleration limit), so
+    neither its position nor its velocity jumps, where sitting on the fresh dock point would
+    have jumped by the prediction's error. None once it is back on a fresh dock point (within
+    :data:`CHASE_DONE_M` and one tick's acceleration): the caller rides on it. A latch due meanwhile
+    fires (at b c, on the fresh state) with the reference's offset from the dock as the law's
+    start (``e_ref``): no jump there either."""
+    assert state.x_ref is not None and state.prev_dock is not None  # riding: both set on entering it
+    u_prev = state.u_ref if state.u_ref is not None else v_dock
+    # from the last tick's reference towards the dock point as it was then (its velocity back over
+    # the tick): the reference lands on the dock point now, not a tick behind it
+    x_ref, u_ref = pursue(state.x_ref, u_prev, dock - v_dock * m.dt_s, v_dock, m.dock_chase, m.dt_s)
+    if fresh and norm(dock - x_ref) <= CHASE_DONE_M and norm(v_dock - u_ref) <= m.dock_chase.accel_m_s2 * m.dt_s:
+        return None
+    t = obs.t_s
+    if fresh and separation_due(dock, False, m.tick):
+        theta, anchor = latch_point(state.prev_dock, dock, m.tick.target, m.tick)
+        offset = x_ref - dock
+        new = enter(state, Phase.SEPARATED, t, anchor=anchor, e_ref=offset, x_ref=anchor + offset, chasing_dock=False,
+                    separation_time_s=t - (1 - float(theta)) * m.dt_s)
+        return navigate(new, obs, m, events=(*events, f"separated at |e_tc| = {norm(m.tick.target - anchor):.3f} m"))
+    tick = passenger_tick(dock, v_dock, ZERO, False, m.tick, u_prev, m.dt_s)  # the law's view (diagnostics)
+    a_ref = (u_ref - u_prev) / m.dt_s if m.tracking.kind == "full" else ZERO
+    tr = _track(state, obs, m, x_ref, u_ref, a_ref)
+    new = replace(state, x_ref=x_ref, u_ref=u_ref, e_ref=ZERO.copy(), prev_dock=dock.copy(), chasing_dock=True,
+                  u_cmd=tr.setpoint.velocity_ned_m_s, integral=tr.integral, accel_lp=tr.accel_lp)
+    return new, tr.decision(dock=dock, P=float(tick.P), relative=tick.relative, desired=u_ref, safety_acted=tr.acted,
+                            events=events)
 
 
 def _lag_m(state: MissionState, obs: Observation) -> float:

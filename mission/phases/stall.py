@@ -13,10 +13,18 @@ distance: a jump in the velocity it flies). So:
     a gap between two ticks longer than STALL_S, in a flying phase (not seated on a deck):
       JOIN, SEPARATED .. ARRIVED, RETURNING .. FALLBACK, HOME --the reference (x_ref, u_ref;
           after separation e_ref) restarts on the vehicle's position and velocity
-      RIDING, TRANSIT --the reference stays on the dock point (the law's equilibrium); the
-          carrier's state the loop finds may be older than mission.carrier_timeout_s (the feed's
-          thread stalled too): the ride goes on, on the dock point predicted with its age, and
-          the latch waits for a fresh one (mission.phases.machine)
+      RIDING --the reference (x_ref, u_ref) restarts on the vehicle's position and velocity
+          too, and chases the dock point (mission.phases.flying: at most
+          mission.dock_rejoin_speed_m_s relative to it, at the passenger's acceleration limit)
+          until it is on it again. For the gap PX4 flew the last full setpoint, whose position
+          stayed where the dock point was: its position loop braked the vehicle towards it while
+          the carrier drove on, and the vehicle lies behind the dock point (0.7 m after 1 s at
+          2 m/s); a reference left on the dock point would pull it there by PX4's position
+          loop, a jump in what PX4 flies once full setpoints resume. The carrier's state the
+          loop finds may be older than mission.carrier_timeout_s (the feed's thread stalled
+          too): the chase goes on, on the dock point predicted with its age, and the latch
+          waits for a fresh one (mission.phases.machine)
+      TRANSIT, riding on an untrusted feed --the reference stays on the dock point
       every one --the last command (u_cmd, the safety filter's previous one) is the vehicle's
           velocity, so the command goes on from what the vehicle does, within the passenger's
           acceleration limit per tick; the dwell being timed (JOIN's, the holdoff's) restarts
@@ -55,7 +63,8 @@ STALL_S = 0.25
 #: flies by velocity only, while the link reads the telemetry it missed (see above).
 SETTLE_S = 0.2
 
-#: Phases whose reference sits on the dock point: it is not moved, only the command restarts.
+#: Phases whose reference sits on the dock point: not moved after a stall (RIDING on a trusted feed
+#: is: it restarts on the vehicle and chases the dock point, see :func:`resume`).
 ON_THE_DOCK = frozenset({Phase.RIDING, Phase.TRANSIT})
 
 #: Phases whose reference is the paper's law integrated about the anchor (``e_ref``).
@@ -96,7 +105,9 @@ def resume(state: MissionState, obs: Observation) -> tuple[MissionState, tuple[s
         return state, ()
     x_p, v_p = v.position_ned_m.copy(), v.velocity_ned_m_s.copy()
     state = replace(state, u_cmd=v_p.copy(), settled_since_s=None)
-    if state.phase not in ON_THE_DOCK:
+    if state.phase is Phase.RIDING and state.held_dock is None:
+        state = replace(state, x_ref=x_p.copy(), u_ref=v_p.copy(), chasing_dock=True)
+    elif state.phase not in ON_THE_DOCK:
         state = replace(state, x_ref=x_p.copy(), u_ref=v_p.copy())
         if state.phase in ABOUT_THE_ANCHOR and state.anchor is not None:
             state = replace(state, e_ref=x_p - state.anchor)
@@ -109,7 +120,8 @@ def _said(state: MissionState, t_s: float) -> tuple[str, ...]:
     """The stall's event on the first tick after it (none on any other)."""
     if state.last_stall is None or state.last_stall[0] != t_s:
         return ()
-    where = "on the dock point" if state.phase in ON_THE_DOCK else "from the vehicle"
+    where = ("from the vehicle, chasing the dock point" if state.chasing_dock and state.phase is Phase.RIDING
+             else "on the dock point" if state.phase in ON_THE_DOCK else "from the vehicle")
     return (f"stalled: no tick for {state.last_stall[1]:.2f} s; the reference goes on {where}, "
             f"the command from the vehicle's velocity (by velocity only for {SETTLE_S:g} s)",)
 

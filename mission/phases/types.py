@@ -181,6 +181,7 @@ class MissionModel:
     final_action: str  # "hold" | "land"
     carrier_timeout_s: float  # [s] before separation, a carrier state older than this is not fresh (no latch on it)...
     carrier_lost_s: float  # ... and none fresh for this long [s]: carrier_lost
+    dock_chase: PursuitLimits  # riding a stale carrier state and back: the reference's limits relative to the dock point
     heartbeat_timeout_s: float
     prestream_s: float
     connect_timeout_s: float
@@ -325,6 +326,7 @@ class MissionState:
     legs_skipped: str | None = None  # why the legs after the last one flown were skipped (None: none were)
     battery_start: tuple[float, float] | None = None  # (t [s], remaining [%]) at the first battery reading
     held_dock: np.ndarray | None = None  # [m] NED: holding on (then rejoining from) this dock point: the feed was untrusted
+    chasing_dock: bool = False  # riding: the reference chases the dock point (a stale state ridden, then back on a fresh one)
     # ride = "deck": the passenger sits on the deck (carried, taking off or landed): PX4 may show it
     # disarmed, landed or out of OFFBOARD without that being a fault (mission.phases.machine)
     seated: bool = False

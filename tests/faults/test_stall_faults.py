@@ -196,9 +196,10 @@ def test_stalls_while_riding_and_at_the_target_and_the_mission_carries_on(tmp_pa
     window = [r for r in rows if oldest["t_s"] - 1.5 <= r["t_s"] <= oldest["t_s"] + 1.0 and r["phase"] == "RIDING"]
     woke = [b["t_s"] for a, b in zip(rows, rows[1:]) if b["t_s"] - a["t_s"] > STALL_S_MISSION]
     for a, b in zip(window, window[1:]):  # the command and the reference (the dock point) go on smoothly
+        if any(0.0 <= b["t_s"] - w < SETTLE_S_MISSION + 0.1 for w in woke):
+            continue  # the loop's own stalls (the reference restarts on the vehicle there): below
         step = math.dist(*((r["u_cmd_n"], r["u_cmd_e"], r["u_cmd_d"]) for r in (a, b)))
-        if not any(0.0 <= b["t_s"] - w < SETTLE_S_MISSION + 0.1 for w in woke):  # the loop's own stalls: below
-            assert step <= JUMP_M_S, (b["t_s"], step)
+        assert step <= JUMP_M_S, (b["t_s"], step)
         moved = math.dist(*((r["x_ref_n"], r["x_ref_e"], r["x_ref_d"]) for r in (a, b)))
         expected = math.hypot(b["v_c_n"], b["v_c_e"], b["v_c_d"]) * (b["t_s"] - a["t_s"])
         assert abs(moved - expected) <= DOCK_STEP_M, (b["t_s"], moved, expected, rows[k]["t_s"])
@@ -224,6 +225,9 @@ def test_stalls_while_riding_and_at_the_target_and_the_mission_carries_on(tmp_pa
     assert all(STALL_S - 0.05 <= gap <= 1.5 for gap, _ in gaps), gaps
     assert sorted(rows[i]["phase"] for _, i in gaps) == ["ARRIVED", "RIDING"], [rows[i]["phase"] for _, i in gaps]
     assert err.count("stalled: no tick for") >= 2, err[-3000:]
+    # riding, the reference restarted on the vehicle and chased the dock point back (not left on
+    # it, 0.63-0.77 m ahead of the vehicle, for PX4's position loop to pull it there)
+    assert "the reference goes on from the vehicle, chasing the dock point" in err, err[-3000:]
     for _, i in gaps:
         assert rows[i - 1]["phase"] == rows[i]["phase"], (rows[i - 1]["phase"], rows[i]["phase"])
         t0 = rows[i]["t_s"]

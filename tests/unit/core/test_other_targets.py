@@ -49,3 +49,33 @@ def test_a_carrier_riding_to_target_2_past_target_1_steers_round_it_without_its_
     # no brake: the barrier turns the command at about the acceleration limit (it has the last
     # word over that limit: 1.54 m/s^2 at its steepest here, against 1 m/s^2)
     assert largest_step <= accel * dt * 2.0, largest_step
+
+
+def test_a_leg_begun_at_the_last_target_s_guard_circle_is_not_pushed_out() -> None:
+    """configs/cycle.toml's leg 2 begun where leg 1 left the carrier: at rest on target 1's guard
+    circle (b c - carrier.p3_margin_m), inside target 1's keep-out (b c + safety.margin_m). The
+    barrier holds it there (no deeper) and never pushes it out: its command grows from rest at its
+    acceleration limit, and it never comes closer to target 1 than it began (Monte-Carlo scenario
+    #102 of seed 1: pushed out at 1.2 m/s in a tick, the riding passenger 0.56 m off its dock)."""
+    cfg = load_config(CONFIGS / "cycle.toml")
+    t1, t2 = (np.asarray(t, dtype=float) for t in cfg.scenario.legs())
+    model = carrier_model(cfg, target=t2)
+    g = guard_params(cfg)
+    height = float(t1[2])
+    # on target 1's guard circle, on the side away from target 2's line (the law leads past target 1)
+    side = np.array([-0.6, 0.8, 0.0])
+    x = t1 + math.sqrt(g.radius_m ** 2 - height ** 2) * side
+    x[2] = 0.0
+    start = float(np.linalg.norm(t1 - x))
+    u, dt = np.zeros(3), 1.0 / cfg.carrier.rate_hz
+    accel = cfg.safety.carrier_max_accel_m_s2
+    closest, largest_step = math.inf, 0.0
+    for _ in range(int(20.0 / dt)):
+        new = np.asarray(carrier_tick(x, False, model, u_prev=u, dt_s=dt).u, dtype=float)
+        largest_step = max(largest_step, float(np.linalg.norm(new - u)))
+        u = new
+        x = x + u * dt
+        closest = min(closest, float(np.linalg.norm(t1 - x)))
+    assert largest_step <= accel * dt + 1e-9, largest_step  # a push out would be ~1.2 m/s in a tick
+    assert closest >= start - 1e-3, (closest, start)
+    assert float(np.linalg.norm(t2 - x)) < float(np.linalg.norm(t2 - (t1 + math.sqrt(g.radius_m ** 2 - height ** 2) * side))) - 5.0

@@ -4,6 +4,7 @@ target the mission carries on; the first setpoint after the gap goes on from the
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 import pytest
@@ -16,7 +17,7 @@ from mission.phases.phase import FLYING
 from mission.phases.stall import SETTLE_S, STALL_S
 from mission.time.clock import ManualClock
 from tests.conftest import CONFIGS
-from tests.support.fake_vehicle import FakeWorld
+from tests.support.fake_vehicle import POSITION_GAIN_PER_S, FakeWorld
 
 GAP_S = 1.0  # [s] the stall: no tick, nothing sent, the world goes on
 JUMP_M_S = 0.05  # [m/s] the most the command may change a tick (summary's max_phase_switch_jump_m_s bound)
@@ -43,13 +44,41 @@ class UnreadWorld(FakeWorld):
         return dataclasses.replace(st, position_rx_s=st.t_s - GAP_S, position_valid=False)
 
 
-def fly_with_a_stall(cfg, phase: Phase, after_s: float, unread_ticks: int = 0, recorder=None):
+class HeldSetpointWorld(UnreadWorld):
+    """The fake world whose vehicle flies its last full setpoint as PX4 does through a gap: the
+    setpoint's velocity plus its position loop (``POSITION_GAIN_PER_S`` x the distance to the
+    setpoint's position, which stays where it was sent), integrated in 10 ms steps; ``demands``
+    (t [s], the velocity it flies [m/s]) just after each setpoint."""
+
+    _held = None
+
+    def send(self, setpoint) -> None:
+        super().send(setpoint)
+        self._held = setpoint if self.mode == "OFFBOARD" and setpoint.position_ned_m is not None else None
+        self.demands = [*getattr(self, "demands", []), (self.clock.now(), self._v_p.copy())]
+
+    def _advance(self) -> float:
+        now = self.clock.now()
+        sp, dt = self._held, now - self._t
+        if sp is None or dt <= 0:
+            return super()._advance()
+        n = max(1, math.ceil(dt / 0.01))
+        for _ in range(n):
+            self._v_p = np.asarray(sp.velocity_ned_m_s, dtype=float) + POSITION_GAIN_PER_S * (sp.position_ned_m - self.vehicle_ned_m)
+            self.vehicle_ned_m = self.vehicle_ned_m + self._v_p * (dt / n)
+        self.carrier_ned_m = self.carrier_ned_m + self._v_c * dt
+        self._t = now
+        return now
+
+
+def fly_with_a_stall(cfg, phase: Phase, after_s: float, unread_ticks: int = 0, recorder=None, world_type=UnreadWorld,
+                     worlds: list | None = None):
     """Fly the mission; ``after_s`` [s] into ``phase`` the clock jumps ``GAP_S`` between two ticks
     (the fake vehicle flies on at its last velocity meanwhile, the carrier drives on). Returns the
     outcome, the tick reports, the controller, and the vehicle's (velocity [m/s], position [m])
     after each tick (the one before the gap: just after it, before the next tick)."""
     clock = ManualClock()
-    world = UnreadWorld(clock, target_ned_m=np.asarray(cfg.scenario.target, dtype=float), recovery_velocity_ned_m_s=COURSE)
+    world = world_type(clock, target_ned_m=np.asarray(cfg.scenario.target, dtype=float), recovery_velocity_ned_m_s=COURSE)
     reports: list[TickReport] = []
     seen: dict = {"since": None, "done": False}
     after: list[tuple[np.ndarray, np.ndarray]] = []
@@ -70,6 +99,8 @@ def fly_with_a_stall(cfg, phase: Phase, after_s: float, unread_ticks: int = 0, r
                                    recorder=recorder)
     outcome = controller.run()
     assert seen["done"], f"never {after_s} s into {phase}"
+    if worlds is not None:
+        worlds.append(world)
     return outcome, reports, controller, after
 
 
@@ -144,6 +175,34 @@ def test_a_stall_riding_navigating_at_the_target_or_coming_home_and_the_mission_
         assert_goes_on_from_the_vehicle(reports, after)
 
 
+def test_a_stall_riding_fast_behind_a_held_setpoint_catches_up_without_a_jump(cfg):
+    """The vehicle flies the last full setpoint through the gap as PX4 does (its position loop on
+    the setpoint's position, which stays where the dock point was): riding at 2 m/s it falls
+    0.7 m behind the dock point in 1 s (P1's 0.5 m broken: physics, not the mission's to prevent).
+    After the gap the reference restarts on the vehicle and chases the dock point: what the
+    vehicle flies changes by at most 0.13 m/s a tick (the first full setpoint's lead, 0.1 s of the
+    vehicle's velocity, pulls 0.95/s x 0.12 m; the rest at most JUMP_M_S); a reference left on the
+    dock point jumped it by 3 m/s when the full setpoints resumed (PX4's position loop pulling
+    the vehicle 0.94 m ahead). Back within mission.dock_tolerance_m within 1.5 s, P1 after it,
+    separation at b c."""
+    worlds: list = []
+    outcome, reports, _, after = fly_with_a_stall(cfg, Phase.RIDING, 3.0, world_type=HeldSetpointWorld, worlds=worlds)
+    assert outcome.ok, (outcome.reason, outcome.detail)
+    world = worlds[0]
+    i, first = first_after_the_gap(reports)
+    off = [(r.t_s, float(norm(after[k][1] - r.decision.dock))) for k, r in enumerate(reports) if k >= i and r.phase is Phase.RIDING]
+    assert off[0][1] >= 0.6, off[0]  # what the held setpoint did in the gap
+    flown = [(t, v) for t, v in world.demands if t >= first.t_s]
+    steps = [float(norm(b - a)) for (_, a), (t, b) in zip(flown, flown[1:]) if t - first.t_s <= 3.0]
+    assert max(steps) <= 0.13, max(steps)
+    assert any("the reference goes on from the vehicle, chasing the dock point" in e for e in first.decision.events)
+    back = next(t for t, d in off if d <= cfg.mission.dock_tolerance_m)
+    assert back - first.t_s <= 1.5, back - first.t_s
+    assert all(d <= cfg.mission.dock_tolerance_m for t, d in off if t >= back), max(d for t, d in off if t >= back)
+    latch = next(e for r in reports for e in r.decision.events if e.startswith("separated at |e_tc| = "))
+    assert float(latch.split("= ")[1].split()[0]) == pytest.approx(cfg.law.b * cfg.law.c, abs=0.01), latch
+
+
 def test_a_position_not_read_yet_after_the_stall_is_no_stop(cfg):
     """The link's thread stalled with the loop: for 3 ticks after the gap the vehicle's position
     is 1 s old. Those ticks resend the last command by velocity only (a silent link's stop would
@@ -201,21 +260,28 @@ class QuietCarrierWorld(FakeWorld):
         return received
 
 
-def fly_with_a_quiet_carrier(cfg, after_s: float, quiet_s: float):
-    """Fly the mission; the carrier falls quiet ``after_s`` [s] into RIDING for ``quiet_s`` [s]."""
+def fly_with_a_quiet_carrier(cfg, after_s: float, quiet_s: float, brake_m_s2: float = 0.0):
+    """Fly the mission; the carrier falls quiet ``after_s`` [s] into RIDING for ``quiet_s`` [s],
+    braking at ``brake_m_s2`` [m/s^2] meanwhile (then driving on at the speed it braked to)."""
     clock = ManualClock()
     world = QuietCarrierWorld(clock, target_ned_m=np.asarray(cfg.scenario.target, dtype=float),
                               recovery_velocity_ned_m_s=COURSE)
     world.positions = []  # the vehicle's position [m] NED after each tick
+    world.velocities = []  # ... and its velocity [m/s] NED
     reports: list[TickReport] = []
 
     def tick(r: TickReport) -> None:
         reports.append(r)
-        world.positions.append(FakeWorld.state.fget(world).position_ned_m.copy())
+        st = FakeWorld.state.fget(world)
+        world.positions.append(st.position_ned_m.copy())
+        world.velocities.append(st.velocity_ned_m_s.copy())  # what it flies: the setpoint and its position loop
         if r.phase is Phase.RIDING and world.quiet[0] == np.inf:
             riding = next(x.t_s for x in reports if x.phase is Phase.RIDING)
             if r.t_s - riding >= after_s:
                 world.quiet = (r.t_s, r.t_s + quiet_s)
+                if brake_m_s2 > 0:
+                    world.carrier_speed_m_s -= brake_m_s2 * quiet_s
+                    world.carrier_accel_m_s2 = brake_m_s2
 
     controller = MissionController(cfg, world, world.feed, clock, publisher=world, on_tick=tick, command_thread=False)
     return controller.run(), reports, controller, world
@@ -243,6 +309,40 @@ def test_a_carrier_quiet_1_s_while_riding_and_the_ride_goes_on(cfg):
     steps = [float(norm(b - a)) for a, b in zip(docks, docks[1:])]
     assert max(steps) <= cfg.carrier.max_speed_m_s * 0.02 + 1e-6, max(steps)  # the predicted dock never jumps
     assert controller.state.recovery.attempts == 1
+
+
+BRAKE_M_S2 = 0.5  # [m/s^2] the carrier's braking while quiet: 2 -> 1.5 m/s, 0.25 m behind the prediction after 1 s
+
+
+def test_a_carrier_that_brakes_while_quiet_is_taken_back_without_a_jump(cfg):
+    """The carrier brakes while its state is quiet (1 s, 0.5 m/s^2): the fresh state puts the dock
+    point 0.25 m behind the prediction the passenger rode, moving 0.5 m/s slower. The reference
+    chases it back (mission.dock_rejoin_speed_m_s, at the passenger's acceleration limit): what
+    the vehicle flies (the setpoint's velocity and its position loop on the setpoint's position)
+    changes by at most JUMP_M_S a tick from the carrier's falling quiet until 2 s after it is
+    fresh again (sitting on the fresh dock point at once jumped it by 0.91 m/s: the position and
+    the velocity fed forward both jumped by the prediction's error), P1 holds, the reference is
+    back on the dock point within 1.5 s, and the latch comes at b c."""
+    outcome, reports, _, world = fly_with_a_quiet_carrier(cfg, 3.0, GAP_S, brake_m_s2=BRAKE_M_S2)
+    assert outcome.ok, (outcome.reason, outcome.detail)
+    riding = [(r, x) for r, x in zip(reports, world.positions) if r.phase is Phase.RIDING]
+    fresh = next(k for k, (r, _) in enumerate(riding) if r.t_s >= world.quiet[1])
+    before, after = riding[fresh - 1][0], riding[fresh][0]
+    predicted = before.decision.dock + (after.t_s - before.t_s) * np.asarray(before.carrier.value.velocity_ned_m_s)
+    error = float(norm(after.decision.dock - predicted))
+    assert error >= 0.2, error  # the prediction was that far off: what the reference would have jumped by
+    sent = [r.decision.setpoint.velocity_ned_m_s for r, _ in riding]
+    assert max(float(norm(b - a)) for a, b in zip(sent, sent[1:])) <= JUMP_M_S
+    flown = [(r.t_s, v) for r, v in zip(reports, world.velocities) if r.phase is Phase.RIDING]
+    steps = [(float(norm(b - a)), t) for (_, a), (t, b) in zip(flown, flown[1:]) if world.quiet[0] <= t <= world.quiet[1] + 2.0]
+    assert max(steps) <= (JUMP_M_S, np.inf), max(steps)  # measured 0.045 m/s
+    offsets = [float(norm(x - r.decision.dock)) for r, x in riding]
+    assert max(offsets) <= cfg.mission.dock_tolerance_m, max(offsets)  # P1
+    events = [(r.t_s, e) for r in reports for e in r.decision.events]
+    back = [t for t, e in events if e == "back on the dock point after a stale carrier state"]
+    assert len(back) == 1 and back[0] - world.quiet[1] <= 1.5, (back, world.quiet)
+    latch = next(e for _, e in events if e.startswith("separated at |e_tc| = "))
+    assert float(latch.split("= ")[1].split()[0]) == pytest.approx(cfg.law.b * cfg.law.c, abs=0.01), latch
 
 
 def test_a_carrier_quiet_for_good_while_riding_is_lost_after_carrier_lost_s(cfg):
