@@ -126,10 +126,15 @@ class LockstepStepper:
         return None
 
     def _hello(self, onboard: VehicleLink) -> None:
-        """A HEARTBEAT outside the streams and the faults, so a controller that has not answered yet
-        can adopt the vehicle."""
+        """A HEARTBEAT outside the streams and the faults on every link, so a controller that has
+        not answered yet can adopt the vehicle and a ground station sees it from power-on, as PX4
+        heartbeats before any offboard controller (the ground station's copy moves no clock)."""
         v = self.v
-        self.send_control(onboard, tel.build("HEARTBEAT", v._telemetry_state(), v._geo, v._noise))
+        heartbeat = tel.build("HEARTBEAT", v._telemetry_state(), v._geo, v._noise)
+        self.send_control(onboard, heartbeat)
+        for link in v._links:
+            if link is not onboard:
+                self.send_control(link, heartbeat)
 
     @property
     def t_ns(self) -> int:
