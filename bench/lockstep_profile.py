@@ -143,6 +143,21 @@ def profile_once(threads: bool, root: Path = ROOT, demo_args: tuple[str, ...] = 
     return out
 
 
+def profile_pair(first: Path, second: Path, demo_args: tuple[str, ...] = ()) -> tuple[dict[str, float], dict[str, float]]:
+    """One demo of each checkout flown at the same moment (so both meet the same load): their
+    :func:`profile_once` figures; ``click.ClickException`` if either failed."""
+    out: dict[Path, dict[str, float]] = {}
+    workers = [threading.Thread(target=lambda r=r: out.__setitem__(r, profile_once(False, r, demo_args)))
+               for r in (first, second)]
+    for w in workers:
+        w.start()
+    for w in workers:
+        w.join()
+    if len(out) < 2:
+        raise click.ClickException("a demo of the pair failed (see above)")
+    return out[first], out[second]
+
+
 def _median(values: list[float]) -> float:
     return statistics.median(values)
 
@@ -157,15 +172,7 @@ def paired(runs: int, other: Path) -> None:
     click.echo(f"paired runs: this checkout ({ROOT}) / {other}; per 20 ms step")
     ratios: dict[str, list[float]] = {"all CPU": [], "wall": []}
     for i in range(runs):
-        out: dict[Path, dict[str, float]] = {}
-        workers = [threading.Thread(target=lambda r=r: out.__setitem__(r, profile_once(False, r))) for r in (ROOT, other)]
-        for w in workers:
-            w.start()
-        for w in workers:
-            w.join()
-        if len(out) < 2:
-            raise click.ClickException("a demo of the pair failed (see above)")
-        mine, theirs = out[ROOT], out[other]
+        mine, theirs = profile_pair(ROOT, other)
         ratios["all CPU"].append(_all_cpu(mine) / _all_cpu(theirs))
         ratios["wall"].append(mine["wall_us"] / theirs["wall_us"])
         click.echo(f"  pair {i + 1} (load {os.getloadavg()[0]:.1f}): all CPU {_all_cpu(mine):.0f} / {_all_cpu(theirs):.0f} us, "

@@ -19,13 +19,12 @@ import statistics
 import subprocess
 import tarfile
 import tempfile
-import threading
 from io import BytesIO
 from pathlib import Path
 
 import click
 
-from bench.lockstep_profile import ROOT, profile_once
+from bench.lockstep_profile import ROOT, profile_pair
 
 PROCESSES = ("run", "mock-vehicle", "carrier")
 
@@ -39,7 +38,7 @@ def export(ref: str, into: Path) -> Path:
 
 
 def per_process_ms(result: dict[str, float]) -> dict[str, float]:
-    """CPU [ms] per step of each process of one :func:`profile_once` result, and ``all``."""
+    """CPU [ms] per step of each process of one :func:`bench.lockstep_profile.profile_once` result, and ``all``."""
     out = {p: result.get(f"{p} CPU us", 0.0) / 1e3 for p in PROCESSES}
     out["all"] = sum(v for k, v in result.items() if k.endswith("CPU us")) / 1e3
     return out
@@ -47,16 +46,8 @@ def per_process_ms(result: dict[str, float]) -> dict[str, float]:
 
 def side_by_side(before: Path, after: Path, demo_args: tuple[str, ...]) -> tuple[dict[str, float], dict[str, float]]:
     """One flight of each checkout at the same moment: their per-process CPU [ms] per step."""
-    out: dict[Path, dict[str, float]] = {}
-    workers = [threading.Thread(target=lambda r=r: out.__setitem__(r, profile_once(False, r, demo_args)))
-               for r in (before, after)]
-    for w in workers:
-        w.start()
-    for w in workers:
-        w.join()
-    if len(out) < 2:
-        raise click.ClickException("a demo failed (see above)")
-    return per_process_ms(out[before]), per_process_ms(out[after])
+    first, second = profile_pair(before, after, demo_args)
+    return per_process_ms(first), per_process_ms(second)
 
 
 @click.command()
