@@ -28,7 +28,7 @@ from mission.vision.detect import MarkerDetector, predicted_roi, schema_settings
 from mission.vision.frames import euler_quaternion, quaternion_matrix
 from mission.vision.layout import MarkerLayout
 from sim.camera.render import Poses, render, true_marker_pose
-from sim.camera.sensor import Sensor, SensorModel, image_motion_px
+from sim.camera.sensor import Sensor, image_motion_px, sensor_model
 
 CAMERA = CameraModel.from_fov(640, 480, 80.0, Mount.downward((0.05, 0.0, 0.08)))
 HEIGHTS_M = (0.5, 1.0, 2.0, 4.0, 8.0)
@@ -49,7 +49,7 @@ def scenes(count: int, layout: MarkerLayout, seed: int = 0) -> list[Scene]:
     """``count`` frames: heights cycled over HEIGHTS_M, tilts up to 20 deg, any yaw, the deck
     within 10 % of the height of the optical axis, 2 grey levels of noise, 1 m/s of blur."""
     rng = np.random.default_rng(seed)
-    sensor = Sensor(SensorModel(dropout_probability=0.0), seed=seed)
+    sensor = Sensor(sensor_model(dropout_probability=0.0), seed=seed)
     out = []
     for i in range(count):
         h = HEIGHTS_M[i % len(HEIGHTS_M)]
@@ -91,7 +91,7 @@ def run(count: int) -> list[dict]:
     layout = MarkerLayout.bundle()
     frames = scenes(count, layout)
     rows = []
-    sensor = Sensor(SensorModel(dropout_probability=0.0))
+    sensor = Sensor(sensor_model(dropout_probability=0.0))
     cpu, wall, _ = timed(lambda i: render(CAMERA, layout, true_marker_pose(CAMERA, frames[i].poses)), count)
     rows.append(row("render (ideal frame)", cpu, wall))
     cpu, wall, _ = timed(lambda i: sensor.expose(render(CAMERA, layout, true_marker_pose(CAMERA, frames[i].poses)),
@@ -124,7 +124,7 @@ def descent(seed: int = 0) -> list[dict]:
     the position error."""
     layout = MarkerLayout.bundle()
     detector = MarkerDetector(CAMERA, layout)
-    sensor = Sensor(SensorModel(), seed=seed)
+    sensor = Sensor(sensor_model(), seed=seed)
     rng = np.random.default_rng(seed)
     bands: dict[tuple[float, float], list] = {b: [] for b in ((4, 10.01), (2, 4), (1, 2), (0.5, 1), (0.25, 0.5))}
     h, t = 10.0, 0.0

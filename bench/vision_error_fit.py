@@ -20,7 +20,7 @@ from mission.vision.frames import euler_quaternion, quaternion_matrix
 from mission.vision.layout import MarkerLayout
 from sim.camera.error_model import FITTED, DetectionErrorModel, apparent_side_px
 from sim.camera.render import Poses, render, true_marker_pose
-from sim.camera.sensor import Sensor, SensorModel
+from sim.camera.sensor import Sensor, sensor_model
 from bench.vision_cost import CAMERA
 
 
@@ -28,7 +28,7 @@ def samples(count: int, layout: MarkerLayout, seed: int) -> np.ndarray:
     """Rows (side_px or nan, seen by the detector, distance, along error, across error 1, 2) [px, -, m, m, m, m]."""
     rng = np.random.default_rng(seed)
     detector = MarkerDetector(CAMERA, layout)
-    sensor = Sensor(SensorModel(dropout_probability=0.0), seed=seed)
+    sensor = Sensor(sensor_model(dropout_probability=0.0), seed=seed)
     rows = []
     for _ in range(count):
         h = float(np.exp(rng.uniform(np.log(0.6), np.log(12.0))))

@@ -2,7 +2,7 @@
 exposure, Gaussian read noise, and dropped frames, all from a seeded generator."""
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import cv2
 import numpy as np
@@ -18,25 +18,27 @@ class SensorModel:
     """noise_sigma: the read noise's standard deviation [grey levels, 0-255]; exposure_s: the
     exposure time [s] (blur length = image speed x exposure); dropout_probability: the chance a
     frame is lost [0-1]; rate_hz: frames a second; latency_s: from exposure to the frame's
-    delivery [s] (the consumer applies it: a frame carries its capture time)."""
+    delivery [s] (the consumer applies it: a frame carries its capture time). No defaults: they
+    are the ``[vision]`` section's (:func:`sensor_model`)."""
 
-    noise_sigma: float = 2.0
-    exposure_s: float = 0.005
-    dropout_probability: float = 0.02
-    rate_hz: float = 30.0
-    latency_s: float = 0.08
+    noise_sigma: float
+    exposure_s: float
+    dropout_probability: float
+    rate_hz: float
+    latency_s: float
 
 
-def sensor_model(section: VisionSection) -> SensorModel:
-    """The simulated sensor of the configuration's ``[vision]`` section."""
-    return derived(SensorModel, section)
+def sensor_model(section: VisionSection | None = None, **changed: float) -> SensorModel:
+    """The simulated sensor of the configuration's ``[vision]`` section (None: the schema's
+    defaults), with the fields named in ``changed`` set to their values."""
+    return replace(derived(SensorModel, section if section is not None else VisionSection()), **changed)
 
 
 @dataclass
 class Sensor:
     """A camera's sensor with its own seeded random stream."""
 
-    model: SensorModel = field(default_factory=SensorModel)
+    model: SensorModel = field(default_factory=sensor_model)
     seed: int = 0
 
     def __post_init__(self) -> None:

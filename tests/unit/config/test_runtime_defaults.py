@@ -73,9 +73,9 @@ def test_no_runtime_default_disagrees_with_the_schema():
 
 
 def test_the_models_built_from_the_configuration_carry_no_default_of_their_own():
-    """TrackingGains, DockingGeometry, RelnavParams and the mission's model take every tunable from the schema:
+    """TrackingGains, DockingGeometry, RelnavParams, the camera sensor and the mission's model take every tunable from the schema:
     none of those fields has a second default."""
-    for model in (TrackingGains, DockingGeometry, RecoveryModel, RelnavParams):
+    for model in (TrackingGains, DockingGeometry, RecoveryModel, RelnavParams, SensorModel):
         assert [f.name for f in dataclasses.fields(model) if f.default is not dataclasses.MISSING] == []
     # the detector's gates that [vision] configures have no second default either
     assert [f.name for f in dataclasses.fields(DetectorSettings)

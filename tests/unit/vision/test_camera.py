@@ -14,7 +14,7 @@ from mission.vision.capture import CameraError, CameraSource
 from mission.vision.detect import MarkerDetector
 from mission.vision.layout import MarkerLayout
 from sim.camera.render import true_marker_pose
-from sim.camera.sensor import Sensor, SensorModel, image_motion_px, line_kernel
+from sim.camera.sensor import Sensor, sensor_model, image_motion_px, line_kernel
 from sim.camera.simulated import SimulatedCamera
 from tests.unit.vision.scenes import CAMERA, aimed, truth
 
@@ -90,7 +90,7 @@ def test_blur_follows_the_image_motion():
 def test_a_moderately_blurred_frame_still_measures():
     layout = MarkerLayout.single(0.5)
     poses = aimed(CAMERA, 2.0, 5.0, 0.0, 0.0)
-    sensor = Sensor(SensorModel(exposure_s=0.01, dropout_probability=0.0), seed=1)
+    sensor = Sensor(sensor_model(exposure_s=0.01, dropout_probability=0.0), seed=1)
     frame = SimulatedCamera(CAMERA, layout, sensor).capture(poses, 0.0, relative_velocity_ned_m_s=(1.5, 0.5, 0.0))
     m = MarkerDetector(CAMERA, layout).measure(frame.image, 0.0, poses.attitude_q_wxyz)
     assert m is not None and np.linalg.norm(m.deck_rel_ned_m - truth(poses)) < 0.05
@@ -100,7 +100,7 @@ def test_the_real_camera_source_reads_a_file(tmp_path):
     """The same detector on frames read back through cv2.VideoCapture from a video file, stamped
     with their time in the file."""
     layout = MarkerLayout.single(0.5)
-    camera = SimulatedCamera(CAMERA, layout, Sensor(SensorModel(dropout_probability=0.0)))
+    camera = SimulatedCamera(CAMERA, layout, Sensor(sensor_model(dropout_probability=0.0)))
     path = tmp_path / "deck.avi"
     writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 20.0, (640, 480), isColor=False)
     poses = [aimed(CAMERA, 1.0 + 0.2 * i, 0.0, 0.0, 10.0 * i) for i in range(5)]

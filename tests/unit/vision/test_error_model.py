@@ -8,7 +8,7 @@ from mission.vision.detect import MarkerDetector
 from mission.vision.layout import MarkerLayout
 from sim.camera.error_model import FITTED, ModelledDetector, apparent_side_px
 from sim.camera.render import true_marker_pose
-from sim.camera.sensor import Sensor, SensorModel
+from sim.camera.sensor import Sensor, sensor_model
 from sim.camera.simulated import SimulatedCamera
 from tests.unit.vision.scenes import CAMERA, aimed, random_attitudes
 
@@ -45,7 +45,7 @@ def test_the_real_detector_falls_inside_the_model():
     """At 5 m the detector's relative errors along the line of sight lie within the model's
     3 sigma of its mean, and their mean within 1 sigma of the model's."""
     detector = MarkerDetector(CAMERA, LAYOUT)
-    camera = SimulatedCamera(CAMERA, LAYOUT, Sensor(SensorModel(dropout_probability=0.0), seed=9))
+    camera = SimulatedCamera(CAMERA, LAYOUT, Sensor(sensor_model(dropout_probability=0.0), seed=9))
     errors, bands = [], []
     for roll, pitch, yaw in random_attitudes(21, 16, 15.0):
         poses = aimed(CAMERA, 5.0, roll, pitch, yaw)

@@ -9,11 +9,11 @@ from mission.vision.detect import MarkerDetector, predicted_roi, schema_settings
 from mission.vision.frames import euler_quaternion, quaternion_matrix
 from mission.vision.layout import MarkerLayout
 from sim.camera.render import render, true_marker_pose
-from sim.camera.sensor import Sensor, SensorModel
+from sim.camera.sensor import Sensor, sensor_model
 from sim.camera.simulated import SimulatedCamera
 from tests.unit.vision.scenes import CAMERA, aimed, random_attitudes, truth
 
-NO_DROPS = SensorModel(noise_sigma=2.0, dropout_probability=0.0)
+NO_DROPS = sensor_model(noise_sigma=2.0, dropout_probability=0.0)
 
 # The bound on |measured - true| [m] per camera height [m], tilts up to 20 deg, any yaw, the
 # optical axis within 10 % of the height of the deck centre; 2 grey levels of noise. Measured over
@@ -93,7 +93,7 @@ def test_the_bundle_uses_both_tags_when_both_are_seen():
 def test_a_dropped_frame_and_an_occluded_tag_give_nothing_never_a_wrong_pose():
     layout = MarkerLayout.single(0.5)
     poses = aimed(CAMERA, 2.0, 5.0, 5.0, 30.0)
-    assert SimulatedCamera(CAMERA, layout, Sensor(SensorModel(dropout_probability=1.0))).capture(poses, 0.0) is None
+    assert SimulatedCamera(CAMERA, layout, Sensor(sensor_model(dropout_probability=1.0))).capture(poses, 0.0) is None
     detector = MarkerDetector(CAMERA, layout)
     ideal = render(CAMERA, layout, true_marker_pose(CAMERA, poses))
     rng = np.random.default_rng(9)
@@ -130,7 +130,7 @@ the deck's normal within 10 deg of the truth more often."""
     layout = MarkerLayout.single(0.5)
     detector = MarkerDetector(CAMERA, layout)
     plain = MarkerDetector(CAMERA, layout, schema_settings(ambiguity_ratio=1.0))  # lower error wins
-    camera = SimulatedCamera(CAMERA, layout, Sensor(SensorModel(noise_sigma=4.0, dropout_probability=0.0), seed=6))
+    camera = SimulatedCamera(CAMERA, layout, Sensor(sensor_model(noise_sigma=4.0, dropout_probability=0.0), seed=6))
     rng = np.random.default_rng(14)
     tilts: dict[str, list[float]] = {"gated": [], "plain": []}
     for i, (roll, pitch, yaw) in enumerate(random_attitudes(13, 40, 20.0)):
