@@ -34,7 +34,7 @@ COLUMNS = (
     + [f"x_c_{a}" for a in VEC] + [f"v_c_{a}" for a in VEC]
     + [f"dock_{a}" for a in VEC] + [f"x_ref_{a}" for a in VEC]
     + ["P"] + [f"relative_{a}" for a in VEC] + [f"desired_{a}" for a in VEC] + [f"u_cmd_{a}" for a in VEC]
-    + ["safety_acted", "carrier_age_s", "mode", "armed"]
+    + ["safety_acted", "carrier_age_s", "mode", "armed", "vehicle_age_s"]
 )
 
 
@@ -59,7 +59,8 @@ class TickRow:
     ``u_p - u_c`` and desired its command [m/s]; setpoint the :class:`~mission.core.setpoint.Setpoint`
     sent (None: nothing sent; its velocity is the CSV's u_cmd); safety_acted whether a filter
     changed the command; carrier_age_s [s] the sample's age (since the carrier measured it once
-    its clock offset is known, else since it arrived); mode, armed the vehicle's; anchor the
+    its clock offset is known, else since it arrived); mode, armed the vehicle's; vehicle_age_s [s]
+    since its newest LOCAL_POSITION_NED arrived (NaN: none); anchor the
     latched separation point [m] (None before); course the carrier's course (horizontal unit
     vector NED) while a recovery brings the passenger home (None otherwise); events what
     happened on this tick (phase change first), as text; yaw_c, yaw_p the carrier's and the
@@ -90,12 +91,14 @@ class TickRow:
     events: tuple[str, ...] = ()
     yaw_c: float | None = None
     yaw_p: float | None = None
+    vehicle_age_s: float = float("nan")
 
     def values(self) -> list[Any]:
         """The row's values in the order of :data:`COLUMNS` (vectors flattened, NaN for None)."""
         return [self.t_s, self.phase, *_vec(self.x_p), *_vec(self.v_p), *_vec(self.x_c), *_vec(self.v_c),
                 *_vec(self.dock), *_vec(self.x_ref), self.P, *_vec(self.relative), *_vec(self.desired),
-                *_vec(self.u_cmd), int(self.safety_acted), self.carrier_age_s, self.mode, int(self.armed)]
+                *_vec(self.u_cmd), int(self.safety_acted), self.carrier_age_s, self.mode, int(self.armed),
+                self.vehicle_age_s]
 
     @property
     def u_cmd(self) -> np.ndarray | None:
@@ -318,7 +321,7 @@ def summary_of(r: FlightRecord) -> dict[str, Any]:
 PER_LEG_ONLY = ("separation_time_s", "carrier_target_distance_at_separation_m")
 #: With several targets, the top level's figures that are the worst (largest) of the legs flown.
 WORST_OF_LEGS = ("relative_speed_at_separation_m_s", "relative_input_jump_m_s", "departure_delay_s",
-                 "final_passenger_target_distance_m", "max_offset_before_separation_m",
+                 "final_passenger_target_distance_m", "max_offset_before_separation_m", "riding_offset_held_m",
                  "max_relative_command_step_m_s", "max_target_distance_after_arrival_m", "last_metre_s",
                  "hover_speed_m_s", "max_target_distance_at_target_m", "takeoff_command_jump_m_s",
                  "takeoff_max_command_step_m_s", "takeoff_clear_s")
@@ -401,6 +404,9 @@ def figures(r: FlightRecord) -> dict[str, Any]:
     offsets = offsets[np.isfinite(offsets)]
     offset_riding = float(offsets.max()) if offsets.size else np.inf
     out["max_offset_before_separation_m"] = _num(offset_riding)
+    # held for two ticks running: a one-tick spike is a sample taken late (a stalled process), not
+    # the vehicle's motion (docs/px4-hold.md)
+    out["riding_offset_held_m"] = _num(float(np.minimum(offsets[:-1], offsets[1:]).max())) if offsets.size > 1 else None
     out["max_relative_command_step_m_s"] = _nanmax(norm(np.diff(rel_cmd[riding | sep_phases], axis=0))) if (riding | sep_phases).sum() > 1 else None
     # Arrival without a swing: once the vehicle has come within the arrival radius of the target,
     # the farthest it got from it again (None if it never came that close).
