@@ -123,7 +123,7 @@ def test_seated_the_position_sent_is_never_above_the_estimate(cycle):
     armed or not, and however low the estimate reads it (below the landing's floor too). On main a
     vehicle reporting itself disarmed was pressed only 0.1 m into the deck's plane: with its
     estimate 0.112 m below the deck that was a position 0.012 m above it, PX4's take-off (seed 0,
-    0.5 s before the second latch; it came down on the deck at 0.41 m/s)."""
+    3.2 s before the second latch, at its arming; it came down on the deck at 0.41 m/s)."""
     dock = DECK.copy()
     press = cycle.deck.press_m
     climbing = Setpoint(np.array([1.5, 0.0, -0.2]), dock.copy(), np.zeros(3))
