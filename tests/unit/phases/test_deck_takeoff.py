@@ -101,8 +101,9 @@ def test_the_take_off_on_a_misplacing_estimate_sends_no_jump(name, request):
     """From the first setpoint streamed on the deck through the latch and 1 s of the take-off, the
     relative velocity sent (``u_cmd - v_c``) starts at zero and changes per tick by at most the
     ramp the acceleration limits allow (the command's, ``command_safety``, plus the braking
-    carrier's 1 m/s^2, over a tick, + 0.01: 0.09 m/s on cycle.toml; 0.078 measured, 0.6 s after
-    the latch), its vertical part the command's alone (+ 0.01: 0.07; 0.057 measured). On main the
+    carrier's 1 m/s^2, over a tick, + 0.01: 0.09 m/s; 0.057-0.058 measured), its vertical part by
+    at most the project's 0.05 m/s (0.045-0.046 measured: the law's climb at the passenger's 2
+    m/s^2 and the offset's relaxation, TAKEOFF_RELAX). On main the
     floor's climb (the estimate 0.41 m below the deck, 0.21 m under the floor) came at the latch at
     once: 0.2 m/s up in one tick."""
     model = request.getfixturevalue(name)
@@ -114,7 +115,7 @@ def test_the_take_off_on_a_misplacing_estimate_sends_no_jump(name, request):
     steps = np.diff(rel, axis=0)
     a_cmd = model.command_safety.max_accel_m_s2  # [m/s^2]
     assert np.linalg.norm(steps, axis=1).max() <= (a_cmd + 1.0) * model.dt_s + 0.01
-    assert np.abs(steps[:, 2]).max() <= a_cmd * model.dt_s + 0.01
+    assert np.abs(steps[:, 2]).max() <= 0.05
 
 
 def test_seated_the_position_sent_is_never_above_the_estimate(cycle):
