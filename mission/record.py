@@ -433,14 +433,18 @@ def _takeoff_figures(r: FlightRecord, x_p: np.ndarray, rel_cmd: np.ndarray, ridi
     latched anchor), on the command relative to the carrier (``u_cmd - v_c``) [m/s]:
 
     - ``takeoff_command_jump_m_s``: its largest change at a switch of the take-off: the first
-      setpoint streamed (against the vehicle's own velocity relative to the deck then: it sits on
-      it), arming or a disarm, and the separation (the latch: RIDING -> SEPARATED; SEPARATED ->
-      NAVIGATING only names the same law's progress);
+      setpoint streamed (against zero, the seated vehicle's velocity relative to the deck: it sits
+      on it, disarmed, with nothing sent before; what it *reports* is the deck's velocity plus its
+      estimate's error, 0.2 m/s sigma, which is no change of a command: that is
+      ``takeoff_stream_start_offset_m_s``), arming or a disarm, and the separation (the latch:
+      RIDING -> SEPARATED; SEPARATED -> NAVIGATING only names the same law's progress);
+    - ``takeoff_stream_start_offset_m_s``: the first setpoint streamed against the velocity the
+      vehicle reported relative to the deck then (its estimate's error, for a seated vehicle);
     - ``takeoff_max_command_step_m_s``: its largest tick-to-tick change anywhere in that window
       (the ramp at the acceleration limits: at most their sum times the tick);
     - ``takeoff_clear_s`` [s]: from the separation until the vehicle is clear (None: never)."""
     out: dict[str, Any] = {"takeoff_command_jump_m_s": None, "takeoff_max_command_step_m_s": None,
-                           "takeoff_clear_s": None}
+                           "takeoff_clear_s": None, "takeoff_stream_start_offset_m_s": None}
     streamed = np.flatnonzero(riding & np.isfinite(rel_cmd).all(axis=1))
     anchor = info.get("anchor_ned_m")
     if not len(streamed) or anchor is None:
@@ -451,7 +455,8 @@ def _takeoff_figures(r: FlightRecord, x_p: np.ndarray, rel_cmd: np.ndarray, ridi
     end = int(np.argmax(above)) if above.any() else len(r.t) - 1
     steps = norm(np.diff(rel_cmd[start:end + 1], axis=0))  # steps[j]: from tick start + j to start + j + 1
     own = r.vec("v_p")[start] - r.vec("v_c")[start]
-    jumps = [float(norm(rel_cmd[start] - own))]
+    out["takeoff_stream_start_offset_m_s"] = _num(norm(rel_cmd[start] - own))
+    jumps = [float(norm(rel_cmd[start]))]
     armed = r.cols.get("armed")
     switch = (r.phase[start + 1:end + 1] == Phase.SEPARATED) & (r.phase[start:end] != Phase.SEPARATED)
     if armed is not None:

@@ -132,20 +132,20 @@ def ride(state: MissionState, obs: Observation, m: MissionModel) -> tuple[Missio
             return new, Decision(setpoint=None, events=(f"abort: {why}",))
         theta, anchor = latch_point(state.prev_dock, dock, m.tick.target, m.tick)
         new = enter(state, Phase.SEPARATED, t, anchor=anchor, e_ref=ZERO.copy(), x_ref=anchor.copy(),
-                    separation_time_s=t - (1 - float(theta)) * m.dt_s)
+                    separation_time_s=t - (1 - float(theta)) * m.dt_s,
+                    takeoff_offset=(takeoff_start(state, obs, m) - dock, ZERO.copy()), seated_sent=None)
         return navigate(new, obs, m, events=(f"separated at |e_tc| = {norm(m.tick.target - anchor):.3f} m: taking off "
                                               "from the deck",))
     due = seconds_to_latch(obs, m) <= _deck(m).arm_lead_s
     if state.streaming_since_s is None and not due:
         if v.armed:  # landed, not yet disarmed: press on the deck until PX4 lets it disarm
             return _sit(state, obs, m, landing(dock, obs, m), v_dock, (), prev_dock=dock)
-        # the reference rides the deck; the command filter's last command is the vehicle's velocity
-        # as it reports it (the deck's plus the estimate's error; never up from the deck), so the
-        # first setpoint streamed starts from it (tracking's integral starts afresh)
-        own = np.asarray(v.velocity_ned_m_s, dtype=float).copy()
-        own[2] = max(float(own[2]), float(v_dock[2]))
+        # the reference rides the deck; the command filter's last command is the deck's velocity,
+        # the seated vehicle's own (what it reports adds its estimate's error: 0.2 m/s sigma, which
+        # a stream starting from it would ramp out while disarmed), so the first setpoint streamed
+        # is the deck's velocity (tracking's integral starts afresh)
         state = replace(state, x_ref=dock.copy(), e_ref=ZERO.copy(), prev_dock=dock.copy(), u_ref=v_dock.copy(),
-                        u_cmd=own, integral=None, accel_lp=None)
+                        u_cmd=v_dock.copy(), integral=None, accel_lp=None, seated_sent=None)
         return state, Decision(setpoint=None, dock=dock)
     events = ()
     since = state.streaming_since_s
@@ -155,7 +155,10 @@ def ride(state: MissionState, obs: Observation, m: MissionModel) -> tuple[Missio
         events = ("separation due: streaming the deck's motion, then arming",)
     tick = passenger_tick(dock, v_dock, ZERO, False, m.tick, state.u_ref, m.dt_s)
     a_ref = _carrier_acceleration(obs, m) if m.tracking.kind == "full" else ZERO
-    tr = _track(state, obs, m, dock, tick.u, a_ref)
+    # the point tracked is where the passenger is by its estimate, moving with the deck (the law's
+    # reference is the dock point): PX4 is asked for no pull towards a deck its estimate misplaces,
+    # and the take-off starts from here (takeoff_start); the floor is left out under it (seated)
+    tr = _track(state, obs, m, np.asarray(v.position_ned_m, dtype=float), tick.u, a_ref, taking_off=True)
     # before the latch: no take-off (armed or not as far as we know: PX4 arms before its HEARTBEAT says so)
     tr = replace(tr, setpoint=held_down(tr.setpoint, dock, obs, m))
     request = None
@@ -166,9 +169,31 @@ def ride(state: MissionState, obs: Observation, m: MissionModel) -> tuple[Missio
         reason = AbortReason.ARMING_REFUSED if failed == "arm" else AbortReason.OFFBOARD_REFUSED
         new = enter(state, Phase.ABORT, t, reason=reason, detail=obs.failed[failed])
         return new, Decision(setpoint=None, events=(f"abort: {failed} refused on the deck: {obs.failed[failed]}",))
-    new = replace(state, x_ref=dock.copy(), e_ref=ZERO.copy(), prev_dock=dock.copy(), u_ref=tick.u, **_kept(tr))
+    sent = tr.setpoint.position_ned_m
+    new = replace(state, x_ref=dock.copy(), e_ref=ZERO.copy(), prev_dock=dock.copy(), u_ref=tick.u,
+                  seated_sent=None if sent is None else sent.copy(), **_kept(tr))
     return new, tr.decision(request=request, dock=dock, P=float(tick.P), relative=tick.relative, desired=tick.desired,
                             safety_acted=tr.acted or bool(tick.safety.changed), events=events)
+
+
+def takeoff_start(state: MissionState, obs: Observation, m: MissionModel) -> np.ndarray:
+    """Where [m] NED the take-off's tracked point starts at the latch: the point whose setpoint
+    continues the last one sent on the deck (``state.seated_sent``, held down ``press_m`` below
+    the vehicle's reported height: tracking's position is ``x + lead (x - x_p) + bias``, solved
+    for ``x``), else, velocity only sent, where the passenger reports itself. Its offset from the
+    deck (the dock point now; the anchor is where the law starts) relaxes to zero in flight (:func:`mission.phases.flying.navigate`), so neither the
+    velocity nor the position sent jumps when the hold releases, however far the estimate puts
+    the vehicle from the deck."""
+    v = obs.vehicle
+    assert v is not None  # riding: the failsafes checked it
+    x_p = np.asarray(v.position_ned_m, dtype=float)
+    if state.seated_sent is None:
+        return x_p.copy()
+    g = m.tracking
+    sent = state.seated_sent
+    if g.bias_compensation_s > 0 and v.velocity_bias_ned_m_s is not None:
+        sent = sent - g.bias_compensation_s * np.asarray(v.velocity_bias_ned_m_s, dtype=float)
+    return (sent + g.position_lead * x_p) / (1.0 + g.position_lead)
 
 
 def _sit(state: MissionState, obs: Observation, m: MissionModel, x_ref: np.ndarray, u_ref: np.ndarray,
@@ -199,14 +224,21 @@ def held_down(sp: Setpoint, dock: np.ndarray, obs: Observation, m: MissionModel)
     """``sp`` asking the vehicle seated on the deck at ``dock`` [m] NED for no take-off: PX4's
     offboard ``want_takeoff`` lifts a landed vehicle on a position above its estimate, an upward
     velocity or an upward acceleration, so no vertical velocity or acceleration points up (NED:
-    none negative) and the position is at least as low as :func:`landing`'s (``press_m`` below the
-    reported height, never deeper than ``press_floor_m`` below the deck's plane)."""
+    none negative) and the position is at least as low as :func:`landing`'s and ``press_m`` below
+    the reported height, whatever the HEARTBEAT last said of arming and however low the estimate
+    reads the vehicle: PX4 arms before its HEARTBEAT says so and at once reads the setpoint
+    against its estimate, and a press into the deck's plane (a disarmed vehicle's :func:`landing`)
+    or to the landing's floor over an estimate reading the vehicle lower is a position above the
+    estimate, a take-off (measured: docs/deck-riding.md, "Landing on PX4's estimate")."""
     vel = sp.velocity_ned_m_s.copy()
     vel[2] = max(float(vel[2]), 0.0)
     pos, acc = sp.position_ned_m, sp.acceleration_ned_m_s2
     if pos is not None and acc is not None:
         pos, acc = pos.copy(), acc.copy()
-        pos[2] = max(float(pos[2]), float(landing(dock, obs, m)[2]))
+        low = float(landing(dock, obs, m)[2])
+        if obs.vehicle is not None:  # the estimate's: however low it reads the vehicle (the floor aside)
+            low = max(low, float(obs.vehicle.position_ned_m[2]) + _deck(m).press_m)
+        pos[2] = max(float(pos[2]), low)
         acc[2] = max(float(acc[2]), 0.0)
     return replace(sp, velocity_ned_m_s=vel, position_ned_m=pos, acceleration_ned_m_s2=acc)
 

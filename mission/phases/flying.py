@@ -17,7 +17,7 @@ from mission.core.records import replace
 from mission.flight_mode import FlightMode
 from mission.core import arrival
 from mission.core.law import norm
-from mission.core.pursuit import pursue
+from mission.core.pursuit import PursuitLimits, pursue
 from mission.core.setpoint import Setpoint
 from mission.phases.types import ZERO, Decision, MissionModel, MissionState, Observation, Phase, carrier_fresh, dock_point, enter
 from mission.phases.phase import Request
@@ -238,18 +238,45 @@ def _chase(state: MissionState, obs: Observation, m: MissionModel, dock: np.ndar
 
 
 def _lag_m(state: MissionState, obs: Observation) -> float:
-    """How far [m] the vehicle is behind the reference along the reference's direction of motion
-    (0 when it is level or ahead, or the reference is still)."""
+    """How far [m] the vehicle is behind the point it tracks (the reference, plus the take-off's
+    offset) along the reference's direction of motion (0 when it is level or ahead, or the
+    reference is still)."""
     if state.x_ref is None or state.u_ref is None or obs.vehicle is None:
         return 0.0
     speed = float(norm(state.u_ref))
     if speed < 1e-6:
         return 0.0
-    return max(0.0, float(np.dot(state.x_ref - obs.vehicle.position_ned_m, state.u_ref)) / speed)
+    tracked = state.x_ref if state.takeoff_offset is None else state.x_ref + state.takeoff_offset[0]
+    return max(0.0, float(np.dot(tracked - obs.vehicle.position_ned_m, state.u_ref)) / speed)
+
+
+#: The take-off's offset relaxes to zero at most this fast [m/s] and accelerating at most this
+#: much [m/s^2] (pull 1/s near zero): on top of the law's own departure at the passenger's
+#: acceleration limit (2 m/s^2 in cycle.toml: 0.04 m/s per tick at 50 Hz) it adds at most 0.006
+#: m/s per tick, so the take-off's command stays within 0.05 m/s per tick; a 0.5 m offset (the
+#: estimate's vertical error, 0.3 m RMS) is gone in about 2.5 s, while the vehicle climbs clear.
+TAKEOFF_RELAX = PursuitLimits(speed_m_s=0.3, accel_m_s2=0.3, gain_per_s=1.0)
+
+
+def _relax(offset: tuple[np.ndarray, np.ndarray] | None, m: MissionModel) -> tuple[np.ndarray, np.ndarray] | None:
+    """The take-off's offset (offset [m], rate [m/s]) one tick on: pursued to zero within
+    :data:`TAKEOFF_RELAX`, so the tracked point's velocity never jumps; None once it is there
+    (within :data:`CHASE_DONE_M`, at rest within a tick's acceleration) or there was none."""
+    if offset is None:
+        return None
+    delta, rate = pursue(offset[0], offset[1], ZERO, ZERO, TAKEOFF_RELAX, m.dt_s)
+    if norm(delta) <= CHASE_DONE_M and norm(rate) <= TAKEOFF_RELAX.accel_m_s2 * m.dt_s:
+        return None
+    return delta, rate
 
 
 def navigate(state, obs, m, events=()):
-    """Equilibria (ii)->(iii): integrate the reference with the latched anchor, track it."""
+    """Equilibria (ii)->(iii): integrate the reference with the latched anchor, track it. Taking
+    off from the deck, the point tracked is the reference plus the take-off's offset
+    (``state.takeoff_offset``: where the passenger was by its estimate when the latch fired,
+    relaxing to zero at bounded acceleration, :func:`_relax`), and the altitude floor is left out
+    while the vehicle reads itself under it (as JOIN's): a seated vehicle whose estimate reads it
+    below the deck would otherwise be sent the floor's climb at once."""
     t = obs.t_s
     deck = m.deck.keep_out(obs, m) if m.deck is not None else None
     tick = passenger_tick(state.anchor, ZERO, state.e_ref, True, m.tick, state.u_ref, m.dt_s, deck=deck)
@@ -261,7 +288,12 @@ def navigate(state, obs, m, events=()):
     x_ref = state.anchor + e_ref
     u_prev = state.u_ref if state.u_ref is not None else u_ref
     a_ref = (u_ref - u_prev) / m.dt_s
-    tr = _track(state, obs, m, x_ref, u_ref, a_ref)
+    offset = _relax(state.takeoff_offset, m)
+    if offset is None:
+        tr = _track(state, obs, m, x_ref, u_ref, a_ref, taking_off=state.seated)
+    else:
+        a_off = (offset[1] - state.takeoff_offset[1]) / m.dt_s  # type: ignore[index]
+        tr = _track(state, obs, m, x_ref + offset[0], u_ref + offset[1], a_ref + a_off, taking_off=state.seated)
     acted = tr.acted
     phase, since, window = state.phase, state.since_s, state.arrival_window
     evs = list(events)
@@ -283,7 +315,7 @@ def navigate(state, obs, m, events=()):
             phase, since = Phase.ARRIVED, t
             evs.append("arrived at the target")
     new = replace(state, phase=phase, since_s=since, e_ref=e_ref, x_ref=x_ref, u_ref=u_ref, arrival_window=window,
-                  seated=seated, **tr.kept())
+                  seated=seated, takeoff_offset=offset, **tr.kept())
     dec = tr.decision(dock=dock_point(obs, m) if obs.carrier is not None else None, P=float(tick.P),
                    relative=tick.relative, desired=tick.desired, safety_acted=acted or bool(tick.safety.changed), events=tuple(evs))
     if phase == Phase.ARRIVED and m.recovery is None:

@@ -333,6 +333,11 @@ class MissionState:
     streaming_since_s: float | None = None  # seated: since when setpoints stream before arming [s] (None: not yet)
     # seated, the mission asking nothing of the vehicle: (seen disarmed since, PX4's mode then) (mission.phases.deck.watch)
     deck_watch: tuple[bool, str] | None = None
+    # seated, streaming before the latch: the position [m] NED the last setpoint sent (None: velocity only)
+    seated_sent: np.ndarray | None = None
+    # the take-off from the deck: (offset [m], its rate [m/s]) NED of the point tracked from the reference, which
+    # starts where the passenger was when the latch fired and relaxes to zero (mission.phases.flying.navigate)
+    takeoff_offset: tuple[np.ndarray, np.ndarray] | None = None
     tick_s: float | None = None  # the last tick's time [s]: a longer gap to this one is a stall (mission.phases.stall)
     last_stall: tuple[float, float] | None = None  # (the first tick after the last stall [s], its gap [s]) (mission.phases.stall)
     carrier_fresh_s: float | None = None  # the last tick [s] that saw a fresh carrier state (mission.carrier_timeout_s)
