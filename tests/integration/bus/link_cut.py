@@ -12,13 +12,15 @@ from sim.net import free_port
 class LinkCut:
     """Accepts on ``127.0.0.1:port`` and relays each connection to ``127.0.0.1:target``;
     :meth:`cut` closes every relayed connection at once (the sessions reconnect through it);
-    :attr:`accepted` counts connections. A context manager: leaving it closes everything and
+    :meth:`down` cuts and refuses new connections until :meth:`up`; :attr:`accepted` counts the
+    connections relayed. A context manager: leaving it closes everything and
     joins its threads."""
 
     def __init__(self, target: int) -> None:
         self.target = target
         self.port = free_port()
         self.accepted = 0
+        self._refusing = False
         self._lock = threading.Lock()
         self._sockets: list[socket.socket] = []
         self._threads: list[threading.Thread] = []
@@ -41,6 +43,11 @@ class LinkCut:
                 near, _ = self._server.accept()
             except OSError:
                 return
+            with self._lock:
+                refusing = self._refusing
+            if refusing:
+                near.close()
+                continue
             try:
                 far = socket.create_connection(("127.0.0.1", self.target))
             except OSError:
@@ -75,6 +82,17 @@ class LinkCut:
             except OSError:
                 pass
             s.close()
+
+    def down(self) -> None:
+        """Cut, and refuse connections until :meth:`up`."""
+        with self._lock:
+            self._refusing = True
+        self.cut()
+
+    def up(self) -> None:
+        """Relay connections again."""
+        with self._lock:
+            self._refusing = False
 
     def close(self) -> None:
         try:
