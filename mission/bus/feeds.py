@@ -5,6 +5,9 @@ A callback on Zenoh's thread checks the payload size before anything else
 (:mod:`mission.bus.wire`), stamps its receive time with the injected clock and keeps only the
 newest accepted one under a lock (it never blocks and never calls Zenoh). A rejected sample is
 dropped and counted per reason (``feed.counters``), never a crash and never returned.
+Liveliness: only a token on exactly the sender's alive key is the sender's; a token on a key
+expression that merely intersects it (``marsupial/**``, anyone's to declare) is ignored and
+counted (``alive_foreign``), so its going away unbinds nothing.
 :class:`CarrierFeed` binds to one source and gates each state (:mod:`mission.bus.gate`);
 :class:`PassengerFeed` accepts only a strictly greater ``seq`` with a stamp not older. When the
 sender's liveliness token goes away the ordering and the binding are forgotten (a restarted
@@ -118,6 +121,7 @@ class _Feed(Generic[T]):
         self._contest: str | None = None  # why the feed refuses its sender for good (two signers, two passengers)
         self._alive: bool | None = None
         self._went_unseen = False  # the token went since the last alive_over_interval()
+        self._alive_foreign = 0  # liveliness samples of another key expression (ignored)
         self._closed = False
         self._listeners: list[Callable[[T], None]] = []
         self._sub = declare(f"subscriber on {key}", lambda: session.declare_subscriber(key, self._on_sample))
@@ -207,6 +211,17 @@ class _Feed(Generic[T]):
 
     def _on_alive(self, sample: zenoh.Sample) -> None:
         alive = sample.kind == zenoh.SampleKind.PUT
+        key = str(sample.key_expr)
+        if key != self.alive_key:
+            # a token on a wildcard that intersects the alive key (``marsupial/**``, ``**``): the
+            # subscriber hears it come and go while the sender's own token stays; not the sender's
+            with self._lock:
+                self._alive_foreign += 1
+                first = self._alive_foreign == 1
+            (log.warning if first else log.debug)(
+                "%s: ignored the liveliness %s of a token on %s (another key expression, not the sender's)",
+                self.alive_key, "PUT" if alive else "DELETE", key)
+            return
         with self._lock:
             changed = alive != self._alive
             self._alive = alive
@@ -264,10 +279,12 @@ class _Feed(Generic[T]):
 
     @property
     def counters(self) -> dict[str, Any]:
-        """Snapshot: ``{"received": n, "accepted": n, "dropped": {reason: n}}``."""
+        """Snapshot: ``{"received": n, "accepted": n, "dropped": {reason: n}, "alive_foreign": n, ...}``
+        (``alive_foreign``: liveliness samples of a token on another key expression, ignored)."""
         with self._lock:
             return {"received": self._received, "accepted": self._accepted, "dropped": dict(self._dropped),
-                    "signed": self._verifier is not None, "contest": self._contest, **self._extra_counters()}
+                    "signed": self._verifier is not None, "contest": self._contest,
+                    "alive_foreign": self._alive_foreign, **self._extra_counters()}
 
     def _extra_counters(self) -> dict[str, Any]:
         return {}
