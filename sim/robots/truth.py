@@ -119,8 +119,10 @@ class TruthTrack:
         self.carrier_ned_m.append([round(float(v), 4) for v in motion.centre(t, 0.0)])
 
     def as_dict(self) -> dict[str, Any]:
-        return {"period_s": self.period_s, "t_s": self.t_s, "vehicle_ned_m": self.vehicle_ned_m,
-                "carrier_ned_m": self.carrier_ned_m}
+        """The samples so far (the vehicle may still be adding one: only whole ones)."""
+        n = min(len(self.t_s), len(self.vehicle_ned_m), len(self.carrier_ned_m))
+        return {"period_s": self.period_s, "t_s": self.t_s[:n], "vehicle_ned_m": self.vehicle_ned_m[:n],
+                "carrier_ned_m": self.carrier_ned_m[:n]}
 
 
 def demo_truth(cfg: Config, log_dir: Path) -> dict[str, Any]:
@@ -136,8 +138,9 @@ def demo_truth(cfg: Config, log_dir: Path) -> dict[str, Any]:
         return {}
     from mission.record import read_record
 
-    t = np.asarray(track["t_s"], float)
-    off = np.asarray(track["vehicle_ned_m"], float) - np.asarray(track["carrier_ned_m"], float) \
+    n = min(len(track["t_s"]), len(track["vehicle_ned_m"]), len(track["carrier_ned_m"]))
+    t = np.asarray(track["t_s"][:n], float)
+    off = np.asarray(track["vehicle_ned_m"][:n], float) - np.asarray(track["carrier_ned_m"][:n], float) \
         - np.asarray(cfg.mission.dock_offset_ned_m, float)
 
     def at(times: np.ndarray) -> np.ndarray:
