@@ -315,8 +315,10 @@ def run_demo(config: str, speed: float, pairs: int, log_root: Path, plot_path: s
             s["carrier_stop_target_distance_m"] = c.get("stopped_target_distance_m")
             s["carrier_braking_distance_m"] = c.get("braking_distance_m")
         s.update(deck_truth(p.log_dir / "vehicle.json"))
-        truth = demo_truth(load_config(config), p.log_dir).get("truth_legs") or []
-        for leg, row in zip(s.get("legs") or [s], truth):  # the figures against the world's truth, per leg
+        truth = demo_truth(load_config(config), p.log_dir)
+        if truth:  # the figures against the world's truth, per leg; kept beside the mission's summary
+            (p.log_dir / "truth.json").write_text(json.dumps(truth, indent=2) + "\n")
+        for leg, row in zip(s.get("legs") or [s], truth.get("truth_legs") or []):
             leg.update(row)
         s.update(recovery_cells(s))
         summaries.append(s)
