@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 import zenoh
 
-from mission.bus.frames import camera_key, encode_frame
+from mission.bus.frames import camera_key, encode_frame, encode_mark
 from mission.bus.session import declare, undeclare
 from mission.config.schema import Config
 from mission.model import vision_detector
@@ -59,15 +59,13 @@ class CameraPublisher:
             math.atan2(v_c[1], v_c[0]) if math.hypot(v_c[0], v_c[1]) > 1e-6 else 0.0)
         poses = Poses(np.array([kin.n_m, kin.e_m, kin.d_m]), q, np.asarray(carrier_ned_m, float) + self.dock_offset_ned_m,
                       float(yaw))
-        if true_marker_pose(self.camera.camera, poses).deck_in_cam_m[2] < MIN_DEPTH_M:
-            return  # the deck level with the lens or behind it: out of view (and its blur unbounded)
-        relative_v = v_c - np.array([kin.vn_m_s, kin.ve_m_s, kin.vd_m_s])
-        frame = self.camera.capture(poses, t_s, relative_v)
-        if frame is None:
-            return
-        try:
-            self._pub.put(encode_frame(frame, q))
-            self.sent += 1
+        frame = None
+        if true_marker_pose(self.camera.camera, poses).deck_in_cam_m[2] >= MIN_DEPTH_M:  # else out of view (and
+            relative_v = v_c - np.array([kin.vn_m_s, kin.ve_m_s, kin.vd_m_s])  # its blur unbounded)
+            frame = self.camera.capture(poses, t_s, relative_v)
+        try:  # a dropped or empty frame still marks the time: a lockstep reader knows the stream passed it
+            self._pub.put(encode_mark(t_s) if frame is None else encode_frame(frame, q))
+            self.sent += frame is not None
         except zenoh.ZError:
             pass  # the session is closing
 

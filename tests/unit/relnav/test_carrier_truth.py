@@ -88,3 +88,10 @@ def test_a_camera_frame_round_trips_through_the_bus_encoding():
     assert frame.capture_t_s == 12.34 and np.array_equal(frame.image, image) and np.allclose(got_q, q)
     with pytest.raises(ValueError):
         decode_frame(encode_frame(Frame(image, 1.0), q)[:-1])  # a pixel short
+
+
+def test_a_time_mark_says_the_stream_passed_a_time_without_a_frame():
+    from mission.bus.frames import encode_mark
+
+    frame, q = decode_frame(encode_mark(3.5))
+    assert frame.capture_t_s == 3.5 and frame.image.size == 0 and np.allclose(q, [1.0, 0.0, 0.0, 0.0])
