@@ -40,6 +40,7 @@ from mission.flightdata.writer import DEFAULT_LIVE, LiveAddress, is_loopback, pa
 from mission.lifetime import supervise_children
 from mission.phases import Phase
 from sim.net import free_port, stop_process
+from sim.robots.truth import demo_truth
 from sim.vehicle.options import VehicleOptions
 
 DEFAULT_CONFIG = Path(__file__).resolve().parents[1] / "configs" / "demo.toml"
@@ -231,7 +232,8 @@ def start_pair(config: str, name: str, zenoh_ep: str, speed: float, log_root: Pa
                                            f"udpout:127.0.0.1:{mav_port}", "--speed", str(speed), "--start-ned",
                                            vehicle_start, "--deck", name, "--deck-height", str(deck_height),
                                            "--zenoh-connect", zenoh_ep, "--summary", str(pair.log_dir / "vehicle.json"),
-                                           "--estimate-error", str(estimate_error), "--seed", str(seed), *mav_signed, *mode),
+                                           "--estimate-error", str(estimate_error), "--seed", str(seed), *world_args(cfg, config),
+                                           *mav_signed, *mode),
                                stderr=err)
     stack.callback(stop_process, vehicle)
     live_args = [] if live is None else ["--live", f"{live.host}:{live.port}"]
@@ -244,6 +246,17 @@ def start_pair(config: str, name: str, zenoh_ep: str, speed: float, log_root: Pa
     if robot is not None:
         pair.procs["carrier_robot"] = robot
     return pair
+
+
+def world_args(cfg: Config, config: str) -> list[str]:
+    """The mock vehicle's arguments for the world's errors and sensors of ``cfg`` (file ``config``):
+    the passenger's GNSS bias (``--world``), the deck on the carrier's truth when the carrier flies
+    its GNSS errors (``--deck-truth``), the downward camera's frames for the feed ``marker``
+    (``--camera``)."""
+    w = cfg.world
+    camera = "marker" in cfg.mission.feeds
+    return [*(["--world", config] if camera or w.passenger_gnss.bias_sigma_m > 0 else []),
+            *(["--deck-truth"] if w.carrier_gnss.enabled else []), *(["--camera"] if camera else [])]
 
 
 def live_addresses(live: LiveAddress | None, pairs: int) -> list[LiveAddress | None]:
@@ -302,6 +315,11 @@ def run_demo(config: str, speed: float, pairs: int, log_root: Path, plot_path: s
             s["carrier_stop_target_distance_m"] = c.get("stopped_target_distance_m")
             s["carrier_braking_distance_m"] = c.get("braking_distance_m")
         s.update(deck_truth(p.log_dir / "vehicle.json"))
+        truth = demo_truth(load_config(config), p.log_dir)
+        if truth:  # the figures against the world's truth, per leg; kept beside the mission's summary
+            (p.log_dir / "truth.json").write_text(json.dumps(truth, indent=2) + "\n")
+        for leg, row in zip(s.get("legs") or [s], truth.get("truth_legs") or []):
+            leg.update(row)
         s.update(recovery_cells(s))
         summaries.append(s)
         if plot_path and (p.log_dir / "record.csv").exists():
@@ -363,6 +381,9 @@ RECOVERY_ROWS = [
     ("max command jump at a phase switch [m/s]", "max_phase_switch_jump_m_s"),
     ("deck touched outside contact [ticks]", "deck_violations"),
     ("truth: last touchdown from the deck's centre [m]", "deck_touchdown_m"),
+    ("truth: contact error, horizontal [m]", "true_contact_horizontal_m"),
+    ("truth: riding offset, horizontal median [m]", "true_riding_horizontal_median_m"),
+    ("truth: riding offset, horizontal max [m]", "true_riding_horizontal_max_m"),
 ]
 RECOVERY_KEYS = {key for _, key in RECOVERY_ROWS}
 DECK_KEYS = {"takeoff_command_jump_m_s", "takeoff_max_command_step_m_s", "takeoff_clear_s"}  # shown when a pair rode the deck

@@ -53,7 +53,9 @@ class GateLimits:
     plausible states in a row needed to bind a source / replace the reference; settle_s [s]
     how long a new reference must stay within the carrier's own limits before it is trusted;
     contest_drops / contest_window_s [s]: stale states of the bound source within that window
-    that make it contested (see the module docstring).
+    that make it contested (see the module docstring); velocity_noise_m_s [m/s] the velocity
+    change from one state to the next allowed beyond the acceleration limit while settling
+    (measurement noise: a GNSS velocity's).
     """
 
     max_speed_m_s: float
@@ -67,6 +69,7 @@ class GateLimits:
     settle_s: float = 2.0
     contest_drops: int = 3
     contest_window_s: float = 1.0
+    velocity_noise_m_s: float = VELOCITY_NOISE_M_S
 
     @property
     def accel_m_s2(self) -> float:
@@ -148,7 +151,7 @@ def beyond_limits(prev: Sample, new: Sample, limits: GateLimits) -> str | None:
     if math.sqrt(float(dp @ dp)) > limits.max_speed_m_s * dt + limits.position_slack_m:
         return "position"
     dv = v - prev.velocity_ned_m_s
-    if math.sqrt(float(dv @ dv)) > limits.accel_m_s2 * dt + VELOCITY_NOISE_M_S:
+    if math.sqrt(float(dv @ dv)) > limits.accel_m_s2 * dt + limits.velocity_noise_m_s:
         return "acceleration"
     return None
 

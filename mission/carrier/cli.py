@@ -25,6 +25,8 @@ from mission.bus.session import close_session
 from mission.time.clock import Clock, LockstepClock, ScaledClock
 from mission.config.required import CARRIER_FIELDS, require_stated
 from mission.config.schema import Config, load_config, with_overrides
+from mission.cli.subcommands import entry_points, load
+from mission.errors import ConfigError
 from mission.bus.lockstep import ZenohUpstream, clock_keys
 from mission.bus.timesync import ClockEcho
 
@@ -65,7 +67,7 @@ def main(cfg: Config, speed: float = 1.0, duration_s: float | None = None, stop_
         with ExitStack() as stack:
             session = open_session(cfg.zenoh)
             stack.callback(close_session, session)  # never raises, bounded: the exit code stands
-            backend = open_backend(cfg, clock, session)
+            backend = with_world(cfg, open_backend(cfg, clock, session), clock, session)
             stack.callback(backend.close)
             steps = open_flight_data(cfg, clock, mcap_path, stack, log_epoch_ns)
             with CarrierController(cfg, clock, session, backend, steps=steps) as ctl:
@@ -99,6 +101,26 @@ def main(cfg: Config, speed: float = 1.0, duration_s: float | None = None, stop_
         for signum, handler in restore.items():
             signal.signal(signum, handler)
     return 0
+
+
+WORLD_GROUP = "marsupial.world"  # entry points: the world's errors a simulated flight adds (pyproject.toml)
+
+
+def with_world(cfg: Config, backend: Any, clock: Clock, session: Any) -> Any:
+    """``backend`` as the world of ``cfg`` makes it (simulation only): with
+    ``world.carrier_gnss.enabled`` wrapped by the entry point ``carrier_gnss`` of
+    :data:`WORLD_GROUP` (the simulator's, called ``(cfg, backend, session, clock)``): the carrier
+    steers on and publishes its state as an erring GNSS gives it. Else ``backend`` itself.
+    :class:`ConfigError` when the errors are asked for and no simulator registered them."""
+    if not cfg.world.carrier_gnss.enabled:
+        return backend
+    known = entry_points(WORLD_GROUP)
+    if "carrier_gnss" not in known:
+        raise ConfigError("world.carrier_gnss.enabled", True, f"the simulator's carrier GNSS errors are not installed "
+                          f"(entry point {WORLD_GROUP}: carrier_gnss)")
+    log.info("carrier %s: the world's carrier GNSS errors on (world.carrier_gnss, seed %d)", cfg.zenoh.pair,
+             cfg.world.carrier_gnss.seed)
+    return load(known["carrier_gnss"])(cfg, backend, session, clock)  # type: ignore[operator]
 
 
 def open_flight_data(cfg: Config, clock: Clock, mcap_path: str | Path | None, stack: ExitStack,

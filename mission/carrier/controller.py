@@ -86,6 +86,19 @@ class StepSink(Protocol):
     def step(self, step: CarrierStep) -> None: ...
 
 
+FRAME_SIGMAS = 3.0  # the frames' disagreement allowed on the dock check with relnav, in standard deviations
+
+
+def frames_disagree_m(cfg: Config) -> float:
+    """How far apart [m] the carrier's and the passenger's frames may be on the dock check: 0 on a
+    shared frame; with ``relnav.enabled`` (each vehicle's own GNSS frame) :data:`FRAME_SIGMAS`
+    times the standard deviation of the bias's norm (``relnav.bias_sigma_m`` per horizontal axis,
+    times ``relnav.vertical_factor`` down), so a passenger riding the carrier's deck in its own
+    frame is seen on it, while one claiming RIDING from farther away still is not."""
+    r = cfg.relnav
+    return FRAME_SIGMAS * r.bias_sigma_m * math.sqrt(2.0 + r.vertical_factor ** 2) if r.enabled else 0.0
+
+
 def passenger_view(feed: PassengerFeed, dock_ned_m: np.ndarray | None, tolerance_m: float, dim: int) -> PassengerView:
     """The passenger as the carrier sees it now: the newest status of the feed's bound source,
     whether it counts as lost (its token went since the last call, no status, or a stale one),
@@ -186,7 +199,8 @@ class CarrierController:
         return self.stepper.velocity_m_s
 
     def _update_mode(self) -> None:
-        view = passenger_view(self.passenger, self.dock_point_ned_m(), self.cfg.mission.dock_tolerance_m, self.dim)
+        view = passenger_view(self.passenger, self.dock_point_ned_m(),
+                              self.cfg.mission.dock_tolerance_m + frames_disagree_m(self.cfg), self.dim)
         up = self.stepper.update_mode(view)
         if up.leg_changed:
             log.info("carrier %s: leg %d, target %s", self.pair, view.leg + 1, self.model.target.tolist())

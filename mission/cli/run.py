@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import math
 import logging
 import signal
 import threading
@@ -44,10 +45,19 @@ def carrier_limits(cfg: Config) -> GateLimits:
     """The carrier's own limits the feed's plausibility gate checks states against: its top
     speed (``carrier.max_speed_m_s``, or ``safety.carrier_max_speed_m_s`` if larger), its
     acceleration (``safety.carrier_max_accel_m_s2``, or ``carrier.brake_decel_m_s2`` if larger),
-    and how long a new reference must keep to them (``mission.carrier_settle_s``)."""
+    and how long a new reference must keep to them (``mission.carrier_settle_s``). With ``relnav.enabled``
+    the carrier's state is its GNSS fix: the position and velocity noise allowed from one state to
+    the next are those of two fixes' difference, :data:`GNSS_NOISE_SIGMAS` times its standard
+    deviation (``relnav.gnss_position_sigma_m``, ``relnav.gnss_velocity_sigma_m_s``, times sqrt 2)."""
     accels = [a for a in (cfg.safety.carrier_max_accel_m_s2, cfg.carrier.brake_decel_m_s2) if a is not None]
+    k = GNSS_NOISE_SIGMAS * math.sqrt(2.0) if cfg.relnav.enabled else 0.0
     return GateLimits(max_speed_m_s=max(cfg.carrier.max_speed_m_s, cfg.safety.carrier_max_speed_m_s or 0.0),
-                      max_accel_m_s2=max(accels) if accels else None, settle_s=cfg.mission.carrier_settle_s)
+                      max_accel_m_s2=max(accels) if accels else None, settle_s=cfg.mission.carrier_settle_s,
+                      position_slack_m=max(GateLimits.position_slack_m, k * cfg.relnav.gnss_position_sigma_m),
+                      velocity_noise_m_s=max(GateLimits.velocity_noise_m_s, k * cfg.relnav.gnss_velocity_sigma_m_s))
+
+
+GNSS_NOISE_SIGMAS = 5.0  # the carrier gate's noise allowance with relnav, in standard deviations of a fix difference
 
 
 FEEDS_GROUP = "marsupial.feeds"  # entry points: a measurement feed's name -> its opener (below)

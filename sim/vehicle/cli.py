@@ -18,11 +18,12 @@ from types import FrameType
 from typing import Any
 
 import click
+import numpy as np
 
 from mission.bus.bridge import CarrierFeed, keys, open_session
 from mission.bus.wire import CarrierState, GeoOrigin
 from mission.config.relnav import PassengerGnssSection
-from mission.config.schema import ZenohSection, load_config
+from mission.config.schema import Config, ZenohSection, load_config
 from mission.errors import ConfigError
 from mission.mavlink.env import read_signing_key
 from sim.vehicle.mock import MockVehicle, VehicleOptions
@@ -31,6 +32,8 @@ from sim.vehicle.faults import FaultOptions
 from sim.vehicle.endpoints import parse_endpoint
 from sim.vehicle.params import SPECS_BY_NAME
 from sim.vehicle.physics.deck import DeckMotion, DeckSpec
+from sim.robots.truth import TruthTrack, truth_key
+from sim.camera.publisher import CameraPublisher
 
 log = logging.getLogger(__name__)
 
@@ -145,6 +148,14 @@ def _write_port_file(path: Path, port: int) -> None:
               help="Learn the carrier's motion from the Zenoh state of marsupial pair PAIR (marsupial/PAIR/carrier/"
                    "state): touchdown on its moving deck, riding on it, crashes (--deck-height, --deck-radius; "
                    "docs/mock-vehicle.md). Needs --zenoh-connect or --zenoh-listen.")
+@click.option("--deck-truth", is_flag=True,
+              help="With --deck: follow the carrier's true state, published by a carrier flying the world's GNSS errors "
+                   "on the sim-only key marsupial/PAIR/sim/carrier_truth (sim/robots/truth.py), not its erring "
+                   "published state.")
+@click.option("--camera", is_flag=True,
+              help="With --deck and --world: render the passenger's downward camera ([vision] of the --world "
+                   "configuration) from the true poses and publish its frames on marsupial/PAIR/passenger/camera for "
+                   "the mission's marker feed (mission.feeds = [\"marker\"]).")
 @click.option("--deck-height", type=click.FloatRange(min=0.0), default=0.0, show_default=True, metavar="METRES",
               help="With --deck: the deck's plane above the carrier's reported position [m].")
 @click.option("--deck-radius", type=click.FloatRange(min=0.0, min_open=True), default=0.5, show_default=True,
@@ -201,7 +212,7 @@ def _write_port_file(path: Path, port: int) -> None:
                    "from its true centre, how fast) and a crash (docs/mock-vehicle.md).")
 def mock_vehicle(mavlink_url: str, target_url: str, gcs_url: str | None, speed: float, home: str, start_ned: str,
                  sysid: int, frame: str, params: tuple[str, ...], battery_drain_s: float | None,
-                 battery_min_pct: float | None, deck_pair: str | None, deck_height: float, deck_radius: float,
+                 battery_min_pct: float | None, deck_pair: str | None, deck_truth: bool, camera: bool, deck_height: float, deck_radius: float,
                  zenoh_connect: tuple[str, ...], zenoh_listen: tuple[str, ...], wind: str, estimate_error: float, ideal: bool, position_noise: float, loss_in: float,
                  loss_out: float, latency_ms: float, jitter_ms: float, blackouts: tuple[str, ...],
                  refuse_arming: str | None, refuse_offboard: str | None, lose_position_s: float | None, seed: int, signing_key: Path | None, port_file: Path | None,
@@ -235,7 +246,19 @@ def mock_vehicle(mavlink_url: str, target_url: str, gcs_url: str | None, speed: 
         lockstep_max_speed=lockstep_max_speed, passenger_gnss=passenger_gnss_of(world_config),
         deck=None if deck_pair is None else DeckSpec(height_m=deck_height, radius_m=deck_radius))
     run(options, port_file, status_every, deck=None if deck_pair is None else _deck_bus(deck_pair, zenoh_connect, zenoh_listen),
-        summary_path=summary_path)
+        summary_path=summary_path, deck_truth=deck_truth, camera=camera_of(world_config, camera, deck_pair))
+
+
+def camera_of(path: Path | None, camera: bool, deck_pair: str | None) -> Config | None:
+    """The configuration of ``--camera`` (``--world``'s), or None without ``--camera``."""
+    if not camera:
+        return None
+    if path is None or deck_pair is None:
+        raise click.BadParameter("needs --world CONFIG (its [vision]) and --deck PAIR (the carrier)", param_hint="--camera")
+    try:
+        return load_config(path)
+    except ConfigError as exc:
+        raise click.BadParameter(str(exc), param_hint="--world") from None
 
 
 def passenger_gnss_of(path: Path | None) -> PassengerGnssSection | None:
@@ -280,16 +303,31 @@ class VehicleClock:
         pass
 
 
-def follow_carrier(vehicle: MockVehicle, session: Any, pair: str) -> CarrierFeed:
+def follow_carrier(vehicle: MockVehicle, session: Any, pair: str, truth: bool = False,
+                   track: TruthTrack | None = None, camera: CameraPublisher | None = None) -> CarrierFeed:
     """Give ``vehicle``'s deck the motion of pair ``pair``'s carrier from its Zenoh state (a wgs84
-    state through the vehicle's origin); returns the feed (close it before the session)."""
-    feed = CarrierFeed(session, pair, VehicleClock(vehicle), origin=GeoOrigin(*vehicle.options.home), max_age_s=math.inf)
+    state through the vehicle's origin), or with ``truth`` from the carrier's sim-only true state
+    (:func:`sim.robots.truth.truth_key`); ``track`` samples the truth at every pass, ``camera``
+    renders its frames from it; returns the feed (close it before the session)."""
+    key = truth_key(pair) if truth else None
+    feed = CarrierFeed(session, pair, VehicleClock(vehicle), key=key, origin=GeoOrigin(*vehicle.options.home),
+                       max_age_s=math.inf)
 
     heard: list[bool] = []
     lockstep = vehicle.options.lockstep
     made: list[tuple[CarrierState, float, DeckMotion]] = []  # the last sample's motion (asked for at every pass)
 
     def motion() -> DeckMotion | None:
+        got = motion_now()
+        if track is not None:
+            track.sample(vehicle, got)
+        if camera is not None and got is not None:
+            t = float(vehicle._t_s)
+            camera.sample(t, vehicle._kin, np.asarray(got.centre(t, 0.0)), np.asarray(got.velocity_ned_m_s),
+                          made[0][0].yaw_rad)
+        return got
+
+    def motion_now() -> DeckMotion | None:
         got = feed.newest()
         if got is None:
             return None
@@ -336,7 +374,8 @@ def describe_estimate(options: VehicleOptions) -> str:
 
 
 def run(options: VehicleOptions, port_file: Path | None = None, status_every_s: float = 5.0,
-        deck: tuple[str, ZenohSection] | None = None, summary_path: Path | None = None) -> None:
+        deck: tuple[str, ZenohSection] | None = None, summary_path: Path | None = None, deck_truth: bool = False,
+        camera: Config | None = None) -> None:
     """Run a vehicle until SIGINT/SIGTERM, logging a status line every ``status_every_s`` wall
     seconds; with ``deck`` (pair, Zenoh section) its deck follows that pair's carrier; with
     ``summary_path`` the world's truth (:func:`truth`) is written there when it stops."""
@@ -344,6 +383,7 @@ def run(options: VehicleOptions, port_file: Path | None = None, status_every_s: 
         logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     log.setLevel(logging.INFO)
     stop = threading.Event()
+    track = TruthTrack() if deck is not None else None
 
     def on_signal(signum: int, frame: FrameType | None) -> None:
         stop.set()
@@ -355,7 +395,11 @@ def run(options: VehicleOptions, port_file: Path | None = None, status_every_s: 
             if deck is not None:
                 session = open_session(deck[1])
                 stack.callback(session.close)
-                stack.callback(follow_carrier(vehicle, session, deck[0]).close)
+                publisher = None
+                if camera is not None:
+                    publisher = CameraPublisher(camera, session, deck[0], options.faults.seed, options.lockstep)
+                    stack.callback(publisher.close)
+                stack.callback(follow_carrier(vehicle, session, deck[0], deck_truth, track, publisher).close)
             if port_file is not None:
                 _write_port_file(port_file, vehicle.port)
             log.info("mock vehicle on UDP %d -> %s, %s, %s", vehicle.port, options.target,
@@ -365,7 +409,10 @@ def run(options: VehicleOptions, port_file: Path | None = None, status_every_s: 
             log.info("stopping: %s", vehicle.status_line())
             if summary_path is not None:
                 summary_path.parent.mkdir(parents=True, exist_ok=True)
-                summary_path.write_text(json.dumps(truth(vehicle.snapshot(), estimate_of(options)), indent=2) + "\n")
+                world = truth(vehicle.snapshot(), estimate_of(options))
+                if track is not None:
+                    world["track"] = track.as_dict()
+                summary_path.write_text(json.dumps(world, indent=2) + "\n")
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)

@@ -197,3 +197,44 @@ def test_the_deck_moves_as_the_carriers_zenoh_state_says(probe: Probe):
     assert carried.on_deck and carried.crash is None and carried.velocity_ned_m_s == pytest.approx([1.0, 0.0, 0.0])
     assert carried.position_ned_m[0] == pytest.approx(now, abs=0.2)  # where the carrier is, within 0.2 s of it
     assert carried.position_ned_m[1:] == pytest.approx([0.0, -HEIGHT_M])
+
+
+def test_with_deck_truth_the_deck_follows_the_carriers_truth_not_its_erring_state(probe: Probe):
+    """``mock-vehicle --deck PAIR --deck-truth``: the carrier publishes its erring state (here 3 m
+    east of the truth, a GNSS bias) and its truth on the sim-only key (sim.robots.truth); the deck
+    carries the vehicle along the truth, and the truth track samples both (10 Hz)."""
+    from mission.carrier.backends import OwnState
+    from mission.time.clock import ManualClock
+    from sim.robots.truth import TruthPublisher, TruthTrack
+
+    with peer_pair() as (carrier_side, vehicle_side):
+        publisher = CarrierPublisher(carrier_side, "deck1")
+        truth = TruthPublisher(carrier_side, "deck1", ManualClock())
+        track = TruthTrack()
+        with vehicle_for(probe, speed=1.0, deck=SPEC, start_ned=(0.0, 0.0, -HEIGHT_M)) as v:
+            feed = follow_carrier(v, vehicle_side, "deck1", truth=True, track=track)
+            stop = threading.Event()
+
+            def publish() -> None:
+                t0 = time.monotonic()
+                for seq in itertools.count():
+                    t = time.monotonic() - t0
+                    publisher.publish(CarrierState(stamp_s=t, seq=seq, frame="local_ned", position=(t, 3.0, 0.0),
+                                                   velocity_ned_m_s=(1.0, 0.0, 0.0)))
+                    truth(OwnState(t, np.array([t, 0.0, 0.0]), np.array([1.0, 0.0, 0.0]), 0.0))
+                    if stop.wait(0.05):
+                        return
+            thread = threading.Thread(target=publish, daemon=True)
+            thread.start()
+            try:
+                carried = wait_flight(v, lambda s: s.position_ned_m[0] > 1.5, 10.0, "carried 1.5 m north")
+            finally:
+                stop.set()
+                thread.join(5.0)
+                feed.close()
+                truth.close()
+                publisher.close()
+    assert carried.on_deck and carried.crash is None
+    assert carried.position_ned_m[1:] == pytest.approx([0.0, -HEIGHT_M])  # on the truth, not 3 m east
+    got = track.as_dict()
+    assert len(got["t_s"]) >= 10 and all(abs(c[1]) < 1e-9 for c in got["carrier_ned_m"])

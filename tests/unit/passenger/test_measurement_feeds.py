@@ -203,12 +203,15 @@ def test_the_registries_are_read_from_the_source_tree():
 
 
 def test_a_feed_that_only_the_simulation_has_is_refused_naming_it():
-    """configs/relnav.toml names the marker, which has a simulated sensor and no flight feed yet:
-    ``marsupial run`` refuses it naming ``mission.feeds`` and saying it is simulation-only."""
+    """``marker_rendered`` has a simulated sensor and no flight feed (the flight's ``marker`` reads
+    the camera's frames, :mod:`mission.cli.marker`): ``marsupial run`` refuses it naming
+    ``mission.feeds`` and saying it is simulation-only; configs/relnav.toml's ``marker`` it opens."""
     from mission.cli.run import feed_openers
     from mission.config.schema import load_config
     from mission.errors import ConfigError
     from tests.conftest import CONFIGS
 
-    with pytest.raises(ConfigError, match=r"mission\.feeds.*marker: a simulated sensor only"):
-        feed_openers(load_config(CONFIGS / "relnav.toml"))
+    relnav = load_config(CONFIGS / "relnav.toml")
+    with pytest.raises(ConfigError, match=r"mission\.feeds.*marker_rendered: a simulated sensor only"):
+        feed_openers(with_overrides(relnav, {"mission.feeds": ["marker_rendered"]}))
+    assert feed_openers(relnav) == {"marker": "mission.cli.marker:open_feed"}

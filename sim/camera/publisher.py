@@ -1,0 +1,73 @@
+"""The passenger's downward camera in the mock vehicle (``mock-vehicle --camera``): frames rendered
+from the true poses (the vehicle's true position, level at its yaw; the deck at the carrier's true
+reference point plus ``mission.dock_offset_ned_m``, level at the carrier's yaw), exposed with the
+sensor's noise, blur and dropouts (:class:`sim.camera.simulated.SimulatedCamera`, ``[vision]``),
+published at capture on the pair's camera key (:mod:`mission.bus.frames`) for the mission's marker
+feed, which runs the detector on the pixels. Captures at ``vision.rate_hz`` on the vehicle's
+simulated time, taken in its physics pass (so in lockstep at the same times every run); seeded.
+"""
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+import zenoh
+
+from mission.bus.frames import camera_key, encode_frame, encode_mark
+from mission.bus.session import declare, undeclare
+from mission.config.schema import Config
+from mission.model import vision_detector
+from sim.camera.render import Poses, true_marker_pose
+from sim.camera.sensor import Sensor, sensor_model
+from sim.camera.simulated import SimulatedCamera
+
+SEED_OFFSET = 7717  # the sensor's stream, apart from the vehicle's other seeded streams
+MIN_DEPTH_M = 0.2  # [m] a deck nearer the camera's plane than this (or behind it) is not captured
+
+
+class CameraPublisher:
+    """Renders and publishes a frame when one is due (:meth:`sample`, in the vehicle's physics pass)."""
+
+    def __init__(self, cfg: Config, session: zenoh.Session, pair: str, seed: int, lockstep: bool) -> None:
+        detector = vision_detector(cfg)
+        self.camera = SimulatedCamera(detector.camera, detector.layout,
+                                      Sensor(sensor_model(cfg.vision), seed=seed + SEED_OFFSET))
+        self.period_s = 1.0 / cfg.vision.rate_hz
+        self.dock_offset_ned_m = np.asarray(cfg.mission.dock_offset_ned_m, dtype=float)
+        self.next_s = 0.0
+        self.captured = self.sent = 0
+        key = camera_key(pair)
+        # DROP even in lockstep: the put runs in the vehicle's physics pass, which must never wait
+        # on the network (a dropped frame is a camera dropout, counted by the feed as a gap)
+        self._pub = declare(f"publisher on {key}", lambda: session.declare_publisher(
+            key, congestion_control=zenoh.CongestionControl.DROP, express=True))
+
+    def sample(self, t_s: float, kin: Any, carrier_ned_m: np.ndarray, carrier_velocity_ned_m_s: np.ndarray,
+               carrier_yaw_rad: float | None) -> None:
+        """At vehicle time ``t_s`` [s] with the vehicle's true state ``kin``
+        (:class:`sim.vehicle.physics.multicopter.KinState`) and the carrier's true reference point
+        [m], velocity [m/s] and yaw [rad] (None: its heading of travel): capture if a frame is due."""
+        if t_s + 1e-9 < self.next_s:
+            return
+        self.next_s = max(self.next_s + self.period_s, t_s)
+        self.captured += 1
+        half = kin.yaw_rad / 2
+        q = np.array([math.cos(half), 0.0, 0.0, math.sin(half)])
+        v_c = np.asarray(carrier_velocity_ned_m_s, dtype=float)
+        yaw = carrier_yaw_rad if carrier_yaw_rad is not None else (
+            math.atan2(v_c[1], v_c[0]) if math.hypot(v_c[0], v_c[1]) > 1e-6 else 0.0)
+        poses = Poses(np.array([kin.n_m, kin.e_m, kin.d_m]), q, np.asarray(carrier_ned_m, float) + self.dock_offset_ned_m,
+                      float(yaw))
+        frame = None
+        if true_marker_pose(self.camera.camera, poses).deck_in_cam_m[2] >= MIN_DEPTH_M:  # else out of view (and
+            relative_v = v_c - np.array([kin.vn_m_s, kin.ve_m_s, kin.vd_m_s])  # its blur unbounded)
+            frame = self.camera.capture(poses, t_s, relative_v)
+        try:  # a dropped or empty frame still marks the time: a lockstep reader knows the stream passed it
+            self._pub.put(encode_mark(t_s) if frame is None else encode_frame(frame, q))
+            self.sent += frame is not None
+        except zenoh.ZError:
+            pass  # the session is closing
+
+    def close(self) -> None:
+        undeclare(self._pub)
