@@ -152,7 +152,8 @@ def carrier_tick(
         u = np.where(sep[..., None], own_plan_velocity, u)  # a new array too
     obstacles = model.carrier_obstacles if model.filter_carrier else Obstacles.none(2 if model.planar_carrier else x_c.shape[-1])
     others = model.other_keep_outs
-    if model.filter_carrier and others is not None and len(others) and obstacles is not None:
+    # (the other targets' keep-outs are the last rows of shared obstacle centres (m, d): TickModel appends them only there)
+    if model.filter_carrier and others is not None and len(others) and obstacles is not None and obstacles.centers.ndim == 2:
         obstacles = keep_outs_at(obstacles, len(others), x_c[..., :obstacles.centers.shape[-1]], model.carrier_safety.margin_m)
     if model.planar_carrier and x_c.shape[-1] == 3:
         in_plane = u[..., :2]
