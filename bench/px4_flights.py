@@ -33,7 +33,8 @@ unless ``--config`` names another, ``carrier.backend = "mavlink"``), with a 10-m
 approaches it took, the contact (horizontal error, horizontal and vertical relative speed), the
 carrier's speed on the approach, that leg's P1-P3, the carrier's closest approach to the leg's target, its swing and separation
 error (per leg: against the leg's own target), and whether PX4's home followed the carrier
-(:meth:`sim.sitl.px4.Px4Flight.home_following`); the targets ``RECOVERY_TARGETS``.
+(:meth:`sim.sitl.px4.Px4Flight.home_following`); the targets ``RECOVERY_TARGETS``; and per flight
+the carrier's closest approach to each target over the whole flight (``closest_each_m``).
 
 Usage: ``python -m bench.px4_flights [-n 5] [--config configs/px4_sitl.toml] [--set K=V ...]
 [--parallel 1|2] [--vehicle px4|mock] [--rover] [--out DIR] [--json F]`` (about 50-60 s of wall time per PX4
@@ -102,6 +103,20 @@ def riding_sustained_m(log_dir: Path) -> float | None:
     off = np.linalg.norm(r.vec("x_p")[riding] - r.vec("dock")[riding], axis=1)
     off = off[np.isfinite(off)]
     return round(float(np.minimum(off[:-1], off[1:]).max()), 3) if off.size > 1 else None
+
+
+def closest_each_m(log_dir: Path) -> list[float | None] | None:
+    """The carrier's closest approach [m] to each target of the flight over the whole flight (the
+    carrier's position as the passenger's controller received it, 3D), whichever leg it served;
+    None without a record."""
+    if not (log_dir / "record.csv").exists():
+        return None
+    r = read_record(log_dir)
+    x_c = r.vec("x_c")
+    x_c = x_c[np.isfinite(x_c).all(axis=1)]
+    targets = r.info.get("targets") or [r.info["target_ned_m"]]
+    return [round(float(np.linalg.norm(x_c - np.asarray(t, dtype=float), axis=1).min()), 3) if len(x_c) else None
+            for t in targets]
 
 
 def swing_and_sep_err(s: dict[str, Any], sep_m: float) -> tuple[float | None, float | None]:
@@ -179,7 +194,7 @@ def fly_once(config: Path, directory: Path, speed_factor: float, ground_truth_hz
     carrier = json.loads(carrier_path.read_text()) if rover and carrier_path.exists() else {}
     return {**_row(s, rc, t0, directory, sep_m), "hold_m": round(after, 3), "clock": round((clock or {}).get("ratio", float("nan")), 3),
             "stall_s": stall_s(f.log_dir), "riding_2tick_m": riding_sustained_m(f.log_dir), "home": home,
-            "carrier_closest_m": carrier.get("closest_target_distance_m"),
+            "carrier_closest_m": carrier.get("closest_target_distance_m"), "closest_each_m": closest_each_m(f.log_dir),
             "dockings": dockings(s, sep_m) if s.get("docked_again") is not None or s.get("legs") else None}
 
 
@@ -312,6 +327,9 @@ def print_dockings(rows: list[dict[str, Any]]) -> None:
             ok = docking_meets(d, home)
             met, total = met + ok, total + 1
             click.echo(f"{i:>6} " + " ".join(f"{_fmt(d[c]):>15}" for c in DOCKING_COLUMNS) + f"  {h:>40}  {'met' if ok else 'MISSED'}")
+        if row.get("closest_each_m") is not None:
+            click.echo(f"{i:>6} the carrier's closest approach to each target over the flight [m]: {row['closest_each_m']} "
+                       f"(its own figure, to any: {_fmt(row.get('carrier_closest_m'))}; stall {_fmt(row.get('stall_s'))} s)")
     click.echo(f"{met}/{total} dockings meet every target ({RECOVERY_TARGETS}, the carrier at >= {CARRIER_MIN_SPEED_M_S} m/s "
                f"on the approach, P1-P3 of the leg, no deck violation, PX4's home, when read, within {HOME_M} m of the carrier's track)")
 

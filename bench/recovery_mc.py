@@ -9,7 +9,9 @@ for the two-target cycle; on a busy machine the wall time is several times that)
 ``--estimate-error``: the vehicle's estimate errs as PX4 SITL's does (1: as much), each scenario
 with its own seed (no shared flight before the recovery). ``--only``: fly only these scenarios
 (their numbers, ``#i`` in the report) of the ``-n`` drawn, to look at one again.
-Exit code 0 when the targets hold.
+Each scenario's row (``--json``) has the carrier's closest approach to each target and to any
+(``closest_to_targets_m``, ``closest_any_target_m``: its true position against every target,
+whichever leg it served); the closest five are printed. Exit code 0 when the targets hold.
 """
 from __future__ import annotations
 
@@ -61,6 +63,10 @@ def main(count: int, seed: int, config: str, estimate_error: float, only: str | 
         if recovery_mc.badness(r)[0]:
             broken = {"legs_broken": [leg["leg"] + 1 for leg in r["legs"] if not (leg["p1"] and leg["p2"] and leg["p3"])]}
             click.echo(f"  missed #{r['index']}: {json.dumps({**{k: r[k] for k in ('speed_m_s', 'heading_deg', 'turn_deg', 'turn_rate_deg_s', 'turn_after_s', 'outcome', 'attempts', 'end_phase', 'deck_violations')}, **(broken if r['legs'] else {})})}")
+    closest = sorted((r["closest_any_target_m"], r["index"]) for r in report.rows if r.get("closest_any_target_m") is not None)
+    if closest:
+        click.echo("the carrier's closest approach to any target, per scenario (the closest five): "
+                   + ", ".join(f"#{i} {d:.3f} m" for d, i in closest[:5]))
     sim_s = sum(r["flight_time_s"] for r in report.rows)
     click.echo(f"cost: {cpu:.1f} s CPU ({cpu / count:.2f} s per scenario, {sim_s / cpu:.0f}x simulated time per CPU "
                f"second), {wall:.1f} s wall; load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs")

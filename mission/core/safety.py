@@ -40,7 +40,8 @@ _TOL = 1e-9
 @dataclass(frozen=True)
 class Obstacles:
     """Circular (2D) or spherical (3D) obstacles: centers [m] shape (m, n) (or (B, m, n) for a
-    batch with per-scenario obstacles), radii [m] shape (m,).
+    batch with per-scenario obstacles), radii [m] shape (m,) (or (B, m) for per-scenario radii:
+    a batch of carriers' keep-outs each shrunk to where its carrier is, :func:`mission.core.tick.keep_outs_at`).
 
     Treat the arrays as immutable: values derived from them (the planar view, squared keep-out
     radii) are computed once per instance and cached, since the filter needs them every tick.
@@ -62,7 +63,7 @@ class Obstacles:
         return cls(centers, np.array([r for _, r in items], dtype=float))
 
     def __len__(self) -> int:
-        return int(self.radii.shape[0])
+        return int(self.radii.shape[-1])
 
     def planar(self) -> "Obstacles":
         """The same obstacles seen by a planar robot: their first two coordinates (circles)."""
@@ -72,7 +73,7 @@ class Obstacles:
         return view
 
     def keepout_sq(self, margin_m: float) -> np.ndarray:
-        """Squared keep-out radii ``(r_i + margin)^2`` [m^2], shape (m,) (cached per margin)."""
+        """Squared keep-out radii ``(r_i + margin)^2`` [m^2], shape (m,) or (B, m) as the radii (cached per margin)."""
         key = ("keepout_sq", margin_m)
         r2 = self._cache.get(key)
         if r2 is None:

@@ -152,8 +152,9 @@ def carrier_tick(
         u = np.where(sep[..., None], own_plan_velocity, u)  # a new array too
     obstacles = model.carrier_obstacles if model.filter_carrier else Obstacles.none(2 if model.planar_carrier else x_c.shape[-1])
     others = model.other_keep_outs
-    if model.filter_carrier and others is not None and len(others) and x_c.ndim == 1 and obstacles is not None:
-        obstacles = keep_outs_at(obstacles, len(others), x_c[:obstacles.centers.shape[-1]], model.carrier_safety.margin_m)
+    # (the other targets' keep-outs are the last rows of shared obstacle centres (m, d): TickModel appends them only there)
+    if model.filter_carrier and others is not None and len(others) and obstacles is not None and obstacles.centers.ndim == 2:
+        obstacles = keep_outs_at(obstacles, len(others), x_c[..., :obstacles.centers.shape[-1]], model.carrier_safety.margin_m)
     if model.planar_carrier and x_c.shape[-1] == 3:
         in_plane = u[..., :2]
         planar = filter_velocity(x_c[..., :2], in_plane, obstacles, model.carrier_safety,
@@ -180,19 +181,22 @@ def default_carrier_obstacles(obstacles: Obstacles, target: np.ndarray, planar: 
 
 def keep_outs_at(obstacles: Obstacles, count: int, x_m: np.ndarray, margin_m: float) -> Obstacles:
     """``obstacles`` with their last ``count`` (the other targets' keep-outs, :func:`target_keep_outs`)
-    shrunk where the carrier at ``x_m`` [m] (one state, in the obstacles' dimension) is inside one
-    (radius + ``margin_m`` [m] beyond its distance): radius ``min(r, |x - o| - margin)``, so the
-    barrier holds it where it is (no deeper) and never pushes it out. A carrier begins a leg
-    wherever the last leg left it, often at the previous target's guard circle, inside that
-    target's keep-out: pushed out at the barrier's rate, ``cbf_gain`` x its depth, its command
-    jumped past its acceleration limit (1.2 m/s in a tick) under the riding passenger
-    (docs/recovery.md, "Monte-Carlo of the cycle"). Unchanged (the same object) where it is outside all."""
-    radii = obstacles.radii[-count:]
-    dist = norm(x_m - obstacles.centers[-count:])
+    shrunk where the carrier at ``x_m`` [m] (one state (d,) or a batch (B, d), in the obstacles'
+    dimension d) is inside one (radius + ``margin_m`` [m] beyond its distance): radius ``min(r, |x -
+    o| - margin)``, so the barrier holds it where it is (no deeper) and never pushes it out. A
+    carrier begins a leg wherever the last leg left it, often at the previous target's guard
+    circle, inside that target's keep-out: pushed out at the barrier's rate, ``cbf_gain`` x its
+    depth, its command jumped past its acceleration limit (1.2 m/s in a tick) under the riding
+    passenger (docs/recovery.md, "Monte-Carlo of the cycle"). For a batch the radii come back per
+    state, (B, m). Unchanged (the same object) where every state is outside all."""
+    radii = obstacles.radii[..., -count:]
+    dist = norm(x_m[..., None, :] - obstacles.centers[..., -count:, :])
     fitted = np.minimum(radii, np.maximum(dist - margin_m, 0.0))
     if np.all(fitted >= radii):
         return obstacles
-    return Obstacles(obstacles.centers, np.concatenate([obstacles.radii[:-count], fitted]))
+    kept = obstacles.radii[..., :-count]
+    kept = np.broadcast_to(kept, fitted.shape[:-1] + kept.shape[-1:])
+    return Obstacles(obstacles.centers, np.concatenate([kept, fitted], axis=-1))
 
 
 def target_keep_outs(targets: list[np.ndarray], radius_m: float, planar: bool, plane_down_m: float = 0.0) -> Obstacles:

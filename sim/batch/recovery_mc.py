@@ -3,7 +3,8 @@
 
 Targets (docs/recovery.md): >= 99 % docked within 2 attempts, every other one fell back safely
 (the fallback handed the vehicle to Hold or Land), none touched the deck outside the contact
-conditions. ``marsupial simulate CONFIG --monte-carlo N`` prints :func:`format_report`;
+conditions, and the carrier never inside any target's guard circle (``b c -
+carrier.p3_margin_m``, its true position against every target, not only the leg's own). ``marsupial simulate CONFIG --monte-carlo N`` prints :func:`format_report`;
 ``python -m bench.recovery_mc`` adds the cost.
 """
 from __future__ import annotations
@@ -44,6 +45,7 @@ class MonteCarloReport:
 
     rows: list[dict[str, Any]]
     seed: int | None = None
+    guard_m: float | None = None  # [m] the P3 guard circle's radius, b c - carrier.p3_margin_m (None: not judged)
 
     @property
     def count(self) -> int:
@@ -99,6 +101,21 @@ class MonteCarloReport:
         return max(jumps) if jumps else None
 
     @property
+    def closest_any_target_m(self) -> float | None:
+        """The carrier's closest approach to any target [m] over every flight (its true position, 3D)."""
+        values = [r["closest_any_target_m"] for r in self.rows if r.get("closest_any_target_m") is not None]
+        return min(values) if values else None
+
+    @property
+    def inside_guard(self) -> list[dict[str, Any]]:
+        """Flights whose carrier came inside a target's guard circle (:attr:`guard_m`, less
+        :data:`GUARD_TOLERANCE_M`)."""
+        if self.guard_m is None:
+            return []
+        return [r for r in self.rows if r.get("closest_any_target_m") is not None
+                and r["closest_any_target_m"] < self.guard_m - GUARD_TOLERANCE_M]
+
+    @property
     def unsafe(self) -> list[dict[str, Any]]:
         """Flights that did not end safely: the mission did not complete (DONE: docked and handed to
         Hold above the carrier, or fallen back to its point and handed to Hold or Land)."""
@@ -126,6 +143,8 @@ class MonteCarloReport:
             "max_phase_switch_jump_m_s": max((r["max_phase_switch_jump_m_s"] or 0.0) for r in self.rows) if self.rows else None,
             "p3": all(r["p3"] for r in self.rows),
             "every_leg_p1_p3": self.legs_held, "max_separation_jump_m_s": self.max_separation_jump_m_s,
+            "closest_any_target_m": self.closest_any_target_m, "guard_m": self.guard_m,
+            "inside_guard": [r["index"] for r in self.inside_guard],
             "rows": self.rows,
         }
 
@@ -137,9 +156,24 @@ def _reason_kind(why: str) -> str:
     return re.sub(r"[-+]?\d+(\.\d+)?", "x", text).strip()
 
 
+def closest_to_targets_m(f: Flight) -> list[float | None]:
+    """The carrier's closest approach [m] to each target of the mission over the whole flight
+    (its true position, 3D, against every target, whichever leg it served); None where the record
+    has no carrier position."""
+    x_c = f.record.vec("x_c_true")
+    x_c = x_c[np.isfinite(x_c).all(axis=1)]
+    targets = f.record.info.get("targets") or [f.record.info["target_ned_m"]]
+    if not len(x_c):
+        return [None for _ in targets]
+    return [round(float(np.linalg.norm(x_c - np.asarray(t, dtype=float), axis=1).min()), 4) for t in targets]
+
+
 def flight_row(f: Flight) -> dict[str, Any]:
-    """One flight's line of the Monte-Carlo report."""
+    """One flight's line of the Monte-Carlo report (``closest_to_targets_m``: the carrier's closest
+    approach to each target, ``closest_any_target_m`` the least of them, :func:`closest_to_targets_m`)."""
     s = f.summary
+    closest = closest_to_targets_m(f)
+    known = [c for c in closest if c is not None]
     safe_end = f.state.phase is Phase.DONE
     return {**f.scenario.as_dict(), "docked": f.docked, "attempts": f.attempts, "outcome": s.get("recovery_outcome"),
             "contact": s.get("contact"), "deck_violations": int(s.get("deck_violations") or 0),
@@ -148,20 +182,23 @@ def flight_row(f: Flight) -> dict[str, Any]:
             "max_phase_switch_jump_m_s": s.get("max_phase_switch_jump_m_s"), "p3": bool(s.get("p3")),
             "go_arounds": f.go_arounds,
             "flight_time_s": round(float(f.record.t[-1]), 2) if len(f.record.t) else 0.0,
+            "closest_to_targets_m": closest, "closest_any_target_m": min(known) if known else None,
             "legs": [leg_row(leg) for leg in s.get("legs") or []]}
 
 
 def leg_row(leg: dict[str, Any]) -> dict[str, Any]:
     """One leg's figures in a flight's row (several targets): its outcome, P1-P3, its separation
-    (time from its riding, carrier-target distance, the relative command's jump) and contact."""
+    (time from its riding, carrier-target distance, the relative command's jump), contact, and the
+    carrier's closest approach to the leg's own target [m] (``min_carrier_target_distance_m``)."""
     keys = ("leg", "outcome", "p1", "p2", "p3", "separation_time_s", "carrier_target_distance_at_separation_m",
-            "relative_input_jump_m_s", "final_passenger_target_distance_m", "contact")
+            "relative_input_jump_m_s", "final_passenger_target_distance_m", "contact", "min_carrier_target_distance_m")
     return {k: leg.get(k) for k in keys}
 
 
 def badness(row: dict[str, Any]) -> tuple[int, int, float]:
     """How bad a flight of the report went, for picking the worst: missed a target (not docked
-    within 2 attempts, an unsafe end, a deck violation, a leg that broke P1-P3) first, then the
+    within 2 attempts, an unsafe end, a deck violation, a leg that broke P1-P3; the carrier inside a
+    target's guard circle is :meth:`MonteCarloReport.inside_guard`'s) first, then the
     attempts, then the contact's horizontal error."""
     missed = (not (row["docked"] and row["attempts"] <= 2)) or not row["safe_end"] or row["deck_violations"] > 0 \
         or not all(leg["p1"] and leg["p2"] and leg["p3"] for leg in row["legs"])
@@ -189,20 +226,23 @@ def monte_carlo(cfg: Config, scenarios: Sequence[Scenario],
         rows.append(row)
         if progress is not None:
             progress(f)
-    return MonteCarloReport(rows), None if worst is None else worst[1]
+    guard_m = cfg.law.b * cfg.law.c - cfg.carrier.p3_margin_m
+    return MonteCarloReport(rows, guard_m=guard_m), None if worst is None else worst[1]
 
 
 DOCKED_WITHIN_2_TARGET = 0.99  # the share of scenarios docked within 2 attempts
+GUARD_TOLERANCE_M = 0.01  # [m] how far inside the guard circle a carrier may come before it counts as inside
 
 
 def report_ok(report: MonteCarloReport) -> bool:
     """The targets: >= :data:`DOCKED_WITHIN_2_TARGET` docked within 2 attempts, every other one
-    fell back safely, no deck violation; with several targets also every leg's P1-P3 in every
+    fell back safely, no deck violation, the carrier never inside a target's guard circle
+    (:attr:`MonteCarloReport.inside_guard`); with several targets also every leg's P1-P3 in every
     flight."""
     d = report.as_dict()
     return (report.docked_within_2 >= DOCKED_WITHIN_2_TARGET and not report.unsafe
             and d["deck_violations"] == 0 and d["true_deck_violations"] == 0
-            and report.legs_held in (None, 1.0))
+            and report.legs_held in (None, 1.0) and not report.inside_guard)
 
 
 def format_report(report: MonteCarloReport) -> str:
@@ -233,6 +273,11 @@ def format_report(report: MonteCarloReport) -> str:
         ("largest command jump at a phase switch", f"{d['max_phase_switch_jump_m_s']:.3f} m/s"),
         ("P3 (the carrier never at the target)", "held" if d["p3"] else "BROKEN"),
     ]
+    closest = report.closest_any_target_m
+    if closest is not None:
+        guard = "" if report.guard_m is None else (f"   guard circle {report.guard_m:.3f} m, inside it: "
+                                                   f"{', '.join(f'#{i}' for i in d['inside_guard']) or 'none'}")
+        rows.append(("carrier's closest approach to any target", f"{closest:.3f} m{guard}"))
     if report.legs_held is not None:  # several targets: each flight flies every leg
         jump = report.max_separation_jump_m_s
         rows[0:0] = [("every leg held P1-P3", pct(report.legs_held)),

@@ -16,7 +16,7 @@ from mission.config.schema import load_config, with_overrides
 from mission.phases import Phase
 from sim.batch import recovery
 from sim.batch.recovery import configured, fly
-from sim.batch.recovery_mc import format_report, monte_carlo, random_scenarios
+from sim.batch.recovery_mc import GUARD_TOLERANCE_M, MonteCarloReport, format_report, monte_carlo, random_scenarios, report_ok
 from tests.conftest import CONFIGS
 from tests.support.agreement import EXACT
 
@@ -134,6 +134,18 @@ def test_the_monte_carlo_of_the_cycle_flies_every_leg(cycle):
     assert all(leg["outcome"] == "done" for row in report.rows for leg in row["legs"])
     assert report.legs_held is not None and "every leg held P1-P3" in format_report(report)
     assert report.max_separation_jump_m_s is not None and report.max_separation_jump_m_s <= 0.05
+    # the carrier's closest approach to every target, whichever leg it served: never inside a guard circle
+    guard = cycle.law.b * cycle.law.c - cycle.carrier.p3_margin_m
+    assert report.guard_m == guard and not report.inside_guard and report_ok(report), format_report(report)
+    for row in report.rows:
+        assert len(row["closest_to_targets_m"]) == 2 and row["closest_any_target_m"] == min(row["closest_to_targets_m"])
+        for leg in row["legs"]:  # a leg's own target is one of them (the leg's figure on the carrier's reported
+            # position, the row's on its true one: up to a carrier step, 0.07 m, apart)
+            assert leg["min_carrier_target_distance_m"] >= row["closest_to_targets_m"][leg["leg"]] - 0.1, (leg, row)
+    assert report.closest_any_target_m == min(row["closest_any_target_m"] for row in report.rows)
+    assert "closest approach to any target" in format_report(report)
+    closer = MonteCarloReport(report.rows, guard_m=report.closest_any_target_m + 2 * GUARD_TOLERANCE_M)
+    assert closer.inside_guard and not report_ok(closer)  # a carrier inside a guard circle misses the target
 
 
 def test_simulate_refuses_a_cycle_it_cannot_fly(tmp_path, capsys):

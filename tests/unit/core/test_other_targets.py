@@ -79,3 +79,38 @@ def test_a_leg_begun_at_the_last_target_s_guard_circle_is_not_pushed_out() -> No
     assert largest_step <= accel * dt + 1e-9, largest_step  # a push out would be ~1.2 m/s in a tick
     assert closest >= start - 1e-3, (closest, start)
     assert float(np.linalg.norm(t2 - x)) < float(np.linalg.norm(t2 - (t1 + math.sqrt(g.radius_m ** 2 - height ** 2) * side))) - 5.0
+
+
+def test_the_batch_path_holds_a_carrier_inside_another_keep_out_as_one_state_does() -> None:
+    """configs/cycle.toml's leg 2 for a batch of carriers (``sim/batch/closed_loop.py``'s path,
+    states (B, 3)) beside the same carriers one at a time (the flight's path, (3,)): two begun
+    inside target 1's keep-out (on its guard circle, and deeper), one outside every keep-out. Tick
+    for tick for 10 s the batch's commands are the single states' (the keep-outs shrunk per
+    carrier, :func:`keep_outs_at`), and neither carrier inside is pushed out."""
+    cfg = load_config(CONFIGS / "cycle.toml")
+    t1, t2 = (np.asarray(t, dtype=float) for t in cfg.scenario.legs())
+    model = carrier_model(cfg, target=t2)
+    g = guard_params(cfg)
+    height = float(t1[2])
+    on_circle = math.sqrt(g.radius_m ** 2 - height ** 2)
+    x = np.array([t1 + on_circle * np.array([-0.6, 0.8, 0.0]), t1 + (on_circle - 1.0) * np.array([0.0, -1.0, 0.0]),
+                  t1 + 3.0 * on_circle * np.array([-0.6, 0.8, 0.0])])
+    x[:, 2] = 0.0
+    others = model.other_keep_outs
+    assert others is not None
+    depth = float(np.linalg.norm(x[0, :2] - others.centers[0]))
+    assert depth < others.radii[0] + cfg.safety.margin_m  # inside target 1's keep-out: the shrink is at stake
+    singles = [row.copy() for row in x]
+    u, u1 = np.zeros_like(x), [np.zeros(3) for _ in x]
+    dt = 1.0 / cfg.carrier.rate_hz
+    start = np.linalg.norm(x[:2, :2] - t1[:2], axis=1)
+    closest = start.copy()
+    for _ in range(int(10.0 / dt)):
+        u = np.asarray(carrier_tick(x, False, model, u_prev=u, dt_s=dt).u, dtype=float)
+        for i in range(len(singles)):
+            u1[i] = np.asarray(carrier_tick(singles[i], False, model, u_prev=u1[i], dt_s=dt).u, dtype=float)
+            singles[i] = singles[i] + u1[i] * dt
+        np.testing.assert_allclose(u, np.array(u1), rtol=0.0, atol=1e-12)
+        x = x + u * dt
+        closest = np.minimum(closest, np.linalg.norm(x[:2, :2] - t1[:2], axis=1))
+    assert (closest >= start - 1e-3).all(), (closest, start)
