@@ -56,7 +56,7 @@ import numpy as np
 
 from mission.config.schema import load_config
 from mission.phases.phase import FLYING, Phase
-from mission.record import read_record
+from mission.record import read_record, summarise
 from sim.sitl.px4 import build_dir, clock_ratio, patched_config, px4_flight, unavailable_reason
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -93,16 +93,13 @@ def stall_s(log_dir: Path) -> float | None:
 
 
 def riding_sustained_m(log_dir: Path) -> float | None:
-    """The riding offset held for at least two ticks [m]: the largest ``min(off[k], off[k+1])``
-    while RIDING. A one-tick spike is no vehicle's motion (0.3-0.6 m and back within 20 ms) but a
-    sample read late after a stall of the machine (the vehicle's or the carrier's)."""
+    """The riding offset held for at least two ticks [m] (the summary's ``riding_offset_held_m``,
+    the worst leg's): a one-tick spike is no vehicle's motion (0.3-0.6 m and back within 20 ms)
+    but a sample read late after a stall of the machine (the vehicle's or the carrier's)."""
     if not (log_dir / "record.csv").exists():
         return None
-    r = read_record(log_dir)
-    riding = r.phase == "RIDING"
-    off = np.linalg.norm(r.vec("x_p")[riding] - r.vec("dock")[riding], axis=1)
-    off = off[np.isfinite(off)]
-    return round(float(np.minimum(off[:-1], off[1:]).max()), 3) if off.size > 1 else None
+    held = summarise(log_dir).get("riding_offset_held_m")
+    return None if held is None else round(float(held), 3)
 
 
 def closest_each_m(log_dir: Path) -> list[float | None] | None:
