@@ -96,6 +96,23 @@ def _pair_with_rogue() -> Iterator[tuple[zenoh.Session, zenoh.Session, str]]:
         yield a, b, ep
 
 
+@contextlib.contextmanager
+def _pair_through_a_link() -> Iterator[tuple[zenoh.Session, zenoh.Session, LinkCut]]:
+    """Sessions ``a`` (listening; the sender) and ``b`` (the feed), ``b`` connected to ``a``
+    through a relay the test can cut (:class:`LinkCut`)."""
+    pa = free_port()
+    a = peer(listen=[endpoint(pa)])
+    with LinkCut(pa) as link:
+        try:
+            b = peer(connect=[link.endpoint])
+        except BaseException:
+            a.close()
+            raise
+        with closing_all(b, a):
+            wait_for(lambda: list(b.info.peers_zid()), what="b connected to a")
+            yield a, b, link
+
+
 def _rogue_wildcards_come_and_go(b: zenoh.Session, ep: str, feed: Any, alive_key: str, stream: Stream) -> None:
     """A rogue session joins by ``ep`` and declares and undeclares a token on each of
     :data:`WILDCARDS` and on the pair's own parent (``.../*``) while the sender keeps sending."""
@@ -224,52 +241,43 @@ def test_a_dropped_link_says_gone_with_the_sender_open_and_its_stream_binds_agai
     them waited forever). The sender's stream, going on, binds again under the feed's usual rules
     (three in order for the carrier, then its settle; the passenger's source again in any phase)."""
     clock = ManualClock(1.0)
-    pa = free_port()
-    a = peer(listen=[endpoint(pa)])
-    with LinkCut(pa) as link:
+    with _pair_through_a_link() as (a, b, link):
+        if side == "carrier":
+            feed: Any = CarrierFeed(b, "p", clock, limits=GateLimits(max_speed_m_s=1000.0), auth=AUTH)
+            pub: Any = CarrierPublisher(a, "p", auth=AUTH)
+            alive_key = keys("p").carrier_alive
+            publish = lambda seq: pub.publish(_state(seq))  # noqa: E731
+            newest = lambda: None if (r := feed.latest()) is None else r.state.seq  # noqa: E731
+        else:
+            feed = PassengerFeed(b, "p", clock, auth=AUTH, bind_phases=BEFORE_RIDING, bind_samples=BIND_STATUSES)
+            pub = PassengerPublisher(a, "p", auth=AUTH)
+            alive_key = keys("p").passenger_alive
+            phase = ["PREFLIGHT"]
+            publish = lambda seq: pub.publish(_status(seq, phase[0]))  # noqa: E731
+            newest = lambda: None if (r := feed.latest()) is None else r.status.seq  # noqa: E731
+        probe = Probe(b, alive_key)
         try:
-            b = peer(connect=[link.endpoint])
-        except BaseException:
-            a.close()
-            raise
-        with closing_all(b, a):
-            wait_for(lambda: list(b.info.peers_zid()), what="b connected to a")
+            stream = Stream(publish, newest)
+            stream.until_accepted("bound")
+            wait_for(lambda: feed.alive is True, what="token")
+            assert feed.alive_over_interval() is True
+            bound = feed.counters["bound_source"]
+            if side == "passenger":
+                phase[0] = "RIDING"  # a riding passenger: only the source bound before may bind again
+            link.cut()
+            wait_for(lambda: probe.count("DELETE", alive_key), what="the token gone with the sender open")
+            wait_for(lambda: probe.count("PUT", alive_key) == 2, what="the token back", timeout_s=20.0)
+            wait_for(lambda: feed.counters["bound_source"] is None or feed.alive_over_interval() is False,
+                     what="the feed heard the DELETE")
+            assert link.accepted == 2  # one link, dropped once and made again
+            stream.until_accepted("the sender's stream after the drop")
+            assert feed.counters["bound_source"] == bound
             if side == "carrier":
-                feed: Any = CarrierFeed(b, "p", clock, limits=GateLimits(max_speed_m_s=1000.0), auth=AUTH)
-                pub: Any = CarrierPublisher(a, "p", auth=AUTH)
-                alive_key = keys("p").carrier_alive
-                publish = lambda seq: pub.publish(_state(seq))  # noqa: E731
-                newest = lambda: None if (r := feed.latest()) is None else r.state.seq  # noqa: E731
-            else:
-                feed = PassengerFeed(b, "p", clock, auth=AUTH, bind_phases=BEFORE_RIDING, bind_samples=BIND_STATUSES)
-                pub = PassengerPublisher(a, "p", auth=AUTH)
-                alive_key = keys("p").passenger_alive
-                phase = ["PREFLIGHT"]
-                publish = lambda seq: pub.publish(_status(seq, phase[0]))  # noqa: E731
-                newest = lambda: None if (r := feed.latest()) is None else r.status.seq  # noqa: E731
-            probe = Probe(b, alive_key)
-            try:
-                stream = Stream(publish, newest)
-                stream.until_accepted("bound")
-                wait_for(lambda: feed.alive is True, what="token")
-                assert feed.alive_over_interval() is True
-                bound = feed.counters["bound_source"]
-                if side == "passenger":
-                    phase[0] = "RIDING"  # a riding passenger: only the source bound before may bind again
-                link.cut()
-                wait_for(lambda: probe.count("DELETE", alive_key), what="the token gone with the sender open")
-                wait_for(lambda: probe.count("PUT", alive_key) == 2, what="the token back", timeout_s=20.0)
-                wait_for(lambda: feed.counters["bound_source"] is None or feed.alive_over_interval() is False,
-                         what="the feed heard the DELETE")
-                assert link.accepted == 2  # one link, dropped once and made again
-                stream.until_accepted("the sender's stream after the drop")
-                assert feed.counters["bound_source"] == bound
-                if side == "carrier":
-                    assert feed.latest().untrusted.startswith("settling")  # bound again: settles again
-            finally:
-                probe.close()
-                pub.close()
-                feed.close()
+                assert feed.latest().untrusted.startswith("settling")  # bound again: settles again
+        finally:
+            probe.close()
+            pub.close()
+            feed.close()
 
 
 @pytest.mark.slow
@@ -312,39 +320,30 @@ def test_statuses_sent_into_a_dropped_link_never_come_and_the_stream_binds_the_s
     waited for the third waited forever. Once the link is back the token is back, and the
     stream's next statuses bind the same signer again."""
     clock = ManualClock(1.0)
-    pa = free_port()
-    a = peer(listen=[endpoint(pa)])
-    with LinkCut(pa) as link:
-        try:
-            b = peer(connect=[link.endpoint])
-        except BaseException:
-            a.close()
-            raise
-        with closing_all(b, a):
-            wait_for(lambda: list(b.info.peers_zid()), what="b connected to a")
-            with PassengerFeed(b, "p", clock, auth=AUTH) as feed, PassengerPublisher(a, "p", auth=AUTH) as pub:
-                heard: list[int] = []
-                feed.add_listener(lambda status: heard.append(status.seq))
-                probe = Probe(b, keys("p").passenger_alive)
-                try:
-                    stream = Stream(lambda seq: pub.publish(_status(seq)), lambda: None if (r := feed.latest()) is None else r.status.seq)
-                    stream.until_accepted("bound")
-                    wait_for(lambda: probe.count("PUT", keys("p").passenger_alive), what="token")
-                    bound = feed.counters["bound_source"]
-                    link.down()
-                    wait_for(lambda: probe.count("DELETE", keys("p").passenger_alive), what="the token gone, publisher open")
-                    wait_for(lambda: not list(b.info.peers_zid()), what="no route left")
-                    wait_for(lambda: feed.counters["bound_source"] is None and feed.alive is False, what="unbound")
-                    lost = range(stream.seq, stream.seq + 3)
-                    for seq in lost:  # what the flaky test did: three, once
-                        pub.publish(_status(seq))
-                    stream.seq += 3
-                    link.up()
-                    wait_for(lambda: probe.count("PUT", keys("p").passenger_alive) == 2, what="the token back",
-                             timeout_s=20.0)
-                    stream.until_accepted("the stream after the drop")
-                    assert not set(lost) & set(heard), heard  # the three never came
-                    assert feed.counters["bound_source"] == bound and feed.alive is True
-                    assert feed.alive_over_interval() is False and feed.alive_over_interval() is True
-                finally:
-                    probe.close()
+    with _pair_through_a_link() as (a, b, link):
+        with PassengerFeed(b, "p", clock, auth=AUTH) as feed, PassengerPublisher(a, "p", auth=AUTH) as pub:
+            heard: list[int] = []
+            feed.add_listener(lambda status: heard.append(status.seq))
+            probe = Probe(b, keys("p").passenger_alive)
+            try:
+                stream = Stream(lambda seq: pub.publish(_status(seq)), lambda: None if (r := feed.latest()) is None else r.status.seq)
+                stream.until_accepted("bound")
+                wait_for(lambda: probe.count("PUT", keys("p").passenger_alive), what="token")
+                bound = feed.counters["bound_source"]
+                link.down()
+                wait_for(lambda: probe.count("DELETE", keys("p").passenger_alive), what="the token gone, publisher open")
+                wait_for(lambda: not list(b.info.peers_zid()), what="no route left")
+                wait_for(lambda: feed.counters["bound_source"] is None and feed.alive is False, what="unbound")
+                lost = range(stream.seq, stream.seq + 3)
+                for seq in lost:  # what the flaky test did: three, once
+                    pub.publish(_status(seq))
+                stream.seq += 3
+                link.up()
+                wait_for(lambda: probe.count("PUT", keys("p").passenger_alive) == 2, what="the token back",
+                         timeout_s=20.0)
+                stream.until_accepted("the stream after the drop")
+                assert not set(lost) & set(heard), heard  # the three never came
+                assert feed.counters["bound_source"] == bound and feed.alive is True
+                assert feed.alive_over_interval() is False and feed.alive_over_interval() is True
+            finally:
+                probe.close()
