@@ -71,6 +71,12 @@ class Received(Generic[T]):
     stale: bool
 
 
+#: [s] a carrier state whose measurement time, by the clock offset, is later than its arrival by
+#: more than the offset's bound and this is aged by its arrival (``rx_age_s``), not by that time:
+#: a state cannot be measured after it arrived, so the offset does not hold for it
+FUTURE_SLACK_S = 0.05
+
+
 @dataclass(frozen=True)
 class ReceivedCarrierState(Received[CarrierState]):
     """A carrier state, always in local NED (``value.frame == "local_ned"``); ``untrusted``: why
@@ -80,7 +86,9 @@ class ReceivedCarrierState(Received[CarrierState]):
     With the carrier's clock offset known (the feed's ``offset``), ``age_s`` [s] is the time since
     the carrier *measured* the state (``now - (stamp - offset)``, :func:`mission.time.offset.sample_age`),
     good to ``age_bound_s`` [s]; ``rx_age_s`` [s] is always the time since it arrived. Without it
-    (no round trip yet) ``age_s`` is the receive age and ``age_bound_s`` is None: the measurement
+    (no round trip yet), or when the offset would put the measurement after the arrival (beyond
+    its bound and :data:`FUTURE_SLACK_S`: the offset does not hold for this carrier's clock, counted
+    ``future_stamps``), ``age_s`` is the receive age and ``age_bound_s`` is None: the measurement
     time is unknown."""
 
     untrusted: str | None = None
@@ -340,6 +348,7 @@ class CarrierFeed(_Feed[CarrierState]):
         self.gate = FeedGate(limits or GateLimits(max_speed_m_s=3.0), use_seq=self._use_seq)
         self._origin = origin
         self._cdr_count = 0
+        self._future_stamps = 0  # states measured, by the offset, after they arrived (see latest)
         k = keys(pair)
         super().__init__(session, key or k.carrier_state, k.carrier_alive, clock, max_age_s, auth)
 
@@ -382,7 +391,8 @@ class CarrierFeed(_Feed[CarrierState]):
                 "resyncs": self.gate.resyncs, "jumps": self.gate.jumps, "settles": self.gate.settles,
                 "contests": self.gate.contests,
                 "clock_offset": None if self._offset is None else self._offset.snapshot(),
-                "delay_growths": self.delay.growths, "delay_growth_last": self.delay.last or None}
+                "delay_growths": self.delay.growths, "delay_growth_last": self.delay.last or None,
+                "future_stamps": self._future_stamps}
 
     def _received_extra(self, now: float) -> dict[str, Any]:
         return {"untrusted": f"signer contest: {self._contest}" if self._contest else self.gate.distrust(now)}
@@ -411,6 +421,16 @@ class CarrierFeed(_Feed[CarrierState]):
         if estimate is None:
             return replace(got, rx_age_s=got.age_s)
         age = sample_age(got.rx_time_s + got.age_s, got.value.stamp_s, estimate)
+        if age < got.age_s - estimate.bound_s - FUTURE_SLACK_S:
+            # measured after it arrived: the offset does not hold for this carrier's clock (a
+            # carrier that left the lockstep, a clock that jumped); aged by its arrival instead
+            with self._lock:
+                self._future_stamps += 1
+                first = self._future_stamps == 1
+            if first:
+                log.warning("carrier feed on %s: a state stamped %.3f s after it arrived (offset %.3f +- %.3f s): "
+                            "aged by its arrival instead", got.key, got.age_s - age, estimate.offset_s, estimate.bound_s)
+            return replace(got, rx_age_s=got.age_s)
         return replace(got, age_s=age, rx_age_s=got.age_s, age_bound_s=estimate.bound_s,
                                    stale=age + estimate.bound_s > self.max_age_s)
 
