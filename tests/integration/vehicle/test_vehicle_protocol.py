@@ -187,21 +187,30 @@ def test_set_message_interval(probe: Probe) -> None:
 
 def test_local_position_rate_up_to_what_px4_delivers(probe: Probe) -> None:
     """LOCAL_POSITION_NED asked at 50 Hz arrives at 50 Hz; asked at 500 Hz, at no more than PX4's
-    125 Hz. Only the link that asked changes (the GCS link keeps 30 Hz). (Lower bounds loose: a
-    vehicle behind wall time on a loaded machine skips what it missed, as PX4 does.)"""
+    125 Hz. Only the link that asked changes (the GCS link keeps 30 Hz). The rate is judged by the
+    median interval between the samples' own stamps and an upper bound on their count: a vehicle
+    behind wall time on a loaded machine skips what it missed, as PX4 does, so a count's lower
+    bound measures the machine (a CI run counted 57 of 125 in a second), not the stream."""
     with Probe() as gcs, vehicle_for(probe, speed=1.0, gcs_target=f"127.0.0.1:{gcs.port}") as v:
         connect(probe)
         lpn = float(mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED)
 
-        def count(p: Probe, t0: float) -> int:
-            return sum(1 for m in p.messages("LOCAL_POSITION_NED") if t0 <= m.time_boot_ms / 1000.0 < t0 + 1.0)
+        def stamps(p: Probe, t0: float) -> list[float]:
+            return sorted(m.time_boot_ms / 1000.0 for m in p.messages("LOCAL_POSITION_NED")
+                          if t0 <= m.time_boot_ms / 1000.0 < t0 + 1.0)
+
+        def assert_rate(p: Probe, t0: float, hz: float) -> None:
+            got = stamps(p, t0)
+            assert 0.25 * hz <= len(got) <= hz + 1, (hz, len(got))  # streaming, never faster than asked
+            median = statistics.median(b - a for a, b in zip(got, got[1:]))
+            assert 0.8 / hz <= median <= 1.25 / hz + 0.001, (hz, median)  # the stamps' 1 ms resolution
 
         for interval_us, expected_hz in ((20_000.0, 50), (2_000.0, 125)):
             assert probe.command(px4.MAV_CMD_SET_MESSAGE_INTERVAL, (lpn, interval_us)).result == px4.MAV_RESULT_ACCEPTED
             t0 = v.clock.now() + 0.1
             wait_flight(v, lambda s: s.t_s > t0 + 1.1, 3.0, "s.t_s > t0 + 1.1")
-            assert 0.75 * expected_hz <= count(probe, t0) <= expected_hz + 1, interval_us
-            assert 20 <= count(gcs, t0) <= 31
+            assert_rate(probe, t0, expected_hz)
+            assert_rate(gcs, t0, 30)
 
 
 def test_timesync_is_answered(probe: Probe) -> None:
