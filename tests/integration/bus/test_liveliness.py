@@ -113,6 +113,17 @@ def _pair_through_a_link() -> Iterator[tuple[zenoh.Session, zenoh.Session, LinkC
             yield a, b, link
 
 
+def _signed_carrier_bound(a: zenoh.Session, feed: CarrierFeed) -> tuple[CarrierPublisher, Stream, str]:
+    """A signed carrier publishing on session ``a`` until ``feed`` has bound it and heard its
+    token: its publisher, its stream and the source the feed bound."""
+    pub = CarrierPublisher(a, "p", auth=AUTH)
+    stream = Stream(lambda seq: pub.publish(_state(seq)), lambda: None if (r := feed.latest()) is None else r.state.seq)
+    stream.until_accepted("the signed carrier bound")
+    wait_for(lambda: feed.alive is True, what="carrier token")
+    assert feed.alive_over_interval() is True
+    return pub, stream, feed.counters["bound_source"]
+
+
 def _rogue_wildcards_come_and_go(b: zenoh.Session, ep: str, feed: Any, alive_key: str, stream: Stream) -> None:
     """A rogue session joins by ``ep`` and declares and undeclares a token on each of
     :data:`WILDCARDS` and on the pair's own parent (``.../*``) while the sender keeps sending."""
@@ -144,13 +155,7 @@ def test_a_rogue_wildcard_token_going_away_neither_unbinds_the_carrier_nor_says_
     session closing still gives "gone" and unbinds."""
     clock = ManualClock(1.0)
     with _pair_with_rogue() as (a, b, ep), CarrierFeed(b, "p", clock, limits=LENIENT, auth=AUTH) as feed:
-        pub = CarrierPublisher(a, "p", auth=AUTH)
-        newest = lambda: None if (r := feed.latest()) is None else r.state.seq  # noqa: E731
-        stream = Stream(lambda seq: pub.publish(_state(seq)), newest)
-        stream.until_accepted("the signed carrier bound")
-        wait_for(lambda: feed.alive is True, what="carrier token")
-        assert feed.alive_over_interval() is True
-        bound = feed.counters["bound_source"]
+        pub, stream, bound = _signed_carrier_bound(a, feed)
         assert bound.startswith("signer:")
         _rogue_wildcards_come_and_go(b, ep, feed, keys("p").carrier_alive, stream)
         assert feed.alive_over_interval() is True  # the tick never hears of an outage
@@ -196,13 +201,7 @@ def test_a_rogue_token_on_the_alive_key_itself_changes_nothing_while_the_carrier
     clock = ManualClock(1.0)
     alive_key = keys("p").carrier_alive
     with _pair_with_rogue() as (a, b, ep), CarrierFeed(b, "p", clock, limits=LENIENT, auth=AUTH) as feed:
-        pub = CarrierPublisher(a, "p", auth=AUTH)
-        newest = lambda: None if (r := feed.latest()) is None else r.state.seq  # noqa: E731
-        stream = Stream(lambda seq: pub.publish(_state(seq)), newest)
-        stream.until_accepted("the signed carrier bound")
-        wait_for(lambda: feed.alive is True, what="carrier token")
-        assert feed.alive_over_interval() is True
-        bound = feed.counters["bound_source"]
+        pub, stream, bound = _signed_carrier_bound(a, feed)
         probe = Probe(b, alive_key)
         marks = Probe(b, "marsupial/p/mark/*")  # a token declared after the rogue's is heard after it
         try:
