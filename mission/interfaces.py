@@ -21,7 +21,7 @@ three without sockets.
 """
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -32,6 +32,7 @@ if TYPE_CHECKING:
     from mission.mavlink.session import LinkCounters
     from mission.mavlink.link import VehicleState
     from mission.bus.wire import GeoOrigin, PassengerStatus
+    from mission.vision.camera import SeenFrame
 
 
 class Vehicle(Protocol):
@@ -140,4 +141,22 @@ class MeasurementSource(Protocol):
 
     def close(self) -> None:
         """Release what the feed holds (subscriptions, devices); the loop polls it no more."""
+        ...
+
+
+@runtime_checkable
+class CameraSink(Protocol):
+    """Where a camera's frames go as a feed saw them (the flight log, :mod:`mission.flightdata`)."""
+
+    def camera(self, t_s: float, seen: SeenFrame) -> None:
+        """Take a frame that reached the mission at ``t_s`` [s, mission clock]; returns at once."""
+        ...
+
+
+@runtime_checkable
+class ShowsFrames(Protocol):
+    """A measurement feed whose frames can be shown to :class:`CameraSink` s (the marker feed)."""
+
+    def show_frames_to(self, sink: CameraSink) -> None:
+        """Hand every frame the feed reads, as it saw it, to ``sink`` too (its rate is the feed's own)."""
         ...

@@ -10,6 +10,10 @@ late as the real one would). In lockstep (a :class:`~mission.time.clock.Lockstep
 also waits, at most :data:`LOCKSTEP_WAIT_WALL_S` of wall time a tick, until the camera's stream
 has passed the due time (a frame or a time mark captured at or after it), so every frame is fused
 at the same tick whatever the transport's delay (``late_ticks`` counts the ticks it gave up).
+
+Shown to a :class:`~mission.interfaces.CameraSink` (the flight log), it hands over at most
+``vision.log_rate_hz`` of its frames a second (by capture time), each with the tags it found in
+it (``logged`` counts them).
 """
 from __future__ import annotations
 
@@ -20,8 +24,10 @@ import numpy as np
 
 from mission.bus.frames import FrameSubscriber
 from mission.config.schema import Config
+from mission.interfaces import CameraSink
 from mission.model import vision_detector
 from mission.phases.measurements import Measurement, RelativePosition
+from mission.vision.camera import SeenFrame
 
 
 LOCKSTEP_WAIT_WALL_S = 1.0  # [s, wall] in lockstep, the longest a tick waits for the camera's stream
@@ -38,6 +44,14 @@ class MarkerFeed:
         self.detected = self.missed = self.late_ticks = 0
         self.lockstep = lockstep
         self._heard = False  # a lockstep feed waits only once the camera has been heard
+        self.log_period_s = math.inf if cfg.vision.log_rate_hz <= 0 else 1.0 / cfg.vision.log_rate_hz
+        self._sinks: list[CameraSink] = []
+        self._next_log_s = -math.inf
+        self.logged = 0
+
+    def show_frames_to(self, sink: CameraSink) -> None:
+        """Hand ``vision.log_rate_hz`` of the frames a second to ``sink`` as well (module docstring)."""
+        self._sinks.append(sink)
 
     def poll(self, t_s: float) -> list[Measurement]:
         due_s = t_s - self.latency_s
@@ -46,7 +60,11 @@ class MarkerFeed:
             if self._heard and not self.frames.wait_past(due_s, LOCKSTEP_WAIT_WALL_S):
                 self.late_ticks += 1
         for frame, q in self.frames.take():
-            m = self.detector.measure(frame.image, frame.capture_t_s, q)
+            found = self.detector.corners(frame.image)
+            m = self.detector.measure_corners(found, frame.capture_t_s, q)
+            if self._sinks and frame.capture_t_s >= self._next_log_s:
+                self._show(t_s, SeenFrame(frame.image, frame.capture_t_s, self.detector.camera, found.ids, found.corners,
+                                          m is not None))
             if m is None:
                 self.missed += 1
                 continue
@@ -57,6 +75,13 @@ class MarkerFeed:
         due = [m for m in self.pending if m.capture_t_s + self.latency_s <= t_s + 1e-9]
         self.pending = [m for m in self.pending if m.capture_t_s + self.latency_s > t_s + 1e-9]
         return list(due)
+
+    def _show(self, t_s: float, seen: SeenFrame) -> None:
+        # the next one a tenth of a period early: a camera at a multiple of the rate keeps its cadence
+        self._next_log_s = seen.capture_t_s + 0.9 * self.log_period_s
+        self.logged += 1
+        for sink in self._sinks:
+            sink.camera(t_s, seen)
 
     def close(self) -> None:
         self.frames.close()

@@ -21,7 +21,7 @@ from mission.config.required import RUN_FIELDS, require_stated
 from mission.config.schema import Config, load_config, with_overrides
 from mission.cli.subcommands import SENSORS_GROUP, entry_points, load
 from mission.controller import MissionController, MissionOutcome
-from mission.interfaces import MeasurementSource
+from mission.interfaces import CameraSink, MeasurementSource, ShowsFrames
 from mission.model import mission_model
 from mission.errors import ConfigError
 from mission.bus.feeds import OffsetSource
@@ -196,6 +196,11 @@ def fly(cfg: Config, *, speed: float = 1.0, log_dir: str | Path | None = None, s
         recorder = FlightRecorder(directory, info, sinks)
         io = mission_io(cfg, clock, recorder.tlog_path, lockstep_lost_wall_s=lockstep_lost_wall_s)
         with io as (feed, publisher, link, sources):
+            for source in sources:  # a camera's frames, as its feed saw them, into the flight log
+                if isinstance(source, ShowsFrames):
+                    for sink in sinks:
+                        if isinstance(sink, CameraSink):
+                            source.show_frames_to(sink)
             controller = MissionController(cfg, link, feed, clock, publisher=publisher, recorder=recorder,
                                            on_event=on_event, stop=stop, sources=sources)
             if on_start is not None:

@@ -43,6 +43,9 @@ class VisionSection(Section):
         [0.0, 0.0, 0.0], description=("[deg] roll, pitch, yaw of the camera from the nominal downward mount (optical "
                                       "axis down, image top forward)"))
     rate_hz: float = Field(30.0, ge=1, le=120, description="[Hz] frames a second")
+    log_rate_hz: float = Field(10.0, ge=0, le=120,
+        description=("[Hz] frames a second the marker feed writes to flight.mcap (JPEG, with the camera's calibration "
+                     "and the detected corners); 0: none"))
     latency_s: float = Field(0.08, ge=0, le=0.5,
         description="[s] from a frame's exposure to its delivery: its capture time is the delivery's minus this")
     max_tilt_deg: float = Field(30.0, gt=0, le=80,

@@ -18,6 +18,8 @@ to FLU), the scene (target, obstacles with their radii, the b c
 circle in the dock's plane, the dock point, both robots, the latched anchor, and while a recovery
 brings the passenger home its holdoff point and glide path: ``foxglove.SceneUpdate``), and the
 carrier feed's and the link's counters. Topics and schemas: :mod:`mission.flightdata.topics`.
+The camera's frames, when a marker feed hands them over (:meth:`MissionLog.camera`), go to the
+camera's channels (:mod:`mission.flightdata.camera_log`).
 """
 from __future__ import annotations
 
@@ -29,10 +31,12 @@ from typing import Any, Callable
 import numpy as np
 
 from mission.core.docking import DockingGeometry, gate_point, holdoff_point
+from mission.flightdata.camera_log import CameraLog
 from mission.flightdata.topics import MAP_FRAME, MISSION_CHANNELS, WORLD_FRAME, flu_frame, frame, topics
 from mission.flightdata.writer import DataLog, LiveAddress, timestamp
 from mission.phases import Phase
 from mission.record import COLUMNS, TickRow
+from mission.vision.camera import SeenFrame
 
 PHASES = [p.value for p in Phase]
 COURSE_REDRAW_COS = math.cos(math.radians(2.0))  # the recovery's course turned this much: draw the scene again
@@ -114,6 +118,7 @@ class MissionLog(DataLog):
         self._target = [float(x) for x in info["target_ned_m"]]
         self._docking = docking
         self._course: np.ndarray | None = None  # the recovery's course the scene was last drawn for
+        self.camera_log = CameraLog(pair, self.channel, self.log_ns)
 
     # ---------------------------------------------------------------- RecordSink
     def tick(self, row: TickRow) -> None:
@@ -122,6 +127,11 @@ class MissionLog(DataLog):
     def set_counters(self, counters: Callable[[], dict[str, Any]]) -> None:
         self._counters = counters
 
+    def camera(self, t_s: float, seen: SeenFrame) -> None:
+        """Queue a camera frame that reached the mission at ``t_s`` [s, mission clock] (a
+        :class:`~mission.interfaces.CameraSink`; returns at once)."""
+        self.submit(t_s, seen)
+
     def close(self, info: dict[str, Any], summary: dict[str, Any]) -> None:
         """Finish the file with ``mission_end``: ``info`` (the final ``mission.json``) and how the
         mission ended (``summary``'s phase, reason, detail and P1-P3). Idempotent."""
@@ -129,8 +139,12 @@ class MissionLog(DataLog):
         self.finish({"mission_end": _json_values(end)} if end else None)
 
     # ---------------------------------------------------------------- worker
-    def handle(self, t_s: float, row: TickRow) -> None:
+    def handle(self, t_s: float, row: TickRow | SeenFrame) -> None:
         from foxglove.messages import FrameTransform, Log, LogLevel, Quaternion, Vector3
+
+        if isinstance(row, SeenFrame):
+            self.camera_log.handle(t_s, row)
+            return
 
         t = self.log_ns(t_s)
         stamp = timestamp(t)

@@ -37,6 +37,15 @@ MISSION_CHANNELS = (
     ("carrier_feed", "carrier_feed", "marsupial.CarrierFeed"),
     ("link", "link", "marsupial.LinkStatistics"),
 )
+# The passenger's downward camera, as the marker feed saw it (``vision.log_rate_hz`` frames a
+# second): the frame, its calibration (what Foxglove's Image panel projects with) and the marker's
+# corners found in it; their frame is the camera's optical frame :func:`camera_frame`.
+CAMERA_CHANNELS = (
+    ("image", "camera/image", "foxglove.CompressedImage"),
+    ("calibration", "camera/calibration", "foxglove.CameraCalibration"),
+    ("detections", "camera/detections", "foxglove.ImageAnnotations"),
+    ("mount_tf", "tf/camera", "foxglove.FrameTransform"),
+)
 CARRIER_CHANNELS = (
     ("tf", "carrier/tf", "foxglove.FrameTransform"),
     ("status", "carrier/status", "marsupial.CarrierStatus"),
@@ -54,6 +63,13 @@ def frame(pair: str, name: str) -> str:
     """A pair's frame id: ``<pair>/<name>`` (dock), or a robot's body ``<pair>/<robot>/base_link_frd``
     for ``name`` carrier, passenger or carrier_own."""
     return f"{pair}/{name}/{BODY_FRD}" if name in ("carrier", "passenger", "carrier_own") else f"{pair}/{name}"
+
+
+def camera_frame(pair: str) -> str:
+    """The passenger camera's optical frame ``<pair>/passenger/camera_optical`` (x right, y down in
+    the image, z along the optical axis: OpenCV's and ROS's ``*_optical_frame``), under the
+    passenger's ``base_link_frd``."""
+    return f"{pair}/passenger/camera_optical"
 
 
 def flu_frame(pair: str, robot: str) -> str:

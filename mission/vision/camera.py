@@ -23,6 +23,21 @@ class Frame:
 
 
 @dataclass(frozen=True)
+class SeenFrame:
+    """A frame as a marker feed saw it: ``image`` (H, W) uint8 grey, ``capture_t_s`` [s] on the
+    mission clock, the ``camera`` it was measured with (:class:`CameraModel`), the tags found in
+    it (``ids`` (n,), ``corners`` (n, 4, 2) [px, OpenCV's pixel-centre coordinates]) and whether a
+    reading of the deck came of it (``measured``: its pose passed the gates)."""
+
+    image: np.ndarray
+    capture_t_s: float
+    camera: CameraModel
+    ids: np.ndarray
+    corners: np.ndarray
+    measured: bool
+
+
+@dataclass(frozen=True)
 class Mount:
     """Where the camera sits on the vehicle: ``offset_body_m`` (3,) its optical centre in body FRD
     [m]; ``rotation_body_cam`` (3, 3) its axes in body FRD (camera -> body)."""

@@ -28,6 +28,29 @@ def quaternion_matrix(q_wxyz: np.ndarray) -> np.ndarray:
                      [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
 
 
+def matrix_quaternion(rotation: np.ndarray) -> np.ndarray:
+    """The unit Hamilton quaternion (w, x, y, z, w >= 0) of the rotation matrix ``rotation``
+    (the inverse of :func:`quaternion_matrix`; Shepperd's method, stable for every angle)."""
+    m = np.asarray(rotation, dtype=float)
+    trace = float(np.trace(m))
+    diag = np.diag(m)
+    k = int(np.argmax([trace, *diag]))
+    if k == 0:
+        w = np.sqrt(1.0 + trace) / 2
+        q = np.array([w, (m[2, 1] - m[1, 2]) / (4 * w), (m[0, 2] - m[2, 0]) / (4 * w), (m[1, 0] - m[0, 1]) / (4 * w)])
+    else:
+        i = k - 1
+        j, n = (i + 1) % 3, (i + 2) % 3
+        v = np.sqrt(1.0 + m[i, i] - m[j, j] - m[n, n]) / 2
+        q = np.empty(4)
+        q[0] = (m[n, j] - m[j, n]) / (4 * v)
+        q[1 + i] = v
+        q[1 + j] = (m[j, i] + m[i, j]) / (4 * v)
+        q[1 + n] = (m[n, i] + m[i, n]) / (4 * v)
+    q = q / np.linalg.norm(q)
+    return -q if q[0] < 0 else q
+
+
 def euler_matrix(roll_rad: float, pitch_rad: float, yaw_rad: float) -> np.ndarray:
     """The rotation of the Tait-Bryan angles (z-y'-x'', PX4's order): ``Rz(yaw) Ry(pitch) Rx(roll)``."""
     cr, sr, cp, sp, cy, sy = (np.cos(roll_rad), np.sin(roll_rad), np.cos(pitch_rad), np.sin(pitch_rad),

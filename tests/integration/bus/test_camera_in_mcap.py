@@ -1,0 +1,110 @@
+"""The passenger camera's frames, read off the bus by the marker feed, land in ``flight.mcap`` as a
+Foxglove user reads them: ``foxglove.CompressedImage`` (JPEG), ``foxglove.CameraCalibration``
+(the detector's pinhole), ``foxglove.ImageAnnotations`` (the tag's corners) and the camera's mount
+transform, decoded here with the ``mcap`` and ``mcap-protobuf-support`` readers against the
+schemas foxglove-sdk wrote (foxglove-sdk 0.30.3). Real Zenoh sessions on loopback."""
+from __future__ import annotations
+
+import json
+
+import cv2
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+from mcap_protobuf.decoder import DecoderFactory
+
+from mission.bus.frames import camera_key, encode_frame
+from mission.cli.marker import MarkerFeed
+from mission.config.schema import load_config, with_overrides
+from mission.flightdata.mission_log import MissionLog
+from mission.flightdata.topics import CAMERA_CHANNELS, camera_frame, frame, topics
+from mission.model import vision_detector
+from mission.vision.camera import Frame
+from mission.vision.frames import quaternion_matrix
+from mission.vision.measurement import MarkerPose
+from sim.camera.render import render
+from tests.conftest import CONFIGS
+from tests.support.zenoh_util import peer_pair, wait_for
+
+pytestmark = pytest.mark.timeout(60)
+
+INFO = {"target_ned_m": [20.0, 0.0, -5.0], "obstacles": [], "bc_m": 8.0, "carrier_start_ned_m": [0.0, 0.0, 0.0],
+        "dock_offset_ned_m": [0, 0, -1.5], "dock_tolerance_m": 0.5, "arrival_radius_m": 0.5, "pair": "pairC"}
+FRAMES = 30  # at 30 Hz of capture time: one second
+LEVEL_Q = np.array([1.0, 0.0, 0.0, 0.0])  # the vehicle level, heading north
+
+
+def _decoded(path):
+    """Every message of ``path`` as (topic, schema name, log time [ns], decoded protobuf)."""
+    decoder = DecoderFactory()
+    out = []
+    with open(path, "rb") as f:
+        for schema, channel, message in make_reader(f).iter_messages():
+            if schema.encoding == "protobuf":
+                decode = decoder.decoder_for(channel.message_encoding, schema)
+                assert decode is not None, schema.name
+                out.append((channel.topic, schema.name, message.log_time, decode(message.data)))
+            else:
+                out.append((channel.topic, schema.name, message.log_time, json.loads(message.data)))
+    return out
+
+
+def test_the_feeds_frames_reach_the_mcap_at_the_log_rate_with_the_tag_drawn(tmp_path) -> None:
+    cfg = with_overrides(load_config(CONFIGS / "relnav.toml"), {"zenoh.pair": "pairC", "vision.log_rate_hz": 10.0})
+    detector = vision_detector(cfg)
+    camera = detector.camera
+    # the vehicle level heading north, the deck (aligned with NED) 2 m below it and 0.2 m east
+    cam_ned = camera.mount.rotation_body_cam.T
+    image = render(camera, detector.layout, MarkerPose(cam_ned, cam_ned @ np.array([0.0, 0.2, 2.0])))
+    assert (image < 60).any(), "the tag was not rendered into the frame"
+    log = MissionLog(tmp_path / "flight.mcap", INFO, pair="pairC", clock={"clock": "mission"})
+    try:
+        with peer_pair() as (a, b):
+            feed = MarkerFeed(cfg, b, lockstep=False)
+            feed.show_frames_to(log)
+            pub = a.declare_publisher(camera_key("pairC"))
+            try:
+                wait_for(lambda: pub.matching_status.matching, 10.0, "the feed's subscriber")
+                readings = 0
+                for k in range(FRAMES):
+                    capture = 5.0 + k / 30.0
+                    pub.put(encode_frame(Frame(image, capture), LEVEL_Q))
+                    wait_for(lambda: feed.frames.received > k, 10.0, f"frame {k}")
+                    readings += len(feed.poll(capture + 1.0))
+            finally:
+                pub.undeclare()
+                feed.close()
+    finally:
+        log.close({}, {})
+    assert feed.detected == FRAMES and readings == FRAMES, (feed.detected, feed.missed)
+    assert feed.logged == 10, feed.logged  # one second of frames at vision.log_rate_hz = 10
+    names = topics("pairC", CAMERA_CHANNELS)
+    got = [m for m in _decoded(tmp_path / "flight.mcap") if m[0] in names.values()]
+    by_topic = {key: [m for m in got if m[0] == topic] for key, topic in names.items()}
+    assert {k: len(v) for k, v in by_topic.items()} == {"image": 10, "calibration": 10, "detections": 10, "mount_tf": 1}
+    assert {m[1] for m in got} == {schema for _, _, schema in CAMERA_CHANNELS}
+
+    first = by_topic["image"][0][3]
+    assert first.format == "jpeg" and first.frame_id == camera_frame("pairC")
+    assert first.timestamp.seconds == 5 and first.timestamp.nanos == 0  # the capture time, not the arrival
+    assert by_topic["image"][0][2] == 6_000_000_000  # logged when the mission polled it
+    seen = cv2.imdecode(np.frombuffer(first.data, np.uint8), cv2.IMREAD_GRAYSCALE)
+    assert seen.shape == image.shape and float(np.abs(seen.astype(float) - image).mean()) < 2.0
+
+    calibration = by_topic["calibration"][0][3]
+    assert (calibration.width, calibration.height) == (camera.width, camera.height)
+    assert np.allclose(calibration.K, camera.matrix.ravel()) and calibration.distortion_model == "plumb_bob"
+    assert np.allclose(np.reshape(calibration.P, (3, 4))[:, :3], camera.matrix)
+
+    found = detector.corners(image)
+    annotations = by_topic["detections"][0][3]
+    assert len(found.ids) == 2 == len(annotations.points)  # relnav.toml's bundle: the big tag and the small one
+    assert [t.text for t in annotations.texts] == [f"tag {int(i)}" for i in found.ids]
+    for outline, corners in zip(annotations.points, found.corners):
+        drawn = np.array([[p.x, p.y] for p in outline.points])
+        assert np.allclose(drawn, corners + 0.5, atol=1e-4)  # Foxglove's origin: the top-left pixel's corner
+
+    mount = by_topic["mount_tf"][0][3]
+    assert (mount.parent_frame_id, mount.child_frame_id) == (frame("pairC", "passenger"), camera_frame("pairC"))
+    r = mount.rotation
+    assert np.allclose(quaternion_matrix(np.array([r.w, r.x, r.y, r.z])), camera.mount.rotation_body_cam)
