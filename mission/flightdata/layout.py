@@ -3,7 +3,8 @@ foxglove-sdk's layout types from the topics of :mod:`mission.flightdata.topics`.
 
 Left, the 3D panel in the ENU ``map`` frame: both robots (turned by their heading), the target,
 the obstacles, the b c circle, the dock point and the anchor (``scene``), moved by the frame
-transforms. Right, top to bottom: the phase, the safety filter's activity and the carrier's mode
+transforms; under it the passenger's camera as the marker feed saw it, with the tags it found
+drawn on it (empty in a flight without the marker feed). Right, top to bottom: the phase, the safety filter's activity and the carrier's mode
 over time (State Transitions); the distances |e_pc|, |e_tc|, |e_pt| with b c and the carrier's own
 distance to the target; the law's command and the safe command (north and east) with the
 filter's change; the log (phase changes and events). The carrier's rows come from
@@ -17,7 +18,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from mission.flightdata.topics import CARRIER_CHANNELS, MAP_FRAME, topics
+from mission.flightdata.topics import CAMERA_CHANNELS, CARRIER_CHANNELS, MAP_FRAME, topics
 
 LAYOUT_FILE = Path(__file__).resolve().parents[2] / "configs" / "foxglove" / "marsupial.json"
 
@@ -28,6 +29,7 @@ def layout(pair: str = "pair0") -> dict[str, Any]:
 
     t = topics(pair)
     c = topics(pair, CARRIER_CHANNELS)
+    cam = topics(pair, CAMERA_CHANNELS)
     three_d = fl.ThreeDeePanel(title="marsupial: carrier, passenger, target (map = ENU above map_ned = NED)",
                                config=fl.ThreeDeeConfig(
                                    follow_tf=MAP_FRAME, fixed_frame=MAP_FRAME, follow_mode="follow-none",
@@ -63,8 +65,13 @@ def layout(pair: str = "pair0") -> dict[str, Any]:
     right = fl.SplitContainer(direction="column", items=[
         fl.SplitItem(proportion=1, content=states), fl.SplitItem(proportion=2, content=distances),
         fl.SplitItem(proportion=2, content=command), fl.SplitItem(proportion=1.5, content=log)])
+    camera = fl.ImagePanel(title="passenger camera: the tags the detector found", config=fl.ImageConfig(
+        image_mode=fl.ImageModeConfig(image_topic=cam["image"], calibration_topic=cam["calibration"],
+                                      annotations={cam["detections"]: fl.ImageAnnotationSettings(visible=True)})))
+    left = fl.SplitContainer(direction="column", items=[
+        fl.SplitItem(proportion=2, content=three_d), fl.SplitItem(proportion=1, content=camera)])
     root = fl.Layout(content=fl.SplitContainer(direction="row", items=[
-        fl.SplitItem(proportion=3, content=three_d), fl.SplitItem(proportion=2, content=right)]))
+        fl.SplitItem(proportion=3, content=left), fl.SplitItem(proportion=2, content=right)]))
     return json.loads(root.to_json())
 
 

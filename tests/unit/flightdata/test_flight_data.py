@@ -18,7 +18,7 @@ from mission.core.setpoint import Setpoint
 from mission.errors import ConfigError
 from mission.flightdata.mission_log import MissionLog, bc_circle
 from mission.flightdata.read import read_messages
-from mission.flightdata.topics import CARRIER_CHANNELS, MISSION_CHANNELS, topics
+from mission.flightdata.topics import CAMERA_CHANNELS, CARRIER_CHANNELS, MISSION_CHANNELS, topics
 from mission.flightdata.writer import LiveAddress, is_loopback, parse_live
 from mission.model import docking_geometry
 from mission.record import FlightRecorder, TickRow, read_record
@@ -135,6 +135,8 @@ def test_the_shipped_layout_is_the_generated_one_and_names_only_real_topics_and_
     schema_of = {topic: schema for (_, name, schema), topic in zip(MISSION_CHANNELS, topics("pair0").values())}
     schema_of |= {topic: schema for (_, name, schema), topic in zip(CARRIER_CHANNELS,
                                                                     topics("pair0", CARRIER_CHANNELS).values())}
+    schema_of |= {topic: schema for (_, name, schema), topic in zip(CAMERA_CHANNELS,
+                                                                    topics("pair0", CAMERA_CHANNELS).values())}
     paths = _paths(json.loads(text))
     assert len(paths) >= 12
     for path in paths:
@@ -143,7 +145,8 @@ def test_the_shipped_layout_is_the_generated_one_and_names_only_real_topics_and_
         if field:
             assert field.split(".")[0] in JSON_SCHEMAS[schema_of[topic]]["properties"], path
     assert {"/pair0/scene", "/pair0/log", "/pair0/distances.e_pc_m", "/pair0/command.safe.n",
-            "/pair0/carrier/status.mode", "/pair0/carrier/status.target_distance_m"} <= set(paths)
+            "/pair0/carrier/status.mode", "/pair0/carrier/status.target_distance_m", "/pair0/camera/image",
+            "/pair0/camera/calibration", "/pair0/camera/detections"} <= set(paths)
 
 
 def _paths(node) -> list[str]:
@@ -151,9 +154,9 @@ def _paths(node) -> list[str]:
     out = []
     if isinstance(node, dict):
         for key, value in node.items():
-            if key in ("value", "topicToRender") and isinstance(value, str):
+            if key in ("value", "topicToRender", "imageTopic", "calibrationTopic") and isinstance(value, str):
                 out.append(value)
-            elif key == "topics" and isinstance(value, dict):
+            elif key in ("topics", "annotations") and isinstance(value, dict):
                 out.extend(value)
             else:
                 out.extend(_paths(value))
