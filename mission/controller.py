@@ -256,13 +256,16 @@ class MissionController:
     def _counters(self) -> dict[str, Any]:
         """What was dropped and why, for summary.json: the carrier feed's counters (received,
         accepted, dropped per reason, bound and rejected sources, resyncs), the link's, the
-        per-packet log lines held back by kind (:mod:`mission.mavlink.receiver`), and in lockstep
-        the clock's (barriers, fall-back, carriers dropped as silent)."""
+        per-packet log lines held back by kind (:mod:`mission.mavlink.receiver`), the measurement
+        feeds' that keep any, and in lockstep the clock's (barriers, fall-back, carriers dropped as silent)."""
         out: dict[str, Any] = {"carrier_feed": self.feed.counters, "link": dataclasses.asdict(self.link.counters),
                                "log_lines_held": receiver.LIMITER.suppressed(),
                                "home": None if self._home is None else self._home.counters, "px4_params": self.px4_params,
                                "px4_kept": None if self._params is None else {
                                    "values": dict(self._params.kept), **self._params.counters, "moves": list(self._params.moves)}}
+        feeds = {name: src.counters for name, src in zip(self.cfg.mission.feeds, self.sources) if hasattr(src, "counters")}
+        if feeds:  # the measurement feeds' own (the marker feed: frames read, refused, detected)
+            out["feeds"] = feeds
         if self.clock.counters is not None:  # a lockstep clock's: was every step in step?
             out["lockstep"] = self.clock.counters
         return out

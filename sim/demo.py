@@ -216,6 +216,9 @@ def start_pair(config: str, name: str, zenoh_ep: str, speed: float, log_root: Pa
         carrier_signed = ["--zenoh-private-key", str(keys_of["carrier"][0]), "--zenoh-peer-key",
                           str(keys_of["passenger"][1]), *(["--zenoh-signing-key", str(bus_key)] if carrier_kind == "ros2" else [])]
     mav_signed = ["--signing-key", str(mav_key)] if mav_key is not None else []
+    # the passenger's camera node signs its frames with the passenger's own key, as run checks them
+    camera_signed = ["--zenoh-private-key", str(keys_of["passenger"][0])] if bus_key is not None and "--camera" in world_args(
+        cfg, config) else []
     backend_args, robot = start_carrier_robot(carrier_kind, name, zenoh_ep, speed, start, stack, err, lockstep, bus_key, cfg)
     carrier = subprocess.Popen(_python_cli("carrier", config, "--speed", str(speed), "--pair", name,
                                            "--zenoh-connect", zenoh_ep, "--summary", str(pair.log_dir / "carrier.json"),
@@ -233,7 +236,7 @@ def start_pair(config: str, name: str, zenoh_ep: str, speed: float, log_root: Pa
                                            vehicle_start, "--deck", name, "--deck-height", str(deck_height),
                                            "--zenoh-connect", zenoh_ep, "--summary", str(pair.log_dir / "vehicle.json"),
                                            "--estimate-error", str(estimate_error), "--seed", str(seed), *world_args(cfg, config),
-                                           *mav_signed, *mode),
+                                           *camera_signed, *mav_signed, *mode),
                                stderr=err)
     stack.callback(stop_process, vehicle)
     live_args = [] if live is None else ["--live", f"{live.host}:{live.port}"]

@@ -91,6 +91,12 @@ class BusAuth:
     def verifier(self) -> SampleVerifier:
         return SampleVerifier(self._peer)
 
+    def own_verifier(self) -> SampleVerifier:
+        """A verifier of what this robot's own key signed: its other nodes' samples (the
+        passenger's camera node beside its autopilot), by its public key or the shared key."""
+        own = self._own
+        return SampleVerifier(own.public_key() if isinstance(own, Ed25519PrivateKey) else own)
+
 
 def bus_auth(section: ZenohSection, pair: str | None = None, *, robot_link: bool = False) -> BusAuth | None:
     """How a robot signs a pair's bus per ``section``: with ``zenoh.private_key_file`` and

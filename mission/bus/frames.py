@@ -9,6 +9,12 @@ mission's clock, ``q`` the attitude body -> NED, w x y z, ``w`` and ``h`` the si
 byte, then the ``h x w`` grey pixels, row by row, one byte each. A sample of size 0 x 0 is a time
 mark: no frame at that capture time (dropped, or nothing in view), so a reader in lockstep
 knows the stream has passed that time (:meth:`FrameSubscriber.wait_past`).
+
+On a signed bus the camera node signs each sample with its robot's own key (the passenger's:
+:meth:`mission.bus.auth.BusAuth.own_verifier` checks it, the attachment as every signed sample's,
+:mod:`mission.bus.signing`); a subscriber given a verifier drops, and counts by reason, every
+sample that does not verify (unsigned, a bad signature, a replay), time marks included, so no
+forged frame reaches the detector and no forged time ends a lockstep wait.
 """
 from __future__ import annotations
 
@@ -22,7 +28,9 @@ from collections import deque
 import numpy as np
 import zenoh
 
+from mission.bus.auth import SampleVerifier
 from mission.bus.session import declare, keys, undeclare
+from mission.bus.wire import WireError
 from mission.vision.camera import Frame
 
 log = logging.getLogger(__name__)
@@ -67,8 +75,10 @@ class FrameSubscriber:
     """The newest frames of pair ``pair``'s camera, at most ``depth`` kept (older ones dropped,
     counted); :meth:`take` returns and forgets them, oldest first."""
 
-    def __init__(self, session: zenoh.Session, pair: str, depth: int = 8) -> None:
+    def __init__(self, session: zenoh.Session, pair: str, depth: int = 8, verifier: SampleVerifier | None = None) -> None:
         self.key = camera_key(pair)
+        self._verifier = verifier
+        self.refused: dict[str, int] = {}  # samples that did not verify, by reason (unsigned, signature, replay)
         self._lock = threading.Lock()
         self._arrived = threading.Condition(self._lock)
         self.newest_t_s = -math.inf  # [s] the newest capture time heard (frames arrive in capture order)
@@ -77,8 +87,18 @@ class FrameSubscriber:
         self._sub = declare(f"subscriber on {self.key}", lambda: session.declare_subscriber(self.key, self._on_sample))
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
+        payload = sample.payload.to_bytes()
+        if self._verifier is not None:
+            try:
+                self._verifier.verify(sample, payload)
+            except WireError as exc:
+                with self._lock:
+                    self.refused[exc.reason] = self.refused.get(exc.reason, 0) + 1
+                    first = sum(self.refused.values()) == 1
+                (log.warning if first else log.debug)("refused a camera sample on %s: %s", self.key, exc)
+                return
         try:
-            got = decode_frame(sample.payload.to_bytes())
+            got = decode_frame(payload)
         except (ValueError, KeyError, TypeError) as exc:
             with self._lock:
                 self.malformed += 1

@@ -11,6 +11,10 @@ also waits, at most :data:`LOCKSTEP_WAIT_WALL_S` of wall time a tick, until the 
 has passed the due time (a frame or a time mark captured at or after it), so every frame is fused
 at the same tick whatever the transport's delay (``late_ticks`` counts the ticks it gave up).
 
+On a signed bus (``zenoh.private_key_file`` or ``zenoh.signing_key_file``) only frames and time
+marks signed with the passenger's own key are read (:mod:`mission.bus.frames`); :attr:`MarkerFeed.counters`
+go to ``summary.json``'s ``feeds``.
+
 Shown to a :class:`~mission.interfaces.CameraSink` (the flight log), it hands over at most
 ``vision.log_rate_hz`` of its frames a second (by capture time), each with the tags it found in
 it (``logged`` counts them).
@@ -22,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from mission.bus.auth import bus_auth
 from mission.bus.frames import FrameSubscriber
 from mission.config.schema import Config
 from mission.interfaces import CameraSink
@@ -39,7 +44,9 @@ class MarkerFeed:
     def __init__(self, cfg: Config, session: Any, lockstep: bool = False) -> None:
         self.detector = vision_detector(cfg)
         self.latency_s = cfg.vision.latency_s
-        self.frames = FrameSubscriber(session, cfg.zenoh.pair)
+        auth = bus_auth(cfg.zenoh)
+        self.signed = auth is not None
+        self.frames = FrameSubscriber(session, cfg.zenoh.pair, verifier=None if auth is None else auth.own_verifier())
         self.pending: list[RelativePosition] = []
         self.detected = self.missed = self.late_ticks = 0
         self.lockstep = lockstep
@@ -48,6 +55,17 @@ class MarkerFeed:
         self._sinks: list[CameraSink] = []
         self._next_log_s = -math.inf
         self.logged = 0
+
+    @property
+    def counters(self) -> dict[str, Any]:
+        """What the feed read and what it dropped: samples received (frames and time marks),
+        refused by reason (they did not verify), malformed, overflowed (not read in time); frames
+        whose marker was measured (``detected``) or not (``missed``); lockstep ticks that gave up
+        waiting (``late_ticks``); frames handed to the flight log (``logged``)."""
+        f = self.frames
+        return {"signed": self.signed, "received": f.received, "refused": dict(f.refused), "malformed": f.malformed,
+                "overflowed": f.overflowed, "detected": self.detected, "missed": self.missed,
+                "late_ticks": self.late_ticks, "logged": self.logged}
 
     def show_frames_to(self, sink: CameraSink) -> None:
         """Hand ``vision.log_rate_hz`` of the frames a second to ``sink`` as well (module docstring)."""

@@ -5,6 +5,8 @@ sensor's noise, blur and dropouts (:class:`sim.camera.simulated.SimulatedCamera`
 published at capture on the pair's camera key (:mod:`mission.bus.frames`) for the mission's marker
 feed, which runs the detector on the pixels. Captures at ``vision.rate_hz`` on the vehicle's
 simulated time, taken in its physics pass (so in lockstep at the same times every run); seeded.
+Given a signer (the passenger robot's own key, ``mock-vehicle --zenoh-private-key`` or
+``--zenoh-signing-key``), every sample is signed as a real camera node's on a signed bus must be.
 """
 from __future__ import annotations
 
@@ -14,6 +16,7 @@ from typing import Any
 import numpy as np
 import zenoh
 
+from mission.bus.auth import SampleSigner
 from mission.bus.frames import camera_key, encode_frame, encode_mark
 from mission.bus.session import declare, undeclare
 from mission.config.schema import Config
@@ -29,7 +32,8 @@ MIN_DEPTH_M = 0.2  # [m] a deck nearer the camera's plane than this (or behind i
 class CameraPublisher:
     """Renders and publishes a frame when one is due (:meth:`sample`, in the vehicle's physics pass)."""
 
-    def __init__(self, cfg: Config, session: zenoh.Session, pair: str, seed: int, lockstep: bool) -> None:
+    def __init__(self, cfg: Config, session: zenoh.Session, pair: str, seed: int, lockstep: bool,
+                 signer: SampleSigner | None = None) -> None:
         detector = vision_detector(cfg)
         self.camera = SimulatedCamera(detector.camera, detector.layout,
                                       Sensor(sensor_model(cfg.vision), seed=seed + SEED_OFFSET))
@@ -38,6 +42,7 @@ class CameraPublisher:
         self.next_s = 0.0
         self.captured = self.sent = 0
         key = camera_key(pair)
+        self.key, self._signer = key, signer
         # DROP even in lockstep: the put runs in the vehicle's physics pass, which must never wait
         # on the network (a dropped frame is a camera dropout, counted by the feed as a gap)
         self._pub = declare(f"publisher on {key}", lambda: session.declare_publisher(
@@ -64,7 +69,8 @@ class CameraPublisher:
             relative_v = v_c - np.array([kin.vn_m_s, kin.ve_m_s, kin.vd_m_s])  # its blur unbounded)
             frame = self.camera.capture(poses, t_s, relative_v)
         try:  # a dropped or empty frame still marks the time: a lockstep reader knows the stream passed it
-            self._pub.put(encode_mark(t_s) if frame is None else encode_frame(frame, q))
+            payload = encode_mark(t_s) if frame is None else encode_frame(frame, q)
+            self._pub.put(payload, attachment=None if self._signer is None else self._signer.attachment(self.key, payload))
             self.sent += frame is not None
         except zenoh.ZError:
             pass  # the session is closing

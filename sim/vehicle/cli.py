@@ -20,9 +20,12 @@ from typing import Any
 import click
 import numpy as np
 
+from mission.bus.auth import SampleSigner
 from mission.bus.bridge import CarrierFeed, keys, open_session
+from mission.bus.signing import pair_key
 from mission.bus.wire import CarrierState, GeoOrigin
 from mission.config.relnav import PassengerGnssSection
+from mission.config.keys import read_key_file, read_private_key_file
 from mission.config.schema import Config, ZenohSection, load_config
 from mission.errors import ConfigError
 from mission.mavlink.env import read_signing_key
@@ -156,6 +159,12 @@ def _write_port_file(path: Path, port: int) -> None:
               help="With --deck and --world: render the passenger's downward camera ([vision] of the --world "
                    "configuration) from the true poses and publish its frames on marsupial/PAIR/passenger/camera for "
                    "the mission's marker feed (mission.feeds = [\"marker\"]).")
+@click.option("--zenoh-private-key", "camera_private_key", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              metavar="FILE", help="With --camera: sign its frames with the passenger's own Ed25519 private key (the one "
+                                   "`run --zenoh-private-key` is given), as a camera node beside its autopilot must on a "
+                                   "signed bus.")
+@click.option("--zenoh-signing-key", "camera_shared_key", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              metavar="FILE", help="With --camera: sign its frames with the pair's shared bus key (zenoh.signing_key_file).")
 @click.option("--deck-height", type=click.FloatRange(min=0.0), default=0.0, show_default=True, metavar="METRES",
               help="With --deck: the deck's plane above the carrier's reported position [m].")
 @click.option("--deck-radius", type=click.FloatRange(min=0.0, min_open=True), default=0.5, show_default=True,
@@ -212,7 +221,8 @@ def _write_port_file(path: Path, port: int) -> None:
                    "from its true centre, how fast) and a crash (docs/mock-vehicle.md).")
 def mock_vehicle(mavlink_url: str, target_url: str, gcs_url: str | None, speed: float, home: str, start_ned: str,
                  sysid: int, frame: str, params: tuple[str, ...], battery_drain_s: float | None,
-                 battery_min_pct: float | None, deck_pair: str | None, deck_truth: bool, camera: bool, deck_height: float, deck_radius: float,
+                 battery_min_pct: float | None, deck_pair: str | None, deck_truth: bool, camera: bool,
+                 camera_private_key: Path | None, camera_shared_key: Path | None, deck_height: float, deck_radius: float,
                  zenoh_connect: tuple[str, ...], zenoh_listen: tuple[str, ...], wind: str, estimate_error: float, ideal: bool, position_noise: float, loss_in: float,
                  loss_out: float, latency_ms: float, jitter_ms: float, blackouts: tuple[str, ...],
                  refuse_arming: str | None, refuse_offboard: str | None, lose_position_s: float | None, seed: int, signing_key: Path | None, port_file: Path | None,
@@ -246,7 +256,26 @@ def mock_vehicle(mavlink_url: str, target_url: str, gcs_url: str | None, speed: 
         lockstep_max_speed=lockstep_max_speed, passenger_gnss=passenger_gnss_of(world_config),
         deck=None if deck_pair is None else DeckSpec(height_m=deck_height, radius_m=deck_radius))
     run(options, port_file, status_every, deck=None if deck_pair is None else _deck_bus(deck_pair, zenoh_connect, zenoh_listen),
-        summary_path=summary_path, deck_truth=deck_truth, camera=camera_of(world_config, camera, deck_pair))
+        summary_path=summary_path, deck_truth=deck_truth, camera=camera_of(world_config, camera, deck_pair),
+        camera_signer=camera_signer(camera_private_key, camera_shared_key, deck_pair, camera))
+
+
+def camera_signer(private_key: Path | None, shared_key: Path | None, pair: str | None, camera: bool) -> SampleSigner | None:
+    """The signer of ``--camera``'s frames: the passenger's own Ed25519 key, or pair ``pair``'s
+    shared key; None when neither is given. A bad key file or option exits 2 naming it."""
+    if private_key is None and shared_key is None:
+        return None
+    if not camera or pair is None:
+        raise click.BadParameter("signs the camera's frames: needs --camera", param_hint="--zenoh-private-key / --zenoh-signing-key")
+    if private_key is not None and shared_key is not None:
+        raise click.BadParameter("one key signs the frames, not two", param_hint="--zenoh-private-key / --zenoh-signing-key")
+    try:
+        if private_key is not None:
+            return SampleSigner(read_private_key_file(private_key, "--zenoh-private-key"))
+        assert shared_key is not None
+        return SampleSigner(pair_key(read_key_file(shared_key, "--zenoh-signing-key"), pair))
+    except ConfigError as exc:
+        raise click.BadParameter(exc.rule, param_hint=exc.field) from None
 
 
 def camera_of(path: Path | None, camera: bool, deck_pair: str | None) -> Config | None:
@@ -375,7 +404,7 @@ def describe_estimate(options: VehicleOptions) -> str:
 
 def run(options: VehicleOptions, port_file: Path | None = None, status_every_s: float = 5.0,
         deck: tuple[str, ZenohSection] | None = None, summary_path: Path | None = None, deck_truth: bool = False,
-        camera: Config | None = None) -> None:
+        camera: Config | None = None, camera_signer: SampleSigner | None = None) -> None:
     """Run a vehicle until SIGINT/SIGTERM, logging a status line every ``status_every_s`` wall
     seconds; with ``deck`` (pair, Zenoh section) its deck follows that pair's carrier; with
     ``summary_path`` the world's truth (:func:`truth`) is written there when it stops."""
@@ -397,7 +426,8 @@ def run(options: VehicleOptions, port_file: Path | None = None, status_every_s: 
                 stack.callback(session.close)
                 publisher = None
                 if camera is not None:
-                    publisher = CameraPublisher(camera, session, deck[0], options.faults.seed, options.lockstep)
+                    publisher = CameraPublisher(camera, session, deck[0], options.faults.seed, options.lockstep,
+                                                signer=camera_signer)
                     stack.callback(publisher.close)
                 stack.callback(follow_carrier(vehicle, session, deck[0], deck_truth, track, publisher).close)
             if port_file is not None:

@@ -108,3 +108,56 @@ def test_the_feeds_frames_reach_the_mcap_at_the_log_rate_with_the_tag_drawn(tmp_
     assert (mount.parent_frame_id, mount.child_frame_id) == (frame("pairC", "passenger"), camera_frame("pairC"))
     r = mount.rotation
     assert np.allclose(quaternion_matrix(np.array([r.w, r.x, r.y, r.z])), camera.mount.rotation_body_cam)
+
+
+def test_on_a_signed_bus_only_the_passengers_own_camera_is_read(tmp_path) -> None:
+    """One key per robot: frames signed with the passenger's own key are read; unsigned ones and
+    ones signed with another robot's key (the carrier's) are refused and counted, and a forged
+    time mark does not end a lockstep wait (it would let the mission fuse before the real frame)."""
+    from mission.bus.auth import SampleSigner
+    from mission.config.keys import read_private_key_file, write_key_pair
+    from sim.vehicle.cli import camera_signer
+
+    keys = {robot: (tmp_path / f"{robot}.key", tmp_path / f"{robot}.pub") for robot in ("passenger", "carrier")}
+    for private, public in keys.values():
+        write_key_pair(private, public)
+    cfg = with_overrides(load_config(CONFIGS / "relnav.toml"), {
+        "zenoh.pair": "pairS", "zenoh.private_key_file": str(keys["passenger"][0]),
+        "zenoh.peer_public_key_file": str(keys["carrier"][1])})
+    detector = vision_detector(cfg)
+    cam_ned = detector.camera.mount.rotation_body_cam.T
+    image = render(detector.camera, detector.layout, MarkerPose(cam_ned, cam_ned @ np.array([0.0, 0.2, 2.0])))
+    own = camera_signer(keys["passenger"][0], None, "pairS", True)  # what mock-vehicle --zenoh-private-key signs with
+    assert own is not None
+    other = SampleSigner(read_private_key_file(keys["carrier"][0], "test"))
+    key = camera_key("pairS")
+    with peer_pair() as (a, b):
+        feed = MarkerFeed(cfg, b, lockstep=True)
+        pub = a.declare_publisher(key)
+        try:
+            wait_for(lambda: pub.matching_status.matching, 10.0, "the feed's subscriber")
+            sent = 0
+
+            def put(t: float, signer, mark: bool = False) -> None:
+                nonlocal sent
+                payload = json.dumps({"t": t, "q": [1, 0, 0, 0], "w": 0, "h": 0}).encode() + b"\0" if mark else encode_frame(
+                    Frame(image, t), LEVEL_Q)
+                pub.put(payload, attachment=None if signer is None else signer.attachment(key, payload))
+                sent += 1
+                wait_for(lambda: feed.frames.received + sum(feed.frames.refused.values()) >= sent, 10.0, f"sample {sent}")
+
+            put(1.0, own)
+            put(1.1, None)  # unsigned
+            put(1.2, other)  # the carrier's key: authentic, but not the passenger's camera
+            put(9.0, None, mark=True)  # a forged time mark far ahead
+            assert not feed.frames.wait_past(5.0, 0.05), "a forged time mark ended the lockstep wait"
+            readings = feed.poll(2.0)
+            put(9.0, own, mark=True)
+            assert feed.frames.wait_past(5.0, 0.05)
+        finally:
+            pub.undeclare()
+            feed.close()
+    assert [m.capture_t_s for m in readings] == [1.0]
+    c = feed.counters
+    assert c["signed"] and c["received"] == 2 and c["refused"] == {"unsigned": 2, "signature": 1}, c
+    assert c["detected"] == 1 and c["missed"] == 0, c
