@@ -21,7 +21,7 @@ import threading
 import time
 from pathlib import Path
 
-from mission.record import read_record
+from mission.record.table import read_record
 from sim.demo import DEFAULT_CONFIG, run_demo
 
 

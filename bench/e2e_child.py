@@ -103,9 +103,9 @@ def child_main(rate_hz: float, duration_s: float, zenoh_connect: str, log_dir: s
     "live" (and the live server on a free loopback port, printed as ``LIVE <port>``)."""
     from mission.config.schema import load_config, with_overrides
     from mission.controller import MissionController
-    from mission.record import mission_info
+    from mission.record.info import mission_info
     from mission.flightdata.writer import LiveAddress
-    from mission.record import FlightRecorder
+    from mission.record.recorder import FlightRecorder
     from mission.cli.run import flight_data as flight_data_sinks, mission_io
 
     cfg = with_overrides(load_config(DEMO_CONFIG), {

@@ -56,7 +56,8 @@ import numpy as np
 
 from mission.config.schema import load_config
 from mission.phases.phase import FLYING, Phase
-from mission.record import read_record, summarise
+from mission.record.figures import summarise
+from mission.record.table import read_record
 from sim.sitl.px4 import build_dir, clock_ratio, patched_config, px4_flight, unavailable_reason
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -29,7 +29,7 @@ import click
 import numpy as np
 
 from mission.mavlink import px4
-from mission.record import read_record
+from mission.record.table import read_record
 from sim.net import wait_for
 from sim.sitl.px4 import build_dir, px4_flight, unavailable_reason
 from tests.px4_sitl.conftest import TEN_MINUTE_BATTERY, px4_return_config

@@ -30,7 +30,9 @@ from mission.model import mission_model
 from mission.passenger.inputs import PassengerInputs
 from mission.passenger.step import PassengerStep, observe_carrier
 from mission.phases import AbortReason, Decision, Measurement, MissionState, Observation, Phase
-from mission.record import FlightRecorder, TickRow, flown_info, outcome_summary
+from mission.record.info import flown_info, outcome_summary
+from mission.record.recorder import FlightRecorder
+from mission.record.table import TickRow
 from mission.time.clock import Clock, Periodic
 
 log = logging.getLogger(__name__)
@@ -80,7 +82,7 @@ class MissionController:
     link: the :class:`~mission.interfaces.Vehicle` (a :class:`mission.mavlink.link.VehicleLink`, opened,
     vehicle identified or not yet); feed: the :class:`~mission.interfaces.CarrierSource` (a
     :class:`mission.bus.bridge.CarrierFeed`); publisher: a :class:`~mission.interfaces.StatusSink`
-    (or None); recorder: a :class:`mission.record.FlightRecorder` (or None); sources: the
+    (or None); recorder: a :class:`mission.record.recorder.FlightRecorder` (or None); sources: the
     measurement feeds (:class:`~mission.interfaces.MeasurementSource`, opened and closed by the
     caller), each polled once a tick, their readings handed to the step as they are. ``on_event(phase,
     text)`` is called on every phase change and event (the CLI prints them), ``on_tick(report)``

@@ -23,7 +23,7 @@ from mission.core.law import norm  # noqa: E402
 from mission.phases.phase import HOMEWARD, Phase  # noqa: E402
 
 if TYPE_CHECKING:
-    from mission.record import FlightRecord
+    from mission.record.table import FlightRecord
 
 
 @dataclass(frozen=True)
@@ -158,7 +158,7 @@ def record_trajectories(rec: FlightRecord, title: str, whole_flight: bool = Fals
 
 def plot_legs(rec: FlightRecord, beside: Path, title: str) -> list[Path]:
     """A flight of several targets: each flown leg's paper figure, judged against its own target
-    (:meth:`~mission.record.FlightRecord.legs`), at ``<stem>-leg<k><suffix>`` beside ``beside``
+    (:meth:`~mission.record.table.FlightRecord.legs`), at ``<stem>-leg<k><suffix>`` beside ``beside``
     (k from 1). Empty for a one-target flight."""
     if len(rec.info.get("targets") or []) < 2:
         return []
@@ -215,7 +215,7 @@ class RecoveryTrack:
 
 
 def recovery_track(rec, title: str = "") -> RecoveryTrack | None:
-    """The :class:`RecoveryTrack` of a :class:`mission.record.FlightRecord` (None: no recovery
+    """The :class:`RecoveryTrack` of a :class:`mission.record.table.FlightRecord` (None: no recovery
     in it). A flight log holds no course: it is rebuilt as the recovery keeps it, the direction
     of the carrier's velocity while it moves faster than
     :data:`~mission.core.docking.COURSE_MIN_SPEED_M_S`, else the last one, starting from the

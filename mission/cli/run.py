@@ -31,7 +31,9 @@ from mission.time.offset import SharedClock
 from mission.mavlink.link import VehicleLink
 from mission.mavlink.env import read_signing_key
 from mission.flightdata.writer import DEFAULT_LIVE, LiveAddress, clock_metadata, is_loopback, parse_live
-from mission.record import CLOCK_NOTE, FlightRecord, FlightRecorder, RecordSink, mission_info, read_record
+from mission.record.info import mission_info
+from mission.record.recorder import CLOCK_NOTE, FlightRecorder, RecordSink
+from mission.record.table import FlightRecord, read_record
 from mission.phases import AbortReason
 from mission.report import WaitReporter, abort_hint, phase_printer, startup_lines
 

@@ -1,7 +1,7 @@
 """Flight data where robotics tools read it: MCAP flight logs and a live Foxglove view.
 
 A :class:`~mission.flightdata.mission_log.MissionLog` is a sink of the flight record
-(:class:`mission.record.TickRow`): the rows the CSV gets also become Foxglove messages
+(:class:`mission.record.table.TickRow`): the rows the CSV gets also become Foxglove messages
 (transforms, a 3D scene, a log, JSON channels) in ``flight.mcap`` and, with ``--live``, on the
 foxglove-sdk's WebSocket server. :class:`~mission.flightdata.carrier_log.CarrierLog` does the same
 for ``marsupial carrier``. The control loop only queues a row; messages are made and written on

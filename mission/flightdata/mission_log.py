@@ -1,6 +1,6 @@
-"""``flight.mcap``: the mission's flight record as Foxglove messages (a :class:`~mission.record.RecordSink`).
+"""``flight.mcap``: the mission's flight record as Foxglove messages (a :class:`~mission.record.recorder.RecordSink`).
 
-Each :class:`~mission.record.TickRow` becomes, at the row's mission-clock time:
+Each :class:`~mission.record.table.TickRow` becomes, at the row's mission-clock time:
 
 - frame transforms ``map_ned -> <pair>/carrier/base_link_frd`` and ``map_ned ->
   <pair>/passenger/base_link_frd`` (rotated by the robot's heading when the row has one) and
@@ -35,7 +35,7 @@ from mission.flightdata.camera_log import CameraLog
 from mission.flightdata.topics import MAP_FRAME, MISSION_CHANNELS, WORLD_FRAME, flu_frame, frame, topics
 from mission.flightdata.writer import DataLog, LiveAddress, timestamp
 from mission.phases import Phase
-from mission.record import COLUMNS, TickRow
+from mission.record.table import COLUMNS, TickRow
 from mission.vision.camera import SeenFrame
 
 PHASES = [p.value for p in Phase]

@@ -94,7 +94,7 @@ _COUNTERS = {"type": "object", "additionalProperties": True}
 
 JSON_SCHEMAS: dict[str, dict[str, Any]] = {
     "marsupial.FlightRecord": _object(
-        "marsupial.FlightRecord", "One row of record.csv, column by column (mission.record.COLUMNS)",
+        "marsupial.FlightRecord", "One row of record.csv, column by column (mission.record.table.COLUMNS)",
         {"t_s": _number("[s] mission clock"), "phase": {"type": "string"}}),
     "marsupial.Phase": _object("marsupial.Phase", "The mission phase after the tick, and the vehicle", {
         "phase": {"type": "string", "description": "mission phase (PREFLIGHT .. DONE, ABORT)"},

@@ -17,7 +17,7 @@ import numpy as np
 from mission.flightdata.mission_log import bc_circle
 from mission.flightdata.read import RECORD_SCHEMA, log_lines, read_messages
 from mission.phases.phase import Phase
-from mission.record import read_record
+from mission.record.table import read_record
 
 BG, PANEL, GRID, TEXT = "#16161d", "#1f1f29", "#33334a", "#e6e6f0"
 

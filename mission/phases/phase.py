@@ -4,7 +4,7 @@ nothing of ours.
 
 A phase is added here (its member and its properties) and in the machine's handler table
 (:data:`mission.phases.machine.HANDLERS`); the wire's phase names (:mod:`mission.bus.wire`), the
-carrier's reaction (:mod:`mission.carrier.modes`), the record's figures (:mod:`mission.record`)
+carrier's reaction (:mod:`mission.carrier.modes`), the record's figures (:mod:`mission.record.figures`)
 and the colours of the plots (:mod:`mission.plots`, :mod:`mission.flightdata.view`) are derived
 from this enum.
 """

@@ -26,7 +26,7 @@ deploy, task, return and dock, ticked as the lockstep demo ticks it:
 
 A :class:`Scenario` is replayable from its fields (the seed only drives the estimate's errors);
 :mod:`sim.batch.recovery_mc` draws them, flies a batch and reports it. The figures of each flight are those of the flight log's ``summary.json``
-(:func:`mission.record.summary_of` on the same columns). Frames: local NED [m], [m/s]; time [s]
+(:func:`mission.record.figures.summary_of` on the same columns). Frames: local NED [m], [m/s]; time [s]
 from the start of the mission.
 """
 from __future__ import annotations
@@ -58,7 +58,9 @@ from mission.passenger.inputs import PassengerInputs, VehicleReport
 from mission.passenger.step import PassengerStep
 from mission.phases import CarrierObs, Decision, Measurement, MissionState, Observation, Phase, finished
 from mission.phases.phase import Duty
-from mission.record import COLUMNS, VEC, FlightRecord, flown_info, mission_info, summary_of
+from mission.record.figures import summary_of
+from mission.record.info import flown_info, mission_info
+from mission.record.table import COLUMNS, VEC, FlightRecord
 from sim.batch.sensors import SensorFactory, sensors_for
 from sim.gnss import CarrierGnss, GnssFix
 from mission.config.relnav import PassengerGnssSection

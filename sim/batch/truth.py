@@ -12,7 +12,7 @@ import numpy as np
 
 from mission.config.schema import Config
 from mission.phases import Phase
-from mission.record import VEC
+from mission.record.table import VEC
 from sim.batch.recovery import Flight
 
 BEFORE_CONTACT = (Phase.RETURNING, Phase.HOLDOFF, Phase.APPROACH, Phase.GO_AROUND)

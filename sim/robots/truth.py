@@ -136,7 +136,7 @@ def demo_truth(cfg: Config, log_dir: Path) -> dict[str, Any]:
     track = json.loads(path.read_text()).get("track") if path.exists() else None
     if not track or len(track["t_s"]) < 2 or not (log_dir / "record.csv").exists():
         return {}
-    from mission.record import read_record
+    from mission.record.table import read_record
 
     n = min(len(track["t_s"]), len(track["vehicle_ned_m"]), len(track["carrier_ned_m"]))
     t = np.asarray(track["t_s"][:n], float)

@@ -29,7 +29,8 @@ import numpy as np
 
 from mission.flightdata.read import read_messages
 from mission.mavlink import px4
-from mission.record import read_record, summarise
+from mission.record.figures import summarise
+from mission.record.table import read_record
 from tests.faults.procs import DEMO, SPEED, Flight, Router, assert_log_complete, assert_safe_end, fleet_config, flight, wait_for
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(120)]

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from mission.config.schema import load_config
-from mission.record import read_record
+from mission.record.table import read_record
 from tests.conftest import CONFIGS
 
 pytestmark = pytest.mark.slow

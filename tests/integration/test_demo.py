@@ -12,7 +12,7 @@ from mcap.reader import make_reader
 from mcap_protobuf.decoder import DecoderFactory
 
 from mission.config.schema import load_config
-from mission.record import read_record
+from mission.record.table import read_record
 from sim.batch.closed_loop import simulate_config
 from tests.conftest import CONFIGS
 

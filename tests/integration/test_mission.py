@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from mission.mavlink.env import mavutil
 
-from mission.record import read_record
+from mission.record.table import read_record
 from mission.phases import AbortReason, Phase
 from sim.vehicle.mock import FaultOptions
 from tests.support.mission_harness import flying_pair, wait_for

@@ -17,7 +17,7 @@ import pytest
 
 from mission.config.schema import load_config
 from mission.phases import Phase
-from mission.record import read_record
+from mission.record.table import read_record
 from sim.batch.recovery import Scenario, fly
 from sim.vehicle.options import VehicleOptions
 from tests.conftest import CONFIGS

@@ -19,7 +19,7 @@ import pytest
 
 from mission.mavlink import px4
 from mission.config.schema import load_config
-from mission.record import read_record
+from mission.record.table import read_record
 from sim.sitl.px4 import clock_ratio, patched_config, px4_flight
 from sim.net import wait_for
 from tests.conftest import CONFIGS

@@ -23,7 +23,7 @@ import pytest
 
 from mission.mavlink import px4
 from mission.mavlink.link import VehicleLink
-from mission.record import read_record
+from mission.record.table import read_record
 from mission.time.clock import ScaledClock
 from sim.net import wait_for
 from sim.sitl.px4 import px4_flight

@@ -18,11 +18,11 @@ from mission.bus.bridge import open_session
 from mission.time.clock import LockstepClock, ScaledClock
 from mission.config.schema import Config, load_config, with_overrides
 from mission.controller import MissionController, MissionOutcome
-from mission.record import mission_info
+from mission.record.info import mission_info
 from mission.mavlink.link import VehicleLink
 from mission.cli.run import mission_io
 from mission.bus.lockstep import ZenohUpstream, clock_keys
-from mission.record import FlightRecorder
+from mission.record.recorder import FlightRecorder
 from mission.phases import Phase
 from sim.robots.carrier import CarrierSim
 from sim.vehicle.mock import MockVehicle, VehicleOptions

@@ -11,12 +11,12 @@ from mission.time.clock import ManualClock
 from mission.config.schema import load_config, with_overrides
 from mission.controller import MissionController, TickReport
 from mission.mavlink.requests import CommandWorker
-from mission.record import mission_info
+from mission.record.info import mission_info
 from mission.errors import LinkError
 from mission.core.law import norm
 from mission.phases import AbortReason, Phase
 from mission.phases.phase import Request
-from mission.record import FlightRecorder
+from mission.record.recorder import FlightRecorder
 from tests.conftest import CONFIGS
 from tests.support.fake_vehicle import FakeWorld
 

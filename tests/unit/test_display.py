@@ -7,7 +7,7 @@ import json
 import numpy as np
 from click.testing import CliRunner
 
-from mission.record import FlightRecorder
+from mission.record.recorder import FlightRecorder
 from mission.cli.run import plot
 from mission.report import event_line
 from sim.demo import PHASE_STEPS, PairProgress, phase_step

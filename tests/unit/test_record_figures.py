@@ -3,7 +3,8 @@
 import numpy as np
 
 from mission.phases.phase import Phase
-from mission.record import COLUMNS, FlightRecord, figures
+from mission.record.figures import figures
+from mission.record.table import COLUMNS, FlightRecord
 
 
 def _record(phases: list[Phase], info: dict) -> FlightRecord:

@@ -21,7 +21,8 @@ from mission.flightdata.read import read_messages
 from mission.flightdata.topics import CAMERA_CHANNELS, CARRIER_CHANNELS, MISSION_CHANNELS, topics
 from mission.flightdata.writer import LiveAddress, is_loopback, parse_live
 from mission.model import docking_geometry
-from mission.record import FlightRecorder, TickRow, read_record
+from mission.record.recorder import FlightRecorder
+from mission.record.table import TickRow, read_record
 
 INFO = {"target_ned_m": [20.0, 0.0, -5.0], "obstacles": [{"center": [10.0, 3.0, -2.0], "radius": 1.0}], "bc_m": 8.0,
         "carrier_start_ned_m": [0.0, 0.0, 0.0], "dock_offset_ned_m": [0, 0, -1.5], "dock_tolerance_m": 0.5,

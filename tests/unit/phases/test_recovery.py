@@ -195,8 +195,8 @@ def test_recovery_phases_are_the_recovery_set():
 
 
 def test_the_summary_tells_how_the_recovery_went(cfg, tmp_path):
-    from mission.record import FlightRecorder
-    from mission.record import mission_info
+    from mission.record.recorder import FlightRecorder
+    from mission.record.info import mission_info
 
     clock = ManualClock()
     world = FakeWorld(clock, target_ned_m=np.asarray(cfg.scenario.target, dtype=float),
@@ -255,8 +255,8 @@ def test_a_battery_too_small_for_the_second_leg_skips_it(cfg):
 
 
 def test_the_summary_has_a_column_per_leg(cfg, tmp_path):
-    from mission.record import mission_info
-    from mission.record import FlightRecorder
+    from mission.record.info import mission_info
+    from mission.record.recorder import FlightRecorder
 
     two, targets = two_targets(cfg, [30.0, 5.0, -5.0])
     clock = ManualClock()
@@ -280,8 +280,8 @@ def test_the_summary_has_a_column_per_leg(cfg, tmp_path):
 
 
 def test_a_skipped_leg_is_reported_with_its_reason(cfg, tmp_path):
-    from mission.record import mission_info
-    from mission.record import FlightRecorder
+    from mission.record.info import mission_info
+    from mission.record.recorder import FlightRecorder
 
     two, targets = two_targets(cfg, [30.0, 5.0, -5.0])
     clock = ManualClock()

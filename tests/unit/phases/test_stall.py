@@ -360,7 +360,8 @@ def test_the_summary_measures_the_stall_apart_from_the_phase_switches(cfg, tmp_p
     """The go-around after a stall switches phase across the gap: the summary's switch jump leaves
     that switch out (command to command across a gap is what the vehicle did meanwhile), and
     max_stall_command_offset_m_s measures the command against the vehicle's velocity after it."""
-    from mission.record import FlightRecorder, mission_info
+    from mission.record.info import mission_info
+    from mission.record.recorder import FlightRecorder
 
     outcome, reports, _, after = fly_with_a_stall(cfg, Phase.APPROACH, 2.0,
                                                   recorder=FlightRecorder(tmp_path, mission_info(cfg)))
