@@ -43,6 +43,7 @@ from mission.time.clock import (
     LOST_WALL_S,
     RESEND_WALL_S,
     LockstepClock,
+    Silence,
 )
 
 log = logging.getLogger(__name__)
@@ -127,7 +128,9 @@ class ZenohRelay:
         self._wake_ns = 0
         self._step_ns, self._step_readies = 0, 0  # the step run() waits for, readies for it so far
         self.dropped = 0
+        self.rejoined = 0  # drops after which the carrier answered again (and steps with us again)
         self.missed = 0  # state samples given up (lost in an outage)
+        self._dropped_ns: int | None = None  # the step the last drop came at
         self._closed = False
         self._wire = _ClockWire(session, time_key, auth)
         self._sub = session.declare_subscriber(ready_key, self._on_ready)
@@ -163,7 +166,11 @@ class ZenohRelay:
                 self._state = "dropped"
             elif self._state == "dropped":
                 self._state, self._wake_ns = "joined", values[1]
-                log.warning("lockstep: the %s is back (ready at t = %.3f s)", self.name, values[0] / 1e9)
+                if self._dropped_ns is not None:
+                    self.rejoined += 1
+                log.warning("lockstep: the %s is back (ready at t = %.3f s): it steps with us again from its next "
+                            "step; the run was not lockstep %s", self.name, values[0] / 1e9,
+                            "before" if self._dropped_ns is None else f"from t = {self._dropped_ns / 1e9:.3f} s")
             self._cv.notify_all()
 
     def wake_ns(self) -> int | None:
@@ -183,6 +190,7 @@ class ZenohRelay:
         if state == "joined" and wake > t_ns:
             return
         start = last_put = time.monotonic()
+        silence = Silence()  # the carrier's, without this process's own stalls
         slow_logged = False
         with self._cv:
             self._step_ns, self._step_readies = t_ns, 0
@@ -192,7 +200,7 @@ class ZenohRelay:
             while not (self._ready is not None and self._ready[0] >= t_ns and self._seen_seq >= self._ready[2]):
                 if self._closed:
                     return
-                now = time.monotonic()
+                now, waited = time.monotonic(), silence.elapsed()
                 if (self._ready is not None and self._ready[0] >= t_ns and now - start > self.lost_wall_s
                         and self._step_readies >= LOST_AFTER_REPEATS):
                     self.missed += 1
@@ -203,18 +211,19 @@ class ZenohRelay:
                 token = None if self._alive is None or state == "joining" else self._alive()
                 limit = self.join_wall_s if state == "joining" else (
                     self.alive_watchdog_wall_s if token else self.watchdog_wall_s)
-                if token is False or now - start > limit:
-                    self._state = "dropped"
+                if token is False or waited > limit:
+                    self._state, self._dropped_ns = "dropped", t_ns
                     self.dropped += 1
                     why = "its liveliness token is gone" if token is False else f"no answer within {limit:.1f} s (wall)"
-                    log.warning("lockstep: the %s dropped at step t = %.3f s (%s); going on without it", self.name,
+                    log.warning("lockstep: the %s dropped at step t = %.3f s (%s); going on without it: the run is "
+                                "no longer lockstep (it rejoins at the next step it answers)", self.name,
                                 t_ns / 1e9, why)
                     return
-                if token and not slow_logged and now - start > self.watchdog_wall_s:
+                if token and not slow_logged and waited > self.watchdog_wall_s:
                     slow_logged = True
                     log.warning("lockstep: the %s has not finished step t = %.3f s after %.1f s (wall), but its "
                                 "liveliness token is present: waiting up to %.1f s", self.name, t_ns / 1e9,
-                                now - start, limit)
+                                waited, limit)
                 if now - last_put > (HELLO_WALL_S if self._state == "joining" else self._resend_wall_s):
                     self._cv.release()
                     try:
@@ -274,6 +283,7 @@ class ZenohUpstream:
         if values is None:
             return
         t_ns, seq = values
+        self.clock.heard()  # the controller is there, even while its call waits for the status it names
         with self._lock:
             if self._seen_seq < seq and t_ns > self._stepped_ns:
                 now = time.monotonic()
