@@ -8,8 +8,9 @@ the same as in real time (only the injected clock differs). Messages (times in [
 - controller -> vehicle: ``TIMESYNC(tc1 wake, ts1 t)``: step ``t`` done (its setpoint and commands
   sent before, on the same socket), next needed at ``wake`` (``wake < 0``: leaving the lockstep);
 - controller -> carrier, Zenoh ``marsupial/<pair>/clock/time`` ``"t seq"``: step to ``t`` once you
-  have passenger status ``seq``; carrier -> controller, ``clock/ready`` ``"t wake seq"``: done at
-  ``t``, next at ``wake``, its last state sample is ``seq``. Zenoh does not order samples across
+  have passenger status ``seq`` (``t < 0``: the controller left the lockstep); carrier ->
+  controller, ``clock/ready`` ``"t wake seq"``: done at ``t``, next at ``wake``, its last state
+  sample is ``seq``. Zenoh does not order samples across
   keys, so each side waits for the sample named, not only for the clock message.
 
 The MAVLink side (the vehicle's clock, and :class:`~mission.mavlink.lockstep.MavlinkRelay`, which
@@ -178,7 +179,12 @@ class ZenohRelay:
             return self._wake_ns if self._state == "joined" else None
 
     def leave(self) -> None:
-        """Nothing to send: the carrier notices a silent clock itself (its watchdog)."""
+        """Tell the carrier that this clock left the lockstep (``"-1 seq"``): it goes on in real
+        time now, rather than after its watchdog (the run's end is not its controller's silence)."""
+        with self._cv:
+            state = self._state
+        if state == "joined":
+            self._call(f"-1 {self._publisher.last_seq}")
 
     def run(self, t_ns: int) -> None:
         with self._cv:
@@ -283,6 +289,10 @@ class ZenohUpstream:
         if values is None:
             return
         t_ns, seq = values
+        if t_ns < 0:  # the controller left the lockstep: real time from now, as after a silence
+            log.info("lockstep: the controller left; going on in real time")
+            threading.Thread(target=self.clock.close, name="lockstep-leave", daemon=True).start()
+            return
         self.clock.heard()  # the controller is there, even while its call waits for the status it names
         with self._lock:
             if self._seen_seq < seq and t_ns > self._stepped_ns:

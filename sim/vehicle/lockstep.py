@@ -22,6 +22,7 @@ import time
 from typing import TYPE_CHECKING, Any
 
 from mission.mavlink.env import mavlink
+from mission.time.clock import Silence
 from sim.vehicle import telemetry as tel
 from sim.vehicle.endpoints import VehicleLink
 
@@ -108,6 +109,7 @@ class LockstepStepper:
         """The controller's answer to the barrier; None on stop() or when it went silent."""
         v = self.v
         called = time.monotonic()
+        silence = Silence()  # the controller's, without the vehicle's own stalls (a stopped process)
         while not v._stop_event.is_set():
             v._io.poll(POLL_WALL_S)
             if self._answer is not None:
@@ -119,7 +121,7 @@ class LockstepStepper:
                     self.send_control(onboard, mavlink.MAVLink_timesync_message(0, self.t_ns))
                     v._io.flush()
                 called = now
-            elif joined and now - called > self.watchdog_wall_s:
+            elif joined and silence.elapsed() > self.watchdog_wall_s:
                 log.warning("lockstep: no answer for step t = %.3f s within %.1f s (wall); the controller is "
                             "gone, going on in real time at speed %g", v._t_s, self.watchdog_wall_s, v.options.speed)
                 return None
