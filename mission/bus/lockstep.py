@@ -10,8 +10,8 @@ the same as in real time (only the injected clock differs). Messages (times in [
 - controller -> carrier, Zenoh ``marsupial/<pair>/clock/time`` ``"t seq"``: step to ``t`` once you
   have passenger status ``seq`` (``t < 0``: the controller left the lockstep); carrier ->
   controller, ``clock/ready`` ``"t wake seq"``: done at ``t``, next at ``wake``, its last state
-  sample is ``seq``. Zenoh does not order samples across
-  keys, so each side waits for the sample named, not only for the clock message.
+  sample is ``seq``. Zenoh does not order samples across keys, so each side waits for the sample
+  named, not only for the clock message.
 
 The MAVLink side (the vehicle's clock, and :class:`~mission.mavlink.lockstep.MavlinkRelay`, which
 brings a carrier's own lockstep vehicle, the mock rover, along the same way) is
@@ -101,8 +101,9 @@ class ZenohRelay:
     Before the first barrier completes it calls the carrier every :data:`HELLO_WALL_S` until it
     answers (for at most ``join_wall_s``); later it waits ``watchdog_wall_s`` at most, or
     ``alive_watchdog_wall_s`` while ``alive()`` (the carrier's liveliness token) is True, and not at
-    all once it is False; then it drops the carrier until it answers again (a restarted carrier
-    rejoins at a later barrier). Once joined it calls again every :data:`RESEND_WALL_S` while
+    all once it is False; then it drops the carrier until it answers again (a late or restarted
+    carrier rejoins at the first later step it answers: :attr:`rejoined`; the waits leave out
+    this process's own stalls, :class:`~mission.time.clock.Silence`). Once joined it calls again every :data:`RESEND_WALL_S` while
     unanswered, and gives up a state sample a ready names after ``lost_wall_s`` (default
     :data:`LOST_WALL_S`) and :data:`LOST_AFTER_REPEATS` readies naming it (the calls then repeated
     every ``lost_wall_s / LOST_AFTER_REPEATS`` if that is shorter). :attr:`dropped` counts the

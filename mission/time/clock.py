@@ -291,7 +291,8 @@ class LockstepClock:
     only starts the participants' threads).
 
     Liveness: if the upstream is silent for ``watchdog_wall_s`` wall seconds while this
-    process waits for it (``join_wall_s`` before the first barrier), or on :meth:`close`, the
+    process waits for it (``join_wall_s`` before the first barrier; this process's own stalls
+    left out, :class:`Silence`), or on :meth:`close`, the
     clock falls back to a :class:`ScaledClock` at ``speed`` from the current simulated time,
     and every participant is released.
     """
