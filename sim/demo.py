@@ -356,7 +356,9 @@ def not_lockstep(s: dict) -> str | None:
            *([f"the mission's clock fell back to the wall clock ({lock['fallback']})"] if lock.get("fallback") else []),
            *([f"the carrier was dropped {lock['downstream_dropped']} time(s) (rejoined "
               f"{lock.get('downstream_rejoined', 0)})"] if lock.get("downstream_dropped") else []),
-           *([f"the carrier's clock fell back to the wall clock ({carrier['fallback']})"] if carrier.get("fallback") else [])]
+           *([f"the carrier's clock fell back to the wall clock ({carrier['fallback']})"] if carrier.get("fallback") else []),
+           *([f"the carrier's robot was dropped {carrier['downstream_dropped']} time(s)"]
+             if carrier.get("downstream_dropped") else [])]
     return "; ".join(why) or None
 
 

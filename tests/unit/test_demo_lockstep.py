@@ -35,4 +35,6 @@ def test_a_clock_on_the_wall_clock_fails_the_demo() -> None:
     assert "the mission's clock fell back" in mission["not_lockstep"]
     never = _pair(lockstep={**HELD, "barriers": 0, "held": False})
     assert never["not_lockstep"] == "the mission never stepped in lockstep"
-    assert exit_code([carrier]) == exit_code([mission]) == exit_code([never]) == 1
+    robot = _pair(carrier_lockstep={**HELD, "downstream_dropped": 1, "held": False})
+    assert robot["not_lockstep"] == "the carrier's robot was dropped 1 time(s)"
+    assert exit_code([carrier]) == exit_code([mission]) == exit_code([never]) == exit_code([robot]) == 1
