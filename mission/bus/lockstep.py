@@ -6,7 +6,8 @@ the same as in real time (only the injected clock differs). Messages (times in [
 - vehicle -> controller, MAVLink: ``SYSTEM_TIME`` (time_boot_ms ``t``: what follows was sampled at
   ``t``), then a barrier ``TIMESYNC(tc1 0, ts1 t)``: integrated to ``t``, no further until answered;
 - controller -> vehicle: ``TIMESYNC(tc1 wake, ts1 t)``: step ``t`` done (its setpoint and commands
-  sent before, on the same socket), next needed at ``wake`` (``wake < 0``: leaving the lockstep);
+  sent before, on the same socket), next needed at ``wake`` (``wake < 0``: leaving the lockstep;
+  ``wake == t``: still working on it, waiting for a slow carrier);
 - controller -> carrier, Zenoh ``marsupial/<pair>/clock/time`` ``"t seq"``: step to ``t`` once you
   have passenger status ``seq`` (``t < 0``: the controller left the lockstep); carrier ->
   controller, ``clock/ready`` ``"t wake seq"``: done at ``t``, next at ``wake``, its last state
@@ -37,7 +38,6 @@ from mission.bus.auth import BusAuth
 from mission.bus.bridge import keys, undeclare
 from mission.bus.wire import WireError
 from mission.time.clock import (
-    ALIVE_CARRIER_WATCHDOG_WALL_S,
     CARRIER_WATCHDOG_WALL_S,
     HELLO_WALL_S,
     LOST_AFTER_REPEATS,
@@ -100,11 +100,13 @@ class ZenohRelay:
 
     Before the first barrier completes it calls the carrier every :data:`HELLO_WALL_S` until it
     answers (for at most ``join_wall_s``); later it waits ``watchdog_wall_s`` at most, or
-    ``alive_watchdog_wall_s`` while ``alive()`` (the carrier's liveliness token) is True, and not at
+    ``alive_watchdog_wall_s`` (default: the same; ``sim.lockstep_carrier_wait_wall_s`` in a
+    mission) while ``alive()`` (the carrier's liveliness token) is True, calling ``keepalive()``
+    meanwhile (the controller's clock tells the vehicle it still works on the step), and not at
     all once it is False; then it drops the carrier until it answers again (a late or restarted
     carrier rejoins at the first later step it answers: :attr:`rejoined`; the waits leave out
-    this process's own stalls, :class:`~mission.time.clock.Silence`). Once joined it calls again every :data:`RESEND_WALL_S` while
-    unanswered, and gives up a state sample a ready names after ``lost_wall_s`` (default
+    this process's own stalls, :class:`~mission.time.clock.Silence`). Once joined it calls again
+    every :data:`RESEND_WALL_S` while unanswered, and gives up a state sample a ready names after ``lost_wall_s`` (default
     :data:`LOST_WALL_S`) and :data:`LOST_AFTER_REPEATS` readies naming it (the calls then repeated
     every ``lost_wall_s / LOST_AFTER_REPEATS`` if that is shorter). :attr:`dropped` counts the
     drops, :attr:`missed` the samples given up.
@@ -112,16 +114,15 @@ class ZenohRelay:
 
     def __init__(self, session: zenoh.Session, keys: tuple[str, str], feed: Any, publisher: Any, *,
                  alive: Callable[[], bool | None] | None = None,
-                 watchdog_wall_s: float = CARRIER_WATCHDOG_WALL_S,
-                 alive_watchdog_wall_s: float = ALIVE_CARRIER_WATCHDOG_WALL_S,
+                 watchdog_wall_s: float = CARRIER_WATCHDOG_WALL_S, alive_watchdog_wall_s: float | None = None,
                  join_wall_s: float = 30.0, name: str = "carrier", auth: BusAuth | None = None,
-                 lost_wall_s: float = LOST_WALL_S) -> None:
+                 lost_wall_s: float = LOST_WALL_S, keepalive: Callable[[], None] | None = None) -> None:
         time_key, ready_key = keys
         self.watchdog_wall_s, self.join_wall_s, self.name = watchdog_wall_s, join_wall_s, name
         self.lost_wall_s = lost_wall_s
         self._resend_wall_s = min(RESEND_WALL_S, lost_wall_s / LOST_AFTER_REPEATS)
-        self.alive_watchdog_wall_s = max(alive_watchdog_wall_s, watchdog_wall_s)
-        self._alive = alive
+        self.alive_watchdog_wall_s = max(alive_watchdog_wall_s or watchdog_wall_s, watchdog_wall_s)
+        self._alive, self._keepalive = alive, keepalive
         self._publisher = publisher  # PassengerPublisher: last_seq
         self._cv = threading.Condition()
         self._ready: tuple[int, int, int] | None = None
@@ -235,6 +236,8 @@ class ZenohRelay:
                     self._cv.release()
                     try:
                         sent = self._call(call)
+                        if token and self._keepalive is not None:
+                            self._keepalive()  # our upstream (the vehicle) waits for us meanwhile
                     finally:
                         self._cv.acquire()
                     if not sent:

@@ -194,7 +194,7 @@ RESEND_WALL_S = 0.5  # resend period of an unanswered call once joined (an outag
 LOST_WALL_S = 2.0  # a named sample still missing this long ... [s, wall]
 LOST_AFTER_REPEATS = 3  # ... after this many repeats of the message naming it is given up
 CARRIER_WATCHDOG_WALL_S = 2.0  # the controller drops a carrier silent this long [s, wall]
-ALIVE_CARRIER_WATCHDOG_WALL_S = 6.0  # ... or this long while its liveliness token is present [s, wall]
+# ... or, while its liveliness token is present, sim.lockstep_carrier_wait_wall_s (the configuration)
 CONTROLLER_WATCHDOG_WALL_S = 5.0  # the controller's clock falls back to the wall clock [s, wall]
 VEHICLE_WATCHDOG_WALL_S = 10.0  # the vehicle drops a controller silent this long [s, wall]
 OWN_STALL_WALL_S = 1.0  # a watchdog's wait this much longer than asked: this process stood still [s, wall]
@@ -430,6 +430,13 @@ class LockstepClock:
         with self._cv:
             if self._started and t_ns > self._t_ns and not self._running:
                 self._t_ns = t_ns
+
+    def keepalive(self) -> None:
+        """A downstream participant is slow but alive, and this process waits for it: tell the
+        upstream that this step is still being worked on (if it can be told: ``working``)."""
+        working = getattr(self.upstream, "working", None)
+        if working is not None and self._fallback is None:
+            working(self._t_ns)
 
     def heard(self) -> None:
         """The upstream spoke (a call whose barrier waits for a sample it names): it is not silent."""
