@@ -228,6 +228,9 @@ class _Barriers:
             self.at.append(t_ns)
             self.cv.notify_all()
 
+    def heard(self) -> None:
+        """A call came (its barrier may wait for the status it names)."""
+
 
 def test_a_passenger_status_lost_in_an_outage_is_given_up_after_repeated_calls(monkeypatch, caplog) -> None:
     """The carrier steps on a call once the passenger status it names has come; one that never
