@@ -317,6 +317,9 @@ def run_demo(config: str, speed: float, pairs: int, log_root: Path, plot_path: s
             c = json.loads(carrier_summary.read_text())
             s["carrier_stop_target_distance_m"] = c.get("stopped_target_distance_m")
             s["carrier_braking_distance_m"] = c.get("braking_distance_m")
+            s["carrier_lockstep"] = c.get("lockstep")
+        if lockstep:
+            s["not_lockstep"] = not_lockstep(s)
         s.update(deck_truth(p.log_dir / "vehicle.json"))
         truth = demo_truth(load_config(config), p.log_dir)
         if truth:  # the figures against the world's truth, per leg; kept beside the mission's summary
@@ -340,10 +343,26 @@ def run_demo(config: str, speed: float, pairs: int, log_root: Path, plot_path: s
 
 def exit_code(summaries: list[dict]) -> int:
     """0 when every pair held P1-P3, its mission exited 0, a passenger that returned docked again,
-    and no deck crash was recorded by the world (whatever the mission believed); else 1."""
+    no deck crash was recorded by the world (whatever the mission believed) and a lockstep run
+    stayed in step (``not_lockstep`` empty); else 1."""
     ok = all(s.get("p1") and s.get("p2") and s.get("p3") and s.get("mission_exit_code") == 0
-             and s.get("docked_again", True) and not s.get("deck_crash") for s in summaries)
+             and s.get("docked_again", True) and not s.get("deck_crash") and not s.get("not_lockstep") for s in summaries)
     return 0 if ok else 1
+
+
+def not_lockstep(s: dict) -> str | None:
+    """Why a lockstep pair's run did not stay in step (its mission's and its carrier's clock
+    counters, ``lockstep`` and ``carrier_lockstep``), or None: a run that went on without a
+    participant for a while proves nothing about the lockstep flight."""
+    lock, carrier = s.get("lockstep") or {}, s.get("carrier_lockstep") or {}
+    why = [*(["the mission never stepped in lockstep"] if not lock.get("barriers") else []),
+           *([f"the mission's clock fell back to the wall clock ({lock['fallback']})"] if lock.get("fallback") else []),
+           *([f"the carrier was dropped {lock['downstream_dropped']} time(s) (rejoined "
+              f"{lock.get('downstream_rejoined', 0)})"] if lock.get("downstream_dropped") else []),
+           *([f"the carrier's clock fell back to the wall clock ({carrier['fallback']})"] if carrier.get("fallback") else []),
+           *([f"the carrier's robot was dropped {carrier['downstream_dropped']} time(s)"]
+             if carrier.get("downstream_dropped") else [])]
+    return "; ".join(why) or None
 
 
 def deck_truth(path: Path) -> dict:
@@ -469,6 +488,8 @@ def verdict_lines(summaries: list[dict]) -> list[str]:
     """One line per pair that failed, naming the properties that did not hold and why."""
     lines = []
     for s in summaries:
+        if s.get("not_lockstep"):
+            lines.append(f"{s['pair']}: the run was NOT lockstep ({s['not_lockstep']}): its figures prove nothing")
         if s.get("deck_crash"):
             lines.append(f"{s['pair']}: the passenger CRASHED on the carrier's deck ({s['deck_crash']}), whatever the "
                          f"mission believed (its contact: {(s.get('contact') or {}).get('horizontal_error_m')} m)")
@@ -566,6 +587,8 @@ def demo(config: str, realtime: bool, speed: float, pairs: int, plot_path: str |
     recovery = any("docked_again" in s for s in summaries)
     if code == 0:
         click.echo("P1-P3 held" + (", and the passenger docked again" if recovery else ""))
+    elif any(s.get("not_lockstep") for s in summaries):
+        click.echo("the run was NOT lockstep: its figures prove nothing", err=True)
     elif all(s.get("p1") and s.get("p2") and s.get("p3") and s["mission_exit_code"] == 0 for s in summaries):
         click.echo("P1-P3 held, but the passenger did NOT dock again", err=True)
     else:

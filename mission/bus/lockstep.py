@@ -6,11 +6,13 @@ the same as in real time (only the injected clock differs). Messages (times in [
 - vehicle -> controller, MAVLink: ``SYSTEM_TIME`` (time_boot_ms ``t``: what follows was sampled at
   ``t``), then a barrier ``TIMESYNC(tc1 0, ts1 t)``: integrated to ``t``, no further until answered;
 - controller -> vehicle: ``TIMESYNC(tc1 wake, ts1 t)``: step ``t`` done (its setpoint and commands
-  sent before, on the same socket), next needed at ``wake`` (``wake < 0``: leaving the lockstep);
+  sent before, on the same socket), next needed at ``wake`` (``wake < 0``: leaving the lockstep;
+  ``wake == t``: still working on it, waiting for a slow carrier);
 - controller -> carrier, Zenoh ``marsupial/<pair>/clock/time`` ``"t seq"``: step to ``t`` once you
-  have passenger status ``seq``; carrier -> controller, ``clock/ready`` ``"t wake seq"``: done at
-  ``t``, next at ``wake``, its last state sample is ``seq``. Zenoh does not order samples across
-  keys, so each side waits for the sample named, not only for the clock message.
+  have passenger status ``seq`` (``t < 0``: the controller left the lockstep); carrier ->
+  controller, ``clock/ready`` ``"t wake seq"``: done at ``t``, next at ``wake``, its last state
+  sample is ``seq``. Zenoh does not order samples across keys, so each side waits for the sample
+  named, not only for the clock message.
 
 The MAVLink side (the vehicle's clock, and :class:`~mission.mavlink.lockstep.MavlinkRelay`, which
 brings a carrier's own lockstep vehicle, the mock rover, along the same way) is
@@ -36,13 +38,13 @@ from mission.bus.auth import BusAuth
 from mission.bus.bridge import keys, undeclare
 from mission.bus.wire import WireError
 from mission.time.clock import (
-    ALIVE_CARRIER_WATCHDOG_WALL_S,
     CARRIER_WATCHDOG_WALL_S,
     HELLO_WALL_S,
     LOST_AFTER_REPEATS,
     LOST_WALL_S,
     RESEND_WALL_S,
     LockstepClock,
+    Silence,
 )
 
 log = logging.getLogger(__name__)
@@ -98,10 +100,13 @@ class ZenohRelay:
 
     Before the first barrier completes it calls the carrier every :data:`HELLO_WALL_S` until it
     answers (for at most ``join_wall_s``); later it waits ``watchdog_wall_s`` at most, or
-    ``alive_watchdog_wall_s`` while ``alive()`` (the carrier's liveliness token) is True, and not at
-    all once it is False; then it drops the carrier until it answers again (a restarted carrier
-    rejoins at a later barrier). Once joined it calls again every :data:`RESEND_WALL_S` while
-    unanswered, and gives up a state sample a ready names after ``lost_wall_s`` (default
+    ``alive_watchdog_wall_s`` (default: the same; ``sim.lockstep_carrier_wait_wall_s`` in a
+    mission) while ``alive()`` (the carrier's liveliness token) is True, calling ``keepalive()``
+    meanwhile (the controller's clock tells the vehicle it still works on the step), and not at
+    all once it is False; then it drops the carrier until it answers again (a late or restarted
+    carrier rejoins at the first later step it answers: :attr:`rejoined`; the waits leave out
+    this process's own stalls, :class:`~mission.time.clock.Silence`). Once joined it calls again
+    every :data:`RESEND_WALL_S` while unanswered, and gives up a state sample a ready names after ``lost_wall_s`` (default
     :data:`LOST_WALL_S`) and :data:`LOST_AFTER_REPEATS` readies naming it (the calls then repeated
     every ``lost_wall_s / LOST_AFTER_REPEATS`` if that is shorter). :attr:`dropped` counts the
     drops, :attr:`missed` the samples given up.
@@ -109,16 +114,15 @@ class ZenohRelay:
 
     def __init__(self, session: zenoh.Session, keys: tuple[str, str], feed: Any, publisher: Any, *,
                  alive: Callable[[], bool | None] | None = None,
-                 watchdog_wall_s: float = CARRIER_WATCHDOG_WALL_S,
-                 alive_watchdog_wall_s: float = ALIVE_CARRIER_WATCHDOG_WALL_S,
+                 watchdog_wall_s: float = CARRIER_WATCHDOG_WALL_S, alive_watchdog_wall_s: float | None = None,
                  join_wall_s: float = 30.0, name: str = "carrier", auth: BusAuth | None = None,
-                 lost_wall_s: float = LOST_WALL_S) -> None:
+                 lost_wall_s: float = LOST_WALL_S, keepalive: Callable[[], None] | None = None) -> None:
         time_key, ready_key = keys
         self.watchdog_wall_s, self.join_wall_s, self.name = watchdog_wall_s, join_wall_s, name
         self.lost_wall_s = lost_wall_s
         self._resend_wall_s = min(RESEND_WALL_S, lost_wall_s / LOST_AFTER_REPEATS)
-        self.alive_watchdog_wall_s = max(alive_watchdog_wall_s, watchdog_wall_s)
-        self._alive = alive
+        self.alive_watchdog_wall_s = max(alive_watchdog_wall_s or watchdog_wall_s, watchdog_wall_s)
+        self._alive, self._keepalive = alive, keepalive
         self._publisher = publisher  # PassengerPublisher: last_seq
         self._cv = threading.Condition()
         self._ready: tuple[int, int, int] | None = None
@@ -127,7 +131,9 @@ class ZenohRelay:
         self._wake_ns = 0
         self._step_ns, self._step_readies = 0, 0  # the step run() waits for, readies for it so far
         self.dropped = 0
+        self.rejoined = 0  # drops after which the carrier answered again (and steps with us again)
         self.missed = 0  # state samples given up (lost in an outage)
+        self._dropped_ns: int | None = None  # the step the last drop came at
         self._closed = False
         self._wire = _ClockWire(session, time_key, auth)
         self._sub = session.declare_subscriber(ready_key, self._on_ready)
@@ -163,7 +169,11 @@ class ZenohRelay:
                 self._state = "dropped"
             elif self._state == "dropped":
                 self._state, self._wake_ns = "joined", values[1]
-                log.warning("lockstep: the %s is back (ready at t = %.3f s)", self.name, values[0] / 1e9)
+                if self._dropped_ns is not None:
+                    self.rejoined += 1
+                log.warning("lockstep: the %s is back (ready at t = %.3f s): it steps with us again from its next "
+                            "step; the run was not lockstep %s", self.name, values[0] / 1e9,
+                            "before" if self._dropped_ns is None else f"from t = {self._dropped_ns / 1e9:.3f} s")
             self._cv.notify_all()
 
     def wake_ns(self) -> int | None:
@@ -171,7 +181,12 @@ class ZenohRelay:
             return self._wake_ns if self._state == "joined" else None
 
     def leave(self) -> None:
-        """Nothing to send: the carrier notices a silent clock itself (its watchdog)."""
+        """Tell the carrier that this clock left the lockstep (``"-1 seq"``): it goes on in real
+        time now, rather than after its watchdog (the run's end is not its controller's silence)."""
+        with self._cv:
+            state = self._state
+        if state == "joined":
+            self._call(f"-1 {self._publisher.last_seq}")
 
     def run(self, t_ns: int) -> None:
         with self._cv:
@@ -183,6 +198,7 @@ class ZenohRelay:
         if state == "joined" and wake > t_ns:
             return
         start = last_put = time.monotonic()
+        silence = Silence()  # the carrier's, without this process's own stalls
         slow_logged = False
         with self._cv:
             self._step_ns, self._step_readies = t_ns, 0
@@ -192,7 +208,7 @@ class ZenohRelay:
             while not (self._ready is not None and self._ready[0] >= t_ns and self._seen_seq >= self._ready[2]):
                 if self._closed:
                     return
-                now = time.monotonic()
+                now, waited = time.monotonic(), silence.elapsed()
                 if (self._ready is not None and self._ready[0] >= t_ns and now - start > self.lost_wall_s
                         and self._step_readies >= LOST_AFTER_REPEATS):
                     self.missed += 1
@@ -203,22 +219,25 @@ class ZenohRelay:
                 token = None if self._alive is None or state == "joining" else self._alive()
                 limit = self.join_wall_s if state == "joining" else (
                     self.alive_watchdog_wall_s if token else self.watchdog_wall_s)
-                if token is False or now - start > limit:
-                    self._state = "dropped"
+                if token is False or waited > limit:
+                    self._state, self._dropped_ns = "dropped", t_ns
                     self.dropped += 1
                     why = "its liveliness token is gone" if token is False else f"no answer within {limit:.1f} s (wall)"
-                    log.warning("lockstep: the %s dropped at step t = %.3f s (%s); going on without it", self.name,
+                    log.warning("lockstep: the %s dropped at step t = %.3f s (%s); going on without it: the run is "
+                                "no longer lockstep (it rejoins at the next step it answers)", self.name,
                                 t_ns / 1e9, why)
                     return
-                if token and not slow_logged and now - start > self.watchdog_wall_s:
+                if token and not slow_logged and waited > self.watchdog_wall_s:
                     slow_logged = True
                     log.warning("lockstep: the %s has not finished step t = %.3f s after %.1f s (wall), but its "
                                 "liveliness token is present: waiting up to %.1f s", self.name, t_ns / 1e9,
-                                now - start, limit)
+                                waited, limit)
                 if now - last_put > (HELLO_WALL_S if self._state == "joining" else self._resend_wall_s):
                     self._cv.release()
                     try:
                         sent = self._call(call)
+                        if token and self._keepalive is not None:
+                            self._keepalive()  # our upstream (the vehicle) waits for us meanwhile
                     finally:
                         self._cv.acquire()
                     if not sent:
@@ -274,6 +293,11 @@ class ZenohUpstream:
         if values is None:
             return
         t_ns, seq = values
+        if t_ns < 0:  # the controller left the lockstep: real time from now, as after a silence
+            log.info("lockstep: the controller left; going on in real time")
+            threading.Thread(target=self.clock.close, name="lockstep-leave", daemon=True).start()
+            return
+        self.clock.heard()  # the controller is there, even while its call waits for the status it names
         with self._lock:
             if self._seen_seq < seq and t_ns > self._stepped_ns:
                 now = time.monotonic()

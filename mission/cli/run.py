@@ -137,7 +137,8 @@ def mission_io(cfg: Config, clock: Clock, tlog_path: str | Path | None = None, *
             from mission.bus.lockstep import ZenohRelay, clock_keys
 
             relay = ZenohRelay(session, clock_keys(cfg.zenoh.pair), feed, publisher, alive=lambda: feed.alive,
-                               auth=auth, lost_wall_s=lockstep_lost_wall_s)
+                               alive_watchdog_wall_s=cfg.sim.lockstep_carrier_wait_wall_s, auth=auth,
+                               lost_wall_s=lockstep_lost_wall_s, keepalive=clock.keepalive)
             stack.callback(relay.close)
             clock.downstream = relay
             stack.callback(clock.close)  # before the link closes: its threads wait on the clock

@@ -119,7 +119,8 @@ class SafetySection(Section):
 
 
 class SimSection(Section):
-    """Numeric closed loop: a fixed step with the command held over it (a digital controller)."""
+    """Numeric closed loop: a fixed step with the command held over it (a digital controller);
+    and the lockstep runs' wait for a slow carrier."""
 
     dt_s: float = Field(1e-3, gt=0, le=0.1,
         description="[s] step of the simulated digital controller (command held over it)")
@@ -128,6 +129,11 @@ class SimSection(Section):
         description="[m] |e_pc| counted as 'on the carrier' before separation (P1)")
     p2_tolerance_m: float = Field(0.1, gt=0, le=10,
         description="[m] final |e_pt| counted as 'at the target' (P2); a mission config uses mission.arrival_radius_m")
+    lockstep_carrier_wait_wall_s: float = Field(20.0, ge=2, le=600,
+        description="[s, wall] a lockstep run (marsupial run --lockstep): how long the controller waits for a step of a "
+                    "carrier whose liveliness token is present (slow, not gone: a loaded machine, a stopped process) "
+                    "before it goes on without it, and the run is no longer lockstep (docs/lockstep.md); the vehicle "
+                    "is told meanwhile that the controller still works on the step")
 
 
 class MonteCarloSection(Section):

@@ -36,6 +36,12 @@ class MavlinkUpstream:
     def report(self, t_ns: int, wake_ns: int) -> None:
         self.link.send_message(mavlink.MAVLink_timesync_message(wake_ns, t_ns))
 
+    def working(self, t_ns: int) -> None:
+        """Still working on step ``t_ns`` (``TIMESYNC(tc1 t, ts1 t)``: a wake that is not after
+        ``t`` answers nothing): the vehicle keeps waiting rather than taking us for gone."""
+        if t_ns > 0:  # tc1 0 is a TIMESYNC request
+            self.link.send_message(mavlink.MAVLink_timesync_message(t_ns, t_ns))
+
 
 class MavlinkRelay:
     """A process brings its own lockstep vehicle on ``link`` along (a :class:`~mission.time.clock.Downstream`):

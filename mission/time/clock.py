@@ -194,9 +194,34 @@ RESEND_WALL_S = 0.5  # resend period of an unanswered call once joined (an outag
 LOST_WALL_S = 2.0  # a named sample still missing this long ... [s, wall]
 LOST_AFTER_REPEATS = 3  # ... after this many repeats of the message naming it is given up
 CARRIER_WATCHDOG_WALL_S = 2.0  # the controller drops a carrier silent this long [s, wall]
-ALIVE_CARRIER_WATCHDOG_WALL_S = 6.0  # ... or this long while its liveliness token is present [s, wall]
+# ... or, while its liveliness token is present, sim.lockstep_carrier_wait_wall_s (the configuration)
 CONTROLLER_WATCHDOG_WALL_S = 5.0  # the controller's clock falls back to the wall clock [s, wall]
 VEHICLE_WATCHDOG_WALL_S = 10.0  # the vehicle drops a controller silent this long [s, wall]
+OWN_STALL_WALL_S = 1.0  # a watchdog's wait this much longer than asked: this process stood still [s, wall]
+
+
+class Silence:
+    """How long [s, wall] a peer has been silent as this process saw it: a stretch in which this
+    process itself stood still (stopped by SIGSTOP, or starved: one of its watchdog's short waits
+    took over :data:`OWN_STALL_WALL_S`) is not the peer's silence, whose messages are waiting in
+    this process's sockets. :meth:`restart` on each message of the peer (and when this process
+    begins to wait for it); :meth:`elapsed` after each wait (every few tens of ms), or a stall is
+    taken for silence."""
+
+    def __init__(self) -> None:
+        self._since = self._checked = time.monotonic()
+        self.own_stalls = 0  # stretches of this process's own standstill left out
+
+    def restart(self) -> None:
+        self._since = self._checked = time.monotonic()
+
+    def elapsed(self) -> float:
+        now = time.monotonic()
+        gap, self._checked = now - self._checked, now
+        if gap > OWN_STALL_WALL_S:
+            self._since += gap
+            self.own_stalls += 1
+        return now - self._since
 
 
 class Upstream(Protocol):
@@ -266,7 +291,8 @@ class LockstepClock:
     only starts the participants' threads).
 
     Liveness: if the upstream is silent for ``watchdog_wall_s`` wall seconds while this
-    process waits for it (``join_wall_s`` before the first barrier), or on :meth:`close`, the
+    process waits for it (``join_wall_s`` before the first barrier; this process's own stalls
+    left out, :class:`Silence`), or on :meth:`close`, the
     clock falls back to a :class:`ScaledClock` at ``speed`` from the current simulated time,
     and every participant is released.
     """
@@ -293,7 +319,7 @@ class LockstepClock:
         self._done_ns, self._wake_ns = -1, 0
         self._fallback: ScaledClock | None = None
         self._closed = False
-        self._last_upstream_wall = time.monotonic()
+        self._silence = Silence()  # the upstream's (guarded by _cv)
         self._thread = threading.Thread(target=self._schedule, name=f"{name}-scheduler", daemon=True)
         self._thread.start()
 
@@ -363,10 +389,15 @@ class LockstepClock:
 
     @property
     def counters(self) -> dict[str, object]:
-        """Barriers, fall-back to the wall clock (None: never, or closed), downstream drops, samples lost."""
-        return {"barriers": self.barriers, "fallback": None if self.fallback_reason == "closed" else self.fallback_reason,
-                "downstream_dropped": int(getattr(self.downstream, "dropped", 0) or 0),
-                "samples_lost": sum(int(getattr(end, "missed", 0) or 0) for end in (self.upstream, self.downstream))}
+        """Barriers, fall-back to the wall clock (None: never, or closed), downstream drops and
+        rejoins, samples lost; ``held``: every step of the run was in step (barriers, no fall-back,
+        no participant dropped)."""
+        fallback = None if self.fallback_reason == "closed" else self.fallback_reason
+        dropped = int(getattr(self.downstream, "dropped", 0) or 0)
+        return {"barriers": self.barriers, "fallback": fallback, "downstream_dropped": dropped,
+                "downstream_rejoined": int(getattr(self.downstream, "rejoined", 0) or 0),
+                "samples_lost": sum(int(getattr(end, "missed", 0) or 0) for end in (self.upstream, self.downstream)),
+                "held": self.barriers > 0 and fallback is None and dropped == 0}
 
     def start_thread(self, target: Callable[[], None], name: str) -> threading.Thread:
         """Start ``target`` in a daemon thread that takes part from its first instruction: its step
@@ -400,10 +431,22 @@ class LockstepClock:
             if self._started and t_ns > self._t_ns and not self._running:
                 self._t_ns = t_ns
 
+    def keepalive(self) -> None:
+        """A downstream participant is slow but alive, and this process waits for it: tell the
+        upstream that this step is still being worked on (if it can be told: ``working``)."""
+        working = getattr(self.upstream, "working", None)
+        if working is not None and self._fallback is None:
+            working(self._t_ns)
+
+    def heard(self) -> None:
+        """The upstream spoke (a call whose barrier waits for a sample it names): it is not silent."""
+        with self._cv:
+            self._silence.restart()
+
     def barrier(self, t_ns: int) -> None:
         """The upstream stopped at ``t_ns`` and waits for this process's report."""
         with self._cv:
-            self._last_upstream_wall = time.monotonic()
+            self._silence.restart()
             if self._barrier_ns is None or t_ns > self._barrier_ns:
                 self._barrier_ns = t_ns
             self._cv.notify_all()
@@ -443,8 +486,12 @@ class LockstepClock:
             ticket.open()
 
     def _next_barrier(self) -> int | None:
-        """Block until a barrier is due and no participant runs; None once fallen back."""
+        """Block until a barrier is due and no participant runs; None once fallen back. The
+        upstream's silence counts from its last barrier or this process's last report, whichever
+        is later (it waited for this step meanwhile)."""
         with self._cv:
+            if self._started:
+                self._silence.restart()
             while True:
                 if self._fallback is not None:
                     return None
@@ -452,7 +499,7 @@ class LockstepClock:
                     t_ns, self._barrier_ns = self._barrier_ns, None
                     return t_ns
                 self._cv.wait(_WALL_SLICE_S)
-                silent = time.monotonic() - self._last_upstream_wall
+                silent = self._silence.elapsed()
                 limit = self.watchdog_wall_s if self._started else self.join_wall_s
                 if self._barrier_ns is None and silent > limit:
                     break

@@ -10,8 +10,9 @@ Before any controller answered, the vehicle says hello (HEARTBEAT + barrier, no 
 once and then every :data:`HELLO_WALL_S`; the streams of that first step (t = 0) go to no one
 (their schedule moves on as if sent), so a controller bound before the vehicle's first datagram
 and one bound after it start from the same first samples (a race on the wall clock otherwise:
-with the estimate's errors the first position differs). A controller that leaves (``wake < 0``) or stays silent for the watchdog
-ends the lockstep: the vehicle goes on in real time (a killed controller is offboard loss, as
+with the estimate's errors the first position differs). A controller that leaves (``wake < 0``)
+or stays silent for the watchdog (its "still working on the step", ``TIMESYNC(t, t)`` while it
+waits for a slow carrier, is not silence) ends the lockstep: the vehicle goes on in real time (a killed controller is offboard loss, as
 in PX4).
 """
 from __future__ import annotations
@@ -22,6 +23,7 @@ import time
 from typing import TYPE_CHECKING, Any
 
 from mission.mavlink.env import mavlink
+from mission.time.clock import Silence
 from sim.vehicle import telemetry as tel
 from sim.vehicle.endpoints import VehicleLink
 
@@ -55,6 +57,7 @@ class LockstepStepper:
         self.batching = False  # a step's packets go out as one datagram per link
         self._barrier_ns = -1  # the step the vehicle waits at
         self._answer: int | None = None  # the controller's answer (its next wake [ns])
+        self._working = 0  # the controller's "still working on this step" messages, counted
         self._marked_steps = -1  # last step announced by SYSTEM_TIME
 
     def run(self) -> None:
@@ -108,10 +111,15 @@ class LockstepStepper:
         """The controller's answer to the barrier; None on stop() or when it went silent."""
         v = self.v
         called = time.monotonic()
+        silence = Silence()  # the controller's, without the vehicle's own stalls (a stopped process)
+        working = self._working
         while not v._stop_event.is_set():
             v._io.poll(POLL_WALL_S)
             if self._answer is not None:
                 return self._answer
+            if self._working != working:  # slow, not gone: it waits for its own carrier
+                working = self._working
+                silence.restart()
             now = time.monotonic()
             if not joined and now - called > HELLO_WALL_S:  # nobody answered yet: hello again
                 with v._lock:  # (time has not started: no link faults yet, or latency would hold it forever)
@@ -119,7 +127,7 @@ class LockstepStepper:
                     self.send_control(onboard, mavlink.MAVLink_timesync_message(0, self.t_ns))
                     v._io.flush()
                 called = now
-            elif joined and now - called > self.watchdog_wall_s:
+            elif joined and silence.elapsed() > self.watchdog_wall_s:
                 log.warning("lockstep: no answer for step t = %.3f s within %.1f s (wall); the controller is "
                             "gone, going on in real time at speed %g", v._t_s, self.watchdog_wall_s, v.options.speed)
                 return None
@@ -142,9 +150,13 @@ class LockstepStepper:
         return self.v._steps * self._step_ns
 
     def on_answer(self, link: VehicleLink, msg: Any) -> None:
-        """A TIMESYNC with ``tc1 != 0``: the controller's answer if it is for this barrier."""
+        """A TIMESYNC with ``tc1 != 0``: the controller's answer if it is for this barrier; with
+        ``tc1 == ts1`` (a wake that is not after the step) it still works on it."""
         if link is self.v._links[0] and msg.ts1 == self._barrier_ns:
-            self._answer = int(msg.tc1)  # the controller finished this step
+            if msg.tc1 == msg.ts1:
+                self._working += 1
+            else:
+                self._answer = int(msg.tc1)  # the controller finished this step
 
     def clock_message(self, link: VehicleLink, data: bytes, address: tuple[str, int]) -> None:
         """A TIMESYNC datagram: the simulation's own clock, so no link faults and no counters."""

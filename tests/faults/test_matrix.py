@@ -179,9 +179,10 @@ class TestLongBlackouts:
 # Lockstep flights acted on from outside at a phase the test reads (a kill, a pilot): at most
 # SPEED simulated seconds per wall second, so the flight never runs away from the test's reaction;
 # the vehicle drops a silent controller after 8 s (wall) rather than 10: longer than the controller
-# waits for its carrier (2 s for a dead one, mission.time.clock.CARRIER_WATCHDOG_WALL_S; up to
-# ALIVE_CARRIER_WATCHDOG_WALL_S = 6 s for a slow one whose liveliness token is present, or one that
-# an outage made lose a message, LOST_WALL_S), so a carrier fault never looks like offboard loss.
+# waits for its carrier (2 s for a dead one, mission.time.clock.CARRIER_WATCHDOG_WALL_S, or one that
+# an outage made lose a message, LOST_WALL_S; for a slow one whose liveliness token is present it
+# waits up to sim.lockstep_carrier_wait_wall_s and tells the vehicle meanwhile that it still works
+# on the step), so a carrier fault never looks like offboard loss.
 PACED = ("--lockstep-max-speed", str(SPEED), "--lockstep-watchdog", "8")
 
 

@@ -110,8 +110,10 @@ def test_a_slow_carrier_is_waited_for_while_its_liveliness_token_is_present(aliv
     feed = _StateFeed()
     with peer_pair() as (controller, carrier_session):
         carrier = _ScriptedCarrier(carrier_session, keys, feed, slow_at_ns=WAKE_NS)
+        kept: list[float] = []  # the relay telling our upstream (the vehicle) that the step goes on
         relay = ZenohRelay(controller, keys, feed, SimpleNamespace(last_seq=-1), alive=lambda: alive,
-                           watchdog_wall_s=WATCHDOG_S, alive_watchdog_wall_s=10 * SLOW_S, join_wall_s=10.0)
+                           watchdog_wall_s=WATCHDOG_S, alive_watchdog_wall_s=10 * SLOW_S, join_wall_s=10.0,
+                           keepalive=lambda: kept.append(time.monotonic()))
         try:
             relay.run(0)  # joins (the call is repeated until the route is up)
             assert relay.wake_ns() == WAKE_NS and relay.dropped == 0
@@ -122,7 +124,9 @@ def test_a_slow_carrier_is_waited_for_while_its_liveliness_token_is_present(aliv
                 assert waited >= SLOW_S and relay.dropped == 0
                 assert relay.wake_ns() == 2 * WAKE_NS  # the carrier's answer to this step, not a guess
                 assert "liveliness token is present: waiting up to" in caplog.text
+                assert kept and start < kept[0], (start, kept)  # told while it waited
             else:
+                assert alive or not kept, kept  # not for a carrier not known to be alive
                 assert waited < SLOW_S and relay.dropped == 1
                 assert relay.wake_ns() is None  # dropped: no longer a participant
                 assert dropped_because in caplog.text
@@ -227,6 +231,9 @@ class _Barriers:
         with self.cv:
             self.at.append(t_ns)
             self.cv.notify_all()
+
+    def heard(self) -> None:
+        """A call came (its barrier may wait for the status it names)."""
 
 
 def test_a_passenger_status_lost_in_an_outage_is_given_up_after_repeated_calls(monkeypatch, caplog) -> None:

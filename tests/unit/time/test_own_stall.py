@@ -1,0 +1,78 @@
+"""A process that stood still (SIGSTOP, starved) does not take its own stop for its upstream's
+silence: its lockstep clock stays in step and takes the next barrier, instead of falling back
+to the wall clock and running on by it (a carrier that did so never rejoined the lockstep)."""
+from __future__ import annotations
+
+import threading
+import time
+import types
+
+import pytest
+
+import mission.time.clock as clock_module
+from mission.time.clock import OWN_STALL_WALL_S, LockstepClock, Silence
+from sim.net import wait_for
+from tests.support.stepper import Stepper
+
+
+class _Wall:
+    """``time`` for the clock module, whose monotonic clock can jump ahead (the process stopped)."""
+
+    def __init__(self) -> None:
+        self.jumped_s = 0.0
+
+    def monotonic(self) -> float:
+        return time.monotonic() + self.jumped_s
+
+    def sleep(self, duration_s: float) -> None:
+        time.sleep(duration_s)
+
+
+@pytest.fixture
+def wall(monkeypatch: pytest.MonkeyPatch) -> _Wall:
+    fake = _Wall()
+    monkeypatch.setattr(clock_module, "time", types.SimpleNamespace(monotonic=fake.monotonic, sleep=fake.sleep))
+    return fake
+
+
+def test_a_stretch_this_process_stood_still_is_not_silence(wall: _Wall) -> None:
+    silence = Silence()
+    assert silence.elapsed() < OWN_STALL_WALL_S
+    wall.jumped_s += 30.0  # stopped for 30 s between two checks
+    assert silence.elapsed() < OWN_STALL_WALL_S and silence.own_stalls == 1
+    silence.restart()
+    assert silence.elapsed() < OWN_STALL_WALL_S
+
+
+def _participant(clock: LockstepClock) -> None:
+    while clock.lockstep:
+        clock.sleep(0.02)
+
+
+def test_a_clock_stopped_longer_than_its_watchdog_stays_in_step(wall: _Wall) -> None:
+    clock = LockstepClock(watchdog_wall_s=0.5, name="stopped", creator_runs=False)
+    stepper = Stepper(clock)
+    threading.Thread(target=_participant, args=(clock,), name="participant", daemon=True).start()
+    try:
+        stepper.step()
+        stepper.step()
+        wall.jumped_s += 6.0  # the process stood still 6 s (wall), its upstream's barrier waiting in a socket
+        wait_for(lambda: clock._silence.own_stalls >= 1, 5.0, "the scheduler saw its own stall")
+        assert clock.lockstep, clock.fallback_reason
+        stepper.step()  # the barrier that was waiting: taken, in step
+        assert clock.now() == pytest.approx(0.04) and clock.counters["held"], clock.counters
+    finally:
+        clock.close()
+
+
+def test_an_upstream_silent_while_this_process_runs_is_gone() -> None:
+    clock = LockstepClock(watchdog_wall_s=0.3, name="silent", creator_runs=False)
+    stepper = Stepper(clock)
+    threading.Thread(target=_participant, args=(clock,), name="participant", daemon=True).start()
+    try:
+        stepper.step()
+        wait_for(lambda: not clock.lockstep, 5.0, "the clock fell back")
+        assert clock.fallback_reason is not None and "upstream silent" in clock.fallback_reason
+        assert clock.counters["held"] is False
+    finally:
+        clock.close()
