@@ -29,6 +29,7 @@ from mission.mavlink.telemetry import vehicle_report
 from mission.model import mission_model
 from mission.passenger.inputs import PassengerInputs
 from mission.passenger.step import PassengerStep, observe_carrier
+from mission.passenger.target import RateGate, deck_target
 from mission.phases import AbortReason, Decision, Measurement, MissionState, Observation, Phase
 from mission.record.info import flown_info, outcome_summary
 from mission.record.recorder import FlightRecorder
@@ -112,6 +113,8 @@ class MissionController:
         self._received: Any = None
         self._rates: list[float] = []  # LOCAL_POSITION_NED rate seen each flying tick [Hz]
         self.step = PassengerStep(self.model, cfg.mission.velocity_bias_tau_s)
+        self._target_gate = RateGate(cfg.relnav.landing_target_rate_hz if cfg.relnav.enabled else 0.0)
+        self._target_failed = False  # a LANDING_TARGET send raised (logged once)
         self._home: HomeKeeper | None = None
         self._params: ParamKeeper | None = None
         self.px4_params: dict[str, Any] = {}  # PX4 parameters read, set and restored (for the summary)
@@ -158,6 +161,26 @@ class MissionController:
             return False
         self.link.send(setpoint)
         return True
+
+    def _offer_landing_target(self, t: float, inputs: PassengerInputs, obs: Observation) -> None:
+        """While the relative estimate of the deck is converged, send the vehicle the deck's
+        landing point (:func:`mission.passenger.target.deck_target`: its own position
+        sample plus the estimate, at the sample's time) at ``relnav.landing_target_rate_hz``, for
+        PX4's own precision landing (docs/px4-precland.md). A send that raises is logged once and
+        never stops the loop."""
+        rel, v = obs.relative, inputs.vehicle
+        if rel is None or not rel.converged or v is None or v.position_ned_m is None or not self._target_gate.due(t):
+            return
+        target = deck_target(v.position_ned_m, rel.position_ned_m, self.model.dock_offset_ned_m,
+                             t if v.sample_t_s is None else v.sample_t_s, None if obs.carrier is None else obs.carrier.yaw_rad)
+        if target is None:
+            return
+        try:
+            self.link.send_landing_target(target)
+        except Exception as exc:  # the backstop's message must never stop the setpoint stream
+            if not self._target_failed:
+                self._target_failed = True
+                log.warning("LANDING_TARGET not sent: %s", exc)
 
     def _publish(self, t: float, obs: Observation) -> None:
         if self.publisher is None or obs.vehicle is None:
@@ -218,6 +241,7 @@ class MissionController:
                     sent_ns = stamp()
                 if dec.request is not None:
                     worker.submit(dec.request)
+                self._offer_landing_target(t, inputs, obs)
                 home.offer(dec.home_ned_m)
                 events = dec.events
                 if self.state.phase != last_phase:
