@@ -17,8 +17,8 @@ console lines about precision landing (``Precland: switching to ...``).
   then kill with COM_OBL_RC_ACT 3 (Return) and RTL_PLD_MD 0 (precision landing off);
 - ``return-required`` / ``return-opportunistic``: COM_OBL_RC_ACT 3, RTL_PLD_MD 2 / 1, the
   stream going on after the kill (another process than the controller sends it);
-- ``return-silent``: COM_OBL_RC_ACT 3, RTL_PLD_MD 2, the stream stopping with the controller
-  (what happens when the mission loop itself is the only sender);
+- ``return-silent`` / ``return-silent-opportunistic``: COM_OBL_RC_ACT 3, RTL_PLD_MD 2 / 1, the
+  stream stopping with the controller (what happens when the mission loop itself is the only sender);
 - ``land``: COM_OBL_RC_ACT 4 (Land), RTL_PLD_MD 2, the stream going on;
 - ``precland-mode``: no kill: AUTO.PRECLAND commanded (DO_SET_MODE 4/9) with the stream on.
 
@@ -121,6 +121,7 @@ SCENARIOS: dict[str, Callable[[Path], dict[str, Any]]] = {
     "return-required": lambda d: scenario(d, 3, 2),
     "return-opportunistic": lambda d: scenario(d, 3, 1),
     "return-silent": lambda d: scenario(d, 3, 2, stream_after=False),
+    "return-silent-opportunistic": lambda d: scenario(d, 3, 1, stream_after=False),
     "land": lambda d: scenario(d, 4, 2),
     "precland-mode": lambda d: scenario(d, 3, 2, kill=False),
 }
