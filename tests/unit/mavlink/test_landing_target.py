@@ -136,3 +136,20 @@ def test_loop_sends_the_dock_point_at_the_configured_rate_while_converged():
 def test_loop_sends_nothing_at_rate_zero():
     _, world, _ = fly(0.0)
     assert world.landing_targets == []
+
+
+def test_a_recovery_that_streams_the_deck_sets_rtl_precision_landing_and_puts_it_back():
+    """PX4's Return (the offboard-loss action of a recovery) lands on the streamed deck only with
+    RTL_PLD_MD > 0: set to opportunistic while the mission flies, put back at its end."""
+    cfg = with_overrides(load_config(CONFIGS / "demo.toml"),
+                         {"mission.final_action": "return", "relnav.enabled": True, "relnav.landing_target_rate_hz": 10.0})
+    clock = ManualClock()
+    world = FakeWorld(clock, target_ned_m=np.asarray(cfg.scenario.target, dtype=float))
+    world.params["RTL_PLD_MD"] = 0.0
+    stop = threading.Event()
+    controller = MissionController(cfg, world, world.feed, clock, command_thread=False, stop=stop,
+                                   on_tick=lambda r: stop.set() if r.t_s > 5.0 else None)
+    controller.run()
+    assert [(n, v) for _, n, v in world.param_sets if n == "RTL_PLD_MD"] == [("RTL_PLD_MD", 1.0), ("RTL_PLD_MD", 0.0)]
+    assert controller.px4_params["RTL_PLD_MD"] == {"was": 0.0, "set": 1.0, "restored": 0.0}
+    assert controller.px4_params["COM_OBL_RC_ACT"]["set"] == 3.0
