@@ -19,6 +19,8 @@ console lines about precision landing (``Precland: switching to ...``).
   stream going on after the kill (another process than the controller sends it);
 - ``return-silent`` / ``return-silent-opportunistic``: COM_OBL_RC_ACT 3, RTL_PLD_MD 2 / 1, the
   stream stopping with the controller (what happens when the mission loop itself is the only sender);
+- ``return-silent-rtl-defaults`` (``-btout``): as ``return-silent-opportunistic`` with PX4's own
+  RTL altitudes (no ``FAST_RTL``), and PLD_BTOUT 30 s;
 - ``land``: COM_OBL_RC_ACT 4 (Land), RTL_PLD_MD 2, the stream going on;
 - ``precland-mode``: no kill: AUTO.PRECLAND commanded (DO_SET_MODE 4/9) with the stream on.
 
@@ -48,7 +50,7 @@ DECK = (6.0, 8.0, 0.0)  # [m] the deck's landing point (its truth; the ground is
 HOME = (9.0, 6.0, 0.0)  # [m] PX4's home: the deck as the carrier's GNSS has it, 3.6 m off
 RATE_S = 0.1  # LANDING_TARGET period [s]
 FAST_RTL = {"RTL_RETURN_ALT": 5.0, "RTL_DESCEND_ALT": 5.0}  # no climb to 60 m first (PX4's defaults)
-SHOWN = ("COM_OBL_RC_ACT", "COM_OF_LOSS_T", "NAV_RCL_ACT", "RTL_PLD_MD", "RTL_TYPE", "RTL_LAND_DELAY", "PLD_BTOUT",
+SHOWN = ("RTL_RETURN_ALT", "RTL_DESCEND_ALT", "RTL_CONE_ANG", "RTL_MIN_DIST", "COM_OBL_RC_ACT", "COM_OF_LOSS_T", "NAV_RCL_ACT", "RTL_PLD_MD", "RTL_TYPE", "RTL_LAND_DELAY", "PLD_BTOUT",
          "PLD_HACC_RAD", "PLD_FAPPR_ALT", "PLD_SRCH_ALT", "PLD_SRCH_TOUT", "PLD_MAX_SRCH", "MPC_LAND_SPEED")
 
 
@@ -70,8 +72,8 @@ def _console(directory: Path, since: int) -> list[str]:
 
 
 def scenario(directory: Path, obl_rc_act: int, pld_md: int, *, stream_after: bool = True, kill: bool = True,
-             offboard_s: float = 3.0) -> dict[str, Any]:
-    params = {"COM_OBL_RC_ACT": obl_rc_act, "RTL_PLD_MD": pld_md, **FAST_RTL}
+             offboard_s: float = 3.0, extra: dict[str, float] | None = None) -> dict[str, Any]:
+    params = {"COM_OBL_RC_ACT": obl_rc_act, "RTL_PLD_MD": pld_md, **(FAST_RTL if extra is None else extra)}
     with sitl(directory, params) as (probe, beats):
         out: dict[str, Any] = {"params": {name: param(probe, name) for name in SHOWN}}
         stream = take_off(probe)
@@ -122,6 +124,8 @@ SCENARIOS: dict[str, Callable[[Path], dict[str, Any]]] = {
     "return-opportunistic": lambda d: scenario(d, 3, 1),
     "return-silent": lambda d: scenario(d, 3, 2, stream_after=False),
     "return-silent-opportunistic": lambda d: scenario(d, 3, 1, stream_after=False),
+    "return-silent-rtl-defaults": lambda d: scenario(d, 3, 1, stream_after=False, extra={}),
+    "return-silent-rtl-defaults-btout": lambda d: scenario(d, 3, 1, stream_after=False, extra={"PLD_BTOUT": 30.0}),
     "land": lambda d: scenario(d, 4, 2),
     "precland-mode": lambda d: scenario(d, 3, 2, kill=False),
 }
