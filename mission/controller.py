@@ -163,13 +163,14 @@ class MissionController:
         return True
 
     def _offer_landing_target(self, t: float, inputs: PassengerInputs, obs: Observation) -> None:
-        """While the relative estimate of the deck is converged, send the vehicle the deck's
-        landing point (:func:`mission.passenger.target.deck_target`: its own position
-        sample plus the estimate, at the sample's time) at ``relnav.landing_target_rate_hz``, for
-        PX4's own precision landing (docs/px4-precland.md). A send that raises is logged once and
-        never stops the loop."""
+        """While the relative estimate of the deck is converged and the vehicle's position is valid,
+        send the vehicle the deck's landing point (:func:`mission.passenger.target.deck_target`:
+        its own position sample plus the estimate, at the sample's time) at
+        ``relnav.landing_target_rate_hz``, for PX4's own precision landing (docs/px4-precland.md).
+        A send that raises is logged once and never stops the loop."""
         rel, v = obs.relative, inputs.vehicle
-        if rel is None or not rel.converged or v is None or v.position_ned_m is None or not self._target_gate.due(t):
+        if rel is None or not rel.converged or v is None or not v.valid or v.position_ned_m is None \
+                or not self._target_gate.due(t):
             return
         target = deck_target(v.position_ned_m, rel.position_ned_m, self.model.dock_offset_ned_m,
                              t if v.sample_t_s is None else v.sample_t_s, None if obs.carrier is None else obs.carrier.yaw_rad)
