@@ -204,13 +204,15 @@ def encode_param(value: float, param_type: int) -> float:
     """PARAM_SET's float field for ``value`` of ``param_type`` (integers rounded, then packed)."""
     return float(value) if param_type == mavlink.MAV_PARAM_TYPE_REAL32 else pack_int32(int(round(value)))
 
+
 # LANDING_TARGET (docs/px4-precland.md). PX4's ``handle_message_landing_target`` reads only
 # ``position_valid``, ``frame``, ``time_usec`` and x, y, z of a position-valid message: its
 # ``landing_target_pose`` gets x_abs, y_abs, z_abs (its local NED frame [m]) with abs_pos_valid,
-# stamped with time_usec moved onto its clock once its TIMESYNC with the sender has converged,
+# stamped with time_usec moved onto its clock once its TIMESYNC on that link has converged,
 # else with the arrival time; q, type and target_num are not read. position_valid 0 is read as an
 # IR-LOCK report (the image angles): never sent.
-FLOAT32_MAX = 3.4028234663852886e38
+FLOAT32_MAX = 3.4028234663852886e38  # float32's largest finite value
+
 
 def quaternion(yaw_rad: float | None) -> tuple[float, float, float, float]:
     """(w, x, y, z) of a rotation by ``yaw_rad`` [rad] about the down axis; identity for None."""

@@ -16,7 +16,6 @@ from typing import Any
 import numpy as np
 
 
-
 @dataclass(frozen=True)
 class LandingTarget:
     """Where PX4 should land: ``position_ned_m`` the deck's landing point in the vehicle's local
