@@ -29,6 +29,7 @@ from mission.mavlink.telemetry import vehicle_report
 from mission.model import mission_model
 from mission.passenger.inputs import PassengerInputs
 from mission.passenger.step import PassengerStep, observe_carrier
+from mission.passenger.target import RateGate, deck_target
 from mission.phases import AbortReason, Decision, Measurement, MissionState, Observation, Phase
 from mission.record.info import flown_info, outcome_summary
 from mission.record.recorder import FlightRecorder
@@ -112,6 +113,8 @@ class MissionController:
         self._received: Any = None
         self._rates: list[float] = []  # LOCAL_POSITION_NED rate seen each flying tick [Hz]
         self.step = PassengerStep(self.model, cfg.mission.velocity_bias_tau_s)
+        self._target_gate = RateGate(cfg.relnav.landing_target_rate_hz if cfg.relnav.enabled else 0.0)
+        self._target_failed = False  # a LANDING_TARGET send raised (logged once)
         self._home: HomeKeeper | None = None
         self._params: ParamKeeper | None = None
         self.px4_params: dict[str, Any] = {}  # PX4 parameters read, set and restored (for the summary)
@@ -159,6 +162,27 @@ class MissionController:
         self.link.send(setpoint)
         return True
 
+    def _offer_landing_target(self, t: float, inputs: PassengerInputs, obs: Observation) -> None:
+        """While the relative estimate of the deck is converged and the vehicle's position is valid,
+        send the vehicle the deck's landing point (:func:`mission.passenger.target.deck_target`:
+        its own position sample plus the estimate, at the sample's time) at
+        ``relnav.landing_target_rate_hz``, for PX4's own precision landing (docs/px4-precland.md).
+        A send that raises is logged once and never stops the loop."""
+        rel, v = obs.relative, inputs.vehicle
+        if rel is None or not rel.converged or v is None or not v.valid or v.position_ned_m is None \
+                or not self._target_gate.due(t):
+            return
+        target = deck_target(v.position_ned_m, rel.position_ned_m, self.model.dock_offset_ned_m,
+                             t if v.sample_t_s is None else v.sample_t_s, None if obs.carrier is None else obs.carrier.yaw_rad)
+        if target is None:
+            return
+        try:
+            self.link.send_landing_target(target)
+        except Exception as exc:  # the backstop's message must never stop the setpoint stream
+            if not self._target_failed:
+                self._target_failed = True
+                log.warning("LANDING_TARGET not sent: %s", exc)
+
     def _publish(self, t: float, obs: Observation) -> None:
         if self.publisher is None or obs.vehicle is None:
             return
@@ -196,7 +220,8 @@ class MissionController:
                              stop_unused=m.unused_streams == "stop", recovery=m.final_action == "return",
                              battery_reserve_pct=self.cfg.recovery.battery_reserve_pct,
                              offboard_loss_return=self.cfg.recovery.offboard_loss_return, keeper=self._params,
-                             params=self.px4_params)
+                             params=self.px4_params,
+                             precland=self.cfg.relnav.enabled and self.cfg.relnav.landing_target_rate_hz > 0)
         periodic = Periodic(self.clock, self.model.dt_s)
         last_phase = None
         stamp = time.monotonic_ns if self.on_tick is not None else _no_stamp
@@ -218,6 +243,7 @@ class MissionController:
                     sent_ns = stamp()
                 if dec.request is not None:
                     worker.submit(dec.request)
+                self._offer_landing_target(t, inputs, obs)
                 home.offer(dec.home_ned_m)
                 events = dec.events
                 if self.state.phase != last_phase:

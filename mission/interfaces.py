@@ -29,6 +29,7 @@ if TYPE_CHECKING:
     from mission.phases.measurements import Measurement
     from mission.core.setpoint import Setpoint
     from mission.bus.bridge import ReceivedCarrierState
+    from mission.passenger.target import LandingTarget
     from mission.mavlink.session import LinkCounters
     from mission.mavlink.link import VehicleState
     from mission.bus.wire import GeoOrigin, PassengerStatus
@@ -46,6 +47,11 @@ class Vehicle(Protocol):
     def send(self, setpoint: Setpoint) -> None:
         """Send one setpoint as it is (velocity only or full, yaw or not: the setpoint says which).
         ValueError for a non-finite one, before anything is sent."""
+        ...
+
+    def send_landing_target(self, target: LandingTarget) -> None:
+        """Send the deck's landing point for the vehicle's own precision landing (PX4's
+        LANDING_TARGET; docs/px4-precland.md). ValueError for an unsendable one."""
         ...
 
     def set_message_interval(self, message_id: int, rate_hz: float) -> None:

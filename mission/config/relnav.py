@@ -21,7 +21,7 @@ if TYPE_CHECKING:
 
 #: ``[relnav]``'s fields that tell the phases how to use the estimate (not the estimator's tuning).
 PHASE_FIELDS = ("enabled", "marker_timeout_s", "marker_memory_s", "search_s", "correction_rate_m_s", "seated_sigma_m",
-                "pending_limit_m")
+                "pending_limit_m", "landing_target_rate_hz")
 
 
 class RelnavSection(Section):
@@ -51,6 +51,11 @@ class RelnavSection(Section):
     pending_limit_m: float = Field(0.3, gt=0, le=10,
         description=("[m] HOLDOFF begins an approach only once the part of the estimate's jumps still held back "
                      "(let through at `relnav.correction_rate_m_s`) is below this"))
+    landing_target_rate_hz: float = Field(0.0, ge=0, le=50,
+        description=("[Hz] while the estimate is converged, the loop sends the vehicle the deck's landing point "
+                     "(the dock point in its local NED frame: its own position plus the relative estimate) as "
+                     "LANDING_TARGET this often, for PX4's own precision landing as a backstop (docs/px4-precland.md); "
+                     "0: never"))
 
     accel_noise_m_s2: float = Field(0.5, gt=0, le=50,
         description=("[m/s^2/sqrt(Hz)] square root of the spectral density of the white relative acceleration "

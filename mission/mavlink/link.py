@@ -27,6 +27,7 @@ from typing import Any, Callable
 from mission.core.setpoint import Setpoint
 from mission.flight_mode import FlightMode
 from mission.mavlink import px4
+from mission.passenger.target import LandingTarget
 from mission.time.clock import Clock, ScaledClock
 from mission.config.urls import DEFAULT_URL
 from mission.errors import LinkError
@@ -88,10 +89,8 @@ class VehicleLink:
         self._source = (int(source_system), int(source_component))
         self._tlog_path = None if tlog_path is None else Path(tlog_path)
         self._signing_key = signing_key
-        self.heartbeat_timeout_s = float(heartbeat_timeout_s)
-        self.heartbeat_period_s = float(heartbeat_period_s)
-        self.position_timeout_s = float(position_timeout_s)
-        self.reason_grace_s = float(reason_grace_s)
+        self.heartbeat_timeout_s, self.heartbeat_period_s = float(heartbeat_timeout_s), float(heartbeat_period_s)
+        self.position_timeout_s, self.reason_grace_s = float(position_timeout_s), float(reason_grace_s)
 
         self._session = LinkSession(url, self._clock, self.position_timeout_s, signed=signing_key is not None)
         self._commander = CommandClient(self._session, self._send, self._require_vehicle, self.reason_grace_s)
@@ -287,6 +286,10 @@ class VehicleLink:
         msg = encode(setpoint, self._require_vehicle(), int(self._clock.now() * 1000.0))
         self._send(msg, "tx_setpoints")
 
+    def send_landing_target(self, target: LandingTarget) -> None:
+        """The deck's landing point as LANDING_TARGET (:func:`~mission.mavlink.px4.encode_landing_target`; ValueError beyond float32)."""
+        self._send(px4.encode_landing_target(target), "tx_landing_targets")
+
     def _require_vehicle(self) -> tuple[int, int]:
         if self._transport is None:
             raise LinkError(f"link {self.url!r} is not open")
@@ -338,13 +341,11 @@ class VehicleLink:
         return True
 
     def _log_packet(self, packet: bytes | bytearray) -> None:
-        tlog = self._tlog
-        if tlog is not None:
+        if (tlog := self._tlog) is not None:
             tlog.write(packet)
 
     def _flush_tlog(self) -> None:
-        tlog = self._tlog
-        if tlog is not None:
+        if (tlog := self._tlog) is not None:
             tlog.flush()
 
 

@@ -10,10 +10,14 @@ the pymavlink dialect's (one source): new code reads them from
 """
 from __future__ import annotations
 
+import math
 import struct
+from dataclasses import dataclass
 from enum import IntEnum
+from typing import Any
 
 from mission.flight_mode import MANUAL_MODES, FlightMode
+from mission.passenger.target import LandingTarget
 from mission.mavlink.env import mavlink
 
 
@@ -199,3 +203,53 @@ def decode_param(wire_value: float, param_type: int) -> float:
 def encode_param(value: float, param_type: int) -> float:
     """PARAM_SET's float field for ``value`` of ``param_type`` (integers rounded, then packed)."""
     return float(value) if param_type == mavlink.MAV_PARAM_TYPE_REAL32 else pack_int32(int(round(value)))
+
+
+# LANDING_TARGET (docs/px4-precland.md). PX4's ``handle_message_landing_target`` reads only
+# ``position_valid``, ``frame``, ``time_usec`` and x, y, z of a position-valid message: its
+# ``landing_target_pose`` gets x_abs, y_abs, z_abs (its local NED frame [m]) with abs_pos_valid,
+# stamped with time_usec moved onto its clock once its TIMESYNC on that link has converged,
+# else with the arrival time; q, type and target_num are not read. position_valid 0 is read as an
+# IR-LOCK report (the image angles): never sent.
+FLOAT32_MAX = 3.4028234663852886e38  # float32's largest finite value
+
+
+def quaternion(yaw_rad: float | None) -> tuple[float, float, float, float]:
+    """(w, x, y, z) of a rotation by ``yaw_rad`` [rad] about the down axis; identity for None."""
+    if yaw_rad is None:
+        return (1.0, 0.0, 0.0, 0.0)
+    return (math.cos(yaw_rad / 2.0), 0.0, 0.0, math.sin(yaw_rad / 2.0))
+
+
+def encode_landing_target(target: LandingTarget) -> Any:
+    """LANDING_TARGET of ``target`` as PX4 accepts it: position_valid 1, frame LOCAL_NED, type
+    VISION_FIDUCIAL, target_num 0, the image fields (angles, distance, sizes) 0. ValueError for a
+    coordinate beyond float32, before any message exists."""
+    x, y, z = target.position_ned_m
+    if not all(math.isfinite(c) and abs(c) <= FLOAT32_MAX for c in (x, y, z)):
+        raise ValueError(f"refusing landing target {target.position_ned_m}")
+    return mavlink.MAVLink_landing_target_message(
+        target.time_usec & 0xFFFFFFFFFFFFFFFF, 0, MAV_FRAME_LOCAL_NED, 0.0, 0.0, 0.0, 0.0, 0.0,
+        x, y, z, quaternion(target.yaw_rad), mavlink.LANDING_TARGET_TYPE_VISION_FIDUCIAL, 1)
+
+
+@dataclass(frozen=True)
+class LandingTargetReading:
+    """What PX4's ``handle_message_landing_target`` makes of a LANDING_TARGET: ``kind`` is
+    ``"pose"`` (a ``landing_target_pose`` with ``abs_pos_valid`` and ``position_ned_m`` =
+    x, y, z [m] as float32 carried them), ``"unsupported_frame"`` (position-valid in another
+    frame: refused with a critical STATUSTEXT naming ``frame``) or ``"irlock"`` (position_valid
+    0: an IR-LOCK report of the image angles, which only PX4's landing_target_estimator reads)."""
+
+    kind: str
+    frame: int
+    position_ned_m: tuple[float, float, float] | None
+    time_usec: int
+
+
+def landing_target_reading(msg: Any) -> LandingTargetReading:
+    """Read ``msg`` (a LANDING_TARGET) as PX4's receiver does: see :class:`LandingTargetReading`."""
+    frame, t = int(msg.frame), int(msg.time_usec)
+    if msg.position_valid and frame == MAV_FRAME_LOCAL_NED:
+        return LandingTargetReading("pose", frame, (float(msg.x), float(msg.y), float(msg.z)), t)
+    return LandingTargetReading("unsupported_frame" if msg.position_valid else "irlock", frame, None, t)

@@ -156,21 +156,26 @@ class Configurable(Protocol):
     def set_param(self, name: str, value: float) -> float: ...
 
 
+RTL_PRECLAND_OPPORTUNISTIC = 1  # RTL_PLD_MD: precision landing if the target is seen, else a normal one
+
+
 class Px4Setup:
     """PX4's streams and failsafe parameters for one mission, each asked once, off the loop.
 
     ``telemetry_rate_hz`` [Hz]: LOCAL_POSITION_NED's rate to ask for (None: as it streams);
     ``stop_unused``: stop :data:`UNUSED_STREAMS`; ``recovery``: the mission comes home
     (``final_action = "return"``), with ``battery_reserve_pct`` [%] its recall and
-    ``offboard_loss_return``: set PX4's offboard-loss action to Return; ``keeper``: keeps
+    ``offboard_loss_return``: set PX4's offboard-loss action to Return, and with ``precland``
+    (the mission streams the deck as LANDING_TARGET) RTL's precision landing to opportunistic
+    (RTL_PLD_MD 1, docs/px4-precland.md) if it is off; ``keeper``: keeps
     :data:`~mission.mavlink.commander.KEPT_PARAMS` as found. ``params``: what was read, set and
     restored (for the summary). docs/recovery.md, "PX4's home".
     """
 
     def __init__(self, vehicle: Configurable, clock: Clock, *, telemetry_rate_hz: float | None, stop_unused: bool,
                  recovery: bool, battery_reserve_pct: float, offboard_loss_return: bool,
-                 keeper: ParamKeeper | None = None, params: dict[str, Any] | None = None) -> None:
-        self.vehicle, self.clock = vehicle, clock
+                 keeper: ParamKeeper | None = None, params: dict[str, Any] | None = None, precland: bool = False) -> None:
+        self.vehicle, self.clock, self.precland = vehicle, clock, precland
         self.telemetry_rate_hz, self.stop_unused = telemetry_rate_hz, stop_unused
         self.recovery, self.battery_reserve_pct, self.offboard_loss_return = recovery, battery_reserve_pct, offboard_loss_return
         self.keeper = keeper
@@ -234,6 +239,12 @@ class Px4Setup:
                 if was != OFFBOARD_LOSS_RETURN:
                     params["COM_OBL_RC_ACT"]["set"] = link.set_param("COM_OBL_RC_ACT", OFFBOARD_LOSS_RETURN)
                     log.info("PX4's offboard-loss action COM_OBL_RC_ACT set to Return (was %g) for the recovery", was)
+            if self.recovery and self.offboard_loss_return and self.precland:
+                was = link.get_param("RTL_PLD_MD")
+                params["RTL_PLD_MD"] = {"was": was, "set": was}
+                if was == 0:
+                    params["RTL_PLD_MD"]["set"] = link.set_param("RTL_PLD_MD", RTL_PRECLAND_OPPORTUNISTIC)
+                    log.info("PX4's RTL_PLD_MD set to opportunistic: its Return lands on the deck streamed as LANDING_TARGET")
         except LinkError as exc:
             log.warning("PX4's parameters for the recovery not read or set: %s", exc)
         if self.keeper is None:
@@ -245,11 +256,12 @@ class Px4Setup:
                 log.warning("PX4's %s not read: it is not kept (%s)", name, exc)
 
     def restore(self) -> None:
-        """Put back the offboard-loss action :meth:`start` changed."""
-        entry = self.params.get("COM_OBL_RC_ACT")
-        if entry is None or entry["set"] == entry["was"]:
-            return
-        try:
-            entry["restored"] = self.vehicle.set_param("COM_OBL_RC_ACT", entry["was"])
-        except LinkError as exc:
-            log.warning("PX4's COM_OBL_RC_ACT left at Return: %s", exc)
+        """Put back the parameters :meth:`start` changed (the offboard-loss action, RTL's precision landing)."""
+        for name in ("COM_OBL_RC_ACT", "RTL_PLD_MD"):
+            entry = self.params.get(name)
+            if entry is None or entry["set"] == entry["was"]:
+                continue
+            try:
+                entry["restored"] = self.vehicle.set_param(name, entry["was"])
+            except LinkError as exc:
+                log.warning("PX4's %s left at %g: %s", name, entry["set"], exc)

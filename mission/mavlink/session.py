@@ -59,6 +59,8 @@ class LinkCounters:
     tx_messages: int = 0
     tx_heartbeats: int = 0
     tx_setpoints: int = 0
+    tx_landing_targets: int = 0
+    """LANDING_TARGET packets sent (the deck's landing point for PX4's precision landing)."""
     tx_commands: int = 0
     """COMMAND_LONG and COMMAND_INT packets sent, retries included."""
     tx_errors: int = 0

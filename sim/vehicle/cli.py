@@ -384,8 +384,9 @@ def truth(snapshot: VehicleSnapshot, estimate_error: dict[str, Any] | None = Non
     """The world's truth of a flight for ``--summary``: the vehicle's simulated time [s], how its
     estimate erred (``estimate_error``: :func:`estimate_of`), whether it
     lies crashed on the deck (``crash``: why, else None) and every touchdown (time [s], horizontal
-    distance from the deck's true centre [m], speeds relative to the deck [m/s], crash)."""
-    return {"t_s": snapshot.t_s, "estimate_error": estimate_error, "deck": {
+    distance from the deck's true centre [m], speeds relative to the deck [m/s], crash) and the
+    vehicle's counters (what it received, accepted and refused)."""
+    return {"t_s": snapshot.t_s, "estimate_error": estimate_error, "counters": snapshot.counters, "deck": {
         "crash": snapshot.crash, "on_deck": snapshot.on_deck,
         "touchdowns": [dataclasses.asdict(t) for t in snapshot.touchdowns]}}
 

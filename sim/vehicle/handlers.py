@@ -7,6 +7,7 @@ at the vehicle's simulated time, and answers through the vehicle's outbound path
 """
 from __future__ import annotations
 
+import collections
 import logging
 import math
 from collections.abc import Callable
@@ -53,7 +54,10 @@ class MessageHandlers:
             "PARAM_REQUEST_READ": self._on_param_request_read,
             "PARAM_SET": self._on_param_set,
             "TIMESYNC": self.timesync,
+            "LANDING_TARGET": self._on_landing_target,
         }
+        # the LANDING_TARGETs read as PX4's receiver reads them (simulated time [s], reading), newest last
+        self.landing_targets: collections.deque[tuple[float, px4.LandingTargetReading]] = collections.deque(maxlen=100)
 
     def process(self, link: VehicleLink, data: bytes, address: tuple[str, int]) -> None:
         """One datagram that passed the inbound faults."""
@@ -200,6 +204,20 @@ class MessageHandlers:
             return
         self.v._counters["setpoints_accepted"] += 1
         self.v._commander.accept_setpoint(self.v._t_s, setpoint)
+
+    def _on_landing_target(self, link: VehicleLink, msg: Any) -> None:
+        """PX4's rule (``handle_message_landing_target``): position-valid in LOCAL_NED becomes the
+        landing target's pose (accepted; PX4's precision landing may use it, OFFBOARD ignores it);
+        position-valid in another frame is refused with PX4's critical STATUSTEXT; position_valid
+        0 is an IR-LOCK report, which nothing reads on a vehicle without an IR-LOCK estimator (ignored)."""
+        reading = px4.landing_target_reading(msg)
+        self.landing_targets.append((self.v._t_s, reading))
+        if reading.kind == "pose":
+            self.v._counters["landing_targets_accepted"] += 1
+            return
+        self.v._counters["landing_targets_ignored"] += 1
+        if reading.kind == "unsupported_frame":
+            self.v._commander._say(f"Landing target: coordinate frame {reading.frame} unsupported", px4.MAV_SEVERITY_CRITICAL)
 
     def _on_param_request_list(self, link: VehicleLink, msg: Any) -> None:
         if self._targets_me(msg):

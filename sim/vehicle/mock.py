@@ -58,7 +58,7 @@ COUNTER_NAMES = (
     "rx_datagrams", "rx_messages", "rx_malformed", "rx_unknown_ids", "rx_unsigned_rejected", "rx_wrong_target",
     "rx_ignored", "commands", "setpoints_accepted", "setpoints_rejected", "params_set", "tx_messages", "tx_errors",
     "dropped_in", "dropped_out", "blackout_in", "blackout_out", "delayed_in", "delayed_out", "physics_steps",
-    "internal_errors",
+    "internal_errors", "landing_targets_accepted", "landing_targets_ignored",
 )
 
 

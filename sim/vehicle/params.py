@@ -65,6 +65,7 @@ PARAM_SPECS: tuple[ParamSpec, ...] = (
     ParamSpec("MPC_LAND_SPEED", 0.7, False, "landing descent speed [m/s]"),
     ParamSpec("MPC_YAWRAUTO_MAX", 45.0, False, "yaw rate limit [deg/s]"),
     ParamSpec("MIS_TAKEOFF_ALT", 2.5, False, "default takeoff altitude above home [m]"),
+    ParamSpec("RTL_PLD_MD", 0, True, "RTL's precision landing: 0 off 1 opportunistic 2 required (kept, not flown)"),
     ParamSpec("RTL_RETURN_ALT", 30.0, False, "RTL return altitude above the destination [m] (multicopter default)"),
     ParamSpec("RTL_MIN_DIST", 10.0, False, "within this horizontal distance [m] of the destination RTL returns in the cone"),
     ParamSpec("RTL_CONE_ANG", 45, True, "half angle [deg] of RTL's altitude cone round the destination (0: none)"),

@@ -102,3 +102,14 @@ def test_the_gate_lets_the_gnss_fixes_through_and_the_lockstep_loses_nothing(fli
     assert s["lockstep"]["samples_lost"] == 0, s["lockstep"]
     track = json.loads((log / "vehicle.json").read_text())["track"]
     assert len(track["t_s"]) >= 500, len(track["t_s"])
+
+
+def test_the_deck_is_streamed_as_landing_target_and_the_vehicle_accepts_every_one(flight):
+    """``relnav.landing_target_rate_hz`` 10: the loop sends the deck's landing point while the
+    estimate is converged (the marker in sight near the deck), and the mock vehicle, reading them
+    by PX4's rule, accepts every one it got and refuses none."""
+    log, _, s, _, _ = flight
+    sent = s["link"]["tx_landing_targets"]
+    counters = json.loads((log / "vehicle.json").read_text())["counters"]
+    assert sent > 0, s["link"]
+    assert counters["landing_targets_accepted"] == sent and counters["landing_targets_ignored"] == 0, counters

@@ -51,6 +51,7 @@ class FakeWorld:
     statuses: list[PassengerStatus] = field(default_factory=list)
     origin_given: GeoOrigin | None = None
     intervals: list[tuple[int, float]] = field(default_factory=list)  # SET_MESSAGE_INTERVAL asked (id, Hz)
+    landing_targets: list[tuple[float, Any]] = field(default_factory=list)  # LANDING_TARGETs sent (t [s], target)
     recovery_velocity_ned_m_s: np.ndarray = field(default_factory=lambda: np.zeros(3))  # the carrier's recovery course
     targets: list[list[float]] | None = None  # several targets: the carrier drives at the status's leg's
     reposition_m: float = 10.5  # REPOSITION: the carrier drives out until this far from the leg's target [m]
@@ -108,6 +109,10 @@ class FakeWorld:
         if setpoint.position_ned_m is not None:
             velocity = velocity + POSITION_GAIN_PER_S * (setpoint.position_ned_m - self.vehicle_ned_m)
         self._v_p = velocity.copy() if self.mode == "OFFBOARD" else np.zeros(3)
+
+    def send_landing_target(self, target: Any) -> None:
+        """Kept, with the time it was sent, in ``landing_targets``."""
+        self.landing_targets.append((self._advance(), target))
 
     def set_message_interval(self, message_id: int, rate_hz: float) -> None:
         self.intervals.append((message_id, rate_hz))
