@@ -14,9 +14,9 @@ import numpy as np
 from mission.core.docking import course
 from mission.core.law import norm
 from mission.core.records import replace
-from mission.phases.types import Observation, RecoveryModel, RecoveryState, describe_age
+from mission.phases.types import CarrierSamples, Observation, RecoveryModel, RecoveryState, describe_age
 
-CARRIER_RATE_WINDOW_S = 0.25  # [s] the carrier's acceleration and turn rate are measured over this
+TURN_MIN_SPEED_M_S = 0.3  # [m/s] a carrier slower than this has no heading to measure a turn by
 FUTURE_SLACK_S = 0.05  # [s] a carrier state stamped further ahead of its clock than the bound and this: a fault
 
 
@@ -49,37 +49,73 @@ def carrier_fresh(obs: Observation, limit_s: float) -> bool:
 
 
 def observe_carrier(rec: RecoveryState, obs: Observation, r: RecoveryModel, t: float) -> RecoveryState:
-    """The recovery's view of the carrier updated: course, last fresh time, velocity history."""
+    """The recovery's view of the carrier updated: course, last fresh time, and its velocity
+    samples over the last ``recovery.carrier_rate_window_s`` (:func:`kept_samples`)."""
     c = obs.carrier
     if c is None:
         return rec
     rec = replace(rec, course=course(c.velocity_ned_m_s, rec.course))
     if carrier_fresh(obs, r.carrier_return_max_age_s):
         rec = replace(rec, carrier_seen_s=t)
-    sampled = t - c.age_s  # when the carrier took this sample (the rates are measured between samples)
-    if rec.carrier_t_s is None or sampled - rec.carrier_t_s >= CARRIER_RATE_WINDOW_S:
-        rec = replace(rec, carrier_v=np.array(c.velocity_ned_m_s, dtype=float), carrier_t_s=sampled)
-    return rec
+    samples = kept_samples(rec.carrier_samples, t - c.age_s, c.velocity_ned_m_s, r.carrier_rate_window_s)
+    return rec if samples is rec.carrier_samples else replace(rec, carrier_samples=samples)
 
 
-def carrier_unsteady(rec: RecoveryState, obs: Observation, r: RecoveryModel, t: float) -> str | None:
-    """Why the carrier is not steady enough to land on (None: it is): accelerating or turning
-    beyond the recovery's limits, measured between its samples over :data:`CARRIER_RATE_WINDOW_S`
-    of their own time (the samples' times, ``t - age``: a 30 Hz carrier read by a 50 Hz tick
-    would otherwise seem to turn up to a fifth faster than it does)."""
+def kept_samples(samples: CarrierSamples, sampled_s: float, velocity_ned_m_s: np.ndarray,
+                 window_s: float) -> CarrierSamples:
+    """``samples`` ((t [s] the sample's own time, v_n, v_e [m/s]), oldest first) with the
+    carrier's velocity sampled at ``sampled_s`` (``t - age``) added when it is newer than the last,
+    and those more than ``window_s`` [s] older than it dropped. A sample read again (or its time
+    moved back by less than the window, as a clock offset's estimate moves) changes nothing; one
+    older than that (the carrier's clock went back) starts the samples anew."""
+    if samples:
+        last = samples[-1][0]
+        if last - window_s <= sampled_s <= last:
+            return samples
+        if sampled_s < last:
+            samples = ()
+    kept = tuple(s for s in samples if s[0] >= sampled_s - window_s)
+    return (*kept, (float(sampled_s), float(velocity_ned_m_s[0]), float(velocity_ned_m_s[1])))
+
+
+def carrier_rates(samples: CarrierSamples, window_s: float) -> tuple[float | None, float | None]:
+    """The carrier's horizontal acceleration [m/s^2] and turn rate [rad/s] (unsigned) over its
+    ``samples`` (:func:`kept_samples`): the least-squares slopes, over the samples' own times, of
+    its velocity and of its unwrapped heading (of the samples at least :data:`TURN_MIN_SPEED_M_S`
+    fast). A steady turn or acceleration reads exactly; a wobble of the heading (a fused velocity's
+    noise) is averaged over the window instead of differenced between two samples. Each is None
+    while its samples span less than half ``window_s`` [s]."""
+    if len(samples) < 2:
+        return None, None
+    a = np.asarray(samples, dtype=float)
+    ts, v = a[:, 0], a[:, 1:3]
+    accel = None
+    if ts[-1] - ts[0] >= window_s / 2:
+        tc = ts - ts.mean()
+        accel = float(norm(tc @ (v - v.mean(axis=0)) / float(tc @ tc)))
+    moving = np.hypot(v[:, 0], v[:, 1]) >= TURN_MIN_SPEED_M_S
+    tm = ts[moving]
+    if len(tm) < 2 or tm[-1] - tm[0] < window_s / 2:
+        return accel, None
+    heading = np.unwrap(np.arctan2(v[moving, 1], v[moving, 0]))
+    tc = tm - tm.mean()
+    return accel, abs(float(tc @ (heading - heading.mean()) / float(tc @ tc)))
+
+
+def carrier_unsteady(rec: RecoveryState, obs: Observation, r: RecoveryModel) -> str | None:
+    """Why the carrier is not steady enough to land on (None: it is): accelerating (its reported
+    acceleration, else :func:`carrier_rates`' from its velocity) or turning (:func:`carrier_rates`)
+    beyond the recovery's limits, measured over its samples of the last
+    ``recovery.carrier_rate_window_s`` by their own times (``t - age``: a 30 Hz carrier read by
+    a 50 Hz tick would otherwise seem to turn up to a fifth faster than it does)."""
     c = obs.carrier
-    if c is None or rec.carrier_v is None or rec.carrier_t_s is None:
+    if c is None:
         return None
-    dt = t - c.age_s - rec.carrier_t_s
+    accel, turn = carrier_rates(rec.carrier_samples, r.carrier_rate_window_s)
     if c.acceleration_ned_m_s2 is not None:
         accel = float(norm(np.asarray(c.acceleration_ned_m_s2)[:2]))
-    else:
-        accel = float(norm((c.velocity_ned_m_s - rec.carrier_v)[:2])) / dt if dt >= CARRIER_RATE_WINDOW_S / 2 else 0.0
-    if accel > r.carrier_max_accel_m_s2:
+    if accel is not None and accel > r.carrier_max_accel_m_s2:
         return f"the carrier accelerates at {accel:.2f} m/s^2 (limit {r.carrier_max_accel_m_s2:g})"
-    v0, v1 = rec.carrier_v[:2], np.asarray(c.velocity_ned_m_s)[:2]
-    if float(norm(v0)) >= 0.3 and float(norm(v1)) >= 0.3 and dt >= CARRIER_RATE_WINDOW_S / 2:
-        turn = abs(math.remainder(math.atan2(v1[1], v1[0]) - math.atan2(v0[1], v0[0]), 2 * math.pi)) / dt
-        if turn > r.carrier_max_turn_rate_rad_s:
-            return f"the carrier turns at {math.degrees(turn):.1f} deg/s (limit {math.degrees(r.carrier_max_turn_rate_rad_s):g})"
+    if turn is not None and turn > r.carrier_max_turn_rate_rad_s:
+        return f"the carrier turns at {math.degrees(turn):.1f} deg/s (limit {math.degrees(r.carrier_max_turn_rate_rad_s):g})"
     return None

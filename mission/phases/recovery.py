@@ -194,7 +194,7 @@ def holdoff(state, obs, m, events=()):
     offset = obs.vehicle.position_ned_m - h
     near = (float(norm(offset)) <= r.settle_radius_m
             and float(norm(v_c[:2])) >= r.settle_carrier_speed_m_s
-            and carrier_unsteady(rec, obs, r, t) is None)
+            and carrier_unsteady(rec, obs, r) is None)
     refused = carrier_unfit(obs, r.carrier_max_age_s)
     c = obs.carrier
     if refused is not None and not (c.age_bound_s is None or c.worst_age_s > r.carrier_max_age_s):
@@ -298,7 +298,7 @@ def approach(state, obs, m, events=()):
     why = carrier_unfit(obs, r.carrier_max_age_s)
     if why is not None:
         return go_around(state, obs, m, why, events)
-    unsteady = carrier_unsteady(rec, obs, r, t)
+    unsteady = carrier_unsteady(rec, obs, r)
     if unsteady is not None:
         return go_around(state, obs, m, unsteady, events)
     g = r.geometry

@@ -315,7 +315,7 @@ def test_the_carriers_turn_is_measured_on_its_own_samples(cfg, rate_deg_s, stead
         v = 1.6 * np.array([math.cos(heading), math.sin(heading), 0.0])
         obs = Observation(t_s=t, vehicle=None, carrier=CarrierObs(v * sampled, v, age_s=t - sampled))
         rec = carrier_fitness.observe_carrier(rec, obs, r, t)
-        why.append(carrier_fitness.carrier_unsteady(rec, obs, r, t))
+        why.append(carrier_fitness.carrier_unsteady(rec, obs, r))
     turning = [w for w in why if w is not None]
     assert (turning == []) is steady, turning[:1]
     if not steady:
