@@ -12,11 +12,11 @@ Before the turn check measured a slope over a window (eleven flights: seed 0 fiv
 twice each), nine fell back on leg 1 after three go-arounds, every one "the carrier turns at
 20.2-25.3 deg/s (limit 20)" while the true carrier drove straight: the estimator's velocity
 swinging near the deck, read by a difference of two samples 0.25 s apart (docs/relnav.md). With
-the slope over recovery.carrier_rate_window_s = 1 s (six flights: seed 0 three times, seeds 1-3
-once), every flight docked both legs, 10 of 12 legs at the first approach (seed 0: both, every
+the slope over recovery.carrier_rate_window_s = 1 s (seven flights: seed 0 four times, seeds 1-3
+once), every flight docked both legs, 12 of 14 legs at the first approach (seed 0: both, every
 time), the other two at the second after "off the deck on the descent", and no go-around on the
-turn check. Seed 0 is still not deterministic: two of its flights gave the same figures, the third
-others (true contact 0.098 / 0.026 m against 0.017 / 0.042 m)."""
+turn check. Seed 0 is still not deterministic: its four flights gave two sets of figures, each
+twice (true contact 0.017 / 0.042 m and 0.098 / 0.026 m)."""
 from __future__ import annotations
 
 import json
@@ -53,10 +53,10 @@ def flight(tmp_path_factory):
 
 def test_both_legs_dock_on_the_marker_within_the_true_contact_bound(flight):
     """Both legs docked: the true contact error within the issue's 0.10 m (measured 0.008-0.098 m
-    over six flights' twelve legs, seed 0 0.017 / 0.042 m twice and 0.098 / 0.026 m once: at the
-    bound; the estimate's 0.022-0.095 m), the true vertical within 0.15 m (-0.021 to -0.131 m,
+    over seven flights' fourteen legs, seed 0 0.017 / 0.042 m twice and 0.098 / 0.026 m twice:
+    at the bound; the estimate's 0.022-0.095 m), the true vertical within 0.15 m (-0.021 to -0.131 m,
     contact being declared 0.1 m over the dock point), at most two approaches (measured: seed 0
-    one each leg, three times; seeds 1 and 2 two on one leg),
+    one each leg, four times; seeds 1 and 2 two on one leg),
     and a go-around only ever "off the deck on the descent" (the vehicle, lined up at the gate,
     hunting 0.03-0.27 m and 0.03-0.39 m/s over the deck until out of line for gate_timeout_s),
     never the turn check (before: every go-around, nine flights of eleven fell back). Never a
