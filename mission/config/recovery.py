@@ -73,6 +73,11 @@ class RecoverySection(Section):
         description="[m/s^2] on the approach, the carrier accelerating harder than this: go around")
     carrier_max_turn_rate_deg_s: float = Field(20.0, gt=0, le=360,
         description="[deg/s] on the approach, the carrier's course turning faster than this: go around")
+    carrier_rate_window_s: float = Field(1.0, gt=0, le=10,
+        description=("[s] the carrier's acceleration and turn rate are the least-squares slopes of its velocity and "
+                     "heading over its samples of this long (by their own times): longer averages out more of a "
+                     "fused velocity's wobble, and finds a turn later (a steady turn at 1.25 times the limit after "
+                     "0.72 of this)"))
     carrier_lost_s: float = Field(3.0, gt=0, le=60,
         description="[s] no fresh carrier state for this long during the recovery: fall back")
     max_attempts: int = Field(3, ge=1, le=20, description="[-] approaches before falling back")
@@ -119,7 +124,8 @@ def check_recovery(r: RecoverySection, c: CarrierSection, *, carrier_max_speed_m
     the field to change): a holdoff that waits for the carrier to drive faster than it ever can
     (its top speed, or with ``mission.final_action = "return"`` its recovery course and legs), a
     carrier the passenger can never catch on that course, and a carrier state age limit on the
-    approach shorter than two of the carrier's publish periods (every approach would go around).
+    approach shorter than two of the carrier's publish periods (every approach would go around), and
+    a window of the carrier's rates (``carrier_rate_window_s``) shorter than two of them.
     ``carrier_max_speed_m_s``, ``passenger_max_speed_m_s``, ``final_action``: the config's
     ``safety.*`` and ``mission.final_action``."""
     top = min(v for v in (c.max_speed_m_s, carrier_max_speed_m_s) if v is not None)
@@ -131,6 +137,10 @@ def check_recovery(r: RecoverySection, c: CarrierSection, *, carrier_max_speed_m
         raise ConfigError("recovery.carrier_max_age_s", r.carrier_max_age_s,
                           f"must be at least two carrier states (2 / carrier.rate_hz = {2.0 / c.rate_hz:g} s): "
                           "every approach would go around")
+    if not r.carrier_rate_window_s >= 2.0 / c.rate_hz:
+        raise ConfigError("recovery.carrier_rate_window_s", r.carrier_rate_window_s,
+                          f"must be at least two carrier states (2 / carrier.rate_hz = {2.0 / c.rate_hz:g} s): "
+                          "half of it must hold two samples to measure a rate")
     if final_action != "return":
         return
     fastest = max([c.recovery_speed_m_s] + [leg[1] for leg in c.recovery_course])

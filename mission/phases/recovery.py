@@ -38,7 +38,6 @@ import numpy as np
 from mission.core.docking import (
     cone_radius_m,
     contact,
-    course,
     gate_point,
     glide_point,
     holdoff_point,
@@ -50,6 +49,7 @@ from mission.core.safety import filter_velocity
 from mission.flight_mode import FlightMode
 from mission.phases import deck, stall
 from mission.phases.battery import next_leg_problem
+from mission.phases.carrier_fitness import carrier_unfit, carrier_unsteady, observe_carrier
 from mission.phases.flying import _track
 from mission.phases.phase import Phase, Request
 from mission.phases.types import (
@@ -59,15 +59,12 @@ from mission.phases.types import (
     Observation,
     RecoveryModel,
     RecoveryState,
-    describe_age,
     dock_point,
     enter,
 )
 
 PARKED_SPEED_M_S = 0.1  # [m/s] the carrier counts as parked below this
 REFERENCE_AT_GOAL_M = 0.2  # [m] a reference this close to its goal has reached it
-CARRIER_RATE_WINDOW_S = 0.25  # [s] the carrier's acceleration and turn rate are measured over this
-FUTURE_SLACK_S = 0.05  # [s] a carrier state stamped further ahead of its clock than the bound and this: a fault
 
 
 def _model(m: MissionModel) -> RecoveryModel:
@@ -91,34 +88,6 @@ def begin(state: MissionState, obs: Observation, m: MissionModel, why: str) -> t
     return returning(new, obs, m, events=(f"returning to the carrier ({why})",))
 
 
-def carrier_unfit(obs: Observation, limit_s: float) -> str | None:
-    """Why the carrier's state is no state to dock on, or None when it is one: present, its
-    liveliness token not gone, measured (its age known: a round trip gave the carrier's clock)
-    no longer than ``limit_s`` [s] ago (recovery.carrier_max_age_s) with the bound, not stamped
-    ahead of the carrier's clock beyond the bound (:data:`FUTURE_SLACK_S`), and trusted by the
-    feed (not just bound, resynced or contested: ``CarrierObs.untrusted``)."""
-    c = obs.carrier
-    if c is None:
-        return "no carrier state"
-    if c.alive is False:
-        return f"carrier liveliness token gone (its last state {describe_age(c)})"
-    if c.age_bound_s is None:
-        return "the carrier's clock is not known (no round trip yet): its state's age is unknown"
-    if c.worst_age_s > limit_s:
-        return f"carrier state {describe_age(c)} (recovery.carrier_max_age_s = {limit_s:g})"
-    if c.age_s < -(c.age_bound_s + FUTURE_SLACK_S):
-        return (f"carrier state stamped {-c.age_s:.2f} s ahead of the carrier's clock (bound {c.age_bound_s:.3f} s): "
-                "its stamps and its round trips disagree")
-    if c.untrusted is not None:
-        return f"carrier feed not trusted ({c.untrusted})"
-    return None
-
-
-def _carrier_fresh(obs: Observation, limit_s: float) -> bool:
-    """A carrier state to dock on (:func:`carrier_unfit` finds nothing wrong)."""
-    return carrier_unfit(obs, limit_s) is None
-
-
 def _fly(state: MissionState, obs: Observation, m: MissionModel, goal_x: np.ndarray, goal_v: np.ndarray,
          limits: PursuitLimits, rec: RecoveryState | None, events: tuple[str, ...] = (),
          request: Request | None = None) -> tuple[MissionState, Decision]:
@@ -137,43 +106,6 @@ def _fly(state: MissionState, obs: Observation, m: MissionModel, goal_x: np.ndar
     new = replace(state, x_ref=x_ref, u_ref=u_ref, recovery=rec, u_cmd=kept["u_cmd"], integral=kept["integral"])
     return new, tr.decision(dock=dock, desired=u_ref, safety_acted=tr.acted or bool(safe.changed), events=events,
                             request=request)
-
-
-def _observe_carrier(rec: RecoveryState, obs: Observation, r: RecoveryModel, t: float) -> RecoveryState:
-    """The recovery's view of the carrier updated: course, last fresh time, velocity history."""
-    c = obs.carrier
-    if c is None:
-        return rec
-    rec = replace(rec, course=course(c.velocity_ned_m_s, rec.course))
-    if _carrier_fresh(obs, r.carrier_return_max_age_s):
-        rec = replace(rec, carrier_seen_s=t)
-    sampled = t - c.age_s  # when the carrier took this sample (the rates are measured between samples)
-    if rec.carrier_t_s is None or sampled - rec.carrier_t_s >= CARRIER_RATE_WINDOW_S:
-        rec = replace(rec, carrier_v=np.array(c.velocity_ned_m_s, dtype=float), carrier_t_s=sampled)
-    return rec
-
-
-def _carrier_unsteady(rec: RecoveryState, obs: Observation, r: RecoveryModel, t: float) -> str | None:
-    """Why the carrier is not steady enough to land on (None: it is): accelerating or turning
-    beyond the recovery's limits, measured between its samples over :data:`CARRIER_RATE_WINDOW_S`
-    of their own time (the samples' times, ``t - age``: a 30 Hz carrier read by a 50 Hz tick
-    would otherwise seem to turn up to a fifth faster than it does)."""
-    c = obs.carrier
-    if c is None or rec.carrier_v is None or rec.carrier_t_s is None:
-        return None
-    dt = t - c.age_s - rec.carrier_t_s
-    if c.acceleration_ned_m_s2 is not None:
-        accel = float(norm(np.asarray(c.acceleration_ned_m_s2)[:2]))
-    else:
-        accel = float(norm((c.velocity_ned_m_s - rec.carrier_v)[:2])) / dt if dt >= CARRIER_RATE_WINDOW_S / 2 else 0.0
-    if accel > r.carrier_max_accel_m_s2:
-        return f"the carrier accelerates at {accel:.2f} m/s^2 (limit {r.carrier_max_accel_m_s2:g})"
-    v0, v1 = rec.carrier_v[:2], np.asarray(c.velocity_ned_m_s)[:2]
-    if float(norm(v0)) >= 0.3 and float(norm(v1)) >= 0.3 and dt >= CARRIER_RATE_WINDOW_S / 2:
-        turn = abs(math.remainder(math.atan2(v1[1], v1[0]) - math.atan2(v0[1], v0[0]), 2 * math.pi)) / dt
-        if turn > r.carrier_max_turn_rate_rad_s:
-            return f"the carrier turns at {math.degrees(turn):.1f} deg/s (limit {math.degrees(r.carrier_max_turn_rate_rad_s):g})"
-    return None
 
 
 def _give_up(state: MissionState, obs: Observation, m: MissionModel, rec: RecoveryState) -> str | None:
@@ -234,7 +166,7 @@ def fallback_phase(state, obs, m, events=()):
 def returning(state, obs, m, events=()):
     """Chase the holdoff point (behind and above the dock point, moving with the carrier)."""
     r, t = _model(m), obs.t_s
-    rec = _observe_carrier(state.recovery, obs, r, t)
+    rec = observe_carrier(state.recovery, obs, r, t)
     why = _give_up(state, obs, m, rec)
     if why is not None:
         return fallback(replace(state, recovery=rec), obs, m, why, events)
@@ -252,7 +184,7 @@ def returning(state, obs, m, events=()):
 def holdoff(state, obs, m, events=()):
     """Hold the holdoff point with the carrier's velocity until the vehicle has settled on it."""
     r, t = _model(m), obs.t_s
-    rec = _observe_carrier(state.recovery, obs, r, t)
+    rec = observe_carrier(state.recovery, obs, r, t)
     why = _give_up(state, obs, m, rec)
     if why is not None:
         return fallback(replace(state, recovery=rec), obs, m, why, events)
@@ -262,7 +194,7 @@ def holdoff(state, obs, m, events=()):
     offset = obs.vehicle.position_ned_m - h
     near = (float(norm(offset)) <= r.settle_radius_m
             and float(norm(v_c[:2])) >= r.settle_carrier_speed_m_s
-            and _carrier_unsteady(rec, obs, r, t) is None)
+            and carrier_unsteady(rec, obs, r) is None)
     refused = carrier_unfit(obs, r.carrier_max_age_s)
     c = obs.carrier
     if refused is not None and not (c.age_bound_s is None or c.worst_age_s > r.carrier_max_age_s):
@@ -336,7 +268,7 @@ def go_around(state, obs, m, why: str, events=()):
 
 def go_around_phase(state, obs, m, events=()):
     r, t = _model(m), obs.t_s
-    rec = _observe_carrier(state.recovery, obs, r, t)
+    rec = observe_carrier(state.recovery, obs, r, t)
     why = _give_up(state, obs, m, rec)
     if why is not None:
         return fallback(replace(state, recovery=rec), obs, m, why, events)
@@ -354,7 +286,7 @@ def approach(state, obs, m, events=()):
     """Fly the glide path onto the gate with the carrier's motion fed forward, wait there until the
     vehicle is lined up over the dock point, then descend vertically onto it."""
     r, t = _model(m), obs.t_s
-    rec = _observe_carrier(state.recovery, obs, r, t)
+    rec = observe_carrier(state.recovery, obs, r, t)
     why = _give_up(state, obs, m, rec)
     if why is not None:
         return fallback(replace(state, recovery=rec), obs, m, why, events)
@@ -366,7 +298,7 @@ def approach(state, obs, m, events=()):
     why = carrier_unfit(obs, r.carrier_max_age_s)
     if why is not None:
         return go_around(state, obs, m, why, events)
-    unsteady = _carrier_unsteady(rec, obs, r, t)
+    unsteady = carrier_unsteady(rec, obs, r)
     if unsteady is not None:
         return go_around(state, obs, m, unsteady, events)
     g = r.geometry
@@ -453,7 +385,7 @@ def approach(state, obs, m, events=()):
 def docked(state, obs, m, events=()):
     """On the dock point with the carrier's velocity: after the dwell, the passenger is home."""
     r, t = _model(m), obs.t_s
-    rec = _observe_carrier(state.recovery, obs, r, t)
+    rec = observe_carrier(state.recovery, obs, r, t)
     dock = dock_point(obs, m)
     v_c = obs.carrier.velocity_ned_m_s
     lost = lost_dock(state, obs, m, dock)
@@ -537,7 +469,7 @@ def home(state, obs, m, events=()):
     v = obs.vehicle
     if v.mode == FlightMode.HOLD:
         return enter(state, Phase.HOLD, t), Decision(setpoint=None, events=(*events, "vehicle in Hold above the carrier"))
-    rec = _observe_carrier(state.recovery, obs, r, t)
+    rec = observe_carrier(state.recovery, obs, r, t)
     if obs.carrier is None:
         return _fly(state, obs, m, state.x_ref, np.zeros(3), r.approach, rec, events, request=Request.HOLD)
     dock = dock_point(obs, m)

@@ -254,6 +254,7 @@ class RecoveryModel:
     carrier_max_age_s: float
     carrier_max_accel_m_s2: float
     carrier_max_turn_rate_rad_s: float
+    carrier_rate_window_s: float  # [s] the carrier's acceleration and turn rate are measured over its samples of this long
     carrier_lost_s: float
     max_attempts: int
     timeout_s: float
@@ -269,6 +270,11 @@ class RecoveryModel:
     carrier_return_max_age_s: float  # [s] the age budget of RETURNING, HOLDOFF and GO_AROUND
 
 
+CarrierSamples = tuple[tuple[float, float, float], ...]
+"""The carrier's velocity samples, oldest first: (t [s] on the controller's clock when the carrier
+sampled it, ``t - age``; v_n, v_e [m/s] NED)."""
+
+
 @dataclass(frozen=True)
 class RecoveryState:
     """What the recovery remembers (frozen; phases return a new one).
@@ -276,7 +282,7 @@ class RecoveryState:
     started_s [s] on the mission clock; why it began ("task done" | "battery"); approaches begun;
     course: the carrier's course (horizontal unit vector NED); ``s``: progress on the glide path
     [0, 1], then ``descent`` on the vertical descent from the gate; ``climb_to`` [m]: a go-around's climb goal relative to the dock point (None: climbed);
-    the carrier's last velocity [m/s] and when it sampled it [s] (``t - age``; its acceleration and turn rate); the last
+    the carrier's velocity samples over the last ``carrier_rate_window_s`` (its acceleration and turn rate); the last
     time a fresh carrier state was seen [s]; since when the vehicle has settled or held contact [s];
     the contact figures at docking; the fallback's reason and goal [m]; the battery when the flight
     began (t [s], remaining [%]): its drain rate."""
@@ -288,8 +294,7 @@ class RecoveryState:
     s: float = 0.0
     descent: float | None = None  # progress [0, 1] of the vertical descent from the gate (None: not begun)
     climb_to: np.ndarray | None = None
-    carrier_v: np.ndarray | None = None
-    carrier_t_s: float | None = None
+    carrier_samples: CarrierSamples = ()
     carrier_seen_s: float | None = None
     settled_since_s: float | None = None
     settled_offset_m: np.ndarray | None = None  # HOLDOFF: the vehicle's offset from the holdoff point at settled_since_s

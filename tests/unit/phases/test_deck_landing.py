@@ -72,7 +72,7 @@ def test_a_vehicle_landed_on_the_deck_that_reads_itself_above_it_has_made_contac
     g = model.recovery.geometry
     obs_air = seen(model, [0.05, 0.0, -0.8])
     rec = RecoveryState(started_s=0.0, why="task done", attempts=1, course=np.array([1.0, 0.0, 0.0]), s=1.0,
-                        descent=1.0, carrier_v=V_C.copy(), carrier_t_s=50.0, carrier_seen_s=50.0)
+                        descent=1.0, carrier_samples=((50.0, float(V_C[0]), float(V_C[1])),), carrier_seen_s=50.0)
     state = MissionState(phase=Phase.APPROACH, since_s=40.0, x_ref=np.array([0.0, 0.0, -0.5]), u_ref=V_C.copy(),
                          u_cmd=V_C.copy(), recovery=rec, seated=False)
     assert 0.3 - 1e-9 > g.contact_height_m

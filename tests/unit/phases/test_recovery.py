@@ -136,7 +136,7 @@ def test_a_go_around_names_why_the_carrier_state_is_unfit():
     """The go-around's reason is the real one: the carrier's liveliness token gone (its state may
     still be fresh), its state too old, no state, or a feed that does not trust it yet."""
     from mission.phases import CarrierObs, Observation
-    from mission.phases.recovery import carrier_unfit
+    from mission.phases.carrier_fitness import carrier_unfit
 
     def seen(**kw) -> Observation:
         c = CarrierObs(position_ned_m=np.zeros(3), velocity_ned_m_s=np.zeros(3), **{"age_s": 0.02, **kw})
@@ -303,7 +303,7 @@ def test_the_carriers_turn_is_measured_on_its_own_samples(cfg, rate_deg_s, stead
     import math
 
     from mission.model import mission_model
-    from mission.phases import recovery
+    from mission.phases import carrier_fitness
     from mission.phases.types import CarrierObs, Observation, RecoveryState
 
     r = mission_model(cfg).recovery
@@ -314,8 +314,8 @@ def test_the_carriers_turn_is_measured_on_its_own_samples(cfg, rate_deg_s, stead
         heading = math.radians(rate_deg_s) * sampled
         v = 1.6 * np.array([math.cos(heading), math.sin(heading), 0.0])
         obs = Observation(t_s=t, vehicle=None, carrier=CarrierObs(v * sampled, v, age_s=t - sampled))
-        rec = recovery._observe_carrier(rec, obs, r, t)
-        why.append(recovery._carrier_unsteady(rec, obs, r, t))
+        rec = carrier_fitness.observe_carrier(rec, obs, r, t)
+        why.append(carrier_fitness.carrier_unsteady(rec, obs, r))
     turning = [w for w in why if w is not None]
     assert (turning == []) is steady, turning[:1]
     if not steady:
