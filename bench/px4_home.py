@@ -191,15 +191,22 @@ SCENARIOS: dict[str, Callable[[Path], dict[str, Any]]] = {
 }
 
 
-@click.command()
-@click.option("--scenario", "scenarios", multiple=True, type=click.Choice(list(SCENARIOS)), help="(repeatable; default all)")
-def main(scenarios: tuple[str, ...]) -> None:
-    why = unavailable_reason()
-    if why:
-        raise click.UsageError(why)
-    for name in scenarios or tuple(SCENARIOS):
-        with tempfile.TemporaryDirectory(dir="/var/tmp") as directory:
-            print(json.dumps({"scenario": name, **SCENARIOS[name](Path(directory))}), flush=True)
+def scenario_command(scenarios: dict[str, Callable[[Path], dict[str, Any]]]) -> click.Command:
+    """A command that flies the ``--scenario`` s named (default all), each a fresh PX4 SITL in a
+    folder of its own under /var/tmp, and prints one JSON line per scenario."""
+    @click.command()
+    @click.option("--scenario", "names", multiple=True, type=click.Choice(list(scenarios)), help="(repeatable; default all)")
+    def command(names: tuple[str, ...]) -> None:
+        why = unavailable_reason()
+        if why:
+            raise click.UsageError(why)
+        for name in names or tuple(scenarios):
+            with tempfile.TemporaryDirectory(dir="/var/tmp") as directory:
+                print(json.dumps({"scenario": name, **scenarios[name](Path(directory))}), flush=True)
+    return command
+
+
+main = scenario_command(SCENARIOS)
 
 
 if __name__ == "__main__":

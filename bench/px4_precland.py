@@ -29,21 +29,17 @@ Needs root and ``MARSUPIAL_PX4_SITL``; run it under ``flock /work/wt/px4.lock``.
 """
 from __future__ import annotations
 
-import json
 import math
 import re
-import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-import click
 
-from bench.px4_home import param, set_home, sitl, take_off, track
+from bench.px4_home import param, scenario_command, set_home, sitl, take_off, track
 from mission.mavlink import px4
 from mission.passenger.target import LandingTarget
-from sim.sitl.px4 import unavailable_reason
 
 HOVER = (10.0, 5.0, -5.0)  # [m] local NED: where the passenger holds when the controller dies
 DECK = (6.0, 8.0, 0.0)  # [m] the deck's landing point (its truth; the ground is z = 0 here)
@@ -131,15 +127,7 @@ SCENARIOS: dict[str, Callable[[Path], dict[str, Any]]] = {
 }
 
 
-@click.command()
-@click.option("--scenario", "scenarios", multiple=True, type=click.Choice(list(SCENARIOS)), help="(repeatable; default all)")
-def main(scenarios: tuple[str, ...]) -> None:
-    why = unavailable_reason()
-    if why:
-        raise click.UsageError(why)
-    for name in scenarios or tuple(SCENARIOS):
-        with tempfile.TemporaryDirectory(dir="/var/tmp") as directory:
-            print(json.dumps({"scenario": name, **SCENARIOS[name](Path(directory))}), flush=True)
+main = scenario_command(SCENARIOS)
 
 
 if __name__ == "__main__":
