@@ -14,7 +14,7 @@ the checks that refuse a plain one.
 
 Usage (root, real time, one PX4 user at a time)::
 
-    flock /tmp/marsupial-px4.lock env MARSUPIAL_PX4_SITL=/work/shared/px4_sitl \\
+    flock /tmp/marsupial-px4.lock env MARSUPIAL_PX4_SITL=../shared/px4_sitl \\
         python -m bench.px4_forced_disarm [--trials 3] [--out DIR] [--json F]
 """
 from __future__ import annotations

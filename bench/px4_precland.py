@@ -25,7 +25,7 @@ console lines about precision landing (``Precland: switching to ...``).
 - ``precland-mode``: no kill: AUTO.PRECLAND commanded (DO_SET_MODE 4/9) with the stream on.
 
 Usage: ``python -m bench.px4_precland [--scenario NAME]...`` (all by default; about 60-90 s each).
-Needs root and ``MARSUPIAL_PX4_SITL``; run it under ``flock /work/wt/px4.lock``.
+Needs root and ``MARSUPIAL_PX4_SITL``; run it under ``flock /tmp/marsupial-px4.lock``.
 """
 from __future__ import annotations
 

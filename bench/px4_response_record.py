@@ -14,7 +14,7 @@ frequencies, 20 s at rest under a zero *velocity* setpoint and 20 s holding a *p
 (the estimate's error under both, with the truth beside it). ``--sequence original`` flies the
 recorded one again.
 
-Usage: ``flock /work/wt/px4.lock python -m bench.px4_response_record OUT.csv [--sequence unseen]``
+Usage: ``flock /tmp/marsupial-px4.lock python -m bench.px4_response_record OUT.csv [--sequence unseen]``
 (real time, about 3 minutes; needs root and ``MARSUPIAL_PX4_SITL``).
 """
 from __future__ import annotations

@@ -16,7 +16,7 @@ Per run: how far the rest point is from where it was at the end (``final_m``) an
 ``hold``, how long OFFBOARD took to come back. The load average when it started.
 
 Usage: ``python -m bench.px4_rover_stand [--ways creep,position,hold] [--stand 70]``. About
-``stand + 35`` s a run. Needs root and ``MARSUPIAL_PX4_SITL``; wrap in ``flock /work/wt/px4.lock``.
+``stand + 35`` s a run. Needs root and ``MARSUPIAL_PX4_SITL``; wrap in ``flock /tmp/marsupial-px4.lock``.
 """
 from __future__ import annotations
 

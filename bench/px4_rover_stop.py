@@ -21,7 +21,7 @@ radius (median of speed / yaw rate while it turned faster than 0.2 rad/s). PX4's
 time and the load average.
 
 Usage: ``python -m bench.px4_rover_stop [-n 3] [--speed 1.2] [--turn-speed 0.36]``. About 45 s a
-run. Needs root and ``MARSUPIAL_PX4_SITL``; wrap in ``flock /work/wt/px4.lock``.
+run. Needs root and ``MARSUPIAL_PX4_SITL``; wrap in ``flock /tmp/marsupial-px4.lock``.
 """
 from __future__ import annotations
 

@@ -14,7 +14,7 @@ the gap against the vehicle's velocity (the jump).
 
 Usage: ``python -m bench.px4_stall [--stall 1.0]... [--after 2.0] [--who mission|carrier] [--during APPROACH]``
 (about 90-120 s a flight; ``--during RIDING``: the stall while the passenger rides).
-Needs root and ``MARSUPIAL_PX4_SITL``. Run it under ``flock /work/wt/px4.lock`` on a shared machine.
+Needs root and ``MARSUPIAL_PX4_SITL``. Run it under ``flock /tmp/marsupial-px4.lock`` on a shared machine.
 """
 from __future__ import annotations
 
