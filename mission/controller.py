@@ -29,12 +29,13 @@ from mission.mavlink.telemetry import vehicle_report
 from mission.model import mission_model
 from mission.passenger.inputs import PassengerInputs
 from mission.passenger.step import PassengerStep, observe_carrier
-from mission.passenger.target import RateGate, deck_target
+from mission.passenger.target import deck_target
 from mission.phases import AbortReason, Decision, Measurement, MissionState, Observation, Phase
 from mission.record.info import flown_info, outcome_summary
 from mission.record.recorder import FlightRecorder
 from mission.record.table import TickRow
 from mission.time.clock import Clock, Periodic
+from mission.time.rate import RateGate
 
 log = logging.getLogger(__name__)
 

@@ -32,6 +32,7 @@ from mission.config.schema import Config
 from mission.interfaces import CameraSink
 from mission.model import vision_detector
 from mission.phases.measurements import Measurement, RelativePosition
+from mission.time.rate import RateGate
 from mission.vision.camera import SeenFrame
 
 
@@ -51,9 +52,8 @@ class MarkerFeed:
         self.detected = self.missed = self.late_ticks = 0
         self.lockstep = lockstep
         self._heard = False  # a lockstep feed waits only once the camera has been heard
-        self.log_period_s = math.inf if cfg.vision.log_rate_hz <= 0 else 1.0 / cfg.vision.log_rate_hz
+        self._log_gate = RateGate(cfg.vision.log_rate_hz)  # on the frames' capture times
         self._sinks: list[CameraSink] = []
-        self._next_log_s = -math.inf
         self.logged = 0
 
     @property
@@ -80,7 +80,7 @@ class MarkerFeed:
         for frame, q in self.frames.take():
             found = self.detector.corners(frame.image)
             m = self.detector.measure_corners(found, frame.capture_t_s, q)
-            if self._sinks and frame.capture_t_s >= self._next_log_s:
+            if self._sinks and self._log_gate.due(frame.capture_t_s):
                 self._show(t_s, SeenFrame(frame.image, frame.capture_t_s, self.detector.camera, found.ids, found.corners,
                                           m is not None))
             if m is None:
@@ -95,8 +95,6 @@ class MarkerFeed:
         return list(due)
 
     def _show(self, t_s: float, seen: SeenFrame) -> None:
-        # the next one a tenth of a period early: a camera at a multiple of the rate keeps its cadence
-        self._next_log_s = seen.capture_t_s + 0.9 * self.log_period_s
         self.logged += 1
         for sink in self._sinks:
             sink.camera(t_s, seen)

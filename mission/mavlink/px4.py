@@ -18,6 +18,7 @@ from typing import Any
 
 from mission.flight_mode import MANUAL_MODES, FlightMode
 from mission.passenger.target import LandingTarget
+from mission.vision.frames import euler_quaternion
 from mission.mavlink.env import mavlink
 
 
@@ -214,13 +215,6 @@ def encode_param(value: float, param_type: int) -> float:
 FLOAT32_MAX = 3.4028234663852886e38  # float32's largest finite value
 
 
-def quaternion(yaw_rad: float | None) -> tuple[float, float, float, float]:
-    """(w, x, y, z) of a rotation by ``yaw_rad`` [rad] about the down axis; identity for None."""
-    if yaw_rad is None:
-        return (1.0, 0.0, 0.0, 0.0)
-    return (math.cos(yaw_rad / 2.0), 0.0, 0.0, math.sin(yaw_rad / 2.0))
-
-
 def encode_landing_target(target: LandingTarget) -> Any:
     """LANDING_TARGET of ``target`` as PX4 accepts it: position_valid 1, frame LOCAL_NED, type
     VISION_FIDUCIAL, target_num 0, the image fields (angles, distance, sizes) 0. ValueError for a
@@ -230,7 +224,8 @@ def encode_landing_target(target: LandingTarget) -> Any:
         raise ValueError(f"refusing landing target {target.position_ned_m}")
     return mavlink.MAVLink_landing_target_message(
         target.time_usec & 0xFFFFFFFFFFFFFFFF, 0, MAV_FRAME_LOCAL_NED, 0.0, 0.0, 0.0, 0.0, 0.0,
-        x, y, z, quaternion(target.yaw_rad), mavlink.LANDING_TARGET_TYPE_VISION_FIDUCIAL, 1)
+        x, y, z, [float(c) for c in euler_quaternion(0.0, 0.0, target.yaw_rad or 0.0)],
+        mavlink.LANDING_TARGET_TYPE_VISION_FIDUCIAL, 1)
 
 
 @dataclass(frozen=True)

@@ -2,8 +2,8 @@
 
 :func:`deck_target` computes it from the passenger's own position estimate and the relative
 estimate of the deck (``[relnav]``), in the vehicle's local NED frame, as PX4's LANDING_TARGET
-carries it (:func:`mission.mavlink.px4.encode_landing_target`); :class:`RateGate` spaces the
-sends (``relnav.landing_target_rate_hz``). No I/O: the mission loop sends it through
+carries it (:func:`mission.mavlink.px4.encode_landing_target`); the loop spaces the sends
+(``relnav.landing_target_rate_hz``, :class:`mission.time.rate.RateGate`). No I/O: the mission loop sends it through
 :meth:`mission.interfaces.Vehicle.send_landing_target`. What PX4 does with it, and what was seen
 on PX4 SITL: docs/px4-precland.md.
 """
@@ -42,20 +42,3 @@ def deck_target(own_position_ned_m: Any, relative_ned_m: Any, dock_offset_ned_m:
     if yaw_rad is not None and not math.isfinite(yaw_rad):
         yaw_rad = None
     return LandingTarget((float(point[0]), float(point[1]), float(point[2])), int(round(sample_t_s * 1e6)), yaw_rad)
-
-
-class RateGate:
-    """Spaces sends at ``rate_hz`` [Hz] on the caller's clock (0: never due): :meth:`due` is True
-    at the first call and then once a period, the schedule kept on the period's grid (a tick that
-    comes late does not push the next send later), restarted after a gap of over a period (no burst)."""
-
-    def __init__(self, rate_hz: float) -> None:
-        self.period_s = 1.0 / rate_hz if rate_hz > 0 else math.inf
-        self.next_s = -math.inf
-
-    def due(self, t_s: float) -> bool:
-        """Whether to send at ``t_s`` [s]; True advances the schedule."""
-        if not math.isfinite(self.period_s) or t_s < self.next_s - 1e-6:
-            return False
-        self.next_s = self.next_s + self.period_s if t_s - self.next_s < self.period_s else t_s + self.period_s
-        return True

@@ -40,18 +40,26 @@ def closing_all(*sessions: zenoh.Session) -> Iterator[tuple[zenoh.Session, ...]]
 
 
 @contextlib.contextmanager
-def peer_pair() -> Iterator[tuple[zenoh.Session, zenoh.Session]]:
-    """Two connected peer sessions: ``a`` listens on a fresh port, ``b`` connects to it."""
-    ep = endpoint(free_port())
-    a = peer(listen=[ep])
+def connected(listen: str, connect: str, b_listen: list[str] | None = None) -> Iterator[tuple[zenoh.Session, zenoh.Session]]:
+    """Session ``a`` listening on ``listen`` and ``b`` connected to ``connect`` (``listen`` itself,
+    or a relay in front of it), once ``b`` has ``a`` as a peer; both closed on exit."""
+    a = peer(listen=[listen])
     try:
-        b = peer(listen=["tcp/127.0.0.1:0"], connect=[ep])
+        b = peer(listen=b_listen, connect=[connect])
     except BaseException:
         a.close()
         raise
-    with closing_all(a, b):
+    with closing_all(b, a):
         wait_for(lambda: len(list(b.info.peers_zid())) > 0, what="b connected to a")
         yield a, b
+
+
+@contextlib.contextmanager
+def peer_pair() -> Iterator[tuple[zenoh.Session, zenoh.Session]]:
+    """Two connected peer sessions: ``a`` listens on a fresh port, ``b`` connects to it."""
+    ep = endpoint(free_port())
+    with connected(ep, ep, b_listen=["tcp/127.0.0.1:0"]) as pair:
+        yield pair
 
 
 def wait_matched(pub: zenoh.Publisher, timeout_s: float = 10.0) -> None:

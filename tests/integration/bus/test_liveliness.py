@@ -21,7 +21,7 @@ from mission.phases import AbortReason, Phase
 from mission.time.clock import ManualClock
 from tests.integration.bus.link_cut import LinkCut
 from tests.support.mission_harness import flying_pair
-from tests.support.zenoh_util import LENIENT, closing_all, endpoint, free_port, peer, wait_for
+from tests.support.zenoh_util import LENIENT, connected, endpoint, free_port, peer, wait_for
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -85,14 +85,7 @@ def _pair_with_rogue() -> Iterator[tuple[zenoh.Session, zenoh.Session, str]]:
     """Sessions ``a`` (listening; the sender) and ``b`` (connected to it; the feed), and the
     endpoint a third session joins by."""
     ep = endpoint(free_port())
-    a = peer(listen=[ep])
-    try:
-        b = peer(connect=[ep])
-    except BaseException:
-        a.close()
-        raise
-    with closing_all(b, a):
-        wait_for(lambda: list(b.info.peers_zid()), what="b connected to a")
+    with connected(ep, ep) as (a, b):
         yield a, b, ep
 
 
@@ -101,16 +94,8 @@ def _pair_through_a_link() -> Iterator[tuple[zenoh.Session, zenoh.Session, LinkC
     """Sessions ``a`` (listening; the sender) and ``b`` (the feed), ``b`` connected to ``a``
     through a relay the test can cut (:class:`LinkCut`)."""
     pa = free_port()
-    a = peer(listen=[endpoint(pa)])
-    with LinkCut(pa) as link:
-        try:
-            b = peer(connect=[link.endpoint])
-        except BaseException:
-            a.close()
-            raise
-        with closing_all(b, a):
-            wait_for(lambda: list(b.info.peers_zid()), what="b connected to a")
-            yield a, b, link
+    with LinkCut(pa) as link, connected(endpoint(pa), link.endpoint) as (a, b):
+        yield a, b, link
 
 
 def _signed_carrier_bound(a: zenoh.Session, feed: CarrierFeed) -> tuple[CarrierPublisher, Stream, str]:

@@ -5,11 +5,12 @@ deck's edge: a crash, with its reason. A deck faster than PX4's LNDMC_XY_VEL_MAX
 PX4 believes is flying."""
 from __future__ import annotations
 
+import contextlib
 import itertools
 import math
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import Any
 
 import numpy as np
@@ -164,6 +165,27 @@ def test_on_a_deck_faster_than_px4s_land_detector_px4_believes_it_flies(probe: P
         assert math.isclose(later.velocity_ned_m_s[0], 2.0)
 
 
+@contextlib.contextmanager
+def every_50_ms(publish: Callable[[float, int], None]) -> Iterator[None]:
+    """Call ``publish(t, seq)`` on a thread every 0.05 s of wall time (``t`` [s] since it began,
+    ``seq`` 0, 1, ...) until the block ends; the thread is joined before it returns."""
+    stop = threading.Event()
+
+    def run() -> None:
+        t0 = time.monotonic()
+        for seq in itertools.count():
+            publish(time.monotonic() - t0, seq)
+            if stop.wait(0.05):
+                return
+    thread = threading.Thread(target=run, daemon=True)
+    thread.start()
+    try:
+        yield
+    finally:
+        stop.set()
+        thread.join(5.0)
+
+
 def test_the_deck_moves_as_the_carriers_zenoh_state_says(probe: Probe):
     """``mock-vehicle --deck PAIR``'s feed (sim.vehicle.cli.follow_carrier): the carrier's state
     published on Zenoh (loopback) at 20 Hz, moving north at 1 m/s, carries the vehicle standing on
@@ -172,26 +194,17 @@ def test_the_deck_moves_as_the_carriers_zenoh_state_says(probe: Probe):
         publisher = CarrierPublisher(carrier_side, "deck0")
         with vehicle_for(probe, speed=1.0, deck=SPEC, start_ned=(0.0, 0.0, -HEIGHT_M)) as v:
             feed = follow_carrier(v, vehicle_side, "deck0")
-            stop = threading.Event()
             published: list[float] = []
 
-            def publish() -> None:
-                t0 = time.monotonic()
-                for seq in itertools.count():
-                    t = time.monotonic() - t0
-                    publisher.publish(CarrierState(stamp_s=t, seq=seq, frame="local_ned", position=(t, 0.0, 0.0),
-                                                   velocity_ned_m_s=(1.0, 0.0, 0.0)))
-                    published.append(t)
-                    if stop.wait(0.05):
-                        return
-            thread = threading.Thread(target=publish, daemon=True)
-            thread.start()
+            def publish(t: float, seq: int) -> None:
+                publisher.publish(CarrierState(stamp_s=t, seq=seq, frame="local_ned", position=(t, 0.0, 0.0),
+                                               velocity_ned_m_s=(1.0, 0.0, 0.0)))
+                published.append(t)
             try:
-                carried = wait_flight(v, lambda s: s.position_ned_m[0] > 1.5, 10.0, "carried 1.5 m north")
-                now = published[-1]
+                with every_50_ms(publish):
+                    carried = wait_flight(v, lambda s: s.position_ned_m[0] > 1.5, 10.0, "carried 1.5 m north")
+                    now = published[-1]
             finally:
-                stop.set()
-                thread.join(5.0)
                 feed.close()
                 publisher.close()
     assert carried.on_deck and carried.crash is None and carried.velocity_ned_m_s == pytest.approx([1.0, 0.0, 0.0])
@@ -213,24 +226,15 @@ def test_with_deck_truth_the_deck_follows_the_carriers_truth_not_its_erring_stat
         track = TruthTrack()
         with vehicle_for(probe, speed=1.0, deck=SPEC, start_ned=(0.0, 0.0, -HEIGHT_M)) as v:
             feed = follow_carrier(v, vehicle_side, "deck1", truth=True, track=track)
-            stop = threading.Event()
 
-            def publish() -> None:
-                t0 = time.monotonic()
-                for seq in itertools.count():
-                    t = time.monotonic() - t0
-                    publisher.publish(CarrierState(stamp_s=t, seq=seq, frame="local_ned", position=(t, 3.0, 0.0),
-                                                   velocity_ned_m_s=(1.0, 0.0, 0.0)))
-                    truth(OwnState(t, np.array([t, 0.0, 0.0]), np.array([1.0, 0.0, 0.0]), 0.0))
-                    if stop.wait(0.05):
-                        return
-            thread = threading.Thread(target=publish, daemon=True)
-            thread.start()
+            def publish(t: float, seq: int) -> None:
+                publisher.publish(CarrierState(stamp_s=t, seq=seq, frame="local_ned", position=(t, 3.0, 0.0),
+                                               velocity_ned_m_s=(1.0, 0.0, 0.0)))
+                truth(OwnState(t, np.array([t, 0.0, 0.0]), np.array([1.0, 0.0, 0.0]), 0.0))
             try:
-                carried = wait_flight(v, lambda s: s.position_ned_m[0] > 1.5, 10.0, "carried 1.5 m north")
+                with every_50_ms(publish):
+                    carried = wait_flight(v, lambda s: s.position_ned_m[0] > 1.5, 10.0, "carried 1.5 m north")
             finally:
-                stop.set()
-                thread.join(5.0)
                 feed.close()
                 truth.close()
                 publisher.close()

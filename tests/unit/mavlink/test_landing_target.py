@@ -11,8 +11,9 @@ import pytest
 from mission.config.schema import load_config, with_overrides
 from mission.controller import MissionController
 from mission.mavlink.env import mavlink
-from mission.mavlink.px4 import encode_landing_target as encode, landing_target_reading as px4_reading, quaternion
-from mission.passenger.target import LandingTarget, RateGate, deck_target
+from mission.mavlink.px4 import encode_landing_target as encode, landing_target_reading as px4_reading
+from mission.passenger.target import LandingTarget, deck_target
+from mission.time.rate import RateGate
 from mission.phases.measurements import RelativePosition
 from mission.time.clock import ManualClock
 from tests.conftest import CONFIGS
@@ -60,7 +61,9 @@ def test_encoded_message_is_what_px4_accepts_on_the_wire():
 
 def test_px4_refuses_other_frames_and_reads_position_invalid_as_irlock():
     base = encode(LandingTarget((1.0, 2.0, 3.0), 5, None))
-    assert list(base.q) == [1.0, 0.0, 0.0, 0.0] == list(quaternion(None))
+    assert list(base.q) == [1.0, 0.0, 0.0, 0.0]
+    turned = encode(LandingTarget((1.0, 2.0, 3.0), 5, math.pi / 2))  # the deck heading east
+    assert list(turned.q) == pytest.approx([math.sqrt(0.5), 0.0, 0.0, math.sqrt(0.5)])
     other = wire(mavlink.MAVLink_landing_target_message(5, 0, mavlink.MAV_FRAME_BODY_FRD, 0, 0, 0, 0, 0, 1, 2, 3,
                                                         (1, 0, 0, 0), 2, 1))
     assert px4_reading(other).kind == "unsupported_frame" and px4_reading(other).position_ned_m is None
