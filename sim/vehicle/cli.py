@@ -9,7 +9,6 @@ import contextlib
 import dataclasses
 import json
 import logging
-import math
 import os
 import signal
 import threading
@@ -18,12 +17,10 @@ from types import FrameType
 from typing import Any
 
 import click
-import numpy as np
 
 from mission.bus.auth import SampleSigner
-from mission.bus.bridge import CarrierFeed, keys, open_session
+from mission.bus.bridge import keys, open_session
 from mission.bus.signing import pair_key
-from mission.bus.wire import CarrierState, GeoOrigin
 from mission.config.relnav import PassengerGnssSection
 from mission.config.keys import read_key_file, read_private_key_file
 from mission.config.schema import Config, ZenohSection, load_config
@@ -34,8 +31,9 @@ from sim.vehicle.options import VehicleSnapshot
 from sim.vehicle.faults import FaultOptions
 from sim.vehicle.endpoints import parse_endpoint
 from sim.vehicle.params import SPECS_BY_NAME
-from sim.vehicle.physics.deck import DeckMotion, DeckSpec
-from sim.robots.truth import TruthTrack, truth_key
+from sim.vehicle.physics.deck import DeckSpec
+from sim.robots.truth import TruthTrack
+from sim.vehicle.deck_follow import follow_carrier
 from sim.camera.publisher import CameraPublisher
 
 log = logging.getLogger(__name__)
@@ -301,85 +299,6 @@ def passenger_gnss_of(path: Path | None) -> PassengerGnssSection | None:
     return gnss if gnss.bias_sigma_m > 0.0 else None
 
 
-class VehicleClock:
-    """The vehicle's clock as it is now (it changes once a lockstep vehicle is left alone), for a
-    carrier feed that stamps what it receives on the vehicle's time."""
-
-    def __init__(self, vehicle: MockVehicle) -> None:
-        self.vehicle = vehicle
-
-    @property
-    def speed(self) -> float:
-        return self.vehicle.clock.speed
-
-    @property
-    def counters(self) -> dict[str, object] | None:
-        return None
-
-    def now(self) -> float:
-        return self.vehicle.clock.now()
-
-    def sleep(self, duration_s: float) -> None:
-        self.vehicle.clock.sleep(duration_s)
-
-    def wait(self, cond: threading.Condition, timeout_s: float) -> None:
-        self.vehicle.clock.wait(cond, timeout_s)
-
-    def notify(self, cond: threading.Condition) -> None:
-        self.vehicle.clock.notify(cond)
-
-    def close(self) -> None:
-        pass
-
-
-def follow_carrier(vehicle: MockVehicle, session: Any, pair: str, truth: bool = False,
-                   track: TruthTrack | None = None, camera: CameraPublisher | None = None) -> CarrierFeed:
-    """Give ``vehicle``'s deck the motion of pair ``pair``'s carrier from its Zenoh state (a wgs84
-    state through the vehicle's origin), or with ``truth`` from the carrier's sim-only true state
-    (:func:`sim.robots.truth.truth_key`); ``track`` samples the truth at every pass, ``camera``
-    renders its frames from it; returns the feed (close it before the session)."""
-    key = truth_key(pair) if truth else None
-    feed = CarrierFeed(session, pair, VehicleClock(vehicle), key=key, origin=GeoOrigin(*vehicle.options.home),
-                       max_age_s=math.inf)
-
-    heard: list[bool] = []
-    lockstep = vehicle.options.lockstep
-    made: list[tuple[CarrierState, float, DeckMotion]] = []  # the last sample's motion (asked for at every pass)
-
-    def motion() -> DeckMotion | None:
-        got = motion_now()
-        if track is not None:
-            track.sample(vehicle, got)
-        if camera is not None and got is not None:
-            t = float(vehicle._t_s)
-            camera.sample(t, vehicle._kin, np.asarray(got.centre(t, 0.0)), np.asarray(got.velocity_ned_m_s),
-                          made[0][0].yaw_rad)
-        return got
-
-    def motion_now() -> DeckMotion | None:
-        got = feed.newest()
-        if got is None:
-            return None
-        value, rx_s = got
-        if made and made[0][0] is value and made[0][1] == rx_s:
-            return made[0][2]
-        if not heard:
-            heard.append(True)
-            log.info("deck: pair %s's carrier heard at %s m NED", pair, [round(float(c), 2) for c in value.position])
-        # In lockstep the carrier and the vehicle step on one simulated time: the deck moves on from
-        # the sample's own stamp, not from when it arrived (a sample delivered late on a loaded
-        # machine would put the deck back by speed x delay). On wall clocks the two processes'
-        # clocks may be apart by more than the transport's delay: from its arrival.
-        stamp = value.stamp_s
-        t_s = stamp if lockstep and abs(stamp - rx_s) <= 1.0 else rx_s
-        new = DeckMotion(tuple(value.position), tuple(value.velocity_ned_m_s), t_s)  # type: ignore[arg-type]
-        made[:] = [(value, rx_s, new)]
-        return new
-
-    vehicle.follow_deck(motion)
-    return feed
-
-
 def truth(snapshot: VehicleSnapshot, estimate_error: dict[str, Any] | None = None) -> dict[str, Any]:
     """The world's truth of a flight for ``--summary``: the vehicle's simulated time [s], how its
     estimate erred (``estimate_error``: :func:`estimate_of`), whether it
@@ -414,6 +333,7 @@ def run(options: VehicleOptions, port_file: Path | None = None, status_every_s: 
     log.setLevel(logging.INFO)
     stop = threading.Event()
     track = TruthTrack() if deck is not None else None
+    deck_feed = None
 
     def on_signal(signum: int, frame: FrameType | None) -> None:
         stop.set()
@@ -430,7 +350,8 @@ def run(options: VehicleOptions, port_file: Path | None = None, status_every_s: 
                     publisher = CameraPublisher(camera, session, deck[0], options.faults.seed, options.lockstep,
                                                 signer=camera_signer)
                     stack.callback(publisher.close)
-                stack.callback(follow_carrier(vehicle, session, deck[0], deck_truth, track, publisher).close)
+                deck_feed = follow_carrier(vehicle, session, deck[0], deck_truth, track, publisher)
+                stack.callback(deck_feed.close)
             if port_file is not None:
                 _write_port_file(port_file, vehicle.port)
             log.info("mock vehicle on UDP %d -> %s, %s, %s", vehicle.port, options.target,
@@ -443,6 +364,8 @@ def run(options: VehicleOptions, port_file: Path | None = None, status_every_s: 
                 world = truth(vehicle.snapshot(), estimate_of(options))
                 if track is not None:
                     world["track"] = track.as_dict()
+                if deck_feed is not None and deck_feed.aligned is not None:
+                    world["deck"]["carrier_steps"] = dict(deck_feed.aligned.counters)
                 summary_path.write_text(json.dumps(world, indent=2) + "\n")
     finally:
         for sig, handler in previous.items():

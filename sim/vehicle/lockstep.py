@@ -145,6 +145,11 @@ class LockstepStepper:
                 self.send_control(link, heartbeat)
 
     @property
+    def barrier_ns(self) -> int:
+        """The barrier the vehicle waits at, or last integrated past once answered [ns] (-1: none yet)."""
+        return self._barrier_ns
+
+    @property
     def t_ns(self) -> int:
         """The vehicle's time [ns] (its step count times the step, exactly)."""
         return self.v._steps * self._step_ns
