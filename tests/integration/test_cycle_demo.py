@@ -144,3 +144,25 @@ def test_the_passenger_rides_each_leg_disarmed_on_the_deck_and_arms_only_for_the
     assert (armed[between] == 0).any()
     # and at the end: disarmed on the parked carrier's deck
     assert r.phase[-1] == "DONE" and armed[-1] == 0
+
+
+def test_a_second_run_on_the_deck_gives_the_same_flight(errors_flight, tmp_path):
+    """Lockstep on a deck: the same configuration and seed give the same flight record, byte for
+    byte, and the same touchdowns on the deck. The mock's deck waits after each barrier for the
+    carrier's state of that step (sim/vehicle/deck_follow.py); when it took whichever state had
+    arrived, two runs parted at t = 14.6 s, the carrier braking under the seated vehicle
+    (docs/lockstep.md, "On a deck")."""
+    first, _ = errors_flight
+    cmd = [sys.executable, "-m", "mission.cli", "demo", "--config", str(CYCLE), "--log-root", str(tmp_path / "logs"),
+           "--plot", "", "--timeout", "200"]
+    again = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    second = tmp_path / "logs" / "pair0"
+    assert again.returncode == 0, again.stdout[-3000:] + again.stderr[-3000:]
+    for run in (first, second):
+        steps = json.loads((run / "vehicle.json").read_text())["deck"]["carrier_steps"]
+        assert steps["aligned"] and steps["given_up"] == 0, steps
+    assert (first / "record.csv").read_text() == (second / "record.csv").read_text()
+    # the first "touchdown" is the vehicle standing on the deck when its first state came, before the
+    # carrier steps with the lockstep (the time it came is the start-up's, not the flight's)
+    touchdowns = [json.loads((run / "vehicle.json").read_text())["deck"]["touchdowns"][1:] for run in (first, second)]
+    assert touchdowns[0] == touchdowns[1] and len(touchdowns[0]) >= 2
