@@ -42,7 +42,11 @@ DOCK_CHASE_GAIN_PER_S = 4.0  # [1/s] the riding reference's pull per metre near 
 
 
 def model_from_config(cfg: Config, target: np.ndarray | None = None) -> TickModel:
-    """The :class:`TickModel` a configuration describes (``target`` overrides, e.g. a batch)."""
+    """The :class:`TickModel` a configuration describes (``target`` overrides, e.g. a batch): one
+    passenger's, so not a whole team's (:mod:`mission.config.passenger` derives each passenger's)."""
+    if cfg.team.passengers:
+        raise ConfigError("team.passengers", [p.name for p in cfg.team.passengers], "a [team]'s configuration is "
+                          "flown one passenger at a time (`marsupial run --passenger NAME`, docs/team.md)")
     s = cfg.scenario
     law = cfg.law.params()
     aim = np.asarray(s.target if target is None else target, dtype=float)

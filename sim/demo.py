@@ -34,6 +34,7 @@ from tqdm import tqdm
 from mission.bus.auth import unsigned_warning
 from mission.bus.bridge import open_session
 from mission.bus.session import close_session
+from mission.config.passenger import sole_passenger
 from mission.config.schema import CarrierRos2Section, Config, ZenohSection, load_config
 from mission.errors import MarsupialError
 from mission.flightdata.writer import DEFAULT_LIVE, LiveAddress, is_loopback, parse_live
@@ -280,6 +281,7 @@ def run_demo(config: str, speed: float, pairs: int, log_root: Path, plot_path: s
     (:func:`throwaway_key`), deleted at the end. ``seed``: pair i's vehicle's is ``seed + i``; ``estimate_error``: its estimate's errors as a multiple of PX4 SITL's (0: exact)."""
     from mission.cli.run import plot as plot_command
 
+    sole_passenger(load_config(config), "flown by demo", team_of_one=False)  # its processes read the file themselves
     supervise_children()  # a demo killed outright takes its processes with it
     log_root.mkdir(parents=True, exist_ok=True)
     zenoh_port = free_port(socket.SOCK_STREAM)

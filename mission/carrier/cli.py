@@ -24,6 +24,7 @@ from mission.bus.bridge import describe_endpoints, keys, open_session
 from mission.bus.session import close_session
 from mission.time.clock import Clock, LockstepClock, ScaledClock
 from mission.config.required import CARRIER_FIELDS, require_stated
+from mission.config.passenger import sole_passenger
 from mission.config.schema import Config, load_config, with_overrides
 from mission.cli.subcommands import entry_points, load
 from mission.errors import ConfigError
@@ -249,6 +250,7 @@ def carrier_cli(config: str, backend: str | None, speed: float, pair: str | None
         "zenoh.private_key_file": own_key_file,
         "zenoh.peer_public_key_file": peer_key_file,
     })
+    cfg = sole_passenger(cfg, "driven by `marsupial carrier`")  # a team of one: its passenger's (docs/team.md)
     require_stated(cfg, CARRIER_FIELDS, "carrier")  # refused before it says anything about flying
     click.echo(startup_line(cfg, speed), err=True)
     if (unsigned := unsigned_warning(cfg.zenoh)) is not None:

@@ -18,6 +18,7 @@ from mission.bus.bridge import CarrierFeed, PassengerPublisher, open_session, ze
 from mission.bus.session import close_session, congestion_for
 from mission.time.clock import LOST_WALL_S, Clock, LockstepClock, ScaledClock
 from mission.config.required import RUN_FIELDS, require_stated
+from mission.config.passenger import chosen_passenger
 from mission.config.schema import Config, load_config, with_overrides
 from mission.cli.subcommands import SENSORS_GROUP, entry_points, load
 from mission.controller import MissionController, MissionOutcome
@@ -260,10 +261,15 @@ def exit_code(outcome: MissionOutcome) -> int:
 @click.option("--log-epoch-ns", type=click.IntRange(min=0), default=None, metavar="NS",
               help="Flight data log times count from this epoch [ns since the Unix epoch] (a demo gives its processes "
                    "one in lockstep) [default: the wall clock at the mission clock's zero].")
+@click.option("--passenger", metavar="NAME", default=None,
+              help="A file with a [team]: fly passenger NAME of team.passengers (its slot's dock offset, its system "
+              "id, its targets; docs/team.md); needed when the team has several. Refused (exit 2) for a file "
+              "without a [team], which describes its one passenger.")
 def run(config: str, mavlink_url: str | None, zenoh_listen: tuple[str, ...], zenoh_connect: tuple[str, ...],
         zenoh_mode: str | None, pair: str | None, speed: float, lockstep: bool, log_dir: str | None,
         signing_key_file: str | None, bus_key_file: str | None, own_key_file: str | None, peer_key_file: str | None,
-        as_json: bool, live: str | None, log_epoch_ns: int | None, lockstep_lost_wall_s: float) -> int:
+        as_json: bool, live: str | None, log_epoch_ns: int | None, lockstep_lost_wall_s: float,
+        passenger: str | None = None) -> int:
     """Fly the marsupial mission described by CONFIG on a PX4 vehicle.
 
     The passenger takes off from the carrier, joins the dock point, rides while the carrier
@@ -291,7 +297,7 @@ def run(config: str, mavlink_url: str | None, zenoh_listen: tuple[str, ...], zen
         overrides["zenoh.listen"] = list(zenoh_listen)
     if zenoh_connect:
         overrides["zenoh.connect"] = list(zenoh_connect)
-    cfg = with_overrides(cfg, overrides)
+    cfg = chosen_passenger(with_overrides(cfg, overrides), passenger)  # one passenger of a [team]
     check_config(cfg)  # refused before it says anything about flying (fly checks again)
     live_address = parse_live(live) if live is not None else None
     stop = threading.Event()

@@ -75,12 +75,13 @@ def covered_circle(center: list[float], radius_m: float, discs: list[tuple[list[
 
 
 def check_legs(s: ScenarioSection, *, final_action: str, bc_m: float, leg_start_margin_m: float,
-               dock_offset_ned_m: list[float], p3_margin_m: float, safety_margin_m: float) -> None:
+               dock_offsets_ned_m: list[list[float]], p3_margin_m: float, safety_margin_m: float) -> None:
     """Refuse targets of scenario ``s`` that leave a leg no start under Assumption 1 (the rules of
     the module docstring), given the fields of the other sections they depend on (each named as
     its field: ``mission.final_action``, ``b c`` [m], ``mission.leg_start_margin_m`` [m],
-    ``mission.dock_offset_ned_m`` [m], ``carrier.p3_margin_m`` [m], ``safety.margin_m`` [m]);
-    raises :class:`ConfigError` naming the field to change."""
+    ``carrier.p3_margin_m`` [m], ``safety.margin_m`` [m]) and each leg's dock offset [m] NED (the
+    passenger's: ``mission.dock_offset_ned_m``, or with a team its slot's); raises
+    :class:`ConfigError` naming the field to change."""
     legs = s.legs()
     if len(legs) > 1 and final_action != "return":
         raise ConfigError("mission.final_action", final_action,
@@ -106,7 +107,7 @@ def check_legs(s: ScenarioSection, *, final_action: str, bc_m: float, leg_start_
     guard_m = bc_m - p3_margin_m
     for k, target in enumerate(legs[1:], start=1):
         # the dock point's height below or above the target: the leg may start nearer horizontally
-        height = abs(target[2] - (ground + dock_offset_ned_m[2])) if dim == 3 and s.planar_carrier else 0.0
+        height = abs(target[2] - (ground + dock_offsets_ned_m[k][2])) if dim == 3 and s.planar_carrier else 0.0
         if dim == 3 and s.planar_carrier and abs(target[2] - ground) > bc_m:
             raise ConfigError(f"scenario.targets[{k}]", target, f"{abs(target[2] - ground):.2f} m above the carrier's "
                               f"plane, more than b*c = {bc_m:g} m: the carrier can never come within b*c of it")

@@ -63,6 +63,10 @@ class ScenarioSection(Section):
             data = {**data, "target": first}
         return data
 
+    def target_field(self) -> str:
+        """How the file named its targets: ``scenario.targets``, or ``scenario.target`` alone."""
+        return "scenario.target" if self.targets is None else "scenario.targets"
+
     def legs(self) -> list[list[float]]:
         """The targets in the order they are visited (one leg each)."""
         return [list(t) for t in self.targets] if self.targets is not None else [list(self.target)]

@@ -17,7 +17,8 @@ geometry is checked across fields (:meth:`Config._cross_fields`): altitude band 
 point above the carrier and inside the band, target inside the band and above ground, starts and
 target outside every obstacle, departure margin well inside b c, carrier rate fast enough for
 the carrier timeout; with several targets, every leg can start under the paper's Assumption 1
-(:mod:`mission.config.legs`).
+(:mod:`mission.config.legs`); with a ``[team]``, one passenger per slot and per target, every slot
+a dock point as above, and every passenger's own configuration valid (:mod:`mission.config.team`).
 """
 from __future__ import annotations
 
@@ -34,6 +35,7 @@ from mission.config.legs import check_legs, first_target_named
 from mission.config.recovery import RecoverySection, check_recovery
 from mission.config.relnav import RelnavSection, WorldSection
 from mission.config.scenario import ObstacleSection, ScenarioSection
+from mission.config.team import TeamSection, as_team_error, check_team, dock_points, passenger_data
 from mission.config.urls import DEFAULT_URL
 from mission.config.vision import VisionSection, check_vision
 from mission.config.fields import (
@@ -394,6 +396,7 @@ class Config(Section):
     vision: VisionSection = VisionSection()
     relnav: RelnavSection = RelnavSection()
     world: WorldSection = WorldSection()
+    team: TeamSection = TeamSection()
 
     @model_validator(mode="after")
     def _assumptions(self) -> "Config":
@@ -416,12 +419,31 @@ class Config(Section):
         if len(self.mission.dock_offset_ned_m) != 3:
             raise ConfigError("mission.dock_offset_ned_m", self.mission.dock_offset_ned_m, "must have 3 components")
         self._cross_fields()
+        if "team" in self.model_fields_set:
+            self._team_flies()
         return self
+
+    def _team_flies(self) -> None:
+        """Each passenger of the team flies the single-passenger configuration derived for it
+        (:func:`mission.config.team.passenger_data`): refused, naming the team file's field, if that one is."""
+        data = self.model_dump(exclude_unset=True)
+        for i in range(len(self.team.passengers)):
+            try:
+                from_dict(passenger_data(data, self.team, self.scenario.legs(), i))
+            except ConfigError as exc:
+                raise as_team_error(exc, self.team, i, self.scenario.target_field()) from None
 
     def _cross_fields(self) -> None:
         """Checks that need several fields (raise ConfigError naming the field to change)."""
         s, sf, m = self.scenario, self.safety, self.mission
         bc = self.law.params().separation_distance_m
+        team = self.team if "team" in self.model_fields_set else None  # one passenger per slot and target
+        if team is not None:
+            check_team(team, n_targets=len(s.legs()), target_field=s.target_field(), contact_radius_m=self.recovery.contact_radius_m,
+                       stated={f"{sec}.{key}": getattr(getattr(self, sec), key) for sec in ("mission", "mavlink")
+                               for key in getattr(self, sec).model_fields_set},
+                       carrier_system_id=self.carrier.mavlink.target_system if self.carrier.backend == "mavlink" else None)
+        docks, leg_docks = dock_points(team, m.dock_offset_ned_m, len(s.legs()))  # (field, offset), each leg's offset
         if not self.law.departure_margin_m >= 1e-6:
             raise ConfigError("law.departure_margin_m", self.law.departure_margin_m,
                               "must be >= 1e-6 m (a smaller departure drowns in float rounding: the passenger stays)")
@@ -441,7 +463,7 @@ class Config(Section):
                                       f"(center {ob.center}, radius {ob.radius:g} m)")
         # several targets: every leg can start under Assumption 1 (mission/config/legs.py)
         check_legs(s, final_action=m.final_action, bc_m=bc, leg_start_margin_m=m.leg_start_margin_m,
-                   dock_offset_ned_m=m.dock_offset_ned_m, p3_margin_m=self.carrier.p3_margin_m,
+                   dock_offsets_ned_m=leg_docks, p3_margin_m=self.carrier.p3_margin_m,
                    safety_margin_m=sf.margin_m)
         check_recovery(self.recovery, self.carrier, carrier_max_speed_m_s=sf.carrier_max_speed_m_s,  # it can finish
                        passenger_max_speed_m_s=sf.passenger_max_speed_m_s, final_action=m.final_action)
@@ -450,20 +472,21 @@ class Config(Section):
             return
         # local NED, z down: the carrier drives on the ground at carrier_start's z
         ground = s.carrier_start[2]
-        dock_z = ground + m.dock_offset_ned_m[2]
-        if not m.dock_offset_ned_m[2] < 0:
-            raise ConfigError("mission.dock_offset_ned_m", m.dock_offset_ned_m,
-                              "the dock point must be above the carrier (down component < 0): it is underground")
+        for name, offset in docks:
+            if not offset[2] < 0:
+                raise ConfigError(name, offset, "the dock point must be above the carrier (down component < 0): it is "
+                                  "underground")
         if not s.target[2] <= ground:
             raise ConfigError("scenario.target", s.target, f"below the ground (z {s.target[2]:g} > carrier z {ground:g}, NED)")
-        for name, z in (("mission.dock_offset_ned_m", dock_z), ("scenario.target", s.target[2])):
-            value = m.dock_offset_ned_m if name.startswith("mission") else s.target
+        for name, value, z in [(name, offset, ground + offset[2]) for name, offset in docks] + [
+                ("scenario.target", s.target, s.target[2])]:
             if sf.z_max_m is not None and z > sf.z_max_m:
                 raise ConfigError(name, value, f"below the altitude floor safety.z_max_m = {sf.z_max_m:g} (z {z:g}, NED)")
             if sf.z_min_m is not None and z < sf.z_min_m:
                 raise ConfigError(name, value, f"above the ceiling safety.z_min_m = {sf.z_min_m:g} (z {z:g}, NED)")
         if m.ride == "deck":
-            self._deck_fields(dock_z)
+            for name, offset in docks:
+                self._deck_fields(name, offset, ground + offset[2])
         for j, later in enumerate(s.legs()[1:], start=1):
             if not later[2] <= ground:
                 raise ConfigError(f"scenario.targets[{j}]", later, f"below the ground (z {later[2]:g} > carrier z {ground:g}, NED)")
@@ -482,12 +505,13 @@ class Config(Section):
                               f"too slow for mission.carrier_timeout_s = {m.carrier_timeout_s:g} s "
                               "(at least two states per timeout)")
 
-    def _deck_fields(self, deck_z: float) -> None:
-        """Riding on the deck (mission.ride = "deck"): the deck (the dock point) above the altitude floor, the arming
-        lead inside PX4's preflight auto-disarm with room for the prestream, the glide path inside the deck's funnel."""
+    def _deck_fields(self, dock_field: str, dock_offset: list[float], deck_z: float) -> None:
+        """Riding on the deck (mission.ride = "deck"): the deck (the dock point ``dock_offset`` [m] NED, field
+        ``dock_field``, at ``deck_z``) above the altitude floor, the arming lead inside PX4's preflight auto-disarm
+        with room for the prestream, the glide path inside the deck's funnel."""
         m, sf, r = self.mission, self.safety, self.recovery
         if sf.z_max_m is not None and deck_z > sf.z_max_m - 0.1:
-            raise ConfigError("mission.dock_offset_ned_m", m.dock_offset_ned_m,
+            raise ConfigError(dock_field, dock_offset,
                               f"with mission.ride = \"deck\" the dock point is the deck, at z {deck_z:g} NED: it must be at "
                               f"least 0.1 m above the altitude floor safety.z_max_m = {sf.z_max_m:g} (the landing "
                               "presses the reference 0.1 m into the deck)")

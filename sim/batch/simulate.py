@@ -14,6 +14,7 @@ import click
 import numpy as np
 from tqdm import tqdm
 
+from mission.config.passenger import sole_passenger
 from mission.config.schema import Config, load_config
 from sim.batch import closed_loop, recovery, recovery_mc
 from sim.batch.closed_loop import ClosedLoopResult, as_flown, is_mission_config, model_from_config, random_scenarios, simulate_config
@@ -308,7 +309,7 @@ def simulate(config: str, as_json: bool, plot_path: str | None, count: int | Non
     Exit code 0 when P1-P3 hold (for every scenario with --monte-carlo), 1 otherwise, 2 on a bad
     config.
     """
-    cfg = load_config(config)
+    cfg = sole_passenger(load_config(config), "simulated by `marsupial simulate`")  # a team of one: its passenger's
     unsaturated = [f"safety.{name}" for name in ("passenger_max_speed_m_s", "passenger_max_accel_m_s2",
                                                   "carrier_max_speed_m_s", "carrier_max_accel_m_s2")
                    if getattr(cfg.safety, name) is None]

@@ -1,0 +1,56 @@
+"""One passenger's configuration out of a team's (``[team]``, :mod:`mission.config.team`): what one
+passenger process flies (``marsupial run --passenger NAME``), and what the commands that drive one
+passenger take of a team file. docs/team.md.
+"""
+from __future__ import annotations
+
+from mission.config.schema import Config, from_dict
+from mission.config.team import passenger_data
+from mission.errors import ConfigError
+
+
+def has_team(cfg: Config) -> bool:
+    """Whether ``cfg`` came from a file with a ``[team]`` (validated: then it has passengers)."""
+    return "team" in cfg.model_fields_set
+
+
+def passenger_config(cfg: Config, name: str) -> Config:
+    """The single-passenger configuration passenger ``name`` of ``cfg``'s team flies: ``cfg`` without
+    ``[team]``, ``mission.dock_offset_ned_m`` its slot's offset, ``mavlink.target_system`` its
+    system id, ``scenario.target(s)`` its own targets (:func:`mission.config.team.passenger_data`);
+    equal to the configuration a file stating just that would give. :class:`ConfigError` naming
+    ``--passenger`` for a file without a team or a name not in it."""
+    if not has_team(cfg):
+        raise ConfigError("--passenger", name, "the file has no [team] section: it describes one passenger, which "
+                          "flies without --passenger")
+    names = [p.name for p in cfg.team.passengers]
+    if name not in names:
+        raise ConfigError("--passenger", name, f"no such passenger in team.passengers ({', '.join(names)})")
+    return from_dict(passenger_data(cfg.model_dump(exclude_unset=True), cfg.team, cfg.scenario.legs(), names.index(name)))
+
+
+def chosen_passenger(cfg: Config, name: str | None) -> Config:
+    """What ``marsupial run`` flies of ``cfg``: ``cfg`` itself without a team; passenger ``name``'s
+    configuration (:func:`passenger_config`), or the only passenger's when ``name`` is None; a team
+    of several without ``name``, or ``name`` without a team: :class:`ConfigError` naming ``--passenger``."""
+    if name is None and has_team(cfg):
+        names = [p.name for p in cfg.team.passengers]
+        if len(names) > 1:
+            raise ConfigError("--passenger", None, f"the file's [team] has {len(names)} passengers: say which this "
+                              f"process flies ({', '.join(names)})")
+        name = names[0]
+    return cfg if name is None else passenger_config(cfg, name)
+
+
+def sole_passenger(cfg: Config, not_yet: str, *, team_of_one: bool = True) -> Config:
+    """``cfg`` for a command that drives one passenger: itself without a team, a team of one's
+    passenger's configuration; a team of several (or of one, with ``team_of_one`` False: a command
+    whose processes read the file's single-passenger fields themselves) is refused,
+    :class:`ConfigError` naming ``team.passengers``: "a team of N passengers is not ``not_yet`` yet"."""
+    if not has_team(cfg):
+        return cfg
+    names = [p.name for p in cfg.team.passengers]
+    if len(names) > 1 or not team_of_one:
+        raise ConfigError("team.passengers", names, f"a team of {len(names)} passenger{'s' * (len(names) != 1)} is not "
+                          f"{not_yet} yet (one of them flies with `marsupial run --passenger NAME`; docs/team.md)")
+    return passenger_config(cfg, names[0])

@@ -1,0 +1,195 @@
+"""One carrier, several passengers: ``[team]``, the carrier's dock slots and the passengers bound to
+them (docs/team.md). Part of the schema in :mod:`mission.config.schema`; pure.
+
+Without ``[team]`` a file describes one passenger exactly as before: it rides
+``mission.dock_offset_ned_m``, flies ``mavlink.target_system``, and visits every target of
+``scenario.targets``. With it, each of those facts is the team's, declared once: a passenger rides
+its slot (``team.slots[k].offset_ned_m``), flies its own system id and visits its own targets
+(indices into ``scenario.targets``, whose order stays the mission's). The file may then not state
+``mission.dock_offset_ned_m`` or ``mavlink.target_system``; one passenger's process flies the
+single-passenger configuration :func:`passenger_data` derives (``marsupial run --passenger NAME``).
+
+Frames: slot offsets are local NED [m] (z down) from the carrier's reported position, as
+``mission.dock_offset_ned_m``; "horizontal" is their first two components.
+"""
+from __future__ import annotations
+
+import math
+from typing import Annotated, Any
+
+from pydantic import Field
+
+from mission.config.fields import Section
+from mission.config.scenario import MAX_TARGETS
+from mission.errors import ConfigError
+
+MAX_TEAM = 16  # slots, passengers
+NAME = r"^[A-Za-z0-9_\-]+$"
+#: The single-passenger fields a team declares itself (the slot's offset, the passenger's system id).
+SINGLE_FIELDS = {"mission.dock_offset_ned_m": "team.slots[].offset_ned_m",
+                 "mavlink.target_system": "team.passengers[].system_id"}
+
+
+class SlotSection(Section):
+    """A dock slot on the carrier's deck."""
+
+    name: str = Field(pattern=NAME, max_length=64, description="[-] the slot's name (team.passengers[].slot gives it)")
+    offset_ned_m: list[Annotated[float, Field(ge=-100, le=100)]] = Field(
+        description=("[m] NED offset of the slot's dock point from the carrier's reported position (its passenger "
+                     "rides and docks there, as mission.dock_offset_ned_m without a team)"))
+
+
+class TeamPassengerSection(Section):
+    """A passenger of the team."""
+
+    name: str = Field(pattern=NAME, max_length=64, description="[-] the passenger's name (`marsupial run --passenger NAME`)")
+    system_id: int = Field(ge=1, le=255, description="[-] its vehicle's MAVLink system id (its mavlink.target_system)")
+    slot: str = Field(max_length=64, description="[-] the name of its slot in team.slots")
+    targets: list[int] = Field(max_length=MAX_TARGETS,
+        description=("[-] its targets, indices into scenario.targets (0 the first; scenario.target alone is 0), in the "
+                     "mission's order: one target is a list of one"))
+
+
+class TeamSection(Section):
+    """``[team]``: the carrier's dock slots and the passengers bound to them (leave out: one passenger)."""
+
+    passenger_span_m: float = Field(0.8, gt=0, le=10,
+        description=("[m] a passenger's width, propeller tip to tip: two slots' dock points must be this plus twice "
+                     "recovery.contact_radius_m apart horizontally (docked anywhere contact allows, they do not touch)"))
+    slots: list[SlotSection] = Field([], max_length=MAX_TEAM,
+        description="[-] list of `{ name, offset_ned_m = [m] }`: the carrier's dock slots")
+    passengers: list[TeamPassengerSection] = Field([], max_length=MAX_TEAM,
+        description="[-] list of `{ name, system_id, slot, targets = [index] }`: one entry per passenger, one slot each")
+
+    def slot_index(self, name: str) -> int:
+        """The index in :attr:`slots` of the slot called ``name`` (the name is checked at load)."""
+        return next(k for k, slot in enumerate(self.slots) if slot.name == name)
+
+    def owners(self, n_targets: int) -> list[int]:
+        """For each of the mission's ``n_targets`` targets, the index of the passenger that flies to it."""
+        owner = [0] * n_targets
+        for i, p in enumerate(self.passengers):
+            for t in p.targets:
+                owner[t] = i
+        return owner
+
+
+def dock_points(team: TeamSection | None, single_offset_ned_m: list[float],
+                n_targets: int) -> tuple[list[tuple[str, list[float]]], list[list[float]]]:
+    """The dock points [m] NED from the carrier's reported position, each with the field that
+    declares it (``mission.dock_offset_ned_m`` = ``single_offset_ned_m`` without a ``team``, else
+    every slot), and for each of the ``n_targets`` targets the one its passenger leaves from."""
+    if team is None:
+        return [("mission.dock_offset_ned_m", single_offset_ned_m)], [single_offset_ned_m] * n_targets
+    docks = [(f"team.slots[{k}].offset_ned_m", list(slot.offset_ned_m)) for k, slot in enumerate(team.slots)]
+    return docks, [list(team.slots[team.slot_index(team.passengers[i].slot)].offset_ned_m) for i in team.owners(n_targets)]
+
+
+def min_slot_spacing_m(team: TeamSection, contact_radius_m: float) -> float:
+    """[m] the least horizontal distance between two slots' dock points: a passenger counts as docked
+    anywhere within ``contact_radius_m`` [m] (recovery.contact_radius_m) of its slot, so two docked
+    neighbours may each sit that much towards the other, and still their spans must not touch."""
+    return team.passenger_span_m + 2.0 * contact_radius_m
+
+
+def check_team(team: TeamSection, *, n_targets: int, target_field: str, contact_radius_m: float,
+               stated: dict[str, Any], carrier_system_id: int | None) -> None:
+    """Refuse a team that is not one passenger per slot and per target (raises :class:`ConfigError`
+    naming the field). ``n_targets``: the mission's targets; ``target_field``: how the file named
+    them (``scenario.targets``, or ``scenario.target`` alone); ``stated``: the dotted fields the file
+    set, with their values (a field of :data:`SINGLE_FIELDS` is the team's); ``carrier_system_id``: the carrier vehicle's
+    MAVLink system id, if it has one."""
+    for field, instead in SINGLE_FIELDS.items():
+        if field in stated:
+            raise ConfigError(field, stated[field], f"with a [team] each passenger's comes from {instead}: leave it out "
+                              "(one fact, declared once)")
+    if not team.passengers:
+        raise ConfigError("team.passengers", [], "a [team] needs at least one passenger")
+    _check_slots(team, contact_radius_m)
+    names = [s.name for s in team.slots]
+    for i, p in enumerate(team.passengers):
+        field = f"team.passengers[{i}]"
+        earlier = team.passengers[:i]
+        if p.name in [q.name for q in earlier]:
+            raise ConfigError(f"{field}.name", p.name, "another passenger has this name")
+        same = [j for j, q in enumerate(earlier) if q.system_id == p.system_id]
+        if same:
+            raise ConfigError(f"{field}.system_id", p.system_id, f"also team.passengers[{same[0]}]'s "
+                              f"({earlier[same[0]].name!r}): every vehicle needs its own MAVLink system id")
+        if p.system_id == carrier_system_id:
+            raise ConfigError(f"{field}.system_id", p.system_id, "also the carrier's (carrier.mavlink.target_system)")
+        if p.slot not in names:
+            raise ConfigError(f"{field}.slot", p.slot, f"no such slot in team.slots ({', '.join(names) or 'none'})")
+        taken = [j for j, q in enumerate(earlier) if q.slot == p.slot]
+        if taken:
+            raise ConfigError(f"{field}.slot", p.slot, f"also team.passengers[{taken[0]}]'s ({earlier[taken[0]].name!r}): "
+                              "one passenger per slot")
+        if not p.targets:
+            raise ConfigError(f"{field}.targets", [], "a passenger with no target: give it at least one index into "
+                              f"{target_field}")
+        for j, t in enumerate(p.targets):
+            if not 0 <= t < n_targets:
+                raise ConfigError(f"{field}.targets[{j}]", t, f"no such target: {target_field} has {n_targets} "
+                                  f"(indices 0..{n_targets - 1})")
+            if j and t <= p.targets[j - 1]:
+                raise ConfigError(f"{field}.targets[{j}]", t, f"after {p.targets[j - 1]}: a passenger's targets go in "
+                                  f"the mission's order, the order of {target_field} (docs/team.md)")
+            owner = [k for k, q in enumerate(earlier) if t in q.targets]
+            if owner:
+                raise ConfigError(f"{field}.targets[{j}]", t, f"also team.passengers[{owner[0]}]'s "
+                                  f"({earlier[owner[0]].name!r}): one passenger per target")
+    served = {t for p in team.passengers for t in p.targets}
+    for k in range(n_targets):
+        if k not in served:
+            name = f"{target_field}[{k}]" if target_field == "scenario.targets" else target_field
+            raise ConfigError(name, k, "no passenger of team.passengers flies to it: list it in one's targets")
+
+
+def _check_slots(team: TeamSection, contact_radius_m: float) -> None:
+    spacing = min_slot_spacing_m(team, contact_radius_m)
+    for k, slot in enumerate(team.slots):
+        field = f"team.slots[{k}]"
+        if len(slot.offset_ned_m) != 3:
+            raise ConfigError(f"{field}.offset_ned_m", slot.offset_ned_m, "must have 3 components")
+        for j, other in enumerate(team.slots[:k]):
+            if other.name == slot.name:
+                raise ConfigError(f"{field}.name", slot.name, f"also team.slots[{j}]'s name")
+            apart = math.dist(slot.offset_ned_m[:2], other.offset_ned_m[:2])
+            if apart < spacing:
+                raise ConfigError(f"{field}.offset_ned_m", slot.offset_ned_m,
+                                  f"overlaps team.slots[{j}] ({other.name!r}): {apart:.2f} m from it horizontally, "
+                                  f"under team.passenger_span_m + 2 recovery.contact_radius_m = {spacing:g} m "
+                                  "(two passengers docked within recovery.contact_radius_m of these slots could touch)")
+
+
+def passenger_data(data: dict[str, Any], team: TeamSection, targets: list[list[float]], i: int) -> dict[str, Any]:
+    """The single-passenger configuration (a nested dict, as a file gives it) of passenger ``i`` of
+    ``team`` in the team's configuration ``data`` whose mission's targets are ``targets`` [m]: no
+    ``[team]``, ``mission.dock_offset_ned_m`` its slot's offset, ``mavlink.target_system`` its system
+    id, and its own targets (``scenario.target`` for one, ``scenario.targets`` for several)."""
+    p = team.passengers[i]
+    out = {key: dict(value) if isinstance(value, dict) else value for key, value in data.items() if key != "team"}
+    scenario = out.setdefault("scenario", {})
+    scenario.pop("target", None)
+    scenario.pop("targets", None)
+    own = [list(targets[t]) for t in p.targets]
+    scenario.update({"target": own[0]} if len(own) == 1 else {"targets": own})
+    out.setdefault("mission", {})["dock_offset_ned_m"] = list(team.slots[team.slot_index(p.slot)].offset_ned_m)
+    out.setdefault("mavlink", {})["target_system"] = p.system_id
+    return out
+
+
+def as_team_error(error: ConfigError, team: TeamSection, i: int, target_field: str) -> ConfigError:
+    """``error`` of passenger ``i``'s derived configuration (:func:`passenger_data`) naming the team
+    file's field: its slot's offset, its system id, the mission's index of its target; any other
+    field as it is, the passenger named in the rule."""
+    p = team.passengers[i]
+    field = error.field
+    named = {"mission.dock_offset_ned_m": f"team.slots[{team.slot_index(p.slot)}].offset_ned_m",
+             "mavlink.target_system": f"team.passengers[{i}].system_id"}
+    for own, index in [("scenario.target", p.targets[0])] + [(f"scenario.targets[{j}]", t) for j, t in enumerate(p.targets)]:
+        named[own] = f"{target_field}[{index}]" if target_field == "scenario.targets" else target_field
+    for old, new in named.items():
+        if field == old or field.startswith((old + "[", old + ".")):
+            return ConfigError(new + field.removeprefix(old), error.value, error.rule)
+    return ConfigError(field, error.value, f"{error.rule} (as team.passengers[{i}] {p.name!r} flies it)")

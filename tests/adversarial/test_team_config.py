@@ -1,0 +1,117 @@
+"""A team that is not one passenger per slot and per target (configs/team.toml mutated): two
+passengers on one slot, slots that overlap, a target with no passenger, a duplicate system id, a
+slot that does not exist, a passenger with no target, a fact the team declares stated again.
+``marsupial run`` refuses each before anything is opened, exit 2, naming the field (in process;
+the four of issue 36 also through the real process); ``--passenger`` is checked the same way,
+and ``demo`` and ``carrier`` refuse a team they cannot fly yet."""
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from mission.cli import main
+from tests.conftest import CONFIGS
+
+TEAM_PATH = CONFIGS / "team.toml"
+TEAM = TEAM_PATH.read_text()
+
+
+def changed(old: str, new: str) -> str:
+    assert TEAM.count(old) == 1, old
+    return TEAM.replace(old, new)
+
+
+# (id, configs/team.toml so mutated, what the error starts with)
+MISTAKES = [
+    ("two-on-one-slot", changed('slot = "starboard"', 'slot = "port"'),
+     "team.passengers[1].slot = 'port': also team.passengers[0]'s ('alpha'): one passenger per slot"),
+    ("slots-overlap", changed("[0.0, 0.75, -0.5]", "[0.0, 0.3, -0.5]"),
+     "team.slots[1].offset_ned_m = [0.0, 0.3, -0.5]: overlaps team.slots[0] ('port'): 1.05 m from it"),
+    ("target-without-passenger", changed("targets = [0, 2]", "targets = [0]"),
+     "scenario.targets[2] = 2: no passenger of team.passengers flies to it"),
+    ("duplicate-system-id", changed("system_id = 2 ", "system_id = 1 "),
+     "team.passengers[1].system_id = 1: also team.passengers[0]'s ('alpha')"),
+    ("no-such-slot", changed('slot = "starboard"', 'slot = "stern"'),
+     "team.passengers[1].slot = 'stern': no such slot in team.slots (port, starboard)"),
+    ("no-target", changed("targets = [1]", "targets = []"), "team.passengers[1].targets = []: a passenger with no target"),
+    ("target-out-of-range", changed("targets = [1]", "targets = [1, 3]"), "team.passengers[1].targets[1] = 3: no such target"),
+    ("targets-out-of-order", changed("targets = [0, 2]", "targets = [2, 0]"),
+     "team.passengers[0].targets[1] = 0: after 2: a passenger's targets go in the mission's order"),
+    ("target-of-two", changed("targets = [1]", "targets = [1, 2]"),
+     "team.passengers[1].targets[1] = 2: also team.passengers[0]'s ('alpha'): one passenger per target"),
+    ("duplicate-name", changed('name = "bravo"', 'name = "alpha"'), "team.passengers[1].name = 'alpha'"),
+    ("duplicate-slot-name", changed('name = "starboard"', 'name = "port"'), "team.slots[1].name = 'port'"),
+    ("dock-offset-stated-too", changed("[mission]\n", "[mission]\ndock_offset_ned_m = [0.0, 0.0, -0.5]\n"),
+     "mission.dock_offset_ned_m = [0.0, 0.0, -0.5]: with a [team] each passenger's comes from team.slots[].offset_ned_m"),
+    ("system-id-stated-too", changed("[mavlink]\n", "[mavlink]\ntarget_system = 1\n"),
+     "mavlink.target_system = 1: with a [team] each passenger's comes from team.passengers[].system_id"),
+    ("slot-underground", changed("[0.0, 0.75, -0.5]", "[0.0, 0.75, 0.5]"), "team.slots[1].offset_ned_m = [0.0, 0.75, 0.5]"),
+    ("slot-two-components", changed("[0.0, 0.75, -0.5]", "[0.75, -0.5]"), "team.slots[1].offset_ned_m = [0.75, -0.5]"),
+    ("slot-a-string", changed("[0.0, 0.75, -0.5]", '"starboard"'), "team.slots[1].offset_ned_m = 'starboard'"),
+    ("system-id-256", changed("system_id = 2 ", "system_id = 256 "), "team.passengers[1].system_id = 256"),
+    ("system-id-a-fraction", changed("system_id = 2 ", "system_id = 2.0 "), "team.passengers[1].system_id = 2.0"),
+    ("target-a-fraction", changed("targets = [1]", "targets = [1.0]"), "team.passengers[1].targets[0] = 1.0"),
+    ("empty-team", TEAM[:TEAM.index("[team]")] + "[team]\n", "team.passengers = []: a [team] needs at least one passenger"),
+    ("unknown-field", changed("[team]\n", "[team]\nslot_spacing_m = 1.0\n"), "team.slot_spacing_m"),
+    ("system-id-of-the-carrier",  # a PX4 rover carrier with bravo's system id
+     changed("[carrier]\n", '[carrier]\nbackend = "mavlink"\n') + "\n[carrier.mavlink]\ntarget_system = 2\n",
+     "team.passengers[1].system_id = 2: also the carrier's"),
+]
+
+
+@pytest.mark.parametrize("text, error", [(t, e) for _, t, e in MISTAKES], ids=[i for i, _, _ in MISTAKES])
+def test_run_refuses_the_team_with_exit_2_naming_the_field(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                          text: str, error: str) -> None:
+    path = tmp_path / "team.toml"
+    path.write_text(text)
+    code = main(["run", str(path), "--passenger", "alpha", "--log-dir", str(tmp_path / "log")])
+    out, err = capsys.readouterr()
+    assert code == 2 and f"error: {error}" in err and "Traceback" not in err, err[:400]
+    assert out == "" and not (tmp_path / "log").exists()  # nothing said about flying, nothing started
+
+
+@pytest.mark.parametrize("case", ["two-on-one-slot", "slots-overlap", "target-without-passenger", "duplicate-system-id"])
+def test_the_real_process_refuses_issue_36s_bad_teams(tmp_path: Path, case: str) -> None:
+    text, error = next((t, e) for i, t, e in MISTAKES if i == case)
+    path = tmp_path / "team.toml"
+    path.write_text(text)
+    out = subprocess.run([sys.executable, "-m", "mission.cli", "run", str(path), "--passenger", "bravo"],
+                         capture_output=True, text=True, timeout=60)
+    assert out.returncode == 2 and f"error: {error}" in out.stderr and "Traceback" not in out.stderr, out.stderr
+
+
+@pytest.mark.parametrize("args, error", [
+    ([str(TEAM_PATH), "--passenger", "charlie"], "--passenger = 'charlie': no such passenger in team.passengers (alpha, bravo)"),
+    ([str(TEAM_PATH)], "--passenger = None: the file's [team] has 2 passengers: say which this process flies (alpha, bravo)"),
+    ([str(CONFIGS / "recovery.toml"), "--passenger", "alpha"], "--passenger = 'alpha': the file has no [team] section"),
+])
+def test_run_refuses_a_passenger_it_cannot_choose(tmp_path: Path, capsys: pytest.CaptureFixture[str], args: list[str],
+                                                  error: str) -> None:
+    code = main(["run", *args, "--log-dir", str(tmp_path / "log")])
+    out, err = capsys.readouterr()
+    assert code == 2 and f"error: {error}" in err and out == "" and not (tmp_path / "log").exists(), err[:400]
+
+
+def test_run_help_says_what_passenger_does(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["run", "--help"]) == 0
+    text = " ".join(capsys.readouterr().out.split())
+    assert "--passenger NAME" in text and "fly passenger NAME of team.passengers" in text
+    assert "Refused (exit 2) for a file without a [team]" in text
+
+
+def test_the_demo_refuses_a_team_it_cannot_fly_yet(tmp_path: Path) -> None:
+    out = subprocess.run([sys.executable, "-m", "mission.cli", "demo", "--config", str(TEAM_PATH), "--log-root",
+                          str(tmp_path / "demo")], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 2 and "a team of 2 passengers is not flown by demo yet" in out.stderr, out.stderr
+    assert "error: team.passengers = ['alpha', 'bravo']" in out.stderr and "Traceback" not in out.stderr
+    assert not (tmp_path / "demo").exists()  # refused before anything started
+
+
+def test_the_carrier_refuses_a_team_it_cannot_drive_yet(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    code = main(["carrier", str(TEAM_PATH), "--zenoh-listen", "tcp/127.0.0.1:9", "--summary", str(tmp_path / "c.json")])
+    err = capsys.readouterr().err
+    assert code == 2 and "error: team.passengers = ['alpha', 'bravo']: a team of 2 passengers is not driven by" in err
+    assert not (tmp_path / "c.json").exists()
