@@ -33,7 +33,7 @@ from sim.vehicle.endpoints import parse_endpoint
 from sim.vehicle.params import SPECS_BY_NAME
 from sim.vehicle.physics.deck import DeckSpec
 from sim.robots.truth import TruthTrack
-from sim.vehicle.deck_follow import follow_carrier
+from sim.robots.deck_follow import follow_carrier
 from sim.camera.publisher import CameraPublisher
 
 log = logging.getLogger(__name__)

@@ -149,7 +149,7 @@ def test_the_passenger_rides_each_leg_disarmed_on_the_deck_and_arms_only_for_the
 def test_a_second_run_on_the_deck_gives_the_same_flight(errors_flight, tmp_path):
     """Lockstep on a deck: the same configuration and seed give the same flight record, byte for
     byte, and the same touchdowns on the deck. The mock's deck waits after each barrier for the
-    carrier's state of that step (sim/vehicle/deck_follow.py); when it took whichever state had
+    carrier's state of that step (sim/robots/deck_follow.py); when it took whichever state had
     arrived, two runs parted at t = 14.6 s, the carrier braking under the seated vehicle
     (docs/lockstep.md, "On a deck")."""
     first, _ = errors_flight

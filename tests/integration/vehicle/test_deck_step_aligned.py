@@ -1,4 +1,4 @@
-"""The lockstep deck steps on the carrier's step (sim/vehicle/deck_follow.py, ``StepAligned``),
+"""The lockstep deck steps on the carrier's step (sim/robots/deck_follow.py, ``StepAligned``),
 over real Zenoh on loopback: after a barrier the deck waits until it has the state of the
 carrier's newest step at or before it, as the carrier's ``clock/ready`` names it (by sequence
 number for its published state, by stamp for its truth), and not longer than its wall bound.
@@ -16,8 +16,8 @@ from mission.bus.bridge import CarrierFeed, CarrierPublisher
 from mission.bus.lockstep import clock_keys
 from mission.bus.wire import CarrierState
 from mission.time.clock import ManualClock
-from sim.vehicle import deck_follow
-from sim.vehicle.deck_follow import StepAligned
+from sim.robots import deck_follow
+from sim.robots.deck_follow import StepAligned
 from tests.support.zenoh_util import LENIENT, peer_pair, wait_for
 
 pytestmark = pytest.mark.timeout(60)

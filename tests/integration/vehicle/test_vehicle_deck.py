@@ -21,7 +21,7 @@ from mission.bus.wire import CarrierState
 from mission.mavlink import px4, setpoints
 from sim.testing.probe import Probe, SetpointStream, connect, start_offboard, vehicle_for, wait_flight
 from sim.vehicle.mock import MockVehicle, VehicleSnapshot
-from sim.vehicle.deck_follow import follow_carrier
+from sim.robots.deck_follow import follow_carrier
 from sim.vehicle.physics.deck import DeckMotion, DeckSpec
 from tests.support.zenoh_util import peer_pair
 
@@ -187,7 +187,7 @@ def every_50_ms(publish: Callable[[float, int], None]) -> Iterator[None]:
 
 
 def test_the_deck_moves_as_the_carriers_zenoh_state_says(probe: Probe):
-    """``mock-vehicle --deck PAIR``'s feed (sim.vehicle.deck_follow.follow_carrier): the carrier's state
+    """``mock-vehicle --deck PAIR``'s feed (sim.robots.deck_follow.follow_carrier): the carrier's state
     published on Zenoh (loopback) at 20 Hz, moving north at 1 m/s, carries the vehicle standing on
     its deck (both on wall time here: the publisher has no simulated clock)."""
     with peer_pair() as (carrier_side, vehicle_side):
