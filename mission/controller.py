@@ -21,7 +21,7 @@ from mission import phases
 from mission.bus.wire import GeoOrigin, PassengerStatus
 from mission.config.schema import Config
 from mission.core.setpoint import Setpoint
-from mission.interfaces import CarrierSource, MeasurementSource, StatusSink, Vehicle
+from mission.interfaces import CarrierSource, CountsReadings, MeasurementSource, StatusSink, Vehicle
 from mission.mavlink import receiver
 from mission.mavlink.commander import HomeKeeper, ParamKeeper
 from mission.mavlink.requests import CommandWorker, Px4Setup
@@ -292,7 +292,8 @@ class MissionController:
                                "home": None if self._home is None else self._home.counters, "px4_params": self.px4_params,
                                "px4_kept": None if self._params is None else {
                                    "values": dict(self._params.kept), **self._params.counters, "moves": list(self._params.moves)}}
-        feeds = {name: src.counters for name, src in zip(self.cfg.mission.feeds, self.sources) if hasattr(src, "counters")}
+        feeds = {name: src.counters for name, src in zip(self.cfg.mission.feeds, self.sources)
+                 if isinstance(src, CountsReadings)}
         if feeds:  # the measurement feeds' own (the marker feed: frames read, refused, detected)
             out["feeds"] = feeds
         if self.clock.counters is not None:  # a lockstep clock's: was every step in step?

@@ -160,6 +160,17 @@ class CameraSink(Protocol):
 
 
 @runtime_checkable
+class CountsReadings(Protocol):
+    """A measurement feed that keeps counters of what it read, refused and used, for
+    ``summary.json``'s ``feeds`` (the marker feed: frames received, refused, detected)."""
+
+    @property
+    def counters(self) -> dict[str, Any]:
+        """The counters so far (a copy: the caller may keep it)."""
+        ...
+
+
+@runtime_checkable
 class ShowsFrames(Protocol):
     """A measurement feed whose frames can be shown to :class:`CameraSink` s (the marker feed)."""
 
