@@ -25,7 +25,9 @@ Order: the change of command is first limited to ``max_accel_m_s2 * dt_s`` (alon
 then the barriers act, then the speed is limited to ``max_speed_m_s`` by scaling (the direction is
 kept, and scaling towards zero never breaks a satisfied barrier constraint). So the barriers have
 the last word: when an obstacle demands a harder stop than the acceleration limit allows, safety
-wins over comfort (``cbf_active`` says so).
+wins over comfort (``cbf_active`` says so). With neighbours, a blocked meeting first veers the
+command right (:func:`veer_right`, before the acceleration limit), and the speed limit never
+scales below what a neighbour's row needs (:func:`limit_speed_keeping`).
 """
 from __future__ import annotations
 
@@ -185,7 +187,7 @@ def veer_right(u: np.ndarray, A: np.ndarray, b: np.ndarray) -> np.ndarray:
     three that meet in the middle turn round it one way, where the barrier alone would stop them
     face to face for good (it lets no one of a pair at ``D`` approach the other, and the law
     pulls straight ahead). The slight backing off is what frees three already packed at ``D``:
-    purely to the right (90 deg) 3 of 200 such 2D scenarios stayed stuck (docs/team.md)."""
+    purely to the right (90 deg) 2 to 5 of 200 such 2D scenarios stayed stuck (docs/team.md)."""
     breaks = dot(A, u[..., None, :]) < b
     if not breaks.any():
         return u
