@@ -25,14 +25,16 @@ from mission.core.tick import TickModel, passenger_tick
 @dataclass(frozen=True)
 class TeamFlight:
     """What a batch of team flights did: min_distance_m (B,) the least distance between any two
-    passengers over the flight [m]; first_close_s (B,) when it first fell below the separation
-    distance less ``tolerance_m`` (nan: never); arrived_s (B, k) when each reached its target
+    passengers over the flight [m]; shortfall_m (B,) how far a pair came inside what the barrier
+    keeps [m] (0: never), the separation distance once the pair has been that far apart, before
+    that the largest distance it has had (a pair that starts closer is held, not pushed apart);
+    arrived_s (B, k) when each reached its target
     (nan: not in the flight's time); infeasible (B,) ticks on which a filter had no solution;
     final_m (B, k, n) where each ended [m]; distance_m (T, B) the least pairwise distance at every
     tick (with ``record``, else None)."""
 
     min_distance_m: np.ndarray
-    first_close_s: np.ndarray
+    shortfall_m: np.ndarray
     arrived_s: np.ndarray
     infeasible: np.ndarray
     final_m: np.ndarray
@@ -40,14 +42,14 @@ class TeamFlight:
 
 
 def pair_distances(x: np.ndarray) -> np.ndarray:
-    """The least distance [m] between two of the ``k`` passengers of each scenario, x (B, k, n) -> (B,)."""
+    """The distance [m] between each two of the ``k`` passengers of each scenario, x (B, k, n) -> (B, pairs)."""
     k = x.shape[-2]
     i, j = np.triu_indices(k, 1)
-    return norm(x[..., i, :] - x[..., j, :]).min(axis=-1)
+    return norm(x[..., i, :] - x[..., j, :])
 
 
 def fly_team(slots: np.ndarray, targets: np.ndarray, law: LawParams, safety: SafetyConfig, dt_s: float, duration_s: float,
-             *, arrival_radius_m: float = 0.5, delay_ticks: int = 1, separate: bool = True, tolerance_m: float = 0.0,
+             *, arrival_radius_m: float = 0.5, delay_ticks: int = 1, separate: bool = True,
              record: bool = False, progress: Callable[[int], None] | None = None) -> TeamFlight:
     """Fly ``B`` scenarios of ``k`` passengers from ``slots`` to ``targets`` (both (B, k, n));
     ``separate``: with the separation barrier (False: each flies as if alone, the control run).
@@ -65,8 +67,11 @@ def fly_team(slots: np.ndarray, targets: np.ndarray, law: LawParams, safety: Saf
     history = [(anchor.copy(), u.copy())] * (delay_ticks + 1)  # the states a bus would deliver, oldest first
     ages = np.full((N, k - 1), delay_ticks * dt_s)
     ticks = int(round(duration_s / dt_s))
-    min_d = pair_distances(slots.astype(float))
-    first_close = np.full(B, np.nan)
+    d = pair_distances(slots.astype(float))
+    min_d = d.min(axis=-1)
+    D = np.inf if safety.separation_m is None else safety.separation_m
+    kept = np.minimum(d, D)  # what the barrier keeps, per pair
+    shortfall = np.zeros(B)
     arrived = np.full(N, np.nan)
     infeasible = np.zeros(B, dtype=int)
     trace = np.empty((ticks, B)) if record else None
@@ -88,15 +93,15 @@ def fly_team(slots: np.ndarray, targets: np.ndarray, law: LawParams, safety: Saf
         arrived[reached] = t
         done |= reached
         d = pair_distances(x.reshape(B, k, n))
-        min_d = np.minimum(min_d, d)
-        close = np.isnan(first_close) & (d < safety.separation_m - tolerance_m) if safety.separation_m else np.zeros(B, bool)
-        first_close[close] = t
+        min_d = np.minimum(min_d, d.min(axis=-1))
+        shortfall = np.maximum(shortfall, (kept - d).max(axis=-1))
+        kept = np.maximum(kept, np.minimum(d, D))
         if trace is not None:
-            trace[step] = d
+            trace[step] = d.min(axis=-1)
         if progress is not None and (step + 1) % 50 == 0:
             progress(50)
         if done.all():
             if trace is not None:
-                trace[step + 1:] = d
+                trace[step + 1:] = d.min(axis=-1)
             break
-    return TeamFlight(min_d, first_close, arrived.reshape(B, k), infeasible, (anchor + e).reshape(B, k, n), trace)
+    return TeamFlight(min_d, shortfall, arrived.reshape(B, k), infeasible, (anchor + e).reshape(B, k, n), trace)

@@ -34,6 +34,7 @@ CASES = {
     "head-on 3D": ([[0.0, 0.0, -1.5], [3.5, 0.0, -1.5]], [[7.0, 0.0, -1.5], [-3.5, 0.0, -1.5]]),
     "crossing 3D": ([[0.0, 0.0, -1.5], [0.0, 3.5, -1.5]], [[4.0, 5.0, -3.0], [4.0, -1.5, -3.0]]),
     "three leave one deck": _roundabout(3, 3.5, 5.5),
+    "three packed 2 m apart": _roundabout(3, 2.0, 5.5),
 }
 
 
@@ -43,7 +44,9 @@ def test_passengers_never_closer_than_the_separation_and_all_arrive(name):
     alone = _fly(slots, targets, separate=False)
     assert alone.min_distance_m[0] < 0.5 * D  # the paths do meet: without the rows they nearly collide
     team = _fly(slots, targets)
-    assert team.min_distance_m[0] >= D - TOL_M
+    start = np.linalg.norm(np.subtract(slots[0], slots[1]))
+    assert team.min_distance_m[0] >= min(D, start) - TOL_M
+    assert team.shortfall_m[0] <= TOL_M  # and once a pair has been D apart, never closer than D
     assert not np.isnan(team.arrived_s).any()  # no deadlock: the head-on tie-break lets them pass
     assert team.infeasible[0] == 0
 
