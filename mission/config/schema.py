@@ -108,11 +108,18 @@ class SafetySection(Section):
     z_max_m: float | None = Field(None, ge=-100_000, le=100_000,
         description="[m] NED z upper bound for the passenger (an altitude floor: z <= z_max_m, e.g. -0.5 = 0.5 m up)")
     filter_carrier: bool = Field(True, description="[-] pass the carrier's command through the CBF filter too")
+    passenger_separation_m: float = Field(3.0, gt=0, le=100,
+        description="[m] least distance between two passengers' centres: the pairwise separation barrier keeps each "
+                    "at least this far from every other passenger it hears (docs/team.md, \"Keeping passengers apart\")")
+    passenger_separation_max_age_s: float = Field(0.5, gt=0, le=10,
+        description="[s] an other passenger's shared state older than this is left out of the separation barrier "
+                    "(as if absent); a younger one counts as flown on at its velocity over its age")
 
     def passenger(self) -> SafetyConfig:
         from mission.core.safety import SafetyConfig
 
-        return SafetyConfig(self.cbf_gain, self.margin_m, self.passenger_max_speed_m_s, self.passenger_max_accel_m_s2, self.z_min_m, self.z_max_m)
+        return SafetyConfig(self.cbf_gain, self.margin_m, self.passenger_max_speed_m_s, self.passenger_max_accel_m_s2, self.z_min_m,
+                            self.z_max_m, self.passenger_separation_m, self.passenger_separation_max_age_s)
 
     def carrier(self) -> SafetyConfig:
         from mission.core.safety import SafetyConfig

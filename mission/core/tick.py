@@ -26,7 +26,7 @@ from typing import Literal
 import numpy as np
 
 from mission.core.law import LawParams, carrier_command, norm, passenger_command, uniform, where_rows
-from mission.core.safety import DeckKeepOut, FilterResult, Obstacles, SafetyConfig, filter_velocity
+from mission.core.safety import DeckKeepOut, FilterResult, Neighbours, Obstacles, SafetyConfig, filter_velocity
 
 
 DEPARTURE_THRESHOLD_M = 0.1  # |e_pc| [m] beyond which the passenger counts as having left the carrier
@@ -94,6 +94,7 @@ def passenger_tick(
     dt_s: float | None = None,
     e_tc_norm_m: np.ndarray | None = None,
     deck: DeckKeepOut | None = None,
+    neighbours: Neighbours | None = None,
 ) -> PassengerTick:
     """Law + safety for the passenger at ``anchor + e_pc`` [m].
 
@@ -101,6 +102,8 @@ def passenger_tick(
     velocity); after separation nothing is fed forward (the anchor is latched).
     ``e_tc_norm_m`` [m]: ``|target - anchor|`` when the caller has it already (else computed).
     ``deck``: the keep-out round the carrier's deck the filter keeps the passenger out of.
+    ``neighbours``: the other passengers the filter keeps it apart from (their last shared states,
+    :func:`mission.core.safety.neighbour_rows`; its own velocity there is ``u_prev``).
     """
     sep = np.asarray(separated, dtype=bool)
     e_tc = model.target - anchor
@@ -123,7 +126,7 @@ def passenger_tick(
             scale = np.where(sep, scale, 1.0)
         desired = desired * scale[..., None]
     safe = filter_velocity(anchor + e_pc, desired, model.obstacles, model.passenger_safety, u_prev, dt_s, copy=False,
-                           deck=deck)
+                           deck=deck, neighbours=neighbours)
     return PassengerTick(u=safe.u, desired=desired, relative=cmd.relative, P=cmd.P, leaving=cmd.leaving, safety=safe,
                          e_pc_norm_m=cmd.e_pc_norm_m)
 

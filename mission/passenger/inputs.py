@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:
+    from mission.core.safety import Neighbours
     from mission.phases.measurements import Measurement
     from mission.phases.types import CarrierObs
 
@@ -51,7 +52,9 @@ class PassengerInputs:
     mission cannot go on (signing, identity), each with its reason; ``interrupted``: the user
     asked the mission to stop; ``measurements``: what the measurement feeds
     (:class:`mission.interfaces.MeasurementSource`) gave since the last tick, each reading once,
-    stamped at capture (:mod:`mission.phases.measurements`)."""
+    stamped at capture (:mod:`mission.phases.measurements`); ``neighbours``: the other passengers'
+    last shared states with their ages (None: none heard; no bus feeds them yet), which the
+    separation barrier keeps this one apart from while it flies to its target."""
 
     t_s: float
     vehicle: VehicleReport | None
@@ -59,3 +62,4 @@ class PassengerInputs:
     failed: dict[str, str] = field(default_factory=dict)
     interrupted: bool = False
     measurements: tuple[Measurement, ...] = ()
+    neighbours: Neighbours | None = None

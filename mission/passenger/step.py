@@ -132,7 +132,7 @@ class PassengerStep:
                                                     on_deck)
         return Observation(t_s=inputs.t_s, vehicle=observe_vehicle(inputs.vehicle, self.velocity_fix),
                            carrier=carrier, failed=dict(inputs.failed), interrupted=inputs.interrupted,
-                           measurements=self.measurements, relative=relative)
+                           measurements=self.measurements, relative=relative, neighbours=inputs.neighbours)
 
     def __call__(self, state: MissionState, inputs: PassengerInputs) -> StepResult:
         """One tick: observe, then the phases."""

@@ -276,10 +276,12 @@ def navigate(state, obs, m, events=()):
     (``state.takeoff_offset``: where the passenger was by its estimate when the latch fired,
     relaxing to zero at bounded acceleration, :func:`_relax`), and the altitude floor is left out
     while the vehicle reads itself under it (as JOIN's): a seated vehicle whose estimate reads it
-    below the deck would otherwise be sent the floor's climb at once."""
+    below the deck would otherwise be sent the floor's climb at once. The reference keeps apart
+    from the other passengers the observation holds (``obs.neighbours``, the separation barrier)."""
     t = obs.t_s
     deck = m.deck.keep_out(obs, m) if m.deck is not None else None
-    tick = passenger_tick(state.anchor, ZERO, state.e_ref, True, m.tick, state.u_ref, m.dt_s, deck=deck)
+    tick = passenger_tick(state.anchor, ZERO, state.e_ref, True, m.tick, state.u_ref, m.dt_s, deck=deck,
+                          neighbours=obs.neighbours)
     # The reference advances at the rate the vehicle can follow (mission.core.tracking.progress); its
     # acceleration is its own velocity's change over the tick (a signal we generate: no noise).
     rate = progress(_lag_m(state, obs), m.tracking)

@@ -18,7 +18,7 @@ import numpy as np
 from mission.core.records import replace
 from mission.phases.measurements import Measurements
 from mission.phases.phase import Phase, Request
-from mission.core.safety import DeckKeepOut, SafetyConfig
+from mission.core.safety import DeckKeepOut, Neighbours, SafetyConfig
 from mission.core.docking import DockingGeometry
 from mission.core.pursuit import PursuitLimits
 from mission.core.setpoint import Setpoint
@@ -105,6 +105,7 @@ class Observation:
     interrupted: bool = False
     measurements: Measurements = Measurements()
     relative: RelativeView | None = None  # the relative estimator's word on the deck ([relnav] enabled)
+    neighbours: Neighbours | None = None  # the other passengers' shared states (the separation barrier's)
 
 
 @dataclass(frozen=True)

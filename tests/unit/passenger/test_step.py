@@ -16,6 +16,7 @@ from mission import phases
 from mission.config.schema import load_config, with_overrides
 from mission.controller import MissionController
 from mission.core.consistent_velocity import PositionConsistentVelocity
+from mission.core.safety import Neighbours
 from mission.mavlink import px4
 from mission.mavlink.telemetry import vehicle_report
 from mission.model import mission_model
@@ -132,6 +133,15 @@ def test_the_step_runs_the_phases_and_returns_setpoint_request_and_decision() ->
     assert result.observation.failed == {"arm": "no"} and result.observation.interrupted
     assert result.state.phase == state.phase and result.decision.request == decision.request
     assert result.setpoint is result.decision.setpoint and result.request is result.decision.request
+
+
+def test_the_step_passes_the_other_passengers_on_to_the_phases() -> None:
+    """``PassengerInputs.neighbours`` (the other passengers' shared states, from the bus once
+    wired) reach the observation the phases see as they came; none heard: none."""
+    step = PassengerStep(mission_model(load_config(CONFIGS / "demo.toml")))
+    others = Neighbours(np.array([[4.0, 0.0, -3.0]]), np.array([[0.0, 1.0, 0.0]]), np.array([0.04]))
+    assert step.observe(PassengerInputs(0.0, vehicle_report(_state(0.0)), None, neighbours=others)).neighbours is others  # type: ignore[arg-type]
+    assert step.observe(PassengerInputs(0.02, vehicle_report(_state(0.02)), None)).neighbours is None  # type: ignore[arg-type]
 
 
 class _Spy:

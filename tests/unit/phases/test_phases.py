@@ -10,6 +10,7 @@ from mission.config.schema import load_config
 from mission.controller import mission_model
 from mission.bus.wire import WireError
 from mission.core.law import norm
+from mission.core.safety import Neighbours
 from mission.phases import AbortReason, CarrierObs, MissionState, Observation, Phase, VehicleObs, finished, step
 from tests.conftest import CONFIGS
 
@@ -354,3 +355,32 @@ def test_a_non_finite_value_aborts_to_hold_naming_it(model, what):
     assert state.detail.startswith("non-finite ") and state.detail.endswith("in RIDING")
     aborted = next(d for _, p, d in log if p == Phase.ABORT)
     assert aborted.request == "hold" and any(e.startswith("abort: non-finite") for e in aborted.events)
+
+
+def test_navigating_keeps_apart_from_a_neighbour_on_its_way(model):
+    """A neighbour hovers half-way between where the passenger separates and its target (the
+    observation's ``neighbours``, as the step passes them on): the reference goes round it at
+    the separation distance; the vehicle, which tracks it, within a small tracking lag. Alone,
+    the passenger passes within a metre of it."""
+    target = model.tick.target
+    dock_z = float(model.dock_offset_ned_m[2])
+    reach = np.sqrt(model.tick.event_distance_m**2 - (target[2] - dock_z) ** 2)  # horizontal, at the latch
+    heading = target[:2] / norm(target[:2])
+    anchor = np.array([*(target[:2] - reach * heading), dock_z])
+    hover = 0.5 * (anchor + target)
+    neighbours = Neighbours(hover[None], np.zeros((1, 3)), np.zeros(1))
+    D = model.tick.passenger_safety.separation_m
+    closest = {}
+
+    def watch(name):
+        def on_tick(k, obs):
+            if obs.vehicle is not None:
+                closest[name] = min(closest.get(name, np.inf), float(norm(obs.vehicle.position_ned_m - hover)))
+            return replace(obs, neighbours=neighbours) if name == "kept" else obs
+        return on_tick
+
+    fly(model, on_tick=watch("alone"))
+    state, _, x_p, _ = fly(model, on_tick=watch("kept"))
+    assert closest["alone"] < 1.0, closest
+    assert closest["kept"] >= D - 0.1, closest  # [m] the vehicle's lag behind the reference, which keeps D
+    assert state.phase == Phase.DONE and norm(x_p - target) <= model.arrival_radius_m
