@@ -96,7 +96,8 @@ def mission_model(cfg: Config) -> MissionModel:
                      clear_height_m=m.deck_clear_height_m, press_floor_m=m.deck_press_floor_m,
                      radius_m=cfg.recovery.deck_radius_m) if m.ride == "deck" else None,
         relnav=derived(RelnavGates, cfg.relnav, params=cfg.relnav.params(), marker_offset_ned_m=np.asarray(
-            marker_offset_ned_m(cfg.vision, m.dock_offset_ned_m), dtype=float)) if cfg.relnav.enabled else None,
+            marker_offset_ned_m(cfg.vision, m.dock_offset_ned_m), dtype=float),
+            carrier_accel_m_s2=s.carrier_max_accel_m_s2) if cfg.relnav.enabled else None,
     )
     legs = cfg.scenario.legs()
     if len(legs) == 1:

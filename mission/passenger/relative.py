@@ -49,6 +49,7 @@ class RelativeDeck:
         self.own_t_s = -np.inf  # [s] the newest own sample
         self.last: tuple[np.ndarray, np.ndarray] | None = None  # the last tick's carrier [m] and velocity [m/s], before pending
         self.pending = np.zeros(3)  # [m] NED, the part of the estimate's jumps not yet let through
+        self.velocity: np.ndarray | None = None  # [m/s] NED, the deck's velocity as last shown to the phases
         self.t_s: float | None = None  # [s] the last tick's time
         self.refused = 0  # readings not fused: no stated sigma, or a non-finite time, offset or sigma
 
@@ -98,10 +99,27 @@ class RelativeDeck:
             step = self.gates.correction_rate_m_s * dt
             self.pending = np.zeros(3) if size <= step else self.pending * (1.0 - step / size)
         self.last = (now, velocity)
+        shown = self._slewed(velocity, dt_s=max(t_s - self.t_s, 0.0) if self.t_s is not None else 0.0, on_deck=on_deck)
         self.t_s = t_s
         now = now + self.pending
-        return replace(carrier, position_ned_m=now - velocity * carrier.age_s, velocity_ned_m_s=velocity), \
+        return replace(carrier, position_ned_m=now - shown * carrier.age_s, velocity_ned_m_s=shown), \
             self._view(e, bias)
+
+    def _slewed(self, velocity: np.ndarray, dt_s: float, on_deck: bool) -> np.ndarray:
+        """The deck's velocity [m/s] shown to the phases: the filter's, changing by at most the
+        carrier's acceleration limit (``gates.carrier_accel_m_s2``) over ``dt_s`` [s]. The carrier
+        cannot change its velocity faster, so what is faster is the filter's noise (each marker
+        moves it, ~0.06 m/s a tick at the 95th percentile while riding), which the riding
+        command would carry into the relative input at the separation."""
+        limit = self.gates.carrier_accel_m_s2
+        if self.velocity is None or limit is None or on_deck:
+            self.velocity = velocity.copy()
+            return self.velocity
+        change = velocity - self.velocity
+        size = float(np.linalg.norm(change))
+        step = limit * dt_s
+        self.velocity = velocity.copy() if size <= step else self.velocity + change * (step / size)
+        return self.velocity
 
     def _view(self, e: RelativeEstimate, bias: np.ndarray) -> RelativeView:
         return RelativeView(position_ned_m=np.asarray(e.position_ned_m, float), bias_ned_m=bias,

@@ -2,6 +2,7 @@
 the passenger's frame, the estimate's jumps let through at the configured rate, the descent's gate."""
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -165,3 +166,31 @@ def test_the_approachs_pending_limit_is_the_configurations():
     view = lambda pending: RelativeView(np.zeros(3), np.zeros(3), np.array([pending, 0.0, 0.0]), 0.02, True, 0.0)  # noqa: E731
     assert gates.taken_in(view(0.04)) and not gates.taken_in(view(0.1))
     assert RelnavSection().pending_limit_m == 0.3
+
+
+@pytest.mark.parametrize("limited", [True, False])
+def test_the_decks_velocity_changes_no_faster_than_the_carrier_can(limited: bool):
+    """Markers with 2 cm of noise at 50 Hz: each one moves the filter's carrier velocity. The
+    phases see the deck's velocity change by at most the carrier's acceleration limit
+    (``safety.carrier_max_accel_m_s2``, 1 m/s^2: 0.02 m/s a tick) and still on the truth (at rest);
+    the control, with no limit known, shows the filter's steps, larger."""
+    gates = dataclasses.replace(_gates(), carrier_accel_m_s2=1.0 if limited else None)
+    deck = RelativeDeck(gates, np.zeros(3))
+    rng = np.random.default_rng(3)
+    measurements, velocities = Measurements(), []
+    for k in range(20 * 50):
+        t = k / 50
+        report = VehicleReport(t, np.array([0.0, 0.0, -1.5]), np.zeros(3), t, t, True, "OFFBOARD", 0.0, True)
+        fix_t = math.floor(t * 10) / 10
+        carrier = CarrierObs(position_ned_m=BIAS.copy(), velocity_ned_m_s=np.zeros(3), age_s=t - fix_t, alive=True)
+        offset = np.array([0.0, 0.0, 1.5]) + rng.normal(0.0, 0.02, 3)
+        measurements = measurements.then((RelativePosition(capture_t_s=t, offset_ned_m=offset, sigma_m=0.02),))
+        shown, _ = deck.observe(t, report, carrier, measurements)
+        if t >= 5.0:
+            velocities.append(shown.velocity_ned_m_s)
+    steps = np.linalg.norm(np.diff(np.array(velocities), axis=0), axis=1)
+    if limited:
+        assert steps.max() <= 1.0 / 50 + 1e-9, steps.max()
+        assert float(np.abs(np.array(velocities)).max()) < 0.3  # still the carrier at rest, within the noise
+    else:
+        assert steps.max() > 1.0 / 50, steps.max()
