@@ -21,6 +21,7 @@ from pydantic import BaseModel
 
 from mission.config.recovery import RecoverySection
 from mission.config.schema import Config
+from mission.config.vision import marker_offset_ned_m
 from mission.errors import ConfigError
 from mission.core.docking import DockingGeometry
 from mission.core.pursuit import PursuitLimits
@@ -98,7 +99,9 @@ def mission_model(cfg: Config) -> MissionModel:
         deck=derived(DeckRide, m, keep_out_radius_m=m.deck_keep_out_radius_m, slope=m.deck_clear_slope,
                      clear_height_m=m.deck_clear_height_m, press_floor_m=m.deck_press_floor_m,
                      radius_m=cfg.recovery.deck_radius_m) if m.ride == "deck" else None,
-        relnav=derived(RelnavGates, cfg.relnav, params=cfg.relnav.params()) if cfg.relnav.enabled else None,
+        relnav=derived(RelnavGates, cfg.relnav, params=cfg.relnav.params(), marker_offset_ned_m=np.asarray(
+            marker_offset_ned_m(cfg.vision, m.dock_offset_ned_m), dtype=float),
+            carrier_accel_m_s2=s.carrier_max_accel_m_s2) if cfg.relnav.enabled else None,
     )
     legs = cfg.scenario.legs()
     if len(legs) == 1:

@@ -79,6 +79,11 @@ class RelnavSection(Section):
     gate_nis: float = Field(16.27, gt=0, le=10_000,
         description=("[-] a measurement whose normalised innovation squared exceeds this is rejected (16.27: "
                      "chi-square, 3 degrees of freedom, 0.999)"))
+    marker_reset_s: float = Field(0.5, gt=0, le=60,
+        description=("[s] markers rejected by the gate for this long in a row, none fused between (by capture time), "
+                     "re-initialise the estimate's uncertainty to its prior, keeping the state, and the marker is fused "
+                     "afresh: the deck moved as the model did not expect (a carrier braking hard, a frame's jump), and "
+                     "the marker is the deck; a lone outlier among fused markers is still rejected"))
     history_s: float = Field(1.0, gt=0, le=30,
         description="[s] how far back a late measurement is still fused (replayed from its capture time)")
     converged_sigma_m: float = Field(0.1, gt=0, le=100,

@@ -30,6 +30,11 @@ class VisionSection(Section):
         description="[m] side of the bundle's small tag's black square, as printed")
     tag_id: int = Field(0, ge=0, lt=APRILTAG_36H11_TAGS, description="[-] the big (or only) tag's AprilTag 36h11 id")
     small_tag_id: int = Field(1, ge=0, lt=APRILTAG_36H11_TAGS, description="[-] the bundle's small tag's id")
+    marker_offset_ned_m: list[Annotated[float, Field(ge=-100, le=100)]] | None = Field(None,
+        description=("[m] NED offset of the marker's centre (the deck centre the detector measures) from the carrier's "
+                     "reported position; unset: at the dock point (`mission.dock_offset_ned_m`, right when the "
+                     "vehicle rides on the deck). A hover ride rides over the deck: set the deck, e.g. [0, 0, 0], "
+                     "and the camera sees the marker while riding"))
     width_px: int = Field(640, ge=160, le=4096, description="[px] image width (without a calibration file)")
     height_px: int = Field(480, ge=120, le=4096, description="[px] image height (without a calibration file)")
     hfov_deg: float = Field(80.0, ge=30, le=120,
@@ -62,11 +67,19 @@ class VisionSection(Section):
     _calibration_printable = field_validator("calibration_file")(lambda v: v if v is None else printable(v))
 
 
-def check_vision(v: VisionSection, decision_height_m: float) -> None:
+def marker_offset_ned_m(v: VisionSection, dock_offset_ned_m: list[float]) -> list[float]:
+    """[m] NED, the marker's centre from the carrier's reported position: ``vision.marker_offset_ned_m``,
+    or the dock point ``dock_offset_ned_m`` (``mission.dock_offset_ned_m``) when it is unset. The one
+    place both the controller (the estimator) and the simulators (the rendered deck) read it from."""
+    return list(v.marker_offset_ned_m if v.marker_offset_ned_m is not None else dock_offset_ned_m)
+
+
+def check_vision(v: VisionSection, decision_height_m: float, marker_below_dock_m: float = 0.0) -> None:
     """The marker can be seen where it matters: the bundle's two tags differ, and the tag that
     serves the last metres (the small one of a bundle, else the only one) fits wholly in the image
-    at ``recovery.decision_height_m`` (the camera that far above the deck, less its mount's down
-    offset). Skipped with a calibration file (its field of view is only known once it is read)."""
+    at ``recovery.decision_height_m`` (the camera that far above the dock point, the marker
+    ``marker_below_dock_m`` [m] below the dock point, less the mount's down offset). Skipped with a
+    calibration file (its field of view is only known once it is read)."""
     for name in ("mount_offset_body_m", "mount_rpy_deg"):
         if len(getattr(v, name)) != 3:
             raise ConfigError(f"vision.{name}", getattr(v, name), "must have 3 components")
@@ -79,7 +92,11 @@ def check_vision(v: VisionSection, decision_height_m: float) -> None:
     if v.calibration_file is not None:
         return
     name, size = ("vision.small_tag_size_m", v.small_tag_size_m) if v.layout == "bundle" else ("vision.tag_size_m", v.tag_size_m)
-    height = decision_height_m - v.mount_offset_body_m[2]
+    height = decision_height_m + marker_below_dock_m - v.mount_offset_body_m[2]
+    if not height > 0 and marker_below_dock_m < 0:
+        raise ConfigError("vision.marker_offset_ned_m", v.marker_offset_ned_m,
+                          f"the marker is {-marker_below_dock_m:g} m above the dock point: at "
+                          f"recovery.decision_height_m = {decision_height_m:g} m the camera is not above it")
     half_h = math.tan(math.radians(v.hfov_deg) / 2)
     span = 2 * height * min(half_h, half_h * v.height_px / v.width_px)  # the image's short side on the deck
     printed = size * (TAG_BITS + 2) / TAG_BITS

@@ -6,9 +6,10 @@ Each tick, in this order: the carrier's state, if it is a new sample (stamped ``
 measurement time), and this tick's marker readings
 (:class:`~mission.phases.measurements.RelativePosition`, by capture time: ``Measurements.arrived``)
 are handed to the estimator; then the vehicle's own sample (its position and velocity as the
-autopilot reports them, at their sample time) moves it on. The marker lies on the deck at the
-dock point; the estimator tracks the carrier's reference point, ``mission.dock_offset_ned_m``
-from it. The phases then see the carrier where the estimate has it (the carrier's position and
+autopilot reports them, at their sample time) moves it on. The marker lies on the deck,
+``gates.marker_offset_ned_m`` from the carrier's reference point (``vision.marker_offset_ned_m``:
+by default the dock point; a hover ride's configuration puts it on the deck under the hover point,
+in the camera's view while riding); the estimator tracks the carrier's reference point. The phases then see the carrier where the estimate has it (the carrier's position and
 velocity in the passenger's frame, the filter's state: the raw fixes' noise filtered, the marker
 pinning it near the deck, one estimate with no switch between sources), less the **pending**
 part of the estimate's jumps (its change beyond its own velocity's), let through at most at
@@ -35,17 +36,20 @@ from mission.relnav.inputs import CarrierFix, MarkerFix, OwnSample, RelativeEsti
 
 class RelativeDeck:
     """The estimator and the correction it drives, for the gates ``gates`` (``[relnav]``); the
-    marker lies on the deck at the dock point, ``dock_offset_ned_m`` [m] NED from the carrier's
-    reference point (``mission.dock_offset_ned_m``), where the vehicle sits when docked."""
+    marker lies ``gates.marker_offset_ned_m`` [m] NED from the carrier's reference point; the dock
+    point, where the vehicle sits when docked, ``dock_offset_ned_m`` [m] NED from it
+    (``mission.dock_offset_ned_m``)."""
 
     def __init__(self, gates: RelnavGates, dock_offset_ned_m: np.ndarray) -> None:
         self.gates = gates
         self.dock_offset = np.asarray(dock_offset_ned_m, dtype=float)
+        self.marker_offset = np.asarray(gates.marker_offset_ned_m, dtype=float)
         self.estimator = RelativeEstimator(gates.params)
         self.fix_t_s = -np.inf  # [s] the newest carrier sample handed to the estimator
         self.own_t_s = -np.inf  # [s] the newest own sample
         self.last: tuple[np.ndarray, np.ndarray] | None = None  # the last tick's carrier [m] and velocity [m/s], before pending
         self.pending = np.zeros(3)  # [m] NED, the part of the estimate's jumps not yet let through
+        self.velocity: np.ndarray | None = None  # [m/s] NED, the deck's velocity as last shown to the phases
         self.t_s: float | None = None  # [s] the last tick's time
         self.refused = 0  # readings not fused: no stated sigma, or a non-finite time, offset or sigma
 
@@ -61,8 +65,8 @@ class RelativeDeck:
             est.carrier(CarrierFix(self.fix_t_s, np.asarray(carrier.position_ned_m, float),
                                    np.asarray(carrier.velocity_ned_m_s, float)))
         for m in measurements.arrived(RelativePosition):
-            if _usable(m) and m.sigma_m is not None:  # the marker at the dock point: the carrier's reference point is dock_offset from it
-                est.marker(MarkerFix.isotropic(m.capture_t_s, np.asarray(m.offset_ned_m, float) - self.dock_offset, m.sigma_m))
+            if _usable(m) and m.sigma_m is not None:  # the carrier's reference point is marker_offset from the marker
+                est.marker(MarkerFix.isotropic(m.capture_t_s, np.asarray(m.offset_ned_m, float) - self.marker_offset, m.sigma_m))
             else:
                 self.refused += 1
         if on_deck and vehicle is not None and vehicle.sample_t_s is not None and vehicle.sample_t_s > self.own_t_s:
@@ -95,10 +99,27 @@ class RelativeDeck:
             step = self.gates.correction_rate_m_s * dt
             self.pending = np.zeros(3) if size <= step else self.pending * (1.0 - step / size)
         self.last = (now, velocity)
+        shown = self._slewed(velocity, dt_s=max(t_s - self.t_s, 0.0) if self.t_s is not None else 0.0, on_deck=on_deck)
         self.t_s = t_s
         now = now + self.pending
-        return replace(carrier, position_ned_m=now - velocity * carrier.age_s, velocity_ned_m_s=velocity), \
+        return replace(carrier, position_ned_m=now - shown * carrier.age_s, velocity_ned_m_s=shown), \
             self._view(e, bias)
+
+    def _slewed(self, velocity: np.ndarray, dt_s: float, on_deck: bool) -> np.ndarray:
+        """The deck's velocity [m/s] shown to the phases: the filter's, changing by at most the
+        carrier's acceleration limit (``gates.carrier_accel_m_s2``) over ``dt_s`` [s]. The carrier
+        cannot change its velocity faster, so what is faster is the filter's noise (each marker
+        moves it, ~0.06 m/s a tick at the 95th percentile while riding), which the riding
+        command would carry into the relative input at the separation."""
+        limit = self.gates.carrier_accel_m_s2
+        if self.velocity is None or limit is None or on_deck:
+            self.velocity = velocity.copy()
+            return self.velocity
+        change = velocity - self.velocity
+        size = float(np.linalg.norm(change))
+        step = limit * dt_s
+        self.velocity = velocity.copy() if size <= step else self.velocity + change * (step / size)
+        return self.velocity
 
     def _view(self, e: RelativeEstimate, bias: np.ndarray) -> RelativeView:
         return RelativeView(position_ned_m=np.asarray(e.position_ned_m, float), bias_ned_m=bias,

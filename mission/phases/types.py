@@ -134,7 +134,11 @@ class RelnavGates:
     this recent; ``search_s`` [s] how long HOLDOFF searches for the marker, and how long the
     descent holds with it lost; ``correction_rate_m_s`` [m/s] the bias correction's top rate;
     ``seated_sigma_m`` [m] how well standing on the deck places the vehicle over it;
-    ``pending_limit_m`` [m] an approach begins only with the estimate's jumps taken in to this."""
+    ``pending_limit_m`` [m] an approach begins only with the estimate's jumps taken in to this;
+    ``marker_offset_ned_m`` (3,) [m] NED, the marker's centre from the carrier's reference point
+    (``vision.marker_offset_ned_m``, the dock point unless set); ``carrier_accel_m_s2`` [m/s^2] the
+    carrier's acceleration limit (``safety.carrier_max_accel_m_s2``; None: unknown): the deck's
+    velocity the phases see changes no faster."""
 
     params: RelnavParams
     marker_timeout_s: float
@@ -143,6 +147,8 @@ class RelnavGates:
     correction_rate_m_s: float
     seated_sigma_m: float
     pending_limit_m: float
+    marker_offset_ned_m: np.ndarray
+    carrier_accel_m_s2: float | None = None
 
     def descent_blocked(self, rel: RelativeView | None) -> str | None:
         """Why the vehicle may not descend below the decision height now (None: it may): the

@@ -38,6 +38,7 @@ from mission.relnav.inputs import CarrierFix, Counts, MarkerFix, MarkerObservati
 
 UNKNOWN_M = 1e3  # [m] the standard deviation of what a measurement does not measure (the seated one's height)
 KINDS = ("marker", "gnss_position", "gnss_velocity", "seated")
+_RESET = "reset"  # an event's outcome: it re-initialised the uncertainty (counted as fused, reported as Counts.resets)
 # at one time: the GNSS state, then the marker, then the tick's snapshot (a fixed order, so that the
 # result does not depend on the order of arrival)
 _GNSS, _MARKER, _TICK = 0, 1, 2
@@ -57,6 +58,7 @@ class RelnavParams:
     initial_sigma_m: float
     initial_velocity_sigma_m_s: float
     gate_nis: float
+    marker_reset_s: float
     history_s: float
     converged_sigma_m: float
 
@@ -86,6 +88,7 @@ class _Snapshot:
     x: np.ndarray
     p: np.ndarray
     marker_t_s: float
+    rejected_since_s: float
 
 
 class RelativeEstimator:
@@ -101,9 +104,10 @@ class RelativeEstimator:
         self._p = self._prior()
         self._t_s = -math.inf  # the time of the filter's state
         self._marker_t_s = -math.inf  # capture time of the newest marker fused
+        self._rejected_since_s = math.inf  # capture time of the first marker rejected since the last one fused
         self._done: tuple[float, int, int] | None = None  # the last event the state includes
         self._replay_from: tuple[float, int, int] | None = None  # the earliest event fused out of order
-        self._fused = dict.fromkeys(KINDS, 0)  # by each measurement's latest fusion
+        self._fused = dict.fromkeys((*KINDS, _RESET), 0)  # by each measurement's latest fusion
         self._rejected = dict.fromkeys(KINDS, 0)
         self._too_old = 0
         self._too_new = 0
@@ -173,7 +177,8 @@ class RelativeEstimator:
 
     def counts(self) -> Counts:
         """Measurements fused and rejected so far (each counted once, by its latest fusion)."""
-        return Counts(dict(self._fused), dict(self._rejected), self._too_old, self._too_new)
+        return Counts({k: self._fused[k] for k in KINDS}, dict(self._rejected), self._too_old, self._too_new,
+                      self._fused[_RESET])
 
     # --- the history --------------------------------------------------------------------------
 
@@ -207,7 +212,7 @@ class RelativeEstimator:
             i = bisect.bisect_left(self._snapshots, self._replay_from, key=lambda s: s.key) - 1
             snap = self._snapshots[i]  # i >= 0: _add drops events older than the first snapshot
             del self._snapshots[i + 1:]
-            self._x, self._p, self._marker_t_s = snap.x, snap.p, snap.marker_t_s
+            self._x, self._p, self._marker_t_s, self._rejected_since_s = snap.x, snap.p, snap.marker_t_s, snap.rejected_since_s
             self._t_s, self._done, self._replay_from = snap.key[0], snap.key, None
         start = 0 if self._done is None else bisect.bisect_right(self._events, self._done, key=lambda e: e.key)
         now = self._own[-1].t_s
@@ -238,7 +243,7 @@ class RelativeEstimator:
             (self._fused if ok else self._rejected)[kind] -= 1
         e.outcome = {}
         if e.tick is not None:
-            self._snapshots.append(_Snapshot(e.key, self._x, self._p, self._marker_t_s))
+            self._snapshots.append(_Snapshot(e.key, self._x, self._p, self._marker_t_s, self._rejected_since_s))
         elif e.marker is not None and e.seated:
             r = self._seated_noise(float(e.marker.covariance_ned_m2[0, 0]))
             if r is not None:
@@ -247,9 +252,17 @@ class RelativeEstimator:
         elif e.marker is not None:
             m = e.marker
             z = np.asarray(m.deck_rel_ned_m, dtype=float) + self._own_at(e.t_s).position_ned_m
-            e.outcome["marker"] = self._update(z, kalman.H_MARKER, np.asarray(m.covariance_ned_m2, dtype=float))
+            r = np.asarray(m.covariance_ned_m2, dtype=float)
+            e.outcome["marker"] = self._update(z, kalman.H_MARKER, r)
+            if not e.outcome["marker"]:
+                self._rejected_since_s = min(self._rejected_since_s, e.t_s)
+                if e.t_s - self._rejected_since_s >= self.params.marker_reset_s:
+                    self._p = self._prior()  # the deck moved as the model did not expect: start afresh from here
+                    e.outcome[_RESET] = True
+                    e.outcome["marker"] = self._update(z, kalman.H_MARKER, r)
             if e.outcome["marker"]:
                 self._marker_t_s = max(self._marker_t_s, e.t_s)
+                self._rejected_since_s = math.inf
         elif e.fix is not None:
             prm = self.params
             z_p = np.asarray(e.fix.position_ned_m, dtype=float)

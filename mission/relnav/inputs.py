@@ -81,12 +81,14 @@ class MarkerFix:
 class Counts:
     """Measurements fused and rejected by the gate, by kind (``marker``, ``gnss_position``,
     ``gnss_velocity``, ``seated``); ``too_old``: measurements older than the history, ``too_new``: stamped
-    more than the history after the newest tick (both dropped unfused)."""
+    more than the history after the newest tick (both dropped unfused); ``resets``: re-initialisations of
+    the uncertainty by a run of rejected markers (``relnav.marker_reset_s``)."""
 
     fused: dict[str, int]
     rejected: dict[str, int]
     too_old: int
     too_new: int = 0
+    resets: int = 0
 
 
 @dataclass(frozen=True)

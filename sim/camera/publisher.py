@@ -1,6 +1,7 @@
 """The passenger's downward camera in the mock vehicle (``mock-vehicle --camera``): frames rendered
-from the true poses (the vehicle's true position, level at its yaw; the deck at the carrier's true
-reference point plus ``mission.dock_offset_ned_m``, level at the carrier's yaw), exposed with the
+from the true poses (the vehicle's true position, level at its yaw; the marker at the carrier's true
+reference point plus ``vision.marker_offset_ned_m``, by default the dock point, level at the
+carrier's yaw), exposed with the
 sensor's noise, blur and dropouts (:class:`sim.camera.simulated.SimulatedCamera`, ``[vision]``),
 published at capture on the pair's camera key (:mod:`mission.bus.frames`) for the mission's marker
 feed, which runs the detector on the pixels. Captures at ``vision.rate_hz`` on the vehicle's
@@ -20,13 +21,13 @@ from mission.bus.auth import SampleSigner
 from mission.bus.frames import camera_key, encode_frame, encode_mark
 from mission.bus.session import declare, undeclare
 from mission.config.schema import Config
+from mission.config.vision import marker_offset_ned_m
 from mission.model import vision_detector
 from sim.camera.render import Poses, true_marker_pose
 from sim.camera.sensor import Sensor, sensor_model
-from sim.camera.simulated import SimulatedCamera
+from sim.camera.simulated import MIN_DEPTH_M, SimulatedCamera
 
 SEED_OFFSET = 7717  # the sensor's stream, apart from the vehicle's other seeded streams
-MIN_DEPTH_M = 0.2  # [m] a deck nearer the camera's plane than this (or behind it) is not captured
 
 
 class CameraPublisher:
@@ -38,7 +39,7 @@ class CameraPublisher:
         self.camera = SimulatedCamera(detector.camera, detector.layout,
                                       Sensor(sensor_model(cfg.vision), seed=seed + SEED_OFFSET))
         self.period_s = 1.0 / cfg.vision.rate_hz
-        self.dock_offset_ned_m = np.asarray(cfg.mission.dock_offset_ned_m, dtype=float)
+        self.marker_offset_ned_m = np.asarray(marker_offset_ned_m(cfg.vision, cfg.mission.dock_offset_ned_m), dtype=float)
         self.next_s = 0.0
         self.captured = self.sent = 0
         key = camera_key(pair)
@@ -62,7 +63,7 @@ class CameraPublisher:
         v_c = np.asarray(carrier_velocity_ned_m_s, dtype=float)
         yaw = carrier_yaw_rad if carrier_yaw_rad is not None else (
             math.atan2(v_c[1], v_c[0]) if math.hypot(v_c[0], v_c[1]) > 1e-6 else 0.0)
-        poses = Poses(np.array([kin.n_m, kin.e_m, kin.d_m]), q, np.asarray(carrier_ned_m, float) + self.dock_offset_ned_m,
+        poses = Poses(np.array([kin.n_m, kin.e_m, kin.d_m]), q, np.asarray(carrier_ned_m, float) + self.marker_offset_ned_m,
                       float(yaw))
         frame = None
         if true_marker_pose(self.camera.camera, poses).deck_in_cam_m[2] >= MIN_DEPTH_M:  # else out of view (and

@@ -13,8 +13,9 @@ Two ways to measure, chosen by the entry point (``pyproject.toml``, ``marsupial.
   detector and pose (:class:`mission.vision.detect.MarkerDetector`): ~5-10 ms a frame.
 
 The vehicle's attitude is level at its yaw (the mock's physics keeps no tilt); the deck is level
-at the carrier's yaw, its centre (the marker's) at the dock point: the carrier's reference point
-plus ``mission.dock_offset_ned_m``, where the vehicle sits when docked. Captures happen on
+at the carrier's yaw, its centre (the marker's) at the carrier's reference point plus
+``vision.marker_offset_ned_m`` (by default ``mission.dock_offset_ned_m``, the dock point, where the
+vehicle sits when docked). Captures happen on
 the world's ticks at ``vision.rate_hz`` at most; every draw is seeded by the scenario's seed.
 """
 from __future__ import annotations
@@ -25,6 +26,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from mission.config.vision import marker_offset_ned_m
 from mission.model import vision_detector
 from mission.phases.measurements import Measurement, RelativePosition
 from mission.vision.measurement import RelativeMeasurement
@@ -58,12 +60,12 @@ class WorldMarker:
         self.checked_s: float | None = None  # [s] when an outage last could begin
 
     def poses(self, t_s: float) -> Poses:
-        """The truth at ``t_s`` [s]: the vehicle level at its yaw, the marker on the deck at the
-        dock point (the carrier's reference point plus ``mission.dock_offset_ned_m``: where the
-        vehicle sits when docked)."""
+        """The truth at ``t_s`` [s]: the vehicle level at its yaw, the marker on the deck (the
+        carrier's reference point plus ``vision.marker_offset_ned_m``, by default the dock point)."""
         kin = self.world.vehicle.kin
         half = kin.yaw_rad / 2
-        deck = self.world.carrier.true_at(t_s)[0] + np.asarray(self.world.cfg.mission.dock_offset_ned_m, float)
+        cfg = self.world.cfg
+        deck = self.world.carrier.true_at(t_s)[0] + np.asarray(marker_offset_ned_m(cfg.vision, cfg.mission.dock_offset_ned_m), float)
         return Poses(self.world.vehicle.true_position, np.array([math.cos(half), 0.0, 0.0, math.sin(half)]),
                      deck, self.world.carrier.yaw_rad)
 

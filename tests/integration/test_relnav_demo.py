@@ -16,7 +16,13 @@ the slope over recovery.carrier_rate_window_s = 1 s (seven flights: seed 0 four 
 once), every flight docked both legs, 12 of 14 legs at the first approach (seed 0: both, every
 time), the other two at the second after "off the deck on the descent", and no go-around on the
 turn check. Seed 0 is still not deterministic: its four flights gave two sets of figures, each
-twice (true contact 0.017 / 0.042 m and 0.098 / 0.026 m)."""
+twice (true contact 0.017 / 0.042 m and 0.098 / 0.026 m).
+
+With the marker on the deck under the hover point (2026-12-04: vision.marker_offset_ned_m, the P3
+guard's margin 3 m, relnav.accel_noise_m_s2 0.3, the estimate restarted after a run of rejected
+markers, the deck's velocity slewed at the carrier's acceleration limit) the camera sees the deck
+while riding: six flights (seeds 0-2) docked both legs at the first approach, true contact
+0.016-0.118 m."""
 from __future__ import annotations
 
 import json
@@ -79,14 +85,17 @@ def test_both_legs_dock_on_the_marker_within_the_true_contact_bound(flight):
     assert deck["crash"] is None, deck
 
 
-def test_no_jump_at_a_switch_p2_p3_hold_and_the_true_ride_is_off_by_the_drift(flight):
-    """P2, P3 and every phase switch within the issue's 0.05 m/s (measured 0.04 in every flight).
-    Missed, as in the in-process simulation: the true riding offset (issue: <= 0.3 m) measured
-    0.23-0.78 m median, 1.1-3.0 m max per leg, and P1 failed on every flight that docked (the
-    estimate's riding offset held 0.87 / 1.69 m, with the windowed turn check 0.51-0.87 m on the
-    second leg, > mission.dock_tolerance_m 0.5): riding, the marker lies
-    under the vehicle out of the camera's view, so the ride holds the carrier's GNSS state less the
-    bias known at the last contact while that bias drifts (docs/relnav.md). So the demo exits 1."""
+def test_no_jump_at_a_switch_p2_p3_hold_and_the_true_ride_is_on_the_deck(flight):
+    """P2, P3 and every phase switch within the issue's 0.05 m/s (0.04 measured; the relative input
+    at the separation 0.039-0.056 m/s, seed 0 0.042 / 0.040). The ride sees the marker on the deck
+    under the hover point (vision.marker_offset_ned_m): the true riding offset's median is within
+    the issue's 0.3 m (measured 0.09-0.26 m over six flights' twelve legs; before, blind, the marker
+    under the riding camera: 0.47 / 0.66 m on seed 0, 0.23-0.78 m on seeds 1-3), its maximum within
+    0.8 m (0.31-0.56 m with this code; before 1.80 / 2.64 m, the carrier stopping dead at its P3
+    guard under the riding passenger). The estimate's riding offset held (P1's figure) within 0.75 m:
+    measured 0.31-0.59 m with this code, so P1 (0.5 m) is met on some legs and not others (seed 0: 0.53 / 0.47 m;
+    before 0.87 / 0.65 m), the vehicle lagging its command as the carrier pulls away from rest
+    (docs/relnav.md, "A ride that sees the deck"); the exit code says whether it held."""
     log, out, s, truth, _ = flight
     cfg = load_config(RELNAV)
     assert s["p2"] and s["p3"], s
@@ -94,10 +103,10 @@ def test_no_jump_at_a_switch_p2_p3_hold_and_the_true_ride_is_off_by_the_drift(fl
     for leg, true in zip(s["legs"], truth):
         if "separation_time_s" in leg:
             assert leg["relative_input_jump_m_s"] <= 0.05, leg
-            assert 0.2 <= true["true_riding_horizontal_median_m"] <= 0.8, true
-            assert true["true_riding_horizontal_max_m"] <= 3.5, true
-    assert s["p1"] or max(leg.get("riding_offset_held_m") or 0.0 for leg in s["legs"]) > cfg.mission.dock_tolerance_m
-    assert out.returncode == 1, out.stdout[-2000:]  # a leg fell back (no docking), or P1 failed
+            assert true["true_riding_horizontal_median_m"] <= 0.3, true  # the issue's target
+            assert true["true_riding_horizontal_max_m"] <= 0.8, true
+            assert leg["riding_offset_held_m"] <= 1.5 * cfg.mission.dock_tolerance_m, leg
+    assert out.returncode == (0 if s["p1"] else 1), out.stdout[-2000:]  # both legs docked: only P1 can fail it
     assert "truth: contact error, horizontal [m]" in out.stdout and "truth: riding offset" in out.stdout
 
 

@@ -2,9 +2,11 @@
 the passenger's frame, the estimate's jumps let through at the configured rate, the descent's gate."""
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
+import pytest
 
 from mission.config.relnav import RelnavSection
 from mission.model import derived
@@ -16,9 +18,9 @@ from mission.phases.types import CarrierObs, RelativeView, RelnavGates
 BIAS = np.array([2.0, -1.0, 0.0])  # [m] the carrier's GNSS frame over the passenger's
 
 
-def _gates() -> RelnavGates:
+def _gates(marker_offset_ned_m=(0.0, 0.0, 0.0)) -> RelnavGates:
     section = RelnavSection(enabled=True)
-    return derived(RelnavGates, section, params=section.params())
+    return derived(RelnavGates, section, params=section.params(), marker_offset_ned_m=np.asarray(marker_offset_ned_m, float))
 
 
 def _fly(deck: RelativeDeck, t0: float, t1: float, marker: bool, measurements: Measurements) -> list:
@@ -51,6 +53,24 @@ def test_the_first_marker_moves_the_deck_at_the_rate_then_onto_the_truth():
     assert float(np.linalg.norm(view.bias_ned_m[:2] - BIAS[:2])) < 0.2
 
 
+@pytest.mark.parametrize("marker_on_the_deck", [True, False])
+def test_the_marker_is_where_the_configuration_puts_it(marker_on_the_deck: bool):
+    """A hover ride (dock point 1.5 m over the carrier's reference point) with the marker on the
+    deck under it (``vision.marker_offset_ned_m`` [0, 0, 0], configs/relnav.toml): the vehicle
+    hovering at the dock point sees the marker 1.5 m below and the carrier is estimated at its
+    reference point. The control reads the same marker as lying at the dock point (the default):
+    the carrier comes out 1.5 m too low, so the offset is what places it."""
+    deck = RelativeDeck(_gates((0.0, 0.0, 0.0) if marker_on_the_deck else (0.0, 0.0, -1.5)), np.array([0.0, 0.0, -1.5]))
+    _fly(deck, 0.0, 10.0, False, Measurements())
+    t, carrier, view = _fly(deck, 10.0, 30.0, True, Measurements())[-1]
+    assert view.converged
+    down = float(carrier.position_ned_m[2] - carrier.velocity_ned_m_s[2] * carrier.age_s)
+    if marker_on_the_deck:
+        assert float(np.linalg.norm(carrier.position_ned_m)) < 0.05, carrier.position_ned_m
+    else:
+        assert abs(down - 1.5) < 0.05, carrier.position_ned_m
+
+
 def test_a_malformed_reading_is_refused_and_counted_never_raised():
     """A faulty or hostile feed: NaN or infinite capture time, offset or sigma, or no sigma. Each
     reading is refused and counted; the loop goes on, and the estimate is the one without them."""
@@ -71,11 +91,11 @@ def test_a_malformed_reading_is_refused_and_counted_never_raised():
 
 
 def test_the_marker_on_the_deck_at_the_dock_point_puts_the_carrier_below_it():
-    """The marker lies on the deck at the dock point, ``dock_offset`` (1.5 m up) from the
-    carrier's reference point: a vehicle 1.5 m over the marker sees the carrier's reference point
-    3 m under it (the old code put the carrier at the marker: 1.5 m off)."""
+    """The marker at the dock point (``vision.marker_offset_ned_m`` unset: a deck ride), ``dock_offset``
+    (1.5 m up) from the carrier's reference point: a vehicle 1.5 m over the marker sees the
+    carrier's reference point 3 m under it (the old code put the carrier at the marker: 1.5 m off)."""
     dock_offset = np.array([0.0, 0.0, -1.5])
-    deck = RelativeDeck(_gates(), dock_offset)
+    deck = RelativeDeck(_gates(dock_offset), dock_offset)
     out = []
     measurements = Measurements()
     for k in range(20 * 50):
@@ -142,7 +162,35 @@ def test_the_approachs_pending_limit_is_the_configurations():
     """``relnav.pending_limit_m`` (declared in the schema, once) decides when the estimate's jumps
     count as taken in."""
     section = RelnavSection(enabled=True, pending_limit_m=0.05)
-    gates = derived(RelnavGates, section, params=section.params())
+    gates = derived(RelnavGates, section, params=section.params(), marker_offset_ned_m=np.zeros(3))
     view = lambda pending: RelativeView(np.zeros(3), np.zeros(3), np.array([pending, 0.0, 0.0]), 0.02, True, 0.0)  # noqa: E731
     assert gates.taken_in(view(0.04)) and not gates.taken_in(view(0.1))
     assert RelnavSection().pending_limit_m == 0.3
+
+
+@pytest.mark.parametrize("limited", [True, False])
+def test_the_decks_velocity_changes_no_faster_than_the_carrier_can(limited: bool):
+    """Markers with 2 cm of noise at 50 Hz: each one moves the filter's carrier velocity. The
+    phases see the deck's velocity change by at most the carrier's acceleration limit
+    (``safety.carrier_max_accel_m_s2``, 1 m/s^2: 0.02 m/s a tick) and still on the truth (at rest);
+    the control, with no limit known, shows the filter's steps, larger."""
+    gates = dataclasses.replace(_gates(), carrier_accel_m_s2=1.0 if limited else None)
+    deck = RelativeDeck(gates, np.zeros(3))
+    rng = np.random.default_rng(3)
+    measurements, velocities = Measurements(), []
+    for k in range(20 * 50):
+        t = k / 50
+        report = VehicleReport(t, np.array([0.0, 0.0, -1.5]), np.zeros(3), t, t, True, "OFFBOARD", 0.0, True)
+        fix_t = math.floor(t * 10) / 10
+        carrier = CarrierObs(position_ned_m=BIAS.copy(), velocity_ned_m_s=np.zeros(3), age_s=t - fix_t, alive=True)
+        offset = np.array([0.0, 0.0, 1.5]) + rng.normal(0.0, 0.02, 3)
+        measurements = measurements.then((RelativePosition(capture_t_s=t, offset_ned_m=offset, sigma_m=0.02),))
+        shown, _ = deck.observe(t, report, carrier, measurements)
+        if t >= 5.0:
+            velocities.append(shown.velocity_ned_m_s)
+    steps = np.linalg.norm(np.diff(np.array(velocities), axis=0), axis=1)
+    if limited:
+        assert steps.max() <= 1.0 / 50 + 1e-9, steps.max()
+        assert float(np.abs(np.array(velocities)).max()) < 0.3  # still the carrier at rest, within the noise
+    else:
+        assert steps.max() > 1.0 / 50, steps.max()

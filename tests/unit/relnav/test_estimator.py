@@ -159,3 +159,39 @@ def test_visions_measurement_is_a_marker_observation():
         marker=vision.MarkerPose(np.eye(3), r)))
     e = est.tick(OwnSample(0.1, np.zeros(3), np.zeros(3)))
     assert e.counts.fused["marker"] == 1 and np.allclose(e.position_ned_m, r, atol=0.01)
+
+
+@pytest.mark.parametrize("reset", [True, False])
+def test_a_run_of_rejected_markers_restarts_the_uncertainty(reset: bool):
+    """A carrier at 1.5 m/s that stops dead at 5 s (the lockstep demo's carrier, braking outright
+    at its P3 guard: 2 m/s to 0 within 0.1 s): the constant-velocity model runs on, so the
+    markers, then the GNSS, fall outside the gate. After ``marker_reset_s`` (0.5 s) of markers
+    rejected with none fused, the uncertainty restarts from the prior and the marker is fused
+    afresh: from 1 s after the stop the estimate is on the deck again. Without the reset (the
+    control: 60 s) every marker is rejected from then on and the estimate runs away."""
+    params = PARAMS if reset else dataclasses.replace(PARAMS, marker_reset_s=60.0)
+    est = RelativeEstimator(dataclasses.replace(params, accel_noise_m_s2=0.1))  # configs/relnav.toml's steady carrier
+    speed, stop_s = np.array([1.5, 0.0, 0.0]), 5.0
+
+    def carrier(t: float) -> tuple[np.ndarray, np.ndarray]:
+        return (speed * min(t, stop_s), speed if t < stop_s else np.zeros(3))
+
+    errors = {}
+    for k in range(1, 201):  # 10 s at 20 Hz; the vehicle stands at the origin
+        t = 0.05 * k
+        c, v = carrier(t)
+        if k % 2 == 0:
+            est.carrier(CarrierFix(t, c, v))  # GNSS, no bias
+        est.marker(MarkerFix.isotropic(t, c, 0.01))
+        e = est.tick(OwnSample(t, np.zeros(3), np.zeros(3)))
+        errors[round(t, 2)] = float(np.linalg.norm(e.position_ned_m - c))
+    counts = est.counts()
+    assert errors[4.9] < 0.02  # converged on the moving carrier
+    assert counts.rejected["marker"] >= 5  # the stop: markers outside the gate
+    if reset:
+        assert counts.resets >= 1
+        assert max(v for t, v in errors.items() if t >= stop_s + 1.0) < 0.05, errors
+        assert est.estimate().converged
+    else:
+        assert counts.resets == 0
+        assert errors[10.0] > 1.0, errors[10.0]

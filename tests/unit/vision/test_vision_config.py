@@ -37,6 +37,9 @@ def test_a_calibration_file_replaces_the_field_of_view(tmp_path):
     ({"vision": {"small_tag_size_m": 0.6}}, "vision.small_tag_size_m", "smaller than vision.tag_size_m"),
     ({"vision": {"small_tag_id": 0}}, "vision.small_tag_id", "must differ"),
     ({"vision": {"mount_rpy_deg": [0.0, 10.0]}}, "vision.mount_rpy_deg", "3 components"),
+    ({"vision": {"marker_offset_ned_m": [0.0, 0.0]}}, "vision.marker_offset_ned_m", "3 components"),
+    # the marker 1 m over the dock point: at the 0.6 m decision height the camera is below it
+    ({"vision": {"marker_offset_ned_m": [0.0, 0.0, -2.5]}}, "vision.marker_offset_ned_m", "not above it"),
 ])
 def test_an_impossible_camera_is_refused_naming_the_field(section, field, words):
     with pytest.raises(ConfigError) as exc:
@@ -47,3 +50,5 @@ def test_an_impossible_camera_is_refused_naming_the_field(section, field, words)
 def test_the_same_camera_passes_where_the_tag_fits():
     from_dict({"vision": {"layout": "single"}, "recovery": {"decision_height_m": 0.6}})  # 0.62 m tag, 0.75 m of view
     from_dict({"vision": {"layout": "single", "hfov_deg": 100.0}, "recovery": {"decision_height_m": 0.4}})
+    # the single tag that does not fit at 0.4 m over the dock point does 1.5 m further down, on the deck
+    from_dict({"vision": {"layout": "single", "marker_offset_ned_m": [0.0, 0.0, 0.0]}, "recovery": {"decision_height_m": 0.4}})
