@@ -215,7 +215,8 @@ def run_mission(cfg: Config, name: str, plot_path: str | None, as_json: bool, es
     return 0 if ok else 1
 
 
-def run_team(cfg: Config, name: str, plot_path: str | None, as_json: bool) -> int:
+def run_team(cfg: Config, name: str, plot_path: str | None, as_json: bool, estimate_error: float = 0.0,
+             seed: int = 0) -> int:
     """Fly a team of several passengers once (:mod:`sim.batch.team_mission`): the demo's table, one
     column per passenger and leg, then where each separated, the least distance between two
     passengers, the carrier's closest approach to every target and the targets it served (or the
@@ -227,7 +228,7 @@ def run_team(cfg: Config, name: str, plot_path: str | None, as_json: bool) -> in
     if cfg.mission.ride == "deck" and not as_json:
         click.echo(f"{name}: the simulation has no deck: flying the team riding hovering "
                    f"{team_mission.HOVER_RAISE_M:g} m above its slots (mission.ride = \"hover\")", err=True)
-    world = team_mission.fly_team(cfg)
+    world = team_mission.fly_team(cfg, estimate_error=estimate_error, seed=seed)
     report = team_mission.team_ok_report(world)
     ok = report["ok"]
     if plot_path:
@@ -358,7 +359,7 @@ def simulate(config: str, as_json: bool, plot_path: str | None, count: int | Non
     if has_team(loaded) and len(loaded.team.passengers) > 1:
         if count is not None:
             raise ConfigError("--monte-carlo", count, "a team of several passengers is simulated once (issue 36)")
-        return run_team(loaded, Path(config).stem, plot_path, as_json)
+        return run_team(loaded, Path(config).stem, plot_path, as_json, estimate_error, seed)
     cfg = sole_passenger(loaded, "simulated by `marsupial simulate`")  # a team of one: its passenger's
     unsaturated = [f"safety.{name}" for name in ("passenger_max_speed_m_s", "passenger_max_accel_m_s2",
                                                   "carrier_max_speed_m_s", "carrier_max_accel_m_s2")

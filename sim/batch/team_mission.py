@@ -122,7 +122,8 @@ class Member:
 class TeamWorld:
     """A team's mission in flight (module docstring); :meth:`tick` advances it one controller tick."""
 
-    def __init__(self, cfg: Config, max_duration_s: float | None = None) -> None:
+    def __init__(self, cfg: Config, max_duration_s: float | None = None, estimate_error: float = 0.0,
+                 seed: int = 0) -> None:
         if not has_team(cfg):
             raise ConfigError("team.passengers", [], "the team simulation flies a file with a [team]")
         if cfg.mission.feeds:
@@ -133,13 +134,13 @@ class TeamWorld:
         self.law_bc_m = cfg.law.params().separation_distance_m
         self.members: list[Member] = []
         start = np.asarray(cfg.scenario.carrier_start, dtype=float)
-        for p in cfg.team.passengers:
+        for i, p in enumerate(cfg.team.passengers):
             own = passenger_config(cfg, p.name)
             model = mission_model(own)
             slot = np.asarray(cfg.team.slots[cfg.team.slot_index(p.slot)].offset_ned_m, dtype=float)
             under = [float(start[0] + slot[0]), float(start[1] + slot[1]), float(start[2])]  # on the ground under its slot
             self.members.append(Member(p.name, own, PassengerStep(model, own.mission.velocity_bias_tau_s),
-                                       MockDynamics(under, gnss=own.world.passenger_gnss)))
+                                       MockDynamics(under, estimate_error, seed + i, gnss=own.world.passenger_gnss)))
         self.dt_s = mission_model(self.members[0].cfg).dt_s
         self.steps_per_tick = int(round(self.dt_s / PHYSICS_DT_S))
         if abs(self.steps_per_tick * PHYSICS_DT_S - self.dt_s) > 1e-12:
@@ -246,9 +247,10 @@ class TeamWorld:
         return out
 
 
-def fly_team(cfg: Config, max_duration_s: float | None = None) -> TeamWorld:
-    """Fly ``cfg``'s team once, as configured (:class:`TeamWorld`)."""
-    return TeamWorld(cfg, max_duration_s).run()
+def fly_team(cfg: Config, max_duration_s: float | None = None, estimate_error: float = 0.0, seed: int = 0) -> TeamWorld:
+    """Fly ``cfg``'s team once, as configured (:class:`TeamWorld`), passenger ``i``'s vehicle
+    estimate erring ``estimate_error`` times PX4 SITL's, drawn from ``seed + i`` (as the demo's pairs)."""
+    return TeamWorld(cfg, max_duration_s, estimate_error, seed).run()
 
 
 def team_ok(report: dict[str, Any]) -> bool:
