@@ -249,7 +249,9 @@ def run_team(cfg: Config, name: str, plot_path: str | None, as_json: bool, estim
                    + f"; largest command jump at a phase switch {s.get('max_phase_switch_jump_m_s') or 0.0:.3f} m/s")
     c = report["carrier"]
     click.echo(f"least distance between two passengers {report['pair_min_distance_m']:.3f} m at t = "
-               f"{report['pair_min_distance_t_s']:.2f} s (true positions; no pairwise barrier yet)")
+               f"{report['pair_min_distance_t_s']:.2f} s ({' and '.join(report['pair_min_phases'])}; true positions; "
+               f"the pairwise barrier, safety.passenger_separation_m = {cfg.safety.passenger_separation_m:g} m, "
+               "acts in NAVIGATING)")
     click.echo("carrier closest to each target: " + ", ".join(f"{k}: {d:.3f} m" for k, d in enumerate(c["closest_m"]))
                + f" (P3 guard radius {c['guard_radius_m']:.3f} m; inside a keep-out: {any(c['inside_keep_out'])})")
     click.echo("carrier served: " + " -> ".join(f"{x['target']} {x['mode']} ({x['t_s']:.1f} s)" for x in c["served"]))
@@ -323,6 +325,17 @@ def simulate(config: str, as_json: bool, plot_path: str | None, count: int | Non
     code 0 when every leg held P1-P3, the mission completed and a passenger that comes home
     docked again. The deck ride (mission.ride = "deck") and a carrier other than the built-in
     holonomic one are refused (exit 2).
+
+    \b
+    A file with a [team] of several passengers (configs/team.toml) flies the whole team once
+    (sim/batch/team_mission.py: every passenger's phase machine on its own mock dynamics, the
+    built-in carrier serving them in the mission's order; a deck-riding team hovers 1 m above its
+    slots): the table with one column per passenger and leg, where each separated and which
+    target the carrier announced, the least distance between two passengers, the carrier's
+    closest approach to every target; --plot draws the tracks and the pairwise distance. Exit
+    code 0 when every leg held P1-P3, each passenger separated at its own target, the carrier
+    kept out of every keep-out and every passenger's mission completed. --monte-carlo is
+    refused for a team (exit 2).
 
     \b
     A file without one (configs/paper_*.toml) is the paper's closed loop: the separation time,

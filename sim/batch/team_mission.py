@@ -12,8 +12,8 @@ world (N vehicles' dynamics, the carrier robot, who hears what).
   (the single-passenger :class:`~mission.carrier.step.CarrierStepper` behind it) on every
   passenger's status of the tick before, with the configuration's recovery course;
 - the neighbours: :meth:`TeamWorld.neighbours_of` gives each passenger the others' reported
-  states (position, velocity, age); the pairwise separation barrier (issue 36 item 3) takes them
-  as its input. Nothing reads them here yet.
+  states (position, velocity, age), which its step passes to the pairwise separation barrier
+  (``PassengerInputs.neighbours``; ``share_neighbours`` False: none, each flies as if alone).
 
 The simulation has no deck (:func:`sim.batch.recovery.as_simulated`): a team that rides the deck
 (``mission.ride = "deck"``) is flown riding hovering :data:`HOVER_RAISE_M` above its slots
@@ -39,6 +39,7 @@ from mission.carrier.team import TeamCarrier
 from mission.carrier.tracking import Tracked
 from mission.config.passenger import carrier_config, has_team, passenger_config
 from mission.config.schema import Config, from_dict
+from mission.core.safety import Neighbours
 from mission.errors import ConfigError
 from mission.model import mission_model
 from mission.passenger.inputs import PassengerInputs
@@ -123,7 +124,7 @@ class TeamWorld:
     """A team's mission in flight (module docstring); :meth:`tick` advances it one controller tick."""
 
     def __init__(self, cfg: Config, max_duration_s: float | None = None, estimate_error: float = 0.0,
-                 seed: int = 0) -> None:
+                 seed: int = 0, share_neighbours: bool = True) -> None:
         if not has_team(cfg):
             raise ConfigError("team.passengers", [], "the team simulation flies a file with a [team]")
         if cfg.mission.feeds:
@@ -150,19 +151,22 @@ class TeamWorld:
         self.views = [PassengerView(None) for _ in self.members]  # the statuses the carrier hears
         self.t: list[float] = []
         self.pair_min_m: list[float] = []  # the least true distance between two passengers at each tick [m]
+        self.phases: list[tuple[Phase, ...]] = []  # every passenger's phase at each tick
+        self.share_neighbours = share_neighbours  # each passenger's step hears the others (the pairwise barrier's rows)
         self.k = 0
         self.done = False
 
-    def neighbours_of(self, i: int, t_s: float) -> list[tuple[np.ndarray, np.ndarray, float]]:
-        """The other passengers' states as passenger ``i`` would hear them at ``t_s`` [s]:
-        (position [m], velocity [m/s] NED as its vehicle reports it, age [s]), each once. The
-        pairwise separation barrier's input (``PassengerInputs.neighbours``, branch pairsep); this
-        world shares them with no delay."""
+    def neighbours_of(self, i: int, t_s: float) -> list[tuple[list[float], list[float], float]]:
+        """The other passengers' states as passenger ``i`` hears them at ``t_s`` [s]: (position
+        [m], velocity [m/s] NED as its vehicle reports it, age [s]), each once: the pairwise
+        separation barrier's input (``PassengerInputs.neighbours``, docs/team.md "Keeping
+        passengers apart"). This world shares them with no delay (no bus carries them yet)."""
         out = []
         for j, m in enumerate(self.members):
             if j != i:
                 r = m.vehicle.report(t_s)
-                out.append((np.asarray(r.position_ned_m, dtype=float), np.asarray(r.velocity_ned_m_s, dtype=float), 0.0))
+                out.append((list(np.asarray(r.position_ned_m, dtype=float)), list(np.asarray(r.velocity_ned_m_s, dtype=float)),
+                            0.0))
         return out
 
     def tick(self) -> None:
@@ -174,15 +178,16 @@ class TeamWorld:
         seen = carrier.observed(t)
         heading_for = carrier.team.heading_for_ned_m()
         views = []
-        for m in self.members:
+        for m in self.members:  # every vehicle at the tick first: each passenger hears the others' states of now
+            m.vehicle.advance_to_step(self.k * self.steps_per_tick)
+        for i, m in enumerate(self.members):
             vehicle = m.vehicle
-            vehicle.advance_to_step(self.k * self.steps_per_tick)
             if m.finished:
                 views.append(PassengerView(m.state.phase, separated=m.state.phase.separated, leg=m.state.leg))
                 continue
             before = m.state.phase
-            # the pairwise barrier's neighbours (self.neighbours_of) join these inputs once it exists
-            result = m.step(m.state, PassengerInputs(t, vehicle.report(t), seen, dict(m.failed),
+            neighbours = Neighbours.of(self.neighbours_of(i, t), 3) if self.share_neighbours else None
+            result = m.step(m.state, PassengerInputs(t, vehicle.report(t), seen, dict(m.failed), neighbours=neighbours,
                                                      carrier_target_ned_m=heading_for))
             m.state, obs, dec = result.state, result.observation, result.decision
             if dec.setpoint is not None:
@@ -200,6 +205,7 @@ class TeamWorld:
         self.views = views
         x = [m.vehicle.true_position for m in self.members]
         self.t.append(t)
+        self.phases.append(tuple(m.state.phase for m in self.members))
         self.pair_min_m.append(min((float(np.linalg.norm(x[i] - x[j])) for i in range(len(x))
                                     for j in range(i + 1, len(x))), default=math.inf))
         self.k += 1
@@ -236,6 +242,7 @@ class TeamWorld:
         worst = int(np.argmin(d)) if d.size else 0
         out["pair_min_distance_m"] = round(float(d[worst]), 3) if d.size else None
         out["pair_min_distance_t_s"] = round(self.t[worst], 3) if d.size else None
+        out["pair_min_phases"] = [p.value for p in self.phases[worst]] if d.size else []
         out["duration_s"] = round(self.t[-1], 3) if self.t else 0.0
         guard = self.carrier.stepper.guard.radius_m
         out["carrier"] = {"guard_radius_m": round(guard, 3),

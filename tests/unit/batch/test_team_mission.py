@@ -12,6 +12,7 @@ import pytest
 
 from mission.cli import main
 from mission.config.schema import load_config
+from mission.phases import Phase
 from sim.batch import team_mission
 from sim.batch.team_mission import HOVER_RAISE_M, TeamWorld, fly_team, hovering, team_ok_report
 from tests.conftest import CONFIGS
@@ -68,11 +69,16 @@ def test_each_passenger_separates_only_at_its_own_target_with_no_jump(report, wo
     assert report["ok"]
 
 
-def test_the_pairwise_distance_is_recorded_every_tick(report, world):
-    assert len(world.pair_min_m) == world.k
+def test_the_pairwise_distance_is_recorded_and_the_barrier_holds_it_while_one_navigates(report, world):
+    """Each passenger's step hears the other (TeamWorld.neighbours_of): the barrier, which acts
+    in NAVIGATING, holds the pair at about the slots' 1.5 m while one leaves beside the other
+    (without the neighbours the same flight comes to 1.14 m, just after alpha's separation)."""
+    assert len(world.pair_min_m) == len(world.phases) == world.k
     d = np.asarray(world.pair_min_m)
     assert report["pair_min_distance_m"] == pytest.approx(float(d.min()), abs=1e-3)
     assert d[0] == pytest.approx(1.5, abs=0.01)  # on the ground under slots 1.5 m apart
+    navigating = np.array([any(p in (Phase.SEPARATED, Phase.NAVIGATING) for p in ph) for ph in world.phases])
+    assert navigating.any() and float(d[navigating].min()) >= 1.4
 
 
 def test_simulate_prints_the_team(world, capsys, monkeypatch, tmp_path):

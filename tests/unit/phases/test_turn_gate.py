@@ -7,7 +7,6 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
-import pytest
 
 from mission.core.law import norm
 from mission.passenger.inputs import PassengerInputs
