@@ -281,7 +281,8 @@ def team_ok_report(world: TeamWorld) -> dict[str, Any]:
 
 def draw_team(world: TeamWorld, path: str | Path, title: str) -> Path:
     """The team's figure at ``path``: north-east tracks (carrier, each passenger, the targets
-    with their P3 guard circles) and the least distance between two passengers over time."""
+    with their P3 guard circles where they cut the carrier's plane) and the least distance
+    between two passengers over time."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -289,9 +290,11 @@ def draw_team(world: TeamWorld, path: str | Path, title: str) -> Path:
 
     fig, (ax, bx) = plt.subplots(1, 2, figsize=(12, 5.5))
     guard = world.carrier.stepper.guard.radius_m
+    plane = float(world.cfg.scenario.carrier_start[2])
     for k, tg in enumerate(world.carrier.targets):
         ax.plot(tg[1], tg[0], "k*", ms=12)
-        ax.add_patch(matplotlib.patches.Circle((tg[1], tg[0]), guard, fill=False, ls="--", color="grey"))
+        cut = math.sqrt(max(guard * guard - (float(tg[2]) - plane) ** 2, 0.0))  # the sphere in the carrier's plane
+        ax.add_patch(matplotlib.patches.Circle((tg[1], tg[0]), cut, fill=False, ls="--", color="grey"))
         ax.annotate(f"target {k}", (tg[1], tg[0]), textcoords="offset points", xytext=(6, 6))
     rows0 = world.members[0].rows
     xc = np.asarray(rows0.vecs["x_c_true"])
