@@ -19,13 +19,16 @@ from mission.core.tick import TickModel
 
 class Legs:
     """``targets`` [m] (one per leg), the carrier's tick ``models`` for each, their P3 guards
-    (``guard`` params; ``planar``), the dock offset [m] and the leg-start distance [m]."""
+    (``guard`` params; ``planar``), the dock offset [m] (one for every leg, or a team's: one per
+    leg, the slot of the passenger that flies it, shape (legs, dim)) and the leg-start distance [m]."""
 
     def __init__(self, targets: list[np.ndarray], models: list[TickModel], guard: GuardParams, planar: bool,
                  dock_offset_m: np.ndarray, leg_start_m: float) -> None:
         self.targets, self.models = targets, models
         self.guards = [P3Guard(guard, t, planar=planar) for t in targets]
-        self.planar, self.dock_offset_m, self.start_m = planar, dock_offset_m, leg_start_m + REPOSITION_SPARE_M
+        self.planar, self.start_m = planar, leg_start_m + REPOSITION_SPARE_M
+        offsets = np.asarray(dock_offset_m, dtype=float)
+        self.dock_offsets_m = offsets if offsets.ndim == 2 else np.tile(offsets, (len(targets), 1))
         self.index = 0
 
     @property
@@ -52,6 +55,6 @@ class Legs:
         if self.planar:
             away[2:] = 0.0
         size = float(np.linalg.norm(away))
-        if float(np.linalg.norm(target - (x_c + self.dock_offset_m))) >= self.start_m or size < 1e-9:
+        if float(np.linalg.norm(target - (x_c + self.dock_offsets_m[self.index]))) >= self.start_m or size < 1e-9:
             return np.zeros_like(away)
         return away / size * speed_m_s

@@ -124,7 +124,7 @@ class CarrierStepper:
     course and speed calibration, for ``cfg`` on a backend that ``brakes_itself`` or not (see
     the module docstring)."""
 
-    def __init__(self, cfg: Config, brakes_itself: bool) -> None:
+    def __init__(self, cfg: Config, brakes_itself: bool, dock_offsets_m: np.ndarray | None = None) -> None:
         c = cfg.carrier
         self.guard = guard_params(cfg)
         self.tracking = tracking_params(cfg)
@@ -134,7 +134,8 @@ class CarrierStepper:
         first = carrier_model(cfg)
         self.planar = first.planar_carrier or self.dim == 2
         self.legs = Legs(targets, [carrier_model(cfg, target=t) for t in targets], self.guard, self.planar,
-                         np.asarray(cfg.mission.dock_offset_ned_m, dtype=float)[:self.dim],
+                         np.asarray(cfg.mission.dock_offset_ned_m if dock_offsets_m is None else dock_offsets_m,
+                                    dtype=float)[..., :self.dim],
                          first.law.separation_distance_m + cfg.mission.leg_start_margin_m)
         self.course = RecoveryCourse.from_lists(c.recovery_course, c.recovery_heading_deg, c.recovery_speed_m_s)
         self.start_accel_m_s2, self.start_lead_m_s = c.start_accel_m_s2, c.start_lead_m_s
@@ -163,6 +164,17 @@ class CarrierStepper:
                 self._course_start = None  # the next recovery drives its course from its own start
             self.mode = mode
         return ModeUpdate(before, mode, why, leg_changed)
+
+    def hand_over(self, view: PassengerView) -> None:
+        """The carrier serves another passenger of its team from now (:class:`mission.carrier.team.TeamCarrier`):
+        its mode starts afresh for that passenger's ``view``, from the mode in which what that
+        passenger's duty asks is a transition of :func:`~mission.carrier.modes.next_mode`
+        (REPOSITION: from RECOVERING; anything else: from WAITING, so that a CARRY starts the
+        approach only confirmed on the dock point). The law's command, the guards' memory and the
+        own plan are kept: the command goes on from where it is, at the acceleration limit."""
+        duty = view.phase.duty if view.phase is not None else Duty.WAIT
+        self.mode = CarrierMode.RECOVERING if duty is Duty.REPOSITION else CarrierMode.WAITING
+        self._course_start = None
 
     def stopping(self) -> bool:
         """A stop for good or for now: not driving (approaching, recovering, repositioning), and no

@@ -5,7 +5,7 @@ passenger take of a team file. docs/team.md.
 from __future__ import annotations
 
 from mission.config.schema import Config, from_dict
-from mission.config.team import passenger_data
+from mission.config.team import dock_points, passenger_data
 from mission.errors import ConfigError
 
 
@@ -54,3 +54,20 @@ def sole_passenger(cfg: Config, not_yet: str, *, team_of_one: bool = True) -> Co
         raise ConfigError("team.passengers", names, f"a team of {len(names)} passenger{'s' * (len(names) != 1)} is not "
                           f"{not_yet} yet (one of them flies with `marsupial run --passenger NAME`; docs/team.md)")
     return passenger_config(cfg, names[0])
+
+
+def carrier_config(cfg: Config) -> tuple[Config, list[list[float]]]:
+    """What the carrier of ``cfg`` drives (:class:`mission.carrier.team.TeamCarrier`), and the dock
+    point [m] NED (from its reported position) each of the mission's targets is left from. Without
+    a team: ``cfg`` itself, its one dock point for every target. With one: the team's file without
+    ``[team]``, every target of the mission in its order, ``mission.dock_offset_ned_m`` the slot of
+    the first target's passenger, and each target's dock point its passenger's slot
+    (:func:`mission.config.team.dock_points`)."""
+    targets = cfg.scenario.legs()
+    if not has_team(cfg):
+        return cfg, [list(cfg.mission.dock_offset_ned_m)] * len(targets)
+    _, docks = dock_points(cfg.team, list(cfg.mission.dock_offset_ned_m), len(targets))
+    data = {key: dict(value) if isinstance(value, dict) else value
+            for key, value in cfg.model_dump(exclude_unset=True).items() if key != "team"}
+    data.setdefault("mission", {})["dock_offset_ned_m"] = list(docks[0])
+    return from_dict(data), docks

@@ -54,7 +54,10 @@ class PassengerInputs:
     (:class:`mission.interfaces.MeasurementSource`) gave since the last tick, each reading once,
     stamped at capture (:mod:`mission.phases.measurements`); ``neighbours``: the other passengers'
     last shared states with their ages (None: none heard; no bus feeds them yet), which the
-    separation barrier keeps this one apart from while it flies to its target."""
+    separation barrier keeps this one apart from while it flies to its target;
+    ``carrier_target_ned_m`` [m] NED: the target the carrier announces it heads for (a carrier
+    serving a team, :class:`mission.carrier.team.TeamCarrier`; None: none announced, every target
+    is this passenger's turn), which its latch waits for (:func:`mission.phases.types.my_turn`)."""
 
     t_s: float
     vehicle: VehicleReport | None
@@ -63,3 +66,4 @@ class PassengerInputs:
     interrupted: bool = False
     measurements: tuple[Measurement, ...] = ()
     neighbours: Neighbours | None = None
+    carrier_target_ned_m: np.ndarray | None = None

@@ -132,7 +132,8 @@ class PassengerStep:
                                                     on_deck)
         return Observation(t_s=inputs.t_s, vehicle=observe_vehicle(inputs.vehicle, self.velocity_fix),
                            carrier=carrier, failed=dict(inputs.failed), interrupted=inputs.interrupted,
-                           measurements=self.measurements, relative=relative, neighbours=inputs.neighbours)
+                           measurements=self.measurements, relative=relative, neighbours=inputs.neighbours,
+                           carrier_target_ned_m=inputs.carrier_target_ned_m)
 
     def __call__(self, state: MissionState, inputs: PassengerInputs) -> StepResult:
         """One tick: observe, then the phases."""

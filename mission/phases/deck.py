@@ -51,6 +51,7 @@ from mission.phases.types import (
     carrier_fresh,
     dock_point,
     enter,
+    my_turn,
 )
 
 #: Phases of the take-off: seated, the vehicle must be armed and in OFFBOARD.
@@ -89,8 +90,10 @@ def _deck(m: MissionModel) -> DeckRide:
 
 def seconds_to_latch(obs: Observation, m: MissionModel) -> float:
     """When the latch will fire [s], at the carrier's present closing speed on the target (inf if
-    it is not closing)."""
+    it is not closing, or the carrier heads for another passenger's target: :func:`my_turn`)."""
     assert obs.carrier is not None
+    if not my_turn(obs, m):
+        return float("inf")
     e_tc = m.tick.target - dock_point(obs, m)
     dist = float(norm(e_tc))
     closing = float(np.dot(obs.carrier.velocity_ned_m_s, e_tc)) / max(dist, 1e-9)
@@ -124,7 +127,7 @@ def ride(state: MissionState, obs: Observation, m: MissionModel) -> tuple[Missio
     dock = dock_point(obs, m)
     v_dock = np.asarray(c.velocity_ned_m_s, dtype=float)
     ready = v.armed and v.mode == FlightMode.OFFBOARD
-    if separation_due(dock, False, m.tick) and state.prev_dock is not None and carrier_fresh(obs, m):
+    if separation_due(dock, False, m.tick) and state.prev_dock is not None and carrier_fresh(obs, m) and my_turn(obs, m):
         if not ready:
             reason = AbortReason.ARMING_REFUSED if not v.armed else AbortReason.OFFBOARD_REFUSED
             why = f"not {'armed' if not v.armed else 'in OFFBOARD'} on the deck when the separation came"

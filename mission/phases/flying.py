@@ -19,7 +19,7 @@ from mission.core import arrival
 from mission.core.law import norm
 from mission.core.pursuit import PursuitLimits, pursue
 from mission.core.setpoint import Setpoint
-from mission.phases.types import ZERO, Decision, MissionModel, MissionState, Observation, Phase, carrier_fresh, dock_point, enter
+from mission.phases.types import ZERO, Decision, MissionModel, MissionState, Observation, Phase, carrier_fresh, dock_point, enter, my_turn
 from mission.phases.phase import Request
 from mission.core.safety import filter_velocity
 from mission.core.tick import DEPARTURE_THRESHOLD_M, carrier_tick, latch_point, passenger_tick, separation_due
@@ -180,7 +180,7 @@ def riding(state, obs, m):
         if chased is not None:
             return chased
         state, event = replace(state, chasing_dock=False), (*event, "back on the dock point after a stale carrier state")
-    if separation_due(dock, False, m.tick) and fresh:
+    if separation_due(dock, False, m.tick) and fresh and my_turn(obs, m):
         theta, anchor = latch_point(state.prev_dock, dock, m.tick.target, m.tick)
         new = enter(state, Phase.SEPARATED, t, anchor=anchor, e_ref=ZERO.copy(), x_ref=anchor.copy(),
                   separation_time_s=t - (1 - float(theta)) * m.dt_s)
@@ -222,7 +222,7 @@ def _chase(state: MissionState, obs: Observation, m: MissionModel, dock: np.ndar
     if fresh and norm(dock - x_ref) <= CHASE_DONE_M and norm(v_dock - u_ref) <= m.dock_chase.accel_m_s2 * m.dt_s:
         return None
     t = obs.t_s
-    if fresh and separation_due(dock, False, m.tick):
+    if fresh and separation_due(dock, False, m.tick) and my_turn(obs, m):
         theta, anchor = latch_point(state.prev_dock, dock, m.tick.target, m.tick)
         offset = x_ref - dock
         new = enter(state, Phase.SEPARATED, t, anchor=anchor, e_ref=offset, x_ref=anchor + offset, chasing_dock=False,

@@ -106,6 +106,9 @@ class Observation:
     measurements: Measurements = Measurements()
     relative: RelativeView | None = None  # the relative estimator's word on the deck ([relnav] enabled)
     neighbours: Neighbours | None = None  # the other passengers' shared states (the separation barrier's)
+    # [m] NED the target the carrier announces it heads for (a carrier serving a team); None: not
+    # announced, every target is this passenger's turn (one passenger; :func:`my_turn`)
+    carrier_target_ned_m: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -396,6 +399,24 @@ def carrier_fresh(obs: Observation, m: MissionModel) -> bool:
     the latch waits for a fresh one."""
     c = obs.carrier
     return c is not None and c.worst_age_s <= m.carrier_timeout_s and c.alive is not False
+
+
+#: [m] how close the carrier's announced target must be to this passenger's leg's to be the same one
+#: (both are the file's numbers: the same target is the same floats, distinct targets are > b c apart)
+SAME_TARGET_M = 1e-3
+
+
+def my_turn(obs: Observation, m: MissionModel) -> bool:
+    """Whether the carrier heads for this passenger's leg's target: its announced target
+    (``obs.carrier_target_ned_m``) is the leg's (within :data:`SAME_TARGET_M`), or it announces
+    none (one passenger: always its turn). The latch (and, on the deck, the arming before it)
+    waits for its turn: a carrier that serves another passenger of its team may pass within
+    ``b c`` of this one's target on the way (docs/team.md)."""
+    aim = obs.carrier_target_ned_m
+    if aim is None:
+        return True
+    target = np.asarray(m.tick.target, dtype=float)
+    return bool(np.linalg.norm(np.asarray(aim, dtype=float)[:target.shape[-1]] - target) <= SAME_TARGET_M)
 
 
 def dock_point(obs: Observation, m: MissionModel) -> np.ndarray:

@@ -14,7 +14,8 @@ import click
 import numpy as np
 from tqdm import tqdm
 
-from mission.config.passenger import sole_passenger
+from mission.config.passenger import has_team, sole_passenger
+from mission.errors import ConfigError
 from mission.config.schema import Config, load_config
 from sim.batch import closed_loop, recovery, recovery_mc
 from sim.batch.closed_loop import ClosedLoopResult, as_flown, is_mission_config, model_from_config, random_scenarios, simulate_config
@@ -214,6 +215,53 @@ def run_mission(cfg: Config, name: str, plot_path: str | None, as_json: bool, es
     return 0 if ok else 1
 
 
+def run_team(cfg: Config, name: str, plot_path: str | None, as_json: bool, estimate_error: float = 0.0,
+             seed: int = 0) -> int:
+    """Fly a team of several passengers once (:mod:`sim.batch.team_mission`): the demo's table, one
+    column per passenger and leg, then where each separated, the least distance between two
+    passengers, the carrier's closest approach to every target and the targets it served (or the
+    report as JSON, ``simulated`` = "team"); the figure at ``plot_path``. 0 when every leg held
+    P1-P3, each passenger separated at its own target, the carrier kept out of every keep-out and
+    every passenger's mission completed; else 1."""
+    from sim.batch import team_mission
+
+    if cfg.mission.ride == "deck" and not as_json:
+        click.echo(f"{name}: the simulation has no deck: flying the team riding hovering "
+                   f"{team_mission.HOVER_RAISE_M:g} m above its slots (mission.ride = \"hover\")", err=True)
+    world = team_mission.fly_team(cfg, estimate_error=estimate_error, seed=seed)
+    report = team_mission.team_ok_report(world)
+    ok = report["ok"]
+    if plot_path:
+        written = team_mission.draw_team(world, plot_path, f"{name}: one carrier, {len(world.members)} passengers")
+    if as_json:
+        click.echo(json.dumps(report, indent=2, default=float))
+        return 0 if ok else 1
+    from sim.demo import format_table, recovery_cells  # the demo's table: one column per passenger and leg
+
+    click.echo(format_table([{**s, **recovery_cells(s), "pair": who, "mission_exit_code": 0 if s["phase"] == "DONE" else None}
+                             for who, s in report["passengers"].items()]))
+    for who, s in report["passengers"].items():
+        for sep in s["separations"]:
+            click.echo(f"{who} leg {sep['leg'] + 1}: separated at t = {sep['t_s']:.2f} s, dock point "
+                       f"{sep['dock_target_distance_m']:.3f} m from its target {sep['own_target']} (nearest target "
+                       f"{sep['nearest_target']}, carrier heading for {sep['carrier_heading_for']})")
+        click.echo(f"{who}: ended {s['phase']}" + ("" if s["reason"] is None else f" ({s['reason']}: {s['detail']})")
+                   + f"; largest command jump at a phase switch {s.get('max_phase_switch_jump_m_s') or 0.0:.3f} m/s")
+    c = report["carrier"]
+    click.echo(f"least distance between two passengers {report['pair_min_distance_m']:.3f} m at t = "
+               f"{report['pair_min_distance_t_s']:.2f} s ({' and '.join(report['pair_min_phases'])}; true positions; "
+               f"the pairwise barrier, safety.passenger_separation_m = {cfg.safety.passenger_separation_m:g} m, "
+               "acts in NAVIGATING)")
+    click.echo("carrier closest to each target: " + ", ".join(f"{k}: {d:.3f} m" for k, d in enumerate(c["closest_m"]))
+               + f" (P3 guard radius {c['guard_radius_m']:.3f} m; inside a keep-out: {any(c['inside_keep_out'])})")
+    click.echo("carrier served: " + " -> ".join(f"{x['target']} {x['mode']} ({x['t_s']:.1f} s)" for x in c["served"]))
+    click.echo("simulated: team (each passenger's phase machine on its mock's dynamics, the built-in carrier driven "
+               "by the team carrier)")
+    if plot_path:
+        click.echo(f"plot written to {written}")
+    return 0 if ok else 1
+
+
 def plot_mission(flight: recovery.Flight, path: Path, name: str) -> list[Path]:
     """The flown mission's figures: each leg's paper figure (``<stem>-leg<k>``) for several
     targets, else the paper's figure at ``path``; and the recovery's figure
@@ -279,6 +327,17 @@ def simulate(config: str, as_json: bool, plot_path: str | None, count: int | Non
     holonomic one are refused (exit 2).
 
     \b
+    A file with a [team] of several passengers (configs/team.toml) flies the whole team once
+    (sim/batch/team_mission.py: every passenger's phase machine on its own mock dynamics, the
+    built-in carrier serving them in the mission's order; a deck-riding team hovers 1 m above its
+    slots): the table with one column per passenger and leg, where each separated and which
+    target the carrier announced, the least distance between two passengers, the carrier's
+    closest approach to every target; --plot draws the tracks and the pairwise distance. Exit
+    code 0 when every leg held P1-P3, each passenger separated at its own target, the carrier
+    kept out of every keep-out and every passenger's mission completed. --monte-carlo is
+    refused for a team (exit 2).
+
+    \b
     A file without one (configs/paper_*.toml) is the paper's closed loop: the separation time,
     the carrier-target distance at separation, the relative input just after separation and its
     jump across it, the final passenger-target distance, the closest carrier-target approach,
@@ -309,7 +368,12 @@ def simulate(config: str, as_json: bool, plot_path: str | None, count: int | Non
     Exit code 0 when P1-P3 hold (for every scenario with --monte-carlo), 1 otherwise, 2 on a bad
     config.
     """
-    cfg = sole_passenger(load_config(config), "simulated by `marsupial simulate`")  # a team of one: its passenger's
+    loaded = load_config(config)
+    if has_team(loaded) and len(loaded.team.passengers) > 1:
+        if count is not None:
+            raise ConfigError("--monte-carlo", count, "a team of several passengers is simulated once (issue 36)")
+        return run_team(loaded, Path(config).stem, plot_path, as_json, estimate_error, seed)
+    cfg = sole_passenger(loaded, "simulated by `marsupial simulate`")  # a team of one: its passenger's
     unsaturated = [f"safety.{name}" for name in ("passenger_max_speed_m_s", "passenger_max_accel_m_s2",
                                                   "carrier_max_speed_m_s", "carrier_max_accel_m_s2")
                    if getattr(cfg.safety, name) is None]
