@@ -101,6 +101,14 @@ class MonteCarloReport:
         return max(jumps) if jumps else None
 
     @property
+    def max_riding_offset_m(self) -> float | None:
+        """The largest riding offset [m] of any leg (the vehicle's distance from the dock point while
+        riding, P1's figure, :func:`leg_row`; None: one target per flight)."""
+        offsets = [leg["max_offset_before_separation_m"] for r in self.rows for leg in r["legs"]
+                   if leg.get("max_offset_before_separation_m") is not None]
+        return max(offsets) if offsets else None
+
+    @property
     def closest_any_target_m(self) -> float | None:
         """The carrier's closest approach to any target [m] over every flight (its true position, 3D)."""
         values = [r["closest_any_target_m"] for r in self.rows if r.get("closest_any_target_m") is not None]
@@ -143,6 +151,7 @@ class MonteCarloReport:
             "max_phase_switch_jump_m_s": max((r["max_phase_switch_jump_m_s"] or 0.0) for r in self.rows) if self.rows else None,
             "p3": all(r["p3"] for r in self.rows),
             "every_leg_p1_p3": self.legs_held, "max_separation_jump_m_s": self.max_separation_jump_m_s,
+            "max_riding_offset_m": self.max_riding_offset_m,
             "closest_any_target_m": self.closest_any_target_m, "guard_m": self.guard_m,
             "inside_guard": [r["index"] for r in self.inside_guard],
             "rows": self.rows,
@@ -188,10 +197,13 @@ def flight_row(f: Flight) -> dict[str, Any]:
 
 def leg_row(leg: dict[str, Any]) -> dict[str, Any]:
     """One leg's figures in a flight's row (several targets): its outcome, P1-P3, its separation
-    (time from its riding, carrier-target distance, the relative command's jump), contact, and the
-    carrier's closest approach to the leg's own target [m] (``min_carrier_target_distance_m``)."""
+    (time from its riding, carrier-target distance, the relative command's jump), contact, the
+    carrier's closest approach to the leg's own target [m] (``min_carrier_target_distance_m``) and
+    the riding offset [m] P1 is judged on (``max_offset_before_separation_m``: the vehicle's largest
+    distance from the dock point while riding, against ``mission.dock_tolerance_m``)."""
     keys = ("leg", "outcome", "p1", "p2", "p3", "separation_time_s", "carrier_target_distance_at_separation_m",
-            "relative_input_jump_m_s", "final_passenger_target_distance_m", "contact", "min_carrier_target_distance_m")
+            "relative_input_jump_m_s", "final_passenger_target_distance_m", "contact", "min_carrier_target_distance_m",
+            "max_offset_before_separation_m")
     return {k: leg.get(k) for k in keys}
 
 
@@ -279,8 +291,9 @@ def format_report(report: MonteCarloReport) -> str:
                                                    f"{', '.join(f'#{i}' for i in d['inside_guard']) or 'none'}")
         rows.append(("carrier's closest approach to any target", f"{closest:.3f} m{guard}"))
     if report.legs_held is not None:  # several targets: each flight flies every leg
-        jump = report.max_separation_jump_m_s
+        jump, offset = report.max_separation_jump_m_s, report.max_riding_offset_m
         rows[0:0] = [("every leg held P1-P3", pct(report.legs_held)),
+                     ("largest riding offset (P1's figure)", "-" if offset is None else f"{offset:.3f} m"),
                      ("largest relative jump at a leg's separation", "-" if jump is None else f"{jump:.3f} m/s")]
     width = max(len(k) for k, _ in rows)
     return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)

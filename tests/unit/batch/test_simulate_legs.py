@@ -134,6 +134,11 @@ def test_the_monte_carlo_of_the_cycle_flies_every_leg(cycle):
     assert all(leg["outcome"] == "done" for row in report.rows for leg in row["legs"])
     assert report.legs_held is not None and "every leg held P1-P3" in format_report(report)
     assert report.max_separation_jump_m_s is not None and report.max_separation_jump_m_s <= 0.05
+    # P1's figure per leg, and its largest in the table
+    offsets = [leg["max_offset_before_separation_m"] for row in report.rows for leg in row["legs"]]
+    assert report.max_riding_offset_m == max(offsets) and 0.0 < max(offsets) <= 0.5, offsets
+    line = next(x for x in format_report(report).splitlines() if x.startswith("largest riding offset (P1's figure)"))
+    assert line.endswith(f"  {max(offsets):.3f} m"), line
     # the carrier's closest approach to every target, whichever leg it served: never inside a guard circle
     guard = cycle.law.b * cycle.law.c - cycle.carrier.p3_margin_m
     assert report.guard_m == guard and not report.inside_guard and report_ok(report), format_report(report)
