@@ -139,6 +139,11 @@ def test_the_monte_carlo_of_the_cycle_flies_every_leg(cycle):
     assert report.max_riding_offset_m == max(offsets) and 0.0 < max(offsets) <= 0.5, offsets
     line = next(x for x in format_report(report).splitlines() if x.startswith("largest riding offset (P1's figure)"))
     assert line.endswith(f"  {max(offsets):.3f} m"), line
+    # ridden (riding or transit): the offset at least P1's, the carrier's steps what a rider follows
+    for row in report.rows:
+        assert row["ridden_offset_m"] >= max(leg["max_offset_before_separation_m"] for leg in row["legs"]) - 1e-6, row
+        assert 0.0 < row["ridden_carrier_step_m_s"] <= cycle.safety.passenger_max_accel_m_s2 / cycle.carrier.rate_hz, row
+    assert report.as_dict()["max_ridden_carrier_step_m_s"] == max(row["ridden_carrier_step_m_s"] for row in report.rows)
     # the carrier's closest approach to every target, whichever leg it served: never inside a guard circle
     guard = cycle.law.b * cycle.law.c - cycle.carrier.p3_margin_m
     assert report.guard_m == guard and not report.inside_guard and report_ok(report), format_report(report)
@@ -174,8 +179,8 @@ def test_the_courses_that_broke_p1_on_leg_2_hold_it(cycle, pushed_out_flights):
     (RIDING, and TRANSIT before a leg) the carrier's velocity changes by no more than the
     passenger's acceleration limit allows in one carrier step, so the rider can follow it. Before
     the carrier's keep-outs held it where it stood (mission.core.tick.keep_outs_at), its barrier
-    pushed it out of target 1's keep-out at leg 2's start: 0.09 -> 1.23 m/s in one step (1.14 m/s
-    against 0.067 m/s), the passenger 0.58 m off the dock point."""
+    pushed it out of target 1's keep-out at leg 2's start: 0.09 -> 1.24 m/s in one step (a change
+    of 1.22 m/s against 0.067 m/s), the passenger 0.58 m off the dock point (docs/recovery.md)."""
     follow_m_s = cycle.safety.passenger_max_accel_m_s2 / cycle.carrier.rate_hz  # [m/s] in one carrier step
     guard = cycle.law.b * cycle.law.c - cycle.carrier.p3_margin_m
     for flight, index in zip(pushed_out_flights, PUSHED_OUT):
@@ -193,6 +198,8 @@ def test_the_courses_that_broke_p1_on_leg_2_hold_it(cycle, pushed_out_flights):
         step = np.linalg.norm(np.diff(r.vec("v_c")[:, :2], axis=0), axis=1)
         steady = step[rides[1:] & rides[:-1]]
         assert float(steady.max()) <= follow_m_s, (index, float(steady.max()))  # measured: 0.035 m/s
+        # the Monte-Carlo's row says the same
+        assert recovery_mc.ridden_figures(flight) == pytest.approx((float(offset[rides].max()), float(steady.max())), abs=1e-6)
         closest = recovery_mc.closest_to_targets_m(flight)
         assert min(c for c in closest if c is not None) >= guard - GUARD_TOLERANCE_M, (index, closest)
 
