@@ -11,7 +11,10 @@ with its own seed (no shared flight before the recovery). ``--only``: fly only t
 (their numbers, ``#i`` in the report) of the ``-n`` drawn, to look at one again.
 Each scenario's row (``--json``) has the carrier's closest approach to each target and to any
 (``closest_to_targets_m``, ``closest_any_target_m``: its true position against every target,
-whichever leg it served); the closest five are printed. Exit code 0 when the targets hold.
+whichever leg it served); the closest five are printed. Each leg's riding offset (P1's figure,
+``max_offset_before_separation_m``), and per scenario, while the passenger rides the dock point
+(RIDING or TRANSIT), its largest offset and the largest step of the carrier's velocity between two
+ticks (``ridden_offset_m``, ``ridden_carrier_step_m_s``). Exit code 0 when the targets hold.
 """
 from __future__ import annotations
 

@@ -101,6 +101,19 @@ class MonteCarloReport:
         return max(jumps) if jumps else None
 
     @property
+    def max_riding_offset_m(self) -> float | None:
+        """The largest riding offset [m] of any leg (the vehicle's distance from the dock point while
+        riding, P1's figure, :func:`leg_row`; None: one target per flight)."""
+        offsets = [leg["max_offset_before_separation_m"] for r in self.rows for leg in r["legs"]
+                   if leg.get("max_offset_before_separation_m") is not None]
+        return max(offsets) if offsets else None
+
+    def largest(self, key: str) -> float | None:
+        """The largest of a row's figure ``key`` over every flight (None: in none)."""
+        values = [r[key] for r in self.rows if r.get(key) is not None]
+        return max(values) if values else None
+
+    @property
     def closest_any_target_m(self) -> float | None:
         """The carrier's closest approach to any target [m] over every flight (its true position, 3D)."""
         values = [r["closest_any_target_m"] for r in self.rows if r.get("closest_any_target_m") is not None]
@@ -143,6 +156,8 @@ class MonteCarloReport:
             "max_phase_switch_jump_m_s": max((r["max_phase_switch_jump_m_s"] or 0.0) for r in self.rows) if self.rows else None,
             "p3": all(r["p3"] for r in self.rows),
             "every_leg_p1_p3": self.legs_held, "max_separation_jump_m_s": self.max_separation_jump_m_s,
+            "max_riding_offset_m": self.max_riding_offset_m, "max_ridden_offset_m": self.largest("ridden_offset_m"),
+            "max_ridden_carrier_step_m_s": self.largest("ridden_carrier_step_m_s"),
             "closest_any_target_m": self.closest_any_target_m, "guard_m": self.guard_m,
             "inside_guard": [r["index"] for r in self.inside_guard],
             "rows": self.rows,
@@ -168,11 +183,32 @@ def closest_to_targets_m(f: Flight) -> list[float | None]:
     return [round(float(np.linalg.norm(x_c - np.asarray(t, dtype=float), axis=1).min()), 4) for t in targets]
 
 
+RIDDEN = (Phase.RIDING.value, Phase.TRANSIT.value)  # the phases in which the passenger rides the dock point
+
+
+def ridden_figures(f: Flight) -> tuple[float | None, float | None]:
+    """While the passenger rides the dock point (RIDING, and TRANSIT before a leg): its largest
+    distance from it [m], and the largest change of the carrier's reported velocity between two
+    ticks [m/s] (at most one of its steps when the carrier steps slower than the controller ticks),
+    which is what the rider has to follow; None: never ridden."""
+    r = f.record
+    ridden = np.isin(r.phase, RIDDEN)
+    if not ridden.any():
+        return None, None
+    offset = np.linalg.norm(r.vec("x_p")[ridden] - r.vec("dock")[ridden], axis=1)
+    both = ridden[1:] & ridden[:-1]
+    step = np.linalg.norm(np.diff(r.vec("v_c")[:, :2], axis=0), axis=1)[both]
+    offset, step = offset[np.isfinite(offset)], step[np.isfinite(step)]
+    return (round(float(offset.max()), 6) if offset.size else None, round(float(step.max()), 6) if step.size else None)
+
+
 def flight_row(f: Flight) -> dict[str, Any]:
     """One flight's line of the Monte-Carlo report (``closest_to_targets_m``: the carrier's closest
-    approach to each target, ``closest_any_target_m`` the least of them, :func:`closest_to_targets_m`)."""
+    approach to each target, ``closest_any_target_m`` the least of them, :func:`closest_to_targets_m`;
+    ``ridden_offset_m`` and ``ridden_carrier_step_m_s``: :func:`ridden_figures`)."""
     s = f.summary
     closest = closest_to_targets_m(f)
+    ridden_offset, ridden_step = ridden_figures(f)
     known = [c for c in closest if c is not None]
     safe_end = f.state.phase is Phase.DONE
     return {**f.scenario.as_dict(), "docked": f.docked, "attempts": f.attempts, "outcome": s.get("recovery_outcome"),
@@ -183,15 +219,19 @@ def flight_row(f: Flight) -> dict[str, Any]:
             "go_arounds": f.go_arounds,
             "flight_time_s": round(float(f.record.t[-1]), 2) if len(f.record.t) else 0.0,
             "closest_to_targets_m": closest, "closest_any_target_m": min(known) if known else None,
+            "ridden_offset_m": ridden_offset, "ridden_carrier_step_m_s": ridden_step,
             "legs": [leg_row(leg) for leg in s.get("legs") or []]}
 
 
 def leg_row(leg: dict[str, Any]) -> dict[str, Any]:
     """One leg's figures in a flight's row (several targets): its outcome, P1-P3, its separation
-    (time from its riding, carrier-target distance, the relative command's jump), contact, and the
-    carrier's closest approach to the leg's own target [m] (``min_carrier_target_distance_m``)."""
+    (time from its riding, carrier-target distance, the relative command's jump), contact, the
+    carrier's closest approach to the leg's own target [m] (``min_carrier_target_distance_m``) and
+    the riding offset [m] P1 is judged on (``max_offset_before_separation_m``: the vehicle's largest
+    distance from the dock point while riding, against ``mission.dock_tolerance_m``)."""
     keys = ("leg", "outcome", "p1", "p2", "p3", "separation_time_s", "carrier_target_distance_at_separation_m",
-            "relative_input_jump_m_s", "final_passenger_target_distance_m", "contact", "min_carrier_target_distance_m")
+            "relative_input_jump_m_s", "final_passenger_target_distance_m", "contact", "min_carrier_target_distance_m",
+            "max_offset_before_separation_m")
     return {k: leg.get(k) for k in keys}
 
 
@@ -279,8 +319,12 @@ def format_report(report: MonteCarloReport) -> str:
                                                    f"{', '.join(f'#{i}' for i in d['inside_guard']) or 'none'}")
         rows.append(("carrier's closest approach to any target", f"{closest:.3f} m{guard}"))
     if report.legs_held is not None:  # several targets: each flight flies every leg
-        jump = report.max_separation_jump_m_s
+        jump, offset = report.max_separation_jump_m_s, report.max_riding_offset_m
+        ridden, step = d["max_ridden_offset_m"], d["max_ridden_carrier_step_m_s"]
         rows[0:0] = [("every leg held P1-P3", pct(report.legs_held)),
+                     ("largest riding offset (P1's figure)", "-" if offset is None else f"{offset:.3f} m"),
+                     ("ridden (riding or transit): offset, carrier's step", "-" if ridden is None or step is None
+                      else f"{ridden:.3f} m, {step:.3f} m/s a tick"),
                      ("largest relative jump at a leg's separation", "-" if jump is None else f"{jump:.3f} m/s")]
     width = max(len(k) for k, _ in rows)
     return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)

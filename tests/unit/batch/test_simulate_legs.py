@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 from mission.cli import main
-from mission.config.schema import load_config, with_overrides
+from mission.config.schema import MissionSection, load_config, with_overrides
 from mission.phases import Phase
-from sim.batch import recovery
+from sim.batch import recovery, recovery_mc
 from sim.batch.recovery import configured, fly
 from sim.batch.recovery_mc import GUARD_TOLERANCE_M, MonteCarloReport, format_report, monte_carlo, random_scenarios, report_ok
 from tests.conftest import CONFIGS
@@ -134,6 +134,16 @@ def test_the_monte_carlo_of_the_cycle_flies_every_leg(cycle):
     assert all(leg["outcome"] == "done" for row in report.rows for leg in row["legs"])
     assert report.legs_held is not None and "every leg held P1-P3" in format_report(report)
     assert report.max_separation_jump_m_s is not None and report.max_separation_jump_m_s <= 0.05
+    # P1's figure per leg, and its largest in the table
+    offsets = [leg["max_offset_before_separation_m"] for row in report.rows for leg in row["legs"]]
+    assert report.max_riding_offset_m == max(offsets) and 0.0 < max(offsets) <= 0.5, offsets
+    line = next(x for x in format_report(report).splitlines() if x.startswith("largest riding offset (P1's figure)"))
+    assert line.endswith(f"  {max(offsets):.3f} m"), line
+    # ridden (riding or transit): the offset at least P1's, the carrier's steps what a rider follows
+    for row in report.rows:
+        assert row["ridden_offset_m"] >= max(leg["max_offset_before_separation_m"] for leg in row["legs"]) - 1e-6, row
+        assert 0.0 < row["ridden_carrier_step_m_s"] <= cycle.safety.passenger_max_accel_m_s2 / cycle.carrier.rate_hz, row
+    assert report.as_dict()["max_ridden_carrier_step_m_s"] == max(row["ridden_carrier_step_m_s"] for row in report.rows)
     # the carrier's closest approach to every target, whichever leg it served: never inside a guard circle
     guard = cycle.law.b * cycle.law.c - cycle.carrier.p3_margin_m
     assert report.guard_m == guard and not report.inside_guard and report_ok(report), format_report(report)
@@ -146,6 +156,52 @@ def test_the_monte_carlo_of_the_cycle_flies_every_leg(cycle):
     assert "closest approach to any target" in format_report(report)
     closer = MonteCarloReport(report.rows, guard_m=report.closest_any_target_m + 2 * GUARD_TOLERANCE_M)
     assert closer.inside_guard and not report_ok(closer)  # a carrier inside a guard circle misses the target
+
+
+# Monte-Carlo scenarios of seed 1 (of 200 drawn) whose leg 2 began with the carrier at rest inside
+# target 1's keep-out, where the barrier pushed it out under the riding passenger: P1 broken at
+# 65a199d (#175: 0.580 m) and 81773f1 (#102: 0.562 m), docs/recovery.md
+PUSHED_OUT = (102, 175)
+# [m] P1's tolerance for a hover ride: the schema's default dock_tolerance_m (0.5; the hover copy keeps the deck ride's 1.0)
+P1_TOLERANCE_M = MissionSection.model_fields["dock_tolerance_m"].default
+
+
+@pytest.fixture(scope="module")
+def pushed_out_flights(cycle):
+    drawn = random_scenarios(200, seed=1)
+    shared = recovery.before_recovery(cycle)  # the flight before the recovery, as the Monte-Carlo shares it
+    return [shared.copy().with_scenario(drawn[i]).run().flight() for i in PUSHED_OUT]
+
+
+def test_the_courses_that_broke_p1_on_leg_2_hold_it(cycle, pushed_out_flights):
+    """The recovery courses of Monte-Carlo #102 and #175 (seed 1), flown as the Monte-Carlo flies
+    them: each leg docks and holds P1 at 0.5 m, and while the passenger rides the dock point
+    (RIDING, and TRANSIT before a leg) the carrier's velocity changes by no more than the
+    passenger's acceleration limit allows in one carrier step, so the rider can follow it. Before
+    the carrier's keep-outs held it where it stood (mission.core.tick.keep_outs_at), its barrier
+    pushed it out of target 1's keep-out at leg 2's start: 0.09 -> 1.24 m/s in one step (a change
+    of 1.22 m/s against 0.067 m/s), the passenger 0.58 m off the dock point (docs/recovery.md)."""
+    follow_m_s = cycle.safety.passenger_max_accel_m_s2 / cycle.carrier.rate_hz  # [m/s] in one carrier step
+    guard = cycle.law.b * cycle.law.c - cycle.carrier.p3_margin_m
+    for flight, index in zip(pushed_out_flights, PUSHED_OUT):
+        assert flight.state.phase is Phase.DONE, (index, flight.events[-5:])
+        legs = flight.summary["legs"]
+        assert [leg["outcome"] for leg in legs] == ["done", "done"], (index, legs)
+        for leg in legs:
+            assert leg["p1"] and leg["p2"] and leg["p3"], (index, leg)
+            assert leg["max_offset_before_separation_m"] <= P1_TOLERANCE_M, (index, leg)  # measured: 0.083-0.090 m
+        r = flight.record
+        rides = np.isin(r.phase, [Phase.RIDING.value, Phase.TRANSIT.value])
+        offset = np.linalg.norm(r.vec("x_p") - r.vec("dock"), axis=1)
+        assert float(offset[rides].max()) <= P1_TOLERANCE_M, index
+        # the carrier's velocity between two 50 Hz ticks: at most one of its 30 Hz steps
+        step = np.linalg.norm(np.diff(r.vec("v_c")[:, :2], axis=0), axis=1)
+        steady = step[rides[1:] & rides[:-1]]
+        assert float(steady.max()) <= follow_m_s, (index, float(steady.max()))  # measured: 0.035 m/s
+        # the Monte-Carlo's row says the same
+        assert recovery_mc.ridden_figures(flight) == pytest.approx((float(offset[rides].max()), float(steady.max())), abs=1e-6)
+        closest = recovery_mc.closest_to_targets_m(flight)
+        assert min(c for c in closest if c is not None) >= guard - GUARD_TOLERANCE_M, (index, closest)
 
 
 def test_simulate_refuses_a_cycle_it_cannot_fly(tmp_path, capsys):
