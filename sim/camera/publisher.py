@@ -44,10 +44,13 @@ class CameraPublisher:
         self.captured = self.sent = 0
         key = camera_key(pair)
         self.key, self._signer = key, signer
-        # DROP even in lockstep: the put runs in the vehicle's physics pass, which must never wait
-        # on the network (a dropped frame is a camera dropout, counted by the feed as a gap)
+        # In real time DROP: the put runs in the vehicle's physics pass, which must not wait on the
+        # network (a dropped frame is a camera dropout, counted by the feed as a gap). In lockstep
+        # BLOCK, as the state streams: a frame Zenoh dropped under load (2 of 3272 in one relnav
+        # demo) made two runs of one seed fuse different markers from t = 3.6 s on.
+        congestion = zenoh.CongestionControl.BLOCK if lockstep else zenoh.CongestionControl.DROP
         self._pub = declare(f"publisher on {key}", lambda: session.declare_publisher(
-            key, congestion_control=zenoh.CongestionControl.DROP, express=True))
+            key, congestion_control=congestion, express=True))
 
     def sample(self, t_s: float, kin: Any, carrier_ned_m: np.ndarray, carrier_velocity_ned_m_s: np.ndarray,
                carrier_yaw_rad: float | None) -> None:
