@@ -286,6 +286,17 @@ class MockDynamics:
         result = c.arm(t_s) if request is Request.ARM else c.set_mode(t_s, MODES_OF_REQUEST[request])
         return None if result == 0 else (c.outbox[-1][2] if len(c.outbox) > before else f"MAV_RESULT {result}")
 
+    def carry_out(self, t_s: float, dec: Decision, failed: dict[str, str]) -> None:
+        """The passenger step's decision at ``t_s`` [s]: its setpoint sent, its request carried out
+        unless it failed before (``failed``: request -> the vehicle's refusal, kept for the step,
+        as the flight's command worker keeps an ARM or OFFBOARD the vehicle refused)."""
+        if dec.setpoint is not None:
+            self.send(t_s, dec.setpoint)
+        if dec.request is not None and dec.request.value not in failed:
+            why = self.request(t_s, dec.request)
+            if why is not None and dec.request in (Request.ARM, Request.OFFBOARD):
+                failed[dec.request.value] = why
+
     @property
     def true_position(self) -> np.ndarray:
         return np.array((self.kin.n_m, self.kin.e_m, self.kin.d_m))
@@ -430,12 +441,7 @@ class World:
         result = self.step(self.state, PassengerInputs(t, vehicle.report(t), carrier.observed(t), dict(self.failed),
                                                        measurements=measured))
         self.state, obs, dec = result.state, result.observation, result.decision
-        if dec.setpoint is not None:
-            vehicle.send(t, dec.setpoint)
-        if dec.request is not None and dec.request.value not in self.failed:
-            why = vehicle.request(t, dec.request)
-            if why is not None and dec.request in (Request.ARM, Request.OFFBOARD):
-                self.failed[dec.request.value] = why
+        vehicle.carry_out(t, dec, self.failed)
         self.events.extend((t, text) for text in dec.events)
         self.published, self.published_leg = self.state.phase, self.state.leg
         if self.approach_s is None and self.state.phase is Phase.APPROACH:

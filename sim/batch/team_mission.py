@@ -45,7 +45,6 @@ from mission.model import mission_model
 from mission.passenger.inputs import PassengerInputs
 from mission.passenger.step import PassengerStep
 from mission.phases import MissionState, Phase, finished
-from mission.phases.phase import Request
 from mission.record.figures import summary_of
 from mission.record.info import flown_info, mission_info
 from sim.batch.recovery import KinematicCarrier, MockDynamics, _record, _Rows, configured, sim_backend
@@ -190,12 +189,7 @@ class TeamWorld:
             result = m.step(m.state, PassengerInputs(t, vehicle.report(t), seen, dict(m.failed), neighbours=neighbours,
                                                      carrier_target_ned_m=heading_for))
             m.state, obs, dec = result.state, result.observation, result.decision
-            if dec.setpoint is not None:
-                vehicle.send(t, dec.setpoint)
-            if dec.request is not None and dec.request.value not in m.failed:
-                why = vehicle.request(t, dec.request)
-                if why is not None and dec.request in (Request.ARM, Request.OFFBOARD):
-                    m.failed[dec.request.value] = why
+            vehicle.carry_out(t, dec, m.failed)
             m.events.extend((t, text) for text in dec.events)
             if m.state.phase is Phase.SEPARATED and before is not Phase.SEPARATED and m.state.anchor is not None:
                 m.separations.append(self._separation(m, t))
