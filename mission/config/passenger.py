@@ -10,8 +10,9 @@ from mission.errors import ConfigError
 
 
 def has_team(cfg: Config) -> bool:
-    """Whether ``cfg`` came from a file with a ``[team]`` (validated: then it has passengers)."""
-    return "team" in cfg.model_fields_set
+    """Whether ``cfg`` came from a file that declares a team (:attr:`TeamSection.given`; validated:
+    then it has passengers)."""
+    return cfg.team.given
 
 
 def passenger_config(cfg: Config, name: str) -> Config:

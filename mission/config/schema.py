@@ -426,7 +426,7 @@ class Config(Section):
         if len(self.mission.dock_offset_ned_m) != 3:
             raise ConfigError("mission.dock_offset_ned_m", self.mission.dock_offset_ned_m, "must have 3 components")
         self._cross_fields()
-        if "team" in self.model_fields_set:
+        if self.team.given:
             self._team_flies()
         return self
 
@@ -444,7 +444,7 @@ class Config(Section):
         """Checks that need several fields (raise ConfigError naming the field to change)."""
         s, sf, m = self.scenario, self.safety, self.mission
         bc = self.law.params().separation_distance_m
-        team = self.team if "team" in self.model_fields_set else None  # one passenger per slot and target
+        team = self.team if self.team.given else None  # one passenger per slot and target
         if team is not None:
             check_team(team, n_targets=len(s.legs()), target_field=s.target_field(), contact_radius_m=self.recovery.contact_radius_m,
                        stated={f"{sec}.{key}": getattr(getattr(self, sec), key) for sec in ("mission", "mavlink")

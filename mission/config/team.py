@@ -61,6 +61,12 @@ class TeamSection(Section):
     passengers: list[TeamPassengerSection] = Field([], max_length=MAX_TEAM,
         description="[-] list of `{ name, system_id, slot, targets = [index] }`: one entry per passenger, one slot each")
 
+    @property
+    def given(self) -> bool:
+        """Whether the file declared a team: any slot or passenger. An empty ``[team]`` (or a dump of a
+        one-passenger configuration, which writes the empty lists) is one passenger, as without it."""
+        return bool(self.slots or self.passengers)
+
     def slot_index(self, name: str) -> int:
         """The index in :attr:`slots` of the slot called ``name`` (the name is checked at load)."""
         return next(k for k, slot in enumerate(self.slots) if slot.name == name)

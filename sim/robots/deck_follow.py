@@ -15,8 +15,10 @@ seq"``, :mod:`mission.bus.lockstep`): the newest ready with ``wake`` after the b
 step; its state is the one with ``seq`` (the state feed) or stamped at its ``t`` (the truth, which
 the carrier stamps with its step time). A carrier that is not in the lockstep (no ready heard) is
 followed as it arrives. A wait longer than :data:`WAIT_WALL_S` of wall time is given up (counted,
-the run is no longer deterministic), and after :data:`GIVE_UP_AFTER` give-ups in a row the deck
-follows arrivals for the rest of the run (a backend whose states are not stamped with its step).
+the run is no longer deterministic; a state given up is not waited for again), and after
+:data:`GIVE_UP_AFTER` give-ups in a row the deck follows arrivals for the rest of the run (a
+backend whose states are not stamped with its step). Until the first state is heard nothing is
+waited for: Zenoh may lose the carrier's first samples before the route to this subscriber is up.
 
 The ready messages are read, not verified: the mock is the world, not a party to the pair's bus
 authentication; a forged ready can only make the deck wait (bounded).
@@ -90,6 +92,7 @@ class StepAligned:
         self._done_ns: int | None = None  # the barrier whose step the deck already has
         self._in_a_row = 0
         self._seen_seq, self._seen_stamp_s = 0, -math.inf  # the newest valid state heard
+        self._given_up: tuple[int, int, int] | None = None  # the ready whose state never came
         self.counters = {"waits": 0, "given_up": 0, "aligned": True}
         feed.add_listener(self._on_state)
         self._sub = session.declare_subscriber(clock_keys(pair)[1], self._on_ready)
@@ -120,9 +123,12 @@ class StepAligned:
             return True
         if ready[1] <= barrier_ns:  # it stepped again at or before the barrier: that ready is still to come
             return False
+        if ready == self._given_up:
+            return True  # its state was waited for once and never came
+        # Nothing heard yet: the route to the carrier may not be up (its first samples can be lost
+        # at start-up, before Zenoh matched this subscriber), and the deck is not known yet anyway.
         if self._by_seq:
-            return self._seen_seq >= ready[2]  # seq 0: it has published no state yet
-        # no truth yet: the carrier's robot is not up (its start-up)
+            return self._seen_seq == 0 or self._seen_seq >= ready[2]
         return self._seen_stamp_s == -math.inf or self._seen_stamp_s >= ready[0] / 1e9 - STAMP_SLACK_S
 
     def wait(self, barrier_ns: int | None) -> None:
@@ -136,13 +142,16 @@ class StepAligned:
                 if not self._cv.wait_for(lambda: self._has_step(barrier_ns), WAIT_WALL_S):
                     self._give_up(barrier_ns)
                     return
-        self._done_ns, self._in_a_row = barrier_ns, 0
+            had = self._given_up is None or self._ready != self._given_up  # else: a state given up before
+            self._done_ns = barrier_ns
+            if had:
+                self._in_a_row = 0
 
     def _give_up(self, barrier_ns: int) -> None:
         """Lock held."""
         self.counters["given_up"] += 1
         self._in_a_row += 1
-        self._done_ns = barrier_ns
+        self._done_ns, self._given_up = barrier_ns, self._ready
         first = self.counters["given_up"] == 1
         newest = self._feed.newest()
         have = "none" if newest is None else f"seq {newest[0].seq} stamped {newest[0].stamp_s:.3f} s"

@@ -54,7 +54,8 @@ MISTAKES = [
     ("system-id-256", changed("system_id = 2 ", "system_id = 256 "), "team.passengers[1].system_id = 256"),
     ("system-id-a-fraction", changed("system_id = 2 ", "system_id = 2.0 "), "team.passengers[1].system_id = 2.0"),
     ("target-a-fraction", changed("targets = [1]", "targets = [1.0]"), "team.passengers[1].targets[0] = 1.0"),
-    ("empty-team", TEAM[:TEAM.index("[team]")] + "[team]\n", "team.passengers = []: a [team] needs at least one passenger"),
+    ("slots-no-passenger", TEAM[:TEAM.index("[team]")] + '[team]\n\n[[team.slots]]\nname = "port"\n'
+     "offset_ned_m = [0.0, -0.75, -0.5]\n", "team.passengers = []: a [team] needs at least one passenger"),
     ("unknown-field", changed("[team]\n", "[team]\nslot_spacing_m = 1.0\n"), "team.slot_spacing_m"),
     ("system-id-of-the-carrier",  # a PX4 rover carrier with bravo's system id
      changed("[carrier]\n", '[carrier]\nbackend = "mavlink"\n') + "\n[carrier.mavlink]\ntarget_system = 2\n",

@@ -119,17 +119,31 @@ def test_no_carrier_in_the_lockstep_no_wait(sides):
     assert aligned.counters["waits"] == 0
 
 
-def test_a_step_that_never_comes_is_given_up_and_then_arrivals_are_followed(sides, monkeypatch):
+def test_a_step_that_never_comes_is_given_up_once_and_three_in_a_row_end_the_alignment(sides, monkeypatch):
     monkeypatch.setattr(deck_follow, "WAIT_WALL_S", 0.1)
     carrier, feed, aligned = sides
     connect(carrier, feed, aligned)
     carrier.ready(20 * MS, 60 * MS, 7)  # names a state that is never published
     wait_for(lambda: aligned._ready[0] == 20 * MS, 10.0, "the ready")
-    for k in range(deck_follow.GIVE_UP_AFTER):
+    aligned.wait(20 * MS)
+    aligned.wait(40 * MS)  # the same step's state: given up already, not waited for again
+    assert aligned.counters == {"waits": 1, "given_up": 1, "aligned": True}
+    for k in (3, 4):  # two more steps whose states never come: three give-ups in a row
+        carrier.ready(k * 20 * MS, (k + 2) * 20 * MS, 6 + k)
+        wait_for(lambda k=k: aligned._ready[0] == k * 20 * MS, 10.0, "the ready")
         aligned.wait(k * 20 * MS)
     assert aligned.counters == {"waits": 3, "given_up": 3, "aligned": False}
     aligned.wait(100 * MS)  # no longer waits
     assert aligned.counters["waits"] == 3
+
+
+def test_before_the_first_state_is_heard_nothing_is_waited_for(sides):
+    """At start-up Zenoh may lose the carrier's first samples before the route to the deck's
+    subscriber is up: a ready heard with no state yet does not hold the vehicle."""
+    carrier, _feed, aligned = sides
+    wait_for(lambda: carrier.ready(0, 40 * MS, 1) or aligned._ready is not None, 10.0, "the ready")
+    aligned.wait(20 * MS)
+    assert aligned.counters["waits"] == 0
 
 
 def test_the_truth_is_named_by_its_stamp():

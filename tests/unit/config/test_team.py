@@ -136,3 +136,14 @@ def test_a_team_of_one_is_its_passenger_and_a_team_of_two_is_refused_where_not_f
     assert info.value.field == "--passenger" and "alpha, bravo" in info.value.rule
     with pytest.raises(ConfigError, match=r"^team.passengers"):  # the team as a whole has no one mission model
         check_config(team)
+
+
+def test_a_dump_of_a_one_passenger_configuration_loads_back_as_one_passenger():
+    """A dump writes every field, the empty team's lists too: that is no team (an empty ``[team]``
+    is one passenger, as without it), not a team that states the single-passenger fields again."""
+    from mission.config.passenger import has_team
+    from mission.config.schema import from_dict
+
+    cfg = load_config(CONFIGS / "cycle.toml")
+    again = from_dict(cfg.model_dump())
+    assert not has_team(again) and again.mission.dock_offset_ned_m == cfg.mission.dock_offset_ned_m
