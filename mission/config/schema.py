@@ -114,12 +114,14 @@ class SafetySection(Section):
     passenger_separation_max_age_s: float = Field(0.5, gt=0, le=10,
         description="[s] an other passenger's shared state older than this is left out of the separation barrier "
                     "(as if absent); a younger one counts as flown on at its velocity over its age")
+    passenger_separation_phase_in_s: float = Field(0.5, ge=0, le=10, description="[s] the separation barrier's rows "
+        "phase in over this time from the passenger's separation: no jump of the command at the latch (0: at once; docs/team.md)")
 
     def passenger(self) -> SafetyConfig:
         from mission.core.safety import SafetyConfig
 
         return SafetyConfig(self.cbf_gain, self.margin_m, self.passenger_max_speed_m_s, self.passenger_max_accel_m_s2, self.z_min_m,
-                            self.z_max_m, self.passenger_separation_m, self.passenger_separation_max_age_s)
+                            self.z_max_m, self.passenger_separation_m, self.passenger_separation_max_age_s, self.passenger_separation_phase_in_s)
 
     def carrier(self) -> SafetyConfig:
         from mission.core.safety import SafetyConfig

@@ -14,7 +14,8 @@ little as possible (least squares) so that every barrier stays non-negative:
   ``v_d``: ``dh/dt = grad h . (u - v_d) >= -gain * h``. The passenger may move out sideways
   relative to the deck only as it climbs: it clears the deck first.
 - optional other passengers (:class:`Neighbours`, the pairwise separation barrier): see
-  :func:`neighbour_rows` (docs/team.md, "Keeping passengers apart").
+  :func:`neighbour_rows` (docs/team.md, "Keeping passengers apart"), its rows phasing in from the
+  passenger's separation.
 
 The QP is solved in closed form where that is exact (no constraint violated, or a projection on
 one violated constraint that satisfies all others: it meets the KKT conditions, so it is the
@@ -97,8 +98,10 @@ class SafetyConfig:
     cbf_gain [1/s] class-K gain; margin_m [m] added to every radius; max_speed_m_s [m/s];
     max_accel_m_s2 [m/s^2]; z_min_m / z_max_m [m] bounds on the third coordinate;
     separation_m [m] the least distance kept from other passengers (None: no pairwise barrier);
-    neighbour_max_age_s [s] an other passenger's sample older than this is left out. (``_cache``
-    holds the constant constraint rows of the bounds, built on first use.)
+    neighbour_max_age_s [s] an other passenger's sample older than this is left out;
+    separation_phase_in_s [s] the pairwise rows phase in over this time from the passenger's
+    separation (:func:`neighbour_rows`; 0: in at once). (``_cache`` holds the constant constraint
+    rows of the bounds, built on first use.)
     """
 
     cbf_gain: float = 1.0
@@ -109,6 +112,7 @@ class SafetyConfig:
     z_max_m: float | None = None
     separation_m: float | None = None
     neighbour_max_age_s: float = 0.5
+    separation_phase_in_s: float = 0.0
     _cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
 
@@ -149,8 +153,18 @@ TIE_BREAK = 0.5  # [-] a blocked passenger veers by this fraction of its speed (
 VEER_RAD = float(np.radians(120.0))  # the veer's direction: this far right of the direction to the neighbour
 
 
+def phase_in_weight(since_s: float | np.ndarray, phase_in_s: float) -> np.ndarray:
+    """The share [-] of the pairwise rows in force ``since_s`` [s] after the separation: 0 at it, 1
+    from ``phase_in_s`` [s] on, a smoothstep between (``3 x^2 - 2 x^3``, ``x = since / phase_in``):
+    its rate is zero at both ends, so the rows neither start nor finish with a kink, and early on
+    (the latch, SEPARATED -> NAVIGATING a few ticks later) they ask almost nothing."""
+    x = np.clip(np.asarray(since_s, dtype=float) / phase_in_s, 0.0, 1.0)
+    return x * x * (3.0 - 2.0 * x)
+
+
 def neighbour_rows(x: np.ndarray, own_velocity: np.ndarray, neighbours: Neighbours,
-                   cfg: SafetyConfig) -> tuple[np.ndarray, np.ndarray] | None:
+                   cfg: SafetyConfig, since_separation_s: float | np.ndarray | None = None,
+                   ) -> tuple[np.ndarray, np.ndarray] | None:
     """The pairwise separation barrier's rows ``A u >= b`` at ``x`` (..., n): A (..., k, n), b
     (..., k); None when there is none (no ``separation_m``, no neighbour, or all stale).
 
@@ -163,7 +177,19 @@ def neighbour_rows(x: np.ndarray, own_velocity: np.ndarray, neighbours: Neighbou
     condition exactly; when it does not react (it holds, or flies without the filter) ``v_i``
     follows this passenger's own command and the row tends to the whole condition at half the
     remaining gap per tick. A pair already closer than ``D`` (slots on one deck) is held at its
-    distance (``D`` shrunk to it), never pushed apart: a push would be a jump of the command."""
+    distance (``D`` shrunk to it), never pushed apart: a push would be a jump of the command.
+
+    The phase-in: ``since_separation_s`` [s], the time since this passenger separated (scalar or
+    (...)), within ``cfg.separation_phase_in_s`` of it, relaxes each row by ``(1 - w)`` of what
+    the own velocity lacks of it, ``w`` :func:`phase_in_weight` (0 at the latch, 1 at the end):
+    ``b' = b - (1 - w) max(0, b - A v_i)``. While riding a passenger flies its dock point, so its
+    rows were absent; at the latch its previous command already breaks a row by half the pair's
+    relative velocity along their line as the samples show it (two passengers riding one deck:
+    the neighbour's estimate's error), and a row fully in at once would make up that half in one
+    tick, a jump of the command. Phased in, the previous command meets the row at the latch and
+    the row asks for ``w`` of the rest each tick; a new approach (the command turning towards a
+    neighbour) is refused in full from the first tick. None, or a time past the phase-in: the
+    rows as above, the same arrays."""
     if cfg.separation_m is None or not len(neighbours):
         return None
     pos, vel, fresh = neighbours.now(cfg.neighbour_max_age_s)
@@ -174,6 +200,11 @@ def neighbour_rows(x: np.ndarray, own_velocity: np.ndarray, neighbours: Neighbou
     h = dist2 - np.minimum(cfg.separation_m**2, dist2)
     A = 2.0 * diff
     b = dot(diff, own_velocity[..., None, :] + vel) - 0.5 * cfg.cbf_gain * h
+    if since_separation_s is not None and cfg.separation_phase_in_s > 0:
+        w = phase_in_weight(since_separation_s, cfg.separation_phase_in_s)
+        if np.any(w < 1.0):
+            lack = np.maximum(b - dot(A, own_velocity[..., None, :]), 0.0)
+            b = b - (1.0 - w)[..., None] * lack
     if fresh is not None:
         A, b = np.where(fresh[..., None], A, 0.0), np.where(fresh, b, -1.0)
     return A, b
@@ -400,20 +431,23 @@ def filter_velocity(
     copy: bool = True,
     deck: DeckKeepOut | None = None,
     neighbours: Neighbours | None = None,
+    since_separation_s: float | np.ndarray | None = None,
 ) -> FilterResult:
     """Safe velocity near ``u_des`` at position ``x`` (arrays ``(..., n)``); see module doc.
 
     ``u_prev`` [m/s] and ``dt_s`` [s] enable the acceleration limit; ``deck``: the keep-out round
     a moving deck (3D); ``neighbours``: the other passengers (:func:`neighbour_rows`, whose own
     velocity is ``u_prev``, else ``u_des``; a blocked head-on meeting veers right first,
-    :func:`veer_right`, before the acceleration limit). ``u`` of the result is a
+    :func:`veer_right`, before the acceleration limit); ``since_separation_s`` [s]: the time
+    since this passenger separated, over which those rows phase in (None: fully in). ``u`` of the result is a
     new array, except with ``copy=False`` when nothing changed the command: then it is
     ``u_des`` itself (for callers that own ``u_des`` and never write into either).
     """
     u_des = np.asarray(u_des, dtype=float)
     u = u_des
     pair = None if neighbours is None else neighbour_rows(
-        np.asarray(x, dtype=float), u_des if u_prev is None else np.asarray(u_prev, dtype=float), neighbours, cfg)
+        np.asarray(x, dtype=float), u_des if u_prev is None else np.asarray(u_prev, dtype=float), neighbours, cfg,
+        since_separation_s)
     if pair is not None:
         u = veer_right(u, *pair)
     if cfg.max_accel_m_s2 is not None and u_prev is not None and dt_s is not None:

@@ -95,6 +95,7 @@ def passenger_tick(
     e_tc_norm_m: np.ndarray | None = None,
     deck: DeckKeepOut | None = None,
     neighbours: Neighbours | None = None,
+    since_separation_s: float | np.ndarray | None = None,
 ) -> PassengerTick:
     """Law + safety for the passenger at ``anchor + e_pc`` [m].
 
@@ -103,7 +104,9 @@ def passenger_tick(
     ``e_tc_norm_m`` [m]: ``|target - anchor|`` when the caller has it already (else computed).
     ``deck``: the keep-out round the carrier's deck the filter keeps the passenger out of.
     ``neighbours``: the other passengers the filter keeps it apart from (their last shared states,
-    :func:`mission.core.safety.neighbour_rows`; its own velocity there is ``u_prev``).
+    :func:`mission.core.safety.neighbour_rows`; its own velocity there is ``u_prev``);
+    ``since_separation_s`` [s]: the time since the passenger separated, over which their rows
+    phase in (``passenger_safety.separation_phase_in_s``; None: fully in).
     """
     sep = np.asarray(separated, dtype=bool)
     e_tc = model.target - anchor
@@ -126,7 +129,7 @@ def passenger_tick(
             scale = np.where(sep, scale, 1.0)
         desired = desired * scale[..., None]
     safe = filter_velocity(anchor + e_pc, desired, model.obstacles, model.passenger_safety, u_prev, dt_s, copy=False,
-                           deck=deck, neighbours=neighbours)
+                           deck=deck, neighbours=neighbours, since_separation_s=since_separation_s)
     return PassengerTick(u=safe.u, desired=desired, relative=cmd.relative, P=cmd.P, leaving=cmd.leaving, safety=safe,
                          e_pc_norm_m=cmd.e_pc_norm_m)
 

@@ -277,11 +277,13 @@ def navigate(state, obs, m, events=()):
     relaxing to zero at bounded acceleration, :func:`_relax`), and the altitude floor is left out
     while the vehicle reads itself under it (as JOIN's): a seated vehicle whose estimate reads it
     below the deck would otherwise be sent the floor's climb at once. The reference keeps apart
-    from the other passengers the observation holds (``obs.neighbours``, the separation barrier)."""
+    from the other passengers the observation holds (``obs.neighbours``, the separation barrier),
+    its rows phasing in from the separation (``state.separation_time_s``)."""
     t = obs.t_s
     deck = m.deck.keep_out(obs, m) if m.deck is not None else None
+    separated_for = None if state.separation_time_s is None else t - state.separation_time_s
     tick = passenger_tick(state.anchor, ZERO, state.e_ref, True, m.tick, state.u_ref, m.dt_s, deck=deck,
-                          neighbours=obs.neighbours)
+                          neighbours=obs.neighbours, since_separation_s=separated_for)
     # The reference advances at the rate the vehicle can follow (mission.core.tracking.progress); its
     # acceleration is its own velocity's change over the tick (a signal we generate: no noise).
     rate = progress(_lag_m(state, obs), m.tracking)

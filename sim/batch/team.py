@@ -5,7 +5,8 @@
 Each passenger separates at ``t = 0`` from its slot on a stopped deck (its latched anchor) and
 flies the paper's law to its own target through the safety filter, the others as its
 :class:`~mission.core.safety.Neighbours`: their states of ``delay_ticks`` ticks ago, with that age,
-as a bus would bring them. The vehicles follow their commands exactly (no dynamics): what is
+as a bus would bring them; its rows phase in from ``t = 0`` as the mission's do
+(``safety.separation_phase_in_s``). The vehicles follow their commands exactly (no dynamics): what is
 measured is the barrier, not the tracking. A passenger that reaches its target (within
 ``arrival_radius_m``) holds there and stops reacting, as one handed to PX4's Hold does. Arrays:
 ``B`` scenarios of ``k`` passengers, NED [m], [m/s], [s].
@@ -82,7 +83,8 @@ def fly_team(slots: np.ndarray, targets: np.ndarray, law: LawParams, safety: Saf
             pos = x_seen.reshape(B, k, n)[:, others].reshape(N, k - 1, n)
             vel = v_seen.reshape(B, k, n)[:, others].reshape(N, k - 1, n)
             neighbours = Neighbours(pos, vel, ages)
-        tick = passenger_tick(anchor, np.zeros(n), e, True, model, u, dt_s, neighbours=neighbours)
+        tick = passenger_tick(anchor, np.zeros(n), e, True, model, u, dt_s, neighbours=neighbours,
+                              since_separation_s=step * dt_s)
         u = np.where(done[:, None], 0.0, tick.u)
         infeasible += (~np.asarray(tick.safety.feasible, dtype=bool) & ~done).reshape(B, k).any(axis=1)
         e = e + u * dt_s

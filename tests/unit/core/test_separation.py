@@ -5,7 +5,9 @@ import numpy as np
 import pytest
 
 from mission.core.law import LawParams, dot
-from mission.core.safety import Neighbours, Obstacles, SafetyConfig, filter_velocity, neighbour_rows
+from dataclasses import replace
+
+from mission.core.safety import Neighbours, Obstacles, SafetyConfig, filter_velocity, neighbour_rows, phase_in_weight
 from mission.core.tick import TickModel, passenger_tick
 from sim.batch.team import fly_team
 
@@ -15,8 +17,12 @@ CFG = SafetyConfig(max_speed_m_s=3.0, max_accel_m_s2=2.0, z_max_m=-0.5, separati
 LAW = LawParams()  # b c = 8 m: every target within 8 m of its slot, so all leave at t = 0
 
 
-def _fly(slots, targets, separate=True):
-    return fly_team(np.array([slots], dtype=float), np.array([targets], dtype=float), LAW, CFG, 0.02, 20.0,
+PHASED = replace(CFG, separation_phase_in_s=0.5)  # the rows phasing in from the separation, as the mission flies them
+STEP_MAX_M_S = 0.05  # [m/s] issue 36: no jump of the command at the separation
+
+
+def _fly(slots, targets, separate=True, cfg=CFG):
+    return fly_team(np.array([slots], dtype=float), np.array([targets], dtype=float), LAW, cfg, 0.02, 20.0,
                     separate=separate)
 
 
@@ -38,12 +44,13 @@ CASES = {
 }
 
 
+@pytest.mark.parametrize("cfg", [CFG, PHASED], ids=["rows in at once", "rows phased in"])
 @pytest.mark.parametrize("name", list(CASES))
-def test_passengers_never_closer_than_the_separation_and_all_arrive(name):
+def test_passengers_never_closer_than_the_separation_and_all_arrive(name, cfg):
     slots, targets = CASES[name]
     alone = _fly(slots, targets, separate=False)
     assert alone.min_distance_m[0] < 0.5 * D  # the paths do meet: without the rows they nearly collide
-    team = _fly(slots, targets)
+    team = _fly(slots, targets, cfg=cfg)
     start = np.linalg.norm(np.subtract(slots[0], slots[1]))
     assert team.min_distance_m[0] >= min(D, start) - TOL_M
     assert team.shortfall_m[0] <= TOL_M  # and once a pair has been D apart, never closer than D
@@ -132,3 +139,76 @@ def test_batch_matches_single_and_the_tick_threads_neighbours():
     free = passenger_tick(anchor, np.zeros(3), np.zeros(3), True, model, np.array([2.0, 0, 0]), 0.02)
     kept = passenger_tick(anchor, np.zeros(3), np.zeros(3), True, model, np.array([2.0, 0, 0]), 0.02, neighbours=ahead)
     assert kept.safety.cbf_active and kept.u[0] < free.u[0]
+
+
+# The latch beside a riding neighbour (configs/team.toml's alpha at 17.2 s with PX4 SITL's estimate
+# errors): the carrier's velocity, the neighbour on the next slot 1.5 m to the east (inside D), its
+# sample 0.12 m/s slower eastwards than the passenger's riding command (its estimate's error), and
+# the law's command just after the latch nearly zero (the carrier's velocity no longer fed forward).
+V_C = np.array([1.3068, 0.9801, 0.0])
+AT_LATCH = dict(x=np.array([0.0, 0.0, -1.5]), u_des=np.array([0.005, 0.005, -0.004]),
+                neighbours=Neighbours(np.array([[0.1, 1.5, -1.55]]), (V_C - [0.0, 0.12, 0.0])[None]))
+
+
+def _latch_step(cfg, since_s):
+    r = filter_velocity(AT_LATCH["x"], AT_LATCH["u_des"], Obstacles.none(3), cfg, V_C, 0.02,
+                        neighbours=AT_LATCH["neighbours"], since_separation_s=since_s)
+    return float(np.linalg.norm(r.u - V_C))
+
+
+def test_the_rows_phase_in_from_the_separation_so_the_latch_does_not_jump():
+    accel_step = CFG.max_accel_m_s2 * 0.02
+    # in at once, the row makes up half the neighbour's apparent closing speed in one tick: a jump
+    assert _latch_step(CFG, 0.01) > STEP_MAX_M_S
+    assert _latch_step(PHASED, None) > STEP_MAX_M_S  # (no time since the separation: in at once too)
+    # phased in, the first ticks ask almost nothing beyond the acceleration limit's step
+    for since in (0.0, 0.01, 0.02, 0.06):
+        assert _latch_step(PHASED, since) <= accel_step + 0.002, since
+    # and from the end of the phase-in on they are the very rows of the barrier
+    x, nb = AT_LATCH["x"], AT_LATCH["neighbours"]
+    full = neighbour_rows(x, V_C, nb, PHASED)
+    for since in (0.5, 3.0):
+        A, b = neighbour_rows(x, V_C, nb, PHASED, since)
+        np.testing.assert_array_equal(A, full[0])
+        np.testing.assert_array_equal(b, full[1])
+
+
+def test_the_phase_in_is_smooth_and_refuses_a_new_approach_from_the_first_tick():
+    w = phase_in_weight(np.linspace(-0.1, 0.7, 81), 0.5)
+    assert w[0] == 0.0 and w[-1] == 1.0 and (np.diff(w) >= 0).all() and np.abs(np.diff(w, 2)).max() < 0.01
+    # a pair held at its distance (1.5 m, D = 3 m), both at rest: turning towards the neighbour is
+    # refused in full at the latch, phase-in or not (what it relaxes is only what the previous command lacked)
+    x, near = np.array([0.0, 0.0, -1.5]), Neighbours(np.array([[1.5, 0.0, -1.5]]), np.zeros((1, 3)))
+    closing = filter_velocity(x, np.array([1.0, 0.0, 0.0]), Obstacles.none(3), PHASED, np.zeros(3), 0.02,
+                              neighbours=near, since_separation_s=0.0)
+    assert closing.cbf_active and closing.u[0] <= 1e-12
+    # in a batch each passenger phases in on its own clock
+    xs = np.stack([AT_LATCH["x"]] * 2)
+    nbs = Neighbours(np.stack([AT_LATCH["neighbours"].positions_m] * 2), np.stack([AT_LATCH["neighbours"].velocities_m_s] * 2))
+    both = filter_velocity(xs, np.stack([AT_LATCH["u_des"]] * 2), Obstacles.none(3), PHASED, np.stack([V_C] * 2), 0.02,
+                           neighbours=nbs, since_separation_s=np.array([0.01, 2.0]))
+    assert np.linalg.norm(both.u[0] - V_C) == pytest.approx(_latch_step(PHASED, 0.01))
+    assert np.linalg.norm(both.u[1] - V_C) == pytest.approx(_latch_step(PHASED, 2.0))
+
+
+def _flown_at(cfg, s0):
+    """A passenger separating at rest with a neighbour exactly D away flying at it at ``s0`` [m/s]
+    that does not react, for 3 s: (how far inside D the pair came [m], the largest command step [m/s])."""
+    x, u, p, v = np.array([0.0, 0.0, -1.5]), np.zeros(3), np.array([0.0, D, -1.5]), np.array([0.0, -s0, 0.0])
+    least, step = D, 0.0
+    for k in range(150):
+        r = filter_velocity(x, np.zeros(3), Obstacles.none(3), cfg, u, 0.02, neighbours=Neighbours(p[None], v[None]),
+                            since_separation_s=k * 0.02)
+        step, u = max(step, float(np.linalg.norm(r.u - u))), r.u
+        x, p = x + u * 0.02, p + v * 0.02
+        least = min(least, float(np.linalg.norm(p - x)))
+    return D - least, step
+
+
+@pytest.mark.parametrize("s0", [0.1, 0.25, 0.5])
+def test_the_price_of_the_phase_in_against_a_neighbour_flying_at_the_passenger(s0):
+    """docs/team.md: in at once the row jumps the command by half the closing speed and gives up
+    s0 x 0.02 s; phased in over 0.5 s it steps by at most a tenth and gives up about s0 x 0.2 s."""
+    at_once, phased = _flown_at(CFG, s0), _flown_at(PHASED, s0)
+    assert at_once[1] == pytest.approx(s0 / 2) and at_once[0] == pytest.approx(0.02 * s0, rel=0.05)
+    assert phased[1] <= 0.1 * s0 and phased[0] <= 0.21 * s0
