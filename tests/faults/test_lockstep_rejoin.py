@@ -72,9 +72,12 @@ def test_a_carrier_stopped_past_its_drop_rejoins_on_the_controllers_clock(tmp_pa
     text = DEMO.read_text()
     assert "arrival_dwell_s = 1.0\n" in text and "[sim]" not in text
     config = tmp_path / "rejoin.toml"
-    # the wait short, to drop the carrier; the passenger at the target long enough (20 s of the
-    # paced flight's clock, x5: 4 s of wall) to see it back
-    config.write_text(text.replace("arrival_dwell_s = 1.0\n", "arrival_dwell_s = 20.0\n")
+    # the wait short, to drop the carrier; the passenger at the target long enough (40 s of the
+    # paced flight's clock, x5: 8 s of wall) to see it back. The pace counts from the start, so the
+    # flight runs flat out after the carrier's 2 s wait until it is back on pace, and the mock's
+    # deck adds 1 s more (it waits that long for the dropped carrier's step before it goes on,
+    # sim/robots/deck_follow.py): with 20 s the mission ended before the carrier was back.
+    config.write_text(text.replace("arrival_dwell_s = 1.0\n", "arrival_dwell_s = 40.0\n")
                       + "\n[sim]\nlockstep_carrier_wait_wall_s = 2.0\n")
     with flight(tmp_path, "rejoin", config=config, lockstep=True, vehicle_args=PACED) as f:
         f.wait_phase("SEPARATED", timeout_s=60.0)
