@@ -37,7 +37,7 @@ from mission.config.relnav import RelnavSection, WorldSection
 from mission.config.scenario import ObstacleSection, ScenarioSection
 from mission.config.team import TeamSection, as_team_error, check_team, dock_points, passenger_data
 from mission.config.urls import DEFAULT_URL
-from mission.config.vision import VisionSection, check_vision, marker_offset_ned_m
+from mission.config.vision import VisionSection, check_vision
 from mission.config.fields import (
     COORD_LIMIT_M,
     MAX_PATH_CHARS,
@@ -476,10 +476,7 @@ class Config(Section):
                    safety_margin_m=sf.margin_m)
         check_recovery(self.recovery, self.carrier, carrier_max_speed_m_s=sf.carrier_max_speed_m_s,  # it can finish
                        passenger_max_speed_m_s=sf.passenger_max_speed_m_s, final_action=m.final_action)
-        if self.vision.marker_offset_ned_m is not None and len(self.vision.marker_offset_ned_m) != 3:
-            raise ConfigError("vision.marker_offset_ned_m", self.vision.marker_offset_ned_m, "must have 3 components")
-        marker_below = marker_offset_ned_m(self.vision, m.dock_offset_ned_m)[2] - m.dock_offset_ned_m[2]
-        check_vision(self.vision, self.recovery.decision_height_m, marker_below)  # the marker in view at the gate
+        check_vision(self.vision, self.recovery.decision_height_m, m.dock_offset_ned_m)  # the marker in view at the gate
         if s.dim != 3 or s.frame != "local_ned":
             return
         # local NED, z down: the carrier drives on the ground at carrier_start's z

@@ -74,15 +74,17 @@ def marker_offset_ned_m(v: VisionSection, dock_offset_ned_m: list[float]) -> lis
     return list(v.marker_offset_ned_m if v.marker_offset_ned_m is not None else dock_offset_ned_m)
 
 
-def check_vision(v: VisionSection, decision_height_m: float, marker_below_dock_m: float = 0.0) -> None:
+def check_vision(v: VisionSection, decision_height_m: float, dock_offset_ned_m: list[float]) -> None:
     """The marker can be seen where it matters: the bundle's two tags differ, and the tag that
     serves the last metres (the small one of a bundle, else the only one) fits wholly in the image
-    at ``recovery.decision_height_m`` (the camera that far above the dock point, the marker
-    ``marker_below_dock_m`` [m] below the dock point, less the mount's down offset). Skipped with a
-    calibration file (its field of view is only known once it is read)."""
-    for name in ("mount_offset_body_m", "mount_rpy_deg"):
-        if len(getattr(v, name)) != 3:
+    at ``recovery.decision_height_m`` (the camera that far above the dock point
+    ``dock_offset_ned_m`` [m] NED, the marker where :func:`marker_offset_ned_m` puts it, less the
+    mount's down offset). Skipped with a calibration file (its field of view is only known once it
+    is read)."""
+    for name in ("mount_offset_body_m", "mount_rpy_deg", "marker_offset_ned_m"):
+        if getattr(v, name) is not None and len(getattr(v, name)) != 3:
             raise ConfigError(f"vision.{name}", getattr(v, name), "must have 3 components")
+    marker_below_dock_m = marker_offset_ned_m(v, dock_offset_ned_m)[2] - dock_offset_ned_m[2]
     if v.layout == "bundle":
         if v.small_tag_id == v.tag_id:
             raise ConfigError("vision.small_tag_id", v.small_tag_id, "must differ from vision.tag_id")

@@ -371,7 +371,7 @@ def simulate(config: str, as_json: bool, plot_path: str | None, count: int | Non
     loaded = load_config(config)
     if has_team(loaded) and len(loaded.team.passengers) > 1:
         if count is not None:
-            raise ConfigError("--monte-carlo", count, "a team of several passengers is simulated once (issue 36)")
+            raise ConfigError("--monte-carlo", count, "a team of several passengers is simulated once: no random team scenarios yet (docs/team.md)")
         return run_team(loaded, Path(config).stem, plot_path, as_json, estimate_error, seed)
     cfg = sole_passenger(loaded, "simulated by `marsupial simulate`")  # a team of one: its passenger's
     unsaturated = [f"safety.{name}" for name in ("passenger_max_speed_m_s", "passenger_max_accel_m_s2",

@@ -2,7 +2,7 @@
 passengers on one slot, slots that overlap, a target with no passenger, a duplicate system id, a
 slot that does not exist, a passenger with no target, a fact the team declares stated again.
 ``marsupial run`` refuses each before anything is opened, exit 2, naming the field (in process;
-the four of issue 36 also through the real process); ``--passenger`` is checked the same way,
+the four a team most needs refused also through the real process); ``--passenger`` is checked the same way,
 and ``demo`` and ``carrier`` refuse a team they cannot fly yet."""
 from __future__ import annotations
 

@@ -21,7 +21,7 @@ from tests.conftest import CONFIGS
 pytestmark = pytest.mark.timeout(600)  # a whole team's mission in-process: about 10 s of CPU (each flight)
 
 TEAM = CONFIGS / "team.toml"
-JUMP_MAX_M_S = 0.05  # issue 36: every separation with no jump
+JUMP_MAX_M_S = 0.05  # [m/s] every separation with no jump (P1)
 
 
 @pytest.fixture(scope="module")

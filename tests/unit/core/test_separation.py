@@ -1,4 +1,4 @@
-"""The pairwise separation barrier (issue 36, item 3): passengers that leave together keep apart."""
+"""The pairwise separation barrier: passengers that leave together keep apart."""
 from __future__ import annotations
 
 import numpy as np
@@ -18,7 +18,7 @@ LAW = LawParams()  # b c = 8 m: every target within 8 m of its slot, so all leav
 
 
 PHASED = replace(CFG, separation_phase_in_s=0.5)  # the rows phasing in from the separation, as the mission flies them
-STEP_MAX_M_S = 0.05  # [m/s] issue 36: no jump of the command at the separation
+STEP_MAX_M_S = 0.05  # [m/s] no jump of the command at the separation
 
 
 def _fly(slots, targets, separate=True, cfg=CFG):
