@@ -18,6 +18,7 @@ import numpy as np
 from mission.core.law import norm
 from mission.phases.phase import AFTER_SEPARATION, FLYING, OUTBOUND, Phase
 from mission.phases.stall import SETTLE_S, STALL_S
+from mission.phases.types import TELEMETRY_SILENT_S
 from mission.record.table import FlightRecord, read_record
 
 
@@ -184,7 +185,7 @@ def figures(r: FlightRecord) -> dict[str, Any]:
                      and out["final_passenger_target_distance_m"] <= float(info.get("arrival_radius_m", 0.5)))
     out["p3"] = bool(out["min_carrier_target_distance_m"] is not None and out["min_carrier_target_distance_m"] > 0.0)
     out["max_phase_switch_jump_m_s"] = _switch_jump(r.t, r.phase, u_cmd)
-    out["max_stall_command_offset_m_s"] = _stall_offset(r.t, r.phase, u_cmd, v_p)
+    out["max_stall_command_offset_m_s"] = _stall_offset(r.t, r.phase, u_cmd, v_p, r.cols.get("vehicle_age_s"))
     if info.get("ride") == "deck":
         out.update(_takeoff_figures(r, x_p, rel_cmd, riding, info))
     out.update(_recovery_summary(r, x_p, v_p, v_c, dock))
@@ -246,14 +247,21 @@ def _switch_jump(t: np.ndarray, phase: np.ndarray, u_cmd: np.ndarray) -> float |
     return _nanmax(jumps) if len(jumps) else None
 
 
-def _stall_offset(t: np.ndarray, phase: np.ndarray, u_cmd: np.ndarray, v_p: np.ndarray) -> float | None:
+def _stall_offset(t: np.ndarray, phase: np.ndarray, u_cmd: np.ndarray, v_p: np.ndarray,
+                  vehicle_age_s: np.ndarray | None = None) -> float | None:
     """After each stall (a gap between ticks longer than ``STALL_S``, flying on both sides): the
     largest distance [m/s] between the command and the vehicle's velocity over the ``SETTLE_S``
     from the first tick after it, where the command restarts on the vehicle
-    (:mod:`mission.phases.stall`); the jump a stall can make (None: no stall)."""
+    (:mod:`mission.phases.stall`); the jump a stall can make (None: no stall). A tick whose
+    vehicle sample is older than ``TELEMETRY_SILENT_S`` (``vehicle_age_s`` [s]; the link's thread
+    stalled with the loop and has not read the vehicle again) is left out: its velocity is the
+    one from before the gap, and the command then repeats the last one by design
+    (:func:`mission.phases.stall.unread`), so the two say nothing of the restart."""
     flying = np.isin(phase, sorted(FLYING))
     after = np.flatnonzero((np.diff(t) > STALL_S) & flying[1:] & flying[:-1]) + 1
-    offsets = [norm(u_cmd[k] - v_p[k]) for i in after for k in [np.flatnonzero((t >= t[i]) & (t < t[i] + SETTLE_S))]]
+    read = np.ones(t.shape, dtype=bool) if vehicle_age_s is None else ~(vehicle_age_s > TELEMETRY_SILENT_S)
+    offsets = [norm(u_cmd[k] - v_p[k]) for i in after
+               for k in [np.flatnonzero((t >= t[i]) & (t < t[i] + SETTLE_S) & read)]]
     values = np.concatenate(offsets) if offsets else np.array([])
     return _nanmax(values) if len(values) else None
 

@@ -370,3 +370,19 @@ def test_the_summary_measures_the_stall_apart_from_the_phase_switches(cfg, tmp_p
     assert first.phase is Phase.GO_AROUND and reports[i - 1].phase is Phase.APPROACH  # a switch across the gap
     assert s["max_phase_switch_jump_m_s"] is not None and s["max_phase_switch_jump_m_s"] <= JUMP_M_S, s
     assert s["max_stall_command_offset_m_s"] is not None and s["max_stall_command_offset_m_s"] <= JUMP_M_S, s
+
+
+def test_the_stall_figure_leaves_out_a_tick_whose_vehicle_sample_predates_the_gap():
+    """The first tick after a 1 s stall may still hold the vehicle's sample from before it (the
+    link's thread stalled with the loop): the command repeats the last one then (stall.unread),
+    and that tick's velocity is not the vehicle's. The figure measures the restart from the next
+    tick, read fresh; before, it read 0.12 m/s on such a tick in about half the serial runs."""
+    from mission.record.figures import _stall_offset
+
+    t = np.array([0.00, 0.02, 1.02, 1.04, 1.06])
+    phase = np.array([Phase.RIDING.value] * 5)
+    u = np.array([[1.6, 1.2, 0.0], [1.6, 1.2, 0.0], [1.6, 1.2, 0.0], [1.31, 0.80, 0.0], [1.29, 0.79, 0.0]])
+    v = np.array([[1.6, 1.2, 0.0], [1.6, 1.2, 0.0], [1.62, 1.26, -0.1], [1.29, 0.77, 0.0], [1.27, 0.76, 0.0]])
+    age = np.array([0.006, 0.006, 1.007, 0.006, 0.006])
+    assert _stall_offset(t, phase, u, v) == pytest.approx(0.122, abs=0.005)  # the stale tick counted
+    assert _stall_offset(t, phase, u, v, age) == pytest.approx(0.036, abs=0.005)  # read fresh: the restart
