@@ -38,7 +38,14 @@ def _rogue_then_kill(tmp_path: Path, signed: bool) -> None:
     key = tmp_path / "mav.key"
     key.write_text(KEY.hex())
     signing = ("--signing-key", str(key)) if signed else ()
-    with flight(tmp_path, "rogue-home-signed" if signed else "rogue-home", config=CONFIGS / "recovery.toml",
+    # The task at the target lasts long enough for the rogue's commands, the read-back and the
+    # kill (200 s of the paced clock, 40 s of wall): with recovery.toml's 5 s the signed mission,
+    # whose refused commands each wait out a 3 s ACK, had docked and ended before the kill.
+    text = (CONFIGS / "recovery.toml").read_text()
+    assert "at_target_s = 5.0 " in text
+    config = tmp_path / "rogue.toml"
+    config.write_text(text.replace("at_target_s = 5.0 ", "at_target_s = 200.0 "))
+    with flight(tmp_path, "rogue-home-signed" if signed else "rogue-home", config=config,
                 lockstep=True, vehicle_args=(*signing, *PACED), mission_args=signing) as f:
         f.wait_phase("ARRIVED", 90.0)
         assert f.gcs is not None
@@ -58,6 +65,7 @@ def _rogue_then_kill(tmp_path: Path, signed: bool) -> None:
         assert home is not None  # the vehicle shows our home
         carrier = next(r for r in reversed(f.record()) if r.get("x_c_n") not in (None, "", "nan"))
         carrier_ne = np.array([float(carrier["x_c_n"]), float(carrier["x_c_e"])])
+        assert f.procs["mission"].poll() is None and f.phases()[-1] == "ARRIVED", f.phases()  # still at the target
         f.procs["mission"].send_signal(signal.SIGKILL)
         f.procs["mission"].wait(10.0)
         assert wait_for(lambda: "AUTO.RTL" in f.modes_seen(), 30.0, "PX4's Return")
