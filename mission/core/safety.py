@@ -122,11 +122,13 @@ class Neighbours:
     for a batch), velocities_m_s [m/s] the same shape, frame as the filtered state's (NED);
     age_s [s] each sample's age at this tick, (k,) or (B, k) (None: all fresh). A sample counts
     as flown on at its velocity over its age; one older than ``neighbour_max_age_s`` is left
-    out, as if absent."""
+    out, as if absent. ``phases``: each neighbour's mission phase name as it shared it (None:
+    not shared), for the recovery queue; the barrier does not read it."""
 
     positions_m: np.ndarray
     velocities_m_s: np.ndarray
     age_s: np.ndarray | None = None
+    phases: tuple[str, ...] | None = None
 
     @classmethod
     def of(cls, items: list[tuple[list[float], list[float], float]], n: int) -> "Neighbours":
