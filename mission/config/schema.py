@@ -207,6 +207,8 @@ class MissionSection(Section):
                                        "rate, low-passed: needs velocity_bias_tau_s > 0), so PX4's velocity setpoint "
                                        "carries the bias and it no longer moves the position PX4 holds; 1/MPC_XY_P "
                                        "(1.05 s) cancels it; 0 off")
+    carrier_accel_horizon_s: float = Field(0.0, ge=0, le=5, description="[s] riding, the carrier's acceleration fed forward (unless it sends one) is its law's "
+        "change of velocity over this time (at most its limit), not over one carrier step: an estimated velocity's noise is then no bang-bang; 0: one step")
     accel_lead_s: float = Field(0.0, ge=0, le=2, description="[s] full setpoints: the reference's acceleration is sent "
                                 "ahead of the vehicle's own acceleration lag, this time constant (SIH quadrotor: 0.28 s), "
                                 "through a lead-lag down to accel_lead_filter_s; 0 off")

@@ -75,9 +75,12 @@ def _carrier_acceleration(obs: Observation, m: MissionModel) -> np.ndarray:
     """The docked carrier's acceleration [m/s^2] NED: the one it measured and sent, if it sent
     one (a real vehicle does not follow its law exactly: a PX4 rover sticks, then leaps off);
     else as its law asks it: the change of the carrier's command (``mission.core.tick.carrier_tick``,
-    with its speed and acceleration limits) over one carrier step from the sample's state.
-    Analytic in the sample (no differences of samples): ``a_max`` along the command while the
-    carrier speeds up, 0 at its speed limit, ``-k_c v_c`` on the final approach. A sent one is
+    with its speed and acceleration limits) over one carrier step from the sample's state, or
+    over ``mission.carrier_accel_horizon_s`` when that is longer. Analytic in the sample (no
+    differences of samples): ``a_max`` along the command while the carrier speeds up, 0 at its
+    speed limit, ``-k_c v_c`` on the final approach. Over one step an estimated velocity's noise
+    (0.1-0.2 m/s) is a full ``a_max`` either way, flipping with the noise; over the horizon it is
+    that noise over the horizon (docs/relnav.md, "Riding on late fixes"). A sent one is
     capped at the passenger's own ``max_accel_m_s2`` (a feed-forward, not an order)."""
     c = obs.carrier
     assert c is not None  # riding: the carrier was checked
@@ -87,8 +90,39 @@ def _carrier_acceleration(obs: Observation, m: MissionModel) -> np.ndarray:
         size = float(norm(a))
         return a * (cap / size) if cap is not None and size > cap else a
     h = m.carrier_dt_s
-    nxt = carrier_tick(c.position_ned_m + c.velocity_ned_m_s * h, False, m.tick, u_prev=c.velocity_ned_m_s, dt_s=h)
-    return (np.asarray(nxt.u, dtype=float) - c.velocity_ned_m_s) / h
+    horizon = max(m.carrier_accel_horizon_s, h)
+    nxt = carrier_tick(c.position_ned_m + c.velocity_ned_m_s * h, False, m.tick, u_prev=c.velocity_ned_m_s, dt_s=horizon)
+    return (np.asarray(nxt.u, dtype=float) - c.velocity_ned_m_s) / horizon
+
+
+def _ridden_dock(obs: Observation, m: MissionModel, fresh: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The dock point [m] and its velocity [m/s] NED now, and the carrier's acceleration
+    [m/s^2] fed forward (:func:`_carrier_acceleration`; zero for a stale state, whose prediction
+    has none). A fresh sample is moved on over its age ``T`` as the carrier moves: with the
+    acceleration it sent, ``v + a T``; else as its law asks it, one carrier step of length ``T``
+    from the sample's velocity (:func:`mission.core.tick.carrier_tick`: its speed limit, and at
+    most ``safety.carrier_max_accel_m_s2 * T`` of change). The dock point moves on by the mean of
+    the two velocities. A GNSS fix 0.2-0.3 s old, the carrier starting at 1 m/s^2, would
+    otherwise feed forward a velocity 0.2-0.3 m/s behind the carrier's, which the vehicle's
+    position loop makes up only with an offset behind the dock (docs/relnav.md, "Riding on late
+    fixes")."""
+    c = obs.carrier
+    assert c is not None  # riding: the carrier was checked
+    dock, v = dock_point(obs, m), np.asarray(c.velocity_ned_m_s, dtype=float)
+    if not fresh:
+        return dock, v, ZERO
+    a = _carrier_acceleration(obs, m)
+    age = min(max(float(c.age_s), 0.0), m.carrier_timeout_s)
+    if age <= 0.0:
+        return dock, v, a
+    if c.acceleration_ned_m_s2 is not None:
+        v_now = v + a * age
+    else:
+        x_now = np.asarray(c.position_ned_m, dtype=float) + v * age
+        v_now = np.asarray(carrier_tick(x_now, False, m.tick, u_prev=v, dt_s=age).u, dtype=float)
+    if m.tick.planar_carrier and len(v_now) == 3:
+        v_now[2] = v[2]  # a ground carrier: its vertical velocity is the sample's (the estimate's noise), not led
+    return dock + 0.5 * (v_now - v) * age, v_now, a
 
 
 def _hold(state: MissionState, obs: Observation, m: MissionModel) -> tuple[MissionState, Decision]:
@@ -162,8 +196,8 @@ def riding(state, obs, m):
     t = obs.t_s
     if obs.carrier.untrusted is not None:
         return _hold(state, obs, m)
-    dock = dock_point(obs, m)
-    v_dock = obs.carrier.velocity_ned_m_s
+    fresh = carrier_fresh(obs, m)
+    dock, v_dock, a_dock = _ridden_dock(obs, m, fresh)
     if state.held_dock is not None:
         x_ref, u_ref, on_dock = _toward_dock(state.x_ref, dock, v_dock, m)
         if not on_dock:
@@ -174,7 +208,6 @@ def riding(state, obs, m):
         event: tuple[str, ...] = ("carrier feed trusted again: back on the dock point, riding",)
     else:
         event = ()
-    fresh = carrier_fresh(obs, m)
     if state.chasing_dock or not fresh:
         chased = _chase(state, obs, m, dock, v_dock, fresh, event)
         if chased is not None:
@@ -187,7 +220,7 @@ def riding(state, obs, m):
         return navigate(new, obs, m, events=(f"separated at |e_tc| = {norm(m.tick.target - anchor):.3f} m",))
     tick = passenger_tick(dock, v_dock, ZERO, False, m.tick, state.u_ref, m.dt_s)
     # velocity setpoints carry no acceleration; a stale state's prediction has none
-    a_ref = _carrier_acceleration(obs, m) if m.tracking.kind == "full" and fresh else ZERO
+    a_ref = a_dock if m.tracking.kind == "full" else ZERO
     tr = _track(state, obs, m, dock, tick.u, a_ref)
     acted = tr.acted
     new = replace(state, x_ref=dock.copy(), e_ref=ZERO.copy(), prev_dock=dock.copy(), u_ref=tick.u, **tr.kept())

@@ -202,6 +202,7 @@ class MissionModel:
     join_settle_s: float  # ... for this long [s]
     arrival_max_speed_m_s: float | None  # arrival also needs the vehicle this slow [m/s]
     carrier_dt_s: float  # the carrier's control period [s] (its acceleration over one step)
+    carrier_accel_horizon_s: float  # [s] the law's acceleration fed forward: over this, or one carrier step if longer
     recovery: RecoveryModel | None  # with final_action "return"
     leg_start_m: float  # a leg after the first starts once the carrier is this far from its target [m]
     deck: DeckRide | None  # mission.ride = "deck": the passenger sits on the deck (the dock point) when carried

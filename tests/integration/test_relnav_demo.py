@@ -86,28 +86,28 @@ def test_both_legs_dock_on_the_marker_within_the_true_contact_bound(flight):
     assert deck["crash"] is None, deck
 
 
-def test_no_jump_at_a_switch_p2_p3_hold_and_the_true_ride_is_on_the_deck(flight):
-    """P2, P3 and every phase switch within the issue's 0.05 m/s (0.04 measured; the relative input
-    at the separation 0.039-0.056 m/s, seed 0 0.042 / 0.040). The ride sees the marker on the deck
-    under the hover point (vision.marker_offset_ned_m): the true riding offset's median is within
-    the issue's 0.3 m (measured 0.09-0.26 m over six flights' twelve legs; before, blind, the marker
-    under the riding camera: 0.47 / 0.66 m on seed 0, 0.23-0.78 m on seeds 1-3), its maximum within
-    0.8 m (0.31-0.56 m with this code; before 1.80 / 2.64 m, the carrier stopping dead at its P3
-    guard under the riding passenger). The estimate's riding offset held (P1's figure) within 0.75 m:
-    measured 0.31-0.59 m with this code, so P1 (0.5 m) is met on some legs and not others (seed 0: 0.53 / 0.47 m;
-    before 0.87 / 0.65 m), the vehicle lagging its command as the carrier pulls away from rest
-    (docs/relnav.md, "A ride that sees the deck"); the exit code says whether it held."""
+def test_no_jump_at_a_switch_p1_p3_hold_and_the_true_ride_is_on_the_deck(flight):
+    """P1-P3 and every phase switch within the issue's 0.05 m/s (0.04 measured; the relative input
+    at the separation 0.033-0.060 m/s over seeds 0-2, seed 0 0.041 / 0.033). The ride sees the
+    marker on the deck under the hover point (vision.marker_offset_ned_m), and the carrier's
+    acceleration fed forward is its law's over mission.carrier_accel_horizon_s (0.5 s), not over
+    one carrier step, where the estimated velocity's noise made it a bang-bang +-1 m/s^2 that
+    rocked the vehicle +-0.5 m about the dock (docs/relnav.md, "Riding on late fixes"). Seed 0:
+    P1's figure (the estimate's riding offset held) 0.29 / 0.21 m against 0.5 (before 0.54 /
+    0.58 m, P1 broken); true riding offset median 0.10 / 0.10 m (the issue's 0.3), max 0.31 /
+    0.30 m. Seeds 1-2 hold P1 on three legs of four: seed 1's leg 2 held 0.62 m, the vehicle not
+    answering its command for 0.8 s as the carrier pulls away (bench/relnav_demo.py)."""
     log, out, s, truth, _ = flight
     cfg = load_config(RELNAV)
-    assert s["p2"] and s["p3"], s
+    assert s["p1"] and s["p2"] and s["p3"], s
     assert s["max_phase_switch_jump_m_s"] <= 0.05, s
     for leg, true in zip(s["legs"], truth):
         if "separation_time_s" in leg:
             assert leg["relative_input_jump_m_s"] <= 0.05, leg
-            assert true["true_riding_horizontal_median_m"] <= 0.3, true  # the issue's target
-            assert true["true_riding_horizontal_max_m"] <= 0.8, true
-            assert leg["riding_offset_held_m"] <= 1.5 * cfg.mission.dock_tolerance_m, leg
-    assert out.returncode == (0 if s["p1"] else 1), out.stdout[-2000:]  # both legs docked: only P1 can fail it
+            assert true["true_riding_horizontal_median_m"] <= 0.2, true  # the issue's target: 0.3
+            assert true["true_riding_horizontal_max_m"] <= 0.45, true
+            assert leg["riding_offset_held_m"] <= cfg.mission.dock_tolerance_m, leg  # P1
+    assert out.returncode == 0, out.stdout[-2000:]
     assert "truth: contact error, horizontal [m]" in out.stdout and "truth: riding offset" in out.stdout
 
 

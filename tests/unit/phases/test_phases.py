@@ -198,6 +198,61 @@ def test_riding_feeds_forward_the_acceleration_the_carrier_sent_capped_else_the_
     assert float(np.dot(law, e)) > 0  # towards the target
 
 
+def test_the_laws_acceleration_over_a_horizon_is_no_bang_bang_on_velocity_noise():
+    """At its speed limit the law asks no acceleration; an estimated velocity 0.1 m/s under it
+    reads a_max over one carrier step (the noise's bang-bang that rocked the relnav ride) and
+    0.1 / horizon over mission.carrier_accel_horizon_s. From rest it is a_max either way."""
+    from mission.phases.flying import _carrier_acceleration
+
+    model = mission_model(load_config(CONFIGS / "relnav.toml"))
+    assert model.carrier_accel_horizon_s == 0.5
+    a_max = model.tick.carrier_safety.max_accel_m_s2
+    speed = model.tick.carrier_safety.max_speed_m_s
+    assert a_max is not None and speed is not None
+    flat = np.array([*model.tick.target[:2], 0.0])
+    along = flat / norm(flat)  # the planar carrier heads for the target in the plane
+    far = flat - 50.0 * along  # cruising: the law's command is the speed limit
+    vehicle = VehicleObs(np.zeros(3), np.zeros(3), True, "OFFBOARD", heartbeat_age_s=0.1)
+
+    def accel(m, v):
+        return _carrier_acceleration(Observation(1.0, vehicle, CarrierObs(far, v * along, 0.0)), m)
+
+    one_step = replace(model, carrier_accel_horizon_s=0.0)
+    assert norm(accel(one_step, speed - 0.1)) == pytest.approx(a_max, rel=1e-6)
+    assert float(np.dot(accel(model, speed - 0.1), along)) == pytest.approx(0.1 / 0.5, rel=1e-3)
+    assert norm(accel(model, speed)) == pytest.approx(0.0, abs=1e-9)
+    assert norm(accel(model, 0.0)) == pytest.approx(a_max, rel=1e-6)
+
+
+def test_a_late_carrier_state_is_ridden_where_the_carrier_is_now_with_its_acceleration():
+    """Riding a 0.3 s old state of a carrier pulling away from rest at a_max: the velocity fed
+    forward is the sample's plus a_max x 0.3 s, the dock point moved on by the mean velocity;
+    at its speed limit the law leads nothing; a stale state is not led."""
+    from mission.phases.flying import _ridden_dock
+
+    model = mission_model(load_config(CONFIGS / "relnav.toml"))
+    a_max = model.tick.carrier_safety.max_accel_m_s2
+    speed = model.tick.carrier_safety.max_speed_m_s
+    assert a_max is not None and speed is not None
+    flat = np.array([*model.tick.target[:2], 0.0])
+    along = flat / norm(flat)
+    far = flat - 50.0 * along
+    vehicle = VehicleObs(np.zeros(3), np.zeros(3), True, "OFFBOARD", heartbeat_age_s=0.1)
+
+    def ridden(v, fresh=True, age=0.3):
+        return _ridden_dock(Observation(1.0, vehicle, CarrierObs(far, v * along, age)), model, fresh)
+
+    dock, v_now, _ = ridden(0.5)
+    np.testing.assert_allclose(v_now, (0.5 + a_max * 0.3) * along, atol=1e-9)
+    np.testing.assert_allclose(dock, far + 0.5 * 0.3 * along + 0.5 * a_max * 0.3 ** 2 * along + model.dock_offset_ned_m,
+                               atol=1e-9)
+    _, v_now, _ = ridden(speed)
+    np.testing.assert_allclose(v_now, speed * along, atol=1e-9)
+    dock, v_now, a = ridden(0.5, fresh=False)
+    np.testing.assert_allclose(v_now, 0.5 * along, atol=1e-12)
+    assert norm(a) == 0.0
+
+
 def test_a_phase_is_defined_once_and_every_part_knows_it():
     """The Phase enum is the one list: the machine handles each (DONE and ABORT in its failsafes),
     the wire carries each by name, the carrier has a duty for each."""
