@@ -21,7 +21,7 @@ from mission.core.pursuit import PursuitLimits, pursue
 from mission.core.setpoint import Setpoint
 from mission.phases.types import ZERO, Decision, MissionModel, MissionState, Observation, Phase, carrier_fresh, dock_point, enter, my_turn
 from mission.phases.phase import Request
-from mission.core.safety import filter_velocity
+from mission.core.safety import SafetyConfig, filter_velocity
 from mission.core.tick import DEPARTURE_THRESHOLD_M, carrier_tick, latch_point, passenger_tick, separation_due
 from mission.core.tracking import lead_acceleration, progress, setpoint as tracking_setpoint, update_integral, velocity_demand
 
@@ -45,6 +45,26 @@ class Tracked:
         return {"u_cmd": self.setpoint.velocity_ned_m_s, "integral": self.integral, "accel_lp": self.accel_lp}
 
 
+#: [m] the most the altitude floor follows the ground the relative estimate puts under the
+#: passenger: two GNSS frames disagree by 1-3 m (docs/relnav.md)
+FLOOR_GROUND_SHIFT_MAX_M = 3.0
+
+
+def _floor_over_the_ground(limits: SafetyConfig, obs: Observation) -> SafetyConfig:
+    """The command's limits with the altitude floor (``z_max_m`` [m] NED, the ground at 0) over
+    the ground the carrier drives on as the passenger sees it, when the relative estimator gives
+    the carrier in the passenger's own frame (``[relnav]``): the carrier's estimated height,
+    at most :data:`FLOOR_GROUND_SHIFT_MAX_M` either way. The passenger's own estimate drifts
+    vertically (measured: 1 m off while riding, seed 1 of the relnav demo), and a floor fixed in
+    it then lay at the hover point: its barrier turned the riding setpoints velocity-only for
+    0.9 s as the carrier pulled away (docs/relnav.md, "Riding on late fixes")."""
+    c = obs.carrier
+    if obs.relative is None or c is None or limits.z_max_m is None or len(c.position_ned_m) != 3:
+        return limits
+    ground = float(np.clip(c.position_ned_m[2], -FLOOR_GROUND_SHIFT_MAX_M, FLOOR_GROUND_SHIFT_MAX_M))
+    return replace(limits, z_max_m=limits.z_max_m + ground)
+
+
 def _track(state: MissionState, obs: Observation, m: MissionModel, x_ref: np.ndarray, u_ref: np.ndarray,
            a_ref: np.ndarray, taking_off: bool = False) -> Tracked:
     """The setpoint that makes the vehicle follow the reference (:func:`mission.core.tracking.setpoint`):
@@ -58,7 +78,7 @@ def _track(state: MissionState, obs: Observation, m: MissionModel, x_ref: np.nda
     integral = state.integral if state.integral is not None else np.zeros(3)
     desired = velocity_demand(x_ref, u_ref, x_p, integral, g)
     prev = state.u_cmd if state.u_cmd is not None else v.velocity_ned_m_s
-    limits = m.command_safety
+    limits = _floor_over_the_ground(m.command_safety, obs)
     if taking_off and limits.z_max_m is not None and len(x_p) == 3 and x_p[2] > limits.z_max_m:
         limits = replace(limits, z_max_m=None)
     safe = filter_velocity(x_p, desired, m.tick.obstacles, limits, prev, m.dt_s)

@@ -439,3 +439,26 @@ def test_navigating_keeps_apart_from_a_neighbour_on_its_way(model):
     assert closest["alone"] < 1.0, closest
     assert closest["kept"] >= D - 0.1, closest  # [m] the vehicle's lag behind the reference, which keeps D
     assert state.phase == Phase.DONE and norm(x_p - target) <= model.arrival_radius_m
+
+
+def test_with_the_relative_estimate_the_altitude_floor_stands_over_the_ground_under_the_passenger():
+    """The floor (z_max_m, the ground at 0) follows the carrier's height in the passenger's own
+    frame when the relative estimator gives it (a 1 m vertical drift put the riding hover point
+    on a fixed floor), at most 3 m either way; without the estimate it stays where configured."""
+    from mission.core.safety import SafetyConfig
+    from mission.phases.flying import FLOOR_GROUND_SHIFT_MAX_M, _floor_over_the_ground
+    from mission.phases.types import RelativeView
+
+    limits = SafetyConfig(z_max_m=-0.5)
+    vehicle = VehicleObs(np.zeros(3), np.zeros(3), True, "OFFBOARD", heartbeat_age_s=0.1)
+    view = RelativeView(np.zeros(3), np.zeros(3), np.zeros(3), 0.05, True, 0.1)
+
+    def floor(carrier_z, relative=view):
+        obs = Observation(1.0, vehicle, CarrierObs(np.array([3.0, 4.0, carrier_z]), np.zeros(3), 0.0), relative=relative)
+        return _floor_over_the_ground(limits, obs).z_max_m
+
+    assert floor(0.9) == pytest.approx(0.4)  # the ground 0.9 m lower in the passenger's frame
+    assert floor(-0.7) == pytest.approx(-1.2)
+    assert floor(50.0) == pytest.approx(-0.5 + FLOOR_GROUND_SHIFT_MAX_M)  # a wild height moves it 3 m at most
+    assert floor(-50.0) == pytest.approx(-0.5 - FLOOR_GROUND_SHIFT_MAX_M)
+    assert floor(0.9, relative=None) == -0.5  # one shared frame: the floor as configured
