@@ -19,12 +19,12 @@ import numpy as np
 
 from mission.carrier.backends import KINDS, describe, open_backend
 from mission.carrier.controller import CarrierController
-from mission.bus.auth import bus_auth, unsigned_warning
+from mission.bus.auth import bus_auth, check_team_auth, unsigned_warning
 from mission.bus.bridge import describe_endpoints, keys, open_session
 from mission.bus.session import close_session
 from mission.time.clock import Clock, LockstepClock, ScaledClock
 from mission.config.required import CARRIER_FIELDS, require_stated
-from mission.config.passenger import sole_passenger
+from mission.config.passenger import has_team, sole_passenger
 from mission.config.schema import Config, load_config, with_overrides
 from mission.cli.subcommands import entry_points, load
 from mission.errors import ConfigError
@@ -250,7 +250,10 @@ def carrier_cli(config: str, backend: str | None, speed: float, pair: str | None
         "zenoh.private_key_file": own_key_file,
         "zenoh.peer_public_key_file": peer_key_file,
     })
-    cfg = sole_passenger(cfg, "driven by `marsupial carrier`")  # a team of one: its passenger's (docs/team.md)
+    if not has_team(cfg) or len(cfg.team.passengers) == 1:
+        cfg = sole_passenger(cfg, "driven by `marsupial carrier`")  # a team of one: its passenger's (docs/team.md)
+    else:  # a team of several: one carrier serves them all (mission.carrier.team_bus), checked before anything opens
+        check_team_auth(cfg.zenoh, bus_auth(cfg.zenoh), len(cfg.team.passengers))
     require_stated(cfg, CARRIER_FIELDS, "carrier")  # refused before it says anything about flying
     click.echo(startup_line(cfg, speed), err=True)
     if (unsigned := unsigned_warning(cfg.zenoh)) is not None:
