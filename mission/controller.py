@@ -168,13 +168,18 @@ class MissionController:
 
     def _note_closest(self, t: float, vehicle: Any, mates: Any) -> None:
         """The least distance [m] so far between this passenger's reported position and a
-        teammate's, moved on by its age (one no older than the barrier's limit), for the summary."""
+        teammate's, moved on by its age (one no older than the barrier's limit), while either of
+        them flies (:data:`mission.phases.FLYING`; two on the deck stand where their slots are),
+        for the summary."""
         if mates is None or vehicle is None or vehicle.position_ned_m is None:
             return
         positions, _, fresh = mates.now(self.cfg.safety.passenger_separation_max_age_s)
         gaps = np.linalg.norm(positions - np.asarray(vehicle.position_ned_m)[None, :], axis=-1)
         if fresh is not None:
             gaps = np.where(fresh, gaps, np.inf)
+        flying = [self.state.phase in phases.FLYING or (p is not None and Phase[p] in phases.FLYING)
+                  for p in (mates.phases or (None,) * len(gaps))]
+        gaps = np.where(flying, gaps, np.inf)
         k = int(np.argmin(gaps))
         best = self._closest["distance_m"]
         if np.isfinite(gaps[k]) and (best is None or gaps[k] < best):

@@ -50,7 +50,7 @@ def _csv(values: Any) -> str:
 
 def start_team(cfg: Config, config: str, zenoh_ep: str, speed: float, log_root: Path, stack: ExitStack, quiet: bool,
                bus_key: Path | None, mav_key: Path | None, seed: int, estimate_error: float,
-               run_type: Any) -> tuple[subprocess.Popen, list[Any]]:
+               run_type: Any, lockstep: bool = True) -> tuple[subprocess.Popen, list[Any]]:
     """Start the team's carrier and, per passenger, its vehicle and its mission; register their
     cleanup on ``stack``. ``run_type``: the demo's record of one passenger's processes
     (:class:`sim.demo.PairRun`, one per passenger, named after it). Returns the carrier and the runs."""
@@ -58,9 +58,11 @@ def start_team(cfg: Config, config: str, zenoh_ep: str, speed: float, log_root: 
     pair = cfg.zenoh.pair
     signed = ["--zenoh-signing-key", str(bus_key)] if bus_key is not None else []
     mav_signed = ["--signing-key", str(mav_key)] if mav_key is not None else []
+    mode = ["--lockstep"] if lockstep else []
+    epoch = ["--log-epoch-ns", str(time.time_ns())] if lockstep else []  # one simulated clock: one epoch
     carrier = subprocess.Popen(child_command("carrier", config, "--speed", str(speed), "--zenoh-connect", zenoh_ep, "--summary",
                                     str(log_root / "carrier.json"), "--mcap", str(log_root / "carrier.mcap"),
-                                    "--backend", "sim", *signed), stderr=err)
+                                    "--backend", "sim", *signed, *mode, *epoch), stderr=err)
     stack.callback(stop_process, carrier)
     runs = []
     for i, p in enumerate(cfg.team.passengers):
@@ -73,11 +75,12 @@ def start_team(cfg: Config, config: str, zenoh_ep: str, speed: float, log_root: 
                                         "--start-ned", _csv(start), "--deck", pair, "--deck-height", repr(-float(slot[2])),
                                         "--deck-offset", _csv(slot[:2]), "--zenoh-connect", zenoh_ep, "--summary",
                                         str(run.log_dir / "vehicle.json"), "--estimate-error", str(estimate_error),
-                                        "--seed", str(seed + i), *mav_signed), stderr=err)
+                                        "--seed", str(seed + i), *mav_signed, *mode), stderr=err)
         stack.callback(stop_process, vehicle)
         mission = subprocess.Popen(child_command("run", config, "--passenger", p.name, "--mavlink", f"udpin:127.0.0.1:{port}",
                                         "--zenoh-connect", zenoh_ep, "--speed", str(speed), "--log-dir", str(run.log_dir),
-                                        *signed, *mav_signed), stdout=subprocess.PIPE, stderr=err, text=True)
+                                        *signed, *mav_signed, *mode, *epoch), stdout=subprocess.PIPE, stderr=err,
+                                   text=True)
         stack.callback(stop_process, mission, 30.0)
         run.procs = {"vehicle": vehicle, "mission": mission}
         runs.append(run)
@@ -101,10 +104,7 @@ def run_team_demo(config: str, speed: float, log_root: Path, timeout_s: float, *
             raise ConfigError(option, value, "a team's demo flies one team on the built-in carrier, with no live view "
                               "(not built)")
     cfg = load_config(config)
-    speed = min(speed, TEAM_MAX_SPEED)
-    if lockstep:
-        print(f"demo: a team flies on wall clocks scaled by {speed:g} (--realtime): lockstep keeps one vehicle's time, "
-              "not several (docs/team.md)", file=sys.stderr)
+    speed = speed if lockstep else min(speed, TEAM_MAX_SPEED)
     supervise_children()  # a demo killed outright takes its processes with it
     log_root.mkdir(parents=True, exist_ok=True)
     zenoh_ep = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
@@ -114,7 +114,7 @@ def run_team_demo(config: str, speed: float, log_root: Path, timeout_s: float, *
         router = open_session(ZenohSection(mode="router", listen=[zenoh_ep]))
         stack.callback(close_session, router)
         carrier, runs = start_team(cfg, config, zenoh_ep, speed, log_root, stack, quiet, bus_key, mav_key, seed,
-                                   estimate_error, PairRun)
+                                   estimate_error, PairRun, lockstep)
         display = PairProgress([r.name for r in runs], tty=progress and sys.stdout.isatty())
         stack.callback(display.close)
         readers = [threading.Thread(target=_follow, args=(r, display), daemon=True) for r in runs]
@@ -134,12 +134,13 @@ def run_team_demo(config: str, speed: float, log_root: Path, timeout_s: float, *
         stop_process(carrier)  # writes carrier.json
         for reader in readers:
             reader.join(timeout=5.0)
-    return team_summaries(cfg, config, log_root, runs, speed)
+    return team_summaries(cfg, config, log_root, runs, speed, lockstep)
 
 
-def team_summaries(cfg: Config, config: str, log_root: Path, runs: list[Any], speed: float) -> tuple[int, list[dict]]:
+def team_summaries(cfg: Config, config: str, log_root: Path, runs: list[Any], speed: float,
+                   lockstep: bool) -> tuple[int, list[dict]]:
     """Each passenger's summary with its exit code, the deck's truth and the team's figures."""
-    from sim.demo import deck_truth, exit_code, recovery_cells
+    from sim.demo import deck_truth, exit_code, not_lockstep, recovery_cells
 
     path = log_root / "carrier.json"
     carrier = json.loads(path.read_text()) if path.exists() else {}
@@ -150,11 +151,15 @@ def team_summaries(cfg: Config, config: str, log_root: Path, runs: list[Any], sp
         s["mission_exit_code"] = r.procs["mission"].returncode
         s.update(deck_truth(r.log_dir / "vehicle.json"))
         s.update(recovery_cells(s))
+        if lockstep:
+            s["carrier_lockstep"] = carrier.get("lockstep")
+            s["not_lockstep"] = not_lockstep(s)
         own = passenger_config(cfg, r.name)
         s["slot_offset_ned_m"] = list(own.mission.dock_offset_ned_m)
         s["closest_teammate"] = (s.get("neighbours") or {}).get("closest")
         summaries.append(s)
-    team = {"speed": speed, "clocks": "scaled wall clocks (a team is not flown in lockstep)",
+    team = {"speed": speed, "clocks": "lockstep, the first passenger's vehicle's time" if lockstep else
+            "scaled wall clocks (--realtime)",
             "carrier_closest_each_target_m": carrier.get("closest_each_target_m"),
             "carrier_hand_overs": carrier.get("hand_overs"),
             "keep_out_m": carrier.get("guard_radius_m"),
@@ -171,7 +176,8 @@ def team_lines(summaries: list[dict]) -> list[str]:
     if not summaries:
         return []
     team = summaries[0]["team"]
-    lines = [f"team flown on {team['clocks']}, speed x{team['speed']:g}"]
+    lines = [f"team flown on {team['clocks']}" + ("" if team["clocks"].startswith("lockstep") else
+                                                  f", speed x{team['speed']:g}")]
     for s in summaries:
         c = s.get("closest_teammate") or {}
         lines.append(f"{s['pair']}: closest teammate {c.get('distance_m')} m at t {c.get('t_s')} s (phases "

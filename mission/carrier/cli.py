@@ -28,7 +28,7 @@ from mission.config.passenger import has_team, sole_passenger
 from mission.config.schema import Config, load_config, with_overrides
 from mission.cli.subcommands import entry_points, load
 from mission.errors import ConfigError
-from mission.bus.lockstep import ZenohUpstream, clock_keys
+from mission.bus.lockstep import Downstreams, LastSeq, ZenohRelay, ZenohUpstream, clock_keys
 from mission.bus.timesync import ClockEcho
 
 log = logging.getLogger(__name__)
@@ -80,7 +80,7 @@ def main(cfg: Config, speed: float = 1.0, duration_s: float | None = None, stop_
                     upstream = ZenohUpstream(clock, session, clock_keys(ctl.pair), ctl.passenger,
                                              published=lambda: ctl.seq - 1, auth=ctl.auth)
                     stack.callback(upstream.close)
-                    clock.downstream = backend.lockstep_relay(session)
+                    clock.downstream = team_relays(cfg, ctl, session, clock, backend.lockstep_relay(session), stack)
                     stack.callback(clock.close)
                 try:
                     ctl.run(stop, duration_s)
@@ -102,6 +102,28 @@ def main(cfg: Config, speed: float = 1.0, duration_s: float | None = None, stop_
         for signum, handler in restore.items():
             signal.signal(signum, handler)
     return 0
+
+
+def team_relays(cfg: Config, ctl: CarrierController, session: Any, clock: LockstepClock, robot: Any,
+                stack: ExitStack) -> Any:
+    """What the carrier brings along in lockstep: its own robot (``robot``, None: none) and, with a
+    team of several, every passenger but the first (whose vehicle owns the time), each on its own
+    clock keys (:func:`~mission.bus.lockstep.clock_keys`): its step waits for the status it names,
+    and its call names the carrier's last state (docs/team.md, "The team on the bus")."""
+    if ctl.team is None:
+        return robot
+    relays = [robot]
+    for name, feed in list(zip(ctl.team.names, ctl.team.feeds))[1:]:
+        relay = ZenohRelay(session, clock_keys(ctl.pair, name), feed, LastSeq(lambda: ctl.seq - 1),
+                           alive=_alive_of(feed), alive_watchdog_wall_s=cfg.sim.lockstep_carrier_wait_wall_s,
+                           auth=ctl.auth, name=f"passenger {name}", keepalive=clock.keepalive)
+        stack.callback(relay.close)
+        relays.append(relay)
+    return Downstreams(relays)
+
+
+def _alive_of(feed: Any) -> Any:
+    return lambda: feed.alive
 
 
 WORLD_GROUP = "marsupial.world"  # entry points: the world's errors a simulated flight adds (pyproject.toml)

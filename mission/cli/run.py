@@ -140,13 +140,26 @@ def mission_io(cfg: Config, clock: Clock, tlog_path: str | Path | None = None, *
                            source_system=cfg.mavlink.source_system, source_component=cfg.mavlink.source_component,
                            tlog_path=None if tlog_path is None else str(tlog_path), signing_key=key,
                            heartbeat_timeout_s=cfg.mission.heartbeat_timeout_s)
-        if isinstance(clock, LockstepClock):  # before open: the vehicle's first barrier may come at once
+        # a later passenger of a team in lockstep: the carrier brings it along, and it its vehicle
+        follower = clock if isinstance(clock, LockstepClock) and team is not None and team.name != team.names[0] else None
+        if follower is not None and team is not None:
+            from mission.bus.lockstep import ZenohUpstream, clock_keys
+
+            upstream = ZenohUpstream(follower, session, clock_keys(cfg.zenoh.pair, team.name), feed,
+                                     published=lambda: publisher.last_seq, auth=auth)
+            stack.callback(upstream.close)
+        elif isinstance(clock, LockstepClock):  # before open: the vehicle's first barrier may come at once
             from mission.mavlink.lockstep import MavlinkUpstream
 
             MavlinkUpstream(clock, link)
         link.open()
         stack.callback(link.close)
-        if isinstance(clock, LockstepClock):  # step on the vehicle's time; bring the carrier along
+        if follower is not None:
+            from mission.mavlink.lockstep import MavlinkRelay
+
+            follower.downstream = MavlinkRelay(link)
+            stack.callback(follower.close)
+        elif isinstance(clock, LockstepClock):  # step on the vehicle's time; bring the carrier along
             from mission.bus.lockstep import ZenohRelay, clock_keys
 
             relay = ZenohRelay(session, clock_keys(cfg.zenoh.pair), feed, publisher, alive=lambda: feed.alive,
