@@ -290,8 +290,11 @@ def startup_line(cfg: Config, speed: float) -> str:
     plan = {"stop": "stops at separation", "remark1": "keeps its own plan after separation (Remark 1)"}
     robot = describe(cfg)
     start = np.round(np.asarray(cfg.scenario.carrier_start, dtype=float), 2).tolist()
+    names = [p.name for p in cfg.team.passengers] if has_team(cfg) else []
+    riders = (f"the passenger to ride (phase RIDING on {k.passenger_phase})" if not names else
+              f"its team to ride ({', '.join(names)}: each on {keys(cfg.zenoh.pair, names[0]).passenger_phase.replace(names[0], 'NAME')})")
     return (f"carrier {cfg.zenoh.pair}: {robot} ({c.kinematics}); publishing {k.carrier_state} ({cfg.zenoh.encoding}, "
             f"{c.rate_hz:g} Hz) on {describe_endpoints(cfg.zenoh)}; mode {cfg.scenario.carrier_mode} "
             f"({plan[cfg.scenario.carrier_mode]}); P3 guard at "
             f"{cfg.law.params().separation_distance_m - c.p3_margin_m:g} m from the target; at {start} NED [m], "
-            f"waiting for the passenger to ride (phase RIDING on {k.passenger_phase}); clock x{speed:g}")
+            f"waiting for {riders}; clock x{speed:g}")
