@@ -120,7 +120,7 @@ def child_main(rate_hz: float, duration_s: float, zenoh_connect: str, log_dir: s
         live = LiveAddress("127.0.0.1", 0) if flight_data == "live" else None
         sinks = flight_data_sinks(cfg, directory, info, clock, live) if flight_data != "none" else []
         recorder = FlightRecorder(directory, info, sinks)
-        feed, publisher, link, sources = stack.enter_context(mission_io(cfg, clock, recorder.tlog_path))
+        feed, publisher, link, sources, _ = stack.enter_context(mission_io(cfg, clock, recorder.tlog_path))
         controller = MissionController(cfg, link, feed, clock, publisher=publisher, recorder=recorder, stop=stop,
                                        on_tick=sends, sources=sources)
         live_port = next((s.live_port for s in sinks if getattr(s, "live_port", None) is not None), 0)

@@ -14,12 +14,15 @@ import logging
 import threading
 import time
 from dataclasses import dataclass
+
+import numpy as np
 from collections.abc import Callable, Sequence
 from typing import Any
 
 from mission import phases
 from mission.bus.wire import GeoOrigin, PassengerStatus
 from mission.config.schema import Config
+from mission.core.safety import Neighbours
 from mission.core.setpoint import Setpoint
 from mission.interfaces import CarrierSource, CountsReadings, MeasurementSource, StatusSink, Vehicle
 from mission.mavlink import receiver
@@ -57,6 +60,16 @@ class MissionOutcome:
         return self.phase is Phase.DONE
 
 
+def as_neighbours(heard: Sequence[Any]) -> Neighbours | None:
+    """The teammates a :class:`~mission.bus.neighbours.NeighbourFeed` heard (its ``heard()``) as
+    the step's :class:`~mission.core.safety.Neighbours` (None: none heard)."""
+    if not heard:
+        return None
+    return Neighbours(np.array([m.position_ned_m for m in heard], dtype=float),
+                      np.array([m.velocity_ned_m_s for m in heard], dtype=float),
+                      np.array([m.age_s for m in heard], dtype=float), tuple(m.phase for m in heard))
+
+
 def _no_stamp() -> int:
     return 0
 
@@ -90,14 +103,20 @@ class MissionController:
     text)`` is called on every phase change and event (the CLI prints them), ``on_tick(report)``
     after every tick (:class:`TickReport`; keep it short: it runs in the loop).
     ``command_thread=False`` runs vehicle commands inside the tick (unit tests only).
+    ``neighbours``: a team's passenger's teammates (:class:`~mission.bus.neighbours.NeighbourFeed`,
+    its ``neighbours()`` read once a tick into :attr:`PassengerInputs.neighbours`; None: no team).
+    The carrier's announced target (its state's ``target_ned_m``) goes into
+    :attr:`PassengerInputs.carrier_target_ned_m` as it arrived.
     """
 
     def __init__(self, cfg: Config, link: Vehicle, feed: CarrierSource, clock: Clock, *,
                  publisher: StatusSink | None = None, recorder: FlightRecorder | None = None,
                  on_event: Callable[[str, str], None] | None = None, on_tick: Callable[[TickReport], None] | None = None,
                  stop: threading.Event | None = None, command_thread: bool = True,
-                 sources: Sequence[MeasurementSource] = ()) -> None:
+                 sources: Sequence[MeasurementSource] = (), neighbours: Any = None) -> None:
         self.cfg, self.link, self.feed, self.clock = cfg, link, feed, clock
+        self.neighbours = neighbours
+        self._closest: dict[str, Any] = {"distance_m": None, "t_s": None, "phases": None}  # to a teammate, as heard
         self.sources = tuple(sources)
         self._source_failed: set[int] = set()  # the sources whose poll raised (logged once each)
         self.publisher, self.recorder = publisher, recorder
@@ -138,9 +157,34 @@ class MissionController:
         identity = self.link.identity_problem()
         if identity:
             failed["identity"] = identity  # a second autopilot with mavlink.target_system unset
-        return PassengerInputs(t_s=t, vehicle=vehicle_report(vstate),
+        mates = None if self.neighbours is None else as_neighbours(self.neighbours.heard())
+        vehicle = vehicle_report(vstate)
+        self._note_closest(t, vehicle, mates)
+        return PassengerInputs(t_s=t, vehicle=vehicle,
                                carrier=observe_carrier(self._received, self.feed.alive_over_interval()),
-                               failed=failed, interrupted=self.stop.is_set(), measurements=self._poll(t))
+                               failed=failed, interrupted=self.stop.is_set(), measurements=self._poll(t),
+                               neighbours=mates, carrier_target_ned_m=getattr(
+                                   getattr(self._received, "value", None), "target_ned_m", None))
+
+    def _note_closest(self, t: float, vehicle: Any, mates: Any) -> None:
+        """The least distance [m] so far between this passenger's reported position and a
+        teammate's, moved on by its age (one no older than the barrier's limit), while either of
+        them flies (:data:`mission.phases.FLYING`; two on the deck stand where their slots are),
+        for the summary."""
+        if mates is None or vehicle is None or vehicle.position_ned_m is None:
+            return
+        positions, _, fresh = mates.now(self.cfg.safety.passenger_separation_max_age_s)
+        gaps = np.linalg.norm(positions - np.asarray(vehicle.position_ned_m)[None, :], axis=-1)
+        if fresh is not None:
+            gaps = np.where(fresh, gaps, np.inf)
+        flying = [self.state.phase in phases.FLYING or (p is not None and Phase[p] in phases.FLYING)
+                  for p in (mates.phases or (None,) * len(gaps))]
+        gaps = np.where(flying, gaps, np.inf)
+        k = int(np.argmin(gaps))
+        best = self._closest["distance_m"]
+        if np.isfinite(gaps[k]) and (best is None or gaps[k] < best):
+            self._closest = {"distance_m": round(float(gaps[k]), 4), "t_s": round(t, 3),
+                             "phases": [self.state.phase.value, None if mates.phases is None else mates.phases[k]]}
 
     def _poll(self, t: float) -> tuple[Measurement, ...]:
         """Every measurement feed's readings since the last tick; a feed that raises gives none
@@ -296,6 +340,8 @@ class MissionController:
                  if isinstance(src, CountsReadings)}
         if feeds:  # the measurement feeds' own (the marker feed: frames read, refused, detected)
             out["feeds"] = feeds
+        if self.neighbours is not None:  # a team's passenger: its teammates heard, and the closest one came
+            out["neighbours"] = {**self.neighbours.counters, "closest": dict(self._closest)}
         if self.clock.counters is not None:  # a lockstep clock's: was every step in step?
             out["lockstep"] = self.clock.counters
         return out

@@ -42,16 +42,13 @@ from mission.lifetime import supervise_children
 from mission.phases import Phase
 from sim.net import free_port, stop_process
 from sim.robots.truth import demo_truth
+from sim.team_demo import child_command as _python_cli, run_team_demo, team_lines
 from sim.vehicle.options import VehicleOptions
 
 DEFAULT_CONFIG = Path(__file__).resolve().parents[1] / "configs" / "demo.toml"
 # The nominal path of a mission; HOLD and LAND are alternatives of the same step.
 PHASE_STEPS = [(p.value,) for p in Phase if p not in (Phase.ABORT, Phase.HOLD, Phase.LAND, Phase.DONE)] + [
     (Phase.HOLD.value, Phase.LAND.value), (Phase.DONE.value,)]
-
-
-def _python_cli(*args: str) -> list[str]:
-    return [sys.executable, "-m", "mission.cli", *args]
 
 
 @dataclass
@@ -281,6 +278,9 @@ def run_demo(config: str, speed: float, pairs: int, log_root: Path, plot_path: s
     (:func:`throwaway_key`), deleted at the end. ``seed``: pair i's vehicle's is ``seed + i``; ``estimate_error``: its estimate's errors as a multiple of PX4 SITL's (0: exact)."""
     from mission.cli.run import plot as plot_command
 
+    if len(load_config(config).team.passengers) > 1:  # a team: one carrier, a vehicle and a mission each
+        return run_team_demo(config, speed, log_root, timeout_s, quiet=quiet, progress=progress, signed=signed, seed=seed,
+                             estimate_error=estimate_error, pairs=pairs, carrier=carrier, live=live, lockstep=lockstep)
     sole_passenger(load_config(config), "flown by demo", team_of_one=False)  # its processes read the file themselves
     supervise_children()  # a demo killed outright takes its processes with it
     log_root.mkdir(parents=True, exist_ok=True)
@@ -312,8 +312,7 @@ def run_demo(config: str, speed: float, pairs: int, log_root: Path, plot_path: s
     summaries = []
     for p in runs:
         s = p.summary()
-        s["pair"] = p.name
-        s["mission_exit_code"] = p.procs["mission"].returncode
+        s.update(pair=p.name, mission_exit_code=p.procs["mission"].returncode)
         carrier_summary = p.log_dir / "carrier.json"
         if carrier_summary.exists():  # the carrier's own account (written when it stops)
             c = json.loads(carrier_summary.read_text())
@@ -580,6 +579,8 @@ def demo(config: str, realtime: bool, speed: float, pairs: int, plot_path: str |
                                seed=seed, estimate_error=estimate_error)
     click.echo("times count from the start of riding (t = 0, as in the paper)")
     click.echo(format_table(summaries))
+    for line in team_lines(summaries) if summaries and "team" in summaries[0] else []:
+        click.echo(line)
     for s in summaries:
         plot = f", plot {s['plot']}" if s.get("plot") else (f", no plot: {s['plot_error']}" if s.get("plot_error") else "")
         plot += f", recovery {s['recovery_plot']}" if s.get("recovery_plot") else ""

@@ -18,6 +18,7 @@ from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey,
 from mission.bus.signing import Ed25519Signer, Ed25519Verifier, Signer, Verifier, pair_key
 from mission.config.keys import read_key_file, read_private_key_file, read_public_key_file
 from mission.config.schema import ZenohSection
+from mission.errors import ConfigError
 
 KEY_FIELD = "zenoh.signing_key_file"
 PRIVATE_KEY_FIELD = "zenoh.private_key_file"
@@ -110,6 +111,16 @@ def bus_auth(section: ZenohSection, pair: str | None = None, *, robot_link: bool
     if not section.signing_key_file:
         return None
     return BusAuth(read_key_file(section.signing_key_file, KEY_FIELD), pair or section.pair)
+
+
+def check_team_auth(section: ZenohSection, auth: BusAuth | None, passengers: int) -> None:
+    """Refuse one key per robot on the bus of a team of several ``passengers``
+    (:class:`~mission.errors.ConfigError` naming ``zenoh.peer_public_key_file``): it names one peer,
+    and every robot of a team hears several. A team signs with the pair's key (``zenoh.signing_key_file``)."""
+    if auth is not None and auth.mode == "ed25519" and passengers > 1:
+        raise ConfigError(PEER_KEY_FIELD, section.peer_public_key_file,
+                          f"one peer key for a team of {passengers} passengers: sign the team's bus with the pair's key "
+                          "(zenoh.signing_key_file); one public key per passenger is not built (docs/team.md)")
 
 
 def unsigned_warning(section: ZenohSection) -> str | None:

@@ -9,6 +9,7 @@ expressions are namespaced per marsupial pair (:func:`keys`)::
     marsupial/<pair>/passenger/state    PassengerStatus (JSON)
     marsupial/<pair>/passenger/phase    the phase alone, UTF-8 text (for humans and tools)
     marsupial/<pair>/passenger/alive    liveliness token of the passenger
+    marsupial/<pair>/passenger/<name>/{state,phase,alive}   a team's passenger ``name``, on its own keys
     marsupial/<pair>/passenger/camera   camera frames for the marker feed (:mod:`mission.bus.frames`)
 
 What a feed accepts, drops and counts, and how staleness is reported: docs/wire.md; signed

@@ -436,7 +436,8 @@ class CarrierFeed(_Feed[CarrierState]):
 
 
 class PassengerFeed(_Feed[PassengerStatus]):
-    """The newest valid passenger status of pair ``pair`` (for the carrier), with liveliness.
+    """The newest valid passenger status of pair ``pair`` (for the carrier), with liveliness;
+    ``passenger``: the name of one passenger of a team, heard on its own keys (None: the pair's).
 
     Source binding: the feed binds to the first source (the verified signer with ``auth``, else
     Zenoh's ``source_info``) that sends ``bind_samples`` statuses in order (sequence number
@@ -457,7 +458,8 @@ class PassengerFeed(_Feed[PassengerStatus]):
     _received_type = ReceivedPassengerStatus
 
     def __init__(self, session: zenoh.Session, pair: str, clock: Clock, *, max_age_s: float = 1.0,
-                 auth: BusAuth | None = None, bind_phases: frozenset[str] | None = None, bind_samples: int = 1) -> None:
+                 auth: BusAuth | None = None, bind_phases: frozenset[str] | None = None, bind_samples: int = 1,
+                 passenger: str | None = None) -> None:
         if bind_samples < 1:
             raise ValueError(f"bind_samples must be >= 1, got {bind_samples!r}")
         self.bind_phases, self.bind_samples = bind_phases, bind_samples
@@ -466,7 +468,7 @@ class PassengerFeed(_Feed[PassengerStatus]):
         self._candidates: dict[str, tuple[int, float, int]] = {}  # source -> (seq, stamp, statuses in order)
         self._last: tuple[int, float] | None = None  # the bound source's last (seq, stamp)
         self._previous: str | None = None  # the source bound before the token went
-        k = keys(pair)
+        k = keys(pair, passenger)  # a team's passenger: its own keys, bound on its own
         super().__init__(session, k.passenger_state, k.passenger_alive, clock, max_age_s, auth)
 
     def _admit(self, value: PassengerStatus, key: str, source: str, rx: float) -> str | None:

@@ -50,10 +50,45 @@ from mission.time.clock import (
 log = logging.getLogger(__name__)
 
 
-def clock_keys(pair: str) -> tuple[str, str]:
-    """The (time, ready) keys of pair ``pair``."""
-    root = keys(pair).carrier_state.rsplit("/", 2)[0]
-    return f"{root}/clock/time", f"{root}/clock/ready"
+def clock_keys(pair: str, passenger: str | None = None) -> tuple[str, str]:
+    """The (time, ready) keys of pair ``pair``; ``passenger``: the clock on which a team's carrier
+    brings passenger NAME along (every passenger of a team but the first, whose vehicle owns the
+    time: docs/team.md), ``marsupial/<pair>/clock/<name>/...``."""
+    root = keys(pair, passenger).carrier_state.rsplit("/", 2)[0]
+    clock = "clock" if passenger is None else f"clock/{passenger}"
+    return f"{root}/{clock}/time", f"{root}/{clock}/ready"
+
+
+class Downstreams:
+    """Several :class:`~mission.time.clock.Downstream` relays as one: each brought to a step in
+    turn, the earliest wake of any (a team's carrier brings its robot and its later passengers)."""
+
+    def __init__(self, relays: list[Any]) -> None:
+        self.relays = [r for r in relays if r is not None]
+
+    def run(self, t_ns: int) -> None:
+        for relay in self.relays:
+            relay.run(t_ns)
+
+    def wake_ns(self) -> int | None:
+        wakes = [w for w in (r.wake_ns() for r in self.relays) if w is not None]
+        return min(wakes) if wakes else None
+
+    def leave(self) -> None:
+        for relay in self.relays:
+            relay.leave()
+
+
+class LastSeq:
+    """``last_seq``: the seq of the last sample a sender published, as ``published()`` tells
+    (the carrier's state, for a :class:`ZenohRelay` to a later passenger of its team)."""
+
+    def __init__(self, published: Callable[[], int]) -> None:
+        self._published = published
+
+    @property
+    def last_seq(self) -> int:
+        return self._published()
 
 
 class _ClockWire:

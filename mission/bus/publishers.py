@@ -102,12 +102,13 @@ class CarrierPublisher(_Publisher):
 
 class PassengerPublisher(_Publisher):
     """Publishes the passenger's status (state key, JSON) and phase (phase key, text) on pair
-    ``pair`` and holds the passenger's liveliness token; signed with ``auth`` if given."""
+    ``pair`` and holds the passenger's liveliness token; signed with ``auth`` if given;
+    ``passenger``: the name of one passenger of a team, on its own keys (None: the pair's)."""
 
     def __init__(self, session: zenoh.Session, pair: str,
                  congestion_control: zenoh.CongestionControl = zenoh.CongestionControl.DROP,
-                 auth: BusAuth | None = None) -> None:
-        k = keys(pair)
+                 auth: BusAuth | None = None, passenger: str | None = None) -> None:
+        k = keys(pair, passenger)
         super().__init__(session, k.passenger_alive, k.passenger_state, zenoh.Encoding.APPLICATION_JSON,
                          congestion_control, auth)
         self.last_seq = -1  # seq of the last status sent

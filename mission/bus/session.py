@@ -200,7 +200,8 @@ def close_abandoned() -> bool:
 
 @dataclass(frozen=True)
 class Keys:
-    """Key expressions of one marsupial pair (see the module docstring)."""
+    """Key expressions of one marsupial pair (see the module docstring); a passenger of a team
+    (``keys(pair, passenger=NAME)``) has its own status, phase and liveliness keys."""
 
     carrier_state: str
     carrier_alive: str
@@ -209,18 +210,45 @@ class Keys:
     passenger_alive: str
 
 
-def keys(pair: str) -> Keys:
-    """The keys of pair ``pair`` (letters, digits, ``_`` and ``-`` only)."""
-    if not pair or any(not (ch.isalnum() or ch in "_-") for ch in pair):
-        raise ConfigError("zenoh.pair", pair, "must be letters, digits, '_' or '-'")
-    root = f"marsupial/{pair}"
+def _name(field: str, value: str) -> str:
+    if not value or any(not (ch.isalnum() or ch in "_-") for ch in value):
+        raise ConfigError(field, value, "must be letters, digits, '_' or '-'")
+    return value
+
+
+def keys(pair: str, passenger: str | None = None) -> Keys:
+    """The keys of pair ``pair`` (letters, digits, ``_`` and ``-`` only). ``passenger``: the name
+    of one passenger of a team (``team.passengers[].name``): its status on
+    ``marsupial/<pair>/passenger/<name>/state`` (phase, alive likewise), so the team's carrier binds
+    each passenger on its own key (:func:`team_status_keys`); None: the single pair's keys."""
+    root = f"marsupial/{_name('zenoh.pair', pair)}"
+    own = _passenger_root(pair) if passenger is None else f"{_passenger_root(pair)}/{_name('team.passengers[].name', passenger)}"
     return Keys(
         carrier_state=f"{root}/carrier/state",
         carrier_alive=f"{root}/carrier/alive",
-        passenger_state=f"{root}/passenger/state",
-        passenger_phase=f"{root}/passenger/phase",
-        passenger_alive=f"{root}/passenger/alive",
+        passenger_state=f"{own}/state",
+        passenger_phase=f"{own}/phase",
+        passenger_alive=f"{own}/alive",
     )
+
+
+def team_status_keys(pair: str) -> str:
+    """The key expression of every team passenger's status on pair ``pair`` (one chunk per name:
+    never the single pair's ``marsupial/<pair>/passenger/state``)."""
+    return f"{_passenger_root(pair)}/*/state"
+
+
+def _passenger_root(pair: str) -> str:
+    return f"marsupial/{_name('zenoh.pair', pair)}/passenger"
+
+
+def passenger_of(key: str, pair: str) -> str | None:
+    """The team passenger's name a status key ``key`` of pair ``pair`` names (None: not one)."""
+    head, tail = f"{_passenger_root(pair)}/", "/state"
+    if not (key.startswith(head) and key.endswith(tail)):
+        return None
+    name = key[len(head):-len(tail)]
+    return name if name and "/" not in name else None
 
 
 def undeclare(*entities: Any) -> None:

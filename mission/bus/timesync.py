@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import logging
 import math
+import secrets
 import threading
 import time
 from typing import Any, Callable
@@ -138,7 +139,7 @@ class ClockPing:
         self.estimator = estimator or OffsetEstimator()
         self._lock = threading.Lock()
         self._sent: dict[int, float] = {}
-        self._seq = 0
+        self._seq = secrets.randbelow(10**15)  # several passengers ping one echo: their numbers never meet
         self.counters: dict[str, Any] = {"pings": 0, "echoes": 0, "dropped": {}}
         self._wire = _Wire(session, ping_key, auth)
         self._wire.listen(echo_key, self._on_echo)

@@ -205,8 +205,11 @@ class CarrierState(_Message):
     stamp_s [s] sender's clock; seq (>= 0) per-sender sequence number; frame "local_ned" or
     "wgs84"; position: local_ned [m] (n, e, d), wgs84 (lat [deg], lon [deg], alt [m] AMSL up);
     velocity_ned_m_s [m/s] NED in both frames; yaw_rad [rad] heading from north towards east, or
-    None; acceleration_ned_m_s2 [m/s^2] NED as measured by the carrier, or None (not sent). Arrays
-    are read-only float (3,). Raises :class:`WireError` when invalid.
+    None; acceleration_ned_m_s2 [m/s^2] NED as measured by the carrier, or None (not sent);
+    target_ned_m [m] local NED: the target a team's carrier heads for (JSON ``target``,
+    :meth:`mission.carrier.team.TeamCarrier.heading_for_ned_m`; None: not announced, as a single
+    pair's carrier and CDR Odometry). Arrays are read-only float (3,). Raises :class:`WireError` when
+    invalid.
     """
 
     stamp_s: Real = Field(alias="stamp")
@@ -216,16 +219,22 @@ class CarrierState(_Message):
     velocity_ned_m_s: VelocityNed = Field(alias="velocity")
     yaw_rad: Real | None = Field(None, alias="yaw")
     acceleration_ned_m_s2: AccelerationNed | None = Field(None, alias="acceleration")
+    target_ned_m: PositionNed | None = Field(None, alias="target")
 
     _check_order = ("frame", "stamp", "stamp_s", "seq", "position", "velocity", "velocity_ned_m_s", "yaw", "yaw_rad",
-                    "acceleration", "acceleration_ned_m_s2")
+                    "acceleration", "acceleration_ned_m_s2", "target", "target_ned_m")
 
     def __init__(self, stamp_s: float, seq: int, frame: str, position: Any, velocity_ned_m_s: Any,
-                 yaw_rad: float | None = None, acceleration_ned_m_s2: Any = None) -> None:
+                 yaw_rad: float | None = None, acceleration_ned_m_s2: Any = None, target_ned_m: Any = None) -> None:
         self._validated(stamp_s=stamp_s, seq=seq, frame=frame, position=position, velocity_ned_m_s=velocity_ned_m_s,
-                        yaw_rad=yaw_rad, acceleration_ned_m_s2=acceleration_ned_m_s2)
+                        yaw_rad=yaw_rad, acceleration_ned_m_s2=acceleration_ned_m_s2, target_ned_m=target_ned_m)
 
     __init__.__pydantic_base_init__ = True  # type: ignore[attr-defined]  # see _Message
+
+    def to_json(self) -> bytes:
+        """The JSON bytes (wire names); ``target`` only when announced, so a single pair's states
+        are the bytes they always were."""
+        return self.model_dump_json(by_alias=True, exclude=None if self.target_ned_m is not None else {"target_ned_m"}).encode()
 
     @model_validator(mode="after")
     def _lat_lon(self) -> CarrierState:
@@ -316,7 +325,7 @@ def to_local_ned(state: CarrierState, origin: GeoOrigin | None) -> CarrierState:
     lat, lon, alt = (float(v) for v in state.position)
     ned = geodetic_to_ned(lat, lon, alt, origin)
     return CarrierState(state.stamp_s, state.seq, "local_ned", ned, state.velocity_ned_m_s, state.yaw_rad,
-                        state.acceleration_ned_m_s2)
+                        state.acceleration_ned_m_s2, state.target_ned_m)
 
 
 # --------------------------------------------------------------------------- JSON

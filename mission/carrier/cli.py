@@ -19,16 +19,16 @@ import numpy as np
 
 from mission.carrier.backends import KINDS, describe, open_backend
 from mission.carrier.controller import CarrierController
-from mission.bus.auth import bus_auth, unsigned_warning
+from mission.bus.auth import bus_auth, check_team_auth, unsigned_warning
 from mission.bus.bridge import describe_endpoints, keys, open_session
 from mission.bus.session import close_session
 from mission.time.clock import Clock, LockstepClock, ScaledClock
 from mission.config.required import CARRIER_FIELDS, require_stated
-from mission.config.passenger import sole_passenger
+from mission.config.passenger import has_team, sole_passenger
 from mission.config.schema import Config, load_config, with_overrides
 from mission.cli.subcommands import entry_points, load
 from mission.errors import ConfigError
-from mission.bus.lockstep import ZenohUpstream, clock_keys
+from mission.bus.lockstep import Downstreams, LastSeq, ZenohRelay, ZenohUpstream, clock_keys
 from mission.bus.timesync import ClockEcho
 
 log = logging.getLogger(__name__)
@@ -80,7 +80,7 @@ def main(cfg: Config, speed: float = 1.0, duration_s: float | None = None, stop_
                     upstream = ZenohUpstream(clock, session, clock_keys(ctl.pair), ctl.passenger,
                                              published=lambda: ctl.seq - 1, auth=ctl.auth)
                     stack.callback(upstream.close)
-                    clock.downstream = backend.lockstep_relay(session)
+                    clock.downstream = team_relays(cfg, ctl, session, clock, backend.lockstep_relay(session), stack)
                     stack.callback(clock.close)
                 try:
                     ctl.run(stop, duration_s)
@@ -102,6 +102,28 @@ def main(cfg: Config, speed: float = 1.0, duration_s: float | None = None, stop_
         for signum, handler in restore.items():
             signal.signal(signum, handler)
     return 0
+
+
+def team_relays(cfg: Config, ctl: CarrierController, session: Any, clock: LockstepClock, robot: Any,
+                stack: ExitStack) -> Any:
+    """What the carrier brings along in lockstep: its own robot (``robot``, None: none) and, with a
+    team of several, every passenger but the first (whose vehicle owns the time), each on its own
+    clock keys (:func:`~mission.bus.lockstep.clock_keys`): its step waits for the status it names,
+    and its call names the carrier's last state (docs/team.md, "The team on the bus")."""
+    if ctl.team is None:
+        return robot
+    relays = [robot]
+    for name, feed in list(zip(ctl.team.names, ctl.team.feeds))[1:]:
+        relay = ZenohRelay(session, clock_keys(ctl.pair, name), feed, LastSeq(lambda: ctl.seq - 1),
+                           alive=_alive_of(feed), alive_watchdog_wall_s=cfg.sim.lockstep_carrier_wait_wall_s,
+                           auth=ctl.auth, name=f"passenger {name}", keepalive=clock.keepalive)
+        stack.callback(relay.close)
+        relays.append(relay)
+    return Downstreams(relays)
+
+
+def _alive_of(feed: Any) -> Any:
+    return lambda: feed.alive
 
 
 WORLD_GROUP = "marsupial.world"  # entry points: the world's errors a simulated flight adds (pyproject.toml)
@@ -250,7 +272,10 @@ def carrier_cli(config: str, backend: str | None, speed: float, pair: str | None
         "zenoh.private_key_file": own_key_file,
         "zenoh.peer_public_key_file": peer_key_file,
     })
-    cfg = sole_passenger(cfg, "driven by `marsupial carrier`")  # a team of one: its passenger's (docs/team.md)
+    if not has_team(cfg) or len(cfg.team.passengers) == 1:
+        cfg = sole_passenger(cfg, "driven by `marsupial carrier`")  # a team of one: its passenger's (docs/team.md)
+    else:  # a team of several: one carrier serves them all (mission.carrier.team_bus), checked before anything opens
+        check_team_auth(cfg.zenoh, bus_auth(cfg.zenoh), len(cfg.team.passengers))
     require_stated(cfg, CARRIER_FIELDS, "carrier")  # refused before it says anything about flying
     click.echo(startup_line(cfg, speed), err=True)
     if (unsigned := unsigned_warning(cfg.zenoh)) is not None:
@@ -265,8 +290,11 @@ def startup_line(cfg: Config, speed: float) -> str:
     plan = {"stop": "stops at separation", "remark1": "keeps its own plan after separation (Remark 1)"}
     robot = describe(cfg)
     start = np.round(np.asarray(cfg.scenario.carrier_start, dtype=float), 2).tolist()
+    names = [p.name for p in cfg.team.passengers] if has_team(cfg) else []
+    riders = (f"the passenger to ride (phase RIDING on {k.passenger_phase})" if not names else
+              f"its team to ride ({', '.join(names)}: each on {keys(cfg.zenoh.pair, names[0]).passenger_phase.replace(names[0], 'NAME')})")
     return (f"carrier {cfg.zenoh.pair}: {robot} ({c.kinematics}); publishing {k.carrier_state} ({cfg.zenoh.encoding}, "
             f"{c.rate_hz:g} Hz) on {describe_endpoints(cfg.zenoh)}; mode {cfg.scenario.carrier_mode} "
             f"({plan[cfg.scenario.carrier_mode]}); P3 guard at "
             f"{cfg.law.params().separation_distance_m - c.p3_margin_m:g} m from the target; at {start} NED [m], "
-            f"waiting for the passenger to ride (phase RIDING on {k.passenger_phase}); clock x{speed:g}")
+            f"waiting for {riders}; clock x{speed:g}")

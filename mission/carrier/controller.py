@@ -45,7 +45,9 @@ from mission.carrier.legs import Legs
 from mission.carrier.modes import BEFORE_RIDING, BIND_STATUSES, CarrierMode, PassengerView, lost_reason, on_dock
 from mission.carrier.step import (DRIVING, REAL_DELAY_S, STOP, CarrierStepper, carrier_model, guard_params, pad3,
                                   tracking_params)
+from mission.carrier.team_bus import TeamBus, views
 from mission.carrier.tracking import Tracked, TrackingParams, along_heading
+from mission.config.passenger import has_team
 from mission.core.consistent_velocity import PositionConsistentVelocity
 from mission.bus.auth import BusAuth, bus_auth
 from mission.bus.bridge import CarrierPublisher, PassengerFeed
@@ -113,13 +115,15 @@ def passenger_view(feed: PassengerFeed, dock_ned_m: np.ndarray | None, tolerance
 
 
 def open_bus(cfg: Config, session: zenoh.Session, pair: str, clock: Clock,
-             encoding: str | None) -> tuple[BusAuth | None, PassengerFeed, CarrierPublisher]:
+             encoding: str | None, team: TeamBus | None = None) -> tuple[BusAuth | None, PassengerFeed, CarrierPublisher]:
     """The carrier's end of pair ``pair``'s bus, signed with the pair's key when one is set
     (``zenoh.signing_key_file``; the auth, else None): the passenger's feed, which binds only to a passenger that
-    began on the deck, and the carrier's state publisher (``encoding`` None: ``zenoh.encoding``)."""
+    began on the deck (``team``'s first passenger's, a team's), and the carrier's state publisher
+    (``encoding`` None: ``zenoh.encoding``)."""
     auth = bus_auth(cfg.zenoh, pair)
-    passenger = PassengerFeed(session, pair, clock, max_age_s=cfg.carrier.passenger_timeout_s,
-                              auth=auth, bind_phases=BEFORE_RIDING, bind_samples=BIND_STATUSES)
+    passenger = team.feeds[0] if team is not None else PassengerFeed(
+        session, pair, clock, max_age_s=cfg.carrier.passenger_timeout_s, auth=auth, bind_phases=BEFORE_RIDING,
+        bind_samples=BIND_STATUSES)
     try:
         publisher = CarrierPublisher(session, pair, encoding or cfg.zenoh.encoding,  # type: ignore[arg-type]
                                      key=cfg.zenoh.carrier_key, congestion_control=congestion_for(clock), auth=auth)
@@ -134,13 +138,20 @@ class CarrierController:
 
     ``clock``: the injected clock. ``pair`` and ``encoding`` default to ``cfg.zenoh``. The caller
     owns the session and the backend; :meth:`close` undeclares what the controller declared.
+    A ``cfg`` with a ``[team]`` serves every passenger of it (:attr:`team`,
+    :mod:`mission.carrier.team_bus`); ``self.cfg`` is then the carrier's own configuration.
     """
 
     def __init__(self, cfg: Config, clock: Clock, session: zenoh.Session, backend: CarrierBackend, *,
                  pair: str | None = None, encoding: str | None = None, steps: StepSink | None = None) -> None:
-        self.cfg, self.clock, self.backend, self.steps = cfg, clock, backend, steps
         self.pair = pair or cfg.zenoh.pair
-        self.stepper = CarrierStepper(cfg, backend.brakes_itself)  # the mode machine, the law, the guards
+        self.team = TeamBus(cfg, session, self.pair, clock, bus_auth(cfg.zenoh, self.pair),
+                            backend.brakes_itself) if has_team(cfg) else None
+        if self.team is not None:
+            cfg = self.team.own
+        self.cfg, self.clock, self.backend, self.steps = cfg, clock, backend, steps
+        # the mode machine, the law, the guards (a team's: its TeamCarrier's)
+        self.stepper = self.team.carrier.stepper if self.team is not None else CarrierStepper(cfg, backend.brakes_itself)
         self.dim = cfg.scenario.dim
         self.period_s = 1.0 / cfg.carrier.rate_hz
         self.seq = 0
@@ -148,7 +159,8 @@ class CarrierController:
         self._stats: dict[str, Any] = {"closest_target_distance_m": math.inf, "guard_active_ticks": 0,
                                        "stale_ticks": 0, "ticks": 0, "distance_at_separation_m": None,
                                        "braking_distance_m": None, "braking_displacement_m": None,
-                                       "stopped_target_distance_m": None}
+                                       "stopped_target_distance_m": None,
+                                       "closest_each_target_m": [math.inf] * len(self.stepper.legs.targets)}
         self._last_position: np.ndarray | None = None
         self._after_separation_m = 0.0
         self._separation_position = np.zeros(self.dim)
@@ -158,7 +170,12 @@ class CarrierController:
         self._acceleration = AccelerationEstimate(tau) if tau > 0 else None  # published when set
         bias_tau = cfg.carrier.velocity_bias_tau_s
         self._velocity_fix = PositionConsistentVelocity(bias_tau) if bias_tau > 0 else None
-        self.auth, self.passenger, self.publisher = open_bus(cfg, session, self.pair, clock, encoding)
+        try:
+            self.auth, self.passenger, self.publisher = open_bus(cfg, session, self.pair, clock, encoding, self.team)
+        except Exception:
+            if self.team is not None:
+                self.team.close()
+            raise
 
     # ------------------------------------------------------------------ decisions
     def dock_point_ned_m(self) -> np.ndarray | None:
@@ -199,11 +216,16 @@ class CarrierController:
         return self.stepper.velocity_m_s
 
     def _update_mode(self) -> None:
-        view = passenger_view(self.passenger, self.dock_point_ned_m(),
-                              self.cfg.mission.dock_tolerance_m + frames_disagree_m(self.cfg), self.dim)
-        up = self.stepper.update_mode(view)
+        tolerance = self.cfg.mission.dock_tolerance_m + frames_disagree_m(self.cfg)
+        if self.team is not None:
+            own = self._in_plane(self.backend.own_state())
+            up = self.team.carrier.update_mode(views(self.team, None if own is None else pad3(
+                own.position_ned_m[:self.dim]), tolerance, self.dim, passenger_view))
+        else:
+            view = passenger_view(self.passenger, self.dock_point_ned_m(), tolerance, self.dim)
+            up = self.stepper.update_mode(view)
         if up.leg_changed:
-            log.info("carrier %s: leg %d, target %s", self.pair, view.leg + 1, self.model.target.tolist())
+            log.info("carrier %s: leg %d, target %s", self.pair, self.legs.index + 1, self.model.target.tolist())
         if up.after is not up.before:
             level = logging.WARNING if up.after in (CarrierMode.PAUSED, CarrierMode.STOPPED) else logging.INFO
             log.log(level, "carrier %s: %s -> %s (%s)", self.pair, up.before.value, up.after.value, up.why)
@@ -266,6 +288,8 @@ class CarrierController:
         dist = float(np.linalg.norm(np.asarray(self.model.target) - x))
         s = self._stats
         s["closest_target_distance_m"] = min(s["closest_target_distance_m"], self.legs.closest_m(x))  # to any target
+        s["closest_each_target_m"] = [min(d, float(np.linalg.norm(np.asarray(t)[:self.dim] - x)))
+                                      for d, t in zip(s["closest_each_target_m"], self.legs.targets)]
         if self.mode is CarrierMode.SEPARATED:
             if s["distance_at_separation_m"] is None:
                 s["distance_at_separation_m"] = dist
@@ -332,7 +356,7 @@ class CarrierController:
             velocity = self._velocity_fix.update(fresh.t_s, pad3(fresh.position_ned_m[:self.dim]), velocity)
         accel = None if self._acceleration is None else self._acceleration.update(fresh.t_s, velocity)
         out = CarrierState(fresh.t_s, self.seq, "local_ned", pad3(fresh.position_ned_m[:self.dim]), velocity,
-                           fresh.yaw_rad, accel)
+                           fresh.yaw_rad, accel, None if self.team is None else self.team.target_ned_m())
         if self.cfg.carrier.align_on_deck_m > 0 and not self._aligned:
             trace(self, now, state, cmd, None)
             return out  # not yet placed in the passenger's frame: nothing the passenger should use
@@ -367,15 +391,18 @@ class CarrierController:
         out.update(mode=self.mode.value, guard_radius_m=self.guard.radius_m, backend=self.backend.name,
                    deck_alignment_m=self._alignment.tolist(),
                    separation_distance_m=self.model.law.separation_distance_m,
-                   passenger_feed=self.passenger.counters)
+                   passenger_feed=self.passenger.counters, **({} if self.team is None else self.team.counters()))
         if math.isinf(out["closest_target_distance_m"]):
             out["closest_target_distance_m"] = None
+        out["closest_each_target_m"] = [None if math.isinf(d) else d for d in out["closest_each_target_m"]]
         return out
 
     def close(self) -> None:
         """Undeclare the publisher, the liveliness token and the passenger subscribers."""
         self.publisher.close()
         self.passenger.close()
+        if self.team is not None:
+            self.team.close()
 
     def __enter__(self) -> "CarrierController":
         return self

@@ -13,12 +13,13 @@ from typing import Any, Iterator, NamedTuple
 
 import click
 
-from mission.bus.auth import bus_auth, unsigned_warning
+from mission.bus.auth import bus_auth, check_team_auth, unsigned_warning
+from mission.bus.neighbours import NeighbourFeed
 from mission.bus.bridge import CarrierFeed, PassengerPublisher, open_session, zenoh_config
 from mission.bus.session import close_session, congestion_for
 from mission.time.clock import LOST_WALL_S, Clock, LockstepClock, ScaledClock
 from mission.config.required import RUN_FIELDS, require_stated
-from mission.config.passenger import chosen_passenger
+from mission.config.passenger import TeamLink, chosen_passenger, team_link
 from mission.config.schema import Config, load_config, with_overrides
 from mission.cli.subcommands import SENSORS_GROUP, entry_points, load
 from mission.controller import MissionController, MissionOutcome
@@ -89,17 +90,20 @@ class MissionIO(NamedTuple):
     publisher: PassengerPublisher
     link: VehicleLink
     sources: tuple[MeasurementSource, ...]  # the measurement feeds of mission.feeds
+    neighbours: NeighbourFeed | None  # a team's passenger: its teammates' statuses (None: no team)
 
 
 @contextmanager
 def mission_io(cfg: Config, clock: Clock, tlog_path: str | Path | None = None, *,
-               lockstep_lost_wall_s: float = LOST_WALL_S) -> Iterator[MissionIO]:
+               lockstep_lost_wall_s: float = LOST_WALL_S, team: TeamLink | None = None) -> Iterator[MissionIO]:
     """Open what a mission talks through, per ``cfg``: the Zenoh session with the carrier feed,
     the passenger publisher and the measurement feeds ``mission.feeds`` names
     (:func:`feed_openers`), and the MAVLink link (opened, signing per
     ``mavlink.signing_key_file``); with a :class:`LockstepClock`, the carrier's lockstep relay
     (a state sample it names that never comes given up after ``lockstep_lost_wall_s`` [s, wall],
-    :class:`~mission.bus.lockstep.ZenohRelay`). Everything is closed in reverse order on exit."""
+    :class:`~mission.bus.lockstep.ZenohRelay`). ``team``: this passenger of a team of several
+    (:func:`mission.config.passenger.team_link`): its status on its own keys, and its teammates'
+    heard (:class:`~mission.bus.neighbours.NeighbourFeed`). Everything is closed in reverse order on exit."""
     openers = feed_openers(cfg)
     key = read_signing_key(cfg.mavlink.signing_key_file) if cfg.mavlink.signing_key_file else None
     auth = bus_auth(cfg.zenoh)
@@ -116,8 +120,16 @@ def mission_io(cfg: Config, clock: Clock, tlog_path: str | Path | None = None, *
         feed = CarrierFeed.from_section(session, cfg.zenoh, clock, max_age_s=cfg.mission.carrier_timeout_s,
                                         limits=carrier_limits(cfg), auth=auth, offset=offset)
         stack.callback(feed.close)
-        publisher = PassengerPublisher(session, cfg.zenoh.pair, congestion_for(clock), auth=auth)
+        publisher = PassengerPublisher(session, cfg.zenoh.pair, congestion_for(clock), auth=auth,
+                                       passenger=None if team is None else team.name)
         stack.callback(publisher.close)
+        neighbours = None
+        if team is not None:
+            neighbours = NeighbourFeed(session, cfg.zenoh.pair, team.name, team.names, clock, auth=auth,
+                                       max_speed_m_s=NEIGHBOUR_SPEED_FACTOR * (cfg.safety.passenger_max_speed_m_s
+                                                                               or cfg.recovery.return_speed_m_s),
+                                       max_age_s=cfg.mission.carrier_timeout_s)
+            stack.callback(neighbours.close)
         sources: list[MeasurementSource] = []
         for target in openers.values():
             source = load(target)(cfg, session, clock)  # type: ignore[operator]
@@ -128,13 +140,26 @@ def mission_io(cfg: Config, clock: Clock, tlog_path: str | Path | None = None, *
                            source_system=cfg.mavlink.source_system, source_component=cfg.mavlink.source_component,
                            tlog_path=None if tlog_path is None else str(tlog_path), signing_key=key,
                            heartbeat_timeout_s=cfg.mission.heartbeat_timeout_s)
-        if isinstance(clock, LockstepClock):  # before open: the vehicle's first barrier may come at once
+        # a later passenger of a team in lockstep: the carrier brings it along, and it its vehicle
+        follower = clock if isinstance(clock, LockstepClock) and team is not None and team.name != team.names[0] else None
+        if follower is not None and team is not None:
+            from mission.bus.lockstep import ZenohUpstream, clock_keys
+
+            upstream = ZenohUpstream(follower, session, clock_keys(cfg.zenoh.pair, team.name), feed,
+                                     published=lambda: publisher.last_seq, auth=auth)
+            stack.callback(upstream.close)
+        elif isinstance(clock, LockstepClock):  # before open: the vehicle's first barrier may come at once
             from mission.mavlink.lockstep import MavlinkUpstream
 
             MavlinkUpstream(clock, link)
         link.open()
         stack.callback(link.close)
-        if isinstance(clock, LockstepClock):  # step on the vehicle's time; bring the carrier along
+        if follower is not None:
+            from mission.mavlink.lockstep import MavlinkRelay
+
+            follower.downstream = MavlinkRelay(link)
+            stack.callback(follower.close)
+        elif isinstance(clock, LockstepClock):  # step on the vehicle's time; bring the carrier along
             from mission.bus.lockstep import ZenohRelay, clock_keys
 
             relay = ZenohRelay(session, clock_keys(cfg.zenoh.pair), feed, publisher, alive=lambda: feed.alive,
@@ -143,7 +168,11 @@ def mission_io(cfg: Config, clock: Clock, tlog_path: str | Path | None = None, *
             stack.callback(relay.close)
             clock.downstream = relay
             stack.callback(clock.close)  # before the link closes: its threads wait on the clock
-        yield MissionIO(feed, publisher, link, tuple(sources))
+        yield MissionIO(feed, publisher, link, tuple(sources), neighbours)
+
+
+#: A teammate reporting more than this times its speed limit (safety.passenger_max_speed_m_s) is implausible.
+NEIGHBOUR_SPEED_FACTOR = 2.0
 
 
 def check_config(cfg: Config) -> None:
@@ -177,7 +206,8 @@ def flight_data(cfg: Config, directory: Path, info: dict[str, Any], clock: Clock
 
 def fly(cfg: Config, *, speed: float = 1.0, log_dir: str | Path | None = None, stop: threading.Event | None = None,
         on_event=None, on_start=None, clock: Clock | None = None, live: LiveAddress | None = None,
-        log_epoch_ns: int | None = None, lockstep_lost_wall_s: float = LOST_WALL_S) -> MissionOutcome:
+        log_epoch_ns: int | None = None, lockstep_lost_wall_s: float = LOST_WALL_S,
+        team: TeamLink | None = None) -> MissionOutcome:
     """Fly one mission with ``cfg`` (the library entry point of ``marsupial run``).
 
     Opens the Zenoh session and the MAVLink link (:func:`mission_io`), runs
@@ -189,7 +219,8 @@ def fly(cfg: Config, *, speed: float = 1.0, log_dir: str | Path | None = None, s
     beside ``record.csv``; ``live``: also serve it to Foxglove on that address; ``log_epoch_ns``:
     the epoch of its log times (default: the wall clock at the clock's zero);
     ``lockstep_lost_wall_s``: in lockstep, how long [s, wall] a carrier state sample named but
-    never received is waited for (:func:`mission_io`).
+    never received is waited for (:func:`mission_io`); ``team``: this passenger of a team of
+    several (:func:`mission_io`).
     """
     check_config(cfg)
     clock = clock or ScaledClock(speed)
@@ -198,15 +229,15 @@ def fly(cfg: Config, *, speed: float = 1.0, log_dir: str | Path | None = None, s
     sinks = flight_data(cfg, directory, info, clock, live, log_epoch_ns)
     try:
         recorder = FlightRecorder(directory, info, sinks)
-        io = mission_io(cfg, clock, recorder.tlog_path, lockstep_lost_wall_s=lockstep_lost_wall_s)
-        with io as (feed, publisher, link, sources):
+        io = mission_io(cfg, clock, recorder.tlog_path, lockstep_lost_wall_s=lockstep_lost_wall_s, team=team)
+        with io as (feed, publisher, link, sources, neighbours):
             for source in sources:  # a camera's frames, as its feed saw them, into the flight log
                 if isinstance(source, ShowsFrames):
                     for sink in sinks:
                         if isinstance(sink, CameraSink):
                             source.show_frames_to(sink)
             controller = MissionController(cfg, link, feed, clock, publisher=publisher, recorder=recorder,
-                                           on_event=on_event, stop=stop, sources=sources)
+                                           on_event=on_event, stop=stop, sources=sources, neighbours=neighbours)
             if on_start is not None:
                 on_start(controller, link, feed, clock)
             try:
@@ -297,7 +328,11 @@ def run(config: str, mavlink_url: str | None, zenoh_listen: tuple[str, ...], zen
         overrides["zenoh.listen"] = list(zenoh_listen)
     if zenoh_connect:
         overrides["zenoh.connect"] = list(zenoh_connect)
-    cfg = chosen_passenger(with_overrides(cfg, overrides), passenger)  # one passenger of a [team]
+    cfg = with_overrides(cfg, overrides)
+    team = team_link(cfg, passenger)  # several passengers: this one's own keys, and its teammates heard
+    if team is not None:
+        check_team_auth(cfg.zenoh, bus_auth(cfg.zenoh), len(team.names))
+    cfg = chosen_passenger(cfg, passenger)  # one passenger of a [team]
     check_config(cfg)  # refused before it says anything about flying (fly checks again)
     live_address = parse_live(live) if live is not None else None
     stop = threading.Event()
@@ -328,7 +363,8 @@ def run(config: str, mavlink_url: str | None, zenoh_listen: tuple[str, ...], zen
     try:
         clock: Clock = LockstepClock(speed=speed, name="mission-lockstep") if lockstep else ScaledClock(speed)
         outcome = fly(cfg, speed=speed, log_dir=log_dir, stop=stop, on_event=on_event, on_start=on_start, clock=clock,
-                      live=live_address, log_epoch_ns=log_epoch_ns, lockstep_lost_wall_s=lockstep_lost_wall_s)
+                      live=live_address, log_epoch_ns=log_epoch_ns, lockstep_lost_wall_s=lockstep_lost_wall_s,
+                      team=team)
     finally:
         if seen.get("reporter") is not None:
             seen["reporter"].stop()

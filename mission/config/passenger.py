@@ -4,6 +4,8 @@ passenger take of a team file. docs/team.md.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 from mission.config.schema import Config, from_dict
 from mission.config.team import dock_points, passenger_data
 from mission.errors import ConfigError
@@ -41,6 +43,22 @@ def chosen_passenger(cfg: Config, name: str | None) -> Config:
                               f"process flies ({', '.join(names)})")
         name = names[0]
     return cfg if name is None else passenger_config(cfg, name)
+
+
+@dataclass(frozen=True)
+class TeamLink:
+    """One passenger of a team of several on the bus: its ``name`` and every passenger's ``names``
+    (the team's order, its own among them)."""
+
+    name: str
+    names: tuple[str, ...]
+
+
+def team_link(cfg: Config, name: str | None) -> TeamLink | None:
+    """Passenger ``name`` of ``cfg``'s team of several (None: no team, or a team of one, which flies
+    on the pair's keys as one passenger; an unknown name is :func:`chosen_passenger`'s to refuse)."""
+    names = tuple(p.name for p in cfg.team.passengers) if has_team(cfg) else ()
+    return TeamLink(name, names) if len(names) > 1 and name in names else None
 
 
 def sole_passenger(cfg: Config, not_yet: str, *, team_of_one: bool = True) -> Config:

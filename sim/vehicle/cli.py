@@ -165,6 +165,8 @@ def _write_port_file(path: Path, port: int) -> None:
               metavar="FILE", help="With --camera: sign its frames with the pair's shared bus key (zenoh.signing_key_file).")
 @click.option("--deck-height", type=click.FloatRange(min=0.0), default=0.0, show_default=True, metavar="METRES",
               help="With --deck: the deck's plane above the carrier's reported position [m].")
+@click.option("--deck-offset", default="0,0", show_default=True, metavar="N,E",
+              help="With --deck: the deck's centre from the carrier's reported position [m] north, east (a team's slot).")
 @click.option("--deck-radius", type=click.FloatRange(min=0.0, min_open=True), default=0.5, show_default=True,
               metavar="METRES", help="With --deck: the deck's radius round the carrier's position [m].")
 @click.option("--zenoh-connect", "zenoh_connect", multiple=True, metavar="ENDPOINT",
@@ -220,7 +222,7 @@ def _write_port_file(path: Path, port: int) -> None:
 def mock_vehicle(mavlink_url: str, target_url: str, gcs_url: str | None, speed: float, home: str, start_ned: str,
                  sysid: int, frame: str, params: tuple[str, ...], battery_drain_s: float | None,
                  battery_min_pct: float | None, deck_pair: str | None, deck_truth: bool, camera: bool,
-                 camera_private_key: Path | None, camera_shared_key: Path | None, deck_height: float, deck_radius: float,
+                 camera_private_key: Path | None, camera_shared_key: Path | None, deck_height: float, deck_offset: str, deck_radius: float,
                  zenoh_connect: tuple[str, ...], zenoh_listen: tuple[str, ...], wind: str, estimate_error: float, ideal: bool, position_noise: float, loss_in: float,
                  loss_out: float, latency_ms: float, jitter_ms: float, blackouts: tuple[str, ...],
                  refuse_arming: str | None, refuse_offboard: str | None, lose_position_s: float | None, seed: int, signing_key: Path | None, port_file: Path | None,
@@ -252,7 +254,8 @@ def mock_vehicle(mavlink_url: str, target_url: str, gcs_url: str | None, speed: 
         wind_ned_m_s=_floats(wind, 3, "--wind"), position_noise_m=position_noise,  # type: ignore[arg-type]
         estimate_error=estimate_error, lockstep=lockstep, lockstep_watchdog_wall_s=lockstep_watchdog_s,
         lockstep_max_speed=lockstep_max_speed, passenger_gnss=passenger_gnss_of(world_config),
-        deck=None if deck_pair is None else DeckSpec(height_m=deck_height, radius_m=deck_radius))
+        deck=None if deck_pair is None else DeckSpec(height_m=deck_height, radius_m=deck_radius,
+                                                      offset_ne_m=_floats(deck_offset, 2, "--deck-offset")))  # type: ignore[arg-type]
     run(options, port_file, status_every, deck=None if deck_pair is None else _deck_bus(deck_pair, zenoh_connect, zenoh_listen),
         summary_path=summary_path, deck_truth=deck_truth, camera=camera_of(world_config, camera, deck_pair),
         camera_signer=camera_signer(camera_private_key, camera_shared_key, deck_pair, camera))

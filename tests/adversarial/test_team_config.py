@@ -3,7 +3,8 @@ passengers on one slot, slots that overlap, a target with no passenger, a duplic
 slot that does not exist, a passenger with no target, a fact the team declares stated again.
 ``marsupial run`` refuses each before anything is opened, exit 2, naming the field (in process;
 the four a team most needs refused also through the real process); ``--passenger`` is checked the same way,
-and ``demo`` and ``carrier`` refuse a team they cannot fly yet."""
+``demo`` refuses what a team's demo does not fly, and ``carrier`` and ``run`` refuse one key per
+robot on a team's bus."""
 from __future__ import annotations
 
 import subprocess
@@ -103,16 +104,25 @@ def test_run_help_says_what_passenger_does(capsys: pytest.CaptureFixture[str]) -
     assert "Refused (exit 2) for a file without a [team]" in text
 
 
-def test_the_demo_refuses_a_team_it_cannot_fly_yet(tmp_path: Path) -> None:
-    out = subprocess.run([sys.executable, "-m", "mission.cli", "demo", "--config", str(TEAM_PATH), "--log-root",
-                          str(tmp_path / "demo")], capture_output=True, text=True, timeout=60)
-    assert out.returncode == 2 and "a team of 2 passengers is not flown by demo yet" in out.stderr, out.stderr
-    assert "error: team.passengers = ['alpha', 'bravo']" in out.stderr and "Traceback" not in out.stderr
+def test_the_demo_refuses_what_a_team_does_not_fly(tmp_path: Path) -> None:
+    out = subprocess.run([sys.executable, "-m", "mission.cli", "demo", "--config", str(TEAM_PATH), "--pairs", "2",
+                          "--log-root", str(tmp_path / "demo")], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 2 and "error: --pairs = 2: a team's demo flies one team" in out.stderr, out.stderr
+    assert "Traceback" not in out.stderr
     assert not (tmp_path / "demo").exists()  # refused before anything started
 
 
-def test_the_carrier_refuses_a_team_it_cannot_drive_yet(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    code = main(["carrier", str(TEAM_PATH), "--zenoh-listen", "tcp/127.0.0.1:9", "--summary", str(tmp_path / "c.json")])
+@pytest.mark.parametrize("command", ["carrier", "run"])
+def test_one_key_per_robot_is_refused_for_a_team_of_several(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                            command: str) -> None:
+    from mission.config.keys import write_key_pair
+
+    write_key_pair(tmp_path / "own.key", tmp_path / "own.pub")
+    write_key_pair(tmp_path / "peer.key", tmp_path / "peer.pub")
+    keys = ["--zenoh-private-key", str(tmp_path / "own.key"), "--zenoh-peer-key", str(tmp_path / "peer.pub")]
+    extra = ["--summary", str(tmp_path / "c.json")] if command == "carrier" else [
+        "--passenger", "alpha", "--log-dir", str(tmp_path / "log")]
+    code = main([command, str(TEAM_PATH), "--zenoh-listen", "tcp/127.0.0.1:9", *keys, *extra])
     err = capsys.readouterr().err
-    assert code == 2 and "error: team.passengers = ['alpha', 'bravo']: a team of 2 passengers is not driven by" in err
-    assert not (tmp_path / "c.json").exists()
+    assert code == 2 and "error: zenoh.peer_public_key_file" in err and "one peer key for a team of 2" in err, err
+    assert not (tmp_path / "c.json").exists() and not (tmp_path / "log").exists()

@@ -104,7 +104,7 @@ def flying_pair(tmp_path: Path, *, speed: float = 5.0, config: str = "demo.toml"
         clock = LockstepClock(speed=speed, name="mission", creator_runs=False) if lockstep else ScaledClock(speed)
         log_dir = tmp_path / "flight"
         recorder = FlightRecorder(log_dir, mission_info(mcfg))
-        feed, publisher, link, sources = stack.enter_context(mission_io(mcfg, clock, recorder.tlog_path))
+        feed, publisher, link, sources, _ = stack.enter_context(mission_io(mcfg, clock, recorder.tlog_path))
         vopts = {"target": f"127.0.0.1:{link.port}", "speed": speed, "start_ned": tuple(cfg.scenario.carrier_start),
                  "lockstep": lockstep, **(vehicle or {})}
         v = stack.enter_context(MockVehicle(VehicleOptions(**vopts)))

@@ -39,13 +39,15 @@ LAND_DETECT_XY_M_S = 1.5  # PX4's LNDMC_XY_VEL_MAX: faster than this horizontall
 class DeckSpec:
     """The deck: height above the carrier's position [m], radius [m], the vehicle's half span
     [m] (the band off the edge that is a crash), and the touchdown limits relative to the deck
-    [m/s]: vertical (descending) and horizontal."""
+    [m/s]: vertical (descending) and horizontal; ``offset_ne_m`` [m] north, east: where its
+    centre sits from the carrier's position (a team's slot, ``team.slots[].offset_ned_m``)."""
 
     height_m: float = 0.0
     radius_m: float = 0.5
     edge_m: float = 0.25
     max_vertical_m_s: float = 1.0
     max_horizontal_m_s: float = 0.5
+    offset_ne_m: tuple[float, float] = (0.0, 0.0)
 
     def __post_init__(self) -> None:
         for name in ("radius_m", "max_vertical_m_s", "max_horizontal_m_s"):
@@ -68,6 +70,10 @@ class DeckMotion:
         dt = t_s - self.t_s
         p, v = self.position_ned_m, self.velocity_ned_m_s
         return p[0] + v[0] * dt, p[1] + v[1] * dt, p[2] + v[2] * dt - height_m
+
+
+def _shifted(centre: tuple[float, float, float], offset_ne_m: tuple[float, float]) -> tuple[float, float, float]:
+    return centre[0] + offset_ne_m[0], centre[1] + offset_ne_m[1], centre[2]
 
 
 @dataclass(frozen=True)
@@ -112,13 +118,13 @@ class Deck:
         motion, s = self.motion, self.spec
         if motion is None:
             return after
-        centre = motion.centre(t_s, s.height_m)
+        centre = _shifted(motion.centre(t_s, s.height_m), s.offset_ne_m)
         if self.offset_ne is not None:
             if self.crash is None and after.d_m < centre[2] and after.vd_m_s < motion.velocity_ned_m_s[2]:
                 self.offset_ne = None  # took off: rising from the deck
                 return after
             return self._ride(after, centre, motion.velocity_ned_m_s)
-        was = motion.centre(t_s - dt_s, s.height_m)  # the deck when the step began
+        was = _shifted(motion.centre(t_s - dt_s, s.height_m), s.offset_ne_m)  # the deck when the step began
         off_n, off_e = before.n_m - was[0], before.e_m - was[1]
         if not self.touchdowns and before.on_ground and abs(before.d_m - was[2]) <= START_ON_DECK_M \
                 and math.hypot(off_n, off_e) <= s.radius_m:  # standing on it when it is first known

@@ -148,7 +148,7 @@ def test_state_streams_never_drop_a_sample_in_lockstep(tmp_path, lockstep, expec
         "mavlink.url": "udpin:127.0.0.1:0"})
     clock = LockstepClock(name="test", creator_runs=False) if lockstep else ScaledClock()
     try:
-        with mission_io(cfg, clock) as (_feed, passenger, _link, _sources):  # what `marsupial run` opens
+        with mission_io(cfg, clock) as (_feed, passenger, _link, _sources, _neighbours):  # what `marsupial run` opens
             assert passenger.congestion_control == expected
         session = open_session(cfg.zenoh)
         try:

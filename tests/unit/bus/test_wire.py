@@ -314,3 +314,38 @@ def test_the_wire_names_are_the_only_names_on_the_wire() -> None:
     assert info.value.reason == "missing"
     sent = json.loads(encode_carrier_json(decode_carrier_json(_json()))).keys()
     assert GOOD.keys() <= sent and not sent & {"stamp_s", "velocity_ned_m_s", "yaw_rad", "acceleration_ned_m_s2"}
+
+
+def test_the_announced_target_is_optional_and_absent_from_a_single_pairs_bytes() -> None:
+    s = decode_carrier_json(_json())
+    assert s.target_ned_m is None and "target" not in json.loads(encode_carrier_json(s))  # a single pair's bytes
+    s = decode_carrier_json(_json(target=[24.0, 18.0, -5.0]))
+    np.testing.assert_array_equal(decode_carrier_json(encode_carrier_json(s)).target_ned_m, [24.0, 18.0, -5.0])
+    local = to_local_ned(decode_carrier_json(_json(frame="wgs84", position=[47.0, 8.0, 400.0], target=[1, 2, 3])),
+                         GeoOrigin(47.0, 8.0, 400.0))
+    np.testing.assert_array_equal(local.target_ned_m, [1.0, 2.0, 3.0])
+
+
+@pytest.mark.parametrize(("value", "reason"), [([1.0, 2.0], "shape"), ([0.0, "a", 0.0], "type"),
+                                               ([0.0, 2e7, 0.0], "range")])
+def test_a_bad_target_is_rejected_naming_the_field(value: object, reason: str) -> None:
+    with pytest.raises(WireError) as info:
+        decode_carrier_json(_json(target=value))
+    assert info.value.reason == reason and "target" in str(info.value)
+
+
+def test_a_team_passengers_keys_are_its_own_and_the_wildcard_hears_only_them() -> None:
+    from mission.bus.session import keys, passenger_of, team_status_keys
+    from mission.errors import ConfigError
+
+    k = keys("pair0", "alpha")
+    assert (k.passenger_state, k.passenger_phase, k.passenger_alive) == (
+        "marsupial/pair0/passenger/alpha/state", "marsupial/pair0/passenger/alpha/phase",
+        "marsupial/pair0/passenger/alpha/alive")
+    assert k.carrier_state == keys("pair0").carrier_state and keys("pair0").passenger_state == "marsupial/pair0/passenger/state"
+    assert team_status_keys("pair0") == "marsupial/pair0/passenger/*/state"
+    assert passenger_of(k.passenger_state, "pair0") == "alpha"
+    assert passenger_of(keys("pair0").passenger_state, "pair0") is None
+    assert passenger_of("marsupial/pair0/passenger/a/b/state", "pair0") is None
+    with pytest.raises(ConfigError, match="team.passengers"):
+        keys("pair0", "al/pha")
