@@ -20,12 +20,13 @@ Anchor and separation latch (design decisions; docs/how-it-works.md, facts about
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
 
-from mission.core.law import LawParams, carrier_command, norm, passenger_command, uniform, where_rows
+from mission.core.law import LawParams, carrier_command, dot, norm, passenger_command, uniform, where_rows
 from mission.core.safety import DeckKeepOut, FilterResult, Neighbours, Obstacles, SafetyConfig, filter_velocity
 
 
@@ -160,7 +161,10 @@ def carrier_tick(
     others = model.other_keep_outs
     # (the other targets' keep-outs are the last rows of shared obstacle centres (m, d): TickModel appends them only there)
     if model.filter_carrier and others is not None and len(others) and obstacles is not None and obstacles.centers.ndim == 2:
-        obstacles = keep_outs_at(obstacles, len(others), x_c[..., :obstacles.centers.shape[-1]], model.carrier_safety.margin_m)
+        k, lim = obstacles.centers.shape[-1], model.carrier_safety
+        brake = lim.max_accel_m_s2 * dt_s if lim.max_accel_m_s2 is not None and dt_s is not None else math.inf
+        obstacles = keep_outs_at(obstacles, len(others), x_c[..., :k], lim.margin_m,
+                                 None if u_prev is None else u_prev[..., :k], lim.cbf_gain, brake)
     if model.planar_carrier and x_c.shape[-1] == 3:
         in_plane = u[..., :2]
         planar = filter_velocity(x_c[..., :2], in_plane, obstacles, model.carrier_safety,
@@ -185,7 +189,8 @@ def default_carrier_obstacles(obstacles: Obstacles, target: np.ndarray, planar: 
     return Obstacles(np.concatenate([centers, centre[..., None, :]], axis=-2), np.append(obs.radii, keepout_m))
 
 
-def keep_outs_at(obstacles: Obstacles, count: int, x_m: np.ndarray, margin_m: float) -> Obstacles:
+def keep_outs_at(obstacles: Obstacles, count: int, x_m: np.ndarray, margin_m: float, u_prev: np.ndarray | None = None,
+                 gain: float = 1.0, brake_m_s: float = math.inf) -> Obstacles:
     """``obstacles`` with their last ``count`` (the other targets' keep-outs, :func:`target_keep_outs`)
     shrunk where the carrier at ``x_m`` [m] (one state (d,) or a batch (B, d), in the obstacles'
     dimension d) is inside one (radius + ``margin_m`` [m] beyond its distance): radius ``min(r, |x -
@@ -193,11 +198,26 @@ def keep_outs_at(obstacles: Obstacles, count: int, x_m: np.ndarray, margin_m: fl
     carrier begins a leg wherever the last leg left it, often at the previous target's guard
     circle, inside that target's keep-out: pushed out at the barrier's rate, ``cbf_gain`` x its
     depth, its command jumped past its acceleration limit (1.2 m/s in a tick) under the riding
-    passenger (docs/recovery.md, "Monte-Carlo of the cycle"). For a batch the radii come back per
-    state, (B, m). Unchanged (the same object) where every state is outside all."""
+    passenger (docs/recovery.md, "Monte-Carlo of the cycle").
+
+    With the last command ``u_prev`` [m/s] (same shape as ``x_m``), the barrier's gain ``gain``
+    [1/s] and ``brake_m_s`` [m/s] the most its speed may fall in one step (acceleration limit x
+    step), a keep-out the carrier drives into is shrunk further, so that its row (``2 (x - o) . u
+    >= -gain h``) asks the inward speed to fall by at most ``brake_m_s`` this step: a team's
+    carrier handed over at one target's separation circle, driving at it at 1.6 m/s, has that
+    target's keep-out as a new row, which stopped it dead in one step under the next riding
+    passenger (docs/team.md). The carrier then brakes at its limit; each target's P3 guard still
+    caps it (:mod:`mission.carrier.guard`). For a batch the radii come back per state, (B, m).
+    Unchanged (the same object) where every state is outside all."""
     radii = obstacles.radii[..., -count:]
-    dist = norm(x_m[..., None, :] - obstacles.centers[..., -count:, :])
-    fitted = np.minimum(radii, np.maximum(dist - margin_m, 0.0))
+    diff = x_m[..., None, :] - obstacles.centers[..., -count:, :]
+    dist = norm(diff)
+    reach = dist
+    if u_prev is not None and math.isfinite(brake_m_s):
+        inward = np.maximum(-dot(diff, np.asarray(u_prev, dtype=float)[..., None, :]) / np.maximum(dist, 1e-9), 0.0)
+        allowed = np.maximum(inward - brake_m_s, 0.0)
+        reach = np.sqrt(np.maximum(dist ** 2 - 2.0 * dist * allowed / gain, 0.0))
+    fitted = np.minimum(radii, np.maximum(reach - margin_m, 0.0))
     if np.all(fitted >= radii):
         return obstacles
     kept = obstacles.radii[..., :-count]

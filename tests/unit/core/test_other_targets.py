@@ -114,3 +114,36 @@ def test_the_batch_path_holds_a_carrier_inside_another_keep_out_as_one_state_doe
         x = x + u * dt
         closest = np.minimum(closest, np.linalg.norm(x[:2, :2] - t1[:2], axis=1))
     assert (closest >= start - 1e-3).all(), (closest, start)
+
+
+def test_a_carrier_driving_into_another_keep_out_brakes_at_its_limit_not_in_one_step() -> None:
+    """A team's hand-over: the carrier at the edge of the target it just served (now another
+    target's keep-out for the next leg), driving straight at it at 1.6 m/s. The shrink leaves its
+    row asking the inward speed to fall by at most the acceleration limit a step (before: 1.6 ->
+    0.03 m/s in one step under the next riding passenger); it stops, and from rest it is held
+    where it stands as before."""
+    cfg = load_config(CONFIGS / "cycle.toml")
+    t1, t2 = (np.asarray(t, dtype=float) for t in cfg.scenario.legs())
+    model = carrier_model(cfg, target=t2)
+    others = model.other_keep_outs
+    assert others is not None
+    a_max = model.carrier_safety.max_accel_m_s2
+    assert a_max is not None
+    dt = 1.0 / cfg.carrier.rate_hz
+    centre = np.array([*others.centers[0][:2], 0.0])
+    edge = float(others.radii[0]) + cfg.safety.margin_m
+    inward = np.array([1.0, 0.0, 0.0])
+    x = centre - (edge + 0.01) * inward
+    u = 1.6 * inward
+    dist = []
+    for _ in range(int(4.0 / dt)):
+        nxt = np.asarray(carrier_tick(x, False, model, u_prev=u, dt_s=dt).u, dtype=float)
+        radial = (centre - x) / float(np.linalg.norm(centre - x))
+        assert float(np.dot(u - nxt, radial)) <= a_max * dt + 1e-9, (u, nxt)  # the inward speed falls at the limit
+        assert float(np.linalg.norm(nxt - u)) <= 1.5 * a_max * dt, (u, nxt)  # the law's turn adds a little
+        u = nxt
+        x = x + u * dt
+        dist.append(float(np.linalg.norm(x[:2] - centre[:2])))
+    assert min(dist) >= edge - 1.6 ** 2 / (2 * a_max) - 0.1, min(dist)  # braked at the limit, no more
+    last = np.array(dist[-int(1.0 / dt):])
+    assert (np.diff(last) >= -1e-3 * dt).all(), last  # stopped going in: it slides round, towards its target
