@@ -252,7 +252,7 @@ class MissionController:
             float("nan") if c is None else c.age_s, "" if v is None else v.mode, bool(v is not None and v.armed),
             u_ref=st.u_ref, anchor=st.anchor, course=None if st.recovery is None else st.recovery.course,
             events=events, yaw_c=None if c is None else c.yaw_rad,
-            vehicle_age_s=float("nan") if v is None else v.position_age_s))
+            vehicle_age_s=float("nan") if v is None else v.position_age_s, relnav=obs.relative))
 
     def run(self) -> MissionOutcome:
         """Fly the mission; returns its outcome (never raises for a vehicle-side failure)."""

@@ -17,7 +17,10 @@ and once a second of mission clock (and when the anchor latches, or the recovery
 to FLU), the scene (target, obstacles with their radii, the b c
 circle in the dock's plane, the dock point, both robots, the latched anchor, and while a recovery
 brings the passenger home its holdoff point and glide path: ``foxglove.SceneUpdate``), and the
-carrier feed's and the link's counters. Topics and schemas: :mod:`mission.flightdata.topics`.
+carrier feed's and the link's counters. With ``[relnav]`` enabled, each row that carries the
+relative estimator's view also becomes a ``relnav`` message (:func:`relnav_message`: the estimate,
+its covariance and counts); the channel is made on the first such row, so a flight without it has
+none. Topics and schemas: :mod:`mission.flightdata.topics`.
 The camera's frames, when a marker feed hands them over (:meth:`MissionLog.camera`), go to the
 camera's channels (:mod:`mission.flightdata.camera_log`).
 """
@@ -32,10 +35,13 @@ import numpy as np
 
 from mission.core.docking import DockingGeometry, gate_point, holdoff_point
 from mission.flightdata.camera_log import CameraLog
-from mission.flightdata.topics import MAP_FRAME, MISSION_CHANNELS, WORLD_FRAME, flu_frame, frame, topics
+from mission.flightdata.topics import (MAP_FRAME, MISSION_CHANNELS, RELNAV_CHANNELS, WORLD_FRAME, flu_frame, frame,
+                                      topics)
 from mission.flightdata.writer import DataLog, LiveAddress, timestamp
 from mission.phases import Phase
+from mission.phases.types import RelativeView
 from mission.record.table import COLUMNS, TickRow
+from mission.relnav.kalman import B_, C_, W_
 from mission.vision.camera import SeenFrame
 
 PHASES = [p.value for p in Phase]
@@ -81,6 +87,39 @@ def _distance(a: Any, b: Any) -> float | None:
     return d if _finite(d) else None
 
 
+def _block(p: Any, rows: slice, cols: slice) -> list[float] | None:
+    """The ``rows`` x ``cols`` block of the matrix ``p`` row-major, or None when any is not finite."""
+    values = [float(v) for v in np.asarray(p[rows, cols]).ravel().tolist()]
+    return values if all(_finite(v) for v in values) else None
+
+
+def relnav_message(view: RelativeView) -> dict[str, Any]:
+    """The ``marsupial.RelativeEstimate`` message of one tick's :class:`RelativeView`: its
+    fields, and from its ``estimate`` (when it has one; else null) the velocities, the
+    covariance's blocks (state order: carrier position, velocity, bias) and the counts."""
+    e = view.estimate
+    out: dict[str, Any] = {
+        "sample_t_s": None, "position": vector(view.position_ned_m), "velocity": None, "carrier_position": None,
+        "carrier_velocity": None, "bias": vector(view.bias_ned_m), "pending": vector(view.pending_ned_m),
+        "position_covariance_m2": None, "velocity_covariance_m2_s2": None, "bias_covariance_m2": None,
+        "position_bias_covariance_m2": None, "position_sigma": None, "position_sigma_m": clean(float(view.position_sigma_m)),
+        "converged": bool(view.converged), "since_marker_s": clean(float(view.since_marker_s)),
+        "fused": None, "rejected": None, "too_old": None, "too_new": None, "resets": None}
+    if e is None:
+        return out
+    p = e.covariance
+    diagonal = np.diag(p)[C_].tolist()
+    out.update({
+        "sample_t_s": clean(float(e.t_s)), "velocity": vector(e.velocity_ned_m_s),
+        "carrier_position": vector(e.carrier_position_ned_m), "carrier_velocity": vector(e.carrier_velocity_ned_m_s),
+        "position_covariance_m2": _block(p, C_, C_), "velocity_covariance_m2_s2": _block(p, W_, W_),
+        "bias_covariance_m2": _block(p, B_, B_), "position_bias_covariance_m2": _block(p, C_, B_),
+        "position_sigma": vector([math.sqrt(v) if v >= 0.0 else math.nan for v in diagonal]),
+        "fused": dict(e.counts.fused), "rejected": dict(e.counts.rejected), "too_old": e.counts.too_old,
+        "too_new": e.counts.too_new, "resets": e.counts.resets})
+    return out
+
+
 def bc_circle(info: dict[str, Any], points: int = 72) -> np.ndarray:
     """The points (points, 3) [m] NED where the dock point is b c from the target: the circle of
     the sphere ``|x_t - dock| = b c`` in the dock's plane (carrier plane + dock offset), the
@@ -119,6 +158,7 @@ class MissionLog(DataLog):
         self._docking = docking
         self._course: np.ndarray | None = None  # the recovery's course the scene was last drawn for
         self.camera_log = CameraLog(pair, self.channel, self.log_ns)
+        self._relnav_ch: Any = None  # made on the first row with a relative estimate
 
     # ---------------------------------------------------------------- RecordSink
     def tick(self, row: TickRow) -> None:
@@ -193,6 +233,11 @@ class MissionLog(DataLog):
                                  "position": None if sp is None else vector(sp.position_ned_m),
                                  "acceleration": None if sp is None else vector(sp.acceleration_ned_m_s2),
                                  "yaw_rad": None if sp is None else clean(sp.yaw_rad)}, log_time=t)
+        if row.relnav is not None:
+            if self._relnav_ch is None:
+                (key, _, schema), = RELNAV_CHANNELS
+                self._relnav_ch = self.channel(topics(self.pair, RELNAV_CHANNELS)[key], schema)
+            self._relnav_ch.log(relnav_message(row.relnav), log_time=t)
         values = row.values()
         values[0] = round(row.t_s, 4)  # as record.csv writes it
         self.ch["record"].log(dict(zip(COLUMNS, [None if type(v) is float and not _finite(v) else v for v in values])),

@@ -15,6 +15,8 @@ from __future__ import annotations
 
 from typing import Any
 
+from mission.relnav.estimator import KINDS
+
 MAP_FRAME = "map"
 WORLD_FRAME = "map_ned"
 BODY_FRD = "base_link_frd"
@@ -45,6 +47,11 @@ CAMERA_CHANNELS = (
     ("calibration", "camera/calibration", "foxglove.CameraCalibration"),
     ("detections", "camera/detections", "foxglove.ImageAnnotations"),
     ("mount_tf", "tf/camera", "foxglove.FrameTransform"),
+)
+# The relative estimator's word on the deck each tick (``[relnav]`` enabled: docs/relnav.md); the
+# channel exists only in flights that had an estimate.
+RELNAV_CHANNELS = (
+    ("relnav", "relnav", "marsupial.RelativeEstimate"),
 )
 CARRIER_CHANNELS = (
     ("tf", "carrier/tf", "foxglove.FrameTransform"),
@@ -91,6 +98,16 @@ def _object(title: str, description: str, properties: dict[str, Any]) -> dict[st
 
 
 _COUNTERS = {"type": "object", "additionalProperties": True}
+
+
+def _matrix(description: str) -> dict[str, Any]:
+    return {"type": ["array", "null"], "items": {"type": "number"}, "minItems": 9, "maxItems": 9,
+            "description": description + " (3 x 3, row-major, NED axes n, e, d)"}
+
+
+def _counts(description: str) -> dict[str, Any]:
+    return {"type": "object", "description": description,
+            "properties": {k: {"type": "integer"} for k in KINDS}}
 
 JSON_SCHEMAS: dict[str, dict[str, Any]] = {
     "marsupial.FlightRecord": _object(
@@ -143,6 +160,29 @@ JSON_SCHEMAS: dict[str, dict[str, Any]] = {
         "guard_active": {"type": "boolean", "description": "the P3 guard cut the command on this step"},
         "guard_active_ticks": {"type": "integer", "description": "steps so far on which it did"},
         "target_distance_m": _number("[m] |x_t - x_c|")}),
+    "marsupial.RelativeEstimate": _object(
+        "marsupial.RelativeEstimate", "The relative estimator's estimate this tick (mission.relnav.inputs.RelativeEstimate, "
+        "docs/relnav.md); vectors in NED axes, relative ones with no origin", {
+            "sample_t_s": _number("[s] mission clock: the vehicle's own sample the estimate is at"),
+            "position": _vector("[m] the carrier's reference point minus the vehicle's (deck minus vehicle)"),
+            "velocity": _vector("[m/s] its rate: the carrier's velocity minus the vehicle's"),
+            "carrier_position": _vector("[m] the carrier's reference point in the passenger's GNSS frame"),
+            "carrier_velocity": _vector("[m/s] the carrier's velocity estimate"),
+            "bias": _vector("[m] the carrier's GNSS frame minus the passenger's"),
+            "pending": _vector("[m] the part of the estimate's jumps the phases' carrier has not taken in yet"),
+            "position_covariance_m2": _matrix("[m^2] covariance of position (and of carrier_position)"),
+            "velocity_covariance_m2_s2": _matrix("[m^2/s^2] covariance of carrier_velocity (and of velocity)"),
+            "bias_covariance_m2": _matrix("[m^2] covariance of bias"),
+            "position_bias_covariance_m2": _matrix("[m^2] cross-covariance, rows position, columns bias"),
+            "position_sigma": _vector("[m] standard deviation of position per axis (square roots of the diagonal)"),
+            "position_sigma_m": _number("[m] the position's largest standard deviation (of its covariance's eigenvalues)"),
+            "converged": {"type": "boolean", "description": "position_sigma_m below relnav.converged_sigma_m"},
+            "since_marker_s": _number("[s] since the capture of the newest marker fused (null: none yet)"),
+            "fused": _counts("measurements fused so far, by kind"),
+            "rejected": _counts("measurements the gate rejected so far, by kind"),
+            "too_old": {"type": "integer", "description": "measurements older than the history, dropped"},
+            "too_new": {"type": "integer", "description": "measurements stamped beyond the history ahead, dropped"},
+            "resets": {"type": "integer", "description": "re-initialisations by a run of rejected markers"}}),
     "marsupial.PassengerFeed": _object("marsupial.PassengerFeed", "The carrier's passenger feed counters",
                                        {"received": {"type": "integer"}, "accepted": {"type": "integer"}}),
 }

@@ -124,7 +124,7 @@ class RelativeDeck:
     def _view(self, e: RelativeEstimate, bias: np.ndarray) -> RelativeView:
         return RelativeView(position_ned_m=np.asarray(e.position_ned_m, float), bias_ned_m=bias,
                             pending_ned_m=self.pending.copy(), position_sigma_m=e.position_sigma_m,
-                            converged=e.converged, since_marker_s=e.since_marker_s)
+                            converged=e.converged, since_marker_s=e.since_marker_s, estimate=e)
 
 
 def _usable(m: RelativePosition) -> bool:

@@ -25,6 +25,7 @@ from mission.core.setpoint import Setpoint
 from mission.core.tick import TickModel
 from mission.core.tracking import TrackingGains
 from mission.relnav.estimator import RelnavParams
+from mission.relnav.inputs import RelativeEstimate
 
 TELEMETRY_SILENT_S = 0.4  # position older than this (PX4 streams it at 30 Hz): the link went quiet [s]
 
@@ -119,7 +120,9 @@ class RelativeView:
     the carrier's GNSS frame over the passenger's [m]; ``pending_ned_m`` the part of the relative
     position's jumps the carrier's state the phases see has not taken in yet [m] (let through at most at
     ``relnav.correction_rate_m_s``); ``position_sigma_m`` [m] and ``converged`` as the estimate's;
-    ``since_marker_s`` [s] since the capture of the newest marker fused (inf: none yet)."""
+    ``since_marker_s`` [s] since the capture of the newest marker fused (inf: none yet);
+    ``estimate`` the estimator's whole output the above comes from (its covariance, velocities and
+    counts: what the flight data logs; the phases read the fields above; None: not given)."""
 
     position_ned_m: np.ndarray
     bias_ned_m: np.ndarray
@@ -127,6 +130,7 @@ class RelativeView:
     position_sigma_m: float
     converged: bool
     since_marker_s: float
+    estimate: RelativeEstimate | None = None
 
 
 @dataclass(frozen=True)

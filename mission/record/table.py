@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from mission.core.setpoint import Setpoint
+from mission.phases.types import RelativeView
 
 VEC = ("n", "e", "d")
 COLUMNS = (
@@ -52,8 +53,10 @@ class TickRow:
     vector NED) while a recovery brings the passenger home (None otherwise); events what
     happened on this tick (phase change first), as text; yaw_c, yaw_p the carrier's and the
     vehicle's heading [rad] from north (None: not known; the flight data's transforms, not the
-    CSV). The CSV holds the columns of :data:`COLUMNS`; the arrays are never written to after the row
-    is made (a sink may read them on another thread).
+    CSV); relnav the relative estimator's view of this tick (``[relnav]`` enabled and the
+    estimate begun; None otherwise: the flight data's relnav channel, not the CSV). The CSV holds
+    the columns of :data:`COLUMNS`; the arrays are never written to after the row is made (a sink
+    may read them on another thread).
     """
 
     t_s: float
@@ -79,6 +82,7 @@ class TickRow:
     yaw_c: float | None = None
     yaw_p: float | None = None
     vehicle_age_s: float = float("nan")
+    relnav: RelativeView | None = None
 
     def values(self) -> list[Any]:
         """The row's values in the order of :data:`COLUMNS` (vectors flattened, NaN for None)."""

@@ -168,9 +168,11 @@ class RelativeEstimator:
         sigma = float(math.sqrt(max(float(np.max(np.linalg.eigvalsh(p[kalman.C_, kalman.C_]))), 0.0)))
         own = self._own[-1] if self._own else OwnSample(math.nan, np.full(3, math.nan), np.full(3, math.nan))
         now = own.t_s
+        covariance = p.copy()
+        covariance.flags.writeable = False  # the estimate is a record: its readers (the flight data's thread) share it
         return RelativeEstimate(
             t_s=now, position_ned_m=x[kalman.C_] - own.position_ned_m, velocity_ned_m_s=x[kalman.W_] - own.velocity_ned_m_s,
-            bias_ned_m=x[kalman.B_].copy(), covariance=p.copy(), position_sigma_m=sigma,
+            bias_ned_m=x[kalman.B_].copy(), covariance=covariance, position_sigma_m=sigma,
             converged=bool(self._own) and sigma < prm.converged_sigma_m,
             since_marker_s=now - self._marker_t_s if self._own else math.inf, counts=self.counts(),
             carrier_position_ned_m=x[kalman.C_].copy(), carrier_velocity_ned_m_s=x[kalman.W_].copy())
