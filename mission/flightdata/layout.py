@@ -7,7 +7,8 @@ transforms; under it the passenger's camera as the marker feed saw it, with the 
 drawn on it (empty in a flight without the marker feed). Right, top to bottom: the phase, the safety filter's activity and the carrier's mode
 over time (State Transitions); the distances |e_pc|, |e_tc|, |e_pt| with b c and the carrier's own
 distance to the target; the law's command and the safe command (north and east) with the
-filter's change; the log (phase changes and events). The carrier's rows come from
+filter's change; the relative estimate's standard deviation (``[relnav]``: the deck from the
+vehicle, its largest and per axis; empty in a flight without it); the log (phase changes and events). The carrier's rows come from
 ``carrier.mcap``: open it with ``flight.mcap`` (their log times are both epoch time). ``python -m mission.flightdata.layout``
 rewrites the file (a test holds the two together).
 """
@@ -18,7 +19,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from mission.flightdata.topics import CAMERA_CHANNELS, CARRIER_CHANNELS, MAP_FRAME, topics
+from mission.flightdata.topics import CAMERA_CHANNELS, CARRIER_CHANNELS, MAP_FRAME, RELNAV_CHANNELS, topics
 
 LAYOUT_FILE = Path(__file__).resolve().parents[2] / "configs" / "foxglove" / "marsupial.json"
 
@@ -30,6 +31,7 @@ def layout(pair: str = "pair0") -> dict[str, Any]:
     t = topics(pair)
     c = topics(pair, CARRIER_CHANNELS)
     cam = topics(pair, CAMERA_CHANNELS)
+    rel = topics(pair, RELNAV_CHANNELS)["relnav"]
     three_d = fl.ThreeDeePanel(title="marsupial: carrier, passenger, target (map = ENU above map_ned = NED)",
                                config=fl.ThreeDeeConfig(
                                    follow_tf=MAP_FRAME, fixed_frame=MAP_FRAME, follow_mode="follow-none",
@@ -61,10 +63,17 @@ def layout(pair: str = "pair0") -> dict[str, Any]:
                series(f"{t['command']}.safe.e", "safe e", "#f5774d"),
                series(f"{t['safety']}.change_m_s", "|safe - law|", "#9cd86b")],
         is_synced=True, show_legend=True, legend_display="top", y_axis_label="m/s"))
+    relnav = fl.PlotPanel(title="relative estimate [m]: standard deviation of the deck from the vehicle", config=fl.PlotConfig(
+        paths=[series(f"{rel}.position_sigma_m", "sigma (largest)", "#f7df71"),
+               series(f"{rel}.position_sigma.n", "sigma n", "#4e98e2", "dashed"),
+               series(f"{rel}.position_sigma.e", "sigma e", "#f5774d", "dashed"),
+               series(f"{rel}.position_sigma.d", "sigma d", "#9cd86b", "dashed")],
+        is_synced=True, show_legend=True, legend_display="top", y_axis_label="m"))
     log = fl.LogPanel(title="mission log", config=fl.LogConfig(topic_to_render=t["log"], show_name=False))
     right = fl.SplitContainer(direction="column", items=[
         fl.SplitItem(proportion=1, content=states), fl.SplitItem(proportion=2, content=distances),
-        fl.SplitItem(proportion=2, content=command), fl.SplitItem(proportion=1.5, content=log)])
+        fl.SplitItem(proportion=2, content=command), fl.SplitItem(proportion=1.5, content=relnav),
+        fl.SplitItem(proportion=1.5, content=log)])
     camera = fl.ImagePanel(title="passenger camera: the tags the detector found", config=fl.ImageConfig(
         image_mode=fl.ImageModeConfig(image_topic=cam["image"], calibration_topic=cam["calibration"],
                                       annotations={cam["detections"]: fl.ImageAnnotationSettings(visible=True)})))

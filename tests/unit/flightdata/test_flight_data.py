@@ -18,7 +18,7 @@ from mission.core.setpoint import Setpoint
 from mission.errors import ConfigError
 from mission.flightdata.mission_log import MissionLog, bc_circle
 from mission.flightdata.read import read_messages
-from mission.flightdata.topics import CAMERA_CHANNELS, CARRIER_CHANNELS, MISSION_CHANNELS, topics
+from mission.flightdata.topics import CAMERA_CHANNELS, CARRIER_CHANNELS, MISSION_CHANNELS, RELNAV_CHANNELS, topics
 from mission.flightdata.writer import LiveAddress, is_loopback, parse_live
 from mission.model import docking_geometry
 from mission.record.recorder import FlightRecorder
@@ -138,6 +138,8 @@ def test_the_shipped_layout_is_the_generated_one_and_names_only_real_topics_and_
                                                                     topics("pair0", CARRIER_CHANNELS).values())}
     schema_of |= {topic: schema for (_, name, schema), topic in zip(CAMERA_CHANNELS,
                                                                     topics("pair0", CAMERA_CHANNELS).values())}
+    schema_of |= {topic: schema for (_, name, schema), topic in zip(RELNAV_CHANNELS,
+                                                                    topics("pair0", RELNAV_CHANNELS).values())}
     paths = _paths(json.loads(text))
     assert len(paths) >= 12
     for path in paths:
@@ -147,7 +149,7 @@ def test_the_shipped_layout_is_the_generated_one_and_names_only_real_topics_and_
             assert field.split(".")[0] in JSON_SCHEMAS[schema_of[topic]]["properties"], path
     assert {"/pair0/scene", "/pair0/log", "/pair0/distances.e_pc_m", "/pair0/command.safe.n",
             "/pair0/carrier/status.mode", "/pair0/carrier/status.target_distance_m", "/pair0/camera/image",
-            "/pair0/camera/calibration", "/pair0/camera/detections"} <= set(paths)
+            "/pair0/camera/calibration", "/pair0/camera/detections", "/pair0/relnav.position_sigma_m"} <= set(paths)
 
 
 def _paths(node) -> list[str]:
