@@ -17,19 +17,16 @@ import json
 import os
 import secrets
 import shutil
-import signal
 import socket
 import subprocess
 import sys
 import tempfile
-import threading
 import time
 from contextlib import ExitStack
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import click
-from tqdm import tqdm
 
 from mission.bus.auth import unsigned_warning
 from mission.bus.bridge import open_session
@@ -39,18 +36,14 @@ from mission.config.schema import CarrierRos2Section, Config, ZenohSection, load
 from mission.errors import MarsupialError
 from mission.flightdata.writer import DEFAULT_LIVE, LiveAddress, is_loopback, parse_live
 from mission.lifetime import supervise_children
-from mission.phases import Phase
 from sim.net import free_port, stop_process
+from sim.progress import watch_missions
 from sim.robots.truth import demo_truth
 from sim.team_demo import child_command as _python_cli, run_team_demo, team_lines
 from sim.vehicle.options import VehicleOptions
 
 DEFAULT_CONFIG = Path(__file__).resolve().parents[1] / "configs" / "demo.toml"
 # The nominal path of a mission; HOLD and LAND are alternatives of the same step.
-PHASE_STEPS = [(p.value,) for p in Phase if p not in (Phase.ABORT, Phase.HOLD, Phase.LAND, Phase.DONE)] + [
-    (Phase.HOLD.value, Phase.LAND.value), (Phase.DONE.value,)]
-
-
 @dataclass
 class PairRun:
     """The processes and state of one pair in the demo."""
@@ -64,63 +57,6 @@ class PairRun:
     def summary(self) -> dict:
         path = self.log_dir / "summary.json"
         return json.loads(path.read_text()) if path.exists() else {}
-
-
-def phase_step(phase: str) -> int | None:
-    """1-based step of ``phase`` on the nominal path (HOLD and LAND are the same step), or None
-    for ABORT or an unknown name."""
-    for i, names in enumerate(PHASE_STEPS, start=1):
-        if phase in names:
-            return i
-    return None
-
-
-class PairProgress:
-    """The demo's live display: one bar per pair on a terminal, whose count never goes back
-    (a phase skipped, e.g. ARMING when already armed, jumps forward; an abort leaves the bar
-    where it was and names the reason); plain ``pair: line`` phase lines otherwise."""
-
-    def __init__(self, names: list[str], tty: bool, out=None) -> None:
-        self.tty, self.out = tty, out or sys.stdout
-        self._lock = threading.Lock()
-        self.steps: dict[str, int] = {n: 0 for n in names}
-        self.bars: dict[str, tqdm] = {}
-        if tty:
-            width = max(len(n) for n in names)
-            for i, name in enumerate(names):
-                self.bars[name] = tqdm(total=len(PHASE_STEPS), desc=f"{name:<{width}}", position=i, file=self.out,
-                                       leave=True, bar_format="{desc} {n_fmt}/{total_fmt} |{bar:20}| {elapsed}{postfix}")
-
-    def update(self, pair: str, phase: str, line: str) -> None:
-        with self._lock:
-            step = phase_step(phase)
-            if step is not None:
-                self.steps[pair] = max(self.steps[pair], step)
-            if not self.tty:
-                self.out.write(f"{pair}: {line}\n")
-                self.out.flush()
-                return
-            bar = self.bars[pair]
-            bar.n = self.steps[pair]
-            bar.set_postfix_str(phase if step is not None else line.split("] ", 1)[-1], refresh=False)
-            bar.refresh()
-
-    def close(self) -> None:
-        for bar in self.bars.values():
-            bar.close()
-
-
-def _follow(pair: PairRun, progress: PairProgress) -> None:
-    """Read the mission's stdout: phase lines move the pair's progress."""
-    stream = pair.procs["mission"].stdout
-    assert stream is not None
-    for raw in stream:
-        line = raw.rstrip()
-        pair.lines.append(line)
-        if "] phase " in line:
-            phase = line.split("] phase ", 1)[1].split()[0]
-            pair.phase = phase
-            progress.update(pair.name, phase, line.strip())
 
 
 def start_carrier_robot(kind: str, name: str, zenoh_ep: str, speed: float, start: str, stack: ExitStack,
@@ -296,18 +232,7 @@ def run_demo(config: str, speed: float, pairs: int, log_root: Path, plot_path: s
         runs = [start_pair(config, f"pair{i}", zenoh_ep, speed, log_root, stack, quiet, carrier, lockstep, address, bus_key,
                            mav_key, seed + i, estimate_error)
                 for i, address in enumerate(live_addresses(live, pairs))]
-        display = PairProgress([p.name for p in runs], tty=progress and sys.stdout.isatty())
-        stack.callback(display.close)
-        readers = [threading.Thread(target=_follow, args=(p, display), daemon=True) for p in runs]
-        for r in readers:
-            r.start()
-        deadline = time.monotonic() + timeout_s
-        for p in runs:
-            try:
-                p.procs["mission"].wait(timeout=max(deadline - time.monotonic(), 0.1))
-            except subprocess.TimeoutExpired:
-                p.procs["mission"].send_signal(signal.SIGINT)
-        for r in readers:
+        for r in watch_missions(runs, timeout_s, progress, stack):
             r.join(timeout=5.0)
     summaries = []
     for p in runs:

@@ -21,7 +21,6 @@ import json
 import socket
 import subprocess
 import sys
-import threading
 import time
 from contextlib import ExitStack
 from pathlib import Path
@@ -34,6 +33,7 @@ from mission.config.schema import Config, ZenohSection, load_config
 from mission.errors import ConfigError
 from mission.lifetime import supervise_children
 from sim.net import free_port, stop_process
+from sim.progress import watch_missions
 
 #: [-] the team's clocks' speed at most: each passenger's mission ticks at 50 Hz of its clock.
 TEAM_MAX_SPEED = 4.0
@@ -96,7 +96,7 @@ def run_team_demo(config: str, speed: float, log_root: Path, timeout_s: float, *
     teammate). What a team's demo does not fly is refused before anything starts
     (:class:`ConfigError` naming the option): several ``pairs``, a ``carrier`` other than the
     built-in robot, a ``live`` view. ``lockstep`` asked for: said on stderr, flown on the scaled clocks."""
-    from sim.demo import PairProgress, PairRun, _follow, throwaway_key
+    from sim.demo import PairRun, throwaway_key
 
     for option, value, ok in (("--pairs", pairs, pairs == 1), ("--carrier", carrier, carrier == "sim"),
                               ("--live", live, live is None)):
@@ -115,17 +115,7 @@ def run_team_demo(config: str, speed: float, log_root: Path, timeout_s: float, *
         stack.callback(close_session, router)
         carrier, runs = start_team(cfg, config, zenoh_ep, speed, log_root, stack, quiet, bus_key, mav_key, seed,
                                    estimate_error, PairRun, lockstep)
-        display = PairProgress([r.name for r in runs], tty=progress and sys.stdout.isatty())
-        stack.callback(display.close)
-        readers = [threading.Thread(target=_follow, args=(r, display), daemon=True) for r in runs]
-        for reader in readers:
-            reader.start()
-        deadline = time.monotonic() + timeout_s
-        for r in runs:
-            try:
-                r.procs["mission"].wait(timeout=max(deadline - time.monotonic(), 0.1))
-            except subprocess.TimeoutExpired:
-                r.procs["mission"].terminate()
+        readers = watch_missions(runs, timeout_s, progress, stack)
         for r in runs:
             try:
                 r.procs["mission"].wait(timeout=30.0)

@@ -10,7 +10,7 @@ from click.testing import CliRunner
 from mission.record.recorder import FlightRecorder
 from mission.cli.run import plot
 from mission.report import event_line
-from sim.demo import PHASE_STEPS, PairProgress, phase_step
+from sim.progress import PHASE_STEPS, PairProgress, phase_step
 
 
 def test_phase_steps_count_hold_and_land_as_one_step():
