@@ -56,6 +56,17 @@ class TeamSection(Section):
     passenger_span_m: float = Field(0.8, gt=0, le=10,
         description=("[m] a passenger's width, propeller tip to tip: two slots' dock points must be this plus twice "
                      "recovery.contact_radius_m apart horizontally (docked anywhere contact allows, they do not touch)"))
+    queue_distance_m: float = Field(3.0, ge=0, le=100,
+        description=("[m] the recovery queue (docs/team.md): a passenger waiting for its turn to approach holds off this "
+                     "much farther behind its holdoff point, along the carrier's course"))
+    queue_height_m: float = Field(1.5, ge=0, le=100,
+        description="[m] ... and this much higher than its holdoff point")
+    queue_timeout_s: float = Field(120.0, gt=0, le=3600,
+        description=("[s] a passenger that has waited its turn this long without a break falls back "
+                     "(recovery.fallback): no deadlock"))
+    queue_battery_pct: float = Field(10.0, ge=0, le=100,
+        description=("[%] a returning passenger with at most recovery.battery_reserve_pct + this left must land: it goes "
+                     "before every one that need not, the lowest battery first; the others go in the order they asked"))
     slots: list[SlotSection] = Field([], max_length=MAX_TEAM,
         description="[-] list of `{ name, offset_ned_m = [m] }`: the carrier's dock slots")
     passengers: list[TeamPassengerSection] = Field([], max_length=MAX_TEAM,
@@ -172,9 +183,13 @@ def passenger_data(data: dict[str, Any], team: TeamSection, targets: list[list[f
     """The single-passenger configuration (a nested dict, as a file gives it) of passenger ``i`` of
     ``team`` in the team's configuration ``data`` whose mission's targets are ``targets`` [m]: no
     ``[team]``, ``mission.dock_offset_ned_m`` its slot's offset, ``mavlink.target_system`` its system
-    id, and its own targets (``scenario.target`` for one, ``scenario.targets`` for several)."""
+    id, and its own targets (``scenario.target`` for one, ``scenario.targets`` for several); the
+    scalars of ``[team]`` the file stated (its span, its queue) stay, without slots or passengers."""
     p = team.passengers[i]
     out = {key: dict(value) if isinstance(value, dict) else value for key, value in data.items() if key != "team"}
+    shared = {key: value for key, value in data.get("team", {}).items() if key not in ("slots", "passengers")}
+    if shared:  # the team's own tuning (the span, the queue): every passenger's, declared once in [team]
+        out["team"] = shared
     scenario = out.setdefault("scenario", {})
     scenario.pop("target", None)
     scenario.pop("targets", None)

@@ -45,9 +45,9 @@ from mission.core.docking import (
 )
 from mission.core.law import norm
 from mission.core.pursuit import PursuitLimits, pursue
-from mission.core.safety import filter_velocity
+from mission.core.safety import SafetyConfig, filter_velocity
 from mission.flight_mode import FlightMode
-from mission.phases import deck, stall
+from mission.phases import deck, queue, stall
 from mission.phases.battery import next_leg_problem
 from mission.phases.carrier_fitness import carrier_unfit, carrier_unsteady, observe_carrier
 from mission.phases.flying import _track
@@ -65,6 +65,10 @@ from mission.phases.types import (
 
 PARKED_SPEED_M_S = 0.1  # [m/s] the carrier counts as parked below this
 REFERENCE_AT_GOAL_M = 0.2  # [m] a reference this close to its goal has reached it
+#: The recovery's phases whose reference keeps safety.passenger_separation_m from the other passengers ...
+KEEP_APART = frozenset({Phase.RETURNING, Phase.HOLDOFF, Phase.GO_AROUND, Phase.FALLBACK})
+#: ... and those on the deck's approach, which keep team.passenger_span_m (the deck's neighbouring slots are closer)
+ON_DECK_APPROACH = frozenset({Phase.APPROACH, Phase.DOCKED})
 
 
 def _model(m: MissionModel) -> RecoveryModel:
@@ -96,7 +100,9 @@ def _fly(state: MissionState, obs: Observation, m: MissionModel, goal_x: np.ndar
     assert state.x_ref is not None and state.u_ref is not None
     _, u_next = pursue(state.x_ref, state.u_ref, goal_x, goal_v, limits, m.dt_s)
     deck = m.deck.keep_out(obs, m) if m.deck is not None else None
-    safe = filter_velocity(state.x_ref, u_next, m.tick.obstacles, m.tick.passenger_safety, state.u_ref, m.dt_s, deck=deck)
+    cfg, neighbours = _apart(state, obs, m)
+    safe = filter_velocity(state.x_ref, u_next, m.tick.obstacles, cfg, state.u_ref, m.dt_s, deck=deck,
+                           neighbours=neighbours)
     u_ref = np.asarray(safe.u, dtype=float)
     x_ref = state.x_ref + u_ref * m.dt_s
     a_ref = (u_ref - state.u_ref) / m.dt_s
@@ -106,6 +112,60 @@ def _fly(state: MissionState, obs: Observation, m: MissionModel, goal_x: np.ndar
     new = replace(state, x_ref=x_ref, u_ref=u_ref, recovery=rec, u_cmd=kept["u_cmd"], integral=kept["integral"])
     return new, tr.decision(dock=dock, desired=u_ref, safety_acted=tr.acted or bool(safe.changed), events=events,
                             request=request)
+
+
+def _apart(state: MissionState, obs: Observation, m: MissionModel) -> tuple[SafetyConfig, object]:
+    """The reference filter's configuration and the neighbours it keeps apart from in this phase:
+    ``safety.passenger_separation_m`` in the air (:data:`KEEP_APART`), ``team.passenger_span_m``
+    on the deck's approach (:data:`ON_DECK_APPROACH`: the deck's other passengers as obstacles, its
+    neighbouring slots closer than the separation), none otherwise (riding the dock point; or no
+    neighbour, or no queue: the filter as alone). A pair already closer is held at its distance,
+    never pushed apart (:func:`mission.core.safety.neighbour_rows`)."""
+    base = m.tick.passenger_safety
+    q = m.queue
+    if q is None or obs.neighbours is None or base.separation_m is None:
+        return base, None
+    if state.phase in KEEP_APART:
+        distance = q.separation_m
+    elif state.phase in ON_DECK_APPROACH:
+        distance = q.deck_clearance_m
+    else:
+        return base, None
+    key = ("recovery_separation", distance)
+    cfg = base._cache.get(key)
+    if cfg is None:
+        cfg = base._cache[key] = replace(base, separation_m=distance)
+    return cfg, obs.neighbours
+
+
+def _queue(obs: Observation, m: MissionModel, rec: RecoveryState
+           ) -> tuple[RecoveryState, str | None, str | None, tuple[str, ...]]:
+    """The queue's word this tick (:mod:`mission.phases.queue`): ``rec`` with its waiting time,
+    why it waits (None: its turn), why it falls back (it waited ``team.queue_timeout_s``; None:
+    it does not) and the events (it starts waiting or waits for another reason; its turn came)."""
+    q = m.queue
+    if q is None:
+        return rec, None, None, ()
+    v = obs.vehicle
+    own = queue.claim(obs.t_s - rec.started_s, None if v is None else v.battery_pct, q.must_pct, q.rank)
+    why = queue.wait_reason(own, obs.neighbours, q.must_pct)
+    if why is None:
+        if rec.queued_since_s is None:
+            return rec, None, None, ()
+        return replace(rec, queued_since_s=None, queued_for=None), None, None, ("its turn: on to the holdoff point",)
+    since = rec.queued_since_s if rec.queued_since_s is not None else obs.t_s
+    events = (f"waits its turn: {why}",) if why != rec.queued_for else ()
+    rec = replace(rec, queued_since_s=since, queued_for=why)
+    if obs.t_s - since > q.timeout_s:
+        return rec, why, f"waited its turn for team.queue_timeout_s = {q.timeout_s:g} s ({why})", events
+    return rec, why, None, events
+
+
+def _holdoff_goal(h: np.ndarray, rec: RecoveryState, m: MissionModel, waits: str | None) -> np.ndarray:
+    """Where the passenger holds off: its holdoff point ``h`` [m] NED, or its queue point while it waits."""
+    if waits is None or m.queue is None:
+        return h
+    return queue.queue_point(h, rec.course, m.queue.distance_m, m.queue.height_m)
 
 
 def _give_up(state: MissionState, obs: Observation, m: MissionModel, rec: RecoveryState) -> str | None:
@@ -170,14 +230,17 @@ def returning(state, obs, m, events=()):
     why = _give_up(state, obs, m, rec)
     if why is not None:
         return fallback(replace(state, recovery=rec), obs, m, why, events)
+    rec, waits, timed_out, queued = _queue(obs, m, rec)
+    if timed_out is not None:
+        return fallback(replace(state, recovery=rec), obs, m, timed_out, (*events, *queued))
     dock = dock_point(obs, m)
-    h = holdoff_point(dock, rec.course, r.geometry)
+    h = _holdoff_goal(holdoff_point(dock, rec.course, r.geometry), rec, m, waits)
     v_c = obs.carrier.velocity_ned_m_s
-    evs = tuple(events)
+    evs = (*events, *queued)
     if float(norm(state.x_ref - h)) <= REFERENCE_AT_GOAL_M and float(norm(state.u_ref - v_c)) <= r.settle_speed_m_s:
         state = enter(state, Phase.HOLDOFF, t)
         rec = replace(rec, settled_since_s=None)
-        evs += ("at the holdoff point",)
+        evs += ("at the holdoff point" if waits is None else "at the queue point",)
     return _fly(state, obs, m, h, v_c, r.returning, rec, evs)
 
 
@@ -188,9 +251,16 @@ def holdoff(state, obs, m, events=()):
     why = _give_up(state, obs, m, rec)
     if why is not None:
         return fallback(replace(state, recovery=rec), obs, m, why, events)
+    rec, waits, timed_out, queued = _queue(obs, m, rec)
+    if timed_out is not None:
+        return fallback(replace(state, recovery=rec), obs, m, timed_out, (*events, *queued))
     dock = dock_point(obs, m)
     h = holdoff_point(dock, rec.course, r.geometry)
     v_c = obs.carrier.velocity_ned_m_s
+    if waits is not None:  # not its turn: hold off at the queue point, no settling, no approach
+        rec = replace(rec, settled_since_s=None, settled_offset_m=None)
+        return _fly(state, obs, m, _holdoff_goal(h, rec, m, waits), v_c, r.returning, rec, (*events, *queued))
+    events = (*events, *queued)
     offset = obs.vehicle.position_ned_m - h
     near = (float(norm(offset)) <= r.settle_radius_m
             and float(norm(v_c[:2])) >= r.settle_carrier_speed_m_s
@@ -301,6 +371,13 @@ def approach(state, obs, m, events=()):
     unsteady = carrier_unsteady(rec, obs, r)
     if unsteady is not None:
         return go_around(state, obs, m, unsteady, events)
+    q = m.queue
+    if q is not None and rec.descent is None:  # a neighbour docking, or one approaching that goes first
+        own = queue.claim(t - rec.started_s, None if obs.vehicle is None else obs.vehicle.battery_pct, q.must_pct,
+                          q.rank)
+        gives_way = queue.yield_reason(own, obs.neighbours, q.must_pct)
+        if gives_way is not None:
+            return go_around(state, obs, m, f"gives way: {gives_way}", events)
     g = r.geometry
     dock = dock_point(obs, m)
     gate = gate_point(dock, g)

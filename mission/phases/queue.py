@@ -1,0 +1,135 @@
+"""The recovery queue (pure): when several passengers of a team come home, one approaches the deck
+at a time (docs/team.md, "The recovery queue").
+
+Each passenger decides alone, from what the others share (:class:`mission.core.safety.Neighbours`:
+their phase names, how long their recovery has run, their battery, their system id):
+
+- **It waits while a neighbour is on the deck's approach** (APPROACH, its glide path and its
+  descent, or DOCKED, holding contact): never two on the deck's approach at once, and nobody
+  overtakes one already approaching.
+- **It waits while the carrier serves a neighbour** (RIDING, TRANSIT, SEPARATED: the carrier
+  carries it to its target, repositions for it, or stops at its separation). The carrier's motion
+  is about to change, and an approach flown then would meet a course that turns under it (the
+  go-around of ``configs/team.toml`` before the queue). The carrier's recovery course begins once
+  the served one has left (:mod:`mission.carrier.team`).
+- **Among those waiting** (RETURNING, HOLDOFF, GO_AROUND) **the one that asked first goes first**
+  (the longest recovery), **except that the battery decides when it must**: one with at most
+  ``recovery.battery_reserve_pct + team.queue_battery_pct`` left must land, and goes before every
+  one that need not, the lowest battery first. Two that asked within :data:`TIE_S` of each other
+  go in the order of their system ids (a clock-free tie-break both sides agree on).
+
+While it waits a passenger holds off at its *queue point* (:func:`queue_point`): its holdoff point
+moved ``team.queue_distance_m`` farther back along the carrier's course and
+``team.queue_height_m`` higher, clear of the approaching one's glide path; when its turn comes it
+flies on to its holdoff point and settles there as alone. Both moves are the pursuit's
+(:func:`mission.core.pursuit.pursue`): bounded speed and acceleration, so the commanded velocity
+never jumps at the queue's switches. Waiting ``team.queue_timeout_s`` without a break falls back
+(no deadlock: a neighbour that went silent in APPROACH is waited on, its last word standing, for
+that long at most).
+
+Frames: local NED [m]; times [s] on the controller's clock; battery [%].
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from mission.core.docking import UP
+from mission.core.safety import Neighbours
+from mission.phases.phase import Phase
+
+#: A neighbour in one of these is on the deck's approach: nobody else begins one.
+ON_APPROACH = frozenset({Phase.APPROACH.value, Phase.DOCKED.value})
+#: A neighbour in one of these is served by the carrier, whose motion is about to change.
+SERVED = frozenset({Phase.RIDING.value, Phase.TRANSIT.value, Phase.SEPARATED.value})
+#: A neighbour in one of these waits for the deck (or asks for it): the queue's order decides.
+WAITING = frozenset({Phase.RETURNING.value, Phase.HOLDOFF.value, Phase.GO_AROUND.value})
+TIE_S = 0.1  # [s] two recoveries begun this close together count as asked at once (the system ids decide)
+
+
+@dataclass(frozen=True)
+class Claim:
+    """One passenger's place in the queue: ``asked_s`` [s] how long ago its recovery began (now);
+    ``battery_pct`` [%] (None: not known); ``must``: it must land (battery at or under the
+    queue's threshold); ``rank``: its system id (None: unknown)."""
+
+    asked_s: float
+    battery_pct: float | None
+    must: bool
+    rank: int | None
+
+
+def claim(asked_s: float, battery_pct: float | None, must_pct: float, rank: int | None) -> Claim:
+    """The :class:`Claim` of a passenger whose recovery began ``asked_s`` [s] ago, with
+    ``battery_pct`` [%] left; it must land at or under ``must_pct`` [%]."""
+    return Claim(asked_s, battery_pct, battery_pct is not None and battery_pct <= must_pct, rank)
+
+
+def goes_before(a: Claim, b: Claim) -> bool:
+    """Whether ``a`` lands before ``b``: one that must before one that need not; of two that must,
+    the lower battery; else the one that asked first (the longer recovery, beyond :data:`TIE_S`);
+    else the lower system id. Never both ways for two distinct claims."""
+    if a.must != b.must:
+        return a.must
+    if a.must and a.battery_pct is not None and b.battery_pct is not None and a.battery_pct != b.battery_pct:
+        return a.battery_pct < b.battery_pct
+    if abs(a.asked_s - b.asked_s) > TIE_S:
+        return a.asked_s > b.asked_s
+    big = 1 << 30
+    return (a.rank if a.rank is not None else big) < (b.rank if b.rank is not None else big)
+
+
+def _name(nb: Neighbours, j: int) -> str:
+    return f"passenger {nb.ids[j]}" if nb.ids is not None else f"neighbour {j}"
+
+
+def neighbour_claim(nb: Neighbours, j: int, must_pct: float) -> Claim:
+    """Neighbour ``j``'s :class:`Claim` now: its shared recovery time moved on by its sample's age."""
+    rec = nb.recovery_s[j] if nb.recovery_s is not None else None
+    age = float(nb.age_s[j]) if nb.age_s is not None else 0.0
+    battery = nb.battery_pct[j] if nb.battery_pct is not None else None
+    return claim(-np.inf if rec is None else rec + age, battery, must_pct,
+                 nb.ids[j] if nb.ids is not None else None)
+
+
+def wait_reason(own: Claim, nb: Neighbours | None, must_pct: float) -> str | None:
+    """Why a passenger with ``own`` claim, returning or holding off, waits for its turn to
+    approach (the first neighbour that holds it, in words), or None: its turn. ``nb``: the
+    others as they shared their states (None, or no phases shared: alone, its turn)."""
+    if nb is None or nb.phases is None:
+        return None
+    for j, phase in enumerate(nb.phases):
+        if phase in ON_APPROACH:
+            return f"{_name(nb, j)} is on the deck's approach ({phase})"
+    for j, phase in enumerate(nb.phases):
+        if phase in SERVED:
+            return f"the carrier serves {_name(nb, j)} ({phase})"
+    for j, phase in enumerate(nb.phases):
+        if phase in WAITING:
+            other = neighbour_claim(nb, j, must_pct)
+            if goes_before(other, own):
+                why = "must land first" if other.must and not own.must else (
+                    "has less battery" if other.must else "asked first")
+                return f"{_name(nb, j)} {why} ({phase})"
+    return None
+
+
+def yield_reason(own: Claim, nb: Neighbours | None, must_pct: float) -> str | None:
+    """Why a passenger already on its glide path (APPROACH, not descending yet) gives way, or
+    None: a neighbour holding contact (DOCKED), or one on its own approach that goes before it
+    (two began at once: their states crossed on the way)."""
+    if nb is None or nb.phases is None:
+        return None
+    for j, phase in enumerate(nb.phases):
+        if phase == Phase.DOCKED.value:
+            return f"{_name(nb, j)} is docking ({phase})"
+        if phase == Phase.APPROACH.value and goes_before(neighbour_claim(nb, j, must_pct), own):
+            return f"{_name(nb, j)} approaches too and goes first"
+    return None
+
+
+def queue_point(holdoff_ned_m: np.ndarray, course_unit: np.ndarray, distance_m: float, height_m: float) -> np.ndarray:
+    """[m] NED where a waiting passenger holds off: its holdoff point ``holdoff_ned_m`` moved
+    ``distance_m`` [m] back along the carrier's course ``course_unit`` and ``height_m`` [m] up."""
+    return np.asarray(holdoff_ned_m, dtype=float) - distance_m * np.asarray(course_unit, dtype=float) + height_m * UP
