@@ -101,8 +101,10 @@ def _fly(state: MissionState, obs: Observation, m: MissionModel, goal_x: np.ndar
     _, u_next = pursue(state.x_ref, state.u_ref, goal_x, goal_v, limits, m.dt_s)
     deck = m.deck.keep_out(obs, m) if m.deck is not None else None
     cfg, neighbours = _apart(state, obs, m)
+    # the rows phase in from the phase's start (as from the separation): they change with the phase
+    # (none, the span, the separation), and a row in at once could correct the command in one tick
     safe = filter_velocity(state.x_ref, u_next, m.tick.obstacles, cfg, state.u_ref, m.dt_s, deck=deck,
-                           neighbours=neighbours)
+                           neighbours=neighbours, since_separation_s=None if neighbours is None else obs.t_s - state.since_s)
     u_ref = np.asarray(safe.u, dtype=float)
     x_ref = state.x_ref + u_ref * m.dt_s
     a_ref = (u_ref - state.u_ref) / m.dt_s
