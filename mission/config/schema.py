@@ -35,7 +35,7 @@ from mission.config.legs import check_legs, first_target_named
 from mission.config.recovery import RecoverySection, check_recovery
 from mission.config.relnav import RelnavSection, WorldSection
 from mission.config.scenario import ObstacleSection, ScenarioSection
-from mission.config.team import TeamSection, as_team_error, check_team, dock_points, passenger_data
+from mission.config.team import TeamSection, as_team_error, check_queue, check_team, dock_points, passenger_data
 from mission.config.urls import DEFAULT_URL
 from mission.config.vision import VisionSection, check_vision
 from mission.config.fields import (
@@ -452,6 +452,11 @@ class Config(Section):
                        stated={f"{sec}.{key}": getattr(getattr(self, sec), key) for sec in ("mission", "mavlink")
                                for key in getattr(self, sec).model_fields_set},
                        carrier_system_id=self.carrier.mavlink.target_system if self.carrier.backend == "mavlink" else None)
+            if m.final_action == "return":
+                r = self.recovery
+                check_queue(team, sf.passenger_separation_m, r.holdoff_distance_m,
+                            r.decision_height_m + r.holdoff_distance_m * math.tan(math.radians(r.glide_angle_deg)),
+                            r.decision_height_m)
         docks, leg_docks = dock_points(team, m.dock_offset_ned_m, len(s.legs()))  # (field, offset), each leg's offset
         if not self.law.departure_margin_m >= 1e-6:
             raise ConfigError("law.departure_margin_m", self.law.departure_margin_m,

@@ -59,8 +59,9 @@ class TeamSection(Section):
     queue_distance_m: float = Field(3.0, ge=0, le=100,
         description=("[m] the recovery queue (docs/team.md): a passenger waiting for its turn to approach holds off this "
                      "much farther behind its holdoff point, along the carrier's course"))
-    queue_height_m: float = Field(1.5, ge=0, le=100,
-        description="[m] ... and this much higher than its holdoff point")
+    queue_height_m: float = Field(3.0, ge=0, le=100,
+        description=("[m] ... and this much higher than its holdoff point: at least safety.passenger_separation_m from "
+                     "every other slot's approach (its holdoff point, glide path and descent), whatever the course"))
     queue_timeout_s: float = Field(120.0, gt=0, le=3600,
         description=("[s] a passenger that has waited its turn this long without a break falls back "
                      "(recovery.fallback): no deadlock"))
@@ -160,6 +161,55 @@ def check_team(team: TeamSection, *, n_targets: int, target_field: str, contact_
         if k not in served:
             name = f"{target_field}[{k}]" if target_field == "scenario.targets" else target_field
             raise ConfigError(name, k, "no passenger of team.passengers flies to it: list it in one's targets")
+
+
+QUEUE_HEADINGS = 72  # the carrier's courses (every 5 deg) over which the queue's clearance is checked
+
+
+def queue_clearance_m(team: TeamSection, holdoff_distance_m: float, holdoff_height_m: float,
+                      decision_height_m: float) -> float:
+    """[m] the least distance, over every course of the carrier (:data:`QUEUE_HEADINGS`) and every
+    pair of slots, from one slot's queue point (its holdoff point ``team.queue_distance_m`` farther
+    back along the course and ``team.queue_height_m`` higher; :mod:`mission.phases.queue`) to the
+    other slot's approach: its holdoff point (``holdoff_distance_m`` [m] behind and
+    ``holdoff_height_m`` [m] above its dock point), the glide path to its gate
+    (``decision_height_m`` [m] above the dock point) and the descent onto it. inf: fewer than two slots."""
+    import numpy as np
+
+    best = math.inf
+    docks = [np.asarray(slot.offset_ned_m, dtype=float) for slot in team.slots]
+    up = np.array([0.0, 0.0, -1.0])
+    for k in range(QUEUE_HEADINGS):
+        a = 2.0 * math.pi * k / QUEUE_HEADINGS
+        c = np.array([math.cos(a), math.sin(a), 0.0])
+        for i, wait in enumerate(docks):
+            q = wait - (holdoff_distance_m + team.queue_distance_m) * c + (holdoff_height_m + team.queue_height_m) * up
+            for j, dock in enumerate(docks):
+                if i != j:
+                    h, gate = dock - holdoff_distance_m * c + holdoff_height_m * up, dock + decision_height_m * up
+                    best = min(best, _to_segment(q, h, gate), _to_segment(q, gate, dock))
+    return best
+
+
+def _to_segment(p, a, b) -> float:  # type: ignore[no-untyped-def]
+    """[m] the distance from point ``p`` to the segment ``a``-``b`` (numpy arrays)."""
+    import numpy as np
+
+    ab = b - a
+    s = float(np.clip(np.dot(p - a, ab) / max(float(np.dot(ab, ab)), 1e-300), 0.0, 1.0))
+    return float(np.linalg.norm(p - (a + s * ab)))
+
+
+def check_queue(team: TeamSection, separation_m: float, holdoff_distance_m: float, holdoff_height_m: float,
+                decision_height_m: float) -> None:
+    """Refuse queue points closer than ``separation_m`` [m] (safety.passenger_separation_m) to
+    another slot's approach on some course (:func:`queue_clearance_m`), naming team.queue_height_m."""
+    clear = queue_clearance_m(team, holdoff_distance_m, holdoff_height_m, decision_height_m)
+    if clear < separation_m - 1e-6:
+        raise ConfigError("team.queue_height_m", team.queue_height_m,
+                          f"a passenger waiting its turn would hold off {clear:.2f} m from another slot's approach on "
+                          f"some course, under safety.passenger_separation_m = {separation_m:g} m: raise it (or "
+                          "team.queue_distance_m)")
 
 
 def _check_slots(team: TeamSection, contact_radius_m: float) -> None:

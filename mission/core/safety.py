@@ -125,8 +125,9 @@ class Neighbours:
     out, as if absent. ``phases``: each neighbour's mission phase name as it shared it (None:
     not shared), for the recovery queue (:mod:`mission.phases.queue`), as are ``recovery_s`` [s]
     how long each one's recovery had run at its sample (None: not recovering, or not shared),
-    ``battery_pct`` [%] its battery (None: not known) and ``ids`` its MAVLink system id (the
-    queue's tie-break); the barrier reads none of them."""
+    ``battery_pct`` [%] its battery (None: not known), ``ids`` its MAVLink system id (the
+    queue's tie-break) and ``targets_ned_m`` [m] (k, 3) the target of the leg it flies or rides
+    for (None: not shared); the barrier reads none of them."""
 
     positions_m: np.ndarray
     velocities_m_s: np.ndarray
@@ -135,6 +136,7 @@ class Neighbours:
     recovery_s: tuple[float | None, ...] | None = None
     battery_pct: tuple[float | None, ...] | None = None
     ids: tuple[int, ...] | None = None
+    targets_ned_m: np.ndarray | None = None
 
     @classmethod
     def of(cls, items: list[tuple[list[float], list[float], float]], n: int) -> "Neighbours":

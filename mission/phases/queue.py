@@ -7,8 +7,9 @@ their phase names, how long their recovery has run, their battery, their system 
 - **It waits while a neighbour is on the deck's approach** (APPROACH, its glide path and its
   descent, or DOCKED, holding contact): never two on the deck's approach at once, and nobody
   overtakes one already approaching.
-- **It waits while the carrier serves a neighbour** (RIDING, TRANSIT, SEPARATED: the carrier
-  carries it to its target, repositions for it, or stops at its separation). The carrier's motion
+- **It waits while the carrier serves a neighbour** (RIDING, TRANSIT, SEPARATED for the target the
+  carrier announces: the carrier carries it to its target, repositions for it, or stops at its
+  separation; a neighbour riding along for a later target does not hold it). The carrier's motion
   is about to change, and an approach flown then would meet a course that turns under it (the
   go-around of ``configs/team.toml`` before the queue). The carrier's recovery course begins once
   the served one has left (:mod:`mission.carrier.team`).
@@ -36,8 +37,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from mission.core.docking import UP
-from mission.core.safety import Neighbours
+from mission.core.records import replace
+from mission.core.safety import Neighbours, SafetyConfig
 from mission.phases.phase import Phase
+from mission.phases.types import SAME_TARGET_M, MissionModel, MissionState, Observation, RecoveryState
 
 #: A neighbour in one of these is on the deck's approach: nobody else begins one.
 ON_APPROACH = frozenset({Phase.APPROACH.value, Phase.DOCKED.value})
@@ -45,6 +48,10 @@ ON_APPROACH = frozenset({Phase.APPROACH.value, Phase.DOCKED.value})
 SERVED = frozenset({Phase.RIDING.value, Phase.TRANSIT.value, Phase.SEPARATED.value})
 #: A neighbour in one of these waits for the deck (or asks for it): the queue's order decides.
 WAITING = frozenset({Phase.RETURNING.value, Phase.HOLDOFF.value, Phase.GO_AROUND.value})
+#: The recovery's phases whose reference keeps safety.passenger_separation_m from the other passengers ...
+KEEP_APART = frozenset({Phase.RETURNING, Phase.HOLDOFF, Phase.GO_AROUND, Phase.FALLBACK})
+#: ... and those on the deck's approach, which keep team.passenger_span_m (the deck's neighbouring slots are closer)
+ON_DECK_APPROACH = frozenset({Phase.APPROACH, Phase.DOCKED})
 TIE_S = 0.1  # [s] two recoveries begun this close together count as asked at once (the system ids decide)
 
 
@@ -93,17 +100,31 @@ def neighbour_claim(nb: Neighbours, j: int, must_pct: float) -> Claim:
                  nb.ids[j] if nb.ids is not None else None)
 
 
-def wait_reason(own: Claim, nb: Neighbours | None, must_pct: float) -> str | None:
+def served(nb: Neighbours, j: int, announced_ned_m: np.ndarray | None) -> bool:
+    """Whether the carrier serves neighbour ``j``: it is in a phase of :data:`SERVED` and the
+    target it rides for is the one the carrier announces (``announced_ned_m`` [m] NED, within
+    :data:`mission.phases.types.SAME_TARGET_M`). Either not known: served (the safe side)."""
+    if nb.phases is None or nb.phases[j] not in SERVED:
+        return False
+    if announced_ned_m is None or nb.targets_ned_m is None:
+        return True
+    gap = np.asarray(nb.targets_ned_m[j], dtype=float) - np.asarray(announced_ned_m, dtype=float)[:3]
+    return bool(np.linalg.norm(gap) <= SAME_TARGET_M)
+
+
+def wait_reason(own: Claim, nb: Neighbours | None, must_pct: float,
+                announced_ned_m: np.ndarray | None = None) -> str | None:
     """Why a passenger with ``own`` claim, returning or holding off, waits for its turn to
     approach (the first neighbour that holds it, in words), or None: its turn. ``nb``: the
-    others as they shared their states (None, or no phases shared: alone, its turn)."""
+    others as they shared their states (None, or no phases shared: alone, its turn);
+    ``announced_ned_m`` [m] NED: the target the carrier announces (:func:`served`)."""
     if nb is None or nb.phases is None:
         return None
     for j, phase in enumerate(nb.phases):
         if phase in ON_APPROACH:
             return f"{_name(nb, j)} is on the deck's approach ({phase})"
     for j, phase in enumerate(nb.phases):
-        if phase in SERVED:
+        if served(nb, j, announced_ned_m):
             return f"the carrier serves {_name(nb, j)} ({phase})"
     for j, phase in enumerate(nb.phases):
         if phase in WAITING:
@@ -133,3 +154,57 @@ def queue_point(holdoff_ned_m: np.ndarray, course_unit: np.ndarray, distance_m: 
     """[m] NED where a waiting passenger holds off: its holdoff point ``holdoff_ned_m`` moved
     ``distance_m`` [m] back along the carrier's course ``course_unit`` and ``height_m`` [m] up."""
     return np.asarray(holdoff_ned_m, dtype=float) - distance_m * np.asarray(course_unit, dtype=float) + height_m * UP
+
+
+def apart(state: MissionState, obs: Observation, m: MissionModel) -> tuple[SafetyConfig, Neighbours | None]:
+    """The reference filter's configuration and the neighbours it keeps apart from in this phase:
+    ``safety.passenger_separation_m`` in the air (:data:`KEEP_APART`), ``team.passenger_span_m``
+    on the deck's approach (:data:`ON_DECK_APPROACH`: the deck's other passengers as obstacles, its
+    neighbouring slots closer than the separation), none otherwise (riding the dock point; or no
+    neighbour, or no queue: the filter as alone). A pair already closer is held at its distance,
+    never pushed apart (:func:`mission.core.safety.neighbour_rows`)."""
+    base = m.tick.passenger_safety
+    q = m.queue
+    if q is None or obs.neighbours is None or base.separation_m is None:
+        return base, None
+    if state.phase in KEEP_APART:
+        distance = q.separation_m
+    elif state.phase in ON_DECK_APPROACH:
+        distance = q.deck_clearance_m
+    else:
+        return base, None
+    key = ("recovery_separation", distance)
+    cfg = base._cache.get(key)
+    if cfg is None:
+        cfg = base._cache[key] = replace(base, separation_m=distance)
+    return cfg, obs.neighbours
+
+
+def turn(obs: Observation, m: MissionModel, rec: RecoveryState
+           ) -> tuple[RecoveryState, str | None, str | None, tuple[str, ...]]:
+    """The queue's word this tick (:mod:`mission.phases.queue`): ``rec`` with its waiting time,
+    why it waits (None: its turn), why it falls back (it waited ``team.queue_timeout_s``; None:
+    it does not) and the events (it starts waiting or waits for another reason; its turn came)."""
+    q = m.queue
+    if q is None:
+        return rec, None, None, ()
+    v = obs.vehicle
+    own = claim(obs.t_s - rec.started_s, None if v is None else v.battery_pct, q.must_pct, q.rank)
+    why = wait_reason(own, obs.neighbours, q.must_pct, obs.carrier_target_ned_m)
+    if why is None:
+        if rec.queued_since_s is None:
+            return rec, None, None, ()
+        return replace(rec, queued_since_s=None, queued_for=None), None, None, ("its turn: on to the holdoff point",)
+    since = rec.queued_since_s if rec.queued_since_s is not None else obs.t_s
+    events = (f"waits its turn: {why}",) if why != rec.queued_for else ()
+    rec = replace(rec, queued_since_s=since, queued_for=why)
+    if obs.t_s - since > q.timeout_s:
+        return rec, why, f"waited its turn for team.queue_timeout_s = {q.timeout_s:g} s ({why})", events
+    return rec, why, None, events
+
+
+def holdoff_goal(h: np.ndarray, rec: RecoveryState, m: MissionModel, waits: str | None) -> np.ndarray:
+    """Where the passenger holds off: its holdoff point ``h`` [m] NED, or its queue point while it waits."""
+    if waits is None or m.queue is None:
+        return h
+    return queue_point(h, rec.course, m.queue.distance_m, m.queue.height_m)

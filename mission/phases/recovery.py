@@ -45,7 +45,7 @@ from mission.core.docking import (
 )
 from mission.core.law import norm
 from mission.core.pursuit import PursuitLimits, pursue
-from mission.core.safety import SafetyConfig, filter_velocity
+from mission.core.safety import filter_velocity
 from mission.flight_mode import FlightMode
 from mission.phases import deck, queue, stall
 from mission.phases.battery import next_leg_problem
@@ -65,10 +65,6 @@ from mission.phases.types import (
 
 PARKED_SPEED_M_S = 0.1  # [m/s] the carrier counts as parked below this
 REFERENCE_AT_GOAL_M = 0.2  # [m] a reference this close to its goal has reached it
-#: The recovery's phases whose reference keeps safety.passenger_separation_m from the other passengers ...
-KEEP_APART = frozenset({Phase.RETURNING, Phase.HOLDOFF, Phase.GO_AROUND, Phase.FALLBACK})
-#: ... and those on the deck's approach, which keep team.passenger_span_m (the deck's neighbouring slots are closer)
-ON_DECK_APPROACH = frozenset({Phase.APPROACH, Phase.DOCKED})
 
 
 def _model(m: MissionModel) -> RecoveryModel:
@@ -100,7 +96,7 @@ def _fly(state: MissionState, obs: Observation, m: MissionModel, goal_x: np.ndar
     assert state.x_ref is not None and state.u_ref is not None
     _, u_next = pursue(state.x_ref, state.u_ref, goal_x, goal_v, limits, m.dt_s)
     deck = m.deck.keep_out(obs, m) if m.deck is not None else None
-    cfg, neighbours = _apart(state, obs, m)
+    cfg, neighbours = queue.apart(state, obs, m)
     # the rows phase in from the phase's start (as from the separation): they change with the phase
     # (none, the span, the separation), and a row in at once could correct the command in one tick
     safe = filter_velocity(state.x_ref, u_next, m.tick.obstacles, cfg, state.u_ref, m.dt_s, deck=deck,
@@ -114,60 +110,6 @@ def _fly(state: MissionState, obs: Observation, m: MissionModel, goal_x: np.ndar
     new = replace(state, x_ref=x_ref, u_ref=u_ref, recovery=rec, u_cmd=kept["u_cmd"], integral=kept["integral"])
     return new, tr.decision(dock=dock, desired=u_ref, safety_acted=tr.acted or bool(safe.changed), events=events,
                             request=request)
-
-
-def _apart(state: MissionState, obs: Observation, m: MissionModel) -> tuple[SafetyConfig, object]:
-    """The reference filter's configuration and the neighbours it keeps apart from in this phase:
-    ``safety.passenger_separation_m`` in the air (:data:`KEEP_APART`), ``team.passenger_span_m``
-    on the deck's approach (:data:`ON_DECK_APPROACH`: the deck's other passengers as obstacles, its
-    neighbouring slots closer than the separation), none otherwise (riding the dock point; or no
-    neighbour, or no queue: the filter as alone). A pair already closer is held at its distance,
-    never pushed apart (:func:`mission.core.safety.neighbour_rows`)."""
-    base = m.tick.passenger_safety
-    q = m.queue
-    if q is None or obs.neighbours is None or base.separation_m is None:
-        return base, None
-    if state.phase in KEEP_APART:
-        distance = q.separation_m
-    elif state.phase in ON_DECK_APPROACH:
-        distance = q.deck_clearance_m
-    else:
-        return base, None
-    key = ("recovery_separation", distance)
-    cfg = base._cache.get(key)
-    if cfg is None:
-        cfg = base._cache[key] = replace(base, separation_m=distance)
-    return cfg, obs.neighbours
-
-
-def _queue(obs: Observation, m: MissionModel, rec: RecoveryState
-           ) -> tuple[RecoveryState, str | None, str | None, tuple[str, ...]]:
-    """The queue's word this tick (:mod:`mission.phases.queue`): ``rec`` with its waiting time,
-    why it waits (None: its turn), why it falls back (it waited ``team.queue_timeout_s``; None:
-    it does not) and the events (it starts waiting or waits for another reason; its turn came)."""
-    q = m.queue
-    if q is None:
-        return rec, None, None, ()
-    v = obs.vehicle
-    own = queue.claim(obs.t_s - rec.started_s, None if v is None else v.battery_pct, q.must_pct, q.rank)
-    why = queue.wait_reason(own, obs.neighbours, q.must_pct)
-    if why is None:
-        if rec.queued_since_s is None:
-            return rec, None, None, ()
-        return replace(rec, queued_since_s=None, queued_for=None), None, None, ("its turn: on to the holdoff point",)
-    since = rec.queued_since_s if rec.queued_since_s is not None else obs.t_s
-    events = (f"waits its turn: {why}",) if why != rec.queued_for else ()
-    rec = replace(rec, queued_since_s=since, queued_for=why)
-    if obs.t_s - since > q.timeout_s:
-        return rec, why, f"waited its turn for team.queue_timeout_s = {q.timeout_s:g} s ({why})", events
-    return rec, why, None, events
-
-
-def _holdoff_goal(h: np.ndarray, rec: RecoveryState, m: MissionModel, waits: str | None) -> np.ndarray:
-    """Where the passenger holds off: its holdoff point ``h`` [m] NED, or its queue point while it waits."""
-    if waits is None or m.queue is None:
-        return h
-    return queue.queue_point(h, rec.course, m.queue.distance_m, m.queue.height_m)
 
 
 def _give_up(state: MissionState, obs: Observation, m: MissionModel, rec: RecoveryState) -> str | None:
@@ -232,11 +174,11 @@ def returning(state, obs, m, events=()):
     why = _give_up(state, obs, m, rec)
     if why is not None:
         return fallback(replace(state, recovery=rec), obs, m, why, events)
-    rec, waits, timed_out, queued = _queue(obs, m, rec)
+    rec, waits, timed_out, queued = queue.turn(obs, m, rec)
     if timed_out is not None:
         return fallback(replace(state, recovery=rec), obs, m, timed_out, (*events, *queued))
     dock = dock_point(obs, m)
-    h = _holdoff_goal(holdoff_point(dock, rec.course, r.geometry), rec, m, waits)
+    h = queue.holdoff_goal(holdoff_point(dock, rec.course, r.geometry), rec, m, waits)
     v_c = obs.carrier.velocity_ned_m_s
     evs = (*events, *queued)
     if float(norm(state.x_ref - h)) <= REFERENCE_AT_GOAL_M and float(norm(state.u_ref - v_c)) <= r.settle_speed_m_s:
@@ -253,7 +195,7 @@ def holdoff(state, obs, m, events=()):
     why = _give_up(state, obs, m, rec)
     if why is not None:
         return fallback(replace(state, recovery=rec), obs, m, why, events)
-    rec, waits, timed_out, queued = _queue(obs, m, rec)
+    rec, waits, timed_out, queued = queue.turn(obs, m, rec)
     if timed_out is not None:
         return fallback(replace(state, recovery=rec), obs, m, timed_out, (*events, *queued))
     dock = dock_point(obs, m)
@@ -261,7 +203,7 @@ def holdoff(state, obs, m, events=()):
     v_c = obs.carrier.velocity_ned_m_s
     if waits is not None:  # not its turn: hold off at the queue point, no settling, no approach
         rec = replace(rec, settled_since_s=None, settled_offset_m=None)
-        return _fly(state, obs, m, _holdoff_goal(h, rec, m, waits), v_c, r.returning, rec, (*events, *queued))
+        return _fly(state, obs, m, queue.holdoff_goal(h, rec, m, waits), v_c, r.returning, rec, (*events, *queued))
     events = (*events, *queued)
     offset = obs.vehicle.position_ned_m - h
     near = (float(norm(offset)) <= r.settle_radius_m

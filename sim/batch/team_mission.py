@@ -174,15 +174,17 @@ class TeamWorld:
     def shared_of(self, i: int, t_s: float) -> Neighbours:
         """What passenger ``i`` hears of the others at ``t_s`` [s] (:meth:`neighbours_of`), with
         what the recovery queue reads (:mod:`mission.phases.queue`): each one's phase (of the tick
-        before, as its status would carry it), how long its recovery has run [s], its battery [%]
-        and its system id."""
+        before, as its status would carry it), how long its recovery has run [s], its battery [%],
+        its system id and its leg's target [m]."""
         others = [m for j, m in enumerate(self.members) if j != i]
         nb = Neighbours.of(self.neighbours_of(i, t_s), 3)
         return replace(nb, phases=tuple(m.state.phase.value for m in others),
                        recovery_s=tuple(None if m.state.recovery is None else t_s - m.state.recovery.started_s
                                         for m in others),
                        battery_pct=tuple(m.battery_pct for m in others),
-                       ids=tuple(m.cfg.mavlink.target_system or 0 for m in others))
+                       ids=tuple(m.cfg.mavlink.target_system or 0 for m in others),
+                       targets_ned_m=np.array([m.cfg.scenario.legs()[min(m.state.leg, len(m.cfg.scenario.legs()) - 1)]
+                                               for m in others], dtype=float).reshape(-1, 3))
 
     def tick(self) -> None:
         """One controller tick at ``k * dt``: the carrier's steps due, then every passenger's tick."""
