@@ -58,10 +58,11 @@ class TeamSection(Section):
                      "recovery.contact_radius_m apart horizontally (docked anywhere contact allows, they do not touch)"))
     queue_distance_m: float = Field(3.0, ge=0, le=100,
         description=("[m] the recovery queue (docs/team.md): a passenger waiting for its turn to approach holds off this "
-                     "much farther behind its holdoff point, along the carrier's course"))
-    queue_height_m: float = Field(3.0, ge=0, le=100,
-        description=("[m] ... and this much higher than its holdoff point: at least safety.passenger_separation_m from "
-                     "every other slot's approach (its holdoff point, glide path and descent), whatever the course"))
+                     "much farther behind its holdoff point, along the carrier's course, per passenger ahead of it"))
+    queue_height_m: float = Field(3.5, ge=0, le=100,
+        description=("[m] ... and this much higher than its holdoff point (both per passenger ahead of it): at least "
+                     "safety.passenger_separation_m from every other slot's approach (its holdoff point, glide path and "
+                     "descent) and queue point, whatever the course"))
     queue_timeout_s: float = Field(120.0, gt=0, le=3600,
         description=("[s] a passenger that has waited its turn this long without a break falls back "
                      "(recovery.fallback): no deadlock"))

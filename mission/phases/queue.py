@@ -21,7 +21,10 @@ their phase names, how long their recovery has run, their battery, their system 
 
 While it waits a passenger holds off at its *queue point* (:func:`queue_point`): its holdoff point
 moved ``team.queue_distance_m`` farther back along the carrier's course and
-``team.queue_height_m`` higher, clear of the approaching one's glide path; when its turn comes it
+``team.queue_height_m`` higher for each neighbour ahead of it (:func:`place`: the one approaching,
+those waiting before it), clear of the approaching one's glide path and of the queue point of the
+one before it (the same offsets between two levels as between the first and a holdoff point,
+:func:`mission.config.team.queue_clearance_m`); when its turn comes it
 flies on to its holdoff point and settles there as alone. Both moves are the pursuit's
 (:func:`mission.core.pursuit.pursue`): bounded speed and acceleration, so the commanded velocity
 never jumps at the queue's switches. Waiting ``team.queue_timeout_s`` without a break falls back
@@ -136,6 +139,16 @@ def wait_reason(own: Claim, nb: Neighbours | None, must_pct: float,
     return None
 
 
+def place(own: Claim, nb: Neighbours | None, must_pct: float) -> int:
+    """Its place in the queue: how many neighbours go before it, those on the deck's approach and
+    those waiting ahead of it (:func:`goes_before`); 0: none (its turn, or it waits only for the
+    one the carrier serves)."""
+    if nb is None or nb.phases is None:
+        return 0
+    return sum(phase in ON_APPROACH or (phase in WAITING and goes_before(neighbour_claim(nb, j, must_pct), own))
+               for j, phase in enumerate(nb.phases))
+
+
 def yield_reason(own: Claim, nb: Neighbours | None, must_pct: float) -> str | None:
     """Why a passenger already on its glide path (APPROACH, not descending yet) gives way, or
     None: a neighbour holding contact (DOCKED), or one on its own approach that goes before it
@@ -181,7 +194,7 @@ def apart(state: MissionState, obs: Observation, m: MissionModel) -> tuple[Safet
 
 
 def turn(obs: Observation, m: MissionModel, rec: RecoveryState
-           ) -> tuple[RecoveryState, str | None, str | None, tuple[str, ...]]:
+         ) -> tuple[RecoveryState, str | None, str | None, tuple[str, ...]]:
     """The queue's word this tick (:mod:`mission.phases.queue`): ``rec`` with its waiting time,
     why it waits (None: its turn), why it falls back (it waited ``team.queue_timeout_s``; None:
     it does not) and the events (it starts waiting or waits for another reason; its turn came)."""
@@ -194,17 +207,20 @@ def turn(obs: Observation, m: MissionModel, rec: RecoveryState
     if why is None:
         if rec.queued_since_s is None:
             return rec, None, None, ()
-        return replace(rec, queued_since_s=None, queued_for=None), None, None, ("its turn: on to the holdoff point",)
+        return replace(rec, queued_since_s=None, queued_for=None, queue_place=0), None, None, (
+            "its turn: on to the holdoff point",)
     since = rec.queued_since_s if rec.queued_since_s is not None else obs.t_s
     events = (f"waits its turn: {why}",) if why != rec.queued_for else ()
-    rec = replace(rec, queued_since_s=since, queued_for=why)
+    rec = replace(rec, queued_since_s=since, queued_for=why, queue_place=place(own, obs.neighbours, q.must_pct))
     if obs.t_s - since > q.timeout_s:
         return rec, why, f"waited its turn for team.queue_timeout_s = {q.timeout_s:g} s ({why})", events
     return rec, why, None, events
 
 
 def holdoff_goal(h: np.ndarray, rec: RecoveryState, m: MissionModel, waits: str | None) -> np.ndarray:
-    """Where the passenger holds off: its holdoff point ``h`` [m] NED, or its queue point while it waits."""
+    """Where the passenger holds off: its holdoff point ``h`` [m] NED, or while it waits its queue
+    point of its place (``rec.queue_place``: one level per neighbour ahead of it)."""
     if waits is None or m.queue is None:
         return h
-    return queue_point(h, rec.course, m.queue.distance_m, m.queue.height_m)
+    k = rec.queue_place
+    return queue_point(h, rec.course, k * m.queue.distance_m, k * m.queue.height_m)
