@@ -21,8 +21,8 @@ their phase names, how long their recovery has run, their battery, their system 
 
 While it waits a passenger holds off at its *queue point* (:func:`queue_point`): its holdoff point
 moved ``team.queue_distance_m`` farther back along the carrier's course and
-``team.queue_height_m`` higher for each neighbour ahead of it (:func:`place`: the one approaching,
-those waiting before it), clear of the approaching one's glide path and of the queue point of the
+``team.queue_height_m`` higher, and as much again for each neighbour waiting ahead of it
+(:func:`place`), clear of the approaching one's glide path and of the queue point of the
 one before it (the same offsets between two levels as between the first and a holdoff point,
 :func:`mission.config.team.queue_clearance_m`); when its turn comes it
 flies on to its holdoff point and settles there as alone. Both moves are the pursuit's
@@ -140,13 +140,11 @@ def wait_reason(own: Claim, nb: Neighbours | None, must_pct: float,
 
 
 def place(own: Claim, nb: Neighbours | None, must_pct: float) -> int:
-    """Its place in the queue: how many neighbours go before it, those on the deck's approach and
-    those waiting ahead of it (:func:`goes_before`); 0: none (its turn, or it waits only for the
-    one the carrier serves)."""
+    """Its place among those waiting: how many neighbours wait ahead of it (:data:`WAITING`,
+    :func:`goes_before`); 0: it is the next to go."""
     if nb is None or nb.phases is None:
         return 0
-    return sum(phase in ON_APPROACH or (phase in WAITING and goes_before(neighbour_claim(nb, j, must_pct), own))
-               for j, phase in enumerate(nb.phases))
+    return sum(phase in WAITING and goes_before(neighbour_claim(nb, j, must_pct), own) for j, phase in enumerate(nb.phases))
 
 
 def yield_reason(own: Claim, nb: Neighbours | None, must_pct: float) -> str | None:
@@ -211,7 +209,7 @@ def turn(obs: Observation, m: MissionModel, rec: RecoveryState
             "its turn: on to the holdoff point",)
     since = rec.queued_since_s if rec.queued_since_s is not None else obs.t_s
     events = (f"waits its turn: {why}",) if why != rec.queued_for else ()
-    rec = replace(rec, queued_since_s=since, queued_for=why, queue_place=place(own, obs.neighbours, q.must_pct))
+    rec = replace(rec, queued_since_s=since, queued_for=why, queue_place=1 + place(own, obs.neighbours, q.must_pct))
     if obs.t_s - since > q.timeout_s:
         return rec, why, f"waited its turn for team.queue_timeout_s = {q.timeout_s:g} s ({why})", events
     return rec, why, None, events

@@ -338,7 +338,7 @@ class RecoveryState:
     marker_lost_s: float | None = None  # [relnav] the descent has had the marker lost since [s]
     queued_since_s: float | None = None  # [s] waiting its turn in the recovery queue since (None: not waiting)
     queued_for: str | None = None  # why it waits (the neighbour ahead), for the events
-    queue_place: int = 0  # how many go before it in the queue (its queue point's level)
+    queue_place: int = 0  # waiting: its queue point's level, 1 + how many wait ahead of it (0: not waiting)
 
 
 @dataclass(frozen=True)

@@ -21,6 +21,7 @@ from mission.phases.queue import (
     Claim,
     claim,
     goes_before,
+    place,
     queue_point,
     wait_reason,
     yield_reason,
@@ -98,6 +99,14 @@ def test_a_riding_neighbour_holds_the_queue_only_when_the_carrier_serves_it():
     assert wait_reason(me(5.0), others("HOME"), MUST, announced) is None
 
 
+def test_each_one_ahead_is_one_more_level_of_queue_point():
+    two = Neighbours(np.zeros((2, 3)), np.zeros((2, 3)), np.zeros(2), phases=("APPROACH", "HOLDOFF"),
+                     recovery_s=(1.0, 9.0), battery_pct=(None, None), ids=(1, 3))
+    assert place(me(5.0), two, MUST) == 1  # the one that asked before it waits too: one level farther
+    assert place(me(12.0), two, MUST) == 0  # it asked before the waiting one: the first level
+    assert place(me(12.0), None, MUST) == 0
+
+
 def test_one_already_on_its_glide_path_gives_way_to_a_docking_one_or_one_that_goes_first():
     assert "docking" in yield_reason(me(1.0), others("DOCKED", 0.5), MUST)
     assert "goes first" in yield_reason(me(1.0), others("APPROACH", 3.0), MUST)
@@ -108,15 +117,17 @@ def test_one_already_on_its_glide_path_gives_way_to_a_docking_one_or_one_that_go
 def test_the_queue_point_is_back_and_up_and_clear_of_every_other_slots_approach():
     team = load_config(CONFIGS / "team.toml")
     q = mission_model(passenger_config(team, "bravo")).queue
-    assert q is not None and (q.distance_m, q.height_m) == (3.0, 3.0)
+    assert q is not None and (q.distance_m, q.height_m) == (3.0, 3.5)
     h = np.array([1.0, 2.0, -3.0])
-    np.testing.assert_allclose(queue_point(h, np.array([0.0, 1.0, 0.0]), 3.0, 3.0), [1.0, -1.0, -6.0])
+    np.testing.assert_allclose(queue_point(h, np.array([0.0, 1.0, 0.0]), 3.0, 3.5), [1.0, -1.0, -6.5])
     r = team.recovery
     holdoff_h = -holdoff_point(np.zeros(3), np.array([1.0, 0.0, 0.0]), mission_model(passenger_config(team, "bravo"))
                                .recovery.geometry)[2]
     clear = queue_clearance_m(team.team, r.holdoff_distance_m, holdoff_h, r.decision_height_m)
-    assert clear == pytest.approx(3.354, abs=1e-3) and clear >= team.safety.passenger_separation_m
+    # worst course: along the slots, 1.5 m apart: |(-1.5, 0, 3.5)| = 3.81 m
+    assert clear == pytest.approx(3.808, abs=1e-3) and clear >= team.safety.passenger_separation_m
     # 1.5 m higher only, a queue point on a course along the slots comes 2.12 m from the other's holdoff point
+    # (or from the queue point of the one before it)
     data = team.model_dump(exclude_unset=True)
     data["team"] = {**data["team"], "queue_height_m": 1.5}
     with pytest.raises(ConfigError) as err:
