@@ -429,6 +429,8 @@ class Config(Section):
             raise ConfigError("mission.dock_offset_ned_m", self.mission.dock_offset_ned_m, "must have 3 components")
         self._cross_fields()
         if self.team.given:
+            if self.mission.final_action == "return":  # after the slots' own checks: their queue points
+                check_queue(self.team, self.safety.passenger_separation_m, self.recovery)
             self._team_flies()
         return self
 
@@ -452,11 +454,6 @@ class Config(Section):
                        stated={f"{sec}.{key}": getattr(getattr(self, sec), key) for sec in ("mission", "mavlink")
                                for key in getattr(self, sec).model_fields_set},
                        carrier_system_id=self.carrier.mavlink.target_system if self.carrier.backend == "mavlink" else None)
-            if m.final_action == "return":
-                r = self.recovery
-                check_queue(team, sf.passenger_separation_m, r.holdoff_distance_m,
-                            r.decision_height_m + r.holdoff_distance_m * math.tan(math.radians(r.glide_angle_deg)),
-                            r.decision_height_m)
         docks, leg_docks = dock_points(team, m.dock_offset_ned_m, len(s.legs()))  # (field, offset), each leg's offset
         if not self.law.departure_margin_m >= 1e-6:
             raise ConfigError("law.departure_margin_m", self.law.departure_margin_m,

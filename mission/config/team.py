@@ -201,11 +201,13 @@ def _to_segment(p, a, b) -> float:  # type: ignore[no-untyped-def]
     return float(np.linalg.norm(p - (a + s * ab)))
 
 
-def check_queue(team: TeamSection, separation_m: float, holdoff_distance_m: float, holdoff_height_m: float,
-                decision_height_m: float) -> None:
+def check_queue(team: TeamSection, separation_m: float, recovery: Any) -> None:
     """Refuse queue points closer than ``separation_m`` [m] (safety.passenger_separation_m) to
-    another slot's approach on some course (:func:`queue_clearance_m`), naming team.queue_height_m."""
-    clear = queue_clearance_m(team, holdoff_distance_m, holdoff_height_m, decision_height_m)
+    another slot's approach on some course (:func:`queue_clearance_m`, the geometry of the
+    ``[recovery]`` section ``recovery``), naming team.queue_height_m."""
+    r = recovery
+    holdoff_height_m = r.decision_height_m + r.holdoff_distance_m * math.tan(math.radians(r.glide_angle_deg))
+    clear = queue_clearance_m(team, r.holdoff_distance_m, holdoff_height_m, r.decision_height_m)
     if clear < separation_m - 1e-6:
         raise ConfigError("team.queue_height_m", team.queue_height_m,
                           f"a passenger waiting its turn would hold off {clear:.2f} m from another slot's approach on "
