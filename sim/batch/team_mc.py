@@ -4,12 +4,14 @@ scenarios, each a whole mission of 2 or 3 passengers flown in-process by their o
 
 A scenario is ``configs/team.toml`` (or the file given) with:
 
-- 2 or 3 passengers on slots 1.5 m apart in a row across the deck (``[0, y, z]``, y = -0.75, 0.75
-  or -1.5, 0, 1.5);
+- 2 or 3 passengers on their slots (:data:`SLOTS`: port and starboard 1.5 m apart as in
+  ``configs/team.toml``, or three round the deck's centre 1.13 m apart, the least spacing
+  allowed, 1.1 m);
 - 2 to 4 targets, each passenger at least one, in the mission's order, drawn 14 to 34 m from the
   carrier's start on any bearing, 2 to 5 m up; a draw that the configuration refuses (the
-  paper's assumptions, the legs' starts, every passenger flying alone: :mod:`mission.config`) is
-  drawn again, so every scenario satisfies them;
+  paper's assumptions, the legs' starts, every passenger flying alone: :mod:`mission.config`), or
+  one whose slot keeps its dock point beyond b c of its target from some side (:func:`reachable`,
+  which the configuration does not check yet), is drawn again, so every scenario satisfies them;
 - each passenger's vehicle estimate erring as PX4 SITL's (``estimate_error``), its own seed;
 - in 30 % of the scenarios one passenger reports a battery low enough that it must land
   (``team.queue_battery_pct``), the others a full one: the queue's battery order.
@@ -34,7 +36,7 @@ import numpy as np
 from mission.config.schema import Config, from_dict
 from mission.errors import ConfigError
 from mission.phases import Phase
-from sim.batch.team_mission import TeamWorld
+from sim.batch.team_mission import HOVER_RAISE_M, TeamWorld
 
 #: Both passengers of a pair in one of these: in the air, away from the deck (the barrier's distance holds).
 AIR = frozenset({Phase.SEPARATED, Phase.NAVIGATING, Phase.ARRIVED, Phase.RETURNING, Phase.HOLDOFF,
@@ -42,6 +44,10 @@ AIR = frozenset({Phase.SEPARATED, Phase.NAVIGATING, Phase.ARRIVED, Phase.RETURNI
 VIOLATION_M = 0.01  # [m] a pair this much inside what the barrier keeps is a violation
 SAFE_END = frozenset({Phase.HOLD, Phase.LAND, Phase.DONE})
 LOW_BATTERY_SHARE = 0.3
+#: [m] north, east of each slot from the carrier's reported position, 0.5 m up, for 2 and 3 passengers
+SLOTS = {2: [(0.0, -0.75), (0.0, 0.75)],
+         3: [(round(0.65 * math.cos(a), 3), round(0.65 * math.sin(a), 3)) for a in (0.0, 2.0944, 4.1888)]}
+REACH_MARGIN_M = 0.05  # [m] a dock point must come this much inside b c of its target (:func:`reachable`)
 
 
 @dataclass
@@ -61,7 +67,7 @@ def draw(index: int, rng: np.random.Generator, base: dict[str, Any], tries: int 
     for _ in range(tries):
         n = int(rng.integers(2, 4))
         k = int(rng.integers(max(n, 2), 5))
-        ys = [-0.75, 0.75] if n == 2 else [-1.5, 0.0, 1.5]
+        offsets = SLOTS[n]
         owners = list(rng.permutation(list(range(n)) + list(rng.integers(0, n, k - n))))
         targets = []
         for _t in range(k):
@@ -72,12 +78,14 @@ def draw(index: int, rng: np.random.Generator, base: dict[str, Any], tries: int 
         data["scenario"] = {**data["scenario"], "targets": targets}
         data["scenario"].pop("target", None)
         data["team"] = {**{key: v for key, v in data["team"].items() if key not in ("slots", "passengers")},
-                        "slots": [{"name": f"s{j}", "offset_ned_m": [0.0, y, -0.5]} for j, y in enumerate(ys)],
+                        "slots": [{"name": f"s{j}", "offset_ned_m": [x, y, -0.5]} for j, (x, y) in enumerate(offsets)],
                         "passengers": [{"name": f"p{j}", "system_id": j + 1, "slot": f"s{j}",
                                         "targets": [t for t in range(k) if owners[t] == j]} for j in range(n)]}
         try:
             cfg = from_dict(data)
         except ConfigError:
+            continue
+        if not reachable(cfg):
             continue
         batteries: list[float | None] = [None] * n
         if rng.uniform() < LOW_BATTERY_SHARE:
@@ -85,6 +93,27 @@ def draw(index: int, rng: np.random.Generator, base: dict[str, Any], tries: int 
             batteries[int(rng.integers(0, n))] = float(cfg.recovery.battery_reserve_pct + cfg.team.queue_battery_pct - 1.0)
         return Scenario(index, cfg, int(rng.integers(0, 2**31)), batteries, n, k)
     raise RuntimeError(f"no valid team drawn in {tries} tries")
+
+
+def reachable(cfg: Config) -> bool:
+    """Whether the carrier can bring every target's dock point within b c of it from any side: it
+    stops at its P3 guard (b c - carrier.p3_margin_m from the target, 3D, on its plane), and a
+    slot to the side (as the simulation flies it, hovering :data:`HOVER_RAISE_M` above it) on the
+    far side may still be farther than b c. The configuration's legs check treats the dock point
+    as standing where the carrier stands (docs/team.md, "The links"), so such a team loads, and
+    its passenger would ride for ever: not a scenario that satisfies the paper's assumptions."""
+    bc = cfg.law.params().separation_distance_m
+    guard = bc - cfg.carrier.p3_margin_m
+    ground = float(cfg.scenario.carrier_start[2])
+    for k, target in enumerate(cfg.scenario.legs()):
+        owner = cfg.team.passengers[cfg.team.owners(len(cfg.scenario.legs()))[k]]
+        slot = cfg.team.slots[cfg.team.slot_index(owner.slot)].offset_ned_m
+        up = ground - float(target[2])
+        across = math.sqrt(max(guard * guard - up * up, 0.0)) + math.hypot(slot[0], slot[1])
+        dock_z = ground + slot[2] - HOVER_RAISE_M
+        if math.hypot(across, float(target[2]) - dock_z) > bc - REACH_MARGIN_M:
+            return False
+    return True
 
 
 def scenarios(count: int, seed: int, base: dict[str, Any]) -> list[Scenario]:
