@@ -55,6 +55,8 @@ WAITING = frozenset({Phase.RETURNING.value, Phase.HOLDOFF.value, Phase.GO_AROUND
 KEEP_APART = frozenset({Phase.RETURNING, Phase.HOLDOFF, Phase.GO_AROUND, Phase.FALLBACK})
 #: ... and those on the deck's approach, which keep team.passenger_span_m (the deck's neighbouring slots are closer)
 ON_DECK_APPROACH = frozenset({Phase.APPROACH, Phase.DOCKED})
+#: A neighbour in one of these sits (or rides) on its slot: an obstacle of the deck's approach.
+SEATED = frozenset({Phase.JOIN.value, Phase.RIDING.value, Phase.TRANSIT.value, Phase.DOCKED.value, Phase.HOME.value})
 TIE_S = 0.1  # [s] two recoveries begun this close together count as asked at once (the system ids decide)
 
 
@@ -178,17 +180,35 @@ def apart(state: MissionState, obs: Observation, m: MissionModel) -> tuple[Safet
     q = m.queue
     if q is None or obs.neighbours is None or base.separation_m is None:
         return base, None
+    nb: Neighbours | None = obs.neighbours
     if state.phase in KEEP_APART:
         distance = q.separation_m
     elif state.phase in ON_DECK_APPROACH:
         distance = q.deck_clearance_m
+        nb = on_deck(obs.neighbours, obs)
+        if nb is None:
+            return base, None
     else:
         return base, None
     key = ("recovery_separation", distance)
     cfg = base._cache.get(key)
     if cfg is None:
         cfg = base._cache[key] = replace(base, separation_m=distance)
-    return cfg, obs.neighbours
+    return cfg, nb
+
+
+def on_deck(nb: Neighbours, obs: Observation) -> Neighbours | None:
+    """The neighbours on the deck (:data:`SEATED`; all when no phase is shared) as obstacles of an
+    approach: where they report themselves, moving with the deck (the carrier's velocity, not their
+    own reported one: PX4's velocity estimate errs by ~0.25 m/s, and a seated neighbour moves with
+    the deck); None: none."""
+    keep = np.ones(len(nb), dtype=bool) if nb.phases is None else np.array([p in SEATED for p in nb.phases], dtype=bool)
+    if not keep.any():
+        return None
+    v = obs.carrier.velocity_ned_m_s if obs.carrier is not None else np.zeros(3)
+    pos = np.asarray(nb.positions_m, dtype=float)[keep]
+    age = None if nb.age_s is None else np.asarray(nb.age_s, dtype=float)[keep]
+    return Neighbours(pos, np.tile(np.asarray(v, dtype=float), (len(pos), 1)), age)
 
 
 def turn(obs: Observation, m: MissionModel, rec: RecoveryState
