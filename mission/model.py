@@ -138,7 +138,8 @@ def queue_model(cfg: Config) -> QueueModel:
     t = cfg.team
     return QueueModel(distance_m=t.queue_distance_m, height_m=t.queue_height_m, timeout_s=t.queue_timeout_s,
                       must_pct=cfg.recovery.battery_reserve_pct + t.queue_battery_pct, rank=cfg.mavlink.target_system,
-                      deck_clearance_m=t.passenger_span_m, separation_m=cfg.safety.passenger_separation_m)
+                      deck_clearance_m=t.passenger_span_m,
+                      separation_m=cfg.safety.passenger_separation_m + cfg.safety.margin_m)
 
 
 def same_named(model: type, section: BaseModel) -> list[str]:

@@ -430,7 +430,7 @@ class Config(Section):
         self._cross_fields()
         if self.team.given:
             if self.mission.final_action == "return":  # after the slots' own checks: their queue points
-                check_queue(self.team, self.safety.passenger_separation_m, self.recovery)
+                check_queue(self.team, self.safety.passenger_separation_m + self.safety.margin_m, self.recovery)
             self._team_flies()
         return self
 

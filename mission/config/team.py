@@ -61,8 +61,8 @@ class TeamSection(Section):
                      "much farther behind its holdoff point, along the carrier's course, per passenger ahead of it"))
     queue_height_m: float = Field(3.5, ge=0, le=100,
         description=("[m] ... and this much higher than its holdoff point (both per passenger ahead of it): at least "
-                     "safety.passenger_separation_m from every other slot's approach (its holdoff point, glide path and "
-                     "descent) and queue point, whatever the course"))
+                     "safety.passenger_separation_m + safety.margin_m from every other slot's approach (its holdoff point, "
+                     "glide path and descent) and queue point, whatever the course"))
     queue_timeout_s: float = Field(120.0, gt=0, le=3600,
         description=("[s] a passenger that has waited its turn this long without a break falls back "
                      "(recovery.fallback): no deadlock"))
@@ -202,7 +202,8 @@ def _to_segment(p, a, b) -> float:  # type: ignore[no-untyped-def]
 
 
 def check_queue(team: TeamSection, separation_m: float, recovery: Any) -> None:
-    """Refuse queue points closer than ``separation_m`` [m] (safety.passenger_separation_m) to
+    """Refuse queue points closer than ``separation_m`` [m] (safety.passenger_separation_m +
+    safety.margin_m, what the recovery keeps) to
     another slot's approach on some course (:func:`queue_clearance_m`, the geometry of the
     ``[recovery]`` section ``recovery``), naming team.queue_height_m."""
     r = recovery
@@ -211,7 +212,7 @@ def check_queue(team: TeamSection, separation_m: float, recovery: Any) -> None:
     if clear < separation_m - 1e-6:
         raise ConfigError("team.queue_height_m", team.queue_height_m,
                           f"a passenger waiting its turn would hold off {clear:.2f} m from another slot's approach on "
-                          f"some course, under safety.passenger_separation_m = {separation_m:g} m: raise it (or "
+                          f"some course, under safety.passenger_separation_m + safety.margin_m = {separation_m:g} m: raise it (or "
                           "team.queue_distance_m)")
 
 

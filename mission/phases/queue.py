@@ -171,7 +171,7 @@ def queue_point(holdoff_ned_m: np.ndarray, course_unit: np.ndarray, distance_m: 
 
 def apart(state: MissionState, obs: Observation, m: MissionModel) -> tuple[SafetyConfig, Neighbours | None]:
     """The reference filter's configuration and the neighbours it keeps apart from in this phase:
-    ``safety.passenger_separation_m`` in the air (:data:`KEEP_APART`), ``team.passenger_span_m``
+    ``safety.passenger_separation_m + safety.margin_m`` in the air (:data:`KEEP_APART`), ``team.passenger_span_m``
     on the deck's approach (:data:`ON_DECK_APPROACH`: the deck's other passengers as obstacles, its
     neighbouring slots closer than the separation), none otherwise (riding the dock point; or no
     neighbour, or no queue: the filter as alone). A pair already closer is held at its distance,

@@ -222,7 +222,8 @@ class QueueModel:
     ``deck_clearance_m`` [m]: the least distance kept from the other passengers while it
     approaches and docks (team.passenger_span_m: tip to tip), where ``safety.passenger_separation_m``
     would forbid the deck's neighbouring slots; ``separation_m`` [m] the distance kept from them
-    in the other recovery phases (safety.passenger_separation_m)."""
+    in the recovery's air phases (safety.passenger_separation_m + safety.margin_m: the barrier
+    holds the references apart on the positions the others report, and both estimates err)."""
 
     distance_m: float
     height_m: float

@@ -177,3 +177,18 @@ def test_waiting_its_turn_and_its_turn_coming_step_the_command_no_more_than_the_
                                atol=0.05)
     assert Phase.APPROACH not in phases[:450]  # never while alpha was on the deck's approach
     assert Phase.APPROACH in phases[450:]  # its turn: it settled at its holdoff point and began
+
+
+def test_on_the_decks_approach_the_seated_neighbours_are_obstacles_moving_with_the_deck():
+    from mission.phases.queue import on_deck
+
+    v_c = np.array([1.5, 0.0, 0.0])
+    nb = Neighbours(np.array([[0.0, 1.1, -1.5], [-8.0, 0.0, -6.0]]), np.array([[1.8, 0.25, 0.1], [1.5, 0.0, 0.0]]),
+                    np.zeros(2), phases=("HOME", "HOLDOFF"))
+    obs = Observation(0.0, None, CarrierObs(np.zeros(3), v_c, 0.0), neighbours=nb)
+    seated = on_deck(nb, obs)
+    assert seated is not None and len(seated) == 1  # the one waiting in the air is the queue's, not an obstacle
+    np.testing.assert_allclose(seated.positions_m, [[0.0, 1.1, -1.5]])
+    np.testing.assert_allclose(seated.velocities_m_s, [v_c])  # not its reported (erring) velocity
+    airborne = Neighbours(nb.positions_m[1:], nb.velocities_m_s[1:], np.zeros(1), phases=("RETURNING",))
+    assert on_deck(airborne, obs) is None
