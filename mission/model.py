@@ -26,7 +26,7 @@ from mission.errors import ConfigError
 from mission.core.docking import DockingGeometry
 from mission.core.pursuit import PursuitLimits
 from mission.phases import MissionModel
-from mission.phases.types import DeckRide, RecoveryModel, RelnavGates
+from mission.phases.types import DeckRide, QueueModel, RecoveryModel, RelnavGates
 from mission.core.safety import SafetyConfig
 from mission.core.tick import TickModel, target_keep_outs
 from mission.core.tracking import TrackingGains
@@ -94,6 +94,7 @@ def mission_model(cfg: Config) -> MissionModel:
         dock_offset_ned_m=np.asarray(m.dock_offset_ned_m, dtype=float), dt_s=1.0 / m.rate_hz, tracking=tracking, carrier_dt_s=1.0 / cfg.carrier.rate_hz,
         join_settle_m=min(m.dock_tolerance_m, m.join_settle_m if m.join_settle_m is not None else m.dock_tolerance_m),
         recovery=recovery_model(cfg) if m.final_action == "return" else None,
+        queue=queue_model(cfg) if m.final_action == "return" else None,
         leg_start_m=tick.law.separation_distance_m + m.leg_start_margin_m,
         dock_chase=PursuitLimits(m.dock_rejoin_speed_m_s, s.passenger_max_accel_m_s2 or math.inf, DOCK_CHASE_GAIN_PER_S),
         deck=derived(DeckRide, m, keep_out_radius_m=m.deck_keep_out_radius_m, slope=m.deck_clear_slope,
@@ -129,6 +130,16 @@ def recovery_model(cfg: Config) -> RecoveryModel:
         carrier_max_turn_rate_rad_s=math.radians(r.carrier_max_turn_rate_deg_s),
         fallback_point_ned_m=None if r.fallback_point_ned_m is None else np.asarray(r.fallback_point_ned_m, dtype=float),
         at_target_s=cfg.mission.at_target_s, keep_out_m=cfg.law.params().separation_distance_m)
+
+
+def queue_model(cfg: Config) -> QueueModel:
+    """The recovery queue's parameters from ``[team]``'s scalars (a passenger's configuration keeps
+    them, :func:`mission.config.team.passenger_data`), ``[recovery]`` and ``[safety]``."""
+    t = cfg.team
+    return QueueModel(distance_m=t.queue_distance_m, height_m=t.queue_height_m, timeout_s=t.queue_timeout_s,
+                      must_pct=cfg.recovery.battery_reserve_pct + t.queue_battery_pct, rank=cfg.mavlink.target_system,
+                      deck_clearance_m=t.passenger_span_m,
+                      separation_m=cfg.safety.passenger_separation_m + cfg.safety.margin_m)
 
 
 def same_named(model: type, section: BaseModel) -> list[str]:

@@ -17,6 +17,11 @@ of the passenger it serves:
   plan), drives the recovery course while that passenger comes home, repositions and approaches
   its next target when it docks again, parks when it is home. It never skips ahead in the order
   (docs/team.md: Assumption 1 is checked for this order).
+- **Several coming home.** While any passenger comes home (duty RECOVER) and the one served has
+  left or is home, the stepper sees that one's recovery: the carrier keeps one steady recovery
+  course through the whole recovery queue (:mod:`mission.phases.queue`: one approaches at a time)
+  and parks only once nobody comes home. A passenger on board for the next target is still served
+  first (the order above); the others wait for the course (the queue holds them off meanwhile).
 - **A hand-over** (the passenger served changes: the next one is on board) starts the stepper's
   mode afresh for it (:meth:`CarrierStepper.hand_over`); its command goes on from where it is, at
   the acceleration limit, and every target's P3 guard still caps it.
@@ -115,11 +120,25 @@ class TeamCarrier:
                 self.focus = i
                 self.stepper.hand_over(replace(view, leg=nxt))
         view = replace(views[self.focus], leg=self.mission_target(self.focus, views[self.focus]))
+        coming = self.coming_home(views)
+        focus_duty = view.phase.duty if view.phase is not None else Duty.WAIT
+        if coming is not None and focus_duty not in ON_BOARD and focus_duty is not Duty.RECOVER:
+            # the one served has left (or is home) while others come home: the course is theirs
+            other = views[coming]
+            view = replace(view, phase=other.phase, separated=True, lost=other.lost)
         if self.stepper.mode is CarrierMode.WAITING and any(
                 (v.phase.duty if v.phase is not None else Duty.WAIT) is Duty.WAIT
                 for j, v in enumerate(views) if j != self.focus):
             view = replace(view, holding=True)  # another passenger is still joining: the carrier waits for it
         return self.stepper.update_mode(view)
+
+    @staticmethod
+    def coming_home(views: Sequence[PassengerView]) -> int | None:
+        """The first passenger whose status says it comes home (duty RECOVER: returning, holding
+        off, approaching, docking), or None. While one does and the passenger served has left
+        (or is home), the carrier keeps its recovery course: one course through every recovery
+        of the queue (:mod:`mission.phases.queue`), never parked under an approach."""
+        return next((j for j, v in enumerate(views) if v.phase is not None and v.phase.duty is Duty.RECOVER), None)
 
     def decide(self, state: OwnState, dt_s: float, age_s: float, now_s: float,
                recovery_velocity_m_s: np.ndarray | None = None) -> Command:

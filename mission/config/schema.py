@@ -35,22 +35,12 @@ from mission.config.legs import check_legs, first_target_named
 from mission.config.recovery import RecoverySection, check_recovery
 from mission.config.relnav import RelnavSection, WorldSection
 from mission.config.scenario import ObstacleSection, ScenarioSection
-from mission.config.team import TeamSection, as_team_error, check_team, dock_points, passenger_data
+from mission.config.team import TeamSection, as_team_error, check_queue, check_team, dock_points, passenger_data
 from mission.config.urls import DEFAULT_URL
 from mission.config.vision import VisionSection, check_vision
 from mission.config.fields import (
-    COORD_LIMIT_M,
-    MAX_PATH_CHARS,
-    MAX_URL_CHARS,
-    Coord,
-    FloatPair,
-    Path_,
-    Section,
-    check_key_expr,
-    check_mavlink_url,
-    check_port,
-    check_zenoh_endpoint,
-    printable,
+    COORD_LIMIT_M, MAX_PATH_CHARS, MAX_URL_CHARS, Coord, FloatPair, Path_, Section, check_key_expr, check_mavlink_url,
+    check_port, check_zenoh_endpoint, printable,
 )
 from mission.errors import ConfigError
 
@@ -431,6 +421,8 @@ class Config(Section):
             raise ConfigError("mission.dock_offset_ned_m", self.mission.dock_offset_ned_m, "must have 3 components")
         self._cross_fields()
         if self.team.given:
+            if self.mission.final_action == "return":  # after the slots' own checks: their queue points
+                check_queue(self.team, self.safety.passenger_separation_m + self.safety.margin_m, self.recovery)
             self._team_flies()
         return self
 

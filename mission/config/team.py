@@ -56,6 +56,19 @@ class TeamSection(Section):
     passenger_span_m: float = Field(0.8, gt=0, le=10,
         description=("[m] a passenger's width, propeller tip to tip: two slots' dock points must be this plus twice "
                      "recovery.contact_radius_m apart horizontally (docked anywhere contact allows, they do not touch)"))
+    queue_distance_m: float = Field(3.0, ge=0, le=100,
+        description=("[m] the recovery queue (docs/team.md): a passenger waiting for its turn to approach holds off this "
+                     "much farther behind its holdoff point, along the carrier's course, per passenger ahead of it"))
+    queue_height_m: float = Field(3.5, ge=0, le=100,
+        description=("[m] ... and this much higher than its holdoff point (both per passenger ahead of it): at least "
+                     "safety.passenger_separation_m + safety.margin_m from every other slot's approach (its holdoff point, "
+                     "glide path and descent) and queue point, whatever the course"))
+    queue_timeout_s: float = Field(120.0, gt=0, le=3600,
+        description=("[s] a passenger that has waited its turn this long without a break falls back "
+                     "(recovery.fallback): no deadlock"))
+    queue_battery_pct: float = Field(10.0, ge=0, le=100,
+        description=("[%] a returning passenger with at most recovery.battery_reserve_pct + this left must land: it goes "
+                     "before every one that need not, the lowest battery first; the others go in the order they asked"))
     slots: list[SlotSection] = Field([], max_length=MAX_TEAM,
         description="[-] list of `{ name, offset_ned_m = [m] }`: the carrier's dock slots")
     passengers: list[TeamPassengerSection] = Field([], max_length=MAX_TEAM,
@@ -151,6 +164,58 @@ def check_team(team: TeamSection, *, n_targets: int, target_field: str, contact_
             raise ConfigError(name, k, "no passenger of team.passengers flies to it: list it in one's targets")
 
 
+QUEUE_HEADINGS = 72  # the carrier's courses (every 5 deg) over which the queue's clearance is checked
+
+
+def queue_clearance_m(team: TeamSection, holdoff_distance_m: float, holdoff_height_m: float,
+                      decision_height_m: float) -> float:
+    """[m] the least distance, over every course of the carrier (:data:`QUEUE_HEADINGS`) and every
+    pair of slots, from one slot's queue point (its holdoff point ``team.queue_distance_m`` farther
+    back along the course and ``team.queue_height_m`` higher; :mod:`mission.phases.queue`) to the
+    other slot's approach: its holdoff point (``holdoff_distance_m`` [m] behind and
+    ``holdoff_height_m`` [m] above its dock point), the glide path to its gate
+    (``decision_height_m`` [m] above the dock point) and the descent onto it. inf: fewer than two slots."""
+    import numpy as np
+
+    best = math.inf
+    docks = [np.asarray(slot.offset_ned_m, dtype=float) for slot in team.slots]
+    up = np.array([0.0, 0.0, -1.0])
+    for k in range(QUEUE_HEADINGS):
+        a = 2.0 * math.pi * k / QUEUE_HEADINGS
+        c = np.array([math.cos(a), math.sin(a), 0.0])
+        for i, wait in enumerate(docks):
+            q = wait - (holdoff_distance_m + team.queue_distance_m) * c + (holdoff_height_m + team.queue_height_m) * up
+            for j, dock in enumerate(docks):
+                if i != j:
+                    h, gate = dock - holdoff_distance_m * c + holdoff_height_m * up, dock + decision_height_m * up
+                    best = min(best, _to_segment(q, h, gate), _to_segment(q, gate, dock))
+    return best
+
+
+def _to_segment(p, a, b) -> float:  # type: ignore[no-untyped-def]
+    """[m] the distance from point ``p`` to the segment ``a``-``b`` (numpy arrays)."""
+    import numpy as np
+
+    ab = b - a
+    s = float(np.clip(np.dot(p - a, ab) / max(float(np.dot(ab, ab)), 1e-300), 0.0, 1.0))
+    return float(np.linalg.norm(p - (a + s * ab)))
+
+
+def check_queue(team: TeamSection, separation_m: float, recovery: Any) -> None:
+    """Refuse queue points closer than ``separation_m`` [m] (safety.passenger_separation_m +
+    safety.margin_m, what the recovery keeps) to
+    another slot's approach on some course (:func:`queue_clearance_m`, the geometry of the
+    ``[recovery]`` section ``recovery``), naming team.queue_height_m."""
+    r = recovery
+    holdoff_height_m = r.decision_height_m + r.holdoff_distance_m * math.tan(math.radians(r.glide_angle_deg))
+    clear = queue_clearance_m(team, r.holdoff_distance_m, holdoff_height_m, r.decision_height_m)
+    if clear < separation_m - 1e-6:
+        raise ConfigError("team.queue_height_m", team.queue_height_m,
+                          f"a passenger waiting its turn would hold off {clear:.2f} m from another slot's approach on "
+                          f"some course, under safety.passenger_separation_m + safety.margin_m = {separation_m:g} m: raise it (or "
+                          "team.queue_distance_m)")
+
+
 def _check_slots(team: TeamSection, contact_radius_m: float) -> None:
     spacing = min_slot_spacing_m(team, contact_radius_m)
     for k, slot in enumerate(team.slots):
@@ -172,9 +237,13 @@ def passenger_data(data: dict[str, Any], team: TeamSection, targets: list[list[f
     """The single-passenger configuration (a nested dict, as a file gives it) of passenger ``i`` of
     ``team`` in the team's configuration ``data`` whose mission's targets are ``targets`` [m]: no
     ``[team]``, ``mission.dock_offset_ned_m`` its slot's offset, ``mavlink.target_system`` its system
-    id, and its own targets (``scenario.target`` for one, ``scenario.targets`` for several)."""
+    id, and its own targets (``scenario.target`` for one, ``scenario.targets`` for several); the
+    scalars of ``[team]`` the file stated (its span, its queue) stay, without slots or passengers."""
     p = team.passengers[i]
     out = {key: dict(value) if isinstance(value, dict) else value for key, value in data.items() if key != "team"}
+    shared = {key: value for key, value in data.get("team", {}).items() if key not in ("slots", "passengers")}
+    if shared:  # the team's own tuning (the span, the queue): every passenger's, declared once in [team]
+        out["team"] = shared
     scenario = out.setdefault("scenario", {})
     scenario.pop("target", None)
     scenario.pop("targets", None)

@@ -123,12 +123,20 @@ class Neighbours:
     age_s [s] each sample's age at this tick, (k,) or (B, k) (None: all fresh). A sample counts
     as flown on at its velocity over its age; one older than ``neighbour_max_age_s`` is left
     out, as if absent. ``phases``: each neighbour's mission phase name as it shared it (None:
-    not shared), for the recovery queue; the barrier does not read it."""
+    not shared), for the recovery queue (:mod:`mission.phases.queue`), as are ``recovery_s`` [s]
+    how long each one's recovery had run at its sample (None: not recovering, or not shared),
+    ``battery_pct`` [%] its battery (None: not known), ``ids`` its MAVLink system id (the
+    queue's tie-break) and ``targets_ned_m`` [m] (k, 3) the target of the leg it flies or rides
+    for (None: not shared); the barrier reads none of them."""
 
     positions_m: np.ndarray
     velocities_m_s: np.ndarray
     age_s: np.ndarray | None = None
     phases: tuple[str, ...] | None = None
+    recovery_s: tuple[float | None, ...] | None = None
+    battery_pct: tuple[float | None, ...] | None = None
+    ids: tuple[int, ...] | None = None
+    targets_ned_m: np.ndarray | None = None
 
     @classmethod
     def of(cls, items: list[tuple[list[float], list[float], float]], n: int) -> "Neighbours":

@@ -47,7 +47,7 @@ from mission.core.law import norm
 from mission.core.pursuit import PursuitLimits, pursue
 from mission.core.safety import filter_velocity
 from mission.flight_mode import FlightMode
-from mission.phases import deck, stall
+from mission.phases import deck, queue, stall
 from mission.phases.battery import next_leg_problem
 from mission.phases.carrier_fitness import carrier_unfit, carrier_unsteady, observe_carrier
 from mission.phases.flying import _track
@@ -96,7 +96,11 @@ def _fly(state: MissionState, obs: Observation, m: MissionModel, goal_x: np.ndar
     assert state.x_ref is not None and state.u_ref is not None
     _, u_next = pursue(state.x_ref, state.u_ref, goal_x, goal_v, limits, m.dt_s)
     deck = m.deck.keep_out(obs, m) if m.deck is not None else None
-    safe = filter_velocity(state.x_ref, u_next, m.tick.obstacles, m.tick.passenger_safety, state.u_ref, m.dt_s, deck=deck)
+    cfg, neighbours = queue.apart(state, obs, m)
+    # the rows phase in from the phase's start (as from the separation): they change with the phase
+    # (none, the span, the separation), and a row in at once could correct the command in one tick
+    safe = filter_velocity(state.x_ref, u_next, m.tick.obstacles, cfg, state.u_ref, m.dt_s, deck=deck,
+                           neighbours=neighbours, since_separation_s=None if neighbours is None else obs.t_s - state.since_s)
     u_ref = np.asarray(safe.u, dtype=float)
     x_ref = state.x_ref + u_ref * m.dt_s
     a_ref = (u_ref - state.u_ref) / m.dt_s
@@ -170,14 +174,17 @@ def returning(state, obs, m, events=()):
     why = _give_up(state, obs, m, rec)
     if why is not None:
         return fallback(replace(state, recovery=rec), obs, m, why, events)
+    rec, waits, timed_out, queued = queue.turn(obs, m, rec)
+    if timed_out is not None:
+        return fallback(replace(state, recovery=rec), obs, m, timed_out, (*events, *queued))
     dock = dock_point(obs, m)
-    h = holdoff_point(dock, rec.course, r.geometry)
+    h = queue.holdoff_goal(holdoff_point(dock, rec.course, r.geometry), rec, m, waits)
     v_c = obs.carrier.velocity_ned_m_s
-    evs = tuple(events)
+    evs = (*events, *queued)
     if float(norm(state.x_ref - h)) <= REFERENCE_AT_GOAL_M and float(norm(state.u_ref - v_c)) <= r.settle_speed_m_s:
         state = enter(state, Phase.HOLDOFF, t)
         rec = replace(rec, settled_since_s=None)
-        evs += ("at the holdoff point",)
+        evs += ("at the holdoff point" if waits is None else "at the queue point",)
     return _fly(state, obs, m, h, v_c, r.returning, rec, evs)
 
 
@@ -188,9 +195,16 @@ def holdoff(state, obs, m, events=()):
     why = _give_up(state, obs, m, rec)
     if why is not None:
         return fallback(replace(state, recovery=rec), obs, m, why, events)
+    rec, waits, timed_out, queued = queue.turn(obs, m, rec)
+    if timed_out is not None:
+        return fallback(replace(state, recovery=rec), obs, m, timed_out, (*events, *queued))
     dock = dock_point(obs, m)
     h = holdoff_point(dock, rec.course, r.geometry)
     v_c = obs.carrier.velocity_ned_m_s
+    if waits is not None:  # not its turn: hold off at the queue point, no settling, no approach
+        rec = replace(rec, settled_since_s=None, settled_offset_m=None)
+        return _fly(state, obs, m, queue.holdoff_goal(h, rec, m, waits), v_c, r.returning, rec, (*events, *queued))
+    events = (*events, *queued)
     offset = obs.vehicle.position_ned_m - h
     near = (float(norm(offset)) <= r.settle_radius_m
             and float(norm(v_c[:2])) >= r.settle_carrier_speed_m_s
@@ -301,6 +315,13 @@ def approach(state, obs, m, events=()):
     unsteady = carrier_unsteady(rec, obs, r)
     if unsteady is not None:
         return go_around(state, obs, m, unsteady, events)
+    q = m.queue
+    if q is not None and rec.descent is None:  # a neighbour docking, or one approaching that goes first
+        own = queue.claim(t - rec.started_s, None if obs.vehicle is None else obs.vehicle.battery_pct, q.must_pct,
+                          q.rank)
+        gives_way = queue.yield_reason(own, obs.neighbours, q.must_pct)
+        if gives_way is not None:
+            return go_around(state, obs, m, f"gives way: {gives_way}", events)
     g = r.geometry
     dock = dock_point(obs, m)
     gate = gate_point(dock, g)

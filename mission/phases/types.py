@@ -211,8 +211,32 @@ class MissionModel:
     leg_start_m: float  # a leg after the first starts once the carrier is this far from its target [m]
     deck: DeckRide | None  # mission.ride = "deck": the passenger sits on the deck (the dock point) when carried
     relnav: RelnavGates | None  # [relnav] enabled: the phases fly the relative estimate
+    queue: QueueModel | None = None  # the recovery queue among the team's passengers (None: as if alone)
     legs: tuple[MissionModel, ...] = ()  # one model per target, in order (the leg's tick has its target)
     next_target: np.ndarray | None = None  # a leg's model: the target of the leg after it [m] NED, or None (the last)
+
+
+@dataclass(frozen=True)
+class QueueModel:
+    """The recovery queue (``[team]``'s ``queue_*``; docs/team.md, :mod:`mission.phases.queue`):
+    a waiting passenger holds off ``distance_m`` [m] farther behind its holdoff point along the
+    carrier's course and ``height_m`` [m] higher; it falls back after waiting ``timeout_s`` [s]
+    without a break; with at most ``must_pct`` [%] (recovery.battery_reserve_pct +
+    team.queue_battery_pct) left it must land (it goes first, the lowest first); ``rank``: its own
+    MAVLink system id (the tie-break of two that asked at once: the lower first; None: unknown);
+    ``deck_clearance_m`` [m]: the least distance kept from the other passengers while it
+    approaches and docks (team.passenger_span_m: tip to tip), where ``safety.passenger_separation_m``
+    would forbid the deck's neighbouring slots; ``separation_m`` [m] the distance kept from them
+    in the recovery's air phases (safety.passenger_separation_m + safety.margin_m: the barrier
+    holds the references apart on the positions the others report, and both estimates err)."""
+
+    distance_m: float
+    height_m: float
+    timeout_s: float
+    must_pct: float
+    rank: int | None
+    deck_clearance_m: float
+    separation_m: float
 
 
 @dataclass(frozen=True)
@@ -318,6 +342,9 @@ class RecoveryState:
     fallback_goal: np.ndarray | None = None
     search_since_s: float | None = None  # [relnav] HOLDOFF searching for the marker since [s]
     marker_lost_s: float | None = None  # [relnav] the descent has had the marker lost since [s]
+    queued_since_s: float | None = None  # [s] waiting its turn in the recovery queue since (None: not waiting)
+    queued_for: str | None = None  # why it waits (the neighbour ahead), for the events
+    queue_place: int = 0  # waiting: its queue point's level, 1 + how many wait ahead of it (0: not waiting)
 
 
 @dataclass(frozen=True)

@@ -250,8 +250,9 @@ def run_team(cfg: Config, name: str, plot_path: str | None, as_json: bool, estim
     c = report["carrier"]
     click.echo(f"least distance between two passengers {report['pair_min_distance_m']:.3f} m at t = "
                f"{report['pair_min_distance_t_s']:.2f} s ({' and '.join(report['pair_min_phases'])}; true positions; "
-               f"the pairwise barrier, safety.passenger_separation_m = {cfg.safety.passenger_separation_m:g} m, "
-               "acts in NAVIGATING)")
+               f"the pairwise barrier keeps safety.passenger_separation_m = {cfg.safety.passenger_separation_m:g} m "
+               f"in NAVIGATING, + safety.margin_m = {cfg.safety.margin_m:g} m in the recovery's air phases, "
+               f"team.passenger_span_m = {cfg.team.passenger_span_m:g} m on the deck's approach)")
     click.echo("carrier closest to each target: " + ", ".join(f"{k}: {d:.3f} m" for k, d in enumerate(c["closest_m"]))
                + f" (P3 guard radius {c['guard_radius_m']:.3f} m; inside a keep-out: {any(c['inside_keep_out'])})")
     click.echo("carrier served: " + " -> ".join(f"{x['target']} {x['mode']} ({x['t_s']:.1f} s)" for x in c["served"]))

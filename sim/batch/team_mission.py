@@ -28,7 +28,7 @@ Frames: local NED [m], [m/s]; time [s] from the start of the mission.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -117,13 +117,14 @@ class Member:
     events: list[tuple[float, str]] = field(default_factory=list)
     finished: bool = False
     separations: list[dict[str, Any]] = field(default_factory=list)  # where the carrier stood at each latch
+    battery_pct: float | None = None  # [%] the battery its vehicle reports, steady (None: none reported)
 
 
 class TeamWorld:
     """A team's mission in flight (module docstring); :meth:`tick` advances it one controller tick."""
 
     def __init__(self, cfg: Config, max_duration_s: float | None = None, estimate_error: float = 0.0,
-                 seed: int = 0, share_neighbours: bool = True) -> None:
+                 seed: int = 0, share_neighbours: bool = True, batteries: list[float | None] | None = None) -> None:
         if not has_team(cfg):
             raise ConfigError("team.passengers", [], "the team simulation flies a file with a [team]")
         if cfg.mission.feeds:
@@ -141,6 +142,8 @@ class TeamWorld:
             under = [float(start[0] + slot[0]), float(start[1] + slot[1]), float(start[2])]  # on the ground under its slot
             self.members.append(Member(p.name, own, PassengerStep(model, own.mission.velocity_bias_tau_s),
                                        MockDynamics(under, estimate_error, seed + i, gnss=own.world.passenger_gnss)))
+        for m, pct in zip(self.members, batteries or []):
+            m.battery_pct = pct
         self.dt_s = mission_model(self.members[0].cfg).dt_s
         self.steps_per_tick = int(round(self.dt_s / PHYSICS_DT_S))
         if abs(self.steps_per_tick * PHYSICS_DT_S - self.dt_s) > 1e-12:
@@ -168,6 +171,21 @@ class TeamWorld:
                             0.0))
         return out
 
+    def shared_of(self, i: int, t_s: float) -> Neighbours:
+        """What passenger ``i`` hears of the others at ``t_s`` [s] (:meth:`neighbours_of`), with
+        what the recovery queue reads (:mod:`mission.phases.queue`): each one's phase (of the tick
+        before, as its status would carry it), how long its recovery has run [s], its battery [%],
+        its system id and its leg's target [m]."""
+        others = [m for j, m in enumerate(self.members) if j != i]
+        nb = Neighbours.of(self.neighbours_of(i, t_s), 3)
+        return replace(nb, phases=tuple(m.state.phase.value for m in others),
+                       recovery_s=tuple(None if m.state.recovery is None else t_s - m.state.recovery.started_s
+                                        for m in others),
+                       battery_pct=tuple(m.battery_pct for m in others),
+                       ids=tuple(m.cfg.mavlink.target_system or 0 for m in others),
+                       targets_ned_m=np.array([m.cfg.scenario.legs()[min(m.state.leg, len(m.cfg.scenario.legs()) - 1)]
+                                               for m in others], dtype=float).reshape(-1, 3))
+
     def tick(self) -> None:
         """One controller tick at ``k * dt``: the carrier's steps due, then every passenger's tick."""
         t = self.k * self.dt_s
@@ -185,8 +203,11 @@ class TeamWorld:
                 views.append(PassengerView(m.state.phase, separated=m.state.phase.separated, leg=m.state.leg))
                 continue
             before = m.state.phase
-            neighbours = Neighbours.of(self.neighbours_of(i, t), 3) if self.share_neighbours else None
-            result = m.step(m.state, PassengerInputs(t, vehicle.report(t), seen, dict(m.failed), neighbours=neighbours,
+            neighbours = self.shared_of(i, t) if self.share_neighbours else None
+            report = vehicle.report(t)
+            if m.battery_pct is not None:
+                report = replace(report, battery_pct=m.battery_pct)
+            result = m.step(m.state, PassengerInputs(t, report, seen, dict(m.failed), neighbours=neighbours,
                                                      carrier_target_ned_m=heading_for))
             m.state, obs, dec = result.state, result.observation, result.decision
             vehicle.carry_out(t, dec, m.failed)

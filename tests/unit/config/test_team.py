@@ -25,11 +25,13 @@ def team():
 
 def single_passenger_text(dock: str, system_id: int, targets_line: str) -> str:
     """configs/team.toml as a one-passenger file would say it: no [team], the dock offset, the
-    system id and the targets stated where a file without a team states them."""
+    system id and the targets stated where a file without a team states them; [team] keeps its
+    scalars (the span, the queue: every passenger's), without slots or passengers."""
     text = TEAM_TOML[:TEAM_TOML.index("[team]")]
     text = re.sub(r"^targets = .*$", targets_line, text, count=1, flags=re.M)
     text = text.replace("[mission]\n", f"[mission]\ndock_offset_ned_m = {dock}\n", 1)
-    return text.replace("[mavlink]\n", f"[mavlink]\ntarget_system = {system_id}\n", 1)
+    text = text.replace("[mavlink]\n", f"[mavlink]\ntarget_system = {system_id}\n", 1)
+    return text + TEAM_TOML[TEAM_TOML.index("[team]"):TEAM_TOML.index("[[team.slots]]")]
 
 
 @pytest.mark.parametrize("name, dock, system_id, targets_line", [
