@@ -211,7 +211,7 @@ class MissionModel:
     leg_start_m: float  # a leg after the first starts once the carrier is this far from its target [m]
     deck: DeckRide | None  # mission.ride = "deck": the passenger sits on the deck (the dock point) when carried
     relnav: RelnavGates | None  # [relnav] enabled: the phases fly the relative estimate
-    queue: QueueModel | None = None  # the recovery queue among the team's passengers (None: as if alone)
+    queue: QueueModel | None  # the recovery queue among the team's passengers (None: as if alone)
     legs: tuple[MissionModel, ...] = ()  # one model per target, in order (the leg's tick has its target)
     next_target: np.ndarray | None = None  # a leg's model: the target of the leg after it [m] NED, or None (the last)
 
