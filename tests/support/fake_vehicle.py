@@ -24,6 +24,7 @@ from mission.errors import CommandRejected, LinkTimeout
 from mission.mavlink.link import VehicleState
 from mission.mavlink.session import LinkCounters
 from mission.bus.wire import CarrierState, GeoOrigin, PassengerStatus
+from mission.phases.measurements import RelativePosition
 from mission.phases.phase import Duty
 
 
@@ -219,6 +220,23 @@ class FakeWorld:
         size = float(np.linalg.norm(step))
         self._v_c = self._v_c + (step * (cap / size) if size > cap else step)
         self._last_status_s = self.clock.now()
+
+
+
+
+class TrueMarker:
+    """A marker feed that sees the dock point from the world's vehicle exactly: captured now, its
+    stated sigma 2 cm (``dock_offset`` [m] NED from the carrier)."""
+
+    def __init__(self, world: FakeWorld, dock_offset: np.ndarray) -> None:
+        self.world, self.dock_offset = world, dock_offset
+
+    def poll(self, t_s: float) -> list[RelativePosition]:
+        offset = self.world.carrier_ned_m + self.dock_offset - self.world.vehicle_ned_m
+        return [RelativePosition(capture_t_s=t_s, offset_ned_m=offset, sigma_m=0.02)]
+
+    def close(self) -> None:
+        pass
 
 
 @dataclass

@@ -15,31 +15,16 @@ from mission.controller import MissionController
 from mission.flightdata.mission_log import MissionLog, relnav_message
 from mission.flightdata.read import RECORD_SCHEMA, read_messages
 from mission.flightdata.topics import JSON_SCHEMAS, RELNAV_CHANNELS, topics
-from mission.phases.measurements import RelativePosition
 from mission.phases.types import RelativeView
 from mission.record.info import mission_info
 from mission.record.recorder import FlightRecorder
 from mission.time.clock import ManualClock
 from tests.conftest import CONFIGS
-from tests.support.fake_vehicle import FakeWorld
+from tests.support.fake_vehicle import FakeWorld, TrueMarker
 
 PAIR = "pairR"
 TOPIC = topics(PAIR, RELNAV_CHANNELS)["relnav"]
 UNTIL_S = 8.0  # [s] of mission clock flown (JOIN, the ride: the marker in view all along)
-
-
-class TrueMarker:
-    """A marker feed that sees the dock point from the vehicle exactly (captured now, 2 cm stated sigma)."""
-
-    def __init__(self, world: FakeWorld, dock_offset: np.ndarray) -> None:
-        self.world, self.dock_offset = world, dock_offset
-
-    def poll(self, t_s: float) -> list[RelativePosition]:
-        offset = self.world.carrier_ned_m + self.dock_offset - self.world.vehicle_ned_m
-        return [RelativePosition(capture_t_s=t_s, offset_ned_m=offset, sigma_m=0.02)]
-
-    def close(self) -> None:
-        pass
 
 
 def fly(tmp_path, relnav: bool):

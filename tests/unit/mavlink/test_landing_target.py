@@ -14,10 +14,9 @@ from mission.mavlink.env import mavlink
 from mission.mavlink.px4 import encode_landing_target as encode, landing_target_reading as px4_reading
 from mission.passenger.target import LandingTarget, deck_target
 from mission.time.rate import RateGate
-from mission.phases.measurements import RelativePosition
 from mission.time.clock import ManualClock
 from tests.conftest import CONFIGS
-from tests.support.fake_vehicle import FakeWorld
+from tests.support.fake_vehicle import FakeWorld, TrueMarker
 
 
 def wire(msg):
@@ -85,20 +84,6 @@ def test_rate_gate_keeps_the_grid_and_restarts_after_a_gap():
     assert gate.due(5.0) and not gate.due(5.02) and gate.due(5.1)  # after a gap: once, then on the new grid
     never = RateGate(0.0)
     assert not any(never.due(float(t)) for t in ticks)
-
-
-class TrueMarker:
-    """A marker feed that sees the dock point exactly (capture now, 2 cm stated sigma)."""
-
-    def __init__(self, world: FakeWorld, dock_offset: np.ndarray) -> None:
-        self.world, self.dock_offset = world, dock_offset
-
-    def poll(self, t_s: float) -> list[RelativePosition]:
-        offset = self.world.carrier_ned_m + self.dock_offset - self.world.vehicle_ned_m
-        return [RelativePosition(capture_t_s=t_s, offset_ned_m=offset, sigma_m=0.02)]
-
-    def close(self) -> None:
-        pass
 
 
 def fly(rate_hz: float, until_s: float = 8.0):
