@@ -1,4 +1,4 @@
-"""The team's Monte-Carlo (issue 36; docs/team.md "The team's Monte-Carlo"): ``-n`` random team
+"""The team's Monte-Carlo (docs/team.md "The team's Monte-Carlo"): ``-n`` random team
 scenarios (2-3 passengers, 2-4 targets satisfying the paper's assumptions), each a whole mission
 flown in-process by every passenger's own step (:mod:`sim.batch.team_mc`), then the table of
 the issue's targets.
@@ -20,7 +20,7 @@ from mission.config.schema import load_config
 from sim.batch import team_mc
 
 ROOT = Path(__file__).resolve().parents[1]
-STEP_LIMIT_M_S = 0.05  # [m/s] issue 36: the command's step at a switch
+STEP_LIMIT_M_S = 0.05  # [m/s] the most the command may step at a switch (docs/team.md)
 
 
 @click.command()

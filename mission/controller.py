@@ -14,10 +14,10 @@ import logging
 import threading
 import time
 from dataclasses import dataclass
-
-import numpy as np
 from collections.abc import Callable, Sequence
 from typing import Any
+
+import numpy as np
 
 from mission import phases
 from mission.bus.wire import GeoOrigin, PassengerStatus

@@ -1,4 +1,4 @@
-"""The team's Monte-Carlo (issue 36's target; docs/team.md "The team's Monte-Carlo"): random team
+"""The team's Monte-Carlo (the team targets; docs/team.md "The team's Monte-Carlo"): random team
 scenarios, each a whole mission of 2 or 3 passengers flown in-process by their own steps
 (:class:`sim.batch.team_mission.TeamWorld`), and the figures the issue asks for.
 

@@ -18,7 +18,7 @@ from tests.conftest import CONFIGS
 
 pytestmark = pytest.mark.timeout(600)  # two team missions in-process, about 10 s of CPU each
 
-STEP_MAX_M_S = 0.05  # [m/s] issue 36: the command's step at a switch
+STEP_MAX_M_S = 0.05  # [m/s] the most the command may step at a switch (docs/team.md)
 ON_APPROACH = {Phase.APPROACH, Phase.DOCKED}
 
 
@@ -88,7 +88,7 @@ def test_every_leg_docks_at_the_first_approach_on_the_recovery_course(flight):
         legs = m.state.legs_done
         assert [leg["contact"]["attempts"] for leg in legs] == [1] * len(m.cfg.scenario.legs())
         # on the contact conditions (recovery.contact_radius_m = 0.15 m); measured 0.033, 0.104, 0.055 m by the
-        # estimates, PX4 SITL's errors (issue 36 asks <= 0.10 m of the mock's lockstep demo: bravo's misses it here)
+        # estimates, PX4 SITL's errors (docs/team.md asks <= 0.10 m of the mock's lockstep demo: bravo's misses it here)
         assert all(leg["contact"]["horizontal_error_m"] <= m.cfg.recovery.contact_radius_m for leg in legs)
     report = flight.world.report()
     for s in report["passengers"].values():
