@@ -86,7 +86,8 @@ def summary_of(r: FlightRecord) -> dict[str, Any]:
 #: With several targets, the top level's figures of one leg's separation: only in ``legs``.
 PER_LEG_ONLY = ("separation_time_s", "carrier_target_distance_at_separation_m")
 #: With several targets, the top level's figures that are the worst (largest) of the legs flown.
-WORST_OF_LEGS = ("relative_speed_at_separation_m_s", "relative_input_jump_m_s", "departure_delay_s",
+WORST_OF_LEGS = ("relative_speed_at_separation_m_s", "relative_input_jump_m_s", "input_jump_m_s",
+                 "carrier_velocity_step_at_separation_m_s", "departure_delay_s",
                  "final_passenger_target_distance_m", "max_offset_before_separation_m", "riding_offset_held_m",
                  "max_relative_command_step_m_s", "max_target_distance_after_arrival_m", "last_metre_s",
                  "hover_speed_m_s", "max_target_distance_at_target_m", "takeoff_command_jump_m_s",
@@ -132,8 +133,9 @@ def figures(r: FlightRecord) -> dict[str, Any]:
     t0 = r.t[riding][0] if riding.any() else (r.t[0] if len(r.t) else 0.0)
     out: dict[str, Any] = {k: None for k in (
         "separation_time_s", "carrier_target_distance_at_separation_m", "relative_speed_at_separation_m_s",
-        "relative_input_jump_m_s", "departure_delay_s", "final_passenger_target_distance_m",
-        "min_carrier_target_distance_m", "min_obstacle_clearance_m", "max_passenger_speed_m_s")}
+        "relative_input_jump_m_s", "input_jump_m_s", "carrier_velocity_step_at_separation_m_s", "departure_delay_s",
+        "final_passenger_target_distance_m", "min_carrier_target_distance_m", "min_obstacle_clearance_m",
+        "max_passenger_speed_m_s")}
     out["riding_start_s"] = _num(t0) if riding.any() else None  # on the mission clock (record.csv t_s)
     have_c = np.isfinite(x_c).all(axis=1)
     if have_c.any():
@@ -160,6 +162,11 @@ def figures(r: FlightRecord) -> dict[str, Any]:
             out["carrier_target_distance_at_separation_m"] = _num(norm(target - np.asarray(anchor)))
         out["relative_speed_at_separation_m_s"] = _num(norm(rel_cmd[first_sep]))
         out["relative_input_jump_m_s"] = _num(norm(rel_cmd[first_sep] - rel_cmd[first_sep - 1]))
+        # The paper's P1 is about the passenger's own input: the command's step at the separation
+        # tick. The relative figure above also holds the carrier's measured velocity changing on that
+        # tick (a new sample of an accelerating rover: up to ~0.03 m/s at 30 Hz), reported beside.
+        out["input_jump_m_s"] = _num(norm(u_cmd[first_sep] - u_cmd[first_sep - 1]))
+        out["carrier_velocity_step_at_separation_m_s"] = _num(norm(np.nan_to_num(v_c[first_sep] - v_c[first_sep - 1])))
         left = np.isin(r.phase, sorted(AFTER_SEPARATION - {Phase.SEPARATED}))  # the passenger has left the dock
         if left.any():
             out["departure_delay_s"] = _num(r.t[int(np.argmax(left))] - r.t[first_sep])

@@ -86,12 +86,13 @@ def test_quadrotor_and_rover_on_px4_fly_two_targets_and_every_dock_meets_the_con
             # failed about two flights in five: a test that fails that often proves nothing.
             assert leg["riding_offset_held_m"] <= 1.5 * 0.5, leg
         assert abs(leg["carrier_target_distance_at_separation_m"] - 8.0) < 0.01
-        # The relative command's largest step at the separation is its braking at
-        # passenger_max_accel_m_s2 (2 m/s^2) over one tick: 0.04 m/s at the nominal 50 Hz, more on
-        # a late tick of this real-time flight (0.055 m/s, a 27 ms tick, in one of three runs on
-        # this loaded 2-core machine): a rate bounded by the limit, no jump; the mock's 0.05 holds
-        # in lockstep (tests/integration/test_cycle_demo.py).
-        assert leg["relative_input_jump_m_s"] <= 0.065, leg["relative_input_jump_m_s"]
+        # P1's "no jump" is about the passenger's own input: its command's step at the separation
+        # tick is its braking at passenger_max_accel_m_s2 (2 m/s^2) over one 20 ms tick, 0.04 m/s
+        # (0.065 leaves room for a late tick of this real-time flight). The command relative to the
+        # carrier also holds the rover's measured velocity changing on that tick, a new 30 Hz sample
+        # of an accelerating rover: 0.072 m/s relative = 0.04 own + 0.03 the rover's in a CI flight
+        # (ad3cc8e), which is not a step of ours; it is printed above.
+        assert leg["input_jump_m_s"] <= 0.065, leg["input_jump_m_s"]
         assert leg["final_passenger_target_distance_m"] <= 0.5
         assert leg["last_metre_s"] is not None and leg["last_metre_s"] <= 5.0, leg["last_metre_s"]
         assert leg["hover_speed_m_s"] is not None and leg["hover_speed_m_s"] <= 0.3, leg["hover_speed_m_s"]

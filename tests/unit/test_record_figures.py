@@ -1,4 +1,5 @@
-"""Flight-record figures of a leg that never separated: no separation figures, no crash."""
+"""Flight-record figures: a leg that never separated has no separation figures and no crash; a
+separated leg's input jump is its own command's step, apart from the carrier's velocity step."""
 
 import numpy as np
 
@@ -29,3 +30,19 @@ def test_a_separated_leg_counts_from_the_missions_separation_time():
     assert out["separation_time_s"] == 0.30
     info.pop("separation_time_s")
     assert abs(figures(_record([Phase.RIDING] * 20 + [Phase.SEPARATED] * 10, info))["separation_time_s"] - 0.40) < 1e-9
+
+
+def test_the_input_jump_is_the_commands_own_step_and_the_carriers_step_is_reported_beside():
+    """At the separation tick the passenger brakes by 0.04 m/s while a new sample of the carrier's
+    velocity steps by 0.03 m/s: the paper's jump (the passenger's input) is 0.04, the command relative
+    to the carrier steps by both."""
+    info = {"target_ned_m": [30.0, 0.0, -5.0], "separation_time_s": 0.40}
+    rec = _record([Phase.RIDING] * 20 + [Phase.SEPARATED] * 10, info)
+    rec.cols["v_c_n"][:] = 2.0
+    rec.cols["v_c_n"][20:] = 2.03
+    rec.cols["u_cmd_n"][:20] = 2.0
+    rec.cols["u_cmd_n"][20:] = 2.0 - 0.04 * np.arange(1, 11)
+    out = figures(rec)
+    assert abs(out["input_jump_m_s"] - 0.04) < 1e-9
+    assert abs(out["carrier_velocity_step_at_separation_m_s"] - 0.03) < 1e-9
+    assert abs(out["relative_input_jump_m_s"] - 0.07) < 1e-9
