@@ -12,7 +12,9 @@ ground-truth stream, asked at 50 Hz; NaN before the first).
 saw: other step sizes and directions, a slower carrier ramp east, sines east at other
 frequencies, 20 s at rest under a zero *velocity* setpoint and 20 s holding a *position*
 (the estimate's error under both, with the truth beside it). ``--sequence original`` flies the
-recorded one again.
+recorded one again. ``--sequence axes`` flies setpoints full on some axes only (position and
+acceleration north and east with the vertical velocity only, then the other way round: type_mask
+3332 and 3267), the kinds tracking sends while the safety filter acts on one axis.
 
 Usage: ``flock /tmp/marsupial-px4.lock python -m bench.px4_response_record OUT.csv [--sequence unseen]``
 (real time, about 3 minutes; needs root and ``MARSUPIAL_PX4_SITL``).
@@ -36,6 +38,9 @@ COLUMNS = ("t_s,segment,setpoint_kind,sp_x_m,sp_y_m,sp_z_m,sp_vx_m_s,sp_vy_m_s,s
 RATE_HZ = 50.0
 VELOCITY_MASK = 0x0DC7  # velocity only (3527)
 FULL_MASK = 1024 | 2048  # position + velocity + acceleration, yaw ignored (3072)
+# position + acceleration on some axes only, velocity on all (mission.mavlink.setpoints: 3332, 3267)
+MASKS = {"velocity": VELOCITY_MASK, "pos_vel_acc": FULL_MASK, "pos_horizontal": FULL_MASK | 4 | 256,
+         "pos_vertical": FULL_MASK | 1 | 2 | 64 | 128}
 
 
 class Recorder:
@@ -83,11 +88,11 @@ class Recorder:
     def send(self) -> None:
         from pymavlink.dialects.v20 import common as mav
 
-        full = self.kind != "velocity"
-        p, a = (self.p, self.a) if full else ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+        mask = MASKS[self.kind]
+        p = [0.0 if mask & bit else x for x, bit in zip(self.p, (1, 2, 4))]  # ignored fields go as 0
+        a = [0.0 if mask & bit else x for x, bit in zip(self.a, (64, 128, 256))]
         self.m.mav.send(mav.MAVLink_set_position_target_local_ned_message(
-            int(self.now() * 1000) & 0xFFFFFFFF, 1, 1, mav.MAV_FRAME_LOCAL_NED, FULL_MASK if full else VELOCITY_MASK,
-            *p, *self.v, *a, 0, 0))
+            int(self.now() * 1000) & 0xFFFFFFFF, 1, 1, mav.MAV_FRAME_LOCAL_NED, mask, *p, *self.v, *a, 0, 0))
 
     def stream(self, duration_s: float, fn: Callable[[float], None] | None = None) -> None:
         """Send at RATE_HZ for ``duration_s``; ``fn(tau)`` sets the setpoint before each send."""
@@ -219,7 +224,28 @@ def gaps(path: Path) -> dict[str, tuple[float, float]]:
     return out
 
 
-SEQUENCES = {"unseen": fly_unseen, "original": fly_original}
+def fly_axes(r: Recorder) -> None:
+    """Setpoints full on some axes only (``Setpoint.position_axes``): 6 s holding north and east
+    at the start while climbing at 0.5 m/s on a velocity-only down axis, then 6 s holding the height
+    while going east at 1 m/s on velocity-only north and east; each followed by 4 s of a full hold."""
+    assert r.pos is not None
+    p0 = list(r.pos)
+    r.segment, r.kind = "hold_horizontal_climb_0p5", "pos_horizontal"
+    r.p, r.v, r.a = [p0[0], p0[1], 0.0], [0.0, 0.0, -0.5], [0.0, 0.0, 0.0]
+    r.stream(6.0)
+    assert r.pos is not None
+    p1 = list(r.pos)
+    r.segment, r.kind, r.p, r.v = "hold_after_climb", "pos_vel_acc", [p0[0], p0[1], p1[2]], [0.0, 0.0, 0.0]
+    r.stream(4.0)
+    r.segment, r.kind = "hold_height_east_1", "pos_vertical"
+    r.p, r.v, r.a = [0.0, 0.0, p1[2]], [0.0, 1.0, 0.0], [0.0, 0.0, 0.0]
+    r.stream(6.0)
+    assert r.pos is not None
+    r.segment, r.kind, r.p, r.v = "hold_after_east", "pos_vel_acc", [r.pos[0], r.pos[1], p1[2]], [0.0, 0.0, 0.0]
+    r.stream(4.0)
+
+
+SEQUENCES = {"unseen": fly_unseen, "original": fly_original, "axes": fly_axes}
 
 
 def child(out_path: Path, sequence: str) -> None:

@@ -91,6 +91,9 @@ class Obstacles:
         return norm(diff) - self.radii
 
 
+CHANGED_M_S = 1e-12  # [m/s] a correction over this is the filter changing the command (per axis too)
+
+
 @dataclass(frozen=True)
 class SafetyConfig:
     """Parameters of the filter. None disables a limit.
@@ -484,4 +487,4 @@ def filter_velocity(
         return FilterResult(u=u.copy() if copy else u, changed=unchanged > 0.0, correction_m_s=unchanged,
                             feasible=feasible, cbf_active=active)
     correction = norm(u - u_des)
-    return FilterResult(u=u, changed=correction > 1e-12, correction_m_s=correction, feasible=feasible, cbf_active=active)
+    return FilterResult(u=u, changed=correction > CHANGED_M_S, correction_m_s=correction, feasible=feasible, cbf_active=active)

@@ -78,20 +78,31 @@ def update_integral(integral: np.ndarray, x_ref: np.ndarray, x_p: np.ndarray, ga
 
 def setpoint(x_ref: np.ndarray, u_ref: np.ndarray, a_ref: np.ndarray, x_p: np.ndarray, velocity: np.ndarray,
              integral: np.ndarray, gains: TrackingGains, v_p: np.ndarray | None = None,
-             filtered: bool = False, velocity_bias: np.ndarray | None = None) -> Setpoint:
+             filtered: bool | np.ndarray = False, velocity_bias: np.ndarray | None = None) -> Setpoint:
     """The setpoint to send; the one place that decides velocity-only or full. ``velocity`` [m/s]
-    is the (safety-filtered) velocity demand. Velocity only for velocity gains, or when the
-    safety filter changed the velocity (``filtered``: the filter wins over the reference, so
-    neither the reference position nor its feed-forward may pull the vehicle back); else a full
+    is the (safety-filtered) velocity demand. Velocity only for velocity gains; else a full
     setpoint adds the position (the reference, the lead and, given the estimator's velocity bias
     ``velocity_bias`` [m/s], its compensation) and the acceleration feed-forward (reference
     acceleration, drag feed-forward, integral and, given the vehicle's velocity ``v_p`` [m/s],
-    damping)."""
-    if gains.kind == "velocity" or filtered:
+    damping). ``filtered``: whether the safety filter changed the velocity, overall (bool) or per
+    axis (north, east, down). On the axes it changed the filter wins over the reference, so
+    neither the reference position nor its feed-forward may pull the vehicle back there: those
+    axes get velocity only (north and east together, as PX4 takes them), the others keep their
+    position and acceleration (a floor acting down leaves the horizontal tracking whole)."""
+    changed = np.broadcast_to(np.asarray(filtered, dtype=bool), np.shape(velocity))
+    axes = (True, True, True)
+    if changed.shape == (3,):
+        horizontal = not bool(changed[0] or changed[1])
+        axes = (horizontal, horizontal, not bool(changed[2]))
+    elif changed.any():
+        axes = (False, False, False)
+    if gains.kind == "velocity" or not any(axes):
         return Setpoint.velocity_only(velocity)
     accel = a_ref + gains.drag_ff_per_s * u_ref + integral
     if gains.damping_per_s > 0 and v_p is not None:
         accel = accel - gains.damping_per_s * (v_p - u_ref)
+    if not all(axes):  # what an ignored axis would have added counts for nothing, nor for the limit
+        accel = np.where(axes, accel, 0.0)
     limit = gains.accel_limit_m_s2
     size = float(np.linalg.norm(accel))
     if limit is not None and size > limit:  # PX4 holds the last setpoint through a stall of ours
@@ -99,7 +110,7 @@ def setpoint(x_ref: np.ndarray, u_ref: np.ndarray, a_ref: np.ndarray, x_p: np.nd
     position = x_ref + gains.position_lead * (x_ref - x_p)
     if gains.bias_compensation_s > 0 and velocity_bias is not None:
         position = position + gains.bias_compensation_s * velocity_bias
-    return Setpoint.triple(position, velocity, accel)
+    return Setpoint.triple(position, velocity, accel, position_axes=axes)
 
 
 def lead_acceleration(a_ref: np.ndarray, low_passed: np.ndarray | None, gains: TrackingGains,

@@ -228,7 +228,7 @@ class MissionLog(DataLog):
         self.ch["safety"].log({"acted": row.safety_acted, "acted_ticks": self._acted,
                                "change_m_s": _distance(row.u_cmd, row.desired)}, log_time=t)
         sp = row.setpoint
-        self.ch["setpoint"].log({"kind": "none" if sp is None else ("full" if sp.full else "velocity"),
+        self.ch["setpoint"].log({"kind": "none" if sp is None else sp.kind,
                                  "velocity": None if sp is None else vector(sp.velocity_ned_m_s),
                                  "position": None if sp is None else vector(sp.position_ned_m),
                                  "acceleration": None if sp is None else vector(sp.acceleration_ned_m_s2),

@@ -138,7 +138,9 @@ JSON_SCHEMAS: dict[str, dict[str, Any]] = {
         "acted_ticks": {"type": "integer", "description": "ticks on which it acted so far"},
         "change_m_s": _number("[m/s] |safe - law| (null when either is missing)")}),
     "marsupial.Setpoint": _object("marsupial.Setpoint", "The setpoint sent to the vehicle (SET_POSITION_TARGET_LOCAL_NED)", {
-        "kind": {"type": "string", "description": "full (position, velocity, acceleration), velocity, or none (nothing sent)"},
+        "kind": {"type": "string", "description": "full (position, velocity, acceleration), full_horizontal or "
+                 "full_vertical (position and acceleration on those axes only; the other axis's are not sent), "
+                 "velocity, or none (nothing sent)"},
         "velocity": _vector("[m/s] velocity"),
         "position": _vector("[m] position (full setpoints)"),
         "acceleration": _vector("[m/s^2] acceleration feed-forward (full setpoints)"),

@@ -14,7 +14,15 @@ velocity only         3527       velocity [m/s]
 velocity + yaw        2503       velocity [m/s], yaw [rad]
 full                  3072       position [m], velocity [m/s], acceleration [m/s^2]
 full + yaw            2048       the same and yaw [rad]
+full, horizontal      3332       position and acceleration north and east, velocity [m/s]
+full, vertical        3267       position and acceleration down, velocity [m/s]
 ====================  =========  ==========================================================
+
+A full setpoint on some axes only (:attr:`Setpoint.position_axes`) sets the position and
+acceleration ignore bits of the others: PX4's receiver reads those fields as NaN, per axis, and
+its position controller adds a position or acceleration term only where it is finite
+(``mavlink_receiver.cpp`` ``handle_message_set_position_target_local_ned``;
+``PositionControl::_inputValid`` wants north and east together). The yaw bits combine as above.
 
 Bit 512 (FORCE_SET) is never set: PX4 reads the acceleration as a *force* then and drops the
 setpoint. Frame: always LOCAL_NED (1). Ignored fields are sent as 0.
@@ -52,11 +60,17 @@ TYPE_MASK_POSITION = VELOCITY_IGNORE | ACCELERATION_IGNORE | YAW_RATE_IGNORE  # 
 TYPE_MASK_POSITION_VELOCITY_ACCELERATION = YAW_IGNORE | YAW_RATE_IGNORE  # 3072
 
 
+AXIS_IGNORE = ((X_IGNORE | AX_IGNORE), (Y_IGNORE | AY_IGNORE), (Z_IGNORE | AZ_IGNORE))  # north, east, down
+
+
 def type_mask(setpoint: Setpoint) -> int:
     """The type mask that sends exactly the setpoint's fields (never a yaw rate, never FORCE_SET)."""
     mask = YAW_RATE_IGNORE
     if not setpoint.full:
         mask |= POSITION_IGNORE | ACCELERATION_IGNORE
+    else:
+        for bits, sent in zip(AXIS_IGNORE, setpoint.position_axes):
+            mask |= 0 if sent else bits
     if setpoint.yaw_rad is None:
         mask |= YAW_IGNORE
     return mask
@@ -80,6 +94,9 @@ def encode(setpoint: Setpoint, target: tuple[int, int], time_boot_ms: int) -> An
     position = _checked("position", setpoint.position_ned_m)
     velocity = _checked("velocity", setpoint.velocity_ned_m_s)
     acceleration = _checked("acceleration", setpoint.acceleration_ned_m_s2)
+    if setpoint.full and not all(setpoint.position_axes):  # ignored fields go as 0
+        position = [c if sent else 0.0 for c, sent in zip(position, setpoint.position_axes)]
+        acceleration = [c if sent else 0.0 for c, sent in zip(acceleration, setpoint.position_axes)]
     yaw = setpoint.yaw_rad
     if yaw is not None and not (math.isfinite(yaw) and abs(yaw) <= FLOAT32_MAX):
         raise ValueError(f"refusing non-finite yaw {yaw!r}")
@@ -133,9 +150,13 @@ def decode(msg: Any) -> Setpoint:
     t = decode_target(msg)
     if t.frame != px4.MAV_FRAME_LOCAL_NED:
         raise ValueError(f"setpoint frame {t.frame} is not LOCAL_NED ({px4.MAV_FRAME_LOCAL_NED})")
-    full = not t.type_mask & POSITION_IGNORE
-    setpoint = Setpoint(np.array(t.velocity), np.array(t.position) if full else None,
-                        np.array(t.acceleration) if full else None, t.yaw_rad)
+    axes = tuple(not t.type_mask & bit for bit in (X_IGNORE, Y_IGNORE, Z_IGNORE))
+    full = any(axes)
+    if full and (axes[0] != axes[1]):
+        raise ValueError(f"type_mask {t.type_mask} sends one horizontal position axis without the other")
+    setpoint = Setpoint(np.array(t.velocity), np.nan_to_num(np.array(t.position)) if full else None,
+                        np.nan_to_num(np.array(t.acceleration)) if full else None, t.yaw_rad,
+                        axes if full else (True, True, True))  # type: ignore[arg-type]
     if type_mask(setpoint) != t.type_mask:
         raise ValueError(f"type_mask {t.type_mask} is no setpoint kind (nearest: {type_mask(setpoint)})")
     return setpoint

@@ -172,9 +172,10 @@ def ride(state: MissionState, obs: Observation, m: MissionModel) -> tuple[Missio
         reason = AbortReason.ARMING_REFUSED if failed == "arm" else AbortReason.OFFBOARD_REFUSED
         new = enter(state, Phase.ABORT, t, reason=reason, detail=obs.failed[failed])
         return new, Decision(setpoint=None, events=(f"abort: {failed} refused on the deck: {obs.failed[failed]}",))
-    sent = tr.setpoint.position_ned_m
+    sp = tr.setpoint
+    sent = None if sp.position_ned_m is None else np.where(sp.position_axes, sp.position_ned_m, np.nan)  # NaN: not sent
     new = replace(state, x_ref=dock.copy(), e_ref=ZERO.copy(), prev_dock=dock.copy(), u_ref=tick.u,
-                  seated_sent=None if sent is None else sent.copy(), **_kept(tr))
+                  seated_sent=sent, **_kept(tr))
     return new, tr.decision(request=request, dock=dock, P=float(tick.P), relative=tick.relative, desired=tick.desired,
                             safety_acted=tr.acted or bool(tick.safety.changed), events=events)
 
@@ -183,7 +184,7 @@ def takeoff_start(state: MissionState, obs: Observation, m: MissionModel) -> np.
     """Where [m] NED the take-off's tracked point starts at the latch: the point whose setpoint
     continues the last one sent on the deck (``state.seated_sent``, held down ``press_m`` below
     the vehicle's reported height: tracking's position is ``x + lead (x - x_p) + bias``, solved
-    for ``x``), else, velocity only sent, where the passenger reports itself. Its offset from the
+    for ``x``), else, velocity only sent (on that axis), where the passenger reports itself. Its offset from the
     deck (the dock point now; the anchor is where the law starts) relaxes to zero in flight (:func:`mission.phases.flying.navigate`), so neither the
     velocity nor the position sent jumps when the hold releases, however far the estimate puts
     the vehicle from the deck."""
@@ -196,7 +197,8 @@ def takeoff_start(state: MissionState, obs: Observation, m: MissionModel) -> np.
     sent = state.seated_sent
     if g.bias_compensation_s > 0 and v.velocity_bias_ned_m_s is not None:
         sent = sent - g.bias_compensation_s * np.asarray(v.velocity_bias_ned_m_s, dtype=float)
-    return (sent + g.position_lead * x_p) / (1.0 + g.position_lead)
+    # an axis sent velocity only (NaN) starts where the vehicle reports itself
+    return np.where(np.isnan(sent), x_p, (sent + g.position_lead * x_p) / (1.0 + g.position_lead))
 
 
 def _sit(state: MissionState, obs: Observation, m: MissionModel, x_ref: np.ndarray, u_ref: np.ndarray,

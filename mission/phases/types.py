@@ -380,7 +380,8 @@ class MissionState:
     streaming_since_s: float | None = None  # seated: since when setpoints stream before arming [s] (None: not yet)
     # seated, the mission asking nothing of the vehicle: (seen disarmed since, PX4's mode then) (mission.phases.deck.watch)
     deck_watch: tuple[bool, str] | None = None
-    # seated, streaming before the latch: the position [m] NED the last setpoint sent (None: velocity only)
+    # seated, streaming before the latch: the position [m] NED the last setpoint sent (None: velocity only; NaN on
+    # an axis sent velocity only)
     seated_sent: np.ndarray | None = None
     # the take-off from the deck: (offset [m], its rate [m/s]) NED of the point tracked from the reference, which
     # starts where the passenger was when the latch fired and relaxes to zero (mission.phases.flying.navigate)

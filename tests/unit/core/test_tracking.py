@@ -55,6 +55,26 @@ def test_a_filtered_velocity_goes_alone_even_with_full_gains() -> None:
     assert sp.velocity_ned_m_s is safe
 
 
+@pytest.mark.parametrize(("changed", "kind"), [
+    ([False, False, True], "full_horizontal"),  # a floor acting down: the horizontal tracking stays whole
+    ([True, False, False], "full_vertical"),  # an obstacle north: north and east go velocity only together
+    ([True, True, True], "velocity"),  # a speed limit scaling the whole command
+])
+def test_only_the_axes_the_filter_changed_lose_their_position_and_feed_forward(changed, kind) -> None:
+    """PX4 reads an ignored field as NaN per axis (north and east together): the axes the filter
+    left alone keep their reference position and acceleration, the others get velocity only."""
+    g = gains(kind="full", position_lead=2.0, drag_ff_per_s=1.0)
+    safe = np.array([1.5, 1.2, 0.4])
+    sp = setpoint(X_REF, U_REF, A_REF, X_P, safe, np.zeros(3), g, filtered=np.array(changed))
+    assert sp.kind == kind and sp.velocity_ned_m_s is safe
+    if sp.full:
+        sent = np.array(sp.position_axes)
+        whole = setpoint(X_REF, U_REF, A_REF, X_P, safe, np.zeros(3), g)
+        np.testing.assert_allclose(sp.position_ned_m[sent], whole.position_ned_m[sent])
+        np.testing.assert_allclose(sp.acceleration_ned_m_s2[sent], whole.acceleration_ned_m_s2[sent])
+        assert not sp.acceleration_ned_m_s2[~sent].any()  # nothing left for the axis not sent
+
+
 def test_integral_integrates_inside_its_window_and_is_clamped() -> None:
     g = gains(kind="full", integral_gain=2.0, integral_limit=0.5, integral_window_m=0.5)
     zero = np.zeros(3)

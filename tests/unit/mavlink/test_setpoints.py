@@ -25,6 +25,10 @@ KINDS = {
     "full": (Setpoint.triple(P, V, A), 3072),
     "full+yaw": (Setpoint.triple(P, V, A, yaw_rad=-1.5), 2048),
     "hold still": (Setpoint.hold_still(), 3527),
+    # position and acceleration on some axes only (their ignored fields go as 0, so the round trip is exact)
+    "full horizontal": (Setpoint.triple(P * [1, 1, 0], V, A * [1, 1, 0], position_axes=(True, True, False)), 3332),
+    "full vertical+yaw": (Setpoint.triple(P * [0, 0, 1], V, A * [0, 0, 1], yaw_rad=0.5,
+                                          position_axes=(False, False, True)), 2243),
 }
 
 
@@ -38,7 +42,8 @@ def same(a: Setpoint, b: Setpoint) -> bool:
     def eq(x: np.ndarray | None, y: np.ndarray | None) -> bool:
         return (x is None and y is None) or (x is not None and y is not None and np.array_equal(x, y))
     return (eq(a.velocity_ned_m_s, b.velocity_ned_m_s) and eq(a.position_ned_m, b.position_ned_m)
-            and eq(a.acceleration_ned_m_s2, b.acceleration_ned_m_s2) and a.yaw_rad == b.yaw_rad)
+            and eq(a.acceleration_ned_m_s2, b.acceleration_ned_m_s2) and a.yaw_rad == b.yaw_rad
+            and a.position_axes == b.position_axes)
 
 
 @pytest.mark.parametrize("kind", KINDS)
@@ -61,14 +66,17 @@ def test_the_masks_are_the_named_ones() -> None:
 
 @pytest.mark.parametrize("kind", KINDS)
 def test_the_mock_vehicle_decodes_what_the_link_encodes(kind: str) -> None:
-    """The mock's reading (PX4's receiver rules) of each kind: the setpoint's fields, NaN where absent."""
+    """The mock's reading (PX4's receiver rules) of each kind: the setpoint's fields, NaN where
+    absent, per axis for a setpoint full on some axes only."""
     sp = KINDS[kind][0]
     got, reason = setpoint_of(on_the_wire(encode(sp, VEHICLE, 0)), yaw_rad=0.3)
     assert got is not None and reason == ""
     nan3 = np.full(3, np.nan)
     np.testing.assert_array_equal(got.velocity, sp.velocity_ned_m_s)
-    np.testing.assert_array_equal(got.position, nan3 if sp.position_ned_m is None else sp.position_ned_m)
-    np.testing.assert_array_equal(got.acceleration, nan3 if sp.acceleration_ned_m_s2 is None else sp.acceleration_ned_m_s2)
+    sent = np.array(sp.position_axes)
+    np.testing.assert_array_equal(got.position, nan3 if sp.position_ned_m is None else np.where(sent, sp.position_ned_m, np.nan))
+    np.testing.assert_array_equal(got.acceleration, nan3 if sp.acceleration_ned_m_s2 is None
+                                  else np.where(sent, sp.acceleration_ned_m_s2, np.nan))
     assert got.yaw_rad == sp.yaw_rad and got.yaw_rate_rad_s is None
 
 
@@ -103,6 +111,10 @@ def test_encode_refuses_a_non_finite_setpoint_by_name(sp: Setpoint, field: str) 
     (px4.MAV_FRAME_LOCAL_NED, setpoints.TYPE_MASK_VELOCITY_YAW_RATE),
     (px4.MAV_FRAME_LOCAL_NED, setpoints.TYPE_MASK_POSITION_VELOCITY_ACCELERATION | setpoints.FORCE_SET),
     (px4.MAV_FRAME_BODY_NED, setpoints.TYPE_MASK_VELOCITY),
+    # north's position without east's: PX4's position controller refuses it (_inputValid)
+    (px4.MAV_FRAME_LOCAL_NED, setpoints.TYPE_MASK_POSITION_VELOCITY_ACCELERATION | setpoints.Y_IGNORE | setpoints.AY_IGNORE),
+    # a position without its acceleration on one axis: no setpoint of ours
+    (px4.MAV_FRAME_LOCAL_NED, setpoints.TYPE_MASK_POSITION_VELOCITY_ACCELERATION | setpoints.AZ_IGNORE),
 ])
 def test_decode_refuses_what_no_setpoint_encodes_to(frame: int, mask: int) -> None:
     msg = mavlink.MAVLink_set_position_target_local_ned_message(0, 1, 1, frame, mask, *([0.0] * 11))
@@ -114,3 +126,14 @@ def test_decode_refuses_what_no_setpoint_encodes_to(frame: int, mask: int) -> No
 def test_hold_still_is_zero_velocity_only() -> None:
     sp = Setpoint.hold_still()
     assert not sp.full and sp.yaw_rad is None and np.array_equal(sp.velocity_ned_m_s, np.zeros(3))
+
+
+@pytest.mark.parametrize("axes", [(True, False, True), (False, True, False), (False, False, False)])
+def test_position_axes_name_north_and_east_together_and_at_least_one(axes) -> None:
+    with pytest.raises(ValueError, match="position_axes"):
+        Setpoint.triple(P, V, A, position_axes=axes)
+
+
+def test_a_setpoint_full_on_some_axes_says_so() -> None:
+    assert [KINDS[k][0].kind for k in ("velocity", "full", "full horizontal", "full vertical+yaw")] == [
+        "velocity", "full", "full_horizontal", "full_vertical"]

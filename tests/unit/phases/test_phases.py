@@ -462,3 +462,27 @@ def test_with_the_relative_estimate_the_altitude_floor_stands_over_the_ground_un
     assert floor(50.0) == pytest.approx(-0.5 + FLOOR_GROUND_SHIFT_MAX_M)  # a wild height moves it 3 m at most
     assert floor(-50.0) == pytest.approx(-0.5 - FLOOR_GROUND_SHIFT_MAX_M)
     assert floor(0.9, relative=None) == -0.5  # one shared frame: the floor as configured
+
+
+def test_the_floor_acting_down_leaves_the_horizontal_tracking_whole():
+    """relnav.toml's full setpoints: a reference descending at 1 m/s into the altitude floor while
+    it rides north. The floor's barrier changes only the vertical velocity, so the
+    setpoint keeps north's and east's position and acceleration and sends down's velocity only;
+    a demand over the speed limit changes every axis and goes velocity only."""
+    from mission.phases.flying import _track
+
+    model = mission_model(load_config(CONFIGS / "relnav.toml"))
+    z_max = model.command_safety.z_max_m
+    assert z_max is not None and model.tracking.kind == "full"
+    x_p = np.array([10.0, 0.0, z_max - 0.05])  # 5 cm over the floor
+    vehicle = VehicleObs(x_p, np.array([1.0, 0.0, 0.0]), True, "OFFBOARD", heartbeat_age_s=0.1)
+    obs = Observation(1.0, vehicle, CarrierObs(np.array([10.0, 0.0, 0.0]), np.array([1.0, 0.0, 0.0]), 0.0))
+    state = MissionState(phase=Phase.RIDING, u_cmd=np.array([1.0, 0.0, 0.0]))
+    tr = _track(state, obs, model, x_p.copy(), np.array([1.0, 0.0, 1.0]), np.zeros(3))
+    assert tr.acted and tr.setpoint.kind == "full_horizontal"
+    assert tr.setpoint.velocity_ned_m_s[2] < 0.5  # held back by the floor
+    assert tr.setpoint.velocity_ned_m_s[0] == pytest.approx(1.0)  # north untouched
+    speed = model.command_safety.max_speed_m_s
+    assert speed is not None
+    fast = _track(state, obs, model, x_p.copy(), np.array([3.0 * speed, 3.0 * speed, -0.5]), np.zeros(3))
+    assert fast.acted and fast.setpoint.kind == "velocity"
