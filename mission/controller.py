@@ -62,12 +62,20 @@ class MissionOutcome:
 
 def as_neighbours(heard: Sequence[Any]) -> Neighbours | None:
     """The teammates a :class:`~mission.bus.neighbours.NeighbourFeed` heard (its ``heard()``) as
-    the step's :class:`~mission.core.safety.Neighbours` (None: none heard)."""
+    the step's :class:`~mission.core.safety.Neighbours` (None: none heard), with what the recovery
+    queue reads: each one's phase, recovery time and battery as shared, its system id and its
+    leg's target from the team's file (each None where not known: a target not known is the
+    queue's safe side, :func:`mission.phases.queue.served`)."""
     if not heard:
         return None
+    targets = [m.target_ned_m for m in heard]
+    ids = [m.system_id for m in heard]
     return Neighbours(np.array([m.position_ned_m for m in heard], dtype=float),
                       np.array([m.velocity_ned_m_s for m in heard], dtype=float),
-                      np.array([m.age_s for m in heard], dtype=float), tuple(m.phase for m in heard))
+                      np.array([m.age_s for m in heard], dtype=float), tuple(m.phase for m in heard),
+                      recovery_s=tuple(m.recovery_s for m in heard), battery_pct=tuple(m.battery_pct for m in heard),
+                      ids=None if any(i is None for i in ids) else tuple(ids),
+                      targets_ned_m=None if any(t is None for t in targets) else np.array(targets, dtype=float))
 
 
 def _no_stamp() -> int:
@@ -237,9 +245,19 @@ class MissionController:
             self.publisher.publish(PassengerStatus(
                 phase=st.phase.value, stamp_s=t, seq=self._seq, position_ned_m=obs.vehicle.position_ned_m,
                 velocity_ned_m_s=obs.vehicle.velocity_ned_m_s, separated=st.anchor is not None, anchor_ned_m=st.anchor,
-                leg=st.leg, reason=st.reason if st.phase == Phase.ABORT else None, holding=st.held_dock is not None))
+                leg=st.leg, reason=st.reason if st.phase == Phase.ABORT else None, holding=st.held_dock is not None,
+                **self._queue_fields(t, obs)))
         except Exception as exc:  # a bus hiccup must never stop the flight loop
             log.warning("could not publish passenger status: %s", exc)
+
+    def _queue_fields(self, t: float, obs: Observation) -> dict[str, float | None]:
+        """A team's passenger's share of the recovery queue (its teammates read it): how long its
+        recovery has run [s] and its battery [%]; nothing for a single pair (its bytes unchanged)."""
+        if self.neighbours is None:
+            return {}
+        rec, v = self.state.recovery, obs.vehicle
+        return {"recovery_s": None if rec is None else max(t - rec.started_s, 0.0),
+                "battery_pct": None if v is None or v.battery_pct is None else min(max(float(v.battery_pct), 0.0), 100.0)}
 
     def _record(self, t: float, obs: Observation, dec: phases.Decision, events: tuple[str, ...]) -> None:
         if self.recorder is None:

@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import logging
 import threading
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -54,25 +54,48 @@ class _Heard:
 @dataclass(frozen=True)
 class Teammate:
     """A teammate's newest accepted status: its ``name``, position [m] and velocity [m/s] local
-    NED (3,), the status's receive age [s] on the feed's clock, and its phase's name."""
+    NED (3,), the status's receive age [s] on the feed's clock, and its phase's name; what its
+    status shares for the recovery queue (how long its recovery had run [s], its battery [%]; None:
+    not shared) and, from the team's file, its MAVLink system id and the target [m] NED (3,) of
+    the leg it says it flies (None: not in the roster)."""
 
     name: str
     position_ned_m: np.ndarray
     velocity_ned_m_s: np.ndarray
     age_s: float
     phase: str
+    recovery_s: float | None = None
+    battery_pct: float | None = None
+    system_id: int | None = None
+    target_ned_m: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class Roster:
+    """A teammate as the team's file names it: its MAVLink ``system_id`` and the targets [m] NED of
+    its legs, in its order (``legs``: a status's ``leg`` indexes them)."""
+
+    system_id: int
+    legs: tuple[tuple[float, float, float], ...]
+
+    def target(self, leg: int) -> np.ndarray | None:
+        """The target [m] NED (3,) of leg ``leg`` (None: no such leg)."""
+        return np.array(self.legs[leg], dtype=float) if 0 <= leg < len(self.legs) else None
 
 
 class NeighbourFeed:
     """The newest valid status of each of ``team``'s passengers but ``own`` on pair ``pair``
-    (see the module docstring); ``auth``: the pair's key (None: unsigned)."""
+    (see the module docstring); ``auth``: the pair's key (None: unsigned); ``roster``: each
+    teammate's system id and legs from the team's file (:class:`Roster`, by name)."""
 
     def __init__(self, session: zenoh.Session, pair: str, own: str, team: Sequence[str], clock: Clock, *,
-                 max_speed_m_s: float, max_age_s: float = 1.0, auth: BusAuth | None = None) -> None:
+                 max_speed_m_s: float, max_age_s: float = 1.0, auth: BusAuth | None = None,
+                 roster: Mapping[str, Roster] | None = None) -> None:
         if not (max_speed_m_s > 0 and max_age_s > 0):
             raise ValueError(f"max_speed_m_s and max_age_s must be > 0, got {max_speed_m_s!r}, {max_age_s!r}")
         self.pair, self.own, self.clock = pair, own, clock
         self.names = tuple(n for n in team if n != own)  # the teammates, in the team's order
+        self.roster = dict(roster or {})
         self.max_speed_m_s, self.max_age_s = float(max_speed_m_s), float(max_age_s)
         self._verifier = auth.verifier() if auth is not None else None
         self._lock = threading.Lock()
@@ -151,8 +174,13 @@ class NeighbourFeed:
         now = self.clock.now()
         with self._lock:
             heard = [(n, self._heard[n]) for n in self.names if n in self._heard]
-        return [Teammate(n, h.status.position_ned_m, h.status.velocity_ned_m_s, max(now - h.rx_s, 0.0),
-                         h.status.phase.value) for n, h in heard]
+        out = []
+        for n, h in heard:
+            st, known = h.status, self.roster.get(n)
+            out.append(Teammate(n, st.position_ned_m, st.velocity_ned_m_s, max(now - h.rx_s, 0.0), st.phase.value,
+                                st.recovery_s, st.battery_pct, None if known is None else known.system_id,
+                                None if known is None else known.target(st.leg)))
+        return out
 
     @property
     def counters(self) -> dict[str, Any]:

@@ -108,6 +108,8 @@ def _vec3(limit: float) -> _Checked:
 Real = Annotated[float, _Checked(core_schema.float_schema(strict=True, allow_inf_nan=False))]
 Seq = Annotated[int, _Checked(core_schema.int_schema(strict=True, ge=0, le=SEQ_MAX))]
 Flag = Annotated[bool, _Checked(core_schema.bool_schema(strict=True))]
+Duration = Annotated[float, _Checked(core_schema.float_schema(strict=True, allow_inf_nan=False, ge=0.0, le=1e6))]
+Percent = Annotated[float, _Checked(core_schema.float_schema(strict=True, allow_inf_nan=False, ge=0.0, le=100.0))]
 #: An abort reason (``mission.phases.AbortReason`` values, and any later one): a short identifier.
 AbortReasonName = Annotated[str, _Checked(core_schema.str_schema(strict=True, pattern=r"^[a-z_]{1,32}$"))]
 PositionNed = Annotated[np.ndarray, _vec3(POSITION_LIMIT_M)]
@@ -255,7 +257,11 @@ class PassengerStatus(_Message):
     served (``scenario.targets``; 0 with one target); reason: why the mission aborted (phase
     ABORT), or None; holding: the passenger holds on the dock point it had because its carrier
     feed is not consistent (a resync, a contested source): the carrier pauses until it rides
-    again. Raises :class:`WireError` when invalid.
+    again. A team's passenger also shares what its teammates' recovery queue reads
+    (:mod:`mission.phases.queue`): recovery_s [s] how long its recovery has run at ``stamp``
+    (JSON ``recovery``; None: not recovering) and battery_pct [%] its battery (JSON ``battery``;
+    None: not known). Each goes on the wire only when given, so a single pair's statuses are the
+    bytes they always were. Raises :class:`WireError` when invalid.
     """
 
     phase: Phase
@@ -268,18 +274,26 @@ class PassengerStatus(_Message):
     leg: int = Field(0, ge=0, le=1000, strict=True)
     reason: AbortReasonName | None = None
     holding: Flag = False
+    recovery_s: Duration | None = Field(None, alias="recovery")
+    battery_pct: Percent | None = Field(None, alias="battery")
 
     _check_order = ("phase", "separated", "holding", "stamp", "stamp_s", "seq", "position", "position_ned_m",
-                    "velocity", "velocity_ned_m_s", "anchor", "anchor_ned_m", "leg", "reason")
+                    "velocity", "velocity_ned_m_s", "anchor", "anchor_ned_m", "leg", "reason", "recovery", "recovery_s",
+                    "battery", "battery_pct")
 
     def __init__(self, phase: Phase | str, stamp_s: float, seq: int, position_ned_m: Any, velocity_ned_m_s: Any,
                  separated: bool = False, anchor_ned_m: Any = None, leg: int = 0, reason: str | None = None,
-                 holding: bool = False) -> None:
+                 holding: bool = False, recovery_s: float | None = None, battery_pct: float | None = None) -> None:
         self._validated(phase=phase, stamp_s=stamp_s, seq=seq, position_ned_m=position_ned_m,
                         velocity_ned_m_s=velocity_ned_m_s, separated=separated, anchor_ned_m=anchor_ned_m, leg=leg,
-                        reason=reason, holding=holding)
+                        reason=reason, holding=holding, recovery_s=recovery_s, battery_pct=battery_pct)
 
     __init__.__pydantic_base_init__ = True  # type: ignore[attr-defined]  # see _Message
+
+    def to_json(self) -> bytes:
+        """The JSON bytes (wire names); ``recovery`` and ``battery`` only when given (a team's)."""
+        skip = {k for k in ("recovery_s", "battery_pct") if getattr(self, k) is None}
+        return self.model_dump_json(by_alias=True, exclude=skip or None).encode()
 
 
 # --------------------------------------------------------------------------- geodesy

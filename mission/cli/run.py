@@ -14,7 +14,7 @@ from typing import Any, Iterator, NamedTuple
 import click
 
 from mission.bus.auth import bus_auth, check_team_auth, unsigned_warning
-from mission.bus.neighbours import NeighbourFeed
+from mission.bus.neighbours import NeighbourFeed, Roster
 from mission.bus.bridge import CarrierFeed, PassengerPublisher, open_session, zenoh_config
 from mission.bus.session import close_session, congestion_for
 from mission.time.clock import LOST_WALL_S, Clock, LockstepClock, ScaledClock
@@ -128,7 +128,8 @@ def mission_io(cfg: Config, clock: Clock, tlog_path: str | Path | None = None, *
             neighbours = NeighbourFeed(session, cfg.zenoh.pair, team.name, team.names, clock, auth=auth,
                                        max_speed_m_s=NEIGHBOUR_SPEED_FACTOR * (cfg.safety.passenger_max_speed_m_s
                                                                                or cfg.recovery.return_speed_m_s),
-                                       max_age_s=cfg.mission.carrier_timeout_s)
+                                       max_age_s=cfg.mission.carrier_timeout_s,
+                                       roster={n: Roster(i, legs) for n, i, legs in zip(team.names, team.ids, team.legs)})
             stack.callback(neighbours.close)
         sources: list[MeasurementSource] = []
         for target in openers.values():

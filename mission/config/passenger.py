@@ -48,17 +48,25 @@ def chosen_passenger(cfg: Config, name: str | None) -> Config:
 @dataclass(frozen=True)
 class TeamLink:
     """One passenger of a team of several on the bus: its ``name`` and every passenger's ``names``
-    (the team's order, its own among them)."""
+    (the team's order, its own among them), with each one's MAVLink system id (``ids``) and the
+    targets [m] NED of its legs in its order (``legs``), as the team's file gives them."""
 
     name: str
     names: tuple[str, ...]
+    ids: tuple[int, ...] = ()
+    legs: tuple[tuple[tuple[float, float, float], ...], ...] = ()
 
 
 def team_link(cfg: Config, name: str | None) -> TeamLink | None:
     """Passenger ``name`` of ``cfg``'s team of several (None: no team, or a team of one, which flies
     on the pair's keys as one passenger; an unknown name is :func:`chosen_passenger`'s to refuse)."""
     names = tuple(p.name for p in cfg.team.passengers) if has_team(cfg) else ()
-    return TeamLink(name, names) if len(names) > 1 and name in names else None
+    if not (len(names) > 1 and name in names):
+        return None
+    each = [passenger_config(cfg, n) for n in names]
+    return TeamLink(name, names, tuple(int(c.mavlink.target_system or 0) for c in each),
+                    tuple(tuple((float(t[0]), float(t[1]), float(t[2]) if len(t) > 2 else 0.0) for t in c.scenario.legs())
+                          for c in each))
 
 
 def sole_passenger(cfg: Config, not_yet: str, *, team_of_one: bool = True) -> Config:

@@ -11,7 +11,7 @@ import pytest
 
 from mission.bus.auth import BusAuth
 from mission.bus.bridge import PassengerFeed, PassengerPublisher, keys
-from mission.bus.neighbours import NeighbourFeed
+from mission.bus.neighbours import NeighbourFeed, Roster
 from mission.bus.wire import PassengerStatus
 from mission.controller import as_neighbours
 from mission.time.clock import ManualClock
@@ -76,6 +76,39 @@ def test_teammates_are_heard_and_bad_statuses_are_dropped_and_counted() -> None:
         assert mates is not None and mates.phases == ("NAVIGATING",) and mates.age_s is not None
         assert mates.positions_m.shape == (1, 3) and float(mates.age_s[0]) == pytest.approx(0.2)
         assert as_neighbours([]) is None
+
+
+def test_the_recovery_queue_hears_what_a_teammate_shares_and_the_roster_names() -> None:
+    """A returning teammate's status carries how long its recovery has run and its battery; the
+    team's file gives its system id and its leg's target: the queue's claim is whole over the bus
+    (without them a teammate's recovery counted as never begun, and each passenger thought it
+    went first)."""
+    hub_ep = endpoint(free_port())
+    clock = ManualClock()
+    roster = {"bravo": Roster(2, ((44.0, 4.0, -4.0), (20.0, -20.0, -4.0)))}
+    with contextlib.ExitStack() as stack:
+        hub = peer(listen=[hub_ep], mode="router")
+        stack.callback(hub.close)
+        a, b = (peer(connect=[hub_ep], mode="client") for _ in range(2))
+        for s in (a, b):
+            stack.callback(s.close)
+        feed = NeighbourFeed(a, "team", "alpha", TEAM, clock, max_speed_m_s=6.0, auth=AUTH, roster=roster)
+        stack.callback(feed.close)
+        bravo = stack.enter_context(PassengerPublisher(b, "team", auth=AUTH, passenger="bravo"))
+        wait_for(lambda: bravo.matched, what="alpha hears bravo's key")
+        bravo.publish(PassengerStatus("HOLDOFF", 30.0, 1, [40.0, 4.0, -6.0], [0.0, 0.0, 0.0], leg=1,
+                                      recovery_s=12.5, battery_pct=41.0))
+        wait_for(lambda: feed.counters["accepted"] == 1, what="bravo's status")
+        clock.advance(0.1)
+        mates = as_neighbours(feed.heard())
+        assert mates is not None and mates.phases == ("HOLDOFF",)
+        assert mates.recovery_s == (12.5,) and mates.battery_pct == (41.0,) and mates.ids == (2,)
+        assert mates.targets_ned_m is not None and np.allclose(mates.targets_ned_m, [[20.0, -20.0, -4.0]])
+        from mission.phases.queue import claim, goes_before, neighbour_claim
+        theirs = neighbour_claim(mates, 0, must_pct=30.0)
+        assert theirs.asked_s == pytest.approx(12.6) and theirs.rank == 2
+        assert goes_before(theirs, claim(5.0, 80.0, 30.0, 1))  # asked 7.6 s before us: it goes first
+        assert goes_before(claim(20.0, 80.0, 30.0, 1), theirs)
 
 
 def test_the_carrier_binds_each_passenger_on_its_own_key() -> None:

@@ -266,6 +266,21 @@ def test_passenger_status_round_trip_and_validation() -> None:
         assert info.value.reason == reason, bad
 
 
+def test_a_teams_queue_fields_go_only_when_given_and_are_range_checked() -> None:
+    """A single pair's status has no ``recovery`` or ``battery`` key (its bytes as they always
+    were); a team's carries them; a negative recovery time or a battery over 100 % is dropped."""
+    plain = json.loads(encode_passenger_json(PassengerStatus("HOLDOFF", 1.0, 1, [0, 0, -5], [0, 0, 0])))
+    assert "recovery" not in plain and "battery" not in plain
+    team = PassengerStatus("HOLDOFF", 1.0, 1, [0, 0, -5], [0, 0, 0], recovery_s=8.25, battery_pct=37.5)
+    back = decode_passenger_json(encode_passenger_json(team))
+    assert (back.recovery_s, back.battery_pct) == (8.25, 37.5)
+    for bad in ({"recovery": -1.0}, {"battery": 100.5}, {"battery": float("nan")}, {"recovery": "long"}):
+        obj = json.loads(encode_passenger_json(team))
+        obj.update(bad)
+        with pytest.raises(WireError):
+            decode_passenger_json(json.dumps(obj).encode())
+
+
 def test_values_built_in_code_take_numpy_and_are_checked_like_the_wire() -> None:
     s = CarrierState(np.float32(1.5), np.int64(3), "local_ned", np.array([1, 2, 3], dtype=np.int32),
                      (0.5, 0.0, 0.0), np.float64(0.25))
