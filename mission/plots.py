@@ -1,5 +1,6 @@
 """The paper's figures (trajectories; the three distances over time) from a simulation or a
-flight, and the recovery's (the approach in the carrier's frame; distances with the phases).
+flight, the recovery's (the approach in the carrier's frame; distances with the phases), and a
+team's (every passenger's track from above; the passengers' distances over time).
 
 Input is plain arrays so that ``marsupial simulate --plot`` and ``marsupial plot LOG`` draw the
 same figure. In a ``local_ned`` frame the vertical axis is drawn as altitude (``-z``).
@@ -23,6 +24,7 @@ from mission.core.law import norm  # noqa: E402
 from mission.phases.phase import HOMEWARD, Phase  # noqa: E402
 
 if TYPE_CHECKING:
+    from mission.flightdata.read import TeamRecord
     from mission.record.table import FlightRecord
 
 
@@ -377,6 +379,88 @@ def plot_recovery(tr: RecoveryTrack, path: str | Path) -> Path:
                                     f"{c['horizontal_relative_speed_m_s']:.2f} / {c['vertical_relative_speed_m_s']:.2f} m/s "
                                     f"(h / v), attempt {c['attempts']}")
     fig.suptitle((tr.title + "\n" if tr.title else "") + f"recovery {tr.outcome or 'unfinished'}{figures}")
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+# --------------------------------------------------------------------------------------------- team
+
+#: Each passenger's colour, the team's order (the carrier is tab:blue, the targets red).
+PASSENGER_COLOURS = ("tab:orange", "tab:green", "tab:purple", "tab:brown", "tab:pink", "tab:olive", "tab:cyan")
+
+
+def plot_team(rec: TeamRecord, path: str | Path, title: str = "") -> Path:
+    """Write a team's figure (PNG/PDF/SVG by suffix) from its carrier's log
+    (:func:`mission.flightdata.read.read_team`), everything as the carrier heard it on its clock:
+    from above, the carrier's track, every passenger's track (its own colour, labelled by name),
+    the targets (with their passenger) and their b c circles, and the closest pair's two positions
+    joined; beside it every pair's distance over time (faint where it does not count: neither
+    flies, or either is unheard or stale) with ``safety.passenger_separation_m`` and the closest
+    pair marked."""
+    path = Path(path)
+    fig, (top, dist) = plt.subplots(1, 2, figsize=(14, 6.2), gridspec_kw={"width_ratios": (1.0, 1.15)})
+    colour = {name: PASSENGER_COLOURS[i % len(PASSENGER_COLOURS)] for i, name in enumerate(rec.names)}
+    c = _display(rec.carrier, "local_ned")
+    top.plot(c[:, 0], c[:, 1], color="tab:blue", lw=2.2, label="carrier")
+    ok = np.isfinite(c).all(axis=1)
+    if ok.any():
+        top.scatter(*c[ok][0, :2], color="tab:blue", marker="s", s=50, zorder=5, label="carrier start")
+        top.scatter(*c[ok][-1, :2], facecolor="white", edgecolor="tab:blue", marker="X", s=90, lw=1.5, zorder=5,
+                    label="carrier end")
+    carrier_then = np.stack([np.interp(rec.t, rec.carrier_t[ok], c[ok, a]) for a in (0, 1)], axis=-1) if ok.any() \
+        else np.zeros((len(rec.t), 2))
+    for i, name in enumerate(rec.names):
+        p = _display(rec.positions[:, i], "local_ned")
+        top.plot(p[:, 0], p[:, 1], color=colour[name], lw=1.4, ls="--", label=f"{name} (as heard)")
+        seen = np.flatnonzero(np.isfinite(p).all(axis=1))
+        if len(seen):  # its name where it flew farthest from the carrier (clear of the tracks on the deck)
+            far = seen[int(np.argmax(np.linalg.norm(p[seen, :2] - carrier_then[seen], axis=1)))]
+            top.annotate(name, p[far, :2], textcoords="offset points", xytext=(6, 6), color=colour[name],
+                         fontsize=10, fontweight="bold")
+    for k, (target, owner) in enumerate(zip(rec.targets, rec.owners)):
+        t = _display(target, "local_ned")
+        top.scatter(*t[:2], color="red", marker="*", s=160, zorder=6, label="targets" if k == 0 else None)
+        top.annotate(f"{k} ({owner})", t[:2], textcoords="offset points", xytext=(6, -12), color="red", fontsize=8)
+        top.add_patch(Circle(t[:2], rec.bc_m, fill=False, ls=":", color="red", alpha=0.6,
+                             label=f"b·c = {rec.bc_m:g} m around the targets" if k == 0 else None))
+    closest = rec.closest()
+    if closest is not None:
+        d, t_s, pair = closest
+        k = int(np.argmin(np.abs(rec.t - t_s)))
+        two = [_display(rec.positions[k, rec.names.index(n)], "local_ned") for n in rec.pairs[pair]]
+        top.plot([two[0][0], two[1][0]], [two[0][1], two[1][1]], color="black", lw=2.0, marker="o", ms=4, zorder=7,
+                 label=f"closest pair as heard, {d:.2f} m")
+    top.set_aspect("equal", adjustable="datalim")
+    top.set_xlabel("east [m]")
+    top.set_ylabel("north [m]")
+    top.set_title("the team from above, as the carrier heard it")
+    top.grid(alpha=0.3)
+    top.legend(loc="best", fontsize=7)
+
+    for j, (a, b) in enumerate(rec.pairs):
+        gap = rec.distances[:, j]
+        line = colour[b] if len(rec.names) > 2 else "black"
+        dist.plot(rec.t, np.where(rec.counted[:, j], gap, np.nan), color=line, lw=1.5, label=f"{a} - {b}")
+        idle = np.where(rec.counted[:, j], np.nan, gap)
+        if np.isfinite(idle).any():
+            dist.plot(rec.t, idle, ls=":", alpha=0.5, lw=1.0, color=line, label=f"{a} - {b}, neither flying (not counted)")
+    dist.axhline(rec.separation_m, color="red", ls="--", lw=1.2,
+                 label=f"safety.passenger_separation_m = {rec.separation_m:g} m")
+    if closest is not None:
+        d, t_s, pair = closest
+        dist.scatter([t_s], [d], color="black", zorder=6, s=40,
+                     label=f"closest: {' - '.join(rec.pairs[pair])}, {d:.3f} m at t = {t_s:.1f} s")
+    dist.set_xlabel("t [s] on the carrier's clock (the mission clock)")
+    dist.set_ylabel("distance [m]")
+    dist.set_ylim(0.0, None)
+    dist.set_title("the passengers' distance as heard (positions moved on by their age)")
+    dist.grid(alpha=0.3)
+    dist.legend(fontsize=7, loc="upper right")
+    if title:
+        fig.suptitle(title)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)

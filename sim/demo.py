@@ -216,7 +216,8 @@ def run_demo(config: str, speed: float, pairs: int, log_root: Path, plot_path: s
 
     if len(load_config(config).team.passengers) > 1:  # a team: one carrier, a vehicle and a mission each
         return run_team_demo(config, speed, log_root, timeout_s, quiet=quiet, progress=progress, signed=signed, seed=seed,
-                             estimate_error=estimate_error, pairs=pairs, carrier=carrier, live=live, lockstep=lockstep)
+                             estimate_error=estimate_error, pairs=pairs, carrier=carrier, live=live, lockstep=lockstep,
+                             plot_path=plot_path)
     sole_passenger(load_config(config), "flown by demo", team_of_one=False)  # its processes read the file themselves
     supervise_children()  # a demo killed outright takes its processes with it
     log_root.mkdir(parents=True, exist_ok=True)
@@ -462,7 +463,8 @@ def format_table(summaries: list[dict]) -> str:
 @click.option("--pairs", type=click.IntRange(1, 16), default=1, show_default=True,
               help="Number of marsupial pairs flying at once on one Zenoh network.")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
-              help="Where to write the flight plot (one per pair, suffixed, with --pairs > 1)  [default: LOG_ROOT/flight.png]")
+              help="Where to write the flight plot (one per pair, suffixed, with --pairs > 1; a team's: the team's "
+              "figure, from carrier.mcap)  [default: LOG_ROOT/flight.png]")
 @click.option("--log-root", type=click.Path(file_okay=False), default="logs/demo", show_default=True,
               help="Directory for the flight logs (one sub-directory per pair).")
 @click.option("--timeout", "timeout_s", type=float, default=120.0, show_default=True, help="Wall-clock limit [s].")

@@ -89,13 +89,16 @@ def start_team(cfg: Config, config: str, zenoh_ep: str, speed: float, log_root: 
 
 def run_team_demo(config: str, speed: float, log_root: Path, timeout_s: float, *, quiet: bool = True,
                   progress: bool = True, signed: bool = True, seed: int = 0, estimate_error: float = 1.0,
-                  pairs: int = 1, carrier: str = "sim", live: Any = None, lockstep: bool = False) -> tuple[int, list[dict]]:
+                  pairs: int = 1, carrier: str = "sim", live: Any = None, lockstep: bool = False,
+                  plot_path: str | None = None) -> tuple[int, list[dict]]:
     """Fly ``config``'s team once on scaled wall clocks (at most :data:`TEAM_MAX_SPEED`); return
     the demo's exit code (:func:`sim.demo.exit_code`) and each passenger's summary, with the team's
     figures (``team``: the carrier's closest approach to every target, each passenger's closest
     teammate). What a team's demo does not fly is refused before anything starts
     (:class:`ConfigError` naming the option): several ``pairs``, a ``carrier`` other than the
-    built-in robot, a ``live`` view. ``lockstep`` asked for: said on stderr, flown on the scaled clocks."""
+    built-in robot, a ``live`` view. ``lockstep`` asked for: said on stderr, flown on the scaled clocks.
+    ``plot_path``: where the team's figure goes (:func:`mission.plots.plot_team`, from the
+    carrier's ``carrier.mcap``; None or empty: none)."""
     from sim.demo import PairRun, throwaway_key
 
     for option, value, ok in (("--pairs", pairs, pairs == 1), ("--carrier", carrier, carrier == "sim"),
@@ -124,11 +127,11 @@ def run_team_demo(config: str, speed: float, log_root: Path, timeout_s: float, *
         stop_process(carrier)  # writes carrier.json
         for reader in readers:
             reader.join(timeout=5.0)
-    return team_summaries(cfg, config, log_root, runs, speed, lockstep)
+    return team_summaries(cfg, config, log_root, runs, speed, lockstep, plot_path)
 
 
 def team_summaries(cfg: Config, config: str, log_root: Path, runs: list[Any], speed: float,
-                   lockstep: bool) -> tuple[int, list[dict]]:
+                   lockstep: bool, plot_path: str | None = None) -> tuple[int, list[dict]]:
     """Each passenger's summary with its exit code, the deck's truth and the team's figures."""
     from sim.demo import deck_truth, exit_code, not_lockstep, recovery_cells
 
@@ -153,7 +156,16 @@ def team_summaries(cfg: Config, config: str, log_root: Path, runs: list[Any], sp
             "carrier_closest_each_target_m": carrier.get("closest_each_target_m"),
             "carrier_hand_overs": carrier.get("hand_overs"),
             "keep_out_m": carrier.get("guard_radius_m"),
-            "separation_m": cfg.safety.passenger_separation_m}
+            "separation_m": cfg.safety.passenger_separation_m,
+            "carrier_closest_pair": carrier.get("closest_pair")}
+    if plot_path and (log_root / "carrier.mcap").exists():
+        from mission.cli.run import plot_team_of
+        from mission.errors import MarsupialError
+
+        try:
+            team["plot"] = str(plot_team_of(log_root / "carrier.mcap", plot_path))
+        except MarsupialError as exc:
+            team["plot_error"] = str(exc)
     (log_root / "team.json").write_text(json.dumps({"team": team, "passengers": summaries}, indent=2, default=str) + "\n")
     for s in summaries:
         s["team"] = team
@@ -161,8 +173,9 @@ def team_summaries(cfg: Config, config: str, log_root: Path, runs: list[Any], sp
 
 
 def team_lines(summaries: list[dict]) -> list[str]:
-    """The team's figures as lines: each passenger's closest teammate, the carrier's closest
-    approach to each target against its keep-out."""
+    """The team's figures as lines: each passenger's closest teammate, the closest pair as the
+    carrier heard them, the carrier's closest approach to each target against its keep-out, the
+    team's figure."""
     if not summaries:
         return []
     team = summaries[0]["team"]
@@ -172,8 +185,13 @@ def team_lines(summaries: list[dict]) -> list[str]:
         c = s.get("closest_teammate") or {}
         lines.append(f"{s['pair']}: closest teammate {c.get('distance_m')} m at t {c.get('t_s')} s (phases "
                      f"{c.get('phases')}), against safety.passenger_separation_m = {team['separation_m']:g} m")
+    pair = team.get("carrier_closest_pair") or {}
+    lines.append(f"carrier: closest pair as heard {pair.get('distance_m')} m at t {pair.get('t_s')} s ({pair.get('names')}, "
+                 f"phases {pair.get('phases')})")
     closest = team.get("carrier_closest_each_target_m") or []
     lines.append("carrier closest approach to each target [m]: "
                  + ", ".join(f"{k}: {d:.3f}" if d is not None else f"{k}: -" for k, d in enumerate(closest))
                  + f" (P3 guard radius {team.get('keep_out_m')} m); hand-overs {team.get('carrier_hand_overs')}")
+    if team.get("plot") or team.get("plot_error"):
+        lines.append(f"team plot {team['plot']}" if team.get("plot") else f"no team plot: {team['plot_error']}")
     return lines

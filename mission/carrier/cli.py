@@ -159,9 +159,23 @@ def open_flight_data(cfg: Config, clock: Clock, mcap_path: str | Path | None, st
     note = "times are the carrier's clock [s] (in lockstep the mission's, relayed to the carrier)"
     steps = CarrierLog(mcap_path, pair=cfg.zenoh.pair, target=cfg.scenario.target,
                        clock=clock_metadata(clock, note, "the mission controller's relay of the mock vehicle's time",
-                                            epoch_ns))
+                                            epoch_ns), team=_team_metadata(cfg))
     stack.callback(steps.close)
     return steps
+
+
+def _team_metadata(cfg: Config) -> dict[str, Any] | None:
+    """A team's ``carrier.mcap`` ``team`` record (:func:`mission.flightdata.carrier_log.team_metadata`);
+    None for a single pair."""
+    if not has_team(cfg):
+        return None
+    from mission.flightdata.carrier_log import team_metadata
+
+    owners = {k: p.name for p in cfg.team.passengers for k in p.targets}
+    targets = cfg.scenario.legs()
+    return team_metadata([p.name for p in cfg.team.passengers], targets, [owners[k] for k in range(len(targets))],
+                         cfg.law.params().separation_distance_m, cfg.safety.passenger_separation_m,
+                         cfg.safety.passenger_separation_max_age_s)
 
 
 def _fmt(value: float | None) -> str:

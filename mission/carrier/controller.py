@@ -41,6 +41,7 @@ import zenoh
 from mission.carrier.acceleration import AccelerationEstimate
 from mission.carrier.backends import CarrierBackend, OwnState
 from mission.carrier.guard import GuardParams
+from mission.carrier.heard import ClosestPair, TeamHeard, hear
 from mission.carrier.legs import Legs
 from mission.carrier.modes import BEFORE_RIDING, BIND_STATUSES, CarrierMode, PassengerView, lost_reason, on_dock
 from mission.carrier.step import (DRIVING, REAL_DELAY_S, STOP, CarrierStepper, carrier_model, guard_params, pad3,
@@ -69,7 +70,8 @@ class CarrierStep:
     hold_reason (None: in control); state the own state used (None: none, or stale); command
     the command sent; law_velocity_m_s [m/s] the filtered law command; guard_active_ticks the
     steps so far on which the P3 guard cut the command; published the state sent to the passenger
-    (None: nothing went out)."""
+    (None: nothing went out); team, a team's carrier only (None for a single pair): every
+    passenger as heard at this step and each pair's distance (:mod:`mission.carrier.heard`)."""
 
     t_s: float
     mode: str
@@ -79,6 +81,7 @@ class CarrierStep:
     law_velocity_m_s: np.ndarray
     guard_active_ticks: int
     published: CarrierState | None
+    team: TeamHeard | None = None
 
 
 class StepSink(Protocol):
@@ -162,6 +165,8 @@ class CarrierController:
                                        "stopped_target_distance_m": None,
                                        "closest_each_target_m": [math.inf] * len(self.stepper.legs.targets)}
         self._last_position: np.ndarray | None = None
+        self._heard: TeamHeard | None = None  # a team's: its passengers as heard this step
+        self._closest_pair = ClosestPair()
         self._after_separation_m = 0.0
         self._separation_position = np.zeros(self.dim)
         self._alignment = np.zeros(3)
@@ -318,6 +323,7 @@ class CarrierController:
             self.backend.park()  # stopped for good (with a recovery to come it keeps control): PX4 holds in Hold
         state = self._in_plane(self.backend.own_state())
         now = self.clock.now()
+        self._hear_team(now)
         why: str | None
         if state is None:
             why = "no valid own state"
@@ -365,6 +371,14 @@ class CarrierController:
         trace(self, now, state, cmd, out)
         return out
 
+    def _hear_team(self, now: float) -> None:
+        """A team's: this step's snapshot of every passenger as heard, each pair's distance, and
+        the closest pair so far (:mod:`mission.carrier.heard`)."""
+        if self.team is None:
+            return
+        self._heard = hear(self.team.heard(), self.team.max_age_s)
+        self._closest_pair.update(now, self._heard)
+
     def run(self, stop_event: threading.Event, duration_s: float | None = None) -> None:
         """Step at ``carrier.rate_hz`` on the clock until ``stop_event`` is set or ``duration_s``
         [s] of clock time has passed. Steps once at the clock's first instant (at once on a
@@ -386,12 +400,16 @@ class CarrierController:
 
     def summary(self) -> dict[str, Any]:
         """Closest approach to the target, distance when the separation was heard, braking
-        distance after it [m], guard and stale tick counts, mode."""
+        distance after it [m], guard and stale tick counts, mode; a team's carrier adds its
+        feeds' counters and ``closest_pair``, the closest two passengers as heard
+        (:meth:`mission.carrier.heard.ClosestPair.summary`)."""
         out = dict(self._stats)
         out.update(mode=self.mode.value, guard_radius_m=self.guard.radius_m, backend=self.backend.name,
                    deck_alignment_m=self._alignment.tolist(),
                    separation_distance_m=self.model.law.separation_distance_m,
                    passenger_feed=self.passenger.counters, **({} if self.team is None else self.team.counters()))
+        if self.team is not None:
+            out["closest_pair"] = self._closest_pair.summary()
         if math.isinf(out["closest_target_distance_m"]):
             out["closest_target_distance_m"] = None
         out["closest_each_target_m"] = [None if math.isinf(d) else d for d in out["closest_each_target_m"]]
@@ -416,4 +434,4 @@ def trace(ctl: CarrierController, t_s: float, state: OwnState | None, cmd: Track
     """Hand the step just taken to the controller's :class:`StepSink`, if it has one."""
     if ctl.steps is not None:
         ctl.steps.step(CarrierStep(t_s, ctl.mode.value, ctl.hold_reason, state, cmd, ctl.velocity_m_s,
-                                   ctl._stats["guard_active_ticks"], published))
+                                   ctl._stats["guard_active_ticks"], published, ctl._heard))

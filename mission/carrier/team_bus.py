@@ -22,6 +22,7 @@ import zenoh
 
 from mission.bus.auth import BusAuth, check_team_auth
 from mission.bus.feeds import PassengerFeed
+from mission.carrier.heard import Heard
 from mission.carrier.modes import BEFORE_RIDING, BIND_STATUSES, PassengerView
 from mission.carrier.team import TeamCarrier
 from mission.config.passenger import carrier_config, has_team
@@ -49,6 +50,7 @@ class TeamBus:
         self.offsets_ned_m = [np.asarray(team.slots[team.slot_index(p.slot)].offset_ned_m, dtype=float)
                               for p in team.passengers]
         self.carrier = TeamCarrier(cfg, brakes_itself)
+        self.max_age_s = cfg.safety.passenger_separation_max_age_s  # [s] a status older than this is left out of distances
         self.feeds: list[PassengerFeed] = []
         try:
             for name in self.names:
@@ -65,6 +67,17 @@ class TeamBus:
         target = self.carrier.heading_for_ned_m()
         aim[:target.shape[0]] = target
         return aim
+
+    def heard(self) -> tuple[Heard, ...]:
+        """Each passenger's newest status on its feed now, the team's order
+        (:class:`~mission.carrier.heard.Heard`: phase, reported position and velocity, its receive
+        age [s] on the carrier's clock; only the name while nothing was heard)."""
+        out = []
+        for name, feed in zip(self.names, self.feeds):
+            rx = feed.latest()
+            out.append(Heard(name) if rx is None else Heard(name, rx.status.phase.value, rx.status.position_ned_m,
+                                                            rx.status.velocity_ned_m_s, rx.age_s))
+        return tuple(out)
 
     def counters(self) -> dict[str, Any]:
         """Each passenger's feed's counters, by name, and the carrier's hand-overs."""

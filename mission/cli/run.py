@@ -32,6 +32,7 @@ from mission.bus.timesync import ClockPing
 from mission.time.offset import SharedClock
 from mission.mavlink.link import VehicleLink
 from mission.mavlink.env import read_signing_key
+from mission.flightdata.read import is_team_log
 from mission.flightdata.writer import DEFAULT_LIVE, LiveAddress, clock_metadata, is_loopback, parse_live
 from mission.record.info import mission_info
 from mission.record.recorder import CLOCK_NOTE, FlightRecorder, RecordSink
@@ -414,7 +415,11 @@ def plot(log_dir: str, out_path: str | None, panels: bool = False) -> int:
     (logs/demo: each one is plotted into its own directory). A flight that came home
     (mission.final_action = "return") also gets its recovery's figure beside it
     (flight-recovery.png: the approach in the carrier's frame, the distances with the phases
-    shaded). Exit code 2 when LOG holds no flight log."""
+    shaded). A team's log root (the team demo's: its carrier.mcap beside one flight log per
+    passenger), or that carrier.mcap itself, gets the team's figure (--out, default team.png beside
+    carrier.mcap: every passenger's track from above and their distances over time, as the
+    carrier heard them), and each passenger's flight its own in its directory. Exit code 2 when
+    LOG holds no flight log."""
     path = Path(log_dir)
     if panels:
         from mission.flightdata.view import draw_panels
@@ -426,6 +431,14 @@ def plot(log_dir: str, out_path: str | None, panels: bool = False) -> int:
         out = draw_panels(mcap, out_path or mcap.parent / "flight-panels.png")
         click.echo(f"panels written to {out}")
         return 0
+    team = path if path.is_file() else path / "carrier.mcap"
+    a_team = team.is_file() and team.suffix == ".mcap" and is_team_log(team)
+    if a_team:
+        out = plot_team_of(team, out_path or team.parent / "team.png")
+        click.echo(f"team plot written to {out}")
+        if path.is_file():
+            return 0
+        out_path = None  # the passengers' flights: each plotted into its own directory
     if path.is_file():
         if path.suffix != ".mcap":
             raise ConfigError("LOG", log_dir, "is a file but not an MCAP flight log (flight.mcap); give it, or "
@@ -439,6 +452,8 @@ def plot(log_dir: str, out_path: str | None, panels: bool = False) -> int:
         click.echo(f"plot written to {out}")
         return 0
     logs = sorted(d for d in directory.iterdir() if d.is_dir() and _is_flight_log(d))
+    if not logs and a_team:
+        return 0
     if not logs:
         raise ConfigError("LOG_DIR", log_dir, "holds no flight log (mission.json and record.csv, or flight.mcap): give a "
                           "directory written by `marsupial run` (mission.log_dir/<time>-<pair>, printed at the end of "
@@ -477,6 +492,15 @@ def plot_flight(log_dir: Path, out_path: str | Path) -> Path:
     plot_legs(rec, Path(out), f"flight {name}")
     plot_recovery_of(rec, out, f"flight {name}")
     return out
+
+
+def plot_team_of(carrier_mcap: str | Path, out_path: str | Path) -> Path:
+    """The team's figure (:func:`mission.plots.plot_team`) of a team's ``carrier.mcap``."""
+    from mission.flightdata.read import read_team
+    from mission.plots import plot_team
+
+    mcap = Path(carrier_mcap)
+    return plot_team(read_team(mcap), out_path, f"team {mcap.parent.name}: as its carrier heard it")
 
 
 def plot_recovery_of(rec: FlightRecord, beside: Path, title: str) -> Path | None:

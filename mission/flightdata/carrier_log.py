@@ -7,18 +7,24 @@ by its heading; the mission's log has ``<pair>/carrier/base_link_frd``, the stat
 received), its ``status`` (mode, why it holds, the
 law's command, what it sent, the P3 guard, the distance to the target: JSON) and a
 ``foxglove.Log`` line when the mode or the hold reason changes; once a second, the passenger
-feed's counters. Topics: :data:`mission.flightdata.topics.CARRIER_CHANNELS`.
+feed's counters. A team's carrier (``team`` given) also logs, every step, its passengers as
+heard and each pair's distance (``carrier/team``, ``marsupial.Team``: the step's
+:class:`~mission.carrier.heard.TeamHeard`) and writes a ``team`` metadata record (the names, the
+targets, b c, the passengers' separation); a single pair's file has neither. Topics:
+:data:`mission.flightdata.topics.CARRIER_CHANNELS`.
 """
 from __future__ import annotations
 
+import json
 from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
 
 from mission.carrier.controller import CarrierStep
+from mission.carrier.heard import TeamHeard
 from mission.flightdata.mission_log import clean, vector, yaw_quaternion
-from mission.flightdata.topics import CARRIER_CHANNELS, WORLD_FRAME, frame, topics
+from mission.flightdata.topics import CARRIER_CHANNELS, TEAM_ONLY, WORLD_FRAME, frame, topics
 from mission.flightdata.writer import DataLog, LiveAddress, timestamp
 
 
@@ -28,15 +34,20 @@ def _pad3(v: np.ndarray) -> np.ndarray:
 
 
 class CarrierLog(DataLog):
-    """``carrier.mcap`` of pair ``pair``: ``target`` [m] NED; ``clock``: the ``clock`` metadata."""
+    """``carrier.mcap`` of pair ``pair``: ``target`` [m] NED; ``clock``: the ``clock`` metadata;
+    ``team``: a team's carrier only (None: a single pair), its ``team`` metadata record (values
+    JSON-encoded, :func:`team_metadata`), and the file gets the team channel."""
 
     def __init__(self, path: str | Path, *, pair: str, target: Any, clock: dict[str, str],
-                 live: LiveAddress | None = None) -> None:
-        super().__init__(path, name=f"{pair}-carrier", metadata={"clock": clock}, live=live)
+                 live: LiveAddress | None = None, team: dict[str, Any] | None = None) -> None:
+        metadata = {"clock": clock} | ({} if team is None else {"team": {k: json.dumps(v) for k, v in team.items()}})
+        super().__init__(path, name=f"{pair}-carrier", metadata=metadata, live=live)
         self.pair = pair
         self.target = _pad3(np.asarray(target, dtype=float))
+        self.separation_m = None if team is None else team.get("separation_m")
         self.topics = topics(pair, CARRIER_CHANNELS)
-        self.ch = {key: self.channel(self.topics[key], schema) for key, _, schema in CARRIER_CHANNELS}
+        self.ch = {key: self.channel(self.topics[key], schema) for key, _, schema in CARRIER_CHANNELS
+                   if team is not None or key not in TEAM_ONLY}
         self._counters: Callable[[], dict[str, Any]] | None = None
         self._said: tuple[str, str | None] | None = None
         self._next_counters_s: float | None = None
@@ -84,6 +95,33 @@ class CarrierLog(DataLog):
             "target_distance_m": None if st is None else clean(float(np.linalg.norm(self.target - _pad3(st.position_ned_m))))},
             log_time=t)
         self._guard_ticks = step.guard_active_ticks
+        if step.team is not None and "team" in self.ch:
+            self.ch["team"].log(self.team_message(step.team), log_time=t)
         if self._counters is not None and (self._next_counters_s is None or t_s >= self._next_counters_s):
             self.ch["passenger_feed"].log(self._counters(), log_time=t)
             self._next_counters_s = t_s + 1.0
+
+    def team_message(self, team: TeamHeard) -> dict[str, Any]:
+        """The ``marsupial.Team`` message of a step's snapshot."""
+        closest = team.closest()
+        return {
+            "passengers": [{"name": h.name, "phase": h.phase,
+                            "position": None if h.position_ned_m is None else vector(_pad3(h.position_ned_m)),
+                            "velocity": None if h.velocity_ned_m_s is None else vector(_pad3(h.velocity_ned_m_s)),
+                            "age_s": None if h.age_s is None else clean(float(h.age_s))} for h in team.passengers],
+            "pairs": [{"a": g.a, "b": g.b, "distance_m": None if g.distance_m is None else clean(g.distance_m),
+                       "counted": g.counted} for g in team.pairs],
+            "closest_m": None if closest is None else clean(closest.distance_m),
+            "closest": None if closest is None else [closest.a, closest.b],
+            "separation_m": self.separation_m}
+
+
+def team_metadata(names: list[str], targets: list[list[float]], owners: list[str], bc_m: float, separation_m: float,
+                  max_age_s: float) -> dict[str, Any]:
+    """What a team's ``carrier.mcap`` says of its team (its ``team`` metadata record, each value
+    JSON): the passengers' ``names`` (the team's order), the ``targets`` [m] NED in the mission's
+    order and each one's passenger (``owners``), ``bc_m`` [m] b c (the keep-out round each),
+    ``separation_m`` [m] ``safety.passenger_separation_m``, ``max_age_s`` [s]
+    ``safety.passenger_separation_max_age_s`` (a status older is left out of the distances)."""
+    return {"names": names, "targets": [[float(v) for v in t] for t in targets], "owners": owners, "bc_m": bc_m,
+            "separation_m": separation_m, "max_age_s": max_age_s}

@@ -5,6 +5,7 @@ be read, with the ``mcap`` package's stream reader.
 from __future__ import annotations
 
 import json
+import math
 import struct
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -130,3 +131,84 @@ def log_lines(content: McapContent, topic: str) -> list[tuple[float, int, str]]:
                 text = value.decode("utf-8", errors="replace")
         out.append(((log_time - content.epoch_ns) / 1e9, level, text))
     return out
+
+
+TEAM_SCHEMA = "marsupial.Team"
+STATUS_SCHEMA = "marsupial.CarrierStatus"
+
+
+@dataclass(frozen=True)
+class TeamRecord:
+    """A team's ``carrier.mcap`` read back (its ``marsupial.Team`` and ``marsupial.CarrierStatus``
+    messages, its ``team`` metadata), as arrays on the carrier's clock [s] (the mission clock: a log
+    time minus the file's epoch).
+
+    names: the passengers, the team's order; t [s] (K,) the team messages' times; positions [m]
+    (K, m, 3) NED each passenger's reported position as heard (NaN: not heard); phases (K, m) their
+    phase names (None: not heard); pairs: the pairs' names (a, b), the file's order; distances [m]
+    (K, P) each pair's distance at the carrier's clock (NaN: none); counted (K, P) whether it
+    counts for the closest pair; carrier_t [s] (J,) and carrier [m] (J, 3) the carrier's own
+    position from its status (NaN: no own state); targets [m] (T, 3) NED and owners (T,) each
+    target's passenger; bc_m [m] b c; separation_m [m] ``safety.passenger_separation_m``."""
+
+    names: list[str]
+    t: Any
+    positions: Any
+    phases: Any
+    pairs: list[tuple[str, str]]
+    distances: Any
+    counted: Any
+    carrier_t: Any
+    carrier: Any
+    targets: Any
+    owners: list[str]
+    bc_m: float
+    separation_m: float
+
+    def closest(self) -> tuple[float, float, int] | None:
+        """(distance [m], t [s], pair index) of the least counted distance; None: none counts."""
+        import numpy as np
+
+        d = np.where(self.counted, self.distances, np.inf)
+        if not np.isfinite(d).any():
+            return None
+        k, p = np.unravel_index(int(np.argmin(d)), d.shape)
+        return float(d[k, p]), float(self.t[k]), int(p)
+
+
+def is_team_log(path: str | Path) -> bool:
+    """Whether the MCAP at ``path`` is a team's ``carrier.mcap`` (it has the ``team`` metadata)."""
+    return "team" in read_messages(path, topics=set()).metadata
+
+
+def read_team(path: str | Path) -> TeamRecord:
+    """The :class:`TeamRecord` of a team's ``carrier.mcap`` (:class:`ConfigError` naming ``LOG``
+    when the file has no team: a single pair's carrier, or not a carrier's file)."""
+    import numpy as np
+
+    content = read_messages(path)
+    meta = {k: json.loads(v) for k, v in content.metadata.get("team", {}).items()}
+    if not meta:
+        raise ConfigError("LOG", str(path), "is not a team's carrier.mcap (no `team` metadata): give the carrier.mcap "
+                          "of `marsupial carrier` with a [team] of several (the team demo's log root)")
+    names = list(meta["names"])
+    team = [(log_time, json.loads(data)) for _, schema, log_time, data in content.messages if schema == TEAM_SCHEMA]
+    status = [(log_time, json.loads(data)) for _, schema, log_time, data in content.messages if schema == STATUS_SCHEMA]
+    epoch = content.epoch_ns
+
+    def ned(v: Any) -> list[float]:
+        return [math.nan] * 3 if v is None else [v["n"], v["e"], v["d"]]
+
+    pairs = [(p["a"], p["b"]) for p in team[0][1]["pairs"]] if team else []
+    return TeamRecord(
+        names=names, t=np.array([(lt - epoch) / 1e9 for lt, _ in team]),
+        positions=np.array([[ned(h["position"]) for h in m["passengers"]] for _, m in team]).reshape(-1, len(names), 3),
+        phases=np.array([[h["phase"] for h in m["passengers"]] for _, m in team], dtype=object).reshape(-1, len(names)),
+        pairs=pairs,
+        distances=np.array([[math.nan if p["distance_m"] is None else p["distance_m"] for p in m["pairs"]]
+                            for _, m in team], dtype=float).reshape(-1, len(pairs)),
+        counted=np.array([[bool(p["counted"]) for p in m["pairs"]] for _, m in team], dtype=bool).reshape(-1, len(pairs)),
+        carrier_t=np.array([(lt - epoch) / 1e9 for lt, _ in status]),
+        carrier=np.array([ned(m["position"]) for _, m in status], dtype=float).reshape(-1, 3),
+        targets=np.array(meta["targets"], dtype=float).reshape(-1, 3), owners=list(meta["owners"]),
+        bc_m=float(meta["bc_m"]), separation_m=float(meta["separation_m"]))

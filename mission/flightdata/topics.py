@@ -53,12 +53,16 @@ CAMERA_CHANNELS = (
 RELNAV_CHANNELS = (
     ("relnav", "relnav", "marsupial.RelativeEstimate"),
 )
+# The carrier's own (``carrier.mcap``). ``team``: a team's carrier only (a single pair's file has
+# no such channel): every passenger as heard and each pair's distance, every step.
 CARRIER_CHANNELS = (
     ("tf", "carrier/tf", "foxglove.FrameTransform"),
     ("status", "carrier/status", "marsupial.CarrierStatus"),
     ("log", "carrier/log", "foxglove.Log"),
     ("passenger_feed", "carrier/passenger_feed", "marsupial.PassengerFeed"),
+    ("team", "carrier/team", "marsupial.Team"),
 )
+TEAM_ONLY = frozenset({"team"})  # keys of CARRIER_CHANNELS a single pair's carrier does not declare
 
 
 def topics(pair: str, channels: tuple[tuple[str, str, str], ...] = MISSION_CHANNELS) -> dict[str, str]:
@@ -185,6 +189,28 @@ JSON_SCHEMAS: dict[str, dict[str, Any]] = {
             "too_old": {"type": "integer", "description": "measurements older than the history, dropped"},
             "too_new": {"type": "integer", "description": "measurements stamped beyond the history ahead, dropped"},
             "resets": {"type": "integer", "description": "re-initialisations by a run of rejected markers"}}),
+    "marsupial.Team": _object(
+        "marsupial.Team", "A team's passengers as the carrier heard them at its step (mission.carrier.heard), "
+        "and every pair's distance at the carrier's clock", {
+            "passengers": {"type": "array", "description": "each passenger, the team's order (team.passengers)",
+                           "items": _object("marsupial.HeardPassenger", "a passenger's newest status on its feed", {
+                               "name": {"type": "string", "description": "team.passengers[].name"},
+                               "phase": {"type": ["string", "null"], "description": "its phase (null: not heard)"},
+                               "position": _vector("[m] its position as it reported it"),
+                               "velocity": _vector("[m/s] its velocity as it reported it"),
+                               "age_s": _number("[s] since its status arrived, on the carrier's clock")})},
+            "pairs": {"type": "array", "description": "every pair of passengers, the team's order (0-1, 0-2, ..., 1-2, ...)",
+                      "items": _object("marsupial.PairDistance", "two passengers' distance", {
+                          "a": {"type": "string"}, "b": {"type": "string"},
+                          "distance_m": _number("[m] between their positions moved on by their velocities over their "
+                                                "ages (null: either unheard, or older than "
+                                                "safety.passenger_separation_max_age_s)"),
+                          "counted": {"type": "boolean", "description": "the distance exists and either of them flies: "
+                                      "it counts for carrier.json's closest_pair"}})},
+            "closest_m": _number("[m] the least counted pair distance at this step (null: none counts)"),
+            "closest": {"type": ["array", "null"], "items": {"type": "string"},
+                        "description": "the names of that pair (null: none counts)"},
+            "separation_m": _number("[m] safety.passenger_separation_m: the distance the passengers keep")}),
     "marsupial.PassengerFeed": _object("marsupial.PassengerFeed", "The carrier's passenger feed counters",
                                        {"received": {"type": "integer"}, "accepted": {"type": "integer"}}),
 }

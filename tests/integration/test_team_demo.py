@@ -45,7 +45,8 @@ def _children_of(root: Path) -> list[str]:
 @pytest.fixture(scope="module")
 def team_flight(tmp_path_factory):
     root = tmp_path_factory.mktemp("team") / "logs"
-    cmd = [sys.executable, "-m", "mission.cli", "demo", "--config", str(TEAM), "--log-root", str(root), "--plot", "",
+    cmd = [sys.executable, "-m", "mission.cli", "demo", "--config", str(TEAM), "--log-root", str(root), "--plot",
+           str(root / "team.png"),
            "--timeout", "240", "--estimate-error", "0"]
     out = subprocess.run(cmd, capture_output=True, text=True, timeout=330)
     return root, out, _children_of(root)
@@ -109,6 +110,32 @@ def test_each_passenger_hears_its_teammate(team_flight) -> None:
         closest = n["closest"]
         assert 1.0 < closest["distance_m"] < 1.5 < cfg.safety.passenger_separation_m, closest  # measured, missed
         assert all(p is not None for p in closest["phases"]), closest
+
+
+def test_carrier_mcap_names_both_passengers_and_its_closest_pair_is_the_summarys(team_flight) -> None:
+    """carrier.mcap's team topic (read with the project's reader) has both passengers by name,
+    their phases and the pair's distance on the carrier's clock; its least counted distance is
+    carrier.json's closest pair, at its time, and team.json and the demo's lines carry it beside
+    each passenger's own figure. The team's figure was written where --plot asked."""
+    from mission.flightdata.read import read_messages, read_team
+
+    root, out, _ = team_flight
+    c = json.loads((root / "carrier.json").read_text())
+    pair = c["closest_pair"]
+    assert pair is not None and sorted(pair["names"]) == ["alpha", "bravo"] and all(pair["phases"]), pair
+    content = read_messages(root / "carrier.mcap", {"/pair0/carrier/team"})
+    first = json.loads(content.messages[0][3])
+    assert [p["name"] for p in first["passengers"]] == ["alpha", "bravo"]
+    rec = read_team(root / "carrier.mcap")
+    assert rec.names == ["alpha", "bravo"] and rec.pairs == [("alpha", "bravo")]
+    assert len(rec.t) > 1000 and rec.counted[:, 0].sum() > 1000  # every step of a 30 Hz carrier, a flight of minutes
+    assert {"RIDING", "NAVIGATING", "HOLDOFF", "APPROACH"} <= set(rec.phases[:, 0]) | set(rec.phases[:, 1])
+    d, t, _ = rec.closest()
+    assert d == pytest.approx(pair["distance_m"], abs=1e-4) and t == pytest.approx(pair["t_s"], abs=1e-3), (d, t, pair)
+    team = json.loads((root / "team.json").read_text())["team"]
+    assert team["carrier_closest_pair"] == pair
+    assert f"carrier: closest pair as heard {pair['distance_m']} m" in out.stdout
+    assert (root / "team.png").stat().st_size > 50_000 and team["plot"] == str(root / "team.png")
 
 
 def test_no_process_is_left_behind(team_flight) -> None:

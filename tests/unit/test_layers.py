@@ -270,6 +270,7 @@ PURE = tuple(sorted(
     | {"mission.bus.wire", "mission.bus.ros2", "mission.bus.gate", "mission.flight_mode", "mission.carrier.modes",
        "mission.carrier.guard", "mission.carrier.tracking", "mission.carrier.start", "mission.carrier.acceleration",
        "mission.carrier.backends", "mission.carrier.step", "mission.carrier.backends.sim", "mission.bus.encodings",
+       "mission.carrier.heard",
        "sim.batch.closed_loop"}))
 IO_MODULES = {"socket", "select", "selectors", "threading", "time", "subprocess", "signal", "asyncio", "zenoh",
               "pymavlink", "serial"}
