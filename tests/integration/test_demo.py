@@ -169,7 +169,7 @@ class TestARealCarrierInterface:
         """--carrier mavlink: the carrier controller flies a mock PX4 Ackermann rover (sysid 2) in
         OFFBOARD; --carrier ros2: it drives a ROS-2-shaped diff-drive robot on rmw_zenoh keys. Each
         robot steps on the carrier's lockstep clock."""
-        out = _demo(tmp_path, "--carrier", carrier)
+        out = _demo(tmp_path, "--carrier", carrier, "--plot", "")  # no figure: TestTheDemoFlight checks the one-pair plot
         s = json.loads((tmp_path / "logs" / "pair0" / "summary.json").read_text())
         assert s["p1"] and s["p2"] and s["p3"] and s["phase"] == "DONE", s
         assert out.returncode == 0, out.stdout + out.stderr
@@ -194,7 +194,7 @@ class TestARos2Robot:
         text = DEMO.read_text().replace('[zenoh]\nmode = "peer"\n', f'[zenoh]\nmode = "{mode}"\n', 1)
         assert f'mode = "{mode}"' in text
         config.write_text(text + f'\n[carrier.ros2]\ncmd_vel_type = "{cmd_vel_type}"\nrmw_attachment = "{attachment}"\n')
-        out = _demo(tmp_path, "--carrier", "ros2", "--config", str(config))
+        out = _demo(tmp_path, "--carrier", "ros2", "--config", str(config), "--plot", "")
         s = json.loads((tmp_path / "logs" / "pair0" / "summary.json").read_text())
         assert s["p1"] and s["p2"] and s["p3"] and s["phase"] == "DONE", s
         assert out.returncode == 0, out.stdout + out.stderr
