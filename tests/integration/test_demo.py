@@ -21,7 +21,7 @@ DEMO = CONFIGS / "demo.toml"
 pytestmark = pytest.mark.slow
 
 # A class per flight (or per flights that share one): `--dist loadscope` schedules a class as its own
-# unit, so the module's eight demo flights spread over the workers instead of queueing on one.
+# unit, so the module's seven demo flights spread over the workers instead of queueing on one.
 
 
 def _demo(tmp_path, *args: str) -> subprocess.CompletedProcess:
@@ -42,18 +42,19 @@ def demo_flight(tmp_path_factory):
     return root, _demo(root)
 
 
-class TestTwoLockstepRuns:
-    def test_two_lockstep_runs_give_the_same_flight(self, tmp_path):
+class TestTheDemoFlight:
+    def test_two_lockstep_runs_give_the_same_flight(self, demo_flight, tmp_path):
         """Same configuration, same seed: the same summary to 1e-9 and the same flight record, tick for
         tick, whatever the machine's load (every participant waits for the others' stamped step).
         On the mock's default estimate errors (PX4 SITL's, seed 0): the vehicle's first barrier carried
         step 0's streams, which a mission bound in time read and a later one did not, so two runs
         differed from their first row (the vehicle at 0.0 against 0.065 m north at t = 0.02 s);
         before any answer the vehicle now sends only its hello (sim/vehicle/lockstep.py)."""
-        out, shared_out = _demo(tmp_path / "a", "--plot", ""), _demo(tmp_path / "b", "--plot", "")
+        # the first run is the class's plain demo (its plot is drawn after the flight, from its files)
+        (root, out), shared_out = demo_flight, _demo(tmp_path / "b", "--plot", "")
         assert out.returncode == 0, out.stdout + out.stderr
         assert shared_out.returncode == 0, shared_out.stdout + shared_out.stderr
-        runs = [tmp_path / "a" / "logs" / "pair0", tmp_path / "b" / "logs" / "pair0"]
+        runs = [root / "logs" / "pair0", tmp_path / "b" / "logs" / "pair0"]
         a, b = (json.loads((d / "summary.json").read_text()) for d in runs)
         for summary in (a, b):
             summary.get("carrier_feed", {}).pop("bound_source", None)  # a Zenoh session id: new in every run
@@ -76,8 +77,6 @@ class TestTwoLockstepRuns:
             assert b[key] == pytest.approx(value, abs=1e-9), key
         assert (runs[0] / "record.csv").read_text() == (runs[1] / "record.csv").read_text()
 
-
-class TestTheDemoFlight:
     def test_demo_flies_p1_p3_with_plot(self, demo_flight):
         """The demo holds P1-P3 on the PX4-like mock (the tracking loop that holds the dock on PX4)."""
         tmp_path, out = demo_flight
@@ -170,7 +169,7 @@ class TestARealCarrierInterface:
         """--carrier mavlink: the carrier controller flies a mock PX4 Ackermann rover (sysid 2) in
         OFFBOARD; --carrier ros2: it drives a ROS-2-shaped diff-drive robot on rmw_zenoh keys. Each
         robot steps on the carrier's lockstep clock."""
-        out = _demo(tmp_path, "--carrier", carrier)
+        out = _demo(tmp_path, "--carrier", carrier, "--plot", "")  # no figure: TestTheDemoFlight checks the one-pair plot
         s = json.loads((tmp_path / "logs" / "pair0" / "summary.json").read_text())
         assert s["p1"] and s["p2"] and s["p3"] and s["phase"] == "DONE", s
         assert out.returncode == 0, out.stdout + out.stderr
@@ -195,7 +194,7 @@ class TestARos2Robot:
         text = DEMO.read_text().replace('[zenoh]\nmode = "peer"\n', f'[zenoh]\nmode = "{mode}"\n', 1)
         assert f'mode = "{mode}"' in text
         config.write_text(text + f'\n[carrier.ros2]\ncmd_vel_type = "{cmd_vel_type}"\nrmw_attachment = "{attachment}"\n')
-        out = _demo(tmp_path, "--carrier", "ros2", "--config", str(config))
+        out = _demo(tmp_path, "--carrier", "ros2", "--config", str(config), "--plot", "")
         s = json.loads((tmp_path / "logs" / "pair0" / "summary.json").read_text())
         assert s["p1"] and s["p2"] and s["p3"] and s["phase"] == "DONE", s
         assert out.returncode == 0, out.stdout + out.stderr

@@ -36,8 +36,14 @@ def fly(cfg, **world_kwargs):
     return outcome, world, reports, controller
 
 
-def test_whole_mission_on_the_fake_vehicle(cfg):
-    outcome, world, reports, controller = fly(cfg)
+@pytest.fixture(scope="module")
+def whole_mission(cfg):
+    """demo.toml's mission on the fake vehicle, flown once for the tests that read it."""
+    return fly(cfg)
+
+
+def test_whole_mission_on_the_fake_vehicle(cfg, whole_mission):
+    outcome, world, reports, controller = whole_mission
     assert outcome.ok, (outcome.reason, outcome.detail)
     phases = list(dict.fromkeys(r.phase for r in reports))
     assert phases == [Phase.STREAMING, Phase.ARMING, Phase.OFFBOARD, Phase.JOIN, Phase.RIDING, Phase.SEPARATED,
@@ -63,8 +69,8 @@ def test_whole_mission_on_the_fake_vehicle(cfg):
     assert controller.ticks == len(reports)
 
 
-def test_tick_report_stamps_only_ticks_that_sent(cfg):
-    _, _, reports, _ = fly(cfg)
+def test_tick_report_stamps_only_ticks_that_sent(whole_mission):
+    _, _, reports, _ = whole_mission
     for r in reports:
         assert r.start_ns <= r.observed_ns
         if r.decision.setpoint is None:

@@ -15,6 +15,7 @@ from mission.phases import Phase
 from sim.batch.team_mission import TeamWorld
 from sim.vehicle.estimator import PX4_SITL_SCALE
 from tests.conftest import CONFIGS
+from tests.unit.batch.test_team_mission import assert_no_phase_switch_jump
 
 pytestmark = pytest.mark.timeout(600)  # two team missions in-process, about 10 s of CPU each
 
@@ -102,6 +103,12 @@ def test_no_step_at_the_queues_switches_and_the_waiting_one_keeps_clear(flight):
     assert 0.0 < flight.queue_step_m_s <= STEP_MAX_M_S
     assert flight.phase_step_m_s <= STEP_MAX_M_S
     assert flight.waiting_gap_m >= load_config(CONFIGS / "team.toml").safety.passenger_separation_m - 0.01
+
+
+def test_no_phase_switch_jumps_the_command_beside_a_neighbour_on_px4s_estimate_errors(flight):
+    """test_team_mission.py's check on this module's flight: ``marsupial simulate configs/team.toml``'s
+    (PX4 SITL's estimate errors, seed 0), flown here once for the tests of both modules."""
+    assert_no_phase_switch_jump(flight.world)
 
 
 def test_the_battery_decides_when_it_must(low_bravo):

@@ -242,10 +242,26 @@ def test_two_targets_one_after_the_other(cfg):
     assert norm(np.asarray(targets[1]) - start2.decision.dock) >= bc + two.mission.leg_start_margin_m - 0.1
 
 
-def test_a_battery_too_small_for_the_second_leg_skips_it(cfg):
+@pytest.fixture(scope="module")
+def battery_for_one_leg(cfg, tmp_path_factory):
+    """Two targets on a battery that drains 1 %/s from 100 %, recorded: one flight for the two
+    tests that read it. (the config, the outcome, the world, the tick reports, the controller)"""
+    from mission.record.info import mission_info
+    from mission.record.recorder import FlightRecorder
+
     two, targets = two_targets(cfg, [30.0, 5.0, -5.0])
-    outcome, world, reports, controller = fly(two, targets=targets, recovery_velocity_ned_m_s=np.array([0.8, 0.0, 0.0]),
-                                              battery_pct=100.0, drain_pct_s=1.0)
+    clock = ManualClock()
+    world = FakeWorld(clock, target_ned_m=np.asarray(targets[0], dtype=float), targets=targets,
+                      recovery_velocity_ned_m_s=np.array([0.8, 0.0, 0.0]), battery_pct=100.0, drain_pct_s=1.0)
+    reports: list[TickReport] = []
+    controller = MissionController(two, world, world.feed, clock, publisher=world, on_tick=reports.append,
+                                   recorder=FlightRecorder(tmp_path_factory.mktemp("battery"), mission_info(two)),
+                                   command_thread=False)
+    return two, controller.run(), world, reports, controller
+
+
+def test_a_battery_too_small_for_the_second_leg_skips_it(battery_for_one_leg):
+    two, outcome, world, reports, controller = battery_for_one_leg
     assert outcome.ok, (outcome.reason, outcome.detail)
     state = controller.state
     assert [leg["outcome"] for leg in state.legs_done] == ["done"]
@@ -279,17 +295,9 @@ def test_the_summary_has_a_column_per_leg(cfg, tmp_path):
     assert s["p1"] and s["p2"] and s["p3"]
 
 
-def test_a_skipped_leg_is_reported_with_its_reason(cfg, tmp_path):
-    from mission.record.info import mission_info
-    from mission.record.recorder import FlightRecorder
-
-    two, targets = two_targets(cfg, [30.0, 5.0, -5.0])
-    clock = ManualClock()
-    world = FakeWorld(clock, target_ned_m=np.asarray(targets[0], dtype=float), targets=targets,
-                      recovery_velocity_ned_m_s=np.array([0.8, 0.0, 0.0]), battery_pct=100.0, drain_pct_s=1.0)
-    controller = MissionController(two, world, world.feed, clock, publisher=world,
-                                   recorder=FlightRecorder(tmp_path, mission_info(two)), command_thread=False)
-    legs = controller.run().summary["legs"]
+def test_a_skipped_leg_is_reported_with_its_reason(battery_for_one_leg):
+    _, outcome, *_ = battery_for_one_leg
+    legs = outcome.summary["legs"]
     assert legs[0]["outcome"] == "done" and legs[1]["outcome"].startswith("skipped: battery")
     assert "p1" not in legs[1]
 

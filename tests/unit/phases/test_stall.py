@@ -140,8 +140,18 @@ def assert_goes_on_from_the_vehicle(reports, after) -> None:
     assert max(float(norm(b - a)) for a, b in zip(sent, sent[1:])) <= JUMP_M_S
 
 
-def test_a_stall_on_the_approach_goes_around_and_docks_at_the_next_approach(cfg):
-    outcome, reports, controller, after = fly_with_a_stall(cfg, Phase.APPROACH, 2.0)
+@pytest.fixture(scope="module")
+def approach_stall(cfg, tmp_path_factory):
+    """The mission stalled 2 s into the approach, recorded: one flight for the two tests that read it."""
+    from mission.record.info import mission_info
+    from mission.record.recorder import FlightRecorder
+
+    return fly_with_a_stall(cfg, Phase.APPROACH, 2.0,
+                            recorder=FlightRecorder(tmp_path_factory.mktemp("approach-stall"), mission_info(cfg)))
+
+
+def test_a_stall_on_the_approach_goes_around_and_docks_at_the_next_approach(approach_stall):
+    outcome, reports, controller, after = approach_stall
     assert outcome.ok, (outcome.reason, outcome.detail)
     phases = order(reports)
     i = phases.index(Phase.APPROACH)
@@ -356,15 +366,11 @@ def test_a_carrier_quiet_for_good_while_riding_is_lost_after_carrier_lost_s(cfg)
     assert all(r.phase is Phase.RIDING for r in reports if world.quiet[0] <= r.t_s < aborted)
 
 
-def test_the_summary_measures_the_stall_apart_from_the_phase_switches(cfg, tmp_path):
+def test_the_summary_measures_the_stall_apart_from_the_phase_switches(approach_stall):
     """The go-around after a stall switches phase across the gap: the summary's switch jump leaves
     that switch out (command to command across a gap is what the vehicle did meanwhile), and
     max_stall_command_offset_m_s measures the command against the vehicle's velocity after it."""
-    from mission.record.info import mission_info
-    from mission.record.recorder import FlightRecorder
-
-    outcome, reports, _, after = fly_with_a_stall(cfg, Phase.APPROACH, 2.0,
-                                                  recorder=FlightRecorder(tmp_path, mission_info(cfg)))
+    outcome, reports, _, after = approach_stall
     s = outcome.summary
     i, first = first_after_the_gap(reports)
     assert first.phase is Phase.GO_AROUND and reports[i - 1].phase is Phase.APPROACH  # a switch across the gap
