@@ -213,7 +213,7 @@ def _sit(state: MissionState, obs: Observation, m: MissionModel, x_ref: np.ndarr
         return replace(state, prev_dock=prev_dock if prev_dock is not None else state.prev_dock), Decision(
             setpoint=None, dock=dock_point(obs, m), events=events)
     dock = dock_point(obs, m)
-    tr = _track(state, obs, m, x_ref, np.asarray(u_ref, dtype=float), ZERO, standing=over_deck(dock, obs, m))
+    tr = _track(state, obs, m, x_ref, np.asarray(u_ref, dtype=float), ZERO, on_deck=over_deck(dock, obs, m))
     tr = replace(tr, setpoint=held_down(tr.setpoint, dock, obs, m))
     new = replace(state, x_ref=np.asarray(x_ref, dtype=float).copy(), u_ref=np.asarray(u_ref, dtype=float).copy(),
                   prev_dock=prev_dock if prev_dock is not None else state.prev_dock, **_kept(tr))

@@ -66,15 +66,16 @@ def _floor_over_the_ground(limits: SafetyConfig, obs: Observation) -> SafetyConf
 
 
 def _track(state: MissionState, obs: Observation, m: MissionModel, x_ref: np.ndarray, u_ref: np.ndarray,
-           a_ref: np.ndarray, standing: bool = False) -> Tracked:
+           a_ref: np.ndarray, standing: bool = False, on_deck: bool = False) -> Tracked:
     """The setpoint that makes the vehicle follow the reference (:func:`mission.core.tracking.setpoint`):
     the velocity demand filtered at the vehicle's real position (obstacles, floor, speed and
-    acceleration of the vehicle), full or velocity only as tracking decides it. ``standing``: the
-    vehicle stands on something above the altitude floor (``z_max_m``), or takes off from under it
-    (JOIN from the ground; seated on the deck: its take-off, and its landing over the deck by its
-    report): while it reads itself under the floor, the floor is left out. PX4's estimate of its
-    height errs by decimetres, and a floor 0.2 m under the deck stopped the landing's press and
-    turned its setpoints velocity only (docs/deck-riding.md, "Landing under the floor")."""
+    acceleration of the vehicle), full or velocity only as tracking decides it. The altitude floor
+    (``z_max_m``) is left out for a vehicle ``standing`` under it, taking off (JOIN from the ground;
+    seated, the take-off from the deck), while it reads itself under the floor; and ``on_deck``:
+    seated on the deck after a contact (its landing, pressed into it) and over it by its report,
+    where the deck, above the floor, is its floor. PX4's estimate of its height errs by decimetres:
+    a floor 0.2 m under the deck stopped the landing's press and turned its setpoints velocity only
+    (docs/deck-riding.md, "Landing under the floor")."""
     v = obs.vehicle
     assert v is not None  # tracking happens only with a vehicle
     x_p = v.position_ned_m
@@ -83,7 +84,7 @@ def _track(state: MissionState, obs: Observation, m: MissionModel, x_ref: np.nda
     desired = velocity_demand(x_ref, u_ref, x_p, integral, g)
     prev = state.u_cmd if state.u_cmd is not None else v.velocity_ned_m_s
     limits = _floor_over_the_ground(m.command_safety, obs)
-    if standing and limits.z_max_m is not None and len(x_p) == 3 and x_p[2] > limits.z_max_m:
+    if limits.z_max_m is not None and (on_deck or (standing and len(x_p) == 3 and x_p[2] > limits.z_max_m)):
         limits = replace(limits, z_max_m=None)
     safe = filter_velocity(x_p, desired, m.tick.obstacles, limits, prev, m.dt_s)
     acted = bool(safe.changed)

@@ -105,11 +105,11 @@ def _fly(state: MissionState, obs: Observation, m: MissionModel, goal_x: np.ndar
     x_ref = state.x_ref + u_ref * m.dt_s
     a_ref = (u_ref - state.u_ref) / m.dt_s
     dock = dock_point(obs, m) if obs.carrier is not None else None
-    # seated on the deck after a contact, over it by its report: the altitude floor under the deck
-    # is left out while the estimate reads the vehicle under it (it would stop the press, and turn
-    # the setpoints velocity only: docs/deck-riding.md, "Landing under the floor")
-    standing = state.seated and m.deck is not None and dock is not None and deck.over_deck(dock, obs, m)
-    tr = _track(state, obs, m, x_ref, u_ref, a_ref, standing=standing)
+    # seated on the deck after a contact, over it by its report: the deck is its floor, the altitude
+    # floor under it is left out (PX4's estimate reading the vehicle near or under it stopped the
+    # press, and turned the setpoints velocity only: docs/deck-riding.md, "Landing under the floor")
+    on_deck = state.seated and m.deck is not None and dock is not None and deck.over_deck(dock, obs, m)
+    tr = _track(state, obs, m, x_ref, u_ref, a_ref, on_deck=on_deck)
     kept = tr.kept()
     new = replace(state, x_ref=x_ref, u_ref=u_ref, recovery=rec, u_cmd=kept["u_cmd"], integral=kept["integral"])
     return new, tr.decision(dock=dock, desired=u_ref, safety_acted=tr.acted or bool(safe.changed), events=events,
