@@ -161,7 +161,7 @@ def ride(state: MissionState, obs: Observation, m: MissionModel) -> tuple[Missio
     # the point tracked is where the passenger is by its estimate, moving with the deck (the law's
     # reference is the dock point): PX4 is asked for no pull towards a deck its estimate misplaces,
     # and the take-off starts from here (takeoff_start); the floor is left out under it (seated)
-    tr = _track(state, obs, m, np.asarray(v.position_ned_m, dtype=float), tick.u, a_ref, taking_off=True)
+    tr = _track(state, obs, m, np.asarray(v.position_ned_m, dtype=float), tick.u, a_ref, standing=True)
     # before the latch: no take-off (armed or not as far as we know: PX4 arms before its HEARTBEAT says so)
     tr = replace(tr, setpoint=held_down(tr.setpoint, dock, obs, m))
     request = None
@@ -212,8 +212,9 @@ def _sit(state: MissionState, obs: Observation, m: MissionModel, x_ref: np.ndarr
     if not v.armed:
         return replace(state, prev_dock=prev_dock if prev_dock is not None else state.prev_dock), Decision(
             setpoint=None, dock=dock_point(obs, m), events=events)
-    tr = _track(state, obs, m, x_ref, np.asarray(u_ref, dtype=float), ZERO)
-    tr = replace(tr, setpoint=held_down(tr.setpoint, dock_point(obs, m), obs, m))
+    dock = dock_point(obs, m)
+    tr = _track(state, obs, m, x_ref, np.asarray(u_ref, dtype=float), ZERO, on_deck=over_deck(dock, obs, m))
+    tr = replace(tr, setpoint=held_down(tr.setpoint, dock, obs, m))
     new = replace(state, x_ref=np.asarray(x_ref, dtype=float).copy(), u_ref=np.asarray(u_ref, dtype=float).copy(),
                   prev_dock=prev_dock if prev_dock is not None else state.prev_dock, **_kept(tr))
     return new, tr.decision(request=Request.DISARM if v.on_ground and may_disarm else None, dock=dock_point(obs, m),
@@ -259,9 +260,16 @@ def landing(dock: np.ndarray, obs: Observation, m: MissionModel) -> np.ndarray:
     dock point. Otherwise (disarmed, or off the deck by its report) :func:`pressed`."""
     d, v = _deck(m), obs.vehicle
     at = pressed(dock, m)
-    if v is None or not v.armed or float(np.hypot(*(v.position_ned_m[:2] - dock[:2]))) > d.radius_m:
+    if v is None or not v.armed or not over_deck(dock, obs, m):
         return at
     return np.array([at[0], at[1], min(float(v.position_ned_m[2]) + d.press_m, float(dock[2]) + d.press_floor_m)])
+
+
+def over_deck(dock: np.ndarray, obs: Observation, m: MissionModel) -> bool:
+    """Whether the vehicle reports itself over the deck at ``dock`` [m] NED: within the deck's
+    ``radius_m`` of it horizontally (its height aside: the estimate's errs by decimetres)."""
+    v = obs.vehicle
+    return v is not None and float(np.hypot(*(v.position_ned_m[:2] - dock[:2]))) <= _deck(m).radius_m
 
 
 def after_landing(obs: Observation, decision: Decision, dock: np.ndarray, m: MissionModel) -> Decision:

@@ -66,11 +66,16 @@ def _floor_over_the_ground(limits: SafetyConfig, obs: Observation) -> SafetyConf
 
 
 def _track(state: MissionState, obs: Observation, m: MissionModel, x_ref: np.ndarray, u_ref: np.ndarray,
-           a_ref: np.ndarray, taking_off: bool = False) -> Tracked:
+           a_ref: np.ndarray, standing: bool = False, on_deck: bool = False) -> Tracked:
     """The setpoint that makes the vehicle follow the reference (:func:`mission.core.tracking.setpoint`):
     the velocity demand filtered at the vehicle's real position (obstacles, floor, speed and
-    acceleration of the vehicle), full or velocity only as tracking decides it. ``taking_off``
-    (JOIN): while the vehicle is still under the altitude floor (``z_max_m``) the floor is left out."""
+    acceleration of the vehicle), full or velocity only as tracking decides it. The altitude floor
+    (``z_max_m``) is left out for a vehicle ``standing`` under it, taking off (JOIN from the ground;
+    seated, the take-off from the deck), while it reads itself under the floor; and ``on_deck``:
+    seated on the deck after a contact (its landing, pressed into it) and over it by its report,
+    where the deck, above the floor, is its floor. PX4's estimate of its height errs by decimetres:
+    a floor 0.2 m under the deck stopped the landing's press and turned its setpoints velocity only
+    (docs/deck-riding.md, "Landing under the floor")."""
     v = obs.vehicle
     assert v is not None  # tracking happens only with a vehicle
     x_p = v.position_ned_m
@@ -79,7 +84,7 @@ def _track(state: MissionState, obs: Observation, m: MissionModel, x_ref: np.nda
     desired = velocity_demand(x_ref, u_ref, x_p, integral, g)
     prev = state.u_cmd if state.u_cmd is not None else v.velocity_ned_m_s
     limits = _floor_over_the_ground(m.command_safety, obs)
-    if taking_off and limits.z_max_m is not None and len(x_p) == 3 and x_p[2] > limits.z_max_m:
+    if limits.z_max_m is not None and (on_deck or (standing and len(x_p) == 3 and x_p[2] > limits.z_max_m)):
         limits = replace(limits, z_max_m=None)
     safe = filter_velocity(x_p, desired, m.tick.obstacles, limits, prev, m.dt_s)
     acted = bool(safe.changed)
@@ -188,7 +193,7 @@ def join(state, obs, m):
     # ground after the reference has climbed would hover under the floor (measured on PX4:
     # docs/recovery.md, "On real PX4"). The reference, which climbs to the dock point above the
     # floor, leads the vehicle up instead.
-    tr = _track(state, obs, m, x_ref, u_ref, ZERO, taking_off=True)
+    tr = _track(state, obs, m, x_ref, u_ref, ZERO, standing=True)
     # Docked once the vehicle has settled on the dock point (within join_settle_m for
     # join_settle_s): the carrier starts its approach then, so what is left of the climb (its
     # overshoot) is not counted as riding offset; rest is judged on positions, not on the velocity
@@ -348,10 +353,10 @@ def navigate(state, obs, m, events=()):
     a_ref = (u_ref - u_prev) / m.dt_s
     offset = _relax(state.takeoff_offset, m)
     if offset is None:
-        tr = _track(state, obs, m, x_ref, u_ref, a_ref, taking_off=state.seated)
+        tr = _track(state, obs, m, x_ref, u_ref, a_ref, standing=state.seated)
     else:
         a_off = (offset[1] - state.takeoff_offset[1]) / m.dt_s  # type: ignore[index]
-        tr = _track(state, obs, m, x_ref + offset[0], u_ref + offset[1], a_ref + a_off, taking_off=state.seated)
+        tr = _track(state, obs, m, x_ref + offset[0], u_ref + offset[1], a_ref + a_off, standing=state.seated)
     acted = tr.acted
     phase, since, window = state.phase, state.since_s, state.arrival_window
     evs = list(events)

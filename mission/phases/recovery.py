@@ -95,17 +95,21 @@ def _fly(state: MissionState, obs: Observation, m: MissionModel, goal_x: np.ndar
     (obstacles, floor, the passenger's limits), track the reference; the state keeps ``rec``."""
     assert state.x_ref is not None and state.u_ref is not None
     _, u_next = pursue(state.x_ref, state.u_ref, goal_x, goal_v, limits, m.dt_s)
-    deck = m.deck.keep_out(obs, m) if m.deck is not None else None
+    keep_out = m.deck.keep_out(obs, m) if m.deck is not None else None
     cfg, neighbours = queue.apart(state, obs, m)
     # the rows phase in from the phase's start (as from the separation): they change with the phase
     # (none, the span, the separation), and a row in at once could correct the command in one tick
-    safe = filter_velocity(state.x_ref, u_next, m.tick.obstacles, cfg, state.u_ref, m.dt_s, deck=deck,
+    safe = filter_velocity(state.x_ref, u_next, m.tick.obstacles, cfg, state.u_ref, m.dt_s, deck=keep_out,
                            neighbours=neighbours, since_separation_s=None if neighbours is None else obs.t_s - state.since_s)
     u_ref = np.asarray(safe.u, dtype=float)
     x_ref = state.x_ref + u_ref * m.dt_s
     a_ref = (u_ref - state.u_ref) / m.dt_s
-    tr = _track(state, obs, m, x_ref, u_ref, a_ref)
     dock = dock_point(obs, m) if obs.carrier is not None else None
+    # seated on the deck after a contact, over it by its report: the deck is its floor, the altitude
+    # floor under it is left out (PX4's estimate reading the vehicle near or under it stopped the
+    # press, and turned the setpoints velocity only: docs/deck-riding.md, "Landing under the floor")
+    on_deck = state.seated and m.deck is not None and dock is not None and deck.over_deck(dock, obs, m)
+    tr = _track(state, obs, m, x_ref, u_ref, a_ref, on_deck=on_deck)
     kept = tr.kept()
     new = replace(state, x_ref=x_ref, u_ref=u_ref, recovery=rec, u_cmd=kept["u_cmd"], integral=kept["integral"])
     return new, tr.decision(dock=dock, desired=u_ref, safety_acted=tr.acted or bool(safe.changed), events=events,

@@ -116,3 +116,44 @@ def test_seated_no_setpoint_asks_for_a_climb(model):
     assert after_landing(obs, Decision(setpoint=climbing), dock, model).setpoint.velocity_ned_m_s[2] == 0.0
     disarmed = seen(model, [0.1, 0.0, -0.3], armed=False)
     assert after_landing(disarmed, Decision(setpoint=climbing), dock, model).setpoint is None
+
+
+@pytest.mark.parametrize("under_m", [0.28, 0.16])  # under the deck's plane: under the floor, 0.04 m over it
+@pytest.mark.parametrize("phase", [Phase.DOCKED, Phase.HOME])
+def test_seated_after_a_contact_the_floor_under_the_deck_does_not_stop_the_press_nor_the_ride(model, phase, under_m):
+    """After a contact on PX4's estimate, seated, the estimate may read the vehicle under the
+    altitude floor (``safety.z_max_m``, 0.2 m under cycle.toml's deck) while it truly hovers over
+    the deck (configs/team.toml seed 1, bravo: contact at 0.31 m over the deck, the estimate 0.44 m
+    low). The command filter's floor then asked for no descent (the press stopped: it hovered
+    0.16 m over the deck for 2 s) and, through the acceleration limit, touched every axis, so the
+    setpoint went velocity only: no position, no drag feed-forward, and PX4's velocity loop fell
+    0.73 m/s behind the 1.5 m/s deck, off its edge; near the floor, over it, its barrier slowed the
+    press likewise. Over the deck by its report, seated, the deck is its floor and the altitude
+    floor is left out: every tick sends the position and acceleration on every axis, the deck's
+    velocity across, and no climb."""
+    from mission.phases.recovery import docked, home
+
+    assert model.command_safety.z_max_m == pytest.approx(-0.3)  # 0.2 m under the deck's plane
+    step = docked if phase is Phase.DOCKED else home
+    offset = np.array([0.02, -0.03, -0.5 + under_m])
+    t0 = 50.0
+    contact = {"horizontal_error_m": 0.05, "height_error_m": -0.09, "time_s": t0}
+    rec = RecoveryState(started_s=0.0, why="task done", attempts=1, course=np.array([1.0, 0.0, 0.0]),
+                        carrier_samples=((t0, float(V_C[0]), float(V_C[1])),), carrier_seen_s=t0,
+                        settled_since_s=t0 if phase is Phase.DOCKED else None, contact=contact)
+    x0 = np.array([0.0, 0.0, -0.5])
+    state = MissionState(phase=phase, since_s=t0, x_ref=x0.copy(), u_ref=V_C.copy(), u_cmd=V_C.copy(), recovery=rec,
+                         seated=True, leg=1 if phase is Phase.HOME else 0)
+    ticks = int(0.9 / model.dt_s)  # within DOCKED's dwell (1 s)
+    for k in range(ticks):
+        t = t0 + k * model.dt_s
+        carrier = V_C * (t - t0)
+        vehicle = VehicleObs(carrier + offset, V_C.copy(), True, "OFFBOARD", heartbeat_age_s=0.0, on_ground=False)
+        obs = Observation(t_s=t, vehicle=vehicle, carrier=CarrierObs(carrier, V_C.copy(), age_s=0.0))
+        state, dec = step(state, obs, model)
+        assert state.phase == phase and state.seated, (k, state.phase)
+        sp = dec.setpoint
+        assert sp is not None and sp.kind == "full", (k, sp.kind if sp is not None else None)
+        assert sp.velocity_ned_m_s[:2] == pytest.approx(V_C[:2], abs=0.02), k
+        assert sp.velocity_ned_m_s[2] >= 0.0 and sp.acceleration_ned_m_s2[2] >= 0.0, k  # no climb
+        assert sp.position_ned_m[2] >= vehicle.position_ned_m[2] + model.deck.press_m - 1e-9, k  # pressed
