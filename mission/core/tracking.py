@@ -76,6 +76,12 @@ def update_integral(integral: np.ndarray, x_ref: np.ndarray, x_p: np.ndarray, ga
     return new * (gains.integral_limit / size) if size > gains.integral_limit else new
 
 
+#: [m/s] an axis whose velocity the safety filter changed by no more than this keeps its position and
+#: acceleration: the acceleration limit scales the whole change, so a floor acting down alone moves
+#: north and east by ~1e-6 m/s, which must not cost them their tracking (docs/tracking.md)
+AXIS_CHANGED_M_S = 1e-3
+
+
 def setpoint(x_ref: np.ndarray, u_ref: np.ndarray, a_ref: np.ndarray, x_p: np.ndarray, velocity: np.ndarray,
              integral: np.ndarray, gains: TrackingGains, v_p: np.ndarray | None = None,
              filtered: bool | np.ndarray = False, velocity_bias: np.ndarray | None = None) -> Setpoint:

@@ -21,9 +21,9 @@ from mission.core.pursuit import PursuitLimits, pursue
 from mission.core.setpoint import Setpoint
 from mission.phases.types import ZERO, Decision, MissionModel, MissionState, Observation, Phase, carrier_fresh, dock_point, enter, my_turn
 from mission.phases.phase import Request
-from mission.core.safety import CHANGED_M_S, SafetyConfig, filter_velocity
+from mission.core.safety import SafetyConfig, filter_velocity
 from mission.core.tick import DEPARTURE_THRESHOLD_M, carrier_tick, latch_point, passenger_tick, separation_due
-from mission.core.tracking import lead_acceleration, progress, setpoint as tracking_setpoint, update_integral, velocity_demand
+from mission.core.tracking import AXIS_CHANGED_M_S, lead_acceleration, progress, setpoint as tracking_setpoint, update_integral, velocity_demand
 
 
 @dataclass(frozen=True)
@@ -89,7 +89,7 @@ def _track(state: MissionState, obs: Observation, m: MissionModel, x_ref: np.nda
     safe = filter_velocity(x_p, desired, m.tick.obstacles, limits, prev, m.dt_s)
     acted = bool(safe.changed)
     a_sent, accel_lp = lead_acceleration(a_ref, state.accel_lp, g, m.dt_s)
-    axes_changed = np.abs(safe.u - desired) > CHANGED_M_S if acted else False  # per axis: the others keep tracking
+    axes_changed = np.abs(safe.u - desired) > AXIS_CHANGED_M_S if acted else False  # per axis: the others keep tracking
     sp = tracking_setpoint(x_ref, u_ref, a_sent, x_p, safe.u, integral, g, v.velocity_ned_m_s, filtered=axes_changed,
                            velocity_bias=v.velocity_bias_ned_m_s)
     if not acted or g.kind == "velocity":
