@@ -105,7 +105,7 @@ def _carrier_tick_model(obs: Observation, m: MissionModel) -> TickModel:
     return replace(m.tick, target=np.asarray(aim, dtype=float)[:target.shape[-1]])
 
 
-def _docked_law_distance(obs: Observation, m: MissionModel, dock: np.ndarray) -> float | None:
+def _docked_law_distance(obs: Observation, m: MissionModel, dock: np.ndarray) -> np.ndarray | None:
     """``|e_tc|`` [m] the riding law uses at the dock point ``dock`` [m]: None (its own, the
     distance to its target) on its turn; else at least ``b c``, so that the law stays on the
     docked branch (``P >= 0``: ``u_p = u_c``). Not its turn, the carrier may carry it within
@@ -115,7 +115,7 @@ def _docked_law_distance(obs: Observation, m: MissionModel, dock: np.ndarray) ->
     point by over the dock tolerance (P1 failed; docs/team.md, "The team's Monte-Carlo")."""
     if my_turn(obs, m):
         return None
-    return max(float(norm(m.tick.target - dock)), m.tick.law.separation_distance_m)
+    return np.asarray(max(float(norm(m.tick.target - dock)), m.tick.law.separation_distance_m))
 
 
 def _carrier_acceleration(obs: Observation, m: MissionModel) -> np.ndarray:
