@@ -74,7 +74,7 @@ CLEAR_MAX_DEG = 90.0
 
 
 def clear_heading_deg(carrier_ned_m: np.ndarray, away_deg: float, centers_m: np.ndarray, radii_m: np.ndarray,
-                      margin_m: float, speed_m_s: float, gain_per_s: float) -> float:
+                      margin_m: float, speed_m_s: float, gain_per_s: float, band_m: float = 0.0) -> float:
     """The steady course's default heading [deg] NED: the away heading ``away_deg``, or the
     nearest to it (within :data:`CLEAR_MAX_DEG` either side, so the course never closes on the
     target it leaves) whose ray from the carrier at ``carrier_ned_m`` [m] passes every other
@@ -82,7 +82,8 @@ def clear_heading_deg(carrier_ned_m: np.ndarray, away_deg: float, centers_m: np.
     other keep-out rows, :func:`mission.core.tick.target_keep_outs`) at least
     ``sqrt((r + margin)^2 + (v / gain)^2)`` from its centre, where a straight pass at
     ``speed_m_s`` [m/s] never wakes the row (``2 (x - o) . u >= -gain h``, ``gain_per_s`` [1/s]
-    the barrier's; a keep-out the carrier stands inside of, or closer than that, counts as passed
+    the barrier's), and at least ``r + margin + band_m`` (the band in which the carrier begins
+    to veer round a keep-out it heads into, :func:`mission.core.tick.round_keep_outs`); a keep-out the carrier stands inside of, or closer than that, counts as passed
     when the ray leaves it). Steered round a keep-out by its row instead, the carrier turned at
     20 deg/s under a passenger on its approach, which went round (team Monte-Carlo, docs/team.md).
     None clear: the heading that passes them at the largest shortfall's least."""
@@ -90,7 +91,8 @@ def clear_heading_deg(carrier_ned_m: np.ndarray, away_deg: float, centers_m: np.
     if not len(centers):
         return away_deg
     x = np.asarray(carrier_ned_m, dtype=float)[:2]
-    need = np.sqrt((np.asarray(radii_m, dtype=float) + margin_m) ** 2 + (speed_m_s / max(gain_per_s, 1e-9)) ** 2)
+    row = np.asarray(radii_m, dtype=float) + margin_m
+    need = np.maximum(np.sqrt(row ** 2 + (speed_m_s / max(gain_per_s, 1e-9)) ** 2), row + band_m)
     rel = centers - x
     steps = int(round(CLEAR_MAX_DEG / CLEAR_STEP_DEG))
     best, best_short = away_deg, math.inf

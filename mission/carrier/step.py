@@ -48,7 +48,7 @@ from mission.carrier.start import gentle_start, speed_lead
 from mission.carrier.tracking import SpeedCalibration, Tracked, TrackingParams, heading_of, track
 from mission.config.carrier import KINDS
 from mission.config.schema import Config
-from mission.core.tick import TickModel, carrier_tick
+from mission.core.tick import ROUND_BAND_M, TickModel, carrier_tick
 from mission.model import model_from_config
 from mission.phases.phase import Duty
 
@@ -237,7 +237,8 @@ class CarrierStepper:
     def away_heading_deg(self, x_c: np.ndarray) -> float:
         """The steady recovery course's default heading [deg] NED from the carrier at ``x_c`` [m]:
         away from the served target, turned as little as clears the other targets' keep-outs
-        (:func:`mission.carrier.course.clear_heading_deg`, at the steady course's speed)."""
+        (:func:`mission.carrier.course.clear_heading_deg`, at the steady course's speed, and clear of
+        the band where it would veer round one, :data:`mission.core.tick.ROUND_BAND_M`)."""
         model = self.model
         away = away_heading_deg(x_c, np.asarray(model.target))
         others = model.other_keep_outs
@@ -245,7 +246,7 @@ class CarrierStepper:
             return away
         lim = model.carrier_safety
         return clear_heading_deg(x_c, away, others.centers, others.radii, lim.margin_m, self.course.speed_m_s,
-                                 lim.cbf_gain)
+                                 lim.cbf_gain, ROUND_BAND_M)
 
     def course_velocity(self, x_c: np.ndarray, now_s: float,
                         recovery_velocity_m_s: np.ndarray | None = None) -> np.ndarray | None:

@@ -177,3 +177,32 @@ def test_the_steady_course_away_from_the_target_turns_clear_of_the_other_targets
     assert 0.0 < abs((headings[-1] - away + 180.0) % 360.0 - 180.0) <= 90.0  # turned off away, never towards target 0
     assert closest_t1 >= r1  # it passed target 1's keep-out
     assert closest_t0 >= float(np.linalg.norm(np.subtract(t0[:2], start[:2]))) - 1e-6  # no closer to target 0
+
+
+def test_a_target_behind_another_s_keep_out_is_reached_round_it() -> None:
+    """Target 0 lies straight behind target 1's keep-out, as seen from the carrier's start: the
+    barrier row alone takes away all of the law's command at the keep-out's edge (an equilibrium
+    of its quadratic program: the team Monte-Carlo's carrier stood there 850 s). The carrier veers
+    round it to the right and brings its rider within b c of target 0, never inside the keep-out."""
+    t0, t1 = [40.0, 0.0, -4.0], [15.0, 0.0, -4.0]
+    cfg = from_dict({
+        "scenario": {"carrier_start": [0.0, 0.0, 0.0], "targets": [t0, t1], "carrier_mode": "stop"},
+        "safety": {"carrier_max_accel_m_s2": ACCEL, "carrier_max_speed_m_s": 2.0},
+        "carrier": {"rate_hz": 30.0, "max_speed_m_s": 2.0},
+        "mission": {"final_action": "return"},
+    })
+    clock = ManualClock()
+    stepper, robot = CarrierStepper(cfg, False), SimRobot(cfg, clock)
+    keep = stepper.legs.models[0].other_keep_outs
+    assert keep is not None and len(keep) == 1
+    least, reached = math.inf, None
+    for k in range(int(90 / DT)):
+        _step(stepper, robot, clock, "RIDING")
+        x = robot.own_state().position_ned_m
+        least = min(least, float(np.linalg.norm(np.subtract(t1[:2], x[:2]))))
+        if np.linalg.norm(np.subtract(t0, x)) <= 8.0:
+            reached = k * DT
+            break
+    assert reached is not None and reached < 30.0, reached  # [s] (22.4 s; the straight way, were it free: 16 s)
+    assert least >= float(keep.radii[0])
+    assert stepper.mode is CarrierMode.APPROACHING
