@@ -7,7 +7,8 @@ speed [m/s] and a duration [s], driven in order from the start of the recovery),
 steady course ``carrier.recovery_heading_deg`` at ``carrier.recovery_speed_m_s`` (speed 0: the
 carrier stops and waits). The steady heading defaults to *away from the target*: the bearing from
 the target to where the carrier stands when the recovery begins (planar), so the steady course
-never brings it closer to the target.
+never brings it closer to the target, turned as little as clears the other targets' keep-outs
+(:func:`clear_heading_deg`).
 
 The course is a velocity request only: the controller passes it through the same CBF filter,
 speed and acceleration limits as the law's command (:func:`mission.core.tick.carrier_tick`) and
