@@ -182,17 +182,22 @@ def carrier_tick(
 
 ROUND_BAND_M = 2.0  # [m] the carrier begins to veer round another target's keep-out this far outside its row's radius
 ROUND_SHARE = 0.5  # [-] ... by up to this fraction of its speed (head-on, at the row's radius)
+ROUND_SIDE = 0.2  # [-] its side: the command's own, full once it passes this fraction of its speed off the centre ...
+ROUND_RIGHT = 0.5  # [-] ... with this bias to the right (straight at the centre: half the veer, to the right)
 
 
 def round_keep_outs(x_m: np.ndarray, u: np.ndarray, centers_m: np.ndarray, radii_m: np.ndarray,
                     band_m: float = ROUND_BAND_M, share: float = ROUND_SHARE) -> np.ndarray:
-    """The carrier's command ``u`` [m/s] (..., k) at ``x_m`` [m] with a veer to the right round the
-    other targets' keep-outs it heads into (``centers_m`` (m, k) [m], ``radii_m`` (m,) or (..., m)
-    [m]: their rows' radii, the margin included): for each, ``share |u| w`` to the right of the
+    """The carrier's command ``u`` [m/s] (..., k) at ``x_m`` [m] with a veer round the other
+    targets' keep-outs it heads into (``centers_m`` (m, k) [m], ``radii_m`` (m,) or (..., m) [m]:
+    their rows' radii, the margin included): for each, ``share |u| w s`` to the right of the
     direction to its centre (NED x north, y east: right of north is east; in the horizontal plane),
     ``w`` the cosine between ``u`` and that direction (0 when it heads away or past) times the
-    nearness (0 at ``band_m`` outside the radius, 1 at it). Continuous in the state and the
-    command (no jump). The barrier row alone takes away the inward part of a command that heads
+    nearness (0 at ``band_m`` outside the radius, 1 at it), ``s`` in [-1, 1] the side ``u``
+    already passes on (its part to the right of the centre over :data:`ROUND_SIDE` ``|u|``) plus
+    :data:`ROUND_RIGHT`: the short way round, and to the right when it heads straight at the
+    centre. Always to the right, a carrier between two keep-outs was pushed by one into the other
+    and stood (team Monte-Carlo #30). Continuous in the state and the command (no jump). The barrier row alone takes away the inward part of a command that heads
     straight at a keep-out's centre and leaves nothing: a carrier whose next target lay behind
     another's keep-out stopped at its edge for good (team Monte-Carlo #52: 850 s, until the
     mission's time ran out), an undesired equilibrium of the barrier's quadratic program."""
@@ -207,7 +212,8 @@ def round_keep_outs(x_m: np.ndarray, u: np.ndarray, centers_m: np.ndarray, radii
         return u
     right = np.zeros(to.shape)
     right[..., 0], right[..., 1] = -to[..., 1], to[..., 0]
-    return u + share * speed[..., None] * np.sum(w[..., None] * right, axis=-2)
+    side = np.clip(dot(right, u[..., None, :]) / (ROUND_SIDE * np.maximum(speed, 1e-9))[..., None] + ROUND_RIGHT, -1.0, 1.0)
+    return u + share * speed[..., None] * np.sum((w * side)[..., None] * right, axis=-2)
 
 
 def default_carrier_obstacles(obstacles: Obstacles, target: np.ndarray, planar: bool, keepout_m: float) -> Obstacles:
