@@ -40,7 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mission.carrier.backends import OwnState
-from mission.carrier.course import RecoveryCourse, away_heading_deg
+from mission.carrier.course import RecoveryCourse, away_heading_deg, clear_heading_deg
 from mission.carrier.guard import GuardParams
 from mission.carrier.legs import Legs
 from mission.carrier.modes import CarrierMode, PassengerView, next_mode
@@ -48,7 +48,7 @@ from mission.carrier.start import gentle_start, speed_lead
 from mission.carrier.tracking import SpeedCalibration, Tracked, TrackingParams, heading_of, track
 from mission.config.carrier import KINDS
 from mission.config.schema import Config
-from mission.core.tick import TickModel, carrier_tick
+from mission.core.tick import ROUND_BAND_M, TickModel, carrier_tick
 from mission.model import model_from_config
 from mission.phases.phase import Duty
 
@@ -234,6 +234,20 @@ class CarrierStepper:
         self.velocity_m_s = u
         return Command(cmd, active, bool(np.all(res.feasible)))
 
+    def away_heading_deg(self, x_c: np.ndarray) -> float:
+        """The steady recovery course's default heading [deg] NED from the carrier at ``x_c`` [m]:
+        away from the served target, turned as little as clears the other targets' keep-outs
+        (:func:`mission.carrier.course.clear_heading_deg`, at the steady course's speed, and clear of
+        the band where it would veer round one, :data:`mission.core.tick.ROUND_BAND_M`)."""
+        model = self.model
+        away = away_heading_deg(x_c, np.asarray(model.target))
+        others = model.other_keep_outs
+        if others is None or not len(others):
+            return away
+        lim = model.carrier_safety
+        return clear_heading_deg(x_c, away, others.centers, others.radii, lim.margin_m, self.course.speed_m_s,
+                                 lim.cbf_gain, ROUND_BAND_M)
+
     def course_velocity(self, x_c: np.ndarray, now_s: float,
                         recovery_velocity_m_s: np.ndarray | None = None) -> np.ndarray | None:
         """RECOVERING: the recovery course's velocity at ``now_s`` [m/s] (dim,) (``recovery_velocity_m_s``
@@ -248,6 +262,6 @@ class CarrierStepper:
         if recovery_velocity_m_s is not None:
             return pad3(recovery_velocity_m_s)[:self.dim]
         if self._course_start is None:
-            self._course_start = (now_s, away_heading_deg(x_c, np.asarray(self.model.target)))
+            self._course_start = (now_s, self.away_heading_deg(x_c))
         t0, away = self._course_start
         return pad3(self.course.velocity_ned_m_s(now_s - t0, away))[:self.dim]

@@ -164,7 +164,8 @@ class CarrierSection(Section):
                      "(at most max_speed_m_s)"))
     recovery_heading_deg: float | None = Field(None, ge=-360, le=360,
         description=("[deg] NED heading (0 north, 90 east) of the steady recovery course; default: away from the target "
-                     "(the bearing from the target to where the carrier is when the recovery begins)"))
+                     "(the bearing from the target to where the carrier is when the recovery begins), turned as little as "
+                     "clears the other targets' keep-outs (at most 90 deg)"))
     recovery_course: list[list[float]] = Field([], max_length=MAX_COURSE_LEGS,
         description=("[deg, m/s, s] scripted legs `[heading_deg, speed_m_s, duration_s]` the carrier drives in order "
                      "from the start of the recovery, before the steady course (e.g. a 90 deg turn mid-approach); "

@@ -130,7 +130,10 @@ class Neighbours:
     how long each one's recovery had run at its sample (None: not recovering, or not shared),
     ``battery_pct`` [%] its battery (None: not known), ``ids`` its MAVLink system id (the
     queue's tie-break) and ``targets_ned_m`` [m] (k, 3) the target of the leg it flies or rides
-    for (None: not shared); the barrier reads none of them."""
+    for (None: not shared); the barrier reads none of them. ``distance_m`` [m] (k,): the distance
+    kept from each one, where it differs per neighbour (None: ``separation_m`` of the filter's
+    configuration for all; the recovery keeps the deck's seated passengers only at the span,
+    :func:`mission.phases.queue.apart`)."""
 
     positions_m: np.ndarray
     velocities_m_s: np.ndarray
@@ -140,6 +143,7 @@ class Neighbours:
     battery_pct: tuple[float | None, ...] | None = None
     ids: tuple[int, ...] | None = None
     targets_ned_m: np.ndarray | None = None
+    distance_m: np.ndarray | None = None
 
     @classmethod
     def of(cls, items: list[tuple[list[float], list[float], float]], n: int) -> "Neighbours":
@@ -181,7 +185,8 @@ def neighbour_rows(x: np.ndarray, own_velocity: np.ndarray, neighbours: Neighbou
     """The pairwise separation barrier's rows ``A u >= b`` at ``x`` (..., n): A (..., k, n), b
     (..., k); None when there is none (no ``separation_m``, no neighbour, or all stale).
 
-    ``h_j = |x - p_j|^2 - D^2`` with ``p_j`` the neighbour's position, ``D = separation_m``. Both
+    ``h_j = |x - p_j|^2 - D^2`` with ``p_j`` the neighbour's position, ``D = separation_m`` (or
+    the neighbour's own ``Neighbours.distance_m``). Both
     passengers move, so ``dh_j/dt = 2 (x - p_j) . (u - v_j)`` and the pair needs
     ``dh_j/dt >= -gain h_j``. Responsibility is shared reciprocally (each takes half the change of
     the pair's relative velocity, as ORCA does): with ``v_i`` this passenger's own velocity (its
@@ -210,7 +215,8 @@ def neighbour_rows(x: np.ndarray, own_velocity: np.ndarray, neighbours: Neighbou
         return None
     diff = x[..., None, :] - pos
     dist2 = dot(diff, diff)
-    h = dist2 - np.minimum(cfg.separation_m**2, dist2)
+    keep2 = cfg.separation_m**2 if neighbours.distance_m is None else np.asarray(neighbours.distance_m, dtype=float) ** 2
+    h = dist2 - np.minimum(keep2, dist2)
     A = 2.0 * diff
     b = dot(diff, own_velocity[..., None, :] + vel) - 0.5 * cfg.cbf_gain * h
     if since_separation_s is not None and cfg.separation_phase_in_s > 0:

@@ -165,6 +165,10 @@ def carrier_tick(
         brake = lim.max_accel_m_s2 * dt_s if lim.max_accel_m_s2 is not None and dt_s is not None else math.inf
         obstacles = keep_outs_at(obstacles, len(others), x_c[..., :k], lim.margin_m,
                                  None if u_prev is None else u_prev[..., :k], lim.cbf_gain, brake)
+    if model.filter_carrier and others is not None and len(others) and obstacles is not None and obstacles.centers.ndim == 2:
+        k = obstacles.centers.shape[-1]
+        u[..., :k] = round_keep_outs(x_c[..., :k], u[..., :k], obstacles.centers[-len(others):],
+                                     obstacles.radii[..., -len(others):] + model.carrier_safety.margin_m)
     if model.planar_carrier and x_c.shape[-1] == 3:
         in_plane = u[..., :2]
         planar = filter_velocity(x_c[..., :2], in_plane, obstacles, model.carrier_safety,
@@ -174,6 +178,42 @@ def carrier_tick(
         u[..., 2:] = 0.0
         return FilterResult(u, planar.changed, planar.correction_m_s, planar.feasible, planar.cbf_active)
     return filter_velocity(x_c, u, obstacles, model.carrier_safety, u_prev, dt_s, copy=False)
+
+
+ROUND_BAND_M = 2.0  # [m] the carrier begins to veer round another target's keep-out this far outside its row's radius
+ROUND_SHARE = 0.5  # [-] ... by up to this fraction of its speed (head-on, at the row's radius)
+ROUND_SIDE = 0.2  # [-] its side: the command's own, full once it passes this fraction of its speed off the centre ...
+ROUND_RIGHT = 0.5  # [-] ... with this bias to the right (straight at the centre: half the veer, to the right)
+
+
+def round_keep_outs(x_m: np.ndarray, u: np.ndarray, centers_m: np.ndarray, radii_m: np.ndarray,
+                    band_m: float = ROUND_BAND_M, share: float = ROUND_SHARE) -> np.ndarray:
+    """The carrier's command ``u`` [m/s] (..., k) at ``x_m`` [m] with a veer round the other
+    targets' keep-outs it heads into (``centers_m`` (m, k) [m], ``radii_m`` (m,) or (..., m) [m]:
+    their rows' radii, the margin included): for each, ``share |u| w s`` to the right of the
+    direction to its centre (NED x north, y east: right of north is east; in the horizontal plane),
+    ``w`` the cosine between ``u`` and that direction (0 when it heads away or past) times the
+    nearness (0 at ``band_m`` outside the radius, 1 at it), ``s`` in [-1, 1] the side ``u``
+    already passes on (its part to the right of the centre over :data:`ROUND_SIDE` ``|u|``) plus
+    :data:`ROUND_RIGHT`: the short way round, and to the right when it heads straight at the
+    centre. Always to the right, a carrier between two keep-outs was pushed by one into the other
+    and stood (team Monte-Carlo #30). Continuous in the state and the command (no jump). The barrier row alone takes away the inward part of a command that heads
+    straight at a keep-out's centre and leaves nothing: a carrier whose next target lay behind
+    another's keep-out stopped at its edge for good (team Monte-Carlo #52: 850 s, until the
+    mission's time ran out), an undesired equilibrium of the barrier's quadratic program."""
+    rel = centers_m - x_m[..., None, :]
+    dist = norm(rel)
+    to = rel / np.maximum(dist, 1e-9)[..., None]
+    speed = norm(u)
+    cos = np.maximum(dot(to, u[..., None, :]) / np.maximum(speed, 1e-9)[..., None], 0.0)
+    near = np.clip(1.0 - (dist - radii_m) / band_m, 0.0, 1.0)
+    w = cos * near
+    if not np.any(w > 0.0):
+        return u
+    right = np.zeros(to.shape)
+    right[..., 0], right[..., 1] = -to[..., 1], to[..., 0]
+    side = np.clip(dot(right, u[..., None, :]) / (ROUND_SIDE * np.maximum(speed, 1e-9))[..., None] + ROUND_RIGHT, -1.0, 1.0)
+    return u + share * speed[..., None] * np.sum((w * side)[..., None] * right, axis=-2)
 
 
 def default_carrier_obstacles(obstacles: Obstacles, target: np.ndarray, planar: bool, keepout_m: float) -> Obstacles:

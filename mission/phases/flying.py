@@ -22,7 +22,7 @@ from mission.core.setpoint import Setpoint
 from mission.phases.types import ZERO, Decision, MissionModel, MissionState, Observation, Phase, carrier_fresh, dock_point, enter, my_turn
 from mission.phases.phase import Request
 from mission.core.safety import SafetyConfig, filter_velocity
-from mission.core.tick import DEPARTURE_THRESHOLD_M, carrier_tick, latch_point, passenger_tick, separation_due
+from mission.core.tick import DEPARTURE_THRESHOLD_M, TickModel, carrier_tick, latch_point, passenger_tick, separation_due
 from mission.core.tracking import AXIS_CHANGED_M_S, lead_acceleration, progress, setpoint as tracking_setpoint, update_integral, velocity_demand
 
 
@@ -97,6 +97,33 @@ def _track(state: MissionState, obs: Observation, m: MissionModel, x_ref: np.nda
     return Tracked(sp, acted, integral, accel_lp)
 
 
+def _carrier_tick_model(obs: Observation, m: MissionModel) -> TickModel:
+    """The law the carrier follows as this passenger predicts it: its leg's (``m.tick``) when it
+    is its turn (:func:`mission.phases.types.my_turn`), else the same towards the target the
+    carrier announces (``obs.carrier_target_ned_m``: it serves another passenger of the team,
+    ``u_c = k_c e_tc`` towards that one's target). Predicted towards its own target instead, a
+    rider carried along for a later target fed forward an acceleration of up to 1 m/s^2 the
+    carrier never made, and lagged its dock point (docs/team.md, "The team's Monte-Carlo")."""
+    aim = obs.carrier_target_ned_m
+    if aim is None or my_turn(obs, m):
+        return m.tick
+    target = np.asarray(m.tick.target, dtype=float)
+    return replace(m.tick, target=np.asarray(aim, dtype=float)[:target.shape[-1]])
+
+
+def _docked_law_distance(obs: Observation, m: MissionModel, dock: np.ndarray) -> np.ndarray | None:
+    """``|e_tc|`` [m] the riding law uses at the dock point ``dock`` [m]: None (its own, the
+    distance to its target) on its turn; else at least ``b c``, so that the law stays on the
+    docked branch (``P >= 0``: ``u_p = u_c``). Not its turn, the carrier may carry it within
+    ``b c`` of its target on the way to another's (it must not latch there, and it does not),
+    and the law's separating branch there, ``P e_pt`` (up to the speed limit, 3 m/s, towards its
+    target), was the reference's velocity of a passenger still riding: it lagged its dock
+    point by over the dock tolerance (P1 failed; docs/team.md, "The team's Monte-Carlo")."""
+    if my_turn(obs, m):
+        return None
+    return np.asarray(max(float(norm(m.tick.target - dock)), m.tick.law.separation_distance_m))
+
+
 def _carrier_acceleration(obs: Observation, m: MissionModel) -> np.ndarray:
     """The docked carrier's acceleration [m/s^2] NED: the one it measured and sent, if it sent
     one (a real vehicle does not follow its law exactly: a PX4 rover sticks, then leaps off);
@@ -117,7 +144,8 @@ def _carrier_acceleration(obs: Observation, m: MissionModel) -> np.ndarray:
         return a * (cap / size) if cap is not None and size > cap else a
     h = m.carrier_dt_s
     horizon = max(m.carrier_accel_horizon_s, h)
-    nxt = carrier_tick(c.position_ned_m + c.velocity_ned_m_s * h, False, m.tick, u_prev=c.velocity_ned_m_s, dt_s=horizon)
+    nxt = carrier_tick(c.position_ned_m + c.velocity_ned_m_s * h, False, _carrier_tick_model(obs, m),
+                       u_prev=c.velocity_ned_m_s, dt_s=horizon)
     return (np.asarray(nxt.u, dtype=float) - c.velocity_ned_m_s) / horizon
 
 
@@ -145,7 +173,7 @@ def _ridden_dock(obs: Observation, m: MissionModel, fresh: bool) -> tuple[np.nda
         v_now = v + a * age
     else:
         x_now = np.asarray(c.position_ned_m, dtype=float) + v * age
-        v_now = np.asarray(carrier_tick(x_now, False, m.tick, u_prev=v, dt_s=age).u, dtype=float)
+        v_now = np.asarray(carrier_tick(x_now, False, _carrier_tick_model(obs, m), u_prev=v, dt_s=age).u, dtype=float)
     if m.tick.planar_carrier and len(v_now) == 3:
         v_now[2] = v[2]  # a ground carrier: its vertical velocity is the sample's (the estimate's noise), not led
     return dock + 0.5 * (v_now - v) * age, v_now, a
@@ -244,7 +272,8 @@ def riding(state, obs, m):
         new = enter(state, Phase.SEPARATED, t, anchor=anchor, e_ref=ZERO.copy(), x_ref=anchor.copy(),
                   separation_time_s=t - (1 - float(theta)) * m.dt_s)
         return navigate(new, obs, m, events=(f"separated at |e_tc| = {norm(m.tick.target - anchor):.3f} m",))
-    tick = passenger_tick(dock, v_dock, ZERO, False, m.tick, state.u_ref, m.dt_s)
+    tick = passenger_tick(dock, v_dock, ZERO, False, m.tick, state.u_ref, m.dt_s,
+                          e_tc_norm_m=_docked_law_distance(obs, m, dock))
     # velocity setpoints carry no acceleration; a stale state's prediction has none
     a_ref = a_dock if m.tracking.kind == "full" else ZERO
     tr = _track(state, obs, m, dock, tick.u, a_ref)
@@ -287,7 +316,8 @@ def _chase(state: MissionState, obs: Observation, m: MissionModel, dock: np.ndar
         new = enter(state, Phase.SEPARATED, t, anchor=anchor, e_ref=offset, x_ref=anchor + offset, chasing_dock=False,
                     separation_time_s=t - (1 - float(theta)) * m.dt_s)
         return navigate(new, obs, m, events=(*events, f"separated at |e_tc| = {norm(m.tick.target - anchor):.3f} m"))
-    tick = passenger_tick(dock, v_dock, ZERO, False, m.tick, u_prev, m.dt_s)  # the law's view (diagnostics)
+    tick = passenger_tick(dock, v_dock, ZERO, False, m.tick, u_prev, m.dt_s,  # the law's view (diagnostics)
+                          e_tc_norm_m=_docked_law_distance(obs, m, dock))
     a_ref = (u_ref - u_prev) / m.dt_s if m.tracking.kind == "full" else ZERO
     tr = _track(state, obs, m, x_ref, u_ref, a_ref)
     new = replace(state, x_ref=x_ref, u_ref=u_ref, e_ref=ZERO.copy(), prev_dock=dock.copy(), chasing_dock=True,

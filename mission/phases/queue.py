@@ -43,7 +43,7 @@ from mission.core.docking import UP
 from mission.core.records import replace
 from mission.core.safety import Neighbours, SafetyConfig
 from mission.phases.phase import Phase
-from mission.phases.types import SAME_TARGET_M, MissionModel, MissionState, Observation, RecoveryState
+from mission.phases.types import SAME_TARGET_M, MissionModel, MissionState, Observation, QueueModel, RecoveryState
 
 #: A neighbour in one of these is on the deck's approach: nobody else begins one.
 ON_APPROACH = frozenset({Phase.APPROACH.value, Phase.DOCKED.value})
@@ -183,6 +183,7 @@ def apart(state: MissionState, obs: Observation, m: MissionModel) -> tuple[Safet
     nb: Neighbours | None = obs.neighbours
     if state.phase in KEEP_APART:
         distance = q.separation_m
+        nb = seated_at_span(obs.neighbours, obs, q)
     elif state.phase in ON_DECK_APPROACH:
         distance = q.deck_clearance_m
         nb = on_deck(obs.neighbours, obs)
@@ -195,6 +196,24 @@ def apart(state: MissionState, obs: Observation, m: MissionModel) -> tuple[Safet
     if cfg is None:
         cfg = base._cache[key] = replace(base, separation_m=distance)
     return cfg, nb
+
+
+def seated_at_span(nb: Neighbours, obs: Observation, q: QueueModel) -> Neighbours:
+    """The neighbours as the recovery's air phases (:data:`KEEP_APART`) keep apart from them: those
+    in the air at ``q.separation_m``, those seated on the deck (:data:`SEATED`) as the deck's
+    obstacles (:func:`on_deck`: at ``q.deck_clearance_m``, moving with the deck). A go-around
+    climbs from the deck's approach, its goal above its own slot 1.1-1.5 m from a neighbour's:
+    kept 3.5 m from the seated ones, its reference circled that goal and never reached it, and
+    the recovery fell back after recovery.timeout_s (team Monte-Carlo, docs/team.md). ``nb``
+    itself when no phase is shared or none is seated."""
+    if nb.phases is None:
+        return nb
+    seated = np.array([p in SEATED for p in nb.phases], dtype=bool)
+    if not seated.any():
+        return nb
+    v = np.asarray(obs.carrier.velocity_ned_m_s if obs.carrier is not None else np.zeros(3), dtype=float)
+    vel = np.where(seated[:, None], v[None, :], np.asarray(nb.velocities_m_s, dtype=float))
+    return replace(nb, velocities_m_s=vel, distance_m=np.where(seated, q.deck_clearance_m, q.separation_m))
 
 
 def on_deck(nb: Neighbours, obs: Observation) -> Neighbours | None:

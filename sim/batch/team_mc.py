@@ -11,7 +11,8 @@ A scenario is ``configs/team.toml`` (or the file given) with:
   carrier's start on any bearing, 2 to 5 m up; a draw that the configuration refuses (the
   paper's assumptions, the legs' starts, every passenger flying alone: :mod:`mission.config`), or
   one whose slot keeps its dock point beyond b c of its target from some side (:func:`reachable`,
-  which the configuration does not check yet), is drawn again, so every scenario satisfies them;
+  which the configuration does not check yet), or one where two targets' carrier keep-outs overlap
+  (:func:`keep_outs_apart`, nor that), is drawn again, so every scenario satisfies them;
 - each passenger's vehicle estimate erring as PX4 SITL's (``estimate_error``), its own seed;
 - in 30 % of the scenarios one passenger reports a battery low enough that it must land
   (``team.queue_battery_pct``), the others a full one: the queue's battery order.
@@ -85,7 +86,7 @@ def draw(index: int, rng: np.random.Generator, base: dict[str, Any], tries: int 
             cfg = from_dict(data)
         except ConfigError:
             continue
-        if not reachable(cfg):
+        if not reachable(cfg) or not keep_outs_apart(cfg):
             continue
         batteries: list[float | None] = [None] * n
         if rng.uniform() < LOW_BATTERY_SHARE:
@@ -113,6 +114,29 @@ def reachable(cfg: Config) -> bool:
         dock_z = ground + slot[2] - HOVER_RAISE_M
         if math.hypot(across, float(target[2]) - dock_z) > bc - REACH_MARGIN_M:
             return False
+    return True
+
+
+def keep_outs_apart(cfg: Config) -> bool:
+    """Whether no two targets' carrier keep-outs overlap: on the carrier's plane each target's
+    keep-out is the disc its b c sphere cuts (``sqrt((b c)^2 - h^2)``, ``h`` its height above the
+    plane) plus ``safety.margin_m`` (the barrier's row, :func:`mission.core.tick.target_keep_outs`),
+    and every two must lie at least the sum of theirs apart, horizontally. Overlapping, they form
+    one wall that the carrier's barrier rows hold it behind: on its way from one target's
+    separation circle to the next target it stood in the corner where two met, every way ahead
+    closing on one of them, until the mission's time ran out (#52 of seed 1: targets 13.0 m apart,
+    rows of 8.0 and 7.3 m). The law drives the carrier straight at its target; reaching b c of
+    each target past the others is the paper's assumption (b c < |e_tc(0)|) carried to several
+    targets, not something a reactive barrier can plan round."""
+    bc = cfg.law.params().separation_distance_m
+    ground = float(cfg.scenario.carrier_start[2])
+    margin = cfg.safety.margin_m
+    legs = [np.asarray(t, dtype=float) for t in cfg.scenario.legs()]
+    radius = [math.sqrt(max(bc * bc - (ground - float(t[2])) ** 2, 0.0)) + margin for t in legs]
+    for i in range(len(legs)):
+        for j in range(i + 1, len(legs)):
+            if math.hypot(*(legs[i][:2] - legs[j][:2])) < radius[i] + radius[j]:
+                return False
     return True
 
 

@@ -192,3 +192,54 @@ def test_on_the_decks_approach_the_seated_neighbours_are_obstacles_moving_with_t
     np.testing.assert_allclose(seated.velocities_m_s, [v_c])  # not its reported (erring) velocity
     airborne = Neighbours(nb.positions_m[1:], nb.velocities_m_s[1:], np.zeros(1), phases=("RETURNING",))
     assert on_deck(airborne, obs) is None
+
+
+def test_a_go_around_beside_a_seated_neighbour_climbs_to_its_goal_keeping_the_span():
+    """bravo of configs/team.toml goes round 1 m behind and 0.8 m above its slot, drifting to
+    starboard at 1.5 m/s, alpha seated
+    (HOME) on the port slot 1.5 m away; the go-around's goal (the holdoff height above where it
+    was) lies 3.1 m from alpha. In the air phases of the recovery a seated neighbour is the deck's
+    obstacle, kept at team.passenger_span_m and moving with the deck (as on the approach): the
+    reference reaches its goal and holds off. Kept at the air's 3.5 m it circled the goal until
+    recovery.timeout_s (the team Monte-Carlo's fall-backs)."""
+    from mission.phases.queue import apart
+
+    m = mission_model(passenger_config(load_config(CONFIGS / "team.toml"), "bravo"))
+    q = m.queue
+    v_c = np.array([1.5, 0.0, 0.0])
+    course = np.array([1.0, 0.0, 0.0])
+    alpha_slot = np.array([0.0, -0.75, -0.5])
+    start = m.dock_offset_ned_m + np.array([-1.0, 0.0, -0.8])
+    rec = RecoveryState(started_s=0.0, why="task done", course=course, carrier_seen_s=0.0)
+    drift = v_c + np.array([0.0, 1.5, 0.0])  # it went round drifting off the glide path, away from alpha
+    state = MissionState(phase=Phase.APPROACH, since_s=0.0, x_ref=start.copy(), u_ref=drift, u_cmd=drift.copy(),
+                         integral=np.zeros(3), recovery=rec, anchor=np.zeros(3), separation_time_s=-30.0)
+
+    def observe(k):
+        t = 10.0 + k * m.dt_s
+        carrier = v_c * t
+        nb = Neighbours(np.array([carrier + alpha_slot]), np.array([[1.8, 0.3, 0.1]]), np.zeros(1), phases=("HOME",),
+                        recovery_s=(None,), battery_pct=(None,), ids=(1,), targets_ned_m=np.zeros((1, 3)))
+        return carrier, Observation(t, VehicleObs(state.x_ref.copy(),
+                                                  state.u_ref.copy(), True, "OFFBOARD", 0.0),
+                                    CarrierObs(carrier, v_c, 0.0), neighbours=nb, carrier_target_ned_m=np.ones(3))
+
+    state = MissionState(**{**state.__dict__, "x_ref": v_c * 10.0 + start})
+    carrier, obs = observe(0)
+    state, _ = recovery.go_around(state, obs, m, "test")
+    goal = m.dock_offset_ned_m + state.recovery.climb_to
+    assert np.linalg.norm(goal - alpha_slot) < q.separation_m  # the goal lies inside the air's distance of alpha
+    cfg, kept = apart(state, obs, m)
+    assert kept is not None and cfg.separation_m == q.separation_m
+    np.testing.assert_allclose(kept.distance_m, [q.deck_clearance_m])  # alpha, seated: the span
+    np.testing.assert_allclose(kept.velocities_m_s, [v_c])  # moving with the deck, not as it reports itself
+    least = np.inf
+    for k in range(1, 1500):
+        carrier, obs = observe(k)
+        state, _ = recovery.go_around_phase(state, obs, m)
+        least = min(least, float(np.linalg.norm(state.x_ref - (carrier + alpha_slot))))
+        if state.phase is not Phase.GO_AROUND:
+            break
+    assert state.phase is Phase.HOLDOFF, k  # climbed: back to the holdoff point
+    assert k * m.dt_s < 6.0, k  # [s] (3.2 s; kept at 3.5 m from alpha it circled its goal for 20 s)
+    assert least >= q.deck_clearance_m
