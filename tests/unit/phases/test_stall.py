@@ -392,3 +392,17 @@ def test_the_stall_figure_leaves_out_a_tick_whose_vehicle_sample_predates_the_ga
     age = np.array([0.006, 0.006, 1.007, 0.006, 0.006])
     assert _stall_offset(t, phase, u, v) == pytest.approx(0.122, abs=0.005)  # the stale tick counted
     assert _stall_offset(t, phase, u, v, age) == pytest.approx(0.036, abs=0.005)  # read fresh: the restart
+
+
+def test_the_stalls_event_says_what_the_restart_will_do_before_the_vehicle_is_read_again():
+    """Said on the first tick after the stall, before the vehicle's position is read again (the
+    restart waits for it): a ride that will chase the dock point says so, one holding on its dock
+    point (an untrusted feed) says that (the event once read "on the dock point" for a chase)."""
+    from mission.phases import MissionState
+    from mission.phases.stall import _said
+
+    riding = MissionState(phase=Phase.RIDING, last_stall=(5.0, 1.01))
+    assert "chasing the dock point" in _said(riding, 5.0)[0]
+    held = dataclasses.replace(riding, held_dock=np.zeros(3))
+    assert "goes on on the dock point" in _said(held, 5.0)[0]
+    assert _said(riding, 5.02) == ()
