@@ -38,7 +38,10 @@ pytestmark = [pytest.mark.slow, pytest.mark.timeout(120)]
 #: [s] a carrier state's age once the carrier steps with the controller: its period (30 Hz) and the
 #: mission's tick (50 Hz), with a step's slack; a carrier on a clock of its own is off by seconds
 STEP_AGE_S = 0.1
-HELD_STOP_S = 8.0  # [s, wall] the carrier stopped while riding: waited for
+# [s, wall] the carrier stopped while riding: waited for. 8 s left 2 s to Zenoh's 10 s lease, and a
+# loaded CI machine took the rest before the woken carrier was heard again: its token went and the
+# mission aborted (carrier_lost), once in a clean clone. 7 s is still over the old 6 s wait.
+HELD_STOP_S = 7.0
 DROPPED_STOP_S = CONTROLLER_WATCHDOG_WALL_S + 1.0  # [s, wall] the carrier stopped past its drop
 
 
