@@ -46,6 +46,24 @@ MAX_PAYLOAD_BYTES = 8192
 T = TypeVar("T")
 
 
+def checked_payload(sample: zenoh.Sample, verifier: Any) -> tuple[bytes, str]:
+    """A received sample's bytes and its source, checked as every feed checks them before decoding:
+    a PUT, at most :data:`MAX_PAYLOAD_BYTES`, and, with ``verifier`` (a :class:`BusAuth`'s), signed
+    by a known key, whose signer is then the source (``source_info`` is not authenticated); without,
+    Zenoh's ``source_info`` (:data:`ANONYMOUS` when absent). Raises :class:`WireError`."""
+    if sample.kind != zenoh.SampleKind.PUT:
+        raise WireError("decode", "DELETE sample")
+    size = len(sample.payload)
+    if size > MAX_PAYLOAD_BYTES:
+        raise WireError("size", f"{size} bytes > {MAX_PAYLOAD_BYTES}")
+    raw = sample.payload.to_bytes()
+    if verifier is not None:
+        source, _ = verifier.verify(sample, raw)
+        return raw, source
+    info = sample.source_info
+    return raw, ANONYMOUS if info is None else f"{info.source_id.zid}/{info.source_id.eid}"
+
+
 class OffsetSource(Protocol):
     """Where the carrier's clock offset comes from: ``estimate()`` now (None: not known yet) and
     ``snapshot()`` (counters for summary.json)."""
@@ -165,17 +183,7 @@ class _Feed(Generic[T]):
         with self._lock:
             self._received += 1
         try:
-            if sample.kind != zenoh.SampleKind.PUT:
-                raise WireError("decode", "DELETE sample")
-            size = len(sample.payload)
-            if size > MAX_PAYLOAD_BYTES:
-                raise WireError("size", f"{size} bytes > {MAX_PAYLOAD_BYTES}")
-            raw = sample.payload.to_bytes()
-            if self._verifier is not None:  # the verified signer is the source (source_info is not authenticated)
-                source, _ = self._verifier.verify(sample, raw)
-            else:
-                info = sample.source_info
-                source = ANONYMOUS if info is None else f"{info.source_id.zid}/{info.source_id.eid}"
+            raw, source = checked_payload(sample, self._verifier)
             value = self._decode(raw)
         except WireError as exc:
             if exc.reason == "contest":

@@ -33,8 +33,7 @@ import numpy as np
 import zenoh
 
 from mission.bus.auth import BusAuth
-from mission.bus.feeds import MAX_PAYLOAD_BYTES
-from mission.bus.gate import ANONYMOUS
+from mission.bus.feeds import checked_payload
 from mission.bus.session import declare, passenger_of, team_status_keys, undeclare
 from mission.bus.wire import PassengerStatus, WireError, decode_passenger_json
 from mission.time.clock import Clock
@@ -116,16 +115,7 @@ class NeighbourFeed:
         with self._lock:
             self._received += 1
         try:
-            if sample.kind != zenoh.SampleKind.PUT:
-                raise WireError("decode", "DELETE sample")
-            if len(sample.payload) > MAX_PAYLOAD_BYTES:
-                raise WireError("size", f"{len(sample.payload)} bytes > {MAX_PAYLOAD_BYTES}")
-            raw = sample.payload.to_bytes()
-            if self._verifier is not None:
-                source, _ = self._verifier.verify(sample, raw)
-            else:
-                info = sample.source_info
-                source = ANONYMOUS if info is None else f"{info.source_id.zid}/{info.source_id.eid}"
+            raw, source = checked_payload(sample, self._verifier)
             status = decode_passenger_json(raw)
         except WireError as exc:
             self._drop(exc.reason, key, str(exc))

@@ -54,6 +54,19 @@ def connected(listen: str, connect: str, b_listen: list[str] | None = None) -> I
         yield a, b
 
 
+def hub_and_clients(stack: contextlib.ExitStack, count: int) -> tuple[zenoh.Session, ...]:
+    """A router on a fresh port and ``count`` client sessions connected to it, as robots on one
+    network reach each other; all closed by ``stack`` (clients first)."""
+    hub_ep = endpoint(free_port())
+    hub = peer(listen=[hub_ep], mode="router")
+    stack.callback(hub.close)
+    clients = []
+    for _ in range(count):
+        clients.append(peer(connect=[hub_ep], mode="client"))
+        stack.callback(clients[-1].close)
+    return tuple(clients)
+
+
 @contextlib.contextmanager
 def peer_pair() -> Iterator[tuple[zenoh.Session, zenoh.Session]]:
     """Two connected peer sessions: ``a`` listens on a fresh port, ``b`` connects to it."""

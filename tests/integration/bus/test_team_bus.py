@@ -15,7 +15,7 @@ from mission.bus.neighbours import NeighbourFeed, Roster
 from mission.bus.wire import PassengerStatus
 from mission.controller import as_neighbours
 from mission.time.clock import ManualClock
-from tests.support.zenoh_util import endpoint, free_port, peer, wait_for
+from tests.support.zenoh_util import hub_and_clients, wait_for
 
 pytestmark = pytest.mark.timeout(30)
 
@@ -29,15 +29,9 @@ def _status(seq: int, position: list[float], velocity: list[float] | None = None
 
 
 def test_teammates_are_heard_and_bad_statuses_are_dropped_and_counted() -> None:
-    hub_ep = endpoint(free_port())
     clock = ManualClock()
     with contextlib.ExitStack() as stack:
-        hub = peer(listen=[hub_ep], mode="router")
-        stack.callback(hub.close)
-        sessions = {}
-        for name in ("alpha", "bravo", "rogue"):
-            sessions[name] = peer(connect=[hub_ep], mode="client")
-            stack.callback(sessions[name].close)
+        sessions = dict(zip(("alpha", "bravo", "rogue"), hub_and_clients(stack, 3)))
         feed = NeighbourFeed(sessions["alpha"], "team", "alpha", TEAM, clock, max_speed_m_s=6.0, max_age_s=1.0,
                              auth=AUTH)
         stack.callback(feed.close)
@@ -83,15 +77,10 @@ def test_the_recovery_queue_hears_what_a_teammate_shares_and_the_roster_names() 
     team's file gives its system id and its leg's target: the queue's claim is whole over the bus
     (without them a teammate's recovery counted as never begun, and each passenger thought it
     went first)."""
-    hub_ep = endpoint(free_port())
     clock = ManualClock()
     roster = {"bravo": Roster(2, ((44.0, 4.0, -4.0), (20.0, -20.0, -4.0)))}
     with contextlib.ExitStack() as stack:
-        hub = peer(listen=[hub_ep], mode="router")
-        stack.callback(hub.close)
-        a, b = (peer(connect=[hub_ep], mode="client") for _ in range(2))
-        for s in (a, b):
-            stack.callback(s.close)
+        a, b = hub_and_clients(stack, 2)
         feed = NeighbourFeed(a, "team", "alpha", TEAM, clock, max_speed_m_s=6.0, auth=AUTH, roster=roster)
         stack.callback(feed.close)
         bravo = stack.enter_context(PassengerPublisher(b, "team", auth=AUTH, passenger="bravo"))
@@ -112,14 +101,9 @@ def test_the_recovery_queue_hears_what_a_teammate_shares_and_the_roster_names() 
 
 
 def test_the_carrier_binds_each_passenger_on_its_own_key() -> None:
-    hub_ep = endpoint(free_port())
     clock = ManualClock()
     with contextlib.ExitStack() as stack:
-        hub = peer(listen=[hub_ep], mode="router")
-        stack.callback(hub.close)
-        carrier, a, b = (peer(connect=[hub_ep], mode="client") for _ in range(3))
-        for s in (carrier, a, b):
-            stack.callback(s.close)
+        carrier, a, b = hub_and_clients(stack, 3)
         feeds = {n: stack.enter_context(PassengerFeed(carrier, "team", clock, auth=AUTH, passenger=n))
                  for n in ("alpha", "bravo")}
         pubs = {"alpha": stack.enter_context(PassengerPublisher(a, "team", auth=AUTH, passenger="alpha")),
