@@ -71,7 +71,8 @@ class CarrierStep:
     the command sent; law_velocity_m_s [m/s] the filtered law command; guard_active_ticks the
     steps so far on which the P3 guard cut the command; published the state sent to the passenger
     (None: nothing went out); team, a team's carrier only (None for a single pair): every
-    passenger as heard at this step and each pair's distance (:mod:`mission.carrier.heard`)."""
+    passenger as heard at this step and each pair's distance (:mod:`mission.carrier.heard`);
+    target_ned_m [m] NED the target of the leg served at this step (None: not known)."""
 
     t_s: float
     mode: str
@@ -82,6 +83,7 @@ class CarrierStep:
     guard_active_ticks: int
     published: CarrierState | None
     team: TeamHeard | None = None
+    target_ned_m: np.ndarray | None = None
 
 
 class StepSink(Protocol):
@@ -434,4 +436,4 @@ def trace(ctl: CarrierController, t_s: float, state: OwnState | None, cmd: Track
     """Hand the step just taken to the controller's :class:`StepSink`, if it has one."""
     if ctl.steps is not None:
         ctl.steps.step(CarrierStep(t_s, ctl.mode.value, ctl.hold_reason, state, cmd, ctl.velocity_m_s,
-                                   ctl._stats["guard_active_ticks"], published, ctl._heard))
+                                   ctl._stats["guard_active_ticks"], published, ctl._heard, ctl.model.target))

@@ -34,7 +34,8 @@ def _pad3(v: np.ndarray) -> np.ndarray:
 
 
 class CarrierLog(DataLog):
-    """``carrier.mcap`` of pair ``pair``: ``target`` [m] NED; ``clock``: the ``clock`` metadata;
+    """``carrier.mcap`` of pair ``pair``: ``target`` [m] NED the first target (a step that names
+    the target it serves is measured against that one); ``clock``: the ``clock`` metadata;
     ``team``: a team's carrier only (None: a single pair), its ``team`` metadata record (values
     JSON-encoded, :func:`team_metadata`), and the file gets the team channel."""
 
@@ -84,6 +85,7 @@ class CarrierLog(DataLog):
             self.ch["log"].log(Log(timestamp=stamp, level=level, message=text, name=f"{self.pair}/carrier"), log_time=t)
             self._said = said
         cmd = step.command
+        target = self.target if step.target_ned_m is None else _pad3(np.asarray(step.target_ned_m, dtype=float))
         self.ch["status"].log({
             "mode": step.mode, "hold_reason": step.hold_reason, "published": step.published is not None,
             "position": None if st is None else vector(_pad3(st.position_ned_m)),
@@ -92,7 +94,8 @@ class CarrierLog(DataLog):
             "law_velocity": vector(_pad3(step.law_velocity_m_s)), "setpoint": vector(_pad3(cmd.setpoint_ned_m_s)),
             "speed_m_s": clean(float(cmd.speed_m_s)), "yaw_rate_rad_s": clean(float(cmd.yaw_rate_rad_s)),
             "guard_active": step.guard_active_ticks > self._guard_ticks, "guard_active_ticks": step.guard_active_ticks,
-            "target_distance_m": None if st is None else clean(float(np.linalg.norm(self.target - _pad3(st.position_ned_m))))},
+            "target": vector(target), "target_distance_m": None if st is None else clean(
+                float(np.linalg.norm(target - _pad3(st.position_ned_m))))},
             log_time=t)
         self._guard_ticks = step.guard_active_ticks
         if step.team is not None and "team" in self.ch:

@@ -165,7 +165,8 @@ JSON_SCHEMAS: dict[str, dict[str, Any]] = {
         "speed_m_s": _number("[m/s] forward speed asked"), "yaw_rate_rad_s": _number("[rad/s] yaw rate asked"),
         "guard_active": {"type": "boolean", "description": "the P3 guard cut the command on this step"},
         "guard_active_ticks": {"type": "integer", "description": "steps so far on which it did"},
-        "target_distance_m": _number("[m] |x_t - x_c|")}),
+        "target": _vector("[m] NED the target of the leg the carrier serves"),
+        "target_distance_m": _number("[m] |x_t - x_c| to that target")}),
     "marsupial.RelativeEstimate": _object(
         "marsupial.RelativeEstimate", "The relative estimator's estimate this tick (mission.relnav.inputs.RelativeEstimate, "
         "docs/relnav.md); vectors in NED axes, relative ones with no origin", {

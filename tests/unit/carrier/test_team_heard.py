@@ -130,3 +130,19 @@ def test_marsupial_plot_draws_a_teams_figure_from_its_log_root_or_its_carrier_mc
     assert result.exit_code == 0 and (tmp_path / "team.png").stat().st_size > 20_000, result.output
     result = CliRunner().invoke(plot, [str(tmp_path / "carrier.mcap"), "--out", str(tmp_path / "other.png")])
     assert result.exit_code == 0 and (tmp_path / "other.png").is_file(), result.output
+
+
+def test_carrier_status_measures_the_distance_to_the_target_served_at_each_step(tmp_path):
+    """A carrier serving its second target reports that target and the distance to it, not to the
+    first target the log was opened with; a step that names none falls back to the first."""
+    import dataclasses
+
+    log = CarrierLog(tmp_path / "carrier.mcap", pair="pairX", target=[24.0, 18.0, -5.0], clock={"clock": "mission"})
+    log.step(_step(0.0))                                                       # x = (0, 0, 0), target 0
+    log.step(dataclasses.replace(_step(1.0), target_ned_m=np.array([1.0, 4.0, 0.0])))  # x = (1, 0, 0), target 1
+    log.close()
+    content = read_messages(tmp_path / "carrier.mcap", {"/pairX/carrier/status"})
+    first, second = (json.loads(data) for _, _, _, data in content.messages)
+    assert first["target"] == {"n": 24.0, "e": 18.0, "d": -5.0}
+    assert first["target_distance_m"] == pytest.approx(math.hypot(24.0, 18.0, 5.0), abs=1e-6)
+    assert second["target"] == {"n": 1.0, "e": 4.0, "d": 0.0} and second["target_distance_m"] == pytest.approx(4.0)
