@@ -5,9 +5,13 @@
   0-3 m (its Gauss-Markov sigma per axis that size / 1.2533), independent seeds;
 - the carrier's speed on its recovery course, uniform in 0-2 m/s;
 - marker outages 10 % of the time, in spells of 0.3-1 s (``world.marker_outages``);
-- the camera's latency, uniform in 50-150 ms.
+- the camera's latency, uniform in 50-150 ms;
 
-    PYTHONPATH=. python -m bench.relnav_mc configs/relnav.toml [--scenarios 20] [--seed 0] [--jsonl out.jsonl]
+and the passenger's own estimate errs as PX4 SITL's does (``--estimate-error``, a multiple of
+PX4 SITL's errors as the demo's mock vehicle flies them; 0: exact, an upper bound).
+
+    PYTHONPATH=. python -m bench.relnav_mc configs/relnav.toml [--scenarios 20] [--seed 0] [--estimate-error 1]
+        [--jsonl out.jsonl]
 
 Prints one JSON line a scenario, then the batch against the targets: docked within two
 approaches (every leg), the true contact error's median and 95th percentile, deck touches outside
@@ -25,6 +29,7 @@ import numpy as np
 from mission.config.schema import Config, load_config, with_overrides
 from sim.batch.recovery import World, configured
 from sim.batch.truth import relnav_truth
+from sim.vehicle.options import VehicleOptions
 
 RAYLEIGH_MEAN = 1.2533  # the mean size of a 2D Gaussian vector over its sigma per axis
 
@@ -47,6 +52,8 @@ def main() -> None:
     ap.add_argument("config")
     ap.add_argument("--scenarios", type=int, default=20)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--estimate-error", type=float, default=VehicleOptions.estimate_error,
+                    help="the vehicle's estimate errors, a multiple of PX4 SITL's (0: exact); default: the demo's")
     ap.add_argument("--jsonl", help="also write each scenario's line here")
     args = ap.parse_args()
     cfg = load_config(args.config)
@@ -56,7 +63,7 @@ def main() -> None:
     for k in range(args.scenarios):
         drawn, flown = draw(cfg, rng, k)
         t0 = time.process_time()
-        f = World(flown, configured(seed=args.seed * 1000 + k)).run().flight()
+        f = World(flown, configured(estimate_error=args.estimate_error, seed=args.seed * 1000 + k)).run().flight()
         row = {"scenario": k, **drawn, "cpu_s": round(time.process_time() - t0, 1), **relnav_truth(flown, f)}
         rows.append(row)
         line = json.dumps(row)
@@ -80,7 +87,7 @@ def main() -> None:
         "max_phase_switch_jump_m_s": max((r["max_phase_switch_jump_m_s"] or 0.0) for r in rows),
         "riding_horizontal_median_m": round(float(np.median([r["riding_horizontal_median_m"] for r in rows
                                                              if r["riding_horizontal_median_m"] is not None])), 3),
-        "not_docked": not_docked, "cpu_s": round(sum(r["cpu_s"] for r in rows), 1)}))
+        "estimate_error": args.estimate_error, "not_docked": not_docked, "cpu_s": round(sum(r["cpu_s"] for r in rows), 1)}))
     if out is not None:
         out.close()
 
