@@ -14,7 +14,7 @@ docs/relnav.md.
 - :class:`CarrierGnss`: the carrier's published GNSS state: fixes at ``rate_hz``, each the truth
   plus the bias and white noise (standalone), or plus centimetres with occasional float
   fallbacks at decimetres (moving-base RTK), stamped with its measurement time and published
-  ``latency_s`` +- ``jitter_s`` later;
+  ``latency_s`` +- ``jitter_s`` later; and its heading with white noise;
 - :class:`ErringCarrier`: a carrier backend whose own state is what :class:`CarrierGnss`
   publishes of the wrapped backend's true state (the carrier steers on it and publishes it).
 
@@ -84,6 +84,17 @@ class CarrierGnss:
         self._switch_t_s = math.nan  # RTK: when the solution next changes between fixed and float
         self._next_t_s = math.nan  # when the next fix is measured
         self._pending: list[GnssFix] = []  # measured, not yet published
+        # the heading's noise draws on a stream of its own: the fixes' errors stay as they were
+        self._heading_rng = np.random.default_rng([cfg.seed, 1])
+
+    def heading(self, yaw_rad: float | None) -> float | None:
+        """The heading [rad] the carrier publishes for its true ``yaw_rad`` (None: it has none):
+        its own attitude estimate, with ``heading_sigma_deg`` of white noise (no GNSS frame: a
+        heading has no origin to be off by)."""
+        if yaw_rad is None or self.cfg.heading_sigma_deg <= 0.0:
+            return yaw_rad
+        return math.remainder(yaw_rad + math.radians(self.cfg.heading_sigma_deg) * self._heading_rng.standard_normal(),
+                              2.0 * math.pi)
 
     def observe(self, t_s: float, position_ned_m: np.ndarray, velocity_ned_m_s: np.ndarray) -> list[GnssFix]:
         """The true state at ``t_s`` [s] (position [m], velocity [m/s]); returns the fixes
@@ -137,7 +148,7 @@ class ErringCarrier:
     def own_state(self) -> OwnState | None:
         truth = self.inner.own_state()
         if truth is not None:
-            self._yaw_rad = truth.yaw_rad
+            self._yaw_rad = self.gnss.heading(truth.yaw_rad)
             for fix in self.gnss.observe(truth.t_s, truth.position_ned_m, truth.velocity_ned_m_s):
                 if self._latest is None or fix.t_s > self._latest.t_s:
                     self._latest = fix

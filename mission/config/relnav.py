@@ -122,6 +122,8 @@ class CarrierGnssSection(Section):
         description="[s] rtk: mean time between float fallbacks (exponential)")
     rtk_float_mean_s: float = Field(5.0, gt=0, le=10_000,
         description="[s] rtk: mean length of a float fallback (exponential)")
+    heading_sigma_deg: float = Field(2.0, ge=0, le=45,
+        description="[deg] white noise of the heading the carrier publishes (its own attitude estimate's, each state)")
     rate_hz: float = Field(10.0, gt=0, le=100, description="[Hz] how often the carrier's GNSS gives a fix")
     latency_s: float = Field(0.2, ge=0, le=5,
         description="[s] mean delay from a fix's measurement to its publication")

@@ -57,14 +57,15 @@ def observe_carrier(rec: RecoveryState, obs: Observation, r: RecoveryModel, t: f
     rec = replace(rec, course=course(c.velocity_ned_m_s, rec.course))
     if carrier_fresh(obs, r.carrier_return_max_age_s):
         rec = replace(rec, carrier_seen_s=t)
-    samples = kept_samples(rec.carrier_samples, t - c.age_s, c.velocity_ned_m_s, r.carrier_rate_window_s)
+    samples = kept_samples(rec.carrier_samples, t - c.age_s, c.velocity_ned_m_s, r.carrier_rate_window_s, c.yaw_rad)
     return rec if samples is rec.carrier_samples else replace(rec, carrier_samples=samples)
 
 
 def kept_samples(samples: CarrierSamples, sampled_s: float, velocity_ned_m_s: np.ndarray,
-                 window_s: float) -> CarrierSamples:
-    """``samples`` ((t [s] the sample's own time, v_n, v_e [m/s]), oldest first) with the
-    carrier's velocity sampled at ``sampled_s`` (``t - age``) added when it is newer than the last,
+                 window_s: float, yaw_rad: float | None = None) -> CarrierSamples:
+    """``samples`` ((t [s] the sample's own time, v_n, v_e [m/s], its heading [rad] or NaN when
+    it sent none), oldest first) with the carrier's velocity and heading ``yaw_rad`` sampled at
+    ``sampled_s`` (``t - age``) added when it is newer than the last,
     and those more than ``window_s`` [s] older than it dropped. A sample read again (or its time
     moved back by less than the window, as a clock offset's estimate moves) changes nothing; one
     older than that (the carrier's clock went back) starts the samples anew."""
@@ -75,16 +76,21 @@ def kept_samples(samples: CarrierSamples, sampled_s: float, velocity_ned_m_s: np
         if sampled_s < last:
             samples = ()
     kept = tuple(s for s in samples if s[0] >= sampled_s - window_s)
-    return (*kept, (float(sampled_s), float(velocity_ned_m_s[0]), float(velocity_ned_m_s[1])))
+    yaw = math.nan if yaw_rad is None or not math.isfinite(yaw_rad) else float(yaw_rad)
+    return (*kept, (float(sampled_s), float(velocity_ned_m_s[0]), float(velocity_ned_m_s[1]), yaw))
 
 
 def carrier_rates(samples: CarrierSamples, window_s: float) -> tuple[float | None, float | None]:
     """The carrier's horizontal acceleration [m/s^2] and turn rate [rad/s] (unsigned) over its
     ``samples`` (:func:`kept_samples`): the least-squares slopes, over the samples' own times, of
     its velocity and of its unwrapped heading (of the samples at least :data:`TURN_MIN_SPEED_M_S`
-    fast). A steady turn or acceleration reads exactly; a wobble of the heading (a fused velocity's
-    noise) is averaged over the window instead of differenced between two samples. Each is None
-    while its samples span less than half ``window_s`` [s]."""
+    fast). The heading is the one the carrier sent when every such sample has one (its own
+    attitude estimate: the body the deck turns with), else the direction of its velocity. The
+    velocity the passenger sees may be an estimate in its own frame (the relative estimator's,
+    carrying the passenger's own velocity error: 0.1 m/s across a carrier at 0.45 m/s is 13 deg of
+    heading), the carrier's heading is not. A steady turn or acceleration reads exactly; a wobble
+    of the heading (a fused velocity's noise) is averaged over the window instead of differenced
+    between two samples. Each is None while its samples span less than half ``window_s`` [s]."""
     if len(samples) < 2:
         return None, None
     a = np.asarray(samples, dtype=float)
@@ -97,7 +103,8 @@ def carrier_rates(samples: CarrierSamples, window_s: float) -> tuple[float | Non
     tm = ts[moving]
     if len(tm) < 2 or tm[-1] - tm[0] < window_s / 2:
         return accel, None
-    heading = np.unwrap(np.arctan2(v[moving, 1], v[moving, 0]))
+    sent = a[moving, 3]
+    heading = np.unwrap(sent if np.isfinite(sent).all() else np.arctan2(v[moving, 1], v[moving, 0]))
     tc = tm - tm.mean()
     return accel, abs(float(tc @ (heading - heading.mean()) / float(tc @ tc)))
 

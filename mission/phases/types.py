@@ -309,9 +309,9 @@ class RecoveryModel:
     carrier_return_max_age_s: float  # [s] the age budget of RETURNING, HOLDOFF and GO_AROUND
 
 
-CarrierSamples = tuple[tuple[float, float, float], ...]
+CarrierSamples = tuple[tuple[float, float, float, float], ...]
 """The carrier's velocity samples, oldest first: (t [s] on the controller's clock when the carrier
-sampled it, ``t - age``; v_n, v_e [m/s] NED)."""
+sampled it, ``t - age``; v_n, v_e [m/s] NED; its heading [rad] as it sent it, NaN: none)."""
 
 
 @dataclass(frozen=True)

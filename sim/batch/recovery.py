@@ -224,7 +224,7 @@ class KinematicCarrier:
             fix = max(self.fixes, key=lambda f: f.t_s)
             self.fixes = [fix]
             return CarrierObs(position_ned_m=fix.position_ned_m.copy(), velocity_ned_m_s=fix.velocity_ned_m_s.copy(),
-                              age_s=max(t_s - fix.t_s, 0.0), alive=True, yaw_rad=self.yaw_rad)
+                              age_s=max(t_s - fix.t_s, 0.0), alive=True, yaw_rad=self.gnss.heading(self.yaw_rad))
         return CarrierObs(position_ned_m=self.position.copy(), velocity_ned_m_s=self.velocity.copy(),
                           age_s=max(t_s - self.t_s, 0.0), alive=True, yaw_rad=self.yaw_rad)
 

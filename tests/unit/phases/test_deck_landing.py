@@ -4,6 +4,8 @@ vehicle *reports* (over the deck only, never deeper than the floor), a landed ve
 itself above the deck has made its contact, and the lost-dock rule reads across and up apart."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -72,7 +74,7 @@ def test_a_vehicle_landed_on_the_deck_that_reads_itself_above_it_has_made_contac
     g = model.recovery.geometry
     obs_air = seen(model, [0.05, 0.0, -0.8])
     rec = RecoveryState(started_s=0.0, why="task done", attempts=1, course=np.array([1.0, 0.0, 0.0]), s=1.0,
-                        descent=1.0, carrier_samples=((50.0, float(V_C[0]), float(V_C[1])),), carrier_seen_s=50.0)
+                        descent=1.0, carrier_samples=((50.0, float(V_C[0]), float(V_C[1]), math.nan),), carrier_seen_s=50.0)
     state = MissionState(phase=Phase.APPROACH, since_s=40.0, x_ref=np.array([0.0, 0.0, -0.5]), u_ref=V_C.copy(),
                          u_cmd=V_C.copy(), recovery=rec, seated=False)
     assert 0.3 - 1e-9 > g.contact_height_m
@@ -139,7 +141,7 @@ def test_seated_after_a_contact_the_floor_under_the_deck_does_not_stop_the_press
     t0 = 50.0
     contact = {"horizontal_error_m": 0.05, "height_error_m": -0.09, "time_s": t0}
     rec = RecoveryState(started_s=0.0, why="task done", attempts=1, course=np.array([1.0, 0.0, 0.0]),
-                        carrier_samples=((t0, float(V_C[0]), float(V_C[1])),), carrier_seen_s=t0,
+                        carrier_samples=((t0, float(V_C[0]), float(V_C[1]), math.nan),), carrier_seen_s=t0,
                         settled_since_s=t0 if phase is Phase.DOCKED else None, contact=contact)
     x0 = np.array([0.0, 0.0, -0.5])
     state = MissionState(phase=phase, since_s=t0, x_ref=x0.copy(), u_ref=V_C.copy(), u_cmd=V_C.copy(), recovery=rec,

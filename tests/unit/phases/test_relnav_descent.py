@@ -3,6 +3,7 @@ the height above the deck, never on it; a vehicle already meeting the contact co
 a go-around forgets when the marker was lost."""
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
 import numpy as np
@@ -36,7 +37,7 @@ def _at(model, height_m: float, descent: float, lost_s: float | None = None):
     vehicle = VehicleObs(position_ned_m=here, velocity_ned_m_s=v_c.copy(), armed=True, mode="OFFBOARD",
                          heartbeat_age_s=0.0)
     rec = RecoveryState(started_s=0.0, why="task done", attempts=1, s=1.0, descent=descent, marker_lost_s=lost_s,
-                        carrier_samples=((T - 0.1, float(v_c[0]), float(v_c[1])),), carrier_seen_s=T)
+                        carrier_samples=((T - 0.1, float(v_c[0]), float(v_c[1]), math.nan),), carrier_seen_s=T)
     state = MissionState(phase=Phase.APPROACH, since_s=T - 5.0, start_s=0.0, x_ref=here.copy(), u_ref=v_c.copy(),
                          recovery=rec, separation_time_s=10.0)
     return state, Observation(t_s=T, vehicle=vehicle, carrier=carrier, relative=LOST), dock

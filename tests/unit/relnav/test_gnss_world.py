@@ -109,7 +109,12 @@ def test_an_erring_carrier_publishes_its_newest_fix():
     assert carrier.own_state() is None  # nothing published yet
     inner.t_s = 0.25
     state = carrier.own_state()
-    assert state is not None and state.t_s == pytest.approx(0.0) and state.yaw_rad == 0.5  # measured 0.2 s before
+    assert state is not None and state.t_s == pytest.approx(0.0)  # measured 0.2 s before
+    assert state.yaw_rad is not None and 0.0 < abs(state.yaw_rad - 0.5) < 0.2  # its heading, 2 deg of noise
+    quiet = ErringCarrier(inner, CarrierGnssSection(enabled=True, heading_sigma_deg=0.0, seed=2))
+    assert quiet.own_state() is None
+    inner.t_s = 0.5
+    assert quiet.own_state().yaw_rad == 0.5  # no heading noise asked: its true heading
     assert carrier.truth is not None and np.array_equal(carrier.truth.position_ned_m, [3.0, 4.0, 0.0])
     assert 0.3 < np.linalg.norm(state.position_ned_m[:2] - [3.0, 4.0]) < 10.0  # the bias and the noise
 
