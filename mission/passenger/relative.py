@@ -38,11 +38,15 @@ class RelativeDeck:
     """The estimator and the correction it drives, for the gates ``gates`` (``[relnav]``); the
     marker lies ``gates.marker_offset_ned_m`` [m] NED from the carrier's reference point; the dock
     point, where the vehicle sits when docked, ``dock_offset_ned_m`` [m] NED from it
-    (``mission.dock_offset_ned_m``)."""
+    (``mission.dock_offset_ned_m``); the seat, where the vehicle stands before take-off,
+    ``seat_offset_ned_m`` [m] NED from it (None: the dock point, as on a deck ride; a hover ride's
+    is the dock point's horizontal place on the deck, at the reference point's height:
+    :func:`seat_offset`)."""
 
-    def __init__(self, gates: RelnavGates, dock_offset_ned_m: np.ndarray) -> None:
+    def __init__(self, gates: RelnavGates, dock_offset_ned_m: np.ndarray, seat_offset_ned_m: np.ndarray | None = None) -> None:
         self.gates = gates
         self.dock_offset = np.asarray(dock_offset_ned_m, dtype=float)
+        self.seat_offset = self.dock_offset if seat_offset_ned_m is None else np.asarray(seat_offset_ned_m, dtype=float)
         self.marker_offset = np.asarray(gates.marker_offset_ned_m, dtype=float)
         self.estimator = RelativeEstimator(gates.params)
         self.fix_t_s = -np.inf  # [s] the newest carrier sample handed to the estimator
@@ -57,8 +61,8 @@ class RelativeDeck:
                 measurements: Measurements, on_deck: bool = False) -> tuple[CarrierObs | None, RelativeView | None]:
         """This tick's readings in; the carrier's state in the passenger's frame and the
         estimate's view out (None until the vehicle's first sample). ``on_deck``: the vehicle
-        stands on the deck (before take-off: the paper's Assumption 2), so the dock point is
-        straight under it: :meth:`RelativeEstimator.seated` with ``relnav.seated_sigma_m``."""
+        stands on the deck (before take-off: the paper's Assumption 2), on its seat:
+        :meth:`RelativeEstimator.seated` with ``relnav.seated_sigma_m``."""
         est = self.estimator
         if carrier is not None and t_s - carrier.age_s > self.fix_t_s:
             self.fix_t_s = t_s - carrier.age_s
@@ -70,7 +74,7 @@ class RelativeDeck:
             else:
                 self.refused += 1
         if on_deck and vehicle is not None and vehicle.sample_t_s is not None and vehicle.sample_t_s > self.own_t_s:
-            est.seated(vehicle.sample_t_s, -self.dock_offset, self.gates.seated_sigma_m)
+            est.seated(vehicle.sample_t_s, -self.seat_offset, self.gates.seated_sigma_m)
         if vehicle is None or vehicle.position_ned_m is None or vehicle.velocity_ned_m_s is None:
             return carrier, None
         sample_t = vehicle.sample_t_s if vehicle.sample_t_s is not None else t_s
@@ -133,3 +137,12 @@ def _usable(m: RelativePosition) -> bool:
     counted, never raised into the loop."""
     return (m.sigma_m is not None and math.isfinite(m.sigma_m) and m.sigma_m > 0 and math.isfinite(m.capture_t_s)
             and bool(np.all(np.isfinite(np.asarray(m.offset_ned_m, float)))))
+
+
+def seat_offset(dock_offset_ned_m: np.ndarray, deck_ride: bool) -> np.ndarray:
+    """[m] NED from the carrier's reference point, where the passenger stands on the deck before
+    take-off: on a deck ride the dock point; on a hover ride the dock point's horizontal place at
+    the reference point's height (the deck the hover ride takes off from and the altitude floor
+    stands on: ``mission.phases.flying``)."""
+    dock = np.asarray(dock_offset_ned_m, dtype=float)
+    return dock.copy() if deck_ride else np.array([dock[0], dock[1], 0.0])

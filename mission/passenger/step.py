@@ -22,7 +22,7 @@ from mission import phases
 from mission.core.consistent_velocity import PositionConsistentVelocity
 from mission.core.setpoint import Setpoint
 from mission.passenger.inputs import PassengerInputs, VehicleReport
-from mission.passenger.relative import RelativeDeck
+from mission.passenger.relative import RelativeDeck, seat_offset
 from mission.phases import CarrierObs, Decision, Measurements, MissionModel, MissionState, Observation, VehicleObs
 from mission.phases.phase import Request
 
@@ -119,7 +119,8 @@ class PassengerStep:
         self.velocity_fix = PositionConsistentVelocity(velocity_bias_tau_s) if velocity_bias_tau_s > 0 else None
         self.measurements = Measurements()  # the measurement feeds' readings: the last tick's, the newest of each kind
         # [relnav] enabled: the relative estimator and the carrier's state in the passenger's frame
-        self.relative = RelativeDeck(model.relnav, model.dock_offset_ned_m) if model.relnav is not None else None
+        self.relative = RelativeDeck(model.relnav, model.dock_offset_ned_m, seat_offset(
+            model.dock_offset_ned_m, model.deck is not None)) if model.relnav is not None else None
 
     def observe(self, inputs: PassengerInputs, on_deck: bool = False) -> Observation:
         """What the phases observe on this tick (the measurements: this tick's readings, and the

@@ -11,9 +11,9 @@ and the passenger's GNSS frames):
   measurement time: its position sees ``c + b``, its velocity ``w``;
 - the marker (:meth:`RelativeEstimator.marker`), stamped with its capture time: the deck from the
   vehicle plus the vehicle's own position then sees ``c``;
-- standing on the deck (:meth:`RelativeEstimator.seated`): the carrier horizontally where the
-  vehicle stands, an error that stays the same for as long as it stands, so fused only up to its
-  own standard deviation.
+- standing on the deck (:meth:`RelativeEstimator.seated`): the carrier where the vehicle stands,
+  its height included, an error that stays the same for as long as it stands, so fused only up
+  to its own standard deviation.
 
 Measurements arrive late and out of order. Each is fused at its own time: the estimator keeps
 the last ``history_s`` of ticks and measurements with the state after each tick, and a late one
@@ -36,7 +36,7 @@ import numpy as np
 from mission.relnav import kalman
 from mission.relnav.inputs import CarrierFix, Counts, MarkerFix, MarkerObservation, OwnSample, RelativeEstimate
 
-UNKNOWN_M = 1e3  # [m] the standard deviation of what a measurement does not measure (the seated one's height)
+UNKNOWN_M = 1e3  # [m] the standard deviation of what a measurement does not measure (a seated axis known already)
 KINDS = ("marker", "gnss_position", "gnss_velocity", "seated")
 _RESET = "reset"  # an event's outcome: it re-initialised the uncertainty (counted as fused, reported as Counts.resets)
 # at one time: the GNSS state, then the marker, then the tick's snapshot (a fixed order, so that the
@@ -152,10 +152,11 @@ class RelativeEstimator:
 
     def seated(self, t_s: float, carrier_rel_ned_m: np.ndarray, sigma_m: float) -> None:
         """The vehicle stands on the deck at ``t_s`` [s]: the carrier's reference point is
-        ``carrier_rel_ned_m`` [m] from the vehicle horizontally (its height unknown), to
-        ``sigma_m`` [m] per horizontal axis. That error is one and the same for as long as the
-        vehicle stands there, so repeating it tells nothing new: it is fused only as far as it
-        brings the carrier's horizontal standard deviation down to ``sigma_m``, never below."""
+        ``carrier_rel_ned_m`` [m] from the vehicle, to ``sigma_m`` [m] per axis, its height
+        included (a vehicle standing on the deck is at the deck's height, however far its GNSS
+        height is off). That error is one and the same for as long as the vehicle stands there,
+        so repeating it tells nothing new: it is fused only as far as it brings the carrier's
+        standard deviation on each axis down to ``sigma_m``, never below."""
         fix = MarkerFix(float(t_s), np.asarray(carrier_rel_ned_m, dtype=float), np.diag([sigma_m ** 2] * 3))
         self._add(_Event(self._key(t_s, _MARKER), marker=fix, seated=True))
 
@@ -295,14 +296,14 @@ class RelativeEstimator:
         self._t_s = t_s
 
     def _seated_noise(self, variance_m2: float) -> np.ndarray | None:
-        """The seated measurement's noise covariance that brings the carrier's horizontal
-        variance per axis down to ``variance_m2`` [m^2] and no lower (the information it lacks
-        for that, per axis; the height unknown), or None: it is there already."""
-        prior = np.diag(self._p)[kalman.C_][:2]
+        """The seated measurement's noise covariance that brings the carrier's variance per axis
+        down to ``variance_m2`` [m^2] and no lower (the information it lacks for that, per axis;
+        an axis already there: unmeasured), or None: every axis is there already."""
+        prior = np.diag(self._p)[kalman.C_]
         if not np.any(prior > variance_m2 * 1.0001):
             return None
-        lack = np.maximum(1.0 / variance_m2 - 1.0 / prior, 1e-12)  # [1/m^2] the information missing per axis
-        return np.diag([*(1.0 / lack), UNKNOWN_M ** 2])
+        lack = 1.0 / variance_m2 - 1.0 / prior  # [1/m^2] the information missing per axis
+        return np.diag(np.where(lack > 1e-12, 1.0 / np.maximum(lack, 1e-12), UNKNOWN_M ** 2))
 
     def _update(self, z: np.ndarray, h: np.ndarray, r: np.ndarray) -> bool:
         u = kalman.update(self._x, self._p, z, h, r, self.params.gate_nis)

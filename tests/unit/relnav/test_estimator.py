@@ -195,3 +195,28 @@ def test_a_run_of_rejected_markers_restarts_the_uncertainty(reset: bool):
     else:
         assert counts.resets == 0
         assert errors[10.0] > 1.0, errors[10.0]
+
+
+@pytest.mark.parametrize("seat_down_m", [0.0, 1.5])
+def test_standing_on_the_deck_gives_the_height_too(seat_down_m):
+    """The passenger's own GNSS height is 1.6 m off (its estimate reads it 1.6 m up while it stands
+    on the deck) and the carrier's GNSS says nothing of it: GNSS alone puts the carrier 1.6 m under
+    the vehicle. Standing on its seat (``seat_down_m`` over the carrier's reference point: a hover
+    ride's at the reference point's height, a deck ride's on the dock point 1.5 m up), the
+    estimate puts the reference point where the seat says, vertically as horizontally, to its
+    sigma, and only that sure (an error that stays the same while it stands)."""
+    sigma = 0.1
+    own = np.array([0.3, -0.2, -1.6 - seat_down_m])  # the vehicle's own estimate: 1.6 m too high
+    fix = CarrierFix(0.0, np.zeros(3), np.zeros(3))  # the carrier's GNSS, on its truth
+    gnss_only, seated = RelativeEstimator(PARAMS), RelativeEstimator(PARAMS)
+    for k in range(100):  # 2 s standing at 50 Hz, GNSS at 10 Hz
+        t = 0.02 * k
+        for est in (gnss_only, seated):
+            if k % 5 == 0:
+                est.carrier(dataclasses.replace(fix, t_s=t))
+        seated.seated(t, np.array([0.0, 0.0, seat_down_m]), sigma)
+        a, b = gnss_only.tick(OwnSample(t, own, np.zeros(3))), seated.tick(OwnSample(t, own, np.zeros(3)))
+    assert a.position_ned_m[2] == pytest.approx(1.6 + seat_down_m, abs=0.1)  # GNSS: the carrier too far below
+    np.testing.assert_allclose(b.position_ned_m, [0.0, 0.0, seat_down_m], atol=0.05)
+    sd = np.sqrt(np.diag(b.covariance)[:3])
+    assert np.all(sd >= sigma * 0.99) and np.all(sd <= sigma * 1.3), sd
