@@ -179,7 +179,8 @@ def fly_once(config: Path, directory: Path, speed_factor: float, ground_truth_hz
     t0 = time.monotonic()
     with px4_flight(directory, config, speed_factor=speed_factor, ground_truth_hz=ground_truth_hz, rover=rover,
                     px4_params=ROVER_BATTERY if rover else {},
-                    carrier_args=("--summary", str(directory / "carrier.json")) if rover else ()) as f:
+                    carrier_args=("--summary", str(directory / "carrier.json"), "--mcap", str(directory / "carrier.mcap"))
+                    if rover else ()) as f:
         rc = f.wait_mission(400.0)
         comes_home = cfg.mission.final_action == "return"
         after = f.watch_after(cfg.scenario.target, 3.0) if rc == 0 and not comes_home else float("nan")

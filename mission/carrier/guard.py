@@ -15,9 +15,13 @@ still stop before the guard circle::
 ``a`` [m/s^2] braking deceleration, ``delay_s`` [s] the vehicle's response delay (including a
 fresh own state's age), ``age_s`` [s] the own state's age now (counted as already driven), ``T``
 [s] the control period. A vehicle that brakes at ``a`` and obeys each command after ``delay_s``
-never crosses the circle. A measured inward speed above the cap by :data:`OVERSPEED_M_S` (a
-vehicle that overshoots its speed setpoint) brakes outright: no inward motion until it is back
-under. Only the inward component is cut (a Remark-1 carrier slides along the circle), and the
+never crosses the circle. A measured inward speed above both the cap and every command sent
+within ``delay_s`` (which the vehicle may still be following) by :data:`OVERSPEED_M_S` (a vehicle
+that overshoots its speed setpoint) brakes outright: no inward motion until it is back under.
+Against the cap alone a vehicle with a response delay tripped it a tick or two after the cap
+first bound, every time (it still drives what it was told ``delay_s`` ago, which ``v_fly``
+already counts): PX4's SIH rover (0.8 s) was stopped dead from 1.2 m/s and leapt off again under
+its riding passenger, 0.49-0.52 m off the dock. Only the inward component is cut (a Remark-1 carrier slides along the circle), and the
 cap falls at rate ``a`` as the carrier closes in: the guard brakes, it does not slam.
 
 A robot that moves along its heading (:meth:`P3Guard.limit_heading`) with a turning model
@@ -118,11 +122,11 @@ class P3Guard:
             return 0.0, h, None
         measured = 0.0 if velocity_m_s is None else float(np.asarray(velocity_m_s, dtype=float)[:self.k] @ n)
         v_fly = max(0.0, measured)
-        if self._sent and horizon > 0:
-            v_fly = max(v_fly, max(v for _, v in self._sent))
+        told = max((v for _, v in self._sent), default=0.0) if horizon > 0 else 0.0
+        v_fly = max(v_fly, told)
         h_pred = h - v_fly * horizon
         cap = stopping_speed(h_pred, self.p.brake_decel_m_s2, self.p.period_s)
-        return (0.0 if measured > cap + OVERSPEED_M_S else cap), h, n
+        return (0.0 if measured > max(cap, told) + OVERSPEED_M_S else cap), h, n
 
     def limit(self, t_s: float, x_c: np.ndarray, u: np.ndarray, velocity_m_s: np.ndarray | None = None,
               age_s: float = 0.0) -> GuardResult:
@@ -209,12 +213,11 @@ class P3Guard:
             end = max(phi - roll / radius, 0.0) if radius > 0 else (0.0 if roll > 0 else phi)
             if closing_m(phi, roll, radius) + turn_away_m(end, self.p.turn_reserve_m) <= clearance:
                 return math.inf, True
-        v_fly = abs(forward)
-        if self._sent_forward and horizon > 0:
-            v_fly = max(v_fly, max(v for _, v, _ in self._sent_forward))
+        told = max((v for _, v, _ in self._sent_forward), default=0.0) if horizon > 0 else 0.0
+        v_fly = max(abs(forward), told)
         path = allowed_path_m(phi, clearance, radius, self.p.turn_reserve_m)
         cap = stopping_speed(path - v_fly * horizon, self.p.brake_decel_m_s2, self.p.period_s)
-        return (0.0 if abs(forward) > cap + OVERSPEED_M_S else cap), away
+        return (0.0 if abs(forward) > max(cap, told) + OVERSPEED_M_S else cap), away
 
 
 def turns_away(yaw_rad: float, bearing_rad: float, to_target_rad: float) -> bool:

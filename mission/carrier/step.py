@@ -144,6 +144,7 @@ class CarrierStepper:
         self._plan_velocity = np.zeros(self.dim)  # [m/s] the own plan after separation (Remark 1)
         self._course_start: tuple[float, float] | None = None  # (time [s], away heading [deg]) of the recovery
         self._calibration = SpeedCalibration(c.speed_ratio_tau_s)
+        self._asked_speed_m_s = 0.0  # [m/s] diff-drive/Ackermann: the forward speed last asked (before the guards)
 
     @property
     def model(self) -> TickModel:
@@ -186,6 +187,7 @@ class CarrierStepper:
         """The carrier is sent a stop from outside the step (no own state, a fault): the law's
         command starts again from rest."""
         self.velocity_m_s = np.zeros(self.dim)
+        self._asked_speed_m_s = 0.0
 
     def decide(self, state: OwnState, dt_s: float, age_s: float, now_s: float,
                recovery_velocity_m_s: np.ndarray | None = None) -> Command:
@@ -197,6 +199,7 @@ class CarrierStepper:
             # A real vehicle brakes with its own limits: ramping the command down at
             # safety.carrier_max_accel_m_s2 (the built-in robot's braking) would keep it driving.
             self.velocity_m_s = np.zeros(self.dim)
+            self._asked_speed_m_s = 0.0
             return Command(STOP)
         separated = self.mode is not CarrierMode.APPROACHING
         plan = self._plan_velocity if self.mode is CarrierMode.SEPARATED else None
@@ -210,15 +213,16 @@ class CarrierStepper:
         # a robot that moves along its heading by its forward speed (its estimator's sideways wander is no motion)
         moving = (float(np.linalg.norm(v_meas[:2])) if self.tracking.kind == "holonomic" or state.yaw_rad is None
                   else abs(math.cos(yaw) * float(v_meas[0]) + math.sin(yaw) * float(v_meas[1])))
-        u = speed_lead(gentle_start(u, self.velocity_m_s, moving, self.start_accel_m_s2, dt_s), moving, self.start_lead_m_s)
         active = False
         if self.tracking.kind == "holonomic":
+            u = speed_lead(gentle_start(u, self.velocity_m_s, moving, self.start_accel_m_s2, dt_s), moving,
+                           self.start_lead_m_s)
             for guard in self.legs.guards:  # every target is hazardous, whichever leg is flown
                 g = guard.limit(t, x_c, u, v_meas, age_s)
                 u, active = g.u, active or g.active
             cmd = track(u, yaw, self.tracking)
         else:
-            cmd = track(u, yaw, self.tracking)
+            cmd = self._started(u, yaw, moving, dt_s)
             speed = cmd.speed_m_s
             for guard in self.legs.guards:
                 speed, acted = guard.limit_heading(t, x_c, speed, yaw, v_meas, age_s, bearing_rad=cmd.bearing_rad)
@@ -233,6 +237,33 @@ class CarrierStepper:
         # fast as the robot already does (a heading lock).
         self.velocity_m_s = u
         return Command(cmd, active, bool(np.all(res.feasible)))
+
+    def _started(self, u: np.ndarray, yaw: float, moving_m_s: float, dt_s: float) -> Tracked:
+        """A diff-drive or Ackermann carrier's tracked command for the law's ``u`` [m/s] at heading
+        ``yaw`` [rad], its forward speed held to the gentle start and the lead
+        (:mod:`mission.carrier.start`) against its measured forward speed ``moving_m_s`` [m/s].
+
+        The caps act on the forward speed asked, after the tracking law has scaled it by the
+        heading error, not on the law's planar command before: capped there at the measured
+        speed plus the lead, a command then scaled by ``max(cos e, min_speed_fraction)`` asks less
+        than the carrier already does, brakes it while it turns, and the next cap is lower still.
+        PX4's SIH rover turning onto leg 2 from rest (106 deg) stuck and leapt on that, 0 to
+        1-2 m/s every 0.5-2 s for 6 s under a riding passenger (docs/recovery.md, "On real PX4").
+        With either cap on, the speed asked also grows at most at ``safety.carrier_max_accel_m_s2``."""
+        cmd = track(u, yaw, self.tracking)
+        asked = np.array([cmd.speed_m_s])
+        capped = float(speed_lead(gentle_start(asked, np.array([self._asked_speed_m_s]), moving_m_s,
+                                               self.start_accel_m_s2, dt_s), moving_m_s, self.start_lead_m_s)[0])
+        accel = self.model.carrier_safety.max_accel_m_s2
+        if (self.start_accel_m_s2 > 0 or self.start_lead_m_s > 0) and accel and dt_s > 0:
+            # the law's command runs on while the caps hold the speed asked back: that speed grows
+            # at most at the law's acceleration limit from where they left it, as the capped law
+            # command did (and its turn onto the bearing does not add to it)
+            capped = min(capped, self._asked_speed_m_s + accel * dt_s)
+        if capped < cmd.speed_m_s:  # the same direction, slower: the tracking law's yaw-rate cap goes with the speed
+            cmd = track(u * (capped / cmd.speed_m_s), yaw, self.tracking)
+        self._asked_speed_m_s = cmd.speed_m_s
+        return cmd
 
     def away_heading_deg(self, x_c: np.ndarray) -> float:
         """The steady recovery course's default heading [deg] NED from the carrier at ``x_c`` [m]:

@@ -67,7 +67,8 @@ class CarrierMavlinkSection(Section):
                      "(bench/px4_rover_stand.py: 0.4 m in 70 s); `creep`: a 1 mm/s velocity along its own heading, on "
                      "which PX4's SIH rover crept or drifted 1.9-2.2 m in 70-80 s"))
     stand_speed_m_s: float = Field(0.1, gt=0, le=1.0,
-        description="[m/s] a stopped vehicle slower than this is at rest: where it is then is held (stand = position)")
+        description=("[m/s] a stopped vehicle slower than this is at rest (a diff-drive or Ackermann one by its forward "
+                     "speed: its estimator's sideways speed is no motion): where it is then is held (stand = position)"))
 
     _url_ok = field_validator("url")(check_mavlink_url)
 

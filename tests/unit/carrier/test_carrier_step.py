@@ -206,3 +206,36 @@ def test_a_target_behind_another_s_keep_out_is_reached_round_it() -> None:
     assert reached is not None and reached < 30.0, reached  # [s] (22.4 s; the straight way, were it free: 16 s)
     assert least >= float(keep.radii[0])
     assert stepper.mode is CarrierMode.APPROACHING
+
+
+@pytest.mark.parametrize("turn_deg", [0.0, 106.0, 180.0])
+def test_an_ackermann_carrier_turning_from_rest_is_not_braked_by_its_own_lead(turn_deg: float) -> None:
+    """The PX4 cycle's start settings (gentle start 0.25 m/s^2, lead 0.3 m/s) on an Ackermann
+    carrier that stands facing ``turn_deg`` away from its target's bearing (leg 2 on PX4: 106 deg).
+    The lead caps the forward speed asked at the measured one plus 0.3 m/s; capped before the
+    tracking law, the planar command was then scaled by max(cos e, 0.3), the carrier was asked
+    less than it did, and it crawled at ~0.14 m/s for the whole turn (facing away: forever), the
+    crawl at which PX4's SIH rover sticks and leaps. The speed asked grows at most at the law's
+    acceleration limit; while it turns it is the tracking law's floor, 0.3 x 1.2 m/s."""
+    bearing = math.atan2(TARGET[1], TARGET[0])
+    cfg = from_dict({
+        "scenario": {"carrier_start": [0.0, 0.0, 0.0], "target": TARGET, "carrier_mode": "stop"},
+        "safety": {"carrier_max_accel_m_s2": ACCEL, "carrier_max_speed_m_s": 2.0},
+        "carrier": {"rate_hz": 30.0, "max_speed_m_s": 1.2, "kinematics": "ackermann", "wheelbase_m": 0.321,
+                    "max_steer_rad": 0.5236, "min_speed_fraction": 0.3, "start_accel_m_s2": 0.25,
+                    "start_lead_m_s": 0.3, "start_yaw_rad": bearing + math.radians(turn_deg)},
+    })
+    clock = ManualClock()
+    stepper, robot = CarrierStepper(cfg, False), SimRobot(cfg, clock)
+    asked, error_deg = [], []
+    for _ in range(int(6.0 / DT)):
+        _step(stepper, robot, clock, "RIDING")
+        asked.append(robot.speed_m_s)
+        error_deg.append(abs(math.degrees(math.remainder(robot.yaw_rad - bearing, 2 * math.pi))))
+    assert stepper.mode is CarrierMode.APPROACHING
+    speed, error, t = np.array(asked), np.array(error_deg), np.arange(1, len(asked) + 1) * DT
+    assert np.diff(speed).max() <= ACCEL * DT + 1e-9  # never faster than the law's own ramp
+    turning = (t > 1.5) & (error > 60.0)  # past the gentle start (0.25 m/s^2 to 0.36 m/s), not yet lined up
+    if turn_deg > 60.0:
+        assert turning.any() and speed[turning].min() >= 0.3 * 1.2 - 1e-6  # old: 0.12-0.14 m/s
+    assert error[-1] < 5.0 and speed[-1] == pytest.approx(1.2, abs=0.01)  # lined up and at the law's speed (old, 180: 0.14)
