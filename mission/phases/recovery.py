@@ -13,8 +13,9 @@ DOCKED, HOME and FALLBACK (``mission.final_action = "return"``).
     APPROACH   --glide path flown, the contact conditions met (a deck: or landed on it)--> DOCKED
                  (on the descent it goes down only lined up, else holds its height)
                --outside the cone; carrier state late or not trusted; carrier accelerating or turning
-                 beyond its limits; below the decision height not lined up; the controller
-                 stalled (no tick for longer than recovery.carrier_max_age_s)-----------------> GO_AROUND
+                 beyond its limits; below the decision height not lined up; the descent longer
+                 than its budget (descent_budget_s); the controller stalled (no tick for longer
+                 than recovery.carrier_max_age_s)----------------------------------------------> GO_AROUND
     GO_AROUND  --climbed to the holdoff height------------------------------------------> HOLDOFF
     DOCKED     --contact held for the dwell--------------------------------------------> HOME
                --contact lost (beyond the dock tolerance, across or up: lost_dock)---------> GO_AROUND
@@ -278,7 +279,7 @@ def go_around(state, obs, m, why: str, events=()):
     dock = dock_point(obs, m)
     rel = obs.vehicle.position_ned_m - dock
     climb = np.array([rel[0], rel[1], -r.geometry.holdoff_height_m])
-    rec = replace(rec, climb_to=climb, settled_since_s=None, descent=None, marker_lost_s=None)
+    rec = replace(rec, climb_to=climb, settled_since_s=None, descent=None, marker_lost_s=None, descent_since_s=None)
     new = enter(state, Phase.GO_AROUND, obs.t_s, recovery=rec, seated=False)
     v_c = obs.carrier.velocity_ned_m_s if obs.carrier is not None else np.zeros(3)
     return _fly(new, obs, m, dock + climb, v_c, r.returning, rec, (*events, f"go-around: {why}"))
@@ -353,7 +354,7 @@ def approach(state, obs, m, events=()):
                 return go_around(state, obs, m, f"no descent below the decision height: {blocked} "
                                  f"for {r.gate_timeout_s:g} s at the gate", events)
             if lined_up and blocked is None:
-                rec = replace(rec, descent=0.0, settled_since_s=None)
+                rec = replace(rec, descent=0.0, settled_since_s=None, descent_since_s=t)
                 events = (*events, "lined up over the deck: descending")
             elif t - at_gate > r.gate_timeout_s:
                 return go_around(state, obs, m, f"not lined up over the deck within {r.gate_timeout_s:g} s "
@@ -368,6 +369,12 @@ def approach(state, obs, m, events=()):
     # the estimate errs by decimetres, so a vehicle on the deck may read itself above it, out of line
     landed = m.deck is not None and v.on_ground and here.horizontal_error_m <= r.deck_radius_m \
         and here.horizontal_relative_speed_m_s <= g.contact_max_horizontal_speed_m_s
+    budget = descent_budget_s(m)
+    if not here.within(g) and not landed and rec.descent_since_s is not None and t - rec.descent_since_s > budget:
+        # out of line or searching, back in line for a moment, out again: each pause's own timer
+        # restarts, so without a bound on the whole a descent could hover over the deck for minutes
+        return go_around(state, obs, m, f"the descent did not reach the deck within {budget:g} s "
+                         f"({here.horizontal_error_m:.2f} m, {here.horizontal_relative_speed_m_s:.2f} m/s)", events)
     if not here.horizontally_within(g) and not landed:
         out_since = rec.settled_since_s if rec.settled_since_s is not None else t
         if here.horizontal_error_m > r.deck_radius_m or t - out_since > r.gate_timeout_s:
@@ -436,6 +443,17 @@ def docked(state, obs, m, events=()):
             return _on_dock(state, obs, m, dock, v_c, rec, evs)
         return begin_next_leg(state, obs, m, events=(*evs, "docked: on to the next target"))
     return _on_dock(state, obs, m, dock, v_c, rec, evs)
+
+
+def descent_budget_s(m: MissionModel) -> float:
+    """[s] the longest one descent from the gate may take before it goes around: twice the
+    descent's own time (``decision_height_m / descent_speed_m_s``), twice the pause out of line
+    it allows (``gate_timeout_s``) and, with ``[relnav]``, the search for a lost marker
+    (``relnav.search_s``)."""
+    r = _model(m)
+    g = r.geometry
+    return 2.0 * g.decision_height_m / r.descent_speed_m_s + 2.0 * r.gate_timeout_s + (
+        m.relnav.search_s if m.relnav is not None else 0.0)
 
 
 def lost_dock(state: MissionState, obs: Observation, m: MissionModel, dock: np.ndarray) -> str | None:

@@ -342,6 +342,7 @@ class RecoveryState:
     fallback_goal: np.ndarray | None = None
     search_since_s: float | None = None  # [relnav] HOLDOFF searching for the marker since [s]
     marker_lost_s: float | None = None  # [relnav] the descent has had the marker lost since [s]
+    descent_since_s: float | None = None  # [s] the descent from the gate began (None: not descending)
     queued_since_s: float | None = None  # [s] waiting its turn in the recovery queue since (None: not waiting)
     queued_for: str | None = None  # why it waits (the neighbour ahead), for the events
     queue_place: int = 0  # waiting: its queue point's level, 1 + how many wait ahead of it (0: not waiting)

@@ -74,3 +74,28 @@ def test_a_go_around_forgets_when_the_marker_was_lost(model):
     later, obs2, _ = _at(model, 0.4, descent=0.3)
     again, dec = approach(replace(later, recovery=replace(new.recovery, s=1.0, descent=0.3)), obs2, model)
     assert again.phase is Phase.APPROACH and again.recovery.marker_lost_s == T, dec.events
+
+
+def test_a_descent_that_never_reaches_the_deck_goes_around_after_its_budget(model):
+    """Every pause of the descent has its own timer (out of line: gate_timeout_s; the marker
+    lost: search_s), and a vehicle that keeps coming back in line for a moment restarts them:
+    in the relnav Monte-Carlo one descent hovered 0.3-0.45 m over the deck for 120 s. The whole
+    descent has a budget (descent_budget_s: 24 s here): in line, 0.4 m over the dock point, not
+    blocked, it still descends within it and goes around once past it, the go-around forgetting
+    when the descent began."""
+    from mission.phases.recovery import descent_budget_s
+
+    budget = descent_budget_s(model)
+    r = model.recovery
+    assert budget == pytest.approx(2 * r.geometry.decision_height_m / r.descent_speed_m_s + 2 * r.gate_timeout_s
+                                   + model.relnav.search_s)
+    seen = replace(LOST, since_marker_s=0.0)
+    state, obs, _ = _at(model, 0.4, descent=1.0)
+    obs = replace(obs, relative=seen)
+    within = replace(state, recovery=replace(state.recovery, descent_since_s=T - budget + 0.1))
+    new, dec = approach(within, obs, model)
+    assert new.phase is Phase.APPROACH, dec.events
+    past = replace(state, recovery=replace(state.recovery, descent_since_s=T - budget - 0.1))
+    new, dec = approach(past, obs, model)
+    assert new.phase is Phase.GO_AROUND and new.recovery.descent_since_s is None
+    assert any("the descent did not reach the deck within" in e for e in dec.events), dec.events
