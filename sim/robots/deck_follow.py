@@ -201,10 +201,13 @@ def follow_carrier(vehicle: MockVehicle, session: Any, pair: str, truth: bool = 
         got = motion_now()
         if track is not None:
             track.sample(vehicle, got)
-        if camera is not None and got is not None:
+        if camera is not None:  # every slot of its grid, a time mark while the deck is not known
             t = float(vehicle._t_s)
-            camera.sample(t, vehicle._kin, np.asarray(got.centre(t, 0.0)), np.asarray(got.velocity_ned_m_s),
-                          made[0][0].yaw_rad)
+            if got is None:
+                camera.sample(t, vehicle._kin, None, None, None)
+            else:
+                camera.sample(t, vehicle._kin, np.asarray(got.centre(t, 0.0)), np.asarray(got.velocity_ned_m_s),
+                              made[0][0].yaw_rad)
         return got
 
     def motion_now() -> DeckMotion | None:
