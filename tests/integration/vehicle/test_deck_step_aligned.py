@@ -66,13 +66,13 @@ def sides() -> Iterator[tuple[Carrier, CarrierFeed, StepAligned]]:
             carrier.close()
 
 
-def connect(carrier: Carrier, feed: CarrierFeed, aligned: StepAligned) -> None:
+def connect(carrier: Carrier, feed: CarrierFeed | None, aligned: StepAligned) -> None:
     """The carrier's step 0 (state 1, ready ``0 40 ms 1``), put again until the vehicle's side has both
     (a put before the route is up is lost)."""
     def heard() -> bool:
         carrier.state(1, 0.0)  # the same sequence number again is dropped as a repeat
         carrier.ready(0, 40 * MS, 1)
-        return feed.newest() is not None and aligned._ready is not None
+        return aligned.newest() is not None and aligned._ready is not None
     wait_for(heard, 10.0, "the carrier's first state and ready")
 
 
@@ -179,6 +179,26 @@ def test_the_truth_is_named_by_its_stamp():
             carrier.state(2, 0.04)
             thread.join(10.0)
             assert done.is_set() and feed.newest()[0].stamp_s == pytest.approx(0.04)
+        finally:
+            aligned.close()
+            feed.close()
+            carrier.close()
+
+
+def test_the_deck_takes_the_newest_state_heard_not_the_gate_s():
+    """The feed's gate binds the carrier only after three plausible states in a row (and unbinds it
+    when its liveliness token goes), at wall-clock moments; the lockstep deck follows every valid
+    state heard, so it is known from the carrier's first step."""
+    with peer_pair() as (carrier_side, vehicle_side):
+        carrier = Carrier(carrier_side, "step2")
+        feed = CarrierFeed(vehicle_side, "step2", ManualClock(), max_age_s=1e9)  # the default gate: binds at 3
+        aligned = StepAligned(vehicle_side, "step2", feed, by_seq=True)
+        try:
+            connect(carrier, feed=None, aligned=aligned)
+            aligned.wait(0)
+            assert feed.newest() is None  # unbound: one state of three
+            state, _ = aligned.newest()
+            assert state.seq == 1 and state.position[0] == 0.0
         finally:
             aligned.close()
             feed.close()
