@@ -6,6 +6,10 @@ sensor's noise, blur and dropouts (:class:`sim.camera.simulated.SimulatedCamera`
 published at capture on the pair's camera key (:mod:`mission.bus.frames`) for the mission's marker
 feed, which runs the detector on the pixels. Captures at ``vision.rate_hz`` on the vehicle's
 simulated time, taken in its physics pass (so in lockstep at the same times every run); seeded.
+The capture grid is the simulated clock's, ``k / vision.rate_hz`` from t = 0: a frame is taken at
+the first physics pass at or after each slot (a slot passed over by a long pass is skipped), so the
+capture times are a function of simulated time only, never of when the carrier was first heard.
+Until the deck is known (the carrier's first state) each slot is published as a time mark only.
 Given a signer (the passenger robot's own key, ``mock-vehicle --zenoh-private-key`` or
 ``--zenoh-signing-key``), every sample is signed as a real camera node's on a signed bus must be.
 """
@@ -40,7 +44,7 @@ class CameraPublisher:
                                       Sensor(sensor_model(cfg.vision), seed=seed + SEED_OFFSET))
         self.period_s = 1.0 / cfg.vision.rate_hz
         self.marker_offset_ned_m = np.asarray(marker_offset_ned_m(cfg.vision, cfg.mission.dock_offset_ned_m), dtype=float)
-        self.next_s = 0.0
+        self.next_s = 0.0  # the next slot's time [s]: k / rate_hz
         self.captured = self.sent = 0
         key = camera_key(pair)
         self.key, self._signer = key, signer
@@ -52,15 +56,21 @@ class CameraPublisher:
         self._pub = declare(f"publisher on {key}", lambda: session.declare_publisher(
             key, congestion_control=congestion, express=True))
 
-    def sample(self, t_s: float, kin: Any, carrier_ned_m: np.ndarray, carrier_velocity_ned_m_s: np.ndarray,
+    def sample(self, t_s: float, kin: Any, carrier_ned_m: np.ndarray | None, carrier_velocity_ned_m_s: np.ndarray | None,
                carrier_yaw_rad: float | None) -> None:
         """At vehicle time ``t_s`` [s] with the vehicle's true state ``kin``
         (:class:`sim.vehicle.physics.multicopter.KinState`) and the carrier's true reference point
-        [m], velocity [m/s] and yaw [rad] (None: its heading of travel): capture if a frame is due."""
+        [m] (None: not known yet, no deck to see), velocity [m/s] and yaw [rad] (None: its heading
+        of travel): capture if a slot of the grid is due."""
         if t_s + 1e-9 < self.next_s:
             return
-        self.next_s = max(self.next_s + self.period_s, t_s)
+        # the next slot after t_s on the grid k / rate_hz (not t_s + period: the first capture, at
+        # whichever pass first had the deck, would set the phase of every later one)
+        self.next_s = (math.floor(t_s / self.period_s + 1e-6) + 1) * self.period_s
         self.captured += 1
+        if carrier_ned_m is None or carrier_velocity_ned_m_s is None:
+            self._put(encode_mark(t_s), False)
+            return
         half = kin.yaw_rad / 2
         q = np.array([math.cos(half), 0.0, 0.0, math.sin(half)])
         v_c = np.asarray(carrier_velocity_ned_m_s, dtype=float)
@@ -72,10 +82,13 @@ class CameraPublisher:
         if true_marker_pose(self.camera.camera, poses).deck_in_cam_m[2] >= MIN_DEPTH_M:  # else out of view (and
             relative_v = v_c - np.array([kin.vn_m_s, kin.ve_m_s, kin.vd_m_s])  # its blur unbounded)
             frame = self.camera.capture(poses, t_s, relative_v)
-        try:  # a dropped or empty frame still marks the time: a lockstep reader knows the stream passed it
-            payload = encode_mark(t_s) if frame is None else encode_frame(frame, q)
+        # a dropped or empty frame still marks the time: a lockstep reader knows the stream passed it
+        self._put(encode_mark(t_s) if frame is None else encode_frame(frame, q), frame is not None)
+
+    def _put(self, payload: bytes, is_frame: bool) -> None:
+        try:
             self._pub.put(payload, attachment=None if self._signer is None else self._signer.attachment(self.key, payload))
-            self.sent += frame is not None
+            self.sent += is_frame
         except zenoh.ZError:
             pass  # the session is closing
 

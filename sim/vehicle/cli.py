@@ -344,7 +344,11 @@ def run(options: VehicleOptions, port_file: Path | None = None, status_every_s: 
     previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
         with contextlib.ExitStack() as stack:
-            vehicle = stack.enter_context(MockVehicle(options))
+            # The deck's subscriptions (the carrier's truth and clock) before the vehicle's first hello:
+            # a controller answering that hello starts the lockstep, and the carrier's first steps put
+            # before this process subscribed were lost (the deck first known at 0.1 s instead of at
+            # the first pass, a step given up; the camera's CameraPublisher loads OpenCV meanwhile).
+            vehicle = MockVehicle(options)
             if deck is not None:
                 session = open_session(deck[1])
                 stack.callback(session.close)
@@ -355,6 +359,7 @@ def run(options: VehicleOptions, port_file: Path | None = None, status_every_s: 
                     stack.callback(publisher.close)
                 deck_feed = follow_carrier(vehicle, session, deck[0], deck_truth, track, publisher)
                 stack.callback(deck_feed.close)
+            stack.enter_context(vehicle)
             if port_file is not None:
                 _write_port_file(port_file, vehicle.port)
             log.info("mock vehicle on UDP %d -> %s, %s, %s", vehicle.port, options.target,

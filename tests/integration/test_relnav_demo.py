@@ -26,8 +26,10 @@ while riding: six flights (seeds 0-2) docked both legs at the first approach, tr
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -55,6 +57,52 @@ def flight(tmp_path_factory):
     truth = json.loads((log / "truth.json").read_text())["truth_legs"]
     events = [text for _, _, text in log_lines(read_messages(log / "flight.mcap", {"/pair0/log"}), "/pair0/log")]
     return log, out, s, truth, events
+
+
+LATE_WORLD = Path(__file__).resolve().parents[1] / "support" / "late_world"  # its sitecustomize.py
+SHORT_S = 10.0  # the perturbed flight's mission.max_duration_s [s]: the records parted at t = 3.62 s
+
+
+@pytest.fixture(scope="module")
+def late_world_flight(tmp_path_factory):
+    """The first 10 s of the same flight (~15 s of CPU) with its wall timing perturbed
+    (tests/support/late_world: the mock hears the carrier's first truth samples 150 ms late each,
+    every camera exposure takes 3 ms longer); its record.csv."""
+    root = tmp_path_factory.mktemp("relnav_late")
+    short = root / "relnav_short.toml"
+    text = RELNAV.read_text()
+    assert "\nmax_duration_s = 300.0" in text
+    short.write_text(text.replace("\nmax_duration_s = 300.0", f"\nmax_duration_s = {SHORT_S}"))
+    env = {**os.environ, "MARSUPIAL_LATE_WORLD": "1",
+           "PYTHONPATH": os.pathsep.join(p for p in (str(LATE_WORLD), os.environ.get("PYTHONPATH")) if p)}
+    cmd = [sys.executable, "-m", "mission.cli", "demo", "--config", str(short), "--log-root", str(root / "logs"),
+           "--plot", "", "--timeout", "600"]
+    out = subprocess.run(cmd, capture_output=True, text=True, timeout=660, env=env)
+    log = root / "logs" / "pair0"
+    assert (log / "record.csv").exists(), out.stderr[-3000:]
+    touchdowns = json.loads((log / "vehicle.json").read_text())["deck"]["touchdowns"]
+    return (log / "record.csv").read_bytes(), touchdowns
+
+
+def test_the_record_does_not_depend_on_wall_timing(flight, late_world_flight):
+    """Lockstep: the flight's record is a function of simulated time only. Before, the mock's deck was
+    first known when the carrier feed's gate had bound its truth as it *arrived* (0.075 s in one run,
+    0.74 s with this perturbation) and the camera's capture grid took its phase from that first
+    frame, so the two records parted at t = 3.62 s (the fused marker); now the deck is known at the
+    vehicle's first pass (its first physics step, 0.005 s) and the frames are captured on the grid
+    k / vision.rate_hz (docs/relnav.md, "The lockstep demo"). The perturbed 10 s flight's rows up
+    to 9.5 s are the full flight's byte for byte."""
+    log, _, _, _, _ = flight
+    late, touchdowns = late_world_flight
+    full = json.loads((log / "vehicle.json").read_text())["deck"]["touchdowns"]
+    assert touchdowns[0] == full[0] and full[0]["t_s"] == 0.005, (touchdowns[0], full[0])  # known at the first pass
+
+    def rows(data: bytes) -> list[bytes]:
+        return [line for line in data.splitlines()[1:] if float(line.split(b",", 1)[0]) < SHORT_S - 0.5]
+    ours, theirs = rows(late), rows((log / "record.csv").read_bytes())
+    assert len(ours) >= 450, len(ours)  # 50 Hz from t = 0.02 s
+    first = next((i for i, (a, b) in enumerate(zip(ours, theirs)) if a != b), min(len(ours), len(theirs)))
+    assert ours == theirs, (len(ours), len(theirs), ours[first:first + 1], theirs[first:first + 1])
 
 
 def test_both_legs_dock_on_the_marker_within_the_true_contact_bound(flight):

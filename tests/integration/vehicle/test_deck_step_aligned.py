@@ -66,13 +66,13 @@ def sides() -> Iterator[tuple[Carrier, CarrierFeed, StepAligned]]:
             carrier.close()
 
 
-def connect(carrier: Carrier, feed: CarrierFeed, aligned: StepAligned) -> None:
+def connect(carrier: Carrier, feed: CarrierFeed | None, aligned: StepAligned) -> None:
     """The carrier's step 0 (state 1, ready ``0 40 ms 1``), put again until the vehicle's side has both
     (a put before the route is up is lost)."""
     def heard() -> bool:
         carrier.state(1, 0.0)  # the same sequence number again is dropped as a repeat
         carrier.ready(0, 40 * MS, 1)
-        return feed.newest() is not None and aligned._ready is not None
+        return aligned.newest() is not None and aligned._ready is not None
     wait_for(heard, 10.0, "the carrier's first state and ready")
 
 
@@ -113,10 +113,16 @@ def test_a_ready_that_wakes_before_the_barrier_means_a_newer_step_to_wait_for(si
     assert done.is_set() and feed.newest()[0].seq == 2
 
 
-def test_no_carrier_in_the_lockstep_no_wait(sides):
+def test_no_carrier_in_the_lockstep_one_give_up_at_the_first_pass_then_no_wait(sides, monkeypatch):
+    """The lockstep carrier's first ready precedes the vehicle's first pass, so the first pass waits
+    for it; a carrier that sends none (on its own clock) is given up there once, then never waited for."""
+    monkeypatch.setattr(deck_follow, "WAIT_WALL_S", 0.1)
     _carrier, _feed, aligned = sides
-    aligned.wait(20 * MS)  # no ready ever heard: the carrier runs on its own clock
-    assert aligned.counters["waits"] == 0
+    aligned.wait(0)
+    assert aligned.counters == {"waits": 1, "given_up": 1, "aligned": True}
+    aligned.wait(20 * MS)
+    aligned.wait(40 * MS)
+    assert aligned.counters == {"waits": 1, "given_up": 1, "aligned": True}
 
 
 def test_a_step_that_never_comes_is_given_up_once_and_three_in_a_row_end_the_alignment(sides, monkeypatch):
@@ -137,13 +143,20 @@ def test_a_step_that_never_comes_is_given_up_once_and_three_in_a_row_end_the_ali
     assert aligned.counters["waits"] == 3
 
 
-def test_before_the_first_state_is_heard_nothing_is_waited_for(sides):
-    """At start-up Zenoh may lose the carrier's first samples before the route to the deck's
-    subscriber is up: a ready heard with no state yet does not hold the vehicle."""
-    carrier, _feed, aligned = sides
+def test_the_first_pass_waits_for_the_carrier_s_first_ready_and_state(sides, monkeypatch):
+    """The deck is first known at the vehicle's first pass, not at whichever pass the carrier's first
+    state happened to arrive by (two relnav demos put it at 0.075 and 0.14 s, and the camera's frames
+    with it): the first barrier waits for the first ready, then for the state it names."""
+    monkeypatch.setattr(deck_follow, "WAIT_WALL_S", 10.0)  # the wall bound is not what is tested here
+    carrier, feed, aligned = sides
+    thread, done = waiting(aligned, 0)
+    assert not done.wait(0.3), "returned before the carrier's first ready"
     wait_for(lambda: carrier.ready(0, 40 * MS, 1) or aligned._ready is not None, 10.0, "the ready")
-    aligned.wait(20 * MS)
-    assert aligned.counters["waits"] == 0
+    assert not done.wait(0.3), "returned before the state the first ready names"
+    wait_for(lambda: carrier.state(1, 0.0) or feed.newest() is not None, 10.0, "the first state")
+    thread.join(10.0)
+    assert done.is_set() and feed.newest()[0].seq == 1
+    assert aligned.counters == {"waits": 1, "given_up": 0, "aligned": True}
 
 
 def test_the_truth_is_named_by_its_stamp():
@@ -166,6 +179,26 @@ def test_the_truth_is_named_by_its_stamp():
             carrier.state(2, 0.04)
             thread.join(10.0)
             assert done.is_set() and feed.newest()[0].stamp_s == pytest.approx(0.04)
+        finally:
+            aligned.close()
+            feed.close()
+            carrier.close()
+
+
+def test_the_deck_takes_the_newest_state_heard_not_the_gate_s():
+    """The feed's gate binds the carrier only after three plausible states in a row (and unbinds it
+    when its liveliness token goes), at wall-clock moments; the lockstep deck follows every valid
+    state heard, so it is known from the carrier's first step."""
+    with peer_pair() as (carrier_side, vehicle_side):
+        carrier = Carrier(carrier_side, "step2")
+        feed = CarrierFeed(vehicle_side, "step2", ManualClock(), max_age_s=1e9)  # the default gate: binds at 3
+        aligned = StepAligned(vehicle_side, "step2", feed, by_seq=True)
+        try:
+            connect(carrier, feed=None, aligned=aligned)
+            aligned.wait(0)
+            assert feed.newest() is None  # unbound: one state of three
+            state, _ = aligned.newest()
+            assert state.seq == 1 and state.position[0] == 0.0
         finally:
             aligned.close()
             feed.close()
