@@ -22,7 +22,8 @@ command step at a phase switch; the largest reference step at a queue switch (wa
 or back); pairwise: the least true distance of two passengers both in the air away from the deck
 (:data:`AIR`) against ``safety.passenger_separation_m`` (a *violation*: more than
 :data:`VIOLATION_M` inside what the barrier keeps, as :mod:`bench.pairwise_mc` counts it), and of
-any two at any time against ``team.passenger_span_m`` (touching); the carrier inside a keep-out;
+any two at any time against ``team.passenger_span_m`` (touching); the moment of the largest
+shortfall (:func:`_worst`: the pair, their phases, the true and the reported distance); the carrier inside a keep-out;
 whether every leg that did not dock ended safe (in PX4's Hold or Land, or DONE; not aborted, not
 still flying at the time limit, no pairwise violation).
 """
