@@ -17,7 +17,9 @@ A scenario is ``configs/team.toml`` (or the file given) with:
 - in 30 % of the scenarios one passenger reports a battery low enough that it must land
   (``team.queue_battery_pct``), the others a full one: the queue's battery order.
 
-Figures per scenario (:func:`fly`): each leg docked within 2 approaches, its P1-P3 and its largest
+Figures per scenario (:func:`fly`): each leg docked within 2 approaches, its P1-P3, its jump at the
+separation (the command's step at the latch, and the step of the command less the carrier's
+velocity: the flight log's ``input_jump_m_s`` and ``relative_input_jump_m_s``) and its largest
 command step at a phase switch; the largest reference step at a queue switch (waiting -> its turn,
 or back); pairwise: the least true distance of two passengers both in the air away from the deck
 (:data:`AIR`) against ``safety.passenger_separation_m`` (a *violation*: more than
@@ -205,6 +207,8 @@ def fly(sc: Scenario, estimate_error: float = 1.0) -> dict[str, Any]:
                    "within_2": docked and attempts is not None and attempts <= 2,
                    "p1": bool(leg.get("p1")), "p2": bool(leg.get("p2")), "p3": bool(leg.get("p3")),
                    "switch_jump_m_s": leg.get("max_phase_switch_jump_m_s"),
+                   "separation_jump_m_s": leg.get("input_jump_m_s"),
+                   "relative_separation_jump_m_s": leg.get("relative_input_jump_m_s"),
                    "outcome": None if rec is None else rec.get("outcome")}
             legs.append(row)
             if not docked:
@@ -267,6 +271,10 @@ def table(rows: list[dict[str, Any]]) -> dict[str, Any]:
         "least_distance_any_m": min((r["pair_min_any_m"] for r in rows), default=None),
         "touched": sum(r["touched"] for r in rows),
         "largest_phase_switch_step_m_s": max(jumps, default=None),
+        "largest_separation_jump_m_s": max((leg["separation_jump_m_s"] for leg in legs
+                                            if leg.get("separation_jump_m_s") is not None), default=None),
+        "largest_relative_separation_jump_m_s": max((leg["relative_separation_jump_m_s"] for leg in legs
+                                                     if leg.get("relative_separation_jump_m_s") is not None), default=None),
         "largest_queue_switch_step_m_s": max((r["queue_step_m_s"] for r in rows), default=0.0),
         "queue_switches": sum(r["queue_switches"] for r in rows),
         "carrier_inside_keep_out": sum(r["carrier_inside_keep_out"] for r in rows),

@@ -58,3 +58,14 @@ def test_a_violation_names_its_pair_and_what_their_barriers_saw():
     assert worst["reported_m"] != worst["true_m"]  # the estimates err (PX4 SITL's)
     rows = [{"index": 7, "violation": True, "worst_pair": worst}, {"index": 8, "violation": False, "worst_pair": None}]
     assert [v["index"] for v in team_mc.table_violations(rows)] == [7]
+
+
+def test_the_table_keeps_the_largest_jump_at_a_separation():
+    def leg(jump, rel):
+        return {"passenger": "p0", "leg": 0, "docked": True, "attempts": 1, "within_2": True, "p1": True, "p2": True,
+                "p3": True, "switch_jump_m_s": 0.04, "separation_jump_m_s": jump, "relative_separation_jump_m_s": rel}
+    row = {"index": 0, "legs": [leg(0.031, 0.012), leg(None, None), leg(0.044, 0.009)], "pair_min_air_m": 5.0,
+           "pair_min_any_m": 1.0, "pair_shortfall_m": 0.0, "violation": False, "touched": False, "queue_switches": 0,
+           "queue_step_m_s": 0.0, "carrier_inside_keep_out": False, "low_battery": None}
+    t = team_mc.table([row])
+    assert t["largest_separation_jump_m_s"] == 0.044 and t["largest_relative_separation_jump_m_s"] == 0.012
