@@ -45,7 +45,8 @@ def main(count: int, seed: int, config: str, estimate_error: float, only: str | 
         rows.append(row)
         bad = [leg for leg in row["legs"] if not leg["within_2"]]
         note = "" if not bad and not row["violation"] else (
-            f"  <- {len(bad)} leg(s) not docked within 2; violation {row['violation']}")
+            f"  <- {len(bad)} leg(s) not docked within 2; violation {row['violation']}"
+            + (f" at {row['worst_pair']}" if row["violation"] else ""))
         click.echo(f"[{k + 1}/{len(drawn)}] #{sc.index}: {sc.n_passengers} passengers, {sc.n_targets} targets, "
                    f"{row['duration_s']:.0f} s flown, pair min in air {row['pair_min_air_m']} m, "
                    f"{time.monotonic() - wall:.0f} s wall{note}", err=True)

@@ -17,12 +17,15 @@ A scenario is ``configs/team.toml`` (or the file given) with:
 - in 30 % of the scenarios one passenger reports a battery low enough that it must land
   (``team.queue_battery_pct``), the others a full one: the queue's battery order.
 
-Figures per scenario (:func:`fly`): each leg docked within 2 approaches, its P1-P3 and its largest
+Figures per scenario (:func:`fly`): each leg docked within 2 approaches, its P1-P3, its jump at the
+separation (the command's step at the latch, and the step of the command less the carrier's
+velocity: the flight log's ``input_jump_m_s`` and ``relative_input_jump_m_s``) and its largest
 command step at a phase switch; the largest reference step at a queue switch (waiting -> its turn,
 or back); pairwise: the least true distance of two passengers both in the air away from the deck
 (:data:`AIR`) against ``safety.passenger_separation_m`` (a *violation*: more than
 :data:`VIOLATION_M` inside what the barrier keeps, as :mod:`bench.pairwise_mc` counts it), and of
-any two at any time against ``team.passenger_span_m`` (touching); the carrier inside a keep-out;
+any two at any time against ``team.passenger_span_m`` (touching); the moment of the largest
+shortfall (:func:`_worst`: the pair, their phases, the true and the reported distance); the carrier inside a keep-out;
 whether every leg that did not dock ended safe (in PX4's Hold or Land, or DONE; not aborted, not
 still flying at the time limit, no pairwise violation).
 """
@@ -154,6 +157,7 @@ def fly(sc: Scenario, estimate_error: float = 1.0) -> dict[str, Any]:
     span = sc.cfg.team.passenger_span_m
     kept = np.zeros((n, n))  # what the barrier keeps of each pair in its current window in the air [m]
     shortfall = np.zeros((n, n))
+    worst: dict[str, Any] | None = None  # the pair and the moment of the largest shortfall (:func:`_worst`)
     least_air, least_any = math.inf, math.inf
     prev_u = [None] * n
     prev_q = [False] * n
@@ -170,6 +174,8 @@ def fly(sc: Scenario, estimate_error: float = 1.0) -> dict[str, Any]:
                 if w.members[i].state.phase in AIR and w.members[j].state.phase in AIR:
                     least_air = min(least_air, d)
                     kept[i, j] = min(D, max(kept[i, j], d))
+                    if kept[i, j] - d > shortfall.max() and kept[i, j] - d > 0.0:
+                        worst = _worst(w, i, j, d, float(kept[i, j]))
                     shortfall[i, j] = max(shortfall[i, j], kept[i, j] - d)
                 else:
                     kept[i, j] = 0.0
@@ -201,6 +207,8 @@ def fly(sc: Scenario, estimate_error: float = 1.0) -> dict[str, Any]:
                    "within_2": docked and attempts is not None and attempts <= 2,
                    "p1": bool(leg.get("p1")), "p2": bool(leg.get("p2")), "p3": bool(leg.get("p3")),
                    "switch_jump_m_s": leg.get("max_phase_switch_jump_m_s"),
+                   "separation_jump_m_s": leg.get("input_jump_m_s"),
+                   "relative_separation_jump_m_s": leg.get("relative_input_jump_m_s"),
                    "outcome": None if rec is None else rec.get("outcome")}
             legs.append(row)
             if not docked:
@@ -216,12 +224,31 @@ def fly(sc: Scenario, estimate_error: float = 1.0) -> dict[str, Any]:
             "batteries": sc.batteries, "duration_s": report["duration_s"], "legs": legs,
             "pair_min_air_m": None if math.isinf(least_air) else round(least_air, 3),
             "pair_min_any_m": round(least_any, 3), "pair_shortfall_m": round(float(shortfall.max()), 4),
-            "violation": violation, "touched": least_any < span,
+            "violation": violation, "worst_pair": worst, "touched": least_any < span,
             "queue_switches": queue_switches, "queue_step_m_s": round(queue_step, 4),
             "carrier_inside_keep_out": any(report["carrier"]["inside_keep_out"]),
             "carrier_closest_m": min(report["carrier"]["closest_m"]), "guard_radius_m": report["carrier"]["guard_radius_m"],
             "docked_order": docked_order, "low_battery": battery_first, "unsafe": unsafe,
             "phases": {m.name: m.state.phase.value for m in w.members}}
+
+
+def _worst(w: TeamWorld, i: int, j: int, d_m: float, kept_m: float) -> dict[str, Any]:
+    """The moment of a pair's shortfall in ``w`` (now): the two passengers and their phases, the
+    time [s], the true distance ``d_m`` [m], what the count keeps ``kept_m`` [m], and the distance
+    of the two positions their vehicles report [m] (what their barriers see): a pair whose reported
+    distance held what the recovery keeps (``safety.passenger_separation_m + safety.margin_m``)
+    came short in truth by their estimates' errors, not by their steps."""
+    a, b = w.members[i], w.members[j]
+    t = w.t[-1]
+    reported = np.asarray(a.vehicle.report(t).position_ned_m, dtype=float) - np.asarray(b.vehicle.report(t).position_ned_m,
+                                                                                      dtype=float)
+    return {"t_s": round(t, 2), "pair": [a.name, b.name], "phases": [a.state.phase.value, b.state.phase.value],
+            "true_m": round(d_m, 3), "kept_m": round(kept_m, 3), "reported_m": round(float(np.linalg.norm(reported)), 3)}
+
+
+def table_violations(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Each violating scenario of ``rows`` (:func:`fly`): its index and its worst pair's moment (:func:`_worst`)."""
+    return [{"index": r["index"], **(r.get("worst_pair") or {})} for r in rows if r["violation"]]
 
 
 def table(rows: list[dict[str, Any]]) -> dict[str, Any]:
@@ -238,11 +265,16 @@ def table(rows: list[dict[str, Any]]) -> dict[str, Any]:
         "legs_not_docked": len(not_docked), "not_docked_safe": sum(bool(leg.get("safe")) for leg in not_docked),
         "p1_p3_all_legs": sum(leg["p1"] and leg["p2"] and leg["p3"] for leg in legs),
         "pairwise_violations": sum(r["violation"] for r in rows),
+        "violations_at": table_violations(rows),
         "largest_shortfall_m": max((r["pair_shortfall_m"] for r in rows), default=0.0),
         "least_distance_in_air_m": min(air, default=None),
         "least_distance_any_m": min((r["pair_min_any_m"] for r in rows), default=None),
         "touched": sum(r["touched"] for r in rows),
         "largest_phase_switch_step_m_s": max(jumps, default=None),
+        "largest_separation_jump_m_s": max((leg["separation_jump_m_s"] for leg in legs
+                                            if leg.get("separation_jump_m_s") is not None), default=None),
+        "largest_relative_separation_jump_m_s": max((leg["relative_separation_jump_m_s"] for leg in legs
+                                                     if leg.get("relative_separation_jump_m_s") is not None), default=None),
         "largest_queue_switch_step_m_s": max((r["queue_step_m_s"] for r in rows), default=0.0),
         "queue_switches": sum(r["queue_switches"] for r in rows),
         "carrier_inside_keep_out": sum(r["carrier_inside_keep_out"] for r in rows),
