@@ -139,6 +139,7 @@ class CarrierStepper:
                          first.law.separation_distance_m + cfg.mission.leg_start_margin_m)
         self.course = RecoveryCourse.from_lists(c.recovery_course, c.recovery_heading_deg, c.recovery_speed_m_s)
         self.start_accel_m_s2, self.start_lead_m_s = c.start_accel_m_s2, c.start_lead_m_s
+        self.min_moving_speed_m_s = c.min_moving_speed_m_s
         self.mode = CarrierMode.WAITING
         self.velocity_m_s = np.zeros(self.dim)  # [m/s] the filtered (and, holonomic, guarded) law command
         self._plan_velocity = np.zeros(self.dim)  # [m/s] the own plan after separation (Remark 1)
@@ -249,7 +250,15 @@ class CarrierStepper:
         than the carrier already does, brakes it while it turns, and the next cap is lower still.
         PX4's SIH rover turning onto leg 2 from rest (106 deg) stuck and leapt on that, 0 to
         1-2 m/s every 0.5-2 s for 6 s under a riding passenger (docs/recovery.md, "On real PX4").
-        With either cap on, the speed asked also grows at most at ``safety.carrier_max_accel_m_s2``."""
+        With either cap on, the speed asked also grows at most at ``safety.carrier_max_accel_m_s2``.
+
+        Neither the caps nor the tracking law's slowing in a turn ask less than
+        ``carrier.min_moving_speed_m_s`` while the law asks that much (below it, the law's own
+        planar speed, which grows at the law's acceleration limit): PX4's rover estimates its speed
+        as its velocity's size signed by the forward part, and its EKF's velocity at rest errs
+        0.2-0.9 m/s sideways after a drive, so at leg 2's start the caps, keyed on that forward speed,
+        asked 0.1-0.8 m/s in turn while its speed loop read +-0.6 m/s, and it swung 0 to 0.9 m/s
+        under the riding passenger (docs/recovery.md, "On real PX4")."""
         cmd = track(u, yaw, self.tracking)
         asked = np.array([cmd.speed_m_s])
         capped = float(speed_lead(gentle_start(asked, np.array([self._asked_speed_m_s]), moving_m_s,
@@ -260,8 +269,12 @@ class CarrierStepper:
             # at most at the law's acceleration limit from where they left it, as the capped law
             # command did (and its turn onto the bearing does not add to it)
             capped = min(capped, self._asked_speed_m_s + accel * dt_s)
-        if capped < cmd.speed_m_s:  # the same direction, slower: the tracking law's yaw-rate cap goes with the speed
-            cmd = track(u * (capped / cmd.speed_m_s), yaw, self.tracking)
+        # the least speed asked while driving: the law's planar speed up to carrier.min_moving_speed_m_s
+        # (a vehicle turning in place, asked no forward speed, is left so)
+        floor = min(float(np.linalg.norm(u[:2])), self.min_moving_speed_m_s) if cmd.speed_m_s > 0 else 0.0
+        wanted = max(min(capped, cmd.speed_m_s), floor)
+        if wanted != cmd.speed_m_s:  # the same direction: the tracking law's yaw-rate cap goes with the speed
+            cmd = track(u * (wanted / cmd.speed_m_s), yaw, self.tracking)
         self._asked_speed_m_s = cmd.speed_m_s
         return cmd
 
