@@ -42,7 +42,7 @@ import numpy as np
 from mission.carrier.backends import OwnState
 from mission.carrier.course import RecoveryCourse, away_heading_deg, clear_heading_deg
 from mission.carrier.guard import GuardParams
-from mission.carrier.legs import Legs
+from mission.carrier.legs import TURN_ROOM_M, Legs
 from mission.carrier.modes import CarrierMode, PassengerView, next_mode
 from mission.carrier.start import gentle_start, speed_lead
 from mission.carrier.tracking import SpeedCalibration, Tracked, TrackingParams, heading_of, track
@@ -146,6 +146,7 @@ class CarrierStepper:
         self._course_start: tuple[float, float] | None = None  # (time [s], away heading [deg]) of the recovery
         self._calibration = SpeedCalibration(c.speed_ratio_tau_s)
         self._asked_speed_m_s = 0.0  # [m/s] diff-drive/Ackermann: the forward speed last asked (before the guards)
+        self._leg_turn = "out"  # REPOSITIONING, non-holonomic: "out", then "turn" towards the leg's target, "done"
 
     @property
     def model(self) -> TickModel:
@@ -164,6 +165,8 @@ class CarrierStepper:
                                        else np.zeros_like(self.velocity_m_s))
             if mode not in (CarrierMode.RECOVERING, CarrierMode.PAUSED):
                 self._course_start = None  # the next recovery drives its course from its own start
+            if mode is CarrierMode.REPOSITIONING:
+                self._leg_turn = "out"  # a new repositioning turns afresh
             self.mode = mode
         return ModeUpdate(before, mode, why, leg_changed)
 
@@ -206,7 +209,7 @@ class CarrierStepper:
         plan = self._plan_velocity if self.mode is CarrierMode.SEPARATED else None
         res = carrier_tick(x_c, separated, self.model, own_plan_velocity=plan, u_prev=self.velocity_m_s,
                            dt_s=dt_s if dt_s > 0 else None,
-                           course_velocity=self.course_velocity(x_c, now_s, recovery_velocity_m_s))
+                           course_velocity=self.course_velocity(x_c, now_s, recovery_velocity_m_s, state.yaw_rad))
         u = np.asarray(res.u, dtype=float)
         yaw = state.yaw_rad if state.yaw_rad is not None else 0.0
         t, v_meas = state.t_s, state.velocity_ned_m_s[:self.dim]
@@ -292,15 +295,37 @@ class CarrierStepper:
         return clear_heading_deg(x_c, away, others.centers, others.radii, lim.margin_m, self.course.speed_m_s,
                                  lim.cbf_gain, ROUND_BAND_M)
 
-    def course_velocity(self, x_c: np.ndarray, now_s: float,
-                        recovery_velocity_m_s: np.ndarray | None = None) -> np.ndarray | None:
+    def course_velocity(self, x_c: np.ndarray, now_s: float, recovery_velocity_m_s: np.ndarray | None = None,
+                        yaw_rad: float | None = None) -> np.ndarray | None:
         """RECOVERING: the recovery course's velocity at ``now_s`` [m/s] (dim,) (``recovery_velocity_m_s``
         when given), its clock and its default heading (away from the target) taken at the first
         step of the recovery; REPOSITIONING: straight away from the leg's target at the carrier's
         top speed until its dock point is ``b c + mission.leg_start_margin_m`` (and
-        :data:`~mission.config.legs.REPOSITION_SPARE_M`) from it, then zero; else None."""
+        :data:`~mission.config.legs.REPOSITION_SPARE_M`) from it, then zero. A diff-drive or
+        Ackermann carrier at heading ``yaw_rad`` [rad] with ``carrier.min_moving_speed_m_s`` > 0 drives
+        out :data:`~mission.carrier.legs.TURN_ROOM_M` farther, then towards the target at that speed
+        until it heads at it (:meth:`~mission.carrier.legs.Legs.turn_velocity`), so that the leg's
+        ride starts straight ahead, then zero (out again, were its turn to end nearer than the start
+        distance). Else None.
+
+        The turn is why: PX4's SIH rover stood facing 16-170 deg off the next target's bearing
+        when leg 2's ride began, and turned from rest under the riding passenger (docs/recovery.md,
+        "On real PX4")."""
         if self.mode is CarrierMode.REPOSITIONING:
-            return self.legs.reposition_velocity(x_c, float(self.model.carrier_safety.max_speed_m_s or 1.0))
+            top = float(self.model.carrier_safety.max_speed_m_s or 1.0)
+            if yaw_rad is None or self.tracking.kind == "holonomic" or self.min_moving_speed_m_s <= 0:
+                return self.legs.reposition_velocity(x_c, top)
+            if self._leg_turn == "out":  # out to the leg's start and the room for the turn
+                away = self.legs.reposition_velocity(x_c, top, TURN_ROOM_M)
+                if away.any():
+                    return away
+                self._leg_turn = "turn"
+            if self._leg_turn == "turn":
+                turn = self.legs.turn_velocity(x_c, yaw_rad, self.min_moving_speed_m_s)
+                if turn is not None:
+                    return turn
+                self._leg_turn = "done"  # it stands from here, whatever its heading wobbles to
+            return self.legs.reposition_velocity(x_c, top)
         if self.mode is not CarrierMode.RECOVERING:
             return None
         if recovery_velocity_m_s is not None:

@@ -11,6 +11,7 @@ import math
 import numpy as np
 import pytest
 
+from mission.carrier.backends import OwnState
 from mission.carrier.backends.sim import SimRobot
 from mission.carrier.modes import CarrierMode, PassengerView
 from mission.carrier.step import REAL_DELAY_S, CarrierStepper, carrier_model, guard_params
@@ -239,3 +240,78 @@ def test_an_ackermann_carrier_turning_from_rest_is_not_braked_by_its_own_lead(tu
     if turn_deg > 60.0:
         assert turning.any() and speed[turning].min() >= 0.3 * 1.2 - 1e-6  # old: 0.12-0.14 m/s
     assert error[-1] < 5.0 and speed[-1] == pytest.approx(1.2, abs=0.01)  # lined up and at the law's speed (old, 180: 0.14)
+
+
+def _px4_rover_cfg(min_moving_speed_m_s: float, targets: list[list[float]] | None = None,
+                   start_yaw_rad: float | None = None) -> Config:
+    """The PX4 cycle's rover settings (gentle start 0.25 m/s^2, lead 0.3 m/s, Ackermann)."""
+    return from_dict({
+        "scenario": {"carrier_start": [0.0, 0.0, 0.0], "carrier_mode": "stop",
+                     **({"targets": targets} if targets else {"target": TARGET})},
+        "safety": {"carrier_max_accel_m_s2": ACCEL, "carrier_max_speed_m_s": 2.0},
+        **({"mission": {"final_action": "return"}} if targets else {}),
+        "carrier": {"rate_hz": 30.0, "max_speed_m_s": 1.2, "kinematics": "ackermann", "wheelbase_m": 0.321,
+                    "max_steer_rad": 0.5236, "min_speed_fraction": 0.3, "start_accel_m_s2": 0.25,
+                    "start_lead_m_s": 0.3, "min_moving_speed_m_s": min_moving_speed_m_s,
+                    "start_yaw_rad": start_yaw_rad, "recovery_speed_m_s": 1.2},
+    })
+
+
+@pytest.mark.parametrize("floor", [0.0, 0.8])
+def test_a_rover_whose_estimate_wanders_sideways_is_never_asked_a_crawl(floor: float) -> None:
+    """PX4's SIH rover at rest after a drive: its EKF says 0.6 m/s sideways and a forward speed
+    that flips +-0.2 m/s while it stands. The gentle start and the lead key on that forward speed;
+    they asked 0.1-0.8 m/s in turn, inside the band its speed loop cannot resolve, and it swung 0 to
+    0.9 m/s under the riding passenger. With carrier.min_moving_speed_m_s the speed asked is the
+    law's own (1 m/s^2) up to the floor, and never below it after."""
+    cfg = _px4_rover_cfg(floor)
+    stepper = CarrierStepper(cfg, True)
+    bearing = math.atan2(TARGET[1], TARGET[0])
+    side = np.array([-math.sin(bearing), math.cos(bearing), 0.0]) * 0.6
+    ahead = np.array([math.cos(bearing), math.sin(bearing), 0.0])
+    stepper.update_mode(_view("RIDING"))
+    asked = []
+    for k in range(int(3.0 / DT)):
+        t = (k + 1) * DT
+        forward = 0.2 if (k // 5) % 2 else -0.2  # its sign flips every 5 ticks, the rover stands
+        state = OwnState(t, np.zeros(3), side + forward * ahead, bearing)
+        asked.append(stepper.decide(state, DT, 0.0, t).tracked.speed_m_s)
+    speed = np.array(asked)
+    assert stepper.mode is CarrierMode.APPROACHING
+    later = speed[int(1.0 / DT):]  # [s] 1 s on: the law asks 1 m/s and more
+    if floor:
+        assert later.min() >= 0.8 - 1e-9 and speed[int(0.5 / DT)] == pytest.approx(0.5, abs=0.04)
+        assert np.diff(speed).max() <= ACCEL * DT + 1e-9  # never faster than the law's own ramp
+    else:
+        assert later.max() < 0.8  # the crawl the floor removes
+
+
+@pytest.mark.parametrize("floor", [0.0, 0.8])
+def test_a_rover_repositioning_turns_to_face_the_next_target_before_it_stands(floor: float) -> None:
+    """Leg 2 on PX4: the rover docked the passenger driving its recovery course, away from target
+    1 and ~150 deg off target 2's bearing, and stood so; leg 2's ride then began with a turn from
+    rest. With carrier.min_moving_speed_m_s it turns towards target 2 at that speed while the
+    passenger is in TRANSIT and stands facing it, beyond the leg-start distance."""
+    t0, t1 = [15.0, 0.0, -5.0], [-25.0, -10.0, -4.0]
+    cfg = _px4_rover_cfg(floor, targets=[t0, t1], start_yaw_rad=math.radians(20.0))
+    clock = ManualClock()
+    stepper, robot = CarrierStepper(cfg, False), SimRobot(cfg, clock)
+    stepper.mode = CarrierMode.RECOVERING  # driving its course (20 deg) when the passenger docks
+    for _ in range(int(2.0 / DT)):
+        _step(stepper, robot, clock, "DOCKED")
+    for _ in range(int(20.0 / DT)):
+        clock.advance(DT)
+        robot.advance(DT)
+        stepper.update_mode(PassengerView(Phase.TRANSIT, leg=1))
+        robot.command(stepper.decide(robot.own_state(), DT, 0.0, clock.now()).tracked)
+    state = robot.own_state()
+    x = state.position_ned_m
+    bearing = math.atan2(t1[1] - x[1], t1[0] - x[0])
+    error_deg = abs(math.degrees(math.remainder(bearing - float(state.yaw_rad), 2 * math.pi)))
+    assert stepper.mode is CarrierMode.REPOSITIONING and robot.speed_m_s == pytest.approx(0.0, abs=1e-9)
+    dock = x + np.asarray(cfg.mission.dock_offset_ned_m)
+    assert float(np.linalg.norm(np.subtract(t1, dock))) >= stepper.legs.start_m  # the leg can start
+    if floor:
+        assert error_deg <= 12.0  # facing target 2 (a 10 deg tolerance and the braking's last turn)
+    else:
+        assert error_deg > 90.0  # the old stand: facing away (109 deg)
