@@ -54,6 +54,7 @@ from mission.phases.phase import Duty
 
 STOP = Tracked(0.0, 0.0, 0.0, np.zeros(2), np.zeros(2))
 REAL_DELAY_S = 0.3  # [s] default response delay of a real carrier for the P3 guard (carrier.brake_delay_s)
+RESTART_S = 1.0  # [s] the least a carrier with carrier.min_moving_speed_m_s stands once stopped (CarrierStepper._restarting)
 DRIVING = (CarrierMode.APPROACHING, CarrierMode.RECOVERING, CarrierMode.REPOSITIONING)  # modes that drive on
 
 
@@ -146,6 +147,7 @@ class CarrierStepper:
         self._course_start: tuple[float, float] | None = None  # (time [s], away heading [deg]) of the recovery
         self._calibration = SpeedCalibration(c.speed_ratio_tau_s)
         self._asked_speed_m_s = 0.0  # [m/s] diff-drive/Ackermann: the forward speed last asked (before the guards)
+        self._stopped_since_s: float | None = None  # [s] diff-drive/Ackermann: since when it is asked to stop
         self._leg_turn = "out"  # REPOSITIONING, non-holonomic: "out", then "turn" towards the leg's target, "done"
 
     @property
@@ -204,6 +206,7 @@ class CarrierStepper:
             # safety.carrier_max_accel_m_s2 (the built-in robot's braking) would keep it driving.
             self.velocity_m_s = np.zeros(self.dim)
             self._asked_speed_m_s = 0.0
+            self._stopped_since_s = now_s if self._stopped_since_s is None else self._stopped_since_s
             return Command(STOP)
         separated = self.mode is not CarrierMode.APPROACHING
         plan = self._plan_velocity if self.mode is CarrierMode.SEPARATED else None
@@ -226,7 +229,11 @@ class CarrierStepper:
                 u, active = g.u, active or g.active
             cmd = track(u, yaw, self.tracking)
         else:
+            if self._restarting(now_s):  # it stands on, and the law starts again from rest after
+                u = np.zeros_like(u)
             cmd = self._started(u, yaw, moving, dt_s)
+            self._stopped_since_s = (None if cmd.speed_m_s > 0 else
+                                     now_s if self._stopped_since_s is None else self._stopped_since_s)
             speed = cmd.speed_m_s
             for guard in self.legs.guards:
                 speed, acted = guard.limit_heading(t, x_c, speed, yaw, v_meas, age_s, bearing_rad=cmd.bearing_rad)
@@ -241,6 +248,16 @@ class CarrierStepper:
         # fast as the robot already does (a heading lock).
         self.velocity_m_s = u
         return Command(cmd, active, bool(np.all(res.feasible)))
+
+    def _restarting(self, now_s: float) -> bool:
+        """A diff-drive or Ackermann carrier with ``carrier.min_moving_speed_m_s`` that was last
+        asked to stop less than :data:`RESTART_S` ago at ``now_s`` [s]: it stands on. PX4's rover
+        holds a rest point once it stands (``carrier.mavlink.stand``), which resets its speed
+        loop; asked to drive again the tick it stopped (leg 2's ride began as its turn towards
+        target 2 ended), the SIH rover leapt to 1.9 m/s, 55 deg off its bearing, under the riding
+        passenger (docs/recovery.md, "On real PX4")."""
+        return (self.min_moving_speed_m_s > 0 and self._stopped_since_s is not None
+                and now_s - self._stopped_since_s < RESTART_S)
 
     def _started(self, u: np.ndarray, yaw: float, moving_m_s: float, dt_s: float) -> Tracked:
         """A diff-drive or Ackermann carrier's tracked command for the law's ``u`` [m/s] at heading

@@ -6,6 +6,7 @@ carrier (sim/batch/recovery.py) commands what the controller's loop on the built
 commands, step for step (over real Zenoh: tests/integration/carrier/test_carrier_step_agrees.py)."""
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -315,3 +316,34 @@ def test_a_rover_repositioning_turns_to_face_the_next_target_before_it_stands(fl
         assert error_deg <= 12.0  # facing target 2 (a 10 deg tolerance and the braking's last turn)
     else:
         assert error_deg > 90.0  # the old stand: facing away (109 deg)
+
+
+@pytest.mark.parametrize("floor", [0.0, 0.8])
+def test_a_rover_that_never_crawls_stands_a_second_once_stopped(floor: float) -> None:
+    """Asked to drive the tick after it was told to stop (leg 2's ride began as its turn towards
+    target 2 ended), PX4's SIH rover leapt to 1.9 m/s: its speed loop had not been reset by a
+    held rest point. With carrier.min_moving_speed_m_s it stands RESTART_S (1 s) first, then
+    starts from rest at the law's ramp."""
+    cfg = _px4_rover_cfg(floor)
+    stepper = CarrierStepper(cfg, True)
+    bearing = math.atan2(TARGET[1], TARGET[0])
+    still = OwnState(0.0, np.zeros(3), np.zeros(3), bearing)
+    now = 0.0
+    for phase, seconds in (("RIDING", 3.0), ("NAVIGATING", 0.5)):
+        for _ in range(round(seconds / DT)):
+            now += DT
+            stepper.update_mode(_view(phase))
+            stepper.decide(dataclasses.replace(still, t_s=now), DT, 0.0, now)
+    stopped_at = now  # told to stop 0.5 s ago
+    asked = []
+    for k in range(int(2.0 / DT)):
+        t = stopped_at + (k + 1) * DT
+        stepper.update_mode(_view("RETURNING"))
+        asked.append(stepper.decide(dataclasses.replace(still, t_s=t), DT, 0.0, t).tracked.speed_m_s)
+    assert stepper.mode is CarrierMode.RECOVERING
+    speed, t = np.array(asked), np.arange(1, len(asked) + 1) * DT
+    if floor:
+        assert speed[t < 0.5 - 1e-6].max() == 0.0 and speed[-1] > 0.5  # stood 1 s in all, then drove
+        assert np.diff(speed).max() <= ACCEL * DT + 1e-9  # from rest, at the law's ramp
+    else:
+        assert speed[0] > 0.0
