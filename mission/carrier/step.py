@@ -44,7 +44,7 @@ from mission.carrier.course import RecoveryCourse, away_heading_deg, clear_headi
 from mission.carrier.guard import GuardParams
 from mission.carrier.legs import TURN_ROOM_M, Legs
 from mission.carrier.modes import CarrierMode, PassengerView, next_mode
-from mission.carrier.start import gentle_start, speed_lead
+from mission.carrier.start import MOVING_M_S, gentle_start, speed_lead
 from mission.carrier.tracking import SpeedCalibration, Tracked, TrackingParams, heading_of, track
 from mission.config.carrier import KINDS
 from mission.config.schema import Config
@@ -231,7 +231,8 @@ class CarrierStepper:
         else:
             if self._restarting(now_s):  # it stands on, and the law starts again from rest after
                 u = np.zeros_like(u)
-            cmd = self._started(u, yaw, moving, dt_s)
+            sideways = abs(math.cos(yaw) * float(v_meas[1]) - math.sin(yaw) * float(v_meas[0]))
+            cmd = self._started(u, yaw, moving, dt_s, sideways)
             self._stopped_since_s = (None if cmd.speed_m_s > 0 else
                                      now_s if self._stopped_since_s is None else self._stopped_since_s)
             speed = cmd.speed_m_s
@@ -259,7 +260,7 @@ class CarrierStepper:
         return (self.min_moving_speed_m_s > 0 and self._stopped_since_s is not None
                 and now_s - self._stopped_since_s < RESTART_S)
 
-    def _started(self, u: np.ndarray, yaw: float, moving_m_s: float, dt_s: float) -> Tracked:
+    def _started(self, u: np.ndarray, yaw: float, moving_m_s: float, dt_s: float, sideways_m_s: float = 0.0) -> Tracked:
         """A diff-drive or Ackermann carrier's tracked command for the law's ``u`` [m/s] at heading
         ``yaw`` [rad], its forward speed held to the gentle start and the lead
         (:mod:`mission.carrier.start`) against its measured forward speed ``moving_m_s`` [m/s].
@@ -272,9 +273,13 @@ class CarrierStepper:
         1-2 m/s every 0.5-2 s for 6 s under a riding passenger (docs/recovery.md, "On real PX4").
         With either cap on, the speed asked also grows at most at ``safety.carrier_max_accel_m_s2``.
 
-        Neither the caps nor the tracking law's slowing in a turn ask less than
-        ``carrier.min_moving_speed_m_s`` while the law asks that much (below it, the law's own
-        planar speed, which grows at the law's acceleration limit): PX4's rover estimates its speed
+        Once it moves (forward at :data:`~mission.carrier.start.MOVING_M_S` or more), or while its
+        velocity's part across its heading, ``sideways_m_s`` [m/s], is that large (its estimate
+        cannot tell a crawl from a stand), neither the caps nor the tracking law's slowing in a turn
+        ask less than ``carrier.min_moving_speed_m_s`` while the law asks that much (below it, the
+        law's own planar speed, which grows at the law's acceleration limit). From a clean stand
+        the gentle start stays: asked 0.8 m/s at once on leg 1 the SIH rover leapt to 0.55 m/s in
+        0.13 s and the passenger trailed 0.39 m. PX4's rover estimates its speed
         as its velocity's size signed by the forward part, and its EKF's velocity at rest errs
         0.2-0.9 m/s sideways after a drive, so at leg 2's start the caps, keyed on that forward speed,
         asked 0.1-0.8 m/s in turn while its speed loop read +-0.6 m/s, and it swung 0 to 0.9 m/s
@@ -291,7 +296,8 @@ class CarrierStepper:
             capped = min(capped, self._asked_speed_m_s + accel * dt_s)
         # the least speed asked while driving: the law's planar speed up to carrier.min_moving_speed_m_s
         # (a vehicle turning in place, asked no forward speed, is left so)
-        floor = min(float(np.linalg.norm(u[:2])), self.min_moving_speed_m_s) if cmd.speed_m_s > 0 else 0.0
+        unsure = moving_m_s >= MOVING_M_S or sideways_m_s >= MOVING_M_S
+        floor = min(float(np.linalg.norm(u[:2])), self.min_moving_speed_m_s) if cmd.speed_m_s > 0 and unsure else 0.0
         wanted = max(min(capped, cmd.speed_m_s), floor)
         if wanted != cmd.speed_m_s:  # the same direction: the tracking law's yaw-rate cap goes with the speed
             cmd = track(u * (wanted / cmd.speed_m_s), yaw, self.tracking)
