@@ -339,9 +339,9 @@ class CarrierStepper:
             if yaw_rad is None or self.tracking.kind == "holonomic" or self.min_moving_speed_m_s <= 0:
                 return self.legs.reposition_velocity(x_c, top)
             if self._leg_turn == "out":  # out to the leg's start and the room for the turn
-                away = self.legs.reposition_velocity(x_c, top, TURN_ROOM_M)
-                if away.any():
-                    return away
+                out = self.legs.reposition_velocity(x_c, top, TURN_ROOM_M)
+                if out.any():
+                    return out
                 self._leg_turn = "turn"
             if self._leg_turn == "turn":
                 turn = self.legs.turn_velocity(x_c, yaw_rad, self.min_moving_speed_m_s)
