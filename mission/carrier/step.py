@@ -298,6 +298,8 @@ class CarrierStepper:
         # (a vehicle turning in place, asked no forward speed, is left so)
         unsure = moving_m_s >= MOVING_M_S or sideways_m_s >= MOVING_M_S
         floor = min(float(np.linalg.norm(u[:2])), self.min_moving_speed_m_s) if cmd.speed_m_s > 0 and unsure else 0.0
+        if accel and dt_s > 0:  # a floor that sets in mid-start grows from the speed asked, at the law's ramp
+            floor = min(floor, self._asked_speed_m_s + accel * dt_s)
         wanted = max(min(capped, cmd.speed_m_s), floor)
         if wanted != cmd.speed_m_s:  # the same direction: the tracking law's yaw-rate cap goes with the speed
             cmd = track(u * (wanted / cmd.speed_m_s), yaw, self.tracking)

@@ -359,3 +359,21 @@ def test_from_a_clean_stand_the_gentle_start_stays() -> None:
     asked = [stepper.decide(OwnState((k + 1) * DT, np.zeros(3), np.zeros(3), bearing), DT, 0.0, (k + 1) * DT)
              .tracked.speed_m_s for k in range(int(2.0 / DT))]
     assert max(asked) == pytest.approx(0.25 * 2.0, abs=0.01)  # 2 s at 0.25 m/s^2
+
+
+def test_a_floor_that_sets_in_mid_start_grows_at_the_law_s_ramp() -> None:
+    """Leg 1 on PX4: the gentle start asked 0.32 m/s when the EKF's sideways velocity reached
+    0.19 m/s; the floor then asked 0.80 m/s the next tick, the rover leapt to 1.1 m/s and the
+    passenger trailed 0.37 m. The floor grows from the speed asked at the law's acceleration."""
+    stepper = CarrierStepper(_px4_rover_cfg(0.8), True)
+    bearing = math.atan2(TARGET[1], TARGET[0])
+    side = np.array([-math.sin(bearing), math.cos(bearing), 0.0])
+    stepper.update_mode(_view("RIDING"))
+    asked = []
+    for k in range(int(3.0 / DT)):
+        t = (k + 1) * DT
+        v = side * (0.0 if t < 1.2 else 0.2)  # a clean stand, then its estimate errs sideways
+        asked.append(stepper.decide(OwnState(t, np.zeros(3), v, bearing), DT, 0.0, t).tracked.speed_m_s)
+    speed = np.array(asked)
+    assert np.diff(speed).max() <= ACCEL * DT + 1e-9  # old: 0.30 -> 0.80 in one tick
+    assert speed[-1] >= 0.8 - 1e-9  # the floor reached
