@@ -10,11 +10,20 @@ Frames: NED [m], [m/s], in the scenario's dimension (2 or 3).
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from mission.carrier.guard import GuardParams, P3Guard
 from mission.config.legs import REPOSITION_SPARE_M
 from mission.core.tick import TickModel
+
+#: [m] room beyond the leg-start distance that a non-holonomic carrier needs to turn towards the
+#: leg's target before it stands (:meth:`Legs.turn_velocity`): its turn at a walking pace drives it
+#: a metre or two, part of it towards the target
+TURN_ROOM_M = 2.0
+#: [rad] heading error to the leg's target at which the turn is done
+LINED_UP_RAD = math.radians(10.0)
 
 
 class Legs:
@@ -47,14 +56,31 @@ class Legs:
         """Distance [m] from ``x_c`` to the nearest target."""
         return min(float(np.linalg.norm(t - x_c)) for t in self.targets)
 
-    def reposition_velocity(self, x_c: np.ndarray, speed_m_s: float) -> np.ndarray:
+    def reposition_velocity(self, x_c: np.ndarray, speed_m_s: float, room_m: float = 0.0) -> np.ndarray:
         """Straight away from the leg's target at ``speed_m_s`` [m/s] until the dock point is far
-        enough for the leg to start; zero from there."""
+        enough for the leg to start (and ``room_m`` [m] farther); zero from there."""
         target = self.targets[self.index]
         away = np.asarray(x_c, dtype=float) - target
         if self.planar:
             away[2:] = 0.0
         size = float(np.linalg.norm(away))
-        if float(np.linalg.norm(target - (x_c + self.dock_offsets_m[self.index]))) >= self.start_m or size < 1e-9:
+        if float(np.linalg.norm(target - (x_c + self.dock_offsets_m[self.index]))) >= self.start_m + room_m or size < 1e-9:
             return np.zeros_like(away)
         return away / size * speed_m_s
+
+    def turn_velocity(self, x_c: np.ndarray, yaw_rad: float, speed_m_s: float) -> np.ndarray | None:
+        """A non-holonomic carrier at ``x_c`` [m] heading ``yaw_rad`` [rad], far enough out: towards
+        the leg's target at ``speed_m_s`` [m/s] (planar), so that it stands facing it when the
+        leg's ride begins; None when the turn is done (heading within :data:`LINED_UP_RAD` of the
+        target's bearing) or there is no room for it (the dock point nearer the target than the
+        leg-start distance)."""
+        target = self.targets[self.index]
+        to = target - np.asarray(x_c, dtype=float)
+        if float(np.linalg.norm(target - (x_c + self.dock_offsets_m[self.index]))) < self.start_m:
+            return None
+        bearing = math.atan2(float(to[1]), float(to[0]))
+        if abs(math.remainder(bearing - yaw_rad, 2 * math.pi)) <= LINED_UP_RAD:
+            return None
+        v = np.zeros_like(to)
+        v[0], v[1] = speed_m_s * math.cos(bearing), speed_m_s * math.sin(bearing)
+        return v

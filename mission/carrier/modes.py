@@ -46,7 +46,9 @@ starts the carrier.
   matters once separated: the passenger has left.
 - REPOSITIONING (duty REPOSITION: the passenger, docked again, rides while the next leg waits for
   the paper's Assumption 1): the carrier drives straight away from the next leg's target until it
-  is ``b c + mission.leg_start_margin_m`` from it (with a little to spare), then stands.
+  is ``b c + mission.leg_start_margin_m`` from it (with a little to spare), then stands; a
+  diff-drive or Ackermann one with ``carrier.min_moving_speed_m_s`` first turns to face that
+  target (:meth:`mission.carrier.legs.Legs.turn_velocity`).
 - RECOVERING (duty RECOVER: the passenger returns, holds off, approaches, docks): the steady
   recovery course (:mod:`mission.carrier.course`: ``carrier.recovery_course`` legs, then
   ``carrier.recovery_heading_deg`` at ``carrier.recovery_speed_m_s``), filtered. A passenger lost

@@ -42,9 +42,9 @@ import numpy as np
 from mission.carrier.backends import OwnState
 from mission.carrier.course import RecoveryCourse, away_heading_deg, clear_heading_deg
 from mission.carrier.guard import GuardParams
-from mission.carrier.legs import Legs
+from mission.carrier.legs import TURN_ROOM_M, Legs
 from mission.carrier.modes import CarrierMode, PassengerView, next_mode
-from mission.carrier.start import gentle_start, speed_lead
+from mission.carrier.start import MOVING_M_S, gentle_start, speed_lead
 from mission.carrier.tracking import SpeedCalibration, Tracked, TrackingParams, heading_of, track
 from mission.config.carrier import KINDS
 from mission.config.schema import Config
@@ -54,6 +54,7 @@ from mission.phases.phase import Duty
 
 STOP = Tracked(0.0, 0.0, 0.0, np.zeros(2), np.zeros(2))
 REAL_DELAY_S = 0.3  # [s] default response delay of a real carrier for the P3 guard (carrier.brake_delay_s)
+RESTART_S = 1.0  # [s] the least a carrier with carrier.min_moving_speed_m_s stands once stopped (CarrierStepper._restarting)
 DRIVING = (CarrierMode.APPROACHING, CarrierMode.RECOVERING, CarrierMode.REPOSITIONING)  # modes that drive on
 
 
@@ -139,12 +140,15 @@ class CarrierStepper:
                          first.law.separation_distance_m + cfg.mission.leg_start_margin_m)
         self.course = RecoveryCourse.from_lists(c.recovery_course, c.recovery_heading_deg, c.recovery_speed_m_s)
         self.start_accel_m_s2, self.start_lead_m_s = c.start_accel_m_s2, c.start_lead_m_s
+        self.min_moving_speed_m_s = c.min_moving_speed_m_s
         self.mode = CarrierMode.WAITING
         self.velocity_m_s = np.zeros(self.dim)  # [m/s] the filtered (and, holonomic, guarded) law command
         self._plan_velocity = np.zeros(self.dim)  # [m/s] the own plan after separation (Remark 1)
         self._course_start: tuple[float, float] | None = None  # (time [s], away heading [deg]) of the recovery
         self._calibration = SpeedCalibration(c.speed_ratio_tau_s)
         self._asked_speed_m_s = 0.0  # [m/s] diff-drive/Ackermann: the forward speed last asked (before the guards)
+        self._stopped_since_s: float | None = None  # [s] diff-drive/Ackermann: since when it is asked to stop
+        self._leg_turn = "out"  # REPOSITIONING, non-holonomic: "out", then "turn" towards the leg's target, "done"
 
     @property
     def model(self) -> TickModel:
@@ -163,6 +167,8 @@ class CarrierStepper:
                                        else np.zeros_like(self.velocity_m_s))
             if mode not in (CarrierMode.RECOVERING, CarrierMode.PAUSED):
                 self._course_start = None  # the next recovery drives its course from its own start
+            if mode is CarrierMode.REPOSITIONING:
+                self._leg_turn = "out"  # a new repositioning turns afresh
             self.mode = mode
         return ModeUpdate(before, mode, why, leg_changed)
 
@@ -200,12 +206,13 @@ class CarrierStepper:
             # safety.carrier_max_accel_m_s2 (the built-in robot's braking) would keep it driving.
             self.velocity_m_s = np.zeros(self.dim)
             self._asked_speed_m_s = 0.0
+            self._stopped_since_s = now_s if self._stopped_since_s is None else self._stopped_since_s
             return Command(STOP)
         separated = self.mode is not CarrierMode.APPROACHING
         plan = self._plan_velocity if self.mode is CarrierMode.SEPARATED else None
         res = carrier_tick(x_c, separated, self.model, own_plan_velocity=plan, u_prev=self.velocity_m_s,
                            dt_s=dt_s if dt_s > 0 else None,
-                           course_velocity=self.course_velocity(x_c, now_s, recovery_velocity_m_s))
+                           course_velocity=self.course_velocity(x_c, now_s, recovery_velocity_m_s, state.yaw_rad))
         u = np.asarray(res.u, dtype=float)
         yaw = state.yaw_rad if state.yaw_rad is not None else 0.0
         t, v_meas = state.t_s, state.velocity_ned_m_s[:self.dim]
@@ -222,7 +229,12 @@ class CarrierStepper:
                 u, active = g.u, active or g.active
             cmd = track(u, yaw, self.tracking)
         else:
-            cmd = self._started(u, yaw, moving, dt_s)
+            if self._restarting(now_s):  # it stands on, and the law starts again from rest after
+                u = np.zeros_like(u)
+            sideways = abs(math.cos(yaw) * float(v_meas[1]) - math.sin(yaw) * float(v_meas[0]))
+            cmd = self._started(u, yaw, moving, dt_s, sideways)
+            self._stopped_since_s = (None if cmd.speed_m_s > 0 else
+                                     now_s if self._stopped_since_s is None else self._stopped_since_s)
             speed = cmd.speed_m_s
             for guard in self.legs.guards:
                 speed, acted = guard.limit_heading(t, x_c, speed, yaw, v_meas, age_s, bearing_rad=cmd.bearing_rad)
@@ -238,7 +250,17 @@ class CarrierStepper:
         self.velocity_m_s = u
         return Command(cmd, active, bool(np.all(res.feasible)))
 
-    def _started(self, u: np.ndarray, yaw: float, moving_m_s: float, dt_s: float) -> Tracked:
+    def _restarting(self, now_s: float) -> bool:
+        """A diff-drive or Ackermann carrier with ``carrier.min_moving_speed_m_s`` that was last
+        asked to stop less than :data:`RESTART_S` ago at ``now_s`` [s]: it stands on. PX4's rover
+        holds a rest point once it stands (``carrier.mavlink.stand``), which resets its speed
+        loop; asked to drive again the tick it stopped (leg 2's ride began as its turn towards
+        target 2 ended), the SIH rover leapt to 1.9 m/s, 55 deg off its bearing, under the riding
+        passenger (docs/recovery.md, "On real PX4")."""
+        return (self.min_moving_speed_m_s > 0 and self._stopped_since_s is not None
+                and now_s - self._stopped_since_s < RESTART_S)
+
+    def _started(self, u: np.ndarray, yaw: float, moving_m_s: float, dt_s: float, sideways_m_s: float = 0.0) -> Tracked:
         """A diff-drive or Ackermann carrier's tracked command for the law's ``u`` [m/s] at heading
         ``yaw`` [rad], its forward speed held to the gentle start and the lead
         (:mod:`mission.carrier.start`) against its measured forward speed ``moving_m_s`` [m/s].
@@ -249,7 +271,19 @@ class CarrierStepper:
         than the carrier already does, brakes it while it turns, and the next cap is lower still.
         PX4's SIH rover turning onto leg 2 from rest (106 deg) stuck and leapt on that, 0 to
         1-2 m/s every 0.5-2 s for 6 s under a riding passenger (docs/recovery.md, "On real PX4").
-        With either cap on, the speed asked also grows at most at ``safety.carrier_max_accel_m_s2``."""
+        With either cap on, the speed asked also grows at most at ``safety.carrier_max_accel_m_s2``.
+
+        Once it moves (forward at :data:`~mission.carrier.start.MOVING_M_S` or more), or while its
+        velocity's part across its heading, ``sideways_m_s`` [m/s], is that large (its estimate
+        cannot tell a crawl from a stand), neither the caps nor the tracking law's slowing in a turn
+        ask less than ``carrier.min_moving_speed_m_s`` while the law asks that much (below it, the
+        law's own planar speed, which grows at the law's acceleration limit). From a clean stand
+        the gentle start stays: asked 0.8 m/s at once on leg 1 the SIH rover leapt to 0.55 m/s in
+        0.13 s and the passenger trailed 0.39 m. PX4's rover estimates its speed
+        as its velocity's size signed by the forward part, and its EKF's velocity at rest errs
+        0.2-0.9 m/s sideways after a drive, so at leg 2's start the caps, keyed on that forward speed,
+        asked 0.1-0.8 m/s in turn while its speed loop read +-0.6 m/s, and it swung 0 to 0.9 m/s
+        under the riding passenger (docs/recovery.md, "On real PX4")."""
         cmd = track(u, yaw, self.tracking)
         asked = np.array([cmd.speed_m_s])
         capped = float(speed_lead(gentle_start(asked, np.array([self._asked_speed_m_s]), moving_m_s,
@@ -260,8 +294,15 @@ class CarrierStepper:
             # at most at the law's acceleration limit from where they left it, as the capped law
             # command did (and its turn onto the bearing does not add to it)
             capped = min(capped, self._asked_speed_m_s + accel * dt_s)
-        if capped < cmd.speed_m_s:  # the same direction, slower: the tracking law's yaw-rate cap goes with the speed
-            cmd = track(u * (capped / cmd.speed_m_s), yaw, self.tracking)
+        # the least speed asked while driving: the law's planar speed up to carrier.min_moving_speed_m_s
+        # (a vehicle turning in place, asked no forward speed, is left so)
+        unsure = moving_m_s >= MOVING_M_S or sideways_m_s >= MOVING_M_S
+        floor = min(float(np.linalg.norm(u[:2])), self.min_moving_speed_m_s) if cmd.speed_m_s > 0 and unsure else 0.0
+        if accel and dt_s > 0:  # a floor that sets in mid-start grows from the speed asked, at the law's ramp
+            floor = min(floor, self._asked_speed_m_s + accel * dt_s)
+        wanted = max(min(capped, cmd.speed_m_s), floor)
+        if wanted != cmd.speed_m_s:  # the same direction: the tracking law's yaw-rate cap goes with the speed
+            cmd = track(u * (wanted / cmd.speed_m_s), yaw, self.tracking)
         self._asked_speed_m_s = cmd.speed_m_s
         return cmd
 
@@ -279,15 +320,37 @@ class CarrierStepper:
         return clear_heading_deg(x_c, away, others.centers, others.radii, lim.margin_m, self.course.speed_m_s,
                                  lim.cbf_gain, ROUND_BAND_M)
 
-    def course_velocity(self, x_c: np.ndarray, now_s: float,
-                        recovery_velocity_m_s: np.ndarray | None = None) -> np.ndarray | None:
+    def course_velocity(self, x_c: np.ndarray, now_s: float, recovery_velocity_m_s: np.ndarray | None = None,
+                        yaw_rad: float | None = None) -> np.ndarray | None:
         """RECOVERING: the recovery course's velocity at ``now_s`` [m/s] (dim,) (``recovery_velocity_m_s``
         when given), its clock and its default heading (away from the target) taken at the first
         step of the recovery; REPOSITIONING: straight away from the leg's target at the carrier's
         top speed until its dock point is ``b c + mission.leg_start_margin_m`` (and
-        :data:`~mission.config.legs.REPOSITION_SPARE_M`) from it, then zero; else None."""
+        :data:`~mission.config.legs.REPOSITION_SPARE_M`) from it, then zero. A diff-drive or
+        Ackermann carrier at heading ``yaw_rad`` [rad] with ``carrier.min_moving_speed_m_s`` > 0 drives
+        out :data:`~mission.carrier.legs.TURN_ROOM_M` farther, then towards the target at that speed
+        until it heads at it (:meth:`~mission.carrier.legs.Legs.turn_velocity`), so that the leg's
+        ride starts straight ahead, then zero (out again, were its turn to end nearer than the start
+        distance). Else None.
+
+        The turn is why: PX4's SIH rover stood facing 16-170 deg off the next target's bearing
+        when leg 2's ride began, and turned from rest under the riding passenger (docs/recovery.md,
+        "On real PX4")."""
         if self.mode is CarrierMode.REPOSITIONING:
-            return self.legs.reposition_velocity(x_c, float(self.model.carrier_safety.max_speed_m_s or 1.0))
+            top = float(self.model.carrier_safety.max_speed_m_s or 1.0)
+            if yaw_rad is None or self.tracking.kind == "holonomic" or self.min_moving_speed_m_s <= 0:
+                return self.legs.reposition_velocity(x_c, top)
+            if self._leg_turn == "out":  # out to the leg's start and the room for the turn
+                out = self.legs.reposition_velocity(x_c, top, TURN_ROOM_M)
+                if out.any():
+                    return out
+                self._leg_turn = "turn"
+            if self._leg_turn == "turn":
+                turn = self.legs.turn_velocity(x_c, yaw_rad, self.min_moving_speed_m_s)
+                if turn is not None:
+                    return turn
+                self._leg_turn = "done"  # it stands from here, whatever its heading wobbles to
+            return self.legs.reposition_velocity(x_c, top)
         if self.mode is not CarrierMode.RECOVERING:
             return None
         if recovery_velocity_m_s is not None:

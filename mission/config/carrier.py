@@ -159,6 +159,12 @@ class CarrierSection(Section):
         description=("[m/s] once it moves (measured at 0.15 m/s or more), its command's speed is at most its measured "
                      "speed plus this: a rover that crawls while its command runs on winds up its speed loop and leaps "
                      "(mission.carrier.start); 0 off"))
+    min_moving_speed_m_s: float = Field(0.0, ge=0, le=100,
+        description=("[m/s] diff-drive/Ackermann: while the law asks at least this planar speed, the forward speed "
+                     "asked is at least this too (the gentle start, the lead and the tracking law's slowing in a turn "
+                     "never ask less); below it, the law's own speed: no crawl that a speed loop whose estimate errs by "
+                     "about this much cannot hold (mission.carrier.start); and before a leg after the first it turns "
+                     "at this speed to face the leg's target, then stands (mission.carrier.legs); 0 off"))
     recovery_speed_m_s: float = Field(0.0, ge=0, le=100,
         description=("[m/s] while the passenger comes home (returns, holds off, approaches, docks) the carrier drives "
                      "its steady recovery course at this speed, after the legs of recovery_course; 0: it stops and waits "

@@ -6,11 +6,13 @@ carrier (sim/batch/recovery.py) commands what the controller's loop on the built
 commands, step for step (over real Zenoh: tests/integration/carrier/test_carrier_step_agrees.py)."""
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
 import pytest
 
+from mission.carrier.backends import OwnState
 from mission.carrier.backends.sim import SimRobot
 from mission.carrier.modes import CarrierMode, PassengerView
 from mission.carrier.step import REAL_DELAY_S, CarrierStepper, carrier_model, guard_params
@@ -239,3 +241,139 @@ def test_an_ackermann_carrier_turning_from_rest_is_not_braked_by_its_own_lead(tu
     if turn_deg > 60.0:
         assert turning.any() and speed[turning].min() >= 0.3 * 1.2 - 1e-6  # old: 0.12-0.14 m/s
     assert error[-1] < 5.0 and speed[-1] == pytest.approx(1.2, abs=0.01)  # lined up and at the law's speed (old, 180: 0.14)
+
+
+def _px4_rover_cfg(min_moving_speed_m_s: float, targets: list[list[float]] | None = None,
+                   start_yaw_rad: float | None = None) -> Config:
+    """The PX4 cycle's rover settings (gentle start 0.25 m/s^2, lead 0.3 m/s, Ackermann)."""
+    return from_dict({
+        "scenario": {"carrier_start": [0.0, 0.0, 0.0], "carrier_mode": "stop",
+                     **({"targets": targets} if targets else {"target": TARGET})},
+        "safety": {"carrier_max_accel_m_s2": ACCEL, "carrier_max_speed_m_s": 2.0},
+        **({"mission": {"final_action": "return"}} if targets else {}),
+        "carrier": {"rate_hz": 30.0, "max_speed_m_s": 1.2, "kinematics": "ackermann", "wheelbase_m": 0.321,
+                    "max_steer_rad": 0.5236, "min_speed_fraction": 0.3, "start_accel_m_s2": 0.25,
+                    "start_lead_m_s": 0.3, "min_moving_speed_m_s": min_moving_speed_m_s,
+                    "start_yaw_rad": start_yaw_rad, "recovery_speed_m_s": 1.2},
+    })
+
+
+@pytest.mark.parametrize("floor", [0.0, 0.8])
+def test_a_rover_whose_estimate_wanders_sideways_is_never_asked_a_crawl(floor: float) -> None:
+    """PX4's SIH rover at rest after a drive: its EKF says 0.6 m/s sideways and a forward speed
+    that flips +-0.2 m/s while it stands. The gentle start and the lead key on that forward speed;
+    they asked 0.1-0.8 m/s in turn, inside the band its speed loop cannot resolve, and it swung 0 to
+    0.9 m/s under the riding passenger. With carrier.min_moving_speed_m_s the speed asked is the
+    law's own (1 m/s^2) up to the floor, and never below it after."""
+    cfg = _px4_rover_cfg(floor)
+    stepper = CarrierStepper(cfg, True)
+    bearing = math.atan2(TARGET[1], TARGET[0])
+    side = np.array([-math.sin(bearing), math.cos(bearing), 0.0]) * 0.6
+    ahead = np.array([math.cos(bearing), math.sin(bearing), 0.0])
+    stepper.update_mode(_view("RIDING"))
+    asked = []
+    for k in range(int(3.0 / DT)):
+        t = (k + 1) * DT
+        forward = 0.2 if (k // 5) % 2 else -0.2  # its sign flips every 5 ticks, the rover stands
+        state = OwnState(t, np.zeros(3), side + forward * ahead, bearing)
+        asked.append(stepper.decide(state, DT, 0.0, t).tracked.speed_m_s)
+    speed = np.array(asked)
+    assert stepper.mode is CarrierMode.APPROACHING
+    later = speed[int(1.0 / DT):]  # [s] 1 s on: the law asks 1 m/s and more
+    if floor:
+        assert later.min() >= 0.8 - 1e-9 and speed[int(0.5 / DT)] == pytest.approx(0.5, abs=0.04)
+        assert np.diff(speed).max() <= ACCEL * DT + 1e-9  # never faster than the law's own ramp
+    else:
+        assert later.max() < 0.8  # the crawl the floor removes
+
+
+@pytest.mark.parametrize("floor", [0.0, 0.8])
+def test_a_rover_repositioning_turns_to_face_the_next_target_before_it_stands(floor: float) -> None:
+    """Leg 2 on PX4: the rover docked the passenger driving its recovery course, away from target
+    1 and ~150 deg off target 2's bearing, and stood so; leg 2's ride then began with a turn from
+    rest. With carrier.min_moving_speed_m_s it turns towards target 2 at that speed while the
+    passenger is in TRANSIT and stands facing it, beyond the leg-start distance."""
+    t0, t1 = [15.0, 0.0, -5.0], [-25.0, -10.0, -4.0]
+    cfg = _px4_rover_cfg(floor, targets=[t0, t1], start_yaw_rad=math.radians(20.0))
+    clock = ManualClock()
+    stepper, robot = CarrierStepper(cfg, False), SimRobot(cfg, clock)
+    stepper.mode = CarrierMode.RECOVERING  # driving its course (20 deg) when the passenger docks
+    for _ in range(int(2.0 / DT)):
+        _step(stepper, robot, clock, "DOCKED")
+    for _ in range(int(20.0 / DT)):
+        clock.advance(DT)
+        robot.advance(DT)
+        stepper.update_mode(PassengerView(Phase.TRANSIT, leg=1))
+        robot.command(stepper.decide(robot.own_state(), DT, 0.0, clock.now()).tracked)
+    state = robot.own_state()
+    x = state.position_ned_m
+    bearing = math.atan2(t1[1] - x[1], t1[0] - x[0])
+    error_deg = abs(math.degrees(math.remainder(bearing - float(state.yaw_rad), 2 * math.pi)))
+    assert stepper.mode is CarrierMode.REPOSITIONING and robot.speed_m_s == pytest.approx(0.0, abs=1e-9)
+    dock = x + np.asarray(cfg.mission.dock_offset_ned_m)
+    assert float(np.linalg.norm(np.subtract(t1, dock))) >= stepper.legs.start_m  # the leg can start
+    if floor:
+        assert error_deg <= 12.0  # facing target 2 (a 10 deg tolerance and the braking's last turn)
+    else:
+        assert error_deg > 90.0  # the old stand: facing away (109 deg)
+
+
+@pytest.mark.parametrize("floor", [0.0, 0.8])
+def test_a_rover_that_never_crawls_stands_a_second_once_stopped(floor: float) -> None:
+    """Asked to drive the tick after it was told to stop (leg 2's ride began as its turn towards
+    target 2 ended), PX4's SIH rover leapt to 1.9 m/s: its speed loop had not been reset by a
+    held rest point. With carrier.min_moving_speed_m_s it stands RESTART_S (1 s) first, then
+    starts from rest at the law's ramp."""
+    cfg = _px4_rover_cfg(floor)
+    stepper = CarrierStepper(cfg, True)
+    bearing = math.atan2(TARGET[1], TARGET[0])
+    still = OwnState(0.0, np.zeros(3), np.zeros(3), bearing)
+    now = 0.0
+    for phase, seconds in (("RIDING", 3.0), ("NAVIGATING", 0.5)):
+        for _ in range(round(seconds / DT)):
+            now += DT
+            stepper.update_mode(_view(phase))
+            stepper.decide(dataclasses.replace(still, t_s=now), DT, 0.0, now)
+    stopped_at = now  # told to stop 0.5 s ago
+    asked = []
+    for k in range(int(2.0 / DT)):
+        t = stopped_at + (k + 1) * DT
+        stepper.update_mode(_view("RETURNING"))
+        asked.append(stepper.decide(dataclasses.replace(still, t_s=t), DT, 0.0, t).tracked.speed_m_s)
+    assert stepper.mode is CarrierMode.RECOVERING
+    speed, t = np.array(asked), np.arange(1, len(asked) + 1) * DT
+    if floor:
+        assert speed[t < 0.5 - 1e-6].max() == 0.0 and speed[-1] > 0.2  # stood 1 s in all, then drove
+        assert np.diff(speed).max() <= ACCEL * DT + 1e-9  # from rest, at the law's ramp
+    else:
+        assert speed[0] > 0.0
+
+
+def test_from_a_clean_stand_the_gentle_start_stays() -> None:
+    """Leg 1 on PX4 (its estimate at rest clean): asked the floor's 0.8 m/s at once the SIH rover
+    leapt to 0.55 m/s in 0.13 s and the passenger trailed 0.39 m; the gentle start (0.25 m/s^2)
+    breaks it free lower. The floor waits until it moves or its estimate errs sideways."""
+    stepper = CarrierStepper(_px4_rover_cfg(0.8), True)
+    bearing = math.atan2(TARGET[1], TARGET[0])
+    stepper.update_mode(_view("RIDING"))
+    asked = [stepper.decide(OwnState((k + 1) * DT, np.zeros(3), np.zeros(3), bearing), DT, 0.0, (k + 1) * DT)
+             .tracked.speed_m_s for k in range(int(2.0 / DT))]
+    assert max(asked) == pytest.approx(0.25 * 2.0, abs=0.01)  # 2 s at 0.25 m/s^2
+
+
+def test_a_floor_that_sets_in_mid_start_grows_at_the_law_s_ramp() -> None:
+    """Leg 1 on PX4: the gentle start asked 0.32 m/s when the EKF's sideways velocity reached
+    0.19 m/s; the floor then asked 0.80 m/s the next tick, the rover leapt to 1.1 m/s and the
+    passenger trailed 0.37 m. The floor grows from the speed asked at the law's acceleration."""
+    stepper = CarrierStepper(_px4_rover_cfg(0.8), True)
+    bearing = math.atan2(TARGET[1], TARGET[0])
+    side = np.array([-math.sin(bearing), math.cos(bearing), 0.0])
+    stepper.update_mode(_view("RIDING"))
+    asked = []
+    for k in range(int(3.0 / DT)):
+        t = (k + 1) * DT
+        v = side * (0.0 if t < 1.2 else 0.2)  # a clean stand, then its estimate errs sideways
+        asked.append(stepper.decide(OwnState(t, np.zeros(3), v, bearing), DT, 0.0, t).tracked.speed_m_s)
+    speed = np.array(asked)
+    assert np.diff(speed).max() <= ACCEL * DT + 1e-9  # old: 0.30 -> 0.80 in one tick
+    assert speed[-1] >= 0.8 - 1e-9  # the floor reached
