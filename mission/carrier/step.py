@@ -45,7 +45,7 @@ from mission.carrier.guard import GuardParams
 from mission.carrier.legs import TURN_ROOM_M, Legs
 from mission.carrier.modes import CarrierMode, PassengerView, next_mode
 from mission.carrier.start import MOVING_M_S, gentle_start, speed_lead
-from mission.carrier.tracking import SpeedCalibration, Tracked, TrackingParams, heading_of, track
+from mission.carrier.tracking import SpeedCalibration, Tracked, TrackingParams, heading_of, own_speed_m_s, track
 from mission.config.carrier import KINDS
 from mission.config.schema import Config
 from mission.core.tick import ROUND_BAND_M, TickModel, carrier_tick
@@ -218,8 +218,7 @@ class CarrierStepper:
         t, v_meas = state.t_s, state.velocity_ned_m_s[:self.dim]
         # A carrier that stands speeds its command up gently until it moves (stiction: mission.carrier.start);
         # a robot that moves along its heading by its forward speed (its estimator's sideways wander is no motion)
-        moving = (float(np.linalg.norm(v_meas[:2])) if self.tracking.kind == "holonomic" or state.yaw_rad is None
-                  else abs(math.cos(yaw) * float(v_meas[0]) + math.sin(yaw) * float(v_meas[1])))
+        moving = own_speed_m_s(v_meas, state.yaw_rad, self.tracking.kind)
         active = False
         if self.tracking.kind == "holonomic":
             u = speed_lead(gentle_start(u, self.velocity_m_s, moving, self.start_accel_m_s2, dt_s), moving,

@@ -96,6 +96,18 @@ def track(u_ned_m_s: np.ndarray, yaw_rad: float, p: TrackingParams) -> Tracked:
     return Tracked(speed, omega, bearing, heading_of(speed, yaw_rad), heading_of(speed, bearing))
 
 
+def own_speed_m_s(velocity_ned_m_s: np.ndarray, yaw_rad: float | None, kind: str) -> float:
+    """How fast [m/s] a vehicle whose estimator says ``velocity_ned_m_s`` [m/s] NED moves: a
+    diff-drive or Ackermann vehicle (``kind``) with a heading ``yaw_rad`` [rad] moves only along it,
+    so its forward speed's size (the sideways part is the estimator's error: PX4's SIH rover,
+    standing, was estimated at 0.3-1.1 m/s sideways for seconds); otherwise, or without a heading,
+    the horizontal speed. What the gentle start calls moving and the MAVLink backend calls at rest."""
+    vn, ve = float(velocity_ned_m_s[0]), float(velocity_ned_m_s[1])
+    if kind == "holonomic" or yaw_rad is None:
+        return math.hypot(vn, ve)
+    return abs(math.cos(yaw_rad) * vn + math.sin(yaw_rad) * ve)
+
+
 class SpeedCalibration:
     """``carrier.speed_ratio_tau_s`` > 0: a vehicle whose own speed loop runs fast is asked for
     ``v / r``, where ``r`` in [1, 3] is its measured forward speed over the speed last asked,

@@ -44,7 +44,7 @@ import numpy as np
 
 from mission.flight_mode import FlightMode
 from mission.carrier.backends import OwnState
-from mission.carrier.tracking import Tracked
+from mission.carrier.tracking import Tracked, own_speed_m_s
 from mission.core.setpoint import Setpoint
 from mission.time.clock import Clock, Downstream
 from mission.mavlink.lockstep import MavlinkRelay
@@ -59,18 +59,6 @@ log = logging.getLogger(__name__)
 
 STOP_SPEED_M_S = 1e-3  # [m/s] "stop" to a PX4 rover: this speed along its own heading (see command)
 PARK_SPEED_M_S = 0.2  # [m/s] below this the stopped carrier is handed to PX4's Hold
-
-
-def rest_speed_m_s(velocity_ned_m_s: np.ndarray, yaw_rad: float | None, kind: str) -> float:
-    """How fast [m/s] a vehicle whose estimator says ``velocity_ned_m_s`` [m/s] NED moves, for
-    telling whether it is at rest: a diff-drive or Ackermann vehicle (``kind``) with a heading
-    ``yaw_rad`` [rad] moves only along it, so its forward speed's size (the sideways part is the
-    estimator's error: PX4's SIH rover, standing, was estimated at 0.3-1.1 m/s sideways for
-    seconds, and its stand never engaged); otherwise, or without a heading, the horizontal speed."""
-    vn, ve = float(velocity_ned_m_s[0]), float(velocity_ned_m_s[1])
-    if kind == "holonomic" or yaw_rad is None:
-        return math.hypot(vn, ve)
-    return abs(math.cos(yaw_rad) * vn + math.sin(yaw_rad) * ve)
 
 
 def open_backend(cfg: Config, clock: Clock, session: object) -> MavlinkCarrier:
@@ -236,7 +224,7 @@ class MavlinkCarrier:
             pos, vel = st.position_ned_m, st.velocity_ned_m_s
             if pos is None or vel is None or not st.position_valid:
                 return None
-            if rest_speed_m_s(vel, st.yaw_rad, self.kind) >= self._stand_speed_m_s:
+            if own_speed_m_s(vel, st.yaw_rad, self.kind) >= self._stand_speed_m_s:
                 return None
             self.stand_at = np.array(pos, dtype=float)
             log.info("carrier vehicle: at rest, held at %s m (its local NED)", np.round(self.stand_at, 2).tolist())

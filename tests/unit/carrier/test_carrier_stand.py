@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from mission.carrier.backends.mavlink import rest_speed_m_s
+from mission.carrier.tracking import own_speed_m_s
 
 STAND_M_S = 0.1  # carrier.mavlink.stand_speed_m_s of configs/px4_sitl_cycle.toml
 
@@ -21,19 +21,19 @@ def test_a_standing_rover_s_sideways_estimate_is_not_motion() -> None:
     yaw = math.radians(-169.0)
     v = np.array([0.19, -0.64, 0.0])
     assert math.hypot(v[0], v[1]) > STAND_M_S  # before: "still rolling", never held
-    assert rest_speed_m_s(v, yaw, "ackermann") < STAND_M_S
-    assert rest_speed_m_s(v, yaw, "diff_drive") < STAND_M_S
+    assert own_speed_m_s(v, yaw, "ackermann") < STAND_M_S
+    assert own_speed_m_s(v, yaw, "diff_drive") < STAND_M_S
 
 
 @pytest.mark.parametrize("kind", ["ackermann", "diff_drive"])
 def test_a_rover_rolling_forward_or_back_is_not_at_rest(kind: str) -> None:
     yaw = math.radians(30.0)
     ahead = np.array([math.cos(yaw), math.sin(yaw), 0.0])
-    assert rest_speed_m_s(0.3 * ahead, yaw, kind) == pytest.approx(0.3)
-    assert rest_speed_m_s(-0.3 * ahead, yaw, kind) == pytest.approx(0.3)
+    assert own_speed_m_s(0.3 * ahead, yaw, kind) == pytest.approx(0.3)
+    assert own_speed_m_s(-0.3 * ahead, yaw, kind) == pytest.approx(0.3)
 
 
 def test_a_holonomic_vehicle_or_one_without_a_heading_counts_its_horizontal_speed() -> None:
     v = np.array([0.19, -0.64, 0.5])
-    assert rest_speed_m_s(v, math.radians(-169.0), "holonomic") == pytest.approx(math.hypot(0.19, 0.64))
-    assert rest_speed_m_s(v, None, "ackermann") == pytest.approx(math.hypot(0.19, 0.64))
+    assert own_speed_m_s(v, math.radians(-169.0), "holonomic") == pytest.approx(math.hypot(0.19, 0.64))
+    assert own_speed_m_s(v, None, "ackermann") == pytest.approx(math.hypot(0.19, 0.64))
