@@ -7,9 +7,10 @@ vehicle per passenger, one ``marsupial run --passenger NAME`` per passenger, on 
   ``team.slots[].offset_ned_m``) and follows the carrier's state;
 - each passenger's mission hears its teammates' statuses and the carrier's announced target.
 
-The bus is signed with one throwaway pair key (``zenoh.signing_key_file``): one Ed25519 key per
-robot names one peer, and every robot of a team hears several (docs/team.md). The MAVLink links are
-signed with a throwaway key as the pair demo's are.
+The bus is signed one key per robot: a throwaway Ed25519 key pair for the carrier and for each
+passenger, the public halves in one private directory (``zenoh.public_keys_dir``, :func:`team_keys`),
+each process given its own private key (docs/team.md). The MAVLink links are signed with a
+throwaway key as the pair demo's are.
 
 Clocks: wall clocks scaled by ``speed`` (``--realtime``). Lockstep is the mock vehicle's simulated
 time, one vehicle per clock; several vehicles would need one time for them all, which is not built,
@@ -18,9 +19,11 @@ so a team always flies on the scaled clocks, and its figures depend on the machi
 from __future__ import annotations
 
 import json
+import shutil
 import socket
 import subprocess
 import sys
+import tempfile
 import time
 from contextlib import ExitStack
 from pathlib import Path
@@ -48,21 +51,42 @@ def _csv(values: Any) -> str:
     return ",".join(repr(float(v)) for v in values)
 
 
+def team_keys(stack: ExitStack, names: list[str]) -> Path:
+    """A private temporary directory (removed when ``stack`` closes) holding a fresh Ed25519 key pair
+    per robot of a team whose passengers are ``names``: ``<robot>.key`` (mode 0600) and
+    ``<robot>.pub`` for :data:`mission.bus.auth.CARRIER` and each name (``zenoh.public_keys_dir``)."""
+    from mission.bus.auth import CARRIER, public_key_path
+    from mission.config.keys import write_key_pair
+
+    folder = Path(tempfile.mkdtemp(prefix="marsupial-team-keys-"))
+    stack.callback(shutil.rmtree, folder, True)
+    for robot in (CARRIER, *names):
+        write_key_pair(folder / f"{robot}.key", public_key_path(folder, robot))
+    return folder
+
+
+def _signed_as(keys: Path | None, robot: str) -> list[str]:
+    """The options that sign robot ``robot``'s bus with its own key of the team's ``keys`` (none: unsigned)."""
+    return [] if keys is None else ["--zenoh-public-keys", str(keys), "--zenoh-private-key", str(keys / f"{robot}.key")]
+
+
 def start_team(cfg: Config, config: str, zenoh_ep: str, speed: float, log_root: Path, stack: ExitStack, quiet: bool,
-               bus_key: Path | None, mav_key: Path | None, seed: int, estimate_error: float,
+               keys: Path | None, mav_key: Path | None, seed: int, estimate_error: float,
                run_type: Any, lockstep: bool = True) -> tuple[subprocess.Popen, list[Any]]:
     """Start the team's carrier and, per passenger, its vehicle and its mission; register their
-    cleanup on ``stack``. ``run_type``: the demo's record of one passenger's processes
+    cleanup on ``stack``. ``keys``: the team's key directory (:func:`team_keys`; None: unsigned).
+    ``run_type``: the demo's record of one passenger's processes
     (:class:`sim.demo.PairRun`, one per passenger, named after it). Returns the carrier and the runs."""
+    from mission.bus.auth import CARRIER
+
     err = subprocess.DEVNULL if quiet else None
     pair = cfg.zenoh.pair
-    signed = ["--zenoh-signing-key", str(bus_key)] if bus_key is not None else []
     mav_signed = ["--signing-key", str(mav_key)] if mav_key is not None else []
     mode = ["--lockstep"] if lockstep else []
     epoch = ["--log-epoch-ns", str(time.time_ns())] if lockstep else []  # one simulated clock: one epoch
     carrier = subprocess.Popen(child_command("carrier", config, "--speed", str(speed), "--zenoh-connect", zenoh_ep, "--summary",
                                     str(log_root / "carrier.json"), "--mcap", str(log_root / "carrier.mcap"),
-                                    "--backend", "sim", *signed, *mode, *epoch), stderr=err)
+                                    "--backend", "sim", *_signed_as(keys, CARRIER), *mode, *epoch), stderr=err)
     stack.callback(stop_process, carrier)
     runs = []
     for i, p in enumerate(cfg.team.passengers):
@@ -79,8 +103,8 @@ def start_team(cfg: Config, config: str, zenoh_ep: str, speed: float, log_root: 
         stack.callback(stop_process, vehicle)
         mission = subprocess.Popen(child_command("run", config, "--passenger", p.name, "--mavlink", f"udpin:127.0.0.1:{port}",
                                         "--zenoh-connect", zenoh_ep, "--speed", str(speed), "--log-dir", str(run.log_dir),
-                                        *signed, *mav_signed, *mode, *epoch), stdout=subprocess.PIPE, stderr=err,
-                                   text=True)
+                                        *_signed_as(keys, p.name), *mav_signed, *mode, *epoch), stdout=subprocess.PIPE,
+                                   stderr=err, text=True)
         stack.callback(stop_process, mission, 30.0)
         run.procs = {"vehicle": vehicle, "mission": mission}
         runs.append(run)
@@ -112,11 +136,11 @@ def run_team_demo(config: str, speed: float, log_root: Path, timeout_s: float, *
     log_root.mkdir(parents=True, exist_ok=True)
     zenoh_ep = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
     with ExitStack() as stack:
-        bus_key = throwaway_key(stack) if signed else None
+        keys = team_keys(stack, [p.name for p in cfg.team.passengers]) if signed else None
         mav_key = throwaway_key(stack, "mavlink.key") if signed else None
         router = open_session(ZenohSection(mode="router", listen=[zenoh_ep]))
         stack.callback(close_session, router)
-        carrier, runs = start_team(cfg, config, zenoh_ep, speed, log_root, stack, quiet, bus_key, mav_key, seed,
+        carrier, runs = start_team(cfg, config, zenoh_ep, speed, log_root, stack, quiet, keys, mav_key, seed,
                                    estimate_error, PairRun, lockstep)
         readers = watch_missions(runs, timeout_s, progress, stack)
         for r in runs:

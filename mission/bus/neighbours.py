@@ -3,10 +3,11 @@
 A passenger of a team (``marsupial run --passenger NAME``) hears every teammate's status on its
 own key (``marsupial/<pair>/passenger/<name>/state``, :func:`mission.bus.session.keys`), through one
 subscriber on :func:`mission.bus.session.team_status_keys`. A callback on Zenoh's thread checks
-each sample as the other feeds do (:mod:`mission.bus.feeds`: size, signature with the pair's key,
-decode and validation, :mod:`mission.bus.wire`), and then:
+each sample as the other feeds do: its name must be a teammate's (not this passenger's own, not a
+stranger's), else ``unbound``; then size, signature (the pair's key, or with one key per robot the
+named teammate's own, :meth:`mission.bus.auth.BusAuth.for_peer`), decode and validation
+(:mod:`mission.bus.feeds`, :mod:`mission.bus.wire`); and then:
 
-- its name must be a teammate's (not this passenger's own, not a stranger's): else ``unbound``;
 - each name binds to the first source (the verified signer's stream, else Zenoh's
   ``source_info``) it hears; another source for that name is dropped as ``source`` until the
   bound one has been silent ``max_age_s`` (a restarted passenger is a new source);
@@ -84,7 +85,7 @@ class Roster:
 
 class NeighbourFeed:
     """The newest valid status of each of ``team``'s passengers but ``own`` on pair ``pair``
-    (see the module docstring); ``auth``: the pair's key (None: unsigned); ``roster``: each
+    (see the module docstring); ``auth``: this robot's keys (None: unsigned); ``roster``: each
     teammate's system id and legs from the team's file (:class:`Roster`, by name)."""
 
     def __init__(self, session: zenoh.Session, pair: str, own: str, team: Sequence[str], clock: Clock, *,
@@ -96,7 +97,8 @@ class NeighbourFeed:
         self.names = tuple(n for n in team if n != own)  # the teammates, in the team's order
         self.roster = dict(roster or {})
         self.max_speed_m_s, self.max_age_s = float(max_speed_m_s), float(max_age_s)
-        self._verifier = auth.verifier() if auth is not None else None
+        # each teammate's samples verify with its own key (a team's one key per robot), else the pair's
+        self._verifiers = {n: auth.for_peer(n).verifier() for n in self.names} if auth is not None else None
         self._lock = threading.Lock()
         self._heard: dict[str, _Heard] = {}
         self._received = 0
@@ -114,8 +116,11 @@ class NeighbourFeed:
             return  # our own status, delivered back to our session
         with self._lock:
             self._received += 1
+        if name is None or name not in self.names:
+            self._drop("unbound", key, "not a teammate's name")
+            return
         try:
-            raw, source = checked_payload(sample, self._verifier)
+            raw, source = checked_payload(sample, None if self._verifiers is None else self._verifiers[name])
             status = decode_passenger_json(raw)
         except WireError as exc:
             self._drop(exc.reason, key, str(exc))
@@ -125,9 +130,9 @@ class NeighbourFeed:
             self._drop("internal", key, "unexpected error")
             return
         with self._lock:
-            reason = "unbound" if name not in self.names else self._admit(name, source, status, rx)
+            reason = self._admit(name, source, status, rx)
             if reason is None:
-                self._heard[name] = _Heard(source, status, rx)  # type: ignore[index]
+                self._heard[name] = _Heard(source, status, rx)
                 self._accepted += 1
         if reason is not None:
             self._drop(reason, key, f"seq {status.seq} stamp {status.stamp_s} from {source}")
@@ -177,7 +182,7 @@ class NeighbourFeed:
         """Snapshot: ``{"received", "accepted", "dropped": {reason: n}, "heard": [names], "signed"}``."""
         with self._lock:
             return {"received": self._received, "accepted": self._accepted, "dropped": dict(self._dropped),
-                    "heard": sorted(self._heard), "signed": self._verifier is not None}
+                    "heard": sorted(self._heard), "signed": self._verifiers is not None}
 
     def close(self) -> None:
         """Undeclare the subscriber (idempotent)."""

@@ -247,16 +247,23 @@ class Verifier:
 
 class Ed25519Verifier(Verifier):
     """Checks that one subscription's samples were signed with the peer robot's private key
-    (its ``public_key``); the counter rules as :class:`Verifier`'s."""
+    (its ``public_key``; several: any one of them, as a team's carrier hears every passenger's
+    clock pings on one key); the counter rules as :class:`Verifier`'s."""
 
-    def __init__(self, public_key: Ed25519PublicKey, window_s: float = REPLAY_WINDOW_S) -> None:
-        self._public = public_key
+    def __init__(self, public_key: Ed25519PublicKey | tuple[Ed25519PublicKey, ...],
+                 window_s: float = REPLAY_WINDOW_S) -> None:
+        self._publics = public_key if isinstance(public_key, tuple) else (public_key,)
+        if not self._publics:
+            raise ValueError("an Ed25519 verifier needs at least one public key")
         self.streams = Streams(window_s)
 
     def _authentic(self, key_expr: str, payload: bytes, attachment: bytes | None) -> tuple[bytes, int, bytes]:
         signer, counter, signature, inner = _trailer(attachment, ED25519_TRAILER, MAGIC_ED25519)
-        try:
-            self._public.verify(signature, _signed_head(key_expr, signer, counter, inner) + payload)
-        except InvalidSignature:
-            raise WireError("signature", f"bad signature from signer {signer.hex()}") from None
-        return signer, counter, inner
+        signed = _signed_head(key_expr, signer, counter, inner) + payload
+        for public in self._publics:
+            try:
+                public.verify(signature, signed)
+            except InvalidSignature:
+                continue
+            return signer, counter, inner
+        raise WireError("signature", f"bad signature from signer {signer.hex()}")

@@ -19,7 +19,7 @@ import numpy as np
 
 from mission.carrier.backends import KINDS, describe, open_backend
 from mission.carrier.controller import CarrierController
-from mission.bus.auth import bus_auth, check_team_auth, unsigned_warning
+from mission.bus.auth import CARRIER, BusAuth, bus_auth, check_team_auth, team_bus_auth, unsigned_warning
 from mission.bus.bridge import describe_endpoints, keys, open_session
 from mission.bus.session import close_session
 from mission.time.clock import Clock, LockstepClock, ScaledClock
@@ -78,7 +78,7 @@ def main(cfg: Config, speed: float = 1.0, duration_s: float | None = None, stop_
                     steps.set_counters(lambda: ctl.passenger.counters)
                 if isinstance(clock, LockstepClock):
                     upstream = ZenohUpstream(clock, session, clock_keys(ctl.pair), ctl.passenger,
-                                             published=lambda: ctl.seq - 1, auth=ctl.auth)
+                                             published=lambda: ctl.seq - 1, auth=first_passenger_auth(ctl))
                     stack.callback(upstream.close)
                     clock.downstream = team_relays(cfg, ctl, session, clock, backend.lockstep_relay(session), stack)
                     stack.callback(clock.close)
@@ -116,10 +116,19 @@ def team_relays(cfg: Config, ctl: CarrierController, session: Any, clock: Lockst
     for name, feed in list(zip(ctl.team.names, ctl.team.feeds))[1:]:
         relay = ZenohRelay(session, clock_keys(ctl.pair, name), feed, LastSeq(lambda: ctl.seq - 1),
                            alive=_alive_of(feed), alive_watchdog_wall_s=cfg.sim.lockstep_carrier_wait_wall_s,
-                           auth=ctl.auth, name=f"passenger {name}", keepalive=clock.keepalive)
+                           auth=None if ctl.auth is None else ctl.auth.for_peer(name), name=f"passenger {name}",
+                           keepalive=clock.keepalive)
         stack.callback(relay.close)
         relays.append(relay)
     return Downstreams(relays)
+
+
+def first_passenger_auth(ctl: CarrierController) -> BusAuth | None:
+    """The carrier's keys for the lockstep calls of the passenger whose vehicle owns the time (a
+    team's first: only its own key verifies them; a pair's: the peer's)."""
+    if ctl.auth is None or ctl.team is None:
+        return ctl.auth
+    return ctl.auth.for_peer(ctl.team.names[0])
 
 
 def _alive_of(feed: Any) -> Any:
@@ -237,13 +246,17 @@ def _jsonable(value: Any) -> Any:
 @click.option("--zenoh-peer-key", "peer_key_file", type=click.Path(dir_okay=False), default=None, metavar="FILE",
               help="The passenger's Ed25519 public key (overrides zenoh.peer_public_key_file): the passenger's status "
                    "must verify with it.")
+@click.option("--zenoh-public-keys", "keys_dir", type=click.Path(file_okay=False), default=None, metavar="DIR",
+              help="A team's robots' Ed25519 public keys (overrides zenoh.public_keys_dir): carrier.pub and "
+                   "<passenger>.pub; with --zenoh-private-key (the carrier's own, the private half of DIR/carrier.pub) one "
+                   "key per robot on the team's bus.")
 def carrier_cli(config: str, backend: str | None, speed: float, pair: str | None, listen: tuple[str, ...],
                     connect: tuple[str, ...], encoding: str | None, rate: float | None, mavlink_url: str | None,
                     target_system: int | None, kinematics: str | None, offset_ned: str | None,
                     ros2_namespace: str | None, key_form: str | None, cmd_vel_type: str | None, duration: float | None,
                     lockstep: bool, summary_path: str | None, mcap_path: str | None, log_epoch_ns: int | None,
                     bus_key_file: str | None,
-                    own_key_file: str | None, peer_key_file: str | None) -> int:
+                    own_key_file: str | None, peer_key_file: str | None, keys_dir: str | None = None) -> int:
     """Run the carrier-side controller of CONFIG (a TOML file).
 
     The carrier waits until the passenger's published phase is RIDING, then drives towards
@@ -285,11 +298,13 @@ def carrier_cli(config: str, backend: str | None, speed: float, pair: str | None
         "zenoh.signing_key_file": bus_key_file,
         "zenoh.private_key_file": own_key_file,
         "zenoh.peer_public_key_file": peer_key_file,
+        "zenoh.public_keys_dir": keys_dir,
     })
+    check_team_auth(cfg.zenoh, len(cfg.team.passengers) if has_team(cfg) else 1)
     if not has_team(cfg) or len(cfg.team.passengers) == 1:
         cfg = sole_passenger(cfg, "driven by `marsupial carrier`")  # a team of one: its passenger's (docs/team.md)
     else:  # a team of several: one carrier serves them all (mission.carrier.team_bus), checked before anything opens
-        check_team_auth(cfg.zenoh, bus_auth(cfg.zenoh), len(cfg.team.passengers))
+        team_bus_auth(cfg.zenoh, [p.name for p in cfg.team.passengers], CARRIER)  # every key read and matched
     require_stated(cfg, CARRIER_FIELDS, "carrier")  # refused before it says anything about flying
     click.echo(startup_line(cfg, speed), err=True)
     if (unsigned := unsigned_warning(cfg.zenoh)) is not None:

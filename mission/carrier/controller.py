@@ -121,11 +121,11 @@ def passenger_view(feed: PassengerFeed, dock_ned_m: np.ndarray | None, tolerance
 
 def open_bus(cfg: Config, session: zenoh.Session, pair: str, clock: Clock,
              encoding: str | None, team: TeamBus | None = None) -> tuple[BusAuth | None, PassengerFeed, CarrierPublisher]:
-    """The carrier's end of pair ``pair``'s bus, signed with the pair's key when one is set
-    (``zenoh.signing_key_file``; the auth, else None): the passenger's feed, which binds only to a passenger that
+    """The carrier's end of pair ``pair``'s bus, signed per ``cfg.zenoh`` (:func:`mission.bus.auth.bus_auth`;
+    a team's per :attr:`TeamBus.auth`; the auth, else None: unsigned): the passenger's feed, which binds only to a passenger that
     began on the deck (``team``'s first passenger's, a team's), and the carrier's state publisher
     (``encoding`` None: ``zenoh.encoding``)."""
-    auth = bus_auth(cfg.zenoh, pair)
+    auth = team.auth if team is not None else bus_auth(cfg.zenoh, pair)
     passenger = team.feeds[0] if team is not None else PassengerFeed(
         session, pair, clock, max_age_s=cfg.carrier.passenger_timeout_s, auth=auth, bind_phases=BEFORE_RIDING,
         bind_samples=BIND_STATUSES)
@@ -150,8 +150,7 @@ class CarrierController:
     def __init__(self, cfg: Config, clock: Clock, session: zenoh.Session, backend: CarrierBackend, *,
                  pair: str | None = None, encoding: str | None = None, steps: StepSink | None = None) -> None:
         self.pair = pair or cfg.zenoh.pair
-        self.team = TeamBus(cfg, session, self.pair, clock, bus_auth(cfg.zenoh, self.pair),
-                            backend.brakes_itself) if has_team(cfg) else None
+        self.team = TeamBus(cfg, session, self.pair, clock, backend.brakes_itself) if has_team(cfg) else None
         if self.team is not None:
             cfg = self.team.own
         self.cfg, self.clock, self.backend, self.steps = cfg, clock, backend, steps

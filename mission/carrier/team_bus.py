@@ -9,9 +9,11 @@ and hands them to the :class:`TeamCarrier`, whose stepper the controller drives.
 carrier heads for goes out on every state it publishes (``CarrierState.target_ned_m``, signed with
 the state), so a passenger separates only on its own turn (:func:`mission.phases.types.my_turn`).
 
-Signing: the pair's key (``zenoh.signing_key_file``) signs and verifies every robot of the team.
-One Ed25519 key per robot (``zenoh.private_key_file`` with ``zenoh.peer_public_key_file``) names one
-peer, so a team of several is refused with it (one public key per passenger is not built).
+Signing: one Ed25519 key per robot, every robot's public key in ``zenoh.public_keys_dir``
+(:func:`mission.bus.auth.team_bus_auth`): each passenger's feed verifies only that passenger's own
+key; else the pair's key (``zenoh.signing_key_file``) signs and verifies every robot of the team. A
+single peer's key (``zenoh.peer_public_key_file``) names one peer, and a team of several is refused
+with it.
 """
 from __future__ import annotations
 
@@ -20,7 +22,7 @@ from typing import Any
 import numpy as np
 import zenoh
 
-from mission.bus.auth import BusAuth, check_team_auth
+from mission.bus.auth import CARRIER, BusAuth, check_team_auth, team_bus_auth
 from mission.bus.feeds import PassengerFeed
 from mission.carrier.heard import Heard
 from mission.carrier.modes import BEFORE_RIDING, BIND_STATUSES, PassengerView
@@ -39,13 +41,15 @@ class TeamBus:
     """The team of ``cfg`` (a ``[team]``) as its carrier hears it: the pure :attr:`carrier`, one
     passenger feed per passenger (:attr:`feeds`, the team's order) and each one's slot offset [m]
     NED (:attr:`offsets_ned_m`). ``own``: the carrier's own configuration
-    (:func:`mission.config.passenger.carrier_config`)."""
+    (:func:`mission.config.passenger.carrier_config`); :attr:`auth`: the carrier's keys on the team's
+    bus (:func:`mission.bus.auth.team_bus_auth`; None: unsigned)."""
 
-    def __init__(self, cfg: Config, session: zenoh.Session, pair: str, clock: Clock, auth: BusAuth | None,
-                 brakes_itself: bool) -> None:
-        check_team_auth(cfg.zenoh, auth, len(cfg.team.passengers))
+    def __init__(self, cfg: Config, session: zenoh.Session, pair: str, clock: Clock, brakes_itself: bool) -> None:
+        check_team_auth(cfg.zenoh, len(cfg.team.passengers))
         self.own, _ = carrier_config(cfg)
         self.names = team_names(cfg) or []
+        self.auth: BusAuth | None = team_bus_auth(cfg.zenoh, self.names, CARRIER, pair)
+        auth = self.auth
         team = cfg.team
         self.offsets_ned_m = [np.asarray(team.slots[team.slot_index(p.slot)].offset_ned_m, dtype=float)
                               for p in team.passengers]
@@ -55,7 +59,8 @@ class TeamBus:
         try:
             for name in self.names:
                 self.feeds.append(PassengerFeed(session, pair, clock, max_age_s=cfg.carrier.passenger_timeout_s,
-                                                auth=auth, bind_phases=BEFORE_RIDING, bind_samples=BIND_STATUSES,
+                                                auth=None if auth is None else auth.for_peer(name),
+                                                bind_phases=BEFORE_RIDING, bind_samples=BIND_STATUSES,
                                                 passenger=name))
         except Exception:
             self.close()

@@ -13,7 +13,7 @@ from typing import Any, Iterator, NamedTuple
 
 import click
 
-from mission.bus.auth import bus_auth, check_team_auth, unsigned_warning
+from mission.bus.auth import bus_auth, check_team_auth, team_bus_auth, unsigned_warning
 from mission.bus.neighbours import NeighbourFeed, Roster
 from mission.bus.bridge import CarrierFeed, PassengerPublisher, open_session, zenoh_config
 from mission.bus.session import close_session, congestion_for
@@ -107,7 +107,7 @@ def mission_io(cfg: Config, clock: Clock, tlog_path: str | Path | None = None, *
     heard (:class:`~mission.bus.neighbours.NeighbourFeed`). Everything is closed in reverse order on exit."""
     openers = feed_openers(cfg)
     key = read_signing_key(cfg.mavlink.signing_key_file) if cfg.mavlink.signing_key_file else None
-    auth = bus_auth(cfg.zenoh)
+    auth = bus_auth(cfg.zenoh) if team is None else team_bus_auth(cfg.zenoh, team.names, team.name)
     with ExitStack() as stack:
         session = open_session(cfg.zenoh)
         stack.callback(close_session, session)  # never raises, bounded: the mission's outcome stands
@@ -287,6 +287,10 @@ def exit_code(outcome: MissionOutcome) -> int:
 @click.option("--zenoh-peer-key", "peer_key_file", type=click.Path(dir_okay=False),
               help="The carrier's Ed25519 public key (overrides zenoh.peer_public_key_file): carrier states and clock "
               "messages must verify with it.")
+@click.option("--zenoh-public-keys", "keys_dir", type=click.Path(file_okay=False), default=None, metavar="DIR",
+              help="A team's robots' Ed25519 public keys (overrides zenoh.public_keys_dir): carrier.pub and "
+              "<passenger>.pub; with --zenoh-private-key (this passenger's own, the private half of its DIR/NAME.pub) "
+              "one key per robot on the team's bus.")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON at the end.")
 @click.option("--live", is_flag=False, flag_value=DEFAULT_LIVE, default=None, metavar="[HOST:PORT]",
               help=f"Serve the flight live to Foxglove (the foxglove-sdk WebSocket server) on HOST:PORT "
@@ -301,7 +305,7 @@ def exit_code(outcome: MissionOutcome) -> int:
 def run(config: str, mavlink_url: str | None, zenoh_listen: tuple[str, ...], zenoh_connect: tuple[str, ...],
         zenoh_mode: str | None, pair: str | None, speed: float, lockstep: bool, log_dir: str | None,
         signing_key_file: str | None, bus_key_file: str | None, own_key_file: str | None, peer_key_file: str | None,
-        as_json: bool, live: str | None, log_epoch_ns: int | None, lockstep_lost_wall_s: float,
+        keys_dir: str | None, as_json: bool, live: str | None, log_epoch_ns: int | None, lockstep_lost_wall_s: float,
         passenger: str | None = None) -> int:
     """Fly the marsupial mission described by CONFIG on a PX4 vehicle.
 
@@ -325,15 +329,17 @@ def run(config: str, mavlink_url: str | None, zenoh_listen: tuple[str, ...], zen
     cfg = load_config(config)
     overrides: dict[str, Any] = {"mavlink.url": mavlink_url, "zenoh.pair": pair, "zenoh.mode": zenoh_mode,
                                  "mavlink.signing_key_file": signing_key_file, "zenoh.signing_key_file": bus_key_file,
-                                 "zenoh.private_key_file": own_key_file, "zenoh.peer_public_key_file": peer_key_file}
+                                 "zenoh.private_key_file": own_key_file, "zenoh.peer_public_key_file": peer_key_file,
+                                 "zenoh.public_keys_dir": keys_dir}
     if zenoh_listen:
         overrides["zenoh.listen"] = list(zenoh_listen)
     if zenoh_connect:
         overrides["zenoh.connect"] = list(zenoh_connect)
     cfg = with_overrides(cfg, overrides)
     team = team_link(cfg, passenger)  # several passengers: this one's own keys, and its teammates heard
+    check_team_auth(cfg.zenoh, len(team.names) if team is not None else 1)
     if team is not None:
-        check_team_auth(cfg.zenoh, bus_auth(cfg.zenoh), len(team.names))
+        team_bus_auth(cfg.zenoh, team.names, team.name)  # every key read, and ours matched
     cfg = chosen_passenger(cfg, passenger)  # one passenger of a [team]
     check_config(cfg)  # refused before it says anything about flying (fly checks again)
     live_address = parse_live(live) if live is not None else None

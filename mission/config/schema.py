@@ -370,17 +370,25 @@ class ZenohSection(Section):
         None, description="[-] the other robot's Ed25519 public key (PEM, or 32 bytes as 64 hex digits or raw): the only "
         "key its samples verify with; unsigned or badly signed samples are dropped and counted")
 
+    public_keys_dir: Path_ | None = Field(None, description="[-] a team's one key per robot: a directory of every "
+        "robot's Ed25519 public key (as peer_public_key_file's), `carrier.pub` and `<name>.pub` per team.passengers; each "
+        "robot signs with its own private_key_file, and a sample verifies only with the key of the robot it names")
+
     _config_file_printable = field_validator("config_file")(lambda v: v if v is None else printable(v))
     _signing_key_printable = field_validator("signing_key_file")(lambda v: v if v is None else printable(v))
-    _robot_keys_printable = field_validator("private_key_file", "peer_public_key_file")(
+    _robot_keys_printable = field_validator("private_key_file", "peer_public_key_file", "public_keys_dir")(
         lambda v: v if v is None else printable(v))
 
     @model_validator(mode="after")
     def _both_robot_keys(self) -> "ZenohSection":
-        if bool(self.private_key_file) != bool(self.peer_public_key_file):
+        if self.public_keys_dir:  # each robot's own private key comes with its process (--zenoh-private-key)
+            if self.peer_public_key_file:
+                raise ConfigError("zenoh.peer_public_key_file", self.peer_public_key_file, "a team's robots' keys are "
+                                  "in zenoh.public_keys_dir: leave out the single peer's")
+        elif bool(self.private_key_file) != bool(self.peer_public_key_file):
             missing = "peer_public_key_file" if self.private_key_file else "private_key_file"
             raise ConfigError(f"zenoh.{missing}", None, "one key per robot needs both zenoh.private_key_file and "
-                              "zenoh.peer_public_key_file")
+                              "zenoh.peer_public_key_file (a team's: zenoh.public_keys_dir)")
         return self
 
 class Config(Section):

@@ -3,8 +3,9 @@ passengers on one slot, slots that overlap, a target with no passenger, a duplic
 slot that does not exist, a passenger with no target, a fact the team declares stated again.
 ``marsupial run`` refuses each before anything is opened, exit 2, naming the field (in process;
 the four a team most needs refused also through the real process); ``--passenger`` is checked the same way,
-``demo`` refuses what a team's demo does not fly, and ``carrier`` and ``run`` refuse one key per
-robot on a team's bus."""
+``demo`` refuses what a team's demo does not fly, and ``carrier`` and ``run`` refuse a single peer's
+key on a team's bus, and a team's key directory (one key per robot) that is incomplete, shares a key,
+is not given this robot's own private key, or is given for one passenger."""
 from __future__ import annotations
 
 import subprocess
@@ -113,7 +114,7 @@ def test_the_demo_refuses_what_a_team_does_not_fly(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize("command", ["carrier", "run"])
-def test_one_key_per_robot_is_refused_for_a_team_of_several(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+def test_a_single_peer_key_is_refused_for_a_team_of_several(tmp_path: Path, capsys: pytest.CaptureFixture[str],
                                                             command: str) -> None:
     from mission.config.keys import write_key_pair
 
@@ -126,3 +127,72 @@ def test_one_key_per_robot_is_refused_for_a_team_of_several(tmp_path: Path, caps
     err = capsys.readouterr().err
     assert code == 2 and "error: zenoh.peer_public_key_file" in err and "one peer key for a team of 2" in err, err
     assert not (tmp_path / "c.json").exists() and not (tmp_path / "log").exists()
+
+
+def _team_keys(folder: Path, robots: tuple[str, ...] = ("carrier", "alpha", "bravo")) -> Path:
+    """A team's key directory: a key pair per robot, ``<robot>.key`` beside ``<robot>.pub``."""
+    from mission.config.keys import write_key_pair
+
+    folder.mkdir()
+    for robot in robots:
+        write_key_pair(folder / f"{robot}.key", folder / f"{robot}.pub")
+    return folder
+
+
+def _refused(command: str, tmp_path: Path, config: Path, keys: list[str], capsys: pytest.CaptureFixture[str]) -> str:
+    """``command`` on ``config`` with ``keys``: exit 2 before anything is written; its stderr."""
+    extra = ["--summary", str(tmp_path / "c.json")] if command == "carrier" else [
+        "--log-dir", str(tmp_path / "log"), *(["--passenger", "alpha"] if config == TEAM_PATH else [])]
+    code = main([command, str(config), "--zenoh-listen", "tcp/127.0.0.1:9", *keys, *extra])
+    err = capsys.readouterr().err
+    assert code == 2 and "Traceback" not in err, err
+    assert not (tmp_path / "c.json").exists() and not (tmp_path / "log").exists()
+    return err
+
+
+@pytest.mark.parametrize("command", ["carrier", "run"])
+def test_a_teams_key_directory_needs_this_robots_own_private_key(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                                 command: str) -> None:
+    keys = _team_keys(tmp_path / "keys")
+    err = _refused(command, tmp_path, TEAM_PATH, ["--zenoh-public-keys", str(keys)], capsys)
+    assert "error: zenoh.private_key_file" in err and "signs with its own private key" in err, err
+
+
+@pytest.mark.parametrize("command, wrong", [("carrier", "alpha"), ("run", "bravo"), ("run", "carrier")])
+def test_a_private_key_that_is_not_this_robots_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                          command: str, wrong: str) -> None:
+    """The carrier given a passenger's key, or passenger alpha given bravo's or the carrier's: it
+    would sign as another robot. Refused, naming the private key."""
+    keys = _team_keys(tmp_path / "keys")
+    err = _refused(command, tmp_path, TEAM_PATH, ["--zenoh-public-keys", str(keys), "--zenoh-private-key",
+                                                  str(keys / f"{wrong}.key")], capsys)
+    me = "the carrier" if command == "carrier" else "passenger alpha"
+    assert "error: zenoh.private_key_file" in err and f"not {me}'s key" in err, err
+
+
+@pytest.mark.parametrize("command", ["carrier", "run"])
+def test_a_key_directory_missing_a_robot_or_sharing_a_key_is_refused(tmp_path: Path,
+                                                                     capsys: pytest.CaptureFixture[str],
+                                                                     command: str) -> None:
+    me = "carrier" if command == "carrier" else "alpha"
+    keys = _team_keys(tmp_path / "keys", ("carrier", "alpha"))  # no bravo.pub
+    own = ["--zenoh-public-keys", str(keys), "--zenoh-private-key", str(keys / f"{me}.key")]
+    err = _refused(command, tmp_path, TEAM_PATH, own, capsys)
+    assert "error: zenoh.public_keys_dir" in err and "bravo.pub" in err and "cannot read the key file" in err, err
+    (keys / "bravo.pub").write_bytes((keys / "alpha.pub").read_bytes())  # bravo on alpha's key: could sign as alpha
+    err = _refused(command, tmp_path, TEAM_PATH, own, capsys)
+    assert "error: zenoh.public_keys_dir" in err and "alpha.pub and bravo.pub hold the same key" in err, err
+
+
+@pytest.mark.parametrize("command", ["carrier", "run"])
+def test_a_key_directory_is_a_teams_and_not_beside_a_peer_key(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                              command: str) -> None:
+    keys = _team_keys(tmp_path / "keys")
+    me = "carrier" if command == "carrier" else "passenger"
+    pair = ["--zenoh-public-keys", str(keys), "--zenoh-private-key", str(keys / ("carrier.key" if me == "carrier"
+                                                                                 else "alpha.key"))]
+    err = _refused(command, tmp_path, CONFIGS / "recovery.toml", pair, capsys)  # one passenger
+    assert "error: zenoh.public_keys_dir" in err and "a team's key directory" in err, err
+    both = [*pair, "--zenoh-peer-key", str(keys / "bravo.pub")]
+    err = _refused(command, tmp_path, TEAM_PATH, both, capsys)
+    assert "error: zenoh.peer_public_key_file" in err and "zenoh.public_keys_dir" in err, err
