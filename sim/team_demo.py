@@ -31,7 +31,7 @@ from typing import Any
 
 from mission.bus.bridge import open_session
 from mission.bus.session import close_session
-from mission.config.passenger import passenger_config
+from mission.config.passenger import check_team_flight, passenger_config
 from mission.config.schema import Config, ZenohSection, load_config
 from mission.errors import ConfigError
 from mission.lifetime import supervise_children
@@ -131,6 +131,7 @@ def run_team_demo(config: str, speed: float, log_root: Path, timeout_s: float, *
             raise ConfigError(option, value, "a team's demo flies one team on the built-in carrier, with no live view "
                               "(not built)")
     cfg = load_config(config)
+    check_team_flight(cfg)
     speed = speed if lockstep else min(speed, TEAM_MAX_SPEED)
     supervise_children()  # a demo killed outright takes its processes with it
     log_root.mkdir(parents=True, exist_ok=True)

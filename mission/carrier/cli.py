@@ -24,7 +24,7 @@ from mission.bus.bridge import describe_endpoints, keys, open_session
 from mission.bus.session import close_session
 from mission.time.clock import Clock, LockstepClock, ScaledClock
 from mission.config.required import CARRIER_FIELDS, require_stated
-from mission.config.passenger import has_team, sole_passenger
+from mission.config.passenger import check_team_flight, has_team, sole_passenger
 from mission.config.schema import Config, load_config, with_overrides
 from mission.cli.subcommands import entry_points, load
 from mission.errors import ConfigError
@@ -301,6 +301,7 @@ def carrier_cli(config: str, backend: str | None, speed: float, pair: str | None
         "zenoh.public_keys_dir": keys_dir,
     })
     check_team_auth(cfg.zenoh, len(cfg.team.passengers) if has_team(cfg) else 1)
+    check_team_flight(cfg)
     if not has_team(cfg) or len(cfg.team.passengers) == 1:
         cfg = sole_passenger(cfg, "driven by `marsupial carrier`")  # a team of one: its passenger's (docs/team.md)
     else:  # a team of several: one carrier serves them all (mission.carrier.team_bus), checked before anything opens

@@ -19,7 +19,7 @@ from mission.bus.bridge import CarrierFeed, PassengerPublisher, open_session, ze
 from mission.bus.session import close_session, congestion_for
 from mission.time.clock import LOST_WALL_S, Clock, LockstepClock, ScaledClock
 from mission.config.required import RUN_FIELDS, require_stated
-from mission.config.passenger import TeamLink, chosen_passenger, team_link
+from mission.config.passenger import TeamLink, check_team_flight, chosen_passenger, team_link
 from mission.config.schema import Config, load_config, with_overrides
 from mission.cli.subcommands import SENSORS_GROUP, entry_points, load
 from mission.controller import MissionController, MissionOutcome
@@ -338,6 +338,7 @@ def run(config: str, mavlink_url: str | None, zenoh_listen: tuple[str, ...], zen
     cfg = with_overrides(cfg, overrides)
     team = team_link(cfg, passenger)  # several passengers: this one's own keys, and its teammates heard
     check_team_auth(cfg.zenoh, len(team.names) if team is not None else 1)
+    check_team_flight(cfg)
     if team is not None:
         team_bus_auth(cfg.zenoh, team.names, team.name)  # every key read, and ours matched
     cfg = chosen_passenger(cfg, passenger)  # one passenger of a [team]

@@ -7,7 +7,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from mission.config.schema import Config, from_dict
-from mission.config.team import dock_points, passenger_data
+from mission.config.team import check_hover_slots, dock_points, passenger_data
 from mission.errors import ConfigError
 
 
@@ -30,6 +30,14 @@ def passenger_config(cfg: Config, name: str) -> Config:
     if name not in names:
         raise ConfigError("--passenger", name, f"no such passenger in team.passengers ({', '.join(names)})")
     return from_dict(passenger_data(cfg.model_dump(exclude_unset=True), cfg.team, cfg.scenario.legs(), names.index(name)))
+
+
+def check_team_flight(cfg: Config) -> None:
+    """What a command that flies ``cfg``'s team checks beyond the file's own rules, before anything
+    opens: a team riding hovering keeps its riders apart (:func:`mission.config.team.check_hover_slots`;
+    :class:`ConfigError` naming the slot). Nothing without a team."""
+    if has_team(cfg):
+        check_hover_slots(cfg.team, cfg.mission.ride, cfg.mission.dock_tolerance_m)
 
 
 def chosen_passenger(cfg: Config, name: str | None) -> Config:

@@ -142,7 +142,7 @@ def _team_keys(folder: Path, robots: tuple[str, ...] = ("carrier", "alpha", "bra
 def _refused(command: str, tmp_path: Path, config: Path, keys: list[str], capsys: pytest.CaptureFixture[str]) -> str:
     """``command`` on ``config`` with ``keys``: exit 2 before anything is written; its stderr."""
     extra = ["--summary", str(tmp_path / "c.json")] if command == "carrier" else [
-        "--log-dir", str(tmp_path / "log"), *(["--passenger", "alpha"] if config == TEAM_PATH else [])]
+        "--log-dir", str(tmp_path / "log"), *(["--passenger", "alpha"] if "[team]" in config.read_text() else [])]
     code = main([command, str(config), "--zenoh-listen", "tcp/127.0.0.1:9", *keys, *extra])
     err = capsys.readouterr().err
     assert code == 2 and "Traceback" not in err, err
@@ -196,3 +196,37 @@ def test_a_key_directory_is_a_teams_and_not_beside_a_peer_key(tmp_path: Path, ca
     both = [*pair, "--zenoh-peer-key", str(keys / "bravo.pub")]
     err = _refused(command, tmp_path, TEAM_PATH, both, capsys)
     assert "error: zenoh.peer_public_key_file" in err and "zenoh.public_keys_dir" in err, err
+
+
+def _hovering(apart_m: float) -> str:
+    """configs/team.toml riding hovering 1.5 m above the carrier, its two slots ``apart_m`` apart."""
+    text = changed('ride = "deck"\n', 'ride = "hover"\n')
+    half = apart_m / 2.0
+    return (text.replace("[0.0, -0.75, -0.5]", f"[0.0, {-half!r}, -1.5]")
+            .replace("[0.0, 0.75, -0.5]", f"[0.0, {half!r}, -1.5]"))
+
+
+@pytest.mark.parametrize("command", ["carrier", "run"])
+def test_a_team_riding_hovering_on_slots_its_riders_could_touch_on_is_refused(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], command: str) -> None:
+    """Riding hovering, each passenger may be mission.dock_tolerance_m (1 m) from its dock point:
+    the deck's slots, 1.5 m apart, would let two riders' 0.8 m spans touch. The deck ride's rule
+    (span + 2 contact radii, 1.1 m) is not enough."""
+    path = tmp_path / "team.toml"
+    path.write_text(_hovering(1.5))
+    err = _refused(command, tmp_path, path, [], capsys)
+    assert ("error: team.slots[1].offset_ned_m = [0.0, 0.75, -1.5]: 1.50 m from team.slots[0] ('port') horizontally: "
+            "a team riding hovering needs team.passenger_span_m + 2 mission.dock_tolerance_m = 2.8 m") in err, err
+
+
+def test_a_team_riding_hovering_far_enough_apart_is_not_refused() -> None:
+    import tomllib
+
+    from mission.config.passenger import check_team_flight
+    from mission.config.schema import from_dict
+    from mission.errors import ConfigError
+
+    check_team_flight(from_dict(tomllib.loads(_hovering(2.8))))
+    check_team_flight(from_dict(tomllib.loads(TEAM)))  # the deck ride: the contact radius' rule, checked at load
+    with pytest.raises(ConfigError, match=r"team.slots\[1\].offset_ned_m"):
+        check_team_flight(from_dict(tomllib.loads(_hovering(2.79))))
