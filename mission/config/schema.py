@@ -34,6 +34,7 @@ from mission.config.carrier import CarrierMavlinkSection, CarrierRos2Section, Ca
 from mission.config.legs import check_legs, first_target_named
 from mission.config.recovery import RecoverySection, check_recovery
 from mission.config.relnav import RelnavSection, WorldSection
+from mission.config.safety import SafetySection
 from mission.config.scenario import ObstacleSection, ScenarioSection
 from mission.config.team import TeamSection, as_team_error, check_queue, check_team, dock_points, passenger_data
 from mission.config.urls import DEFAULT_URL
@@ -46,7 +47,6 @@ from mission.errors import ConfigError
 
 if TYPE_CHECKING:  # the schema imports no law: the converters below import it when called
     from mission.core.law import LawParams
-    from mission.core.safety import SafetyConfig
 
 __all__ = [  # the sections and field checks in config_carrier / config_fields are importable from here too
     "COORD_LIMIT_M", "MAX_PATH_CHARS", "MAX_URL_CHARS", "CarrierMavlinkSection", "CarrierRos2Section",
@@ -77,46 +77,6 @@ class LawSection(Section):
         from mission.core.law import LawParams
 
         return LawParams(k_c=self.k_c, k_p=self.k_p, b=self.b, c=self.c, d=self.d)
-
-
-class SafetySection(Section):
-    """CBF filter and limits; a limit left out is off (the simulator's paper runs)."""
-
-    cbf_gain: float = Field(1.0, gt=0, le=100, description="[1/s] class-K gain of the control barrier functions")
-    margin_m: float = Field(0.5, ge=0, le=100,
-        description="[m] clearance kept from every obstacle surface (reference; the command filter keeps half)")
-    passenger_max_speed_m_s: float | None = Field(None, gt=0, le=100,
-        description="[m/s] passenger speed limit, direction kept (off when left out: the paper's unsaturated law)")
-    passenger_max_accel_m_s2: float | None = Field(None, gt=0, le=100,
-        description="[m/s^2] passenger acceleration limit; also shapes arrival (speed <= sqrt(2 a |e_pt|))")
-    carrier_max_speed_m_s: float | None = Field(None, gt=0, le=100,
-        description="[m/s] carrier speed limit in the law's command")
-    carrier_max_accel_m_s2: float | None = Field(None, gt=0, le=100,
-        description="[m/s^2] carrier acceleration limit in the law's command")
-    z_min_m: float | None = Field(None, ge=-100_000, le=100_000,
-        description="[m] NED z lower bound for the passenger (a ceiling: z >= z_min_m)")
-    z_max_m: float | None = Field(None, ge=-100_000, le=100_000,
-        description="[m] NED z upper bound for the passenger (an altitude floor: z <= z_max_m, e.g. -0.5 = 0.5 m up)")
-    filter_carrier: bool = Field(True, description="[-] pass the carrier's command through the CBF filter too")
-    passenger_separation_m: float = Field(3.0, gt=0, le=100,
-        description="[m] least distance between two passengers' centres: the pairwise separation barrier keeps each "
-                    "at least this far from every other passenger it hears (docs/team.md, \"Keeping passengers apart\")")
-    passenger_separation_max_age_s: float = Field(0.5, gt=0, le=10,
-        description="[s] an other passenger's shared state older than this is left out of the separation barrier "
-                    "(as if absent); a younger one counts as flown on at its velocity over its age")
-    passenger_separation_phase_in_s: float = Field(0.5, ge=0, le=10, description="[s] the separation barrier's rows "
-        "phase in over this time from the passenger's separation: no jump of the command at the latch (0: at once; docs/team.md)")
-
-    def passenger(self) -> SafetyConfig:
-        from mission.core.safety import SafetyConfig
-
-        return SafetyConfig(self.cbf_gain, self.margin_m, self.passenger_max_speed_m_s, self.passenger_max_accel_m_s2, self.z_min_m,
-                            self.z_max_m, self.passenger_separation_m, self.passenger_separation_max_age_s, self.passenger_separation_phase_in_s)
-
-    def carrier(self) -> SafetyConfig:
-        from mission.core.safety import SafetyConfig
-
-        return SafetyConfig(self.cbf_gain, self.margin_m, self.carrier_max_speed_m_s, self.carrier_max_accel_m_s2)
 
 
 class SimSection(Section):
@@ -430,7 +390,8 @@ class Config(Section):
         self._cross_fields()
         if self.team.given:
             if self.mission.final_action == "return":  # after the slots' own checks: their queue points
-                check_queue(self.team, self.safety.passenger_separation_m + self.safety.margin_m, self.recovery)
+                check_queue(self.team, self.safety.passenger_separation_m + self.safety.margin_m, self.recovery,
+                            self.safety.vertical_ratio)
             self._team_flies()
         return self
 

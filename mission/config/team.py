@@ -168,18 +168,21 @@ QUEUE_HEADINGS = 72  # the carrier's courses (every 5 deg) over which the queue'
 
 
 def queue_clearance_m(team: TeamSection, holdoff_distance_m: float, holdoff_height_m: float,
-                      decision_height_m: float) -> float:
+                      decision_height_m: float, vertical_ratio: float = 1.0) -> float:
     """[m] the least distance, over every course of the carrier (:data:`QUEUE_HEADINGS`) and every
     pair of slots, from one slot's queue point (its holdoff point ``team.queue_distance_m`` farther
     back along the course and ``team.queue_height_m`` higher; :mod:`mission.phases.queue`) to the
     other slot's approach: its holdoff point (``holdoff_distance_m`` [m] behind and
     ``holdoff_height_m`` [m] above its dock point), the glide path to its gate
-    (``decision_height_m`` [m] above the dock point) and the descent onto it. inf: fewer than two slots."""
+    (``decision_height_m`` [m] above the dock point) and the descent onto it. inf: fewer than two slots.
+    Measured as the pairwise barrier measures (:func:`mission.core.safety.neighbour_rows`): heights
+    divided by ``vertical_ratio`` (safety.passenger_separation_vertical_m over passenger_separation_m)."""
     import numpy as np
 
     best = math.inf
-    docks = [np.asarray(slot.offset_ned_m, dtype=float) for slot in team.slots]
-    up = np.array([0.0, 0.0, -1.0])
+    squash = np.array([1.0, 1.0, 1.0 / vertical_ratio])  # the barrier's metric: a linear map, segments stay segments
+    docks = [np.asarray(slot.offset_ned_m, dtype=float) * squash for slot in team.slots]
+    up = np.array([0.0, 0.0, -1.0]) * squash
     for k in range(QUEUE_HEADINGS):
         a = 2.0 * math.pi * k / QUEUE_HEADINGS
         c = np.array([math.cos(a), math.sin(a), 0.0])
@@ -201,18 +204,19 @@ def _to_segment(p, a, b) -> float:  # type: ignore[no-untyped-def]
     return float(np.linalg.norm(p - (a + s * ab)))
 
 
-def check_queue(team: TeamSection, separation_m: float, recovery: Any) -> None:
+def check_queue(team: TeamSection, separation_m: float, recovery: Any, vertical_ratio: float = 1.0) -> None:
     """Refuse queue points closer than ``separation_m`` [m] (safety.passenger_separation_m +
-    safety.margin_m, what the recovery keeps) to
+    safety.margin_m, what the recovery keeps; in the barrier's metric, ``vertical_ratio``) to
     another slot's approach on some course (:func:`queue_clearance_m`, the geometry of the
     ``[recovery]`` section ``recovery``), naming team.queue_height_m."""
     r = recovery
     holdoff_height_m = r.decision_height_m + r.holdoff_distance_m * math.tan(math.radians(r.glide_angle_deg))
-    clear = queue_clearance_m(team, r.holdoff_distance_m, holdoff_height_m, r.decision_height_m)
+    clear = queue_clearance_m(team, r.holdoff_distance_m, holdoff_height_m, r.decision_height_m, vertical_ratio)
     if clear < separation_m - 1e-6:
         raise ConfigError("team.queue_height_m", team.queue_height_m,
                           f"a passenger waiting its turn would hold off {clear:.2f} m from another slot's approach on "
-                          f"some course, under safety.passenger_separation_m + safety.margin_m = {separation_m:g} m: raise it (or "
+                          f"some course, under safety.passenger_separation_m + safety.margin_m = {separation_m:g} m (heights "
+                          "divided by safety.passenger_separation_vertical_m / passenger_separation_m): raise it (or "
                           "team.queue_distance_m)")
 
 

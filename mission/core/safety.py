@@ -103,8 +103,10 @@ class SafetyConfig:
     separation_m [m] the least distance kept from other passengers (None: no pairwise barrier);
     neighbour_max_age_s [s] an other passenger's sample older than this is left out;
     separation_phase_in_s [s] the pairwise rows phase in over this time from the passenger's
-    separation (:func:`neighbour_rows`; 0: in at once). (``_cache`` holds the constant constraint
-    rows of the bounds, built on first use.)
+    separation (:func:`neighbour_rows`; 0: in at once); separation_vertical_ratio [-] the pairwise
+    barrier's vertical half-axis over its level one (3D: an ellipsoid, a passenger straight above
+    or below kept ``separation_m`` times this; 1: a sphere). (``_cache`` holds the constant
+    constraint rows of the bounds, built on first use.)
     """
 
     cbf_gain: float = 1.0
@@ -116,6 +118,7 @@ class SafetyConfig:
     separation_m: float | None = None
     neighbour_max_age_s: float = 0.5
     separation_phase_in_s: float = 0.0
+    separation_vertical_ratio: float = 1.0
     _cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
 
@@ -185,12 +188,14 @@ def neighbour_rows(x: np.ndarray, own_velocity: np.ndarray, neighbours: Neighbou
     """The pairwise separation barrier's rows ``A u >= b`` at ``x`` (..., n): A (..., k, n), b
     (..., k); None when there is none (no ``separation_m``, no neighbour, or all stale).
 
-    ``h_j = |x - p_j|^2 - D^2`` with ``p_j`` the neighbour's position, ``D = separation_m`` (or
-    the neighbour's own ``Neighbours.distance_m``). Both
-    passengers move, so ``dh_j/dt = 2 (x - p_j) . (u - v_j)`` and the pair needs
+    ``h_j = |x - p_j|_W^2 - D^2`` with ``p_j`` the neighbour's position, ``D = separation_m`` (or
+    the neighbour's own ``Neighbours.distance_m``) and ``|d|_W^2 = d . W d``, ``W = diag(1, 1,
+    1 / separation_vertical_ratio^2)`` in 3D (an ellipsoid: a neighbour straight above or below is
+    kept ``D`` times the ratio away; the identity, a sphere, at ratio 1 and in 2D). Both
+    passengers move, so ``dh_j/dt = 2 W (x - p_j) . (u - v_j)`` and the pair needs
     ``dh_j/dt >= -gain h_j``. Responsibility is shared reciprocally (each takes half the change of
     the pair's relative velocity, as ORCA does): with ``v_i`` this passenger's own velocity (its
-    previous command), its row is ``2 (x - p_j) . u >= (x - p_j) . (v_i + v_j) - gain h_j / 2``.
+    previous command), its row is ``2 W (x - p_j) . u >= W (x - p_j) . (v_i + v_j) - gain h_j / 2``.
     When the neighbour runs the same row on the same states the two rows add up to the pair's
     condition exactly; when it does not react (it holds, or flies without the filter) ``v_i``
     follows this passenger's own command and the row tends to the whole condition at half the
@@ -214,11 +219,14 @@ def neighbour_rows(x: np.ndarray, own_velocity: np.ndarray, neighbours: Neighbou
     if fresh is not None and not fresh.any():
         return None
     diff = x[..., None, :] - pos
-    dist2 = dot(diff, diff)
+    weighted = diff  # W (x - p_j)
+    if diff.shape[-1] == 3 and cfg.separation_vertical_ratio != 1.0:
+        weighted = diff * np.array([1.0, 1.0, cfg.separation_vertical_ratio ** -2])
+    dist2 = dot(weighted, diff)
     keep2 = cfg.separation_m**2 if neighbours.distance_m is None else np.asarray(neighbours.distance_m, dtype=float) ** 2
     h = dist2 - np.minimum(keep2, dist2)
-    A = 2.0 * diff
-    b = dot(diff, own_velocity[..., None, :] + vel) - 0.5 * cfg.cbf_gain * h
+    A = 2.0 * weighted
+    b = dot(weighted, own_velocity[..., None, :] + vel) - 0.5 * cfg.cbf_gain * h
     if since_separation_s is not None and cfg.separation_phase_in_s > 0:
         w = phase_in_weight(since_separation_s, cfg.separation_phase_in_s)
         if np.any(w < 1.0):

@@ -212,3 +212,48 @@ def test_the_price_of_the_phase_in_against_a_neighbour_flying_at_the_passenger(s
     at_once, phased = _flown_at(CFG, s0), _flown_at(PHASED, s0)
     assert at_once[1] == pytest.approx(s0 / 2) and at_once[0] == pytest.approx(0.02 * s0, rel=0.05)
     assert phased[1] <= 0.1 * s0 and phased[0] <= 0.21 * s0
+
+
+TALL = replace(CFG, separation_vertical_ratio=2.0)  # 3 m level, 6 m straight above or below
+
+
+def test_an_ellipsoid_keeps_a_neighbour_below_twice_as_far_and_a_level_one_as_before():
+    """A passenger descends towards a point 4 m straight above one that sits at its target. The
+    sphere (3 m) lets it arrive; the ellipsoid of ratio 2 (3 m level, 6 m straight above or below)
+    holds it on its surface (the head-on tie-break slides it round to the right a little), higher
+    than the sphere would have let it come. Level, both keep 3 m."""
+    below, above = [0.0, 0.0, -1.5], [0.0, 0.1, -9.5]
+    stacked = ([below, above], [below, [0.0, 0.1, -5.5]])
+    sphere = _fly(*stacked, cfg=CFG)
+    assert not np.isnan(sphere.arrived_s).any()
+    tall = _fly(*stacked, cfg=TALL)
+    d = tall.final_m[0, 1] - tall.final_m[0, 0]
+    assert np.isnan(tall.arrived_s[0, 1]) and tall.infeasible[0] == 0
+    assert D - TOL_M <= np.sqrt(d[0] ** 2 + d[1] ** 2 + (d[2] / 2.0) ** 2) <= D + 0.1, d  # on the ellipsoid
+    assert -d[2] > 4.0 + 0.5, d  # above where the sphere let it arrive
+    level = ([below, [6.5, 0.0, -1.5]], [below, [0.5, 0.0, -1.5]])
+    for cfg in (CFG, TALL):
+        flown = _fly(*level, cfg=cfg)
+        apart = float(np.linalg.norm(flown.final_m[0, 1] - flown.final_m[0, 0]))
+        assert D - TOL_M <= apart <= D + 0.1, apart
+
+
+def test_with_a_vertical_ratio_of_one_the_rows_are_the_spheres():
+    x, own = np.array([0.2, -0.1, -4.0]), np.array([0.5, 0.0, 0.3])
+    near = Neighbours(np.array([[2.0, 1.0, -2.5], [-1.0, 2.5, -6.0]]), np.array([[0.1, 0.0, 0.0], [0.0, -0.2, 0.4]]))
+    A1, b1 = neighbour_rows(x, own, near, CFG)  # type: ignore[misc]
+    A2, b2 = neighbour_rows(x, own, near, replace(CFG, separation_vertical_ratio=1.0))  # type: ignore[misc]
+    np.testing.assert_array_equal(A1, A2)
+    np.testing.assert_array_equal(b1, b2)
+    At, bt = neighbour_rows(x, own, near, TALL)  # type: ignore[misc]
+    np.testing.assert_array_equal(At[:, :2], A1[:, :2])  # level components unchanged
+    np.testing.assert_allclose(At[:, 2], A1[:, 2] / 4.0)  # heights weigh a quarter: W = diag(1, 1, 1/2^2)
+
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_the_ellipsoid_keeps_every_pair_at_least_the_level_distance(name):
+    slots, targets = CASES[name]
+    team = _fly(slots, targets, cfg=replace(TALL, separation_phase_in_s=0.5))
+    start = np.linalg.norm(np.subtract(slots[0], slots[1]))
+    assert team.min_distance_m[0] >= min(D, start) - TOL_M
+    assert not np.isnan(team.arrived_s).any() and team.infeasible[0] == 0
