@@ -136,7 +136,8 @@ class Neighbours:
     for (None: not shared); the barrier reads none of them. ``distance_m`` [m] (k,): the distance
     kept from each one, where it differs per neighbour (None: ``separation_m`` of the filter's
     configuration for all; the recovery keeps the deck's seated passengers only at the span,
-    :func:`mission.phases.queue.apart`)."""
+    :func:`mission.phases.queue.apart`); ``on_deck`` (k,) bool: kept on a sphere whatever
+    ``separation_vertical_ratio`` (the deck's obstacles, whose span is level; None: none)."""
 
     positions_m: np.ndarray
     velocities_m_s: np.ndarray
@@ -147,6 +148,7 @@ class Neighbours:
     ids: tuple[int, ...] | None = None
     targets_ned_m: np.ndarray | None = None
     distance_m: np.ndarray | None = None
+    on_deck: np.ndarray | None = None
 
     @classmethod
     def of(cls, items: list[tuple[list[float], list[float], float]], n: int) -> "Neighbours":
@@ -191,7 +193,9 @@ def neighbour_rows(x: np.ndarray, own_velocity: np.ndarray, neighbours: Neighbou
     ``h_j = |x - p_j|_W^2 - D^2`` with ``p_j`` the neighbour's position, ``D = separation_m`` (or
     the neighbour's own ``Neighbours.distance_m``) and ``|d|_W^2 = d . W d``, ``W = diag(1, 1,
     1 / separation_vertical_ratio^2)`` in 3D (an ellipsoid: a neighbour straight above or below is
-    kept ``D`` times the ratio away; the identity, a sphere, at ratio 1 and in 2D). Both
+    kept ``D`` times the ratio away; the identity, a sphere, at ratio 1, in 2D and for a neighbour
+    ``Neighbours.on_deck``: a seated passenger is an obstacle of the deck's approach, its span
+    level). Both
     passengers move, so ``dh_j/dt = 2 W (x - p_j) . (u - v_j)`` and the pair needs
     ``dh_j/dt >= -gain h_j``. Responsibility is shared reciprocally (each takes half the change of
     the pair's relative velocity, as ORCA does): with ``v_i`` this passenger's own velocity (its
@@ -221,7 +225,10 @@ def neighbour_rows(x: np.ndarray, own_velocity: np.ndarray, neighbours: Neighbou
     diff = x[..., None, :] - pos
     weighted = diff  # W (x - p_j)
     if diff.shape[-1] == 3 and cfg.separation_vertical_ratio != 1.0:
-        weighted = diff * np.array([1.0, 1.0, cfg.separation_vertical_ratio ** -2])
+        w_z = np.full(diff.shape[:-1], cfg.separation_vertical_ratio ** -2)
+        if neighbours.on_deck is not None:
+            w_z = np.where(np.asarray(neighbours.on_deck, dtype=bool), 1.0, w_z)  # the deck's obstacles: a sphere
+        weighted = np.concatenate([diff[..., :2], (diff[..., 2] * w_z)[..., None]], axis=-1)
     dist2 = dot(weighted, diff)
     keep2 = cfg.separation_m**2 if neighbours.distance_m is None else np.asarray(neighbours.distance_m, dtype=float) ** 2
     h = dist2 - np.minimum(keep2, dist2)

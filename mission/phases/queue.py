@@ -213,21 +213,21 @@ def seated_at_span(nb: Neighbours, obs: Observation, q: QueueModel) -> Neighbour
         return nb
     v = np.asarray(obs.carrier.velocity_ned_m_s if obs.carrier is not None else np.zeros(3), dtype=float)
     vel = np.where(seated[:, None], v[None, :], np.asarray(nb.velocities_m_s, dtype=float))
-    return replace(nb, velocities_m_s=vel, distance_m=np.where(seated, q.deck_clearance_m, q.separation_m))
+    return replace(nb, velocities_m_s=vel, distance_m=np.where(seated, q.deck_clearance_m, q.separation_m), on_deck=seated)
 
 
 def on_deck(nb: Neighbours, obs: Observation) -> Neighbours | None:
     """The neighbours on the deck (:data:`SEATED`; all when no phase is shared) as obstacles of an
     approach: where they report themselves, moving with the deck (the carrier's velocity, not their
     own reported one: PX4's velocity estimate errs by ~0.25 m/s, and a seated neighbour moves with
-    the deck); None: none."""
+    the deck), each kept on a sphere (``Neighbours.on_deck``); None: none."""
     keep = np.ones(len(nb), dtype=bool) if nb.phases is None else np.array([p in SEATED for p in nb.phases], dtype=bool)
     if not keep.any():
         return None
     v = obs.carrier.velocity_ned_m_s if obs.carrier is not None else np.zeros(3)
     pos = np.asarray(nb.positions_m, dtype=float)[keep]
     age = None if nb.age_s is None else np.asarray(nb.age_s, dtype=float)[keep]
-    return Neighbours(pos, np.tile(np.asarray(v, dtype=float), (len(pos), 1)), age)
+    return Neighbours(pos, np.tile(np.asarray(v, dtype=float), (len(pos), 1)), age, on_deck=np.ones(len(pos), dtype=bool))
 
 
 def turn(obs: Observation, m: MissionModel, rec: RecoveryState

@@ -257,3 +257,19 @@ def test_the_ellipsoid_keeps_every_pair_at_least_the_level_distance(name):
     start = np.linalg.norm(np.subtract(slots[0], slots[1]))
     assert team.min_distance_m[0] >= min(D, start) - TOL_M
     assert not np.isnan(team.arrived_s).any() and team.infeasible[0] == 0
+
+
+def test_the_decks_seated_obstacles_stay_spheres_under_the_ellipsoid():
+    """A passenger 0.9 m above a neighbour seated on the deck, kept at the span (0.8 m): on a
+    sphere it may go on down no faster than the barrier allows, but the row is not in force;
+    weighed as the ellipsoid of ratio 2 it would be 0.45 m away, inside, and held. The deck's
+    obstacles (``on_deck``) keep the sphere, as an approach beside seated neighbours needs."""
+    x, seated = np.array([0.0, 0.0, -2.4]), np.array([[0.0, 0.0, -1.5]])
+    cfg = replace(TALL, separation_m=0.8)
+    as_air = neighbour_rows(x, np.zeros(3), Neighbours(seated, np.zeros((1, 3))), cfg)
+    as_deck = neighbour_rows(x, np.zeros(3), Neighbours(seated, np.zeros((1, 3)), on_deck=np.array([True])), cfg)
+    sphere = neighbour_rows(x, np.zeros(3), Neighbours(seated, np.zeros((1, 3))), replace(cfg, separation_vertical_ratio=1.0))
+    assert as_air is not None and as_deck is not None and sphere is not None
+    np.testing.assert_array_equal(as_deck[0], sphere[0])
+    np.testing.assert_array_equal(as_deck[1], sphere[1])
+    assert float(as_air[1][0]) == 0.0 and float(sphere[1][0]) < 0.0  # held at its distance / room to descend
