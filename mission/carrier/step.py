@@ -271,6 +271,12 @@ class CarrierStepper:
         PX4's SIH rover turning onto leg 2 from rest (106 deg) stuck and leapt on that, 0 to
         1-2 m/s every 0.5-2 s for 6 s under a riding passenger (docs/recovery.md, "On real PX4").
         With either cap on, the speed asked also grows at most at ``safety.carrier_max_accel_m_s2``.
+        The lead stops the speed asked from running on ahead of a rover that does not follow it; it
+        never takes back speed already asked (while the law still asks it). Keyed on the forward
+        speed, it did: mid-ride on leg 2 the SIH rover's EKF put 0.9-1.1 m/s of its velocity
+        sideways, PX4's speed loop (which reads the velocity's size) slowed the rover, the lead cut
+        the speed asked to the forward speed plus 0.3 m/s, down to the floor, PX4 slowed it further,
+        to a stop, and it leapt off again: the passenger trailed 0.53 m (docs/recovery.md, "On real PX4").
 
         Once it moves (forward at :data:`~mission.carrier.start.MOVING_M_S` or more), or while its
         velocity's part across its heading, ``sideways_m_s`` [m/s], is that large (its estimate
@@ -287,6 +293,8 @@ class CarrierStepper:
         asked = np.array([cmd.speed_m_s])
         capped = float(speed_lead(gentle_start(asked, np.array([self._asked_speed_m_s]), moving_m_s,
                                                self.start_accel_m_s2, dt_s), moving_m_s, self.start_lead_m_s)[0])
+        if self.start_lead_m_s > 0:  # the lead holds the speed asked back, it never takes back speed asked
+            capped = max(capped, min(self._asked_speed_m_s, cmd.speed_m_s))
         accel = self.model.carrier_safety.max_accel_m_s2
         if (self.start_accel_m_s2 > 0 or self.start_lead_m_s > 0) and accel and dt_s > 0:
             # the law's command runs on while the caps hold the speed asked back: that speed grows

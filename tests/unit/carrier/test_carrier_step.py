@@ -377,3 +377,28 @@ def test_a_floor_that_sets_in_mid_start_grows_at_the_law_s_ramp() -> None:
     speed = np.array(asked)
     assert np.diff(speed).max() <= ACCEL * DT + 1e-9  # old: 0.30 -> 0.80 in one tick
     assert speed[-1] >= 0.8 - 1e-9  # the floor reached
+
+
+@pytest.mark.parametrize("floor", [0.0, 0.8])
+def test_the_lead_never_takes_back_speed_asked_when_the_estimate_turns_sideways(floor: float) -> None:
+    """Leg 2 on PX4, mid-ride at 1.2 m/s: the SIH rover's EKF put 0.9-1.1 m/s of its velocity
+    sideways, and PX4's speed loop, which reads the velocity's size, slowed it (forward 1.0 ->
+    0.5 m/s). The lead, keyed on the forward speed, cut the speed asked to it plus 0.3 m/s, down to
+    the floor; PX4 slowed the rover to a stop and it leapt off again, the passenger 0.53 m off the
+    dock. The lead holds the speed asked back while it starts; it takes none back."""
+    stepper = CarrierStepper(_px4_rover_cfg(floor), True)
+    bearing = math.atan2(TARGET[1], TARGET[0])
+    ahead = np.array([math.cos(bearing), math.sin(bearing), 0.0])
+    side = np.array([-math.sin(bearing), math.cos(bearing), 0.0])
+    stepper.update_mode(_view("RIDING"))
+    asked = [0.0]
+    for k in range(int(6.0 / DT)):
+        t = (k + 1) * DT
+        if t < 3.0:  # it follows what it was asked, a tick late
+            v = ahead * asked[-1]
+        else:  # its estimate turns sideways and PX4 slows it
+            v = ahead * max(1.0 - (t - 3.0) / 1.5 * 0.5, 0.5) + side * 0.95
+        asked.append(stepper.decide(OwnState(t, np.zeros(3), v, bearing), DT, 0.0, t).tracked.speed_m_s)
+    speed, times = np.array(asked[1:]), np.arange(1, len(asked)) * DT
+    assert speed[times < 3.0].max() == pytest.approx(1.2, abs=1e-6)  # the law's speed, reached
+    assert speed[times >= 3.0].min() >= 1.2 - 1e-6  # old: 0.8 (the forward speed plus 0.3; the floor)
