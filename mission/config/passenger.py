@@ -37,7 +37,7 @@ def check_team_flight(cfg: Config) -> None:
     opens: a team riding hovering keeps its riders apart (:func:`mission.config.team.check_hover_slots`;
     :class:`ConfigError` naming the slot). Nothing without a team."""
     if has_team(cfg):
-        check_hover_slots(cfg.team, cfg.mission.ride, cfg.mission.dock_tolerance_m)
+        check_hover_slots(cfg.team, cfg.mission.ride, cfg.safety.margin_m)
 
 
 def chosen_passenger(cfg: Config, name: str | None) -> Config:

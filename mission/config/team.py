@@ -237,26 +237,26 @@ def _check_slots(team: TeamSection, contact_radius_m: float) -> None:
                                   "(two passengers docked within recovery.contact_radius_m of these slots could touch)")
 
 
-def check_hover_slots(team: TeamSection, ride: str, dock_tolerance_m: float) -> None:
+def check_hover_slots(team: TeamSection, ride: str, margin_m: float) -> None:
     """Refuse a team that rides hovering (``ride`` ``"hover"``, mission.ride) on slots its riding
     passengers could touch on (raises :class:`ConfigError` naming the nearer slot's offset): a
-    passenger riding hovering may be ``dock_tolerance_m`` [m] (mission.dock_tolerance_m, what P1
-    allows) from its dock point, so two riding neighbours need ``team.passenger_span_m + 2
-    dock_tolerance_m`` between their slots' dock points horizontally, not only the span and the
-    contact radius a docked one needs (:func:`min_slot_spacing_m`). Checked by the commands that
-    fly a team (``run``, ``carrier``, ``demo``); the in-process simulation flies a deck team hovering
-    on its deck slots (:func:`sim.batch.team_mission.hovering`) and is not refused."""
+    rider hovers where its estimate puts it, so two riding neighbours each keep ``margin_m`` [m]
+    (safety.margin_m, the clearance kept from every obstacle) from the other's span: ``team.passenger_span_m
+    + 2 margin_m`` between their slots' dock points horizontally, where a docked one needs only the
+    span and the contact radius (:func:`min_slot_spacing_m`). Checked by the commands that fly a
+    team (``run``, ``carrier``, ``demo``); the in-process simulation flies a deck team hovering on
+    its deck slots (:func:`sim.batch.team_mission.hovering`) and is not refused."""
     if ride != "hover" or len(team.slots) < 2:
         return
-    spacing = team.passenger_span_m + 2.0 * dock_tolerance_m
+    spacing = team.passenger_span_m + 2.0 * margin_m
     for k, slot in enumerate(team.slots):
         for j, other in enumerate(team.slots[:k]):
             apart = math.dist(slot.offset_ned_m[:2], other.offset_ned_m[:2])
-            if apart < spacing:
+            if apart < spacing - 1e-9:
                 raise ConfigError(f"team.slots[{k}].offset_ned_m", slot.offset_ned_m,
                                   f"{apart:.2f} m from team.slots[{j}] ({other.name!r}) horizontally: a team riding "
-                                  f"hovering needs team.passenger_span_m + 2 mission.dock_tolerance_m = {spacing:g} m "
-                                  "(each rider may be mission.dock_tolerance_m from its dock point)")
+                                  f"hovering needs team.passenger_span_m + 2 safety.margin_m = {spacing:g} m (each rider "
+                                  "hovers where its estimate puts it)")
 
 
 def passenger_data(data: dict[str, Any], team: TeamSection, targets: list[list[float]], i: int) -> dict[str, Any]:

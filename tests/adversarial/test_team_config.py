@@ -199,8 +199,9 @@ def test_a_key_directory_is_a_teams_and_not_beside_a_peer_key(tmp_path: Path, ca
 
 
 def _hovering(apart_m: float) -> str:
-    """configs/team.toml riding hovering 1.5 m above the carrier, its two slots ``apart_m`` apart."""
-    text = changed('ride = "deck"\n', 'ride = "hover"\n')
+    """configs/team.toml riding hovering 1.5 m above the carrier, its two slots ``apart_m`` apart
+    (its queue 1 m higher: wider slots' queue points come nearer the other's approach)."""
+    text = changed('ride = "deck"\n', 'ride = "hover"\n').replace("queue_height_m = 3.8", "queue_height_m = 4.8")
     half = apart_m / 2.0
     return (text.replace("[0.0, -0.75, -0.5]", f"[0.0, {-half!r}, -1.5]")
             .replace("[0.0, 0.75, -0.5]", f"[0.0, {half!r}, -1.5]"))
@@ -209,14 +210,14 @@ def _hovering(apart_m: float) -> str:
 @pytest.mark.parametrize("command", ["carrier", "run"])
 def test_a_team_riding_hovering_on_slots_its_riders_could_touch_on_is_refused(
         tmp_path: Path, capsys: pytest.CaptureFixture[str], command: str) -> None:
-    """Riding hovering, each passenger may be mission.dock_tolerance_m (1 m) from its dock point:
-    the deck's slots, 1.5 m apart, would let two riders' 0.8 m spans touch. The deck ride's rule
-    (span + 2 contact radii, 1.1 m) is not enough."""
+    """Riding hovering, each passenger hovers where its estimate puts it: the deck's slots, 1.5 m
+    apart, leave two riders' 0.8 m spans 0.35 m of margin each, under safety.margin_m (0.5 m). The
+    deck ride's rule (span + 2 contact radii, 1.1 m) is not enough."""
     path = tmp_path / "team.toml"
     path.write_text(_hovering(1.5))
     err = _refused(command, tmp_path, path, [], capsys)
     assert ("error: team.slots[1].offset_ned_m = [0.0, 0.75, -1.5]: 1.50 m from team.slots[0] ('port') horizontally: "
-            "a team riding hovering needs team.passenger_span_m + 2 mission.dock_tolerance_m = 2.8 m") in err, err
+            "a team riding hovering needs team.passenger_span_m + 2 safety.margin_m = 1.8 m") in err, err
 
 
 def test_a_team_riding_hovering_far_enough_apart_is_not_refused() -> None:
@@ -226,7 +227,7 @@ def test_a_team_riding_hovering_far_enough_apart_is_not_refused() -> None:
     from mission.config.schema import from_dict
     from mission.errors import ConfigError
 
-    check_team_flight(from_dict(tomllib.loads(_hovering(2.8))))
+    check_team_flight(from_dict(tomllib.loads(_hovering(1.8))))
     check_team_flight(from_dict(tomllib.loads(TEAM)))  # the deck ride: the contact radius' rule, checked at load
     with pytest.raises(ConfigError, match=r"team.slots\[1\].offset_ned_m"):
-        check_team_flight(from_dict(tomllib.loads(_hovering(2.79))))
+        check_team_flight(from_dict(tomllib.loads(_hovering(1.79))))
