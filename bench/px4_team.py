@@ -26,7 +26,13 @@ distance between the passenger's estimate as its record has it and as the GCS li
 mapped time (a wrong mapping shows as metres).
 
 *True contact error*: at the contact's time, the passenger's true horizontal position against the
-rover's true position plus its slot's offset; ``estimates_apart_m`` is how far the two PX4s'
+rover's true position plus its slot's offset. The rover's timing is the weak point: the positions
+the carrier published (``carrier.mcap``, stamped on its own receipt of the rover's estimate on the
+offboard link) match the rover's estimate on the GCS link best shifted by ``rover_gcs_delay_s``
+(:func:`gcs_delay_s`; seen -0.13 to +0.17 s), and on a loaded machine either receiver can be the
+late one; so ``true_error_shifted_m`` is the same figure with the rover's truth on the carrier's
+receipt, and the two bracket it (at 1.2-1.5 m/s, 0.15 s is 0.2 m along the course). The
+passengers' timing is checked (``map_check_m``); ``estimates_apart_m`` is how far the two PX4s'
 estimate errors alone (each estimate minus its truth) put the pair apart then: the mission docks on
 estimates, and GPS-based EKFs err by decimetres. *Pairwise*: while both passengers fly (``FLYING``)
 and neither is in JOIN (the three SIHs start at one home, so both quadrotors take off from one
@@ -36,7 +42,7 @@ recovery queue"): ``team.passenger_span_m`` while either is seated on its slot
 distance the pair has had since both left their slots if they have not yet been that far apart
 (bench/pairwise_mc.py's rule); a violation is a shortfall over 0.01 m.
 
-Usage (root, ``MARSUPIAL_PX4_SITL``; about 4-6 min of wall time a flight; one flight per call so
+Usage (root, ``MARSUPIAL_PX4_SITL``; about 2 min of wall time a flight, 90 s of it flying; one flight per call so
 that another user of the PX4 lock can fly between):
 ``flock /work/wt/px4.lock nice -n 15 python -m bench.px4_team --out DIR [--config configs/px4_sitl_team.toml]``.
 """
@@ -68,6 +74,7 @@ from sim.sitl.px4 import (QUAD_AIRFRAME, ROVER_AIRFRAME, ROVER_PARAMS, NetNamesp
                           clock_ratio, clock_ratio_of, gcs_probe, unavailable_reason)
 
 ROOT = Path(__file__).resolve().parents[1]
+STATUS_TOPIC = "/pair0/carrier/status"  # the carrier's own log of each state it published (carrier.mcap)
 TRUTH_HZ = 20.0  # [Hz] each PX4's truth and estimate on the GCS link (three PX4s: 120 messages a second)
 OFFBOARD_PORT = 14540  # + instance: where PX4 SITL sends its offboard link
 GCS_LISTEN_PORT = 18570  # + instance: where its GCS link listens
@@ -191,6 +198,32 @@ def _read_truth(path: Path) -> tuple[np.ndarray, np.ndarray]:
     return est, truth[np.isfinite(truth[:, 2:]).all(axis=1)]
 
 
+def gcs_delay_s(directory: Path, offset_s: float, rover_est: np.ndarray, moving_m_s: float = 0.8) -> float | None:
+    """How much later [s] the rover's estimate arrived on the GCS link than the carrier process
+    received it on the offboard link: the shift of the GCS series that best matches (least median
+    horizontal distance) the positions the carrier published (``carrier.mcap``'s status, its own
+    receive-time copy of the same LOCAL_POSITION_NED, plus its small alignment shift) while it
+    drove faster than ``moving_m_s``. Positive: the bench's receipt was the later (its truth of
+    the rover is as late); negative: the carrier's. None without a log."""
+    path = directory / "carrier.mcap"
+    if not path.exists() or len(rover_est) < 2:
+        return None
+    content = read_messages(path, topics={STATUS_TOPIC})
+    rows = []
+    for _, _, log_ns, data in content.messages:
+        st = json.loads(data)
+        if st.get("published") and st.get("position") and st.get("velocity"):
+            p, v = st["position"], st["velocity"]
+            rows.append((log_ns * 1e-9 - offset_s, p["n"], p["e"], v["n"], v["e"]))
+    r = np.asarray(rows).reshape(-1, 5)
+    r = r[np.hypot(r[:, 3], r[:, 4]) > moving_m_s]
+    if len(r) < 30:
+        return None
+    shifts = np.arange(-0.2, 0.6, 0.01)
+    cost = [float(np.median(np.hypot(*(r[:, 1:3] - _at(rover_est, r[:, 0] + tau)[:, :2]).T))) for tau in shifts]
+    return round(float(shifts[int(np.argmin(cost))]), 2)
+
+
 def analyse(cfg: Config, directory: Path, offset_s: float) -> dict[str, Any]:
     """The flight's figures (module docstring) from its logs and ``truth-*.csv``; ``offset_s`` [s]
     Unix time minus the bench's monotonic clock during the flight."""
@@ -198,6 +231,10 @@ def analyse(cfg: Config, directory: Path, offset_s: float) -> dict[str, Any]:
     est, truth = {}, {}
     for name in [*names, "rover"]:
         est[name], truth[name] = _read_truth(directory / f"truth-{name}.csv")
+    rover_delay = gcs_delay_s(directory, offset_s, est["rover"])
+    # the rover's truth moved onto the carrier's receive times (module docstring: which clock is late is not known)
+    shifted = truth["rover"].copy()
+    shifted[:, 0] -= rover_delay or 0.0
     clocks = {n: round(clock_ratio_of(e[:, 0], e[:, 1]), 3) if len(e) > 10 else None for n, e in est.items()}
     law = cfg.law
     carrier_path = directory / "carrier.json"
@@ -214,16 +251,19 @@ def analyse(cfg: Config, directory: Path, offset_s: float) -> dict[str, Any]:
         tlog = clock_ratio(log_dir / "flight.tlog") if (log_dir / "flight.tlog").exists() else None
         for d, leg in zip(dockings(s, law.b * law.c), s.get("legs") or [s]):
             contact = leg.get("contact") or {}
-            true_err = frames = None
+            true_err = true_shifted = frames = None
             if contact and rec is not None and len(truth[p.name]) > 1 and len(truth["rover"]) > 1:
                 tc = np.array([contact["time_s"] + rec[1]])
                 rel = _at(truth[p.name], tc)[0] - (_at(truth["rover"], tc)[0] + slot)
                 true_err = round(float(np.hypot(rel[0], rel[1])), 3)
+                rel = _at(truth[p.name], tc)[0] - (_at(shifted, tc)[0] + slot)
+                true_shifted = round(float(np.hypot(rel[0], rel[1])), 3)
                 # what the two estimates' errors alone put between estimate and truth at contact
                 off = (_at(est[p.name], tc)[0] - _at(truth[p.name], tc)[0]) - (_at(est["rover"], tc)[0] - _at(truth["rover"], tc)[0])
                 frames = round(float(np.hypot(off[0], off[1])), 3)
             target_k = p.targets[int(d["leg"] or 0)] if d["leg"] is not None and int(d["leg"]) < len(p.targets) else None
-            legs.append({"passenger": p.name, "target": target_k, **d, "true_error_m": true_err, "estimates_apart_m": frames,
+            legs.append({"passenger": p.name, "target": target_k, **d, "true_error_m": true_err, "true_error_shifted_m": true_shifted,
+                         "estimates_apart_m": frames,
                          "stall_s": stall_s(log_dir), "mission_clock": None if tlog is None else round(tlog["ratio"], 3)})
     map_check = {}
     for name, (rec, shift) in recs.items():
@@ -240,7 +280,7 @@ def analyse(cfg: Config, directory: Path, offset_s: float) -> dict[str, Any]:
     return {"legs": legs, "pair": pair, "separation_m": cfg.safety.passenger_separation_m,
             "span_m": cfg.team.passenger_span_m, "carrier_closest_each_target_m": carrier.get("closest_each_target_m"),
             "carrier_closest_pair_heard": carrier.get("closest_pair"), "hand_overs": carrier.get("hand_overs"),
-            "clocks": clocks, "map_check_m": map_check}
+            "clocks": clocks, "map_check_m": map_check, "rover_gcs_delay_s": rover_delay}
 
 
 def fly_team(config: Path, directory: Path, speed_factor: float = 1.08, timeout_s: float | None = None) -> dict[str, Any]:
@@ -335,7 +375,7 @@ def _fmt(v: Any) -> str:
     return f"{v:.3f}" if isinstance(v, float) else "-" if v is None else str(v)
 
 
-LEG_COLUMNS = ("passenger", "target", "outcome", "attempts", "error_m", "true_error_m", "estimates_apart_m", "h_speed_m_s",
+LEG_COLUMNS = ("passenger", "target", "outcome", "attempts", "error_m", "true_error_m", "true_error_shifted_m", "estimates_apart_m", "h_speed_m_s",
                "p1", "p2", "p3", "riding_offset_m", "jump_m_s", "closest_m", "stall_s", "mission_clock")
 
 
@@ -353,7 +393,8 @@ def report(row: dict[str, Any]) -> list[str]:
     heard = row.get("carrier_closest_pair_heard") or {}
     lines.append(f"  carrier: closest approach to each target {row.get('carrier_closest_each_target_m')} m; closest pair heard "
                  f"{heard.get('distance_m')} m {heard.get('phases')}; hand-overs {row.get('hand_overs')}")
-    lines.append(f"  PX4 clocks {row['clocks']}; record-to-GCS map check {row['map_check_m']} m; exit codes "
+    lines.append(f"  PX4 clocks {row['clocks']}; record-to-GCS map check {row['map_check_m']} m; the rover's GCS link "
+                 f"{row.get('rover_gcs_delay_s')} s later than the carrier's receipt; exit codes "
                  f"{row['exit_codes']}; load {row['load_before']} -> {row['load_after']}; {row['wall_s']} s")
     return lines
 
@@ -365,9 +406,10 @@ ATTEMPTS = 2  # ... and for the approaches
 def leg_meets(leg: dict[str, Any], error: str = "error_m") -> bool:
     """Issue 36's PX4 target for one leg: docked within 2 approaches at <= 0.2 m, with P1-P3;
     ``error`` the contact error judged: ``error_m`` (the mission's, on the estimates, as
-    docs/recovery.md's PX4 target) or ``true_error_m`` (SIH's truth)."""
-    return bool(leg["docked"] and leg["attempts"] is not None and leg["attempts"] <= ATTEMPTS and leg[error] is not None
-                and leg[error] <= CONTACT_M and leg["p1"] and leg["p2"] and leg["p3"])
+    docs/recovery.md's PX4 target) or ``true`` (SIH's truth: both timings of the rover's within it)."""
+    errors = [leg["true_error_m"], leg["true_error_shifted_m"]] if error == "true" else [leg[error]]
+    return bool(leg["docked"] and leg["attempts"] is not None and leg["attempts"] <= ATTEMPTS and None not in errors
+                and max(errors) <= CONTACT_M and leg["p1"] and leg["p2"] and leg["p3"])
 
 
 @click.command()
@@ -398,8 +440,8 @@ def main(config: str, out: str, speed_factor: float, again: bool) -> None:
         click.echo(line)
     pair = row.get("pair") or {}
     click.echo(f"{sum(leg_meets(leg) for leg in row['legs'])}/{len(row['legs'])} legs docked within {ATTEMPTS} approaches at "
-               f"<= {CONTACT_M} m with P1-P3 ({sum(leg_meets(leg, 'true_error_m') for leg in row['legs'])} by the true "
-               f"error); pairwise: {'VIOLATION' if pair.get('violation') else 'none' if pair else 'not measured'}; "
+               f"<= {CONTACT_M} m with P1-P3 ({sum(leg_meets(leg, 'true') for leg in row['legs'])} by the true "
+               f"error, either timing); pairwise: {'VIOLATION' if pair.get('violation') else 'none' if pair else 'not measured'}; "
                f"flagged: {', '.join(flags(row)) or 'no'} (PX4 clocks within {CLOCK_OK}, no stall over {STALL_S} s); logs in {out}")
 
 
