@@ -51,4 +51,4 @@ def test_each_passenger_rides_the_pairs_dock_point_moved_to_its_side_on_its_own_
         assert own.mission.dock_offset_ned_m == pytest.approx(expected)
         assert own.mission.ride == "hover"  # an SIH quadrotor cannot sit on an SIH rover
     assert ids == {1, 2} and team.carrier.mavlink.target_system not in ids
-    assert [p.targets for p in team.team.passengers] == [[0], [1]]
+    assert [p.targets for p in team.team.passengers] == [[0, 2], [1]]  # alpha, bravo, alpha: configs/team.toml's order
