@@ -26,14 +26,14 @@ distance between the passenger's estimate as its record has it and as the GCS li
 mapped time (a wrong mapping shows as metres).
 
 *True contact error*: at the contact's time, the passenger's true horizontal position against the
-rover's true position plus its slot's offset. The rover's timing is the weak point: the positions
-the carrier published (``carrier.mcap``, stamped on its own receipt of the rover's estimate on the
-offboard link) match the rover's estimate on the GCS link best shifted by ``rover_gcs_delay_s``
-(:func:`gcs_delay_s`; seen -0.13 to +0.17 s), and on a loaded machine either receiver can be the
-late one; so ``true_error_shifted_m`` is the same figure with the rover's truth on the carrier's
-receipt, and the two bracket it (at 1.2-1.5 m/s, 0.15 s is 0.2 m along the course). The
+rover's true position plus its slot's offset. The rover's timing is checked as the passengers'
+are: the positions the carrier published (``carrier.mcap``, stamped on its own receipt of the
+rover's estimate on the offboard link, with its alignment shift) match the rover's estimate on the
+GCS link best shifted by ``rover_gcs_delay_s`` (:func:`gcs_delay_s`: -0.02 s in each of eight
+flights); ``true_error_shifted_m`` is the figure with the rover's truth moved by that shift. The
 passengers' timing is checked (``map_check_m``); ``estimates_apart_m`` is how far the two PX4s'
-estimate errors alone (each estimate minus its truth) put the pair apart then: the mission docks on
+estimate errors alone (each estimate minus its truth; the rover's with the carrier's alignment
+shift onto alpha at the start, :func:`carrier_alignment_m`) put the pair apart then: the mission docks on
 estimates, and GPS-based EKFs err by decimetres. *Pairwise*: while both passengers fly (``FLYING``)
 and neither is in JOIN (the three SIHs start at one home, so both quadrotors take off from one
 point; on a real deck each stands on its slot), the least true distance, and the shortfall against what the barrier keeps (docs/team.md, "The
@@ -50,6 +50,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -198,6 +199,15 @@ def _read_truth(path: Path) -> tuple[np.ndarray, np.ndarray]:
     return est, truth[np.isfinite(truth[:, 2:]).all(axis=1)]
 
 
+def carrier_alignment_m(directory: Path) -> np.ndarray:
+    """The shift [m] NED the carrier added to the rover's estimate once, aligning it onto the first
+    passenger standing on the deck (``carrier.align_on_deck_m``; its log says it), zeros without one."""
+    path = directory / "carrier.err"
+    text = path.read_text(errors="replace") if path.exists() else ""
+    match = re.search(r"aligned on the passenger standing on the deck: shift \[([^\]]*)\]", text)
+    return np.array([float(v) for v in match.group(1).split(",")]) if match else np.zeros(3)
+
+
 def gcs_delay_s(directory: Path, offset_s: float, rover_est: np.ndarray, moving_m_s: float = 0.8) -> float | None:
     """How much later [s] the rover's estimate arrived on the GCS link than the carrier process
     received it on the offboard link: the shift of the GCS series that best matches (least median
@@ -231,6 +241,7 @@ def analyse(cfg: Config, directory: Path, offset_s: float) -> dict[str, Any]:
     est, truth = {}, {}
     for name in [*names, "rover"]:
         est[name], truth[name] = _read_truth(directory / f"truth-{name}.csv")
+    est["rover"][:, 2:5] += carrier_alignment_m(directory)  # the carrier's frame: its estimate as it published it
     rover_delay = gcs_delay_s(directory, offset_s, est["rover"])
     # the rover's truth moved onto the carrier's receive times (module docstring: which clock is late is not known)
     shifted = truth["rover"].copy()
