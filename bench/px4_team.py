@@ -29,7 +29,7 @@ mapped time (a wrong mapping shows as metres).
 rover's true position plus its slot's offset. The rover's timing is checked as the passengers'
 are: the positions the carrier published (``carrier.mcap``, stamped on its own receipt of the
 rover's estimate on the offboard link, with its alignment shift) match the rover's estimate on the
-GCS link best shifted by ``rover_gcs_delay_s`` (:func:`gcs_delay_s`: -0.02 s in each of eight
+GCS link best shifted by ``rover_gcs_delay_s`` (:func:`gcs_delay_s`: -0.02 s in each of nine
 flights); ``true_error_shifted_m`` is the figure with the rover's truth moved by that shift. The
 passengers' timing is checked (``map_check_m``); ``estimates_apart_m`` is how far the two PX4s'
 estimate errors alone (each estimate minus its truth; the rover's with the carrier's alignment
