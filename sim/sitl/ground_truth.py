@@ -29,30 +29,48 @@ GPS_GLOBAL_ORIGIN_ID = 49
 COLUMNS = ("t_rx_s", "boot_s", "x", "y", "z", "vx", "vy", "vz", "true_x", "true_y", "true_z", "true_vx", "true_vy", "true_vz")
 
 
-def ask(probe: Any, rate_hz: float) -> dict[int, Any]:
+def ask(probe: Any, rate_hz: float, system_id: int = 1, gcs_port: int | None = None) -> dict[int, Any]:
     """Ask PX4 (over ``probe``'s link) for its estimate and its ground truth at ``rate_hz`` and for
-    its EKF origin; returns the COMMAND_ACK result per message id (None: no answer)."""
+    its EKF origin; returns the COMMAND_ACK result per message id (None: no answer). Several PX4s on
+    one link: ``system_id`` is the one asked and ``gcs_port`` the port its GCS link listens on
+    (18570 + its instance; None: the probe's vehicle)."""
+    vehicle = probe.vehicle
+    if gcs_port is not None:
+        probe.vehicle = ("127.0.0.1", gcs_port)
+    target = (system_id, 1)
     results: dict[int, Any] = {}
-    for msg_id in (LOCAL_POSITION_NED_ID, HIL_STATE_QUATERNION_ID):
-        ack = probe.command(px4.MAV_CMD_SET_MESSAGE_INTERVAL, (msg_id, 1e6 / rate_hz))
-        results[msg_id] = None if ack is None else ack.result
-    ack = probe.command(px4.MAV_CMD_REQUEST_MESSAGE, (GPS_GLOBAL_ORIGIN_ID,))
-    results[GPS_GLOBAL_ORIGIN_ID] = None if ack is None else ack.result
+    try:
+        for msg_id in (LOCAL_POSITION_NED_ID, HIL_STATE_QUATERNION_ID):
+            ack = probe.command(px4.MAV_CMD_SET_MESSAGE_INTERVAL, (msg_id, 1e6 / rate_hz), target=target)
+            results[msg_id] = None if ack is None else ack.result
+        ack = probe.command(px4.MAV_CMD_REQUEST_MESSAGE, (GPS_GLOBAL_ORIGIN_ID,), target=target)
+        results[GPS_GLOBAL_ORIGIN_ID] = None if ack is None else ack.result
+    finally:
+        probe.vehicle = vehicle
     return results
 
 
-def series(probe: Any) -> tuple[np.ndarray, np.ndarray]:
+def series(probe: Any, system_id: int | None = None,
+           origin: tuple[float, float, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(estimate, truth) received so far: rows ``t_rx, boot, x, y, z, vx, vy, vz`` (the truth's
-    boot time NaN) in PX4's local NED frame. Raises LookupError without an EKF origin."""
+    boot time NaN) in PX4's local NED frame. ``system_id``: only that PX4's messages (several
+    PX4s on one link; None: all). ``origin``: project the truth about this latitude, longitude
+    [deg] and altitude [m] instead of the PX4's own EKF origin (several PX4s' truths in one frame).
+    Raises LookupError without an EKF origin."""
+    def mine(entries: Any) -> list[Any]:
+        return [e for e in entries if system_id is None or e[2].get_srcSystem() == system_id]
+
     with probe._cond:  # the probe's thread keeps receiving
-        lps = list(probe.history.get("LOCAL_POSITION_NED", ()))
-        hils = list(probe.history.get("HIL_STATE_QUATERNION", ()))
-        origin = probe.history.get("GPS_GLOBAL_ORIGIN")
-        origin_msg = origin[-1][2] if origin else None
+        lps = mine(probe.history.get("LOCAL_POSITION_NED", ()))
+        hils = mine(probe.history.get("HIL_STATE_QUATERNION", ()))
+        origins = mine(probe.history.get("GPS_GLOBAL_ORIGIN", ()))
+        origin_msg = origins[-1][2] if origins else None
     est = np.array([(t, m.time_boot_ms * 1e-3, m.x, m.y, m.z, m.vx, m.vy, m.vz) for _, t, m in lps]).reshape(-1, 8)
-    if origin_msg is None:
-        raise LookupError("no GPS_GLOBAL_ORIGIN received: PX4's EKF origin is unknown")
-    lat0, lon0, alt0 = origin_msg.latitude * 1e-7, origin_msg.longitude * 1e-7, origin_msg.altitude * 1e-3
+    if origin is None:
+        if origin_msg is None:
+            raise LookupError("no GPS_GLOBAL_ORIGIN received: PX4's EKF origin is unknown")
+        origin = (origin_msg.latitude * 1e-7, origin_msg.longitude * 1e-7, origin_msg.altitude * 1e-3)
+    lat0, lon0, alt0 = origin
     rows = []
     for _, t, m in hils:
         n, e = project(m.lat * 1e-7, m.lon * 1e-7, lat0, lon0)
