@@ -82,7 +82,7 @@ GCS_LISTEN_PORT = 18570  # + instance: where its GCS link listens
 VIOLATION_M = 0.01  # [m] a shortfall over this is a violation (bench/pairwise_mc.py)
 FLYING_NAMES = frozenset(p.value for p in FLYING)
 # Left out of the pairwise figures: the three SIHs start at one home (SIH has no collisions), so
-# both quadrotors take off from one point and JOIN their slots 1.5 m apart; on a real deck each
+# both quadrotors take off from one point and JOIN their slots 1.8 m apart; on a real deck each
 # stands on its own slot.
 JOIN = Phase.JOIN.value
 

@@ -12,7 +12,7 @@ from tests.conftest import CONFIGS
 
 # The fields the team states itself, or that differ for a team's reason: the rover is instance 2
 # (its link and system id), the mission's duration (two legs and two recoveries), the dock
-# tolerance (both quadrotors start at the rover's home, 0.75 m from their slots).
+# tolerance (both quadrotors start at the rover's home, 0.9 m from their slots).
 OWN = {"mission": {"dock_offset_ned_m", "max_duration_s", "dock_tolerance_m"}, "mavlink": {"target_system"}, "carrier": {"mavlink"},
        "scenario": {"targets", "target"}}
 
@@ -43,7 +43,7 @@ def test_the_rovers_link_is_the_third_instances_and_only_its_address_differs(tea
 
 def test_each_passenger_rides_the_pairs_dock_point_moved_to_its_side_on_its_own_instance(team, cycle):
     ids = set()
-    for p, side in zip(team.team.passengers, (-0.75, 0.75)):
+    for p, side in zip(team.team.passengers, (-0.9, 0.9)):
         own = passenger_config(team, p.name)
         ids.add(own.mavlink.target_system)
         expected = list(cycle.mission.dock_offset_ned_m)
