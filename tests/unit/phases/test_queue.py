@@ -117,22 +117,24 @@ def test_one_already_on_its_glide_path_gives_way_to_a_docking_one_or_one_that_go
 def test_the_queue_point_is_back_and_up_and_clear_of_every_other_slots_approach():
     team = load_config(CONFIGS / "team.toml")
     q = mission_model(passenger_config(team, "bravo")).queue
-    assert q is not None and (q.distance_m, q.height_m) == (3.0, 3.5)
+    assert q is not None and (q.distance_m, q.height_m) == (3.0, 3.8)
     h = np.array([1.0, 2.0, -3.0])
     np.testing.assert_allclose(queue_point(h, np.array([0.0, 1.0, 0.0]), 3.0, 3.5), [1.0, -1.0, -6.5])
     r = team.recovery
     holdoff_h = -holdoff_point(np.zeros(3), np.array([1.0, 0.0, 0.0]), mission_model(passenger_config(team, "bravo"))
                                .recovery.geometry)[2]
-    clear = queue_clearance_m(team.team, r.holdoff_distance_m, holdoff_h, r.decision_height_m)
-    # worst course: along the slots, 1.5 m apart: |(-1.5, 0, 3.5)| = 3.81 m
-    assert clear == pytest.approx(3.808, abs=1e-3) and clear >= team.safety.passenger_separation_m
-    # 1.5 m higher only, a queue point on a course along the slots comes 2.12 m from the other's holdoff point
-    # (or from the queue point of the one before it)
+    ratio = team.safety.vertical_ratio  # 3.5 / 3 m: the pairwise barrier's vertical ellipsoid
+    clear = queue_clearance_m(team.team, r.holdoff_distance_m, holdoff_h, r.decision_height_m, ratio)
+    # worst course: along the slots, 1.5 m apart, 3.8 m up, heights weighed 3/3.5: |(-1.5, 0, 3.257)| = 3.59 m
+    assert clear == pytest.approx(3.586, abs=1e-3) and clear >= team.safety.passenger_separation_m + team.safety.margin_m
+    assert queue_clearance_m(team.team, r.holdoff_distance_m, holdoff_h, r.decision_height_m) == pytest.approx(4.085, abs=1e-3)
+    # 1.5 m higher only, a queue point on a course along the slots comes 1.98 m from the other's holdoff point
+    # in the barrier's metric (or from the queue point of the one before it)
     data = team.model_dump(exclude_unset=True)
     data["team"] = {**data["team"], "queue_height_m": 1.5}
     with pytest.raises(ConfigError) as err:
         from_dict(data)
-    assert err.value.field == "team.queue_height_m" and "2.12 m" in err.value.rule
+    assert err.value.field == "team.queue_height_m" and "1.98 m" in err.value.rule
 
 
 def _holdoff_flight(flip: list[tuple[int, str]], ticks: int):
