@@ -153,3 +153,22 @@ def test_a_marker_lost_on_the_descent_climbs_back_to_the_gate(model):
     new, dec = approach(state, obs, model)
     assert new.phase is Phase.APPROACH and new.recovery.descent == 0.0, dec.events
     assert new.x_ref[2] < state.x_ref[2]  # the reference already climbs
+
+
+def test_the_reference_floor_is_over_the_ground_the_passenger_sees(model):
+    """The passenger's own height estimate 1.8 m off (the relnav Monte-Carlo: its GNSS bias and
+    PX4's error, 1.7-2.3 m in scenario 63): the carrier, on the ground, reads 1.8 m down in its
+    frame, the dock point under the altitude floor fixed in it (safety.z_max_m = -0.5). The
+    reference's floor moves over that ground, as the command's does: the descent goes on down
+    (on the old code the reference sat on the floor at -0.500 m for 24 s and the approach went
+    around on the descent's budget, three times in scenarios 98 and 129, which never docked)."""
+    g = model.recovery.geometry
+    state, obs, dock = _at(model, 0.4, descent=1.0 - 0.4 / g.decision_height_m)
+    low = np.array([0.0, 0.0, 1.8])  # the ground 1.8 m down in the passenger's frame
+    carrier = replace(obs.carrier, position_ned_m=obs.carrier.position_ned_m + low)
+    vehicle = replace(obs.vehicle, position_ned_m=obs.vehicle.position_ned_m + low)
+    state = replace(state, x_ref=state.x_ref + low)
+    assert state.x_ref[2] > model.command_safety.z_max_m  # under the floor fixed in its frame
+    new, dec = approach(state, replace(obs, carrier=carrier, vehicle=vehicle, relative=SEEN), model)
+    assert new.phase is Phase.APPROACH, dec.events
+    assert new.u_ref[2] > 0.0, new.u_ref  # going down, not pushed up to the floor
