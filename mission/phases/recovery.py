@@ -37,9 +37,9 @@ from mission.core.records import replace
 import numpy as np
 
 from mission.core.docking import (
-    Contact,
     cone_radius_m,
     contact,
+    descent_step,
     gate_point,
     glide_point,
     holdoff_point,
@@ -406,7 +406,8 @@ def approach(state, obs, m, events=()):
         rec = replace(rec, marker_lost_s=lost, descent=0.0)
         return _fly(state, obs, m, gate, v_c, r.approach, rec, events)
     rec = replace(rec, settled_since_s=None, marker_lost_s=None)
-    descent, rate = _descend(rec.descent, here, r, m.dt_s)
+    descent, rate = descent_step(rec.descent, here.horizontal_error_m, g, r.descent_speed_m_s,
+                                 r.final_descent_speed_m_s, r.final_lineup_margin, m.dt_s)
     goal = gate + descent * (dock - gate)
     goal_v = v_c + ((dock - gate) / g.decision_height_m * rate if descent < 1.0 else 0.0)
     rec = replace(rec, descent=descent)
@@ -420,31 +421,6 @@ def approach(state, obs, m, events=()):
         state = enter(state, Phase.DOCKED, t, seated=m.deck is not None)  # on a deck: it lands on it
         events = (*events, f"contact: {here.horizontal_error_m:.3f} m, {here.horizontal_relative_speed_m_s:.2f} m/s")
     return _fly(state, obs, m, goal, goal_v, r.approach, rec, events)
-
-
-def _descend(descent: float, here: Contact, r: RecoveryModel, dt_s: float) -> tuple[float, float]:
-    """The descent's progress one tick on (``descent``: 0 at the gate, 1 at the dock point) and
-    the rate [m/s] it goes down at, relative to the carrier, over the tick ``dt_s`` [s]:
-    ``descent_speed_m_s`` down to three contact heights over the dock point, below them
-    ``final_descent_speed_m_s`` and only while lined up within ``1 - final_lineup_margin`` of the
-    contact radius (``here``: the vehicle against the dock point). Out of that it pauses (rate 0)
-    where it is, but no lower than two contact heights: the vehicle's vertical swing (~0.1 m round
-    its reference) may take it into the contact band, but within the contact radius it docks
-    there (beyond it the out-of-line rule holds it at three contact heights). (Not its horizontal speed with a
-    margin: the estimate's, PX4's velocity error in it, is over 0.14 m/s for seconds on a slow
-    carrier, and a descent waiting for it went around on its budget; nor back up to three contact
-    heights, or 2.5: the vehicle's horizontal error wanders 0.01-0.15 m within a second or two, and
-    a descent sent back up at each excursion went around on its budget.)"""
-    g = r.geometry
-    slow_from = 1.0 - 3.0 * g.contact_height_m / g.decision_height_m
-    pause = 1.0 - 2.0 * g.contact_height_m / g.decision_height_m
-    rate = r.descent_speed_m_s
-    if descent >= slow_from and r.final_descent_speed_m_s is not None:
-        rate = r.final_descent_speed_m_s
-    nxt = min(1.0, descent + rate * dt_s / g.decision_height_m)
-    if nxt > slow_from and here.horizontal_error_m > (1.0 - r.final_lineup_margin) * g.contact_radius_m:
-        return min(descent, pause), 0.0
-    return nxt, rate
 
 
 def docked(state, obs, m, events=()):
