@@ -132,7 +132,7 @@ def descent_step(descent: float, horizontal_error_m: float, g: DockingGeometry, 
     on a slow carrier, and a descent waiting for it went around on its budget; nor back up to
     three contact heights, or 2.5: the vehicle's horizontal error wanders 0.01-0.15 m within a
     second or two, and a descent sent back up at each excursion went around on its budget
-    (docs/relnav.md, "The deck touches")."""
+    (docs/relnav.md, "The deck touches, the floor and P1")."""
     slow_from = 1.0 - 3.0 * g.contact_height_m / g.decision_height_m
     pause = 1.0 - 2.0 * g.contact_height_m / g.decision_height_m
     rate = final_speed_m_s if descent >= slow_from and final_speed_m_s is not None else speed_m_s
