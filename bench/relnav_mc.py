@@ -11,7 +11,11 @@ and the passenger's own estimate errs as PX4 SITL's does (``--estimate-error``, 
 PX4 SITL's errors as the demo's mock vehicle flies them; 0: exact, an upper bound).
 
     PYTHONPATH=. python -m bench.relnav_mc configs/relnav.toml [--scenarios 20] [--seed 0] [--estimate-error 1]
-        [--jsonl out.jsonl]
+        [--first 0] [--only 3 18 ...] [--jsonl out.jsonl]
+
+``--first K`` flies scenarios K .. ``--scenarios``-1 and ``--only`` just the ones named: each
+scenario draws the same as in the whole batch (the draws before it are made and thrown away), so
+a batch split in ranges over several processes, or one scenario flown again, flies the same.
 
 Prints one JSON line a scenario, then the batch against the targets: docked within two
 approaches (every leg), the true contact error's median and 95th percentile, deck touches outside
@@ -54,14 +58,19 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--estimate-error", type=float, default=VehicleOptions.estimate_error,
                     help="the vehicle's estimate errors, a multiple of PX4 SITL's (0: exact); default: the demo's")
+    ap.add_argument("--first", type=int, default=0, help="the first scenario flown (a range: --first K --scenarios N)")
+    ap.add_argument("--only", type=int, nargs="+", help="fly only these scenarios (their draws as in the batch)")
     ap.add_argument("--jsonl", help="also write each scenario's line here")
     args = ap.parse_args()
     cfg = load_config(args.config)
     rng = np.random.default_rng(args.seed)
     rows = []
     out = open(args.jsonl, "w") if args.jsonl else None
-    for k in range(args.scenarios):
+    last = max(args.only) + 1 if args.only else args.scenarios
+    for k in range(last):
         drawn, flown = draw(cfg, rng, k)
+        if k < args.first or (args.only and k not in args.only):
+            continue
         t0 = time.process_time()
         f = World(flown, configured(estimate_error=args.estimate_error, seed=args.seed * 1000 + k)).run().flight()
         row = {"scenario": k, **drawn, "cpu_s": round(time.process_time() - t0, 1), **relnav_truth(flown, f)}
@@ -83,6 +92,8 @@ def main() -> None:
         "true_contact_p95_m": round(float(np.percentile(contacts, 95)), 4) if contacts else None,
         "true_contact_max_m": round(float(np.max(contacts)), 4) if contacts else None,
         "true_deck_touches": sum(r["true_deck_touches"] for r in rows),
+        "flights_with_deck_touches": sum(1 for r in rows if r["true_deck_touches"]),
+        "p1_failed": [r["scenario"] for r in rows if not r["p1"]],
         "p1_p3_all": all(r["p1"] and r["p2"] and r["p3"] for r in rows),
         "max_phase_switch_jump_m_s": max((r["max_phase_switch_jump_m_s"] or 0.0) for r in rows),
         "riding_horizontal_median_m": round(float(np.median([r["riding_horizontal_median_m"] for r in rows

@@ -33,6 +33,17 @@ class RecoverySection(Section):
                      "decision_height_m above the dock point"))
     descent_speed_m_s: float = Field(0.3, gt=0, le=2,
         description="[m/s] speed of the final, vertical descent from the gate onto the dock point, relative to the carrier")
+    final_descent_speed_m_s: float | None = Field(None, gt=0, le=2,
+        description=("[m/s] speed of the descent's last part, from three contact heights (contact_height_m) over "
+                     "the dock point, relative to the carrier (unset: descent_speed_m_s). The vehicle's vertical "
+                     "speed swings round what the reference asks (its estimate's velocity error, the dock's "
+                     "vertical velocity in its frame): asked well under contact_max_vertical_speed_m_s, it crosses "
+                     "into the contact band within it"))
+    final_lineup_margin: float = Field(0.0, ge=0, lt=1,
+        description=("[-] the descent goes below two contact heights over the dock point only lined up with this "
+                     "fraction of the contact radius to spare (0.3: within 0.7 contact_radius_m), else it pauses "
+                     "there: the estimate's few centimetres and the drift while crossing the last decimetre then "
+                     "stay inside the contact radius"))
     gate_timeout_s: float = Field(5.0, gt=0, le=60,
         description="[s] at the gate, the vehicle has this long to line up over the dock point, else it goes around")
     deck_radius_m: float = Field(0.5, gt=0, le=20,

@@ -116,3 +116,27 @@ def contact(vehicle_ned_m: np.ndarray, vehicle_v_ned_m_s: np.ndarray, dock_ned_m
     e = np.asarray(vehicle_ned_m, dtype=float) - dock_ned_m
     dv = np.asarray(vehicle_v_ned_m_s, dtype=float) - carrier_v_ned_m_s
     return Contact(float(np.hypot(e[0], e[1])), float(e[2]), float(np.hypot(dv[0], dv[1])), abs(float(dv[2])))
+
+
+def descent_step(descent: float, horizontal_error_m: float, g: DockingGeometry, speed_m_s: float,
+                 final_speed_m_s: float | None, lineup_margin: float, dt_s: float) -> tuple[float, float]:
+    """The final descent's progress one tick ``dt_s`` [s] on (``descent``: 0 at the gate, 1 at the
+    dock point) and the rate [m/s] it goes down at, relative to the carrier: ``speed_m_s`` down
+    to three contact heights over the dock point, below them ``final_speed_m_s`` (None: the same)
+    and only while lined up within ``1 - lineup_margin`` of the contact radius
+    (``horizontal_error_m`` [m], the vehicle from the dock point). Out of that it pauses (rate 0)
+    where it is, no lower than two contact heights: the vehicle's vertical swing (~0.1 m round
+    its reference) may take it into the contact band, but within the contact radius it docks
+    there (beyond it the out-of-line rule holds it at three contact heights). Not its horizontal
+    speed with a margin: the estimate's, PX4's velocity error in it, is over 0.14 m/s for seconds
+    on a slow carrier, and a descent waiting for it went around on its budget; nor back up to
+    three contact heights, or 2.5: the vehicle's horizontal error wanders 0.01-0.15 m within a
+    second or two, and a descent sent back up at each excursion went around on its budget
+    (docs/relnav.md, "The deck touches, the floor and P1")."""
+    slow_from = 1.0 - 3.0 * g.contact_height_m / g.decision_height_m
+    pause = 1.0 - 2.0 * g.contact_height_m / g.decision_height_m
+    rate = final_speed_m_s if descent >= slow_from and final_speed_m_s is not None else speed_m_s
+    nxt = min(1.0, descent + rate * dt_s / g.decision_height_m)
+    if nxt > slow_from and horizontal_error_m > (1.0 - lineup_margin) * g.contact_radius_m:
+        return min(descent, pause), 0.0
+    return nxt, rate

@@ -39,6 +39,7 @@ import numpy as np
 from mission.core.docking import (
     cone_radius_m,
     contact,
+    descent_step,
     gate_point,
     glide_point,
     holdoff_point,
@@ -51,7 +52,7 @@ from mission.flight_mode import FlightMode
 from mission.phases import deck, queue, stall
 from mission.phases.battery import next_leg_problem
 from mission.phases.carrier_fitness import carrier_unfit, carrier_unsteady, observe_carrier
-from mission.phases.flying import _track
+from mission.phases.flying import _floor_over_the_ground, _track
 from mission.phases.phase import Phase, Request
 from mission.phases.types import (
     Decision,
@@ -98,6 +99,10 @@ def _fly(state: MissionState, obs: Observation, m: MissionModel, goal_x: np.ndar
     _, u_next = pursue(state.x_ref, state.u_ref, goal_x, goal_v, limits, m.dt_s)
     keep_out = m.deck.keep_out(obs, m) if m.deck is not None else None
     cfg, neighbours = queue.apart(state, obs, m)
+    # the reference's altitude floor over the ground as the passenger sees it, as the command's
+    # ([relnav]: its own height estimate drifts by a metre or two, and a floor fixed in it lay
+    # under the dock point: the reference sat on it, the descent never reached the dock)
+    cfg = _floor_over_the_ground(cfg, obs)
     # the rows phase in from the phase's start (as from the separation): they change with the phase
     # (none, the span, the separation), and a row in at once could correct the command in one tick
     safe = filter_velocity(state.x_ref, u_next, m.tick.obstacles, cfg, state.u_ref, m.dt_s, deck=keep_out,
@@ -390,17 +395,21 @@ def approach(state, obs, m, events=()):
         # the marker lost or the estimate unsure: hold the height (a search) no lower than three
         # contact heights over the deck (never sitting on it outside the contact conditions), go
         # around after search_s; a vehicle already meeting the contact conditions docks below
+        # Blind, the relative height drifts with the vehicle's own height estimate (the marker no
+        # longer pins the deck in its frame; PX4 holds its estimate, so the vehicle truly sinks
+        # or rises with its error: 0.65 m in 1.5 s measured), so the search climbs back to the gate
+        # rather than hold a height it no longer knows
         lost = rec.marker_lost_s if rec.marker_lost_s is not None else t
         if t - lost > m.relnav.search_s:
             return go_around(state, obs, m, f"on the descent: {blocked} (relnav.search_s = {m.relnav.search_s:g})",
                              events)
-        held = max(0.0, min(rec.descent, 1.0 - 3.0 * g.contact_height_m / g.decision_height_m))
-        rec = replace(rec, marker_lost_s=lost, descent=held)
-        return _fly(state, obs, m, gate + held * (dock - gate), v_c, r.approach, rec, events)
+        rec = replace(rec, marker_lost_s=lost, descent=0.0)
+        return _fly(state, obs, m, gate, v_c, r.approach, rec, events)
     rec = replace(rec, settled_since_s=None, marker_lost_s=None)
-    descent = min(1.0, rec.descent + r.descent_speed_m_s * m.dt_s / g.decision_height_m)
+    descent, rate = descent_step(rec.descent, here.horizontal_error_m, g, r.descent_speed_m_s,
+                                 r.final_descent_speed_m_s, r.final_lineup_margin, m.dt_s)
     goal = gate + descent * (dock - gate)
-    goal_v = v_c + ((dock - gate) / g.decision_height_m * r.descent_speed_m_s if descent < 1.0 else 0.0)
+    goal_v = v_c + ((dock - gate) / g.decision_height_m * rate if descent < 1.0 else 0.0)
     rec = replace(rec, descent=descent)
     if here.within(g) or landed:  # on the deck under the contact conditions (ahead of its reference: at once)
         figures = {"horizontal_error_m": round(here.horizontal_error_m, 4),

@@ -284,6 +284,8 @@ class RecoveryModel:
     returning: PursuitLimits
     approach: PursuitLimits
     descent_speed_m_s: float
+    final_descent_speed_m_s: float | None  # [m/s] the descent's last three contact heights (None: descent_speed_m_s)
+    final_lineup_margin: float  # [-] below two contact heights: lined up with this fraction of the contact radius to spare
     gate_timeout_s: float
     settle_radius_m: float
     settle_speed_m_s: float

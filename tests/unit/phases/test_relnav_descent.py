@@ -27,12 +27,13 @@ def model():
     return mission_model(load_config(CONFIGS / "relnav.toml"))
 
 
-def _at(model, height_m: float, descent: float, lost_s: float | None = None):
-    """The vehicle on the descent, ``height_m`` [m] over the dock point, exactly over it, with
-    the carrier's velocity; the carrier at the origin moving north at 1.5 m/s."""
+def _at(model, height_m: float, descent: float, lost_s: float | None = None, east_m: float = 0.0):
+    """The vehicle on the descent, ``height_m`` [m] over the dock point, exactly over it (or
+    ``east_m`` [m] east of it), with the carrier's velocity; the carrier at the origin moving
+    north at 1.5 m/s."""
     v_c = np.array([1.5, 0.0, 0.0])
     dock = np.zeros(3) + model.dock_offset_ned_m
-    here = dock + np.array([0.0, 0.0, -height_m])
+    here = dock + np.array([0.0, east_m, -height_m])
     carrier = CarrierObs(position_ned_m=np.zeros(3), velocity_ned_m_s=v_c, age_s=0.0, alive=True, yaw_rad=0.0)
     vehicle = VehicleObs(position_ned_m=here, velocity_ned_m_s=v_c.copy(), armed=True, mode="OFFBOARD",
                          heartbeat_age_s=0.0)
@@ -99,3 +100,75 @@ def test_a_descent_that_never_reaches_the_deck_goes_around_after_its_budget(mode
     new, dec = approach(past, obs, model)
     assert new.phase is Phase.GO_AROUND and new.recovery.descent_since_s is None
     assert any("the descent did not reach the deck within" in e for e in dec.events), dec.events
+
+
+SEEN = replace(LOST, since_marker_s=0.0)
+
+
+def _descent_after_one_tick(model, height_m: float, east_m: float = 0.0, relative=SEEN):
+    g = model.recovery.geometry
+    state, obs, _ = _at(model, height_m, descent=1.0 - height_m / g.decision_height_m, east_m=east_m)
+    new, dec = approach(state, replace(obs, relative=relative), model)
+    assert new.phase is Phase.APPROACH, dec.events
+    return state.recovery.descent, new.recovery.descent
+
+
+def test_the_last_contact_heights_are_descended_slower(model):
+    """From three contact heights over the dock point the reference descends at
+    recovery.final_descent_speed_m_s (0.15 m/s), above them at descent_speed_m_s (0.3 m/s). At
+    0.3 m/s all the way the vehicle crossed the contact band at a true 0.53-0.58 m/s, over the
+    contact conditions' 0.5 (relnav Monte-Carlo: its vertical speed swings +-0.25 m/s round the
+    asked one)."""
+    r, g = model.recovery, model.recovery.geometry
+    assert r.final_descent_speed_m_s == pytest.approx(0.15)
+    high = _descent_after_one_tick(model, 0.45)
+    low = _descent_after_one_tick(model, 0.25)
+    assert (high[1] - high[0]) * g.decision_height_m / model.dt_s == pytest.approx(r.descent_speed_m_s)
+    assert (low[1] - low[0]) * g.decision_height_m / model.dt_s == pytest.approx(r.final_descent_speed_m_s)
+
+
+def test_below_three_contact_heights_only_lined_up_with_a_margin(model):
+    """0.08 m off the dock point (inside the 0.10 m contact radius, outside its 0.07 m with the
+    0.3 margin): at 0.301 m and at 0.25 m over it the reference pauses where it is, at 0.15 m it
+    goes back up to two contact heights, no go-around; 0.05 m off, it goes on down. Without the
+    margin the vehicle entered the contact band 0.099-0.106 m off by the truth and sat in it, out
+    of the contact conditions."""
+    g = model.recovery.geometry
+    pause = 1.0 - 2.0 * g.contact_height_m / g.decision_height_m
+    for height in (0.301, 0.25):
+        before, after = _descent_after_one_tick(model, height, east_m=0.08)
+        assert after == pytest.approx(before), height
+    before, after = _descent_after_one_tick(model, 0.15, east_m=0.08)
+    assert after == pytest.approx(pause)
+    before, after = _descent_after_one_tick(model, 0.15, east_m=0.05)
+    assert after > before
+
+
+def test_a_marker_lost_on_the_descent_climbs_back_to_the_gate(model):
+    """Blind, the relative height drifts with the vehicle's own height estimate (0.65 m in 1.5 s
+    in the Monte-Carlo, the vehicle then 0.3 m under the dock point while it read 0.3 m over):
+    the reference's goal goes back to the gate instead of holding the height."""
+    g = model.recovery.geometry
+    state, obs, dock = _at(model, 0.4, descent=1.0 - 0.4 / g.decision_height_m)
+    new, dec = approach(state, obs, model)
+    assert new.phase is Phase.APPROACH and new.recovery.descent == 0.0, dec.events
+    assert new.x_ref[2] < state.x_ref[2]  # the reference already climbs
+
+
+def test_the_reference_floor_is_over_the_ground_the_passenger_sees(model):
+    """The passenger's own height estimate 1.8 m off (the relnav Monte-Carlo: its GNSS bias and
+    PX4's error, 1.7-2.3 m in scenario 63): the carrier, on the ground, reads 1.8 m down in its
+    frame, the dock point under the altitude floor fixed in it (safety.z_max_m = -0.5). The
+    reference's floor moves over that ground, as the command's does: the descent goes on down
+    (on the old code the reference sat on the floor at -0.500 m for 24 s and the approach went
+    around on the descent's budget, three times in scenarios 98 and 129, which never docked)."""
+    g = model.recovery.geometry
+    state, obs, dock = _at(model, 0.4, descent=1.0 - 0.4 / g.decision_height_m)
+    low = np.array([0.0, 0.0, 1.8])  # the ground 1.8 m down in the passenger's frame
+    carrier = replace(obs.carrier, position_ned_m=obs.carrier.position_ned_m + low)
+    vehicle = replace(obs.vehicle, position_ned_m=obs.vehicle.position_ned_m + low)
+    state = replace(state, x_ref=state.x_ref + low)
+    assert state.x_ref[2] > model.command_safety.z_max_m  # under the floor fixed in its frame
+    new, dec = approach(state, replace(obs, carrier=carrier, vehicle=vehicle, relative=SEEN), model)
+    assert new.phase is Phase.APPROACH, dec.events
+    assert new.u_ref[2] > 0.0, new.u_ref  # going down, not pushed up to the floor
