@@ -29,7 +29,7 @@ PRODUCT: dict[str, Subcommand] = {
                           "Run the carrier-side controller (built-in robot, PX4 rover, ROS 2 robot)."),
     "run": Subcommand("mission.cli.run:run", "Fly the offboard mission on a PX4 vehicle (mock, SITL or real)."),
     "plot": Subcommand("mission.cli.run:plot", "Draw the paper-style figures from a flight log directory."),
-    "config": Subcommand("mission.config.cli:config_command",
+    "config": Subcommand("mission.cli.config:config_command",
                          "Every configuration field: type, default, rule, meaning and unit (--schema: JSON)."),
 }
 

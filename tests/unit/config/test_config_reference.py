@@ -5,7 +5,7 @@ import re
 
 from click.testing import CliRunner
 
-from mission.config.cli import config_command
+from mission.cli.config import config_command
 from mission.config.reference import fields, markdown_table
 from tests.conftest import CONFIGS, ROOT
 
