@@ -410,12 +410,12 @@ def report(row: dict[str, Any]) -> list[str]:
     return lines
 
 
-CONTACT_M = 0.2  # [m] issue 36's PX4 target for the contact error
+CONTACT_M = 0.2  # [m] the team's PX4 target for the contact error (docs/team.md, "On real PX4")
 ATTEMPTS = 2  # ... and for the approaches
 
 
 def leg_meets(leg: dict[str, Any], error: str = "error_m") -> bool:
-    """Issue 36's PX4 target for one leg: docked within 2 approaches at <= 0.2 m, with P1-P3;
+    """The team's PX4 target for one leg: docked within 2 approaches at <= 0.2 m, with P1-P3;
     ``error`` the contact error judged: ``error_m`` (the mission's, on the estimates, as
     docs/recovery.md's PX4 target) or ``true`` (SIH's truth: both timings of the rover's within it)."""
     errors = [leg["true_error_m"], leg["true_error_shifted_m"]] if error == "true" else [leg[error]]
