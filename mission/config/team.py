@@ -220,8 +220,18 @@ def check_queue(team: TeamSection, separation_m: float, recovery: Any, vertical_
                           "team.queue_distance_m)")
 
 
+def _closest_slots(team: TeamSection, spacing_m: float) -> tuple[int, int, float] | None:
+    """The first two slots (``k``, an earlier ``j``, their distance [m]) whose dock points are
+    closer than ``spacing_m`` [m] horizontally; None: none are."""
+    for k, slot in enumerate(team.slots):
+        for j, other in enumerate(team.slots[:k]):
+            apart = math.dist(slot.offset_ned_m[:2], other.offset_ned_m[:2])
+            if apart < spacing_m - 1e-9:
+                return k, j, apart
+    return None
+
+
 def _check_slots(team: TeamSection, contact_radius_m: float) -> None:
-    spacing = min_slot_spacing_m(team, contact_radius_m)
     for k, slot in enumerate(team.slots):
         field = f"team.slots[{k}]"
         if len(slot.offset_ned_m) != 3:
@@ -229,12 +239,13 @@ def _check_slots(team: TeamSection, contact_radius_m: float) -> None:
         for j, other in enumerate(team.slots[:k]):
             if other.name == slot.name:
                 raise ConfigError(f"{field}.name", slot.name, f"also team.slots[{j}]'s name")
-            apart = math.dist(slot.offset_ned_m[:2], other.offset_ned_m[:2])
-            if apart < spacing:
-                raise ConfigError(f"{field}.offset_ned_m", slot.offset_ned_m,
-                                  f"overlaps team.slots[{j}] ({other.name!r}): {apart:.2f} m from it horizontally, "
-                                  f"under team.passenger_span_m + 2 recovery.contact_radius_m = {spacing:g} m "
-                                  "(two passengers docked within recovery.contact_radius_m of these slots could touch)")
+    spacing = min_slot_spacing_m(team, contact_radius_m)
+    if (close := _closest_slots(team, spacing)) is not None:
+        k, j, apart = close
+        raise ConfigError(f"team.slots[{k}].offset_ned_m", team.slots[k].offset_ned_m,
+                          f"overlaps team.slots[{j}] ({team.slots[j].name!r}): {apart:.2f} m from it horizontally, "
+                          f"under team.passenger_span_m + 2 recovery.contact_radius_m = {spacing:g} m "
+                          "(two passengers docked within recovery.contact_radius_m of these slots could touch)")
 
 
 def check_hover_slots(team: TeamSection, ride: str, margin_m: float) -> None:
@@ -246,17 +257,14 @@ def check_hover_slots(team: TeamSection, ride: str, margin_m: float) -> None:
     span and the contact radius (:func:`min_slot_spacing_m`). Checked by the commands that fly a
     team (``run``, ``carrier``, ``demo``); the in-process simulation flies a deck team hovering on
     its deck slots (:func:`sim.batch.team_mission.hovering`) and is not refused."""
-    if ride != "hover" or len(team.slots) < 2:
-        return
     spacing = team.passenger_span_m + 2.0 * margin_m
-    for k, slot in enumerate(team.slots):
-        for j, other in enumerate(team.slots[:k]):
-            apart = math.dist(slot.offset_ned_m[:2], other.offset_ned_m[:2])
-            if apart < spacing - 1e-9:
-                raise ConfigError(f"team.slots[{k}].offset_ned_m", slot.offset_ned_m,
-                                  f"{apart:.2f} m from team.slots[{j}] ({other.name!r}) horizontally: a team riding "
-                                  f"hovering needs team.passenger_span_m + 2 safety.margin_m = {spacing:g} m (each rider "
-                                  "hovers where its estimate puts it)")
+    if ride != "hover" or (close := _closest_slots(team, spacing)) is None:
+        return
+    k, j, apart = close
+    raise ConfigError(f"team.slots[{k}].offset_ned_m", team.slots[k].offset_ned_m,
+                      f"{apart:.2f} m from team.slots[{j}] ({team.slots[j].name!r}) horizontally: a team riding "
+                      f"hovering needs team.passenger_span_m + 2 safety.margin_m = {spacing:g} m (each rider "
+                      "hovers where its estimate puts it)")
 
 
 def passenger_data(data: dict[str, Any], team: TeamSection, targets: list[list[float]], i: int) -> dict[str, Any]:

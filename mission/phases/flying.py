@@ -50,7 +50,7 @@ class Tracked:
 FLOOR_GROUND_SHIFT_MAX_M = 3.0
 
 
-def _floor_over_the_ground(limits: SafetyConfig, obs: Observation) -> SafetyConfig:
+def floor_over_the_ground(limits: SafetyConfig, obs: Observation) -> SafetyConfig:
     """The command's limits with the altitude floor (``z_max_m`` [m] NED, the ground at 0) over
     the ground the carrier drives on as the passenger sees it, when the relative estimator gives
     the carrier in the passenger's own frame (``[relnav]``): the carrier's estimated height,
@@ -83,7 +83,7 @@ def _track(state: MissionState, obs: Observation, m: MissionModel, x_ref: np.nda
     integral = state.integral if state.integral is not None else np.zeros(3)
     desired = velocity_demand(x_ref, u_ref, x_p, integral, g)
     prev = state.u_cmd if state.u_cmd is not None else v.velocity_ned_m_s
-    limits = _floor_over_the_ground(m.command_safety, obs)
+    limits = floor_over_the_ground(m.command_safety, obs)
     if limits.z_max_m is not None and (on_deck or (standing and len(x_p) == 3 and x_p[2] > limits.z_max_m)):
         limits = replace(limits, z_max_m=None)
     safe = filter_velocity(x_p, desired, m.tick.obstacles, limits, prev, m.dt_s)

@@ -52,7 +52,7 @@ from mission.flight_mode import FlightMode
 from mission.phases import deck, queue, stall
 from mission.phases.battery import next_leg_problem
 from mission.phases.carrier_fitness import carrier_unfit, carrier_unsteady, observe_carrier
-from mission.phases.flying import _floor_over_the_ground, _track
+from mission.phases.flying import floor_over_the_ground, _track
 from mission.phases.phase import Phase, Request
 from mission.phases.types import (
     Decision,
@@ -102,7 +102,7 @@ def _fly(state: MissionState, obs: Observation, m: MissionModel, goal_x: np.ndar
     # the reference's altitude floor over the ground as the passenger sees it, as the command's
     # ([relnav]: its own height estimate drifts by a metre or two, and a floor fixed in it lay
     # under the dock point: the reference sat on it, the descent never reached the dock)
-    cfg = _floor_over_the_ground(cfg, obs)
+    cfg = floor_over_the_ground(cfg, obs)
     # the rows phase in from the phase's start (as from the separation): they change with the phase
     # (none, the span, the separation), and a row in at once could correct the command in one tick
     safe = filter_velocity(state.x_ref, u_next, m.tick.obstacles, cfg, state.u_ref, m.dt_s, deck=keep_out,

@@ -446,7 +446,7 @@ def test_with_the_relative_estimate_the_altitude_floor_stands_over_the_ground_un
     frame when the relative estimator gives it (a 1 m vertical drift put the riding hover point
     on a fixed floor), at most 3 m either way; without the estimate it stays where configured."""
     from mission.core.safety import SafetyConfig
-    from mission.phases.flying import FLOOR_GROUND_SHIFT_MAX_M, _floor_over_the_ground
+    from mission.phases.flying import FLOOR_GROUND_SHIFT_MAX_M, floor_over_the_ground
     from mission.phases.types import RelativeView
 
     limits = SafetyConfig(z_max_m=-0.5)
@@ -455,7 +455,7 @@ def test_with_the_relative_estimate_the_altitude_floor_stands_over_the_ground_un
 
     def floor(carrier_z, relative=view):
         obs = Observation(1.0, vehicle, CarrierObs(np.array([3.0, 4.0, carrier_z]), np.zeros(3), 0.0), relative=relative)
-        return _floor_over_the_ground(limits, obs).z_max_m
+        return floor_over_the_ground(limits, obs).z_max_m
 
     assert floor(0.9) == pytest.approx(0.4)  # the ground 0.9 m lower in the passenger's frame
     assert floor(-0.7) == pytest.approx(-1.2)
