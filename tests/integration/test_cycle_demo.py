@@ -16,7 +16,7 @@ from mission.config.schema import load_config
 from mission.record.table import read_record
 from tests.conftest import CONFIGS
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(330)]  # a cycle flight: ~30-60 s, its demo 300 s at most
 
 CYCLE = CONFIGS / "cycle.toml"
 

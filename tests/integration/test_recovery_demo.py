@@ -23,7 +23,7 @@ from sim.vehicle.options import VehicleOptions
 from tests.conftest import CONFIGS
 from tests.support.agreement import SEEDED, assert_same_flight, simulated
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(270)]  # the recovery flight: ~35 s, its demo 240 s at most
 
 RECOVERY = CONFIGS / "recovery.toml"
 # How close the simulated flight's contact is to the demo's (docs/recovery.md): the simulation

@@ -22,7 +22,7 @@ import pytest
 from mission.config.schema import load_config
 from tests.conftest import CONFIGS
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(360)]  # the team flight: ~90 s on an idle machine, its demo 330 s at most
 
 TEAM = CONFIGS / "team.toml"
 
