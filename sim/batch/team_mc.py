@@ -207,6 +207,7 @@ def fly(sc: Scenario, estimate_error: float = 1.0) -> dict[str, Any]:
                    "within_2": docked and attempts is not None and attempts <= 2,
                    "p1": bool(leg.get("p1")), "p2": bool(leg.get("p2")), "p3": bool(leg.get("p3")),
                    "switch_jump_m_s": leg.get("max_phase_switch_jump_m_s"),
+                   "switch_excess_m_s": leg.get("max_phase_switch_excess_m_s"),
                    "separation_jump_m_s": leg.get("input_jump_m_s"),
                    "relative_separation_jump_m_s": leg.get("relative_input_jump_m_s"),
                    "outcome": None if rec is None else rec.get("outcome")}
@@ -271,6 +272,8 @@ def table(rows: list[dict[str, Any]]) -> dict[str, Any]:
         "least_distance_any_m": min((r["pair_min_any_m"] for r in rows), default=None),
         "touched": sum(r["touched"] for r in rows),
         "largest_phase_switch_step_m_s": max(jumps, default=None),
+        "largest_phase_switch_excess_m_s": max((leg["switch_excess_m_s"] for leg in legs
+                                                if leg.get("switch_excess_m_s") is not None), default=None),
         "largest_separation_jump_m_s": max((leg["separation_jump_m_s"] for leg in legs
                                             if leg.get("separation_jump_m_s") is not None), default=None),
         "largest_relative_separation_jump_m_s": max((leg["relative_separation_jump_m_s"] for leg in legs

@@ -46,3 +46,22 @@ def test_the_input_jump_is_the_commands_own_step_and_the_carriers_step_is_report
     assert abs(out["input_jump_m_s"] - 0.04) < 1e-9
     assert abs(out["carrier_velocity_step_at_separation_m_s"] - 0.03) < 1e-9
     assert abs(out["relative_input_jump_m_s"] - 0.07) < 1e-9
+
+
+def test_a_switch_inside_a_steady_turn_adds_nothing_and_a_jump_stands_out():
+    """A command turning at 3 m/s^2 steps by 0.06 m/s on every tick: the step at the
+    SEPARATED -> NAVIGATING switch is 0.06, its excess over the ticks beside it 0. The same
+    switch with a 0.05 m/s jump on it has an excess of 0.05."""
+    info = {"target_ned_m": [30.0, 0.0, -5.0], "separation_time_s": 0.10}
+    phases = [Phase.RIDING] * 5 + [Phase.SEPARATED] * 10 + [Phase.NAVIGATING] * 10
+    angle = 0.06 * np.arange(25)  # 1 m/s turning so that each tick steps by 0.06 m/s
+    rec = _record(phases, info)
+    rec.cols["u_cmd_n"][:], rec.cols["u_cmd_e"][:] = np.cos(angle), np.sin(angle)
+    out = figures(rec)
+    assert abs(out["max_phase_switch_jump_m_s"] - 0.06) < 1e-3
+    assert abs(out["max_phase_switch_excess_m_s"]) < 1e-6
+    rec.cols["u_cmd_n"][15:] -= 0.05 * np.sin(angle[15])  # the switch to NAVIGATING jumps by 0.05 along the turn
+    rec.cols["u_cmd_e"][15:] += 0.05 * np.cos(angle[15])
+    out = figures(rec)
+    assert abs(out["max_phase_switch_jump_m_s"] - 0.11) < 2e-3
+    assert abs(out["max_phase_switch_excess_m_s"] - 0.05) < 2e-3
