@@ -274,8 +274,10 @@ def sitl_camera(config: Path, vehicle_sysid: int, carrier_sysid: int, seed: int,
                 connect: tuple[str, ...], listen: tuple[str, ...]) -> None:
     """Render the passenger's downward camera from PX4 SITL's SIH truth and publish its frames (module docstring)."""
     cfg = load_config(config)
-    zenoh = ZenohSection(connect=list(connect), listen=list(listen),  # type: ignore[arg-type]
-                         **({"rendezvous": None} if connect or listen else {}))
+    endpoints: dict[str, Any] = {"connect": list(connect), "listen": list(listen)}
+    if connect or listen:
+        endpoints["rendezvous"] = None  # not the other processes' loopback rendezvous
+    zenoh = ZenohSection(**endpoints)
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     signal.signal(signal.SIGINT, lambda *_: stop.set())
