@@ -234,8 +234,8 @@ def report(row: dict[str, Any]) -> list[str]:
     lines.append(f"  camera: {cam.get('frames_sent')} frames of {cam.get('captured')} captures; marker feed "
                  f"{(row.get('feeds') or {}).get('marker') if isinstance(row.get('feeds'), dict) else row.get('feeds')}")
     lines.append(f"  PX4 clocks {row['clocks']}; record-to-truth map check {row['map_check_m']} m; exit codes "
-                 f"{row['exit_codes']}; load {row['load_before']} -> {row['load_after']}; {row['wall_s']} s; outcome "
-                 f"{row.get('outcome')}")
+                 f"{row.get('exit_codes')}; load {row.get('load_before')} -> {row.get('load_after')}; {row.get('wall_s')} s; "
+                 f"outcome {row.get('outcome')}")
     return lines
 
 
@@ -251,7 +251,8 @@ def main(config: str, out: str, seed: int, speed_factor: float, sets: tuple[str,
     """Fly CONFIG's relative navigation once on real PX4 SITL and print its legs."""
     directory = Path(out).resolve()
     if again:
-        row = json.loads((directory / "row.json").read_text())
+        row_path = directory / "row.json"  # a flight the bench did not finish (a test's) has none
+        row = json.loads(row_path.read_text()) if row_path.exists() else {}
         offset_s = json.loads((directory / "clock_offset.json").read_text())["unix_minus_monotonic_s"]
         row.update(analyse(directory / "config.toml", directory, offset_s))
     else:
