@@ -140,9 +140,10 @@ def analyse(config: Path, directory: Path, offset_s: float) -> dict[str, Any]:
 
 
 def fly(config: Path, directory: Path, seed: int, speed_factor: float = 1.08,
-        overrides: dict[str, str] | None = None) -> dict[str, Any]:
+        overrides: dict[str, str] | None = None, camera_on: bool = True) -> dict[str, Any]:
     """One flight of ``config`` (seeded ``seed``; ``overrides`` ``section.key`` -> TOML value) on two
-    fresh PX4s; its figures (:func:`analyse`)."""
+    fresh PX4s; its figures (:func:`analyse`). ``camera_on`` False: no camera node (no marker, no
+    truth recorded)."""
     directory.mkdir(parents=True, exist_ok=True)
     text = patched_config(config.read_text(), {**(overrides or {}), "world.carrier_gnss.seed": str(seed)})
     flown = directory / "config.toml"
@@ -181,7 +182,7 @@ def fly(config: Path, directory: Path, seed: int, speed_factor: float = 1.08,
             "--mcap", str(directory / "carrier.mcap")], stack)
         camera = _popen(ns, directory, "camera", "sim.sitl.camera", [
             str(flown), "--vehicle-sysid", str(passenger_sysid), "--carrier-sysid", str(rover_sysid), "--seed", str(seed),
-            "--truth-dir", str(directory), "--zenoh-connect", endpoint], stack)
+            "--truth-dir", str(directory), "--zenoh-connect", endpoint], stack) if camera_on else None
         mission = _popen(ns, directory, PAIR_DIR, "mission.cli", [
             "-v", "run", str(flown), "--mavlink", f"udpin:127.0.0.1:{OFFBOARD_PORT + instance_of(passenger_sysid)}",
             "--zenoh-connect", endpoint, "--log-dir", str(directory / PAIR_DIR)], stack)
@@ -204,8 +205,9 @@ def fly(config: Path, directory: Path, seed: int, speed_factor: float = 1.08,
         codes["mission"] = mission.returncode
         stop_process(carrier, 10.0)  # writes carrier.json
         codes["carrier"] = carrier.returncode
-        stop_process(camera, 20.0)  # writes the truth and camera.json
-        codes["camera"] = camera.returncode
+        if camera is not None:
+            stop_process(camera, 20.0)  # writes the truth and camera.json
+            codes["camera"] = camera.returncode
     (directory / "clock_offset.json").write_text(json.dumps({"unix_minus_monotonic_s": offset_s}) + "\n")
     return {**analyse(flown, directory, offset_s), "seed": seed, "exit_codes": codes, "armable_after_s": round(armable_s, 1),
             "wall_s": round(time.monotonic() - t0, 1), "load_before": [round(x, 2) for x in load],
@@ -246,8 +248,9 @@ def report(row: dict[str, Any]) -> list[str]:
 @click.option("--seed", type=int, default=0, show_default=True, help="world.carrier_gnss.seed and the camera's noise")
 @click.option("--speed-factor", type=float, default=1.08, show_default=True, help="PX4_SIM_SPEED_FACTOR of both PX4s")
 @click.option("--set", "sets", multiple=True, metavar="SECTION.KEY=VALUE", help="Change the configuration (TOML value).")
+@click.option("--no-camera", is_flag=True, help="No camera node: the marker never seen (and no truth recorded).")
 @click.option("--analyse", "again", is_flag=True, help="Do not fly: analyse the flight already in --out again.")
-def main(config: str, out: str, seed: int, speed_factor: float, sets: tuple[str, ...], again: bool) -> None:
+def main(config: str, out: str, seed: int, speed_factor: float, sets: tuple[str, ...], no_camera: bool, again: bool) -> None:
     """Fly CONFIG's relative navigation once on real PX4 SITL and print its legs."""
     directory = Path(out).resolve()
     if again:
@@ -260,7 +263,8 @@ def main(config: str, out: str, seed: int, speed_factor: float, sets: tuple[str,
         if why:
             raise click.ClickException(why)
         click.echo(f"PX4 build {build_dir()}, config {config}, seed {seed}, load {os.getloadavg()}")
-        row = fly(Path(config).resolve(), directory, seed, speed_factor, dict(x.split("=", 1) for x in sets))
+        row = fly(Path(config).resolve(), directory, seed, speed_factor, dict(x.split("=", 1) for x in sets),
+                  camera_on=not no_camera)
     (directory / "row.json").write_text(json.dumps(row, indent=1, default=str) + "\n")
     for line in report(row):
         click.echo(line)
