@@ -1,5 +1,7 @@
-"""The passenger's downward camera in the mock vehicle (``mock-vehicle --camera``): frames rendered
-from the true poses (the vehicle's true position, level at its yaw; the marker at the carrier's true
+"""The passenger's downward camera in simulation: frames rendered from the true poses, for the mock
+vehicle (``mock-vehicle --camera``: the vehicle's true position, level at its yaw) and for PX4 SITL
+(:mod:`sim.sitl.camera`: SIH's true position and attitude of the passenger and the rover), given as
+a :class:`BodyTruth` and a :class:`DeckTruth` (the marker at the carrier's true
 reference point plus ``vision.marker_offset_ned_m``, by default the dock point, level at the
 carrier's yaw), exposed with the
 sensor's noise, blur and dropouts (:class:`sim.camera.simulated.SimulatedCamera`, ``[vision]``),
@@ -16,7 +18,7 @@ Given a signer (the passenger robot's own key, ``mock-vehicle --zenoh-private-ke
 from __future__ import annotations
 
 import math
-from typing import Any
+from dataclasses import dataclass
 
 import numpy as np
 import zenoh
@@ -32,6 +34,35 @@ from sim.camera.sensor import Sensor, sensor_model
 from sim.camera.simulated import MIN_DEPTH_M, SimulatedCamera
 
 SEED_OFFSET = 7717  # the sensor's stream, apart from the vehicle's other seeded streams
+
+
+@dataclass(frozen=True)
+class BodyTruth:
+    """The camera's vehicle, true: position ``position_ned_m`` (3,) [m] (any origin shared with the
+    :class:`DeckTruth`), attitude ``attitude_q_wxyz`` (4,) body -> NED, velocity
+    ``velocity_ned_m_s`` (3,) [m/s] NED."""
+
+    position_ned_m: np.ndarray
+    attitude_q_wxyz: np.ndarray
+    velocity_ned_m_s: np.ndarray
+
+    @classmethod
+    def level(cls, position_ned_m: np.ndarray, yaw_rad: float, velocity_ned_m_s: np.ndarray) -> BodyTruth:
+        """A vehicle level at yaw ``yaw_rad`` [rad] (the mock vehicle's kinematic state has no tilt)."""
+        half = yaw_rad / 2
+        return cls(np.asarray(position_ned_m, float), np.array([math.cos(half), 0.0, 0.0, math.sin(half)]),
+                   np.asarray(velocity_ned_m_s, float))
+
+
+@dataclass(frozen=True)
+class DeckTruth:
+    """The carrier, true: its reference point ``position_ned_m`` (3,) [m] (the marker lies
+    ``vision.marker_offset_ned_m`` from it), velocity ``velocity_ned_m_s`` (3,) [m/s] NED and yaw
+    ``yaw_rad`` [rad] (None: its heading of travel)."""
+
+    position_ned_m: np.ndarray
+    velocity_ned_m_s: np.ndarray
+    yaw_rad: float | None = None
 
 
 class CameraPublisher:
@@ -56,31 +87,27 @@ class CameraPublisher:
         self._pub = declare(f"publisher on {key}", lambda: session.declare_publisher(
             key, congestion_control=congestion, express=True))
 
-    def sample(self, t_s: float, kin: Any, carrier_ned_m: np.ndarray | None, carrier_velocity_ned_m_s: np.ndarray | None,
-               carrier_yaw_rad: float | None) -> None:
-        """At vehicle time ``t_s`` [s] with the vehicle's true state ``kin``
-        (:class:`sim.vehicle.physics.multicopter.KinState`) and the carrier's true reference point
-        [m] (None: not known yet, no deck to see), velocity [m/s] and yaw [rad] (None: its heading
-        of travel): capture if a slot of the grid is due."""
+    def sample(self, t_s: float, vehicle: BodyTruth, deck: DeckTruth | None) -> None:
+        """At time ``t_s`` [s] on the mission's clock, the vehicle's and the carrier's true state
+        (``deck`` None: not known yet, no deck to see): capture if a slot of the grid is due."""
         if t_s + 1e-9 < self.next_s:
             return
         # the next slot after t_s on the grid k / rate_hz (not t_s + period: the first capture, at
         # whichever pass first had the deck, would set the phase of every later one)
         self.next_s = (math.floor(t_s / self.period_s + 1e-6) + 1) * self.period_s
         self.captured += 1
-        if carrier_ned_m is None or carrier_velocity_ned_m_s is None:
+        if deck is None:
             self._put(encode_mark(t_s), False)
             return
-        half = kin.yaw_rad / 2
-        q = np.array([math.cos(half), 0.0, 0.0, math.sin(half)])
-        v_c = np.asarray(carrier_velocity_ned_m_s, dtype=float)
-        yaw = carrier_yaw_rad if carrier_yaw_rad is not None else (
+        q = np.asarray(vehicle.attitude_q_wxyz, dtype=float)
+        v_c = np.asarray(deck.velocity_ned_m_s, dtype=float)
+        yaw = deck.yaw_rad if deck.yaw_rad is not None else (
             math.atan2(v_c[1], v_c[0]) if math.hypot(v_c[0], v_c[1]) > 1e-6 else 0.0)
-        poses = Poses(np.array([kin.n_m, kin.e_m, kin.d_m]), q, np.asarray(carrier_ned_m, float) + self.marker_offset_ned_m,
-                      float(yaw))
+        poses = Poses(np.asarray(vehicle.position_ned_m, float), q,
+                      np.asarray(deck.position_ned_m, float) + self.marker_offset_ned_m, float(yaw))
         frame = None
         if true_marker_pose(self.camera.camera, poses).deck_in_cam_m[2] >= MIN_DEPTH_M:  # else out of view (and
-            relative_v = v_c - np.array([kin.vn_m_s, kin.ve_m_s, kin.vd_m_s])  # its blur unbounded)
+            relative_v = v_c - np.asarray(vehicle.velocity_ned_m_s, float)  # its blur unbounded)
             frame = self.camera.capture(poses, t_s, relative_v)
         # a dropped or empty frame still marks the time: a lockstep reader knows the stream passed it
         self._put(encode_mark(t_s) if frame is None else encode_frame(frame, q), frame is not None)

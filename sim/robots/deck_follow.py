@@ -49,7 +49,7 @@ import zenoh
 from mission.bus.bridge import CarrierFeed, undeclare
 from mission.bus.lockstep import clock_keys
 from mission.bus.wire import CarrierState, GeoOrigin
-from sim.camera.publisher import CameraPublisher
+from sim.camera.publisher import BodyTruth, CameraPublisher, DeckTruth
 from sim.robots.truth import TruthTrack, truth_key
 from sim.vehicle.mock import MockVehicle
 from sim.vehicle.physics.deck import DeckMotion
@@ -230,12 +230,11 @@ def follow_carrier(vehicle: MockVehicle, session: Any, pair: str, truth: bool = 
         if track is not None:
             track.sample(vehicle, got)
         if camera is not None:  # every slot of its grid, a time mark while the deck is not known
-            t = float(vehicle._t_s)
-            if got is None:
-                camera.sample(t, vehicle._kin, None, None, None)
-            else:
-                camera.sample(t, vehicle._kin, np.asarray(got.centre(t, 0.0)), np.asarray(got.velocity_ned_m_s),
-                              made[0][0].yaw_rad)
+            t, kin = float(vehicle._t_s), vehicle._kin
+            body = BodyTruth.level(np.array([kin.n_m, kin.e_m, kin.d_m]), kin.yaw_rad,
+                                   np.array([kin.vn_m_s, kin.ve_m_s, kin.vd_m_s]))
+            camera.sample(t, body, None if got is None else DeckTruth(
+                np.asarray(got.centre(t, 0.0)), np.asarray(got.velocity_ned_m_s), made[0][0].yaw_rad))
         return got
 
     def motion_now() -> DeckMotion | None:

@@ -65,17 +65,25 @@ def series(probe: Any, system_id: int | None = None,
         hils = mine(probe.history.get("HIL_STATE_QUATERNION", ()))
         origins = mine(probe.history.get("GPS_GLOBAL_ORIGIN", ()))
         origin_msg = origins[-1][2] if origins else None
-    est = np.array([(t, m.time_boot_ms * 1e-3, m.x, m.y, m.z, m.vx, m.vy, m.vz) for _, t, m in lps]).reshape(-1, 8)
     if origin is None:
         if origin_msg is None:
             raise LookupError("no GPS_GLOBAL_ORIGIN received: PX4's EKF origin is unknown")
         origin = (origin_msg.latitude * 1e-7, origin_msg.longitude * 1e-7, origin_msg.altitude * 1e-3)
+    return rows([(t, m) for _, t, m in lps], [(t, m) for _, t, m in hils], origin)
+
+
+def rows(estimates: list[tuple[float, Any]], truths: list[tuple[float, Any]],
+         origin: tuple[float, float, float]) -> tuple[np.ndarray, np.ndarray]:
+    """(estimate, truth) rows as :func:`series` returns them, from (receive time [s], message)
+    pairs of LOCAL_POSITION_NED and HIL_STATE_QUATERNION, the truth projected about ``origin``
+    (latitude, longitude [deg], altitude [m])."""
+    est = np.array([(t, m.time_boot_ms * 1e-3, m.x, m.y, m.z, m.vx, m.vy, m.vz) for t, m in estimates]).reshape(-1, 8)
     lat0, lon0, alt0 = origin
-    rows = []
-    for _, t, m in hils:
+    out = []
+    for t, m in truths:
         n, e = project(m.lat * 1e-7, m.lon * 1e-7, lat0, lon0)
-        rows.append((t, math.nan, n, e, -(m.alt * 1e-3 - alt0), m.vx * 0.01, m.vy * 0.01, m.vz * 0.01))
-    return est, np.array(rows).reshape(-1, 8)
+        out.append((t, math.nan, n, e, -(m.alt * 1e-3 - alt0), m.vx * 0.01, m.vy * 0.01, m.vz * 0.01))
+    return est, np.array(out).reshape(-1, 8)
 
 
 def aligned(est: np.ndarray, truth: np.ndarray) -> np.ndarray:

@@ -11,8 +11,7 @@ import numpy as np
 
 from mission.bus.frames import decode_frame
 from mission.config.schema import load_config
-from sim.camera.publisher import CameraPublisher
-from sim.vehicle.physics.multicopter import KinState
+from sim.camera.publisher import BodyTruth, CameraPublisher, DeckTruth
 from tests.conftest import CONFIGS
 
 PASS_S = 0.02  # the vehicle's passes in the relnav demo: its 50 Hz streams and barriers [s]
@@ -43,13 +42,13 @@ def captures(deck_known_s: float, until_s: float = 0.5) -> list[tuple[float, int
     cfg = load_config(CONFIGS / "relnav.toml")
     session = Session()
     camera = CameraPublisher(cfg, session, "pair0", seed=0, lockstep=True)  # type: ignore[arg-type]
-    kin = KinState(0.0, 0.0, -3.0, on_ground=False)
+    body = BodyTruth.level(np.array([0.0, 0.0, -3.0]), 0.0, np.zeros(3))
     for k in range(1, round(until_s / PASS_S) + 1):
         t = k * PASS_S
         if t < deck_known_s - 1e-9:
-            camera.sample(t, kin, None, None, None)
+            camera.sample(t, body, None)
         else:
-            camera.sample(t, kin, np.zeros(3), np.zeros(3), 0.0)
+            camera.sample(t, body, DeckTruth(np.zeros(3), np.zeros(3), 0.0))
     out = []
     for payload in session.publisher.payloads:
         frame, _ = decode_frame(payload)
