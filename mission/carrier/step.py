@@ -48,6 +48,7 @@ from mission.carrier.start import MOVING_M_S, gentle_start, speed_lead
 from mission.carrier.tracking import SpeedCalibration, Tracked, TrackingParams, heading_of, own_speed_m_s, track
 from mission.config.carrier import KINDS
 from mission.config.schema import Config
+from mission.core.consistent_velocity import PositionConsistentVelocity
 from mission.core.tick import ROUND_BAND_M, TickModel, carrier_tick
 from mission.model import model_from_config
 from mission.phases.phase import Duty
@@ -141,6 +142,8 @@ class CarrierStepper:
         self.course = RecoveryCourse.from_lists(c.recovery_course, c.recovery_heading_deg, c.recovery_speed_m_s)
         self.start_accel_m_s2, self.start_lead_m_s = c.start_accel_m_s2, c.start_lead_m_s
         self.min_moving_speed_m_s = c.min_moving_speed_m_s
+        # [m/s] its motion for the start's caps: the estimator's velocity made consistent with its position
+        self._motion = PositionConsistentVelocity(c.start_motion_tau_s) if c.start_motion_tau_s > 0 else None
         self.mode = CarrierMode.WAITING
         self.velocity_m_s = np.zeros(self.dim)  # [m/s] the filtered (and, holonomic, guarded) law command
         self._plan_velocity = np.zeros(self.dim)  # [m/s] the own plan after separation (Remark 1)
@@ -201,6 +204,7 @@ class CarrierStepper:
         last step, at ``now_s`` [s]. ``recovery_velocity_m_s`` [m/s] NED: a recovery course the
         caller drives instead of the configured one while RECOVERING (a simulation's drawn course)."""
         x_c = state.position_ned_m[:self.dim]
+        v_motion = self.motion_m_s(state)
         if self.stopping() and self.brakes_itself:
             # A real vehicle brakes with its own limits: ramping the command down at
             # safety.carrier_max_accel_m_s2 (the built-in robot's braking) would keep it driving.
@@ -218,7 +222,7 @@ class CarrierStepper:
         t, v_meas = state.t_s, state.velocity_ned_m_s[:self.dim]
         # A carrier that stands speeds its command up gently until it moves (stiction: mission.carrier.start);
         # a robot that moves along its heading by its forward speed (its estimator's sideways wander is no motion)
-        moving = own_speed_m_s(v_meas, state.yaw_rad, self.tracking.kind)
+        moving = own_speed_m_s(v_motion, state.yaw_rad, self.tracking.kind)
         active = False
         if self.tracking.kind == "holonomic":
             u = speed_lead(gentle_start(u, self.velocity_m_s, moving, self.start_accel_m_s2, dt_s), moving,
@@ -230,7 +234,7 @@ class CarrierStepper:
         else:
             if self._restarting(now_s):  # it stands on, and the law starts again from rest after
                 u = np.zeros_like(u)
-            sideways = abs(math.cos(yaw) * float(v_meas[1]) - math.sin(yaw) * float(v_meas[0]))
+            sideways = abs(math.cos(yaw) * float(v_motion[1]) - math.sin(yaw) * float(v_motion[0]))
             cmd = self._started(u, yaw, moving, dt_s, sideways)
             self._stopped_since_s = (None if cmd.speed_m_s > 0 else
                                      now_s if self._stopped_since_s is None else self._stopped_since_s)
@@ -248,6 +252,25 @@ class CarrierStepper:
         # fast as the robot already does (a heading lock).
         self.velocity_m_s = u
         return Command(cmd, active, bool(np.all(res.feasible)))
+
+    def motion_m_s(self, state: OwnState) -> np.ndarray:
+        """The velocity [m/s] NED (dim,) by which the start's caps (:meth:`_started`,
+        :mod:`mission.carrier.start`) judge whether the carrier moves: with
+        ``carrier.start_motion_tau_s`` > 0 the ``state``'s velocity made consistent with its
+        position (:mod:`mission.core.consistent_velocity`; a sample no newer than the last changes
+        nothing), else the estimator's velocity as it is. The guards and the speed calibration
+        keep the estimator's.
+
+        Why: at leg 2's start PX4's SIH rover stood still (its position's rate -0.05 to +0.03 m/s)
+        while its EKF said -0.2 to -0.25 m/s forward or 0.2-0.36 m/s sideways, for 1-2 s after it
+        braked out of its turn; read as moving, or as unsure, the speed asked ramped at the law's
+        1 m/s^2 instead of the gentle start's 0.25, the rover stuck until asked 0.7-0.8 m/s, then
+        leapt to 1.1-1.3 m/s in 0.5 s, and the riding passenger, whose command grows at 2 m/s^2,
+        trailed 0.30-0.35 m (docs/recovery.md, "On real PX4")."""
+        v = state.velocity_ned_m_s[:self.dim]
+        if self._motion is None:
+            return v
+        return self._motion.update(state.t_s, state.position_ned_m[:self.dim], v)
 
     def _restarting(self, now_s: float) -> bool:
         """A diff-drive or Ackermann carrier with ``carrier.min_moving_speed_m_s`` that was last

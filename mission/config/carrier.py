@@ -165,6 +165,12 @@ class CarrierSection(Section):
                      "never ask less); below it, the law's own speed: no crawl that a speed loop whose estimate errs by "
                      "about this much cannot hold (mission.carrier.start); and before a leg after the first it turns "
                      "at this speed to face the leg's target, then stands (mission.carrier.legs); 0 off"))
+    start_motion_tau_s: float = Field(0.0, ge=0, le=60,
+        description=("[s] the gentle start, the lead and the floor judge whether the carrier moves (and, "
+                     "diff-drive/Ackermann, how fast across its heading) by its velocity made consistent with its "
+                     "position, the difference low-passed with this time constant (mission.core.consistent_velocity), "
+                     "not by its estimator's velocity alone: a PX4 rover standing still was estimated at 0.2-0.3 m/s "
+                     "and was asked the floor's ramp instead of the gentle start; 0 off"))
     recovery_speed_m_s: float = Field(0.0, ge=0, le=100,
         description=("[m/s] while the passenger comes home (returns, holds off, approaches, docks) the carrier drives "
                      "its steady recovery course at this speed, after the legs of recovery_course; 0: it stops and waits "

@@ -52,6 +52,7 @@ from mission.config.schema import Config
 from mission.mavlink.requests import CommandWorker
 from mission.errors import LinkError
 from mission.mavlink.link import VehicleLink
+from mission.mavlink.telemetry import VehicleState
 from mission.mavlink.env import read_signing_key
 from mission.bus.wire import GeoOrigin, geodetic_to_ned
 
@@ -69,6 +70,26 @@ def open_backend(cfg: Config, clock: Clock, session: object) -> MavlinkCarrier:
 def describe(cfg: Config) -> str:
     m = cfg.carrier.mavlink
     return f"PX4 vehicle on {m.url} (sysid {m.target_system or 'first PX4 heard'})"
+
+
+def own_state_of(st: VehicleState, offset: np.ndarray | None, position_timeout_s: float) -> OwnState | None:
+    """The carrier's own state from the link's ``st``: its local position moved by ``offset`` [m]
+    into the shared frame, at the time the vehicle took the sample (its ``time_boot_ms`` on the
+    link clock, ``position_t_s``; the receive time when that is not known). None without a
+    position, a velocity or an ``offset``, or while the position is fresh (age <=
+    ``position_timeout_s`` [s]) but unusable (non-finite, or the estimator says unhealthy).
+
+    The sample time, not the receive time: a carrier process stalled 0.3-0.4 s read the samples
+    that had waited in its socket, each stamped as new, and published a rover 0.5-0.7 m behind
+    where it was as a fresh state; the riding passenger, which moves the dock point on by the
+    state's age, then saw it leap forward, 0.30 -> 0.47 m off the dock in one tick
+    (docs/recovery.md, "On real PX4")."""
+    if st.position_ned_m is None or st.velocity_ned_m_s is None or st.position_rx_s is None or offset is None:
+        return None
+    if not st.position_valid and st.position_age_s <= position_timeout_s:
+        return None  # fresh but unusable (non-finite, or the estimator says unhealthy)
+    t_s = st.position_t_s if st.position_t_s is not None else st.position_rx_s
+    return OwnState(t_s, st.position_ned_m + offset, np.array(st.velocity_ned_m_s), st.yaw_rad)
 
 
 class MavlinkCarrier:
@@ -113,12 +134,7 @@ class MavlinkCarrier:
 
     def own_state(self) -> OwnState | None:
         st = self.link.state
-        offset = self._frame_offset(st.origin)
-        if st.position_ned_m is None or st.velocity_ned_m_s is None or st.position_rx_s is None or offset is None:
-            return None
-        if not st.position_valid and st.position_age_s <= self.link.position_timeout_s:
-            return None  # fresh but unusable (non-finite, or the estimator says unhealthy)
-        return OwnState(st.position_rx_s, st.position_ned_m + offset, np.array(st.velocity_ned_m_s), st.yaw_rad)
+        return own_state_of(st, self._frame_offset(st.origin), self.link.position_timeout_s)
 
     # ------------------------------------------------------------------ control
     def engage(self) -> None:

@@ -244,7 +244,7 @@ def test_an_ackermann_carrier_turning_from_rest_is_not_braked_by_its_own_lead(tu
 
 
 def _px4_rover_cfg(min_moving_speed_m_s: float, targets: list[list[float]] | None = None,
-                   start_yaw_rad: float | None = None) -> Config:
+                   start_yaw_rad: float | None = None, start_motion_tau_s: float = 0.0) -> Config:
     """The PX4 cycle's rover settings (gentle start 0.25 m/s^2, lead 0.3 m/s, Ackermann)."""
     return from_dict({
         "scenario": {"carrier_start": [0.0, 0.0, 0.0], "carrier_mode": "stop",
@@ -254,7 +254,8 @@ def _px4_rover_cfg(min_moving_speed_m_s: float, targets: list[list[float]] | Non
         "carrier": {"rate_hz": 30.0, "max_speed_m_s": 1.2, "kinematics": "ackermann", "wheelbase_m": 0.321,
                     "max_steer_rad": 0.5236, "min_speed_fraction": 0.3, "start_accel_m_s2": 0.25,
                     "start_lead_m_s": 0.3, "min_moving_speed_m_s": min_moving_speed_m_s,
-                    "start_yaw_rad": start_yaw_rad, "recovery_speed_m_s": 1.2},
+                    "start_yaw_rad": start_yaw_rad, "recovery_speed_m_s": 1.2,
+                    "start_motion_tau_s": start_motion_tau_s},
     })
 
 
@@ -402,3 +403,40 @@ def test_the_lead_never_takes_back_speed_asked_when_the_estimate_turns_sideways(
     speed, times = np.array(asked[1:]), np.arange(1, len(asked)) * DT
     assert speed[times < 3.0].max() == pytest.approx(1.2, abs=1e-6)  # the law's speed, reached
     assert speed[times >= 3.0].min() >= 1.2 - 1e-6  # old: 0.8 (the forward speed plus 0.3; the floor)
+
+
+@pytest.mark.parametrize("tau_s", [0.0, 0.3])
+def test_a_rover_standing_still_under_an_erring_estimate_starts_gently(tau_s: float) -> None:
+    """Leg 2 on PX4: the SIH rover braked out of its turn and stood (its position's rate -0.05 to
+    +0.03 m/s) while its EKF said -0.25 m/s forward and 0.2-0.3 m/s sideways. Read as moving, the
+    speed asked ramped at the law's 1 m/s^2, the rover stuck until asked 0.7-0.8 m/s, leapt to
+    1.3 m/s in 0.5 s, and the riding passenger trailed 0.30-0.35 m. With
+    carrier.start_motion_tau_s it is judged by its velocity made consistent with its position: it
+    stands, and the gentle start (0.25 m/s^2) asks for speed; once its position moves, the floor."""
+    stepper = CarrierStepper(_px4_rover_cfg(0.8, start_motion_tau_s=tau_s), True)
+    bearing = math.atan2(TARGET[1], TARGET[0])
+    ahead = np.array([math.cos(bearing), math.sin(bearing), 0.0])
+    side = np.array([-math.sin(bearing), math.cos(bearing), 0.0])
+    erring = -0.25 * ahead + 0.25 * side  # [m/s] its EKF's velocity while it stands
+    now = 0.0
+    for _ in range(round(1.5 / DT)):  # it stands, told to stop, while the passenger is in transit
+        now += DT
+        stepper.update_mode(_view("TRANSIT"))
+        stepper.decide(OwnState(now, np.zeros(3), erring, bearing), DT, 0.0, now)
+    asked, x = [], np.zeros(3)
+    for k in range(round(4.0 / DT)):
+        now += DT
+        free = k * DT >= 1.6  # 1.6 s into the ride it breaks free at 0.4 m/s, its estimate now right
+        x = x + (0.4 * ahead * DT if free else 0.0)
+        stepper.update_mode(_view("RIDING"))
+        state = OwnState(now, x.copy(), 0.4 * ahead if free else erring, bearing)
+        asked.append(stepper.decide(state, DT, 0.0, now).tracked.speed_m_s)
+    speed, t = np.array(asked), np.arange(1, len(asked) + 1) * DT
+    assert stepper.mode is CarrierMode.APPROACHING
+    standing = t <= 1.6
+    if tau_s:
+        assert speed[standing].max() <= 0.25 * 1.6 + 0.01  # the gentle start (old: the law's ramp to 0.8)
+        assert speed[-1] >= 0.8 - 1e-9  # once it moves, the floor and the law's ramp
+    else:
+        assert speed[standing].max() >= 0.8 - 1e-9  # the old ramp: 0.8 asked of a rover that stands
+    assert np.diff(speed).max() <= ACCEL * DT + 1e-9
