@@ -351,6 +351,10 @@ def test_position_setpoint_and_body_frame_velocity(probe: Probe) -> None:
 
 SCRIPT = ((1.0, (1.5, 0.5, -0.5)), (2.5, (-0.5, 1.0, 0.0)), (3.5, (0.0, 0.0, 0.0)))  # (t since armed [s], velocity NED [m/s])
 CLIMB = (0.0, 0.0, -1.5)  # the setpoint before the script [m/s NED]
+# Both vehicles wait 30 s of simulated time for a setpoint before PX4's offboard-loss failsafe: at
+# speed 10 its 1 s default is 0.1 s of wall time, which a loaded machine (load 7-15) let pass
+# between two of the script's setpoints, and the failsafe landed the vehicle (0.36 m flown).
+SCRIPT_PARAMS = {"COM_OF_LOSS_T": 30.0}
 Velocity = tuple[float, float, float]
 
 
@@ -370,7 +374,7 @@ def _fly_script(speed: float) -> tuple[float, list[tuple[float, Velocity]], np.n
     and the final snapshot's (t_s, position NED, velocity NED). When a setpoint takes effect
     depends on the wall clock (at speed 10, a millisecond late is 10 ms of flight); what the
     vehicle does with it must not."""
-    with Probe() as probe, vehicle_for(probe, speed=speed) as v:
+    with Probe() as probe, vehicle_for(probe, speed=speed, params=dict(SCRIPT_PARAMS)) as v:
         connect(probe)
         with start_offboard(probe, CLIMB, period_s=0.1 / speed):
             t_armed = v.event_time("Armed by external command")
@@ -392,7 +396,8 @@ def _replay(t_armed: float, taken: list[tuple[float, Velocity]], t_end: float) -
     from sim.vehicle.mock import VehicleOptions
 
     clock = ManualClock()
-    with Probe() as probe, MockVehicle(VehicleOptions(bind="127.0.0.1:0", target=f"127.0.0.1:{probe.port}"), clock=clock) as v:
+    with Probe() as probe, MockVehicle(VehicleOptions(bind="127.0.0.1:0", target=f"127.0.0.1:{probe.port}",
+                                                      params=dict(SCRIPT_PARAMS)), clock=clock) as v:
         probe.vehicle = ("127.0.0.1", v.port)
         connect(probe)
 
