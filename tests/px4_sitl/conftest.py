@@ -66,8 +66,8 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
 
 @pytest.fixture(scope="session")
 def px4_jobs(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, Future]]:
-    """Every selected PX4 job in the order the tests come, with at most :data:`PX4S_AT_ONCE` PX4
-    instances running; leaving waits for all of them."""
+    """Every selected PX4 job, started in the order the tests come, with at most
+    :data:`PX4S_AT_ONCE` PX4 instances running; leaving waits for all of them."""
     why = unavailable_reason()
     if why:
         pytest.skip(why)
@@ -77,12 +77,18 @@ def px4_jobs(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFa
     names = request.config.stash.get(_SELECTED, [])
     slots = threading.Condition()
     free = [PX4S_AT_ONCE]
+    turn = [0]  # the jobs start in the tests' order (their index in ``names``)
     last_start = [-math.inf]
 
-    def fly(job: Job, px4s: int, directory: Path) -> Any:
-        with slots:  # a job waits until all the PX4s it needs are free
-            slots.wait_for(lambda: free[0] >= px4s)
+    def fly(index: int, job: Job, px4s: int, directory: Path) -> Any:
+        with slots:  # a job waits for its turn and until all the PX4s it needs are free
+            # In turn, not whoever wakes first: a one-PX4 job released and took a slot again on the
+            # same pool thread before a job that flies alone woke, so the lone job starved until
+            # every later job had flown, and its test ran out of time (240 s) waiting.
+            slots.wait_for(lambda: turn[0] == index and free[0] >= px4s)
             free[0] -= px4s
+            turn[0] += 1
+            slots.notify_all()
             # and starts its PX4 at least STAGGER_S after the last one started: two PX4s booting
             # together starved SIH's simulated baro, and PX4 failed over to ALTCTL after take-off
             wait_s = last_start[0] + STAGGER_S - time.monotonic()
@@ -97,7 +103,8 @@ def px4_jobs(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFa
                 slots.notify_all()
 
     with ThreadPoolExecutor(max_workers=PX4S_AT_ONCE, thread_name_prefix="px4-job") as pool:
-        yield {name: pool.submit(fly, *JOBS[name], tmp_path_factory.mktemp(f"px4-{name}")) for name in names}
+        yield {name: pool.submit(fly, index, *JOBS[name], tmp_path_factory.mktemp(f"px4-{name}"))
+               for index, name in enumerate(names)}
 
 
 # PX4 SITL's battery simulator empties in 60 s (and stops at 50 %): a recall would bring the
