@@ -172,3 +172,47 @@ def test_the_reference_floor_is_over_the_ground_the_passenger_sees(model):
     new, dec = approach(state, replace(obs, carrier=carrier, vehicle=vehicle, relative=SEEN), model)
     assert new.phase is Phase.APPROACH, dec.events
     assert new.u_ref[2] > 0.0, new.u_ref  # going down, not pushed up to the floor
+
+
+def test_a_marker_lost_below_the_decision_height_climbs_at_the_descent_timeout(model):
+    """Below the decision height the marker counts as lost after relnav.descent_marker_timeout_s
+    (0.25 s), not the gate's marker_timeout_s (0.5 s): 0.3 s after its last capture the vehicle
+    0.2 m over the deck climbs back to the gate. In the Monte-Carlo the relative height had
+    drifted 0.15-0.28 m by 0.5 s (PX4's vertical velocity error, 0.3 m/s), and the vehicle met
+    the contact band out of the contact conditions before the climb began (scenarios 24, 35, 99,
+    118, 192: 45-51 ticks each; 0-8 with the shorter timeout)."""
+    relnav = model.relnav
+    assert relnav.descent_marker_timeout_s < 0.3 < relnav.marker_timeout_s
+    g = model.recovery.geometry
+    state, obs, dock = _at(model, 0.2, descent=1.0 - 0.2 / g.decision_height_m)
+    new, dec = approach(state, replace(obs, relative=replace(LOST, since_marker_s=0.3)), model)
+    assert new.phase is Phase.APPROACH and new.recovery.descent == 0.0 and new.recovery.marker_lost_s == T, dec.events
+    assert new.u_ref[2] < state.u_ref[2]  # the reference turns upwards at once
+    # the gate itself still waits for marker_timeout_s: 0.3 s is in sight there
+    assert relnav.descent_blocked(replace(LOST, since_marker_s=0.3)) is None
+
+
+def test_a_marker_lost_out_of_line_climbs_rather_than_holds(model):
+    """Blind and 0.12 m off the dock point by the estimate (out of the 0.10 m contact radius):
+    the climb to the gate goes ahead of the out-of-line hold at three contact heights, whose
+    horizontal error is the drifted estimate's (scenarios 35 and 118: held 0.3 m over the deck
+    by the estimate, the truth 0.1 m over it and 0.15 m off)."""
+    g = model.recovery.geometry
+    state, obs, dock = _at(model, 0.25, descent=1.0 - 0.25 / g.decision_height_m, east_m=0.12)
+    new, dec = approach(state, obs, model)
+    assert new.phase is Phase.APPROACH, dec.events
+    assert new.recovery.descent == 0.0 and new.recovery.marker_lost_s == T
+    assert new.recovery.settled_since_s is None  # not the out-of-line pause
+
+
+def test_the_marker_back_the_descent_goes_on_from_where_the_reference_climbed_to(model):
+    """After a climb for a lost marker the descent resumes from the reference's height (0.4 m
+    over the deck here), not from the gate: with 10 % of the time blind, a descent restarted
+    from the gate at every loss would spend its budget."""
+    g = model.recovery.geometry
+    state, obs, dock = _at(model, 0.4, descent=0.0, lost_s=T - 0.5)
+    new, dec = approach(state, replace(obs, relative=SEEN), model)
+    assert new.phase is Phase.APPROACH and new.recovery.marker_lost_s is None, dec.events
+    resumed = 1.0 - 0.4 / g.decision_height_m
+    step = model.recovery.descent_speed_m_s * model.dt_s / g.decision_height_m
+    assert new.recovery.descent == pytest.approx(resumed + step)
