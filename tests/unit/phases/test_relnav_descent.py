@@ -216,3 +216,27 @@ def test_the_marker_back_the_descent_goes_on_from_where_the_reference_climbed_to
     resumed = 1.0 - 0.4 / g.decision_height_m
     step = model.recovery.descent_speed_m_s * model.dt_s / g.decision_height_m
     assert new.recovery.descent == pytest.approx(resumed + step)
+
+
+def test_the_riding_reference_floor_is_over_the_ground_the_passenger_sees(model):
+    """Riding with the passenger's own height estimate 2.2 m off (the relnav Monte-Carlo's
+    scenario 63: the ground 2.2 m down in its frame, the dock point 0.7 m under it, under the
+    altitude floor safety.z_max_m = -0.5 fixed in its frame). The riding law's reference filter
+    has its floor over that ground, as the command's: the reference rides the dock point's
+    velocity (on the old code the barrier asked it 1.2 m/s up, the vehicle rose 0.6 m off the
+    dock point and P1 failed)."""
+    from mission.phases.flying import riding
+
+    ground = np.array([0.0, 0.0, 2.2])
+    v_c = np.array([1.0, 0.0, 0.0])
+    carrier = CarrierObs(position_ned_m=ground.copy(), velocity_ned_m_s=v_c, age_s=0.0, alive=True, yaw_rad=0.0)
+    dock = ground + model.dock_offset_ned_m
+    assert dock[2] > model.tick.passenger_safety.z_max_m  # under the floor fixed in its frame
+    vehicle = VehicleObs(position_ned_m=dock.copy(), velocity_ned_m_s=v_c.copy(), armed=True, mode="OFFBOARD",
+                         heartbeat_age_s=0.0)
+    state = MissionState(phase=Phase.RIDING, since_s=T - 5.0, start_s=0.0, x_ref=dock.copy(), u_ref=v_c.copy(),
+                         prev_dock=dock - v_c * model.dt_s, separation_time_s=None)
+    new, dec = riding(state, Observation(t_s=T, vehicle=vehicle, carrier=carrier, relative=SEEN), model)
+    assert new.phase is Phase.RIDING, dec.events
+    assert abs(new.u_ref[2]) < 0.05, new.u_ref  # the dock's velocity, no climb
+    assert new.u_ref[0] == pytest.approx(v_c[0], abs=0.05)
