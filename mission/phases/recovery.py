@@ -410,8 +410,12 @@ def approach(state, obs, m, events=()):
     if rec.marker_lost_s is not None:
         # the marker back after a climb: the descent goes on from where the reference has climbed
         # to, not from the gate (with 10 % of the time blind, a descent restarted from the gate
-        # at each loss spent its budget)
-        rec = replace(rec, descent=descent_progress(state.x_ref, dock, g))
+        # at each loss spent its budget), but no lower than three contact heights: the marker's
+        # correction of the drifted estimate (0.1-0.2 m) is still being let through
+        # (relnav.correction_rate_m_s), and a descent resumed under them met the contact band
+        # out of the contact conditions (scenarios 15, 16: 0.54-0.61 m/s)
+        slow_from = 1.0 - 3.0 * g.contact_height_m / g.decision_height_m
+        rec = replace(rec, descent=min(descent_progress(state.x_ref, dock, g), slow_from))
     rec = replace(rec, settled_since_s=None, marker_lost_s=None)
     descent, rate = descent_step(rec.descent, here.horizontal_error_m, g, r.descent_speed_m_s,
                                  r.final_descent_speed_m_s, r.final_lineup_margin, m.dt_s)

@@ -216,6 +216,14 @@ def test_the_marker_back_the_descent_goes_on_from_where_the_reference_climbed_to
     resumed = 1.0 - 0.4 / g.decision_height_m
     step = model.recovery.descent_speed_m_s * model.dt_s / g.decision_height_m
     assert new.recovery.descent == pytest.approx(resumed + step)
+    # from under three contact heights it resumes from them: the marker's correction of the
+    # drifted estimate is still being let through (scenarios 15, 16: resumed 0.2 m over the deck,
+    # the vehicle crossed the contact band at 0.54-0.61 m/s)
+    low, obs, dock = _at(model, 0.2, descent=0.0, lost_s=T - 0.5)
+    new, dec = approach(low, replace(obs, relative=SEEN), model)
+    slow_from = 1.0 - 3.0 * g.contact_height_m / g.decision_height_m
+    final = model.recovery.final_descent_speed_m_s * model.dt_s / g.decision_height_m
+    assert new.recovery.descent == pytest.approx(slow_from + final), dec.events
 
 
 def test_the_riding_reference_floor_is_over_the_ground_the_passenger_sees(model):
