@@ -395,7 +395,9 @@ def approach(state, obs, m, events=()):
         if t - lost > m.relnav.search_s:
             return go_around(state, obs, m, f"on the descent: {blocked} (relnav.search_s = {m.relnav.search_s:g})",
                              events)
-        rec = replace(rec, marker_lost_s=lost, descent=0.0)
+        # the out-of-line pause's timer restarts: the climb is its own pause (search_s, the budget),
+        # and carried over it sent a vehicle out of line for a moment after the climb round at once
+        rec = replace(rec, marker_lost_s=lost, descent=0.0, settled_since_s=None)
         return _fly(state, obs, m, gate, v_c, r.approach, rec, events)
     if not here.horizontally_within(g) and not landed:
         out_since = rec.settled_since_s if rec.settled_since_s is not None else t
