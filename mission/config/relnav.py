@@ -20,7 +20,7 @@ if TYPE_CHECKING:
 
 
 #: ``[relnav]``'s fields that tell the phases how to use the estimate (not the estimator's tuning).
-PHASE_FIELDS = ("enabled", "marker_timeout_s", "marker_memory_s", "search_s", "correction_rate_m_s", "seated_sigma_m",
+PHASE_FIELDS = ("enabled", "marker_timeout_s", "descent_marker_timeout_s", "marker_memory_s", "search_s", "correction_rate_m_s", "seated_sigma_m",
                 "pending_limit_m", "landing_target_rate_hz")
 
 
@@ -35,6 +35,11 @@ class RelnavSection(Section):
                      "`recovery.decision_height_m` then needs the marker in sight and the estimate converged"))
     marker_timeout_s: float = Field(0.5, gt=0, le=10,
         description="[s] the marker counts as in sight while its newest fused capture is no older than this")
+    descent_marker_timeout_s: float = Field(0.25, gt=0, le=10,
+        description=("[s] below the decision height the marker counts as lost once its newest fused capture is older "
+                     "than this, and the vehicle climbs (at most `relnav.marker_timeout_s`; at least the camera's "
+                     "latency and a frame or two: blind, the relative height drifts with the vehicle's own height "
+                     "estimate, ~0.3 m/s with PX4's errors)"))
     marker_memory_s: float = Field(20.0, gt=0, le=600,
         description=("[s] HOLDOFF begins an approach only with a marker fused this recently; else it searches for "
                      "it over the deck at the holdoff height"))
@@ -88,6 +93,14 @@ class RelnavSection(Section):
         description="[s] how far back a late measurement is still fused (replayed from its capture time)")
     converged_sigma_m: float = Field(0.1, gt=0, le=100,
         description="[m] the estimate counts as converged when its position's largest standard deviation is below this")
+
+    @model_validator(mode="after")
+    def _descent_timeout(self) -> RelnavSection:
+        if self.descent_marker_timeout_s > self.marker_timeout_s:
+            raise ConfigError("relnav.descent_marker_timeout_s", self.descent_marker_timeout_s,
+                              f"must be <= relnav.marker_timeout_s = {self.marker_timeout_s:g} (the descent needs the "
+                              "marker at least as recent as the gate does)")
+        return self
 
     def params(self) -> RelnavParams:
         from mission.relnav.estimator import RelnavParams

@@ -140,3 +140,10 @@ def descent_step(descent: float, horizontal_error_m: float, g: DockingGeometry, 
     if nxt > slow_from and horizontal_error_m > (1.0 - lineup_margin) * g.contact_radius_m:
         return min(descent, pause), 0.0
     return nxt, rate
+
+
+def descent_progress(point_ned_m: np.ndarray, dock_ned_m: np.ndarray, g: DockingGeometry) -> float:
+    """How far [0-1] down from the gate (0) to the dock point (1) ``point_ned_m`` [m] NED is, by its
+    height over the dock point (clamped)."""
+    height = float(np.asarray(dock_ned_m, dtype=float)[2] - np.asarray(point_ned_m, dtype=float)[2])
+    return min(1.0, max(0.0, 1.0 - height / g.decision_height_m))

@@ -65,6 +65,18 @@ def floor_over_the_ground(limits: SafetyConfig, obs: Observation) -> SafetyConfi
     return replace(limits, z_max_m=limits.z_max_m + ground)
 
 
+def tick_over_the_ground(m: MissionModel, obs: Observation) -> TickModel:
+    """``m.tick`` with the passenger's altitude floor (the riding law's reference filter) over the
+    ground as the passenger sees it (:func:`floor_over_the_ground`), as the command's and the
+    recovery reference's are. Fixed in its frame, with its own height estimate 2 m off (the relnav
+    Monte-Carlo's scenario 63) the dock point lay 1.1-1.5 m under it, and the barrier asked the
+    riding reference 1.0-1.5 m/s up for seconds: the vehicle rose 0.6 m off the dock point (P1
+    failed; docs/relnav.md, "The climb at once and the riding floor"). The same after the separation
+    (navigate), so that the reference does not jump at the switch."""
+    limits = floor_over_the_ground(m.tick.passenger_safety, obs)
+    return m.tick if limits is m.tick.passenger_safety else replace(m.tick, passenger_safety=limits)
+
+
 def _track(state: MissionState, obs: Observation, m: MissionModel, x_ref: np.ndarray, u_ref: np.ndarray,
            a_ref: np.ndarray, standing: bool = False, on_deck: bool = False) -> Tracked:
     """The setpoint that makes the vehicle follow the reference (:func:`mission.core.tracking.setpoint`):
@@ -272,7 +284,7 @@ def riding(state, obs, m):
         new = enter(state, Phase.SEPARATED, t, anchor=anchor, e_ref=ZERO.copy(), x_ref=anchor.copy(),
                   separation_time_s=t - (1 - float(theta)) * m.dt_s)
         return navigate(new, obs, m, events=(f"separated at |e_tc| = {norm(m.tick.target - anchor):.3f} m",))
-    tick = passenger_tick(dock, v_dock, ZERO, False, m.tick, state.u_ref, m.dt_s,
+    tick = passenger_tick(dock, v_dock, ZERO, False, tick_over_the_ground(m, obs), state.u_ref, m.dt_s,
                           e_tc_norm_m=_docked_law_distance(obs, m, dock))
     # velocity setpoints carry no acceleration; a stale state's prediction has none
     a_ref = a_dock if m.tracking.kind == "full" else ZERO
@@ -316,7 +328,7 @@ def _chase(state: MissionState, obs: Observation, m: MissionModel, dock: np.ndar
         new = enter(state, Phase.SEPARATED, t, anchor=anchor, e_ref=offset, x_ref=anchor + offset, chasing_dock=False,
                     separation_time_s=t - (1 - float(theta)) * m.dt_s)
         return navigate(new, obs, m, events=(*events, f"separated at |e_tc| = {norm(m.tick.target - anchor):.3f} m"))
-    tick = passenger_tick(dock, v_dock, ZERO, False, m.tick, u_prev, m.dt_s,  # the law's view (diagnostics)
+    tick = passenger_tick(dock, v_dock, ZERO, False, tick_over_the_ground(m, obs), u_prev, m.dt_s,  # the law's view
                           e_tc_norm_m=_docked_law_distance(obs, m, dock))
     a_ref = (u_ref - u_prev) / m.dt_s if m.tracking.kind == "full" else ZERO
     tr = _track(state, obs, m, x_ref, u_ref, a_ref)
@@ -371,7 +383,7 @@ def navigate(state, obs, m, events=()):
     t = obs.t_s
     deck = m.deck.keep_out(obs, m) if m.deck is not None else None
     separated_for = None if state.separation_time_s is None else t - state.separation_time_s
-    tick = passenger_tick(state.anchor, ZERO, state.e_ref, True, m.tick, state.u_ref, m.dt_s, deck=deck,
+    tick = passenger_tick(state.anchor, ZERO, state.e_ref, True, tick_over_the_ground(m, obs), state.u_ref, m.dt_s, deck=deck,
                           neighbours=obs.neighbours, since_separation_s=separated_for)
     # The reference advances at the rate the vehicle can follow (mission.core.tracking.progress); its
     # acceleration is its own velocity's change over the tick (a signal we generate: no noise).

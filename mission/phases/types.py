@@ -137,7 +137,8 @@ class RelativeView:
 class RelnavGates:
     """How the phases use the relative estimate (``[relnav]``, docs/relnav.md): ``params`` the
     estimator's tuning; ``marker_timeout_s`` [s] the marker is in sight while its newest fused
-    capture is this recent; ``marker_memory_s`` [s] HOLDOFF begins an approach only with a marker
+    capture is this recent; ``descent_marker_timeout_s`` [s] below the decision height, this
+    recent (no later than ``marker_timeout_s``); ``marker_memory_s`` [s] HOLDOFF begins an approach only with a marker
     this recent; ``search_s`` [s] how long HOLDOFF searches for the marker, and how long the
     descent holds with it lost; ``correction_rate_m_s`` [m/s] the bias correction's top rate;
     ``seated_sigma_m`` [m] how well standing on the deck places the vehicle over it;
@@ -149,6 +150,7 @@ class RelnavGates:
 
     params: RelnavParams
     marker_timeout_s: float
+    descent_marker_timeout_s: float
     marker_memory_s: float
     search_s: float
     correction_rate_m_s: float
@@ -157,12 +159,13 @@ class RelnavGates:
     marker_offset_ned_m: np.ndarray
     carrier_accel_m_s2: float | None = None
 
-    def descent_blocked(self, rel: RelativeView | None) -> str | None:
+    def descent_blocked(self, rel: RelativeView | None, below: bool = False) -> str | None:
         """Why the vehicle may not descend below the decision height now (None: it may): the
-        marker in sight and the estimate converged."""
+        marker in sight (``below`` the decision height already: within ``descent_marker_timeout_s``,
+        else ``marker_timeout_s``) and the estimate converged."""
         if rel is None:
             return "no relative estimate"
-        if rel.since_marker_s > self.marker_timeout_s:
+        if rel.since_marker_s > (self.descent_marker_timeout_s if below else self.marker_timeout_s):
             return "marker not in sight" if math.isinf(rel.since_marker_s) else \
                 f"marker not in sight for {rel.since_marker_s:.1f} s"
         if not rel.converged:

@@ -36,6 +36,8 @@ def test_shipped_configs_load(path):
     ({"mission": {"ride": "deck", "dock_offset_ned_m": [0.0, 0.0, -0.5], "final_action": "return",
                   "deck_clear_slope": 2.0}}, "mission.deck_clear_slope", "glide"),
     ({"mission": {"ride": "carried"}}, "mission.ride", "'hover' or 'deck'"),
+    ({"relnav": {"marker_timeout_s": 0.3, "descent_marker_timeout_s": 0.4}}, "relnav.descent_marker_timeout_s",
+     "relnav.marker_timeout_s"),
 ])
 def test_bad_fields_are_named(data, field, words):
     with pytest.raises(ConfigError) as exc:

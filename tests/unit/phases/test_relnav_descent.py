@@ -172,3 +172,82 @@ def test_the_reference_floor_is_over_the_ground_the_passenger_sees(model):
     new, dec = approach(state, replace(obs, carrier=carrier, vehicle=vehicle, relative=SEEN), model)
     assert new.phase is Phase.APPROACH, dec.events
     assert new.u_ref[2] > 0.0, new.u_ref  # going down, not pushed up to the floor
+
+
+def test_a_marker_lost_below_the_decision_height_climbs_at_the_descent_timeout(model):
+    """Below the decision height the marker counts as lost after relnav.descent_marker_timeout_s
+    (0.25 s), not the gate's marker_timeout_s (0.5 s): 0.3 s after its last capture the vehicle
+    0.2 m over the deck climbs back to the gate. In the Monte-Carlo the relative height had
+    drifted 0.15-0.28 m by 0.5 s (PX4's vertical velocity error, 0.3 m/s), and the vehicle met
+    the contact band out of the contact conditions before the climb began (scenarios 24, 35, 99,
+    118, 192: 45-51 ticks each; 0-8 with the shorter timeout)."""
+    relnav = model.relnav
+    assert relnav.descent_marker_timeout_s < 0.3 < relnav.marker_timeout_s
+    g = model.recovery.geometry
+    state, obs, dock = _at(model, 0.2, descent=1.0 - 0.2 / g.decision_height_m)
+    new, dec = approach(state, replace(obs, relative=replace(LOST, since_marker_s=0.3)), model)
+    assert new.phase is Phase.APPROACH and new.recovery.descent == 0.0 and new.recovery.marker_lost_s == T, dec.events
+    assert new.u_ref[2] < state.u_ref[2]  # the reference turns upwards at once
+    # the gate itself still waits for marker_timeout_s: 0.3 s is in sight there
+    assert relnav.descent_blocked(replace(LOST, since_marker_s=0.3)) is None
+
+
+def test_a_marker_lost_out_of_line_climbs_rather_than_holds(model):
+    """Blind and 0.12 m off the dock point by the estimate (out of the 0.10 m contact radius):
+    the climb to the gate goes ahead of the out-of-line hold at three contact heights, whose
+    horizontal error is the drifted estimate's (scenarios 35 and 118: held 0.3 m over the deck
+    by the estimate, the truth 0.1 m over it and 0.15 m off)."""
+    g = model.recovery.geometry
+    state, obs, dock = _at(model, 0.25, descent=1.0 - 0.25 / g.decision_height_m, east_m=0.12)
+    # out of line for 4 s already (gate_timeout_s 5): the climb restarts that pause's timer, else a
+    # vehicle out of line for a moment once the marker is back went round at once (scenarios 40, 103)
+    state = replace(state, recovery=replace(state.recovery, settled_since_s=T - 4.0))
+    new, dec = approach(state, obs, model)
+    assert new.phase is Phase.APPROACH, dec.events
+    assert new.recovery.descent == 0.0 and new.recovery.marker_lost_s == T
+    assert new.recovery.settled_since_s is None  # not the out-of-line pause
+
+
+def test_the_marker_back_the_descent_goes_on_from_where_the_reference_climbed_to(model):
+    """After a climb for a lost marker the descent resumes from the reference's height (0.4 m
+    over the deck here), not from the gate: with 10 % of the time blind, a descent restarted
+    from the gate at every loss would spend its budget."""
+    g = model.recovery.geometry
+    state, obs, dock = _at(model, 0.4, descent=0.0, lost_s=T - 0.5)
+    new, dec = approach(state, replace(obs, relative=SEEN), model)
+    assert new.phase is Phase.APPROACH and new.recovery.marker_lost_s is None, dec.events
+    resumed = 1.0 - 0.4 / g.decision_height_m
+    step = model.recovery.descent_speed_m_s * model.dt_s / g.decision_height_m
+    assert new.recovery.descent == pytest.approx(resumed + step)
+    # from under three contact heights it resumes from them: the marker's correction of the
+    # drifted estimate is still being let through (scenarios 15, 16: resumed 0.2 m over the deck,
+    # the vehicle crossed the contact band at 0.54-0.61 m/s)
+    low, obs, dock = _at(model, 0.2, descent=0.0, lost_s=T - 0.5)
+    new, dec = approach(low, replace(obs, relative=SEEN), model)
+    slow_from = 1.0 - 3.0 * g.contact_height_m / g.decision_height_m
+    final = model.recovery.final_descent_speed_m_s * model.dt_s / g.decision_height_m
+    assert new.recovery.descent == pytest.approx(slow_from + final), dec.events
+
+
+def test_the_riding_reference_floor_is_over_the_ground_the_passenger_sees(model):
+    """Riding with the passenger's own height estimate 2.2 m off (the relnav Monte-Carlo's
+    scenario 63: the ground 2.2 m down in its frame, the dock point 0.7 m under it, under the
+    altitude floor safety.z_max_m = -0.5 fixed in its frame). The riding law's reference filter
+    has its floor over that ground, as the command's: the reference rides the dock point's
+    velocity (on the old code the barrier asked it 1.2 m/s up, the vehicle rose 0.6 m off the
+    dock point and P1 failed)."""
+    from mission.phases.flying import riding
+
+    ground = np.array([0.0, 0.0, 2.2])
+    v_c = np.array([1.0, 0.0, 0.0])
+    carrier = CarrierObs(position_ned_m=ground.copy(), velocity_ned_m_s=v_c, age_s=0.0, alive=True, yaw_rad=0.0)
+    dock = ground + model.dock_offset_ned_m
+    assert dock[2] > model.tick.passenger_safety.z_max_m  # under the floor fixed in its frame
+    vehicle = VehicleObs(position_ned_m=dock.copy(), velocity_ned_m_s=v_c.copy(), armed=True, mode="OFFBOARD",
+                         heartbeat_age_s=0.0)
+    state = MissionState(phase=Phase.RIDING, since_s=T - 5.0, start_s=0.0, x_ref=dock.copy(), u_ref=v_c.copy(),
+                         prev_dock=dock - v_c * model.dt_s, separation_time_s=None)
+    new, dec = riding(state, Observation(t_s=T, vehicle=vehicle, carrier=carrier, relative=SEEN), model)
+    assert new.phase is Phase.RIDING, dec.events
+    assert abs(new.u_ref[2]) < 0.05, new.u_ref  # the dock's velocity, no climb
+    assert new.u_ref[0] == pytest.approx(v_c[0], abs=0.05)
