@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import subprocess
 import sys
 import time
@@ -45,15 +44,15 @@ import numpy as np
 
 from bench.px4_flights import ROVER_BATTERY, dockings
 from bench.px4_team import (GCS_LISTEN_PORT, OFFBOARD_PORT, STATUS_TOPIC, Progress, _at, _home_set, _on_monotonic,
-                            _read_truth, instance_of)
+                            _read_truth, instance_of, start_px4s)
 from mission.config.schema import load_config
 from mission.flightdata.read import read_messages
 from sim.net import stop_process, wait_for
-from sim.sitl.px4 import (QUAD_AIRFRAME, ROVER_AIRFRAME, ROVER_PARAMS, NetNamespace, Px4Sitl, build_dir, clock_ratio_of,
+from sim.sitl.px4 import (QUAD_AIRFRAME, ROVER_AIRFRAME, ROVER_PARAMS, NetNamespace, build_dir, clock_ratio_of,
                           patched_config, unavailable_reason)
 
 ROOT = Path(__file__).resolve().parents[1]
-CONTACT_M = 0.2  # [m] issue 33's PX4 target: true contact error
+CONTACT_M = 0.2  # [m] the PX4 target of docs/relnav.md: true contact error
 ATTEMPTS = 2  # ... docked within this many approaches
 PAIR_DIR = "pair0"
 HOME_S = 10.0  # [s] of HOME after the last dock, then the bench stops the mission (module docstring)
@@ -159,18 +158,9 @@ def fly(config: Path, directory: Path, seed: int, speed_factor: float = 1.08,
     t0 = time.monotonic()
     codes: dict[str, int | None] = {}
     with ExitStack() as stack:
-        ns = NetNamespace()
-        stack.callback(ns.close)
-        rootfs = Path(f"/var/tmp/{ns.name}")  # not under /tmp: PX4 gets a private /tmp
-        stack.callback(shutil.rmtree, rootfs, True)
         vehicles = [("passenger", instance_of(passenger_sysid), QUAD_AIRFRAME, ROVER_BATTERY),
                     ("rover", instance_of(rover_sysid), ROVER_AIRFRAME, ROVER_PARAMS)]
-        for name, instance, airframe, params in vehicles:
-            px4 = Px4Sitl(build, rootfs / f"rootfs{instance}", ns, instance=instance, airframe=airframe,
-                          speed_factor=speed_factor, out_dir=directory, params=dict(params))
-            px4.start()
-            stack.callback(px4.stop)
-            click.echo(f"  PX4 instance {instance} ({name}, airframe {airframe}) pid {px4.pid}")
+        ns = start_px4s(stack, build, vehicles, speed_factor, directory)
         for _, instance, _, _ in vehicles:
             path = directory / f"px4-{instance}.out"
             wait_for(lambda: _home_set(path), 90.0, f"'home set' in {path.name}")
@@ -215,7 +205,7 @@ def fly(config: Path, directory: Path, seed: int, speed_factor: float = 1.08,
 
 
 def leg_meets(leg: dict[str, Any]) -> bool:
-    """Issue 33's PX4 target for one leg: docked within 2 approaches, true contact error <= 0.2 m."""
+    """The PX4 target for one leg (docs/relnav.md, "On real PX4 SITL"): docked within 2 approaches, true contact error <= 0.2 m."""
     return bool(leg["docked"] and leg["attempts"] is not None and leg["attempts"] <= ATTEMPTS
                 and leg["true_error_m"] is not None and leg["true_error_m"] <= CONTACT_M)
 

@@ -125,6 +125,25 @@ class Progress:
                     click.echo(f"  +{time.monotonic() - self.t0:6.1f} s {name}: {line.strip()[-110:]}")
 
 
+
+def start_px4s(stack: ExitStack, build: Path, vehicles: list[tuple[str, int, int, Any]], speed_factor: float,
+               directory: Path) -> NetNamespace:
+    """Start one PX4 SITL per ``(name, instance, airframe, params)`` of ``vehicles`` in a new
+    network namespace, their root folders under ``/var/tmp`` (not under ``/tmp``: PX4 gets a
+    private one) and their output in ``directory``; ``stack`` stops them and removes both.
+    Returns the namespace."""
+    ns = NetNamespace()
+    stack.callback(ns.close)
+    rootfs = Path(f"/var/tmp/{ns.name}")
+    stack.callback(shutil.rmtree, rootfs, True)
+    for name, instance, airframe, params in vehicles:
+        px4 = Px4Sitl(build, rootfs / f"rootfs{instance}", ns, instance=instance, airframe=airframe,
+                      speed_factor=speed_factor, out_dir=directory, params=dict(params))
+        px4.start()
+        stack.callback(px4.stop)
+        click.echo(f"  PX4 instance {instance} ({name}, airframe {airframe}) pid {px4.pid}")
+    return ns
+
 def _home_set(px4_out: Path) -> bool:
     """Whether a PX4's output says its estimator has a home (armable soon after)."""
     return "home set" in px4_out.read_text(errors="replace")
@@ -314,18 +333,9 @@ def fly_team(config: Path, directory: Path, speed_factor: float = 1.08, timeout_
     t0 = time.monotonic()
     codes: dict[str, int | None] = {}
     with ExitStack() as stack:
-        ns = NetNamespace()
-        stack.callback(ns.close)
-        rootfs = Path(f"/var/tmp/{ns.name}")  # not under /tmp: PX4 gets a private /tmp
-        stack.callback(shutil.rmtree, rootfs, True)
         vehicles = [(p.name, instance_of(p.system_id), QUAD_AIRFRAME, ROVER_BATTERY) for p in cfg.team.passengers]
         vehicles.append(("rover", rover_instance, ROVER_AIRFRAME, ROVER_PARAMS))
-        for name, instance, airframe, params in vehicles:
-            px4 = Px4Sitl(build, rootfs / f"rootfs{instance}", ns, instance=instance, airframe=airframe,
-                          speed_factor=speed_factor, out_dir=directory, params=dict(params))
-            px4.start()
-            stack.callback(px4.stop)
-            click.echo(f"  PX4 instance {instance} ({name}, airframe {airframe}) pid {px4.pid}")
+        ns = start_px4s(stack, build, vehicles, speed_factor, directory)
         gcs = gcs_probe(ns, history_len=200_000)
         stack.callback(gcs.close)
         from sim.testing.probe import connect
