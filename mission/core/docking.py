@@ -118,6 +118,12 @@ def contact(vehicle_ned_m: np.ndarray, vehicle_v_ned_m_s: np.ndarray, dock_ned_m
     return Contact(float(np.hypot(e[0], e[1])), float(e[2]), float(np.hypot(dv[0], dv[1])), abs(float(dv[2])))
 
 
+def heights_over_dock(n: float, g: DockingGeometry) -> float:
+    """The final descent's progress (0 at the gate, 1 at the dock point) ``n`` contact heights
+    over the dock point."""
+    return 1.0 - n * g.contact_height_m / g.decision_height_m
+
+
 def descent_step(descent: float, horizontal_error_m: float, g: DockingGeometry, speed_m_s: float,
                  final_speed_m_s: float | None, lineup_margin: float, dt_s: float) -> tuple[float, float]:
     """The final descent's progress one tick ``dt_s`` [s] on (``descent``: 0 at the gate, 1 at the
@@ -133,8 +139,7 @@ def descent_step(descent: float, horizontal_error_m: float, g: DockingGeometry, 
     three contact heights, or 2.5: the vehicle's horizontal error wanders 0.01-0.15 m within a
     second or two, and a descent sent back up at each excursion went around on its budget
     (docs/relnav.md, "The deck touches, the floor and P1")."""
-    slow_from = 1.0 - 3.0 * g.contact_height_m / g.decision_height_m
-    pause = 1.0 - 2.0 * g.contact_height_m / g.decision_height_m
+    slow_from, pause = heights_over_dock(3.0, g), heights_over_dock(2.0, g)
     rate = final_speed_m_s if descent >= slow_from and final_speed_m_s is not None else speed_m_s
     nxt = min(1.0, descent + rate * dt_s / g.decision_height_m)
     if nxt > slow_from and horizontal_error_m > (1.0 - lineup_margin) * g.contact_radius_m:

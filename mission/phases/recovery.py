@@ -42,6 +42,7 @@ from mission.core.docking import (
     descent_progress,
     descent_step,
     gate_point,
+    heights_over_dock,
     glide_point,
     holdoff_point,
     path_length_m,
@@ -406,7 +407,7 @@ def approach(state, obs, m, events=()):
                              f"{here.horizontal_relative_speed_m_s:.2f} m/s)", events)
         # held no lower than three contact heights over the deck, so it does not sit on it (PX4
         # dips 0.1 m below a descending reference)
-        held = max(0.0, min(rec.descent, 1.0 - 3.0 * g.contact_height_m / g.decision_height_m))
+        held = max(0.0, min(rec.descent, heights_over_dock(3.0, g)))
         rec = replace(rec, settled_since_s=out_since, descent=held)
         return _fly(state, obs, m, gate + held * (dock - gate), v_c, r.approach, rec, events)
     if rec.marker_lost_s is not None:
@@ -416,8 +417,7 @@ def approach(state, obs, m, events=()):
         # correction of the drifted estimate (0.1-0.2 m) is still being let through
         # (relnav.correction_rate_m_s), and a descent resumed under them met the contact band
         # out of the contact conditions (scenarios 15, 16: 0.54-0.61 m/s)
-        slow_from = 1.0 - 3.0 * g.contact_height_m / g.decision_height_m
-        rec = replace(rec, descent=min(descent_progress(state.x_ref, dock, g), slow_from))
+        rec = replace(rec, descent=min(descent_progress(state.x_ref, dock, g), heights_over_dock(3.0, g)))
     rec = replace(rec, settled_since_s=None, marker_lost_s=None)
     descent, rate = descent_step(rec.descent, here.horizontal_error_m, g, r.descent_speed_m_s,
                                  r.final_descent_speed_m_s, r.final_lineup_margin, m.dt_s)
