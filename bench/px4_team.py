@@ -71,14 +71,13 @@ from mission.phases.queue import SEATED
 from mission.record.table import read_record
 from sim.net import stop_process, wait_for
 from sim.sitl import ground_truth
-from sim.sitl.px4 import (QUAD_AIRFRAME, ROVER_AIRFRAME, ROVER_PARAMS, NetNamespace, Px4Sitl, build_dir,
+from sim.sitl.px4 import (GCS_LISTEN_PORT, QUAD_AIRFRAME, ROVER_AIRFRAME, ROVER_PARAMS, NetNamespace, Px4Sitl, build_dir,
                           clock_ratio, clock_ratio_of, gcs_probe, unavailable_reason)
 
 ROOT = Path(__file__).resolve().parents[1]
 STATUS_TOPIC = "/pair0/carrier/status"  # the carrier's own log of each state it published (carrier.mcap)
 TRUTH_HZ = 20.0  # [Hz] each PX4's truth and estimate on the GCS link (three PX4s: 120 messages a second)
 OFFBOARD_PORT = 14540  # + instance: where PX4 SITL sends its offboard link
-GCS_LISTEN_PORT = 18570  # + instance: where its GCS link listens
 VIOLATION_M = 0.01  # [m] a shortfall over this is a violation (bench/pairwise_mc.py)
 FLYING_NAMES = frozenset(p.value for p in FLYING)
 # Left out of the pairwise figures: the three SIHs start at one home (SIH has no collisions), so

@@ -52,11 +52,10 @@ from mission.mavlink.env import mavlink
 from sim.camera.publisher import BodyTruth, CameraPublisher, DeckTruth
 from sim.camera.render import poses_from_ground_truth
 from sim.sitl import ground_truth
+from sim.sitl.px4 import GCS_LISTEN_PORT, GCS_PORT
 
 log = logging.getLogger("sim.sitl.camera")
 
-GCS_PORT = 14550  # every PX4 SITL's GCS link sends here
-GCS_LISTEN_PORT = 18570  # + instance: where it listens
 CARRIER_MAX_AGE_S = 0.5  # [s] a carrier truth older than this at a passenger truth: no deck
 ASK_PERIOD_S = 1.0  # [s] the streams are asked again until they arrive
 

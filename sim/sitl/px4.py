@@ -48,7 +48,8 @@ ROVER_AIRFRAME = 10045  # SIH Ackermann rover: a carrier
 # run). PX4 SITL sets PX4_PARAM_<name> from the environment at start.
 ROVER_PARAMS = {"RO_MAX_THR_SPEED": 4.0, "RO_SPEED_P": 0.5, "RO_SPEED_I": 0.1, "RO_ACCEL_LIM": 6.0, "RO_DECEL_LIM": 6.0}
 CLONE_NEWNET = 0x40000000
-GCS_PORT = 14550  # PX4's GCS link (it listens on 18570 + instance) sends here
+GCS_PORT = 14550  # PX4's GCS link (it listens on GCS_LISTEN_PORT + instance) sends here
+GCS_LISTEN_PORT = 18570  # + instance: where a PX4's GCS link listens
 HOME_LAG_S = 3.5  # a home follows the carrier within this [s]: moved at most once a second, HOME_POSITION at 0.5 Hz
 _counter = itertools.count()
 T = TypeVar("T")
@@ -189,7 +190,7 @@ def gcs_probe(ns: NetNamespace, instance: int = 0, history_len: int = 4000) -> A
     the last ``history_len`` messages of each type."""
     from sim.testing.probe import Probe
 
-    return ns.inside(lambda: Probe(bind=f"127.0.0.1:{GCS_PORT}", vehicle=("127.0.0.1", 18570 + instance),
+    return ns.inside(lambda: Probe(bind=f"127.0.0.1:{GCS_PORT}", vehicle=("127.0.0.1", GCS_LISTEN_PORT + instance),
                                    history_len=history_len))
 
 
