@@ -202,10 +202,18 @@ def test_the_deck_moves_as_the_carriers_zenoh_state_says(probe: Probe):
                 publisher.publish(CarrierState(stamp_s=t, seq=seq, frame="local_ned", position=(t, 0.0, 0.0),
                                                velocity_ned_m_s=(1.0, 0.0, 0.0)))
                 published.append(t)
+            at_check: list[float] = []  # the newest publication when each snapshot was judged
+
+            def carried_north(s: Any) -> bool:
+                at_check.append(published[-1] if published else math.nan)
+                return bool(s.position_ned_m[0] > 1.5)
+
             try:
                 with every_50_ms(publish):
-                    carried = wait_flight(v, lambda s: s.position_ned_m[0] > 1.5, 10.0, "carried 1.5 m north")
-                    now = published[-1]
+                    carried = wait_flight(v, carried_north, 10.0, "carried 1.5 m north")
+                    # read with the snapshot, not after it: on a loaded machine the publisher had gone
+                    # on 0.33 s before the test read its list (carried 1.50 m against 1.83 m)
+                    now = at_check[-1]
             finally:
                 feed.close()
                 publisher.close()
