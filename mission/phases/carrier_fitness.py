@@ -61,6 +61,16 @@ def observe_carrier(rec: RecoveryState, obs: Observation, r: RecoveryModel, t: f
     return rec if samples is rec.carrier_samples else replace(rec, carrier_samples=samples)
 
 
+def mean_speed_m_s(samples: CarrierSamples, velocity_ned_m_s: np.ndarray) -> float:
+    """[m/s] the carrier's horizontal speed as the mean of its velocity ``samples`` (the window
+    :func:`observe_carrier` keeps): a GNSS velocity's noise (0.1-0.3 m/s on a parked carrier)
+    averages out of the mean vector, where it adds to each sample's length. No samples: the
+    length of ``velocity_ned_m_s``'s horizontal part."""
+    if not samples:
+        return float(norm(velocity_ned_m_s[:2]))
+    return math.hypot(sum(s[1] for s in samples) / len(samples), sum(s[2] for s in samples) / len(samples))
+
+
 def kept_samples(samples: CarrierSamples, sampled_s: float, velocity_ned_m_s: np.ndarray,
                  window_s: float, yaw_rad: float | None = None) -> CarrierSamples:
     """``samples`` ((t [s] the sample's own time, v_n, v_e [m/s], its heading [rad] or NaN when

@@ -53,7 +53,7 @@ from mission.core.safety import filter_velocity
 from mission.flight_mode import FlightMode
 from mission.phases import deck, queue, stall
 from mission.phases.battery import next_leg_problem
-from mission.phases.carrier_fitness import carrier_unfit, carrier_unsteady, observe_carrier
+from mission.phases.carrier_fitness import carrier_unfit, carrier_unsteady, mean_speed_m_s, observe_carrier
 from mission.phases.flying import floor_over_the_ground, _track
 from mission.phases.phase import Phase, Request
 from mission.phases.types import (
@@ -68,6 +68,7 @@ from mission.phases.types import (
 )
 
 PARKED_SPEED_M_S = 0.1  # [m/s] the carrier counts as parked below this
+STILL_PARKED_SPEED_M_S = 0.2  # [m/s] HOME: a carrier counted parked stays so until its mean speed exceeds this
 REFERENCE_AT_GOAL_M = 0.2  # [m] a reference this close to its goal has reached it
 
 
@@ -540,7 +541,10 @@ def home(state, obs, m, events=()):
     dock = dock_point(obs, m)
     v_c = obs.carrier.velocity_ned_m_s
     on_it = contact(v.position_ned_m, v.velocity_ned_m_s, dock, v_c)
-    parked = float(norm(v_c[:2])) <= PARKED_SPEED_M_S and (on_it.within(r.geometry) or state.seated) \
+    # parked by the mean of the window's velocities, with hysteresis: on a parked carrier a GNSS
+    # velocity's noise reads 0.1 m/s and more on half the ticks, and each of those restarted the dwell
+    limit = PARKED_SPEED_M_S if rec.settled_since_s is None else STILL_PARKED_SPEED_M_S
+    parked = mean_speed_m_s(rec.carrier_samples, v_c) <= limit and (on_it.within(r.geometry) or state.seated) \
         and obs.carrier.untrusted is None
     since = (rec.settled_since_s if rec.settled_since_s is not None else t) if parked else None
     rec = replace(rec, settled_since_s=since)
