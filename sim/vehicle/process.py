@@ -10,8 +10,10 @@ from collections.abc import Sequence
 from typing import Any
 
 
-def spawn_process(args: Sequence[str], timeout_s: float = 15.0, **popen_kwargs: Any) -> tuple[subprocess.Popen[bytes], int]:
+def spawn_process(args: Sequence[str], timeout_s: float = 60.0, **popen_kwargs: Any) -> tuple[subprocess.Popen[bytes], int]:
     """Start ``python -m sim.vehicle.cli ARGS`` as its own process; return it and its UDP port.
+    ``timeout_s`` [s] of wall time for it to report its port: an event waited on, long only when it
+    fails (a start takes 0.6 s of CPU; at load 20 it once took over 15 s).
 
     The port comes from ``--port-file`` (added here). Stop the process with ``terminate()``
     (SIGTERM: clean exit 0) and ``wait()``.
