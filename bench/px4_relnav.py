@@ -43,7 +43,7 @@ import click
 import numpy as np
 
 from bench.px4_flights import ROVER_BATTERY, dockings
-from bench.px4_team import (OFFBOARD_PORT, STATUS_TOPIC, Progress, _at, _home_set, _on_monotonic,
+from bench.px4_team import (HOME_S, OFFBOARD_PORT, STATUS_TOPIC, Progress, _at, _home_set, _on_monotonic,
                             _read_truth, instance_of, start_px4s)
 from mission.config.schema import load_config
 from mission.flightdata.read import read_messages
@@ -55,7 +55,6 @@ ROOT = Path(__file__).resolve().parents[1]
 CONTACT_M = 0.2  # [m] the PX4 target of docs/relnav.md: true contact error
 ATTEMPTS = 2  # ... docked within this many approaches
 PAIR_DIR = "pair0"
-HOME_S = 10.0  # [s] of HOME after the last dock, then the bench stops the mission (module docstring)
 
 
 def _popen(ns: NetNamespace, directory: Path, name: str, module: str, args: list[str],
