@@ -294,9 +294,16 @@ def analyse(cfg: Config, directory: Path, offset_s: float) -> dict[str, Any]:
         own = passenger_config(cfg, p.name)
         slot = np.asarray(own.mission.dock_offset_ned_m, dtype=float)
         tlog = clock_ratio(log_dir / "flight.tlog") if (log_dir / "flight.tlog").exists() else None
+        leg_records = {leg.k: leg.record for leg in rec[0].legs()} if rec is not None else {}
         for d, leg in zip(dockings(s, law.b * law.c), s.get("legs") or [s]):
             contact = leg.get("contact") or {}
-            true_err = true_shifted = frames = None
+            true_err = true_shifted = frames = riding = None
+            lr = leg_records.get(d["leg"])
+            if lr is not None and rec is not None and len(truth[p.name]) > 1 and len(truth["rover"]) > 1:
+                t = lr.t[lr.phase == "RIDING"] + rec[1]  # the true riding offset before this leg's separation
+                if len(t):
+                    rel = _at(truth[p.name], t) - (_at(truth["rover"], t) + slot)
+                    riding = round(float(np.hypot(rel[:, 0], rel[:, 1]).max()), 3)
             if contact and rec is not None and len(truth[p.name]) > 1 and len(truth["rover"]) > 1:
                 tc = np.array([contact["time_s"] + rec[1]])
                 rel = _at(truth[p.name], tc)[0] - (_at(truth["rover"], tc)[0] + slot)
@@ -308,7 +315,7 @@ def analyse(cfg: Config, directory: Path, offset_s: float) -> dict[str, Any]:
                 frames = round(float(np.hypot(off[0], off[1])), 3)
             target_k = p.targets[int(d["leg"] or 0)] if d["leg"] is not None and int(d["leg"]) < len(p.targets) else None
             legs.append({"passenger": p.name, "target": target_k, **d, "true_error_m": true_err, "true_error_shifted_m": true_shifted,
-                         "estimates_apart_m": frames,
+                         "estimates_apart_m": frames, "true_riding_m": riding,
                          "stall_s": stall_s(log_dir), "mission_clock": None if tlog is None else round(tlog["ratio"], 3)})
     map_check = {}
     for name, (rec, shift) in recs.items():
@@ -447,7 +454,7 @@ def _fmt(v: Any) -> str:
 
 
 LEG_COLUMNS = ("passenger", "target", "outcome", "attempts", "error_m", "true_error_m", "true_error_shifted_m", "estimates_apart_m", "h_speed_m_s",
-               "p1", "p2", "p3", "riding_offset_m", "jump_m_s", "closest_m", "stall_s", "mission_clock")
+               "p1", "p2", "p3", "riding_offset_m", "true_riding_m", "jump_m_s", "closest_m", "stall_s", "mission_clock")
 
 
 def report(row: dict[str, Any]) -> list[str]:
