@@ -91,7 +91,7 @@ def test_relnavs_fields_are_px4_sitl_relnavs(team_relnav, relnav, section):
     if section == "world":  # the seed is the bench's (--seed)
         assert {**mine["carrier_gnss"], "seed": 0} == {**theirs["carrier_gnss"], "seed": 0}
     if section == "relnav":  # all but the seat's sigma: its quadrotors stand 0.9 m from their seats
-        assert {k for k in mine if mine[k] != theirs[k]} == {"seated_sigma_m"} and team_relnav.relnav.seated_sigma_m == 1.0
+        assert {k for k in mine if mine[k] != theirs[k]} == {"seated_sigma_m"} and team_relnav.relnav.seated_sigma_m == 0.5
     if section == "vision":  # all but where the marker is: under each slot's dock point (its own)
         assert {k for k in mine if mine[k] != theirs[k]} == {"marker_offset_ned_m"}
 
