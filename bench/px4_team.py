@@ -486,11 +486,14 @@ def leg_meets(leg: dict[str, Any], error: str = "error_m") -> bool:
     """The team's PX4 target for one leg: docked within 2 approaches at <= 0.2 m, with P1-P3;
     ``error`` the contact error judged: ``error_m`` (the mission's, on the estimates, as
     docs/recovery.md's PX4 target) or ``true`` (SIH's truth: both timings of the rover's within it,
-    the one without a timing check when the carrier publishes GNSS)."""
+    the one without a timing check when the carrier publishes GNSS). A leg that touched but fell
+    back after (its outcome ``fallback: ...``: it went around from DOCKED) has a contact, and is
+    not docked."""
     shifted = [] if leg["true_error_shifted_m"] is None else [leg["true_error_shifted_m"]]
     errors = [leg["true_error_m"], *shifted] if error == "true" else [leg[error]]
-    return bool(leg["docked"] and leg["attempts"] is not None and leg["attempts"] <= ATTEMPTS and None not in errors
-                and max(errors) <= CONTACT_M and leg["p1"] and leg["p2"] and leg["p3"])
+    stayed = not str(leg.get("outcome") or "").startswith("fallback")
+    return bool(leg["docked"] and stayed and leg["attempts"] is not None and leg["attempts"] <= ATTEMPTS
+                and None not in errors and max(errors) <= CONTACT_M and leg["p1"] and leg["p2"] and leg["p3"])
 
 
 @click.command()
