@@ -3,13 +3,13 @@ vehicle's attitude then, on ``marsupial/<pair>/passenger/camera`` (:func:`camera
 
 The passenger's marker feed (``mission.feeds = ["marker"]``, :mod:`mission.cli.marker`) reads
 them and runs the detector on the pixels (a passenger of a team of several reads its own camera,
-``marsupial/<pair>/passenger/<name>/camera``, as its status is on its own keys); what publishes them is a camera node beside the
-autopilot, or in simulation the mock vehicle rendering its downward camera from the true poses
-(``mock-vehicle --camera``). One sample a frame: a JSON header (``t`` the capture time [s] on the
-mission's clock, ``q`` the attitude body -> NED, w x y z, ``w`` and ``h`` the size [px]), a zero
-byte, then the ``h x w`` grey pixels, row by row, one byte each. A sample of size 0 x 0 is a time
-mark: no frame at that capture time (dropped, or nothing in view), so a reader in lockstep
-knows the stream has passed that time (:meth:`FrameSubscriber.wait_past`).
+``marsupial/<pair>/passenger/<name>/camera``, as its status is on its own keys); what publishes
+them is a camera node beside the autopilot, or in simulation the mock vehicle rendering its
+downward camera from the true poses (``mock-vehicle --camera``). One sample a frame: a JSON
+header (``t`` the capture time [s] on the mission's clock, ``q`` the attitude body -> NED, w x y
+z, ``w`` and ``h`` the size [px]), a zero byte, then the ``h x w`` grey pixels, row by row, one
+byte each. A sample of size 0 x 0 is a time mark: no frame at that capture time (dropped, or
+nothing in view), so a reader in lockstep knows the stream has passed that time (:meth:`FrameSubscriber.wait_past`).
 
 On a signed bus the camera node signs each sample with its robot's own key (the passenger's:
 :meth:`mission.bus.auth.BusAuth.own_verifier` checks it, the attachment as every signed sample's,
