@@ -18,11 +18,11 @@ as :mod:`bench.px4_team`), the true riding offset (the same difference while RID
 median and max, horizontal), and the carrier's GNSS error as published (its published position
 against the rover's truth at the publication's log time: median horizontal, over the flight).
 
-The bench stops the mission :data:`HOME_S` after it entered HOME (the last leg docked, riding the
-carrier while it parks) if it has not ended by then. HOME hands the vehicle to Hold once the
-carrier's mean speed over its velocity window is under 0.1 m/s with the vehicle within the contact
-conditions for the dwell; before that rule counted the window's mean (docs/relnav.md), the filter's
-noisy speed over the parked rover kept HOME going for 138 s (seed 10).
+The bench stops the mission :data:`bench.px4_team.HOME_S` after it entered HOME (the last leg
+docked, riding the carrier while it parks) if it has not ended by then. HOME hands the vehicle to
+Hold once the carrier's mean speed over its velocity window is under 0.1 m/s with the vehicle
+within the contact conditions for the dwell; before that rule counted the window's mean
+(docs/relnav.md), the filter's noisy speed over the parked rover kept HOME going for 138 s (seed 10).
 
 Usage (root, ``MARSUPIAL_PX4_SITL``; one flight a call, about 3-4 min of wall time):
 ``flock /work/wt/px4.lock nice -n 15 python -m bench.px4_relnav --out DIR [--config configs/px4_sitl_relnav.toml] [--seed N]``.
@@ -42,7 +42,7 @@ import click
 import numpy as np
 
 from bench.px4_flights import ROVER_BATTERY, dockings
-from bench.px4_team import (OFFBOARD_PORT, STATUS_TOPIC, Progress, _at, _home_set, _on_monotonic,
+from bench.px4_team import (HOME_S, OFFBOARD_PORT, STATUS_TOPIC, Progress, _at, _home_set, _on_monotonic,
                             _read_truth, instance_of, start_px4s)
 from mission.config.schema import load_config
 from mission.flightdata.read import read_messages
@@ -54,7 +54,6 @@ ROOT = Path(__file__).resolve().parents[1]
 CONTACT_M = 0.2  # [m] the PX4 target of docs/relnav.md: true contact error
 ATTEMPTS = 2  # ... docked within this many approaches
 PAIR_DIR = "pair0"
-HOME_S = 30.0  # [s] of HOME after the last dock, then the bench stops the mission (module docstring)
 
 
 def _popen(ns: NetNamespace, directory: Path, name: str, module: str, args: list[str],

@@ -42,9 +42,22 @@ recovery queue"): ``team.passenger_span_m`` while either is seated on its slot
 distance the pair has had since both left their slots if they have not yet been that far apart
 (bench/pairwise_mc.py's rule); a violation is a shortfall over 0.01 m.
 
+*With a camera* (``--camera``, ``configs/px4_sitl_team_relnav.toml``: relative navigation, each
+slot its own marker, the carrier's published state carrying the world's GNSS errors drawn by
+``--seed``): one camera node renders every passenger's downward camera from SIH's truth
+(``python -m sim.sitl.camera FILE --passenger NAME ...``, :mod:`sim.sitl.camera`) and records the
+truth of every vehicle (``truth-NAME.csv``) in place of the bench's GCS probe (the PX4s' GCS links
+share one port). The missions are stopped :data:`HOME_S` after the last passenger entered HOME
+(bench/px4_relnav.py says why: with relative navigation HOME on PX4 lasts minutes and measures
+nothing of the docking); until then the others ride their slots. The rover's timing check
+(``rover_gcs_delay_s``) is skipped: its published positions carry the world's GNSS errors (late
+fixes, metres of bias). The carrier's true closest approach to each target (3D, as its own
+``closest_each_target_m``, which is in its biased frame) comes from the rover's truth.
+
 Usage (root, ``MARSUPIAL_PX4_SITL``; about 2 min of wall time a flight, 90 s of it flying; one flight per call so
 that another user of the PX4 lock can fly between):
-``flock /work/wt/px4.lock nice -n 15 python -m bench.px4_team --out DIR [--config configs/px4_sitl_team.toml]``.
+``flock /work/wt/px4.lock nice -n 15 python -m bench.px4_team --out DIR [--config configs/px4_sitl_team.toml]``;
+with a camera: ``... python -m bench.px4_team --camera --seed N --out DIR`` (its config ``configs/px4_sitl_team_relnav.toml``).
 """
 from __future__ import annotations
 
@@ -72,10 +85,11 @@ from mission.record.table import read_record
 from sim.net import stop_process, wait_for
 from sim.sitl import ground_truth
 from sim.sitl.px4 import (GCS_LISTEN_PORT, QUAD_AIRFRAME, ROVER_AIRFRAME, ROVER_PARAMS, NetNamespace, Px4Sitl, build_dir,
-                          clock_ratio, clock_ratio_of, gcs_probe, unavailable_reason)
+                          clock_ratio, clock_ratio_of, gcs_probe, patched_config, unavailable_reason)
 
 ROOT = Path(__file__).resolve().parents[1]
 STATUS_TOPIC = "/pair0/carrier/status"  # the carrier's own log of each state it published (carrier.mcap)
+HOME_S = 30.0  # [s] of HOME after a relnav flight's last dock, then the bench stops the mission (bench/px4_relnav.py)
 TRUTH_HZ = 20.0  # [Hz] each PX4's truth and estimate on the GCS link (three PX4s: 120 messages a second)
 OFFBOARD_PORT = 14540  # + instance: where PX4 SITL sends its offboard link
 VIOLATION_M = 0.01  # [m] a shortfall over this is a violation (bench/pairwise_mc.py)
@@ -91,12 +105,13 @@ def instance_of(system_id: int) -> int:
     return system_id - 1
 
 
-def _popen(ns: NetNamespace, directory: Path, name: str, args: list[str], stack: ExitStack) -> subprocess.Popen[bytes]:
+def _popen(ns: NetNamespace, directory: Path, name: str, args: list[str], stack: ExitStack,
+           module: str = "mission.cli") -> subprocess.Popen[bytes]:
     out, err = open(directory / f"{name}.out", "ab"), open(directory / f"{name}.err", "ab")
     stack.callback(err.close)
     stack.callback(out.close)
     env = {**os.environ, "PYTHONUNBUFFERED": "1", "PYTHONPATH": f"{ROOT}{os.pathsep}{os.environ.get('PYTHONPATH', '')}"}
-    proc = subprocess.Popen(ns.command([sys.executable, "-m", "mission.cli", *args]), stdout=out, stderr=err, env=env,
+    proc = subprocess.Popen(ns.command([sys.executable, "-m", module, *args]), stdout=out, stderr=err, env=env,
                             cwd=ROOT, stdin=subprocess.DEVNULL)
     stack.callback(stop_process, proc)
     return proc
@@ -260,7 +275,8 @@ def analyse(cfg: Config, directory: Path, offset_s: float) -> dict[str, Any]:
     for name in [*names, "rover"]:
         est[name], truth[name] = _read_truth(directory / f"truth-{name}.csv")
     est["rover"][:, 2:5] += carrier_alignment_m(directory)  # the carrier's frame: its estimate as it published it
-    rover_delay = gcs_delay_s(directory, offset_s, est["rover"])
+    # the carrier's published positions carry the world's GNSS errors (a fix 0.2 s late, metres of bias): no timing check
+    rover_delay = None if cfg.world.carrier_gnss.enabled else gcs_delay_s(directory, offset_s, est["rover"])
     # the rover's truth moved onto the carrier's receive times (module docstring: which clock is late is not known)
     shifted = truth["rover"].copy()
     shifted[:, 0] -= rover_delay or 0.0
@@ -278,21 +294,28 @@ def analyse(cfg: Config, directory: Path, offset_s: float) -> dict[str, Any]:
         own = passenger_config(cfg, p.name)
         slot = np.asarray(own.mission.dock_offset_ned_m, dtype=float)
         tlog = clock_ratio(log_dir / "flight.tlog") if (log_dir / "flight.tlog").exists() else None
+        leg_records = {leg.k: leg.record for leg in rec[0].legs()} if rec is not None else {}
         for d, leg in zip(dockings(s, law.b * law.c), s.get("legs") or [s]):
             contact = leg.get("contact") or {}
-            true_err = true_shifted = frames = None
+            true_err = true_shifted = frames = riding = None
+            lr = leg_records.get(d["leg"])
+            if lr is not None and rec is not None and len(truth[p.name]) > 1 and len(truth["rover"]) > 1:
+                t = lr.t[lr.phase == "RIDING"] + rec[1]  # the true riding offset before this leg's separation
+                if len(t):
+                    rel = _at(truth[p.name], t) - (_at(truth["rover"], t) + slot)
+                    riding = round(float(np.hypot(rel[:, 0], rel[:, 1]).max()), 3)
             if contact and rec is not None and len(truth[p.name]) > 1 and len(truth["rover"]) > 1:
                 tc = np.array([contact["time_s"] + rec[1]])
                 rel = _at(truth[p.name], tc)[0] - (_at(truth["rover"], tc)[0] + slot)
                 true_err = round(float(np.hypot(rel[0], rel[1])), 3)
                 rel = _at(truth[p.name], tc)[0] - (_at(shifted, tc)[0] + slot)
-                true_shifted = round(float(np.hypot(rel[0], rel[1])), 3)
+                true_shifted = None if rover_delay is None else round(float(np.hypot(rel[0], rel[1])), 3)
                 # what the two estimates' errors alone put between estimate and truth at contact
                 off = (_at(est[p.name], tc)[0] - _at(truth[p.name], tc)[0]) - (_at(est["rover"], tc)[0] - _at(truth["rover"], tc)[0])
                 frames = round(float(np.hypot(off[0], off[1])), 3)
             target_k = p.targets[int(d["leg"] or 0)] if d["leg"] is not None and int(d["leg"]) < len(p.targets) else None
             legs.append({"passenger": p.name, "target": target_k, **d, "true_error_m": true_err, "true_error_shifted_m": true_shifted,
-                         "estimates_apart_m": frames,
+                         "estimates_apart_m": frames, "true_riding_m": riding,
                          "stall_s": stall_s(log_dir), "mission_clock": None if tlog is None else round(tlog["ratio"], 3)})
     map_check = {}
     for name, (rec, shift) in recs.items():
@@ -306,15 +329,25 @@ def analyse(cfg: Config, directory: Path, offset_s: float) -> dict[str, Any]:
         dist = np.linalg.norm(truth[names[0]][:, 2:5] - _at(truth[names[1]], t), axis=1)
         phases = (_phase_at(*recs[names[0]], t), _phase_at(*recs[names[1]], t))
         pair = pairwise(t, dist, phases, cfg.safety.passenger_separation_m, cfg.team.passenger_span_m)
-    return {"legs": legs, "pair": pair, "separation_m": cfg.safety.passenger_separation_m,
+    rover = truth["rover"]  # the carrier's true closest approach to each target (its own figure: in its frame)
+    true_closest = [round(float(np.min(np.linalg.norm(rover[:, 2:5] - np.asarray(t, float), axis=1))), 3)
+                    if len(rover) else None for t in cfg.scenario.legs()]
+    return {"legs": legs, "pair": pair, "carrier_true_closest_each_target_m": true_closest, "separation_m": cfg.safety.passenger_separation_m,
             "span_m": cfg.team.passenger_span_m, "carrier_closest_each_target_m": carrier.get("closest_each_target_m"),
             "carrier_closest_pair_heard": carrier.get("closest_pair"), "hand_overs": carrier.get("hand_overs"),
             "clocks": clocks, "map_check_m": map_check, "rover_gcs_delay_s": rover_delay}
 
 
-def fly_team(config: Path, directory: Path, speed_factor: float = 1.08, timeout_s: float | None = None) -> dict[str, Any]:
+def fly_team(config: Path, directory: Path, speed_factor: float = 1.08, timeout_s: float | None = None,
+             camera: bool = False, seed: int = 0) -> dict[str, Any]:
     """One flight of ``config``'s team on three fresh PX4s; its figures (:func:`analyse`) with the
-    exit codes, the wall time and the load."""
+    exit codes, the wall time and the load. ``camera``: with the camera node (module docstring),
+    the flown configuration ``config.toml`` in ``directory`` with ``world.carrier_gnss.seed`` ``seed``."""
+    directory.mkdir(parents=True, exist_ok=True)
+    if camera:
+        flown = directory / "config.toml"
+        flown.write_text(patched_config(config.read_text(), {"world.carrier_gnss.seed": str(seed)}))
+        config = flown
     cfg = load_config(config)
     build = build_dir()
     assert build is not None
@@ -335,23 +368,32 @@ def fly_team(config: Path, directory: Path, speed_factor: float = 1.08, timeout_
         vehicles = [(p.name, instance_of(p.system_id), QUAD_AIRFRAME, ROVER_BATTERY) for p in cfg.team.passengers]
         vehicles.append(("rover", rover_instance, ROVER_AIRFRAME, ROVER_PARAMS))
         ns = start_px4s(stack, build, vehicles, speed_factor, directory)
-        gcs = gcs_probe(ns, history_len=200_000)
-        stack.callback(gcs.close)
-        from sim.testing.probe import connect
+        gcs = None
+        if not camera:  # with a camera its node holds the GCS port and records the truth
+            gcs = gcs_probe(ns, history_len=200_000)
+            stack.callback(gcs.close)
+            from sim.testing.probe import connect
 
-        connect(gcs, timeout_s=30.0, heartbeat_period_s=0.5)
+            connect(gcs, timeout_s=30.0, heartbeat_period_s=0.5)
         for _, instance, _, _ in vehicles:
             path = directory / f"px4-{instance}.out"
             wait_for(lambda: _home_set(path), 90.0, f"'home set' in {path.name}")
         for name, instance, _, _ in vehicles:
-            acks = ground_truth.ask(gcs, TRUTH_HZ, system_id=instance + 1, gcs_port=GCS_LISTEN_PORT + instance)
-            click.echo(f"  {name}: truth asked, acks {acks}")
+            if gcs is not None:
+                acks = ground_truth.ask(gcs, TRUTH_HZ, system_id=instance + 1, gcs_port=GCS_LISTEN_PORT + instance)
+                click.echo(f"  {name}: truth asked, acks {acks}")
         armable_s = time.monotonic() - t0
         offset_s = time.time() - time.monotonic()
         endpoint = "tcp/127.0.0.1:7450"
         carrier = _popen(ns, directory, "carrier", ["-v", "carrier", str(config), "--zenoh-listen", endpoint, "--summary",
                                                      str(directory / "carrier.json"), "--mcap", str(directory / "carrier.mcap")],
                          stack)
+        node = None
+        if camera:
+            node = _popen(ns, directory, "camera", [
+                str(config), *[a for p in cfg.team.passengers for a in ("--passenger", p.name)], "--carrier-sysid",
+                str(rover_sysid), "--seed", str(seed), "--truth-dir", str(directory),
+                "--zenoh-connect", endpoint], stack, module="sim.sitl.camera")
         missions = {}
         for p in cfg.team.passengers:
             missions[p.name] = _popen(ns, directory, p.name, [
@@ -360,8 +402,17 @@ def fly_team(config: Path, directory: Path, speed_factor: float = 1.08, timeout_
                 "--log-dir", str(directory / p.name)], stack)
         progress = Progress(directory, list(missions), t0)
         deadline = time.monotonic() + timeout_s
+        home_since: dict[str, float] = {}
         while any(m.poll() is None for m in missions.values()) and time.monotonic() < deadline:
             progress.poll()
+            for name in missions if camera else ():
+                if name not in home_since and "] phase HOME" in (directory / f"{name}.out").read_text(errors="replace"):
+                    home_since[name] = time.monotonic()
+            if len(home_since) == len(missions) and time.monotonic() - max(home_since.values()) > HOME_S:
+                click.echo(f"  every passenger {HOME_S:g} s in HOME after its last dock: the missions are stopped (module docstring)")
+                for m in missions.values():
+                    stop_process(m, 30.0)
+                break
             time.sleep(1.0)
         progress.poll()
         for name, m in missions.items():
@@ -371,9 +422,16 @@ def fly_team(config: Path, directory: Path, speed_factor: float = 1.08, timeout_
             codes[name] = m.returncode
         stop_process(carrier, 10.0)  # writes carrier.json
         codes["carrier"] = carrier.returncode
-        record_truth(cfg, directory, gcs, rover_sysid)
+        if node is not None:
+            stop_process(node, 20.0)  # writes the truth and camera.json
+            codes["camera"] = node.returncode
+        if gcs is not None:
+            record_truth(cfg, directory, gcs, rover_sysid)
     (directory / "clock_offset.json").write_text(json.dumps({"unix_minus_monotonic_s": offset_s}) + "\n")
     figures = analyse(cfg, directory, offset_s)
+    if camera:
+        figures["camera"] = json.loads((directory / "camera.json").read_text()) if (directory / "camera.json").exists() else {}
+        figures["seed"] = seed
     return {**figures, "exit_codes": codes, "armable_after_s": round(armable_s, 1),
             "wall_s": round(time.monotonic() - t0, 1), "load_before": [round(x, 2) for x in load],
             "load_after": [round(x, 2) for x in os.getloadavg()], "dir": str(directory)}
@@ -396,7 +454,7 @@ def _fmt(v: Any) -> str:
 
 
 LEG_COLUMNS = ("passenger", "target", "outcome", "attempts", "error_m", "true_error_m", "true_error_shifted_m", "estimates_apart_m", "h_speed_m_s",
-               "p1", "p2", "p3", "riding_offset_m", "jump_m_s", "closest_m", "stall_s", "mission_clock")
+               "p1", "p2", "p3", "riding_offset_m", "true_riding_m", "jump_m_s", "closest_m", "stall_s", "mission_clock")
 
 
 def report(row: dict[str, Any]) -> list[str]:
@@ -411,7 +469,8 @@ def report(row: dict[str, Any]) -> list[str]:
                  f"{pair.get('shortfall_phases')} (span {row['span_m']:g} m beside a seated one): "
                  f"{'VIOLATION' if pair.get('violation') else 'no violation' if pair else 'not measured'}")
     heard = row.get("carrier_closest_pair_heard") or {}
-    lines.append(f"  carrier: closest approach to each target {row.get('carrier_closest_each_target_m')} m; closest pair heard "
+    lines.append(f"  carrier: closest approach to each target {row.get('carrier_closest_each_target_m')} m as it knew itself, "
+                 f"{row.get('carrier_true_closest_each_target_m')} m in truth; closest pair heard "
                  f"{heard.get('distance_m')} m {heard.get('phases')}; hand-overs {row.get('hand_overs')}")
     lines.append(f"  PX4 clocks {row['clocks']}; record-to-GCS map check {row['map_check_m']} m; the rover's GCS link "
                  f"{row.get('rover_gcs_delay_s')} s later than the carrier's receipt; exit codes "
@@ -426,23 +485,34 @@ ATTEMPTS = 2  # ... and for the approaches
 def leg_meets(leg: dict[str, Any], error: str = "error_m") -> bool:
     """The team's PX4 target for one leg: docked within 2 approaches at <= 0.2 m, with P1-P3;
     ``error`` the contact error judged: ``error_m`` (the mission's, on the estimates, as
-    docs/recovery.md's PX4 target) or ``true`` (SIH's truth: both timings of the rover's within it)."""
-    errors = [leg["true_error_m"], leg["true_error_shifted_m"]] if error == "true" else [leg[error]]
-    return bool(leg["docked"] and leg["attempts"] is not None and leg["attempts"] <= ATTEMPTS and None not in errors
-                and max(errors) <= CONTACT_M and leg["p1"] and leg["p2"] and leg["p3"])
+    docs/recovery.md's PX4 target) or ``true`` (SIH's truth: both timings of the rover's within it,
+    the one without a timing check when the carrier publishes GNSS). A leg that touched but fell
+    back after (its outcome ``fallback: ...``: it went around from DOCKED) has a contact, and is
+    not docked."""
+    shifted = [] if leg["true_error_shifted_m"] is None else [leg["true_error_shifted_m"]]
+    errors = [leg["true_error_m"], *shifted] if error == "true" else [leg[error]]
+    stayed = not str(leg.get("outcome") or "").startswith("fallback")
+    return bool(leg["docked"] and stayed and leg["attempts"] is not None and leg["attempts"] <= ATTEMPTS
+                and None not in errors and max(errors) <= CONTACT_M and leg["p1"] and leg["p2"] and leg["p3"])
 
 
 @click.command()
-@click.option("--config", type=click.Path(dir_okay=False, exists=True), default=str(ROOT / "configs" / "px4_sitl_team.toml"),
-              show_default=True)
+@click.option("--config", type=click.Path(dir_okay=False, exists=True), default=None,
+              help="[default: configs/px4_sitl_team.toml; with --camera configs/px4_sitl_team_relnav.toml]")
 @click.option("--out", type=click.Path(file_okay=False), required=True, help="The flight's logs and its row (row.json).")
 @click.option("--speed-factor", type=float, default=1.08, show_default=True, help="PX4_SIM_SPEED_FACTOR of every PX4")
 @click.option("--analyse", "again", is_flag=True, help="Do not fly: analyse the flight already in --out again (its "
               "row.json's run figures kept).")
-def main(config: str, out: str, speed_factor: float, again: bool) -> None:
+@click.option("--camera", is_flag=True, help="Relative navigation: a camera per passenger (module docstring); --config "
+              "defaults to configs/px4_sitl_team_relnav.toml.")
+@click.option("--seed", type=int, default=0, show_default=True, help="With --camera: world.carrier_gnss.seed and the cameras' noise.")
+def main(config: str | None, out: str, speed_factor: float, again: bool, camera: bool, seed: int) -> None:
     """Fly CONFIG's team once on real PX4 SITL and print its legs."""
-    cfg_path = Path(config).resolve()
     directory = Path(out)
+    default = "px4_sitl_team_relnav.toml" if camera else "px4_sitl_team.toml"
+    cfg_path = Path(config).resolve() if config else ROOT / "configs" / default
+    if again and (directory / "config.toml").exists():
+        cfg_path = (directory / "config.toml").resolve()  # a camera flight's, as flown
     if again:
         row = json.loads((directory / "row.json").read_text())
         offset_path = directory / "clock_offset.json"
@@ -453,8 +523,8 @@ def main(config: str, out: str, speed_factor: float, again: bool) -> None:
         why = unavailable_reason()
         if why:
             raise click.ClickException(why)
-        click.echo(f"PX4 build {build_dir()}, config {config}, PX4_SIM_SPEED_FACTOR {speed_factor}, load {os.getloadavg()}")
-        row = fly_team(cfg_path, directory, speed_factor)
+        click.echo(f"PX4 build {build_dir()}, config {cfg_path}, PX4_SIM_SPEED_FACTOR {speed_factor}, load {os.getloadavg()}")
+        row = fly_team(cfg_path, directory, speed_factor, camera=camera, seed=seed)
     (directory / "row.json").write_text(json.dumps(row, indent=1, default=str) + "\n")
     for line in report(row):
         click.echo(line)

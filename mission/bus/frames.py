@@ -2,13 +2,14 @@
 vehicle's attitude then, on ``marsupial/<pair>/passenger/camera`` (:func:`camera_key`).
 
 The passenger's marker feed (``mission.feeds = ["marker"]``, :mod:`mission.cli.marker`) reads
-them and runs the detector on the pixels; what publishes them is a camera node beside the
-autopilot, or in simulation the mock vehicle rendering its downward camera from the true poses
-(``mock-vehicle --camera``). One sample a frame: a JSON header (``t`` the capture time [s] on the
-mission's clock, ``q`` the attitude body -> NED, w x y z, ``w`` and ``h`` the size [px]), a zero
-byte, then the ``h x w`` grey pixels, row by row, one byte each. A sample of size 0 x 0 is a time
-mark: no frame at that capture time (dropped, or nothing in view), so a reader in lockstep
-knows the stream has passed that time (:meth:`FrameSubscriber.wait_past`).
+them and runs the detector on the pixels (a passenger of a team of several reads its own camera,
+``marsupial/<pair>/passenger/<name>/camera``, as its status is on its own keys); what publishes
+them is a camera node beside the autopilot, or in simulation the mock vehicle rendering its
+downward camera from the true poses (``mock-vehicle --camera``). One sample a frame: a JSON
+header (``t`` the capture time [s] on the mission's clock, ``q`` the attitude body -> NED, w x y
+z, ``w`` and ``h`` the size [px]), a zero byte, then the ``h x w`` grey pixels, row by row, one
+byte each. A sample of size 0 x 0 is a time mark: no frame at that capture time (dropped, or
+nothing in view), so a reader in lockstep knows the stream has passed that time (:meth:`FrameSubscriber.wait_past`).
 
 On a signed bus the camera node signs each sample with its robot's own key (the passenger's:
 :meth:`mission.bus.auth.BusAuth.own_verifier` checks it, the attachment as every signed sample's,
@@ -38,10 +39,11 @@ log = logging.getLogger(__name__)
 MAX_FRAME_BYTES = 4096 * 4096 + 1024  # a frame larger than the schema's largest image is refused
 
 
-def camera_key(pair: str) -> str:
-    """The camera frames' key of pair ``pair``."""
-    root = keys(pair).carrier_state.rsplit("/", 2)[0]
-    return f"{root}/passenger/camera"
+def camera_key(pair: str, passenger: str | None = None) -> str:
+    """The camera frames' key of pair ``pair``; ``passenger``: the camera of that passenger of a
+    team of several (``team.passengers[].name``), beside its own status key."""
+    own = keys(pair, passenger).passenger_state.rsplit("/", 1)[0]
+    return f"{own}/camera"
 
 
 def encode_frame(frame: Frame, attitude_q_wxyz: np.ndarray) -> bytes:
@@ -72,11 +74,13 @@ def decode_frame(payload: bytes) -> tuple[Frame, np.ndarray]:
 
 
 class FrameSubscriber:
-    """The newest frames of pair ``pair``'s camera, at most ``depth`` kept (older ones dropped,
-    counted); :meth:`take` returns and forgets them, oldest first."""
+    """The newest frames of pair ``pair``'s camera (``passenger``: of that team passenger's,
+    :func:`camera_key`), at most ``depth`` kept (older ones dropped, counted); :meth:`take` returns
+    and forgets them, oldest first."""
 
-    def __init__(self, session: zenoh.Session, pair: str, depth: int = 8, verifier: SampleVerifier | None = None) -> None:
-        self.key = camera_key(pair)
+    def __init__(self, session: zenoh.Session, pair: str, depth: int = 8, verifier: SampleVerifier | None = None,
+                 passenger: str | None = None) -> None:
+        self.key = camera_key(pair, passenger)
         self._verifier = verifier
         self.refused: dict[str, int] = {}  # samples that did not verify, by reason (unsigned, signature, replay)
         self._lock = threading.Lock()

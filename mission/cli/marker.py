@@ -42,12 +42,13 @@ LOCKSTEP_WAIT_WALL_S = 1.0  # [s, wall] in lockstep, the longest a tick waits fo
 class MarkerFeed:
     """A :class:`~mission.interfaces.MeasurementSource` of the marker on the camera's frames."""
 
-    def __init__(self, cfg: Config, session: Any, lockstep: bool = False) -> None:
+    def __init__(self, cfg: Config, session: Any, lockstep: bool = False, passenger: str | None = None) -> None:
         self.detector = vision_detector(cfg)
         self.latency_s = cfg.vision.latency_s
         auth = bus_auth(cfg.zenoh)
         self.signed = auth is not None
-        self.frames = FrameSubscriber(session, cfg.zenoh.pair, verifier=None if auth is None else auth.own_verifier())
+        self.frames = FrameSubscriber(session, cfg.zenoh.pair, verifier=None if auth is None else auth.own_verifier(),
+                                      passenger=passenger)
         self.pending: list[RelativePosition] = []
         self.detected = self.missed = self.late_ticks = 0
         self.lockstep = lockstep
@@ -104,8 +105,9 @@ class MarkerFeed:
         self.pending = []
 
 
-def open_feed(cfg: Config, session: Any, clock: Any) -> MarkerFeed:
-    """The opener ``marsupial run`` calls for the feed name ``marker`` (waiting in lockstep)."""
+def open_feed(cfg: Config, session: Any, clock: Any, passenger: str | None = None) -> MarkerFeed:
+    """The opener ``marsupial run`` calls for the feed name ``marker`` (waiting in lockstep);
+    ``passenger``: a team passenger's name, whose own camera it reads."""
     from mission.time.clock import LockstepClock
 
-    return MarkerFeed(cfg, session, lockstep=isinstance(clock, LockstepClock))
+    return MarkerFeed(cfg, session, lockstep=isinstance(clock, LockstepClock), passenger=passenger)

@@ -71,7 +71,8 @@ FEEDS_GROUP = "marsupial.feeds"  # entry points: a measurement feed's name -> it
 def feed_openers(cfg: Config) -> dict[str, str]:
     """The opener (``"module:attribute"``) of each measurement feed ``mission.feeds`` names,
     registered in ``pyproject.toml``'s entry-point group ``marsupial.feeds``. An opener is called
-    as ``open(cfg, session, clock)`` and returns a :class:`~mission.interfaces.MeasurementSource`.
+    as ``open(cfg, session, clock)`` (a passenger of a team of several: ``passenger=NAME`` too, its
+    own keys) and returns a :class:`~mission.interfaces.MeasurementSource`.
     :class:`ConfigError` for a name nothing registered."""
     known = entry_points(FEEDS_GROUP)
     unknown = [name for name in cfg.mission.feeds if name not in known]
@@ -134,7 +135,9 @@ def mission_io(cfg: Config, clock: Clock, tlog_path: str | Path | None = None, *
             stack.callback(neighbours.close)
         sources: list[MeasurementSource] = []
         for target in openers.values():
-            source = load(target)(cfg, session, clock)  # type: ignore[operator]
+            # a team passenger's feeds read its own keys (its camera beside its status)
+            own = {} if team is None else {"passenger": team.name}
+            source = load(target)(cfg, session, clock, **own)  # type: ignore[operator]
             stack.callback(source.close)
             sources.append(source)
         link = VehicleLink(cfg.mavlink.url, clock, target_system=cfg.mavlink.target_system,

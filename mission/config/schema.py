@@ -36,7 +36,8 @@ from mission.config.recovery import RecoverySection, check_recovery
 from mission.config.relnav import RelnavSection, WorldSection
 from mission.config.safety import SafetySection
 from mission.config.scenario import ObstacleSection, ScenarioSection
-from mission.config.team import TeamSection, as_team_error, check_queue, check_team, dock_points, passenger_data
+from mission.config.team import (TeamSection, as_team_error, check_queue, check_slot_markers, check_team, dock_points,
+                                 passenger_data)
 from mission.config.urls import DEFAULT_URL
 from mission.config.vision import VisionSection, check_vision
 from mission.config.fields import (
@@ -412,9 +413,11 @@ class Config(Section):
         team = self.team if self.team.given else None  # one passenger per slot and target
         if team is not None:
             check_team(team, n_targets=len(s.legs()), target_field=s.target_field(), contact_radius_m=self.recovery.contact_radius_m,
-                       stated={f"{sec}.{key}": getattr(getattr(self, sec), key) for sec in ("mission", "mavlink")
+                       stated={f"{sec}.{key}": getattr(getattr(self, sec), key) for sec in ("mission", "mavlink", "vision")
                                for key in getattr(self, sec).model_fields_set},
                        carrier_system_id=self.carrier.mavlink.target_system if self.carrier.backend == "mavlink" else None)
+            if "marker" in m.feeds:  # each passenger's detector must see its own slot's marker only
+                check_slot_markers(team, self.vision.tag_id, self.vision.small_tag_id, self.vision.layout == "bundle")
         docks, leg_docks = dock_points(team, m.dock_offset_ned_m, len(s.legs()))  # (field, offset), each leg's offset
         if not self.law.departure_margin_m >= 1e-6:
             raise ConfigError("law.departure_margin_m", self.law.departure_margin_m,

@@ -21,13 +21,17 @@ from pydantic import Field
 
 from mission.config.fields import Section
 from mission.config.scenario import MAX_TARGETS
+from mission.config.vision import APRILTAG_36H11_TAGS
 from mission.errors import ConfigError
 
 MAX_TEAM = 16  # slots, passengers
 NAME = r"^[A-Za-z0-9_\-]+$"
 #: The single-passenger fields a team declares itself (the slot's offset, the passenger's system id).
 SINGLE_FIELDS = {"mission.dock_offset_ned_m": "team.slots[].offset_ned_m",
-                 "mavlink.target_system": "team.passengers[].system_id"}
+                 "mavlink.target_system": "team.passengers[].system_id",
+                 "vision.marker_offset_ned_m": "team.slots[].marker_offset_ned_m"}
+#: A slot's own marker fields and the passenger's ``[vision]`` field each sets (unset: vision's).
+SLOT_MARKER_FIELDS = ("tag_id", "small_tag_id", "marker_offset_ned_m")
 
 
 class SlotSection(Section):
@@ -37,6 +41,16 @@ class SlotSection(Section):
     offset_ned_m: list[Annotated[float, Field(ge=-100, le=100)]] = Field(
         description=("[m] NED offset of the slot's dock point from the carrier's reported position (its passenger "
                      "rides and docks there, as mission.dock_offset_ned_m without a team)"))
+    tag_id: int | None = Field(None, ge=0, lt=APRILTAG_36H11_TAGS,
+        description=("[-] the AprilTag 36h11 id of the slot's marker's big (or only) tag, what its passenger's "
+                     "detector looks for (its vision.tag_id); unset: vision.tag_id. Slots of a team flying the marker "
+                     "feed need ids of their own, or a passenger would take another slot's marker for its own"))
+    small_tag_id: int | None = Field(None, ge=0, lt=APRILTAG_36H11_TAGS,
+        description="[-] ... and of its bundle's small tag (its vision.small_tag_id); unset: vision.small_tag_id")
+    marker_offset_ned_m: list[Annotated[float, Field(ge=-100, le=100)]] | None = Field(None,
+        description=("[m] NED offset of the slot's marker's centre from the carrier's reported position (its "
+                     "passenger's vision.marker_offset_ned_m); unset: at the slot's dock point. A hover ride rides over "
+                     "the deck: set the deck under the dock point, e.g. [0, y, 0] for a dock point [0, y, -1.5]"))
 
 
 class TeamPassengerSection(Section):
@@ -236,6 +250,8 @@ def _check_slots(team: TeamSection, contact_radius_m: float) -> None:
         field = f"team.slots[{k}]"
         if len(slot.offset_ned_m) != 3:
             raise ConfigError(f"{field}.offset_ned_m", slot.offset_ned_m, "must have 3 components")
+        if slot.marker_offset_ned_m is not None and len(slot.marker_offset_ned_m) != 3:
+            raise ConfigError(f"{field}.marker_offset_ned_m", slot.marker_offset_ned_m, "must have 3 components")
         for j, other in enumerate(team.slots[:k]):
             if other.name == slot.name:
                 raise ConfigError(f"{field}.name", slot.name, f"also team.slots[{j}]'s name")
@@ -283,9 +299,39 @@ def passenger_data(data: dict[str, Any], team: TeamSection, targets: list[list[f
     scenario.pop("targets", None)
     own = [list(targets[t]) for t in p.targets]
     scenario.update({"target": own[0]} if len(own) == 1 else {"targets": own})
-    out.setdefault("mission", {})["dock_offset_ned_m"] = list(team.slots[team.slot_index(p.slot)].offset_ned_m)
+    slot = team.slots[team.slot_index(p.slot)]
+    out.setdefault("mission", {})["dock_offset_ned_m"] = list(slot.offset_ned_m)
     out.setdefault("mavlink", {})["target_system"] = p.system_id
+    marker = {name: getattr(slot, name) for name in SLOT_MARKER_FIELDS if getattr(slot, name) is not None}
+    if marker:  # the slot's own marker: what its passenger's detector looks for, and where
+        out["vision"] = {**out.get("vision", {}), **marker}
     return out
+
+
+def slot_tag_ids(team: TeamSection, tag_id: int, small_tag_id: int, bundle: bool) -> list[tuple[int, ...]]:
+    """The tag ids of each slot's marker, in :attr:`TeamSection.slots`' order: its own
+    (``team.slots[k].tag_id``, ``small_tag_id``) or, unset, ``[vision]``'s ``tag_id`` and
+    ``small_tag_id``; the small one only in a ``bundle``."""
+    return [(slot.tag_id if slot.tag_id is not None else tag_id,
+             *((slot.small_tag_id if slot.small_tag_id is not None else small_tag_id,) if bundle else ()))
+            for slot in team.slots]
+
+
+def check_slot_markers(team: TeamSection, tag_id: int, small_tag_id: int, bundle: bool) -> None:
+    """Refuse two slots whose markers share a tag id (raises :class:`ConfigError` naming the later
+    slot's ``tag_id``, or ``small_tag_id`` when only that one is shared): each passenger's detector
+    keeps only its own slot's ids (:func:`slot_tag_ids`), so a shared one would let it take another
+    slot's marker for its own. For a team flying the marker feed (``mission.feeds``)."""
+    ids = slot_tag_ids(team, tag_id, small_tag_id, bundle)
+    for k, own in enumerate(ids):
+        for j, other in enumerate(ids[:k]):
+            shared = sorted(set(own) & set(other))
+            if shared:
+                name = "tag_id" if own[0] in shared else "small_tag_id"
+                raise ConfigError(f"team.slots[{k}].{name}", getattr(team.slots[k], name),
+                                  f"tag id {shared[0]} is also team.slots[{j}]'s ({team.slots[j].name!r}) marker's: "
+                                  "each slot's marker needs ids of its own (team.slots[].tag_id, small_tag_id; unset: "
+                                  "vision.tag_id, small_tag_id), or its passenger takes the other slot's for its own")
 
 
 def as_team_error(error: ConfigError, team: TeamSection, i: int, target_field: str) -> ConfigError:
@@ -294,8 +340,11 @@ def as_team_error(error: ConfigError, team: TeamSection, i: int, target_field: s
     field as it is, the passenger named in the rule."""
     p = team.passengers[i]
     field = error.field
-    named = {"mission.dock_offset_ned_m": f"team.slots[{team.slot_index(p.slot)}].offset_ned_m",
+    k = team.slot_index(p.slot)
+    named = {"mission.dock_offset_ned_m": f"team.slots[{k}].offset_ned_m",
              "mavlink.target_system": f"team.passengers[{i}].system_id"}
+    named |= {f"vision.{name}": f"team.slots[{k}].{name}" for name in SLOT_MARKER_FIELDS
+              if getattr(team.slots[k], name) is not None}
     for own, index in [("scenario.target", p.targets[0])] + [(f"scenario.targets[{j}]", t) for j, t in enumerate(p.targets)]:
         named[own] = f"{target_field}[{index}]" if target_field == "scenario.targets" else target_field
     for old, new in named.items():

@@ -69,15 +69,22 @@ class CameraPublisher:
     """Renders and publishes a frame when one is due (:meth:`sample`, in the vehicle's physics pass)."""
 
     def __init__(self, cfg: Config, session: zenoh.Session, pair: str, seed: int, lockstep: bool,
-                 signer: SampleSigner | None = None) -> None:
+                 signer: SampleSigner | None = None, passenger: str | None = None,
+                 others: tuple[Config, ...] = ()) -> None:
+        """``cfg``: the camera's passenger's configuration (its marker: the one it looks for);
+        ``passenger``: a team passenger's name, its camera on its own key (:func:`camera_key`);
+        ``others``: the configurations of the deck's other markers' passengers (a team's other
+        slots'), whose markers the frames show as well."""
         detector = vision_detector(cfg)
-        self.camera = SimulatedCamera(detector.camera, detector.layout,
-                                      Sensor(sensor_model(cfg.vision), seed=seed + SEED_OFFSET))
-        self.period_s = 1.0 / cfg.vision.rate_hz
         self.marker_offset_ned_m = np.asarray(marker_offset_ned_m(cfg.vision, cfg.mission.dock_offset_ned_m), dtype=float)
+        neighbours = tuple((vision_detector(c).layout, np.asarray(marker_offset_ned_m(c.vision, c.mission.dock_offset_ned_m),
+                                                                  dtype=float) - self.marker_offset_ned_m) for c in others)
+        self.camera = SimulatedCamera(detector.camera, detector.layout,
+                                      Sensor(sensor_model(cfg.vision), seed=seed + SEED_OFFSET), neighbours)
+        self.period_s = 1.0 / cfg.vision.rate_hz
         self.next_s = 0.0  # the next slot's time [s]: k / rate_hz
         self.captured = self.sent = 0
-        key = camera_key(pair)
+        key = camera_key(pair, passenger)
         self.key, self._signer = key, signer
         # In real time DROP: the put runs in the vehicle's physics pass, which must not wait on the
         # network (a dropped frame is a camera dropout, counted by the feed as a gap). In lockstep

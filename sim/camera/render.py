@@ -4,7 +4,8 @@ effects (:mod:`sim.camera.sensor`). A pinhole without distortion: the simulated 
 none."""
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
 from functools import lru_cache
 from typing import Any
 
@@ -52,13 +53,25 @@ def tag_image(tag_id: int, bit_px: int) -> np.ndarray:
     return cv2.copyMakeBorder(marker, bit_px, bit_px, bit_px, bit_px, cv2.BORDER_CONSTANT, value=255)
 
 
-def render(camera: CameraModel, layout: MarkerLayout, marker: MarkerPose, background: int = BACKGROUND) -> np.ndarray:
+def render(camera: CameraModel, layout: MarkerLayout, marker: MarkerPose, background: int = BACKGROUND,
+           others: Sequence[tuple[MarkerLayout, MarkerPose]] = ()) -> np.ndarray:
     """The ideal grey frame (height, width) uint8 of ``layout`` at ``marker`` (the deck in the
-    camera frame): no noise, no blur."""
+    camera frame), and of each of ``others`` (another marker on the deck, another slot's: its
+    layout and pose) drawn first: no noise, no blur."""
     image = np.full((camera.height, camera.width), background, np.uint8)
-    for tag in sorted(layout.tags, key=lambda t: -t.size_m):  # the small tags last, on top
-        _draw(image, camera, tag, marker)
+    for other, pose in [*others, (layout, marker)]:
+        for tag in sorted(other.tags, key=lambda t: -t.size_m):  # the small tags last, on top
+            _draw(image, camera, tag, pose)
     return image
+
+
+def other_poses(camera: CameraModel, poses: Poses,
+                others: Sequence[tuple[MarkerLayout, np.ndarray]]) -> list[tuple[MarkerLayout, MarkerPose]]:
+    """Each of ``others`` (a marker's layout and its centre's NED offset [m] from the marker of
+    ``poses``) in the camera frame, at the same deck yaw: what :func:`render` draws beside it."""
+    return [(layout, true_marker_pose(camera, replace(poses, deck_ned_m=np.asarray(poses.deck_ned_m, float)
+                                                      + np.asarray(offset, float))))
+            for layout, offset in others]
 
 
 def _draw(image: np.ndarray, camera: CameraModel, tag: Tag, marker: MarkerPose) -> None:

@@ -25,6 +25,13 @@ detector on the pixels as it does on the mock vehicle's frames (:mod:`mission.cl
   (:func:`sim.sitl.ground_truth.write_csv`; receive times on ``CLOCK_MONOTONIC``), both truths
   projected about the passenger's EKF origin, and ``camera.json`` (counts, the clock offset).
 
+- **A team** (``--passenger NAME``, repeated, of a file with a ``[team]``): one camera a named
+  passenger, on its own vehicle (its ``team.passengers[].system_id``) and its own key
+  (:func:`mission.bus.frames.camera_key`), clocked by its own status; each frame shows every
+  named passenger's slot's marker (the deck's other markers too, so its detector must keep to its
+  own ids). One node renders them all: the PX4s' GCS links share one port. The truth files are
+  then ``truth-NAME.csv`` per passenger and ``truth-rover.csv``, about the first one's EKF origin.
+
 No noisy truth goes to the controller: it gets pixels.
 """
 from __future__ import annotations
@@ -37,6 +44,7 @@ import socket
 import threading
 import time
 from collections import defaultdict
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -45,6 +53,7 @@ import numpy as np
 
 from mission.bus.session import close_session, declare, keys, open_session, undeclare
 from mission.bus.wire import decode_passenger_json
+from mission.config.passenger import has_team, passenger_config, team_link
 from mission.config.schema import Config, ZenohSection, load_config
 from mission.mavlink import px4
 from mission.mavlink.codec import new_codec, reset_parser
@@ -155,6 +164,19 @@ class Px4Truths:
                     return None
                 self._cond.wait(left)
 
+    def wait_newer(self, after_s: dict[int, float], timeout_s: float) -> dict[int, tuple[float, Any]]:
+        """The newest truth of each system of ``after_s`` received after its time [s, monotonic],
+        waiting at most ``timeout_s`` [s] for one of them; empty if none came."""
+        deadline = time.monotonic() + timeout_s
+        with self._cond:
+            while True:
+                got = {sysid: self.truth[sysid][-1] for sysid, t in after_s.items()
+                       if self.truth.get(sysid) and self.truth[sysid][-1][0] > t}
+                left = deadline - time.monotonic()
+                if got or left <= 0 or self._stop.is_set():
+                    return got
+                self._cond.wait(left)
+
     def write_csv(self, directory: Path, names: dict[str, int], origin_sysid: int) -> None:
         """``truth-NAME.csv`` of each ``names`` entry (module docstring), projected about
         ``origin_sysid``'s EKF origin (none heard: about latitude 0, longitude 0, altitude 0)."""
@@ -179,12 +201,12 @@ class MissionClock:
     """The mission's clock from the passenger's published status (module docstring): :meth:`at`
     maps a ``time.monotonic`` time to it, None until a status was heard."""
 
-    def __init__(self, session: Any, pair: str) -> None:
+    def __init__(self, session: Any, pair: str, passenger: str | None = None) -> None:
         self.offset_s: float | None = None
         self.heard = 0
         self._lock = threading.Lock()
-        self._sub = declare(f"subscriber on {keys(pair).passenger_state}", lambda: session.declare_subscriber(
-            keys(pair).passenger_state, self._on_sample))
+        key = keys(pair, passenger).passenger_state  # a team passenger's: its own status
+        self._sub = declare(f"subscriber on {key}", lambda: session.declare_subscriber(key, self._on_sample))
 
     def _on_sample(self, sample: Any) -> None:
         t = time.monotonic()
@@ -218,50 +240,81 @@ def deck_truth(vehicle: tuple[float, Any], carrier: tuple[float, Any] | None) ->
     return body, DeckTruth(poses.deck_ned_m + velocity * (t_v - t_c), velocity, poses.deck_yaw_rad)
 
 
-def run_camera(cfg: Config, zenoh: ZenohSection, vehicle_sysid: int, carrier_sysid: int, seed: int, truth_hz: float,
+@dataclass
+class Eye:
+    """One passenger's camera: its truth file's ``name``, its vehicle's ``sysid``, its configuration
+    ``cfg`` (its marker), its team name ``passenger`` (None: the pair's keys) and the configurations
+    of the deck's other markers' passengers ``others``."""
+
+    name: str
+    sysid: int
+    cfg: Config
+    passenger: str | None = None
+    others: tuple[Config, ...] = ()
+
+
+def team_eyes(cfg: Config, names: list[str]) -> list[Eye]:
+    """The cameras of ``cfg``'s team passengers ``names`` (module docstring): each on its own
+    vehicle and keys, its frames showing every other passenger's slot's marker too."""
+    every = [p.name for p in cfg.team.passengers]
+    own = {n: passenger_config(cfg, n) for n in every}
+    return [Eye(n, int(own[n].mavlink.target_system or 0), own[n], n if team_link(cfg, n) is not None else None,
+                tuple(own[o] for o in every if o != n)) for n in names]
+
+
+def run_camera(eyes: list[Eye], zenoh: ZenohSection, carrier_sysid: int, seed: int, truth_hz: float,
                truth_dir: Path | None, stop: threading.Event) -> dict[str, Any]:
-    """Render and publish until ``stop`` is set; the counts (``camera.json``)."""
-    truths = Px4Truths([vehicle_sysid, carrier_sysid], truth_hz)
+    """Render and publish every camera of ``eyes`` until ``stop`` is set; the counts (``camera.json``;
+    a team's: per passenger)."""
+    truths = Px4Truths([*[e.sysid for e in eyes], carrier_sysid], truth_hz)
     session = open_session(zenoh)
-    publisher = mission_clock = None
+    publishers: list[CameraPublisher] = []
+    clocks: list[MissionClock] = []
+    counts = [{"truths_unstamped": 0, "no_deck": 0} for _ in eyes]
     try:
-        publisher = CameraPublisher(cfg, session, cfg.zenoh.pair, seed, lockstep=False)
-        mission_clock = MissionClock(session, cfg.zenoh.pair)
-        last = -math.inf
-        unstamped = stale_deck = 0
+        for k, e in enumerate(eyes):
+            publishers.append(CameraPublisher(e.cfg, session, e.cfg.zenoh.pair, seed + 101 * k, lockstep=False,
+                                              passenger=e.passenger, others=e.others))
+            clocks.append(MissionClock(session, e.cfg.zenoh.pair, e.passenger))
+        last = {e.sysid: -math.inf for e in eyes}
         while not stop.is_set():
-            got = truths.wait_truth(vehicle_sysid, last, 0.5)
-            if got is None:
-                continue
-            last = got[0]
-            t_mission = mission_clock.at(got[0])
-            if t_mission is None:
-                unstamped += 1
-                continue
-            body, deck = deck_truth(got, truths.newest(carrier_sysid))
-            stale_deck += deck is None
-            publisher.sample(t_mission, body, deck)
-        return {"captured": publisher.captured, "frames_sent": publisher.sent, "truths_unstamped": unstamped,
-                "no_deck": stale_deck, "mavlink_received": truths.received, "statuses_heard": mission_clock.heard,
-                "mission_minus_monotonic_s": mission_clock.offset_s}
+            got = truths.wait_newer(last, 0.5)
+            for e, publisher, mission_clock, n in zip(eyes, publishers, clocks, counts):
+                if e.sysid not in got:
+                    continue
+                last[e.sysid] = got[e.sysid][0]
+                t_mission = mission_clock.at(got[e.sysid][0])
+                if t_mission is None:
+                    n["truths_unstamped"] += 1
+                    continue
+                body, deck = deck_truth(got[e.sysid], truths.newest(carrier_sysid))
+                n["no_deck"] += deck is None
+                publisher.sample(t_mission, body, deck)
+        each = {e.name: {"captured": p.captured, "frames_sent": p.sent, **n, "statuses_heard": c.heard,
+                         "mission_minus_monotonic_s": c.offset_s} for e, p, c, n in zip(eyes, publishers, clocks, counts)}
+        out: dict[str, Any] = {"mavlink_received": truths.received}
+        return {**out, **each[eyes[0].name]} if len(eyes) == 1 and eyes[0].passenger is None else {**out, "cameras": each}
     finally:
-        if mission_clock is not None:
-            mission_clock.close()
-        if publisher is not None:
-            publisher.close()
+        for c in clocks:
+            c.close()
+        for p in publishers:
+            p.close()
         close_session(session)
         truths.close()
         if truth_dir is not None:
             truth_dir.mkdir(parents=True, exist_ok=True)
-            truths.write_csv(truth_dir, {"passenger": vehicle_sysid, "rover": carrier_sysid}, vehicle_sysid)
+            truths.write_csv(truth_dir, {**{e.name: e.sysid for e in eyes}, "rover": carrier_sysid}, eyes[0].sysid)
 
 
 @click.command("sitl-camera", context_settings={"help_option_names": ["-h", "--help"]})
 @click.argument("config", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("--vehicle-sysid", type=click.IntRange(1, 255), default=1, show_default=True,
               help="The passenger's PX4 (instance sysid - 1).")
-@click.option("--carrier-sysid", type=click.IntRange(1, 255), default=2, show_default=True,
-              help="The carrier's PX4, the SIH rover (instance sysid - 1).")
+@click.option("--carrier-sysid", type=click.IntRange(1, 255), default=None,
+              help="The carrier's PX4, the SIH rover (instance sysid - 1) [default: carrier.mavlink.target_system, else 2].")
+@click.option("--passenger", "passengers", multiple=True, metavar="NAME",
+              help="A team passenger whose camera to render (repeat for each; its own system id and keys): "
+                   "the file's [team] (module docstring). Not with --vehicle-sysid.")
 @click.option("--seed", type=int, default=0, show_default=True, help="The sensor's noise and dropouts.")
 @click.option("--truth-hz", type=click.FloatRange(1.0, 250.0), default=50.0, show_default=True,
               help="HIL_STATE_QUATERNION and LOCAL_POSITION_NED asked of each PX4 [Hz].")
@@ -269,8 +322,8 @@ def run_camera(cfg: Config, zenoh: ZenohSection, vehicle_sysid: int, carrier_sys
               help="On exit write truth-passenger.csv, truth-rover.csv and camera.json here.")
 @click.option("--zenoh-connect", "connect", multiple=True, metavar="ENDPOINT")
 @click.option("--zenoh-listen", "listen", multiple=True, metavar="ENDPOINT")
-def sitl_camera(config: Path, vehicle_sysid: int, carrier_sysid: int, seed: int, truth_hz: float, truth_dir: Path | None,
-                connect: tuple[str, ...], listen: tuple[str, ...]) -> None:
+def sitl_camera(config: Path, vehicle_sysid: int, carrier_sysid: int | None, passengers: tuple[str, ...], seed: int,
+                truth_hz: float, truth_dir: Path | None, connect: tuple[str, ...], listen: tuple[str, ...]) -> None:
     """Render the passenger's downward camera from PX4 SITL's SIH truth and publish its frames (module docstring)."""
     cfg = load_config(config)
     endpoints: dict[str, Any] = {"connect": list(connect), "listen": list(listen)}
@@ -280,7 +333,12 @@ def sitl_camera(config: Path, vehicle_sysid: int, carrier_sysid: int, seed: int,
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     signal.signal(signal.SIGINT, lambda *_: stop.set())
-    counts = run_camera(cfg, zenoh, vehicle_sysid, carrier_sysid, seed, truth_hz, truth_dir, stop)
+    if passengers and not has_team(cfg):
+        raise click.BadParameter("the file has no [team]", param_hint="--passenger")
+    eyes = team_eyes(cfg, list(passengers)) if passengers else [Eye("passenger", vehicle_sysid, cfg)]
+    if carrier_sysid is None:
+        carrier_sysid = cfg.carrier.mavlink.target_system or 2
+    counts = run_camera(eyes, zenoh, carrier_sysid, seed, truth_hz, truth_dir, stop)
     log.info("camera: %s", counts)
     if truth_dir is not None:
         (truth_dir / "camera.json").write_text(json.dumps(counts, indent=1) + "\n")

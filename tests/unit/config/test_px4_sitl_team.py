@@ -52,3 +52,52 @@ def test_each_passenger_rides_the_pairs_dock_point_moved_to_its_side_on_its_own_
         assert own.mission.ride == "hover"  # an SIH quadrotor cannot sit on an SIH rover
     assert ids == {1, 2} and team.carrier.mavlink.target_system not in ids
     assert [p.targets for p in team.team.passengers] == [[0, 2], [1]]  # alpha, bravo, alpha: configs/team.toml's order
+
+
+# configs/px4_sitl_team_relnav.toml: the team above with configs/px4_sitl_relnav.toml's relative
+# navigation. Each field comes from one of the two, and these say which: what relnav changed of
+# the PX4 cycle's is relnav's, the rest the team's; its own is the seat's sigma (its quadrotors
+# stand 0.9 m from their seats) and each slot's marker.
+RELNAV_OWN = {"mission": {"feeds"}, "carrier": {"p3_margin_m", "align_on_deck_m", "acceleration_tau_s", "start_motion_tau_s"},
+              "recovery": {"holdoff_distance_m", "glide_angle_deg", "final_descent_speed_m_s", "final_lineup_margin",
+                           "decision_height_m"},
+              "vision": {"rate_hz", "layout"}, "relnav": {"enabled", "landing_target_rate_hz", "accel_noise_m_s2"},
+              "world": {"carrier_gnss"}}
+
+
+@pytest.fixture(scope="module")
+def team_relnav():
+    return load_config(CONFIGS / "px4_sitl_team_relnav.toml")
+
+
+@pytest.fixture(scope="module")
+def relnav():
+    return load_config(CONFIGS / "px4_sitl_relnav.toml")
+
+
+@pytest.mark.parametrize("section", ["law", "scenario", "safety", "mission", "mavlink", "zenoh", "carrier", "recovery", "team"])
+def test_the_relnav_team_is_the_team_but_for_relnavs_fields(team_relnav, team, section):
+    mine, theirs = getattr(team_relnav, section).model_dump(), getattr(team, section).model_dump()
+    differ = {k for k in mine if mine[k] != theirs[k]}
+    own = RELNAV_OWN.get(section, set()) | ({"slots"} if section == "team" else set())
+    assert differ <= own, f"{section}: {sorted(differ - own)} drifted from px4_sitl_team.toml"
+
+
+@pytest.mark.parametrize("section", ["carrier", "recovery", "vision", "relnav", "world"])
+def test_relnavs_fields_are_px4_sitl_relnavs(team_relnav, relnav, section):
+    mine, theirs = getattr(team_relnav, section).model_dump(), getattr(relnav, section).model_dump()
+    fields = RELNAV_OWN[section] - {"carrier_gnss"}
+    assert {k: mine[k] for k in fields} == {k: theirs[k] for k in fields}
+    if section == "world":  # the seed is the bench's (--seed)
+        assert {**mine["carrier_gnss"], "seed": 0} == {**theirs["carrier_gnss"], "seed": 0}
+    if section == "relnav":  # all but the seat's sigma: its quadrotors stand 0.9 m from their seats
+        assert {k for k in mine if mine[k] != theirs[k]} == {"seated_sigma_m"} and team_relnav.relnav.seated_sigma_m == 0.5
+    if section == "vision":  # all but where the marker is: under each slot's dock point (its own)
+        assert {k for k in mine if mine[k] != theirs[k]} == {"marker_offset_ned_m"}
+
+
+def test_the_relnav_teams_slots_are_the_teams_with_a_marker_each_under_its_dock_point(team_relnav, team):
+    for mine, theirs in zip(team_relnav.team.slots, team.team.slots):
+        assert (mine.name, mine.offset_ned_m) == (theirs.name, theirs.offset_ned_m)
+        assert mine.marker_offset_ned_m == [*mine.offset_ned_m[:2], 0.0]  # on the rover (the ground) under the dock point
+    assert len({i for s in team_relnav.team.slots for i in (s.tag_id, s.small_tag_id)}) == 4

@@ -58,7 +58,7 @@ def test_overrides_reach_the_passenger(team):
     assert derived.mavlink.url == "udpin:127.0.0.1:14541" and derived.mavlink.target_system == 2
 
 
-TEAM_FILES = {"team.toml", "px4_sitl_team.toml"}  # the shipped teams (the mock's, real PX4 SITL's)
+TEAM_FILES = {"team.toml", "px4_sitl_team.toml", "px4_sitl_team_relnav.toml"}  # the shipped teams (the mock's, real PX4 SITL's, with a camera)
 
 
 @pytest.mark.parametrize("path", sorted(p for p in CONFIGS.glob("*.toml") if p.name not in TEAM_FILES), ids=lambda p: p.name)
