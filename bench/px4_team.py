@@ -48,8 +48,8 @@ slot its own marker, the carrier's published state carrying the world's GNSS err
 (``python -m sim.sitl.camera FILE --passenger NAME ...``, :mod:`sim.sitl.camera`) and records the
 truth of every vehicle (``truth-NAME.csv``) in place of the bench's GCS probe (the PX4s' GCS links
 share one port). The missions are stopped :data:`HOME_S` after the last passenger entered HOME
-(bench/px4_relnav.py says why: with relative navigation HOME on PX4 lasts minutes and measures
-nothing of the docking); until then the others ride their slots. The rover's timing check
+if they have not ended by then (bench/px4_relnav.py says how HOME ends on a noisy carrier
+velocity); until then the others ride their slots. The rover's timing check
 (``rover_gcs_delay_s``) is skipped: its published positions carry the world's GNSS errors (late
 fixes, metres of bias). The carrier's true closest approach to each target (3D, as its own
 ``closest_each_target_m``, which is in its biased frame) comes from the rover's truth.
