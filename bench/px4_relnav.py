@@ -286,13 +286,14 @@ def report(row: dict[str, Any]) -> list[str]:
 @click.option("--set", "sets", multiple=True, metavar="SECTION.KEY=VALUE", help="Change the configuration (TOML value).")
 @click.option("--no-camera", is_flag=True, help="No camera node: the marker never seen (and no truth recorded).")
 @click.option("--analyse", "again", is_flag=True, help="Do not fly: analyse the flight already in --out again.")
-@click.option("--table", "tabled", multiple=True, type=click.Path(file_okay=False, exists=True),
-              help="Do not fly: print the legs of these flights (their row.json), one line each.")
+@click.option("--table", "tabled", is_flag=True, help="Do not fly: print the legs of the flights FLOWN (their row.json).")
+@click.argument("flown", nargs=-1, type=click.Path(file_okay=False, exists=True))
 def main(config: str, out: str | None, seed: int, speed_factor: float, sets: tuple[str, ...], no_camera: bool, again: bool,
-         tabled: tuple[str, ...]) -> None:
-    """Fly CONFIG's relative navigation once on real PX4 SITL and print its legs."""
+         tabled: bool, flown: tuple[str, ...]) -> None:
+    """Fly CONFIG's relative navigation once on real PX4 SITL and print its legs (``--table FLOWN...``:
+    print the legs of flights already flown, one line each)."""
     if tabled:
-        for line in table([Path(d) for d in tabled]):
+        for line in table([Path(d) for d in flown]):
             click.echo(line)
         return
     if out is None:

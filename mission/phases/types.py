@@ -149,9 +149,9 @@ class RelnavGates:
     ``marker_offset_ned_m`` (3,) [m] NED, the marker's centre from the carrier's reference point
     (``vision.marker_offset_ned_m``, the dock point unless set); ``carrier_accel_tau_s`` [s] the
     low-pass of the carrier's acceleration estimated from its velocity (0: none estimated);
-    ``carrier_accel_m_s2`` [m/s^2] the
-    carrier's acceleration limit (``safety.carrier_max_accel_m_s2``; None: unknown): the deck's
-    velocity the phases see changes no faster."""
+    ``carrier_accel_m_s2`` [m/s^2] the carrier's acceleration limit (``relnav.velocity_slew_m_s2``,
+    else ``safety.carrier_max_accel_m_s2``; None: unknown): the deck's velocity the phases see
+    changes no faster."""
 
     params: RelnavParams
     marker_timeout_s: float

@@ -233,3 +233,23 @@ def test_the_deck_acceleration_is_the_rate_of_its_estimated_velocity_when_asked(
     assert abs(float(pulling[:, 0].mean()) - 0.5) < 0.1 and np.abs(pulling[:, 1:]).max() < 0.05, pulling.mean(axis=0)
     assert np.abs(cruising).max() < 0.1, np.abs(cruising).max(axis=0)
     assert all(view.carrier_accel_ned_m_s2 is None for _, _, view in _ride_a_ramp(0.0)[-5:])
+
+
+def test_the_deck_velocity_slews_at_its_own_limit_when_configured_else_at_the_laws():
+    """relnav.velocity_slew_m_s2 is the limit of the deck's velocity shown to the phases; unset,
+    safety.carrier_max_accel_m_s2 (the law's): a rover that leaps from rest at ~2 m/s^2 was shown
+    pulling away at 1 m/s^2, 0.5 m/s behind the estimate's own velocity for 0.6 s on PX4."""
+    from mission.config.schema import load_config
+    from mission.model import mission_model
+    from tests.conftest import CONFIGS
+
+    cfg = load_config(CONFIGS / "px4_sitl_relnav.toml")
+    gates = mission_model(cfg).relnav
+    assert gates is not None and gates.carrier_accel_m_s2 == cfg.safety.carrier_max_accel_m_s2
+    faster = cfg.model_copy(update={"relnav": cfg.relnav.model_copy(update={"velocity_slew_m_s2": 2.0})})
+    gates = mission_model(faster).relnav
+    assert gates is not None and gates.carrier_accel_m_s2 == 2.0
+    deck = RelativeDeck(gates, np.zeros(3))
+    deck.velocity = np.zeros(3)
+    shown = deck._slewed(np.array([1.0, 0.0, 0.0]), dt_s=0.25, on_deck=False)
+    np.testing.assert_allclose(shown, [0.5, 0.0, 0.0])  # 2 m/s^2 x 0.25 s, not 1 x 0.25
