@@ -15,8 +15,12 @@ figure) and in TRUTH (at the contact's time, the passenger's true horizontal pos
 rover's true position plus ``mission.dock_offset_ned_m``, SIH's truth as the camera node received
 it, on ``CLOCK_MONOTONIC``; the mission's record put on that clock through its flight log's epoch,
 as :mod:`bench.px4_team`), the true riding offset (the same difference while RIDING in that leg:
-median and max, horizontal), and the carrier's GNSS error as published (its published position
+median and max, horizontal; with the time into the ride of the max and the rover's true speed
+then), the rover's true closest approach to the leg's target over the whole flight (3D, as P3's
+figure, and horizontal), and the carrier's GNSS error as published (its published position
 against the rover's truth at the publication's log time: median horizontal, over the flight).
+``--table DIR...`` prints the legs of flights already flown, one line each, and their count
+against the targets (:func:`leg_meets`).
 
 The bench stops the mission :data:`bench.px4_team.HOME_S` after it entered HOME (the last leg
 docked, riding the carrier while it parks) if it has not ended by then. HOME hands the vehicle to
@@ -47,12 +51,15 @@ from bench.px4_team import (HOME_S, OFFBOARD_PORT, STATUS_TOPIC, Progress, _at, 
 from mission.config.schema import load_config
 from mission.flightdata.read import read_messages
 from sim.net import stop_process, wait_for
+from sim.sitl import ground_truth
 from sim.sitl.px4 import (QUAD_AIRFRAME, ROVER_AIRFRAME, ROVER_PARAMS, NetNamespace, build_dir, clock_ratio_of,
                           patched_config, unavailable_reason)
 
 ROOT = Path(__file__).resolve().parents[1]
 CONTACT_M = 0.2  # [m] the PX4 target of docs/relnav.md: true contact error
 ATTEMPTS = 2  # ... docked within this many approaches
+RIDING_M = 0.3  # [m] ... and the true riding offset, horizontal, at most this all the ride long
+CLOSEST_M = 7.0  # [m] ... and the rover truly never closer than this to the leg's target (b c - margin, less 0.5 m)
 PAIR_DIR = "pair0"
 
 
@@ -91,6 +98,15 @@ def published_error(directory: Path, offset_s: float, rover_truth: np.ndarray) -
             "first_10s_ne_m": [round(float(v), 2) for v in np.median(err[first], axis=0)]}
 
 
+def _rover_velocity(path: Path) -> np.ndarray:
+    """The rover's true horizontal velocity [m/s] as rows ``t, north, east`` (``truth-rover.csv``)."""
+    if not path.exists():
+        return np.zeros((0, 3))
+    c = ground_truth.read_csv(path)
+    rows = np.column_stack([c["t_rx_s"], c["true_vx"], c["true_vy"]])
+    return rows[np.isfinite(rows).all(axis=1)]
+
+
 def analyse(config: Path, directory: Path, offset_s: float) -> dict[str, Any]:
     """The flight's legs and figures (module docstring) from its logs and the camera node's truth."""
     cfg = load_config(config)
@@ -101,6 +117,7 @@ def analyse(config: Path, directory: Path, offset_s: float) -> dict[str, Any]:
         path = directory / f"truth-{name}.csv"
         est[name], truth[name] = _read_truth(path) if path.exists() else (np.zeros((0, 5)), np.zeros((0, 5)))
     have_truth = len(truth["passenger"]) > 1 and len(truth["rover"]) > 1
+    rover_v = _rover_velocity(directory / "truth-rover.csv")
     slot = np.asarray(cfg.mission.dock_offset_ned_m, dtype=float)
     rec = _on_monotonic(log_dir, offset_s)
 
@@ -110,9 +127,10 @@ def analyse(config: Path, directory: Path, offset_s: float) -> dict[str, Any]:
 
     legs = []
     leg_records = {leg.k: leg.record for leg in rec[0].legs()} if rec is not None else {}
+    targets = [np.asarray(t, dtype=float) for t in cfg.scenario.legs()]
     for d, leg in zip(dockings(s, cfg.law.b * cfg.law.c), s.get("legs") or [s]):
         contact = leg.get("contact") or {}
-        true_err = riding = None
+        true_err = riding = closest = None
         if contact and rec is not None and have_truth:
             true_err = round(float(true_offset(np.array([contact["time_s"] + rec[1]]))[0]), 3)
         lr = leg_records.get(d["leg"])
@@ -120,8 +138,14 @@ def analyse(config: Path, directory: Path, offset_s: float) -> dict[str, Any]:
             t = lr.t[lr.phase == "RIDING"] + rec[1]
             if len(t):
                 off = true_offset(t)
-                riding = [round(float(np.median(off)), 3), round(float(off.max()), 3)]
-        legs.append({**d, "true_error_m": true_err, "true_riding_m": riding,
+                k = int(off.argmax())
+                v = np.column_stack([np.interp(t[k:k + 1], rover_v[:, 0], rover_v[:, j]) for j in (1, 2)])[0]
+                riding = [round(float(np.median(off)), 3), round(float(off[k]), 3), round(float(t[k] - t[0]), 1),
+                          round(float(np.hypot(*v)), 2)]
+        if d["leg"] is not None and d["leg"] < len(targets) and len(truth["rover"]):
+            gap = truth["rover"][:, 2:5] - targets[d["leg"]]
+            closest = [round(float(np.linalg.norm(gap, axis=1).min()), 2), round(float(np.hypot(gap[:, 0], gap[:, 1]).min()), 2)]
+        legs.append({**d, "true_error_m": true_err, "true_riding_m": riding, "true_closest_m": closest,
                      "estimate_error_at_contact_m": contact.get("estimate_error_m")})
     map_check = None
     if rec is not None and len(est["passenger"]):
@@ -202,16 +226,39 @@ def fly(config: Path, directory: Path, seed: int, speed_factor: float = 1.08,
 
 
 def leg_meets(leg: dict[str, Any]) -> bool:
-    """The PX4 target for one leg (docs/relnav.md, "On real PX4 SITL"): docked within 2 approaches, true contact error <= 0.2 m."""
+    """The PX4 targets for one leg (docs/relnav.md, "On real PX4 SITL"): docked within 2 approaches,
+    true contact error <= 0.2 m, true riding offset <= 0.3 m all the ride long, the rover truly never
+    within 7.0 m of the leg's target."""
+    riding, closest = leg.get("true_riding_m"), leg.get("true_closest_m")
     return bool(leg["docked"] and leg["attempts"] is not None and leg["attempts"] <= ATTEMPTS
-                and leg["true_error_m"] is not None and leg["true_error_m"] <= CONTACT_M)
+                and leg["true_error_m"] is not None and leg["true_error_m"] <= CONTACT_M
+                and riding is not None and riding[1] <= RIDING_M and closest is not None and closest[0] >= CLOSEST_M)
+
+
+def table(dirs: list[Path]) -> list[str]:
+    """One line per leg of the flights in ``dirs`` (each one's ``row.json``), then the count."""
+    lines = ["| seed | leg | approaches | true contact [m] | true riding median / max [m] (at s into the ride, rover m/s) "
+             "| rover's true closest, 3D / horizontal [m] | meets |", "|---|---|---|---|---|---|---|"]
+    met = total = 0
+    for d in dirs:
+        row = json.loads((d / "row.json").read_text())
+        for leg in row["legs"]:
+            r, c = leg.get("true_riding_m") or [None] * 4, leg.get("true_closest_m") or [None, None]
+            ok = leg_meets(leg)
+            met, total = met + ok, total + 1
+            lines.append(f"| {row.get('seed')} | {leg['leg']} | {_fmt(leg.get('attempts'))} | {_fmt(leg.get('true_error_m'))} "
+                         f"| {_fmt(r[0])} / {_fmt(r[1])} ({_fmt(r[2] if len(r) > 2 else None)} s, {_fmt(r[3] if len(r) > 3 else None)}) "
+                         f"| {_fmt(c[0])} / {_fmt(c[1])} | {'yes' if ok else 'no'} |")
+    lines.append(f"{met}/{total} legs meet every target (docked within {ATTEMPTS} approaches, true contact <= {CONTACT_M} m, "
+                 f"true riding <= {RIDING_M} m, the rover >= {CLOSEST_M} m from the target)")
+    return lines
 
 
 def _fmt(v: Any) -> str:
     return f"{v:.3f}" if isinstance(v, float) else "-" if v is None else str(v)
 
 
-COLUMNS = ("leg", "outcome", "docked", "attempts", "error_m", "true_error_m", "true_riding_m", "h_speed_m_s", "p1", "p2", "p3")
+COLUMNS = ("leg", "outcome", "docked", "attempts", "error_m", "true_error_m", "true_riding_m", "true_closest_m", "p1", "p2", "p3")
 
 
 def report(row: dict[str, Any]) -> list[str]:
@@ -231,14 +278,24 @@ def report(row: dict[str, Any]) -> list[str]:
 @click.command()
 @click.option("--config", type=click.Path(dir_okay=False, exists=True), default=str(ROOT / "configs" / "px4_sitl_relnav.toml"),
               show_default=True)
-@click.option("--out", type=click.Path(file_okay=False), required=True, help="The flight's logs and its row (row.json).")
+@click.option("--out", type=click.Path(file_okay=False), help="The flight's logs and its row (row.json).")
 @click.option("--seed", type=int, default=0, show_default=True, help="world.carrier_gnss.seed and the camera's noise")
 @click.option("--speed-factor", type=float, default=1.08, show_default=True, help="PX4_SIM_SPEED_FACTOR of both PX4s")
 @click.option("--set", "sets", multiple=True, metavar="SECTION.KEY=VALUE", help="Change the configuration (TOML value).")
 @click.option("--no-camera", is_flag=True, help="No camera node: the marker never seen (and no truth recorded).")
 @click.option("--analyse", "again", is_flag=True, help="Do not fly: analyse the flight already in --out again.")
-def main(config: str, out: str, seed: int, speed_factor: float, sets: tuple[str, ...], no_camera: bool, again: bool) -> None:
-    """Fly CONFIG's relative navigation once on real PX4 SITL and print its legs."""
+@click.option("--table", "tabled", is_flag=True, help="Do not fly: print the legs of the flights FLOWN (their row.json).")
+@click.argument("flown", nargs=-1, type=click.Path(file_okay=False, exists=True))
+def main(config: str, out: str | None, seed: int, speed_factor: float, sets: tuple[str, ...], no_camera: bool, again: bool,
+         tabled: bool, flown: tuple[str, ...]) -> None:
+    """Fly CONFIG's relative navigation once on real PX4 SITL and print its legs (``--table FLOWN...``:
+    print the legs of flights already flown, one line each)."""
+    if tabled:
+        for line in table([Path(d) for d in flown]):
+            click.echo(line)
+        return
+    if out is None:
+        raise click.UsageError("--out is required to fly or analyse")
     directory = Path(out).resolve()
     if again:
         row_path = directory / "row.json"  # a flight the bench did not finish (a test's) has none
@@ -256,7 +313,8 @@ def main(config: str, out: str, seed: int, speed_factor: float, sets: tuple[str,
     for line in report(row):
         click.echo(line)
     click.echo(f"{sum(leg_meets(leg) for leg in row['legs'])}/{len(row['legs'])} legs docked within {ATTEMPTS} approaches "
-               f"at a true contact error <= {CONTACT_M} m; logs in {out}")
+               f"at a true contact error <= {CONTACT_M} m, riding <= {RIDING_M} m, the rover >= {CLOSEST_M} m from "
+               f"the target; logs in {out}")
 
 
 if __name__ == "__main__":

@@ -21,7 +21,7 @@ if TYPE_CHECKING:
 
 #: ``[relnav]``'s fields that tell the phases how to use the estimate (not the estimator's tuning).
 PHASE_FIELDS = ("enabled", "marker_timeout_s", "descent_marker_timeout_s", "marker_memory_s", "search_s", "correction_rate_m_s", "seated_sigma_m",
-                "pending_limit_m", "landing_target_rate_hz")
+                "pending_limit_m", "landing_target_rate_hz", "carrier_accel_tau_s", "velocity_slew_m_s2")
 
 
 class RelnavSection(Section):
@@ -56,6 +56,18 @@ class RelnavSection(Section):
     pending_limit_m: float = Field(0.3, gt=0, le=10,
         description=("[m] HOLDOFF begins an approach only once the part of the estimate's jumps still held back "
                      "(let through at `relnav.correction_rate_m_s`) is below this"))
+    carrier_accel_tau_s: float = Field(0.0, ge=0, le=10,
+        description=("[s] riding, the carrier's acceleration fed forward (when the carrier sends none) is the rate of "
+                     "the estimate's carrier velocity (as the phases see it, slewed at the carrier's acceleration "
+                     "limit), low-passed with this time constant, instead of its law's (`mission.carrier_accel_horizon_s`): "
+                     "a carrier that does not drive its law (a PX4 rover at its own cruise speed, under the law's "
+                     "`safety.carrier_max_speed_m_s`; one that stands a while before it moves off) is ridden as it "
+                     "moves, not as the law says it should; 0: the law's"))
+    velocity_slew_m_s2: float | None = Field(None, gt=0, le=50,
+        description=("[m/s^2] the carrier's velocity the phases see (the estimate's) changes at most this fast: the "
+                     "filter's noise (each marker moves it) is slewed away, the carrier cannot change its velocity "
+                     "faster; unset: the law's limit `safety.carrier_max_accel_m_s2`. A carrier that does (the SIH "
+                     "rover leaps from rest at ~2 m/s^2) needs its own, or the ride lags it"))
     landing_target_rate_hz: float = Field(0.0, ge=0, le=50,
         description=("[Hz] while the estimate is converged, the loop sends the vehicle the deck's landing point "
                      "(the dock point in its local NED frame: its own position plus the relative estimate) as "

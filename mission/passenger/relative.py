@@ -54,6 +54,7 @@ class RelativeDeck:
         self.last: tuple[np.ndarray, np.ndarray] | None = None  # the last tick's carrier [m] and velocity [m/s], before pending
         self.pending = np.zeros(3)  # [m] NED, the part of the estimate's jumps not yet let through
         self.velocity: np.ndarray | None = None  # [m/s] NED, the deck's velocity as last shown to the phases
+        self.accel = np.zeros(3)  # [m/s^2] NED, the rate of that velocity low-passed (gates.carrier_accel_tau_s)
         self.t_s: float | None = None  # [s] the last tick's time
         self.refused = 0  # readings not fused: no stated sigma, or a non-finite time, offset or sigma
 
@@ -103,11 +104,30 @@ class RelativeDeck:
             step = self.gates.correction_rate_m_s * dt
             self.pending = np.zeros(3) if size <= step else self.pending * (1.0 - step / size)
         self.last = (now, velocity)
-        shown = self._slewed(velocity, dt_s=max(t_s - self.t_s, 0.0) if self.t_s is not None else 0.0, on_deck=on_deck)
+        dt = max(t_s - self.t_s, 0.0) if self.t_s is not None else 0.0
+        before = self.velocity
+        shown = self._slewed(velocity, dt_s=dt, on_deck=on_deck)
+        accel = self._acceleration(before, shown, dt, on_deck)
         self.t_s = t_s
         now = now + self.pending
         return replace(carrier, position_ned_m=now - shown * carrier.age_s, velocity_ned_m_s=shown), \
-            self._view(e, bias)
+            self._view(e, bias, accel)
+
+    def _acceleration(self, before: np.ndarray | None, shown: np.ndarray, dt_s: float, on_deck: bool) -> np.ndarray | None:
+        """The carrier's acceleration [m/s^2] NED as the estimate shows it: the rate of the velocity
+        shown to the phases (``before`` the last tick's, ``shown`` this one's, ``dt_s`` [s] apart),
+        low-passed with ``gates.carrier_accel_tau_s`` (exact first-order step); None when that is 0.
+        The shown velocity changes at most at the carrier's acceleration limit, so this never
+        exceeds it. Zero standing on the deck (nothing rides it) and until a velocity was shown."""
+        tau = self.gates.carrier_accel_tau_s
+        if tau <= 0:
+            return None
+        if on_deck or before is None:
+            self.accel = np.zeros(3)
+        elif dt_s > 0:
+            rate = (shown - before) / dt_s
+            self.accel = self.accel + (1.0 - math.exp(-dt_s / tau)) * (rate - self.accel)
+        return self.accel.copy()
 
     def _slewed(self, velocity: np.ndarray, dt_s: float, on_deck: bool) -> np.ndarray:
         """The deck's velocity [m/s] shown to the phases: the filter's, changing by at most the
@@ -125,10 +145,11 @@ class RelativeDeck:
         self.velocity = velocity.copy() if size <= step else self.velocity + change * (step / size)
         return self.velocity
 
-    def _view(self, e: RelativeEstimate, bias: np.ndarray) -> RelativeView:
+    def _view(self, e: RelativeEstimate, bias: np.ndarray, accel: np.ndarray | None = None) -> RelativeView:
         return RelativeView(position_ned_m=np.asarray(e.position_ned_m, float), bias_ned_m=bias,
                             pending_ned_m=self.pending.copy(), position_sigma_m=e.position_sigma_m,
-                            converged=e.converged, since_marker_s=e.since_marker_s, estimate=e)
+                            converged=e.converged, since_marker_s=e.since_marker_s, estimate=e,
+                            carrier_accel_ned_m_s2=accel)
 
 
 def _usable(m: RelativePosition) -> bool:

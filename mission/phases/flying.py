@@ -146,11 +146,16 @@ def _carrier_acceleration(obs: Observation, m: MissionModel) -> np.ndarray:
     speed limit, ``-k_c v_c`` on the final approach. Over one step an estimated velocity's noise
     (0.1-0.2 m/s) is a full ``a_max`` either way, flipping with the noise; over the horizon it is
     that noise over the horizon (docs/relnav.md, "Riding on late fixes"). A sent one is
-    capped at the passenger's own ``max_accel_m_s2`` (a feed-forward, not an order)."""
+    capped at the passenger's own ``max_accel_m_s2`` (a feed-forward, not an order). With none sent
+    and the relative estimate's (``relnav.carrier_accel_tau_s`` > 0: the rate of the deck's estimated
+    velocity), that one, horizontal for a planar carrier: the SIH rover cruises at its own speed,
+    under the law's limit, and stands ~2 s before it moves off, where the law's prediction had the
+    riding passenger 0.3-0.45 m ahead of the deck (docs/relnav.md, "Where the PX4 ride lost 0.3 m")."""
     c = obs.carrier
     assert c is not None  # riding: the carrier was checked
-    if c.acceleration_ned_m_s2 is not None:
-        a = np.asarray(c.acceleration_ned_m_s2, dtype=float)
+    a_est = _estimated_acceleration(obs, m)
+    if c.acceleration_ned_m_s2 is not None or a_est is not None:
+        a = np.asarray(c.acceleration_ned_m_s2 if c.acceleration_ned_m_s2 is not None else a_est, dtype=float)
         cap = m.command_safety.max_accel_m_s2
         size = float(norm(a))
         return a * (cap / size) if cap is not None and size > cap else a
@@ -161,11 +166,24 @@ def _carrier_acceleration(obs: Observation, m: MissionModel) -> np.ndarray:
     return (np.asarray(nxt.u, dtype=float) - c.velocity_ned_m_s) / horizon
 
 
+def _estimated_acceleration(obs: Observation, m: MissionModel) -> np.ndarray | None:
+    """The carrier's acceleration [m/s^2] NED from the relative estimate (``obs.relative``), its
+    vertical zero for a planar carrier (the passenger's own height estimate drifts, the ground
+    does not); None when the estimate gives none."""
+    rel = obs.relative
+    if rel is None or rel.carrier_accel_ned_m_s2 is None:
+        return None
+    a = np.array(rel.carrier_accel_ned_m_s2, dtype=float)
+    if m.tick.planar_carrier and len(a) == 3:
+        a[2] = 0.0
+    return a
+
+
 def _ridden_dock(obs: Observation, m: MissionModel, fresh: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The dock point [m] and its velocity [m/s] NED now, and the carrier's acceleration
     [m/s^2] fed forward (:func:`_carrier_acceleration`; zero for a stale state, whose prediction
     has none). A fresh sample is moved on over its age ``T`` as the carrier moves: with the
-    acceleration it sent, ``v + a T``; else as its law asks it, one carrier step of length ``T``
+    acceleration it sent (or the estimate's), ``v + a T``; else as its law asks it, one carrier step of length ``T``
     from the sample's velocity (:func:`mission.core.tick.carrier_tick`: its speed limit, and at
     most ``safety.carrier_max_accel_m_s2 * T`` of change). The dock point moves on by the mean of
     the two velocities. A GNSS fix 0.2-0.3 s old, the carrier starting at 1 m/s^2, would
@@ -181,7 +199,7 @@ def _ridden_dock(obs: Observation, m: MissionModel, fresh: bool) -> tuple[np.nda
     age = min(max(float(c.age_s), 0.0), m.carrier_timeout_s)
     if age <= 0.0:
         return dock, v, a
-    if c.acceleration_ned_m_s2 is not None:
+    if c.acceleration_ned_m_s2 is not None or _estimated_acceleration(obs, m) is not None:
         v_now = v + a * age
     else:
         x_now = np.asarray(c.position_ned_m, dtype=float) + v * age

@@ -122,7 +122,9 @@ class RelativeView:
     ``relnav.correction_rate_m_s``); ``position_sigma_m`` [m] and ``converged`` as the estimate's;
     ``since_marker_s`` [s] since the capture of the newest marker fused (inf: none yet);
     ``estimate`` the estimator's whole output the above comes from (its covariance, velocities and
-    counts: what the flight data logs; the phases read the fields above; None: not given)."""
+    counts: what the flight data logs; the phases read the fields above; None: not given);
+    ``carrier_accel_ned_m_s2`` [m/s^2] NED the carrier's acceleration as the estimate shows it
+    (``relnav.carrier_accel_tau_s`` > 0; None: not estimated, riding predicts the law's)."""
 
     position_ned_m: np.ndarray
     bias_ned_m: np.ndarray
@@ -131,6 +133,7 @@ class RelativeView:
     converged: bool
     since_marker_s: float
     estimate: RelativeEstimate | None = None
+    carrier_accel_ned_m_s2: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -144,9 +147,11 @@ class RelnavGates:
     ``seated_sigma_m`` [m] how well standing on the deck places the vehicle over it;
     ``pending_limit_m`` [m] an approach begins only with the estimate's jumps taken in to this;
     ``marker_offset_ned_m`` (3,) [m] NED, the marker's centre from the carrier's reference point
-    (``vision.marker_offset_ned_m``, the dock point unless set); ``carrier_accel_m_s2`` [m/s^2] the
-    carrier's acceleration limit (``safety.carrier_max_accel_m_s2``; None: unknown): the deck's
-    velocity the phases see changes no faster."""
+    (``vision.marker_offset_ned_m``, the dock point unless set); ``carrier_accel_tau_s`` [s] the
+    low-pass of the carrier's acceleration estimated from its velocity (0: none estimated);
+    ``carrier_accel_m_s2`` [m/s^2] the carrier's acceleration limit (``relnav.velocity_slew_m_s2``,
+    else ``safety.carrier_max_accel_m_s2``; None: unknown): the deck's velocity the phases see
+    changes no faster."""
 
     params: RelnavParams
     marker_timeout_s: float
@@ -156,6 +161,7 @@ class RelnavGates:
     correction_rate_m_s: float
     seated_sigma_m: float
     pending_limit_m: float
+    carrier_accel_tau_s: float
     marker_offset_ned_m: np.ndarray
     carrier_accel_m_s2: float | None = None
 

@@ -194,3 +194,61 @@ def test_the_decks_velocity_changes_no_faster_than_the_carrier_can(limited: bool
         assert float(np.abs(np.array(velocities)).max()) < 0.3  # still the carrier at rest, within the noise
     else:
         assert steps.max() > 1.0 / 50, steps.max()
+
+
+def _ride_a_ramp(tau_s: float) -> list:
+    """The vehicle riding 1.5 m over a deck that stands until 2 s, pulls away north at 0.5 m/s^2
+    until 4 s, then cruises at 1 m/s; GNSS at 10 Hz with the bias, the marker every tick."""
+    gates = dataclasses.replace(_gates(), carrier_accel_tau_s=tau_s)
+    deck = RelativeDeck(gates, np.zeros(3))
+    out = []
+    for k in range(0, 10 * 50):
+        t = k / 50
+
+        def truth(s: float) -> tuple[np.ndarray, np.ndarray]:
+            run = min(max(s - 2.0, 0.0), 2.0)
+            x = 0.25 * run ** 2 + max(s - 4.0, 0.0) * 1.0
+            return np.array([x, 0.0, 0.0]), np.array([0.5 * run, 0.0, 0.0])
+
+        x, v = truth(t)
+        fix_t = math.floor(t * 10) / 10
+        fx, fv = truth(fix_t)
+        report = VehicleReport(t, x + np.array([0.0, 0.0, -1.5]), v, t, t, True, "OFFBOARD", 0.0, True)
+        carrier = CarrierObs(position_ned_m=fx + BIAS, velocity_ned_m_s=fv, age_s=t - fix_t, alive=True)
+        seen = Measurements().then((RelativePosition(capture_t_s=t, offset_ned_m=np.array([0.0, 0.0, 1.5]), sigma_m=0.02),))
+        out.append((t, *deck.observe(t, report, carrier, seen)))
+    return out
+
+
+def test_the_deck_acceleration_is_the_rate_of_its_estimated_velocity_when_asked():
+    """relnav.carrier_accel_tau_s > 0: the view carries the carrier's acceleration as the estimate
+    shows it, ~0.5 m/s^2 north while the deck pulls away at 0.5, ~0 while it stands or cruises
+    (the law would predict its limit all the while the carrier is under its speed limit); 0: none."""
+    ridden = _ride_a_ramp(0.3)
+    accel = {t: view.carrier_accel_ned_m_s2 for t, _, view in ridden}
+    standing = np.array([a for t, a in accel.items() if 1.0 <= t < 2.0])
+    pulling = np.array([a for t, a in accel.items() if 3.0 <= t < 4.0])
+    cruising = np.array([a for t, a in accel.items() if 7.0 <= t < 10.0])
+    assert np.abs(standing).max() < 0.05, standing.max(axis=0)
+    assert abs(float(pulling[:, 0].mean()) - 0.5) < 0.1 and np.abs(pulling[:, 1:]).max() < 0.05, pulling.mean(axis=0)
+    assert np.abs(cruising).max() < 0.1, np.abs(cruising).max(axis=0)
+    assert all(view.carrier_accel_ned_m_s2 is None for _, _, view in _ride_a_ramp(0.0)[-5:])
+
+
+def test_the_deck_velocity_slews_at_its_own_limit_when_configured_else_at_the_laws():
+    """relnav.velocity_slew_m_s2 is the limit of the deck's velocity shown to the phases; unset,
+    safety.carrier_max_accel_m_s2 (the law's): a rover that leaps from rest at ~2 m/s^2 was shown
+    pulling away at 1 m/s^2, 0.5 m/s behind the estimate's own velocity for 0.6 s on PX4."""
+    from mission.config.schema import load_config
+    from mission.model import mission_model
+    from tests.conftest import CONFIGS
+
+    cfg = load_config(CONFIGS / "relnav.toml")
+    gates = mission_model(cfg).relnav
+    assert gates is not None and gates.carrier_accel_m_s2 == cfg.safety.carrier_max_accel_m_s2 == 1.0
+    gates = mission_model(load_config(CONFIGS / "px4_sitl_relnav.toml")).relnav
+    assert gates is not None and gates.carrier_accel_m_s2 == 2.0
+    deck = RelativeDeck(gates, np.zeros(3))
+    deck.velocity = np.zeros(3)
+    shown = deck._slewed(np.array([1.0, 0.0, 0.0]), dt_s=0.25, on_deck=False)
+    np.testing.assert_allclose(shown, [0.5, 0.0, 0.0])  # 2 m/s^2 x 0.25 s, not 1 x 0.25

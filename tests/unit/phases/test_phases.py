@@ -253,6 +253,42 @@ def test_a_late_carrier_state_is_ridden_where_the_carrier_is_now_with_its_accele
     assert norm(a) == 0.0
 
 
+def test_riding_feeds_forward_the_estimated_deck_acceleration_not_the_laws_when_asked():
+    """configs/px4_sitl_relnav.toml (relnav.carrier_accel_tau_s > 0): a rover cruising at its own
+    1.1 m/s, under the law's 2 m/s, its state 0.3 s old. By the law it would be speeding up at
+    a_max: the ride led it by a_max x 0.3 s of velocity and a_max of acceleration, and rode 0.3-0.45 m
+    ahead of the deck on PX4. With the estimate's acceleration (here 0, and a vertical that a planar
+    carrier never has) the velocity fed forward is the carrier's, the acceleration the estimate's."""
+    from mission.phases.flying import _ridden_dock
+    from mission.phases.types import RelativeView
+
+    model = mission_model(load_config(CONFIGS / "px4_sitl_relnav.toml"))
+    assert model.relnav is not None and model.relnav.carrier_accel_tau_s > 0
+    a_max = model.tick.carrier_safety.max_accel_m_s2
+    speed = model.tick.carrier_safety.max_speed_m_s
+    assert a_max is not None and speed is not None and speed > 1.5
+    flat = np.array([*model.tick.target[:2], 0.0])
+    along = flat / norm(flat)
+    far = flat - 50.0 * along
+    vehicle = VehicleObs(np.zeros(3), np.zeros(3), True, "OFFBOARD", heartbeat_age_s=0.1)
+
+    def ridden(accel):
+        view = RelativeView(np.zeros(3), np.zeros(3), np.zeros(3), 0.02, True, 0.05,
+                            carrier_accel_ned_m_s2=None if accel is None else np.asarray(accel, float))
+        return _ridden_dock(Observation(1.0, vehicle, CarrierObs(far, 1.1 * along, 0.3), relative=view), model, True)
+
+    dock, v_now, a = ridden([0.0, 0.0, 0.4])
+    np.testing.assert_allclose(v_now, 1.1 * along, atol=1e-12)
+    np.testing.assert_allclose(a, np.zeros(3), atol=1e-12)
+    np.testing.assert_allclose(dock, far + 1.1 * 0.3 * along + model.dock_offset_ned_m, atol=1e-12)
+    _, v_now, a = ridden(0.5 * along)
+    np.testing.assert_allclose(v_now, (1.1 + 0.5 * 0.3) * along, atol=1e-12)
+    np.testing.assert_allclose(a, 0.5 * along, atol=1e-12)
+    _, v_now, a = ridden(None)  # no estimate of it: the law's, speeding up at a_max
+    np.testing.assert_allclose(v_now, (1.1 + a_max * 0.3) * along, atol=1e-9)
+    assert norm(a) == pytest.approx(a_max, rel=1e-6)
+
+
 def test_a_phase_is_defined_once_and_every_part_knows_it():
     """The Phase enum is the one list: the machine handles each (DONE and ABORT in its failsafes),
     the wire carries each by name, the carrier has a duty for each."""
