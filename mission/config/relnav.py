@@ -93,6 +93,19 @@ class RelnavSection(Section):
         description="[s] how far back a late measurement is still fused (replayed from its capture time)")
     converged_sigma_m: float = Field(0.1, gt=0, le=100,
         description="[m] the estimate counts as converged when its position's largest standard deviation is below this")
+    own_drift_sigma_m_s: float = Field(0.0, ge=0, le=10,
+        description=("[m/s] standard deviation of the rate at which the passenger's own position estimate drifts (its "
+                     "autopilot's estimate error changing; per horizontal axis, down times `relnav.vertical_factor`), "
+                     "a state of the filter: the deck moves at the carrier's velocity plus it in the passenger's "
+                     "frame, the carrier's GNSS velocity sees the carrier's alone, so through a marker loss the deck "
+                     "keeps the drift the marker showed (PX4 SITL's: "
+                     "~0.09 m/s horizontally, ~0.18 m/s down); 0: no such state (the GNSS velocity is the deck's)"))
+    own_drift_tau_s: float = Field(1.0, gt=0, le=600,
+        description="[s] correlation time of that drift rate (first-order Gauss-Markov)")
+    accel_vertical_factor: float = Field(1.0, ge=0.01, le=10,
+        description=("[-] the carrier's vertical acceleration noise over `relnav.accel_noise_m_s2` (a ground "
+                     "carrier on flat ground: small, so the marker's vertical rate is read as the passenger's own "
+                     "drift, `relnav.own_drift_sigma_m_s`, not as the carrier climbing)"))
 
     @model_validator(mode="after")
     def _descent_timeout(self) -> RelnavSection:
