@@ -21,7 +21,7 @@ if TYPE_CHECKING:
 
 #: ``[relnav]``'s fields that tell the phases how to use the estimate (not the estimator's tuning).
 PHASE_FIELDS = ("enabled", "marker_timeout_s", "descent_marker_timeout_s", "marker_memory_s", "search_s", "correction_rate_m_s", "seated_sigma_m",
-                "pending_limit_m", "landing_target_rate_hz")
+                "pending_limit_m", "landing_target_rate_hz", "deck_velocity_catch_up_per_s")
 
 
 class RelnavSection(Section):
@@ -61,6 +61,13 @@ class RelnavSection(Section):
                      "(the dock point in its local NED frame: its own position plus the relative estimate) as "
                      "LANDING_TARGET this often, for PX4's own precision landing as a backstop (docs/px4-precland.md); "
                      "0: never"))
+
+    deck_velocity_catch_up_per_s: float = Field(0.0, ge=0, le=100,
+        description=("[1/s] the deck's velocity the phases see changes by at most the carrier's acceleration limit "
+                     "(`safety.carrier_max_accel_m_s2`: the filter's noise, which the riding command would carry into "
+                     "the separation, is faster) plus this times how far it is behind the filter's velocity: a lag "
+                     "beyond the noise (a carrier pulling away at its limit from a lagging start, or braking "
+                     "harder than it, at a P3 guard) is caught up; 0: the limit alone"))
 
     accel_noise_m_s2: float = Field(0.5, gt=0, le=50,
         description=("[m/s^2/sqrt(Hz)] square root of the spectral density of the white relative acceleration "

@@ -111,17 +111,22 @@ class RelativeDeck:
 
     def _slewed(self, velocity: np.ndarray, dt_s: float, on_deck: bool) -> np.ndarray:
         """The deck's velocity [m/s] shown to the phases: the filter's, changing by at most the
-        carrier's acceleration limit (``gates.carrier_accel_m_s2``) over ``dt_s`` [s]. The carrier
-        cannot change its velocity faster, so what is faster is the filter's noise (each marker
-        moves it, ~0.06 m/s a tick at the 95th percentile while riding), which the riding
-        command would carry into the relative input at the separation."""
+        carrier's acceleration limit (``gates.carrier_accel_m_s2``) over ``dt_s`` [s], plus
+        ``gates.deck_velocity_catch_up_per_s`` times how far it is behind. The carrier does not
+        change its velocity faster in its normal driving, so what is faster is the filter's noise
+        (each marker moves it, ~0.06 m/s a tick at the 95th percentile while riding), which the
+        riding command would carry into the relative input at the separation. A lag of decimetres
+        a second is no noise: behind a carrier pulling away at its limit, a velocity limited to
+        that limit never catches up (0.2-0.7 m/s behind, the rider 0.5-0.65 m off its dock point
+        2 s into the ride), and a carrier stopping dead at its P3 guard was followed down at
+        1 m/s^2 (the rider 0.8-1 m past its dock point)."""
         limit = self.gates.carrier_accel_m_s2
         if self.velocity is None or limit is None or on_deck:
             self.velocity = velocity.copy()
             return self.velocity
         change = velocity - self.velocity
         size = float(np.linalg.norm(change))
-        step = limit * dt_s
+        step = (limit + self.gates.deck_velocity_catch_up_per_s * size) * dt_s
         self.velocity = velocity.copy() if size <= step else self.velocity + change * (step / size)
         return self.velocity
 

@@ -146,7 +146,8 @@ class RelnavGates:
     ``marker_offset_ned_m`` (3,) [m] NED, the marker's centre from the carrier's reference point
     (``vision.marker_offset_ned_m``, the dock point unless set); ``carrier_accel_m_s2`` [m/s^2] the
     carrier's acceleration limit (``safety.carrier_max_accel_m_s2``; None: unknown): the deck's
-    velocity the phases see changes no faster."""
+    velocity the phases see changes no faster, plus ``deck_velocity_catch_up_per_s`` [1/s] times
+    how far it is behind the filter's (a lag beyond the noise is caught up)."""
 
     params: RelnavParams
     marker_timeout_s: float
@@ -157,6 +158,7 @@ class RelnavGates:
     seated_sigma_m: float
     pending_limit_m: float
     marker_offset_ned_m: np.ndarray
+    deck_velocity_catch_up_per_s: float
     carrier_accel_m_s2: float | None = None
 
     def descent_blocked(self, rel: RelativeView | None, below: bool = False) -> str | None:
