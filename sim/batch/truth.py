@@ -66,6 +66,7 @@ def relnav_truth(cfg: Config, f: Flight) -> dict[str, Any]:
             "riding_horizontal_max_m": stat(ride_h, np.max), "riding_horizontal_median_m": stat(ride_h, np.median),
             "p1": s.get("p1"), "p2": s.get("p2"), "p3": s.get("p3"),
             "max_phase_switch_jump_m_s": s.get("max_phase_switch_jump_m_s"),
+            "relative_input_jump_m_s": s.get("relative_input_jump_m_s"),
             "true_deck_touches": int(np.count_nonzero(touches)), "go_arounds": f.go_arounds,
             "p1_legs": p1_legs, "worst_ride": _worst_ride(f, riding),
             "fallback": (rec.fallback_why or None) if rec is not None else None,
