@@ -21,7 +21,8 @@ if TYPE_CHECKING:
 
 #: ``[relnav]``'s fields that tell the phases how to use the estimate (not the estimator's tuning).
 PHASE_FIELDS = ("enabled", "marker_timeout_s", "descent_marker_timeout_s", "marker_memory_s", "search_s", "correction_rate_m_s", "seated_sigma_m",
-                "pending_limit_m", "landing_target_rate_hz", "carrier_accel_tau_s", "velocity_slew_m_s2")
+                "pending_limit_m", "landing_target_rate_hz", "carrier_accel_tau_s", "velocity_slew_m_s2",
+                "deck_velocity_catch_up_per_s")
 
 
 class RelnavSection(Section):
@@ -74,6 +75,13 @@ class RelnavSection(Section):
                      "LANDING_TARGET this often, for PX4's own precision landing as a backstop (docs/px4-precland.md); "
                      "0: never"))
 
+    deck_velocity_catch_up_per_s: float = Field(0.0, ge=0, le=100,
+        description=("[1/s] the deck's velocity the phases see changes by at most the carrier's acceleration limit "
+                     "(`safety.carrier_max_accel_m_s2`: the filter's noise, which the riding command would carry into "
+                     "the separation, is faster) plus this times how far it is behind the filter's velocity: a lag "
+                     "beyond the noise (a carrier pulling away at its limit from a lagging start, or braking "
+                     "harder than it, at a P3 guard) is caught up; 0: the limit alone"))
+
     accel_noise_m_s2: float = Field(0.5, gt=0, le=50,
         description=("[m/s^2/sqrt(Hz)] square root of the spectral density of the white relative acceleration "
                      "driving the constant-velocity model (per axis)"))
@@ -105,6 +113,19 @@ class RelnavSection(Section):
         description="[s] how far back a late measurement is still fused (replayed from its capture time)")
     converged_sigma_m: float = Field(0.1, gt=0, le=100,
         description="[m] the estimate counts as converged when its position's largest standard deviation is below this")
+    own_drift_sigma_m_s: float = Field(0.0, ge=0, le=10,
+        description=("[m/s] standard deviation of the rate at which the passenger's own position estimate drifts (its "
+                     "autopilot's estimate error changing; per horizontal axis, down times `relnav.vertical_factor`), "
+                     "a state of the filter: the deck moves at the carrier's velocity plus it in the passenger's "
+                     "frame, the carrier's GNSS velocity sees the carrier's alone, so through a marker loss the deck "
+                     "keeps the drift the marker showed (PX4 SITL's: "
+                     "~0.09 m/s horizontally, ~0.18 m/s down); 0: no such state (the GNSS velocity is the deck's)"))
+    own_drift_tau_s: float = Field(1.0, gt=0, le=600,
+        description="[s] correlation time of that drift rate (first-order Gauss-Markov)")
+    accel_vertical_factor: float = Field(1.0, ge=0.01, le=10,
+        description=("[-] the carrier's vertical acceleration noise over `relnav.accel_noise_m_s2` (a ground "
+                     "carrier on flat ground: small, so the marker's vertical rate is read as the passenger's own "
+                     "drift, `relnav.own_drift_sigma_m_s`, not as the carrier climbing)"))
 
     @model_validator(mode="after")
     def _descent_timeout(self) -> RelnavSection:

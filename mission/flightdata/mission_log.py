@@ -41,7 +41,7 @@ from mission.flightdata.writer import DataLog, LiveAddress, timestamp
 from mission.phases import Phase
 from mission.phases.types import RelativeView
 from mission.record.table import COLUMNS, TickRow
-from mission.relnav.kalman import B_, C_, W_
+from mission.relnav.kalman import B_, C_, D_, W_
 from mission.vision.camera import SeenFrame
 
 PHASES = [p.value for p in Phase]
@@ -96,7 +96,8 @@ def _block(p: Any, rows: slice, cols: slice) -> list[float] | None:
 def relnav_message(view: RelativeView) -> dict[str, Any]:
     """The ``marsupial.RelativeEstimate`` message of one tick's :class:`RelativeView`: its
     fields, and from its ``estimate`` (when it has one; else null) the velocities, the
-    covariance's blocks (state order: carrier position, velocity, bias) and the counts."""
+    covariance's blocks (state order: carrier position, velocity, bias, the passenger's drift; the
+    velocity's the carrier's in the passenger's frame, its own plus the drift) and the counts."""
     e = view.estimate
     out: dict[str, Any] = {
         "sample_t_s": None, "position": vector(view.position_ned_m), "velocity": None, "carrier_position": None,
@@ -112,12 +113,20 @@ def relnav_message(view: RelativeView) -> dict[str, Any]:
     out.update({
         "sample_t_s": clean(float(e.t_s)), "velocity": vector(e.velocity_ned_m_s),
         "carrier_position": vector(e.carrier_position_ned_m), "carrier_velocity": vector(e.carrier_velocity_ned_m_s),
-        "position_covariance_m2": _block(p, C_, C_), "velocity_covariance_m2_s2": _block(p, W_, W_),
+        "position_covariance_m2": _block(p, C_, C_), "velocity_covariance_m2_s2": _moving_covariance(p),
         "bias_covariance_m2": _block(p, B_, B_), "position_bias_covariance_m2": _block(p, C_, B_),
         "position_sigma": vector([math.sqrt(v) if v >= 0.0 else math.nan for v in diagonal]),
         "fused": dict(e.counts.fused), "rejected": dict(e.counts.rejected), "too_old": e.counts.too_old,
         "too_new": e.counts.too_new, "resets": e.counts.resets})
     return out
+
+
+def _moving_covariance(p: Any) -> list[float] | None:
+    """The covariance [m^2/s^2] of the carrier's velocity in the passenger's frame (its own plus the
+    passenger's drift: :mod:`mission.relnav.kalman`) from the filter's ``p``, as :func:`_block`."""
+    p = np.asarray(p, dtype=float)
+    moving = p[W_, W_] + p[W_, D_] + p[D_, W_] + p[D_, D_]
+    return _block(moving, slice(0, 3), slice(0, 3))
 
 
 def bc_circle(info: dict[str, Any], points: int = 72) -> np.ndarray:

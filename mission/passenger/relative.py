@@ -117,8 +117,8 @@ class RelativeDeck:
         """The carrier's acceleration [m/s^2] NED as the estimate shows it: the rate of the velocity
         shown to the phases (``before`` the last tick's, ``shown`` this one's, ``dt_s`` [s] apart),
         low-passed with ``gates.carrier_accel_tau_s`` (exact first-order step); None when that is 0.
-        The shown velocity changes at most at the carrier's acceleration limit, so this never
-        exceeds it. Zero standing on the deck (nothing rides it) and until a velocity was shown."""
+        The shown velocity changes at most at the carrier's acceleration limit (and the catch-up's
+        share, :meth:`_slewed`), and this no faster. Zero standing on the deck (nothing rides it) and until a velocity was shown."""
         tau = self.gates.carrier_accel_tau_s
         if tau <= 0:
             return None
@@ -131,17 +131,22 @@ class RelativeDeck:
 
     def _slewed(self, velocity: np.ndarray, dt_s: float, on_deck: bool) -> np.ndarray:
         """The deck's velocity [m/s] shown to the phases: the filter's, changing by at most the
-        carrier's acceleration limit (``gates.carrier_accel_m_s2``) over ``dt_s`` [s]. The carrier
-        cannot change its velocity faster, so what is faster is the filter's noise (each marker
-        moves it, ~0.06 m/s a tick at the 95th percentile while riding), which the riding
-        command would carry into the relative input at the separation."""
+        carrier's acceleration limit (``gates.carrier_accel_m_s2``) over ``dt_s`` [s], plus
+        ``gates.deck_velocity_catch_up_per_s`` times how far it is behind. The carrier does not
+        change its velocity faster in its normal driving, so what is faster is the filter's noise
+        (each marker moves it, ~0.06 m/s a tick at the 95th percentile while riding), which the
+        riding command would carry into the relative input at the separation. A lag of decimetres
+        a second is no noise: behind a carrier pulling away at its limit, a velocity limited to
+        that limit never catches up (0.2-0.7 m/s behind, the rider 0.5-0.65 m off its dock point
+        2 s into the ride), and a carrier stopping dead at its P3 guard was followed down at
+        1 m/s^2 (the rider 0.8-1 m past its dock point)."""
         limit = self.gates.carrier_accel_m_s2
         if self.velocity is None or limit is None or on_deck:
             self.velocity = velocity.copy()
             return self.velocity
         change = velocity - self.velocity
         size = float(np.linalg.norm(change))
-        step = limit * dt_s
+        step = (limit + self.gates.deck_velocity_catch_up_per_s * size) * dt_s
         self.velocity = velocity.copy() if size <= step else self.velocity + change * (step / size)
         return self.velocity
 

@@ -1,8 +1,8 @@
 """The relative estimator: where the deck is from the passenger, with no shared frame.
 
 :class:`RelativeEstimator` fuses, into the state of :mod:`mission.relnav.kalman` (the carrier's
-reference point and velocity in the passenger's GNSS frame, and the bias between the carrier's
-and the passenger's GNSS frames):
+reference point and velocity in the passenger's GNSS frame, the bias between the carrier's
+and the passenger's GNSS frames, and the drift rate of the passenger's own estimate):
 
 - the passenger's own estimate, every tick (:meth:`RelativeEstimator.tick`): it sets the time,
   and the relative position is the carrier's less it (the vehicle's own manoeuvres are an input,
@@ -11,6 +11,9 @@ and the passenger's GNSS frames):
   measurement time: its position sees ``c + b``, its velocity ``w``;
 - the marker (:meth:`RelativeEstimator.marker`), stamped with its capture time: the deck from the
   vehicle plus the vehicle's own position then sees ``c``;
+- with ``own_drift_sigma_m_s`` > 0, the passenger's own position estimate drifts at a rate ``d``,
+  a state: the deck moves in the passenger's frame at ``w + d`` (the marker shows it, the GNSS
+  velocity does not), which it keeps through a marker loss;
 - standing on the deck (:meth:`RelativeEstimator.seated`): the carrier where the vehicle stands,
   its height included, an error that stays the same for as long as it stands, so fused only up
   to its own standard deviation.
@@ -61,6 +64,9 @@ class RelnavParams:
     marker_reset_s: float
     history_s: float
     converged_sigma_m: float
+    own_drift_sigma_m_s: float
+    own_drift_tau_s: float
+    accel_vertical_factor: float
 
 
 @dataclass
@@ -116,7 +122,7 @@ class RelativeEstimator:
     def _prior(self) -> np.ndarray:
         p = self.params
         return np.diag([p.initial_sigma_m ** 2] * 3 + [p.initial_velocity_sigma_m_s ** 2] * 3
-                       + list(self._per_axis(p.bias_sigma_m) ** 2))
+                       + list(self._per_axis(p.bias_sigma_m) ** 2) + list(self._per_axis(p.own_drift_sigma_m_s) ** 2))
 
     def _per_axis(self, horizontal: float) -> np.ndarray:
         """A horizontal standard deviation per NED axis (the vertical one times ``vertical_factor``)."""
@@ -169,14 +175,15 @@ class RelativeEstimator:
         sigma = float(math.sqrt(max(float(np.max(np.linalg.eigvalsh(p[kalman.C_, kalman.C_]))), 0.0)))
         own = self._own[-1] if self._own else OwnSample(math.nan, np.full(3, math.nan), np.full(3, math.nan))
         now = own.t_s
+        moving = x[kalman.W_] + x[kalman.D_]  # the carrier's velocity in the passenger's frame (its own plus the drift)
         covariance = p.copy()
         covariance.flags.writeable = False  # the estimate is a record: its readers (the flight data's thread) share it
         return RelativeEstimate(
-            t_s=now, position_ned_m=x[kalman.C_] - own.position_ned_m, velocity_ned_m_s=x[kalman.W_] - own.velocity_ned_m_s,
+            t_s=now, position_ned_m=x[kalman.C_] - own.position_ned_m, velocity_ned_m_s=moving - own.velocity_ned_m_s,
             bias_ned_m=x[kalman.B_].copy(), covariance=covariance, position_sigma_m=sigma,
             converged=bool(self._own) and sigma < prm.converged_sigma_m,
             since_marker_s=now - self._marker_t_s if self._own else math.inf, counts=self.counts(),
-            carrier_position_ned_m=x[kalman.C_].copy(), carrier_velocity_ned_m_s=x[kalman.W_].copy())
+            carrier_position_ned_m=x[kalman.C_].copy(), carrier_velocity_ned_m_s=moving)
 
     def counts(self) -> Counts:
         """Measurements fused and rejected so far (each counted once, by its latest fusion)."""
@@ -289,9 +296,11 @@ class RelativeEstimator:
             prm = self.params
             if len(self._models) > 256:
                 self._models.clear()
-            model = self._models[dt] = (kalman.transition(dt, prm.bias_tau_s),
-                                        kalman.process_noise(dt, prm.accel_noise_m_s2, self._per_axis(prm.bias_sigma_m),
-                                                             prm.bias_tau_s))
+            accel = np.array([1.0, 1.0, prm.accel_vertical_factor]) * prm.accel_noise_m_s2
+            model = self._models[dt] = (kalman.transition(dt, prm.bias_tau_s, prm.own_drift_tau_s),
+                                        kalman.process_noise(dt, accel, self._per_axis(prm.bias_sigma_m),
+                                                             prm.bias_tau_s, self._per_axis(prm.own_drift_sigma_m_s),
+                                                             prm.own_drift_tau_s))
         self._x, self._p = kalman.predict(self._x, self._p, *model)
         self._t_s = t_s
 

@@ -97,14 +97,15 @@ class RelativeEstimate:
 
     position_ned_m (3,): the carrier's reference point minus the vehicle's [m], NED axes (the
     truth's estimate: what the marker measures, not what the GNSS difference says);
-    velocity_ned_m_s (3,): its rate, the carrier's velocity minus the vehicle's [m/s];
+    velocity_ned_m_s (3,): its rate, the carrier's velocity in the passenger's frame (its own plus
+    the drift of the passenger's estimate) minus the vehicle's [m/s];
     bias_ned_m (3,): the carrier's GNSS frame minus the passenger's [m] (the GNSS difference
     minus the relative position);
-    covariance (9, 9): the filter's, of its state (the carrier's reference point [m], its velocity
-    [m/s], the bias [m]) in that order, so of (position, velocity, bias) above (the vehicle's own
-    state is an input, known: the relative position's covariance is the carrier's, its velocity's
-    the carrier velocity's); blocks in [m^2], [m^2/s^2], [m^2] on the diagonal, [m^2/s] between a
-    position and a velocity; a read-only copy;
+    covariance (12, 12): the filter's, of its state (the carrier's reference point [m], its own
+    velocity [m/s], the bias [m], the passenger's own drift rate [m/s]) in that order (the vehicle's
+    own state is an input, known: the relative position's covariance is the carrier's; the
+    relative velocity is the carrier's plus the drift, less the vehicle's); blocks in [m^2],
+    [m^2/s^2], [m^2], [m^2/s^2] on the diagonal; a read-only copy;
     position_sigma_m: the position's largest standard deviation [m];
     converged: ``position_sigma_m`` is below the configured threshold;
     since_marker_s: time since the capture of the newest marker fused [s] (inf: none yet);

@@ -55,6 +55,8 @@ def relnav_truth(cfg: Config, f: Flight) -> dict[str, Any]:
                & (horizontal <= r.deck_radius_m) & out_of_contact)
     seen = _vec(f, "since_marker")[:, 0] <= cfg.relnav.marker_timeout_s
     s, rec = f.summary, f.state.recovery
+    p1_legs = [{k: leg.get(k) for k in ("leg", "p1", "max_offset_before_separation_m", "departure_delay_s")}
+               for leg in s.get("legs") or []]
 
     def stat(v: np.ndarray, how) -> float | None:
         return round(float(how(v)), 4) if v.size else None
@@ -64,7 +66,37 @@ def relnav_truth(cfg: Config, f: Flight) -> dict[str, Any]:
             "riding_horizontal_max_m": stat(ride_h, np.max), "riding_horizontal_median_m": stat(ride_h, np.median),
             "p1": s.get("p1"), "p2": s.get("p2"), "p3": s.get("p3"),
             "max_phase_switch_jump_m_s": s.get("max_phase_switch_jump_m_s"),
+            "relative_input_jump_m_s": s.get("relative_input_jump_m_s"),
             "true_deck_touches": int(np.count_nonzero(touches)), "go_arounds": f.go_arounds,
+            "p1_legs": p1_legs, "worst_ride": _worst_ride(f, riding),
             "fallback": (rec.fallback_why or None) if rec is not None else None,
             "marker_in_view_s": round(float(seen.sum() * (t[1] - t[0])), 1) if len(t) > 1 else 0.0,
             "duration_s": round(float(t[-1]), 1)}
+
+
+def _worst_ride(f: Flight, riding: np.ndarray) -> dict[str, Any] | None:
+    """Where the riding offset by the estimate (the vehicle's own position against the phases'
+    dock point, P1's figure) was largest: its time [s], since the ride began [s], the offset
+    [m] NED, the true carrier's speed [m/s] and acceleration [m/s^2], the phases' carrier
+    velocity less the true one (horizontal) [m/s], the relative estimate's error [m], the
+    marker's age [s]. None: no riding tick."""
+    t = f.record.t
+    if not riding.any():
+        return None
+    off = _vec(f, "x_p") - _vec(f, "dock")
+    size = np.where(riding, np.linalg.norm(off, axis=1), -1.0)
+    size = np.where(np.isfinite(size), size, -1.0)
+    k = int(np.argmax(size))
+    start = k
+    while start > 0 and riding[start - 1]:
+        start -= 1
+    v_true = np.gradient(_vec(f, "x_c_true"), t, axis=0)
+    a_true = np.gradient(v_true, t, axis=0)
+    dv = _vec(f, "v_c")[k] - v_true[k]
+    return {"t_s": round(float(t[k]), 2), "into_ride_s": round(float(t[k] - t[start]), 2),
+            "offset_ned_m": [round(float(x), 3) for x in off[k]],
+            "carrier_speed_m_s": round(float(np.hypot(*v_true[k, :2])), 3),
+            "carrier_accel_m_s2": round(float(np.hypot(*a_true[k, :2])), 3),
+            "deck_velocity_error_m_s": round(float(np.hypot(*dv[:2])), 3),
+            "relative_error_m": round(float(np.linalg.norm(_vec(f, "rel_est")[k] - _vec(f, "rel_true")[k])), 3),
+            "marker_age_s": round(float(_vec(f, "since_marker")[k, 0]), 2)}

@@ -122,6 +122,6 @@ def average_nees(params: RelnavParams, runs: int) -> tuple[np.ndarray, np.ndarra
             k = int(round(t / 0.1))
             e = est[k]
             err = np.concatenate([e.position_ned_m, e.velocity_ned_m_s, e.bias_ned_m]) - world.truth[k]
-            n9[j] += err @ np.linalg.solve(e.covariance, err) / runs
+            n9[j] += err @ np.linalg.solve(e.covariance[:9, :9], err) / runs
             n3[j] += err[:3] @ np.linalg.solve(e.covariance[:3, :3], err[:3]) / runs
     return n9, n3

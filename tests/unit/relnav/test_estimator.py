@@ -54,7 +54,7 @@ def test_the_marker_removes_the_bias():
     last = est[-1]
     # the bias is estimated within 3 sigma of its own covariance (0.16 m, 0.24 m down: the GNSS
     # noise against the drift the model allows), the relative position much better (the marker)
-    bias_sigma = np.sqrt(np.diag(last.covariance)[6:])
+    bias_sigma = np.sqrt(np.diag(last.covariance)[6:9])
     assert np.all(np.abs(last.bias_ned_m - BIAS) < 3 * bias_sigma), (last.bias_ned_m, bias_sigma)
     assert np.all(bias_sigma < 0.2 * np.array([1.0, 1.0, PARAMS.vertical_factor])), bias_sigma
     assert last.converged and last.position_sigma_m < PARAMS.converged_sigma_m
