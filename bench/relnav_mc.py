@@ -54,7 +54,7 @@ def draw(cfg: Config, rng: np.random.Generator, k: int) -> tuple[dict[str, Any],
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("config")
-    ap.add_argument("--scenarios", type=int, default=20)
+    ap.add_argument("--scenarios", type=int, default=20, help="scenarios drawn: 0 .. N-1 (the range's end with --first)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--estimate-error", type=float, default=VehicleOptions.estimate_error,
                     help="the vehicle's estimate errors, a multiple of PX4 SITL's (0: exact); default: the demo's")
@@ -62,6 +62,9 @@ def main() -> None:
     ap.add_argument("--only", type=int, nargs="+", help="fly only these scenarios (their draws as in the batch)")
     ap.add_argument("--jsonl", help="also write each scenario's line here")
     args = ap.parse_args()
+    if not args.only and args.first >= args.scenarios:
+        ap.error(f"--first {args.first} flies nothing: scenarios {args.first} .. {args.scenarios - 1} "
+                 "(--scenarios is the range's end, not its length)")
     cfg = load_config(args.config)
     rng = np.random.default_rng(args.seed)
     rows = []
