@@ -151,14 +151,21 @@ def _carrier_acceleration(obs: Observation, m: MissionModel) -> np.ndarray:
     velocity), that one, horizontal for a planar carrier: the SIH rover cruises at its own speed,
     under the law's limit, and stands ~2 s before it moves off, where the law's prediction had the
     riding passenger 0.3-0.45 m ahead of the deck (docs/relnav.md, "Where the PX4 ride lost 0.3 m")."""
+    a = _measured_acceleration(obs, m)
+    return _law_acceleration(obs, m) if a is None else _capped(a, m)
+
+
+def _capped(a: np.ndarray, m: MissionModel) -> np.ndarray:
+    """A measured acceleration [m/s^2] capped at the passenger's own ``max_accel_m_s2``."""
+    cap = m.command_safety.max_accel_m_s2
+    size = float(norm(a))
+    return a * (cap / size) if cap is not None and size > cap else a
+
+
+def _law_acceleration(obs: Observation, m: MissionModel) -> np.ndarray:
+    """The carrier's acceleration [m/s^2] NED as its law asks it (:func:`_carrier_acceleration`)."""
     c = obs.carrier
     assert c is not None  # riding: the carrier was checked
-    a_est = _estimated_acceleration(obs, m)
-    if c.acceleration_ned_m_s2 is not None or a_est is not None:
-        a = np.asarray(c.acceleration_ned_m_s2 if c.acceleration_ned_m_s2 is not None else a_est, dtype=float)
-        cap = m.command_safety.max_accel_m_s2
-        size = float(norm(a))
-        return a * (cap / size) if cap is not None and size > cap else a
     h = m.carrier_dt_s
     horizon = max(m.carrier_accel_horizon_s, h)
     nxt = carrier_tick(c.position_ned_m + c.velocity_ned_m_s * h, False, _carrier_tick_model(obs, m),
@@ -166,10 +173,14 @@ def _carrier_acceleration(obs: Observation, m: MissionModel) -> np.ndarray:
     return (np.asarray(nxt.u, dtype=float) - c.velocity_ned_m_s) / horizon
 
 
-def _estimated_acceleration(obs: Observation, m: MissionModel) -> np.ndarray | None:
-    """The carrier's acceleration [m/s^2] NED from the relative estimate (``obs.relative``), its
-    vertical zero for a planar carrier (the passenger's own height estimate drifts, the ground
-    does not); None when the estimate gives none."""
+def _measured_acceleration(obs: Observation, m: MissionModel) -> np.ndarray | None:
+    """The carrier's acceleration [m/s^2] NED as measured, not as its law predicts it: the one it
+    sent, else the relative estimate's (``obs.relative``), that one's vertical zero for a planar
+    carrier (the passenger's own height estimate drifts, the ground does not); None when neither
+    gives one."""
+    c = obs.carrier
+    if c is not None and c.acceleration_ned_m_s2 is not None:
+        return np.asarray(c.acceleration_ned_m_s2, dtype=float)
     rel = obs.relative
     if rel is None or rel.carrier_accel_ned_m_s2 is None:
         return None
@@ -195,11 +206,12 @@ def _ridden_dock(obs: Observation, m: MissionModel, fresh: bool) -> tuple[np.nda
     dock, v = dock_point(obs, m), np.asarray(c.velocity_ned_m_s, dtype=float)
     if not fresh:
         return dock, v, ZERO
-    a = _carrier_acceleration(obs, m)
+    measured = _measured_acceleration(obs, m)
+    a = _law_acceleration(obs, m) if measured is None else _capped(measured, m)  # _carrier_acceleration's
     age = min(max(float(c.age_s), 0.0), m.carrier_timeout_s)
     if age <= 0.0:
         return dock, v, a
-    if c.acceleration_ned_m_s2 is not None or _estimated_acceleration(obs, m) is not None:
+    if measured is not None:  # not the law's: the sample moves on with it
         v_now = v + a * age
     else:
         x_now = np.asarray(c.position_ned_m, dtype=float) + v * age

@@ -72,8 +72,8 @@ ASK_PERIOD_S = 1.0  # [s] the streams are asked again until they arrive
 class Px4Truths:
     """SIH's truth (HIL_STATE_QUATERNION), the estimate (LOCAL_POSITION_NED) and the EKF origin of
     several PX4 SITLs, received on their GCS links' one port; each stamped with its receive time
-    on ``time.monotonic`` [s]. :meth:`newest` the newest truth of a system; :meth:`wait_truth`
-    blocks until one of ``sysid`` newer than a time arrives."""
+    on ``time.monotonic`` [s]. :meth:`newest` the newest truth of a system; :meth:`wait_newer`
+    blocks until one of several systems' is newer than its given time."""
 
     def __init__(self, sysids: list[int], rate_hz: float, bind: tuple[str, int] = ("127.0.0.1", GCS_PORT)) -> None:
         self.sysids, self.rate_hz = list(sysids), rate_hz
@@ -149,20 +149,6 @@ class Px4Truths:
         with self._cond:
             got = self.truth.get(sysid)
             return got[-1] if got else None
-
-    def wait_truth(self, sysid: int, after_s: float, timeout_s: float) -> tuple[float, Any] | None:
-        """The newest truth of ``sysid`` received after ``after_s`` [s, monotonic], waiting at most
-        ``timeout_s`` [s] for one; None if none came."""
-        deadline = time.monotonic() + timeout_s
-        with self._cond:
-            while True:
-                got = self.truth.get(sysid)
-                if got and got[-1][0] > after_s:
-                    return got[-1]
-                left = deadline - time.monotonic()
-                if left <= 0 or self._stop.is_set():
-                    return None
-                self._cond.wait(left)
 
     def wait_newer(self, after_s: dict[int, float], timeout_s: float) -> dict[int, tuple[float, Any]]:
         """The newest truth of each system of ``after_s`` received after its time [s, monotonic],
