@@ -16,7 +16,9 @@ docs/relnav.md.
   fallbacks at decimetres (moving-base RTK), stamped with its measurement time and published
   ``latency_s`` +- ``jitter_s`` later; and its heading with white noise;
 - :class:`ErringCarrier`: a carrier backend whose own state is what :class:`CarrierGnss`
-  publishes of the wrapped backend's true state (the carrier steers on it and publishes it).
+  publishes of the wrapped backend's true state (the carrier steers on it and publishes it),
+  with the wrapped backend's velocity as the robot's inertial one (what its acceleration is
+  measured from: an autopilot's velocity comes from its IMU, not only from the fixes).
 
 Units SI, NED, simulated seconds.
 """
@@ -132,8 +134,9 @@ class CarrierGnss:
 class ErringCarrier:
     """A carrier backend (:class:`mission.carrier.backends.CarrierBackend`) whose own state is the
     newest fix :class:`CarrierGnss` has published of ``inner``'s true state: the
-    carrier steers on it and publishes it, as a real one does with its GNSS. Everything else is
-    ``inner``'s; :attr:`truth` is ``inner``'s own state."""
+    carrier steers on it and publishes it, as a real one does with its GNSS. Its ``inertial`` state
+    (:class:`~mission.carrier.backends.OwnState`) is ``inner``'s.
+    Everything else is ``inner``'s; :attr:`truth` is ``inner``'s own state."""
 
     def __init__(self, inner: CarrierBackend, cfg: CarrierGnssSection) -> None:
         self.inner, self.gnss = inner, CarrierGnss(cfg)
@@ -153,7 +156,9 @@ class ErringCarrier:
                 if self._latest is None or fix.t_s > self._latest.t_s:
                     self._latest = fix
         f = self._latest
-        return None if f is None else OwnState(f.t_s, f.position_ned_m.copy(), f.velocity_ned_m_s.copy(), self._yaw_rad)
+        if f is None:
+            return None
+        return OwnState(f.t_s, f.position_ned_m.copy(), f.velocity_ned_m_s.copy(), self._yaw_rad, inertial=truth)
 
     def advance(self, dt_s: float) -> None:
         self.inner.advance(dt_s)

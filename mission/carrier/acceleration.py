@@ -12,6 +12,9 @@ import math
 
 import numpy as np
 
+from mission.carrier.backends import OwnState
+from mission.carrier.tracking import along_heading
+
 
 class AccelerationEstimate:
     """Low-passed difference of velocity samples; :meth:`update` once per control tick."""
@@ -45,3 +48,22 @@ class AccelerationEstimate:
     def reset(self) -> None:
         """Forget everything (the own state went stale: the next difference would span the gap)."""
         self._last, self.value = None, None
+
+
+def inertial_sample(state: OwnState, velocity_ned_m_s: np.ndarray, dim: int, along: bool) -> tuple[float, np.ndarray]:
+    """The time [s] and velocity [m/s] NED (3,) the carrier's acceleration is measured from: where
+    its ``state`` is a GNSS fix, the robot's inertial state's (``state.inertial``: its first
+    ``dim`` axes; for a robot that moves ``along`` its heading, the part along its own heading);
+    else the ``velocity_ned_m_s`` the carrier publishes, at the state's time. Differentiated from
+    10 Hz fixes with 0.2 m/s of noise the acceleration swung past the passenger's HOLDOFF limit at
+    every tick, and the fixes' 0.2 s latency puts it that late behind a rover's pull-away, which
+    is what the riding passenger feeds it forward for (docs/relnav.md, "The rover's own
+    acceleration")."""
+    nav = state.inertial
+    if nav is None:
+        return state.t_s, velocity_ned_m_s
+    v = np.zeros(3)
+    v[:dim] = np.asarray(nav.velocity_ned_m_s, dtype=float)[:dim]
+    if along and nav.yaw_rad is not None:
+        v = along_heading(v, nav.yaw_rad)
+    return nav.t_s, v

@@ -38,7 +38,7 @@ from typing import Any, Protocol
 import numpy as np
 import zenoh
 
-from mission.carrier.acceleration import AccelerationEstimate
+from mission.carrier.acceleration import AccelerationEstimate, inertial_sample
 from mission.carrier.backends import CarrierBackend, OwnState
 from mission.carrier.guard import GuardParams
 from mission.carrier.heard import ClosestPair, TeamHeard, hear
@@ -255,9 +255,14 @@ class CarrierController:
         if state is None:
             return None
         p, v = state.position_ned_m + self._alignment, state.velocity_ned_m_s.copy()
+        inertial = state.inertial
         if self.planar and self.dim == 3:
             p[2], v[2] = self.cfg.scenario.carrier_start[2], 0.0
-        return OwnState(state.t_s, p, v, state.yaw_rad)
+            if inertial is not None:
+                flat = np.array(inertial.velocity_ned_m_s, dtype=float)
+                flat[2] = 0.0
+                inertial = OwnState(inertial.t_s, inertial.position_ned_m, flat, inertial.yaw_rad)
+        return OwnState(state.t_s, p, v, state.yaw_rad, inertial)
 
     def _align_on_deck(self) -> None:
         """carrier.align_on_deck_m > 0: while the passenger still stands on the deck (PREFLIGHT ..
@@ -361,7 +366,8 @@ class CarrierController:
             velocity = along_heading(velocity, fresh.yaw_rad)  # no sideslip: the estimator's wander removed
         if self._velocity_fix is not None:  # consistent with its position (mission.core.consistent_velocity)
             velocity = self._velocity_fix.update(fresh.t_s, pad3(fresh.position_ned_m[:self.dim]), velocity)
-        accel = None if self._acceleration is None else self._acceleration.update(fresh.t_s, velocity)
+        accel = None if self._acceleration is None else self._acceleration.update(
+            *inertial_sample(fresh, velocity, self.dim, self.tracking.kind != "holonomic"))
         out = CarrierState(fresh.t_s, self.seq, "local_ned", pad3(fresh.position_ned_m[:self.dim]), velocity,
                            fresh.yaw_rad, accel, None if self.team is None else self.team.target_ned_m())
         if self.cfg.carrier.align_on_deck_m > 0 and not self._aligned:

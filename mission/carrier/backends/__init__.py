@@ -31,12 +31,19 @@ __all__ = ["KINDS", "BackendKind", "CarrierBackend", "OwnState", "describe", "op
 @dataclass(frozen=True)
 class OwnState:
     """The carrier's own state: t_s [s] clock time of the measurement; position_ned_m (3,) [m]
-    and velocity_ned_m_s (3,) [m/s] in the shared local NED frame; yaw_rad [rad] or None."""
+    and velocity_ned_m_s (3,) [m/s] in the shared local NED frame; yaw_rad [rad] or None.
+
+    inertial: where the state is a GNSS fix (the simulators' world errors,
+    :class:`sim.gnss.ErringCarrier`), the robot's own navigation state now, as its autopilot's
+    inertial estimate has it (timely, no fix's latency or noise; a velocity has no frame origin to
+    be off by), the carrier's measured acceleration is taken from (``carrier.acceleration_tau_s``);
+    None: the state is that estimate already (every real backend)."""
 
     t_s: float
     position_ned_m: np.ndarray
     velocity_ned_m_s: np.ndarray
     yaw_rad: float | None
+    inertial: OwnState | None = None
 
 
 class CarrierBackend(Protocol):

@@ -110,6 +110,8 @@ def test_an_erring_carrier_publishes_its_newest_fix():
     inner.t_s = 0.25
     state = carrier.own_state()
     assert state is not None and state.t_s == pytest.approx(0.0)  # measured 0.2 s before
+    assert state.inertial is not None and state.inertial.t_s == 0.25  # its own navigation state: now, exact
+    assert state.inertial.yaw_rad == 0.5 and np.array_equal(state.inertial.position_ned_m, [3.0, 4.0, 0.0])
     assert state.yaw_rad is not None and 0.0 < abs(state.yaw_rad - 0.5) < 0.2  # its heading, 2 deg of noise
     quiet = ErringCarrier(inner, CarrierGnssSection(enabled=True, heading_sigma_deg=0.0, seed=2))
     assert quiet.own_state() is None
