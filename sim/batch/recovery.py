@@ -41,6 +41,7 @@ from typing import Any
 import numpy as np
 
 from mission.core.records import replace
+from mission.carrier.acceleration import AccelerationEstimate
 from mission.carrier.backends.sim import KinematicRobot
 from mission.carrier.modes import CarrierMode, PassengerView
 from mission.carrier.step import CarrierStepper
@@ -155,6 +156,10 @@ class KinematicCarrier:
         # [world.carrier_gnss] enabled: what it publishes is its GNSS fixes, with their errors (it steers on its truth)
         self.gnss = CarrierGnss(cfg.world.carrier_gnss) if cfg.world.carrier_gnss.enabled else None
         self.fixes: list[GnssFix] = []
+        # carrier.acceleration_tau_s > 0: it sends its measured acceleration, as the controller does
+        # (of its robot's own velocity: mission.carrier.acceleration.inertial_sample)
+        tau = cfg.carrier.acceleration_tau_s
+        self.acceleration = AccelerationEstimate(tau) if tau > 0 else None
 
     @property
     def model(self) -> TickModel:
@@ -200,6 +205,10 @@ class KinematicCarrier:
                 course = self._scenario_course(t_s, approach_s)
         cmd = self.stepper.decide(self.robot.state_at(t_s), dt, 0.0, t_s, course).tracked
         self.robot.command(cmd)
+        # the robot now holds the new command (the controller's order); the step at 0 is none of the
+        # controller's (its first tick comes one period later, its first sample of the velocity)
+        if self.acceleration is not None and self.done > 1:
+            self.acceleration.update(t_s, self.robot.state_at(t_s).velocity_ned_m_s)
         return cmd
 
     def _scenario_course(self, t_s: float, approach_s: float | None) -> np.ndarray:
@@ -224,9 +233,17 @@ class KinematicCarrier:
             fix = max(self.fixes, key=lambda f: f.t_s)
             self.fixes = [fix]
             return CarrierObs(position_ned_m=fix.position_ned_m.copy(), velocity_ned_m_s=fix.velocity_ned_m_s.copy(),
-                              age_s=max(t_s - fix.t_s, 0.0), alive=True, yaw_rad=self.gnss.heading(self.yaw_rad))
+                              age_s=max(t_s - fix.t_s, 0.0), alive=True, yaw_rad=self.gnss.heading(self.yaw_rad),
+                              acceleration_ned_m_s2=self._sent_acceleration())
         return CarrierObs(position_ned_m=self.position.copy(), velocity_ned_m_s=self.velocity.copy(),
-                          age_s=max(t_s - self.t_s, 0.0), alive=True, yaw_rad=self.yaw_rad)
+                          age_s=max(t_s - self.t_s, 0.0), alive=True, yaw_rad=self.yaw_rad,
+                          acceleration_ned_m_s2=self._sent_acceleration())
+
+    def _sent_acceleration(self) -> np.ndarray | None:
+        """The acceleration [m/s^2] NED it sends (None: none, ``carrier.acceleration_tau_s`` 0, or
+        fewer than two steps yet)."""
+        a = None if self.acceleration is None else self.acceleration.value
+        return None if a is None else a.copy()
 
 
 # ---------------------------------------------------------------------------------------- vehicle
