@@ -18,7 +18,8 @@ in this order, from the rover's true motion then and the estimate:
 
 Per leg it prints the ticks over and their causes, the median offset along the rover's path while
 it cruises (positive: the passenger ahead), and the estimate's error (median, and over the ticks
-over). ``PYTHONPATH=. python -m bench.px4_relnav_ride DIR...``.
+over). ``PYTHONPATH=. python -m bench.px4_relnav_ride DIR...``; ``--trace N [--span A B]`` prints leg N's
+ride every 0.1 s instead (:func:`trace`).
 """
 from __future__ import annotations
 
@@ -125,11 +126,57 @@ def causes(directory: Path, over_m: float = 0.3) -> list[dict[str, Any]]:
     return out
 
 
+def trace(directory: Path, leg_k: int, span_s: tuple[float, float], step_s: float = 0.1) -> list[dict[str, float]]:
+    """Leg ``leg_k``'s ride in ``directory`` every ``step_s`` [s] over ``span_s`` [s] into it: the
+    true offset from the dock point [m] (north, east, size), and north/east velocities [m/s] of
+    the rover (true), the passenger (true), the deck as the phases saw it (``v_c``) and the
+    command (``u_cmd``)."""
+    cfg = load_config(directory / "config.toml")
+    offset_s = json.loads((directory / "clock_offset.json").read_text())["unix_minus_monotonic_s"]
+    rec = _on_monotonic(directory / PAIR_DIR, offset_s)
+    if rec is None:
+        return []
+    _, passenger = _read_truth(directory / "truth-passenger.csv")
+    _, rover = _read_truth(directory / "truth-rover.csv")
+    rover_v, passenger_v = _rover_velocity(directory / "truth-rover.csv"), _rover_velocity(directory / "truth-passenger.csv")
+    slot = np.asarray(cfg.mission.dock_offset_ned_m, dtype=float)
+    out: list[dict[str, float]] = []
+    for leg in rec[0].legs():
+        lr = leg.record
+        if leg.k != leg_k or lr is None or not (lr.phase == "RIDING").any():
+            continue
+        riding = lr.phase == "RIDING"
+        t_all = lr.t[riding] + rec[1]
+        deck, cmd = lr.vec("v_c")[riding], lr.vec("u_cmd")[riding]
+        for t in np.arange(t_all[0] + span_s[0], min(t_all[0] + span_s[1], t_all[-1]) + 1e-9, step_s):
+            i = int(np.searchsorted(t_all, t))
+            i = min(i, len(t_all) - 1)
+            off = (_at(passenger, np.array([t])) - (_at(rover, np.array([t])) + slot))[0, :2]
+            row = {"s": round(float(t - t_all[0]), 2), "off_n": float(off[0]), "off_e": float(off[1]),
+                   "off": float(np.hypot(*off))}
+            for name, series in (("rover", rover_v), ("passenger", passenger_v)):
+                for j, axis in ((1, "n"), (2, "e")):
+                    row[f"{name}_v{axis}"] = float(np.interp(t, series[:, 0], series[:, j]))
+            for name, vec in (("deck", deck), ("cmd", cmd)):
+                row[f"{name}_vn"], row[f"{name}_ve"] = float(vec[i, 0]), float(vec[i, 1])
+            out.append({k: round(v, 3) for k, v in row.items()})
+    return out
+
+
 @click.command()
 @click.argument("flights", nargs=-1, type=click.Path(file_okay=False, exists=True))
 @click.option("--over", "over_m", type=float, default=0.3, show_default=True, help="[m] the riding offset counted")
-def main(flights: tuple[str, ...], over_m: float) -> None:
+@click.option("--trace", "trace_leg", type=int, default=None,
+              help="Instead: print leg N's ride every 0.1 s over --span (the offset, the rover's, the passenger's, "
+                   "the deck's and the command's velocities) of each flight.")
+@click.option("--span", type=(float, float), default=(0.0, 4.0), show_default=True, help="[s] into the ride, with --trace")
+def main(flights: tuple[str, ...], over_m: float, trace_leg: int | None, span: tuple[float, float]) -> None:
     """Print, per leg of each flight, where its true riding offset went over --over."""
+    if trace_leg is not None:
+        for d in flights:
+            for row in trace(Path(d), trace_leg, span):
+                click.echo(f"{Path(d).name} {json.dumps(row)}")
+        return
     total: dict[str, int] = {}
     for d in flights:
         for row in causes(Path(d), over_m):
