@@ -1,8 +1,9 @@
 """One carrier step in one place: ``marsupial carrier``'s controller on its built-in robot, hearing
 a scripted passenger over real Zenoh, and the recovery simulation's carrier
-(sim/batch/recovery.py's KinematicCarrier) told the same phases, command the same velocity and
-stand at the same place every tick, and send the same measured acceleration, through a deploy, a recovery course with a turn, the guard's
-circle, parking and riding again. The carrier steps on a manual clock."""
+(sim/batch/recovery.py's KinematicCarrier) told the same phases, command the same velocity,
+stand at the same place and send the same measured acceleration every tick, through a deploy, a
+recovery course with a turn, the guard's circle, parking and riding again. The carrier steps on a
+manual clock."""
 from __future__ import annotations
 
 import math
