@@ -20,7 +20,7 @@ BIAS = np.array([2.0, -1.0, 0.0])  # [m] the carrier's GNSS frame over the passe
 
 def _gates(marker_offset_ned_m=(0.0, 0.0, 0.0)) -> RelnavGates:
     section = RelnavSection(enabled=True)
-    return derived(RelnavGates, section, params=section.params(), marker_offset_ned_m=np.asarray(marker_offset_ned_m, float))
+    return derived(RelnavGates, section, params=section.params(), deck_radius_m=0.5, marker_offset_ned_m=np.asarray(marker_offset_ned_m, float))
 
 
 def _fly(deck: RelativeDeck, t0: float, t1: float, marker: bool, measurements: Measurements) -> list:
@@ -162,7 +162,7 @@ def test_the_approachs_pending_limit_is_the_configurations():
     """``relnav.pending_limit_m`` (declared in the schema, once) decides when the estimate's jumps
     count as taken in."""
     section = RelnavSection(enabled=True, pending_limit_m=0.05)
-    gates = derived(RelnavGates, section, params=section.params(), marker_offset_ned_m=np.zeros(3))
+    gates = derived(RelnavGates, section, params=section.params(), deck_radius_m=0.5, marker_offset_ned_m=np.zeros(3))
     view = lambda pending: RelativeView(np.zeros(3), np.zeros(3), np.array([pending, 0.0, 0.0]), 0.02, True, 0.0)  # noqa: E731
     assert gates.taken_in(view(0.04)) and not gates.taken_in(view(0.1))
     assert RelnavSection().pending_limit_m == 0.3
@@ -259,7 +259,7 @@ def _stop_dead(catch_up_per_s: float) -> float:
     2 m/s stops dead (as at its P3 guard: in one step), the vehicle hovering where it was, the
     marker at 30 Hz and GNSS at 10 Hz telling it, with configs/relnav.toml's estimator."""
     section = RelnavSection(enabled=True, accel_noise_m_s2=1.0, deck_velocity_catch_up_per_s=catch_up_per_s)
-    gates = derived(RelnavGates, section, params=section.params(), marker_offset_ned_m=np.zeros(3), carrier_accel_m_s2=1.0)
+    gates = derived(RelnavGates, section, params=section.params(), deck_radius_m=0.5, marker_offset_ned_m=np.zeros(3), carrier_accel_m_s2=1.0)
     deck = RelativeDeck(gates, np.zeros(3))
     measurements, stop = Measurements(), 5.0
     shown = None
