@@ -126,6 +126,13 @@ class RelnavSection(Section):
         description=("[-] the carrier's vertical acceleration noise over `relnav.accel_noise_m_s2` (a ground "
                      "carrier on flat ground: small, so the marker's vertical rate is read as the passenger's own "
                      "drift, `relnav.own_drift_sigma_m_s`, not as the carrier climbing)"))
+    range_gate_nis: float = Field(10.83, gt=0, le=10_000,
+        description=("[-] a downward range (the feed `rangefinder`) whose normalised innovation squared exceeds this is "
+                     "rejected (10.83: chi-square, 1 degree of freedom, 0.999)"))
+    range_deck_margin_m: float = Field(0.1, ge=0, le=10,
+        description=("[m] a downward range is fused (the deck's height from the vehicle's own height plus it) only "
+                     "while the estimate has the vehicle within `recovery.deck_radius_m` less this of the deck's "
+                     "centre, horizontally: else it measured the ground (counted `off_deck`)"))
 
     @model_validator(mode="after")
     def _descent_timeout(self) -> RelnavSection:
@@ -214,6 +221,19 @@ class MarkerOutagesSection(Section):
         return self
 
 
+class RangefinderSection(Section):
+    """The passenger's downward rangefinder as the simulated world measures it (the feed
+    `rangefinder` in `mission.feeds` turns it on): the vertical distance from the vehicle to the
+    deck's top when it is over the deck (within `recovery.deck_radius_m` of its centre), else to
+    the ground (`scenario.carrier_start`'s height)."""
+
+    sigma_m: float = Field(0.03, gt=0, le=5, description="[m] white noise of each range (standard deviation)")
+    rate_hz: float = Field(25.0, gt=0, le=200, description="[Hz] how often the rangefinder measures")
+    latency_s: float = Field(0.03, ge=0, le=2, description="[s] from a range's capture to its delivery")
+    max_range_m: float = Field(10.0, gt=0, le=100, description="[m] beyond this (or below 0) it gives no reading")
+    dropout_fraction: float = Field(0.02, ge=0, lt=1, description="[-] the share of ranges lost, each on its own")
+
+
 class WorldSection(Section):
     """The simulated world's errors (read by the simulators only)."""
 
@@ -223,3 +243,5 @@ class WorldSection(Section):
         description="[-] the slow GNSS bias of the passenger's own estimate (`[world.passenger_gnss]`)")
     marker_outages: MarkerOutagesSection = Field(MarkerOutagesSection(),
         description="[-] spells with no marker reading (`[world.marker_outages]`)")
+    rangefinder: RangefinderSection = Field(RangefinderSection(),
+        description="[-] the passenger's downward rangefinder (`[world.rangefinder]`; the feed `rangefinder`)")

@@ -5,7 +5,8 @@ carrier's state moved into the passenger's GNSS frame.
 Each tick, in this order: the carrier's state, if it is a new sample (stamped ``t - age``, its
 measurement time), and this tick's marker readings
 (:class:`~mission.phases.measurements.RelativePosition`, by capture time: ``Measurements.arrived``)
-are handed to the estimator; then the vehicle's own sample (its position and velocity as the
+and downward ranges (:class:`~mission.phases.measurements.DownwardRange`, the feed ``rangefinder``:
+the deck's top, the seat, that far under the vehicle while over the deck) are handed to the estimator; then the vehicle's own sample (its position and velocity as the
 autopilot reports them, at their sample time) moves it on. The marker lies on the deck,
 ``gates.marker_offset_ned_m`` from the carrier's reference point (``vision.marker_offset_ned_m``:
 by default the dock point; a hover ride's configuration puts it on the deck under the hover point,
@@ -28,10 +29,10 @@ from mission.core.records import replace
 import numpy as np
 
 from mission.passenger.inputs import VehicleReport
-from mission.phases.measurements import Measurements, RelativePosition
+from mission.phases.measurements import DownwardRange, Measurements, RelativePosition
 from mission.phases.types import CarrierObs, RelativeView, RelnavGates
 from mission.relnav.estimator import RelativeEstimator
-from mission.relnav.inputs import CarrierFix, MarkerFix, OwnSample, RelativeEstimate
+from mission.relnav.inputs import CarrierFix, MarkerFix, OwnSample, RangeFix, RelativeEstimate
 
 
 class RelativeDeck:
@@ -41,7 +42,8 @@ class RelativeDeck:
     (``mission.dock_offset_ned_m``); the seat, where the vehicle stands before take-off,
     ``seat_offset_ned_m`` [m] NED from it (None: the dock point, as on a deck ride; a hover ride's
     is the dock point's horizontal place on the deck, at the reference point's height:
-    :func:`seat_offset`)."""
+    :func:`seat_offset`), which is also the deck's top and centre a downward range measures
+    (the feed ``rangefinder``: :class:`~mission.phases.measurements.DownwardRange`)."""
 
     def __init__(self, gates: RelnavGates, dock_offset_ned_m: np.ndarray, seat_offset_ned_m: np.ndarray | None = None) -> None:
         self.gates = gates
@@ -72,6 +74,11 @@ class RelativeDeck:
         for m in measurements.arrived(RelativePosition):
             if _usable(m) and m.sigma_m is not None:  # the carrier's reference point is marker_offset from the marker
                 est.marker(MarkerFix.isotropic(m.capture_t_s, np.asarray(m.offset_ned_m, float) - self.marker_offset, m.sigma_m))
+            else:
+                self.refused += 1
+        for r in measurements.arrived(DownwardRange):  # the deck's top is the seat: the deck's centre, at its height
+            if _usable_range(r) and r.sigma_m is not None:
+                est.range(RangeFix(r.capture_t_s, r.range_m, r.sigma_m, self.seat_offset, self.gates.deck_radius_m))
             else:
                 self.refused += 1
         if on_deck and vehicle is not None and vehicle.sample_t_s is not None and vehicle.sample_t_s > self.own_t_s:
@@ -163,6 +170,13 @@ def _usable(m: RelativePosition) -> bool:
     counted, never raised into the loop."""
     return (m.sigma_m is not None and math.isfinite(m.sigma_m) and m.sigma_m > 0 and math.isfinite(m.capture_t_s)
             and bool(np.all(np.isfinite(np.asarray(m.offset_ned_m, float)))))
+
+
+def _usable_range(r: DownwardRange) -> bool:
+    """A range the estimator can fuse: a finite capture time [s], a finite, non-negative range [m]
+    and a stated, finite, positive sigma [m] (else refused and counted, as :func:`_usable`)."""
+    return (r.sigma_m is not None and math.isfinite(r.sigma_m) and r.sigma_m > 0 and math.isfinite(r.capture_t_s)
+            and math.isfinite(r.range_m) and r.range_m >= 0)
 
 
 def seat_offset(dock_offset_ned_m: np.ndarray, deck_ride: bool) -> np.ndarray:

@@ -45,6 +45,17 @@ class RelativePosition(Measurement):
     marker: int = 0
 
 
+@dataclass(frozen=True)
+class DownwardRange(Measurement):
+    """A downward rangefinder's reading at capture: ``range_m`` [m] from the vehicle's reference
+    point straight down (the NED down axis: a level vehicle's body-down axis) to whatever is
+    below it, the carrier's deck when it is over it, else the ground; ``sigma_m`` [m] its
+    standard deviation (None: not stated)."""
+
+    range_m: float
+    sigma_m: float | None = None
+
+
 M = TypeVar("M", bound=Measurement)
 
 

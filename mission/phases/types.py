@@ -152,7 +152,8 @@ class RelnavGates:
     ``carrier_accel_m_s2`` [m/s^2] the carrier's acceleration limit (``relnav.velocity_slew_m_s2``,
     else ``safety.carrier_max_accel_m_s2``; None: unknown): the deck's velocity the phases see
     changes no faster, plus ``deck_velocity_catch_up_per_s`` [1/s] times how far it is behind the
-    filter's (a lag beyond the noise is caught up)."""
+    filter's (a lag beyond the noise is caught up); ``deck_radius_m`` [m] the deck's radius
+    (``recovery.deck_radius_m``): a downward range is fused over it only."""
 
     params: RelnavParams
     marker_timeout_s: float
@@ -165,6 +166,7 @@ class RelnavGates:
     carrier_accel_tau_s: float
     marker_offset_ned_m: np.ndarray
     deck_velocity_catch_up_per_s: float
+    deck_radius_m: float
     carrier_accel_m_s2: float | None = None
 
     def descent_blocked(self, rel: RelativeView | None, below: bool = False) -> str | None:

@@ -14,6 +14,12 @@ and the passenger's GNSS frames, and the drift rate of the passenger's own estim
 - with ``own_drift_sigma_m_s`` > 0, the passenger's own position estimate drifts at a rate ``d``,
   a state: the deck moves in the passenger's frame at ``w + d`` (the marker shows it, the GNSS
   velocity does not), which it keeps through a marker loss;
+- a downward range (:meth:`RelativeEstimator.range`), stamped with its capture time: over the
+  deck the deck's top is the vehicle's own position then plus the range straight down, so it sees
+  ``c``'s height (the deck's top less its offset from the reference point), which the vehicle's
+  own height estimate does not carry; fused only while the estimate has the vehicle over the deck
+  (within its radius less ``range_deck_margin_m``; else it measured the ground: counted ``off_deck``),
+  through its own one-degree gate ``range_gate_nis``;
 - standing on the deck (:meth:`RelativeEstimator.seated`): the carrier where the vehicle stands,
   its height included, an error that stays the same for as long as it stands, so fused only up
   to its own standard deviation.
@@ -37,12 +43,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from mission.relnav import kalman
-from mission.relnav.inputs import CarrierFix, Counts, MarkerFix, MarkerObservation, OwnSample, RelativeEstimate
+from mission.relnav.inputs import CarrierFix, Counts, MarkerFix, MarkerObservation, OwnSample, RangeFix, RelativeEstimate
 
 UNKNOWN_M = 1e3  # [m] the standard deviation of what a measurement does not measure (a seated axis known already)
-KINDS = ("marker", "gnss_position", "gnss_velocity", "seated")
+KINDS = ("marker", "gnss_position", "gnss_velocity", "seated", "range")
 _RESET = "reset"  # an event's outcome: it re-initialised the uncertainty (counted as fused, reported as Counts.resets)
-# at one time: the GNSS state, then the marker, then the tick's snapshot (a fixed order, so that the
+_OFF_DECK = "off_deck"  # a range's outcome: the estimate had the vehicle off the deck (counted as fused, reported as Counts.off_deck)
+H_HEIGHT = kalman.H_MARKER[2:3]  # a range sees the carrier's reference point's height
+# at one time: the GNSS state, then the marker (and the range), then the tick's snapshot (a fixed order, so that the
 # result does not depend on the order of arrival)
 _GNSS, _MARKER, _TICK = 0, 1, 2
 
@@ -67,6 +75,8 @@ class RelnavParams:
     own_drift_sigma_m_s: float
     own_drift_tau_s: float
     accel_vertical_factor: float
+    range_gate_nis: float
+    range_deck_margin_m: float
 
 
 @dataclass
@@ -79,6 +89,7 @@ class _Event:
     fix: CarrierFix | None = None
     marker: MarkerObservation | None = None
     seated: bool = False  # ``marker`` is the seated pseudo-measurement (fused up to its own sigma)
+    range: RangeFix | None = None
     outcome: dict[str, bool] = field(default_factory=dict)
 
     @property
@@ -113,7 +124,7 @@ class RelativeEstimator:
         self._rejected_since_s = math.inf  # capture time of the first marker rejected since the last one fused
         self._done: tuple[float, int, int] | None = None  # the last event the state includes
         self._replay_from: tuple[float, int, int] | None = None  # the earliest event fused out of order
-        self._fused = dict.fromkeys((*KINDS, _RESET), 0)  # by each measurement's latest fusion
+        self._fused = dict.fromkeys((*KINDS, _RESET, _OFF_DECK), 0)  # by each measurement's latest fusion
         self._rejected = dict.fromkeys(KINDS, 0)
         self._too_old = 0
         self._too_new = 0
@@ -156,6 +167,11 @@ class RelativeEstimator:
         :meth:`estimate`."""
         self._add(_Event(self._key(observation.capture_t_s, _MARKER), marker=observation))
 
+    def range(self, fix: RangeFix) -> None:
+        """A downward range captured at ``fix.t_s`` [s]; fused at the next :meth:`tick` or
+        :meth:`estimate`, if the estimate then has the vehicle over the deck (module docstring)."""
+        self._add(_Event(self._key(fix.t_s, _MARKER), range=fix))
+
     def seated(self, t_s: float, carrier_rel_ned_m: np.ndarray, sigma_m: float) -> None:
         """The vehicle stands on the deck at ``t_s`` [s]: the carrier's reference point is
         ``carrier_rel_ned_m`` [m] from the vehicle, to ``sigma_m`` [m] per axis, its height
@@ -188,7 +204,7 @@ class RelativeEstimator:
     def counts(self) -> Counts:
         """Measurements fused and rejected so far (each counted once, by its latest fusion)."""
         return Counts({k: self._fused[k] for k in KINDS}, dict(self._rejected), self._too_old, self._too_new,
-                      self._fused[_RESET])
+                      self._fused[_RESET], self._fused[_OFF_DECK])
 
     # --- the history --------------------------------------------------------------------------
 
@@ -273,6 +289,8 @@ class RelativeEstimator:
             if e.outcome["marker"]:
                 self._marker_t_s = max(self._marker_t_s, e.t_s)
                 self._rejected_since_s = math.inf
+        elif e.range is not None:
+            self._fuse_range(e)
         elif e.fix is not None:
             prm = self.params
             z_p = np.asarray(e.fix.position_ned_m, dtype=float)
@@ -283,6 +301,24 @@ class RelativeEstimator:
                                                       kalman.I3 * prm.gnss_velocity_sigma_m_s ** 2)
         for kind, ok in e.outcome.items():
             (self._fused if ok else self._rejected)[kind] += 1
+
+    def _fuse_range(self, e: _Event) -> None:
+        """A range's event: off the deck by the estimate (the vehicle's horizontal place at the
+        capture against the deck's centre, beyond its radius less the margin) it is not fused;
+        over it, the reference point's height is the vehicle's own height then plus the range less
+        the deck's top's offset, through the range's gate."""
+        r = e.range
+        assert r is not None
+        own = self._own_at(e.t_s).position_ned_m
+        top = np.asarray(r.deck_top_ned_m, dtype=float)
+        off = self._x[kalman.C_][:2] + top[:2] - own[:2]  # [m] the deck's centre from the vehicle, horizontally
+        if float(np.hypot(*off)) > r.deck_radius_m - self.params.range_deck_margin_m:
+            e.outcome[_OFF_DECK] = True
+            return
+        z = np.array([own[2] + r.range_m - top[2]])
+        u = kalman.update(self._x, self._p, z, H_HEIGHT, np.array([[r.sigma_m ** 2]]), self.params.range_gate_nis)
+        self._x, self._p = u.x, u.p
+        e.outcome["range"] = u.accepted
 
     def _predict_to(self, t_s: float) -> None:
         if self._t_s == -math.inf:

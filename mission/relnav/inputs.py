@@ -78,17 +78,34 @@ class MarkerFix:
 
 
 @dataclass(frozen=True)
+class RangeFix:
+    """A downward range captured at ``t_s`` [s]: ``range_m`` [m] from the vehicle's reference point
+    straight down (NED down) to the surface below it, to ``sigma_m`` [m]; the deck's top is
+    ``deck_top_ned_m`` (3,) [m] NED from the carrier's reference point (its centre: the seat) and
+    ``deck_radius_m`` [m] its radius. Over the deck (by the estimate) the deck's top is the
+    vehicle's own position at ``t_s`` plus the range straight down."""
+
+    t_s: float
+    range_m: float
+    sigma_m: float
+    deck_top_ned_m: np.ndarray
+    deck_radius_m: float
+
+
+@dataclass(frozen=True)
 class Counts:
     """Measurements fused and rejected by the gate, by kind (``marker``, ``gnss_position``,
-    ``gnss_velocity``, ``seated``); ``too_old``: measurements older than the history, ``too_new``: stamped
+    ``gnss_velocity``, ``seated``, ``range``); ``too_old``: measurements older than the history, ``too_new``: stamped
     more than the history after the newest tick (both dropped unfused); ``resets``: re-initialisations of
-    the uncertainty by a run of rejected markers (``relnav.marker_reset_s``)."""
+    the uncertainty by a run of rejected markers (``relnav.marker_reset_s``); ``off_deck``: ranges not
+    fused because the estimate had the vehicle off the deck (they measured the ground)."""
 
     fused: dict[str, int]
     rejected: dict[str, int]
     too_old: int
     too_new: int = 0
     resets: int = 0
+    off_deck: int = 0
 
 
 @dataclass(frozen=True)

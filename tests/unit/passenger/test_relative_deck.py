@@ -13,6 +13,7 @@ from mission.model import derived
 from mission.passenger.inputs import VehicleReport
 from mission.passenger.relative import RelativeDeck
 from mission.phases import Measurements, RelativePosition
+from mission.phases.measurements import DownwardRange
 from mission.phases.types import CarrierObs, RelativeView, RelnavGates
 
 BIAS = np.array([2.0, -1.0, 0.0])  # [m] the carrier's GNSS frame over the passenger's
@@ -20,7 +21,7 @@ BIAS = np.array([2.0, -1.0, 0.0])  # [m] the carrier's GNSS frame over the passe
 
 def _gates(marker_offset_ned_m=(0.0, 0.0, 0.0)) -> RelnavGates:
     section = RelnavSection(enabled=True)
-    return derived(RelnavGates, section, params=section.params(), marker_offset_ned_m=np.asarray(marker_offset_ned_m, float))
+    return derived(RelnavGates, section, params=section.params(), deck_radius_m=0.5, marker_offset_ned_m=np.asarray(marker_offset_ned_m, float))
 
 
 def _fly(deck: RelativeDeck, t0: float, t1: float, marker: bool, measurements: Measurements) -> list:
@@ -162,7 +163,7 @@ def test_the_approachs_pending_limit_is_the_configurations():
     """``relnav.pending_limit_m`` (declared in the schema, once) decides when the estimate's jumps
     count as taken in."""
     section = RelnavSection(enabled=True, pending_limit_m=0.05)
-    gates = derived(RelnavGates, section, params=section.params(), marker_offset_ned_m=np.zeros(3))
+    gates = derived(RelnavGates, section, params=section.params(), deck_radius_m=0.5, marker_offset_ned_m=np.zeros(3))
     view = lambda pending: RelativeView(np.zeros(3), np.zeros(3), np.array([pending, 0.0, 0.0]), 0.02, True, 0.0)  # noqa: E731
     assert gates.taken_in(view(0.04)) and not gates.taken_in(view(0.1))
     assert RelnavSection().pending_limit_m == 0.3
@@ -259,7 +260,7 @@ def _stop_dead(catch_up_per_s: float) -> float:
     2 m/s stops dead (as at its P3 guard: in one step), the vehicle hovering where it was, the
     marker at 30 Hz and GNSS at 10 Hz telling it, with configs/relnav.toml's estimator."""
     section = RelnavSection(enabled=True, accel_noise_m_s2=1.0, deck_velocity_catch_up_per_s=catch_up_per_s)
-    gates = derived(RelnavGates, section, params=section.params(), marker_offset_ned_m=np.zeros(3), carrier_accel_m_s2=1.0)
+    gates = derived(RelnavGates, section, params=section.params(), deck_radius_m=0.5, marker_offset_ned_m=np.zeros(3), carrier_accel_m_s2=1.0)
     deck = RelativeDeck(gates, np.zeros(3))
     measurements, stop = Measurements(), 5.0
     shown = None
@@ -288,3 +289,24 @@ def test_the_decks_velocity_catches_up_with_a_carrier_stopping_dead():
     tuned = 3.0
     assert _stop_dead(tuned) <= 0.6, _stop_dead(tuned)
     assert _stop_dead(0.0) >= 1.45, _stop_dead(0.0)
+
+
+def test_downward_ranges_are_fused_over_the_deck_and_malformed_ones_refused():
+    """A hover ride over the deck (the seat, the deck's top, at the carrier's reference point): with
+    the marker having put the deck under the vehicle, its ranges (1.5 m) are fused; far off by the
+    GNSS alone (2.2 m beside, the deck's radius 0.5 m) they are counted off the deck; a NaN range,
+    a negative one and one with no sigma are refused and counted."""
+    far = RelativeDeck(_gates(), np.array([0.0, 0.0, -1.5]), np.array([0.0, 0.0, 0.0]))
+    near = RelativeDeck(_gates(), np.array([0.0, 0.0, -1.5]), np.array([0.0, 0.0, 0.0]))
+    _fly(far, 0.0, 10.0, False, Measurements())
+    _fly(near, 0.0, 10.0, True, Measurements())
+    ranges = tuple(DownwardRange(capture_t_s=9.62 + 0.04 * k, range_m=1.5, sigma_m=0.03) for k in range(10))
+    bad = (DownwardRange(capture_t_s=9.9, range_m=math.nan, sigma_m=0.03),
+           DownwardRange(capture_t_s=9.9, range_m=-0.2, sigma_m=0.03), DownwardRange(capture_t_s=9.9, range_m=1.5))
+    report = VehicleReport(10.0, np.array([0.0, 0.0, -1.5]), np.zeros(3), 10.0, 10.0, True, "OFFBOARD", 0.0, True)
+    carrier = CarrierObs(position_ned_m=BIAS.copy(), velocity_ned_m_s=np.zeros(3), age_s=0.0, alive=True)
+    for deck in (far, near):
+        deck.observe(10.0, report, carrier, Measurements().then(ranges + bad))
+        counts = deck.estimator.counts()
+        assert deck.refused == len(bad)
+        assert (counts.fused["range"], counts.off_deck) == ((10, 0) if deck is near else (0, 10)), counts
