@@ -24,6 +24,7 @@ ride every 0.1 s instead (:func:`trace`).
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -63,18 +64,40 @@ def _since_marker(directory: Path, offset_s: float) -> tuple[np.ndarray, np.ndar
     return np.asarray(t), np.asarray(since)
 
 
+@dataclass(frozen=True)
+class _Flight:
+    """One flight's record on the bench's monotonic clock (``rec``: the record and its shift [s]),
+    the clocks' offset [s], both truths (rows t, _, x, y, z, ...), the rover's true velocity
+    (rows t, north, east) and the dock offset [m] NED."""
+
+    rec: tuple[Any, float]
+    offset_s: float
+    passenger: np.ndarray
+    rover: np.ndarray
+    rover_v: np.ndarray
+    slot: np.ndarray
+
+    @classmethod
+    def read(cls, directory: Path) -> _Flight | None:
+        """The flight in ``directory`` (None: no record)."""
+        cfg = load_config(directory / "config.toml")
+        offset_s = json.loads((directory / "clock_offset.json").read_text())["unix_minus_monotonic_s"]
+        rec = _on_monotonic(directory / PAIR_DIR, offset_s)
+        if rec is None:
+            return None
+        _, passenger = _read_truth(directory / "truth-passenger.csv")
+        _, rover = _read_truth(directory / "truth-rover.csv")
+        return cls(rec, offset_s, passenger, rover, _rover_velocity(directory / "truth-rover.csv"),
+                   np.asarray(cfg.mission.dock_offset_ned_m, dtype=float))
+
+
 def causes(directory: Path, over_m: float = 0.3) -> list[dict[str, Any]]:
     """Per leg of the flight in ``directory``: its RIDING ticks over ``over_m`` [m] by cause (module docstring)."""
-    cfg = load_config(directory / "config.toml")
-    offset_s = json.loads((directory / "clock_offset.json").read_text())["unix_minus_monotonic_s"]
-    rec = _on_monotonic(directory / PAIR_DIR, offset_s)
-    if rec is None:
+    flight = _Flight.read(directory)
+    if flight is None:
         return []
-    _, passenger = _read_truth(directory / "truth-passenger.csv")
-    _, rover = _read_truth(directory / "truth-rover.csv")
-    rover_v = _rover_velocity(directory / "truth-rover.csv")
-    marker_t, since = _since_marker(directory, offset_s)
-    slot = np.asarray(cfg.mission.dock_offset_ned_m, dtype=float)
+    rec, passenger, rover, rover_v, slot = flight.rec, flight.passenger, flight.rover, flight.rover_v, flight.slot
+    marker_t, since = _since_marker(directory, flight.offset_s)
 
     def vel(t: np.ndarray) -> np.ndarray:
         return np.column_stack([np.interp(t, rover_v[:, 0], rover_v[:, j]) for j in (1, 2)])
@@ -131,15 +154,11 @@ def trace(directory: Path, leg_k: int, span_s: tuple[float, float], step_s: floa
     true offset from the dock point [m] (north, east, size), and north/east velocities [m/s] of
     the rover (true), the passenger (true), the deck as the phases saw it (``v_c``) and the
     command (``u_cmd``)."""
-    cfg = load_config(directory / "config.toml")
-    offset_s = json.loads((directory / "clock_offset.json").read_text())["unix_minus_monotonic_s"]
-    rec = _on_monotonic(directory / PAIR_DIR, offset_s)
-    if rec is None:
+    flight = _Flight.read(directory)
+    if flight is None:
         return []
-    _, passenger = _read_truth(directory / "truth-passenger.csv")
-    _, rover = _read_truth(directory / "truth-rover.csv")
-    rover_v, passenger_v = _rover_velocity(directory / "truth-rover.csv"), _rover_velocity(directory / "truth-passenger.csv")
-    slot = np.asarray(cfg.mission.dock_offset_ned_m, dtype=float)
+    rec, passenger, rover, rover_v, slot = flight.rec, flight.passenger, flight.rover, flight.rover_v, flight.slot
+    passenger_v = _rover_velocity(directory / "truth-passenger.csv")  # the same columns
     out: list[dict[str, float]] = []
     for leg in rec[0].legs():
         lr = leg.record
