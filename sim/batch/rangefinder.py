@@ -20,6 +20,7 @@ import numpy as np
 
 from mission.passenger.relative import seat_offset
 from mission.phases.measurements import DownwardRange, Measurement
+from sim.batch.sensors import CaptureGrid
 
 if TYPE_CHECKING:
     from sim.batch.recovery import World
@@ -33,13 +34,11 @@ class WorldRangefinder:
     def __init__(self, world: World) -> None:
         cfg = world.cfg
         self.world, self.cfg = world, cfg.world.rangefinder
-        self.period_s = 1.0 / self.cfg.rate_hz
+        self.grid: CaptureGrid[DownwardRange] = CaptureGrid(1.0 / self.cfg.rate_hz, self.cfg.latency_s)
         self.seat = seat_offset(np.asarray(cfg.mission.dock_offset_ned_m, float), cfg.mission.ride == "deck")
         self.radius_m = cfg.recovery.deck_radius_m
         self.ground_d_m = float(cfg.scenario.carrier_start[2]) if len(cfg.scenario.carrier_start) > 2 else 0.0
         self.rng = np.random.default_rng(world.scenario.seed + SEED_OFFSET)
-        self.next_s = 0.0
-        self.pending: list[DownwardRange] = []  # captured, not yet delivered
         self.captured = 0  # ranges measured (a reading or not)
 
     def true_range_m(self, t_s: float) -> float:
@@ -52,19 +51,16 @@ class WorldRangefinder:
     def poll(self, t_s: float) -> list[Measurement]:
         """Measure if a range is due at ``t_s`` [s]; deliver what is ``latency_s`` old."""
         c = self.cfg
-        if t_s + 1e-9 >= self.next_s:
-            self.next_s = max(self.next_s + self.period_s, t_s)
+        if self.grid.due(t_s):
             self.captured += 1
             noisy = self.true_range_m(t_s) + float(self.rng.normal(0.0, c.sigma_m))
             lost = self.rng.random() < c.dropout_fraction
             if not lost and 0.0 <= noisy <= c.max_range_m:
-                self.pending.append(DownwardRange(capture_t_s=t_s, range_m=noisy, sigma_m=c.sigma_m))
-        out = [m for m in self.pending if m.capture_t_s + c.latency_s <= t_s + 1e-9]
-        self.pending = [m for m in self.pending if m.capture_t_s + c.latency_s > t_s + 1e-9]
-        return list(out)
+                self.grid.hold(DownwardRange(capture_t_s=t_s, range_m=noisy, sigma_m=c.sigma_m))
+        return list(self.grid.deliver(t_s))
 
     def close(self) -> None:
-        self.pending = []
+        self.grid.clear()
 
 
 def rangefinder(world: World) -> WorldRangefinder:

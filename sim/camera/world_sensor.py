@@ -30,6 +30,7 @@ from mission.config.vision import marker_offset_ned_m
 from mission.model import vision_detector
 from mission.phases.measurements import Measurement, RelativePosition
 from mission.vision.measurement import RelativeMeasurement
+from sim.batch.sensors import CaptureGrid
 from sim.camera.error_model import FITTED, ModelledDetector
 from sim.camera.render import Poses
 from sim.camera.sensor import Sensor, sensor_model
@@ -48,9 +49,7 @@ class WorldMarker:
     def __init__(self, world: World, measure: Callable[[Poses, float], RelativeMeasurement | None]) -> None:
         v = world.cfg.vision
         self.world, self.measure = world, measure
-        self.period_s, self.latency_s = 1.0 / v.rate_hz, v.latency_s
-        self.next_s = 0.0
-        self.pending: list[RelativePosition] = []  # captured, not yet delivered
+        self.grid: CaptureGrid[RelativePosition] = CaptureGrid(1.0 / v.rate_hz, v.latency_s)
         self.captured = 0  # frames taken
         self.seen = 0  # frames that gave a measurement
         outages = world.cfg.world.marker_outages
@@ -71,17 +70,14 @@ class WorldMarker:
 
     def poll(self, t_s: float) -> list[Measurement]:
         """Capture if a frame is due at ``t_s`` [s]; deliver what is ``latency_s`` old."""
-        if t_s + 1e-9 >= self.next_s:
-            self.next_s = max(self.next_s + self.period_s, t_s)
+        if self.grid.due(t_s):
             self.captured += 1
             m = None if self._blind(t_s) else self.measure(self.poses(t_s), t_s)
             if m is not None:
                 self.seen += 1
-                self.pending.append(RelativePosition(capture_t_s=t_s, offset_ned_m=np.asarray(m.deck_rel_ned_m, float),
-                                                     sigma_m=float(m.sigma_m), marker=int(m.tag_ids[0])))
-        out = [m for m in self.pending if m.capture_t_s + self.latency_s <= t_s + 1e-9]
-        self.pending = [m for m in self.pending if m.capture_t_s + self.latency_s > t_s + 1e-9]
-        return list(out)
+                self.grid.hold(RelativePosition(capture_t_s=t_s, offset_ned_m=np.asarray(m.deck_rel_ned_m, float),
+                                                sigma_m=float(m.sigma_m), marker=int(m.tag_ids[0])))
+        return list(self.grid.deliver(t_s))
 
     def _blind(self, t_s: float) -> bool:
         """In an outage at ``t_s`` [s] (``world.marker_outages``): spells of a length uniform in
@@ -101,7 +97,7 @@ class WorldMarker:
         return False
 
     def close(self) -> None:
-        self.pending = []
+        self.grid.clear()
 
 
 def modelled(world: World) -> WorldMarker:
