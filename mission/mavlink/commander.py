@@ -271,8 +271,12 @@ class ParamClient:
         return self._exchange(name, request, lambda pv: True, timeout_s, retries)
 
     def set(self, name: str, value: float, timeout_s: float = 0.5, retries: int = 3) -> ParamValue:
-        """Set ``name`` to ``value`` (its type read first if not yet known) and confirm it by the
-        PARAM_VALUE that follows; LinkError if the vehicle keeps another value."""
+        """Set ``name`` to ``value`` (its type read first if not yet known) and confirm it by a
+        PARAM_VALUE showing it; LinkError if, after every attempt, the vehicle shows another value.
+
+        A PARAM_VALUE of another value does not end an attempt: it may be a late answer to an
+        earlier read (a read that timed out and was sent again is answered twice; under load the
+        second answer came after the set, and was taken for the vehicle's refusal)."""
         if not math.isfinite(value):
             raise ValueError(f"{name}: value must be finite, got {value!r}")
         with self.session.lock:
@@ -282,10 +286,16 @@ class ParamClient:
         wanted = px4.decode_param(px4.encode_param(value, param_type), param_type)
         msg = mavlink.MAVLink_param_set_message(target[0], target[1], name.encode("ascii"), px4.encode_param(value, param_type),
                                                 param_type)
-        kept = self._exchange(name, msg, lambda pv: True, timeout_s, retries)
-        if not math.isclose(kept.value, wanted, rel_tol=1e-6, abs_tol=1e-9):
-            raise LinkError(f"vehicle kept {name} = {kept.value:g} (asked {value:g})")
-        return kept
+        t_first = self.session.clock.now()
+        try:
+            return self._exchange(name, msg, lambda pv: math.isclose(pv.value, wanted, rel_tol=1e-6, abs_tol=1e-9),
+                                  timeout_s, retries)
+        except LinkTimeout:
+            with self.session.lock:
+                shown = self.session.params.get(name)
+            if shown is not None and shown.rx_s >= t_first:
+                raise LinkError(f"vehicle kept {name} = {shown.value:g} (asked {value:g})") from None
+            raise
 
     def _exchange(self, name: str, msg: Any, accept: Callable[[ParamValue], bool], timeout_s: float,
                   retries: int) -> ParamValue:
