@@ -36,7 +36,9 @@ from mission.time.rate import RateGate
 from mission.vision.camera import SeenFrame
 
 
-LOCKSTEP_WAIT_WALL_S = 1.0  # [s, wall] in lockstep, the longest a tick waits for the camera's stream
+LOCKSTEP_WAIT_WALL_S = 5.0  # [s, wall] in lockstep, the longest a tick waits for the camera's stream (its
+# publisher blocks rather than drop in lockstep, so a wait runs out only on a loaded machine or a lost route;
+# the mock's deck waits for the carrier as long, sim.robots.deck_follow.WAIT_WALL_S)
 
 
 class MarkerFeed:
@@ -53,6 +55,7 @@ class MarkerFeed:
         self.detected = self.missed = self.late_ticks = 0
         self.lockstep = lockstep
         self._heard = False  # a lockstep feed waits only once the camera has been heard
+        self._stalled_at_s: float | None = None  # the stream's newest time when a lockstep wait last ran out
         self._log_gate = RateGate(cfg.vision.log_rate_hz)  # on the frames' capture times
         self._sinks: list[CameraSink] = []
         self.logged = 0
@@ -75,9 +78,13 @@ class MarkerFeed:
     def poll(self, t_s: float) -> list[Measurement]:
         due_s = t_s - self.latency_s
         if self.lockstep:
-            self._heard = self._heard or self.frames.newest_t_s > -math.inf
-            if self._heard and not self.frames.wait_past(due_s, LOCKSTEP_WAIT_WALL_S):
+            newest_s = self.frames.newest_t_s
+            self._heard = self._heard or newest_s > -math.inf
+            # a stream given up on is not waited for again until it has moved on (a camera gone
+            # silent costs one wait, not one a tick)
+            if self._heard and newest_s != self._stalled_at_s and not self.frames.wait_past(due_s, LOCKSTEP_WAIT_WALL_S):
                 self.late_ticks += 1
+                self._stalled_at_s = self.frames.newest_t_s
         for frame, q in self.frames.take():
             found = self.detector.corners(frame.image)
             m = self.detector.measure_corners(found, frame.capture_t_s, q)

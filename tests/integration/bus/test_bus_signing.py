@@ -86,9 +86,10 @@ def test_signed_states_bind_to_their_signer_and_no_copy_replay_or_foreign_key_ge
             pub.publish(_state(seq))
             seq += 1
             time.sleep(0.05)
-        # five more, then go on as a stream, one sample at a time, until both have the newest: a
-        # link dropped under load (a full CI run: the feed heard the carrier's token go) loses what
-        # was sent into it, so a burst sent once may never arrive whole
+        # four more, then go on as a stream, one sample at a time, until the feed has accepted five
+        # and both have the newest: a link dropped under load (a full CI run: the feed heard the
+        # carrier's token go) loses what was sent into it, so a burst sent once may never arrive
+        # whole (a loaded run: 4 of them accepted)
         for _ in range(4):
             pub.publish(_state(seq))
             seq += 1
@@ -97,8 +98,9 @@ def test_signed_states_bind_to_their_signer_and_no_copy_replay_or_foreign_key_ge
             pub.publish(_state(seq))
             newest, seq = seq, seq + 1
             try:
-                wait_for(lambda: feed.latest().state.seq == newest and json.loads(capture.samples[-1][0])["seq"] == newest,  # type: ignore[union-attr]
-                         what="the newest signed state at both", timeout_s=1.0)
+                wait_for(lambda: feed.counters["accepted"] >= 5 and feed.latest().state.seq == newest  # type: ignore[union-attr]
+                         and json.loads(capture.samples[-1][0])["seq"] == newest,
+                         what="five accepted and the newest signed state at both", timeout_s=1.0)
                 break
             except AssertionError:
                 assert time.monotonic() < deadline, "the newest signed state never reached both the feed and the capture"

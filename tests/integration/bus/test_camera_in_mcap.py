@@ -161,3 +161,33 @@ def test_on_a_signed_bus_only_the_passengers_own_camera_is_read(tmp_path) -> Non
     c = feed.counters
     assert c["signed"] and c["received"] == 2 and c["refused"] == {"unsigned": 2, "signature": 1}, c
     assert c["detected"] == 1 and c["missed"] == 0, c
+
+
+def test_a_lockstep_feed_whose_camera_goes_silent_waits_once_not_every_tick(monkeypatch) -> None:
+    """In lockstep a tick waits (wall time, bounded) for the camera's stream to pass its due time;
+    a camera gone silent costs one such wait, then none until the stream moves again."""
+    import mission.cli.marker as marker
+    from mission.bus.frames import encode_mark
+    monkeypatch.setattr(marker, "LOCKSTEP_WAIT_WALL_S", 0.2)
+    cfg = with_overrides(load_config(CONFIGS / "relnav.toml"), {"zenoh.pair": "pairS"})
+    with peer_pair() as (a, b):
+        feed = MarkerFeed(cfg, b, lockstep=True)
+        pub = a.declare_publisher(camera_key("pairS"))
+        try:
+            wait_for(lambda: pub.matching_status.matching, 10.0, "the feed's subscriber")
+            pub.put(encode_mark(1.0))
+            wait_for(lambda: feed.frames.received > 0 or feed.frames.newest_t_s >= 1.0, 10.0, "the first mark")
+            feed.poll(1.0 + feed.latency_s)  # the stream has passed it: no wait
+            assert feed.late_ticks == 0
+            for k in range(5):  # silent from here: the first tick waits and gives up, the rest do not wait
+                feed.poll(2.0 + k / 50.0 + feed.latency_s)
+            assert feed.late_ticks == 1
+            pub.put(encode_mark(3.0))  # it moves again: a tick past it waits for it once more
+            wait_for(lambda: feed.frames.newest_t_s >= 3.0, 10.0, "the second mark")
+            feed.poll(3.0 + feed.latency_s)
+            assert feed.late_ticks == 1
+            feed.poll(4.0 + feed.latency_s)
+            assert feed.late_ticks == 2
+        finally:
+            pub.undeclare()
+            feed.close()
