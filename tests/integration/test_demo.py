@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -163,13 +164,30 @@ class TestThreePairs:
         # here three full stacks share one Zenoh router and every one of them completes.
 
 
+def _ros2_config(tmp_path, cmd_vel_type: str, attachment: str, mode: str) -> Path:
+    """demo.toml with ``carrier.ros2.cmd_vel_type``, ``rmw_attachment`` and ``zenoh.mode`` set."""
+    config = tmp_path / "demo.toml"
+    text = DEMO.read_text().replace('[zenoh]\nmode = "peer"\n', f'[zenoh]\nmode = "{mode}"\n', 1)
+    assert f'mode = "{mode}"' in text
+    config.write_text(text + f'\n[carrier.ros2]\ncmd_vel_type = "{cmd_vel_type}"\nrmw_attachment = "{attachment}"\n')
+    return config
+
+
+def _assert_ros2_robot(tmp_path, cmd_vel_type: str, attachment: str) -> None:
+    ros2 = json.loads((tmp_path / "logs" / "pair0" / "carrier.json").read_text())["ros2"]
+    assert ros2["cmd_vel_type"] == f"geometry_msgs/msg/{cmd_vel_type}" and ros2["robot_attachment"] == attachment
+    assert ros2["robot_token_seen"] and ros2["dropped"] == {}, ros2
+
+
 class TestARealCarrierInterface:
     @pytest.mark.parametrize("carrier", ["mavlink", "ros2"])
     def test_demo_with_a_real_carrier_interface_holds_p1_p3_and_the_guard(self, tmp_path, carrier):
         """--carrier mavlink: the carrier controller flies a mock PX4 Ackermann rover (sysid 2) in
-        OFFBOARD; --carrier ros2: it drives a ROS-2-shaped diff-drive robot on rmw_zenoh keys. Each
-        robot steps on the carrier's lockstep clock."""
-        out = _demo(tmp_path, "--carrier", carrier, "--plot", "")  # no figure: TestTheDemoFlight checks the one-pair plot
+        OFFBOARD; --carrier ros2: it drives a ROS-2-shaped diff-drive robot on rmw_zenoh keys
+        (TwistStamped, rmw_zenoh's current attachment, peer mode; the other command type, the legacy
+        attachment and client mode: TestARos2Robot). Each robot steps on the carrier's lockstep clock."""
+        config = ("--config", str(_ros2_config(tmp_path, "TwistStamped", "current", "peer"))) if carrier == "ros2" else ()
+        out = _demo(tmp_path, "--carrier", carrier, *config, "--plot", "")  # no figure: TestTheDemoFlight checks the one-pair plot
         s = json.loads((tmp_path / "logs" / "pair0" / "summary.json").read_text())
         assert s["p1"] and s["p2"] and s["p3"] and s["phase"] == "DONE", s
         assert out.returncode == 0, out.stdout + out.stderr
@@ -180,24 +198,20 @@ class TestARealCarrierInterface:
         # the robot stepped on the carrier's clock to the end of the flight
         assert c["lockstep"]["barriers"] > 500 and c["lockstep"]["downstream_dropped"] == 0, c["lockstep"]
         assert c["lockstep"]["fallback"] is None and s["lockstep"]["fallback"] is None, (c["lockstep"], s["lockstep"])
+        if carrier == "ros2":
+            _assert_ros2_robot(tmp_path, "TwistStamped", "current")
 
 
 class TestARos2Robot:
-    @pytest.mark.parametrize(("cmd_vel_type", "attachment", "mode"), [("TwistStamped", "current", "peer"),
-                                                                      ("Twist", "legacy", "client")])
-    def test_demo_drives_a_ros2_robot_of_either_command_type(self, tmp_path, cmd_vel_type, attachment, mode):
+    def test_demo_drives_a_ros2_robot_of_the_other_command_type(self, tmp_path):
         """``carrier.ros2.cmd_vel_type`` and ``rmw_attachment`` in the config: the ROS-2-shaped robot
         takes only that type (its subscription's key carries the type and its hash) and speaks that
-        attachment, and the flight holds P1-P3. ``zenoh.mode = "client"``: rmw_zenoh's topology, every
+        attachment, and the flight holds P1-P3 (TwistStamped with the current attachment, in peer
+        mode: TestARealCarrierInterface). ``zenoh.mode = "client"``: rmw_zenoh's topology, every
         process a client of the demo's router (which plays ``rmw_zenohd``), the robot included."""
-        config = tmp_path / "demo.toml"
-        text = DEMO.read_text().replace('[zenoh]\nmode = "peer"\n', f'[zenoh]\nmode = "{mode}"\n', 1)
-        assert f'mode = "{mode}"' in text
-        config.write_text(text + f'\n[carrier.ros2]\ncmd_vel_type = "{cmd_vel_type}"\nrmw_attachment = "{attachment}"\n')
+        config = _ros2_config(tmp_path, "Twist", "legacy", "client")
         out = _demo(tmp_path, "--carrier", "ros2", "--config", str(config), "--plot", "")
         s = json.loads((tmp_path / "logs" / "pair0" / "summary.json").read_text())
         assert s["p1"] and s["p2"] and s["p3"] and s["phase"] == "DONE", s
         assert out.returncode == 0, out.stdout + out.stderr
-        ros2 = json.loads((tmp_path / "logs" / "pair0" / "carrier.json").read_text())["ros2"]
-        assert ros2["cmd_vel_type"] == f"geometry_msgs/msg/{cmd_vel_type}" and ros2["robot_attachment"] == attachment
-        assert ros2["robot_token_seen"] and ros2["dropped"] == {}, ros2
+        _assert_ros2_robot(tmp_path, "Twist", "legacy")
