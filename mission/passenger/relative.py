@@ -117,7 +117,11 @@ class RelativeDeck:
         accel = self._acceleration(before, shown, dt, on_deck)
         self.t_s = t_s
         now = now + self.pending
-        return replace(carrier, position_ned_m=now - shown * carrier.age_s, velocity_ned_m_s=shown), \
+        # its law runs in its own frame: a prediction by it starts from where it says it is, not from the
+        # passenger's frame, which is off by the two GNSS biases (2 m at 8-10 m from the target turned the
+        # law's course by ~0.2 rad: the ride fed forward 0.2-0.25 m/s across the carrier's velocity)
+        return replace(carrier, position_ned_m=now - shown * carrier.age_s, velocity_ned_m_s=shown,
+                       own_frame_position_ned_m=np.asarray(carrier.position_ned_m, float)), \
             self._view(e, bias, accel)
 
     def _acceleration(self, before: np.ndarray | None, shown: np.ndarray, dt_s: float, on_deck: bool) -> np.ndarray | None:

@@ -139,7 +139,8 @@ def _docked_law_distance(obs: Observation, m: MissionModel, dock: np.ndarray) ->
 def _carrier_acceleration(obs: Observation, m: MissionModel) -> np.ndarray:
     """The docked carrier's acceleration [m/s^2] NED: the one it measured and sent, if it sent
     one (a real vehicle does not follow its law exactly: a PX4 rover sticks, then leaps off);
-    else as its law asks it: the change of the carrier's command (``mission.core.tick.carrier_tick``,
+    else as its law asks it, run where the carrier itself says it is (``CarrierObs.law_position_ned_m``:
+    its own frame): the change of the carrier's command (``mission.core.tick.carrier_tick``,
     with its speed and acceleration limits) over one carrier step from the sample's state, or
     over ``mission.carrier_accel_horizon_s`` when that is longer. Analytic in the sample (no
     differences of samples): ``a_max`` along the command while the carrier speeds up, 0 at its
@@ -168,7 +169,7 @@ def _law_acceleration(obs: Observation, m: MissionModel) -> np.ndarray:
     assert c is not None  # riding: the carrier was checked
     h = m.carrier_dt_s
     horizon = max(m.carrier_accel_horizon_s, h)
-    nxt = carrier_tick(c.position_ned_m + c.velocity_ned_m_s * h, False, _carrier_tick_model(obs, m),
+    nxt = carrier_tick(c.law_position_ned_m + c.velocity_ned_m_s * h, False, _carrier_tick_model(obs, m),
                        u_prev=c.velocity_ned_m_s, dt_s=horizon)
     return (np.asarray(nxt.u, dtype=float) - c.velocity_ned_m_s) / horizon
 
@@ -214,7 +215,7 @@ def _ridden_dock(obs: Observation, m: MissionModel, fresh: bool) -> tuple[np.nda
     if measured is not None:  # not the law's: the sample moves on with it
         v_now = v + a * age
     else:
-        x_now = np.asarray(c.position_ned_m, dtype=float) + v * age
+        x_now = np.asarray(c.law_position_ned_m, dtype=float) + v * age  # in the carrier's own frame
         v_now = np.asarray(carrier_tick(x_now, False, _carrier_tick_model(obs, m), u_prev=v, dt_s=age).u, dtype=float)
     if m.tick.planar_carrier and len(v_now) == 3:
         v_now[2] = v[2]  # a ground carrier: its vertical velocity is the sample's (the estimate's noise), not led

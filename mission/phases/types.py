@@ -76,7 +76,10 @@ class CarrierObs:
     measured it, good to ``age_bound_s`` [s] (the clock offset's bound; None: the measurement time
     is unknown, no round trip yet, and ``age_s`` is the time since it arrived); liveliness;
     acceleration NED [m/s^2] as the carrier measured it, or None (it sent none); untrusted: why
-    the feed does not trust it yet (just bound, a resync, a contested source), None when it does."""
+    the feed does not trust it yet (just bound, a resync, a contested source), None when it does;
+    ``own_frame_position_ned_m`` [m] NED: where the carrier itself says it is (its published
+    position, in its own GNSS frame, where its own law runs) when ``position_ned_m`` was moved into
+    the passenger's frame (the relative estimator); None: the same as ``position_ned_m``."""
 
     position_ned_m: np.ndarray
     velocity_ned_m_s: np.ndarray
@@ -86,6 +89,12 @@ class CarrierObs:
     yaw_rad: float | None = None  # [rad] its heading, if it sent one
     untrusted: str | None = None
     age_bound_s: float | None = 0.0
+    own_frame_position_ned_m: np.ndarray | None = None
+
+    @property
+    def law_position_ned_m(self) -> np.ndarray:
+        """[m] NED the position the carrier's own law runs at: its own frame's (module docstring)."""
+        return self.position_ned_m if self.own_frame_position_ned_m is None else self.own_frame_position_ned_m
 
     @property
     def worst_age_s(self) -> float:

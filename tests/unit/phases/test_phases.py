@@ -289,6 +289,57 @@ def test_riding_feeds_forward_the_estimated_deck_acceleration_not_the_laws_when_
     assert norm(a) == pytest.approx(a_max, rel=1e-6)
 
 
+def test_the_carriers_law_is_predicted_where_the_carrier_says_it_is_not_in_the_passengers_frame():
+    """No shared frame (configs/relnav.toml): the relative estimator moves the carrier's state into
+    the passenger's frame, 2 m across from where the carrier's own GNSS puts it. The carrier steers
+    by its law in its own frame: cruising at its speed limit straight at its target, 9 m away, its
+    law asks no change. Run at the passenger-frame position the law's course turns by ~0.2 rad,
+    and the ride fed forward 0.2-0.25 m/s across the carrier's velocity and 0.4 m/s^2 of acceleration
+    (the relnav demo's rider drifted to 0.31 m off its dock point before the separation)."""
+    from mission.phases.flying import _carrier_acceleration, _ridden_dock
+
+    model = mission_model(load_config(CONFIGS / "relnav.toml"))
+    speed = model.tick.carrier_safety.max_speed_m_s
+    assert speed is not None and model.relnav is not None and model.relnav.carrier_accel_tau_s == 0
+    flat = np.array([*model.tick.target[:2], 0.0])
+    along = flat / norm(flat)
+    across = np.array([-along[1], along[0], 0.0])
+    own = flat - 9.0 * along  # where the carrier says it is: heading straight for the target
+    passenger_frame = own + 2.0 * across
+    vehicle = VehicleObs(np.zeros(3), np.zeros(3), True, "OFFBOARD", heartbeat_age_s=0.1)
+
+    def obs(own_frame):
+        return Observation(1.0, vehicle, CarrierObs(passenger_frame, speed * along, 0.25, own_frame_position_ned_m=own_frame))
+
+    _, v_now, a = _ridden_dock(obs(own), model, True)
+    np.testing.assert_allclose(v_now, speed * along, atol=1e-9)
+    np.testing.assert_allclose(_carrier_acceleration(obs(own), model), np.zeros(3), atol=1e-9)
+    _, v_wrong, _ = _ridden_dock(obs(None), model, True)  # the law run in the passenger's frame
+    assert abs(float(np.dot(v_wrong, across))) > 0.05  # over the 0.25 s of age, at the law's acceleration limit
+    assert norm(_carrier_acceleration(obs(None), model)) > 0.2
+
+
+def test_the_relative_deck_keeps_where_the_carrier_says_it_is():
+    """The carrier's state moved into the passenger's frame keeps its published position for its law."""
+    from mission.passenger.inputs import VehicleReport
+    from mission.passenger.relative import RelativeDeck
+    from mission.phases.measurements import Measurements
+
+    model = mission_model(load_config(CONFIGS / "relnav.toml"))
+    assert model.relnav is not None
+    deck = RelativeDeck(model.relnav, model.dock_offset_ned_m)
+    published = np.array([3.0, 4.0, 0.0])
+    carrier = CarrierObs(published, np.array([1.0, 0.0, 0.0]), 0.2)
+    seen = None
+    for k in range(5):
+        t = 0.1 * (k + 1)
+        report = VehicleReport(t, np.array([0.0, 0.0, -2.0]), np.zeros(3), t, t, True, "OFFBOARD", 0.1, True)
+        seen, _ = deck.observe(t, report, replace(carrier, age_s=0.2 - 0.1 * k if k < 2 else 0.0), Measurements())
+    assert seen is not None
+    np.testing.assert_allclose(seen.own_frame_position_ned_m, published)
+    np.testing.assert_allclose(seen.law_position_ned_m, published)
+
+
 def test_a_phase_is_defined_once_and_every_part_knows_it():
     """The Phase enum is the one list: the machine handles each (DONE and ABORT in its failsafes),
     the wire carries each by name, the carrier has a duty for each."""
