@@ -44,7 +44,8 @@ from mission.core.records import replace
 from mission.carrier.acceleration import AccelerationEstimate
 from mission.carrier.backends.sim import KinematicRobot
 from mission.carrier.modes import CarrierMode, PassengerView
-from mission.carrier.step import CarrierStepper
+from mission.carrier.backends import OwnState
+from mission.carrier.step import STOP, CarrierStepper
 from mission.carrier.tracking import Tracked
 from mission.config.schema import Config
 from mission.errors import ConfigError
@@ -153,7 +154,8 @@ class KinematicCarrier:
         self.t_s = 0.0  # [s] the time of its state (its last step)
         self.done = 0  # steps taken (the next is at done * period_s)
         self.course_begun = False  # it has driven the scenario's recovery course
-        # [world.carrier_gnss] enabled: what it publishes is its GNSS fixes, with their errors (it steers on its truth)
+        # [world.carrier_gnss] enabled: it steers on and publishes its GNSS fixes, with their errors, as the
+        # flight's carrier does (sim.gnss.ErringCarrier)
         self.gnss = CarrierGnss(cfg.world.carrier_gnss) if cfg.world.carrier_gnss.enabled else None
         self.fixes: list[GnssFix] = []
         # carrier.acceleration_tau_s > 0: it sends its measured acceleration, as the controller does
@@ -203,13 +205,50 @@ class KinematicCarrier:
             self.course_begun = True
             if not self.scenario.configured:
                 course = self._scenario_course(t_s, approach_s)
-        cmd = self.stepper.decide(self.robot.state_at(t_s), dt, 0.0, t_s, course).tracked
+        state, age = self._own_state(t_s)
+        if state is None or age > self.cfg.carrier.state_timeout_s:  # the controller's stop without an own state
+            self.stepper.hold()
+            self.robot.command(STOP)
+            if self.acceleration is not None:
+                self.acceleration.reset()
+            return STOP
+        cmd = self.stepper.decide(state, dt, age, t_s, course).tracked
         self.robot.command(cmd)
         # the robot now holds the new command (the controller's order); the step at 0 is none of the
         # controller's (its first tick comes one period later, its first sample of the velocity)
         if self.acceleration is not None and self.done > 1:
             self.acceleration.update(t_s, self.robot.state_at(t_s).velocity_ned_m_s)
         return cmd
+
+    def _own_state(self, t_s: float) -> tuple[OwnState | None, float]:
+        """What it steers on at ``t_s`` [s] and how old that is [s]: its robot's state; with
+        ``world.carrier_gnss.enabled`` the newest GNSS fix published by then, its robot's state as
+        the inertial one (:class:`sim.gnss.ErringCarrier`'s; the heading its robot's own: the
+        holonomic carrier does not steer by it). Before, it steered on its truth while the flight's
+        carrier steered on its fixes, metres apart."""
+        truth = self.robot.state_at(t_s)
+        if self.gnss is None:
+            return truth, 0.0
+        fix = self._newest_fix(t_s)
+        if fix is None:
+            return None, math.inf
+        return OwnState(fix.t_s, fix.position_ned_m, fix.velocity_ned_m_s, truth.yaw_rad,
+                        inertial=truth), max(t_s - fix.t_s, 0.0)
+
+    def _newest_fix(self, t_s: float) -> GnssFix | None:
+        """The newest GNSS fix published by ``t_s`` [s] (None before the first), in the plane of
+        ``scenario.carrier_start`` for a planar carrier in 3D, as the controller uses and publishes
+        it (``CarrierController._in_plane``: a ground robot's height is not its fix's)."""
+        assert self.gnss is not None
+        self.fixes.extend(self.gnss.observe(t_s, *self.true_at(t_s)))
+        if not self.fixes:
+            return None
+        fix = max(self.fixes, key=lambda f: f.t_s)
+        self.fixes = [fix]
+        p, v = fix.position_ned_m.copy(), fix.velocity_ned_m_s.copy()
+        if self.stepper.planar and self.stepper.dim == 3:
+            p[2], v[2] = self.cfg.scenario.carrier_start[2], 0.0
+        return replace(fix, position_ned_m=p, velocity_ned_m_s=v)
 
     def _scenario_course(self, t_s: float, approach_s: float | None) -> np.ndarray:
         """The scenario's recovery course's velocity [m/s] NED at ``t_s`` [s] (its turn during the
@@ -227,11 +266,9 @@ class KinematicCarrier:
         ``world.carrier_gnss.enabled`` the newest GNSS fix published by then (:class:`sim.gnss.CarrierGnss`,
         None before the first), else its state."""
         if self.gnss is not None:
-            self.fixes.extend(self.gnss.observe(t_s, *self.true_at(t_s)))
-            if not self.fixes:
+            fix = self._newest_fix(t_s)
+            if fix is None:
                 return None
-            fix = max(self.fixes, key=lambda f: f.t_s)
-            self.fixes = [fix]
             return CarrierObs(position_ned_m=fix.position_ned_m.copy(), velocity_ned_m_s=fix.velocity_ned_m_s.copy(),
                               age_s=max(t_s - fix.t_s, 0.0), alive=True, yaw_rad=self.gnss.heading(self.yaw_rad),
                               acceleration_ned_m_s2=self._sent_acceleration())
