@@ -6,7 +6,8 @@ Each tick, in this order: the carrier's state, if it is a new sample (stamped ``
 measurement time), and this tick's marker readings
 (:class:`~mission.phases.measurements.RelativePosition`, by capture time: ``Measurements.arrived``)
 and downward ranges (:class:`~mission.phases.measurements.DownwardRange`, the feed ``rangefinder``:
-the deck's top, the seat, that far under the vehicle while over the deck) are handed to the estimator; then the vehicle's own sample (its position and velocity as the
+the deck's top, the seat, that far under the vehicle while over the deck; only in the phases the
+caller names: :data:`mission.phases.phase.RANGED`) are handed to the estimator; then the vehicle's own sample (its position and velocity as the
 autopilot reports them, at their sample time) moves it on. The marker lies on the deck,
 ``gates.marker_offset_ned_m`` from the carrier's reference point (``vision.marker_offset_ned_m``:
 by default the dock point; a hover ride's configuration puts it on the deck under the hover point,
