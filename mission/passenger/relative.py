@@ -6,7 +6,8 @@ Each tick, in this order: the carrier's state, if it is a new sample (stamped ``
 measurement time), and this tick's marker readings
 (:class:`~mission.phases.measurements.RelativePosition`, by capture time: ``Measurements.arrived``)
 and downward ranges (:class:`~mission.phases.measurements.DownwardRange`, the feed ``rangefinder``:
-the deck's top, the seat, that far under the vehicle while over the deck) are handed to the estimator; then the vehicle's own sample (its position and velocity as the
+the deck's top, the seat, that far under the vehicle while over the deck; only in the phases the
+caller names: :data:`mission.phases.phase.RANGED`) are handed to the estimator; then the vehicle's own sample (its position and velocity as the
 autopilot reports them, at their sample time) moves it on. The marker lies on the deck,
 ``gates.marker_offset_ned_m`` from the carrier's reference point (``vision.marker_offset_ned_m``:
 by default the dock point; a hover ride's configuration puts it on the deck under the hover point,
@@ -59,13 +60,16 @@ class RelativeDeck:
         self.accel = np.zeros(3)  # [m/s^2] NED, the rate of that velocity low-passed (gates.carrier_accel_tau_s)
         self.t_s: float | None = None  # [s] the last tick's time
         self.refused = 0  # readings not fused: no stated sigma, or a non-finite time, offset or sigma
+        self.unranged = 0  # downward ranges not handed to the estimator: they arrived outside the phases that fuse them
 
     def observe(self, t_s: float, vehicle: VehicleReport | None, carrier: CarrierObs | None,
-                measurements: Measurements, on_deck: bool = False) -> tuple[CarrierObs | None, RelativeView | None]:
+                measurements: Measurements, on_deck: bool = False, ranged: bool = True) -> tuple[CarrierObs | None, RelativeView | None]:
         """This tick's readings in; the carrier's state in the passenger's frame and the
         estimate's view out (None until the vehicle's first sample). ``on_deck``: the vehicle
         stands on the deck (before take-off: the paper's Assumption 2), on its seat:
-        :meth:`RelativeEstimator.seated` with ``relnav.seated_sigma_m``."""
+        :meth:`RelativeEstimator.seated` with ``relnav.seated_sigma_m``. ``ranged``: this tick's
+        downward ranges are handed to the estimator (else dropped and counted in ``unranged``;
+        the caller decides by phase: :data:`mission.phases.phase.RANGED`)."""
         est = self.estimator
         if carrier is not None and t_s - carrier.age_s > self.fix_t_s:
             self.fix_t_s = t_s - carrier.age_s
@@ -77,7 +81,9 @@ class RelativeDeck:
             else:
                 self.refused += 1
         for r in measurements.arrived(DownwardRange):  # the deck's top is the seat: the deck's centre, at its height
-            if _usable_range(r) and r.sigma_m is not None:
+            if not ranged:
+                self.unranged += 1
+            elif _usable_range(r) and r.sigma_m is not None:
                 est.range(RangeFix(r.capture_t_s, r.range_m, r.sigma_m, self.seat_offset, self.gates.deck_radius_m))
             else:
                 self.refused += 1

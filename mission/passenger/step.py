@@ -24,7 +24,7 @@ from mission.core.setpoint import Setpoint
 from mission.passenger.inputs import PassengerInputs, VehicleReport
 from mission.passenger.relative import RelativeDeck, seat_offset
 from mission.phases import CarrierObs, Decision, Measurements, MissionModel, MissionState, Observation, VehicleObs
-from mission.phases.phase import Request
+from mission.phases.phase import RANGED, Phase, Request
 
 
 def observe_vehicle(report: VehicleReport | None, velocity_fix: PositionConsistentVelocity | None = None) -> VehicleObs | None:
@@ -122,15 +122,18 @@ class PassengerStep:
         self.relative = RelativeDeck(model.relnav, model.dock_offset_ned_m, seat_offset(
             model.dock_offset_ned_m, model.deck is not None)) if model.relnav is not None else None
 
-    def observe(self, inputs: PassengerInputs, on_deck: bool = False) -> Observation:
+    def observe(self, inputs: PassengerInputs, phase: Phase | None = None) -> Observation:
         """What the phases observe on this tick (the measurements: this tick's readings, and the
-        newest of each kind so far); ``on_deck``: the vehicle still stands on the carrier's deck
-        (the phase's ``on_deck``), which the relative estimator takes as a measurement."""
+        newest of each kind so far) in ``phase``, the mission's phase before this tick (None: not
+        known, taken as off the deck with ranges fused). The relative estimator takes the phase's
+        ``on_deck`` (the vehicle still stands on the carrier's deck) as a measurement, and fuses
+        downward ranges only in :data:`~mission.phases.phase.RANGED` (the recovery near the deck)."""
         self.measurements = self.measurements.then(tuple(inputs.measurements))
         carrier, relative = inputs.carrier, None
         if self.relative is not None:
             carrier, relative = self.relative.observe(inputs.t_s, inputs.vehicle, carrier, self.measurements,
-                                                    on_deck)
+                                                    phase is not None and phase.on_deck,
+                                                    phase is None or phase in RANGED)
         return Observation(t_s=inputs.t_s, vehicle=observe_vehicle(inputs.vehicle, self.velocity_fix),
                            carrier=carrier, failed=dict(inputs.failed), interrupted=inputs.interrupted,
                            measurements=self.measurements, relative=relative, neighbours=inputs.neighbours,
@@ -138,6 +141,6 @@ class PassengerStep:
 
     def __call__(self, state: MissionState, inputs: PassengerInputs) -> StepResult:
         """One tick: observe, then the phases."""
-        obs = self.observe(inputs, state.phase.on_deck)
+        obs = self.observe(inputs, state.phase)
         state, decision = phases.step(state, obs, self.model)
         return StepResult(state, obs, decision)

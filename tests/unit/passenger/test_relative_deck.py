@@ -9,12 +9,15 @@ import numpy as np
 import pytest
 
 from mission.config.relnav import RelnavSection
-from mission.model import derived
-from mission.passenger.inputs import VehicleReport
+from mission.config.schema import load_config
+from mission.model import derived, mission_model
+from mission.passenger.inputs import PassengerInputs, VehicleReport
 from mission.passenger.relative import RelativeDeck
-from mission.phases import Measurements, RelativePosition
+from mission.passenger.step import PassengerStep
+from mission.phases import Measurements, Phase, RelativePosition
 from mission.phases.measurements import DownwardRange
 from mission.phases.types import CarrierObs, RelativeView, RelnavGates
+from tests.conftest import CONFIGS
 
 BIAS = np.array([2.0, -1.0, 0.0])  # [m] the carrier's GNSS frame over the passenger's
 
@@ -240,9 +243,6 @@ def test_the_deck_velocity_slews_at_its_own_limit_when_configured_else_at_the_la
     """relnav.velocity_slew_m_s2 is the limit of the deck's velocity shown to the phases; unset,
     safety.carrier_max_accel_m_s2 (the law's): a rover that leaps from rest at ~2 m/s^2 was shown
     pulling away at 1 m/s^2, 0.5 m/s behind the estimate's own velocity for 0.6 s on PX4."""
-    from mission.config.schema import load_config
-    from mission.model import mission_model
-    from tests.conftest import CONFIGS
 
     cfg = load_config(CONFIGS / "relnav.toml")
     gates = mission_model(cfg).relnav
@@ -310,3 +310,46 @@ def test_downward_ranges_are_fused_over_the_deck_and_malformed_ones_refused():
         counts = deck.estimator.counts()
         assert deck.refused == len(bad)
         assert (counts.fused["range"], counts.off_deck) == ((10, 0) if deck is near else (0, 10)), counts
+
+
+def _hover(step, t0: float, t1: float, phase, ranges: bool) -> None:
+    """The passenger's step ``step`` in ``phase`` from ``t0`` to ``t1`` [s] at 50 Hz: the vehicle
+    hovering 1.5 m over a deck at rest at the origin (the carrier's GNSS at 10 Hz with the bias, the
+    marker every tick), with ``ranges`` a downward range of 1.5 m every other tick."""
+    for k in range(int(round(t0 * 50)), int(round(t1 * 50))):
+        t = k / 50
+        report = VehicleReport(t, np.array([0.0, 0.0, -1.5]), np.zeros(3), t, t, True, "OFFBOARD", 0.0, True)
+        fix_t = math.floor(t * 10) / 10
+        carrier = CarrierObs(position_ned_m=BIAS.copy(), velocity_ned_m_s=np.zeros(3), age_s=t - fix_t, alive=True)
+        new: tuple = (RelativePosition(capture_t_s=t, offset_ned_m=np.array([0.0, 0.0, 1.5]), sigma_m=0.02),)
+        if ranges and k % 2 == 0:
+            new += (DownwardRange(capture_t_s=t, range_m=1.5, sigma_m=0.03),)
+        step.observe(PassengerInputs(t, report, carrier, measurements=new), phase)
+
+
+def test_downward_ranges_are_fused_only_in_the_recovery_near_the_deck():
+    """The passenger's step hands a downward range to the estimator only in HOLDOFF, APPROACH and
+    GO_AROUND (mission.phases.phase.RANGED): riding, the estimate is the one without the
+    rangefinder to the last bit, and every range is counted unranged; on the approach they are
+    fused (the marker has put the deck under the vehicle)."""
+
+    model = mission_model(load_config(CONFIGS / "relnav.toml"))
+    with_ranges, without = PassengerStep(model), PassengerStep(model)
+    for step, ranges in ((with_ranges, True), (without, False)):
+        _hover(step, 0.0, 4.0, Phase.RIDING, ranges)
+    a, b = with_ranges.relative, without.relative
+    assert a is not None and b is not None
+    assert a.estimator.counts().fused["range"] == 0 and a.unranged == 100
+    np.testing.assert_array_equal(a.estimator.estimate().position_ned_m, b.estimator.estimate().position_ned_m)
+    _hover(with_ranges, 4.0, 5.0, Phase.APPROACH, True)
+    assert a.estimator.counts().fused["range"] == 25 and a.unranged == 100
+    fused = {p for p in Phase if _one_range_handed_over(model, p)}
+    assert fused == {Phase.HOLDOFF, Phase.APPROACH, Phase.GO_AROUND}
+
+
+def _one_range_handed_over(model, phase) -> bool:
+    """One tick of a fresh passenger's step in ``phase`` with one range: was it handed to the estimator?"""
+    step = PassengerStep(model)
+    _hover(step, 0.0, 0.02, phase, True)
+    assert step.relative is not None
+    return step.relative.unranged == 0
