@@ -93,7 +93,7 @@ class CarrierObs:
 
     @property
     def law_position_ned_m(self) -> np.ndarray:
-        """[m] NED the position the carrier's own law runs at: its own frame's (module docstring)."""
+        """[m] NED the position the carrier's own law runs at: its own frame's (the class docstring)."""
         return self.position_ned_m if self.own_frame_position_ned_m is None else self.own_frame_position_ned_m
 
     @property
