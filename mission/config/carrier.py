@@ -171,6 +171,11 @@ class CarrierSection(Section):
                      "position, the difference low-passed with this time constant (mission.core.consistent_velocity), "
                      "not by its estimator's velocity alone: a PX4 rover standing still was estimated at 0.2-0.3 m/s "
                      "and was asked the floor's ramp instead of the gentle start; 0 off"))
+    fix_smoothing_tau_s: float = Field(0.0, ge=0, le=60,
+        description=("[s] where the own state is a GNSS fix with the robot's inertial velocity beside it (the "
+                     "simulators' world errors), steer and guard on the fix low-passed with this time constant and "
+                     "moved on by that velocity, as a rover's EKF fuses GNSS with its wheels and IMU (the bias stays, "
+                     "the fix-to-fix noise goes); what it publishes is still the fix; 0: steer on the fix"))
     recovery_speed_m_s: float = Field(0.0, ge=0, le=100,
         description=("[m/s] while the passenger comes home (returns, holds off, approaches, docks) the carrier drives "
                      "its steady recovery course at this speed, after the legs of recovery_course; 0: it stops and waits "
