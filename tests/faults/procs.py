@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import io
 import json
 import os
 import socket
@@ -233,8 +234,12 @@ class Flight:
         return out
 
     def record(self) -> list[dict[str, str]]:
-        with open(self.log_dir / "record.csv", newline="") as f:
-            return list(csv.DictReader(f))
+        """The flight record's complete rows so far: read while the mission writes it, its last line
+        may be a row half written (a CI run read one with an empty ``t_s``), which is left out."""
+        text = (self.log_dir / "record.csv").read_text()
+        if not text.endswith("\n"):
+            text = text[:text.rfind("\n") + 1]
+        return list(csv.DictReader(io.StringIO(text, newline="")))
 
     def summary(self) -> dict[str, Any]:
         return json.loads((self.log_dir / "summary.json").read_text())

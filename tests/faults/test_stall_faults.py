@@ -114,7 +114,7 @@ def test_a_controller_stalled_1_s_on_the_approach_goes_around_and_docks_at_the_n
 
 def _flown_s(f: Any, phase: str) -> float:
     """How long [s] the mission has been in ``phase`` since it first entered it (record time; 0 before)."""
-    rows = f.record()
+    rows = [r for r in f.record() if r.get("t_s")]  # complete rows (the record is read while it is written)
     start = next((float(r["t_s"]) for r in rows if r["phase"] == phase), None)
     return 0.0 if start is None or not rows else float(rows[-1]["t_s"]) - start
 
