@@ -157,7 +157,7 @@ class KinematicCarrier:
         # [world.carrier_gnss] enabled: it steers on and publishes its GNSS fixes, with their errors, as the
         # flight's carrier does (sim.gnss.ErringCarrier)
         self.gnss = CarrierGnss(cfg.world.carrier_gnss) if cfg.world.carrier_gnss.enabled else None
-        self.fixes: list[GnssFix] = []
+        self.fix: GnssFix | None = None  # the newest GNSS fix published so far, in its plane (_newest_fix)
         # carrier.acceleration_tau_s > 0: it sends its measured acceleration, as the controller does
         # (of its robot's own velocity: mission.carrier.acceleration.inertial_sample)
         tau = cfg.carrier.acceleration_tau_s
@@ -240,15 +240,14 @@ class KinematicCarrier:
         ``scenario.carrier_start`` for a planar carrier in 3D, as the controller uses and publishes
         it (``CarrierController._in_plane``: a ground robot's height is not its fix's)."""
         assert self.gnss is not None
-        self.fixes.extend(self.gnss.observe(t_s, *self.true_at(t_s)))
-        if not self.fixes:
-            return None
-        fix = max(self.fixes, key=lambda f: f.t_s)
-        self.fixes = [fix]
-        p, v = fix.position_ned_m.copy(), fix.velocity_ned_m_s.copy()
-        if self.stepper.planar and self.stepper.dim == 3:
-            p[2], v[2] = self.cfg.scenario.carrier_start[2], 0.0
-        return replace(fix, position_ned_m=p, velocity_ned_m_s=v)
+        published = self.gnss.observe(t_s, *self.true_at(t_s))
+        newest = max(published, key=lambda f: f.t_s) if published else None
+        if newest is not None and (self.fix is None or newest.t_s > self.fix.t_s):  # flattened once, as it comes
+            p, v = newest.position_ned_m.copy(), newest.velocity_ned_m_s.copy()
+            if self.stepper.planar and self.stepper.dim == 3:
+                p[2], v[2] = self.cfg.scenario.carrier_start[2], 0.0
+            self.fix = replace(newest, position_ned_m=p, velocity_ned_m_s=v)
+        return self.fix
 
     def _scenario_course(self, t_s: float, approach_s: float | None) -> np.ndarray:
         """The scenario's recovery course's velocity [m/s] NED at ``t_s`` [s] (its turn during the
