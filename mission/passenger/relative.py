@@ -74,7 +74,7 @@ class RelativeDeck:
         if carrier is not None and t_s - carrier.age_s > self.fix_t_s:
             self.fix_t_s = t_s - carrier.age_s
             est.carrier(CarrierFix(self.fix_t_s, np.asarray(carrier.position_ned_m, float),
-                                   np.asarray(carrier.velocity_ned_m_s, float)))
+                                   np.asarray(carrier.velocity_ned_m_s, float), _sent_acceleration(carrier)))
         for m in measurements.arrived(RelativePosition):
             if _usable(m) and m.sigma_m is not None:  # the carrier's reference point is marker_offset from the marker
                 est.marker(MarkerFix.isotropic(m.capture_t_s, np.asarray(m.offset_ned_m, float) - self.marker_offset, m.sigma_m))
@@ -119,14 +119,19 @@ class RelativeDeck:
         self.last = (now, velocity)
         dt = max(t_s - self.t_s, 0.0) if self.t_s is not None else 0.0
         before = self.velocity
-        shown = self._slewed(velocity, dt_s=dt, on_deck=on_deck)
+        sent = _sent_acceleration(carrier)
+        shown = self._slewed(velocity, dt_s=dt, on_deck=on_deck, sent=sent)
         accel = self._acceleration(before, shown, dt, on_deck)
         self.t_s = t_s
         now = now + self.pending
+        # the state handed on is the carrier's at its sample's time, as a fix's is (its readers move it on
+        # over age_s): the estimate's now moved back, with the acceleration it sent when it sent one (the
+        # estimate's velocity already carries it through the fix's latency)
+        age, a = carrier.age_s, (np.zeros(3) if sent is None else sent)
         # its law runs in its own frame: a prediction by it starts from where it says it is, not from the
         # passenger's frame, which is off by the two GNSS biases (2 m at 8-10 m from the target turned the
         # law's course by ~0.2 rad: the ride fed forward 0.2-0.25 m/s across the carrier's velocity)
-        return replace(carrier, position_ned_m=now - shown * carrier.age_s, velocity_ned_m_s=shown,
+        return replace(carrier, position_ned_m=now - shown * age + 0.5 * a * age * age, velocity_ned_m_s=shown - a * age,
                        own_frame_position_ned_m=np.asarray(carrier.position_ned_m, float)), \
             self._view(e, bias, accel)
 
@@ -146,7 +151,7 @@ class RelativeDeck:
             self.accel = self.accel + (1.0 - math.exp(-dt_s / tau)) * (rate - self.accel)
         return self.accel.copy()
 
-    def _slewed(self, velocity: np.ndarray, dt_s: float, on_deck: bool) -> np.ndarray:
+    def _slewed(self, velocity: np.ndarray, dt_s: float, on_deck: bool, sent: np.ndarray | None = None) -> np.ndarray:
         """The deck's velocity [m/s] shown to the phases: the filter's, changing by at most the
         carrier's acceleration limit (``gates.carrier_accel_m_s2``) over ``dt_s`` [s], plus
         ``gates.deck_velocity_catch_up_per_s`` times how far it is behind. The carrier does not
@@ -156,15 +161,18 @@ class RelativeDeck:
         a second is no noise: behind a carrier pulling away at its limit, a velocity limited to
         that limit never catches up (0.2-0.7 m/s behind, the rider 0.5-0.65 m off its dock point
         2 s into the ride), and a carrier stopping dead at its P3 guard was followed down at
-        1 m/s^2 (the rider 0.8-1 m past its dock point)."""
+        1 m/s^2 (the rider 0.8-1 m past its dock point). With the acceleration the carrier
+        measured and ``sent`` [m/s^2] NED the limit is round the change it makes (that is motion, not
+        noise: at the limit itself the shown velocity could not take a single correction)."""
         limit = self.gates.carrier_accel_m_s2
         if self.velocity is None or limit is None or on_deck:
             self.velocity = velocity.copy()
             return self.velocity
-        change = velocity - self.velocity
+        expected = self.velocity if sent is None else self.velocity + sent * dt_s
+        change = velocity - expected
         size = float(np.linalg.norm(change))
         step = (limit + self.gates.deck_velocity_catch_up_per_s * size) * dt_s
-        self.velocity = velocity.copy() if size <= step else self.velocity + change * (step / size)
+        self.velocity = velocity.copy() if size <= step else expected + change * (step / size)
         return self.velocity
 
     def _view(self, e: RelativeEstimate, bias: np.ndarray, accel: np.ndarray | None = None) -> RelativeView:
@@ -172,6 +180,16 @@ class RelativeDeck:
                             pending_ned_m=self.pending.copy(), position_sigma_m=e.position_sigma_m,
                             converged=e.converged, since_marker_s=e.since_marker_s, estimate=e,
                             carrier_accel_ned_m_s2=accel)
+
+
+def _sent_acceleration(carrier: CarrierObs) -> np.ndarray | None:
+    """The acceleration [m/s^2] NED the carrier measured and sent with its state, None if it sent
+    none or one that is not finite."""
+    a = carrier.acceleration_ned_m_s2
+    if a is None:
+        return None
+    a = np.asarray(a, dtype=float)
+    return a if a.shape == (3,) and np.all(np.isfinite(a)) else None
 
 
 def _usable(m: RelativePosition) -> bool:

@@ -8,7 +8,11 @@ and the passenger's GNSS frames, and the drift rate of the passenger's own estim
   and the relative position is the carrier's less it (the vehicle's own manoeuvres are an input,
   never a disturbance the model must absorb);
 - the carrier's reported GNSS state (:meth:`RelativeEstimator.carrier`), stamped with its
-  measurement time: its position sees ``c + b``, its velocity ``w``;
+  measurement time: its position sees ``c + b``, its velocity ``w``; the acceleration the carrier
+  measured and sent beside it is the model's known input from that time until the next fix (it
+  was measured when the fix was published, up to the fix's latency later: so the velocity moves
+  on through that latency as the carrier's does, where a constant-velocity prediction lags a
+  carrier pulling away by its acceleration times the latency and more);
 - the marker (:meth:`RelativeEstimator.marker`), stamped with its capture time: the deck from the
   vehicle plus the vehicle's own position then sees ``c``;
 - with ``own_drift_sigma_m_s`` > 0, the passenger's own position estimate drifts at a rate ``d``,
@@ -106,6 +110,7 @@ class _Snapshot:
     p: np.ndarray
     marker_t_s: float
     rejected_since_s: float
+    accel: np.ndarray
 
 
 class RelativeEstimator:
@@ -119,6 +124,7 @@ class RelativeEstimator:
         self._seq = 0
         self._x = np.zeros(kalman.N)
         self._p = self._prior()
+        self._accel = np.zeros(3)  # [m/s^2] NED the carrier's acceleration it sent with its newest fix fused (the input)
         self._t_s = -math.inf  # the time of the filter's state
         self._marker_t_s = -math.inf  # capture time of the newest marker fused
         self._rejected_since_s = math.inf  # capture time of the first marker rejected since the last one fused
@@ -239,6 +245,7 @@ class RelativeEstimator:
             snap = self._snapshots[i]  # i >= 0: _add drops events older than the first snapshot
             del self._snapshots[i + 1:]
             self._x, self._p, self._marker_t_s, self._rejected_since_s = snap.x, snap.p, snap.marker_t_s, snap.rejected_since_s
+            self._accel = snap.accel
             self._t_s, self._done, self._replay_from = snap.key[0], snap.key, None
         start = 0 if self._done is None else bisect.bisect_right(self._events, self._done, key=lambda e: e.key)
         now = self._own[-1].t_s
@@ -269,7 +276,7 @@ class RelativeEstimator:
             (self._fused if ok else self._rejected)[kind] -= 1
         e.outcome = {}
         if e.tick is not None:
-            self._snapshots.append(_Snapshot(e.key, self._x, self._p, self._marker_t_s, self._rejected_since_s))
+            self._snapshots.append(_Snapshot(e.key, self._x, self._p, self._marker_t_s, self._rejected_since_s, self._accel))
         elif e.marker is not None and e.seated:
             r = self._seated_noise(float(e.marker.covariance_ned_m2[0, 0]))
             if r is not None:
@@ -299,6 +306,8 @@ class RelativeEstimator:
                                                       np.diag(self._per_axis(prm.gnss_position_sigma_m) ** 2))
             e.outcome["gnss_velocity"] = self._update(z_v, kalman.H_GNSS_VELOCITY,
                                                       kalman.I3 * prm.gnss_velocity_sigma_m_s ** 2)
+            a = e.fix.acceleration_ned_m_s2
+            self._accel = np.zeros(3) if a is None or not np.all(np.isfinite(a)) else np.asarray(a, dtype=float).copy()
         for kind, ok in e.outcome.items():
             (self._fused if ok else self._rejected)[kind] += 1
 
@@ -337,7 +346,8 @@ class RelativeEstimator:
                                         kalman.process_noise(dt, accel, self._per_axis(prm.bias_sigma_m),
                                                              prm.bias_tau_s, self._per_axis(prm.own_drift_sigma_m_s),
                                                              prm.own_drift_tau_s))
-        self._x, self._p = kalman.predict(self._x, self._p, *model)
+        step = kalman.input_step(dt, self._accel) if np.any(self._accel) else None
+        self._x, self._p = kalman.predict(self._x, self._p, *model, step)
         self._t_s = t_s
 
     def _seated_noise(self, variance_m2: float) -> np.ndarray | None:

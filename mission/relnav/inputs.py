@@ -36,11 +36,14 @@ class OwnSample:
 class CarrierFix:
     """The carrier's reported GNSS state, measured at ``t_s`` [s] (its stamp, not its arrival):
     ``position_ned_m`` (3,) [m] in the carrier's GNSS frame (of the deck's reference point) and
-    ``velocity_ned_m_s`` (3,) [m/s]."""
+    ``velocity_ned_m_s`` (3,) [m/s]; ``acceleration_ned_m_s2`` (3,) [m/s^2]: the acceleration the
+    carrier measured with its own inertial state and sent beside the fix (newer than the fix by its
+    latency), or None (it sent none)."""
 
     t_s: float
     position_ned_m: np.ndarray
     velocity_ned_m_s: np.ndarray
+    acceleration_ned_m_s2: np.ndarray | None = None
 
 
 class MarkerObservation(Protocol):

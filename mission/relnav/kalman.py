@@ -9,9 +9,10 @@ position and velocity are inputs, not states (its autopilot reports them every t
 vehicle's own manoeuvres never enter the model; the relative position is ``c`` less the vehicle's
 own. Model, per axis (the axes independent):
 
-- ``c`` and ``w``: ``dc/dt = w + d``, ``w`` a constant velocity driven by a white acceleration of
-  the carrier of spectral density ``q = accel_noise^2`` [m^2/s^3] (down: times the vertical
-  factor squared);
+- ``c`` and ``w``: ``dc/dt = w + d``, ``dw/dt = u + n``: ``u`` the acceleration the carrier
+  measured and sent (a known input, :func:`input_step`; zero when it sends none: ``w`` a constant
+  velocity), ``n`` a white acceleration of spectral density ``q = accel_noise^2`` [m^2/s^3]
+  (down: times the vertical factor squared);
 - ``b``: first-order Gauss-Markov, ``db/dt = -b / tau - d + n``, stationary standard deviation
   ``sigma_b`` [m] (its own per axis), so ``b(t+dt) = exp(-dt/tau) b(t) - (d's integral) + n``
   with ``var n = sigma_b^2 (1 - exp(-2 dt/tau))`` (the passenger's frame drifting moves ``c`` by
@@ -71,9 +72,22 @@ def process_noise(dt_s: float, accel_noise_m_s2: np.ndarray, bias_sigma_m: np.nd
     return out
 
 
-def predict(x: np.ndarray, p: np.ndarray, f: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The state and covariance moved on by transition ``f`` with process noise ``q``."""
-    return f @ x, f @ p @ f.T + q
+def input_step(dt_s: float, accel_ned_m_s2: np.ndarray) -> np.ndarray:
+    """The (12,) change of the state over ``dt_s`` [s] that the carrier's known acceleration
+    ``accel_ned_m_s2`` (3,) [m/s^2], held over the step, makes: ``c`` by ``u dt^2 / 2``, ``w`` by ``u dt``."""
+    u = np.asarray(accel_ned_m_s2, dtype=float)
+    out = np.zeros(N)
+    out[C_] = 0.5 * dt_s * dt_s * u
+    out[W_] = dt_s * u
+    return out
+
+
+def predict(x: np.ndarray, p: np.ndarray, f: np.ndarray, q: np.ndarray,
+            step: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The state and covariance moved on by transition ``f`` with process noise ``q``, plus a
+    known input's change ``step`` (:func:`input_step`; None: no input)."""
+    x_new = f @ x if step is None else f @ x + step
+    return x_new, f @ p @ f.T + q
 
 
 @dataclass(frozen=True)

@@ -25,8 +25,10 @@ def _carrier(t: float) -> tuple[np.ndarray, np.ndarray]:
     return np.array([x, 0.0, 0.0]), np.array([a, 0.0, 0.0])
 
 
-def _velocity_lag(seed: int) -> float:
-    """The estimate's carrier velocity behind the truth [m/s], mean over 0.5-2 s of the pull."""
+def _velocity_lag(seed: int, sends_acceleration: bool = False) -> float:
+    """The estimate's carrier velocity behind the truth [m/s], mean over 0.5-2 s of the pull;
+    ``sends_acceleration``: each fix carries the acceleration the carrier measured when it
+    published it (0.2 s after the fix), with 0.05 m/s^2 of noise."""
     params = load_config(CONFIGS / "relnav.toml").relnav.params()
     est = RelativeEstimator(params)
     rng = np.random.default_rng(seed)
@@ -37,7 +39,11 @@ def _velocity_lag(seed: int) -> float:
         t = k * DT
         x, v = _carrier(t)
         if k % 5 == 0:
-            waiting.append((t + 0.2, CarrierFix(t, x + bias + rng.normal(0, 0.3, 3), v + rng.normal(0, 0.2, 3))))
+            a = None
+            if sends_acceleration:
+                a = np.array([ACCEL if START <= t + 0.2 and _carrier(t + 0.2)[1][0] < 2.0 else 0.0, 0.0, 0.0])
+                a = a + rng.normal(0, 0.05, 3)
+            waiting.append((t + 0.2, CarrierFix(t, x + bias + rng.normal(0, 0.3, 3), v + rng.normal(0, 0.2, 3), a)))
         if k % 3 == 0:
             waiting.append((t + 0.1, MarkerFix.isotropic(t, -above + rng.normal(0, 0.03, 3), 0.03)))
         for _, m in [w for w in waiting if w[0] <= t]:
@@ -55,3 +61,12 @@ def test_the_estimate_follows_a_carrier_pulling_away_from_rest():
     failed in 24 of 200 Monte-Carlo flights, each at the start of a ride from rest)."""
     lags = [_velocity_lag(seed) for seed in range(6)]
     assert 0.0 < float(np.mean(lags)) <= 0.25, lags
+
+
+def test_the_acceleration_the_carrier_sends_takes_the_lag_away():
+    """With the acceleration the carrier measured sent beside each fix, the estimate's velocity
+    moves on through the fixes' latency as the carrier's does: mean lag over six seeds within
+    0.05 m/s either way (0.20-0.22 m/s behind without it, the test above)."""
+    lags = [_velocity_lag(seed, sends_acceleration=True) for seed in range(6)]
+    assert abs(float(np.mean(lags))) <= 0.05, lags
+    assert max(abs(x) for x in lags) <= 0.1, lags
