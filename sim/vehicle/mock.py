@@ -41,6 +41,7 @@ from sim.vehicle.streams import DUE_EPSILON, StreamSchedule
 from sim.vehicle.params import ParamTable, vehicle_limits
 from sim.vehicle.physics.deck import Deck, DeckMotion
 from sim.vehicle.physics.multicopter import KinState, Limits, initial_state, step
+from sim.vehicle.physics.rangefinder import Rangefinder, range_below_m
 from sim.vehicle.physics.rover import rover_stepper
 
 __all__ = ["MockVehicle", "VehicleOptions", "FaultOptions", "VehicleSnapshot", "spawn_process", "PHYSICS_DT_S"]
@@ -58,8 +59,9 @@ COUNTER_NAMES = (
     "rx_datagrams", "rx_messages", "rx_malformed", "rx_unknown_ids", "rx_unsigned_rejected", "rx_wrong_target",
     "rx_ignored", "commands", "setpoints_accepted", "setpoints_rejected", "params_set", "tx_messages", "tx_errors",
     "dropped_in", "dropped_out", "blackout_in", "blackout_out", "delayed_in", "delayed_out", "physics_steps",
-    "internal_errors", "landing_targets_accepted", "landing_targets_ignored",
+    "internal_errors", "landing_targets_accepted", "landing_targets_ignored", "ranges_sent",
 )
+RANGEFINDER_GROUND_D_M = 0.0  # what the rangefinder sees beside the deck: the ground the physics lands on [m NED down]
 
 
 class MockVehicle:
@@ -84,6 +86,7 @@ class MockVehicle:
         self._commander = Commander(self.params, self._kin)
         self._physics = rover_stepper(lambda: self._commander.mode) if opts.frame == "rover" else step
         self._deck = Deck(opts.deck, lambda: self.params.get("LNDMC_XY_VEL_MAX")) if opts.deck is not None else None
+        self._rangefinder = None if opts.rangefinder is None else Rangefinder(opts.rangefinder, opts.faults.seed)
         self._commander.refuse_arming_reason = opts.faults.refuse_arming_reason
         self._commander.refuse_offboard_reason = opts.faults.refuse_offboard_reason
         self._faults = FaultInjector(opts.faults)
@@ -282,6 +285,7 @@ class MockVehicle:
         for kind, item in self._faults.due(self._t_s):
             self._io.release(kind, item)
         self._service_streams(self._t_s)
+        self._send_ranges(self._t_s)
         self._flush_outbox()
 
     def _limits(self) -> Limits:
@@ -310,6 +314,8 @@ class MockVehicle:
             else:
                 moved = self._physics(kin, command, limits, wind, PHYSICS_DT_S)
             kin = moved if deck is None else deck.step(k * PHYSICS_DT_S, PHYSICS_DT_S, kin, moved)
+            if self._rangefinder is not None:
+                self._measure_range(k * PHYSICS_DT_S, kin)
         if deck is not None and deck.crash is not None and not crashed:
             log.warning("crash on the deck at t=%.2f s: %s", deck.touchdowns[-1].t_s, deck.crash)
         self._counters["physics_steps"] += target - self._steps
@@ -329,7 +335,9 @@ class MockVehicle:
     def _wait_wall_s(self, t_s: float) -> float:
         """Wall seconds until the physics step at which the next stream or held datagram is due."""
         held = self._faults.next_due_s()
-        next_s = min(self._schedule.next_due_s(self._links), math.inf if held is None else held)
+        ranged = None if self._rangefinder is None else self._rangefinder.next_delivery_s()
+        next_s = min(self._schedule.next_due_s(self._links), math.inf if held is None else held,
+                     math.inf if ranged is None else ranged)
         next_s = t_s + 1.0 if next_s == math.inf else next_s
         wake_s = math.ceil(next_s / PHYSICS_DT_S - DUE_EPSILON) * PHYSICS_DT_S
         return min(max(wake_s - self.clock.now(), 0.0) / self.clock.speed, MAX_POLL_WALL_S)
@@ -349,6 +357,28 @@ class MockVehicle:
                 built[stream.name] = tel.build(stream.name, state, self._geo, self._noise)
             if built[stream.name] is not None:
                 self._io.send(link, built[stream.name])  # type: ignore[arg-type]  (one of self._links)
+
+    def _measure_range(self, t_s: float, kin: KinState) -> None:
+        """The rangefinder's capture at the physics step ending at ``t_s`` [s], if one is due: from
+        the true position down to the deck's top when over its disc (``deck.radius_m``), else the
+        ground (:data:`RANGEFINDER_GROUND_D_M`)."""
+        assert self._rangefinder is not None
+        deck = self._deck
+        top = None if deck is None else deck.top(t_s)
+        radius_m = 0.0 if deck is None else deck.spec.radius_m
+        self._rangefinder.capture(t_s, lambda: range_below_m((kin.n_m, kin.e_m, kin.d_m), top, radius_m,
+                                                             RANGEFINDER_GROUND_D_M))
+
+    def _send_ranges(self, t_s: float) -> None:
+        """Send every range due by ``t_s`` [s] (``latency_s`` after its capture) as DISTANCE_SENSOR on every link."""
+        if self._rangefinder is None:
+            return
+        spec = self._rangefinder.cfg
+        for reading in self._rangefinder.deliver(t_s):
+            msg = tel.distance_sensor(reading.capture_t_s, reading.range_m, spec.sigma_m, spec.max_range_m)
+            self._counters["ranges_sent"] += 1
+            for link in self._links:
+                self._io.send(link, msg)
 
     def _flush_outbox(self) -> None:
         """Send the commander's STATUSTEXTs to the links whose peer is alive (PX4 rule)."""
