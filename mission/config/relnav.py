@@ -133,6 +133,10 @@ class RelnavSection(Section):
         description=("[m] a downward range is fused (the deck's height from the vehicle's own height plus it) only "
                      "while the estimate has the vehicle within `recovery.deck_radius_m` less this of the deck's "
                      "centre, horizontally: else it measured the ground (counted `off_deck`)"))
+    range_sigma_m: float = Field(0.05, gt=0, le=5,
+        description=("[m] a flight's downward range's standard deviation when the vehicle does not state it "
+                     "(the feed `rangefinder`: DISTANCE_SENSOR's covariance 0 or 255, unknown; PX4 sends 0 for a "
+                     "driver that sets no variance)"))
 
     @model_validator(mode="after")
     def _descent_timeout(self) -> RelnavSection:
@@ -223,7 +227,8 @@ class MarkerOutagesSection(Section):
 
 class RangefinderSection(Section):
     """The passenger's downward rangefinder as the simulated world measures it (the feed
-    `rangefinder` in `mission.feeds` turns it on): the vertical distance from the vehicle to the
+    `rangefinder` in `mission.feeds` turns it on: the in-process simulation's sensor, and the mock
+    vehicle's DISTANCE_SENSOR, `sim/vehicle/physics/rangefinder.py`): the vertical distance from the vehicle to the
     deck's top when it is over the deck (within `recovery.deck_radius_m` of its centre), else to
     the ground (`scenario.carrier_start`'s height)."""
 

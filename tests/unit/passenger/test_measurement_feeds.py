@@ -169,7 +169,7 @@ def test_a_feed_reaches_the_step_of_the_simulation():
     assert isinstance(copied, ToySensor) and copied.world is branch and copied is not sensor
 
 
-def open_toy_camera(cfg, session, clock) -> ToyCamera:
+def open_toy_camera(cfg, session, clock, link=None) -> ToyCamera:
     """A feed's opener as ``marsupial run`` calls it (the fake world stands in for the pixels)."""
     return ToyCamera(FakeWorld(ManualClock(), target_ned_m=np.zeros(3)))
 
