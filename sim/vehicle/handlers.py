@@ -67,7 +67,7 @@ class MessageHandlers:
             self.v._counters["rx_malformed"] += 1
         for msg in messages:
             self._dispatch(link, msg, address)
-        self.v._flush_outbox()
+        self.v._io.send_statustexts()
 
     def _dispatch(self, link: VehicleLink, msg: Any, address: tuple[str, int]) -> None:
         kind = msg.get_type()

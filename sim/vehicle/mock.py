@@ -41,7 +41,6 @@ from sim.vehicle.streams import DUE_EPSILON, StreamSchedule
 from sim.vehicle.params import ParamTable, vehicle_limits
 from sim.vehicle.physics.deck import Deck, DeckMotion
 from sim.vehicle.physics.multicopter import KinState, Limits, initial_state, step
-from sim.vehicle.physics.rangefinder import Rangefinder, range_below_m
 from sim.vehicle.physics.rover import rover_stepper
 
 __all__ = ["MockVehicle", "VehicleOptions", "FaultOptions", "VehicleSnapshot", "spawn_process", "PHYSICS_DT_S"]
@@ -50,7 +49,6 @@ log = logging.getLogger(__name__)
 
 PHYSICS_DT_S = 0.005  # fixed physics step [s, simulated]
 MAX_POLL_WALL_S = 0.02  # longest socket wait [s, wall]; bounds the reaction to stop()
-STATUSTEXT_PEER_TIMEOUT_S = 2.5  # PX4 treats a peer without HEARTBEAT for this long as gone
 LINK_NAMES = ("onboard", "gcs")
 # A PX4 rover is "landed" only when disarmed (RoverLandDetector.cpp): no preflight auto-disarm.
 ROVER_PARAMS = {"COM_DISARM_PRFLT": 0.0}
@@ -59,9 +57,8 @@ COUNTER_NAMES = (
     "rx_datagrams", "rx_messages", "rx_malformed", "rx_unknown_ids", "rx_unsigned_rejected", "rx_wrong_target",
     "rx_ignored", "commands", "setpoints_accepted", "setpoints_rejected", "params_set", "tx_messages", "tx_errors",
     "dropped_in", "dropped_out", "blackout_in", "blackout_out", "delayed_in", "delayed_out", "physics_steps",
-    "internal_errors", "landing_targets_accepted", "landing_targets_ignored", "ranges_sent",
+    "internal_errors", "landing_targets_accepted", "landing_targets_ignored",
 )
-RANGEFINDER_GROUND_D_M = 0.0  # what the rangefinder sees beside the deck: the ground the physics lands on [m NED down]
 
 
 class MockVehicle:
@@ -86,7 +83,7 @@ class MockVehicle:
         self._commander = Commander(self.params, self._kin)
         self._physics = rover_stepper(lambda: self._commander.mode) if opts.frame == "rover" else step
         self._deck = Deck(opts.deck, lambda: self.params.get("LNDMC_XY_VEL_MAX")) if opts.deck is not None else None
-        self._rangefinder = None if opts.rangefinder is None else Rangefinder(opts.rangefinder, opts.faults.seed)
+        self._ranges = tel.RangeStream(opts.rangefinder, opts.faults.seed)
         self._commander.refuse_arming_reason = opts.faults.refuse_arming_reason
         self._commander.refuse_offboard_reason = opts.faults.refuse_offboard_reason
         self._faults = FaultInjector(opts.faults)
@@ -100,7 +97,6 @@ class MockVehicle:
         self._steps = 0
         self._limits_cache: tuple[int, Limits] | None = None
         self._counters = dict.fromkeys(COUNTER_NAMES, 0)
-        self._chunk_id = 0
         self._position_fault_done = False  # FaultOptions.position_lost_at_s applied
         self._events: collections.deque[tuple[float, int, str]] = collections.deque(maxlen=1000)
         self._unsent: list[tuple[float, int, str]] = []
@@ -162,7 +158,7 @@ class MockVehicle:
         """A copy of the counters (received, malformed, dropped, sent, ...)."""
         with self._lock:
             counters = dict(self._counters)
-        counters["held_by_latency"] = self._faults.pending()
+        counters["held_by_latency"], counters["ranges_sent"] = self._faults.pending(), self._ranges.sent
         return counters
 
     def snapshot(self) -> VehicleSnapshot:
@@ -285,8 +281,7 @@ class MockVehicle:
         for kind, item in self._faults.due(self._t_s):
             self._io.release(kind, item)
         self._service_streams(self._t_s)
-        self._send_ranges(self._t_s)
-        self._flush_outbox()
+        self._io.send_statustexts()
 
     def _limits(self) -> Limits:
         """The dynamics' gains and limits from the parameters (derived again only after a change)."""
@@ -314,8 +309,7 @@ class MockVehicle:
             else:
                 moved = self._physics(kin, command, limits, wind, PHYSICS_DT_S)
             kin = moved if deck is None else deck.step(k * PHYSICS_DT_S, PHYSICS_DT_S, kin, moved)
-            if self._rangefinder is not None:
-                self._measure_range(k * PHYSICS_DT_S, kin)
+            self._ranges.measure(k * PHYSICS_DT_S, kin, deck)
         if deck is not None and deck.crash is not None and not crashed:
             log.warning("crash on the deck at t=%.2f s: %s", deck.touchdowns[-1].t_s, deck.crash)
         self._counters["physics_steps"] += target - self._steps
@@ -335,9 +329,7 @@ class MockVehicle:
     def _wait_wall_s(self, t_s: float) -> float:
         """Wall seconds until the physics step at which the next stream or held datagram is due."""
         held = self._faults.next_due_s()
-        ranged = None if self._rangefinder is None else self._rangefinder.next_delivery_s()
-        next_s = min(self._schedule.next_due_s(self._links), math.inf if held is None else held,
-                     math.inf if ranged is None else ranged)
+        next_s = min(self._schedule.next_due_s(self._links), math.inf if held is None else held, self._ranges.next_s)
         next_s = t_s + 1.0 if next_s == math.inf else next_s
         wake_s = math.ceil(next_s / PHYSICS_DT_S - DUE_EPSILON) * PHYSICS_DT_S
         return min(max(wake_s - self.clock.now(), 0.0) / self.clock.speed, MAX_POLL_WALL_S)
@@ -357,41 +349,8 @@ class MockVehicle:
                 built[stream.name] = tel.build(stream.name, state, self._geo, self._noise)
             if built[stream.name] is not None:
                 self._io.send(link, built[stream.name])  # type: ignore[arg-type]  (one of self._links)
-
-    def _measure_range(self, t_s: float, kin: KinState) -> None:
-        """The rangefinder's capture at the physics step ending at ``t_s`` [s], if one is due: from
-        the true position down to the deck's top when over its disc (``deck.radius_m``), else the
-        ground (:data:`RANGEFINDER_GROUND_D_M`)."""
-        assert self._rangefinder is not None
-        deck = self._deck
-        top = None if deck is None else deck.top(t_s)
-        radius_m = 0.0 if deck is None else deck.spec.radius_m
-        self._rangefinder.capture(t_s, lambda: range_below_m((kin.n_m, kin.e_m, kin.d_m), top, radius_m,
-                                                             RANGEFINDER_GROUND_D_M))
-
-    def _send_ranges(self, t_s: float) -> None:
-        """Send every range due by ``t_s`` [s] (``latency_s`` after its capture) as DISTANCE_SENSOR on every link."""
-        if self._rangefinder is None:
-            return
-        spec = self._rangefinder.cfg
-        for reading in self._rangefinder.deliver(t_s):
-            msg = tel.distance_sensor(reading.capture_t_s, reading.range_m, spec.sigma_m, spec.max_range_m)
-            self._counters["ranges_sent"] += 1
-            for link in self._links:
-                self._io.send(link, msg)
-
-    def _flush_outbox(self) -> None:
-        """Send the commander's STATUSTEXTs to the links whose peer is alive (PX4 rule)."""
-        self._collect_events()
-        unsent, self._unsent = self._unsent, []
-        for _, severity, text in unsent:
-            log.info("STATUSTEXT %s", text)
-            self._chunk_id = self._chunk_id % 65535 + 1
-            for link in self._links:
-                peer_alive = self._t_s - link.last_peer_heartbeat_s <= STATUSTEXT_PEER_TIMEOUT_S
-                if peer_alive or not self.options.statustext_needs_heartbeat:
-                    for chunk in tel.statustext_chunks(severity, text, self._chunk_id):
-                        self._io.send(link, chunk)
+        for msg, link in ((msg, link) for msg in self._ranges.due(t_s) for link in self._links):
+            self._io.send(link, msg)  # the rangefinder's DISTANCE_SENSOR, latency_s after each capture
 
 
 def estimate_error_of(opts: VehicleOptions) -> EstimateError:

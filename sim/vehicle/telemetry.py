@@ -14,7 +14,7 @@ stream at :data:`CAP_OTHER_WALL_HZ`. At speed 1 no cap bites (PX4's rates exactl
 LOCAL_POSITION_NED arrives at 300 Hz wall (15 Hz simulated), ATTITUDE at 100 Hz wall (5 Hz
 simulated), SYS_STATUS at 50 Hz wall (2.5 Hz simulated).
 DISTANCE_SENSOR is no stream of this table: a vehicle with a rangefinder
-(``VehicleOptions.rangefinder``) sends each reading as it is due (:func:`distance_sensor`).
+(``VehicleOptions.rangefinder``) sends each reading as it is due (:class:`RangeStream`).
 *Not streamed: PX4's own TIMESYNC requests and SYSTEM_TIME (the lockstep clock uses them), and
 the messages our clients never read (SERVO_OUTPUT_RAW, GPS_RAW_INT, ...).
 """
@@ -31,7 +31,10 @@ from mission.mavlink import px4, setpoints
 from mission.mavlink.env import mavlink
 from sim.vehicle.modes import TrajectorySetpoint
 from sim.vehicle.estimator import EstimateError
+from mission.config.relnav import RangefinderSection
+from sim.vehicle.physics.deck import Deck
 from sim.vehicle.physics.multicopter import GRAVITY_M_S2, KinState, attitude_rad, quaternion
+from sim.vehicle.physics.rangefinder import Rangefinder, range_below_m
 
 CAP_PRIMARY_WALL_HZ = 300.0
 CAP_OTHER_WALL_HZ = 50.0
@@ -335,6 +338,44 @@ def distance_sensor(capture_t_s: float, range_m: float, sigma_m: float, max_rang
 
 def _cm(m: float) -> int:
     return max(0, min(65535, int(round(m * 100.0))))
+
+
+class RangeStream:
+    """The mock vehicle's DISTANCE_SENSOR: its downward rangefinder (``cfg``, ``[world.rangefinder]``;
+    None: no rangefinder, nothing is sent) with the in-process world's model
+    (:mod:`sim.vehicle.physics.rangefinder`, draws from ``seed``), measuring at every physics step
+    a capture is due from the true position down to the deck's top over its disc
+    (:meth:`~sim.vehicle.physics.deck.Deck.top`, ``radius_m``), else the ground
+    (:data:`GROUND_D_M`); each reading is sent ``latency_s`` after its capture (:func:`distance_sensor`)."""
+
+    GROUND_D_M = 0.0  # beside the deck it sees the ground the physics lands on [m, NED down]
+
+    def __init__(self, cfg: RangefinderSection | None, seed: int) -> None:
+        self.sensor = None if cfg is None else Rangefinder(cfg, seed)
+        self.sent = 0  # DISTANCE_SENSOR messages built (one per reading, whatever the links)
+
+    @property
+    def next_s(self) -> float:
+        """When [s] the next held reading is due (inf: none)."""
+        due = None if self.sensor is None else self.sensor.next_delivery_s()
+        return math.inf if due is None else due
+
+    def measure(self, t_s: float, kin: KinState, deck: Deck | None) -> None:
+        """The physics step ending at ``t_s`` [s] left the vehicle at ``kin`` over ``deck`` (None: no deck)."""
+        if self.sensor is None:
+            return
+        top = None if deck is None else deck.top(t_s)
+        radius_m = 0.0 if deck is None else deck.spec.radius_m
+        self.sensor.capture(t_s, lambda: range_below_m((kin.n_m, kin.e_m, kin.d_m), top, radius_m, self.GROUND_D_M))
+
+    def due(self, t_s: float) -> list[Any]:
+        """The DISTANCE_SENSOR messages of the readings due by ``t_s`` [s], in capture order, each once."""
+        if self.sensor is None:
+            return []
+        c = self.sensor.cfg
+        out = [distance_sensor(r.capture_t_s, r.range_m, c.sigma_m, c.max_range_m) for r in self.sensor.deliver(t_s)]
+        self.sent += len(out)
+        return out
 
 
 def autopilot_version(sysid: int) -> Any:
