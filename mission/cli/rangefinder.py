@@ -49,7 +49,7 @@ class RangefinderFeed:
         try:
             if msg.get_type() != "DISTANCE_SENSOR" or self._closed:
                 return
-            found = downward_range(msg, self.link.vehicle_clock_offset_s(), self.default_sigma_m)
+            found = downward_range(msg, self.link.state.vehicle_clock_offset_s, self.default_sigma_m)
         except Exception:  # noqa: BLE001  (a reading is dropped and counted; the link's thread goes on)
             found = "malformed"
         with self._lock:

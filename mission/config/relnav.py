@@ -23,6 +23,7 @@ if TYPE_CHECKING:
 PHASE_FIELDS = ("enabled", "marker_timeout_s", "descent_marker_timeout_s", "marker_memory_s", "search_s", "correction_rate_m_s", "seated_sigma_m",
                 "pending_limit_m", "landing_target_rate_hz", "carrier_accel_tau_s", "velocity_slew_m_s2",
                 "deck_velocity_catch_up_per_s")
+FEED_FIELDS = ("range_sigma_m",)  # read by a flight's measurement feeds (mission.cli.rangefinder), not the estimator
 
 
 class RelnavSection(Section):
@@ -149,7 +150,7 @@ class RelnavSection(Section):
     def params(self) -> RelnavParams:
         from mission.relnav.estimator import RelnavParams
 
-        return RelnavParams(**{name: getattr(self, name) for name in type(self).model_fields if name not in PHASE_FIELDS})
+        return RelnavParams(**{name: getattr(self, name) for name in type(self).model_fields if name not in PHASE_FIELDS + FEED_FIELDS})
 
 
 class CarrierGnssSection(Section):

@@ -38,7 +38,7 @@ from mission.mavlink.identity import ADOPT_HEARTBEATS, VEHICLE_TYPES, Adoption
 from mission.mavlink.receiver import LIMITER, Receiver, install_limiter
 from mission.mavlink.session import LinkCounters, LinkSession
 from mission.mavlink.setpoints import encode
-from mission.mavlink.telemetry import VehicleState, vehicle_clock_offset_s
+from mission.mavlink.telemetry import VehicleState
 from mission.mavlink.transport import Tlog, Transport, open_transport
 from mission.mavlink.env import mavlink
 
@@ -204,13 +204,6 @@ class VehicleLink:
         """Immutable snapshot of the vehicle's telemetry now."""
         with self._session.lock:
             return self._session.snapshot_locked()
-
-    def vehicle_clock_offset_s(self) -> float | None:
-        """The link clock less the vehicle's boot clock [s] (``time_boot_ms`` / 1000 plus it is that
-        sample's time on the link clock), as learned from LOCAL_POSITION_NED
-        (:func:`~mission.mavlink.telemetry.vehicle_time_to_link`); None before the first."""
-        with self._session.lock:
-            return vehicle_clock_offset_s(self._session.telemetry.vehicle_clock)
 
     def heartbeat_age_s(self) -> float:
         """Clock seconds since the vehicle's last HEARTBEAT (inf before the first) [s]."""

@@ -39,9 +39,10 @@ EXTENDED_SYS_STATE_ID = mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE
 # about 0.43 s, where the 1 Hz HEARTBEAT can take a second (docs/flying-px4.md)
 LANDED_STATE_RATE_HZ = 10.0
 DISTANCE_SENSOR_ID = mavlink.MAVLINK_MSG_ID_DISTANCE_SENSOR
-# DISTANCE_SENSOR asked at this rate [Hz] for the feed rangefinder: PX4's onboard profiles stream it at 0.5 Hz,
-# and its stream sends a sample only when the sensor published a new one, so asked at or above the sensor's rate
-# it delivers every reading (src/modules/mavlink/streams/DISTANCE_SENSOR.hpp)
+# DISTANCE_SENSOR asked at this rate [Hz] for the feed rangefinder: PX4's onboard profile streams it at 10 Hz (its
+# normal profile 0.5 Hz; src/modules/mavlink/mavlink_main.cpp), and its stream sends a sample only when the sensor
+# published a new one, so asked at or above the sensor's rate it delivers every reading once
+# (src/modules/mavlink/streams/DISTANCE_SENSOR.hpp)
 RANGEFINDER_RATE_HZ = 50.0
 
 

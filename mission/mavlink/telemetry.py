@@ -101,6 +101,10 @@ class VehicleState:
     """Armed, unless a disarm was confirmed (module docstring): what a mission's disarmed verdict reads."""
     believed_on_ground: bool = False
     """Landed (ON_GROUND) as confirmed (module docstring): what a mission's landed verdict reads."""
+    vehicle_clock_offset_s: float | None = None
+    """The link clock less the vehicle's boot clock [s]: a ``time_boot_ms`` / 1000 plus it is that
+    sample's time on the link clock, as learned from LOCAL_POSITION_NED (:func:`vehicle_time_to_link`,
+    the same that gives ``position_t_s``); None before the first."""
 
     @property
     def heartbeat_age_s(self) -> float:
@@ -376,6 +380,7 @@ def snapshot(tm: Telemetry, now_s: float, vehicle: tuple[int, int] | None, posit
         home_rx_s=tm.home_rx_s,
         believed_armed=tm.believed_armed,
         believed_on_ground=tm.believed_on_ground,
+        vehicle_clock_offset_s=vehicle_clock_offset_s(tm.vehicle_clock),
     )
 
 

@@ -74,7 +74,7 @@ def test_the_mock_vehicles_ranges_reach_the_feed_over_udp() -> None:
     assert all(polled >= m.capture_t_s + SENSOR.latency_s - 0.003 for polled, m in over + after)
     # each arrived the latency after its capture (the capture moved onto the link's clock by the
     # offset the link learned from LOCAL_POSITION_NED): never earlier, as a rule not much later
-    offset = link.vehicle_clock_offset_s()
+    offset = link.state.vehicle_clock_offset_s
     assert offset is not None
     delays = [rx - (boot_ms / 1000.0 + offset) for rx, boot_ms in heard]
     assert min(delays) > SENSOR.latency_s - 0.003 and statistics.median(delays) < SENSOR.latency_s + 0.03

@@ -70,8 +70,9 @@ class _Link:
     def add_listener(self, callback: Callable[[Any], None]) -> None:
         self.listeners.append(callback)
 
-    def vehicle_clock_offset_s(self) -> float | None:
-        return self.offset_s
+    @property
+    def state(self) -> SimpleNamespace:
+        return SimpleNamespace(vehicle_clock_offset_s=self.offset_s)
 
     def hear(self, msg: Any) -> None:
         for listener in self.listeners:
@@ -109,3 +110,24 @@ def test_the_mock_vehicle_sends_what_the_feed_reads():
     assert (r.capture_t_s, r.range_m, r.sigma_m) == (pytest.approx(12.84), 1.23, pytest.approx(0.03))
     assert tel.distance_sensor(0.0, 1.0, 0.2, 10.0).covariance == 255  # 400 cm^2 does not fit
     assert tel.distance_sensor(0.0, 1.0, 0.159, 10.0).covariance == 253
+
+
+def test_the_mission_asks_the_vehicle_for_every_range_only_with_the_feed():
+    """PX4's onboard profile streams DISTANCE_SENSOR at 10 Hz: with the feed the mission asks 50 Hz
+    (PX4's stream sends each new sample up to that), without it nothing."""
+    from mission.mavlink.requests import DISTANCE_SENSOR_ID, RANGEFINDER_RATE_HZ, Px4Setup
+    from mission.time.clock import ManualClock
+
+    class Asked:
+        def __init__(self) -> None:
+            self.intervals: list[tuple[int, float]] = []
+
+        def set_message_interval(self, msg_id: int, rate_hz: float) -> None:
+            self.intervals.append((msg_id, rate_hz))
+
+    for rangefinder in (True, False):
+        vehicle = Asked()
+        Px4Setup(vehicle, ManualClock(), telemetry_rate_hz=None, stop_unused=False, recovery=False,  # type: ignore[arg-type]
+                 battery_reserve_pct=20.0, offboard_loss_return=False, rangefinder=rangefinder)._ask_streams()
+        assert ((DISTANCE_SENSOR_ID, RANGEFINDER_RATE_HZ) in vehicle.intervals) is rangefinder
+    assert (DISTANCE_SENSOR_ID, RANGEFINDER_RATE_HZ) == (132, 50.0)
