@@ -23,6 +23,9 @@ ANY_PORT = "udpin:127.0.0.1:0"
 SENSOR = RangefinderSection()  # 25 Hz, 3 cm, 30 ms late, 2 % lost
 STANDS_D_M = -2.0  # the vehicle stands on a platform 2 m above the ground (d = 0)
 DECK_HEIGHT_M = 0.8  # the deck's top 0.8 m above the carrier's position at d = 0: 1.2 m under the vehicle
+# the link's vehicle-clock offset may run this far ahead of the truth after a stalled receiver (it may grow
+# 0.1 s/s between LOCAL_POSITION_NEDs): no capture reads earlier than its latency by more [s]
+SLACK_S = 0.015
 
 
 def _collect(feed: RangefinderFeed, into: list[tuple[float, DownwardRange]], clock: ScaledClock, count: int) -> Callable[[], bool]:
@@ -66,17 +69,22 @@ def test_the_mock_vehicles_ranges_reach_the_feed_over_udp() -> None:
     assert len(ground_m) >= 20 and abs(statistics.mean(ground_m) - (0.0 - STANDS_D_M)) < 0.02  # 2.0 m
     assert max(abs(r - 1.2) for r in over_m) < 5 * SENSOR.sigma_m and max(abs(r - 2.0) for r in ground_m) < 5 * SENSOR.sigma_m
     assert statistics.pstdev(over_m) < 2 * SENSOR.sigma_m and all(m.sigma_m == SENSOR.sigma_m for _, m in over + after)
-    # captures on the sensor's 40 ms grid of the vehicle's clock (a lost one skips a slot), in order, to
-    # within the few ms the link's vehicle-clock offset wanders (it may grow 0.1 s/s between LOCAL_POSITION_NEDs)
+    # captured on the sensor's 40 ms grid of the vehicle's boot clock (a lost one skips a slot), in order;
+    # on the link's clock to within the few ms its vehicle-clock offset wanders
+    boot_ms = [ms for _, ms in heard]  # (the first capture is the first physics step's, at 5 ms)
+    assert [ms for ms in boot_ms if ms % 40 and ms != 5] == [] and all(b > a for a, b in zip(boot_ms, boot_ms[1:]))
     readings = [m for _, m in over + after]
     steps = [b.capture_t_s - a.capture_t_s for a, b in zip(readings, readings[1:])]
-    assert all(round(d / 0.04) >= 1 and abs(d - 0.04 * round(d / 0.04)) < 0.006 for d in steps)
-    assert all(polled >= m.capture_t_s + SENSOR.latency_s - 0.003 for polled, m in over + after)
+    off_grid = [d for d in steps if round(d / 0.04) < 1 or abs(d - 0.04 * round(d / 0.04)) > SLACK_S]
+    assert off_grid == []
+    early = [(polled, m.capture_t_s) for polled, m in over + after if polled < m.capture_t_s + SENSOR.latency_s - SLACK_S]
+    assert early == []
     # each arrived the latency after its capture (the capture moved onto the link's clock by the
-    # offset the link learned from LOCAL_POSITION_NED): never earlier, as a rule not much later
+    # offset the link learned from LOCAL_POSITION_NED): as a rule to the ms, never much earlier
     offset = link.state.vehicle_clock_offset_s
     assert offset is not None
-    delays = [rx - (boot_ms / 1000.0 + offset) for rx, boot_ms in heard]
-    assert min(delays) > SENSOR.latency_s - 0.003 and statistics.median(delays) < SENSOR.latency_s + 0.03
+    delays = sorted(rx - (boot_ms / 1000.0 + offset) for rx, boot_ms in heard)
+    assert SENSOR.latency_s - 0.002 < statistics.median(delays) < SENSOR.latency_s + 0.01
+    assert delays[len(delays) // 10] > SENSOR.latency_s - 0.003 and delays[0] > SENSOR.latency_s - SLACK_S
     assert counters["readings"] == len(heard) >= 70 and counters["received"] == counters["readings"]
     assert sent >= counters["readings"]
