@@ -284,7 +284,8 @@ class MissionController:
                              battery_reserve_pct=self.cfg.recovery.battery_reserve_pct,
                              offboard_loss_return=self.cfg.recovery.offboard_loss_return, keeper=self._params,
                              params=self.px4_params,
-                             precland=self.cfg.relnav.enabled and self.cfg.relnav.landing_target_rate_hz > 0)
+                             precland=self.cfg.relnav.enabled and self.cfg.relnav.landing_target_rate_hz > 0,
+                             rangefinder="rangefinder" in m.feeds)
         periodic = Periodic(self.clock, self.model.dt_s)
         last_phase = None
         stamp = time.monotonic_ns if self.on_tick is not None else _no_stamp

@@ -189,10 +189,11 @@ def world_args(cfg: Config, config: str) -> list[str]:
     """The mock vehicle's arguments for the world's errors and sensors of ``cfg`` (file ``config``):
     the passenger's GNSS bias (``--world``), the deck on the carrier's truth when the carrier flies
     its GNSS errors (``--deck-truth``), the downward camera's frames for the feed ``marker``
-    (``--camera``)."""
+    (``--camera``), the downward rangefinder's DISTANCE_SENSOR for the feed ``rangefinder`` (the
+    ``--world`` file's ``mission.feeds`` names it)."""
     w = cfg.world
-    camera = "marker" in cfg.mission.feeds
-    return [*(["--world", config] if camera or w.passenger_gnss.bias_sigma_m > 0 else []),
+    camera, ranged = "marker" in cfg.mission.feeds, "rangefinder" in cfg.mission.feeds
+    return [*(["--world", config] if camera or ranged or w.passenger_gnss.bias_sigma_m > 0 else []),
             *(["--deck-truth"] if w.carrier_gnss.enabled else []), *(["--camera"] if camera else [])]
 
 

@@ -112,9 +112,10 @@ class MarkerFeed:
         self.pending = []
 
 
-def open_feed(cfg: Config, session: Any, clock: Any, passenger: str | None = None) -> MarkerFeed:
+def open_feed(cfg: Config, session: Any, clock: Any, link: Any = None, passenger: str | None = None) -> MarkerFeed:
     """The opener ``marsupial run`` calls for the feed name ``marker`` (waiting in lockstep);
-    ``passenger``: a team passenger's name, whose own camera it reads."""
+    ``passenger``: a team passenger's name, whose own camera it reads (``link``, the MAVLink
+    link, it does not read)."""
     from mission.time.clock import LockstepClock
 
     return MarkerFeed(cfg, session, lockstep=isinstance(clock, LockstepClock), passenger=passenger)

@@ -71,8 +71,10 @@ FEEDS_GROUP = "marsupial.feeds"  # entry points: a measurement feed's name -> it
 def feed_openers(cfg: Config) -> dict[str, str]:
     """The opener (``"module:attribute"``) of each measurement feed ``mission.feeds`` names,
     registered in ``pyproject.toml``'s entry-point group ``marsupial.feeds``. An opener is called
-    as ``open(cfg, session, clock)`` (a passenger of a team of several: ``passenger=NAME`` too, its
-    own keys) and returns a :class:`~mission.interfaces.MeasurementSource`.
+    as ``open(cfg, session, clock, link=LINK)`` (``LINK``: the mission's
+    :class:`~mission.mavlink.link.VehicleLink`, not opened yet, for a feed of the vehicle's own
+    messages; a passenger of a team of several: ``passenger=NAME`` too, its own keys) and returns a
+    :class:`~mission.interfaces.MeasurementSource`.
     :class:`ConfigError` for a name nothing registered."""
     known = entry_points(FEEDS_GROUP)
     unknown = [name for name in cfg.mission.feeds if name not in known]
@@ -133,18 +135,18 @@ def mission_io(cfg: Config, clock: Clock, tlog_path: str | Path | None = None, *
                                        max_age_s=cfg.mission.carrier_timeout_s,
                                        roster={n: Roster(i, legs) for n, i, legs in zip(team.names, team.ids, team.legs)})
             stack.callback(neighbours.close)
-        sources: list[MeasurementSource] = []
-        for target in openers.values():
-            # a team passenger's feeds read its own keys (its camera beside its status)
-            own = {} if team is None else {"passenger": team.name}
-            source = load(target)(cfg, session, clock, **own)  # type: ignore[operator]
-            stack.callback(source.close)
-            sources.append(source)
         link = VehicleLink(cfg.mavlink.url, clock, target_system=cfg.mavlink.target_system,
                            target_component=cfg.mavlink.target_component,
                            source_system=cfg.mavlink.source_system, source_component=cfg.mavlink.source_component,
                            tlog_path=None if tlog_path is None else str(tlog_path), signing_key=key,
                            heartbeat_timeout_s=cfg.mission.heartbeat_timeout_s)
+        sources: list[MeasurementSource] = []
+        for target in openers.values():
+            # a team passenger's feeds read its own keys (its camera beside its status)
+            own = {} if team is None else {"passenger": team.name}
+            source = load(target)(cfg, session, clock, link=link, **own)  # type: ignore[operator]
+            stack.callback(source.close)
+            sources.append(source)
         # a later passenger of a team in lockstep: the carrier brings it along, and it its vehicle
         follower = clock if isinstance(clock, LockstepClock) and team is not None and team.name != team.names[0] else None
         if follower is not None and team is not None:

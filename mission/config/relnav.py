@@ -23,6 +23,7 @@ if TYPE_CHECKING:
 PHASE_FIELDS = ("enabled", "marker_timeout_s", "descent_marker_timeout_s", "marker_memory_s", "search_s", "correction_rate_m_s", "seated_sigma_m",
                 "pending_limit_m", "landing_target_rate_hz", "carrier_accel_tau_s", "velocity_slew_m_s2",
                 "deck_velocity_catch_up_per_s")
+FEED_FIELDS = ("range_sigma_m",)  # read by a flight's measurement feeds (mission.cli.rangefinder), not the estimator
 
 
 class RelnavSection(Section):
@@ -133,6 +134,10 @@ class RelnavSection(Section):
         description=("[m] a downward range is fused (the deck's height from the vehicle's own height plus it) only "
                      "while the estimate has the vehicle within `recovery.deck_radius_m` less this of the deck's "
                      "centre, horizontally: else it measured the ground (counted `off_deck`)"))
+    range_sigma_m: float = Field(0.05, gt=0, le=5,
+        description=("[m] a flight's downward range's standard deviation when the vehicle does not state it "
+                     "(the feed `rangefinder`: DISTANCE_SENSOR's covariance 0 or 255, unknown; PX4 sends 0 for a "
+                     "driver that sets no variance)"))
 
     @model_validator(mode="after")
     def _descent_timeout(self) -> RelnavSection:
@@ -145,7 +150,7 @@ class RelnavSection(Section):
     def params(self) -> RelnavParams:
         from mission.relnav.estimator import RelnavParams
 
-        return RelnavParams(**{name: getattr(self, name) for name in type(self).model_fields if name not in PHASE_FIELDS})
+        return RelnavParams(**{name: getattr(self, name) for name in type(self).model_fields if name not in PHASE_FIELDS + FEED_FIELDS})
 
 
 class CarrierGnssSection(Section):
@@ -223,7 +228,8 @@ class MarkerOutagesSection(Section):
 
 class RangefinderSection(Section):
     """The passenger's downward rangefinder as the simulated world measures it (the feed
-    `rangefinder` in `mission.feeds` turns it on): the vertical distance from the vehicle to the
+    `rangefinder` in `mission.feeds` turns it on: the in-process simulation's sensor, and the mock
+    vehicle's DISTANCE_SENSOR, `sim/vehicle/physics/rangefinder.py`): the vertical distance from the vehicle to the
     deck's top when it is over the deck (within `recovery.deck_radius_m` of its centre), else to
     the ground (`scenario.carrier_start`'s height)."""
 

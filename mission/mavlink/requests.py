@@ -5,7 +5,8 @@
   carrier's MAVLink backend);
 - :class:`Px4Setup` asks PX4, once the mission's preflight checks passed, for the telemetry
   streams it reads (LOCAL_POSITION_NED at ``mission.telemetry_rate_hz``, EXTENDED_SYS_STATE at
-  :data:`LANDED_STATE_RATE_HZ`) and to stop those it never reads (:data:`UNUSED_STREAMS`); sets
+  :data:`LANDED_STATE_RATE_HZ`, DISTANCE_SENSOR at :data:`RANGEFINDER_RATE_HZ` for the feed
+  ``rangefinder``) and to stop those it never reads (:data:`UNUSED_STREAMS`); sets
   the failsafe parameters a recovery relies on, keeps them (:class:`~mission.mavlink.commander.ParamKeeper`)
   and puts them back at the end.
 """
@@ -37,6 +38,12 @@ EXTENDED_SYS_STATE_ID = mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE
 # disarm in the air shows as ON_GROUND LNDMC_TRIG_TIME / 3 (0.33 s) after it, so at 10 Hz within
 # about 0.43 s, where the 1 Hz HEARTBEAT can take a second (docs/flying-px4.md)
 LANDED_STATE_RATE_HZ = 10.0
+DISTANCE_SENSOR_ID = mavlink.MAVLINK_MSG_ID_DISTANCE_SENSOR
+# DISTANCE_SENSOR asked at this rate [Hz] for the feed rangefinder: PX4's onboard profile streams it at 10 Hz (its
+# normal profile 0.5 Hz; src/modules/mavlink/mavlink_main.cpp), and its stream sends a sample only when the sensor
+# published a new one, so asked at or above the sensor's rate it delivers every reading once
+# (src/modules/mavlink/streams/DISTANCE_SENSOR.hpp)
+RANGEFINDER_RATE_HZ = 50.0
 
 
 class Commandable(Protocol):
@@ -163,6 +170,7 @@ class Px4Setup:
     """PX4's streams and failsafe parameters for one mission, each asked once, off the loop.
 
     ``telemetry_rate_hz`` [Hz]: LOCAL_POSITION_NED's rate to ask for (None: as it streams);
+    ``rangefinder``: ask for DISTANCE_SENSOR at :data:`RANGEFINDER_RATE_HZ` (the feed ``rangefinder``);
     ``stop_unused``: stop :data:`UNUSED_STREAMS`; ``recovery``: the mission comes home
     (``final_action = "return"``), with ``battery_reserve_pct`` [%] its recall and
     ``offboard_loss_return``: set PX4's offboard-loss action to Return, and with ``precland``
@@ -174,8 +182,9 @@ class Px4Setup:
 
     def __init__(self, vehicle: Configurable, clock: Clock, *, telemetry_rate_hz: float | None, stop_unused: bool,
                  recovery: bool, battery_reserve_pct: float, offboard_loss_return: bool,
-                 keeper: ParamKeeper | None = None, params: dict[str, Any] | None = None, precland: bool = False) -> None:
-        self.vehicle, self.clock, self.precland = vehicle, clock, precland
+                 keeper: ParamKeeper | None = None, params: dict[str, Any] | None = None, precland: bool = False,
+                 rangefinder: bool = False) -> None:
+        self.vehicle, self.clock, self.precland, self.rangefinder = vehicle, clock, precland, rangefinder
         self.telemetry_rate_hz, self.stop_unused = telemetry_rate_hz, stop_unused
         self.recovery, self.battery_reserve_pct, self.offboard_loss_return = recovery, battery_reserve_pct, offboard_loss_return
         self.keeper = keeper
@@ -195,6 +204,7 @@ class Px4Setup:
         """LOCAL_POSITION_NED at ``telemetry_rate_hz`` (PX4 streams 30 Hz to a 50 Hz loop by
         default): a refusal is logged and the mission flies at the rate that comes (the summary's
         ``position_rate_hz`` says which). Then EXTENDED_SYS_STATE at :data:`LANDED_STATE_RATE_HZ`,
+        DISTANCE_SENSOR at :data:`RANGEFINDER_RATE_HZ` with ``rangefinder``,
         and with ``stop_unused`` the streams the mission never reads stopped."""
         rate, link = self.telemetry_rate_hz, self.vehicle
         try:
@@ -208,6 +218,13 @@ class Px4Setup:
         except (CommandRejected, LinkError) as exc:
             log.warning("vehicle did not take EXTENDED_SYS_STATE at %g Hz (%s): a disarm in the air may take up "
                         "to its HEARTBEAT period to notice", LANDED_STATE_RATE_HZ, exc)
+        if self.rangefinder:
+            try:
+                link.set_message_interval(DISTANCE_SENSOR_ID, RANGEFINDER_RATE_HZ)
+                log.info("asked the vehicle for DISTANCE_SENSOR at %g Hz (the rangefinder feed)", RANGEFINDER_RATE_HZ)
+            except (CommandRejected, LinkError) as exc:
+                log.warning("vehicle did not take DISTANCE_SENSOR at %g Hz (%s): the rangefinder feed reads what it "
+                            "streams", RANGEFINDER_RATE_HZ, exc)
         if self.stop_unused:
             stopped = 0
             for msg_id in UNUSED_STREAMS:

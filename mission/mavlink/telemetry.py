@@ -4,7 +4,8 @@
 reads (HEARTBEAT, LOCAL_POSITION_NED, EXTENDED_SYS_STATE, SYS_STATUS, BATTERY_STATUS,
 GPS_GLOBAL_ORIGIN, HOME_POSITION, ATTITUDE); other
 messages leave it unchanged. :func:`snapshot` turns it into the immutable :class:`VehicleState`
-a caller sees at one clock time. :class:`StatusTextAssembler` joins chunked STATUSTEXTs. Times
+a caller sees at one clock time. :class:`StatusTextAssembler` joins chunked STATUSTEXTs.
+:func:`downward_range` reads a DISTANCE_SENSOR (the rangefinder feed, :mod:`mission.cli.rangefinder`). Times
 are link-clock seconds [s]; positions and velocities PX4's local NED frame.
 
 No single sample decides that the vehicle is disarmed or landed (the verdicts a mission aborts
@@ -29,6 +30,7 @@ from mission.core.records import replace
 from mission.mavlink import px4
 from mission.mavlink.env import mavlink
 from mission.passenger.inputs import VehicleReport
+from mission.phases.measurements import DownwardRange
 
 STATUSTEXT_CHUNK_LEN = 50
 LANDED_AGREE_S = 0.08
@@ -99,6 +101,10 @@ class VehicleState:
     """Armed, unless a disarm was confirmed (module docstring): what a mission's disarmed verdict reads."""
     believed_on_ground: bool = False
     """Landed (ON_GROUND) as confirmed (module docstring): what a mission's landed verdict reads."""
+    vehicle_clock_offset_s: float | None = None
+    """The link clock less the vehicle's boot clock [s]: a ``time_boot_ms`` / 1000 plus it is that
+    sample's time on the link clock, as learned from LOCAL_POSITION_NED (:func:`vehicle_time_to_link`,
+    the same that gives ``position_t_s``); None before the first."""
 
     @property
     def heartbeat_age_s(self) -> float:
@@ -215,6 +221,69 @@ def vehicle_time_to_link(state: tuple[float, float, float] | None, t_vehicle_s: 
     return t_vehicle_s + offset, (offset, t_vehicle_s, t_rx_s)
 
 
+def vehicle_clock_offset_s(state: tuple[float, float, float] | None) -> float | None:
+    """The link clock less the vehicle's boot clock [s] that :func:`vehicle_time_to_link` last
+    settled on (``state`` as it keeps it; None before the first sample): a vehicle time plus it
+    is that time on the link clock."""
+    return None if state is None else state[0]
+
+
+DOWNWARD = mavlink.MAV_SENSOR_ROTATION_PITCH_270  # 25: DISTANCE_SENSOR's orientation for a downward sensor
+COVARIANCE_UNKNOWN = 255  # DISTANCE_SENSOR covariance [cm^2]: UINT8_MAX if unknown
+SIGNAL_INVALID = 1  # DISTANCE_SENSOR signal_quality [%]: 0 unknown, 1 invalid, 100 perfect
+#: Why :func:`downward_range` drops a DISTANCE_SENSOR (the rangefinder feed's counters).
+RANGE_DROPS = ("other_orientation", "invalid_signal", "out_of_range", "malformed", "unclocked")
+
+
+def downward_range(msg: Any, clock_offset_s: float | None, default_sigma_m: float) -> DownwardRange | str:
+    """A DISTANCE_SENSOR as a :class:`~mission.phases.measurements.DownwardRange`, or why not
+    (a name of :data:`RANGE_DROPS`). Pure: ``msg`` needs only the message's fields.
+
+    The message (MAVLink common.xml, DISTANCE_SENSOR, id 132): ``time_boot_ms`` [ms] the vehicle's
+    boot clock at the sample (PX4 streams its sample's timestamp: PX4-Autopilot
+    src/modules/mavlink/streams/DISTANCE_SENSOR.hpp), ``min_distance``, ``max_distance``,
+    ``current_distance`` [cm], ``orientation`` (MAV_SENSOR_ROTATION_PITCH_270 = 25: downward),
+    ``covariance`` [cm^2] (UINT8_MAX if unknown; PX4 sends its variance in cm^2, 0 when its driver
+    set none), ``signal_quality`` [%] (0 unknown, 1 invalid, 100 perfect; a MAVLink 2 extension).
+
+    Dropped: ``malformed`` (a field that is no integer of its range, ``max_distance`` 0 or below
+    ``min_distance``), ``other_orientation`` (any orientation but downward), ``invalid_signal``
+    (signal_quality 1), ``out_of_range`` (``current_distance`` outside ``[min_distance,
+    max_distance]``), ``unclocked`` (``clock_offset_s`` None: the link knows no vehicle time yet).
+    Kept: ``range_m`` = current_distance / 100 [m], captured at ``time_boot_ms / 1000 +
+    clock_offset_s`` [s, link clock] (:func:`vehicle_clock_offset_s`), ``sigma_m`` =
+    sqrt(covariance) / 100 [m], or ``default_sigma_m`` [m] when the covariance is 0 or 255.
+    """
+    try:
+        boot_ms, low, high, current, orientation, covariance = (
+            _uint(msg.time_boot_ms, 32), _uint(msg.min_distance, 16), _uint(msg.max_distance, 16),
+            _uint(msg.current_distance, 16), _uint(msg.orientation, 8), _uint(msg.covariance, 8))
+        quality = _uint(getattr(msg, "signal_quality", 0), 8)
+    except (AttributeError, TypeError, ValueError):
+        return "malformed"
+    if high == 0 or high < low:
+        return "malformed"
+    if orientation != DOWNWARD:
+        return "other_orientation"
+    if quality == SIGNAL_INVALID:
+        return "invalid_signal"
+    if not low <= current <= high:
+        return "out_of_range"
+    if clock_offset_s is None or not math.isfinite(clock_offset_s):
+        return "unclocked"
+    sigma_m = default_sigma_m if covariance in (0, COVARIANCE_UNKNOWN) else math.sqrt(covariance) / 100.0
+    return DownwardRange(capture_t_s=boot_ms * 1e-3 + clock_offset_s, range_m=current / 100.0, sigma_m=sigma_m)
+
+
+def _uint(value: Any, bits: int) -> int:
+    """``value`` as an unsigned integer of ``bits`` bits; ValueError or TypeError if it is not one."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise TypeError(f"not an integer: {value!r}")
+    if not 0 <= int(value) < 1 << bits:
+        raise ValueError(f"outside uint{bits}: {value!r}")
+    return int(value)
+
+
 def _local_position(tm: Telemetry, msg: Any, t_rx: float) -> Telemetry:
     position, velocity = (msg.x, msg.y, msg.z), (msg.vx, msg.vy, msg.vz)
     finite = all(math.isfinite(c) for c in position + velocity)
@@ -311,6 +380,7 @@ def snapshot(tm: Telemetry, now_s: float, vehicle: tuple[int, int] | None, posit
         home_rx_s=tm.home_rx_s,
         believed_armed=tm.believed_armed,
         believed_on_ground=tm.believed_on_ground,
+        vehicle_clock_offset_s=vehicle_clock_offset_s(tm.vehicle_clock),
     )
 
 

@@ -21,7 +21,7 @@ import click
 from mission.bus.auth import SampleSigner
 from mission.bus.bridge import keys, open_session
 from mission.bus.signing import pair_key
-from mission.config.relnav import PassengerGnssSection
+from mission.config.relnav import PassengerGnssSection, RangefinderSection
 from mission.config.keys import read_key_file, read_private_key_file
 from mission.config.schema import Config, ZenohSection, load_config
 from mission.errors import ConfigError
@@ -182,7 +182,9 @@ def _write_port_file(path: Path, port: int) -> None:
 @click.option("--ideal", is_flag=True, help="An exact estimate (--estimate-error 0): for tests of exactness.")
 @click.option("--world", "world_config", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
               metavar="CONFIG", help="Take the world's errors from this configuration file: [world.passenger_gnss], "
-                                     "a slow GNSS bias on the estimate (docs/relnav.md).")
+                                     "a slow GNSS bias on the estimate (docs/relnav.md); with the feed rangefinder in "
+                                     "its mission.feeds, a downward rangefinder ([world.rangefinder]) sent as "
+                                     "DISTANCE_SENSOR.")
 @click.option("--position-noise", type=click.FloatRange(min=0.0), default=0.0, show_default=True, metavar="METRES",
               help="Sigma [m] of Gaussian noise on the reported position (seeded by --seed).")
 @click.option("--loss-in", type=click.FloatRange(0.0, 1.0), default=0.0, show_default=True, metavar="FRACTION",
@@ -254,6 +256,7 @@ def mock_vehicle(mavlink_url: str, target_url: str, gcs_url: str | None, speed: 
         wind_ned_m_s=_floats(wind, 3, "--wind"), position_noise_m=position_noise,  # type: ignore[arg-type]
         estimate_error=estimate_error, lockstep=lockstep, lockstep_watchdog_wall_s=lockstep_watchdog_s,
         lockstep_max_speed=lockstep_max_speed, passenger_gnss=passenger_gnss_of(world_config),
+        rangefinder=rangefinder_of(world_config),
         deck=None if deck_pair is None else DeckSpec(height_m=deck_height, radius_m=deck_radius,
                                                       offset_ne_m=_floats(deck_offset, 2, "--deck-offset")))  # type: ignore[arg-type]
     run(options, port_file, status_every, deck=None if deck_pair is None else _deck_bus(deck_pair, zenoh_connect, zenoh_listen),
@@ -300,6 +303,18 @@ def passenger_gnss_of(path: Path | None) -> PassengerGnssSection | None:
     except ConfigError as exc:
         raise click.BadParameter(str(exc), param_hint="--world") from None
     return gnss if gnss.bias_sigma_m > 0.0 else None
+
+
+def rangefinder_of(path: Path | None) -> RangefinderSection | None:
+    """``[world.rangefinder]`` of the configuration file ``path`` when its ``mission.feeds`` names
+    ``rangefinder`` (None: no file, or no such feed)."""
+    if path is None:
+        return None
+    try:
+        cfg = load_config(path)
+    except ConfigError as exc:
+        raise click.BadParameter(str(exc), param_hint="--world") from None
+    return cfg.world.rangefinder if "rangefinder" in cfg.mission.feeds else None
 
 
 def truth(snapshot: VehicleSnapshot, estimate_error: dict[str, Any] | None = None) -> dict[str, Any]:

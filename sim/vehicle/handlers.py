@@ -67,7 +67,7 @@ class MessageHandlers:
             self.v._counters["rx_malformed"] += 1
         for msg in messages:
             self._dispatch(link, msg, address)
-        self.v._flush_outbox()
+        self.v._io.send_statustexts()
 
     def _dispatch(self, link: VehicleLink, msg: Any, address: tuple[str, int]) -> None:
         kind = msg.get_type()
@@ -177,10 +177,14 @@ class MessageHandlers:
         """PX4's rules (mavlink_receiver.cpp, and measured on SITL): FAILED for HEARTBEAT, for a
         message it cannot stream, or with param3, param4 or param7 (response target) set; interval
         < 0 stops the stream, 0 (or NaN) restores the default, > 0 sets it (delivered up to the
-        stream's source rate). Only the link the command came on changes."""
+        stream's source rate). Only the link the command came on changes. DISTANCE_SENSOR with a
+        rangefinder is accepted and changes nothing (every reading is sent, as PX4's stream sends each
+        new sample at a rate asked at or above the sensor's)."""
         msg_id, interval_us = int_param(p[0]), p[1]
         stream = self._stream_of(link, msg_id)
         extras_set = any(math.isfinite(x) and int(x + 0.5) != 0 for x in (p[2], p[3], p[6]))
+        if msg_id == mavlink.MAVLINK_MSG_ID_DISTANCE_SENSOR and self.v.options.rangefinder is not None and not extras_set:
+            return px4.MAV_RESULT_ACCEPTED, []  # its rangefinder sends every reading whatever the interval
         if stream is None or msg_id == mavlink.MAVLINK_MSG_ID_HEARTBEAT or extras_set:
             return px4.MAV_RESULT_FAILED, []
         self.v._schedule.set_interval(stream, interval_us, self.v._t_s)

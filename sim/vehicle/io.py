@@ -3,14 +3,17 @@
 Inbound: poll the sockets, pass each datagram through the link faults (lost, delayed, blacked
 out; lockstep clock messages bypass them) to :class:`sim.vehicle.handlers.MessageHandlers`.
 Outbound: encode, count, pass through the faults, then send one message per datagram as PX4
-does, or, in lockstep, queue the step's packets behind its SYSTEM_TIME for one datagram per link.
+does, or, in lockstep, queue the step's packets behind its SYSTEM_TIME for one datagram per link;
+the commander's STATUSTEXTs go to the links whose peer is alive.
 All fault times are simulated seconds at the vehicle's current step.
 """
 from __future__ import annotations
 
+import logging
 import select
 from typing import TYPE_CHECKING, Any
 
+from sim.vehicle import telemetry as tel
 from sim.vehicle.endpoints import VehicleLink
 from sim.vehicle.lockstep import is_timesync
 
@@ -18,6 +21,9 @@ if TYPE_CHECKING:
     from sim.vehicle.mock import MockVehicle
 
 RX_BATCH = 256  # datagrams read per socket per pass
+STATUSTEXT_PEER_TIMEOUT_S = 2.5  # PX4 treats a peer without HEARTBEAT for this long as gone
+
+log = logging.getLogger("sim.vehicle.mock")
 
 
 class LinkIO:
@@ -26,6 +32,7 @@ class LinkIO:
 
     def __init__(self, vehicle: MockVehicle) -> None:
         self.v = vehicle
+        self._chunk_id = 0  # the last STATUSTEXT chunk id
 
     def poll(self, wait_s: float) -> None:
         links = list(self.v._links)
@@ -99,6 +106,20 @@ class LinkIO:
             link.queue(data)
         elif not link.sendto(data, link.target):  # type: ignore[arg-type]  (the caller checked)
             self.v._counters["tx_errors"] += 1
+
+    def send_statustexts(self) -> None:
+        """Send the commander's STATUSTEXTs to the links whose peer is alive (PX4 rule)."""
+        v = self.v
+        v._collect_events()
+        unsent, v._unsent = v._unsent, []
+        for _, severity, text in unsent:
+            log.info("STATUSTEXT %s", text)
+            self._chunk_id = self._chunk_id % 65535 + 1
+            for link in v._links:
+                peer_alive = v._t_s - link.last_peer_heartbeat_s <= STATUSTEXT_PEER_TIMEOUT_S
+                if peer_alive or not v.options.statustext_needs_heartbeat:
+                    for chunk in tel.statustext_chunks(severity, text, self._chunk_id):
+                        self.send(link, chunk)
 
     def flush(self) -> None:
         """Send each link's batch of this step as one datagram (lockstep)."""

@@ -49,7 +49,6 @@ log = logging.getLogger(__name__)
 
 PHYSICS_DT_S = 0.005  # fixed physics step [s, simulated]
 MAX_POLL_WALL_S = 0.02  # longest socket wait [s, wall]; bounds the reaction to stop()
-STATUSTEXT_PEER_TIMEOUT_S = 2.5  # PX4 treats a peer without HEARTBEAT for this long as gone
 LINK_NAMES = ("onboard", "gcs")
 # A PX4 rover is "landed" only when disarmed (RoverLandDetector.cpp): no preflight auto-disarm.
 ROVER_PARAMS = {"COM_DISARM_PRFLT": 0.0}
@@ -84,6 +83,7 @@ class MockVehicle:
         self._commander = Commander(self.params, self._kin)
         self._physics = rover_stepper(lambda: self._commander.mode) if opts.frame == "rover" else step
         self._deck = Deck(opts.deck, lambda: self.params.get("LNDMC_XY_VEL_MAX")) if opts.deck is not None else None
+        self._ranges = tel.RangeStream(opts.rangefinder, opts.faults.seed)
         self._commander.refuse_arming_reason = opts.faults.refuse_arming_reason
         self._commander.refuse_offboard_reason = opts.faults.refuse_offboard_reason
         self._faults = FaultInjector(opts.faults)
@@ -97,7 +97,6 @@ class MockVehicle:
         self._steps = 0
         self._limits_cache: tuple[int, Limits] | None = None
         self._counters = dict.fromkeys(COUNTER_NAMES, 0)
-        self._chunk_id = 0
         self._position_fault_done = False  # FaultOptions.position_lost_at_s applied
         self._events: collections.deque[tuple[float, int, str]] = collections.deque(maxlen=1000)
         self._unsent: list[tuple[float, int, str]] = []
@@ -159,7 +158,7 @@ class MockVehicle:
         """A copy of the counters (received, malformed, dropped, sent, ...)."""
         with self._lock:
             counters = dict(self._counters)
-        counters["held_by_latency"] = self._faults.pending()
+        counters["held_by_latency"], counters["ranges_sent"] = self._faults.pending(), self._ranges.sent
         return counters
 
     def snapshot(self) -> VehicleSnapshot:
@@ -282,7 +281,7 @@ class MockVehicle:
         for kind, item in self._faults.due(self._t_s):
             self._io.release(kind, item)
         self._service_streams(self._t_s)
-        self._flush_outbox()
+        self._io.send_statustexts()
 
     def _limits(self) -> Limits:
         """The dynamics' gains and limits from the parameters (derived again only after a change)."""
@@ -310,6 +309,7 @@ class MockVehicle:
             else:
                 moved = self._physics(kin, command, limits, wind, PHYSICS_DT_S)
             kin = moved if deck is None else deck.step(k * PHYSICS_DT_S, PHYSICS_DT_S, kin, moved)
+            self._ranges.measure(k * PHYSICS_DT_S, kin, deck)
         if deck is not None and deck.crash is not None and not crashed:
             log.warning("crash on the deck at t=%.2f s: %s", deck.touchdowns[-1].t_s, deck.crash)
         self._counters["physics_steps"] += target - self._steps
@@ -329,7 +329,7 @@ class MockVehicle:
     def _wait_wall_s(self, t_s: float) -> float:
         """Wall seconds until the physics step at which the next stream or held datagram is due."""
         held = self._faults.next_due_s()
-        next_s = min(self._schedule.next_due_s(self._links), math.inf if held is None else held)
+        next_s = min(self._schedule.next_due_s(self._links), math.inf if held is None else held, self._ranges.next_s)
         next_s = t_s + 1.0 if next_s == math.inf else next_s
         wake_s = math.ceil(next_s / PHYSICS_DT_S - DUE_EPSILON) * PHYSICS_DT_S
         return min(max(wake_s - self.clock.now(), 0.0) / self.clock.speed, MAX_POLL_WALL_S)
@@ -349,19 +349,8 @@ class MockVehicle:
                 built[stream.name] = tel.build(stream.name, state, self._geo, self._noise)
             if built[stream.name] is not None:
                 self._io.send(link, built[stream.name])  # type: ignore[arg-type]  (one of self._links)
-
-    def _flush_outbox(self) -> None:
-        """Send the commander's STATUSTEXTs to the links whose peer is alive (PX4 rule)."""
-        self._collect_events()
-        unsent, self._unsent = self._unsent, []
-        for _, severity, text in unsent:
-            log.info("STATUSTEXT %s", text)
-            self._chunk_id = self._chunk_id % 65535 + 1
-            for link in self._links:
-                peer_alive = self._t_s - link.last_peer_heartbeat_s <= STATUSTEXT_PEER_TIMEOUT_S
-                if peer_alive or not self.options.statustext_needs_heartbeat:
-                    for chunk in tel.statustext_chunks(severity, text, self._chunk_id):
-                        self._io.send(link, chunk)
+        for msg, link in ((msg, link) for msg in self._ranges.due(t_s) for link in self._links):
+            self._io.send(link, msg)  # the rangefinder's DISTANCE_SENSOR, latency_s after each capture
 
 
 def estimate_error_of(opts: VehicleOptions) -> EstimateError:

@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from mission.config.relnav import PassengerGnssSection
+from mission.config.relnav import PassengerGnssSection, RangefinderSection
 from mission.mavlink import px4
 from sim.vehicle.estimator import PX4_SITL_SCALE
 from sim.vehicle.faults import FaultOptions
@@ -43,6 +43,9 @@ class VehicleOptions:
     silent for ``lockstep_watchdog_wall_s`` wall seconds. ``lockstep_max_speed``: in lockstep, fly at
     most this many simulated seconds per wall second (None: as fast as the CPU allows), so that
     a test acting from outside at a phase (a kill, a pilot) has a known margin.
+    rangefinder: a downward rangefinder (``[world.rangefinder]``): its ranges from the true
+    position to the deck's top (over the deck) or the ground (d = 0), sent as DISTANCE_SENSOR
+    ``latency_s`` after capture (seeded by ``faults.seed``); None: none.
     """
 
     bind: str = "127.0.0.1:0"
@@ -66,6 +69,7 @@ class VehicleOptions:
     lockstep: bool = False
     lockstep_watchdog_wall_s: float = 10.0  # mission.time.clock.VEHICLE_WATCHDOG_WALL_S
     lockstep_max_speed: float | None = None
+    rangefinder: RangefinderSection | None = None  # a downward rangefinder sent as DISTANCE_SENSOR (sim.vehicle.physics.rangefinder)
     passenger_gnss: PassengerGnssSection | None = None  # a slow GNSS bias on a quadrotor's estimate (sim.vehicle.estimator.BiasedEstimateError)
 
     def __post_init__(self) -> None:

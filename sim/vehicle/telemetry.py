@@ -13,8 +13,10 @@ run stays cheap, each stream's wall-clock rate is capped: LOCAL_POSITION_NED and
 stream at :data:`CAP_OTHER_WALL_HZ`. At speed 1 no cap bites (PX4's rates exactly); at speed 20
 LOCAL_POSITION_NED arrives at 300 Hz wall (15 Hz simulated), ATTITUDE at 100 Hz wall (5 Hz
 simulated), SYS_STATUS at 50 Hz wall (2.5 Hz simulated).
+DISTANCE_SENSOR is no stream of this table: a vehicle with a rangefinder
+(``VehicleOptions.rangefinder``) sends each reading as it is due (:class:`RangeStream`).
 *Not streamed: PX4's own TIMESYNC requests and SYSTEM_TIME (the lockstep clock uses them), and
-the messages our clients never read (SERVO_OUTPUT_RAW, GPS_RAW_INT, DISTANCE_SENSOR, ...).
+the messages our clients never read (SERVO_OUTPUT_RAW, GPS_RAW_INT, ...).
 """
 from __future__ import annotations
 
@@ -29,7 +31,10 @@ from mission.mavlink import px4, setpoints
 from mission.mavlink.env import mavlink
 from sim.vehicle.modes import TrajectorySetpoint
 from sim.vehicle.estimator import EstimateError
+from mission.config.relnav import RangefinderSection
+from sim.vehicle.physics.deck import Deck
 from sim.vehicle.physics.multicopter import GRAVITY_M_S2, KinState, attitude_rad, quaternion
+from sim.vehicle.physics.rangefinder import Rangefinder, range_below_m
 
 CAP_PRIMARY_WALL_HZ = 300.0
 CAP_OTHER_WALL_HZ = 50.0
@@ -311,6 +316,66 @@ def home_position(s: TelemetryState, geo: Geo) -> Any:
 def gps_global_origin(s: TelemetryState, geo: Geo) -> Any:
     return mavlink.MAVLink_gps_global_origin_message(int(round(geo.lat0_deg * 1e7)), int(round(geo.lon0_deg * 1e7)),
                                                      int(round(geo.alt0_m * 1000.0)), _us(s.t_s))
+
+
+COVARIANCE_UNKNOWN = 255  # DISTANCE_SENSOR covariance: UINT8_MAX if unknown (MAVLink common.xml)
+
+
+def distance_sensor(capture_t_s: float, range_m: float, sigma_m: float, max_range_m: float) -> Any:
+    """A downward range as PX4 streams it (PX4-Autopilot src/modules/mavlink/streams/DISTANCE_SENSOR.hpp:
+    ``time_boot_ms`` the sample's own timestamp, distances m -> cm, ``covariance`` the variance
+    m^2 -> cm^2, ``signal_quality`` left 0, unknown; MAVLink common.xml DISTANCE_SENSOR: orientation
+    MAV_SENSOR_ROTATION_PITCH_270 for downward, covariance UINT8_MAX if unknown): ``range_m`` [m]
+    captured at ``capture_t_s`` [s of the vehicle's boot clock], ``sigma_m`` [m] its standard
+    deviation (a variance over 254 cm^2 is sent as unknown), ``max_range_m`` [m] the sensor's
+    reach (its minimum 0). The range is rounded to the centimetre, as on the wire."""
+    variance_cm2 = (sigma_m * 100.0) ** 2
+    covariance = int(round(variance_cm2)) if variance_cm2 < COVARIANCE_UNKNOWN - 0.5 else COVARIANCE_UNKNOWN
+    return mavlink.MAVLink_distance_sensor_message(
+        int(round(capture_t_s * 1000.0)) & 0xFFFFFFFF, 0, _cm(max_range_m), _cm(range_m),
+        mavlink.MAV_DISTANCE_SENSOR_LASER, 0, mavlink.MAV_SENSOR_ROTATION_PITCH_270, covariance)
+
+
+def _cm(m: float) -> int:
+    return max(0, min(65535, int(round(m * 100.0))))
+
+
+class RangeStream:
+    """The mock vehicle's DISTANCE_SENSOR: its downward rangefinder (``cfg``, ``[world.rangefinder]``;
+    None: no rangefinder, nothing is sent) with the in-process world's model
+    (:mod:`sim.vehicle.physics.rangefinder`, draws from ``seed``), measuring at every physics step
+    a capture is due from the true position down to the deck's top over its disc
+    (:meth:`~sim.vehicle.physics.deck.Deck.top`, ``radius_m``), else the ground
+    (:data:`GROUND_D_M`); each reading is sent ``latency_s`` after its capture (:func:`distance_sensor`)."""
+
+    GROUND_D_M = 0.0  # beside the deck it sees the ground the physics lands on [m, NED down]
+
+    def __init__(self, cfg: RangefinderSection | None, seed: int) -> None:
+        self.sensor = None if cfg is None else Rangefinder(cfg, seed)
+        self.sent = 0  # DISTANCE_SENSOR messages built (one per reading, whatever the links)
+
+    @property
+    def next_s(self) -> float:
+        """When [s] the next held reading is due (inf: none)."""
+        due = None if self.sensor is None else self.sensor.next_delivery_s()
+        return math.inf if due is None else due
+
+    def measure(self, t_s: float, kin: KinState, deck: Deck | None) -> None:
+        """The physics step ending at ``t_s`` [s] left the vehicle at ``kin`` over ``deck`` (None: no deck)."""
+        if self.sensor is None:
+            return
+        top = None if deck is None else deck.top(t_s)
+        radius_m = 0.0 if deck is None else deck.spec.radius_m
+        self.sensor.capture(t_s, lambda: range_below_m((kin.n_m, kin.e_m, kin.d_m), top, radius_m, self.GROUND_D_M))
+
+    def due(self, t_s: float) -> list[Any]:
+        """The DISTANCE_SENSOR messages of the readings due by ``t_s`` [s], in capture order, each once."""
+        if self.sensor is None:
+            return []
+        c = self.sensor.cfg
+        out = [distance_sensor(r.capture_t_s, r.range_m, c.sigma_m, c.max_range_m) for r in self.sensor.deliver(t_s)]
+        self.sent += len(out)
+        return out
 
 
 def autopilot_version(sysid: int) -> Any:

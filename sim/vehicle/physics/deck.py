@@ -112,6 +112,11 @@ class Deck:
     def on_deck(self) -> bool:
         return self.offset_ne is not None
 
+    def top(self, t_s: float) -> tuple[float, float, float] | None:
+        """The centre of the deck's top at ``t_s`` [s] (NED [m]); None while the carrier is not known."""
+        motion = self.motion
+        return None if motion is None else _shifted(motion.centre(t_s, self.spec.height_m), self.spec.offset_ne_m)
+
     def step(self, t_s: float, dt_s: float, before: KinState, after: KinState) -> KinState:
         """The vehicle's state after the step from ``before`` to ``after`` (``dt_s`` [s], ending at
         ``t_s`` [s]) once the deck had its say (see the module docstring)."""

@@ -14,7 +14,7 @@ from mission.carrier.guard import GuardParams
 from mission.carrier.tracking import TrackingParams
 from mission.config.carrier import CarrierSection
 from mission.config.recovery import RecoverySection
-from mission.config.relnav import PHASE_FIELDS, RelnavSection
+from mission.config.relnav import FEED_FIELDS, PHASE_FIELDS, RelnavSection
 from mission.config.scenario import ScenarioSection
 from mission.config.schema import Config, LawSection, MissionSection, SafetySection, from_dict
 from mission.core.docking import DockingGeometry
@@ -145,6 +145,6 @@ def test_derived_takes_same_named_fields_and_lets_explicit_ones_convert():
 
 def test_the_relative_estimators_params_are_the_sections():
     section = RelnavSection(gate_nis=9.0)
-    tuning = {k: v for k, v in section.model_dump().items() if k not in PHASE_FIELDS}  # the rest tells the phases
+    tuning = {k: v for k, v in section.model_dump().items() if k not in PHASE_FIELDS + FEED_FIELDS}  # the rest: phases, feeds
     assert dataclasses.asdict(section.params()) == tuning
-    assert set(PHASE_FIELDS) <= set(section.model_dump())
+    assert set(PHASE_FIELDS + FEED_FIELDS) <= set(section.model_dump())

@@ -169,7 +169,7 @@ def test_a_feed_reaches_the_step_of_the_simulation():
     assert isinstance(copied, ToySensor) and copied.world is branch and copied is not sensor
 
 
-def open_toy_camera(cfg, session, clock) -> ToyCamera:
+def open_toy_camera(cfg, session, clock, link=None) -> ToyCamera:
     """A feed's opener as ``marsupial run`` calls it (the fake world stands in for the pixels)."""
     return ToyCamera(FakeWorld(ManualClock(), target_ned_m=np.zeros(3)))
 
@@ -205,7 +205,8 @@ def test_the_registries_are_read_from_the_source_tree():
 def test_a_feed_that_only_the_simulation_has_is_refused_naming_it():
     """``marker_rendered`` has a simulated sensor and no flight feed (the flight's ``marker`` reads
     the camera's frames, :mod:`mission.cli.marker`): ``marsupial run`` refuses it naming
-    ``mission.feeds`` and saying it is simulation-only; configs/relnav.toml's ``marker`` it opens."""
+    ``mission.feeds`` and saying it is simulation-only; configs/relnav.toml's ``marker`` it opens,
+    and ``rangefinder`` beside it (:mod:`mission.cli.rangefinder`)."""
     from mission.cli.run import feed_openers
     from mission.config.schema import load_config
     from mission.errors import ConfigError
@@ -215,3 +216,6 @@ def test_a_feed_that_only_the_simulation_has_is_refused_naming_it():
     with pytest.raises(ConfigError, match=r"mission\.feeds.*marker_rendered: a simulated sensor only"):
         feed_openers(with_overrides(relnav, {"mission.feeds": ["marker_rendered"]}))
     assert feed_openers(relnav) == {"marker": "mission.cli.marker:open_feed"}
+    ranged = with_overrides(relnav, {"mission.feeds": ["marker", "rangefinder"]})  # the vehicle's DISTANCE_SENSOR
+    assert feed_openers(ranged) == {"marker": "mission.cli.marker:open_feed",
+                                    "rangefinder": "mission.cli.rangefinder:open_feed"}
