@@ -206,7 +206,7 @@ def test_a_feed_that_only_the_simulation_has_is_refused_naming_it():
     """``marker_rendered`` has a simulated sensor and no flight feed (the flight's ``marker`` reads
     the camera's frames, :mod:`mission.cli.marker`): ``marsupial run`` refuses it naming
     ``mission.feeds`` and saying it is simulation-only; configs/relnav.toml's ``marker`` it opens,
-    and ``rangefinder`` beside it (:mod:`mission.cli.rangefinder`)."""
+    and ``rangefinder`` beside it (:mod:`mission.cli.rangefinder`), each alone too."""
     from mission.cli.run import feed_openers
     from mission.config.schema import load_config
     from mission.errors import ConfigError
@@ -215,7 +215,8 @@ def test_a_feed_that_only_the_simulation_has_is_refused_naming_it():
     relnav = load_config(CONFIGS / "relnav.toml")
     with pytest.raises(ConfigError, match=r"mission\.feeds.*marker_rendered: a simulated sensor only"):
         feed_openers(with_overrides(relnav, {"mission.feeds": ["marker_rendered"]}))
-    assert feed_openers(relnav) == {"marker": "mission.cli.marker:open_feed"}
-    ranged = with_overrides(relnav, {"mission.feeds": ["marker", "rangefinder"]})  # the vehicle's DISTANCE_SENSOR
-    assert feed_openers(ranged) == {"marker": "mission.cli.marker:open_feed",
+    assert feed_openers(relnav) == {"marker": "mission.cli.marker:open_feed",  # the vehicle's DISTANCE_SENSOR
                                     "rangefinder": "mission.cli.rangefinder:open_feed"}
+    for name in ("marker", "rangefinder"):
+        alone = with_overrides(relnav, {"mission.feeds": [name]})
+        assert feed_openers(alone) == {name: f"mission.cli.{name}:open_feed"}
