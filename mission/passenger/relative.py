@@ -71,10 +71,11 @@ class RelativeDeck:
         downward ranges are handed to the estimator (else dropped and counted in ``unranged``;
         the caller decides by phase: :data:`mission.phases.phase.RANGED`)."""
         est = self.estimator
+        sent = None if carrier is None else _sent_acceleration(carrier)
         if carrier is not None and t_s - carrier.age_s > self.fix_t_s:
             self.fix_t_s = t_s - carrier.age_s
             est.carrier(CarrierFix(self.fix_t_s, np.asarray(carrier.position_ned_m, float),
-                                   np.asarray(carrier.velocity_ned_m_s, float), _sent_acceleration(carrier)))
+                                   np.asarray(carrier.velocity_ned_m_s, float), sent))
         for m in measurements.arrived(RelativePosition):
             if _usable(m) and m.sigma_m is not None:  # the carrier's reference point is marker_offset from the marker
                 est.marker(MarkerFix.isotropic(m.capture_t_s, np.asarray(m.offset_ned_m, float) - self.marker_offset, m.sigma_m))
@@ -119,7 +120,6 @@ class RelativeDeck:
         self.last = (now, velocity)
         dt = max(t_s - self.t_s, 0.0) if self.t_s is not None else 0.0
         before = self.velocity
-        sent = _sent_acceleration(carrier)
         shown = self._slewed(velocity, dt_s=dt, on_deck=on_deck, sent=sent)
         accel = self._acceleration(before, shown, dt, on_deck)
         self.t_s = t_s

@@ -349,8 +349,9 @@ class MockVehicle:
                 built[stream.name] = tel.build(stream.name, state, self._geo, self._noise)
             if built[stream.name] is not None:
                 self._io.send(link, built[stream.name])  # type: ignore[arg-type]  (one of self._links)
-        for msg, link in ((msg, link) for msg in self._ranges.due(t_s) for link in self._links):
-            self._io.send(link, msg)  # the rangefinder's DISTANCE_SENSOR, latency_s after each capture
+        for msg in self._ranges.due(t_s):  # the rangefinder's DISTANCE_SENSOR, latency_s after each capture
+            for link in self._links:
+                self._io.send(link, msg)
 
 
 def estimate_error_of(opts: VehicleOptions) -> EstimateError:

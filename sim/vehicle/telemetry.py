@@ -29,6 +29,7 @@ from mission.core import geodesy
 
 from mission.mavlink import px4, setpoints
 from mission.mavlink.env import mavlink
+from mission.mavlink.telemetry import COVARIANCE_UNKNOWN, DOWNWARD
 from sim.vehicle.modes import TrajectorySetpoint
 from sim.vehicle.estimator import EstimateError
 from mission.config.relnav import RangefinderSection
@@ -318,9 +319,6 @@ def gps_global_origin(s: TelemetryState, geo: Geo) -> Any:
                                                      int(round(geo.alt0_m * 1000.0)), _us(s.t_s))
 
 
-COVARIANCE_UNKNOWN = 255  # DISTANCE_SENSOR covariance: UINT8_MAX if unknown (MAVLink common.xml)
-
-
 def distance_sensor(capture_t_s: float, range_m: float, sigma_m: float, max_range_m: float) -> Any:
     """A downward range as PX4 streams it (PX4-Autopilot src/modules/mavlink/streams/DISTANCE_SENSOR.hpp:
     ``time_boot_ms`` the sample's own timestamp, distances m -> cm, ``covariance`` the variance
@@ -333,7 +331,7 @@ def distance_sensor(capture_t_s: float, range_m: float, sigma_m: float, max_rang
     covariance = int(round(variance_cm2)) if variance_cm2 < COVARIANCE_UNKNOWN - 0.5 else COVARIANCE_UNKNOWN
     return mavlink.MAVLink_distance_sensor_message(
         int(round(capture_t_s * 1000.0)) & 0xFFFFFFFF, 0, _cm(max_range_m), _cm(range_m),
-        mavlink.MAV_DISTANCE_SENSOR_LASER, 0, mavlink.MAV_SENSOR_ROTATION_PITCH_270, covariance)
+        mavlink.MAV_DISTANCE_SENSOR_LASER, 0, DOWNWARD, covariance)
 
 
 def _cm(m: float) -> int:
@@ -364,9 +362,9 @@ class RangeStream:
         """The physics step ending at ``t_s`` [s] left the vehicle at ``kin`` over ``deck`` (None: no deck)."""
         if self.sensor is None:
             return
-        top = None if deck is None else deck.top(t_s)
         radius_m = 0.0 if deck is None else deck.spec.radius_m
-        self.sensor.capture(t_s, lambda: range_below_m((kin.n_m, kin.e_m, kin.d_m), top, radius_m, self.GROUND_D_M))
+        self.sensor.capture(t_s, lambda: range_below_m((kin.n_m, kin.e_m, kin.d_m), None if deck is None else deck.top(t_s),
+                                                       radius_m, self.GROUND_D_M))  # the deck looked up only at a capture
 
     def due(self, t_s: float) -> list[Any]:
         """The DISTANCE_SENSOR messages of the readings due by ``t_s`` [s], in capture order, each once."""
