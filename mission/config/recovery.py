@@ -44,6 +44,11 @@ class RecoverySection(Section):
                      "fraction of the contact radius to spare (0.3: within 0.7 contact_radius_m), else it pauses "
                      "there: the estimate's few centimetres and the drift while crossing the last decimetre then "
                      "stay inside the contact radius"))
+    final_descent_lag_m: float | None = Field(None, gt=0, le=1,
+        description=("[m] below three contact heights over the dock point the descent's reference lies at most this "
+                     "far below the vehicle (by its estimate) and waits there (unset: it never waits). PX4 closes the "
+                     "position sent with the mission's lead (mission.position_lead): a vehicle its vertical swing left "
+                     "0.1-0.15 m above its reference caught up at 0.5-0.7 m/s, into the contact band"))
     gate_timeout_s: float = Field(5.0, gt=0, le=60,
         description="[s] at the gate, the vehicle has this long to line up over the dock point, else it goes around")
     deck_radius_m: float = Field(0.5, gt=0, le=20,

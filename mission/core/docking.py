@@ -152,3 +152,24 @@ def descent_progress(point_ned_m: np.ndarray, dock_ned_m: np.ndarray, g: Docking
     height over the dock point (clamped)."""
     height = float(np.asarray(dock_ned_m, dtype=float)[2] - np.asarray(point_ned_m, dtype=float)[2])
     return min(1.0, max(0.0, 1.0 - height / g.decision_height_m))
+
+
+def wait_for_vehicle(descent: float, rate: float, x_ref: np.ndarray, vehicle_ned_m: np.ndarray, dock_ned_m: np.ndarray,
+                     g: DockingGeometry, max_lag_m: float | None) -> tuple[float, float, np.ndarray]:
+    """The final descent's progress and rate (:func:`descent_step`'s) and the reference's position
+    ``x_ref`` [m] NED held, below three contact heights over the dock point, to no more than
+    ``max_lag_m`` [m] below the vehicle's own height (``vehicle_ned_m`` [m] NED, its estimate; None:
+    not held): the reference waits for a vehicle its vertical swing left above it. Held, the rate is
+    0 and the progress the vehicle's plus that lag (no higher than three contact heights). PX4
+    closes the position sent with the mission's lead (``mission.position_lead``), so a vehicle left
+    0.1-0.15 m above its reference caught up at 0.5-0.7 m/s, into the contact band over its
+    vertical speed (docs/relnav.md, "The last decimetre's speed"). The bound comes into force as the
+    lag reaches it, so the reference moves on continuously."""
+    slow_from = heights_over_dock(3.0, g)
+    if max_lag_m is None or descent <= slow_from:
+        return descent, rate, x_ref
+    lowest = float(vehicle_ned_m[2]) + max_lag_m
+    if x_ref[2] > lowest:
+        x_ref = np.array([x_ref[0], x_ref[1], lowest])
+    held = descent_progress(np.array([0.0, 0.0, lowest]), np.array([0.0, 0.0, float(dock_ned_m[2])]), g)
+    return (descent, rate, x_ref) if descent <= held else (max(held, slow_from), 0.0, x_ref)

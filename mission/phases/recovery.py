@@ -36,17 +36,8 @@ from mission.core.records import replace
 
 import numpy as np
 
-from mission.core.docking import (
-    cone_radius_m,
-    contact,
-    descent_progress,
-    descent_step,
-    gate_point,
-    heights_over_dock,
-    glide_point,
-    holdoff_point,
-    path_length_m,
-)
+from mission.core.docking import (cone_radius_m, contact, descent_progress, descent_step, gate_point, glide_point,
+                                  heights_over_dock, holdoff_point, path_length_m, wait_for_vehicle)
 from mission.core.law import norm
 from mission.core.pursuit import PursuitLimits, pursue
 from mission.core.safety import filter_velocity
@@ -420,8 +411,10 @@ def approach(state, obs, m, events=()):
         # out of the contact conditions (scenarios 15, 16: 0.54-0.61 m/s)
         rec = replace(rec, descent=min(descent_progress(state.x_ref, dock, g), heights_over_dock(3.0, g)))
     rec = replace(rec, settled_since_s=None, marker_lost_s=None)
-    descent, rate = descent_step(rec.descent, here.horizontal_error_m, g, r.descent_speed_m_s,
-                                 r.final_descent_speed_m_s, r.final_lineup_margin, m.dt_s)
+    descent, rate, x_ref = wait_for_vehicle(*descent_step(rec.descent, here.horizontal_error_m, g, r.descent_speed_m_s,
+                                                          r.final_descent_speed_m_s, r.final_lineup_margin, m.dt_s),
+                                            state.x_ref, v.position_ned_m, dock, g, r.final_descent_lag_m)
+    state = replace(state, x_ref=x_ref)
     goal = gate + descent * (dock - gate)
     goal_v = v_c + ((dock - gate) / g.decision_height_m * rate if descent < 1.0 else 0.0)
     rec = replace(rec, descent=descent)

@@ -308,6 +308,7 @@ class RecoveryModel:
     descent_speed_m_s: float
     final_descent_speed_m_s: float | None  # [m/s] the descent's last three contact heights (None: descent_speed_m_s)
     final_lineup_margin: float  # [-] below two contact heights: lined up with this fraction of the contact radius to spare
+    final_descent_lag_m: float | None  # [m] below three contact heights: the reference at most this far below the vehicle
     gate_timeout_s: float
     settle_radius_m: float
     settle_speed_m_s: float

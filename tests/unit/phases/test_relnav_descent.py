@@ -251,3 +251,31 @@ def test_the_riding_reference_floor_is_over_the_ground_the_passenger_sees(model)
     assert new.phase is Phase.RIDING, dec.events
     assert abs(new.u_ref[2]) < 0.05, new.u_ref  # the dock's velocity, no climb
     assert new.u_ref[0] == pytest.approx(v_c[0], abs=0.05)
+
+
+
+
+def test_below_three_contact_heights_the_reference_waits_for_the_vehicle(model):
+    """The vehicle 0.25 m over the dock point, its reference 0.16 m below it (its vertical swing
+    left it behind): with recovery.final_descent_lag_m 0.1 the reference is held 0.1 m below the
+    vehicle and the descent waits; unset, the reference stays 0.16 m below and the descent goes
+    on (the lead then sent the position 0.58 m below the vehicle, and such vehicles crossed the
+    contact band at 0.5-0.7 m/s in the relnav Monte-Carlo). A reference within the lag, or above
+    three contact heights, is not held."""
+    g = model.recovery.geometry
+    held_model = replace(model, recovery=replace(model.recovery, final_descent_lag_m=0.1))
+    free_model = replace(model, recovery=replace(model.recovery, final_descent_lag_m=None))
+    for height, lag, held in ((0.25, 0.16, True), (0.25, 0.05, False), (0.6, 0.16, False)):
+        state, obs, dock = _at(model, height, descent=1.0 - (height - lag) / g.decision_height_m)
+        state = replace(state, x_ref=state.x_ref + np.array([0.0, 0.0, lag]))
+        x_p = obs.vehicle.position_ned_m
+        for m, bounded in ((held_model, held), (free_model, False)):
+            new, dec = approach(state, replace(obs, relative=SEEN), m)
+            assert new.phase is Phase.APPROACH, dec.events
+            below = new.x_ref[2] - x_p[2]  # [m] the reference under the vehicle after the tick
+            if bounded:
+                assert below == pytest.approx(0.1, abs=abs(new.u_ref[2]) * m.dt_s + 1e-9), (height, lag)
+                assert new.recovery.descent < state.recovery.descent
+            else:
+                assert below > lag - 0.01, (height, lag, m.recovery.final_descent_lag_m)
+                assert new.recovery.descent > state.recovery.descent
