@@ -151,6 +151,7 @@ class CarrierStepper:
         self._calibration = SpeedCalibration(c.speed_ratio_tau_s)
         self._asked_speed_m_s = 0.0  # [m/s] diff-drive/Ackermann: the forward speed last asked (before the guards)
         self._stopped_since_s: float | None = None  # [s] diff-drive/Ackermann: since when it is asked to stop
+        self._ride_begins = False  # APPROACHING entered from driving on: its first step asks a stop if none was
         self._leg_turn = "out"  # REPOSITIONING, non-holonomic: "out", then "turn" towards the leg's target, "done"
         self.fix_smoothing_tau_s = c.fix_smoothing_tau_s
         self._navigated: tuple[float, np.ndarray] | None = None  # (fix time [s], smoothed position [m]) of the last fix
@@ -174,6 +175,7 @@ class CarrierStepper:
                 self._course_start = None  # the next recovery drives its course from its own start
             if mode is CarrierMode.REPOSITIONING:
                 self._leg_turn = "out"  # a new repositioning turns afresh
+            self._ride_begins = mode is CarrierMode.APPROACHING and before in DRIVING
             self.mode = mode
         return ModeUpdate(before, mode, why, leg_changed)
 
@@ -235,6 +237,9 @@ class CarrierStepper:
                 u, active = g.u, active or g.active
             cmd = track(u, yaw, self.tracking)
         else:
+            ride_begins, self._ride_begins = self._ride_begins, False
+            if ride_begins and self._stopped_since_s is None:  # a ride begins from a stand (_restarting)
+                self._stopped_since_s = now_s
             if self._restarting(now_s):  # it stands on, and the law starts again from rest after
                 u = np.zeros_like(u)
             sideways = abs(math.cos(yaw) * float(v_motion[1]) - math.sin(yaw) * float(v_motion[0]))
@@ -303,7 +308,9 @@ class CarrierStepper:
         holds a rest point once it stands (``carrier.mavlink.stand``), which resets its speed
         loop; asked to drive again the tick it stopped (leg 2's ride began as its turn towards
         target 2 ended), the SIH rover leapt to 1.9 m/s, 55 deg off its bearing, under the riding
-        passenger (docs/recovery.md, "On real PX4")."""
+        passenger (docs/recovery.md, "On real PX4"). A ride entered from driving on (:data:`DRIVING`)
+        asks that stop at its first step if none was: leg 2's began as repositioning, braking out of its
+        turn, still asked 0.03 m/s; no rest point, the rover rolled back, leapt, the passenger trailed 0.316 m."""
         return (self.min_moving_speed_m_s > 0 and self._stopped_since_s is not None
                 and now_s - self._stopped_since_s < RESTART_S)
 

@@ -350,6 +350,44 @@ def test_a_rover_that_never_crawls_stands_a_second_once_stopped(floor: float) ->
         assert speed[0] > 0.0
 
 
+@pytest.mark.parametrize("floor", [0.0, 0.8])
+def test_a_leg_s_ride_begins_from_a_stand_though_repositioning_never_asked_a_stop(floor: float) -> None:
+    """Leg 2 on PX4: the rover's repositioning braked out of its turn (the law's command ramping
+    0.8 -> 0 at 1 m/s^2) and the passenger began the ride when the published speed fell below
+    0.1 m/s, while 0.03 m/s was still asked: no stop was ever asked, so the stand after one
+    (RESTART_S) never ran; PX4 held no rest point, the rover rolled back, then leapt, and the
+    passenger trailed 0.316 m. With carrier.min_moving_speed_m_s a ride begins from a stand:
+    RESTART_S (1 s) of stop from the ride's first tick, then the gentle start from rest."""
+    t0, t1 = [15.0, 0.0, -5.0], [-25.0, -10.0, -4.0]
+    stepper = CarrierStepper(_px4_rover_cfg(floor, targets=[t0, t1]), True)
+    x = np.array([-5.0, 0.0, 0.0])  # beyond leg 2's start, facing target 2
+    bearing = math.atan2(t1[1] - x[1], t1[0] - x[0])
+    ahead = np.array([math.cos(bearing), math.sin(bearing), 0.0])
+    stepper.mode = CarrierMode.REPOSITIONING  # its turn towards target 2 just ended, 0.8 m/s asked
+    stepper.update_mode(PassengerView(Phase.TRANSIT, leg=1))
+    stepper.velocity_m_s = 0.8 * ahead
+    now, asked = 0.0, [0.8]
+    for _ in range(round(0.7 / DT)):  # braking: the speed asked ramps down, never to zero
+        now += DT
+        x = x + ahead * asked[-1] * DT
+        state = OwnState(now, x.copy(), ahead * asked[-1], bearing)
+        asked.append(stepper.decide(state, DT, 0.0, now).tracked.speed_m_s)
+        stepper.update_mode(PassengerView(Phase.TRANSIT, leg=1))
+    assert stepper.mode is CarrierMode.REPOSITIONING and 0.0 < asked[-1] < 0.15  # still asked, no stop
+    ride = []
+    for _ in range(round(2.0 / DT)):  # the ride: the rover has come to rest (and stays so)
+        now += DT
+        stepper.update_mode(PassengerView(Phase.RIDING, leg=1))
+        ride.append(stepper.decide(OwnState(now, x.copy(), np.zeros(3), bearing), DT, 0.0, now).tracked.speed_m_s)
+    assert stepper.mode is CarrierMode.APPROACHING
+    speed, t = np.array(ride), np.arange(1, len(ride) + 1) * DT
+    if floor:
+        assert speed[t < 1.0 - 1e-6].max() == 0.0  # old: 0.11 m/s asked at once, 0.34 at 1 s; no rest point held
+        assert 0.0 < speed[-1] <= 0.25 * 1.0 + 0.01  # then the gentle start from rest
+    else:
+        assert speed[0] > 0.0
+
+
 def test_from_a_clean_stand_the_gentle_start_stays() -> None:
     """Leg 1 on PX4 (its estimate at rest clean): asked the floor's 0.8 m/s at once the SIH rover
     leapt to 0.55 m/s in 0.13 s and the passenger trailed 0.39 m; the gentle start (0.25 m/s^2)
