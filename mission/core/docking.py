@@ -171,5 +171,5 @@ def wait_for_vehicle(descent: float, rate: float, x_ref: np.ndarray, vehicle_ned
     lowest = float(vehicle_ned_m[2]) + max_lag_m
     if x_ref[2] > lowest:
         x_ref = np.array([x_ref[0], x_ref[1], lowest])
-    held = descent_progress(np.array([0.0, 0.0, lowest]), np.array([0.0, 0.0, float(dock_ned_m[2])]), g)
+    held = descent_progress(np.asarray(vehicle_ned_m, dtype=float) + np.array([0.0, 0.0, max_lag_m]), dock_ned_m, g)
     return (descent, rate, x_ref) if descent <= held else (max(held, slow_from), 0.0, x_ref)
