@@ -175,7 +175,8 @@ class CarrierController:
         tau = cfg.carrier.acceleration_tau_s
         self._acceleration = AccelerationEstimate(tau) if tau > 0 else None  # published when set
         bias_tau = cfg.carrier.velocity_bias_tau_s
-        self._velocity_fix = PositionConsistentVelocity(bias_tau) if bias_tau > 0 else None
+        across = cfg.carrier.velocity_bias_across_tau_s or None
+        self._velocity_fix = PositionConsistentVelocity(bias_tau, across) if bias_tau > 0 else None
         try:
             self.auth, self.passenger, self.publisher = open_bus(cfg, session, self.pair, clock, encoding, self.team)
         except Exception:
@@ -365,7 +366,7 @@ class CarrierController:
         if self.tracking.kind != "holonomic" and fresh.yaw_rad is not None:
             velocity = along_heading(velocity, fresh.yaw_rad)  # no sideslip: the estimator's wander removed
         if self._velocity_fix is not None:  # consistent with its position (mission.core.consistent_velocity)
-            velocity = self._velocity_fix.update(fresh.t_s, pad3(fresh.position_ned_m[:self.dim]), velocity)
+            velocity = self._velocity_fix.update(fresh.t_s, pad3(fresh.position_ned_m[:self.dim]), velocity, fresh.yaw_rad)
         accel = None if self._acceleration is None else self._acceleration.update(
             *inertial_sample(fresh, velocity, self.dim, self.tracking.kind != "holonomic"))
         out = CarrierState(fresh.t_s, self.seq, "local_ned", pad3(fresh.position_ned_m[:self.dim]), velocity,

@@ -151,6 +151,11 @@ class CarrierSection(Section):
         description=("[s] the carrier publishes its velocity plus the low-passed (this time constant) difference "
                      "between its position's rate and its estimator's velocity, so the passenger's feed-forward moves "
                      "as the dock does (a PX4 rover's EKF position ran 0.1-0.3 m/s faster than its velocity); 0 off"))
+    velocity_bias_across_tau_s: float = Field(0.0, ge=0, le=60,
+        description=("[s] with velocity_bias_tau_s, the difference's part across the carrier's heading is low-passed "
+                     "with this time constant instead (a PX4 rover's EKF position drifts sideways while its heading "
+                     "holds; the published velocity, along its heading, then ran short across it); 0: "
+                     "velocity_bias_tau_s"))
     start_accel_m_s2: float = Field(0.0, ge=0, le=100,
         description=("[m/s^2] the carrier's gentle start: while it is measured slower than 0.15 m/s its command's "
                      "speed grows at most this fast (stiction: it breaks free at a low command, not leaping to a high "

@@ -17,18 +17,26 @@ import numpy as np
 
 
 class PositionConsistentVelocity:
-    """The velocity plus the low-passed bias of its position's rate; :meth:`update` once a tick."""
+    """The velocity plus the low-passed bias of its position's rate; :meth:`update` once a tick.
+    With ``across_tau_s`` [s] the bias's part across the heading given to :meth:`update` (yaw
+    from north, the horizontal perpendicular) is low-passed with that time constant instead, its
+    other parts with ``tau_s``."""
 
-    def __init__(self, tau_s: float) -> None:
+    def __init__(self, tau_s: float, across_tau_s: float | None = None) -> None:
         if tau_s <= 0:
             raise ValueError(f"tau_s must be > 0, got {tau_s!r}")
+        if across_tau_s is not None and across_tau_s <= 0:
+            raise ValueError(f"across_tau_s must be > 0, got {across_tau_s!r}")
         self.tau_s = tau_s
+        self.across_tau_s = across_tau_s
         self._last: tuple[float, np.ndarray, np.ndarray] | None = None
         self.bias: np.ndarray | None = None  # [m/s]; None until two samples were seen
 
-    def update(self, t_s: float, position_m: np.ndarray, velocity_m_s: np.ndarray) -> np.ndarray:
-        """Take the sample (time ``t_s`` [s], position [m], velocity [m/s]); returns the velocity
-        corrected by the bias so far. A sample no newer than the last one changes nothing."""
+    def update(self, t_s: float, position_m: np.ndarray, velocity_m_s: np.ndarray,
+               yaw_rad: float | None = None) -> np.ndarray:
+        """Take the sample (time ``t_s`` [s], position [m], velocity [m/s], and the heading
+        ``yaw_rad`` [rad] for ``across_tau_s``); returns the velocity corrected by the bias so far.
+        A sample no newer than the last one changes nothing."""
         x = np.asarray(position_m, dtype=float).copy()
         v = np.asarray(velocity_m_s, dtype=float).copy()
         if self._last is not None:
@@ -39,7 +47,13 @@ class PositionConsistentVelocity:
             raw = (x - x0) / dt - 0.5 * (v + v0)
             if self.bias is None:
                 self.bias = np.zeros_like(raw)
-            self.bias = self.bias + (1.0 - math.exp(-dt / self.tau_s)) * (raw - self.bias)
+            change = (1.0 - math.exp(-dt / self.tau_s)) * (raw - self.bias)
+            if self.across_tau_s is not None and yaw_rad is not None and raw.shape[0] >= 2:
+                across = np.zeros_like(raw)
+                across[:2] = -math.sin(yaw_rad), math.cos(yaw_rad)
+                error = float(np.dot(raw - self.bias, across))
+                change += ((1.0 - math.exp(-dt / self.across_tau_s)) - (1.0 - math.exp(-dt / self.tau_s))) * error * across
+            self.bias = self.bias + change
         self._last = (t_s, x, v)
         return v if self.bias is None else v + self.bias
 

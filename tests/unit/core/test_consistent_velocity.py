@@ -74,3 +74,26 @@ def test_the_mission_observes_its_vehicle_s_velocity_made_consistent_with_its_po
     assert float(obs.velocity_ned_m_s[1]) == pytest.approx(-0.12 + 0.56 * math.exp(-2.98 / 0.5), abs=1e-6)
     raw = _vehicle_obs(state)  # without the fix: the estimator's velocity as it came
     assert raw is not None and float(raw.velocity_ned_m_s[1]) == pytest.approx(0.44)
+
+
+@pytest.mark.parametrize("yaw_deg", [0.0, 30.0, -120.0])
+def test_the_part_across_the_heading_has_its_own_time_constant(yaw_deg: float) -> None:
+    """A rover heading ``yaw`` whose position drifts 0.2 m/s along and 0.2 m/s across its heading
+    while its velocity says neither: with tau 1.0 s and across_tau 0.3 s, after 0.6 s the bias's
+    across part is 0.2 (1 - exp(-2)) and its along part 0.2 (1 - exp(-0.6)); without across_tau
+    both are the latter, and without a heading the split is not made."""
+    yaw = math.radians(yaw_deg)
+    along, across = np.array([math.cos(yaw), math.sin(yaw), 0.0]), np.array([-math.sin(yaw), math.cos(yaw), 0.0])
+    drift = 0.2 * along + 0.2 * across
+    split, plain, blind = (PositionConsistentVelocity(1.0, 0.3), PositionConsistentVelocity(1.0),
+                           PositionConsistentVelocity(1.0, 0.3))
+    for k in range(31):  # 0.6 s at 50 Hz
+        t = 0.02 * k
+        split.update(t, drift * t, np.zeros(3), yaw)
+        plain.update(t, drift * t, np.zeros(3), yaw)
+        blind.update(t, drift * t, np.zeros(3))
+    assert split.bias is not None and plain.bias is not None and blind.bias is not None
+    assert float(split.bias @ across) == pytest.approx(0.2 * (1.0 - math.exp(-2.0)), abs=1e-9)
+    assert float(split.bias @ along) == pytest.approx(0.2 * (1.0 - math.exp(-0.6)), abs=1e-9)
+    assert plain.bias == pytest.approx(0.2 * (1.0 - math.exp(-0.6)) * (along + across), abs=1e-9)
+    assert blind.bias == pytest.approx(plain.bias, abs=1e-12)
