@@ -47,12 +47,13 @@ class PositionConsistentVelocity:
             raw = (x - x0) / dt - 0.5 * (v + v0)
             if self.bias is None:
                 self.bias = np.zeros_like(raw)
-            change = (1.0 - math.exp(-dt / self.tau_s)) * (raw - self.bias)
+            gain = 1.0 - math.exp(-dt / self.tau_s)
+            change = gain * (raw - self.bias)
             if self.across_tau_s is not None and yaw_rad is not None and raw.shape[0] >= 2:
                 across = np.zeros_like(raw)
-                across[:2] = -math.sin(yaw_rad), math.cos(yaw_rad)
-                error = float(np.dot(raw - self.bias, across))
-                change += ((1.0 - math.exp(-dt / self.across_tau_s)) - (1.0 - math.exp(-dt / self.tau_s))) * error * across
+                across[:2] = -math.sin(yaw_rad), math.cos(yaw_rad)  # the horizontal perpendicular to the heading
+                # the part across the heading moves with its own gain instead
+                change += (1.0 - math.exp(-dt / self.across_tau_s) - gain) * float(np.dot(raw - self.bias, across)) * across
             self.bias = self.bias + change
         self._last = (t_s, x, v)
         return v if self.bias is None else v + self.bias
