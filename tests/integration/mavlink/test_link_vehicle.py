@@ -77,7 +77,9 @@ def _vehicle(link: VehicleLink, **options: object) -> MockVehicle:
 def test_offboard_flight_follow_velocity_hold_and_land(link: VehicleLink) -> None:
     with _vehicle(link, estimate_error=0.0) as vehicle:  # exact: at rest to 0.2 m/s
         link.wait_vehicle(20.0)
-        s = link.wait_until(lambda s: s.position_valid and s.origin is not None, 20.0)
+        # EXTENDED_SYS_STATE comes on its own stream: wait for it too, or a loaded machine asserts
+        # on a landed state not yet heard (None)
+        s = link.wait_until(lambda s: s.position_valid and s.origin is not None and s.landed_state is not None, 20.0)
         assert s.mode == "AUTO.LOITER" and not s.armed and s.landed_state == px4.LANDED_ON_GROUND
         assert s.origin == pytest.approx(vehicle.options.home, abs=1e-6)
         with Streamer(link) as stream:
