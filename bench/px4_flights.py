@@ -54,7 +54,7 @@ from typing import Any
 import click
 import numpy as np
 
-from mission.config.schema import load_config
+from mission.config.schema import Config, load_config
 from mission.phases.phase import FLYING, Phase
 from mission.record.figures import summarise
 from mission.record.table import read_record
@@ -172,6 +172,54 @@ def docking_meets(d: dict[str, Any], home: dict[str, Any] | None) -> bool:
                 and (home is None or (home["max_lagged_m"] is not None and home["max_lagged_m"] <= HOME_M)))
 
 
+def true_figures(cfg: Config, directory: Path, log_dir: Path, offset_s: float) -> dict[str, Any] | None:
+    """With the rover and ``--ground-truth`` (``truth.csv``, ``truth-rover.csv``: both of SIH's truths
+    in the quadrotor's EKF frame, :meth:`sim.sitl.px4.Px4Flight.write_ground_truth`): per leg the
+    true horizontal contact error (the quadrotor against the rover's truth plus the dock offset at the
+    contact's time) and the true riding offset (its largest over the leg's RIDING, and when, s into
+    the ride) [m]; the rover's true closest approach to each target over the flight, 3D [m]; and the
+    map check: the median distance [m] between the record's own estimate and PX4's as the observer
+    heard it at the mapped time (millimetres when ``offset_s`` [s], which puts the record's wall
+    clock on the observer's monotonic one, is right). None without them."""
+    from bench.px4_team import _at, _on_monotonic, _read_truth  # (px4_team imports this module)
+
+    paths = directory / "truth.csv", directory / "truth-rover.csv"
+    rec = _on_monotonic(log_dir, offset_s)
+    if rec is None or not all(p.exists() for p in paths):
+        return None
+    (quad_est, quad), (_, rover) = (_read_truth(p) for p in paths)
+    if len(quad) < 2 or len(rover) < 2:
+        return None
+    record, shift = rec
+    x = record.vec("x_p")
+    ok = np.isfinite(x).all(axis=1)  # the record's own estimate against PX4's as the observer heard it: the clocks' map
+    map_check = round(float(np.median(np.linalg.norm(x[ok] - _at(quad_est, record.t[ok] + shift), axis=1))), 3) if ok.any() else None
+    slot = np.asarray(cfg.mission.dock_offset_ned_m, dtype=float)
+
+    def offset(t: np.ndarray) -> np.ndarray:
+        rel = _at(quad, t) - (_at(rover, t) + slot)
+        return np.hypot(rel[:, 0], rel[:, 1])
+
+    s = json.loads((log_dir / "summary.json").read_text()) if (log_dir / "summary.json").exists() else {}
+    contacts = {leg.get("leg", 0): (leg.get("contact") or {}).get("time_s") for leg in s.get("legs") or [s]}
+    legs = []
+    for leg in record.legs():
+        if leg.record is None:  # not flown
+            continue
+        t = leg.record.t[leg.record.phase == "RIDING"] + shift
+        riding = None
+        if len(t):
+            off = offset(t)
+            k = int(off.argmax())
+            riding = [round(float(off[k]), 3), round(float(t[k] - t[0]), 1)]
+        tc = contacts.get(leg.k)
+        legs.append({"leg": leg.k, "true_riding_m": riding,
+                     "true_contact_m": None if tc is None else round(float(offset(np.array([tc + shift]))[0]), 3)})
+    targets = [np.asarray(t, dtype=float) for t in cfg.scenario.legs()]
+    closest = [round(float(np.linalg.norm(rover[:, 2:5] - t, axis=1).min()), 3) for t in targets]
+    return {"legs": legs, "true_closest_each_m": closest, "map_check_m": map_check}
+
+
 def fly_once(config: Path, directory: Path, speed_factor: float, ground_truth_hz: float = 0.0,
              rover: bool = False) -> dict[str, Any]:
     """One flight; its row of the table."""
@@ -194,7 +242,8 @@ def fly_once(config: Path, directory: Path, speed_factor: float, ground_truth_hz
     return {**_row(s, rc, t0, directory, sep_m), "hold_m": round(after, 3), "clock": round((clock or {}).get("ratio", float("nan")), 3),
             "stall_s": stall_s(f.log_dir), "riding_2tick_m": riding_sustained_m(f.log_dir), "home": home,
             "carrier_closest_m": carrier.get("closest_target_distance_m"), "closest_each_m": closest_each_m(f.log_dir),
-            "dockings": dockings(s, sep_m) if s.get("docked_again") is not None or s.get("legs") else None}
+            "dockings": dockings(s, sep_m) if s.get("docked_again") is not None or s.get("legs") else None,
+            "truth": true_figures(cfg, directory, f.log_dir, f.monotonic_offset_s) if rover and ground_truth_hz > 0 else None}
 
 
 def fly_mock(config: Path, directory: Path, speed: float, seed: int) -> dict[str, Any]:
@@ -238,7 +287,8 @@ def _fmt(value: Any) -> str:
 @click.option("--out", type=click.Path(file_okay=False), default=None, help="Where the flights' logs go (default a temp dir).")
 @click.option("--speed-factor", type=float, default=None, help="PX4_SIM_SPEED_FACTOR [default: 1.03, 1.08 with --rover]")
 @click.option("--parallel", type=click.IntRange(1, 2), default=1, show_default=True, help="PX4 flights at once")
-@click.option("--ground-truth", is_flag=True, help="Record PX4's estimate and SIH's truth at 50 Hz (truth.csv per flight).")
+@click.option("--ground-truth", is_flag=True, help="Record PX4's estimate and SIH's truth at 50 Hz (truth.csv per flight; "
+              "with --rover also truth-rover.csv, and the dockings' true riding, contact and closest approach).")
 @click.option("--vehicle", type=click.Choice(["px4", "mock"]), default="px4", show_default=True,
               help="real PX4 SITL, or the mock vehicle (marsupial demo with the same config; 'clock' is its speed)")
 @click.option("--mock-speed", type=float, default=2.0, show_default=True)
@@ -326,6 +376,12 @@ def print_dockings(rows: list[dict[str, Any]]) -> None:
             ok = docking_meets(d, home)
             met, total = met + ok, total + 1
             click.echo(f"{i:>6} " + " ".join(f"{_fmt(d[c]):>15}" for c in DOCKING_COLUMNS) + f"  {h:>40}  {'met' if ok else 'MISSED'}")
+        truth = row.get("truth")
+        if truth is not None:
+            click.echo(f"{i:>6} against SIH's truth: per leg (riding max [m], s into the ride; contact [m]) "
+                       + "; ".join(f"{d['leg']}: {d['true_riding_m']}; {d['true_contact_m']}" for d in truth["legs"])
+                       + f"; the rover's closest to each target, 3D [m]: {truth['true_closest_each_m']} "
+                       f"(record-to-truth map check {truth['map_check_m']} m)")
         if row.get("closest_each_m") is not None:
             click.echo(f"{i:>6} the carrier's closest approach to each target over the flight [m]: {row['closest_each_m']} "
                        f"(its own figure, to any: {_fmt(row.get('carrier_closest_m'))}; stall {_fmt(row.get('stall_s'))} s)")

@@ -50,6 +50,7 @@ ROVER_PARAMS = {"RO_MAX_THR_SPEED": 4.0, "RO_SPEED_P": 0.5, "RO_SPEED_I": 0.1, "
 CLONE_NEWNET = 0x40000000
 GCS_PORT = 14550  # PX4's GCS link (it listens on GCS_LISTEN_PORT + instance) sends here
 GCS_LISTEN_PORT = 18570  # + instance: where a PX4's GCS link listens
+PASSENGER_SYSID, ROVER_SYSID = 1, 2  # the quadrotor (instance 0) and, with ``rover``, the rover (instance 1)
 HOME_LAG_S = 3.5  # a home follows the carrier within this [s]: moved at most once a second, HOME_POSITION at 0.5 Hz
 _counter = itertools.count()
 T = TypeVar("T")
@@ -313,6 +314,7 @@ class Px4Flight:
     px4_params: dict[str, float] = field(default_factory=dict)  # PX4_PARAM_<name>: set by PX4 SITL at start
     rover: bool = False  # the carrier a PX4 rover (instance 1) rather than the carrier simulator
     rover_px4: Px4Sitl | None = None
+    monotonic_offset_s: float = float("nan")  # [s] wall time less monotonic time as the mission started
     _files: list[Any] = field(default_factory=list)
 
     @property
@@ -357,8 +359,11 @@ class Px4Flight:
             from sim.sitl import ground_truth
 
             ground_truth.ask(self.gcs, self.ground_truth_hz)
+            if self.rover:  # the rover's too, on its own GCS port (both arrive on the observer's socket)
+                ground_truth.ask(self.gcs, self.ground_truth_hz, system_id=ROVER_SYSID, gcs_port=GCS_LISTEN_PORT + 1)
         if self.settle_s > 0:
             time.sleep(self.settle_s)  # real-time PX4's estimator keeps converging (the probe keeps receiving)
+        self.monotonic_offset_s = time.time() - time.monotonic()
         endpoint = f"tcp/127.0.0.1:{zenoh_port}"
         self._popen("carrier", ["-v", "carrier", str(self.config), "--zenoh-listen", endpoint, *self.carrier_args])
         self._popen("mission", ["-v", "run", str(self.config), "--zenoh-connect", endpoint, "--log-dir",
@@ -419,14 +424,20 @@ class Px4Flight:
 
     def write_ground_truth(self) -> Path | None:
         """Write what the GCS link received of PX4's estimate and SIH's truth to ``truth.csv``
-        (:mod:`sim.sitl.ground_truth`); None when not recorded."""
+        (:mod:`sim.sitl.ground_truth`; the quadrotor's, sysid 1) and, with the rover, the rover's
+        to ``truth-rover.csv``: its estimate in its own EKF frame, its truth projected about the
+        quadrotor's EKF origin (one frame for both truths). None when not recorded."""
         if self.gcs is None or self.ground_truth_hz <= 0:
             return None
         from sim.sitl import ground_truth
 
-        est, truth = ground_truth.series(self.gcs)
+        est, truth = ground_truth.series(self.gcs, system_id=PASSENGER_SYSID if self.rover else None)
         path = self.dir / "truth.csv"
         ground_truth.write_csv(path, est, truth)
+        if self.rover:
+            origin = ground_truth.ekf_origin(self.gcs, PASSENGER_SYSID)
+            est, truth = ground_truth.series(self.gcs, system_id=ROVER_SYSID, origin=origin)
+            ground_truth.write_csv(self.dir / "truth-rover.csv", est, truth)
         return path
 
     def close(self) -> None:
