@@ -35,6 +35,7 @@ log = logging.getLogger(__name__)
 
 DEFAULT_LIVE = "127.0.0.1:8765"  # Foxglove's default WebSocket port, on loopback
 FLUSH_PERIOD_S = 1.0  # [s] of mission clock between two finished chunks
+DRAIN_WALL_S = 0.02  # [s, wall] the worker sleeps after emptying its queue (it wakes at most this often)
 _STOP = object()
 
 
@@ -206,22 +207,34 @@ class DataLog:
     def _run(self) -> None:
         while True:
             entry = self._queue.get()
-            if entry is _STOP:
-                return
-            t_s, item = entry
-            try:
-                self.handle(t_s, item)
-                if self.server is not None:
-                    self.server.broadcast_time(self.log_ns(t_s))
-                if self._next_flush_s is None:
-                    self._next_flush_s = t_s + self.flush_period_s
-                elif t_s >= self._next_flush_s:
-                    self.writer.flush()  # end the chunk: on disk and readable whatever happens next
-                    self._next_flush_s = t_s + self.flush_period_s
-            except Exception as exc:  # the flight data never stops the flight
-                self.errors += 1
-                if self.errors <= 3:
-                    log.warning("flight data %s: %s: %s", self.path.name, type(exc).__name__, exc)
+            while entry is not None:
+                if entry is _STOP:
+                    return
+                self._log(*entry)
+                try:
+                    entry = self._queue.get_nowait()
+                except queue.Empty:
+                    entry = None
+            # Drained: let the next entries gather for a while instead of waking on each (a wake per
+            # tick, and the GIL handed over each time, cost the control loop's process more CPU than
+            # the messages' own making). At most DRAIN_WALL_S later, on the mission's clock the same.
+            time.sleep(DRAIN_WALL_S)
+
+    def _log(self, t_s: float, item: Any) -> None:
+        """Log one queued ``item`` of mission-clock time ``t_s`` [s]; end the chunk when due."""
+        try:
+            self.handle(t_s, item)
+            if self.server is not None:
+                self.server.broadcast_time(self.log_ns(t_s))
+            if self._next_flush_s is None:
+                self._next_flush_s = t_s + self.flush_period_s
+            elif t_s >= self._next_flush_s:
+                self.writer.flush()  # end the chunk: on disk and readable whatever happens next
+                self._next_flush_s = t_s + self.flush_period_s
+        except Exception as exc:  # the flight data never stops the flight
+            self.errors += 1
+            if self.errors <= 3:
+                log.warning("flight data %s: %s: %s", self.path.name, type(exc).__name__, exc)
 
     def finish(self, metadata: dict[str, dict[str, str]] | None = None, timeout_s: float = 10.0) -> None:
         """Let the worker finish what was queued, write ``metadata``, finish the file (summary,

@@ -9,7 +9,6 @@ from dataclasses import dataclass, replace
 from functools import lru_cache
 from typing import Any
 
-import cv2
 import numpy as np
 
 from mission.vision.camera import CameraModel
@@ -48,6 +47,8 @@ def true_marker_pose(camera: CameraModel, poses: Poses) -> MarkerPose:
 @lru_cache(maxsize=64)
 def tag_image(tag_id: int, bit_px: int) -> np.ndarray:
     """The tag ``tag_id`` with a white margin of one bit, ``bit_px`` pixels a bit, uint8."""
+    import cv2  # (here, not at the top: a mock vehicle without a camera imports this module for its poses)
+
     dictionary = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, FAMILY))
     marker = cv2.aruco.generateImageMarker(dictionary, tag_id, TAG_BITS * bit_px)
     return cv2.copyMakeBorder(marker, bit_px, bit_px, bit_px, bit_px, cv2.BORDER_CONSTANT, value=255)
@@ -93,6 +94,8 @@ def _draw(image: np.ndarray, camera: CameraModel, tag: Tag, marker: MarkerPose) 
     x1, y1 = np.minimum(np.ceil(pixels.max(axis=0)) + 2, [camera.width, camera.height]).astype(int)
     if x1 <= x0 or y1 <= y0:
         return
+    import cv2
+
     # only the tag's bounding box is warped: the homography onto the box's own pixels
     homography = cv2.getPerspectiveTransform(source_corners, (pixels - [x0, y0]).astype(np.float32))
     size = (int(x1 - x0), int(y1 - y0))

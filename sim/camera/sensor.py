@@ -4,7 +4,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 
-import cv2
 import numpy as np
 
 from mission.config.vision import VisionSection
@@ -52,6 +51,8 @@ class Sensor:
             return None
         frame = ideal.astype(np.float32)
         if blur_px is not None and np.hypot(*blur_px) >= 1.0:
+            import cv2  # (here, not at the top: a mock vehicle without a camera imports this module)
+
             frame = cv2.filter2D(frame, -1, line_kernel(blur_px))
         if self.model.noise_sigma > 0:
             # In place, into a buffer kept between frames: a fresh array of a frame's size a time
