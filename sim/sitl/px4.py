@@ -36,6 +36,9 @@ from typing import Any, TypeVar
 from sim.net import stop_process
 
 ENV_VAR = "MARSUPIAL_PX4_SITL"
+# The tree this module is in: the flight's processes run its mission code, not whatever is installed (parents[1]
+# was sim/, so a worktree's flights with a relative PYTHONPATH flew the editable install's code)
+REPO_ROOT = Path(__file__).resolve().parents[2]
 QUAD_AIRFRAME = 10040  # sihsim_quadx
 ROVER_AIRFRAME = 10045  # SIH Ackermann rover: a carrier
 # The rover's speed loop, tuned (PX4's rover tuning: RO_MAX_THR_SPEED, then RO_SPEED_P / RO_SPEED_I).
@@ -324,10 +327,9 @@ class Px4Flight:
     def _popen(self, name: str, args: list[str]) -> subprocess.Popen[bytes]:
         out, err = open(self.dir / f"{name}.out", "ab"), open(self.dir / f"{name}.err", "ab")
         self._files += [out, err]
-        root = Path(__file__).resolve().parents[1]
-        env = {**os.environ, "PYTHONUNBUFFERED": "1", "PYTHONPATH": f"{root}{os.pathsep}{os.environ.get('PYTHONPATH', '')}"}
+        env = {**os.environ, "PYTHONUNBUFFERED": "1", "PYTHONPATH": f"{REPO_ROOT}{os.pathsep}{os.environ.get('PYTHONPATH', '')}"}
         proc = subprocess.Popen(self.ns.command([sys.executable, "-m", "mission.cli", *args]), stdout=out, stderr=err,
-                                env=env, cwd=root, stdin=subprocess.DEVNULL)
+                                env=env, cwd=REPO_ROOT, stdin=subprocess.DEVNULL)
         self.procs[name] = proc
         return proc
 
