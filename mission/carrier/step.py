@@ -27,7 +27,8 @@ One step, every ``1 / carrier.rate_hz`` [s]:
    then for a holonomic carrier the P3 guard of every target on the planar command and
    :func:`~mission.carrier.tracking.track`, for a diff-drive or Ackermann one
    :func:`~mission.carrier.tracking.track`, the guards along its heading and the speed
-   calibration (:class:`~mission.carrier.tracking.SpeedCalibration`).
+   calibration (:class:`~mission.carrier.tracking.SpeedCalibration`), then the correction for the
+   vehicle's own speed loop (:func:`~mission.carrier.tracking.speed_loop_corrected`).
 
 Frames: local NED [m], [m/s], in the scenario's dimension (2 or 3); times [s] of the caller's clock.
 """
@@ -45,7 +46,8 @@ from mission.carrier.guard import GuardParams
 from mission.carrier.legs import TURN_ROOM_M, Legs
 from mission.carrier.modes import CarrierMode, PassengerView, next_mode
 from mission.carrier.start import MOVING_M_S, gentle_start, speed_lead
-from mission.carrier.tracking import SpeedCalibration, Tracked, TrackingParams, heading_of, own_speed_m_s, track
+from mission.carrier.tracking import (SpeedCalibration, Tracked, TrackingParams, heading_of, own_speed_m_s,
+                                      speed_loop_corrected, track)
 from mission.config.carrier import KINDS
 from mission.config.schema import Config
 from mission.core.consistent_velocity import PositionConsistentVelocity
@@ -96,7 +98,7 @@ def tracking_params(cfg: Config) -> TrackingParams:
     """What the carrier can follow (``carrier.kinematics`` and its tracking law's settings)."""
     c = cfg.carrier
     return TrackingParams(c.kinematics, c.heading_gain, c.max_yaw_rate_rad_s, c.min_speed_fraction, c.wheelbase_m,
-                          c.max_steer_rad)
+                          c.max_steer_rad, c.speed_loop_correction)
 
 
 @dataclass(frozen=True)
@@ -254,10 +256,10 @@ class CarrierStepper:
                 scale = speed / cmd.speed_m_s if cmd.speed_m_s > 0 else 0.0
                 cmd = Tracked(speed, cmd.yaw_rate_rad_s, cmd.bearing_rad, heading_of(speed, yaw),
                               cmd.setpoint_ned_m_s * scale)
-            cmd = self._calibration.asked(cmd, yaw, v_meas, dt_s)  # what to ask for so that it does ``cmd``
-        # The law's planar command (not the motion along the heading) is what the acceleration
-        # limit and Remark 1 act on: tying it to the heading would let the command turn only as
-        # fast as the robot already does (a heading lock).
+            cmd = speed_loop_corrected(self._calibration.asked(cmd, yaw, v_meas, dt_s), state.yaw_rad, v_meas, v_motion,
+                                       self.tracking)  # what to ask for so that it does ``cmd``
+        # The law's planar command (not the motion along the heading) is what the acceleration limit and
+        # Remark 1 act on: tying it to the heading would let it turn only as fast as the robot does (a heading lock).
         self.velocity_m_s = u
         return Command(cmd, active, bool(np.all(res.feasible)))
 

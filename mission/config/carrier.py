@@ -176,6 +176,13 @@ class CarrierSection(Section):
                      "position, the difference low-passed with this time constant (mission.core.consistent_velocity), "
                      "not by its estimator's velocity alone: a PX4 rover standing still was estimated at 0.2-0.3 m/s "
                      "and was asked the floor's ramp instead of the gentle start; 0 off"))
+    speed_loop_correction: float = Field(0.0, ge=0, le=1,
+        description=("[-] diff-drive/Ackermann behind an autopilot's own speed loop (PX4's rover): the forward speed "
+                     "asked is raised by this fraction of how much faster that loop measures the carrier (its EKF "
+                     "velocity's size signed by the forward part) than its velocity made consistent with its position "
+                     "(start_motion_tau_s) says it moves: a SIH rover standing while its EKF read -0.3 m/s broke free "
+                     "early, stalled as the reading flipped to +0.3, and leapt; RO_SPEED_P / (RO_SPEED_P + "
+                     "1 / RO_MAX_THR_SPEED) cancels the error in PX4's throttle (mission.carrier.tracking); 0 off"))
     fix_smoothing_tau_s: float = Field(0.0, ge=0, le=60,
         description=("[s] where the own state is a GNSS fix with the robot's inertial velocity beside it (the "
                      "simulators' world errors), steer and guard on the fix low-passed with this time constant and "
