@@ -170,6 +170,11 @@ class CarrierSection(Section):
                      "never ask less); below it, the law's own speed: no crawl that a speed loop whose estimate errs by "
                      "about this much cannot hold (mission.carrier.start); and before a leg after the first it turns "
                      "at this speed to face the leg's target, then stands (mission.carrier.legs); 0 off"))
+    floor_from_m_s: float = Field(0.0, ge=0, le=100,
+        description=("[m/s] diff-drive/Ackermann: min_moving_speed_m_s's floor sets in once the carrier moves (forward or "
+                     "across its heading) at this speed, not at 0.15 m/s: a SIH rover crawling at 0.15-0.3 m/s off a "
+                     "stand was asked the floor's ramp to 0.8 m/s, did not follow for 0.5 s, then leapt to 1.1-1.5 "
+                     "m/s under the riding passenger (start_lead_m_s holds it back below); 0: 0.15 m/s"))
     start_motion_tau_s: float = Field(0.0, ge=0, le=60,
         description=("[s] the gentle start, the lead and the floor judge whether the carrier moves (and, "
                      "diff-drive/Ackermann, how fast across its heading) by its velocity made consistent with its "

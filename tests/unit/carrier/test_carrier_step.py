@@ -246,7 +246,7 @@ def test_an_ackermann_carrier_turning_from_rest_is_not_braked_by_its_own_lead(tu
 
 def _px4_rover_cfg(min_moving_speed_m_s: float, targets: list[list[float]] | None = None,
                    start_yaw_rad: float | None = None, start_motion_tau_s: float = 0.0,
-                   speed_loop_correction: float = 0.0) -> Config:
+                   speed_loop_correction: float = 0.0, floor_from_m_s: float = 0.0) -> Config:
     """The PX4 cycle's rover settings (gentle start 0.25 m/s^2, lead 0.3 m/s, Ackermann)."""
     return from_dict({
         "scenario": {"carrier_start": [0.0, 0.0, 0.0], "carrier_mode": "stop",
@@ -257,7 +257,8 @@ def _px4_rover_cfg(min_moving_speed_m_s: float, targets: list[list[float]] | Non
                     "max_steer_rad": 0.5236, "min_speed_fraction": 0.3, "start_accel_m_s2": 0.25,
                     "start_lead_m_s": 0.3, "min_moving_speed_m_s": min_moving_speed_m_s,
                     "start_yaw_rad": start_yaw_rad, "recovery_speed_m_s": 1.2,
-                    "start_motion_tau_s": start_motion_tau_s, "speed_loop_correction": speed_loop_correction},
+                    "start_motion_tau_s": start_motion_tau_s, "speed_loop_correction": speed_loop_correction,
+                    "floor_from_m_s": floor_from_m_s},
     })
 
 
@@ -599,3 +600,36 @@ def test_the_carrier_step_asks_a_px4_rover_s_speed_loop_the_corrected_speed() ->
     want = np.maximum(plain[driving] - SPEED_LOOP_K * math.hypot(0.23, 0.18), np.minimum(plain[driving], 0.01))
     assert corrected[driving] == pytest.approx(want, abs=0.01)  # the consistent speed: ~0 (its position still)
     assert np.array_equal(corrected[~driving], plain[~driving])  # the stops stay
+
+
+@pytest.mark.parametrize("floor_from", [0.0, 0.8])
+def test_a_rover_crawling_off_a_stand_is_led_not_pulled_up_to_the_floor(floor_from: float) -> None:
+    """Off a stand the SIH rover broke free and crawled at 0.15-0.3 m/s for 0.5 s while the floor's
+    ramp asked it 0.8 m/s (it counted as moving at 0.15), then leapt to 1.1-1.5 m/s under the riding
+    passenger. With carrier.floor_from_m_s = 0.8 the floor sets in only once it moves at 0.8 m/s:
+    crawling at 0.2 m/s it is asked at most 0.2 + the lead (0.3); once at 0.9 m/s, it is asked no
+    less though it reads 0.5 m/s again (the floor, then the lead never taking back speed asked).
+    0: the floor's ramp from 0.15 m/s, as before."""
+    stepper = CarrierStepper(_px4_rover_cfg(0.8, start_motion_tau_s=0.3, floor_from_m_s=floor_from), True)
+    bearing = math.atan2(TARGET[1], TARGET[0])
+    ahead = np.array([math.cos(bearing), math.sin(bearing), 0.0])
+    now, x = 0.0, np.zeros(3)
+    for _ in range(round(1.5 / DT)):  # it stands, told to stop, while the passenger is in transit
+        now += DT
+        stepper.update_mode(_view("TRANSIT"))
+        stepper.decide(OwnState(now, x.copy(), np.zeros(3), bearing), DT, 0.0, now)
+    asked, speeds = [], []
+    for k in range(round(5.0 / DT)):
+        now += DT
+        speed = 0.0 if k * DT < 2.0 else 0.2 if k * DT < 3.5 else 0.9 if k * DT < 4.0 else 0.5  # [m/s] what it does
+        x = x + speed * ahead * DT
+        stepper.update_mode(_view("RIDING"))
+        asked.append(stepper.decide(OwnState(now, x.copy(), speed * ahead, bearing), DT, 0.0, now).tracked.speed_m_s)
+        speeds.append(speed)
+    asked_a, t = np.array(asked), np.arange(1, len(asked) + 1) * DT
+    crawl = (t >= 2.5) & (t < 3.5)  # crawling for a while (its motion filter caught up)
+    if floor_from:
+        assert asked_a[crawl].max() <= 0.2 + 0.3 + 0.02  # the lead (old: the floor's ramp to 0.8)
+        assert asked_a[t >= 4.1].min() >= 0.8 - 1e-9  # it moved at the floor's speed: no less asked
+    else:
+        assert asked_a[crawl].max() >= 0.8 - 1e-9  # the old ramp: 0.8 asked of a rover that crawls at 0.2
