@@ -257,7 +257,7 @@ class CarrierStepper:
                 cmd = Tracked(speed, cmd.yaw_rate_rad_s, cmd.bearing_rad, heading_of(speed, yaw),
                               cmd.setpoint_ned_m_s * scale)
             cmd = speed_loop_corrected(self._calibration.asked(cmd, yaw, v_meas, dt_s), state.yaw_rad, v_meas, v_motion,
-                                       self.tracking)  # what to ask for so that it does ``cmd``
+                                       self.tracking, active)  # what to ask for so that it does ``cmd``
         # The law's planar command (not the motion along the heading) is what the acceleration limit and
         # Remark 1 act on: tying it to the heading would let it turn only as fast as the robot does (a heading lock).
         self.velocity_m_s = u

@@ -125,16 +125,19 @@ def autopilot_speed_m_s(velocity_ned_m_s: np.ndarray, yaw_rad: float) -> float:
 
 
 def speed_loop_corrected(cmd: Tracked, yaw_rad: float | None, velocity_ned_m_s: np.ndarray,
-                         motion_ned_m_s: np.ndarray, p: TrackingParams) -> Tracked:
+                         motion_ned_m_s: np.ndarray, p: TrackingParams, guarded: bool = False) -> Tracked:
     """``cmd`` for a diff-drive or Ackermann vehicle whose own speed loop closes on its estimator's
     velocity ``velocity_ned_m_s`` [m/s] NED (PX4's rover): with ``p.speed_loop_correction`` = k > 0
     the forward speed asked is raised by k times that loop's error, e = :func:`autopilot_speed_m_s`
     less the forward part of ``motion_ned_m_s`` [m/s] NED (its velocity made consistent with its
     position: :meth:`mission.carrier.step.CarrierStepper.motion_m_s`), e within
     +-:data:`SPEED_LOOP_ERROR_MAX_M_S`; never below :data:`SPEED_LOOP_FLOOR_M_S` (nor the speed
-    asked, if less). A stop, a heading unknown or k = 0 leave ``cmd`` as it is. The motion
-    (``velocity_ned_m_s`` of ``cmd``) stays what the vehicle is to do; the speed and the setpoint
-    are what it is asked.
+    asked, if less); never above the speed asked while ``guarded`` (a P3 guard cut it this step: in
+    lb8 the guard braked the rover 1.1 s before the separation, its position read it rolling back,
+    the correction raised the speed asked to 1.1-1.4 m/s, and it leapt from a stop to 1.55 m/s under
+    the riding passenger, 7.60 m from the target). A stop, a heading unknown or k = 0 leave ``cmd``
+    as it is. The motion (``velocity_ned_m_s`` of ``cmd``) stays what the vehicle is to do; the speed
+    and the setpoint are what it is asked.
 
     Why: PX4's throttle is ``s / RO_MAX_THR_SPEED + RO_SPEED_P (s - m) + I`` for the speed asked ``s``
     and the speed it measures ``m`` (``RoverControl::speedControl``). At leg 2's start the SIH
@@ -151,7 +154,7 @@ def speed_loop_corrected(cmd: Tracked, yaw_rad: float | None, velocity_ned_m_s: 
     forward = math.cos(yaw_rad) * float(motion_ned_m_s[0]) + math.sin(yaw_rad) * float(motion_ned_m_s[1])
     error = min(max(autopilot_speed_m_s(velocity_ned_m_s, yaw_rad) - forward, -SPEED_LOOP_ERROR_MAX_M_S),
                 SPEED_LOOP_ERROR_MAX_M_S)
-    speed = max(cmd.speed_m_s + k * error, min(cmd.speed_m_s, SPEED_LOOP_FLOOR_M_S))
+    speed = max(cmd.speed_m_s + k * (min(error, 0.0) if guarded else error), min(cmd.speed_m_s, SPEED_LOOP_FLOOR_M_S))
     scale = speed / cmd.speed_m_s
     return Tracked(speed, cmd.yaw_rate_rad_s, cmd.bearing_rad, cmd.velocity_ned_m_s, cmd.setpoint_ned_m_s * scale)
 

@@ -575,6 +575,13 @@ def test_the_speed_loop_correction_never_turns_a_stop_into_a_drive_nor_a_drive_i
     assert speed_loop_corrected(slow, 0.0, np.array([3.0, 0.0]), np.zeros(2), p).speed_m_s == pytest.approx(
         0.2 + SPEED_LOOP_K * 1.0)
     assert speed_loop_corrected(slow, None, np.array([-0.9, 0.0]), np.zeros(2), p) is slow
+    # under a P3 guard's cut it may lower the speed asked, never raise it (its position read it rolling back)
+    assert speed_loop_corrected(slow, 0.0, np.zeros(2), np.array([-0.3, 0.0]), p, guarded=True) is not slow
+    assert speed_loop_corrected(slow, 0.0, np.zeros(2), np.array([-0.3, 0.0]), p, guarded=True).speed_m_s == 0.2
+    assert speed_loop_corrected(slow, 0.0, np.zeros(2), np.array([-0.3, 0.0]), p).speed_m_s == pytest.approx(
+        0.2 + SPEED_LOOP_K * 0.3)
+    assert speed_loop_corrected(slow, 0.0, np.array([-0.15, 0.0]), np.zeros(2), p, guarded=True).speed_m_s == (
+        pytest.approx(0.2 - SPEED_LOOP_K * 0.15))
 
 
 def test_the_carrier_step_asks_a_px4_rover_s_speed_loop_the_corrected_speed() -> None:
