@@ -27,7 +27,8 @@ One step, every ``1 / carrier.rate_hz`` [s]:
    then for a holonomic carrier the P3 guard of every target on the planar command and
    :func:`~mission.carrier.tracking.track`, for a diff-drive or Ackermann one
    :func:`~mission.carrier.tracking.track`, the guards along its heading and the speed
-   calibration (:class:`~mission.carrier.tracking.SpeedCalibration`).
+   calibration (:class:`~mission.carrier.tracking.SpeedCalibration`), then the correction for the
+   vehicle's own speed loop (:func:`~mission.carrier.tracking.speed_loop_corrected`).
 
 Frames: local NED [m], [m/s], in the scenario's dimension (2 or 3); times [s] of the caller's clock.
 """
@@ -45,7 +46,8 @@ from mission.carrier.guard import GuardParams
 from mission.carrier.legs import TURN_ROOM_M, Legs
 from mission.carrier.modes import CarrierMode, PassengerView, next_mode
 from mission.carrier.start import MOVING_M_S, gentle_start, speed_lead
-from mission.carrier.tracking import SpeedCalibration, Tracked, TrackingParams, heading_of, own_speed_m_s, track
+from mission.carrier.tracking import (SpeedCalibration, Tracked, TrackingParams, heading_of, own_speed_m_s,
+                                      speed_loop_corrected, track)
 from mission.config.carrier import KINDS
 from mission.config.schema import Config
 from mission.core.consistent_velocity import PositionConsistentVelocity
@@ -96,7 +98,7 @@ def tracking_params(cfg: Config) -> TrackingParams:
     """What the carrier can follow (``carrier.kinematics`` and its tracking law's settings)."""
     c = cfg.carrier
     return TrackingParams(c.kinematics, c.heading_gain, c.max_yaw_rate_rad_s, c.min_speed_fraction, c.wheelbase_m,
-                          c.max_steer_rad)
+                          c.max_steer_rad, c.speed_loop_correction)
 
 
 @dataclass(frozen=True)
@@ -141,7 +143,7 @@ class CarrierStepper:
                          first.law.separation_distance_m + cfg.mission.leg_start_margin_m)
         self.course = RecoveryCourse.from_lists(c.recovery_course, c.recovery_heading_deg, c.recovery_speed_m_s)
         self.start_accel_m_s2, self.start_lead_m_s = c.start_accel_m_s2, c.start_lead_m_s
-        self.min_moving_speed_m_s = c.min_moving_speed_m_s
+        self.min_moving_speed_m_s, self.floor_from_m_s = c.min_moving_speed_m_s, max(c.floor_from_m_s, MOVING_M_S)
         # [m/s] its motion for the start's caps: the estimator's velocity made consistent with its position
         self._motion = PositionConsistentVelocity(c.start_motion_tau_s) if c.start_motion_tau_s > 0 else None
         self.mode = CarrierMode.WAITING
@@ -254,10 +256,10 @@ class CarrierStepper:
                 scale = speed / cmd.speed_m_s if cmd.speed_m_s > 0 else 0.0
                 cmd = Tracked(speed, cmd.yaw_rate_rad_s, cmd.bearing_rad, heading_of(speed, yaw),
                               cmd.setpoint_ned_m_s * scale)
-            cmd = self._calibration.asked(cmd, yaw, v_meas, dt_s)  # what to ask for so that it does ``cmd``
-        # The law's planar command (not the motion along the heading) is what the acceleration
-        # limit and Remark 1 act on: tying it to the heading would let the command turn only as
-        # fast as the robot already does (a heading lock).
+            cmd = speed_loop_corrected(self._calibration.asked(cmd, yaw, v_meas, dt_s), state.yaw_rad, v_meas, v_motion,
+                                       self.tracking, active)  # what to ask for so that it does ``cmd``
+        # The law's planar command (not the motion along the heading) is what the acceleration limit and
+        # Remark 1 act on: tying it to the heading would let it turn only as fast as the robot does (a heading lock).
         self.velocity_m_s = u
         return Command(cmd, active, bool(np.all(res.feasible)))
 
@@ -333,11 +335,11 @@ class CarrierStepper:
         the speed asked to the forward speed plus 0.3 m/s, down to the floor, PX4 slowed it further,
         to a stop, and it leapt off again: the passenger trailed 0.53 m (docs/recovery.md, "On real PX4").
 
-        Once it moves (forward at :data:`~mission.carrier.start.MOVING_M_S` or more), or while its
-        velocity's part across its heading, ``sideways_m_s`` [m/s], is that large (its estimate
-        cannot tell a crawl from a stand), neither the caps nor the tracking law's slowing in a turn
-        ask less than ``carrier.min_moving_speed_m_s`` while the law asks that much (below it, the
-        law's own planar speed, which grows at the law's acceleration limit). From a clean stand
+        Once it moves (forward at :data:`~mission.carrier.start.MOVING_M_S` or ``carrier.floor_from_m_s``,
+        whichever is more), or while its velocity's part across its heading, ``sideways_m_s`` [m/s], is
+        that large (its estimate cannot tell a crawl from a stand), neither the caps nor the tracking law's
+        slowing in a turn ask less than ``carrier.min_moving_speed_m_s`` while the law asks that much (below
+        it, the law's own planar speed, which grows at the law's acceleration limit). From a clean stand
         the gentle start stays: asked 0.8 m/s at once on leg 1 the SIH rover leapt to 0.55 m/s in
         0.13 s and the passenger trailed 0.39 m. PX4's rover estimates its speed
         as its velocity's size signed by the forward part, and its EKF's velocity at rest errs
@@ -358,7 +360,7 @@ class CarrierStepper:
             capped = min(capped, self._asked_speed_m_s + accel * dt_s)
         # the least speed asked while driving: the law's planar speed up to carrier.min_moving_speed_m_s
         # (a vehicle turning in place, asked no forward speed, is left so)
-        unsure = moving_m_s >= MOVING_M_S or sideways_m_s >= MOVING_M_S
+        unsure = max(moving_m_s, sideways_m_s) >= self.floor_from_m_s  # carrier.floor_from_m_s, at least MOVING_M_S
         floor = min(float(np.linalg.norm(u[:2])), self.min_moving_speed_m_s) if cmd.speed_m_s > 0 and unsure else 0.0
         if accel and dt_s > 0:  # a floor that sets in mid-start grows from the speed asked, at the law's ramp
             floor = min(floor, self._asked_speed_m_s + accel * dt_s)

@@ -29,12 +29,16 @@ import numpy as np
 from mission.core.geodesy import wrap_pi
 
 Kinematics = Literal["holonomic", "diff_drive", "ackermann"]
+AUTOPILOT_SPEED_TH_M_S = 0.1  # [m/s] PX4's RO_SPEED_TH (default): a speed estimate below it reads as 0
+SPEED_LOOP_ERROR_MAX_M_S = 1.0  # [m/s] the most of an autopilot's speed error corrected (its EKF erred <= 0.9 m/s)
+SPEED_LOOP_FLOOR_M_S = 0.01  # [m/s] a corrected speed asked never falls below this (nor above the speed asked)
 
 
 @dataclass(frozen=True)
 class TrackingParams:
     """kind; heading_gain [1/s]; max_yaw_rate_rad_s [rad/s]; min_speed_fraction (Ackermann
-    creep, in [0, 1]); wheelbase_m [m] and max_steer_rad [rad] (Ackermann)."""
+    creep, in [0, 1]); wheelbase_m [m] and max_steer_rad [rad] (Ackermann); speed_loop_correction
+    (diff-drive/Ackermann, in [0, 1]: :func:`speed_loop_corrected`)."""
 
     kind: Kinematics = "holonomic"
     heading_gain: float = 2.0
@@ -42,6 +46,7 @@ class TrackingParams:
     min_speed_fraction: float = 0.3
     wheelbase_m: float = 0.3
     max_steer_rad: float = 0.5
+    speed_loop_correction: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -106,6 +111,52 @@ def own_speed_m_s(velocity_ned_m_s: np.ndarray, yaw_rad: float | None, kind: str
     if kind == "holonomic" or yaw_rad is None:
         return math.hypot(vn, ve)
     return abs(math.cos(yaw_rad) * vn + math.sin(yaw_rad) * ve)
+
+
+def autopilot_speed_m_s(velocity_ned_m_s: np.ndarray, yaw_rad: float) -> float:
+    """The forward speed [m/s] a PX4 rover's speed loop measures from its estimator's velocity
+    ``velocity_ned_m_s`` [m/s] NED at heading ``yaw_rad`` [rad]: the horizontal velocity's size signed
+    by its forward part, 0 below :data:`AUTOPILOT_SPEED_TH_M_S` (``AckermannVelControl.cpp``,
+    ``updateSubscriptions``). Standing with its EKF at -0.23 m/s forward and 0.18 sideways it reads
+    -0.29; creeping forward at 0.1 with the same sideways error, +0.2."""
+    vn, ve = float(velocity_ned_m_s[0]), float(velocity_ned_m_s[1])
+    forward, size = math.cos(yaw_rad) * vn + math.sin(yaw_rad) * ve, math.hypot(vn, ve)
+    return math.copysign(size, forward) if size > AUTOPILOT_SPEED_TH_M_S else 0.0
+
+
+def speed_loop_corrected(cmd: Tracked, yaw_rad: float | None, velocity_ned_m_s: np.ndarray,
+                         motion_ned_m_s: np.ndarray, p: TrackingParams, guarded: bool = False) -> Tracked:
+    """``cmd`` for a diff-drive or Ackermann vehicle whose own speed loop closes on its estimator's
+    velocity ``velocity_ned_m_s`` [m/s] NED (PX4's rover): with ``p.speed_loop_correction`` = k > 0
+    the forward speed asked is raised by k times that loop's error, e = :func:`autopilot_speed_m_s`
+    less the forward part of ``motion_ned_m_s`` [m/s] NED (its velocity made consistent with its
+    position: :meth:`mission.carrier.step.CarrierStepper.motion_m_s`), e within
+    +-:data:`SPEED_LOOP_ERROR_MAX_M_S`; never below :data:`SPEED_LOOP_FLOOR_M_S` (nor the speed
+    asked, if less); never above the speed asked while ``guarded`` (a P3 guard cut it this step: in
+    lb8 the guard braked the rover 1.1 s before the separation, its position read it rolling back,
+    the correction raised the speed asked to 1.1-1.4 m/s, and it leapt from a stop to 1.55 m/s under
+    the riding passenger, 7.60 m from the target). A stop, a heading unknown or k = 0 leave ``cmd``
+    as it is. The motion (``velocity_ned_m_s`` of ``cmd``) stays what the vehicle is to do; the speed
+    and the setpoint are what it is asked.
+
+    Why: PX4's throttle is ``s / RO_MAX_THR_SPEED + RO_SPEED_P (s - m) + I`` for the speed asked ``s``
+    and the speed it measures ``m`` (``RoverControl::speedControl``). At leg 2's start the SIH
+    rover stood with its EKF reading -0.3 m/s (backwards), so the first ask already pushed; it broke
+    free asked 0.1-0.3 m/s, its estimate flipped to +0.3 as it crept, its throttle fell below the
+    rolling friction, it stopped, read -0.2 again, and by then asked 0.7 m/s it leapt to 1.5-1.7 m/s
+    (SIH's static friction is 0.5 g, its rolling friction 0.3 g: ``Sih::generate_rover_ackermann_dynamics``)
+    and the riding passenger trailed 0.36-0.37 m (docs/recovery.md, "On real PX4"). Asked
+    ``s + k e``, the throttle's proportional and feed-forward terms together see the consistent
+    speed's error for k = RO_SPEED_P / (RO_SPEED_P + 1 / RO_MAX_THR_SPEED)."""
+    k = p.speed_loop_correction
+    if k <= 0 or cmd.speed_m_s <= 0 or yaw_rad is None or p.kind == "holonomic":
+        return cmd
+    forward = math.cos(yaw_rad) * float(motion_ned_m_s[0]) + math.sin(yaw_rad) * float(motion_ned_m_s[1])
+    error = min(max(autopilot_speed_m_s(velocity_ned_m_s, yaw_rad) - forward, -SPEED_LOOP_ERROR_MAX_M_S),
+                SPEED_LOOP_ERROR_MAX_M_S)
+    speed = max(cmd.speed_m_s + k * (min(error, 0.0) if guarded else error), min(cmd.speed_m_s, SPEED_LOOP_FLOOR_M_S))
+    scale = speed / cmd.speed_m_s
+    return Tracked(speed, cmd.yaw_rate_rad_s, cmd.bearing_rad, cmd.velocity_ned_m_s, cmd.setpoint_ned_m_s * scale)
 
 
 class SpeedCalibration:

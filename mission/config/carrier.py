@@ -170,12 +170,24 @@ class CarrierSection(Section):
                      "never ask less); below it, the law's own speed: no crawl that a speed loop whose estimate errs by "
                      "about this much cannot hold (mission.carrier.start); and before a leg after the first it turns "
                      "at this speed to face the leg's target, then stands (mission.carrier.legs); 0 off"))
+    floor_from_m_s: float = Field(0.0, ge=0, le=100,
+        description=("[m/s] diff-drive/Ackermann: min_moving_speed_m_s's floor sets in once the carrier moves (forward or "
+                     "across its heading) at this speed, not at 0.15 m/s: a SIH rover crawling at 0.15-0.3 m/s off a "
+                     "stand was asked the floor's ramp to 0.8 m/s, did not follow for 0.5 s, then leapt to 1.1-1.5 "
+                     "m/s under the riding passenger (start_lead_m_s holds it back below); 0: 0.15 m/s"))
     start_motion_tau_s: float = Field(0.0, ge=0, le=60,
         description=("[s] the gentle start, the lead and the floor judge whether the carrier moves (and, "
                      "diff-drive/Ackermann, how fast across its heading) by its velocity made consistent with its "
                      "position, the difference low-passed with this time constant (mission.core.consistent_velocity), "
                      "not by its estimator's velocity alone: a PX4 rover standing still was estimated at 0.2-0.3 m/s "
                      "and was asked the floor's ramp instead of the gentle start; 0 off"))
+    speed_loop_correction: float = Field(0.0, ge=0, le=1,
+        description=("[-] diff-drive/Ackermann behind an autopilot's own speed loop (PX4's rover): the forward speed "
+                     "asked is raised by this fraction of how much faster that loop measures the carrier (its EKF "
+                     "velocity's size signed by the forward part) than its velocity made consistent with its position "
+                     "(start_motion_tau_s) says it moves: a SIH rover standing while its EKF read -0.3 m/s broke free "
+                     "early, stalled as the reading flipped to +0.3, and leapt; RO_SPEED_P / (RO_SPEED_P + "
+                     "1 / RO_MAX_THR_SPEED) cancels the error in PX4's throttle (mission.carrier.tracking); 0 off"))
     fix_smoothing_tau_s: float = Field(0.0, ge=0, le=60,
         description=("[s] where the own state is a GNSS fix with the robot's inertial velocity beside it (the "
                      "simulators' world errors), steer and guard on the fix low-passed with this time constant and "

@@ -15,7 +15,8 @@ import pytest
 from mission.carrier.backends import OwnState
 from mission.carrier.backends.sim import SimRobot
 from mission.carrier.modes import CarrierMode, PassengerView
-from mission.carrier.step import REAL_DELAY_S, CarrierStepper, carrier_model, guard_params
+from mission.carrier.step import REAL_DELAY_S, CarrierStepper, carrier_model, guard_params, tracking_params
+from mission.carrier.tracking import Tracked, autopilot_speed_m_s, speed_loop_corrected
 from mission.config.schema import Config, from_dict
 from mission.phases.phase import Phase
 from mission.time.clock import ManualClock
@@ -244,7 +245,8 @@ def test_an_ackermann_carrier_turning_from_rest_is_not_braked_by_its_own_lead(tu
 
 
 def _px4_rover_cfg(min_moving_speed_m_s: float, targets: list[list[float]] | None = None,
-                   start_yaw_rad: float | None = None, start_motion_tau_s: float = 0.0) -> Config:
+                   start_yaw_rad: float | None = None, start_motion_tau_s: float = 0.0,
+                   speed_loop_correction: float = 0.0, floor_from_m_s: float = 0.0) -> Config:
     """The PX4 cycle's rover settings (gentle start 0.25 m/s^2, lead 0.3 m/s, Ackermann)."""
     return from_dict({
         "scenario": {"carrier_start": [0.0, 0.0, 0.0], "carrier_mode": "stop",
@@ -255,7 +257,8 @@ def _px4_rover_cfg(min_moving_speed_m_s: float, targets: list[list[float]] | Non
                     "max_steer_rad": 0.5236, "min_speed_fraction": 0.3, "start_accel_m_s2": 0.25,
                     "start_lead_m_s": 0.3, "min_moving_speed_m_s": min_moving_speed_m_s,
                     "start_yaw_rad": start_yaw_rad, "recovery_speed_m_s": 1.2,
-                    "start_motion_tau_s": start_motion_tau_s},
+                    "start_motion_tau_s": start_motion_tau_s, "speed_loop_correction": speed_loop_correction,
+                    "floor_from_m_s": floor_from_m_s},
     })
 
 
@@ -507,3 +510,133 @@ def test_the_carrier_steers_on_its_fixes_smoothed_by_its_inertial_velocity() -> 
     assert stepper.navigated(raw) is raw
     off = CarrierStepper(_cfg(), False)
     assert off.navigated(fix) is fix
+
+
+def _px4_throttle(asked_m_s: float, measured_m_s: float) -> float:
+    """PX4's rover throttle without its integral (RoverControl::speedControl): the feed-forward
+    asked / RO_MAX_THR_SPEED plus RO_SPEED_P times the error, for the bench's 4 m/s and 0.5."""
+    return asked_m_s / 4.0 + 0.5 * (asked_m_s - measured_m_s)
+
+
+SPEED_LOOP_K = 0.5 / (0.5 + 1.0 / 4.0)  # RO_SPEED_P / (RO_SPEED_P + 1 / RO_MAX_THR_SPEED)
+
+
+def test_px4_s_speed_loop_measures_its_estimate_s_size_signed_by_its_forward_part() -> None:
+    """AckermannVelControl: the EKF velocity's size, signed by its forward part, 0 below RO_SPEED_TH."""
+    yaw = 0.3
+    ahead, side = np.array([math.cos(yaw), math.sin(yaw)]), np.array([-math.sin(yaw), math.cos(yaw)])
+    assert autopilot_speed_m_s(-0.23 * ahead - 0.18 * side, yaw) == pytest.approx(-math.hypot(0.23, 0.18))
+    assert autopilot_speed_m_s(0.05 * ahead + 0.30 * side, yaw) == pytest.approx(math.hypot(0.05, 0.30))
+    assert autopilot_speed_m_s(0.06 * ahead + 0.07 * side, yaw) == 0.0  # 0.092 m/s: under 0.1, read as 0
+
+
+@pytest.mark.parametrize(("ekf_forward", "ekf_side", "moving"), [
+    (-0.23, -0.18, 0.0),  # a7's stand: its EKF read -0.29 m/s, the rover stood
+    (+0.10, +0.30, 0.10),  # creeping at 0.1 m/s, the EKF's sideways error flips the reading to +0.32
+    (+0.15, -0.35, 0.0),  # a4's stand: read +0.38 m/s forward while it stood
+    (+1.30, +0.40, 1.45),  # mid-ride: EKF velocity 0.1 m/s behind its position, 0.4 sideways
+])
+def test_a_rover_s_speed_loop_is_asked_so_that_its_throttle_sees_its_consistent_speed(
+        ekf_forward: float, ekf_side: float, moving: float) -> None:
+    """With carrier.speed_loop_correction = RO_SPEED_P / (RO_SPEED_P + 1 / RO_MAX_THR_SPEED), the
+    speed asked of PX4, through its speed loop's reading of the EKF velocity, gives the throttle
+    (feed-forward and proportional term) that the speed wanted gives against the speed the carrier
+    really makes (its velocity consistent with its position): a7 and a9's leg 2 began with the
+    rover read at -0.29 m/s while it stood (a push at the first ask), and broke free, stalled on
+    the flip to +0.3 and leapt. The motion wanted is kept; the setpoint keeps its bearing."""
+    yaw = 0.7
+    ahead, side = np.array([math.cos(yaw), math.sin(yaw)]), np.array([-math.sin(yaw), math.cos(yaw)])
+    p = tracking_params(_cfg(kinematics="ackermann", wheelbase_m=0.321, max_steer_rad=0.5236,
+                             speed_loop_correction=SPEED_LOOP_K))
+    ekf, motion = ekf_forward * ahead + ekf_side * side, moving * ahead
+    measured = autopilot_speed_m_s(ekf, yaw)
+    for wanted in (0.3, 0.6, 1.2):
+        cmd = Tracked(wanted, 0.1, yaw, wanted * ahead, wanted * ahead)
+        out = speed_loop_corrected(cmd, yaw, ekf, motion, p)
+        assert _px4_throttle(out.speed_m_s, measured) == pytest.approx(_px4_throttle(wanted, moving), abs=1e-9)
+        assert np.linalg.norm(out.setpoint_ned_m_s) == pytest.approx(out.speed_m_s)
+        assert out.setpoint_ned_m_s @ ahead == pytest.approx(out.speed_m_s)  # the bearing kept
+        assert np.array_equal(out.velocity_ned_m_s, cmd.velocity_ned_m_s)  # the motion wanted kept
+        off = speed_loop_corrected(cmd, yaw, ekf, motion, dataclasses.replace(p, speed_loop_correction=0.0))
+        assert off is cmd
+    # uncorrected, the stand's -0.29 m/s reading pushes at a tenth of the throttle that breaks it free
+    if ekf_forward < 0:
+        assert _px4_throttle(0.01, measured) - _px4_throttle(0.01, moving) == pytest.approx(0.146, abs=0.001)
+
+
+def test_the_speed_loop_correction_never_turns_a_stop_into_a_drive_nor_a_drive_into_a_stop() -> None:
+    """A stop stays a stop; a speed asked that the correction would take below 0.01 m/s is asked
+    0.01 m/s (the speed loop's reading -0.9 m/s of a rover that stands); the error is at most 1 m/s."""
+    p = dataclasses.replace(tracking_params(_cfg(kinematics="ackermann")), speed_loop_correction=SPEED_LOOP_K)
+    stop = Tracked(0.0, 0.0, 0.0, np.zeros(2), np.zeros(2))
+    assert speed_loop_corrected(stop, 0.0, np.array([-0.9, 0.0]), np.zeros(2), p) is stop
+    slow = Tracked(0.2, 0.0, 0.0, np.array([0.2, 0.0]), np.array([0.2, 0.0]))
+    assert speed_loop_corrected(slow, 0.0, np.array([-0.9, 0.0]), np.zeros(2), p).speed_m_s == pytest.approx(0.01)
+    assert speed_loop_corrected(slow, 0.0, np.array([3.0, 0.0]), np.zeros(2), p).speed_m_s == pytest.approx(
+        0.2 + SPEED_LOOP_K * 1.0)
+    assert speed_loop_corrected(slow, None, np.array([-0.9, 0.0]), np.zeros(2), p) is slow
+    # under a P3 guard's cut it may lower the speed asked, never raise it (its position read it rolling back)
+    assert speed_loop_corrected(slow, 0.0, np.zeros(2), np.array([-0.3, 0.0]), p, guarded=True) is not slow
+    assert speed_loop_corrected(slow, 0.0, np.zeros(2), np.array([-0.3, 0.0]), p, guarded=True).speed_m_s == 0.2
+    assert speed_loop_corrected(slow, 0.0, np.zeros(2), np.array([-0.3, 0.0]), p).speed_m_s == pytest.approx(
+        0.2 + SPEED_LOOP_K * 0.3)
+    assert speed_loop_corrected(slow, 0.0, np.array([-0.15, 0.0]), np.zeros(2), p, guarded=True).speed_m_s == (
+        pytest.approx(0.2 - SPEED_LOOP_K * 0.15))
+
+
+def test_the_carrier_step_asks_a_px4_rover_s_speed_loop_the_corrected_speed() -> None:
+    """Wired in the step: leg 2's start on a stand read at -0.29 m/s (position still), the speed
+    asked of the rover is the gentle start's less 2/3 of 0.29 m/s (at least 0.01 m/s); the same
+    step without the correction asks the gentle start's."""
+    def run(k: float) -> list[float]:
+        stepper = CarrierStepper(_px4_rover_cfg(0.8, start_motion_tau_s=0.3, speed_loop_correction=k), True)
+        bearing = math.atan2(TARGET[1], TARGET[0])
+        ahead = np.array([math.cos(bearing), math.sin(bearing), 0.0])
+        side = np.array([-math.sin(bearing), math.cos(bearing), 0.0])
+        erring = -0.23 * ahead - 0.18 * side
+        now, asked = 0.0, []
+        for phase, seconds in (("TRANSIT", 1.5), ("RIDING", 2.5)):
+            for _ in range(round(seconds / DT)):
+                now += DT
+                stepper.update_mode(_view(phase))
+                asked.append(stepper.decide(OwnState(now, np.zeros(3), erring, bearing), DT, 0.0, now).tracked.speed_m_s)
+        return asked
+    plain, corrected = np.array(run(0.0)), np.array(run(SPEED_LOOP_K))
+    driving = plain > 0
+    assert driving.sum() > 20 and plain.max() > 0.3  # the gentle start asks for speed
+    want = np.maximum(plain[driving] - SPEED_LOOP_K * math.hypot(0.23, 0.18), np.minimum(plain[driving], 0.01))
+    assert corrected[driving] == pytest.approx(want, abs=0.01)  # the consistent speed: ~0 (its position still)
+    assert np.array_equal(corrected[~driving], plain[~driving])  # the stops stay
+
+
+@pytest.mark.parametrize("floor_from", [0.0, 0.8])
+def test_a_rover_crawling_off_a_stand_is_led_not_pulled_up_to_the_floor(floor_from: float) -> None:
+    """Off a stand the SIH rover broke free and crawled at 0.15-0.3 m/s for 0.5 s while the floor's
+    ramp asked it 0.8 m/s (it counted as moving at 0.15), then leapt to 1.1-1.5 m/s under the riding
+    passenger. With carrier.floor_from_m_s = 0.8 the floor sets in only once it moves at 0.8 m/s:
+    crawling at 0.2 m/s it is asked at most 0.2 + the lead (0.3); once at 0.9 m/s, it is asked no
+    less though it reads 0.5 m/s again (the floor, then the lead never taking back speed asked).
+    0: the floor's ramp from 0.15 m/s, as before."""
+    stepper = CarrierStepper(_px4_rover_cfg(0.8, start_motion_tau_s=0.3, floor_from_m_s=floor_from), True)
+    bearing = math.atan2(TARGET[1], TARGET[0])
+    ahead = np.array([math.cos(bearing), math.sin(bearing), 0.0])
+    now, x = 0.0, np.zeros(3)
+    for _ in range(round(1.5 / DT)):  # it stands, told to stop, while the passenger is in transit
+        now += DT
+        stepper.update_mode(_view("TRANSIT"))
+        stepper.decide(OwnState(now, x.copy(), np.zeros(3), bearing), DT, 0.0, now)
+    asked, speeds = [], []
+    for k in range(round(5.0 / DT)):
+        now += DT
+        speed = 0.0 if k * DT < 2.0 else 0.2 if k * DT < 3.5 else 0.9 if k * DT < 4.0 else 0.5  # [m/s] what it does
+        x = x + speed * ahead * DT
+        stepper.update_mode(_view("RIDING"))
+        asked.append(stepper.decide(OwnState(now, x.copy(), speed * ahead, bearing), DT, 0.0, now).tracked.speed_m_s)
+        speeds.append(speed)
+    asked_a, t = np.array(asked), np.arange(1, len(asked) + 1) * DT
+    crawl = (t >= 2.5) & (t < 3.5)  # crawling for a while (its motion filter caught up)
+    if floor_from:
+        assert asked_a[crawl].max() <= 0.2 + 0.3 + 0.02  # the lead (old: the floor's ramp to 0.8)
+        assert asked_a[t >= 4.1].min() >= 0.8 - 1e-9  # it moved at the floor's speed: no less asked
+    else:
+        assert asked_a[crawl].max() >= 0.8 - 1e-9  # the old ramp: 0.8 asked of a rover that crawls at 0.2
