@@ -186,7 +186,7 @@ def true_figures(cfg: Config, directory: Path, log_dir: Path, offset_s: float) -
     map check: the median distance [m] between the record's own estimate and PX4's as the observer
     heard it at the mapped time (millimetres when ``offset_s`` [s], which puts the record's wall
     clock on the observer's monotonic one, is right). None without them."""
-    from bench.px4_team import _at, _on_monotonic, _read_truth  # (px4_team imports this module)
+    from bench.px4_team import _at, _on_monotonic, _read_truth, true_offset_m  # (px4_team imports this module)
 
     paths = directory / "truth.csv", directory / "truth-rover.csv"
     rec = _on_monotonic(log_dir, offset_s)
@@ -202,8 +202,7 @@ def true_figures(cfg: Config, directory: Path, log_dir: Path, offset_s: float) -
     slot = np.asarray(cfg.mission.dock_offset_ned_m, dtype=float)
 
     def offset(t: np.ndarray) -> np.ndarray:
-        rel = _at(quad, t) - (_at(rover, t) + slot)
-        return np.hypot(rel[:, 0], rel[:, 1])
+        return true_offset_m(quad, rover, slot, t)
 
     s = json.loads((log_dir / "summary.json").read_text()) if (log_dir / "summary.json").exists() else {}
     contacts = {leg.get("leg", 0): (leg.get("contact") or {}).get("time_s") for leg in s.get("legs") or [s]}

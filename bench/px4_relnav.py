@@ -47,7 +47,7 @@ import numpy as np
 
 from bench.px4_flights import ROVER_BATTERY, dockings
 from bench.px4_team import (HOME_S, OFFBOARD_PORT, STATUS_TOPIC, Progress, _at, _home_set, _on_monotonic,
-                            _read_truth, instance_of, start_px4s)
+                            _read_truth, instance_of, start_px4s, true_offset_m)
 from mission.config.schema import load_config
 from mission.flightdata.read import read_messages
 from sim.net import stop_process, wait_for
@@ -122,8 +122,7 @@ def analyse(config: Path, directory: Path, offset_s: float) -> dict[str, Any]:
     rec = _on_monotonic(log_dir, offset_s)
 
     def true_offset(t: np.ndarray) -> np.ndarray:
-        rel = _at(truth["passenger"], t) - (_at(truth["rover"], t) + slot)
-        return np.hypot(rel[:, 0], rel[:, 1])
+        return true_offset_m(truth["passenger"], truth["rover"], slot, t)
 
     legs = []
     leg_records = {leg.k: leg.record for leg in rec[0].legs()} if rec is not None else {}

@@ -176,6 +176,13 @@ def _at(series: np.ndarray, t: np.ndarray) -> np.ndarray:
     return np.column_stack([np.interp(t, series[:, 0], series[:, k]) for k in (2, 3, 4)])
 
 
+def true_offset_m(passenger: np.ndarray, carrier: np.ndarray, slot: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """The horizontal distance [m] of the passenger from the dock point (``carrier`` plus ``slot`` [m]
+    NED) at times ``t``, both ``series`` rows as :func:`_at` reads them (e.g. SIH's truths)."""
+    rel = _at(passenger, t) - (_at(carrier, t) + slot)
+    return np.hypot(rel[:, 0], rel[:, 1])
+
+
 def _phase_at(rec: Any, shift_s: float, t: np.ndarray) -> np.ndarray:
     """The passenger's phase (its record's, the last tick at or before each time) at monotonic times ``t``."""
     i = np.searchsorted(rec.t + shift_s, t, side="right") - 1
@@ -302,14 +309,12 @@ def analyse(cfg: Config, directory: Path, offset_s: float) -> dict[str, Any]:
             if lr is not None and rec is not None and len(truth[p.name]) > 1 and len(truth["rover"]) > 1:
                 t = lr.t[lr.phase == "RIDING"] + rec[1]  # the true riding offset before this leg's separation
                 if len(t):
-                    rel = _at(truth[p.name], t) - (_at(truth["rover"], t) + slot)
-                    riding = round(float(np.hypot(rel[:, 0], rel[:, 1]).max()), 3)
+                    riding = round(float(true_offset_m(truth[p.name], truth["rover"], slot, t).max()), 3)
             if contact and rec is not None and len(truth[p.name]) > 1 and len(truth["rover"]) > 1:
                 tc = np.array([contact["time_s"] + rec[1]])
-                rel = _at(truth[p.name], tc)[0] - (_at(truth["rover"], tc)[0] + slot)
-                true_err = round(float(np.hypot(rel[0], rel[1])), 3)
-                rel = _at(truth[p.name], tc)[0] - (_at(shifted, tc)[0] + slot)
-                true_shifted = None if rover_delay is None else round(float(np.hypot(rel[0], rel[1])), 3)
+                true_err = round(float(true_offset_m(truth[p.name], truth["rover"], slot, tc)[0]), 3)
+                true_shifted = (None if rover_delay is None
+                                else round(float(true_offset_m(truth[p.name], shifted, slot, tc)[0]), 3))
                 # what the two estimates' errors alone put between estimate and truth at contact
                 off = (_at(est[p.name], tc)[0] - _at(truth[p.name], tc)[0]) - (_at(est["rover"], tc)[0] - _at(truth["rover"], tc)[0])
                 frames = round(float(np.hypot(off[0], off[1])), 3)

@@ -63,28 +63,22 @@ def series(probe: Any, system_id: int | None = None,
     with probe._cond:  # the probe's thread keeps receiving
         lps = mine(probe.history.get("LOCAL_POSITION_NED", ()))
         hils = mine(probe.history.get("HIL_STATE_QUATERNION", ()))
-        origins = mine(probe.history.get("GPS_GLOBAL_ORIGIN", ()))
-        origin_msg = origins[-1][2] if origins else None
     if origin is None:
-        if origin_msg is None:
-            raise LookupError("no GPS_GLOBAL_ORIGIN received: PX4's EKF origin is unknown")
-        origin = origin_of(origin_msg)
+        origin = ekf_origin(probe, system_id)
     return rows([(t, m) for _, t, m in lps], [(t, m) for _, t, m in hils], origin)
 
 
-def origin_of(msg: Any) -> tuple[float, float, float]:
-    """A GPS_GLOBAL_ORIGIN message as (latitude, longitude [deg], altitude [m])."""
-    return msg.latitude * 1e-7, msg.longitude * 1e-7, msg.altitude * 1e-3
-
-
-def ekf_origin(probe: Any, system_id: int) -> tuple[float, float, float]:
-    """The EKF origin that PX4 ``system_id`` last sent on ``probe``'s link (:func:`origin_of`);
-    raises LookupError without one."""
-    with probe._cond:
-        origins = [m for _, _, m in probe.history.get("GPS_GLOBAL_ORIGIN", ()) if m.get_srcSystem() == system_id]
+def ekf_origin(probe: Any, system_id: int | None = None) -> tuple[float, float, float]:
+    """The EKF origin (latitude, longitude [deg], altitude [m]) that PX4 ``system_id`` (None: any)
+    last sent on ``probe``'s link; raises LookupError without one."""
+    with probe._cond:  # the probe's thread keeps receiving
+        origins = [m for _, _, m in probe.history.get("GPS_GLOBAL_ORIGIN", ())
+                   if system_id is None or m.get_srcSystem() == system_id]
     if not origins:
-        raise LookupError(f"no GPS_GLOBAL_ORIGIN received from system {system_id}: its EKF origin is unknown")
-    return origin_of(origins[-1])
+        raise LookupError(f"no GPS_GLOBAL_ORIGIN received{'' if system_id is None else f' from system {system_id}'}: "
+                          "PX4's EKF origin is unknown")
+    msg = origins[-1]
+    return msg.latitude * 1e-7, msg.longitude * 1e-7, msg.altitude * 1e-3
 
 
 def rows(estimates: list[tuple[float, Any]], truths: list[tuple[float, Any]],
