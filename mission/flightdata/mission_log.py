@@ -19,8 +19,9 @@ circle in the dock's plane, the dock point, both robots, the latched anchor, and
 brings the passenger home its holdoff point and glide path: ``foxglove.SceneUpdate``), and the
 carrier feed's and the link's counters. With ``[relnav]`` enabled, each row that carries the
 relative estimator's view also becomes a ``relnav`` message (:func:`relnav_message`: the estimate,
-its covariance and counts); the channel is made on the first such row, so a flight without it has
-none. Topics and schemas: :mod:`mission.flightdata.topics`.
+its covariance and counts), and each input the estimator was handed since the row before a
+``relnav/inputs`` message (:mod:`mission.flightdata.relnav_inputs`: they replay it); the channels
+are made on the first such row, so a flight without it has none. Topics and schemas: :mod:`mission.flightdata.topics`.
 The camera's frames, when a marker feed hands them over (:meth:`MissionLog.camera`), go to the
 camera's channels (:mod:`mission.flightdata.camera_log`).
 """
@@ -35,6 +36,7 @@ import numpy as np
 
 from mission.core.docking import DockingGeometry, gate_point, holdoff_point
 from mission.flightdata.camera_log import CameraLog
+from mission.flightdata.relnav_inputs import input_message
 from mission.flightdata.topics import (MAP_FRAME, MISSION_CHANNELS, RELNAV_CHANNELS, WORLD_FRAME, flu_frame, frame,
                                       topics)
 from mission.flightdata.writer import DataLog, LiveAddress, timestamp
@@ -168,6 +170,8 @@ class MissionLog(DataLog):
         self._course: np.ndarray | None = None  # the recovery's course the scene was last drawn for
         self.camera_log = CameraLog(pair, self.channel, self.log_ns)
         self._relnav_ch: Any = None  # made on the first row with a relative estimate
+        self._inputs_ch: Any = None  # ... and the estimator's inputs (made with it)
+        self._inputs = 0  # the estimator's inputs logged so far
 
     # ---------------------------------------------------------------- RecordSink
     def tick(self, row: TickRow) -> None:
@@ -244,9 +248,12 @@ class MissionLog(DataLog):
                                  "yaw_rad": None if sp is None else clean(sp.yaw_rad)}, log_time=t)
         if row.relnav is not None:
             if self._relnav_ch is None:
-                (key, _, schema), = RELNAV_CHANNELS
-                self._relnav_ch = self.channel(topics(self.pair, RELNAV_CHANNELS)[key], schema)
+                names, schemas = topics(self.pair, RELNAV_CHANNELS), {key: schema for key, _, schema in RELNAV_CHANNELS}
+                self._relnav_ch, self._inputs_ch = (self.channel(names[k], schemas[k]) for k in ("relnav", "relnav_inputs"))
             self._relnav_ch.log(relnav_message(row.relnav), log_time=t)
+            for item in row.relnav.inputs:
+                self._inputs_ch.log(input_message(item, self._inputs), log_time=t)
+                self._inputs += 1
         values = row.values()
         values[0] = round(row.t_s, 4)  # as record.csv writes it
         self.ch["record"].log(dict(zip(COLUMNS, [None if type(v) is float and not _finite(v) else v for v in values])),

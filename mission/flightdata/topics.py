@@ -52,6 +52,7 @@ CAMERA_CHANNELS = (
 # channel exists only in flights that had an estimate.
 RELNAV_CHANNELS = (
     ("relnav", "relnav", "marsupial.RelativeEstimate"),
+    ("relnav_inputs", "relnav/inputs", "marsupial.RelativeInput"),
 )
 # The carrier's own (``carrier.mcap``). ``team``: a team's carrier only (a single pair's file has
 # no such channel): every passenger as heard and each pair's distance, every step.
@@ -190,6 +191,26 @@ JSON_SCHEMAS: dict[str, dict[str, Any]] = {
             "too_old": {"type": "integer", "description": "measurements older than the history, dropped"},
             "too_new": {"type": "integer", "description": "measurements stamped beyond the history ahead, dropped"},
             "resets": {"type": "integer", "description": "re-initialisations by a run of rejected markers"}}),
+    "marsupial.RelativeInput": _object(
+        "marsupial.RelativeInput", "One input the relative estimator was handed, in the order handed "
+        "(mission.flightdata.relnav_inputs; they replay the estimator: python -m bench.relnav_replay); "
+        "vectors in NED axes as lists [n, e, d]", {
+            "seq": {"type": "integer", "description": "its place among the flight's inputs (from 0)"},
+            "kind": {"type": "string", "description": "own (the vehicle's own sample: it ticks the estimator), "
+                     "carrier (its GNSS fix), marker, range (downward), seated (standing on the deck)"},
+            "t_s": _number("[s] mission clock: the sample's, fix's or capture's time"),
+            "position": {"type": "array", "items": {"type": "number"},
+                         "description": "[m] own: the vehicle's position; carrier: the carrier's, in its GNSS frame"},
+            "velocity": {"type": "array", "items": {"type": "number"}, "description": "[m/s] own, carrier: velocity"},
+            "acceleration": {"type": ["array", "null"], "items": {"type": "number"},
+                             "description": "[m/s^2] carrier: the acceleration it measured and sent (null: none)"},
+            "offset": {"type": "array", "items": {"type": "number"},
+                       "description": "[m] marker, seated: the carrier's reference point minus the vehicle's"},
+            "covariance": {"type": "array", "items": {"type": "number"}, "description": "[m^2] marker: 3 x 3, row-major"},
+            "range_m": _number("[m] range: straight down"), "sigma_m": _number("[m] range, seated: standard deviation"),
+            "deck_top": {"type": "array", "items": {"type": "number"},
+                         "description": "[m] range: the deck's top from the carrier's reference point"},
+            "deck_radius_m": _number("[m] range: the deck's radius")}),
     "marsupial.Team": _object(
         "marsupial.Team", "A team's passengers as the carrier heard them at its step (mission.carrier.heard), "
         "and every pair's distance at the carrier's clock", {

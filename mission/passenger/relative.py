@@ -33,7 +33,10 @@ from mission.passenger.inputs import VehicleReport
 from mission.phases.measurements import DownwardRange, Measurements, RelativePosition
 from mission.phases.types import CarrierObs, RelativeView, RelnavGates
 from mission.relnav.estimator import RelativeEstimator
-from mission.relnav.inputs import CarrierFix, MarkerFix, OwnSample, RangeFix, RelativeEstimate
+from mission.relnav.inputs import CarrierFix, EstimatorInput, MarkerFix, OwnSample, RangeFix, RelativeEstimate, Seated
+
+
+HANDED_KEPT = 1000  # inputs kept for the next view while none is made (the vehicle not heard yet): ~10 s of them
 
 
 class RelativeDeck:
@@ -61,6 +64,7 @@ class RelativeDeck:
         self.t_s: float | None = None  # [s] the last tick's time
         self.refused = 0  # readings not fused: no stated sigma, or a non-finite time, offset or sigma
         self.unranged = 0  # downward ranges not handed to the estimator: they arrived outside the phases that fuse them
+        self.handed: list[EstimatorInput] = []  # what the estimator was handed since the last view (the view's inputs)
 
     def observe(self, t_s: float, vehicle: VehicleReport | None, carrier: CarrierObs | None,
                 measurements: Measurements, on_deck: bool = False, ranged: bool = True) -> tuple[CarrierObs | None, RelativeView | None]:
@@ -74,29 +78,31 @@ class RelativeDeck:
         sent = None if carrier is None else _sent_acceleration(carrier)
         if carrier is not None and t_s - carrier.age_s > self.fix_t_s:
             self.fix_t_s = t_s - carrier.age_s
-            est.carrier(CarrierFix(self.fix_t_s, np.asarray(carrier.position_ned_m, float),
-                                   np.asarray(carrier.velocity_ned_m_s, float), sent))
+            self._hand(CarrierFix(self.fix_t_s, np.asarray(carrier.position_ned_m, float),
+                                  np.asarray(carrier.velocity_ned_m_s, float), sent))
         for m in measurements.arrived(RelativePosition):
             if _usable(m) and m.sigma_m is not None:  # the carrier's reference point is marker_offset from the marker
-                est.marker(MarkerFix.isotropic(m.capture_t_s, np.asarray(m.offset_ned_m, float) - self.marker_offset, m.sigma_m))
+                self._hand(MarkerFix.isotropic(m.capture_t_s, np.asarray(m.offset_ned_m, float) - self.marker_offset, m.sigma_m))
             else:
                 self.refused += 1
         for r in measurements.arrived(DownwardRange):  # the deck's top is the seat: the deck's centre, at its height
             if not ranged:
                 self.unranged += 1
             elif _usable_range(r) and r.sigma_m is not None:
-                est.range(RangeFix(r.capture_t_s, r.range_m, r.sigma_m, self.seat_offset, self.gates.deck_radius_m))
+                self._hand(RangeFix(r.capture_t_s, r.range_m, r.sigma_m, self.seat_offset, self.gates.deck_radius_m))
             else:
                 self.refused += 1
         if on_deck and vehicle is not None and vehicle.sample_t_s is not None and vehicle.sample_t_s > self.own_t_s:
-            est.seated(vehicle.sample_t_s, -self.seat_offset, self.gates.seated_sigma_m)
+            self._hand(Seated(vehicle.sample_t_s, -self.seat_offset, self.gates.seated_sigma_m))
         if vehicle is None or vehicle.position_ned_m is None or vehicle.velocity_ned_m_s is None:
             return carrier, None
         sample_t = vehicle.sample_t_s if vehicle.sample_t_s is not None else t_s
         pos, vel = np.asarray(vehicle.position_ned_m, float), np.asarray(vehicle.velocity_ned_m_s, float)
         if sample_t > self.own_t_s and np.all(np.isfinite(pos)) and np.all(np.isfinite(vel)):
             self.own_t_s = sample_t
-            e = est.tick(OwnSample(sample_t, pos, vel))
+            own = OwnSample(sample_t, pos, vel)
+            self.handed.append(own)
+            e = est.tick(own)
         elif self.own_t_s == -np.inf:
             return carrier, None
         else:
@@ -134,6 +140,14 @@ class RelativeDeck:
         return replace(carrier, position_ned_m=now - shown * age + 0.5 * a * age * age, velocity_ned_m_s=shown - a * age,
                        own_frame_position_ned_m=np.asarray(carrier.position_ned_m, float)), \
             self._view(e, bias, accel)
+
+    def _hand(self, item: EstimatorInput) -> None:
+        """Hand ``item`` (a measurement: it waits for the next tick) to the estimator and keep it
+        for the next view's ``inputs`` (the newest :data:`HANDED_KEPT` of them, while no view is made)."""
+        self.handed.append(item)
+        if len(self.handed) > HANDED_KEPT:
+            del self.handed[0]
+        hand(self.estimator, item)
 
     def _acceleration(self, before: np.ndarray | None, shown: np.ndarray, dt_s: float, on_deck: bool) -> np.ndarray | None:
         """The carrier's acceleration [m/s^2] NED as the estimate shows it: the rate of the velocity
@@ -176,10 +190,28 @@ class RelativeDeck:
         return self.velocity
 
     def _view(self, e: RelativeEstimate, bias: np.ndarray, accel: np.ndarray | None = None) -> RelativeView:
+        inputs, self.handed = tuple(self.handed), []
         return RelativeView(position_ned_m=np.asarray(e.position_ned_m, float), bias_ned_m=bias,
                             pending_ned_m=self.pending.copy(), position_sigma_m=e.position_sigma_m,
                             converged=e.converged, since_marker_s=e.since_marker_s, estimate=e,
-                            carrier_accel_ned_m_s2=accel)
+                            carrier_accel_ned_m_s2=accel, inputs=inputs)
+
+
+def hand(estimator: RelativeEstimator, item: EstimatorInput) -> RelativeEstimate | None:
+    """One input to ``estimator`` by its kind: an own sample ticks it (and returns the estimate),
+    the rest wait in its history for the next tick (None). The one place an input record becomes
+    a call, so a flight log's inputs replay as the flight handed them."""
+    if isinstance(item, OwnSample):
+        return estimator.tick(item)
+    if isinstance(item, CarrierFix):
+        estimator.carrier(item)
+    elif isinstance(item, MarkerFix):
+        estimator.marker(item)
+    elif isinstance(item, RangeFix):
+        estimator.range(item)
+    else:
+        estimator.seated(item.t_s, item.carrier_rel_ned_m, item.sigma_m)
+    return None
 
 
 def _sent_acceleration(carrier: CarrierObs) -> np.ndarray | None:

@@ -133,7 +133,10 @@ class RelativeView:
     ``estimate`` the estimator's whole output the above comes from (its covariance, velocities and
     counts: what the flight data logs; the phases read the fields above; None: not given);
     ``carrier_accel_ned_m_s2`` [m/s^2] NED the carrier's acceleration as the estimate shows it
-    (``relnav.carrier_accel_tau_s`` > 0; None: not estimated, riding predicts the law's)."""
+    (``relnav.carrier_accel_tau_s`` > 0; None: not estimated, riding predicts the law's);
+    ``inputs`` what the estimator was handed since the last view, in that order
+    (:data:`mission.relnav.inputs.EstimatorInput` records: the flight log keeps them, and they
+    replay the estimator exactly)."""
 
     position_ned_m: np.ndarray
     bias_ned_m: np.ndarray
@@ -143,6 +146,7 @@ class RelativeView:
     since_marker_s: float
     estimate: RelativeEstimate | None = None
     carrier_accel_ned_m_s2: np.ndarray | None = None
+    inputs: tuple[Any, ...] = ()
 
 
 @dataclass(frozen=True)

@@ -96,6 +96,22 @@ class RangeFix:
 
 
 @dataclass(frozen=True)
+class Seated:
+    """The vehicle standing on the deck at ``t_s`` [s]: the carrier's reference point is
+    ``carrier_rel_ned_m`` (3,) [m] NED from the vehicle, to ``sigma_m`` [m] per axis
+    (:meth:`mission.relnav.estimator.RelativeEstimator.seated`'s arguments, as one record)."""
+
+    t_s: float
+    carrier_rel_ned_m: np.ndarray
+    sigma_m: float
+
+
+# What the estimator is handed, one record per call (its inputs, in the order handed: a flight log
+# of them replays the estimator exactly)
+EstimatorInput = OwnSample | CarrierFix | MarkerFix | RangeFix | Seated
+
+
+@dataclass(frozen=True)
 class Counts:
     """Measurements fused and rejected by the gate, by kind (``marker``, ``gnss_position``,
     ``gnss_velocity``, ``seated``, ``range``); ``too_old``: measurements older than the history, ``too_new``: stamped
