@@ -56,6 +56,7 @@ class RelativeDeck:
         self.marker_offset = np.asarray(gates.marker_offset_ned_m, dtype=float)
         self.estimator = RelativeEstimator(gates.params)
         self.fix_t_s = -np.inf  # [s] the newest carrier sample handed to the estimator
+        self.fix_stamp_s: float | None = None  # [s] ... and its time on the carrier's clock (None: unknown)
         self.own_t_s = -np.inf  # [s] the newest own sample
         self.last: tuple[np.ndarray, np.ndarray] | None = None  # the last tick's carrier [m] and velocity [m/s], before pending
         self.pending = np.zeros(3)  # [m] NED, the part of the estimate's jumps not yet let through
@@ -76,8 +77,8 @@ class RelativeDeck:
         the caller decides by phase: :data:`mission.phases.phase.RANGED`)."""
         est = self.estimator
         sent = None if carrier is None else _sent_acceleration(carrier)
-        if carrier is not None and t_s - carrier.age_s > self.fix_t_s:
-            self.fix_t_s = t_s - carrier.age_s
+        if carrier is not None and self._new_fix(t_s, carrier):
+            self.fix_t_s, self.fix_stamp_s = t_s - carrier.age_s, carrier.stamp_s
             self._hand(CarrierFix(self.fix_t_s, np.asarray(carrier.position_ned_m, float),
                                   np.asarray(carrier.velocity_ned_m_s, float), sent))
         for m in measurements.arrived(RelativePosition):
@@ -140,6 +141,18 @@ class RelativeDeck:
         return replace(carrier, position_ned_m=now - shown * age + 0.5 * a * age * age, velocity_ned_m_s=shown - a * age,
                        own_frame_position_ned_m=np.asarray(carrier.position_ned_m, float)), \
             self._view(e, bias, accel)
+
+    def _new_fix(self, t_s: float, carrier: CarrierObs) -> bool:
+        """Whether ``carrier`` is a measurement not yet handed to the estimator: by a later stamp on
+        the carrier's own clock when the feed gives it, else by a later measurement time on ours
+        (``t_s - age_s`` [s]). The same measurement comes again every tick until the next, and a
+        carrier publishing at 30 Hz sends each 10 Hz GNSS fix three times; on our clock its time
+        moves by microseconds to milliseconds as the clock offset is corrected, so by that time
+        alone, on real PX4 over half the fixes handed were such repeats, each fused as a new
+        measurement (docs/relnav.md, "Replaying a flight's estimator")."""
+        if carrier.stamp_s is not None and self.fix_stamp_s is not None:
+            return carrier.stamp_s > self.fix_stamp_s
+        return t_s - carrier.age_s > self.fix_t_s
 
     def _hand(self, item: EstimatorInput) -> None:
         """Hand ``item`` (a measurement: it waits for the next tick) to the estimator and keep it

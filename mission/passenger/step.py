@@ -82,7 +82,8 @@ def observe_carrier(received: ReceivedCarrier | None, alive: bool | None) -> Car
     return CarrierObs(position_ned_m=np.asarray(st.position, dtype=float),
                       velocity_ned_m_s=np.asarray(st.velocity_ned_m_s, dtype=float), age_s=received.age_s, alive=alive,
                       acceleration_ned_m_s2=st.acceleration_ned_m_s2, yaw_rad=st.yaw_rad,
-                      untrusted=getattr(received, "untrusted", None), age_bound_s=getattr(received, "age_bound_s", 0.0))
+                      untrusted=getattr(received, "untrusted", None), age_bound_s=getattr(received, "age_bound_s", 0.0),
+                      stamp_s=getattr(st, "stamp_s", None))
 
 
 @dataclass(frozen=True)

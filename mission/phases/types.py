@@ -79,7 +79,11 @@ class CarrierObs:
     the feed does not trust it yet (just bound, a resync, a contested source), None when it does;
     ``own_frame_position_ned_m`` [m] NED: where the carrier itself says it is (its published
     position, in its own GNSS frame, where its own law runs) when ``position_ned_m`` was moved into
-    the passenger's frame (the relative estimator); None: the same as ``position_ned_m``."""
+    the passenger's frame (the relative estimator); None: the same as ``position_ned_m``;
+    ``stamp_s`` [s] the sample's measurement time on the carrier's own clock (the wire's ``stamp``;
+    None: unknown), which tells a new measurement from the same one sent or aged again: ``t - age_s``
+    moves by the clock offset's corrections while the measurement stays the same, and a carrier may
+    publish one GNSS fix several times (a new ``seq`` each, the same stamp)."""
 
     position_ned_m: np.ndarray
     velocity_ned_m_s: np.ndarray
@@ -90,6 +94,7 @@ class CarrierObs:
     untrusted: str | None = None
     age_bound_s: float | None = 0.0
     own_frame_position_ned_m: np.ndarray | None = None
+    stamp_s: float | None = None
 
     @property
     def law_position_ned_m(self) -> np.ndarray:

@@ -61,7 +61,8 @@ def test_each_passenger_rides_the_pairs_dock_point_moved_to_its_side_on_its_own_
 RELNAV_OWN = {"mission": {"feeds"}, "carrier": {"p3_margin_m", "align_on_deck_m", "acceleration_tau_s", "start_motion_tau_s"},
               "recovery": {"holdoff_distance_m", "glide_angle_deg", "final_descent_speed_m_s", "final_lineup_margin",
                            "final_descent_lag_m", "decision_height_m"},
-              "vision": {"rate_hz", "layout"}, "relnav": {"enabled", "landing_target_rate_hz", "accel_noise_m_s2"},
+              "vision": {"rate_hz", "layout"}, "relnav": {"enabled", "landing_target_rate_hz", "accel_noise_m_s2",
+                                                                                 "gnss_velocity_sigma_m_s"},
               "world": {"carrier_gnss"}}
 
 

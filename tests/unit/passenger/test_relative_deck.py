@@ -353,3 +353,27 @@ def _one_range_handed_over(model, phase) -> bool:
     _hover(step, 0.0, 0.02, phase, True)
     assert step.relative is not None
     return step.relative.unranged == 0
+
+
+@pytest.mark.parametrize("stamped", [True, False])
+def test_a_carrier_fix_sent_again_or_aged_again_is_one_fix(stamped: bool):
+    """A carrier publishing at 50 Hz sends each 10 Hz GNSS fix five times (a new ``seq`` each, the
+    same stamp on its clock); its measurement time on ours, ``t - age_s``, moves by the clock
+    offset's corrections (here up to 2 ms, as on real PX4). Stamped, each fix is handed to the
+    estimator once; by our time alone, every later-looking repeat would be fused again."""
+    deck = RelativeDeck(_gates(), np.zeros(3))
+    rng = np.random.default_rng(3)
+    for k in range(500):  # 10 s at 50 Hz, a fix every 0.1 s
+        t = k / 50
+        fix = k // 5
+        report = VehicleReport(t, np.array([0.0, 0.0, -1.5]), np.zeros(3), t, t, True, "OFFBOARD", 0.0, True)
+        carrier = CarrierObs(position_ned_m=BIAS + np.array([0.01 * fix, 0.0, 0.0]), velocity_ned_m_s=np.zeros(3),
+                             age_s=t - fix / 10 - rng.uniform(0.0, 0.002), alive=True,
+                             stamp_s=1000.0 + fix / 10 if stamped else None)
+        deck.observe(t, report, carrier, Measurements())
+    counts = deck.estimator.counts()
+    fused = counts.fused["gnss_position"]
+    if stamped:
+        assert fused + counts.too_old == 100 and counts.too_old == 1  # one per fix (the first before the first tick)
+    else:
+        assert fused > 200  # our time alone: repeats counted as fixes (why the carrier's stamp is used)
