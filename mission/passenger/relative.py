@@ -143,15 +143,16 @@ class RelativeDeck:
             self._view(e, bias, accel)
 
     def _new_fix(self, t_s: float, carrier: CarrierObs) -> bool:
-        """Whether ``carrier`` is a measurement not yet handed to the estimator: by a later stamp on
-        the carrier's own clock when the feed gives it, else by a later measurement time on ours
-        (``t_s - age_s`` [s]). The same measurement comes again every tick until the next, and a
+        """Whether ``carrier`` is a measurement not yet handed to the estimator: by another stamp on
+        the carrier's own clock when the feed gives it (another, not only a later one: a carrier
+        clock that stepped back must not silence its fixes), else by a later measurement time on
+        ours (``t_s - age_s`` [s]). The same measurement comes again every tick until the next, and a
         carrier publishing at 30 Hz sends each 10 Hz GNSS fix three times; on our clock its time
         moves by microseconds to milliseconds as the clock offset is corrected, so by that time
         alone, on real PX4 over half the fixes handed were such repeats, each fused as a new
         measurement (docs/relnav.md, "Replaying a flight's estimator")."""
         if carrier.stamp_s is not None and self.fix_stamp_s is not None:
-            return carrier.stamp_s > self.fix_stamp_s
+            return carrier.stamp_s != self.fix_stamp_s
         return t_s - carrier.age_s > self.fix_t_s
 
     def _hand(self, item: EstimatorInput) -> None:

@@ -373,7 +373,13 @@ def test_a_carrier_fix_sent_again_or_aged_again_is_one_fix(stamped: bool):
         deck.observe(t, report, carrier, Measurements())
     counts = deck.estimator.counts()
     fused = counts.fused["gnss_position"]
-    if stamped:
+    if stamped:  # a carrier clock that steps back is still heard: another stamp is another fix
+        t = 10.0
+        report = VehicleReport(t, np.array([0.0, 0.0, -1.5]), np.zeros(3), t, t, True, "OFFBOARD", 0.0, True)
+        deck.observe(t, report, CarrierObs(position_ned_m=BIAS.copy(), velocity_ned_m_s=np.zeros(3), age_s=0.05,
+                                           alive=True, stamp_s=5.0), Measurements())
+        assert deck.fix_stamp_s == 5.0
+
         assert fused + counts.too_old == 100 and counts.too_old == 1  # one per fix (the first before the first tick)
     else:
         assert fused > 200  # our time alone: repeats counted as fixes (why the carrier's stamp is used)
