@@ -251,9 +251,8 @@ class CarrierController:
                         state.position_ned_m[:self.dim].tolist())
         if out.guard_active:
             self._stats["guard_active_ticks"] += 1
-        if out.frame_change:
-            log.log(logging.INFO if self.stepper.frame.passenger else logging.WARNING, "carrier %s: %s", self.pair,
-                    out.frame_change)
+        if out.frame_change:  # the P3 guard's frame (mission.carrier.frames): a fall back is a warning
+            log.log(logging.WARNING - 10 * self.stepper.frame.passenger, "carrier %s: %s", self.pair, out.frame_change)
         return out.tracked
 
     def _in_plane(self, state: OwnState | None) -> OwnState | None:

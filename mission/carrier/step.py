@@ -134,13 +134,13 @@ class CarrierStepper:
     def __init__(self, cfg: Config, brakes_itself: bool, dock_offsets_m: np.ndarray | None = None) -> None:
         c = cfg.carrier
         self.guard = guard_params(cfg)
-        self.frame = GuardFrame(FrameParams.from_carrier(c))  # the guards' frame (mission.carrier.frames)
         self.tracking = tracking_params(cfg)
         self.brakes_itself = brakes_itself
         self.dim = cfg.scenario.dim
         targets = [np.asarray(t, dtype=float) for t in cfg.scenario.legs()]
         first = carrier_model(cfg)
         self.planar = first.planar_carrier or self.dim == 2
+        self.frame = GuardFrame(FrameParams.from_carrier(c), self.planar)  # the guards' frame (mission.carrier.frames)
         self.legs = Legs(targets, [carrier_model(cfg, target=t) for t in targets], self.guard, self.planar,
                          np.asarray(cfg.mission.dock_offset_ned_m if dock_offsets_m is None else dock_offsets_m,
                                     dtype=float)[..., :self.dim],
