@@ -251,8 +251,8 @@ class CarrierController:
                         state.position_ned_m[:self.dim].tolist())
         if out.guard_active:
             self._stats["guard_active_ticks"] += 1
-        if out.frame_change:  # the P3 guard's frame (mission.carrier.frames): a fall back is a warning
-            log.log(logging.WARNING - 10 * self.stepper.frame.passenger, "carrier %s: %s", self.pair, out.frame_change)
+        if out.frame_change:  # the P3 guard's frame (mission.carrier.frames)
+            log_frame_change(self.pair, self.stepper.frame.passenger, out.frame_change)
         return out.tracked
 
     def _in_plane(self, state: OwnState | None) -> OwnState | None:
@@ -318,7 +318,7 @@ class CarrierController:
             s["braking_displacement_m"] = float(np.linalg.norm(x - self._separation_position))
             s["stopped_target_distance_m"] = dist
         self._last_position = x.copy()
-        self.stepper.frame.account(x, self.legs.targets, self.planar)  # the same in the guard's frame
+        self.stepper.frame.account(x, self.legs.targets)  # the same in the guard's frame
 
     # ------------------------------------------------------------------ stepping
     def step(self, dt_s: float) -> CarrierState | None:
@@ -442,6 +442,12 @@ class CarrierController:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def log_frame_change(pair: str, passenger: bool, change: str) -> None:
+    """Log what changed in the P3 guard's frame: into the passenger's (info), or a fall back to the
+    carrier's own with the margin widened (warning)."""
+    log.log(logging.INFO if passenger else logging.WARNING, "carrier %s: %s", pair, change)
 
 
 def trace(ctl: CarrierController, t_s: float, state: OwnState | None, cmd: Tracked,

@@ -143,21 +143,24 @@ class GuardFrame:
         if self.p.frame != "passenger":
             return ""
         h = self._heard
-        if h is not None and h.stamp_s != self._stamp:  # a new sample: the gates, the run
+        new = h is not None and h.stamp_s != self._stamp
+        if h is not None and new:
             self._stamp, self._heard_s = h.stamp_s, now_s - h.age_s
-        elif self._heard_s is not None and now_s - self._heard_s <= self.p.max_age_s:
-            h = None  # none since the last (statuses without one, or none at all): the last holds while fresh
-        if h is not None and h.age_s <= self.p.max_age_s:
-            why = self._take(np.asarray(h.bias_ned_m, dtype=float), h.sigma_m, now_s - h.age_s)
-        elif h is not None or self._heard_s is not None and now_s - self._heard_s > self.p.max_age_s:
+        if self._heard_s is None:
+            why = "none"
+        elif now_s - self._heard_s > self.p.max_age_s:  # none since (statuses without one): the last holds till then
             why, self._run = "stale", None
+        elif h is not None and new:  # a new sample: the gates, the run
+            why = self._take(np.asarray(h.bias_ned_m, dtype=float), h.sigma_m, self._heard_s)
         else:
-            why = self.why if self._heard_s is not None else "none"  # the sample judged before: as it was
-        if not why:
+            why = self.why  # the sample judged before: as it was
+        run = self._run
+        if not why and run is not None:
             was = self.bias_ned_m
-            self.bias_ned_m, self.why = self._run[2].copy(), ""  # type: ignore[index]  # a run goes with no why
+            self.bias_ned_m, self.why = run[2].copy(), ""
             return "" if was is not None else \
                 f"P3 guard in the passenger's frame: bias {np.round(self.bias_ned_m, 2).tolist()} m"
+        why = why or "none"
         change = ""
         if self.bias_ned_m is not None:
             self.fallbacks[why] += 1
@@ -189,14 +192,14 @@ class GuardFrame:
         self._run = (heard_s, heard_s, b.copy()) if why == "jump" else None
         return why
 
-    def account(self, x_c: np.ndarray, targets: list[np.ndarray], planar: bool) -> None:
+    def account(self, x_c: np.ndarray, targets: list[np.ndarray]) -> None:
         """Count the step in the frame used and take the carrier at ``x_c`` [m] (its own frame)
         into the closest approach to ``targets`` [m] in the guard's frame."""
         if self.p.frame != "passenger":
             return
         self.steps["passenger" if self.passenger else "own"] += 1
         x = np.asarray(x_c, dtype=float)
-        x = x - self.shift_ned_m(x.shape[0], planar)
+        x = x - self.shift_ned_m(x.shape[0], self.planar)
         self.closest_m = min([self.closest_m, *(float(np.linalg.norm(np.asarray(t)[:x.shape[0]] - x)) for t in targets)])
 
     def summary(self) -> dict[str, Any]:

@@ -166,7 +166,7 @@ def _lying_ride(cfg: Config, bias: HeardBias | None, seconds: float = 40.0) -> t
         heard = None if bias is None else HeardBias(bias.bias_ned_m, bias.sigma_m, k * dt, 0.02)
         stepper.update_mode(PassengerView(Phase.RIDING, False, bias=heard))
         robot.command(stepper.decide(robot.own_state(), dt, 0.0, clock.now()).tracked)
-        stepper.frame.account(robot.own_state().position_ned_m[:3], stepper.legs.targets, stepper.planar)
+        stepper.frame.account(robot.own_state().position_ned_m[:3], stepper.legs.targets)
     return stepper, robot.own_state().position_ned_m[:3]
 
 
