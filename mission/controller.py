@@ -31,6 +31,7 @@ from mission.mavlink.requests import CommandWorker, Px4Setup
 from mission.mavlink.telemetry import vehicle_report
 from mission.model import mission_model
 from mission.passenger.inputs import PassengerInputs
+from mission.passenger.relative import shared_bias
 from mission.passenger.step import PassengerStep, observe_carrier
 from mission.passenger.target import deck_target
 from mission.phases import AbortReason, Decision, Measurement, MissionState, Observation, Phase
@@ -246,7 +247,7 @@ class MissionController:
                 phase=st.phase.value, stamp_s=t, seq=self._seq, position_ned_m=obs.vehicle.position_ned_m,
                 velocity_ned_m_s=obs.vehicle.velocity_ned_m_s, separated=st.anchor is not None, anchor_ned_m=st.anchor,
                 leg=st.leg, reason=st.reason if st.phase == Phase.ABORT else None, holding=st.held_dock is not None,
-                **self._queue_fields(t, obs)))
+                **self._queue_fields(t, obs), **shared_bias(obs.relative)))  # type: ignore[arg-type]
         except Exception as exc:  # a bus hiccup must never stop the flight loop
             log.warning("could not publish passenger status: %s", exc)
 

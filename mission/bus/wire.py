@@ -110,6 +110,7 @@ Seq = Annotated[int, _Checked(core_schema.int_schema(strict=True, ge=0, le=SEQ_M
 Flag = Annotated[bool, _Checked(core_schema.bool_schema(strict=True))]
 Duration = Annotated[float, _Checked(core_schema.float_schema(strict=True, allow_inf_nan=False, ge=0.0, le=1e6))]
 Percent = Annotated[float, _Checked(core_schema.float_schema(strict=True, allow_inf_nan=False, ge=0.0, le=100.0))]
+Sigma = Annotated[float, _Checked(core_schema.float_schema(strict=True, allow_inf_nan=False, ge=0.0, le=POSITION_LIMIT_M))]
 #: An abort reason (``mission.phases.AbortReason`` values, and any later one): a short identifier.
 AbortReasonName = Annotated[str, _Checked(core_schema.str_schema(strict=True, pattern=r"^[a-z_]{1,32}$"))]
 PositionNed = Annotated[np.ndarray, _vec3(POSITION_LIMIT_M)]
@@ -260,8 +261,12 @@ class PassengerStatus(_Message):
     again. A team's passenger also shares what its teammates' recovery queue reads
     (:mod:`mission.phases.queue`): recovery_s [s] how long its recovery has run at ``stamp``
     (JSON ``recovery``; None: not recovering) and battery_pct [%] its battery (JSON ``battery``;
-    None: not known). Each goes on the wire only when given, so a single pair's statuses are the
-    bytes they always were. Raises :class:`WireError` when invalid.
+    None: not known). With ``[relnav]`` (no shared frame) a passenger whose relative estimate
+    has converged shares its estimate of the frames' bias, which the carrier's P3 guard may use
+    (:mod:`mission.carrier.frames`): bias_ned_m [m] NED the carrier's GNSS frame minus the
+    passenger's (JSON ``bias``) and bias_sigma_m [m] its largest standard deviation (JSON
+    ``bias_sigma``), both or neither (None: not shared). Each goes on the wire only when given, so a
+    single pair's statuses are the bytes they always were. Raises :class:`WireError` when invalid.
     """
 
     phase: Phase
@@ -276,23 +281,35 @@ class PassengerStatus(_Message):
     holding: Flag = False
     recovery_s: Duration | None = Field(None, alias="recovery")
     battery_pct: Percent | None = Field(None, alias="battery")
+    bias_ned_m: PositionNed | None = Field(None, alias="bias")
+    bias_sigma_m: Sigma | None = Field(None, alias="bias_sigma")
 
     _check_order = ("phase", "separated", "holding", "stamp", "stamp_s", "seq", "position", "position_ned_m",
                     "velocity", "velocity_ned_m_s", "anchor", "anchor_ned_m", "leg", "reason", "recovery", "recovery_s",
-                    "battery", "battery_pct")
+                    "battery", "battery_pct", "bias", "bias_ned_m", "bias_sigma", "bias_sigma_m")
+    _OPTIONAL: ClassVar[tuple[str, ...]] = ("recovery_s", "battery_pct", "bias_ned_m", "bias_sigma_m")
 
     def __init__(self, phase: Phase | str, stamp_s: float, seq: int, position_ned_m: Any, velocity_ned_m_s: Any,
                  separated: bool = False, anchor_ned_m: Any = None, leg: int = 0, reason: str | None = None,
-                 holding: bool = False, recovery_s: float | None = None, battery_pct: float | None = None) -> None:
+                 holding: bool = False, recovery_s: float | None = None, battery_pct: float | None = None,
+                 bias_ned_m: Any = None, bias_sigma_m: float | None = None) -> None:
         self._validated(phase=phase, stamp_s=stamp_s, seq=seq, position_ned_m=position_ned_m,
                         velocity_ned_m_s=velocity_ned_m_s, separated=separated, anchor_ned_m=anchor_ned_m, leg=leg,
-                        reason=reason, holding=holding, recovery_s=recovery_s, battery_pct=battery_pct)
+                        reason=reason, holding=holding, recovery_s=recovery_s, battery_pct=battery_pct,
+                        bias_ned_m=bias_ned_m, bias_sigma_m=bias_sigma_m)
 
     __init__.__pydantic_base_init__ = True  # type: ignore[attr-defined]  # see _Message
 
+    @model_validator(mode="after")
+    def _bias_pair(self) -> PassengerStatus:
+        if (self.bias_ned_m is None) != (self.bias_sigma_m is None):
+            raise PydanticCustomError("missing", "bias and bias_sigma go together")
+        return self
+
     def to_json(self) -> bytes:
-        """The JSON bytes (wire names); ``recovery`` and ``battery`` only when given (a team's)."""
-        skip = {k for k in ("recovery_s", "battery_pct") if getattr(self, k) is None}
+        """The JSON bytes (wire names); ``recovery`` and ``battery`` only when given (a team's),
+        ``bias`` and ``bias_sigma`` only when given (relnav's, converged)."""
+        skip = {k for k in self._OPTIONAL if getattr(self, k) is None}
         return self.model_dump_json(by_alias=True, exclude=skip or None).encode()
 
 

@@ -326,5 +326,7 @@ def startup_line(cfg: Config, speed: float) -> str:
     return (f"carrier {cfg.zenoh.pair}: {robot} ({c.kinematics}); publishing {k.carrier_state} ({cfg.zenoh.encoding}, "
             f"{c.rate_hz:g} Hz) on {describe_endpoints(cfg.zenoh)}; mode {cfg.scenario.carrier_mode} "
             f"({plan[cfg.scenario.carrier_mode]}); P3 guard at "
-            f"{cfg.law.params().separation_distance_m - c.p3_margin_m:g} m from the target; at {start} NED [m], "
+            f"{cfg.law.params().separation_distance_m - c.p3_margin_m:g} m from the target"
+            f"{'' if c.p3_frame == 'own' else f' in the passenger frame (its own: {c.p3_unaligned_margin_m:g} m nearer)'}"
+            f"; at {start} NED [m], "
             f"waiting for {riders}; clock x{speed:g}")

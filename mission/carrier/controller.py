@@ -40,6 +40,7 @@ import zenoh
 
 from mission.carrier.acceleration import AccelerationEstimate, inertial_sample
 from mission.carrier.backends import CarrierBackend, OwnState
+from mission.carrier.frames import HeardBias
 from mission.carrier.guard import GuardParams
 from mission.carrier.heard import ClosestPair, TeamHeard, hear
 from mission.carrier.legs import Legs
@@ -109,14 +110,17 @@ def frames_disagree_m(cfg: Config) -> float:
 def passenger_view(feed: PassengerFeed, dock_ned_m: np.ndarray | None, tolerance_m: float, dim: int) -> PassengerView:
     """The passenger as the carrier sees it now: the newest status of the feed's bound source,
     whether it counts as lost (its token went since the last call, no status, or a stale one),
-    and whether it is on the dock point ``dock_ned_m`` [m] NED (None: no own state; not on it)."""
+    whether it is on the dock point ``dock_ned_m`` [m] NED (None: no own state; not on it), and
+    the frames' bias it shares (relnav's, :mod:`mission.carrier.frames`), with its receive age."""
     rx = feed.latest()
     lost = lost_reason(feed.alive_over_interval(), None if rx is None else rx.age_s, feed.max_age_s)
     if rx is None:
         return PassengerView(None, False, lost)
     st = rx.status
     near = dock_ned_m is not None and on_dock(st.position_ned_m, dock_ned_m, tolerance_m, dim)
-    return PassengerView(st.phase, st.separated, lost, st.leg, st.reason, st.holding, near)
+    bias = None if st.bias_ned_m is None or st.bias_sigma_m is None else HeardBias(
+        st.bias_ned_m, st.bias_sigma_m, st.stamp_s, rx.age_s)
+    return PassengerView(st.phase, st.separated, lost, st.leg, st.reason, st.holding, near, bias)
 
 
 def open_bus(cfg: Config, session: zenoh.Session, pair: str, clock: Clock,
@@ -247,6 +251,8 @@ class CarrierController:
                         state.position_ned_m[:self.dim].tolist())
         if out.guard_active:
             self._stats["guard_active_ticks"] += 1
+        if out.frame_change:  # the P3 guard's frame (mission.carrier.frames)
+            log_frame_change(self.pair, self.stepper.frame.passenger, out.frame_change)
         return out.tracked
 
     def _in_plane(self, state: OwnState | None) -> OwnState | None:
@@ -312,6 +318,7 @@ class CarrierController:
             s["braking_displacement_m"] = float(np.linalg.norm(x - self._separation_position))
             s["stopped_target_distance_m"] = dist
         self._last_position = x.copy()
+        self.stepper.frame.account(x, self.legs.targets)  # the same in the guard's frame
 
     # ------------------------------------------------------------------ stepping
     def step(self, dt_s: float) -> CarrierState | None:
@@ -413,7 +420,7 @@ class CarrierController:
         (:meth:`mission.carrier.heard.ClosestPair.summary`)."""
         out = dict(self._stats)
         out.update(mode=self.mode.value, guard_radius_m=self.guard.radius_m, backend=self.backend.name,
-                   deck_alignment_m=self._alignment.tolist(),
+                   deck_alignment_m=self._alignment.tolist(), p3_frame=self.stepper.frame.summary(),
                    separation_distance_m=self.model.law.separation_distance_m,
                    passenger_feed=self.passenger.counters, **({} if self.team is None else self.team.counters()))
         if self.team is not None:
@@ -435,6 +442,12 @@ class CarrierController:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def log_frame_change(pair: str, passenger: bool, change: str) -> None:
+    """Log what changed in the P3 guard's frame: into the passenger's (info), or a fall back to the
+    carrier's own with the margin widened (warning)."""
+    log.log(logging.INFO if passenger else logging.WARNING, "carrier %s: %s", pair, change)
 
 
 def trace(ctl: CarrierController, t_s: float, state: OwnState | None, cmd: Tracked,

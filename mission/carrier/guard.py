@@ -36,6 +36,11 @@ that turns it away from the target (:func:`turns_away`: its bearing at least sid
 target, the turn the way that does not face it more), with every command in flight one too or a
 stop, is not capped while that turn, at radius ``turn_reserve_m``, stays out of the circle: the
 reserve kept for it is spent on it.
+
+Its frame (:mod:`mission.carrier.frames`): given a :class:`~mission.carrier.frames.GuardFrame`, the
+guard runs on the carrier's position moved into the frame it names (the passenger's, by the frames'
+bias) and with the radius it names (``r_guard`` less the widening without a usable bias); its
+velocity is the same in both frames.
 """
 from __future__ import annotations
 
@@ -45,6 +50,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from mission.carrier.frames import GuardFrame
 from mission.carrier.stopping import allowed_path_m, closing_m, turn_away_m
 from mission.core.geodesy import wrap_pi
 
@@ -93,21 +99,34 @@ def stopping_speed(distance_m: float, decel_m_s2: float, hold_s: float) -> float
 class P3Guard:
     """The guard with its memory of the inward commands still in flight (see the module docstring).
 
-    Pure apart from that memory: times come from the caller's clock [s].
+    Pure apart from that memory: times come from the caller's clock [s]. ``frame``: the frame
+    it runs in (None: the carrier's own, as given).
     """
 
-    def __init__(self, params: GuardParams, target: np.ndarray, planar: bool = True) -> None:
+    def __init__(self, params: GuardParams, target: np.ndarray, planar: bool = True,
+                 frame: GuardFrame | None = None) -> None:
         self.p = params
+        self.frame = frame
         self.target = np.asarray(target, dtype=float)
         self.k = self.target.shape[-1]
         self.planar = planar  # the carrier moves in the first two axes only: cut the command there
         self._sent: collections.deque[tuple[float, float]] = collections.deque()
         self._sent_forward: collections.deque[tuple[float, float, bool]] = collections.deque()  # (t, v, away)
 
+    @property
+    def radius_m(self) -> float:
+        """[m] ``r_guard`` now: ``b c - margin``, less its frame's widening."""
+        return self.p.radius_m - (0.0 if self.frame is None else self.frame.widen_m)
+
+    def _here(self, x_c: np.ndarray) -> np.ndarray:
+        """[m] (k,) the carrier's position ``x_c`` [m] (its own frame) in the guard's frame."""
+        x = np.asarray(x_c, dtype=float)[:self.k]
+        return x if self.frame is None else x - self.frame.shift_ned_m(self.k, self.planar)
+
     def _geometry(self, x_c: np.ndarray) -> tuple[np.ndarray | None, float]:
-        e = self.target[:self.k] - np.asarray(x_c, dtype=float)[:self.k]
+        e = self.target[:self.k] - self._here(x_c)
         dist = float(math.sqrt(float(e @ e)))
-        return (None if dist < 1e-9 else e / dist), dist - self.p.radius_m
+        return (None if dist < 1e-9 else e / dist), dist - self.radius_m
 
     def cap(self, t_s: float, x_c: np.ndarray, velocity_m_s: np.ndarray | None,
             age_s: float = 0.0) -> tuple[float, float, np.ndarray | None]:
@@ -187,10 +206,10 @@ class P3Guard:
         horizon = max(self.p.delay_s, age_s)
         while self._sent_forward and self._sent_forward[0][0] < t_s - self.p.delay_s - 1e-9:
             self._sent_forward.popleft()
-        e = self.target[:self.k] - np.asarray(x_c, dtype=float)[:self.k]
+        e = self.target[:self.k] - self._here(x_c)
         rho = math.hypot(float(e[0]), float(e[1]))
         above2 = float(e[2:] @ e[2:])  # the target's height over the carrier's plane, squared
-        r2 = self.p.radius_m * self.p.radius_m
+        r2 = self.radius_m * self.radius_m
         if above2 >= r2:
             return math.inf, False
         if rho < 1e-9:

@@ -14,6 +14,7 @@ import math
 
 import numpy as np
 
+from mission.carrier.frames import GuardFrame
 from mission.carrier.guard import GuardParams, P3Guard
 from mission.config.legs import REPOSITION_SPARE_M
 from mission.core.tick import TickModel
@@ -29,12 +30,13 @@ LINED_UP_RAD = math.radians(10.0)
 class Legs:
     """``targets`` [m] (one per leg), the carrier's tick ``models`` for each, their P3 guards
     (``guard`` params; ``planar``), the dock offset [m] (one for every leg, or a team's: one per
-    leg, the slot of the passenger that flies it, shape (legs, dim)) and the leg-start distance [m]."""
+    leg, the slot of the passenger that flies it, shape (legs, dim)) and the leg-start distance [m];
+    ``frame`` the frame every guard runs in (None: the carrier's own)."""
 
     def __init__(self, targets: list[np.ndarray], models: list[TickModel], guard: GuardParams, planar: bool,
-                 dock_offset_m: np.ndarray, leg_start_m: float) -> None:
+                 dock_offset_m: np.ndarray, leg_start_m: float, frame: GuardFrame | None = None) -> None:
         self.targets, self.models = targets, models
-        self.guards = [P3Guard(guard, t, planar=planar) for t in targets]
+        self.guards = [P3Guard(guard, t, planar=planar, frame=frame) for t in targets]
         self.planar, self.start_m = planar, leg_start_m + REPOSITION_SPARE_M
         offsets = np.asarray(dock_offset_m, dtype=float)
         self.dock_offsets_m = offsets if offsets.ndim == 2 else np.tile(offsets, (len(targets), 1))

@@ -66,6 +66,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from mission.carrier.frames import HeardBias
 from mission.phases.phase import Duty, Phase
 
 #: Phases a passenger's status may bind its source in: before riding (duty WAIT), on the deck or joining.
@@ -94,8 +95,9 @@ class PassengerView:
     """The passenger as the carrier sees it now: its newest phase (None: nothing received),
     whether that status says the latch fired, why it counts as lost (None if it does not),
     which target's leg it flies, why it aborted (phase ABORT; None if it did not say), whether it
-    holds (its carrier feed is not consistent: it waits on the dock point it had), and whether it
-    says it is on the carrier's dock point."""
+    holds (its carrier feed is not consistent: it waits on the dock point it had), whether it
+    says it is on the carrier's dock point, and the frames' bias its status shares (None: none;
+    the P3 guard's frame, :mod:`mission.carrier.frames`)."""
 
     phase: Phase | None
     separated: bool = False
@@ -104,6 +106,7 @@ class PassengerView:
     reason: str | None = None
     holding: bool = False
     on_dock: bool = True
+    bias: HeardBias | None = None
 
 
 def lost_reason(token_alive: bool | None, age_s: float | None, max_age_s: float) -> str | None:

@@ -42,6 +42,7 @@ import numpy as np
 
 from mission.carrier.backends import OwnState
 from mission.carrier.course import RecoveryCourse, away_heading_deg, clear_heading_deg
+from mission.carrier.frames import FrameParams, GuardFrame
 from mission.carrier.guard import GuardParams
 from mission.carrier.legs import TURN_ROOM_M, Legs
 from mission.carrier.modes import CarrierMode, PassengerView, next_mode
@@ -116,11 +117,13 @@ class ModeUpdate:
 class Command:
     """What :meth:`CarrierStepper.decide` decided: ``tracked`` the command for the robot;
     ``guard_active`` the P3 guard cut it; ``feasible`` False when the CBF filter found no
-    command (it holds still)."""
+    command (it holds still); ``frame_change`` what changed in the guard's frame, for the log
+    (:meth:`mission.carrier.frames.GuardFrame.settle`; ``""``: nothing)."""
 
     tracked: Tracked
     guard_active: bool = False
     feasible: bool = True
+    frame_change: str = ""
 
 
 class CarrierStepper:
@@ -137,10 +140,11 @@ class CarrierStepper:
         targets = [np.asarray(t, dtype=float) for t in cfg.scenario.legs()]
         first = carrier_model(cfg)
         self.planar = first.planar_carrier or self.dim == 2
+        self.frame = GuardFrame(FrameParams.from_carrier(c), self.planar)  # the guards' frame (mission.carrier.frames)
         self.legs = Legs(targets, [carrier_model(cfg, target=t) for t in targets], self.guard, self.planar,
                          np.asarray(cfg.mission.dock_offset_ned_m if dock_offsets_m is None else dock_offsets_m,
                                     dtype=float)[..., :self.dim],
-                         first.law.separation_distance_m + cfg.mission.leg_start_margin_m)
+                         first.law.separation_distance_m + cfg.mission.leg_start_margin_m, self.frame)
         self.course = RecoveryCourse.from_lists(c.recovery_course, c.recovery_heading_deg, c.recovery_speed_m_s)
         self.start_accel_m_s2, self.start_lead_m_s = c.start_accel_m_s2, c.start_lead_m_s
         self.min_moving_speed_m_s, self.floor_from_m_s = c.min_moving_speed_m_s, max(c.floor_from_m_s, MOVING_M_S)
@@ -164,7 +168,9 @@ class CarrierStepper:
         return self.legs.model
 
     def update_mode(self, view: PassengerView) -> ModeUpdate:
-        """Follow the passenger's leg and take the mode after the current one given ``view``."""
+        """Follow the passenger's leg and take the mode after the current one given ``view``
+        (and the frames' bias it shares, for the guards' frame)."""
+        self.frame.hear(view.bias)
         leg_changed = (view.phase is not None and view.phase.duty in (Duty.REPOSITION, Duty.CARRY)
                        and self.legs.follow(view.leg))
         before = self.mode
@@ -209,6 +215,7 @@ class CarrierStepper:
         """The command for the own ``state`` (measured ``age_s`` [s] ago), ``dt_s`` [s] after the
         last step, at ``now_s`` [s]. ``recovery_velocity_m_s`` [m/s] NED: a recovery course the
         caller drives instead of the configured one while RECOVERING (a simulation's drawn course)."""
+        change = self.frame.settle(now_s)  # the guards' frame at this step
         state = self.navigated(state)
         x_c = state.position_ned_m[:self.dim]
         v_motion = self.motion_m_s(state)
@@ -218,7 +225,7 @@ class CarrierStepper:
             self.velocity_m_s = np.zeros(self.dim)
             self._asked_speed_m_s = 0.0
             self._stopped_since_s = now_s if self._stopped_since_s is None else self._stopped_since_s
-            return Command(STOP)
+            return Command(STOP, frame_change=change)
         separated = self.mode is not CarrierMode.APPROACHING
         plan = self._plan_velocity if self.mode is CarrierMode.SEPARATED else None
         res = carrier_tick(x_c, separated, self.model, own_plan_velocity=plan, u_prev=self.velocity_m_s,
@@ -261,7 +268,7 @@ class CarrierStepper:
         # The law's planar command (not the motion along the heading) is what the acceleration limit and
         # Remark 1 act on: tying it to the heading would let it turn only as fast as the robot does (a heading lock).
         self.velocity_m_s = u
-        return Command(cmd, active, bool(np.all(res.feasible)))
+        return Command(cmd, active, bool(np.all(res.feasible)), change)
 
     def navigated(self, state: OwnState) -> OwnState:
         """The own state it steers and guards on: ``state`` itself, unless ``carrier.fix_smoothing_tau_s``
@@ -370,20 +377,6 @@ class CarrierStepper:
         self._asked_speed_m_s = cmd.speed_m_s
         return cmd
 
-    def away_heading_deg(self, x_c: np.ndarray) -> float:
-        """The steady recovery course's default heading [deg] NED from the carrier at ``x_c`` [m]:
-        away from the served target, turned as little as clears the other targets' keep-outs
-        (:func:`mission.carrier.course.clear_heading_deg`, at the steady course's speed, and clear of
-        the band where it would veer round one, :data:`mission.core.tick.ROUND_BAND_M`)."""
-        model = self.model
-        away = away_heading_deg(x_c, np.asarray(model.target))
-        others = model.other_keep_outs
-        if others is None or not len(others):
-            return away
-        lim = model.carrier_safety
-        return clear_heading_deg(x_c, away, others.centers, others.radii, lim.margin_m, self.course.speed_m_s,
-                                 lim.cbf_gain, ROUND_BAND_M)
-
     def course_velocity(self, x_c: np.ndarray, now_s: float, recovery_velocity_m_s: np.ndarray | None = None,
                         yaw_rad: float | None = None) -> np.ndarray | None:
         """RECOVERING: the recovery course's velocity at ``now_s`` [m/s] (dim,) (``recovery_velocity_m_s``
@@ -420,6 +413,21 @@ class CarrierStepper:
         if recovery_velocity_m_s is not None:
             return pad3(recovery_velocity_m_s)[:self.dim]
         if self._course_start is None:
-            self._course_start = (now_s, self.away_heading_deg(x_c))
+            self._course_start = (now_s, recovery_heading_deg(self.model, x_c, self.course.speed_m_s))
         t0, away = self._course_start
         return pad3(self.course.velocity_ned_m_s(now_s - t0, away))[:self.dim]
+
+
+def recovery_heading_deg(model: TickModel, x_c: np.ndarray, speed_m_s: float) -> float:
+    """The steady recovery course's default heading [deg] NED from the carrier at ``x_c`` [m]:
+    away from ``model``'s target (the served one), turned as little as clears the other targets'
+    keep-outs (:func:`mission.carrier.course.clear_heading_deg`, at the steady course's speed
+    ``speed_m_s`` [m/s], and clear of the band where it would veer round one,
+    :data:`mission.core.tick.ROUND_BAND_M`)."""
+    away = away_heading_deg(x_c, np.asarray(model.target))
+    others = model.other_keep_outs
+    if others is None or not len(others):
+        return away
+    lim = model.carrier_safety
+    return clear_heading_deg(x_c, away, others.centers, others.radii, lim.margin_m, speed_m_s, lim.cbf_gain,
+                             ROUND_BAND_M)

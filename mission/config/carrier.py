@@ -112,6 +112,31 @@ class CarrierSection(Section):
     state_timeout_s: float = Field(0.5, gt=0, le=10, description="[s] own state older than this stops the carrier")
     p3_margin_m: float = Field(0.5, gt=0, description="[m] the P3 guard keeps the carrier at least b c - margin "
                                "from the target, whatever the passenger does")
+    p3_frame: Literal["own", "passenger"] = Field("own",
+        description=("[-] the frame the P3 guard runs in: `own` the carrier's own position; `passenger` (relnav: no "
+                     "shared frame) its position moved into the passenger's frame, where the targets are, by the bias "
+                     "the passenger's status shares while it is usable (p3_bias_*), else its own frame with the margin "
+                     "widened by p3_unaligned_margin_m (mission/carrier/frames.py)"))
+    p3_unaligned_margin_m: float = Field(0.0, ge=0, le=20,
+        description=("[m] p3_frame `passenger` without a usable bias: the P3 guard runs in the carrier's own frame "
+                     "with its margin widened by this (the frames may disagree by metres)"))
+    p3_bias_max_age_s: float = Field(5.0, gt=0, le=600,
+        description=("[s] p3_frame `passenger`: a bias heard longer ago is stale (the passenger stops sharing it when "
+                     "its marker leaves the camera, a second after it separates, while the carrier still brakes)"))
+    p3_bias_max_sigma_m: float = Field(0.5, gt=0, le=20,
+        description="[m] p3_frame `passenger`: a bias whose largest standard deviation is above this is not used")
+    p3_bias_max_m: float = Field(5.0, gt=0, le=100,
+        description=("[m] p3_frame `passenger`: a bias larger than this is implausible, dropped; what a hostile "
+                     "passenger can move the guard by"))
+    p3_bias_max_step_m: float = Field(0.5, gt=0, le=10,
+        description=("[m] p3_frame `passenger`: a sample this far from the guard's bias is a jump, dropped (a run of "
+                     "steady samples starts from it)"))
+    p3_bias_tau_s: float = Field(1.0, ge=0, le=60,
+        description=("[s] p3_frame `passenger`: the guard's bias is the samples smoothed with this time constant "
+                     "(0: the newest sample); a sample moves it at most p3_bias_max_step_m (1 - exp(-dt / tau))"))
+    p3_bias_settle_s: float = Field(1.0, ge=0, le=60,
+        description=("[s] p3_frame `passenger`: the guard enters the passenger's frame once the bias has been usable "
+                     "and steady this long"))
     brake_decel_m_s2: float | None = Field(None, gt=0, description="[m/s^2] braking the guard plans with; "
                                            "default safety.carrier_max_accel_m_s2, else 1")
     brake_delay_s: float | None = Field(None, ge=0, le=5, description="[s] the carrier's response delay (command "

@@ -386,6 +386,9 @@ class Config(Section):
                               "must exceed law.departure_margin_m, or the carrier never reaches the separation distance")
         if self.carrier.p3_margin_m >= self.law.params().separation_distance_m:
             raise ConfigError("carrier.p3_margin_m", self.carrier.p3_margin_m, "must be < b c")
+        if self.carrier.p3_margin_m + self.carrier.p3_unaligned_margin_m >= self.law.params().separation_distance_m:
+            raise ConfigError("carrier.p3_unaligned_margin_m", self.carrier.p3_unaligned_margin_m,
+                              "must be < b c - carrier.p3_margin_m (the guard's radius in the carrier's own frame)")
         if len(self.mission.dock_offset_ned_m) != 3:
             raise ConfigError("mission.dock_offset_ned_m", self.mission.dock_offset_ned_m, "must have 3 components")
         self._cross_fields()

@@ -43,6 +43,7 @@ import numpy as np
 from mission.core.records import replace
 from mission.carrier.acceleration import AccelerationEstimate
 from mission.carrier.backends.sim import KinematicRobot
+from mission.carrier.frames import HeardBias
 from mission.carrier.modes import CarrierMode, PassengerView
 from mission.carrier.backends import OwnState
 from mission.carrier.step import STOP, CarrierStepper
@@ -57,6 +58,7 @@ from mission.mavlink import setpoints
 from mission.model import mission_model
 from mission.interfaces import MeasurementSource
 from mission.passenger.inputs import PassengerInputs, VehicleReport
+from mission.passenger.relative import shared_bias
 from mission.passenger.step import PassengerStep
 from mission.phases import CarrierObs, Decision, Measurement, MissionState, Observation, Phase, finished
 from mission.phases.phase import Duty
@@ -190,16 +192,18 @@ class KinematicCarrier:
         """When [s] it steps next (every ``1 / carrier.rate_hz`` from 0)."""
         return self.done * self.period_s
 
-    def step(self, phase: Phase | None, approach_s: float | None, leg: int = 0) -> Tracked:
+    def step(self, phase: Phase | None, approach_s: float | None, leg: int = 0, bias: HeardBias | None = None) -> Tracked:
         """Step at :meth:`next_step_s`: move there under the held command, then decide the next
         command (returned, and held) for the passenger's ``phase`` (None: none heard yet) on its
-        ``leg`` (the index of its target); ``approach_s`` [s]: when the first approach began (None: not yet)."""
+        ``leg`` (the index of its target) and the frames' ``bias`` its status shares (relnav's, for the P3
+        guard's frame; None: none); ``approach_s`` [s]: when the first approach began (None: not yet)."""
         t_s = self.next_step_s()
         dt = t_s - self.t_s
         self.robot.advance(dt)
         self.t_s = t_s
         self.done += 1
-        self.stepper.update_mode(PassengerView(phase, separated=phase is not None and phase.separated, leg=leg))
+        self.stepper.update_mode(PassengerView(phase, separated=phase is not None and phase.separated, leg=leg,
+                                               bias=bias))
         course: np.ndarray | None = None  # the scenario's course (None: the configured one)
         if self.mode is CarrierMode.RECOVERING:
             self.course_begun = True
@@ -453,6 +457,7 @@ class World:
         self.rows = _Rows()
         self.published: Phase | None = None  # the status the carrier hears: the phase and its leg
         self.published_leg = 0
+        self.published_bias: HeardBias | None = None  # the frames' bias the status shares (relnav's)
         self.approach_s: float | None = None  # when the first approach began [s]
         self.failed: dict[str, str] = {}
         self.events: list[tuple[float, str]] = []  # (t [s], what the phases said)
@@ -488,7 +493,7 @@ class World:
         t = self.k * self.dt_s
         carrier, vehicle = self.carrier, self.vehicle
         while carrier.next_step_s() <= t + 1e-9:  # the carrier steps first, on the status of the tick before
-            carrier.step(self.published, self.approach_s, self.published_leg)
+            carrier.step(self.published, self.approach_s, self.published_leg, self.published_bias)
         vehicle.advance_to_step(self.k * self.steps_per_tick)
         measured: tuple[Measurement, ...] = tuple(m for source in self.sources for m in source.poll(t))
         result = self.step(self.state, PassengerInputs(t, vehicle.report(t), carrier.observed(t), dict(self.failed),
@@ -497,6 +502,8 @@ class World:
         vehicle.carry_out(t, dec, self.failed)
         self.events.extend((t, text) for text in dec.events)
         self.published, self.published_leg = self.state.phase, self.state.leg
+        shared = shared_bias(obs.relative)  # as the controller's status shares it, heard at the carrier's next step
+        self.published_bias = HeardBias(shared["bias_ned_m"], shared["bias_sigma_m"], t, 0.0) if shared else None  # type: ignore[arg-type]
         if self.approach_s is None and self.state.phase is Phase.APPROACH:
             self.approach_s = t
         _record(self.rows, t, self.state, obs, dec, vehicle, carrier)

@@ -12,6 +12,7 @@ from mission.config.schema import Config, from_dict
 from mission.bus.wire import PassengerStatus
 from mission.carrier.controller import CarrierController
 from mission.carrier.backends.sim import SimRobot
+from mission.phases.phase import Phase
 from sim.robots.carrier import CarrierMode, CarrierSim
 from tests.integration.carrier.test_carrier_sim import TARGET, Passenger, _seen, sessions
 from tests.support.zenoh_util import wait_for
@@ -187,3 +188,53 @@ def test_speed_calibration_holds_an_overshooting_robot_at_the_law_s_speed_and_th
     # A robot faster than told can enter the circle by at most the overspeed tolerance held for
     # a period (0.1 m/s x 1/30 s = 3 mm) before the guard's measured-speed brake catches it.
     assert min(d) >= RADIUS - 0.1 * DT
+
+
+class SharingPassenger(Passenger):
+    """A passenger whose statuses share the frames' bias (``bias``; None: its estimate not
+    converged, none shared), as a relnav passenger's do."""
+
+    bias: np.ndarray | None = None
+
+    def _send(self, phase: str) -> int:
+        self.seq += 1
+        dock = self.carrier.dock_point_ned_m() if self.carrier is not None else None
+        at = [0.0, 0.0, -1.5] if dock is None else dock
+        shared = {} if self.bias is None else {"bias_ned_m": self.bias, "bias_sigma_m": 0.2}
+        self.pub.publish(PassengerStatus(phase, self.clock.now(), self.seq, at, [0, 0, 0], Phase(phase).separated,
+                                         **shared))  # type: ignore[arg-type]
+        return self.seq
+
+
+def test_the_guard_holds_in_the_passengers_frame_by_the_bias_it_shares_and_widens_once_it_goes_stale() -> None:
+    """carrier.p3_frame = "passenger": a passenger that never separates, riding, shares a bias that
+    puts the carrier 1.5 m nearer the target in its frame than in the carrier's own; over real Zenoh
+    the carrier parks at b c - p3_margin_m from the target in the passenger's frame (1.5 m farther in
+    its own). Then the passenger stops sharing it: p3_bias_max_age_s later the guard falls back to
+    the carrier's own frame with the margin widened by p3_unaligned_margin_m, and the carrier
+    drives on to that circle; the fall back is counted in its summary."""
+    toward = np.array([TARGET[0], TARGET[1], 0.0]) / float(np.hypot(TARGET[0], TARGET[1]))
+    bias = -1.5 * toward  # the carrier's GNSS frame minus the passenger's
+    clock = ManualClock()
+    cfg = _cfg(p3_frame="passenger", p3_unaligned_margin_m=2.0, p3_bias_max_age_s=1.0)
+    with sessions(1) as (sa, sb), CarrierSim(cfg, clock, sa) as sim:
+        passenger = SharingPassenger(sb, "p3", clock, sim)
+        passenger.bias = bias
+        try:
+            wait_for(lambda: passenger.pub.matched)
+            _drive(sim, clock, passenger, {0: "RIDING"}, 30 * 40, refresh="RIDING")
+            x = np.pad(sim.position_m, (0, 3 - sim.position_m.shape[0]))
+            frame = sim.summary()["p3_frame"]
+            passenger.bias = None  # its marker lost: statuses without the bias
+            d = _drive(sim, clock, passenger, {}, 30 * 30, refresh="RIDING")
+            summary = sim.summary()["p3_frame"]
+        finally:
+            passenger.pub.close()
+        assert sim.mode is CarrierMode.APPROACHING
+    assert frame["passenger"] is True and frame["fallbacks"]["stale"] == 0
+    in_passenger = float(np.linalg.norm(TARGET - (x - bias)))
+    assert RADIUS - 1e-9 <= in_passenger < RADIUS + 0.1  # at the guard's circle where the target is
+    assert float(np.linalg.norm(TARGET - x)) > RADIUS + 1.2  # and short of it in its own frame
+    assert frame["closest_target_distance_m"] == pytest.approx(in_passenger, abs=0.05)
+    assert summary["passenger"] is False and summary["why"] == "stale" and summary["fallbacks"]["stale"] == 1
+    assert RADIUS - 2.0 - 1e-9 <= min(d) and d[-1] < RADIUS - 2.0 + 0.1  # its own frame, 2 m nearer

@@ -281,6 +281,38 @@ def test_a_teams_queue_fields_go_only_when_given_and_are_range_checked() -> None
             decode_passenger_json(json.dumps(obj).encode())
 
 
+def test_the_frames_bias_goes_only_when_given_in_pairs_and_is_range_checked() -> None:
+    """A status without the bias is byte for byte what it was before the field existed; one with
+    it round-trips ``bias`` [m] and ``bias_sigma`` [m]; half a pair, a negative sigma, a bias of
+    the wrong shape or not finite is dropped with the reason the feed counts."""
+    plain = PassengerStatus("RIDING", 2.5, 7, [1, 2, -0.5], [0.5, 0, 0], leg=1)
+    assert encode_passenger_json(plain) == (
+        b'{"phase":"RIDING","stamp":2.5,"seq":7,"position":[1.0,2.0,-0.5],"velocity":[0.5,0.0,0.0],'
+        b'"separated":false,"anchor":null,"leg":1,"reason":null,"holding":false}')
+    shared = PassengerStatus("RIDING", 2.5, 7, [1, 2, -0.5], [0.5, 0, 0], leg=1,
+                             bias_ned_m=np.array([1.75, -0.5, 0.25]), bias_sigma_m=0.125)
+    raw = encode_passenger_json(shared)
+    assert raw.endswith(b'"holding":false,"bias":[1.75,-0.5,0.25],"bias_sigma":0.125}')
+    back = decode_passenger_json(raw)
+    assert back.bias_ned_m.tolist() == [1.75, -0.5, 0.25] and back.bias_sigma_m == 0.125
+    assert decode_passenger_json(encode_passenger_json(plain)).bias_ned_m is None
+    for drop, reason in (("bias_sigma", "missing"), ("bias", "missing")):
+        obj = json.loads(raw)
+        del obj[drop]
+        with pytest.raises(WireError) as info:
+            decode_passenger_json(json.dumps(obj).encode())
+        assert info.value.reason == reason
+    for bad, reason in (({"bias_sigma": -0.1}, "range"), ({"bias": [1.0, 2.0]}, "shape"),
+                        ({"bias": [1.0, float("nan"), 0.0]}, "nonfinite"), ({"bias_sigma": "small"}, "type")):
+        obj = json.loads(raw)
+        obj.update(bad)
+        with pytest.raises(WireError) as info:
+            decode_passenger_json(json.dumps(obj).encode())
+        assert info.value.reason == reason, bad
+    with pytest.raises(WireError):
+        PassengerStatus("RIDING", 2.5, 7, [1, 2, -0.5], [0.5, 0, 0], bias_ned_m=[1.0, 0.0, 0.0])
+
+
 def test_values_built_in_code_take_numpy_and_are_checked_like_the_wire() -> None:
     s = CarrierState(np.float32(1.5), np.int64(3), "local_ned", np.array([1, 2, 3], dtype=np.int32),
                      (0.5, 0.0, 0.0), np.float64(0.25))

@@ -12,7 +12,8 @@ from mission.config.relnav import RelnavSection
 from mission.config.schema import load_config
 from mission.model import derived, mission_model
 from mission.passenger.inputs import PassengerInputs, VehicleReport
-from mission.passenger.relative import RelativeDeck
+from mission.passenger.relative import RelativeDeck, shared_bias
+from mission.relnav.kalman import B_
 from mission.passenger.step import PassengerStep
 from mission.phases import Measurements, Phase, RelativePosition
 from mission.phases.measurements import DownwardRange
@@ -55,6 +56,24 @@ def test_the_first_marker_moves_the_deck_at_the_rate_then_onto_the_truth():
     assert view.converged and gates.descent_blocked(view) is None and gates.taken_in(view)
     assert float(np.linalg.norm(carrier.position_ned_m)) < 0.05  # on the true deck
     assert float(np.linalg.norm(view.bias_ned_m[:2] - BIAS[:2])) < 0.2
+
+
+def test_the_status_shares_the_bias_and_its_sigma_only_while_converged():
+    """What the passenger's status shares for the carrier's P3 guard (mission.carrier.frames):
+    nothing without relnav or before the estimate converges; then the bias [m] and the square root
+    of the bias block's largest eigenvalue [m]."""
+    assert shared_bias(None) == {}
+    deck = RelativeDeck(_gates(), np.zeros(3))
+    *_, view = _fly(deck, 0.0, 20.0, False, Measurements())[-1]
+    assert not view.converged and shared_bias(view) == {}
+    *_, view = _fly(deck, 20.0, 40.0, True, Measurements())[-1]
+    shared = shared_bias(view)
+    assert view.converged and set(shared) == {"bias_ned_m", "bias_sigma_m"}
+    assert shared["bias_ned_m"].tolist() == view.bias_ned_m.tolist()
+    block = view.estimate.covariance[B_, B_]
+    assert shared["bias_sigma_m"] == pytest.approx(math.sqrt(max(np.linalg.eigvalsh(block))))
+    assert shared["bias_sigma_m"] >= math.sqrt(max(np.diag(block))) - 1e-12  # the largest, not an axis's
+    assert 0.0 < shared["bias_sigma_m"] < 0.5
 
 
 @pytest.mark.parametrize("marker_on_the_deck", [True, False])
