@@ -412,7 +412,9 @@ def approach(state, obs, m, events=()):
         rec = replace(rec, descent=min(descent_progress(state.x_ref, dock, g), heights_over_dock(3.0, g)))
     rec = replace(rec, settled_since_s=None, marker_lost_s=None)
     descent, rate, x_ref = wait_for_vehicle(*descent_step(rec.descent, here.horizontal_error_m, g, r.descent_speed_m_s,
-                                                          r.final_descent_speed_m_s, r.final_lineup_margin, m.dt_s),
+                                                          r.final_descent_speed_m_s, r.final_lineup_margin, m.dt_s,
+                                                          here.horizontal_relative_speed_m_s,
+                                                          r.final_speed_margin_m_s),
                                             state.x_ref, v.position_ned_m, dock, g, r.final_descent_lag_m)
     state = replace(state, x_ref=x_ref)
     goal = gate + descent * (dock - gate)

@@ -309,6 +309,7 @@ class RecoveryModel:
     final_descent_speed_m_s: float | None  # [m/s] the descent's last three contact heights (None: descent_speed_m_s)
     final_lineup_margin: float  # [-] below two contact heights: lined up with this fraction of the contact radius to spare
     final_descent_lag_m: float | None  # [m] below three contact heights: the reference at most this far below the vehicle
+    final_speed_margin_m_s: float  # [m/s] below two contact heights: the horizontal speed this far under the contact's limit
     gate_timeout_s: float
     settle_radius_m: float
     settle_speed_m_s: float
