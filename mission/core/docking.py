@@ -125,8 +125,7 @@ def heights_over_dock(n: float, g: DockingGeometry) -> float:
 
 
 def descent_step(descent: float, horizontal_error_m: float, g: DockingGeometry, speed_m_s: float,
-                 final_speed_m_s: float | None, lineup_margin: float, dt_s: float,
-                 horizontal_speed_m_s: float = 0.0, speed_margin_m_s: float = 0.0) -> tuple[float, float]:
+                 final_speed_m_s: float | None, lineup_margin: float, dt_s: float) -> tuple[float, float]:
     """The final descent's progress one tick ``dt_s`` [s] on (``descent``: 0 at the gate, 1 at the
     dock point) and the rate [m/s] it goes down at, relative to the carrier: ``speed_m_s`` down
     to three contact heights over the dock point, below them ``final_speed_m_s`` (None: the same)
@@ -139,23 +138,36 @@ def descent_step(descent: float, horizontal_error_m: float, g: DockingGeometry, 
     on a slow carrier, and a descent waiting for it went around on its budget; nor back up to
     three contact heights, or 2.5: the vehicle's horizontal error wanders 0.01-0.15 m within a
     second or two, and a descent sent back up at each excursion went around on its budget
-    (docs/relnav.md, "The deck touches, the floor and P1").
-
-    Below two contact heights it also goes on only with the vehicle's horizontal speed relative to
-    the carrier (``horizontal_speed_m_s`` [m/s], the estimate's) ``speed_margin_m_s`` [m/s] under
-    the contact's limit, else it pauses (rate 0) no lower than two contact heights, as out of
-    line: the estimate's speed errs by ~0.1 m/s (the vehicle's own velocity, the carrier's), and a
-    vehicle that entered the contact band at an estimated 0.10-0.20 m/s was truly over the limit
-    there (docs/relnav.md, "The sideways speed at the deck"). A margin of 0 adds nothing: over the
-    limit itself the vehicle is out of line (:meth:`Contact.horizontally_within`) and held higher."""
+    (docs/relnav.md, "The deck touches, the floor and P1")."""
     slow_from, pause = heights_over_dock(3.0, g), heights_over_dock(2.0, g)
     rate = final_speed_m_s if descent >= slow_from and final_speed_m_s is not None else speed_m_s
     nxt = min(1.0, descent + rate * dt_s / g.decision_height_m)
     if nxt > slow_from and horizontal_error_m > (1.0 - lineup_margin) * g.contact_radius_m:
         return min(descent, pause), 0.0
-    if nxt > pause and horizontal_speed_m_s > g.contact_max_horizontal_speed_m_s - speed_margin_m_s:
-        return min(descent, pause), 0.0
     return nxt, rate
+
+
+def wait_for_sideways_speed(descent: float, step: tuple[float, float], horizontal_speed_m_s: float,
+                            g: DockingGeometry, margin_m_s: float, t_s: float, waiting_since_s: float | None,
+                            max_wait_s: float) -> tuple[tuple[float, float], float | None]:
+    """The final descent's progress and rate (``step``: :func:`descent_step`'s from ``descent``)
+    held at three contact heights over the dock point while the vehicle's horizontal speed relative
+    to the carrier (``horizontal_speed_m_s`` [m/s], the estimate's) is over the contact's limit less
+    ``margin_m_s`` [m/s] (0: never held; over the limit itself the vehicle is out of line and held
+    anyway), and the time it waits there: ``waiting_since_s`` [s] (None: not yet waited this
+    descent) becomes ``t_s`` [s] at the first hold, and ``max_wait_s`` [s] after it the descent goes on
+    as without the margin, so a wait never spends the descent's budget. The hold is where the
+    vehicle's vertical swing (~0.1 m) keeps it out of the contact band, and only on the way past
+    that height: a descent below it goes on (held lower, the vehicle hovered over the band for
+    longer and met it more often). The estimate's relative speed errs by ~0.1 m/s (the vehicle's own
+    velocity, the carrier's): vehicles entered the contact band at an estimated 0.10-0.21 m/s that
+    was truly 0.21-0.26 m/s (docs/relnav.md, "The sideways speed at the deck")."""
+    slow_from = heights_over_dock(3.0, g)
+    if (margin_m_s <= 0.0 or not descent <= slow_from < step[0]
+            or horizontal_speed_m_s <= g.contact_max_horizontal_speed_m_s - margin_m_s
+            or (waiting_since_s is not None and t_s - waiting_since_s >= max_wait_s)):
+        return step, waiting_since_s
+    return (descent, 0.0), (t_s if waiting_since_s is None else waiting_since_s)
 
 
 def descent_progress(point_ned_m: np.ndarray, dock_ned_m: np.ndarray, g: DockingGeometry) -> float:

@@ -281,32 +281,43 @@ def test_below_three_contact_heights_the_reference_waits_for_the_vehicle(model):
                 assert new.recovery.descent > state.recovery.descent
 
 
-def test_below_two_contact_heights_the_descent_waits_for_the_sideways_speed(model):
-    """The vehicle 0.15 m over the dock point (under two contact heights), lined up, moving
+def test_at_three_contact_heights_the_descent_waits_for_the_sideways_speed(model):
+    """The vehicle arriving at three contact heights (0.3 m) over the dock point, lined up, moving
     0.15 m/s sideways relative to the carrier by its estimate: within the contact's 0.2 m/s, but
-    with recovery.final_speed_margin_m_s 0.1 over its 0.1 m/s, so the descent goes back to two
-    contact heights and waits there (rate 0); once the speed is 0.05 m/s it goes on down. With
-    the margin 0 (as before) it goes on down at 0.15 m/s too. Above two contact heights the margin
-    holds nothing. In the relnav Monte-Carlo vehicles entered the contact band at an estimated
-    0.10-0.21 m/s that was truly 0.21-0.26 m/s (the estimate's relative speed errs by ~0.1 m/s)."""
+    with recovery.final_speed_margin_m_s 0.1 over its 0.1 m/s, so the descent holds there (rate
+    0) and remembers since when; at 0.05 m/s it goes on down; final_speed_wait_s (3 s) after the
+    first hold it goes on whatever the speed; below three contact heights it is never held. With
+    the margin 0 (as before) it goes on down at 0.15 m/s too. In the relnav Monte-Carlo vehicles
+    entered the contact band at an estimated 0.10-0.21 m/s that was truly 0.21-0.26 m/s (the
+    estimate's relative speed errs by ~0.1 m/s)."""
     r, g = model.recovery, model.recovery.geometry
-    pause = 1.0 - 2.0 * g.contact_height_m / g.decision_height_m
-    margin = replace(model, recovery=replace(r, final_speed_margin_m_s=0.1))
+    margin = replace(model, recovery=replace(r, final_speed_margin_m_s=0.1, final_speed_wait_s=3.0))
     unset = replace(model, recovery=replace(r, final_speed_margin_m_s=0.0))
-    step = r.final_descent_speed_m_s * model.dt_s / g.decision_height_m
+    slow_from = 1.0 - 3.0 * g.contact_height_m / g.decision_height_m
 
-    def tick(m, height_m: float, sideways_m_s: float):
+    def tick(m, height_m: float, sideways_m_s: float, waited_s: float | None = None):
         state, obs, _ = _at(model, height_m, descent=1.0 - height_m / g.decision_height_m)
+        waiting = None if waited_s is None else T - waited_s
+        state = replace(state, recovery=replace(state.recovery, speed_wait_s=waiting))
         vehicle = replace(obs.vehicle, velocity_ned_m_s=obs.vehicle.velocity_ned_m_s + [0.0, sideways_m_s, 0.0])
         new, dec = approach(state, replace(obs, vehicle=vehicle, relative=SEEN), m)
         assert new.phase is Phase.APPROACH, dec.events  # no contact, no go-around
-        return state.recovery.descent, new.recovery.descent
+        return state.recovery.descent, new.recovery.descent, new.recovery.speed_wait_s
 
-    before, after = tick(margin, 0.15, 0.15)
-    assert before > pause and after == pytest.approx(pause)  # held at two contact heights: 0.2 m
-    before, after = tick(margin, 0.15, 0.05)  # released: the speed under the margin
-    assert after == pytest.approx(before + step)
-    before, after = tick(unset, 0.15, 0.15)  # unset: as before
-    assert after == pytest.approx(before + step)
-    before, after = tick(margin, 0.25, 0.15)  # above two contact heights: on down
-    assert after == pytest.approx(before + step)
+    above = 3 * g.contact_height_m + 0.001  # [m] the next tick's step crosses three contact heights
+    before, after, since = tick(margin, above, 0.15)
+    assert before <= slow_from and after == pytest.approx(before) and since == T  # held, from now
+    before, after, since = tick(margin, above, 0.15, waited_s=2.0)
+    assert after == pytest.approx(before) and since == T - 2.0  # still held, since the first hold
+    before, after, since = tick(margin, above, 0.05, waited_s=2.0)  # released: the speed under the margin
+    assert after > slow_from
+    before, after, since = tick(margin, above, 0.15, waited_s=3.0)  # released: waited final_speed_wait_s
+    assert after > slow_from
+    before, after, since = tick(unset, above, 0.15)  # unset: as before
+    assert after > slow_from and since is None
+    before, after, since = tick(margin, 0.25, 0.15)  # below three contact heights: on down
+    assert after > before and since is None
+    # a go-around forgets the wait: the next descent may wait again
+    state, obs, _ = _at(model, above, descent=slow_from)
+    state = replace(state, recovery=replace(state.recovery, speed_wait_s=T - 1.0))
+    assert go_around(state, obs, margin, "test")[0].recovery.speed_wait_s is None
