@@ -49,16 +49,6 @@ class RecoverySection(Section):
                      "far below the vehicle (by its estimate) and waits there (unset: it never waits). PX4 closes the "
                      "position sent with the mission's lead (mission.position_lead): a vehicle its vertical swing left "
                      "0.1-0.15 m above its reference caught up at 0.5-0.7 m/s, into the contact band"))
-    final_speed_margin_m_s: float = Field(0.0, ge=0, le=5,
-        description=("[m/s] the descent goes on past three contact heights over the dock point only with the "
-                     "vehicle's horizontal speed relative to the carrier (its estimate) this far under "
-                     "contact_max_horizontal_speed_m_s, else it waits there, for at most final_speed_wait_s a "
-                     "descent (0: no wait). The estimate's relative speed errs by ~0.1 m/s (the vehicle's own "
-                     "velocity, the carrier's): vehicles entered the contact band at an estimated 0.10-0.21 m/s "
-                     "that was truly 0.21-0.26 m/s"))
-    final_speed_wait_s: float = Field(3.0, gt=0, le=60,
-        description=("[s] the longest one descent waits for its horizontal speed (final_speed_margin_m_s); then "
-                     "it goes on as without the margin, so the wait never spends the descent's budget"))
     gate_timeout_s: float = Field(5.0, gt=0, le=60,
         description="[s] at the gate, the vehicle has this long to line up over the dock point, else it goes around")
     deck_radius_m: float = Field(0.5, gt=0, le=20,
@@ -133,10 +123,6 @@ class RecoverySection(Section):
             raise ConfigError("recovery.holdoff_distance_m", self.holdoff_distance_m,
                               f"inside the deck: must exceed recovery.deck_radius_m + recovery.cone_min_radius_m "
                               f"= {self.deck_radius_m + self.cone_min_radius_m:g} m")
-        if not self.final_speed_margin_m_s < self.contact_max_horizontal_speed_m_s:
-            raise ConfigError("recovery.final_speed_margin_m_s", self.final_speed_margin_m_s,
-                              f"must be under recovery.contact_max_horizontal_speed_m_s = "
-                              f"{self.contact_max_horizontal_speed_m_s:g} m/s: the descent would never finish")
         if not self.contact_radius_m <= self.deck_radius_m:
             raise ConfigError("recovery.contact_radius_m", self.contact_radius_m,
                               f"larger than the deck (recovery.deck_radius_m = {self.deck_radius_m:g} m)")

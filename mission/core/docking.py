@@ -147,29 +147,6 @@ def descent_step(descent: float, horizontal_error_m: float, g: DockingGeometry, 
     return nxt, rate
 
 
-def wait_for_sideways_speed(descent: float, step: tuple[float, float], horizontal_speed_m_s: float,
-                            g: DockingGeometry, margin_m_s: float, t_s: float, waiting_since_s: float | None,
-                            max_wait_s: float) -> tuple[tuple[float, float], float | None]:
-    """The final descent's progress and rate (``step``: :func:`descent_step`'s from ``descent``)
-    held at three contact heights over the dock point while the vehicle's horizontal speed relative
-    to the carrier (``horizontal_speed_m_s`` [m/s], the estimate's) is over the contact's limit less
-    ``margin_m_s`` [m/s] (0: never held; over the limit itself the vehicle is out of line and held
-    anyway), and the time it waits there: ``waiting_since_s`` [s] (None: not yet waited this
-    descent) becomes ``t_s`` [s] at the first hold, and ``max_wait_s`` [s] after it the descent goes on
-    as without the margin, so a wait never spends the descent's budget. The hold is where the
-    vehicle's vertical swing (~0.1 m) keeps it out of the contact band, and only on the way past
-    that height: a descent below it goes on (held lower, the vehicle hovered over the band for
-    longer and met it more often). The estimate's relative speed errs by ~0.1 m/s (the vehicle's own
-    velocity, the carrier's): vehicles entered the contact band at an estimated 0.10-0.21 m/s that
-    was truly 0.21-0.26 m/s (docs/relnav.md, "The sideways speed at the deck")."""
-    slow_from = heights_over_dock(3.0, g)
-    if (margin_m_s <= 0.0 or not descent <= slow_from < step[0]
-            or horizontal_speed_m_s <= g.contact_max_horizontal_speed_m_s - margin_m_s
-            or (waiting_since_s is not None and t_s - waiting_since_s >= max_wait_s)):
-        return step, waiting_since_s
-    return (descent, 0.0), (t_s if waiting_since_s is None else waiting_since_s)
-
-
 def descent_progress(point_ned_m: np.ndarray, dock_ned_m: np.ndarray, g: DockingGeometry) -> float:
     """How far [0-1] down from the gate (0) to the dock point (1) ``point_ned_m`` [m] NED is, by its
     height over the dock point (clamped)."""

@@ -37,8 +37,7 @@ from mission.core.records import replace
 import numpy as np
 
 from mission.core.docking import (cone_radius_m, contact, descent_progress, descent_step, gate_point, glide_point,
-                                  heights_over_dock, holdoff_point, path_length_m, wait_for_sideways_speed,
-                                  wait_for_vehicle)
+                                  heights_over_dock, holdoff_point, path_length_m, wait_for_vehicle)
 from mission.core.law import norm
 from mission.core.pursuit import PursuitLimits, pursue
 from mission.core.safety import filter_velocity
@@ -279,8 +278,7 @@ def go_around(state, obs, m, why: str, events=()):
     dock = dock_point(obs, m)
     rel = obs.vehicle.position_ned_m - dock
     climb = np.array([rel[0], rel[1], -r.geometry.holdoff_height_m])
-    rec = replace(rec, climb_to=climb, settled_since_s=None, descent=None, marker_lost_s=None, descent_since_s=None,
-                  speed_wait_s=None)
+    rec = replace(rec, climb_to=climb, settled_since_s=None, descent=None, marker_lost_s=None, descent_since_s=None)
     new = enter(state, Phase.GO_AROUND, obs.t_s, recovery=rec, seated=False)
     v_c = obs.carrier.velocity_ned_m_s if obs.carrier is not None else np.zeros(3)
     return _fly(new, obs, m, dock + climb, v_c, r.returning, rec, (*events, f"go-around: {why}"))
@@ -413,11 +411,9 @@ def approach(state, obs, m, events=()):
         # out of the contact conditions (scenarios 15, 16: 0.54-0.61 m/s)
         rec = replace(rec, descent=min(descent_progress(state.x_ref, dock, g), heights_over_dock(3.0, g)))
     rec = replace(rec, settled_since_s=None, marker_lost_s=None)
-    step, waited = wait_for_sideways_speed(rec.descent, descent_step(
-        rec.descent, here.horizontal_error_m, g, r.descent_speed_m_s, r.final_descent_speed_m_s, r.final_lineup_margin,
-        m.dt_s), here.horizontal_relative_speed_m_s, g, r.final_speed_margin_m_s, t, rec.speed_wait_s, r.final_speed_wait_s)
-    rec = replace(rec, speed_wait_s=waited)
-    descent, rate, x_ref = wait_for_vehicle(*step, state.x_ref, v.position_ned_m, dock, g, r.final_descent_lag_m)
+    descent, rate, x_ref = wait_for_vehicle(*descent_step(rec.descent, here.horizontal_error_m, g, r.descent_speed_m_s,
+                                                          r.final_descent_speed_m_s, r.final_lineup_margin, m.dt_s),
+                                            state.x_ref, v.position_ned_m, dock, g, r.final_descent_lag_m)
     state = replace(state, x_ref=x_ref)
     goal = gate + descent * (dock - gate)
     goal_v = v_c + ((dock - gate) / g.decision_height_m * rate if descent < 1.0 else 0.0)

@@ -309,8 +309,6 @@ class RecoveryModel:
     final_descent_speed_m_s: float | None  # [m/s] the descent's last three contact heights (None: descent_speed_m_s)
     final_lineup_margin: float  # [-] below two contact heights: lined up with this fraction of the contact radius to spare
     final_descent_lag_m: float | None  # [m] below three contact heights: the reference at most this far below the vehicle
-    final_speed_margin_m_s: float  # [m/s] at three contact heights: wait for the horizontal speed this far under the limit
-    final_speed_wait_s: float  # [s] ... at most this long a descent
     gate_timeout_s: float
     settle_radius_m: float
     settle_speed_m_s: float
@@ -370,7 +368,6 @@ class RecoveryState:
     search_since_s: float | None = None  # [relnav] HOLDOFF searching for the marker since [s]
     marker_lost_s: float | None = None  # [relnav] the descent has had the marker lost since [s]
     descent_since_s: float | None = None  # [s] the descent from the gate began (None: not descending)
-    speed_wait_s: float | None = None  # [s] the descent first waited for the sideways speed (None: not yet)
     queued_since_s: float | None = None  # [s] waiting its turn in the recovery queue since (None: not waiting)
     queued_for: str | None = None  # why it waits (the neighbour ahead), for the events
     queue_place: int = 0  # waiting: its queue point's level, 1 + how many wait ahead of it (0: not waiting)

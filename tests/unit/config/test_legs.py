@@ -72,7 +72,6 @@ def test_a_bad_entry_of_targets_is_named_as_the_file_wrote_it(targets, field, wo
      "never settle"),
     ({"safety.passenger_max_speed_m_s": 1.5}, "carrier.recovery_speed_m_s", "never catch"),
     ({"recovery.carrier_max_age_s": 0.05}, "recovery.carrier_max_age_s", "two carrier states"),
-    ({"recovery.final_speed_margin_m_s": 0.2}, "recovery.final_speed_margin_m_s", "never finish"),
 ])
 def test_a_recovery_that_cannot_finish_is_refused(cycle, overrides, field, words):
     with pytest.raises(ConfigError) as exc:
