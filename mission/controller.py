@@ -242,12 +242,14 @@ class MissionController:
             return
         self._seq += 1
         st = self.state
+        shared = shared_bias(obs.relative)  # the frames' bias, for the carrier's P3 guard (None: not shared)
         try:
             self.publisher.publish(PassengerStatus(
                 phase=st.phase.value, stamp_s=t, seq=self._seq, position_ned_m=obs.vehicle.position_ned_m,
                 velocity_ned_m_s=obs.vehicle.velocity_ned_m_s, separated=st.anchor is not None, anchor_ned_m=st.anchor,
                 leg=st.leg, reason=st.reason if st.phase == Phase.ABORT else None, holding=st.held_dock is not None,
-                **self._queue_fields(t, obs), **shared_bias(obs.relative)))  # type: ignore[arg-type]
+                **self._queue_fields(t, obs), bias_ned_m=None if shared is None else shared[0],
+                bias_sigma_m=None if shared is None else shared[1]))
         except Exception as exc:  # a bus hiccup must never stop the flight loop
             log.warning("could not publish passenger status: %s", exc)
 

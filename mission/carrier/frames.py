@@ -47,7 +47,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
@@ -75,16 +75,17 @@ class FrameParams:
     """``frame`` ``"own"`` or ``"passenger"``; the gates' bounds ``max_age_s`` [s], ``max_sigma_m``
     [m], ``max_bias_m`` [m], ``max_step_m`` [m]; ``tau_s`` [s] the smoothing, ``settle_s`` [s] the
     run of usable samples before the guard uses them; ``unaligned_margin_m`` [m] the guard's margin
-    widened by this without a usable bias (``carrier.p3_*``, module docstring)."""
+    widened by this without a usable bias (``carrier.p3_*``, module docstring; their defaults are
+    the configuration's, :meth:`from_carrier`)."""
 
-    frame: str = "own"
-    max_age_s: float = 5.0
-    max_sigma_m: float = 0.5
-    max_bias_m: float = 5.0
-    max_step_m: float = 0.5
-    tau_s: float = 1.0
-    settle_s: float = 1.0
-    unaligned_margin_m: float = 0.0
+    frame: Literal["own", "passenger"]
+    max_age_s: float
+    max_sigma_m: float
+    max_bias_m: float
+    max_step_m: float
+    tau_s: float
+    settle_s: float
+    unaligned_margin_m: float
 
     @classmethod
     def from_carrier(cls, c: Any) -> FrameParams:

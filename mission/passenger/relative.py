@@ -212,21 +212,21 @@ class RelativeDeck:
                             carrier_accel_ned_m_s2=accel, inputs=inputs)
 
 
-def shared_bias(view: RelativeView | None) -> dict[str, object]:
+def shared_bias(view: RelativeView | None) -> tuple[np.ndarray, float] | None:
     """What the passenger's status shares of the frames' bias (:class:`mission.bus.wire.PassengerStatus`):
     ``bias_ned_m`` [m] NED the carrier's GNSS frame minus the passenger's and ``bias_sigma_m`` [m]
     the square root of the bias block's largest eigenvalue, while ``view`` (``[relnav]`` enabled)
-    has converged and has its covariance; else nothing (no relnav: the status's bytes unchanged).
-    The carrier's P3 guard may run in the passenger's frame on it (:mod:`mission.carrier.frames`)."""
-    e = None if view is None or not view.converged else view.estimate
-    if e is None:
-        return {}
-    bias = np.asarray(view.bias_ned_m, dtype=float)  # type: ignore[union-attr]  # view is set with e
-    block = np.asarray(e.covariance, dtype=float)[B_, B_]
+    has converged and has its covariance; else None (nothing shared, no relnav: the status's bytes
+    unchanged). The carrier's P3 guard may run in the passenger's frame on it
+    (:mod:`mission.carrier.frames`)."""
+    if view is None or not view.converged or view.estimate is None:
+        return None
+    bias = np.asarray(view.bias_ned_m, dtype=float)
+    block = np.asarray(view.estimate.covariance, dtype=float)[B_, B_]
     sigma = math.sqrt(max(float(np.linalg.eigvalsh(0.5 * (block + block.T))[-1]), 0.0))
     if not (np.all(np.isfinite(bias)) and math.isfinite(sigma)):
-        return {}
-    return {"bias_ned_m": bias, "bias_sigma_m": sigma}
+        return None
+    return bias, sigma
 
 
 def hand(estimator: RelativeEstimator, item: EstimatorInput) -> RelativeEstimate | None:

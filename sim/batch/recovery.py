@@ -503,7 +503,7 @@ class World:
         self.events.extend((t, text) for text in dec.events)
         self.published, self.published_leg = self.state.phase, self.state.leg
         shared = shared_bias(obs.relative)  # as the controller's status shares it, heard at the carrier's next step
-        self.published_bias = HeardBias(shared["bias_ned_m"], shared["bias_sigma_m"], t, 0.0) if shared else None  # type: ignore[arg-type]
+        self.published_bias = None if shared is None else HeardBias(*shared, t, 0.0)
         if self.approach_s is None and self.state.phase is Phase.APPROACH:
             self.approach_s = t
         _record(self.rows, t, self.state, obs, dec, vehicle, carrier)

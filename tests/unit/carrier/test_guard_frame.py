@@ -4,6 +4,7 @@ carrier's own frame with the margin widened; every sample dropped and every fall
 And the carrier's step guarding a lying passenger (RIDING for ever) in either frame."""
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -34,7 +35,7 @@ def _settled(frame: GuardFrame, heard: HeardBias | None, now: float) -> str:
 
 
 def test_the_own_frame_is_the_guard_as_it_always_was_whatever_the_passenger_shares() -> None:
-    frame = GuardFrame(FrameParams("own", unaligned_margin_m=2.0))
+    frame = GuardFrame(dataclasses.replace(PARAMS, frame="own"))
     assert _settled(frame, _heard(), 1.0) == ""
     assert not frame.passenger and frame.widen_m == 0.0 and frame.shift_ned_m(3, False).tolist() == [0, 0, 0]
     assert frame.dropped == {"unconverged": 0, "implausible": 0, "jump": 0}
