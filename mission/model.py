@@ -28,7 +28,7 @@ from mission.core.pursuit import PursuitLimits
 from mission.phases import MissionModel
 from mission.phases.types import DeckRide, QueueModel, RecoveryModel, RelnavGates
 from mission.core.safety import SafetyConfig
-from mission.core.tick import TickModel, target_keep_outs
+from mission.core.tick import SeparationSpeed, TickModel, target_keep_outs
 from mission.core.tracking import TrackingGains
 
 if TYPE_CHECKING:
@@ -69,6 +69,9 @@ def model_from_config(cfg: Config, target: np.ndarray | None = None) -> TickMode
         departure_margin_m=cfg.law.departure_margin_m,
         filter_carrier=cfg.safety.filter_carrier,
         other_keep_outs=others,
+        separation_speed=None if cfg.carrier.separation_speed_m_s <= 0 else SeparationSpeed(
+            cfg.carrier.separation_speed_m_s, cfg.carrier.separation_decel_m_s2,
+            law.separation_distance_m + cfg.carrier.separation_room_m),
     )
 
 

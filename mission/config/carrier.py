@@ -106,6 +106,15 @@ class CarrierSection(Section):
                      "time)"))
     max_speed_m_s: float = Field(3.0, gt=0, le=100,
         description="[m/s] carrier speed limit in the law's command (with safety.carrier_max_speed_m_s)")
+    separation_speed_m_s: float = Field(0.0, ge=0, le=100,
+        description=("[m/s] the most speed the carrier's approach has within separation_room_m of the separation "
+                     "distance b c (its own distance to the target, as the law measures it), so that a stop at the "
+                     "separation stops it short; its speed limit falls to it at separation_decel_m_s2; 0 off"))
+    separation_decel_m_s2: float = Field(0.2, gt=0, le=10,
+        description="[m/s^2] separation_speed_m_s: how gently the approach's speed limit falls to it")
+    separation_room_m: float = Field(0.0, ge=0, le=50,
+        description=("[m] separation_speed_m_s holds from b c + this: room for how far the carrier's own frame may "
+                     "put the target from where the passenger separates (relnav: the GNSS frames' bias)"))
     passenger_timeout_s: float = Field(
         1.0, gt=0, le=10,
             description="[s] a passenger status older than this (or a lost liveliness token) stops an approaching carrier")

@@ -34,6 +34,27 @@ DEPARTURE_THRESHOLD_M = 0.1  # |e_pc| [m] beyond which the passenger counts as h
 
 
 @dataclass(frozen=True)
+class SeparationSpeed:
+    """How slowly the carrier arrives at the separation: its approach's speed [m/s] is capped at
+    ``sqrt(speed_m_s^2 + 2 decel_m_s2 max(|e_tc| - distance_m, 0))``, ``|e_tc|`` [m] its distance
+    to the target as the law measures it (in its own frame; a planar carrier's counts the
+    target's height). ``speed_m_s`` > 0 [m/s] from ``distance_m`` [m] in (``b c`` plus room for
+    the frames' disagreement: the passenger separates at ``b c`` in its own), reached at
+    ``decel_m_s2`` > 0 [m/s^2]. A carrier told to stop at the separation then stops from that
+    speed: one that drove on at 1.3 m/s on PX4's SIH rover rolled 1.4 m into the target's
+    keep-out before it stood (docs/recovery.md)."""
+
+    speed_m_s: float
+    decel_m_s2: float
+    distance_m: float
+
+    def cap_m_s(self, distance_m: np.ndarray) -> np.ndarray:
+        """The speed cap [m/s] at the carrier-target distance ``distance_m`` [m] (any shape)."""
+        room = np.maximum(np.asarray(distance_m, dtype=float) - self.distance_m, 0.0)
+        return np.sqrt(self.speed_m_s * self.speed_m_s + 2.0 * self.decel_m_s2 * room)
+
+
+@dataclass(frozen=True)
 class TickModel:
     """Everything a tick needs besides the state.
 
@@ -53,6 +74,7 @@ class TickModel:
     filter_carrier: bool = True
     carrier_obstacles: Obstacles | None = None  # default: obstacles (planar) + target keep-out
     other_keep_outs: Obstacles | None = None  # other targets' keep-outs the carrier steers round (target_keep_outs)
+    separation_speed: SeparationSpeed | None = None  # the approach's speed falls towards the separation (None: off)
 
     def __post_init__(self) -> None:
         if self.carrier_obstacles is None:
@@ -154,7 +176,12 @@ def carrier_tick(
         if model.planar_carrier and x_c.shape[-1] == 3:
             u[..., 2:] = 0.0
     else:
-        u = carrier_command(model.target - x_c, ~sep, model.law, planar=model.planar_carrier)  # a new array
+        e_tc = model.target - x_c
+        u = carrier_command(e_tc, ~sep, model.law, planar=model.planar_carrier)  # a new array
+        if model.separation_speed is not None:  # it arrives at the separation slowly (separated rows: u = 0)
+            speed = norm(u)
+            cap = model.separation_speed.cap_m_s(norm(e_tc))
+            u = u * (np.minimum(speed, cap) / np.maximum(speed, 1e-12))[..., None]
     if course_velocity is None and model.carrier_mode == "remark1" and own_plan_velocity is not None and uniform(sep) is not False:
         u = np.where(sep[..., None], own_plan_velocity, u)  # a new array too
     obstacles = model.carrier_obstacles if model.filter_carrier else Obstacles.none(2 if model.planar_carrier else x_c.shape[-1])
