@@ -55,6 +55,7 @@ from mission.carrier.stopping import allowed_path_m, closing_m, turn_away_m
 from mission.core.geodesy import wrap_pi
 
 OVERSPEED_M_S = 0.1  # [m/s] measured inward speed above the cap at which the guard brakes outright
+AWAY_TURN_BAND_M = 3.0  # [m] a robot turns round away from a target (P3Guard.away_turn) within b c + this of it
 
 
 @dataclass(frozen=True)
@@ -194,6 +195,25 @@ class P3Guard:
             return speed_m_s, False
         self._sent.append((now, cap))
         return cap / cos_in, True  # cos_in > 0 here (inward > cap >= 0 with speed >= 0)
+
+    def away_turn(self, x_c: np.ndarray, yaw_rad: float, bearing_rad: float, within_m: float) -> int:
+        """Which way round a robot at ``x_c`` [m] heading ``yaw_rad`` [rad] turns onto the bearing
+        ``bearing_rad`` [rad] (:func:`mission.carrier.tracking.track`'s ``turn``): 0 the shortest
+        way, or, within ``within_m`` [m] of the target (as the law measures, in the guard's frame),
+        for a turn of more than a right angle onto a bearing at least sideways from the target
+        whose shortest way faces the target more on the way (:func:`turns_away`), the other way
+        round (+1 towards east from north). Why: PX4's SIH rover, standing facing 25-35 deg off
+        the target at 8 m, turned round onto its recovery course (180 deg, either way alike)
+        through the target's bearing, and came 0.8-1.0 m closer before it drove away
+        (docs/recovery.md)."""
+        e = self.target[:self.k] - self._here(x_c)
+        err = wrap_pi(bearing_rad - yaw_rad)
+        if float(math.sqrt(float(e @ e))) > within_m or abs(err) <= 0.5 * math.pi:
+            return 0
+        to_target = math.atan2(float(e[1]), float(e[0]))
+        if abs(wrap_pi(bearing_rad - to_target)) < 0.5 * math.pi or turns_away(yaw_rad, bearing_rad, to_target):
+            return 0
+        return -1 if err > 0 else 1
 
     def heading_cap(self, t_s: float, x_c: np.ndarray, yaw_rad: float, velocity_m_s: np.ndarray | None,
                     age_s: float = 0.0, bearing_rad: float | None = None) -> tuple[float, bool]:

@@ -43,7 +43,7 @@ import numpy as np
 from mission.carrier.backends import OwnState
 from mission.carrier.course import RecoveryCourse, away_heading_deg, clear_heading_deg
 from mission.carrier.frames import FrameParams, GuardFrame
-from mission.carrier.guard import GuardParams
+from mission.carrier.guard import AWAY_TURN_BAND_M, GuardParams
 from mission.carrier.legs import TURN_ROOM_M, Legs
 from mission.carrier.modes import CarrierMode, PassengerView, next_mode
 from mission.carrier.start import MOVING_M_S, gentle_start, speed_lead
@@ -145,6 +145,7 @@ class CarrierStepper:
                          np.asarray(cfg.mission.dock_offset_ned_m if dock_offsets_m is None else dock_offsets_m,
                                     dtype=float)[..., :self.dim],
                          first.law.separation_distance_m + cfg.mission.leg_start_margin_m, self.frame)
+        self.away_within_m = first.law.separation_distance_m + AWAY_TURN_BAND_M  # [m] turns round away from a target
         self.course = RecoveryCourse.from_lists(c.recovery_course, c.recovery_heading_deg, c.recovery_speed_m_s)
         self.start_accel_m_s2, self.start_lead_m_s = c.start_accel_m_s2, c.start_lead_m_s
         self.min_moving_speed_m_s, self.floor_from_m_s = c.min_moving_speed_m_s, max(c.floor_from_m_s, MOVING_M_S)
@@ -252,7 +253,8 @@ class CarrierStepper:
             if self._restarting(now_s):  # it stands on, and the law starts again from rest after
                 u = np.zeros_like(u)
             sideways = abs(math.cos(yaw) * float(v_motion[1]) - math.sin(yaw) * float(v_motion[0]))
-            cmd = self._started(u, yaw, moving, dt_s, sideways)
+            turn = next((w for g in self.legs.guards if (w := g.away_turn(x_c, yaw, math.atan2(u[1], u[0]), self.away_within_m))), 0)
+            cmd = self._started(u, yaw, moving, dt_s, sideways, turn)
             self._stopped_since_s = (None if cmd.speed_m_s > 0 else
                                      now_s if self._stopped_since_s is None else self._stopped_since_s)
             speed = cmd.speed_m_s
@@ -323,7 +325,8 @@ class CarrierStepper:
         return (self.min_moving_speed_m_s > 0 and self._stopped_since_s is not None
                 and now_s - self._stopped_since_s < RESTART_S)
 
-    def _started(self, u: np.ndarray, yaw: float, moving_m_s: float, dt_s: float, sideways_m_s: float = 0.0) -> Tracked:
+    def _started(self, u: np.ndarray, yaw: float, moving_m_s: float, dt_s: float, sideways_m_s: float = 0.0,
+                 turn: int = 0) -> Tracked:
         """A diff-drive or Ackermann carrier's tracked command for the law's ``u`` [m/s] at heading
         ``yaw`` [rad], its forward speed held to the gentle start and the lead
         (:mod:`mission.carrier.start`) against its measured forward speed ``moving_m_s`` [m/s].
@@ -353,7 +356,7 @@ class CarrierStepper:
         0.2-0.9 m/s sideways after a drive, so at leg 2's start the caps, keyed on that forward speed,
         asked 0.1-0.8 m/s in turn while its speed loop read +-0.6 m/s, and it swung 0 to 0.9 m/s
         under the riding passenger (docs/recovery.md, "On real PX4")."""
-        cmd = track(u, yaw, self.tracking)
+        cmd = track(u, yaw, self.tracking, turn)  # ``turn``: which way round (mission.carrier.guard.P3Guard.away_turn)
         asked = np.array([cmd.speed_m_s])
         capped = float(speed_lead(gentle_start(asked, np.array([self._asked_speed_m_s]), moving_m_s,
                                                self.start_accel_m_s2, dt_s), moving_m_s, self.start_lead_m_s)[0])
@@ -373,7 +376,7 @@ class CarrierStepper:
             floor = min(floor, self._asked_speed_m_s + accel * dt_s)
         wanted = max(min(capped, cmd.speed_m_s), floor)
         if wanted != cmd.speed_m_s:  # the same direction: the tracking law's yaw-rate cap goes with the speed
-            cmd = track(u * (wanted / cmd.speed_m_s), yaw, self.tracking)
+            cmd = track(u * (wanted / cmd.speed_m_s), yaw, self.tracking, turn)
         self._asked_speed_m_s = cmd.speed_m_s
         return cmd
 

@@ -31,6 +31,7 @@ from mission.core.geodesy import wrap_pi
 Kinematics = Literal["holonomic", "diff_drive", "ackermann"]
 AUTOPILOT_SPEED_TH_M_S = 0.1  # [m/s] PX4's RO_SPEED_TH (default): a speed estimate below it reads as 0
 SPEED_LOOP_ERROR_MAX_M_S = 1.0  # [m/s] the most of an autopilot's speed error corrected (its EKF erred <= 0.9 m/s)
+TURN_STEP_RAD = 0.5 * math.pi  # [rad] a turn set a way round steers to at most this far ahead of the heading
 SPEED_LOOP_FLOOR_M_S = 0.01  # [m/s] a corrected speed asked never falls below this (nor above the speed asked)
 
 
@@ -79,9 +80,14 @@ def along_heading(v_ned_m_s: np.ndarray, yaw_rad: float) -> np.ndarray:
     return out
 
 
-def track(u_ned_m_s: np.ndarray, yaw_rad: float, p: TrackingParams) -> Tracked:
+def track(u_ned_m_s: np.ndarray, yaw_rad: float, p: TrackingParams, turn: int = 0) -> Tracked:
     """Forward speed and yaw rate following the planar command ``u_ned_m_s`` (first two
-    components used) from heading ``yaw_rad``; see the module docstring."""
+    components used) from heading ``yaw_rad``; see the module docstring. ``turn`` (diff-drive
+    and Ackermann): 0 the shortest way onto the command's bearing; +1 (towards east from north)
+    or -1 that way round, however long: then the bearing steered to (``bearing_rad``, and the
+    setpoint's) is at most :data:`TURN_STEP_RAD` ahead of the heading that way, so that an
+    autopilot that steers the shortest way to a setpoint's bearing (PX4's rover) turns that way
+    too (:meth:`mission.carrier.guard.P3Guard.away_turn`: round away from a target)."""
     un, ue = float(u_ned_m_s[0]), float(u_ned_m_s[1])
     speed_des = math.hypot(un, ue)
     if p.kind == "holonomic":
@@ -92,6 +98,10 @@ def track(u_ned_m_s: np.ndarray, yaw_rad: float, p: TrackingParams) -> Tracked:
         return Tracked(0.0, 0.0, yaw_rad, np.zeros(2), np.zeros(2))
     bearing = math.atan2(ue, un)
     err = wrap_pi(bearing - yaw_rad)
+    if turn and (turn > 0) != (err > 0):  # the long way round: the turn left to make that way
+        err = math.copysign(2.0 * math.pi - abs(err), turn)
+    if turn and abs(err) > TURN_STEP_RAD:
+        bearing = wrap_pi(yaw_rad + math.copysign(TURN_STEP_RAD, err))
     floor = p.min_speed_fraction if p.kind == "ackermann" else 0.0
     speed = speed_des * max(math.cos(err), floor)
     rate_max = p.max_yaw_rate_rad_s
