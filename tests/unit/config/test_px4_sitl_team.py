@@ -60,7 +60,8 @@ def test_each_passenger_rides_the_pairs_dock_point_moved_to_its_side_on_its_own_
 # stand 0.9 m from their seats) and each slot's marker.
 RELNAV_OWN = {"mission": {"feeds"}, "carrier": {"p3_margin_m", "p3_frame", "p3_unaligned_margin_m", "p3_bias_max_m",
                                                 "align_on_deck_m", "acceleration_tau_s", "start_motion_tau_s",
-                                                "separation_speed_m_s", "separation_decel_m_s2", "separation_room_m"},
+                                                "separation_speed_m_s", "separation_decel_m_s2", "separation_room_m",
+                                                "p3_bias_max_age_s"},
               "recovery": {"holdoff_distance_m", "glide_angle_deg", "final_descent_speed_m_s", "final_lineup_margin",
                            "final_descent_lag_m", "decision_height_m"},
               "vision": {"rate_hz", "layout"}, "relnav": {"enabled", "landing_target_rate_hz", "accel_noise_m_s2",
