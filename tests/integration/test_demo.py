@@ -1,10 +1,13 @@
 """The one-command demo, end to end: separate processes over real UDP and Zenoh, in lockstep on
-the mock vehicle's simulated time (the default) and in real time (``--realtime``)."""
+the mock vehicle's simulated time (the default) and in real time (``--realtime``); several pairs
+at once, and the live view (``--live``) of each while it flies."""
 from __future__ import annotations
 
 import json
 import subprocess
 import sys
+import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -15,14 +18,16 @@ from mcap_protobuf.decoder import DecoderFactory
 from mission.config.schema import load_config
 from mission.record.table import read_record
 from sim.batch.closed_loop import simulate_config
-from tests.conftest import CONFIGS
+from sim.net import stop_process, wait_for
+from sim.testing.foxglove_viewer import LiveViewer
+from tests.conftest import CONFIGS, free_port
 
 DEMO = CONFIGS / "demo.toml"
 
 pytestmark = pytest.mark.slow
 
 # A class per flight (or per flights that share one): `--dist loadscope` schedules a class as its own
-# unit, so the module's seven demo flights spread over the workers instead of queueing on one.
+# unit, so the module's demo flights spread over the workers instead of queueing on one.
 
 
 def _demo(tmp_path, *args: str) -> subprocess.CompletedProcess:
@@ -43,19 +48,82 @@ def demo_flight(tmp_path_factory):
     return root, _demo(root)
 
 
+def free_ports_in_a_row(n: int) -> int:
+    """A free TCP port p on 127.0.0.1 whose n - 1 neighbours above it are free too (pair i serves on p + i)."""
+    for _ in range(200):
+        ports = [free_port() for _ in range(n)]
+        if ports == list(range(ports[0], ports[0] + n)):
+            return ports[0]
+    raise AssertionError(f"no {n} neighbouring free ports")
+
+
+@dataclass
+class LiveFlight:
+    """The three-pair demo as it flew: its folder, exit code and output (stdout and stderr), the
+    first port of its live views, the viewers of pairs 0 and 1, and whether both viewers saw their
+    pair's pose and a flying phase before the demo ended (None) or why not."""
+    root: Path
+    code: int | None
+    text: str
+    port: int
+    viewers: tuple[LiveViewer, LiveViewer]
+    not_seen_flying: str | None
+
+
+@pytest.fixture(scope="module")
+def three_pairs(tmp_path_factory) -> LiveFlight:
+    """Three pairs at once on one network (``--pairs 3``), each serving its flight live (``--live``:
+    pair i on port + i), pairs 0 and 1 watched by a Foxglove viewer while they fly; no plot (the
+    one-pair plot is :func:`demo_flight`'s). Pair 0 is the plain demo's configuration and seed (pair
+    i's vehicle draws from seed i): the second run of the determinism check."""
+    root = tmp_path_factory.mktemp("pairs")
+    port = free_ports_in_a_row(3)
+    cmd = [sys.executable, "-m", "mission.cli", "demo", "--pairs", "3", "--live", f"127.0.0.1:{port}",
+           "--log-root", str(root / "logs"), "--plot", "", "--timeout", "90"]
+    not_seen, code = None, None
+    with open(root / "demo.out", "w") as out:
+        demo = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, text=True)
+        try:
+            viewers = [LiveViewer(f"ws://127.0.0.1:{port + i}", topics={f"/pair{i}/phase", f"/pair{i}/tf/passenger"},
+                                  connect_timeout_s=60.0) for i in range(2)]
+            with viewers[0] as v0, viewers[1] as v1:
+                # the pose and the phase arrive while the pair flies (before the demo has ended)
+                try:
+                    wait_for(lambda: _flying_seen(v0, "pair0") and _flying_seen(v1, "pair1") and demo.poll() is None,
+                             90.0, "poses and a flying phase from both pairs while they fly")
+                except AssertionError as e:
+                    not_seen = str(e)
+                code = demo.wait(timeout=150)
+        finally:
+            stop_process(demo, 30.0)
+    return LiveFlight(root, code, (root / "demo.out").read_text(), port, (v0, v1), not_seen)
+
+
+def _flying_seen(v: LiveViewer, pair: str) -> bool:
+    time.sleep(0.05)  # (polled: leave the viewers' threads the time to receive)
+    phases = v.messages(f"/{pair}/phase")[-3:]
+    return bool(v.messages(f"/{pair}/tf/passenger")) and any(
+        v.decode(f"/{pair}/phase", p)["phase"] in ("JOIN", "RIDING", "SEPARATED", "NAVIGATING") for _, p, _ in phases)
+
+
+# The plain demo and the three pairs (its second run, the live view) are one unit: the determinism check
+# reads both.
+@pytest.mark.timeout(300)
 class TestTheDemoFlight:
-    def test_two_lockstep_runs_give_the_same_flight(self, demo_flight, tmp_path):
+    def test_two_lockstep_runs_give_the_same_flight(self, demo_flight, three_pairs):
         """Same configuration, same seed: the same summary to 1e-9 and the same flight record, tick for
-        tick, whatever the machine's load (every participant waits for the others' stamped step).
-        On the mock's default estimate errors (PX4 SITL's, seed 0): the vehicle's first barrier carried
-        step 0's streams, which a mission bound in time read and a later one did not, so two runs
-        differed from their first row (the vehicle at 0.0 against 0.065 m north at t = 0.02 s);
-        before any answer the vehicle now sends only its hello (sim/vehicle/lockstep.py)."""
+        tick, whatever the machine's load (every participant waits for the others' stamped step). The
+        second run is pair 0 of the three-pair demo (:func:`three_pairs`: the same configuration and
+        seed, flown beside two other pairs on one network and served live). On the mock's default
+        estimate errors (PX4 SITL's, seed 0): the vehicle's first barrier carried step 0's streams,
+        which a mission bound in time read and a later one did not, so two runs differed from their
+        first row (the vehicle at 0.0 against 0.065 m north at t = 0.02 s); before any answer the
+        vehicle now sends only its hello (sim/vehicle/lockstep.py)."""
         # the first run is the class's plain demo (its plot is drawn after the flight, from its files)
-        (root, out), shared_out = demo_flight, _demo(tmp_path / "b", "--plot", "")
+        root, out = demo_flight
         assert out.returncode == 0, out.stdout + out.stderr
-        assert shared_out.returncode == 0, shared_out.stdout + shared_out.stderr
-        runs = [root / "logs" / "pair0", tmp_path / "b" / "logs" / "pair0"]
+        assert three_pairs.code == 0, three_pairs.text
+        runs = [root / "logs" / "pair0", three_pairs.root / "logs" / "pair0"]
         a, b = (json.loads((d / "summary.json").read_text()) for d in runs)
         for summary in (a, b):
             summary.get("carrier_feed", {}).pop("bound_source", None)  # a Zenoh session id: new in every run
@@ -149,19 +217,42 @@ class TestTheDemoFlight:
         assert closest == pytest.approx(carrier["closest_target_distance_m"], abs=1e-6)
 
 
-class TestThreePairs:
-    def test_three_pairs_fly_at_once_on_one_network(self, tmp_path):
-        out = _demo(tmp_path, "--pairs", "3")
+    def test_three_pairs_fly_at_once_on_one_network(self, three_pairs):
         for i in range(3):
-            d = tmp_path / "logs" / f"pair{i}"
+            d = three_pairs.root / "logs" / f"pair{i}"
             s = json.loads((d / "summary.json").read_text())
             assert s["p1"] and s["p2"] and s["p3"] and s["phase"] == "DONE", (i, s)
             info = json.loads((d / "mission.json").read_text())
             assert info["pair"] == f"pair{i}"
             assert info["anchor_ned_m"] is not None
-        assert out.returncode == 0, out.stdout + out.stderr
+        assert three_pairs.code == 0, three_pairs.text
         # Crosstalk on the bus itself is tested in test_bridge_pairs.py (distinct states per pair);
         # here three full stacks share one Zenoh router and every one of them completes.
+
+    def test_demo_live_serves_each_pair_under_its_prefix_while_it_flies(self, three_pairs):
+        """``marsupial demo --live`` serves each pair's flight to a Foxglove WebSocket client while it
+        flies (the protocol the Foxglove app speaks, on test-chosen loopback ports)."""
+        f = three_pairs
+        assert f.not_seen_flying is None, (f.not_seen_flying, f.text[-3000:])
+        # the flights end (whether P1-P3 held is test_three_pairs_fly_at_once_on_one_network's business:
+        # here, what the viewer saw)
+        assert f.code in (0, 1), f.text
+        for i, v in enumerate(f.viewers):
+            assert v.subprotocol in ("foxglove.sdk.v1", "foxglove.websocket.v1")
+            topics = {c["topic"] for c in v.channels.values()}
+            assert topics and all(t.startswith(f"/pair{i}/") for t in topics), topics
+            assert {c["schemaName"] for c in v.channels.values()} >= {"foxglove.FrameTransform", "foxglove.SceneUpdate",
+                                                                     "foxglove.Log", "marsupial.Phase"}
+            phases = [v.decode(f"/pair{i}/phase", p)["phase"] for _, p, _ in v.messages(f"/pair{i}/phase")]
+            assert phases[-1] == "DONE" and "NAVIGATING" in phases, phases[-5:]
+            poses = [v.decode(f"/pair{i}/tf/passenger", p) for _, p, _ in v.messages(f"/pair{i}/tf/passenger")]
+            assert poses[-1].child_frame_id == f"pair{i}/passenger/base_link_frd"
+            assert poses[-1].parent_frame_id == "map_ned"
+            assert poses[-1].translation.x - poses[0].translation.x > 10.0  # it flew towards the target (24 m N)
+            times = [t for t, _, _ in v.messages(f"/pair{i}/phase")]
+            # epoch time [ns]: the demo's epoch plus the simulated clock (a lockstep flight of < 60 s)
+            assert times == sorted(times) and times[0] > 1.5e18 and times[-1] - times[0] < 60e9
+        assert f"live view of pair1: ws://127.0.0.1:{f.port + 1}" in f.text
 
 
 def _ros2_config(tmp_path, cmd_vel_type: str, attachment: str, mode: str) -> Path:
