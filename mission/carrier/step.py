@@ -253,7 +253,8 @@ class CarrierStepper:
             if self._restarting(now_s):  # it stands on, and the law starts again from rest after
                 u = np.zeros_like(u)
             sideways = abs(math.cos(yaw) * float(v_motion[1]) - math.sin(yaw) * float(v_motion[0]))
-            turn = next((w for g in self.legs.guards if (w := g.away_turn(x_c, yaw, math.atan2(u[1], u[0]), self.away_within_m))), 0)
+            bearing = math.atan2(float(u[1]), float(u[0]))  # round away from a target near it, not through it
+            turn = next((w for g in self.legs.guards if (w := g.away_turn(x_c, yaw, bearing, self.away_within_m))), 0)
             cmd = self._started(u, yaw, moving, dt_s, sideways, turn)
             self._stopped_since_s = (None if cmd.speed_m_s > 0 else
                                      now_s if self._stopped_since_s is None else self._stopped_since_s)

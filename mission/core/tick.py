@@ -41,8 +41,8 @@ class SeparationSpeed:
     target's height). ``speed_m_s`` > 0 [m/s] from ``distance_m`` [m] in (``b c`` plus room for
     the frames' disagreement: the passenger separates at ``b c`` in its own), reached at
     ``decel_m_s2`` > 0 [m/s^2]. A carrier told to stop at the separation then stops from that
-    speed: one that drove on at 1.3 m/s on PX4's SIH rover rolled 1.4 m into the target's
-    keep-out before it stood (docs/recovery.md)."""
+    speed: PX4's SIH rover, separating at up to 1.4 m/s, rolled 0.2-0.8 m on before it stood
+    (docs/safety.md, "Arriving slowly, turning round away")."""
 
     speed_m_s: float
     decel_m_s2: float
