@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from mission.carrier.frames import FrameParams, GuardFrame, HeardBias
 from mission.carrier.guard import GuardParams, P3Guard
 from mission.carrier.tracking import TURN_STEP_RAD, TrackingParams, track
 from mission.core.geodesy import wrap_pi
@@ -86,3 +87,25 @@ def test_turning_round_away_closes_in_less_than_the_shortest_way(heading_deg):
     round_away = _turn_round(x, yaw, bearing, way_round=True)
     assert round_away >= short + 0.15  # measured 0.19-0.97 m less closed (the creep's 0.56 m turning radius)
     assert round_away >= 8.0 - 0.56  # at most its turning radius, from facing the target 10 deg off
+
+
+def test_the_side_of_the_target_is_judged_in_the_guards_frame():
+    """The rover truly 8 m south of the target, heading north with the target 20 deg to its right;
+    its own GNSS frame 5.8 m east of the passenger's puts the target 20 deg to its left. Onto a
+    course 170 deg round to the left, the shortest way, it must keep that way (it turns away from
+    the true target); judged in its own frame it would turn right round, through it."""
+    bias = np.array([0.0, 5.8, 0.0])  # [m] the carrier's GNSS frame minus the passenger's
+    truly = np.array([-8.0, -8.0 * math.tan(math.radians(20.0))])
+    own_x = truly + bias[:2]
+    yaw, bearing = 0.0, math.radians(-170.0)
+    params = FrameParams("passenger", max_age_s=15.0, max_sigma_m=0.5, max_bias_m=8.0, max_step_m=0.5, tau_s=0.0,
+                         settle_s=0.0, unaligned_margin_m=0.0)
+    frame = GuardFrame(params)
+    guard = P3Guard(GUARD.p, TARGET, planar=False, frame=frame)
+    assert guard.away_turn(own_x, yaw, bearing, within_m=11.0) == 1  # no bias heard: its own frame, the wrong side
+    frame.hear(HeardBias(bias, 0.1, stamp_s=1.0, age_s=0.0))
+    assert frame.settle(1.0).startswith("P3 guard in the passenger's frame")
+    assert guard.away_turn(own_x, yaw, bearing, within_m=11.0) == 0  # the target on its right: left is away
+    frame.hear(None)
+    frame.settle(1.0 + 15.5)  # the bias heard 15.5 s ago is stale: its own frame again
+    assert guard.away_turn(own_x, yaw, bearing, within_m=11.0) == 1
