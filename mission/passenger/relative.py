@@ -102,9 +102,8 @@ class RelativeDeck:
         pos, vel = np.asarray(vehicle.position_ned_m, float), np.asarray(vehicle.velocity_ned_m_s, float)
         if sample_t > self.own_t_s and np.all(np.isfinite(pos)) and np.all(np.isfinite(vel)):
             self.own_t_s = sample_t
-            own = OwnSample(sample_t, pos, vel)
-            self.handed.append(own)
-            e = est.tick(own)
+            e = self._hand(OwnSample(sample_t, pos, vel))
+            assert e is not None  # an own sample ticks the estimator
         elif self.own_t_s == -np.inf:
             return carrier, None
         else:
@@ -156,13 +155,14 @@ class RelativeDeck:
             return carrier.stamp_s != self.fix_stamp_s
         return t_s - carrier.age_s > self.fix_t_s
 
-    def _hand(self, item: EstimatorInput) -> None:
-        """Hand ``item`` (a measurement: it waits for the next tick) to the estimator and keep it
-        for the next view's ``inputs`` (the newest :data:`HANDED_KEPT` of them, while no view is made)."""
+    def _hand(self, item: EstimatorInput) -> RelativeEstimate | None:
+        """Hand ``item`` to the estimator (:func:`hand`: an own sample ticks it and gives the estimate,
+        a measurement waits for the next tick, None) and keep it for the next view's ``inputs`` (the
+        newest :data:`HANDED_KEPT` of them, while no view is made)."""
         self.handed.append(item)
         if len(self.handed) > HANDED_KEPT:
             del self.handed[0]
-        hand(self.estimator, item)
+        return hand(self.estimator, item)
 
     def _acceleration(self, before: np.ndarray | None, shown: np.ndarray, dt_s: float, on_deck: bool) -> np.ndarray | None:
         """The carrier's acceleration [m/s^2] NED as the estimate shows it: the rate of the velocity
