@@ -20,7 +20,7 @@ import pytest
 
 from sim.sitl.px4 import px4_flight
 from tests.conftest import CONFIGS
-from tests.px4_sitl.conftest import px4_job
+from tests.px4_sitl.conftest import HOVER_SPEED_M_S, LAST_METRE_S, px4_job
 
 CONFIG = CONFIGS / "px4_sitl_cycle.toml"
 # Skipped, with the reason, by the px4_jobs fixture (sim.sitl.px4.unavailable_reason).
@@ -94,8 +94,8 @@ def test_quadrotor_and_rover_on_px4_fly_two_targets_and_every_dock_meets_the_con
         # (ad3cc8e), which is not a step of ours; it is printed above.
         assert leg["input_jump_m_s"] <= 0.065, leg["input_jump_m_s"]
         assert leg["final_passenger_target_distance_m"] <= 0.5
-        assert leg["last_metre_s"] is not None and leg["last_metre_s"] <= 5.0, leg["last_metre_s"]
-        assert leg["hover_speed_m_s"] is not None and leg["hover_speed_m_s"] <= 0.3, leg["hover_speed_m_s"]
+        assert leg["last_metre_s"] is not None and leg["last_metre_s"] <= LAST_METRE_S, leg["last_metre_s"]
+        assert leg["hover_speed_m_s"] is not None and leg["hover_speed_m_s"] <= HOVER_SPEED_M_S, leg["hover_speed_m_s"]
         assert leg["max_target_distance_at_target_m"] <= 0.5
     assert s["max_phase_switch_jump_m_s"] <= 0.05 + 0.03  # the reference's 0.03 m/s plus what tracking adds
     # PX4's home followed the rover (HOME_POSITION read back on the GCS link beside the rover's own
