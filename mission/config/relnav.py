@@ -110,6 +110,12 @@ class RelnavSection(Section):
                      "re-initialise the estimate's uncertainty to its prior, keeping the state, and the marker is fused "
                      "afresh: the deck moved as the model did not expect (a carrier braking hard, a frame's jump), and "
                      "the marker is the deck; a lone outlier among fused markers is still rejected"))
+    marker_model_sigma_m: float = Field(0.0, ge=0, le=1,
+        description=("[m] per axis, added in quadrature to each marker's own covariance (which holds the corners' "
+                     "noise only): what the detector cannot know of (the vehicle's own position and attitude at the "
+                     "capture, the capture's time). A marker the detector called a centimetre sure and 9 cm off "
+                     "otherwise swings the deck's velocity by 0.5 m/s and the filter then rejects the good ones; "
+                     "0: the detector's covariance alone"))
     history_s: float = Field(1.0, gt=0, le=30,
         description="[s] how far back a late measurement is still fused (replayed from its capture time)")
     converged_sigma_m: float = Field(0.1, gt=0, le=100,

@@ -14,7 +14,8 @@ and the passenger's GNSS frames, and the drift rate of the passenger's own estim
   on through that latency as the carrier's does, where a constant-velocity prediction lags a
   carrier pulling away by its acceleration times the latency and more);
 - the marker (:meth:`RelativeEstimator.marker`), stamped with its capture time: the deck from the
-  vehicle plus the vehicle's own position then sees ``c``;
+  vehicle plus the vehicle's own position then sees ``c``, with the detector's covariance plus
+  ``marker_model_sigma_m`` squared per axis (what the detector cannot know of);
 - with ``own_drift_sigma_m_s`` > 0, the passenger's own position estimate drifts at a rate ``d``,
   a state: the deck moves in the passenger's frame at ``w + d`` (the marker shows it, the GNSS
   velocity does not), which it keeps through a marker loss;
@@ -81,6 +82,7 @@ class RelnavParams:
     accel_vertical_factor: float
     range_gate_nis: float
     range_deck_margin_m: float
+    marker_model_sigma_m: float
 
 
 @dataclass
@@ -285,7 +287,7 @@ class RelativeEstimator:
         elif e.marker is not None:
             m = e.marker
             z = np.asarray(m.deck_rel_ned_m, dtype=float) + self._own_at(e.t_s).position_ned_m
-            r = np.asarray(m.covariance_ned_m2, dtype=float)
+            r = np.asarray(m.covariance_ned_m2, dtype=float) + kalman.I3 * self.params.marker_model_sigma_m ** 2
             e.outcome["marker"] = self._update(z, kalman.H_MARKER, r)
             if not e.outcome["marker"]:
                 self._rejected_since_s = min(self._rejected_since_s, e.t_s)

@@ -65,7 +65,7 @@ RELNAV_OWN = {"mission": {"feeds"}, "carrier": {"p3_margin_m", "p3_frame", "p3_u
               "recovery": {"holdoff_distance_m", "glide_angle_deg", "final_descent_speed_m_s", "final_lineup_margin",
                            "final_descent_lag_m", "decision_height_m"},
               "vision": {"rate_hz", "layout"}, "relnav": {"enabled", "landing_target_rate_hz", "accel_noise_m_s2",
-                                                                                 "gnss_velocity_sigma_m_s"},
+                                                                                 "gnss_velocity_sigma_m_s", "marker_model_sigma_m"},
               "world": {"carrier_gnss"}}
 
 
