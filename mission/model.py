@@ -88,6 +88,9 @@ def mission_model(cfg: Config) -> MissionModel:
         max_accel_m_s2=None if s.passenger_max_accel_m_s2 is None else s.passenger_max_accel_m_s2 * COMMAND_ACCEL_FACTOR,
         z_min_m=s.z_min_m, z_max_m=s.z_max_m,
     )
+    riding = s.riding()
+    riding_command = None if riding is None else dataclasses.replace(
+        command, max_accel_m_s2=None if riding.max_accel_m_s2 is None else riding.max_accel_m_s2 * COMMAND_ACCEL_FACTOR)
     m = cfg.mission
     tracking = derived(TrackingGains, m, kind=m.setpoint, position_gain_per_s=m.track_gain,
                        accel_limit_m_s2=command.max_accel_m_s2, slow_lag_m=m.reference_slow_lag_m,
@@ -99,6 +102,7 @@ def mission_model(cfg: Config) -> MissionModel:
         recovery=recovery_model(cfg) if m.final_action == "return" else None,
         queue=queue_model(cfg) if m.final_action == "return" else None,
         leg_start_m=tick.law.separation_distance_m + m.leg_start_margin_m,
+        riding_safety=riding, riding_command_safety=riding_command,
         dock_chase=PursuitLimits(m.dock_rejoin_speed_m_s, s.passenger_max_accel_m_s2 or math.inf, DOCK_CHASE_GAIN_PER_S),
         deck=derived(DeckRide, m, keep_out_radius_m=m.deck_keep_out_radius_m, slope=m.deck_clear_slope,
                      clear_height_m=m.deck_clear_height_m, press_floor_m=m.deck_press_floor_m,

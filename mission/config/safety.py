@@ -4,9 +4,10 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from pydantic import Field
+from pydantic import Field, model_validator
 
 from mission.config.fields import Section
+from mission.errors import ConfigError
 
 if TYPE_CHECKING:  # the schema imports no law: the converters below import it when called
     from mission.core.safety import SafetyConfig
@@ -22,6 +23,13 @@ class SafetySection(Section):
         description="[m/s] passenger speed limit, direction kept (off when left out: the paper's unsaturated law)")
     passenger_max_accel_m_s2: float | None = Field(None, gt=0, le=100,
         description="[m/s^2] passenger acceleration limit; also shapes arrival (speed <= sqrt(2 a |e_pt|))")
+    riding_max_accel_m_s2: float | None = Field(None, gt=0, le=100,
+        description=("[m/s^2] the passenger's acceleration limit while it rides its carrier (RIDING: the reference on "
+                     "the dock point, and the command sent, which may change 1.5 times as fast as the reference), "
+                     "where it must follow what the carrier does: a rover that sticks and breaks free from a stand "
+                     "leaps faster than `passenger_max_accel_m_s2` (docs/relnav.md, \"Riding a rover that leaps\"). "
+                     "The separation and everything after keep `passenger_max_accel_m_s2`, so the input's step at "
+                     "the separation stays that limit times one tick. None: `passenger_max_accel_m_s2`"))
     carrier_max_speed_m_s: float | None = Field(None, gt=0, le=100,
         description="[m/s] carrier speed limit in the law's command")
     carrier_max_accel_m_s2: float | None = Field(None, gt=0, le=100,
@@ -43,6 +51,15 @@ class SafetySection(Section):
     passenger_separation_phase_in_s: float = Field(0.5, ge=0, le=10, description="[s] the separation barrier's rows "
         "phase in over this time from the passenger's separation: no jump of the command at the latch (0: at once; docs/team.md)")
 
+    @model_validator(mode="after")
+    def _riding(self) -> "SafetySection":
+        ride, own = self.riding_max_accel_m_s2, self.passenger_max_accel_m_s2
+        if ride is not None and (own is None or ride < own):
+            raise ConfigError("safety.riding_max_accel_m_s2", ride,
+                              "needs safety.passenger_max_accel_m_s2 set and no larger (riding follows the carrier, "
+                              f"it never limits the passenger more than flying does; passenger_max_accel_m_s2 = {own})")
+        return self
+
     def passenger(self) -> SafetyConfig:
         from mission.core.safety import SafetyConfig
 
@@ -54,6 +71,15 @@ class SafetySection(Section):
     def vertical_ratio(self) -> float:
         """[-] the pairwise barrier's vertical half-axis over its level one (1: a sphere)."""
         return (self.passenger_separation_vertical_m or self.passenger_separation_m) / self.passenger_separation_m
+
+    def riding(self) -> SafetyConfig | None:
+        """The passenger's limits while it rides: :meth:`passenger` with ``riding_max_accel_m_s2``
+        (None when that is unset)."""
+        if self.riding_max_accel_m_s2 is None:
+            return None
+        from dataclasses import replace
+
+        return replace(self.passenger(), max_accel_m_s2=self.riding_max_accel_m_s2)
 
     def carrier(self) -> SafetyConfig:
         from mission.core.safety import SafetyConfig

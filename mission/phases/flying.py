@@ -65,20 +65,22 @@ def floor_over_the_ground(limits: SafetyConfig, obs: Observation) -> SafetyConfi
     return replace(limits, z_max_m=limits.z_max_m + ground)
 
 
-def tick_over_the_ground(m: MissionModel, obs: Observation) -> TickModel:
+def tick_over_the_ground(m: MissionModel, obs: Observation, riding: bool = False) -> TickModel:
     """``m.tick`` with the passenger's altitude floor (the riding law's reference filter) over the
     ground as the passenger sees it (:func:`floor_over_the_ground`), as the command's and the
     recovery reference's are. Fixed in its frame, with its own height estimate 2 m off (the relnav
     Monte-Carlo's scenario 63) the dock point lay 1.1-1.5 m under it, and the barrier asked the
     riding reference 1.0-1.5 m/s up for seconds: the vehicle rose 0.6 m off the dock point (P1
     failed; docs/relnav.md, "The climb at once and the riding floor"). The same after the separation
-    (navigate), so that the reference does not jump at the switch."""
-    limits = floor_over_the_ground(m.tick.passenger_safety, obs)
+    (navigate), so that the reference does not jump at the switch. ``riding``: with the riding
+    limits (``m.riding_safety``, when set)."""
+    own = m.riding_safety if riding and m.riding_safety is not None else m.tick.passenger_safety
+    limits = floor_over_the_ground(own, obs)
     return m.tick if limits is m.tick.passenger_safety else replace(m.tick, passenger_safety=limits)
 
 
 def _track(state: MissionState, obs: Observation, m: MissionModel, x_ref: np.ndarray, u_ref: np.ndarray,
-           a_ref: np.ndarray, standing: bool = False, on_deck: bool = False) -> Tracked:
+           a_ref: np.ndarray, standing: bool = False, on_deck: bool = False, riding: bool = False) -> Tracked:
     """The setpoint that makes the vehicle follow the reference (:func:`mission.core.tracking.setpoint`):
     the velocity demand filtered at the vehicle's real position (obstacles, floor, speed and
     acceleration of the vehicle), full or velocity only as tracking decides it. The altitude floor
@@ -87,7 +89,8 @@ def _track(state: MissionState, obs: Observation, m: MissionModel, x_ref: np.nda
     seated on the deck after a contact (its landing, pressed into it) and over it by its report,
     where the deck, above the floor, is its floor. PX4's estimate of its height errs by decimetres:
     a floor 0.2 m under the deck stopped the landing's press and turned its setpoints velocity only
-    (docs/deck-riding.md, "Landing under the floor")."""
+    (docs/deck-riding.md, "Landing under the floor"). ``riding``: the command's riding limits
+    (``m.riding_command_safety``, when set)."""
     v = obs.vehicle
     assert v is not None  # tracking happens only with a vehicle
     x_p = v.position_ned_m
@@ -95,7 +98,8 @@ def _track(state: MissionState, obs: Observation, m: MissionModel, x_ref: np.nda
     integral = state.integral if state.integral is not None else np.zeros(3)
     desired = velocity_demand(x_ref, u_ref, x_p, integral, g)
     prev = state.u_cmd if state.u_cmd is not None else v.velocity_ned_m_s
-    limits = floor_over_the_ground(m.command_safety, obs)
+    limits = floor_over_the_ground(m.riding_command_safety if riding and m.riding_command_safety is not None
+                                   else m.command_safety, obs)
     if limits.z_max_m is not None and (on_deck or (standing and len(x_p) == 3 and x_p[2] > limits.z_max_m)):
         limits = replace(limits, z_max_m=None)
     safe = filter_velocity(x_p, desired, m.tick.obstacles, limits, prev, m.dt_s)
@@ -157,8 +161,9 @@ def _carrier_acceleration(obs: Observation, m: MissionModel) -> np.ndarray:
 
 
 def _capped(a: np.ndarray, m: MissionModel) -> np.ndarray:
-    """A measured acceleration [m/s^2] capped at the passenger's own ``max_accel_m_s2``."""
-    cap = m.command_safety.max_accel_m_s2
+    """A measured acceleration [m/s^2] capped at the passenger's own ``max_accel_m_s2`` (its riding
+    command's, when set: the carrier's is fed forward to a passenger it carries)."""
+    cap = (m.riding_command_safety or m.command_safety).max_accel_m_s2
     size = float(norm(a))
     return a * (cap / size) if cap is not None and size > cap else a
 
@@ -315,11 +320,11 @@ def riding(state, obs, m):
         new = enter(state, Phase.SEPARATED, t, anchor=anchor, e_ref=ZERO.copy(), x_ref=anchor.copy(),
                   separation_time_s=t - (1 - float(theta)) * m.dt_s)
         return navigate(new, obs, m, events=(f"separated at |e_tc| = {norm(m.tick.target - anchor):.3f} m",))
-    tick = passenger_tick(dock, v_dock, ZERO, False, tick_over_the_ground(m, obs), state.u_ref, m.dt_s,
+    tick = passenger_tick(dock, v_dock, ZERO, False, tick_over_the_ground(m, obs, riding=True), state.u_ref, m.dt_s,
                           e_tc_norm_m=_docked_law_distance(obs, m, dock))
     # velocity setpoints carry no acceleration; a stale state's prediction has none
     a_ref = a_dock if m.tracking.kind == "full" else ZERO
-    tr = _track(state, obs, m, dock, tick.u, a_ref)
+    tr = _track(state, obs, m, dock, tick.u, a_ref, riding=True)
     acted = tr.acted
     new = replace(state, x_ref=dock.copy(), e_ref=ZERO.copy(), prev_dock=dock.copy(), u_ref=tick.u, **tr.kept())
     return new, tr.decision(dock=dock, P=float(tick.P), relative=tick.relative, desired=tick.desired,

@@ -227,6 +227,8 @@ class MissionModel:
     carrier_timeout_s: float  # [s] before separation, a carrier state older than this is not fresh (no latch on it)...
     carrier_lost_s: float  # ... and none fresh for this long [s]: carrier_lost
     dock_chase: PursuitLimits  # riding a stale carrier state and back: the reference's limits relative to the dock point
+    riding_safety: SafetyConfig | None  # riding: the reference's limits (safety.riding_max_accel_m_s2; None: the tick's)
+    riding_command_safety: SafetyConfig | None  # ... and the command's (None: command_safety)
     heartbeat_timeout_s: float
     prestream_s: float
     connect_timeout_s: float
