@@ -56,8 +56,8 @@ class SafetySection(Section):
         ride, own = self.riding_max_accel_m_s2, self.passenger_max_accel_m_s2
         if ride is not None and (own is None or ride < own):
             raise ConfigError("safety.riding_max_accel_m_s2", ride,
-                              "needs safety.passenger_max_accel_m_s2 set and no larger (riding follows the carrier, "
-                              f"it never limits the passenger more than flying does; passenger_max_accel_m_s2 = {own})")
+                              f"must be at least safety.passenger_max_accel_m_s2 (= {own}), which must be set: riding "
+                              "follows the carrier, and never limits the passenger more than flying does")
         return self
 
     def passenger(self) -> SafetyConfig:
