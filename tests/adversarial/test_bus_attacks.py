@@ -186,8 +186,11 @@ def _unsigned_campaign(tmp_path: Path) -> None:
     assert out.phase == "DONE", (out.reason, out.detail, pair.events[-5:])
     assert campaign.walked >= 60 and campaign.burst_at is not None and campaign.floods >= 200, vars(campaign)
     feed = s["carrier_feed"]
-    # the copier contested the source (its honest twins went stale); the burst was followed, then left
-    assert feed["contests"] >= 1 and feed["jumps"] >= 2 and feed["dropped"].get("stale_seq", 0) >= 30, feed
+    # the copier contested the source (its honest twins dropped: as stale, or as a jump once the feed has
+    # resynced onto the walk, whichever of the two arrives first; 22 and 76 in one CI run); the burst was
+    # followed, then left
+    honest_dropped = feed["dropped"].get("stale_seq", 0) + feed["dropped"].get("jump", 0)
+    assert feed["contests"] >= 1 and feed["jumps"] >= 2 and honest_dropped >= 30, feed
     # no latch on the walk or the burst: it fired at b c of the real carrier, which kept its guard
     assert s["carrier_target_distance_at_separation_m"] == pytest.approx(BC, abs=0.05)
     assert AT_SEPARATION_M - 0.2 <= carrier["distance_at_separation_m"] <= AT_SEPARATION_M + 0.05, carrier
