@@ -88,9 +88,9 @@ def mission_model(cfg: Config) -> MissionModel:
         max_accel_m_s2=None if s.passenger_max_accel_m_s2 is None else s.passenger_max_accel_m_s2 * COMMAND_ACCEL_FACTOR,
         z_min_m=s.z_min_m, z_max_m=s.z_max_m,
     )
-    riding = s.riding()
-    riding_command = None if riding is None else dataclasses.replace(
-        command, max_accel_m_s2=None if riding.max_accel_m_s2 is None else riding.max_accel_m_s2 * COMMAND_ACCEL_FACTOR)
+    ride = s.riding_max_accel_m_s2  # riding: the reference's and the command's acceleration limits, as flying's
+    riding = None if ride is None else dataclasses.replace(tick.passenger_safety, max_accel_m_s2=ride)
+    riding_command = None if ride is None else dataclasses.replace(command, max_accel_m_s2=ride * COMMAND_ACCEL_FACTOR)
     m = cfg.mission
     tracking = derived(TrackingGains, m, kind=m.setpoint, position_gain_per_s=m.track_gain,
                        accel_limit_m_s2=command.max_accel_m_s2, slow_lag_m=m.reference_slow_lag_m,

@@ -72,15 +72,6 @@ class SafetySection(Section):
         """[-] the pairwise barrier's vertical half-axis over its level one (1: a sphere)."""
         return (self.passenger_separation_vertical_m or self.passenger_separation_m) / self.passenger_separation_m
 
-    def riding(self) -> SafetyConfig | None:
-        """The passenger's limits while it rides: :meth:`passenger` with ``riding_max_accel_m_s2``
-        (None when that is unset)."""
-        if self.riding_max_accel_m_s2 is None:
-            return None
-        from dataclasses import replace
-
-        return replace(self.passenger(), max_accel_m_s2=self.riding_max_accel_m_s2)
-
     def carrier(self) -> SafetyConfig:
         from mission.core.safety import SafetyConfig
 
