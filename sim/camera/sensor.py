@@ -12,6 +12,9 @@ from mission.vision.camera import CameraModel
 from mission.vision.measurement import MarkerPose
 
 
+NOISE_BANK_FRAMES = 4  # frames of read noise drawn once, windows of which make each frame's
+
+
 @dataclass(frozen=True)
 class SensorModel:
     """noise_sigma: the read noise's standard deviation [grey levels, 0-255]; exposure_s: the
@@ -42,7 +45,7 @@ class Sensor:
 
     def __post_init__(self) -> None:
         self._rng = np.random.default_rng(self.seed)
-        self._noise: np.ndarray | None = None  # the read noise's buffer, reused frame to frame
+        self._bank: np.ndarray | None = None  # the read noise drawn once, NOISE_BANK_FRAMES frames of it, scaled
 
     def expose(self, ideal: np.ndarray, blur_px: np.ndarray | None = None) -> np.ndarray | None:
         """The frame the sensor delivers from the ideal one: None when dropped; else blurred
@@ -55,16 +58,25 @@ class Sensor:
 
             frame = cv2.filter2D(frame, -1, line_kernel(blur_px))
         if self.model.noise_sigma > 0:
-            # In place, into a buffer kept between frames: a fresh array of a frame's size a time
-            # (a temporary for each operation) cost a fifth of the exposure (page faults).
-            if self._noise is None or self._noise.shape != frame.shape:
-                self._noise = np.empty(frame.shape, np.float32)
-            self._rng.standard_normal(dtype=np.float32, out=self._noise)
-            self._noise *= np.float32(self.model.noise_sigma)
-            frame += self._noise
+            frame += self._read_noise(frame.shape)
         frame += np.float32(0.5)
         np.clip(frame, 0, 255, out=frame)
         return frame.astype(np.uint8)
+
+    def _read_noise(self, shape: tuple[int, ...]) -> np.ndarray:
+        """One frame's read noise [grey levels]: a window of ``shape`` at a seeded random place
+        in a bank of :data:`NOISE_BANK_FRAMES` frames of independent normals (times the noise's
+        sigma), drawn at the first frame. Each pixel's noise is Gaussian with the model's sigma,
+        independent of its neighbours'; two frames' windows are the bank shifted by a random
+        number of pixels, so a pixel's noise is not its noise in the last frame. Drawing a
+        frame's 307 200 normals afresh took 2.6 ms of the exposure's 3.0 (a quarter of the relnav
+        demo's mock vehicle; docs/testing.md), the window 0.1."""
+        size = int(np.prod(shape))
+        if self._bank is None or self._bank.size < NOISE_BANK_FRAMES * size:
+            self._bank = self._rng.standard_normal(NOISE_BANK_FRAMES * size, dtype=np.float32)
+            self._bank *= np.float32(self.model.noise_sigma)
+        start = int(self._rng.integers(0, self._bank.size - size + 1))
+        return self._bank[start:start + size].reshape(shape)
 
 
 def line_kernel(blur_px: np.ndarray) -> np.ndarray:

@@ -143,8 +143,10 @@ the deck's normal within 10 deg of the truth more often."""
                 continue
             tilts[name].append(np.degrees(np.arccos(np.clip((rotation_ned_cam @ m.marker.rotation_cam_deck)[2, 2], -1, 1))))
     flipped = {name: sum(t > 10.0 for t in values) for name, values in tilts.items()}
-    # seeded: 2 of 39 gated poses against 6 of 39 when the lower error wins
-    assert len(tilts["gated"]) >= 35 and flipped["gated"] <= 2 and flipped["plain"] >= 2 * flipped["gated"] + 2, flipped
+    # seeded (sensor seed 6): 3 of 40 gated poses against 7 when the lower error wins. Over sensor seeds 0-7
+    # the gated flipped 2-3 and the plain 4-8, at least 2 more (with the read noise drawn afresh each frame
+    # as with windows of a bank): a bound at this seed's own count would hold on its luck alone
+    assert len(tilts["gated"]) >= 35 and flipped["gated"] <= 3 and flipped["plain"] >= flipped["gated"] + 2, flipped
 
 
 def test_a_region_of_interest_finds_the_same_pose():
