@@ -151,6 +151,9 @@ class MissionSection(Section):
     velocity_bias_tau_s: float = Field(0.0, ge=0, le=60, description="[s] the vehicle's velocity as the mission uses it "
                                        "is corrected by the low-passed (this time constant) difference between its position's "
                                        "rate and its estimator's velocity (PX4's EKF on SIH: 0.3-0.5 m/s apart for seconds); 0 off")
+    near_deck_velocity_bias_tau_s: float | None = Field(None, gt=0, le=60, description="[s] velocity_bias_tau_s in "
+        "HOLDOFF, APPROACH and GO_AROUND, near the deck (None: velocity_bias_tau_s; needs it > 0): a shorter one follows "
+        "the position's rate closer where the speed relative to the deck decides the contact (docs/relnav.md)")
     damping_per_s: float = Field(0.0, ge=0, le=20, description="[1/s] full setpoints: velocity damping in the acceleration "
                                  "feed-forward, -k (v_p - u_ref): damps the ringing of PX4's position loop stiffened by the lead; 0 off")
     bias_compensation_s: float = Field(0.0, ge=0, le=10, description="[s] full setpoints: the position sent also "
@@ -255,6 +258,13 @@ class MissionSection(Section):
                      "`marsupial.feeds`, `simulate` gives the world its sensor of the same name (`marsupial.sensors`)"))
 
     _log_dir_printable = field_validator("log_dir")(printable)
+
+    @model_validator(mode="after")
+    def _near_deck_bias(self) -> "MissionSection":
+        if self.near_deck_velocity_bias_tau_s is not None and self.velocity_bias_tau_s <= 0:
+            raise ConfigError("mission.near_deck_velocity_bias_tau_s", self.near_deck_velocity_bias_tau_s,
+                              "needs mission.velocity_bias_tau_s > 0: it changes that filter's time constant near the deck")
+        return self
 
 
 class MavlinkSection(Section):

@@ -109,15 +109,19 @@ class StepResult:
 class PassengerStep:
     """The passenger's tick for ``model``; ``velocity_bias_tau_s`` [s] the time constant of the
     vehicle's consistent velocity (``mission.velocity_bias_tau_s``; 0: the estimator's velocity
-    as it comes). Its only memory is that filter's, the newest measurement of each kind and, with
+    as it comes), ``near_deck_tau_s`` [s] its time constant instead in
+    :data:`~mission.phases.phase.RANGED` (``mission.near_deck_velocity_bias_tau_s``; None: the
+    same). Its only memory is that filter's, the newest measurement of each kind and, with
     ``[relnav]`` enabled (``model.relnav``), the relative estimator
     (:class:`mission.passenger.relative.RelativeDeck`: the carrier's state the phases see is
     then in the passenger's frame, and the estimate is in ``Observation.relative``); the
     mission's state is the caller's."""
 
-    def __init__(self, model: MissionModel, velocity_bias_tau_s: float = 0.0) -> None:
+    def __init__(self, model: MissionModel, velocity_bias_tau_s: float = 0.0, near_deck_tau_s: float | None = None) -> None:
         self.model = model
         self.velocity_fix = PositionConsistentVelocity(velocity_bias_tau_s) if velocity_bias_tau_s > 0 else None
+        # (time constant elsewhere, near the deck): the filter's bias carries on across the switch, only its gain changes
+        self._taus = (velocity_bias_tau_s, near_deck_tau_s) if self.velocity_fix is not None and near_deck_tau_s else None
         self.measurements = Measurements()  # the measurement feeds' readings: the last tick's, the newest of each kind
         # [relnav] enabled: the relative estimator and the carrier's state in the passenger's frame
         self.relative = RelativeDeck(model.relnav, model.dock_offset_ned_m, seat_offset(
@@ -130,6 +134,8 @@ class PassengerStep:
         ``on_deck`` (the vehicle still stands on the carrier's deck) as a measurement, and fuses
         downward ranges only in :data:`~mission.phases.phase.RANGED` (the recovery near the deck)."""
         self.measurements = self.measurements.then(tuple(inputs.measurements))
+        if self._taus is not None and self.velocity_fix is not None:
+            self.velocity_fix.tau_s = self._taus[1] if phase in RANGED else self._taus[0]
         carrier, relative = inputs.carrier, None
         if self.relative is not None:
             carrier, relative = self.relative.observe(inputs.t_s, inputs.vehicle, carrier, self.measurements,
