@@ -141,7 +141,8 @@ class MissionController:
         self._origin_given = False
         self._received: Any = None
         self._rates: list[float] = []  # LOCAL_POSITION_NED rate seen each flying tick [Hz]
-        self.step = PassengerStep(self.model, cfg.mission.velocity_bias_tau_s, cfg.mission.near_deck_velocity_bias_tau_s)
+        self.step = PassengerStep(self.model, cfg.mission.velocity_bias_tau_s,
+                                  cfg.mission.near_deck_velocity_bias_tau_s)
         self._target_gate = RateGate(cfg.relnav.landing_target_rate_hz if cfg.relnav.enabled else 0.0)
         self._target_failed = False  # a LANDING_TARGET send raised (logged once)
         self._home: HomeKeeper | None = None

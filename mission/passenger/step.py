@@ -120,8 +120,7 @@ class PassengerStep:
     def __init__(self, model: MissionModel, velocity_bias_tau_s: float = 0.0, near_deck_tau_s: float | None = None) -> None:
         self.model = model
         self.velocity_fix = PositionConsistentVelocity(velocity_bias_tau_s) if velocity_bias_tau_s > 0 else None
-        # (time constant elsewhere, near the deck): the filter's bias carries on across the switch, only its gain changes
-        self._taus = (velocity_bias_tau_s, near_deck_tau_s) if self.velocity_fix is not None and near_deck_tau_s else None
+        self._tau_s, self._near_deck_tau_s = velocity_bias_tau_s, near_deck_tau_s
         self.measurements = Measurements()  # the measurement feeds' readings: the last tick's, the newest of each kind
         # [relnav] enabled: the relative estimator and the carrier's state in the passenger's frame
         self.relative = RelativeDeck(model.relnav, model.dock_offset_ned_m, seat_offset(
@@ -134,8 +133,9 @@ class PassengerStep:
         ``on_deck`` (the vehicle still stands on the carrier's deck) as a measurement, and fuses
         downward ranges only in :data:`~mission.phases.phase.RANGED` (the recovery near the deck)."""
         self.measurements = self.measurements.then(tuple(inputs.measurements))
-        if self._taus is not None and self.velocity_fix is not None:
-            self.velocity_fix.tau_s = self._taus[1] if phase in RANGED else self._taus[0]
+        if self.velocity_fix is not None and self._near_deck_tau_s is not None:
+            # the filter's bias carries on across a switch: only its gain changes
+            self.velocity_fix.tau_s = self._near_deck_tau_s if phase in RANGED else self._tau_s
         carrier, relative = inputs.carrier, None
         if self.relative is not None:
             carrier, relative = self.relative.observe(inputs.t_s, inputs.vehicle, carrier, self.measurements,

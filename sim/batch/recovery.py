@@ -461,7 +461,8 @@ class World:
         self.approach_s: float | None = None  # when the first approach began [s]
         self.failed: dict[str, str] = {}
         self.events: list[tuple[float, str]] = []  # (t [s], what the phases said)
-        self.step = PassengerStep(self.model, cfg.mission.velocity_bias_tau_s, cfg.mission.near_deck_velocity_bias_tau_s)  # the controller's own step
+        self.step = PassengerStep(self.model, cfg.mission.velocity_bias_tau_s,  # the controller's own step
+                                  cfg.mission.near_deck_velocity_bias_tau_s)
         self.limit_s = max_duration_s if max_duration_s is not None else self.model.max_duration_s + 30.0
         self.k = 0
         self.done = False

@@ -140,7 +140,8 @@ class TeamWorld:
             model = mission_model(own)
             slot = np.asarray(cfg.team.slots[cfg.team.slot_index(p.slot)].offset_ned_m, dtype=float)
             under = [float(start[0] + slot[0]), float(start[1] + slot[1]), float(start[2])]  # on the ground under its slot
-            self.members.append(Member(p.name, own, PassengerStep(model, own.mission.velocity_bias_tau_s, own.mission.near_deck_velocity_bias_tau_s),
+            step = PassengerStep(model, own.mission.velocity_bias_tau_s, own.mission.near_deck_velocity_bias_tau_s)
+            self.members.append(Member(p.name, own, step,
                                        MockDynamics(under, estimate_error, seed + i, gnss=own.world.passenger_gnss)))
         for m, pct in zip(self.members, batteries or []):
             m.battery_pct = pct

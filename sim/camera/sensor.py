@@ -68,9 +68,8 @@ class Sensor:
         in a bank of :data:`NOISE_BANK_FRAMES` frames of independent normals (times the noise's
         sigma), drawn at the first frame. Each pixel's noise is Gaussian with the model's sigma,
         independent of its neighbours'; two frames' windows are the bank shifted by a random
-        number of pixels, so a pixel's noise is not its noise in the last frame. Drawing a
-        frame's 307 200 normals afresh took 2.6 ms of the exposure's 3.0 (a quarter of the relnav
-        demo's mock vehicle; docs/testing.md), the window 0.1."""
+        number of pixels, so a pixel's noise is not its noise in the last frame (why a bank and
+        not fresh draws: docs/testing.md, thirteenth session)."""
         size = int(np.prod(shape))
         if self._bank is None or self._bank.size < NOISE_BANK_FRAMES * size:
             self._bank = self._rng.standard_normal(NOISE_BANK_FRAMES * size, dtype=np.float32)
