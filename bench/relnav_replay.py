@@ -14,7 +14,10 @@ estimates to the bit (printed as ``replay check``: the largest difference of the
 Per flight and phase group (``riding``: RIDING; ``approach``: HOLDOFF and APPROACH), against the
 truth (the rover's SIH position and velocity minus the quadrotor's, at each estimate's sample time
 on the bench's monotonic clock): the relative position's horizontal error [m] (median, 95th
-percentile, max), each marker's horizontal error against the truth at its capture beside the
+percentile, max), in all and in sight of the marker (the newest fused marker captured at most
+``IN_SIGHT_S`` before), the share of estimates out of sight (``blind_share``), the error over the
+standard deviation the estimate states (``error_over_sigma``: an honest filter keeps it under about
+3 however long it is blind), each marker's horizontal error against the truth at its capture beside the
 standard deviation it stated, the deck's velocity error [m/s] (the estimate's carrier velocity against the
 rover's true velocity: a frame offset does not move, so they compare directly; and against what
 riding must follow, the deck's motion in the passenger's GNSS frame: the rover's true motion plus
@@ -43,6 +46,7 @@ from mission.relnav.inputs import RelativeEstimate
 from sim.sitl import ground_truth
 
 DERIVATIVE_S = 0.2  # [s] the window the deck's true motion is differentiated over
+IN_SIGHT_S = 0.3  # [s] an estimate counts as in sight of the marker when its newest fused marker is this young
 GROUPS = {"riding": ("RIDING",), "approach": ("HOLDOFF", "APPROACH")}
 PAIR_DIR = "pair0"
 
@@ -156,6 +160,8 @@ def figures(directory: Path, r: dict[str, Any]) -> dict[str, Any]:
     t = np.array([e.t_s for e in est])
     vel = np.array([e.carrier_velocity_ned_m_s for e in est])
     rel = np.array([e.position_ned_m for e in est])
+    since = np.array([e.since_marker_s for e in est])
+    sigma = np.array([e.position_sigma_m for e in est])
     flown = r["flown"]
     check = None
     if len(flown) == len(est):
@@ -178,7 +184,12 @@ def figures(directory: Path, r: dict[str, Any]) -> dict[str, Any]:
             tm = t[sel] + r["shift_s"]
             true_rel = _at(rover, tm, range(1, 4)) - _at(passenger, tm, range(1, 4))
             true_v = _at(rover, tm, range(4, 7))
-            g["position_error_m"] = _stats(np.hypot(*(rel[sel] - true_rel)[:, :2].T))
+            error = np.hypot(*(rel[sel] - true_rel)[:, :2].T)
+            g["position_error_m"] = _stats(error)
+            in_sight = since[sel] <= IN_SIGHT_S
+            g["blind_share"] = round(float(1.0 - in_sight.mean()), 3)
+            g["in_sight_position_error_m"] = _stats(error[in_sight])
+            g["error_over_sigma"] = _stats(error / sigma[sel])
             g["velocity_error_m_s"] = _stats(np.hypot(*(vel[sel] - true_v)[:, :2].T))
             g["motion_error_m_s"] = _stats(np.hypot(*(vel[sel] - deck_motion(rover, passenger, tm))[:, :2].T))
         out[name] = g
@@ -251,7 +262,8 @@ def main(dirs: tuple[Path, ...], config: Path | None, sets: tuple[str, ...], plo
          drop_repeats: bool) -> None:
     overrides = _parse_sets(sets)
     rows = []
-    header = ("flight | group | ticks | position error med/p95/max [m] | deck velocity error med/p95/max [m/s] | "
+    header = ("flight | group | ticks | position error med/p95/max [m] | out of sight [share] | in sight: "
+              "position error med/p95/max [m] | error over its stated sigma med/p95/max | deck velocity error med/p95/max [m/s] | "
               "against its motion in the passenger's frame [m/s] | "
               "largest swing [m/s] | markers fused/rejected, resets | replay check [m/s]")
     if not as_json:
@@ -267,7 +279,8 @@ def main(dirs: tuple[Path, ...], config: Path | None, sets: tuple[str, ...], plo
         c = f.get("counts", {})
         for name in GROUPS:
             g = f[name]
-            click.echo(f"{f['flight']} | {name} | {g['ticks']} | {g.get('position_error_m')} | {g.get('velocity_error_m_s')} | "
+            click.echo(f"{f['flight']} | {name} | {g['ticks']} | {g.get('position_error_m')} | {g.get('blind_share')} | "
+                       f"{g.get('in_sight_position_error_m')} | {g.get('error_over_sigma')} | {g.get('velocity_error_m_s')} | "
                        f"{g.get('motion_error_m_s')} | "
                        f"{g['swing_max_m_s']} | {c.get('markers_fused')}/{c.get('markers_rejected')}, {c.get('resets')} | "
                        f"{f['replay_check_m_s'] if not (overrides or drop_repeats) else '-'}   [{k}/{len(dirs)}]")
