@@ -51,14 +51,15 @@ def test_the_quadrotor_docks_on_the_rover_through_a_2_m_gnss_bias_by_the_camera(
 @pytest.mark.px4_job("relnav")
 def test_the_flights_estimator_replays_from_its_log_and_holds_against_the_truth(px4_jobs) -> None:
     """The estimator's inputs in the flight's log replay it to the bit (``bench.relnav_replay``); by
-    SIH's truth, on the approach, its relative position is within 0.1 m at the 95th percentile while
-    the marker is in sight, and its error stays within 3 of the standard deviations it states however
-    long the marker is out of sight; it never re-initialised (a GNSS fix fused more than once, or
+    SIH's truth, on the approach, the marker is out of sight at most 10 % of the time, the relative
+    position is within 0.1 m at the 95th percentile while it is in sight and within 0.2 m in all,
+    and the error stays within 3 of the standard deviations the estimate states however long the
+    marker is out of sight; it never re-initialised (a GNSS fix fused more than once, or
     over-trusted, reset it 2-5 times a flight: docs/relnav.md, "Replaying a flight's estimator").
-    Measured on 30 ten-seed flights and two of this test's: in sight, p95 0.032-0.044 m; the error
-    over its sigma at most 2.15; out of sight 1.4-19 % of the approach (this flight's the most: the
-    marker leaves the frame in the holdoff while the rover pulls away from its turn), when the error
-    grows to 0.2-0.3 m and the stated sigma with it (docs/relnav.md, "Out of sight in the holdoff")."""
+    Measured on 26 flights with the 90 deg camera (ten-seed batches and this flight): out of sight
+    0-5.4 %; in sight p95 0.033-0.053 m; in all p95 0.034-0.066 m; the error over its sigma at most
+    1.69. With an 80 deg camera this flight's marker left the frame in the holdoff for 14-19 % of the
+    approach, and its p95 read 0.07-0.24 m (docs/relnav.md, "Out of sight in the holdoff")."""
     from bench.relnav_replay import figures, replay
 
     directory = Path(px4_jobs["relnav"].result()["directory"])
@@ -67,6 +68,6 @@ def test_the_flights_estimator_replays_from_its_log_and_holds_against_the_truth(
     c = f["counts"]  # 0-13 markers rejected of 550-1350 a flight after the fix (10 flights and this test's)
     assert c["resets"] == 0 and c["markers_rejected"] <= 0.05 * c["markers_fused"], c
     a = f["approach"]
-    assert a["in_sight_position_error_m"][1] <= 0.1, a
+    assert a["blind_share"] <= 0.1, a
+    assert a["in_sight_position_error_m"][1] <= 0.1 and a["position_error_m"][1] <= 0.2, a
     assert a["error_over_sigma"][2] <= 3.0, a
-    assert a["blind_share"] <= 0.3, a

@@ -58,13 +58,13 @@ def test_each_passenger_rides_the_pairs_dock_point_moved_to_its_side_on_its_own_
 # navigation. Each field comes from one of the two, and these say which: what relnav changed of
 # the PX4 cycle's is relnav's, the rest the team's; its own is the seat's sigma (its quadrotors
 # stand 0.9 m from their seats) and each slot's marker.
-RELNAV_OWN = {"mission": {"feeds"}, "carrier": {"p3_margin_m", "p3_frame", "p3_unaligned_margin_m", "p3_bias_max_m",
+RELNAV_OWN = {"mission": {"feeds", "near_deck_velocity_bias_tau_s"}, "carrier": {"p3_margin_m", "p3_frame", "p3_unaligned_margin_m", "p3_bias_max_m",
                                                 "align_on_deck_m", "acceleration_tau_s", "start_motion_tau_s",
                                                 "separation_speed_m_s", "separation_decel_m_s2", "separation_room_m",
                                                 "p3_bias_max_age_s"},
               "recovery": {"holdoff_distance_m", "glide_angle_deg", "final_descent_speed_m_s", "final_lineup_margin",
                            "final_descent_lag_m", "decision_height_m"},
-              "vision": {"rate_hz", "layout"}, "relnav": {"enabled", "landing_target_rate_hz", "accel_noise_m_s2",
+              "vision": {"rate_hz", "layout", "hfov_deg"}, "relnav": {"enabled", "landing_target_rate_hz", "accel_noise_m_s2",
                                                                                  "gnss_velocity_sigma_m_s", "marker_model_sigma_m"},
               "world": {"carrier_gnss"}}
 
