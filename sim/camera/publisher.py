@@ -48,7 +48,8 @@ class BodyTruth:
 
     @classmethod
     def level(cls, position_ned_m: np.ndarray, yaw_rad: float, velocity_ned_m_s: np.ndarray) -> BodyTruth:
-        """A vehicle level at yaw ``yaw_rad`` [rad] (the mock vehicle's kinematic state has no tilt)."""
+        """A vehicle level at yaw ``yaw_rad`` [rad] (a hover; the mock tilts with its acceleration:
+        :func:`sim.vehicle.physics.multicopter.attitude_quaternion`)."""
         half = yaw_rad / 2
         return cls(np.asarray(position_ned_m, float), np.array([math.cos(half), 0.0, 0.0, math.sin(half)]),
                    np.asarray(velocity_ned_m_s, float))

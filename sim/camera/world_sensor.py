@@ -35,6 +35,7 @@ from sim.camera.error_model import FITTED, ModelledDetector
 from sim.camera.render import Poses
 from sim.camera.sensor import Sensor, sensor_model
 from sim.camera.simulated import SimulatedCamera
+from sim.vehicle.physics.multicopter import attitude_quaternion
 
 if TYPE_CHECKING:
     from sim.batch.recovery import World
@@ -59,14 +60,14 @@ class WorldMarker:
         self.checked_s: float | None = None  # [s] when an outage last could begin
 
     def poses(self, t_s: float) -> Poses:
-        """The truth at ``t_s`` [s]: the vehicle level at its yaw, the marker on the deck (the
-        carrier's reference point plus ``vision.marker_offset_ned_m``, by default the dock point)."""
+        """The truth at ``t_s`` [s]: the vehicle tilted as its acceleration tilts a multicopter
+        (:func:`sim.vehicle.physics.multicopter.attitude_quaternion`: a downward camera looks away
+        from where the vehicle accelerates), the marker on the deck (the carrier's reference point
+        plus ``vision.marker_offset_ned_m``, by default the dock point)."""
         kin = self.world.vehicle.kin
-        half = kin.yaw_rad / 2
         cfg = self.world.cfg
         deck = self.world.carrier.true_at(t_s)[0] + np.asarray(marker_offset_ned_m(cfg.vision, cfg.mission.dock_offset_ned_m), float)
-        return Poses(self.world.vehicle.true_position, np.array([math.cos(half), 0.0, 0.0, math.sin(half)]),
-                     deck, self.world.carrier.yaw_rad)
+        return Poses(self.world.vehicle.true_position, np.array(attitude_quaternion(kin)), deck, self.world.carrier.yaw_rad)
 
     def poll(self, t_s: float) -> list[Measurement]:
         """Capture if a frame is due at ``t_s`` [s]; deliver what is ``latency_s`` old."""

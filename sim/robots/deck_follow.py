@@ -53,6 +53,7 @@ from sim.camera.publisher import BodyTruth, CameraPublisher, DeckTruth
 from sim.robots.truth import TruthTrack, truth_key
 from sim.vehicle.mock import MockVehicle
 from sim.vehicle.physics.deck import DeckMotion
+from sim.vehicle.physics.multicopter import attitude_quaternion
 
 log = logging.getLogger(__name__)
 
@@ -233,8 +234,8 @@ def follow_carrier(vehicle: MockVehicle, session: Any, pair: str, truth: bool = 
             track.sample(vehicle, got)
         if camera is not None:  # every slot of its grid, a time mark while the deck is not known
             t, kin = float(vehicle._t_s), vehicle._kin
-            body = BodyTruth.level(np.array([kin.n_m, kin.e_m, kin.d_m]), kin.yaw_rad,
-                                   np.array([kin.vn_m_s, kin.ve_m_s, kin.vd_m_s]))
+            body = BodyTruth(np.array([kin.n_m, kin.e_m, kin.d_m]), np.array(attitude_quaternion(kin)),
+                             np.array([kin.vn_m_s, kin.ve_m_s, kin.vd_m_s]))
             camera.sample(t, body, None if got is None else DeckTruth(
                 np.asarray(got.centre(t, 0.0)), np.asarray(got.velocity_ned_m_s), made[0][0].yaw_rad))
         return got

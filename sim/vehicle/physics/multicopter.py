@@ -189,6 +189,12 @@ def attitude_rad(state: KinState) -> tuple[float, float, float]:
     return math.atan2(a_right, GRAVITY_M_S2), -math.atan2(a_fwd, GRAVITY_M_S2), state.yaw_rad
 
 
+def attitude_quaternion(state: KinState) -> tuple[float, float, float, float]:
+    """(w, x, y, z), body FRD to NED: the attitude :func:`attitude_rad` gives (what a camera fixed
+    to the body looks along, and what ATTITUDE_QUATERNION reports)."""
+    return quaternion(*attitude_rad(state))
+
+
 def quaternion(roll_rad: float, pitch_rad: float, yaw_rad: float) -> tuple[float, float, float, float]:
     """Hamilton quaternion (w, x, y, z) of the ZYX Euler angles, body FRD to NED."""
     cr, sr = math.cos(roll_rad / 2), math.sin(roll_rad / 2)
