@@ -1,5 +1,6 @@
 """The passenger's downward camera in simulation: frames rendered from the true poses, for the mock
-vehicle (``mock-vehicle --camera``: the vehicle's true position, level at its yaw) and for PX4 SITL
+vehicle (``mock-vehicle --camera``: the vehicle's true position, tilted as its acceleration tilts a
+multicopter) and for PX4 SITL
 (:mod:`sim.sitl.camera`: SIH's true position and attitude of the passenger and the rover), given as
 a :class:`BodyTruth` and a :class:`DeckTruth` (the marker at the carrier's true
 reference point plus ``vision.marker_offset_ned_m``, by default the dock point, level at the

@@ -12,7 +12,8 @@ Two ways to measure, chosen by the entry point (``pyproject.toml``, ``marsupial.
   sensor's noise, blur and dropouts (:class:`sim.camera.simulated.SimulatedCamera`) and the real
   detector and pose (:class:`mission.vision.detect.MarkerDetector`): ~5-10 ms a frame.
 
-The vehicle's attitude is level at its yaw (the mock's physics keeps no tilt); the deck is level
+The vehicle's attitude is the one its acceleration gives a multicopter (the mock's ATTITUDE:
+:func:`sim.vehicle.physics.multicopter.attitude_quaternion`); the deck is level
 at the carrier's yaw, its centre (the marker's) at the carrier's reference point plus
 ``vision.marker_offset_ned_m`` (by default ``mission.dock_offset_ned_m``, the dock point, where the
 vehicle sits when docked). Captures happen on

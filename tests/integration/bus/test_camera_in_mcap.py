@@ -50,7 +50,9 @@ def _decoded(path):
 
 
 def test_the_feeds_frames_reach_the_mcap_at_the_log_rate_with_the_tag_drawn(tmp_path) -> None:
-    cfg = with_overrides(load_config(CONFIGS / "relnav.toml"), {"zenoh.pair": "pairC", "vision.log_rate_hz": 10.0})
+    # an 80 deg camera: the small tag 2 m away is 19 px wide (at relnav.toml's 90 deg, 16 px: not found)
+    cfg = with_overrides(load_config(CONFIGS / "relnav.toml"), {"zenoh.pair": "pairC", "vision.log_rate_hz": 10.0,
+                                                               "vision.hfov_deg": 80.0})
     detector = vision_detector(cfg)
     camera = detector.camera
     # the vehicle level heading north, the deck (aligned with NED) 2 m below it and 0.2 m east
