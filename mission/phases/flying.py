@@ -273,9 +273,13 @@ def join(state, obs, m):
     # Docked once the vehicle has settled on the dock point (within join_settle_m for
     # join_settle_s): the carrier starts its approach then, so what is left of the climb (its
     # overshoot) is not counted as riding offset; rest is judged on positions, not on the velocity
-    # estimate (why, measured on PX4: docs/flying-px4.md, "JOIN waits until settled").
+    # estimate (why, measured on PX4: docs/flying-px4.md, "JOIN waits until settled"). With the
+    # relative estimate, only on a dock point that has taken in the estimate's jumps (as an approach
+    # waits: RelnavGates.taken_in): the first markers move the deck by the seat's error, and a ride
+    # begun while that was still being let through began 0.6-0.94 m off the deck (docs/team.md).
     v = obs.vehicle
-    near = on_dock and norm(v.position_ned_m - dock) <= m.join_settle_m
+    near = (on_dock and norm(v.position_ned_m - dock) <= m.join_settle_m
+            and (m.relnav is None or obs.relative is None or m.relnav.taken_in(obs.relative)))
     settled = (state.settled_since_s if state.settled_since_s is not None else t) if near else None
     if settled is not None and t - settled >= m.join_settle_s:
         new = enter(state, Phase.RIDING, t, x_ref=dock.copy(), e_ref=ZERO.copy(), prev_dock=dock.copy(), u_ref=v_dock.copy(),

@@ -7,7 +7,8 @@
     STREAMING --zero-velocity setpoints for prestream_s--> ARMING (or OFFBOARD if armed)
     ARMING    --armed--> OFFBOARD           refused after retries --> ABORT(arming_refused)
     OFFBOARD  --mode is OFFBOARD--> JOIN    refused after retries --> ABORT(offboard_refused)
-    JOIN      --reference on the dock point, vehicle within join_settle_m for join_settle_s--> RIDING
+    JOIN      --reference on the dock point, vehicle within join_settle_m for join_settle_s (with [relnav],
+               the estimate's jumps taken in: relnav.pending_limit_m)--> RIDING
     RIDING    --docked carrier within b c - margin of the target (latched)--> SEPARATED
     SEPARATED --passenger left the dock (> 0.1 m)--> NAVIGATING
     NAVIGATING --within arrival radius for arrival dwell--> ARRIVED
