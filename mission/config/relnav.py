@@ -56,8 +56,8 @@ class RelnavSection(Section):
                      "deck as straight under it, horizontally, to this standard deviation per axis (the same error "
                      "all the while it stands: the estimate is never made surer than this by it)"))
     pending_limit_m: float = Field(0.3, gt=0, le=10,
-        description=("[m] HOLDOFF begins an approach only once the part of the estimate's jumps still held back "
-                     "(let through at `relnav.correction_rate_m_s`) is below this"))
+        description=("[m] HOLDOFF begins an approach, and JOIN settles into the ride, only once the part of the "
+                     "estimate's jumps still held back (let through at `relnav.correction_rate_m_s`) is below this"))
     carrier_accel_tau_s: float = Field(0.0, ge=0, le=10,
         description=("[s] riding, the carrier's acceleration fed forward (when the carrier sends none) is the rate of "
                      "the estimate's carrier velocity (as the phases see it, slewed at the carrier's acceleration "
