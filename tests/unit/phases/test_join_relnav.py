@@ -25,17 +25,17 @@ def _view(pending_m: float) -> RelativeView:
                         position_sigma_m=0.03, converged=True, since_marker_s=0.05)
 
 
-def _joined_after(model, pending_m: list[float], dt_s: float = 0.02) -> float | None:
+def _joined_after(model, views: list[RelativeView | None], dt_s: float = 0.02) -> float | None:
     """[s] when JOIN hands over to RIDING, the vehicle hovering still on the dock point of a carrier
-    standing at the origin, the tick k's relative view pending ``pending_m[k]`` (None: never)."""
+    standing at the origin, the tick k's relative view ``views[k]`` (None: never)."""
     dock = np.asarray(model.dock_offset_ned_m, float)
     carrier = CarrierObs(position_ned_m=np.zeros(3), velocity_ned_m_s=np.zeros(3), age_s=0.0, alive=True, yaw_rad=0.0)
     vehicle = VehicleObs(position_ned_m=dock.copy(), velocity_ned_m_s=np.zeros(3), armed=True, mode="OFFBOARD",
                          heartbeat_age_s=0.0)
     state = MissionState(phase=Phase.JOIN, since_s=0.0, start_s=0.0, x_ref=dock.copy(), u_ref=np.zeros(3))
-    for k, p in enumerate(pending_m):
+    for k, view in enumerate(views):
         t = k * dt_s
-        state, _ = join(state, Observation(t_s=t, vehicle=vehicle, carrier=carrier, relative=_view(p)), model)
+        state, _ = join(state, Observation(t_s=t, vehicle=vehicle, carrier=carrier, relative=view), model)
         if state.phase is Phase.RIDING:
             return t
     return None
@@ -44,21 +44,15 @@ def _joined_after(model, pending_m: list[float], dt_s: float = 0.02) -> float | 
 def test_join_rides_only_once_the_estimates_jump_is_taken_in(model):
     settle, limit = model.join_settle_s, model.relnav.pending_limit_m
     ticks = int(round(3 * settle / 0.02)) + 10
-    assert _joined_after(model, [0.0] * ticks) == pytest.approx(settle, abs=0.021)  # nothing pending: as before
+    assert _joined_after(model, [_view(0.0)] * ticks) == pytest.approx(settle, abs=0.021)  # nothing pending: as before
     # a 0.8 m correction still pending for the first second, then within the limit: the settle starts over
     first = int(round(1.0 / 0.02))
-    pending = [0.8] * first + [0.5 * limit] * (ticks - first)
+    pending = [_view(0.8)] * first + [_view(0.5 * limit)] * (ticks - first)
     assert _joined_after(model, pending) == pytest.approx(1.0 + settle, abs=0.021)
-    assert _joined_after(model, [limit + 0.05] * ticks) is None  # never while more than the limit is pending
+    assert _joined_after(model, [_view(limit + 0.05)] * ticks) is None  # never while more than the limit is pending
 
 
 def test_join_without_a_relative_view_is_not_held(model):
     """No estimate made yet (the vehicle or the carrier not heard): nothing pending to wait for."""
-    dock = np.asarray(model.dock_offset_ned_m, float)
-    carrier = CarrierObs(position_ned_m=np.zeros(3), velocity_ned_m_s=np.zeros(3), age_s=0.0, alive=True, yaw_rad=0.0)
-    vehicle = VehicleObs(position_ned_m=dock.copy(), velocity_ned_m_s=np.zeros(3), armed=True, mode="OFFBOARD",
-                         heartbeat_age_s=0.0)
-    state = MissionState(phase=Phase.JOIN, since_s=0.0, start_s=0.0, x_ref=dock.copy(), u_ref=np.zeros(3))
-    for k in range(int(round(2 * model.join_settle_s / 0.02)) + 5):
-        state, _ = join(state, Observation(t_s=k * 0.02, vehicle=vehicle, carrier=carrier, relative=None), model)
-    assert state.phase is Phase.RIDING
+    ticks = int(round(2 * model.join_settle_s / 0.02)) + 5
+    assert _joined_after(model, [None] * ticks) == pytest.approx(model.join_settle_s, abs=0.021)

@@ -14,6 +14,16 @@ from sim.vehicle.physics.multicopter import GRAVITY_M_S2, KinState
 from tests.conftest import CONFIGS, ROOT
 
 
+def _poses(cfg, kin: KinState, carrier_at: np.ndarray):
+    """The world's poses at 1 s: the vehicle's state ``kin`` (its true position the state's), the
+    carrier standing at ``carrier_at`` [m] NED, heading north."""
+    world = SimpleNamespace(
+        cfg=cfg, vehicle=SimpleNamespace(kin=kin, true_position=np.array([kin.n_m, kin.e_m, kin.d_m])),
+        carrier=SimpleNamespace(true_at=lambda t: (carrier_at.copy(), np.zeros(3)), yaw_rad=0.0),
+        scenario=SimpleNamespace(seed=0))
+    return WorldMarker(world, lambda poses, t: None).poses(1.0)  # type: ignore[arg-type]
+
+
 @pytest.mark.parametrize("configured", [True, False])
 def test_the_marker_lies_where_the_configuration_puts_it(configured: bool):
     """The marker lies at the carrier's reference point plus ``vision.marker_offset_ned_m``
@@ -24,11 +34,7 @@ def test_the_marker_lies_where_the_configuration_puts_it(configured: bool):
     if not configured:
         cfg = cfg.model_copy(update={"vision": cfg.vision.model_copy(update={"marker_offset_ned_m": None})})
     carrier_at = np.array([3.0, -2.0, 0.0])
-    world = SimpleNamespace(
-        cfg=cfg, vehicle=SimpleNamespace(kin=KinState(3.0, -2.0, -3.0), true_position=np.array([3.0, -2.0, -3.0])),
-        carrier=SimpleNamespace(true_at=lambda t: (carrier_at.copy(), np.zeros(3)), yaw_rad=0.0),
-        scenario=SimpleNamespace(seed=0))
-    poses = WorldMarker(world, lambda poses, t: None).poses(1.0)  # type: ignore[arg-type]
+    poses = _poses(cfg, KinState(3.0, -2.0, -3.0), carrier_at)
     expected = cfg.vision.marker_offset_ned_m if configured else cfg.mission.dock_offset_ned_m
     assert np.allclose(poses.deck_ned_m, carrier_at + np.asarray(expected))
     assert configured == (poses.deck_ned_m[2] - carrier_at[2] == 0.0)  # the deck, not 1.5 m over it
@@ -44,11 +50,7 @@ def test_the_camera_tilts_away_from_where_the_vehicle_accelerates(yaw_deg: float
     yaw = np.radians(yaw_deg)
 
     def optical_axis(an_m_s2: float) -> np.ndarray:
-        kin = KinState(0.0, 0.0, -5.0, yaw_rad=float(yaw), an_m_s2=an_m_s2)
-        world = SimpleNamespace(
-            cfg=cfg, vehicle=SimpleNamespace(kin=kin, true_position=np.array([0.0, 0.0, -5.0])),
-            carrier=SimpleNamespace(true_at=lambda t: (np.zeros(3), np.zeros(3)), yaw_rad=0.0), scenario=SimpleNamespace(seed=0))
-        q = WorldMarker(world, lambda poses, t: None).poses(1.0).attitude_q_wxyz  # type: ignore[arg-type]
+        q = _poses(cfg, KinState(0.0, 0.0, -5.0, yaw_rad=float(yaw), an_m_s2=an_m_s2), np.zeros(3)).attitude_q_wxyz
         return quaternion_matrix(q) @ np.array([0.0, 0.0, 1.0])  # the body's down axis in NED
 
     assert np.allclose(optical_axis(0.0), [0.0, 0.0, 1.0])
