@@ -36,7 +36,7 @@ from mission.config.schema import CarrierRos2Section, Config, ZenohSection, load
 from mission.errors import MarsupialError
 from mission.flightdata.writer import DEFAULT_LIVE, LiveAddress, is_loopback, parse_live
 from mission.lifetime import supervise_children
-from sim.net import free_port, stop_process
+from sim.net import child_stderr, free_port, stop_process
 from sim.progress import watch_missions
 from sim.robots.truth import demo_truth
 from sim.team_demo import child_command as _python_cli, run_team_demo, team_lines
@@ -60,20 +60,21 @@ class PairRun:
 
 
 def start_carrier_robot(kind: str, name: str, zenoh_ep: str, speed: float, start: str, stack: ExitStack,
-                        err: int | None, lockstep: bool = False, bus_key: Path | None = None,
+                        logs: Path | None, lockstep: bool = False, bus_key: Path | None = None,
                         cfg: Config | None = None) -> tuple[list[str], subprocess.Popen | None]:
     """The robot under a ``kind`` carrier ("sim": built in, none to start; "mavlink": a mock PX4
     rover, sysid 2; "ros2": a ROS-2-shaped robot on rmw_zenoh keys in namespace ``name``, taking
     the command type and sending the attachment form of ``cfg.carrier.ros2``, a Zenoh client of
     the demo's router when ``cfg.zenoh.mode`` is "client" (as an rmw_zenoh node of its host's
     ``rmw_zenohd``), and only commands signed with ``bus_key`` if given; with ``lockstep`` both
-    step on the carrier's clock) and the carrier controller's arguments for it."""
+    step on the carrier's clock) and the carrier controller's arguments for it. ``logs``: the
+    robot's log goes to ``carrier_robot.log`` there (None: to this process's stderr)."""
     if kind == "mavlink":
         port = free_port(socket.SOCK_DGRAM)
         robot = subprocess.Popen(_python_cli("mock-vehicle", "--frame", "rover", "--sysid", "2", "--mavlink",
                                              "udpin:127.0.0.1:0", "--target", f"udpout:127.0.0.1:{port}", "--speed",
                                              str(speed), "--start-ned", start, *(["--lockstep"] if lockstep else [])),
-                                 stderr=err)
+                                 stderr=child_stderr(stack, logs, "carrier_robot"))
         stack.callback(stop_process, robot)
         return ["--backend", "mavlink", "--mavlink", f"udpin:127.0.0.1:{port}", "--target-system", "2",
                 "--kinematics", "ackermann"], robot
@@ -84,7 +85,8 @@ def start_carrier_robot(kind: str, name: str, zenoh_ep: str, speed: float, start
         robot = subprocess.Popen(_python_cli("ros2-robot", "--key-form", "rmw_zenoh", "--namespace", name, *client,
                                              "--cmd-vel-type", ros2.cmd_vel_type, "--rmw-attachment", ros2.rmw_attachment,
                                              "--zenoh-connect", zenoh_ep, "--speed", str(speed), *signed,
-                                             *(["--lockstep"] if lockstep else [])), stderr=err)
+                                             *(["--lockstep"] if lockstep else [])),
+                                 stderr=child_stderr(stack, logs, "carrier_robot"))
         stack.callback(stop_process, robot)
         return ["--backend", "ros2", "--key-form", "rmw_zenoh", "--ros2-namespace", name, "--kinematics",
                 "diff_drive", "--offset-ned", start], robot  # its odometry starts at zero where it stands
@@ -134,11 +136,12 @@ def start_pair(config: str, name: str, zenoh_ep: str, speed: float, log_root: Pa
     carrier count their flight data's log times from one epoch (``--log-epoch-ns``); else wall
     clocks scaled by ``speed``. ``live``: the mission serves its flight to Foxglove there (``run --live``).
     ``estimate_error``: the vehicle's estimate errs this many times as PX4 SITL's does (0: exact;
-    ``mock-vehicle --estimate-error``), drawn from ``seed`` (``mock-vehicle --seed``)."""
+    ``mock-vehicle --estimate-error``), drawn from ``seed`` (``mock-vehicle --seed``). ``quiet``: each
+    child's log (its stderr) goes to ``<child>.log`` in the pair's flight folder, else to ours."""
     cfg = load_config(config)
     pair = PairRun(name=name, log_dir=log_root / name)
     mav_port = free_port(socket.SOCK_DGRAM)
-    err = subprocess.DEVNULL if quiet else None
+    logs = pair.log_dir if quiet else None  # quiet: each child's log goes to <name>.log beside its flight
     mode = ["--lockstep"] if lockstep else []
     # in lockstep the mission and the carrier log on one simulated clock: one epoch lines their files up
     epoch = ["--log-epoch-ns", str(time.time_ns())] if lockstep else []
@@ -153,12 +156,13 @@ def start_pair(config: str, name: str, zenoh_ep: str, speed: float, log_root: Pa
     # the passenger's camera node signs its frames with the passenger's own key, as run checks them
     camera_signed = ["--zenoh-private-key", str(keys_of["passenger"][0])] if bus_key is not None and "--camera" in world_args(
         cfg, config) else []
-    backend_args, robot = start_carrier_robot(carrier_kind, name, zenoh_ep, speed, start, stack, err, lockstep, bus_key, cfg)
+    backend_args, robot = start_carrier_robot(carrier_kind, name, zenoh_ep, speed, start, stack, logs, lockstep, bus_key,
+                                              cfg)
     carrier = subprocess.Popen(_python_cli("carrier", config, "--speed", str(speed), "--pair", name,
                                            "--zenoh-connect", zenoh_ep, "--summary", str(pair.log_dir / "carrier.json"),
                                            "--mcap", str(pair.log_dir / "carrier.mcap"), *backend_args, *carrier_signed,
                                            *mode, *epoch),
-                               stderr=err)
+                               stderr=child_stderr(stack, logs, "carrier"))
     stack.callback(stop_process, carrier)
     # riding on the deck (mission.ride = "deck"): the deck is the dock point, the vehicle stands on it
     on_deck = cfg.mission.ride == "deck"
@@ -171,13 +175,13 @@ def start_pair(config: str, name: str, zenoh_ep: str, speed: float, log_root: Pa
                                            "--zenoh-connect", zenoh_ep, "--summary", str(pair.log_dir / "vehicle.json"),
                                            "--estimate-error", str(estimate_error), "--seed", str(seed), *world_args(cfg, config),
                                            *camera_signed, *mav_signed, *mode),
-                               stderr=err)
+                               stderr=child_stderr(stack, logs, "vehicle"))
     stack.callback(stop_process, vehicle)
     live_args = [] if live is None else ["--live", f"{live.host}:{live.port}"]
     mission = subprocess.Popen(_python_cli("run", config, "--mavlink", f"udpin:127.0.0.1:{mav_port}", "--zenoh-connect",
                                            zenoh_ep, "--pair", name, "--speed", str(speed), "--log-dir", str(pair.log_dir),
                                            *signed, *mav_signed, *mode, *epoch, *live_args),
-                               stdout=subprocess.PIPE, stderr=err, text=True)
+                               stdout=subprocess.PIPE, stderr=child_stderr(stack, logs, "mission"), text=True)
     stack.callback(stop_process, mission, 30.0)
     pair.procs = {"carrier": carrier, "vehicle": vehicle, "mission": mission}
     if robot is not None:
@@ -469,7 +473,9 @@ def format_table(summaries: list[dict]) -> str:
 @click.option("--log-root", type=click.Path(file_okay=False), default="logs/demo", show_default=True,
               help="Directory for the flight logs (one sub-directory per pair).")
 @click.option("--timeout", "timeout_s", type=float, default=120.0, show_default=True, help="Wall-clock limit [s].")
-@click.option("--verbose-children", is_flag=True, help="Show the children's log output.")
+@click.option("--verbose-children", is_flag=True,
+              help="Show the children's log output here (default: each child's log is written to <name>.log in its "
+                   "pair's flight folder).")
 @click.option("--carrier", "carrier_kind", type=click.Choice(["sim", "mavlink", "ros2"]), default="sim", show_default=True,
               help="The carrier robot: built-in kinematic robot; a mock PX4 Ackermann rover over MAVLink; a "
                    "ROS-2-shaped diff-drive robot over Zenoh (rmw_zenoh keys).")

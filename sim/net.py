@@ -10,7 +10,9 @@ import subprocess
 import threading
 import time
 from collections.abc import Callable
-from typing import TypeVar
+from contextlib import ExitStack
+from pathlib import Path
+from typing import IO, TypeVar
 
 T = TypeVar("T")
 
@@ -118,3 +120,14 @@ def recv_stamped(sock: socket.socket) -> tuple[bytes, int, tuple[str, int]]:
             sec, nsec = struct.unpack("qq", payload[:16])
             return data, sec * 1_000_000_000 + nsec, address
     return data, time.time_ns(), address
+
+
+def child_stderr(stack: ExitStack, folder: Path | None, name: str) -> IO[str] | None:
+    """Where a child process's stderr (its log) goes: the file ``folder/name.log``, closed with
+    ``stack``, or this process's own stderr (``folder`` None)."""
+    if folder is None:
+        return None
+    folder.mkdir(parents=True, exist_ok=True)
+    out = open(folder / f"{name}.log", "w", encoding="utf-8")  # noqa: SIM115 - closed with the stack
+    stack.callback(out.close)
+    return out

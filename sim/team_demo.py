@@ -35,7 +35,7 @@ from mission.config.passenger import check_team_flight, passenger_config
 from mission.config.schema import Config, ZenohSection, load_config
 from mission.errors import ConfigError
 from mission.lifetime import supervise_children
-from sim.net import free_port, stop_process
+from sim.net import child_stderr, free_port, stop_process
 from sim.progress import watch_missions
 
 #: [-] the team's clocks' speed at most: each passenger's mission ticks at 50 Hz of its clock.
@@ -79,14 +79,17 @@ def start_team(cfg: Config, config: str, zenoh_ep: str, speed: float, log_root: 
     (:class:`sim.demo.PairRun`, one per passenger, named after it). Returns the carrier and the runs."""
     from mission.bus.auth import CARRIER
 
-    err = subprocess.DEVNULL if quiet else None
+    def logs(folder: Path) -> Path | None:  # quiet: a child's log goes beside its flight, else to our stderr
+        return folder if quiet else None
+
     pair = cfg.zenoh.pair
     mav_signed = ["--signing-key", str(mav_key)] if mav_key is not None else []
     mode = ["--lockstep"] if lockstep else []
     epoch = ["--log-epoch-ns", str(time.time_ns())] if lockstep else []  # one simulated clock: one epoch
     carrier = subprocess.Popen(child_command("carrier", config, "--speed", str(speed), "--zenoh-connect", zenoh_ep, "--summary",
                                     str(log_root / "carrier.json"), "--mcap", str(log_root / "carrier.mcap"),
-                                    "--backend", "sim", *_signed_as(keys, CARRIER), *mode, *epoch), stderr=err)
+                                    "--backend", "sim", *_signed_as(keys, CARRIER), *mode, *epoch),
+                               stderr=child_stderr(stack, logs(log_root), "carrier"))
     stack.callback(stop_process, carrier)
     runs = []
     for i, p in enumerate(cfg.team.passengers):
@@ -99,12 +102,13 @@ def start_team(cfg: Config, config: str, zenoh_ep: str, speed: float, log_root: 
                                         "--start-ned", _csv(start), "--deck", pair, "--deck-height", repr(-float(slot[2])),
                                         "--deck-offset", _csv(slot[:2]), "--zenoh-connect", zenoh_ep, "--summary",
                                         str(run.log_dir / "vehicle.json"), "--estimate-error", str(estimate_error),
-                                        "--seed", str(seed + i), *mav_signed, *mode), stderr=err)
+                                        "--seed", str(seed + i), *mav_signed, *mode),
+                                   stderr=child_stderr(stack, logs(run.log_dir), "vehicle"))
         stack.callback(stop_process, vehicle)
         mission = subprocess.Popen(child_command("run", config, "--passenger", p.name, "--mavlink", f"udpin:127.0.0.1:{port}",
                                         "--zenoh-connect", zenoh_ep, "--speed", str(speed), "--log-dir", str(run.log_dir),
                                         *_signed_as(keys, p.name), *mav_signed, *mode, *epoch), stdout=subprocess.PIPE,
-                                   stderr=err, text=True)
+                                   stderr=child_stderr(stack, logs(run.log_dir), "mission"), text=True)
         stack.callback(stop_process, mission, 30.0)
         run.procs = {"vehicle": vehicle, "mission": mission}
         runs.append(run)

@@ -96,7 +96,11 @@ def three_pairs(tmp_path_factory) -> LiveFlight:
                 code = demo.wait(timeout=150)
         finally:
             stop_process(demo, 30.0)
-    return LiveFlight(root, code, (root / "demo.out").read_text(), port, (v0, v1), not_seen)
+    text = (root / "demo.out").read_text()
+    if code != 0 or not_seen:  # what each child logged (the demo writes it beside the pair's flight)
+        text += "".join(f"\n--- {log} (last 40 lines)\n" + "".join(log.read_text().splitlines(True)[-40:])
+                        for log in sorted((root / "logs").glob("pair*/*.log")))
+    return LiveFlight(root, code, text, port, (v0, v1), not_seen)
 
 
 def _flying_seen(v: LiveViewer, pair: str) -> bool:
