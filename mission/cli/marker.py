@@ -38,7 +38,7 @@ from mission.vision.camera import SeenFrame
 
 LOCKSTEP_WAIT_WALL_S = 5.0  # [s, wall] in lockstep, the longest a tick waits for the camera's stream (its
 # publisher blocks rather than drop in lockstep, so a wait runs out only on a loaded machine or a lost route;
-# the mock's deck waits for the carrier as long, sim.robots.deck_follow.WAIT_WALL_S)
+# the tick is this process's own work, which the vehicle waits for up to its 10 s watchdog)
 
 
 class MarkerFeed:

@@ -58,6 +58,7 @@ class MavlinkRelay:
         self.link, self.watchdog_wall_s, self.join_wall_s = link, watchdog_wall_s, join_wall_s
         self._cv = threading.Condition()
         self._at_ns: int | None = None  # the barrier the vehicle waits at
+        self._heard = 0  # barrier messages received (the vehicle sends one again when unanswered)
         self._joined = False
         self.dropped = False  # it fell silent
         self.left = False  # we left the lockstep
@@ -67,6 +68,7 @@ class MavlinkRelay:
         if msg.get_type() == "TIMESYNC" and msg.tc1 == 0:
             with self._cv:
                 self._at_ns = max(self._at_ns if self._at_ns is not None else -1, int(msg.ts1))
+                self._heard += 1
                 self._cv.notify_all()
 
     def wake_ns(self) -> int | None:
@@ -76,14 +78,14 @@ class MavlinkRelay:
         if self.dropped or self.left:
             return
         limit = self.watchdog_wall_s if self._joined else self.join_wall_s
-        start, answered = time.monotonic(), None
+        start, answered = time.monotonic(), -1
         with self._cv:
             while self._at_ns is None or self._at_ns < t_ns:
-                if self._at_ns is not None and self._at_ns != answered:
-                    answered = self._at_ns
+                if self._at_ns is not None and self._heard != answered:  # a barrier, new or sent again
+                    answered, at = self._heard, self._at_ns
                     self._cv.release()
                     try:
-                        self.link.send_message(mavlink.MAVLink_timesync_message(t_ns, answered))
+                        self.link.send_message(mavlink.MAVLink_timesync_message(t_ns, at))
                     finally:
                         self._cv.acquire()
                 if time.monotonic() - start > limit:

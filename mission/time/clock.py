@@ -294,7 +294,7 @@ class LockstepClock:
     process waits for it (``join_wall_s`` before the first barrier; this process's own stalls
     left out, :class:`Silence`), or on :meth:`close`, the
     clock falls back to a :class:`ScaledClock` at ``speed`` from the current simulated time,
-    and every participant is released.
+    every participant is released, and the upstream is told this process left (as on close).
     """
 
     def __init__(self, *, speed: float = 1.0, watchdog_wall_s: float = CONTROLLER_WATCHDOG_WALL_S,
@@ -317,6 +317,8 @@ class LockstepClock:
         self._barrier_ns: int | None = None
         self._notified: set[threading.Condition] = set()  # by I/O threads since the last barrier
         self._done_ns, self._wake_ns = -1, 0
+        self._reported_wall_s = 0.0  # when the last report went upstream [s, wall monotonic]
+        self._repeating = False  # the scheduler is back from a repeated report, not from a barrier
         self._fallback: ScaledClock | None = None
         self._closed = False
         self._silence = Silence()  # the upstream's (guarded by _cv)
@@ -379,12 +381,9 @@ class LockstepClock:
             if self._closed:
                 return
             self._closed = True
-            t_ns, joined = self._t_ns, self._done_ns >= 0
-        if joined and self.upstream is not None and self._fallback is None:
-            try:
-                self.upstream.report(t_ns, -1)
-            except Exception as exc:  # noqa: BLE001 - leaving must not fail
-                log.debug("lockstep leave not sent: %s", exc)
+            joined = self._done_ns >= 0
+        if joined and self._fallback is None:
+            self._say_leaving()
         self._fall_back("closed")
 
     @property
@@ -488,10 +487,15 @@ class LockstepClock:
     def _next_barrier(self) -> int | None:
         """Block until a barrier is due and no participant runs; None once fallen back. The
         upstream's silence counts from its last barrier or this process's last report, whichever
-        is later (it waited for this step meanwhile)."""
+        is later (it waited for this step meanwhile). Every :data:`RESEND_WALL_S` without a barrier
+        it returns the step already done, which :meth:`_schedule` reports again (the report may
+        have been lost, or reached a peer not yet routed: a carrier's ready for step 0 published
+        before the vehicle's deck subscription was up left the deck waiting at its first pass);
+        that repeat is not the upstream speaking."""
         with self._cv:
-            if self._started:
+            if self._started and not self._repeating:
                 self._silence.restart()
+            self._repeating = False
             while True:
                 if self._fallback is not None:
                     return None
@@ -503,8 +507,24 @@ class LockstepClock:
                 limit = self.watchdog_wall_s if self._started else self.join_wall_s
                 if self._barrier_ns is None and silent > limit:
                     break
+                if (self._done_ns >= 0 and self.upstream is not None and not self._running
+                        and time.monotonic() - self._reported_wall_s > RESEND_WALL_S):
+                    self._repeating = True
+                    return self._done_ns
         self._fall_back(f"upstream silent for {silent:.1f} s (wall)")
+        self._say_leaving()
         return None
+
+    def _say_leaving(self) -> None:
+        """Tell the upstream this process left (it fell back to the wall clock), so the vehicle goes
+        on in real time now rather than after its own watchdog, which outlasts ours: meanwhile it
+        sent nothing, and the flight took it for lost."""
+        if self.upstream is None or self._done_ns < 0:
+            return
+        try:
+            self.upstream.report(self._t_ns, -1)
+        except Exception as exc:  # noqa: BLE001 - leaving must not fail
+            log.debug("lockstep leave not sent: %s", exc)
 
     def _schedule(self) -> None:
         while True:
@@ -520,6 +540,7 @@ class LockstepClock:
                     self.upstream.report(self._done_ns, self._wake_ns)
                 except Exception:  # noqa: BLE001 - the next barrier asks again
                     log.exception("%s: report failed", self.name)
+                self._reported_wall_s = time.monotonic()
 
     def _step(self, t_ns: int) -> None:
         with self._cv:

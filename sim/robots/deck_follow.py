@@ -57,7 +57,11 @@ from sim.vehicle.physics.multicopter import attitude_quaternion
 
 log = logging.getLogger(__name__)
 
-WAIT_WALL_S = 5.0  # the longest wall-clock wait for the carrier's step before the deck goes on without it [s]
+# The longest wall-clock wait for the carrier's step before the deck goes on without it [s]. The
+# controller's and the carrier's clocks wait for this vehicle's next barrier meanwhile, 5 s at most
+# (mission.time.clock.CONTROLLER_WATCHDOG_WALL_S): an equal wait lost the race by 5 ms on a loaded
+# machine, the carrier fell back to its wall clock, and the pair's run was no longer lockstep.
+WAIT_WALL_S = 3.0
 # (1 s was given up once in a full suite run at load 7: the state came, late; in lockstep the carrier's
 # states are sent with congestion control BLOCK, so a wait this long is a loaded machine or a lost route)
 GIVE_UP_AFTER = 3  # give-ups in a row after which the deck follows arrivals for the rest of the run

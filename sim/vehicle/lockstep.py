@@ -10,7 +10,9 @@ Before any controller answered, the vehicle says hello (HEARTBEAT + barrier, no 
 once and then every :data:`HELLO_WALL_S`; the streams of that first step (t = 0) go to no one
 (their schedule moves on as if sent), so a controller bound before the vehicle's first datagram
 and one bound after it start from the same first samples (a race on the wall clock otherwise:
-with the estimate's errors the first position differs). A controller that leaves (``wake < 0``)
+with the estimate's errors the first position differs). Later, a barrier still unanswered after
+:data:`RESEND_WALL_S` is sent again (UDP may lose it or its answer; the controller answers a
+barrier it has done again with the same answer). A controller that leaves (``wake < 0``)
 or stays silent for the watchdog (its "still working on the step", ``TIMESYNC(t, t)`` while it
 waits for a slow carrier, is not silence) ends the lockstep: the vehicle goes on in real time (a killed controller is offboard loss, as
 in PX4).
@@ -33,6 +35,7 @@ if TYPE_CHECKING:
 log = logging.getLogger("sim.vehicle.mock")
 
 HELLO_WALL_S = 0.05  # resend period of the first barrier until a controller answers [s, wall]
+RESEND_WALL_S = 0.5  # resend period of a later barrier still unanswered (it or its answer lost) [s, wall]
 POLL_WALL_S = 0.02  # longest socket wait while waiting for an answer [s, wall]; bounds the reaction to stop()
 
 
@@ -59,6 +62,7 @@ class LockstepStepper:
         self._answer: int | None = None  # the controller's answer (its next wake [ns])
         self._working = 0  # the controller's "still working on this step" messages, counted
         self._marked_steps = -1  # last step announced by SYSTEM_TIME
+        self.resends = 0  # barriers sent again, unanswered after RESEND_WALL_S
 
     def run(self) -> None:
         """Step until the controller leaves or goes silent, or the vehicle stops (then the
@@ -131,6 +135,12 @@ class LockstepStepper:
                 log.warning("lockstep: no answer for step t = %.3f s within %.1f s (wall); the controller is "
                             "gone, going on in real time at speed %g", v._t_s, self.watchdog_wall_s, v.options.speed)
                 return None
+            elif joined and now - called > RESEND_WALL_S:  # UDP: the barrier or its answer may be lost
+                with v._lock:
+                    self.send_control(onboard, mavlink.MAVLink_timesync_message(0, self._barrier_ns))
+                    v._io.flush()
+                self.resends += 1
+                called = now
         return None
 
     def _hello(self, onboard: VehicleLink) -> None:
@@ -156,8 +166,14 @@ class LockstepStepper:
 
     def on_answer(self, link: VehicleLink, msg: Any) -> None:
         """A TIMESYNC with ``tc1 != 0``: the controller's answer if it is for this barrier; with
-        ``tc1 == ts1`` (a wake that is not after the step) it still works on it."""
-        if link is self.v._links[0] and msg.ts1 == self._barrier_ns:
+        ``tc1 == ts1`` (a wake that is not after the step) it still works on it; ``tc1 < 0``: it
+        left, at this step or an earlier one (it fell back to its wall clock while this barrier
+        was lost on the way)."""
+        if link is not self.v._links[0]:
+            return
+        if msg.tc1 < 0 and 0 <= msg.ts1 <= self._barrier_ns:  # it left, at this step or an earlier one
+            self._answer = -1
+        elif msg.ts1 == self._barrier_ns:
             if msg.tc1 == msg.ts1:
                 self._working += 1
             else:

@@ -22,10 +22,12 @@ class Stepper:
         clock.upstream = self
         self._cv = threading.Condition()
         self._done_ns, self._wake_ns = -1, 0
+        self.reports: list[tuple[int, int]] = []  # every (t, wake) reported [ns], in order
 
     def report(self, t_ns: int, wake_ns: int) -> None:
         with self._cv:
             self._done_ns, self._wake_ns = t_ns, wake_ns
+            self.reports.append((t_ns, wake_ns))
             self._cv.notify_all()
 
     def step(self) -> None:

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from mission.mavlink import px4, setpoints
+from mission.mavlink.env import mavlink
 from sim.net import wait_for
 from sim.vehicle.mock import PHYSICS_DT_S, MockVehicle, VehicleSnapshot
 from sim.testing.probe import Lockstep, Probe, SetpointStream, connect, sleep_until, start_offboard, vehicle_for, wait_flight
@@ -68,6 +69,25 @@ def test_in_lockstep_nothing_but_the_hello_comes_before_the_first_answer(probe: 
         clock.run_for(0.04, lambda: None, period_s=0.02)
         first = probe.messages("LOCAL_POSITION_NED")
         assert first and first[0].time_boot_ms >= 4, first[:1]
+
+
+def test_in_lockstep_an_unanswered_barrier_is_sent_again_and_a_leave_for_an_earlier_step_ends_it(probe: Probe) -> None:
+    """UDP loses datagrams: a barrier still unanswered after RESEND_WALL_S goes out again (a lost
+    barrier or answer stalled the pair for good: the controller fell back after its 5 s, the
+    vehicle waited 10 s, sending nothing, and the flight took it for lost). A controller that fell
+    back while the vehicle's next barrier was lost says it leaves for its last step: the vehicle
+    goes on in real time at once."""
+    with vehicle_for(probe, lockstep=True) as v:
+        clock = Lockstep(probe)
+        clock.barrier()
+        clock.run_for(0.1, lambda: None)
+        t_ns, mark = clock.t_ns, probe.mark()
+        again = probe.wait_for("TIMESYNC", lambda m: m.tc1 == 0 and m.ts1 == t_ns, 5.0, mark, wall=True)
+        assert again is not None and v.snapshot().t_s == pytest.approx(t_ns / 1e9)  # sent again, not stepped
+        clock.release(t_ns + 20_000_000)
+        assert clock.barrier() > t_ns  # the answer to the resent barrier moves it on
+        probe.send(mavlink.MAVLink_timesync_message(-1, t_ns))  # left at the step before this barrier
+        wait_flight(v, lambda s: s.t_s > t_ns / 1e9 + 1.0, 5.0, "the vehicle going on in real time")  # its watchdog: 10 s
 
 
 def test_offboard_rejected_without_setpoint_stream(probe: Probe) -> None:

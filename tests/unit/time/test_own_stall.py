@@ -74,5 +74,26 @@ def test_an_upstream_silent_while_this_process_runs_is_gone() -> None:
         wait_for(lambda: not clock.lockstep, 5.0, "the clock fell back")
         assert clock.fallback_reason is not None and "upstream silent" in clock.fallback_reason
         assert clock.counters["held"] is False
+        # and it says it left, so the vehicle goes on in real time at once (its own watchdog is
+        # longer than ours: it sent nothing meanwhile, and the flight took it for lost)
+        wait_for(lambda: stepper.reports[-1][1] < 0, 5.0, "the leave reported upstream")
+        assert stepper.reports[-1][0] == stepper.reports[0][0]
+    finally:
+        clock.close()
+
+
+def test_a_barrier_sent_again_is_answered_again() -> None:
+    """Over UDP a barrier or its answer can be lost; the vehicle sends the barrier again, and a
+    step already done is answered again, the same answer, without stepping twice."""
+    clock = LockstepClock(watchdog_wall_s=5.0, name="again", creator_runs=False)
+    stepper = Stepper(clock)
+    threading.Thread(target=_participant, args=(clock,), name="participant", daemon=True).start()
+    try:
+        stepper.step()
+        stepper.step()
+        steps, (t_ns, wake_ns) = clock.barriers, stepper.reports[-1]
+        clock.barrier(t_ns)  # the same barrier again (its answer was lost)
+        wait_for(lambda: len(stepper.reports) == 3, 5.0, "the barrier answered again")
+        assert stepper.reports[-1] == (t_ns, wake_ns) and clock.barriers == steps and clock.now() == t_ns / 1e9
     finally:
         clock.close()
