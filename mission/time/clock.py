@@ -273,6 +273,16 @@ class _Ticket:
                 self.cond.notify_all()
 
 
+def _say_leaving(upstream: Upstream | None, t_ns: int) -> None:
+    """Tell ``upstream`` this process left the lockstep at step ``t_ns`` (closed, or fell back)."""
+    if upstream is None:
+        return
+    try:
+        upstream.report(t_ns, -1)
+    except Exception as exc:  # noqa: BLE001 - leaving must not fail
+        log.debug("lockstep leave not sent: %s", exc)
+
+
 class LockstepClock:
     """Simulated time owned upstream (the mock vehicle), advanced only in steps this process
     has finished.
@@ -280,21 +290,19 @@ class LockstepClock:
     Threads that sleep or wait through this clock are its *participants*. At each barrier
     ``t`` announced by the upstream (:meth:`barrier`), the clock (1) lets the downstream
     relay bring its remote participants to ``t``, (2) runs the local participants that are due
-    (deadline reached, or notified) one at a time in a fixed order, each until it waits on the
-    clock again, and (3) reports ``(t, next wake)`` upstream. Between barriers no participant
-    runs, so everything they read that arrived before the barrier is the same in every run:
-    the outcome is deterministic. Participants run in the order of their thread names. I/O
-    threads (receivers, Zenoh callbacks) are not participants: a condition they notify wakes its
-    waiters at the next barrier, whether the notification came before or after a waiter parked
-    (what a command's ACK races with). The thread that makes
-    the clock counts as running until it first waits (``creator_runs=False``: a test thread that
-    only starts the participants' threads).
+    (deadline reached, or notified) one at a time in the order of their thread names, each until
+    it waits on the clock again, and (3) reports ``(t, next wake)`` upstream. Between barriers no
+    participant runs, so what they read is the same in every run: the outcome is deterministic.
+    I/O threads (receivers, Zenoh callbacks) are not participants: a condition they notify wakes
+    its waiters at the next barrier, before or after a waiter parked (what a command's ACK races
+    with). The thread that makes the clock runs until it first waits (``creator_runs=False``: a
+    test thread that only starts the participants' threads).
 
-    Liveness: if the upstream is silent for ``watchdog_wall_s`` wall seconds while this
-    process waits for it (``join_wall_s`` before the first barrier; this process's own stalls
-    left out, :class:`Silence`), or on :meth:`close`, the
-    clock falls back to a :class:`ScaledClock` at ``speed`` from the current simulated time,
-    every participant is released, and the upstream is told this process left (as on close).
+    Liveness: if the upstream is silent for ``watchdog_wall_s`` wall seconds while this process
+    waits for it (``join_wall_s`` before the first barrier; this process's own stalls left out,
+    :class:`Silence`), or on :meth:`close`, the clock falls back to a :class:`ScaledClock` at
+    ``speed`` from the current simulated time, releases every participant and tells the upstream
+    it left.
     """
 
     def __init__(self, *, speed: float = 1.0, watchdog_wall_s: float = CONTROLLER_WATCHDOG_WALL_S,
@@ -308,8 +316,7 @@ class LockstepClock:
         self.barriers = 0
         self.fallback_reason: str | None = None
         self._cv = threading.Condition()
-        self._t_ns = 0
-        self._started = False
+        self._t_ns, self._started = 0, False
         self._tickets: dict[int, _Ticket] = {}
         self._order: dict[int, int] = {}
         me = threading.current_thread()
@@ -317,8 +324,8 @@ class LockstepClock:
         self._barrier_ns: int | None = None
         self._notified: set[threading.Condition] = set()  # by I/O threads since the last barrier
         self._done_ns, self._wake_ns = -1, 0
-        self._reported_wall_s = 0.0  # when the last report went upstream [s, wall monotonic]
-        self._repeating = False  # the scheduler is back from a repeated report, not from a barrier
+        # when the last report went upstream [s, wall monotonic]; the scheduler is back from a repeat of it
+        self._reported_wall_s, self._repeating = 0.0, False
         self._fallback: ScaledClock | None = None
         self._closed = False
         self._silence = Silence()  # the upstream's (guarded by _cv)
@@ -380,10 +387,9 @@ class LockstepClock:
         with self._cv:
             if self._closed:
                 return
-            self._closed = True
-            joined = self._done_ns >= 0
+            self._closed, joined = True, self._done_ns >= 0
         if joined and self._fallback is None:
-            self._say_leaving()
+            _say_leaving(self.upstream, self._t_ns)
         self._fall_back("closed")
 
     @property
@@ -487,11 +493,8 @@ class LockstepClock:
     def _next_barrier(self) -> int | None:
         """Block until a barrier is due and no participant runs; None once fallen back. The
         upstream's silence counts from its last barrier or this process's last report, whichever
-        is later (it waited for this step meanwhile). Every :data:`RESEND_WALL_S` without a barrier
-        it returns the step already done, which :meth:`_schedule` reports again (the report may
-        have been lost, or reached a peer not yet routed: a carrier's ready for step 0 published
-        before the vehicle's deck subscription was up left the deck waiting at its first pass);
-        that repeat is not the upstream speaking."""
+        is later. Every :data:`RESEND_WALL_S` without a barrier it returns the step done, reported
+        again (lost, or put before a peer's route was up: docs/lockstep.md), not silence's end."""
         with self._cv:
             if self._started and not self._repeating:
                 self._silence.restart()
@@ -512,19 +515,9 @@ class LockstepClock:
                     self._repeating = True
                     return self._done_ns
         self._fall_back(f"upstream silent for {silent:.1f} s (wall)")
-        self._say_leaving()
+        if self._done_ns >= 0:  # the vehicle goes on in real time now, not after its longer watchdog
+            _say_leaving(self.upstream, self._t_ns)
         return None
-
-    def _say_leaving(self) -> None:
-        """Tell the upstream this process left (it fell back to the wall clock), so the vehicle goes
-        on in real time now rather than after its own watchdog, which outlasts ours: meanwhile it
-        sent nothing, and the flight took it for lost."""
-        if self.upstream is None or self._done_ns < 0:
-            return
-        try:
-            self.upstream.report(self._t_ns, -1)
-        except Exception as exc:  # noqa: BLE001 - leaving must not fail
-            log.debug("lockstep leave not sent: %s", exc)
 
     def _schedule(self) -> None:
         while True:
