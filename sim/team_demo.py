@@ -76,11 +76,10 @@ def start_team(cfg: Config, config: str, zenoh_ep: str, speed: float, log_root: 
     """Start the team's carrier and, per passenger, its vehicle and its mission; register their
     cleanup on ``stack``. ``keys``: the team's key directory (:func:`team_keys`; None: unsigned).
     ``run_type``: the demo's record of one passenger's processes
-    (:class:`sim.demo.PairRun`, one per passenger, named after it). Returns the carrier and the runs."""
+    (:class:`sim.demo.PairRun`, one per passenger, named after it). ``quiet``: each child's log goes
+    to ``<child>.log`` beside its flight (the carrier's in ``log_root``), else to our stderr.
+    Returns the carrier and the runs."""
     from mission.bus.auth import CARRIER
-
-    def logs(folder: Path) -> Path | None:  # quiet: a child's log goes beside its flight, else to our stderr
-        return folder if quiet else None
 
     pair = cfg.zenoh.pair
     mav_signed = ["--signing-key", str(mav_key)] if mav_key is not None else []
@@ -89,7 +88,7 @@ def start_team(cfg: Config, config: str, zenoh_ep: str, speed: float, log_root: 
     carrier = subprocess.Popen(child_command("carrier", config, "--speed", str(speed), "--zenoh-connect", zenoh_ep, "--summary",
                                     str(log_root / "carrier.json"), "--mcap", str(log_root / "carrier.mcap"),
                                     "--backend", "sim", *_signed_as(keys, CARRIER), *mode, *epoch),
-                               stderr=child_stderr(stack, logs(log_root), "carrier"))
+                               stderr=child_stderr(stack, log_root if quiet else None, "carrier"))
     stack.callback(stop_process, carrier)
     runs = []
     for i, p in enumerate(cfg.team.passengers):
@@ -103,12 +102,12 @@ def start_team(cfg: Config, config: str, zenoh_ep: str, speed: float, log_root: 
                                         "--deck-offset", _csv(slot[:2]), "--zenoh-connect", zenoh_ep, "--summary",
                                         str(run.log_dir / "vehicle.json"), "--estimate-error", str(estimate_error),
                                         "--seed", str(seed + i), *mav_signed, *mode),
-                                   stderr=child_stderr(stack, logs(run.log_dir), "vehicle"))
+                                   stderr=child_stderr(stack, run.log_dir if quiet else None, "vehicle"))
         stack.callback(stop_process, vehicle)
         mission = subprocess.Popen(child_command("run", config, "--passenger", p.name, "--mavlink", f"udpin:127.0.0.1:{port}",
                                         "--zenoh-connect", zenoh_ep, "--speed", str(speed), "--log-dir", str(run.log_dir),
                                         *_signed_as(keys, p.name), *mav_signed, *mode, *epoch), stdout=subprocess.PIPE,
-                                   stderr=child_stderr(stack, logs(run.log_dir), "mission"), text=True)
+                                   stderr=child_stderr(stack, run.log_dir if quiet else None, "mission"), text=True)
         stack.callback(stop_process, mission, 30.0)
         run.procs = {"vehicle": vehicle, "mission": mission}
         runs.append(run)

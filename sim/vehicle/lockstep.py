@@ -62,7 +62,6 @@ class LockstepStepper:
         self._answer: int | None = None  # the controller's answer (its next wake [ns])
         self._working = 0  # the controller's "still working on this step" messages, counted
         self._marked_steps = -1  # last step announced by SYSTEM_TIME
-        self.resends = 0  # barriers sent again, unanswered after RESEND_WALL_S
 
     def run(self) -> None:
         """Step until the controller leaves or goes silent, or the vehicle stops (then the
@@ -139,7 +138,6 @@ class LockstepStepper:
                 with v._lock:
                     self.send_control(onboard, mavlink.MAVLink_timesync_message(0, self._barrier_ns))
                     v._io.flush()
-                self.resends += 1
                 called = now
         return None
 
