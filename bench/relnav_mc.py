@@ -19,7 +19,7 @@ a batch split in ranges over several processes, or one scenario flown again, fli
 
 Prints one JSON line a scenario, then the batch against the targets: docked within two
 approaches (every leg), the true contact error's median and 95th percentile, deck touches outside
-the contact conditions, and how every flight that did not dock ended.
+the contact conditions, the median over the flights of the last 0.3 m's true sideways speed's p95, and how every flight that did not dock ended.
 """
 from __future__ import annotations
 
@@ -49,6 +49,12 @@ def draw(cfg: Config, rng: np.random.Generator, k: int) -> tuple[dict[str, Any],
         "carrier.recovery_speed_m_s": drawn["carrier_speed_m_s"], "vision.latency_s": drawn["latency_s"],
         "world.marker_outages.fraction": 0.1, "world.marker_outages.min_s": 0.3, "world.marker_outages.max_s": 1.0})
     return {k2: round(v, 3) for k2, v in drawn.items()}, flown
+
+
+def _median(values: list[float | None]) -> float | None:
+    """The median of the values given (None: none given)."""
+    given = [v for v in values if v is not None]
+    return round(float(np.median(given)), 4) if given else None
 
 
 def main() -> None:
@@ -95,6 +101,8 @@ def main() -> None:
         "true_contact_p95_m": round(float(np.percentile(contacts, 95)), 4) if contacts else None,
         "true_contact_max_m": round(float(np.max(contacts)), 4) if contacts else None,
         "true_deck_touches": sum(r["true_deck_touches"] for r in rows),
+        # the last decimetres' true sideways speed against the deck: a figure of every descent (the touches are rare)
+        "low_horizontal_speed_p95_median_m_s": _median([r["low_horizontal_speed_m_s"]["p95"] for r in rows]),
         "flights_with_deck_touches": sum(1 for r in rows if r["true_deck_touches"]),
         "p1_failed": [r["scenario"] for r in rows if not r["p1"]],
         "p1_p3_all": all(r["p1"] and r["p2"] and r["p3"] for r in rows),

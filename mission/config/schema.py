@@ -156,6 +156,10 @@ class MissionSection(Section):
         "the position's rate closer where the speed relative to the deck decides the contact (docs/relnav.md)")
     damping_per_s: float = Field(0.0, ge=0, le=20, description="[1/s] full setpoints: velocity damping in the acceleration "
                                  "feed-forward, -k (v_p - u_ref): damps the ringing of PX4's position loop stiffened by the lead; 0 off")
+    near_deck_damping_per_s: float | None = Field(None, ge=0, le=20, description="[1/s] damping_per_s in HOLDOFF and "
+        "APPROACH, over the deck (None: damping_per_s): there the loop closes on the marker, 50-150 ms late, and rang at "
+        "about 0.6 Hz, +-0.2 m/s sideways against the deck under a steady command (docs/relnav.md, \"Damping the last "
+        "decimetre\"). It steps the acceleration sent by the change times the velocity error as those phases begin and end")
     bias_compensation_s: float = Field(0.0, ge=0, le=10, description="[s] full setpoints: the position sent also "
                                        "carries this times the estimator's velocity bias (its velocity less its position's "
                                        "rate, low-passed: needs velocity_bias_tau_s > 0), so PX4's velocity setpoint "

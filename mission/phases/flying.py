@@ -45,6 +45,10 @@ class Tracked:
         return {"u_cmd": self.setpoint.velocity_ned_m_s, "integral": self.integral, "accel_lp": self.accel_lp}
 
 
+#: the phases whose tracking damps with ``mission.near_deck_damping_per_s``: the deck's approach, where the
+#: loop closes on the marker (GO_AROUND climbs away from it)
+NEAR_DECK_DAMPED = frozenset({Phase.HOLDOFF, Phase.APPROACH})
+
 #: [m] the most the altitude floor follows the ground the relative estimate puts under the
 #: passenger: two GNSS frames disagree by 1-3 m (docs/relnav.md)
 FLOOR_GROUND_SHIFT_MAX_M = 3.0
@@ -90,11 +94,14 @@ def _track(state: MissionState, obs: Observation, m: MissionModel, x_ref: np.nda
     where the deck, above the floor, is its floor. PX4's estimate of its height errs by decimetres:
     a floor 0.2 m under the deck stopped the landing's press and turned its setpoints velocity only
     (docs/deck-riding.md, "Landing under the floor"). ``riding``: the command's riding limits
-    (``m.riding_command_safety``, when set)."""
+    (``m.riding_command_safety``, when set). In :data:`NEAR_DECK_DAMPED` the damping is
+    ``m.near_deck_damping_per_s`` when set."""
     v = obs.vehicle
     assert v is not None  # tracking happens only with a vehicle
     x_p = v.position_ned_m
     g = m.tracking
+    if m.near_deck_damping_per_s is not None and state.phase in NEAR_DECK_DAMPED:
+        g = replace(g, damping_per_s=m.near_deck_damping_per_s)
     integral = state.integral if state.integral is not None else np.zeros(3)
     desired = velocity_demand(x_ref, u_ref, x_p, integral, g)
     prev = state.u_cmd if state.u_cmd is not None else v.velocity_ned_m_s

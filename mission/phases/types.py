@@ -235,6 +235,7 @@ class MissionModel:
     max_duration_s: float
     dt_s: float
     tracking: TrackingGains
+    near_deck_damping_per_s: float | None  # [1/s] the tracking's damping in HOLDOFF and APPROACH (None: the tracking's)
     join_settle_m: float  # JOIN -> RIDING within this of the dock point [m] (min with the tolerance)...
     join_settle_s: float  # ... for this long [s]
     arrival_max_speed_m_s: float | None  # arrival also needs the vehicle this slow [m/s]

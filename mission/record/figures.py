@@ -304,6 +304,8 @@ def _recovery_summary(r: FlightRecord, x_p: np.ndarray, v_p: np.ndarray, v_c: np
     if r.info.get("final_action") != "return" or params is None:
         return {}
     contact = None if rec is None else rec.get("contact")
+    if contact is not None and len(r.t) and contact.get("time_s") is not None and contact["time_s"] < r.t[0]:
+        contact = None  # the last leg's, carried on into this one (riding on to its target): this leg has not docked
     # on a deck a dock is confirmed by the passenger's own landed state, never by the carrier's word
     unconfirmed = contact is not None and r.info.get("ride") == "deck" and "confirmed_s" not in contact
     out: dict[str, Any] = {"docked_again": contact is not None and not unconfirmed}

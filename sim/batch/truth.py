@@ -28,7 +28,9 @@ def relnav_truth(cfg: Config, f: Flight) -> dict[str, Any]:
     then [m] and the attempts; the true riding offset (3D, horizontal) max and median [m];
     ``true_deck_touches``: ticks before contact with the vehicle truly within the deck's radius
     and at or below the contact height over it while out of the contact conditions (its true
-    velocity against the carrier's); P1-P3 and the largest command jump at a phase switch
+    velocity against the carrier's); ``low_horizontal_speed_m_s``: its true horizontal speed
+    against the deck [m/s] over the approach's ticks within three contact heights over the dock
+    point and the deck's radius (p50, p95, max, and how many ticks); P1-P3 and the largest command jump at a phase switch
     [m/s] from the summary; the go-arounds, the fallback's reason, the marker's time in view [s]."""
     t, phase, r = f.record.t, f.record.phase, cfg.recovery
     dock = _vec(f, "x_c_true") + np.asarray(cfg.mission.dock_offset_ned_m, float)
@@ -53,6 +55,10 @@ def relnav_truth(cfg: Config, f: Flight) -> dict[str, Any]:
                       | (np.abs(dv[:, 2]) > r.contact_max_vertical_speed_m_s))
     touches = (np.isin(phase, [p.value for p in BEFORE_CONTACT]) & (off[:, 2] >= -r.contact_height_m)
                & (horizontal <= r.deck_radius_m) & out_of_contact)
+    # the last decimetres: the approach within three contact heights over the dock point and over the deck,
+    # where the contact's speeds are decided (a figure of every descent, not of the rare touch alone)
+    low = ((phase == Phase.APPROACH.value) & (off[:, 2] >= -3.0 * r.contact_height_m) & (horizontal <= r.deck_radius_m))
+    low_speed = np.hypot(dv[low, 0], dv[low, 1])
     seen = _vec(f, "since_marker")[:, 0] <= cfg.relnav.marker_timeout_s
     s, rec = f.summary, f.state.recovery
     p1_legs = [{k: leg.get(k) for k in ("leg", "p1", "max_offset_before_separation_m", "departure_delay_s")}
@@ -68,6 +74,8 @@ def relnav_truth(cfg: Config, f: Flight) -> dict[str, Any]:
             "max_phase_switch_jump_m_s": s.get("max_phase_switch_jump_m_s"),
             "relative_input_jump_m_s": s.get("relative_input_jump_m_s"),
             "true_deck_touches": int(np.count_nonzero(touches)), "go_arounds": f.go_arounds,
+            "low_horizontal_speed_m_s": {"p50": stat(low_speed, np.median), "p95": stat(low_speed, lambda v: np.percentile(v, 95)),
+                                         "max": stat(low_speed, np.max), "ticks": int(low_speed.size)},
             "p1_legs": p1_legs, "worst_ride": _worst_ride(f, riding),
             "fallback": (rec.fallback_why or None) if rec is not None else None,
             "marker_in_view_s": round(float(seen.sum() * (t[1] - t[0])), 1) if len(t) > 1 else 0.0,

@@ -65,3 +65,24 @@ def test_a_switch_inside_a_steady_turn_adds_nothing_and_a_jump_stands_out():
     out = figures(rec)
     assert abs(out["max_phase_switch_jump_m_s"] - 0.11) < 2e-3
     assert abs(out["max_phase_switch_excess_m_s"] - 0.05) < 2e-3
+
+
+RECOVERY_PARAMS = {"contact_height_m": 0.1, "contact_radius_m": 0.1, "contact_max_horizontal_speed_m_s": 0.2,
+                   "contact_max_vertical_speed_m_s": 0.5, "deck_radius_m": 0.5}
+
+
+def test_a_leg_riding_on_to_its_target_has_not_docked_on_the_last_legs_contact():
+    """A leg after a dock rides on (TRANSIT) and the mission ends before it separates: the
+    recovery the state still holds is the last leg's, whose contact came before this leg began.
+    The leg reports no contact and an unfinished recovery (it reported the last leg's contact,
+    docked, when a carrier that stood short of the next leg's start kept it riding until the
+    mission's timeout); a contact inside the leg's own ticks is its own."""
+    contact = {"horizontal_error_m": 0.06, "attempts": 1, "time_s": 0.1}
+    info = {"target_ned_m": [30.0, 0.0, -5.0], "separation_time_s": None, "final_action": "return",
+            "recovery": RECOVERY_PARAMS, "recovered": {"contact": contact}}
+    rec = _record([Phase.TRANSIT] * 20, info)
+    rec = FlightRecord(t=rec.t + 1.0, phase=rec.phase, cols=rec.cols, info=info)  # the leg began at 1.0 s
+    out = figures(rec)
+    assert out["docked_again"] is False and out["contact"] is None and out["recovery_outcome"] == "unfinished", out
+    own = figures(FlightRecord(t=rec.t - 1.0, phase=rec.phase, cols=rec.cols, info=info))  # the contact at 0.1 s: its own
+    assert own["docked_again"] is True and own["contact"] == contact and own["recovery_outcome"] == "docked", own

@@ -27,6 +27,9 @@ def test_relnav_docks_at_the_first_approach_every_leg_against_the_truth(cfg):
         assert leg["contact_horizontal_m"] <= 0.10, leg  # the true contact error
         assert abs(leg["contact_vertical_m"]) <= cfg.recovery.contact_height_m + 0.01, leg
     assert figures["go_arounds"] == [] and figures["true_deck_touches"] == 0, figures
+    # the last 0.3 m over the deck, every tick of both descents: truly under the contact's sideways speed
+    low = figures["low_horizontal_speed_m_s"]
+    assert low["ticks"] > 0 and low["p50"] <= low["p95"] <= low["max"] < cfg.recovery.contact_max_horizontal_speed_m_s, low
     assert figures["p1"] and figures["p2"] and figures["p3"], figures
     assert figures["max_phase_switch_jump_m_s"] <= 0.05, figures
     # riding blind: the marker lies under the vehicle at the dock point, so the ride holds the dock

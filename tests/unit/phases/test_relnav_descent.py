@@ -279,3 +279,25 @@ def test_below_three_contact_heights_the_reference_waits_for_the_vehicle(model):
             else:
                 assert below > lag - 0.01, (height, lag, m.recovery.final_descent_lag_m)
                 assert new.recovery.descent > state.recovery.descent
+
+
+def test_over_the_deck_the_acceleration_sent_damps_with_the_near_deck_damping(model):
+    """configs/relnav.toml's mission.near_deck_damping_per_s (3.6 /s, the tracking's 1.8 elsewhere):
+    on the approach the acceleration sent carries -3.6 (v_p - u_ref), against -1.8 with it unset.
+    The loop closing on the marker rang +-0.2 m/s sideways against the deck at about 0.6 Hz under
+    a steady command (docs/relnav.md, "Damping the last decimetre")."""
+    from mission.phases.flying import NEAR_DECK_DAMPED
+
+    assert NEAR_DECK_DAMPED == {Phase.HOLDOFF, Phase.APPROACH}
+    near, damping = model.near_deck_damping_per_s, model.tracking.damping_per_s
+    assert near is not None and near > damping > 0
+    state, obs, _ = _at(model, 0.25, descent=1.0 - 0.25 / model.recovery.geometry.decision_height_m)
+    state = replace(state, u_cmd=obs.vehicle.velocity_ned_m_s.copy())  # the last command: the carrier's velocity
+    v_p = obs.vehicle.velocity_ned_m_s + np.array([0.0, 0.08, 0.0])  # 0.08 m/s east of the carrier's velocity
+    obs = replace(obs, vehicle=replace(obs.vehicle, velocity_ned_m_s=v_p), relative=SEEN)
+    damped, dec = approach(state, obs, model)
+    plain, dec_plain = approach(state, obs, replace(model, near_deck_damping_per_s=None))
+    assert damped.phase is plain.phase is Phase.APPROACH and dec.setpoint.full and dec_plain.setpoint.full
+    np.testing.assert_allclose(damped.u_ref, plain.u_ref)  # the reference does not depend on it
+    extra = dec.setpoint.acceleration_ned_m_s2 - dec_plain.setpoint.acceleration_ned_m_s2
+    np.testing.assert_allclose(extra, -(near - damping) * (v_p - damped.u_ref), atol=1e-9)
