@@ -385,10 +385,11 @@ class Flight:
     @property
     def docked(self) -> bool:
         """It docked again (with several targets: after every leg, the leg it was on included: a
-        mission that ended riding on to a leg it never flew did not)."""
+        mission that ended riding on to a leg it never flew did not, its summary's leg having no
+        contact of its own, :mod:`mission.record.figures`)."""
         legs = self.summary.get("legs")
         if legs:
-            return len(legs) > self.state.leg and all(leg.get("contact") is not None for leg in legs)
+            return all(leg.get("contact") is not None for leg in legs)
         return bool(self.summary.get("docked_again"))
 
     @property
