@@ -5,6 +5,10 @@ law drives at that leg's target. Every target is hazardous whichever leg is flow
 own P3 guard, and the command passes all of them. Before a leg after the first, the carrier drives
 straight out from the leg's target until its dock point is ``b c + mission.leg_start_margin_m``
 (and :data:`mission.config.legs.REPOSITION_SPARE_M`) from it: the paper's Assumption 1 at the leg's start.
+That distance is measured where the passenger measures it, in the frame the targets are in: the
+guards' frame (:mod:`mission.carrier.frames`: the passenger's while its shared bias is usable), and,
+in the carrier's own frame, ``carrier.p3_unaligned_margin_m`` farther out (the frames may disagree
+by that much; the passenger waits in TRANSIT until it sees the distance itself).
 
 Frames: NED [m], [m/s], in the scenario's dimension (2 or 3).
 """
@@ -37,7 +41,7 @@ class Legs:
                  dock_offset_m: np.ndarray, leg_start_m: float, frame: GuardFrame | None = None) -> None:
         self.targets, self.models = targets, models
         self.guards = [P3Guard(guard, t, planar=planar, frame=frame) for t in targets]
-        self.planar, self.start_m = planar, leg_start_m + REPOSITION_SPARE_M
+        self.planar, self.start_m, self.frame = planar, leg_start_m + REPOSITION_SPARE_M, frame
         offsets = np.asarray(dock_offset_m, dtype=float)
         self.dock_offsets_m = offsets if offsets.ndim == 2 else np.tile(offsets, (len(targets), 1))
         self.index = 0
@@ -58,15 +62,26 @@ class Legs:
         """Distance [m] from ``x_c`` to the nearest target."""
         return min(float(np.linalg.norm(t - x_c)) for t in self.targets)
 
+    def _from_target(self, x_c: np.ndarray) -> tuple[np.ndarray, float]:
+        """The carrier at ``x_c`` [m] (its own frame) from the leg's target, in the guards' frame
+        [m], and how far its dock point is from the leg's start there [m] (< 0: nearer the target;
+        the own frame's widening counts as nearer)."""
+        x = np.asarray(x_c, dtype=float)
+        if self.frame is not None:
+            x = x - self.frame.shift_ned_m(x.shape[0], self.planar)
+        target = self.targets[self.index]
+        beyond = float(np.linalg.norm(target - (x + self.dock_offsets_m[self.index]))) - self.start_m
+        return x - target, beyond - (0.0 if self.frame is None else self.frame.widen_m)
+
     def reposition_velocity(self, x_c: np.ndarray, speed_m_s: float, room_m: float = 0.0) -> np.ndarray:
         """Straight away from the leg's target at ``speed_m_s`` [m/s] until the dock point is far
-        enough for the leg to start (and ``room_m`` [m] farther); zero from there."""
-        target = self.targets[self.index]
-        away = np.asarray(x_c, dtype=float) - target
+        enough for the leg to start (and ``room_m`` [m] farther), in the guards' frame (module
+        docstring); zero from there."""
+        away, beyond = self._from_target(x_c)
         if self.planar:
             away[2:] = 0.0
         size = float(np.linalg.norm(away))
-        if float(np.linalg.norm(target - (x_c + self.dock_offsets_m[self.index]))) >= self.start_m + room_m or size < 1e-9:
+        if beyond >= room_m or size < 1e-9:
             return np.zeros_like(away)
         return away / size * speed_m_s
 
@@ -75,14 +90,13 @@ class Legs:
         the leg's target at ``speed_m_s`` [m/s] (planar), so that it stands facing it when the
         leg's ride begins; None when the turn is done (heading within :data:`LINED_UP_RAD` of the
         target's bearing) or there is no room for it (the dock point nearer the target than the
-        leg-start distance)."""
-        target = self.targets[self.index]
-        to = target - np.asarray(x_c, dtype=float)
-        if float(np.linalg.norm(target - (x_c + self.dock_offsets_m[self.index]))) < self.start_m:
+        leg-start distance, in the guards' frame)."""
+        away, beyond = self._from_target(x_c)
+        if beyond < 0.0:
             return None
-        bearing = math.atan2(float(to[1]), float(to[0]))
+        bearing = math.atan2(-float(away[1]), -float(away[0]))
         if abs(math.remainder(bearing - yaw_rad, 2 * math.pi)) <= LINED_UP_RAD:
             return None
-        v = np.zeros_like(to)
+        v = np.zeros_like(away)
         v[0], v[1] = speed_m_s * math.cos(bearing), speed_m_s * math.sin(bearing)
         return v

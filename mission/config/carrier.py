@@ -128,7 +128,8 @@ class CarrierSection(Section):
                      "widened by p3_unaligned_margin_m (mission/carrier/frames.py)"))
     p3_unaligned_margin_m: float = Field(0.0, ge=0, le=20,
         description=("[m] p3_frame `passenger` without a usable bias: the P3 guard runs in the carrier's own frame "
-                     "with its margin widened by this (the frames may disagree by metres)"))
+                     "with its margin widened by this (the frames may disagree by metres), and the carrier drives "
+                     "this much farther out for the next leg's start (mission/carrier/legs.py)"))
     p3_bias_max_age_s: float = Field(5.0, gt=0, le=600,
         description=("[s] p3_frame `passenger`: a bias heard longer ago is stale (the passenger stops sharing it when "
                      "its marker leaves the camera, a second after it separates, while the carrier still brakes)"))

@@ -190,3 +190,28 @@ def test_the_carrier_parks_at_the_guard_radius_in_the_frame_it_guards_in() -> No
 def test_the_unaligned_margin_leaves_a_guard_radius() -> None:
     with pytest.raises(ConfigError, match="p3_unaligned_margin_m"):
         _cfg(p3_frame="passenger", p3_unaligned_margin_m=7.0)
+
+
+def test_the_next_legs_start_is_measured_where_the_passenger_measures_it() -> None:
+    """The carrier drives out for the next leg until its dock point is the leg-start distance from
+    the target in the guards' frame: by the passenger's usable bias, else in its own frame
+    ``p3_unaligned_margin_m`` farther. In its own frame alone, a carrier 6.5 m off the passenger's
+    frame stood where the passenger saw the dock point inside b c, and both waited for ever."""
+    from mission.carrier.legs import Legs
+    from mission.config.legs import REPOSITION_SPARE_M
+
+    target = np.array([0.0, 0.0, 0.0])
+    frame = GuardFrame(PARAMS)
+    legs = Legs([target], [], GuardParams(radius_m=5.0, brake_decel_m_s2=1.0), True, np.zeros(3), 10.0, frame)
+    start = 10.0 + REPOSITION_SPARE_M
+    far = np.array([start + 0.1, 0.0, 0.0])  # far enough in its own frame
+    _settled(frame, None, 0.0)  # no usable bias: its own frame, 2 m farther out
+    assert legs.reposition_velocity(far, 1.0).tolist() == [1.0, 0.0, 0.0]
+    assert not legs.reposition_velocity(far + [2.0, 0.0, 0.0], 1.0).any()
+    _settled(frame, _heard(bias=[1.5, 0.0, 0.0]), 0.1)  # the passenger has the carrier 1.5 m nearer the target
+    assert frame.passenger
+    assert legs.reposition_velocity(far, 1.0).tolist() == [1.0, 0.0, 0.0]
+    assert legs.reposition_velocity(far + [1.5, 0.0, 0.0], 1.0).tolist() == [0.0, 0.0, 0.0]
+    assert legs.turn_velocity(far, math.pi, 0.5) is None  # no room to turn yet, where the passenger has it
+    turn = legs.turn_velocity(far + [1.5, 0.0, 0.0], 0.0, 0.5)  # out far enough: it turns towards the target
+    assert turn is not None and np.allclose(turn, [-0.5, 0.0, 0.0])
