@@ -282,8 +282,8 @@ def test_below_three_contact_heights_the_reference_waits_for_the_vehicle(model):
 
 
 def test_over_the_deck_the_acceleration_sent_damps_with_the_near_deck_damping(model):
-    """configs/relnav.toml's mission.near_deck_damping_per_s (3.6 /s, the tracking's 1.8 elsewhere):
-    on the approach the acceleration sent carries -3.6 (v_p - u_ref), against -1.8 with it unset.
+    """configs/relnav.toml's mission.near_deck_damping_per_s (7.2 /s, the tracking's 1.8 elsewhere):
+    on the approach the acceleration sent carries -7.2 (v_p - u_ref), against -1.8 with it unset.
     The loop closing on the marker rang +-0.2 m/s sideways against the deck at about 0.6 Hz under
     a steady command (docs/relnav.md, "Damping the last decimetre")."""
     from mission.phases.flying import NEAR_DECK_DAMPED
