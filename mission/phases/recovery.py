@@ -56,11 +56,13 @@ from mission.phases.types import (
     RecoveryState,
     dock_point,
     enter,
+    finish_leg,
 )
 
 PARKED_SPEED_M_S = 0.1  # [m/s] the carrier counts as parked below this
 STILL_PARKED_SPEED_M_S = 0.2  # [m/s] HOME: a carrier counted parked stays so until its mean speed exceeds this
 REFERENCE_AT_GOAL_M = 0.2  # [m] a reference this close to its goal has reached it
+TRANSIT_REPORT_S = 15.0  # [s] TRANSIT names its wait for the carrier in an event this often
 
 
 def _model(m: MissionModel) -> RecoveryModel:
@@ -550,17 +552,6 @@ def home(state, obs, m, events=()):
     return _fly(state, obs, m, dock, v_c, r.approach, rec, events, request=Request.HOLD if done else None)
 
 
-def finish_leg(state: MissionState, obs: Observation, outcome: str) -> MissionState:
-    """``state`` with the current leg's record appended to ``legs_done``."""
-    rec = state.recovery
-    leg = {"leg": state.leg, "outcome": outcome, "end_s": obs.t_s,
-           "separation_time_s": state.separation_time_s,
-           "anchor_ned_m": None if state.anchor is None else [float(x) for x in state.anchor],
-           "contact": None if rec is None else rec.contact,
-           "recovery_why": None if rec is None else rec.why}
-    return replace(state, legs_done=(*state.legs_done, leg))
-
-
 def begin_next_leg(state: MissionState, obs: Observation, m: MissionModel,
                    events: tuple[str, ...] = ()) -> tuple[MissionState, Decision]:
     """After a dock: the next target's leg begins, riding the dock point; TRANSIT first while the
@@ -576,7 +567,8 @@ def transit(state, obs, m, events=()):
     """Ride the dock point (a leg after the first) until the carrier stands far enough from the
     leg's target for the paper's Assumption 1 (b c + ``mission.leg_start_margin_m``, and slower
     than 0.1 m/s: the law starts from rest), then RIDING: the reference sits on the dock point
-    again and the law takes over."""
+    again and the law takes over. Every ``TRANSIT_REPORT_S`` of waiting an event names the wait
+    (two frames that disagree can make it last until ``mission.max_duration_s``)."""
     r, t = _model(m), obs.t_s
     dock = dock_point(obs, m)
     v_c = obs.carrier.velocity_ned_m_s
@@ -589,4 +581,10 @@ def transit(state, obs, m, events=()):
             return new, replace(dec, events=(*events, f"leg {state.leg + 1}: riding on the deck", *dec.events))
         new = enter(state, Phase.RIDING, t, x_ref=dock.copy(), prev_dock=dock.copy())
         return _fly(new, obs, m, dock, v_c, r.approach, None, (*events, f"leg {state.leg + 1}: riding"))
+    waited = (t - state.since_s, max((state.tick_s if state.tick_s is not None else t) - state.since_s, 0.0))
+    if math.floor(waited[0] / TRANSIT_REPORT_S) > math.floor(waited[1] / TRANSIT_REPORT_S):
+        events = (*events, f"leg {state.leg + 1}: waited {waited[0]:.0f} s for the carrier: the dock point is "
+                  f"{float(norm(m.tick.target - dock)):.2f} m from the target (the leg starts at {m.leg_start_m:.2f} m, "
+                  f"b c + mission.leg_start_margin_m), the carrier at {float(norm(v_c[:2])):.2f} m/s "
+                  f"(at most {PARKED_SPEED_M_S:g})")
     return _on_dock(state, obs, m, dock, v_c, state.recovery, events)

@@ -454,6 +454,17 @@ def enter(state: MissionState, phase: Phase, t: float, **kw) -> MissionState:
     return replace(state, phase=phase, since_s=t, **kw)
 
 
+def finish_leg(state: MissionState, obs: Observation, outcome: str) -> MissionState:
+    """``state`` with the current leg's record appended to ``legs_done``."""
+    rec = state.recovery
+    leg = {"leg": state.leg, "outcome": outcome, "end_s": obs.t_s,
+           "separation_time_s": state.separation_time_s,
+           "anchor_ned_m": None if state.anchor is None else [float(x) for x in state.anchor],
+           "contact": None if rec is None else rec.contact,
+           "recovery_why": None if rec is None else rec.why}
+    return replace(state, legs_done=(*state.legs_done, leg))
+
+
 def describe_age(c: CarrierObs) -> str:
     """``c``'s age in words: since the carrier measured it (with the bound), or since it arrived."""
     if c.age_bound_s is None:

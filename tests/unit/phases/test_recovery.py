@@ -487,3 +487,33 @@ def test_a_contact_on_the_deck_is_confirmed_by_the_passengers_own_landed_state_o
     assert _confirm_contact(confirmed, seen(43.0, True)) is confirmed
     no_contact = RecoveryState(started_s=0.0, why="task done")
     assert _confirm_contact(no_contact, seen(41.5, True)) is no_contact
+
+
+def test_transit_names_its_wait_for_the_carrier():
+    """A carrier parked within b c + the leg margin of the next target: TRANSIT rides on and, every
+    ``TRANSIT_REPORT_S``, names the wait with the distances it compares (pure, synthetic
+    observations), so a wait that lasts until the mission's timeout says why in the events."""
+    from mission.controller import mission_model
+    from mission.phases import CarrierObs, MissionState, Observation, VehicleObs
+    from mission.phases.recovery import TRANSIT_REPORT_S, transit
+    from mission.phases.types import RecoveryState, dock_point
+
+    m = mission_model(load_config(CONFIGS / "cycle.toml"))
+    target = np.asarray(m.tick.target, dtype=float)
+    short = m.leg_start_m - 3.0  # the dock point stands 3 m inside where the leg starts
+    carrier = CarrierObs(target - np.array([short, 0.0, 0.0]) - np.asarray(m.dock_offset_ned_m), np.zeros(3), age_s=0.0)
+    t0 = 100.0
+    dock = dock_point(Observation(t_s=t0, vehicle=None, carrier=carrier), m)  # type: ignore[arg-type]
+    assert abs(norm(target - dock) - short) < 1e-9
+    state = MissionState(phase=Phase.TRANSIT, since_s=t0, x_ref=dock.copy(), u_ref=np.zeros(3), u_cmd=np.zeros(3),
+                         recovery=RecoveryState(started_s=0.0, why="task done", attempts=1, carrier_seen_s=t0), leg=1)
+    events: list[tuple[float, str]] = []
+    for k in range(int(40.0 / m.dt_s)):
+        t = t0 + k * m.dt_s
+        vehicle = VehicleObs(dock.copy(), np.zeros(3), True, "OFFBOARD", heartbeat_age_s=0.0, on_ground=False)
+        state, dec = transit(state, Observation(t_s=t, vehicle=vehicle, carrier=carrier), m)
+        state = dataclasses.replace(state, tick_s=t)
+        events += [(t - t0, e) for e in dec.events]
+        assert state.phase is Phase.TRANSIT
+    assert [round(when, 6) for when, _ in events] == [TRANSIT_REPORT_S, 2 * TRANSIT_REPORT_S], events
+    assert f"the dock point is {short:.2f} m from the target (the leg starts at {m.leg_start_m:.2f} m" in events[0][1]
