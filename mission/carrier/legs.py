@@ -8,7 +8,9 @@ straight out from the leg's target until its dock point is ``b c + mission.leg_s
 That distance is measured where the passenger measures it, in the frame the targets are in: the
 guards' frame (:mod:`mission.carrier.frames`: the passenger's while its shared bias is usable), and,
 in the carrier's own frame, ``carrier.p3_unaligned_margin_m`` farther out (the frames may disagree
-by that much; the passenger waits in TRANSIT until it sees the distance itself).
+by that much; the passenger waits in TRANSIT until it sees the distance itself). Should it still
+wait once the carrier stands there, the carrier takes the start farther out step by step
+(:meth:`Legs.wait_out`).
 
 Frames: NED [m], [m/s], in the scenario's dimension (2 or 3).
 """
@@ -29,6 +31,13 @@ from mission.core.tick import TickModel
 TURN_ROOM_M = 2.0
 #: [rad] heading error to the leg's target at which the turn is done
 LINED_UP_RAD = math.radians(10.0)
+#: [s] how long the carrier stands at the leg's start while the passenger still waits (in TRANSIT: it
+#: sees the dock point nearer than the start, its frame farther off than the carrier allowed for)
+#: before it takes the start :data:`LEG_START_STEP_M` farther out, up to :data:`LEG_START_EXTRA_MAX_M`
+#: in all (farther from the target is never less safe; standing, both would wait for the timeout)
+LEG_START_PATIENCE_S = 20.0
+LEG_START_STEP_M = 2.0  # [m]
+LEG_START_EXTRA_MAX_M = 12.0  # [m] as far as configs/relnav.toml's bound on the frames' bias
 
 
 class Legs:
@@ -45,6 +54,8 @@ class Legs:
         offsets = np.asarray(dock_offset_m, dtype=float)
         self.dock_offsets_m = offsets if offsets.ndim == 2 else np.tile(offsets, (len(targets), 1))
         self.index = 0
+        self.extra_m = 0.0  # [m] the leg's start moved out this far while the passenger waited (:meth:`wait_out`)
+        self._stood: tuple[float, float | None] | None = None  # (the last wait_out's time, standing since) [s]
 
     @property
     def model(self) -> TickModel:
@@ -54,7 +65,7 @@ class Legs:
     def follow(self, leg: int) -> bool:
         """Take the passenger's leg if it is a later one that exists; True when it changed."""
         if self.index < leg < len(self.targets):
-            self.index = leg
+            self.index, self.extra_m, self._stood = leg, 0.0, None
             return True
         return False
 
@@ -71,7 +82,21 @@ class Legs:
             x = x - self.frame.shift_ned_m(x.shape[0], self.planar)
         target = self.targets[self.index]
         beyond = float(np.linalg.norm(target - (x + self.dock_offsets_m[self.index]))) - self.start_m
-        return x - target, beyond - (0.0 if self.frame is None else self.frame.widen_m)
+        return x - target, beyond - self.extra_m - (0.0 if self.frame is None else self.frame.widen_m)
+
+    def wait_out(self, x_c: np.ndarray, now_s: float) -> bool:
+        """Each repositioning step at ``now_s`` [s] (the passenger waits in TRANSIT): with the
+        carrier at ``x_c`` [m] standing at the leg's start for :data:`LEG_START_PATIENCE_S`, the
+        start moves :data:`LEG_START_STEP_M` farther out (True: it moved). A gap of over a second
+        between the calls (another mode in between) starts the wait afresh."""
+        at_start = self._from_target(x_c)[1] >= 0.0
+        last = self._stood
+        since = None if not at_start else (now_s if last is None or now_s - last[0] > 1.0 or last[1] is None else last[1])
+        moved = since is not None and now_s - since >= LEG_START_PATIENCE_S and self.extra_m < LEG_START_EXTRA_MAX_M
+        if moved:
+            self.extra_m, since = min(self.extra_m + LEG_START_STEP_M, LEG_START_EXTRA_MAX_M), None
+        self._stood = (now_s, since)
+        return moved
 
     def reposition_velocity(self, x_c: np.ndarray, speed_m_s: float, room_m: float = 0.0) -> np.ndarray:
         """Straight away from the leg's target at ``speed_m_s`` [m/s] until the dock point is far

@@ -392,13 +392,15 @@ class CarrierStepper:
         out :data:`~mission.carrier.legs.TURN_ROOM_M` farther, then towards the target at that speed
         until it heads at it (:meth:`~mission.carrier.legs.Legs.turn_velocity`), so that the leg's
         ride starts straight ahead, then zero (out again, were its turn to end nearer than the start
-        distance). Else None.
+        distance, or the start to move out: :meth:`~mission.carrier.legs.Legs.wait_out`). Else None.
 
         The turn is why: PX4's SIH rover stood facing 16-170 deg off the next target's bearing
         when leg 2's ride began, and turned from rest under the riding passenger (docs/recovery.md,
         "On real PX4")."""
         if self.mode is CarrierMode.REPOSITIONING:
             top = float(self.model.carrier_safety.max_speed_m_s or 1.0)
+            if self.legs.wait_out(x_c, now_s):  # the passenger still waits: the start moved out, turn afresh
+                self._leg_turn = "out"
             if yaw_rad is None or self.tracking.kind == "holonomic" or self.min_moving_speed_m_s <= 0:
                 return self.legs.reposition_velocity(x_c, top)
             if self._leg_turn == "out":  # out to the leg's start and the room for the turn

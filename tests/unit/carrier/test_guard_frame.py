@@ -215,3 +215,35 @@ def test_the_next_legs_start_is_measured_where_the_passenger_measures_it() -> No
     assert legs.turn_velocity(far, math.pi, 0.5) is None  # no room to turn yet, where the passenger has it
     turn = legs.turn_velocity(far + [1.5, 0.0, 0.0], 0.0, 0.5)  # out far enough: it turns towards the target
     assert turn is not None and np.allclose(turn, [-0.5, 0.0, 0.0])
+
+
+def test_a_passenger_that_still_waits_has_the_leg_start_moved_out() -> None:
+    """The carrier stands at the leg's start by its own frame while the passenger, its frame
+    farther off than the carrier allowed for, still waits in TRANSIT: after LEG_START_PATIENCE_S
+    standing the start moves LEG_START_STEP_M farther out (and again, up to LEG_START_EXTRA_MAX_M),
+    so the two do not wait for each other until the mission's timeout; the next leg starts afresh."""
+    from mission.carrier.legs import LEG_START_EXTRA_MAX_M, LEG_START_PATIENCE_S, LEG_START_STEP_M, Legs
+    from mission.config.legs import REPOSITION_SPARE_M
+
+    targets = [np.array([0.0, 0.0, 0.0]), np.array([50.0, 0.0, 0.0])]
+    legs = Legs(targets, [], GuardParams(radius_m=5.0, brake_decel_m_s2=1.0), True, np.zeros(3), 10.0)
+    at = np.array([10.0 + REPOSITION_SPARE_M + 0.1, 0.0, 0.0])  # at the start, in its own frame
+    assert not legs.reposition_velocity(at, 1.0).any()
+    dt, t, x, moved = 0.05, 0.0, at.copy(), []
+    while t < 2.5 * LEG_START_PATIENCE_S:  # the carrier drives as told, at 1 m/s
+        if legs.wait_out(x, t):
+            moved.append(round(t, 6))
+        x = x + legs.reposition_velocity(x, 1.0) * dt
+        t += dt
+    # it stood 20 s, drove 2 m out (2 s), stood 20 s again
+    assert moved == [pytest.approx(LEG_START_PATIENCE_S), pytest.approx(2 * LEG_START_PATIENCE_S + 2.0, abs=0.1)], moved
+    assert legs.extra_m == 2 * LEG_START_STEP_M and x[0] == pytest.approx(10.0 + REPOSITION_SPARE_M + 2 * LEG_START_STEP_M, abs=0.06)
+    assert legs.reposition_velocity(at, 1.0).tolist() == [1.0, 0.0, 0.0]  # where it first stood: out again
+    # a carrier still driving out is not waited on; a gap in the calls starts the wait afresh
+    out = x + [1.0, 0.0, 0.0]
+    assert not legs.wait_out(at, t) and not legs.wait_out(out, t + 5.0)
+    assert not legs.wait_out(out, t + 5.0 + LEG_START_PATIENCE_S - 0.1)
+    for k in range(1000):  # 500 s standing far out
+        legs.wait_out(out + [100.0, 0.0, 0.0], 1000.0 + k * 0.5)
+    assert legs.extra_m == LEG_START_EXTRA_MAX_M  # bounded
+    assert legs.follow(1) and legs.extra_m == 0.0
