@@ -24,7 +24,7 @@ from mission.core.setpoint import Setpoint
 from mission.passenger.inputs import PassengerInputs, VehicleReport
 from mission.passenger.relative import RelativeDeck, seat_offset
 from mission.phases import CarrierObs, Decision, Measurements, MissionModel, MissionState, Observation, VehicleObs
-from mission.phases.phase import RANGED, Phase, Request
+from mission.phases.phase import NEAR_DECK, RANGED, Phase, Request
 
 
 def observe_vehicle(report: VehicleReport | None, velocity_fix: PositionConsistentVelocity | None = None) -> VehicleObs | None:
@@ -110,7 +110,7 @@ class PassengerStep:
     """The passenger's tick for ``model``; ``velocity_bias_tau_s`` [s] the time constant of the
     vehicle's consistent velocity (``mission.velocity_bias_tau_s``; 0: the estimator's velocity
     as it comes), ``near_deck_tau_s`` [s] its time constant instead in
-    :data:`~mission.phases.phase.RANGED` (``mission.near_deck_velocity_bias_tau_s``; None: the
+    :data:`~mission.phases.phase.NEAR_DECK` (``mission.near_deck_velocity_bias_tau_s``; None: the
     same). Its only memory is that filter's, the newest measurement of each kind and, with
     ``[relnav]`` enabled (``model.relnav``), the relative estimator
     (:class:`mission.passenger.relative.RelativeDeck`: the carrier's state the phases see is
@@ -135,7 +135,7 @@ class PassengerStep:
         self.measurements = self.measurements.then(tuple(inputs.measurements))
         if self.velocity_fix is not None and self._near_deck_tau_s is not None:
             # the filter's bias carries on across a switch: only its gain changes
-            self.velocity_fix.tau_s = self._near_deck_tau_s if phase in RANGED else self._tau_s
+            self.velocity_fix.tau_s = self._near_deck_tau_s if phase in NEAR_DECK else self._tau_s
         carrier, relative = inputs.carrier, None
         if self.relative is not None:
             carrier, relative = self.relative.observe(inputs.t_s, inputs.vehicle, carrier, self.measurements,

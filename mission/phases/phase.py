@@ -95,11 +95,13 @@ BEFORE_SEPARATION = frozenset(p for p in Phase if not p.separated and p is not P
 AFTER_SEPARATION = frozenset(p for p in Phase if p.separated)
 #: The phases that bring the passenger home to the carrier (mission.final_action = "return").
 RECOVERY = frozenset({Phase.RETURNING, Phase.HOLDOFF, Phase.APPROACH, Phase.GO_AROUND, Phase.DOCKED})
+#: The recovery near the deck (the holdoff over it, the approach and its descent, the climb of a go-around): the
+#: vehicle's velocity follows its position's rate closer there (``mission.near_deck_velocity_bias_tau_s``).
+NEAR_DECK = frozenset({Phase.HOLDOFF, Phase.APPROACH, Phase.GO_AROUND})
 #: The phases in which a downward range (the feed ``rangefinder``) is fused: the recovery near the deck, where
-#: its height decides the contact (the holdoff over it, the approach and its descent, the climb of a go-around).
-#: Riding, the marker already carries the height and a range only moves the vertical estimate the ride's settle
-#: and floor read (docs/relnav.md, "A downward rangefinder").
-RANGED = frozenset({Phase.HOLDOFF, Phase.APPROACH, Phase.GO_AROUND})
+#: its height decides the contact. Riding, the marker already carries the height and a range only moves the
+#: vertical estimate the ride's settle and floor read (docs/relnav.md, "A downward rangefinder").
+RANGED = NEAR_DECK
 #: The recovery and how it ends (home on the deck, or the fallback): the recovery's figure.
 HOMEWARD = RECOVERY | {Phase.HOME, Phase.FALLBACK}
 #: The flight to the target, from the separation to the handover (the arrival's figures).
