@@ -152,8 +152,9 @@ class MissionSection(Section):
                                        "is corrected by the low-passed (this time constant) difference between its position's "
                                        "rate and its estimator's velocity (PX4's EKF on SIH: 0.3-0.5 m/s apart for seconds); 0 off")
     near_deck_velocity_bias_tau_s: float | None = Field(None, gt=0, le=60, description="[s] velocity_bias_tau_s in "
-        "HOLDOFF, APPROACH and GO_AROUND, near the deck (None: velocity_bias_tau_s; needs it > 0): a shorter one follows "
-        "the position's rate closer where the speed relative to the deck decides the contact (docs/relnav.md)")
+        "the phases over the deck (JOIN, RIDING, TRANSIT, HOLDOFF, APPROACH, GO_AROUND, DOCKED, HOME; None: "
+        "velocity_bias_tau_s; needs it > 0): a shorter one follows the position's rate closer where the speed relative "
+        "to the deck decides the contact and the ride (docs/relnav.md)")
     damping_per_s: float = Field(0.0, ge=0, le=20, description="[1/s] full setpoints: velocity damping in the acceleration "
                                  "feed-forward, -k (v_p - u_ref): damps the ringing of PX4's position loop stiffened by the lead; 0 off")
     near_deck_damping_per_s: float | None = Field(None, ge=0, le=20, description="[1/s] damping_per_s in HOLDOFF and "

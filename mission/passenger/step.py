@@ -131,7 +131,7 @@ class PassengerStep:
         newest of each kind so far) in ``phase``, the mission's phase before this tick (None: not
         known, taken as off the deck with ranges fused). The relative estimator takes the phase's
         ``on_deck`` (the vehicle still stands on the carrier's deck) as a measurement, and fuses
-        downward ranges only in :data:`~mission.phases.phase.RANGED` (the recovery near the deck)."""
+        downward ranges only in :data:`~mission.phases.phase.RANGED` (the phases over the deck)."""
         self.measurements = self.measurements.then(tuple(inputs.measurements))
         if self.velocity_fix is not None and self._near_deck_tau_s is not None:
             # the filter's bias carries on across a switch: only its gain changes

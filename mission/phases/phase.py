@@ -95,12 +95,15 @@ BEFORE_SEPARATION = frozenset(p for p in Phase if not p.separated and p is not P
 AFTER_SEPARATION = frozenset(p for p in Phase if p.separated)
 #: The phases that bring the passenger home to the carrier (mission.final_action = "return").
 RECOVERY = frozenset({Phase.RETURNING, Phase.HOLDOFF, Phase.APPROACH, Phase.GO_AROUND, Phase.DOCKED})
-#: The recovery near the deck (the holdoff over it, the approach and its descent, the climb of a go-around): the
-#: vehicle's velocity follows its position's rate closer there (``mission.near_deck_velocity_bias_tau_s``).
-NEAR_DECK = frozenset({Phase.HOLDOFF, Phase.APPROACH, Phase.GO_AROUND})
-#: The phases in which a downward range (the feed ``rangefinder``) is fused: the recovery near the deck, where
-#: its height decides the contact. Riding, the marker already carries the height and a range only moves the
-#: vertical estimate the ride's settle and floor read (docs/relnav.md, "A downward rangefinder").
+#: The phases over the deck: the climb to the dock point, the ride, the recovery's holdoff, approach and
+#: go-around, the contact and the ride home. The vehicle's velocity follows its position's rate closer there
+#: (``mission.near_deck_velocity_bias_tau_s``): the speed relative to the deck decides the contact and the ride.
+NEAR_DECK = frozenset({Phase.JOIN, Phase.RIDING, Phase.TRANSIT, Phase.HOLDOFF, Phase.APPROACH, Phase.GO_AROUND,
+                       Phase.DOCKED, Phase.HOME})
+#: The phases in which a downward range (the feed ``rangefinder``) is handed to the relative estimator (which
+#: fuses it only with the vehicle over the deck by its estimate): all over the deck. Only in the recovery's
+#: (HOLDOFF, APPROACH, GO_AROUND) until 7 December, a ride then lost its height to the vehicle's own height
+#: estimate whenever the marker went out of sight (docs/relnav.md, "The range on the ride").
 RANGED = NEAR_DECK
 #: The recovery and how it ends (home on the deck, or the fallback): the recovery's figure.
 HOMEWARD = RECOVERY | {Phase.HOME, Phase.FALLBACK}

@@ -1,6 +1,7 @@
-"""``mission.near_deck_velocity_bias_tau_s``: near the deck (HOLDOFF, APPROACH, GO_AROUND) the
-vehicle's velocity made consistent with its position follows the position's rate with a time
-constant of its own; elsewhere ``velocity_bias_tau_s``'s; the bias carries on across a switch."""
+"""``mission.near_deck_velocity_bias_tau_s``: over the deck (mission.phases.phase.NEAR_DECK: the
+ride, the recovery's last phases) the vehicle's velocity made consistent with its position follows
+the position's rate with a time constant of its own; elsewhere (flying to the target, returning)
+``velocity_bias_tau_s``'s; the bias carries on across a switch."""
 from __future__ import annotations
 
 import numpy as np
@@ -37,14 +38,14 @@ def test_near_the_deck_the_bias_is_followed_with_its_own_time_constant() -> None
     cfg = with_overrides(load_config(CONFIGS / "relnav.toml"), {"mission.near_deck_velocity_bias_tau_s": 0.1})
     assert cfg.mission.velocity_bias_tau_s == 0.5
     model = mission_model(cfg)
-    riding = PassengerStep(model, cfg.mission.velocity_bias_tau_s, cfg.mission.near_deck_velocity_bias_tau_s)
+    away = PassengerStep(model, cfg.mission.velocity_bias_tau_s, cfg.mission.near_deck_velocity_bias_tau_s)
     near = PassengerStep(model, cfg.mission.velocity_bias_tau_s, cfg.mission.near_deck_velocity_bias_tau_s)
     # 0.2 s after the bias appears: 1 - exp(-0.2 / tau) of it (one tick less: the first sample has no rate)
-    assert _bias_after(riding, Phase.RIDING, 0.0, 0.22) == pytest.approx(0.2 * (1 - np.exp(-0.2 / 0.5)), abs=0.005)
-    assert _bias_after(near, Phase.APPROACH, 0.0, 0.22) == pytest.approx(0.2 * (1 - np.exp(-0.2 / 0.1)), abs=0.005)
-    # the bias carries on across the switch: the first tick in APPROACH moves it by one tick's gain, no more
-    before = _bias_after(riding, Phase.RIDING, 0.22, 0.02)
-    after = _bias_after(riding, Phase.APPROACH, 0.24, 0.02)
+    assert _bias_after(away, Phase.RETURNING, 0.0, 0.22) == pytest.approx(0.2 * (1 - np.exp(-0.2 / 0.5)), abs=0.005)
+    assert _bias_after(near, Phase.RIDING, 0.0, 0.22) == pytest.approx(0.2 * (1 - np.exp(-0.2 / 0.1)), abs=0.005)
+    # the bias carries on across the switch: the first tick in HOLDOFF moves it by one tick's gain, no more
+    before = _bias_after(away, Phase.RETURNING, 0.22, 0.02)
+    after = _bias_after(away, Phase.HOLDOFF, 0.24, 0.02)
     assert after - before == pytest.approx((0.2 - before) * (1 - np.exp(-0.02 / 0.1)), abs=1e-6)
     # unset: the same filter everywhere
     plain = PassengerStep(model, 0.5)
