@@ -101,9 +101,9 @@ RECOVERY = frozenset({Phase.RETURNING, Phase.HOLDOFF, Phase.APPROACH, Phase.GO_A
 NEAR_DECK = frozenset({Phase.JOIN, Phase.RIDING, Phase.TRANSIT, Phase.HOLDOFF, Phase.APPROACH, Phase.GO_AROUND,
                        Phase.DOCKED, Phase.HOME})
 #: The phases in which a downward range (the feed ``rangefinder``) is handed to the relative estimator (which
-#: fuses it only with the vehicle over the deck by its estimate): all over the deck. Only in the recovery's
-#: (HOLDOFF, APPROACH, GO_AROUND) until 7 December, a ride then lost its height to the vehicle's own height
-#: estimate whenever the marker went out of sight (docs/relnav.md, "The range on the ride").
+#: fuses it only with the vehicle over the deck by its estimate): all over the deck. Without them a ride that
+#: loses the marker holds the deck's height by the vehicle's own height estimate, which wanders by decimetres
+#: in seconds (docs/relnav.md, "The range on the ride").
 RANGED = NEAR_DECK
 #: The recovery and how it ends (home on the deck, or the fallback): the recovery's figure.
 HOMEWARD = RECOVERY | {Phase.HOME, Phase.FALLBACK}
