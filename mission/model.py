@@ -110,7 +110,8 @@ def mission_model(cfg: Config) -> MissionModel:
         relnav=derived(RelnavGates, cfg.relnav, params=cfg.relnav.params(), marker_offset_ned_m=np.asarray(
             marker_offset_ned_m(cfg.vision, m.dock_offset_ned_m), dtype=float),
             carrier_accel_m_s2=cfg.relnav.velocity_slew_m_s2 or s.carrier_max_accel_m_s2,
-            deck_radius_m=cfg.recovery.deck_radius_m) if cfg.relnav.enabled else None,
+            deck_radius_m=cfg.recovery.deck_radius_m, carrier_law_own_frame=cfg.carrier.p3_frame == "own")
+        if cfg.relnav.enabled else None,
     )
     legs = cfg.scenario.legs()
     if len(legs) == 1:

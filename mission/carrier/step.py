@@ -19,7 +19,8 @@ One step, every ``1 / carrier.rate_hz`` [s]:
    that falls back keeps the plan it had). Any mode but RECOVERING and PAUSED forgets the recovery
    course's start: the next recovery drives its course from its own start.
 2. :meth:`CarrierStepper.decide`: a vehicle that brakes itself is sent a stop at once while the
-   carrier stops; otherwise :func:`mission.core.tick.carrier_tick` (the paper's law while
+   carrier stops; otherwise :func:`mission.core.tick.carrier_tick` at its position in the guards'
+   frame (:mod:`mission.carrier.frames`: where the passenger has the targets) (the paper's law while
    approaching; once separated a stop or the own plan; RECOVERING the recovery course of
    :mod:`mission.carrier.course`, its clock and its away-from-the-target heading taken at its
    first step; REPOSITIONING the drive out to the next leg's start; CBF filter, speed and
@@ -229,7 +230,8 @@ class CarrierStepper:
             return Command(STOP, frame_change=change)
         separated = self.mode is not CarrierMode.APPROACHING
         plan = self._plan_velocity if self.mode is CarrierMode.SEPARATED else None
-        res = carrier_tick(x_c, separated, self.model, own_plan_velocity=plan, u_prev=self.velocity_m_s,
+        res = carrier_tick(x_c - self.frame.shift_ned_m(self.dim, self.planar), separated, self.model,  # the guards' frame
+                           own_plan_velocity=plan, u_prev=self.velocity_m_s,
                            dt_s=dt_s if dt_s > 0 else None,
                            course_velocity=self.course_velocity(x_c, now_s, recovery_velocity_m_s, state.yaw_rad))
         u = np.asarray(res.u, dtype=float)

@@ -125,7 +125,8 @@ class CarrierSection(Section):
         description=("[-] the frame the P3 guard runs in: `own` the carrier's own position; `passenger` (relnav: no "
                      "shared frame) its position moved into the passenger's frame, where the targets are, by the bias "
                      "the passenger's status shares while it is usable (p3_bias_*), else its own frame with the margin "
-                     "widened by p3_unaligned_margin_m (mission/carrier/frames.py)"))
+                     "widened by p3_unaligned_margin_m (mission/carrier/frames.py); the carrier's law, the next leg's "
+                     "start and its guard all run in that frame"))
     p3_unaligned_margin_m: float = Field(0.0, ge=0, le=20,
         description=("[m] p3_frame `passenger` without a usable bias: the P3 guard runs in the carrier's own frame "
                      "with its margin widened by this (the frames may disagree by metres), and the carrier drives "

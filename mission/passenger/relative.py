@@ -135,11 +135,13 @@ class RelativeDeck:
         # over age_s): the estimate's now moved back, with the acceleration it sent when it sent one (the
         # estimate's velocity already carries it through the fix's latency)
         age, a = carrier.age_s, (np.zeros(3) if sent is None else sent)
-        # its law runs in its own frame: a prediction by it starts from where it says it is, not from the
-        # passenger's frame, which is off by the two GNSS biases (2 m at 8-10 m from the target turned the
-        # law's course by ~0.2 rad: the ride fed forward 0.2-0.25 m/s across the carrier's velocity)
+        # its law runs in its own frame (carrier.p3_frame "own"): a prediction by it starts from where it says it
+        # is, not from the passenger's frame, which is off by the two GNSS biases (2 m at 8-10 m from the target
+        # turned the law's course by ~0.2 rad: the ride fed forward 0.2-0.25 m/s across the carrier's velocity);
+        # with "passenger" its law runs in the guards' frame, moved by the bias shared: here
         return replace(carrier, position_ned_m=now - shown * age + 0.5 * a * age * age, velocity_ned_m_s=shown - a * age,
-                       own_frame_position_ned_m=np.asarray(carrier.position_ned_m, float)), \
+                       own_frame_position_ned_m=np.asarray(carrier.position_ned_m, float) if self.gates.carrier_law_own_frame
+                       else None), \
             self._view(e, bias, accel)
 
     def _new_fix(self, t_s: float, carrier: CarrierObs) -> bool:

@@ -151,7 +151,7 @@ def _carrier_acceleration(obs: Observation, m: MissionModel) -> np.ndarray:
     """The docked carrier's acceleration [m/s^2] NED: the one it measured and sent, if it sent
     one (a real vehicle does not follow its law exactly: a PX4 rover sticks, then leaps off);
     else as its law asks it, run where the carrier itself says it is (``CarrierObs.law_position_ned_m``:
-    its own frame): the change of the carrier's command (``mission.core.tick.carrier_tick``,
+    its own frame, or the passenger's when it runs there): the change of the carrier's command (``mission.core.tick.carrier_tick``,
     with its speed and acceleration limits) over one carrier step from the sample's state, or
     over ``mission.carrier_accel_horizon_s`` when that is longer. Analytic in the sample (no
     differences of samples): ``a_max`` along the command while the carrier speeds up, 0 at its
@@ -227,7 +227,7 @@ def _ridden_dock(obs: Observation, m: MissionModel, fresh: bool) -> tuple[np.nda
     if measured is not None:  # not the law's: the sample moves on with it
         v_now = v + a * age
     else:
-        x_now = np.asarray(c.law_position_ned_m, dtype=float) + v * age  # in the carrier's own frame
+        x_now = np.asarray(c.law_position_ned_m, dtype=float) + v * age  # where the carrier's law runs
         v_now = np.asarray(carrier_tick(x_now, False, _carrier_tick_model(obs, m), u_prev=v, dt_s=age).u, dtype=float)
     if m.tick.planar_carrier and len(v_now) == 3:
         v_now[2] = v[2]  # a ground carrier: its vertical velocity is the sample's (the estimate's noise), not led

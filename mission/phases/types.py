@@ -78,8 +78,9 @@ class CarrierObs:
     acceleration NED [m/s^2] as the carrier measured it, or None (it sent none); untrusted: why
     the feed does not trust it yet (just bound, a resync, a contested source), None when it does;
     ``own_frame_position_ned_m`` [m] NED: where the carrier itself says it is (its published
-    position, in its own GNSS frame, where its own law runs) when ``position_ned_m`` was moved into
-    the passenger's frame (the relative estimator); None: the same as ``position_ned_m``;
+    position, in its own GNSS frame) when its law runs there (``carrier.p3_frame = "own"``) and
+    ``position_ned_m`` was moved into the passenger's frame (the relative estimator); None: the
+    same as ``position_ned_m``, or its law runs in the passenger's frame too;
     ``stamp_s`` [s] the sample's measurement time on the carrier's own clock (the wire's ``stamp``;
     None: unknown), which tells a new measurement from the same one sent or aged again: ``t - age_s``
     moves by the clock offset's corrections while the measurement stays the same, and a carrier may
@@ -98,7 +99,7 @@ class CarrierObs:
 
     @property
     def law_position_ned_m(self) -> np.ndarray:
-        """[m] NED the position the carrier's own law runs at: its own frame's (the class docstring)."""
+        """[m] NED the position the carrier's own law runs at (the class docstring)."""
         return self.position_ned_m if self.own_frame_position_ned_m is None else self.own_frame_position_ned_m
 
     @property
@@ -186,6 +187,7 @@ class RelnavGates:
     deck_velocity_catch_up_per_s: float
     deck_radius_m: float
     carrier_accel_m_s2: float | None = None
+    carrier_law_own_frame: bool = True  # the carrier's law runs in its own GNSS frame (carrier.p3_frame "own")
 
     def descent_blocked(self, rel: RelativeView | None, below: bool = False) -> str | None:
         """Why the vehicle may not descend below the decision height now (None: it may): the

@@ -247,3 +247,22 @@ def test_a_passenger_that_still_waits_has_the_leg_start_moved_out() -> None:
         legs.wait_out(out + [100.0, 0.0, 0.0], 1000.0 + k * 0.5)
     assert legs.extra_m == LEG_START_EXTRA_MAX_M  # bounded
     assert legs.follow(1) and legs.extra_m == 0.0
+
+
+def test_the_carrier_s_law_drives_at_the_target_where_the_passenger_has_it() -> None:
+    """The carrier's law runs in the guards' frame: with the passenger's frame 4 m across the
+    carrier's own, it drives at the target where the passenger (and the targets' file) has it,
+    not where its own GNSS has it. In its own frame, with the frames 7-9 m apart along its course,
+    it stood 4-5 m from the target by its GNSS while the passenger saw the dock point 11-14 m out,
+    beyond b c, and never separated (seed 3's 59 of the Monte-Carlo, 3 minutes)."""
+    across = _heard(np.array([0.0, 4.0, 0.0]))  # the carrier's GNSS frame less the passenger's: 4 m east
+    _, x_own = _lying_ride(_cfg(), across, seconds=4.0)
+    assert abs(float(x_own[1])) < 0.01  # straight at the target by its own GNSS
+    aligned, x = _lying_ride(_cfg(p3_frame="passenger", p3_unaligned_margin_m=2.0), across, seconds=4.0)
+    _, x_later = _lying_ride(_cfg(p3_frame="passenger", p3_unaligned_margin_m=2.0), across, seconds=5.0)
+    assert aligned.frame.passenger  # (its first second in its own frame, settling)
+    seen = x - across.bias_ned_m  # where the passenger has the carrier at 4 s
+    to_target = math.atan2(0.0 - float(seen[1]), 20.0 - float(seen[0]))
+    moved = x_later - x
+    assert math.atan2(float(moved[1]), float(moved[0])) == pytest.approx(to_target, abs=math.radians(2.0))
+    assert to_target > math.radians(8.0)  # which its own GNSS would not have it drive at
