@@ -138,7 +138,7 @@ class RelativeDeck:
         # its law runs in its own frame (carrier.p3_frame "own"): a prediction by it starts from where it says it
         # is, not from the passenger's frame, which is off by the two GNSS biases (2 m at 8-10 m from the target
         # turned the law's course by ~0.2 rad: the ride fed forward 0.2-0.25 m/s across the carrier's velocity);
-        # with "passenger" its law runs in the guards' frame, moved by the bias shared: here
+        # with "passenger" its law runs in the guards' frame (its position less the bias it heard), as here
         return replace(carrier, position_ned_m=now - shown * age + 0.5 * a * age * age, velocity_ned_m_s=shown - a * age,
                        own_frame_position_ned_m=np.asarray(carrier.position_ned_m, float) if self.gates.carrier_law_own_frame
                        else None), \

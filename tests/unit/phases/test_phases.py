@@ -319,13 +319,17 @@ def test_the_carriers_law_is_predicted_where_the_carrier_says_it_is_not_in_the_p
     assert norm(_carrier_acceleration(obs(None), model)) > 0.2
 
 
-def test_the_relative_deck_keeps_where_the_carrier_says_it_is():
-    """The carrier's state moved into the passenger's frame keeps its published position for its law."""
+@pytest.mark.parametrize("p3_frame", ["own", "passenger"])
+def test_the_relative_deck_keeps_where_the_carrier_s_law_runs(p3_frame: str):
+    """The carrier's state moved into the passenger's frame keeps its published position for its
+    law when that runs in the carrier's own frame (``carrier.p3_frame = "own"``); with
+    ``"passenger"`` the law runs in the passenger's frame, at the moved position."""
+    from mission.config.schema import with_overrides
     from mission.passenger.inputs import VehicleReport
     from mission.passenger.relative import RelativeDeck
     from mission.phases.measurements import Measurements
 
-    model = mission_model(load_config(CONFIGS / "relnav.toml"))
+    model = mission_model(with_overrides(load_config(CONFIGS / "relnav.toml"), {"carrier.p3_frame": p3_frame}))
     assert model.relnav is not None
     deck = RelativeDeck(model.relnav, model.dock_offset_ned_m)
     published = np.array([3.0, 4.0, 0.0])
@@ -336,8 +340,12 @@ def test_the_relative_deck_keeps_where_the_carrier_says_it_is():
         report = VehicleReport(t, np.array([0.0, 0.0, -2.0]), np.zeros(3), t, t, True, "OFFBOARD", 0.1, True)
         seen, _ = deck.observe(t, report, replace(carrier, age_s=0.2 - 0.1 * k if k < 2 else 0.0), Measurements())
     assert seen is not None
-    np.testing.assert_allclose(seen.own_frame_position_ned_m, published)
-    np.testing.assert_allclose(seen.law_position_ned_m, published)
+    if p3_frame == "own":
+        np.testing.assert_allclose(seen.own_frame_position_ned_m, published)
+        np.testing.assert_allclose(seen.law_position_ned_m, published)
+    else:
+        assert seen.own_frame_position_ned_m is None
+        np.testing.assert_array_equal(seen.law_position_ned_m, seen.position_ned_m)
 
 
 def test_a_phase_is_defined_once_and_every_part_knows_it():
