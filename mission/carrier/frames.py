@@ -40,7 +40,9 @@ What a hostile passenger can do: in the passenger's frame the guard keeps the ca
 ``b c - p3_margin_m - p3_bias_max_m`` [m] from a target as its own frame has it, and in its own
 frame ``b c - p3_margin_m - p3_unaligned_margin_m``: it moves the guard's circle within that,
 creeping at most as above a step while it stays in the passenger's frame, and every larger jump
-costs it ``p3_bias_settle_s`` in the carrier's own frame first. ``carrier.p3_frame = "own"`` (the
+costs it ``p3_bias_settle_s`` in the carrier's own frame first. The carrier's law and the next
+leg's start run in the same frame (:mod:`mission.carrier.step`, :mod:`mission.carrier.legs`), so
+within those bounds it moves where the carrier drives too. ``carrier.p3_frame = "own"`` (the
 default) is the guard as it always was: its own frame, no widening, the bias ignored.
 """
 from __future__ import annotations
