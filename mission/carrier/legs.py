@@ -89,9 +89,11 @@ class Legs:
         carrier at ``x_c`` [m] standing at the leg's start for :data:`LEG_START_PATIENCE_S`, the
         start moves :data:`LEG_START_STEP_M` farther out (True: it moved). A gap of over a second
         between the calls (another mode in between) starts the wait afresh."""
-        at_start = self._from_target(x_c)[1] >= 0.0
-        last = self._stood
-        since = None if not at_start else (now_s if last is None or now_s - last[0] > 1.0 or last[1] is None else last[1])
+        last_s, since = self._stood if self._stood is not None else (None, None)
+        if self._from_target(x_c)[1] < 0.0:  # not at the start: driving out to it
+            since = None
+        elif since is None or last_s is None or now_s - last_s > 1.0:
+            since = now_s
         moved = since is not None and now_s - since >= LEG_START_PATIENCE_S and self.extra_m < LEG_START_EXTRA_MAX_M
         if moved:
             self.extra_m, since = min(self.extra_m + LEG_START_STEP_M, LEG_START_EXTRA_MAX_M), None
