@@ -24,6 +24,7 @@ from typing import Any
 import pytest
 
 LOG_ENV = "MARSUPIAL_CPU_LOG"
+HEAVY_S = 5.0  # a test of this much CPU [s] or more is a flight (docs/testing.md)
 
 
 def _cpu() -> tuple[float, float]:
@@ -59,7 +60,11 @@ def report(lines: list[dict[str, Any]], top: int = 10) -> str:
         unit_wall[unit(test)] += wall[test]
     own, kids = sum(d["self_s"] for d in lines), sum(d["children_s"] for d in lines)
     out = [f"{len(lines)} tests: CPU {own + kids:.0f} s (the workers' own {own:.0f} s, their commands' {kids:.0f} s), "
-           f"wall summed over the workers {sum(wall.values()):.0f} s", "", f"the {top} most CPU [s] (wall [s]):"]
+           f"wall summed over the workers {sum(wall.values()):.0f} s"]
+    heavy = [c for c in cpu.values() if c >= HEAVY_S]
+    out += [f"the {len(heavy)} tests of {HEAVY_S:.0f} s of CPU or more (the flights) {sum(heavy):.0f} s, the other "
+            f"{len(cpu) - len(heavy)} {own + kids - sum(heavy):.0f} s; on two cores at least {(own + kids) / 2:.0f} s of wall",
+            "", f"the {top} most CPU [s] (wall [s]):"]
     out += [f"{c:8.1f} ({wall[t]:6.1f})  {t}" for t, c in sorted(cpu.items(), key=lambda kv: -kv[1])[:top]]
     out += ["", f"the {top} loadscope units of most CPU [s] (wall [s]):"]
     out += [f"{c:8.1f} ({unit_wall[u]:6.1f})  {u}" for u, c in units.most_common(top)]
