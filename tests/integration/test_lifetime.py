@@ -1,4 +1,6 @@
-"""A command started by a supervisor ends when the supervisor is killed outright (no orphans)."""
+"""How a command's process ends: a stop signal stops it even when it lands while the main thread
+holds a lock, and a command started by a supervisor ends when the supervisor is killed outright
+(no orphans)."""
 from __future__ import annotations
 
 import os
@@ -7,8 +9,54 @@ import socket
 import subprocess
 import sys
 import textwrap
+import threading
+from pathlib import Path
 
+from mission.lifetime import on_stop_signals
 from sim.net import free_port, stop_process, wait_for
+
+ROOT = Path(__file__).resolve().parents[2]
+
+# The main thread holds the stop event's own lock, as ``Event.wait`` does between two waits, when
+# SIGTERM lands: Python's handler runs right there. A handler that set the event itself would wait
+# for ever on that lock (a mock vehicle hung so on SIGTERM); on_stop_signals' stop runs on its own
+# thread and sets the event once the main thread lets go.
+LOCK_HELD = textwrap.dedent("""
+    import os, signal, threading
+    from mission.lifetime import on_stop_signals
+
+    stop = threading.Event()
+    before = signal.getsignal(signal.SIGTERM)
+    with on_stop_signals(lambda signum: stop.set()) as installed:
+        with stop._cond:
+            os.kill(os.getpid(), signal.SIGTERM)
+            for _ in range(200_000):
+                pass
+        print(installed, stop.wait(10.0), flush=True)
+    print(signal.getsignal(signal.SIGTERM) is before, signal.set_wakeup_fd(-1), flush=True)
+""")
+
+
+def test_a_stop_signal_landing_while_the_main_thread_holds_the_stop_event_s_lock_stops_it():
+    out = subprocess.run([sys.executable, "-c", LOCK_HELD], capture_output=True, text=True, timeout=60, cwd=ROOT)
+    assert out.returncode == 0, out.stderr
+    # stopped; and on exit the old handler and no wake-up socket are back
+    assert out.stdout.split() == ["True", "True", "True", "-1"], out.stdout + out.stderr
+
+
+def test_off_the_main_thread_nothing_is_installed():
+    seen = []
+
+    def call() -> None:
+        with on_stop_signals(lambda signum: None) as installed:
+            seen.append((installed, signal.getsignal(signal.SIGTERM)))
+
+    before = signal.getsignal(signal.SIGTERM)
+    worker = threading.Thread(target=call)
+    worker.start()
+    worker.join()
+    assert seen == [(False, before)]
+
 
 SUPERVISOR = textwrap.dedent("""
     import subprocess, sys, time
