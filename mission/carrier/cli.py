@@ -11,7 +11,6 @@ import signal
 import threading
 from contextlib import ExitStack
 from pathlib import Path
-from types import FrameType
 from typing import Any
 
 import click
@@ -28,6 +27,7 @@ from mission.config.passenger import check_team_flight, has_team, sole_passenger
 from mission.config.schema import Config, load_config, with_overrides
 from mission.cli.subcommands import entry_points, load
 from mission.errors import ConfigError
+from mission.lifetime import on_stop_signals
 from mission.bus.lockstep import Downstreams, LastSeq, ZenohRelay, ZenohUpstream, clock_keys
 from mission.bus.timesync import ClockEcho
 
@@ -54,17 +54,14 @@ def main(cfg: Config, speed: float = 1.0, duration_s: float | None = None, stop_
     require_stated(cfg, CARRIER_FIELDS, "carrier")  # before anything is opened
     bus_auth(cfg.zenoh)
     stop = stop_event or threading.Event()
-    restore: dict[int, Any] = {}
     clock: Clock = LockstepClock(speed=speed, name="carrier-lockstep") if lockstep else ScaledClock(speed)
-    if threading.current_thread() is threading.main_thread():
-        def _stop(signum: int, _frame: FrameType | None) -> None:
-            log.info("carrier: %s, stopping", signal.Signals(signum).name)
-            stop.set()
-            threading.Thread(target=clock.close, daemon=True).start()  # a lockstep sleep ends now
 
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            restore[sig] = signal.signal(sig, _stop)
-    try:
+    def _stop(signum: int) -> None:
+        log.info("carrier: %s, stopping", signal.Signals(signum).name)
+        stop.set()
+        clock.close()  # a lockstep sleep ends now
+
+    with on_stop_signals(_stop):
         with ExitStack() as stack:
             session = open_session(cfg.zenoh)
             stack.callback(close_session, session)  # never raises, bounded: the exit code stands
@@ -98,9 +95,6 @@ def main(cfg: Config, speed: float = 1.0, duration_s: float | None = None, stop_
                     if summary_path is not None:
                         Path(summary_path).parent.mkdir(parents=True, exist_ok=True)
                         Path(summary_path).write_text(json.dumps(summary, indent=2, default=_jsonable) + "\n")
-    finally:
-        for signum, handler in restore.items():
-            signal.signal(signum, handler)
     return 0
 
 

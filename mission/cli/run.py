@@ -26,6 +26,7 @@ from mission.controller import MissionController, MissionOutcome
 from mission.interfaces import CameraSink, MeasurementSource, ShowsFrames
 from mission.model import mission_model
 from mission.errors import ConfigError
+from mission.lifetime import on_stop_signals
 from mission.bus.feeds import OffsetSource
 from mission.bus.gate import GateLimits
 from mission.bus.timesync import ClockPing
@@ -358,11 +359,10 @@ def run(config: str, mavlink_url: str | None, zenoh_listen: tuple[str, ...], zen
         click.echo(f"warning: the live view binds {live_address.host}, not loopback: anyone who can reach "
                    f"{live_address.url} sees the flight", err=True)
 
-    def on_signal(signum: int, _frame: Any) -> None:
+    def on_signal(signum: int) -> None:
         click.echo(f"signal {signal.Signals(signum).name}: asking the vehicle to Hold", err=True)
         stop.set()
 
-    previous = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
     on_event, remember, seen = phase_printer(click.echo)
 
     def on_start(controller: Any, link: Any, feed: Any, clock: Any) -> None:
@@ -375,16 +375,15 @@ def run(config: str, mavlink_url: str | None, zenoh_listen: tuple[str, ...], zen
         seen["reporter"] = WaitReporter(cfg, controller, link, feed, clock).start()
 
     try:
-        clock: Clock = LockstepClock(speed=speed, name="mission-lockstep") if lockstep else ScaledClock(speed)
-        outcome = fly(cfg, speed=speed, log_dir=log_dir, stop=stop, on_event=on_event, on_start=on_start, clock=clock,
-                      live=live_address, log_epoch_ns=log_epoch_ns, lockstep_lost_wall_s=lockstep_lost_wall_s,
-                      team=team)
+        with on_stop_signals(on_signal):
+            clock: Clock = LockstepClock(speed=speed, name="mission-lockstep") if lockstep else ScaledClock(speed)
+            outcome = fly(cfg, speed=speed, log_dir=log_dir, stop=stop, on_event=on_event, on_start=on_start,
+                          clock=clock, live=live_address, log_epoch_ns=log_epoch_ns,
+                          lockstep_lost_wall_s=lockstep_lost_wall_s, team=team)
     finally:
         if seen.get("reporter") is not None:
             seen["reporter"].stop()
             seen["reporter"].clear()
-        for s, h in previous.items():
-            signal.signal(s, h)
     if as_json:
         click.echo(json.dumps(outcome.summary, indent=2))
     elif seen["riding_start_s"] is not None:

@@ -18,10 +18,8 @@ from __future__ import annotations
 
 import logging
 import math
-import signal
 import threading
 from collections.abc import Callable
-from types import FrameType
 
 import click
 import numpy as np
@@ -33,6 +31,7 @@ from mission.core.geodesy import wrap_pi
 from mission.bus.auth import BusAuth, bus_auth
 from mission.bus.bridge import open_session
 from mission.bus.session import close_session, congestion_for, undeclare
+from mission.lifetime import on_stop_signals
 from mission.time.clock import Clock, LockstepClock, Periodic, ScaledClock
 from mission.config.schema import CarrierRos2Section, ZenohSection
 from mission.bus.wire import CarrierState, WireError
@@ -198,32 +197,31 @@ def ros2_robot(key_form: str, namespace: str, domain_id: int, cmd_vel_type: str,
     stop = threading.Event()
     clock: Clock = LockstepClock(speed=speed, name="robot-lockstep") if lockstep else ScaledClock(speed)
 
-    def on_signal(signum: int, _frame: FrameType | None) -> None:
+    def on_signal(signum: int) -> None:
         stop.set()
         if isinstance(clock, LockstepClock):
-            threading.Thread(target=clock.close, daemon=True).start()  # a lockstep sleep ends now
+            clock.close()  # a lockstep sleep ends now
 
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, on_signal)
-    session = open_session(section)
-    try:
-        robot = Ros2RobotSim(session, topics, clock, holonomic=kinematics == "holonomic",
-                             yaw_rad=math.radians(yaw_deg), auth=auth, attachment_form=rmw_attachment)
-        upstream = None
-        if isinstance(clock, LockstepClock):
-            from mission.bus.lockstep import ZenohUpstream
-
-            upstream = ZenohUpstream(clock, session, robot_clock_keys(ros2), robot, published=lambda: robot.published_seq,
-                                     auth=auth)
-        log.info("ROS 2 robot: %s in, %s out%s", topics.cmd_vel_sub, topics.odom_pub, " (lockstep)" if lockstep else "")
+    with on_stop_signals(on_signal):
+        session = open_session(section)
         try:
-            robot.run(stop, rate_hz)
-        finally:
-            if upstream is not None:
-                upstream.close()
+            robot = Ros2RobotSim(session, topics, clock, holonomic=kinematics == "holonomic",
+                                 yaw_rad=math.radians(yaw_deg), auth=auth, attachment_form=rmw_attachment)
+            upstream = None
             if isinstance(clock, LockstepClock):
-                clock.close()
-            robot.close()
-    finally:
-        close_session(session)
+                from mission.bus.lockstep import ZenohUpstream
+
+                upstream = ZenohUpstream(clock, session, robot_clock_keys(ros2), robot, published=lambda: robot.published_seq,
+                                         auth=auth)
+            log.info("ROS 2 robot: %s in, %s out%s", topics.cmd_vel_sub, topics.odom_pub, " (lockstep)" if lockstep else "")
+            try:
+                robot.run(stop, rate_hz)
+            finally:
+                if upstream is not None:
+                    upstream.close()
+                if isinstance(clock, LockstepClock):
+                    clock.close()
+                robot.close()
+        finally:
+            close_session(session)
     return 0

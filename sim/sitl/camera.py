@@ -39,7 +39,6 @@ from __future__ import annotations
 import json
 import logging
 import math
-import signal
 import socket
 import threading
 import time
@@ -55,6 +54,7 @@ from mission.bus.session import close_session, declare, keys, open_session, unde
 from mission.bus.wire import decode_passenger_json
 from mission.config.passenger import has_team, passenger_config, team_link
 from mission.config.schema import Config, ZenohSection, load_config
+from mission.lifetime import on_stop_signals
 from mission.mavlink import px4
 from mission.mavlink.codec import new_codec, reset_parser
 from mission.mavlink.env import mavlink
@@ -317,14 +317,13 @@ def sitl_camera(config: Path, vehicle_sysid: int, carrier_sysid: int | None, pas
         endpoints["rendezvous"] = None  # not the other processes' loopback rendezvous
     zenoh = ZenohSection(**endpoints)
     stop = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    signal.signal(signal.SIGINT, lambda *_: stop.set())
     if passengers and not has_team(cfg):
         raise click.BadParameter("the file has no [team]", param_hint="--passenger")
     eyes = team_eyes(cfg, list(passengers)) if passengers else [Eye("passenger", vehicle_sysid, cfg)]
     if carrier_sysid is None:
         carrier_sysid = cfg.carrier.mavlink.target_system or 2
-    counts = run_camera(eyes, zenoh, carrier_sysid, seed, truth_hz, truth_dir, stop)
+    with on_stop_signals(lambda _signum: stop.set()):
+        counts = run_camera(eyes, zenoh, carrier_sysid, seed, truth_hz, truth_dir, stop)
     log.info("camera: %s", counts)
     if truth_dir is not None:
         (truth_dir / "camera.json").write_text(json.dumps(counts, indent=1) + "\n")

@@ -10,10 +10,8 @@ import dataclasses
 import json
 import logging
 import os
-import signal
 import threading
 from pathlib import Path
-from types import FrameType
 from typing import Any
 
 import click
@@ -25,6 +23,7 @@ from mission.config.relnav import PassengerGnssSection, RangefinderSection
 from mission.config.keys import read_key_file, read_private_key_file
 from mission.config.schema import Config, ZenohSection, load_config
 from mission.errors import ConfigError
+from mission.lifetime import on_stop_signals
 from mission.mavlink.env import read_signing_key
 from sim.vehicle.mock import MockVehicle, VehicleOptions
 from sim.vehicle.options import VehicleSnapshot
@@ -353,46 +352,39 @@ def run(options: VehicleOptions, port_file: Path | None = None, status_every_s: 
     track = TruthTrack() if deck is not None else None
     deck_feed = None
 
-    def on_signal(signum: int, frame: FrameType | None) -> None:
-        stop.set()
-
-    previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        with contextlib.ExitStack() as stack:
-            # The deck's subscriptions (the carrier's truth and clock) before the vehicle's first hello:
-            # a controller answering that hello starts the lockstep, and the carrier's first steps put
-            # before this process subscribed were lost (the deck first known at 0.1 s instead of at
-            # the first pass, a step given up; the camera's CameraPublisher loads OpenCV meanwhile).
-            vehicle = MockVehicle(options)
-            if deck is not None:
-                session = open_session(deck[1])
-                stack.callback(session.close)
-                publisher = None
-                if camera is not None:
-                    publisher = CameraPublisher(camera, session, deck[0], options.faults.seed, options.lockstep,
-                                                signer=camera_signer)
-                    stack.callback(publisher.close)
-                deck_feed = follow_carrier(vehicle, session, deck[0], deck_truth, track, publisher)
-                stack.callback(deck_feed.close)
-            stack.enter_context(vehicle)
-            if port_file is not None:
-                _write_port_file(port_file, vehicle.port)
-            log.info("mock vehicle on UDP %d -> %s, %s, %s", vehicle.port, options.target,
-                     "lockstep" if options.lockstep else f"speed {options.speed:g}", describe_estimate(options))
-            while not stop.wait(status_every_s if status_every_s > 0 else None):
-                log.info("%s", vehicle.status_line())
-            log.info("stopping: %s", vehicle.status_line())
-            if summary_path is not None:
-                summary_path.parent.mkdir(parents=True, exist_ok=True)
-                world = truth(vehicle.snapshot(), estimate_of(options))
-                if track is not None:
-                    world["track"] = track.as_dict()
-                if deck_feed is not None and deck_feed.aligned is not None:
-                    world["deck"]["carrier_steps"] = dict(deck_feed.aligned.counters)
-                summary_path.write_text(json.dumps(world, indent=2) + "\n")
-    finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
+    with contextlib.ExitStack() as stack:
+        stack.enter_context(on_stop_signals(lambda _signum: stop.set()))
+        # The deck's subscriptions (the carrier's truth and clock) before the vehicle's first hello:
+        # a controller answering that hello starts the lockstep, and the carrier's first steps put
+        # before this process subscribed were lost (the deck first known at 0.1 s instead of at
+        # the first pass, a step given up; the camera's CameraPublisher loads OpenCV meanwhile).
+        vehicle = MockVehicle(options)
+        if deck is not None:
+            session = open_session(deck[1])
+            stack.callback(session.close)
+            publisher = None
+            if camera is not None:
+                publisher = CameraPublisher(camera, session, deck[0], options.faults.seed, options.lockstep,
+                                            signer=camera_signer)
+                stack.callback(publisher.close)
+            deck_feed = follow_carrier(vehicle, session, deck[0], deck_truth, track, publisher)
+            stack.callback(deck_feed.close)
+        stack.enter_context(vehicle)
+        if port_file is not None:
+            _write_port_file(port_file, vehicle.port)
+        log.info("mock vehicle on UDP %d -> %s, %s, %s", vehicle.port, options.target,
+                 "lockstep" if options.lockstep else f"speed {options.speed:g}", describe_estimate(options))
+        while not stop.wait(status_every_s if status_every_s > 0 else None):
+            log.info("%s", vehicle.status_line())
+        log.info("stopping: %s", vehicle.status_line())
+        if summary_path is not None:
+            summary_path.parent.mkdir(parents=True, exist_ok=True)
+            world = truth(vehicle.snapshot(), estimate_of(options))
+            if track is not None:
+                world["track"] = track.as_dict()
+            if deck_feed is not None and deck_feed.aligned is not None:
+                world["deck"]["carrier_steps"] = dict(deck_feed.aligned.counters)
+            summary_path.write_text(json.dumps(world, indent=2) + "\n")
 
 
 if __name__ == "__main__":

@@ -58,6 +58,13 @@ def test_off_the_main_thread_nothing_is_installed():
     assert seen == [(False, before)]
 
 
+def test_no_other_module_installs_a_signal_handler():
+    """Every command's SIGINT and SIGTERM go through mission.lifetime.on_stop_signals."""
+    found = [f"{p.relative_to(ROOT)}:{n}" for top in ("mission", "sim", "bench") for p in sorted((ROOT / top).rglob("*.py"))
+             if p != ROOT / "mission" / "lifetime.py"
+             for n, line in enumerate(p.read_text().splitlines(), 1) if "signal.signal(" in line or "set_wakeup_fd(" in line]
+    assert found == []
+
 SUPERVISOR = textwrap.dedent("""
     import subprocess, sys, time
     from mission.lifetime import supervise_children
