@@ -62,8 +62,9 @@ def report(lines: list[dict[str, Any]], top: int = 10) -> str:
     out = [f"{len(lines)} tests: CPU {own + kids:.0f} s (the workers' own {own:.0f} s, their commands' {kids:.0f} s), "
            f"wall summed over the workers {sum(wall.values()):.0f} s"]
     heavy = [c for c in cpu.values() if c >= HEAVY_S]
-    out += [f"the {len(heavy)} tests of {HEAVY_S:.0f} s of CPU or more (the flights) {sum(heavy):.0f} s, the other "
-            f"{len(cpu) - len(heavy)} {own + kids - sum(heavy):.0f} s; on two cores at least {(own + kids) / 2:.0f} s of wall",
+    total, heavy_s = own + kids, sum(heavy)
+    out += [f"the {len(heavy)} tests of {HEAVY_S:.0f} s of CPU or more (the flights) {heavy_s:.0f} s, "
+            f"the other {len(cpu) - len(heavy)} {total - heavy_s:.0f} s; on two cores at least {total / 2:.0f} s of wall",
             "", f"the {top} most CPU [s] (wall [s]):"]
     out += [f"{c:8.1f} ({wall[t]:6.1f})  {t}" for t, c in sorted(cpu.items(), key=lambda kv: -kv[1])[:top]]
     out += ["", f"the {top} loadscope units of most CPU [s] (wall [s]):"]
